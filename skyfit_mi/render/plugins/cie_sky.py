@@ -1,0 +1,254 @@
+"""The ``cie_sky`` environment emitter: the daylight sky and the sun disc.
+
+It evaluates exactly :meth:`skyfit_mi.sky.Sky.radiance` (the same pattern
+sum, term by term) and importance-samples it: the sun disc by a uniform cone,
+the sky by a piecewise-constant table over an equal-area (azimuth,
+cos theta) grid built from the NumPy sky whenever its parameters change.
+Every number lives in an opaque Dr.Jit variable, so changing the sky from
+frame to frame (``mi.traverse`` + ``params.update()``, see
+:func:`update_sky`) recompiles nothing.
+
+Parameters (all linear sRGB radiance in W m^-2 sr^-1 unless stated; none
+differentiable; all exposed by ``traverse`` and updatable):
+
+====================  ========  ==========================  ==========================================
+name                  type      default                     meaning
+====================  ========  ==========================  ==========================================
+``sun_direction``     vector    (0, 0, 1)                   toward the sun, world frame (+X E, +Y N, +Z up)
+``sun_radiance``      rgb       0                           radiance of the solar disc
+``sun_solid_angle``   float     6e-5                        solar disc solid angle [sr], in [1e-7, 0.5]
+``clear``             rgb       0                           weight of the CIE clear pattern
+``overcast``          rgb       0                           weight of the CIE overcast pattern
+``uniform``           rgb       0                           uniform sky radiance
+``intermediate``      rgb       0                           weight of Radiance's intermediate pattern
+``ground``            rgb       0                           radiance below the horizon
+``horizon_blend``     bool      false                       Radiance's sky-to-ground blend
+``scene_radius``      float     1e4                         distance [scene units] beyond all geometry
+====================  ========  ==========================  ==========================================
+
+Build the dictionary from a :class:`~skyfit_mi.sky.Sky` with :func:`sky_dict`.
+"""
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ...sky import Sky
+
+#: Sampling table resolution: azimuth cells x cos(theta) cells.
+TABLE_NU, TABLE_NV = 128, 64
+#: Sub-samples per cell side when tabulating the sky's luminance.
+TABLE_SUPERSAMPLE = 3
+#: Share of the sky's sampling density spread uniformly over the sphere.
+UNIFORM_FLOOR = 0.02
+_RGB_KEYS = ("sun_radiance", "clear", "overcast", "uniform", "intermediate", "ground")
+_LUM = np.array([0.2126, 0.7152, 0.0722])
+
+
+def _triple(props, name, default):
+    if not props.has_property(name):
+        return np.asarray(default, dtype=float)
+    v = props[name]
+    if isinstance(v, str):
+        v = [float(x) for x in v.replace(",", " ").split()]
+    a = np.asarray(v, dtype=float).ravel()
+    return np.full(3, a[0]) if a.size == 1 else a
+
+
+def _table_directions():
+    """Sub-sample directions of each table cell, shape (NV*NU, S*S, 3)."""
+    s = TABLE_SUPERSAMPLE
+    off = (np.arange(s) + 0.5) / s
+    u = (np.arange(TABLE_NU)[None, :, None, None] + off[None, None, None, :]) / TABLE_NU
+    v = (np.arange(TABLE_NV)[:, None, None, None] + off[None, None, :, None]) / TABLE_NV
+    u, v = np.broadcast_arrays(u, v)
+    z = 1.0 - 2.0 * v
+    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    d = np.stack([r * np.cos(2 * np.pi * u), r * np.sin(2 * np.pi * u), z], axis=-1)
+    return d.reshape(TABLE_NV * TABLE_NU, s * s, 3)
+
+
+_TABLE_DIRS = _table_directions()
+
+
+class CIESkyEmitter(mi.Emitter):
+    """Daylight sky plus sun disc (see the module docstring for parameters)."""
+
+    def __init__(self, props):
+        mi.Emitter.__init__(self, props)
+        self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
+        sky = Sky(_triple(props, "sun_direction", (0, 0, 1)),
+                  **{k: _triple(props, k, 0.0) for k in _RGB_KEYS},
+                  horizon_blend=bool(props.get("horizon_blend", False)),
+                  sun_solid_angle=float(props.get("sun_solid_angle", 6e-5)))
+        self.scene_radius = mi.Float(float(props.get("scene_radius", 1e4)))
+        self.sun_direction = mi.Vector3f(*map(float, sky.sun_direction))
+        self.sun_solid_angle = mi.Float(float(sky.sun_solid_angle))
+        for k in _RGB_KEYS:
+            setattr(self, k, mi.Color3f(*map(float, getattr(sky, k))))
+        self.horizon_blend = mi.Bool(bool(sky.horizon_blend))
+        self._build_sampling(sky)
+
+    # ---- parameters -------------------------------------------------------
+    def _build_sampling(self, sky):
+        """Rebuild the sampling table from the NumPy twin of the current parameters.
+
+        The traversed parameters stay the same Dr.Jit variables (``params.update()``
+        writes into them); only derived data are replaced.  All are made opaque so
+        that new values never change a kernel.
+        """
+        self.sky = sky
+        lum = sky.sky_radiance(_TABLE_DIRS) @ _LUM               # (cells, sub)
+        cell = np.maximum(lum.mean(axis=1), 0.0)
+        sky_power = cell.mean() * 4 * np.pi                      # integral of luminance over the sphere
+        pmf = cell / cell.sum() if cell.sum() > 0 else np.full(cell.size, 1.0 / cell.size)
+        pmf = (1 - UNIFORM_FLOOR) * pmf + UNIFORM_FLOOR / pmf.size
+        cdf = np.cumsum(pmf)
+        cdf /= cdf[-1]
+        sun_power = float(sky.sun_radiance @ _LUM) * sky.sun_solid_angle
+        total = sun_power + sky_power
+        p_sun = sun_power / total if total > 0 else 0.0
+        self.pmf = mi.Float(pmf.astype(np.float32))
+        self.cdf = mi.Float(cdf.astype(np.float32))
+        self.p_sun = mi.Float(p_sun)
+        self.sun_cos_half = mi.Float(sky.sun_cos_half_angle)
+        for k in ("sun_direction", "sun_solid_angle", "horizon_blend", "p_sun", "sun_cos_half",
+                  "scene_radius") + _RGB_KEYS:
+            dr.make_opaque(getattr(self, k))
+
+    def traverse(self, cb):
+        flag = mi.ParamFlags.NonDifferentiable
+        cb.put("sun_direction", self.sun_direction, flag)
+        cb.put("sun_solid_angle", self.sun_solid_angle, flag)
+        for k in _RGB_KEYS:
+            cb.put(k, getattr(self, k), flag)
+        cb.put("horizon_blend", self.horizon_blend, flag)
+        cb.put("scene_radius", self.scene_radius, flag)
+
+    def parameters_changed(self, keys=[]):
+        def arr(v):
+            return np.array(v, dtype=float).ravel()
+        sky = Sky(arr(self.sun_direction), **{k: arr(getattr(self, k)) for k in _RGB_KEYS},
+                  horizon_blend=bool(arr(self.horizon_blend)[0]),
+                  sun_solid_angle=float(arr(self.sun_solid_angle)[0]))
+        self._build_sampling(sky)
+
+    # ---- evaluation -------------------------------------------------------
+    def _sky_eval(self, d):
+        """Sky radiance (no sun) toward world direction d: Sky.sky_radiance in Dr.Jit."""
+        s = self.sun_direction
+        cos_z = dr.clip(dr.dot(d, s), -1.0, 1.0)
+        zeta = dr.acos(cos_z)
+        dz = d.z
+        gamma_f = dr.select(dz > 0.01, 1.0 - dr.exp(-0.32 / dr.maximum(dz, 0.01)), 1.0)  # eq. 4.12
+        clear = (0.91 + 10.0 * dr.exp(-3.0 * zeta) + 0.45 * cos_z * cos_z) * gamma_f  # eq. 4.13
+        overcast = (1.0 + 2.0 * dz) / 3.0                                             # eq. 4.16
+        eta = dr.acos(dr.clip(dz, -1.0, 1.0))
+        zt = dr.acos(dr.clip(s.z, -1.0, 1.0))
+        inter = (((1.35 * dr.sin(5.631 - 3.59 * eta) + 3.12) * dr.sin(4.396 - 2.6 * zt)
+                  + 6.37 - eta) / 2.326
+                 * dr.exp(zeta * -0.563 * ((2.629 - eta) * (1.562 - zt) + 0.812)))
+        sky = self.clear * clear + self.overcast * overcast + self.uniform \
+            + self.intermediate * inter
+        a = dr.power(dz + 1.01, 10.0)
+        w = a / (a + dr.rcp(a))
+        blended = w * sky + (1.0 - w) * self.ground
+        sharp = dr.select(dz > 0.0, sky, self.ground)
+        return dr.select(self.horizon_blend, blended, sharp)
+
+    def _radiance(self, d):
+        in_sun = dr.dot(d, self.sun_direction) >= self.sun_cos_half
+        return self._sky_eval(d) + dr.select(in_sun, self.sun_radiance, 0.0)
+
+    def _pdf(self, d):
+        cone = 2.0 * dr.pi * (1.0 - self.sun_cos_half)
+        in_sun = dr.dot(d, self.sun_direction) >= self.sun_cos_half
+        pdf_sun = dr.select(in_sun, dr.rcp(cone), 0.0)
+        u = dr.atan2(d.y, d.x) * dr.inv_two_pi
+        u = dr.select(u < 0.0, u + 1.0, u)
+        v = (1.0 - d.z) * 0.5
+        iu = dr.minimum(mi.UInt32(u * TABLE_NU), TABLE_NU - 1)
+        iv = dr.minimum(mi.UInt32(dr.maximum(v, 0.0) * TABLE_NV), TABLE_NV - 1)
+        pmf = dr.gather(mi.Float, self.pmf, iv * TABLE_NU + iu)
+        pdf_sky = pmf * (TABLE_NU * TABLE_NV) / (4.0 * dr.pi)
+        return self.p_sun * pdf_sun + (1.0 - self.p_sun) * pdf_sky
+
+    def eval(self, si, active=True):
+        return dr.select(active, self._radiance(-si.wi), 0.0)
+
+    def eval_direction(self, it, ds, active=True):
+        return dr.select(active, self._radiance(ds.d), 0.0)
+
+    def pdf_direction(self, it, ds, active=True):
+        return dr.select(active, self._pdf(ds.d), 0.0)
+
+    def sample_direction(self, it, sample, active=True):
+        pick_sun = sample.x < self.p_sun
+        # sun: uniform in the cone around sun_direction
+        x_sun = sample.x / dr.maximum(self.p_sun, 1e-12)
+        cos_t = 1.0 - x_sun * (1.0 - self.sun_cos_half)
+        sin_t = dr.safe_sqrt(1.0 - cos_t * cos_t)
+        sp, cp = dr.sincos(2.0 * dr.pi * sample.y)
+        d_sun = mi.Frame3f(self.sun_direction).to_world(mi.Vector3f(sin_t * cp, sin_t * sp, cos_t))
+        # sky: table cell by inverse CDF, then uniform in the cell (sample reuse)
+        x_sky = dr.clip((sample.x - self.p_sun) / dr.maximum(1.0 - self.p_sun, 1e-12), 0.0, 1.0)
+        n = TABLE_NU * TABLE_NV
+        idx = dr.binary_search(0, n - 1,
+                               lambda i: dr.gather(mi.Float, self.cdf, i) <= x_sky)
+        c1 = dr.gather(mi.Float, self.cdf, idx)
+        p = dr.gather(mi.Float, self.pmf, idx)
+        t = dr.clip((x_sky - (c1 - p)) / dr.maximum(p, 1e-12), 0.0, 0.99999)
+        u = (mi.Float(idx % TABLE_NU) + t) / TABLE_NU
+        v = (mi.Float(idx // TABLE_NU) + sample.y) / TABLE_NV
+        z = 1.0 - 2.0 * v
+        r = dr.safe_sqrt(1.0 - z * z)
+        su, cu = dr.sincos(2.0 * dr.pi * u)
+        d_sky = mi.Vector3f(r * cu, r * su, z)
+        d = dr.select(pick_sun, d_sun, d_sky)
+
+        radius = dr.maximum(self.scene_radius, dr.norm(it.p))
+        dist = 2.0 * radius
+        ds = dr.zeros(mi.DirectionSample3f)
+        ds.p = it.p + d * dist
+        ds.n = -d
+        ds.time = it.time
+        ds.pdf = self._pdf(d)
+        ds.delta = mi.Bool(False)
+        ds.emitter = mi.EmitterPtr(self)
+        ds.d = d
+        ds.dist = dist
+        active = mi.Bool(active) & (ds.pdf > 0.0)
+        weight = dr.select(active, self._radiance(d) / dr.maximum(ds.pdf, 1e-30), 0.0)
+        ds.pdf = dr.select(active, ds.pdf, 0.0)
+        return ds, mi.Spectrum(weight)
+
+    def sample_ray(self, time, sample1, sample2, sample3, active=True):
+        raise NotImplementedError("cie_sky supports only integrators that sample directions "
+                                  "from surfaces (path, prb, direct), not light tracing.")
+
+    def to_string(self):
+        return f"CIESkyEmitter[{self.sky.info or 'custom'}]"
+
+
+def sky_dict(sky, scene_radius=1e4):
+    """The ``mi.load_dict`` dictionary of a ``cie_sky`` emitter showing ``sky``."""
+    d = {"type": "cie_sky", "sun_direction": mi.ScalarVector3f(*map(float, sky.sun_direction)),
+         "sun_solid_angle": float(sky.sun_solid_angle), "horizon_blend": bool(sky.horizon_blend),
+         "scene_radius": float(scene_radius)}
+    for k in _RGB_KEYS:
+        d[k] = mi.ScalarVector3f(*map(float, getattr(sky, k)))
+    return d
+
+
+def update_sky(params, sky, prefix):
+    """Write ``sky`` into a ``cie_sky`` emitter through ``mi.traverse`` parameters.
+
+    ``prefix`` is the emitter's key prefix in ``params`` (e.g. ``'sky.'`` for an
+    emitter with id ``sky``).  Calls ``params.update()``; no recompilation.
+    """
+    params[prefix + "sun_direction"] = mi.Vector3f(*map(float, sky.sun_direction))
+    params[prefix + "sun_solid_angle"] = mi.Float(float(sky.sun_solid_angle))
+    params[prefix + "horizon_blend"] = mi.Bool(bool(sky.horizon_blend))
+    for k in _RGB_KEYS:
+        params[prefix + k] = mi.Color3f(*map(float, getattr(sky, k)))
+    params.update()

@@ -1,0 +1,220 @@
+"""The ``ward`` BSDF: Ward's isotropic model (thesis eq. 3.19) with the thesis's parameterisations.
+
+Implements exactly :func:`skyfit_mi.ward.ward_brdf` (tested against it) with
+importance sampling after B. Walter, "Notes on the Ward BRDF", Cornell
+PCG-05-06, 2005 (half vector with tan^2 delta = -sigma^2 ln u), mixed with
+cosine-weighted diffuse sampling in proportion to the two reflectances.
+sigma_alpha <= 1e-4 is an ideal mirror lobe (a Dirac delta) reflecting
+rho_s times the sigma -> 0 limit of the chosen normalisation.
+
+Parameters (reflectances unitless, sigma_alpha the rms slope):
+
+=================  =========  ============  =============  ===============================================
+name               type       range         default        notes
+=================  =========  ============  =============  ===============================================
+``model``          string     see below     ``raw``        which parameters the plugin takes
+``normalisation``  string     see below     ``ward``       ``ward`` (eq. 3.19), ``duer``, ``balanced``
+``rho_d``          rgb/float  [0, 1]        0.5            ``raw`` only; rho_d + rho_s <= 1
+``rho_s``          rgb/float  [0, 1]        0.05           rgb in ``raw``, float in the other models
+``sigma_alpha``    float      [0, 1]        0.1            0 = mirror
+``R``              float      [0, 1]        1.0            ``achromatic`` only (eq. 3.20)
+``C``              rgb        [0, 1]        (1, 1, 1)      ``colour`` only; plastic/metal rule at rho_s 0.5
+=================  =========  ============  =============  ===============================================
+
+Models: ``raw`` (rho_d, rho_s, sigma_alpha), ``two`` (rho_s, sigma_alpha; rho_d = 1 - rho_s),
+``achromatic`` (R, rho_s, sigma_alpha), ``colour`` (C, rho_s, sigma_alpha).  ``traverse``
+exposes exactly the model's parameters, all differentiable.  Values set through
+``params.update()`` are clamped to their ranges inside the kernel (validation
+happens when the plugin is built from properties).
+"""
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ...errors import check_choice
+from ...ward import METAL_THRESHOLD, MODELS, NORMALISATIONS, SIGMA_MAX, SIGMA_MIRROR, raw_parameters
+
+_DEFAULTS = {"rho_d": 0.5, "rho_s": 0.05, "sigma_alpha": 0.1, "R": 1.0, "C": (1.0, 1.0, 1.0)}
+_RGB_PARAMS = {"raw": ("rho_d", "rho_s"), "colour": ("C",)}
+
+
+def _prop(props, name):
+    if not props.has_property(name):
+        return _DEFAULTS[name]
+    v = props[name]
+    if isinstance(v, str):
+        v = [float(x) for x in v.replace(",", " ").split()]
+    a = np.asarray(v, dtype=float).ravel()
+    return float(a[0]) if a.size == 1 else a
+
+
+def _lum(c):
+    return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+
+
+class WardBSDF(mi.BSDF):
+    """Ward's isotropic BRDF (see the module docstring for parameters)."""
+
+    def __init__(self, props):
+        mi.BSDF.__init__(self, props)
+        self.model = check_choice("Ward model", props.get("model", "raw"), tuple(MODELS))
+        self.normalisation = check_choice("Ward normalisation", props.get("normalisation", "ward"),
+                                          NORMALISATIONS)
+        values = {k: _prop(props, k) for k in MODELS[self.model]}
+        raw_parameters(self.model, **values)          # validates; raises SkyfitError
+        self.names = MODELS[self.model]
+        for k, v in values.items():
+            if k in _RGB_PARAMS.get(self.model, ()):
+                setattr(self, k, mi.Color3f(*map(float, np.broadcast_to(v, (3,)))))
+            else:
+                setattr(self, k, mi.Float(float(v)))
+        front = mi.BSDFFlags.FrontSide
+        self.m_components = [mi.BSDFFlags.DiffuseReflection | front,
+                             mi.BSDFFlags.GlossyReflection | front,
+                             mi.BSDFFlags.DeltaReflection | front]
+        self.m_flags = self.m_components[0] | self.m_components[1] | self.m_components[2]
+
+    def traverse(self, cb):
+        for k in self.names:
+            cb.put(k, getattr(self, k), mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, keys=[]):
+        pass
+
+    # ---- the model --------------------------------------------------------
+    def _raw(self):
+        """(rho_d, rho_s, sigma) as Dr.Jit values, clamped to valid ranges."""
+        sigma = dr.clip(self.sigma_alpha, 0.0, SIGMA_MAX)
+        if self.model == "raw":
+            rho_s = dr.clip(self.rho_s, 0.0, 1.0)
+            rho_d = dr.minimum(dr.clip(self.rho_d, 0.0, 1.0), 1.0 - rho_s)
+            return rho_d, rho_s, sigma
+        ps = dr.clip(self.rho_s, 0.0, 1.0)
+        if self.model == "two":
+            return mi.Color3f(1.0 - ps), mi.Color3f(ps), sigma
+        if self.model == "achromatic":
+            r = dr.clip(self.R, 0.0, 1.0)
+            return mi.Color3f(r * (1.0 - ps)), mi.Color3f(r * ps), sigma          # eq. 3.20
+        c = dr.clip(self.C, 0.0, 1.0)
+        spec = dr.select(ps >= METAL_THRESHOLD, c * ps, mi.Color3f(ps))
+        return c * (1.0 - ps), spec, sigma
+
+    def _lobe(self, wi, wo, sigma):
+        """Specular lobe value (no rho_s) [sr^-1], as skyfit_mi.ward.specular_lobe."""
+        ci, co = mi.Frame3f.cos_theta(wi), mi.Frame3f.cos_theta(wo)
+        hu = wi + wo
+        hz = hu.z
+        hh = dr.squared_norm(hu)
+        s2 = dr.square(dr.maximum(sigma, SIGMA_MIRROR))
+        hz2 = dr.maximum(dr.square(hz), 1e-20)
+        e = dr.exp(-(hh - hz2) / (hz2 * s2))
+        if self.normalisation == "ward":
+            f = e / (4.0 * dr.pi * s2 * dr.safe_sqrt(ci * co))                   # eq. 3.19
+        elif self.normalisation == "duer":
+            f = e / (4.0 * dr.pi * s2 * ci * co)
+        else:
+            f = e * hh / (dr.pi * s2 * dr.square(hz2))
+        return dr.select((ci > 0) & (co > 0) & (sigma > SIGMA_MIRROR), f, 0.0)
+
+    def _mirror_fraction(self, cos_i):
+        return dr.clip(cos_i, 0.0, 1.0) if self.normalisation == "ward" else mi.Float(1.0)
+
+    def _p_spec(self, rho_d, rho_s):
+        ld, ls = _lum(rho_d), _lum(rho_s)
+        return dr.select(ld + ls > 0, ls / dr.maximum(ld + ls, 1e-12), 0.0)
+
+    def _enabled(self, ctx):
+        return (ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 0),
+                ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 1),
+                ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 2))
+
+    def _glossy_pdf(self, wi, wo, sigma):
+        """Walter's half-vector density mapped to wo [sr^-1]."""
+        h = dr.normalize(wi + wo)
+        cz = dr.maximum(h.z, 1e-6)
+        s2 = dr.square(dr.maximum(sigma, SIGMA_MIRROR))
+        tan2 = (1.0 - cz * cz) / (cz * cz)
+        d_h = dr.exp(-tan2 / s2) / (dr.pi * s2 * cz * cz * cz)
+        return d_h / (4.0 * dr.maximum(dr.abs(dr.dot(wo, h)), 1e-6))
+
+    def eval(self, ctx, si, wo, active=True):
+        wi = si.wi
+        ci, co = mi.Frame3f.cos_theta(wi), mi.Frame3f.cos_theta(wo)
+        rho_d, rho_s, sigma = self._raw()
+        en_d, en_g, _ = self._enabled(ctx)
+        f = mi.Color3f(0.0)
+        if en_d:
+            f += rho_d * dr.inv_pi
+        if en_g:
+            f += rho_s * self._lobe(wi, wo, sigma)
+        valid = mi.Bool(active) & (ci > 0) & (co > 0)
+        return mi.Spectrum(dr.select(valid, f * co, 0.0))
+
+    def pdf(self, ctx, si, wo, active=True):
+        wi = si.wi
+        ci, co = mi.Frame3f.cos_theta(wi), mi.Frame3f.cos_theta(wo)
+        rho_d, rho_s, sigma = self._raw()
+        en_d, en_g, en_delta = self._enabled(ctx)
+        mirror = sigma <= SIGMA_MIRROR
+        p_spec = self._p_spec(rho_d, rho_s) if (en_g or en_delta) and en_d else \
+            (mi.Float(1.0) if (en_g or en_delta) else mi.Float(0.0))
+        pdf = mi.Float(0.0)
+        if en_d:
+            pdf += (1.0 - p_spec) * co * dr.inv_pi
+        if en_g:
+            pdf += dr.select(mirror, 0.0, p_spec * self._glossy_pdf(wi, wo, sigma))
+        valid = mi.Bool(active) & (ci > 0) & (co > 0)
+        return dr.select(valid, pdf, 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        wi = si.wi
+        ci = mi.Frame3f.cos_theta(wi)
+        rho_d, rho_s, sigma = self._raw()
+        en_d, en_g, en_delta = self._enabled(ctx)
+        mirror = sigma <= SIGMA_MIRROR
+        p_spec = self._p_spec(rho_d, rho_s) if (en_g or en_delta) and en_d else \
+            (mi.Float(1.0) if (en_g or en_delta) else mi.Float(0.0))
+        pick_spec = sample1 < p_spec
+        if not en_g:
+            pick_spec &= mirror
+        if not en_delta:
+            pick_spec &= ~mirror
+
+        # Walter: tan^2 delta = -sigma^2 ln(1 - u), phi = 2 pi v
+        s2 = dr.square(dr.maximum(sigma, SIGMA_MIRROR))
+        tan2 = -s2 * dr.log(dr.maximum(1.0 - sample2.x, 1e-12))
+        cos_h = dr.rsqrt(1.0 + tan2)
+        sin_h = dr.safe_sqrt(1.0 - cos_h * cos_h)
+        sp, cp = dr.sincos(2.0 * dr.pi * sample2.y)
+        h = mi.Vector3f(sin_h * cp, sin_h * sp, cos_h)
+        wo_glossy = mi.reflect(wi, h)
+        wo_mirror = mi.reflect(wi)
+        wo_diffuse = mi.warp.square_to_cosine_hemisphere(sample2)
+
+        wo = dr.select(pick_spec, dr.select(mirror, wo_mirror, wo_glossy), wo_diffuse)
+        bs = dr.zeros(mi.BSDFSample3f)
+        bs.wo = wo
+        bs.eta = 1.0
+        delta = pick_spec & mirror
+        bs.sampled_component = dr.select(pick_spec, dr.select(mirror, mi.UInt32(2), mi.UInt32(1)),
+                                         mi.UInt32(0))
+        bs.sampled_type = dr.select(delta, mi.UInt32(+mi.BSDFFlags.DeltaReflection),
+                                    dr.select(pick_spec, mi.UInt32(+mi.BSDFFlags.GlossyReflection),
+                                              mi.UInt32(+mi.BSDFFlags.DiffuseReflection)))
+        smooth_pdf = self.pdf(ctx, si, wo, active)
+        bs.pdf = dr.select(delta, p_spec, smooth_pdf)
+        f = self.eval(ctx, si, wo, active)
+        w_smooth = f / dr.maximum(smooth_pdf, 1e-20)
+        w_delta = mi.Spectrum(rho_s * self._mirror_fraction(ci)) / dr.maximum(p_spec, 1e-20)
+        weight = dr.select(delta, w_delta, w_smooth)
+        ok = mi.Bool(active) & (ci > 0) & (mi.Frame3f.cos_theta(wo) > 0) & (bs.pdf > 0)
+        bs.pdf = dr.select(ok, bs.pdf, 0.0)
+        return bs, dr.select(ok, weight, 0.0)
+
+    def to_string(self):
+        vals = ", ".join(f"{k}={getattr(self, k)}" for k in self.names)
+        return f"WardBSDF[model={self.model}, normalisation={self.normalisation}, {vals}]"

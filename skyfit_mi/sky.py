@@ -1,0 +1,367 @@
+"""Sky light: CIE clear, overcast and intermediate skies (thesis section 4.2).
+
+A :class:`Sky` holds the whole daylight environment: the sky's radiance
+distribution and the sun as a disc of finite solid angle.  The sky is a
+weighted sum of fixed angular patterns, each weight a linear-sRGB radiance
+[W m^-2 sr^-1]:
+
+* ``clear``: the CIE clear-sky pattern f(zeta) gamma(theta_p) (eqs. 4.12-4.14),
+* ``overcast``: the CIE overcast pattern (1 + 2 cos theta_p)/3 (eq. 4.16),
+* ``uniform``: 1,
+* ``intermediate``: the Matsuura intermediate pattern used by Radiance's
+  ``gensky +i`` (only reached through :func:`skyfit_mi.gensky.from_gensky`),
+
+plus a uniform ``ground`` radiance below the horizon.  The thesis's skies
+(eqs. 4.10-4.18) and Radiance's ``skybright.cal`` skies are both exact
+members of this family, and the ``cie_sky`` Mitsuba emitter evaluates the
+same sum, so a frame's sky changes by changing numbers, never code.
+"""
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .colour import SRGB_LUMINANCE, cct_to_rgb
+from .conventions import direction_from_angles
+from .errors import SkyfitError, check_choice, check_range
+from .sun import SUN_SOLID_ANGLE, direct_normal_irradiance, sun_rgb
+
+#: Luminous efficacy of clear-sky light [lm W^-1] (thesis 4.2.2).
+EFFICACY_CLEAR = 150.0
+#: Luminous efficacy of overcast-sky light [lm W^-1]; the thesis gives 115-125.
+EFFICACY_OVERCAST = 120.0
+#: Default sky colour temperatures [K] (thesis 4.2.3: 1e4-1e5 clear, 4500-7000 overcast).
+CCT_CLEAR = 15000.0
+CCT_OVERCAST = 6500.0
+#: Default ground reflectance (as Radiance's gensky).
+GROUND_ALBEDO = 0.2
+#: Zenith angle below which Kittler's zenith luminance (eq. 4.15) is held constant [deg].
+KITTLER_MIN_ZENITH_DEG = 10.0
+
+_PATTERNS = ("clear", "overcast", "uniform", "intermediate")
+
+
+# --------------------------------------------------------------------------
+# The angular patterns (shared, term by term, with the Mitsuba emitter)
+# --------------------------------------------------------------------------
+
+def gamma_factor(cos_theta_p):
+    """gamma(theta_p) = 1 - exp(-0.32 / cos theta_p), thesis eq. 4.12.
+
+    Taken as 1 for cos theta_p <= 0.01 (near and below the horizon), as in
+    Radiance's ``skybright.cal``; the two agree to 1e-14 there.
+    """
+    c = np.asarray(cos_theta_p, dtype=float)
+    return np.where(c > 0.01, -np.expm1(-0.32 / np.where(c > 0.01, c, 1.0)), 1.0)
+
+
+def scattering_indicatrix(zeta):
+    """f(zeta) = 0.91 + 10 exp(-3 zeta) + 0.45 cos^2 zeta, thesis eq. 4.13.
+
+    ``zeta`` is the angle between the sky point and the sun [rad].
+    """
+    zeta = np.asarray(zeta, dtype=float)
+    return 0.91 + 10.0 * np.exp(-3.0 * zeta) + 0.45 * np.cos(zeta) ** 2
+
+
+def clear_pattern(d, sun):
+    """CIE clear-sky pattern f(zeta) gamma(theta_p) (eqs. 4.12-4.14), unnormalised."""
+    cos_zeta = np.clip(d @ sun, -1.0, 1.0)                                   # eq. 4.14
+    return scattering_indicatrix(np.arccos(cos_zeta)) * gamma_factor(d[..., 2])
+
+
+def overcast_pattern(d):
+    """CIE overcast-sky pattern (1 + 2 cos theta_p)/3, thesis eq. 4.16."""
+    return (1.0 + 2.0 * d[..., 2]) / 3.0
+
+
+def intermediate_pattern(d, sun):
+    """Matsuura's intermediate-sky pattern as in Radiance's ``skybright.cal``.
+
+    ((1.35 sin(5.631 - 3.59 eta) + 3.12) sin(4.396 - 2.6 z_s) + 6.37 - eta)
+    / 2.326 * exp(-0.563 gamma ((2.629 - eta)(1.562 - z_s) + 0.812)), with
+    eta the point's zenith angle, z_s the sun's and gamma the angle between.
+    This is Radiance's ``gensky +i`` sky, not the thesis's eq. 4.18 mixture.
+    """
+    eta = np.arccos(np.clip(d[..., 2], -1.0, 1.0))
+    zt = np.arccos(np.clip(sun[2], -1.0, 1.0))
+    gam = np.arccos(np.clip(d @ sun, -1.0, 1.0))
+    return (((1.35 * np.sin(5.631 - 3.59 * eta) + 3.12) * np.sin(4.396 - 2.6 * zt) + 6.37 - eta)
+            / 2.326 * np.exp(gam * -0.563 * ((2.629 - eta) * (1.562 - zt) + 0.812)))
+
+
+def horizon_blend_weight(cos_theta_p):
+    """Weight of the sky (vs. the ground) in Radiance's ``skybright.cal``.
+
+    (cos+1.01)^10 / ((cos+1.01)^10 + (cos+1.01)^-10): 0.55 at the horizon,
+    0.98 at 11.5 degrees altitude.
+    """
+    a = (np.asarray(cos_theta_p, dtype=float) + 1.01) ** 10
+    return a / (a + 1.0 / a)
+
+
+def _rgb(value, name):
+    v = np.asarray(value, dtype=float)
+    v = np.broadcast_to(v, (3,)).astype(float) if v.ndim == 0 or v.shape == (1,) else v
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise SkyfitError(f"{name} must be a finite number or an RGB triple, got {value!r}.")
+    return v
+
+
+@dataclass(frozen=True)
+class Sky:
+    """A daylight environment: sky radiance pattern weights and a sun disc.
+
+    Attributes
+    ----------
+    sun_direction : ndarray (3,)
+        Unit vector toward the sun's centre, world frame (+X east, +Y north, +Z up).
+        It also orients the sky patterns.
+    clear, overcast, uniform, intermediate : ndarray (3,)
+        Linear-sRGB weight of each sky pattern [W m^-2 sr^-1].
+    ground : ndarray (3,)
+        Radiance of the ground below the horizon [W m^-2 sr^-1].
+    horizon_blend : bool
+        Blend sky into ground across the horizon as Radiance does (True for
+        skies imported from ``gensky``); otherwise a sharp horizon.
+    sun_radiance : ndarray (3,)
+        Radiance of the solar disc [W m^-2 sr^-1] (uniform over the disc).
+    sun_solid_angle : float
+        Solid angle of the solar disc [sr].
+    info : dict
+        How the sky was made (kind, phi, sun angles, levels...), for manifests.
+    """
+
+    sun_direction: np.ndarray
+    clear: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    overcast: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    uniform: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    intermediate: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    ground: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    horizon_blend: bool = False
+    sun_radiance: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    sun_solid_angle: float = SUN_SOLID_ANGLE
+    info: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        s = np.asarray(self.sun_direction, dtype=float)
+        n = np.linalg.norm(s)
+        if s.shape != (3,) or not np.isfinite(n) or n == 0:
+            raise SkyfitError(f"sun_direction must be a non-zero 3-vector, got {self.sun_direction!r}.")
+        object.__setattr__(self, "sun_direction", s / n)
+        for name in _PATTERNS + ("ground", "sun_radiance"):
+            object.__setattr__(self, name, _rgb(getattr(self, name), name))
+        check_range("sun_solid_angle", self.sun_solid_angle, 1e-7, 0.5, "sr")
+
+    # ---- evaluation -------------------------------------------------------
+    @property
+    def sun_cos_half_angle(self):
+        """cos of the solar disc's angular radius (disc of solid angle Omega)."""
+        return 1.0 - self.sun_solid_angle / (2.0 * np.pi)
+
+    def sky_radiance(self, directions):
+        """Radiance of the sky alone (no sun) toward world ``directions`` (..., 3).
+
+        Returns linear sRGB [W m^-2 sr^-1], shape (..., 3).
+        """
+        d = np.asarray(directions, dtype=float)
+        d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        s = self.sun_direction
+        sky = (clear_pattern(d, s)[..., None] * self.clear
+               + overcast_pattern(d)[..., None] * self.overcast
+               + self.uniform
+               + intermediate_pattern(d, s)[..., None] * self.intermediate)
+        if self.horizon_blend:
+            w = horizon_blend_weight(d[..., 2])[..., None]
+            return w * sky + (1.0 - w) * self.ground
+        return np.where(d[..., 2:3] > 0.0, sky, self.ground)
+
+    def sun_mask(self, directions):
+        """True where ``directions`` fall inside the solar disc."""
+        d = np.asarray(directions, dtype=float)
+        d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        return d @ self.sun_direction >= self.sun_cos_half_angle
+
+    def radiance(self, directions):
+        """Radiance of sky and sun toward world ``directions`` (..., 3).
+
+        Returns linear sRGB [W m^-2 sr^-1], shape (..., 3).
+        """
+        return self.sky_radiance(directions) + self.sun_mask(directions)[..., None] * self.sun_radiance
+
+    # ---- irradiance -------------------------------------------------------
+    def sky_horizontal_irradiance(self, n=512):
+        """Horizontal irradiance from the sky alone [W m^-2], RGB (3,).
+
+        Independent quadrature of eq. 4.19: Gauss-Legendre in cos(theta) over
+        the upper hemisphere (``n`` nodes) by ``2 n`` azimuths.
+        """
+        mu, wmu = np.polynomial.legendre.leggauss(n)
+        mu, wmu = 0.5 * (mu + 1.0), 0.5 * wmu                 # nodes on (0, 1)
+        m = 2 * n
+        phi = (np.arange(m) + 0.5) * 2 * np.pi / m
+        theta = np.arccos(mu)
+        d = direction_from_angles(theta[:, None], phi[None, :])
+        l_sky = self.sky_radiance(d)
+        return np.einsum("ijc,i->c", l_sky, wmu * mu) * (2 * np.pi / m)
+
+    def sun_horizontal_irradiance(self):
+        """Horizontal irradiance from the solar disc [W m^-2], RGB (3,)."""
+        return self.sun_radiance * self.sun_solid_angle * max(self.sun_direction[2], 0.0)
+
+    def horizontal_irradiance(self, n=512):
+        """Global horizontal irradiance, sky plus sun [W m^-2], RGB (3,)."""
+        return self.sky_horizontal_irradiance(n) + self.sun_horizontal_irradiance()
+
+    # ---- levels -----------------------------------------------------------
+    def scaled(self, diffuse_horizontal=None, direct_normal=None):
+        """A copy with absolute levels set from measurements.
+
+        Parameters
+        ----------
+        diffuse_horizontal : float, optional
+            Measured horizontal diffuse (sky) irradiance [W m^-2]; the sky
+            patterns (not the ground) are scaled so that the luminance-weighted
+            sky irradiance equals it.
+        direct_normal : float, optional
+            Measured direct normal irradiance [W m^-2]; sets the sun disc.
+        """
+        out = self
+        if diffuse_horizontal is not None:
+            check_range("diffuse horizontal irradiance", diffuse_horizontal, 0, 2000, "W m^-2")
+            now = float(self.sky_horizontal_irradiance() @ SRGB_LUMINANCE)
+            if now <= 0:
+                raise SkyfitError("this sky is black above the horizon; cannot scale it to a "
+                                  "measured irradiance. Build it with a non-zero level first.")
+            k = diffuse_horizontal / now
+            out = replace(out, **{p: getattr(out, p) * k for p in _PATTERNS})
+        if direct_normal is not None:
+            check_range("direct normal irradiance", direct_normal, 0, 1500, "W m^-2")
+            lum = float(out.sun_radiance @ SRGB_LUMINANCE)
+            colour = out.sun_radiance / lum if lum > 0 else sun_rgb(
+                np.degrees(np.arccos(out.sun_direction[2])))
+            out = replace(out, sun_radiance=colour * direct_normal / out.sun_solid_angle)
+        return out
+
+    def scaled_to_illuminance(self, diffuse_horizontal_lux, efficacy):
+        """A copy scaled to a measured horizontal diffuse illuminance [lx].
+
+        ``efficacy`` [lm W^-1] converts it to irradiance (thesis 4.2.2).
+        """
+        check_range("luminous efficacy", efficacy, 1, 683, "lm W^-1")
+        return self.scaled(diffuse_horizontal=diffuse_horizontal_lux / efficacy)
+
+
+# --------------------------------------------------------------------------
+# The thesis's skies
+# --------------------------------------------------------------------------
+
+def kittler_zenith_luminance(sun_zenith_deg):
+    """Clear-sky zenith luminance 300 + 3000 cot(theta_s) [cd m^-2], thesis eq. 4.15.
+
+    Kittler's formula is stated for theta_s > 30 degrees and diverges as
+    theta_s -> 0; it is held at its value for 10 degrees above that, and
+    clamped at 0 for a sun far below the horizon.
+    """
+    z = np.radians(np.maximum(np.asarray(sun_zenith_deg, dtype=float), KITTLER_MIN_ZENITH_DEG))
+    return np.maximum(300.0 + 3000.0 / np.tan(z), 0.0)
+
+
+def krochmann_seidl_zenith_luminance(sun_zenith_deg):
+    """Overcast-sky zenith luminance 123 + 8600 cos(theta_s) [cd m^-2], thesis eq. 4.17.
+
+    Clamped at 0 for a sun far below the horizon.
+    """
+    return np.maximum(123.0 + 8600.0 * np.cos(np.radians(sun_zenith_deg)), 0.0)
+
+
+#: The thesis's sky types and their sun probability phi (eq. 4.18).
+SKY_TYPES = {"clear": 1.0, "overcast": 0.0, "intermediate": None}
+
+
+def cie_sky(kind, sun_zenith_deg, sun_azimuth_deg, *, phi=None, day=172,
+            clear_zenith_luminance=None, overcast_zenith_luminance=None,
+            efficacy_clear=EFFICACY_CLEAR, efficacy_overcast=EFFICACY_OVERCAST,
+            cct_clear=CCT_CLEAR, cct_overcast=CCT_OVERCAST,
+            sun=True, extinction=None, solar_constant=None,
+            sun_solid_angle=SUN_SOLID_ANGLE, ground_albedo=GROUND_ALBEDO):
+    """A thesis sky: CIE clear, CIE overcast, or intermediate (eq. 4.18).
+
+    L_in = (1 - phi) L_oc + phi L_cl (eq. 4.18); clear is phi = 1 and
+    overcast phi = 0.  L_cl follows eqs. 4.10-4.14 with zenith luminance
+    eq. 4.15; L_oc eq. 4.16 with eq. 4.17.  Luminance becomes radiance by
+    the luminous efficacies (4.2.2) and gets its colour from a CCT (4.2.3).
+    The sun disc carries phi times the direct normal irradiance of eq. 4.7
+    (phi is the probability that the sun is out).  The ground is a
+    Lambertian plane of reflectance ``ground_albedo`` lit by sky and sun.
+
+    Parameters
+    ----------
+    kind : {'clear', 'overcast', 'intermediate'}
+    sun_zenith_deg, sun_azimuth_deg : float
+        Sun position [degrees], zenith in [0, 180], compass azimuth.
+    phi : float, optional
+        Sun probability in [0, 1]; required for 'intermediate'.
+    day : int
+        Day of the year (for eq. 4.5).
+    clear_zenith_luminance, overcast_zenith_luminance : float, optional
+        Override eqs. 4.15 / 4.17 [cd m^-2].
+    efficacy_clear, efficacy_overcast : float
+        Luminous efficacies [lm W^-1].
+    cct_clear, cct_overcast : float
+        Sky colour temperatures [K].
+    sun : bool
+        Include the solar disc.
+    extinction : float, optional
+        beta of eq. 4.7 (default 0.431).
+    solar_constant : float, optional
+        [W m^-2] (default 1377).
+    sun_solid_angle : float
+        [sr] (default 6e-5).
+    ground_albedo : float
+        Ground reflectance in [0, 1].
+
+    Returns
+    -------
+    Sky
+    """
+    check_choice("sky type", kind, tuple(SKY_TYPES))
+    if kind == "intermediate":
+        if phi is None:
+            raise SkyfitError("an intermediate sky needs a sun probability phi in [0, 1], "
+                              "e.g. phi=0.5.")
+    elif phi is not None and phi != SKY_TYPES[kind]:
+        raise SkyfitError(f"a {kind} sky has phi = {SKY_TYPES[kind]:g}; give phi only for an "
+                          f"intermediate sky (or use kind='intermediate').")
+    phi = SKY_TYPES[kind] if phi is None else phi
+    check_range("sun probability phi", phi, 0.0, 1.0)
+    check_range("sun zenith", sun_zenith_deg, 0.0, 180.0, "degrees")
+    check_range("ground albedo", ground_albedo, 0.0, 1.0)
+    for name, v in (("efficacy_clear", efficacy_clear), ("efficacy_overcast", efficacy_overcast)):
+        check_range(name, v, 1.0, 683.0, "lm W^-1")
+
+    theta_s = np.radians(sun_zenith_deg)
+    s = direction_from_angles(theta_s, np.radians(sun_azimuth_deg))
+    lz_cl = kittler_zenith_luminance(sun_zenith_deg) if clear_zenith_luminance is None \
+        else check_range("clear zenith luminance", clear_zenith_luminance, 0, 1e6, "cd m^-2")
+    lz_oc = krochmann_seidl_zenith_luminance(sun_zenith_deg) if overcast_zenith_luminance is None \
+        else check_range("overcast zenith luminance", overcast_zenith_luminance, 0, 1e6, "cd m^-2")
+    # eq. 4.10: L_cl = L_zcl * pattern / (gamma(0) f(theta_s))
+    norm = float(gamma_factor(1.0) * scattering_indicatrix(theta_s))
+    clear = phi * float(lz_cl) / norm / efficacy_clear * cct_to_rgb(cct_clear)
+    overcast = (1.0 - phi) * float(lz_oc) / efficacy_overcast * cct_to_rgb(cct_overcast)
+
+    sun_rad = np.zeros(3)
+    if sun and phi > 0:
+        kw = {k: v for k, v in (("extinction", extinction), ("solar_constant", solar_constant))
+              if v is not None}
+        n = float(direct_normal_irradiance(sun_zenith_deg, day, **kw))
+        sun_rad = phi * n / sun_solid_angle * sun_rgb(sun_zenith_deg)
+    sky = Sky(s, clear=clear, overcast=overcast, sun_radiance=sun_rad,
+              sun_solid_angle=sun_solid_angle,
+              info={"kind": kind, "phi": phi, "sun_zenith_deg": float(sun_zenith_deg),
+                    "sun_azimuth_deg": float(sun_azimuth_deg),
+                    "clear_zenith_luminance_cd_m2": float(lz_cl),
+                    "overcast_zenith_luminance_cd_m2": float(lz_oc),
+                    "ground_albedo": ground_albedo})
+    return replace(sky, ground=ground_albedo * sky.horizontal_irradiance(n=128) / np.pi)

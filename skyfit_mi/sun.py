@@ -1,0 +1,289 @@
+"""The sun: position, irradiance and colour (thesis section 4.1).
+
+Angles are in degrees at this module's boundary (arguments and results named
+``*_deg``) and follow ``docs/CONVENTIONS.md``: zenith from the vertical,
+compass azimuth from north toward east.  Times must carry a time zone.
+"""
+
+from dataclasses import dataclass
+import datetime as _dt
+
+import numpy as np
+
+from .colour import cct_to_rgb
+from .conventions import direction_from_angles
+from .errors import SkyfitError, check_choice, check_range
+
+#: Mean solid angle of the solar disc seen from the earth [sr] (thesis 4.1.1).
+SUN_SOLID_ANGLE = 6e-5
+#: Solar constant after Rapp, the thesis's default [W m^-2] (thesis 4.1.2).
+SOLAR_CONSTANT = 1377.0
+#: The traditional solar constant [W m^-2] (thesis 4.1.2), selectable.
+SOLAR_CONSTANT_CLASSIC = 1353.0
+#: Eccentricity of the earth's orbit (thesis eq. 4.5).
+ECCENTRICITY = 0.01672
+#: Broadband extinction coefficient of a clear atmosphere (thesis eq. 4.7).
+EXTINCTION_CLEAR = 0.431
+
+
+@dataclass(frozen=True)
+class SolarPosition:
+    """Solar zenith and compass azimuth [degrees], arrays of equal shape."""
+
+    zenith_deg: np.ndarray
+    azimuth_deg: np.ndarray
+
+    @property
+    def altitude_deg(self):
+        """Solar altitude above the horizon [degrees]."""
+        return 90.0 - self.zenith_deg
+
+    def direction(self):
+        """Unit vector(s) toward the sun in the world frame, shape (..., 3)."""
+        return direction_from_angles(np.radians(self.zenith_deg), np.radians(self.azimuth_deg))
+
+
+def _times(time):
+    """Return a tz-aware pandas DatetimeIndex, or raise SkyfitError."""
+    import pandas as pd
+
+    if isinstance(time, (_dt.datetime, pd.Timestamp)):
+        time = [time]
+    try:
+        idx = pd.DatetimeIndex(time)
+    except (TypeError, ValueError) as exc:
+        raise SkyfitError(f"cannot read {time!r} as times: {exc}") from exc
+    if idx.tz is None:
+        raise SkyfitError(
+            "time has no time zone; give a time-zone-aware time, e.g. "
+            "datetime(2026, 6, 21, 12, tzinfo=ZoneInfo('Europe/London')) or '2026-06-21T12:00+01:00'."
+        )
+    return idx
+
+
+def _shape_like(time, values):
+    import pandas as pd
+
+    if isinstance(time, (_dt.datetime, pd.Timestamp)):
+        return float(values[0])
+    return np.asarray(values, dtype=float)
+
+
+def day_of_year(time):
+    """Day of the year, 1 on 1 January, in the time's own time zone."""
+    return _shape_like(time, _times(time).dayofyear.to_numpy())
+
+
+# --------------------------------------------------------------------------
+# Solar position
+# --------------------------------------------------------------------------
+
+def spa_solar_position(time, latitude_deg, longitude_deg, elevation=0.0, pressure=101325.0,
+                       temperature=12.0, delta_t=67.0, refraction=True):
+    """Solar position by the NREL SPA algorithm (Reda and Andreas 2004) via pvlib.
+
+    Parameters
+    ----------
+    time : datetime or sequence of datetimes, time-zone aware
+    latitude_deg : float
+        Latitude, north positive [degrees], in [-90, 90].
+    longitude_deg : float
+        Longitude, east positive [degrees], in [-180, 180].
+    elevation : float
+        Height above sea level [m].
+    pressure : float
+        Mean air pressure [Pa] (used for refraction).
+    temperature : float
+        Mean air temperature [degrees C] (used for refraction).
+    delta_t : float
+        TT - UT1 [s].
+    refraction : bool
+        Return the apparent (refracted) zenith (True) or the geometric one.
+
+    Returns
+    -------
+    SolarPosition
+        Zenith and compass azimuth [degrees].
+
+    References
+    ----------
+    I. Reda, A. Andreas, "Solar position algorithm for solar radiation
+    applications", Solar Energy 76(5), 577-589, 2004. doi:10.1016/j.solener.2003.12.003
+    """
+    from pvlib.solarposition import spa_python
+
+    check_range("latitude", latitude_deg, -90, 90, "degrees")
+    check_range("longitude", longitude_deg, -180, 180, "degrees")
+    idx = _times(time)
+    sp = spa_python(idx, latitude_deg, longitude_deg, altitude=elevation, pressure=pressure,
+                    temperature=temperature, delta_t=delta_t)
+    zen = sp["apparent_zenith" if refraction else "zenith"].to_numpy()
+    return SolarPosition(_shape_like(time, zen), _shape_like(time, sp["azimuth"].to_numpy()))
+
+
+def equation_of_time(day):
+    """Equation of time [minutes] for day of year ``day`` (1-366).
+
+    Spencer's Fourier series (J. W. Spencer, "Fourier series representation
+    of the position of the sun", Search 2(5), 172, 1971), as used for the
+    local solar time of thesis eq. 4.1.  Accurate to about 0.5 minute.
+    """
+    b = 2 * np.pi * (np.asarray(day, dtype=float) - 1) / 365.0
+    return 229.18 * (0.000075 + 0.001868 * np.cos(b) - 0.032077 * np.sin(b)
+                     - 0.014615 * np.cos(2 * b) - 0.040849 * np.sin(2 * b))
+
+
+def thesis_declination_sine(day):
+    """sin of the solar declination, thesis eq. 4.3 [unitless].
+
+    ``day`` is the day of the year (1 = 1 January); the thesis's day count
+    D_s starts at 1 on 21 December.
+    """
+    d_s = np.mod(np.asarray(day, dtype=float) - 355.0, 365.0) + 1.0
+    return -np.cos(np.radians((d_s - 1.0) * 180.0 / 182.6)) * np.sin(np.radians(23.45))
+
+
+def thesis_solar_position(time, latitude_deg, longitude_deg):
+    """Solar position by the thesis's eqs. 4.1-4.4 (after Rapp).
+
+    Local solar time = UTC + longitude/15 h + equation of time (Spencer);
+    hour angle h = (LST - 12) * 15 degrees (eq. 4.1); zenith from eq. 4.2 with
+    the declination of eq. 4.3; azimuth from eq. 4.4, placed west of the
+    meridian in the afternoon.  No refraction.  Errors against SPA are up to
+    about a degree (the declination formula is approximate).
+
+    Returns
+    -------
+    SolarPosition
+        Zenith and compass azimuth [degrees].
+    """
+    check_range("latitude", latitude_deg, -90, 90, "degrees")
+    check_range("longitude", longitude_deg, -180, 180, "degrees")
+    idx = _times(time)
+    utc = idx.tz_convert("UTC")
+    doy_utc = utc.dayofyear.to_numpy()
+    hours = (utc.hour + utc.minute / 60 + utc.second / 3600).to_numpy()
+    lst = hours + longitude_deg / 15.0 + equation_of_time(doy_utc) / 60.0
+    h = np.radians((lst - 12.0) * 15.0)                                   # eq. 4.1
+    sin_d = thesis_declination_sine(doy_utc)                              # eq. 4.3
+    cos_d = np.sqrt(1 - sin_d**2)
+    lat = np.radians(latitude_deg)
+    cos_zen = sin_d * np.sin(lat) + cos_d * np.cos(lat) * np.cos(h)      # eq. 4.2
+    zen = np.arccos(np.clip(cos_zen, -1, 1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos_az = (sin_d - np.sin(lat) * cos_zen) / (np.cos(lat) * np.sin(zen))  # eq. 4.4
+    az = np.arccos(np.clip(np.nan_to_num(cos_az, nan=1.0), -1, 1))
+    # Eq. 4.4 gives the angle from north in [0, pi]; afternoon suns lie west.
+    az = np.where(np.sin(h) > 0, 2 * np.pi - az, az)
+    return SolarPosition(_shape_like(time, np.degrees(zen)), _shape_like(time, np.degrees(az)))
+
+
+#: Solar-position methods by name.
+SOLAR_POSITION_METHODS = {"spa": spa_solar_position, "thesis": thesis_solar_position}
+
+
+def solar_position(time, latitude_deg, longitude_deg, method="spa", **kwargs):
+    """Solar zenith and azimuth [degrees] at a place and time-zone-aware time.
+
+    ``method`` is ``'spa'`` (NREL SPA through pvlib, the default) or
+    ``'thesis'`` (thesis eqs. 4.1-4.4); ``kwargs`` go to the method.
+    """
+    check_choice("solar position method", method, tuple(SOLAR_POSITION_METHODS))
+    return SOLAR_POSITION_METHODS[method](time, latitude_deg, longitude_deg, **kwargs)
+
+
+# --------------------------------------------------------------------------
+# Irradiance
+# --------------------------------------------------------------------------
+
+def extraterrestrial_irradiance(day, solar_constant=SOLAR_CONSTANT):
+    """Extraterrestrial solar irradiance normal to the sun's rays, thesis eq. 4.5-4.6.
+
+    Parameters
+    ----------
+    day : array_like
+        Day of the (Julian) year D_j, 1-366.
+    solar_constant : float
+        S [W m^-2]; 1377 (Rapp, default) or 1353 (:data:`SOLAR_CONSTANT_CLASSIC`).
+
+    Returns
+    -------
+    ndarray
+        N_ext [W m^-2].
+    """
+    check_range("day of year", day, 1, 366)
+    check_range("solar constant", solar_constant, 0, np.inf, "W m^-2")
+    phi = np.radians((np.asarray(day, dtype=float) - 2.0) * 360.0 / 365.2)       # eq. 4.6
+    e = ECCENTRICITY
+    return solar_constant * (1 + e * np.cos(phi)) ** 2 / (1 - e**2)             # eq. 4.5
+
+
+def direct_normal_irradiance(zenith_deg, day, extinction=EXTINCTION_CLEAR,
+                             solar_constant=SOLAR_CONSTANT):
+    """Direct solar irradiance on a plane normal to the sun, thesis eq. 4.7.
+
+    N = N_ext exp(-beta sec(theta_h)); zero when the sun is on or below the
+    horizon (zenith >= 90 degrees).
+
+    Parameters
+    ----------
+    zenith_deg : array_like
+        Solar zenith [degrees].
+    day : array_like
+        Day of the year, 1-366.
+    extinction : float
+        Broadband extinction coefficient beta [unitless], >= 0 (0.431: clear).
+    solar_constant : float
+        [W m^-2].
+
+    Returns
+    -------
+    ndarray
+        N [W m^-2].
+    """
+    check_range("extinction coefficient", extinction, 0, np.inf)
+    z = np.radians(np.asarray(zenith_deg, dtype=float))
+    up = np.cos(z) > 0
+    airmass = np.where(up, 1.0 / np.where(up, np.cos(z), 1.0), np.inf)
+    n = extraterrestrial_irradiance(day, solar_constant) * np.exp(-extinction * airmass)
+    return np.where(up, n, 0.0)
+
+
+def cos_incidence(sun_zenith_deg, sun_azimuth_deg, tilt_deg, plane_azimuth_deg):
+    """Cosine of the sun's angle to a tilted plane's normal, thesis eq. 4.8.
+
+    ``tilt_deg`` is the plane normal's zenith (0: horizontal) and
+    ``plane_azimuth_deg`` its compass azimuth [degrees].  Not clamped.
+    """
+    zs, as_, zn, an = (np.radians(np.asarray(a, dtype=float))
+                       for a in (sun_zenith_deg, sun_azimuth_deg, tilt_deg, plane_azimuth_deg))
+    return np.cos(zn) * np.cos(zs) + np.sin(zn) * np.sin(zs) * np.cos(as_ - an)
+
+
+def tilted_direct_irradiance(normal_irradiance, sun_zenith_deg, sun_azimuth_deg, tilt_deg,
+                             plane_azimuth_deg):
+    """Direct solar irradiance on a tilted plane, thesis eq. 4.9 [W m^-2].
+
+    D_T = N cos(theta_T), zero when the sun is behind the plane.
+    """
+    c = cos_incidence(sun_zenith_deg, sun_azimuth_deg, tilt_deg, plane_azimuth_deg)
+    return np.asarray(normal_irradiance, dtype=float) * np.maximum(c, 0.0)
+
+
+# --------------------------------------------------------------------------
+# Colour
+# --------------------------------------------------------------------------
+
+def sun_cct(zenith_deg):
+    """Correlated colour temperature of terrestrial sunlight [K] (thesis 4.1.3).
+
+    The thesis gives about 4000 K for a low sun and 5500 K for a high sun;
+    between them this project uses 4000 + 1500 sin(altitude), clamped.
+    """
+    alt = np.radians(90.0 - np.asarray(zenith_deg, dtype=float))
+    return 4000.0 + 1500.0 * np.clip(np.sin(alt), 0.0, 1.0)
+
+
+def sun_rgb(zenith_deg):
+    """Linear-sRGB colour of sunlight with luminance Y = 1, shape (..., 3)."""
+    return cct_to_rgb(sun_cct(zenith_deg))
