@@ -71,7 +71,7 @@ def _shape_like(time, values):
 
 def day_of_year(time):
     """Day of the year, 1 on 1 January, in the time's own time zone."""
-    return _shape_like(time, _times(time).dayofyear.to_numpy())
+    return _shape_like(time, _times(time).day_of_year.to_numpy())
 
 
 # --------------------------------------------------------------------------
@@ -161,7 +161,7 @@ def thesis_solar_position(time, latitude_deg, longitude_deg):
     check_range("longitude", longitude_deg, -180, 180, "degrees")
     idx = _times(time)
     utc = idx.tz_convert("UTC")
-    doy_utc = utc.dayofyear.to_numpy()
+    doy_utc = utc.day_of_year.to_numpy()
     hours = (utc.hour + utc.minute / 60 + utc.second / 3600).to_numpy()
     lst = hours + longitude_deg / 15.0 + equation_of_time(doy_utc) / 60.0
     h = np.radians((lst - 12.0) * 15.0)                                   # eq. 4.1
