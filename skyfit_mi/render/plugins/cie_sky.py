@@ -46,7 +46,7 @@ _LUM = np.array([0.2126, 0.7152, 0.0722])
 
 
 def _triple(props, name, default):
-    if not props.has_property(name):
+    if name not in props:
         return np.asarray(default, dtype=float)
     v = props[name]
     if isinstance(v, str):

@@ -40,7 +40,7 @@ _RGB_PARAMS = {"raw": ("rho_d", "rho_s"), "colour": ("C",)}
 
 
 def _prop(props, name):
-    if not props.has_property(name):
+    if name not in props:
         return _DEFAULTS[name]
     v = props[name]
     if isinstance(v, str):
