@@ -155,9 +155,13 @@ class Sky:
 
     # ---- evaluation -------------------------------------------------------
     @property
-    def sun_cos_half_angle(self):
-        """cos of the solar disc's angular radius (disc of solid angle Omega)."""
-        return 1.0 - self.sun_solid_angle / (2.0 * np.pi)
+    def sun_chord2(self):
+        """Squared chord |d - s|^2 at the solar disc's edge, 2 (1 - cos alpha) = Omega/pi.
+
+        A direction d is in the disc when |d - s|^2 <= this; unlike d.s >= cos alpha
+        the test keeps its precision in single precision.
+        """
+        return self.sun_solid_angle / np.pi
 
     def sky_radiance(self, directions):
         """Radiance of the sky alone (no sun) toward world ``directions`` (..., 3).
@@ -180,7 +184,7 @@ class Sky:
         """True where ``directions`` fall inside the solar disc."""
         d = np.asarray(directions, dtype=float)
         d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-        return d @ self.sun_direction >= self.sun_cos_half_angle
+        return np.sum((d - self.sun_direction) ** 2, axis=-1) <= self.sun_chord2
 
     def radiance(self, directions):
         """Radiance of sky and sun toward world ``directions`` (..., 3).

@@ -111,8 +111,8 @@ class CIESkyEmitter(mi.Emitter):
         self.pmf = mi.Float(pmf.astype(np.float32))
         self.cdf = mi.Float(cdf.astype(np.float32))
         self.p_sun = mi.Float(p_sun)
-        self.sun_cos_half = mi.Float(sky.sun_cos_half_angle)
-        for k in ("sun_direction", "sun_solid_angle", "horizon_blend", "p_sun", "sun_cos_half",
+        self.sun_chord2 = mi.Float(sky.sun_chord2)
+        for k in ("sun_direction", "sun_solid_angle", "horizon_blend", "p_sun", "sun_chord2",
                   "scene_radius") + _RGB_KEYS:
             dr.make_opaque(getattr(self, k))
 
@@ -156,14 +156,17 @@ class CIESkyEmitter(mi.Emitter):
         sharp = dr.select(dz > 0.0, sky, self.ground)
         return dr.select(self.horizon_blend, blended, sharp)
 
+    def _in_sun(self, d):
+        # |d - s|^2 <= 2 (1 - cos alpha): exact for unit vectors and, unlike d.s >= cos alpha,
+        # precise in single precision for a disc of 0.25 degree radius
+        return dr.squared_norm(d - self.sun_direction) <= self.sun_chord2
+
     def _radiance(self, d):
-        in_sun = dr.dot(d, self.sun_direction) >= self.sun_cos_half
+        in_sun = self._in_sun(d)
         return self._sky_eval(d) + dr.select(in_sun, self.sun_radiance, 0.0)
 
     def _pdf(self, d):
-        cone = 2.0 * dr.pi * (1.0 - self.sun_cos_half)
-        in_sun = dr.dot(d, self.sun_direction) >= self.sun_cos_half
-        pdf_sun = dr.select(in_sun, dr.rcp(cone), 0.0)
+        pdf_sun = dr.select(self._in_sun(d), dr.rcp(dr.pi * self.sun_chord2), 0.0)
         u = dr.atan2(d.y, d.x) * dr.inv_two_pi
         u = dr.select(u < 0.0, u + 1.0, u)
         v = (1.0 - d.z) * 0.5
@@ -186,8 +189,9 @@ class CIESkyEmitter(mi.Emitter):
         pick_sun = sample.x < self.p_sun
         # sun: uniform in the cone around sun_direction
         x_sun = sample.x / dr.maximum(self.p_sun, 1e-12)
-        cos_t = 1.0 - x_sun * (1.0 - self.sun_cos_half)
-        sin_t = dr.safe_sqrt(1.0 - cos_t * cos_t)
+        one_minus_cos = x_sun * 0.5 * self.sun_chord2           # uniform in cos theta
+        cos_t = 1.0 - one_minus_cos
+        sin_t = dr.safe_sqrt(one_minus_cos * (2.0 - one_minus_cos))
         sp, cp = dr.sincos(2.0 * dr.pi * sample.y)
         d_sun = mi.Frame3f(self.sun_direction).to_world(mi.Vector3f(sin_t * cp, sin_t * sp, cos_t))
         # sky: table cell by inverse CDF, then uniform in the cell (sample reuse)
