@@ -21,7 +21,7 @@ def vec(mi, a):
 
 
 def emitter(mi, sky, **over):
-    from skyfit_mi.render.plugins.cie_sky import sky_dict
+    from skyfit_mi.render.daylight import sky_dict
     return mi.load_dict({**sky_dict(sky), **over})
 
 
@@ -53,7 +53,7 @@ def test_chi2_sampling_of_the_sky(mi, name):
     tested exactly below (test_sun_cone_is_uniform, test_real_sun_sampling).
     """
     from mitsuba.chi2 import ChiSquareTest, EmitterAdapter, SphericalDomain
-    from skyfit_mi.render.plugins.cie_sky import sky_dict
+    from skyfit_mi.render.daylight import sky_dict
     d = sky_dict(SKIES[name]())
     d["sun_radiance"] = mi.ScalarVector3f(0.0, 0.0, 0.0)
     sample, pdf = EmitterAdapter("cie_sky", d)
@@ -113,7 +113,7 @@ def test_real_sun_sampling(mi, name):
 
 def test_sky_changes_without_recompilation(mi):
     import drjit as dr
-    from skyfit_mi.render.plugins.cie_sky import sky_dict, update_sky
+    from skyfit_mi.render.daylight import sky_dict, update_sky
     scene = mi.load_dict({
         "type": "scene", "integrator": {"type": "direct"},
         "sky": sky_dict(SKIES["clear-high"]()),
@@ -146,7 +146,7 @@ def test_lambertian_disc_radiance_equals_irradiance_over_pi(mi, name):
     64x64 orthographic pixels on the disc, 256 spp, seed 0 (1M samples); MIS
     direct lighting.  Tolerance 1%; the observed error is reported on failure.
     """
-    from skyfit_mi.render.plugins.cie_sky import sky_dict
+    from skyfit_mi.render.daylight import sky_dict
     sky = SKIES[name]()
     scene = mi.load_dict({
         "type": "scene", "integrator": {"type": "direct"},

@@ -5,8 +5,7 @@ sum, term by term) and importance-samples it: the sun disc by a uniform cone,
 the sky by a piecewise-constant table over an equal-area (azimuth,
 cos theta) grid built from the NumPy sky whenever its parameters change.
 Every number lives in an opaque Dr.Jit variable, so changing the sky from
-frame to frame (``mi.traverse`` + ``params.update()``, see
-:func:`update_sky`) recompiles nothing.
+frame to frame (``mi.traverse`` + ``params.update()``) recompiles nothing.
 
 Parameters (all linear sRGB radiance in W m^-2 sr^-1 unless stated; none
 differentiable; all exposed by ``traverse`` and updatable):
@@ -26,7 +25,9 @@ name                  type      default                     meaning
 ``scene_radius``      float     1e4                         distance [scene units] beyond all geometry
 ====================  ========  ==========================  ==========================================
 
-Build the dictionary from a :class:`~skyfit_mi.sky.Sky` with :func:`sky_dict`.
+Build the dictionary from a :class:`~skyfit_mi.sky.Sky` with
+:func:`skyfit_mi.render.daylight.sky_dict`; change it with
+:func:`skyfit_mi.render.daylight.update_sky`.
 """
 
 import drjit as dr
@@ -34,6 +35,7 @@ import mitsuba as mi
 import numpy as np
 
 from ...sky import Sky
+from ..daylight import RGB_KEYS as _RGB_KEYS
 
 #: Sampling table resolution: azimuth cells x cos(theta) cells.
 TABLE_NU, TABLE_NV = 128, 64
@@ -41,7 +43,6 @@ TABLE_NU, TABLE_NV = 128, 64
 TABLE_SUPERSAMPLE = 3
 #: Share of the sky's sampling density spread uniformly over the sphere.
 UNIFORM_FLOOR = 0.02
-_RGB_KEYS = ("sun_radiance", "clear", "overcast", "uniform", "intermediate", "ground")
 _LUM = np.array([0.2126, 0.7152, 0.0722])
 
 
@@ -232,27 +233,3 @@ class CIESkyEmitter(mi.Emitter):
 
     def to_string(self):
         return f"CIESkyEmitter[{self.sky.info or 'custom'}]"
-
-
-def sky_dict(sky, scene_radius=1e4):
-    """The ``mi.load_dict`` dictionary of a ``cie_sky`` emitter showing ``sky``."""
-    d = {"type": "cie_sky", "sun_direction": mi.ScalarVector3f(*map(float, sky.sun_direction)),
-         "sun_solid_angle": float(sky.sun_solid_angle), "horizon_blend": bool(sky.horizon_blend),
-         "scene_radius": float(scene_radius)}
-    for k in _RGB_KEYS:
-        d[k] = mi.ScalarVector3f(*map(float, getattr(sky, k)))
-    return d
-
-
-def update_sky(params, sky, prefix):
-    """Write ``sky`` into a ``cie_sky`` emitter through ``mi.traverse`` parameters.
-
-    ``prefix`` is the emitter's key prefix in ``params`` (e.g. ``'sky.'`` for an
-    emitter with id ``sky``).  Calls ``params.update()``; no recompilation.
-    """
-    params[prefix + "sun_direction"] = mi.Vector3f(*map(float, sky.sun_direction))
-    params[prefix + "sun_solid_angle"] = mi.Float(float(sky.sun_solid_angle))
-    params[prefix + "horizon_blend"] = mi.Bool(bool(sky.horizon_blend))
-    for k in _RGB_KEYS:
-        params[prefix + k] = mi.Color3f(*map(float, getattr(sky, k)))
-    params.update()

@@ -1,0 +1,63 @@
+"""Image output: linear EXR frames and PNG previews, written atomically."""
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+
+def _atomic(path, write):
+    """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it over ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def write_exr(path, image):
+    """Write a linear float32 RGB image (H, W, 3) [W m^-2 sr^-1] as OpenEXR."""
+    import mitsuba as mi
+
+    bmp = mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), mi.Bitmap.PixelFormat.RGB)
+    return _atomic(path, lambda p: bmp.write(p))
+
+
+def read_exr(path):
+    """Read an EXR written by :func:`write_exr` as a float32 array (H, W, 3)."""
+    import mitsuba as mi
+
+    return np.array(mi.Bitmap(str(path)), dtype=np.float32)
+
+
+def to_srgb8(image, exposure):
+    """Linear RGB times ``exposure`` to 8-bit sRGB (IEC 61966-2-1 transfer curve)."""
+    x = np.clip(np.asarray(image, dtype=float) * exposure, 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return np.round(srgb * 255).astype(np.uint8)
+
+
+def write_png(path, image8):
+    """Write an 8-bit RGB image (H, W, 3) as PNG."""
+    import matplotlib.image
+
+    return _atomic(path, lambda p: matplotlib.image.imsave(p, np.asarray(image8, dtype=np.uint8),
+                                                           format="png"))
+
+
+def contact_sheet(images, exposure, columns=5, gap=2):
+    """Tile linear images (same shape) into one 8-bit sRGB preview at a common exposure."""
+    h, w, _ = images[0].shape
+    rows = -(-len(images) // columns)
+    sheet = np.full((rows * (h + gap) - gap, columns * (w + gap) - gap, 3), 255, np.uint8)
+    for i, im in enumerate(images):
+        r, c = divmod(i, columns)
+        sheet[r * (h + gap):r * (h + gap) + h, c * (w + gap):c * (w + gap) + w] = to_srgb8(im, exposure)
+    return sheet
