@@ -43,6 +43,8 @@ def _prop(props, name):
     if name not in props:
         return _DEFAULTS[name]
     v = props[name]
+    if isinstance(v, mi.Texture):                 # <rgb>/<float> written as a constant texture
+        v = np.array(v.eval(dr.zeros(mi.SurfaceInteraction3f)), dtype=float).ravel()
     if isinstance(v, str):
         v = [float(x) for x in v.replace(",", " ").split()]
     a = np.asarray(v, dtype=float).ravel()

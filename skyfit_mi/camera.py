@@ -1,0 +1,154 @@
+"""The camera as a radiometric sensor (thesis chapter 5 and 6.3.3), NumPy.
+
+Scene radiance L [W m^-2 sr^-1] becomes a pixel value V [DN] in these steps:
+
+1. optics: image-plane irradiance E_p = l(alpha) L, with the off-axis
+   falloff cos^4(alpha) of eq. 5.6 (optional; the constant (pi/4)(D/f)^2 is
+   folded into the exposure);
+2. exposure: the normalised signal s = exposure * E_p / L-units, with the
+   shutter time, gain and aperture of eq. 5.11 in the one number ``exposure``
+   [sr m^2 W^-1]; s = 1 is full scale;
+3. saturation: s is clipped to [0, 1];
+4. response (the transfer function Q of eq. 5.11): linear, a power law
+   s^(1/gamma), or the sRGB curve;
+5. noise: additive Gaussian with standard deviation ``noise_percent`` per cent
+   of the dynamic range (thesis 6.3.3), seeded;
+6. quantisation to ``bits`` bits, clipped to [0, 2^bits - 1] so that no value
+   is negative or over range.
+
+The per-pixel standard deviation that chi-square needs (eq. 6.2) is
+sqrt(sigma_noise^2 + 1/12) DN (noise plus uniform quantisation error); a
+saturated pixel carries no information about the radiance and gets an
+infinite sigma.
+"""
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .errors import SkyfitError, check_choice, check_range
+
+RESPONSES = ("linear", "gamma", "srgb")
+BIT_DEPTHS = (8, 10, 12, 16)
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """A radiometric camera model; see the module docstring for the steps.
+
+    Attributes
+    ----------
+    exposure : float
+        Radiance giving a full-scale signal is 1/exposure [sr m^2 W^-1].
+    response : {'linear', 'gamma', 'srgb'}
+    gamma : float
+        Exponent of the power-law response (V ~ s^(1/gamma)).
+    bits : {8, 10, 12, 16}
+    noise_percent : float
+        Gaussian noise standard deviation, per cent of the dynamic range, in [0, 50].
+    cos4 : bool
+        Apply the cos^4 off-axis falloff of eq. 5.6.
+    """
+
+    exposure: float
+    response: str = "linear"
+    gamma: float = 2.2
+    bits: int = 8
+    noise_percent: float = 0.0
+    cos4: bool = False
+
+    def __post_init__(self):
+        if not (np.isfinite(self.exposure) and self.exposure > 0):
+            raise SkyfitError(f"sensor exposure = {self.exposure!r} must be a positive number "
+                              "[sr m^2 W^-1] (1 / the radiance that saturates the sensor).")
+        check_choice("sensor response", self.response, RESPONSES)
+        check_range("sensor gamma", self.gamma, 0.1, 10.0)
+        check_choice("sensor bit depth", self.bits, BIT_DEPTHS)
+        check_range("sensor noise_percent", self.noise_percent, 0.0, 50.0, "%")
+
+    @property
+    def max_code(self):
+        """Largest pixel value [DN]."""
+        return 2 ** self.bits - 1
+
+    @property
+    def noise_sigma(self):
+        """Standard deviation of the additive noise [DN]."""
+        return self.noise_percent / 100.0 * self.max_code
+
+    @property
+    def sigma(self):
+        """Per-pixel standard deviation of an unsaturated pixel [DN] (noise + quantisation)."""
+        return float(np.sqrt(self.noise_sigma ** 2 + 1.0 / 12.0))
+
+    def to_dict(self):
+        return asdict(self)
+
+    # ---- the forward model ----------------------------------------------
+    @staticmethod
+    def falloff(width, height, fov_deg):
+        """cos^4 of each pixel's off-axis angle (eq. 5.6) for a horizontal field of view."""
+        t = np.tan(np.radians(fov_deg) / 2.0)
+        x = ((np.arange(width) + 0.5) / width * 2.0 - 1.0) * t
+        y = ((np.arange(height) + 0.5) / height * 2.0 - 1.0) * t * height / width
+        r2 = x[None, :] ** 2 + y[:, None] ** 2
+        return (1.0 / (1.0 + r2)) ** 2                      # cos^4 = 1/(1 + tan^2)^2
+
+    def signal(self, radiance, fov_deg=None):
+        """Normalised, unclipped sensor signal s for radiance (H, W, 3) [W m^-2 sr^-1]."""
+        s = np.asarray(radiance, dtype=float) * self.exposure
+        if self.cos4:
+            if fov_deg is None:
+                raise SkyfitError("the cos^4 falloff needs the camera's field of view (fov_deg).")
+            h, w = s.shape[:2]
+            s = s * self.falloff(w, h, fov_deg)[..., None]
+        return s
+
+    def respond(self, s):
+        """Transfer function on the clipped signal, in [0, 1]."""
+        s = np.clip(s, 0.0, 1.0)
+        if self.response == "linear":
+            return s
+        if self.response == "gamma":
+            return s ** (1.0 / self.gamma)
+        return np.where(s <= 0.0031308, 12.92 * s, 1.055 * s ** (1 / 2.4) - 0.055)
+
+    def expected(self, radiance, fov_deg=None):
+        """Noise-free, unquantised pixel value [DN] (what the chi-square model predicts)."""
+        return self.respond(self.signal(radiance, fov_deg)) * self.max_code
+
+    def capture(self, radiance, rng, fov_deg=None):
+        """Simulate one exposure.
+
+        Parameters
+        ----------
+        radiance : ndarray (H, W, 3)
+            Scene radiance [W m^-2 sr^-1].
+        rng : numpy.random.Generator
+            Source of the noise (seed it and record the seed).
+        fov_deg : float, optional
+            Horizontal field of view, needed with ``cos4``.
+
+        Returns
+        -------
+        values : ndarray (H, W, 3) of uint16
+            Pixel values [DN], in [0, 2^bits - 1].
+        sigma : ndarray (H, W, 3) of float32
+            Standard deviation for chi-square [DN]; inf where saturated.
+        """
+        s = self.signal(radiance, fov_deg)
+        v = self.respond(s) * self.max_code
+        if self.noise_percent > 0:
+            v = v + rng.normal(0.0, self.noise_sigma, size=v.shape)
+        values = np.clip(np.rint(v), 0, self.max_code).astype(np.uint16)
+        sigma = np.where(s >= 1.0, np.inf, self.sigma).astype(np.float32)
+        return values, sigma
+
+
+def auto_exposure(radiance, percentile=99.0, headroom=0.8):
+    """An exposure [sr m^2 W^-1] that puts the given percentile of radiance at ``headroom`` full scale."""
+    level = float(np.percentile(np.asarray(radiance, dtype=float), percentile))
+    if not level > 0:
+        raise SkyfitError("cannot set an automatic exposure on a black sequence; give "
+                          "sensor.exposure explicitly.")
+    return headroom / level

@@ -1,0 +1,84 @@
+"""Pixel values across a rendered sequence (thesis figs. 6.3, 6.14, 6.17): CSV and a plot."""
+
+import csv
+import datetime as dt
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SkyfitError
+from .sequence import load_manifest
+
+SOURCES = {"radiance": "W m^-2 sr^-1", "sensor": "DN"}
+
+
+def parse_pixel(text):
+    """'X,Y' -> (x, y) integers (x across, y down, from the top-left pixel)."""
+    try:
+        x, y = (int(v) for v in str(text).split(","))
+    except ValueError:
+        raise SkyfitError(f"pixel {text!r} is not 'X,Y' (two whole numbers, e.g. 64,40).") from None
+    return x, y
+
+
+def pixel_series(manifest_path, pixels, source="radiance"):
+    """Rows (frame, time, x, y, R, G, B) for every rendered frame and pixel."""
+    if source not in SOURCES:
+        raise SkyfitError(f"unknown source {source!r}; valid: {', '.join(SOURCES)}.")
+    doc, root = load_manifest(manifest_path)
+    from .render.image import read_exr
+
+    w, h = doc["camera"]["width"], doc["camera"]["height"]
+    for x, y in pixels:
+        if not (0 <= x < w and 0 <= y < h):
+            raise SkyfitError(f"pixel {x},{y} is outside the {w}x{h} image; x in [0, {w - 1}], "
+                              f"y in [0, {h - 1}].")
+    rows = []
+    for f in doc["frames"]:
+        if f.get("status") != "rendered":
+            continue
+        img = read_exr(root / f[source])
+        for x, y in pixels:
+            rows.append((f["index"], f["time"], x, y, *map(float, img[y, x])))
+    return rows, SOURCES[source]
+
+
+def write_pixels(manifest_path, pixels, out_prefix=None, source="radiance"):
+    """Write ``<prefix>.csv`` and ``<prefix>.png``; returns their paths."""
+    rows, unit = pixel_series(manifest_path, pixels, source)
+    root = Path(manifest_path) if Path(manifest_path).is_dir() else Path(manifest_path).parent
+    prefix = Path(out_prefix) if out_prefix else root / f"pixels_{source}"
+    prefix.parent.mkdir(parents=True, exist_ok=True)
+    csv_path, png_path = prefix.with_suffix(".csv"), prefix.with_suffix(".png")
+    tmp = csv_path.with_name(f".{csv_path.name}.tmp")
+    with open(tmp, "w", newline="") as fh:
+        wr = csv.writer(fh)
+        wr.writerow(["frame", "time", "x", "y", f"R [{unit}]", f"G [{unit}]", f"B [{unit}]"])
+        wr.writerows(rows)
+    os.replace(tmp, csv_path)
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    styles = ["-", "--", ":", "-."]
+    for k, (x, y) in enumerate(pixels):
+        sel = [r for r in rows if r[2] == x and r[3] == y]
+        t = [dt.datetime.fromisoformat(r[1]) for r in sel]
+        vals = np.array([r[4:] for r in sel])
+        for c, colour in enumerate("rgb"):
+            ax.plot(t, vals[:, c], styles[k % 4], color=colour, marker="o", ms=3,
+                    label=f"({x},{y}) {'RGB'[c]}")
+    ax.set_xlabel("local time")
+    ax.set_ylabel(f"{source} [{unit}]")
+    ax.set_title(f"pixel values across the sequence ({source})")
+    ax.legend(fontsize=7, ncol=len(pixels))
+    fig.autofmt_xdate()
+    fig.tight_layout()
+    tmp_png = png_path.with_name(f".{png_path.stem}.tmp.png")
+    fig.savefig(tmp_png, dpi=120)
+    plt.close(fig)
+    os.replace(tmp_png, png_path)
+    return csv_path, png_path

@@ -1,0 +1,145 @@
+"""Scenes from the Mitsuba XML files in ``scenes/`` plus a spec's materials, sky and camera.
+
+A scene file holds geometry and ``ward`` materials with ids; the spec may
+override any of those materials (any parameterisation).  The loader adds the
+``cie_sky`` emitter (id ``sky``), an optional ground plane, the integrator and
+the camera, and returns the scene with its ``mi.traverse`` parameters.
+"""
+
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+from ..errors import SkyfitError
+from ..ward import MODELS, raw_parameters
+from .scene import camera_origin
+
+_SCALAR_TAGS = {"float": float, "integer": int, "string": str,
+                "boolean": lambda v: v.lower() == "true"}
+
+
+def _value(el):
+    v = el.get("value")
+    if el.tag in ("rgb", "vector", "point"):
+        return [float(x) for x in v.replace(",", " ").split()]
+    return _SCALAR_TAGS[el.tag](v)
+
+
+def scene_materials(tree):
+    """The ``ward`` materials of a parsed scene: {id: {model, normalisation, parameters}}."""
+    out = {}
+    for el in tree.iter("bsdf"):
+        if el.get("type") == "ward" and el.get("id"):
+            params = {c.get("name"): _value(c) for c in el if c.tag in (*_SCALAR_TAGS, "rgb")}
+            params.setdefault("model", "raw")
+            params.setdefault("normalisation", "ward")
+            out[el.get("id")] = params
+    return out
+
+
+def resolve_materials(scene_file, overrides):
+    """Scene materials with the spec's ``overrides`` applied, validated."""
+    tree = ET.parse(scene_file)
+    mats = scene_materials(tree)
+    for name, m in overrides.items():
+        if name not in mats:
+            raise SkyfitError(f"material {name!r} is not a ward material of {scene_file.name}; "
+                              f"its materials are: {', '.join(mats) or 'none'}.")
+        same_model = m.get("model", mats[name]["model"]) == mats[name]["model"]
+        mats[name] = {**mats[name], **m} if same_model else {"normalisation": "ward", **m}
+    for name, m in mats.items():
+        params = {k: v for k, v in m.items() if k in MODELS[m["model"]]}
+        rho_d, rho_s, sigma = raw_parameters(m["model"], **params)
+        m["raw"] = {"rho_d": rho_d.tolist(), "rho_s": rho_s.tolist(), "sigma_alpha": sigma}
+    return tree, mats
+
+
+def look_at(origin, target, up):
+    """Camera to_world 4x4 (Mitsuba's look_at: columns left, up, forward, origin)."""
+    o, t, u = (np.asarray(v, dtype=float) for v in (origin, target, up))
+    d = t - o
+    d /= np.linalg.norm(d)
+    if abs(np.dot(d, u / np.linalg.norm(u))) > 0.999:
+        u = np.array([0.0, 1.0, 0.0])                 # looking straight down: north up in the image
+    left = np.cross(u, d)
+    left /= np.linalg.norm(left)
+    new_up = np.cross(d, left)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, new_up, d, o
+    return m
+
+
+def camera_matrix(cam):
+    """The camera's to_world from a validated [camera] table."""
+    if "matrix" in cam:
+        return np.asarray(cam["matrix"], dtype=float)
+    origin = cam.get("origin")
+    if origin is None:
+        origin = camera_origin(cam["azimuth_deg"], cam["angle_deg"], cam["distance"], cam["target"])
+    return look_at(origin, cam["target"], cam.get("up", [0.0, 0.0, 1.0]))
+
+
+def _sub(parent, tag, **attrs):
+    return ET.SubElement(parent, tag, {k: str(v) for k, v in attrs.items()})
+
+
+def _ward_element(el, name, m):
+    for child in list(el):
+        el.remove(child)
+    el.attrib = {"type": "ward", "id": name}
+    _sub(el, "string", name="model", value=m["model"])
+    _sub(el, "string", name="normalisation", value=m["normalisation"])
+    for k in MODELS[m["model"]]:
+        v = m[k]
+        if isinstance(v, (list, tuple)):
+            _sub(el, "string", name=k, value=" ".join(repr(float(x)) for x in v))
+        else:
+            _sub(el, "float", name=k, value=repr(float(v)))
+
+
+def build_scene_xml(spec):
+    """The full scene XML of a validated spec, and (materials, camera to_world)."""
+    tree, mats = resolve_materials(spec.scene_file, spec.materials)
+    root = tree.getroot()
+    for el in root.iter("bsdf"):
+        if el.get("type") == "ward" and el.get("id") in mats:
+            _ward_element(el, el.get("id"), mats[el.get("id")])
+    ground = spec.raw["scene"].get("ground_albedo")
+    if ground is not None:
+        g = _sub(root, "shape", type="rectangle", id="ground")
+        tr = _sub(g, "transform", name="to_world")
+        _sub(tr, "scale", value=1000)
+        _sub(tr, "translate", x=0, y=0, z=-0.002)
+        b = _sub(g, "bsdf", type="diffuse")
+        _sub(b, "rgb", name="reflectance", value=float(ground))
+    _sub(root, "emitter", type="cie_sky", id="sky")
+    integ = _sub(root, "integrator", type="path", id="integrator")
+    _sub(integ, "integer", name="max_depth", value=spec.render["max_depth"])
+    cam = spec.camera
+    to_world = camera_matrix(cam)
+    sensor = _sub(root, "sensor", type="perspective", id="camera")
+    _sub(sensor, "float", name="fov", value=float(cam["fov_deg"]))
+    _sub(sensor, "string", name="fov_axis", value="x")
+    tr = _sub(sensor, "transform", name="to_world")
+    _sub(tr, "matrix", value=" ".join(repr(float(x)) for x in to_world.ravel()))
+    film = _sub(sensor, "film", type="hdrfilm")
+    _sub(film, "integer", name="width", value=int(cam["width"]))
+    _sub(film, "integer", name="height", value=int(cam["height"]))
+    _sub(film, "string", name="pixel_format", value="rgb")
+    _sub(film, "rfilter", type="box")
+    sampler = _sub(sensor, "sampler", type="independent")
+    _sub(sampler, "integer", name="sample_count", value=int(spec.render["spp"]))
+    return ET.tostring(root, encoding="unicode"), mats, to_world
+
+
+def load_scene(spec):
+    """Load a spec's scene into Mitsuba; returns (scene, params, materials, to_world, xml)."""
+    import mitsuba as mi
+
+    xml, mats, to_world = build_scene_xml(spec)
+    try:
+        scene = mi.load_string(xml)
+    except RuntimeError as exc:
+        raise SkyfitError(f"Mitsuba could not load {spec.scene_file.name} with the spec's "
+                          f"materials: {str(exc).splitlines()[-1]}") from None
+    return scene, mi.traverse(scene), mats, to_world, xml

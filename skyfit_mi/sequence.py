@@ -1,0 +1,187 @@
+"""Render a day: spec -> linear EXR frames, sensor images, manifest, contact sheet.
+
+The output folder holds::
+
+    manifest.json            the contract with fitting (schema skyfit-manifest/1)
+    frames/radiance_NNN.exr  linear RGB radiance [W m^-2 sr^-1]
+    frames/sensor_NNN.exr    the sensor model's pixel values [DN] (integers stored as float)
+    frames/sigma_NNN.exr     per-pixel standard deviation for chi-square [DN]; inf = saturated
+    contact_sheet.png        the day at the sensor's exposure (sRGB preview)
+
+Each frame is rendered with seed ``seed + index`` and its noise drawn from
+``numpy.random.default_rng([seed, index])``, so a frame does not depend on
+which frames were rendered before it: an interrupted run resumes where it
+stopped and gives the same files as an uninterrupted one.
+"""
+
+import datetime as dt
+import json
+import os
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .camera import SensorModel
+from .colour import SRGB_LUMINANCE
+from .errors import SkyfitError
+
+SCHEMA = "skyfit-manifest/1"
+
+
+def _write_json(path, doc):
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(doc, indent=1, default=_jsonable))
+    os.replace(tmp, path)
+
+
+def _jsonable(x):
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, (dt.datetime, Path)):
+        return str(x) if isinstance(x, Path) else x.isoformat()
+    raise TypeError(f"not JSON serialisable: {type(x).__name__}")
+
+
+def _versions():
+    out = {"skyfit_mi": __version__}
+    for pkg in ("mitsuba", "drjit", "numpy", "pvlib"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def _sky_record(sky):
+    return {"sun_direction": sky.sun_direction, "sun_radiance": sky.sun_radiance,
+            "sun_solid_angle_sr": sky.sun_solid_angle, "clear": sky.clear, "overcast": sky.overcast,
+            "uniform": sky.uniform, "intermediate": sky.intermediate, "ground": sky.ground,
+            "horizon_blend": sky.horizon_blend, "info": sky.info,
+            "horizontal_irradiance_W_m2": sky.horizontal_irradiance(n=128),
+            "units": "weights and radiances W m^-2 sr^-1, linear sRGB"}
+
+
+def resolve_exposure(spec):
+    """The sensor exposure [sr m^2 W^-1]: the spec's, or 'auto'.
+
+    'auto' puts a white Lambertian horizontal surface under the day's highest
+    global horizontal irradiance at 80% of full scale (E/pi * exposure = 0.8),
+    known before rendering so that every frame, and a resumed run, shares it.
+    """
+    e = spec.sensor["exposure"]
+    if e != "auto":
+        return float(e)
+    lum = [float(f.sky.horizontal_irradiance(n=128) @ SRGB_LUMINANCE) for f in spec.frames
+           if not f.skipped]
+    peak = max(lum, default=0.0)
+    if peak <= 0:
+        raise SkyfitError("every frame is dark, so sensor.exposure = 'auto' has nothing to go by; "
+                          "give sensor.exposure [sr m^2 W^-1] explicitly.")
+    return 0.8 * np.pi / peak
+
+
+def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
+    """Render every frame of a validated spec into ``out_dir``; returns the manifest dict.
+
+    Refuses a folder that holds another run's manifest unless ``overwrite``;
+    resumes a folder that holds this run's (complete frames are kept).
+    """
+    from .render import setup
+    from .render.daylight import update_sky
+    from .render.image import contact_sheet, read_exr, write_exr, write_png
+    from .render.scene_xml import load_scene
+
+    out = Path(out_dir)
+    run_id = spec.run_id()
+    mpath = out / "manifest.json"
+    done = {}
+    if mpath.exists():
+        old = json.loads(mpath.read_text())
+        if old.get("run_id") != run_id and not overwrite:
+            raise SkyfitError(f"{out} holds another run ({old.get('name')!r}, run {old.get('run_id')});"
+                              " render into an empty folder, or pass --overwrite to replace it.")
+        if old.get("run_id") == run_id:
+            done = {f["index"]: f for f in old["frames"] if f["status"] == "rendered"
+                    and all((out / f[k]).exists() for k in ("radiance", "sensor", "sigma"))}
+    (out / "frames").mkdir(parents=True, exist_ok=True)
+
+    mi = setup(spec.render["variant"])
+    scene, params, mats, to_world, xml = load_scene(spec)
+    sensor = SensorModel(exposure=resolve_exposure(spec),
+                         **{k: spec.sensor[k] for k in ("response", "gamma", "bits", "noise_percent",
+                                                        "cos4")})
+    cam = spec.camera
+    seed = int(spec.render["seed"])
+    manifest = {
+        "schema": SCHEMA, "run_id": run_id, "name": spec.raw.get("name"), "status": "incomplete",
+        "created": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+        "spec": spec.raw, "spec_dir": spec.base_dir.resolve(),
+        "location": spec.raw["location"],
+        "scene": {"file": spec.scene_file, "xml": xml, "materials": mats},
+        "camera": {"to_world": to_world, "fov_deg": cam["fov_deg"], "fov_axis": "x",
+                   "width": cam["width"], "height": cam["height"]},
+        "sensor": {**sensor.to_dict(), "max_code": sensor.max_code, "sigma_DN": sensor.sigma,
+                   "units": "exposure sr m^2 W^-1; values and sigma in DN"},
+        "render": {**spec.render, "integrator": "path", "seed_rule": "mitsuba seed = seed + index; "
+                   "noise rng = numpy.random.default_rng([seed, index])"},
+        "versions": _versions(), "frames": [],
+    }
+    frames_iter = spec.frames
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(spec.frames), desc="render", unit="frame", initial=len(done))
+    for f in frames_iter:
+        rec = {"index": f.index, "time": f.time.isoformat(), "sun_zenith_deg": f.sun_zenith_deg,
+               "sun_azimuth_deg": f.sun_azimuth_deg, "below_horizon": f.sun_zenith_deg >= 90.0,
+               "sky": _sky_record(f.sky), "seed": seed + f.index}
+        names = {k: f"frames/{k}_{f.index:03d}.exr" for k in ("radiance", "sensor", "sigma")}
+        if f.skipped:
+            rec["status"] = "skipped"
+            log(f"frame {f.index} at {f.time:%H:%M}: sun below the horizon, skipped as the spec says")
+        elif f.index in done:
+            rec.update(status="rendered", **names)
+        else:
+            update_sky(params, f.sky, "sky.")
+            img = np.array(mi.render(scene, params, seed=seed + f.index), dtype=np.float32)
+            values, sigma = sensor.capture(img, np.random.default_rng([seed, f.index]),
+                                           fov_deg=cam["fov_deg"])
+            write_exr(out / names["radiance"], img)
+            write_exr(out / names["sensor"], values.astype(np.float32))
+            write_exr(out / names["sigma"], sigma)
+            rec.update(status="rendered", **names)
+            if bar is not None:
+                bar.update(1)
+        manifest["frames"].append(rec)
+        if rec["status"] == "rendered" and f.index not in done:
+            _write_json(mpath, {**manifest, "frames": manifest["frames"]
+                                + [{"index": g.index, "status": "pending"}
+                                   for g in spec.frames[len(manifest["frames"]):]]})
+    if bar is not None:
+        bar.close()
+    manifest["status"] = "complete"
+    rendered = [read_exr(out / r["radiance"]) for r in manifest["frames"] if r["status"] == "rendered"]
+    if rendered:
+        write_png(out / "contact_sheet.png", contact_sheet(rendered, sensor.exposure))
+    _write_json(mpath, manifest)
+    skipped = sum(r["status"] == "skipped" for r in manifest["frames"])
+    log(f"{len(rendered)} frames rendered ({len(done)} kept from an earlier run), {skipped} skipped;"
+        f" manifest, frames and contact sheet in {out.resolve()}")
+    return manifest
+
+
+def load_manifest(path):
+    """Read a manifest (a file, or a folder holding manifest.json)."""
+    p = Path(path)
+    p = p / "manifest.json" if p.is_dir() else p
+    if not p.is_file():
+        raise SkyfitError(f"no manifest at {str(p)!r}; give a folder written by `skyfit render`.")
+    doc = json.loads(p.read_text())
+    if doc.get("schema") != SCHEMA:
+        raise SkyfitError(f"{p} is not a skyfit manifest (schema {doc.get('schema')!r}, "
+                          f"expected {SCHEMA!r}).")
+    return doc, p.parent

@@ -1,0 +1,365 @@
+"""Sequence specifications (TOML or JSON): reading, validation, resolution into frames.
+
+A spec describes a day to render: where and when, the sky of each frame, the
+scene and its materials, the camera, the sensor and the render settings.
+See ``scenes/specs/*.toml`` and ``docs/SPEC.md``.  Every problem raises a
+:class:`~skyfit_mi.errors.SpecError` naming the key and the fix.
+"""
+
+import copy
+import datetime as dt
+import hashlib
+import json
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
+
+import numpy as np
+
+from .camera import SensorModel
+from .errors import SkyfitError
+from .gensky import from_gensky
+from .sky import SKY_TYPES, cie_sky
+from .sun import solar_position
+from .ward import MODELS, NORMALISATIONS, raw_parameters
+
+#: Where the shipped scenes live; a spec's ``scene.file`` is looked up beside the spec first.
+SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
+
+
+class SpecError(SkyfitError):
+    """A sequence spec is invalid; the message names the key and the fix."""
+
+
+_SCHEMA = {
+    "name": None,
+    "location": {"latitude_deg", "longitude_deg", "timezone", "elevation_m"},
+    "time": {"date", "times", "start", "end", "step_minutes"},
+    "sky": {"type", "phi", "time", "frames", "efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
+            "ground_albedo", "extinction", "solar_constant", "sun", "gensky", "gensky_file",
+            "clear_zenith_luminance", "overcast_zenith_luminance",
+            "diffuse_horizontal_W_m2", "direct_normal_W_m2", "diffuse_horizontal_lux"},
+    "scene": {"file", "ground_albedo"},
+    "materials": None,
+    "camera": {"azimuth_deg", "angle_deg", "distance", "target", "origin", "up", "matrix",
+               "fov_deg", "width", "height"},
+    "sensor": {"exposure", "response", "gamma", "bits", "noise_percent", "cos4"},
+    "render": {"spp", "seed", "variant", "max_depth", "below_horizon"},
+}
+SKY_KINDS = tuple(SKY_TYPES) + ("gensky",)
+BELOW_HORIZON = ("sky", "skip")
+
+
+def _unknown(section, got, allowed):
+    bad = sorted(set(got) - set(allowed))
+    if bad:
+        raise SpecError(f"unknown key(s) {', '.join(bad)} in [{section}]; allowed: "
+                        f"{', '.join(sorted(allowed))}.")
+
+
+def _num(section, key, v, lo=-np.inf, hi=np.inf, integer=False):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+        raise SpecError(f"[{section}] {key} must be a number, got {v!r}.")
+    if integer and int(v) != v:
+        raise SpecError(f"[{section}] {key} must be a whole number, got {v!r}.")
+    if not lo <= v <= hi:
+        raise SpecError(f"[{section}] {key} = {v!r} is outside [{lo:g}, {hi:g}]; give a value in "
+                        "that range.")
+    return int(v) if integer else float(v)
+
+
+def _tz(name):
+    if isinstance(name, str) and name[:1] in "+-" and len(name) == 6 and name[3] == ":":
+        sign = 1 if name[0] == "+" else -1
+        return dt.timezone(sign * dt.timedelta(hours=int(name[1:3]), minutes=int(name[4:6])))
+    try:
+        return ZoneInfo(str(name))
+    except (ZoneInfoNotFoundError, ValueError):
+        raise SpecError(f"[location] timezone {name!r} is not a time zone; give an IANA name such "
+                        "as 'Europe/London' or 'UTC', or an offset such as '+01:00'.") from None
+
+
+def _clock(s, date, tz, key):
+    try:
+        if "T" in str(s) or len(str(s)) > 8:
+            t = dt.datetime.fromisoformat(str(s))
+            return t if t.tzinfo else t.replace(tzinfo=tz)
+        hh, mm = (int(x) for x in str(s).split(":")[:2])
+        return dt.datetime.combine(date, dt.time(hh, mm), tzinfo=tz)
+    except (ValueError, TypeError):
+        raise SpecError(f"[time] {key} {s!r} is not a time; write 'HH:MM' (on [time] date) or an "
+                        "ISO date-time such as '2026-06-21T06:00'.") from None
+
+
+@dataclass
+class Frame:
+    """One resolved frame: its time, sun and sky, and whether it is rendered."""
+
+    index: int
+    time: dt.datetime
+    sun_zenith_deg: float
+    sun_azimuth_deg: float
+    sky: object
+    skipped: bool = False
+
+
+@dataclass
+class Spec:
+    """A validated spec: the raw dictionary plus resolved pieces."""
+
+    raw: dict
+    base_dir: Path
+    scene_file: Path
+    materials: dict
+    camera: dict
+    sensor: dict
+    render: dict
+    frames: list = field(default_factory=list)
+
+    def run_id(self):
+        """Hash of everything that determines the output (the resolved spec)."""
+        doc = {"spec": self.raw, "scene": self.scene_file.read_text(), "materials": self.materials}
+        return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def load_spec(path):
+    """Read and validate a spec file (``.toml`` or ``.json``); returns :class:`Spec`."""
+    path = Path(path)
+    if not path.is_file():
+        raise SpecError(f"spec file {str(path)!r} does not exist.")
+    text = path.read_text()
+    try:
+        raw = json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
+        raise SpecError(f"{path.name} is not valid {'JSON' if path.suffix == '.json' else 'TOML'}: "
+                        f"{exc}") from None
+    return validate_spec(raw, path.parent)
+
+
+def validate_spec(raw, base_dir="."):
+    """Validate a spec dictionary and resolve its frames; returns :class:`Spec`."""
+    raw = copy.deepcopy(raw)
+    base_dir = Path(base_dir)
+    if not isinstance(raw, dict):
+        raise SpecError("a spec must be a table of sections ([location], [time], ...).")
+    _unknown("spec", raw, _SCHEMA)
+    for sec in ("location", "time", "scene", "camera"):
+        if sec not in raw:
+            raise SpecError(f"the spec has no [{sec}] section; it is required (see scenes/specs/ "
+                            "for examples).")
+    for sec, keys in _SCHEMA.items():
+        if keys and sec in raw and sec != "sky":
+            if not isinstance(raw[sec], dict):
+                raise SpecError(f"[{sec}] must be a table.")
+            _unknown(sec, raw[sec], keys)
+
+    loc = raw["location"]
+    for k in ("latitude_deg", "longitude_deg", "timezone"):
+        if k not in loc:
+            raise SpecError(f"[location] needs {k}.")
+    lat = _num("location", "latitude_deg", loc["latitude_deg"], -90, 90)
+    lon = _num("location", "longitude_deg", loc["longitude_deg"], -180, 180)
+    elevation = _num("location", "elevation_m", loc.get("elevation_m", 0.0), -500, 9000)
+    tz = _tz(loc["timezone"])
+    times = _times(raw["time"], tz)
+
+    render = {"spp": 64, "seed": 0, "variant": "llvm_ad_rgb", "max_depth": 4, "below_horizon": "sky",
+              **raw.get("render", {})}
+    _num("render", "spp", render["spp"], 1, 1 << 20, integer=True)
+    _num("render", "seed", render["seed"], 0, 2**31 - 1, integer=True)
+    _num("render", "max_depth", render["max_depth"], 1, 64, integer=True)
+    if render["below_horizon"] not in BELOW_HORIZON:
+        raise SpecError(f"[render] below_horizon = {render['below_horizon']!r}; give 'sky' (render "
+                        "the sky alone) or 'skip' (leave the frame out).")
+
+    scene_file = _scene_file(raw["scene"], base_dir)
+    sensor = _sensor(raw.get("sensor", {}))
+    camera = _camera(raw["camera"])
+    materials = _materials(raw.get("materials", {}))
+
+    pos = solar_position(times, lat, lon, elevation=elevation)
+    entries = _sky_entries(raw.get("sky", {"type": "clear"}), times, tz)
+    frames = []
+    for i, (t, z, a, entry) in enumerate(zip(times, np.atleast_1d(pos.zenith_deg),
+                                             np.atleast_1d(pos.azimuth_deg), entries)):
+        sky = _make_sky(entry, float(z), float(a), t, base_dir)
+        below = (sky.sun_direction[2] <= 0.0) if entry.get("type") == "gensky" else z >= 90.0
+        frames.append(Frame(i, t, float(z), float(a), sky,
+                            skipped=bool(below and render["below_horizon"] == "skip")))
+    return Spec(raw, base_dir, scene_file, materials, camera, sensor, render, frames)
+
+
+def _times(sec, tz):
+    if "date" not in sec and not all("T" in str(t) for t in sec.get("times", ["x"])):
+        raise SpecError("[time] needs date = 'YYYY-MM-DD' (or ISO date-times in times).")
+    try:
+        date = dt.date.fromisoformat(str(sec["date"])) if "date" in sec else None
+    except ValueError:
+        raise SpecError(f"[time] date {sec['date']!r} is not a date; write 'YYYY-MM-DD'.") from None
+    if "times" in sec:
+        if any(k in sec for k in ("start", "end", "step_minutes")):
+            raise SpecError("[time] give either times = [...] or start/end/step_minutes, not both.")
+        if not isinstance(sec["times"], list) or not sec["times"]:
+            raise SpecError("[time] times must be a non-empty list such as ['12:00', '12:30'].")
+        out = [_clock(s, date, tz, "time") for s in sec["times"]]
+    else:
+        missing = [k for k in ("start", "end", "step_minutes") if k not in sec]
+        if missing:
+            raise SpecError(f"[time] needs times = [...] or start, end and step_minutes; missing "
+                            f"{', '.join(missing)}.")
+        start, end = _clock(sec["start"], date, tz, "start"), _clock(sec["end"], date, tz, "end")
+        step = _num("time", "step_minutes", sec["step_minutes"], 1, 24 * 60)
+        if end < start:
+            raise SpecError(f"[time] end {sec['end']} is before start {sec['start']}.")
+        n = int(np.floor((end - start) / dt.timedelta(minutes=step) + 1e-9)) + 1
+        out = [start + k * dt.timedelta(minutes=step) for k in range(n)]
+    if len(out) > 10000:
+        raise SpecError(f"[time] gives {len(out)} frames; at most 10000.")
+    if len(set(out)) != len(out):
+        raise SpecError("[time] lists the same time twice.")
+    return out
+
+
+def _scene_file(sec, base_dir):
+    if "file" not in sec:
+        raise SpecError("[scene] needs file = 'disc.xml' (a file beside the spec or in scenes/).")
+    for cand in (base_dir / sec["file"], SCENES_DIR / sec["file"]):
+        if cand.is_file():
+            break
+    else:
+        shipped = ", ".join(sorted(p.name for p in SCENES_DIR.glob("*.xml")))
+        raise SpecError(f"[scene] file {sec['file']!r} not found beside the spec or in scenes/ "
+                        f"(shipped: {shipped}).")
+    if "ground_albedo" in sec:
+        _num("scene", "ground_albedo", sec["ground_albedo"], 0, 1)
+    return cand.resolve()
+
+
+def _sensor(sec):
+    s = {"exposure": "auto", "response": "linear", "gamma": 2.2, "bits": 8, "noise_percent": 0.0,
+         "cos4": False, **sec}
+    if s["exposure"] != "auto":
+        _num("sensor", "exposure", s["exposure"], 1e-12, 1e12)
+    SensorModel(exposure=1.0 if s["exposure"] == "auto" else s["exposure"],
+                **{k: s[k] for k in ("response", "gamma", "bits", "noise_percent", "cos4")})
+    return s
+
+
+def _camera(sec):
+    c = {"fov_deg": 30.0, "width": 128, "height": 128, "target": [0.0, 0.0, 0.0], **sec}
+    forms = [k for k in ("azimuth_deg", "origin", "matrix") if k in sec]
+    if len(forms) != 1:
+        raise SpecError("[camera] place the camera one way: azimuth_deg + angle_deg + distance "
+                        "(compass placement), origin (+ target, up), or matrix (4x4 to_world).")
+    if "azimuth_deg" in sec:
+        for k in ("angle_deg", "distance"):
+            if k not in sec:
+                raise SpecError(f"[camera] compass placement needs {k}.")
+        _num("camera", "angle_deg", c["angle_deg"], 0, 89)
+        _num("camera", "distance", c["distance"], 1e-6, 1e6)
+        _num("camera", "azimuth_deg", c["azimuth_deg"], -360, 360)
+    for k in ("target", "origin", "up"):
+        if k in c and (not isinstance(c[k], list) or len(c[k]) != 3):
+            raise SpecError(f"[camera] {k} must be a list of 3 numbers [x east, y north, z up].")
+    if "matrix" in c:
+        m = np.asarray(c["matrix"], dtype=float)
+        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+            raise SpecError("[camera] matrix must be 4 rows of 4 numbers (the camera's to_world).")
+    _num("camera", "fov_deg", c["fov_deg"], 0.1, 170)
+    _num("camera", "width", c["width"], 1, 16384, integer=True)
+    _num("camera", "height", c["height"], 1, 16384, integer=True)
+    return c
+
+
+def _materials(sec):
+    out = {}
+    for name, m in sec.items():
+        if not isinstance(m, dict):
+            raise SpecError(f"[materials.{name}] must be a table (model = ..., rho_s = ...).")
+        m = dict(m)
+        model = m.get("model", "raw")
+        norm = m.pop("normalisation", "ward")
+        if norm not in NORMALISATIONS:
+            raise SpecError(f"[materials.{name}] normalisation {norm!r}; valid: "
+                            f"{', '.join(NORMALISATIONS)}.")
+        params = {k: v for k, v in m.items() if k != "model"}
+        try:
+            raw_parameters(model, **params)
+        except SkyfitError as exc:
+            raise SpecError(f"[materials.{name}] {exc}") from None
+        out[name] = {"model": model, "normalisation": norm, **params}
+    return out
+
+
+def _sky_entries(sec, times, tz):
+    if isinstance(sec, dict):
+        base = {k: v for k, v in sec.items() if k != "frames"}
+        entries = sec.get("frames")
+    elif isinstance(sec, list):
+        base, entries = {}, sec
+    else:
+        raise SpecError("[sky] must be a table, or [[sky]] a list of tables (one per frame).")
+    _unknown("sky", base, _SCHEMA["sky"] - {"frames"})
+    if entries is None:
+        out = [dict(base) for _ in times]
+    else:
+        if all("time" in e for e in entries):
+            by_time = {}
+            for e in entries:
+                _unknown("sky", e, _SCHEMA["sky"])
+                by_time[_clock(e["time"], times[0].date(), tz, "sky time")] = e
+            missing = [t for t in times if t not in by_time]
+            if missing:
+                raise SpecError(f"[[sky]] has no entry for {missing[0]:%H:%M}; give one per frame "
+                                "time (or drop 'time' and list one per frame in order).")
+            out = [{**base, **by_time[t]} for t in times]
+        elif len(entries) == len(times):
+            for e in entries:
+                _unknown("sky", e, _SCHEMA["sky"])
+            out = [{**base, **e} for e in entries]
+        else:
+            raise SpecError(f"[[sky]] lists {len(entries)} skies for {len(times)} frames; give one "
+                            "per frame, or a 'time' in each.")
+    for e in out:
+        e.setdefault("type", "gensky" if ("gensky" in e or "gensky_file" in e) else "clear")
+        if e["type"] not in SKY_KINDS:
+            raise SpecError(f"[sky] type {e['type']!r} is unknown; valid: {', '.join(SKY_KINDS)}.")
+        if e["type"] == "intermediate" and "phi" not in e:
+            raise SpecError("[sky] an intermediate sky needs phi (sun probability) in [0, 1].")
+        if "phi" in e:
+            _num("sky", "phi", e["phi"], 0, 1)
+    return out
+
+
+def _make_sky(e, zenith, azimuth, t, base_dir):
+    measured = {k: e[k] for k in ("diffuse_horizontal_W_m2", "direct_normal_W_m2",
+                                  "diffuse_horizontal_lux") if k in e}
+    try:
+        if e["type"] == "gensky":
+            text = e.get("gensky")
+            if text is None:
+                p = base_dir / e.get("gensky_file", "")
+                if not p.is_file():
+                    raise SpecError(f"[sky] gensky_file {str(p)!r} not found; give gensky = '''...''' "
+                                    "or a file beside the spec.")
+                text = p.read_text()
+            sky = from_gensky(text)
+        else:
+            kw = {k: e[k] for k in ("efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
+                                    "ground_albedo", "extinction", "solar_constant", "sun",
+                                    "clear_zenith_luminance", "overcast_zenith_luminance") if k in e}
+            phi = e.get("phi") if e["type"] == "intermediate" else None
+            sky = cie_sky(e["type"], zenith, azimuth, phi=phi, day=t.timetuple().tm_yday, **kw)
+        if measured:
+            lux = measured.get("diffuse_horizontal_lux")
+            if lux is not None:
+                sky = sky.scaled_to_illuminance(lux, e.get("efficacy_overcast" if e["type"] == "overcast"
+                                                           else "efficacy_clear", 150.0))
+            sky = sky.scaled(diffuse_horizontal=measured.get("diffuse_horizontal_W_m2"),
+                             direct_normal=measured.get("direct_normal_W_m2"))
+    except SpecError:
+        raise
+    except SkyfitError as exc:
+        raise SpecError(f"[sky] at {t:%Y-%m-%d %H:%M}: {exc}") from None
+    return sky
