@@ -20,6 +20,7 @@ import numpy as np
 from .camera import SensorModel
 from .errors import SkyfitError
 from .gensky import from_gensky
+from .render.variant import VARIANTS
 from .sky import SKY_TYPES, cie_sky
 from .sun import solar_position
 from .ward import MODELS, NORMALISATIONS, raw_parameters
@@ -169,6 +170,9 @@ def validate_spec(raw, base_dir="."):
     _num("render", "spp", render["spp"], 1, 1 << 20, integer=True)
     _num("render", "seed", render["seed"], 0, 2**31 - 1, integer=True)
     _num("render", "max_depth", render["max_depth"], 1, 64, integer=True)
+    if render["variant"] not in VARIANTS:
+        raise SpecError(f"[render] variant {render['variant']!r}; valid: 'llvm_ad_rgb' (CPU), "
+                        "'cuda_ad_rgb' (NVIDIA GPU).")
     if render["below_horizon"] not in BELOW_HORIZON:
         raise SpecError(f"[render] below_horizon = {render['below_horizon']!r}; give 'sky' (render "
                         "the sky alone) or 'skip' (leave the frame out).")
@@ -241,8 +245,11 @@ def _sensor(sec):
          "cos4": False, **sec}
     if s["exposure"] != "auto":
         _num("sensor", "exposure", s["exposure"], 1e-12, 1e12)
-    SensorModel(exposure=1.0 if s["exposure"] == "auto" else s["exposure"],
-                **{k: s[k] for k in ("response", "gamma", "bits", "noise_percent", "cos4")})
+    try:
+        SensorModel(exposure=1.0 if s["exposure"] == "auto" else s["exposure"],
+                    **{k: s[k] for k in ("response", "gamma", "bits", "noise_percent", "cos4")})
+    except SkyfitError as exc:
+        raise SpecError(f"[sensor] {exc}") from None
     return s
 
 

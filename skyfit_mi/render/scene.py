@@ -17,17 +17,30 @@ def camera_origin(azimuth_deg, angle_deg, distance, target=(0.0, 0.0, 0.0)):
     return np.asarray(target, dtype=float) + distance * d
 
 
+def look_at(origin, target, up=(0.0, 0.0, 1.0)):
+    """Camera to_world 4x4 as Mitsuba's look_at builds it (columns: left, up, forward, origin).
+
+    Looking straight down, ``up`` falls back to north (+Y), so north is up in the image.
+    """
+    o, t, u = (np.asarray(v, dtype=float) for v in (origin, target, up))
+    d = t - o
+    d /= np.linalg.norm(d)
+    if abs(np.dot(d, u / np.linalg.norm(u))) > 0.999:
+        u = np.array([0.0, 1.0, 0.0])
+    left = np.cross(u, d)
+    left /= np.linalg.norm(left)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, np.cross(d, left), d, o
+    return m
+
+
 def perspective_sensor(origin, target=(0.0, 0.0, 0.0), fov_deg=30.0, width=256, height=256, spp=64,
                        up=(0.0, 0.0, 1.0)):
     """A perspective camera with a box-filtered HDR film and an independent sampler."""
     import mitsuba as mi
 
-    origin = [float(v) for v in origin]
-    if abs(np.dot(np.subtract(target, origin) / np.linalg.norm(np.subtract(target, origin)), up)) > 0.999:
-        up = (0.0, 1.0, 0.0)          # looking straight down: north is up in the image
-    return {"type": "perspective", "fov": float(fov_deg),
-            "to_world": mi.ScalarTransform4f().look_at(origin=origin, target=[float(v) for v in target],
-                                                       up=[float(v) for v in up]),
+    return {"type": "perspective", "fov": float(fov_deg), "fov_axis": "x",
+            "to_world": mi.ScalarTransform4f(look_at(origin, target, up)),
             "film": {"type": "hdrfilm", "width": int(width), "height": int(height),
                      "rfilter": {"type": "box"}, "pixel_format": "rgb"},
             "sampler": {"type": "independent", "sample_count": int(spp)}}

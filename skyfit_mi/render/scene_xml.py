@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..ward import MODELS, raw_parameters
-from .scene import camera_origin
+from .scene import camera_origin, look_at
 
 _SCALAR_TAGS = {"float": float, "integer": int, "string": str,
                 "boolean": lambda v: v.lower() == "true"}
@@ -52,21 +52,6 @@ def resolve_materials(scene_file, overrides):
         rho_d, rho_s, sigma = raw_parameters(m["model"], **params)
         m["raw"] = {"rho_d": rho_d.tolist(), "rho_s": rho_s.tolist(), "sigma_alpha": sigma}
     return tree, mats
-
-
-def look_at(origin, target, up):
-    """Camera to_world 4x4 (Mitsuba's look_at: columns left, up, forward, origin)."""
-    o, t, u = (np.asarray(v, dtype=float) for v in (origin, target, up))
-    d = t - o
-    d /= np.linalg.norm(d)
-    if abs(np.dot(d, u / np.linalg.norm(u))) > 0.999:
-        u = np.array([0.0, 1.0, 0.0])                 # looking straight down: north up in the image
-    left = np.cross(u, d)
-    left /= np.linalg.norm(left)
-    new_up = np.cross(d, left)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, new_up, d, o
-    return m
 
 
 def camera_matrix(cam):

@@ -1,0 +1,58 @@
+"""Sensor model statistics (thesis 5 and 6.3.3)."""
+import numpy as np
+import pytest
+
+from skyfit_mi.camera import SensorModel
+from skyfit_mi.errors import SkyfitError
+
+
+def test_noise_sigma_and_mean():
+    s = SensorModel(exposure=0.01, bits=10, noise_percent=5.0)
+    img = np.full((400, 400, 3), 40.0)                      # signal 0.4 of full scale
+    v, sigma = s.capture(img, np.random.default_rng(1))
+    assert v.std() == pytest.approx(0.05 * 1023, rel=0.02)
+    assert v.mean() == pytest.approx(0.4 * 1023, abs=0.3)
+    assert np.all(sigma == pytest.approx(np.sqrt((0.05 * 1023) ** 2 + 1 / 12)))
+
+
+@pytest.mark.parametrize("bits", [8, 10, 12, 16])
+def test_quantisation_steps(bits):
+    s = SensorModel(exposure=1.0, bits=bits)
+    ramp = np.linspace(0, 1, 5000)[None, :, None] * np.ones((1, 1, 3))
+    v, _ = s.capture(ramp, np.random.default_rng(0))
+    assert v.dtype == np.uint16 and v.max() == 2**bits - 1
+    err = v - ramp * (2**bits - 1)
+    assert np.abs(err).max() <= 0.5 + 1e-9                  # rounding to the nearest code
+    if bits == 8:                                          # a fine ramp hits every code once
+        assert np.array_equal(np.unique(v), np.arange(256))
+
+
+def test_clipping_never_negative_or_over_range():
+    s = SensorModel(exposure=1.0, bits=8, noise_percent=20.0)
+    img = np.concatenate([np.zeros((50, 50, 3)), np.full((50, 50, 3), 3.0)], axis=0)
+    v, sigma = s.capture(img, np.random.default_rng(2))
+    assert v.min() == 0 and v.max() == 255
+    assert np.all(np.isinf(sigma[50:])) and np.all(np.isfinite(sigma[:50]))
+
+
+def test_responses_and_cos4():
+    lin = SensorModel(exposure=1.0, bits=16)
+    assert lin.respond(np.array(0.5)) == 0.5
+    assert SensorModel(exposure=1.0, response="gamma", gamma=2.0).respond(np.array(0.25)) == 0.5
+    assert SensorModel(exposure=1.0, response="srgb").respond(np.array(0.5)) == pytest.approx(0.735357, abs=1e-6)
+    f = SensorModel.falloff(2, 2, 90.0)
+    # pixel centres at tan = +-0.5 in x and y: tan^2 alpha = 0.5 -> cos^4 = (1/1.5)^2
+    np.testing.assert_allclose(f, (1 / 1.5) ** 2)
+    c = SensorModel(exposure=1.0, cos4=True).signal(np.ones((2, 2, 3)), fov_deg=90.0)
+    np.testing.assert_allclose(c[..., 0], (1 / 1.5) ** 2)
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(exposure=0.0), "must be a positive number"),
+    (dict(exposure=1.0, bits=9), "valid values are: 8, 10, 12, 16"),
+    (dict(exposure=1.0, response="log"), "'linear', 'gamma', 'srgb'"),
+    (dict(exposure=1.0, noise_percent=-1), r"noise_percent = -1 % is outside the valid range \[0, 50\]"),
+])
+def test_bad_sensor(kw, match):
+    with pytest.raises(SkyfitError, match=match):
+        SensorModel(**kw)

@@ -1,0 +1,185 @@
+"""Specs, `skyfit render` and `skyfit pixels`: validation, resume, physics, end to end."""
+import copy
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from skyfit_mi.cli import main
+from skyfit_mi.spec import SpecError, load_spec, validate_spec
+
+TINY = {
+    "name": "tiny",
+    "location": {"latitude_deg": 40.0, "longitude_deg": 0.0, "timezone": "UTC"},
+    "time": {"date": "2026-06-21", "times": ["07:00", "10:00", "13:00", "16:00"]},
+    "sky": {"type": "clear"},
+    "scene": {"file": "disc.xml"},
+    "materials": {"disc": {"model": "two", "rho_s": 0.0, "sigma_alpha": 0.0}},
+    "camera": {"azimuth_deg": 90.0, "angle_deg": 45.0, "distance": 5.0, "fov_deg": 8.0,
+               "width": 16, "height": 16},
+    "sensor": {"exposure": "auto", "bits": 12, "noise_percent": 2.0},
+    "render": {"spp": 64, "seed": 3},
+}
+
+
+def spec(**changes):
+    raw = copy.deepcopy(TINY)
+    for path, v in changes.items():
+        sec, _, key = path.partition("__")
+        if key:
+            raw.setdefault(sec, {})[key] = v
+        elif v is None:
+            raw.pop(sec)
+        else:
+            raw[sec] = v
+    return raw
+
+
+@pytest.mark.parametrize("changes, match", [
+    (dict(location__latitude_deg=95), r"latitude_deg = 95 is outside \[-90, 90\]"),
+    (dict(location__timezone="Mars/Olympus"), "IANA name such as 'Europe/London'"),
+    (dict(time={"date": "2026-06-21"}), "needs times = \\[...\\] or start, end and step_minutes"),
+    (dict(time={"date": "21/06/2026", "times": ["12:00"]}), "write 'YYYY-MM-DD'"),
+    (dict(time={"date": "2026-06-21", "times": ["noon"]}), "write 'HH:MM'"),
+    (dict(sky={"type": "stormy"}), "valid: clear, overcast, intermediate, gensky"),
+    (dict(sky={"type": "intermediate"}), "needs phi"),
+    (dict(sky={"type": "intermediate", "phi": 2}), r"phi = 2 is outside \[0, 1\]"),
+    (dict(scene={"file": "nothere.xml"}), "shipped: disc.xml, sample_board.xml, sphere.xml"),
+    (dict(materials={"disc": {"model": "raw", "rho_d": 0.8, "rho_s": 0.4, "sigma_alpha": 0.1}}),
+     "rho_d \\+ rho_s = 1.2 > 1"),
+    (dict(materials={"disc": {"model": "two", "rho_s": 0.1, "sigma_alpha": -0.1}}), "negative"),
+    (dict(camera={"fov_deg": 30}), "place the camera one way"),
+    (dict(camera__origin=[0, 0, 5]), "place the camera one way"),
+    (dict(sensor__bits=7), "valid values are: 8, 10, 12, 16"),
+    (dict(render__below_horizon="maybe"), "'sky' .render the sky alone. or 'skip'"),
+    (dict(camera__colour="red"), r"unknown key\(s\) colour in \[camera\]"),
+    (dict(location=None), r"no \[location\] section"),
+    (dict(render__variant="scalar_rgb"), "valid: 'llvm_ad_rgb' .CPU., 'cuda_ad_rgb'"),
+])
+def test_spec_errors_name_the_fix(changes, match, tmp_path):
+    with pytest.raises(SpecError, match=match):
+        validate_spec(spec(**changes), tmp_path)
+
+
+def test_unknown_material_names_the_scene_materials(tmp_path, mi):
+    from skyfit_mi.render.scene_xml import build_scene_xml
+    s = validate_spec(spec(materials={"plate": {"model": "two", "rho_s": 0.1, "sigma_alpha": 0.1}}),
+                      tmp_path)
+    with pytest.raises(Exception, match="its materials are: disc"):
+        build_scene_xml(s)
+
+
+def test_time_range_and_per_frame_skies(tmp_path):
+    s = validate_spec(spec(time={"date": "2026-06-21", "start": "06:00", "end": "18:00",
+                                 "step_minutes": 60},
+                           sky=[{"type": "clear"}] * 6 + [{"type": "intermediate", "phi": 0.5}]
+                           + [{"type": "overcast", "diffuse_horizontal_W_m2": 150.0}] * 6),
+                      tmp_path)
+    assert len(s.frames) == 13 and s.frames[0].time.hour == 6 and s.frames[-1].time.hour == 18
+    assert s.frames[6].sky.info["phi"] == 0.5
+    lum = s.frames[9].sky.sky_horizontal_irradiance() @ [0.2126, 0.7152, 0.0722]
+    assert lum == pytest.approx(150.0)
+
+
+def test_example_specs_are_valid():
+    from skyfit_mi.spec import SCENES_DIR
+    names = sorted(p.name for p in (SCENES_DIR / "specs").glob("*.toml"))
+    assert len(names) >= 8
+    for p in (SCENES_DIR / "specs").glob("*.toml"):
+        s = load_spec(p)
+        assert s.frames and not any(f.skipped for f in s.frames)
+    board = load_spec(SCENES_DIR / "specs" / "board_east_37.toml")
+    assert [f.time.strftime("%H:%M %Z") for f in board.frames][::12] == ["12:00 BST", "18:00 BST"]
+
+
+def _render(raw, out, tmp_path, **kw):
+    from skyfit_mi.sequence import render_sequence
+    return render_sequence(validate_spec(raw, tmp_path), out, progress=False, log=lambda *a: None, **kw)
+
+
+def test_interrupted_render_resumes_to_identical_frames(tmp_path, mi, monkeypatch):
+    from skyfit_mi.render import image
+    from skyfit_mi.render.image import read_exr
+    ref = _render(spec(), tmp_path / "a", tmp_path)
+
+    calls = {"n": 0}
+    real = image.write_exr
+
+    def dying(path, img):
+        calls["n"] += 1
+        if calls["n"] == 5:                        # frame 0: 3 files, frame 1: dies on its 2nd file
+            raise KeyboardInterrupt
+        return real(path, img)
+
+    monkeypatch.setattr(image, "write_exr", dying)
+    with pytest.raises(KeyboardInterrupt):
+        _render(spec(), tmp_path / "b", tmp_path)
+    monkeypatch.setattr(image, "write_exr", real)
+    partial = json.loads((tmp_path / "b" / "manifest.json").read_text())
+    assert partial["status"] == "incomplete"
+    assert [f["status"] for f in partial["frames"]] == ["rendered", "pending", "pending", "pending"]
+    assert not list((tmp_path / "b" / "frames").glob(".*"))          # no half-written files
+
+    logs = []
+    from skyfit_mi.sequence import render_sequence
+    done = render_sequence(validate_spec(spec(), tmp_path), tmp_path / "b", progress=False,
+                           log=logs.append)
+    assert "(1 kept from an earlier run)" in logs[-1] and done["status"] == "complete"
+    for fa, fb in zip(ref["frames"], done["frames"]):
+        for k in ("radiance", "sensor", "sigma"):
+            assert np.array_equal(read_exr(tmp_path / "a" / fa[k]), read_exr(tmp_path / "b" / fb[k]))
+
+
+def test_refuses_to_mix_runs(tmp_path, mi):
+    from skyfit_mi.errors import SkyfitError
+    _render(spec(), tmp_path / "a", tmp_path)
+    other = spec(render__seed=4)
+    with pytest.raises(SkyfitError, match="holds another run.*--overwrite"):
+        _render(other, tmp_path / "a", tmp_path)
+    m = _render(other, tmp_path / "a", tmp_path, overwrite=True)
+    assert m["render"]["seed"] == 4
+
+
+def test_lambertian_disc_across_the_day_equals_irradiance_over_pi(tmp_path, mi):
+    """A white Lambertian disc (rho_s = 0): every pixel's radiance is E/pi.
+
+    16x16 pixels, all on the disc (8-degree field), 64 spp, seed 3: 16k samples per
+    frame; the clear-sky sun dominates and is sampled exactly. Tolerance 1%.
+    """
+    from skyfit_mi.render.image import read_exr
+    m = _render(spec(time={"date": "2026-06-21", "start": "06:00", "end": "18:00",
+                           "step_minutes": 120}), tmp_path / "d", tmp_path)
+    for f in m["frames"]:
+        img = read_exr(tmp_path / "d" / f["radiance"])
+        expected = np.array(f["sky"]["horizontal_irradiance_W_m2"]) / np.pi
+        np.testing.assert_allclose(img.reshape(-1, 3).mean(axis=0), expected, rtol=0.01)
+
+
+def test_sun_below_horizon_is_skipped_or_sky_only(tmp_path, mi):
+    times = {"date": "2026-06-21", "times": ["02:00", "12:00", "21:00"]}
+    m = _render(spec(time=times, render__below_horizon="skip"), tmp_path / "s", tmp_path)
+    assert [f["status"] for f in m["frames"]] == ["skipped", "rendered", "skipped"]
+    m = _render(spec(time=times, sensor__exposure=0.01), tmp_path / "k", tmp_path)
+    assert [f["status"] for f in m["frames"]] == ["rendered"] * 3
+    from skyfit_mi.render.image import read_exr
+    night = read_exr(tmp_path / "k" / m["frames"][0]["radiance"])
+    assert np.all(np.isfinite(night)) and night.max() < 1e-3
+
+
+def test_cli_render_and_pixels_end_to_end(tmp_path, mi):
+    p = tmp_path / "tiny.json"
+    p.write_text(json.dumps(TINY))
+    out = tmp_path / "run"
+    assert main(["render", str(p), "-o", str(out), "-q"]) == 0
+    m = json.loads((out / "manifest.json").read_text())
+    assert m["schema"] == "skyfit-manifest/1" and m["status"] == "complete"
+    assert m["scene"]["materials"]["disc"]["raw"]["rho_d"] == [1.0, 1.0, 1.0]
+    assert len(m["camera"]["to_world"]) == 4 and m["sensor"]["max_code"] == 4095
+    assert (out / "contact_sheet.png").exists()
+    assert main(["pixels", str(out), "--pixel", "8,8", "--pixel", "3,12", "--source", "sensor"]) == 0
+    rows = list(csv.reader(open(out / "pixels_sensor.csv")))
+    assert rows[0][4] == "R [DN]" and len(rows) == 1 + 4 * 2
+    assert (out / "pixels_sensor.png").stat().st_size > 5000
+    assert main(["pixels", str(out), "--pixel", "99,1"]) == 2
+    assert main(["render", str(tmp_path / "missing.toml"), "-o", str(out)]) == 2
