@@ -17,6 +17,7 @@ stopped and gives the same files as an uninterrupted one.
 import datetime as dt
 import json
 import os
+import time
 from importlib import metadata
 from pathlib import Path
 
@@ -130,12 +131,11 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
                    "noise rng = numpy.random.default_rng([seed, index])"},
         "versions": _versions(), "frames": [],
     }
-    frames_iter = spec.frames
     bar = None
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=len(spec.frames), desc="render", unit="frame", initial=len(done))
-    for f in frames_iter:
+    for f in spec.frames:
         rec = {"index": f.index, "time": f.time.isoformat(), "sun_zenith_deg": f.sun_zenith_deg,
                "sun_azimuth_deg": f.sun_azimuth_deg, "below_horizon": f.sun_zenith_deg >= 90.0,
                "sky": _sky_record(f.sky), "seed": seed + f.index}
@@ -147,7 +147,9 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
             rec.update(status="rendered", **names)
         else:
             update_sky(params, f.sky, "sky.")
+            t0 = time.perf_counter()
             img = np.array(mi.render(scene, params, seed=seed + f.index), dtype=np.float32)
+            rec["render_seconds"] = time.perf_counter() - t0
             values, sigma = sensor.capture(img, np.random.default_rng([seed, f.index]),
                                            fov_deg=cam["fov_deg"])
             write_exr(out / names["radiance"], img)
@@ -157,10 +159,9 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
             if bar is not None:
                 bar.update(1)
         manifest["frames"].append(rec)
-        if rec["status"] == "rendered" and f.index not in done:
-            _write_json(mpath, {**manifest, "frames": manifest["frames"]
-                                + [{"index": g.index, "status": "pending"}
-                                   for g in spec.frames[len(manifest["frames"]):]]})
+        if "render_seconds" in rec:               # checkpoint: the frames so far, the rest pending
+            pending = [{"index": g.index, "status": "pending"} for g in spec.frames[f.index + 1:]]
+            _write_json(mpath, {**manifest, "frames": manifest["frames"] + pending})
     if bar is not None:
         bar.close()
     manifest["status"] = "complete"

@@ -112,7 +112,7 @@ def build_scene_xml(spec):
     _sub(film, "integer", name="height", value=int(cam["height"]))
     _sub(film, "string", name="pixel_format", value="rgb")
     _sub(film, "rfilter", type="box")
-    sampler = _sub(sensor, "sampler", type="independent")
+    sampler = _sub(sensor, "sampler", type=spec.render["sampler"])
     _sub(sampler, "integer", name="sample_count", value=int(spec.render["spp"]))
     return ET.tostring(root, encoding="unicode"), mats, to_world
 
