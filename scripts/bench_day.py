@@ -8,10 +8,10 @@
    ambient sampling without caching (-ab 1 -aa 0 -as 0), pixel centres (-pj 0 -ps 1).
    skyfit uses the spec's sampler (multijitter).
 3. Equal noise: relative RMSE (RMSE / reference mean) over the disc's interior pixels in the
-   noon frame against each renderer's
-   own high-sample reference, corrected for the reference's own noise. Radiance's -ad is
-   scaled (noise ~ 1/sqrt(ad)) to match skyfit's 64-spp noise, and its day is timed with two
-   rpict processes in parallel (the machine has two cores, which Mitsuba uses).
+   noon frame against each renderer's own high-sample reference, corrected for the reference's
+   own noise. Radiance's -ad is the smallest of a ladder whose noise is at most skyfit's 64-spp
+   noise, and its day is timed with two rpict processes in parallel (the machine has two
+   cores, which Mitsuba uses).
 
     .venv/bin/python scripts/bench_day.py [--ref-spp 4096] [--ref-ad 4096]
 """
