@@ -113,6 +113,24 @@ class SensorModel:
             return s ** (1.0 / self.gamma)
         return np.where(s <= 0.0031308, 12.92 * s, 1.055 * s ** (1 / 2.4) - 0.055)
 
+    def gain(self, width, height, fov_deg):
+        """Per-pixel factor from radiance to signal, exposure x optional cos^4, shape (H, W)."""
+        g = np.full((height, width), float(self.exposure))
+        return g * self.falloff(width, height, fov_deg) if self.cos4 else g
+
+    def slope(self, s):
+        """d(response)/d(signal) at signal ``s``; 0 where the sensor is saturated or black."""
+        s = np.asarray(s, dtype=float)
+        inside = (s > 0.0) & (s < 1.0)
+        sc = np.clip(s, 1e-12, 1.0)
+        if self.response == "linear":
+            d = np.ones_like(sc)
+        elif self.response == "gamma":
+            d = sc ** (1.0 / self.gamma - 1.0) / self.gamma
+        else:
+            d = np.where(sc <= 0.0031308, 12.92, 1.055 / 2.4 * sc ** (1 / 2.4 - 1.0))
+        return np.where(inside, d, 0.0)
+
     def expected(self, radiance, fov_deg=None):
         """Noise-free, unquantised pixel value [DN] (what the chi-square model predicts)."""
         return self.respond(self.signal(radiance, fov_deg)) * self.max_code

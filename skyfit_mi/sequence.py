@@ -66,6 +66,16 @@ def _sky_record(sky):
             "units": "weights and radiances W m^-2 sr^-1, linear sRGB"}
 
 
+def sky_from_record(rec):
+    """The :class:`~skyfit_mi.sky.Sky` a manifest frame's ``sky`` record describes."""
+    from .sky import Sky
+
+    keys = ("clear", "overcast", "uniform", "intermediate", "ground", "sun_radiance")
+    return Sky(np.asarray(rec["sun_direction"]), **{k: np.asarray(rec[k]) for k in keys},
+               horizon_blend=bool(rec["horizon_blend"]), sun_solid_angle=rec["sun_solid_angle_sr"],
+               info=rec.get("info", {}))
+
+
 def resolve_exposure(spec):
     """The sensor exposure [sr m^2 W^-1]: the spec's, or 'auto'.
 

@@ -166,16 +166,44 @@ class CIESkyEmitter(mi.Emitter):
         in_sun = self._in_sun(d)
         return self._sky_eval(d) + dr.select(in_sun, self.sun_radiance, 0.0)
 
-    def _pdf(self, d):
-        pdf_sun = dr.select(self._in_sun(d), dr.rcp(dr.pi * self.sun_chord2), 0.0)
+    def pdf_sun(self, d):
+        """Density [sr^-1] of :meth:`sample_sun` (uniform over the solar disc)."""
+        return dr.select(self._in_sun(d), dr.rcp(dr.pi * self.sun_chord2), 0.0)
+
+    def pdf_sky(self, d):
+        """Density [sr^-1] of :meth:`sample_sky` (the piecewise-constant table)."""
         u = dr.atan2(d.y, d.x) * dr.inv_two_pi
         u = dr.select(u < 0.0, u + 1.0, u)
         v = (1.0 - d.z) * 0.5
         iu = dr.minimum(mi.UInt32(u * TABLE_NU), TABLE_NU - 1)
         iv = dr.minimum(mi.UInt32(dr.maximum(v, 0.0) * TABLE_NV), TABLE_NV - 1)
         pmf = dr.gather(mi.Float, self.pmf, iv * TABLE_NU + iu)
-        pdf_sky = pmf * (TABLE_NU * TABLE_NV) / (4.0 * dr.pi)
-        return self.p_sun * pdf_sun + (1.0 - self.p_sun) * pdf_sky
+        return pmf * (TABLE_NU * TABLE_NV) / (4.0 * dr.pi)
+
+    def sample_sun(self, sample):
+        """World direction uniform over the solar disc, from a 2D sample."""
+        one_minus_cos = sample.x * 0.5 * self.sun_chord2           # uniform in cos theta
+        cos_t = 1.0 - one_minus_cos
+        sin_t = dr.safe_sqrt(one_minus_cos * (2.0 - one_minus_cos))
+        sp, cp = dr.sincos(2.0 * dr.pi * sample.y)
+        return mi.Frame3f(self.sun_direction).to_world(mi.Vector3f(sin_t * cp, sin_t * sp, cos_t))
+
+    def sample_sky(self, sample):
+        """World direction from the sky table (cell by inverse CDF, then uniform in the cell)."""
+        n = TABLE_NU * TABLE_NV
+        idx = dr.binary_search(0, n - 1, lambda i: dr.gather(mi.Float, self.cdf, i) <= sample.x)
+        c1 = dr.gather(mi.Float, self.cdf, idx)
+        p = dr.gather(mi.Float, self.pmf, idx)
+        t = dr.clip((sample.x - (c1 - p)) / dr.maximum(p, 1e-12), 0.0, 0.99999)
+        u = (mi.Float(idx % TABLE_NU) + t) / TABLE_NU
+        v = (mi.Float(idx // TABLE_NU) + sample.y) / TABLE_NV
+        z = 1.0 - 2.0 * v
+        r = dr.safe_sqrt(1.0 - z * z)
+        su, cu = dr.sincos(2.0 * dr.pi * u)
+        return mi.Vector3f(r * cu, r * su, z)
+
+    def _pdf(self, d):
+        return self.p_sun * self.pdf_sun(d) + (1.0 - self.p_sun) * self.pdf_sky(d)
 
     def eval(self, si, active=True):
         return dr.select(active, self._radiance(-si.wi), 0.0)
@@ -187,29 +215,12 @@ class CIESkyEmitter(mi.Emitter):
         return dr.select(active, self._pdf(ds.d), 0.0)
 
     def sample_direction(self, it, sample, active=True):
+        # one 2D sample picks the sun (x < p_sun) or the sky and is reused within the choice
         pick_sun = sample.x < self.p_sun
-        # sun: uniform in the cone around sun_direction
         x_sun = sample.x / dr.maximum(self.p_sun, 1e-12)
-        one_minus_cos = x_sun * 0.5 * self.sun_chord2           # uniform in cos theta
-        cos_t = 1.0 - one_minus_cos
-        sin_t = dr.safe_sqrt(one_minus_cos * (2.0 - one_minus_cos))
-        sp, cp = dr.sincos(2.0 * dr.pi * sample.y)
-        d_sun = mi.Frame3f(self.sun_direction).to_world(mi.Vector3f(sin_t * cp, sin_t * sp, cos_t))
-        # sky: table cell by inverse CDF, then uniform in the cell (sample reuse)
         x_sky = dr.clip((sample.x - self.p_sun) / dr.maximum(1.0 - self.p_sun, 1e-12), 0.0, 1.0)
-        n = TABLE_NU * TABLE_NV
-        idx = dr.binary_search(0, n - 1,
-                               lambda i: dr.gather(mi.Float, self.cdf, i) <= x_sky)
-        c1 = dr.gather(mi.Float, self.cdf, idx)
-        p = dr.gather(mi.Float, self.pmf, idx)
-        t = dr.clip((x_sky - (c1 - p)) / dr.maximum(p, 1e-12), 0.0, 0.99999)
-        u = (mi.Float(idx % TABLE_NU) + t) / TABLE_NU
-        v = (mi.Float(idx // TABLE_NU) + sample.y) / TABLE_NV
-        z = 1.0 - 2.0 * v
-        r = dr.safe_sqrt(1.0 - z * z)
-        su, cu = dr.sincos(2.0 * dr.pi * u)
-        d_sky = mi.Vector3f(r * cu, r * su, z)
-        d = dr.select(pick_sun, d_sun, d_sky)
+        d = dr.select(pick_sun, self.sample_sun(mi.Point2f(x_sun, sample.y)),
+                      self.sample_sky(mi.Point2f(x_sky, sample.y)))
 
         radius = dr.maximum(self.scene_radius, dr.norm(it.p))
         dist = 2.0 * radius

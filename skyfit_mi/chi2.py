@@ -1,0 +1,145 @@
+"""Chi-square between observed pixel values and the model (thesis eq. 6.2), and the data it needs.
+
+chi^2 = sum_i ((y_i - y(x_i; a)) / sigma_i)^2 over every region pixel, frame and
+colour channel, with y the sensor's pixel values [DN] and sigma their standard
+deviations from the manifest's sensor model (saturated pixels, sigma = inf,
+drop out).  The model y(x; a) is the sensor model applied to the radiance the
+:class:`~skyfit_mi.render.fit_model.WardModel` renders for parameters a.
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .camera import SensorModel
+from .errors import SkyfitError
+from .sequence import load_manifest
+
+
+@dataclass
+class Observations:
+    """Observed values of a region across a sequence.
+
+    y, sigma : (P, T, 3) [DN];  gain : (P,) radiance -> signal factor;
+    pixels : (P, 2) (x, y);  frames : manifest frame indices (T,);  times : ISO strings.
+    """
+
+    pixels: np.ndarray
+    frames: list
+    times: list
+    y: np.ndarray
+    sigma: np.ndarray
+    gain: np.ndarray
+    sensor: SensorModel
+
+
+def parse_region(text):
+    """'rect:x0,y0,x1,y1' (inclusive) or 'pixels:x,y;x,y;...' -> (P, 2) array of (x, y)."""
+    kind, _, rest = str(text).partition(":")
+    try:
+        if kind == "rect":
+            x0, y0, x1, y1 = (int(v) for v in rest.split(","))
+            if x1 < x0 or y1 < y0:
+                raise ValueError
+            xs, ys = np.meshgrid(np.arange(x0, x1 + 1), np.arange(y0, y1 + 1))
+            return np.stack([xs.ravel(), ys.ravel()], axis=1)
+        if kind == "pixels":
+            return np.array([[int(v) for v in p.split(",")] for p in rest.split(";") if p], int)
+    except ValueError:
+        pass
+    raise SkyfitError(f"region {text!r} is not 'rect:x0,y0,x1,y1' (x1 >= x0, y1 >= y0) or "
+                      "'pixels:x,y;x,y'.")
+
+
+def region_from_mask(path, label):
+    """Pixels of a label-mask PNG equal to ``label`` (first channel), as (P, 2) (x, y)."""
+    import matplotlib.image
+
+    m = matplotlib.image.imread(str(path))
+    m = m[..., 0] if m.ndim == 3 else m
+    if m.dtype != np.uint8:
+        m = np.rint(m * 255).astype(int)
+    ys, xs = np.nonzero(m == int(label))
+    if len(xs) == 0:
+        raise SkyfitError(f"label {label} does not occur in mask {path}; its values are "
+                          f"{sorted(set(np.unique(m).tolist()))[:10]}.")
+    return np.stack([xs, ys], axis=1)
+
+
+def load_observations(manifest_path, pixels):
+    """Read a region's pixel values and sigmas from every rendered frame of a manifest."""
+    from .render.image import read_exr
+
+    doc, root = load_manifest(manifest_path)
+    cam = doc["camera"]
+    w, h = cam["width"], cam["height"]
+    pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
+    bad = (pixels[:, 0] < 0) | (pixels[:, 0] >= w) | (pixels[:, 1] < 0) | (pixels[:, 1] >= h)
+    if bad.any():
+        x, y = pixels[bad][0]
+        raise SkyfitError(f"region pixel {x},{y} is outside the {w}x{h} frames.")
+    frames = [f for f in doc["frames"] if f.get("status") == "rendered"]
+    if len(frames) < 2:
+        raise SkyfitError("the sequence has fewer than 2 rendered frames; a fit needs a sequence.")
+    s = doc["sensor"]
+    sensor = SensorModel(**{k: s[k] for k in ("exposure", "response", "gamma", "bits",
+                                              "noise_percent", "cos4")})
+    ys, sig = [], []
+    for f in frames:
+        ys.append(read_exr(root / f["sensor"])[pixels[:, 1], pixels[:, 0]])
+        sig.append(read_exr(root / f["sigma"])[pixels[:, 1], pixels[:, 0]])
+    gain = sensor.gain(w, h, cam["fov_deg"])[pixels[:, 1], pixels[:, 0]]
+    return Observations(pixels, [f["index"] for f in frames], [f["time"] for f in frames],
+                        np.stack(ys, 1).astype(float), np.stack(sig, 1).astype(float), gain, sensor)
+
+
+class Problem:
+    """chi^2(a) for one region: observations, and a radiance model with ``radiance``/``jacobian``."""
+
+    def __init__(self, obs, model, valid=None):
+        self.obs, self.model = obs, model
+        ok = np.isfinite(obs.sigma) & (obs.sigma > 0)
+        if valid is not None:
+            ok &= valid[..., None]
+        self.mask = ok
+        self.n_data = int(ok.sum())
+        self.n_params = len(model.names)
+        if self.n_data <= self.n_params:
+            raise SkyfitError(f"only {self.n_data} usable pixel values (the rest saturated or off "
+                              f"the material) for {self.n_params} parameters; choose a larger "
+                              "region or a lower exposure.")
+        self.evaluations = 0
+
+    @property
+    def dof(self):
+        return self.n_data - self.n_params
+
+    def predict(self, radiance):
+        """Pixel values [DN] the sensor gives for radiance (P, T, 3)."""
+        s = radiance * self.obs.gain[:, None, None]
+        return self.obs.sensor.respond(s) * self.obs.sensor.max_code
+
+    def residuals_from(self, radiance):
+        r = (self.obs.y - self.predict(radiance)) / self.obs.sigma
+        return r[self.mask]
+
+    def residuals(self, theta):
+        """(y - y(a)) / sigma over usable values, flat."""
+        self.evaluations += 1
+        return self.residuals_from(self.model.radiance(theta))
+
+    def chi2(self, theta):
+        """Thesis eq. 6.2."""
+        r = self.residuals(theta)
+        return float(r @ r)
+
+    def jacobian(self, theta):
+        """(residuals, d residuals / d theta) with the model's forward-mode derivatives."""
+        self.evaluations += 1
+        L, dL = self.model.jacobian(theta)
+        s = L * self.obs.gain[:, None, None]
+        dm = self.obs.sensor.slope(s) * self.obs.sensor.max_code * self.obs.gain[:, None, None]
+        r = self.residuals_from(L)
+        J = -(dm[..., None] * dL) / self.obs.sigma[..., None]
+        return r, J[self.mask]

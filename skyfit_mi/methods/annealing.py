@@ -1,0 +1,112 @@
+"""Simulated annealing: the downhill simplex with thermal fluctuations (thesis 6.4.4, 7.3).
+
+After Press et al., Numerical Recipes 2nd ed. section 10.9: the Nelder-Mead simplex moves
+(reflect, expand, contract, shrink), with a positive thermal fluctuation -T ln(u) added
+to the values kept at the vertices and subtracted from every new trial, so that uphill
+moves are accepted with a probability that falls with the temperature T.  Trial points
+that leave the parameter box are mirrored back into it.  The cooling
+schedule of the thesis (7.3.1): start at T0, run m simplex iterations at each
+temperature, then multiply T by alpha; below t_min the simplex runs cold (T = 0) until
+its chi^2 values agree to ftol.  Seeded; the walk (best point after each
+iteration) is recorded (thesis fig. 7.10).
+"""
+
+import numpy as np
+
+#: The thesis's cooling schedules (T0, alpha, m) by number of parameters (tables 7.4-7.12).
+SCHEDULES = {2: (1e6, 0.7, 10), 3: (1e6, 0.8, 10), 5: (1e7, 0.8, 20)}
+
+
+def reflect_into(x, lower, upper):
+    """Mirror a point back into the box (keeps a simplex from collapsing onto a bound)."""
+    span = np.asarray(upper) - np.asarray(lower)
+    y = np.mod(np.asarray(x) - lower, 2 * span)
+    return lower + np.where(y > span, 2 * span - y, y)
+
+
+def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max_evaluations=4000,
+                        t_min=1e-3, step=0.25, ftol=1e-7, max_restarts=4, **_):
+    """Minimise chi^2 by annealing from ``start``; returns a result dict with the walk."""
+    rng = np.random.default_rng(seed)
+    n = len(start)
+    t0, alpha, m = schedule or SCHEDULES.get(n, (1e6, 0.8, 10))
+    span = np.asarray(upper) - np.asarray(lower)
+
+    def make_simplex(x0, size):
+        pts = [x0]
+        for i in range(n):
+            v = x0.copy()
+            v[i] = v[i] + size * span[i] if v[i] + size * span[i] <= upper[i] else v[i] - size * span[i]
+            pts.append(np.clip(v, lower, upper))
+        return np.array(pts), np.array([problem.chi2(v) for v in pts])
+
+    simplex, f = make_simplex(np.clip(np.asarray(start, dtype=float), lower, upper), step)
+    evals = n + 1
+    restarts = 0
+    finished = False
+    best_i = int(np.argmin(f))
+    best_x, best_f = simplex[best_i].copy(), float(f[best_i])
+    walk = [best_x.tolist()]
+    temp = t0
+
+    def trial(fac):
+        nonlocal evals, best_x, best_f
+        centroid = (simplex.sum(axis=0) - simplex[hi]) / n
+        x = reflect_into(centroid * (1 - fac) + simplex[hi] * fac, lower, upper)
+        y = problem.chi2(x)
+        evals += 1
+        if y < best_f:
+            best_x, best_f = x.copy(), y
+        yflu = y + temp * np.log(rng.random())         # trials get a negative fluctuation
+        if yflu < fluct[hi]:
+            simplex[hi], f[hi], fluct[hi] = x, y, yflu
+        return yflu
+
+    def converged():
+        return 2 * abs(f.max() - f.min()) <= ftol * (abs(f.max()) + abs(f.min()) + 1e-300)
+
+    frozen = False
+    while evals < max_evaluations:
+        if temp <= t_min:                   # frozen: plain downhill simplex until it converges
+            temp, frozen = 0.0, True
+        for _ in range(m):
+            fluct = f - temp * np.log(rng.random(n + 1))            # vertices get +T|ln u|
+            order = np.argsort(fluct)
+            lo, hi, nhi = order[0], order[-1], order[-2]
+            y = trial(-1.0)                                  # reflect
+            if y <= fluct[lo]:
+                trial(2.0)                                   # expand
+            elif y >= fluct[nhi]:
+                ysave = fluct[hi]
+                y = trial(0.5)                               # contract
+                if y >= ysave:                               # shrink toward the best
+                    for i in range(n + 1):
+                        if i != lo:
+                            simplex[i] = np.clip(0.5 * (simplex[i] + simplex[lo]), lower, upper)
+                            f[i] = problem.chi2(simplex[i])
+                            evals += 1
+                            if f[i] < best_f:
+                                best_x, best_f = simplex[i].copy(), float(f[i])
+            walk.append(best_x.tolist())
+            if evals >= max_evaluations or (frozen and converged()):
+                break
+        if frozen and converged():
+            # Nelder-Mead can stall on a degenerate simplex: restart small around the best
+            # point until a restart no longer improves (Press et al. 10.4)
+            if restarts >= max_restarts or evals >= max_evaluations:
+                finished = True
+                break
+            before = best_f
+            simplex, f = make_simplex(best_x.copy(), 0.05)
+            evals += n + 1
+            restarts += 1
+            if restarts > 1 and before - best_f <= ftol * abs(before):
+                finished = True
+                break
+            continue
+        temp *= alpha
+    return {"theta": best_x, "chi2": float(best_f),
+            "status": "converged" if finished else "max_evaluations",
+            "message": f"cooled to T = 0; the simplex converged ({restarts} restarts)" if finished
+            else f"stopped at {evals} evaluations (temperature {temp:.3g})",
+            "trace": walk, "schedule": {"T0": t0, "alpha": alpha, "m": m, "seed": seed}}

@@ -1,0 +1,161 @@
+"""The global method: sigma_alpha searched on a grid, the linear parameters solved in closed form.
+
+Given sigma_alpha, Ward's model is linear in rho_d and rho_s (thesis eq. 3.19), so with
+the basis L = rho_d * D + rho_s * G(sigma) (light cached once, :class:`LightCache`)
+every model's remaining parameters have closed-form bounded least-squares solutions on
+linearised data (y mapped back through the sensor response, sigma through its slope):
+
+* 2 parameters: L = D + rho_s (G - D), scored on a grid of rho_s;
+* 3 parameters: L = R ((1 - rho_s) D + rho_s G): for each rho_s on a grid, R in closed form;
+* 5 parameters: per channel, plastic (rho_s < 0.5) L_c = C_c (1 - rho_s) D_c + rho_s G_c,
+  metal L_c = C_c ((1 - rho_s) D_c + rho_s G_c): for each rho_s on a grid, C_c in closed form.
+
+Every (sigma, rho_s) grid point is scored at once; the best few distinct candidates are
+polished by Levenberg-Marquardt on the full model, so the result is the global minimum
+from any start.  The grid also gives the profile chi-square of sigma_alpha and rho_s.
+"""
+
+import numpy as np
+
+from .levenberg_marquardt import levenberg_marquardt
+
+#: sigma_alpha grid: the ideal mirror, then log-spaced.
+SIGMA_GRID = np.concatenate([[0.0], np.geomspace(0.004, 0.5, 64)])
+RHO_GRID = np.linspace(0.0, 1.0, 101)
+#: Resolution of the profiles near the optimum.
+RHO_FINE = np.linspace(0.0, 1.0, 2001)
+SIGMA_FINE_POINTS = 41
+
+
+def _linearise(problem):
+    """Observed radiance-space values and weights: y_lin (P,T,3), w = 1/sigma_lin^2 (0 = unused)."""
+    obs = problem.obs
+    sensor = obs.sensor
+    v = np.clip(obs.y / sensor.max_code, 0.0, 1.0)
+    if sensor.response == "linear":
+        s = v
+    elif sensor.response == "gamma":
+        s = v ** sensor.gamma
+    else:
+        s = np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+    g = obs.gain[:, None, None]
+    y = s / g
+    slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code * g
+    w = np.where(problem.mask, (slope / obs.sigma) ** 2, 0.0)
+    return y, w
+
+
+def basis(model_two, sigmas):
+    """D (P,T,3) and G (K,P,T,3) for every sigma, from the two-parameter Dr.Jit model."""
+    D = model_two.radiance([0.0, 0.1])                 # rho_d = 1, rho_s = 0
+    G = np.stack([model_two.radiance([1.0, s]) for s in sigmas])
+    return D, G
+
+
+def grid_chi2(model, y, w, D, G, rho=RHO_GRID):
+    """Linearised chi^2 and the closed-form linear parameters at every (sigma[, rho_s]) point.
+
+    Returns (chi2, thetas) with chi2 of shape (K, R) and thetas (K, R, n_params).
+    """
+    K = G.shape[0]
+    if model == "two":
+        H = G - D                                                    # (K,P,T,3)
+        A = np.einsum("ptc,ptc->", w * (y - D), y - D)
+        B = np.einsum("ptc,kptc->k", w * (y - D), H)
+        C = np.einsum("ptc,kptc->k", w, H * H)
+        chi2 = A - 2 * rho[None, :] * B[:, None] + rho[None, :] ** 2 * C[:, None]
+        thetas = np.stack([np.broadcast_to(rho, chi2.shape), np.zeros_like(chi2)], axis=-1)
+        return chi2, thetas
+    # h = (1 - rho) D + rho G: (K, R, P, T, 3) built lazily by channel sums
+    Dw, yw = D * w, y * w
+    if model == "achromatic":
+        a = np.einsum("ptc,ptc->", Dw, D)
+        b = np.einsum("ptc,kptc->k", Dw, G)
+        c = np.einsum("ptc,kptc->k", w, G * G)
+        yd = np.einsum("ptc,ptc->", yw, D)
+        yg = np.einsum("ptc,kptc->k", yw, G)
+        yy = np.einsum("ptc,ptc->", yw, y)
+        r1 = (1 - rho)[None, :]
+        r2 = rho[None, :]
+        hh = r1**2 * a + 2 * r1 * r2 * b[:, None] + r2**2 * c[:, None]
+        yh = r1 * yd + r2 * yg[:, None]
+        R = np.clip(yh / np.maximum(hh, 1e-300), 0.0, 1.0)
+        chi2 = yy - 2 * R * yh + R**2 * hh
+        thetas = np.stack([R, np.broadcast_to(rho, R.shape), np.zeros_like(R)], axis=-1)
+        return chi2, thetas
+    # colour: per channel sums
+    a = np.einsum("ptc,ptc->c", Dw, D)
+    b = np.einsum("ptc,kptc->kc", Dw, G)
+    c = np.einsum("ptc,kptc->kc", w, G * G)
+    yd = np.einsum("ptc,ptc->c", yw, D)
+    yg = np.einsum("ptc,kptc->kc", yw, G)
+    yy = np.einsum("ptc,ptc->c", yw, y)
+    r1 = (1 - rho)[None, :, None]
+    r2 = rho[None, :, None]
+    metal = (rho >= 0.5)[None, :, None]
+    # metal: h = r1 D + r2 G, L = C h
+    hh_m = r1**2 * a + 2 * r1 * r2 * b[:, None] + r2**2 * c[:, None]
+    yh_m = r1 * yd + r2 * yg[:, None]
+    # plastic: L = C r1 D + r2 G  ->  residual (y - r2 G) - C r1 D
+    hh_p = r1**2 * a * np.ones_like(hh_m)
+    yh_p = r1 * (yd - r2 * b[:, None])
+    zz_p = yy - 2 * r2 * yg[:, None] + r2**2 * c[:, None]        # |y - r2 G|^2
+    hh = np.where(metal, hh_m, hh_p)
+    yh = np.where(metal, yh_m, yh_p)
+    zz = np.where(metal, yy, zz_p)
+    C = np.clip(yh / np.maximum(hh, 1e-300), 0.0, 1.0)
+    chi2 = np.sum(zz - 2 * C * yh + C**2 * hh, axis=-1)
+    thetas = np.concatenate([C, np.broadcast_to(rho[None, :, None], C.shape[:2] + (1,)),
+                             np.zeros(C.shape[:2] + (1,))], axis=-1)
+    return chi2, thetas
+
+
+def global_search(problem, start, lower, upper, model_two=None, candidates=3, **_):
+    """Grid over sigma_alpha (and rho_s) with closed-form linear parameters, then LM polish.
+
+    ``start`` is not needed (the search is global); it is accepted for a uniform interface.
+    """
+    model = problem.model.model
+    y, w = _linearise(problem)
+    D, G = basis(model_two, SIGMA_GRID)
+    chi2, thetas = grid_chi2(model, y, w, D, G)
+    thetas[..., -1] = SIGMA_GRID[:, None]
+    # candidates: best grid point, then the best ones at other roughness (distinct minima)
+    best_per_sigma = chi2.min(axis=1)
+    order = np.argsort(best_per_sigma)
+    picks = []
+    for k in order:
+        if all(abs(np.log((SIGMA_GRID[k] + 0.01) / (SIGMA_GRID[j] + 0.01))) > 0.5 for j in picks):
+            picks.append(k)
+        if len(picks) == candidates:
+            break
+    results = []
+    for k in picks:
+        j = int(np.argmin(chi2[k]))
+        res = levenberg_marquardt(problem, thetas[k, j], lower, upper)
+        # a polish that fails (singular curvature) keeps the grid point
+        if res["status"] == "failed" or not res["chi2"] <= problem.chi2(thetas[k, j]):
+            res = {**res, "theta": thetas[k, j], "chi2": problem.chi2(thetas[k, j])}
+        results.append(res)
+    best = min(results, key=lambda r: r["chi2"])
+    profile = refined_profile(model, model_two, y, w, D, G, chi2, float(best["theta"][-1]))
+    return {**best, "status": "converged", "message": f"global grid of {len(SIGMA_GRID)} roughness "
+            f"values, {len(picks)} candidates polished", "profile_linearised": profile,
+            "grid_candidates": [results[i]["theta"].tolist() for i in range(len(results))]}
+
+
+def refined_profile(model, model_two, y, w, D, G, chi2, sigma_best):
+    """Profile chi^2 of sigma_alpha and rho_s: the coarse grid plus a fine one near the optimum."""
+    k = int(np.argmin(np.abs(SIGMA_GRID - sigma_best)))
+    lo = SIGMA_GRID[max(k - 3, 1)] if sigma_best > 0 else 0.0
+    hi = SIGMA_GRID[min(k + 3, len(SIGMA_GRID) - 1)]
+    fine = np.geomspace(max(lo, 1e-3), hi, SIGMA_FINE_POINTS)
+    _, Gf = basis(model_two, fine)
+    chi2_f, _ = grid_chi2(model, y, w, D, Gf, RHO_FINE)
+    chi2_all, _ = grid_chi2(model, y, w, D, G, RHO_FINE)
+    sig = np.concatenate([SIGMA_GRID, fine])
+    prof_s = np.concatenate([chi2.min(axis=1), chi2_f.min(axis=1)])
+    order = np.argsort(sig, kind="stable")
+    prof_r = np.minimum(chi2_all.min(axis=0), chi2_f.min(axis=0))
+    return {"sigma_alpha": sig[order], "chi2_sigma": prof_s[order], "rho_s": RHO_FINE,
+            "chi2_rho": prof_r}

@@ -1,0 +1,55 @@
+"""Levenberg-Marquardt (thesis 6.4.3, eq. 6.12; Press et al., Numerical Recipes ch. 15.5).
+
+The thesis's baseline: from a starting point, solve (alpha + lambda diag alpha) delta = beta
+with alpha = J^T J (the curvature matrix) and beta = -J^T r, accept the step if chi^2
+falls (lambda /= 10) or raise lambda (x 10).  Steps are clipped to the bounds.  When
+alpha is singular (a parameter the data do not constrain, e.g. sigma_alpha at rho_s = 0)
+the method fails, as the thesis's tables report; the failure and its reason are returned.
+"""
+
+import numpy as np
+
+#: Condition number above which the curvature matrix counts as singular.
+SINGULAR_CONDITION = 1e12
+
+
+def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1e-3,
+                        tol_chi2=1e-6, **_):
+    """Minimise chi^2 from ``start``; returns a result dict (theta, chi2, evaluations, ...)."""
+    theta = np.clip(np.asarray(start, dtype=float), lower, upper)
+    r, J = problem.jacobian(theta)
+    chi2 = float(r @ r)
+    lam = lam0
+    trace = [theta.tolist()]
+    status, message = "max_iterations", "stopped after the iteration limit"
+    small = 0
+    for _ in range(max_iterations):
+        alpha = J.T @ J
+        beta = -J.T @ r
+        a = alpha + lam * np.diag(np.diag(alpha))
+        if not np.all(np.isfinite(a)) or np.linalg.cond(a) > SINGULAR_CONDITION:
+            status = "failed"
+            message = ("curvature matrix singular (a parameter does not change chi-square here, "
+                       "e.g. sigma_alpha when rho_s = 0): the thesis's 'Fail'")
+            break
+        delta = np.linalg.solve(a, beta)
+        trial = np.clip(theta - delta, lower, upper)
+        r_t = problem.residuals(trial)
+        chi2_t = float(r_t @ r_t)
+        if chi2_t < chi2:
+            improvement = chi2 - chi2_t
+            theta, chi2 = trial, chi2_t
+            r, J = problem.jacobian(theta)
+            lam = max(lam / 10.0, 1e-12)
+            trace.append(theta.tolist())
+            small = small + 1 if improvement < tol_chi2 * max(chi2, 1.0) else 0
+            if small >= 2:
+                status, message = "converged", "chi-square stopped decreasing"
+                break
+        else:
+            lam *= 10.0
+            if lam > 1e10:
+                status, message = "converged", "no step lowers chi-square (lambda > 1e10)"
+                break
+    return {"theta": theta, "chi2": chi2, "status": status, "message": message, "trace": trace,
+            "jacobian": J}

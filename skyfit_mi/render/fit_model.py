@@ -1,0 +1,173 @@
+"""The fitting model in Dr.Jit: a region's pixel radiances from a :class:`LightCache` and the ``ward`` plugin.
+
+:class:`WardModel` evaluates L(theta) for every region pixel and frame with the
+plugin's own ``eval`` (and its mirror ``sample`` for sigma_alpha = 0) on the
+cached light, and differentiates it with Dr.Jit: forward mode for Jacobian
+columns (few parameters), reverse mode for the gradient of a scalar loss.
+"""
+
+import numpy as np
+
+#: Fitted parameters of each model (thesis 7.1), in order; C is three numbers.
+PARAMETERS = {"two": ("rho_s", "sigma_alpha"),
+              "achromatic": ("R", "rho_s", "sigma_alpha"),
+              "colour": ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha")}
+#: Models by their number of free parameters (the CLI's --model 2/3/5).
+BY_COUNT = {2: "two", 3: "achromatic", 5: "colour"}
+#: Bounds of every parameter: reflectances in [0, 1], sigma_alpha in [0, 0.5].
+BOUNDS = {"rho_s": (0.0, 1.0), "sigma_alpha": (0.0, 0.5), "R": (0.0, 1.0),
+          "C_r": (0.0, 1.0), "C_g": (0.0, 1.0), "C_b": (0.0, 1.0)}
+
+
+def bounds(model):
+    """(lower, upper) arrays of the model's parameters."""
+    lo, hi = zip(*(BOUNDS[p] for p in PARAMETERS[model]))
+    return np.array(lo), np.array(hi)
+
+
+def material_dict(model, theta, normalisation="ward"):
+    """The ``ward`` plugin dictionary (and spec material) for parameters ``theta``."""
+    theta = [float(v) for v in theta]
+    d = {"model": model, "normalisation": normalisation, "rho_s": theta[-2], "sigma_alpha": theta[-1]}
+    if model == "achromatic":
+        d["R"] = theta[0]
+    if model == "colour":
+        d["C"] = theta[:3]
+    return d
+
+
+class WardModel:
+    """Radiance of region pixels as a differentiable function of Ward parameters.
+
+    Parameters
+    ----------
+    cache : LightCache
+    model : {'two', 'achromatic', 'colour'}
+    normalisation : {'ward', 'duer', 'balanced'}
+    """
+
+    def __init__(self, cache, model, normalisation="ward"):
+        import drjit as dr
+        import mitsuba as mi
+
+        self.mi, self.dr = mi, dr
+        self.model, self.normalisation = model, normalisation
+        self.names = PARAMETERS[model]
+        self.shape = cache.weight.shape[:2]                     # (P, T)
+        self.n = cache.weight.shape[2]
+        P, T, N, _ = cache.weight.shape
+        S = cache.mirror.shape[2]
+        flat = lambda a, k: [np.ascontiguousarray(a.reshape(-1, k)[:, i]) for i in range(k)]
+        self.si = dr.zeros(mi.SurfaceInteraction3f, P * T * N)
+        self.si.wi = mi.Vector3f(*flat(cache.wo, 3))
+        self.wi = mi.Vector3f(*flat(cache.wi, 3))
+        self.weight = mi.Color3f(*flat(cache.weight, 3))
+        self.si_m = dr.zeros(mi.SurfaceInteraction3f, P * T * S)
+        # the mirror sample only needs the view direction
+        wo_m = np.zeros((P, T, S, 3), np.float32)
+        c = cache.mirror_cos
+        wo_m[..., 0] = np.sqrt(np.clip(1 - c**2, 0, 1))
+        wo_m[..., 2] = c
+        self.si_m.wi = mi.Vector3f(*flat(wo_m, 3))
+        self.mirror = mi.Color3f(*flat(cache.mirror, 3))
+        self.S = S
+        self.bsdf = mi.load_dict({"type": "ward", **self._props(material_dict(model, self._mid()))})
+        self.params = mi.traverse(self.bsdf)
+        self.evaluations = 0
+
+    def _mid(self):
+        lo, hi = bounds(self.model)
+        return 0.5 * (lo + hi)
+
+    def _props(self, d):
+        d = dict(d)
+        if "C" in d:
+            d["C"] = self.mi.ScalarColor3f(*d["C"])
+        return d
+
+    def _set(self, theta):
+        mi = self.mi
+        theta = [float(v) for v in theta]
+        self.params["rho_s"] = mi.Float(theta[-2])
+        self.params["sigma_alpha"] = mi.Float(theta[-1])
+        if self.model == "achromatic":
+            self.params["R"] = mi.Float(theta[0])
+        if self.model == "colour":
+            self.params["C"] = mi.Color3f(*theta[:3])
+        self.params.update()
+
+    def _radiance_dr(self):
+        """L as a Dr.Jit Color3f of size P*T (attached to any parameter gradients)."""
+        dr, mi = self.dr, self.mi
+        ctx = mi.BSDFContext()
+        f = self.bsdf.eval(ctx, self.si, self.wi)                       # f_r cos(theta_i)
+        glossy = dr.block_sum(f * self.weight, self.n)
+        bs, w = self.bsdf.sample(ctx, self.si_m, mi.Float(0.0), mi.Point2f(0.5, 0.5))
+        delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection)
+        mirror = dr.select(delta, w * bs.pdf, 0.0) * self.mirror
+        return glossy + dr.block_sum(mirror, self.S)
+
+    def _np(self, v):
+        return np.array(v, dtype=float).T.reshape(*self.shape, 3)
+
+    def radiance(self, theta):
+        """L [W m^-2 sr^-1] for parameters ``theta``, shape (P, T, 3)."""
+        self._set(theta)
+        self.evaluations += 1
+        return self._np(self._radiance_dr())
+
+    def jacobian(self, theta):
+        """(L, dL/dtheta) with shapes (P, T, 3) and (P, T, 3, n_params), by forward-mode AD."""
+        dr, mi = self.dr, self.mi
+        self._set(theta)
+        cols = []
+        value = None
+        for i, name in enumerate(self.names):
+            key = "C" if name.startswith("C_") else name
+            x = self.params[key]
+            dr.enable_grad(x)
+            self.params.update()
+            L = self._radiance_dr()
+            if name.startswith("C_"):
+                seed = [0.0, 0.0, 0.0]
+                seed[int("rgb".index(name[-1]))] = 1.0
+                dr.set_grad(x, mi.Color3f(*seed))
+            else:
+                dr.set_grad(x, 1.0)
+            dr.forward_to(L)
+            cols.append(self._np(dr.grad(L)))
+            if value is None:
+                value = self._np(dr.detach(L))
+            dr.disable_grad(x)
+        self.params.update()
+        self.evaluations += 1
+        return value, np.stack(cols, axis=-1)
+
+    def gradient(self, theta, dloss_dL):
+        """d(loss)/d(theta) by reverse-mode AD, given dloss/dL (P, T, 3) as a constant."""
+        dr, mi = self.dr, self.mi
+        self._set(theta)
+        xs = []
+        for name in self.names:
+            key = "C" if name.startswith("C_") else name
+            if key not in [k for k, _ in xs]:
+                x = self.params[key]
+                dr.enable_grad(x)
+                xs.append((key, x))
+        self.params.update()
+        L = self._radiance_dr()
+        g = dloss_dL.reshape(-1, 3)
+        dr.backward_from(dr.sum(L * mi.Color3f(*[np.ascontiguousarray(g[:, i]) for i in range(3)]),
+                                axis=None))
+        grads = {k: np.array(dr.grad(x), dtype=float).ravel() for k, x in xs}
+        for _, x in xs:
+            dr.disable_grad(x)
+        self.params.update()
+        self.evaluations += 1
+        out = []
+        for name in self.names:
+            if name.startswith("C_"):
+                out.append(grads["C"]["rgb".index(name[-1])])
+            else:
+                out.append(grads[name][0])
+        return np.array(out)

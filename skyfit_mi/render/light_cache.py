@@ -1,0 +1,190 @@
+"""The fitting model's renderer: light arriving at exactly the region's pixels, cached once.
+
+Fitting needs the radiance of a few pixels in every frame for thousands of
+parameter values.  Everything in that radiance except the fitted material's
+BRDF is independent of the parameters: the surface points seen through each
+pixel, the light arriving there from sky, sun and the rest of the scene, and
+its visibility.  :func:`build_light_cache` traces it once per region pixel
+and frame with Mitsuba (primary rays jittered over the pixel, incident light
+by the scene's own path integrator) along fixed directions drawn from a
+parameter-independent mixture (the ``cie_sky`` samplers of the sun disc and
+the sky, cosine, and Ward lobes at several roughnesses around the mirror direction);
+the mixture density weights each sample (multi-sample MIS, balance
+heuristic).  Then for any parameters
+
+    L = sum_k f_r(w_o, w_k) cos(theta_k) L_i(w_k) / (p_mix(w_k) N)  +  rho_s m(cos) L_i(mirror)
+
+(the last term only for an ideal mirror, sigma_alpha <= 1e-4) is an unbiased
+estimate of the pixel's radiance with fixed samples: a deterministic, smooth
+function of the parameters (common random numbers), evaluated with the
+``ward`` plugin's own ``eval`` in Dr.Jit (so gradients come from Dr.Jit), or
+split into the basis L = rho_d * D + rho_s * G(sigma) for the global search.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..ward import SIGMA_MIRROR
+
+#: Roughnesses of the Ward sampling lobes in the direction mixture.
+LOBE_SIGMAS = (0.01, 0.03, 0.07, 0.15, 0.3)
+#: Share of directions from the solar disc, the sky table, cosine, and all lobes together; fixed
+#: counts, so the sun's share does not fluctuate from pixel to pixel.
+MIX = {"sun": 0.25, "sky": 0.20, "cosine": 0.15, "lobes": 0.40}
+
+
+@dataclass
+class LightCache:
+    """Cached light at region pixels.
+
+    Shapes: P pixels, T frames, N = positions x directions samples.
+
+    Attributes
+    ----------
+    wo : (P, T, N, 3)  view direction, local frame [unitless]
+    wi : (P, T, N, 3)  light direction, local frame
+    weight : (P, T, N, 3)  L_i / (p_mix N) [W m^-2 sr^-1 sr]; multiply by f_r cos
+    mirror : (P, T, S, 3)  L_i along the mirror direction / S, per position
+    mirror_cos : (P, T, S)  cos(theta_o) at each position
+    hit : (P, T) bool  every position of the pixel lands on the material
+    """
+
+    wo: np.ndarray
+    wi: np.ndarray
+    weight: np.ndarray
+    mirror: np.ndarray
+    mirror_cos: np.ndarray
+    hit: np.ndarray
+
+    # ---- the basis (NumPy, for the global search) ------------------------
+    def diffuse_basis(self):
+        """D with L = rho_d * D + ...: sum cos/pi * weight, shape (P, T, 3)."""
+        cos = np.clip(self.wi[..., 2], 0, None) * (self.wo[..., 2] > 0)
+        return np.einsum("ptn,ptnc->ptc", cos / np.pi, self.weight)
+
+    def specular_basis(self, sigma_alpha, normalisation="ward"):
+        """G(sigma) with L = ... + rho_s * G: shape (P, T, 3); the mirror term for sigma <= 1e-4."""
+        from ..ward import mirror_reflectance, specular_lobe
+
+        if sigma_alpha <= SIGMA_MIRROR:
+            frac = mirror_reflectance(self.mirror_cos, normalisation)
+            return np.einsum("pts,ptsc->ptc", frac, self.mirror)
+        lobe = specular_lobe(self.wi, self.wo, sigma_alpha, normalisation)
+        cos = np.clip(self.wi[..., 2], 0, None)
+        return np.einsum("ptn,ptnc->ptc", lobe * cos, self.weight)
+
+
+def _stratified(rng, n):
+    """n stratified 2D samples in [0, 1)^2 (jittered rows of a near-square grid), shuffled."""
+    a = int(np.ceil(np.sqrt(n)))
+    b = int(np.ceil(n / a))
+    ij = np.stack(np.meshgrid(np.arange(a), np.arange(b), indexing="ij"), -1).reshape(-1, 2)[:n]
+    u = (ij + rng.random((n, 2))) / [a, b]
+    return u[rng.permutation(n)]
+
+
+def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=16, directions=64, seed=0,
+                      max_depth=3):
+    """Trace the light arriving at ``pixels`` for every sky in ``skies``.
+
+    Parameters
+    ----------
+    scene, params : a loaded spec scene and its ``mi.traverse`` parameters
+    skies : list of :class:`~skyfit_mi.sky.Sky`, one per frame
+    pixels : (P, 2) int array of (x, y) pixel coordinates
+    bsdf_id : str, the material whose surface the pixels must show
+    positions, directions : samples per pixel: positions over the pixel's area,
+        and light directions at each
+    seed : int, the seed of every random choice (recorded by the caller)
+    max_depth : path depth for light arriving from the rest of the scene
+
+    Returns
+    -------
+    LightCache
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    from .daylight import update_sky
+
+    pixels = np.asarray(pixels, dtype=int)
+    P, S, K = len(pixels), int(positions), int(directions)
+    sensor = scene.sensors()[0]
+    w, h = sensor.film().crop_size()
+    emitter = scene.environment()
+    integrator = mi.load_dict({"type": "path", "max_depth": int(max_depth)})
+    lobes = [mi.load_dict({"type": "ward", "rho_d": 0.0, "rho_s": 1.0, "sigma_alpha": s})
+             for s in LOBE_SIGMAS]
+    ctx = mi.BSDFContext()
+    target = [s for s in scene.shapes() if s.bsdf().id() == bsdf_id]
+    if not target:
+        raise ValueError(f"no shape of the scene uses material {bsdf_id!r}")
+
+    # component of each of the K directions: sun, sky, cosine, lobes (fixed counts)
+    n_sun, n_sky, n_cos = (max(1, int(round(MIX[k] * K))) for k in ("sun", "sky", "cosine"))
+    n_l = K - n_sun - n_sky - n_cos
+    if n_l < len(LOBE_SIGMAS):
+        raise ValueError(f"directions = {K} is too few; use at least 32")
+    comp = np.concatenate([np.zeros(n_sun, int), np.ones(n_sky, int), np.full(n_cos, 2),
+                           3 + np.sort(np.arange(n_l) % len(LOBE_SIGMAS))])
+    n_comp = 3 + len(LOBE_SIGMAS)
+    frac = [float(np.sum(comp == c)) / K for c in range(n_comp)]
+
+    rng = np.random.default_rng(seed)
+    out = {k: [] for k in ("wo", "wi", "weight", "mirror", "mirror_cos", "hit")}
+    for t, sky in enumerate(skies):
+        update_sky(params, sky, "sky.")
+        # primary rays: S stratified positions in each pixel
+        pos = np.concatenate([pixels[:, None, :] + _stratified(rng, S)[None] for _ in [0]], 0)
+        pos = pos.reshape(P * S, 2) / [w, h]
+        ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
+                                   mi.Point2f(pos[:, 0], pos[:, 1]), mi.Point2f(0.5, 0.5))
+        si = scene.ray_intersect(ray)
+        on = np.zeros(P * S, bool)
+        for shape in target:
+            on |= np.array(si.shape == mi.ShapePtr(shape)) & np.array(si.is_valid())
+        # repeat each position K times
+        idx = mi.UInt32(np.repeat(np.arange(P * S), K))
+        sik = dr.gather(mi.SurfaceInteraction3f, si, idx)
+        comp_all = np.tile(comp, P * S)
+        # stratified within each component's block of directions
+        u = np.concatenate([np.concatenate([_stratified(rng, int(np.sum(comp == c)))
+                                            for c in range(n_comp)])
+                            for _ in range(P * S)])
+        u2 = mi.Point2f(u[:, 0], u[:, 1])
+        # candidate directions from every component, then pick each sample's own
+        cands = [emitter.sample_sun(u2), emitter.sample_sky(u2),
+                 sik.to_world(mi.warp.square_to_cosine_hemisphere(u2))]
+        for b in lobes:
+            bs, _ = b.sample(ctx, sik, mi.Float(0.0), u2)
+            cands.append(sik.to_world(bs.wo))
+        cmask = mi.UInt32(comp_all)
+        d = cands[0]
+        for c in range(1, n_comp):
+            d = dr.select(cmask == c, cands[c], d)
+        # mixture density of each chosen direction under every component (balance heuristic)
+        wl = sik.to_local(d)
+        p_mix = frac[0] * emitter.pdf_sun(d) + frac[1] * emitter.pdf_sky(d) \
+            + frac[2] * dr.maximum(mi.Frame3f.cos_theta(wl), 0.0) * dr.inv_pi
+        for j, b in enumerate(lobes):
+            p_mix += frac[3 + j] * b.pdf(ctx, sik, wl)
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(int(rng.integers(2**31)), P * S * K)
+        li, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(sik.spawn_ray(d)))
+        ok = (p_mix > 0) & (mi.Frame3f.cos_theta(wl) > 0)
+        weight = dr.select(ok, li / dr.maximum(p_mix, 1e-30) / (K * S), 0.0)
+        # mirror direction at each position
+        wm = mi.reflect(si.wi)
+        sampler.seed(int(rng.integers(2**31)), P * S)
+        lm, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(si.spawn_ray(si.to_world(wm))))
+
+        def np3(v, n):
+            return np.array(v, dtype=np.float32).T.reshape(P, n, 3)
+        out["wo"].append(np.repeat(np3(si.wi, S), K, axis=1))
+        out["wi"].append(np3(wl, S * K))
+        out["weight"].append(np3(weight, S * K))
+        out["mirror"].append(np3(lm, S) / S)
+        out["mirror_cos"].append(np.array(mi.Frame3f.cos_theta(si.wi), np.float32).reshape(P, S))
+        out["hit"].append(on.reshape(P, S).all(axis=1))
+    return LightCache(**{k: np.stack(v, axis=1) for k, v in out.items()})

@@ -1,0 +1,83 @@
+"""Uncertainty of fitted parameters and whether the data determine them (thesis 6.3).
+
+Two estimates, both reported:
+
+* profile chi-square (for sigma_alpha and rho_s, from the global grid): the set where the
+  minimum of chi^2 over the other parameters stays within Delta of its minimum,
+  Delta = 1 (68%) and 3.84 (95%) for one parameter;
+* covariance: C = (J^T J)^-1 at the optimum, intervals +- 1 and 1.96 standard deviations.
+
+When chi^2/dof > 1 (the model or the sigmas are imperfect, e.g. render noise in the
+data) both are widened by s^2 = chi^2/dof (Birge ratio), and the output says so.
+"""
+
+import numpy as np
+
+LEVELS = {"68": 1.0, "95": 3.841458820694124}
+Z = {"68": 1.0, "95": 1.959963984540054}
+
+
+def scale(chi2, dof):
+    """The Birge ratio s^2 = max(1, chi^2/dof) that widens intervals of a poor fit."""
+    return max(1.0, chi2 / dof) if dof > 0 else 1.0
+
+
+def covariance(J, s2=1.0):
+    """Parameter covariance s^2 (J^T J)^-1 (pseudo-inverse when singular)."""
+    a = J.T @ J
+    try:
+        c = np.linalg.inv(a)
+        if not np.all(np.isfinite(c)):
+            raise np.linalg.LinAlgError
+    except np.linalg.LinAlgError:
+        c = np.linalg.pinv(a)
+    return c * s2
+
+
+def covariance_intervals(theta, cov, lower, upper):
+    """{level: (lo, hi) arrays} from the covariance, clipped to the bounds."""
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    return {lv: (np.clip(theta - z * sd, lower, upper), np.clip(theta + z * sd, lower, upper))
+            for lv, z in Z.items()}
+
+
+def profile_interval(grid, profile, s2=1.0):
+    """{level: (lo, hi)} where profile <= min + Delta s^2, edges interpolated linearly."""
+    grid, profile = np.asarray(grid, float), np.asarray(profile, float)
+    pmin = profile.min()
+    out = {}
+    for lv, delta in LEVELS.items():
+        thr = pmin + delta * s2
+        inside = np.nonzero(profile <= thr)[0]
+        i0, i1 = inside[0], inside[-1]
+
+        def edge(i, j):
+            if j < 0 or j >= len(grid):
+                return grid[i]
+            t = (thr - profile[i]) / (profile[j] - profile[i]) if profile[j] != profile[i] else 0
+            return grid[i] + np.clip(t, 0, 1) * (grid[j] - grid[i])
+        out[lv] = (float(edge(i0, i0 - 1)), float(edge(i1, i1 + 1)))
+    return out
+
+
+def identifiability(names, intervals95, lower, upper, profile_rise, s2, chi2_dof):
+    """Warnings for parameters the data do not determine, and for a poor fit."""
+    warnings = []
+    span = np.asarray(upper) - np.asarray(lower)
+    for i, name in enumerate(names):
+        lo, hi = intervals95[name]
+        rise = profile_rise.get(name)
+        flat = rise is not None and rise < LEVELS["95"] * s2
+        if flat or (hi - lo) > 0.5 * span[i]:
+            why = (f"chi-square changes by only {rise:.3g} across its whole range" if flat else
+                   f"its 95% interval {lo:.3g}-{hi:.3g} covers over half its range")
+            hint = (" The camera never sees this surface's specular lobe (e.g. a camera on the "
+                    "sun's side, such as in the south, an overcast sky, or too few frames), so "
+                    "the roughness is unknown; do not use the value." if name == "sigma_alpha"
+                    else " Treat this parameter as unknown.")
+            warnings.append(f"{name} is not determined by this sequence: {why}.{hint}")
+    if chi2_dof > 3:
+        warnings.append(f"chi-square per degree of freedom is {chi2_dof:.3g}: the model does not "
+                        "describe the data to within their sigmas (intervals are widened by "
+                        f"s^2 = {s2:.3g}); check the sensor model, the region, or the model choice.")
+    return warnings
