@@ -17,9 +17,10 @@ Scene radiance L [W m^-2 sr^-1] becomes a pixel value V [DN] in these steps:
    is negative or over range.
 
 The per-pixel standard deviation that chi-square needs (eq. 6.2) is
-sqrt(sigma_noise^2 + 1/12) DN (noise plus uniform quantisation error); a
-saturated pixel carries no information about the radiance and gets an
-infinite sigma.
+sqrt(sigma_noise^2 + 1/12) DN (noise plus uniform quantisation error), plus,
+for a rendered frame, the render's own Monte Carlo error carried through the
+response; a saturated pixel carries no information about the radiance and gets
+an infinite sigma.
 """
 
 from dataclasses import asdict, dataclass
@@ -135,7 +136,7 @@ class SensorModel:
         """Noise-free, unquantised pixel value [DN] (what the chi-square model predicts)."""
         return self.respond(self.signal(radiance, fov_deg)) * self.max_code
 
-    def capture(self, radiance, rng, fov_deg=None):
+    def capture(self, radiance, rng, fov_deg=None, radiance_sd=None):
         """Simulate one exposure.
 
         Parameters
@@ -146,6 +147,9 @@ class SensorModel:
             Source of the noise (seed it and record the seed).
         fov_deg : float, optional
             Horizontal field of view, needed with ``cos4``.
+        radiance_sd : ndarray (H, W, 3), optional
+            Standard error of ``radiance`` itself (a render's Monte Carlo error)
+            [W m^-2 sr^-1]; carried through the response into sigma.
 
         Returns
         -------
@@ -159,14 +163,9 @@ class SensorModel:
         if self.noise_percent > 0:
             v = v + rng.normal(0.0, self.noise_sigma, size=v.shape)
         values = np.clip(np.rint(v), 0, self.max_code).astype(np.uint16)
-        sigma = np.where(s >= 1.0, np.inf, self.sigma).astype(np.float32)
+        var = np.full(s.shape, self.sigma ** 2)
+        if radiance_sd is not None:
+            ds_dl = s / np.where(radiance > 0, radiance, 1.0)           # the pixel's gain
+            var = var + (self.slope(s) * self.max_code * ds_dl * radiance_sd) ** 2
+        sigma = np.where(s >= 1.0, np.inf, np.sqrt(var)).astype(np.float32)
         return values, sigma
-
-
-def auto_exposure(radiance, percentile=99.0, headroom=0.8):
-    """An exposure [sr m^2 W^-1] that puts the given percentile of radiance at ``headroom`` full scale."""
-    level = float(np.percentile(np.asarray(radiance, dtype=float), percentile))
-    if not level > 0:
-        raise SkyfitError("cannot set an automatic exposure on a black sequence; give "
-                          "sensor.exposure explicitly.")
-    return headroom / level

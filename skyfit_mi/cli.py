@@ -22,6 +22,37 @@ def _pixels(args):
     print("wrote " + " and ".join(str(p) for p in paths))
 
 
+def _fit(args):
+    from pathlib import Path
+
+    from .chi2 import parse_region, region_from_mask
+    from .fit import fit_region, write_fit
+
+    regions = []
+    for r in args.region or []:
+        name, sep, text = r.partition("=")
+        if not sep:
+            raise SkyfitError(f"--region {r!r}: write NAME=rect:x0,y0,x1,y1 or NAME=pixels:x,y;x,y.")
+        regions.append((name, parse_region(text)))
+    for lab in args.label or []:
+        name, sep, value = lab.partition("=")
+        if not sep or args.mask is None:
+            raise SkyfitError("--label NAME=VALUE needs --mask PNG (a label image of the frames' size).")
+        regions.append((name, region_from_mask(args.mask, int(value))))
+    if not regions:
+        raise SkyfitError("give at least one --region NAME=rect:... (or --mask and --label).")
+    start = [float(v) for v in args.start.split(",")] if args.start else None
+    root = Path(args.manifest)
+    root = root if root.is_dir() else root.parent
+    for name, pixels in regions:
+        res = fit_region(args.manifest, name, pixels, model=int(args.model), method=args.method,
+                         normalisation=args.normalisation, seed=args.seed, start=start,
+                         positions=args.positions, directions=args.directions)
+        prefix = Path(args.output) / f"fit_{name}" if args.output else root / f"fit_{name}"
+        paths = write_fit(res, prefix)
+        print("wrote " + " and ".join(str(p) for p in paths))
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="skyfit", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -41,6 +72,24 @@ def main(argv=None):
                         help="linear radiance frames or the sensor model's pixel values")
     pixels.add_argument("-o", "--output", help="output path prefix (default: MANIFEST/pixels_SOURCE)")
     pixels.set_defaults(func=_pixels)
+
+    fit = sub.add_parser("fit", help="fit Ward parameters to material regions of a sequence")
+    fit.add_argument("manifest", help="folder written by `skyfit render` (or its manifest.json)")
+    fit.add_argument("--region", action="append", metavar="NAME=rect:x0,y0,x1,y1",
+                     help="a material region (NAME = the material id); also NAME=pixels:x,y;x,y")
+    fit.add_argument("--mask", help="label-mask PNG (values per material), with --label")
+    fit.add_argument("--label", action="append", metavar="NAME=VALUE",
+                     help="the mask value of material NAME")
+    fit.add_argument("--model", choices=("2", "3", "5"), default="2",
+                     help="2: rho_s, sigma_alpha; 3: R, rho_s, sigma_alpha; 5: C, rho_s, sigma_alpha")
+    fit.add_argument("--method", choices=("global", "lm", "anneal", "adam"), default="global")
+    fit.add_argument("--normalisation", choices=("ward", "duer", "balanced"), default="ward")
+    fit.add_argument("--start", help="starting parameters, comma-separated (lm, anneal, adam)")
+    fit.add_argument("--seed", type=int, default=0, help="seed of the light cache and random starts")
+    fit.add_argument("--positions", type=int, default=4, help="light-cache positions per pixel")
+    fit.add_argument("--directions", type=int, default=1024, help="light-cache directions per position")
+    fit.add_argument("-o", "--output", help="output folder (default: the manifest's folder)")
+    fit.set_defaults(func=_fit)
     args = parser.parse_args(argv)
     try:
         args.func(args)

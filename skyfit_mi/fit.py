@@ -74,6 +74,8 @@ def fit_region(manifest_path, name, pixels, model="two", method="global", normal
     opts = dict(method_options or {})
     res = METHODS[method](problem, start, lower, upper, seed=seed, model_two=two, **opts)
     theta = np.asarray(res["theta"], dtype=float)
+    evaluations = problem.evaluations + (two.evaluations if two is not wm else 0)
+    t_method = time.perf_counter() - t0 - t_cache
 
     # uncertainty: covariance at the optimum, and profiles from the global grid
     r, J = problem.jacobian(theta)
@@ -87,19 +89,31 @@ def fit_region(manifest_path, name, pixels, model="two", method="global", normal
         problem, start, lower, upper, model_two=two, candidates=1)["profile_linearised"]
     prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
             "rho_s": (grid["rho_s"], grid["chi2_rho"])}
+    # the profiles describe the global minimum; a local method is judged against it
+    glob = method == "global"
     intervals, rise = {}, {}
     for i, p in enumerate(names):
         iv = {lv: (float(cov_iv[lv][0][i]), float(cov_iv[lv][1][i])) for lv in ("68", "95")}
         source = "covariance"
         if p in prof:
-            iv = unc.profile_interval(*prof[p], s2)
             rise[p] = float(np.max(prof[p][1]) - np.min(prof[p][1]))
-            source = "profile"
+            if glob:
+                iv = unc.profile_interval(*prof[p], s2)
+                source = "profile"
         intervals[p] = {"68": iv["68"], "95": iv["95"], "from": source}
     warnings = unc.identifiability(names, {p: intervals[p]["95"] for p in names}, lower, upper,
                                    rise, s2, chi2 / dof)
     if res.get("status") == "failed":
         warnings.insert(0, f"{method} failed: {res['message']}")
+    if not glob:
+        # compare with the global minimum: explains local failures (thesis 7.2)
+        g = global_search(problem, start, lower, upper, model_two=two, candidates=2)
+        if g["chi2"] < chi2 - max(1.0, 1e-3 * chi2):
+            warnings.insert(0, f"{method} stopped at chi2 = {chi2:.6g}, but the global search finds "
+                            f"chi2 = {g['chi2']:.6g} at " + ", ".join(
+                                f"{k} = {v:.4f}" for k, v in zip(names, g["theta"]))
+                            + f": {method} ended in a local minimum or on a flat region of "
+                            "chi-square from this start (thesis 6.3, 7.2)")
     wall = time.perf_counter() - t0
     L = wm.radiance(theta)
     out = {
@@ -109,10 +123,9 @@ def fit_region(manifest_path, name, pixels, model="two", method="global", normal
         "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof, "interval_scale_s2": s2,
         "intervals": intervals,
         "covariance": {"names": list(names), "matrix": cov.tolist()},
-        "evaluations": problem.evaluations + (two.evaluations if two is not wm else 0),
-        "status": res.get("status"),
+        "evaluations": evaluations, "status": res.get("status"),
         "message": res.get("message"), "warnings": warnings,
-        "wall_time_s": wall, "light_cache_time_s": t_cache,
+        "wall_time_s": wall, "light_cache_time_s": t_cache, "method_time_s": t_method,
         "light_cache": {"positions": positions, "directions": directions, "seed": seed},
         "trace": res.get("trace", []), "schedule": res.get("schedule"),
         "truth": mats[name], "units": "reflectances unitless, sigma_alpha rms slope; chi2 in "
@@ -122,7 +135,7 @@ def fit_region(manifest_path, name, pixels, model="two", method="global", normal
     }
     log(f"{name}: {model} fit by {method}: "
         + ", ".join(f"{k} = {v:.4f}" for k, v in out["parameters"].items())
-        + f"; chi2/dof = {chi2 / dof:.3g}; {problem.evaluations} evaluations; {wall:.1f} s"
+        + f"; chi2/dof = {chi2 / dof:.3g}; {evaluations} evaluations; {wall:.1f} s"
         + "".join(f"\n  warning: {w}" for w in warnings))
     return out
 

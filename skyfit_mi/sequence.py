@@ -6,9 +6,11 @@ The output folder holds::
     frames/radiance_NNN.exr  linear RGB radiance [W m^-2 sr^-1]
     frames/sensor_NNN.exr    the sensor model's pixel values [DN] (integers stored as float)
     frames/sigma_NNN.exr     per-pixel standard deviation for chi-square [DN]; inf = saturated
+                             (sensor noise, quantisation and the render's Monte Carlo error)
     contact_sheet.png        the day at the sensor's exposure (sRGB preview)
 
-Each frame is rendered with seed ``seed + index`` and its noise drawn from
+Each frame is rendered as two half-spp passes with seeds ``seed + index`` and
+``seed + index + 2^31`` (their difference estimates the Monte Carlo error) and its noise drawn from
 ``numpy.random.default_rng([seed, index])``, so a frame does not depend on
 which frames were rendered before it: an interrupted run resumes where it
 stopped and gives the same files as an uninterrupted one.
@@ -64,6 +66,23 @@ def _sky_record(sky):
             "horizon_blend": sky.horizon_blend, "info": sky.info,
             "horizontal_irradiance_W_m2": sky.horizontal_irradiance(n=128),
             "units": "weights and radiances W m^-2 sr^-1, linear sRGB"}
+
+
+def render_with_error(mi, scene, params, seed, spp):
+    """A frame and the standard error of each pixel's Monte Carlo estimate.
+
+    Two independent half-spp renders (seeds ``seed`` and ``seed + 2^31``): their mean is
+    the frame (the same samples as one render at ``spp``), and (a - b)^2 / 4, averaged
+    over each pixel's 3x3 neighbourhood, estimates the variance of that mean.
+    """
+    half = max(1, int(spp) // 2)
+    a = np.array(mi.render(scene, params, seed=seed, spp=half), dtype=np.float64)
+    b = np.array(mi.render(scene, params, seed=seed + 2**31, spp=half), dtype=np.float64)
+    var = (a - b) ** 2 / 4.0
+    pad = np.pad(var, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    h, w = var.shape[:2]
+    var = sum(pad[i:i + h, j:j + w] for i in range(3) for j in range(3)) / 9.0
+    return (0.5 * (a + b)).astype(np.float32), np.sqrt(var).astype(np.float32)
 
 
 def sky_from_record(rec):
@@ -137,8 +156,9 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
                    "width": cam["width"], "height": cam["height"]},
         "sensor": {**sensor.to_dict(), "max_code": sensor.max_code, "sigma_DN": sensor.sigma,
                    "units": "exposure sr m^2 W^-1; values and sigma in DN"},
-        "render": {**spec.render, "integrator": "path", "seed_rule": "mitsuba seed = seed + index; "
-                   "noise rng = numpy.random.default_rng([seed, index])"},
+        "render": {**spec.render, "integrator": "path", "seed_rule": "two half-spp passes with "
+                   "mitsuba seeds seed + index and seed + index + 2^31; noise rng = "
+                   "numpy.random.default_rng([seed, index])"},
         "versions": _versions(), "frames": [],
     }
     bar = None
@@ -158,10 +178,10 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
         else:
             update_sky(params, f.sky, "sky.")
             t0 = time.perf_counter()
-            img = np.array(mi.render(scene, params, seed=seed + f.index), dtype=np.float32)
+            img, img_sd = render_with_error(mi, scene, params, seed + f.index, spec.render["spp"])
             rec["render_seconds"] = time.perf_counter() - t0
             values, sigma = sensor.capture(img, np.random.default_rng([seed, f.index]),
-                                           fov_deg=cam["fov_deg"])
+                                           fov_deg=cam["fov_deg"], radiance_sd=img_sd)
             write_exr(out / names["radiance"], img)
             write_exr(out / names["sensor"], values.astype(np.float32))
             write_exr(out / names["sigma"], sigma)

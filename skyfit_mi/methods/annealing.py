@@ -6,7 +6,8 @@ to the values kept at the vertices and subtracted from every new trial, so that 
 moves are accepted with a probability that falls with the temperature T.  Trial points
 that leave the parameter box are mirrored back into it.  The cooling
 schedule of the thesis (7.3.1): start at T0, run m simplex iterations at each
-temperature, then multiply T by alpha; below t_min the simplex runs cold (T = 0) until
+temperature, then multiply T by alpha (temperatures scale with the number of region pixels,
+since the thesis's chi^2 was one pixel's, and start no lower than 10x the initial chi^2); below t_min the simplex runs cold (T = 0) until
 its chi^2 values agree to ftol.  Seeded; the walk (best point after each
 iteration) is recorded (thesis fig. 7.10).
 """
@@ -24,12 +25,16 @@ def reflect_into(x, lower, upper):
     return lower + np.where(y > span, 2 * span - y, y)
 
 
-def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max_evaluations=4000,
+def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max_evaluations=6000,
                         t_min=1e-3, step=0.25, ftol=1e-7, max_restarts=4, **_):
     """Minimise chi^2 by annealing from ``start``; returns a result dict with the walk."""
     rng = np.random.default_rng(seed)
     n = len(start)
     t0, alpha, m = schedule or SCHEDULES.get(n, (1e6, 0.8, 10))
+    # The thesis's temperatures are chi^2 values of one pixel's sequence; a region of P
+    # pixels sums P such chi^2, so its temperatures are P times higher.
+    pixels = max(1, int(problem.obs.y.shape[0]))
+    t0, t_min = t0 * pixels, t_min * pixels
     span = np.asarray(upper) - np.asarray(lower)
 
     def make_simplex(x0, size):
@@ -44,10 +49,14 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
     evals = n + 1
     restarts = 0
     finished = False
+    # The thesis's T0 (1e6, 1e7) exceeded its sequences' chi^2 many times over, so annealing
+    # began as a random walk.  Sequences with more pixels or less noise have larger chi^2:
+    # then start at 10x the initial simplex's largest chi^2 to keep that first phase.
+    t0_used = max(t0, 10.0 * float(np.max(f)))
     best_i = int(np.argmin(f))
     best_x, best_f = simplex[best_i].copy(), float(f[best_i])
     walk = [best_x.tolist()]
-    temp = t0
+    temp = t0_used
 
     def trial(fac):
         nonlocal evals, best_x, best_f
@@ -109,4 +118,6 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
             "status": "converged" if finished else "max_evaluations",
             "message": f"cooled to T = 0; the simplex converged ({restarts} restarts)" if finished
             else f"stopped at {evals} evaluations (temperature {temp:.3g})",
-            "trace": walk, "schedule": {"T0": t0, "alpha": alpha, "m": m, "seed": seed}}
+            "trace": walk, "schedule": {"T0": t0 / pixels, "alpha": alpha, "m": m, "seed": seed,
+                                        "temperature_scale_pixels": pixels,
+                                        "T0_used": t0_used, "evaluations": evals}}

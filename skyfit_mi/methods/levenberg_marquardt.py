@@ -33,7 +33,7 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
                        "e.g. sigma_alpha when rho_s = 0): the thesis's 'Fail'")
             break
         delta = np.linalg.solve(a, beta)
-        trial = np.clip(theta - delta, lower, upper)
+        trial = np.clip(theta + delta, lower, upper)
         r_t = problem.residuals(trial)
         chi2_t = float(r_t @ r_t)
         if chi2_t < chi2:
