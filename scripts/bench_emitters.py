@@ -73,8 +73,8 @@ def main():
                 for i in range(3)]
         rows.append((k, float(np.median(times[k])), float(np.mean(errs)), float(ref.mean())))
     base = dict((r[0], r) for r in rows)["sunsky"]
-    print(f"| emitter | time per frame [s] | time / sunsky | relative RMSE | RMSE / sunsky's | "
-          f"reference mean [W m^-2 sr^-1] |")
+    print("| emitter | time per frame [s] | time / sunsky | relative RMSE | RMSE / sunsky's | "
+          "reference mean [W m^-2 sr^-1] |")
     print("|---|---|---|---|---|---|")
     for k, tm, e, m in rows:
         print(f"| {k} | {tm:.3f} | {tm / base[1]:.2f} | {e:.4f} | {e / base[2]:.2f} | {m:.1f} |")

@@ -8,7 +8,6 @@ drop out).  The model y(x; a) is the sensor model applied to the radiance the
 """
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 

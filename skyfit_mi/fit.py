@@ -22,9 +22,11 @@ from .methods import METHODS, global_search
 from .sequence import load_manifest, sky_from_record
 
 
-def fit_region(manifest_path, name, pixels, model="two", method="global", normalisation="ward",
-               seed=0, start=None, positions=4, directions=1024, method_options=None, log=print):
-    """Fit one material region; returns a JSON-ready result dictionary.
+class FitSession:
+    """One region of one sequence, ready to fit: observations, light cache, models, chi-square.
+
+    Building it traces the light at the region's pixels once; :meth:`run` then fits by any
+    method and start without tracing again.
 
     Parameters
     ----------
@@ -32,112 +34,134 @@ def fit_region(manifest_path, name, pixels, model="two", method="global", normal
     name : the region's material id in the manifest's scene
     pixels : (P, 2) pixel (x, y) coordinates on that material
     model : 'two', 'achromatic', 'colour' (or 2, 3, 5)
-    method : 'global' (default), 'lm', 'anneal', 'adam'
     normalisation : Ward normalisation of the model ('ward' = thesis eq. 3.19)
-    seed : seeds the light cache, random starts and annealing
-    start : starting parameters (LM, annealing, Adam); random within bounds if None
+    seed : seeds the light cache
     positions, directions : samples per pixel of the light cache
     """
-    from .render import setup
-    from .render.fit_model import BY_COUNT, PARAMETERS, WardModel, bounds
-    from .render.light_cache import build_light_cache
 
-    model = BY_COUNT.get(model, model)
-    check_choice("model", model, tuple(PARAMETERS))
-    check_choice("fit method", method, tuple(METHODS))
-    t0 = time.perf_counter()
-    doc, root = load_manifest(manifest_path)
-    obs = load_observations(manifest_path, pixels)
-    mats = doc["scene"]["materials"]
-    if name not in mats:
-        raise SkyfitError(f"region {name!r} names no material of the scene; its materials are: "
-                          f"{', '.join(mats)}.")
-    mi = setup(doc["render"]["variant"])
-    scene = mi.load_string(doc["scene"]["xml"])
-    params = mi.traverse(scene)
-    frames = {f["index"]: f for f in doc["frames"]}
-    skies = [sky_from_record(frames[i]["sky"]) for i in obs.frames]
-    cache = build_light_cache(scene, params, skies, obs.pixels, name, positions=positions,
-                              directions=directions, seed=seed,
-                              max_depth=max(1, int(doc["render"]["max_depth"]) - 1))
-    if not cache.hit.any():
-        raise SkyfitError(f"none of the region's pixels shows material {name!r}; check the region.")
-    t_cache = time.perf_counter() - t0
-    wm = WardModel(cache, model, normalisation)
-    two = wm if model == "two" else WardModel(cache, "two", normalisation)
-    problem = Problem(obs, wm, valid=cache.hit)
-    lower, upper = bounds(model)
-    rng = np.random.default_rng(seed)
-    if start is None:
-        start = lower + rng.random(len(lower)) * (upper - lower)
-    start = np.clip(np.asarray(start, dtype=float), lower, upper)
-    opts = dict(method_options or {})
-    res = METHODS[method](problem, start, lower, upper, seed=seed, model_two=two, **opts)
-    theta = np.asarray(res["theta"], dtype=float)
-    evaluations = problem.evaluations + (two.evaluations if two is not wm else 0)
-    t_method = time.perf_counter() - t0 - t_cache
+    def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
+                 positions=4, directions=1024):
+        from .render import setup
+        from .render.fit_model import BY_COUNT, PARAMETERS, WardModel, bounds
+        from .render.light_cache import build_light_cache
 
-    # uncertainty: covariance at the optimum, and profiles from the global grid
-    r, J = problem.jacobian(theta)
-    chi2 = float(r @ r)
-    dof = problem.dof
-    s2 = unc.scale(chi2, dof)
-    cov = unc.covariance(J, s2)
-    cov_iv = unc.covariance_intervals(theta, cov, lower, upper)
-    names = PARAMETERS[model]
-    grid = res.get("profile_linearised") or global_search(
-        problem, start, lower, upper, model_two=two, candidates=1)["profile_linearised"]
-    prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
-            "rho_s": (grid["rho_s"], grid["chi2_rho"])}
-    # the profiles describe the global minimum; a local method is judged against it
-    glob = method == "global"
-    intervals, rise = {}, {}
-    for i, p in enumerate(names):
-        iv = {lv: (float(cov_iv[lv][0][i]), float(cov_iv[lv][1][i])) for lv in ("68", "95")}
-        source = "covariance"
-        if p in prof:
-            rise[p] = float(np.max(prof[p][1]) - np.min(prof[p][1]))
-            if glob:
-                iv = unc.profile_interval(*prof[p], s2)
-                source = "profile"
-        intervals[p] = {"68": iv["68"], "95": iv["95"], "from": source}
-    warnings = unc.identifiability(names, {p: intervals[p]["95"] for p in names}, lower, upper,
-                                   rise, s2, chi2 / dof)
-    if res.get("status") == "failed":
-        warnings.insert(0, f"{method} failed: {res['message']}")
-    if not glob:
-        # compare with the global minimum: explains local failures (thesis 7.2)
-        g = global_search(problem, start, lower, upper, model_two=two, candidates=2)
-        if g["chi2"] < chi2 - max(1.0, 1e-3 * chi2):
-            warnings.insert(0, f"{method} stopped at chi2 = {chi2:.6g}, but the global search finds "
-                            f"chi2 = {g['chi2']:.6g} at " + ", ".join(
-                                f"{k} = {v:.4f}" for k, v in zip(names, g["theta"]))
-                            + f": {method} ended in a local minimum or on a flat region of "
-                            "chi-square from this start (thesis 6.3, 7.2)")
-    wall = time.perf_counter() - t0
-    L = wm.radiance(theta)
-    out = {
-        "region": name, "pixels": obs.pixels.tolist(), "model": model, "normalisation": normalisation,
-        "method": method, "seed": seed, "start": start.tolist(),
-        "parameters": dict(zip(names, theta.tolist())),
-        "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof, "interval_scale_s2": s2,
-        "intervals": intervals,
-        "covariance": {"names": list(names), "matrix": cov.tolist()},
-        "evaluations": evaluations, "status": res.get("status"),
-        "message": res.get("message"), "warnings": warnings,
-        "wall_time_s": wall, "light_cache_time_s": t_cache, "method_time_s": t_method,
-        "light_cache": {"positions": positions, "directions": directions, "seed": seed},
-        "trace": res.get("trace", []), "schedule": res.get("schedule"),
-        "truth": mats[name], "units": "reflectances unitless, sigma_alpha rms slope; chi2 in "
-        "(DN/DN)^2; observed/model values in DN",
-        "series": {"times": obs.times, "observed_DN": obs.y.tolist(),
-                   "model_DN": problem.predict(L).tolist()},
-    }
-    log(f"{name}: {model} fit by {method}: "
-        + ", ".join(f"{k} = {v:.4f}" for k, v in out["parameters"].items())
-        + f"; chi2/dof = {chi2 / dof:.3g}; {evaluations} evaluations; {wall:.1f} s"
-        + "".join(f"\n  warning: {w}" for w in warnings))
-    return out
+        model = BY_COUNT.get(model, model)
+        check_choice("model", model, tuple(PARAMETERS))
+        t0 = time.perf_counter()
+        doc, _ = load_manifest(manifest_path)
+        self.obs = load_observations(manifest_path, pixels)
+        mats = doc["scene"]["materials"]
+        if name not in mats:
+            raise SkyfitError(f"region {name!r} names no material of the scene; its materials are: "
+                              f"{', '.join(mats)}.")
+        mi = setup(doc["render"]["variant"])
+        self.scene = mi.load_string(doc["scene"]["xml"])
+        self.params = mi.traverse(self.scene)
+        frames = {f["index"]: f for f in doc["frames"]}
+        self.skies = [sky_from_record(frames[i]["sky"]) for i in self.obs.frames]
+        self.cache = build_light_cache(self.scene, self.params, self.skies, self.obs.pixels, name,
+                                       positions=positions, directions=directions, seed=seed,
+                                       max_depth=max(1, int(doc["render"]["max_depth"]) - 1))
+        if not self.cache.hit.any():
+            raise SkyfitError(f"none of the region's pixels shows material {name!r}; check the region.")
+        self.cache_time = time.perf_counter() - t0
+        self.doc, self.name, self.model, self.normalisation = doc, name, model, normalisation
+        self.names = PARAMETERS[model]
+        self.wm = WardModel(self.cache, model, normalisation)
+        self.two = self.wm if model == "two" else WardModel(self.cache, "two", normalisation)
+        self.problem = Problem(self.obs, self.wm, valid=self.cache.hit)
+        self.lower, self.upper = bounds(model)
+        self.truth = mats[name]
+        self.cache_settings = {"positions": positions, "directions": directions, "seed": seed}
+
+    def random_start(self, rng):
+        return self.lower + rng.random(len(self.lower)) * (self.upper - self.lower)
+
+    def run(self, method="global", start=None, seed=0, method_options=None, log=print):
+        """Fit by ``method`` from ``start`` (random within bounds, seeded, if None); a result dict."""
+        check_choice("fit method", method, tuple(METHODS))
+        problem, wm, two = self.problem, self.wm, self.two
+        lower, upper, names = self.lower, self.upper, self.names
+        problem.evaluations = 0
+        wm.evaluations = two.evaluations = 0
+        t0 = time.perf_counter()
+        if start is None:
+            start = self.random_start(np.random.default_rng(seed))
+        start = np.clip(np.asarray(start, dtype=float), lower, upper)
+        res = METHODS[method](problem, start, lower, upper, seed=seed, model_two=two,
+                              **dict(method_options or {}))
+        theta = np.asarray(res["theta"], dtype=float)
+        evaluations = problem.evaluations + (two.evaluations if two is not wm else 0)
+        t_method = time.perf_counter() - t0
+        # uncertainty: covariance at the optimum, and profiles from the global grid
+        r, J = problem.jacobian(theta)
+        chi2 = float(r @ r)
+        dof = problem.dof
+        s2 = unc.scale(chi2, dof)
+        cov = unc.covariance(J, s2)
+        cov_iv = unc.covariance_intervals(theta, cov, lower, upper)
+        grid = res.get("profile_linearised") or global_search(
+            problem, start, lower, upper, model_two=two, candidates=1)["profile_linearised"]
+        prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
+                "rho_s": (grid["rho_s"], grid["chi2_rho"])}
+        # the profiles describe the global minimum; a local method is judged against it
+        glob = method == "global"
+        intervals, rise = {}, {}
+        for i, p in enumerate(names):
+            iv = {lv: (float(cov_iv[lv][0][i]), float(cov_iv[lv][1][i])) for lv in ("68", "95")}
+            source = "covariance"
+            if p in prof:
+                rise[p] = float(np.max(prof[p][1]) - np.min(prof[p][1]))
+                if glob:
+                    iv = unc.profile_interval(*prof[p], s2)
+                    source = "profile"
+            intervals[p] = {"68": iv["68"], "95": iv["95"], "from": source}
+        warnings = unc.identifiability(names, {p: intervals[p]["95"] for p in names}, lower, upper,
+                                       rise, s2, chi2 / dof)
+        if res.get("status") == "failed":
+            warnings.insert(0, f"{method} failed: {res['message']}")
+        if not glob:
+            # compare with the global minimum: explains local failures (thesis 7.2)
+            g = global_search(problem, start, lower, upper, model_two=two, candidates=2)
+            if g["chi2"] < chi2 - max(1.0, 1e-3 * chi2):
+                warnings.insert(0, f"{method} stopped at chi2 = {chi2:.6g}, but the global search finds "
+                                f"chi2 = {g['chi2']:.6g} at " + ", ".join(
+                                    f"{k} = {v:.4f}" for k, v in zip(names, g["theta"]))
+                                + f": {method} ended in a local minimum or on a flat region of "
+                                "chi-square from this start (thesis 6.3, 7.2)")
+        wall = time.perf_counter() - t0 + self.cache_time
+        L = wm.radiance(theta)
+        out = {
+            "region": self.name, "pixels": self.obs.pixels.tolist(), "model": self.model,
+            "normalisation": self.normalisation,
+            "method": method, "seed": seed, "start": start.tolist(),
+            "parameters": dict(zip(names, theta.tolist())),
+            "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof, "interval_scale_s2": s2,
+            "intervals": intervals,
+            "covariance": {"names": list(names), "matrix": cov.tolist()},
+            "evaluations": evaluations, "status": res.get("status"),
+            "message": res.get("message"), "warnings": warnings,
+            "wall_time_s": wall, "light_cache_time_s": self.cache_time, "method_time_s": t_method,
+            "light_cache": self.cache_settings,
+            "trace": res.get("trace", []), "schedule": res.get("schedule"),
+            "truth": self.truth, "units": "reflectances unitless, sigma_alpha rms slope; chi2 in "
+            "(DN/DN)^2; observed/model values in DN",
+            "series": {"times": self.obs.times, "observed_DN": self.obs.y.tolist(),
+                       "model_DN": problem.predict(L).tolist()},
+        }
+        log(f"{self.name}: {self.model} fit by {method}: "
+            + ", ".join(f"{k} = {v:.4f}" for k, v in out["parameters"].items())
+            + f"; chi2/dof = {chi2 / dof:.3g}; {evaluations} evaluations; {wall:.1f} s"
+            + "".join(f"\n  warning: {w}" for w in warnings))
+        return out
+
+
+def fit_region(manifest_path, name, pixels, model="two", method="global", normalisation="ward",
+               seed=0, start=None, positions=4, directions=1024, method_options=None, log=print):
+    """Fit one material region (see :class:`FitSession`); returns a JSON-ready result dict."""
+    session = FitSession(manifest_path, name, pixels, model, normalisation, seed, positions,
+                         directions)
+    return session.run(method, start, seed, method_options, log)
 
 
 def write_fit(result, prefix):

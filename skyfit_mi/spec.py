@@ -23,7 +23,7 @@ from .gensky import from_gensky
 from .render.variant import VARIANTS
 from .sky import SKY_TYPES, cie_sky
 from .sun import solar_position
-from .ward import MODELS, NORMALISATIONS, raw_parameters
+from .ward import NORMALISATIONS, raw_parameters
 
 #: Where the shipped scenes live; a spec's ``scene.file`` is looked up beside the spec first.
 SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"

@@ -1,7 +1,6 @@
 """Fitting: recovery of known parameters, chi-square statistics, failures explained, identifiability."""
 import json
 
-import numpy as np
 import pytest
 
 from skyfit_mi.chi2 import parse_region

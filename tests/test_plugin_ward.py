@@ -121,7 +121,6 @@ def test_pdf_integrates_to_one(mi, theta_i):
 
 def directional_albedo(mi, bsdf, theta_i, n=400_000, seed=0):
     """Monte Carlo directional albedo from the plugin's own sample weights (white furnace)."""
-    import drjit as dr
     rng = np.random.default_rng(seed)
     wi = np.tile([np.sin(theta_i), 0.0, np.cos(theta_i)], (n, 1))
     si = local_si(mi, wi)

@@ -57,7 +57,6 @@ def grid_chi2(model, y, w, D, G, rho=RHO_GRID):
 
     Returns (chi2, thetas) with chi2 of shape (K, R) and thetas (K, R, n_params).
     """
-    K = G.shape[0]
     if model == "two":
         H = G - D                                                    # (K,P,T,3)
         A = np.einsum("ptc,ptc->", w * (y - D), y - D)
