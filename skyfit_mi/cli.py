@@ -53,6 +53,30 @@ def _fit(args):
         print("wrote " + " and ".join(str(p) for p in paths))
 
 
+def _labels(args):
+    import json
+    from pathlib import Path
+
+    import numpy as np
+
+    from .render import setup
+    from .render.image import write_png
+    from .render.labels import label_image
+    from .sequence import load_manifest
+
+    doc, root = load_manifest(args.manifest)
+    mi = setup(doc["render"]["variant"])
+    labels, ids = label_image(mi.load_string(doc["scene"]["xml"]))
+    out = Path(args.output) if args.output else root / "labels.png"
+    write_png(out, np.repeat(labels[..., None], 3, axis=2).astype(np.uint8))
+    legend = {name: k + 1 for k, name in enumerate(ids)}
+    tmp = out.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps({"labels": legend, "0": "no material"}, indent=1))
+    tmp.replace(out.with_suffix(".json"))
+    print(f"wrote {out} (pixel value = material label) and {out.with_suffix('.json')}: "
+          + ", ".join(f"{k}={v}" for k, v in legend.items()))
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="skyfit", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -72,6 +96,11 @@ def main(argv=None):
                         help="linear radiance frames or the sensor model's pixel values")
     pixels.add_argument("-o", "--output", help="output path prefix (default: MANIFEST/pixels_SOURCE)")
     pixels.set_defaults(func=_pixels)
+
+    labels = sub.add_parser("labels", help="label-mask PNG of the materials each pixel sees")
+    labels.add_argument("manifest", help="folder written by `skyfit render` (or its manifest.json)")
+    labels.add_argument("-o", "--output", help="PNG path (default: MANIFEST/labels.png)")
+    labels.set_defaults(func=_labels)
 
     fit = sub.add_parser("fit", help="fit Ward parameters to material regions of a sequence")
     fit.add_argument("manifest", help="folder written by `skyfit render` (or its manifest.json)")

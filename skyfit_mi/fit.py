@@ -120,6 +120,15 @@ class FitSession:
                                        rise, s2, chi2 / dof)
         if res.get("status") == "failed":
             warnings.insert(0, f"{method} failed: {res['message']}")
+        if self.model == "colour":
+            other = unc.colour_rule_ambiguity(theta, {p: intervals[p]["95"] for p in names})
+            if other is not None:
+                kind = "metal" if other[1] >= 0.5 else "plastic"
+                warnings.append(
+                    f"C is grey, so the colour model's plastic and metal readings give the same "
+                    f"BRDF: the {kind} reading C = {other[0]:.3f} (all channels), rho_s = "
+                    f"{other[1]:.3f} fits equally well; only rho_d and the specular reflectance "
+                    "are determined.")
         if not glob:
             # compare with the global minimum: explains local failures (thesis 7.2)
             g = global_search(problem, start, lower, upper, model_two=two, candidates=2)

@@ -68,14 +68,22 @@ def _sky_record(sky):
             "units": "weights and radiances W m^-2 sr^-1, linear sRGB"}
 
 
-def render_with_error(mi, scene, params, seed, spp):
+def pass_spp(spp, sampler):
+    """Samples per pixel of each of the two passes: half of ``spp``, rounded to a square for
+    the stratified samplers (which need one and would otherwise round it themselves)."""
+    half = max(1, int(spp) // 2)
+    if sampler in ("multijitter", "stratified"):
+        half = max(1, int(round(np.sqrt(half)))) ** 2
+    return half
+
+
+def render_with_error(mi, scene, params, seed, half):
     """A frame and the standard error of each pixel's Monte Carlo estimate.
 
-    Two independent half-spp renders (seeds ``seed`` and ``seed + 2^31``): their mean is
-    the frame (the same samples as one render at ``spp``), and (a - b)^2 / 4, averaged
-    over each pixel's 3x3 neighbourhood, estimates the variance of that mean.
+    Two independent renders of ``half`` spp (seeds ``seed`` and ``seed + 2^31``): their
+    mean is the frame, and (a - b)^2 / 4, averaged over each pixel's 3x3 neighbourhood,
+    estimates the variance of that mean.
     """
-    half = max(1, int(spp) // 2)
     a = np.array(mi.render(scene, params, seed=seed, spp=half), dtype=np.float64)
     b = np.array(mi.render(scene, params, seed=seed + 2**31, spp=half), dtype=np.float64)
     var = (a - b) ** 2 / 4.0
@@ -146,6 +154,7 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
                                                         "cos4")})
     cam = spec.camera
     seed = int(spec.render["seed"])
+    half = pass_spp(spec.render["spp"], spec.render["sampler"])
     manifest = {
         "schema": SCHEMA, "run_id": run_id, "name": spec.raw.get("name"), "status": "incomplete",
         "created": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
@@ -156,7 +165,8 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
                    "width": cam["width"], "height": cam["height"]},
         "sensor": {**sensor.to_dict(), "max_code": sensor.max_code, "sigma_DN": sensor.sigma,
                    "units": "exposure sr m^2 W^-1; values and sigma in DN"},
-        "render": {**spec.render, "integrator": "path", "seed_rule": "two half-spp passes with "
+        "render": {**spec.render, "spp_rendered": 2 * half, "integrator": "path",
+                   "seed_rule": "two half-spp passes with "
                    "mitsuba seeds seed + index and seed + index + 2^31; noise rng = "
                    "numpy.random.default_rng([seed, index])"},
         "versions": _versions(), "frames": [],
@@ -178,7 +188,7 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
         else:
             update_sky(params, f.sky, "sky.")
             t0 = time.perf_counter()
-            img, img_sd = render_with_error(mi, scene, params, seed + f.index, spec.render["spp"])
+            img, img_sd = render_with_error(mi, scene, params, seed + f.index, half)
             rec["render_seconds"] = time.perf_counter() - t0
             values, sigma = sensor.capture(img, np.random.default_rng([seed, f.index]),
                                            fov_deg=cam["fov_deg"], radiance_sd=img_sd)

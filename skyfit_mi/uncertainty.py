@@ -81,3 +81,28 @@ def identifiability(names, intervals95, lower, upper, profile_rise, s2, chi2_dof
                         "describe the data to within their sigmas (intervals are widened by "
                         f"s^2 = {s2:.3g}); check the sensor model, the region, or the model choice.")
     return warnings
+
+
+def colour_rule_ambiguity(theta, intervals95):
+    """For the colour model: the other reading of the same BRDF when C is grey, or None.
+
+    With C_r = C_g = C_b = c the plastic rule (rho_s < 0.5, white highlight) and the metal
+    rule (rho_s >= 0.5, highlight c rho_s) describe the same raw Ward model when
+    rho_d = c (1 - rho_s) and the specular reflectance agree, so the data cannot tell them
+    apart (thesis 3.4.5).  Returns (C', rho_s') of the other reading if it is valid.
+    """
+    c = np.asarray(theta[:3], dtype=float)
+    lo = max(intervals95[k][0] for k in ("C_r", "C_g", "C_b"))
+    hi = min(intervals95[k][1] for k in ("C_r", "C_g", "C_b"))
+    if lo > hi + 1e-9:                      # the channels differ: C is not grey
+        return None
+    g, rho = float(c.mean()), float(theta[3])
+    if rho < 0.5:                           # plastic -> metal: C' rho' = rho, C'(1 - rho') = g(1 - rho)
+        c2 = rho + g * (1 - rho)
+        rho2 = rho / c2 if c2 > 0 else 0.0
+        ok = rho2 >= 0.5 and c2 <= 1.0
+    else:                                   # metal -> plastic: rho' = g rho, C'(1 - rho') = g(1 - rho)
+        rho2 = g * rho
+        c2 = g * (1 - rho) / (1 - rho2) if rho2 < 1 else 0.0
+        ok = rho2 < 0.5 and c2 <= 1.0
+    return (c2, rho2) if ok else None

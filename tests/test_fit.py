@@ -114,3 +114,26 @@ def test_cli_fit_writes_json_and_plot(days, tmp_path):
     assert res["truth"]["rho_s"] == 0.3
     assert (tmp_path / "fit_disc.png").stat().st_size > 10000
     assert main(["fit", str(days["noisy"]), "--region", "disc=box"]) == 2
+
+
+def test_labels_and_mask_regions(days, tmp_path):
+    from skyfit_mi.chi2 import region_from_mask
+    assert main(["labels", str(days["clean"]), "-o", str(tmp_path / "labels.png")]) == 0
+    legend = json.loads((tmp_path / "labels.json").read_text())["labels"]
+    assert legend == {"disc": 1}
+    px = region_from_mask(tmp_path / "labels.png", legend["disc"])
+    assert len(px) == 144                                  # the 6-degree view is all disc
+    from skyfit_mi.errors import SkyfitError
+    with pytest.raises(SkyfitError, match="label 7 does not occur"):
+        region_from_mask(tmp_path / "labels.png", 7)
+
+
+def test_colour_model_plastic_metal_ambiguity_for_grey_c():
+    from skyfit_mi.uncertainty import colour_rule_ambiguity
+    grey = {k: (0.194, 0.196) for k in ("C_r", "C_g", "C_b")}
+    c2, rho2 = colour_rule_ambiguity([0.195, 0.195, 0.195, 0.439, 0.08], grey)
+    # the metal reading of the same raw BRDF: C' rho' = 0.439 and C'(1 - rho') = 0.195 * 0.561
+    assert c2 * rho2 == pytest.approx(0.439) and c2 * (1 - rho2) == pytest.approx(0.195 * 0.561)
+    assert rho2 >= 0.5
+    coloured = {"C_r": (0.79, 0.81), "C_g": (0.49, 0.51), "C_b": (0.19, 0.21)}
+    assert colour_rule_ambiguity([0.8, 0.5, 0.2, 0.3, 0.08], coloured) is None

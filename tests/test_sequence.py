@@ -183,3 +183,15 @@ def test_cli_render_and_pixels_end_to_end(tmp_path, mi):
     assert (out / "pixels_sensor.png").stat().st_size > 5000
     assert main(["pixels", str(out), "--pixel", "99,1"]) == 2
     assert main(["render", str(tmp_path / "missing.toml"), "-o", str(out)]) == 2
+
+
+def test_render_error_estimate_and_pass_counts(tmp_path, mi):
+    from skyfit_mi.sequence import pass_spp
+    assert pass_spp(64, "multijitter") == 36 and pass_spp(64, "independent") == 32
+    assert pass_spp(1024, "stratified") == 529 and pass_spp(1, "independent") == 1
+    m = _render(spec(), tmp_path / "e", tmp_path)
+    assert m["render"]["spp_rendered"] == 72
+    from skyfit_mi.render.image import read_exr
+    sig = read_exr(tmp_path / "e" / m["frames"][1]["sigma"])
+    # sensor part alone: sqrt((2% of 4095)^2 + 1/12); the render's error only adds to it
+    assert np.all(sig >= np.sqrt((0.02 * 4095) ** 2 + 1 / 12) - 1e-3)

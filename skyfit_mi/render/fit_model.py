@@ -134,7 +134,7 @@ class WardModel:
                 dr.set_grad(x, mi.Color3f(*seed))
             else:
                 dr.set_grad(x, 1.0)
-            dr.forward_to(L)
+            dr.forward_to(L, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
             cols.append(self._np(dr.grad(L)))
             if value is None:
                 value = self._np(dr.detach(L))
@@ -158,7 +158,7 @@ class WardModel:
         L = self._radiance_dr()
         g = dloss_dL.reshape(-1, 3)
         dr.backward_from(dr.sum(L * mi.Color3f(*[np.ascontiguousarray(g[:, i]) for i in range(3)]),
-                                axis=None))
+                                axis=None), flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
         grads = {k: np.array(dr.grad(x), dtype=float).ravel() for k, x in xs}
         for _, x in xs:
             dr.disable_grad(x)
@@ -171,3 +171,75 @@ class WardModel:
             else:
                 out.append(grads[name][0])
         return np.array(out)
+
+
+class RegionRenderModel:
+    """The region's radiance by a full Mitsuba render of its pixels for every frame.
+
+    The thesis's way of evaluating the model (a render per chi-square evaluation), kept as
+    the baseline the cached :class:`WardModel` is measured against.  One scene per frame
+    holds that frame's sky; every call sets the material's parameters in each and
+    path-traces ``spp`` jittered rays through each region pixel with a fixed seed (common
+    random numbers, so chi-square is a deterministic function of the parameters).
+    """
+
+    def __init__(self, scene_xml, material, skies, pixels, model, spp=256, seed=0, max_depth=4,
+                 normalisation="ward"):
+        import xml.etree.ElementTree as ET
+
+        import mitsuba as mi
+
+        from .daylight import update_sky
+        from .scene_xml import _ward_element
+
+        root = ET.fromstring(scene_xml)
+        for el in root.iter("bsdf"):
+            if el.get("id") == material:
+                _ward_element(el, material, material_dict(model, 0.5 * sum(bounds(model)),
+                                                          normalisation))
+        xml = ET.tostring(root, encoding="unicode")
+        self.mi = mi
+        self.scenes, self.params = [], []
+        for sky in skies:
+            scene = mi.load_string(xml)
+            params = mi.traverse(scene)
+            update_sky(params, sky, "sky.")
+            self.scenes.append(scene)
+            self.params.append(params)
+        self.key = material + "."
+        self.model, self.names = model, PARAMETERS[model]
+        self.spp, self.seed = int(spp), int(seed)
+        self.pixels = np.asarray(pixels, dtype=int)
+        self.shape = (len(self.pixels), len(skies))
+        self.integrator = mi.load_dict({"type": "path", "max_depth": int(max_depth)})
+        sensor = self.scenes[0].sensors()[0]
+        w, h = sensor.film().crop_size()
+        rng = np.random.default_rng(seed)
+        pos = (np.repeat(self.pixels, self.spp, axis=0) + rng.random((len(self.pixels) * self.spp, 2)))
+        pos = pos / [w, h]
+        self.rays, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
+                                         mi.Point2f(pos[:, 0], pos[:, 1]), mi.Point2f(0.5, 0.5))
+        self.evaluations = 0
+
+    def radiance(self, theta):
+        import drjit as dr
+
+        mi = self.mi
+        d = material_dict(self.model, theta)
+        out = np.zeros(self.shape + (3,))
+        n = len(self.pixels) * self.spp
+        for t, (scene, params) in enumerate(zip(self.scenes, self.params)):
+            params[self.key + "rho_s"] = mi.Float(d["rho_s"])
+            params[self.key + "sigma_alpha"] = mi.Float(d["sigma_alpha"])
+            if "R" in d:
+                params[self.key + "R"] = mi.Float(d["R"])
+            if "C" in d:
+                params[self.key + "C"] = mi.Color3f(*d["C"])
+            params.update()
+            sampler = mi.load_dict({"type": "independent"})
+            sampler.seed(self.seed + t, n)
+            li, _, _ = self.integrator.sample(scene, sampler, mi.RayDifferential3f(self.rays))
+            v = dr.block_sum(li, self.spp) / self.spp
+            out[:, t] = np.array(v, dtype=float).T
+        self.evaluations += 1
+        return out

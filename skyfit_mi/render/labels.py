@@ -1,0 +1,29 @@
+"""Label masks: which material each pixel of a sequence's camera sees (for fit regions)."""
+
+import numpy as np
+
+
+def label_image(scene):
+    """(H, W) int array: 1 + the index of the material seen at each pixel centre, 0 for none,
+    and the list of material ids (label k is ids[k - 1])."""
+    import mitsuba as mi
+
+    sensor = scene.sensors()[0]
+    w, h = sensor.film().crop_size()
+    ys, xs = np.mgrid[0:h, 0:w]
+    u = (xs.ravel() + 0.5) / w
+    v = (ys.ravel() + 0.5) / h
+    ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5), mi.Point2f(u, v), mi.Point2f(0.5, 0.5))
+    si = scene.ray_intersect(ray)
+    ids = []
+    labels = np.zeros(w * h, dtype=np.int32)
+    valid = np.array(si.is_valid())
+    for shape in scene.shapes():
+        bid = shape.bsdf().id()
+        if not bid:
+            continue
+        if bid not in ids:
+            ids.append(bid)
+        hit = np.array(si.shape == mi.ShapePtr(shape)) & valid
+        labels[hit] = ids.index(bid) + 1
+    return labels.reshape(h, w), ids
