@@ -34,7 +34,7 @@ def main():
     ap.add_argument("--render-spp", type=int, default=256)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--methods", default="global,anneal,lm,adam")
-    ap.add_argument("--baseline-evaluations", type=int, default=100,
+    ap.add_argument("--baseline-evaluations", type=int, default=10,
                     help="evaluation budget of the full-render annealing actually run; its time "
                     "for the thesis's ~1500 evaluations (table 7.15) is projected from the measured "
                     "time per evaluation")

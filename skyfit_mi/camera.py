@@ -132,10 +132,6 @@ class SensorModel:
             d = np.where(sc <= 0.0031308, 12.92, 1.055 / 2.4 * sc ** (1 / 2.4 - 1.0))
         return np.where(inside, d, 0.0)
 
-    def expected(self, radiance, fov_deg=None):
-        """Noise-free, unquantised pixel value [DN] (what the chi-square model predicts)."""
-        return self.respond(self.signal(radiance, fov_deg)) * self.max_code
-
     def capture(self, radiance, rng, fov_deg=None, radiance_sd=None):
         """Simulate one exposure.
 

@@ -69,11 +69,6 @@ def _shape_like(time, values):
     return np.asarray(values, dtype=float)
 
 
-def day_of_year(time):
-    """Day of the year, 1 on 1 January, in the time's own time zone."""
-    return _shape_like(time, _times(time).day_of_year.to_numpy())
-
-
 # --------------------------------------------------------------------------
 # Solar position
 # --------------------------------------------------------------------------
