@@ -52,6 +52,15 @@ def basis(model_two, sigmas):
     return D, G
 
 
+def _weighted_sums(y, w, D, G, keep):
+    """The weighted inner products <D,D>, <D,G_k>, <G_k,G_k>, <y,D>, <y,G_k>, <y,y>,
+    summed over pixels and frames, and over channels too unless ``keep`` = 'c'."""
+    Dw, yw = D * w, y * w
+    return (np.einsum(f"ptc,ptc->{keep}", Dw, D), np.einsum(f"ptc,kptc->k{keep}", Dw, G),
+            np.einsum(f"ptc,kptc->k{keep}", w, G * G), np.einsum(f"ptc,ptc->{keep}", yw, D),
+            np.einsum(f"ptc,kptc->k{keep}", yw, G), np.einsum(f"ptc,ptc->{keep}", yw, y))
+
+
 def grid_chi2(model, y, w, D, G, rho=RHO_GRID):
     """Linearised chi^2 and the closed-form linear parameters at every (sigma[, rho_s]) point.
 
@@ -66,14 +75,8 @@ def grid_chi2(model, y, w, D, G, rho=RHO_GRID):
         thetas = np.stack([np.broadcast_to(rho, chi2.shape), np.zeros_like(chi2)], axis=-1)
         return chi2, thetas
     # h = (1 - rho) D + rho G: (K, R, P, T, 3) built lazily by channel sums
-    Dw, yw = D * w, y * w
     if model == "achromatic":
-        a = np.einsum("ptc,ptc->", Dw, D)
-        b = np.einsum("ptc,kptc->k", Dw, G)
-        c = np.einsum("ptc,kptc->k", w, G * G)
-        yd = np.einsum("ptc,ptc->", yw, D)
-        yg = np.einsum("ptc,kptc->k", yw, G)
-        yy = np.einsum("ptc,ptc->", yw, y)
+        a, b, c, yd, yg, yy = _weighted_sums(y, w, D, G, "")
         r1 = (1 - rho)[None, :]
         r2 = rho[None, :]
         hh = r1**2 * a + 2 * r1 * r2 * b[:, None] + r2**2 * c[:, None]
@@ -83,12 +86,7 @@ def grid_chi2(model, y, w, D, G, rho=RHO_GRID):
         thetas = np.stack([R, np.broadcast_to(rho, R.shape), np.zeros_like(R)], axis=-1)
         return chi2, thetas
     # colour: per channel sums
-    a = np.einsum("ptc,ptc->c", Dw, D)
-    b = np.einsum("ptc,kptc->kc", Dw, G)
-    c = np.einsum("ptc,kptc->kc", w, G * G)
-    yd = np.einsum("ptc,ptc->c", yw, D)
-    yg = np.einsum("ptc,kptc->kc", yw, G)
-    yy = np.einsum("ptc,ptc->c", yw, y)
+    a, b, c, yd, yg, yy = _weighted_sums(y, w, D, G, "c")
     r1 = (1 - rho)[None, :, None]
     r2 = rho[None, :, None]
     metal = (rho >= 0.5)[None, :, None]

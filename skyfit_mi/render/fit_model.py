@@ -25,6 +25,20 @@ def bounds(model):
     return np.array(lo), np.array(hi)
 
 
+def write_material(params, prefix, model, theta):
+    """Set a ``ward`` plugin's parameters (keys ``prefix + name``) to ``theta`` and update."""
+    import mitsuba as mi
+
+    d = material_dict(model, theta)
+    params[prefix + "rho_s"] = mi.Float(d["rho_s"])
+    params[prefix + "sigma_alpha"] = mi.Float(d["sigma_alpha"])
+    if "R" in d:
+        params[prefix + "R"] = mi.Float(d["R"])
+    if "C" in d:
+        params[prefix + "C"] = mi.Color3f(*d["C"])
+    params.update()
+
+
 def material_dict(model, theta, normalisation="ward"):
     """The ``ward`` plugin dictionary (and spec material) for parameters ``theta``."""
     theta = [float(v) for v in theta]
@@ -86,15 +100,7 @@ class WardModel:
         return d
 
     def _set(self, theta):
-        mi = self.mi
-        theta = [float(v) for v in theta]
-        self.params["rho_s"] = mi.Float(theta[-2])
-        self.params["sigma_alpha"] = mi.Float(theta[-1])
-        if self.model == "achromatic":
-            self.params["R"] = mi.Float(theta[0])
-        if self.model == "colour":
-            self.params["C"] = mi.Color3f(*theta[:3])
-        self.params.update()
+        write_material(self.params, "", self.model, theta)
 
     def _radiance_dr(self):
         """L as a Dr.Jit Color3f of size P*T (attached to any parameter gradients)."""
@@ -225,17 +231,10 @@ class RegionRenderModel:
         import drjit as dr
 
         mi = self.mi
-        d = material_dict(self.model, theta)
         out = np.zeros(self.shape + (3,))
         n = len(self.pixels) * self.spp
         for t, (scene, params) in enumerate(zip(self.scenes, self.params)):
-            params[self.key + "rho_s"] = mi.Float(d["rho_s"])
-            params[self.key + "sigma_alpha"] = mi.Float(d["sigma_alpha"])
-            if "R" in d:
-                params[self.key + "R"] = mi.Float(d["R"])
-            if "C" in d:
-                params[self.key + "C"] = mi.Color3f(*d["C"])
-            params.update()
+            write_material(params, self.key, self.model, theta)
             sampler = mi.load_dict({"type": "independent"})
             sampler.seed(self.seed + t, n)
             li, _, _ = self.integrator.sample(scene, sampler, mi.RayDifferential3f(self.rays))

@@ -136,8 +136,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=16, direc
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
         # primary rays: S stratified positions in each pixel
-        pos = np.concatenate([pixels[:, None, :] + _stratified(rng, S)[None] for _ in [0]], 0)
-        pos = pos.reshape(P * S, 2) / [w, h]
+        pos = (pixels[:, None, :] + _stratified(rng, S)[None]).reshape(P * S, 2) / [w, h]
         ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
                                    mi.Point2f(pos[:, 0], pos[:, 1]), mi.Point2f(0.5, 0.5))
         si = scene.ray_intersect(ray)

@@ -36,6 +36,7 @@ import numpy as np
 
 from ...sky import Sky
 from ..daylight import RGB_KEYS as _RGB_KEYS
+from .properties import property_values
 
 #: Sampling table resolution: azimuth cells x cos(theta) cells.
 TABLE_NU, TABLE_NV = 128, 64
@@ -47,12 +48,7 @@ _LUM = np.array([0.2126, 0.7152, 0.0722])
 
 
 def _triple(props, name, default):
-    if name not in props:
-        return np.asarray(default, dtype=float)
-    v = props[name]
-    if isinstance(v, str):
-        v = [float(x) for x in v.replace(",", " ").split()]
-    a = np.asarray(v, dtype=float).ravel()
+    a = property_values(props, name, default)
     return np.full(3, a[0]) if a.size == 1 else a
 
 

@@ -33,6 +33,7 @@ import mitsuba as mi
 import numpy as np
 
 from ...errors import check_choice
+from .properties import property_values
 from ...ward import METAL_THRESHOLD, MODELS, NORMALISATIONS, SIGMA_MAX, SIGMA_MIRROR, raw_parameters
 
 _DEFAULTS = {"rho_d": 0.5, "rho_s": 0.05, "sigma_alpha": 0.1, "R": 1.0, "C": (1.0, 1.0, 1.0)}
@@ -40,14 +41,7 @@ _RGB_PARAMS = {"raw": ("rho_d", "rho_s"), "colour": ("C",)}
 
 
 def _prop(props, name):
-    if name not in props:
-        return _DEFAULTS[name]
-    v = props[name]
-    if isinstance(v, mi.Texture):                 # <rgb>/<float> written as a constant texture
-        v = np.array(v.eval(dr.zeros(mi.SurfaceInteraction3f)), dtype=float).ravel()
-    if isinstance(v, str):
-        v = [float(x) for x in v.replace(",", " ").split()]
-    a = np.asarray(v, dtype=float).ravel()
+    a = property_values(props, name, _DEFAULTS[name])
     return float(a[0]) if a.size == 1 else a
 
 
