@@ -14,6 +14,7 @@ meaning, as in the thesis).  Writes markdown to --output.
 
 import argparse
 import datetime as dt
+import os
 import sys
 import tempfile
 import time
@@ -87,6 +88,19 @@ def render_case(tmp, i, model, azimuth, truth):
     return out
 
 
+def explain(result, model, truth):
+    """Why a Levenberg-Marquardt run ended where it did, from the fit's own warnings."""
+    if success(model, list(result["parameters"].values()), truth):
+        return "reached the truth"
+    for w in result["warnings"]:
+        if "failed" in w:
+            return "the curvature matrix is singular at a point where chi2 is flat in some direction"
+        if "global search finds" in w:
+            return w.split(": lm ended")[0].replace("lm stopped", "stopped").replace(", but", "; ")
+    return "chi2 at the result is within tolerance of the global minimum: the data do not " \
+        "separate the two (see the warnings)"
+
+
 def fmt(theta):
     return ", ".join(f"{v:.3f}" for v in theta)
 
@@ -105,7 +119,7 @@ def main():
              f"Command: `{' '.join(['.venv/bin/python', 'scripts/reproduce_thesis.py'] + sys.argv[1:])}`. "
              f"Date: {dt.date.today().isoformat()}. Method in the script's docstring.", ""]
     summary = ["| table | model | truth | method | starts | successes | median evaluations | "
-               "median time [s] | thesis |", "|---|---|---|---|---|---|---|---|---|"]
+               "median time [s] | largest error | thesis |", "|---|---|---|---|---|---|---|---|---|---|"]
     with tempfile.TemporaryDirectory() as tmp:
         for i, (lm_table, sa_table, model, az, truth) in enumerate(CASES):
             if args.cases != "all" and sa_table not in args.cases.split(","):
@@ -117,13 +131,14 @@ def main():
             if lm_table:
                 lines += [f"## Table {lm_table}: Levenberg-Marquardt, {model}-parameter model, disc "
                           f"from the {cam}, truth ({fmt(tv)})", "",
-                          "| start | thesis result | our result | our chi2/dof | our status |",
-                          "|---|---|---|---|---|"]
+                          "| start | thesis result | our result | our chi2/dof | our status | why |",
+                          "|---|---|---|---|---|---|"]
                 for s, th in zip(LM_STARTS[lm_table], LM_THESIS[lm_table]):
                     r = session.run("lm", start=s, log=lambda *a: None)
                     status = r["status"] if r["status"] != "failed" else "Fail (singular curvature)"
                     lines.append(f"| {fmt(s)} | {'Fail' if th is None else fmt(th)} | "
-                                 f"{fmt(r['parameters'].values())} | {r['chi2_per_dof']:.3g} | {status} |")
+                                 f"{fmt(r['parameters'].values())} | {r['chi2_per_dof']:.3g} | {status} | "
+                                 f"{explain(r, model, truth)} |")
                 lines.append("")
             rng = np.random.default_rng(1000 + i)
             starts = [session.random_start(rng) for _ in range(args.starts)]
@@ -132,20 +147,32 @@ def main():
                 for k, s in enumerate(starts):
                     t0 = time.perf_counter()
                     r = session.run(method, start=s, seed=k, log=lambda *a: None)
-                    runs.append((success(model, list(r["parameters"].values()), truth),
-                                 r["evaluations"], time.perf_counter() - t0))
+                    th = list(r["parameters"].values())
+                    runs.append((success(model, th, truth), r["evaluations"],
+                                 time.perf_counter() - t0, np.abs(np.array(th) - tv)))
                 ok = sum(x[0] for x in runs)
                 thesis = f"annealing: table {sa_table}, correct from every start" \
                     if method == "anneal" else "-"
                 summary.append(f"| {sa_table} | {model} | {fmt(tv)} | {method} | {len(runs)} | {ok} | "
                                f"{np.median([x[1] for x in runs]):.0f} | "
-                               f"{np.median([x[2] for x in runs]):.1f} | {thesis} |")
+                               f"{np.median([x[2] for x in runs]):.1f} | "
+                               f"{fmt(np.max([x[3] for x in runs], axis=0))} | {thesis} |")
                 print(summary[-1], flush=True)
-    lines += ["## Annealing (tables 7.4-7.12) and the global method from random starts", ""] + summary
-    lines += ["", "Times exclude the light cache (built once per case, about 1-3 s) and include "
-              "the uncertainty analysis of each fit."]
-    Path(args.output).write_text("\n".join(lines) + "\n")
+            write(args.output, lines, summary, done=False)
+    write(args.output, lines, summary, done=True)
     print(f"wrote {args.output}")
+
+
+def write(path, lines, summary, done):
+    """Write the tables so far (atomically), so that an interrupted run keeps its results."""
+    text = lines + ["## Annealing (tables 7.4-7.12) and the global method from random starts", ""]
+    text += summary + ["", "Times exclude the light cache (built once per case) and include the "
+                       "uncertainty analysis of each fit."]
+    if not done:
+        text += ["", "*Run in progress: the cases above are complete, later ones not yet run.*"]
+    tmp = Path(path).with_name(f".{Path(path).name}.tmp")
+    tmp.write_text("\n".join(text) + "\n")
+    os.replace(tmp, path)
 
 
 if __name__ == "__main__":

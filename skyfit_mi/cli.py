@@ -4,6 +4,7 @@ import argparse
 import sys
 
 from .errors import SetupError, SkyfitError
+from .render.light_cache import DIRECTIONS, POSITIONS
 
 
 def _render(args):
@@ -115,8 +116,8 @@ def main(argv=None):
     fit.add_argument("--normalisation", choices=("ward", "duer", "balanced"), default="ward")
     fit.add_argument("--start", help="starting parameters, comma-separated (lm, anneal, adam)")
     fit.add_argument("--seed", type=int, default=0, help="seed of the light cache and random starts")
-    fit.add_argument("--positions", type=int, default=4, help="light-cache positions per pixel")
-    fit.add_argument("--directions", type=int, default=1024, help="light-cache directions per position")
+    fit.add_argument("--positions", type=int, default=POSITIONS, help="light-cache positions per pixel")
+    fit.add_argument("--directions", type=int, default=DIRECTIONS, help="light-cache directions per position")
     fit.add_argument("-o", "--output", help="output folder (default: the manifest's folder)")
     fit.set_defaults(func=_fit)
     args = parser.parse_args(argv)

@@ -19,6 +19,7 @@ from . import uncertainty as unc
 from .chi2 import Problem, load_observations
 from .errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
+from .render.light_cache import DIRECTIONS, POSITIONS
 from .sequence import load_manifest, sky_from_record
 
 
@@ -40,7 +41,7 @@ class FitSession:
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
-                 positions=4, directions=1024):
+                 positions=POSITIONS, directions=DIRECTIONS):
         from .render import setup
         from .render.fit_model import BY_COUNT, PARAMETERS, WardModel, bounds
         from .render.light_cache import build_light_cache
@@ -166,7 +167,8 @@ class FitSession:
 
 
 def fit_region(manifest_path, name, pixels, model="two", method="global", normalisation="ward",
-               seed=0, start=None, positions=4, directions=1024, method_options=None, log=print):
+               seed=0, start=None, positions=POSITIONS, directions=DIRECTIONS,
+               method_options=None, log=print):
     """Fit one material region (see :class:`FitSession`); returns a JSON-ready result dict."""
     session = FitSession(manifest_path, name, pixels, model, normalisation, seed, positions,
                          directions)

@@ -8,6 +8,8 @@ columns (few parameters), reverse mode for the gradient of a scalar loss.
 
 import numpy as np
 
+from .light_cache import SIGMA_RESOLVED
+
 #: Fitted parameters of each model (thesis 7.1), in order; C is three numbers.
 PARAMETERS = {"two": ("rho_s", "sigma_alpha"),
               "achromatic": ("R", "rho_s", "sigma_alpha"),
@@ -85,7 +87,7 @@ class WardModel:
         self.si_m.wi = mi.Vector3f(*flat(wo_m, 3))
         self.mirror = mi.Color3f(*flat(cache.mirror, 3))
         self.S = S
-        self.bsdf = mi.load_dict({"type": "ward", **self._props(material_dict(model, self._mid()))})
+        self.bsdf = mi.load_dict({"type": "ward", **self._props(material_dict(model, self._mid(), normalisation))})
         self.params = mi.traverse(self.bsdf)
         self.evaluations = 0
 
@@ -99,11 +101,21 @@ class WardModel:
             d["C"] = self.mi.ScalarColor3f(*d["C"])
         return d
 
-    def _set(self, theta):
-        write_material(self.params, "", self.model, theta)
+    def _variables(self, theta, grad=()):
+        """The parameters as Dr.Jit values keyed like the plugin's; those in ``grad`` track derivatives."""
+        mi, dr = self.mi, self.dr
+        d = material_dict(self.model, theta, self.normalisation)
+        v = {"rho_s": mi.Float(d["rho_s"]), "sigma_alpha": mi.Float(d["sigma_alpha"])}
+        if "R" in d:
+            v["R"] = mi.Float(d["R"])
+        if "C" in d:
+            v["C"] = mi.Color3f(*d["C"])
+        for k in grad:
+            dr.enable_grad(v[k])
+        return v, d["sigma_alpha"]
 
-    def _radiance_dr(self):
-        """L as a Dr.Jit Color3f of size P*T (attached to any parameter gradients)."""
+    def _eval(self):
+        """L for the plugin's current parameters: the lobe on the cached light, plus the mirror."""
         dr, mi = self.dr, self.mi
         ctx = mi.BSDFContext()
         f = self.bsdf.eval(ctx, self.si, self.wi)                       # f_r cos(theta_i)
@@ -113,70 +125,70 @@ class WardModel:
         mirror = dr.select(delta, w * bs.pdf, 0.0) * self.mirror
         return glossy + dr.block_sum(mirror, self.S)
 
+    def _radiance_dr(self, v, sigma):
+        """L as a Dr.Jit Color3f of size P*T from parameter values ``v`` (attached to their gradients).
+
+        Below the cache's resolution (sigma < SIGMA_RESOLVED) L is interpolated linearly in
+        sigma between the ideal mirror and the lobe at SIGMA_RESOLVED, so that L stays a
+        continuous function of sigma down to the mirror (see :mod:`.light_cache`).
+        """
+        p = self.params
+        for k, x in v.items():
+            p[k] = x
+        if sigma >= SIGMA_RESOLVED:
+            p.update()
+            return self._eval()
+        p["sigma_alpha"] = self.mi.Float(SIGMA_RESOLVED)
+        p.update()
+        rough = self._eval()
+        p["sigma_alpha"] = self.mi.Float(0.0)
+        p.update()
+        mirror = self._eval()
+        return mirror + (v["sigma_alpha"] / SIGMA_RESOLVED) * (rough - mirror)
+
     def _np(self, v):
         return np.array(v, dtype=float).T.reshape(*self.shape, 3)
 
     def radiance(self, theta):
         """L [W m^-2 sr^-1] for parameters ``theta``, shape (P, T, 3)."""
-        self._set(theta)
         self.evaluations += 1
-        return self._np(self._radiance_dr())
+        return self._np(self._radiance_dr(*self._variables(theta)))
 
     def jacobian(self, theta):
         """(L, dL/dtheta) with shapes (P, T, 3) and (P, T, 3, n_params), by forward-mode AD."""
         dr, mi = self.dr, self.mi
-        self._set(theta)
         cols = []
         value = None
-        for i, name in enumerate(self.names):
+        for name in self.names:
             key = "C" if name.startswith("C_") else name
-            x = self.params[key]
-            dr.enable_grad(x)
-            self.params.update()
-            L = self._radiance_dr()
+            v, sigma = self._variables(theta, grad=(key,))
+            L = self._radiance_dr(v, sigma)
             if name.startswith("C_"):
                 seed = [0.0, 0.0, 0.0]
-                seed[int("rgb".index(name[-1]))] = 1.0
-                dr.set_grad(x, mi.Color3f(*seed))
+                seed["rgb".index(name[-1])] = 1.0
+                dr.set_grad(v[key], mi.Color3f(*seed))
             else:
-                dr.set_grad(x, 1.0)
+                dr.set_grad(v[key], 1.0)
             dr.forward_to(L, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
             cols.append(self._np(dr.grad(L)))
             if value is None:
                 value = self._np(dr.detach(L))
-            dr.disable_grad(x)
-        self.params.update()
         self.evaluations += 1
         return value, np.stack(cols, axis=-1)
 
     def gradient(self, theta, dloss_dL):
         """d(loss)/d(theta) by reverse-mode AD, given dloss/dL (P, T, 3) as a constant."""
         dr, mi = self.dr, self.mi
-        self._set(theta)
-        xs = []
-        for name in self.names:
-            key = "C" if name.startswith("C_") else name
-            if key not in [k for k, _ in xs]:
-                x = self.params[key]
-                dr.enable_grad(x)
-                xs.append((key, x))
-        self.params.update()
-        L = self._radiance_dr()
+        keys = list(dict.fromkeys("C" if n.startswith("C_") else n for n in self.names))
+        v, sigma = self._variables(theta, grad=keys)
+        L = self._radiance_dr(v, sigma)
         g = dloss_dL.reshape(-1, 3)
         dr.backward_from(dr.sum(L * mi.Color3f(*[np.ascontiguousarray(g[:, i]) for i in range(3)]),
                                 axis=None), flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
-        grads = {k: np.array(dr.grad(x), dtype=float).ravel() for k, x in xs}
-        for _, x in xs:
-            dr.disable_grad(x)
-        self.params.update()
+        grads = {k: np.array(dr.grad(v[k]), dtype=float).ravel() for k in keys}
         self.evaluations += 1
-        out = []
-        for name in self.names:
-            if name.startswith("C_"):
-                out.append(grads["C"]["rgb".index(name[-1])])
-            else:
-                out.append(grads[name][0])
-        return np.array(out)
+        return np.array([grads["C"]["rgb".index(n[-1])] if n.startswith("C_") else grads[n][0]
+                         for n in self.names])
 
 
 class RegionRenderModel:

@@ -19,6 +19,14 @@ estimate of the pixel's radiance with fixed samples: a deterministic, smooth
 function of the parameters (common random numbers), evaluated with the
 ``ward`` plugin's own ``eval`` in Dr.Jit (so gradients come from Dr.Jit), or
 split into the basis L = rho_d * D + rho_s * G(sigma) for the global search.
+
+Fixed samples resolve a lobe no narrower than the narrowest sampling lobe,
+SIGMA_RESOLVED: below it the estimate's variance grows as (SIGMA_RESOLVED /
+sigma)^2 and chi-square would turn into noise between the resolved lobes and
+the mirror.  There the model interpolates linearly in sigma between the mirror
+(sigma = 0) and the lobe at SIGMA_RESOLVED.  SIGMA_RESOLVED = 0.002 is below the
+sun's angular radius (0.0047 rad), so such lobes reflect sun and sky almost as a
+mirror does, and the interpolation changes little but keeps L continuous.
 """
 
 from dataclasses import dataclass
@@ -28,7 +36,12 @@ import numpy as np
 from ..ward import SIGMA_MIRROR
 
 #: Roughnesses of the Ward sampling lobes in the direction mixture.
-LOBE_SIGMAS = (0.01, 0.03, 0.07, 0.15, 0.3)
+LOBE_SIGMAS = (0.002, 0.006, 0.02, 0.06, 0.15, 0.3)
+#: The narrowest lobe the cache resolves; the model interpolates to the mirror below it.
+SIGMA_RESOLVED = LOBE_SIGMAS[0]
+#: Samples per pixel by default: positions over the pixel's area (a highlight's radiance can
+#: vary by tens of per cent across one pixel) and light directions at each position.
+POSITIONS, DIRECTIONS = 32, 128
 #: Share of directions from the solar disc, the sky table, cosine, and all lobes together; fixed
 #: counts, so the sun's share does not fluctuate from pixel to pixel.
 MIX = {"sun": 0.25, "sky": 0.20, "cosine": 0.15, "lobes": 0.40}
@@ -64,27 +77,42 @@ class LightCache:
         return np.einsum("ptn,ptnc->ptc", cos / np.pi, self.weight)
 
     def specular_basis(self, sigma_alpha, normalisation="ward"):
-        """G(sigma) with L = ... + rho_s * G: shape (P, T, 3); the mirror term for sigma <= 1e-4."""
+        """G(sigma) with L = ... + rho_s * G: shape (P, T, 3).
+
+        The mirror term for sigma <= 1e-4, linear interpolation from it to G(SIGMA_RESOLVED)
+        below SIGMA_RESOLVED (as the Dr.Jit model does).
+        """
         from ..ward import mirror_reflectance, specular_lobe
 
         if sigma_alpha <= SIGMA_MIRROR:
             frac = mirror_reflectance(self.mirror_cos, normalisation)
             return np.einsum("pts,ptsc->ptc", frac, self.mirror)
+        if sigma_alpha < SIGMA_RESOLVED:
+            t = sigma_alpha / SIGMA_RESOLVED
+            return (1 - t) * self.specular_basis(0.0, normalisation) \
+                + t * self.specular_basis(SIGMA_RESOLVED, normalisation)
         lobe = specular_lobe(self.wi, self.wo, sigma_alpha, normalisation)
         cos = np.clip(self.wi[..., 2], 0, None)
         return np.einsum("ptn,ptnc->ptc", lobe * cos, self.weight)
 
 
 def _stratified(rng, n):
-    """n stratified 2D samples in [0, 1)^2 (jittered rows of a near-square grid), shuffled."""
+    """n stratified 2D samples in [0, 1)^2, in random order.
+
+    One jittered sample in each of n cells of an a x b grid (a b >= n).  When n is not
+    a b, the n cells are a random subset, so that every sample stays uniform on the
+    square and the estimate unbiased (a fixed subset would leave the same corner
+    unsampled every time).
+    """
     a = int(np.ceil(np.sqrt(n)))
     b = int(np.ceil(n / a))
-    ij = np.stack(np.meshgrid(np.arange(a), np.arange(b), indexing="ij"), -1).reshape(-1, 2)[:n]
-    u = (ij + rng.random((n, 2))) / [a, b]
-    return u[rng.permutation(n)]
+    cells = rng.permutation(a * b)[:n]
+    ij = np.stack([cells // b, cells % b], axis=-1)
+    return (ij + rng.random((n, 2))) / [a, b]
 
 
-def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=16, directions=64, seed=0,
+def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
+                      directions=DIRECTIONS, seed=0,
                       max_depth=3):
     """Trace the light arriving at ``pixels`` for every sky in ``skies``.
 
