@@ -6,7 +6,8 @@ high-quality noise-free day is rendered once (16x16, 4096 spp, east camera at 45
 the dynamic range, seeded by replicate) from the same radiance, and the global method fits
 the central 4x4 region.  Reports, per parameter, how often the 95% profile and covariance
 intervals contain the truth, and the RMSE of the estimates over the replicates divided by
-the Cramer-Rao bound sqrt(diag((J^T J)^-1)) at the truth.
+the Cramer-Rao bound sqrt(diag(F^-1)) at the truth, F the Fisher information of the
+sensor's data (Gaussian noise, values clipped at code 0).
 
     .venv/bin/python scripts/coverage.py [--replicates 50]
 """
@@ -24,6 +25,22 @@ import numpy as np
 CASES = {"7.2": ("rough disc (cf. 7.2)", "two", {"rho_s": 0.5, "sigma_alpha": 0.1}),
          "7.7": ("7.7", "achromatic", {"R": 0.33, "rho_s": 0.2, "sigma_alpha": 0.05}),
          "7.10": ("7.10", "colour", {"C": [0.25, 0.5, 0.75], "rho_s": 0.2, "sigma_alpha": 0.05})}
+
+
+def fisher_jacobian(session, theta, sensor):
+    """J with J^T J = the Fisher information of the clipped Gaussian sensor data at ``theta``."""
+    from scipy.stats import norm
+
+    from skyfit_mi.chi2 import LOW_CODE
+
+    problem = session.problem
+    L, dL = session.wm.jacobian(theta)
+    g = problem.obs.gain[:, None, None]
+    dm = sensor.slope(L * g) * sensor.max_code * g
+    a = (LOW_CODE - problem.predict(L)) / sensor.sigma
+    info = norm.pdf(a) ** 2 / np.maximum(norm.cdf(a), 1e-300) + a * norm.pdf(a) + norm.sf(a)
+    J = (np.sqrt(info) * dm / sensor.sigma)[..., None] * dL
+    return J[problem.mask]
 
 
 def main():
@@ -76,9 +93,12 @@ def main():
                 sensor = SensorModel(**{**{k: s[k] for k in ("exposure", "response", "gamma", "bits",
                                                              "cos4")}, "noise_percent": noise})
                 obs.sensor = sensor
-                # Cramer-Rao bound at the truth with this noise
+                # Cramer-Rao bound at the truth with this noise, for the data as the sensor
+                # gives them: Gaussian, clipped at code 0 (the Fisher information of a value
+                # whose standardised clipping point is a is phi(a)^2/Phi(a) + a phi(a) + 1 - Phi(a),
+                # in units of 1/sigma^2; 1 without clipping)
                 obs.sigma = np.full_like(obs.y, sensor.sigma)
-                _, J = session.problem.jacobian(tv)
+                J = fisher_jacobian(session, tv, sensor)
                 crb = np.sqrt(np.diag(np.linalg.pinv(J.T @ J)))
                 # the fit of the noise-free values: the offset every replicate shares
                 obs.y = sensor.respond(radiance * obs.gain[:, None, None]) * sensor.max_code

@@ -5,6 +5,12 @@ colour channel, with y the sensor's pixel values [DN] and sigma their standard
 deviations from the manifest's sensor model (saturated pixels, sigma = inf,
 drop out).  The model y(x; a) is the sensor model applied to the radiance the
 :class:`~skyfit_mi.render.fit_model.WardModel` renders for parameters a.
+
+Values at code 0 are censored, not measured: the sensor clipped a noisy signal
+that fell below 0.5 DN.  Taking them as exact zeros biases dark channels upward
+under strong noise, so each contributes -2 ln P(y = 0) = -2 ln Phi((0.5 - y(x; a)) /
+sigma) instead of its squared residual (the Tobit likelihood); chi^2 stays
+-2 ln(likelihood) up to a constant, and is eq. 6.2 when nothing is clipped.
 """
 
 from dataclasses import dataclass
@@ -14,6 +20,9 @@ import numpy as np
 from .camera import SensorModel
 from .errors import SkyfitError
 from .sequence import load_manifest
+
+#: Values below this [DN] read as code 0.
+LOW_CODE = 0.5
 
 
 @dataclass
@@ -119,8 +128,29 @@ class Problem:
         s = radiance * self.obs.gain[:, None, None]
         return self.obs.sensor.respond(s) * self.obs.sensor.max_code
 
+    @property
+    def low(self):
+        """Values clipped at the lowest code (censored; see the module docstring)."""
+        return self.mask & (self.obs.y <= 0)
+
+    def _censored(self, m, low):
+        """Residuals sqrt(-2 ln P(y = 0)) of the clipped values ``low`` and their d/dm, for model
+        values m [DN]."""
+        from scipy.special import log_ndtr
+
+        sig = self.obs.sigma[low]
+        z = (LOW_CODE - m[low]) / sig
+        r = np.sqrt(-2.0 * log_ndtr(z))
+        # d r / d m = phi(z) / (sigma Phi(z) r)
+        d = np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z)) / (sig * r)
+        return r, d
+
     def residuals_from(self, radiance):
-        r = (self.obs.y - self.predict(radiance)) / self.obs.sigma
+        m = self.predict(radiance)
+        r = (self.obs.y - m) / self.obs.sigma
+        low = self.low
+        if low.any():
+            r[low] = self._censored(m, low)[0]
         return r[self.mask]
 
     def residuals(self, theta):
@@ -140,5 +170,9 @@ class Problem:
         s = L * self.obs.gain[:, None, None]
         dm = self.obs.sensor.slope(s) * self.obs.sensor.max_code * self.obs.gain[:, None, None]
         r = self.residuals_from(L)
-        J = -(dm[..., None] * dL) / self.obs.sigma[..., None]
+        dr = -1.0 / self.obs.sigma
+        low = self.low
+        if low.any():
+            dr[low] = self._censored(self.predict(L), low)[1]
+        J = (dr * dm)[..., None] * dL
         return r, J[self.mask]

@@ -86,3 +86,21 @@ def test_annealing_reaches_a_minimum_on_the_bound():
         r = simulated_annealing(_Valley(), np.array([0.9, 0.4]), lower, upper, seed=seed,
                                 schedule=(1e3, 0.7, 10))
         assert r["theta"][1] == 0.0 and r["theta"][0] == pytest.approx(0.3, abs=1e-3)
+
+
+def test_full_render_model_replays_new_parameters_and_agrees_with_the_cache(session, days):
+    from skyfit_mi.render.fit_model import RegionRenderModel
+    from skyfit_mi.sequence import load_manifest
+
+    doc, _ = load_manifest(days["clean"])
+
+    def model():
+        return RegionRenderModel(doc["scene"]["xml"], "disc", session.skies, session.obs.pixels,
+                                 "two", spp=64, seed=1)
+    a = model()
+    a.radiance([0.3, 0.1])                               # records the frozen frames
+    replayed = a.radiance([0.7, 0.05])                   # replays them with new parameters
+    fresh = model().radiance([0.7, 0.05])
+    assert np.allclose(replayed, fresh, rtol=1e-5)
+    cached = session.wm.radiance([0.7, 0.05])
+    assert abs(np.mean(replayed / cached) - 1) < 0.01

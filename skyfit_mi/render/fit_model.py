@@ -198,13 +198,17 @@ class RegionRenderModel:
     the baseline the cached :class:`WardModel` is measured against.  One scene per frame
     holds that frame's sky; every call sets the material's parameters in each and
     path-traces ``spp`` jittered rays through each region pixel with a fixed seed (common
-    random numbers, so chi-square is a deterministic function of the parameters).
+    random numbers, so chi-square is a deterministic function of the parameters).  The
+    per-frame render is a ``dr.freeze`` function: traced once per frame's scene, then
+    replayed with the new parameters (about 12x faster than re-tracing every call), so
+    the baseline is as fast as Dr.Jit makes it.
     """
 
     def __init__(self, scene_xml, material, skies, pixels, model, spp=256, seed=0, max_depth=4,
                  normalisation="ward"):
         import xml.etree.ElementTree as ET
 
+        import drjit as dr
         import mitsuba as mi
 
         from .daylight import update_sky
@@ -235,22 +239,26 @@ class RegionRenderModel:
         rng = np.random.default_rng(seed)
         pos = (np.repeat(self.pixels, self.spp, axis=0) + rng.random((len(self.pixels) * self.spp, 2)))
         pos = pos / [w, h]
-        self.rays, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
-                                         mi.Point2f(pos[:, 0], pos[:, 1]), mi.Point2f(0.5, 0.5))
+        self.rays = mi.RayDifferential3f(
+            sensor.sample_ray(mi.Float(0.0), mi.Float(0.5), mi.Point2f(pos[:, 0], pos[:, 1]),
+                              mi.Point2f(0.5, 0.5))[0])
         self.evaluations = 0
+        spp, n, integrator = self.spp, len(self.pixels) * self.spp, self.integrator
+
+        def frame(scene, rays, seed):
+            sampler = mi.load_dict({"type": "independent"})
+            sampler.seed(seed, n)
+            li, _, _ = integrator.sample(scene, sampler, rays)
+            return dr.block_sum(li, spp) / spp
+        # one recording per frame's scene is expected
+        self._frame = dr.freeze(frame, warn_after=2 * len(skies) + 2)
 
     def radiance(self, theta):
-        import drjit as dr
-
         mi = self.mi
         out = np.zeros(self.shape + (3,))
-        n = len(self.pixels) * self.spp
         for t, (scene, params) in enumerate(zip(self.scenes, self.params)):
             write_material(params, self.key, self.model, theta)
-            sampler = mi.load_dict({"type": "independent"})
-            sampler.seed(self.seed + t, n)
-            li, _, _ = self.integrator.sample(scene, sampler, mi.RayDifferential3f(self.rays))
-            v = dr.block_sum(li, self.spp) / self.spp
+            v = self._frame(scene, self.rays, mi.UInt32(self.seed + t))
             out[:, t] = np.array(v, dtype=float).T
         self.evaluations += 1
         return out
