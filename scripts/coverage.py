@@ -7,7 +7,7 @@ the dynamic range, seeded by replicate) from the same radiance, and the global m
 the central 4x4 region.  Reports, per parameter, how often the 95% profile and covariance
 intervals contain the truth, and the RMSE of the estimates over the replicates divided by
 the Cramer-Rao bound sqrt(diag(F^-1)) at the truth, F the Fisher information of the
-sensor's data (Gaussian noise, values clipped at code 0).
+sensor's data (Gaussian noise, values clipped at both ends of the range).
 
     .venv/bin/python scripts/coverage.py [--replicates 50]
 """
@@ -28,7 +28,12 @@ CASES = {"7.2": ("rough disc (cf. 7.2)", "two", {"rho_s": 0.5, "sigma_alpha": 0.
 
 
 def fisher_jacobian(session, theta, sensor):
-    """J with J^T J = the Fisher information of the clipped Gaussian sensor data at ``theta``."""
+    """J with J^T J = the Fisher information of the clipped Gaussian sensor data at ``theta``.
+
+    A value with mean m, clipped below a = (0.5 - m) / sigma and above u = (max - 0.5 - m) /
+    sigma (standardised), carries information [phi(a)^2 / Phi(a) + phi(u)^2 / (1 - Phi(u)) +
+    Phi(u) - Phi(a) - u phi(u) + a phi(a)] / sigma^2 about m: 1 / sigma^2 without clipping.
+    """
     from scipy.stats import norm
 
     from skyfit_mi.chi2 import LOW_CODE
@@ -37,8 +42,11 @@ def fisher_jacobian(session, theta, sensor):
     L, dL = session.wm.jacobian(theta)
     g = problem.obs.gain[:, None, None]
     dm = sensor.slope(L * g) * sensor.max_code * g
-    a = (LOW_CODE - problem.predict(L)) / sensor.sigma
-    info = norm.pdf(a) ** 2 / np.maximum(norm.cdf(a), 1e-300) + a * norm.pdf(a) + norm.sf(a)
+    m = problem.predict(L)
+    a, u = (LOW_CODE - m) / sensor.sigma, (sensor.max_code - LOW_CODE - m) / sensor.sigma
+    info = (norm.pdf(a) ** 2 / np.maximum(norm.cdf(a), 1e-300)
+            + norm.pdf(u) ** 2 / np.maximum(norm.sf(u), 1e-300)
+            + norm.cdf(u) - norm.cdf(a) - u * norm.pdf(u) + a * norm.pdf(a))
     J = (np.sqrt(info) * dm / sensor.sigma)[..., None] * dL
     return J[problem.mask]
 
@@ -94,9 +102,7 @@ def main():
                                                              "cos4")}, "noise_percent": noise})
                 obs.sensor = sensor
                 # Cramer-Rao bound at the truth with this noise, for the data as the sensor
-                # gives them: Gaussian, clipped at code 0 (the Fisher information of a value
-                # whose standardised clipping point is a is phi(a)^2/Phi(a) + a phi(a) + 1 - Phi(a),
-                # in units of 1/sigma^2; 1 without clipping)
+                # gives them: Gaussian, clipped at both ends of its range
                 obs.sigma = np.full_like(obs.y, sensor.sigma)
                 J = fisher_jacobian(session, tv, sensor)
                 crb = np.sqrt(np.diag(np.linalg.pinv(J.T @ J)))

@@ -6,11 +6,14 @@ deviations from the manifest's sensor model (saturated pixels, sigma = inf,
 drop out).  The model y(x; a) is the sensor model applied to the radiance the
 :class:`~skyfit_mi.render.fit_model.WardModel` renders for parameters a.
 
-Values at code 0 are censored, not measured: the sensor clipped a noisy signal
-that fell below 0.5 DN.  Taking them as exact zeros biases dark channels upward
-under strong noise, so each contributes -2 ln P(y = 0) = -2 ln Phi((0.5 - y(x; a)) /
-sigma) instead of its squared residual (the Tobit likelihood); chi^2 stays
--2 ln(likelihood) up to a constant, and is eq. 6.2 when nothing is clipped.
+Values at code 0 or at the top code with a finite sigma are censored, not
+measured: the sensor clipped a noisy signal that fell below 0.5 DN or above
+max - 0.5 DN.  Taking them as exact biases dark channels upward (and bright ones
+downward) under strong noise, so each contributes -2 ln P(y = 0) =
+-2 ln Phi((0.5 - y(x; a)) / sigma), or -2 ln P(y = max) = -2 ln Phi((y(x; a) -
+max + 0.5) / sigma), instead of its squared residual (the Tobit likelihood);
+chi^2 stays -2 ln(likelihood) up to a constant, and is eq. 6.2 when nothing is
+clipped.
 """
 
 from dataclasses import dataclass
@@ -128,29 +131,31 @@ class Problem:
         s = radiance * self.obs.gain[:, None, None]
         return self.obs.sensor.respond(s) * self.obs.sensor.max_code
 
-    @property
-    def low(self):
-        """Values clipped at the lowest code (censored; see the module docstring)."""
-        return self.mask & (self.obs.y <= 0)
+    def clipped(self):
+        """Boolean masks of the values clipped at the lowest and at the highest code."""
+        return self.mask & (self.obs.y <= 0), self.mask & (self.obs.y >= self.obs.sensor.max_code)
 
-    def _censored(self, m, low):
-        """Residuals sqrt(-2 ln P(y = 0)) of the clipped values ``low`` and their d/dm, for model
-        values m [DN]."""
+    def _censored(self, m, low, high):
+        """Residuals sqrt(-2 ln P(clipped)) of the clipped values and their d/dm, for model
+        values m [DN], as (r, dr/dm) arrays shaped like m (entries elsewhere unused)."""
         from scipy.special import log_ndtr
 
-        sig = self.obs.sigma[low]
-        z = (LOW_CODE - m[low]) / sig
+        sig = self.obs.sigma
+        sign = np.where(low, -1.0, 1.0)
+        z = sign * (m - np.where(low, LOW_CODE, self.obs.sensor.max_code - LOW_CODE)) / sig
+        z = np.where(low | high, z, 0.0)
         r = np.sqrt(-2.0 * log_ndtr(z))
-        # d r / d m = phi(z) / (sigma Phi(z) r)
-        d = np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z)) / (sig * r)
+        # d r / d m = -sign phi(z) / (sigma Phi(z) r)
+        d = -sign * np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z)) / (sig * r)
         return r, d
 
     def residuals_from(self, radiance):
         m = self.predict(radiance)
         r = (self.obs.y - m) / self.obs.sigma
-        low = self.low
-        if low.any():
-            r[low] = self._censored(m, low)[0]
+        low, high = self.clipped()
+        if low.any() or high.any():
+            c = low | high
+            r[c] = self._censored(m, low, high)[0][c]
         return r[self.mask]
 
     def residuals(self, theta):
@@ -171,8 +176,9 @@ class Problem:
         dm = self.obs.sensor.slope(s) * self.obs.sensor.max_code * self.obs.gain[:, None, None]
         r = self.residuals_from(L)
         dr = -1.0 / self.obs.sigma
-        low = self.low
-        if low.any():
-            dr[low] = self._censored(self.predict(L), low)[1]
+        low, high = self.clipped()
+        if low.any() or high.any():
+            c = low | high
+            dr[c] = self._censored(self.predict(L), low, high)[1][c]
         J = (dr * dm)[..., None] * dL
         return r, J[self.mask]

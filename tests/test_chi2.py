@@ -33,27 +33,30 @@ def _problem(mean_dn, noise_percent=10.0, n=4000, seed=0):
     return Problem(obs, _Flat(shape)), sensor
 
 
-def test_censored_residuals_and_jacobian():
-    problem, sensor = _problem(10.0, n=50)
-    assert problem.low.any() and not problem.low.all()
-    theta = np.array([12.0 / sensor.max_code])
+@pytest.mark.parametrize("mean_dn, side", [(10.0, 0), (245.0, 1)])
+def test_censored_residuals_and_jacobian(mean_dn, side):
+    problem, sensor = _problem(mean_dn, n=50)
+    clipped = problem.clipped()[side]
+    assert clipped.any() and not clipped.all() and not problem.clipped()[1 - side].any()
+    m = mean_dn + 2.0
+    theta = np.array([m / sensor.max_code])
     r, J = problem.jacobian(theta)
-    m = 12.0
-    low = problem.low[problem.mask]
-    expected = np.sqrt(-2 * norm.logcdf((LOW_CODE - m) / sensor.sigma))
-    assert np.allclose(r[low], expected)
+    edge = (LOW_CODE - m) if side == 0 else (m - sensor.max_code + LOW_CODE)
+    expected = np.sqrt(-2 * norm.logcdf(edge / sensor.sigma))
+    assert np.allclose(r[clipped[problem.mask]], expected)
     h = 1e-6
     fd = (problem.residuals(theta + h) - problem.residuals(theta - h)) / (2 * h)
     assert np.allclose(J[:, 0], fd, rtol=1e-5, atol=1e-8)
 
 
-def test_clipped_dark_values_give_an_unbiased_estimate():
-    # a dark channel at 10 DN under noise of sigma 25.5 DN: a third of its values read 0
-    problem, sensor = _problem(10.0)
-    assert 0.25 < problem.low.mean() < 0.45
-    fit = minimize_scalar(lambda a: problem.chi2([a / sensor.max_code]), bounds=(0, 100),
+@pytest.mark.parametrize("mean_dn, side", [(10.0, 0), (245.0, 1)])
+def test_clipped_values_give_an_unbiased_estimate(mean_dn, side):
+    # a channel 10 DN from either end under noise of sigma 25.5 DN: a third of its values clip
+    problem, sensor = _problem(mean_dn)
+    assert 0.25 < problem.clipped()[side].mean() < 0.45
+    fit = minimize_scalar(lambda a: problem.chi2([a / sensor.max_code]), bounds=(0, 300),
                           method="bounded")
     se = sensor.sigma / np.sqrt(problem.n_data)
-    assert fit.x == pytest.approx(10.0, abs=4 * se)              # about 1.4 DN
-    naive = problem.obs.y.mean()                                 # zeros taken as measured
-    assert naive - 10.0 > 10 * se
+    assert fit.x == pytest.approx(mean_dn, abs=4 * se)              # about 1.4 DN
+    naive = problem.obs.y.mean()                                     # clipped values taken as measured
+    assert abs(naive - mean_dn) > 10 * se
