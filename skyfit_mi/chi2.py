@@ -78,6 +78,17 @@ def region_from_mask(path, label):
     return np.stack([xs, ys], axis=1)
 
 
+def subsample_region(pixels, max_pixels, seed):
+    """At most ``max_pixels`` of a region's (P, 2) pixels, a seeded random subset in image order."""
+    pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
+    if max_pixels is None or len(pixels) <= max_pixels:
+        return pixels
+    if max_pixels < 1:
+        raise SkyfitError(f"max_pixels = {max_pixels}: give at least 1 (or none to fit every pixel).")
+    keep = np.sort(np.random.default_rng(seed).choice(len(pixels), int(max_pixels), replace=False))
+    return pixels[keep]
+
+
 def load_observations(manifest_path, pixels):
     """Read a region's pixel values and sigmas from every rendered frame of a manifest."""
     from .render.image import read_exr
@@ -167,6 +178,19 @@ class Problem:
         """Thesis eq. 6.2."""
         r = self.residuals(theta)
         return float(r @ r)
+
+    def model_noise_chi2(self, theta):
+        """Expected share of chi^2 at ``theta`` due to the model's own Monte Carlo variance:
+        sum of var(y(x; a)) / sigma^2 (the model's radiance variance through the sensor's slope).
+
+        It also sets the size of chi^2's ripples between nearby parameters, which the same
+        samples make only partly alike.
+        """
+        var = self.model.radiance_variance(theta)
+        L = self.model.radiance(theta)
+        g = self.obs.gain[:, None, None]
+        dm = self.obs.sensor.slope(L * g) * self.obs.sensor.max_code * g
+        return float(np.sum((dm**2 * var / self.obs.sigma**2)[self.mask]))
 
     def jacobian(self, theta):
         """(residuals, d residuals / d theta) with the model's forward-mode derivatives."""

@@ -26,8 +26,8 @@ def _pixels(args):
 def _fit(args):
     from pathlib import Path
 
-    from .chi2 import parse_region, region_from_mask
-    from .fit import fit_region, write_fit
+    from .chi2 import parse_region, region_from_mask, subsample_region
+    from .fit import fit_region, write_fit, write_summary
 
     regions = []
     for r in args.region or []:
@@ -40,18 +40,50 @@ def _fit(args):
         if not sep or args.mask is None:
             raise SkyfitError("--label NAME=VALUE needs --mask PNG (a label image of the frames' size).")
         regions.append((name, region_from_mask(args.mask, int(value))))
+    if args.all:
+        regions += _material_regions(args.manifest)
     if not regions:
-        raise SkyfitError("give at least one --region NAME=rect:... (or --mask and --label).")
+        raise SkyfitError("give at least one --region NAME=rect:... (or --mask and --label, or --all).")
     start = [float(v) for v in args.start.split(",")] if args.start else None
     root = Path(args.manifest)
     root = root if root.is_dir() else root.parent
+    out = Path(args.output) if args.output else root
+    results = []
     for name, pixels in regions:
-        res = fit_region(args.manifest, name, pixels, model=int(args.model), method=args.method,
+        kept = subsample_region(pixels, args.max_pixels or None, args.seed)
+        if len(kept) < len(pixels):
+            print(f"{name}: fitting {len(kept)} of its {len(pixels)} pixels (--max-pixels, seed "
+                  f"{args.seed})")
+        res = fit_region(args.manifest, name, kept, model=int(args.model), method=args.method,
                          normalisation=args.normalisation, seed=args.seed, start=start,
                          positions=args.positions, directions=args.directions)
-        prefix = Path(args.output) / f"fit_{name}" if args.output else root / f"fit_{name}"
-        paths = write_fit(res, prefix)
+        res["region_pixels_total"] = int(len(pixels))
+        paths = write_fit(res, out / f"fit_{name}")
+        results.append(res)
         print("wrote " + " and ".join(str(p) for p in paths))
+    print(f"wrote {write_summary(results, out / 'fits.csv')}")
+
+
+def _material_regions(manifest):
+    """(name, pixels) of every material the camera sees, from the scene's label image: the
+    pixels inside each material's area (edge pixels, which also see a neighbour, left out)."""
+    import numpy as np
+    from scipy.ndimage import binary_erosion
+
+    from .render import setup
+    from .render.labels import label_image
+    from .sequence import load_manifest
+
+    doc, _ = load_manifest(manifest)
+    mi = setup(doc["render"]["variant"])
+    labels, ids = label_image(mi.load_string(doc["scene"]["xml"]))
+    ward = set(doc["scene"]["materials"])
+    regions = []
+    for k, name in enumerate(ids):
+        ys, xs = np.nonzero(binary_erosion(labels == k + 1, border_value=1))
+        if name in ward and len(xs):
+            regions.append((name, np.stack([xs, ys], axis=1)))
+    return regions
 
 
 def _labels(args):
@@ -110,6 +142,11 @@ def main(argv=None):
     fit.add_argument("--mask", help="label-mask PNG (values per material), with --label")
     fit.add_argument("--label", action="append", metavar="NAME=VALUE",
                      help="the mask value of material NAME")
+    fit.add_argument("--all", action="store_true",
+                     help="fit every Ward material the camera sees (regions from the label image)")
+    fit.add_argument("--max-pixels", type=int, default=64,
+                     help="fit at most this many pixels of a region, a seeded random subset "
+                     "(default 64; 0 = every pixel)")
     fit.add_argument("--model", choices=("2", "3", "5"), default="2",
                      help="2: rho_s, sigma_alpha; 3: R, rho_s, sigma_alpha; 5: C, rho_s, sigma_alpha")
     fit.add_argument("--method", choices=("global", "lm", "anneal", "adam"), default="global")

@@ -19,7 +19,7 @@ from . import uncertainty as unc
 from .chi2 import Problem, load_observations
 from .errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
-from .render.light_cache import DIRECTIONS, POSITIONS
+from .render.light_cache import DIRECTIONS, POSITIONS, SIGMA_RESOLVED
 from .sequence import load_manifest, sky_from_record
 
 
@@ -74,6 +74,34 @@ class FitSession:
         self.lower, self.upper = bounds(model)
         self.truth = mats[name]
         self.cache_settings = {"positions": positions, "directions": directions, "seed": seed}
+        self._halves = None
+
+    def cache_error(self, theta, method):
+        """Standard error each parameter owes to the light cache's Monte Carlo samples.
+
+        The fit is repeated on each of two independent half caches (by the global method
+        when that found ``theta``, else by Levenberg-Marquardt from ``theta``, which finds
+        the same local minimum); their estimates differ by the cache error of a half twice
+        over, so the whole cache's error is |theta_A - theta_B| / 2.  One degree of freedom
+        makes it rough, but it keeps intervals honest when the data are precise enough for
+        the cache's noise to ripple chi-square by more than the 95% threshold.
+        """
+        from .methods.levenberg_marquardt import levenberg_marquardt
+        from .render.fit_model import WardModel
+
+        if self._halves is None:
+            self._halves = []
+            for c in self.cache.halves():
+                wm = WardModel(c, self.model, self.normalisation)
+                two = wm if self.model == "two" else WardModel(c, "two", self.normalisation)
+                self._halves.append((Problem(self.obs, wm, valid=self.cache.hit), two))
+        if method == "global":
+            fits = [global_search(p, theta, self.lower, self.upper, model_two=two,
+                                  candidates=2)["theta"] for p, two in self._halves]
+        else:
+            fits = [levenberg_marquardt(p, theta, self.lower, self.upper)["theta"]
+                    for p, _ in self._halves]
+        return np.abs(np.asarray(fits[0]) - np.asarray(fits[1])) / 2
 
     def random_start(self, rng):
         return self.lower + rng.random(len(self.lower)) * (self.upper - self.lower)
@@ -105,6 +133,10 @@ class FitSession:
             problem, start, lower, upper, model_two=two, candidates=1)["profile_linearised"]
         prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
                 "rho_s": (grid["rho_s"], grid["chi2_rho"])}
+        # chi^2 ripples by the larger model noise of the two estimators compared: near the
+        # mirror, the mirror rays' (small) and the narrowest resolved lobe's
+        ripple = max(problem.model_noise_chi2(theta),
+                     problem.model_noise_chi2(np.r_[theta[:-1], max(theta[-1], SIGMA_RESOLVED)]))
         # the profiles describe the global minimum; a local method is judged against it
         glob = method == "global"
         intervals, rise = {}, {}
@@ -114,11 +146,16 @@ class FitSession:
             if p in prof:
                 rise[p] = float(np.max(prof[p][1]) - np.min(prof[p][1]))
                 if glob:
-                    iv = unc.profile_interval(*prof[p], s2)
+                    iv = unc.profile_interval(*prof[p], s2, ripple)
                     source = "profile"
             intervals[p] = {"68": iv["68"], "95": iv["95"], "from": source}
+        mc_sd = self.cache_error(theta, method)
+        for i, p in enumerate(names):
+            for lv in ("68", "95"):
+                intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * mc_sd[i],
+                                             lower[i], upper[i])
         warnings = unc.identifiability(names, {p: intervals[p]["95"] for p in names}, lower, upper,
-                                       rise, s2, chi2 / dof)
+                                       rise, s2, chi2 / dof, ripple)
         if res.get("status") == "failed":
             warnings.insert(0, f"{method} failed: {res['message']}")
         if self.model == "colour":
@@ -148,6 +185,7 @@ class FitSession:
             "parameters": dict(zip(names, theta.tolist())),
             "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof, "interval_scale_s2": s2,
             "intervals": intervals,
+            "cache_error_sd": dict(zip(names, mc_sd.tolist())), "cache_noise_chi2": ripple,
             "covariance": {"names": list(names), "matrix": cov.tolist()},
             "evaluations": evaluations, "status": res.get("status"),
             "message": res.get("message"), "warnings": warnings,
@@ -209,3 +247,37 @@ def write_fit(result, prefix):
     plt.close(fig)
     os.replace(tmp_png, png)
     return js, png
+
+
+def write_summary(results, path):
+    """One CSV row per fitted region: parameters with 95% intervals, chi2/dof, truth, warnings.
+
+    Units: reflectances unitless, sigma_alpha rms slope, times in seconds.
+    """
+    import csv
+    import io
+
+    names = list(dict.fromkeys(n for r in results for n in r["parameters"]))
+    cols = ["region", "model", "method", "pixels_fitted", "pixels_total"]
+    for n in names:
+        cols += [n, f"{n}_95_lo", f"{n}_95_hi"]
+    cols += ["chi2_per_dof", "evaluations", "wall_time_s", "truth", "warnings"]
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(cols)
+    for r in results:
+        row = [r["region"], r["model"], r["method"], len(r["pixels"]),
+               r.get("region_pixels_total", len(r["pixels"]))]
+        for n in names:
+            if n in r["parameters"]:
+                row += [f"{r['parameters'][n]:.5f}", *(f"{v:.5f}" for v in r["intervals"][n]["95"])]
+            else:
+                row += ["", "", ""]
+        row += [f"{r['chi2_per_dof']:.4g}", r["evaluations"], f"{r['wall_time_s']:.2f}",
+                json.dumps(r["truth"]) if r.get("truth") else "", " | ".join(r["warnings"])]
+        w.writerow(row)
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(buf.getvalue())
+    os.replace(tmp, path)
+    return path

@@ -8,7 +8,11 @@ Two estimates, both reported:
 * covariance: C = (J^T J)^-1 at the optimum, intervals +- 1 and 1.96 standard deviations.
 
 When chi^2/dof > 1 (the model or the sigmas are imperfect, e.g. render noise in the
-data) both are widened by s^2 = chi^2/dof (Birge ratio), and the output says so.
+data) both are widened by s^2 = chi^2/dof (Birge ratio), and the output says so.  The
+model's own Monte Carlo error (the light cache's samples, estimated by fitting on two
+independent halves of it) is then added in quadrature to each interval's half-widths,
+and the profile threshold is raised by the chi^2 that noise contributes, since chi^2
+ripples by about that much from one parameter value to the next.
 """
 
 import numpy as np
@@ -41,13 +45,26 @@ def covariance_intervals(theta, cov, lower, upper):
             for lv, z in Z.items()}
 
 
-def profile_interval(grid, profile, s2=1.0):
-    """{level: (lo, hi)} where profile <= min + Delta s^2, edges interpolated linearly."""
+def widen(value, interval, extra, lower, upper):
+    """(lo, hi) with ``extra`` added in quadrature to each half-width (an independent error,
+    such as the model's own Monte Carlo error), clipped to the bounds."""
+    lo, hi = interval
+    return (float(max(lower, value - np.hypot(max(value - lo, 0.0), extra))),
+            float(min(upper, value + np.hypot(max(hi - value, 0.0), extra))))
+
+
+def profile_interval(grid, profile, s2=1.0, ripple=0.0):
+    """{level: (lo, hi)} where profile <= min + Delta s^2 + ripple, edges interpolated linearly.
+
+    ``ripple`` is the chi^2 the model's own Monte Carlo noise can add or take away
+    (:meth:`~skyfit_mi.chi2.Problem.model_noise_chi2`): profile values closer than that to
+    the minimum are not told apart from it.
+    """
     grid, profile = np.asarray(grid, float), np.asarray(profile, float)
     pmin = profile.min()
     out = {}
     for lv, delta in LEVELS.items():
-        thr = pmin + delta * s2
+        thr = pmin + delta * s2 + ripple
         inside = np.nonzero(profile <= thr)[0]
         i0, i1 = inside[0], inside[-1]
 
@@ -60,14 +77,14 @@ def profile_interval(grid, profile, s2=1.0):
     return out
 
 
-def identifiability(names, intervals95, lower, upper, profile_rise, s2, chi2_dof):
+def identifiability(names, intervals95, lower, upper, profile_rise, s2, chi2_dof, ripple=0.0):
     """Warnings for parameters the data do not determine, and for a poor fit."""
     warnings = []
     span = np.asarray(upper) - np.asarray(lower)
     for i, name in enumerate(names):
         lo, hi = intervals95[name]
         rise = profile_rise.get(name)
-        flat = rise is not None and rise < LEVELS["95"] * s2
+        flat = rise is not None and rise < LEVELS["95"] * s2 + ripple
         if flat or (hi - lo) > 0.5 * span[i]:
             why = (f"chi-square changes by only {rise:.3g} across its whole range" if flat else
                    f"its 95% interval {lo:.3g}-{hi:.3g} covers over half its range")

@@ -84,7 +84,26 @@ def test_cli_fit_writes_json_and_plot(days, tmp_path):
         assert key in res
     assert res["truth"]["rho_s"] == 0.3
     assert (tmp_path / "fit_disc.png").stat().st_size > 10000
+    summary = (tmp_path / "fits.csv").read_text().splitlines()
+    assert summary[0].startswith("region,model,method,pixels_fitted,pixels_total,rho_s,")
+    assert summary[1].startswith("disc,two,global,16,16,")
     assert main(["fit", str(days["noisy"]), "--region", "disc=box"]) == 2
+
+
+def test_cli_fit_all_materials_subsamples_large_regions(days, tmp_path):
+    assert main(["fit", str(days["noisy"]), "--all", "--max-pixels", "20", "--positions", "2",
+                 "--directions", "512", "-o", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "fit_disc.json").read_text())
+    assert len(res["pixels"]) == 20 and res["region_pixels_total"] == 144
+    assert res["parameters"]["rho_s"] == pytest.approx(0.3, abs=0.05)
+
+
+def test_subsample_region_is_seeded():
+    from skyfit_mi.chi2 import subsample_region
+    px = parse_region("rect:0,0,9,9")
+    a, b = subsample_region(px, 10, seed=3), subsample_region(px, 10, seed=3)
+    assert len(a) == 10 and (a == b).all() and len({tuple(p) for p in a}) == 10
+    assert (subsample_region(px, None, 0) == px).all()
 
 
 def test_labels_and_mask_regions(days, tmp_path):

@@ -114,18 +114,29 @@ class WardModel:
             dr.enable_grad(v[k])
         return v, d["sigma_alpha"]
 
-    def _eval(self):
-        """L for the plugin's current parameters: the lobe on the cached light, plus the mirror."""
+    def _eval(self, per_position=False):
+        """L for the plugin's current parameters: the lobe on the cached light, plus the mirror;
+        with ``per_position`` each position's share (size P*T*S) instead of their sum (P*T)."""
         dr, mi = self.dr, self.mi
         ctx = mi.BSDFContext()
         f = self.bsdf.eval(ctx, self.si, self.wi)                       # f_r cos(theta_i)
-        glossy = dr.block_sum(f * self.weight, self.n)
+        glossy = dr.block_sum(f * self.weight, self.n // self.S if per_position else self.n)
         bs, w = self.bsdf.sample(ctx, self.si_m, mi.Float(0.0), mi.Point2f(0.5, 0.5))
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection)
         mirror = dr.select(delta, w * bs.pdf, 0.0) * self.mirror
-        return glossy + dr.block_sum(mirror, self.S)
+        return glossy + (mirror if per_position else dr.block_sum(mirror, self.S))
 
-    def _radiance_dr(self, v, sigma):
+    def radiance_variance(self, theta):
+        """Monte Carlo variance of ``radiance(theta)`` [(W m^-2 sr^-1)^2], shape (P, T, 3).
+
+        Each of the S positions of a pixel gives an independent estimate (S times its share);
+        the variance of their mean is their sample variance / S.
+        """
+        shares = self._radiance_dr(*self._variables(theta), per_position=True)
+        est = np.array(shares, dtype=float).T.reshape(*self.shape, self.S, 3) * self.S
+        return np.var(est, axis=2, ddof=1) / self.S
+
+    def _radiance_dr(self, v, sigma, per_position=False):
         """L as a Dr.Jit Color3f of size P*T from parameter values ``v`` (attached to their gradients).
 
         Below the cache's resolution (sigma < SIGMA_RESOLVED) L is interpolated linearly in
@@ -137,13 +148,13 @@ class WardModel:
             p[k] = x
         if sigma >= SIGMA_RESOLVED:
             p.update()
-            return self._eval()
+            return self._eval(per_position)
         p["sigma_alpha"] = self.mi.Float(SIGMA_RESOLVED)
         p.update()
-        rough = self._eval()
+        rough = self._eval(per_position)
         p["sigma_alpha"] = self.mi.Float(0.0)
         p.update()
-        mirror = self._eval()
+        mirror = self._eval(per_position)
         return mirror + (v["sigma_alpha"] / SIGMA_RESOLVED) * (rough - mirror)
 
     def _np(self, v):

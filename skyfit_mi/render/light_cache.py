@@ -70,6 +70,24 @@ class LightCache:
     mirror_cos: np.ndarray
     hit: np.ndarray
 
+    def halves(self):
+        """Two independent caches, each from half of every pixel's positions (weights doubled).
+
+        Fits on each estimate the Monte Carlo error the cache adds to a fit on the whole.
+        """
+        S = self.mirror.shape[2]
+        if S < 2:
+            raise ValueError("a cache with one position per pixel cannot be halved")
+        K = self.weight.shape[2] // S
+        h = S // 2
+        out = []
+        for sl in (slice(0, h), slice(h, 2 * h)):
+            n = slice(sl.start * K, sl.stop * K)
+            out.append(LightCache(self.wo[:, :, n], self.wi[:, :, n], self.weight[:, :, n] * (S / h),
+                                  self.mirror[:, :, sl] * (S / h), self.mirror_cos[:, :, sl],
+                                  self.hit))
+        return out
+
     # ---- the basis (NumPy, for the global search) ------------------------
     def diffuse_basis(self):
         """D with L = rho_d * D + ...: sum cos/pi * weight, shape (P, T, 3)."""
