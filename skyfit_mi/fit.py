@@ -214,7 +214,8 @@ def fit_region(manifest_path, name, pixels, model="two", method="global", normal
 
 
 def write_fit(result, prefix):
-    """Write ``<prefix>.json`` and ``<prefix>.png`` (observed vs model over the day)."""
+    """Write ``<prefix>.json`` and ``<prefix>.png`` (observed vs model over the day; for
+    annealing also its walk)."""
     import datetime as dt
 
     import matplotlib
@@ -230,7 +231,20 @@ def write_fit(result, prefix):
     t = [dt.datetime.fromisoformat(s) for s in result["series"]["times"]]
     y = np.asarray(result["series"]["observed_DN"])
     m = np.asarray(result["series"]["model_DN"])
-    fig, ax = plt.subplots(figsize=(7, 4))
+    walk = np.asarray(result.get("trace") or [])
+    if len(walk) > 1:                     # the annealing walk beside the series (thesis fig. 7.10)
+        fig, (ax, ax_w) = plt.subplots(1, 2, figsize=(11, 4), gridspec_kw={"width_ratios": [7, 4]})
+        names = list(result["parameters"])
+        i, j = names.index("rho_s"), names.index("sigma_alpha")
+        ax_w.plot(walk[:, i], walk[:, j], "-", color="0.5", lw=0.8)
+        ax_w.plot(*walk[0, [i, j]], "s", color="k", label="start")
+        ax_w.plot(*walk[-1, [i, j]], "*", color="r", ms=10, label="end")
+        ax_w.set_xlabel("rho_s")
+        ax_w.set_ylabel("sigma_alpha")
+        ax_w.set_title(f"annealing walk: lowest vertex, {len(walk) - 1} iterations", fontsize=9)
+        ax_w.legend(fontsize=7)
+    else:
+        fig, ax = plt.subplots(figsize=(7, 4))
     for c, col in enumerate("rgb"):
         ax.plot(t, y[..., c].mean(axis=0), "o", color=col, ms=4, label=f"observed {'RGB'[c]}")
         ax.plot(t, m[..., c].mean(axis=0), "-", color=col, label=f"model {'RGB'[c]}")
@@ -239,7 +253,9 @@ def write_fit(result, prefix):
     ax.set_xlabel("local time")
     ax.set_ylabel("region mean pixel value [DN]")
     ax.legend(fontsize=7, ncol=2)
-    fig.autofmt_xdate()
+    for label in ax.get_xticklabels():
+        label.set_rotation(30)
+        label.set_ha("right")
     fig.tight_layout()
     png = prefix.with_suffix(".png")
     tmp_png = png.with_name(f".{png.stem}.tmp.png")

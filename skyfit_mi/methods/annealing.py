@@ -8,8 +8,8 @@ that leave the parameter box are mirrored back into it.  The cooling
 schedule of the thesis (7.3.1): start at T0, run m simplex iterations at each
 temperature, then multiply T by alpha (temperatures scale with the number of region pixels,
 since the thesis's chi^2 was one pixel's, and start no lower than 10x the initial chi^2); below t_min the simplex runs cold (T = 0) until
-its chi^2 values agree to ftol.  Seeded; the walk (best point after each
-iteration) is recorded (thesis fig. 7.10).
+its chi^2 values agree to ftol.  Seeded; the walk (the simplex's lowest vertex
+after each iteration) is recorded (thesis fig. 7.10).
 
 Two additions to the thesis's method, for the end game: when the cold simplex has
 converged it restarts small around the best point (Press et al. 10.4), and before each
@@ -102,7 +102,7 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
                             evals += 1
                             if f[i] < best_f:
                                 best_x, best_f = simplex[i].copy(), float(f[i])
-            walk.append(best_x.tolist())
+            walk.append(simplex[int(np.argmin(f))].tolist())
             if evals >= max_evaluations or (frozen and converged()):
                 break
         if frozen and converged():
