@@ -12,8 +12,9 @@ its chi^2 values agree to ftol.  Seeded; the walk (the simplex's lowest vertex
 after each iteration) is recorded (thesis fig. 7.10).
 
 Two additions to the thesis's method, for the end game: when the cold simplex has
-converged it restarts small around the best point (Press et al. 10.4), and before each
-restart it tries the best point with each parameter moved onto each of its bounds.
+converged it restarts around the best point, first with a full-size simplex and then
+small ones (Press et al. 10.4), and before each restart it tries the best point with
+each parameter moved onto each of its bounds.
 Mirrored trial points almost never land exactly on a bound, yet real truths often lie
 there (an ideal mirror, sigma_alpha = 0; rho_s = 0 or 1), behind a narrow valley.
 """
@@ -120,7 +121,9 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
                     evals += 1
                     if y < best_f:
                         best_x, best_f = x, y
-            simplex, f = make_simplex(best_x.copy(), 0.05)
+            # the first restart is as large as the first simplex (Press et al. restart at a
+            # claimed minimum with a full-size simplex), later ones small
+            simplex, f = make_simplex(best_x.copy(), step if restarts == 0 else 0.05)
             evals += n + 1
             restarts += 1
             if restarts > 1 and before - best_f <= ftol * abs(before):

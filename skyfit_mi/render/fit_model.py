@@ -261,8 +261,9 @@ class RegionRenderModel:
             sampler.seed(seed, n)
             li, _, _ = integrator.sample(scene, sampler, rays)
             return dr.block_sum(li, spp) / spp
-        # one recording per frame's scene is expected
-        self._frame = dr.freeze(frame, warn_after=2 * len(skies) + 2)
+        # a few recordings per frame's scene are expected (Dr.Jit re-records once it has seen
+        # which inputs change from call to call)
+        self._frame = dr.freeze(frame, warn_after=5 * len(skies))
 
     def radiance(self, theta):
         mi = self.mi
