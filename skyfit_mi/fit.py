@@ -97,7 +97,7 @@ class FitSession:
                 self._halves.append((Problem(self.obs, wm, valid=self.cache.hit), two))
         if method == "global":
             fits = [global_search(p, theta, self.lower, self.upper, model_two=two,
-                                  candidates=2)["theta"] for p, two in self._halves]
+                                  candidates=2, profile=False)["theta"] for p, two in self._halves]
         else:
             fits = [levenberg_marquardt(p, theta, self.lower, self.upper)["theta"]
                     for p, _ in self._halves]
@@ -129,8 +129,10 @@ class FitSession:
         s2 = unc.scale(chi2, dof)
         cov = unc.covariance(J, s2)
         cov_iv = unc.covariance_intervals(theta, cov, lower, upper)
-        grid = res.get("profile_linearised") or global_search(
-            problem, start, lower, upper, model_two=two, candidates=1)["profile_linearised"]
+        # the global minimum: its grid gives the profiles; a local method is judged against it
+        g = res if method == "global" else global_search(problem, start, lower, upper,
+                                                        model_two=two, candidates=2)
+        grid = g["profile_linearised"]
         prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
                 "rho_s": (grid["rho_s"], grid["chi2_rho"])}
         # chi^2 ripples by the larger model noise of the two estimators compared: near the
@@ -169,7 +171,6 @@ class FitSession:
                     "are determined.")
         if not glob:
             # compare with the global minimum: explains local failures (thesis 7.2)
-            g = global_search(problem, start, lower, upper, model_two=two, candidates=2)
             if g["chi2"] < chi2 - max(1.0, 1e-3 * chi2):
                 warnings.insert(0, f"{method} stopped at chi2 = {chi2:.6g}, but the global search finds "
                                 f"chi2 = {g['chi2']:.6g} at " + ", ".join(

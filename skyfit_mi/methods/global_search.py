@@ -107,10 +107,11 @@ def grid_chi2(model, y, w, D, G, rho=RHO_GRID):
     return chi2, thetas
 
 
-def global_search(problem, start, lower, upper, model_two=None, candidates=3, **_):
+def global_search(problem, start, lower, upper, model_two=None, candidates=3, profile=True, **_):
     """Grid over sigma_alpha (and rho_s) with closed-form linear parameters, then LM polish.
 
     ``start`` is not needed (the search is global); it is accepted for a uniform interface.
+    ``profile`` = False skips the refined profiles (when only the minimum is wanted).
     """
     model = problem.model.model
     y, w = _linearise(problem)
@@ -135,9 +136,10 @@ def global_search(problem, start, lower, upper, model_two=None, candidates=3, **
             res = {**res, "theta": thetas[k, j], "chi2": problem.chi2(thetas[k, j])}
         results.append(res)
     best = min(results, key=lambda r: r["chi2"])
-    profile = refined_profile(model, model_two, y, w, D, G, chi2, float(best["theta"][-1]))
+    prof = refined_profile(model, model_two, y, w, D, G, chi2, float(best["theta"][-1])) \
+        if profile else None
     return {**best, "status": "converged", "message": f"global grid of {len(SIGMA_GRID)} roughness "
-            f"values, {len(picks)} candidates polished", "profile_linearised": profile,
+            f"values, {len(picks)} candidates polished", "profile_linearised": prof,
             "grid_candidates": [results[i]["theta"].tolist() for i in range(len(results))]}
 
 
