@@ -97,7 +97,7 @@ class FitSession:
                 self._halves.append((Problem(self.obs, wm, valid=self.cache.hit), two))
         if method == "global":
             fits = [global_search(p, theta, self.lower, self.upper, model_two=two,
-                                  candidates=2, profile=False)["theta"] for p, two in self._halves]
+                                  candidates=1, profile=False)["theta"] for p, two in self._halves]
         else:
             fits = [levenberg_marquardt(p, theta, self.lower, self.upper)["theta"]
                     for p, _ in self._halves]

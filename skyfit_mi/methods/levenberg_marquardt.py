@@ -48,6 +48,9 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
                 break
         else:
             lam *= 10.0
+            if small >= 1:                   # a tiny gain, then no gain: at the minimum
+                status, message = "converged", "chi-square stopped decreasing"
+                break
             if lam > 1e10:
                 status, message = "converged", "no step lowers chi-square (lambda > 1e10)"
                 break
