@@ -29,6 +29,7 @@ from . import __version__
 from .camera import SensorModel
 from .colour import SRGB_LUMINANCE
 from .errors import SkyfitError
+from .render.scene_xml import pass_spp
 
 SCHEMA = "skyfit-manifest/1"
 
@@ -66,15 +67,6 @@ def _sky_record(sky):
             "horizon_blend": sky.horizon_blend, "info": sky.info,
             "horizontal_irradiance_W_m2": sky.horizontal_irradiance(n=128),
             "units": "weights and radiances W m^-2 sr^-1, linear sRGB"}
-
-
-def pass_spp(spp, sampler):
-    """Samples per pixel of each of the two passes: half of ``spp``, rounded to a square for
-    the stratified samplers (which need one and would otherwise round it themselves)."""
-    half = max(1, int(spp) // 2)
-    if sampler in ("multijitter", "stratified"):
-        half = max(1, int(round(np.sqrt(half)))) ** 2
-    return half
 
 
 def render_with_error(mi, scene, params, seed, half):

@@ -113,8 +113,19 @@ def build_scene_xml(spec):
     _sub(film, "string", name="pixel_format", value="rgb")
     _sub(film, "rfilter", type="box")
     sampler = _sub(sensor, "sampler", type=spec.render["sampler"])
-    _sub(sampler, "integer", name="sample_count", value=int(spec.render["spp"]))
+    # the count of each of the render's two passes, which the sampler accepts as it is
+    _sub(sampler, "integer", name="sample_count",
+         value=pass_spp(spec.render["spp"], spec.render["sampler"]))
     return ET.tostring(root, encoding="unicode"), mats, to_world
+
+
+def pass_spp(spp, sampler):
+    """Samples per pixel of each of the two passes: half of ``spp``, rounded to a square for
+    the stratified samplers (which need one and would otherwise round it themselves)."""
+    half = max(1, int(spp) // 2)
+    if sampler in ("multijitter", "stratified"):
+        half = max(1, int(round(np.sqrt(half)))) ** 2
+    return half
 
 
 def load_scene(spec):
