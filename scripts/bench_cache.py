@@ -30,18 +30,10 @@ def main():
     from skyfit_mi.fit import FitSession
     from skyfit_mi.render.image import read_exr
     from skyfit_mi.sequence import load_manifest, render_sequence
-    from skyfit_mi.spec import validate_spec
+    from skyfit_mi.spec import thesis_disc_spec, validate_spec
 
     truth = {"R": 0.33, "rho_s": 0.2, "sigma_alpha": 0.05}
-    raw = {"name": "cache-bench", "location": {"latitude_deg": 40.0, "longitude_deg": 0.0,
-                                               "timezone": "UTC"},
-           "time": {"date": "2026-06-21", "start": "06:00", "end": "18:00", "step_minutes": 60},
-           "sky": {"type": "clear"}, "scene": {"file": "disc.xml"},
-           "materials": {"disc": {"model": "achromatic", **truth}},
-           "camera": {"azimuth_deg": 90.0, "angle_deg": 45.0, "distance": 5.0, "fov_deg": 6.0,
-                      "width": 16, "height": 16},
-           "sensor": {"exposure": "auto", "bits": 12, "noise_percent": 0.0},
-           "render": {"spp": args.spp, "seed": 8}}
+    raw = thesis_disc_spec("cache-bench", {"model": "achromatic", **truth}, spp=args.spp, seed=8)
     print(f"Command: `.venv/bin/python scripts/bench_cache.py {' '.join(sys.argv[1:])}`. "
           f"Date: {dt.date.today().isoformat()}.\n")
     print("| positions x directions | samples per pixel | RMS relative error | largest per-frame "

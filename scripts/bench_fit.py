@@ -43,17 +43,10 @@ def main():
     from skyfit_mi.methods import METHODS
     from skyfit_mi.render.fit_model import RegionRenderModel
     from skyfit_mi.sequence import load_manifest, render_sequence
-    from skyfit_mi.spec import validate_spec
+    from skyfit_mi.spec import thesis_disc_spec, validate_spec
 
-    raw = {"name": "table-7.10-disc",
-           "location": {"latitude_deg": 40.0, "longitude_deg": 0.0, "timezone": "UTC"},
-           "time": {"date": "2026-06-21", "start": "06:00", "end": "18:00", "step_minutes": 60},
-           "sky": {"type": "clear"}, "scene": {"file": "disc.xml"},
-           "materials": {"disc": {"model": "colour", **TRUTH}},
-           "camera": {"azimuth_deg": 90.0, "angle_deg": 45.0, "distance": 5.0, "fov_deg": 10.0,
-                      "width": 24, "height": 24},
-           "sensor": {"exposure": "auto", "bits": 12, "noise_percent": 0.0},
-           "render": {"spp": 1024, "seed": 5}}
+    raw = thesis_disc_spec("table-7.10-disc", {"model": "colour", **TRUTH}, size=24, fov_deg=10.0,
+                           seed=5)
     region = parse_region("rect:8,8,15,15")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -64,7 +64,7 @@ def main():
     from skyfit_mi.fit import FitSession
     from skyfit_mi.render.image import read_exr
     from skyfit_mi.sequence import load_manifest, render_sequence
-    from skyfit_mi.spec import validate_spec
+    from skyfit_mi.spec import thesis_disc_spec, validate_spec
 
     region = parse_region("rect:6,6,9,9")
     print(f"Command: `.venv/bin/python scripts/coverage.py {' '.join(sys.argv[1:])}`. "
@@ -77,16 +77,7 @@ def main():
             if key not in args.cases.split(","):
                 continue
             label, model, truth = CASES[key]
-            raw = {"name": label, "location": {"latitude_deg": 40.0, "longitude_deg": 0.0,
-                                               "timezone": "UTC"},
-                   "time": {"date": "2026-06-21", "start": "06:00", "end": "18:00",
-                            "step_minutes": 60},
-                   "sky": {"type": "clear"}, "scene": {"file": "disc.xml"},
-                   "materials": {"disc": {"model": model, **truth}},
-                   "camera": {"azimuth_deg": 90.0, "angle_deg": 45.0, "distance": 5.0,
-                              "fov_deg": 6.0, "width": 16, "height": 16},
-                   "sensor": {"exposure": "auto", "bits": 8, "noise_percent": 0.0},
-                   "render": {"spp": 4096, "seed": 7 + i}}
+            raw = thesis_disc_spec(label, {"model": model, **truth}, bits=8, spp=4096, seed=7 + i)
             out = Path(tmp) / f"case{i}"
             render_sequence(validate_spec(raw, tmp), out, progress=False, log=lambda *a: None)
             doc, root = load_manifest(out)

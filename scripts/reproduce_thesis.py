@@ -72,17 +72,10 @@ def success(model, theta, truth):
 
 def render_case(tmp, i, model, azimuth, truth):
     from skyfit_mi.sequence import render_sequence
-    from skyfit_mi.spec import validate_spec
+    from skyfit_mi.spec import thesis_disc_spec, validate_spec
 
-    raw = {"name": f"case-{i}",
-           "location": {"latitude_deg": 40.0, "longitude_deg": 0.0, "timezone": "UTC"},
-           "time": {"date": "2026-06-21", "start": "06:00", "end": "18:00", "step_minutes": 60},
-           "sky": {"type": "clear"}, "scene": {"file": "disc.xml"},
-           "materials": {"disc": {"model": model, **truth}},
-           "camera": {"azimuth_deg": azimuth, "angle_deg": 45.0, "distance": 5.0, "fov_deg": 6.0,
-                      "width": 16, "height": 16},
-           "sensor": {"exposure": "auto", "bits": 12, "noise_percent": 0.0},
-           "render": {"spp": 1024, "seed": 100 + i}}
+    raw = thesis_disc_spec(f"case-{i}", {"model": model, **truth}, camera_azimuth_deg=azimuth,
+                           seed=100 + i)
     out = Path(tmp) / f"case{i}"
     render_sequence(validate_spec(raw, tmp), out, progress=False, log=lambda *a: None)
     return out

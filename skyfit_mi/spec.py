@@ -375,3 +375,25 @@ def _make_sky(e, zenith, azimuth, t, base_dir):
     except SkyfitError as exc:
         raise SpecError(f"[sky] at {t:%Y-%m-%d %H:%M}: {exc}") from None
     return sky
+
+
+def thesis_disc_spec(name, material, camera_azimuth_deg=90.0, size=16, fov_deg=6.0, bits=12,
+                     noise_percent=0.0, spp=1024, seed=0, sky="clear", exposure="auto"):
+    """The thesis's synthetic experiment (ch. 7) as a raw spec for :func:`validate_spec`.
+
+    The disc (``scenes/disc.xml``) made of ``material`` (a spec material table, e.g.
+    ``{"model": "two", "rho_s": 1.0, "sigma_alpha": 0.2}``), seen at 45 degrees from the
+    ``camera_azimuth_deg`` side (0 north, 90 east) from 5 m, at 40 N 0 E on 21 June, hourly
+    06:00-18:00 UTC, under a CIE ``sky``; ``size`` x ``size`` pixels over ``fov_deg``.
+    """
+    return {"name": name,
+            "location": {"latitude_deg": 40.0, "longitude_deg": 0.0, "timezone": "UTC"},
+            "time": {"date": "2026-06-21", "start": "06:00", "end": "18:00", "step_minutes": 60},
+            "sky": {"type": sky}, "scene": {"file": "disc.xml"},
+            "materials": {"disc": dict(material)},
+            "camera": {"azimuth_deg": float(camera_azimuth_deg), "angle_deg": 45.0,
+                       "distance": 5.0, "fov_deg": float(fov_deg), "width": int(size),
+                       "height": int(size)},
+            "sensor": {"exposure": exposure, "bits": int(bits),
+                       "noise_percent": float(noise_percent)},
+            "render": {"spp": int(spp), "seed": int(seed)}}

@@ -82,6 +82,13 @@ def test_time_range_and_per_frame_skies(tmp_path):
     assert lum == pytest.approx(150.0)
 
 
+def test_thesis_disc_spec_is_valid(tmp_path):
+    from skyfit_mi.spec import thesis_disc_spec
+    spec = validate_spec(thesis_disc_spec("d", {"model": "two", "rho_s": 0.5, "sigma_alpha": 0.1},
+                                          camera_azimuth_deg=0.0), tmp_path)
+    assert len(spec.frames) == 13 and spec.camera["azimuth_deg"] == 0.0
+
+
 def test_example_specs_are_valid():
     from skyfit_mi.spec import SCENES_DIR
     names = sorted(p.name for p in (SCENES_DIR / "specs").glob("*.toml"))
