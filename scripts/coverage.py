@@ -40,8 +40,7 @@ def fisher_jacobian(session, theta, sensor):
 
     problem = session.problem
     L, dL = session.wm.jacobian(theta)
-    g = problem.obs.gain[:, None, None]
-    dm = sensor.slope(L * g) * sensor.max_code * g
+    dm = problem.slope(L)
     m = problem.predict(L)
     a, u = (LOW_CODE - m) / sensor.sigma, (sensor.max_code - LOW_CODE - m) / sensor.sigma
     info = (norm.pdf(a) ** 2 / np.maximum(norm.cdf(a), 1e-300)

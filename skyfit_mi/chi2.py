@@ -142,32 +142,40 @@ class Problem:
         s = radiance * self.obs.gain[:, None, None]
         return self.obs.sensor.respond(s) * self.obs.sensor.max_code
 
+    def slope(self, radiance):
+        """d(pixel value) / d(radiance) [DN per W m^-2 sr^-1], shape (P, T, 3)."""
+        g = self.obs.gain[:, None, None]
+        return self.obs.sensor.slope(radiance * g) * self.obs.sensor.max_code * g
+
     def clipped(self):
         """Boolean masks of the values clipped at the lowest and at the highest code."""
         return self.mask & (self.obs.y <= 0), self.mask & (self.obs.y >= self.obs.sensor.max_code)
 
-    def _censored(self, m, low, high):
-        """Residuals sqrt(-2 ln P(clipped)) of the clipped values and their d/dm, for model
-        values m [DN], as (r, dr/dm) arrays shaped like m (entries elsewhere unused)."""
+    def residual_terms(self, radiance):
+        """Residuals of every value (P, T, 3) and their derivative d r / d(model value).
+
+        Measured values: (y - m) / sigma.  Clipped ones: sqrt(-2 ln P(clipped)), with
+        z = -(m - 0.5) / sigma at the bottom and (m - max + 0.5) / sigma at the top.
+        """
         from scipy.special import log_ndtr
 
+        m = self.predict(radiance)
         sig = self.obs.sigma
-        sign = np.where(low, -1.0, 1.0)
-        z = sign * (m - np.where(low, LOW_CODE, self.obs.sensor.max_code - LOW_CODE)) / sig
-        z = np.where(low | high, z, 0.0)
-        r = np.sqrt(-2.0 * log_ndtr(z))
-        # d r / d m = -sign phi(z) / (sigma Phi(z) r)
-        d = -sign * np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z)) / (sig * r)
-        return r, d
+        r, dr = (self.obs.y - m) / sig, -1.0 / sig
+        low, high = self.clipped()
+        c = low | high
+        if c.any():
+            sign = np.where(low, -1.0, 1.0)[c]
+            z = sign * (m[c] - np.where(low, LOW_CODE, self.obs.sensor.max_code - LOW_CODE)[c]) \
+                / sig[c]
+            r[c] = np.sqrt(-2.0 * log_ndtr(z))
+            # d r / d m = -sign phi(z) / (sigma Phi(z) r)
+            dr[c] = -sign * np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z)) \
+                / (sig[c] * r[c])
+        return r, dr
 
     def residuals_from(self, radiance):
-        m = self.predict(radiance)
-        r = (self.obs.y - m) / self.obs.sigma
-        low, high = self.clipped()
-        if low.any() or high.any():
-            c = low | high
-            r[c] = self._censored(m, low, high)[0][c]
-        return r[self.mask]
+        return self.residual_terms(radiance)[0][self.mask]
 
     def residuals(self, theta):
         """(y - y(a)) / sigma over usable values, flat."""
@@ -186,23 +194,13 @@ class Problem:
         It also sets the size of chi^2's ripples between nearby parameters, which the same
         samples make only partly alike.
         """
-        var = self.model.radiance_variance(theta)
-        L = self.model.radiance(theta)
-        g = self.obs.gain[:, None, None]
-        dm = self.obs.sensor.slope(L * g) * self.obs.sensor.max_code * g
-        return float(np.sum((dm**2 * var / self.obs.sigma**2)[self.mask]))
+        L, var = self.model.radiance_and_variance(theta)
+        return float(np.sum((self.slope(L) ** 2 * var / self.obs.sigma**2)[self.mask]))
 
     def jacobian(self, theta):
         """(residuals, d residuals / d theta) with the model's forward-mode derivatives."""
         self.evaluations += 1
         L, dL = self.model.jacobian(theta)
-        s = L * self.obs.gain[:, None, None]
-        dm = self.obs.sensor.slope(s) * self.obs.sensor.max_code * self.obs.gain[:, None, None]
-        r = self.residuals_from(L)
-        dr = -1.0 / self.obs.sigma
-        low, high = self.clipped()
-        if low.any() or high.any():
-            c = low | high
-            dr[c] = self._censored(self.predict(L), low, high)[1][c]
-        J = (dr * dm)[..., None] * dL
-        return r, J[self.mask]
+        r, dr = self.residual_terms(L)
+        J = (dr * self.slope(L))[..., None] * dL
+        return r[self.mask], J[self.mask]

@@ -70,13 +70,7 @@ def _material_regions(manifest):
     import numpy as np
     from scipy.ndimage import binary_erosion
 
-    from .render import setup
-    from .render.labels import label_image
-    from .sequence import load_manifest
-
-    doc, _ = load_manifest(manifest)
-    mi = setup(doc["render"]["variant"])
-    labels, ids = label_image(mi.load_string(doc["scene"]["xml"]))
+    doc, _, labels, ids = _scene_labels(manifest)
     ward = set(doc["scene"]["materials"])
     regions = []
     for k, name in enumerate(ids):
@@ -86,20 +80,26 @@ def _material_regions(manifest):
     return regions
 
 
+def _scene_labels(manifest):
+    """(manifest document, its folder, label image, material ids) of a rendered sequence."""
+    from .render import setup
+    from .render.labels import label_image
+    from .sequence import load_manifest
+
+    doc, root = load_manifest(manifest)
+    mi = setup(doc["render"]["variant"])
+    return (doc, root, *label_image(mi.load_string(doc["scene"]["xml"])))
+
+
 def _labels(args):
     import json
     from pathlib import Path
 
     import numpy as np
 
-    from .render import setup
     from .render.image import write_png
-    from .render.labels import label_image
-    from .sequence import load_manifest
 
-    doc, root = load_manifest(args.manifest)
-    mi = setup(doc["render"]["variant"])
-    labels, ids = label_image(mi.load_string(doc["scene"]["xml"]))
+    _, root, labels, ids = _scene_labels(args.manifest)
     out = Path(args.output) if args.output else root / "labels.png"
     write_png(out, np.repeat(labels[..., None], 3, axis=2).astype(np.uint8))
     legend = {name: k + 1 for k, name in enumerate(ids)}

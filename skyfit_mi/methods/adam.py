@@ -18,16 +18,15 @@ def adam(problem, start, lower, upper, iterations=300, learning_rate=0.02, beta1
     v = np.zeros_like(x)
     best_x, best_f = x.copy(), np.inf
     trace = []
-    obs, model = problem.obs, problem.model
+    model = problem.model
     for k in range(1, iterations + 1):
         L = model.radiance(x)
-        r = np.where(problem.mask, (obs.y - problem.predict(L)) / obs.sigma, 0.0)
+        r, dr_dm = problem.residual_terms(L)
+        r = np.where(problem.mask, r, 0.0)
         f = float(np.sum(r**2))
         if f < best_f:
             best_x, best_f = x.copy(), f
-        s = L * obs.gain[:, None, None]
-        dm_dl = obs.sensor.slope(s) * obs.sensor.max_code * obs.gain[:, None, None]
-        dloss_dl = np.where(problem.mask, -2.0 * r / obs.sigma * dm_dl, 0.0)
+        dloss_dl = np.where(problem.mask, 2.0 * r * dr_dm * problem.slope(L), 0.0)
         g = model.gradient(x, dloss_dl) * span          # in units of the range
         m = beta1 * m + (1 - beta1) * g
         v = beta2 * v + (1 - beta2) * g * g

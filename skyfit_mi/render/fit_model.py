@@ -27,17 +27,23 @@ def bounds(model):
     return np.array(lo), np.array(hi)
 
 
-def write_material(params, prefix, model, theta):
-    """Set a ``ward`` plugin's parameters (keys ``prefix + name``) to ``theta`` and update."""
+def material_values(model, theta):
+    """The ``ward`` plugin's parameters for ``theta`` as Dr.Jit values, keyed like ``traverse``."""
     import mitsuba as mi
 
     d = material_dict(model, theta)
-    params[prefix + "rho_s"] = mi.Float(d["rho_s"])
-    params[prefix + "sigma_alpha"] = mi.Float(d["sigma_alpha"])
+    v = {"rho_s": mi.Float(d["rho_s"]), "sigma_alpha": mi.Float(d["sigma_alpha"])}
     if "R" in d:
-        params[prefix + "R"] = mi.Float(d["R"])
+        v["R"] = mi.Float(d["R"])
     if "C" in d:
-        params[prefix + "C"] = mi.Color3f(*d["C"])
+        v["C"] = mi.Color3f(*d["C"])
+    return v
+
+
+def write_material(params, prefix, model, theta):
+    """Set a ``ward`` plugin's parameters (keys ``prefix + name``) to ``theta`` and update."""
+    for k, x in material_values(model, theta).items():
+        params[prefix + k] = x
     params.update()
 
 
@@ -102,17 +108,12 @@ class WardModel:
         return d
 
     def _variables(self, theta, grad=()):
-        """The parameters as Dr.Jit values keyed like the plugin's; those in ``grad`` track derivatives."""
-        mi, dr = self.mi, self.dr
-        d = material_dict(self.model, theta, self.normalisation)
-        v = {"rho_s": mi.Float(d["rho_s"]), "sigma_alpha": mi.Float(d["sigma_alpha"])}
-        if "R" in d:
-            v["R"] = mi.Float(d["R"])
-        if "C" in d:
-            v["C"] = mi.Color3f(*d["C"])
+        """The parameters as Dr.Jit values keyed like the plugin's (those in ``grad`` track
+        derivatives), and sigma_alpha as a float."""
+        v = material_values(self.model, theta)
         for k in grad:
-            dr.enable_grad(v[k])
-        return v, d["sigma_alpha"]
+            self.dr.enable_grad(v[k])
+        return v, float(theta[-1])
 
     def _eval(self, per_position=False):
         """L for the plugin's current parameters: the lobe on the cached light, plus the mirror;
@@ -126,15 +127,16 @@ class WardModel:
         mirror = dr.select(delta, w * bs.pdf, 0.0) * self.mirror
         return glossy + (mirror if per_position else dr.block_sum(mirror, self.S))
 
-    def radiance_variance(self, theta):
-        """Monte Carlo variance of ``radiance(theta)`` [(W m^-2 sr^-1)^2], shape (P, T, 3).
+    def radiance_and_variance(self, theta):
+        """``radiance(theta)`` and its Monte Carlo variance [(W m^-2 sr^-1)^2], both (P, T, 3).
 
-        Each of the S positions of a pixel gives an independent estimate (S times its share);
-        the variance of their mean is their sample variance / S.
+        Each of the S positions of a pixel gives an independent estimate (S times its share):
+        their mean is the radiance, their sample variance / S the variance of that mean.
         """
+        self.evaluations += 1
         shares = self._radiance_dr(*self._variables(theta), per_position=True)
         est = np.array(shares, dtype=float).T.reshape(*self.shape, self.S, 3) * self.S
-        return np.var(est, axis=2, ddof=1) / self.S
+        return est.mean(axis=2), np.var(est, axis=2, ddof=1) / self.S
 
     def _radiance_dr(self, v, sigma, per_position=False):
         """L as a Dr.Jit Color3f of size P*T from parameter values ``v`` (attached to their gradients).
