@@ -95,6 +95,7 @@ class WardModel:
         self.S = S
         self.bsdf = mi.load_dict({"type": "ward", **self._props(material_dict(model, self._mid(), normalisation))})
         self.params = mi.traverse(self.bsdf)
+        self._rest = material_values(model, self._mid())
         self.evaluations = 0
 
     def _mid(self):
@@ -109,8 +110,14 @@ class WardModel:
 
     def _variables(self, theta, grad=()):
         """The parameters as Dr.Jit values keyed like the plugin's (those in ``grad`` track
-        derivatives), and sigma_alpha as a float."""
+        derivatives), and sigma_alpha as a float.
+
+        The values are opaque (kernel inputs, not literals baked into the code), so that the
+        kernels compiled for one theta serve every theta; with literals each new theta
+        compiled anew, ten times the cost of the evaluation itself.
+        """
         v = material_values(self.model, theta)
+        self.dr.make_opaque(*v.values())
         for k in grad:
             self.dr.enable_grad(v[k])
         return v, float(theta[-1])
@@ -150,16 +157,25 @@ class WardModel:
             p[k] = x
         if sigma >= SIGMA_RESOLVED:
             p.update()
-            return self._eval(per_position)
-        p["sigma_alpha"] = self.mi.Float(SIGMA_RESOLVED)
+            L = self._eval(per_position)
+        else:
+            p["sigma_alpha"] = self.mi.Float(SIGMA_RESOLVED)
+            p.update()
+            rough = self._eval(per_position)
+            p["sigma_alpha"] = self.mi.Float(0.0)
+            p.update()
+            mirror = self._eval(per_position)
+            L = mirror + (v["sigma_alpha"] / SIGMA_RESOLVED) * (rough - mirror)
+        # L holds the opaque values; the plugin gets literals back, because a frozen function
+        # elsewhere in the process (RegionRenderModel) dispatches over every registered BSDF
+        # and cannot record foreign opaque state
+        for k, x in self._rest.items():
+            p[k] = x
         p.update()
-        rough = self._eval(per_position)
-        p["sigma_alpha"] = self.mi.Float(0.0)
-        p.update()
-        mirror = self._eval(per_position)
-        return mirror + (v["sigma_alpha"] / SIGMA_RESOLVED) * (rough - mirror)
+        return L
 
     def _np(self, v):
+        self.dr.eval(v)                                  # one kernel for all three channels
         return np.array(v, dtype=float).T.reshape(*self.shape, 3)
 
     def radiance(self, theta):
