@@ -19,6 +19,7 @@ from . import uncertainty as unc
 from .chi2 import Problem, load_observations
 from .errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
+from .render.fit_model import other_readings
 from .render.light_cache import DIRECTIONS, POSITIONS, SIGMA_RESOLVED
 from .sequence import load_manifest, sky_from_record
 
@@ -118,6 +119,7 @@ class FitSession:
             start = self.random_start(np.random.default_rng(seed))
         start = np.clip(np.asarray(start, dtype=float), lower, upper)
         res = METHODS[method](problem, start, lower, upper, seed=seed, model_two=two,
+                              alternatives=lambda th: other_readings(self.model, th),
                               **dict(method_options or {}))
         theta = np.asarray(res["theta"], dtype=float)
         evaluations = problem.evaluations + (two.evaluations if two is not wm else 0)

@@ -17,6 +17,8 @@ ripples by about that much from one parameter value to the next.
 
 import numpy as np
 
+from .ward import METAL_THRESHOLD, colour_rule_twin
+
 LEVELS = {"68": 1.0, "95": 3.841458820694124}
 Z = {"68": 1.0, "95": 1.959963984540054}
 
@@ -108,18 +110,11 @@ def colour_rule_ambiguity(theta, intervals95):
     rho_d = c (1 - rho_s) and the specular reflectance agree, so the data cannot tell them
     apart (thesis 3.4.5).  Returns (C', rho_s') of the other reading if it is valid.
     """
-    c = np.asarray(theta[:3], dtype=float)
     lo = max(intervals95[k][0] for k in ("C_r", "C_g", "C_b"))
     hi = min(intervals95[k][1] for k in ("C_r", "C_g", "C_b"))
     if lo > hi + 1e-9:                      # the channels differ: C is not grey
         return None
-    g, rho = float(c.mean()), float(theta[3])
-    if rho < 0.5:                           # plastic -> metal: C' rho' = rho, C'(1 - rho') = g(1 - rho)
-        c2 = rho + g * (1 - rho)
-        rho2 = rho / c2 if c2 > 0 else 0.0
-        ok = rho2 >= 0.5 and c2 <= 1.0
-    else:                                   # metal -> plastic: rho' = g rho, C'(1 - rho') = g(1 - rho)
-        rho2 = g * rho
-        c2 = g * (1 - rho) / (1 - rho2) if rho2 < 1 else 0.0
-        ok = rho2 < 0.5 and c2 <= 1.0
-    return (c2, rho2) if ok else None
+    g = float(np.mean(theta[:3]))
+    c2, rho2 = colour_rule_twin(np.full(3, g), theta[3])
+    ok = (rho2 < METAL_THRESHOLD) != (theta[3] < METAL_THRESHOLD) and c2[0] <= 1.0
+    return (float(c2[0]), rho2) if ok else None

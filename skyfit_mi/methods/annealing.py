@@ -4,20 +4,32 @@ After Press et al., Numerical Recipes 2nd ed. section 10.9: the Nelder-Mead simp
 (reflect, expand, contract, shrink), with a positive thermal fluctuation -T ln(u) added
 to the values kept at the vertices and subtracted from every new trial, so that uphill
 moves are accepted with a probability that falls with the temperature T.  Trial points
-that leave the parameter box are mirrored back into it.  The cooling
-schedule of the thesis (7.3.1): start at T0, run m simplex iterations at each
-temperature, then multiply T by alpha (temperatures scale with the number of region pixels,
-since the thesis's chi^2 was one pixel's, and start no lower than 10x the initial chi^2); below t_min the simplex runs cold (T = 0) until
-its chi^2 values agree to ftol.  Seeded; the walk (the simplex's lowest vertex
-after each iteration) is recorded (thesis fig. 7.10).
+that leave the parameter box are mirrored back into it.  The cooling schedule of the thesis
+(7.3.1): start at T0, run m simplex iterations at each temperature, then multiply T by alpha
+(temperatures scale with the number of region pixels, since the thesis's chi^2 was one
+pixel's, and start no lower than 10x the initial chi^2); below t_min (0.1 per pixel:
+fluctuations far below a chi^2 change of 1, which moves a parameter by its standard error)
+the simplex runs cold (T = 0) until its chi^2 values agree to ftol.  Seeded; the walk (the
+simplex's lowest vertex after each iteration) is recorded (thesis fig. 7.10).
 
-Two additions to the thesis's method, for the end game: when the cold simplex has
-converged it restarts around the best point, first with a full-size simplex and then
-small ones (Press et al. 10.4), and before each restart it tries the best point with
-each parameter moved onto each of its bounds.
-Mirrored trial points almost never land exactly on a bound, yet real truths often lie
-there (an ideal mirror, sigma_alpha = 0; rho_s = 0 or 1), behind a narrow valley.
+Additions to the thesis's method, for the end game, all measured on its tables 7.4-7.12
+(docs/THESIS_TABLES.md):
+
+* When the cold simplex first converges, it tries the best point on every face, edge and
+  corner of the parameter box.  Mirrored trial points almost never land on a bound, yet
+  truths often lie there (an ideal mirror: sigma_alpha = 0, rho_s = R = 1) at the bottom
+  of a well too narrow for the hot random walk to find (table 7.9 failed from half the
+  starts without this).
+* Then it anneals again (further cooling cycles, Press et al. 10.9), each starting at
+  T = the chi^2 of its start: from the best point, which frees simplices stuck on a
+  ridge, and from each point the caller names: for the colour model the reading across
+  the plastic/metal rule, where chi^2 jumps and no simplex move crosses (a metal reading
+  of a plastic surface is a local minimum at rho_s = 0.5).
+* Later convergences restart around the best point, first with a full-size simplex and
+  then small ones (Press et al. 10.4), each after trying every parameter on each bound.
 """
+
+import itertools
 
 import numpy as np
 
@@ -32,9 +44,26 @@ def reflect_into(x, lower, upper):
     return lower + np.where(y > span, 2 * span - y, y)
 
 
-def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max_evaluations=6000,
-                        t_min=1e-3, step=0.25, ftol=1e-7, max_restarts=4, **_):
-    """Minimise chi^2 by annealing from ``start``; returns a result dict with the walk."""
+def on_bounds(x, lower, upper, every_face=False):
+    """``x`` with each parameter moved onto each of its bounds (2 n points), or with
+    ``every_face`` onto every face, edge and corner of the box through x (3^n - 1 points)."""
+    n = len(x)
+    cols = np.stack([np.asarray(x, dtype=float), lower, upper])        # (3, n): keep, low, high
+    if every_face:
+        picks = [p for p in itertools.product(range(3), repeat=n) if any(p)]
+    else:
+        picks = [tuple(k if j == i else 0 for j in range(n)) for i in range(n) for k in (1, 2)]
+    return [cols[list(p), range(n)] for p in picks]
+
+
+def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max_evaluations=15000,
+                        t_min=0.1, step=0.25, ftol=1e-7, max_restarts=4, reanneal=True,
+                        alternatives=None, **_):
+    """Minimise chi^2 by annealing from ``start``; returns a result dict with the walk.
+
+    With ``reanneal`` further cooling cycles follow the first: from its best point and from
+    each of ``alternatives(best point)`` (see the module).
+    """
     rng = np.random.default_rng(seed)
     n = len(start)
     t0, alpha, m = schedule or SCHEDULES.get(n, (1e6, 0.8, 10))
@@ -54,7 +83,8 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
 
     simplex, f = make_simplex(np.clip(np.asarray(start, dtype=float), lower, upper), step)
     evals = n + 1
-    restarts = 0
+    restarts = reanneals = 0
+    cycles = None                    # further cooling cycles' starts, queued at the first freeze
     finished = False
     # The thesis's T0 (1e6, 1e7) exceeded its sequences' chi^2 many times over, so annealing
     # began as a random walk.  Sequences with more pixels or less noise have larger chi^2:
@@ -107,22 +137,41 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
             if evals >= max_evaluations or (frozen and converged()):
                 break
         if frozen and converged():
-            # Nelder-Mead can stall on a degenerate simplex: restart small around the best
-            # point until a restart no longer improves (Press et al. 10.4)
             if restarts >= max_restarts or evals >= max_evaluations:
                 finished = True
                 break
             before = best_f
-            for i in range(n):
-                for bound in (lower[i], upper[i]):
-                    x = best_x.copy()
-                    x[i] = bound
+            if cycles is None:
+                # first freeze: try points the simplex's mirrored moves rarely reach, the best
+                # point on every face, edge and corner of the box; then queue further cooling
+                # cycles from the best point and from each alternative reading
+                for x in on_bounds(best_x, lower, upper, every_face=True):
                     y = problem.chi2(x)
                     evals += 1
                     if y < best_f:
                         best_x, best_f = x, y
-            # the first restart is as large as the first simplex (Press et al. restart at a
-            # claimed minimum with a full-size simplex), later ones small
+                cycles = [best_x.copy()] if reanneal else []
+                if reanneal and alternatives:
+                    cycles += [np.clip(np.asarray(x, dtype=float), lower, upper)
+                               for x in alternatives(best_x)]
+            if cycles:
+                # anneal again, hot enough to leave a basin as deep as the start's chi^2
+                # (a further cooling cycle, Press et al. 10.9)
+                simplex, f = make_simplex(cycles.pop(0), step)
+                evals += n + 1
+                best_i = int(np.argmin(f))
+                if f[best_i] < best_f:
+                    best_x, best_f = simplex[best_i].copy(), float(f[best_i])
+                temp, frozen = max(float(f[0]), t_min / alpha), False
+                reanneals += 1
+                continue
+            for x in on_bounds(best_x, lower, upper):
+                y = problem.chi2(x)
+                evals += 1
+                if y < best_f:
+                    best_x, best_f = x, y
+            # Nelder-Mead can stall on a degenerate simplex: restart around the best point
+            # until a restart no longer improves (Press et al. 10.4); the first full-size
             simplex, f = make_simplex(best_x.copy(), step if restarts == 0 else 0.05)
             evals += n + 1
             restarts += 1
@@ -137,4 +186,5 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
             else f"stopped at {evals} evaluations (temperature {temp:.3g})",
             "trace": walk, "schedule": {"T0": t0 / pixels, "alpha": alpha, "m": m, "seed": seed,
                                         "temperature_scale_pixels": pixels,
-                                        "T0_used": t0_used, "evaluations": evals}}
+                                        "T0_used": t0_used, "reanneals": reanneals,
+                                        "evaluations": evals}}

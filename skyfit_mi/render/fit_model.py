@@ -47,6 +47,20 @@ def write_material(params, prefix, model, theta):
     params.update()
 
 
+def other_readings(model, theta):
+    """Parameter points that chi^2 should also be tried at because the model jumps between
+    them and ``theta``: for the colour model the reading across the plastic/metal rule
+    (:func:`~skyfit_mi.ward.colour_rule_twin`), clipped to the bounds and its side of the rule."""
+    from ..ward import METAL_THRESHOLD, colour_rule_twin
+
+    if model != "colour":
+        return []
+    c2, rho2 = colour_rule_twin(theta[:3], theta[3])
+    side = (0.0, np.nextafter(METAL_THRESHOLD, 0)) if theta[3] >= METAL_THRESHOLD \
+        else (METAL_THRESHOLD, 1.0)
+    return [np.r_[np.clip(c2, 0, 1), np.clip(rho2, *side), theta[4]]]
+
+
 def material_dict(model, theta, normalisation="ward"):
     """The ``ward`` plugin dictionary (and spec material) for parameters ``theta``."""
     theta = [float(v) for v in theta]
