@@ -112,21 +112,21 @@ def raw_parameters(model="raw", **params):
 def colour_rule_twin(C, rho_s):
     """The colour model's reading on the other side of the plastic/metal rule (thesis 7.1).
 
-    Keeps the diffuse reflectance C (1 - rho_s) of every channel and the mean specular
-    reflectance: metal -> plastic: rho_s' = mean(C) rho_s, C' = C (1 - rho_s) / (1 - rho_s');
-    plastic -> metal: C' = C (1 - rho_s) + rho_s, rho_s' = rho_s / mean(C').  When C is grey
-    the twin is the same raw BRDF; otherwise it is the nearest reading with the other rule.
+    Keeps the diffuse reflectance d = C (1 - rho_s) of every channel and the mean specular
+    reflectance: metal -> plastic: rho_s' = mean(C) rho_s; plastic -> metal: rho_s' =
+    rho_s / (mean(d) + rho_s); either way C' = d / (1 - rho_s').  When C is grey the twin is
+    the same raw BRDF; otherwise it is the nearest reading with the other rule.
 
     Returns (C', rho_s') unclipped: valid only if rho_s' lies on the other side of
     METAL_THRESHOLD and C' <= 1.
     """
     c, rho = np.asarray(C, dtype=float), float(rho_s)
+    d = c * (1 - rho)
     if rho >= METAL_THRESHOLD:
         rho2 = float(np.mean(c)) * rho
-        return (c * (1 - rho) / (1 - rho2) if rho2 < 1 else np.zeros(3)), rho2
-    c2 = c * (1 - rho) + rho
-    g = float(np.mean(c2))
-    return c2, (rho / g if g > 0 else 0.0)
+    else:
+        rho2 = rho / (float(np.mean(d)) + rho) if rho > 0 else 0.0
+    return (d / (1 - rho2) if rho2 < 1 else np.zeros(3)), rho2
 
 
 def _cos(w):

@@ -127,3 +127,18 @@ def test_colour_model_plastic_metal_ambiguity_for_grey_c():
     assert rho2 >= 0.5
     coloured = {"C_r": (0.79, 0.81), "C_g": (0.49, 0.51), "C_b": (0.19, 0.21)}
     assert colour_rule_ambiguity([0.8, 0.5, 0.2, 0.3, 0.08], coloured) is None
+
+
+@pytest.mark.parametrize("C, rho_s", [((0.9, 0.6, 0.3), 0.7), ((0.2, 0.3, 0.4), 0.4),
+                                      ((0.4, 0.4, 0.4), 0.8), ((0.4, 0.4, 0.4), 0.3)])
+def test_colour_rule_twin_keeps_diffuse_and_mean_specular(C, rho_s):
+    import numpy as np
+
+    from skyfit_mi.ward import METAL_THRESHOLD, colour_rule_twin, raw_parameters
+    c2, rho2 = colour_rule_twin(C, rho_s)
+    assert (rho2 >= METAL_THRESHOLD) != (rho_s >= METAL_THRESHOLD)   # the other rule
+    d, s, _ = raw_parameters("colour", C=C, rho_s=rho_s, sigma_alpha=0.1)
+    d2, s2, _ = raw_parameters("colour", C=c2, rho_s=rho2, sigma_alpha=0.1)
+    assert np.allclose(d2, d) and np.mean(s2) == pytest.approx(np.mean(s))
+    if np.ptp(C) == 0:                                     # grey: the same BRDF
+        assert np.allclose(s2, s)

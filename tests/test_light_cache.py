@@ -67,27 +67,6 @@ def test_jacobian_matches_finite_differences(session, sigma):
         assert np.max(np.abs(J[..., i] - fd)) < 2e-3 * scale, i
 
 
-class _Valley:
-    """chi^2 with its minimum on the bound x1 = 0, behind a valley 0.002 wide (like an ideal
-    mirror among rough lobes), and a broad local minimum at x1 = 0.2."""
-
-    class obs:
-        y = np.zeros((1, 1, 3))
-
-    def chi2(self, x):
-        a, s = x
-        return 100.0 * (a - 0.3) ** 2 + min(1000.0 * min(s / 0.002, 1.0), 50.0 + 2000.0 * (s - 0.2) ** 2)
-
-
-def test_annealing_reaches_a_minimum_on_the_bound():
-    from skyfit_mi.methods.annealing import simulated_annealing
-    lower, upper = np.zeros(2), np.array([1.0, 0.5])
-    for seed in range(3):
-        r = simulated_annealing(_Valley(), np.array([0.9, 0.4]), lower, upper, seed=seed,
-                                schedule=(1e3, 0.7, 10))
-        assert r["theta"][1] == 0.0 and r["theta"][0] == pytest.approx(0.3, abs=1e-3)
-
-
 def test_full_render_model_replays_new_parameters_and_agrees_with_the_cache(session, days):
     from skyfit_mi.render.fit_model import RegionRenderModel
     from skyfit_mi.sequence import load_manifest
