@@ -67,6 +67,30 @@ def test_jacobian_matches_finite_differences(session, sigma):
         assert np.max(np.abs(J[..., i] - fd)) < 2e-3 * scale, i
 
 
+@pytest.mark.parametrize("model, theta", [("colour", [0.25, 0.5, 0.75, 0.2, 0.05]),
+                                          ("colour", [0.3, 0.6, 0.9, 0.7, 0.001]),
+                                          ("achromatic", [0.5, 0.3, 0.02])])
+def test_jacobian_through_the_basis_matches_the_plugin(session, model, theta):
+    # L = rho_d D + s G(sigma): the value must be the plugin's own radiance, the columns of
+    # the linear parameters exact secants, those of rho_s and sigma finite differences
+    from skyfit_mi.render.fit_model import WardModel
+    wm = WardModel(session.cache, model)
+    theta = np.array(theta)
+    L, J = wm.jacobian(theta)
+    assert np.allclose(L, wm.radiance(theta), rtol=1e-5)
+    n_lin = len(theta) - 2
+    for i in range(n_lin):
+        hi, lo = theta.copy(), theta.copy()
+        hi[i], lo[i] = 1.0, 0.0
+        secant = wm.radiance(hi) - wm.radiance(lo)
+        assert np.allclose(J[..., i], secant, atol=1e-5 * np.max(np.abs(secant)))
+    for i, h in ((n_lin, 1e-3), (n_lin + 1, 1e-5 if theta[-1] < 0.002 else 1e-4)):
+        d = np.zeros(len(theta))
+        d[i] = h
+        fd = (wm.radiance(theta + d) - wm.radiance(theta - d)) / (2 * h)
+        assert np.max(np.abs(J[..., i] - fd)) < 2e-3 * np.max(np.abs(fd)), i
+
+
 def test_full_render_model_replays_new_parameters_and_agrees_with_the_cache(session, days):
     from skyfit_mi.render.fit_model import RegionRenderModel
     from skyfit_mi.sequence import load_manifest

@@ -8,6 +8,7 @@ columns (few parameters), reverse mode for the gradient of a scalar loss.
 
 import numpy as np
 
+from ..ward import METAL_THRESHOLD
 from .light_cache import SIGMA_RESOLVED
 
 #: Fitted parameters of each model (thesis 7.1), in order; C is three numbers.
@@ -51,7 +52,7 @@ def other_readings(model, theta):
     """Parameter points that chi^2 should also be tried at because the model jumps between
     them and ``theta``: for the colour model the reading across the plastic/metal rule
     (:func:`~skyfit_mi.ward.colour_rule_twin`), clipped to the bounds and its side of the rule."""
-    from ..ward import METAL_THRESHOLD, colour_rule_twin
+    from ..ward import colour_rule_twin
 
     if model != "colour":
         return []
@@ -59,6 +60,35 @@ def other_readings(model, theta):
     side = (0.0, np.nextafter(METAL_THRESHOLD, 0)) if theta[3] >= METAL_THRESHOLD \
         else (METAL_THRESHOLD, 1.0)
     return [np.r_[np.clip(c2, 0, 1), np.clip(rho2, *side), theta[4]]]
+
+
+def reflectances(model, theta):
+    """rho_d and the specular reflectance s per channel for ``theta`` (as
+    :func:`~skyfit_mi.ward.raw_parameters`, thesis 7.1), and their derivatives.
+
+    Returns rho_d (3,), s (3,), d rho_d / d theta (3, n), d s / d theta (3, n); the
+    sigma_alpha column is zero.  For the colour model the derivative is that of the rule on
+    theta's side of rho_s = 0.5.
+    """
+    th = np.asarray(theta, dtype=float)
+    rho = th[-2]
+    d_rho_d, d_spec = np.zeros((3, len(th))), np.zeros((3, len(th)))
+    if model == "two":
+        d_rho_d[:, 0], d_spec[:, 0] = -1.0, 1.0
+        return np.full(3, 1 - rho), np.full(3, rho), d_rho_d, d_spec
+    if model == "achromatic":
+        R = th[0]
+        d_rho_d[:, 0], d_spec[:, 0] = 1 - rho, rho
+        d_rho_d[:, 1], d_spec[:, 1] = -R, R
+        return np.full(3, R * (1 - rho)), np.full(3, R * rho), d_rho_d, d_spec
+    C = th[:3]
+    ch = np.arange(3)
+    d_rho_d[ch, ch], d_rho_d[:, 3] = 1 - rho, -C
+    if rho >= METAL_THRESHOLD:
+        d_spec[ch, ch], d_spec[:, 3] = rho, C
+        return C * (1 - rho), C * rho, d_rho_d, d_spec
+    d_spec[:, 3] = 1.0
+    return C * (1 - rho), np.full(3, rho), d_rho_d, d_spec
 
 
 def material_dict(model, theta, normalisation="ward"):
@@ -107,14 +137,17 @@ class WardModel:
         self.si_m.wi = mi.Vector3f(*flat(wo_m, 3))
         self.mirror = mi.Color3f(*flat(cache.mirror, 3))
         self.S = S
-        self.bsdf = mi.load_dict({"type": "ward", **self._props(material_dict(model, self._mid(), normalisation))})
-        self.params = mi.traverse(self.bsdf)
-        self._rest = material_values(model, self._mid())
+        # the model's plugin, and a two-parameter one for the basis L = rho_d D + rho_s G(sigma)
+        # of the Jacobian (rho_s = 0: D; rho_s = 1: G), each with the literal values it keeps
+        # between evaluations
+        self.plugins = {}
+        for key, m in (("model", model), ("basis", "two")):
+            mid = 0.5 * np.add(*bounds(m))
+            bsdf = mi.load_dict({"type": "ward", **self._props(material_dict(m, mid, normalisation))})
+            self.plugins[key] = (bsdf, mi.traverse(bsdf), material_values(m, mid))
+        self.bsdf = self.plugins["model"][0]
+        self._D = None
         self.evaluations = 0
-
-    def _mid(self):
-        lo, hi = bounds(self.model)
-        return 0.5 * (lo + hi)
 
     def _props(self, d):
         d = dict(d)
@@ -136,14 +169,14 @@ class WardModel:
             self.dr.enable_grad(v[k])
         return v, float(theta[-1])
 
-    def _eval(self, per_position=False):
+    def _eval(self, bsdf, per_position=False):
         """L for the plugin's current parameters: the lobe on the cached light, plus the mirror;
         with ``per_position`` each position's share (size P*T*S) instead of their sum (P*T)."""
         dr, mi = self.dr, self.mi
         ctx = mi.BSDFContext()
-        f = self.bsdf.eval(ctx, self.si, self.wi)                       # f_r cos(theta_i)
+        f = bsdf.eval(ctx, self.si, self.wi)                            # f_r cos(theta_i)
         glossy = dr.block_sum(f * self.weight, self.n // self.S if per_position else self.n)
-        bs, w = self.bsdf.sample(ctx, self.si_m, mi.Float(0.0), mi.Point2f(0.5, 0.5))
+        bs, w = bsdf.sample(ctx, self.si_m, mi.Float(0.0), mi.Point2f(0.5, 0.5))
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection)
         mirror = dr.select(delta, w * bs.pdf, 0.0) * self.mirror
         return glossy + (mirror if per_position else dr.block_sum(mirror, self.S))
@@ -159,31 +192,32 @@ class WardModel:
         est = np.array(shares, dtype=float).T.reshape(*self.shape, self.S, 3) * self.S
         return est.mean(axis=2), np.var(est, axis=2, ddof=1) / self.S
 
-    def _radiance_dr(self, v, sigma, per_position=False):
-        """L as a Dr.Jit Color3f of size P*T from parameter values ``v`` (attached to their gradients).
+    def _radiance_dr(self, v, sigma, per_position=False, plugin="model"):
+        """L as a Dr.Jit Color3f of size P*T from parameter values ``v`` (attached to their
+        gradients) of the model's plugin, or of the basis plugin (``plugin='basis'``).
 
         Below the cache's resolution (sigma < SIGMA_RESOLVED) L is interpolated linearly in
         sigma between the ideal mirror and the lobe at SIGMA_RESOLVED, so that L stays a
         continuous function of sigma down to the mirror (see :mod:`.light_cache`).
         """
-        p = self.params
+        bsdf, p, rest = self.plugins[plugin]
         for k, x in v.items():
             p[k] = x
         if sigma >= SIGMA_RESOLVED:
             p.update()
-            L = self._eval(per_position)
+            L = self._eval(bsdf, per_position)
         else:
             p["sigma_alpha"] = self.mi.Float(SIGMA_RESOLVED)
             p.update()
-            rough = self._eval(per_position)
+            rough = self._eval(bsdf, per_position)
             p["sigma_alpha"] = self.mi.Float(0.0)
             p.update()
-            mirror = self._eval(per_position)
+            mirror = self._eval(bsdf, per_position)
             L = mirror + (v["sigma_alpha"] / SIGMA_RESOLVED) * (rough - mirror)
         # L holds the opaque values; the plugin gets literals back, because a frozen function
         # elsewhere in the process (RegionRenderModel) dispatches over every registered BSDF
         # and cannot record foreign opaque state
-        for k, x in self._rest.items():
+        for k, x in rest.items():
             p[k] = x
         p.update()
         return L
@@ -198,26 +232,34 @@ class WardModel:
         return self._np(self._radiance_dr(*self._variables(theta)))
 
     def jacobian(self, theta):
-        """(L, dL/dtheta) with shapes (P, T, 3) and (P, T, 3, n_params), by forward-mode AD."""
+        """(L, dL/dtheta) with shapes (P, T, 3) and (P, T, 3, n_params).
+
+        Through the basis: L = rho_d D + s G(sigma) per channel (thesis eq. 3.19, the lobe
+        linear in its reflectances), with D and G from the plugin and dG/dsigma by Dr.Jit's
+        forward mode, so that one pass gives every column; rho_d, s and their derivatives
+        come from :func:`reflectances`.
+        """
         dr, mi = self.dr, self.mi
-        cols = []
-        value = None
-        for name in self.names:
-            key = "C" if name.startswith("C_") else name
-            v, sigma = self._variables(theta, grad=(key,))
-            L = self._radiance_dr(v, sigma)
-            if name.startswith("C_"):
-                seed = [0.0, 0.0, 0.0]
-                seed["rgb".index(name[-1])] = 1.0
-                dr.set_grad(v[key], mi.Color3f(*seed))
-            else:
-                dr.set_grad(v[key], 1.0)
-            dr.forward_to(L, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
-            cols.append(self._np(dr.grad(L)))
-            if value is None:
-                value = self._np(dr.detach(L))
+        if self._D is None:
+            self._D = self._np(self._radiance_dr(*self._unit(0.0, 0.1), plugin="basis"))
+        v, sigma = self._unit(1.0, theta[-1])
+        dr.enable_grad(v["sigma_alpha"])
+        G_dr = self._radiance_dr(v, sigma, plugin="basis")
+        dr.set_grad(v["sigma_alpha"], 1.0)
+        dr.forward_to(G_dr, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
+        G, dG = self._np(dr.detach(G_dr)), self._np(dr.grad(G_dr))
+        rho_d, spec, d_rho_d, d_spec = reflectances(self.model, theta)
+        D = self._D
+        J = D[..., None] * d_rho_d + G[..., None] * d_spec        # (P, T, 3, n)
+        J[..., -1] = spec * dG
         self.evaluations += 1
-        return value, np.stack(cols, axis=-1)
+        return rho_d * D + spec * G, J
+
+    def _unit(self, rho_s, sigma):
+        """Opaque values of the basis plugin (rho_s = 0: the diffuse basis; 1: the lobe)."""
+        v = material_values("two", [rho_s, sigma])
+        self.dr.make_opaque(*v.values())
+        return v, float(sigma)
 
     def gradient(self, theta, dloss_dL):
         """d(loss)/d(theta) by reverse-mode AD, given dloss/dL (P, T, 3) as a constant."""
