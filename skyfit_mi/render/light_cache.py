@@ -114,8 +114,9 @@ class LightCache:
         return np.einsum("ptn,ptnc->ptc", lobe * cos, self.weight)
 
 
-def _stratified(rng, n):
-    """n stratified 2D samples in [0, 1)^2, in random order.
+def _stratified(rng, n, count=None):
+    """n stratified 2D samples in [0, 1)^2, in random order: shape (n, 2), or (count, n, 2)
+    for ``count`` independent sets.
 
     One jittered sample in each of n cells of an a x b grid (a b >= n).  When n is not
     a b, the n cells are a random subset, so that every sample stays uniform on the
@@ -124,9 +125,11 @@ def _stratified(rng, n):
     """
     a = int(np.ceil(np.sqrt(n)))
     b = int(np.ceil(n / a))
-    cells = rng.permutation(a * b)[:n]
+    m = 1 if count is None else int(count)
+    cells = np.argsort(rng.random((m, a * b)), axis=1)[:, :n]        # random subsets, orders
     ij = np.stack([cells // b, cells % b], axis=-1)
-    return (ij + rng.random((n, 2))) / [a, b]
+    u = (ij + rng.random((m, n, 2))) / [a, b]
+    return u[0] if count is None else u
 
 
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
@@ -194,9 +197,8 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         sik = dr.gather(mi.SurfaceInteraction3f, si, idx)
         comp_all = np.tile(comp, P * S)
         # stratified within each component's block of directions
-        u = np.concatenate([np.concatenate([_stratified(rng, int(np.sum(comp == c)))
-                                            for c in range(n_comp)])
-                            for _ in range(P * S)])
+        u = np.concatenate([_stratified(rng, int(np.sum(comp == c)), P * S)
+                            for c in range(n_comp)], axis=1).reshape(P * S * K, 2)
         u2 = mi.Point2f(u[:, 0], u[:, 1])
         # candidate directions from every component, then pick each sample's own
         cands = [emitter.sample_sun(u2), emitter.sample_sky(u2),
