@@ -171,7 +171,7 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
                 if y < best_f:
                     best_x, best_f = x, y
             # Nelder-Mead can stall on a degenerate simplex: restart around the best point
-            # until a restart no longer improves (Press et al. 10.4); the first full-size
+            # until a restart no longer improves (Press et al. 10.4); the first is full-size
             simplex, f = make_simplex(best_x.copy(), step if restarts == 0 else 0.05)
             evals += n + 1
             restarts += 1
@@ -182,7 +182,8 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
         temp *= alpha
     return {"theta": best_x, "chi2": float(best_f),
             "status": "converged" if finished else "max_evaluations",
-            "message": f"cooled to T = 0; the simplex converged ({restarts} restarts)" if finished
+            "message": f"cooled to T = 0 in {1 + reanneals} cycles; the simplex converged "
+            f"({restarts} restarts)" if finished
             else f"stopped at {evals} evaluations (temperature {temp:.3g})",
             "trace": walk, "schedule": {"T0": t0 / pixels, "alpha": alpha, "m": m, "seed": seed,
                                         "temperature_scale_pixels": pixels,
