@@ -19,6 +19,7 @@ from . import uncertainty as unc
 from .chi2 import Problem, load_observations
 from .errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
+from .methods.global_search import SIGMA_GRID
 from .render.fit_model import other_readings
 from .render.light_cache import DIRECTIONS, POSITIONS, SIGMA_RESOLVED
 from .sequence import load_manifest, sky_from_record
@@ -70,12 +71,11 @@ class FitSession:
         self.doc, self.name, self.model, self.normalisation = doc, name, model, normalisation
         self.names = PARAMETERS[model]
         self.wm = WardModel(self.cache, model, normalisation)
-        self.two = self.wm if model == "two" else WardModel(self.cache, "two", normalisation)
         self.problem = Problem(self.obs, self.wm, valid=self.cache.hit)
         self.lower, self.upper = bounds(model)
         self.truth = mats[name]
         self.cache_settings = {"positions": positions, "directions": directions, "seed": seed}
-        self._halves = None
+        self._halves = self._bases = None
 
     def cache_error(self, theta, method):
         """Standard error each parameter owes to the light cache's Monte Carlo samples.
@@ -91,18 +91,23 @@ class FitSession:
         from .render.fit_model import WardModel
 
         if self._halves is None:
-            self._halves = []
-            for c in self.cache.halves():
-                wm = WardModel(c, self.model, self.normalisation)
-                two = wm if self.model == "two" else WardModel(c, "two", self.normalisation)
-                self._halves.append((Problem(self.obs, wm, valid=self.cache.hit), two))
+            self._halves = [Problem(self.obs, WardModel(c, self.model, self.normalisation),
+                                    valid=self.cache.hit) for c in self.cache.halves()]
         if method == "global":
-            fits = [global_search(p, theta, self.lower, self.upper, model_two=two,
-                                  candidates=1, profile=False)["theta"] for p, two in self._halves]
+            fits = [global_search(p, theta, self.lower, self.upper, candidates=1, profile=False,
+                                  grid_basis=b)["theta"]
+                    for p, b in zip(self._halves, self.grid_bases()[1:])]
         else:
             fits = [levenberg_marquardt(p, theta, self.lower, self.upper)["theta"]
-                    for p, _ in self._halves]
+                    for p in self._halves]
         return np.abs(np.asarray(fits[0]) - np.asarray(fits[1])) / 2
+
+    def grid_bases(self):
+        """The global search's basis on its sigma grid for the whole cache and each half,
+        computed once per session (it does not depend on the data)."""
+        if self._bases is None:
+            self._bases = self.wm.basis(SIGMA_GRID, halves=True)
+        return self._bases
 
     def random_start(self, rng):
         return self.lower + rng.random(len(self.lower)) * (self.upper - self.lower)
@@ -110,19 +115,19 @@ class FitSession:
     def run(self, method="global", start=None, seed=0, method_options=None, log=print):
         """Fit by ``method`` from ``start`` (random within bounds, seeded, if None); a result dict."""
         check_choice("fit method", method, tuple(METHODS))
-        problem, wm, two = self.problem, self.wm, self.two
+        problem, wm = self.problem, self.wm
         lower, upper, names = self.lower, self.upper, self.names
-        problem.evaluations = 0
-        wm.evaluations = two.evaluations = 0
+        problem.evaluations = wm.evaluations = wm.basis_evaluations = 0
         t0 = time.perf_counter()
         if start is None:
             start = self.random_start(np.random.default_rng(seed))
         start = np.clip(np.asarray(start, dtype=float), lower, upper)
-        res = METHODS[method](problem, start, lower, upper, seed=seed, model_two=two,
+        grid_basis = self.grid_bases()[0]
+        res = METHODS[method](problem, start, lower, upper, seed=seed, grid_basis=grid_basis,
                               alternatives=lambda th: other_readings(self.model, th),
                               **dict(method_options or {}))
         theta = np.asarray(res["theta"], dtype=float)
-        evaluations = problem.evaluations + (two.evaluations if two is not wm else 0)
+        evaluations = problem.evaluations + wm.basis_evaluations
         t_method = time.perf_counter() - t0
         # uncertainty: covariance at the optimum, and profiles from the global grid
         r, J = problem.jacobian(theta)
@@ -133,7 +138,7 @@ class FitSession:
         cov_iv = unc.covariance_intervals(theta, cov, lower, upper)
         # the global minimum: its grid gives the profiles; a local method is judged against it
         g = res if method == "global" else global_search(problem, start, lower, upper,
-                                                        model_two=two, candidates=2)
+                                                        candidates=2, grid_basis=grid_basis)
         grid = g["profile_linearised"]
         prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
                 "rho_s": (grid["rho_s"], grid["chi2_rho"])}

@@ -1,7 +1,8 @@
 """The global method: sigma_alpha searched on a grid, the linear parameters solved in closed form.
 
 Given sigma_alpha, Ward's model is linear in rho_d and rho_s (thesis eq. 3.19), so with
-the basis L = rho_d * D + rho_s * G(sigma) (light cached once, :class:`LightCache`)
+the basis L = rho_d * D + rho_s * G(sigma) (light cached once, :class:`LightCache`;
+:meth:`WardModel.basis`)
 every model's remaining parameters have closed-form bounded least-squares solutions on
 linearised data (y mapped back through the sensor response, sigma through its slope):
 
@@ -43,13 +44,6 @@ def _linearise(problem):
     slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code * g
     w = np.where(problem.mask, (slope / obs.sigma) ** 2, 0.0)
     return y, w
-
-
-def basis(model_two, sigmas):
-    """D (P,T,3) and G (K,P,T,3) for every sigma, from the two-parameter Dr.Jit model."""
-    D = model_two.radiance([0.0, 0.1])                 # rho_d = 1, rho_s = 0
-    G = np.stack([model_two.radiance([1.0, s]) for s in sigmas])
-    return D, G
 
 
 def _weighted_sums(y, w, D, G, keep):
@@ -107,15 +101,18 @@ def grid_chi2(model, y, w, D, G, rho=RHO_GRID):
     return chi2, thetas
 
 
-def global_search(problem, start, lower, upper, model_two=None, candidates=3, profile=True, **_):
+def global_search(problem, start, lower, upper, candidates=3, profile=True, grid_basis=None, **_):
     """Grid over sigma_alpha (and rho_s) with closed-form linear parameters, then LM polish.
 
     ``start`` is not needed (the search is global); it is accepted for a uniform interface.
     ``profile`` = False skips the refined profiles (when only the minimum is wanted).
+    ``grid_basis`` = (D, G) on SIGMA_GRID from ``problem.model.basis``, if already computed
+    (it depends on the light cache only, not on the data).
     """
-    model = problem.model.model
+    wm = problem.model
+    model = wm.model
     y, w = _linearise(problem)
-    D, G = basis(model_two, SIGMA_GRID)
+    D, G = grid_basis if grid_basis is not None else wm.basis(SIGMA_GRID)
     chi2, thetas = grid_chi2(model, y, w, D, G)
     thetas[..., -1] = SIGMA_GRID[:, None]
     # candidates: best grid point, then the best ones at other roughness (distinct minima)
@@ -136,22 +133,22 @@ def global_search(problem, start, lower, upper, model_two=None, candidates=3, pr
             res = {**res, "theta": thetas[k, j], "chi2": problem.chi2(thetas[k, j])}
         results.append(res)
     best = min(results, key=lambda r: r["chi2"])
-    prof = refined_profile(model, model_two, y, w, D, G, chi2, float(best["theta"][-1])) \
+    prof = refined_profile(wm, y, w, D, G, chi2, float(best["theta"][-1])) \
         if profile else None
     return {**best, "status": "converged", "message": f"global grid of {len(SIGMA_GRID)} roughness "
             f"values, {len(picks)} candidates polished", "profile_linearised": prof,
             "grid_candidates": [results[i]["theta"].tolist() for i in range(len(results))]}
 
 
-def refined_profile(model, model_two, y, w, D, G, chi2, sigma_best):
+def refined_profile(wm, y, w, D, G, chi2, sigma_best):
     """Profile chi^2 of sigma_alpha and rho_s: the coarse grid plus a fine one near the optimum."""
     k = int(np.argmin(np.abs(SIGMA_GRID - sigma_best)))
     lo = SIGMA_GRID[max(k - 3, 1)] if sigma_best > 0 else 0.0
     hi = SIGMA_GRID[min(k + 3, len(SIGMA_GRID) - 1)]
     fine = np.geomspace(max(lo, 1e-3), hi, SIGMA_FINE_POINTS)
-    _, Gf = basis(model_two, fine)
-    chi2_f, _ = grid_chi2(model, y, w, D, Gf, RHO_FINE)
-    chi2_all, _ = grid_chi2(model, y, w, D, G, RHO_FINE)
+    _, Gf = wm.basis(fine)
+    chi2_f, _ = grid_chi2(wm.model, y, w, D, Gf, RHO_FINE)
+    chi2_all, _ = grid_chi2(wm.model, y, w, D, G, RHO_FINE)
     sig = np.concatenate([SIGMA_GRID, fine])
     prof_s = np.concatenate([chi2.min(axis=1), chi2_f.min(axis=1)])
     order = np.argsort(sig, kind="stable")

@@ -147,7 +147,7 @@ class WardModel:
             self.plugins[key] = (bsdf, mi.traverse(bsdf), material_values(m, mid))
         self.bsdf = self.plugins["model"][0]
         self._D = None
-        self.evaluations = 0
+        self.evaluations = self.basis_evaluations = 0
 
     def _props(self, d):
         d = dict(d)
@@ -254,6 +254,29 @@ class WardModel:
         J[..., -1] = spec * dG
         self.evaluations += 1
         return rho_d * D + spec * G, J
+
+    def basis(self, sigmas, halves=False):
+        """The basis of L = rho_d D + s G(sigma) per channel (thesis eq. 3.19): D (P, T, 3)
+        and G (K, P, T, 3) for the K ``sigmas``, from the basis plugin.
+
+        With ``halves`` a list [(D, G) of the whole cache, of its first half, of its second
+        half] (halves of every pixel's positions, as :meth:`LightCache.halves`), from one
+        per-position pass per sigma.
+        """
+        S, h = self.S, self.S // 2
+        parts = [(slice(0, S), 1.0)] + ([(slice(0, h), S / h), (slice(h, 2 * h), S / h)]
+                                        if halves else [])
+        acc = [[] for _ in parts]
+        for rho_s, sigma in [(0.0, 0.1)] + [(1.0, float(s)) for s in sigmas]:
+            shares = self._radiance_dr(*self._unit(rho_s, sigma), per_position=True,
+                                       plugin="basis")
+            self.dr.eval(shares)
+            shares = np.array(shares, dtype=float).T.reshape(*self.shape, S, 3)
+            for j, (sl, scale) in enumerate(parts):
+                acc[j].append(shares[:, :, sl].sum(axis=2) * scale)
+        self.basis_evaluations += len(sigmas) + 1
+        out = [(a[0], np.stack(a[1:])) for a in acc]
+        return out if halves else out[0]
 
     def _unit(self, rho_s, sigma):
         """Opaque values of the basis plugin (rho_s = 0: the diffuse basis; 1: the lobe)."""
