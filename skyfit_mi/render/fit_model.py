@@ -2,8 +2,10 @@
 
 :class:`WardModel` evaluates L(theta) for every region pixel and frame with the
 plugin's own ``eval`` (and its mirror ``sample`` for sigma_alpha = 0) on the
-cached light, and differentiates it with Dr.Jit: forward mode for Jacobian
-columns (few parameters), reverse mode for the gradient of a scalar loss.
+cached light, and differentiates it with Dr.Jit: the Jacobian through the basis
+L = rho_d D + s G(sigma) (linear in the reflectances, thesis eq. 3.19) with dG/dsigma
+by forward mode, and reverse mode for the gradient of a scalar loss.  The same basis
+on a grid of sigma is the global search's.
 """
 
 import numpy as np
