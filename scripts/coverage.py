@@ -7,9 +7,10 @@ the dynamic range, seeded by replicate) from the same radiance, and the global m
 the central 4x4 region.  Reports, per parameter, how often the 95% profile and covariance
 intervals contain the truth, and the RMSE of the estimates over the replicates divided by
 the Cramer-Rao bound sqrt(diag(F^-1)) at the truth, F the Fisher information of the
-sensor's data (Gaussian noise, values clipped at both ends of the range).
+sensor's data (Gaussian noise, values clipped at both ends of the range).  --region fits
+other pixels (e.g. rect:4,4,11,11, the central 8x8, all on the disc).
 
-    .venv/bin/python scripts/coverage.py [--replicates 50]
+    .venv/bin/python scripts/coverage.py [--replicates 50] [--region rect:6,6,9,9]
 """
 
 import argparse
@@ -55,6 +56,8 @@ def main():
     ap.add_argument("--replicates", type=int, default=50)
     ap.add_argument("--noise", default="5,10")
     ap.add_argument("--cases", default=",".join(CASES), help="comma-separated case keys")
+    ap.add_argument("--region", default="rect:6,6,9,9",
+                    help="fitted pixels of the 16x16 frames (default: the central 4x4)")
     args = ap.parse_args()
     from reproduce_thesis import truth_vector
 
@@ -65,7 +68,7 @@ def main():
     from skyfit_mi.sequence import load_manifest, render_sequence
     from skyfit_mi.spec import thesis_disc_spec, validate_spec
 
-    region = parse_region("rect:6,6,9,9")
+    region = parse_region(args.region)
     print(f"Command: `.venv/bin/python scripts/coverage.py {' '.join(sys.argv[1:])}`. "
           f"Date: {dt.date.today().isoformat()}.\n")
     print("| case | noise | parameter | truth | 95% profile coverage | 95% covariance coverage | "
