@@ -68,6 +68,24 @@ def test_jacobian_matches_finite_differences(session, sigma):
         assert np.max(np.abs(J[..., i] - fd)) < 2e-3 * scale, i
 
 
+def test_new_parameters_reuse_the_compiled_kernels(session):
+    # parameters enter the kernels as inputs, not literals: an evaluation at a new theta
+    # must not compile anything (that cost 7x the evaluation itself)
+    import drjit as dr
+    wm = session.wm
+    wm.radiance([0.3, 0.1])
+    wm.jacobian([0.3, 0.1])
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()                                   # clears it
+        wm.radiance([0.55, 0.21])
+        wm.jacobian([0.61, 0.07])
+        jit = [k for k in dr.kernel_history() if "cache_hit" in k]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert jit and all(k["cache_hit"] for k in jit)
+
+
 @pytest.mark.parametrize("model, theta", [("colour", [0.25, 0.5, 0.75, 0.2, 0.05]),
                                           ("colour", [0.3, 0.6, 0.9, 0.7, 0.001]),
                                           ("achromatic", [0.5, 0.3, 0.02])])
