@@ -122,6 +122,15 @@ def test_full_render_model_replays_new_parameters_and_agrees_with_the_cache(sess
     a = model()
     a.radiance([0.3, 0.1])                               # records the frozen frames
     replayed = a.radiance([0.7, 0.05])                   # replays them with new parameters
+    # parameters on the bounds (annealing's probes) replay too: no new recordings
+    c = RegionRenderModel(doc["scene"]["xml"], "disc", session.skies[:2], session.obs.pixels,
+                          "colour", spp=4, seed=1)
+    c.radiance([0.3, 0.4, 0.5, 0.2, 0.1])
+    c.radiance([0.31, 0.4, 0.5, 0.2, 0.1])
+    recorded = c._frame.n_recordings
+    for theta in ([0.0, 0.4, 0.5, 0.2, 0.1], [0.3, 0.4, 0.5, 0.0, 0.1], [1.0, 1.0, 1.0, 1.0, 0.0]):
+        c.radiance(theta)
+    assert c._frame.n_recordings == recorded
     fresh = model().radiance([0.7, 0.05])
     assert np.allclose(replayed, fresh, rtol=1e-5)
     cached = session.wm.radiance([0.7, 0.05])

@@ -44,8 +44,16 @@ def material_values(model, theta):
 
 
 def write_material(params, prefix, model, theta):
-    """Set a ``ward`` plugin's parameters (keys ``prefix + name``) to ``theta`` and update."""
-    for k, x in material_values(model, theta).items():
+    """Set a ``ward`` plugin's parameters (keys ``prefix + name``) to ``theta`` and update.
+
+    The values are opaque, so that a frozen render replays for every theta: literal values
+    (0 on a bound, above all) changed the recorded kernels and forced a new recording.
+    """
+    import drjit as dr
+
+    v = material_values(model, theta)
+    dr.make_opaque(*v.values())
+    for k, x in v.items():
         params[prefix + k] = x
     params.update()
 
