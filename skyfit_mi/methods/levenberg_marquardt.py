@@ -3,8 +3,9 @@
 The thesis's baseline: from a starting point, solve (alpha + lambda diag alpha) delta = beta
 with alpha = J^T J (the curvature matrix) and beta = -J^T r, accept the step if chi^2
 falls (lambda /= 10) or raise lambda (x 10).  Steps are clipped to the bounds.  When
-alpha is singular (a parameter the data do not constrain, e.g. sigma_alpha at rho_s = 0)
-the method fails, as the thesis's tables report; the failure and its reason are returned.
+alpha is singular at the start (a parameter the data do not constrain, e.g. sigma_alpha at
+rho_s = 0) the method fails, as the thesis's tables report; the failure and its reason are
+returned.  When steps lead to such a point, the determined parameters have converged.
 """
 
 import numpy as np
@@ -28,6 +29,13 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
         beta = -J.T @ r
         a = alpha + lam * np.diag(np.diag(alpha))
         if not np.all(np.isfinite(a)) or np.linalg.cond(a) > SINGULAR_CONDITION:
+            if len(trace) > 1:
+                # steps led here (e.g. onto rho_s = 0, where sigma_alpha has no effect): the
+                # determined parameters have converged
+                status = "converged"
+                message = ("stopped where the curvature matrix became singular (a parameter no "
+                           "longer changes chi-square, e.g. sigma_alpha at rho_s = 0)")
+                break
             status = "failed"
             message = ("curvature matrix singular (a parameter does not change chi-square here, "
                        "e.g. sigma_alpha when rho_s = 0): the thesis's 'Fail'")
