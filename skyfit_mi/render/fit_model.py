@@ -165,15 +165,16 @@ class WardModel:
             d["C"] = self.mi.ScalarColor3f(*d["C"])
         return d
 
-    def _variables(self, theta, grad=()):
+    def _variables(self, theta, grad=(), model=None):
         """The parameters as Dr.Jit values keyed like the plugin's (those in ``grad`` track
-        derivatives), and sigma_alpha as a float.
+        derivatives), and sigma_alpha as a float; ``model='two'`` for the basis plugin
+        (rho_s = 0: the diffuse basis; 1: the lobe).
 
         The values are opaque (kernel inputs, not literals baked into the code), so that the
         kernels compiled for one theta serve every theta; with literals each new theta
         compiled anew, ten times the cost of the evaluation itself.
         """
-        v = material_values(self.model, theta)
+        v = material_values(model or self.model, theta)
         self.dr.make_opaque(*v.values())
         for k in grad:
             self.dr.enable_grad(v[k])
@@ -199,7 +200,7 @@ class WardModel:
         """
         self.evaluations += 1
         shares = self._radiance_dr(*self._variables(theta), per_position=True)
-        est = np.array(shares, dtype=float).T.reshape(*self.shape, self.S, 3) * self.S
+        est = self._np(shares, per_position=True) * self.S
         return est.mean(axis=2), np.var(est, axis=2, ddof=1) / self.S
 
     def _radiance_dr(self, v, sigma, per_position=False, plugin="model"):
@@ -232,9 +233,11 @@ class WardModel:
         p.update()
         return L
 
-    def _np(self, v):
+    def _np(self, v, per_position=False):
+        """A Dr.Jit Color3f as (P, T, 3), or (P, T, S, 3) for per-position shares."""
         self.dr.eval(v)                                  # one kernel for all three channels
-        return np.array(v, dtype=float).T.reshape(*self.shape, 3)
+        return np.array(v, dtype=float).T.reshape(*self.shape, *((self.S,) if per_position
+                                                                  else ()), 3)
 
     def radiance(self, theta):
         """L [W m^-2 sr^-1] for parameters ``theta``, shape (P, T, 3)."""
@@ -251,9 +254,8 @@ class WardModel:
         """
         dr, mi = self.dr, self.mi
         if self._D is None:
-            self._D = self._np(self._radiance_dr(*self._unit(0.0, 0.1), plugin="basis"))
-        v, sigma = self._unit(1.0, theta[-1])
-        dr.enable_grad(v["sigma_alpha"])
+            self._D = self._np(self._radiance_dr(*self._variables([0.0, 0.1], model="two"), plugin="basis"))
+        v, sigma = self._variables([1.0, theta[-1]], grad=("sigma_alpha",), model="two")
         G_dr = self._radiance_dr(v, sigma, plugin="basis")
         dr.set_grad(v["sigma_alpha"], 1.0)
         dr.forward_to(G_dr, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
@@ -278,21 +280,14 @@ class WardModel:
                                         if halves else [])
         acc = [[] for _ in parts]
         for rho_s, sigma in [(0.0, 0.1)] + [(1.0, float(s)) for s in sigmas]:
-            shares = self._radiance_dr(*self._unit(rho_s, sigma), per_position=True,
-                                       plugin="basis")
-            self.dr.eval(shares)
-            shares = np.array(shares, dtype=float).T.reshape(*self.shape, S, 3)
+            shares = self._radiance_dr(*self._variables([rho_s, sigma], model="two"),
+                                       per_position=True, plugin="basis")
+            shares = self._np(shares, per_position=True)
             for j, (sl, scale) in enumerate(parts):
                 acc[j].append(shares[:, :, sl].sum(axis=2) * scale)
         self.basis_evaluations += len(sigmas) + 1
         out = [(a[0], np.stack(a[1:])) for a in acc]
         return out if halves else out[0]
-
-    def _unit(self, rho_s, sigma):
-        """Opaque values of the basis plugin (rho_s = 0: the diffuse basis; 1: the lobe)."""
-        v = material_values("two", [rho_s, sigma])
-        self.dr.make_opaque(*v.values())
-        return v, float(sigma)
 
     def gradient(self, theta, dloss_dL):
         """d(loss)/d(theta) by reverse-mode AD, given dloss/dL (P, T, 3) as a constant."""
