@@ -20,11 +20,15 @@ Additions to the thesis's method, for the end game, all measured on its tables 7
   truths often lie there (an ideal mirror: sigma_alpha = 0, rho_s = R = 1) at the bottom
   of a well too narrow for the hot random walk to find (table 7.9 failed from half the
   starts without this).
-* Then it anneals again (further cooling cycles, Press et al. 10.9), each starting at
-  T = the chi^2 of its start: from the best point, which frees simplices stuck on a
-  ridge, and from each point the caller names: for the colour model the reading across
-  the plastic/metal rule, where chi^2 jumps and no simplex move crosses (a metal reading
-  of a plastic surface is a local minimum at rho_s = 0.5).
+* At every freeze that leaves a new best point, a cold simplex descends from each point
+  the caller names for it (``alternatives``): for the colour model the reading across the
+  plastic/metal rule, where chi^2 jumps and no simplex move crosses (a metal reading of a
+  plastic surface is a local minimum at rho_s = 0.5).  Cold, because the twin lies in the
+  other rule's basin and a hot walk from it may leave that basin again (table 7.10 failed
+  from one start of 30 so).
+* After the first freeze it also anneals again from the best point (a further cooling
+  cycle, Press et al. 10.9), starting at T = the chi^2 there, which frees simplices stuck
+  on a ridge.
 * Later convergences restart around the best point, first with a full-size simplex and
   then small ones (Press et al. 10.4), each after trying every parameter on each bound.
 """
@@ -61,8 +65,9 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
                         alternatives=None, **_):
     """Minimise chi^2 by annealing from ``start``; returns a result dict with the walk.
 
-    With ``reanneal`` further cooling cycles follow the first: from its best point and from
-    each of ``alternatives(best point)`` (see the module).
+    With ``reanneal`` the end game of the module's docstring follows the first cooling cycle:
+    a further cycle from its best point, and cold descents from ``alternatives(x)`` of every
+    new best point x (each distinct point once).
     """
     rng = np.random.default_rng(seed)
     n = len(start)
@@ -83,8 +88,9 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
 
     simplex, f = make_simplex(np.clip(np.asarray(start, dtype=float), lower, upper), step)
     evals = n + 1
-    restarts = reanneals = 0
-    cycles = None                    # further cooling cycles' starts, queued at the first freeze
+    restarts = reanneals = descents = 0
+    cycles = None        # queued (start or None for the best point, hot?), from the first freeze
+    tried = []           # alternative readings already descended from
     finished = False
     # The thesis's T0 (1e6, 1e7) exceeded its sequences' chi^2 many times over, so annealing
     # began as a random walk.  Sequences with more pixels or less noise have larger chi^2:
@@ -108,8 +114,20 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
             simplex[hi], f[hi], fluct[hi] = x, y, yflu
         return yflu
 
+    def untried_alternatives():
+        """Cold descents from the alternatives to the best point, except near (within 1% of
+        the box) one already descended from."""
+        out = []
+        for x in (alternatives(best_x) if reanneal and alternatives else []):
+            x = np.clip(np.asarray(x, dtype=float), lower, upper)
+            if not any(np.all(np.abs(x - t) <= 0.01 * span) for t in tried):
+                tried.append(x)
+                out.append((x, False))
+        return out
+
     def converged():
-        return 2 * abs(f.max() - f.min()) <= ftol * (abs(f.max()) + abs(f.min()) + 1e-300)
+        # relative, and absolute for a minimum at chi^2 = 0 (data made by the model itself)
+        return 2 * abs(f.max() - f.min()) <= ftol * (abs(f.max()) + abs(f.min())) + 1e-10
 
     frozen = False
     while evals < max_evaluations:
@@ -137,34 +155,37 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
             if evals >= max_evaluations or (frozen and converged()):
                 break
         if frozen and converged():
-            if restarts >= max_restarts or evals >= max_evaluations:
+            if evals >= max_evaluations:
                 finished = True
                 break
             before = best_f
             if cycles is None:
                 # first freeze: try points the simplex's mirrored moves rarely reach, the best
-                # point on every face, edge and corner of the box; then queue further cooling
-                # cycles from the best point and from each alternative reading
+                # point on every face, edge and corner of the box; then queue a further cooling
+                # cycle from the best point
                 for x in on_bounds(best_x, lower, upper, every_face=True):
                     y = problem.chi2(x)
                     evals += 1
                     if y < best_f:
                         best_x, best_f = x, y
-                cycles = [best_x.copy()] if reanneal else []
-                if reanneal and alternatives:
-                    cycles += [np.clip(np.asarray(x, dtype=float), lower, upper)
-                               for x in alternatives(best_x)]
+                cycles = [(None, True)] if reanneal else []
+            cycles[:0] = untried_alternatives()
             if cycles:
-                # anneal again, hot enough to leave a basin as deep as the start's chi^2
-                # (a further cooling cycle, Press et al. 10.9)
-                simplex, f = make_simplex(cycles.pop(0), step)
+                x, hot = cycles.pop(0)
+                simplex, f = make_simplex(best_x.copy() if x is None else x, step)
                 evals += n + 1
                 best_i = int(np.argmin(f))
                 if f[best_i] < best_f:
                     best_x, best_f = simplex[best_i].copy(), float(f[best_i])
-                temp, frozen = max(float(f[0]), t_min / alpha), False
-                reanneals += 1
+                # a further cooling cycle starts hot enough to leave a basin as deep as its
+                # start's chi^2 (Press et al. 10.9); a descent from an alternative, cold
+                temp, frozen = (max(float(f[0]), t_min / alpha) if hot else 0.0), False
+                reanneals += hot
+                descents += not hot
                 continue
+            if restarts >= max_restarts:
+                finished = True
+                break
             for x in on_bounds(best_x, lower, upper):
                 y = problem.chi2(x)
                 evals += 1
@@ -182,10 +203,11 @@ def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max
         temp *= alpha
     return {"theta": best_x, "chi2": float(best_f),
             "status": "converged" if finished else "max_evaluations",
-            "message": f"cooled to T = 0 in {1 + reanneals} cycles; the simplex converged "
-            f"({restarts} restarts)" if finished
+            "message": f"cooled to T = 0 in {1 + reanneals} cycles and {descents} cold descents "
+            f"from alternative readings; the simplex converged ({restarts} restarts)" if finished
             else f"stopped at {evals} evaluations (temperature {temp:.3g})",
             "trace": walk, "schedule": {"T0": t0 / pixels, "alpha": alpha, "m": m, "seed": seed,
                                         "temperature_scale_pixels": pixels,
                                         "T0_used": t0_used, "reanneals": reanneals,
+                                        "descents": descents,
                                         "evaluations": evals}}
