@@ -73,32 +73,34 @@ def other_readings(model, theta):
 
 
 def reflectances(model, theta):
-    """rho_d and the specular reflectance s per channel for ``theta`` (as
-    :func:`~skyfit_mi.ward.raw_parameters`, thesis 7.1), and their derivatives.
+    """rho_d and the specular reflectance s per channel for ``theta``
+    (:func:`~skyfit_mi.ward.raw_parameters`, thesis 7.1), and their derivatives.
 
     Returns rho_d (3,), s (3,), d rho_d / d theta (3, n), d s / d theta (3, n); the
     sigma_alpha column is zero.  For the colour model the derivative is that of the rule on
     theta's side of rho_s = 0.5.
     """
+    from ..ward import raw_parameters
+
     th = np.asarray(theta, dtype=float)
+    params = material_dict(model, th)
+    rho_d, spec, _ = raw_parameters(params.pop("model"), **{k: v for k, v in params.items()
+                                                             if k != "normalisation"})
     rho = th[-2]
     d_rho_d, d_spec = np.zeros((3, len(th))), np.zeros((3, len(th)))
     if model == "two":
         d_rho_d[:, 0], d_spec[:, 0] = -1.0, 1.0
-        return np.full(3, 1 - rho), np.full(3, rho), d_rho_d, d_spec
-    if model == "achromatic":
-        R = th[0]
+    elif model == "achromatic":
         d_rho_d[:, 0], d_spec[:, 0] = 1 - rho, rho
-        d_rho_d[:, 1], d_spec[:, 1] = -R, R
-        return np.full(3, R * (1 - rho)), np.full(3, R * rho), d_rho_d, d_spec
-    C = th[:3]
-    ch = np.arange(3)
-    d_rho_d[ch, ch], d_rho_d[:, 3] = 1 - rho, -C
-    if rho >= METAL_THRESHOLD:
-        d_spec[ch, ch], d_spec[:, 3] = rho, C
-        return C * (1 - rho), C * rho, d_rho_d, d_spec
-    d_spec[:, 3] = 1.0
-    return C * (1 - rho), np.full(3, rho), d_rho_d, d_spec
+        d_rho_d[:, 1], d_spec[:, 1] = -th[0], th[0]
+    else:
+        ch = np.arange(3)
+        d_rho_d[ch, ch], d_rho_d[:, 3] = 1 - rho, -th[:3]
+        if rho >= METAL_THRESHOLD:
+            d_spec[ch, ch], d_spec[:, 3] = rho, th[:3]
+        else:
+            d_spec[:, 3] = 1.0
+    return rho_d, spec, d_rho_d, d_spec
 
 
 def material_dict(model, theta, normalisation="ward"):
@@ -156,7 +158,7 @@ class WardModel:
             bsdf = mi.load_dict({"type": "ward", **self._props(material_dict(m, mid, normalisation))})
             self.plugins[key] = (bsdf, mi.traverse(bsdf), material_values(m, mid))
         self.bsdf = self.plugins["model"][0]
-        self._D = None
+        self._D_shares = None
         self.evaluations = self.basis_evaluations = 0
 
     def _props(self, d):
@@ -252,16 +254,14 @@ class WardModel:
         forward mode, so that one pass gives every column; rho_d, s and their derivatives
         come from :func:`reflectances`.
         """
-        dr, mi = self.dr, self.mi
-        if self._D is None:
-            self._D = self._np(self._radiance_dr(*self._variables([0.0, 0.1], model="two"), plugin="basis"))
+        dr = self.dr
         v, sigma = self._variables([1.0, theta[-1]], grad=("sigma_alpha",), model="two")
         G_dr = self._radiance_dr(v, sigma, plugin="basis")
         dr.set_grad(v["sigma_alpha"], 1.0)
         dr.forward_to(G_dr, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
         G, dG = self._np(dr.detach(G_dr)), self._np(dr.grad(G_dr))
         rho_d, spec, d_rho_d, d_spec = reflectances(self.model, theta)
-        D = self._D
+        D = self._basis_shares(0.0, 0.1).sum(axis=2)
         J = D[..., None] * d_rho_d + G[..., None] * d_spec        # (P, T, 3, n)
         J[..., -1] = spec * dG
         self.evaluations += 1
@@ -280,14 +280,24 @@ class WardModel:
                                         if halves else [])
         acc = [[] for _ in parts]
         for rho_s, sigma in [(0.0, 0.1)] + [(1.0, float(s)) for s in sigmas]:
-            shares = self._radiance_dr(*self._variables([rho_s, sigma], model="two"),
-                                       per_position=True, plugin="basis")
-            shares = self._np(shares, per_position=True)
+            shares = self._basis_shares(rho_s, sigma)
             for j, (sl, scale) in enumerate(parts):
                 acc[j].append(shares[:, :, sl].sum(axis=2) * scale)
-        self.basis_evaluations += len(sigmas) + 1
+        self.basis_evaluations += len(sigmas)
         out = [(a[0], np.stack(a[1:])) for a in acc]
         return out if halves else out[0]
+
+    def _basis_shares(self, rho_s, sigma):
+        """Each position's share (P, T, S, 3) of the basis plugin's L; the diffuse basis
+        (rho_s = 0), which does not depend on theta, is computed once."""
+        if rho_s == 0.0 and self._D_shares is not None:
+            return self._D_shares
+        shares = self._np(self._radiance_dr(*self._variables([rho_s, sigma], model="two"),
+                                            per_position=True, plugin="basis"), per_position=True)
+        if rho_s == 0.0:
+            self._D_shares = shares
+            self.basis_evaluations += 1
+        return shares
 
     def gradient(self, theta, dloss_dL):
         """d(loss)/d(theta) by reverse-mode AD, given dloss/dL (P, T, 3) as a constant."""
