@@ -20,12 +20,13 @@ Additions to the thesis's method, for the end game, all measured on its tables 7
   truths often lie there (an ideal mirror: sigma_alpha = 0, rho_s = R = 1) at the bottom
   of a well too narrow for the hot random walk to find (table 7.9 failed from half the
   starts without this).
-* At every freeze that leaves a new best point, a cold simplex descends from each point
-  the caller names for it (``alternatives``): for the colour model the reading across the
-  plastic/metal rule, where chi^2 jumps and no simplex move crosses (a metal reading of a
-  plastic surface is a local minimum at rho_s = 0.5).  Cold, because the twin lies in the
-  other rule's basin and a hot walk from it may leave that basin again (table 7.10 failed
-  from one start of 30 so).
+* At every freeze a cold simplex descends from each point the caller names for the best
+  point (``alternatives``), unless it lies near one already descended from: for the colour
+  model the reading across the plastic/metal rule, where chi^2 jumps and no simplex move
+  crosses (a metal reading of a plastic surface is a local minimum at rho_s = 0.5).  Cold,
+  because the twin lies in the other rule's basin and a hot walk from it may leave that
+  basin again; and at every freeze, because the first freeze's best point may be in neither
+  basin of the truth's pair (table 7.10 failed from one start of 30 so).
 * After the first freeze it also anneals again from the best point (a further cooling
   cycle, Press et al. 10.9), starting at T = the chi^2 there, which frees simplices stuck
   on a ridge.
