@@ -20,6 +20,7 @@ from .chi2 import Problem, load_observations
 from .errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
+from .methods.profile import profile_edges
 from .render.fit_model import other_readings
 from .render.light_cache import DIRECTIONS, POSITIONS, SIGMA_RESOLVED
 from .sequence import load_manifest, sky_from_record
@@ -134,7 +135,8 @@ class FitSession:
         chi2 = float(r @ r)
         dof = problem.dof
         s2 = unc.scale(chi2, dof)
-        cov = unc.covariance(J, s2)
+        curv_inv = unc.covariance(J)
+        cov = curv_inv * s2
         cov_iv = unc.covariance_intervals(theta, cov, lower, upper)
         # the global minimum: its grid gives the profiles; a local method is judged against it
         g = res if method == "global" else global_search(problem, start, lower, upper,
@@ -155,7 +157,14 @@ class FitSession:
             if p in prof:
                 rise[p] = float(np.max(prof[p][1]) - np.min(prof[p][1]))
                 if glob:
+                    # the grid's (linearised) profile, its edges then placed on the true chi^2
                     iv = unc.profile_interval(*prof[p], s2, ripple)
+                    levels = list(iv)
+                    exact, _ = profile_edges(problem, theta, chi2, i,
+                                             [unc.LEVELS[lv] * s2 + ripple for lv in levels],
+                                             lower, upper, curv_inv)
+                    iv = {lv: tuple(iv[lv][m] if e[m] is None else e[m] for m in range(2))
+                          for lv, e in zip(levels, exact)}
                     source = "profile"
             intervals[p] = {"68": iv["68"], "95": iv["95"], "from": source}
         mc_sd = self.cache_error(theta, method)

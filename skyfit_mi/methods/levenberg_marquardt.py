@@ -6,6 +6,8 @@ falls (lambda /= 10) or raise lambda (x 10).  Steps are clipped to the bounds.  
 alpha is singular at the start (a parameter the data do not constrain, e.g. sigma_alpha at
 rho_s = 0) the method fails, as the thesis's tables report; the failure and its reason are
 returned.  When steps lead to such a point, the determined parameters have converged.
+Parameters listed in ``fixed`` keep their start values (the constrained fits of a profile
+chi-square, :mod:`.profile`).
 """
 
 import numpy as np
@@ -15,9 +17,12 @@ SINGULAR_CONDITION = 1e12
 
 
 def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1e-3,
-                        tol_chi2=1e-6, **_):
-    """Minimise chi^2 from ``start``; returns a result dict (theta, chi2, evaluations, ...)."""
+                        tol_chi2=1e-6, fixed=(), **_):
+    """Minimise chi^2 from ``start`` over the parameters not in ``fixed`` (indices); returns a
+    result dict (theta, chi2, status, message, trace, jacobian)."""
     theta = np.clip(np.asarray(start, dtype=float), lower, upper)
+    free = np.ones(len(theta), dtype=bool)
+    free[list(fixed)] = False
     r, J = problem.jacobian(theta)
     chi2 = float(r @ r)
     lam = lam0
@@ -25,8 +30,9 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
     status, message = "max_iterations", "stopped after the iteration limit"
     small = 0
     for _ in range(max_iterations):
-        alpha = J.T @ J
-        beta = -J.T @ r
+        Jf = J[:, free]
+        alpha = Jf.T @ Jf
+        beta = -Jf.T @ r
         a = alpha + lam * np.diag(np.diag(alpha))
         if not np.all(np.isfinite(a)) or np.linalg.cond(a) > SINGULAR_CONDITION:
             if len(trace) > 1:
@@ -40,8 +46,9 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
             message = ("curvature matrix singular (a parameter does not change chi-square here, "
                        "e.g. sigma_alpha when rho_s = 0): the thesis's 'Fail'")
             break
-        delta = np.linalg.solve(a, beta)
-        trial = np.clip(theta + delta, lower, upper)
+        trial = theta.copy()
+        trial[free] += np.linalg.solve(a, beta)
+        trial = np.clip(trial, lower, upper)
         r_t = problem.residuals(trial)
         chi2_t = float(r_t @ r_t)
         if chi2_t < chi2:

@@ -1,0 +1,89 @@
+"""Profile chi-square intervals on the true chi-square, by constrained fits (thesis 6.3).
+
+The profile of parameter k is P_k(x) = the minimum of chi^2 over the other parameters with
+theta_k held at x; its interval at level Delta is {x : P_k(x) - chi^2_min <= Delta} (Press
+et al., Numerical Recipes 15.6).  The global method's grid gives P_k cheaply, but on
+linearised data (:mod:`.global_search`), whose minimum lies off the fit's wherever the
+sensor clips: a value at code 0 enters chi^2 as a censored term, but the linear solve takes
+it as an exact 0.  On table 7.7's dark disc at 10% noise that shifted the rho_s profile by
+half a standard deviation and its 95% interval missed the truth in 8 of 50 replicates.
+
+So each edge is placed on the true chi^2: P_k(x) is a Levenberg-Marquardt fit with theta_k
+held at x, started on the covariance's conditional mean theta + (x - theta_k) C[:, k] /
+C[k, k], and the edge is found by secant steps on h(x) = sqrt(P_k(x) - chi^2_min), which
+is linear in x where chi^2 is quadratic, so two or three fits place an edge.
+"""
+
+import numpy as np
+
+from .levenberg_marquardt import levenberg_marquardt
+
+
+def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, rtol=0.05,
+                  max_fits=6):
+    """Edges of {x : P_k(x) - chi2_min <= thr} for each threshold (ascending chi^2 rises).
+
+    ``cov`` is (J^T J)^-1 at ``theta`` (unscaled), for the first guesses and the fits'
+    starts.  Returns ([(lo, hi)] per threshold, with None for an edge the fits could not
+    place, e.g. where the constrained fit's curvature is singular), and the number of fits.
+    An edge is placed when P_k - chi2_min is within ``rtol`` of the threshold (relative, in
+    h), or at the bound if the profile stays below the threshold there.
+    """
+    theta = np.asarray(theta, dtype=float)
+    x0 = float(theta[k])
+    ckk = float(cov[k, k]) if np.isfinite(cov[k, k]) else 0.0
+    sd = np.sqrt(ckk) if ckk > 0 else 0.05 * (upper[k] - lower[k])
+    direction = cov[:, k] / ckk if ckk > 0 and np.all(np.isfinite(cov[:, k])) else np.zeros(len(theta))
+    fits = 0
+
+    def h(x):
+        """sqrt(P_k(x) - chi2_min), and whether it is exact (not just an upper bound)."""
+        nonlocal fits
+        fits += 1
+        start = np.clip(theta + (x - x0) * direction, lower, upper)
+        start[k] = x
+        res = levenberg_marquardt(problem, start, lower, upper, max_iterations=30, fixed=[k])
+        exact = res["status"] != "failed"
+        chi2 = res["chi2"] if exact else problem.chi2(start)
+        return float(np.sqrt(max(chi2 - chi2_min, 0.0))), exact
+
+    def guess(pts, t, side, bound):
+        """Next x: interpolate a bracket of t, else extrapolate outward (pts sorted by
+        distance from x0, with (x0, 0) first)."""
+        above = [p for p in pts if p[1] >= t]
+        below = [p for p in pts if p[1] < t]
+        b = below[-1]
+        if above:
+            a = above[0]
+            x = b[0] + (t - b[1]) * (a[0] - b[0]) / (a[1] - b[1])
+        elif len(below) == 1:
+            x = x0 + side * t * sd
+        else:
+            (x1, h1), (x2, h2) = below[-2], below[-1]
+            x = x2 + (t - h2) * (x2 - x1) / (h2 - h1) if h2 > h1 else x0 + 2 * (x2 - x0)
+        return float(np.clip(x, min(x0, bound), max(x0, bound)))
+
+    edges = [[None, None] for _ in thresholds]
+    for j, (side, bound) in enumerate(((-1, lower[k]), (1, upper[k]))):
+        if x0 == bound:
+            for e in edges:
+                e[j] = float(bound)
+            continue
+        pts = [(x0, 0.0)]
+        for e, thr in zip(edges, thresholds):
+            t = np.sqrt(thr)
+            for _ in range(max_fits):
+                x = guess(pts, t, side, bound)
+                if any(x == p[0] for p in pts):         # no new point to try
+                    break
+                hx, exact = h(x)
+                if not exact and hx >= t:               # only an upper bound: undecided
+                    break
+                pts = sorted(pts + [(x, hx)], key=lambda p: abs(p[0] - x0))
+                if abs(hx - t) <= rtol * t:
+                    e[j] = x
+                    break
+                if hx < t and x == bound:
+                    e[j] = float(bound)
+                    break
+    return [tuple(e) for e in edges], fits

@@ -1,0 +1,63 @@
+"""Profile chi-square edges on the true chi-square (skyfit_mi.methods.profile)."""
+import numpy as np
+import pytest
+from scipy.optimize import minimize_scalar
+
+from skyfit_mi.chi2 import parse_region
+
+LEVELS = [1.0, 3.841458820694124]
+
+
+@pytest.fixture(scope="module")
+def noisy_fit(days):
+    """A global fit of the noisy two-parameter day (rho_s 0.3, sigma_alpha 0.1)."""
+    from skyfit_mi.fit import FitSession
+    from skyfit_mi.methods.global_search import global_search
+
+    s = FitSession(days["noisy"], "disc", parse_region("rect:4,4,7,7"), model="two",
+                   positions=2, directions=512)
+    g = global_search(s.problem, None, s.lower, s.upper, profile=False,
+                      grid_basis=s.grid_bases()[0])
+    r, J = s.problem.jacobian(g["theta"])
+    return s, np.asarray(g["theta"]), float(r @ r), np.linalg.inv(J.T @ J)
+
+
+def brute_profile(s, k, x):
+    """P_k(x): the other parameter on a grid of 201 values, then Brent's method between the
+    best one's neighbours."""
+    j = 1 - k
+
+    def f(v):
+        th = np.empty(2)
+        th[k], th[j] = x, v
+        return s.problem.chi2(th)
+    grid = np.linspace(s.lower[j], s.upper[j], 201)
+    i = int(np.argmin([f(v) for v in grid]))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    return minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-8}).fun
+
+
+@pytest.mark.parametrize("k", [0, 1])
+def test_edges_sit_where_the_profile_crosses_the_threshold(noisy_fit, k):
+    from skyfit_mi.methods.profile import profile_edges
+
+    s, theta, chi2, cinv = noisy_fit
+    edges, fits = profile_edges(s.problem, theta, chi2, k, LEVELS, s.lower, s.upper, cinv)
+    assert fits <= 4 * 6
+    for (lo, hi), thr in zip(edges, LEVELS):
+        assert lo < theta[k] < hi
+        for x in (lo, hi):
+            rise = brute_profile(s, k, x) - chi2
+            assert np.sqrt(max(rise, 0)) == pytest.approx(np.sqrt(thr), rel=0.06), (x, rise, thr)
+    (lo68, hi68), (lo95, hi95) = edges
+    assert lo95 < lo68 and hi68 < hi95
+
+
+def test_levenberg_marquardt_holds_fixed_parameters(noisy_fit):
+    from skyfit_mi.methods.levenberg_marquardt import levenberg_marquardt
+
+    s, theta, chi2, _ = noisy_fit
+    start = theta + [0.03, 0.02]
+    res = levenberg_marquardt(s.problem, start, s.lower, s.upper, fixed=[0])
+    assert res["theta"][0] == start[0]
+    assert res["chi2"] == pytest.approx(brute_profile(s, 0, start[0]), rel=1e-4, abs=0.05)
