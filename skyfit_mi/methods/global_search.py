@@ -25,7 +25,7 @@ SIGMA_GRID = np.concatenate([[0.0], np.geomspace(0.004, 0.5, 64)])
 RHO_GRID = np.linspace(0.0, 1.0, 101)
 #: Resolution of the profiles near the optimum.
 RHO_FINE = np.linspace(0.0, 1.0, 2001)
-SIGMA_FINE_POINTS = 41
+SIGMA_FINE_POINTS = 21
 
 
 def _linearise(problem):

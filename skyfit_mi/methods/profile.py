@@ -10,7 +10,7 @@ half a standard deviation and its 95% interval missed the truth in 8 of 50 repli
 
 So each edge is placed on the true chi^2: P_k(x) is a Levenberg-Marquardt fit with theta_k
 held at x, started on the covariance's conditional mean theta + (x - theta_k) C[:, k] /
-C[k, k], and the edge is found by secant steps on h(x) = sqrt(P_k(x) - chi^2_min), which
+C[k, k] (the exact minimiser where chi^2 is quadratic, so five iterations at most), and the edge is found by secant steps on h(x) = sqrt(P_k(x) - chi^2_min), which
 is linear in x where chi^2 is quadratic, so two or three fits place an edge.
 """
 
@@ -42,7 +42,7 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, rt
         fits += 1
         start = np.clip(theta + (x - x0) * direction, lower, upper)
         start[k] = x
-        res = levenberg_marquardt(problem, start, lower, upper, max_iterations=30, fixed=[k])
+        res = levenberg_marquardt(problem, start, lower, upper, max_iterations=5, fixed=[k])
         exact = res["status"] != "failed"
         chi2 = res["chi2"] if exact else problem.chi2(start)
         return float(np.sqrt(max(chi2 - chi2_min, 0.0))), exact
