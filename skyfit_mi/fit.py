@@ -157,13 +157,17 @@ class FitSession:
             if p in prof:
                 rise[p] = float(np.max(prof[p][1]) - np.min(prof[p][1]))
                 if glob:
-                    # the grid's (linearised) profile, its edges then placed on the true chi^2
+                    # the union of the grid's (linearised) profile interval and the true
+                    # chi^2's (see methods/profile.py): the first is offset where the sensor
+                    # clips, the second inherits the cache's narrow-lobe error (a mirror fit
+                    # of the board's polished steel, truth sigma_alpha 0.02: 95% edge 0.002)
                     iv = unc.profile_interval(*prof[p], s2, ripple)
                     levels = list(iv)
                     exact, _ = profile_edges(problem, theta, chi2, i,
                                              [unc.LEVELS[lv] * s2 + ripple for lv in levels],
                                              lower, upper, curv_inv)
-                    iv = {lv: tuple(iv[lv][m] if e[m] is None else e[m] for m in range(2))
+                    iv = {lv: (min(iv[lv][0], e[0] if e[0] is not None else np.inf),
+                               max(iv[lv][1], e[1] if e[1] is not None else -np.inf))
                           for lv, e in zip(levels, exact)}
                     source = "profile"
             intervals[p] = {"68": iv["68"], "95": iv["95"], "from": source}

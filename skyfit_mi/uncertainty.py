@@ -2,10 +2,10 @@
 
 Two estimates, both reported:
 
-* profile chi-square (for sigma_alpha and rho_s, from the global grid, each edge then
-  placed on the true chi^2 by :mod:`.methods.profile`): the set where the minimum of chi^2
-  over the other parameters stays within Delta of its minimum, Delta = 1 (68%) and 3.84
-  (95%) for one parameter;
+* profile chi-square (for sigma_alpha and rho_s; the union of the global grid's linearised
+  profile interval and the true chi^2's, :mod:`.methods.profile`): the set where the minimum
+  of chi^2 over the other parameters stays within Delta of its minimum, Delta = 1 (68%) and
+  3.84 (95%) for one parameter;
 * covariance: C = (J^T J)^-1 at the optimum, intervals +- 1 and 1.96 standard deviations.
 
 When chi^2/dof > 1 (the model or the sigmas are imperfect, e.g. render noise in the

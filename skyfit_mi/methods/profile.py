@@ -12,6 +12,11 @@ So each edge is placed on the true chi^2: P_k(x) is a Levenberg-Marquardt fit wi
 held at x, started on the covariance's conditional mean theta + (x - theta_k) C[:, k] /
 C[k, k] (the exact minimiser where chi^2 is quadratic, so five iterations at most), and the edge is found by secant steps on h(x) = sqrt(P_k(x) - chi^2_min), which
 is linear in x where chi^2 is quadratic, so two or three fits place an edge.
+
+The fit reports the union of this interval and the grid's: the true chi^2 is that of the
+light cache, whose narrow lobes carry an error of their own (for a mirror fit, sigma_alpha
+just above 0 can look excluded when it is not), and the grid's profile was measured to cover
+there (docs/BENCHMARKS.md).
 """
 
 import numpy as np
