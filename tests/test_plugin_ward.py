@@ -85,7 +85,7 @@ def test_reciprocity(mi, normalisation):
                                atol=1e-6)
 
 
-@pytest.mark.parametrize("sigma", [0.03, 0.1, 0.3])
+@pytest.mark.parametrize("sigma", [0.01, 0.03, 0.1, 0.3])
 @pytest.mark.parametrize("theta_i", [10.0, 45.0, 75.0])
 @pytest.mark.parametrize("normalisation", ["ward", "balanced"])
 def test_chi2_sampling(mi, sigma, theta_i, normalisation):
@@ -95,7 +95,8 @@ def test_chi2_sampling(mi, sigma, theta_i, normalisation):
                                        "sigma_alpha": sigma, "normalisation": normalisation},
                               wi=[float(np.sin(t)), 0.0, float(np.cos(t))])
     chi2 = ChiSquareTest(domain=SphericalDomain(), sample_func=sample, pdf_func=pdf,
-                         sample_dim=3, res=181 if sigma < 0.05 else 101, ires=8, seed=3)
+                         sample_dim=3, res=721 if sigma < 0.02 else 181 if sigma < 0.05 else 101,
+                         ires=8, seed=3)          # the grid resolves the lobe
     assert chi2.run(), chi2.messages
 
 
