@@ -10,8 +10,9 @@ half a standard deviation and its 95% interval missed the truth in 8 of 50 repli
 
 So each edge is placed on the true chi^2: P_k(x) is a Levenberg-Marquardt fit with theta_k
 held at x, started on the covariance's conditional mean theta + (x - theta_k) C[:, k] /
-C[k, k] (the exact minimiser where chi^2 is quadratic, so five iterations at most), and the edge is found by secant steps on h(x) = sqrt(P_k(x) - chi^2_min), which
-is linear in x where chi^2 is quadratic, so two or three fits place an edge.
+C[k, k] (the exact minimiser where chi^2 is quadratic, so five iterations at most), and the
+edge is found by secant steps on h(x) = sqrt(P_k(x) - chi^2_min), which is linear in x where
+chi^2 is quadratic, so two or three fits place an edge.
 
 The fit reports the union of this interval and the grid's: the true chi^2 is that of the
 light cache, whose narrow lobes carry an error of their own (for a mirror fit, sigma_alpha
@@ -38,7 +39,8 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, rt
     x0 = float(theta[k])
     ckk = float(cov[k, k]) if np.isfinite(cov[k, k]) else 0.0
     sd = np.sqrt(ckk) if ckk > 0 else 0.05 * (upper[k] - lower[k])
-    direction = cov[:, k] / ckk if ckk > 0 and np.all(np.isfinite(cov[:, k])) else np.zeros(len(theta))
+    usable = ckk > 0 and np.all(np.isfinite(cov[:, k]))
+    direction = cov[:, k] / ckk if usable else np.zeros(len(theta))
     fits = 0
 
     def h(x):

@@ -8,6 +8,8 @@ by forward mode, and reverse mode for the gradient of a scalar loss.  The same b
 on a grid of sigma is the global search's.
 """
 
+import itertools
+
 import numpy as np
 
 from ..ward import METAL_THRESHOLD
@@ -83,9 +85,8 @@ def reflectances(model, theta):
     from ..ward import raw_parameters
 
     th = np.asarray(theta, dtype=float)
-    params = material_dict(model, th)
-    rho_d, spec, _ = raw_parameters(params.pop("model"), **{k: v for k, v in params.items()
-                                                             if k != "normalisation"})
+    rho_d, spec, _ = raw_parameters(**{k: v for k, v in material_dict(model, th).items()
+                                       if k != "normalisation"})
     rho = th[-2]
     d_rho_d, d_spec = np.zeros((3, len(th))), np.zeros((3, len(th)))
     if model == "two":
@@ -261,7 +262,7 @@ class WardModel:
         dr.forward_to(G_dr, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
         G, dG = self._np(dr.detach(G_dr)), self._np(dr.grad(G_dr))
         rho_d, spec, d_rho_d, d_spec = reflectances(self.model, theta)
-        D = self._basis_shares(0.0, 0.1).sum(axis=2)
+        D = self._diffuse_shares().sum(axis=2)
         J = D[..., None] * d_rho_d + G[..., None] * d_spec        # (P, T, 3, n)
         J[..., -1] = spec * dG
         self.evaluations += 1
@@ -279,25 +280,27 @@ class WardModel:
         parts = [(slice(0, S), 1.0)] + ([(slice(0, h), S / h), (slice(h, 2 * h), S / h)]
                                         if halves else [])
         acc = [[] for _ in parts]
-        for rho_s, sigma in [(0.0, 0.1)] + [(1.0, float(s)) for s in sigmas]:
-            shares = self._basis_shares(rho_s, sigma)
+        lobes = (self._shares(1.0, float(s)) for s in sigmas)
+        for shares in itertools.chain([self._diffuse_shares()], lobes):
             for j, (sl, scale) in enumerate(parts):
                 acc[j].append(shares[:, :, sl].sum(axis=2) * scale)
         self.basis_evaluations += len(sigmas)
         out = [(a[0], np.stack(a[1:])) for a in acc]
         return out if halves else out[0]
 
-    def _basis_shares(self, rho_s, sigma):
-        """Each position's share (P, T, S, 3) of the basis plugin's L; the diffuse basis
-        (rho_s = 0), which does not depend on theta, is computed once."""
-        if rho_s == 0.0 and self._D_shares is not None:
-            return self._D_shares
-        shares = self._np(self._radiance_dr(*self._variables([rho_s, sigma], model="two"),
-                                            per_position=True, plugin="basis"), per_position=True)
-        if rho_s == 0.0:
-            self._D_shares = shares
+    def _shares(self, rho_s, sigma):
+        """Each position's share (P, T, S, 3) of the basis plugin's L (rho_s = 0: the diffuse
+        basis; 1: the lobe at sigma)."""
+        L = self._radiance_dr(*self._variables([rho_s, sigma], model="two"), per_position=True,
+                              plugin="basis")
+        return self._np(L, per_position=True)
+
+    def _diffuse_shares(self):
+        """The diffuse basis's shares, computed once: they do not depend on theta."""
+        if self._D_shares is None:
+            self._D_shares = self._shares(0.0, 0.1)
             self.basis_evaluations += 1
-        return shares
+        return self._D_shares
 
     def gradient(self, theta, dloss_dL):
         """d(loss)/d(theta) by reverse-mode AD, given dloss/dL (P, T, 3) as a constant."""
