@@ -12,8 +12,8 @@ import itertools
 
 import numpy as np
 
-from ..ward import METAL_THRESHOLD
-from .light_cache import SIGMA_RESOLVED
+from ..ward import METAL_THRESHOLD, SIGMA_MIRROR, lobe_albedo_nodes
+from .light_cache import CONTROL_SIGMA, SIGMA_RESOLVED, control_weight
 
 #: Fitted parameters of each model (thesis 7.1), in order; C is three numbers.
 PARAMETERS = {"two": ("rho_s", "sigma_alpha"),
@@ -150,6 +150,19 @@ class WardModel:
         self.si_m.wi = mi.Vector3f(*flat(wo_m, 3))
         self.mirror = mi.Color3f(*flat(cache.mirror, 3))
         self.S = S
+        # the lobe's control variate (see .light_cache): the inverse densities, the estimate of
+        # the diffuse albedo per position (rho_d times it is the diffuse part of the estimated
+        # albedo), the constant c, and the albedo quadrature's nodes around each view direction
+        self.inv_pdf = mi.Float(cache.inv_pdf.ravel())
+        up = (cache.wi[..., 2] > 0) & (cache.wo[..., 2] > 0)
+        d_hat = (np.clip(cache.wi[..., 2], 0, None) / np.pi * up * cache.inv_pdf)
+        self.d_hat = mi.Float(d_hat.reshape(P * T * S, -1).sum(axis=1))
+        self.c = mi.Color3f(*flat(cache.mirror_sky, 3))
+        a, b, c = lobe_albedo_nodes()
+        self.J = len(a)
+        self.si_q = dr.zeros(mi.SurfaceInteraction3f, P * T * S * self.J)
+        self.si_q.wi = mi.Vector3f(*flat(np.repeat(wo_m, self.J, axis=2), 3))
+        self.nodes = [mi.Float(np.tile(x, P * T * S)) for x in (a, b, c)]
         # the model's plugin, and a two-parameter one for the basis L = rho_d D + rho_s G(sigma)
         # of the Jacobian (rho_s = 0: D; rho_s = 1: G), each with the literal values it keeps
         # between evaluations
@@ -183,17 +196,31 @@ class WardModel:
             self.dr.enable_grad(v[k])
         return v, float(theta[-1])
 
-    def _eval(self, bsdf, per_position=False):
-        """L for the plugin's current parameters: the lobe on the cached light, plus the mirror;
-        with ``per_position`` each position's share (size P*T*S) instead of their sum (P*T)."""
+    def _eval(self, bsdf, sigma, per_position=False):
+        """L for the plugin's current parameters (``sigma`` its sigma_alpha as a float): the
+        BRDF on the cached light with the lobe's control variate, plus the mirror; with
+        ``per_position`` each position's share (size P*T*S) instead of their sum (P*T)."""
         dr, mi = self.dr, self.mi
         ctx = mi.BSDFContext()
         f = bsdf.eval(ctx, self.si, self.wi)                            # f_r cos(theta_i)
-        glossy = dr.block_sum(f * self.weight, self.n // self.S if per_position else self.n)
+        K = self.n // self.S
+        L = dr.block_sum(f * self.weight, K)
         bs, w = bsdf.sample(ctx, self.si_m, mi.Float(0.0), mi.Point2f(0.5, 0.5))
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection)
-        mirror = dr.select(delta, w * bs.pdf, 0.0) * self.mirror
-        return glossy + (mirror if per_position else dr.block_sum(mirror, self.S))
+        L += dr.select(delta, w * bs.pdf, 0.0) * self.mirror
+        if SIGMA_MIRROR < sigma < CONTROL_SIGMA:
+            rho_d, _, s = bsdf.raw()
+            # the lobe's albedo: its estimate from the samples, and the quadrature
+            estimate = dr.block_sum(f * self.inv_pdf, K) - rho_d * self.d_hat
+            a, b, c = self.nodes
+            h = dr.normalize(mi.Vector3f(s * a, s * b, 1.0))
+            oh = dr.dot(self.si_q.wi, h)
+            glossy = mi.BSDFContext()
+            glossy.component = 1
+            g = bsdf.eval(glossy, self.si_q, 2.0 * oh * h - self.si_q.wi)
+            albedo = dr.block_sum(g * (2.0 * dr.square(s) * oh * h.z * dr.square(h.z) * c), self.J)
+            L += control_weight(s, dr.clip) * self.c * (albedo / self.S - estimate)
+        return L if per_position else dr.block_sum(L, self.S)
 
     def radiance_and_variance(self, theta):
         """``radiance(theta)`` and its Monte Carlo variance [(W m^-2 sr^-1)^2], both (P, T, 3).
@@ -219,14 +246,14 @@ class WardModel:
             p[k] = x
         if sigma >= SIGMA_RESOLVED:
             p.update()
-            L = self._eval(bsdf, per_position)
+            L = self._eval(bsdf, sigma, per_position)
         else:
             p["sigma_alpha"] = self.mi.Float(SIGMA_RESOLVED)
             p.update()
-            rough = self._eval(bsdf, per_position)
+            rough = self._eval(bsdf, SIGMA_RESOLVED, per_position)
             p["sigma_alpha"] = self.mi.Float(0.0)
             p.update()
-            mirror = self._eval(bsdf, per_position)
+            mirror = self._eval(bsdf, 0.0, per_position)
             L = mirror + (v["sigma_alpha"] / SIGMA_RESOLVED) * (rough - mirror)
         # L holds the opaque values; the plugin gets literals back, because a frozen function
         # elsewhere in the process (RegionRenderModel) dispatches over every registered BSDF

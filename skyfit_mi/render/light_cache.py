@@ -20,6 +20,21 @@ function of the parameters (common random numbers), evaluated with the
 ``ward`` plugin's own ``eval`` in Dr.Jit (so gradients come from Dr.Jit), or
 split into the basis L = rho_d * D + rho_s * G(sigma) for the global search.
 
+A narrow lobe sees the sky through a few of the fixed directions, so its estimate
+is noisy (1.7% rms per value at sigma_alpha = 0.01 with the default samples,
+fifty times the difference the data see between 0.01 and 0.003).  Near the
+mirror direction the sky is smooth, so the lobe's part takes a control variate:
+with c the radiance along the mirror direction without the solar disc (one more
+ray per position) and A the lobe's directional albedo from a deterministic
+quadrature (:func:`~skyfit_mi.ward.lobe_albedo`),
+
+    L_lobe = sum_k f_s(w_k) cos(theta_k) (L_i(w_k) - beta c) / (p_mix(w_k) N)  +  beta c A
+
+is still unbiased (c is independent of the directions' samples) and for
+sigma_alpha = 0.01 has 24 times less error (0.07% rms per value).  Its weight
+beta is 1 up to CONTROL_FULL and falls smoothly to 0 at CONTROL_SIGMA, where the
+quadrature's accuracy ends at grazing views (:func:`control_weight`).
+
 Fixed samples resolve a lobe no narrower than the narrowest sampling lobe,
 SIGMA_RESOLVED: below it the estimate's variance grows as (SIGMA_RESOLVED /
 sigma)^2 and chi-square would turn into noise between the resolved lobes and
@@ -45,6 +60,10 @@ POSITIONS, DIRECTIONS = 32, 128
 #: Share of directions from the solar disc, the sky table, cosine, and all lobes together; fixed
 #: counts, so the sun's share does not fluctuate from pixel to pixel.
 MIX = {"sun": 0.25, "sky": 0.20, "cosine": 0.15, "lobes": 0.40}
+#: Roughness from which the lobe's control variate is off (see the module docstring), and up to
+#: which it has its full weight; its quadrature of the lobe's albedo is exact to 1e-7 below
+#: CONTROL_SIGMA up to 70 degrees from the normal.
+CONTROL_FULL, CONTROL_SIGMA = 0.035, 0.05
 
 
 @dataclass
@@ -61,6 +80,9 @@ class LightCache:
     mirror : (P, T, S, 3)  L_i along the mirror direction / S, per position
     mirror_cos : (P, T, S)  cos(theta_o) at each position
     hit : (P, T) bool  every position of the pixel lands on the material
+    inv_pdf : (P, T, N)  1 / (p_mix N) [sr]: weight without L_i
+    mirror_sky : (P, T, S, 3)  L_i along the mirror direction without the solar disc
+        [W m^-2 sr^-1], per position: the control variate's constant
     """
 
     wo: np.ndarray
@@ -69,6 +91,8 @@ class LightCache:
     mirror: np.ndarray
     mirror_cos: np.ndarray
     hit: np.ndarray
+    inv_pdf: np.ndarray
+    mirror_sky: np.ndarray
 
     def halves(self):
         """Two independent caches, each from half of every pixel's positions (weights doubled).
@@ -85,7 +109,8 @@ class LightCache:
             n = slice(sl.start * K, sl.stop * K)
             out.append(LightCache(self.wo[:, :, n], self.wi[:, :, n], self.weight[:, :, n] * (S / h),
                                   self.mirror[:, :, sl] * (S / h), self.mirror_cos[:, :, sl],
-                                  self.hit))
+                                  self.hit, self.inv_pdf[:, :, n] * (S / h),
+                                  self.mirror_sky[:, :, sl]))
         return out
 
     # ---- the basis (NumPy, for the global search) ------------------------
@@ -100,7 +125,7 @@ class LightCache:
         The mirror term for sigma <= 1e-4, linear interpolation from it to G(SIGMA_RESOLVED)
         below SIGMA_RESOLVED (as the Dr.Jit model does).
         """
-        from ..ward import mirror_reflectance, specular_lobe
+        from ..ward import lobe_albedo, mirror_reflectance, specular_lobe
 
         if sigma_alpha <= SIGMA_MIRROR:
             frac = mirror_reflectance(self.mirror_cos, normalisation)
@@ -109,9 +134,25 @@ class LightCache:
             t = sigma_alpha / SIGMA_RESOLVED
             return (1 - t) * self.specular_basis(0.0, normalisation) \
                 + t * self.specular_basis(SIGMA_RESOLVED, normalisation)
-        lobe = specular_lobe(self.wi, self.wo, sigma_alpha, normalisation)
-        cos = np.clip(self.wi[..., 2], 0, None)
-        return np.einsum("ptn,ptnc->ptc", lobe * cos, self.weight)
+        lobe = specular_lobe(self.wi, self.wo, sigma_alpha, normalisation) \
+            * np.clip(self.wi[..., 2], 0, None)
+        G = np.einsum("ptn,ptnc->ptc", lobe, self.weight)
+        beta = float(control_weight(sigma_alpha))
+        if beta == 0:
+            return G
+        P, T, S = self.mirror_cos.shape
+        wo = self.wo.reshape(P, T, S, -1, 3)[:, :, :, 0]
+        albedo = lobe_albedo(wo, sigma_alpha, normalisation)
+        estimate = (lobe * self.inv_pdf).reshape(P, T, S, -1).sum(axis=-1)
+        return G + beta * np.einsum("pts,ptsc->ptc", albedo / S - estimate, self.mirror_sky)
+
+
+def control_weight(sigma_alpha, clip=np.clip):
+    """Weight beta of the control variate at ``sigma_alpha``: 1 up to CONTROL_FULL, a
+    smoothstep (zero slope at both ends) down to 0 at CONTROL_SIGMA, and 0 beyond.
+    ``clip`` lets Dr.Jit values through (``dr.clip``)."""
+    x = clip((sigma_alpha - CONTROL_FULL) / (CONTROL_SIGMA - CONTROL_FULL), 0.0, 1.0)
+    return 1.0 - x * x * (3.0 - 2.0 * x)
 
 
 def _stratified(rng, n, count=None):
@@ -181,7 +222,8 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     frac = [float(np.sum(comp == c)) / K for c in range(n_comp)]
 
     rng = np.random.default_rng(seed)
-    out = {k: [] for k in ("wo", "wi", "weight", "mirror", "mirror_cos", "hit")}
+    out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky",
+                                  "mirror_cos", "hit")}
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
         # primary rays: S stratified positions in each pixel
@@ -220,17 +262,24 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         sampler.seed(int(rng.integers(2**31)), P * S * K)
         li, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(sik.spawn_ray(d)))
         ok = (p_mix > 0) & (mi.Frame3f.cos_theta(wl) > 0)
-        weight = dr.select(ok, li / dr.maximum(p_mix, 1e-30) / (K * S), 0.0)
+        inv_pdf = dr.select(ok, dr.rcp(dr.maximum(p_mix, 1e-30)) / (K * S), 0.0)
+        weight = li * inv_pdf
         # mirror direction at each position
         wm = mi.reflect(si.wi)
         sampler.seed(int(rng.integers(2**31)), P * S)
-        lm, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(si.spawn_ray(si.to_world(wm))))
+        ray_m = mi.RayDifferential3f(si.spawn_ray(si.to_world(wm)))
+        lm, _, _ = integrator.sample(scene, sampler, ray_m)
+        # the same without the solar disc: the control variate's constant
+        sun_seen = ~scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
+        lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0)
 
         def np3(v, n):
             return np.array(v, dtype=np.float32).T.reshape(P, n, 3)
         out["wo"].append(np.repeat(np3(si.wi, S), K, axis=1))
         out["wi"].append(np3(wl, S * K))
         out["weight"].append(np3(weight, S * K))
+        out["inv_pdf"].append(np.array(inv_pdf, dtype=np.float32).reshape(P, S * K))
+        out["mirror_sky"].append(np3(lm_sky, S))
         out["mirror"].append(np3(lm, S) / S)
         out["mirror_cos"].append(np.array(mi.Frame3f.cos_theta(si.wi), np.float32).reshape(P, S))
         out["hit"].append(on.reshape(P, S).all(axis=1))
