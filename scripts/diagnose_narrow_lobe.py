@@ -6,9 +6,8 @@ central 4x4 pixels and every frame it compares three estimates of the radiance a
 
 - the frames (Mitsuba's path tracer, the cie_sky emitter's sampling and the ward plugin's);
 - the light cache the fit uses (``FitSession``, --positions x --directions, --cache-seed);
-- a deterministic quadrature in NumPy (``ward.ward_brdf`` times ``Sky.radiance``): Gauss-Legendre
-  over the solar disc, over a cap around each position's mirror direction for the lobe, and over
-  the hemisphere for the diffuse part, averaged over an 8x8 grid of positions in the pixel.
+- a deterministic quadrature in NumPy (``reflection.reflected_radiance``: the Ward BRDF of
+  ``ward.py`` times ``Sky.radiance``) averaged over an 8x8 grid of positions in the pixel.
 
 It prints, per frame, the region's mean of each estimate and the cache's and the frames'
 differences from the quadrature (in per cent, and for the frames in units of their own Monte
@@ -26,82 +25,6 @@ from pathlib import Path
 import numpy as np
 
 
-def _gauss(n, a, b):
-    x, w = np.polynomial.legendre.leggauss(n)
-    return 0.5 * (b - a) * x + 0.5 * (b + a), 0.5 * (b - a) * w
-
-
-def _basis(axis):
-    """Two unit vectors orthogonal to ``axis`` and to each other."""
-    a = np.asarray(axis, float)
-    t = np.array([1.0, 0, 0]) if abs(a[0]) < 0.9 else np.array([0, 1.0, 0])
-    e1 = np.cross(a, t)
-    e1 /= np.linalg.norm(e1)
-    return e1, np.cross(a, e1)
-
-
-def _cap(axis, radius, n_r=48, n_phi=96):
-    """Directions and solid-angle weights of a Gauss-Legendre x uniform grid over the cap of
-    angular ``radius`` [rad] around ``axis``: (n, 3), (n,)."""
-    th, wt = _gauss(n_r, 0.0, radius)
-    ph = (np.arange(n_phi) + 0.5) * 2 * np.pi / n_phi
-    e1, e2 = _basis(axis)
-    T, F = np.meshgrid(th, ph, indexing="ij")
-    d = (np.cos(T)[..., None] * axis + np.sin(T)[..., None]
-         * (np.cos(F)[..., None] * e1 + np.sin(F)[..., None] * e2))
-    w = (wt[:, None] * np.sin(T) * (2 * np.pi / n_phi))
-    return d.reshape(-1, 3), w.ravel()
-
-
-def _hemisphere(n_t=96, n_phi=192):
-    """Directions and weights over the upper hemisphere (Gauss-Legendre in cos theta)."""
-    c, wc = _gauss(n_t, 0.0, 1.0)
-    ph = (np.arange(n_phi) + 0.5) * 2 * np.pi / n_phi
-    C, F = np.meshgrid(c, ph, indexing="ij")
-    s = np.sqrt(1 - C**2)
-    d = np.stack([s * np.cos(F), s * np.sin(F), C], axis=-1)
-    return d.reshape(-1, 3), np.repeat(wc, n_phi) * (2 * np.pi / n_phi)
-
-
-def quadrature_radiance(sky, wo, rho_d, rho_s, sigma):
-    """Radiance [W m^-2 sr^-1] (3,) leaving a horizontal Ward surface toward world ``wo``
-    under ``sky``, by quadrature (sun disc, lobe cap, diffuse hemisphere)."""
-    from skyfit_mi.ward import specular_lobe
-
-    wo = np.asarray(wo, float)
-    out = np.zeros(3)
-    # sun: the whole BRDF over the disc
-    alpha = np.arccos(1 - sky.sun_chord2 / 2)
-    d, w = _cap(sky.sun_direction, alpha)
-    f = rho_d / np.pi + rho_s * specular_lobe(d, wo, sigma)[:, None]
-    out += np.sum((f * np.clip(d[:, 2], 0, None)[:, None] * w[:, None]), axis=0) * sky.sun_radiance
-    # sky, diffuse part
-    d, w = _hemisphere()
-    out += rho_d / np.pi * np.sum(sky.sky_radiance(d) * (d[:, 2] * w)[:, None], axis=0)
-    # sky, lobe: a cap around the mirror direction holding all but e^-100 of the lobe
-    r = np.array([-wo[0], -wo[1], wo[2]])
-    d, w = _cap(r, min(np.pi, 20 * sigma), n_r=96, n_phi=128)
-    lobe = specular_lobe(d, wo, sigma) * np.clip(d[:, 2], 0, None)
-    out += rho_s * np.sum(sky.sky_radiance(d) * (lobe * w)[:, None], axis=0)
-    return out
-
-
-def pixel_views(scene, pixels, m=8):
-    """World view directions (toward the camera) of an m x m grid of positions in each pixel
-    on the horizontal plane z = 0: (P, m*m, 3)."""
-    import mitsuba as mi
-
-    sensor = scene.sensors()[0]
-    w, h = sensor.film().crop_size()
-    g = (np.arange(m) + 0.5) / m
-    u = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
-    pos = (np.asarray(pixels)[:, None, :] + u[None]).reshape(-1, 2) / [w, h]
-    ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5), mi.Point2f(pos[:, 0], pos[:, 1]),
-                               mi.Point2f(0.5, 0.5))
-    d = np.array(ray.d, dtype=float).T
-    return (-d).reshape(len(pixels), m * m, 3)
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sigma", type=float, default=0.01)
@@ -115,8 +38,10 @@ def main():
     args = ap.parse_args()
     from skyfit_mi.chi2 import parse_region
     from skyfit_mi.fit import FitSession
+    from skyfit_mi.reflection import reflected_radiance
     from skyfit_mi.render.fit_model import material_dict
     from skyfit_mi.render.image import read_exr
+    from skyfit_mi.render.scene import pixel_views
     from skyfit_mi.sequence import load_manifest, render_sequence
     from skyfit_mi.spec import thesis_disc_spec, validate_spec
     from skyfit_mi.ward import raw_parameters
@@ -141,7 +66,7 @@ def main():
         rho_d, rho_s, _ = raw_parameters(**{k: v for k, v in material_dict("two", truth).items()
                                             if k != "normalisation"})
         views = pixel_views(s.scene, px)
-        quad = np.array([[np.mean([quadrature_radiance(sky, wo, rho_d, rho_s, args.sigma)
+        quad = np.array([[np.mean([reflected_radiance(sky, wo, rho_d, rho_s, args.sigma)
                                    for wo in views[p]], axis=0) for sky in s.skies]
                          for p in range(len(px))])
         print("| frame | quadrature | frames | frames - quad [%] | (frames - quad) / sd | "

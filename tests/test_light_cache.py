@@ -55,12 +55,36 @@ def test_model_is_continuous_down_to_the_mirror(session):
     assert np.allclose(basis, half, rtol=1e-3)
 
 
-@pytest.mark.parametrize("sigma", [0.001, 0.05])
+@pytest.mark.parametrize("sigma", [0.01, 0.042])
+def test_numpy_basis_with_the_control_variate_equals_the_model(session, sigma):
+    # the NumPy twin (ward.specular_lobe, ward.lobe_albedo) and the Dr.Jit model (the plugin)
+    basis = 0.2 * session.cache.diffuse_basis() + 0.8 * session.cache.specular_basis(sigma)
+    assert np.allclose(basis, session.wm.radiance([0.8, sigma]), rtol=1e-4)
+
+
+def test_narrow_lobe_matches_an_independent_quadrature(session):
+    # sigma_alpha = 0.01, four times the sun's radius: the cache (with its control variate)
+    # against reflection.reflected_radiance on a 4x4 grid of positions per pixel.  Without
+    # the control variate this cache is off by up to 0.74% in a frame, 0.83% rms per value
+    from skyfit_mi.reflection import reflected_radiance
+    from skyfit_mi.render.scene import pixel_views
+    views = pixel_views(session.scene, session.obs.pixels, m=4)
+    quad = np.array([[np.mean([reflected_radiance(sky, wo, 0.2, 0.8, 0.01) for wo in v], axis=0)
+                      for sky in session.skies] for v in views])
+    model = session.wm.radiance([0.8, 0.01])
+    per_frame = model.sum(axis=(0, 2)) / quad.sum(axis=(0, 2)) - 1
+    assert np.all(np.abs(per_frame) < 2.5e-3), per_frame                # 0.14% with it
+    assert np.sqrt(np.mean((model / quad - 1) ** 2)) < 0.004                 # 0.21%
+
+
+@pytest.mark.parametrize("sigma", [0.001, 0.02, 0.042, 0.05])
 def test_jacobian_matches_finite_differences(session, sigma):
+    # 0.001: the linear interpolation to the mirror (a step inside it); 0.02: with the control
+    # variate; 0.042: where its weight falls; 0.05: without it
     wm = session.wm
     theta = np.array([0.6, sigma])
     _, J = wm.jacobian(theta)
-    for i, h in enumerate((1e-3, 1e-5 if sigma < 0.002 else 1e-4)):
+    for i, h in enumerate((1e-3, 5e-4 if sigma < 0.002 else 1e-4)):
         d = np.zeros(2)
         d[i] = h
         fd = (wm.radiance(theta + d) - wm.radiance(theta - d)) / (2 * h)
@@ -103,7 +127,7 @@ def test_jacobian_through_the_basis_matches_the_plugin(session, model, theta):
         hi[i], lo[i] = 1.0, 0.0
         secant = wm.radiance(hi) - wm.radiance(lo)
         assert np.allclose(J[..., i], secant, atol=1e-5 * np.max(np.abs(secant)))
-    for i, h in ((n_lin, 1e-3), (n_lin + 1, 1e-5 if theta[-1] < 0.002 else 1e-4)):
+    for i, h in ((n_lin, 1e-3), (n_lin + 1, 5e-4 if theta[-1] < 0.002 else 1e-4)):
         d = np.zeros(len(theta))
         d[i] = h
         fd = (wm.radiance(theta + d) - wm.radiance(theta - d)) / (2 * h)

@@ -56,3 +56,18 @@ def disc_scene(emitter, bsdf, sensor, radius=1.0, integrator=None):
             "disc": {"type": "disk", "to_world": mi.ScalarTransform4f().scale(float(radius)),
                      "bsdf": bsdf},
             "sensor": sensor}
+
+
+def pixel_views(scene, pixels, m=8):
+    """World unit directions toward the camera from an m x m grid of positions in each of
+    ``pixels`` ((P, 2) x, y) of the scene's first sensor: (P, m*m, 3)."""
+    import mitsuba as mi
+
+    sensor = scene.sensors()[0]
+    w, h = sensor.film().crop_size()
+    g = (np.arange(m) + 0.5) / m
+    u = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+    pos = (np.asarray(pixels)[:, None, :] + u[None]).reshape(-1, 2) / [w, h]
+    ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5), mi.Point2f(pos[:, 0], pos[:, 1]),
+                               mi.Point2f(0.5, 0.5))
+    return -np.array(ray.d, dtype=float).T.reshape(len(pixels), m * m, 3)
