@@ -24,6 +24,12 @@ from .methods.profile import profile_edges
 from .render.fit_model import other_readings
 from .render.light_cache import DIRECTIONS, POSITIONS, SIGMA_RESOLVED
 from .sequence import load_manifest, sky_from_record
+from .ward import METAL_THRESHOLD
+
+
+#: Largest spread of C's channels for which the cache-error estimate treats the colour rule's
+#: two readings as one BRDF (:meth:`FitSession._same_reading`).
+GREY_SPREAD = 0.02
 
 
 class FitSession:
@@ -84,7 +90,8 @@ class FitSession:
         The fit is repeated on each of two independent half caches (by the global method
         when that found ``theta``, else by Levenberg-Marquardt from ``theta``, which finds
         the same local minimum); their estimates differ by the cache error of a half twice
-        over, so the whole cache's error is |theta_A - theta_B| / 2.  One degree of freedom
+        over, so the whole cache's error is |theta_A - theta_B| / 2 (each on theta's side of
+        the colour rule, see :meth:`_same_reading`).  One degree of freedom
         makes it rough, but it keeps intervals honest when the data are precise enough for
         the cache's noise to ripple chi-square by more than the 95% threshold.
         """
@@ -101,7 +108,28 @@ class FitSession:
         else:
             fits = [levenberg_marquardt(p, theta, self.lower, self.upper)["theta"]
                     for p in self._halves]
-        return np.abs(np.asarray(fits[0]) - np.asarray(fits[1])) / 2
+        # a half that lands on the other reading of a grey C (across the colour rule, the
+        # same BRDF to within the data) is read at its minimum on theta's side: the
+        # difference between readings is the ambiguity warned of, not cache error
+        fits = [self._same_reading(p, np.asarray(f, dtype=float), theta)
+                for p, f in zip(self._halves, fits)]
+        return np.abs(fits[0] - fits[1]) / 2
+
+    def _same_reading(self, problem, fit, theta):
+        from .methods.levenberg_marquardt import levenberg_marquardt
+        from .render.fit_model import other_readings
+
+        def side(x):
+            return x[3] >= METAL_THRESHOLD
+        if np.ptp(fit[:3]) > GREY_SPREAD:
+            return fit
+        for twin in other_readings(self.model, fit):
+            if side(twin) == side(theta) != side(fit):
+                polished = np.asarray(levenberg_marquardt(problem, twin, self.lower,
+                                                          self.upper)["theta"])
+                if side(polished) == side(theta):
+                    return polished
+        return fit
 
     def grid_bases(self):
         """The global search's basis on its sigma grid for the whole cache and each half,

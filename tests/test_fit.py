@@ -142,3 +142,54 @@ def test_colour_rule_twin_keeps_diffuse_and_mean_specular(C, rho_s):
     assert np.allclose(d2, d) and np.mean(s2) == pytest.approx(np.mean(s))
     if np.ptp(C) == 0:                                     # grey: the same BRDF
         assert np.allclose(s2, s)
+
+
+class _RawBRDF:
+    """A toy chi-square over the colour model whose data determine only the raw BRDF (rho_d,
+    the specular reflectance, sigma): for a grey C both readings of the rule fit exactly."""
+
+    def __init__(self, truth):
+        from skyfit_mi.render.fit_model import reflectances
+        self.reflectances = reflectances
+        self.target = self._raw(truth)
+
+    def _raw(self, theta):
+        import numpy as np
+        rho_d, spec, _, _ = self.reflectances("colour", theta)
+        return np.r_[rho_d, spec, theta[-1]]
+
+    def residuals(self, theta):
+        return 100 * (self._raw(theta) - self.target)
+
+    def jacobian(self, theta):
+        import numpy as np
+        _, _, d_rho_d, d_spec = self.reflectances("colour", theta)
+        J = np.zeros((7, 5))
+        J[:3], J[3:6], J[6, 4] = d_rho_d, d_spec, 1.0
+        return self.residuals(theta), 100 * J
+
+    def chi2(self, theta):
+        r = self.residuals(theta)
+        return float(r @ r)
+
+
+def test_cache_error_compares_the_halves_on_the_same_reading():
+    # a half whose fit lands on the plastic reading of a grey metal is read on the metal side:
+    # the readings' difference (C 0.55 against 0.16) is not Monte Carlo error
+    import numpy as np
+
+    from skyfit_mi.fit import FitSession
+    from skyfit_mi.render.fit_model import bounds, other_readings
+    from skyfit_mi.ward import METAL_THRESHOLD
+    theta = np.array([0.55, 0.55, 0.55, 0.85, 0.03])
+    minimum = theta + [0, 0, 0, 0, 0.002]                     # this half's minimum
+    half = _RawBRDF(minimum)
+    plastic = other_readings("colour", minimum)[0]
+    assert plastic[3] < METAL_THRESHOLD and half.chi2(plastic) < 1e-6
+    session = FitSession.__new__(FitSession)
+    session.model = "colour"
+    session.lower, session.upper = bounds("colour")
+    read = session._same_reading(half, plastic, theta)
+    assert np.allclose(read, minimum, atol=1e-4)
+    coloured = np.array([0.2, 0.5, 0.8, 0.3, 0.03])           # not grey: another BRDF, kept
+    assert session._same_reading(half, coloured, theta) is coloured
