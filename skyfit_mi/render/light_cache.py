@@ -222,8 +222,8 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     frac = [float(np.sum(comp == c)) / K for c in range(n_comp)]
 
     rng = np.random.default_rng(seed)
-    out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky",
-                                  "mirror_cos", "hit")}
+    out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos",
+                           "hit")}
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
         # primary rays: S stratified positions in each pixel
