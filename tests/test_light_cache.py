@@ -97,13 +97,16 @@ def test_new_parameters_reuse_the_compiled_kernels(session):
     # must not compile anything (that cost 7x the evaluation itself)
     import drjit as dr
     wm = session.wm
-    wm.radiance([0.3, 0.1])
-    wm.jacobian([0.3, 0.1])
+    for theta in ([0.3, 0.1], [0.3, 0.02]):                  # without and with the control variate
+        wm.radiance(theta)
+        wm.jacobian(theta)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
         dr.kernel_history()                                   # clears it
         wm.radiance([0.55, 0.21])
         wm.jacobian([0.61, 0.07])
+        wm.radiance([0.45, 0.013])
+        wm.jacobian([0.71, 0.03])
         jit = [k for k in dr.kernel_history() if "cache_hit" in k]
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
