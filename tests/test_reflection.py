@@ -29,7 +29,7 @@ def test_lobe_albedo_matches_a_brute_force_integral(sigma, theta):
     mirror = np.array([-wo[0], -wo[1], wo[2]])
     d, w = cap_quadrature(mirror, 20 * sigma, n_r=200, n_phi=256)
     brute = np.sum(specular_lobe(d, wo, sigma) * np.clip(d[:, 2], 0, None) * w)
-    assert lobe_albedo(wo, sigma) == pytest.approx(brute, rel=1e-6)
+    assert lobe_albedo(wo, sigma) == pytest.approx(brute, rel=2e-6)
 
 
 def test_hemisphere_quadrature_integrates_the_cosine_to_pi():

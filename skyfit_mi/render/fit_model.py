@@ -203,12 +203,16 @@ class WardModel:
         dr, mi = self.dr, self.mi
         ctx = mi.BSDFContext()
         f = bsdf.eval(ctx, self.si, self.wi)                            # f_r cos(theta_i)
+        # evaluated once: each block sum below launches a kernel per channel, which would
+        # evaluate the BRDF anew every time
+        dr.eval(f)
         K = self.n // self.S
+        control = SIGMA_MIRROR < sigma < CONTROL_SIGMA
         L = dr.block_sum(f * self.weight, K)
         bs, w = bsdf.sample(ctx, self.si_m, mi.Float(0.0), mi.Point2f(0.5, 0.5))
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection)
         L += dr.select(delta, w * bs.pdf, 0.0) * self.mirror
-        if SIGMA_MIRROR < sigma < CONTROL_SIGMA:
+        if control:
             rho_d, _, s = bsdf.raw()
             # the lobe's albedo: its estimate from the samples, and the quadrature
             estimate = dr.block_sum(f * self.inv_pdf, K) - rho_d * self.d_hat
@@ -218,6 +222,7 @@ class WardModel:
             glossy = mi.BSDFContext()
             glossy.component = 1
             g = bsdf.eval(glossy, self.si_q, 2.0 * oh * h - self.si_q.wi)
+            dr.eval(g)
             albedo = dr.block_sum(g * (2.0 * dr.square(s) * oh * h.z * dr.square(h.z) * c), self.J)
             L += control_weight(s, dr.clip) * self.c * (albedo / self.S - estimate)
         return L if per_position else dr.block_sum(L, self.S)

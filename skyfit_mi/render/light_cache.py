@@ -61,7 +61,7 @@ POSITIONS, DIRECTIONS = 32, 128
 #: counts, so the sun's share does not fluctuate from pixel to pixel.
 MIX = {"sun": 0.25, "sky": 0.20, "cosine": 0.15, "lobes": 0.40}
 #: Roughness from which the lobe's control variate is off (see the module docstring), and up to
-#: which it has its full weight; its quadrature of the lobe's albedo is exact to 1e-7 below
+#: which it has its full weight; its quadrature of the lobe's albedo is exact to 1e-6 below
 #: CONTROL_SIGMA up to 70 degrees from the normal.
 CONTROL_FULL, CONTROL_SIGMA = 0.035, 0.05
 
