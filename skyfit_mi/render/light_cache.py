@@ -272,6 +272,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         # the same without the solar disc: the control variate's constant
         sun_seen = ~scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
         lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0)
+        dr.eval(weight, inv_pdf, lm, lm_sky)              # together: the mixture density once
 
         def np3(v, n):
             return np.array(v, dtype=np.float32).T.reshape(P, n, 3)
