@@ -66,9 +66,8 @@ def main():
         rho_d, rho_s, _ = raw_parameters(**{k: v for k, v in material_dict("two", truth).items()
                                             if k != "normalisation"})
         views = pixel_views(s.scene, px)
-        quad = np.array([[np.mean([reflected_radiance(sky, wo, rho_d, rho_s, args.sigma)
-                                   for wo in views[p]], axis=0) for sky in s.skies]
-                         for p in range(len(px))])
+        quad = np.stack([reflected_radiance(sky, views, rho_d, rho_s, args.sigma).mean(axis=1)
+                         for sky in s.skies], axis=1)
         print("| frame | quadrature | frames | frames - quad [%] | (frames - quad) / sd | "
               "cache | cache - quad [%] | (cache - quad) / cache sd |")
         print("|---|---|---|---|---|---|---|---|")

@@ -24,19 +24,20 @@ def _gauss(n, a, b):
 
 
 def cap_quadrature(axis, radius, n_r=48, n_phi=96):
-    """Directions (n, 3) and solid-angle weights (n,) [sr] of a Gauss-Legendre (angle) x
-    trapezoid (azimuth) rule over the cap of angular ``radius`` [rad] around unit ``axis``."""
+    """Directions (..., n, 3) and solid-angle weights (n,) [sr] of a Gauss-Legendre (angle) x
+    trapezoid (azimuth) rule over the cap of angular ``radius`` [rad] around each unit
+    ``axis`` (..., 3)."""
     axis = np.asarray(axis, dtype=float)
-    t = np.array([1.0, 0, 0]) if abs(axis[0]) < 0.9 else np.array([0, 1.0, 0])
+    t = np.where((np.abs(axis[..., :1]) < 0.9), [1.0, 0, 0], [0, 1.0, 0])
     e1 = np.cross(axis, t)
-    e1 /= np.linalg.norm(e1)
+    e1 /= np.linalg.norm(e1, axis=-1, keepdims=True)
     e2 = np.cross(axis, e1)
     th, wt = _gauss(n_r, 0.0, radius)
     ph = (np.arange(n_phi) + 0.5) * 2 * np.pi / n_phi
-    T, F = np.meshgrid(th, ph, indexing="ij")
-    d = (np.cos(T)[..., None] * axis + np.sin(T)[..., None]
-         * (np.cos(F)[..., None] * e1 + np.sin(F)[..., None] * e2))
-    return d.reshape(-1, 3), (wt[:, None] * np.sin(T) * (2 * np.pi / n_phi)).ravel()
+    T, F = (v.ravel() for v in np.meshgrid(th, ph, indexing="ij"))
+    local = np.stack([np.sin(T) * np.cos(F), np.sin(T) * np.sin(F), np.cos(T)], axis=-1)
+    d = local @ np.stack([e1, e2, axis], axis=-2)                  # (..., n, 3)
+    return d, np.repeat(wt, n_phi) * np.sin(T) * (2 * np.pi / n_phi)
 
 
 def hemisphere_quadrature(n_t=96, n_phi=192):
@@ -50,16 +51,22 @@ def hemisphere_quadrature(n_t=96, n_phi=192):
 
 
 def reflected_radiance(sky, wo, rho_d, rho_s, sigma_alpha, normalisation="ward"):
-    """Radiance [W m^-2 sr^-1], RGB (3,), leaving a horizontal Ward surface toward world unit
-    ``wo`` under ``sky``; raw parameters (``ward.raw_parameters``), sigma_alpha >= 0.001."""
+    """Radiance [W m^-2 sr^-1], RGB (..., 3), leaving a horizontal Ward surface toward world
+    unit directions ``wo`` (..., 3) under ``sky``; raw parameters (``ward.raw_parameters``),
+    sigma_alpha >= 0.001."""
     wo = np.asarray(wo, dtype=float)
     rho_d, rho_s = np.broadcast_to(rho_d, (3,)), np.broadcast_to(rho_s, (3,))
+    wo_n = wo[..., None, :]
+    # the solar disc: the whole BRDF
     d, w = cap_quadrature(sky.sun_direction, np.arccos(1 - sky.sun_chord2 / 2))
-    f = rho_d / np.pi + rho_s * specular_lobe(d, wo, sigma_alpha, normalisation)[:, None]
-    out = np.sum(f * (np.clip(d[:, 2], 0, None) * w)[:, None], axis=0) * sky.sun_radiance
+    lobe = specular_lobe(d, wo_n, sigma_alpha, normalisation) * np.clip(d[:, 2], 0, None) * w
+    sun = (rho_d / np.pi * np.sum(np.clip(d[:, 2], 0, None) * w)
+           + rho_s * np.sum(lobe, axis=-1)[..., None]) * sky.sun_radiance
+    # the sky: the diffuse part (the same for every wo), and the lobe over its cap
     d, w = hemisphere_quadrature()
-    out = out + rho_d / np.pi * np.sum(sky.sky_radiance(d) * (d[:, 2] * w)[:, None], axis=0)
-    mirror = np.array([-wo[0], -wo[1], wo[2]])
-    d, w = cap_quadrature(mirror, min(np.pi, 20 * sigma_alpha), n_r=96, n_phi=128)
-    lobe = specular_lobe(d, wo, sigma_alpha, normalisation) * np.clip(d[:, 2], 0, None)
-    return out + rho_s * np.sum(sky.sky_radiance(d) * (lobe * w)[:, None], axis=0)
+    diffuse = rho_d / np.pi * np.sum(sky.sky_radiance(d) * (d[:, 2] * w)[:, None], axis=0)
+    mirror = wo * [-1.0, -1.0, 1.0]
+    d, w = cap_quadrature(mirror, min(np.pi, 20 * sigma_alpha), n_r=64, n_phi=96)
+    lobe = specular_lobe(d, wo_n, sigma_alpha, normalisation) * np.clip(d[..., 2], 0, None) * w
+    glossy = rho_s * np.einsum("...n,...nc->...c", lobe, sky.sky_radiance(d))
+    return sun + diffuse + glossy
