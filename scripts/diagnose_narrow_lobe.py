@@ -60,8 +60,10 @@ def main():
         px = s.obs.pixels
         frames = [f for f in doc["frames"] if f["index"] in s.obs.frames]
         rendered = np.stack([read_exr(root / f["radiance"])[px[:, 1], px[:, 0]] for f in frames], 1)
+        # the frames' standard error in radiance: the DN sigma (quantisation and the render's
+        # own error) through the sensor's slope
         sd = np.stack([read_exr(root / f["sigma"])[px[:, 1], px[:, 0]] for f in frames], 1) \
-            / (s.obs.gain[:, None, None] * s.obs.sensor.exposure)
+            / s.problem.slope(rendered)
         cache, cache_var = s.wm.radiance_and_variance(truth)
         rho_d, rho_s, _ = raw_parameters(**{k: v for k, v in material_dict("two", truth).items()
                                             if k != "normalisation"})
