@@ -91,9 +91,9 @@ class FitSession:
         when that found ``theta``, else by Levenberg-Marquardt from ``theta``, which finds
         the same local minimum); their estimates differ by the cache error of a half twice
         over, so the whole cache's error is |theta_A - theta_B| / 2 (each on theta's side of
-        the colour rule, see :meth:`_same_reading`).  One degree of freedom
-        makes it rough, but it keeps intervals honest when the data are precise enough for
-        the cache's noise to ripple chi-square by more than the 95% threshold.
+        the colour rule, see :meth:`_same_reading`).  One degree of freedom makes it rough,
+        but it keeps intervals honest when the data are precise enough for the cache's noise
+        to ripple chi-square by more than the 95% threshold.
         """
         from .methods.levenberg_marquardt import levenberg_marquardt
         from .render.fit_model import WardModel
@@ -116,8 +116,10 @@ class FitSession:
         return np.abs(fits[0] - fits[1]) / 2
 
     def _same_reading(self, problem, fit, theta):
+        """A half cache's ``fit`` on ``theta``'s side of the colour rule: when C is grey (within
+        GREY_SPREAD) and the fit is across the rule, Levenberg-Marquardt on that half from the
+        fit's twin reading; otherwise the fit itself."""
         from .methods.levenberg_marquardt import levenberg_marquardt
-        from .render.fit_model import other_readings
 
         def side(x):
             return x[3] >= METAL_THRESHOLD
