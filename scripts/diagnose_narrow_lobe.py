@@ -9,10 +9,11 @@ central 4x4 pixels and every frame it compares three estimates of the radiance a
 - a deterministic quadrature in NumPy (``reflection.reflected_radiance``: the Ward BRDF of
   ``ward.py`` times ``Sky.radiance``) averaged over an 8x8 grid of positions in the pixel.
 
-It prints, per frame, the region's mean of each estimate and the cache's and the frames'
-differences from the quadrature (in per cent, and for the frames in units of their own Monte
-Carlo standard error), then the global fit with its 95% interval and chi-square at the fit and
-at the truth.
+It prints, per frame, the region's mean of each estimate and the frames' and the cache's
+differences from the quadrature, in per cent and in units of each one's standard error (the
+frames': the manifest's sigma, quantisation included, through the sensor's slope; the cache's:
+the spread of its positions), then the global fit with its 95% interval and chi-square at the
+fit and at the truth.
 
     .venv/bin/python scripts/diagnose_narrow_lobe.py [--sigma 0.01] [--spp 1024] [--out DIR]
 """
