@@ -40,12 +40,11 @@ def main():
     from skyfit_mi.chi2 import parse_region
     from skyfit_mi.fit import FitSession
     from skyfit_mi.reflection import reflected_radiance
-    from skyfit_mi.render.fit_model import material_dict
+    from skyfit_mi.render.fit_model import reflectances
     from skyfit_mi.render.image import read_exr
     from skyfit_mi.render.scene import pixel_views
     from skyfit_mi.sequence import load_manifest, render_sequence
     from skyfit_mi.spec import thesis_disc_spec, validate_spec
-    from skyfit_mi.ward import raw_parameters
 
     print(f"Command: `.venv/bin/python scripts/diagnose_narrow_lobe.py {' '.join(sys.argv[1:])}`\n")
     truth = np.array([args.rho_s, args.sigma])
@@ -66,8 +65,7 @@ def main():
         sd = np.stack([read_exr(root / f["sigma"])[px[:, 1], px[:, 0]] for f in frames], 1) \
             / s.problem.slope(rendered)
         cache, cache_var = s.wm.radiance_and_variance(truth)
-        rho_d, rho_s, _ = raw_parameters(**{k: v for k, v in material_dict("two", truth).items()
-                                            if k != "normalisation"})
+        rho_d, rho_s = reflectances("two", truth)[:2]
         views = pixel_views(s.scene, px)
         quad = np.stack([reflected_radiance(sky, views, rho_d, rho_s, args.sigma).mean(axis=1)
                          for sky in s.skies], axis=1)

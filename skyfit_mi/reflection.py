@@ -8,8 +8,9 @@ integral (thesis eq. 3.1 with the Ward BRDF, eq. 3.19):
     L(wo) = integral over the hemisphere of f_r(wi, wo) cos(theta_i) L_sky+sun(wi) dwi
 
 split into the solar disc (the whole BRDF, Gauss-Legendre in the angle from the sun's
-centre), the diffuse part over the sky (Gauss-Legendre in cos theta) and the lobe over the
-sky (a cap around the mirror direction holding all but e^-100 of it).  Used to arbitrate
+centre), the diffuse part over the sky (the sky's horizontal irradiance, ``Sky``'s own
+quadrature) and the lobe over the sky (a cap around the mirror direction holding all but
+e^-100 of it).  Used to arbitrate
 between the light cache and the path-traced frames (``scripts/diagnose_narrow_lobe.py``).
 """
 
@@ -40,16 +41,6 @@ def cap_quadrature(axis, radius, n_r=48, n_phi=96):
     return d, np.repeat(wt, n_phi) * np.sin(T) * (2 * np.pi / n_phi)
 
 
-def hemisphere_quadrature(n_t=96, n_phi=192):
-    """Directions and weights [sr] over the upper hemisphere (Gauss-Legendre in cos theta)."""
-    c, wc = _gauss(n_t, 0.0, 1.0)
-    ph = (np.arange(n_phi) + 0.5) * 2 * np.pi / n_phi
-    C, F = np.meshgrid(c, ph, indexing="ij")
-    s = np.sqrt(1 - C**2)
-    d = np.stack([s * np.cos(F), s * np.sin(F), C], axis=-1)
-    return d.reshape(-1, 3), np.repeat(wc, n_phi) * (2 * np.pi / n_phi)
-
-
 def reflected_radiance(sky, wo, rho_d, rho_s, sigma_alpha, normalisation="ward"):
     """Radiance [W m^-2 sr^-1], RGB (..., 3), leaving a horizontal Ward surface toward world
     unit directions ``wo`` (..., 3) under ``sky``; raw parameters (``ward.raw_parameters``),
@@ -63,8 +54,7 @@ def reflected_radiance(sky, wo, rho_d, rho_s, sigma_alpha, normalisation="ward")
     sun = (rho_d / np.pi * np.sum(np.clip(d[:, 2], 0, None) * w)
            + rho_s * np.sum(lobe, axis=-1)[..., None]) * sky.sun_radiance
     # the sky: the diffuse part (the same for every wo), and the lobe over its cap
-    d, w = hemisphere_quadrature()
-    diffuse = rho_d / np.pi * np.sum(sky.sky_radiance(d) * (d[:, 2] * w)[:, None], axis=0)
+    diffuse = rho_d / np.pi * sky.sky_horizontal_irradiance(n=128)
     mirror = wo * [-1.0, -1.0, 1.0]
     d, w = cap_quadrature(mirror, min(np.pi, 20 * sigma_alpha), n_r=64, n_phi=96)
     lobe = specular_lobe(d, wo_n, sigma_alpha, normalisation) * np.clip(d[..., 2], 0, None) * w

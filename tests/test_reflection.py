@@ -3,7 +3,7 @@ limits and brute-force integrals."""
 import numpy as np
 import pytest
 
-from skyfit_mi.reflection import cap_quadrature, hemisphere_quadrature, reflected_radiance
+from skyfit_mi.reflection import cap_quadrature, reflected_radiance
 from skyfit_mi.sky import Sky
 from skyfit_mi.ward import lobe_albedo, mirror_reflectance, specular_lobe
 
@@ -30,12 +30,6 @@ def test_lobe_albedo_matches_a_brute_force_integral(sigma, theta):
     d, w = cap_quadrature(mirror, 20 * sigma, n_r=200, n_phi=256)
     brute = np.sum(specular_lobe(d, wo, sigma) * np.clip(d[:, 2], 0, None) * w)
     assert lobe_albedo(wo, sigma) == pytest.approx(brute, rel=2e-6)
-
-
-def test_hemisphere_quadrature_integrates_the_cosine_to_pi():
-    d, w = hemisphere_quadrature()
-    assert np.sum(d[:, 2] * w) == pytest.approx(np.pi, rel=1e-12)
-    assert np.sum(w) == pytest.approx(2 * np.pi, rel=1e-12)
 
 
 def test_reflected_radiance_under_a_uniform_sky_and_a_sun():
