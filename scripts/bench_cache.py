@@ -26,11 +26,11 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spp", type=int, default=4096)
     args = ap.parse_args()
-    from skyfit_mi.chi2 import parse_region
-    from skyfit_mi.fit import FitSession
+    from skyfit_mi.fitting.chi2 import parse_region
+    from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.render.image import read_exr
-    from skyfit_mi.sequence import load_manifest, render_sequence
-    from skyfit_mi.spec import thesis_disc_spec, validate_spec
+    from skyfit_mi.pipeline.sequence import load_manifest, render_sequence
+    from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
     truth = {"R": 0.33, "rho_s": 0.2, "sigma_alpha": 0.05}
     raw = thesis_disc_spec("cache-bench", {"model": "achromatic", **truth}, spp=args.spp, seed=8)

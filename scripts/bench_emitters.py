@@ -28,8 +28,8 @@ def main():
     from skyfit_mi.render import setup
     from skyfit_mi.render.daylight import sky_dict
     from skyfit_mi.render.scene import camera_origin, disc_scene, perspective_sensor
-    from skyfit_mi.sky import cie_sky
-    from skyfit_mi.sun import solar_position
+    from skyfit_mi.physics.sky import cie_sky
+    from skyfit_mi.physics.sun import solar_position
 
     mi = setup()
     import drjit as dr

@@ -41,12 +41,12 @@ def main():
                     "it to completion)")
     args = ap.parse_args()
 
-    from skyfit_mi.chi2 import Problem, parse_region
-    from skyfit_mi.fit import FitSession
-    from skyfit_mi.methods import METHODS
+    from skyfit_mi.fitting.chi2 import Problem, parse_region
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.methods import METHODS
     from skyfit_mi.render.fit_model import RegionRenderModel
-    from skyfit_mi.sequence import load_manifest, render_sequence
-    from skyfit_mi.spec import thesis_disc_spec, validate_spec
+    from skyfit_mi.pipeline.sequence import load_manifest, render_sequence
+    from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
     raw = thesis_disc_spec("table-7.10-disc", {"model": "colour", **TRUTH}, size=24, fov_deg=10.0,
                            seed=5)

@@ -39,7 +39,7 @@ def fisher_jacobian(session, theta, sensor):
     """
     from scipy.stats import norm
 
-    from skyfit_mi.chi2 import LOW_CODE
+    from skyfit_mi.fitting.chi2 import LOW_CODE
 
     problem = session.problem
     L, dL = session.wm.jacobian(theta)
@@ -64,12 +64,12 @@ def main():
     args = ap.parse_args()
     from reproduce_thesis import truth_vector
 
-    from skyfit_mi.camera import SensorModel
-    from skyfit_mi.chi2 import parse_region
-    from skyfit_mi.fit import FitSession
+    from skyfit_mi.physics.camera import SensorModel
+    from skyfit_mi.fitting.chi2 import parse_region
+    from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.render.image import read_exr
-    from skyfit_mi.sequence import load_manifest, render_sequence
-    from skyfit_mi.spec import thesis_disc_spec, validate_spec
+    from skyfit_mi.pipeline.sequence import load_manifest, render_sequence
+    from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
     region = parse_region(args.region)
     print(f"Command: `.venv/bin/python scripts/coverage.py {' '.join(sys.argv[1:])}`. "

@@ -37,14 +37,14 @@ def main():
     ap.add_argument("--directions", type=int, default=128)
     ap.add_argument("--out", help="render folder (kept; resumed); default: a temporary one")
     args = ap.parse_args()
-    from skyfit_mi.chi2 import parse_region
-    from skyfit_mi.fit import FitSession
-    from skyfit_mi.reflection import reflected_radiance
+    from skyfit_mi.fitting.chi2 import parse_region
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.physics.reflection import reflected_radiance
     from skyfit_mi.render.fit_model import reflectances
     from skyfit_mi.render.image import read_exr
     from skyfit_mi.render.scene import pixel_views
-    from skyfit_mi.sequence import load_manifest, render_sequence
-    from skyfit_mi.spec import thesis_disc_spec, validate_spec
+    from skyfit_mi.pipeline.sequence import load_manifest, render_sequence
+    from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
     print(f"Command: `.venv/bin/python scripts/diagnose_narrow_lobe.py {' '.join(sys.argv[1:])}`\n")
     truth = np.array([args.rho_s, args.sigma])

@@ -71,8 +71,8 @@ def success(model, theta, truth):
 
 
 def render_case(tmp, i, model, azimuth, truth):
-    from skyfit_mi.sequence import render_sequence
-    from skyfit_mi.spec import thesis_disc_spec, validate_spec
+    from skyfit_mi.pipeline.sequence import render_sequence
+    from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
     raw = thesis_disc_spec(f"case-{i}", {"model": model, **truth}, camera_azimuth_deg=azimuth,
                            seed=100 + i)
@@ -106,8 +106,8 @@ def main():
     ap.add_argument("--cases", default="all", help="comma-separated table numbers (7.1-7.12)")
     ap.add_argument("--output", default="docs/THESIS_TABLES.md")
     args = ap.parse_args()
-    from skyfit_mi.chi2 import parse_region
-    from skyfit_mi.fit import FitSession
+    from skyfit_mi.fitting.chi2 import parse_region
+    from skyfit_mi.fitting.fit import FitSession
 
     region = parse_region("rect:6,6,9,9")
     lines = ["# The thesis's tables 7.1-7.12 on skyfit's sequences", "",

@@ -1,8 +1,8 @@
 """skyfit-mi: daylight image sequences and Ward reflection-model fitting.
 
 Importing this package never imports Mitsuba or sets a variant; the NumPy
-physics (:mod:`skyfit_mi.sun`, :mod:`skyfit_mi.sky`, :mod:`skyfit_mi.ward`,
-:mod:`skyfit_mi.gensky`) works without a renderer.  Rendering starts with
+physics (:mod:`skyfit_mi.physics.sun`, :mod:`skyfit_mi.physics.sky`, :mod:`skyfit_mi.physics.ward`,
+:mod:`skyfit_mi.physics.gensky`) works without a renderer.  Rendering starts with
 :func:`skyfit_mi.render.setup`.
 """
 

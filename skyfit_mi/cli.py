@@ -8,15 +8,15 @@ from .render.light_cache import DIRECTIONS, POSITIONS
 
 
 def _render(args):
-    from .sequence import render_sequence
-    from .spec import load_spec
+    from .pipeline.sequence import render_sequence
+    from .pipeline.spec import load_spec
 
     render_sequence(load_spec(args.spec), args.output, overwrite=args.overwrite,
                     progress=not args.quiet)
 
 
 def _pixels(args):
-    from .pixels import parse_pixel, write_pixels
+    from .pipeline.pixels import parse_pixel, write_pixels
 
     paths = write_pixels(args.manifest, [parse_pixel(p) for p in args.pixel], args.output,
                          args.source)
@@ -26,8 +26,8 @@ def _pixels(args):
 def _fit(args):
     from pathlib import Path
 
-    from .chi2 import parse_region, region_from_mask, subsample_region
-    from .fit import fit_region, write_fit, write_summary
+    from .fitting.chi2 import parse_region, region_from_mask, subsample_region
+    from .fitting.fit import fit_region, write_fit, write_summary
 
     regions = []
     for r in args.region or []:
@@ -84,7 +84,7 @@ def _scene_labels(manifest):
     """(manifest document, its folder, label image, material ids) of a rendered sequence."""
     from .render import setup
     from .render.labels import label_image
-    from .sequence import load_manifest
+    from .pipeline.sequence import load_manifest
 
     doc, root = load_manifest(manifest)
     mi = setup(doc["render"]["variant"])
@@ -92,20 +92,18 @@ def _scene_labels(manifest):
 
 
 def _labels(args):
-    import json
     from pathlib import Path
 
     import numpy as np
 
+    from .files import write_json
     from .render.image import write_png
 
     _, root, labels, ids = _scene_labels(args.manifest)
     out = Path(args.output) if args.output else root / "labels.png"
     write_png(out, np.repeat(labels[..., None], 3, axis=2).astype(np.uint8))
     legend = {name: k + 1 for k, name in enumerate(ids)}
-    tmp = out.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps({"labels": legend, "0": "no material"}, indent=1))
-    tmp.replace(out.with_suffix(".json"))
+    write_json(out.with_suffix(".json"), {"labels": legend, "0": "no material"})
     print(f"wrote {out} (pixel value = material label) and {out.with_suffix('.json')}: "
           + ", ".join(f"{k}={v}" for k, v in legend.items()))
 

@@ -21,6 +21,10 @@ class ParseError(SkyfitError):
     """A text description (e.g. Radiance ``gensky`` output) could not be read."""
 
 
+class OutputError(SkyfitError):
+    """An output path cannot be written (the message names the path and the reason)."""
+
+
 class SetupError(RuntimeError):
     """The rendering back-end cannot start (missing libLLVM, no GPU...)."""
 

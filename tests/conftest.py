@@ -10,8 +10,8 @@ def mi():
 
 
 def disc_day(tmp, name, camera_az=90.0, sky="clear", noise=0.0, rho_s=0.3, sigma=0.1, spp=1024):
-    from skyfit_mi.sequence import render_sequence
-    from skyfit_mi.spec import thesis_disc_spec, validate_spec
+    from skyfit_mi.pipeline.sequence import render_sequence
+    from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
     raw = thesis_disc_spec(name, {"model": "two", "rho_s": rho_s, "sigma_alpha": sigma},
                            camera_azimuth_deg=camera_az, size=12, noise_percent=noise, spp=spp,

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from skyfit_mi.methods.annealing import on_bounds, simulated_annealing
+from skyfit_mi.fitting.methods.annealing import on_bounds, simulated_annealing
 
 
 class _Toy:

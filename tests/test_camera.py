@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from skyfit_mi.camera import SensorModel
+from skyfit_mi.physics.camera import SensorModel
 from skyfit_mi.errors import SkyfitError
 
 

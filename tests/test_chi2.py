@@ -4,8 +4,8 @@ import pytest
 from scipy.optimize import minimize_scalar
 from scipy.stats import norm
 
-from skyfit_mi.camera import SensorModel
-from skyfit_mi.chi2 import LOW_CODE, Observations, Problem
+from skyfit_mi.physics.camera import SensorModel
+from skyfit_mi.fitting.chi2 import LOW_CODE, Observations, Problem
 
 
 class _Flat:

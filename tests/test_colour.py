@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from skyfit_mi.colour import cct_to_rgb, cct_to_xyz
+from skyfit_mi.physics.colour import cct_to_rgb, cct_to_xyz
 from skyfit_mi.errors import SkyfitError
 
 

@@ -3,7 +3,7 @@ import json
 
 import pytest
 
-from skyfit_mi.chi2 import parse_region
+from skyfit_mi.fitting.chi2 import parse_region
 from skyfit_mi.cli import main
 
 REGION = parse_region("rect:4,4,7,7")          # 16 pixels, all on the disc
@@ -11,7 +11,7 @@ FAST = dict(positions=2, directions=512)
 
 
 def fit(path, **kw):
-    from skyfit_mi.fit import fit_region
+    from skyfit_mi.fitting.fit import fit_region
     return fit_region(path, "disc", REGION, log=lambda *a: None, **{**FAST, **kw})
 
 
@@ -66,7 +66,7 @@ def test_undetermined_roughness_is_flagged(days, day):
 
 def test_region_errors(days):
     from skyfit_mi.errors import SkyfitError
-    from skyfit_mi.fit import fit_region
+    from skyfit_mi.fitting.fit import fit_region
     with pytest.raises(SkyfitError, match="outside the 12x12 frames"):
         fit_region(days["clean"], "disc", parse_region("rect:10,10,13,13"), log=lambda *a: None)
     with pytest.raises(SkyfitError, match="its materials are: disc"):
@@ -99,7 +99,7 @@ def test_cli_fit_all_materials_subsamples_large_regions(days, tmp_path):
 
 
 def test_subsample_region_is_seeded():
-    from skyfit_mi.chi2 import subsample_region
+    from skyfit_mi.fitting.chi2 import subsample_region
     px = parse_region("rect:0,0,9,9")
     a, b = subsample_region(px, 10, seed=3), subsample_region(px, 10, seed=3)
     assert len(a) == 10 and (a == b).all() and len({tuple(p) for p in a}) == 10
@@ -107,7 +107,7 @@ def test_subsample_region_is_seeded():
 
 
 def test_labels_and_mask_regions(days, tmp_path):
-    from skyfit_mi.chi2 import region_from_mask
+    from skyfit_mi.fitting.chi2 import region_from_mask
     assert main(["labels", str(days["clean"]), "-o", str(tmp_path / "labels.png")]) == 0
     legend = json.loads((tmp_path / "labels.json").read_text())["labels"]
     assert legend == {"disc": 1}
@@ -119,7 +119,7 @@ def test_labels_and_mask_regions(days, tmp_path):
 
 
 def test_colour_model_plastic_metal_ambiguity_for_grey_c():
-    from skyfit_mi.uncertainty import colour_rule_ambiguity
+    from skyfit_mi.fitting.uncertainty import colour_rule_ambiguity
     grey = {k: (0.194, 0.196) for k in ("C_r", "C_g", "C_b")}
     c2, rho2 = colour_rule_ambiguity([0.195, 0.195, 0.195, 0.439, 0.08], grey)
     # the metal reading of the same raw BRDF: C' rho' = 0.439 and C'(1 - rho') = 0.195 * 0.561
@@ -134,7 +134,7 @@ def test_colour_model_plastic_metal_ambiguity_for_grey_c():
 def test_colour_rule_twin_keeps_diffuse_and_mean_specular(C, rho_s):
     import numpy as np
 
-    from skyfit_mi.ward import METAL_THRESHOLD, colour_rule_twin, raw_parameters
+    from skyfit_mi.physics.ward import METAL_THRESHOLD, colour_rule_twin, raw_parameters
     c2, rho2 = colour_rule_twin(C, rho_s)
     assert (rho2 >= METAL_THRESHOLD) != (rho_s >= METAL_THRESHOLD)   # the other rule
     d, s, _ = raw_parameters("colour", C=C, rho_s=rho_s, sigma_alpha=0.1)
@@ -178,9 +178,9 @@ def test_cache_error_compares_the_halves_on_the_same_reading():
     # the readings' difference (C 0.55 against 0.16) is not Monte Carlo error
     import numpy as np
 
-    from skyfit_mi.fit import FitSession
+    from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.render.fit_model import bounds, other_readings
-    from skyfit_mi.ward import METAL_THRESHOLD
+    from skyfit_mi.physics.ward import METAL_THRESHOLD
     theta = np.array([0.55, 0.55, 0.55, 0.85, 0.03])
     minimum = theta + [0, 0, 0, 0, 0.002]                     # this half's minimum
     half = _RawBRDF(minimum)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from skyfit_mi.errors import ParseError
-from skyfit_mi.gensky import from_gensky
+from skyfit_mi.physics.gensky import from_gensky
 
 CLEAR = """# gensky 6 21 12 +s -a 40 -o 0 -m 0
 # Solar altitude and azimuth: 73.4 -1.1

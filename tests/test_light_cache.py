@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from skyfit_mi.chi2 import parse_region
+from skyfit_mi.fitting.chi2 import parse_region
 
 REGION = parse_region("rect:4,4,7,7")          # 16 pixels, all on the disc
 
@@ -21,13 +21,13 @@ def test_stratified_samples_cover_the_square_uniformly():
 
 @pytest.fixture(scope="module")
 def session(days):
-    from skyfit_mi.fit import FitSession
+    from skyfit_mi.fitting.fit import FitSession
     return FitSession(days["clean"], "disc", REGION, model="two", seed=5)
 
 
 def test_cache_matches_the_render_without_bias(session, days):
     from skyfit_mi.render.image import read_exr
-    from skyfit_mi.sequence import load_manifest
+    from skyfit_mi.pipeline.sequence import load_manifest
 
     doc, root = load_manifest(days["clean"])
     px = session.obs.pixels
@@ -66,7 +66,7 @@ def test_narrow_lobe_matches_an_independent_quadrature(session):
     # sigma_alpha = 0.01, four times the sun's radius: the cache (with its control variate)
     # against reflection.reflected_radiance on a 4x4 grid of positions per pixel.  Without
     # the control variate this cache is off by up to 0.74% in a frame, 0.83% rms per value
-    from skyfit_mi.reflection import reflected_radiance
+    from skyfit_mi.physics.reflection import reflected_radiance
     from skyfit_mi.render.scene import pixel_views
     views = pixel_views(session.scene, session.obs.pixels, m=4)
     quad = np.stack([reflected_radiance(sky, views, 0.2, 0.8, 0.01).mean(axis=1)
@@ -139,7 +139,7 @@ def test_jacobian_through_the_basis_matches_the_plugin(session, model, theta):
 
 def test_full_render_model_replays_new_parameters_and_agrees_with_the_cache(session, days):
     from skyfit_mi.render.fit_model import RegionRenderModel
-    from skyfit_mi.sequence import load_manifest
+    from skyfit_mi.pipeline.sequence import load_manifest
 
     doc, _ = load_manifest(days["clean"])
 

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from skyfit_mi.gensky import from_gensky
-from skyfit_mi.sky import cie_sky
+from skyfit_mi.physics.gensky import from_gensky
+from skyfit_mi.physics.sky import cie_sky
 from test_gensky import CLEAR
 
 SKIES = {

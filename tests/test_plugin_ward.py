@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from skyfit_mi import ward as ref
+from skyfit_mi.physics import ward as ref
 from skyfit_mi.errors import SkyfitError
 
 RNG = np.random.default_rng(7)

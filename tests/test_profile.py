@@ -1,9 +1,9 @@
-"""Profile chi-square edges on the true chi-square (skyfit_mi.methods.profile)."""
+"""Profile chi-square edges on the true chi-square (skyfit_mi.fitting.methods.profile)."""
 import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 
-from skyfit_mi.chi2 import parse_region
+from skyfit_mi.fitting.chi2 import parse_region
 
 LEVELS = [1.0, 3.841458820694124]
 
@@ -11,8 +11,8 @@ LEVELS = [1.0, 3.841458820694124]
 @pytest.fixture(scope="module")
 def noisy_fit(days):
     """A global fit of the noisy two-parameter day (rho_s 0.3, sigma_alpha 0.1)."""
-    from skyfit_mi.fit import FitSession
-    from skyfit_mi.methods.global_search import global_search
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.methods.global_search import global_search
 
     s = FitSession(days["noisy"], "disc", parse_region("rect:4,4,7,7"), model="two",
                    positions=2, directions=512)
@@ -39,7 +39,7 @@ def brute_profile(s, k, x):
 
 @pytest.mark.parametrize("k", [0, 1])
 def test_edges_sit_where_the_profile_crosses_the_threshold(noisy_fit, k):
-    from skyfit_mi.methods.profile import profile_edges
+    from skyfit_mi.fitting.methods.profile import profile_edges
 
     s, theta, chi2, cinv = noisy_fit
     edges, fits = profile_edges(s.problem, theta, chi2, k, LEVELS, s.lower, s.upper, cinv)
@@ -54,7 +54,7 @@ def test_edges_sit_where_the_profile_crosses_the_threshold(noisy_fit, k):
 
 
 def test_levenberg_marquardt_holds_fixed_parameters(noisy_fit):
-    from skyfit_mi.methods.levenberg_marquardt import levenberg_marquardt
+    from skyfit_mi.fitting.methods.levenberg_marquardt import levenberg_marquardt
 
     s, theta, chi2, _ = noisy_fit
     start = theta + [0.03, 0.02]

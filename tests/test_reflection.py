@@ -3,9 +3,9 @@ limits and brute-force integrals."""
 import numpy as np
 import pytest
 
-from skyfit_mi.reflection import cap_quadrature, reflected_radiance
-from skyfit_mi.sky import Sky
-from skyfit_mi.ward import lobe_albedo, mirror_reflectance, specular_lobe
+from skyfit_mi.physics.reflection import cap_quadrature, reflected_radiance
+from skyfit_mi.physics.sky import Sky
+from skyfit_mi.physics.ward import lobe_albedo, mirror_reflectance, specular_lobe
 
 
 def _view(theta_deg):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from skyfit_mi.cli import main
-from skyfit_mi.spec import SpecError, load_spec, validate_spec
+from skyfit_mi.pipeline.spec import SpecError, load_spec, validate_spec
 
 TINY = {
     "name": "tiny",
@@ -83,14 +83,14 @@ def test_time_range_and_per_frame_skies(tmp_path):
 
 
 def test_thesis_disc_spec_is_valid(tmp_path):
-    from skyfit_mi.spec import thesis_disc_spec
+    from skyfit_mi.pipeline.spec import thesis_disc_spec
     spec = validate_spec(thesis_disc_spec("d", {"model": "two", "rho_s": 0.5, "sigma_alpha": 0.1},
                                           camera_azimuth_deg=0.0), tmp_path)
     assert len(spec.frames) == 13 and spec.camera["azimuth_deg"] == 0.0
 
 
 def test_example_specs_are_valid():
-    from skyfit_mi.spec import SCENES_DIR
+    from skyfit_mi.pipeline.spec import SCENES_DIR
     names = sorted(p.name for p in (SCENES_DIR / "specs").glob("*.toml"))
     assert len(names) >= 8
     for p in (SCENES_DIR / "specs").glob("*.toml"):
@@ -101,7 +101,7 @@ def test_example_specs_are_valid():
 
 
 def _render(raw, out, tmp_path, **kw):
-    from skyfit_mi.sequence import render_sequence
+    from skyfit_mi.pipeline.sequence import render_sequence
     return render_sequence(validate_spec(raw, tmp_path), out, progress=False, log=lambda *a: None, **kw)
 
 
@@ -129,7 +129,7 @@ def test_interrupted_render_resumes_to_identical_frames(tmp_path, mi, monkeypatc
     assert not list((tmp_path / "b" / "frames").glob(".*"))          # no half-written files
 
     logs = []
-    from skyfit_mi.sequence import render_sequence
+    from skyfit_mi.pipeline.sequence import render_sequence
     done = render_sequence(validate_spec(spec(), tmp_path), tmp_path / "b", progress=False,
                            log=logs.append)
     assert "(1 kept from an earlier run)" in logs[-1] and done["status"] == "complete"
@@ -193,7 +193,7 @@ def test_cli_render_and_pixels_end_to_end(tmp_path, mi):
 
 
 def test_render_error_estimate_and_pass_counts(tmp_path, mi):
-    from skyfit_mi.sequence import pass_spp
+    from skyfit_mi.pipeline.sequence import pass_spp
     assert pass_spp(64, "multijitter") == 36 and pass_spp(64, "independent") == 32
     assert pass_spp(1024, "stratified") == 529 and pass_spp(1, "independent") == 1
     m = _render(spec(), tmp_path / "e", tmp_path)

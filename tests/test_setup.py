@@ -36,7 +36,7 @@ def test_missing_libllvm_names_the_fix():
 
 
 def test_import_sets_no_variant():
-    r = _python("import sys, skyfit_mi, skyfit_mi.sky, skyfit_mi.gensky, skyfit_mi.ward, "
+    r = _python("import sys, skyfit_mi, skyfit_mi.physics.sky, skyfit_mi.physics.gensky, skyfit_mi.physics.ward, "
                 "skyfit_mi.render, skyfit_mi.render.daylight, skyfit_mi.cli\n"
                 "print('mitsuba' in sys.modules, 'drjit' in sys.modules)")
     assert r.stdout.split() == ["False", "False"], r.stderr

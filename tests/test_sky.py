@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from skyfit_mi import sky as sk
+from skyfit_mi.physics import sky as sk
 from skyfit_mi.conventions import direction_from_angles
 from skyfit_mi.errors import SkyfitError
 

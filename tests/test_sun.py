@@ -5,7 +5,7 @@ from zoneinfo import ZoneInfo
 import numpy as np
 import pytest
 
-from skyfit_mi import sun
+from skyfit_mi.physics import sun
 from skyfit_mi.errors import SkyfitError
 
 

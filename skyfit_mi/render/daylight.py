@@ -4,7 +4,7 @@ Importable before a variant is set; the functions need one (see
 :func:`skyfit_mi.render.setup`).
 """
 
-#: The emitter's RGB parameters, named as the :class:`~skyfit_mi.sky.Sky` fields.
+#: The emitter's RGB parameters, named as the :class:`~skyfit_mi.physics.sky.Sky` fields.
 RGB_KEYS = ("sun_radiance", "clear", "overcast", "uniform", "intermediate", "ground")
 
 

@@ -12,7 +12,7 @@ import itertools
 
 import numpy as np
 
-from ..ward import METAL_THRESHOLD, SIGMA_MIRROR, lobe_albedo_nodes
+from ..physics.ward import METAL_THRESHOLD, SIGMA_MIRROR, lobe_albedo_nodes
 from .light_cache import CONTROL_SIGMA, SIGMA_RESOLVED, control_weight
 
 #: Fitted parameters of each model (thesis 7.1), in order; C is three numbers.
@@ -63,8 +63,8 @@ def write_material(params, prefix, model, theta):
 def other_readings(model, theta):
     """Parameter points that chi^2 should also be tried at because the model jumps between
     them and ``theta``: for the colour model the reading across the plastic/metal rule
-    (:func:`~skyfit_mi.ward.colour_rule_twin`), clipped to the bounds and its side of the rule."""
-    from ..ward import colour_rule_twin
+    (:func:`~skyfit_mi.physics.ward.colour_rule_twin`), clipped to the bounds and its side of the rule."""
+    from ..physics.ward import colour_rule_twin
 
     if model != "colour":
         return []
@@ -76,13 +76,13 @@ def other_readings(model, theta):
 
 def reflectances(model, theta):
     """rho_d and the specular reflectance s per channel for ``theta``
-    (:func:`~skyfit_mi.ward.raw_parameters`, thesis 7.1), and their derivatives.
+    (:func:`~skyfit_mi.physics.ward.raw_parameters`, thesis 7.1), and their derivatives.
 
     Returns rho_d (3,), s (3,), d rho_d / d theta (3, n), d s / d theta (3, n); the
     sigma_alpha column is zero.  For the colour model the derivative is that of the rule on
     theta's side of rho_s = 0.5.
     """
-    from ..ward import raw_parameters
+    from ..physics.ward import raw_parameters
 
     th = np.asarray(theta, dtype=float)
     rho_d, spec, _ = raw_parameters(**{k: v for k, v in material_dict(model, th).items()

@@ -1,25 +1,8 @@
 """Image output: linear EXR frames and PNG previews, written atomically."""
 
-import os
-import tempfile
-from pathlib import Path
-
 import numpy as np
 
-
-def _atomic(path, write):
-    """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it over ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+from ..files import atomic_write
 
 
 def write_exr(path, image):
@@ -27,7 +10,7 @@ def write_exr(path, image):
     import mitsuba as mi
 
     bmp = mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), mi.Bitmap.PixelFormat.RGB)
-    return _atomic(path, lambda p: bmp.write(p))
+    return atomic_write(path, lambda p: bmp.write(p))
 
 
 def read_exr(path):
@@ -48,8 +31,8 @@ def write_png(path, image8):
     """Write an 8-bit RGB image (H, W, 3) as PNG."""
     import matplotlib.image
 
-    return _atomic(path, lambda p: matplotlib.image.imsave(p, np.asarray(image8, dtype=np.uint8),
-                                                           format="png"))
+    return atomic_write(path, lambda p: matplotlib.image.imsave(
+        p, np.asarray(image8, dtype=np.uint8), format="png"))
 
 
 def contact_sheet(images, exposure, columns=5, gap=2):

@@ -26,7 +26,7 @@ fifty times the difference the data see between 0.01 and 0.003).  Near the
 mirror direction the sky is smooth, so the lobe's part takes a control variate:
 with c the radiance along the mirror direction without the solar disc (one more
 ray per position) and A the lobe's directional albedo from a deterministic
-quadrature (:func:`~skyfit_mi.ward.lobe_albedo`),
+quadrature (:func:`~skyfit_mi.physics.ward.lobe_albedo`),
 
     L_lobe = sum_k f_s(w_k) cos(theta_k) (L_i(w_k) - beta c) / (p_mix(w_k) N)  +  beta c A
 
@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..ward import SIGMA_MIRROR
+from ..physics.ward import SIGMA_MIRROR
 
 #: Roughnesses of the Ward sampling lobes in the direction mixture.
 LOBE_SIGMAS = (0.002, 0.006, 0.02, 0.06, 0.15, 0.3)
@@ -125,7 +125,7 @@ class LightCache:
         The mirror term for sigma <= 1e-4, linear interpolation from it to G(SIGMA_RESOLVED)
         below SIGMA_RESOLVED (as the Dr.Jit model does).
         """
-        from ..ward import lobe_albedo, mirror_reflectance, specular_lobe
+        from ..physics.ward import lobe_albedo, mirror_reflectance, specular_lobe
 
         if sigma_alpha <= SIGMA_MIRROR:
             frac = mirror_reflectance(self.mirror_cos, normalisation)
@@ -181,7 +181,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     Parameters
     ----------
     scene, params : a loaded spec scene and its ``mi.traverse`` parameters
-    skies : list of :class:`~skyfit_mi.sky.Sky`, one per frame
+    skies : list of :class:`~skyfit_mi.physics.sky.Sky`, one per frame
     pixels : (P, 2) int array of (x, y) pixel coordinates
     bsdf_id : str, the material whose surface the pixels must show
     positions, directions : samples per pixel: positions over the pixel's area,

@@ -11,7 +11,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 from ..errors import SkyfitError
-from ..ward import MODELS, raw_parameters
+from ..physics.ward import MODELS, raw_parameters
 from .scene import camera_origin, look_at
 
 _SCALAR_TAGS = {"float": float, "integer": int, "string": str,

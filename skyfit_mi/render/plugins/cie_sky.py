@@ -1,6 +1,6 @@
 """The ``cie_sky`` environment emitter: the daylight sky and the sun disc.
 
-It evaluates exactly :meth:`skyfit_mi.sky.Sky.radiance` (the same pattern
+It evaluates exactly :meth:`skyfit_mi.physics.sky.Sky.radiance` (the same pattern
 sum, term by term) and importance-samples it: the sun disc by a uniform cone,
 the sky by a piecewise-constant table over an equal-area (azimuth,
 cos theta) grid built from the NumPy sky whenever its parameters change.
@@ -25,7 +25,7 @@ name                  type      default                     meaning
 ``scene_radius``      float     1e4                         distance [scene units] beyond all geometry
 ====================  ========  ==========================  ==========================================
 
-Build the dictionary from a :class:`~skyfit_mi.sky.Sky` with
+Build the dictionary from a :class:`~skyfit_mi.physics.sky.Sky` with
 :func:`skyfit_mi.render.daylight.sky_dict`; change it with
 :func:`skyfit_mi.render.daylight.update_sky`.
 """
@@ -34,7 +34,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ...sky import Sky
+from ...physics.sky import Sky
 from ..daylight import RGB_KEYS as _RGB_KEYS
 from .properties import property_values
 

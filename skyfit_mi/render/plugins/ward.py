@@ -1,6 +1,6 @@
 """The ``ward`` BSDF: Ward's isotropic model (thesis eq. 3.19) with the thesis's parameterisations.
 
-Implements exactly :func:`skyfit_mi.ward.ward_brdf` (tested against it) with
+Implements exactly :func:`skyfit_mi.physics.ward.ward_brdf` (tested against it) with
 importance sampling after B. Walter, "Notes on the Ward BRDF", Cornell
 PCG-05-06, 2005 (half vector with tan^2 delta = -sigma^2 ln u), mixed with
 cosine-weighted diffuse sampling in proportion to the two reflectances.
@@ -34,7 +34,7 @@ import numpy as np
 
 from ...errors import check_choice
 from .properties import property_values
-from ...ward import METAL_THRESHOLD, MODELS, NORMALISATIONS, SIGMA_MAX, SIGMA_MIRROR, raw_parameters
+from ...physics.ward import METAL_THRESHOLD, MODELS, NORMALISATIONS, SIGMA_MAX, SIGMA_MIRROR, raw_parameters
 
 _DEFAULTS = {"rho_d": 0.5, "rho_s": 0.05, "sigma_alpha": 0.1, "R": 1.0, "C": (1.0, 1.0, 1.0)}
 _RGB_PARAMS = {"raw": ("rho_d", "rho_s"), "colour": ("C",)}
@@ -98,7 +98,7 @@ class WardBSDF(mi.BSDF):
         return c * (1.0 - ps), spec, sigma
 
     def _lobe(self, wi, wo, sigma):
-        """Specular lobe value (no rho_s) [sr^-1], as skyfit_mi.ward.specular_lobe."""
+        """Specular lobe value (no rho_s) [sr^-1], as skyfit_mi.physics.ward.specular_lobe."""
         ci, co = mi.Frame3f.cos_theta(wi), mi.Frame3f.cos_theta(wo)
         hu = wi + wo
         hz = hu.z

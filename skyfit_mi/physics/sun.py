@@ -11,8 +11,8 @@ import datetime as _dt
 import numpy as np
 
 from .colour import cct_to_rgb
-from .conventions import direction_from_angles
-from .errors import SkyfitError, check_choice, check_range
+from ..conventions import direction_from_angles
+from ..errors import SkyfitError, check_choice, check_range
 
 #: Mean solid angle of the solar disc seen from the earth [sr] (thesis 4.1.1).
 SUN_SOLID_ANGLE = 6e-5

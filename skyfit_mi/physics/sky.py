@@ -9,7 +9,7 @@ weighted sum of fixed angular patterns, each weight a linear-sRGB radiance
 * ``overcast``: the CIE overcast pattern (1 + 2 cos theta_p)/3 (eq. 4.16),
 * ``uniform``: 1,
 * ``intermediate``: the Matsuura intermediate pattern used by Radiance's
-  ``gensky +i`` (only reached through :func:`skyfit_mi.gensky.from_gensky`),
+  ``gensky +i`` (only reached through :func:`skyfit_mi.physics.gensky.from_gensky`),
 
 plus a uniform ``ground`` radiance below the horizon.  The thesis's skies
 (eqs. 4.10-4.18) and Radiance's ``skybright.cal`` skies are both exact
@@ -22,8 +22,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .colour import SRGB_LUMINANCE, cct_to_rgb
-from .conventions import direction_from_angles
-from .errors import SkyfitError, check_choice, check_range
+from ..conventions import direction_from_angles
+from ..errors import SkyfitError, check_choice, check_range
 from .sun import SUN_SOLID_ANGLE, direct_normal_irradiance, sun_rgb
 
 #: Luminous efficacy of clear-sky light [lm W^-1] (thesis 4.2.2).

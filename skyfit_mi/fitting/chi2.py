@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera import SensorModel
-from .errors import SkyfitError
-from .sequence import load_manifest
+from ..physics.camera import SensorModel
+from ..errors import SkyfitError
+from ..pipeline.sequence import load_manifest
 
 #: Values below this [DN] read as code 0.
 LOW_CODE = 0.5
@@ -91,7 +91,7 @@ def subsample_region(pixels, max_pixels, seed):
 
 def load_observations(manifest_path, pixels):
     """Read a region's pixel values and sigmas from every rendered frame of a manifest."""
-    from .render.image import read_exr
+    from ..render.image import read_exr
 
     doc, root = load_manifest(manifest_path)
     cam = doc["camera"]

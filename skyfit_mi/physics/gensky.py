@@ -1,4 +1,4 @@
-"""Import of Radiance ``gensky`` sky descriptions into :class:`~skyfit_mi.sky.Sky`.
+"""Import of Radiance ``gensky`` sky descriptions into :class:`~skyfit_mi.physics.sky.Sky`.
 
 ``gensky`` prints a small Radiance scene: the sun as a ``light`` material on
 a ``source`` of given angular diameter, and the sky as a ``brightfunc``
@@ -17,7 +17,7 @@ the sky is grey (1, 1, 1), as in the usual ``skyfunc glow sky_mat 0 0 4 1 1 1 0`
 
 import numpy as np
 
-from .errors import ParseError
+from ..errors import ParseError
 from .sky import Sky
 
 #: skybright.cal's A1 -> the Sky pattern it selects.

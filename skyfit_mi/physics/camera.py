@@ -27,7 +27,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .errors import SkyfitError, check_choice, check_range
+from ..errors import SkyfitError, check_choice, check_range
 
 RESPONSES = ("linear", "gamma", "srgb")
 BIT_DEPTHS = (8, 10, 12, 16)

@@ -9,7 +9,7 @@ the luminance-weighted value of the RGB triple.
 
 import numpy as np
 
-from .errors import check_range
+from ..errors import check_range
 
 #: XYZ -> linear sRGB (IEC 61966-2-1).
 XYZ_TO_SRGB = np.array([[3.2406, -1.5372, -0.4986],

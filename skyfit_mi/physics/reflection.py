@@ -1,7 +1,7 @@
 """Radiance reflected by a horizontal Ward surface under an open daylight sky, by quadrature.
 
 A deterministic NumPy reference for the renderers: the surface (normal +Z, world frame)
-sees the whole upper hemisphere of a :class:`~skyfit_mi.sky.Sky`, nothing occludes it, and
+sees the whole upper hemisphere of a :class:`~skyfit_mi.physics.sky.Sky`, nothing occludes it, and
 light reflects once, so the radiance toward ``wo`` is the rendering equation's single
 integral (thesis eq. 3.1 with the Ward BRDF, eq. 3.19):
 

@@ -34,7 +34,7 @@ the chosen normalisation.
 
 import numpy as np
 
-from .errors import SkyfitError, check_choice, check_range
+from ..errors import SkyfitError, check_choice, check_range
 
 NORMALISATIONS = ("ward", "duer", "balanced")
 MODELS = {"raw": ("rho_d", "rho_s", "sigma_alpha"),

@@ -17,13 +17,13 @@ from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 import numpy as np
 
-from .camera import SensorModel
-from .errors import SkyfitError
-from .gensky import from_gensky
-from .render.variant import VARIANTS
-from .sky import SKY_TYPES, cie_sky
-from .sun import solar_position
-from .ward import NORMALISATIONS, raw_parameters
+from ..physics.camera import SensorModel
+from ..errors import SkyfitError
+from ..physics.gensky import from_gensky
+from ..render.variant import VARIANTS
+from ..physics.sky import SKY_TYPES, cie_sky
+from ..physics.sun import solar_position
+from ..physics.ward import NORMALISATIONS, raw_parameters
 
 #: Where the shipped scenes live; a spec's ``scene.file`` is looked up beside the spec first.
 SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"

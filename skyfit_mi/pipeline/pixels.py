@@ -2,12 +2,13 @@
 
 import csv
 import datetime as dt
-import os
+import io
 from pathlib import Path
 
 import numpy as np
 
-from .errors import SkyfitError
+from ..errors import SkyfitError
+from ..files import save_figure, write_text
 from .sequence import load_manifest
 
 SOURCES = {"radiance": "W m^-2 sr^-1", "sensor": "DN"}
@@ -27,7 +28,7 @@ def pixel_series(manifest_path, pixels, source="radiance"):
     if source not in SOURCES:
         raise SkyfitError(f"unknown source {source!r}; valid: {', '.join(SOURCES)}.")
     doc, root = load_manifest(manifest_path)
-    from .render.image import read_exr
+    from ..render.image import read_exr
 
     w, h = doc["camera"]["width"], doc["camera"]["height"]
     for x, y in pixels:
@@ -49,14 +50,11 @@ def write_pixels(manifest_path, pixels, out_prefix=None, source="radiance"):
     rows, unit = pixel_series(manifest_path, pixels, source)
     root = Path(manifest_path) if Path(manifest_path).is_dir() else Path(manifest_path).parent
     prefix = Path(out_prefix) if out_prefix else root / f"pixels_{source}"
-    prefix.parent.mkdir(parents=True, exist_ok=True)
-    csv_path, png_path = prefix.with_suffix(".csv"), prefix.with_suffix(".png")
-    tmp = csv_path.with_name(f".{csv_path.name}.tmp")
-    with open(tmp, "w", newline="") as fh:
-        wr = csv.writer(fh)
-        wr.writerow(["frame", "time", "x", "y", f"R [{unit}]", f"G [{unit}]", f"B [{unit}]"])
-        wr.writerows(rows)
-    os.replace(tmp, csv_path)
+    buf = io.StringIO()
+    wr = csv.writer(buf)
+    wr.writerow(["frame", "time", "x", "y", f"R [{unit}]", f"G [{unit}]", f"B [{unit}]"])
+    wr.writerows(rows)
+    csv_path = write_text(prefix.with_suffix(".csv"), buf.getvalue())
 
     import matplotlib
     matplotlib.use("Agg")
@@ -77,8 +75,4 @@ def write_pixels(manifest_path, pixels, out_prefix=None, source="radiance"):
     ax.legend(fontsize=7, ncol=len(pixels))
     fig.autofmt_xdate()
     fig.tight_layout()
-    tmp_png = png_path.with_name(f".{png_path.stem}.tmp.png")
-    fig.savefig(tmp_png, dpi=120)
-    plt.close(fig)
-    os.replace(tmp_png, png_path)
-    return csv_path, png_path
+    return csv_path, save_figure(fig, prefix.with_suffix(".png"))

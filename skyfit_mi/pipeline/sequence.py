@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
-from .camera import SensorModel
-from .colour import SRGB_LUMINANCE
-from .errors import SkyfitError
-from .render.scene_xml import pass_spp
+from .. import __version__
+from ..physics.camera import SensorModel
+from ..physics.colour import SRGB_LUMINANCE
+from ..errors import SkyfitError
+from ..render.scene_xml import pass_spp
 
 SCHEMA = "skyfit-manifest/1"
 
@@ -86,8 +86,8 @@ def render_with_error(mi, scene, params, seed, half):
 
 
 def sky_from_record(rec):
-    """The :class:`~skyfit_mi.sky.Sky` a manifest frame's ``sky`` record describes."""
-    from .sky import Sky
+    """The :class:`~skyfit_mi.physics.sky.Sky` a manifest frame's ``sky`` record describes."""
+    from ..physics.sky import Sky
 
     keys = ("clear", "overcast", "uniform", "intermediate", "ground", "sun_radiance")
     return Sky(np.asarray(rec["sun_direction"]), **{k: np.asarray(rec[k]) for k in keys},
@@ -120,10 +120,10 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
     Refuses a folder that holds another run's manifest unless ``overwrite``;
     resumes a folder that holds this run's (complete frames are kept).
     """
-    from .render import setup
-    from .render.daylight import update_sky
-    from .render.image import contact_sheet, read_exr, write_exr, write_png
-    from .render.scene_xml import load_scene
+    from ..render import setup
+    from ..render.daylight import update_sky
+    from ..render.image import contact_sheet, read_exr, write_exr, write_png
+    from ..render.scene_xml import load_scene
 
     out = Path(out_dir)
     run_id = spec.run_id()

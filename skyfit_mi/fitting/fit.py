@@ -9,7 +9,6 @@ plot (thesis fig. 7.14).
 """
 
 import json
-import os
 import time
 from pathlib import Path
 
@@ -17,14 +16,15 @@ import numpy as np
 
 from . import uncertainty as unc
 from .chi2 import Problem, load_observations
-from .errors import SkyfitError, check_choice
+from ..errors import SkyfitError, check_choice
+from ..files import save_figure, write_json, write_text
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.profile import profile_edges
-from .render.fit_model import other_readings
-from .render.light_cache import DIRECTIONS, POSITIONS, SIGMA_RESOLVED
-from .sequence import load_manifest, sky_from_record
-from .ward import METAL_THRESHOLD
+from ..render.fit_model import other_readings
+from ..render.light_cache import DIRECTIONS, POSITIONS, SIGMA_RESOLVED
+from ..pipeline.sequence import load_manifest, sky_from_record
+from ..physics.ward import METAL_THRESHOLD
 
 
 #: Largest spread of C's channels for which the cache-error estimate treats the colour rule's
@@ -51,9 +51,9 @@ class FitSession:
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
                  positions=POSITIONS, directions=DIRECTIONS):
-        from .render import setup
-        from .render.fit_model import BY_COUNT, PARAMETERS, WardModel, bounds
-        from .render.light_cache import build_light_cache
+        from ..render import setup
+        from ..render.fit_model import BY_COUNT, PARAMETERS, WardModel, bounds
+        from ..render.light_cache import build_light_cache
 
         model = BY_COUNT.get(model, model)
         check_choice("model", model, tuple(PARAMETERS))
@@ -96,7 +96,7 @@ class FitSession:
         to ripple chi-square by more than the 95% threshold.
         """
         from .methods.levenberg_marquardt import levenberg_marquardt
-        from .render.fit_model import WardModel
+        from ..render.fit_model import WardModel
 
         if self._halves is None:
             self._halves = [Problem(self.obs, WardModel(c, self.model, self.normalisation),
@@ -274,11 +274,7 @@ def write_fit(result, prefix):
     import matplotlib.pyplot as plt
 
     prefix = Path(prefix)
-    prefix.parent.mkdir(parents=True, exist_ok=True)
-    js = prefix.with_suffix(".json")
-    tmp = js.with_name(f".{js.name}.tmp")
-    tmp.write_text(json.dumps(result, indent=1))
-    os.replace(tmp, js)
+    js = write_json(prefix.with_suffix(".json"), result)
     t = [dt.datetime.fromisoformat(s) for s in result["series"]["times"]]
     y = np.asarray(result["series"]["observed_DN"])
     m = np.asarray(result["series"]["model_DN"])
@@ -308,12 +304,7 @@ def write_fit(result, prefix):
         label.set_rotation(30)
         label.set_ha("right")
     fig.tight_layout()
-    png = prefix.with_suffix(".png")
-    tmp_png = png.with_name(f".{png.stem}.tmp.png")
-    fig.savefig(tmp_png, dpi=120)
-    plt.close(fig)
-    os.replace(tmp_png, png)
-    return js, png
+    return js, save_figure(fig, prefix.with_suffix(".png"))
 
 
 def write_summary(results, path):
@@ -343,8 +334,4 @@ def write_summary(results, path):
         row += [f"{r['chi2_per_dof']:.4g}", r["evaluations"], f"{r['wall_time_s']:.2f}",
                 json.dumps(r["truth"]) if r.get("truth") else "", " | ".join(r["warnings"])]
         w.writerow(row)
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(buf.getvalue())
-    os.replace(tmp, path)
-    return path
+    return write_text(path, buf.getvalue())

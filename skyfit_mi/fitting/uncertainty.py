@@ -18,7 +18,7 @@ ripples by about that much from one parameter value to the next.
 
 import numpy as np
 
-from .ward import METAL_THRESHOLD, colour_rule_twin
+from ..physics.ward import METAL_THRESHOLD, colour_rule_twin
 
 LEVELS = {"68": 1.0, "95": 3.841458820694124}
 Z = {"68": 1.0, "95": 1.959963984540054}
@@ -60,7 +60,7 @@ def profile_interval(grid, profile, s2=1.0, ripple=0.0):
     """{level: (lo, hi)} where profile <= min + Delta s^2 + ripple, edges interpolated linearly.
 
     ``ripple`` is the chi^2 the model's own Monte Carlo noise can add or take away
-    (:meth:`~skyfit_mi.chi2.Problem.model_noise_chi2`): profile values closer than that to
+    (:meth:`~skyfit_mi.fitting.chi2.Problem.model_noise_chi2`): profile values closer than that to
     the minimum are not told apart from it.
     """
     grid, profile = np.asarray(grid, float), np.asarray(profile, float)

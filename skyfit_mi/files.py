@@ -1,0 +1,106 @@
+"""Writing output files: atomically (temporary file, then rename), with the user's umask.
+
+The one home of atomic writes.  Every file skyfit-mi writes goes through
+:func:`atomic_write`, so an interrupted run never leaves a half-written file under its
+final name, and a path that cannot be written gives one clear
+:class:`~skyfit_mi.errors.OutputError` instead of a traceback.
+"""
+
+import datetime as dt
+import json
+import os
+import tempfile
+from pathlib import Path
+
+from .errors import OutputError
+
+
+def _umask():
+    """The process's umask (read without changing it for longer than the call)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def ensure_dir(path, what="output folder"):
+    """Create folder ``path`` (and parents) or raise :class:`OutputError` saying why not."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise OutputError(f"{what} {str(path)!r} is a file, not a folder; give a folder path.") \
+            from None
+    except OSError as exc:
+        raise OutputError(f"cannot create {what} {str(path)!r}: {exc.strerror or exc}; give a "
+                          "writable folder.") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise OutputError(f"{what} {str(path)!r} is not writable; give a writable folder.")
+    return path
+
+
+def atomic_write(path, write):
+    """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it to ``path``.
+
+    The file gets the permissions a plain ``open`` would give (0666 less the umask);
+    a failure leaves any earlier ``path`` untouched and no temporary file behind.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise OutputError(f"output {str(path)!r} is a folder; give a file path.")
+    ensure_dir(path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f"{path.suffix}.tmp"
+                                   if not path.suffix else path.suffix, dir=path.parent)
+    except OSError as exc:
+        raise OutputError(f"cannot write {str(path)!r}: {exc.strerror or exc}.") from None
+    os.close(fd)
+    try:
+        write(tmp)
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise OutputError(f"cannot write {str(path)!r}: {exc.strerror or exc}.") from None
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def write_text(path, text):
+    """Write ``text`` (UTF-8) to ``path`` atomically."""
+    return atomic_write(path, lambda p: Path(p).write_text(text, encoding="utf-8"))
+
+
+def jsonable(x):
+    """JSON form of the NumPy scalars/arrays, dates and paths found in skyfit documents."""
+    import numpy as np
+
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, (np.floating, np.integer, np.bool_)):
+        return x.item()
+    if isinstance(x, (dt.datetime, dt.date, dt.time)):
+        return x.isoformat()
+    if isinstance(x, Path):
+        return str(x)
+    raise TypeError(f"not JSON serialisable: {type(x).__name__}")
+
+
+def to_json(doc):
+    """``doc`` as indented JSON text (NumPy values, dates and paths converted)."""
+    return json.dumps(doc, indent=1, default=jsonable, allow_nan=True)
+
+
+def write_json(path, doc):
+    """Write ``doc`` as indented JSON to ``path`` atomically."""
+    return write_text(path, to_json(doc) + "\n")
+
+
+def save_figure(fig, path, dpi=120):
+    """Save a matplotlib figure as PNG atomically and close it."""
+    import matplotlib.pyplot as plt
+
+    try:
+        return atomic_write(path, lambda p: fig.savefig(p, dpi=dpi, format="png"))
+    finally:
+        plt.close(fig)
