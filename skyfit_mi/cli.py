@@ -27,7 +27,8 @@ def _fit(args):
     from pathlib import Path
 
     from .fitting.chi2 import parse_region, region_from_mask, subsample_region
-    from .fitting.fit import fit_region, write_fit, write_summary
+    from .fitting.fit import fit_region
+    from .fitting.report import write_fit, write_summary
 
     regions = []
     for r in args.region or []:

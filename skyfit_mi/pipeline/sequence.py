@@ -69,22 +69,6 @@ def _sky_record(sky):
             "units": "weights and radiances W m^-2 sr^-1, linear sRGB"}
 
 
-def render_with_error(mi, scene, params, seed, half):
-    """A frame and the standard error of each pixel's Monte Carlo estimate.
-
-    Two independent renders of ``half`` spp (seeds ``seed`` and ``seed + 2^31``): their
-    mean is the frame, and (a - b)^2 / 4, averaged over each pixel's 3x3 neighbourhood,
-    estimates the variance of that mean.
-    """
-    a = np.array(mi.render(scene, params, seed=seed, spp=half), dtype=np.float64)
-    b = np.array(mi.render(scene, params, seed=seed + 2**31, spp=half), dtype=np.float64)
-    var = (a - b) ** 2 / 4.0
-    pad = np.pad(var, ((1, 1), (1, 1), (0, 0)), mode="edge")
-    h, w = var.shape[:2]
-    var = sum(pad[i:i + h, j:j + w] for i in range(3) for j in range(3)) / 9.0
-    return (0.5 * (a + b)).astype(np.float32), np.sqrt(var).astype(np.float32)
-
-
 def sky_from_record(rec):
     """The :class:`~skyfit_mi.physics.sky.Sky` a manifest frame's ``sky`` record describes."""
     from ..physics.sky import Sky
@@ -122,6 +106,7 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
     """
     from ..render import setup
     from ..render.daylight import update_sky
+    from ..render.frame import render_with_error
     from ..render.image import contact_sheet, read_exr, write_exr, write_png
     from ..render.scene_xml import load_scene
 

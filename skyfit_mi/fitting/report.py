@@ -1,0 +1,81 @@
+"""A fit's outputs: ``fit_NAME.json``, the observed-vs-model plot (thesis fig. 7.14) and ``fits.csv``."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..files import save_figure, write_json, write_text
+
+
+def write_fit(result, prefix):
+    """Write ``<prefix>.json`` and ``<prefix>.png`` (observed vs model over the day; for
+    annealing also its walk)."""
+    import datetime as dt
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    prefix = Path(prefix)
+    js = write_json(prefix.with_suffix(".json"), result)
+    t = [dt.datetime.fromisoformat(s) for s in result["series"]["times"]]
+    y = np.asarray(result["series"]["observed_DN"])
+    m = np.asarray(result["series"]["model_DN"])
+    walk = np.asarray(result.get("trace") or [])
+    if len(walk) > 1:                     # the annealing walk beside the series (thesis fig. 7.10)
+        fig, (ax, ax_w) = plt.subplots(1, 2, figsize=(11, 4), gridspec_kw={"width_ratios": [7, 4]})
+        names = list(result["parameters"])
+        i, j = names.index("rho_s"), names.index("sigma_alpha")
+        ax_w.plot(walk[:, i], walk[:, j], "-", color="0.5", lw=0.8)
+        ax_w.plot(*walk[0, [i, j]], "s", color="k", label="start")
+        ax_w.plot(*walk[-1, [i, j]], "*", color="r", ms=10, label="end")
+        ax_w.set_xlabel("rho_s")
+        ax_w.set_ylabel("sigma_alpha")
+        ax_w.set_title(f"annealing walk: lowest vertex, {len(walk) - 1} iterations", fontsize=9)
+        ax_w.legend(fontsize=7)
+    else:
+        fig, ax = plt.subplots(figsize=(7, 4))
+    for c, col in enumerate("rgb"):
+        ax.plot(t, y[..., c].mean(axis=0), "o", color=col, ms=4, label=f"observed {'RGB'[c]}")
+        ax.plot(t, m[..., c].mean(axis=0), "-", color=col, label=f"model {'RGB'[c]}")
+    p = result["parameters"]
+    ax.set_title(f"{result['region']}: " + ", ".join(f"{k}={v:.3f}" for k, v in p.items()), fontsize=9)
+    ax.set_xlabel("local time")
+    ax.set_ylabel("region mean pixel value [DN]")
+    ax.legend(fontsize=7, ncol=2)
+    for label in ax.get_xticklabels():
+        label.set_rotation(30)
+        label.set_ha("right")
+    fig.tight_layout()
+    return js, save_figure(fig, prefix.with_suffix(".png"))
+
+
+def write_summary(results, path):
+    """One CSV row per fitted region: parameters with 95% intervals, chi2/dof, truth, warnings.
+
+    Units: reflectances unitless, sigma_alpha rms slope, times in seconds.
+    """
+    import csv
+    import io
+
+    names = list(dict.fromkeys(n for r in results for n in r["parameters"]))
+    cols = ["region", "model", "method", "pixels_fitted", "pixels_total"]
+    for n in names:
+        cols += [n, f"{n}_95_lo", f"{n}_95_hi"]
+    cols += ["chi2_per_dof", "evaluations", "wall_time_s", "truth", "warnings"]
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(cols)
+    for r in results:
+        row = [r["region"], r["model"], r["method"], len(r["pixels"]),
+               r.get("region_pixels_total", len(r["pixels"]))]
+        for n in names:
+            if n in r["parameters"]:
+                row += [f"{r['parameters'][n]:.5f}", *(f"{v:.5f}" for v in r["intervals"][n]["95"])]
+            else:
+                row += ["", "", ""]
+        row += [f"{r['chi2_per_dof']:.4g}", r["evaluations"], f"{r['wall_time_s']:.2f}",
+                json.dumps(r["truth"]) if r.get("truth") else "", " | ".join(r["warnings"])]
+        w.writerow(row)
+    return write_text(path, buf.getvalue())
