@@ -29,7 +29,8 @@ def main():
     from skyfit_mi.fitting.chi2 import parse_region
     from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.render.image import read_exr
-    from skyfit_mi.pipeline.sequence import load_manifest, render_sequence
+    from skyfit_mi.pipeline.manifest import load_manifest
+    from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
     truth = {"R": 0.33, "rho_s": 0.2, "sigma_alpha": 0.05}

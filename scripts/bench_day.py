@@ -63,7 +63,7 @@ def radiance_frame(frame, manifest, tmp, ad, tag):
     import pyradiance
     bindir = Path(pyradiance.__file__).parent / "bin"
     env = dict(os.environ, RAYPATH=f".{os.pathsep}{Path(pyradiance.__file__).parent / 'lib'}")
-    s = frame["sky"]
+    s = frame["illumination"]
     sd = s["sun_direction"]
     diam = float(np.degrees(2 * np.arccos(1 - s["sun_solid_angle_sr"] / (2 * np.pi))))
     args9 = [*s["clear"], *s["ground"], *sd]

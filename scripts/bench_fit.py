@@ -45,7 +45,8 @@ def main():
     from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.fitting.methods import METHODS
     from skyfit_mi.render.fit_model import RegionRenderModel
-    from skyfit_mi.pipeline.sequence import load_manifest, render_sequence
+    from skyfit_mi.pipeline.manifest import load_manifest
+    from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
     raw = thesis_disc_spec("table-7.10-disc", {"model": "colour", **TRUTH}, size=24, fov_deg=10.0,

@@ -68,7 +68,8 @@ def main():
     from skyfit_mi.fitting.chi2 import parse_region
     from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.render.image import read_exr
-    from skyfit_mi.pipeline.sequence import load_manifest, render_sequence
+    from skyfit_mi.pipeline.manifest import load_manifest
+    from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
     region = parse_region(args.region)
@@ -103,14 +104,14 @@ def main():
                 J = fisher_jacobian(session, tv, sensor)
                 crb = np.sqrt(np.diag(np.linalg.pinv(J.T @ J)))
                 # the fit of the noise-free values: the offset every replicate shares
-                obs.y = sensor.respond(radiance * obs.gain[:, None, None]) * sensor.max_code
+                obs.y = sensor.respond(radiance * obs.gain) * sensor.max_code
                 offset = np.array(list(session.run("global", log=lambda *a: None)
                                        ["parameters"].values())) - tv
                 est, cov_prof, cov_cov, chis = [], [], [], []
                 t0 = time.perf_counter()
                 for r in range(args.replicates):
                     rng = np.random.default_rng([i, int(noise), r])
-                    y, sig = sensor.capture(radiance * obs.gain[:, None, None] / sensor.exposure,
+                    y, sig = sensor.capture(radiance * obs.gain / sensor.exposure,
                                             rng)
                     obs.y, obs.sigma = y.astype(float), sig.astype(float)
                     res = session.run("global", seed=r, log=lambda *a: None)

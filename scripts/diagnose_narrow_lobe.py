@@ -43,7 +43,8 @@ def main():
     from skyfit_mi.render.fit_model import reflectances
     from skyfit_mi.render.image import read_exr
     from skyfit_mi.render.scene import pixel_views
-    from skyfit_mi.pipeline.sequence import load_manifest, render_sequence
+    from skyfit_mi.pipeline.manifest import load_manifest
+    from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
     print(f"Command: `.venv/bin/python scripts/diagnose_narrow_lobe.py {' '.join(sys.argv[1:])}`\n")

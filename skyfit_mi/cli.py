@@ -85,7 +85,7 @@ def _scene_labels(manifest):
     """(manifest document, its folder, label image, material ids) of a rendered sequence."""
     from .render import setup
     from .render.labels import label_image
-    from .pipeline.sequence import load_manifest
+    from .pipeline.manifest import load_manifest
 
     doc, root = load_manifest(manifest)
     mi = setup(doc["render"]["variant"])

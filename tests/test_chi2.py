@@ -29,7 +29,7 @@ def _problem(mean_dn, noise_percent=10.0, n=4000, seed=0):
     shape = (n, 1, 3)
     y = np.clip(np.rint(mean_dn + rng.normal(0, sensor.sigma, shape)), 0, sensor.max_code)
     obs = Observations(np.zeros((n, 2), int), [0], ["t"], y, np.full(shape, sensor.sigma),
-                       np.ones(n), sensor)
+                       np.ones(shape), sensor)
     return Problem(obs, _Flat(shape)), sensor
 
 

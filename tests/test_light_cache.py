@@ -27,7 +27,7 @@ def session(days):
 
 def test_cache_matches_the_render_without_bias(session, days):
     from skyfit_mi.render.image import read_exr
-    from skyfit_mi.pipeline.sequence import load_manifest
+    from skyfit_mi.pipeline.manifest import load_manifest
 
     doc, root = load_manifest(days["clean"])
     px = session.obs.pixels
@@ -139,7 +139,7 @@ def test_jacobian_through_the_basis_matches_the_plugin(session, model, theta):
 
 def test_full_render_model_replays_new_parameters_and_agrees_with_the_cache(session, days):
     from skyfit_mi.render.fit_model import RegionRenderModel
-    from skyfit_mi.pipeline.sequence import load_manifest
+    from skyfit_mi.pipeline.manifest import load_manifest
 
     doc, _ = load_manifest(days["clean"])
 

@@ -159,7 +159,7 @@ def test_lambertian_disc_across_the_day_equals_irradiance_over_pi(tmp_path, mi):
                            "step_minutes": 120}), tmp_path / "d", tmp_path)
     for f in m["frames"]:
         img = read_exr(tmp_path / "d" / f["radiance"])
-        expected = np.array(f["sky"]["horizontal_irradiance_W_m2"]) / np.pi
+        expected = np.array(f["illumination"]["horizontal_irradiance_W_m2"]) / np.pi
         np.testing.assert_allclose(img.reshape(-1, 3).mean(axis=0), expected, rtol=0.01)
 
 

@@ -16,13 +16,13 @@ chi^2 stays -2 ln(likelihood) up to a constant, and is eq. 6.2 when nothing is
 clipped.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..physics.camera import SensorModel
 from ..errors import SkyfitError
-from ..pipeline.sequence import load_manifest
+from ..pipeline.manifest import frame_exposure, load_manifest, rendered_frames, sensor_from_record
 
 #: Values below this [DN] read as code 0.
 LOW_CODE = 0.5
@@ -32,8 +32,11 @@ LOW_CODE = 0.5
 class Observations:
     """Observed values of a region across a sequence.
 
-    y, sigma : (P, T, 3) [DN];  gain : (P,) radiance -> signal factor;
-    pixels : (P, 2) (x, y);  frames : manifest frame indices (T,);  times : ISO strings.
+    y, sigma : (P, T, 3) [DN] (sigma inf: the value carries no information);
+    gain : (P, T, 3) radiance -> signal factor [sr m^2 W^-1] (each frame's exposure and white
+    balance, times the pixel's off-axis falloff);  pixels : (P, 2) (x, y);
+    frames : manifest frame indices (T,);  times : ISO strings;  warnings : what the loading
+    noticed (incomplete render, values left out).
     """
 
     pixels: np.ndarray
@@ -43,6 +46,7 @@ class Observations:
     sigma: np.ndarray
     gain: np.ndarray
     sensor: SensorModel
+    warnings: list = field(default_factory=list)
 
 
 def parse_region(text):
@@ -89,31 +93,84 @@ def subsample_region(pixels, max_pixels, seed):
     return pixels[keep]
 
 
-def load_observations(manifest_path, pixels):
-    """Read a region's pixel values and sigmas from every rendered frame of a manifest."""
+def _region_values(root, frame, key, pixels, shape):
+    """The region's values in one frame's EXR ``frame[key]``, checked: readable, of the
+    manifest's size."""
     from ..render.image import read_exr
 
+    path = root / frame[key]
+    try:
+        img = read_exr(path)
+    except Exception as exc:          # Mitsuba raises RuntimeError for unreadable files
+        raise SkyfitError(f"frame {frame['index']}: cannot read {path} ({str(exc).splitlines()[0]});"
+                          " render the sequence again (it resumes and replaces damaged frames).") \
+            from None
+    if img.shape != shape:
+        raise SkyfitError(f"frame {frame['index']}: {path} is {img.shape[1]}x{img.shape[0]} with "
+                          f"{img.shape[2] if img.ndim == 3 else 1} channels, but the manifest's "
+                          f"camera is {shape[1]}x{shape[0]} RGB; it does not belong to this sequence.")
+    return img[pixels[:, 1], pixels[:, 0]]
+
+
+def load_observations(manifest_path, pixels, frames=None):
+    """Read a region's pixel values and sigmas from the rendered frames of a manifest.
+
+    Parameters
+    ----------
+    manifest_path : folder written by ``skyfit render`` (or its manifest.json)
+    pixels : (P, 2) pixel (x, y) coordinates
+    frames : manifest frame indices to use (default: every rendered frame)
+
+    Each frame file is checked (readable, the camera's size).  Non-finite values or
+    sigmas (NaN, a damaged pixel) are left out and counted in ``warnings``; a frame
+    with none of the region's values finite is refused by name.  Each frame's own
+    exposure (``exposure`` record, with white balance) sets its gain.
+    """
     doc, root = load_manifest(manifest_path)
     cam = doc["camera"]
     w, h = cam["width"], cam["height"]
     pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
+    if len(pixels) == 0:
+        raise SkyfitError("the region has no pixels; give a region on the material.")
     bad = (pixels[:, 0] < 0) | (pixels[:, 0] >= w) | (pixels[:, 1] < 0) | (pixels[:, 1] >= h)
     if bad.any():
         x, y = pixels[bad][0]
-        raise SkyfitError(f"region pixel {x},{y} is outside the {w}x{h} frames.")
-    frames = [f for f in doc["frames"] if f.get("status") == "rendered"]
-    if len(frames) < 2:
+        raise SkyfitError(f"region pixel {x},{y} is outside the {w}x{h} frames; x in [0, {w - 1}],"
+                          f" y in [0, {h - 1}].")
+    rendered = rendered_frames(doc)
+    if frames is not None:
+        known = {f["index"] for f in rendered}
+        missing = sorted(set(frames) - known)
+        if missing:
+            raise SkyfitError(f"frame {missing[0]} is not a rendered frame of the sequence; the "
+                              f"rendered frames are {sorted(known)}.")
+        rendered = [f for f in rendered if f["index"] in set(frames)]
+    if len(rendered) < 2:
         raise SkyfitError("the sequence has fewer than 2 rendered frames; a fit needs a sequence.")
-    s = doc["sensor"]
-    sensor = SensorModel(**{k: s[k] for k in ("exposure", "response", "gamma", "bits",
-                                              "noise_percent", "cos4")})
-    ys, sig = [], []
-    for f in frames:
-        ys.append(read_exr(root / f["sensor"])[pixels[:, 1], pixels[:, 0]])
-        sig.append(read_exr(root / f["sigma"])[pixels[:, 1], pixels[:, 0]])
-    gain = sensor.gain(w, h, cam["fov_deg"])[pixels[:, 1], pixels[:, 0]]
-    return Observations(pixels, [f["index"] for f in frames], [f["time"] for f in frames],
-                        np.stack(ys, 1).astype(float), np.stack(sig, 1).astype(float), gain, sensor)
+    warnings = []
+    if doc.get("status") != "complete":
+        warnings.append("the sequence's render is incomplete (manifest status "
+                        f"{doc.get('status')!r}): only {len(rendered)} of its "
+                        f"{len(doc['frames'])} frames are fitted; finish it with `skyfit render`.")
+    sensor = sensor_from_record(doc["sensor"])
+    falloff = sensor.gain(w, h, cam["fov_deg"])[pixels[:, 1], pixels[:, 0]] / sensor.exposure
+    ys, sig, gain = [], [], []
+    for f in rendered:
+        y = _region_values(root, f, "sensor", pixels, (h, w, 3))
+        s = _region_values(root, f, "sigma", pixels, (h, w, 3))
+        ok = np.isfinite(y) & ~np.isnan(s) & (s >= 0)
+        if not ok.any():
+            raise SkyfitError(f"frame {f['index']} ({root / f['sensor']}) has no finite value in "
+                              "the region; repair or re-render that frame.")
+        if not ok.all():
+            warnings.append(f"frame {f['index']}: {int((~ok).sum())} of the region's values are "
+                            "not finite (NaN) and are left out.")
+        ys.append(np.where(ok, y, 0.0))
+        sig.append(np.where(ok, s, np.inf))
+        gain.append(falloff[:, None] * frame_exposure(doc, f)[None, :])
+    return Observations(pixels, [f["index"] for f in rendered], [f["time"] for f in rendered],
+                        np.stack(ys, 1).astype(float), np.stack(sig, 1).astype(float),
+                        np.stack(gain, 1), sensor, warnings)
 
 
 class Problem:
@@ -139,12 +196,12 @@ class Problem:
 
     def predict(self, radiance):
         """Pixel values [DN] the sensor gives for radiance (P, T, 3)."""
-        s = radiance * self.obs.gain[:, None, None]
+        s = radiance * self.obs.gain
         return self.obs.sensor.respond(s) * self.obs.sensor.max_code
 
     def slope(self, radiance):
         """d(pixel value) / d(radiance) [DN per W m^-2 sr^-1], shape (P, T, 3)."""
-        g = self.obs.gain[:, None, None]
+        g = self.obs.gain
         return self.obs.sensor.slope(radiance * g) * self.obs.sensor.max_code * g
 
     def clipped(self):

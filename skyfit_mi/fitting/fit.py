@@ -20,7 +20,7 @@ from .methods.global_search import SIGMA_GRID
 from .methods.profile import profile_edges
 from ..render.fit_model import other_readings
 from ..render.light_cache import DIRECTIONS, POSITIONS, SIGMA_RESOLVED
-from ..pipeline.sequence import load_manifest, sky_from_record
+from ..pipeline.manifest import frame_sky, load_manifest
 from ..physics.ward import METAL_THRESHOLD
 
 
@@ -65,7 +65,7 @@ class FitSession:
         self.scene = mi.load_string(doc["scene"]["xml"])
         self.params = mi.traverse(self.scene)
         frames = {f["index"]: f for f in doc["frames"]}
-        self.skies = [sky_from_record(frames[i]["sky"]) for i in self.obs.frames]
+        self.skies = [frame_sky(frames[i]) for i in self.obs.frames]
         self.cache = build_light_cache(self.scene, self.params, self.skies, self.obs.pixels, name,
                                        positions=positions, directions=directions, seed=seed,
                                        max_depth=max(1, int(doc["render"]["max_depth"]) - 1))

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..files import save_figure, write_text
-from .sequence import load_manifest
+from .manifest import load_manifest
 
 SOURCES = {"radiance": "W m^-2 sr^-1", "sensor": "DN"}
 

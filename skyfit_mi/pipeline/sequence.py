@@ -18,65 +18,16 @@ stopped and gives the same files as an uninterrupted one.
 
 import datetime as dt
 import json
-import os
 import time
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
 from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
 from ..errors import SkyfitError
 from ..render.scene_xml import pass_spp
-
-SCHEMA = "skyfit-manifest/1"
-
-
-def _write_json(path, doc):
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(doc, indent=1, default=_jsonable))
-    os.replace(tmp, path)
-
-
-def _jsonable(x):
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, (np.floating, np.integer)):
-        return x.item()
-    if isinstance(x, (dt.datetime, Path)):
-        return str(x) if isinstance(x, Path) else x.isoformat()
-    raise TypeError(f"not JSON serialisable: {type(x).__name__}")
-
-
-def _versions():
-    out = {"skyfit_mi": __version__}
-    for pkg in ("mitsuba", "drjit", "numpy", "pvlib"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            out[pkg] = None
-    return out
-
-
-def _sky_record(sky):
-    return {"sun_direction": sky.sun_direction, "sun_radiance": sky.sun_radiance,
-            "sun_solid_angle_sr": sky.sun_solid_angle, "clear": sky.clear, "overcast": sky.overcast,
-            "uniform": sky.uniform, "intermediate": sky.intermediate, "ground": sky.ground,
-            "horizon_blend": sky.horizon_blend, "info": sky.info,
-            "horizontal_irradiance_W_m2": sky.horizontal_irradiance(n=128),
-            "units": "weights and radiances W m^-2 sr^-1, linear sRGB"}
-
-
-def sky_from_record(rec):
-    """The :class:`~skyfit_mi.physics.sky.Sky` a manifest frame's ``sky`` record describes."""
-    from ..physics.sky import Sky
-
-    keys = ("clear", "overcast", "uniform", "intermediate", "ground", "sun_radiance")
-    return Sky(np.asarray(rec["sun_direction"]), **{k: np.asarray(rec[k]) for k in keys},
-               horizon_blend=bool(rec["horizon_blend"]), sun_solid_angle=rec["sun_solid_angle_sr"],
-               info=rec.get("info", {}))
+from .manifest import SCHEMA, illumination_record, sensor_record, versions, write_manifest
 
 
 def resolve_exposure(spec):
@@ -133,29 +84,31 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
     seed = int(spec.render["seed"])
     half = pass_spp(spec.render["spp"], spec.render["sampler"])
     manifest = {
-        "schema": SCHEMA, "run_id": run_id, "name": spec.raw.get("name"), "status": "incomplete",
+        "schema": SCHEMA, "source": "render", "run_id": run_id, "name": spec.raw.get("name"),
+        "status": "incomplete",
         "created": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
         "spec": spec.raw, "spec_dir": spec.base_dir.resolve(),
         "location": spec.raw["location"],
         "scene": {"file": spec.scene_file, "xml": xml, "materials": mats},
         "camera": {"to_world": to_world, "fov_deg": cam["fov_deg"], "fov_axis": "x",
                    "width": cam["width"], "height": cam["height"]},
-        "sensor": {**sensor.to_dict(), "max_code": sensor.max_code, "sigma_DN": sensor.sigma,
-                   "units": "exposure sr m^2 W^-1; values and sigma in DN"},
+        "sensor": sensor_record(sensor),
         "render": {**spec.render, "spp_rendered": 2 * half, "integrator": "path",
                    "seed_rule": "two half-spp passes with "
                    "mitsuba seeds seed + index and seed + index + 2^31; noise rng = "
                    "numpy.random.default_rng([seed, index])"},
-        "versions": _versions(), "frames": [],
+        "versions": versions(), "frames": [],
     }
     bar = None
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=len(spec.frames), desc="render", unit="frame", initial=len(done))
     for f in spec.frames:
-        rec = {"index": f.index, "time": f.time.isoformat(), "sun_zenith_deg": f.sun_zenith_deg,
+        rec = {"index": f.index, "time": f.time.isoformat(),
+               "time_utc": f.time.astimezone(dt.timezone.utc).isoformat(),
+               "sun_zenith_deg": f.sun_zenith_deg,
                "sun_azimuth_deg": f.sun_azimuth_deg, "below_horizon": f.sun_zenith_deg >= 90.0,
-               "sky": _sky_record(f.sky), "seed": seed + f.index}
+               "illumination": illumination_record(f.sky), "seed": seed + f.index}
         names = {k: f"frames/{k}_{f.index:03d}.exr" for k in ("radiance", "sensor", "sigma")}
         if f.skipped:
             rec["status"] = "skipped"
@@ -178,28 +131,15 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
         manifest["frames"].append(rec)
         if "render_seconds" in rec:               # checkpoint: the frames so far, the rest pending
             pending = [{"index": g.index, "status": "pending"} for g in spec.frames[f.index + 1:]]
-            _write_json(mpath, {**manifest, "frames": manifest["frames"] + pending})
+            write_manifest(mpath, {**manifest, "frames": manifest["frames"] + pending})
     if bar is not None:
         bar.close()
     manifest["status"] = "complete"
     rendered = [read_exr(out / r["radiance"]) for r in manifest["frames"] if r["status"] == "rendered"]
     if rendered:
         write_png(out / "contact_sheet.png", contact_sheet(rendered, sensor.exposure))
-    _write_json(mpath, manifest)
+    write_manifest(mpath, manifest)
     skipped = sum(r["status"] == "skipped" for r in manifest["frames"])
     log(f"{len(rendered)} frames rendered ({len(done)} kept from an earlier run), {skipped} skipped;"
         f" manifest, frames and contact sheet in {out.resolve()}")
     return manifest
-
-
-def load_manifest(path):
-    """Read a manifest (a file, or a folder holding manifest.json)."""
-    p = Path(path)
-    p = p / "manifest.json" if p.is_dir() else p
-    if not p.is_file():
-        raise SkyfitError(f"no manifest at {str(p)!r}; give a folder written by `skyfit render`.")
-    doc = json.loads(p.read_text())
-    if doc.get("schema") != SCHEMA:
-        raise SkyfitError(f"{p} is not a skyfit manifest (schema {doc.get('schema')!r}, "
-                          f"expected {SCHEMA!r}).")
-    return doc, p.parent

@@ -26,7 +26,7 @@ from ..physics.sun import solar_position
 from ..physics.ward import NORMALISATIONS, raw_parameters
 
 #: Where the shipped scenes live; a spec's ``scene.file`` is looked up beside the spec first.
-SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
+SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
 
 
 class SpecError(SkyfitError):

@@ -39,7 +39,7 @@ def _linearise(problem):
         s = v ** sensor.gamma
     else:
         s = np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
-    g = obs.gain[:, None, None]
+    g = obs.gain
     y = s / g
     slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code * g
     w = np.where(problem.mask, (slope / obs.sigma) ** 2, 0.0)

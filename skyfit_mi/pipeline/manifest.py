@@ -1,0 +1,223 @@
+"""The sequence manifest: the one contract between the forward and the inverse half.
+
+``render`` (and later ``ingest`` and ``relight``) write a folder with ``manifest.json``;
+``fit``, ``pixels``, ``labels`` (and later ``relight`` and ``chi2map``) read it.  This
+module is the only code that reads, validates, upgrades or writes that file.  The
+format is the versioned JSON Schema shipped beside this module
+(``manifest.schema.json``, schema id ``skyfit-manifest/2``) and is documented for
+people in ``docs/MANIFEST.md``.
+
+Per frame it holds the time (local with its offset, and UTC), the illumination as one
+of several kinds (``sky``: the CIE/gensky sun and sky as pattern weights; ``gensky``:
+Radiance text; ``irradiance``: measured levels driving a sky model; ``envmap``: an HDR
+environment map; ``directional``: a lab light), the frame's own exposure when it differs
+from the sequence's sensor (exposure, shutter time, gain, white balance), and the
+observations (image files, or a table of measured values).
+
+Version 1 manifests (skyfit-mi before the layered package) are upgraded on reading.
+"""
+
+import datetime as dt
+import functools
+import json
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..errors import SkyfitError
+from ..files import write_json
+from ..physics.camera import SensorModel
+
+SCHEMA = "skyfit-manifest/2"
+#: Schemas this version reads (older ones are upgraded in memory).
+READABLE = ("skyfit-manifest/1", SCHEMA)
+SCHEMA_FILE = Path(__file__).with_name("manifest.schema.json")
+FILENAME = "manifest.json"
+#: The illumination kinds the schema defines, and those the sky model can build today.
+ILLUMINATION_KINDS = ("sky", "gensky", "irradiance", "envmap", "directional")
+SKY_KINDS = ("sky", "gensky")
+#: The SensorModel fields a manifest's ``sensor`` record carries.
+SENSOR_FIELDS = ("exposure", "response", "gamma", "bits", "noise_percent", "cos4")
+
+
+class ManifestError(SkyfitError):
+    """A manifest is missing, damaged, foreign or invalid; the message says what to do."""
+
+
+@functools.cache
+def schema():
+    """The manifest's JSON Schema (a dict)."""
+    return json.loads(SCHEMA_FILE.read_text())
+
+
+def _where(path_parts):
+    out = ""
+    for p in path_parts:
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
+    return out or "(top level)"
+
+
+def validate_manifest(doc, source="manifest"):
+    """Check ``doc`` against the schema; raise :class:`ManifestError` naming the first problem."""
+    import jsonschema
+
+    validator = jsonschema.Draft202012Validator(schema())
+    err = jsonschema.exceptions.best_match(validator.iter_errors(doc))
+    if err is not None:
+        raise ManifestError(f"{source} is not a valid {SCHEMA} manifest: at "
+                            f"{_where(err.absolute_path)}: {err.message}. See docs/MANIFEST.md.")
+    return doc
+
+
+def _utc(iso):
+    t = dt.datetime.fromisoformat(iso)
+    return t.astimezone(dt.timezone.utc).isoformat() if t.tzinfo else None
+
+
+def upgrade(doc):
+    """A version-1 manifest as version 2 (frames' ``sky`` -> ``illumination``; UTC times)."""
+    if doc.get("schema") == SCHEMA:
+        return doc
+    doc = dict(doc, schema=SCHEMA)
+    frames = []
+    for f in doc.get("frames", []):
+        f = dict(f)
+        if "sky" in f:
+            f["illumination"] = {"kind": "sky", **f.pop("sky")}
+        if "time" in f and "time_utc" not in f and _utc(f["time"]):
+            f["time_utc"] = _utc(f["time"])
+        frames.append(f)
+    doc["frames"] = frames
+    return doc
+
+
+def manifest_file(path):
+    """The manifest file of ``path`` (a folder holding manifest.json, or the file itself)."""
+    p = Path(path)
+    return p / FILENAME if p.is_dir() else p
+
+
+def load_manifest(path):
+    """Read, upgrade and validate the manifest at ``path`` (a folder holding manifest.json,
+    or the file itself); returns (doc, folder).
+
+    Raises :class:`ManifestError` for a missing, damaged (e.g. truncated), foreign,
+    newer or invalid file.
+    """
+    p = manifest_file(path)
+    if not p.is_file():
+        raise ManifestError(f"no manifest at {str(p)!r}; give a folder written by `skyfit render` "
+                            "(or its manifest.json).")
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ManifestError(f"{p} is damaged (not complete JSON: {exc}); render the folder again "
+                            "(`skyfit render SPEC -o DIR` resumes, `--overwrite` starts clean).") \
+            from None
+    except OSError as exc:
+        raise ManifestError(f"cannot read {p}: {exc.strerror or exc}.") from None
+    if not isinstance(doc, dict) or not str(doc.get("schema", "")).startswith("skyfit-manifest/"):
+        raise ManifestError(f"{p} is not a skyfit manifest (no 'schema': 'skyfit-manifest/N'); "
+                            "give a folder written by `skyfit render`.")
+    if doc["schema"] not in READABLE:
+        raise ManifestError(f"{p} has schema {doc['schema']!r}, which this skyfit-mi "
+                            f"({__version__}) cannot read (it reads {', '.join(READABLE)}); "
+                            "upgrade skyfit-mi.")
+    return validate_manifest(upgrade(doc), str(p)), p.parent
+
+
+def write_manifest(path, doc):
+    """Validate ``doc`` and write it atomically to ``path`` (a folder or the file)."""
+    doc = json.loads(json.dumps(doc, default=_jsonable_default))   # the form a reader sees
+    validate_manifest(doc, "the manifest to write")
+    return write_json(manifest_file(path) if Path(path).is_dir() else Path(path), doc)
+
+
+def _jsonable_default(x):
+    from ..files import jsonable
+
+    return jsonable(x)
+
+
+def versions():
+    """Versions of skyfit-mi and of the packages its results depend on."""
+    out = {"skyfit_mi": __version__}
+    for pkg in ("mitsuba", "drjit", "numpy", "pvlib"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+# ---- illumination -----------------------------------------------------------
+
+def illumination_record(sky):
+    """The ``illumination`` record (kind ``sky``) of a :class:`~skyfit_mi.physics.sky.Sky`."""
+    return {"kind": "sky", "sun_direction": sky.sun_direction, "sun_radiance": sky.sun_radiance,
+            "sun_solid_angle_sr": sky.sun_solid_angle, "clear": sky.clear,
+            "overcast": sky.overcast, "uniform": sky.uniform, "intermediate": sky.intermediate,
+            "ground": sky.ground, "horizon_blend": sky.horizon_blend, "info": sky.info,
+            "horizontal_irradiance_W_m2": sky.horizontal_irradiance(n=128),
+            "units": "weights and radiances W m^-2 sr^-1, linear sRGB"}
+
+
+def frame_sky(frame):
+    """The :class:`~skyfit_mi.physics.sky.Sky` of a manifest frame's illumination.
+
+    Kinds ``sky`` and ``gensky`` become a sky; the others (measured irradiance, HDR
+    maps, lab lights) are part of the contract but not yet turned into light by this
+    version: a :class:`ManifestError` says so.
+    """
+    from ..physics.gensky import from_gensky
+    from ..physics.sky import Sky
+
+    rec = frame.get("illumination")
+    if rec is None:
+        raise ManifestError(f"frame {frame.get('index')} has no illumination record.")
+    kind = rec.get("kind")
+    if kind == "gensky":
+        return from_gensky(rec["text"])
+    if kind != "sky":
+        raise ManifestError(f"frame {frame.get('index')}: illumination kind {kind!r} is part of "
+                            f"the manifest format but this version of skyfit-mi can only light "
+                            f"frames of kind {' or '.join(map(repr, SKY_KINDS))}.")
+    keys = ("clear", "overcast", "uniform", "intermediate", "ground", "sun_radiance")
+    return Sky(np.asarray(rec["sun_direction"], dtype=float),
+               **{k: np.asarray(rec[k], dtype=float) for k in keys},
+               horizon_blend=bool(rec["horizon_blend"]),
+               sun_solid_angle=float(rec["sun_solid_angle_sr"]), info=rec.get("info", {}))
+
+
+# ---- the sensor and each frame's exposure ----------------------------------
+
+def sensor_record(sensor):
+    """The manifest's ``sensor`` record of a :class:`~skyfit_mi.physics.camera.SensorModel`."""
+    return {**sensor.to_dict(), "max_code": sensor.max_code, "sigma_DN": sensor.sigma,
+            "units": "exposure sr m^2 W^-1; values and sigma in DN"}
+
+
+def sensor_from_record(rec):
+    """The :class:`~skyfit_mi.physics.camera.SensorModel` a manifest's ``sensor`` record describes."""
+    defaults = {"gamma": 2.2, "noise_percent": 0.0, "cos4": False}
+    try:
+        return SensorModel(**{k: rec.get(k, defaults.get(k)) for k in SENSOR_FIELDS})
+    except SkyfitError as exc:
+        raise ManifestError(f"the manifest's sensor record is invalid: {exc}") from None
+
+
+def frame_exposure(doc, frame):
+    """Per-channel exposure [sr m^2 W^-1] of a frame, shape (3,): the frame's own
+    ``exposure`` record (times its white balance) when present, else the sensor's."""
+    rec = frame.get("exposure")
+    if rec is None:
+        return np.full(3, float(doc["sensor"]["exposure"]))
+    return float(rec["exposure"]) * np.asarray(rec.get("white_balance", (1.0, 1.0, 1.0)),
+                                               dtype=float)
+
+
+def rendered_frames(doc):
+    """The frames that hold observations (status ``rendered``), in time order."""
+    return [f for f in doc["frames"] if f.get("status") == "rendered"]

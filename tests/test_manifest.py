@@ -1,0 +1,167 @@
+"""The manifest contract: schema, upgrade of old files, clear messages, per-frame exposure,
+and observations checked on load."""
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from skyfit_mi.pipeline.manifest import (SCHEMA, ManifestError, frame_exposure, frame_sky,
+                                         load_manifest, schema, upgrade, validate_manifest,
+                                         write_manifest)
+
+
+@pytest.fixture(scope="module")
+def day(tmp_path_factory, mi):
+    """A small rendered disc day (12x12, 13 frames)."""
+    from conftest import disc_day
+
+    return disc_day(tmp_path_factory.mktemp("manifest"), "day", spp=16)
+
+
+def _copy(day, tmp_path):
+    out = tmp_path / "copy"
+    shutil.copytree(day, out)
+    return out
+
+
+def test_rendered_manifest_follows_the_shipped_schema(day):
+    import jsonschema
+
+    doc = json.loads((day / "manifest.json").read_text())
+    jsonschema.Draft202012Validator.check_schema(schema())
+    jsonschema.validate(doc, schema())               # the file itself, not an upgraded copy
+    assert doc["schema"] == SCHEMA and doc["source"] == "render"
+    f = doc["frames"][0]
+    assert f["illumination"]["kind"] == "sky"
+    assert f["time_utc"].endswith("+00:00")
+
+
+def test_a_version_1_manifest_is_upgraded(day, tmp_path):
+    out = _copy(day, tmp_path)
+    doc = json.loads((out / "manifest.json").read_text())
+    old = dict(doc, schema="skyfit-manifest/1")
+    old["frames"] = [{k: v for k, v in f.items() if k not in ("illumination", "time_utc")}
+                     | ({"sky": {k: v for k, v in f["illumination"].items() if k != "kind"}}
+                        if "illumination" in f else {}) for f in doc["frames"]]
+    (out / "manifest.json").write_text(json.dumps(old))
+    new, root = load_manifest(out)
+    assert root == out and new["schema"] == SCHEMA
+    assert new["frames"][3]["illumination"] == doc["frames"][3]["illumination"]
+    assert new["frames"][3]["time_utc"] == doc["frames"][3]["time_utc"]
+    assert upgrade(doc) is doc
+
+
+@pytest.mark.parametrize("text, match", [
+    ('{"schema": "skyfit-manifest/2", "frames": [', "damaged .not complete JSON"),
+    ('{"hello": 1}', "not a skyfit manifest"),
+    ('[1, 2]', "not a skyfit manifest"),
+    ('{"schema": "skyfit-manifest/9"}', "cannot read .*upgrade skyfit-mi"),
+    ('{"schema": "skyfit-manifest/2", "run_id": "x", "status": "complete"}',
+     "not a valid skyfit-manifest/2 manifest: at .*required property"),
+])
+def test_bad_manifests_get_one_clear_message(tmp_path, text, match):
+    (tmp_path / "manifest.json").write_text(text)
+    with pytest.raises(ManifestError, match=match):
+        load_manifest(tmp_path)
+
+
+def test_missing_manifest(tmp_path):
+    with pytest.raises(ManifestError, match="no manifest at"):
+        load_manifest(tmp_path / "nowhere")
+
+
+def test_invalid_frame_is_named(day):
+    doc, _ = load_manifest(day)
+    doc = json.loads(json.dumps(doc))
+    doc["frames"][2]["illumination"] = {"kind": "envmap", "file": "x.exr"}   # no projection
+    with pytest.raises(ManifestError, match=r"frames\[2\]\.illumination"):
+        validate_manifest(doc)
+    doc["frames"][2]["illumination"]["projection"] = "latlong"
+    validate_manifest(doc)                               # a valid kind of the contract ...
+    with pytest.raises(ManifestError, match="kind 'envmap' .* can only light"):
+        frame_sky(doc["frames"][2])                      # ... that this version cannot light yet
+
+
+def test_write_refuses_an_invalid_document_and_keeps_the_old_file(day, tmp_path):
+    out = _copy(day, tmp_path)
+    before = (out / "manifest.json").read_text()
+    doc, _ = load_manifest(out)
+    doc["camera"]["width"] = 0
+    with pytest.raises(ManifestError, match=r"camera\.width"):
+        write_manifest(out, doc)
+    assert (out / "manifest.json").read_text() == before
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+
+
+def test_per_frame_exposure_and_white_balance_reach_the_fit(day, tmp_path):
+    """A frame photographed at half the exposure, with a white balance, fits the same
+    radiance: the observations' gain follows each frame's exposure record."""
+    from skyfit_mi.fitting.chi2 import load_observations
+    from skyfit_mi.render.image import read_exr, write_exr
+
+    out = _copy(day, tmp_path)
+    doc, _ = load_manifest(out)
+    px = np.array([[5, 5], [6, 6]])
+    ref = load_observations(out, px)
+    f = doc["frames"][4]
+    wb = np.array([1.0, 0.8, 1.25])
+    f["exposure"] = {"exposure": doc["sensor"]["exposure"] / 2, "exposure_time_s": 0.005,
+                     "white_balance": wb.tolist()}
+    write_manifest(out, doc)
+    assert np.allclose(frame_exposure(doc, f), doc["sensor"]["exposure"] / 2 * wb)
+    obs = load_observations(out, px)
+    t = obs.frames.index(4)
+    assert np.allclose(obs.gain[:, t], ref.gain[:, t] / 2 * wb)
+    others = [i for i in range(len(obs.frames)) if i != t]
+    assert np.allclose(obs.gain[:, others], ref.gain[:, others])
+    # frame 4's files untouched here; the gain is what changes
+    assert read_exr(out / f["sensor"]).shape == (12, 12, 3) and write_exr
+
+
+def test_frames_are_checked_on_load(day, tmp_path):
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.fitting.chi2 import load_observations
+    from skyfit_mi.render.image import read_exr, write_exr
+
+    out = _copy(day, tmp_path)
+    doc, _ = load_manifest(out)
+    px = np.array([[5, 5], [6, 6], [7, 7]])
+    f3, f5, f7 = (doc["frames"][i] for i in (3, 5, 7))
+    img = read_exr(out / f3["sensor"])
+    img[5, 5] = np.nan                                     # one damaged pixel: left out, counted
+    write_exr(out / f3["sensor"], img)
+    obs = load_observations(out, px)
+    assert any("frame 3: 3 of the region's values are not finite" in w for w in obs.warnings)
+    assert np.isinf(obs.sigma[0, obs.frames.index(3)]).all()
+    write_exr(out / f5["sensor"], np.full((12, 12, 3), np.nan, np.float32))
+    with pytest.raises(SkyfitError, match="frame 5 .* no finite value"):
+        load_observations(out, px)
+    write_exr(out / f5["sensor"], np.zeros((10, 12, 3), np.float32))        # another size
+    with pytest.raises(SkyfitError, match="frame 5: .* is 12x10 .* camera is 12x12"):
+        load_observations(out, px)
+    (out / f5["sensor"]).write_bytes((out / f7["sensor"]).read_bytes()[:200])  # truncated
+    with pytest.raises(SkyfitError, match="frame 5: cannot read"):
+        load_observations(out, px)
+
+
+def test_incomplete_render_is_warned_and_frames_can_be_chosen(day, tmp_path):
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.fitting.chi2 import load_observations
+
+    out = _copy(day, tmp_path)
+    doc, _ = load_manifest(out)
+    doc["status"] = "incomplete"
+    for f in doc["frames"][8:]:
+        for k in ("radiance", "sensor", "sigma", "illumination"):
+            f.pop(k, None)
+        f["status"] = "pending"
+    write_manifest(out, doc)
+    obs = load_observations(out, [[5, 5]])
+    assert obs.frames == list(range(8))
+    assert any("incomplete" in w and "8 of its 13 frames" in w for w in obs.warnings)
+    assert load_observations(out, [[5, 5]], frames=[0, 2, 4]).frames == [0, 2, 4]
+    with pytest.raises(SkyfitError, match="frame 9 is not a rendered frame"):
+        load_observations(out, [[5, 5]], frames=[0, 9])
+    with pytest.raises(SkyfitError, match="region has no pixels"):
+        load_observations(out, np.zeros((0, 2), int))
