@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import ParseError
 from .sky import Sky
+from .sun import SUN_SOLID_ANGLE
 
 #: skybright.cal's A1 -> the Sky pattern it selects.
 _SKYBR_TYPES = {1: "clear", 2: "overcast", 3: "uniform", 4: "intermediate"}
@@ -139,4 +140,4 @@ def from_gensky(text):
             "command": next((ln.strip("# ").strip() for ln in text.splitlines()
                              if ln.lstrip().startswith("#") and "gensky" in ln), None)}
     return Sky(sun_dir, ground=colour * ground, horizon_blend=True, sun_radiance=sun_rad,
-               sun_solid_angle=omega if omega is not None else 6e-5, info=info, **weights)
+               sun_solid_angle=omega if omega is not None else SUN_SOLID_ANGLE, info=info, **weights)
