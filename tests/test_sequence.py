@@ -180,7 +180,7 @@ def test_cli_render_and_pixels_end_to_end(tmp_path, mi):
     out = tmp_path / "run"
     assert main(["render", str(p), "-o", str(out), "-q"]) == 0
     m = json.loads((out / "manifest.json").read_text())
-    assert m["schema"] == "skyfit-manifest/1" and m["status"] == "complete"
+    assert m["schema"] == "skyfit-manifest/2" and m["status"] == "complete"
     assert m["scene"]["materials"]["disc"]["raw"]["rho_d"] == [1.0, 1.0, 1.0]
     assert len(m["camera"]["to_world"]) == 4 and m["sensor"]["max_code"] == 4095
     assert (out / "contact_sheet.png").exists()

@@ -20,17 +20,33 @@ def sky_dict(sky, scene_radius=1e4):
     return d
 
 
+def _array(cls, values):
+    """A Dr.Jit value of type ``cls`` holding ``values``, copied from a NumPy buffer.
+
+    A value built from Python floats is a literal that Dr.Jit compiles into the kernel
+    which first stores it (a new kernel for every new sky); built from a buffer it is
+    plain memory, so every frame's sky reuses the same kernels.
+    """
+    import numpy as np
+
+    a = np.atleast_1d(np.asarray(values))
+    if a.size == 1:
+        return cls(a.astype(bool) if a.dtype == bool else a.astype(np.float32))
+    return cls(*[np.array([v], dtype=np.float32) for v in a.ravel()])
+
+
 def update_sky(params, sky, prefix):
     """Write ``sky`` into a ``cie_sky`` emitter through ``mi.traverse`` parameters.
 
     ``prefix`` is the emitter's key prefix in ``params`` (e.g. ``'sky.'`` for an
-    emitter with id ``sky``).  Calls ``params.update()``; no recompilation.
+    emitter with id ``sky``).  Calls ``params.update()``; no recompilation: every value
+    is copied from memory, never a kernel literal (see :func:`_array`).
     """
     import mitsuba as mi
 
-    params[prefix + "sun_direction"] = mi.Vector3f(*map(float, sky.sun_direction))
-    params[prefix + "sun_solid_angle"] = mi.Float(float(sky.sun_solid_angle))
-    params[prefix + "horizon_blend"] = mi.Bool(bool(sky.horizon_blend))
+    params[prefix + "sun_direction"] = _array(mi.Vector3f, sky.sun_direction)
+    params[prefix + "sun_solid_angle"] = _array(mi.Float, float(sky.sun_solid_angle))
+    params[prefix + "horizon_blend"] = _array(mi.Bool, bool(sky.horizon_blend))
     for k in RGB_KEYS:
-        params[prefix + k] = mi.Color3f(*map(float, getattr(sky, k)))
+        params[prefix + k] = _array(mi.Color3f, getattr(sky, k))
     params.update()

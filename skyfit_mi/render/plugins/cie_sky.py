@@ -107,9 +107,13 @@ class CIESkyEmitter(mi.Emitter):
         p_sun = sun_power / total if total > 0 else 0.0
         self.pmf = mi.Float(pmf.astype(np.float32))
         self.cdf = mi.Float(cdf.astype(np.float32))
-        self.p_sun = mi.Float(p_sun)
-        self.sun_chord2 = mi.Float(sky.sun_chord2)
-        for k in ("sun_direction", "sun_solid_angle", "horizon_blend", "p_sun", "sun_chord2",
+        self.p_sun = mi.Float(np.array([p_sun], dtype=np.float32))
+        self.sun_chord2 = mi.Float(np.array([sky.sun_chord2], dtype=np.float32))
+        # the kernel reads the blend switch as a float: a 1-byte Bool among the emitter's
+        # data would shift the other fields' alignment from frame to frame, and with it
+        # the kernel's hash (a recompilation per frame)
+        self.blend_weight = mi.Float(np.array([float(sky.horizon_blend)], dtype=np.float32))
+        for k in ("sun_direction", "sun_solid_angle", "blend_weight", "p_sun", "sun_chord2",
                   "scene_radius") + _RGB_KEYS:
             dr.make_opaque(getattr(self, k))
 
@@ -151,7 +155,7 @@ class CIESkyEmitter(mi.Emitter):
         w = a / (a + dr.rcp(a))
         blended = w * sky + (1.0 - w) * self.ground
         sharp = dr.select(dz > 0.0, sky, self.ground)
-        return dr.select(self.horizon_blend, blended, sharp)
+        return dr.select(self.blend_weight > 0.5, blended, sharp)
 
     def _in_sun(self, d):
         # |d - s|^2 <= 2 (1 - cos alpha): exact for unit vectors and, unlike d.s >= cos alpha,
