@@ -165,3 +165,14 @@ def test_incomplete_render_is_warned_and_frames_can_be_chosen(day, tmp_path):
         load_observations(out, [[5, 5]], frames=[0, 9])
     with pytest.raises(SkyfitError, match="region has no pixels"):
         load_observations(out, np.zeros((0, 2), int))
+
+
+def test_the_fit_reports_what_loading_noticed(day, tmp_path):
+    from skyfit_mi.fitting.fit import fit_region
+
+    out = _copy(day, tmp_path)
+    doc, _ = load_manifest(out)
+    doc["status"] = "incomplete"
+    write_manifest(out, doc)
+    res = fit_region(out, "disc", [[5, 5], [6, 6]], positions=4, directions=16, log=lambda *a: None)
+    assert any("render is incomplete" in w for w in res["warnings"])

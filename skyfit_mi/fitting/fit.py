@@ -205,6 +205,7 @@ class FitSession:
                                              lower[i], upper[i])
         warnings = unc.identifiability(names, {p: intervals[p]["95"] for p in names}, lower, upper,
                                        rise, s2, chi2 / dof, ripple)
+        warnings = list(self.obs.warnings) + warnings       # what loading the frames noticed
         if res.get("status") == "failed":
             warnings.insert(0, f"{method} failed: {res['message']}")
         if self.model == "colour":
