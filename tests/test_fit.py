@@ -1,6 +1,7 @@
 """Fitting: recovery of known parameters, chi-square statistics, failures explained, identifiability."""
 import json
 
+import numpy as np
 import pytest
 
 from skyfit_mi.fitting.chi2 import parse_region
@@ -21,6 +22,27 @@ def test_global_recovers_noise_free_truth(days):
     assert p["rho_s"] == pytest.approx(0.3, abs=0.01)
     assert p["sigma_alpha"] == pytest.approx(0.1, abs=0.005)
     assert r["evaluations"] > 0 and r["wall_time_s"] > 0 and r["seed"] == 0
+    assert r["status"] == "converged" and "polish of the best: converged" in r["message"]
+
+
+def test_global_search_reports_a_failed_polish(days, monkeypatch):
+    """When the polish cannot lower chi-square the grid point is kept and the status says so."""
+    import importlib
+    gs = importlib.import_module("skyfit_mi.fitting.methods.global_search")
+
+    calls = {}
+
+    def failing_lm(problem, theta, lower, upper, **kw):
+        calls["n"] = calls.get("n", 0) + 1
+        return {"theta": theta, "chi2": np.inf, "status": "failed", "message": "singular curvature",
+                "trace": []}
+
+    monkeypatch.setattr(gs, "levenberg_marquardt", failing_lm)
+    from skyfit_mi.fitting.fit import FitSession
+    s = FitSession(days["clean"], "disc", REGION, positions=2, directions=64)
+    res = gs.global_search(s.problem, s.lower, s.lower, s.upper, candidates=1, profile=False)
+    assert calls["n"] == 1 and res["status"] == "grid_point"
+    assert "singular curvature" in res["message"] and "best grid point" in res["message"]
 
 
 def test_noisy_fit_chi2_per_dof_near_one_and_intervals_cover(days):

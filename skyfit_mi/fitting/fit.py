@@ -208,6 +208,9 @@ class FitSession:
         warnings = list(self.obs.warnings) + warnings       # what loading the frames noticed
         if res.get("status") == "failed":
             warnings.insert(0, f"{method} failed: {res['message']}")
+        elif res.get("status") not in (None, "converged"):
+            warnings.insert(0, f"{method} did not converge (status {res['status']}): "
+                            f"{res['message']}")
         if self.model == "colour":
             other = unc.colour_rule_ambiguity(theta, {p: intervals[p]["95"] for p in names})
             if other is not None:

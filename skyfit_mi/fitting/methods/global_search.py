@@ -130,13 +130,16 @@ def global_search(problem, start, lower, upper, candidates=3, profile=True, grid
         res = levenberg_marquardt(problem, thetas[k, j], lower, upper)
         # a polish that fails (singular curvature) keeps the grid point
         if res["status"] == "failed" or not res["chi2"] <= problem.chi2(thetas[k, j]):
-            res = {**res, "theta": thetas[k, j], "chi2": problem.chi2(thetas[k, j])}
+            res = {**res, "theta": thetas[k, j], "chi2": problem.chi2(thetas[k, j]),
+                   "status": "grid_point", "message": "the Levenberg-Marquardt polish did not "
+                   f"lower chi-square ({res['message']}); the best grid point is reported"}
         results.append(res)
     best = min(results, key=lambda r: r["chi2"])
     prof = refined_profile(wm, y, w, D, G, chi2, float(best["theta"][-1])) \
         if profile else None
-    return {**best, "status": "converged", "message": f"global grid of {len(SIGMA_GRID)} roughness "
-            f"values, {len(picks)} candidates polished", "profile_linearised": prof,
+    message = (f"global grid of {len(SIGMA_GRID)} roughness values, {len(picks)} candidates "
+               f"polished; polish of the best: {best['status']} ({best['message']})")
+    return {**best, "status": best["status"], "message": message, "profile_linearised": prof,
             "grid_candidates": [results[i]["theta"].tolist() for i in range(len(results))]}
 
 
