@@ -202,3 +202,16 @@ def test_render_error_estimate_and_pass_counts(tmp_path, mi):
     sig = read_exr(tmp_path / "e" / m["frames"][1]["sigma"])
     # sensor part alone: sqrt((2% of 4095)^2 + 1/12); the render's error only adds to it
     assert np.all(sig >= np.sqrt((0.02 * 4095) ** 2 + 1 / 12) - 1e-3)
+
+
+@pytest.mark.parametrize("kind, efficacy", [("overcast", 120.0), ("clear", 150.0)])
+def test_sky_given_by_illuminance_uses_its_own_efficacy(tmp_path, kind, efficacy):
+    """An overcast sky of 12 000 lx diffuse illuminance is 12 000 / 120 = 100 W m^-2 of
+    diffuse irradiance (thesis 4.2.2: overcast efficacy 120 lm/W); a clear one 12 000 / 150."""
+    from skyfit_mi.physics.colour import SRGB_LUMINANCE
+
+    raw = spec()
+    raw["sky"] = {"type": kind, "diffuse_horizontal_lux": 12000.0}
+    s = validate_spec(raw, tmp_path)
+    e = s.frames[0].sky.sky_horizontal_irradiance(n=128) @ SRGB_LUMINANCE
+    assert e == pytest.approx(12000.0 / efficacy, rel=1e-3)

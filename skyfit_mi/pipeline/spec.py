@@ -21,7 +21,7 @@ from ..physics.camera import SensorModel
 from ..errors import SkyfitError
 from ..physics.gensky import from_gensky
 from ..render.variant import VARIANTS
-from ..physics.sky import SKY_TYPES, cie_sky
+from ..physics.sky import EFFICACY_CLEAR, EFFICACY_OVERCAST, SKY_TYPES, cie_sky
 from ..physics.sun import solar_position
 from ..physics.ward import NORMALISATIONS, raw_parameters
 
@@ -366,8 +366,10 @@ def _make_sky(e, zenith, azimuth, t, base_dir):
         if measured:
             lux = measured.get("diffuse_horizontal_lux")
             if lux is not None:
-                sky = sky.scaled_to_illuminance(lux, e.get("efficacy_overcast" if e["type"] == "overcast"
-                                                           else "efficacy_clear", 150.0))
+                overcast = e["type"] == "overcast"
+                sky = sky.scaled_to_illuminance(lux, e.get(
+                    "efficacy_overcast" if overcast else "efficacy_clear",
+                    EFFICACY_OVERCAST if overcast else EFFICACY_CLEAR))
             sky = sky.scaled(diffuse_horizontal=measured.get("diffuse_horizontal_W_m2"),
                              direct_normal=measured.get("direct_normal_W_m2"))
     except SpecError:
