@@ -32,7 +32,20 @@ def test_clipping_never_negative_or_over_range():
     img = np.concatenate([np.zeros((50, 50, 3)), np.full((50, 50, 3), 3.0)], axis=0)
     v, sigma = s.capture(img, np.random.default_rng(2))
     assert v.min() == 0 and v.max() == 255
-    assert np.all(np.isinf(sigma[50:])) and np.all(np.isfinite(sigma[:50]))
+    # the bright half clips at full scale, and noise leaves about half of it at the top code;
+    # sigma stays finite (chi-square takes top-code values as censored)
+    assert 0.4 < np.mean(v[50:] == 255) < 0.6 and np.all(np.isfinite(sigma))
+
+
+def test_saturation_follows_the_captured_value():
+    """Just under full scale, noise pushes some values to the top code and others below it;
+    just over, the clipped signal plus noise may read below the top: a value is saturated when
+    it reads the top code, whatever the noise-free signal was."""
+    s = SensorModel(exposure=1.0, bits=8, noise_percent=2.0)
+    for level in (0.99, 1.01):
+        v, sigma = s.capture(np.full((40, 40, 3), level), np.random.default_rng(3))
+        assert 0 < np.mean(v == 255) < 1
+        np.testing.assert_allclose(sigma, s.sigma, rtol=1e-6)
 
 
 def test_responses_and_cos4():

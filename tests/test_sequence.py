@@ -213,5 +213,5 @@ def test_sky_given_by_illuminance_uses_its_own_efficacy(tmp_path, kind, efficacy
     raw = spec()
     raw["sky"] = {"type": kind, "diffuse_horizontal_lux": 12000.0}
     s = validate_spec(raw, tmp_path)
-    e = s.frames[0].sky.sky_horizontal_irradiance(n=128) @ SRGB_LUMINANCE
+    e = s.frames[0].sky.sky_horizontal_irradiance() @ SRGB_LUMINANCE
     assert e == pytest.approx(12000.0 / efficacy, rel=1e-3)

@@ -73,6 +73,10 @@ def test_sun_disc_and_levels():
 def test_ground_is_lambertian_reflection_of_global_irradiance():
     s = sk.cie_sky("clear", 40, 100, ground_albedo=0.3)
     np.testing.assert_allclose(s.ground, 0.3 * s.horizontal_irradiance() / np.pi, rtol=1e-3)
+    # still so after scaling to measured levels: the ground follows its lighting
+    m = s.scaled(diffuse_horizontal=60.0, direct_normal=300.0)
+    np.testing.assert_allclose(m.ground, 0.3 * m.horizontal_irradiance() / np.pi, rtol=1e-3)
+    assert not np.allclose(m.ground, s.ground, rtol=0.05)
     assert np.all(s.radiance(np.array([0.3, 0.1, -0.5])) == s.ground)
 
 

@@ -2,8 +2,8 @@
 
 chi^2 = sum_i ((y_i - y(x_i; a)) / sigma_i)^2 over every region pixel, frame and
 colour channel, with y the sensor's pixel values [DN] and sigma their standard
-deviations from the manifest's sensor model (saturated pixels, sigma = inf,
-drop out).  The model y(x; a) is the sensor model applied to the radiance the
+deviations from the manifest's sensor model (a value with sigma = inf carries no
+information and drops out).  The model y(x; a) is the sensor model applied to the radiance the
 :class:`~skyfit_mi.render.fit_model.WardModel` renders for parameters a.
 
 Values at code 0 or at the top code with a finite sigma are censored, not

@@ -19,8 +19,10 @@ Scene radiance L [W m^-2 sr^-1] becomes a pixel value V [DN] in these steps:
 The per-pixel standard deviation that chi-square needs (eq. 6.2) is
 sqrt(sigma_noise^2 + 1/12) DN (noise plus uniform quantisation error), plus,
 for a rendered frame, the render's own Monte Carlo error carried through the
-response; a saturated pixel carries no information about the radiance and gets
-an infinite sigma.
+response.  A pixel is saturated (or black) when its captured value is at the top
+(or bottom) code: chi-square then takes it as censored (P(value >= top)), which
+the finite sigma also describes; a value's sigma is infinite only where it
+carries no information at all (a pixel left out).
 """
 
 from dataclasses import asdict, dataclass
@@ -152,7 +154,8 @@ class SensorModel:
         values : ndarray (H, W, 3) of uint16
             Pixel values [DN], in [0, 2^bits - 1].
         sigma : ndarray (H, W, 3) of float32
-            Standard deviation for chi-square [DN]; inf where saturated.
+            Standard deviation for chi-square [DN], finite; values at the top code are
+            saturated and enter chi-square as censored.
         """
         s = self.signal(radiance, fov_deg)
         v = self.respond(s) * self.max_code
@@ -163,5 +166,5 @@ class SensorModel:
         if radiance_sd is not None:
             ds_dl = s / np.where(radiance > 0, radiance, 1.0)           # the pixel's gain
             var = var + (self.slope(s) * self.max_code * ds_dl * radiance_sd) ** 2
-        sigma = np.where(s >= 1.0, np.inf, np.sqrt(var)).astype(np.float32)
+        sigma = np.sqrt(var).astype(np.float32)
         return values, sigma

@@ -54,7 +54,7 @@ def reflected_radiance(sky, wo, rho_d, rho_s, sigma_alpha, normalisation="ward")
     sun = (rho_d / np.pi * np.sum(np.clip(d[:, 2], 0, None) * w)
            + rho_s * np.sum(lobe, axis=-1)[..., None]) * sky.sun_radiance
     # the sky: the diffuse part (the same for every wo), and the lobe over its cap
-    diffuse = rho_d / np.pi * sky.sky_horizontal_irradiance(n=128)
+    diffuse = rho_d / np.pi * sky.sky_horizontal_irradiance()
     mirror = wo * [-1.0, -1.0, 1.0]
     d, w = cap_quadrature(mirror, min(np.pi, 20 * sigma_alpha), n_r=64, n_phi=96)
     lobe = specular_lobe(d, wo_n, sigma_alpha, normalisation) * np.clip(d[..., 2], 0, None) * w

@@ -160,7 +160,7 @@ def illumination_record(sky):
             "sun_solid_angle_sr": sky.sun_solid_angle, "clear": sky.clear,
             "overcast": sky.overcast, "uniform": sky.uniform, "intermediate": sky.intermediate,
             "ground": sky.ground, "horizon_blend": sky.horizon_blend, "info": sky.info,
-            "horizontal_irradiance_W_m2": sky.horizontal_irradiance(n=128),
+            "horizontal_irradiance_W_m2": sky.horizontal_irradiance(),
             "units": "weights and radiances W m^-2 sr^-1, linear sRGB"}
 
 
