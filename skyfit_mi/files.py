@@ -104,3 +104,73 @@ def save_figure(fig, path, dpi=120):
         return atomic_write(path, lambda p: fig.savefig(p, dpi=dpi, format="png"))
     finally:
         plt.close(fig)
+
+
+#: Name of the lock file a writer holds in its output folder.
+LOCK_NAME = ".skyfit.lock"
+
+
+def _alive(pid):
+    """Whether process ``pid`` (> 0) exists on this host."""
+    if not isinstance(pid, int) or pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:                      # someone else's process: it exists
+        return True
+    return True
+
+
+class FolderLock:
+    """Exclusive use of an output folder by one process (a context manager).
+
+    The lock is a file holding the owner's host, process id and start time, created with
+    O_EXCL so two writers cannot both take it.  A lock whose process no longer exists on this
+    host is stale (the owner was killed): it is taken over, and ``stale`` says so.
+    """
+
+    def __init__(self, folder, what="output folder"):
+        self.path = Path(folder) / LOCK_NAME
+        self.what = what
+        self.stale = None
+
+    def _owner(self):
+        try:
+            return json.loads(self.path.read_text())
+        except (OSError, ValueError):
+            return None
+
+    def __enter__(self):
+        import socket
+
+        ensure_dir(self.path.parent, self.what)
+        me = {"host": socket.gethostname(), "pid": os.getpid(),
+              "since": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")}
+        for _ in range(2):
+            try:
+                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666 & ~_umask())
+            except FileExistsError:
+                owner = self._owner()
+                if owner is None or (owner.get("host") == me["host"]
+                                     and not _alive(owner.get("pid"))):
+                    self.stale = owner or {}
+                    self.path.unlink(missing_ok=True)
+                    continue
+                raise OutputError(
+                    f"{self.what} {str(self.path.parent)!r} is in use by process {owner.get('pid')}"
+                    f" on {owner.get('host')} since {owner.get('since')}; wait for it to finish, "
+                    f"or, if that run no longer exists, delete {self.path}.") from None
+            except OSError as exc:
+                raise OutputError(f"cannot lock {self.what} {str(self.path.parent)!r}: "
+                                  f"{exc.strerror or exc}.") from None
+            with os.fdopen(fd, "w") as f:
+                json.dump(me, f)
+            return self
+        raise OutputError(f"cannot lock {self.what} {str(self.path.parent)!r}: another process "
+                          "keeps taking it.")
+
+    def __exit__(self, *exc):
+        self.path.unlink(missing_ok=True)
+        return False

@@ -138,7 +138,7 @@ def test_frames_are_checked_on_load(day, tmp_path):
     with pytest.raises(SkyfitError, match="frame 5 .* no finite value"):
         load_observations(out, px)
     write_exr(out / f5["sensor"], np.zeros((10, 12, 3), np.float32))        # another size
-    with pytest.raises(SkyfitError, match="frame 5: .* is 12x10 .* camera is 12x12"):
+    with pytest.raises(SkyfitError, match="frame 5: .* is 12x10 .* not the camera.s 12x12"):
         load_observations(out, px)
     (out / f5["sensor"]).write_bytes((out / f7["sensor"]).read_bytes()[:200])  # truncated
     with pytest.raises(SkyfitError, match="frame 5: cannot read"):

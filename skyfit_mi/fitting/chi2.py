@@ -96,19 +96,13 @@ def subsample_region(pixels, max_pixels, seed):
 def _region_values(root, frame, key, pixels, shape):
     """The region's values in one frame's EXR ``frame[key]``, checked: readable, of the
     manifest's size."""
-    from ..render.image import read_exr
+    from ..render.image import read_exr_checked
 
-    path = root / frame[key]
     try:
-        img = read_exr(path)
-    except Exception as exc:          # Mitsuba raises RuntimeError for unreadable files
-        raise SkyfitError(f"frame {frame['index']}: cannot read {path} ({str(exc).splitlines()[0]});"
-                          " render the sequence again (it resumes and replaces damaged frames).") \
-            from None
-    if img.shape != shape:
-        raise SkyfitError(f"frame {frame['index']}: {path} is {img.shape[1]}x{img.shape[0]} with "
-                          f"{img.shape[2] if img.ndim == 3 else 1} channels, but the manifest's "
-                          f"camera is {shape[1]}x{shape[0]} RGB; it does not belong to this sequence.")
+        img = read_exr_checked(root / frame[key], shape)
+    except SkyfitError as exc:
+        raise SkyfitError(f"frame {frame['index']}: {exc}; render the sequence again (it resumes "
+                          "and replaces damaged frames).") from None
     return img[pixels[:, 1], pixels[:, 0]]
 
 

@@ -2,10 +2,10 @@
 
 The output folder holds::
 
-    manifest.json            the contract with fitting (schema skyfit-manifest/1)
+    manifest.json            the contract with fitting (schema skyfit-manifest/2)
     frames/radiance_NNN.exr  linear RGB radiance [W m^-2 sr^-1]
     frames/sensor_NNN.exr    the sensor model's pixel values [DN] (integers stored as float)
-    frames/sigma_NNN.exr     per-pixel standard deviation for chi-square [DN]; inf = saturated
+    frames/sigma_NNN.exr     per-pixel standard deviation for chi-square [DN]
                              (sensor noise, quantisation and the render's Monte Carlo error)
     contact_sheet.png        the day at the sensor's exposure (sRGB preview)
 
@@ -14,20 +14,35 @@ Each frame is rendered as two half-spp passes with seeds ``seed + index`` and
 ``numpy.random.default_rng([seed, index])``, so a frame does not depend on
 which frames were rendered before it: an interrupted run resumes where it
 stopped and gives the same files as an uninterrupted one.
+
+The steps are separate so that relighting and photograph ingest reuse them:
+:func:`prepare_folder` (lock held: refuse another run's folder, verify the frames kept
+for a resume), :class:`FrameRenderer` (the Mitsuba scene; radiance and its Monte Carlo
+error per frame), :func:`capture_frame` (the sensor model), :func:`write_frame`,
+:func:`manifest_header` and :func:`finish` (contact sheet, complete manifest).
 """
 
 import datetime as dt
-import json
 import time
 from pathlib import Path
 
 import numpy as np
 
+from ..errors import SkyfitError
+from ..files import FolderLock, ensure_dir
 from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
-from ..errors import SkyfitError
 from ..render.scene_xml import pass_spp
-from .manifest import SCHEMA, illumination_record, sensor_record, versions, write_manifest
+from .manifest import (SCHEMA, ManifestError, illumination_record, load_manifest, manifest_file,
+                       sensor_record, versions, write_manifest)
+
+#: The files of one frame, by kind.
+FRAME_FILES = ("radiance", "sensor", "sigma")
+
+
+def frame_names(index):
+    """Paths of frame ``index``'s files relative to the output folder, by kind."""
+    return {k: f"frames/{k}_{index:03d}.exr" for k in FRAME_FILES}
 
 
 def resolve_exposure(spec):
@@ -40,7 +55,7 @@ def resolve_exposure(spec):
     e = spec.sensor["exposure"]
     if e != "auto":
         return float(e)
-    lum = [float(f.sky.horizontal_irradiance(n=128) @ SRGB_LUMINANCE) for f in spec.frames
+    lum = [float(f.sky.horizontal_irradiance() @ SRGB_LUMINANCE) for f in spec.frames
            if not f.skipped]
     peak = max(lum, default=0.0)
     if peak <= 0:
@@ -49,97 +64,198 @@ def resolve_exposure(spec):
     return 0.8 * np.pi / peak
 
 
-def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
-    """Render every frame of a validated spec into ``out_dir``; returns the manifest dict.
+def spec_sensor(spec):
+    """The spec's :class:`SensorModel` (exposure resolved)."""
+    return SensorModel(exposure=resolve_exposure(spec),
+                       **{k: spec.sensor[k] for k in ("response", "gamma", "bits", "noise_percent",
+                                                      "cos4")})
 
-    Refuses a folder that holds another run's manifest unless ``overwrite``;
-    resumes a folder that holds this run's (complete frames are kept).
+
+def _clear(out):
+    """Remove an earlier run's files (only the names a render writes) from ``out``."""
+    for p in [out / "manifest.json", out / "contact_sheet.png",
+              *(out / "frames").glob("*_[0-9][0-9][0-9]*.exr")]:
+        if p.name.split("_")[0] in FRAME_FILES or p.parent == out:
+            p.unlink(missing_ok=True)
+
+
+def prepare_folder(out, run_id, shape, overwrite=False, log=print):
+    """Make ``out`` ready for run ``run_id`` (call with the folder's lock held); returns the
+    frame records that a resume keeps, by index.
+
+    A folder holding another run's manifest, or a damaged one, is refused unless
+    ``overwrite``, which always starts clean (the earlier run's files removed).  For a
+    resume, each kept frame's files are read back and checked (readable, of the camera's
+    ``shape``); a damaged frame is rendered again.
     """
-    from ..render import setup
-    from ..render.daylight import update_sky
-    from ..render.frame import render_with_error
-    from ..render.image import contact_sheet, read_exr, write_exr, write_png
-    from ..render.scene_xml import load_scene
+    from ..render.image import read_exr_checked
 
-    out = Path(out_dir)
-    run_id = spec.run_id()
-    mpath = out / "manifest.json"
-    done = {}
-    if mpath.exists():
-        old = json.loads(mpath.read_text())
-        if old.get("run_id") != run_id and not overwrite:
-            raise SkyfitError(f"{out} holds another run ({old.get('name')!r}, run {old.get('run_id')});"
-                              " render into an empty folder, or pass --overwrite to replace it.")
-        if old.get("run_id") == run_id:
-            done = {f["index"]: f for f in old["frames"] if f["status"] == "rendered"
-                    and all((out / f[k]).exists() for k in ("radiance", "sensor", "sigma"))}
-    (out / "frames").mkdir(parents=True, exist_ok=True)
+    ensure_dir(out / "frames")
+    if overwrite:
+        _clear(out)
+        return {}
+    if not manifest_file(out).exists():
+        return {}
+    try:
+        old, _ = load_manifest(out)
+    except ManifestError as exc:
+        raise SkyfitError(f"{exc} To replace that run, pass --overwrite.") from None
+    if old.get("run_id") != run_id:
+        raise SkyfitError(f"{out} holds another run ({old.get('name')!r}, run {old.get('run_id')});"
+                          " render into an empty folder, or pass --overwrite to replace it.")
+    kept = {}
+    for f in old["frames"]:
+        if f["status"] != "rendered":
+            continue
+        try:
+            for k in FRAME_FILES:
+                read_exr_checked(out / f[k], shape)
+        except SkyfitError as exc:
+            log(f"frame {f['index']}: {exc}; rendering it again")
+            continue
+        kept[f["index"]] = f
+    return kept
 
-    mi = setup(spec.render["variant"])
-    scene, params, mats, to_world, xml = load_scene(spec)
-    sensor = SensorModel(exposure=resolve_exposure(spec),
-                         **{k: spec.sensor[k] for k in ("response", "gamma", "bits", "noise_percent",
-                                                        "cos4")})
+
+class FrameRenderer:
+    """A spec's scene in Mitsuba: the radiance of each frame's sky and its Monte Carlo error."""
+
+    def __init__(self, spec):
+        from ..render import setup
+        from ..render.scene_xml import load_scene
+
+        self.mi = setup(spec.render["variant"])
+        self.scene, self.params, self.materials, self.to_world, self.xml = load_scene(spec)
+        self.seed = int(spec.render["seed"])
+        self.half = pass_spp(spec.render["spp"], spec.render["sampler"])
+
+    def render(self, frame):
+        """(radiance (H, W, 3) [W m^-2 sr^-1], its standard error) of a spec frame."""
+        from ..render.daylight import update_sky
+        from ..render.frame import render_with_error
+
+        update_sky(self.params, frame.sky, "sky.")
+        return render_with_error(self.mi, self.scene, self.params, self.seed + frame.index,
+                                 self.half)
+
+
+def capture_frame(sensor, radiance, radiance_sd, seed, index, fov_deg):
+    """The sensor's pixel values and sigmas [DN] for frame ``index``, its noise seeded by
+    ``numpy.random.default_rng([seed, index])``; and whether the frame is dark (all zero)."""
+    values, sigma = sensor.capture(radiance, np.random.default_rng([seed, index]),
+                                   fov_deg=fov_deg, radiance_sd=radiance_sd)
+    return values, sigma, not np.any(values > 0)
+
+
+def write_frame(out, index, radiance, values, sigma):
+    """Write one frame's three EXRs atomically; returns their relative paths by kind."""
+    from ..render.image import write_exr
+
+    names = frame_names(index)
+    write_exr(out / names["radiance"], radiance)
+    write_exr(out / names["sensor"], values.astype(np.float32))
+    write_exr(out / names["sigma"], sigma)
+    return names
+
+
+def manifest_header(spec, sensor, renderer):
+    """The manifest of a render of ``spec``, before any frame (status incomplete)."""
     cam = spec.camera
-    seed = int(spec.render["seed"])
-    half = pass_spp(spec.render["spp"], spec.render["sampler"])
-    manifest = {
-        "schema": SCHEMA, "source": "render", "run_id": run_id, "name": spec.raw.get("name"),
+    return {
+        "schema": SCHEMA, "source": "render", "run_id": spec.run_id(), "name": spec.raw.get("name"),
         "status": "incomplete",
         "created": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
         "spec": spec.raw, "spec_dir": spec.base_dir.resolve(),
         "location": spec.raw["location"],
-        "scene": {"file": spec.scene_file, "xml": xml, "materials": mats},
-        "camera": {"to_world": to_world, "fov_deg": cam["fov_deg"], "fov_axis": "x",
+        "scene": {"file": spec.scene_file, "xml": renderer.xml, "materials": renderer.materials},
+        "camera": {"to_world": renderer.to_world, "fov_deg": cam["fov_deg"], "fov_axis": "x",
                    "width": cam["width"], "height": cam["height"]},
         "sensor": sensor_record(sensor),
-        "render": {**spec.render, "spp_rendered": 2 * half, "integrator": "path",
+        "render": {**spec.render, "spp_rendered": 2 * renderer.half, "integrator": "path",
                    "seed_rule": "two half-spp passes with "
                    "mitsuba seeds seed + index and seed + index + 2^31; noise rng = "
                    "numpy.random.default_rng([seed, index])"},
         "versions": versions(), "frames": [],
     }
+
+
+def frame_record(frame, seed):
+    """A spec frame's manifest record without its files (time, sun, illumination, seed)."""
+    return {"index": frame.index, "time": frame.time.isoformat(),
+            "time_utc": frame.time.astimezone(dt.timezone.utc).isoformat(),
+            "sun_zenith_deg": frame.sun_zenith_deg, "sun_azimuth_deg": frame.sun_azimuth_deg,
+            "below_horizon": frame.sun_zenith_deg >= 90.0,
+            "illumination": illumination_record(frame.sky), "seed": seed + frame.index}
+
+
+def finish(out, manifest, exposure):
+    """Write the contact sheet and the complete manifest; returns the rendered frames' count."""
+    from ..render.image import contact_sheet, read_exr, write_png
+
+    manifest["status"] = "complete"
+    rendered = [read_exr(out / r["radiance"]) for r in manifest["frames"] if r["status"] == "rendered"]
+    if rendered:
+        write_png(out / "contact_sheet.png", contact_sheet(rendered, exposure))
+    write_manifest(out, manifest)
+    return len(rendered)
+
+
+def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
+    """Render every frame of a validated spec into ``out_dir``; returns the manifest dict.
+
+    The folder is locked while the run lasts (a second run into it is refused).  A folder
+    holding another run is refused unless ``overwrite`` (which starts clean); a folder holding
+    this run is resumed (its verified frames are kept).
+    """
+    out = Path(out_dir)
+    with FolderLock(out) as lock:
+        if lock.stale is not None:
+            log(f"{out}: took over the lock of a run that no longer exists "
+                f"(process {lock.stale.get('pid')}); resuming")
+        return _render(spec, out, overwrite, progress, log)
+
+
+def _render(spec, out, overwrite, progress, log):
+    cam = spec.camera
+    done = prepare_folder(out, spec.run_id(), (cam["height"], cam["width"], 3), overwrite, log)
+    sensor = spec_sensor(spec)
+    renderer = FrameRenderer(spec)
+    manifest = manifest_header(spec, sensor, renderer)
     bar = None
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=len(spec.frames), desc="render", unit="frame", initial=len(done))
     for f in spec.frames:
-        rec = {"index": f.index, "time": f.time.isoformat(),
-               "time_utc": f.time.astimezone(dt.timezone.utc).isoformat(),
-               "sun_zenith_deg": f.sun_zenith_deg,
-               "sun_azimuth_deg": f.sun_azimuth_deg, "below_horizon": f.sun_zenith_deg >= 90.0,
-               "illumination": illumination_record(f.sky), "seed": seed + f.index}
-        names = {k: f"frames/{k}_{f.index:03d}.exr" for k in ("radiance", "sensor", "sigma")}
+        rec = frame_record(f, renderer.seed)
         if f.skipped:
             rec["status"] = "skipped"
             log(f"frame {f.index} at {f.time:%H:%M}: sun below the horizon, skipped as the spec says")
         elif f.index in done:
-            rec.update(status="rendered", **names)
+            rec.update(status="rendered", **{k: done[f.index][k] for k in FRAME_FILES},
+                       **({"dark": True} if done[f.index].get("dark") else {}))
         else:
-            update_sky(params, f.sky, "sky.")
             t0 = time.perf_counter()
-            img, img_sd = render_with_error(mi, scene, params, seed + f.index, half)
+            img, img_sd = renderer.render(f)
             rec["render_seconds"] = time.perf_counter() - t0
-            values, sigma = sensor.capture(img, np.random.default_rng([seed, f.index]),
-                                           fov_deg=cam["fov_deg"], radiance_sd=img_sd)
-            write_exr(out / names["radiance"], img)
-            write_exr(out / names["sensor"], values.astype(np.float32))
-            write_exr(out / names["sigma"], sigma)
-            rec.update(status="rendered", **names)
+            values, sigma, dark = capture_frame(sensor, img, img_sd, renderer.seed, f.index,
+                                                cam["fov_deg"])
+            rec.update(status="rendered", **write_frame(out, f.index, img, values, sigma))
+            if dark:
+                rec["dark"] = True
+                log(f"frame {f.index} at {f.time:%H:%M}: black at this exposure (no light reached "
+                    "the camera); kept and marked dark in the manifest")
             if bar is not None:
                 bar.update(1)
         manifest["frames"].append(rec)
         if "render_seconds" in rec:               # checkpoint: the frames so far, the rest pending
             pending = [{"index": g.index, "status": "pending"} for g in spec.frames[f.index + 1:]]
-            write_manifest(mpath, {**manifest, "frames": manifest["frames"] + pending})
+            write_manifest(out, {**manifest, "frames": manifest["frames"] + pending})
     if bar is not None:
         bar.close()
-    manifest["status"] = "complete"
-    rendered = [read_exr(out / r["radiance"]) for r in manifest["frames"] if r["status"] == "rendered"]
-    if rendered:
-        write_png(out / "contact_sheet.png", contact_sheet(rendered, sensor.exposure))
-    write_manifest(mpath, manifest)
+    n = finish(out, manifest, sensor.exposure)
     skipped = sum(r["status"] == "skipped" for r in manifest["frames"])
-    log(f"{len(rendered)} frames rendered ({len(done)} kept from an earlier run), {skipped} skipped;"
-        f" manifest, frames and contact sheet in {out.resolve()}")
+    dark = sum(bool(r.get("dark")) for r in manifest["frames"])
+    log(f"{n} frames rendered ({len(done)} kept from an earlier run), {skipped} skipped"
+        + (f", {dark} dark" if dark else "")
+        + f"; manifest, frames and contact sheet in {out.resolve()}")
     return manifest

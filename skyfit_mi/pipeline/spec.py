@@ -20,6 +20,8 @@ import numpy as np
 from ..physics.camera import SensorModel
 from ..errors import SkyfitError
 from ..physics.gensky import from_gensky
+from ..render.scene import camera_matrix
+from ..render.scene_xml import resolve_materials
 from ..render.variant import VARIANTS
 from ..physics.sky import EFFICACY_CLEAR, EFFICACY_OVERCAST, SKY_TYPES, cie_sky
 from ..physics.sun import solar_position
@@ -73,10 +75,32 @@ def _num(section, key, v, lo=-np.inf, hi=np.inf, integer=False):
     return int(v) if integer else float(v)
 
 
+def _plain(v):
+    """The spec with TOML's native dates and times (``date = 2026-08-16``, unquoted) as the ISO
+    strings a quoted value gives, so that both spellings mean the same and the spec is JSON."""
+    if isinstance(v, dict):
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, list):
+        return [_plain(x) for x in v]
+    if isinstance(v, (dt.datetime, dt.date, dt.time)):
+        return v.isoformat()
+    return v
+
+
+#: Offsets from UTC that exist in civil time [hours] (UTC-12 to UTC+14).
+UTC_OFFSETS = (-12.0, 14.0)
+
+
 def _tz(name):
-    if isinstance(name, str) and name[:1] in "+-" and len(name) == 6 and name[3] == ":":
-        sign = 1 if name[0] == "+" else -1
-        return dt.timezone(sign * dt.timedelta(hours=int(name[1:3]), minutes=int(name[4:6])))
+    if isinstance(name, str) and name[:1] in "+-" and ":" in name:
+        hh, _, mm = name[1:].partition(":")
+        if not (hh.isdigit() and mm.isdigit() and len(mm) == 2):
+            raise SpecError(f"[location] timezone {name!r} is not an offset; write it as '+01:00'.")
+        hours = (1 if name[0] == "+" else -1) * (int(hh) + int(mm) / 60)
+        if not UTC_OFFSETS[0] <= hours <= UTC_OFFSETS[1] or int(mm) >= 60:
+            raise SpecError(f"[location] timezone {name!r} is not a civil time offset; give one "
+                            "from '-12:00' to '+14:00' (minutes below 60).")
+        return dt.timezone(dt.timedelta(hours=hours))
     try:
         return ZoneInfo(str(name))
     except (ZoneInfoNotFoundError, ValueError):
@@ -88,10 +112,16 @@ def _clock(s, date, tz, key):
     try:
         if "T" in str(s) or len(str(s)) > 8:
             t = dt.datetime.fromisoformat(str(s))
+            if t.tzinfo is not None:
+                off = t.utcoffset() / dt.timedelta(hours=1)
+                if not UTC_OFFSETS[0] <= off <= UTC_OFFSETS[1]:
+                    raise ValueError(off)
             return t if t.tzinfo else t.replace(tzinfo=tz)
+        if date is None:
+            raise ValueError(s)
         hh, mm = (int(x) for x in str(s).split(":")[:2])
         return dt.datetime.combine(date, dt.time(hh, mm), tzinfo=tz)
-    except (ValueError, TypeError):
+    except (ValueError, TypeError, OverflowError):
         raise SpecError(f"[time] {key} {s!r} is not a time; write 'HH:MM' (on [time] date) or an "
                         "ISO date-time such as '2026-06-21T06:00'.") from None
 
@@ -143,7 +173,7 @@ def load_spec(path):
 
 def validate_spec(raw, base_dir="."):
     """Validate a spec dictionary and resolve its frames; returns :class:`Spec`."""
-    raw = copy.deepcopy(raw)
+    raw = _plain(copy.deepcopy(raw))
     base_dir = Path(base_dir)
     if not isinstance(raw, dict):
         raise SpecError("a spec must be a table of sections ([location], [time], ...).")
@@ -186,6 +216,10 @@ def validate_spec(raw, base_dir="."):
     sensor = _sensor(raw.get("sensor", {}))
     camera = _camera(raw["camera"])
     materials = _materials(raw.get("materials", {}))
+    try:
+        resolve_materials(scene_file, materials)       # the scene parses; its overrides exist
+    except SkyfitError as exc:
+        raise SpecError(f"[materials] {exc}") from None
 
     pos = solar_position(times, lat, lon, elevation=elevation)
     entries = _sky_entries(raw.get("sky", {"type": "clear"}), times, tz)
@@ -225,8 +259,11 @@ def _times(sec, tz):
         out = [start + k * dt.timedelta(minutes=step) for k in range(n)]
     if len(out) > 10000:
         raise SpecError(f"[time] gives {len(out)} frames; at most 10000.")
-    if len(set(out)) != len(out):
-        raise SpecError("[time] lists the same time twice.")
+    for a, b in zip(out, out[1:]):
+        if b <= a:
+            raise SpecError(f"[time] times must increase: {b.isoformat()} "
+                            f"{'repeats' if a == b else 'comes after'} {a.isoformat()}; list each "
+                            "time once, in order.")
     return out
 
 
@@ -274,13 +311,21 @@ def _camera(sec):
     for k in ("target", "origin", "up"):
         if k in c and (not isinstance(c[k], list) or len(c[k]) != 3):
             raise SpecError(f"[camera] {k} must be a list of 3 numbers [x east, y north, z up].")
-    if "matrix" in c:
-        m = np.asarray(c["matrix"], dtype=float)
-        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-            raise SpecError("[camera] matrix must be 4 rows of 4 numbers (the camera's to_world).")
+        for i, v in enumerate(c.get(k, ())):
+            _num("camera", f"{k}[{i}]", v)
+    if "matrix" in c and (not isinstance(c["matrix"], list) or len(c["matrix"]) != 4 or not all(
+            isinstance(row, list) and len(row) == 4 for row in c["matrix"])):
+        raise SpecError("[camera] matrix must be 4 rows of 4 numbers (the camera's to_world).")
+    for i, row in enumerate(c.get("matrix", ())):
+        for j, v in enumerate(row):
+            _num("camera", f"matrix[{i}][{j}]", v)
     _num("camera", "fov_deg", c["fov_deg"], 0.1, 170)
     _num("camera", "width", c["width"], 1, 16384, integer=True)
     _num("camera", "height", c["height"], 1, 16384, integer=True)
+    try:
+        camera_matrix(c)
+    except SkyfitError as exc:
+        raise SpecError(f"[camera] {exc}") from None
     return c
 
 
@@ -339,6 +384,9 @@ def _sky_entries(sec, times, tz):
             raise SpecError(f"[sky] type {e['type']!r} is unknown; valid: {', '.join(SKY_KINDS)}.")
         if e["type"] == "intermediate" and "phi" not in e:
             raise SpecError("[sky] an intermediate sky needs phi (sun probability) in [0, 1].")
+        if "phi" in e and e["type"] != "intermediate":
+            raise SpecError(f"[sky] phi (the sun's probability) belongs to an intermediate sky, not "
+                            f"to a {e['type']} one; drop phi or set type = 'intermediate'.")
         if "phi" in e:
             _num("sky", "phi", e["phi"], 0, 1)
     return out

@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from ..errors import SkyfitError
 from ..files import atomic_write
 
 
@@ -18,6 +19,20 @@ def read_exr(path):
     import mitsuba as mi
 
     return np.array(mi.Bitmap(str(path)), dtype=np.float32)
+
+
+def read_exr_checked(path, shape):
+    """:func:`read_exr`, raising SkyfitError (naming the file and what is wrong) unless the
+    file reads as an image of ``shape`` (H, W, 3)."""
+    try:
+        img = read_exr(path)
+    except Exception as exc:          # Mitsuba raises RuntimeError for unreadable files
+        raise SkyfitError(f"cannot read {path} ({str(exc).splitlines()[0]})") from None
+    if img.shape != tuple(shape):
+        raise SkyfitError(f"{path} is {img.shape[1]}x{img.shape[0]} with "
+                          f"{img.shape[2] if img.ndim == 3 else 1} channels, not the camera's "
+                          f"{shape[1]}x{shape[0]} RGB")
+    return img
 
 
 def to_srgb8(image, exposure):

@@ -3,7 +3,7 @@
 import numpy as np
 
 from ..conventions import direction_from_angles
-from ..errors import check_range
+from ..errors import SkyfitError, check_range
 
 
 def camera_origin(azimuth_deg, angle_deg, distance, target=(0.0, 0.0, 0.0)):
@@ -17,15 +17,32 @@ def camera_origin(azimuth_deg, angle_deg, distance, target=(0.0, 0.0, 0.0)):
     return np.asarray(target, dtype=float) + distance * d
 
 
-def look_at(origin, target, up=(0.0, 0.0, 1.0)):
+#: The default up vector (+Z).  A view within ~2.6 degrees of it (|cos| > 0.999) uses north.
+UP = (0.0, 0.0, 1.0)
+
+
+def look_at(origin, target, up=None):
     """Camera to_world 4x4 as Mitsuba's look_at builds it (columns: left, up, forward, origin).
 
-    Looking straight down, ``up`` falls back to north (+Y), so north is up in the image.
+    With the default ``up`` (+Z), a camera looking (nearly) straight up or down takes north
+    (+Y) as up, so north is up in the image; an ``up`` given explicitly must not lie along the
+    view.  Raises SkyfitError for a camera at its target or an ``up`` along the view.
     """
-    o, t, u = (np.asarray(v, dtype=float) for v in (origin, target, up))
+    o, t = np.asarray(origin, dtype=float), np.asarray(target, dtype=float)
+    u = np.asarray(UP if up is None else up, dtype=float)
+    if not (np.all(np.isfinite(o)) and np.all(np.isfinite(t)) and np.all(np.isfinite(u))):
+        raise SkyfitError("the camera's origin, target and up must be finite numbers.")
     d = t - o
+    if np.linalg.norm(d) <= 1e-9 * max(1.0, np.linalg.norm(o)):
+        raise SkyfitError(f"the camera's origin {o.tolist()} is its target; place the camera away "
+                          "from what it looks at.")
     d /= np.linalg.norm(d)
+    if np.linalg.norm(u) == 0:
+        raise SkyfitError("the camera's up vector is zero; give a direction such as [0, 0, 1].")
     if abs(np.dot(d, u / np.linalg.norm(u))) > 0.999:
+        if up is not None:
+            raise SkyfitError(f"the camera's up {list(up)} lies along its view direction "
+                              f"{np.round(d, 3).tolist()}; give an up across the view.")
         u = np.array([0.0, 1.0, 0.0])
     left = np.cross(u, d)
     left /= np.linalg.norm(left)
@@ -34,8 +51,26 @@ def look_at(origin, target, up=(0.0, 0.0, 1.0)):
     return m
 
 
+def camera_matrix(cam):
+    """The camera's to_world 4x4 from a [camera] table (compass placement, origin + target
+    (+ up), or matrix); raises SkyfitError for a degenerate one."""
+    if "matrix" in cam:
+        m = np.asarray(cam["matrix"], dtype=float)
+        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+            raise SkyfitError("the camera matrix must be 4 rows of 4 finite numbers (to_world).")
+        if abs(np.linalg.det(m[:3, :3])) < 1e-9 or not np.allclose(m[3], [0, 0, 0, 1]):
+            raise SkyfitError("the camera matrix is not a camera placement: its 3x3 part is "
+                              "singular or its last row is not [0, 0, 0, 1].")
+        return m
+    target = cam.get("target", (0.0, 0.0, 0.0))
+    origin = cam.get("origin")
+    if origin is None:
+        origin = camera_origin(cam["azimuth_deg"], cam["angle_deg"], cam["distance"], target)
+    return look_at(origin, target, cam.get("up"))
+
+
 def perspective_sensor(origin, target=(0.0, 0.0, 0.0), fov_deg=30.0, width=256, height=256, spp=64,
-                       up=(0.0, 0.0, 1.0)):
+                       up=None):
     """A perspective camera with a box-filtered HDR film and an independent sampler."""
     import mitsuba as mi
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..physics.ward import MODELS, raw_parameters
-from .scene import camera_origin, look_at
+from .scene import camera_matrix
 
 _SCALAR_TAGS = {"float": float, "integer": int, "string": str,
                 "boolean": lambda v: v.lower() == "true"}
@@ -39,7 +39,11 @@ def scene_materials(tree):
 
 def resolve_materials(scene_file, overrides):
     """Scene materials with the spec's ``overrides`` applied, validated."""
-    tree = ET.parse(scene_file)
+    try:
+        tree = ET.parse(scene_file)
+    except ET.ParseError as exc:
+        raise SkyfitError(f"scene file {scene_file} is not valid XML ({exc}); repair it or "
+                          "choose a shipped scene.") from None
     mats = scene_materials(tree)
     for name, m in overrides.items():
         if name not in mats:
@@ -52,16 +56,6 @@ def resolve_materials(scene_file, overrides):
         rho_d, rho_s, sigma = raw_parameters(m["model"], **params)
         m["raw"] = {"rho_d": rho_d.tolist(), "rho_s": rho_s.tolist(), "sigma_alpha": sigma}
     return tree, mats
-
-
-def camera_matrix(cam):
-    """The camera's to_world from a validated [camera] table."""
-    if "matrix" in cam:
-        return np.asarray(cam["matrix"], dtype=float)
-    origin = cam.get("origin")
-    if origin is None:
-        origin = camera_origin(cam["azimuth_deg"], cam["angle_deg"], cam["distance"], cam["target"])
-    return look_at(origin, cam["target"], cam.get("up", [0.0, 0.0, 1.0]))
 
 
 def _sub(parent, tag, **attrs):

@@ -1,0 +1,78 @@
+"""`skyfit render`'s output folder: locked, verified on resume, started clean on --overwrite."""
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from skyfit_mi.errors import OutputError, SkyfitError
+from skyfit_mi.files import LOCK_NAME, FolderLock
+from skyfit_mi.pipeline.sequence import render_sequence
+from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
+
+
+def _spec(tmp_path, **render):
+    raw = thesis_disc_spec("folder", {"model": "two", "rho_s": 0.3, "sigma_alpha": 0.1}, size=8,
+                           spp=4, exposure=0.0015)
+    raw["time"] = {"date": "2026-06-21", "times": ["09:00", "12:00", "15:00"]}
+    raw["render"].update(render)
+    return validate_spec(raw, tmp_path)
+
+
+def _render(spec, out, **kw):
+    logs = []
+    m = render_sequence(spec, out, progress=False, log=logs.append, **kw)
+    return m, logs
+
+
+def test_a_locked_folder_is_refused_and_a_stale_lock_taken_over(tmp_path, mi):
+    out = tmp_path / "day"
+    with FolderLock(out):                                   # another run holds the folder
+        with pytest.raises(OutputError, match=f"in use by process {os.getpid()}"):
+            _render(_spec(tmp_path), out)
+        with pytest.raises(OutputError, match="in use"):
+            FolderLock(out).__enter__()
+    assert not (out / LOCK_NAME).exists()                   # released on exit
+    # a lock left by a process that no longer exists (killed) is stale
+    (out / LOCK_NAME).write_text(json.dumps({"host": os.uname().nodename, "pid": 2**22 + 12345,
+                                             "since": "2026-01-01T00:00:00+00:00"}))
+    m, logs = _render(_spec(tmp_path), out)
+    assert m["status"] == "complete" and any("took over the lock" in s for s in logs)
+    assert not (out / LOCK_NAME).exists()
+
+
+def test_resume_rerenders_damaged_frames_and_overwrite_starts_clean(tmp_path, mi):
+    from skyfit_mi.render.image import read_exr, write_exr
+
+    out = tmp_path / "day"
+    ref, _ = _render(_spec(tmp_path), out)
+    first = read_exr(out / ref["frames"][1]["radiance"])
+    p = out / ref["frames"][1]["radiance"]
+    p.write_bytes(p.read_bytes()[:100])                     # truncated
+    write_exr(out / ref["frames"][2]["sigma"], np.zeros((4, 8, 3), np.float32))   # wrong size
+    m, logs = _render(_spec(tmp_path), out)
+    assert "(1 kept from an earlier run)" in logs[-1]
+    assert any(s.startswith("frame 1: cannot read") for s in logs)
+    assert any(s.startswith("frame 2: ") and "not the camera's 8x8" in s for s in logs)
+    assert np.array_equal(read_exr(out / m["frames"][1]["radiance"]), first)
+
+    (out / "manifest.json").write_text('{"schema": "skyfit-manif')           # truncated
+    with pytest.raises(SkyfitError, match="damaged .* pass --overwrite"):
+        _render(_spec(tmp_path), out)
+    (out / "frames" / "radiance_007.exr").write_text("an older run's frame")
+    (out / "notes.txt").write_text("the user's own file")
+    m, logs = _render(_spec(tmp_path, seed=5), out, overwrite=True)
+    assert m["status"] == "complete" and "(0 kept from an earlier run)" in logs[-1]
+    assert not (out / "frames" / "radiance_007.exr").exists()          # clean: no stale frames
+    assert (out / "notes.txt").exists()                                 # but nothing else removed
+
+
+def test_black_frames_are_reported(tmp_path, mi):
+    raw = thesis_disc_spec("polar", {"model": "two", "rho_s": 0.3, "sigma_alpha": 0.1}, size=8,
+                           spp=4, exposure=1e-4)
+    raw["location"]["latitude_deg"] = 80.0                  # polar night: the sun 13 deg down
+    raw["time"] = {"date": "2026-12-21", "times": ["06:00", "12:00"]}
+    m, logs = _render(validate_spec(raw, tmp_path), tmp_path / "polar")
+    assert all(f["dark"] for f in m["frames"])
+    assert "2 dark" in logs[-1] and sum("black at this exposure" in s for s in logs) == 2

@@ -1,0 +1,112 @@
+"""Spec validation: every bad spec is refused before frame 0 with a message naming the key."""
+
+import datetime as dt
+
+import numpy as np
+import pytest
+
+from skyfit_mi.pipeline.spec import SpecError, load_spec, thesis_disc_spec, validate_spec
+
+BASE = """
+name = "t"
+[location]
+latitude_deg = 40.0
+longitude_deg = 0.0
+timezone = "{tz}"
+[time]
+{time}
+[sky]
+{sky}
+[scene]
+file = "{scene}"
+[camera]
+{camera}
+"""
+TIME = 'date = "2026-06-21"\ntimes = ["10:00", "12:00"]'
+CAMERA = "azimuth_deg = 90\nangle_deg = 45.0\ndistance = 5.0\nwidth = 8\nheight = 8"
+
+
+def _spec(tmp_path, tz="UTC", time=TIME, sky='type = "clear"', scene="disc.xml", camera=CAMERA):
+    p = tmp_path / "s.toml"
+    p.write_text(BASE.format(tz=tz, time=time, sky=sky, scene=scene, camera=camera))
+    return load_spec(p)
+
+
+def test_native_toml_dates_and_times_mean_what_quoted_ones_do(tmp_path):
+    quoted = _spec(tmp_path, time='times = ["2026-08-16T12:00:00+01:00", "2026-08-16T13:00:00+01:00"]')
+    native = _spec(tmp_path, time="times = [2026-08-16T12:00:00+01:00, 2026-08-16T13:00:00+01:00]")
+    assert [f.time for f in native.frames] == [f.time for f in quoted.frames]
+    assert native.frames[0].time.utcoffset() == dt.timedelta(hours=1)
+    assert native.raw["time"]["times"][0] == "2026-08-16T12:00:00+01:00"     # JSON-ready
+    local = _spec(tmp_path, time="date = 2026-06-21\nstart = 10:00:00\nend = 11:00:00\n"
+                                 "step_minutes = 30")
+    assert [f.time.strftime("%H:%M") for f in local.frames] == ["10:00", "10:30", "11:00"]
+    assert native.raw == quoted.raw and native.run_id() == quoted.run_id()
+
+
+@pytest.mark.parametrize("tz, match", [
+    ("+25:00", "not a civil time offset"),
+    ("+01:75", "not a civil time offset"),
+    ("+1:xx", "not an offset"),
+    ("Mars/Olympus", "not a time zone"),
+])
+def test_bad_time_zones(tmp_path, tz, match):
+    with pytest.raises(SpecError, match=match):
+        _spec(tmp_path, tz=tz)
+
+
+@pytest.mark.parametrize("time, match", [
+    ('date = "2026-06-21"\ntimes = ["12:00", "10:00"]', "must increase: .* comes after"),
+    ('date = "2026-06-21"\ntimes = ["12:00", "12:00"]', "must increase: .* repeats"),
+    ('times = ["2026-06-21T12:00+25:00"]', "is not a time"),
+    ('date = "2026-06-21"\ntimes = ["25:00"]', "is not a time"),
+    ('date = "2026-06-21"\nstart = "12:00"\nend = "10:00"\nstep_minutes = 5', "before start"),
+])
+def test_bad_times(tmp_path, time, match):
+    with pytest.raises(SpecError, match=match):
+        _spec(tmp_path, time=time)
+
+
+def test_phi_only_on_an_intermediate_sky(tmp_path):
+    for kind in ("clear", "overcast"):
+        with pytest.raises(SpecError, match="phi .* belongs to an intermediate sky"):
+            _spec(tmp_path, sky=f'type = "{kind}"\nphi = 0.5')
+    assert _spec(tmp_path, sky='type = "intermediate"\nphi = 0.5').frames
+
+
+@pytest.mark.parametrize("camera, match", [
+    ("origin = [0, 0, 0]\nwidth = 8\nheight = 8", "is its target"),
+    ("origin = [0, 0, 5]\nup = [0, 0, 1]\nwidth = 8\nheight = 8", "lies along its view"),
+    ("origin = [nan, 0, 5]\nwidth = 8\nheight = 8", r"origin\[0\] must be a number"),
+    ("origin = [1, 0, 5]\nup = [0, 0, 0]\nwidth = 8\nheight = 8", "up vector is zero"),
+    (CAMERA + "\nfov_deg = 0", "fov_deg = 0 is outside"),
+    (CAMERA + "\nfov_deg = nan", "fov_deg must be a number"),
+    ("matrix = [[1,0,0,0],[0,1,0,0],[0,0,0,0],[0,0,0,1]]", "singular"),
+    ("matrix = [[1,0,0],[0,1,0]]", "4 rows of 4 numbers"),
+])
+def test_degenerate_cameras(tmp_path, camera, match):
+    with pytest.raises(SpecError, match=match):
+        _spec(tmp_path, camera=camera)
+
+
+def test_straight_down_camera_takes_north_as_up(tmp_path):
+    s = _spec(tmp_path, camera="origin = [0, 0, 5]\nwidth = 8\nheight = 8")
+    assert s.frames
+
+
+def test_malformed_scene_xml_and_unknown_material(tmp_path):
+    (tmp_path / "bad.xml").write_text("<scene version='3.0.0'><bsdf type='ward' id='x'>")
+    with pytest.raises(SpecError, match="bad.xml is not valid XML"):
+        _spec(tmp_path, scene="bad.xml")
+    raw = thesis_disc_spec("t", {"model": "two", "rho_s": 0.5, "sigma_alpha": 0.1})
+    raw["materials"] = {"nosuch": raw["materials"]["disc"]}
+    with pytest.raises(SpecError, match="'nosuch' is not a ward material of disc.xml"):
+        validate_spec(raw)
+
+
+def test_measured_levels_scale_sky_and_ground(tmp_path):
+    s = _spec(tmp_path, sky='type = "clear"\ndiffuse_horizontal_W_m2 = 50.0\n'
+                            'direct_normal_W_m2 = 400.0')
+    sky = s.frames[0].sky
+    albedo = sky.info.get("ground_albedo", 0.2)
+    np.testing.assert_allclose(sky.ground, albedo * sky.horizontal_irradiance() / np.pi, rtol=1e-3)
