@@ -1,12 +1,84 @@
-"""The ``skyfit`` command: thin argument parsing over the package."""
+"""The ``skyfit`` command: thin argument parsing over the package.
+
+Every user error ends in one line on stderr naming the input and what is allowed, exit
+code 2; Ctrl-C exits 130 and leaves what was finished (a render resumes, fits already
+written stay); ``--debug`` shows the traceback of any error.
+"""
 
 import argparse
+import re
 import sys
 
 from .errors import SetupError, SkyfitError
 from .render.light_cache import DIRECTIONS, POSITIONS
 
+DESCRIPTION = ("Render daylight image sequences, fit Ward reflection models to them, and map "
+               "the materials a camera sees.")
+#: A region's name becomes part of file names (fit_NAME.json): letters, digits, _ . -
+REGION_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors as one line: what was wrong and where to read more."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
+
+
+# ---- argument types: each raises ArgumentTypeError, which argparse turns into one line -------
+def _int_in(lo, hi=None):
+    def parse(text):
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        if v < lo or (hi is not None and v > hi):
+            raise argparse.ArgumentTypeError(
+                f"{v} is outside [{lo}, {hi}]" if hi is not None else f"{v} is below {lo}")
+        return v
+    parse.__name__ = "whole number"
+    return parse
+
+
+def _numbers(text):
+    try:
+        return [float(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not comma-separated numbers "
+                                         "(e.g. 0.5,0.1)") from None
+
+
+def _named(text, what="NAME=VALUE"):
+    name, sep, value = text.partition("=")
+    if not sep or not REGION_NAME.match(name):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not {what} with NAME of letters, digits, '_', '.' or '-'")
+    return name, value
+
+
+def _label(text):
+    name, value = _named(text)
+    try:
+        v = int(value)
+        if not 0 < v < 65536:
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: the label VALUE must be a whole number "
+                                         "1-65535 (a mask value)") from None
+    return name, v
+
+
+def _region(text):
+    from .fitting.chi2 import parse_region
+
+    name, value = _named(text, "NAME=rect:x0,y0,x1,y1 or NAME=pixels:x,y;x,y")
+    try:
+        return name, parse_region(value)
+    except SkyfitError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+# ---- commands ---------------------------------------------------------------------------------
 def _render(args):
     from .pipeline.sequence import render_sequence
     from .pipeline.spec import load_spec
@@ -23,46 +95,57 @@ def _pixels(args):
     print("wrote " + " and ".join(str(p) for p in paths))
 
 
-def _fit(args):
-    from pathlib import Path
-
-    from .fitting.chi2 import parse_region, region_from_mask, subsample_region
-    from .fitting.fit import fit_region
-    from .fitting.report import write_fit, write_summary
-
-    regions = []
-    for r in args.region or []:
-        name, sep, text = r.partition("=")
-        if not sep:
-            raise SkyfitError(f"--region {r!r}: write NAME=rect:x0,y0,x1,y1 or NAME=pixels:x,y;x,y.")
-        regions.append((name, parse_region(text)))
-    for lab in args.label or []:
-        name, sep, value = lab.partition("=")
-        if not sep or args.mask is None:
-            raise SkyfitError("--label NAME=VALUE needs --mask PNG (a label image of the frames' size).")
-        regions.append((name, region_from_mask(args.mask, int(value))))
+def _fit_regions(args):
+    """(name, pixels) of every region the arguments ask for, checked before any fitting."""
+    regions = list(args.region or [])
+    if args.label and args.mask is None:
+        raise SkyfitError("--label NAME=VALUE needs --mask PNG (a label image of the frames' size).")
+    if args.mask is not None and not args.label:
+        raise SkyfitError("--mask needs at least one --label NAME=VALUE (which mask value is "
+                          "which material).")
+    if args.label:
+        from .fitting.chi2 import region_from_mask
+        regions += [(name, region_from_mask(args.mask, value)) for name, value in args.label]
     if args.all:
         regions += _material_regions(args.manifest)
     if not regions:
         raise SkyfitError("give at least one --region NAME=rect:... (or --mask and --label, or --all).")
-    start = [float(v) for v in args.start.split(",")] if args.start else None
-    root = Path(args.manifest)
-    root = root if root.is_dir() else root.parent
-    out = Path(args.output) if args.output else root
-    results = []
+    names = [n for n, _ in regions]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise SkyfitError(f"region {twice[0]!r} is given twice; give each region once (its "
+                          f"fit is written to fit_{twice[0]}.json).")
+    return regions
+
+
+def _fit(args):
+    from pathlib import Path
+
+    from .files import ensure_dir
+    from .fitting.chi2 import subsample_region
+    from .fitting.fit import fit_region
+    from .fitting.report import write_fit, write_summary
+    from .pipeline.manifest import load_manifest
+    from .render.fit_model import BY_COUNT, check_start
+
+    model = BY_COUNT[int(args.model)]
+    _, root = load_manifest(args.manifest)
+    if args.start is not None:
+        check_start(model, args.start)
+    regions = _fit_regions(args)
+    out = ensure_dir(Path(args.output) if args.output else root)
     for name, pixels in regions:
         kept = subsample_region(pixels, args.max_pixels or None, args.seed)
         if len(kept) < len(pixels):
             print(f"{name}: fitting {len(kept)} of its {len(pixels)} pixels (--max-pixels, seed "
                   f"{args.seed})")
-        res = fit_region(args.manifest, name, kept, model=int(args.model), method=args.method,
-                         normalisation=args.normalisation, seed=args.seed, start=start,
+        res = fit_region(args.manifest, name, kept, model=model, method=args.method,
+                         normalisation=args.normalisation, seed=args.seed, start=args.start,
                          positions=args.positions, directions=args.directions)
         res["region_pixels_total"] = int(len(pixels))
         paths = write_fit(res, out / f"fit_{name}")
-        results.append(res)
-        print("wrote " + " and ".join(str(p) for p in paths))
-    print(f"wrote {write_summary(results, out / 'fits.csv')}")
+        summary = write_summary(out)              # after each region: agrees with the JSONs
+        print("wrote " + " and ".join(str(p) for p in paths) + f"; updated {summary}")
 
 
 def _material_regions(manifest):
@@ -78,6 +161,9 @@ def _material_regions(manifest):
         ys, xs = np.nonzero(binary_erosion(labels == k + 1, border_value=1))
         if name in ward and len(xs):
             regions.append((name, np.stack([xs, ys], axis=1)))
+    if not regions:
+        raise SkyfitError(f"the camera sees no Ward material of {manifest} away from its edges; "
+                          "give regions with --region.")
     return regions
 
 
@@ -100,8 +186,12 @@ def _labels(args):
     from .files import write_json
     from .render.image import write_png
 
+    out = Path(args.output) if args.output else None
+    if out is not None and out.suffix.lower() != ".png":
+        raise SkyfitError(f"-o {args.output}: the label mask is a PNG (lossless); give a path "
+                          "ending in .png.")
     _, root, labels, ids = _scene_labels(args.manifest)
-    out = Path(args.output) if args.output else root / "labels.png"
+    out = out or root / "labels.png"
     write_png(out, np.repeat(labels[..., None], 3, axis=2).astype(np.uint8))
     legend = {name: k + 1 for k, name in enumerate(ids)}
     write_json(out.with_suffix(".json"), {"labels": legend, "0": "no material"})
@@ -109,19 +199,32 @@ def _labels(args):
           + ", ".join(f"{k}={v}" for k, v in legend.items()))
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(prog="skyfit", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
-    render = sub.add_parser("render", help="render the day a sequence spec describes")
+def build_parser():
+    """The ``skyfit`` argument parser."""
+    from . import __version__
+
+    parser = _Parser(prog="skyfit", description=DESCRIPTION)
+    parser.add_argument("--version", action="version", version=f"skyfit-mi {__version__}")
+    debug_help = "show the full traceback of an error (for bug reports)"
+    parser.add_argument("--debug", action="store_true", help=debug_help)
+    common = _Parser(add_help=False)               # --debug also after the command
+    common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=debug_help)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    render = sub.add_parser("render", parents=[common], help="render the day a sequence spec describes",
+                            description="Render the day a sequence spec describes into a folder "
+                            "(frames, manifest, contact sheet); an interrupted run resumes.")
     render.add_argument("spec", help="sequence spec (.toml or .json), e.g. scenes/specs/disc_clear_east.toml")
-    render.add_argument("-o", "--output", required=True, help="output folder")
+    render.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
     render.add_argument("--overwrite", action="store_true",
-                        help="replace another run's output in the folder")
+                        help="replace another run's output in the folder (starts clean)")
     render.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     render.set_defaults(func=_render)
 
-    pixels = sub.add_parser("pixels", help="values of chosen pixels across a rendered sequence")
-    pixels.add_argument("manifest", help="folder written by `skyfit render` (or its manifest.json)")
+    manifest_help = "folder written by `skyfit render` (or its manifest.json)"
+    pixels = sub.add_parser("pixels", parents=[common], help="values of chosen pixels across a rendered sequence",
+                            description="Write chosen pixels' values across a sequence as CSV "
+                            "and a plot.")
+    pixels.add_argument("manifest", help=manifest_help)
     pixels.add_argument("--pixel", action="append", required=True, metavar="X,Y",
                         help="pixel column,row from the top left; repeat for more pixels")
     pixels.add_argument("--source", choices=("radiance", "sensor"), default="radiance",
@@ -129,39 +232,85 @@ def main(argv=None):
     pixels.add_argument("-o", "--output", help="output path prefix (default: MANIFEST/pixels_SOURCE)")
     pixels.set_defaults(func=_pixels)
 
-    labels = sub.add_parser("labels", help="label-mask PNG of the materials each pixel sees")
-    labels.add_argument("manifest", help="folder written by `skyfit render` (or its manifest.json)")
+    labels = sub.add_parser("labels", parents=[common], help="label-mask PNG of the materials each pixel sees",
+                            description="Write a label-mask PNG (pixel value = material) and "
+                            "its legend JSON, for `skyfit fit --mask`.")
+    labels.add_argument("manifest", help=manifest_help)
     labels.add_argument("-o", "--output", help="PNG path (default: MANIFEST/labels.png)")
     labels.set_defaults(func=_labels)
 
-    fit = sub.add_parser("fit", help="fit Ward parameters to material regions of a sequence")
-    fit.add_argument("manifest", help="folder written by `skyfit render` (or its manifest.json)")
-    fit.add_argument("--region", action="append", metavar="NAME=rect:x0,y0,x1,y1",
+    fit = sub.add_parser("fit", parents=[common], help="fit Ward parameters to material regions of a sequence",
+                         description="Fit Ward reflection parameters, with 95% intervals and "
+                         "warnings, to material regions of a rendered sequence.")
+    fit.add_argument("manifest", help=manifest_help)
+    fit.add_argument("--region", action="append", type=_region, metavar="NAME=rect:x0,y0,x1,y1",
                      help="a material region (NAME = the material id); also NAME=pixels:x,y;x,y")
     fit.add_argument("--mask", help="label-mask PNG (values per material), with --label")
-    fit.add_argument("--label", action="append", metavar="NAME=VALUE",
+    fit.add_argument("--label", action="append", type=_label, metavar="NAME=VALUE",
                      help="the mask value of material NAME")
     fit.add_argument("--all", action="store_true",
                      help="fit every Ward material the camera sees (regions from the label image)")
-    fit.add_argument("--max-pixels", type=int, default=64,
+    fit.add_argument("--max-pixels", type=_int_in(0), default=64,
                      help="fit at most this many pixels of a region, a seeded random subset "
                      "(default 64; 0 = every pixel)")
-    fit.add_argument("--model", choices=("2", "3", "5"), default="2",
-                     help="2: rho_s, sigma_alpha; 3: R, rho_s, sigma_alpha; 5: C, rho_s, sigma_alpha")
-    fit.add_argument("--method", choices=("global", "lm", "anneal", "adam"), default="global")
-    fit.add_argument("--normalisation", choices=("ward", "duer", "balanced"), default="ward")
-    fit.add_argument("--start", help="starting parameters, comma-separated (lm, anneal, adam)")
-    fit.add_argument("--seed", type=int, default=0, help="seed of the light cache and random starts")
-    fit.add_argument("--positions", type=int, default=POSITIONS, help="light-cache positions per pixel")
-    fit.add_argument("--directions", type=int, default=DIRECTIONS, help="light-cache directions per position")
+    fit.add_argument("--model", choices=("2", "3", "5"), default="5",
+                     help="5 (default): C (RGB diffuse colour), rho_s, sigma_alpha; "
+                     "3: R, rho_s, sigma_alpha; 2: rho_s, sigma_alpha (thesis 7.1)")
+    fit.add_argument("--method", choices=("global", "lm", "anneal", "adam"), default="global",
+                     help="global (default: grid over sigma_alpha then Levenberg-Marquardt; "
+                     "right from any start), lm (the thesis's baseline), anneal (simulated "
+                     "annealing over full renders), adam (gradient descent)")
+    fit.add_argument("--normalisation", choices=("ward", "duer", "balanced"), default="ward",
+                     help="normalisation of Ward's specular lobe (default ward, the thesis's)")
+    fit.add_argument("--start", type=_numbers, metavar="A,B,...",
+                     help="starting parameters in the model's order, comma-separated (lm, anneal,"
+                     " adam; default a seeded random start)")
+    fit.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,
+                     help="seed of the light cache, random starts and subsets (default 0)")
+    fit.add_argument("--positions", type=_int_in(1, 4096), default=POSITIONS,
+                     help=f"light-cache positions per pixel (default {POSITIONS})")
+    fit.add_argument("--directions", type=_int_in(1, 1 << 16), default=DIRECTIONS,
+                     help=f"light-cache directions per position (default {DIRECTIONS})")
     fit.add_argument("-o", "--output", help="output folder (default: the manifest's folder)")
     fit.set_defaults(func=_fit)
-    args = parser.parse_args(argv)
+    return parser
+
+
+def _oneline(exc):
+    return " ".join(str(exc).split())
+
+
+def main(argv=None):
+    """Run ``skyfit`` with ``argv``; returns the exit code."""
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:              # --help, --version, or a usage error (already printed)
+        return exc.code
     try:
         args.func(args)
+    except KeyboardInterrupt:
+        if args.debug:
+            raise
+        print("skyfit: interrupted; finished work is kept (run the same command again: a render "
+              "resumes, written fits stay).", file=sys.stderr)
+        return 130
     except (SkyfitError, SetupError) as exc:
-        print(f"skyfit: error: {exc}", file=sys.stderr)
+        if args.debug:
+            raise
+        print(f"skyfit: error: {_oneline(exc)}", file=sys.stderr)
         return 2
+    except OSError as exc:                 # a path the package did not anticipate
+        if args.debug:
+            raise
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"skyfit: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except Exception as exc:               # a bug: one line, the traceback with --debug
+        if args.debug:
+            raise
+        print(f"skyfit: internal error ({type(exc).__name__}: {_oneline(exc)}); run again with "
+              "--debug for the traceback and report it.", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -76,3 +76,34 @@ def test_black_frames_are_reported(tmp_path, mi):
     m, logs = _render(validate_spec(raw, tmp_path), tmp_path / "polar")
     assert all(f["dark"] for f in m["frames"])
     assert "2 dark" in logs[-1] and sum("black at this exposure" in s for s in logs) == 2
+
+
+def test_clean_runs_agree_to_float32_rounding(tmp_path, mi):
+    """The promise (README, docs/MANIFEST.md): a render of the same spec in another process,
+    even from an empty kernel cache, gives the same sensor values and radiance and sigma equal
+    to 1e-6 relative (the parallel film accumulation's float32 rounding order may differ)."""
+    import subprocess
+    import sys
+
+    from skyfit_mi.render.image import read_exr
+
+    raw_spec = _spec(tmp_path)
+    a, _ = _render(raw_spec, tmp_path / "a")
+    code = ("import sys; from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec; "
+            "from skyfit_mi.pipeline.sequence import render_sequence; "
+            "raw = thesis_disc_spec('folder', {'model': 'two', 'rho_s': 0.3, 'sigma_alpha': 0.1}, "
+            "size=8, spp=4, exposure=0.0015); "
+            "raw['time'] = {'date': '2026-06-21', 'times': ['09:00', '12:00', '15:00']}; "
+            "render_sequence(validate_spec(raw, sys.argv[2]), sys.argv[1], progress=False, "
+            "log=lambda *a: None)")
+    env = {**os.environ, "HOME": str(tmp_path / "home")}          # an empty kernel cache
+    subprocess.run([sys.executable, "-c", code, str(tmp_path / "b"), str(tmp_path)], check=True,
+                   env=env, timeout=600)
+    b = json.loads((tmp_path / "b" / "manifest.json").read_text())
+    assert a["run_id"] == b["run_id"]
+    for fa, fb in zip(a["frames"], b["frames"]):
+        assert np.array_equal(read_exr(tmp_path / "a" / fa["sensor"]),
+                              read_exr(tmp_path / "b" / fb["sensor"]))
+        for k in ("radiance", "sigma"):
+            np.testing.assert_allclose(read_exr(tmp_path / "b" / fb[k]),
+                                       read_exr(tmp_path / "a" / fa[k]), rtol=1e-6, atol=0)

@@ -22,7 +22,8 @@ import numpy as np
 
 from ..physics.camera import SensorModel
 from ..errors import SkyfitError
-from ..pipeline.manifest import frame_exposure, load_manifest, rendered_frames, sensor_from_record
+from ..pipeline.manifest import (frame_exposure, load_manifest, read_frame_image, rendered_frames,
+                                  sensor_from_record)
 
 #: Values below this [DN] read as code 0.
 LOW_CODE = 0.5
@@ -60,18 +61,24 @@ def parse_region(text):
             xs, ys = np.meshgrid(np.arange(x0, x1 + 1), np.arange(y0, y1 + 1))
             return np.stack([xs.ravel(), ys.ravel()], axis=1)
         if kind == "pixels":
-            return np.array([[int(v) for v in p.split(",")] for p in rest.split(";") if p], int)
+            px = np.array([[int(v) for v in p.split(",")] for p in rest.split(";") if p], int)
+            if len(px) and px.shape[1] == 2:
+                return px
     except ValueError:
         pass
-    raise SkyfitError(f"region {text!r} is not 'rect:x0,y0,x1,y1' (x1 >= x0, y1 >= y0) or "
-                      "'pixels:x,y;x,y'.")
+    raise SkyfitError(f"region {text!r} is not 'rect:x0,y0,x1,y1' (whole numbers, x1 >= x0, "
+                      "y1 >= y0) or 'pixels:x,y;x,y' (at least one pixel).")
 
 
 def region_from_mask(path, label):
     """Pixels of a label-mask PNG equal to ``label`` (first channel), as (P, 2) (x, y)."""
     import matplotlib.image
 
-    m = matplotlib.image.imread(str(path))
+    try:
+        m = matplotlib.image.imread(str(path))
+    except Exception as exc:          # missing, not an image, damaged: PIL/OS errors
+        raise SkyfitError(f"cannot read mask {path} ({str(exc).splitlines()[0]}); give the PNG "
+                          "`skyfit labels` wrote, or another label image.") from None
     m = m[..., 0] if m.ndim == 3 else m
     if m.dtype != np.uint8:
         m = np.rint(m * 255).astype(int)
@@ -96,14 +103,7 @@ def subsample_region(pixels, max_pixels, seed):
 def _region_values(root, frame, key, pixels, shape):
     """The region's values in one frame's EXR ``frame[key]``, checked: readable, of the
     manifest's size."""
-    from ..render.image import read_exr_checked
-
-    try:
-        img = read_exr_checked(root / frame[key], shape)
-    except SkyfitError as exc:
-        raise SkyfitError(f"frame {frame['index']}: {exc}; render the sequence again (it resumes "
-                          "and replaces damaged frames).") from None
-    return img[pixels[:, 1], pixels[:, 0]]
+    return read_frame_image(root, frame, key, shape)[pixels[:, 1], pixels[:, 0]]
 
 
 def load_observations(manifest_path, pixels, frames=None):

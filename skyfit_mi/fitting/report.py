@@ -51,13 +51,36 @@ def write_fit(result, prefix):
     return js, save_figure(fig, prefix.with_suffix(".png"))
 
 
-def write_summary(results, path):
-    """One CSV row per fitted region: parameters with 95% intervals, chi2/dof, truth, warnings.
+#: Name of the summary CSV in a fit output folder.
+SUMMARY_NAME = "fits.csv"
 
-    Units: reflectances unitless, sigma_alpha rms slope, times in seconds.
+
+def read_fits(folder):
+    """The fit results (``fit_*.json``) in ``folder``, by region name; files that are not a
+    fit's result are left out."""
+    out = {}
+    for p in sorted(Path(folder).glob("fit_*.json")):
+        try:
+            r = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            continue
+        if isinstance(r, dict) and {"region", "parameters", "intervals"} <= set(r):
+            out[r["region"]] = r
+    return out
+
+
+def write_summary(folder):
+    """Write ``folder/fits.csv`` from every fit result in the folder (one row per region,
+    sorted), so that it always agrees with the ``fit_*.json`` files there; returns its path.
+
+    Columns: parameters with 95% intervals, chi2/dof, truth, warnings.  Units: reflectances
+    unitless, sigma_alpha rms slope, times in seconds.
     """
     import csv
     import io
+
+    fits = read_fits(folder)
+    results = [fits[k] for k in sorted(fits)]
 
     names = list(dict.fromkeys(n for r in results for n in r["parameters"]))
     cols = ["region", "model", "method", "pixels_fitted", "pixels_total"]
@@ -78,4 +101,4 @@ def write_summary(results, path):
         row += [f"{r['chi2_per_dof']:.4g}", r["evaluations"], f"{r['wall_time_s']:.2f}",
                 json.dumps(r["truth"]) if r.get("truth") else "", " | ".join(r["warnings"])]
         w.writerow(row)
-    return write_text(path, buf.getvalue())
+    return write_text(Path(folder) / SUMMARY_NAME, buf.getvalue())

@@ -221,3 +221,16 @@ def frame_exposure(doc, frame):
 def rendered_frames(doc):
     """The frames that hold observations (status ``rendered``), in time order."""
     return [f for f in doc["frames"] if f.get("status") == "rendered"]
+
+
+def read_frame_image(root, frame, key, shape):
+    """Frame record ``frame``'s image ``key`` ('radiance', 'sensor', 'sigma') of the sequence in
+    folder ``root``, checked to read as an image of ``shape`` (H, W, 3); a damaged or foreign
+    file raises SkyfitError naming the frame and the fix."""
+    from ..render.image import read_exr_checked
+
+    try:
+        return read_exr_checked(Path(root) / frame[key], shape)
+    except SkyfitError as exc:
+        raise SkyfitError(f"frame {frame['index']}: {exc}; render the sequence again (it resumes "
+                          "and replaces damaged frames).") from None

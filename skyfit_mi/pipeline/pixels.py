@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..files import save_figure, write_text
-from .manifest import load_manifest
+from .manifest import load_manifest, read_frame_image
 
 SOURCES = {"radiance": "W m^-2 sr^-1", "sensor": "DN"}
 
@@ -28,8 +28,6 @@ def pixel_series(manifest_path, pixels, source="radiance"):
     if source not in SOURCES:
         raise SkyfitError(f"unknown source {source!r}; valid: {', '.join(SOURCES)}.")
     doc, root = load_manifest(manifest_path)
-    from ..render.image import read_exr
-
     w, h = doc["camera"]["width"], doc["camera"]["height"]
     for x, y in pixels:
         if not (0 <= x < w and 0 <= y < h):
@@ -39,7 +37,7 @@ def pixel_series(manifest_path, pixels, source="radiance"):
     for f in doc["frames"]:
         if f.get("status") != "rendered":
             continue
-        img = read_exr(root / f[source])
+        img = read_frame_image(root, f, source, (h, w, 3))
         for x, y in pixels:
             rows.append((f["index"], f["time"], x, y, *map(float, img[y, x])))
     return rows, SOURCES[source]

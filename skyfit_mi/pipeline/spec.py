@@ -51,6 +51,11 @@ _SCHEMA = {
     "render": {"spp", "seed", "variant", "max_depth", "below_horizon", "sampler"},
 }
 SKY_KINDS = tuple(SKY_TYPES) + ("gensky",)
+#: [sky] keys whose values are numbers (their ranges are checked where they are used).
+_SKY_NUMBERS = {"phi", "efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
+                "ground_albedo", "extinction", "solar_constant", "clear_zenith_luminance",
+                "overcast_zenith_luminance", "diffuse_horizontal_W_m2", "direct_normal_W_m2",
+                "diffuse_horizontal_lux"}
 BELOW_HORIZON = ("sky", "skip")
 #: Mitsuba samplers a spec may choose; multijitter stratifies the sun/sky choice of the
 #: emitter sample and gives about 5x lower noise than independent at equal cost (docs/BENCHMARKS.md).
@@ -89,6 +94,12 @@ def _plain(v):
 
 #: Offsets from UTC that exist in civil time [hours] (UTC-12 to UTC+14).
 UTC_OFFSETS = (-12.0, 14.0)
+
+
+def _text(section, key, v):
+    if not isinstance(v, str) or not v:
+        raise SpecError(f"[{section}] {key} must be text, got {v!r}.")
+    return v
 
 
 def _tz(name):
@@ -270,6 +281,7 @@ def _times(sec, tz):
 def _scene_file(sec, base_dir):
     if "file" not in sec:
         raise SpecError("[scene] needs file = 'disc.xml' (a file beside the spec or in scenes/).")
+    _text("scene", "file", sec["file"])
     for cand in (base_dir / sec["file"], SCENES_DIR / sec["file"]):
         if cand.is_file():
             break
@@ -379,6 +391,12 @@ def _sky_entries(sec, times, tz):
             raise SpecError(f"[[sky]] lists {len(entries)} skies for {len(times)} frames; give one "
                             "per frame, or a 'time' in each.")
     for e in out:
+        for k in _SKY_NUMBERS & set(e):
+            _num("sky", k, e[k])
+        for k in {"type", "gensky", "gensky_file"} & set(e):
+            _text("sky", k, e[k])
+        if "sun" in e and not isinstance(e["sun"], bool):
+            raise SpecError(f"[sky] sun must be true or false (draw the sun's disc), got {e['sun']!r}.")
         e.setdefault("type", "gensky" if ("gensky" in e or "gensky_file" in e) else "clear")
         if e["type"] not in SKY_KINDS:
             raise SpecError(f"[sky] type {e['type']!r} is unknown; valid: {', '.join(SKY_KINDS)}.")

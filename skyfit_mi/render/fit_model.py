@@ -32,6 +32,24 @@ def bounds(model):
     return np.array(lo), np.array(hi)
 
 
+def check_start(model, start):
+    """``start`` as an array, or SkyfitError unless it has one value per parameter of
+    ``model``, each within its bounds (nothing is clipped or broadcast silently)."""
+    from ..errors import SkyfitError
+
+    names, (lo, hi) = PARAMETERS[model], bounds(model)
+    v = np.asarray(start, dtype=float).ravel()
+    if v.size != len(names):
+        raise SkyfitError(f"the start gives {v.size} value(s); model {model!r} has "
+                          f"{len(names)}: {', '.join(names)}, in that order.")
+    bad = ~((v >= lo) & (v <= hi))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SkyfitError(f"start {names[i]} = {v[i]:g} is outside its bounds "
+                          f"[{lo[i]:g}, {hi[i]:g}].")
+    return v
+
+
 def material_values(model, theta):
     """The ``ward`` plugin's parameters for ``theta`` as Dr.Jit values, keyed like ``traverse``."""
     import mitsuba as mi

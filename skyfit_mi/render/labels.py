@@ -5,7 +5,8 @@ import numpy as np
 
 def label_image(scene):
     """(H, W) int array: 1 + the index of the material seen at each pixel centre, 0 for none,
-    and the list of material ids (label k is ids[k - 1])."""
+    and the list of material ids (label k is ids[k - 1]), sorted, so that a scene's labels
+    do not depend on the order Mitsuba lists its shapes in."""
     import mitsuba as mi
 
     sensor = scene.sensors()[0]
@@ -15,15 +16,11 @@ def label_image(scene):
     v = (ys.ravel() + 0.5) / h
     ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5), mi.Point2f(u, v), mi.Point2f(0.5, 0.5))
     si = scene.ray_intersect(ray)
-    ids = []
-    labels = np.zeros(w * h, dtype=np.int32)
     valid = np.array(si.is_valid())
-    for shape in scene.shapes():
-        bid = shape.bsdf().id()
-        if not bid:
-            continue
-        if bid not in ids:
-            ids.append(bid)
-        hit = np.array(si.shape == mi.ShapePtr(shape)) & valid
+    hits = [(shape.bsdf().id(), np.array(si.shape == mi.ShapePtr(shape)) & valid)
+            for shape in scene.shapes() if shape.bsdf().id()]
+    ids = sorted({bid for bid, _ in hits})
+    labels = np.zeros(w * h, dtype=np.int32)
+    for bid, hit in hits:
         labels[hit] = ids.index(bid) + 1
     return labels.reshape(h, w), ids
