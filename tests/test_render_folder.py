@@ -46,7 +46,13 @@ def test_resume_rerenders_damaged_frames_and_overwrite_starts_clean(tmp_path, mi
     from skyfit_mi.render.image import read_exr, write_exr
 
     out = tmp_path / "day"
-    ref, _ = _render(_spec(tmp_path), out)
+    old = os.umask(0o027)                                   # files follow the user's umask
+    try:
+        ref, _ = _render(_spec(tmp_path), out)
+    finally:
+        os.umask(old)
+    for p in (out / "manifest.json", out / "contact_sheet.png", out / ref["frames"][0]["sigma"]):
+        assert p.stat().st_mode & 0o777 == 0o640, p
     first = read_exr(out / ref["frames"][1]["radiance"])
     p = out / ref["frames"][1]["radiance"]
     p.write_bytes(p.read_bytes()[:100])                     # truncated
@@ -58,7 +64,7 @@ def test_resume_rerenders_damaged_frames_and_overwrite_starts_clean(tmp_path, mi
     assert np.array_equal(read_exr(out / m["frames"][1]["radiance"]), first)
 
     (out / "manifest.json").write_text('{"schema": "skyfit-manif')           # truncated
-    with pytest.raises(SkyfitError, match="damaged .* pass --overwrite"):
+    with pytest.raises(SkyfitError, match="damaged .* --overwrite"):
         _render(_spec(tmp_path), out)
     (out / "frames" / "radiance_007.exr").write_text("an older run's frame")
     (out / "notes.txt").write_text("the user's own file")

@@ -113,8 +113,8 @@ def load_manifest(path):
     try:
         doc = json.loads(p.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ManifestError(f"{p} is damaged (not complete JSON: {exc}); render the folder again "
-                            "(`skyfit render SPEC -o DIR` resumes, `--overwrite` starts clean).") \
+        raise ManifestError(f"{p} is damaged (not complete JSON: {exc}); render it afresh "
+                            "with `skyfit render SPEC -o DIR --overwrite`.") \
             from None
     except OSError as exc:
         raise ManifestError(f"cannot read {p}: {exc.strerror or exc}.") from None

@@ -33,7 +33,7 @@ from ..files import FolderLock, ensure_dir
 from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
 from ..render.scene_xml import pass_spp
-from .manifest import (SCHEMA, ManifestError, illumination_record, load_manifest, manifest_file,
+from .manifest import (SCHEMA, illumination_record, load_manifest, manifest_file,
                        sensor_record, versions, write_manifest)
 
 #: The files of one frame, by kind.
@@ -96,10 +96,7 @@ def prepare_folder(out, run_id, shape, overwrite=False, log=print):
         return {}
     if not manifest_file(out).exists():
         return {}
-    try:
-        old, _ = load_manifest(out)
-    except ManifestError as exc:
-        raise SkyfitError(f"{exc} To replace that run, pass --overwrite.") from None
+    old, _ = load_manifest(out)          # a damaged one: ManifestError says --overwrite
     if old.get("run_id") != run_id:
         raise SkyfitError(f"{out} holds another run ({old.get('name')!r}, run {old.get('run_id')});"
                           " render into an empty folder, or pass --overwrite to replace it.")
