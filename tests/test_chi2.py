@@ -1,9 +1,11 @@
-"""Chi-square: values clipped at code 0 are censored, not exact zeros (Tobit likelihood)."""
+"""Chi-square: values clipped at either end of the sensor's range are censored, not exact
+(Tobit likelihood); label masks."""
 import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 from scipy.stats import norm
 
+from skyfit_mi.errors import SkyfitError
 from skyfit_mi.physics.camera import SensorModel
 from skyfit_mi.fitting.chi2 import LOW_CODE, Observations, Problem
 
@@ -60,3 +62,36 @@ def test_clipped_values_give_an_unbiased_estimate(mean_dn, side):
     assert fit.x == pytest.approx(mean_dn, abs=4 * se)              # about 1.4 DN
     naive = problem.obs.y.mean()                                     # clipped values taken as measured
     assert abs(naive - mean_dn) > 10 * se
+
+
+def test_captured_saturation_is_censored_and_unbiased():
+    """The sensor model's own capture near full scale: about half the values read the top code
+    (saturated by the captured value, sigma finite); the censored fit recovers the radiance."""
+    sensor = SensorModel(exposure=1.0, bits=8, noise_percent=4.0)
+    n, level = 3000, 0.99
+    values, sigma = sensor.capture(np.full((n, 1, 3), level), np.random.default_rng(5))
+    y = values.astype(float)
+    obs = Observations(np.zeros((n, 2), int), [0], ["t"], y, sigma.astype(float),
+                       np.ones(y.shape), sensor)
+    problem = Problem(obs, _Flat(y.shape))
+    assert problem.n_data == y.size and 0.3 < problem.clipped()[1].mean() < 0.6
+    fit = minimize_scalar(lambda a: problem.chi2([a]), bounds=(0.8, 1.0), method="bounded")
+    se = sensor.sigma / sensor.max_code / np.sqrt(y.size)
+    assert fit.x == pytest.approx(level, abs=5 * se)
+
+
+def test_label_masks_of_8_and_16_bits(tmp_path):
+    from PIL import Image
+
+    from skyfit_mi.fitting.chi2 import region_from_mask
+
+    m16 = np.zeros((4, 5), np.uint16)
+    m16[1, 2] = m16[3, 0] = 300                        # beyond 8 bits: many materials
+    Image.fromarray(m16).save(tmp_path / "m16.png")
+    assert sorted(map(tuple, region_from_mask(tmp_path / "m16.png", 300))) == [(0, 3), (2, 1)]
+    m8 = np.zeros((4, 5, 3), np.uint8)
+    m8[2, 3] = 7
+    Image.fromarray(m8).save(tmp_path / "m8.png")
+    assert region_from_mask(tmp_path / "m8.png", 7).tolist() == [[3, 2]]
+    with pytest.raises(SkyfitError, match="label 8 does not occur in mask"):
+        region_from_mask(tmp_path / "m8.png", 8)

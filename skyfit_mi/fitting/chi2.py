@@ -71,17 +71,17 @@ def parse_region(text):
 
 
 def region_from_mask(path, label):
-    """Pixels of a label-mask PNG equal to ``label`` (first channel), as (P, 2) (x, y)."""
-    import matplotlib.image
+    """Pixels of a label-mask image (8- or 16-bit PNG; first channel) equal to ``label``,
+    as (P, 2) (x, y)."""
+    from PIL import Image
 
     try:
-        m = matplotlib.image.imread(str(path))
+        with Image.open(path) as im:
+            m = np.asarray(im)
     except Exception as exc:          # missing, not an image, damaged: PIL/OS errors
         raise SkyfitError(f"cannot read mask {path} ({str(exc).splitlines()[0]}); give the PNG "
                           "`skyfit labels` wrote, or another label image.") from None
     m = m[..., 0] if m.ndim == 3 else m
-    if m.dtype != np.uint8:
-        m = np.rint(m * 255).astype(int)
     ys, xs = np.nonzero(m == int(label))
     if len(xs) == 0:
         raise SkyfitError(f"label {label} does not occur in mask {path}; its values are "
