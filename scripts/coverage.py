@@ -15,6 +15,7 @@ other pixels (e.g. rect:4,4,11,11, the central 8x8, all on the disc).
 """
 
 import argparse
+import dataclasses
 import datetime as dt
 import sys
 import tempfile
@@ -30,29 +31,6 @@ CASES = {"7.2": ("rough disc (cf. 7.2)", "two", {"rho_s": 0.5, "sigma_alpha": 0.
          "narrow": ("narrow lobe", "two", {"rho_s": 0.5, "sigma_alpha": 0.02})}
 
 
-def fisher_jacobian(session, theta, sensor):
-    """J with J^T J = the Fisher information of the clipped Gaussian sensor data at ``theta``.
-
-    A value with mean m, clipped below a = (0.5 - m) / sigma and above u = (max - 0.5 - m) /
-    sigma (standardised), carries information [phi(a)^2 / Phi(a) + phi(u)^2 / (1 - Phi(u)) +
-    Phi(u) - Phi(a) - u phi(u) + a phi(a)] / sigma^2 about m: 1 / sigma^2 without clipping.
-    """
-    from scipy.stats import norm
-
-    from skyfit_mi.fitting.chi2 import LOW_CODE
-
-    problem = session.problem
-    L, dL = session.wm.jacobian(theta)
-    dm = problem.slope(L)
-    m = problem.predict(L)
-    a, u = (LOW_CODE - m) / sensor.sigma, (sensor.max_code - LOW_CODE - m) / sensor.sigma
-    info = (norm.pdf(a) ** 2 / np.maximum(norm.cdf(a), 1e-300)
-            + norm.pdf(u) ** 2 / np.maximum(norm.sf(u), 1e-300)
-            + norm.cdf(u) - norm.cdf(a) - u * norm.pdf(u) + a * norm.pdf(a))
-    J = (np.sqrt(info) * dm / sensor.sigma)[..., None] * dL
-    return J[problem.mask]
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--replicates", type=int, default=50)
@@ -64,11 +42,11 @@ def main():
     args = ap.parse_args()
     from reproduce_thesis import truth_vector
 
-    from skyfit_mi.physics.camera import SensorModel
+    from skyfit_mi.fitting import cramer_rao
     from skyfit_mi.fitting.chi2 import parse_region
     from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.render.image import read_exr
-    from skyfit_mi.pipeline.manifest import load_manifest
+    from skyfit_mi.pipeline.manifest import load_manifest, sensor_from_record
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
@@ -94,15 +72,13 @@ def main():
                                  for f in doc["frames"] if f["index"] in obs.frames], axis=1)
             tv = truth_vector(model, truth)
             for noise in (float(v) for v in args.noise.split(",")):
-                s = doc["sensor"]
-                sensor = SensorModel(**{**{k: s[k] for k in ("exposure", "response", "gamma", "bits",
-                                                             "cos4")}, "noise_percent": noise})
+                sensor = dataclasses.replace(sensor_from_record(doc["sensor"]),
+                                             noise_percent=noise)
                 obs.sensor = sensor
                 # Cramer-Rao bound at the truth with this noise, for the data as the sensor
                 # gives them: Gaussian, clipped at both ends of its range
                 obs.sigma = np.full_like(obs.y, sensor.sigma)
-                J = fisher_jacobian(session, tv, sensor)
-                crb = np.sqrt(np.diag(np.linalg.pinv(J.T @ J)))
+                crb = cramer_rao.bound(cramer_rao.fisher_jacobian(session, tv, sensor.sigma))
                 # the fit of the noise-free values: the offset every replicate shares
                 obs.y = sensor.respond(radiance * obs.gain) * sensor.max_code
                 offset = np.array(list(session.run("global", log=lambda *a: None)

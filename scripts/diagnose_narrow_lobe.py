@@ -39,6 +39,7 @@ def main():
     args = ap.parse_args()
     from skyfit_mi.fitting.chi2 import parse_region
     from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.physics.colour import SRGB_LUMINANCE
     from skyfit_mi.physics.reflection import reflected_radiance
     from skyfit_mi.render.fit_model import reflectances
     from skyfit_mi.render.image import read_exr
@@ -73,7 +74,7 @@ def main():
         print("| frame | quadrature | frames | frames - quad [%] | (frames - quad) / sd | "
               "cache | cache - quad [%] | (cache - quad) / cache sd |")
         print("|---|---|---|---|---|---|---|---|")
-        lum = np.array([0.2126, 0.7152, 0.0722])
+        lum = SRGB_LUMINANCE
         for t, f in enumerate(frames):
             q, r, c = (a[:, t] @ lum for a in (quad, rendered, cache))
             r_sd = np.sqrt(np.sum((sd[:, t] @ lum) ** 2))   # of the region's sum

@@ -18,7 +18,7 @@ from ..errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.profile import profile_edges
-from ..render.fit_model import other_readings
+from ..render.fit_model import check_start, other_readings
 from ..render.light_cache import DIRECTIONS, POSITIONS, SIGMA_RESOLVED
 from ..pipeline.manifest import frame_sky, load_manifest
 from ..physics.ward import METAL_THRESHOLD
@@ -141,34 +141,55 @@ class FitSession:
         return self.lower + rng.random(len(self.lower)) * (self.upper - self.lower)
 
     def run(self, method="global", start=None, seed=0, method_options=None, log=print):
-        """Fit by ``method`` from ``start`` (random within bounds, seeded, if None); a result dict."""
+        """Fit by ``method`` from ``start`` (random within bounds, seeded, if None); a result dict.
+
+        The steps: the method's minimum, its covariance, the global minimum (whose grid gives
+        the profiles and judges a local method), intervals (:meth:`_intervals`), warnings
+        (:meth:`_warnings`), and the JSON-ready record (:meth:`_record`).
+        """
         check_choice("fit method", method, tuple(METHODS))
         problem, wm = self.problem, self.wm
-        lower, upper, names = self.lower, self.upper, self.names
         problem.evaluations = wm.evaluations = wm.basis_evaluations = 0
         t0 = time.perf_counter()
         if start is None:
             start = self.random_start(np.random.default_rng(seed))
-        start = np.clip(np.asarray(start, dtype=float), lower, upper)
+        start = check_start(self.model, start)      # one value per parameter, within bounds
         grid_basis = self.grid_bases()[0]
-        res = METHODS[method](problem, start, lower, upper, seed=seed, grid_basis=grid_basis,
+        res = METHODS[method](problem, start, self.lower, self.upper, seed=seed,
+                              grid_basis=grid_basis,
                               alternatives=lambda th: other_readings(self.model, th),
                               **dict(method_options or {}))
         theta = np.asarray(res["theta"], dtype=float)
         evaluations = problem.evaluations + wm.basis_evaluations
         t_method = time.perf_counter() - t0
-        # uncertainty: covariance at the optimum, and profiles from the global grid
+        # uncertainty: covariance at the optimum
         r, J = problem.jacobian(theta)
         chi2 = float(r @ r)
-        dof = problem.dof
-        s2 = unc.scale(chi2, dof)
+        s2 = unc.scale(chi2, problem.dof)
         curv_inv = unc.covariance(J)
-        cov = curv_inv * s2
-        cov_iv = unc.covariance_intervals(theta, cov, lower, upper)
         # the global minimum: its grid gives the profiles; a local method is judged against it
-        g = res if method == "global" else global_search(problem, start, lower, upper,
+        g = res if method == "global" else global_search(problem, start, self.lower, self.upper,
                                                         candidates=2, grid_basis=grid_basis)
-        grid = g["profile_linearised"]
+        fit = {"method": method, "theta": theta, "chi2": chi2, "s2": s2, "curv_inv": curv_inv,
+               "cov": curv_inv * s2, "result": res, "global": g}
+        self._intervals(fit)
+        warnings = self._warnings(fit)
+        wall = time.perf_counter() - t0 + self.cache_time
+        out = self._record(fit, warnings, start, seed, evaluations, wall, t_method)
+        log(f"{self.name}: {self.model} fit by {method}: "
+            + ", ".join(f"{k} = {v:.4f}" for k, v in out["parameters"].items())
+            + f"; chi2/dof = {out['chi2_per_dof']:.3g}; {evaluations} evaluations; {wall:.1f} s"
+            + "".join(f"\n  warning: {w}" for w in warnings))
+        return out
+
+    def _intervals(self, fit):
+        """68% and 95% intervals of every parameter into ``fit`` (keys intervals, rise, ripple,
+        mc_sd): the covariance's, or for rho_s and sigma_alpha of a global fit the profile's;
+        each widened by the light cache's own Monte Carlo error."""
+        problem, theta, names = self.problem, fit["theta"], self.names
+        lower, upper, s2 = self.lower, self.upper, fit["s2"]
+        cov_iv = unc.covariance_intervals(theta, fit["cov"], lower, upper)
+        grid = fit["global"]["profile_linearised"]
         prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
                 "rho_s": (grid["rho_s"], grid["chi2_rho"])}
         # chi^2 ripples by the larger model noise of the two estimators compared: near the
@@ -176,7 +197,7 @@ class FitSession:
         ripple = max(problem.model_noise_chi2(theta),
                      problem.model_noise_chi2(np.r_[theta[:-1], max(theta[-1], SIGMA_RESOLVED)]))
         # the profiles describe the global minimum; a local method is judged against it
-        glob = method == "global"
+        glob = fit["method"] == "global"
         intervals, rise = {}, {}
         for i, p in enumerate(names):
             iv = {lv: (float(cov_iv[lv][0][i]), float(cov_iv[lv][1][i])) for lv in ("68", "95")}
@@ -190,55 +211,69 @@ class FitSession:
                     # of the board's polished steel, truth sigma_alpha 0.02: 95% edge 0.002)
                     iv = unc.profile_interval(*prof[p], s2, ripple)
                     levels = list(iv)
-                    exact, _ = profile_edges(problem, theta, chi2, i,
+                    exact, _ = profile_edges(problem, theta, fit["chi2"], i,
                                              [unc.LEVELS[lv] * s2 + ripple for lv in levels],
-                                             lower, upper, curv_inv)
+                                             lower, upper, fit["curv_inv"])
                     iv = {lv: (min(iv[lv][0], e[0] if e[0] is not None else np.inf),
                                max(iv[lv][1], e[1] if e[1] is not None else -np.inf))
                           for lv, e in zip(levels, exact)}
                     source = "profile"
             intervals[p] = {"68": iv["68"], "95": iv["95"], "from": source}
-        mc_sd = self.cache_error(theta, method)
+        mc_sd = self.cache_error(theta, fit["method"])
         for i, p in enumerate(names):
             for lv in ("68", "95"):
                 intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * mc_sd[i],
                                              lower[i], upper[i])
-        warnings = unc.identifiability(names, {p: intervals[p]["95"] for p in names}, lower, upper,
-                                       rise, s2, chi2 / dof, ripple)
-        warnings = list(self.obs.warnings) + warnings       # what loading the frames noticed
+        fit.update(intervals=intervals, rise=rise, ripple=ripple, mc_sd=mc_sd)
+
+    def _warnings(self, fit):
+        """What the user must know about ``fit``: loading, the method's status, identifiability,
+        the colour rule's ambiguity, and a local method's distance from the global minimum."""
+        names, method, theta, chi2 = self.names, fit["method"], fit["theta"], fit["chi2"]
+        res, g, intervals = fit["result"], fit["global"], fit["intervals"]
+        iv95 = {p: intervals[p]["95"] for p in names}
+        warnings = []
         if res.get("status") == "failed":
-            warnings.insert(0, f"{method} failed: {res['message']}")
+            warnings.append(f"{method} failed: {res['message']}")
         elif res.get("status") not in (None, "converged"):
-            warnings.insert(0, f"{method} did not converge (status {res['status']}): "
+            warnings.append(f"{method} did not converge (status {res['status']}): "
                             f"{res['message']}")
+        warnings += self.obs.warnings                       # what loading the frames noticed
+        if method != "global" and g["chi2"] < chi2 - max(1.0, 1e-3 * chi2):
+            # compare with the global minimum: explains local failures (thesis 7.2)
+            warnings.insert(0, f"{method} stopped at chi2 = {chi2:.6g}, but the global search finds "
+                            f"chi2 = {g['chi2']:.6g} at " + ", ".join(
+                                f"{k} = {v:.4f}" for k, v in zip(names, g["theta"]))
+                            + f": {method} ended in a local minimum or on a flat region of "
+                            "chi-square from this start (thesis 6.3, 7.2)")
+        warnings += unc.identifiability(names, iv95, self.lower, self.upper, fit["rise"],
+                                        fit["s2"], chi2 / self.problem.dof, fit["ripple"])
         if self.model == "colour":
-            other = unc.colour_rule_ambiguity(theta, {p: intervals[p]["95"] for p in names})
+            other = unc.colour_rule_ambiguity(theta, iv95)
             if other is not None:
-                kind = "metal" if other[1] >= 0.5 else "plastic"
+                kind = "metal" if other[1] >= METAL_THRESHOLD else "plastic"
                 warnings.append(
                     f"C is grey, so the colour model's plastic and metal readings give the same "
                     f"BRDF: the {kind} reading C = {other[0]:.3f} (all channels), rho_s = "
                     f"{other[1]:.3f} fits equally well; only rho_d and the specular reflectance "
                     "are determined.")
-        if not glob:
-            # compare with the global minimum: explains local failures (thesis 7.2)
-            if g["chi2"] < chi2 - max(1.0, 1e-3 * chi2):
-                warnings.insert(0, f"{method} stopped at chi2 = {chi2:.6g}, but the global search finds "
-                                f"chi2 = {g['chi2']:.6g} at " + ", ".join(
-                                    f"{k} = {v:.4f}" for k, v in zip(names, g["theta"]))
-                                + f": {method} ended in a local minimum or on a flat region of "
-                                "chi-square from this start (thesis 6.3, 7.2)")
-        wall = time.perf_counter() - t0 + self.cache_time
-        L = wm.radiance(theta)
-        out = {
+        return warnings
+
+    def _record(self, fit, warnings, start, seed, evaluations, wall, t_method):
+        """The JSON-ready result of ``fit`` (the layout of ``fit_NAME.json``)."""
+        names, theta, chi2, dof = self.names, fit["theta"], fit["chi2"], self.problem.dof
+        res = fit["result"]
+        L = self.wm.radiance(theta)
+        return {
             "region": self.name, "pixels": self.obs.pixels.tolist(), "model": self.model,
             "normalisation": self.normalisation,
-            "method": method, "seed": seed, "start": start.tolist(),
+            "method": fit["method"], "seed": seed, "start": start.tolist(),
             "parameters": dict(zip(names, theta.tolist())),
-            "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof, "interval_scale_s2": s2,
-            "intervals": intervals,
-            "cache_error_sd": dict(zip(names, mc_sd.tolist())), "cache_noise_chi2": ripple,
-            "covariance": {"names": list(names), "matrix": cov.tolist()},
+            "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof, "interval_scale_s2": fit["s2"],
+            "intervals": fit["intervals"],
+            "cache_error_sd": dict(zip(names, fit["mc_sd"].tolist())),
+            "cache_noise_chi2": fit["ripple"],
+            "covariance": {"names": list(names), "matrix": fit["cov"].tolist()},
             "evaluations": evaluations, "status": res.get("status"),
             "message": res.get("message"), "warnings": warnings,
             "wall_time_s": wall, "light_cache_time_s": self.cache_time, "method_time_s": t_method,
@@ -247,13 +282,8 @@ class FitSession:
             "truth": self.truth, "units": "reflectances unitless, sigma_alpha rms slope; chi2 in "
             "(DN/DN)^2; observed/model values in DN",
             "series": {"times": self.obs.times, "observed_DN": self.obs.y.tolist(),
-                       "model_DN": problem.predict(L).tolist()},
+                       "model_DN": self.problem.predict(L).tolist()},
         }
-        log(f"{self.name}: {self.model} fit by {method}: "
-            + ", ".join(f"{k} = {v:.4f}" for k, v in out["parameters"].items())
-            + f"; chi2/dof = {chi2 / dof:.3g}; {evaluations} evaluations; {wall:.1f} s"
-            + "".join(f"\n  warning: {w}" for w in warnings))
-        return out
 
 
 def fit_region(manifest_path, name, pixels, model="two", method="global", normalisation="ward",

@@ -18,6 +18,7 @@ from any start.  The grid also gives the profile chi-square of sigma_alpha and r
 
 import numpy as np
 
+from ...physics.ward import METAL_THRESHOLD
 from .levenberg_marquardt import levenberg_marquardt
 
 #: sigma_alpha grid: the ideal mirror, then log-spaced.
@@ -42,7 +43,12 @@ def _linearise(problem):
     g = obs.gain
     y = s / g
     slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code * g
-    w = np.where(problem.mask, (slope / obs.sigma) ** 2, 0.0)
+    # the grid's model is linear and cannot saturate: a value at the top code (censored in
+    # chi2.py) or within 3 sigma of it (a saturated pixel read down by noise) would pull its
+    # highlight down, so the grid leaves them out; the polish on the true chi-square uses
+    # them. A value at code 0 stays: reading it as zero errs by less than its sigma.
+    saturated = obs.y >= sensor.max_code - 3.0 * obs.sigma
+    w = np.where(problem.mask & ~saturated, (slope / obs.sigma) ** 2, 0.0)
     return y, w
 
 
@@ -83,7 +89,7 @@ def grid_chi2(model, y, w, D, G, rho=RHO_GRID):
     a, b, c, yd, yg, yy = _weighted_sums(y, w, D, G, "c")
     r1 = (1 - rho)[None, :, None]
     r2 = rho[None, :, None]
-    metal = (rho >= 0.5)[None, :, None]
+    metal = (rho >= METAL_THRESHOLD)[None, :, None]
     # metal: h = r1 D + r2 G, L = C h
     hh_m = r1**2 * a + 2 * r1 * r2 * b[:, None] + r2**2 * c[:, None]
     yh_m = r1 * yd + r2 * yg[:, None]
@@ -115,9 +121,13 @@ def global_search(problem, start, lower, upper, candidates=3, profile=True, grid
     D, G = grid_basis if grid_basis is not None else wm.basis(SIGMA_GRID)
     chi2, thetas = grid_chi2(model, y, w, D, G)
     thetas[..., -1] = SIGMA_GRID[:, None]
-    # candidates: best grid point, then the best ones at other roughness (distinct minima)
-    best_per_sigma = chi2.min(axis=1)
-    order = np.argsort(best_per_sigma)
+    # candidates: best grid point, then the best ones at other roughness (distinct minima),
+    # ranked by the true chi-square at each roughness's grid minimum: the linear grid leaves
+    # out values near saturation, and on the rest a saturated highlight's roughness can look
+    # worse than a narrower lobe's
+    rows = np.arange(len(SIGMA_GRID))
+    best_j = np.argmin(chi2, axis=1)
+    order = np.argsort([problem.chi2(thetas[k, j]) for k, j in zip(rows, best_j)])
     picks = []
     for k in order:
         if all(abs(np.log((SIGMA_GRID[k] + 0.01) / (SIGMA_GRID[j] + 0.01))) > 0.5 for j in picks):
@@ -126,7 +136,7 @@ def global_search(problem, start, lower, upper, candidates=3, profile=True, grid
             break
     results = []
     for k in picks:
-        j = int(np.argmin(chi2[k]))
+        j = int(best_j[k])
         res = levenberg_marquardt(problem, thetas[k, j], lower, upper)
         # a polish that fails (singular curvature) keeps the grid point
         if res["status"] == "failed" or not res["chi2"] <= problem.chi2(thetas[k, j]):

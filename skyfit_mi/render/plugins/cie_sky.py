@@ -34,6 +34,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ...physics.colour import SRGB_LUMINANCE
 from ...physics.sky import Sky
 from ..daylight import RGB_KEYS as _RGB_KEYS
 from .properties import property_values
@@ -44,7 +45,6 @@ TABLE_NU, TABLE_NV = 128, 64
 TABLE_SUPERSAMPLE = 3
 #: Share of the sky's sampling density spread uniformly over the sphere.
 UNIFORM_FLOOR = 0.02
-_LUM = np.array([0.2126, 0.7152, 0.0722])
 
 
 def _triple(props, name, default):
@@ -95,14 +95,14 @@ class CIESkyEmitter(mi.Emitter):
         that new values never change a kernel.
         """
         self.sky = sky
-        lum = sky.sky_radiance(_TABLE_DIRS) @ _LUM               # (cells, sub)
+        lum = sky.sky_radiance(_TABLE_DIRS) @ SRGB_LUMINANCE               # (cells, sub)
         cell = np.maximum(lum.mean(axis=1), 0.0)
         sky_power = cell.mean() * 4 * np.pi                      # integral of luminance over the sphere
         pmf = cell / cell.sum() if cell.sum() > 0 else np.full(cell.size, 1.0 / cell.size)
         pmf = (1 - UNIFORM_FLOOR) * pmf + UNIFORM_FLOOR / pmf.size
         cdf = np.cumsum(pmf)
         cdf /= cdf[-1]
-        sun_power = float(sky.sun_radiance @ _LUM) * sky.sun_solid_angle
+        sun_power = float(sky.sun_radiance @ SRGB_LUMINANCE) * sky.sun_solid_angle
         total = sun_power + sky_power
         p_sun = sun_power / total if total > 0 else 0.0
         self.pmf = mi.Float(pmf.astype(np.float32))

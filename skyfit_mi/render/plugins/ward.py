@@ -34,6 +34,7 @@ import numpy as np
 
 from ...errors import check_choice
 from .properties import property_values
+from ...physics.colour import SRGB_LUMINANCE
 from ...physics.ward import METAL_THRESHOLD, MODELS, NORMALISATIONS, SIGMA_MAX, SIGMA_MIRROR, raw_parameters
 
 _DEFAULTS = {"rho_d": 0.5, "rho_s": 0.05, "sigma_alpha": 0.1, "R": 1.0, "C": (1.0, 1.0, 1.0)}
@@ -46,7 +47,8 @@ def _prop(props, name):
 
 
 def _lum(c):
-    return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+    wr, wg, wb = (float(w) for w in SRGB_LUMINANCE)
+    return wr * c.x + wg * c.y + wb * c.z
 
 
 class WardBSDF(mi.BSDF):
