@@ -213,3 +213,36 @@ def test_sky_given_by_illuminance_uses_its_own_efficacy(tmp_path, kind, efficacy
     s = validate_spec(raw, tmp_path)
     e = s.frames[0].sky.sky_horizontal_irradiance() @ SRGB_LUMINANCE
     assert e == pytest.approx(12000.0 / efficacy, rel=1e-3)
+
+
+def test_monte_carlo_error_estimate_matches_the_scatter_of_independent_renders(tmp_path, mi):
+    """The render's per-pixel standard error (two half-spp passes, 3x3-smoothed) agrees with the
+    scatter of the same frame rendered with eight other seeds: the variance ratio is within
+    the sampling error of eight renders, and an estimate off by sqrt(2) (the error of one pass,
+    not of their mean) would fail."""
+    from skyfit_mi.pipeline.sequence import FrameRenderer
+
+    raw = spec(materials={"disc": {"model": "two", "rho_s": 0.3, "sigma_alpha": 0.1}},
+               time={"date": "2026-06-21", "times": ["08:00"]}, render__spp=32)
+    s = validate_spec(raw, tmp_path)
+    renderer = FrameRenderer(s)
+    images, sds = [], []
+    for seed in range(8):
+        renderer.seed = 1000 * seed
+        img, sd = renderer.render(s.frames[0])
+        images.append(img)
+        sds.append(sd)
+    images, sds = np.array(images, dtype=float), np.array(sds, dtype=float)
+    scatter_var = images.var(axis=0, ddof=1)
+    estimate_var = np.mean(sds**2, axis=0)
+    # pixels whose 3x3 neighbourhood lies on the disc (the estimate is smoothed over it)
+    on = images.mean(axis=0).sum(axis=-1) > 0
+    inner = on.copy()
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            inner &= np.roll(np.roll(on, dy, axis=0), dx, axis=1)
+    inner[[0, -1], :] = inner[:, [0, -1]] = False
+    assert inner.sum() >= 50
+    ratio = scatter_var[inner].sum() / estimate_var[inner].sum()
+    assert 0.75 < ratio < 1.33, ratio
+    assert np.all(estimate_var[inner] > 0)
