@@ -29,3 +29,21 @@ def days(tmp_path_factory, mi):
             "noisy": disc_day(tmp, "noisy", noise=5.0),
             "south": disc_day(tmp, "south", camera_az=180.0, noise=5.0),
             "overcast": disc_day(tmp, "overcast", sky="overcast", noise=5.0)}
+
+
+@pytest.fixture(scope="session")
+def radiance():
+    """Runs a program of the Radiance that the pyradiance wheel ships (the independent
+    reference: gensky, oconv, rtrace): ``radiance("rtrace", "-h", octree, input=rays)`` ->
+    its stdout (bytes when ``binary``); tests using it skip where pyradiance is absent."""
+    import os
+    import subprocess
+    from pathlib import Path
+
+    root = Path(pytest.importorskip("pyradiance").__file__).parent
+    env = dict(os.environ, RAYPATH=f".{os.pathsep}{root / 'lib'}")
+
+    def run(program, *args, input=None, binary=False):
+        return subprocess.run([str(root / "bin" / program), *map(str, args)], input=input,
+                              capture_output=True, check=True, text=not binary, env=env).stdout
+    return run

@@ -1,6 +1,4 @@
 """Radiance gensky import: exact reproduction of skybright.cal, and Radiance's own irradiance."""
-import os
-import subprocess
 
 import numpy as np
 import pytest
@@ -68,34 +66,22 @@ def test_malformed_gensky(text, match):
 
 # ---- Radiance cross-check ---------------------------------------------------
 
-def _radiance_bin():
-    pyradiance = pytest.importorskip("pyradiance")
-    root = os.path.dirname(pyradiance.__file__)
-    return os.path.join(root, "bin"), os.path.join(root, "lib")
-
-
-def _rtrace_irradiance(text, tmp_path, ab):
-    bindir, libdir = _radiance_bin()
-    env = dict(os.environ, RAYPATH=f".{os.pathsep}{libdir}")
+def _rtrace_irradiance(text, radiance, tmp_path, ab):
+    """Horizontal irradiance [W m^-2] at the origin under the gensky ``text``, by rtrace -I."""
     rad = tmp_path / "sky.rad"
     rad.write_text(text + "\nskyfunc glow sky_glow 0 0 4 1 1 1 0\nsky_glow source sky 0 0 4 0 0 1 360\n")
-    oct_ = subprocess.run([os.path.join(bindir, "oconv"), str(rad)], capture_output=True,
-                          check=True, env=env).stdout
-    (tmp_path / "sky.oct").write_bytes(oct_)
-    out = subprocess.run([os.path.join(bindir, "rtrace"), "-h", "-I", "-ab", str(ab), "-ad", "20000",
-                          "-as", "0", "-aa", "0", "-lw", "1e-6", str(tmp_path / "sky.oct")],
-                         input="0 0 0 0 0 1\n", capture_output=True, text=True, check=True, env=env)
-    return np.array(out.stdout.split()[:3], dtype=float)
+    (tmp_path / "sky.oct").write_bytes(radiance("oconv", rad, binary=True))
+    out = radiance("rtrace", "-h", "-I", "-ab", ab, "-ad", "20000", "-as", "0", "-aa", "0",
+                   "-lw", "1e-6", tmp_path / "sky.oct", input="0 0 0 0 0 1\n")
+    return np.array(out.split()[:3], dtype=float)
 
 
 @pytest.mark.parametrize("args", [["6", "21", "12", "+s"], ["6", "21", "8.5", "+s"],
                                   ["8", "16", "15", "+i"], ["12", "21", "12", "-c"]])
-def test_horizontal_irradiance_matches_rtrace(args, tmp_path):
-    bindir, _ = _radiance_bin()
-    text = subprocess.run([os.path.join(bindir, "gensky"), *args, "-a", "40", "-o", "0", "-m", "0",
-                           "-y", "2026"], capture_output=True, text=True, check=True).stdout
+def test_horizontal_irradiance_matches_rtrace(args, radiance, tmp_path):
+    text = radiance("gensky", *args, "-a", "40", "-o", "0", "-m", "0", "-y", "2026")
     s = from_gensky(text)
-    ref_sun = _rtrace_irradiance(text, tmp_path, ab=0)
-    ref_all = _rtrace_irradiance(text, tmp_path, ab=1)
+    ref_sun = _rtrace_irradiance(text, radiance, tmp_path, ab=0)
+    ref_all = _rtrace_irradiance(text, radiance, tmp_path, ab=1)
     np.testing.assert_allclose(s.sun_horizontal_irradiance(), ref_sun, rtol=1e-3)
     np.testing.assert_allclose(s.horizontal_irradiance(), ref_all, rtol=0.02)
