@@ -176,6 +176,35 @@ def test_undetermined_roughness_is_flagged(days, day):
     assert any(w.startswith("sigma_alpha is not determined") for w in r["warnings"]), r["warnings"]
 
 
+def test_the_days_geometry_is_reported_and_warned_from(days):
+    """The fit JSON states the closest sun half-angle; a camera on the sun's side (south, the
+    highlight 30 degrees away) is warned of, an east camera (3 degrees) is not, and an
+    overcast day is warned to have no sun."""
+    east, south, overcast = (fit(days[d]) for d in ("noisy", "south", "overcast"))
+    assert east["geometry"]["frames_with_sun"] == east["geometry"]["frames"] == 13
+    assert east["geometry"]["closest_highlight_half_angle_deg"] < 5
+    assert not any("highlight never comes closer" in w for w in east["warnings"])
+    assert south["geometry"]["closest_highlight_half_angle_deg"] > 20
+    assert south["parameters"]["sigma_alpha"] < 0.236         # the lobe the sun cannot show
+    assert any("highlight never comes closer" in w for w in south["warnings"])
+    assert overcast["geometry"]["frames_with_sun"] == 0
+    assert overcast["geometry"]["closest_highlight_half_angle_deg"] is None
+    assert any(w.startswith("no frame has the sun") for w in overcast["warnings"])
+
+
+def test_a_model_that_cannot_describe_the_data_is_called_unreliable(days):
+    """The noisy day fits at chi2/dof ~ 1 without a misfit warning; the same values with a
+    tenth of their sigma (a wrong sensor model) are called unreliable."""
+    from skyfit_mi.fitting.fit import FitSession
+
+    s = FitSession(days["noisy"], "disc", REGION, **FAST)
+    good = s.run("global", log=lambda *a: None)
+    assert not any("misfit" in w or "does not describe" in w for w in good["warnings"])
+    s.obs.sigma = s.obs.sigma / 10
+    bad = s.run("global", log=lambda *a: None)
+    assert any(w.startswith("the model does not describe these data") for w in bad["warnings"])
+
+
 def test_region_errors(days):
     from skyfit_mi.errors import SkyfitError
     from skyfit_mi.fitting.fit import fit_region

@@ -14,6 +14,7 @@ import numpy as np
 
 from . import uncertainty as unc
 from .chi2 import Problem, load_observations
+from .geometry import geometry_warnings, highlight_geometry
 from ..errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
@@ -72,6 +73,8 @@ class FitSession:
         if not self.cache.hit.any():
             raise SkyfitError(f"none of the region's pixels shows material {name!r}; check the region.")
         self.cache_time = time.perf_counter() - t0
+        self.geometry = highlight_geometry(np.where(self.cache.hit[..., None],
+                                                    self.cache.sun_half_cos, np.nan))
         self.doc, self.name, self.model, self.normalisation = doc, name, model, normalisation
         self.names = PARAMETERS[model]
         self.wm = WardModel(self.cache, model, normalisation)
@@ -227,8 +230,9 @@ class FitSession:
         fit.update(intervals=intervals, rise=rise, ripple=ripple, mc_sd=mc_sd)
 
     def _warnings(self, fit):
-        """What the user must know about ``fit``: loading, the method's status, identifiability,
-        the colour rule's ambiguity, and a local method's distance from the global minimum."""
+        """What the user must know about ``fit``: loading, the method's status, a local method's
+        distance from the global minimum, misfit, identifiability, the day's geometry, and the
+        colour rule's ambiguity."""
         names, method, theta, chi2 = self.names, fit["method"], fit["theta"], fit["chi2"]
         res, g, intervals = fit["result"], fit["global"], fit["intervals"]
         iv95 = {p: intervals[p]["95"] for p in names}
@@ -246,8 +250,10 @@ class FitSession:
                                 f"{k} = {v:.4f}" for k, v in zip(names, g["theta"]))
                             + f": {method} ended in a local minimum or on a flat region of "
                             "chi-square from this start (thesis 6.3, 7.2)")
+        warnings += unc.misfit(chi2, self.problem.dof, fit["s2"], fit["ripple"])
         warnings += unc.identifiability(names, iv95, self.lower, self.upper, fit["rise"],
-                                        fit["s2"], chi2 / self.problem.dof, fit["ripple"])
+                                        fit["s2"], fit["ripple"])
+        warnings += geometry_warnings(self.geometry, float(theta[-1]))
         if self.model == "colour":
             other = unc.colour_rule_ambiguity(theta, iv95)
             if other is not None:
@@ -277,7 +283,7 @@ class FitSession:
             "evaluations": evaluations, "status": res.get("status"),
             "message": res.get("message"), "warnings": warnings,
             "wall_time_s": wall, "light_cache_time_s": self.cache_time, "method_time_s": t_method,
-            "light_cache": self.cache_settings,
+            "light_cache": self.cache_settings, "geometry": self.geometry,
             "trace": res.get("trace", []), "schedule": res.get("schedule"),
             "truth": self.truth, "units": "reflectances unitless, sigma_alpha rms slope; chi2 in "
             "(DN/DN)^2; observed/model values in DN",

@@ -24,6 +24,12 @@ LEVELS = {"68": 1.0, "95": 3.841458820694124}
 Z = {"68": 1.0, "95": 1.959963984540054}
 
 
+#: chi2/dof above which (and significant) a fit's parameters are called unreliable.
+MISFIT_UNRELIABLE = 1.5
+#: p-value of chi-square below which misfit is reported.
+MISFIT_P = 1e-3
+
+
 def scale(chi2, dof):
     """The Birge ratio s^2 = max(1, chi^2/dof) that widens intervals of a poor fit."""
     return max(1.0, chi2 / dof) if dof > 0 else 1.0
@@ -80,8 +86,8 @@ def profile_interval(grid, profile, s2=1.0, ripple=0.0):
     return out
 
 
-def identifiability(names, intervals95, lower, upper, profile_rise, s2, chi2_dof, ripple=0.0):
-    """Warnings for parameters the data do not determine, and for a poor fit."""
+def identifiability(names, intervals95, lower, upper, profile_rise, s2, ripple=0.0):
+    """Warnings for parameters the data do not determine."""
     warnings = []
     span = np.asarray(upper) - np.asarray(lower)
     for i, name in enumerate(names):
@@ -96,11 +102,36 @@ def identifiability(names, intervals95, lower, upper, profile_rise, s2, chi2_dof
                     "the roughness is unknown; do not use the value." if name == "sigma_alpha"
                     else " Treat this parameter as unknown.")
             warnings.append(f"{name} is not determined by this sequence: {why}.{hint}")
-    if chi2_dof > 3:
-        warnings.append(f"chi-square per degree of freedom is {chi2_dof:.3g}: the model does not "
-                        "describe the data to within their sigmas (intervals are widened by "
-                        f"s^2 = {s2:.3g}); check the sensor model, the region, or the model choice.")
     return warnings
+
+
+def misfit(chi2, dof, s2, model_noise=0.0):
+    """Warnings when chi-square is larger than the data's noise explains (thesis 6.2).
+
+    Noise and the model's own Monte Carlo error (``model_noise``, its expected share of
+    chi-square) together expect dof + model_noise; the p-value of chi-square scaled to that
+    mean (as a chi-square of dof degrees of freedom) says whether the misfit is real, its size
+    what to do.  Above MISFIT_UNRELIABLE times the expectation the model does not describe the
+    data and no parameter can be trusted (widening intervals by s^2 does not repair a wrong
+    model); a significant smaller excess (p < MISFIT_P) widens the intervals by s^2.
+    """
+    from scipy.stats import chi2 as chi2_dist
+
+    expected = dof + max(model_noise, 0.0)
+    ratio = chi2 / expected
+    p = float(chi2_dist.sf(chi2 * dof / expected, dof))
+    of = (f"chi-square is {ratio:.3g} times what noise" +
+          (f" and the model's Monte Carlo error ({model_noise:.3g})" if model_noise > 0.01 * dof
+           else "") + f" explain (p = {p:.2g}; noise alone varies it by +- "
+          f"{np.sqrt(2 / dof):.2g})")
+    if ratio > MISFIT_UNRELIABLE and p < MISFIT_P:
+        return [f"the model does not describe these data: {of}; its parameters and intervals are "
+                "not reliable. Check the sensor model and sigmas, the region (one material "
+                "only?), or use another reflection model."]
+    if p < MISFIT_P:
+        return [f"more misfit than the noise explains: {of}; intervals are widened by "
+                f"s^2 = {s2:.3g}."]
+    return []
 
 
 def colour_rule_ambiguity(theta, intervals95):

@@ -83,6 +83,9 @@ class LightCache:
     inv_pdf : (P, T, N)  1 / (p_mix N) [sr]: weight without L_i
     mirror_sky : (P, T, S, 3)  L_i along the mirror direction without the solar disc
         [W m^-2 sr^-1], per position: the control variate's constant
+    sun_half_cos : (P, T, S)  cos of the angle between the normal and the half vector of the
+        sun and view directions, per position; NaN where the frame's sun gives no light
+        (none, below the horizon, or behind the surface) [unitless]
     """
 
     wo: np.ndarray
@@ -93,6 +96,7 @@ class LightCache:
     hit: np.ndarray
     inv_pdf: np.ndarray
     mirror_sky: np.ndarray
+    sun_half_cos: np.ndarray
 
     def halves(self):
         """Two independent caches, each from half of every pixel's positions (weights doubled).
@@ -110,7 +114,7 @@ class LightCache:
             out.append(LightCache(self.wo[:, :, n], self.wi[:, :, n], self.weight[:, :, n] * (S / h),
                                   self.mirror[:, :, sl] * (S / h), self.mirror_cos[:, :, sl],
                                   self.hit, self.inv_pdf[:, :, n] * (S / h),
-                                  self.mirror_sky[:, :, sl]))
+                                  self.mirror_sky[:, :, sl], self.sun_half_cos[:, :, sl]))
         return out
 
     # ---- the basis (NumPy, for the global search) ------------------------
@@ -145,6 +149,21 @@ class LightCache:
         albedo = lobe_albedo(wo, sigma_alpha, normalisation)
         estimate = (lobe * self.inv_pdf).reshape(P, T, S, -1).sum(axis=-1)
         return G + beta * np.einsum("pts,ptsc->ptc", albedo / S - estimate, self.mirror_sky)
+
+
+def _sun_half_cos(mi, si, sky):
+    """cos(delta) per surface interaction of ``si``: delta the angle between the normal and the
+    half vector of the sun's and the view's directions (Ward's highlight angle, thesis eq. 3.19);
+    NaN where the sun gives no light there (none in ``sky``, below the horizon, or behind the
+    surface)."""
+    sun = np.array(si.to_local(mi.Vector3f(*(float(c) for c in sky.sun_direction))),
+                   dtype=float).T
+    view = np.array(si.wi, dtype=float).T
+    h = sun + view
+    cos = h[:, 2] / np.maximum(np.linalg.norm(h, axis=1), 1e-12)
+    lit = (np.max(sky.sun_radiance) > 0) & (sky.sun_direction[2] > 0) & (sun[:, 2] > 0) \
+        & (view[:, 2] > 0)
+    return np.where(lit, cos, np.nan).astype(np.float32)
 
 
 def control_weight(sigma_alpha, clip=np.clip):
@@ -223,7 +242,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
 
     rng = np.random.default_rng(seed)
     out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos",
-                           "hit")}
+                           "hit", "sun_half_cos")}
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
         # primary rays: S stratified positions in each pixel
@@ -284,4 +303,5 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         out["mirror"].append(np3(lm, S) / S)
         out["mirror_cos"].append(np.array(mi.Frame3f.cos_theta(si.wi), np.float32).reshape(P, S))
         out["hit"].append(on.reshape(P, S).all(axis=1))
+        out["sun_half_cos"].append(_sun_half_cos(mi, si, sky).reshape(P, S))
     return LightCache(**{k: np.stack(v, axis=1) for k, v in out.items()})

@@ -1,0 +1,69 @@
+"""What the sequence's geometry lets the data say about the specular lobe.
+
+Ward's lobe falls as exp(-tan^2 delta / sigma_alpha^2) with delta the angle between the surface
+normal and the half vector of the light and view directions (thesis eq. 3.19).  The sun is the
+only light bright enough to show a narrow lobe, so the smallest delta the sun reaches over the
+day (the closest highlight) bounds the roughness the sun can reveal: a lobe narrow enough to be
+dark at that angle leaves no trace of the sun, and its roughness rests on the sky alone.
+"""
+
+import numpy as np
+
+#: A lobe leaves "no trace" at the closest highlight when its value there is below this share
+#: of a white Lambertian surface's 1 / pi [unitless].
+TRACE = 0.01
+
+
+def highlight_geometry(sun_half_cos):
+    """Summary of the sun's highlight over a region and day.
+
+    ``sun_half_cos`` (P, T, S): cos(delta) per pixel, frame and position, NaN where the frame's
+    sun gives no light (:class:`~skyfit_mi.render.light_cache.LightCache`).  Returns a JSON-ready
+    dict: frames, frames_with_sun, closest_highlight_half_angle_deg (None without sun) and its
+    value per frame [degrees].
+    """
+    c = np.asarray(sun_half_cos, dtype=float)
+    per_frame = []
+    for t in range(c.shape[1]):
+        v = c[:, t]
+        per_frame.append(float(np.degrees(np.arccos(np.clip(np.nanmax(v), -1, 1))))
+                         if np.isfinite(v).any() else None)
+    lit = [d for d in per_frame if d is not None]
+    return {"frames": int(c.shape[1]), "frames_with_sun": len(lit),
+            "closest_highlight_half_angle_deg": min(lit) if lit else None,
+            "closest_half_angle_per_frame_deg": per_frame}
+
+
+def traceless_roughness(half_angle_deg):
+    """The largest sigma_alpha whose lobe, exp(-tan^2 delta / sigma^2) / (4 sigma^2) relative to
+    a white Lambertian 1 / pi (Ward's normalisation at normal incidence, thesis eq. 3.19), stays
+    below TRACE at delta = ``half_angle_deg``: narrower lobes show no sun at all.  0 at 0."""
+    t = np.tan(np.radians(half_angle_deg))
+    if t <= 0:
+        return 0.0
+    sig = np.geomspace(1e-4, 1.0, 4001)
+    rel = np.exp(-(t / sig) ** 2) / (4.0 * sig**2)
+    dark = rel < TRACE
+    # the lobe's value at delta rises with sigma up to sigma = t, then falls
+    rising = sig <= t
+    idx = np.nonzero(dark & rising)[0]
+    return float(sig[idx[-1]]) if idx.size else 0.0
+
+
+def geometry_warnings(geometry, sigma_alpha):
+    """Warnings from the day's geometry for a fit at ``sigma_alpha``: no sun on the surface at
+    all, or a closest highlight too far from the camera's view for the sun to show a lobe this
+    narrow."""
+    if geometry["frames_with_sun"] == 0:
+        return ["no frame has the sun on this surface (an overcast sky, or the sun behind it): "
+                "rho_s and sigma_alpha rest on the sky's reflection alone and are weakly "
+                "determined; a sequence with direct sun is needed to measure the lobe."]
+    delta = geometry["closest_highlight_half_angle_deg"]
+    limit = traceless_roughness(delta)
+    if sigma_alpha < limit:
+        return [f"the sun's highlight never comes closer than {delta:.1f} degrees (half-angle) "
+                f"to the camera's view, and lobes narrower than sigma_alpha = {limit:.3g} show no "
+                f"sun there: sigma_alpha = {sigma_alpha:.3g} rests on the sky's reflection alone; "
+                f"treat it as not determined below {limit:.3g} (a camera nearer the sun's mirror "
+                "direction would measure it)."]
+    return []

@@ -1,0 +1,61 @@
+"""The day's highlight geometry: the closest sun half-angle, the roughness it can reveal, and
+the warnings drawn from them."""
+import numpy as np
+import pytest
+
+from skyfit_mi.fitting.geometry import (TRACE, geometry_warnings, highlight_geometry,
+                                        traceless_roughness)
+from skyfit_mi.fitting.uncertainty import misfit
+
+
+def test_highlight_geometry_takes_the_closest_lit_approach_per_frame():
+    c = np.full((2, 3, 4), np.nan)                     # 2 pixels, 3 frames, 4 positions
+    c[0, 0] = np.cos(np.radians([20, 25, 30, 35]))
+    c[1, 0, 0] = np.cos(np.radians(12.0))
+    c[:, 2, 1] = np.cos(np.radians(40.0))              # frame 1 has no sun
+    g = highlight_geometry(c)
+    assert g["frames"] == 3 and g["frames_with_sun"] == 2
+    assert g["closest_half_angle_per_frame_deg"][1] is None
+    assert g["closest_half_angle_per_frame_deg"][0] == pytest.approx(12.0)
+    assert g["closest_highlight_half_angle_deg"] == pytest.approx(12.0)
+    none = highlight_geometry(np.full((2, 3, 4), np.nan))
+    assert none["frames_with_sun"] == 0 and none["closest_highlight_half_angle_deg"] is None
+
+
+@pytest.mark.parametrize("delta", [1.0, 5.0, 16.0, 30.0])
+def test_traceless_roughness_is_where_the_lobe_at_the_closest_approach_reaches_the_trace(delta):
+    """Ward's lobe at normal incidence relative to a white Lambertian, exp(-tan^2 d/s^2)/(4 s^2),
+    equals TRACE (1%) at the returned roughness, and is below it for every narrower lobe."""
+    s = traceless_roughness(delta)
+    t = np.tan(np.radians(delta))
+    rel = lambda sig: np.exp(-(t / sig) ** 2) / (4 * sig**2)
+    assert rel(s) < TRACE < rel(s * 1.01)
+    assert np.all(rel(np.geomspace(1e-3, s, 50)) < TRACE)
+    assert traceless_roughness(0.0) == 0.0
+
+
+def test_hand_value_of_the_traceless_roughness():
+    # delta = 16 deg: tan = 0.2867; sigma = 0.1028 gives exp(-7.78) / 0.0423 = 0.0099
+    assert traceless_roughness(16.0) == pytest.approx(0.1028, abs=5e-4)
+
+
+def test_geometry_warnings():
+    sunless = {"frames": 5, "frames_with_sun": 0, "closest_highlight_half_angle_deg": None}
+    assert "no frame has the sun" in geometry_warnings(sunless, 0.1)[0]
+    far = {"frames": 5, "frames_with_sun": 5, "closest_highlight_half_angle_deg": 20.0}
+    w = geometry_warnings(far, 0.05)
+    assert len(w) == 1 and "never comes closer than 20.0 degrees" in w[0]
+    assert geometry_warnings(far, 0.3) == []
+    near = {"frames": 5, "frames_with_sun": 5, "closest_highlight_half_angle_deg": 1.0}
+    assert geometry_warnings(near, 0.01) == []
+
+
+def test_misfit_counts_the_models_own_noise_and_grades_the_excess():
+    dof = 600
+    assert misfit(620.0, dof, 1.03) == []                       # p = 0.27
+    mild = misfit(1.25 * dof, dof, 1.25)
+    assert len(mild) == 1 and "more misfit than the noise explains" in mild[0]
+    bad = misfit(4.0 * dof, dof, 4.0)
+    assert "does not describe these data" in bad[0] and "not reliable" in bad[0]
+    # the same chi-square is expected when the model's Monte Carlo error adds 3 dof's worth
+    assert misfit(4.0 * dof, dof, 4.0, model_noise=3.0 * dof) == []
