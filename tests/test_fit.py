@@ -187,6 +187,10 @@ def test_the_days_geometry_is_reported_and_warned_from(days):
     assert south["geometry"]["closest_highlight_half_angle_deg"] > 20
     assert south["parameters"]["sigma_alpha"] < 0.236         # the lobe the sun cannot show
     assert any("highlight never comes closer" in w for w in south["warnings"])
+    # its interval runs to sigma_alpha = 0: read as an upper limit, not a value
+    assert south["readings"][1].startswith("sigma_alpha < ") and "lower end not determined" \
+        in south["readings"][1]
+    assert east["readings"][1].startswith("sigma_alpha = ")
     assert overcast["geometry"]["frames_with_sun"] == 0
     assert overcast["geometry"]["closest_highlight_half_angle_deg"] is None
     assert any(w.startswith("no frame has the sun") for w in overcast["warnings"])

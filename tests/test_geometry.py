@@ -59,3 +59,15 @@ def test_misfit_counts_the_models_own_noise_and_grades_the_excess():
     assert "does not describe these data" in bad[0] and "not reliable" in bad[0]
     # the same chi-square is expected when the model's Monte Carlo error adds 3 dof's worth
     assert misfit(4.0 * dof, dof, 4.0, model_noise=3.0 * dof) == []
+
+
+@pytest.mark.parametrize("value, interval, expected", [
+    (0.1, (0.09, 0.11), "sigma_alpha = 0.1 (95%: 0.09-0.11)"),
+    (0.003, (0.0, 0.0965), "sigma_alpha < 0.0965 (95%); lower end not determined"),
+    (0.0, (0.0, 0.01), "sigma_alpha < 0.01 (95%); lower end not determined"),
+    (0.45, (0.3, 0.5), "sigma_alpha > 0.3 (95%); upper end not determined"),
+    (0.2, (0.0, 0.5), "sigma_alpha not determined (its 95% interval spans 0-0.5)"),
+])
+def test_one_sided_results_read_as_limits(value, interval, expected):
+    from skyfit_mi.fitting.uncertainty import reading
+    assert reading("sigma_alpha", value, interval, 0.0, 0.5) == expected

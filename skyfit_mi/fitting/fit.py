@@ -182,6 +182,7 @@ class FitSession:
         log(f"{self.name}: {self.model} fit by {method}: "
             + ", ".join(f"{k} = {v:.4f}" for k, v in out["parameters"].items())
             + f"; chi2/dof = {out['chi2_per_dof']:.3g}; {evaluations} evaluations; {wall:.1f} s"
+            + "".join(f"\n  {r}" for r in out["readings"] if "=" not in r)
             + "".join(f"\n  warning: {w}" for w in warnings))
         return out
 
@@ -277,6 +278,8 @@ class FitSession:
             "parameters": dict(zip(names, theta.tolist())),
             "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof, "interval_scale_s2": fit["s2"],
             "intervals": fit["intervals"],
+            "readings": [unc.reading(p, theta[i], fit["intervals"][p]["95"], self.lower[i],
+                                     self.upper[i]) for i, p in enumerate(names)],
             "cache_error_sd": dict(zip(names, fit["mc_sd"].tolist())),
             "cache_noise_chi2": fit["ripple"],
             "covariance": {"names": list(names), "matrix": fit["cov"].tolist()},

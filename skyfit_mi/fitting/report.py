@@ -73,7 +73,8 @@ def write_summary(folder):
     """Write ``folder/fits.csv`` from every fit result in the folder (one row per region,
     sorted), so that it always agrees with the ``fit_*.json`` files there; returns its path.
 
-    Columns: parameters with 95% intervals, chi2/dof, truth, warnings.  Units: reflectances
+    Columns: parameters with 95% intervals, how each reads (one-sided limits where an interval
+    runs into a bound), chi2/dof, truth, warnings.  Units: reflectances
     unitless, sigma_alpha rms slope, times in seconds.
     """
     import csv
@@ -86,7 +87,7 @@ def write_summary(folder):
     cols = ["region", "model", "method", "pixels_fitted", "pixels_total"]
     for n in names:
         cols += [n, f"{n}_95_lo", f"{n}_95_hi"]
-    cols += ["chi2_per_dof", "evaluations", "wall_time_s", "truth", "warnings"]
+    cols += ["readings", "chi2_per_dof", "evaluations", "wall_time_s", "truth", "warnings"]
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(cols)
@@ -98,7 +99,8 @@ def write_summary(folder):
                 row += [f"{r['parameters'][n]:.5f}", *(f"{v:.5f}" for v in r["intervals"][n]["95"])]
             else:
                 row += ["", "", ""]
-        row += [f"{r['chi2_per_dof']:.4g}", r["evaluations"], f"{r['wall_time_s']:.2f}",
+        row += [" | ".join(r.get("readings", [])),
+                f"{r['chi2_per_dof']:.4g}", r["evaluations"], f"{r['wall_time_s']:.2f}",
                 json.dumps(r["truth"]) if r.get("truth") else "", " | ".join(r["warnings"])]
         w.writerow(row)
     return write_text(Path(folder) / SUMMARY_NAME, buf.getvalue())

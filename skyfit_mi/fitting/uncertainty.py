@@ -105,6 +105,22 @@ def identifiability(names, intervals95, lower, upper, profile_rise, s2, ripple=0
     return warnings
 
 
+def reading(name, value, interval95, lower, upper):
+    """How a parameter's result reads: a value with its 95% interval, or, where the interval
+    runs into a bound of the parameter's range, a one-sided limit ("sigma_alpha < 0.0965
+    (95%); lower end not determined"), or "not determined" when it spans the range."""
+    lo, hi = interval95
+    eps = 1e-6 * (upper - lower)
+    at_lo, at_hi = lo <= lower + eps, hi >= upper - eps
+    if at_lo and at_hi:
+        return f"{name} not determined (its 95% interval spans {lower:g}-{upper:g})"
+    if at_lo:
+        return f"{name} < {hi:.3g} (95%); lower end not determined"
+    if at_hi:
+        return f"{name} > {lo:.3g} (95%); upper end not determined"
+    return f"{name} = {value:.4g} (95%: {lo:.3g}-{hi:.3g})"
+
+
 def misfit(chi2, dof, s2, model_noise=0.0):
     """Warnings when chi-square is larger than the data's noise explains (thesis 6.2).
 
