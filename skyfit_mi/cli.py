@@ -10,6 +10,7 @@ import re
 import sys
 
 from .errors import SetupError, SkyfitError
+from .physics.ward import NORMALISATIONS
 from .render.light_cache import DIRECTIONS, POSITIONS
 
 DESCRIPTION = ("Render daylight image sequences, fit Ward reflection models to them, and map "
@@ -126,9 +127,10 @@ def _fit(args):
     from .fitting.fit import fit_region
     from .fitting.report import write_fit, write_summary
     from .pipeline.manifest import load_manifest
-    from .render.fit_model import BY_COUNT, check_start
+    from .render.fit_model import BY_COUNT, check_fit_normalisation, check_start
 
     model = BY_COUNT[int(args.model)]
+    check_fit_normalisation(args.normalisation)          # before the costly light cache
     _, root = load_manifest(args.manifest)
     if args.start is not None:
         check_start(model, args.start)
@@ -260,8 +262,10 @@ def build_parser():
                      help="global (default: grid over sigma_alpha then Levenberg-Marquardt; "
                      "right from any start), lm (the thesis's baseline), anneal (simulated "
                      "annealing over full renders), adam (gradient descent)")
-    fit.add_argument("--normalisation", choices=("ward", "duer", "balanced"), default="ward",
-                     help="normalisation of Ward's specular lobe (default ward, the thesis's)")
+    fit.add_argument("--normalisation", choices=NORMALISATIONS, default="ward",
+                     help="normalisation of Ward's specular lobe (default ward, the thesis's; "
+                     "balanced is Radiance 6's lobe; radiance, that lobe plus Radiance's "
+                     "Fresnel estimate for smooth surfaces, renders but cannot be fitted)")
     fit.add_argument("--start", type=_numbers, metavar="A,B,...",
                      help="starting parameters in the model's order, comma-separated (lm, anneal,"
                      " adam; default a seeded random start)")

@@ -66,6 +66,8 @@ def test_version_help_and_description(capsys):
     (["fit", "{day}", "--region", "disc=pixels:"], ["--region", "at least one pixel"]),
     (["fit", "{day}", "--region", "../x=rect:1,1,2,2"], ["--region", "letters, digits"]),
     (["fit", "{day}", "--all", "--start", "a,b"], ["--start", "not comma-separated numbers"]),
+    (["fit", "{day}", "--all", "--normalisation", "radiance"],
+     ["normalisation 'radiance' cannot be fitted", "'balanced'"]),
     (["fit", "{day}", "--all", "--model", "2", "--start", "0.5"],
      ["start gives 1 value(s); model 'two' has 2: rho_s, sigma_alpha"]),
     (["fit", "{day}", "--all", "--model", "2", "--start", "0.5,0.1,0.2"], ["gives 3 value(s)"]),

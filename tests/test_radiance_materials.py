@@ -24,7 +24,9 @@ output's rounding.  RTOL = 2e-6 leaves a margin of 4 and still resolves the FTIN
 import numpy as np
 import pytest
 
-from skyfit_mi.physics.ward import mirror_reflectance, raw_parameters, specular_lobe, ward_brdf
+from skyfit_mi.physics.ward import (RADIANCE_FRESNEL_K, mirror_albedo, mirror_reflectance,
+                                    radiance_specularity, raw_parameters, specular_lobe,
+                                    ward_brdf)
 
 RTOL = 2e-6
 #: Radiance's FTINY (double build): normal.c drops lobe values at or below it [sr^-1].
@@ -198,3 +200,45 @@ def test_mirror_plastic_is_radiance(spec, theta, radiance, tmp_path):
     errors = [np.max(np.abs(measured / _mirror_plastic(colour, spec, sun, views, k) - 1))
               for k in FRESNEL_K]
     assert min(errors) < RTOL
+
+
+#: Roughness-0 materials for the 'radiance' normalisation: (type, colour C, specularity), with
+#: the NumPy model that reproduces each (plastic below, metal at or above METAL_THRESHOLD in
+#: 'colour'; 'achromatic' R, rho_s is a grey metal).  Fresnel from spec 0.018 up, metals too.
+SMOOTH = [("plastic", (0.6, 0.4, 0.2), 0.01, "colour"),
+          ("plastic", (0.6, 0.4, 0.2), 0.018, "colour"),
+          ("plastic", (0.2, 0.5, 0.7), 0.05, "colour"),
+          ("plastic", (0.7, 0.6, 0.3), 0.3, "colour"),
+          ("metal", (0.9, 0.6, 0.3), 0.8, "colour"),
+          ("metal", (0.02, 0.02, 0.02), 0.6, "achromatic")]
+
+
+@pytest.mark.parametrize("kind, colour, spec, model", SMOOTH)
+@pytest.mark.parametrize("theta", [0, 40, 70])
+def test_radiance_normalisation_is_radiance_at_roughness_0(kind, colour, spec, model, theta,
+                                                            radiance, tmp_path):
+    """The 'radiance' normalisation alone (ward_brdf's diffuse part and mirror_albedo, no
+    Fresnel of this test's own) reproduces rtrace's roughness-0 plastic and metal [W sr^-1
+    m^-2]: off the mirror direction the diffuse part with (1 - F(cos_o)) (1 - F(cos_i)), along it
+    the source in a mirror of reflectance rho_s + F(cos_o) (1 - rho_s).  The achromatic metal
+    has max(rho_s) = 0.012 below the threshold yet gets the term, through its specularity."""
+    params = dict(C=colour, rho_s=spec) if model == "colour" else dict(R=colour[0], rho_s=spec)
+    rho_d, rho_s, _ = raw_parameters(model, sigma_alpha=0.0, **params)
+    s = radiance_specularity(model, rho_s=spec)
+    assert RADIANCE_FRESNEL_K == FRESNEL_K[0]            # the constant of this rtrace (6.0a)
+    sun = _dir(theta, 180)
+    views = np.array([_dir(theta, 0), _dir(30, 90), _dir(70, 90), _dir(80, 30), _dir(5, 200)])
+    measured = _rtrace(_material(kind, colour, spec, 0), sun, DIAMETER, views, radiance,
+                       tmp_path)
+    mirrored = np.all(np.isclose(views, sun * [-1, -1, 1]), axis=1)[:, None]
+    expected = L_SUN * (_omega(DIAMETER) * sun[2]
+                        * ward_brdf(sun, views, rho_d, rho_s, 0.0, "radiance", specularity=s)
+                        + mirrored * mirror_albedo(views[:, 2], rho_s, "radiance", specularity=s))
+    np.testing.assert_allclose(measured, expected, rtol=RTOL)
+    # the Fresnel term is resolved: 'balanced' misses by far more than RTOL where it applies
+    plain = L_SUN * (_omega(DIAMETER) * sun[2] * ward_brdf(sun, views, rho_d, rho_s, 0.0)
+                     + mirrored * rho_s * mirror_reflectance(views[:, 2:], "balanced"))
+    if spec >= 0.018:
+        assert np.max(np.abs(measured / plain - 1)) > 100 * RTOL
+    else:
+        np.testing.assert_allclose(measured, plain, rtol=RTOL)

@@ -50,11 +50,13 @@ class FitSession:
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
                  positions=POSITIONS, directions=DIRECTIONS):
         from ..render import setup
-        from ..render.fit_model import BY_COUNT, PARAMETERS, WardModel, bounds
+        from ..render.fit_model import (BY_COUNT, PARAMETERS, WardModel, bounds,
+                                        check_fit_normalisation)
         from ..render.light_cache import build_light_cache
 
         model = BY_COUNT.get(model, model)
         check_choice("model", model, tuple(PARAMETERS))
+        check_fit_normalisation(normalisation)          # before the light is traced
         t0 = time.perf_counter()
         doc, _ = load_manifest(manifest_path)
         self.obs = load_observations(manifest_path, pixels)
@@ -196,10 +198,7 @@ class FitSession:
         grid = fit["global"]["profile_linearised"]
         prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
                 "rho_s": (grid["rho_s"], grid["chi2_rho"])}
-        # chi^2 ripples by the larger model noise of the two estimators compared: near the
-        # mirror, the mirror rays' (small) and the narrowest resolved lobe's
-        ripple = max(problem.model_noise_chi2(theta),
-                     problem.model_noise_chi2(np.r_[theta[:-1], max(theta[-1], SIGMA_RESOLVED)]))
+        ripple = self._model_noise_allowance(theta, *prof["sigma_alpha"], s2)
         # the profiles describe the global minimum; a local method is judged against it
         glob = fit["method"] == "global"
         intervals, rise = {}, {}
@@ -229,6 +228,32 @@ class FitSession:
                 intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * mc_sd[i],
                                              lower[i], upper[i])
         fit.update(intervals=intervals, rise=rise, ripple=ripple, mc_sd=mc_sd)
+
+    def _model_noise_allowance(self, theta, sigmas, profile, s2):
+        """The chi-square the model's own Monte Carlo error may add, as the largest over the
+        sigma_alpha profile's 95% region (not only at the fit: the cache's error grows with
+        sigma_alpha, and the truth may lie where it is larger).  At each roughness the model
+        noise of the larger of two estimators compared (near the mirror, the mirror rays'
+        and the narrowest resolved lobe's); the region widens with the allowance, so it is
+        found again until it stops growing."""
+        def noise(sigma):
+            return max(self.problem.model_noise_chi2(np.r_[theta[:-1], sigma]),
+                       self.problem.model_noise_chi2(np.r_[theta[:-1],
+                                                           max(sigma, SIGMA_RESOLVED)]))
+        sigmas, profile = np.asarray(sigmas, dtype=float), np.asarray(profile, dtype=float)
+        ripple, seen = noise(theta[-1]), {float(theta[-1])}
+        for _ in range(4):
+            inside = sigmas[profile <= profile.min() + unc.LEVELS["95"] * s2 + ripple]
+            points = {float(v) for v in np.quantile(inside, [0, 0.25, 0.5, 0.75, 1])} - seen
+            if not points:
+                break
+            seen |= points
+            grown = max(ripple, max(noise(v) for v in points))
+            if grown <= 1.05 * ripple:
+                ripple = grown
+                break
+            ripple = grown
+        return ripple
 
     def _warnings(self, fit):
         """What the user must know about ``fit``: loading, the method's status, a local method's

@@ -26,6 +26,23 @@ BOUNDS = {"rho_s": (0.0, 1.0), "sigma_alpha": (0.0, 0.5), "R": (0.0, 1.0),
           "C_r": (0.0, 1.0), "C_g": (0.0, 1.0), "C_b": (0.0, 1.0)}
 
 
+def check_fit_normalisation(normalisation):
+    """``normalisation``, or SkyfitError unless the fitting model can represent it: every one
+    of :data:`~skyfit_mi.physics.ward.NORMALISATIONS` but ``'radiance'``, whose Fresnel term
+    for an ideal mirror is outside the basis L = rho_d D + s G(sigma) (the render side takes it)."""
+    from ..errors import SkyfitError, check_choice
+    from ..physics.ward import NORMALISATIONS
+
+    check_choice("Ward normalisation", normalisation, NORMALISATIONS)
+    if normalisation == "radiance":
+        raise SkyfitError("normalisation 'radiance' cannot be fitted: its Fresnel term at "
+                          f"sigma_alpha <= {SIGMA_MIRROR:g} adds light independent of rho_s and "
+                          "scales the diffuse part, outside the light cache's basis L = rho_d D "
+                          "+ rho_s G(sigma); fit with 'balanced' (the same BRDF for sigma_alpha "
+                          f"> {SIGMA_MIRROR:g}) or use 'radiance' only to render.")
+    return normalisation
+
+
 def bounds(model):
     """(lower, upper) arrays of the model's parameters."""
     lo, hi = zip(*(BOUNDS[p] for p in PARAMETERS[model]))
@@ -141,12 +158,14 @@ class WardModel:
     cache : LightCache
     model : {'two', 'achromatic', 'colour'}
     normalisation : {'ward', 'duer', 'balanced'}
+        ('radiance' is refused: :func:`check_fit_normalisation`)
     """
 
     def __init__(self, cache, model, normalisation="ward"):
         import drjit as dr
         import mitsuba as mi
 
+        check_fit_normalisation(normalisation)
         self.mi, self.dr = mi, dr
         self.model, self.normalisation = model, normalisation
         self.names = PARAMETERS[model]

@@ -127,10 +127,13 @@ class LightCache:
         """G(sigma) with L = ... + rho_s * G: shape (P, T, 3).
 
         The mirror term for sigma <= 1e-4, linear interpolation from it to G(SIGMA_RESOLVED)
-        below SIGMA_RESOLVED (as the Dr.Jit model does).
+        below SIGMA_RESOLVED (as the Dr.Jit model does).  ``'radiance'`` is refused
+        (:func:`~skyfit_mi.render.fit_model.check_fit_normalisation`).
         """
         from ..physics.ward import lobe_albedo, mirror_reflectance, specular_lobe
+        from .fit_model import check_fit_normalisation
 
+        check_fit_normalisation(normalisation)
         if sigma_alpha <= SIGMA_MIRROR:
             frac = mirror_reflectance(self.mirror_cos, normalisation)
             return np.einsum("pts,ptsc->ptc", frac, self.mirror)
@@ -151,6 +154,22 @@ class LightCache:
         return G + beta * np.einsum("pts,ptsc->ptc", albedo / S - estimate, self.mirror_sky)
 
 
+def _has_sun(sky):
+    """Whether the frame's sun gives any light (shining, and above the horizon)."""
+    return bool(np.max(sky.sun_radiance) > 0 and sky.sun_direction[2] > 0)
+
+
+def _components(K, has_sun):
+    """The component of each of K directions, fixed counts: 0 sun, 1 sky, 2 cosine, 3 + j the
+    j-th lobe (MIX's shares); without a sun its share goes to the sky."""
+    n_sun, n_sky, n_cos = (max(1, int(round(MIX[k] * K))) for k in ("sun", "sky", "cosine"))
+    n_l = K - n_sun - n_sky - n_cos
+    if not has_sun:
+        n_sun, n_sky = 0, n_sky + n_sun
+    return np.concatenate([np.zeros(n_sun, int), np.ones(n_sky, int), np.full(n_cos, 2),
+                           3 + np.sort(np.arange(n_l) % len(LOBE_SIGMAS))])
+
+
 def _sun_half_cos(mi, si, sky):
     """cos(delta) per surface interaction of ``si``: delta the angle between the normal and the
     half vector of the sun's and the view's directions (Ward's highlight angle, thesis eq. 3.19);
@@ -161,8 +180,7 @@ def _sun_half_cos(mi, si, sky):
     view = np.array(si.wi, dtype=float).T
     h = sun + view
     cos = h[:, 2] / np.maximum(np.linalg.norm(h, axis=1), 1e-12)
-    lit = (np.max(sky.sun_radiance) > 0) & (sky.sun_direction[2] > 0) & (sun[:, 2] > 0) \
-        & (view[:, 2] > 0)
+    lit = _has_sun(sky) & (sun[:, 2] > 0) & (view[:, 2] > 0)
     return np.where(lit, cos, np.nan).astype(np.float32)
 
 
@@ -183,9 +201,11 @@ def _stratified(rng, n, count=None):
     square and the estimate unbiased (a fixed subset would leave the same corner
     unsampled every time).
     """
+    m = 1 if count is None else int(count)
+    if n == 0:
+        return np.zeros((0, 2)) if count is None else np.zeros((m, 0, 2))
     a = int(np.ceil(np.sqrt(n)))
     b = int(np.ceil(n / a))
-    m = 1 if count is None else int(count)
     cells = np.argsort(rng.random((m, a * b)), axis=1)[:, :n]        # random subsets, orders
     ij = np.stack([cells // b, cells % b], axis=-1)
     u = (ij + rng.random((m, n, 2))) / [a, b]
@@ -230,21 +250,18 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     if not target:
         raise ValueError(f"no shape of the scene uses material {bsdf_id!r}")
 
-    # component of each of the K directions: sun, sky, cosine, lobes (fixed counts)
-    n_sun, n_sky, n_cos = (max(1, int(round(MIX[k] * K))) for k in ("sun", "sky", "cosine"))
-    n_l = K - n_sun - n_sky - n_cos
-    if n_l < len(LOBE_SIGMAS):
+    if K - sum(max(1, int(round(MIX[k] * K))) for k in ("sun", "sky", "cosine")) \
+            < len(LOBE_SIGMAS):
         raise ValueError(f"directions = {K} is too few; use at least 32")
-    comp = np.concatenate([np.zeros(n_sun, int), np.ones(n_sky, int), np.full(n_cos, 2),
-                           3 + np.sort(np.arange(n_l) % len(LOBE_SIGMAS))])
     n_comp = 3 + len(LOBE_SIGMAS)
-    frac = [float(np.sum(comp == c)) / K for c in range(n_comp)]
 
     rng = np.random.default_rng(seed)
     out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos",
                            "hit", "sun_half_cos")}
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
+        comp = _components(K, _has_sun(sky))
+        frac = [float(np.sum(comp == c)) / K for c in range(n_comp)]
         # primary rays: S stratified positions in each pixel
         pos = (pixels[:, None, :] + _stratified(rng, S)[None]).reshape(P * S, 2) / [w, h]
         ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),

@@ -5,7 +5,11 @@ importance sampling after B. Walter, "Notes on the Ward BRDF", Cornell
 PCG-05-06, 2005 (half vector with tan^2 delta = -sigma^2 ln u), mixed with
 cosine-weighted diffuse sampling in proportion to the two reflectances.
 sigma_alpha <= 1e-4 is an ideal mirror lobe (a Dirac delta) reflecting
-rho_s times the sigma -> 0 limit of the chosen normalisation.
+rho_s times the sigma -> 0 limit of the chosen normalisation; with ``radiance`` (Radiance 6's
+``plastic``/``metal``: the balanced lobe plus Radiance's Fresnel estimate for smooth surfaces,
+src/rt/normal.c, see :mod:`skyfit_mi.physics.ward`) that mirror reflects
+rho_s + F(cos) (1 - rho_s) and the diffuse part is scaled by (1 - F(cos_i)) (1 - F(cos_o))
+when the specularity (the model's ``rho_s``; max(rho_s) in ``raw``) is at least 0.018.
 
 Parameters (reflectances unitless, sigma_alpha the rms slope):
 
@@ -13,7 +17,7 @@ Parameters (reflectances unitless, sigma_alpha the rms slope):
 name               type       range         default        notes
 =================  =========  ============  =============  ===============================================
 ``model``          string     see below     ``raw``        which parameters the plugin takes
-``normalisation``  string     see below     ``ward``       ``ward`` (eq. 3.19), ``duer``, ``balanced``
+``normalisation``  string     see below     ``ward``       ``ward`` (eq. 3.19), ``duer``, ``balanced``, ``radiance``
 ``rho_d``          rgb/float  [0, 1]        0.5            ``raw`` only; rho_d + rho_s <= 1
 ``rho_s``          rgb/float  [0, 1]        0.05           rgb in ``raw``, float in the other models
 ``sigma_alpha``    float      [0, 1]        0.1            0 = mirror
@@ -35,7 +39,8 @@ import numpy as np
 from ...errors import check_choice
 from .properties import property_values
 from ...physics.colour import SRGB_LUMINANCE
-from ...physics.ward import METAL_THRESHOLD, MODELS, NORMALISATIONS, SIGMA_MAX, SIGMA_MIRROR, raw_parameters
+from ...physics.ward import (METAL_THRESHOLD, MODELS, NORMALISATIONS, RADIANCE_FRESNEL_K,
+                              RADIANCE_FRESNEL_MIN, SIGMA_MAX, SIGMA_MIRROR, raw_parameters)
 
 _DEFAULTS = {"rho_d": 0.5, "rho_s": 0.05, "sigma_alpha": 0.1, "R": 1.0, "C": (1.0, 1.0, 1.0)}
 _RGB_PARAMS = {"raw": ("rho_d", "rho_s"), "colour": ("C",)}
@@ -121,6 +126,22 @@ class WardBSDF(mi.BSDF):
     def _mirror_fraction(self, cos_i):
         return dr.clip(cos_i, 0.0, 1.0) if self.normalisation == "ward" else mi.Float(1.0)
 
+    def _fresnel(self, cos, rho_s, sigma):
+        """The 'radiance' normalisation's Fresnel estimate at ``cos`` (0 where it does not
+        apply), as skyfit_mi.physics.ward.smooth_fresnel with the model's specularity."""
+        spec = dr.maximum(dr.maximum(rho_s.x, rho_s.y), rho_s.z) if self.model == "raw" \
+            else dr.clip(self.rho_s, 0.0, 1.0)
+        on = (sigma <= SIGMA_MIRROR) & (spec >= RADIANCE_FRESNEL_MIN)
+        return dr.select(on, dr.exp(-5.85 * dr.abs(cos)) - RADIANCE_FRESNEL_K, 0.0)
+
+    def _mix(self, ci, rho_d, rho_s, sigma):
+        """(diffuse, specular) reflectances seen from the view at cosine ``ci``, that split the
+        samples: rho_d, rho_s, or with the 'radiance' Fresnel rho_d (1 - F), rho_s + F (1 - rho_s)."""
+        if self.normalisation != "radiance":
+            return rho_d, rho_s
+        f = self._fresnel(ci, rho_s, sigma)
+        return rho_d * (1.0 - f), rho_s + f * (1.0 - rho_s)
+
     def _p_spec(self, rho_d, rho_s):
         ld, ls = _lum(rho_d), _lum(rho_s)
         return dr.select(ld + ls > 0, ls / dr.maximum(ld + ls, 1e-12), 0.0)
@@ -146,6 +167,9 @@ class WardBSDF(mi.BSDF):
         en_d, en_g, _ = self._enabled(ctx)
         f = mi.Color3f(0.0)
         if en_d:
+            if self.normalisation == "radiance":
+                rho_d = rho_d * ((1.0 - self._fresnel(ci, rho_s, sigma))
+                                 * (1.0 - self._fresnel(co, rho_s, sigma)))
             f += rho_d * dr.inv_pi
         if en_g:
             f += rho_s * self._lobe(wi, wo, sigma)
@@ -158,8 +182,8 @@ class WardBSDF(mi.BSDF):
         rho_d, rho_s, sigma = self.raw()
         en_d, en_g, en_delta = self._enabled(ctx)
         mirror = sigma <= SIGMA_MIRROR
-        p_spec = self._p_spec(rho_d, rho_s) if (en_g or en_delta) and en_d else \
-            (mi.Float(1.0) if (en_g or en_delta) else mi.Float(0.0))
+        p_spec = self._p_spec(*self._mix(ci, rho_d, rho_s, sigma)) if (en_g or en_delta) and en_d \
+            else (mi.Float(1.0) if (en_g or en_delta) else mi.Float(0.0))
         pdf = mi.Float(0.0)
         if en_d:
             pdf += (1.0 - p_spec) * co * dr.inv_pi
@@ -177,8 +201,8 @@ class WardBSDF(mi.BSDF):
         rho_d, rho_s, sigma = self.raw()
         en_d, en_g, en_delta = self._enabled(ctx)
         mirror = sigma <= SIGMA_MIRROR
-        p_spec = self._p_spec(rho_d, rho_s) if (en_g or en_delta) and en_d else \
-            (mi.Float(1.0) if (en_g or en_delta) else mi.Float(0.0))
+        p_spec = self._p_spec(*self._mix(ci, rho_d, rho_s, sigma)) if (en_g or en_delta) and en_d \
+            else (mi.Float(1.0) if (en_g or en_delta) else mi.Float(0.0))
         pick_spec = sample1 < p_spec
         if not en_g:
             pick_spec &= mirror
@@ -210,7 +234,8 @@ class WardBSDF(mi.BSDF):
         bs.pdf = dr.select(delta, p_spec, smooth_pdf)
         f = self.eval(ctx, si, wo, active)
         w_smooth = f / dr.maximum(smooth_pdf, 1e-20)
-        w_delta = mi.Spectrum(rho_s * self._mirror_fraction(ci)) / dr.maximum(p_spec, 1e-20)
+        w_delta = mi.Spectrum(self._mix(ci, rho_d, rho_s, sigma)[1] * self._mirror_fraction(ci)) \
+            / dr.maximum(p_spec, 1e-20)
         weight = dr.select(delta, w_delta, w_smooth)
         ok = mi.Bool(active) & (ci > 0) & (mi.Frame3f.cos_theta(wo) > 0) & (bs.pdf > 0)
         bs.pdf = dr.select(ok, bs.pdf, 0.0)
