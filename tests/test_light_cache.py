@@ -203,3 +203,19 @@ def test_sunless_frames_give_the_suns_directions_to_the_sky(days, monkeypatch):
     rendered = np.stack([read_exr(root / f["radiance"])[px[:, 1], px[:, 0]]
                          for f in doc["frames"] if f["index"] in sunless.obs.frames], axis=1)
     assert abs((sunless.wm.radiance([0.3, 0.1]) / rendered - 1).mean()) < 0.003
+
+
+def test_plastic_metal_rule_agrees_in_single_precision_at_the_threshold(days):
+    """A rho_s just below 0.5 is a plastic in NumPy; in the float32 plugin it rounded up to 0.5,
+    a metal: a dark glossy colour fit then saw a model 20-260x off at the threshold. The Dr.Jit
+    model and the NumPy basis agree on either side of it."""
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.render.fit_model import reflectances
+
+    s = FitSession(days["clean"], "disc", REGION, model="colour", positions=2, directions=128)
+    D, G = s.wm.basis(np.array([0.05]))
+    for rho_s in (0.4999, 0.49999999, float(np.nextafter(0.5, 0)), 0.5):
+        theta = np.array([0.02, 0.03, 0.05, rho_s, 0.05])
+        rho_d, spec, _, _ = reflectances("colour", theta)
+        np.testing.assert_allclose(s.wm.radiance(theta), rho_d * D + spec * G[0], rtol=1e-4,
+                                   atol=1e-6 * np.max(D), err_msg=str(rho_s))

@@ -65,6 +65,10 @@ SIGMA_MIRROR = 1e-4
 SIGMA_MAX = 1.0
 #: rho_s at and above which the colour model's highlight takes the colour C.
 METAL_THRESHOLD = 0.5
+#: Largest rho_s that reads as plastic in single precision too (the float32 below the
+#: threshold): a float64 rho_s between it and METAL_THRESHOLD rounds up to the threshold in a
+#: float32 plugin, which would read a metal where NumPy reads a plastic.
+PLASTIC_MAX = float(np.nextafter(np.float32(METAL_THRESHOLD), np.float32(0.0)))
 #: The offset K of Radiance's Fresnel estimate F(c) = exp(-5.85 c) - K (normal.c's ``FRESNE``)
 #: in Radiance 6.0a (normal.c 2.83), the ``rtrace`` the tests compare with [unitless].  Upstream
 #: Radiance uses K = exp(-5.85) = 0.00287989916 since commit 637ca291 (2026-06-11), so that

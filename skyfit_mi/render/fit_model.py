@@ -12,7 +12,7 @@ import itertools
 
 import numpy as np
 
-from ..physics.ward import METAL_THRESHOLD, SIGMA_MIRROR, lobe_albedo_nodes
+from ..physics.ward import METAL_THRESHOLD, PLASTIC_MAX, SIGMA_MIRROR, lobe_albedo_nodes
 from .light_cache import CONTROL_SIGMA, SIGMA_RESOLVED, control_weight
 
 #: Fitted parameters of each model (thesis 7.1), in order; C is three numbers.
@@ -104,7 +104,7 @@ def other_readings(model, theta):
     if model != "colour":
         return []
     c2, rho2 = colour_rule_twin(theta[:3], theta[3])
-    side = (0.0, np.nextafter(METAL_THRESHOLD, 0)) if theta[3] >= METAL_THRESHOLD \
+    side = (0.0, PLASTIC_MAX) if theta[3] >= METAL_THRESHOLD \
         else (METAL_THRESHOLD, 1.0)
     return [np.r_[np.clip(c2, 0, 1), np.clip(rho2, *side), theta[4]]]
 
@@ -142,7 +142,10 @@ def reflectances(model, theta):
 def material_dict(model, theta, normalisation="ward"):
     """The ``ward`` plugin dictionary (and spec material) for parameters ``theta``."""
     theta = [float(v) for v in theta]
-    d = {"model": model, "normalisation": normalisation, "rho_s": theta[-2], "sigma_alpha": theta[-1]}
+    rho_s = theta[-2]
+    if model == "colour" and rho_s < METAL_THRESHOLD:
+        rho_s = min(rho_s, PLASTIC_MAX)           # a plastic stays one in single precision
+    d = {"model": model, "normalisation": normalisation, "rho_s": rho_s, "sigma_alpha": theta[-1]}
     if model == "achromatic":
         d["R"] = theta[0]
     if model == "colour":
