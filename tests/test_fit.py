@@ -386,3 +386,19 @@ def test_model_noise_allowance_is_the_largest_over_the_profiles_region():
     # at the fit 10; the region (chi2 rise <= 3.84 + allowance) grows to the fixed point
     # 1e4 (s - 0.05)^2 = 3.84 + 200 s, s = 0.0985, where the noise is 19.7
     assert allowance == pytest.approx(19.7, rel=0.02)
+
+
+def test_other_parameters_are_profiled_when_the_lobe_is_poorly_determined(days):
+    """Under an overcast sky rho_s and sigma_alpha are poorly determined, and R trades off with
+    them along a ridge: R's interval then comes from its profile on the true chi-square (at
+    least as wide as the covariance's) and contains the truth (R = 1: the day's two-parameter
+    material, rho_d = 1 - rho_s). On the sunny east day R keeps its covariance interval."""
+    cov_only = fit(days["noisy"], model="achromatic")
+    assert cov_only["intervals"]["R"]["from"] == "covariance"
+    r = fit(days["overcast"], model="achromatic")
+    iv = r["intervals"]["R"]
+    assert iv["from"].startswith("profile")
+    sd = np.sqrt(r["covariance"]["matrix"][0][0])
+    lo, hi = iv["95"]
+    assert lo <= r["parameters"]["R"] - 1.9 * sd or lo == 0.0
+    assert lo <= 1.0 <= hi + 1e-9

@@ -222,12 +222,44 @@ class FitSession:
                           for lv, e in zip(levels, exact)}
                     source = "profile"
             intervals[p] = {"68": iv["68"], "95": iv["95"], "from": source}
+        if glob and self._poorly_determined(intervals, prof):
+            self._profile_the_rest(fit, intervals, ripple)
         mc_sd = self.cache_error(theta, fit["method"])
         for i, p in enumerate(names):
             for lv in ("68", "95"):
                 intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * mc_sd[i],
                                              lower[i], upper[i])
         fit.update(intervals=intervals, rise=rise, ripple=ripple, mc_sd=mc_sd)
+
+    def _poorly_determined(self, intervals, profiled):
+        """Whether a profiled parameter's 95% interval runs into a bound of its range or covers
+        over half of it: then the others trade off along a ridge that their covariance
+        intervals (a quadratic at the fit) miss."""
+        for i, p in enumerate(self.names):
+            if p in profiled:
+                lo, hi = intervals[p]["95"]
+                span = self.upper[i] - self.lower[i]
+                if lo <= self.lower[i] + 1e-6 * span or hi >= self.upper[i] - 1e-6 * span \
+                        or hi - lo > 0.5 * span:
+                    return True
+        return False
+
+    def _profile_the_rest(self, fit, intervals, ripple):
+        """Profile intervals, on the true chi-square by constrained fits, for the parameters
+        that have only covariance intervals; each the union with its covariance interval (an
+        edge the fits cannot place keeps the covariance's)."""
+        levels = ("68", "95")
+        for i, p in enumerate(self.names):
+            if intervals[p]["from"] != "covariance":
+                continue
+            exact, _ = profile_edges(self.problem, fit["theta"], fit["chi2"], i,
+                                     [unc.LEVELS[lv] * fit["s2"] + ripple for lv in levels],
+                                     self.lower, self.upper, fit["curv_inv"])
+            for lv, e in zip(levels, exact):
+                lo, hi = intervals[p][lv]
+                intervals[p][lv] = (min(lo, e[0]) if e[0] is not None else lo,
+                                    max(hi, e[1]) if e[1] is not None else hi)
+            intervals[p]["from"] = "profile (another parameter is poorly determined)"
 
     def _model_noise_allowance(self, theta, sigmas, profile, s2):
         """The chi-square the model's own Monte Carlo error may add, as the largest over the

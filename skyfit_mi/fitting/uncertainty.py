@@ -136,10 +136,10 @@ def misfit(chi2, dof, s2, model_noise=0.0):
     expected = dof + max(model_noise, 0.0)
     ratio = chi2 / expected
     p = float(chi2_dist.sf(chi2 * dof / expected, dof))
-    of = (f"chi-square is {ratio:.3g} times what noise" +
-          (f" and the model's Monte Carlo error ({model_noise:.3g})" if model_noise > 0.01 * dof
-           else "") + f" explain (p = {p:.2g}; noise alone varies it by +- "
-          f"{np.sqrt(2 / dof):.2g})")
+    by = (f"noise and the model's Monte Carlo error ({model_noise:.3g}) explain"
+          if model_noise > 0.01 * dof else "noise explains")
+    of = (f"chi-square is {ratio:.3g} times what {by} (p = {p:.2g}; noise alone varies it by "
+          f"+- {np.sqrt(2 / dof):.2g})")
     if ratio > MISFIT_UNRELIABLE and p < MISFIT_P:
         return [f"the model does not describe these data: {of}; its parameters and intervals are "
                 "not reliable. Check the sensor model and sigmas, the region (one material "
