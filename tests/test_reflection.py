@@ -22,14 +22,15 @@ def test_narrow_lobe_albedo_is_the_mirror_reflectance(normalisation, theta):
     assert lobe_albedo(wo, 1e-3, normalisation) == pytest.approx(expected, rel=2e-5)
 
 
+@pytest.mark.parametrize("normalisation", ["ward", "duer", "balanced", "radiance"])
 @pytest.mark.parametrize("sigma", [0.002, 0.01, 0.05])
 @pytest.mark.parametrize("theta", [45.0, 70.0])
-def test_lobe_albedo_matches_a_brute_force_integral(sigma, theta):
+def test_lobe_albedo_matches_a_brute_force_integral(sigma, theta, normalisation):
     wo = _view(theta)
     mirror = np.array([-wo[0], -wo[1], wo[2]])
     d, w = cap_quadrature(mirror, 20 * sigma, n_r=200, n_phi=256)
-    brute = np.sum(specular_lobe(d, wo, sigma) * np.clip(d[:, 2], 0, None) * w)
-    assert lobe_albedo(wo, sigma) == pytest.approx(brute, rel=2e-6)
+    brute = np.sum(specular_lobe(d, wo, sigma, normalisation) * np.clip(d[:, 2], 0, None) * w)
+    assert lobe_albedo(wo, sigma, normalisation) == pytest.approx(brute, rel=2e-6)
 
 
 def test_reflected_radiance_under_a_uniform_sky_and_a_sun():
