@@ -402,3 +402,16 @@ def test_other_parameters_are_profiled_when_the_lobe_is_poorly_determined(days):
     lo, hi = iv["95"]
     assert lo <= r["parameters"]["R"] - 1.9 * sd or lo == 0.0
     assert lo <= 1.0 <= hi + 1e-9
+
+
+def test_the_models_own_noise_is_reported_over_roughness_and_warned_when_data_are_finer(days):
+    """The fit JSON gives the light cache's share of chi-square at each roughness; the
+    noise-free day (quantisation only) is more precise than the cache and is warned of,
+    the 5%-noise day is not."""
+    clean, noisy = fit(days["clean"]), fit(days["noisy"])
+    by_sigma = clean["cache_noise_chi2_by_sigma"]
+    assert set(by_sigma) == {"0.01", "0.02", "0.05", "0.1", "0.2", "0.35", "0.5"}
+    assert max(by_sigma.values()) > 0.25 * clean["dof"]
+    assert any(w.startswith("the light cache's own Monte Carlo error") for w in clean["warnings"])
+    assert max(noisy["cache_noise_chi2_by_sigma"].values()) < 0.25 * noisy["dof"]
+    assert not any("light cache's own" in w for w in noisy["warnings"])

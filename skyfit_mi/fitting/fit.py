@@ -30,6 +30,12 @@ from ..physics.ward import METAL_THRESHOLD
 GREY_SPREAD = 0.02
 
 
+#: Roughness values at which the model's own noise is reported [rms slope].
+NOISE_SIGMAS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5)
+#: Share of the degrees of freedom above which the model's own noise is warned of.
+NOISE_SHARE = 0.25
+
+
 class FitSession:
     """One region of one sequence, ready to fit: observations, light cache, models, chi-square.
 
@@ -229,7 +235,15 @@ class FitSession:
             for lv in ("68", "95"):
                 intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * mc_sd[i],
                                              lower[i], upper[i])
-        fit.update(intervals=intervals, rise=rise, ripple=ripple, mc_sd=mc_sd)
+        fit.update(intervals=intervals, rise=rise, ripple=ripple, mc_sd=mc_sd,
+                   noise_by_sigma=self._model_noise_by_sigma(theta))
+
+    def _model_noise_by_sigma(self, theta):
+        """The model's own Monte Carlo share of chi-square at the fitted reflectances over the
+        roughness range (NOISE_SIGMAS): where it is a sizeable share of the degrees of freedom
+        it pulls fits toward the roughness where it is small."""
+        return {f"{v:g}": self.problem.model_noise_chi2(np.r_[theta[:-1], v])
+                for v in NOISE_SIGMAS}
 
     def _poorly_determined(self, intervals, profiled):
         """Whether a profiled parameter's 95% interval runs into a bound of its range or covers
@@ -312,6 +326,15 @@ class FitSession:
         warnings += unc.identifiability(names, iv95, self.lower, self.upper, fit["rise"],
                                         fit["s2"], fit["ripple"])
         warnings += geometry_warnings(self.geometry, float(theta[-1]))
+        worst = max(fit["noise_by_sigma"], key=fit["noise_by_sigma"].get)
+        if fit["noise_by_sigma"][worst] > NOISE_SHARE * self.problem.dof:
+            warnings.append(
+                f"the light cache's own Monte Carlo error adds up to "
+                f"{fit['noise_by_sigma'][worst]:.3g} to chi-square (at sigma_alpha = {worst}), "
+                f"over {NOISE_SHARE:.0%} of the {self.problem.dof} degrees of freedom: the data "
+                "are more precise than the model, which pulls fits toward the roughness where "
+                "its error is small (intervals allow for it); use more --directions and "
+                "--positions.")
         if self.model == "colour":
             other = unc.colour_rule_ambiguity(theta, iv95)
             if other is not None:
@@ -338,7 +361,7 @@ class FitSession:
             "readings": [unc.reading(p, theta[i], fit["intervals"][p]["95"], self.lower[i],
                                      self.upper[i]) for i, p in enumerate(names)],
             "cache_error_sd": dict(zip(names, fit["mc_sd"].tolist())),
-            "cache_noise_chi2": fit["ripple"],
+            "cache_noise_chi2": fit["ripple"], "cache_noise_chi2_by_sigma": fit["noise_by_sigma"],
             "covariance": {"names": list(names), "matrix": fit["cov"].tolist()},
             "evaluations": evaluations, "status": res.get("status"),
             "message": res.get("message"), "warnings": warnings,
