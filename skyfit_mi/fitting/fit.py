@@ -34,6 +34,9 @@ GREY_SPREAD = 0.02
 NOISE_SIGMAS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5)
 #: Share of the degrees of freedom above which the model's own noise is warned of.
 NOISE_SHARE = 0.25
+#: Iterations of each constrained fit that profiles a parameter along a ridge (another
+#: parameter poorly determined): the conditional-mean start is poor there.
+PROFILE_RIDGE_ITERATIONS = 40
 
 
 class FitSession:
@@ -268,7 +271,8 @@ class FitSession:
                 continue
             exact, _ = profile_edges(self.problem, fit["theta"], fit["chi2"], i,
                                      [unc.LEVELS[lv] * fit["s2"] + ripple for lv in levels],
-                                     self.lower, self.upper, fit["curv_inv"])
+                                     self.lower, self.upper, fit["curv_inv"], rtol=0.01,
+                                     max_fits=10, iterations=PROFILE_RIDGE_ITERATIONS)
             for lv, e in zip(levels, exact):
                 lo, hi = intervals[p][lv]
                 intervals[p][lv] = (min(lo, e[0]) if e[0] is not None else lo,

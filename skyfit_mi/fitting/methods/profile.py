@@ -26,11 +26,12 @@ from .levenberg_marquardt import levenberg_marquardt
 
 
 def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, rtol=0.05,
-                  max_fits=6):
+                  max_fits=6, iterations=5):
     """Edges of {x : P_k(x) - chi2_min <= thr} for each threshold (ascending chi^2 rises).
 
     ``cov`` is (J^T J)^-1 at ``theta`` (unscaled), for the first guesses and the fits'
-    starts.  Returns ([(lo, hi)] per threshold, with None for an edge the fits could not
+    starts; ``iterations`` bounds each constrained fit (5 where chi^2 is near quadratic; more
+    along a curved ridge, where the conditional mean is a poor start).  Returns ([(lo, hi)] per threshold, with None for an edge the fits could not
     place, e.g. where the constrained fit's curvature is singular), and the number of fits.
     An edge is placed when P_k - chi2_min is within ``rtol`` of the threshold (relative, in
     h), or at the bound if the profile stays below the threshold there.
@@ -49,7 +50,8 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, rt
         fits += 1
         start = np.clip(theta + (x - x0) * direction, lower, upper)
         start[k] = x
-        res = levenberg_marquardt(problem, start, lower, upper, max_iterations=5, fixed=[k])
+        res = levenberg_marquardt(problem, start, lower, upper, max_iterations=iterations,
+                                  fixed=[k])
         exact = res["status"] != "failed"
         chi2 = res["chi2"] if exact else problem.chi2(start)
         return float(np.sqrt(max(chi2 - chi2_min, 0.0))), exact
