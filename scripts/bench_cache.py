@@ -28,8 +28,7 @@ def main():
     args = ap.parse_args()
     from skyfit_mi.fitting.chi2 import parse_region
     from skyfit_mi.fitting.fit import FitSession
-    from skyfit_mi.render.image import read_exr
-    from skyfit_mi.pipeline.manifest import load_manifest
+    from skyfit_mi.pipeline.pixels import frame_values
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
@@ -43,15 +42,12 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "seq"
         render_sequence(validate_spec(raw, tmp), out, progress=False, log=lambda *a: None)
-        doc, root = load_manifest(out)
         for positions, directions in SPLITS:
             t0 = time.perf_counter()
             s = FitSession(out, "disc", parse_region("rect:6,6,9,9"), model="achromatic", seed=1,
                            positions=positions, directions=directions)
             t = time.perf_counter() - t0
-            px = s.obs.pixels
-            rendered = np.stack([read_exr(root / f["radiance"])[px[:, 1], px[:, 0]]
-                                 for f in doc["frames"] if f["index"] in s.obs.frames], axis=1)
+            rendered = frame_values(out, s.obs.pixels, s.obs.frames)
             rel = s.wm.radiance([truth["R"], truth["rho_s"], truth["sigma_alpha"]]) / rendered - 1
             print(f"| {positions} x {directions} | {positions * directions} | "
                   f"{100 * np.sqrt(np.mean(rel**2)):.2f}% | "

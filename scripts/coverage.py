@@ -45,8 +45,8 @@ def main():
     from skyfit_mi.fitting import cramer_rao
     from skyfit_mi.fitting.chi2 import parse_region
     from skyfit_mi.fitting.fit import FitSession
-    from skyfit_mi.render.image import read_exr
     from skyfit_mi.pipeline.manifest import load_manifest, sensor_from_record
+    from skyfit_mi.pipeline.pixels import frame_values
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
@@ -64,12 +64,10 @@ def main():
             raw = thesis_disc_spec(label, {"model": model, **truth}, bits=8, spp=4096, seed=7 + i)
             out = Path(tmp) / f"case{i}"
             render_sequence(validate_spec(raw, tmp), out, progress=False, log=lambda *a: None)
-            doc, root = load_manifest(out)
+            doc, _ = load_manifest(out)
             session = FitSession(out, "disc", region, model=model, seed=i)
             obs = session.obs
-            px = obs.pixels
-            radiance = np.stack([read_exr(root / f["radiance"])[px[:, 1], px[:, 0]]
-                                 for f in doc["frames"] if f["index"] in obs.frames], axis=1)
+            radiance = frame_values(out, obs.pixels, obs.frames)
             tv = truth_vector(model, truth)
             for noise in (float(v) for v in args.noise.split(",")):
                 sensor = dataclasses.replace(sensor_from_record(doc["sensor"]),

@@ -42,9 +42,9 @@ def main():
     from skyfit_mi.physics.colour import SRGB_LUMINANCE
     from skyfit_mi.physics.reflection import reflected_radiance
     from skyfit_mi.render.fit_model import reflectances
-    from skyfit_mi.render.image import read_exr
     from skyfit_mi.render.scene import pixel_views
     from skyfit_mi.pipeline.manifest import load_manifest
+    from skyfit_mi.pipeline.pixels import frame_values
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
@@ -56,16 +56,15 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(args.out or Path(tmp) / "seq")
         render_sequence(validate_spec(raw, tmp), out, progress=False, log=lambda *a: None)
-        doc, root = load_manifest(out)
+        doc, _ = load_manifest(out)
         s = FitSession(out, "disc", parse_region("rect:6,6,9,9"), model="two",
                        seed=args.cache_seed, positions=args.positions, directions=args.directions)
         px = s.obs.pixels
         frames = [f for f in doc["frames"] if f["index"] in s.obs.frames]
-        rendered = np.stack([read_exr(root / f["radiance"])[px[:, 1], px[:, 0]] for f in frames], 1)
+        rendered = frame_values(out, px, s.obs.frames)
         # the frames' standard error in radiance: the DN sigma (quantisation and the render's
         # own error) through the sensor's slope
-        sd = np.stack([read_exr(root / f["sigma"])[px[:, 1], px[:, 0]] for f in frames], 1) \
-            / s.problem.slope(rendered)
+        sd = frame_values(out, px, s.obs.frames, "sigma") / s.problem.slope(rendered)
         cache, cache_var = s.wm.radiance_and_variance(truth)
         rho_d, rho_s = reflectances("two", truth)[:2]
         views = pixel_views(s.scene, px)

@@ -53,15 +53,11 @@ def _replicates(day, n, seed, noise_percent=5.0, saturate_quantile=None):
     import dataclasses
 
     from skyfit_mi.fitting.fit import FitSession
-    from skyfit_mi.pipeline.manifest import load_manifest
-    from skyfit_mi.render.image import read_exr
+    from skyfit_mi.pipeline.pixels import frame_values
 
     s = FitSession(day, "disc", REGION, **FAST)
-    doc, root = load_manifest(day)
     obs = s.obs
-    px = obs.pixels
-    radiance = np.stack([read_exr(root / f["radiance"])[px[:, 1], px[:, 0]]
-                         for f in doc["frames"] if f["index"] in obs.frames], axis=1)
+    radiance = frame_values(day, obs.pixels, obs.frames)
     changes = {"noise_percent": noise_percent}
     if saturate_quantile is not None:
         signal = radiance * obs.gain

@@ -81,23 +81,24 @@ def radiance_day(radiance, tmp_path_factory, mi):
     return out
 
 
+def _session(radiance_day):
+    """The fit session of the disc's central 4x4 (colour model, 'balanced'), the truth, and
+    Radiance's radiance there (P, T, 3)."""
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.pipeline.pixels import frame_values
+
+    s = FitSession(radiance_day, "disc", parse_region("rect:4,4,7,7"), model="colour",
+                   normalisation="balanced")
+    return s, np.array([*C, SPEC, ROUGH]), frame_values(radiance_day, s.obs.pixels, s.obs.frames)
+
+
 def test_radiance_rendered_day_is_modelled_and_fitted_within_the_intervals(radiance_day):
     """The fit model at the truth reproduces Radiance's frames (measured: 0.1% per frame and
     channel), and the fit's 95% intervals contain the truth. Here rho_s and sigma_alpha trade
     off with C along a ridge (five frames, sigma_alpha undetermined and warned of), so C's
     intervals come from profiles; the truth lies 1.5-3% inside their lower edges (C_r from
     0.588, C_g 0.394, C_b 0.194) where the covariance's intervals excluded it."""
-    from skyfit_mi.fitting.fit import FitSession
-    from skyfit_mi.pipeline.manifest import load_manifest
-    from skyfit_mi.render.image import read_exr
-
-    s = FitSession(radiance_day, "disc", parse_region("rect:4,4,7,7"), model="colour",
-                   normalisation="balanced")
-    truth = np.array([*C, SPEC, ROUGH])
-    doc, root = load_manifest(radiance_day)
-    px = s.obs.pixels
-    traced = np.stack([read_exr(root / f["radiance"])[px[:, 1], px[:, 0]]
-                       for f in doc["frames"] if f["index"] in s.obs.frames], axis=1)
+    s, truth, traced = _session(radiance_day)
     ratio = (s.wm.radiance(truth) / traced).mean(axis=0)              # per frame and channel
     np.testing.assert_allclose(ratio, 1.0, atol=0.003)
     r = s.run("global", log=lambda *a: None)
@@ -115,17 +116,7 @@ def test_intervals_cover_the_truth_over_replicates_of_the_radiance_day(radiance_
     """Over 40 noise replicates of the Radiance-traced frames (``pytest -m slow``) each
     parameter's 95% interval contains the truth in at least 90% of them: the goal of issue 13,
     not met yet for C_r (the ridge along which C, rho_s and sigma_alpha trade off)."""
-    from skyfit_mi.fitting.fit import FitSession
-    from skyfit_mi.pipeline.manifest import load_manifest
-    from skyfit_mi.render.image import read_exr
-
-    s = FitSession(radiance_day, "disc", parse_region("rect:4,4,7,7"), model="colour",
-                   normalisation="balanced")
-    truth = np.array([*C, SPEC, ROUGH])
-    doc, root = load_manifest(radiance_day)
-    px = s.obs.pixels
-    traced = np.stack([read_exr(root / f["radiance"])[px[:, 1], px[:, 0]]
-                       for f in doc["frames"] if f["index"] in s.obs.frames], axis=1)
+    s, truth, traced = _session(radiance_day)
     covered = []
     for r in range(40):
         y, sig = s.obs.sensor.capture(traced * s.obs.gain / s.obs.sensor.exposure,

@@ -40,13 +40,9 @@ def session(days):
 
 
 def test_cache_matches_the_render_without_bias(session, days):
-    from skyfit_mi.render.image import read_exr
-    from skyfit_mi.pipeline.manifest import load_manifest
+    from skyfit_mi.pipeline.pixels import frame_values
 
-    doc, root = load_manifest(days["clean"])
-    px = session.obs.pixels
-    rendered = np.stack([read_exr(root / f["radiance"])[px[:, 1], px[:, 0]]
-                         for f in doc["frames"] if f["index"] in session.obs.frames], axis=1)
+    rendered = frame_values(days["clean"], session.obs.pixels, session.obs.frames)
     model = session.wm.radiance([0.3, 0.1])                   # the day's truth
     rel = model / rendered - 1
     # both are Monte Carlo estimates (1024 spp render; 32 x 128 cache samples per pixel), so
@@ -184,10 +180,9 @@ def test_sunless_frames_give_the_suns_directions_to_the_sky(days, monkeypatch):
     the solar disc (measured: 0.62% against 0.73% rms per value), and the radiance still
     agrees with the render."""
     from skyfit_mi.fitting.fit import FitSession
-    from skyfit_mi.pipeline.manifest import load_manifest
+    from skyfit_mi.pipeline.pixels import frame_values
     from skyfit_mi.render import light_cache
     from skyfit_mi.render.fit_model import WardModel
-    from skyfit_mi.render.image import read_exr
 
     def error(session):
         a, b = (WardModel(c, "two").radiance([0.3, 0.1]) for c in session.cache.halves())
@@ -198,10 +193,7 @@ def test_sunless_frames_give_the_suns_directions_to_the_sky(days, monkeypatch):
     monkeypatch.setattr(light_cache, "_has_sun", lambda sky: True)  # the old mixture
     wasted = FitSession(days["overcast"], "disc", REGION, **kw)
     assert error(sunless) < 0.9 * error(wasted), (error(sunless), error(wasted))
-    doc, root = load_manifest(days["overcast"])
-    px = sunless.obs.pixels
-    rendered = np.stack([read_exr(root / f["radiance"])[px[:, 1], px[:, 0]]
-                         for f in doc["frames"] if f["index"] in sunless.obs.frames], axis=1)
+    rendered = frame_values(days["overcast"], sunless.obs.pixels, sunless.obs.frames)
     assert abs((sunless.wm.radiance([0.3, 0.1]) / rendered - 1).mean()) < 0.003
 
 

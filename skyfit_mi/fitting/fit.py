@@ -286,10 +286,11 @@ class FitSession:
         noise of the larger of two estimators compared (near the mirror, the mirror rays'
         and the narrowest resolved lobe's); the region widens with the allowance, so it is
         found again until it stops growing."""
+        def at(sigma):
+            return self.problem.model_noise_chi2(np.r_[theta[:-1], sigma])
+
         def noise(sigma):
-            return max(self.problem.model_noise_chi2(np.r_[theta[:-1], sigma]),
-                       self.problem.model_noise_chi2(np.r_[theta[:-1],
-                                                           max(sigma, SIGMA_RESOLVED)]))
+            return at(sigma) if sigma >= SIGMA_RESOLVED else max(at(sigma), at(SIGMA_RESOLVED))
         sigmas, profile = np.asarray(sigmas, dtype=float), np.asarray(profile, dtype=float)
         ripple, seen = noise(theta[-1]), {float(theta[-1])}
         for _ in range(4):

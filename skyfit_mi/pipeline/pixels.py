@@ -11,7 +11,7 @@ from ..errors import SkyfitError
 from ..files import save_figure, write_text
 from .manifest import load_manifest, read_frame_image
 
-SOURCES = {"radiance": "W m^-2 sr^-1", "sensor": "DN"}
+SOURCES = {"radiance": "W m^-2 sr^-1", "sensor": "DN", "sigma": "DN"}
 
 
 def parse_pixel(text):
@@ -41,6 +41,17 @@ def pixel_series(manifest_path, pixels, source="radiance"):
         for x, y in pixels:
             rows.append((f["index"], f["time"], x, y, *map(float, img[y, x])))
     return rows, SOURCES[source]
+
+
+def frame_values(manifest_path, pixels, frames, source="radiance"):
+    """Values of ``pixels`` ((P, 2) x, y) in the frames whose index is in ``frames``, in time
+    order: (P, T, 3) [``SOURCES[source]``]; each frame read and checked as ``fit`` reads it."""
+    doc, root = load_manifest(manifest_path)
+    shape = (doc["camera"]["height"], doc["camera"]["width"], 3)
+    px = np.asarray(pixels, dtype=int)
+    wanted = set(int(i) for i in frames)
+    return np.stack([read_frame_image(root, f, source, shape)[px[:, 1], px[:, 0]]
+                     for f in doc["frames"] if f["index"] in wanted], axis=1).astype(float)
 
 
 def write_pixels(manifest_path, pixels, out_prefix=None, source="radiance"):
