@@ -100,8 +100,11 @@ def test_radiance_rendered_day_is_modelled_and_fitted_within_the_intervals(radia
     0.588, C_g 0.394, C_b 0.194) where the covariance's intervals excluded it."""
     s, truth, traced = _session(radiance_day)
     ratio = (s.wm.radiance(truth) / traced).mean(axis=0)              # per frame and channel
+    print("model / Radiance per frame and channel:", ratio.round(4).tolist())
     np.testing.assert_allclose(ratio, 1.0, atol=0.003)
-    r = s.run("global", log=lambda *a: None)
+    r = s.run("global", log=print)
+    print("95% intervals:", {p: tuple(round(v, 3) for v in r["intervals"][p]["95"])
+                             for p in s.names})
     for p, t in zip(s.names, truth):
         lo, hi = r["intervals"][p]["95"]
         assert lo <= t <= hi, (p, t, lo, hi)
@@ -126,4 +129,5 @@ def test_intervals_cover_the_truth_over_replicates_of_the_radiance_day(radiance_
         covered.append([res["intervals"][p]["95"][0] <= t <= res["intervals"][p]["95"][1]
                         for p, t in zip(s.names, truth)])
     coverage = np.mean(covered, axis=0)
+    print("95% coverage over 40 replicates:", dict(zip(s.names, coverage.round(3).tolist())))
     assert np.all(coverage >= 0.9), dict(zip(s.names, coverage))
