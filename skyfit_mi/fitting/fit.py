@@ -80,7 +80,8 @@ class FitSession:
         self.skies = [frame_sky(frames[i]) for i in self.obs.frames]
         self.cache = build_light_cache(self.scene, self.params, self.skies, self.obs.pixels, name,
                                        positions=positions, directions=directions, seed=seed,
-                                       max_depth=max(1, int(doc["render"]["max_depth"]) - 1))
+                                       max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
+                                       normalisation=normalisation)
         if not self.cache.hit.any():
             raise SkyfitError(f"none of the region's pixels shows material {name!r}; check the region.")
         self.cache_time = time.perf_counter() - t0

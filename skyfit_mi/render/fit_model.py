@@ -13,7 +13,8 @@ import itertools
 import numpy as np
 
 from ..physics.ward import METAL_THRESHOLD, PLASTIC_MAX, SIGMA_MIRROR, lobe_albedo_nodes
-from .light_cache import CONTROL_SIGMA, SIGMA_RESOLVED, control_weight
+from .light_cache import CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED, SIGMA_TABLE, control_weight
+from .sky_control import chebyshev_eval, chebyshev_x
 
 #: Fitted parameters of each model (thesis 7.1), in order; C is three numbers.
 PARAMETERS = {"two": ("rho_s", "sigma_alpha"),
@@ -22,7 +23,7 @@ PARAMETERS = {"two": ("rho_s", "sigma_alpha"),
 #: Models by their number of free parameters (the CLI's --model 2/3/5).
 BY_COUNT = {2: "two", 3: "achromatic", 5: "colour"}
 #: Bounds of every parameter: reflectances in [0, 1], sigma_alpha in [0, 0.5].
-BOUNDS = {"rho_s": (0.0, 1.0), "sigma_alpha": (0.0, 0.5), "R": (0.0, 1.0),
+BOUNDS = {"rho_s": (0.0, 1.0), "sigma_alpha": (0.0, SIGMA_LARGEST), "R": (0.0, 1.0),
           "C_r": (0.0, 1.0), "C_g": (0.0, 1.0), "C_b": (0.0, 1.0)}
 
 
@@ -198,6 +199,13 @@ class WardModel:
         d_hat = (np.clip(cache.wi[..., 2], 0, None) / np.pi * up * cache.inv_pdf)
         self.d_hat = mi.Float(d_hat.reshape(P * T * S, -1).sum(axis=1))
         self.c = mi.Color3f(*flat(cache.mirror_sky, 3))
+        # the sky function's integrals (.sky_control), per position's share
+        if cache.normalisation != normalisation:
+            raise ValueError(f"the light cache integrates the {cache.normalisation!r} lobe, "
+                             f"not {normalisation!r}")
+        self.diffuse_sky = mi.Color3f(*flat(cache.diffuse_sky / S, 3))
+        self.lobe_sky = [mi.Color3f(*flat(cache.lobe_sky[:, :, :, m] / S, 3))
+                         for m in range(cache.lobe_sky.shape[3])]
         a, b, c = lobe_albedo_nodes()
         self.J = len(a)
         self.si_q = dr.zeros(mi.SurfaceInteraction3f, P * T * S * self.J)
@@ -252,8 +260,12 @@ class WardModel:
         bs, w = bsdf.sample(ctx, self.si_m, mi.Float(0.0), mi.Point2f(0.5, 0.5))
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection)
         L += dr.select(delta, w * bs.pdf, 0.0) * self.mirror
+        rho_d, spec, s = bsdf.raw()
+        L += rho_d * self.diffuse_sky
+        if sigma > SIGMA_MIRROR:
+            x = chebyshev_x(s, *SIGMA_TABLE, dr.log, dr.clip)
+            L += spec * chebyshev_eval(self.lobe_sky, x)
         if control:
-            rho_d, _, s = bsdf.raw()
             # the lobe's albedo: its estimate from the samples, and the quadrature
             estimate = dr.block_sum(f * self.inv_pdf, K) - rho_d * self.d_hat
             a, b, c = self.nodes

@@ -44,7 +44,7 @@ sun's angular radius (0.0047 rad), so such lobes reflect sun and sky almost as a
 mirror does, and the interpolation changes little but keeps L continuous.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -54,6 +54,10 @@ from ..physics.ward import SIGMA_MIRROR
 LOBE_SIGMAS = (0.002, 0.006, 0.02, 0.06, 0.15, 0.3)
 #: The narrowest lobe the cache resolves; the model interpolates to the mirror below it.
 SIGMA_RESOLVED = LOBE_SIGMAS[0]
+#: The largest roughness the model represents [rms slope]: the fits' upper bound.
+SIGMA_LARGEST = 0.5
+#: The roughness range of the sky's integral through the lobe (:mod:`.sky_control`).
+SIGMA_TABLE = (SIGMA_RESOLVED, SIGMA_LARGEST)
 #: Samples per pixel by default: positions over the pixel's area (a highlight's radiance can
 #: vary by tens of per cent across one pixel) and light directions at each position.
 POSITIONS, DIRECTIONS = 32, 128
@@ -86,6 +90,14 @@ class LightCache:
     sun_half_cos : (P, T, S)  cos of the angle between the normal and the half vector of the
         sun and view directions, per position; NaN where the frame's sun gives no light
         (none, below the horizon, or behind the surface) [unitless]
+    diffuse_sky : (P, T, S, 3)  I_d, the sky function's cosine-weighted integral / pi per
+        position [W m^-2 sr^-1] (:mod:`.sky_control`)
+    lobe_sky : (P, T, S, M, 3)  Chebyshev coefficients in log sigma of I_s(sigma), the sky
+        function through the lobe of rho_s = 1, per position [W m^-2 sr^-1]
+    normalisation : the Ward normalisation of that lobe
+
+    ``weight`` and ``mirror_sky`` hold the light less the sky function h (the control
+    variate of :mod:`.sky_control`): L_i - h.
     """
 
     wo: np.ndarray
@@ -97,6 +109,9 @@ class LightCache:
     inv_pdf: np.ndarray
     mirror_sky: np.ndarray
     sun_half_cos: np.ndarray
+    diffuse_sky: np.ndarray
+    lobe_sky: np.ndarray
+    normalisation: str = "ward"
 
     def halves(self):
         """Two independent caches, each from half of every pixel's positions (weights doubled).
@@ -111,17 +126,26 @@ class LightCache:
         out = []
         for sl in (slice(0, h), slice(h, 2 * h)):
             n = slice(sl.start * K, sl.stop * K)
-            out.append(LightCache(self.wo[:, :, n], self.wi[:, :, n], self.weight[:, :, n] * (S / h),
-                                  self.mirror[:, :, sl] * (S / h), self.mirror_cos[:, :, sl],
-                                  self.hit, self.inv_pdf[:, :, n] * (S / h),
-                                  self.mirror_sky[:, :, sl], self.sun_half_cos[:, :, sl]))
+            out.append(replace(
+                self, wo=self.wo[:, :, n], wi=self.wi[:, :, n], weight=self.weight[:, :, n] * (S / h),
+                mirror=self.mirror[:, :, sl] * (S / h), mirror_cos=self.mirror_cos[:, :, sl],
+                inv_pdf=self.inv_pdf[:, :, n] * (S / h), mirror_sky=self.mirror_sky[:, :, sl],
+                sun_half_cos=self.sun_half_cos[:, :, sl], diffuse_sky=self.diffuse_sky[:, :, sl],
+                lobe_sky=self.lobe_sky[:, :, sl]))
         return out
 
     # ---- the basis (NumPy, for the global search) ------------------------
     def diffuse_basis(self):
         """D with L = rho_d * D + ...: sum cos/pi * weight, shape (P, T, 3)."""
         cos = np.clip(self.wi[..., 2], 0, None) * (self.wo[..., 2] > 0)
-        return np.einsum("ptn,ptnc->ptc", cos / np.pi, self.weight)
+        return np.einsum("ptn,ptnc->ptc", cos / np.pi, self.weight) + self.diffuse_sky.mean(axis=2)
+
+    def lobe_sky_integral(self, sigma_alpha):
+        """I_s(sigma) per position (P, T, S, 3): the sky function through the lobe."""
+        from .sky_control import chebyshev_eval, chebyshev_x
+
+        x = chebyshev_x(sigma_alpha, *SIGMA_TABLE, np.log, np.clip)
+        return chebyshev_eval(np.moveaxis(self.lobe_sky, 3, 0), x)
 
     def specular_basis(self, sigma_alpha, normalisation="ward"):
         """G(sigma) with L = ... + rho_s * G: shape (P, T, 3).
@@ -134,6 +158,9 @@ class LightCache:
         from .fit_model import check_fit_normalisation
 
         check_fit_normalisation(normalisation)
+        if normalisation != self.normalisation:
+            raise ValueError(f"the cache integrates the {self.normalisation!r} lobe, not "
+                             f"{normalisation!r}")
         if sigma_alpha <= SIGMA_MIRROR:
             frac = mirror_reflectance(self.mirror_cos, normalisation)
             return np.einsum("pts,ptsc->ptc", frac, self.mirror)
@@ -143,7 +170,8 @@ class LightCache:
                 + t * self.specular_basis(SIGMA_RESOLVED, normalisation)
         lobe = specular_lobe(self.wi, self.wo, sigma_alpha, normalisation) \
             * np.clip(self.wi[..., 2], 0, None)
-        G = np.einsum("ptn,ptnc->ptc", lobe, self.weight)
+        G = np.einsum("ptn,ptnc->ptc", lobe, self.weight) \
+            + self.lobe_sky_integral(sigma_alpha).mean(axis=2)
         beta = float(control_weight(sigma_alpha))
         if beta == 0:
             return G
@@ -212,9 +240,44 @@ def _stratified(rng, n, count=None):
     return u[0] if count is None else u
 
 
+def _sky_integrals(mi, dr, emitter, si, lobe):
+    """I_d (Q) and the Chebyshev coefficients of I_s (M, Q) of every surface interaction in
+    ``si`` under the emitter's current sky, as NumPy (Q, 3) and (Q, M, 3) (:mod:`.sky_control`);
+    ``lobe`` a rho_s = 1 ``ward`` plugin of the fit's normalisation."""
+    from .sky_control import (chebyshev_coefficients, chebyshev_nodes, diffuse_directions,
+                              lobe_directions, lobe_resolution)
+
+    Q = dr.width(si.wi)
+    up = si.to_local(mi.Vector3f(0.0, 0.0, 1.0))
+
+    def sky(wi, J):
+        frame = dr.gather(mi.Frame3f, si.sh_frame, dr.arange(mi.UInt32, Q * J) // J)
+        return emitter.sky_eval(frame.to_world(wi))
+
+    def np3(v):
+        return np.array(v, dtype=np.float64).T
+
+    wi, w, J = diffuse_directions(up)
+    diffuse = np3(dr.block_sum(sky(wi, J) * w, J))
+    params = mi.traverse(lobe)
+    glossy = mi.BSDFContext()
+    glossy.component = 1
+    values = []
+    for sigma in chebyshev_nodes(*SIGMA_TABLE):
+        s = mi.Float(sigma)
+        dr.make_opaque(s)
+        params["sigma_alpha"] = s
+        params.update()
+        wi, w, J = lobe_directions(si.wi, up, s, *lobe_resolution(sigma))
+        si_n = dr.zeros(mi.SurfaceInteraction3f, Q * J)
+        si_n.wi = dr.gather(mi.Vector3f, si.wi, dr.arange(mi.UInt32, Q * J) // J)
+        f = lobe.eval(glossy, si_n, wi)                             # lobe cos(theta_i)
+        values.append(np3(dr.block_sum(f * sky(wi, J) * w, J)))
+    return diffuse, chebyshev_coefficients(np.stack(values, axis=1), axis=1)
+
+
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
-                      directions=DIRECTIONS, seed=0,
-                      max_depth=3):
+                      directions=DIRECTIONS, seed=0, max_depth=3, normalisation="ward"):
     """Trace the light arriving at ``pixels`` for every sky in ``skies``.
 
     Parameters
@@ -227,6 +290,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         and light directions at each
     seed : int, the seed of every random choice (recorded by the caller)
     max_depth : path depth for light arriving from the rest of the scene
+    normalisation : the Ward normalisation the cache's sky integrals are for
 
     Returns
     -------
@@ -256,8 +320,10 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     n_comp = 3 + len(LOBE_SIGMAS)
 
     rng = np.random.default_rng(seed)
+    lobe_plugin = mi.load_dict({"type": "ward", "model": "two", "rho_s": 1.0, "sigma_alpha": 0.1,
+                                "normalisation": normalisation})
     out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos",
-                           "hit", "sun_half_cos")}
+                           "hit", "sun_half_cos", "diffuse_sky", "lobe_sky")}
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
         comp = _components(K, _has_sun(sky))
@@ -299,7 +365,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         li, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(sik.spawn_ray(d)))
         ok = (p_mix > 0) & (mi.Frame3f.cos_theta(wl) > 0)
         inv_pdf = dr.select(ok, dr.rcp(dr.maximum(p_mix, 1e-30)) / (K * S), 0.0)
-        weight = li * inv_pdf
+        weight = (li - emitter.sky_eval(d)) * inv_pdf                # the control variate's rest
         # mirror direction at each position
         wm = mi.reflect(si.wi)
         sampler.seed(int(rng.integers(2**31)), P * S)
@@ -307,7 +373,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         lm, _, _ = integrator.sample(scene, sampler, ray_m)
         # the same without the solar disc: the control variate's constant
         sun_seen = ~scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
-        lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0)
+        lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0) - emitter.sky_eval(ray_m.d)
         dr.eval(weight, inv_pdf, lm, lm_sky)              # together: the mixture density once
 
         def np3(v, n):
@@ -321,4 +387,8 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         out["mirror_cos"].append(np.array(mi.Frame3f.cos_theta(si.wi), np.float32).reshape(P, S))
         out["hit"].append(on.reshape(P, S).all(axis=1))
         out["sun_half_cos"].append(_sun_half_cos(mi, si, sky).reshape(P, S))
-    return LightCache(**{k: np.stack(v, axis=1) for k, v in out.items()})
+        diffuse, lobe = _sky_integrals(mi, dr, emitter, si, lobe_plugin)
+        out["diffuse_sky"].append(diffuse.reshape(P, S, 3))
+        out["lobe_sky"].append(lobe.reshape(P, S, -1, 3))
+    return LightCache(**{k: np.stack(v, axis=1) for k, v in out.items()},
+                      normalisation=normalisation)

@@ -135,8 +135,9 @@ class CIESkyEmitter(mi.Emitter):
         self._build_sampling(sky)
 
     # ---- evaluation -------------------------------------------------------
-    def _sky_eval(self, d):
-        """Sky radiance (no sun) toward world direction d: Sky.sky_radiance in Dr.Jit."""
+    def sky_eval(self, d):
+        """Sky radiance (no sun) toward world directions d [W m^-2 sr^-1]: Sky.sky_radiance in
+        Dr.Jit (the light cache's control variate integrates it, :mod:`..sky_control`)."""
         s = self.sun_direction
         cos_z = dr.clip(dr.dot(d, s), -1.0, 1.0)
         zeta = dr.acos(cos_z)
@@ -164,7 +165,7 @@ class CIESkyEmitter(mi.Emitter):
 
     def _radiance(self, d):
         in_sun = self._in_sun(d)
-        return self._sky_eval(d) + dr.select(in_sun, self.sun_radiance, 0.0)
+        return self.sky_eval(d) + dr.select(in_sun, self.sun_radiance, 0.0)
 
     def pdf_sun(self, d):
         """Density [sr^-1] of :meth:`sample_sun` (uniform over the solar disc)."""

@@ -1,0 +1,189 @@
+"""The sky's own share of a surface point's radiance, integrated deterministically.
+
+The light cache (:mod:`.light_cache`) estimates the light a material reflects from fixed
+sampled directions.  Most of that light comes straight from the sky, whose radiance h(w)
+is a known function: the ``cie_sky`` emitter's pattern sum without the solar disc
+(:meth:`~skyfit_mi.render.plugins.cie_sky.CIESkyEmitter.sky_eval`, thesis eqs. 4.12-4.18).
+Taking h as a control variate,
+
+    L = sum_k f_r cos(theta_k) (L_i(w_k) - h(w_k)) / (p(w_k) N)  +  integral f_r cos(theta) h dw
+
+is still an unbiased estimate of L for any f_r, and its samples only carry what differs from
+the unoccluded sky: the sun, the scene's own geometry and its shadows.  With f_r = rho_d /
+pi + s lobe(sigma) (thesis eq. 3.19) the integral is rho_d I_d + s I_s(sigma), so two
+deterministic integrals per surface point serve every parameter value:
+
+* I_d = integral cos(theta)/pi h dw over the surface's hemisphere [W m^-2 sr^-1]
+  (:func:`diffuse_directions`), and
+* I_s(sigma) = integral lobe(wi, wo; sigma) cos(theta_i) h(wi) dwi [W m^-2 sr^-1]
+  (:func:`lobe_directions`), computed at CHEBYSHEV_NODES roughness values and kept as a
+  Chebyshev series in log sigma (:func:`chebyshev_nodes`, :func:`chebyshev_coefficients`,
+  :func:`chebyshev_eval`), smooth in sigma, so that Dr.Jit differentiates it.
+
+Both quadratures split their domain where the integrand is not smooth: at the surface's
+horizon and at the world's horizon (where a sky without Radiance's blend jumps to the
+ground).  The lobe's nodes lie along NODE_AZIMUTHS rays of the half vector's slope
+(tan delta cos phi, tan delta sin phi), each cut at the two horizons and at TRUNCATION
+sigma (where the lobe is e^-16 of its peak); the diffuse term's along rays of azimuth, in
+the polar angle.  Each piece takes Gauss-Legendre nodes through a smoothstep map, whose
+vanishing slope at both ends absorbs the square-root behaviour of the integrand at a
+horizon (Ward's 1/sqrt(cos_i cos_o)).
+"""
+
+import numpy as np
+
+#: Roughness values at which I_s is integrated: the Chebyshev series' degree + 1.
+CHEBYSHEV_NODES = 16
+#: The lobe quadrature's resolution by roughness: (largest sigma, rays of the half vector's
+#: slope, Gauss-Legendre nodes per piece of a ray).  A wide lobe sees the sky's structure (the
+#: circumsolar peak, the horizon); against brute force (tests/test_sky_control.py) the
+#: integral is exact to 1e-4 up to sigma 0.25 and 6e-4 at 0.5.
+LOBE_RESOLUTION = ((0.12, 16, 6), (0.25, 32, 12), (float("inf"), 64, 12))
+#: The diffuse quadrature's rays of azimuth and Gauss-Legendre nodes per piece: exact to 5e-4
+#: (the circumsolar peak's cusp at the sun limits it).
+DIFFUSE_AZIMUTHS, DIFFUSE_POLAR = 128, 24
+#: Where the lobe's rays end: tan delta = TRUNCATION sigma, exp(-TRUNCATION^2) of the peak.
+TRUNCATION = 4.0
+
+
+def _smoothstep_legendre(n):
+    """Nodes y in (0, 1) and weights of n-point Gauss-Legendre through y = 3x^2 - 2x^3."""
+    x, w = np.polynomial.legendre.leggauss(int(n))
+    x, w = 0.5 * (x + 1.0), 0.5 * w
+    return x * x * (3.0 - 2.0 * x), w * 6.0 * x * (1.0 - x)
+
+
+def _tables(n_rays, pieces, n):
+    """Per node j of one surface point: its ray's azimuth, its piece, y and weight."""
+    y, wy = _smoothstep_legendre(n)
+    phi = (np.arange(n_rays) + 0.5) * 2.0 * np.pi / n_rays
+    grid = np.meshgrid(phi, np.arange(pieces), np.arange(n), indexing="ij")
+    return grid[0].ravel(), grid[1].ravel(), y[grid[2].ravel()], wy[grid[2].ravel()]
+
+
+def _per_node(mi, dr, Q, tables):
+    """Index of each node's surface point, and its table values as Dr.Jit arrays."""
+    J = len(tables[0])
+    i = dr.arange(mi.UInt32, Q * J)
+    q, j = i // J, i % J
+    phi, piece, y, wy = (dr.gather(mi.Float, mi.Float(np.asarray(t, np.float32)), j)
+                         for t in tables)
+    return q, J, phi, piece, y, wy
+
+
+def _pieces(dr, piece, y, wy, b1, b2, end, start=0.0):
+    """The node's position along its ray, from the ray's breakpoints start, b1, b2, end (in
+    order, increasing or decreasing), and its weight (d position, signed)."""
+    lo = dr.select(piece < 0.5, start, dr.select(piece < 1.5, b1, b2))
+    hi = dr.select(piece < 0.5, b1, dr.select(piece < 1.5, b2, end))
+    return lo + (hi - lo) * y, (hi - lo) * wy
+
+
+def lobe_resolution(sigma):
+    """(rays, nodes per piece) of the lobe quadrature at roughness ``sigma`` (LOBE_RESOLUTION)."""
+    return next((n, k) for top, n, k in LOBE_RESOLUTION if sigma <= top)
+
+
+def lobe_directions(wo, up, sigma, n_rays, n_radial):
+    """Light directions and solid-angle weights of the lobe quadrature.
+
+    Parameters
+    ----------
+    wo : mi.Vector3f (Q)  view directions, local frame (normal +Z)
+    up : mi.Vector3f (Q)  the world's zenith in each local frame
+    sigma : mi.Float (1)  the lobe's roughness
+    n_rays, n_radial : its resolution (:func:`lobe_resolution`)
+
+    Returns wi (Q J) local light directions, weights (Q J) [sr] and J, nodes per point:
+    integral g(wi) dwi ~ sum over each point's J nodes of g(wi) weight, for g with the
+    lobe's e^(-tan^2 delta / sigma^2) (Walter's change of variables to the half vector h,
+    dwi = 4 (wo.h) cos^3 delta d(slope area)).
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    q, J, phi, piece, y, wy = _per_node(mi, dr, dr.width(wo), _tables(n_rays, 3, n_radial))
+    wo, up = dr.gather(mi.Vector3f, wo, q), dr.gather(mi.Vector3f, up, q)
+    s, c = dr.sincos(phi)
+    ko, ku, uo = wo.x * c + wo.y * s, up.x * c + up.y * s, dr.dot(up, wo)
+    # the surface's horizon along the ray (wi.z = 0), and the lobe's truncation
+    end = dr.minimum((ko + dr.sqrt(ko * ko + wo.z * wo.z)) / dr.maximum(wo.z, 1e-12),
+                     TRUNCATION * sigma)
+    # the world's horizon: up.wi = 0 where A r^2 + B r + C = 0
+    A, B, C = 2.0 * ko * ku - uo, 2.0 * (wo.z * ku + up.z * ko), 2.0 * wo.z * up.z - uo
+    disc = B * B - 4.0 * A * C
+    root = -0.5 * (B + dr.copysign(dr.safe_sqrt(disc), B))
+    r1, r2 = root / A, C / root
+
+    def inside(r):
+        return dr.select((disc >= 0) & dr.isfinite(r) & (r > 0) & (r < end), r, end)
+    r1, r2 = inside(r1), inside(r2)
+    # nodes in tau = exp(-r^2 / sigma^2), in which the lobe is constant: r dr = sigma^2 dtau /
+    # (2 tau)
+    s2 = sigma * sigma
+
+    def tau(r):
+        return dr.exp(-r * r / s2)
+    t, wt = _pieces(dr, piece, y, wy, tau(dr.minimum(r1, r2)), tau(dr.maximum(r1, r2)), tau(end),
+                    start=1.0)
+    r = dr.sqrt(dr.maximum(-dr.log(t), 0.0) * s2)
+    h = dr.normalize(mi.Vector3f(r * c, r * s, 1.0))
+    oh = dr.dot(wo, h)
+    wi = 2.0 * oh * h - wo
+    area = s2 * dr.abs(wt) / (2.0 * t) * (2.0 * np.pi / n_rays)
+    return wi, 4.0 * oh * h.z * h.z * h.z * area, J
+
+
+def diffuse_directions(up, n_rays=DIFFUSE_AZIMUTHS, n_polar=DIFFUSE_POLAR):
+    """Light directions and cosine-weighted solid-angle weights of the diffuse quadrature.
+
+    ``up`` (Q) the world's zenith in each local frame.  Returns wi (Q J), weights (Q J) and
+    J: integral g(wi) cos(theta_i) / pi dwi ~ sum of g(wi) weight [unitless], the polar
+    angle of each azimuth's ray split at the world's horizon.
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    q, J, phi, piece, y, wy = _per_node(mi, dr, dr.width(up), _tables(n_rays, 2, n_polar))
+    up = dr.gather(mi.Vector3f, up, q)
+    s, c = dr.sincos(phi)
+    ku = up.x * c + up.y * s
+    # up.wi = up.z cos(theta) + ku sin(theta) = 0 at tan(theta) = -up.z / ku
+    t = -up.z / ku
+    edge = dr.select(dr.isfinite(t) & (t > 0), dr.atan(t), 0.5 * dr.pi)
+    theta, wt = _pieces(dr, piece, y, wy, edge, 0.5 * dr.pi, 0.5 * dr.pi)
+    st, ct = dr.sincos(theta)
+    wi = mi.Vector3f(st * c, st * s, ct)
+    return wi, ct * st * wt * (2.0 / n_rays), J
+
+
+def chebyshev_nodes(lo, hi, n=CHEBYSHEV_NODES):
+    """The n roughness values of the Chebyshev series on [lo, hi] (nodes in log sigma)."""
+    x = np.cos(np.pi * (np.arange(n) + 0.5) / n)
+    return np.exp(0.5 * (np.log(lo) + np.log(hi)) + 0.5 * (np.log(hi) - np.log(lo)) * x)
+
+
+def chebyshev_coefficients(values, axis=0):
+    """Chebyshev coefficients of ``values`` given at :func:`chebyshev_nodes` along ``axis``."""
+    v = np.moveaxis(np.asarray(values, dtype=float), axis, 0)
+    n = v.shape[0]
+    k = np.arange(n)
+    T = np.cos(np.pi * np.outer(k, k + 0.5) / n) * (2.0 / n)
+    T[0] *= 0.5
+    return np.moveaxis(np.tensordot(T, v, axes=1), 0, axis)
+
+
+def chebyshev_x(sigma, lo, hi, log, clip):
+    """sigma's coordinate in [-1, 1] on [lo, hi] in log sigma (``log``/``clip`` from NumPy or
+    Dr.Jit, so that the same line serves both)."""
+    a, b = np.log(lo), np.log(hi)
+    return clip((2.0 * log(sigma) - (a + b)) / (b - a), -1.0, 1.0)
+
+
+def chebyshev_eval(coefficients, x):
+    """sum_k c_k T_k(x) by Clenshaw's recurrence; ``coefficients`` a sequence of arrays (NumPy
+    or Dr.Jit, any shape broadcasting with x): arithmetic only, so Dr.Jit differentiates it."""
+    b1 = b2 = 0.0
+    for c in reversed(coefficients[1:]):
+        b1, b2 = c + 2.0 * x * b1 - b2, b1
+    return coefficients[0] + x * b1 - b2
