@@ -21,18 +21,21 @@ def sky_dict(sky, scene_radius=1e4):
 
 
 def _array(cls, values):
-    """A Dr.Jit value of type ``cls`` holding ``values``, copied from a NumPy buffer.
+    """An opaque Dr.Jit value of type ``cls`` holding ``values`` (a scalar or a triple).
 
-    A value built from Python floats is a literal that Dr.Jit compiles into the kernel
-    which first stores it (a new kernel for every new sky); built from a buffer it is
-    plain memory, so every frame's sky reuses the same kernels.
+    Opaque: a kernel reads it from memory, never as a literal compiled in, so every frame's
+    sky reuses the same kernels.  Made from Python numbers and then made opaque, never from a
+    NumPy buffer: Dr.Jit reads a size-1 array made from NumPy with an alignment that varies
+    with the buffer's address (``align 1`` or ``align 4`` in the kernel), and every variant
+    is a kernel of its own (measured: one compilation per frame in the light cache).
     """
+    import drjit as dr
     import numpy as np
 
-    a = np.atleast_1d(np.asarray(values))
-    if a.size == 1:
-        return cls(a.astype(bool) if a.dtype == bool else a.astype(np.float32))
-    return cls(*[np.array([v], dtype=np.float32) for v in a.ravel()])
+    a = np.atleast_1d(np.asarray(values)).ravel()
+    v = cls(*(bool(x) if a.dtype == bool else float(x) for x in a))
+    dr.make_opaque(v)
+    return v
 
 
 def update_sky(params, sky, prefix):

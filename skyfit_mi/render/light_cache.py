@@ -20,11 +20,21 @@ function of the parameters (common random numbers), evaluated with the
 ``ward`` plugin's own ``eval`` in Dr.Jit (so gradients come from Dr.Jit), or
 split into the basis L = rho_d * D + rho_s * G(sigma) for the global search.
 
-A narrow lobe sees the sky through a few of the fixed directions, so its estimate
-is noisy (1.7% rms per value at sigma_alpha = 0.01 with the default samples,
-fifty times the difference the data see between 0.01 and 0.003).  Near the
-mirror direction the sky is smooth, so the lobe's part takes a control variate:
-with c the radiance along the mirror direction without the solar disc (one more
+Most of that light is the sky itself, a known function h (the ``cie_sky`` emitter's pattern
+sum).  It is the estimate's control variate (:mod:`.sky_control`): the samples carry only
+L_i - h (the sun, the scene's geometry and its shadows, which h does not know), and the
+integrals of h through the diffuse term and through the lobe at every sigma are computed
+deterministically, per position, once.  Without it the sampled sky cost 1.5-1.9% rms per
+value above sigma_alpha = 0.05 and pulled fits toward smooth lobes, where the estimate was
+almost exact; with it the whole range is as accurate as the narrow end (docs/BENCHMARKS.md,
+"the light cache's accuracy at every roughness").
+
+A narrow lobe sees what h does not know (a reflected object, say) through a few of the fixed
+directions, so that part's estimate
+is noisy (before the sky's control variate: 1.7% rms per value at sigma_alpha = 0.01 with
+the default samples, fifty times the difference the data see between 0.01 and 0.003).  Near the
+mirror direction that light is smooth, so the lobe's part takes a second control variate:
+with c the radiance along the mirror direction without the solar disc, less h (one more
 ray per position) and A the lobe's directional albedo from a deterministic
 quadrature (:func:`~skyfit_mi.physics.ward.lobe_albedo`),
 
@@ -212,6 +222,14 @@ def _sun_half_cos(mi, si, sky):
     return np.where(lit, cos, np.nan).astype(np.float32)
 
 
+def _opaque_seed(mi, dr, rng):
+    """A sampler seed drawn from ``rng`` as an opaque value: a Python int is a literal compiled
+    into the tracing kernel, a new kernel for every frame."""
+    seed = mi.UInt32(int(rng.integers(2**31)))
+    dr.make_opaque(seed)
+    return seed
+
+
 def control_weight(sigma_alpha, clip=np.clip):
     """Weight beta of the control variate at ``sigma_alpha``: 1 up to CONTROL_FULL, a
     smoothstep (zero slope at both ends) down to 0 at CONTROL_SIGMA, and 0 beyond.
@@ -361,14 +379,14 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         for j, b in enumerate(lobes):
             p_mix += frac[3 + j] * b.pdf(ctx, sik, wl)
         sampler = mi.load_dict({"type": "independent"})
-        sampler.seed(int(rng.integers(2**31)), P * S * K)
+        sampler.seed(_opaque_seed(mi, dr, rng), P * S * K)
         li, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(sik.spawn_ray(d)))
         ok = (p_mix > 0) & (mi.Frame3f.cos_theta(wl) > 0)
         inv_pdf = dr.select(ok, dr.rcp(dr.maximum(p_mix, 1e-30)) / (K * S), 0.0)
         weight = (li - emitter.sky_eval(d)) * inv_pdf                # the control variate's rest
         # mirror direction at each position
         wm = mi.reflect(si.wi)
-        sampler.seed(int(rng.integers(2**31)), P * S)
+        sampler.seed(_opaque_seed(mi, dr, rng), P * S)
         ray_m = mi.RayDifferential3f(si.spawn_ray(si.to_world(wm)))
         lm, _, _ = integrator.sample(scene, sampler, ray_m)
         # the same without the solar disc: the control variate's constant

@@ -20,14 +20,17 @@ deterministic integrals per surface point serve every parameter value:
   Chebyshev series in log sigma (:func:`chebyshev_nodes`, :func:`chebyshev_coefficients`,
   :func:`chebyshev_eval`), smooth in sigma, so that Dr.Jit differentiates it.
 
-Both quadratures split their domain where the integrand is not smooth: at the surface's
-horizon and at the world's horizon (where a sky without Radiance's blend jumps to the
-ground).  The lobe's nodes lie along NODE_AZIMUTHS rays of the half vector's slope
-(tan delta cos phi, tan delta sin phi), each cut at the two horizons and at TRUNCATION
-sigma (where the lobe is e^-16 of its peak); the diffuse term's along rays of azimuth, in
-the polar angle.  Each piece takes Gauss-Legendre nodes through a smoothstep map, whose
-vanishing slope at both ends absorbs the square-root behaviour of the integrand at a
-horizon (Ward's 1/sqrt(cos_i cos_o)).
+Both quadratures split their domain where the integrand is not smooth.  The lobe's nodes lie
+along rays of the half vector's slope (tan delta cos phi, tan delta sin phi), each ending at
+the surface's horizon or at TRUNCATION sigma (where the lobe is e^-16 of its peak) and cut
+where it first crosses the world's horizon (where a sky without Radiance's blend jumps to the
+ground); the radial variable is tau = exp(-tan^2 delta / sigma^2), in which the lobe is
+constant, and each piece takes Gauss-Legendre nodes through a smoothstep map, whose vanishing
+slope at both ends absorbs the integrand's square-root behaviour at the surface's horizon
+(Ward's 1/sqrt(cos_i cos_o)) and at the lobe's centre.  The diffuse term's nodes lie along
+rays of azimuth, Gauss-Legendre in the polar angle, cut at the world's horizon.  Both are
+tested against brute force (tests/test_sky_control.py); the cusp of the clear sky's
+circumsolar peak limits them to a few 1e-4.
 """
 
 import numpy as np
@@ -37,11 +40,10 @@ CHEBYSHEV_NODES = 16
 #: The lobe quadrature's resolution by roughness: (largest sigma, rays of the half vector's
 #: slope, Gauss-Legendre nodes per piece of a ray).  A wide lobe sees the sky's structure (the
 #: circumsolar peak, the horizon); against brute force (tests/test_sky_control.py) the
-#: integral is exact to 1e-4 up to sigma 0.25 and 6e-4 at 0.5.
-LOBE_RESOLUTION = ((0.12, 16, 6), (0.25, 32, 12), (float("inf"), 64, 12))
-#: The diffuse quadrature's rays of azimuth and Gauss-Legendre nodes per piece: exact to 5e-4
-#: (the circumsolar peak's cusp at the sun limits it).
-DIFFUSE_AZIMUTHS, DIFFUSE_POLAR = 128, 24
+#: integral is exact to 1e-4 up to sigma 0.1, 3e-4 at 0.2 and 1e-3 at 0.5.
+LOBE_RESOLUTION = ((0.12, 16, 6), (0.25, 32, 8), (float("inf"), 64, 12))
+#: The diffuse quadrature's rays of azimuth and Gauss-Legendre nodes per piece: exact to 2e-4.
+DIFFUSE_AZIMUTHS, DIFFUSE_POLAR = 64, 24
 #: Where the lobe's rays end: tan delta = TRUNCATION sigma, exp(-TRUNCATION^2) of the peak.
 TRUNCATION = 4.0
 
@@ -53,11 +55,16 @@ def _smoothstep_legendre(n):
     return x * x * (3.0 - 2.0 * x), w * 6.0 * x * (1.0 - x)
 
 
-def _tables(n_rays, pieces, n):
-    """Per node j of one surface point: its ray's azimuth, its piece, y and weight."""
-    y, wy = _smoothstep_legendre(n)
+def _tables(n_rays, n, smoothstep):
+    """Per node j of one surface point: its ray's azimuth, its piece (two per ray), y and weight
+    (Gauss-Legendre on (0, 1), through the smoothstep map or not)."""
+    if smoothstep:
+        y, wy = _smoothstep_legendre(n)
+    else:
+        x, w = np.polynomial.legendre.leggauss(int(n))
+        y, wy = 0.5 * (x + 1.0), 0.5 * w
     phi = (np.arange(n_rays) + 0.5) * 2.0 * np.pi / n_rays
-    grid = np.meshgrid(phi, np.arange(pieces), np.arange(n), indexing="ij")
+    grid = np.meshgrid(phi, np.arange(2), np.arange(n), indexing="ij")
     return grid[0].ravel(), grid[1].ravel(), y[grid[2].ravel()], wy[grid[2].ravel()]
 
 
@@ -71,11 +78,11 @@ def _per_node(mi, dr, Q, tables):
     return q, J, phi, piece, y, wy
 
 
-def _pieces(dr, piece, y, wy, b1, b2, end, start=0.0):
-    """The node's position along its ray, from the ray's breakpoints start, b1, b2, end (in
-    order, increasing or decreasing), and its weight (d position, signed)."""
-    lo = dr.select(piece < 0.5, start, dr.select(piece < 1.5, b1, b2))
-    hi = dr.select(piece < 0.5, b1, dr.select(piece < 1.5, b2, end))
+def _pieces(dr, piece, y, wy, mid, end, start=0.0):
+    """The node's position along its ray, in two pieces from the ray's breakpoints start, mid,
+    end (in order, increasing or decreasing), and its weight (d position, signed)."""
+    first = piece < 0.5
+    lo, hi = dr.select(first, start, mid), dr.select(first, mid, end)
     return lo + (hi - lo) * y, (hi - lo) * wy
 
 
@@ -102,7 +109,7 @@ def lobe_directions(wo, up, sigma, n_rays, n_radial):
     import drjit as dr
     import mitsuba as mi
 
-    q, J, phi, piece, y, wy = _per_node(mi, dr, dr.width(wo), _tables(n_rays, 3, n_radial))
+    q, J, phi, piece, y, wy = _per_node(mi, dr, dr.width(wo), _tables(n_rays, n_radial, True))
     wo, up = dr.gather(mi.Vector3f, wo, q), dr.gather(mi.Vector3f, up, q)
     s, c = dr.sincos(phi)
     ko, ku, uo = wo.x * c + wo.y * s, up.x * c + up.y * s, dr.dot(up, wo)
@@ -117,15 +124,14 @@ def lobe_directions(wo, up, sigma, n_rays, n_radial):
 
     def inside(r):
         return dr.select((disc >= 0) & dr.isfinite(r) & (r > 0) & (r < end), r, end)
-    r1, r2 = inside(r1), inside(r2)
+    cross = dr.minimum(inside(r1), inside(r2))        # a second crossing is rare: left inside
     # nodes in tau = exp(-r^2 / sigma^2), in which the lobe is constant: r dr = sigma^2 dtau /
     # (2 tau)
     s2 = sigma * sigma
 
     def tau(r):
         return dr.exp(-r * r / s2)
-    t, wt = _pieces(dr, piece, y, wy, tau(dr.minimum(r1, r2)), tau(dr.maximum(r1, r2)), tau(end),
-                    start=1.0)
+    t, wt = _pieces(dr, piece, y, wy, tau(cross), tau(end), start=1.0)
     r = dr.sqrt(dr.maximum(-dr.log(t), 0.0) * s2)
     h = dr.normalize(mi.Vector3f(r * c, r * s, 1.0))
     oh = dr.dot(wo, h)
@@ -144,14 +150,14 @@ def diffuse_directions(up, n_rays=DIFFUSE_AZIMUTHS, n_polar=DIFFUSE_POLAR):
     import drjit as dr
     import mitsuba as mi
 
-    q, J, phi, piece, y, wy = _per_node(mi, dr, dr.width(up), _tables(n_rays, 2, n_polar))
+    q, J, phi, piece, y, wy = _per_node(mi, dr, dr.width(up), _tables(n_rays, n_polar, False))
     up = dr.gather(mi.Vector3f, up, q)
     s, c = dr.sincos(phi)
     ku = up.x * c + up.y * s
     # up.wi = up.z cos(theta) + ku sin(theta) = 0 at tan(theta) = -up.z / ku
     t = -up.z / ku
     edge = dr.select(dr.isfinite(t) & (t > 0), dr.atan(t), 0.5 * dr.pi)
-    theta, wt = _pieces(dr, piece, y, wy, edge, 0.5 * dr.pi, 0.5 * dr.pi)
+    theta, wt = _pieces(dr, piece, y, wy, edge, 0.5 * dr.pi)
     st, ct = dr.sincos(theta)
     wi = mi.Vector3f(st * c, st * s, ct)
     return wi, ct * st * wt * (2.0 / n_rays), J
