@@ -37,28 +37,15 @@ def _sky(name):
 
 def _quadrature(mi, sky, si, sigma=None):
     """The module's integral at every point: I_d, or I_s(sigma) with the 'ward' lobe."""
-    import drjit as dr
-
     from skyfit_mi.render.daylight import sky_dict
-    from skyfit_mi.render.sky_control import diffuse_directions, lobe_directions, lobe_resolution
+    from skyfit_mi.render.sky_control import diffuse_integral, lobe_integral
 
     emitter = mi.load_dict(sky_dict(sky))
-    Q = len(SURFACES)
     up = si.to_local(mi.Vector3f(0.0, 0.0, 1.0))
     if sigma is None:
-        wi, w, J = diffuse_directions(up)
-        f = 1.0
-    else:
-        s = mi.Float(sigma)
-        wi, w, J = lobe_directions(si.wi, up, s, *lobe_resolution(sigma))
-        lobe = mi.load_dict({"type": "ward", "model": "two", "rho_s": 1.0, "sigma_alpha": sigma})
-        ctx = mi.BSDFContext()
-        ctx.component = 1
-        si_n = dr.zeros(mi.SurfaceInteraction3f, Q * J)
-        si_n.wi = dr.gather(mi.Vector3f, si.wi, dr.arange(mi.UInt32, Q * J) // J)
-        f = lobe.eval(ctx, si_n, wi)
-    frame = dr.gather(mi.Frame3f, si.sh_frame, dr.arange(mi.UInt32, Q * J) // J)
-    return np.array(dr.block_sum(f * emitter.sky_eval(frame.to_world(wi)) * w, J), float).T
+        return diffuse_integral(emitter, si, up)
+    lobe = mi.load_dict({"type": "ward", "model": "two", "rho_s": 1.0, "sigma_alpha": 0.1})
+    return lobe_integral(emitter, si, up, lobe, sigma)
 
 
 def _brute_diffuse(sky, frame, n=1500):

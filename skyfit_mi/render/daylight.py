@@ -20,11 +20,11 @@ def sky_dict(sky, scene_radius=1e4):
     return d
 
 
-def _array(cls, values):
+def opaque_value(cls, values):
     """An opaque Dr.Jit value of type ``cls`` holding ``values`` (a scalar or a triple).
 
     Opaque: a kernel reads it from memory, never as a literal compiled in, so every frame's
-    sky reuses the same kernels.  Made from Python numbers and then made opaque, never from a
+    sky (or sampler seed) reuses the same kernels.  Made from Python numbers and then made opaque, never from a
     NumPy buffer: Dr.Jit reads a size-1 array made from NumPy with an alignment that varies
     with the buffer's address (``align 1`` or ``align 4`` in the kernel), and every variant
     is a kernel of its own (measured: one compilation per frame in the light cache).
@@ -32,8 +32,7 @@ def _array(cls, values):
     import drjit as dr
     import numpy as np
 
-    a = np.atleast_1d(np.asarray(values)).ravel()
-    v = cls(*(bool(x) if a.dtype == bool else float(x) for x in a))
+    v = cls(*(x.item() for x in np.atleast_1d(np.asarray(values)).ravel()))
     dr.make_opaque(v)
     return v
 
@@ -43,13 +42,13 @@ def update_sky(params, sky, prefix):
 
     ``prefix`` is the emitter's key prefix in ``params`` (e.g. ``'sky.'`` for an
     emitter with id ``sky``).  Calls ``params.update()``; no recompilation: every value
-    is copied from memory, never a kernel literal (see :func:`_array`).
+    is copied from memory, never a kernel literal (see :func:`opaque_value`).
     """
     import mitsuba as mi
 
-    params[prefix + "sun_direction"] = _array(mi.Vector3f, sky.sun_direction)
-    params[prefix + "sun_solid_angle"] = _array(mi.Float, float(sky.sun_solid_angle))
-    params[prefix + "horizon_blend"] = _array(mi.Bool, bool(sky.horizon_blend))
+    params[prefix + "sun_direction"] = opaque_value(mi.Vector3f, sky.sun_direction)
+    params[prefix + "sun_solid_angle"] = opaque_value(mi.Float, float(sky.sun_solid_angle))
+    params[prefix + "horizon_blend"] = opaque_value(mi.Bool, bool(sky.horizon_blend))
     for k in RGB_KEYS:
-        params[prefix + k] = _array(mi.Color3f, getattr(sky, k))
+        params[prefix + k] = opaque_value(mi.Color3f, getattr(sky, k))
     params.update()

@@ -200,9 +200,7 @@ class WardModel:
         self.d_hat = mi.Float(d_hat.reshape(P * T * S, -1).sum(axis=1))
         self.c = mi.Color3f(*flat(cache.mirror_sky, 3))
         # the sky function's integrals (.sky_control), per position's share
-        if cache.normalisation != normalisation:
-            raise ValueError(f"the light cache integrates the {cache.normalisation!r} lobe, "
-                             f"not {normalisation!r}")
+        cache.check_normalisation(normalisation)
         self.diffuse_sky = mi.Color3f(*flat(cache.diffuse_sky / S, 3))
         self.lobe_sky = [mi.Color3f(*flat(cache.lobe_sky[:, :, :, m] / S, 3))
                          for m in range(cache.lobe_sky.shape[3])]

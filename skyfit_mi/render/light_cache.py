@@ -144,6 +144,12 @@ class LightCache:
                 lobe_sky=self.lobe_sky[:, :, sl]))
         return out
 
+    def check_normalisation(self, normalisation):
+        """ValueError unless the cache's sky integrals are for the lobe of ``normalisation``."""
+        if normalisation != self.normalisation:
+            raise ValueError(f"the light cache integrates the {self.normalisation!r} lobe, "
+                             f"not {normalisation!r}")
+
     # ---- the basis (NumPy, for the global search) ------------------------
     def diffuse_basis(self):
         """D with L = rho_d * D + ...: sum cos/pi * weight, shape (P, T, 3)."""
@@ -168,9 +174,7 @@ class LightCache:
         from .fit_model import check_fit_normalisation
 
         check_fit_normalisation(normalisation)
-        if normalisation != self.normalisation:
-            raise ValueError(f"the cache integrates the {self.normalisation!r} lobe, not "
-                             f"{normalisation!r}")
+        self.check_normalisation(normalisation)
         if sigma_alpha <= SIGMA_MIRROR:
             frac = mirror_reflectance(self.mirror_cos, normalisation)
             return np.einsum("pts,ptsc->ptc", frac, self.mirror)
@@ -222,14 +226,6 @@ def _sun_half_cos(mi, si, sky):
     return np.where(lit, cos, np.nan).astype(np.float32)
 
 
-def _opaque_seed(mi, dr, rng):
-    """A sampler seed drawn from ``rng`` as an opaque value: a Python int is a literal compiled
-    into the tracing kernel, a new kernel for every frame."""
-    seed = mi.UInt32(int(rng.integers(2**31)))
-    dr.make_opaque(seed)
-    return seed
-
-
 def control_weight(sigma_alpha, clip=np.clip):
     """Weight beta of the control variate at ``sigma_alpha``: 1 up to CONTROL_FULL, a
     smoothstep (zero slope at both ends) down to 0 at CONTROL_SIGMA, and 0 beyond.
@@ -258,40 +254,16 @@ def _stratified(rng, n, count=None):
     return u[0] if count is None else u
 
 
-def _sky_integrals(mi, dr, emitter, si, lobe):
-    """I_d (Q) and the Chebyshev coefficients of I_s (M, Q) of every surface interaction in
-    ``si`` under the emitter's current sky, as NumPy (Q, 3) and (Q, M, 3) (:mod:`.sky_control`);
-    ``lobe`` a rho_s = 1 ``ward`` plugin of the fit's normalisation."""
-    from .sky_control import (chebyshev_coefficients, chebyshev_nodes, diffuse_directions,
-                              lobe_directions, lobe_resolution)
+def _sky_integrals(mi, emitter, si, lobe):
+    """I_d (Q, 3) and the Chebyshev coefficients of I_s (Q, M, 3) of every surface interaction
+    in ``si`` under the emitter's current sky (:mod:`.sky_control`); ``lobe`` a rho_s = 1
+    ``ward`` plugin of the fit's normalisation."""
+    from .sky_control import chebyshev_coefficients, chebyshev_nodes, diffuse_integral, lobe_integral
 
-    Q = dr.width(si.wi)
     up = si.to_local(mi.Vector3f(0.0, 0.0, 1.0))
-
-    def sky(wi, J):
-        frame = dr.gather(mi.Frame3f, si.sh_frame, dr.arange(mi.UInt32, Q * J) // J)
-        return emitter.sky_eval(frame.to_world(wi))
-
-    def np3(v):
-        return np.array(v, dtype=np.float64).T
-
-    wi, w, J = diffuse_directions(up)
-    diffuse = np3(dr.block_sum(sky(wi, J) * w, J))
-    params = mi.traverse(lobe)
-    glossy = mi.BSDFContext()
-    glossy.component = 1
-    values = []
-    for sigma in chebyshev_nodes(*SIGMA_TABLE):
-        s = mi.Float(sigma)
-        dr.make_opaque(s)
-        params["sigma_alpha"] = s
-        params.update()
-        wi, w, J = lobe_directions(si.wi, up, s, *lobe_resolution(sigma))
-        si_n = dr.zeros(mi.SurfaceInteraction3f, Q * J)
-        si_n.wi = dr.gather(mi.Vector3f, si.wi, dr.arange(mi.UInt32, Q * J) // J)
-        f = lobe.eval(glossy, si_n, wi)                             # lobe cos(theta_i)
-        values.append(np3(dr.block_sum(f * sky(wi, J) * w, J)))
-    return diffuse, chebyshev_coefficients(np.stack(values, axis=1), axis=1)
+    lobe_values = [lobe_integral(emitter, si, up, lobe, s) for s in chebyshev_nodes(*SIGMA_TABLE)]
+    return diffuse_integral(emitter, si, up), \
+        chebyshev_coefficients(np.stack(lobe_values, axis=1), axis=1)
 
 
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
@@ -317,7 +289,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     import drjit as dr
     import mitsuba as mi
 
-    from .daylight import update_sky
+    from .daylight import opaque_value, update_sky
 
     pixels = np.asarray(pixels, dtype=int)
     P, S, K = len(pixels), int(positions), int(directions)
@@ -379,14 +351,14 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         for j, b in enumerate(lobes):
             p_mix += frac[3 + j] * b.pdf(ctx, sik, wl)
         sampler = mi.load_dict({"type": "independent"})
-        sampler.seed(_opaque_seed(mi, dr, rng), P * S * K)
+        sampler.seed(opaque_value(mi.UInt32, int(rng.integers(2**31))), P * S * K)
         li, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(sik.spawn_ray(d)))
         ok = (p_mix > 0) & (mi.Frame3f.cos_theta(wl) > 0)
         inv_pdf = dr.select(ok, dr.rcp(dr.maximum(p_mix, 1e-30)) / (K * S), 0.0)
         weight = (li - emitter.sky_eval(d)) * inv_pdf                # the control variate's rest
         # mirror direction at each position
         wm = mi.reflect(si.wi)
-        sampler.seed(_opaque_seed(mi, dr, rng), P * S)
+        sampler.seed(opaque_value(mi.UInt32, int(rng.integers(2**31))), P * S)
         ray_m = mi.RayDifferential3f(si.spawn_ray(si.to_world(wm)))
         lm, _, _ = integrator.sample(scene, sampler, ray_m)
         # the same without the solar disc: the control variate's constant
@@ -405,7 +377,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         out["mirror_cos"].append(np.array(mi.Frame3f.cos_theta(si.wi), np.float32).reshape(P, S))
         out["hit"].append(on.reshape(P, S).all(axis=1))
         out["sun_half_cos"].append(_sun_half_cos(mi, si, sky).reshape(P, S))
-        diffuse, lobe = _sky_integrals(mi, dr, emitter, si, lobe_plugin)
+        diffuse, lobe = _sky_integrals(mi, emitter, si, lobe_plugin)
         out["diffuse_sky"].append(diffuse.reshape(P, S, 3))
         out["lobe_sky"].append(lobe.reshape(P, S, -1, 3))
     return LightCache(**{k: np.stack(v, axis=1) for k, v in out.items()},

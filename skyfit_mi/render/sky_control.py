@@ -101,7 +101,8 @@ def lobe_directions(wo, up, sigma, n_rays, n_radial):
     sigma : mi.Float (1)  the lobe's roughness
     n_rays, n_radial : its resolution (:func:`lobe_resolution`)
 
-    Returns wi (Q J) local light directions, weights (Q J) [sr] and J, nodes per point:
+    Returns wi (Q J) local light directions, weights (Q J) [sr], each node's point index q and
+    J, nodes per point:
     integral g(wi) dwi ~ sum over each point's J nodes of g(wi) weight, for g with the
     lobe's e^(-tan^2 delta / sigma^2) (Walter's change of variables to the half vector h,
     dwi = 4 (wo.h) cos^3 delta d(slope area)).
@@ -137,14 +138,14 @@ def lobe_directions(wo, up, sigma, n_rays, n_radial):
     oh = dr.dot(wo, h)
     wi = 2.0 * oh * h - wo
     area = s2 * dr.abs(wt) / (2.0 * t) * (2.0 * np.pi / n_rays)
-    return wi, 4.0 * oh * h.z * h.z * h.z * area, J
+    return wi, 4.0 * oh * h.z * h.z * h.z * area, q, J
 
 
 def diffuse_directions(up, n_rays=DIFFUSE_AZIMUTHS, n_polar=DIFFUSE_POLAR):
     """Light directions and cosine-weighted solid-angle weights of the diffuse quadrature.
 
-    ``up`` (Q) the world's zenith in each local frame.  Returns wi (Q J), weights (Q J) and
-    J: integral g(wi) cos(theta_i) / pi dwi ~ sum of g(wi) weight [unitless], the polar
+    ``up`` (Q) the world's zenith in each local frame.  Returns wi (Q J), weights (Q J), each
+    node's point index q and J: integral g(wi) cos(theta_i) / pi dwi ~ sum of g(wi) weight [unitless], the polar
     angle of each azimuth's ray split at the world's horizon.
     """
     import drjit as dr
@@ -160,7 +161,44 @@ def diffuse_directions(up, n_rays=DIFFUSE_AZIMUTHS, n_polar=DIFFUSE_POLAR):
     theta, wt = _pieces(dr, piece, y, wy, edge, 0.5 * dr.pi)
     st, ct = dr.sincos(theta)
     wi = mi.Vector3f(st * c, st * s, ct)
-    return wi, ct * st * wt * (2.0 / n_rays), J
+    return wi, ct * st * wt * (2.0 / n_rays), q, J
+
+
+def _sky_sum(mi, dr, emitter, si, wi, w, q, J, f=1.0):
+    """Sum over each point's J nodes of f h(wi) w, h the emitter's sky function toward the
+    nodes' directions (local to each point's frame) [W m^-2 sr^-1], (Q, 3) NumPy."""
+    frame = dr.gather(mi.Frame3f, si.sh_frame, q)
+    return np.array(dr.block_sum(f * emitter.sky_eval(frame.to_world(wi)) * w, J),
+                    dtype=np.float64).T
+
+
+def diffuse_integral(emitter, si, up):
+    """I_d of every surface interaction in ``si`` (Q) under the ``cie_sky`` ``emitter``'s
+    current sky, ``up`` the world's zenith in each local frame: (Q, 3) [W m^-2 sr^-1]."""
+    import drjit as dr
+    import mitsuba as mi
+
+    return _sky_sum(mi, dr, emitter, si, *diffuse_directions(up))
+
+
+def lobe_integral(emitter, si, up, lobe, sigma):
+    """I_s(sigma) of every surface interaction in ``si`` (Q): the sky function through the lobe
+    of ``lobe``, a ``ward`` plugin of rho_s = 1 (its roughness is set to ``sigma``), times
+    cos(theta_i); (Q, 3) [W m^-2 sr^-1]."""
+    import drjit as dr
+    import mitsuba as mi
+
+    s = mi.Float(float(sigma))
+    dr.make_opaque(s)                         # one kernel for every sigma
+    params = mi.traverse(lobe)
+    params["sigma_alpha"] = s
+    params.update()
+    wi, w, q, J = lobe_directions(si.wi, up, s, *lobe_resolution(sigma))
+    at_node = dr.zeros(mi.SurfaceInteraction3f, dr.width(wi))
+    at_node.wi = dr.gather(mi.Vector3f, si.wi, q)
+    glossy = mi.BSDFContext()
+    glossy.component = 1
+    return _sky_sum(mi, dr, emitter, si, wi, w, q, J, lobe.eval(glossy, at_node, wi))
 
 
 def chebyshev_nodes(lo, hi, n=CHEBYSHEV_NODES):

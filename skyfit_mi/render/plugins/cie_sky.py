@@ -36,7 +36,7 @@ import numpy as np
 
 from ...physics.colour import SRGB_LUMINANCE
 from ...physics.sky import Sky
-from ..daylight import RGB_KEYS as _RGB_KEYS, _array
+from ..daylight import RGB_KEYS as _RGB_KEYS, opaque_value
 from .properties import property_values
 
 #: Sampling table resolution: azimuth cells x cos(theta) cells.
@@ -107,12 +107,12 @@ class CIESkyEmitter(mi.Emitter):
         p_sun = sun_power / total if total > 0 else 0.0
         self.pmf = mi.Float(pmf.astype(np.float32))
         self.cdf = mi.Float(cdf.astype(np.float32))
-        self.p_sun = _array(mi.Float, p_sun)
-        self.sun_chord2 = _array(mi.Float, sky.sun_chord2)
+        self.p_sun = opaque_value(mi.Float, p_sun)
+        self.sun_chord2 = opaque_value(mi.Float, sky.sun_chord2)
         # the kernel reads the blend switch as a float: a 1-byte Bool among the emitter's
         # data would shift the other fields' alignment from frame to frame, and with it
         # the kernel's hash (a recompilation per frame)
-        self.blend_weight = _array(mi.Float, float(sky.horizon_blend))
+        self.blend_weight = opaque_value(mi.Float, float(sky.horizon_blend))
         for k in ("sun_direction", "sun_solid_angle", "blend_weight", "p_sun", "sun_chord2",
                   "scene_radius") + _RGB_KEYS:
             dr.make_opaque(getattr(self, k))
