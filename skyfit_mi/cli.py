@@ -271,8 +271,10 @@ def build_parser():
                      " adam; default a seeded random start)")
     fit.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,
                      help="seed of the light cache, random starts and subsets (default 0)")
-    fit.add_argument("--positions", type=_int_in(1, 4096), default=POSITIONS,
-                     help=f"light-cache positions per pixel (default {POSITIONS})")
+    fit.add_argument("--positions", type=_int_in(1, 4096), default=None,
+                     help=f"light-cache positions per pixel (default: chosen from the data, "
+                     f"{POSITIONS}, grown until the cache's own noise is a tenth of the "
+                     "degrees of freedom; the fit JSON's light_cache records it)")
     fit.add_argument("--directions", type=_int_in(1, 1 << 16), default=DIRECTIONS,
                      help=f"light-cache directions per position (default {DIRECTIONS})")
     fit.add_argument("-o", "--output", help="output folder (default: the manifest's folder)")

@@ -36,14 +36,6 @@ def radiance():
     """Runs a program of the Radiance that the pyradiance wheel ships (the independent
     reference: gensky, oconv, rtrace): ``radiance("rtrace", "-h", octree, input=rays)`` ->
     its stdout (bytes when ``binary``); tests using it skip where pyradiance is absent."""
-    import os
-    import subprocess
-    from pathlib import Path
-
-    root = Path(pytest.importorskip("pyradiance").__file__).parent
-    env = dict(os.environ, RAYPATH=f".{os.pathsep}{root / 'lib'}")
-
-    def run(program, *args, input=None, binary=False):
-        return subprocess.run([str(root / "bin" / program), *map(str, args)], input=input,
-                              capture_output=True, check=True, text=not binary, env=env).stdout
-    return run
+    pytest.importorskip("pyradiance")
+    from independent import radiance_runner
+    return radiance_runner()

@@ -411,3 +411,26 @@ def test_the_models_own_noise_is_reported_over_roughness_and_warned_when_data_ar
     assert any(w.startswith("the light cache's own Monte Carlo error") for w in clean["warnings"])
     assert max(noisy["cache_noise_chi2_by_sigma"].values()) < 0.25 * noisy["dof"]
     assert not any("light cache's own" in w for w in noisy["warnings"])
+
+
+def test_an_automatically_sized_cache_grows_until_its_noise_is_a_small_share(days, monkeypatch):
+    """With positions=None the cache is sized from the data: after a fit whose largest model
+    noise over the roughness range exceeds CACHE_SHARE of the dof, the positions grow (powers
+    of two, within CACHE_GROWTH_MAX) and the fit is repeated; the JSON records both sizes.
+    Started small (2 positions) on the noise-free day, whose sigma is the quantisation's."""
+    from skyfit_mi.fitting import fit as fit_module
+    from skyfit_mi.fitting.fit import CACHE_SHARE, FitSession
+
+    monkeypatch.setattr(fit_module, "POSITIONS", 2)
+    monkeypatch.setattr(fit_module, "CACHE_GROWTH_MAX", 8)
+    s = FitSession(days["clean"], "disc", REGION, directions=64)
+    first = max(s._model_noise_by_sigma(np.array([0.3, 0.1])).values())
+    assert first > CACHE_SHARE * s.problem.dof                   # the small cache is too noisy
+    r = s.run("lm", start=[0.3, 0.1], log=lambda *a: None)
+    c = r["light_cache"]
+    assert c["sized"] == "from the data" and c["grown_from"][0]["positions"] == 2
+    assert c["positions"] == 16 and s.cache.mirror.shape[2] == 16        # capped at 8x
+    assert max(r["cache_noise_chi2_by_sigma"].values()) < first / 4
+    given = FitSession(days["clean"], "disc", REGION, positions=2, directions=64)
+    r = given.run("lm", start=[0.3, 0.1], log=lambda *a: None)
+    assert r["light_cache"]["positions"] == 2 and "grown_from" not in r["light_cache"]

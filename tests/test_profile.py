@@ -42,7 +42,7 @@ def test_edges_sit_where_the_profile_crosses_the_threshold(noisy_fit, k):
     from skyfit_mi.fitting.methods.profile import profile_edges
 
     s, theta, chi2, cinv = noisy_fit
-    edges, fits = profile_edges(s.problem, theta, chi2, k, LEVELS, s.lower, s.upper, cinv)
+    edges, fits, _ = profile_edges(s.problem, theta, chi2, k, LEVELS, s.lower, s.upper, cinv)
     assert fits <= 4 * 6
     for (lo, hi), thr in zip(edges, LEVELS):
         assert lo < theta[k] < hi

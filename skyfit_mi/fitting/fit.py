@@ -18,7 +18,7 @@ from .geometry import geometry_warnings, highlight_geometry
 from ..errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
-from .methods.profile import profile_edges
+from .methods.profile import profile_edges, ridge_intervals
 from ..render.fit_model import check_start, other_readings
 from ..render.light_cache import DIRECTIONS, POSITIONS, SIGMA_RESOLVED
 from ..pipeline.manifest import frame_sky, load_manifest
@@ -34,6 +34,12 @@ GREY_SPREAD = 0.02
 NOISE_SIGMAS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5)
 #: Share of the degrees of freedom above which the model's own noise is warned of.
 NOISE_SHARE = 0.25
+#: Share of the degrees of freedom that an automatically sized light cache's largest noise over
+#: the roughness range (NOISE_SIGMAS) is grown to stay under.
+CACHE_SHARE = 0.1
+#: Largest growth of an automatically sized cache's positions, and the largest cache it may
+#: reach [bytes] (40 bytes a sample; the model's Dr.Jit copies take about as much again).
+CACHE_GROWTH_MAX, CACHE_BYTES_MAX = 16, 1 << 30
 #: Iterations of each constrained fit that profiles a parameter along a ridge (another
 #: parameter poorly determined): the conditional-mean start is poor there.
 PROFILE_RIDGE_ITERATIONS = 40
@@ -53,15 +59,14 @@ class FitSession:
     model : 'two', 'achromatic', 'colour' (or 2, 3, 5)
     normalisation : Ward normalisation of the model ('ward' = thesis eq. 3.19)
     seed : seeds the light cache
-    positions, directions : samples per pixel of the light cache
+    positions, directions : samples per pixel of the light cache; ``positions=None`` sizes
+        it from the data (:meth:`run`): POSITIONS, grown after a fit whose cache noise
+        exceeds CACHE_SHARE of the degrees of freedom
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
-                 positions=POSITIONS, directions=DIRECTIONS):
-        from ..render import setup
-        from ..render.fit_model import (BY_COUNT, PARAMETERS, WardModel, bounds,
-                                        check_fit_normalisation)
-        from ..render.light_cache import build_light_cache
+                 positions=None, directions=DIRECTIONS):
+        from ..render.fit_model import BY_COUNT, PARAMETERS, bounds, check_fit_normalisation
 
         model = BY_COUNT.get(model, model)
         check_choice("model", model, tuple(PARAMETERS))
@@ -73,28 +78,60 @@ class FitSession:
         if name not in mats:
             raise SkyfitError(f"region {name!r} names no material of the scene; its materials are: "
                               f"{', '.join(mats)}.")
-        mi = setup(doc["render"]["variant"])
-        self.scene = mi.load_string(doc["scene"]["xml"])
-        self.params = mi.traverse(self.scene)
         frames = {f["index"]: f for f in doc["frames"]}
         self.skies = [frame_sky(frames[i]) for i in self.obs.frames]
-        self.cache = build_light_cache(self.scene, self.params, self.skies, self.obs.pixels, name,
-                                       positions=positions, directions=directions, seed=seed,
-                                       max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
-                                       normalisation=normalisation)
-        if not self.cache.hit.any():
-            raise SkyfitError(f"none of the region's pixels shows material {name!r}; check the region.")
-        self.cache_time = time.perf_counter() - t0
-        self.geometry = highlight_geometry(np.where(self.cache.hit[..., None],
-                                                    self.cache.sun_half_cos, np.nan))
         self.doc, self.name, self.model, self.normalisation = doc, name, model, normalisation
         self.names = PARAMETERS[model]
-        self.wm = WardModel(self.cache, model, normalisation)
-        self.problem = Problem(self.obs, self.wm, valid=self.cache.hit)
         self.lower, self.upper = bounds(model)
         self.truth = mats[name]
-        self.cache_settings = {"positions": positions, "directions": directions, "seed": seed}
+        self.auto_size = positions is None
+        self.cache_settings = {"positions": POSITIONS if positions is None else int(positions),
+                               "directions": int(directions), "seed": seed,
+                               "sized": "from the data" if positions is None else "given"}
+        self.cache_time = time.perf_counter() - t0
+        self._trace_cache()
+
+    def _trace_cache(self):
+        """(Re)build the light cache at ``cache_settings`` and everything made from it."""
+        from ..render import setup
+        from ..render.fit_model import WardModel
+        from ..render.light_cache import build_light_cache
+
+        t0 = time.perf_counter()
+        mi = setup(self.doc["render"]["variant"])
+        self.scene = mi.load_string(self.doc["scene"]["xml"])
+        self.params = mi.traverse(self.scene)
+        c = self.cache_settings
+        self.cache = build_light_cache(self.scene, self.params, self.skies, self.obs.pixels,
+                                       self.name, positions=c["positions"],
+                                       directions=c["directions"], seed=c["seed"],
+                                       max_depth=max(1, int(self.doc["render"]["max_depth"]) - 1),
+                                       normalisation=self.normalisation)
+        if not self.cache.hit.any():
+            raise SkyfitError(f"none of the region's pixels shows material {self.name!r}; check "
+                              "the region.")
+        self.cache_time += time.perf_counter() - t0
+        self.geometry = highlight_geometry(np.where(self.cache.hit[..., None],
+                                                    self.cache.sun_half_cos, np.nan))
+        self.wm = WardModel(self.cache, self.model, self.normalisation)
+        self.problem = Problem(self.obs, self.wm, valid=self.cache.hit)
         self._halves = self._bases = None
+
+    def cache_growth(self, noise_by_sigma):
+        """The factor by which an automatically sized cache's positions must grow so that the
+        largest model noise over the roughness range (``noise_by_sigma``, chi-square) falls
+        under CACHE_SHARE of the degrees of freedom (its variance falls as 1 / positions, the
+        directions' share and the pixel footprint's alike): a power of two within
+        CACHE_GROWTH_MAX and CACHE_BYTES_MAX; 1 when ``noise_by_sigma`` is empty (a cache of given size)."""
+        if not noise_by_sigma:
+            return 1
+        need = max(noise_by_sigma.values()) / (CACHE_SHARE * self.problem.dof)
+        room = min(CACHE_GROWTH_MAX * POSITIONS / self.cache_settings["positions"],
+                   CACHE_BYTES_MAX / self.cache.nbytes())
+        factor = 1
+        while factor < need and 2 * factor <= room:
+            factor *= 2
+        return factor
 
     def cache_error(self, theta, method):
         """Standard error each parameter owes to the light cache's Monte Carlo samples.
@@ -175,6 +212,20 @@ class FitSession:
                               alternatives=lambda th: other_readings(self.model, th),
                               **dict(method_options or {}))
         theta = np.asarray(res["theta"], dtype=float)
+        noise = self._model_noise_by_sigma(theta) if self.auto_size else {}
+        growth = self.cache_growth(noise)
+        if growth > 1:
+            # the data are more precise than the cache: grow it and fit again
+            c = self.cache_settings
+            c.setdefault("grown_from", []).append(
+                {"positions": c["positions"], "largest_noise_chi2": max(noise.values()),
+                 "dof": self.problem.dof})
+            log(f"{self.name}: the light cache's noise adds up to {max(noise.values()):.3g} to "
+                f"chi-square ({self.problem.dof} degrees of freedom); tracing it again with "
+                f"{growth * c['positions']} positions per pixel")
+            c["positions"] *= growth
+            self._trace_cache()
+            return self.run(method, start, seed, method_options, log)
         evaluations = problem.evaluations + wm.basis_evaluations
         t_method = time.perf_counter() - t0
         # uncertainty: covariance at the optimum
@@ -211,7 +262,7 @@ class FitSession:
         ripple = self._model_noise_allowance(theta, *prof["sigma_alpha"], s2)
         # the profiles describe the global minimum; a local method is judged against it
         glob = fit["method"] == "global"
-        intervals, rise = {}, {}
+        intervals, rise, walked = {}, {}, []
         for i, p in enumerate(names):
             iv = {lv: (float(cov_iv[lv][0][i]), float(cov_iv[lv][1][i])) for lv in ("68", "95")}
             source = "covariance"
@@ -224,16 +275,24 @@ class FitSession:
                     # of the board's polished steel, truth sigma_alpha 0.02: 95% edge 0.002)
                     iv = unc.profile_interval(*prof[p], s2, ripple)
                     levels = list(iv)
-                    exact, _ = profile_edges(problem, theta, fit["chi2"], i,
-                                             [unc.LEVELS[lv] * s2 + ripple for lv in levels],
-                                             lower, upper, fit["curv_inv"])
+                    exact, _, points = profile_edges(
+                        problem, theta, fit["chi2"], i,
+                        [unc.LEVELS[lv] * s2 + ripple for lv in levels], lower, upper,
+                        fit["curv_inv"])
+                    walked += points
                     iv = {lv: (min(iv[lv][0], e[0] if e[0] is not None else np.inf),
                                max(iv[lv][1], e[1] if e[1] is not None else -np.inf))
                           for lv, e in zip(levels, exact)}
                     source = "profile"
             intervals[p] = {"68": iv["68"], "95": iv["95"], "from": source}
-        if glob and self._poorly_determined(intervals, prof):
-            self._profile_the_rest(fit, intervals, ripple)
+        if glob and self._poorly_determined(theta, intervals, prof, fit["cov"]):
+            walked += self._profile_the_rest(fit, intervals, ripple)
+        for lv in ("68", "95"):
+            # every point the profiles walked within the level lies inside every interval
+            ridge = ridge_intervals(walked, fit["chi2"], unc.LEVELS[lv] * s2 + ripple)
+            for i, p in enumerate(names if ridge is not None else ()):
+                lo, hi = intervals[p][lv]
+                intervals[p][lv] = (min(lo, float(ridge[0][i])), max(hi, float(ridge[1][i])))
         mc_sd = self.cache_error(theta, fit["method"])
         for i, p in enumerate(names):
             for lv in ("68", "95"):
@@ -249,36 +308,43 @@ class FitSession:
         return {f"{v:g}": self.problem.model_noise_chi2(np.r_[theta[:-1], v])
                 for v in NOISE_SIGMAS}
 
-    def _poorly_determined(self, intervals, profiled):
-        """Whether a profiled parameter's 95% interval runs into a bound of its range or covers
-        over half of it: then the others trade off along a ridge that their covariance
-        intervals (a quadratic at the fit) miss."""
+    def _poorly_determined(self, theta, intervals, profiled, cov):
+        """Whether a profiled parameter's 95% interval runs into a bound of its range, covers
+        over half of it, or is not the covariance's (either side under half or over twice its
+        covariance half-width: chi-square far from quadratic; on a Radiance-traced day rho_s's
+        profile was a cliff on one side and flat on the other): then the others trade off along
+        a ridge that their covariance intervals (a quadratic at the fit) miss."""
         for i, p in enumerate(self.names):
             if p in profiled:
                 lo, hi = intervals[p]["95"]
                 span = self.upper[i] - self.lower[i]
+                half = unc.Z["95"] * np.sqrt(max(cov[i, i], 0.0))
+                sides = np.array([theta[i] - lo, hi - theta[i]]) / max(half, 1e-12)
                 if lo <= self.lower[i] + 1e-6 * span or hi >= self.upper[i] - 1e-6 * span \
-                        or hi - lo > 0.5 * span:
+                        or hi - lo > 0.5 * span or np.any((sides < 0.5) | (sides > 2)):
                     return True
         return False
 
     def _profile_the_rest(self, fit, intervals, ripple):
         """Profile intervals, on the true chi-square by constrained fits, for the parameters
         that have only covariance intervals; each the union with its covariance interval (an
-        edge the fits cannot place keeps the covariance's)."""
-        levels = ("68", "95")
+        edge the fits cannot place keeps the covariance's).  Returns the points the
+        constrained fits walked [(theta, chi2)]."""
+        levels, walked = ("68", "95"), []
         for i, p in enumerate(self.names):
             if intervals[p]["from"] != "covariance":
                 continue
-            exact, _ = profile_edges(self.problem, fit["theta"], fit["chi2"], i,
-                                     [unc.LEVELS[lv] * fit["s2"] + ripple for lv in levels],
-                                     self.lower, self.upper, fit["curv_inv"], rtol=0.01,
-                                     max_fits=10, iterations=PROFILE_RIDGE_ITERATIONS)
+            exact, _, points = profile_edges(
+                self.problem, fit["theta"], fit["chi2"], i,
+                [unc.LEVELS[lv] * fit["s2"] + ripple for lv in levels], self.lower, self.upper,
+                fit["curv_inv"], rtol=0.01, iterations=PROFILE_RIDGE_ITERATIONS)
+            walked += points
             for lv, e in zip(levels, exact):
                 lo, hi = intervals[p][lv]
                 intervals[p][lv] = (min(lo, e[0]) if e[0] is not None else lo,
                                     max(hi, e[1]) if e[1] is not None else hi)
             intervals[p]["from"] = "profile (another parameter is poorly determined)"
+        return walked
 
     def _model_noise_allowance(self, theta, sigmas, profile, s2):
         """The chi-square the model's own Monte Carlo error may add, as the largest over the
@@ -382,7 +448,7 @@ class FitSession:
 
 
 def fit_region(manifest_path, name, pixels, model="two", method="global", normalisation="ward",
-               seed=0, start=None, positions=POSITIONS, directions=DIRECTIONS,
+               seed=0, start=None, positions=None, directions=DIRECTIONS,
                method_options=None, log=print):
     """Fit one material region (see :class:`FitSession`); returns a JSON-ready result dict."""
     session = FitSession(manifest_path, name, pixels, model, normalisation, seed, positions,

@@ -123,6 +123,10 @@ class LightCache:
     lobe_sky: np.ndarray
     normalisation: str = "ward"
 
+    def nbytes(self):
+        """Memory the cache's arrays take [bytes]."""
+        return sum(v.nbytes for v in vars(self).values() if isinstance(v, np.ndarray))
+
     def halves(self):
         """Two independent caches, each from half of every pixel's positions (weights doubled).
 
