@@ -388,9 +388,7 @@ def test_other_parameters_are_profiled_when_the_lobe_is_poorly_determined(days):
     """Under an overcast sky rho_s and sigma_alpha are poorly determined, and R trades off with
     them along a ridge: R's interval then comes from its profile on the true chi-square (at
     least as wide as the covariance's) and contains the truth (R = 1: the day's two-parameter
-    material, rho_d = 1 - rho_s). On the sunny east day R keeps its covariance interval."""
-    cov_only = fit(days["noisy"], model="achromatic")
-    assert cov_only["intervals"]["R"]["from"] == "covariance"
+    material, rho_d = 1 - rho_s)."""
     r = fit(days["overcast"], model="achromatic")
     iv = r["intervals"]["R"]
     assert iv["from"].startswith("profile")

@@ -310,8 +310,8 @@ class FitSession:
 
     def _poorly_determined(self, theta, intervals, profiled, cov):
         """Whether a profiled parameter's 95% interval runs into a bound of its range, covers
-        over half of it, or is not the covariance's (either side under half or over twice its
-        covariance half-width: chi-square far from quadratic; on a Radiance-traced day rho_s's
+        over half of it, or is not the covariance's (either side under a third or over three times
+        its covariance half-width: chi-square far from quadratic; on a Radiance-traced day rho_s's
         profile was a cliff on one side and flat on the other): then the others trade off along
         a ridge that their covariance intervals (a quadratic at the fit) miss."""
         for i, p in enumerate(self.names):
@@ -321,7 +321,7 @@ class FitSession:
                 half = unc.Z["95"] * np.sqrt(max(cov[i, i], 0.0))
                 sides = np.array([theta[i] - lo, hi - theta[i]]) / max(half, 1e-12)
                 if lo <= self.lower[i] + 1e-6 * span or hi >= self.upper[i] - 1e-6 * span \
-                        or hi - lo > 0.5 * span or np.any((sides < 0.5) | (sides > 2)):
+                        or hi - lo > 0.5 * span or np.any((sides < 1 / 3) | (sides > 3)):
                     return True
         return False
 
