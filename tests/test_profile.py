@@ -61,3 +61,41 @@ def test_levenberg_marquardt_holds_fixed_parameters(noisy_fit):
     res = levenberg_marquardt(s.problem, start, s.lower, s.upper, fixed=[0])
     assert res["theta"][0] == start[0]
     assert res["chi2"] == pytest.approx(brute_profile(s, 0, start[0]), rel=1e-4, abs=0.05)
+
+
+class _Banana:
+    """chi^2 along a curved ridge a = b^2: residuals (a - b^2) / 0.01 and (b - 0.5) / 0.2.
+    The profile of a rises as ((sqrt(a) - 0.5) / 0.2)^2, so its 95% interval is
+    a in [(0.5 - 0.392)^2, (0.5 + 0.392)^2] = [0.0117, 0.796]; the covariance at the minimum
+    (a quadratic) puts the upper edge at 0.25 + 0.392 = 0.642."""
+    evaluations = 0
+
+    def residuals(self, t):
+        return np.array([(t[0] - t[1] ** 2) / 0.01, (t[1] - 0.5) / 0.2])
+
+    def jacobian(self, t):
+        return self.residuals(t), np.array([[1 / 0.01, -2 * t[1] / 0.01], [0.0, 1 / 0.2]])
+
+    def chi2(self, t):
+        r = self.residuals(t)
+        return float(r @ r)
+
+
+def test_edges_follow_a_curved_ridge_and_its_points_widen_the_others():
+    """The profile's fits continue along their own path, so the edges of a sit where the
+    curved ridge's profile crosses the threshold (not the covariance's quadratic), and the
+    points walked give b an interval covering its own 95% profile interval's core."""
+    from skyfit_mi.fitting.methods.profile import profile_edges, ridge_intervals
+
+    p = _Banana()
+    theta, lower, upper = np.array([0.25, 0.5]), np.zeros(2), np.array([1.0, 1.5])
+    r, J = p.jacobian(theta)
+    cov = np.linalg.inv(J.T @ J)
+    assert 0.25 + 1.96 * np.sqrt(cov[0, 0]) == pytest.approx(0.642, abs=0.002)
+    edges, _, walked = profile_edges(p, theta, 0.0, 0, LEVELS, lower, upper, cov, rtol=0.01,
+                                     iterations=40)
+    lo, hi = edges[1]
+    assert lo == pytest.approx(0.0117, abs=0.002) and hi == pytest.approx(0.796, rel=0.02)
+    b_lo, b_hi = (v[1] for v in ridge_intervals(walked, 0.0, LEVELS[1]))
+    assert b_lo < 0.15 and b_hi > 0.85                   # b's own 95%: 0.108-0.892
+    assert ridge_intervals(walked, 0.0, -1.0) is None
