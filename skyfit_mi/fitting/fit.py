@@ -66,6 +66,7 @@ class FitSession:
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
                  positions=None, directions=DIRECTIONS):
+        from ..render import setup
         from ..render.fit_model import BY_COUNT, PARAMETERS, bounds, check_fit_normalisation
 
         model = BY_COUNT.get(model, model)
@@ -84,23 +85,21 @@ class FitSession:
         self.names = PARAMETERS[model]
         self.lower, self.upper = bounds(model)
         self.truth = mats[name]
-        self.auto_size = positions is None
         self.cache_settings = {"positions": POSITIONS if positions is None else int(positions),
                                "directions": int(directions), "seed": seed,
                                "sized": "from the data" if positions is None else "given"}
+        mi = setup(doc["render"]["variant"])
+        self.scene = mi.load_string(doc["scene"]["xml"])
+        self.params = mi.traverse(self.scene)
         self.cache_time = time.perf_counter() - t0
         self._trace_cache()
 
     def _trace_cache(self):
         """(Re)build the light cache at ``cache_settings`` and everything made from it."""
-        from ..render import setup
         from ..render.fit_model import WardModel
         from ..render.light_cache import build_light_cache
 
         t0 = time.perf_counter()
-        mi = setup(self.doc["render"]["variant"])
-        self.scene = mi.load_string(self.doc["scene"]["xml"])
-        self.params = mi.traverse(self.scene)
         c = self.cache_settings
         self.cache = build_light_cache(self.scene, self.params, self.skies, self.obs.pixels,
                                        self.name, positions=c["positions"],
@@ -122,8 +121,8 @@ class FitSession:
         largest model noise over the roughness range (``noise_by_sigma``, chi-square) falls
         under CACHE_SHARE of the degrees of freedom (its variance falls as 1 / positions, the
         directions' share and the pixel footprint's alike): a power of two within
-        CACHE_GROWTH_MAX and CACHE_BYTES_MAX; 1 when ``noise_by_sigma`` is empty (a cache of given size)."""
-        if not noise_by_sigma:
+        CACHE_GROWTH_MAX and CACHE_BYTES_MAX; 1 for a cache of given size."""
+        if self.cache_settings["sized"] == "given":
             return 1
         need = max(noise_by_sigma.values()) / (CACHE_SHARE * self.problem.dof)
         room = min(CACHE_GROWTH_MAX * POSITIONS / self.cache_settings["positions"],
@@ -212,7 +211,7 @@ class FitSession:
                               alternatives=lambda th: other_readings(self.model, th),
                               **dict(method_options or {}))
         theta = np.asarray(res["theta"], dtype=float)
-        noise = self._model_noise_by_sigma(theta) if self.auto_size else {}
+        noise = self._model_noise_by_sigma(theta)
         growth = self.cache_growth(noise)
         if growth > 1:
             # the data are more precise than the cache: grow it and fit again
@@ -237,7 +236,7 @@ class FitSession:
         g = res if method == "global" else global_search(problem, start, self.lower, self.upper,
                                                         candidates=2, grid_basis=grid_basis)
         fit = {"method": method, "theta": theta, "chi2": chi2, "s2": s2, "curv_inv": curv_inv,
-               "cov": curv_inv * s2, "result": res, "global": g}
+               "cov": curv_inv * s2, "result": res, "global": g, "noise_by_sigma": noise}
         self._intervals(fit)
         warnings = self._warnings(fit)
         wall = time.perf_counter() - t0 + self.cache_time
@@ -298,8 +297,7 @@ class FitSession:
             for lv in ("68", "95"):
                 intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * mc_sd[i],
                                              lower[i], upper[i])
-        fit.update(intervals=intervals, rise=rise, ripple=ripple, mc_sd=mc_sd,
-                   noise_by_sigma=self._model_noise_by_sigma(theta))
+        fit.update(intervals=intervals, rise=rise, ripple=ripple, mc_sd=mc_sd)
 
     def _model_noise_by_sigma(self, theta):
         """The model's own Monte Carlo share of chi-square at the fitted reflectances over the
