@@ -45,6 +45,25 @@ def test_global_search_reports_a_failed_polish(days, monkeypatch):
     assert "singular curvature" in res["message"] and "best grid point" in res["message"]
 
 
+def test_a_polish_beside_its_grid_point_is_judged_on_one_evaluation_path(days, monkeypatch):
+    """LM's chi-square comes from the derivative path, ~1e-7 relative from the plain one: a
+    polish that stays at its grid point converged; one that ends worse keeps the grid point."""
+    import importlib
+    gs = importlib.import_module("skyfit_mi.fitting.methods.global_search")
+    from skyfit_mi.fitting.fit import FitSession
+    s = FitSession(days["clean"], "disc", REGION, positions=2, directions=64)
+    for move, status in ((0.0, "converged"), (0.05, "grid_point")):
+        def lm(problem, theta, lower, upper, **kw):
+            moved = np.clip(theta + move, lower, upper)
+            return {"theta": moved, "chi2": problem.chi2(theta) * (1 + 1e-7),
+                    "status": "converged", "message": "chi-square stopped decreasing",
+                    "trace": [theta.tolist()]}
+        monkeypatch.setattr(gs, "levenberg_marquardt", lm)
+        res = gs.global_search(s.problem, s.lower, s.lower, s.upper, candidates=1,
+                               profile=False)
+        assert res["status"] == status, (move, res["message"])
+
+
 def _replicates(day, n, seed, noise_percent=5.0, saturate_quantile=None):
     """A fit session of ``day`` and a generator of ``n`` noise replicates of its noise-free
     radiance (the frames' EXRs), each set as the session's observations before it is yielded.
