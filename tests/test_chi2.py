@@ -95,3 +95,35 @@ def test_label_masks_of_8_and_16_bits(tmp_path):
     assert region_from_mask(tmp_path / "m8.png", 7).tolist() == [[3, 2]]
     with pytest.raises(SkyfitError, match="label 8 does not occur in mask"):
         region_from_mask(tmp_path / "m8.png", 8)
+
+
+@pytest.mark.parametrize("mean_dn", [10.0, 128.0, 245.0])
+def test_noise_alone_gives_the_censored_chi2_expectation(mean_dn):
+    """chi^2 at the truth over noise replicates has the mean and spread of noise_chi2, which is
+    (dof, 2 dof) where nothing clips and larger where a third of the values clip (so the misfit
+    test does not read clipping as misfit)."""
+    values = []
+    for seed in range(40):
+        problem, sensor = _problem(mean_dn, n=500, seed=seed)
+        values.append(problem.chi2([mean_dn / sensor.max_code]))
+    mean, var = problem.noise_chi2([mean_dn / sensor.max_code])
+    assert np.mean(values) == pytest.approx(mean, abs=4 * np.sqrt(var / len(values)))
+    assert np.var(values, ddof=1) == pytest.approx(var, rel=0.5)
+    if mean_dn == 128.0:
+        assert (mean, var) == pytest.approx((problem.dof, 2 * problem.dof), rel=1e-4)
+    else:
+        assert mean > problem.dof + 6 * np.sqrt(var)       # dof alone would read as misfit
+
+
+def test_censored_term_moments_match_sampling():
+    from scipy.special import ndtr
+
+    from skyfit_mi.fitting.chi2 import censored_term_moments
+    e = np.random.default_rng(3).standard_normal(400_000)
+    for a, b in ((0.0, np.inf), (-1.0, 1.0), (1.5, np.inf), (-np.inf, 0.3), (-0.3, 2.0)):
+        low = -2 * np.log(ndtr(a)) if np.isfinite(a) else 0.0
+        high = -2 * np.log(ndtr(-b)) if np.isfinite(b) else 0.0
+        t = np.where(e < a, low, np.where(e > b, high, e * e))
+        mean, var = censored_term_moments(a, b)
+        assert mean == pytest.approx(t.mean(), abs=5 * t.std() / np.sqrt(t.size))
+        assert var == pytest.approx(t.var(), rel=0.03)

@@ -59,6 +59,10 @@ def test_misfit_counts_the_models_own_noise_and_grades_the_excess():
     assert "does not describe these data" in bad[0] and "not reliable" in bad[0]
     # the same chi-square is expected when the model's Monte Carlo error adds 3 dof's worth
     assert misfit(4.0 * dof, dof, 4.0, model_noise=3.0 * dof) == []
+    # clipping near code 0: noise alone expects 1.2 dof (and a narrower spread), so 1.21 dof
+    # is no misfit, while against dof it is (the overcast test day at 5% noise)
+    assert misfit(1.21 * dof, dof, 1.0, noise=(1.2 * dof, 1.1 * dof)) == []
+    assert misfit(1.21 * dof, dof, 1.21) != []
 
 
 @pytest.mark.parametrize("value, interval, expected", [

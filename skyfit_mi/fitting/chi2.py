@@ -167,6 +167,30 @@ def load_observations(manifest_path, pixels, frames=None):
                         np.stack(gain, 1), sensor, warnings)
 
 
+def censored_term_moments(a, b):
+    """Mean and variance of one value's chi^2 term under pure noise (the Tobit terms above).
+
+    The value is m + sigma e with e standard normal, clipped below at a (standard units: code 0
+    when e < a) and above at b; it contributes e^2 between them and -2 ln P at a clipped end
+    of probability P.  With the truncated normal moments
+    int_a^b e^2 phi = [Phi - e phi]_a^b and int_a^b e^4 phi = [3 Phi - (e^3 + 3 e) phi]_a^b.
+    Returns (mean, variance) arrays; (1, 2) for values far from both ends.
+    """
+    from scipy.special import ndtr
+
+    a = np.clip(np.asarray(a, float), -40.0, 40.0)
+    b = np.clip(np.asarray(b, float), -40.0, 40.0)
+    phi = lambda e: np.exp(-0.5 * e * e) / np.sqrt(2.0 * np.pi)  # noqa: E731
+    m2 = (ndtr(b) - b * phi(b)) - (ndtr(a) - a * phi(a))
+    m4 = (3 * ndtr(b) - (b**3 + 3 * b) * phi(b)) - (3 * ndtr(a) - (a**3 + 3 * a) * phi(a))
+    mean, second = m2, m4
+    for p in (ndtr(a), ndtr(-b)):                  # the low and the high clipped ends
+        t = np.where(p > 0, -2.0 * np.log(np.maximum(p, 1e-300)), 0.0)
+        mean = mean + p * t
+        second = second + p * t * t
+    return mean, np.maximum(second - mean * mean, 0.0)
+
+
 class Problem:
     """chi^2(a) for one region: observations, and a radiance model with ``radiance``/``jacobian``."""
 
@@ -224,6 +248,23 @@ class Problem:
             dr[c] = -sign * np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z)) \
                 / (sig[c] * r[c])
         return r, dr
+
+    def noise_chi2(self, theta):
+        """Mean and variance of the chi^2 that noise alone gives at ``theta``, scaled to the
+        degrees of freedom (dof and 2 dof when nothing can clip).
+
+        A clipped value's term -2 ln P(clipped) is not a squared standard normal: a channel
+        whose model value sits near code 0 (a dark day, strong noise) expects
+        P (-2 ln P) + (the unclipped part), up to 1.39 at P = 1/2, so the misfit test must
+        compare chi^2 with this sum, not with dof (an overcast test day at 5% noise, a
+        sixth of its values at code 0: chi^2/dof 1.21, chi^2/expected 1.0).
+        """
+        m = self.predict(self.model.radiance(theta))[self.mask]
+        sig = self.obs.sigma[self.mask]
+        mean, var = censored_term_moments((LOW_CODE - m) / sig,
+                                          (self.obs.sensor.max_code - LOW_CODE - m) / sig)
+        share = self.dof / self.n_data
+        return float(mean.sum() * share), float(var.sum() * share)
 
     def residuals_from(self, radiance):
         return self.residual_terms(radiance)[0][self.mask]

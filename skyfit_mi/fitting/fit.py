@@ -18,6 +18,7 @@ from .geometry import geometry_warnings, highlight_geometry
 from ..errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
+from .methods.levenberg_marquardt import SINGULAR_CONDITION
 from .methods.profile import profile_edges, ridge_intervals
 from ..render.fit_model import check_start, other_readings
 from ..render.light_cache import DIRECTIONS, POSITIONS, SIGMA_RESOLVED
@@ -230,13 +231,15 @@ class FitSession:
         # uncertainty: covariance at the optimum
         r, J = problem.jacobian(theta)
         chi2 = float(r @ r)
-        s2 = unc.scale(chi2, problem.dof)
+        noise_chi2 = problem.noise_chi2(theta)           # what noise alone gives (clipping)
+        s2 = unc.scale(chi2, noise_chi2[0])
         curv_inv = unc.covariance(J)
         # the global minimum: its grid gives the profiles; a local method is judged against it
         g = res if method == "global" else global_search(problem, start, self.lower, self.upper,
                                                         candidates=2, grid_basis=grid_basis)
         fit = {"method": method, "theta": theta, "chi2": chi2, "s2": s2, "curv_inv": curv_inv,
-               "cov": curv_inv * s2, "result": res, "global": g, "noise_by_sigma": noise}
+               "cov": curv_inv * s2, "result": res, "global": g, "noise_by_sigma": noise,
+               "noise_chi2": noise_chi2}
         self._intervals(fit)
         warnings = self._warnings(fit)
         wall = time.perf_counter() - t0 + self.cache_time
@@ -326,9 +329,18 @@ class FitSession:
     def _profile_the_rest(self, fit, intervals, ripple):
         """Profile intervals, on the true chi-square by constrained fits, for the parameters
         that have only covariance intervals; each the union with its covariance interval (an
-        edge the fits cannot place keeps the covariance's).  Returns the points the
+        edge the fits cannot place keeps the covariance's), unless the fit lies on a bound of
+        its range or the curvature is singular there: the covariance's quadratic then runs
+        into the excluded side (rho_s < 0) and means nothing (an overcast day fitted at
+        rho_s = 0: R's covariance interval 0-1, its profile 0.83-1).  Returns the points the
         constrained fits walked [(theta, chi2)]."""
         levels, walked = ("68", "95"), []
+        theta = fit["theta"]
+        span = self.upper - self.lower
+        quadratic = bool(np.all(np.isfinite(fit["curv_inv"]))
+                         and np.all(theta > self.lower + 1e-9 * span)
+                         and np.all(theta < self.upper - 1e-9 * span)
+                         and np.linalg.cond(fit["curv_inv"]) < SINGULAR_CONDITION)
         for i, p in enumerate(self.names):
             if intervals[p]["from"] != "covariance":
                 continue
@@ -339,8 +351,9 @@ class FitSession:
             walked += points
             for lv, e in zip(levels, exact):
                 lo, hi = intervals[p][lv]
-                intervals[p][lv] = (min(lo, e[0]) if e[0] is not None else lo,
-                                    max(hi, e[1]) if e[1] is not None else hi)
+                keep_lo, keep_hi = (lo, hi) if quadratic else (np.inf, -np.inf)
+                intervals[p][lv] = (min(keep_lo, e[0]) if e[0] is not None else lo,
+                                    max(keep_hi, e[1]) if e[1] is not None else hi)
             intervals[p]["from"] = "profile (another parameter is poorly determined)"
         return walked
 
@@ -392,7 +405,8 @@ class FitSession:
                                 f"{k} = {v:.4f}" for k, v in zip(names, g["theta"]))
                             + f": {method} ended in a local minimum or on a flat region of "
                             "chi-square from this start (thesis 6.3, 7.2)")
-        warnings += unc.misfit(chi2, self.problem.dof, fit["s2"], fit["ripple"])
+        warnings += unc.misfit(chi2, self.problem.dof, fit["s2"], fit["ripple"],
+                               fit["noise_chi2"])
         warnings += unc.identifiability(names, iv95, self.lower, self.upper, fit["rise"],
                                         fit["s2"], fit["ripple"])
         warnings += geometry_warnings(self.geometry, float(theta[-1]))
@@ -426,7 +440,8 @@ class FitSession:
             "normalisation": self.normalisation,
             "method": fit["method"], "seed": seed, "start": start.tolist(),
             "parameters": dict(zip(names, theta.tolist())),
-            "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof, "interval_scale_s2": fit["s2"],
+            "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof,
+            "chi2_expected_from_noise": fit["noise_chi2"][0], "interval_scale_s2": fit["s2"],
             "intervals": fit["intervals"],
             "readings": [unc.reading(p, theta[i], fit["intervals"][p]["95"], self.lower[i],
                                      self.upper[i]) for i, p in enumerate(names)],

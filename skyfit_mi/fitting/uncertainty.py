@@ -30,9 +30,11 @@ MISFIT_UNRELIABLE = 1.5
 MISFIT_P = 1e-3
 
 
-def scale(chi2, dof):
-    """The Birge ratio s^2 = max(1, chi^2/dof) that widens intervals of a poor fit."""
-    return max(1.0, chi2 / dof) if dof > 0 else 1.0
+def scale(chi2, expected):
+    """The Birge ratio s^2 = max(1, chi^2 / expected) that widens intervals of a poor fit;
+    ``expected`` is the chi^2 noise alone gives (dof when nothing clips,
+    :meth:`~skyfit_mi.fitting.chi2.Problem.noise_chi2`)."""
+    return max(1.0, chi2 / expected) if expected > 0 else 1.0
 
 
 def covariance(J, s2=1.0):
@@ -121,25 +123,30 @@ def reading(name, value, interval95, lower, upper):
     return f"{name} = {value:.4g} (95%: {lo:.3g}-{hi:.3g})"
 
 
-def misfit(chi2, dof, s2, model_noise=0.0):
+def misfit(chi2, dof, s2, model_noise=0.0, noise=None):
     """Warnings when chi-square is larger than the data's noise explains (thesis 6.2).
 
-    Noise and the model's own Monte Carlo error (``model_noise``, its expected share of
-    chi-square) together expect dof + model_noise; the p-value of chi-square scaled to that
-    mean (as a chi-square of dof degrees of freedom) says whether the misfit is real, its size
-    what to do.  Above MISFIT_UNRELIABLE times the expectation the model does not describe the
-    data and no parameter can be trusted (widening intervals by s^2 does not repair a wrong
-    model); a significant smaller excess (p < MISFIT_P) widens the intervals by s^2.
+    ``noise`` = (mean, variance) of the chi-square noise alone gives
+    (:meth:`~skyfit_mi.fitting.chi2.Problem.noise_chi2`; default (dof, 2 dof), nothing
+    clipped).  Noise and the model's own Monte Carlo error (``model_noise``, its expected share
+    of chi-square) together expect mean + model_noise; the p-value is that of a chi-square
+    distribution matched to this mean and the noise's variance (k = 2 mean^2 / variance degrees
+    of freedom; k = dof when nothing clips), its size says what to do.  Above MISFIT_UNRELIABLE
+    times the expectation the model does not describe the data and no parameter can be trusted
+    (widening intervals by s^2 does not repair a wrong model); a significant smaller excess
+    (p < MISFIT_P) widens the intervals by s^2.
     """
     from scipy.stats import chi2 as chi2_dist
 
-    expected = dof + max(model_noise, 0.0)
+    mean, var = noise if noise is not None else (float(dof), 2.0 * dof)
+    expected = mean + max(model_noise, 0.0)
+    k = 2.0 * mean * mean / var if var > 0 else float(dof)
     ratio = chi2 / expected
-    p = float(chi2_dist.sf(chi2 * dof / expected, dof))
+    p = float(chi2_dist.sf(chi2 * k / expected, k))
     by = (f"noise and the model's Monte Carlo error ({model_noise:.3g}) explain"
-          if model_noise > 0.01 * dof else "noise explains")
+          if model_noise > 0.01 * mean else "noise explains")
     of = (f"chi-square is {ratio:.3g} times what {by} (p = {p:.2g}; noise alone varies it by "
-          f"+- {np.sqrt(2 / dof):.2g})")
+          f"+- {np.sqrt(2 / k):.2g})")
     if ratio > MISFIT_UNRELIABLE and p < MISFIT_P:
         return [f"the model does not describe these data: {of}; its parameters and intervals are "
                 "not reliable. Check the sensor model and sigmas, the region (one material "

@@ -19,7 +19,7 @@ from any start.  The grid also gives the profile chi-square of sigma_alpha and r
 import numpy as np
 
 from ...physics.ward import METAL_THRESHOLD
-from .levenberg_marquardt import levenberg_marquardt
+from .levenberg_marquardt import polish
 
 #: sigma_alpha grid: the ideal mirror, then log-spaced.
 SIGMA_GRID = np.concatenate([[0.0], np.geomspace(0.004, 0.5, 64)])
@@ -147,7 +147,7 @@ def global_search(problem, start, lower, upper, candidates=3, profile=True, grid
     results = []
     for k in picks:
         j = int(best_j[k])
-        res = levenberg_marquardt(problem, thetas[k, j], lower, upper)
+        res = polish(problem, thetas[k, j], lower, upper)
         # a polish that fails (singular curvature) keeps the grid point
         at_grid = problem.chi2(thetas[k, j])
         if res["status"] == "failed" or \

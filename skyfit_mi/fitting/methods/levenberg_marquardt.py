@@ -14,6 +14,8 @@ import numpy as np
 
 #: Condition number above which the curvature matrix counts as singular.
 SINGULAR_CONDITION = 1e12
+#: A parameter whose Jacobian column is below this share of the largest changes nothing.
+NO_EFFECT = 1e-9
 
 
 def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1e-3,
@@ -25,6 +27,9 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
     free[list(fixed)] = False
     r, J = problem.jacobian(theta)
     chi2 = float(r @ r)
+    if not free.any():
+        return {"theta": theta, "chi2": chi2, "status": "converged",
+                "message": "every parameter held", "trace": [theta.tolist()], "jacobian": J}
     lam = lam0
     trace = [theta.tolist()]
     status, message = "max_iterations", "stopped after the iteration limit"
@@ -71,3 +76,24 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
                 break
     return {"theta": theta, "chi2": chi2, "status": status, "message": message, "trace": trace,
             "jacobian": J}
+
+
+def polish(problem, start, lower, upper, fixed=(), **options):
+    """Levenberg-Marquardt for polishing and constrained fits (the global search's candidates,
+    profile chi-square): where the curvature is singular at the start because sigma_alpha (the
+    last parameter) changes nothing there (its Jacobian column vanishes: rho_s = 0), sigma_alpha
+    is held at its start and the rest are fitted, instead of the thesis's 'Fail' (an overcast
+    day at rho_s = 0: every constrained fit of R failed, and R's profile interval ran to 0).
+    Any other singular start still fails: holding a parameter that does change chi-square would
+    overstate the profile and narrow its interval."""
+    res = levenberg_marquardt(problem, start, lower, upper, fixed=fixed, **options)
+    last = len(lower) - 1
+    if res["status"] == "failed" and last not in fixed:
+        norms = np.linalg.norm(res["jacobian"], axis=0)
+        if norms[last] <= NO_EFFECT * norms.max():
+            held = levenberg_marquardt(problem, start, lower, upper, fixed=(*fixed, last),
+                                       **options)
+            if held["status"] != "failed":
+                return {**held, "message": f"{held['message']}; sigma_alpha held at its start "
+                        "(it does not change chi-square there)"}
+    return res

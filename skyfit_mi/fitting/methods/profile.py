@@ -24,7 +24,7 @@ there (docs/BENCHMARKS.md).
 
 import numpy as np
 
-from .levenberg_marquardt import levenberg_marquardt
+from .levenberg_marquardt import polish
 
 
 def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, rtol=0.05,
@@ -56,8 +56,7 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, rt
         """sqrt(P_k(x) - chi2_min), and whether it is exact (not just an upper bound)."""
         nonlocal fits
         fits += 1
-        res = levenberg_marquardt(problem, start_at(x), lower, upper, max_iterations=iterations,
-                                  fixed=[k])
+        res = polish(problem, start_at(x), lower, upper, max_iterations=iterations, fixed=(k,))
         exact = res["status"] != "failed"
         chi2 = res["chi2"] if exact else problem.chi2(start_at(x))
         if exact:
