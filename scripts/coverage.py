@@ -84,10 +84,7 @@ def main():
                 est, cov_prof, cov_cov, chis = [], [], [], []
                 t0 = time.perf_counter()
                 for r in range(args.replicates):
-                    rng = np.random.default_rng([i, int(noise), r])
-                    y, sig = sensor.capture(radiance * obs.gain / sensor.exposure,
-                                            rng)
-                    obs.y, obs.sigma = y.astype(float), sig.astype(float)
+                    obs.recapture(radiance, np.random.default_rng([i, int(noise), r]))
                     res = session.run("global", seed=r, log=lambda *a: None)
                     th = np.array(list(res["parameters"].values()))
                     est.append(th)

@@ -92,14 +92,6 @@ def _render(spec, out):
                     overwrite=True)
 
 
-def _replicate(session, radiance, seed):
-    """Session observations: a noise replicate of the frames' radiance (seeded ``seed``)."""
-    obs = session.obs
-    y, sig = obs.sensor.capture(radiance * obs.gain / obs.sensor.exposure,
-                                np.random.default_rng(seed))
-    obs.y, obs.sigma = y.astype(float), sig.astype(float)
-
-
 def _held(names, intervals, warnings, truth):
     """Per parameter: 'in' (95% holds the truth), 'warned' (outside, a warning names it),
     or 'MISSED'."""
@@ -129,7 +121,7 @@ def radiance_case(case, root, replicates, run):
     model_ratio = float(np.median(s.wm.radiance(np.array(truth)) / traced))
     rows, covered = [], []
     for r in range(replicates):
-        _replicate(s, traced, [31, r])
+        s.obs.recapture(traced, np.random.default_rng([31, r]))
         res = s.run("global", seed=r, log=lambda *a: None)
         held = _held(s.names, res["intervals"], res["warnings"], truth)
         covered.append([res["intervals"][p]["95"][0] <= t <= res["intervals"][p]["95"][1]
@@ -192,7 +184,7 @@ def mitsuba_case(case, root, replicates):
     rows = []
     for r in range(replicates):
         for j, s in enumerate(sessions):
-            _replicate(s, radiance[j], [37, r, j])
+            s.obs.recapture(radiance[j], np.random.default_rng([37, r, j]))
         fits = [s.run("global", seed=r, log=lambda *a: None) for s in sessions]
         # the best Ward fit: all cameras at once, from each camera's own global fit
         joint = Joint([s.problem for s in sessions])

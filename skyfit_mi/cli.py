@@ -11,7 +11,7 @@ import sys
 
 from .errors import SetupError, SkyfitError
 from .physics.ward import NORMALISATIONS
-from .render.light_cache import DIRECTIONS, POSITIONS
+from .render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS
 
 DESCRIPTION = ("Render daylight image sequences, fit Ward reflection models to them, and map "
                "the materials a camera sees.")
@@ -273,8 +273,8 @@ def build_parser():
                      help="seed of the light cache, random starts and subsets (default 0)")
     fit.add_argument("--positions", type=_int_in(1, 4096), default=None,
                      help=f"light-cache positions per pixel (default: chosen from the data, "
-                     f"{POSITIONS}, grown until the cache's own noise is a tenth of the "
-                     "degrees of freedom; the fit JSON's light_cache records it)")
+                     f"{POSITIONS}, grown until the cache's own noise is {CACHE_SHARE * 100:g}%% of "
+                     "the degrees of freedom; the fit JSON's light_cache records it)")
     fit.add_argument("--directions", type=_int_in(1, 1 << 16), default=DIRECTIONS,
                      help=f"light-cache directions per position (default {DIRECTIONS})")
     fit.add_argument("-o", "--output", help="output folder (default: the manifest's folder)")

@@ -52,6 +52,7 @@ def test_version_help_and_description(capsys):
     for name, sub in subs.items():
         for action in sub._actions:
             assert action.help, f"skyfit {name} {action.option_strings or action.dest} has no help"
+        assert "usage" in sub.format_help()          # formats (a bare % in a help breaks it)
     fit = subs["fit"]
     assert fit.get_default("model") == "5"        # the README's main job fits --model 5
 

@@ -87,9 +87,7 @@ def _replicates(day, n, seed, noise_percent=5.0, saturate_quantile=None):
 
     def draws():
         for r in range(n):
-            y, sig = obs.sensor.capture(radiance * obs.gain / obs.sensor.exposure,
-                                        np.random.default_rng([seed, r]))
-            obs.y, obs.sigma = y.astype(float), sig.astype(float)
+            obs.recapture(radiance, np.random.default_rng([seed, r]))
             yield r
     return s, draws()
 

@@ -98,9 +98,7 @@ def test_intervals_cover_the_truth_over_replicates_of_the_radiance_day(radiance_
     s, truth, traced = _session(radiance_day)
     covered = []
     for r in range(40):
-        y, sig = s.obs.sensor.capture(traced * s.obs.gain / s.obs.sensor.exposure,
-                                      np.random.default_rng([31, r]))
-        s.obs.y, s.obs.sigma = y.astype(float), sig.astype(float)
+        s.obs.recapture(traced, np.random.default_rng([31, r]))
         res = s.run("global", seed=r, log=lambda *a: None)
         covered.append([res["intervals"][p]["95"][0] <= t <= res["intervals"][p]["95"][1]
                         for p, t in zip(s.names, truth)])

@@ -49,6 +49,12 @@ class Observations:
     sensor: SensorModel
     warnings: list = field(default_factory=list)
 
+    def recapture(self, radiance, rng):
+        """Replace y and sigma by a new capture of ``radiance`` (P, T, 3) [W m^-2 sr^-1]
+        through the sensor model with ``rng``: a noise replicate, for coverage studies."""
+        y, sigma = self.sensor.capture(radiance * self.gain / self.sensor.exposure, rng)
+        self.y, self.sigma = y.astype(float), sigma.astype(float)
+
 
 def parse_region(text):
     """'rect:x0,y0,x1,y1' (inclusive) or 'pixels:x,y;x,y;...' -> (P, 2) array of (x, y)."""

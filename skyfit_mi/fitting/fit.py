@@ -21,7 +21,7 @@ from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION
 from .methods.profile import profile_edges, ridge_intervals
 from ..render.fit_model import check_start, other_readings
-from ..render.light_cache import DIRECTIONS, POSITIONS, SIGMA_RESOLVED
+from ..render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS, SIGMA_RESOLVED
 from ..pipeline.manifest import frame_sky, load_manifest
 from ..physics.ward import METAL_THRESHOLD
 
@@ -35,9 +35,6 @@ GREY_SPREAD = 0.02
 NOISE_SIGMAS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5)
 #: Share of the degrees of freedom above which the model's own noise is warned of.
 NOISE_SHARE = 0.25
-#: Share of the degrees of freedom that an automatically sized light cache's largest noise over
-#: the roughness range (NOISE_SIGMAS) is grown to stay under.
-CACHE_SHARE = 0.1
 #: Largest growth of an automatically sized cache's positions, and the largest cache it may
 #: reach [bytes] (40 bytes a sample; the model's Dr.Jit copies take about as much again).
 CACHE_GROWTH_MAX, CACHE_BYTES_MAX = 16, 1 << 30

@@ -71,6 +71,9 @@ SIGMA_TABLE = (SIGMA_RESOLVED, SIGMA_LARGEST)
 #: Samples per pixel by default: positions over the pixel's area (a highlight's radiance can
 #: vary by tens of per cent across one pixel) and light directions at each position.
 POSITIONS, DIRECTIONS = 32, 128
+#: Share of a fit's degrees of freedom that an automatically sized cache's largest noise over
+#: the roughness range is grown to stay under (:meth:`~skyfit_mi.fitting.fit.FitSession.run`).
+CACHE_SHARE = 0.1
 #: Share of directions from the solar disc, the sky table, cosine, and all lobes together; fixed
 #: counts, so the sun's share does not fluctuate from pixel to pixel.
 MIX = {"sun": 0.25, "sky": 0.20, "cosine": 0.15, "lobes": 0.40}
