@@ -172,6 +172,25 @@ def test_sun_below_horizon_is_skipped_or_sky_only(tmp_path, mi):
     assert np.all(np.isfinite(night)) and night.max() < 1e-3
 
 
+def test_a_fitted_material_renders_and_the_manifest_says_where_it_came_from(tmp_path, mi):
+    """A spec material given as a fit JSON is rendered with the fitted parameters; the
+    manifest's materials name their source (the fit file and region, or the spec)."""
+    (tmp_path / "fit_disc.json").write_text(json.dumps(
+        {"region": "disc", "model": "achromatic", "normalisation": "balanced",
+         "parameters": {"R": 0.5, "rho_s": 0.2, "sigma_alpha": 0.05}}))
+    raw = copy.deepcopy(TINY)
+    raw["materials"] = {"disc": {"fit": "fit_disc.json"}}
+    raw["time"]["times"] = ["12:00"]
+    p = tmp_path / "relit.json"
+    p.write_text(json.dumps(raw))
+    assert main(["render", str(p), "-o", str(tmp_path / "run"), "-q"]) == 0
+    m = json.loads((tmp_path / "run" / "manifest.json").read_text())["scene"]["materials"]
+    assert m["disc"]["source"] == "fit fit_disc.json (region disc)"
+    assert m["disc"]["normalisation"] == "balanced"
+    assert m["disc"]["raw"]["rho_d"] == pytest.approx([0.4] * 3)
+    assert m["disc"]["raw"]["rho_s"] == pytest.approx([0.1] * 3)
+
+
 def test_cli_render_and_pixels_end_to_end(tmp_path, mi):
     p = tmp_path / "tiny.json"
     p.write_text(json.dumps(TINY))

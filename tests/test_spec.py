@@ -110,3 +110,50 @@ def test_measured_levels_scale_sky_and_ground(tmp_path):
     sky = s.frames[0].sky
     albedo = sky.info.get("ground_albedo", 0.2)
     np.testing.assert_allclose(sky.ground, albedo * sky.horizontal_irradiance() / np.pi, rtol=1e-3)
+
+
+def _fit_json(path, **changes):
+    import json
+    result = {"region": "disc", "model": "colour", "normalisation": "balanced",
+              "parameters": {"C_r": 0.6, "C_g": 0.4, "C_b": 0.2, "rho_s": 0.08,
+                             "sigma_alpha": 0.1}, **changes}
+    path.write_text(json.dumps(result))
+    return path.name
+
+
+def test_a_fit_json_is_a_spec_material(tmp_path):
+    """``materials.disc = { fit = "fit_disc.json" }`` takes the fit's model, normalisation and
+    parameters; the resolved materials say where each came from."""
+    from skyfit_mi.render.scene_xml import resolve_materials
+    raw = thesis_disc_spec("t", {"model": "two", "rho_s": 0.5, "sigma_alpha": 0.1})
+    raw["materials"] = {"disc": {"fit": _fit_json(tmp_path / "fit_disc.json")}}
+    spec = validate_spec(raw, tmp_path)
+    m = spec.materials["disc"]
+    assert m["model"] == "colour" and m["normalisation"] == "balanced"
+    assert m["C"] == [0.6, 0.4, 0.2] and m["rho_s"] == 0.08 and m["sigma_alpha"] == 0.1
+    assert m["source"] == "fit fit_disc.json (region disc)"
+    _, mats = resolve_materials(spec.scene_file, spec.materials)
+    assert mats["disc"]["source"].startswith("fit ")
+    raw["materials"] = {"disc": {"model": "two", "rho_s": 0.5, "sigma_alpha": 0.1}}
+    _, mats = resolve_materials(validate_spec(raw, tmp_path).scene_file,
+                                validate_spec(raw, tmp_path).materials)
+    assert mats["disc"]["source"] == "spec"
+
+
+@pytest.mark.parametrize("fit, match", [
+    ({"fit": "missing.json"}, "missing.json does not exist"),
+    ({"fit": "fit_disc.json", "rho_s": 0.1}, "either fit = .* not both"),
+    ({"fit": "not_json.json"}, "not readable JSON"),
+    ({"fit": "other.json"}, "is not a skyfit fit JSON"),
+    ({"fit": "nan.json"}, "not finite numbers"),
+])
+def test_bad_fit_materials(tmp_path, fit, match):
+    _fit_json(tmp_path / "fit_disc.json")
+    (tmp_path / "not_json.json").write_text("{oops")
+    _fit_json(tmp_path / "other.json", model="raw")
+    (tmp_path / "nan.json").write_text(
+        '{"model": "two", "parameters": {"rho_s": NaN, "sigma_alpha": 0.1}}')
+    raw = thesis_disc_spec("t", {"model": "two", "rho_s": 0.5, "sigma_alpha": 0.1})
+    raw["materials"] = {"disc": fit}
+    with pytest.raises(SpecError, match=match):
+        validate_spec(raw, tmp_path)

@@ -226,7 +226,7 @@ def validate_spec(raw, base_dir="."):
     scene_file = _scene_file(raw["scene"], base_dir)
     sensor = _sensor(raw.get("sensor", {}))
     camera = _camera(raw["camera"])
-    materials = _materials(raw.get("materials", {}))
+    materials = _materials(raw.get("materials", {}), base_dir)
     try:
         resolve_materials(scene_file, materials)       # the scene parses; its overrides exist
     except SkyfitError as exc:
@@ -341,12 +341,47 @@ def _camera(sec):
     return c
 
 
-def _materials(sec):
+def _fitted_material(name, m, base_dir):
+    """The material a fit JSON (``fit_NAME.json`` of ``skyfit fit``) describes: its model,
+    normalisation and fitted parameters, with ``source`` naming the file and region."""
+    import json
+
+    from ..render.fit_model import PARAMETERS, material_dict
+
+    if set(m) != {"fit"}:
+        raise SpecError(f"[materials.{name}] takes either fit = \"fit_NAME.json\" or a model "
+                        f"and its parameters, not both (got {', '.join(sorted(m))}).")
+    path = base_dir / _text(f"materials.{name}", "fit", m["fit"])
+    try:
+        result = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise SpecError(f"[materials.{name}] fit file {path} does not exist; give the "
+                        "fit_NAME.json that `skyfit fit` wrote (relative to the spec).") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise SpecError(f"[materials.{name}] fit file {path} is not readable JSON ({exc}).") \
+            from None
+    model = result.get("model") if isinstance(result, dict) else None
+    params = result.get("parameters") if model in PARAMETERS else None
+    if not isinstance(params, dict) or set(params) != set(PARAMETERS[model]):
+        raise SpecError(f"[materials.{name}] {path} is not a skyfit fit JSON (it needs a model "
+                        f"of {', '.join(PARAMETERS)} and that model's parameters).")
+    theta = [params[k] for k in PARAMETERS[model]]
+    if not all(isinstance(v, (int, float)) and np.isfinite(v) for v in theta):
+        raise SpecError(f"[materials.{name}] {path} has parameters that are not finite numbers.")
+    out = material_dict(model, theta, result.get("normalisation", "ward"))
+    return {**out, "source": f"fit {path.name} (region {result.get('region', '?')})"}
+
+
+def _materials(sec, base_dir):
     out = {}
     for name, m in sec.items():
         if not isinstance(m, dict):
             raise SpecError(f"[materials.{name}] must be a table (model = ..., rho_s = ...).")
         m = dict(m)
+        source = None
+        if "fit" in m:
+            m = _fitted_material(name, m, base_dir)
+            source = m.pop("source")
         model = m.get("model", "raw")
         norm = m.pop("normalisation", "ward")
         if norm not in NORMALISATIONS:
@@ -358,6 +393,8 @@ def _materials(sec):
         except SkyfitError as exc:
             raise SpecError(f"[materials.{name}] {exc}") from None
         out[name] = {"model": model, "normalisation": norm, **params}
+        if source:
+            out[name]["source"] = source
     return out
 
 

@@ -7,6 +7,7 @@ the camera, and returns the scene with its ``mi.traverse`` parameters.
 """
 
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 
@@ -51,7 +52,9 @@ def resolve_materials(scene_file, overrides):
                               f"its materials are: {', '.join(mats) or 'none'}.")
         same_model = m.get("model", mats[name]["model"]) == mats[name]["model"]
         mats[name] = {**mats[name], **m} if same_model else {"normalisation": "ward", **m}
+        mats[name].setdefault("source", "spec")
     for name, m in mats.items():
+        m.setdefault("source", f"scene {Path(scene_file).name}")
         params = {k: v for k, v in m.items() if k in MODELS[m["model"]]}
         rho_d, rho_s, sigma = raw_parameters(m["model"], **params)
         m["raw"] = {"rho_d": rho_d.tolist(), "rho_s": rho_s.tolist(), "sigma_alpha": sigma}
