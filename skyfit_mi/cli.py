@@ -150,6 +150,13 @@ def _fit(args):
         print("wrote " + " and ".join(str(p) for p in paths) + f"; updated {summary}")
 
 
+def _relight(args):
+    from .pipeline.relight import load_fits, relight
+
+    relight(load_fits(args.fits), args.target, args.output, overwrite=args.overwrite,
+            progress=not args.quiet)
+
+
 def _material_regions(manifest):
     """(name, pixels) of every material the camera sees, from the scene's label image: the
     pixels inside each material's area (edge pixels, which also see a neighbour, left out)."""
@@ -279,6 +286,22 @@ def build_parser():
                      help=f"light-cache directions per position (default {DIRECTIONS})")
     fit.add_argument("-o", "--output", help="output folder (default: the manifest's folder)")
     fit.set_defaults(func=_fit)
+
+    relit = sub.add_parser("relight", parents=[common],
+                           help="render a day, sky or camera with fitted materials",
+                           description="Render a target (a spec, or a sequence folder: its "
+                           "times, skies and camera) with the materials of fits; with the "
+                           "target's frames as observations, report the prediction error "
+                           "(relight.json, relight.csv).")
+    relit.add_argument("fits", nargs="+",
+                       help="fit_NAME.json files, a fits.csv, or the folder `skyfit fit` wrote")
+    relit.add_argument("--target", required=True,
+                       help="spec file (.toml/.json) or sequence folder to relight")
+    relit.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
+    relit.add_argument("--overwrite", action="store_true",
+                       help="replace another run's output in the folder (starts clean)")
+    relit.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    relit.set_defaults(func=_relight)
     return parser
 
 

@@ -55,18 +55,30 @@ def write_fit(result, prefix):
 SUMMARY_NAME = "fits.csv"
 
 
-def read_fits(folder):
-    """The fit results (``fit_*.json``) in ``folder``, by region name; files that are not a
-    fit's result are left out."""
+def read_fit(path):
+    """The fit result in ``path`` (a ``fit_NAME.json``), or None if it holds none."""
+    try:
+        r = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    ok = isinstance(r, dict) and {"region", "parameters", "intervals"} <= set(r)
+    return r if ok else None
+
+
+def fit_files(folder):
+    """{region: (path, result)} of the fit results (``fit_*.json``) in ``folder``; files that
+    are not a fit's result are left out."""
     out = {}
     for p in sorted(Path(folder).glob("fit_*.json")):
-        try:
-            r = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-            continue
-        if isinstance(r, dict) and {"region", "parameters", "intervals"} <= set(r):
-            out[r["region"]] = r
+        r = read_fit(p)
+        if r is not None:
+            out[r["region"]] = (p, r)
     return out
+
+
+def read_fits(folder):
+    """The fit results (``fit_*.json``) in ``folder``, by region name."""
+    return {k: r for k, (_, r) in fit_files(folder).items()}
 
 
 def write_summary(folder):

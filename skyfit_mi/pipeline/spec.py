@@ -168,18 +168,22 @@ class Spec:
         return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
-def load_spec(path):
-    """Read and validate a spec file (``.toml`` or ``.json``); returns :class:`Spec`."""
+def read_spec(path):
+    """The unvalidated tables of a spec file (``.toml`` or ``.json``)."""
     path = Path(path)
     if not path.is_file():
         raise SpecError(f"spec file {str(path)!r} does not exist.")
     text = path.read_text()
     try:
-        raw = json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
+        return json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
     except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
         raise SpecError(f"{path.name} is not valid {'JSON' if path.suffix == '.json' else 'TOML'}: "
                         f"{exc}") from None
-    return validate_spec(raw, path.parent)
+
+
+def load_spec(path):
+    """Read and validate a spec file (``.toml`` or ``.json``); returns :class:`Spec`."""
+    return validate_spec(read_spec(path), Path(path).parent)
 
 
 def validate_spec(raw, base_dir="."):

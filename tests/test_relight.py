@@ -1,0 +1,101 @@
+"""Relighting: a target rendered with fitted materials, and the prediction error against the
+target's frames."""
+import copy
+import json
+
+import pytest
+
+from skyfit_mi.cli import main
+
+from test_sequence import TINY
+
+PIXELS = [[x, y] for x in range(6, 10) for y in range(6, 10)]
+
+
+def _fit_json(path, region="disc", model="two", **parameters):
+    """A fit result as `skyfit fit` writes it (the keys relight reads)."""
+    parameters = parameters or {"rho_s": 0.0, "sigma_alpha": 0.0}
+    path.write_text(json.dumps({
+        "region": region, "model": model, "normalisation": "ward", "parameters": parameters,
+        "intervals": {k: {"95": [v, v]} for k, v in parameters.items()}, "pixels": PIXELS}))
+    return path
+
+
+@pytest.fixture(scope="module")
+def day(tmp_path_factory, mi):
+    tmp = tmp_path_factory.mktemp("relight")
+    (tmp / "day.json").write_text(json.dumps(TINY))
+    assert main(["render", str(tmp / "day.json"), "-o", str(tmp / "day"), "-q"]) == 0
+    return tmp
+
+
+def test_relit_with_the_true_material_reproduces_the_target(day, tmp_path):
+    """The target's own material as a fit: the relit day is the target's render (same spec and
+    seeds), so the prediction error is zero; the manifest says the material came from the fit."""
+    fit = _fit_json(tmp_path / "fit_disc.json")
+    out = tmp_path / "relit"
+    assert main(["relight", str(fit), "--target", str(day / "day"), "-o", str(out), "-q"]) == 0
+    errors = json.loads((out / "relight.json").read_text())
+    assert errors["rel_rms"] < 1e-6 and errors["regions"]["disc"]["pixels"] == 16
+    assert len(errors["regions"]["disc"]["per_frame"]) == len(TINY["time"]["times"])
+    m = json.loads((out / "manifest.json").read_text())
+    assert m["scene"]["materials"]["disc"]["source"] == "fit fit_disc.json (region disc)"
+    rows = (out / "relight.csv").read_text().splitlines()
+    assert rows[0] == "region,frame,time,rel_rms_error" and rows[-1].startswith("all,all,,")
+
+
+def test_a_wrong_material_shows_as_prediction_error(day, tmp_path):
+    """Half the target's reflectance (R = 0.5 Lambertian where the target is white): the relit
+    radiance is half the observed in every frame (the same seeds trace the same paths), so
+    the error is 50% per frame and overall; a fit folder is a valid input."""
+    fit = _fit_json(tmp_path / "fit_disc.json", model="achromatic", R=0.5, rho_s=0.0,
+                    sigma_alpha=0.0)
+    out = tmp_path / "relit"
+    assert main(["relight", str(tmp_path), "--target", str(day / "day"), "-o", str(out),
+                 "-q"]) == 0
+    errors = json.loads((out / "relight.json").read_text())
+    assert errors["regions"]["disc"]["fit"] == str(fit)
+    assert errors["rel_rms"] == pytest.approx(0.5, rel=1e-3)
+    assert errors["regions"]["disc"]["per_frame"] == pytest.approx([0.5] * 4, rel=1e-3)
+
+
+def test_relight_onto_a_new_day_has_no_observations(day, tmp_path):
+    fit = _fit_json(tmp_path / "fit_disc.json", rho_s=0.3, sigma_alpha=0.1)
+    raw = copy.deepcopy(TINY)
+    raw["time"] = {"date": "2026-12-21", "times": ["12:00"]}
+    del raw["materials"]
+    (tmp_path / "winter.json").write_text(json.dumps(raw))
+    out = tmp_path / "winter"
+    assert main(["relight", str(fit), "--target", str(tmp_path / "winter.json"), "-o", str(out),
+                 "-q"]) == 0
+    m = json.loads((out / "manifest.json").read_text())
+    assert m["status"] == "complete" and len(m["frames"]) == 1
+    assert m["scene"]["materials"]["disc"]["raw"]["rho_s"] == pytest.approx([0.3] * 3)
+    assert not (out / "relight.json").exists()
+
+
+@pytest.mark.parametrize("case, phrase", [
+    ("missing", "does not exist"),
+    ("not a fit", "is not a fit result"),
+    ("other region", "'plate' is not a ward material of disc.xml"),
+    ("twice", "is fitted twice"),
+    ("into the target", "the output folder is the target's"),
+])
+def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
+    fit = _fit_json(tmp_path / "fit_disc.json")
+    args = [str(fit)]
+    out = tmp_path / "out"
+    if case == "missing":
+        args = [str(tmp_path / "fit_nothing.json")]
+    elif case == "not a fit":
+        (tmp_path / "fit_x.json").write_text('{"a": 1}')
+        args = [str(tmp_path / "fit_x.json")]
+    elif case == "other region":
+        args = [str(_fit_json(tmp_path / "fit_plate.json", region="plate"))]
+    elif case == "twice":
+        args = [str(fit), str(tmp_path)]
+    elif case == "into the target":
+        out = day / "day"
+    assert main(["relight", *args, "--target", str(day / "day"), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert phrase in err and len(err.splitlines()) == 1, err
