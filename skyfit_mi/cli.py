@@ -153,8 +153,8 @@ def _fit(args):
 def _relight(args):
     from .pipeline.relight import load_fits, relight
 
-    relight(load_fits(args.fits), args.target, args.output, overwrite=args.overwrite,
-            progress=not args.quiet)
+    relight(load_fits(args.fits), args.target, args.output, images=not args.no_images,
+            draws=args.draws, seed=args.seed, overwrite=args.overwrite, progress=not args.quiet)
 
 
 def _material_regions(manifest):
@@ -300,6 +300,14 @@ def build_parser():
     relit.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
     relit.add_argument("--overwrite", action="store_true",
                        help="replace another run's output in the folder (starts clean)")
+    relit.add_argument("--no-images", action="store_true",
+                       help="predict the regions' values only (prediction.csv/png), from the "
+                       "fits' cached model of the target folder's light; no frame is rendered")
+    relit.add_argument("--draws", type=_int_in(2, 100000), default=200,
+                       help="parameter draws from the fits' intervals for the 95%% band "
+                       "(default 200)")
+    relit.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,
+                       help="seed of the parameter draws and the light cache (default 0)")
     relit.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     relit.set_defaults(func=_relight)
     return parser

@@ -1,6 +1,7 @@
 """Relighting: a target rendered with fitted materials, and the prediction error against the
 target's frames."""
 import copy
+import csv
 import json
 
 import pytest
@@ -42,6 +43,13 @@ def test_relit_with_the_true_material_reproduces_the_target(day, tmp_path):
     assert m["scene"]["materials"]["disc"]["source"] == "fit fit_disc.json (region disc)"
     rows = (out / "relight.csv").read_text().splitlines()
     assert rows[0] == "region,frame,time,rel_rms_error" and rows[-1].startswith("all,all,,")
+    # the fast path: the fit's cached model of the target's light predicts the observed region
+    # means (a fit with zero-width intervals: a band of the model's own noise only)
+    pred = list(csv.reader(open(out / "prediction.csv")))
+    assert pred[0][:4] == ["region", "frame", "time", "channel"] and len(pred) == 1 + 4 * 3
+    for row in pred[1:]:
+        assert float(row[4]) == pytest.approx(float(row[7]), rel=0.01)
+    assert (out / "prediction.png").stat().st_size > 0
 
 
 def test_a_wrong_material_shows_as_prediction_error(day, tmp_path):
@@ -99,3 +107,27 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
     assert main(["relight", *args, "--target", str(day / "day"), "-o", str(out), "-q"]) == 2
     err = capsys.readouterr().err.strip()
     assert phrase in err and len(err.splitlines()) == 1, err
+
+
+def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day, tmp_path):
+    """--no-images renders nothing; a fit whose roughness is unknown (interval 0-0.5) gets a
+    band that holds the observed values, and a zero-width fit of the wrong reflectance gets
+    a narrow band that misses them."""
+    params = {"rho_s": 0.0, "sigma_alpha": 0.0}
+    fit = tmp_path / "fit_disc.json"
+    fit.write_text(json.dumps({
+        "region": "disc", "model": "two", "normalisation": "ward", "parameters": params,
+        "intervals": {"rho_s": {"95": [0.0, 0.3]}, "sigma_alpha": {"95": [0.0, 0.5]}},
+        "pixels": PIXELS}))
+    out = tmp_path / "pred"
+    assert main(["relight", str(fit), "--target", str(day / "day"), "-o", str(out), "-q",
+                 "--no-images", "--draws", "50"]) == 0
+    assert not (out / "manifest.json").exists()
+    errors = json.loads((out / "relight.json").read_text())
+    assert errors["band_coverage"]["share"] == 1.0
+    rows = list(csv.reader(open(out / "prediction.csv")))[1:]
+    assert all(float(r[6]) - float(r[5]) > 0.02 * float(r[4]) for r in rows)
+    _fit_json(fit, model="achromatic", R=0.8, rho_s=0.0, sigma_alpha=0.0)
+    assert main(["relight", str(fit), "--target", str(day / "day"), "-o", str(out), "-q",
+                 "--no-images", "--draws", "20"]) == 0
+    assert json.loads((out / "relight.json").read_text())["band_coverage"]["share"] == 0.0

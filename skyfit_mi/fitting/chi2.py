@@ -112,7 +112,7 @@ def _region_values(root, frame, key, pixels, shape):
     return read_frame_image(root, frame, key, shape)[pixels[:, 1], pixels[:, 0]]
 
 
-def load_observations(manifest_path, pixels, frames=None):
+def load_observations(manifest_path, pixels, frames=None, min_frames=2):
     """Read a region's pixel values and sigmas from the rendered frames of a manifest.
 
     Parameters
@@ -145,8 +145,9 @@ def load_observations(manifest_path, pixels, frames=None):
             raise SkyfitError(f"frame {missing[0]} is not a rendered frame of the sequence; the "
                               f"rendered frames are {sorted(known)}.")
         rendered = [f for f in rendered if f["index"] in set(frames)]
-    if len(rendered) < 2:
-        raise SkyfitError("the sequence has fewer than 2 rendered frames; a fit needs a sequence.")
+    if len(rendered) < min_frames:
+        raise SkyfitError(f"the sequence has fewer than {min_frames} rendered frames; a fit "
+                          "needs a sequence.")
     warnings = []
     if doc.get("status") != "complete":
         warnings.append("the sequence's render is incomplete (manifest status "

@@ -60,10 +60,11 @@ class FitSession:
     positions, directions : samples per pixel of the light cache; ``positions=None`` sizes
         it from the data (:meth:`run`): POSITIONS, grown after a fit whose cache noise
         exceeds CACHE_SHARE of the degrees of freedom
+    min_frames : rendered frames the sequence must hold (1 to predict a single frame)
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
-                 positions=None, directions=DIRECTIONS):
+                 positions=None, directions=DIRECTIONS, min_frames=2):
         from ..render import setup
         from ..render.fit_model import BY_COUNT, PARAMETERS, bounds, check_fit_normalisation
 
@@ -72,7 +73,7 @@ class FitSession:
         check_fit_normalisation(normalisation)          # before the light is traced
         t0 = time.perf_counter()
         doc, _ = load_manifest(manifest_path)
-        self.obs = load_observations(manifest_path, pixels)
+        self.obs = load_observations(manifest_path, pixels, min_frames=min_frames)
         mats = doc["scene"]["materials"]
         if name not in mats:
             raise SkyfitError(f"region {name!r} names no material of the scene; its materials are: "

@@ -8,6 +8,11 @@ region measured; every other material keeps the target's value, and the manifest
 frames, they are the observations: ``relight.json`` and ``relight.csv`` give the relative RMS
 error of the relit radiance at each fit's pixels, per region and frame, per region, and
 overall (thesis fig. 7.14's comparison, as numbers).
+
+:func:`predict` gives the numbers without images: each region's radiance per frame from the
+fitted parameters and the target's light (the fit's own cached model, traced once), with a
+95% band from the fit's intervals, so that a highlight the training sequence never showed
+comes out with the wide band its undetermined roughness implies.
 """
 
 import csv
@@ -55,6 +60,9 @@ def target_spec(target, fits):
     target = Path(target)
     if target.is_dir() or target.name == "manifest.json":
         doc, _ = load_manifest(target)
+        if not isinstance(doc.get("spec"), dict):
+            raise SkyfitError(f"{target} was not rendered from a spec (source "
+                              f"{doc.get('source', '?')}); give a spec file as --target.")
         raw, base = doc["spec"], Path(doc.get("spec_dir", "."))
     else:
         doc, raw, base = None, read_spec(target), target.parent
@@ -65,23 +73,42 @@ def target_spec(target, fits):
     return validate_spec(raw, base), doc
 
 
-def relight(fits, target, out, log=print, progress=True, overwrite=False):
-    """Render ``target`` with the fitted materials into ``out``; with observations in the
-    target, write and return the prediction errors (:func:`prediction_errors`)."""
+def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progress=True,
+            overwrite=False):
+    """Render ``target`` with the fitted materials into ``out`` (``images``) and predict each
+    region's radiance with its 95% band (``prediction.csv``, ``prediction.png``); with
+    observations in the target, write and return the prediction errors
+    (:func:`prediction_errors`).  Without ``images`` the target must be a sequence folder:
+    only the prediction is made, from the fits' cached model (no frame is rendered)."""
+    from ..files import ensure_dir
     from .sequence import render_sequence
 
     spec, doc = target_spec(target, fits)
     if doc is not None and Path(out).resolve() == manifest_file(target).parent.resolve():
         raise SkyfitError("the output folder is the target's; give another with -o.")
-    render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log)
-    if doc is None or not rendered_frames(doc):
+    if not images and doc is None:
+        raise SkyfitError("a prediction without images needs a sequence folder as --target "
+                          "(its light is traced there); give one, or leave out --no-images.")
+    observed = doc is not None and bool(rendered_frames(doc))
+    if images:
+        render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log)
+    ensure_dir(Path(out))
+    rows = predict(fits, target if observed or not images else out, draws, seed, log)
+    write_prediction(rows, out, "observed" if observed else "relit render")
+    if not observed:
         return None
-    errors = prediction_errors(fits, target, out)
+    errors = prediction_errors(fits, target, out) if images else {"regions": {}}
+    inside = [lo <= o <= hi for *_, lo, hi, o in rows]
+    errors["band_coverage"] = {"share": float(np.mean(inside)), "values": len(inside),
+                               "band": "95%, from the fits' intervals"}
     write_errors(errors, out)
     for region, e in errors["regions"].items():
         log(f"{region}: relit radiance differs from the observed by {e['rel_rms']:.2%} rms "
             f"({e['frames']} frames, {e['pixels']} pixels)")
-    log(f"overall: {errors['rel_rms']:.2%} rms")
+    if images:
+        log(f"overall: {errors['rel_rms']:.2%} rms")
+    log(f"observed region means inside the predicted 95% band: "
+        f"{errors['band_coverage']['share']:.0%} of {len(inside)}")
     return errors
 
 
@@ -120,6 +147,8 @@ def write_errors(errors, out):
     """``relight.json`` and ``relight.csv`` (region, frame, time, relative RMS error; 'all' rows
     per region and overall) in ``out``."""
     write_json(Path(out) / "relight.json", errors)
+    if not errors["regions"]:
+        return
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["region", "frame", "time", "rel_rms_error"])
@@ -129,3 +158,97 @@ def write_errors(errors, out):
         w.writerow([region, "all", "", f"{e['rel_rms']:.6f}"])
     w.writerow(["all", "all", "", f"{errors['rel_rms']:.6f}"])
     write_text(Path(out) / "relight.csv", buf.getvalue())
+
+
+def write_prediction(rows, out, image_kind):
+    """``prediction.csv`` (one row per region, frame and channel; radiance in W m^-2 sr^-1)
+    and ``prediction.png``: per region the predicted series with its 95% band and the
+    image values (``image_kind``: the observed frames, or the relit render) (thesis fig 7.14)."""
+    import datetime as dt
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..files import save_figure
+
+    column = image_kind.replace(" ", "_")
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["region", "frame", "time", "channel", "predicted [W m^-2 sr^-1]",
+                "lo95 [W m^-2 sr^-1]", "hi95 [W m^-2 sr^-1]", f"{column} [W m^-2 sr^-1]"])
+    w.writerows([(*row[:4], *(f"{v:.6g}" for v in row[4:])) for row in rows])
+    write_text(Path(out) / "prediction.csv", buf.getvalue())
+    regions = sorted({row[0] for row in rows})
+    fig, axes = plt.subplots(len(regions), 1, figsize=(7, 3.2 * len(regions)), squeeze=False)
+    for ax, region in zip(axes[:, 0], regions):
+        for ch, col in zip("RGB", ("r", "g", "b")):
+            sel = [row for row in rows if row[0] == region and row[3] == ch]
+            t = [dt.datetime.fromisoformat(row[2]) for row in sel]
+            pred, lo, hi, img = (np.array([row[k] for row in sel]) for k in (4, 5, 6, 7))
+            ax.fill_between(t, lo, hi, color=col, alpha=0.15, lw=0)
+            ax.plot(t, pred, "-", color=col, label=f"predicted {ch} (95% band)")
+            ax.plot(t, img, "o", color=col, ms=4, label=f"{image_kind} {ch}")
+        ax.set_title(f"{region}: region mean", fontsize=9)
+        ax.set_ylabel("radiance [W m^-2 sr^-1]")
+        ax.legend(fontsize=6, ncol=2)
+    fig.autofmt_xdate()
+    save_figure(fig, Path(out) / "prediction.png")
+
+
+def parameter_draws(result, names, lower, upper, n, rng):
+    """``n`` parameter sets spread as the fit's uncertainty: Gaussian with each parameter's
+    standard deviation from its 95% interval (half-width / 1.96, so profile and one-sided
+    intervals count at their full width) and the covariance's correlations, clipped to the
+    bounds; the first row is the fit itself."""
+    theta = np.array([result["parameters"][k] for k in names], dtype=float)
+    iv = np.array([result["intervals"][k]["95"] for k in names], dtype=float)
+    sd = (iv[:, 1] - iv[:, 0]) / (2 * 1.959963984540054)
+    corr = np.eye(len(names))
+    cov = result.get("covariance", {})
+    if cov.get("names") == list(names):
+        c = np.asarray(cov["matrix"], dtype=float)
+        d = np.sqrt(np.clip(np.diag(c), 0, None))
+        if np.all(np.isfinite(c)) and np.all(d > 0):
+            corr = np.clip(c / np.outer(d, d), -1, 1)
+    w, v = np.linalg.eigh(corr)
+    root = v * np.sqrt(np.clip(w, 0, None))              # corr = root root^T (PSD)
+    z = rng.standard_normal((n - 1, len(names))) @ root.T
+    draws = np.clip(theta + z * sd, lower, upper)
+    return np.vstack([theta, draws])
+
+
+def predict(fits, target, draws=200, seed=0, log=print):
+    """Radiance of each fitted region in the target's frames, without rendering images: the
+    region's mean per frame and channel at the fit and its 95% band (2.5-97.5 percentiles
+    over :func:`parameter_draws`, widened in quadrature by the image's noise and the model's
+    Monte Carlo error), with the image's mean (the observed, where the target holds frames).
+    Returns rows (region, frame, time, channel, predicted, lo95, hi95, observed) [W m^-2 sr^-1].
+    """
+    from ..fitting.fit import FitSession
+    from ..fitting.uncertainty import widen
+
+    rng = np.random.default_rng(seed)
+    rows = []
+    for region, (_, r) in sorted(fits.items()):
+        s = FitSession(target, region, np.asarray(r["pixels"], dtype=int), model=r["model"],
+                       normalisation=r.get("normalisation", "ward"), seed=seed,
+                        min_frames=1)
+        sets = parameter_draws(r, s.names, s.lower, s.upper, draws, rng)
+        means = np.stack([s.wm.radiance(t).mean(axis=0) for t in sets])     # (draws, T, 3)
+        lo, hi = np.percentile(means[1:], [2.5, 97.5], axis=0)
+        # widened by what the parameters leave out: the image's own noise (the sensor model's
+        # sigma in radiance) and the model's Monte Carlo error, both of the region mean
+        L, model_var = s.wm.radiance_and_variance(sets[0])
+        image_sd = s.obs.sigma / s.problem.slope(L)
+        n = len(s.obs.pixels)
+        extra = 1.959963984540054 * np.sqrt((np.sum(image_sd**2, axis=0)
+                                             + np.sum(model_var, axis=0)) / n**2)
+        observed = frame_values(target, s.obs.pixels, s.obs.frames).mean(axis=0)
+        for j, (i, t) in enumerate(zip(s.obs.frames, s.obs.times)):
+            for c, ch in enumerate("RGB"):
+                band = widen(means[0, j, c], (lo[j, c], hi[j, c]), extra[j, c], 0.0, np.inf)
+                rows.append((region, int(i), t, ch, float(means[0, j, c]), *band,
+                             float(observed[j, c])))
+        log(f"{region}: predicted {len(s.obs.frames)} frames from {draws} parameter draws")
+    return rows
