@@ -79,6 +79,18 @@ def _region(text):
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _frame_list(text):
+    """'0-6,9' -> [0, 1, ..., 6, 9] (manifest frame indices)."""
+    out = set()
+    for part in text.split(","):
+        m = re.fullmatch(r"\s*(\d+)\s*(?:-\s*(\d+)\s*)?", part)
+        if not m or (m.group(2) is not None and int(m.group(2)) < int(m.group(1))):
+            raise argparse.ArgumentTypeError(f"{text!r} is not a frame list; give indices and "
+                                             "ranges such as 0-6,9.")
+        out.update(range(int(m.group(1)), int(m.group(2) or m.group(1)) + 1))
+    return sorted(out)
+
+
 # ---- commands ---------------------------------------------------------------------------------
 def _render(args):
     from .pipeline.sequence import render_sequence
@@ -143,7 +155,8 @@ def _fit(args):
                   f"{args.seed})")
         res = fit_region(args.manifest, name, kept, model=model, method=args.method,
                          normalisation=args.normalisation, seed=args.seed, start=args.start,
-                         positions=args.positions, directions=args.directions)
+                         positions=args.positions, directions=args.directions,
+                         frames=args.frames)
         res["region_pixels_total"] = int(len(pixels))
         paths = write_fit(res, out / f"fit_{name}")
         summary = write_summary(out)              # after each region: agrees with the JSONs
@@ -284,6 +297,9 @@ def build_parser():
                      "the degrees of freedom; the fit JSON's light_cache records it)")
     fit.add_argument("--directions", type=_int_in(1, 1 << 16), default=DIRECTIONS,
                      help=f"light-cache directions per position (default {DIRECTIONS})")
+    fit.add_argument("--frames", type=_frame_list, metavar="LIST",
+                     help="fit only these frames (manifest indices, e.g. 0-6,9), to hold the "
+                     "others out for `skyfit relight` onto the same folder (default: all)")
     fit.add_argument("-o", "--output", help="output folder (default: the manifest's folder)")
     fit.set_defaults(func=_fit)
 

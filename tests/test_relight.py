@@ -42,7 +42,8 @@ def test_relit_with_the_true_material_reproduces_the_target(day, tmp_path):
     m = json.loads((out / "manifest.json").read_text())
     assert m["scene"]["materials"]["disc"]["source"] == "fit fit_disc.json (region disc)"
     rows = (out / "relight.csv").read_text().splitlines()
-    assert rows[0] == "region,frame,time,rel_rms_error" and rows[-1].startswith("all,all,,")
+    assert rows[0] == "region,frame,time,rel_rms_error,held_out"
+    assert rows[-1].startswith("all,all,,")
     # the fast path: the fit's cached model of the target's light predicts the observed region
     # means (a fit with zero-width intervals: a band of the model's own noise only)
     pred = list(csv.reader(open(out / "prediction.csv")))
@@ -131,3 +132,30 @@ def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day
     assert main(["relight", str(fit), "--target", str(day / "day"), "-o", str(out), "-q",
                  "--no-images", "--draws", "20"]) == 0
     assert json.loads((out / "relight.json").read_text())["band_coverage"]["share"] == 0.0
+
+
+def test_fit_on_some_frames_and_relight_onto_the_same_folder_reports_the_held_out_error(
+        day, tmp_path):
+    """The held-out-time test in two commands: `fit --frames` trains on frames 0-1, `relight`
+    onto the same folder reports the error on frames 2-3 apart (the fit JSON names its
+    sequence and frames)."""
+    fits = tmp_path / "fits"
+    assert main(["fit", str(day / "day"), "--region", "disc=rect:6,6,9,9", "--model", "2",
+                 "--frames", "0-1", "-o", str(fits)]) == 0
+    r = json.loads((fits / "fit_disc.json").read_text())
+    assert r["frames"] == [0, 1] and len(r["series"]["times"]) == 2
+    out = tmp_path / "relit"
+    assert main(["relight", str(fits), "--target", str(day / "day"), "-o", str(out), "-q",
+                 "--no-images", "--draws", "20"]) == 0
+    assert main(["relight", str(fits), "--target", str(day / "day"), "-o", str(out), "-q",
+                 "--overwrite", "--draws", "20"]) == 0
+    e = json.loads((out / "relight.json").read_text())["regions"]["disc"]
+    assert e["trained_frames"] == [0, 1] and e["held_out_rel_rms"] < 0.05
+    rows = list(csv.reader(open(out / "relight.csv")))
+    assert [row[4] for row in rows[1:5]] == ["no", "no", "yes", "yes"]
+
+
+@pytest.mark.parametrize("text", ["6-2", "a", "1,,2", "-1"])
+def test_bad_frame_lists_get_one_line(day, capsys, text):
+    assert main(["fit", str(day / "day"), "--all", "--frames", text]) == 2
+    assert "is not a frame list" in capsys.readouterr().err

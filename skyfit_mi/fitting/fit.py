@@ -61,10 +61,12 @@ class FitSession:
         it from the data (:meth:`run`): POSITIONS, grown after a fit whose cache noise
         exceeds CACHE_SHARE of the degrees of freedom
     min_frames : rendered frames the sequence must hold (1 to predict a single frame)
+    frames : manifest frame indices to use (None: every rendered frame), e.g. to hold some
+        out for a prediction test
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
-                 positions=None, directions=DIRECTIONS, min_frames=2):
+                 positions=None, directions=DIRECTIONS, min_frames=2, frames=None):
         from ..render import setup
         from ..render.fit_model import BY_COUNT, PARAMETERS, bounds, check_fit_normalisation
 
@@ -73,7 +75,8 @@ class FitSession:
         check_fit_normalisation(normalisation)          # before the light is traced
         t0 = time.perf_counter()
         doc, _ = load_manifest(manifest_path)
-        self.obs = load_observations(manifest_path, pixels, min_frames=min_frames)
+        self.run_id = doc.get("run_id")
+        self.obs = load_observations(manifest_path, pixels, frames, min_frames)
         mats = doc["scene"]["materials"]
         if name not in mats:
             raise SkyfitError(f"region {name!r} names no material of the scene; its materials are: "
@@ -453,6 +456,7 @@ class FitSession:
             "trace": res.get("trace", []), "schedule": res.get("schedule"),
             "truth": self.truth, "units": "reflectances unitless, sigma_alpha rms slope; chi2 in "
             "(DN/DN)^2; observed/model values in DN",
+            "sequence_run_id": self.run_id, "frames": [int(i) for i in self.obs.frames],
             "series": {"times": self.obs.times, "observed_DN": self.obs.y.tolist(),
                        "model_DN": self.problem.predict(L).tolist()},
         }
@@ -460,8 +464,8 @@ class FitSession:
 
 def fit_region(manifest_path, name, pixels, model="two", method="global", normalisation="ward",
                seed=0, start=None, positions=None, directions=DIRECTIONS,
-               method_options=None, log=print):
+               method_options=None, log=print, frames=None):
     """Fit one material region (see :class:`FitSession`); returns a JSON-ready result dict."""
     session = FitSession(manifest_path, name, pixels, model, normalisation, seed, positions,
-                         directions)
+                         directions, frames=frames)
     return session.run(method, start, seed, method_options, log)

@@ -103,8 +103,10 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
                                "band": "95%, from the fits' intervals"}
     write_errors(errors, out)
     for region, e in errors["regions"].items():
+        held = e.get("held_out_rel_rms")
         log(f"{region}: relit radiance differs from the observed by {e['rel_rms']:.2%} rms "
-            f"({e['frames']} frames, {e['pixels']} pixels)")
+            f"({e['frames']} frames, {e['pixels']} pixels)"
+            + (f"; {held:.2%} on the frames the fit did not see" if held is not None else ""))
     if images:
         log(f"overall: {errors['rel_rms']:.2%} rms")
     log(f"observed region means inside the predicted 95% band: "
@@ -136,6 +138,12 @@ def prediction_errors(fits, observed, relit):
         regions[region] = {"fit": str(path), "pixels": len(px), "frames": len(both),
                            "rel_rms": float(_rel_rms(p, o)),
                            "per_frame": _rel_rms(p, o, axis=(0, 2)).tolist()}
+        if r.get("sequence_run_id") == obs_doc.get("run_id") and "frames" in r:
+            # the fit's own sequence: the frames it did not train on are held out
+            held = np.array([i not in set(r["frames"]) for i in both])
+            regions[region]["trained_frames"] = [int(i) for i in r["frames"]]
+            regions[region]["held_out_rel_rms"] = (float(_rel_rms(p[:, held], o[:, held]))
+                                                   if held.any() else None)
         all_pred.append(p.ravel())
         all_obs.append(o.ravel())
     return {"regions": regions, "times": times, "frames": both,
@@ -151,12 +159,16 @@ def write_errors(errors, out):
         return
     buf = io.StringIO()
     w = csv.writer(buf)
-    w.writerow(["region", "frame", "time", "rel_rms_error"])
+    w.writerow(["region", "frame", "time", "rel_rms_error", "held_out"])
     for region, e in errors["regions"].items():
+        trained = set(e.get("trained_frames", ()))
         for i, t, v in zip(errors["frames"], errors["times"], e["per_frame"]):
-            w.writerow([region, i, t, f"{v:.6f}"])
-        w.writerow([region, "all", "", f"{e['rel_rms']:.6f}"])
-    w.writerow(["all", "all", "", f"{errors['rel_rms']:.6f}"])
+            w.writerow([region, i, t, f"{v:.6f}",
+                        ("no" if i in trained else "yes") if trained else ""])
+        w.writerow([region, "all", "", f"{e['rel_rms']:.6f}", ""])
+        if e.get("held_out_rel_rms") is not None:
+            w.writerow([region, "held out", "", f"{e['held_out_rel_rms']:.6f}", "yes"])
+    w.writerow(["all", "all", "", f"{errors['rel_rms']:.6f}", ""])
     write_text(Path(out) / "relight.csv", buf.getvalue())
 
 
