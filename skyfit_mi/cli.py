@@ -170,6 +170,59 @@ def _relight(args):
             draws=args.draws, seed=args.seed, overwrite=args.overwrite, progress=not args.quiet)
 
 
+def _chi2map(args):
+    from pathlib import Path
+
+    import numpy as np
+
+    from .fitting.fit import FitSession
+    from .fitting.landscape import chi2_map, truth_parameters, write_chi2_map
+    from .fitting.report import read_fit
+    from .pipeline.manifest import load_manifest
+
+    _, root = load_manifest(args.manifest)
+    r = read_fit(args.fit)
+    if r is None:
+        raise SkyfitError(f"{args.fit} is not a fit result of `skyfit fit` (fit_NAME.json).")
+    s = FitSession(args.manifest, r["region"], np.asarray(r["pixels"], dtype=int),
+                   model=r["model"], normalisation=r.get("normalisation", "ward"),
+                   seed=args.seed, frames=r.get("frames"))
+    theta = np.array([r["parameters"][k] for k in s.names])
+    axes = []
+    for name, given in ((args.x, args.x_range), (args.y, args.y_range)):
+        if name not in s.names:
+            raise SkyfitError(f"{name!r} is not a parameter of the {s.model} model; its "
+                              f"parameters are {', '.join(s.names)}.")
+        i = s.names.index(name)
+        lo, hi = given if given is not None else (s.lower[i], s.upper[i])
+        if not s.lower[i] <= lo < hi <= s.upper[i]:
+            raise SkyfitError(f"the {name} range {lo:g},{hi:g} must rise within "
+                              f"[{s.lower[i]:g}, {s.upper[i]:g}].")
+        axes.append(np.linspace(lo, hi, args.n))
+    xs, ys = axes
+    chi2 = chi2_map(s, theta, args.x, args.y, xs, ys)
+    ix, iy = s.names.index(args.x), s.names.index(args.y)
+    j, i = np.unravel_index(np.argmin(chi2), chi2.shape)
+    marks = {"fit": (theta[ix], theta[iy]), "map minimum": (xs[i], ys[j])}
+    truth = truth_parameters(r.get("truth"), s.model, s.names)
+    if truth is not None:
+        marks["truth"] = (truth[ix], truth[iy])
+    walk = np.asarray(r.get("trace") or [], dtype=float)
+    walk = walk[:, [ix, iy]] if args.walk and walk.ndim == 2 and len(walk) > 1 else None
+    prefix = Path(args.output) if args.output else root / f"chi2map_{r['region']}_{args.x}_{args.y}"
+    paths = write_chi2_map(prefix, args.x, args.y, xs, ys, chi2, marks, walk)
+    print(f"{r['region']}: chi2 minimum {chi2.min():.6g} at {args.x} = {xs[i]:.4g}, "
+          f"{args.y} = {ys[j]:.4g} (the fit: {theta[ix]:.4g}, {theta[iy]:.4g}); wrote "
+          + " and ".join(str(p) for p in paths))
+
+
+def _range(text):
+    v = _numbers(text)
+    if len(v) != 2:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a range as LO,HI.")
+    return v
+
+
 def _material_regions(manifest):
     """(name, pixels) of every material the camera sees, from the scene's label image: the
     pixels inside each material's area (edge pixels, which also see a neighbour, left out)."""
@@ -326,6 +379,29 @@ def build_parser():
                        help="seed of the parameter draws and the light cache (default 0)")
     relit.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     relit.set_defaults(func=_relight)
+
+    cmap = sub.add_parser("chi2map", parents=[common],
+                          help="chi-square over two parameters of a fitted region",
+                          description="Map chi-square over two parameters of a fitted region, "
+                          "the others at the fit (thesis figs 6.5-6.21, 7.10): CSV and PNG.")
+    cmap.add_argument("manifest", help=manifest_help)
+    cmap.add_argument("fit", help="the region's fit_NAME.json (its pixels, model and frames)")
+    cmap.add_argument("--x", default="rho_s", help="parameter on the x axis (default rho_s)")
+    cmap.add_argument("--y", default="sigma_alpha",
+                      help="parameter on the y axis (default sigma_alpha)")
+    cmap.add_argument("--x-range", type=_range, metavar="LO,HI",
+                      help="x axis range (default the parameter's bounds)")
+    cmap.add_argument("--y-range", type=_range, metavar="LO,HI",
+                      help="y axis range (default the parameter's bounds)")
+    cmap.add_argument("--n", type=_int_in(2, 1000), default=60,
+                      help="grid points per axis (default 60)")
+    cmap.add_argument("--walk", action="store_true",
+                      help="overlay the fit's walk (its trace, e.g. annealing's)")
+    cmap.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,
+                      help="seed of the light cache (default 0)")
+    cmap.add_argument("-o", "--output",
+                      help="output path prefix (default MANIFEST/chi2map_REGION_X_Y)")
+    cmap.set_defaults(func=_chi2map)
     return parser
 
 
