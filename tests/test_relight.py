@@ -51,6 +51,8 @@ def test_relit_with_the_true_material_reproduces_the_target(day, tmp_path):
     for row in pred[1:]:
         assert float(row[4]) == pytest.approx(float(row[7]), rel=0.01)
     assert (out / "prediction.png").stat().st_size > 0
+    assert errors["comparison_images"] == [f"compare_{i:04d}.png" for i in range(4)]
+    assert all((out / n).stat().st_size > 0 for n in errors["comparison_images"])
 
 
 def test_a_wrong_material_shows_as_prediction_error(day, tmp_path):

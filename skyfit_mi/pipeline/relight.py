@@ -98,6 +98,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if not observed:
         return None
     errors = prediction_errors(fits, target, out) if images else {"regions": {}}
+    if images:
+        errors["comparison_images"] = write_comparisons(target, out)
     inside = [lo <= o <= hi for *_, lo, hi, o in rows]
     errors["band_coverage"] = {"share": float(np.mean(inside)), "values": len(inside),
                                "band": "95%, from the fits' intervals"}
@@ -170,6 +172,49 @@ def write_errors(errors, out):
             w.writerow([region, "held out", "", f"{e['held_out_rel_rms']:.6f}", "yes"])
     w.writerow(["all", "all", "", f"{errors['rel_rms']:.6f}", ""])
     write_text(Path(out) / "relight.csv", buf.getvalue())
+
+
+def write_comparisons(observed, relit):
+    """Per frame both sequences hold, ``compare_NNNN.png`` in ``relit``: observed | relit |
+    signed error (relit - observed, over the observed image's 99th percentile, on a diverging
+    colour map with its scale bar).  Both images at one exposure (the observed day's 99th
+    percentile to 80% white).  Returns the file names."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..files import save_figure
+    from ..render.image import to_srgb8
+    from .manifest import read_frame_image
+
+    obs_doc, obs_root = load_manifest(observed)
+    new_doc, new_root = load_manifest(relit)
+    shape = (obs_doc["camera"]["height"], obs_doc["camera"]["width"], 3)
+    new = {f["index"]: f for f in rendered_frames(new_doc)}
+    pairs = [(f, new[f["index"]]) for f in rendered_frames(obs_doc) if f["index"] in new]
+    if not pairs:
+        return []
+    images = [(read_frame_image(obs_root, a, "radiance", shape),
+               read_frame_image(new_root, b, "radiance", shape)) for a, b in pairs]
+    scale = np.percentile(np.concatenate([o.ravel() for o, _ in images]), 99) or 1.0
+    names = []
+    for (a, _), (o, r) in zip(pairs, images):
+        err = (r - o).mean(axis=2) / scale
+        lim = max(float(np.abs(err).max()), 1e-6)
+        fig, axes = plt.subplots(1, 3, figsize=(10, 3.4))
+        for ax, im, title in zip(axes[:2], (o, r), ("observed", "relit")):
+            ax.imshow(to_srgb8(im, 0.8 / scale))
+            ax.set_title(f"{title}, {a['time']}", fontsize=8)
+        shown = axes[2].imshow(err, cmap="RdBu_r", vmin=-lim, vmax=lim)
+        axes[2].set_title("relit - observed (/ observed 99th pct.)", fontsize=8)
+        fig.colorbar(shown, ax=axes[2], fraction=0.046)
+        for ax in axes:
+            ax.set_xticks([])
+            ax.set_yticks([])
+        name = f"compare_{a['index']:04d}.png"
+        save_figure(fig, Path(relit) / name)
+        names.append(name)
+    return names
 
 
 def write_prediction(rows, out, image_kind):
@@ -251,12 +296,15 @@ def predict(fits, target, draws=200, seed=0, log=print):
         lo, hi = np.percentile(means[1:], [2.5, 97.5], axis=0)
         # widened by what the parameters leave out: the image's own noise (the sensor model's
         # sigma in radiance) and the model's Monte Carlo error, both of the region mean
-        L, model_var = s.wm.radiance_and_variance(sets[0])
-        image_sd = s.obs.sigma / s.problem.slope(L)
+        _, model_var = s.wm.radiance_and_variance(sets[0])
+        image = frame_values(target, s.obs.pixels, s.obs.frames)
+        slope = s.problem.slope(image)
+        usable = np.isfinite(s.obs.sigma) & (slope > 0)     # not saturated or left out
+        image_var = np.where(usable, s.obs.sigma / np.where(usable, slope, 1.0), 0.0) ** 2
         n = len(s.obs.pixels)
-        extra = 1.959963984540054 * np.sqrt((np.sum(image_sd**2, axis=0)
+        extra = 1.959963984540054 * np.sqrt((np.sum(image_var, axis=0)
                                              + np.sum(model_var, axis=0)) / n**2)
-        observed = frame_values(target, s.obs.pixels, s.obs.frames).mean(axis=0)
+        observed = image.mean(axis=0)
         for j, (i, t) in enumerate(zip(s.obs.frames, s.obs.times)):
             for c, ch in enumerate("RGB"):
                 band = widen(means[0, j, c], (lo[j, c], hi[j, c]), extra[j, c], 0.0, np.inf)
