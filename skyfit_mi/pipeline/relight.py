@@ -28,6 +28,9 @@ from .manifest import load_manifest, manifest_file, rendered_frames
 from .pixels import frame_values
 from .spec import read_spec, validate_spec
 
+#: Seed offset of the reference render of a synthetic target (its own materials, other noise).
+REFERENCE_SEED = 1_000_003
+
 
 def load_fits(paths):
     """{region: (path, fit result)} from fit JSONs, a fit folder's ``fits.csv`` (the
@@ -100,15 +103,31 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     errors = prediction_errors(fits, target, out) if images else {"regions": {}}
     if images:
         errors["comparison_images"] = write_comparisons(target, out)
+    if images and doc.get("source") == "render":
+        # a synthetic target: its own materials rendered again with other seeds give the
+        # Monte Carlo floor, so the relit error's model share can be told from noise
+        raw = {**doc["spec"], "render": {**doc["spec"].get("render", {}),
+                                         "seed": int(doc["render"]["seed"]) + REFERENCE_SEED}}
+        ref = Path(out) / "reference"
+        render_sequence(validate_spec(raw, Path(doc.get("spec_dir", "."))), ref,
+                        overwrite=overwrite, progress=False, log=lambda *a: None)
+        floor = prediction_errors(fits, target, ref)
+        for region, e in errors["regions"].items():
+            e["monte_carlo_floor_rel_rms"] = floor["regions"][region]["rel_rms"]
+        errors["monte_carlo_floor_rel_rms"] = floor["rel_rms"]
+        errors["reference"] = ("the target's own materials rendered again with seed + "
+                               f"{REFERENCE_SEED} (in reference/): its error is Monte Carlo "
+                               "noise alone")
     inside = [lo <= o <= hi for *_, lo, hi, o in rows]
     errors["band_coverage"] = {"share": float(np.mean(inside)), "values": len(inside),
                                "band": "95%, from the fits' intervals"}
     write_errors(errors, out)
     for region, e in errors["regions"].items():
-        held = e.get("held_out_rel_rms")
+        held, floor = e.get("held_out_rel_rms"), e.get("monte_carlo_floor_rel_rms")
         log(f"{region}: relit radiance differs from the observed by {e['rel_rms']:.2%} rms "
             f"({e['frames']} frames, {e['pixels']} pixels)"
-            + (f"; {held:.2%} on the frames the fit did not see" if held is not None else ""))
+            + (f"; {held:.2%} on the frames the fit did not see" if held is not None else "")
+            + (f"; Monte Carlo floor {floor:.2%}" if floor is not None else ""))
     if images:
         log(f"overall: {errors['rel_rms']:.2%} rms")
     log(f"observed region means inside the predicted 95% band: "
