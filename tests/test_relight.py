@@ -154,8 +154,10 @@ def test_fit_on_some_frames_and_relight_onto_the_same_folder_reports_the_held_ou
                  "--no-images", "--draws", "20"]) == 0
     assert main(["relight", str(fits), "--target", str(day / "day"), "-o", str(out), "-q",
                  "--overwrite", "--draws", "20"]) == 0
-    e = json.loads((out / "relight.json").read_text())["regions"]["disc"]
+    errors = json.loads((out / "relight.json").read_text())
+    e = errors["regions"]["disc"]
     assert e["trained_frames"] == [0, 1] and e["held_out_rel_rms"] < 0.05
+    assert errors["band_coverage"]["share"] >= 0.75          # measured 1.0 (12 values)
     rows = list(csv.reader(open(out / "relight.csv")))
     assert [row[4] for row in rows[1:5]] == ["no", "no", "yes", "yes"]
 
