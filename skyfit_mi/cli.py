@@ -176,7 +176,8 @@ def _chi2map(args):
     import numpy as np
 
     from .fitting.fit import FitSession
-    from .fitting.landscape import chi2_map, truth_parameters, write_chi2_map
+    from .fitting.landscape import (chi2_map, profiled_rho_sigma_map, truth_parameters,
+                                    write_chi2_map)
     from .fitting.report import read_fit
     from .pipeline.manifest import load_manifest
 
@@ -200,7 +201,13 @@ def _chi2map(args):
                               f"[{s.lower[i]:g}, {s.upper[i]:g}].")
         axes.append(np.linspace(lo, hi, args.n))
     xs, ys = axes
-    chi2 = chi2_map(s, theta, args.x, args.y, xs, ys)
+    if args.profile:
+        if {args.x, args.y} != {"rho_s", "sigma_alpha"} or s.model == "two":
+            raise SkyfitError("--profile maps rho_s against sigma_alpha with R or C at their "
+                              "best; for other axes, or the 2-parameter model, leave it out.")
+        chi2 = profiled_rho_sigma_map(s, xs, ys, args.x)
+    else:
+        chi2 = chi2_map(s, theta, args.x, args.y, xs, ys)
     ix, iy = s.names.index(args.x), s.names.index(args.y)
     j, i = np.unravel_index(np.argmin(chi2), chi2.shape)
     marks = {"fit": (theta[ix], theta[iy]), "map minimum": (xs[i], ys[j])}
@@ -210,7 +217,8 @@ def _chi2map(args):
     walk = np.asarray(r.get("trace") or [], dtype=float)
     walk = walk[:, [ix, iy]] if args.walk and walk.ndim == 2 and len(walk) > 1 else None
     prefix = Path(args.output) if args.output else root / f"chi2map_{r['region']}_{args.x}_{args.y}"
-    paths = write_chi2_map(prefix, args.x, args.y, xs, ys, chi2, marks, walk)
+    others = ("profiled (linearised, closed form)" if args.profile else "at the fit")
+    paths = write_chi2_map(prefix, args.x, args.y, xs, ys, chi2, marks, walk, others)
     print(f"{r['region']}: chi2 minimum {chi2.min():.6g} at {args.x} = {xs[i]:.4g}, "
           f"{args.y} = {ys[j]:.4g} (the fit: {theta[ix]:.4g}, {theta[iy]:.4g}); wrote "
           + " and ".join(str(p) for p in paths))
@@ -395,6 +403,9 @@ def build_parser():
                       help="y axis range (default the parameter's bounds)")
     cmap.add_argument("--n", type=_int_in(2, 1000), default=60,
                       help="grid points per axis (default 60)")
+    cmap.add_argument("--profile", action="store_true",
+                      help="rho_s against sigma_alpha with R or C at their best for each point "
+                      "(closed form on the linearised data), not fixed at the fit")
     cmap.add_argument("--walk", action="store_true",
                       help="overlay the fit's walk (its trace, e.g. annealing's)")
     cmap.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,

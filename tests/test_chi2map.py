@@ -46,3 +46,23 @@ def test_bad_maps_get_one_line(fitted, capsys, args, phrase):
     assert main(["chi2map", str(day), str(fit), "--n", "5", *args]) == 2
     err = capsys.readouterr().err.strip()
     assert phrase in err and len(err.splitlines()) == 1, err
+
+
+def test_a_profiled_map_is_at_most_the_fixed_one(days, tmp_path):
+    """With R at its best for every (rho_s, sigma_alpha) the map lies at or below the map with
+    R fixed at the fit (up to the linearisation), and both share the minimum region."""
+    out = tmp_path / "fits"
+    assert main(["fit", str(days["noisy"]), "--region", "disc=rect:4,4,7,7", "--model", "3",
+                 "-o", str(out)]) == 0
+    maps = {}
+    for flag in ([], ["--profile"]):
+        prefix = tmp_path / ("p" if flag else "f")
+        assert main(["chi2map", str(days["noisy"]), str(out / "fit_disc.json"), "--n", "12",
+                     "--y-range", "0.02,0.3", *flag, "-o", str(prefix)]) == 0
+        maps[bool(flag)] = np.array(list(csv.reader(open(prefix.with_suffix(".csv"))))[1:],
+                                    dtype=float)[:, 2]
+    fixed, profiled = maps[False], maps[True]
+    assert np.all(profiled <= fixed * 1.01 + 1.0)
+    assert np.mean(profiled < fixed - 1.0) > 0.5              # R's freedom lowers most points
+    assert main(["chi2map", str(days["noisy"]), str(out / "fit_disc.json"), "--x", "R",
+                 "--profile"]) == 2

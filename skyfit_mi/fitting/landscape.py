@@ -1,5 +1,5 @@
 """Chi-square landscapes: chi^2 over two parameters of a region, the others fixed at a fit
-(thesis figs 6.5-6.21 and 7.10).
+or, over (rho_s, sigma_alpha), at their best (thesis figs 6.5-6.21 and 7.10).
 
 The map uses the fit's fast model: Ward's radiance is linear in its reflectances once
 sigma_alpha is given (thesis eq. 3.19, L = rho_d D + s G(sigma) per channel), so the light is
@@ -60,7 +60,21 @@ def chi2_map(session, theta, x, y, xs, ys):
     return out
 
 
-def write_chi2_map(prefix, x, y, xs, ys, chi2, marks, walk=None):
+def profiled_rho_sigma_map(session, xs, ys, x="rho_s"):
+    """chi^2 over (rho_s, sigma_alpha) with R or C at their best for each point, closed form
+    on the linearised data (:func:`~skyfit_mi.fitting.methods.global_search.grid_chi2`, the
+    global search's grid: values near saturation left out, no censoring): array
+    (len(ys), len(xs)); ``x`` names the parameter on the x axis."""
+    from .methods.global_search import _linearise, grid_chi2
+
+    rho, sigma = (xs, ys) if x == "rho_s" else (ys, xs)
+    y, w = _linearise(session.problem)
+    D, G = session.wm.basis(np.asarray(sigma, dtype=float))
+    chi2, _ = grid_chi2(session.model, y, w, D, G, np.asarray(rho, dtype=float))  # (sigma, rho)
+    return chi2 if x == "rho_s" else chi2.T
+
+
+def write_chi2_map(prefix, x, y, xs, ys, chi2, marks, walk=None, others="at the fit"):
     """``<prefix>.csv`` (x, y, chi2 per grid point) and ``<prefix>.png`` (log-scaled filled
     contours of chi^2 - min + 1, ``marks`` {label: (x, y)} such as the fit, the map's
     minimum and the truth, and an optional walk (N, 2) such as an annealing trace)."""
@@ -92,7 +106,7 @@ def write_chi2_map(prefix, x, y, xs, ys, chi2, marks, walk=None):
         ax.plot(mx, my, m, color=c, ms=10, mfc="none" if m == "o" else c, label=label)
     ax.set_xlabel(x)
     ax.set_ylabel(y)
-    ax.set_title(f"chi-square over {x} and {y} (others at the fit)", fontsize=9)
+    ax.set_title(f"chi-square over {x} and {y} (others {others})", fontsize=9)
     ax.legend(fontsize=7, loc="upper right")
     png_path = save_figure(fig, prefix.with_suffix(".png"))
     return csv_path, png_path
