@@ -1,0 +1,69 @@
+"""Benchmark: relighting a 13-frame 256x256 day and a 60x60 chi-square map (issue 14).
+
+In one run, each step a fresh `skyfit` process (imports and JIT compilation included), on
+scenes/specs/disc_clear_east.toml at 256x256, 64 spp, its disc made of table 7.10's material
+(C = 0.25, 0.5, 0.75, rho_s 0.2, sigma_alpha 0.05) with 2% sensor noise (12 bits):
+1. `skyfit render` of the day (the peer: relighting should cost no more);
+2. `skyfit fit` of the disc's central 8x8 pixels (64 pixels, --model 5);
+3. `skyfit relight` of that fit onto the day (render, prediction with its band, comparison
+   images and, the target being synthetic, the reference render of the Monte Carlo floor);
+4. `skyfit relight --no-images` (the prediction alone);
+5. `skyfit chi2map` 60 x 60 over (rho_s, sigma_alpha), others at the fit.
+Prints a markdown table of wall times and the ratio of each to the render's.
+
+    .venv/bin/python scripts/bench_relight.py [-o DIR]
+"""
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SPEC = ROOT / "scenes" / "specs" / "disc_clear_east.toml"
+MATERIAL = {"model": "colour", "C": [0.25, 0.5, 0.75], "rho_s": 0.2, "sigma_alpha": 0.05}
+
+
+def timed(args):
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "skyfit_mi.cli", *map(str, args)], check=True,
+                   stdout=subprocess.DEVNULL)
+    return time.perf_counter() - t0
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("-o", "--output", help="work folder (default a temporary one)")
+    args = ap.parse_args()
+    work = Path(args.output or tempfile.mkdtemp(prefix="bench_relight_"))
+    day, fits = work / "day", work / "fits"
+    from skyfit_mi.pipeline.spec import read_spec
+
+    raw = read_spec(SPEC)
+    raw["camera"].update(width=256, height=256)
+    raw["materials"] = {"disc": MATERIAL}
+    raw["sensor"].update(bits=12, noise_percent=2.0)
+    spec = work / "day.json"
+    spec.write_text(json.dumps(raw))
+    rows = [("render (the peer)", timed(["render", spec, "-o", day, "-q", "--overwrite"]))]
+    rows.append(("fit, 64 pixels, --model 5",
+                 timed(["fit", day, "--region", "disc=rect:124,124,131,131", "-o", fits])))
+    rows.append(("relight (images, band, comparisons, reference render)",
+                 timed(["relight", fits, "--target", day, "-o", work / "relit", "-q",
+                        "--overwrite"])))
+    rows.append(("relight --no-images (prediction and band only)",
+                 timed(["relight", fits, "--target", day, "-o", work / "predicted", "-q",
+                        "--no-images"])))
+    rows.append(("chi2map 60 x 60, 64 pixels",
+                 timed(["chi2map", day, fits / "fit_disc.json", "-o", work / "map"])))
+    peer = rows[0][1]
+    print("| step | wall time [s] | / render |\n|---|---|---|")
+    for name, t in rows:
+        print(f"| {name} | {t:.1f} | {t / peer:.2f} |")
+
+
+if __name__ == "__main__":
+    main()
