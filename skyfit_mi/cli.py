@@ -180,44 +180,46 @@ def _chi2map(args):
                                     write_chi2_map)
     from .fitting.report import read_fit
     from .pipeline.manifest import load_manifest
+    from .render.fit_model import PARAMETERS, bounds
 
     _, root = load_manifest(args.manifest)
     r = read_fit(args.fit)
-    if r is None:
+    if r is None or r.get("model") not in PARAMETERS:
         raise SkyfitError(f"{args.fit} is not a fit result of `skyfit fit` (fit_NAME.json).")
+    names, (lower, upper) = list(PARAMETERS[r["model"]]), bounds(r["model"])
+    axes = []
+    for name, given in ((args.x, args.x_range), (args.y, args.y_range)):
+        if name not in names:
+            raise SkyfitError(f"{name!r} is not a parameter of the {r['model']} model; its "
+                              f"parameters are {', '.join(names)}.")
+        i = names.index(name)
+        lo, hi = given if given is not None else (lower[i], upper[i])
+        if not lower[i] <= lo < hi <= upper[i]:
+            raise SkyfitError(f"the {name} range {lo:g},{hi:g} must rise within "
+                              f"[{lower[i]:g}, {upper[i]:g}].")
+        axes.append(np.linspace(lo, hi, args.n))
+    if args.x == args.y:
+        raise SkyfitError("give two different parameters for the map's axes.")
+    if args.profile and ({args.x, args.y} != {"rho_s", "sigma_alpha"} or r["model"] == "two"):
+        raise SkyfitError("--profile maps rho_s against sigma_alpha with R or C at their best; "
+                          "for other axes, or the 2-parameter model, leave it out.")
+    xs, ys = axes
     s = FitSession(args.manifest, r["region"], np.asarray(r["pixels"], dtype=int),
                    model=r["model"], normalisation=r.get("normalisation", "ward"),
                    seed=args.seed, frames=r.get("frames"))
-    theta = np.array([r["parameters"][k] for k in s.names])
-    axes = []
-    for name, given in ((args.x, args.x_range), (args.y, args.y_range)):
-        if name not in s.names:
-            raise SkyfitError(f"{name!r} is not a parameter of the {s.model} model; its "
-                              f"parameters are {', '.join(s.names)}.")
-        i = s.names.index(name)
-        lo, hi = given if given is not None else (s.lower[i], s.upper[i])
-        if not s.lower[i] <= lo < hi <= s.upper[i]:
-            raise SkyfitError(f"the {name} range {lo:g},{hi:g} must rise within "
-                              f"[{s.lower[i]:g}, {s.upper[i]:g}].")
-        axes.append(np.linspace(lo, hi, args.n))
-    xs, ys = axes
-    if args.profile:
-        if {args.x, args.y} != {"rho_s", "sigma_alpha"} or s.model == "two":
-            raise SkyfitError("--profile maps rho_s against sigma_alpha with R or C at their "
-                              "best; for other axes, or the 2-parameter model, leave it out.")
-        chi2 = profiled_rho_sigma_map(s, xs, ys, args.x)
-    else:
-        chi2 = chi2_map(s, theta, args.x, args.y, xs, ys)
-    ix, iy = s.names.index(args.x), s.names.index(args.y)
+    theta = np.array([r["parameters"][k] for k in names])
+    chi2 = (profiled_rho_sigma_map(s, xs, ys, args.x) if args.profile
+            else chi2_map(s, theta, args.x, args.y, xs, ys))
+    ix, iy = names.index(args.x), names.index(args.y)
     j, i = np.unravel_index(np.argmin(chi2), chi2.shape)
     marks = {"fit": (theta[ix], theta[iy]), "map minimum": (xs[i], ys[j])}
-    truth = truth_parameters(r.get("truth"), s.model, s.names)
+    truth = truth_parameters(r.get("truth"), r["model"], names)
     if truth is not None:
         marks["truth"] = (truth[ix], truth[iy])
     walk = np.asarray(r.get("trace") or [], dtype=float)
     walk = walk[:, [ix, iy]] if args.walk and walk.ndim == 2 and len(walk) > 1 else None
     prefix = Path(args.output) if args.output else root / f"chi2map_{r['region']}_{args.x}_{args.y}"
-    others = ("profiled (linearised, closed form)" if args.profile else "at the fit")
+    others = "profiled (linearised, closed form)" if args.profile else "at the fit"
     paths = write_chi2_map(prefix, args.x, args.y, xs, ys, chi2, marks, walk, others)
     print(f"{r['region']}: chi2 minimum {chi2.min():.6g} at {args.x} = {xs[i]:.4g}, "
           f"{args.y} = {ys[j]:.4g} (the fit: {theta[ix]:.4g}, {theta[iy]:.4g}); wrote "
