@@ -164,7 +164,7 @@ def _fit(args):
 
 
 def _relight(args):
-    from .pipeline.relight import load_fits, relight
+    from .fitting.relight import load_fits, relight
 
     relight(load_fits(args.fits), args.target, args.output, images=not args.no_images,
             draws=args.draws, seed=args.seed, overwrite=args.overwrite, progress=not args.quiet)

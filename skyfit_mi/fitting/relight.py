@@ -23,10 +23,10 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..files import write_json, write_text
-from ..fitting.report import fit_files, read_fit
-from .manifest import load_manifest, manifest_file, rendered_frames
-from .pixels import frame_values
-from .spec import read_spec, validate_spec
+from .report import fit_files, read_fit
+from ..pipeline.manifest import load_manifest, manifest_file, rendered_frames
+from ..pipeline.pixels import frame_values
+from ..pipeline.spec import read_spec, validate_spec
 
 #: Seed offset of the reference render of a synthetic target (its own materials, other noise).
 REFERENCE_SEED = 1_000_003
@@ -84,7 +84,7 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     (:func:`prediction_errors`).  Without ``images`` the target must be a sequence folder:
     only the prediction is made, from the fits' cached model (no frame is rendered)."""
     from ..files import ensure_dir
-    from .sequence import render_sequence
+    from ..pipeline.sequence import render_sequence
 
     spec, doc = target_spec(target, fits)
     if doc is not None and Path(out).resolve() == manifest_file(target).parent.resolve():
@@ -204,7 +204,7 @@ def write_comparisons(observed, relit):
 
     from ..files import save_figure
     from ..render.image import to_srgb8
-    from .manifest import read_frame_image
+    from ..pipeline.manifest import read_frame_image
 
     obs_doc, obs_root = load_manifest(observed)
     new_doc, new_root = load_manifest(relit)
@@ -301,8 +301,8 @@ def predict(fits, target, draws=200, seed=0, log=print):
     Monte Carlo error), with the image's mean (the observed, where the target holds frames).
     Returns rows (region, frame, time, channel, predicted, lo95, hi95, observed) [W m^-2 sr^-1].
     """
-    from ..fitting.fit import FitSession
-    from ..fitting.uncertainty import widen
+    from .fit import FitSession
+    from .uncertainty import widen
 
     rng = np.random.default_rng(seed)
     rows = []
