@@ -120,7 +120,8 @@ def _fit_regions(args):
         from .fitting.chi2 import region_from_mask
         regions += [(name, region_from_mask(args.mask, value)) for name, value in args.label]
     if args.all:
-        regions += _material_regions(args.manifest)
+        from .pipeline.pixels import material_regions
+        regions += material_regions(args.manifest)
     if not regions:
         raise SkyfitError("give at least one --region NAME=rect:... (or --mask and --label, or --all).")
     names = [n for n, _ in regions]
@@ -233,49 +234,20 @@ def _range(text):
     return v
 
 
-def _material_regions(manifest):
-    """(name, pixels) of every material the camera sees, from the scene's label image: the
-    pixels inside each material's area (edge pixels, which also see a neighbour, left out)."""
-    import numpy as np
-    from scipy.ndimage import binary_erosion
-
-    doc, _, labels, ids = _scene_labels(manifest)
-    ward = set(doc["scene"]["materials"])
-    regions = []
-    for k, name in enumerate(ids):
-        ys, xs = np.nonzero(binary_erosion(labels == k + 1, border_value=1))
-        if name in ward and len(xs):
-            regions.append((name, np.stack([xs, ys], axis=1)))
-    if not regions:
-        raise SkyfitError(f"the camera sees no Ward material of {manifest} away from its edges; "
-                          "give regions with --region.")
-    return regions
-
-
-def _scene_labels(manifest):
-    """(manifest document, its folder, label image, material ids) of a rendered sequence."""
-    from .render import setup
-    from .render.labels import label_image
-    from .pipeline.manifest import load_manifest
-
-    doc, root = load_manifest(manifest)
-    mi = setup(doc["render"]["variant"])
-    return (doc, root, *label_image(mi.load_string(doc["scene"]["xml"])))
-
-
 def _labels(args):
     from pathlib import Path
 
     import numpy as np
 
     from .files import write_json
+    from .pipeline.pixels import scene_labels
     from .render.image import write_png
 
     out = Path(args.output) if args.output else None
     if out is not None and out.suffix.lower() != ".png":
         raise SkyfitError(f"-o {args.output}: the label mask is a PNG (lossless); give a path "
                           "ending in .png.")
-    _, root, labels, ids = _scene_labels(args.manifest)
+    _, root, labels, ids = scene_labels(args.manifest)
     out = out or root / "labels.png"
     write_png(out, np.repeat(labels[..., None], 3, axis=2).astype(np.uint8))
     legend = {name: k + 1 for k, name in enumerate(ids)}

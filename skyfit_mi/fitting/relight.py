@@ -6,7 +6,8 @@ region measured; every other material keeps the target's value, and the manifest
 ``scene.materials.ID.source`` says which is which.  The output is a sequence folder like
 ``render``'s, so ``pixels``, ``labels`` and ``fit`` work on it.  When the target folder holds
 frames, they are the observations: ``relight.json`` and ``relight.csv`` give the relative RMS
-error of the relit radiance at each fit's pixels, per region and frame, per region, and
+error of the relit radiance at each region's pixels (the fit's own on its own sequence, else
+the material's interior in the target's label image), per region and frame, per region, and
 overall (thesis fig. 7.14's comparison, as numbers).
 
 :func:`predict` gives the numbers without images: each region's radiance per frame from the
@@ -96,11 +97,13 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if images:
         render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log)
     ensure_dir(Path(out))
-    rows = predict(fits, target if observed or not images else out, draws, seed, log)
+    where = target if observed or not images else out
+    pixels = target_pixels(fits, where, seed)
+    rows = predict(fits, where, pixels, draws, seed, log)
     write_prediction(rows, out, "observed" if observed else "relit render")
     if not observed:
         return None
-    errors = prediction_errors(fits, target, out) if images else {"regions": {}}
+    errors = prediction_errors(fits, target, out, pixels) if images else {"regions": {}}
     if images:
         errors["comparison_images"] = write_comparisons(target, out)
     if images and doc.get("source") == "render":
@@ -111,7 +114,7 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
         ref = Path(out) / "reference"
         render_sequence(validate_spec(raw, Path(doc.get("spec_dir", "."))), ref,
                         overwrite=overwrite, progress=False, log=lambda *a: None)
-        floor = prediction_errors(fits, target, ref)
+        floor = prediction_errors(fits, target, ref, pixels)
         for region, e in errors["regions"].items():
             e["monte_carlo_floor_rel_rms"] = floor["regions"][region]["rel_rms"]
         errors["monte_carlo_floor_rel_rms"] = floor["rel_rms"]
@@ -135,13 +138,36 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     return errors
 
 
+def target_pixels(fits, target, seed=0, max_pixels=64):
+    """{region: (P, 2) pixels} at which each fit is compared in ``target`` (a sequence
+    folder): the fit's own pixels on its own sequence (the same run), otherwise the material's
+    interior in the target's label image (another camera sees it elsewhere), a seeded subset
+    of at most ``max_pixels``."""
+    from .chi2 import subsample_region
+    from ..pipeline.pixels import material_regions
+
+    doc, _ = load_manifest(target)
+    out, seen = {}, None
+    for region, (_, r) in fits.items():
+        if r.get("sequence_run_id") == doc.get("run_id"):
+            out[region] = np.asarray(r["pixels"], dtype=int)
+            continue
+        if seen is None:
+            seen = dict(material_regions(target))
+        if region not in seen:
+            raise SkyfitError(f"the target's camera does not see region {region!r} away from "
+                              "its edges; choose a target camera that sees it.")
+        out[region] = subsample_region(seen[region], max_pixels, seed)
+    return out
+
+
 def _rel_rms(pred, obs, axis=None):
     return np.sqrt(np.mean((pred - obs) ** 2, axis=axis)) / np.sqrt(np.mean(obs**2, axis=axis))
 
 
-def prediction_errors(fits, observed, relit):
-    """Relative RMS error of the relit radiance against the observed, at each fit's pixels
-    (fit_NAME.json's ``pixels``), over the frames both sequences hold:
+def prediction_errors(fits, observed, relit, pixels):
+    """Relative RMS error of the relit radiance against the observed, at each region's
+    ``pixels`` ({region: (P, 2)}, :func:`target_pixels`), over the frames both sequences hold:
     {"regions": {region: {rel_rms, per_frame, frames, pixels, fit}}, "rel_rms", "times"}.
     Unitless; radiance is compared in W m^-2 sr^-1, all channels together."""
     obs_doc, _ = load_manifest(observed)
@@ -153,7 +179,7 @@ def prediction_errors(fits, observed, relit):
     times = [f["time"] for f in obs_doc["frames"] if f["index"] in both]
     regions, all_pred, all_obs = {}, [], []
     for region, (path, r) in sorted(fits.items()):
-        px = np.asarray(r["pixels"], dtype=int)
+        px = pixels[region]
         o = frame_values(observed, px, both)
         p = frame_values(relit, px, both)
         regions[region] = {"fit": str(path), "pixels": len(px), "frames": len(both),
@@ -294,7 +320,7 @@ def parameter_draws(result, names, lower, upper, n, rng):
     return np.vstack([theta, draws])
 
 
-def predict(fits, target, draws=200, seed=0, log=print):
+def predict(fits, target, pixels, draws=200, seed=0, log=print):
     """Radiance of each fitted region in the target's frames, without rendering images: the
     region's mean per frame and channel at the fit and its 95% band (2.5-97.5 percentiles
     over :func:`parameter_draws`, widened in quadrature by the image's noise and the model's
@@ -307,7 +333,7 @@ def predict(fits, target, draws=200, seed=0, log=print):
     rng = np.random.default_rng(seed)
     rows = []
     for region, (_, r) in sorted(fits.items()):
-        s = FitSession(target, region, np.asarray(r["pixels"], dtype=int), model=r["model"],
+        s = FitSession(target, region, pixels[region], model=r["model"],
                        normalisation=r.get("normalisation", "ward"), seed=seed,
                         min_frames=1)
         sets = parameter_draws(r, s.names, s.lower, s.upper, draws, rng)

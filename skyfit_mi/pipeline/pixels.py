@@ -85,3 +85,32 @@ def write_pixels(manifest_path, pixels, out_prefix=None, source="radiance"):
     fig.autofmt_xdate()
     fig.tight_layout()
     return csv_path, save_figure(fig, prefix.with_suffix(".png"))
+
+
+def scene_labels(manifest):
+    """(manifest document, its folder, label image, material ids) of a rendered sequence."""
+    from ..render import setup
+    from ..render.labels import label_image
+
+    doc, root = load_manifest(manifest)
+    mi = setup(doc["render"]["variant"])
+    return (doc, root, *label_image(mi.load_string(doc["scene"]["xml"])))
+
+
+def material_regions(manifest):
+    """(name, pixels) of every Ward material the camera sees, from the scene's label image:
+    the pixels inside each material's area (edge pixels, which also see a neighbour, left
+    out); SkyfitError when it sees none."""
+    from scipy.ndimage import binary_erosion
+
+    doc, _, labels, ids = scene_labels(manifest)
+    ward = set(doc["scene"]["materials"])
+    regions = []
+    for k, name in enumerate(ids):
+        ys, xs = np.nonzero(binary_erosion(labels == k + 1, border_value=1))
+        if name in ward and len(xs):
+            regions.append((name, np.stack([xs, ys], axis=1)))
+    if not regions:
+        raise SkyfitError(f"the camera sees no Ward material of {manifest} away from its edges; "
+                          "give regions with --region.")
+    return regions
