@@ -39,6 +39,7 @@ def main():
     ap.add_argument("-o", "--output", help="work folder (default a temporary one)")
     args = ap.parse_args()
     work = Path(args.output or tempfile.mkdtemp(prefix="bench_relight_"))
+    work.mkdir(parents=True, exist_ok=True)
     day, fits = work / "day", work / "fits"
     from skyfit_mi.pipeline.spec import read_spec
 
