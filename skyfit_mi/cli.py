@@ -177,34 +177,21 @@ def _chi2map(args):
     import numpy as np
 
     from .fitting.fit import FitSession
-    from .fitting.landscape import (chi2_map, profiled_rho_sigma_map, truth_parameters,
-                                    write_chi2_map)
+    from .fitting.landscape import (chi2_map, map_axes, profiled_rho_sigma_map,
+                                    truth_parameters, write_chi2_map)
     from .fitting.report import read_fit
     from .pipeline.manifest import load_manifest
-    from .render.fit_model import PARAMETERS, bounds
+    from .render.fit_model import PARAMETERS
 
     _, root = load_manifest(args.manifest)
     r = read_fit(args.fit)
     if r is None or r.get("model") not in PARAMETERS:
         raise SkyfitError(f"{args.fit} is not a fit result of `skyfit fit` (fit_NAME.json).")
-    names, (lower, upper) = list(PARAMETERS[r["model"]]), bounds(r["model"])
-    axes = []
-    for name, given in ((args.x, args.x_range), (args.y, args.y_range)):
-        if name not in names:
-            raise SkyfitError(f"{name!r} is not a parameter of the {r['model']} model; its "
-                              f"parameters are {', '.join(names)}.")
-        i = names.index(name)
-        lo, hi = given if given is not None else (lower[i], upper[i])
-        if not lower[i] <= lo < hi <= upper[i]:
-            raise SkyfitError(f"the {name} range {lo:g},{hi:g} must rise within "
-                              f"[{lower[i]:g}, {upper[i]:g}].")
-        axes.append(np.linspace(lo, hi, args.n))
-    if args.x == args.y:
-        raise SkyfitError("give two different parameters for the map's axes.")
+    names = list(PARAMETERS[r["model"]])
+    xs, ys = map_axes(r["model"], args.x, args.y, args.x_range, args.y_range, args.n)
     if args.profile and ({args.x, args.y} != {"rho_s", "sigma_alpha"} or r["model"] == "two"):
         raise SkyfitError("--profile maps rho_s against sigma_alpha with R or C at their best; "
                           "for other axes, or the 2-parameter model, leave it out.")
-    xs, ys = axes
     s = FitSession(args.manifest, r["region"], np.asarray(r["pixels"], dtype=int),
                    model=r["model"], normalisation=r.get("normalisation", "ward"),
                    seed=args.seed, frames=r.get("frames"))

@@ -32,16 +32,33 @@ def truth_parameters(truth, model, names):
         return None
 
 
-def chi2_map(session, theta, x, y, xs, ys):
-    """chi^2 on the grid ``xs`` x ``ys`` of parameters ``x`` and ``y`` (names), every other
-    parameter at ``theta``: array (len(ys), len(xs))."""
-    names = list(session.names)
-    for p in (x, y):
-        if p not in names:
-            raise SkyfitError(f"{p!r} is not a parameter of the {session.model} model; its "
-                              f"parameters are {', '.join(names)}.")
+def map_axes(model, x, y, x_range=None, y_range=None, n=60):
+    """The grid (xs, ys) of a map of ``model``'s parameters ``x`` and ``y``: ``n`` values over
+    each range (default the parameter's bounds); SkyfitError for an unknown or repeated
+    parameter or a range outside its bounds."""
+    from ..render.fit_model import PARAMETERS, bounds
+
+    names, (lower, upper) = list(PARAMETERS[model]), bounds(model)
     if x == y:
         raise SkyfitError("give two different parameters for the map's axes.")
+    axes = []
+    for name, given in ((x, x_range), (y, y_range)):
+        if name not in names:
+            raise SkyfitError(f"{name!r} is not a parameter of the {model} model; its "
+                              f"parameters are {', '.join(names)}.")
+        i = names.index(name)
+        lo, hi = given if given is not None else (lower[i], upper[i])
+        if not lower[i] <= lo < hi <= upper[i]:
+            raise SkyfitError(f"the {name} range {lo:g},{hi:g} must rise within "
+                              f"[{lower[i]:g}, {upper[i]:g}].")
+        axes.append(np.linspace(lo, hi, n))
+    return tuple(axes)
+
+
+def chi2_map(session, theta, x, y, xs, ys):
+    """chi^2 on the grid ``xs`` x ``ys`` of parameters ``x`` and ``y`` (names, checked by
+    :func:`map_axes`), every other parameter at ``theta``: array (len(ys), len(xs))."""
+    names = list(session.names)
     ix, iy = names.index(x), names.index(y)
     last = len(names) - 1
     theta = np.asarray(theta, dtype=float)
