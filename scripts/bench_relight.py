@@ -6,9 +6,10 @@ scenes/specs/disc_clear_east.toml at 256x256, 64 spp, its disc made of table 7.1
 1. `skyfit render` of the day (the peer: relighting should cost no more);
 2. `skyfit fit` of the disc's central 8x8 pixels (64 pixels, --model 5);
 3. `skyfit relight` of that fit onto the day (render, prediction with its band, comparison
-   images and, the target being synthetic, the reference render of the Monte Carlo floor);
-4. `skyfit relight --no-images` (the prediction alone);
-5. `skyfit chi2map` 60 x 60 over (rho_s, sigma_alpha), others at the fit.
+   images, the noise floor from the sigma images);
+4. the same with `--reference` (the target's own materials rendered again: a second render);
+5. `skyfit relight --no-images` (the prediction alone);
+6. `skyfit chi2map` 60 x 60 over (rho_s, sigma_alpha), others at the fit.
 Prints a markdown table of wall times and the ratio of each to the render's.
 
     .venv/bin/python scripts/bench_relight.py [-o DIR]
@@ -52,12 +53,15 @@ def main():
     rows = [("render (the peer)", timed(["render", spec, "-o", day, "-q", "--overwrite"]))]
     rows.append(("fit, 64 pixels, --model 5",
                  timed(["fit", day, "--region", "disc=rect:124,124,131,131", "-o", fits])))
-    rows.append(("relight (images, band, comparisons, reference render)",
+    rows.append(("relight (images, band, comparisons)",
                  timed(["relight", fits, "--target", day, "-o", work / "relit", "-q",
                         "--overwrite"])))
+    rows.append(("relight --reference (also the truth rendered again)",
+                 timed(["relight", fits, "--target", day, "-o", work / "relit", "-q",
+                        "--overwrite", "--reference"])))
     rows.append(("relight --no-images (prediction and band only)",
                  timed(["relight", fits, "--target", day, "-o", work / "predicted", "-q",
-                        "--no-images"])))
+                        "--no-images", "--overwrite"])))
     rows.append(("chi2map 60 x 60, 64 pixels",
                  timed(["chi2map", day, fits / "fit_disc.json", "-o", work / "map"])))
     peer = rows[0][1]

@@ -168,7 +168,8 @@ def _relight(args):
     from .fitting.relight import load_fits, relight
 
     relight(load_fits(args.fits), args.target, args.output, images=not args.no_images,
-            draws=args.draws, seed=args.seed, overwrite=args.overwrite, progress=not args.quiet)
+            draws=args.draws, seed=args.seed, overwrite=args.overwrite, progress=not args.quiet,
+            reference=args.reference)
 
 
 def _chi2map(args):
@@ -341,6 +342,10 @@ def build_parser():
     relit.add_argument("--no-images", action="store_true",
                        help="predict the regions' values only (prediction.csv/png), from the "
                        "fits' cached model of the target folder's light; no frame is rendered")
+    relit.add_argument("--reference", action="store_true",
+                       help="a synthetic target: also render its own materials again with "
+                       "other seeds (reference/), to measure the Monte Carlo floor that "
+                       "relight.json otherwise estimates from the sigma images")
     relit.add_argument("--draws", type=_int_in(2, 100000), default=200,
                        help="parameter draws from the fits' intervals for the 95%% band "
                        "(default 200)")

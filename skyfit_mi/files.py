@@ -96,14 +96,16 @@ def write_json(path, doc):
     return write_text(path, to_json(doc) + "\n")
 
 
-def save_figure(fig, path, dpi=120):
-    """Save a matplotlib figure as PNG atomically and close it."""
+def save_figure(fig, path, dpi=120, close=True):
+    """Save a matplotlib figure as PNG atomically and close it (unless not ``close``: a figure
+    redrawn for the next file)."""
     import matplotlib.pyplot as plt
 
     try:
         return atomic_write(path, lambda p: fig.savefig(p, dpi=dpi, format="png"))
     finally:
-        plt.close(fig)
+        if close:
+            plt.close(fig)
 
 
 #: Name of the lock file a writer holds in its output folder.

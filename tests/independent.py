@@ -60,7 +60,7 @@ def _copy_frames(out, frames, sensor_seed, trace):
         img = trace(f, extra).astype(np.float32)
         values, sigma, _ = capture_frame(sensor, img, None, sensor_seed, f["index"],
                                          doc["camera"]["fov_deg"])
-        write_frame(out, f["index"], img, values, sigma)
+        write_frame(out, f["index"], img, np.zeros_like(img), values, sigma)  # taken as exact
 
 
 def radiance_frames(run, out, gensky_texts, material, geometry="disc", m=4, sensor_seed=99):

@@ -31,6 +31,10 @@ from ..pipeline.spec import read_spec, validate_spec
 
 #: Seed offset of the reference render of a synthetic target (its own materials, other noise).
 REFERENCE_SEED = 1_000_003
+#: Light-cache samples per pixel of a prediction (positions, directions): it predicts region
+#: means, whose Monte Carlo error (in the band) falls with the region's pixels, so it is an
+#: eighth of a fit's cache, whose chi-square needs every pixel accurate.
+PREDICTION_CACHE = (4, 64)
 
 
 def load_fits(paths):
@@ -78,12 +82,15 @@ def target_spec(target, fits):
 
 
 def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progress=True,
-            overwrite=False):
+            overwrite=False, reference=False):
     """Render ``target`` with the fitted materials into ``out`` (``images``) and predict each
     region's radiance with its 95% band (``prediction.csv``, ``prediction.png``); with
     observations in the target, write and return the prediction errors
-    (:func:`prediction_errors`).  Without ``images`` the target must be a sequence folder:
-    only the prediction is made, from the fits' cached model (no frame is rendered)."""
+    (:func:`prediction_errors`) beside the error that the images' noise alone gives
+    (:func:`noise_floor`).  Without ``images`` the target must be a sequence folder: only the
+    prediction is made, from the fits' cached model (no frame is rendered).  ``reference``
+    (a synthetic target) also renders the target's own materials again with other seeds, and
+    reports their error: Monte Carlo noise measured rather than estimated."""
     from ..files import ensure_dir
     from ..pipeline.sequence import render_sequence
 
@@ -94,6 +101,9 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
         raise SkyfitError("a prediction without images needs a sequence folder as --target "
                           "(its light is traced there); give one, or leave out --no-images.")
     observed = doc is not None and bool(rendered_frames(doc))
+    if reference and not (images and observed and doc.get("source") == "render"):
+        raise SkyfitError("--reference renders a synthetic target's own materials again; it "
+                          "needs a target folder that `skyfit render` wrote, and images.")
     if images:
         render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log)
     ensure_dir(Path(out))
@@ -103,21 +113,32 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     write_prediction(rows, out, "observed" if observed else "relit render")
     if not observed:
         return None
-    errors = prediction_errors(fits, target, out, pixels) if images else {"regions": {}}
+    errors = {"regions": {}}
     if images:
+        errors = prediction_errors(fits, target, out, pixels)
+        if all("radiance_sigma" in f for f in rendered_frames(doc)):
+            floor = noise_floor(target, out, pixels, errors["frames"])
+            for region, e in errors["regions"].items():
+                e["noise_floor_rel_rms"] = floor["regions"][region]
+            errors["noise_floor_rel_rms"] = floor["all"]
+            errors["noise_floor"] = ("the relative RMS error that the two sequences' Monte "
+                                     "Carlo noise alone gives (their radiance_sigma images)")
+        else:
+            errors["noise_floor"] = ("unknown: the target's frames have no radiance_sigma "
+                                     "image (an older render); --reference measures it")
+            log("the target's frames carry no radiance_sigma image, so the noise floor is "
+                "not reported (render it again, or use --reference)")
         errors["comparison_images"] = write_comparisons(target, out)
-    if images and doc.get("source") == "render":
-        # a synthetic target: its own materials rendered again with other seeds give the
-        # Monte Carlo floor, so the relit error's model share can be told from noise
+    if reference:
         raw = {**doc["spec"], "render": {**doc["spec"].get("render", {}),
                                          "seed": int(doc["render"]["seed"]) + REFERENCE_SEED}}
         ref = Path(out) / "reference"
         render_sequence(validate_spec(raw, Path(doc.get("spec_dir", "."))), ref,
                         overwrite=overwrite, progress=False, log=lambda *a: None)
-        floor = prediction_errors(fits, target, ref, pixels)
+        measured = prediction_errors(fits, target, ref, pixels)
         for region, e in errors["regions"].items():
-            e["monte_carlo_floor_rel_rms"] = floor["regions"][region]["rel_rms"]
-        errors["monte_carlo_floor_rel_rms"] = floor["rel_rms"]
+            e["reference_rel_rms"] = measured["regions"][region]["rel_rms"]
+        errors["reference_rel_rms"] = measured["rel_rms"]
         errors["reference"] = ("the target's own materials rendered again with seed + "
                                f"{REFERENCE_SEED} (in reference/): its error is Monte Carlo "
                                "noise alone")
@@ -126,11 +147,13 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
                                "band": "95%, from the fits' intervals"}
     write_errors(errors, out)
     for region, e in errors["regions"].items():
-        held, floor = e.get("held_out_rel_rms"), e.get("monte_carlo_floor_rel_rms")
+        held, floor = e.get("held_out_rel_rms"), e.get("noise_floor_rel_rms")
         log(f"{region}: relit radiance differs from the observed by {e['rel_rms']:.2%} rms "
             f"({e['frames']} frames, {e['pixels']} pixels)"
             + (f"; {held:.2%} on the frames the fit did not see" if held is not None else "")
-            + (f"; Monte Carlo floor {floor:.2%}" if floor is not None else ""))
+            + (f"; the images' noise alone gives {floor:.2%}" if floor is not None else "")
+            + (f", a re-render of the truth {e['reference_rel_rms']:.2%}"
+               if "reference_rel_rms" in e else ""))
     if images:
         log(f"overall: {errors['rel_rms']:.2%} rms")
     log(f"observed region means inside the predicted 95% band: "
@@ -198,6 +221,24 @@ def prediction_errors(fits, observed, relit, pixels):
             "unit": "relative RMS of radiance (unitless)"}
 
 
+def noise_floor(observed, relit, pixels, frames):
+    """The relative RMS error that noise alone would give between two sequences at ``pixels``
+    ({region: (P, 2)}) over ``frames``: sqrt(mean(sigma_o^2 + sigma_r^2)) / rms(observed), each
+    sigma the frame's ``radiance_sigma`` image (a render's Monte Carlo error); independent
+    noise in the two is assumed, so a relit render that shares the target's seeds (its own day)
+    shows less.  {"regions": {region: value}, "all": value}."""
+    sq, ref, out = [], [], {}
+    for region, px in sorted(pixels.items()):
+        o = frame_values(observed, px, frames)
+        var = (frame_values(observed, px, frames, "radiance_sigma") ** 2
+               + frame_values(relit, px, frames, "radiance_sigma") ** 2)
+        out[region] = float(np.sqrt(np.mean(var) / np.mean(o**2)))
+        sq.append(var.ravel())
+        ref.append((o**2).ravel())
+    return {"regions": out, "all": float(np.sqrt(np.mean(np.concatenate(sq))
+                                                 / np.mean(np.concatenate(ref))))}
+
+
 def write_errors(errors, out):
     """``relight.json`` and ``relight.csv`` (region, frame, time, relative RMS error; 'all' rows
     per region and overall) in ``out``."""
@@ -242,23 +283,29 @@ def write_comparisons(observed, relit):
     images = [(read_frame_image(obs_root, a, "radiance", shape),
                read_frame_image(new_root, b, "radiance", shape)) for a, b in pairs]
     scale = np.percentile(np.concatenate([o.ravel() for o, _ in images]), 99) or 1.0
+    # one figure, its images and colour bar updated per frame (a figure each is slower)
+    fig, axes = plt.subplots(1, 3, figsize=(10, 3.4))
+    blank = np.zeros(shape, np.uint8)
+    panels = [ax.imshow(blank) for ax in axes[:2]]
+    shown = axes[2].imshow(blank[..., 0].astype(float), cmap="RdBu_r")
+    axes[2].set_title("relit - observed (/ observed 99th pct.)", fontsize=8)
+    fig.colorbar(shown, ax=axes[2], fraction=0.046)
+    for ax in axes:
+        ax.set_xticks([])
+        ax.set_yticks([])
     names = []
     for (a, _), (o, r) in zip(pairs, images):
         err = (r - o).mean(axis=2) / scale
         lim = max(float(np.abs(err).max()), 1e-6)
-        fig, axes = plt.subplots(1, 3, figsize=(10, 3.4))
-        for ax, im, title in zip(axes[:2], (o, r), ("observed", "relit")):
-            ax.imshow(to_srgb8(im, 0.8 / scale))
+        for ax, panel, im, title in zip(axes, panels, (o, r), ("observed", "relit")):
+            panel.set_data(to_srgb8(im, 0.8 / scale))
             ax.set_title(f"{title}, {a['time']}", fontsize=8)
-        shown = axes[2].imshow(err, cmap="RdBu_r", vmin=-lim, vmax=lim)
-        axes[2].set_title("relit - observed (/ observed 99th pct.)", fontsize=8)
-        fig.colorbar(shown, ax=axes[2], fraction=0.046)
-        for ax in axes:
-            ax.set_xticks([])
-            ax.set_yticks([])
+        shown.set_data(err)
+        shown.set_clim(-lim, lim)
         name = f"compare_{a['index']:04d}.png"
-        save_figure(fig, Path(relit) / name)
+        save_figure(fig, Path(relit) / name, close=False)
         names.append(name)
+    plt.close(fig)
     return names
 
 
@@ -335,7 +382,8 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
     for region, (_, r) in sorted(fits.items()):
         s = FitSession(target, region, pixels[region], model=r["model"],
                        normalisation=r.get("normalisation", "ward"), seed=seed,
-                        min_frames=1)
+                       positions=PREDICTION_CACHE[0], directions=PREDICTION_CACHE[1],
+                       min_frames=1)
         sets = parameter_draws(r, s.names, s.lower, s.upper, draws, rng)
         means = np.stack([s.wm.radiance(t).mean(axis=0) for t in sets])     # (draws, T, 3)
         lo, hi = np.percentile(means[1:], [2.5, 97.5], axis=0)

@@ -224,11 +224,15 @@ def rendered_frames(doc):
 
 
 def read_frame_image(root, frame, key, shape):
-    """Frame record ``frame``'s image ``key`` ('radiance', 'sensor', 'sigma') of the sequence in
-    folder ``root``, checked to read as an image of ``shape`` (H, W, 3); a damaged or foreign
-    file raises SkyfitError naming the frame and the fix."""
+    """Frame record ``frame``'s image ``key`` ('radiance', 'radiance_sigma', 'sensor',
+    'sigma') of the sequence in folder ``root``, checked to read as an image of ``shape``
+    (H, W, 3); a missing, damaged or foreign file raises SkyfitError naming the frame and the
+    fix."""
     from ..render.image import read_exr_checked
 
+    if key not in frame:
+        raise SkyfitError(f"frame {frame['index']} has no {key} image (an older render, or a "
+                          "sequence without it); render the sequence again with --overwrite.")
     try:
         return read_exr_checked(Path(root) / frame[key], shape)
     except SkyfitError as exc:

@@ -11,7 +11,8 @@ from ..errors import SkyfitError
 from ..files import save_figure, write_text
 from .manifest import load_manifest, read_frame_image
 
-SOURCES = {"radiance": "W m^-2 sr^-1", "sensor": "DN", "sigma": "DN"}
+SOURCES = {"radiance": "W m^-2 sr^-1", "radiance_sigma": "W m^-2 sr^-1", "sensor": "DN",
+           "sigma": "DN"}
 
 
 def parse_pixel(text):

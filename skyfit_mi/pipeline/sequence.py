@@ -36,8 +36,9 @@ from ..render.scene_xml import pass_spp
 from .manifest import (SCHEMA, illumination_record, load_manifest, manifest_file,
                        sensor_record, versions, write_manifest)
 
-#: The files of one frame, by kind.
-FRAME_FILES = ("radiance", "sensor", "sigma")
+#: The files of one frame, by kind: the radiance, its standard error (Monte Carlo)
+#: [W m^-2 sr^-1], the sensor's values and their sigma [DN].
+FRAME_FILES = ("radiance", "radiance_sigma", "sensor", "sigma")
 
 
 def frame_names(index):
@@ -106,6 +107,8 @@ def prepare_folder(out, run_id, shape, overwrite=False, log=print):
             continue
         try:
             for k in FRAME_FILES:
+                if k not in f:
+                    raise SkyfitError(f"an older render without its {k} image")
                 read_exr_checked(out / f[k], shape)
         except SkyfitError as exc:
             log(f"frame {f['index']}: {exc}; rendering it again")
@@ -144,12 +147,14 @@ def capture_frame(sensor, radiance, radiance_sd, seed, index, fov_deg):
     return values, sigma, not np.any(values > 0)
 
 
-def write_frame(out, index, radiance, values, sigma):
-    """Write one frame's three EXRs atomically; returns their relative paths by kind."""
+def write_frame(out, index, radiance, radiance_sd, values, sigma):
+    """Write one frame's EXRs (:data:`FRAME_FILES`) atomically; returns their relative paths
+    by kind."""
     from ..render.image import write_exr
 
     names = frame_names(index)
     write_exr(out / names["radiance"], radiance)
+    write_exr(out / names["radiance_sigma"], radiance_sd)
     write_exr(out / names["sensor"], values.astype(np.float32))
     write_exr(out / names["sigma"], sigma)
     return names
@@ -236,7 +241,7 @@ def _render(spec, out, overwrite, progress, log):
             rec["render_seconds"] = time.perf_counter() - t0
             values, sigma, dark = capture_frame(sensor, img, img_sd, renderer.seed, f.index,
                                                 cam["fov_deg"])
-            rec.update(status="rendered", **write_frame(out, f.index, img, values, sigma))
+            rec.update(status="rendered", **write_frame(out, f.index, img, img_sd, values, sigma))
             if dark:
                 rec["dark"] = True
                 log(f"frame {f.index} at {f.time:%H:%M}: black at this exposure (no light reached "
