@@ -161,6 +161,7 @@ def mitsuba_case(case, root, replicates):
     from skyfit_mi.fitting.chi2 import parse_region
     from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.fitting.methods.levenberg_marquardt import levenberg_marquardt
+    from skyfit_mi.fitting.relight import rel_rms
     from skyfit_mi.pipeline.pixels import frame_values
 
     name, bsdf = case
@@ -178,8 +179,7 @@ def mitsuba_case(case, root, replicates):
         """Relative RMS error of the radiance predicted at camera j (against Mitsuba's)."""
         pred = sessions[j].wm.radiance(theta)
         ok = sessions[j].cache.hit
-        return float(np.sqrt(np.mean((pred[ok] - radiance[j][ok]) ** 2))
-                     / np.sqrt(np.mean(radiance[j][ok] ** 2)))
+        return float(rel_rms(pred[ok], radiance[j][ok]))
 
     rows = []
     for r in range(replicates):

@@ -180,22 +180,18 @@ def _chi2map(args):
     from .fitting.fit import FitSession
     from .fitting.landscape import (chi2_map, map_axes, profiled_rho_sigma_map,
                                     truth_parameters, write_chi2_map)
-    from .fitting.report import read_fit
+    from .pipeline.fit_result import read_fit_result
     from .pipeline.manifest import load_manifest
     from .render.fit_model import PARAMETERS
 
     _, root = load_manifest(args.manifest)
-    r = read_fit(args.fit)
-    if r is None or r.get("model") not in PARAMETERS:
-        raise SkyfitError(f"{args.fit} is not a fit result of `skyfit fit` (fit_NAME.json).")
+    r = read_fit_result(args.fit)
     names = list(PARAMETERS[r["model"]])
     xs, ys = map_axes(r["model"], args.x, args.y, args.x_range, args.y_range, args.n)
     if args.profile and ({args.x, args.y} != {"rho_s", "sigma_alpha"} or r["model"] == "two"):
         raise SkyfitError("--profile maps rho_s against sigma_alpha with R or C at their best; "
                           "for other axes, or the 2-parameter model, leave it out.")
-    s = FitSession(args.manifest, r["region"], np.asarray(r["pixels"], dtype=int),
-                   model=r["model"], normalisation=r.get("normalisation", "ward"),
-                   seed=args.seed, frames=r.get("frames"))
+    s = FitSession.from_fit(r, args.manifest, seed=args.seed, frames=r.get("frames"))
     theta = np.array([r["parameters"][k] for k in names])
     chi2 = (profiled_rho_sigma_map(s, xs, ys, args.x) if args.profile
             else chi2_map(s, theta, args.x, args.y, xs, ys))

@@ -129,7 +129,7 @@ def test_debug_shows_the_traceback(tmp_path):
 
 
 def _fake_fit(manifest, name, pixels, **kw):
-    return {"region": name, "model": kw["model"], "method": kw["method"], "pixels": pixels.tolist(),
+    return {"region": name, "model": "two", "method": kw["method"], "pixels": pixels.tolist(),
             "parameters": {"rho_s": 0.3 + 0.01 * kw["seed"], "sigma_alpha": 0.1},
             "intervals": {"rho_s": {"95": [0.2, 0.4]}, "sigma_alpha": {"95": [0.05, 0.15]}},
             "chi2_per_dof": 1.0, "evaluations": 1, "wall_time_s": 0.1, "truth": None,

@@ -4,6 +4,7 @@ import copy
 import csv
 import json
 
+import numpy as np
 import pytest
 
 from skyfit_mi.cli import main
@@ -99,6 +100,9 @@ def test_relight_onto_a_new_day_has_no_observations(day, tmp_path):
     ("other region", "'plate' is not a ward material of disc.xml"),
     ("twice", "is fitted twice"),
     ("into the target", "the output folder is the target's"),
+    ("another model", "is not a fit result of `skyfit fit`"),
+    ("no sun", "the target's sun is below the horizon at every time (01:00, 23:00)"),
+    ("no region in the target", "does not see region 'disc'"),
 ])
 def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
     fit = _fit_json(tmp_path / "fit_disc.json")
@@ -115,7 +119,22 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
         args = [str(fit), str(tmp_path)]
     elif case == "into the target":
         out = day / "day"
-    assert main(["relight", *args, "--target", str(day / "day"), "-o", str(out), "-q"]) == 2
+    elif case == "another model":
+        _fit_json(fit, model="seven", rho_s=0.1, sigma_alpha=0.1)
+    target = day / "day"
+    if case in ("no sun", "no region in the target"):
+        raw = copy.deepcopy(TINY)
+        if case == "no sun":
+            raw["time"]["times"] = ["01:00", "23:00"]
+        else:                                   # the camera looks away from the disc
+            raw["camera"] = {"origin": [0.0, 0.0, 3.0], "target": [10.0, 0.0, 3.0],
+                             "fov_deg": 8.0, "width": 16, "height": 16}
+        target = tmp_path / "target.json"
+        target.write_text(json.dumps(raw))
+        if case == "no region in the target":
+            assert main(["render", str(target), "-o", str(tmp_path / "away"), "-q"]) == 0
+            target = tmp_path / "away"
+    assert main(["relight", *args, "--target", str(target), "-o", str(out), "-q"]) == 2
     err = capsys.readouterr().err.strip()
     assert phrase in err and len(err.splitlines()) == 1, err
 
@@ -191,3 +210,44 @@ def test_relight_onto_another_camera_compares_the_material_where_that_camera_see
                  "--draws", "10"]) == 0
     e = json.loads((out / "relight.json").read_text())["regions"]["disc"]
     assert e["pixels"] > 16 and e["rel_rms"] < 1e-6 and "held_out_rel_rms" not in e
+
+
+@pytest.fixture(scope="module")
+def glossy(tmp_path_factory, mi):
+    """A glossy Ward disc's clear day seen from the east, fitted (3 parameters)."""
+    tmp = tmp_path_factory.mktemp("glossy")
+    raw = copy.deepcopy(TINY)
+    raw["materials"] = {"disc": {"model": "achromatic", "R": 0.6, "rho_s": 0.08,
+                                 "sigma_alpha": 0.12}}
+    raw["render"]["spp"] = 256
+    (tmp / "train.json").write_text(json.dumps(raw))
+    assert main(["render", str(tmp / "train.json"), "-o", str(tmp / "train"), "-q"]) == 0
+    assert main(["fit", str(tmp / "train"), "--region", "disc=rect:6,6,9,9", "--model", "3",
+                 "-o", str(tmp / "fits")]) == 0
+    return tmp, raw
+
+
+@pytest.mark.parametrize("change", ["overcast sky", "camera from the north"])
+def test_a_fit_of_ward_data_predicts_another_sky_and_camera_within_its_band(
+        glossy, tmp_path, change):
+    """Predict (the fast path) a day the fit never saw: an overcast sky, or the clear day from
+    the north.  The observed region means lie in the predicted 95% bands, and the prediction
+    is close."""
+    fitted, target = glossy[0], copy.deepcopy(glossy[1])
+    if change == "overcast sky":
+        target["sky"] = {"type": "overcast"}
+    else:
+        target["camera"]["azimuth_deg"] = 0.0
+    target["render"]["seed"] = 11
+    (tmp_path / "target.json").write_text(json.dumps(target))
+    assert main(["render", str(tmp_path / "target.json"), "-o", str(tmp_path / "target"),
+                 "-q"]) == 0
+    out = tmp_path / "pred"
+    assert main(["relight", str(fitted / "fits"), "--target", str(tmp_path / "target"),
+                 "-o", str(out), "-q", "--no-images", "--draws", "100"]) == 0
+    errors = json.loads((out / "relight.json").read_text())
+    assert errors["band_coverage"]["share"] >= 0.75, errors["band_coverage"]
+    rows = list(csv.reader(open(out / "prediction.csv")))[1:]
+    pred, seen = (np.array([float(r[k]) for r in rows]) for k in (4, 7))
+    err = np.sqrt(np.mean((pred - seen) ** 2) / np.mean(seen**2))
+    assert err < 0.02                 # measured 0.56% (overcast) and 0.26% (north); 12 values

@@ -117,6 +117,7 @@ def _fit_json(path, **changes):
     result = {"region": "disc", "model": "colour", "normalisation": "balanced",
               "parameters": {"C_r": 0.6, "C_g": 0.4, "C_b": 0.2, "rho_s": 0.08,
                              "sigma_alpha": 0.1}, **changes}
+    result["intervals"] = {k: {"95": [v, v]} for k, v in result["parameters"].items()}
     path.write_text(json.dumps(result))
     return path.name
 
@@ -144,15 +145,15 @@ def test_a_fit_json_is_a_spec_material(tmp_path):
     ({"fit": "missing.json"}, "missing.json does not exist"),
     ({"fit": "fit_disc.json", "rho_s": 0.1}, "either fit = .* not both"),
     ({"fit": "not_json.json"}, "not readable JSON"),
-    ({"fit": "other.json"}, "is not a skyfit fit JSON"),
+    ({"fit": "other.json"}, "is not a fit result of `skyfit fit`"),
     ({"fit": "nan.json"}, "not finite numbers"),
 ])
 def test_bad_fit_materials(tmp_path, fit, match):
     _fit_json(tmp_path / "fit_disc.json")
     (tmp_path / "not_json.json").write_text("{oops")
     _fit_json(tmp_path / "other.json", model="raw")
-    (tmp_path / "nan.json").write_text(
-        '{"model": "two", "parameters": {"rho_s": NaN, "sigma_alpha": 0.1}}')
+    _fit_json(tmp_path / "nan.json", model="two",
+              parameters={"rho_s": float("nan"), "sigma_alpha": 0.1})
     raw = thesis_disc_spec("t", {"model": "two", "rho_s": 0.5, "sigma_alpha": 0.1})
     raw["materials"] = {"disc": fit}
     with pytest.raises(SpecError, match=match):

@@ -96,6 +96,21 @@ class FitSession:
         self.cache_time = time.perf_counter() - t0
         self._trace_cache()
 
+    @classmethod
+    def from_fit(cls, result, manifest_path, pixels=None, **options):
+        """The session of the region that a fit ``result`` (a fit JSON, checked by
+        :func:`~skyfit_mi.pipeline.fit_result.read_fit_result`) measured, in its model and
+        normalisation, on the sequence ``manifest_path`` (its own, or a target's); ``pixels``
+        default to the fit's own; ``options`` as the constructor's."""
+        if pixels is None:
+            if not isinstance(result.get("pixels"), list) or not result["pixels"]:
+                raise SkyfitError(f"the fit of region {result['region']!r} lists no pixels; "
+                                  "give the fit_NAME.json that `skyfit fit` wrote.")
+            pixels = result["pixels"]
+        return cls(manifest_path, result["region"], np.asarray(pixels, dtype=int),
+                   model=result["model"], normalisation=result.get("normalisation", "ward"),
+                   **options)
+
     def _trace_cache(self):
         """(Re)build the light cache at ``cache_settings`` and everything made from it."""
         from ..render.fit_model import WardModel

@@ -24,7 +24,8 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..files import write_json, write_text
-from .report import fit_files, read_fit
+from .report import fit_files
+from ..pipeline.fit_result import read_fit_result
 from ..pipeline.manifest import load_manifest, manifest_file, rendered_frames
 from ..pipeline.pixels import frame_values
 from ..pipeline.spec import read_spec, validate_spec
@@ -47,9 +48,7 @@ def load_fits(paths):
             if not found:
                 raise SkyfitError(f"no fit_*.json beside {p}; give the folder `skyfit fit` wrote.")
         elif p.is_file():
-            r = read_fit(p)
-            if r is None:
-                raise SkyfitError(f"{p} is not a fit result of `skyfit fit` (fit_NAME.json).")
+            r = read_fit_result(p)
             found = {r["region"]: (p, r)}
         else:
             raise SkyfitError(f"fit {str(p)!r} does not exist; give fit_NAME.json files, a "
@@ -95,6 +94,10 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     from ..pipeline.sequence import render_sequence
 
     spec, doc = target_spec(target, fits)
+    if all(f.skipped or f.sun_zenith_deg >= 90.0 for f in spec.frames):
+        raise SkyfitError(f"the target's sun is below the horizon at every time "
+                          f"({', '.join(f'{f.time:%H:%M}' for f in spec.frames)}); give times "
+                          "of day with the sun up.")
     if doc is not None and Path(out).resolve() == manifest_file(target).parent.resolve():
         raise SkyfitError("the output folder is the target's; give another with -o.")
     if not images and doc is None:
@@ -176,7 +179,10 @@ def target_pixels(fits, target, seed=0, max_pixels=64):
             out[region] = np.asarray(r["pixels"], dtype=int)
             continue
         if seen is None:
-            seen = dict(material_regions(target))
+            try:
+                seen = dict(material_regions(target))
+            except SkyfitError:                   # it sees no material at all
+                seen = {}
         if region not in seen:
             raise SkyfitError(f"the target's camera does not see region {region!r} away from "
                               "its edges; choose a target camera that sees it.")
@@ -184,7 +190,9 @@ def target_pixels(fits, target, seed=0, max_pixels=64):
     return out
 
 
-def _rel_rms(pred, obs, axis=None):
+def rel_rms(pred, obs, axis=None):
+    """Relative RMS error of ``pred`` against ``obs`` (over ``axis``, default all): the RMS of
+    the difference over the RMS of ``obs`` (unitless)."""
     return np.sqrt(np.mean((pred - obs) ** 2, axis=axis)) / np.sqrt(np.mean(obs**2, axis=axis))
 
 
@@ -206,18 +214,18 @@ def prediction_errors(fits, observed, relit, pixels):
         o = frame_values(observed, px, both)
         p = frame_values(relit, px, both)
         regions[region] = {"fit": str(path), "pixels": len(px), "frames": len(both),
-                           "rel_rms": float(_rel_rms(p, o)),
-                           "per_frame": _rel_rms(p, o, axis=(0, 2)).tolist()}
+                           "rel_rms": float(rel_rms(p, o)),
+                           "per_frame": rel_rms(p, o, axis=(0, 2)).tolist()}
         if r.get("sequence_run_id") == obs_doc.get("run_id") and "frames" in r:
             # the fit's own sequence: the frames it did not train on are held out
             held = np.array([i not in set(r["frames"]) for i in both])
             regions[region]["trained_frames"] = [int(i) for i in r["frames"]]
-            regions[region]["held_out_rel_rms"] = (float(_rel_rms(p[:, held], o[:, held]))
+            regions[region]["held_out_rel_rms"] = (float(rel_rms(p[:, held], o[:, held]))
                                                    if held.any() else None)
         all_pred.append(p.ravel())
         all_obs.append(o.ravel())
     return {"regions": regions, "times": times, "frames": both,
-            "rel_rms": float(_rel_rms(np.concatenate(all_pred), np.concatenate(all_obs))),
+            "rel_rms": float(rel_rms(np.concatenate(all_pred), np.concatenate(all_obs))),
             "unit": "relative RMS of radiance (unitless)"}
 
 
@@ -380,10 +388,9 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
     rng = np.random.default_rng(seed)
     rows = []
     for region, (_, r) in sorted(fits.items()):
-        s = FitSession(target, region, pixels[region], model=r["model"],
-                       normalisation=r.get("normalisation", "ward"), seed=seed,
-                       positions=PREDICTION_CACHE[0], directions=PREDICTION_CACHE[1],
-                       min_frames=1)
+        s = FitSession.from_fit(r, target, pixels[region], seed=seed,
+                                positions=PREDICTION_CACHE[0],
+                                directions=PREDICTION_CACHE[1], min_frames=1)
         sets = parameter_draws(r, s.names, s.lower, s.upper, draws, rng)
         means = np.stack([s.wm.radiance(t).mean(axis=0) for t in sets])     # (draws, T, 3)
         lo, hi = np.percentile(means[1:], [2.5, 97.5], axis=0)

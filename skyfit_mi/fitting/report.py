@@ -5,7 +5,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import SkyfitError
 from ..files import save_figure, write_json, write_text
+from ..pipeline.fit_result import read_fit_result
 
 
 def write_fit(result, prefix):
@@ -56,13 +58,12 @@ SUMMARY_NAME = "fits.csv"
 
 
 def read_fit(path):
-    """The fit result in ``path`` (a ``fit_NAME.json``), or None if it holds none."""
+    """The fit result in ``path`` (a ``fit_NAME.json``, :func:`read_fit_result`), or None if
+    it holds none."""
     try:
-        r = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return read_fit_result(path)
+    except SkyfitError:
         return None
-    ok = isinstance(r, dict) and {"region", "parameters", "intervals"} <= set(r)
-    return r if ok else None
 
 
 def fit_files(folder):

@@ -348,30 +348,19 @@ def _camera(sec):
 def _fitted_material(name, m, base_dir):
     """The material a fit JSON (``fit_NAME.json`` of ``skyfit fit``) describes: its model,
     normalisation and fitted parameters, with ``source`` naming the file and region."""
-    import json
-
     from ..render.fit_model import PARAMETERS, material_dict
+    from .fit_result import read_fit_result
 
     if set(m) != {"fit"}:
         raise SpecError(f"[materials.{name}] takes either fit = \"fit_NAME.json\" or a model "
                         f"and its parameters, not both (got {', '.join(sorted(m))}).")
     path = base_dir / _text(f"materials.{name}", "fit", m["fit"])
     try:
-        result = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise SpecError(f"[materials.{name}] fit file {path} does not exist; give the "
-                        "fit_NAME.json that `skyfit fit` wrote (relative to the spec).") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise SpecError(f"[materials.{name}] fit file {path} is not readable JSON ({exc}).") \
-            from None
-    model = result.get("model") if isinstance(result, dict) else None
-    params = result.get("parameters") if model in PARAMETERS else None
-    if not isinstance(params, dict) or set(params) != set(PARAMETERS[model]):
-        raise SpecError(f"[materials.{name}] {path} is not a skyfit fit JSON (it needs a model "
-                        f"of {', '.join(PARAMETERS)} and that model's parameters).")
-    theta = [params[k] for k in PARAMETERS[model]]
-    if not all(isinstance(v, (int, float)) and np.isfinite(v) for v in theta):
-        raise SpecError(f"[materials.{name}] {path} has parameters that are not finite numbers.")
+        result = read_fit_result(path)
+    except SkyfitError as exc:
+        raise SpecError(f"[materials.{name}] {exc} (Paths are relative to the spec.)") from None
+    model = result["model"]
+    theta = [result["parameters"][k] for k in PARAMETERS[model]]
     out = material_dict(model, theta, result.get("normalisation", "ward"))
     return {**out, "source": f"fit {path.name} (region {result.get('region', '?')})"}
 

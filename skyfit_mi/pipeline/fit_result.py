@@ -1,0 +1,50 @@
+"""The fit result file (``fit_NAME.json``, written by ``skyfit fit``): its one reader.
+
+It is the inverse half's output and, as a spec material (``{ fit = "fit_NAME.json" }``), an
+input of the forward half, so it is read here, below both: the spec takes a fitted material
+from it, and ``relight``, ``chi2map`` and the fit folder's summary take whole results.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SkyfitError
+
+
+def read_fit_result(path):
+    """The fit result in ``path``, checked: a region name, a model of
+    :data:`~skyfit_mi.render.fit_model.PARAMETERS`, that model's parameters as finite numbers
+    and a 95% interval of each.  SkyfitError saying what is wrong otherwise."""
+    from ..render.fit_model import PARAMETERS
+
+    path = Path(path)
+    try:
+        r = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise SkyfitError(f"fit file {path} does not exist; give a fit_NAME.json that "
+                          "`skyfit fit` wrote.") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise SkyfitError(f"fit file {path} is not readable JSON ({exc}).") from None
+    if not _is_fit_result(r, PARAMETERS):
+        raise SkyfitError(f"{path} is not a fit result of `skyfit fit` (fit_NAME.json: a "
+                          f"region, a model of {', '.join(PARAMETERS)}, its parameters and "
+                          "their intervals).")
+    params = r["parameters"]
+    if not all(isinstance(v, (int, float)) and np.isfinite(v) for v in params.values()):
+        raise SkyfitError(f"{path} has parameters that are not finite numbers.")
+    return r
+
+
+def _is_fit_result(r, parameters):
+    """Whether the JSON value ``r`` has a fit result's keys: region, model (of
+    ``parameters``), its parameters, and each one's 95% interval."""
+    if not isinstance(r, dict) or not isinstance(r.get("region"), str) \
+            or r.get("model") not in parameters:
+        return False
+    params, intervals = r.get("parameters"), r.get("intervals")
+    return (isinstance(params, dict) and set(params) == set(parameters[r["model"]])
+            and isinstance(intervals, dict)
+            and all(isinstance(intervals.get(k), dict) and "95" in intervals[k]
+                    for k in params))
