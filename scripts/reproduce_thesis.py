@@ -1,4 +1,7 @@
-"""Regenerate the thesis's tables 7.1-7.12 on skyfit's synthetic sequences (issue: fitting).
+"""Regenerate the thesis's tables 7.1-7.12 and figures 6.5-6.21, 7.10, 7.13-7.14 on skyfit's
+synthetic sequences (issues: fitting, relight).
+
+Tables (``--part tables``):
 
 Each case is a noise-free synthetic day (40 N, 21 June, hourly 06:00-18:00, clear sky, the
 disc seen at 45 degrees from the thesis's camera), 16x16 frames at 1024 spp, 12-bit sensor;
@@ -7,14 +10,18 @@ from the thesis's listed starting points and its result is printed beside the th
 annealing (the thesis's schedules) and the global method run from --starts random starts.
 A fit succeeds when every determined parameter is within 0.01 (rho_s, R, C) and 0.005
 (sigma_alpha) of the truth (sigma_alpha is not counted when rho_s = 0, where it has no
-meaning, as in the thesis).  Writes markdown to --output.
+meaning, as in the thesis).
 
-    .venv/bin/python scripts/reproduce_thesis.py [--starts 30] [--output docs/THESIS_TABLES.md]
+Figures (``--part figures``): see ``scripts/thesis_figures.py``; the PNGs go to
+--figures-dir, their summary into --output after the tables.  Each part replaces only its own
+section of --output.
+
+    .venv/bin/python scripts/reproduce_thesis.py [--part all|tables|figures] [--starts 30]
+        [--output docs/THESIS_TABLES.md] [--figures-dir out/thesis_figures]
 """
 
 import argparse
 import datetime as dt
-import os
 import sys
 import tempfile
 import time
@@ -105,13 +112,30 @@ def main():
                     help="random starts per case and method (0: only the Levenberg-Marquardt tables)")
     ap.add_argument("--cases", default="all", help="comma-separated table numbers (7.1-7.12)")
     ap.add_argument("--output", default="docs/THESIS_TABLES.md")
+    ap.add_argument("--part", choices=("all", "tables", "figures"), default="all")
+    ap.add_argument("--figures-dir", default="out/thesis_figures",
+                    help="folder of the figures' PNGs (default out/thesis_figures)")
     args = ap.parse_args()
+    command = " ".join([".venv/bin/python", "scripts/reproduce_thesis.py"] + sys.argv[1:])
+    if args.part in ("all", "figures"):
+        from thesis_figures import figures
+
+        with tempfile.TemporaryDirectory() as tmp:
+            section = figures(Path(tmp), Path(args.figures_dir).resolve())
+        replace_part(args.output, 1, [FIGURES_MARK, "", f"Command: `{command}`. Date: "
+                                      f"{dt.date.today().isoformat()}.", "", *section])
+        print(f"wrote the figures' section of {args.output}")
+    if args.part in ("all", "tables"):
+        tables(args, command)
+
+
+def tables(args, command):
     from skyfit_mi.fitting.chi2 import parse_region
     from skyfit_mi.fitting.fit import FitSession
 
     region = parse_region("rect:6,6,9,9")
-    lines = ["# The thesis's tables 7.1-7.12 on skyfit's sequences", "",
-             f"Command: `{' '.join(['.venv/bin/python', 'scripts/reproduce_thesis.py'] + sys.argv[1:])}`. "
+    lines = ["# The thesis's tables 7.1-7.12 (and, below, figures 6.5-6.21, 7.10, 7.13-7.14) on skyfit's sequences", "",
+             f"Command: `{command}`. "
              f"Date: {dt.date.today().isoformat()}. Method in the script's docstring.", ""]
     summary = ["| table | model | truth | method | starts | successes | median evaluations | "
                "median time [s] | largest error | thesis |", "|---|---|---|---|---|---|---|---|---|---|"]
@@ -158,16 +182,30 @@ def main():
     print(f"wrote {args.output}")
 
 
+#: The line that starts the figures' section of the output (the tables' part comes before).
+FIGURES_MARK = "<!-- figures: scripts/reproduce_thesis.py --part figures -->"
+
+
 def write(path, lines, summary, done):
-    """Write the tables so far (atomically), so that an interrupted run keeps its results."""
+    """Write the tables so far, so that an interrupted run keeps its results."""
     text = lines + ["## Annealing (tables 7.4-7.12) and the global method from random starts", ""]
     text += summary + ["", "Times exclude the light cache (built once per case) and include the "
                        "uncertainty analysis of each fit."]
     if not done:
         text += ["", "*Run in progress: the cases above are complete, later ones not yet run.*"]
-    tmp = Path(path).with_name(f".{Path(path).name}.tmp")
-    tmp.write_text("\n".join(text) + "\n")
-    os.replace(tmp, path)
+    replace_part(path, 0, text)
+
+
+def replace_part(path, part, lines):
+    """Replace part 0 (the tables) or 1 (the figures, from FIGURES_MARK on) of the markdown
+    file ``path``, keeping the other; written atomically."""
+    from skyfit_mi.files import write_text
+
+    old = Path(path).read_text() if Path(path).exists() else ""
+    head, mark, tail = old.partition(FIGURES_MARK)
+    parts = [head.rstrip("\n"), (mark + tail).rstrip("\n")]
+    parts[part] = "\n".join(lines).rstrip("\n")
+    write_text(path, "\n\n".join(p for p in parts if p) + "\n")
 
 
 if __name__ == "__main__":

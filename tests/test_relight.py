@@ -55,7 +55,7 @@ def test_relit_with_the_true_material_reproduces_the_target(day, tmp_path):
     assert rows[-1].startswith("all,all,,")
     # the fast path: the fit's cached model of the target's light predicts the observed region
     # means (a fit with zero-width intervals: a band of the model's own noise only)
-    pred = list(csv.reader(open(out / "prediction.csv")))
+    pred = list(csv.reader((out / "prediction.csv").read_text().splitlines()))
     assert pred[0][:4] == ["region", "frame", "time", "channel"] and len(pred) == 1 + 4 * 3
     for row in pred[1:]:
         assert float(row[4]) == pytest.approx(float(row[7]), rel=0.01)
@@ -155,7 +155,7 @@ def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day
     assert not (out / "manifest.json").exists()
     errors = json.loads((out / "relight.json").read_text())
     assert errors["band_coverage"]["share"] == 1.0
-    rows = list(csv.reader(open(out / "prediction.csv")))[1:]
+    rows = list(csv.reader((out / "prediction.csv").read_text().splitlines()))[1:]
     assert all(float(r[6]) - float(r[5]) > 0.02 * float(r[4]) for r in rows)
     _fit_json(fit, model="achromatic", R=0.8, rho_s=0.0, sigma_alpha=0.0)
     assert main(["relight", str(fit), "--target", str(day / "day"), "-o", str(out), "-q",
@@ -183,7 +183,7 @@ def test_fit_on_some_frames_and_relight_onto_the_same_folder_reports_the_held_ou
     assert e["trained_frames"] == [0, 1] and e["held_out_rel_rms"] < 0.05
     assert e["pixels"] == 16                                  # the fit's own pixels
     assert errors["band_coverage"]["share"] >= 0.75          # measured 1.0 (12 values)
-    rows = list(csv.reader(open(out / "relight.csv")))
+    rows = list(csv.reader((out / "relight.csv").read_text().splitlines()))
     assert [row[4] for row in rows[1:5]] == ["no", "no", "yes", "yes"]
 
 
@@ -247,7 +247,10 @@ def test_a_fit_of_ward_data_predicts_another_sky_and_camera_within_its_band(
                  "-o", str(out), "-q", "--no-images", "--draws", "100"]) == 0
     errors = json.loads((out / "relight.json").read_text())
     assert errors["band_coverage"]["share"] >= 0.75, errors["band_coverage"]
-    rows = list(csv.reader(open(out / "prediction.csv")))[1:]
+    rows = list(csv.reader((out / "prediction.csv").read_text().splitlines()))[1:]
     pred, seen = (np.array([float(r[k]) for r in rows]) for k in (4, 7))
     err = np.sqrt(np.mean((pred - seen) ** 2) / np.mean(seen**2))
     assert err < 0.02                 # measured 0.56% (overcast) and 0.26% (north); 12 values
+    # the same from the true material: noise alone, which the fit's error is compared with
+    means = errors["region_means"]["disc"]
+    assert means["fit"] == pytest.approx(err, rel=1e-3) and means["truth"] < 0.02

@@ -112,11 +112,14 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     ensure_dir(Path(out))
     where = target if observed or not images else out
     pixels = target_pixels(fits, where, seed)
-    rows = predict(fits, where, pixels, draws, seed, log)
+    rows, means = predict(fits, where, pixels, draws, seed, log)
     write_prediction(rows, out, "observed" if observed else "relit render")
     if not observed:
         return None
-    errors = {"regions": {}}
+    errors = {"regions": {}, "region_means": means,
+              "region_means_note": "relative RMS error of each region's mean radiance per "
+              "frame as predicted by the fit's cached model, at the fit and (a synthetic target "
+              "in the fit's model) at the true material, whose error is noise alone"}
     if images:
         errors = prediction_errors(fits, target, out, pixels)
         if all("radiance_sigma" in f for f in rendered_frames(doc)):
@@ -157,6 +160,9 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
             + (f"; the images' noise alone gives {floor:.2%}" if floor is not None else "")
             + (f", a re-render of the truth {e['reference_rel_rms']:.2%}"
                if "reference_rel_rms" in e else ""))
+    for region, m in means.items():
+        log(f"{region}: predicted region means differ from the observed by {m['fit']:.2%} rms"
+            + ("" if m["truth"] is None else f" (the true material's: {m['truth']:.2%})"))
     if images:
         log(f"overall: {errors['rel_rms']:.2%} rms")
     log(f"observed region means inside the predicted 95% band: "
@@ -380,13 +386,18 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
     region's mean per frame and channel at the fit and its 95% band (2.5-97.5 percentiles
     over :func:`parameter_draws`, widened in quadrature by the image's noise and the model's
     Monte Carlo error), with the image's mean (the observed, where the target holds frames).
-    Returns rows (region, frame, time, channel, predicted, lo95, hi95, observed) [W m^-2 sr^-1].
+    Returns rows (region, frame, time, channel, predicted, lo95, hi95, observed)
+    [W m^-2 sr^-1], and per region the relative RMS error of its predicted means against the
+    image's, at the fit and, where the target's material is known in the fit's model (a
+    synthetic target), at the truth: the truth's error is the Monte Carlo noise alone, so the
+    fit's excess over it is the fit's error.
     """
     from .fit import FitSession
+    from .landscape import truth_parameters
     from .uncertainty import widen
 
     rng = np.random.default_rng(seed)
-    rows = []
+    rows, summary = [], {}
     for region, (_, r) in sorted(fits.items()):
         s = FitSession.from_fit(r, target, pixels[region], seed=seed,
                                 positions=PREDICTION_CACHE[0],
@@ -410,5 +421,10 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
                 band = widen(means[0, j, c], (lo[j, c], hi[j, c]), extra[j, c], 0.0, np.inf)
                 rows.append((region, int(i), t, ch, float(means[0, j, c]), *band,
                              float(observed[j, c])))
+        truth = truth_parameters(s.truth, s.model, s.names)
+        summary[region] = {
+            "fit": float(rel_rms(means[0], observed)),
+            "truth": None if truth is None
+            else float(rel_rms(s.wm.radiance(truth).mean(axis=0), observed))}
         log(f"{region}: predicted {len(s.obs.frames)} frames from {draws} parameter draws")
-    return rows
+    return rows, summary
