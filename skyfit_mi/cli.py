@@ -178,8 +178,8 @@ def _chi2map(args):
     import numpy as np
 
     from .fitting.fit import FitSession
-    from .fitting.landscape import (chi2_map, map_axes, profiled_rho_sigma_map,
-                                    truth_parameters, write_chi2_map)
+    from .fitting.landscape import (chi2_map, map_axes, profiled_map, truth_parameters,
+                                    write_chi2_map)
     from .pipeline.fit_result import read_fit_result
     from .pipeline.manifest import load_manifest
     from .render.fit_model import PARAMETERS
@@ -187,13 +187,11 @@ def _chi2map(args):
     _, root = load_manifest(args.manifest)
     r = read_fit_result(args.fit)
     names = list(PARAMETERS[r["model"]])
-    xs, ys = map_axes(r["model"], args.x, args.y, args.x_range, args.y_range, args.n)
-    if args.profile and ({args.x, args.y} != {"rho_s", "sigma_alpha"} or r["model"] == "two"):
-        raise SkyfitError("--profile maps rho_s against sigma_alpha with R or C at their best; "
-                          "for other axes, or the 2-parameter model, leave it out.")
+    xs, ys = map_axes(r["model"], args.x, args.y, args.x_range, args.y_range, args.n,
+                      args.profile)
     s = FitSession.from_fit(r, args.manifest, seed=args.seed, frames=r.get("frames"))
     theta = np.array([r["parameters"][k] for k in names])
-    chi2 = (profiled_rho_sigma_map(s, xs, ys, args.x) if args.profile
+    chi2 = (profiled_map(s, theta, args.x, args.y, xs, ys) if args.profile
             else chi2_map(s, theta, args.x, args.y, xs, ys))
     ix, iy = names.index(args.x), names.index(args.y)
     j, i = np.unravel_index(np.argmin(chi2), chi2.shape)
@@ -204,7 +202,7 @@ def _chi2map(args):
     walk = np.asarray(r.get("trace") or [], dtype=float)
     walk = walk[:, [ix, iy]] if args.walk and walk.ndim == 2 and len(walk) > 1 else None
     prefix = Path(args.output) if args.output else root / f"chi2map_{r['region']}_{args.x}_{args.y}"
-    others = "profiled (linearised, closed form)" if args.profile else "at the fit"
+    others = "profiled (linearised, on the global search's grids)" if args.profile else "at the fit"
     paths = write_chi2_map(prefix, args.x, args.y, xs, ys, chi2, marks, walk, others)
     print(f"{r['region']}: chi2 minimum {chi2.min():.6g} at {args.x} = {xs[i]:.4g}, "
           f"{args.y} = {ys[j]:.4g} (the fit: {theta[ix]:.4g}, {theta[iy]:.4g}); wrote "
@@ -366,8 +364,8 @@ def build_parser():
     cmap.add_argument("--n", type=_int_in(2, 1000), default=60,
                       help="grid points per axis (default 60)")
     cmap.add_argument("--profile", action="store_true",
-                      help="rho_s against sigma_alpha with R or C at their best for each point "
-                      "(closed form on the linearised data), not fixed at the fit")
+                      help="every other parameter at its best for each point (the profile, "
+                      "on the linearised data), not fixed at the fit")
     cmap.add_argument("--walk", action="store_true",
                       help="overlay the fit's walk (its trace, e.g. annealing's)")
     cmap.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,

@@ -25,7 +25,7 @@ def test_the_maps_minimum_is_the_fits(fitted, tmp_path, capsys):
     prefix = tmp_path / "map"
     assert main(["chi2map", str(day), str(fit), "--x-range", f"{rho - 0.1:.4f},{rho + 0.1:.4f}",
                  "--y-range", f"{sigma - 0.05:.4f},{sigma + 0.05:.4f}", "-o", str(prefix)]) == 0
-    rows = list(csv.reader(open(prefix.with_suffix(".csv"))))
+    rows = list(csv.reader(prefix.with_suffix(".csv").read_text().splitlines()))
     assert rows[0] == ["rho_s", "sigma_alpha", "chi2"] and len(rows) == 1 + 60 * 60
     grid = np.array(rows[1:], dtype=float)
     best = grid[np.argmin(grid[:, 2])]
@@ -48,18 +48,48 @@ def test_bad_maps_get_one_line(fitted, capsys, args, phrase):
     assert phrase in err and len(err.splitlines()) == 1, err
 
 
-def test_a_profiled_map_is_at_most_the_fixed_one(fitted, tmp_path):
-    """With R at its best for every (rho_s, sigma_alpha) the map lies at or below the map with
-    R fixed at the fit (up to the linearisation), and lower at most points."""
+@pytest.fixture(scope="module")
+def session(fitted):
+    from skyfit_mi.fitting.fit import FitSession
+
     day, fit = fitted
-    maps = {}
-    for flag in ([], ["--profile"]):
-        prefix = tmp_path / ("p" if flag else "f")
-        assert main(["chi2map", str(day), str(fit), "--n", "12", "--y-range", "0.02,0.3",
-                     *flag, "-o", str(prefix)]) == 0
-        maps[bool(flag)] = np.array(list(csv.reader(open(prefix.with_suffix(".csv"))))[1:],
-                                    dtype=float)[:, 2]
-    fixed, profiled = maps[False], maps[True]
-    assert np.all(profiled <= fixed * 1.01 + 1.0)
-    assert np.mean(profiled < fixed - 1.0) > 0.5              # R's freedom lowers most points
-    assert main(["chi2map", str(day), str(fit), "--x", "R", "--profile"]) == 2
+    r = json.loads(fit.read_text())
+    return FitSession.from_fit(r, day, seed=0), r
+
+
+@pytest.mark.parametrize("x, y", [("rho_s", "sigma_alpha"), ("R", "sigma_alpha"),
+                                  ("R", "rho_s")])
+def test_a_profiled_map_is_at_most_the_fixed_one(session, x, y):
+    """With every other parameter at its best for each point (started from the linearised
+    best and from the fit, polished on the true chi-square) the map lies below the map with
+    them fixed at the fit at most points, never above it, and never below the fit's own
+    chi-square (the global minimum)."""
+    from skyfit_mi.fitting.landscape import chi2_map, map_axes, profiled_map
+
+    s, r = session
+    theta = np.array([r["parameters"][k] for k in s.names])
+    xs, ys = map_axes(s.model, x, y, None, (0.02, 0.3) if y == "sigma_alpha" else None, 12,
+                      profile=True)
+    fixed = chi2_map(s, theta, x, y, xs, ys)
+    profiled = profiled_map(s, theta, x, y, xs, ys)
+    assert np.mean(profiled < fixed - 1.0) > 0.5              # the freedom lowers most points
+    assert np.all(profiled <= fixed * (1 + 1e-6) + 1e-6)
+    assert profiled.min() >= r["chi2"] * (1 - 1e-4)
+
+
+def test_a_profiled_map_from_the_command_line(fitted, tmp_path, capsys):
+    day, fit = fitted
+    assert main(["chi2map", str(day), str(fit), "--n", "4", "--profile", "--x", "R",
+                 "-o", str(tmp_path / "p")]) == 0
+    assert len((tmp_path / "p.csv").read_text().splitlines()) == 1 + 16
+    assert "chi2 minimum" in capsys.readouterr().out
+
+
+def test_a_two_parameter_fit_has_nothing_to_profile(fitted, tmp_path, capsys):
+    day, fit = fitted
+    r = json.loads(fit.read_text())
+    two = {**r, "model": "two", "parameters": {k: r["parameters"][k]
+                                               for k in ("rho_s", "sigma_alpha")}}
+    (tmp_path / "fit_two.json").write_text(json.dumps(two))
+    assert main(["chi2map", str(day), str(tmp_path / "fit_two.json"), "--profile"]) == 2
+    assert "no other parameter to profile" in capsys.readouterr().err

@@ -32,13 +32,17 @@ def truth_parameters(truth, model, names):
         return None
 
 
-def map_axes(model, x, y, x_range=None, y_range=None, n=60):
+def map_axes(model, x, y, x_range=None, y_range=None, n=60, profile=False):
     """The grid (xs, ys) of a map of ``model``'s parameters ``x`` and ``y``: ``n`` values over
     each range (default the parameter's bounds); SkyfitError for an unknown or repeated
-    parameter or a range outside its bounds."""
+    parameter, a range outside its bounds, or a ``profile`` (:func:`profiled_map`) of the
+    2-parameter model, which has no other parameter."""
     from ..render.fit_model import PARAMETERS, bounds
 
     names, (lower, upper) = list(PARAMETERS[model]), bounds(model)
+    if profile and len(names) == 2:
+        raise SkyfitError("the 2-parameter model has no other parameter to profile; leave "
+                          "out --profile.")
     if x == y:
         raise SkyfitError("give two different parameters for the map's axes.")
     axes = []
@@ -71,24 +75,124 @@ def chi2_map(session, theta, x, y, xs, ys):
         for i, vx in enumerate(xs):
             point[ix], point[iy] = vx, vy
             k = i if ix == last else j if iy == last else 0
-            rho_d, spec = reflectances(session.model, point)[:2]
-            r = session.problem.residuals_from(rho_d * D + spec * G[k])
-            out[j, i] = float(r @ r)
+            out[j, i] = _chi2_from_basis(session, point, D, G[k])
     return out
 
 
-def profiled_rho_sigma_map(session, xs, ys, x="rho_s"):
-    """chi^2 over (rho_s, sigma_alpha) with R or C at their best for each point, closed form
-    on the linearised data (:func:`~skyfit_mi.fitting.methods.global_search.grid_chi2`, the
-    global search's grid: values near saturation left out, no censoring): array
-    (len(ys), len(xs)); ``x`` names the parameter on the x axis."""
-    from .methods.global_search import _linearise, grid_chi2
+def _radiance_from_basis(model, theta, D, G):
+    """Ward's radiance rho_d D + rho_s G at ``theta`` from the basis D, G at its sigma_alpha."""
+    rho_d, spec = reflectances(model, theta)[:2]
+    return rho_d * D + spec * G
 
-    rho, sigma = (xs, ys) if x == "rho_s" else (ys, xs)
-    y, w = _linearise(session.problem)
-    D, G = session.wm.basis(np.asarray(sigma, dtype=float))
-    chi2, _ = grid_chi2(session.model, y, w, D, G, np.asarray(rho, dtype=float))  # (sigma, rho)
-    return chi2 if x == "rho_s" else chi2.T
+
+def _chi2_from_basis(session, theta, D, G):
+    """The true chi^2 (censored values included) at ``theta`` from the basis at its sigma."""
+    r = session.problem.residuals_from(_radiance_from_basis(session.model, theta, D, G))
+    return float(r @ r)
+
+
+#: Gauss-Newton steps of a profile point on the true chi-square.
+PROFILE_STEPS = 4
+
+
+def _polish(session, theta, free, D, G):
+    """The lowest true chi^2 (censored values included) that Gauss-Newton steps from
+    ``theta`` over its parameters of indices ``free`` (never sigma_alpha, whose basis D, G is
+    given) reach, within the bounds; forward differences on the basis model (Ward's radiance
+    is linear in R, C and, within the plastic or the metal reading, rho_s)."""
+    problem, model = session.problem, session.model
+    theta = np.array(theta, dtype=float)
+    free = np.asarray(free, dtype=int)
+    best = np.inf
+    for step in range(PROFILE_STEPS + 1):
+        rad = _radiance_from_basis(model, theta, D, G)
+        r, dr = problem.residual_terms(rad)
+        r = r[problem.mask]
+        chi2 = float(r @ r)
+        if not chi2 < best:                         # no lower: keep the best so far
+            break
+        best = chi2
+        if step == PROFILE_STEPS or not len(free):
+            break
+        ds = (dr * problem.slope(rad))[problem.mask]
+        J = np.empty((len(r), len(free)))
+        for c, g in enumerate(free):
+            h = 1e-4 if theta[g] + 1e-4 <= session.upper[g] else -1e-4
+            t = theta.copy()
+            t[g] += h
+            J[:, c] = ds * (_radiance_from_basis(model, t, D, G) - rad)[problem.mask] / h
+        JTJ = J.T @ J
+        delta = np.linalg.lstsq(JTJ + 1e-9 * np.diag(np.diag(JTJ)), -(J.T @ r), rcond=None)[0]
+        theta[free] = np.clip(theta[free] + delta, session.lower[free], session.upper[free])
+    return best
+
+
+def profiled_map(session, theta, x, y, xs, ys):
+    """chi^2 on the grid ``xs`` x ``ys`` of parameters ``x`` and ``y`` with every other
+    parameter at its best for each point (the profile), as the true chi^2 (censored values
+    included), comparable with :func:`chi2_map`.  Each point starts from two places: the best
+    on the linearised data as the global search's grid finds it
+    (:func:`~skyfit_mi.fitting.methods.global_search.linear_quadratics`: R or each free C_c in
+    closed form, rho_s and sigma_alpha, when not an axis, on RHO_GRID and SIGMA_GRID), and
+    the fit ``theta``'s values; where sigma_alpha is not an axis, every value of its grid is
+    tried at its linearised best and the true chi^2 picks one (about 65 evaluations a
+    point).  From each start, R, C and rho_s are polished on the true chi^2 (:func:`_polish`;
+    sigma_alpha stays on its grid), and the lower is kept: so the map is never above the map
+    with the others at the fit, and bounds the profile from above.
+    The 3- and 5-parameter models (:func:`map_axes` refuses the 2-parameter one).  Returns an
+    array (len(ys), len(xs))."""
+    from .methods.global_search import RHO_GRID, SIGMA_GRID, _linearise, linear_quadratics
+
+    names = list(session.names)
+    theta = np.asarray(theta, dtype=float)
+    axes = {x: np.asarray(xs, dtype=float), y: np.asarray(ys, dtype=float)}
+    # the grids hold the fit's values, so that its start is a grid point
+    sigma = axes.get("sigma_alpha", np.union1d(SIGMA_GRID, [theta[-1]]))
+    rho = axes.get("rho_s", np.union1d(RHO_GRID, [theta[-2]]))
+    obs, w = _linearise(session.problem)
+    D, G = session.wm.basis(sigma)
+    zz, yh, hh = linear_quadratics(session.model, obs, w, D, G, rho)       # (K, R, groups)
+    at_best = np.clip(yh / np.maximum(hh, 1e-300), 0.0, 1.0)
+    best = zz - 2 * at_best * yh + at_best**2 * hh          # each group's best
+    linear = names[:-2]                                      # R, or C_r, C_g, C_b
+    ix, iy = names.index(x), names.index(y)
+    free = [n for n in range(len(names) - 1) if n not in (ix, iy)]
+    out = np.empty((len(ys), len(xs)))
+    for j, vy in enumerate(ys):
+        for i, vx in enumerate(xs):
+            at, pos = {x: vx, y: vy}, {x: i, y: j}
+            # the (sigma, rho) grid rows this point may use: its own where one is an axis
+            k0, r0 = pos.get("sigma_alpha", 0), pos.get("rho_s", 0)
+            ks = slice(k0, k0 + 1) if "sigma_alpha" in pos else slice(None)
+            rs = slice(r0, r0 + 1) if "rho_s" in pos else slice(None)
+            q = best[ks, rs].copy()
+            for g, name in enumerate(linear):
+                if name in at:
+                    v = at[name]
+                    q[..., g] = zz[ks, rs, g] - 2 * v * yh[ks, rs, g] + v * v * hh[ks, rs, g]
+            qs = q.sum(axis=-1)                                   # (K', R')
+
+            def grid_point(k, r):
+                return np.array([*(at.get(n, at_best[k, r, g]) for g, n in enumerate(linear)),
+                                 rho[r], sigma[k]])
+
+            def best_rho(row):
+                return r0 if "rho_s" in pos else int(np.argmin(qs[row]))
+            if "sigma_alpha" in pos:
+                k, r = k0, best_rho(0)
+            else:
+                # every roughness at its linearised best; the true chi^2 picks among them
+                # (the linearised one leaves out values near saturation, and can mislead)
+                k = min(range(len(sigma)), key=lambda kk: _chi2_from_basis(
+                    session, grid_point(kk, best_rho(kk)), D, G[kk]))
+                r = best_rho(k)
+            grid = grid_point(k, r)
+            at_fit = theta.copy()
+            at_fit[ix], at_fit[iy] = vx, vy
+            k_fit = k0 if "sigma_alpha" in pos else int(np.searchsorted(sigma, theta[-1]))
+            out[j, i] = min(_polish(session, grid, free, D, G[k]),
+                            _polish(session, at_fit, free, D, G[k_fit]))
+    return out
 
 
 def write_chi2_map(prefix, x, y, xs, ys, chi2, marks, walk=None, others="at the fit"):

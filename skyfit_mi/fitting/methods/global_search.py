@@ -84,6 +84,19 @@ def grid_chi2(model, y, w, D, G, rho=RHO_GRID):
         chi2 = A - 2 * rho[None, :] * B[:, None] + rho[None, :] ** 2 * C[:, None]
         thetas = np.stack([np.broadcast_to(rho, chi2.shape), np.zeros_like(chi2)], axis=-1)
         return chi2, thetas
+    zz, yh, hh = linear_quadratics(model, y, w, D, G, rho)
+    L = np.clip(yh / np.maximum(hh, 1e-300), 0.0, 1.0)          # R, or C per channel
+    chi2 = np.sum(zz - 2 * L * yh + L**2 * hh, axis=-1)
+    rho_col = np.broadcast_to(rho[None, :, None], L.shape[:2] + (1,))
+    thetas = np.concatenate([L, rho_col, np.zeros(L.shape[:2] + (1,))], axis=-1)
+    return chi2, thetas
+
+
+def linear_quadratics(model, y, w, D, G, rho):
+    """The 3- and 5-parameter models' linearised chi^2 at each (sigma_k, rho_s) grid point as
+    a quadratic in the linear parameter of each channel group (R over all channels, or C_c
+    per channel): chi^2 = sum over groups of zz - 2 L yh + L^2 hh.  Returns (zz, yh, hh),
+    each (K, R, groups) with 1 group (R) or 3 (C_r, C_g, C_b)."""
     # h = (1 - rho) D + rho G: (K, R, P, T, 3) built lazily by channel sums
     if model == "achromatic":
         a, b, c, yd, yg, yy = _weighted_sums(y, w, D, G, "")
@@ -91,10 +104,7 @@ def grid_chi2(model, y, w, D, G, rho=RHO_GRID):
         r2 = rho[None, :]
         hh = r1**2 * a + 2 * r1 * r2 * b[:, None] + r2**2 * c[:, None]
         yh = r1 * yd + r2 * yg[:, None]
-        R = np.clip(yh / np.maximum(hh, 1e-300), 0.0, 1.0)
-        chi2 = yy - 2 * R * yh + R**2 * hh
-        thetas = np.stack([R, np.broadcast_to(rho, R.shape), np.zeros_like(R)], axis=-1)
-        return chi2, thetas
+        return np.broadcast_to(yy, hh.shape)[..., None], yh[..., None], hh[..., None]
     # colour: per channel sums
     a, b, c, yd, yg, yy = _weighted_sums(y, w, D, G, "c")
     r1 = (1 - rho)[None, :, None]
@@ -107,14 +117,8 @@ def grid_chi2(model, y, w, D, G, rho=RHO_GRID):
     hh_p = r1**2 * a * np.ones_like(hh_m)
     yh_p = r1 * (yd - r2 * b[:, None])
     zz_p = yy - 2 * r2 * yg[:, None] + r2**2 * c[:, None]        # |y - r2 G|^2
-    hh = np.where(metal, hh_m, hh_p)
-    yh = np.where(metal, yh_m, yh_p)
-    zz = np.where(metal, yy, zz_p)
-    C = np.clip(yh / np.maximum(hh, 1e-300), 0.0, 1.0)
-    chi2 = np.sum(zz - 2 * C * yh + C**2 * hh, axis=-1)
-    thetas = np.concatenate([C, np.broadcast_to(rho[None, :, None], C.shape[:2] + (1,)),
-                             np.zeros(C.shape[:2] + (1,))], axis=-1)
-    return chi2, thetas
+    return (np.where(metal, yy, zz_p), np.where(metal, yh_m, yh_p),
+            np.where(metal, hh_m, hh_p))
 
 
 def global_search(problem, start, lower, upper, candidates=3, profile=True, grid_basis=None, **_):
