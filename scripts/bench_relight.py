@@ -9,7 +9,8 @@ scenes/specs/disc_clear_east.toml at 256x256, 64 spp, its disc made of table 7.1
    images, the noise floor from the sigma images);
 4. the same with `--reference` (the target's own materials rendered again: a second render);
 5. `skyfit relight --no-images` (the prediction alone);
-6. `skyfit chi2map` 60 x 60 over (rho_s, sigma_alpha), others at the fit.
+6. `skyfit chi2map` 60 x 60 over (rho_s, sigma_alpha), others at the fit;
+7. the same with `--profile` (C at its best for each point).
 Prints a markdown table of wall times and the ratio of each to the render's.
 
     .venv/bin/python scripts/bench_relight.py [-o DIR]
@@ -64,6 +65,9 @@ def main():
                         "--no-images", "--overwrite"])))
     rows.append(("chi2map 60 x 60, 64 pixels",
                  timed(["chi2map", day, fits / "fit_disc.json", "-o", work / "map"])))
+    rows.append(("chi2map 60 x 60 --profile",
+                 timed(["chi2map", day, fits / "fit_disc.json", "-o", work / "profile",
+                        "--profile"])))
     peer = rows[0][1]
     print("| step | wall time [s] | / render |\n|---|---|---|")
     for name, t in rows:

@@ -122,8 +122,8 @@ def pixels(kind, seq, material_id):
                      for dx, dy in ((0, 0), (-1, 0), (1, 0), (0, -1), (0, 1))])
 
 
-def topology(chi2, truth):
-    """Numbers that describe a map (rows sigma_alpha SIGMA, columns rho_s RHO): where its
+def topology(chi2, truth, sigma=SIGMA):
+    """Numbers that describe a map (rows sigma_alpha ``sigma``, columns rho_s RHO): where its
     minimum is and whether that is the truth (sigma_alpha not counted when rho_s = 0, where it
     has no meaning), its other local minima (lower than their 8 neighbours, 2 cells or more
     from the global one, higher than it by more than 1; the lowest one's chi2 above the
@@ -132,17 +132,17 @@ def topology(chi2, truth):
     from scipy.ndimage import minimum_filter
 
     j, i = np.unravel_index(np.argmin(chi2), chi2.shape)
-    dr, ds = RHO[1] - RHO[0], SIGMA[1] - SIGMA[0]
+    dr, ds = RHO[1] - RHO[0], sigma[1] - sigma[0]
     at_truth = abs(RHO[i] - truth[0]) <= dr + 1e-9 and (
-        truth[0] == 0 or abs(SIGMA[j] - truth[1]) <= ds + 1e-9)
+        truth[0] == 0 or abs(sigma[j] - truth[1]) <= ds + 1e-9)
     lo = chi2.min()
     local = (chi2 <= minimum_filter(chi2, size=3, mode="nearest")) & (chi2 > lo + 1.0)
     jj, ii = np.nonzero(local)
     far = np.maximum(np.abs(jj - j), np.abs(ii - i)) >= 2
-    others = sorted(zip(chi2[jj[far], ii[far]], RHO[ii[far]], SIGMA[jj[far]]))
+    others = sorted(zip(chi2[jj[far], ii[far]], RHO[ii[far]], sigma[jj[far]]))
     col = chi2[:, int(np.argmin(np.abs(RHO - truth[0])))]
     span = max(chi2.max() - lo, 1e-300)
-    return {"minimum": (float(RHO[i]), float(SIGMA[j])), "at_truth": bool(at_truth),
+    return {"minimum": (float(RHO[i]), float(sigma[j])), "at_truth": bool(at_truth),
             "chi2_min": float(lo), "chi2_median": float(np.median(chi2)),
             "local_minima": len(others),
             "lowest_local": (others[0][1], others[0][2], float(others[0][0] - lo))
@@ -163,30 +163,23 @@ def describe(t):
     return text + f"roughness changes chi2 by {t['sigma_sensitivity']:.1%} of the range at the truth's rho_s"
 
 
-def panel_figure(path, title, maps, truths, walk=None):
-    """One PNG of a figure's panels: log-scaled filled contours of chi2 - min + 1 over the
-    thesis's axes, the truth (orange circle) and the minimum (white cross) marked."""
+def panel_figure(path, title, maps, truths, walk=None, sigma=SIGMA):
+    """One PNG of a figure's panels (:func:`~skyfit_mi.fitting.landscape.draw_chi2_map` over
+    rho_s and ``sigma``), the truth and each map's minimum marked."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.colors import LogNorm
 
     from skyfit_mi.files import save_figure
+    from skyfit_mi.fitting.landscape import draw_chi2_map
 
-    fig, axes = plt.subplots(1, len(maps), figsize=(4.2 * len(maps), 3.6), squeeze=False)
+    fig, axes = plt.subplots(1, len(maps), figsize=(4.4 * len(maps), 3.8), squeeze=False,
+                             layout="constrained")
     for k, (ax, chi2, truth) in enumerate(zip(axes[0], maps, truths)):
-        rise = chi2 - chi2.min() + 1.0
-        cs = ax.contourf(RHO, SIGMA, rise, levels=np.geomspace(1.0, max(rise.max(), 10.0), 25),
-                         norm=LogNorm(), cmap="viridis")
-        fig.colorbar(cs, ax=ax, fraction=0.046)
         j, i = np.unravel_index(np.argmin(chi2), chi2.shape)
-        ax.plot(*truth, "o", color="orange", mfc="none", ms=10)
-        ax.plot(RHO[i], SIGMA[j], "+", color="w", ms=10)
-        if walk is not None:
-            ax.plot(walk[:, 0], walk[:, 1], "-", color="w", lw=0.7, alpha=0.8)
+        draw_chi2_map(fig, ax, "rho_s", "sigma_alpha", RHO, sigma, chi2,
+                      {"truth": truth, "map minimum": (RHO[i], sigma[j])}, walk)
         ax.set_title(f"({PANELS[k]}) rho_s = {truth[0]}, sigma_alpha = {truth[1]}", fontsize=8)
-        ax.set_xlabel("rho_s")
-        ax.set_ylabel("sigma_alpha")
     fig.suptitle(title, fontsize=9)
     save_figure(fig, path)
 
@@ -313,14 +306,16 @@ def random_walk(renders, out):
     start = (0.2, 0.2)
     r = s.run("anneal", start=start, seed=0, log=lambda *a: None)
     walk = np.asarray(r["trace"], dtype=float)
-    chi2 = chi2_map(s, np.array(SMOOTH_METAL), "rho_s", "sigma_alpha", RHO, SIGMA)
+    wide = np.linspace(0.0, float(s.upper[-1]), 51)         # the walk's whole range
+    chi2 = chi2_map(s, np.array(SMOOTH_METAL), "rho_s", "sigma_alpha", RHO, wide)
     panel_figure(out / "fig_7_10.png", "Fig. 7.10: an annealing walk over chi2 (smooth metal "
-                 "disc, camera east, 16 pixels), from (0.2, 0.2)", [chi2], [SMOOTH_METAL], walk)
+                 "disc, camera east, 16 pixels), from (0.2, 0.2)", [chi2], [SMOOTH_METAL], walk,
+                 wide)
     end = [r["parameters"][k] for k in ("rho_s", "sigma_alpha")]
     return (f"| 7.10 | annealing over table 7.6's map, from the local minimum (0.2, 0.2) | "
             f"escapes the local minimum and finds the global one | {len(walk)} simplex steps "
             f"recorded; ends at ({end[0]:.3f}, {end[1]:.3f}), truth (1, 0); "
-            f"{describe(topology(chi2, SMOOTH_METAL))} |")
+            f"{describe(topology(chi2, SMOOTH_METAL, wide))} |")
 
 
 def board(work, out, log):
@@ -338,22 +333,32 @@ def board(work, out, log):
                  ["relight", fits, "--target", seq, "-o", relit, "-q", "--overwrite"]):
         if main([str(a) for a in args]) != 0:
             raise SystemExit(f"skyfit {args[0]} failed")
+    from skyfit_mi.fitting.landscape import truth_parameters
+
     shutil.copy(relit / "contact_sheet.png", out / "fig_7_13.png")
     shutil.copy(relit / "prediction.png", out / "fig_7_14.png")
+    for name in ("fits.csv", "relight.json"):
+        shutil.copy((fits if name == "fits.csv" else relit) / name, out / f"board_{name}")
     errors = json.loads((relit / "relight.json").read_text())
     rows = []
     for region, e in sorted(errors["regions"].items()):
         r = json.loads((fits / f"fit_{region}.json").read_text())
-        p, t = r["parameters"], r.get("truth") or {}
+        names = list(r["parameters"])
+        p, t = r["parameters"], truth_parameters(r.get("truth"), r["model"], names)
+        outside = [] if t is None else [n for n, v in zip(names, t)
+                                        if not r["intervals"][n]["95"][0] - 1e-9 <= v
+                                        <= r["intervals"][n]["95"][1] + 1e-9]
+        truth = r.get("truth") or {}
         rows.append(f"| {region} | C ({p['C_r']:.3f}, {p['C_g']:.3f}, {p['C_b']:.3f}), rho_s "
-                    f"{p['rho_s']:.3f}, sigma_alpha {p['sigma_alpha']:.3f} | C {t.get('C')}, "
-                    f"rho_s {t.get('rho_s')}, sigma_alpha {t.get('sigma_alpha')} | "
-                    f"{e['rel_rms']:.2%} (noise alone {e.get('noise_floor_rel_rms', float('nan')):.2%})"
-                    f" | {len(r['warnings'])} |")
+                    f"{p['rho_s']:.3f}, sigma_alpha {p['sigma_alpha']:.3f} | C {truth.get('C')},"
+                    f" rho_s {truth.get('rho_s')}, sigma_alpha {truth.get('sigma_alpha')} | "
+                    + ("?" if t is None else "yes" if not outside else "no: " + ", ".join(outside))
+                    + f" | {e['rel_rms']:.2%} | {len(r['warnings'])}: "
+                    + " / ".join(w.split(":")[0][:70] for w in r["warnings"]) + " |")
         log(rows[-1])
-    rows.append(f"| all | | | {errors['rel_rms']:.2%}; observed region means in the 95% band: "
-                f"{errors['band_coverage']['share']:.0%} of {errors['band_coverage']['values']}"
-                " | |")
+    rows.append(f"| all | | | | {errors['rel_rms']:.2%}; observed region means in the 95% "
+                f"band: {errors['band_coverage']['share']:.0%} of "
+                f"{errors['band_coverage']['values']} | |")
     return rows
 
 
@@ -380,5 +385,6 @@ def figures(work, out, log=print):
             "ingest` (issue 15) brings photographs. fig_7_13.png is the relit day's contact "
             "sheet, fig_7_14.png each sample's predicted series with its 95% band and the "
             "observed values.", "",
-            "| sample | fitted | truth | relit vs observed (rel. RMS) | warnings |",
-            "|---|---|---|---|---|", *board_rows, ""]
+            "| sample | fitted | truth | truth in the 95% intervals | relit vs observed (rel. "
+            "RMS; the relit day shares the target's seeds) | warnings (their first words) |",
+            "|---|---|---|---|---|---|", *board_rows, ""]

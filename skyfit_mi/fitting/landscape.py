@@ -196,13 +196,12 @@ def profiled_map(session, theta, x, y, xs, ys):
 
 
 def write_chi2_map(prefix, x, y, xs, ys, chi2, marks, walk=None, others="at the fit"):
-    """``<prefix>.csv`` (x, y, chi2 per grid point) and ``<prefix>.png`` (log-scaled filled
-    contours of chi^2 - min + 1, ``marks`` {label: (x, y)} such as the fit, the map's
-    minimum and the truth, and an optional walk (N, 2) such as an annealing trace)."""
+    """``<prefix>.csv`` (x, y, chi2 per grid point) and ``<prefix>.png`` (:func:`draw_chi2_map`
+    with ``marks`` {label: (x, y)} such as the fit, the map's minimum and the truth, and an
+    optional walk (N, 2) such as an annealing trace)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.colors import LogNorm
 
     from ..files import save_figure, write_text
 
@@ -214,20 +213,36 @@ def write_chi2_map(prefix, x, y, xs, ys, chi2, marks, walk=None, others="at the 
         for i, vx in enumerate(xs):
             w.writerow([f"{vx:.6g}", f"{vy:.6g}", f"{chi2[j, i]:.6g}"])
     csv_path = write_text(prefix.with_suffix(".csv"), buf.getvalue())
-    rise = chi2 - chi2.min() + 1.0
-    fig, ax = plt.subplots(figsize=(6, 5))
-    levels = np.geomspace(1.0, max(rise.max(), 10.0), 25)
-    cs = ax.contourf(xs, ys, rise, levels=levels, norm=LogNorm(), cmap="viridis")
-    fig.colorbar(cs, ax=ax, label="chi2 - min + 1 (log scale)")
-    if walk is not None and len(walk) > 1:
-        ax.plot(walk[:, 0], walk[:, 1], "-", color="w", lw=0.8, alpha=0.8, label="walk")
-    styles = {"fit": ("*", "r"), "map minimum": ("+", "w"), "truth": ("o", "orange")}
-    for label, (mx, my) in marks.items():
-        m, c = styles.get(label, ("x", "k"))
-        ax.plot(mx, my, m, color=c, ms=10, mfc="none" if m == "o" else c, label=label)
-    ax.set_xlabel(x)
-    ax.set_ylabel(y)
+    fig, ax = plt.subplots(figsize=(6, 5), layout="constrained")
+    draw_chi2_map(fig, ax, x, y, xs, ys, chi2, marks, walk)
     ax.set_title(f"chi-square over {x} and {y} (others {others})", fontsize=9)
     ax.legend(fontsize=7, loc="upper right")
     png_path = save_figure(fig, prefix.with_suffix(".png"))
     return csv_path, png_path
+
+
+#: How each mark of a chi-square map is drawn: (marker, colour).
+MARK_STYLES = {"fit": ("*", "r"), "map minimum": ("+", "w"), "truth": ("o", "orange")}
+
+
+def draw_chi2_map(fig, ax, x, y, xs, ys, chi2, marks, walk=None):
+    """Log-scaled filled contours of chi^2 - min + 1 on ``ax`` with a colour bar in decades,
+    ``marks`` {label: (x, y)} (MARK_STYLES) and an optional walk (N, 2), drawn within the
+    map's ranges (a walk beyond them is cut)."""
+    from matplotlib.colors import LogNorm
+    from matplotlib.ticker import LogLocator
+
+    rise = chi2 - chi2.min() + 1.0
+    levels = np.geomspace(1.0, max(rise.max(), 10.0), 25)
+    cs = ax.contourf(xs, ys, rise, levels=levels, norm=LogNorm(), cmap="viridis")
+    fig.colorbar(cs, ax=ax, ticks=LogLocator(), label="chi2 - min + 1")
+    if walk is not None and len(walk) > 1:
+        ax.plot(walk[:, 0], walk[:, 1], "-", color="w", lw=0.8, alpha=0.8, label="walk")
+    for label, (mx, my) in marks.items():
+        m, c = MARK_STYLES.get(label, ("x", "k"))
+        ax.plot(mx, my, m, color=c, ms=10, mfc="none" if m == "o" else c, label=label,
+                clip_on=False)
+    ax.set_xlim(xs[0], xs[-1])
+    ax.set_ylim(ys[0], ys[-1])
+    ax.set_xlabel(x)
+    ax.set_ylabel(y)

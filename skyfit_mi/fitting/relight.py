@@ -128,7 +128,14 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
                 e["noise_floor_rel_rms"] = floor["regions"][region]
             errors["noise_floor_rel_rms"] = floor["all"]
             errors["noise_floor"] = ("the relative RMS error that the two sequences' Monte "
-                                     "Carlo noise alone gives (their radiance_sigma images)")
+                                     "Carlo noise alone gives (their radiance_sigma images), "
+                                     "were it independent")
+            errors["shares_target_seeds"] = doc.get("source") == "render" and \
+                int(doc["render"]["seed"]) == int(spec.render["seed"])
+            if errors["shares_target_seeds"]:
+                errors["noise_floor"] += ("; here the relit render shares the target's seeds, "
+                                          "so much of that noise cancels and the error is "
+                                          "mostly the materials' difference")
         else:
             errors["noise_floor"] = ("unknown: the target's frames have no radiance_sigma "
                                      "image (an older render); --reference measures it")
@@ -157,14 +164,16 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
         log(f"{region}: relit radiance differs from the observed by {e['rel_rms']:.2%} rms "
             f"({e['frames']} frames, {e['pixels']} pixels)"
             + (f"; {held:.2%} on the frames the fit did not see" if held is not None else "")
-            + (f"; the images' noise alone gives {floor:.2%}" if floor is not None else "")
+            + (f"; independent noise alone would give {floor:.2%}" if floor is not None else "")
             + (f", a re-render of the truth {e['reference_rel_rms']:.2%}"
                if "reference_rel_rms" in e else ""))
     for region, m in means.items():
         log(f"{region}: predicted region means differ from the observed by {m['fit']:.2%} rms"
             + ("" if m["truth"] is None else f" (the true material's: {m['truth']:.2%})"))
     if images:
-        log(f"overall: {errors['rel_rms']:.2%} rms")
+        log(f"overall: {errors['rel_rms']:.2%} rms" + (
+            " (the relit day shares the target's seeds: their Monte Carlo noise largely "
+            "cancels)" if errors.get("shares_target_seeds") else ""))
     log(f"observed region means inside the predicted 95% band: "
         f"{errors['band_coverage']['share']:.0%} of {len(inside)}")
     return errors
