@@ -49,6 +49,7 @@ def test_relit_with_the_true_material_reproduces_the_target(day, tmp_path):
     assert (out / "reference" / "manifest.json").exists()
     assert len(errors["regions"]["disc"]["per_frame"]) == len(TINY["time"]["times"])
     m = json.loads((out / "manifest.json").read_text())
+    assert m["source"] == "relight"
     assert m["scene"]["materials"]["disc"]["source"] == "fit fit_disc.json (region disc)"
     rows = (out / "relight.csv").read_text().splitlines()
     assert rows[0] == "region,frame,time,rel_rms_error,held_out"

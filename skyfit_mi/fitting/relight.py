@@ -26,7 +26,8 @@ from ..errors import SkyfitError
 from ..files import write_json, write_text
 from .report import fit_files
 from ..pipeline.fit_result import read_fit_result
-from ..pipeline.manifest import load_manifest, manifest_file, rendered_frames
+from ..pipeline.manifest import (RENDERED_SOURCES, load_manifest, manifest_file,
+                                 rendered_frames)
 from ..pipeline.pixels import frame_values
 from ..pipeline.spec import read_spec, validate_spec
 
@@ -104,11 +105,12 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
         raise SkyfitError("a prediction without images needs a sequence folder as --target "
                           "(its light is traced there); give one, or leave out --no-images.")
     observed = doc is not None and bool(rendered_frames(doc))
-    if reference and not (images and observed and doc.get("source") == "render"):
+    if reference and not (images and observed and doc.get("source") in RENDERED_SOURCES):
         raise SkyfitError("--reference renders a synthetic target's own materials again; it "
-                          "needs a target folder that `skyfit render` wrote, and images.")
+                          "needs a target folder that skyfit rendered, and images.")
     if images:
-        render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log)
+        render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log,
+                        source="relight")
     ensure_dir(Path(out))
     where = target if observed or not images else out
     pixels = target_pixels(fits, where, seed)
@@ -130,7 +132,7 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
             errors["noise_floor"] = ("the relative RMS error that the two sequences' Monte "
                                      "Carlo noise alone gives (their radiance_sigma images), "
                                      "were it independent")
-            errors["shares_target_seeds"] = doc.get("source") == "render" and \
+            errors["shares_target_seeds"] = doc.get("source") in RENDERED_SOURCES and \
                 int(doc["render"]["seed"]) == int(spec.render["seed"])
             if errors["shares_target_seeds"]:
                 errors["noise_floor"] += ("; here the relit render shares the target's seeds, "
@@ -147,7 +149,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
                                          "seed": int(doc["render"]["seed"]) + REFERENCE_SEED}}
         ref = Path(out) / "reference"
         render_sequence(validate_spec(raw, Path(doc.get("spec_dir", "."))), ref,
-                        overwrite=overwrite, progress=False, log=lambda *a: None)
+                        overwrite=overwrite, progress=False, log=lambda *a: None,
+                        source=doc["source"])
         measured = prediction_errors(fits, target, ref, pixels)
         for region, e in errors["regions"].items():
             e["reference_rel_rms"] = measured["regions"][region]["rel_rms"]

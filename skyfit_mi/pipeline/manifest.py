@@ -218,6 +218,10 @@ def frame_exposure(doc, frame):
                                                dtype=float)
 
 
+#: Manifest sources whose frames skyfit rendered (their materials are known: synthetic).
+RENDERED_SOURCES = ("render", "relight")
+
+
 def rendered_frames(doc):
     """The frames that hold observations (status ``rendered``), in time order."""
     return [f for f in doc["frames"] if f.get("status") == "rendered"]

@@ -160,11 +160,12 @@ def write_frame(out, index, radiance, radiance_sd, values, sigma):
     return names
 
 
-def manifest_header(spec, sensor, renderer):
-    """The manifest of a render of ``spec``, before any frame (status incomplete)."""
+def manifest_header(spec, sensor, renderer, source="render"):
+    """The manifest of a render of ``spec`` by command ``source`` ('render', or 'relight' for
+    fitted materials), before any frame (status incomplete)."""
     cam = spec.camera
     return {
-        "schema": SCHEMA, "source": "render", "run_id": spec.run_id(), "name": spec.raw.get("name"),
+        "schema": SCHEMA, "source": source, "run_id": spec.run_id(), "name": spec.raw.get("name"),
         "status": "incomplete",
         "created": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
         "spec": spec.raw, "spec_dir": spec.base_dir.resolve(),
@@ -202,8 +203,9 @@ def finish(out, manifest, exposure):
     return len(rendered)
 
 
-def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
-    """Render every frame of a validated spec into ``out_dir``; returns the manifest dict.
+def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print, source="render"):
+    """Render every frame of a validated spec into ``out_dir``; returns the manifest dict
+    (its ``source`` the command that renders, :func:`manifest_header`).
 
     The folder is locked while the run lasts (a second run into it is refused).  A folder
     holding another run is refused unless ``overwrite`` (which starts clean); a folder holding
@@ -214,15 +216,15 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print):
         if lock.stale is not None:
             log(f"{out}: took over the lock of a run that no longer exists "
                 f"(process {lock.stale.get('pid')}); resuming")
-        return _render(spec, out, overwrite, progress, log)
+        return _render(spec, out, overwrite, progress, log, source)
 
 
-def _render(spec, out, overwrite, progress, log):
+def _render(spec, out, overwrite, progress, log, source):
     cam = spec.camera
     done = prepare_folder(out, spec.run_id(), (cam["height"], cam["width"], 3), overwrite, log)
     sensor = spec_sensor(spec)
     renderer = FrameRenderer(spec)
-    manifest = manifest_header(spec, sensor, renderer)
+    manifest = manifest_header(spec, sensor, renderer, source)
     bar = None
     if progress:
         from tqdm import tqdm
