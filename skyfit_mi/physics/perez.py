@@ -17,15 +17,17 @@ follows ``docs/CONVENTIONS.md`` instead: ``theta_p`` is the element's zenith ang
 ``zeta`` its angle to the sun.  World frame +X east, +Y north, +Z up; azimuths from north
 toward east; degrees only in arguments named ``*_deg``.
 
-Where common implementations depart from the paper, this module follows the paper and
-offers the departure as an option, saying so:
+Where this module, or common implementations, depart from the paper:
 
 * the horizon: ``cos theta_p`` is held at 0.01 below 0.01, as Radiance's ``perezlum.cal``
   does, so that exp(b / cos theta_p) stays finite;
-* ``delta_floor``: Radiance's ``gendaylit`` and ``gendaymtx`` raise Delta to 0.2 when
-  1.065 < epsilon < 2.8, because there the published coefficients give negative luminance at
-  low Delta (a low sun in bin 2, for example).  Off by default; ``RADIANCE_DELTA_FLOOR``
-  reproduces Radiance.
+* ``delta_floor`` of :func:`perez_sky`: Radiance's ``gendaylit`` and ``gendaymtx`` (and
+  other implementations) raise Delta to 0.2 for the coefficients when 1.065 < epsilon < 2.8:
+  at lower Delta the published coefficients of those bins give b > 0 (a sky growing without
+  bound toward the horizon, e.g. DHI 60 and DNI 50 W m^-2 under a high sun) or negative
+  luminance near the horizon (a low sun in bin 2).  :func:`perez_sky` does the same by
+  default; ``delta_floor=None`` gives the published model unchanged.  :func:`coefficients`
+  is always the published model.
 * Radiance's ``gendaylit`` also clamps epsilon to [1, 12.01), Delta to [0.01, 0.6] and the
   solar altitude to at most 87 degrees, computes the air mass with Kasten (1966) and
   normalises with a 145-point sum over the sky; none of this is done here.
@@ -55,11 +57,12 @@ from .sky import IRRADIANCE_NODES
 #: the same bins in 1993) [unitless].  Bin i holds edges[i] <= epsilon < edges[i + 1].
 CLEARNESS_BIN_EDGES = np.array([1.0, 1.065, 1.23, 1.5, 1.95, 2.8, 4.5, 6.2, np.inf])
 
-#: Perez et al. 1993, Table 1 (with the erratum): for each clearness bin (axis 0) and each
-#: coefficient a, b, c, d, e (axis 1), the terms x1..x4 of x = x1 + x2 Z + Delta (x3 + x4 Z)
-#: (axis 2), Z in radians.  In bin 1, c and d take other forms (see :func:`coefficients`).
-#: The numbers agree digit for digit in three implementations: Radiance's gendaylit.c
-#: (J.-J. Delaunay 1994) and gendaymtx.c (I. Ashdown), and cPerezSkyModel.cpp.
+#: Perez et al. 1993, Table 1: for each clearness bin (axis 0) and each coefficient a, b, c,
+#: d, e (axis 1), the terms x1..x4 of x = x1 + x2 Z + Delta (x3 + x4 Z) (axis 2), Z in
+#: radians.  In bin 1, c and d take other forms (see :func:`coefficients`).  Transcribed
+#: from, and identical digit for digit in, three implementations: Radiance's gendaylit.c
+#: (J.-J. Delaunay 1994) and gendaymtx.c (I. Ashdown, who cites the 1993 erratum), and
+#: cPerezSkyModel.cpp.
 LUMINANCE_COEFFICIENTS = np.array([
     # epsilon 1.000 - 1.065 (overcast)
     [[1.3525, -0.2576, -0.2690, -1.4366], [-0.7670, 0.0007, 1.2734, -0.1233],
@@ -97,8 +100,7 @@ LUMINANCE_COEFFICIENTS = np.array([
 
 #: Perez et al. 1990, Table 4, diffuse luminous efficacy: a_i [lm W^-1], b_i [lm W^-1 cm^-1],
 #: c_i, d_i [lm W^-1] per clearness bin, for K = a + b W + c cos Z + d ln Delta (eq. 7).
-#: The same numbers are in Radiance's gendaylit.c and gendaymtx.c, in cPerezSkyModel.cpp,
-#: and in DOE-2's daylighting code.
+#: Identical in Radiance's gendaylit.c and gendaymtx.c and in cPerezSkyModel.cpp.
 DIFFUSE_EFFICACY_COEFFICIENTS = np.array([
     [97.24, -0.46, 12.00, -8.91],
     [107.22, 1.15, 0.59, -3.95],
@@ -112,21 +114,22 @@ DIFFUSE_EFFICACY_COEFFICIENTS = np.array([
 
 #: kappa of the clearness, 1.041 for Z in radians (Perez et al. 1990, eq. 1) [rad^-3].
 KAPPA = 1.041
-#: Solar constant for the extraterrestrial irradiance of Delta [W m^-2]: the WMO value of
-#: the Perez model's time, used by Radiance's gendaylit and gendaymtx.
+#: Solar constant for the extraterrestrial irradiance of Delta [W m^-2]: the WMO (1981)
+#: value of the Perez model's time, used by Radiance's gendaylit and gendaymtx.
 PEREZ_SOLAR_CONSTANT = 1367.0
 #: cos theta_p is held at this value below it, as in Radiance's perezlum.cal [unitless].
 HORIZON_COS = 0.01
-#: Radiance's lower limit on Delta for 1.065 < epsilon < 2.8 (gendaylit.c, gendaymtx.c).
+#: Radiance's lower limit on Delta for 1.065 < epsilon < 2.8 (gendaylit.c, gendaymtx.c),
+#: the default of :func:`perez_sky`.
 RADIANCE_DELTA_FLOOR = 0.2
 #: Atmospheric precipitable water assumed by Radiance's gendaylit (dew point 11 C) [cm].
 PRECIPITABLE_WATER = 2.0
 
 #: Relative air mass models for Delta, by pvlib name.
 AIRMASS_MODELS = {
-    "kastenyoung1989": "F. Kasten, A. T. Young, Applied Optics 28(22), 4735-4738, 1989 "
+    "kastenyoung1989": "F. Kasten, A. T. Young, Applied Optics 28, 4735-4738, 1989 "
                        "(pvlib's choice for the Perez models)",
-    "kasten1966": "F. Kasten, Arch. Meteorol. Geophys. Bioklimatol. B14, 206-223, 1966 "
+    "kasten1966": "F. Kasten, Arch. Meteorol. Geophys. Bioklimatol. B14, 206-233, 1966 "
                   "(Radiance's gendaylit and gendaymtx)",
 }
 
@@ -134,10 +137,11 @@ AIRMASS_MODELS = {
 #: name of their pvlib.irradiance function.
 DECOMPOSITIONS = {
     "erbs": "D. G. Erbs, S. A. Klein, J. A. Duffie, Solar Energy 28(4), 293-302, 1982",
-    "erbs_driesse": "A. Driesse, A. Jensen, R. Perez, Solar Energy 269, 112326, 2024",
-    "boland": "J. Boland, B. Ridley, B. Brown, Renewable Energy 33(4), 575-584, 2008",
+    "erbs_driesse": "A. Driesse, A. Jensen, R. Perez, Solar Energy 267, 112093, 2024",
+    "boland": "J. Boland, B. Ridley, in Modeling Solar Radiation at the Earth's Surface, "
+              "Springer, 2008, doi:10.1007/978-3-540-77455-6_8",
     "orgill_hollands": "J. F. Orgill, K. G. T. Hollands, Solar Energy 19(4), 357-359, 1977",
-    "louche": "A. Louche, G. Notton, P. Poggi, G. Simonnot, Solar Energy 46(4), 261-266, 1991",
+    "louche": "A. Louche, G. Notton, P. Poggi, G. Simonnot, Solar Energy 46, 261-266, 1991",
 }
 
 
@@ -162,8 +166,8 @@ def _irradiance(name, value, hi, positive=False):
     check_range(name, value, 0.0, hi, "W m^-2")
     v = np.asarray(value, dtype=float)
     if positive and np.any(v == 0.0):
-        raise InputRangeError(f"{name} = 0 W m^-2: the Perez sky is undefined without diffuse "
-                              "light (night, or a missing record); skip that time step.")
+        raise InputRangeError(f"{name} = 0 W m^-2: the Perez sky needs some diffuse light "
+                              "(0 means night or a missing record); skip that time step.")
     return v
 
 
@@ -301,7 +305,7 @@ def coefficients(epsilon, delta, sun_zenith_deg):
     .. math:: c = \\exp\\left([\\Delta (c_1 + c_2 Z)]^{c_3}\\right) - c_4, \\qquad
               d = -\\exp\\left(\\Delta (d_1 + d_2 Z)\\right) + d_3 + \\Delta d_4.
 
-    This is the table as published: no limits on Delta (see ``delta_floor`` of
+    This is the model as published: no limits on Delta (see ``delta_floor`` of
     :func:`perez_sky` for Radiance's).
 
     Parameters
@@ -340,8 +344,8 @@ def relative_luminance(cos_theta_p, zeta, coeffs):
     (the paper's zeta is ``theta_p`` here and its gamma is ``zeta``, see the module notes).
     Below ``cos theta_p`` = :data:`HORIZON_COS` the value at :data:`HORIZON_COS` is used, as
     in Radiance's perezlum.cal: the result is finite down to and below the horizon whenever
-    b <= 0, which holds for the model's physical range.  Not clamped at zero: at low Delta
-    some bins give negative values (see the module notes).
+    b <= 0 (:func:`perez_sky` refuses b > 0).  Not clamped at zero: at low Delta some bins
+    give negative values (see the module notes).
 
     Parameters
     ----------
@@ -401,8 +405,10 @@ def hemisphere_integral(f, n=IRRADIANCE_NODES):
     ``f`` maps world directions (..., 3) to values (...).  Gauss-Legendre in cos theta_p
     (``n`` nodes on (0, 1)) by ``2 n`` equally spaced azimuths, the rule of
     :meth:`skyfit_mi.physics.sky.Sky.sky_horizontal_irradiance` (thesis eq. 4.19).  With
-    the default 128 nodes it agrees with a 2048-node rule to 2e-6 relative on Perez skies
-    of every clearness bin with the sun 0-87 degrees from the zenith.
+    the default 128 nodes, Perez skies of every clearness bin with the sun 0-87 degrees from
+    the zenith agree with a 512-node rule to 3e-6 relative; where :class:`PerezSky` clamps
+    negative model values at zero (``delta_floor=None`` and a low Delta) the kink limits
+    the agreement to about 1.5e-4.
     """
     mu, w_mu = np.polynomial.legendre.leggauss(n)
     mu, w_mu = 0.5 * (mu + 1.0), 0.5 * w_mu                  # nodes on (0, 1)
@@ -419,6 +425,9 @@ def hemisphere_integral(f, n=IRRADIANCE_NODES):
 @dataclass(frozen=True)
 class PerezSky:
     """A Perez sky scaled to measured irradiance; build it with :func:`perez_sky`.
+
+    Radiance is broadband (solar), as the measured irradiance; a colour, e.g. from
+    :func:`skyfit_mi.physics.colour.cct_to_rgb`, is the caller's choice.
 
     Attributes
     ----------
@@ -464,15 +473,16 @@ class PerezSky:
         return hemisphere_integral(self.radiance, n)
 
 
-def _scalar(name, value):
-    if value is not None and np.ndim(value) != 0:
-        raise SkyfitError(f"perez_sky builds one sky, so {name} must be a number, not an array; "
-                          "call clearness(), brightness() and coefficients() for many.")
-    return value
+def _check_scalars(**values):
+    for name, value in values.items():
+        if value is not None and np.ndim(value) != 0:
+            raise SkyfitError(f"perez_sky builds one sky, so {name} must be a number, not an "
+                              "array; call clearness(), brightness() and coefficients() for many.")
 
 
 def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=None, ghi=None,
-              decomposition="erbs", airmass_model="kastenyoung1989", delta_floor=None,
+              decomposition="erbs", airmass_model="kastenyoung1989",
+              delta_floor=RADIANCE_DELTA_FLOOR,
               precipitable_water=PRECIPITABLE_WATER, nodes=IRRADIANCE_NODES):
     """A Perez all-weather sky (1993) scaled to measured irradiance.
 
@@ -499,10 +509,12 @@ def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=Non
         A key of :data:`DECOMPOSITIONS` (pvlib.irradiance function of that name).
     airmass_model : str
         A key of :data:`AIRMASS_MODELS`, for Delta.
-    delta_floor : float, optional
-        If given, Delta is raised to at least this value for the coefficients when
-        1.065 < epsilon < 2.8; :data:`RADIANCE_DELTA_FLOOR` (0.2) reproduces Radiance's
-        gendaylit and gendaymtx.  None (default) uses the published model unchanged.
+    delta_floor : float or None
+        Delta is raised to at least this value for the coefficients when
+        1.065 < epsilon < 2.8, as Radiance's gendaylit and gendaymtx do with the default
+        :data:`RADIANCE_DELTA_FLOOR` (0.2); None uses the published model unchanged, which
+        refuses (b > 0) some dark skies with a little sun.  The efficacy always uses the
+        measured Delta.
     precipitable_water : float
         W [cm] for the luminous efficacy.
     nodes : int
@@ -518,11 +530,11 @@ def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=Non
         On bad or missing irradiance (negative, NaN, dhi = 0), a sun on or below the horizon,
         an unknown decomposition or air mass model, or coefficients with b > 0 (a sky growing
         without bound toward the horizon, outside the model's range; gendaylit refuses these
-        too).
+        too: with the default ``delta_floor`` they need epsilon >= 2.8 and a low Delta, e.g.
+        epsilon 2.8-4.5 with Delta < 0.075 and the sun near the zenith).
     """
-    for name, v in (("sun_zenith_deg", sun_zenith_deg), ("sun_azimuth_deg", sun_azimuth_deg),
-                    ("day_of_year", day_of_year), ("dhi", dhi), ("dni", dni), ("ghi", ghi)):
-        _scalar(name, v)
+    _check_scalars(sun_zenith_deg=sun_zenith_deg, sun_azimuth_deg=sun_azimuth_deg,
+                   day_of_year=day_of_year, dhi=dhi, dni=dni, ghi=ghi)
     _sun_zenith(sun_zenith_deg)
     z = float(sun_zenith_deg)
     check_range("sun azimuth", sun_azimuth_deg, -360.0, 360.0, "degrees")
@@ -552,7 +564,8 @@ def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=Non
         raise SkyfitError(f"the Perez coefficient b = {coeffs[1]:.4g} > 0 for epsilon = {eps:.4g}, "
                           f"Delta = {delta_c:.4g}, sun zenith {z:.4g} degrees: the sky would grow "
                           "without bound toward the horizon. These irradiances are outside the "
-                          "model's range; check dhi, dni and the sun position.")
+                          "model's range; check dhi, dni and the sun position (or keep "
+                          "delta_floor at its default).")
     sun = direction_from_angles(np.radians(z), np.radians(sun_azimuth_deg))
     unit = PerezSky(sun, coeffs, 1.0, 1.0)
     total = hemisphere_integral(unit.relative_luminance, nodes)          # 1993 eq. 3
