@@ -344,7 +344,8 @@ def board(work, out, log):
     for region, e in sorted(errors["regions"].items()):
         r = json.loads((fits / f"fit_{region}.json").read_text())
         names = list(r["parameters"])
-        p, t = r["parameters"], truth_parameters(r.get("truth"), r["model"], names)
+        p, t = r["parameters"], truth_parameters(r.get("truth"), r["model"], names,
+                                                 r.get("normalisation", "ward"))
         outside = [] if t is None else [n for n, v in zip(names, t)
                                         if not r["intervals"][n]["95"][0] - 1e-9 <= v
                                         <= r["intervals"][n]["95"][1] + 1e-9]

@@ -196,13 +196,13 @@ def _chi2map(args):
     ix, iy = names.index(args.x), names.index(args.y)
     j, i = np.unravel_index(np.argmin(chi2), chi2.shape)
     marks = {"fit": (theta[ix], theta[iy]), "map minimum": (xs[i], ys[j])}
-    truth = truth_parameters(r.get("truth"), r["model"], names)
+    truth = truth_parameters(r.get("truth"), r["model"], names, r.get("normalisation", "ward"))
     if truth is not None:
         marks["truth"] = (truth[ix], truth[iy])
     walk = np.asarray(r.get("trace") or [], dtype=float)
     walk = walk[:, [ix, iy]] if args.walk and walk.ndim == 2 and len(walk) > 1 else None
     prefix = Path(args.output) if args.output else root / f"chi2map_{r['region']}_{args.x}_{args.y}"
-    others = "profiled (linearised, on the global search's grids)" if args.profile else "at the fit"
+    others = "at their best" if args.profile else "at the fit"
     paths = write_chi2_map(prefix, args.x, args.y, xs, ys, chi2, marks, walk, others)
     print(f"{r['region']}: chi2 minimum {chi2.min():.6g} at {args.x} = {xs[i]:.4g}, "
           f"{args.y} = {ys[j]:.4g} (the fit: {theta[ix]:.4g}, {theta[iy]:.4g}); wrote "
@@ -364,8 +364,9 @@ def build_parser():
     cmap.add_argument("--n", type=_int_in(2, 1000), default=60,
                       help="grid points per axis (default 60)")
     cmap.add_argument("--profile", action="store_true",
-                      help="every other parameter at its best for each point (the profile, "
-                      "on the linearised data), not fixed at the fit")
+                      help="every other parameter at its best for each point (the profile: "
+                      "started from the linearised grid and the fit, polished on the true "
+                      "chi-square), not fixed at the fit")
     cmap.add_argument("--walk", action="store_true",
                       help="overlay the fit's walk (its trace, e.g. annealing's)")
     cmap.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,

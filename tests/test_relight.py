@@ -41,12 +41,19 @@ def test_relit_with_the_true_material_reproduces_the_target(day, tmp_path):
     errors = json.loads((out / "relight.json").read_text())
     # a fit JSON without its sequence's run id: compared over the disc's interior (64 of it)
     assert errors["rel_rms"] < 1e-6 and errors["regions"]["disc"]["pixels"] == 64
-    # the reference render (other seeds) measures the Monte Carlo floor (64 spp: ~1-10%); the
-    # floor from the two days' sigma images estimates it (256 values of independent noise:
+    # relit with the target's seeds (common random numbers): no noise floor applies; the
+    # reference render (other seeds) measures independent Monte Carlo noise (64 spp: ~1-10%),
+    # which the noise floor from the two days' radiance_sigma images estimates (256 values:
     # within 25%)
-    measured, estimated = errors["reference_rel_rms"], errors["noise_floor_rel_rms"]
+    assert errors["shares_target_seeds"] and "noise_floor_rel_rms" not in errors
+    from skyfit_mi.fitting.relight import load_fits, noise_floor, target_pixels
+    pixels = target_pixels(load_fits([fit]), day / "day")         # as relight chose them
+    estimated = noise_floor(day / "day", out / "reference", pixels, errors["frames"])["all"]
+    measured = errors["reference_rel_rms"]
     assert 0.002 < measured < 0.2 and estimated == pytest.approx(measured, rel=0.25)
     assert (out / "reference" / "manifest.json").exists()
+    # the region means predicted at the truth (the target's own material): noise alone
+    assert errors["region_means"]["disc"]["truth"] < 0.02
     assert len(errors["regions"]["disc"]["per_frame"]) == len(TINY["time"]["times"])
     m = json.loads((out / "manifest.json").read_text())
     assert m["source"] == "relight"
@@ -102,6 +109,7 @@ def test_relight_onto_a_new_day_has_no_observations(day, tmp_path):
     ("twice", "is fitted twice"),
     ("into the target", "the output folder is the target's"),
     ("another model", "is not a fit result of `skyfit fit`"),
+    ("bad interval", "is not a fit result of `skyfit fit`"),
     ("no sun", "the target's sun is below the horizon at every time (01:00, 23:00)"),
     ("no region in the target", "does not see region 'disc'"),
 ])
@@ -122,6 +130,10 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
         out = day / "day"
     elif case == "another model":
         _fit_json(fit, model="seven", rho_s=0.1, sigma_alpha=0.1)
+    elif case == "bad interval":
+        r = json.loads(fit.read_text())
+        r["intervals"]["rho_s"]["95"] = [0.0, None]
+        fit.write_text(json.dumps(r))
     target = day / "day"
     if case in ("no sun", "no region in the target"):
         raw = copy.deepcopy(TINY)

@@ -117,7 +117,7 @@ def _fit_json(path, **changes):
     result = {"region": "disc", "model": "colour", "normalisation": "balanced",
               "parameters": {"C_r": 0.6, "C_g": 0.4, "C_b": 0.2, "rho_s": 0.08,
                              "sigma_alpha": 0.1}, **changes}
-    result["intervals"] = {k: {"95": [v, v]} for k, v in result["parameters"].items()}
+    result.setdefault("intervals", {k: {"95": [v, v]} for k, v in result["parameters"].items()})
     path.write_text(json.dumps(result))
     return path.name
 
@@ -153,7 +153,8 @@ def test_bad_fit_materials(tmp_path, fit, match):
     (tmp_path / "not_json.json").write_text("{oops")
     _fit_json(tmp_path / "other.json", model="raw")
     _fit_json(tmp_path / "nan.json", model="two",
-              parameters={"rho_s": float("nan"), "sigma_alpha": 0.1})
+              parameters={"rho_s": float("nan"), "sigma_alpha": 0.1},
+              intervals={"rho_s": {"95": [0.0, 1.0]}, "sigma_alpha": {"95": [0.0, 0.5]}})
     raw = thesis_disc_spec("t", {"model": "two", "rho_s": 0.5, "sigma_alpha": 0.1})
     raw["materials"] = {"disc": fit}
     with pytest.raises(SpecError, match=match):

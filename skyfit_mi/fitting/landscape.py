@@ -18,10 +18,12 @@ from ..errors import SkyfitError
 from ..render.fit_model import reflectances
 
 
-def truth_parameters(truth, model, names):
+def truth_parameters(truth, model, names, normalisation="ward"):
     """The true parameters in the fit's parameterisation, from the manifest's material record
-    (``truth`` in a fit JSON), or None when the material was given in another model."""
-    if not isinstance(truth, dict) or truth.get("model") != model:
+    (``truth`` in a fit JSON), or None when the material was given in another model or Ward
+    normalisation (its parameters would mean another BRDF)."""
+    if not isinstance(truth, dict) or truth.get("model") != model \
+            or truth.get("normalisation", "ward") != normalisation:
         return None
     values = dict(truth)
     if model == "colour" and isinstance(truth.get("C"), (list, tuple)):

@@ -35,7 +35,7 @@ from ..pipeline.spec import read_spec, validate_spec
 REFERENCE_SEED = 1_000_003
 #: Light-cache samples per pixel of a prediction (positions, directions): it predicts region
 #: means, whose Monte Carlo error (in the band) falls with the region's pixels, so it is an
-#: eighth of a fit's cache, whose chi-square needs every pixel accurate.
+#: sixteenth of a fit's cache, whose chi-square needs every pixel accurate.
 PREDICTION_CACHE = (4, 64)
 
 
@@ -95,7 +95,7 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     from ..pipeline.sequence import render_sequence
 
     spec, doc = target_spec(target, fits)
-    if all(f.skipped or f.sun_zenith_deg >= 90.0 for f in spec.frames):
+    if all(f.below_horizon for f in spec.frames):
         raise SkyfitError(f"the target's sun is below the horizon at every time "
                           f"({', '.join(f'{f.time:%H:%M}' for f in spec.frames)}); give times "
                           "of day with the sun up.")
@@ -118,32 +118,34 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     write_prediction(rows, out, "observed" if observed else "relit render")
     if not observed:
         return None
-    errors = {"regions": {}, "region_means": means,
-              "region_means_note": "relative RMS error of each region's mean radiance per "
-              "frame as predicted by the fit's cached model, at the fit and (a synthetic target "
-              "in the fit's model) at the true material, whose error is noise alone"}
+    errors = {"regions": {}}
     if images:
         errors = prediction_errors(fits, target, out, pixels)
-        if all("radiance_sigma" in f for f in rendered_frames(doc)):
+        errors["shares_target_seeds"] = doc.get("source") in RENDERED_SOURCES and \
+            int(doc["render"]["seed"]) == int(spec.render["seed"])
+        if errors["shares_target_seeds"]:
+            errors["noise"] = ("common random numbers: the relit day is rendered with the "
+                               "target's seeds, so their Monte Carlo noise largely cancels, "
+                               "the true materials give zero error, and the relit error is "
+                               "the fitted materials' difference")
+        elif all("radiance_sigma" in f for f in rendered_frames(doc)):
             floor = noise_floor(target, out, pixels, errors["frames"])
             for region, e in errors["regions"].items():
                 e["noise_floor_rel_rms"] = floor["regions"][region]
             errors["noise_floor_rel_rms"] = floor["all"]
-            errors["noise_floor"] = ("the relative RMS error that the two sequences' Monte "
-                                     "Carlo noise alone gives (their radiance_sigma images), "
-                                     "were it independent")
-            errors["shares_target_seeds"] = doc.get("source") in RENDERED_SOURCES and \
-                int(doc["render"]["seed"]) == int(spec.render["seed"])
-            if errors["shares_target_seeds"]:
-                errors["noise_floor"] += ("; here the relit render shares the target's seeds, "
-                                          "so much of that noise cancels and the error is "
-                                          "mostly the materials' difference")
+            errors["noise"] = ("independent noise: noise_floor_rel_rms is the error the two "
+                               "sequences' noise alone gives (their radiance_sigma images)")
         else:
-            errors["noise_floor"] = ("unknown: the target's frames have no radiance_sigma "
-                                     "image (an older render); --reference measures it")
-            log("the target's frames carry no radiance_sigma image, so the noise floor is "
-                "not reported (render it again, or use --reference)")
+            errors["noise"] = ("unknown: the target's frames have no radiance_sigma image, so "
+                               "the error that noise alone gives is not known")
+            log("the target's frames carry no radiance_sigma image: the error that noise "
+                "alone gives is not reported")
         errors["comparison_images"] = write_comparisons(target, out)
+    errors["region_means"] = means
+    errors["region_means_note"] = (
+        "relative RMS error of each region's mean radiance per frame as predicted by the fit's "
+        "cached model, at the fit and (a synthetic target in the fit's model and "
+        "normalisation) at the true material, whose error is noise alone")
     if reference:
         raw = {**doc["spec"], "render": {**doc["spec"].get("render", {}),
                                          "seed": int(doc["render"]["seed"]) + REFERENCE_SEED}}
@@ -156,8 +158,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
             e["reference_rel_rms"] = measured["regions"][region]["rel_rms"]
         errors["reference_rel_rms"] = measured["rel_rms"]
         errors["reference"] = ("the target's own materials rendered again with seed + "
-                               f"{REFERENCE_SEED} (in reference/): its error is Monte Carlo "
-                               "noise alone")
+                               f"{REFERENCE_SEED} (in reference/): its error is what "
+                               "independent Monte Carlo noise alone gives")
     inside = [lo <= o <= hi for *_, lo, hi, o in rows]
     errors["band_coverage"] = {"share": float(np.mean(inside)), "values": len(inside),
                                "band": "95%, from the fits' intervals"}
@@ -167,7 +169,7 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
         log(f"{region}: relit radiance differs from the observed by {e['rel_rms']:.2%} rms "
             f"({e['frames']} frames, {e['pixels']} pixels)"
             + (f"; {held:.2%} on the frames the fit did not see" if held is not None else "")
-            + (f"; independent noise alone would give {floor:.2%}" if floor is not None else "")
+            + (f"; noise alone gives {floor:.2%}" if floor is not None else "")
             + (f", a re-render of the truth {e['reference_rel_rms']:.2%}"
                if "reference_rel_rms" in e else ""))
     for region, m in means.items():
@@ -175,8 +177,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
             + ("" if m["truth"] is None else f" (the true material's: {m['truth']:.2%})"))
     if images:
         log(f"overall: {errors['rel_rms']:.2%} rms" + (
-            " (the relit day shares the target's seeds: their Monte Carlo noise largely "
-            "cancels)" if errors.get("shares_target_seeds") else ""))
+            " (relit with the target's seeds: Monte Carlo noise largely cancels, so this is "
+            "the materials' difference)" if errors["shares_target_seeds"] else ""))
     log(f"observed region means inside the predicted 95% band: "
         f"{errors['band_coverage']['share']:.0%} of {len(inside)}")
     return errors
@@ -433,7 +435,7 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
                 band = widen(means[0, j, c], (lo[j, c], hi[j, c]), extra[j, c], 0.0, np.inf)
                 rows.append((region, int(i), t, ch, float(means[0, j, c]), *band,
                              float(observed[j, c])))
-        truth = truth_parameters(s.truth, s.model, s.names)
+        truth = truth_parameters(s.truth, s.model, s.names, s.normalisation)
         summary[region] = {
             "fit": float(rel_rms(means[0], observed)),
             "truth": None if truth is None

@@ -16,7 +16,8 @@ from ..errors import SkyfitError
 def read_fit_result(path):
     """The fit result in ``path``, checked: a region name, a model of
     :data:`~skyfit_mi.render.fit_model.PARAMETERS`, that model's parameters as finite numbers
-    and a 95% interval of each.  SkyfitError saying what is wrong otherwise."""
+    and a 95% interval [lo, hi] of each, and pixels (if any) as [x, y] pairs.  SkyfitError
+    saying what is wrong otherwise."""
     from ..render.fit_model import PARAMETERS
 
     path = Path(path)
@@ -43,8 +44,16 @@ def _is_fit_result(r, parameters):
     if not isinstance(r, dict) or not isinstance(r.get("region"), str) \
             or r.get("model") not in parameters:
         return False
-    params, intervals = r.get("parameters"), r.get("intervals")
+    params, intervals, pixels = r.get("parameters"), r.get("intervals"), r.get("pixels", [])
     return (isinstance(params, dict) and set(params) == set(parameters[r["model"]])
             and isinstance(intervals, dict)
-            and all(isinstance(intervals.get(k), dict) and "95" in intervals[k]
-                    for k in params))
+            and all(isinstance(intervals.get(k), dict) and _pair(intervals[k].get("95"))
+                    for k in params)
+            and isinstance(pixels, list) and all(_pair(p, int) for p in pixels))
+
+
+def _pair(value, kind=(int, float)):
+    """Whether ``value`` is a list of two finite numbers (of ``kind``)."""
+    return (isinstance(value, list) and len(value) == 2
+            and all(isinstance(v, kind) and not isinstance(v, bool) and np.isfinite(v)
+                    for v in value))

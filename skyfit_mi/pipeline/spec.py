@@ -147,6 +147,7 @@ class Frame:
     sun_azimuth_deg: float
     sky: object
     skipped: bool = False
+    below_horizon: bool = False
 
 
 @dataclass
@@ -244,7 +245,8 @@ def validate_spec(raw, base_dir="."):
         sky = _make_sky(entry, float(z), float(a), t, base_dir)
         below = (sky.sun_direction[2] <= 0.0) if entry.get("type") == "gensky" else z >= 90.0
         frames.append(Frame(i, t, float(z), float(a), sky,
-                            skipped=bool(below and render["below_horizon"] == "skip")))
+                            skipped=bool(below and render["below_horizon"] == "skip"),
+                            below_horizon=bool(below)))
     return Spec(raw, base_dir, scene_file, materials, camera, sensor, render, frames)
 
 
