@@ -177,7 +177,9 @@ def test_a_fitted_material_renders_and_the_manifest_says_where_it_came_from(tmp_
     manifest's materials name their source (the fit file and region, or the spec)."""
     (tmp_path / "fit_disc.json").write_text(json.dumps(
         {"region": "disc", "model": "achromatic", "normalisation": "balanced",
-         "parameters": {"R": 0.5, "rho_s": 0.2, "sigma_alpha": 0.05}}))
+         "parameters": {"R": 0.5, "rho_s": 0.2, "sigma_alpha": 0.05},
+         "intervals": {"R": {"95": [0.4, 0.6]}, "rho_s": {"95": [0.1, 0.3]},
+                       "sigma_alpha": {"95": [0.02, 0.08]}}}))
     raw = copy.deepcopy(TINY)
     raw["materials"] = {"disc": {"fit": "fit_disc.json"}}
     raw["time"]["times"] = ["12:00"]
