@@ -51,6 +51,21 @@ _PATTERNS = ("clear", "overcast", "uniform", "intermediate")
 IRRADIANCE_NODES = 128
 
 
+def hemisphere_integral(f, n=IRRADIANCE_NODES):
+    """Integral of f(d) cos(theta) dOmega over the upper hemisphere (thesis eq. 4.19).
+
+    ``f`` maps world directions (..., 3) to values (...) or (..., k); the result is a
+    number or (k,).  Gauss-Legendre in cos(theta) (``n`` nodes on (0, 1)) by ``2 n``
+    equally spaced azimuths.
+    """
+    mu, wmu = np.polynomial.legendre.leggauss(n)
+    mu, wmu = 0.5 * (mu + 1.0), 0.5 * wmu                 # nodes on (0, 1)
+    m = 2 * n
+    phi = (np.arange(m) + 0.5) * 2 * np.pi / m
+    d = direction_from_angles(np.arccos(mu)[:, None], phi[None, :])
+    return np.einsum("ij...,i->...", f(d), wmu * mu) * (2 * np.pi / m)
+
+
 def gamma_factor(cos_theta_p):
     """gamma(theta_p) = 1 - exp(-0.32 / cos theta_p), thesis eq. 4.12.
 
@@ -206,14 +221,7 @@ class Sky:
         Independent quadrature of eq. 4.19: Gauss-Legendre in cos(theta) over
         the upper hemisphere (``n`` nodes) by ``2 n`` azimuths.
         """
-        mu, wmu = np.polynomial.legendre.leggauss(n)
-        mu, wmu = 0.5 * (mu + 1.0), 0.5 * wmu                 # nodes on (0, 1)
-        m = 2 * n
-        phi = (np.arange(m) + 0.5) * 2 * np.pi / m
-        theta = np.arccos(mu)
-        d = direction_from_angles(theta[:, None], phi[None, :])
-        l_sky = self.sky_radiance(d)
-        return np.einsum("ijc,i->c", l_sky, wmu * mu) * (2 * np.pi / m)
+        return hemisphere_integral(self.sky_radiance, n)
 
     def sun_horizontal_irradiance(self):
         """Horizontal irradiance from the solar disc [W m^-2], RGB (3,)."""
