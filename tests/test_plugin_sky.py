@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from skyfit_mi.physics.gensky import from_gensky
+from skyfit_mi.physics.perez import perez_sky
 from skyfit_mi.physics.sky import cie_sky
 from test_gensky import CLEAR
 
@@ -13,6 +14,10 @@ SKIES = {
     "intermediate-high": lambda: cie_sky("intermediate", 25, 200, phi=0.5),
     "intermediate-low": lambda: cie_sky("intermediate", 84, 95, phi=0.5),
     "gensky-clear": lambda: from_gensky(CLEAR),
+    # Perez all-weather skies from measured irradiance: clear (bin 8), intermediate, overcast
+    "perez-clear": lambda: perez_sky(30, 150, 172, dhi=90, dni=850).to_sky(),
+    "perez-intermediate": lambda: perez_sky(60, 230, 100, dhi=200, dni=300).to_sky(),
+    "perez-overcast": lambda: perez_sky(45, 100, 300, ghi=150, decomposition="erbs").to_sky(),
 }
 
 
@@ -135,7 +140,8 @@ def test_sky_changes_without_recompilation(mi):
                    "sampler": {"type": "independent", "sample_count": 4}}})
     params = mi.traverse(scene)
     day = ["clear-low", "overcast", "clear-high", "gensky-clear", "intermediate-low", "overcast",
-           "intermediate-high", "clear-low", "gensky-clear", "clear-high"]
+           "perez-clear", "intermediate-high", "perez-overcast", "clear-low", "gensky-clear",
+           "clear-high"]
     means, kernels = [], []
     dr.kernel_history()                                   # drop earlier tests' entries
     dr.set_flag(dr.JitFlag.KernelHistory, True)
@@ -155,11 +161,12 @@ def test_sky_changes_without_recompilation(mi):
     # every other kernel (sampling-table uploads and the like) is one of a fixed few; a sky
     # baked in as literals adds new ones with every new sky
     small = {h for frame in kernels for h, size in frame if size != pixels}
-    assert len(small) <= 12, f"{len(small)} distinct small kernels in a day of 10 frames"
+    assert len(small) <= 12, f"{len(small)} distinct small kernels in a day of 12 frames"
     assert means[1] != means[2] and means[1] == pytest.approx(means[5], rel=0.05)
 
 
-@pytest.mark.parametrize("name", ["clear-high", "intermediate-low", "overcast", "gensky-clear"])
+@pytest.mark.parametrize("name", ["clear-high", "intermediate-low", "overcast", "gensky-clear",
+                                  "perez-clear", "perez-overcast"])
 def test_lambertian_disc_radiance_equals_irradiance_over_pi(mi, name):
     """A white Lambertian horizontal disc: pixel radiance = (E_sky + E_sun)/pi.
 

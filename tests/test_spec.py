@@ -159,3 +159,64 @@ def test_bad_fit_materials(tmp_path, fit, match):
     raw["materials"] = {"disc": fit}
     with pytest.raises(SpecError, match=match):
         validate_spec(raw, tmp_path)
+
+
+# ---- the Perez all-weather sky as a spec sky type (issue 15) -------------------------------
+
+def test_perez_sky_type_is_the_physics_perez_sky(tmp_path):
+    from skyfit_mi.physics.perez import perez_sky
+    from skyfit_mi.physics.sky import SRGB_LUMINANCE
+    spec = _spec(tmp_path, sky='type = "perez"\ndiffuse_horizontal_W_m2 = 110\n'
+                               'direct_normal_W_m2 = 720\ncct = 9000')
+    f = spec.frames[1]
+    ref = perez_sky(f.sun_zenith_deg, f.sun_azimuth_deg, f.time.timetuple().tm_yday,
+                    dhi=110, dni=720)
+    d = np.array([[0.0, 0.0, 1.0], [0.6, -0.3, 0.5], [-0.2, 0.9, 0.1]])
+    np.testing.assert_allclose(f.sky.sky_radiance(d) @ SRGB_LUMINANCE, ref.radiance(d), rtol=1e-12)
+    assert float(f.sky.sky_horizontal_irradiance() @ SRGB_LUMINANCE) == pytest.approx(110, rel=1e-9)
+    assert float(f.sky.sun_horizontal_irradiance() @ SRGB_LUMINANCE) == pytest.approx(
+        720 * np.cos(np.radians(f.sun_zenith_deg)), rel=1e-9)
+    assert f.sky.info["kind"] == "perez" and f.sky.info["epsilon"] == pytest.approx(
+        ref.info["epsilon"])
+
+
+def test_perez_sky_from_an_irradiance_csv_is_interpolated_in_time(tmp_path):
+    (tmp_path / "irr.csv").write_text("time,ghi\n2026-06-21T09:00,500\n2026-06-21T11:00,700\n"
+                                      "2026-06-21T13:00,900\n")
+    spec = _spec(tmp_path, sky='type = "perez"\nirradiance_file = "irr.csv"')
+    # 10:00 lies halfway between 500 and 700; the frame's GHI is split by erbs (the default)
+    assert spec.frames[0].sky.info["ghi_w_m2"] == pytest.approx(600.0)
+    assert spec.frames[1].sky.info["ghi_w_m2"] == pytest.approx(800.0)
+    assert spec.frames[0].sky.info["decomposition"] == "erbs"
+    g = spec.frames[1].sky.horizontal_irradiance()
+    assert float(g @ np.array([0.2126, 0.7152, 0.0722])) == pytest.approx(800.0, rel=1e-6)
+
+
+def test_perez_sky_from_a_tmy3_weather_file(tmp_path):
+    import shutil
+    import pvlib
+    from pathlib import Path
+    src = Path(pvlib.__file__).parent / "data" / "723170TYA.CSV"      # Greensboro NC, TMY3
+    shutil.copy(src, tmp_path / "tmy.csv")
+    spec = _spec(tmp_path, tz="-05:00", sky='type = "perez"\nirradiance_file = "tmy.csv"')
+    import pvlib.iotools
+    df, _ = pvlib.iotools.read_tmy3(str(src), coerce_year=2026)
+    # 10:00 is the middle of the hours ending 10:00 and 11:00 (their values at 9:30 and 10:30)
+    row = df.loc["2026-06-21 10:00-05:00":"2026-06-21 11:00-05:00"]
+    info = spec.frames[0].sky.info
+    assert info["dhi_w_m2"] == pytest.approx(row["dhi"].mean(), rel=1e-9)
+    assert info["dni_w_m2"] == pytest.approx(row["dni"].mean(), rel=1e-9)
+
+
+@pytest.mark.parametrize("sky, message", [
+    ('type = "perez"', "needs measured irradiance"),
+    ('type = "clear"\nglobal_horizontal_W_m2 = 500', "belong to a Perez sky"),
+    ('type = "perez"\nirradiance_file = "none.csv"', "not found"),
+    ('type = "perez"\nirradiance_file = "short.csv"', "lies outside it"),
+    ('type = "clear"\nirradiance_file = "short.csv"', "scaled by dhi and dni"),
+    ('type = "perez"\nglobal_horizontal_W_m2 = -5', "global horizontal irradiance"),
+])
+def test_bad_perez_specs_are_refused_by_key(tmp_path, sky, message):
+    (tmp_path / "short.csv").write_text("time,ghi\n2026-06-21T09:00,500\n2026-06-21T10:00,600\n")
+    with pytest.raises(SpecError, match=message):
+        _spec(tmp_path, sky=sky)

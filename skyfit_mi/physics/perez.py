@@ -45,13 +45,17 @@ and irradiance components from direct and global irradiance", Solar Energy 44(5)
 Equation numbers of the 1993 paper are those cited by Radiance's ``gendaymtx.c`` (I. Ashdown).
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..conventions import direction_from_angles
 from ..errors import InputRangeError, SkyfitError, check_choice, check_range
-from .sky import IRRADIANCE_NODES, hemisphere_integral as sky_hemisphere_integral
+from .colour import cct_to_rgb
+from .sky import (CCT_CLEAR, CCT_OVERCAST, GROUND_ALBEDO, IRRADIANCE_NODES, Sky,
+                  hemisphere_integral as sky_hemisphere_integral, perez_pattern,
+                  perez_relative_luminance as relative_luminance)
+from .sun import SUN_SOLID_ANGLE, sun_rgb
 
 #: Lower edges of the eight sky-clearness bins, then +inf (Perez et al. 1990, Table 1;
 #: the same bins in 1993) [unitless].  Bin i holds edges[i] <= epsilon < edges[i + 1].
@@ -117,8 +121,6 @@ KAPPA = 1.041
 #: Solar constant for the extraterrestrial irradiance of Delta [W m^-2]: the WMO (1981)
 #: value of the Perez model's time, used by Radiance's gendaylit and gendaymtx.
 PEREZ_SOLAR_CONSTANT = 1367.0
-#: cos theta_p is held at this value below it, as in Radiance's perezlum.cal [unitless].
-HORIZON_COS = 0.01
 #: Radiance's lower limit on Delta for 1.065 < epsilon < 2.8 (gendaylit.c, gendaymtx.c),
 #: the default of :func:`perez_sky`.
 RADIANCE_DELTA_FLOOR = 0.2
@@ -336,37 +338,6 @@ def coefficients(epsilon, delta, sun_zenith_deg):
     return out
 
 
-def relative_luminance(cos_theta_p, zeta, coeffs):
-    """Perez relative sky luminance l_v, 1993 eq. 1 [unitless].
-
-    .. math:: l_v = (1 + a\\, e^{b / \\cos\\theta_p})(1 + c\\, e^{d \\zeta} + e \\cos^2\\zeta)
-
-    (the paper's zeta is ``theta_p`` here and its gamma is ``zeta``, see the module notes).
-    Below ``cos theta_p`` = :data:`HORIZON_COS` the value at :data:`HORIZON_COS` is used, as
-    in Radiance's perezlum.cal: the result is finite down to and below the horizon whenever
-    b <= 0 (:func:`perez_sky` refuses b > 0).  Not clamped at zero: at low Delta some bins
-    give negative values (see the module notes).
-
-    Parameters
-    ----------
-    cos_theta_p : array_like
-        Cosine of the sky element's zenith angle [unitless].
-    zeta : array_like
-        Angle between the sky element and the sun [rad], in [0, pi].
-    coeffs : array_like, shape (..., 5)
-        a, b, c, d, e from :func:`coefficients`, broadcast against the angles.
-
-    Returns
-    -------
-    ndarray
-        l_v [unitless].
-    """
-    a, b, c, d, e = np.moveaxis(np.asarray(coeffs, dtype=float), -1, 0)
-    mu = np.maximum(np.asarray(cos_theta_p, dtype=float), HORIZON_COS)
-    zeta = np.asarray(zeta, dtype=float)
-    return (1.0 + a * np.exp(b / mu)) * (1.0 + c * np.exp(d * zeta) + e * np.cos(zeta) ** 2)
-
-
 def diffuse_efficacy(epsilon, delta, sun_zenith_deg, precipitable_water=PRECIPITABLE_WATER):
     """Luminous efficacy of diffuse skylight, Perez et al. 1990 eq. 7 and Table 4.
 
@@ -448,9 +419,8 @@ class PerezSky:
         horizon (the Perez model has no ground) [unitless]."""
         d = np.asarray(directions, dtype=float)
         d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-        zeta = np.arccos(np.clip(d @ self.sun_direction, -1.0, 1.0))
-        lv = relative_luminance(d[..., 2], zeta, self.coefficients)
-        return np.where(d[..., 2] > 0.0, np.maximum(lv, 0.0), 0.0)
+        return np.where(d[..., 2] > 0.0, perez_pattern(d, self.sun_direction, self.coefficients),
+                        0.0)
 
     def radiance(self, directions):
         """Sky radiance toward world ``directions`` (..., 3) [W m^-2 sr^-1], broadband."""
@@ -463,6 +433,41 @@ class PerezSky:
     def horizontal_irradiance(self, n=IRRADIANCE_NODES):
         """The sky's horizontal irradiance by :func:`hemisphere_integral` [W m^-2]."""
         return hemisphere_integral(self.radiance, n)
+
+
+    def to_sky(self, cct=None, ground_albedo=GROUND_ALBEDO, sun=True,
+               sun_solid_angle=SUN_SOLID_ANGLE):
+        """This sky with its sun as a :class:`~skyfit_mi.physics.sky.Sky` (the ``perez``
+        pattern of the family the ``cie_sky`` emitter renders), linear sRGB.
+
+        The sky gets the colour of ``cct`` [K] (default :func:`default_cct`), whose luminance
+        is 1, so the sky's luminance-weighted horizontal irradiance stays the measured DHI; the
+        sun disc carries the measured DNI [W m^-2] over ``sun_solid_angle`` [sr] in the colour
+        of :func:`~skyfit_mi.physics.sun.sun_rgb`; the ground is a Lambertian plane of
+        reflectance ``ground_albedo`` lit by sky and sun (as the CIE skies' ground).
+        """
+        check_range("ground albedo", ground_albedo, 0.0, 1.0)
+        eps = self.info.get("epsilon", 1.0)
+        colour = cct_to_rgb(default_cct(eps) if cct is None else cct)
+        z = float(np.degrees(np.arccos(np.clip(self.sun_direction[2], -1.0, 1.0))))
+        dni = float(self.info.get("dni_w_m2", 0.0)) if sun else 0.0
+        sky = Sky(self.sun_direction, perez=self.scale * colour,
+                  perez_coefficients=self.coefficients,
+                  sun_radiance=dni / sun_solid_angle * sun_rgb(z),
+                  sun_solid_angle=sun_solid_angle,
+                  info={**self.info, "kind": "perez", "ground_albedo": float(ground_albedo),
+                        "efficacy_lm_W": self.efficacy})
+        return replace(sky, ground=ground_albedo * sky.horizontal_irradiance() / np.pi)
+
+
+def default_cct(epsilon):
+    """The sky colour temperature [K] skyfit gives a Perez sky of clearness ``epsilon``: the
+    thesis's overcast 6500 K at epsilon = 1 to its clear 15000 K at epsilon >= 6.2 (the last
+    bin's edge), linear in reciprocal temperature (mired) between.  A choice, not a published
+    model: the thesis gives 4500-7000 K overcast and 1e4-1e5 K clear (4.2.3); give ``cct`` to
+    override."""
+    w = float(np.clip((float(epsilon) - 1.0) / (CLEARNESS_BIN_EDGES[-2] - 1.0), 0.0, 1.0))
+    return 1.0 / ((1.0 - w) / CCT_OVERCAST + w / CCT_CLEAR)
 
 
 def _check_scalars(**values):

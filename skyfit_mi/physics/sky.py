@@ -35,10 +35,13 @@ CCT_CLEAR = 15000.0
 CCT_OVERCAST = 6500.0
 #: Default ground reflectance (as Radiance's gensky).
 GROUND_ALBEDO = 0.2
+#: cos theta_p is held at this value below it in the Perez pattern, as in Radiance's
+#: perezlum.cal [unitless].
+PEREZ_HORIZON_COS = 0.01
 #: Zenith angle below which Kittler's zenith luminance (eq. 4.15) is held constant [deg].
 KITTLER_MIN_ZENITH_DEG = 10.0
 
-_PATTERNS = ("clear", "overcast", "uniform", "intermediate")
+_PATTERNS = ("clear", "overcast", "uniform", "intermediate", "perez")
 
 
 # --------------------------------------------------------------------------
@@ -111,6 +114,45 @@ def intermediate_pattern(d, sun):
             / 2.326 * np.exp(gam * -0.563 * ((2.629 - eta) * (1.562 - zt) + 0.812)))
 
 
+def perez_relative_luminance(cos_theta_p, zeta, coeffs):
+    """Perez relative sky luminance l_v, 1993 eq. 1 [unitless].
+
+    .. math:: l_v = (1 + a\\, e^{b / \\cos\\theta_p})(1 + c\\, e^{d \\zeta} + e \\cos^2\\zeta)
+
+    (the paper's zeta is ``theta_p`` here and its gamma is ``zeta``).  The coefficients come
+    from measured irradiance (:func:`skyfit_mi.physics.perez.coefficients`).
+    Below ``cos theta_p`` = :data:`PEREZ_HORIZON_COS` the value at :data:`PEREZ_HORIZON_COS` is used, as
+    in Radiance's perezlum.cal: the result is finite down to and below the horizon whenever
+    b <= 0 (:func:`skyfit_mi.physics.perez.perez_sky` refuses b > 0).  Not clamped at zero: at low
+    Delta some bins give negative values (see :mod:`skyfit_mi.physics.perez`).
+
+    Parameters
+    ----------
+    cos_theta_p : array_like
+        Cosine of the sky element's zenith angle [unitless].
+    zeta : array_like
+        Angle between the sky element and the sun [rad], in [0, pi].
+    coeffs : array_like, shape (..., 5)
+        a, b, c, d, e, broadcast against the angles.
+
+    Returns
+    -------
+    ndarray
+        l_v [unitless].
+    """
+    a, b, c, d, e = np.moveaxis(np.asarray(coeffs, dtype=float), -1, 0)
+    mu = np.maximum(np.asarray(cos_theta_p, dtype=float), PEREZ_HORIZON_COS)
+    zeta = np.asarray(zeta, dtype=float)
+    return (1.0 + a * np.exp(b / mu)) * (1.0 + c * np.exp(d * zeta) + e * np.cos(zeta) ** 2)
+
+
+def perez_pattern(d, sun, coeffs):
+    """The Perez all-weather pattern l_v toward world directions ``d`` (..., 3), clamped at 0
+    (as Radiance's gendaymtx), for the sun toward ``sun`` (1993 eq. 1; unitless)."""
+    zeta = np.arccos(np.clip(d @ sun, -1.0, 1.0))
+    return np.maximum(perez_relative_luminance(d[..., 2], zeta, coeffs), 0.0)
+
+
 def horizon_blend_weight(cos_theta_p):
     """Weight of the sky (vs. the ground) in Radiance's ``skybright.cal``.
 
@@ -138,8 +180,11 @@ class Sky:
     sun_direction : ndarray (3,)
         Unit vector toward the sun's centre, world frame (+X east, +Y north, +Z up).
         It also orients the sky patterns.
-    clear, overcast, uniform, intermediate : ndarray (3,)
+    clear, overcast, uniform, intermediate, perez : ndarray (3,)
         Linear-sRGB weight of each sky pattern [W m^-2 sr^-1].
+    perez_coefficients : ndarray (5,)
+        a, b, c, d, e of the Perez pattern (:func:`perez_pattern`); zeros give l_v = 1, but
+        the pattern counts only where ``perez`` is non-zero.
     ground : ndarray (3,)
         Radiance of the ground below the horizon [W m^-2 sr^-1].
     horizon_blend : bool
@@ -158,6 +203,8 @@ class Sky:
     overcast: np.ndarray = field(default_factory=lambda: np.zeros(3))
     uniform: np.ndarray = field(default_factory=lambda: np.zeros(3))
     intermediate: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    perez: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    perez_coefficients: np.ndarray = field(default_factory=lambda: np.zeros(5))
     ground: np.ndarray = field(default_factory=lambda: np.zeros(3))
     horizon_blend: bool = False
     sun_radiance: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -172,6 +219,11 @@ class Sky:
         object.__setattr__(self, "sun_direction", s / n)
         for name in _PATTERNS + ("ground", "sun_radiance"):
             object.__setattr__(self, name, _rgb(getattr(self, name), name))
+        c = np.asarray(self.perez_coefficients, dtype=float).ravel()
+        if c.shape != (5,) or not np.all(np.isfinite(c)) or c[1] > 0:
+            raise SkyfitError(f"perez_coefficients must be 5 finite numbers a, b, c, d, e with "
+                              f"b <= 0, got {self.perez_coefficients!r}.")
+        object.__setattr__(self, "perez_coefficients", c)
         check_range("sun_solid_angle", self.sun_solid_angle, 1e-7, 0.5, "sr")
 
     # ---- evaluation -------------------------------------------------------
@@ -196,6 +248,8 @@ class Sky:
                + overcast_pattern(d)[..., None] * self.overcast
                + self.uniform
                + intermediate_pattern(d, s)[..., None] * self.intermediate)
+        if np.any(self.perez):
+            sky = sky + perez_pattern(d, s, self.perez_coefficients)[..., None] * self.perez
         if self.horizon_blend:
             w = horizon_blend_weight(d[..., 2])[..., None]
             return w * sky + (1.0 - w) * self.ground

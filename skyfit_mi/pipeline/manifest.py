@@ -159,6 +159,7 @@ def illumination_record(sky):
     return {"kind": "sky", "sun_direction": sky.sun_direction, "sun_radiance": sky.sun_radiance,
             "sun_solid_angle_sr": sky.sun_solid_angle, "clear": sky.clear,
             "overcast": sky.overcast, "uniform": sky.uniform, "intermediate": sky.intermediate,
+            "perez": sky.perez, "perez_coefficients": sky.perez_coefficients,
             "ground": sky.ground, "horizon_blend": sky.horizon_blend, "info": sky.info,
             "horizontal_irradiance_W_m2": sky.horizontal_irradiance(),
             "units": "weights and radiances W m^-2 sr^-1, linear sRGB"}
@@ -185,8 +186,10 @@ def frame_sky(frame):
                             f"the manifest format but this version of skyfit-mi can only light "
                             f"frames of kind {' or '.join(map(repr, SKY_KINDS))}.")
     keys = ("clear", "overcast", "uniform", "intermediate", "ground", "sun_radiance")
+    optional = {k: np.asarray(rec[k], dtype=float) for k in ("perez", "perez_coefficients")
+                if k in rec}                       # absent from manifests before the Perez sky
     return Sky(np.asarray(rec["sun_direction"], dtype=float),
-               **{k: np.asarray(rec[k], dtype=float) for k in keys},
+               **{k: np.asarray(rec[k], dtype=float) for k in keys}, **optional,
                horizon_blend=bool(rec["horizon_blend"]),
                sun_solid_angle=float(rec["sun_solid_angle_sr"]), info=rec.get("info", {}))
 

@@ -42,7 +42,8 @@ _SCHEMA = {
     "sky": {"type", "phi", "time", "frames", "efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
             "ground_albedo", "extinction", "solar_constant", "sun", "gensky", "gensky_file",
             "clear_zenith_luminance", "overcast_zenith_luminance",
-            "diffuse_horizontal_W_m2", "direct_normal_W_m2", "diffuse_horizontal_lux"},
+            "diffuse_horizontal_W_m2", "direct_normal_W_m2", "diffuse_horizontal_lux",
+            "global_horizontal_W_m2", "decomposition", "cct", "irradiance_file"},
     "scene": {"file", "ground_albedo"},
     "materials": None,
     "camera": {"azimuth_deg", "angle_deg", "distance", "target", "origin", "up", "matrix",
@@ -50,12 +51,15 @@ _SCHEMA = {
     "sensor": {"exposure", "response", "gamma", "bits", "noise_percent", "cos4"},
     "render": {"spp", "seed", "variant", "max_depth", "below_horizon", "sampler"},
 }
-SKY_KINDS = tuple(SKY_TYPES) + ("gensky",)
+SKY_KINDS = tuple(SKY_TYPES) + ("gensky", "perez")
 #: [sky] keys whose values are numbers (their ranges are checked where they are used).
 _SKY_NUMBERS = {"phi", "efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
                 "ground_albedo", "extinction", "solar_constant", "clear_zenith_luminance",
                 "overcast_zenith_luminance", "diffuse_horizontal_W_m2", "direct_normal_W_m2",
-                "diffuse_horizontal_lux"}
+                "diffuse_horizontal_lux", "global_horizontal_W_m2", "cct"}
+#: [sky] keys a measured series (``irradiance_file``) fills per frame, by the series' column.
+_SERIES_KEYS = {"ghi": "global_horizontal_W_m2", "dhi": "diffuse_horizontal_W_m2",
+                "dni": "direct_normal_W_m2"}
 BELOW_HORIZON = ("sky", "skip")
 #: Mitsuba samplers a spec may choose; multijitter stratifies the sun/sky choice of the
 #: emitter sample and gives about 5x lower noise than independent at equal cost (docs/BENCHMARKS.md).
@@ -238,7 +242,8 @@ def validate_spec(raw, base_dir="."):
         raise SpecError(f"[materials] {exc}") from None
 
     pos = solar_position(times, lat, lon, elevation=elevation)
-    entries = _sky_entries(raw.get("sky", {"type": "clear"}), times, tz)
+    entries = _with_series(_sky_entries(raw.get("sky", {"type": "clear"}), times, tz), times, tz,
+                           base_dir)
     frames = []
     for i, (t, z, a, entry) in enumerate(zip(times, np.atleast_1d(pos.zenith_deg),
                                              np.atleast_1d(pos.azimuth_deg), entries)):
@@ -425,7 +430,7 @@ def _sky_entries(sec, times, tz):
     for e in out:
         for k in _SKY_NUMBERS & set(e):
             _num("sky", k, e[k])
-        for k in {"type", "gensky", "gensky_file"} & set(e):
+        for k in {"type", "gensky", "gensky_file", "decomposition", "irradiance_file"} & set(e):
             _text("sky", k, e[k])
         if "sun" in e and not isinstance(e["sun"], bool):
             raise SpecError(f"[sky] sun must be true or false (draw the sun's disc), got {e['sun']!r}.")
@@ -439,13 +444,73 @@ def _sky_entries(sec, times, tz):
                             f"to a {e['type']} one; drop phi or set type = 'intermediate'.")
         if "phi" in e:
             _num("sky", "phi", e["phi"], 0, 1)
+        perez_only = sorted({"global_horizontal_W_m2", "decomposition", "cct"} & set(e))
+        if perez_only and e["type"] != "perez":
+            raise SpecError(f"[sky] {', '.join(perez_only)} belong to a Perez sky (type = "
+                            f"'perez'), not to a {e['type']} one.")
     return out
+
+
+def _with_series(entries, times, tz, base_dir):
+    """Entries with ``irradiance_file`` get that series' values at their frame's time."""
+    from .irradiance import irradiance_at, read_irradiance
+
+    series = {}
+    out = []
+    for e, t in zip(entries, times):
+        if "irradiance_file" in e:
+            path = base_dir / e["irradiance_file"]
+            try:
+                if path not in series:
+                    series[path] = read_irradiance(path, tz, year=t.year)
+                values = irradiance_at(series[path], [t], path)[0]
+            except SkyfitError as exc:
+                raise SpecError(f"[sky] irradiance_file: {exc}") from None
+            if e["type"] != "perez" and not {"dhi", "dni"} <= set(values):
+                raise SpecError(f"[sky] irradiance_file {e['irradiance_file']!r} gives "
+                                f"{', '.join(values)}; a {e['type']} sky is scaled by dhi and "
+                                "dni, so give both, or use type = 'perez' (ghi alone is split).")
+            if e["type"] != "perez":
+                values.pop("ghi", None)
+            e = {**e, **{_SERIES_KEYS[k]: v for k, v in values.items()}}
+        out.append(e)
+    return out
+
+
+def _perez(e, zenith, azimuth, t):
+    """The Perez all-weather sky of a [sky] entry (measured irradiance) at one frame."""
+    from ..conventions import direction_from_angles
+    from ..physics.perez import perez_sky
+    from ..physics.sky import GROUND_ALBEDO, Sky
+
+    if zenith >= 90.0:              # no daylight model below the horizon: a black sky
+        return Sky(direction_from_angles(np.radians(zenith), np.radians(azimuth)),
+                   info={"kind": "perez", "sun_zenith_deg": zenith, "sun_azimuth_deg": azimuth,
+                         "note": "sun below the horizon: no sky light"})
+    dhi, dni = e.get("diffuse_horizontal_W_m2"), e.get("direct_normal_W_m2")
+    ghi = e.get("global_horizontal_W_m2")
+    if dhi is not None and dni is not None:
+        kw = {"dhi": dhi, "dni": dni}
+    elif ghi is not None:
+        kw = {"ghi": ghi, "decomposition": e.get("decomposition", "erbs")}
+    else:
+        raise SpecError(f"[sky] at {t:%Y-%m-%d %H:%M}: a Perez sky needs measured irradiance: "
+                        "diffuse_horizontal_W_m2 and direct_normal_W_m2, or "
+                        "global_horizontal_W_m2 (split by a decomposition model), or "
+                        "irradiance_file.")
+    sky = perez_sky(zenith, azimuth, t.timetuple().tm_yday, **kw)
+    if ghi is not None and "ghi" not in kw:
+        sky.info["ghi_w_m2"] = float(ghi)
+    return sky.to_sky(cct=e.get("cct"), ground_albedo=e.get("ground_albedo", GROUND_ALBEDO),
+                      sun=e.get("sun", True))
 
 
 def _make_sky(e, zenith, azimuth, t, base_dir):
     measured = {k: e[k] for k in ("diffuse_horizontal_W_m2", "direct_normal_W_m2",
                                   "diffuse_horizontal_lux") if k in e}
     try:
+        if e["type"] == "perez":
+            return _perez(e, zenith, azimuth, t)
         if e["type"] == "gensky":
             text = e.get("gensky")
             if text is None:

@@ -5,7 +5,9 @@ Importable before a variant is set; the functions need one (see
 """
 
 #: The emitter's RGB parameters, named as the :class:`~skyfit_mi.physics.sky.Sky` fields.
-RGB_KEYS = ("sun_radiance", "clear", "overcast", "uniform", "intermediate", "ground")
+RGB_KEYS = ("sun_radiance", "clear", "overcast", "uniform", "intermediate", "perez", "ground")
+#: The emitter's float parameters holding the Sky's ``perez_coefficients`` a..e.
+PEREZ_KEYS = ("perez_a", "perez_b", "perez_c", "perez_d", "perez_e")
 
 
 def sky_dict(sky, scene_radius=1e4):
@@ -17,6 +19,8 @@ def sky_dict(sky, scene_radius=1e4):
          "scene_radius": float(scene_radius)}
     for k in RGB_KEYS:
         d[k] = mi.ScalarVector3f(*map(float, getattr(sky, k)))
+    for k, v in zip(PEREZ_KEYS, sky.perez_coefficients):
+        d[k] = float(v)
     return d
 
 
@@ -51,4 +55,6 @@ def update_sky(params, sky, prefix):
     params[prefix + "horizon_blend"] = opaque_value(mi.Bool, bool(sky.horizon_blend))
     for k in RGB_KEYS:
         params[prefix + k] = opaque_value(mi.Color3f, getattr(sky, k))
+    for k, v in zip(PEREZ_KEYS, sky.perez_coefficients):
+        params[prefix + k] = opaque_value(mi.Float, float(v))
     params.update()

@@ -20,6 +20,8 @@ name                  type      default                     meaning
 ``overcast``          rgb       0                           weight of the CIE overcast pattern
 ``uniform``           rgb       0                           uniform sky radiance
 ``intermediate``      rgb       0                           weight of Radiance's intermediate pattern
+``perez``             rgb       0                           weight of the Perez all-weather pattern
+``perez_a`` .. ``_e`` float     0                           the Perez pattern's coefficients (b <= 0)
 ``ground``            rgb       0                           radiance below the horizon
 ``horizon_blend``     bool      false                       Radiance's sky-to-ground blend
 ``scene_radius``      float     1e4                         distance [scene units] beyond all geometry
@@ -35,8 +37,8 @@ import mitsuba as mi
 import numpy as np
 
 from ...physics.colour import SRGB_LUMINANCE
-from ...physics.sky import Sky
-from ..daylight import RGB_KEYS as _RGB_KEYS, opaque_value
+from ...physics.sky import PEREZ_HORIZON_COS, Sky
+from ..daylight import PEREZ_KEYS as _PEREZ_KEYS, RGB_KEYS as _RGB_KEYS, opaque_value
 from .properties import property_values
 
 #: Sampling table resolution: azimuth cells x cos(theta) cells.
@@ -76,6 +78,7 @@ class CIESkyEmitter(mi.Emitter):
         self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
         sky = Sky(_triple(props, "sun_direction", (0, 0, 1)),
                   **{k: _triple(props, k, 0.0) for k in _RGB_KEYS},
+                  perez_coefficients=[float(props.get(k, 0.0)) for k in _PEREZ_KEYS],
                   horizon_blend=bool(props.get("horizon_blend", False)),
                   sun_solid_angle=float(props.get("sun_solid_angle", 6e-5)))
         self.scene_radius = mi.Float(float(props.get("scene_radius", 1e4)))
@@ -83,6 +86,8 @@ class CIESkyEmitter(mi.Emitter):
         self.sun_solid_angle = mi.Float(float(sky.sun_solid_angle))
         for k in _RGB_KEYS:
             setattr(self, k, mi.Color3f(*map(float, getattr(sky, k))))
+        for k, v in zip(_PEREZ_KEYS, sky.perez_coefficients):
+            setattr(self, k, mi.Float(float(v)))
         self.horizon_blend = mi.Bool(bool(sky.horizon_blend))
         self._build_sampling(sky)
 
@@ -114,14 +119,14 @@ class CIESkyEmitter(mi.Emitter):
         # the kernel's hash (a recompilation per frame)
         self.blend_weight = opaque_value(mi.Float, float(sky.horizon_blend))
         for k in ("sun_direction", "sun_solid_angle", "blend_weight", "p_sun", "sun_chord2",
-                  "scene_radius") + _RGB_KEYS:
+                  "scene_radius") + _RGB_KEYS + _PEREZ_KEYS:
             dr.make_opaque(getattr(self, k))
 
     def traverse(self, cb):
         flag = mi.ParamFlags.NonDifferentiable
         cb.put("sun_direction", self.sun_direction, flag)
         cb.put("sun_solid_angle", self.sun_solid_angle, flag)
-        for k in _RGB_KEYS:
+        for k in _RGB_KEYS + _PEREZ_KEYS:
             cb.put(k, getattr(self, k), flag)
         cb.put("horizon_blend", self.horizon_blend, flag)
         cb.put("scene_radius", self.scene_radius, flag)
@@ -130,6 +135,7 @@ class CIESkyEmitter(mi.Emitter):
         def arr(v):
             return np.array(v, dtype=float).ravel()
         sky = Sky(arr(self.sun_direction), **{k: arr(getattr(self, k)) for k in _RGB_KEYS},
+                  perez_coefficients=[arr(getattr(self, k))[0] for k in _PEREZ_KEYS],
                   horizon_blend=bool(arr(self.horizon_blend)[0]),
                   sun_solid_angle=float(arr(self.sun_solid_angle)[0]))
         self._build_sampling(sky)
@@ -150,8 +156,13 @@ class CIESkyEmitter(mi.Emitter):
         inter = (((1.35 * dr.sin(5.631 - 3.59 * eta) + 3.12) * dr.sin(4.396 - 2.6 * zt)
                   + 6.37 - eta) / 2.326
                  * dr.exp(zeta * -0.563 * ((2.629 - eta) * (1.562 - zt) + 0.812)))
+        # Perez et al. 1993 eq. 1, cos theta_p held at 0.01 below it, clamped at 0 (Sky.perez)
+        mu = dr.maximum(dz, PEREZ_HORIZON_COS)
+        perez = dr.maximum((1.0 + self.perez_a * dr.exp(self.perez_b / mu))
+                           * (1.0 + self.perez_c * dr.exp(self.perez_d * zeta)
+                              + self.perez_e * cos_z * cos_z), 0.0)
         sky = self.clear * clear + self.overcast * overcast + self.uniform \
-            + self.intermediate * inter
+            + self.intermediate * inter + self.perez * perez
         a = dr.power(dz + 1.01, 10.0)
         w = a / (a + dr.rcp(a))
         blended = w * sky + (1.0 - w) * self.ground
