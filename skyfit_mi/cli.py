@@ -100,6 +100,33 @@ def _render(args):
                     progress=not args.quiet)
 
 
+def _reflectance(text):
+    name, value = _named(text, "MATERIAL=REFLECTANCE")
+    try:
+        rho = [float(v) for v in value.split(",")]
+        if len(rho) not in (1, 3) or not all(0.0 < v <= 1.0 for v in rho):
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give the reference's reflectance as one "
+                                         "number or R,G,B, each in (0, 1]") from None
+    return name, rho * 3 if len(rho) == 1 else rho
+
+
+def _ingest(args):
+    from .pipeline.ingest import ingest
+
+    for name, n in (("--site", (2, 3)), ("--noise", (2,))):
+        v = getattr(args, name[2:])
+        if v is not None and len(v) not in n:
+            raise SkyfitError(f"{name} takes {' or '.join(map(str, n))} comma-separated numbers, "
+                              f"got {len(v)}.")
+    ingest(args.photos, args.spec, args.output, times_csv=args.times,
+           name_pattern=args.name_pattern, tz=args.tz, site=args.site, response=args.response,
+           gamma=args.gamma, exposure=args.exposure, calibrate=dict(args.calibrate or []),
+           vignetting=args.vignetting, noise=args.noise, overwrite=args.overwrite,
+           progress=not args.quiet)
+
+
 def _pixels(args):
     from .pipeline.pixels import parse_pixel, write_pixels
 
@@ -258,6 +285,44 @@ def build_parser():
                         help="replace another run's output in the folder (starts clean)")
     render.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     render.set_defaults(func=_render)
+
+    ing = sub.add_parser(
+        "ingest", parents=[common], help="photographs of a day -> a sequence folder",
+        description="Turn photographs of a day into the sequence folder `render` writes (frames, "
+        "manifest, contact sheet), so fit, relight and chi2map read them. The spec gives site, "
+        "camera pose, scene geometry and sky (or measured irradiance); the photographs give the "
+        "times and the observations.")
+    ing.add_argument("spec", help="spec (.toml/.json) with [location], [camera], [scene], [sky]; "
+                     "its [time] is replaced by the photographs' times")
+    ing.add_argument("photos", nargs="+", help="image files, or folders of them (EXR, HDR, TIFF, "
+                     "PNG, JPEG, camera RAW)")
+    ing.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
+    ing.add_argument("--times", metavar="CSV", help="CSV file,time giving each frame's time "
+                     "(instead of EXIF DateTimeOriginal)")
+    ing.add_argument("--name-pattern", metavar="PATTERN", help="times from the file names, e.g. "
+                     "'IMG_%%Y%%m%%d_%%H%%M%%S.jpg'")
+    ing.add_argument("--tz", help="time zone of times without an offset (IANA name such as "
+                     "'Europe/London', or '+01:00')")
+    ing.add_argument("--site", type=_numbers, metavar="LAT,LON[,ALT]",
+                     help="site in degrees (north, east) and metres, overriding the spec's")
+    ing.add_argument("--response", choices=("srgb", "gamma", "linear"),
+                     help="the encoding to invert (default: the spec's [sensor], else the files')")
+    ing.add_argument("--gamma", type=float, help="exponent of a gamma response")
+    ing.add_argument("--exposure", type=float, help="absolute exposure of the first frame "
+                     "[sr m^2 W^-1] (1 / the radiance at full scale)")
+    ing.add_argument("--calibrate", action="append", type=_reflectance,
+                     metavar="MATERIAL=REFLECTANCE", help="a scene material that is a grey "
+                     "Lambertian reference of this reflectance (or R,G,B); sets the exposure and "
+                     "white balance (repeatable)")
+    ing.add_argument("--vignetting", default="none", metavar="none|cos4|FLAT",
+                     help="none, the cos^4 law, or a flat-field image (default none)")
+    ing.add_argument("--noise", type=_numbers, metavar="READ,SHOT",
+                     help="noise model: read variance [DN^2] and shot gain [DN] of the linear "
+                     "codes (default: estimated from the frames)")
+    ing.add_argument("--overwrite", action="store_true",
+                     help="replace another run's output in the folder (starts clean)")
+    ing.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    ing.set_defaults(func=_ingest)
 
     manifest_help = "folder written by `skyfit render` (or its manifest.json)"
     pixels = sub.add_parser("pixels", parents=[common], help="values of chosen pixels across a rendered sequence",

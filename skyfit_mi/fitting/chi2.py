@@ -155,6 +155,10 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2):
                         f"{len(doc['frames'])} frames are fitted; finish it with `skyfit render`.")
     sensor = sensor_from_record(doc["sensor"])
     falloff = sensor.gain(w, h, cam["fov_deg"])[pixels[:, 1], pixels[:, 0]] / sensor.exposure
+    if doc["sensor"].get("flat_field"):         # a measured vignetting (ingest), per pixel
+        flat = read_frame_image(root, {"index": "flat field", "flat": doc["sensor"]["flat_field"]},
+                                "flat", (h, w, 3))
+        falloff = falloff * flat[pixels[:, 1], pixels[:, 0], 0]
     ys, sig, gain = [], [], []
     for f in rendered:
         y = _region_values(root, f, "sensor", pixels, (h, w, 3))

@@ -22,7 +22,7 @@ from .methods.levenberg_marquardt import SINGULAR_CONDITION
 from .methods.profile import profile_edges, ridge_intervals
 from ..render.fit_model import check_start, other_readings
 from ..render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS, SIGMA_RESOLVED
-from ..pipeline.manifest import frame_sky, load_manifest
+from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
 from ..physics.ward import METAL_THRESHOLD
 
 
@@ -86,7 +86,9 @@ class FitSession:
         self.doc, self.name, self.model, self.normalisation = doc, name, model, normalisation
         self.names = PARAMETERS[model]
         self.lower, self.upper = bounds(model)
-        self.truth = mats[name]
+        # a material is the truth only where skyfit rendered the frames with it; an ingested
+        # sequence's spec materials are placeholders for the unknown photographed surface
+        self.truth = mats[name] if doc.get("source", "render") in RENDERED_SOURCES else None
         self.cache_settings = {"positions": POSITIONS if positions is None else int(positions),
                                "directions": int(directions), "seed": seed,
                                "sized": "from the data" if positions is None else "given"}

@@ -116,6 +116,16 @@ class SensorModel:
             return s ** (1.0 / self.gamma)
         return np.where(s <= 0.0031308, 12.92 * s, 1.055 * s ** (1 / 2.4) - 0.055)
 
+    def linearise(self, values):
+        """The signal s in [0, 1] that pixel ``values`` [DN] encode: the inverse of
+        :meth:`respond` (eq. 5.11's Q^-1) on values / max_code, clipped to [0, 1]."""
+        v = np.clip(np.asarray(values, dtype=float) / self.max_code, 0.0, 1.0)
+        if self.response == "linear":
+            return v
+        if self.response == "gamma":
+            return v ** self.gamma
+        return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
     def gain(self, width, height, fov_deg):
         """Per-pixel factor from radiance to signal, exposure x optional cos^4, shape (H, W)."""
         g = np.full((height, width), float(self.exposure))

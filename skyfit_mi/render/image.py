@@ -37,7 +37,7 @@ def read_exr_checked(path, shape):
 
 def to_srgb8(image, exposure):
     """Linear RGB times ``exposure`` to 8-bit sRGB (IEC 61966-2-1 transfer curve)."""
-    x = np.clip(np.asarray(image, dtype=float) * exposure, 0.0, 1.0)
+    x = np.clip(np.nan_to_num(np.asarray(image, dtype=float) * exposure), 0.0, 1.0)
     srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
     return np.round(srgb * 255).astype(np.uint8)
 
@@ -59,3 +59,29 @@ def contact_sheet(images, exposure, columns=5, gap=2):
         r, c = divmod(i, columns)
         sheet[r * (h + gap):r * (h + gap) + h, c * (w + gap):c * (w + gap) + w] = to_srgb8(im, exposure)
     return sheet
+
+
+def read_bitmap(path):
+    """Read any image Mitsuba's ``Bitmap`` reads (OpenEXR, Radiance RGBE ``.hdr``/``.pic``,
+    PNG of 8 or 16 bits, PFM...) as it is stored, with no conversion.
+
+    Returns
+    -------
+    values : ndarray, shape (H, W, C)
+        The file's pixels in its own component type (float32/float16 for EXR and RGBE,
+        uint8/uint16 codes for PNG).
+    channels : list of str
+        Channel names, e.g. ``['R', 'G', 'B']``, ``['R', 'G', 'B', 'A']`` or ``['Y']``.
+
+    Raises whatever Mitsuba raises on an unreadable file (``RuntimeError``); callers in the
+    pipeline turn it into a :class:`~skyfit_mi.errors.SkyfitError` naming the file.
+    """
+    import mitsuba as mi
+
+    bmp = mi.Bitmap(str(path))
+    values = np.array(bmp)
+    if values.ndim == 2:
+        values = values[:, :, None]
+    struct = bmp.struct_()
+    channels = [struct[i].name for i in range(bmp.channel_count())]
+    return values, channels

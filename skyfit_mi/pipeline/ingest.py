@@ -1,0 +1,450 @@
+"""Photographs in: a day of real frames becomes the sequence folder ``render`` writes.
+
+``skyfit ingest SPEC PHOTOS... -o DIR`` reads the photographs (:mod:`.photos`), gives each its
+time (:mod:`.photo_times`: EXIF, a CSV or a file-name pattern), resolves the sun and sky of
+each time from the spec (site, camera pose, scene geometry, sky type or measured irradiance:
+the spec's ``[time]`` is replaced by the photographs' times), and writes the manifest
+contract with ``source = "ingest"``, so ``fit``, ``pixels``, ``labels``, ``relight`` and
+``chi2map`` read it unchanged.  The sensor model (thesis ch. 5) is the one synthetic
+sequences use:
+
+* values stay in the camera's codes [DN]: an 8-bit JPEG's 0-255, a 16-bit TIFF's or a RAW
+  file's 0-65535; floating-point frames (EXR, HDR) are put on a linear 16-bit scale (one
+  factor for the day, recorded).  Codes at 0 or the top are censored in the fit, as for
+  synthetic frames; NaN values are masked (sigma infinite) and counted;
+* linearisation: the response (``srgb``, ``gamma``, ``linear``) inverts the encoding;
+* exposure: relative from EXIF (t ISO / N^2, per frame) when every frame has it, and an
+  absolute scale [sr m^2 W^-1] given (``--exposure``, for the first frame) or **fitted from
+  patches of known reflectance**: scene materials named as grey Lambertian references
+  (``--calibrate grey=0.18``) are rendered under each frame's sky and their observed signal
+  divided by the rendered radiance; this gives each channel's scale (white balance) too, and
+  each frame's own exposure where EXIF has none;
+* vignetting: none, the cos^4 law (eq. 5.6) or a flat-field image (``sensor.flat_field``,
+  multiplied into each pixel's gain by the fit);
+* noise: per pixel, sigma^2 = Q'(s)^2 (a + b s M) + 1/12 + c [DN^2] (read noise a and shot
+  noise b in linear codes, through the response's slope Q', plus quantisation, plus a JPEG's
+  quantisation error c from its tables), a and b estimated from the frames (local
+  differences, robust by level) or given.
+
+Nothing is written until every input is checked; the folder is then written as ``render``
+writes it (frames atomically, manifest last) and a second run into it is refused unless
+``--overwrite``.
+"""
+
+import datetime as dt
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SkyfitError
+from ..files import FolderLock
+from ..physics.camera import SensorModel
+from ..physics.colour import SRGB_LUMINANCE
+from .manifest import sensor_record, write_manifest
+from .sequence import FRAME_FILES, finish, frame_names, frame_record, prepare_folder
+from .spec import SpecError, read_spec, validate_spec
+
+#: Floating-point frames are scaled so that the day's brightest finite value is this share of
+#: a 16-bit full scale.
+FLOAT_HEADROOM = 0.9
+#: Level bins and the least pixels per bin of the noise estimate.
+NOISE_BINS, NOISE_MIN_PIXELS = 16, 200
+#: Render settings of the calibration patches' radiance.
+CALIBRATION_SPP = 64
+
+
+# ---- the sensor ------------------------------------------------------------------------
+
+def _sensor(photos, response, gamma, spec_sensor, cos4):
+    """The day's SensorModel (exposure 1 for now) and the float scale (None for codes)."""
+    kinds = {p.kind for p in photos}
+    if len(kinds) > 1:
+        raise SkyfitError("the frames mix floating-point (EXR/HDR) and integer images; give one "
+                          "kind for the whole day.")
+    bits = {p.bits for p in photos}
+    if len(bits) > 1:
+        raise SkyfitError(f"the frames mix bit depths {sorted(bits, key=str)}; give one depth for "
+                          "the whole day.")
+    first = photos[0]
+    scale = None
+    if first.kind == "float":
+        peak = max(float(p.values[np.isfinite(p.values)].max(initial=0.0)) for p in photos)
+        if not peak > 0:
+            raise SkyfitError("every floating-point frame is black or NaN; nothing to ingest.")
+        scale = FLOAT_HEADROOM * 65535.0 / peak
+        depth = 16
+    else:
+        depth = int(first.bits)
+    if response is None and first.kind == "float":
+        response = "linear"                       # EXR/HDR hold linear values whatever the spec
+    if response is None:
+        response = spec_sensor.get("response") if "response" in spec_sensor else None
+    if response is None:
+        hints = {p.encoding_hint for p in photos}
+        response = hints.pop() if len(hints) == 1 else "srgb"
+    g = gamma if gamma is not None else spec_sensor.get("gamma", 2.2)
+    return SensorModel(exposure=1.0, response=response, gamma=g, bits=depth, cos4=cos4), scale
+
+
+def _relative_exposures(photos, log):
+    """t ISO / N^2 of each frame over the first's, or None when some frame lacks EXIF."""
+    vals = []
+    for p in photos:
+        m = p.metadata
+        t, n, iso = m.get("exposure_time_s"), m.get("f_number"), m.get("iso")
+        if not (t and n and iso):
+            if any(x.metadata.get("exposure_time_s") for x in photos):
+                log(f"{Path(p.path).name}: no EXIF exposure (time, f-number, ISO); every frame's "
+                    "exposure is taken from the calibration or --exposure instead")
+            return None
+        vals.append(float(t) * float(iso) / float(n) ** 2)
+    return np.asarray(vals) / vals[0]
+
+
+# ---- noise --------------------------------------------------------------------------------
+
+def estimate_noise(values, sensor):
+    """Read and shot noise (a [DN^2], b [DN]) of the linear codes from frames (H, W, 3) [DN].
+
+    The difference between a pixel and the mean of its four neighbours has variance 5/4 of the
+    pixel's where the scene is smooth; its robust variance (1.4826 MAD)^2 per level bin is
+    fitted by Q'(s)^2 (a + b s M) + 1/12 with a, b >= 0 (non-negative least squares), the
+    edges of the scene falling in the MAD's discarded tails.
+    """
+    from scipy.optimize import nnls
+
+    rows, rhs, weights = [], [], []
+    for v in values:
+        c = v[1:-1, 1:-1]
+        nb = 0.25 * (v[:-2, 1:-1] + v[2:, 1:-1] + v[1:-1, :-2] + v[1:-1, 2:])
+        r = (c - nb).ravel()
+        lvl = c.ravel()
+        ok = np.isfinite(r) & (lvl > 0) & (lvl < sensor.max_code)
+        r, lvl = r[ok], lvl[ok]
+        if len(r) < NOISE_MIN_PIXELS:
+            continue
+        edges = np.quantile(lvl, np.linspace(0, 1, NOISE_BINS + 1))
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            sel = (lvl >= lo) & (lvl <= hi)
+            if sel.sum() < NOISE_MIN_PIXELS:
+                continue
+            rr = r[sel]
+            var = (1.4826 * np.median(np.abs(rr - np.median(rr)))) ** 2 / 1.25
+            s = float(sensor.linearise(np.median(lvl[sel])))
+            q = float(sensor.slope(np.clip(s, 1e-6, 1 - 1e-6))) ** 2
+            rows.append([q, q * s * sensor.max_code])
+            rhs.append(max(var - 1.0 / 12.0, 0.0))
+            weights.append(np.sqrt(sel.sum()))
+    if len(rows) < 2:
+        raise SkyfitError("too few unsaturated pixels to estimate the noise; give --noise "
+                          "READ,SHOT [DN^2, DN] explicitly.")
+    w = np.asarray(weights) / np.mean(weights)
+    (a, b), _ = nnls(np.asarray(rows) * w[:, None], np.asarray(rhs) * w)
+    return float(a), float(b)
+
+
+def pixel_sigma(values, sensor, noise, compression=None):
+    """sigma [DN] of each value (H, W, 3): sqrt(Q'(s)^2 (a + b s M) + 1/12 + c), inf where NaN,
+    with c the compression's error variance per channel [DN^2] (JPEG's quantisation,
+    :func:`.photos.jpeg_error_variance`)."""
+    a, b = noise
+    s = sensor.linearise(np.nan_to_num(values))
+    q = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6))
+    c = 0.0 if compression is None else np.asarray(compression, dtype=float)
+    sig = np.sqrt(q * q * (a + b * s * sensor.max_code) + 1.0 / 12.0 + c)
+    return np.where(np.isfinite(values), sig, np.inf).astype(np.float32)
+
+
+# ---- calibration from patches of known reflectance ----------------------------------------
+
+def _calibration_spec(raw, calibrate, base_dir):
+    """The spec with each calibration material a grey (or RGB) Lambertian of its reflectance."""
+    raw = json.loads(json.dumps(raw))
+    mats = raw.setdefault("materials", {})
+    for name, rho in calibrate.items():
+        mats[name] = {"model": "raw", "rho_d": list(rho), "rho_s": 0.0, "sigma_alpha": 0.1}
+    return validate_spec(raw, base_dir)
+
+
+def calibrate_exposure(spec, photos, values, sensor, falloff, rel, calibrate, log):
+    """Per-frame, per-channel exposure [sr m^2 W^-1] (F, 3) from the calibration materials.
+
+    Each material's pixels (away from its edges) are rendered under each frame's sky as a
+    Lambertian of its known reflectance; exposure = median over pixels of the observed
+    linear signal / (rendered radiance x falloff).  With EXIF exposures ``rel`` the day
+    shares one scale per channel (the median over frames of exposure / rel), and the
+    frames' spread about it is reported.
+    """
+    from scipy.ndimage import binary_erosion
+
+    from ..render.labels import label_image
+    from .sequence import FrameRenderer
+
+    renderer = FrameRenderer(spec)
+    labels, ids = label_image(renderer.scene)
+    masks = {}
+    for name in calibrate:
+        if name not in ids:
+            raise SkyfitError(f"--calibrate {name}: the camera sees no material {name!r}; it sees "
+                              f"{', '.join(ids) or 'none'}.")
+        m = binary_erosion(labels == ids.index(name) + 1, border_value=1)
+        if m.sum() < 4:
+            raise SkyfitError(f"--calibrate {name}: fewer than 4 pixels of it lie away from its "
+                              "edges; frame the reference patch larger.")
+        masks[name] = m
+    lit = [f for f in spec.frames if not f.skipped]
+    k = np.full((len(lit), 3), np.nan)
+    for i, (f, v) in enumerate(zip(lit, values)):
+        radiance, _ = renderer.render(f)
+        ratios = []
+        for m in masks.values():
+            y = v[m]
+            ok = np.isfinite(y) & (y > 0) & (y < sensor.max_code)
+            s = sensor.linearise(np.where(ok, y, 0.0))
+            L = radiance[m] * falloff[m][:, None]
+            ok &= L > 0
+            ratios.append(np.where(ok, s / np.where(ok, L, 1.0), np.nan))
+        r = np.concatenate(ratios)
+        with np.errstate(all="ignore"):
+            k[i] = np.nanmedian(r, axis=0) if np.isfinite(r).any(axis=0).all() else np.nan
+    good = np.isfinite(k).all(axis=1)
+    if not good.any():
+        raise SkyfitError("the calibration patches are saturated, black or unlit in every frame; "
+                          "they cannot set the exposure. Give --exposure instead.")
+    if rel is None:
+        missing = [Path(photos[i].path).name for i in np.flatnonzero(~good)]
+        if missing:
+            raise SkyfitError(f"{missing[0]}: the calibration patches are saturated, black or "
+                              "unlit, and the frame has no EXIF exposure; drop the frame or give "
+                              "--exposure.")
+        return k, {"per_frame": True}
+    scale = np.nanmedian(k[good] / rel[good, None], axis=0)
+    spread = float(np.std(k[good] @ SRGB_LUMINANCE / (rel[good] * (scale @ SRGB_LUMINANCE))))
+    log(f"calibration: exposure {scale @ SRGB_LUMINANCE:.4g} sr m^2 W^-1 (EXIF relative "
+        f"exposures; frame-to-frame spread {100 * spread:.1f}%)")
+    return rel[:, None] * scale[None, :], {"per_frame": False, "relative_spread": spread}
+
+
+# ---- the whole ingest ---------------------------------------------------------------------
+
+def _run_id(paths, spec_raw, options):
+    h = hashlib.sha256()
+    for p in paths:
+        h.update(p.name.encode())
+        h.update(hashlib.sha256(p.read_bytes()).digest())
+    h.update(json.dumps([spec_raw, options], sort_keys=True, default=str).encode())
+    return h.hexdigest()[:16]
+
+
+def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None, tz=None,
+           site=None, response=None, gamma=None, exposure=None, calibrate=None,
+           vignetting="none", noise=None, overwrite=False, progress=True, log=print):
+    """Turn photographs into a sequence folder; returns the manifest dict.
+
+    Parameters
+    ----------
+    photo_paths : list of paths (files, or folders whose images are taken in name order)
+    spec_path : the spec (TOML/JSON) giving site, camera, scene and sky; its [time] is unused
+    out_dir : the sequence folder to write
+    times_csv, name_pattern, tz : the frames' times (see :func:`.photo_times.frame_times`)
+    site : (latitude_deg, longitude_deg[, elevation_m]) overriding the spec's [location]
+    response, gamma : the encoding to invert (default: the spec's [sensor], else the files')
+    exposure : absolute exposure of the first frame [sr m^2 W^-1]
+    calibrate : {material: (r, g, b) reflectance} of grey Lambertian references in the scene
+    vignetting : 'none', 'cos4', or the path of a flat-field image
+    noise : (a [DN^2], b [DN]) of the noise model, or None to estimate it from the frames
+    """
+    from .photo_times import frame_times
+    from .photos import SUFFIXES, check_same_size, read_photo
+
+    paths = []
+    for p in map(Path, photo_paths):
+        if p.is_dir():
+            paths += sorted(q for q in p.iterdir() if q.suffix.lower() in SUFFIXES)
+        elif p.is_file():
+            paths.append(p)
+        else:
+            raise SkyfitError(f"{p} does not exist; give photographs or a folder of them.")
+    if len(paths) < 2:
+        raise SkyfitError(f"{len(paths)} photograph(s) given; a sequence needs at least 2.")
+    photos = [read_photo(p) for p in paths]
+    check_same_size(list(zip(paths, photos)))
+    times = frame_times(paths, [p.metadata for p in photos], times_csv=times_csv,
+                        name_pattern=name_pattern, tz=tz, warn=log)
+    order = np.argsort([t.timestamp() for t in times], kind="stable")
+    paths, photos, times = ([x[i] for i in order] for x in (paths, photos, times))
+    for a, b, ta, tb in zip(paths, paths[1:], times, times[1:]):
+        if ta == tb:
+            raise SkyfitError(f"{a.name} and {b.name} were both taken at {ta.isoformat()}; a "
+                              "sequence has one frame per time: drop one of them.")
+
+    spec_path = Path(spec_path)
+    raw = read_spec(spec_path)
+    h, w = photos[0].values.shape[:2]
+    cam = dict(raw.get("camera", {}))
+    for key, size in (("width", w), ("height", h)):
+        if key in cam and int(cam[key]) != size:
+            raise SpecError(f"[camera] {key} = {cam[key]} but the photographs are {w}x{h}; drop "
+                            f"{key} from the spec or give the camera of these photographs.")
+        cam[key] = size
+    raw["camera"] = cam
+    loc = dict(raw.get("location", {}))
+    if site is not None:
+        loc.update(latitude_deg=site[0], longitude_deg=site[1],
+                   **({"elevation_m": site[2]} if len(site) > 2 else {}))
+    loc.setdefault("timezone", tz or times[0].isoformat()[-6:])
+    raw["location"] = loc
+    raw["time"] = {"times": [t.isoformat() for t in times]}
+    raw["render"] = {**raw.get("render", {}), "below_horizon": "skip"}
+    spec = validate_spec(raw, spec_path.parent)
+    night = [paths[f.index].name for f in spec.frames if f.skipped]
+    if len(night) == len(paths):
+        raise SkyfitError(f"every frame was taken with the sun below the horizon (first: "
+                          f"{paths[0].name} at {times[0].isoformat()}); check the times, --tz and "
+                          "--site.")
+    if night:
+        log(f"{len(night)} night frame(s) (sun below the horizon) are kept out of the sequence: "
+            f"{', '.join(night)}")
+
+    sensor, float_scale = _sensor(photos, response, gamma, spec.sensor if "sensor" in raw else {},
+                                  vignetting == "cos4")
+    fov = spec.camera["fov_deg"]
+    falloff = sensor.falloff(w, h, fov) if sensor.cos4 else np.ones((h, w))
+    flat_rec = None
+    if vignetting not in ("none", "cos4"):
+        flat = read_photo(Path(vignetting))
+        if flat.values.shape[:2] != (h, w):
+            raise SkyfitError(f"flat field {vignetting} is {flat.values.shape[1]}x"
+                              f"{flat.values.shape[0]}, the frames {w}x{h}; give one of their size.")
+        fl = np.nanmean(flat.values if flat.kind == "float" else
+                        SensorModel(1.0, response=flat.encoding_hint, bits=flat.bits)
+                        .linearise(flat.values), axis=2)
+        if not np.all(np.isfinite(fl)) or fl.max() <= 0:
+            raise SkyfitError(f"flat field {vignetting} has non-finite or no positive values.")
+        falloff = fl / fl.max()
+        flat_rec = falloff
+    values = [(p.values * float_scale) if float_scale else p.values for p in photos]
+    lit = [i for i, f in enumerate(spec.frames) if not f.skipped]
+
+    rel = _relative_exposures(photos, log)
+    cal_info = None
+    if calibrate:
+        cal_spec = _calibration_spec(spec.raw, calibrate, spec.base_dir)
+        per_frame, cal_info = calibrate_exposure(
+            cal_spec, [photos[i] for i in lit], [values[i] for i in lit], sensor, falloff,
+            None if rel is None else rel[lit], calibrate, log)
+        e0 = float(per_frame[0] @ SRGB_LUMINANCE)
+        exposures = {i: per_frame[j] for j, i in enumerate(lit)}
+    else:
+        given = exposure if exposure is not None else (
+            spec.sensor.get("exposure") if raw.get("sensor", {}).get("exposure", "auto") != "auto"
+            else None)
+        if given is None:
+            raise SkyfitError("the photographs' absolute scale is unknown: give --exposure E "
+                              "[sr m^2 W^-1] for the first frame, or --calibrate MATERIAL="
+                              "REFLECTANCE naming a grey reference in the scene.")
+        e0 = float(given)
+        r = np.ones(len(paths)) if rel is None else rel
+        exposures = {i: np.full(3, e0 * r[i]) for i in lit}
+    sensor = SensorModel(exposure=e0, response=sensor.response, gamma=sensor.gamma,
+                         bits=sensor.bits, cos4=sensor.cos4)
+    if noise is None:
+        a, b = estimate_noise([values[i] for i in lit], sensor)
+        noise_info = {"read_DN2": a, "shot_DN": b, "source": "estimated from the frames"}
+    else:
+        a, b = (float(x) for x in noise)
+        noise_info = {"read_DN2": a, "shot_DN": b, "source": "given"}
+    log(f"noise model: read {np.sqrt(a):.3g} DN rms, shot {b:.3g} DN per linear DN "
+        f"({noise_info['source']})")
+
+    options = {"times_csv": str(times_csv), "name_pattern": name_pattern, "tz": tz,
+               "response": sensor.response, "gamma": sensor.gamma, "exposure": exposure,
+               "calibrate": calibrate, "vignetting": str(vignetting), "noise": [a, b]}
+    run_id = _run_id(paths, spec.raw, options)
+    out = Path(out_dir)
+    with FolderLock(out):
+        prepare_folder(out, run_id, (h, w, 3), overwrite, log)
+        return _write(out, spec, paths, photos, values, times, sensor, exposures, (a, b),
+                      falloff, flat_rec, float_scale, rel, cal_info, noise_info, options, run_id,
+                      progress)
+
+
+def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, falloff, flat,
+           float_scale, rel, cal_info, noise_info, options, run_id, progress):
+    from .photos import jpeg_error_variance
+    from ..render.image import write_exr
+    from ..render.scene_xml import build_scene_xml
+    from .manifest import versions
+
+    xml, materials, to_world = build_scene_xml(spec)
+    for m in materials.values():
+        m["source"] = f"{m.get('source', 'spec')}: a placeholder; the photographed material is " \
+                      "unknown until fitted"
+    cam = spec.camera
+    sensor_rec = sensor_record(sensor)
+    sensor_rec["noise_model"] = {**noise_info, "sigma2_DN2": "Q'(s)^2 (read + shot s M) + 1/12"}
+    if flat is not None:
+        write_exr(out / "frames" / "flat_field.exr", np.repeat(flat[..., None], 3, axis=2))
+        sensor_rec["flat_field"] = "frames/flat_field.exr"
+    manifest = {
+        "schema": "skyfit-manifest/2", "source": "ingest", "run_id": run_id,
+        "name": spec.raw.get("name"), "status": "incomplete",
+        "created": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+        "spec": spec.raw, "spec_dir": spec.base_dir.resolve(), "location": spec.raw["location"],
+        "scene": {"file": spec.scene_file, "xml": xml, "materials": materials},
+        "camera": {"to_world": to_world, "fov_deg": cam["fov_deg"], "fov_axis": "x",
+                   "width": cam["width"], "height": cam["height"]},
+        "sensor": sensor_rec,
+        "render": {**spec.render, "seed_rule": "none: frames are photographs"},
+        "ingest": {"photos": [p.name for p in paths], "options": options,
+                   "float_scale_DN": float_scale, "calibration": cal_info,
+                   "relative_exposure_from_exif": None if rel is None else rel.tolist()},
+        "versions": versions(),
+        "frames": [],
+    }
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(paths), desc="ingest", unit="frame")
+    for f, p, photo, v in zip(spec.frames, paths, photos, values):
+        rec = frame_record(f, 0)
+        rec.pop("seed")
+        rec["photo"] = {"file": p.name, **{k: x for k, x in photo.metadata.items()
+                                            if isinstance(x, (str, int, float, type(None)))}}
+        if f.skipped:
+            rec["status"] = "skipped"
+        else:
+            e = exposures[f.index]
+            gain = e[None, None, :] * falloff[..., None]
+            jpeg = jpeg_error_variance(p) if photo.format == "jpeg" else None
+            sig = pixel_sigma(v, sensor, noise, jpeg)
+            s = sensor.linearise(np.nan_to_num(v))
+            slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code
+            radiance = np.where(np.isfinite(v), s / gain, np.nan).astype(np.float32)
+            rad_sd = np.where(np.isfinite(v), sig / (slope * gain), np.inf).astype(np.float32)
+            names = frame_names(f.index)
+            write_exr(out / names["radiance"], radiance)
+            write_exr(out / names["radiance_sigma"], rad_sd)
+            write_exr(out / names["sensor"], v.astype(np.float32))
+            write_exr(out / names["sigma"], sig)
+            rec.update(status="rendered", **names,
+                       exposure={"exposure": float(e @ SRGB_LUMINANCE),
+                                 "white_balance": (e / float(e @ SRGB_LUMINANCE)).tolist(),
+                                 **{k: photo.metadata[k] for k in ("exposure_time_s", "f_number",
+                                                                   "iso")
+                                    if photo.metadata.get(k)}})
+            if jpeg is not None:
+                rec["compression_variance_DN2"] = jpeg.tolist()
+            bad = int(photo.nan_count + photo.inf_count)
+            if bad:
+                rec["non_finite_values"] = bad
+        manifest["frames"].append(rec)
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    finish(out, manifest, sensor.exposure)
+    return manifest
+
