@@ -45,7 +45,7 @@ def spec(**changes):
     (dict(sky={"type": "stormy"}), "valid: clear, overcast, intermediate, gensky"),
     (dict(sky={"type": "intermediate"}), "needs phi"),
     (dict(sky={"type": "intermediate", "phi": 2}), r"phi = 2 is outside \[0, 1\]"),
-    (dict(scene={"file": "nothere.xml"}), "shipped: disc.xml, sample_board.xml, sphere.xml"),
+    (dict(scene={"file": "nothere.xml"}), "shipped: disc.xml, photo_board.xml, sample_board.xml, sphere.xml"),
     (dict(materials={"disc": {"model": "raw", "rho_d": 0.8, "rho_s": 0.4, "sigma_alpha": 0.1}}),
      "rho_d \\+ rho_s = 1.2 > 1"),
     (dict(materials={"disc": {"model": "two", "rho_s": 0.1, "sigma_alpha": -0.1}}), "negative"),
