@@ -31,7 +31,6 @@ writes it (frames atomically, manifest last) and a second run into it is refused
 ``--overwrite``.
 """
 
-import datetime as dt
 import hashlib
 import json
 from pathlib import Path
@@ -42,8 +41,7 @@ from ..errors import SkyfitError
 from ..files import FolderLock
 from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
-from .manifest import sensor_record, write_manifest
-from .sequence import FRAME_FILES, finish, frame_names, frame_record, prepare_folder
+from .sequence import finish, frame_names, frame_record, manifest_header, prepare_folder
 from .spec import SpecError, read_spec, validate_spec
 
 #: Floating-point frames are scaled so that the day's brightest finite value is this share of
@@ -51,8 +49,6 @@ from .spec import SpecError, read_spec, validate_spec
 FLOAT_HEADROOM = 0.9
 #: Level bins and the least pixels per bin of the noise estimate.
 NOISE_BINS, NOISE_MIN_PIXELS = 16, 200
-#: Render settings of the calibration patches' radiance.
-CALIBRATION_SPP = 64
 
 
 # ---- the sensor ------------------------------------------------------------------------
@@ -376,34 +372,22 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, fa
     from .photos import jpeg_error_variance
     from ..render.image import write_exr
     from ..render.scene_xml import build_scene_xml
-    from .manifest import versions
 
     xml, materials, to_world = build_scene_xml(spec)
     for m in materials.values():
         m["source"] = f"{m.get('source', 'spec')}: a placeholder; the photographed material is " \
                       "unknown until fitted"
-    cam = spec.camera
-    sensor_rec = sensor_record(sensor)
-    sensor_rec["noise_model"] = {**noise_info, "sigma2_DN2": "Q'(s)^2 (read + shot s M) + 1/12"}
+    manifest = manifest_header(spec, sensor, (xml, materials, to_world),
+                               {**spec.render, "seed_rule": "none: frames are photographs"},
+                               source="ingest", run_id=run_id)
+    manifest["sensor"]["noise_model"] = {**noise_info,
+                                         "sigma2_DN2": "Q'(s)^2 (read + shot s M) + 1/12"}
     if flat is not None:
         write_exr(out / "frames" / "flat_field.exr", np.repeat(flat[..., None], 3, axis=2))
-        sensor_rec["flat_field"] = "frames/flat_field.exr"
-    manifest = {
-        "schema": "skyfit-manifest/2", "source": "ingest", "run_id": run_id,
-        "name": spec.raw.get("name"), "status": "incomplete",
-        "created": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-        "spec": spec.raw, "spec_dir": spec.base_dir.resolve(), "location": spec.raw["location"],
-        "scene": {"file": spec.scene_file, "xml": xml, "materials": materials},
-        "camera": {"to_world": to_world, "fov_deg": cam["fov_deg"], "fov_axis": "x",
-                   "width": cam["width"], "height": cam["height"]},
-        "sensor": sensor_rec,
-        "render": {**spec.render, "seed_rule": "none: frames are photographs"},
-        "ingest": {"photos": [p.name for p in paths], "options": options,
-                   "float_scale_DN": float_scale, "calibration": cal_info,
-                   "relative_exposure_from_exif": None if rel is None else rel.tolist()},
-        "versions": versions(),
-        "frames": [],
-    }
+        manifest["sensor"]["flat_field"] = "frames/flat_field.exr"
+    manifest["ingest"] = {"photos": [p.name for p in paths], "options": options,
+                          "float_scale_DN": float_scale, "calibration": cal_info,
+                          "relative_exposure_from_exif": None if rel is None else rel.tolist()}
     bar = None
     if progress:
         from tqdm import tqdm

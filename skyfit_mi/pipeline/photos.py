@@ -393,15 +393,20 @@ def _read_pillow(path, fmt):
     meta["icc_profile"] = _icc_description(info.get("icc_profile"))
     hint, source = _hint_from_icc(meta["icc_profile"], "srgb")
     if fmt == "png":
-        if "srgb" in info:
-            hint, source = "srgb", "PNG sRGB chunk"
-        elif "gamma" in info:
-            g = float(info["gamma"])
-            if abs(g - 1.0) < 1e-3:
-                hint, source = "linear", "PNG gAMA 1.0"
-            elif abs(g - 1 / 2.2) < 2e-3:
-                hint, source = "srgb", "PNG gAMA 1/2.2"
+        hint, source = _png_hint(info, hint, source)
     return _integer_photo(path, fmt, codes, 8, hint, source, meta)
+
+
+def _png_hint(info, hint, source):
+    """The encoding a PNG's sRGB or gAMA chunk states (Pillow's ``info``), else (hint, source)."""
+    if "srgb" in info:
+        return "srgb", "PNG sRGB chunk"
+    g = float(info.get("gamma", 0.0))
+    if abs(g - 1.0) < 1e-3:
+        return "linear", "PNG gAMA 1.0"
+    if abs(g - 1 / 2.2) < 2e-3:
+        return "srgb", "PNG gAMA 1/2.2"
+    return hint, source
 
 
 def _png_header(path):
@@ -439,14 +444,7 @@ def _read_png(path):
     codes = _rgb(codes, channels, path)
     meta["icc_profile"] = _icc_description(info.get("icc_profile"))
     hint, source = _hint_from_icc(meta["icc_profile"], "linear")
-    if "srgb" in info:
-        hint, source = "srgb", "PNG sRGB chunk"
-    elif "gamma" in info:
-        g = float(info["gamma"])
-        if abs(g - 1.0) < 1e-3:
-            hint, source = "linear", "PNG gAMA 1.0"
-        elif abs(g - 1 / 2.2) < 2e-3:
-            hint, source = "srgb", "PNG gAMA 1/2.2"
+    hint, source = _png_hint(info, hint, source)
     return _integer_photo(path, "png", codes, 16, hint, source, meta)
 
 

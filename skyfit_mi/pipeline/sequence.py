@@ -160,26 +160,31 @@ def write_frame(out, index, radiance, radiance_sd, values, sigma):
     return names
 
 
-def manifest_header(spec, sensor, renderer, source="render"):
-    """The manifest of a render of ``spec`` by command ``source`` ('render', or 'relight' for
-    fitted materials), before any frame (status incomplete)."""
+def manifest_header(spec, sensor, scene, render, source="render", run_id=None):
+    """The manifest of a sequence of ``spec`` written by command ``source`` ('render',
+    'relight' for fitted materials, 'ingest' for photographs), before any frame (status
+    incomplete).  ``scene`` is (xml, materials, camera to_world); ``render`` the record of how
+    the frames were made; ``run_id`` defaults to the spec's."""
+    xml, materials, to_world = scene
     cam = spec.camera
     return {
-        "schema": SCHEMA, "source": source, "run_id": spec.run_id(), "name": spec.raw.get("name"),
-        "status": "incomplete",
+        "schema": SCHEMA, "source": source, "run_id": run_id or spec.run_id(),
+        "name": spec.raw.get("name"), "status": "incomplete",
         "created": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
         "spec": spec.raw, "spec_dir": spec.base_dir.resolve(),
         "location": spec.raw["location"],
-        "scene": {"file": spec.scene_file, "xml": renderer.xml, "materials": renderer.materials},
-        "camera": {"to_world": renderer.to_world, "fov_deg": cam["fov_deg"], "fov_axis": "x",
+        "scene": {"file": spec.scene_file, "xml": xml, "materials": materials},
+        "camera": {"to_world": to_world, "fov_deg": cam["fov_deg"], "fov_axis": "x",
                    "width": cam["width"], "height": cam["height"]},
-        "sensor": sensor_record(sensor),
-        "render": {**spec.render, "spp_rendered": 2 * renderer.half, "integrator": "path",
-                   "seed_rule": "two half-spp passes with "
-                   "mitsuba seeds seed + index and seed + index + 2^31; noise rng = "
-                   "numpy.random.default_rng([seed, index])"},
-        "versions": versions(), "frames": [],
+        "sensor": sensor_record(sensor), "render": render, "versions": versions(), "frames": [],
     }
+
+
+def render_record(spec, renderer):
+    """The manifest's ``render`` record of frames rendered by ``renderer`` (settings, seeds)."""
+    return {**spec.render, "spp_rendered": 2 * renderer.half, "integrator": "path",
+            "seed_rule": "two half-spp passes with mitsuba seeds seed + index and seed + index "
+            "+ 2^31; noise rng = numpy.random.default_rng([seed, index])"}
 
 
 def frame_record(frame, seed):
@@ -224,7 +229,9 @@ def _render(spec, out, overwrite, progress, log, source):
     done = prepare_folder(out, spec.run_id(), (cam["height"], cam["width"], 3), overwrite, log)
     sensor = spec_sensor(spec)
     renderer = FrameRenderer(spec)
-    manifest = manifest_header(spec, sensor, renderer, source)
+    manifest = manifest_header(spec, sensor, (renderer.xml, renderer.materials,
+                                              renderer.to_world),
+                               render_record(spec, renderer), source)
     bar = None
     if progress:
         from tqdm import tqdm
