@@ -304,7 +304,7 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
         log(f"{len(night)} night frame(s) (sun below the horizon) are kept out of the sequence: "
             f"{', '.join(night)}")
 
-    sensor, float_scale = _sensor(photos, response, gamma, spec.sensor if "sensor" in raw else {},
+    sensor, float_scale = _sensor(photos, response, gamma, raw.get("sensor", {}),
                                   vignetting == "cos4")
     fov = spec.camera["fov_deg"]
     falloff = sensor.falloff(w, h, fov) if sensor.cos4 else np.ones((h, w))
