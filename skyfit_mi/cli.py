@@ -72,6 +72,8 @@ def _label(text):
 def _region(text):
     from .fitting.chi2 import parse_region
 
+    if "=" not in text and REGION_NAME.match(text):
+        return text, None                                 # a region of an observation table
     name, value = _named(text, "NAME=rect:x0,y0,x1,y1 or NAME=pixels:x,y;x,y")
     try:
         return name, parse_region(value)
@@ -120,6 +122,21 @@ def _ingest(args):
         if v is not None and len(v) not in n:
             raise SkyfitError(f"{name} takes {' or '.join(map(str, n))} comma-separated numbers, "
                               f"got {len(v)}.")
+    if args.table is not None:
+        from .pipeline.observation_table import ingest_table
+
+        photo_only = [k for k in ("times", "name_pattern", "response", "gamma", "exposure",
+                                  "calibrate", "noise") if getattr(args, k) is not None]
+        if args.photos or photo_only or args.vignetting != "none":
+            what = "photographs" if args.photos else "--" + (photo_only or ["vignetting"])[0] \
+                .replace("_", "-")
+            raise SkyfitError(f"--table takes no {what}: the table gives times, values and "
+                              "sigmas; give either photographs or --table.")
+        ingest_table(args.table, args.spec, args.output, tz=args.tz, site=args.site,
+                     overwrite=args.overwrite)
+        return
+    if not args.photos:
+        raise SkyfitError("give photographs (files or folders), or --table OBS.csv.")
     ingest(args.photos, args.spec, args.output, times_csv=args.times,
            name_pattern=args.name_pattern, tz=args.tz, site=args.site, response=args.response,
            gamma=args.gamma, exposure=args.exposure, calibrate=dict(args.calibrate or []),
@@ -149,6 +166,17 @@ def _fit_regions(args):
     if args.all:
         from .pipeline.pixels import material_regions
         regions += material_regions(args.manifest)
+    from .pipeline.manifest import load_manifest
+    from .pipeline.observation_table import is_table
+
+    if is_table(load_manifest(args.manifest)[0]):
+        if any(px is not None for _, px in regions):
+            raise SkyfitError("the sequence is an observation table: name its regions alone "
+                              "(--region NAME, or --all), without pixels or a mask.")
+    elif any(px is None for _, px in regions):
+        name = next(n for n, px in regions if px is None)
+        raise SkyfitError(f"--region {name} names no pixels; give {name}=rect:x0,y0,x1,y1 or "
+                          f"{name}=pixels:x,y;... (a bare name is for observation tables).")
     if not regions:
         raise SkyfitError("give at least one --region NAME=rect:... (or --mask and --label, or --all).")
     names = [n for n, _ in regions]
@@ -177,15 +205,17 @@ def _fit(args):
     regions = _fit_regions(args)
     out = ensure_dir(Path(args.output) if args.output else root)
     for name, pixels in regions:
-        kept = subsample_region(pixels, args.max_pixels or None, args.seed)
-        if len(kept) < len(pixels):
+        kept = pixels if pixels is None else subsample_region(pixels, args.max_pixels or None,
+                                                              args.seed)
+        if pixels is not None and len(kept) < len(pixels):
             print(f"{name}: fitting {len(kept)} of its {len(pixels)} pixels (--max-pixels, seed "
                   f"{args.seed})")
         res = fit_region(args.manifest, name, kept, model=model, method=args.method,
                          normalisation=args.normalisation, seed=args.seed, start=args.start,
                          positions=args.positions, directions=args.directions,
                          frames=args.frames)
-        res["region_pixels_total"] = int(len(pixels))
+        res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
+                                         if pixels is None else len(pixels))
         paths = write_fit(res, out / f"fit_{name}")
         summary = write_summary(out)              # after each region: agrees with the JSONs
         print("wrote " + " and ".join(str(p) for p in paths) + f"; updated {summary}")
@@ -294,8 +324,11 @@ def build_parser():
         "times and the observations.")
     ing.add_argument("spec", help="spec (.toml/.json) with [location], [camera], [scene], [sky]; "
                      "its [time] is replaced by the photographs' times")
-    ing.add_argument("photos", nargs="+", help="image files, or folders of them (EXR, HDR, TIFF, "
+    ing.add_argument("photos", nargs="*", help="image files, or folders of them (EXR, HDR, TIFF, "
                      "PNG, JPEG, camera RAW)")
+    ing.add_argument("--table", metavar="CSV", help="instead of photographs: a table of measured "
+                     "radiances (time, region, r, g, b, sigma, optional point, x,y,z, view, "
+                     "normal; see docs/MANIFEST.md)")
     ing.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
     ing.add_argument("--times", metavar="CSV", help="CSV file,time giving each frame's time "
                      "(instead of EXIF DateTimeOriginal)")

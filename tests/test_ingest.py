@@ -56,6 +56,7 @@ def _toml(raw):
 @pytest.fixture(scope="module")
 def day(tmp_path_factory):
     """The truth rendered, its clean fit, and its photographs (JPEG with offsets in EXIF)."""
+    from skyfit_mi.fitting.chi2 import subsample_region
     from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.pipeline.photo_sim import photograph_day
     from skyfit_mi.pipeline.pixels import material_regions
@@ -65,7 +66,8 @@ def day(tmp_path_factory):
     spec_path, raw = _small_spec(tmp)
     truth = tmp / "truth"
     render_sequence(validate_spec(raw, spec_path.parent), truth, progress=False, **QUIET)
-    regions = dict(material_regions(truth))
+    # 64 of the sample's pixels, as `skyfit fit` takes by default (--max-pixels)
+    regions = {k: subsample_region(v, 64, 0) for k, v in material_regions(truth)}
     clean = fit_region(truth, "sample", regions["sample"], model="colour", **QUIET)
     photos = tmp / "photos"
     photograph_day(truth, photos, seed=5, quality=100)
@@ -109,14 +111,15 @@ def test_fit_after_ingest_recovers_the_material(day, ingested):
         lo, hi = fit["intervals"][k]["95"]
         # one noise realisation: the truth within 1.5 half-widths of the 95% interval's centre
         # (2.9 sigma, p = 0.004 per parameter); 95% coverage needs replicates (not run here;
-        # measured: C_r 0.0002 outside its 95% interval, the others inside)
+        # measured on the full region: C_r 0.0002 outside its 95% interval, the others inside)
         mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
         assert abs(t - mid) <= 1.5 * half, f"{k}: truth {t} far outside the fit's [{lo}, {hi}]"
 
 
-@pytest.mark.xfail(strict=True, reason="issue 15 open: the noise estimate from the frames "
-                   "doubles the shot noise (0.041 vs 0.02 DN), chi2/dof 0.68, and C_r's interval "
-                   "is 1.9x the clean fit's")
+@pytest.mark.xfail(strict=False, reason="issue 15 open: the noise estimate from the frames "
+                   "doubles the shot noise (0.041 vs 0.02 DN) and chi2/dof is 0.68; on 64 of "
+                   "the sample's pixels C_b's interval is 1.50x the clean fit's (0.00383 vs "
+                   "0.00255), at the goal's edge, so the outcome may flip: not strict")
 def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, ingested):
     fit, clean = ingested[2], day["clean"]
     for k in ("C_r", "C_g", "C_b", "rho_s"):

@@ -152,7 +152,10 @@ def test_jacobian_through_the_basis_matches_the_plugin(session, model, theta):
         assert np.max(np.abs(J[..., i] - fd)) < _fd_tolerance(L, fd, h), i
 
 
+@pytest.mark.slow
 def test_full_render_model_replays_new_parameters_and_agrees_with_the_cache(session, days):
+    """The full-render baseline of the benchmarks (scripts/bench_fit.py), 36 s of frozen-function
+    recordings: run with the benchmarks (``pytest -m slow``), not by default."""
     from skyfit_mi.render.fit_model import RegionRenderModel
     from skyfit_mi.pipeline.manifest import load_manifest
 

@@ -35,9 +35,12 @@ class Observations:
 
     y, sigma : (P, T, 3) [DN] (sigma inf: the value carries no information);
     gain : (P, T, 3) radiance -> signal factor [sr m^2 W^-1] (each frame's exposure and white
-    balance, times the pixel's off-axis falloff);  pixels : (P, 2) (x, y);
-    frames : manifest frame indices (T,);  times : ISO strings;  warnings : what the loading
-    noticed (incomplete render, values left out).
+    balance, times the pixel's off-axis falloff);  pixels : (P, 2) (x, y), or for an
+    observation table the points' names (P,);  frames : manifest frame indices (T,);  times :
+    ISO strings;  warnings : what the loading noticed (incomplete render, values left out);
+    rays : for a table, the :class:`~skyfit_mi.render.light_cache.PointRays` that meet its
+    points (None for pixels);  luminance : the values are luminances (first channel; the
+    model's must be mixed by :class:`LuminanceModel`).
     """
 
     pixels: np.ndarray
@@ -48,6 +51,8 @@ class Observations:
     gain: np.ndarray
     sensor: SensorModel
     warnings: list = field(default_factory=list)
+    rays: object = None
+    luminance: bool = False
 
     def recapture(self, radiance, rng):
         """Replace y and sigma by a new capture of ``radiance`` (P, T, 3) [W m^-2 sr^-1]
@@ -110,6 +115,83 @@ def _region_values(root, frame, key, pixels, shape):
     """The region's values in one frame's EXR ``frame[key]``, checked: readable, of the
     manifest's size."""
     return read_frame_image(root, frame, key, shape)[pixels[:, 1], pixels[:, 0]]
+
+
+def load_table_observations(manifest_path, region, points=None, frames=None, min_frames=2):
+    """A region's values and sigmas from a sequence's observation table
+    (:mod:`~skyfit_mi.pipeline.observation_table`), on the linear scale of its sensor record,
+    with the rays that meet its points; ``points`` (names) default to all of the region's."""
+    from ..pipeline.observation_table import table_observations
+    from ..render.light_cache import point_rays
+
+    doc, root = load_manifest(manifest_path)
+    names, fr, pos, view, y, sig, luminance = table_observations(doc, root, region, points,
+                                                                 frames)
+    known = {f["index"]: f for f in rendered_frames(doc)}
+    missing = [i for i in fr if i not in known]
+    if missing:
+        raise SkyfitError(f"frame {missing[0]} is not an observed frame of the sequence; its "
+                          f"frames are {sorted(known)}.")
+    if len(fr) < min_frames:
+        raise SkyfitError(f"region {region!r} is measured at fewer than {min_frames} times; a "
+                          "fit needs a sequence.")
+    sensor = sensor_from_record(doc["sensor"])
+    scale = sensor.exposure * sensor.max_code
+    gain = np.full(y.shape, sensor.exposure)
+    return Observations(np.array(names, dtype=object), fr, [known[i]["time"] for i in fr],
+                        y * scale, sig * scale, gain, sensor,
+                        rays=point_rays(pos, view, doc["ingest"]["ray_offset"]),
+                        luminance=luminance)
+
+
+class LuminanceModel:
+    """A radiance model whose outputs' first channel is the luminance-weighted radiance
+    Y = SRGB_LUMINANCE . (R, G, B) [W m^-2 sr^-1] (the others unchanged), for observations of
+    luminance (:func:`load_table_observations`): every output the fit uses (radiance, its
+    variance, Jacobian, the global search's basis, gradients) is mixed alike, so chi-square,
+    the grid and the intervals see Y.  Attributes not mixed pass through to ``model`` (its ``model`` name among them)."""
+
+    def __init__(self, model):
+        from ..physics.colour import SRGB_LUMINANCE
+
+        self.inner = model
+        self.mix = np.eye(3)
+        self.mix[0] = SRGB_LUMINANCE
+
+    def __getattr__(self, name):
+        return getattr(self.__dict__["inner"], name)
+
+    def __setattr__(self, name, value):
+        # the wrapped model's counters (evaluations, ...) are reset through the wrapper
+        if name in ("inner", "mix"):
+            object.__setattr__(self, name, value)
+        else:
+            setattr(self.inner, name, value)
+
+    def _mix(self, x, axis=-1):
+        """x with its channel axis (``axis``) mixed."""
+        return np.moveaxis(np.tensordot(self.mix, np.moveaxis(x, axis, 0), axes=1), 0, axis)
+
+    def radiance(self, theta):
+        return self._mix(self.inner.radiance(theta))
+
+    def radiance_and_variance(self, theta):
+        L, var = self.inner.radiance_and_variance(theta)
+        # channels' estimates share their samples: the variance of a sum is at most the square
+        # of the sum of standard deviations (taken, to stay on the safe side)
+        return self._mix(L), self._mix(np.sqrt(var)) ** 2
+
+    def jacobian(self, theta):
+        L, J = self.inner.jacobian(theta)
+        return self._mix(L), self._mix(J, axis=-2)
+
+    def basis(self, sigmas, halves=False):
+        out = self.inner.basis(sigmas, halves)
+        mixed = [(self._mix(D), self._mix(G)) for D, G in (out if halves else [out])]
+        return mixed if halves else mixed[0]
+
+    def gradient(self, theta, dloss_dL):
+        return self.inner.gradient(theta, np.tensordot(dloss_dL, self.mix, axes=1))
 
 
 def load_observations(manifest_path, pixels, frames=None, min_frames=2):

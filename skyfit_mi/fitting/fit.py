@@ -13,7 +13,7 @@ import time
 import numpy as np
 
 from . import uncertainty as unc
-from .chi2 import Problem, load_observations
+from .chi2 import LuminanceModel, Problem, load_observations, load_table_observations
 from .geometry import geometry_warnings, highlight_geometry
 from ..errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
@@ -23,6 +23,7 @@ from .methods.profile import profile_edges, ridge_intervals
 from ..render.fit_model import check_start, other_readings
 from ..render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS, SIGMA_RESOLVED
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
+from ..pipeline.observation_table import is_table
 from ..physics.ward import METAL_THRESHOLD
 
 
@@ -76,7 +77,13 @@ class FitSession:
         t0 = time.perf_counter()
         doc, _ = load_manifest(manifest_path)
         self.run_id = doc.get("run_id")
-        self.obs = load_observations(manifest_path, pixels, frames, min_frames)
+        if is_table(doc):
+            self.obs = load_table_observations(manifest_path, name, pixels, frames, min_frames)
+            if self.obs.luminance and model == "colour":
+                raise SkyfitError(f"region {name!r} is measured as luminance, which cannot tell "
+                                  "colour; fit it with --model 2 or 3.")
+        else:
+            self.obs = load_observations(manifest_path, pixels, frames, min_frames)
         mats = doc["scene"]["materials"]
         if name not in mats:
             raise SkyfitError(f"region {name!r} names no material of the scene; its materials are: "
@@ -104,23 +111,25 @@ class FitSession:
         :func:`~skyfit_mi.pipeline.fit_result.read_fit_result`) measured, in its model and
         normalisation, on the sequence ``manifest_path`` (its own, or a target's); ``pixels``
         default to the fit's own; ``options`` as the constructor's."""
-        if pixels is None:
+        if pixels is None and "points" in result:           # a fit of an observation table
+            pixels = result["points"]
+        elif pixels is None:
             if not isinstance(result.get("pixels"), list) or not result["pixels"]:
                 raise SkyfitError(f"the fit of region {result['region']!r} lists no pixels; "
                                   "give the fit_NAME.json that `skyfit fit` wrote.")
             pixels = result["pixels"]
-        return cls(manifest_path, result["region"], np.asarray(pixels, dtype=int),
+        return cls(manifest_path, result["region"], pixels,
                    model=result["model"], normalisation=result.get("normalisation", "ward"),
                    **options)
 
     def _trace_cache(self):
         """(Re)build the light cache at ``cache_settings`` and everything made from it."""
-        from ..render.fit_model import WardModel
         from ..render.light_cache import build_light_cache
 
         t0 = time.perf_counter()
         c = self.cache_settings
-        self.cache = build_light_cache(self.scene, self.params, self.skies, self.obs.pixels,
+        at = self.obs.pixels if self.obs.rays is None else self.obs.rays
+        self.cache = build_light_cache(self.scene, self.params, self.skies, at,
                                        self.name, positions=c["positions"],
                                        directions=c["directions"], seed=c["seed"],
                                        max_depth=max(1, int(self.doc["render"]["max_depth"]) - 1),
@@ -131,9 +140,17 @@ class FitSession:
         self.cache_time += time.perf_counter() - t0
         self.geometry = highlight_geometry(np.where(self.cache.hit[..., None],
                                                     self.cache.sun_half_cos, np.nan))
-        self.wm = WardModel(self.cache, self.model, self.normalisation)
+        self.wm = self._model(self.cache)
         self.problem = Problem(self.obs, self.wm, valid=self.cache.hit)
         self._halves = self._bases = None
+
+    def _model(self, cache):
+        """The fit's radiance model on ``cache``: Ward's, through the luminance where the
+        observations are luminances."""
+        from ..render.fit_model import WardModel
+
+        wm = WardModel(cache, self.model, self.normalisation)
+        return LuminanceModel(wm) if self.obs.luminance else wm
 
     def cache_growth(self, noise_by_sigma):
         """The factor by which an automatically sized cache's positions must grow so that the
@@ -163,11 +180,10 @@ class FitSession:
         to ripple chi-square by more than the 95% threshold.
         """
         from .methods.levenberg_marquardt import levenberg_marquardt
-        from ..render.fit_model import WardModel
 
         if self._halves is None:
-            self._halves = [Problem(self.obs, WardModel(c, self.model, self.normalisation),
-                                    valid=self.cache.hit) for c in self.cache.halves()]
+            self._halves = [Problem(self.obs, self._model(c), valid=self.cache.hit)
+                            for c in self.cache.halves()]
         if method == "global":
             fits = [global_search(p, theta, self.lower, self.upper, candidates=1, profile=False,
                                   grid_basis=b)["theta"]
@@ -454,7 +470,9 @@ class FitSession:
         res = fit["result"]
         L = self.wm.radiance(theta)
         return {
-            "region": self.name, "pixels": self.obs.pixels.tolist(), "model": self.model,
+            "region": self.name, **({"pixels": self.obs.pixels.tolist()} if self.obs.rays is None
+                                    else {"points": list(self.obs.pixels)}),
+            "model": self.model,
             "normalisation": self.normalisation,
             "method": fit["method"], "seed": seed, "start": start.tolist(),
             "parameters": dict(zip(names, theta.tolist())),

@@ -29,7 +29,9 @@ from ..pipeline.fit_result import read_fit_result
 from ..pipeline.manifest import (RENDERED_SOURCES, load_manifest, manifest_file,
                                  rendered_frames)
 from ..pipeline.pixels import frame_values
+from ..pipeline.observation_table import is_table, table_regions
 from ..pipeline.spec import read_spec, validate_spec
+from ..render.light_cache import DIRECTIONS, POSITIONS
 
 #: Seed offset of the reference render of a synthetic target (its own materials, other noise).
 REFERENCE_SEED = 1_000_003
@@ -105,7 +107,9 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
         raise SkyfitError("a prediction without images needs a sequence folder as --target "
                           "(its light is traced there); give one, or leave out --no-images.")
     observed = doc is not None and bool(rendered_frames(doc))
-    if reference and not (images and observed and doc.get("source") in RENDERED_SOURCES):
+    table = doc is not None and is_table(doc)      # observations without images
+    if reference and not (images and observed and not table
+                          and doc.get("source") in RENDERED_SOURCES):
         raise SkyfitError("--reference renders a synthetic target's own materials again; it "
                           "needs a target folder that skyfit rendered, and images.")
     if images:
@@ -119,7 +123,11 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if not observed:
         return None
     errors = {"regions": {}}
-    if images:
+    if table:
+        errors["observations"] = ("an observation table: the relit images have no observed "
+                                  "frames to compare with; region_means compares the table's "
+                                  "values")
+    elif images:
         errors = prediction_errors(fits, target, out, pixels)
         errors["shares_target_seeds"] = doc.get("source") in RENDERED_SOURCES and \
             int(doc["render"]["seed"]) == int(spec.render["seed"])
@@ -175,7 +183,7 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     for region, m in means.items():
         log(f"{region}: predicted region means differ from the observed by {m['fit']:.2%} rms"
             + ("" if m["truth"] is None else f" (the true material's: {m['truth']:.2%})"))
-    if images:
+    if images and not table:
         log(f"overall: {errors['rel_rms']:.2%} rms" + (
             " (relit with the target's seeds: Monte Carlo noise largely cancels, so this is "
             "the materials' difference)" if errors["shares_target_seeds"] else ""))
@@ -188,12 +196,19 @@ def target_pixels(fits, target, seed=0, max_pixels=64):
     """{region: (P, 2) pixels} at which each fit is compared in ``target`` (a sequence
     folder): the fit's own pixels on its own sequence (the same run), otherwise the material's
     interior in the target's label image (another camera sees it elsewhere), a seeded subset
-    of at most ``max_pixels``."""
+    of at most ``max_pixels``; for an observation table, None (all the region's points)."""
     from .chi2 import subsample_region
     from ..pipeline.pixels import material_regions
 
-    doc, _ = load_manifest(target)
+    doc, root = load_manifest(target)
     out, seen = {}, None
+    if is_table(doc):                       # an observation table: every point of the region
+        measured = table_regions(root)
+        for region in fits:
+            if region not in measured:
+                raise SkyfitError(f"the target's observation table measures no point of region "
+                                  f"{region!r}; it measures: {', '.join(measured)}.")
+        return {region: None for region in fits}
     for region, (_, r) in fits.items():
         if r.get("sequence_run_id") == doc.get("run_id"):
             out[region] = np.asarray(r["pixels"], dtype=int)
@@ -338,7 +353,8 @@ def write_comparisons(observed, relit):
 
 
 def write_prediction(rows, out, image_kind):
-    """``prediction.csv`` (one row per region, frame and channel; radiance in W m^-2 sr^-1)
+    """``prediction.csv`` (one row per region, frame and channel, R, G, B or a luminance
+    table's Y; radiance in W m^-2 sr^-1)
     and ``prediction.png``: per region the predicted series with its 95% band and the
     image values (``image_kind``: the observed frames, or the relit render) (thesis fig 7.14)."""
     import datetime as dt
@@ -359,8 +375,10 @@ def write_prediction(rows, out, image_kind):
     regions = sorted({row[0] for row in rows})
     fig, axes = plt.subplots(len(regions), 1, figsize=(7, 3.2 * len(regions)), squeeze=False)
     for ax, region in zip(axes[:, 0], regions):
-        for ch, col in zip("RGB", ("r", "g", "b")):
+        for ch, col in zip("RGBY", ("r", "g", "b", "k")):
             sel = [row for row in rows if row[0] == region and row[3] == ch]
+            if not sel:
+                continue
             t = [dt.datetime.fromisoformat(row[2]) for row in sel]
             pred, lo, hi, img = (np.array([row[k] for row in sel]) for k in (4, 5, 6, 7))
             ax.fill_between(t, lo, hi, color=col, alpha=0.15, lw=0)
@@ -413,25 +431,39 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
     rng = np.random.default_rng(seed)
     rows, summary = [], {}
     for region, (_, r) in sorted(fits.items()):
-        s = FitSession.from_fit(r, target, pixels[region], seed=seed,
-                                positions=PREDICTION_CACHE[0],
-                                directions=PREDICTION_CACHE[1], min_frames=1)
+        # a table's few points take the fit's own cache size: the small one averages out
+        # only over an image region's many pixels
+        size = PREDICTION_CACHE if pixels[region] is not None else (POSITIONS, DIRECTIONS)
+        s = FitSession.from_fit(r, target, pixels[region], seed=seed, positions=size[0],
+                                directions=size[1], min_frames=1)
         sets = parameter_draws(r, s.names, s.lower, s.upper, draws, rng)
-        means = np.stack([s.wm.radiance(t).mean(axis=0) for t in sets])     # (draws, T, 3)
+        # the region's mean over its pixels; over a table's points measured in each frame
+        have = np.ones(s.obs.y.shape) if s.obs.rays is None else np.isfinite(s.obs.sigma) * 1.0
+        have = have / np.maximum(have.sum(axis=0), 1.0)
+
+        def region_mean(x):
+            return np.sum(x * have, axis=0)
+        means = np.stack([region_mean(s.wm.radiance(t)) for t in sets])     # (draws, T, 3)
         lo, hi = np.percentile(means[1:], [2.5, 97.5], axis=0)
         # widened by what the parameters leave out: the image's own noise (the sensor model's
         # sigma in radiance) and the model's Monte Carlo error, both of the region mean
         _, model_var = s.wm.radiance_and_variance(sets[0])
-        image = frame_values(target, s.obs.pixels, s.obs.frames)
+        if s.obs.rays is None:
+            image = frame_values(target, s.obs.pixels, s.obs.frames)
+        else:                                # a table's values, back in W m^-2 sr^-1
+            image = s.obs.y / (s.obs.gain * s.obs.sensor.max_code)
         slope = s.problem.slope(image)
         usable = np.isfinite(s.obs.sigma) & (slope > 0)     # not saturated or left out
         image_var = np.where(usable, s.obs.sigma / np.where(usable, slope, 1.0), 0.0) ** 2
         n = len(s.obs.pixels)
         extra = 1.959963984540054 * np.sqrt((np.sum(image_var, axis=0)
                                              + np.sum(model_var, axis=0)) / n**2)
-        observed = image.mean(axis=0)
+        observed = region_mean(image)
+        # a luminance table predicts its one quantity: Y, the models' first channel
+        names = "Y" if s.obs.luminance else "RGB"
+        means, observed = means[..., :len(names)], observed[..., :len(names)]
         for j, (i, t) in enumerate(zip(s.obs.frames, s.obs.times)):
-            for c, ch in enumerate("RGB"):
+            for c, ch in enumerate(names):
                 band = widen(means[0, j, c], (lo[j, c], hi[j, c]), extra[j, c], 0.0, np.inf)
                 rows.append((region, int(i), t, ch, float(means[0, j, c]), *band,
                              float(observed[j, c])))
@@ -439,6 +471,6 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
         summary[region] = {
             "fit": float(rel_rms(means[0], observed)),
             "truth": None if truth is None
-            else float(rel_rms(s.wm.radiance(truth).mean(axis=0), observed))}
+            else float(rel_rms(region_mean(s.wm.radiance(truth))[..., :len(names)], observed))}
         log(f"{region}: predicted {len(s.obs.frames)} frames from {draws} parameter draws")
     return rows, summary

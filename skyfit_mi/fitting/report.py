@@ -105,8 +105,8 @@ def write_summary(folder):
     w = csv.writer(buf)
     w.writerow(cols)
     for r in results:
-        row = [r["region"], r["model"], r["method"], len(r["pixels"]),
-               r.get("region_pixels_total", len(r["pixels"]))]
+        n = len(r.get("pixels") or r.get("points") or [])    # pixels, or a table's points
+        row = [r["region"], r["model"], r["method"], n, r.get("region_pixels_total", n)]
         for n in names:
             if n in r["parameters"]:
                 row += [f"{r['parameters'][n]:.5f}", *(f"{v:.5f}" for v in r["intervals"][n]["95"])]

@@ -225,6 +225,33 @@ def calibrate_exposure(spec, photos, values, sensor, falloff, rel, calibrate, lo
 
 # ---- the whole ingest ---------------------------------------------------------------------
 
+def spec_for_times(spec_path, times, tz=None, site=None, size=None):
+    """(raw, validated spec) of ``spec_path`` for measured frames at ``times`` (aware
+    datetimes, in order): its [time] replaced by them, frames with the sun below the horizon
+    skipped, ``site`` (latitude_deg, longitude_deg[, elevation_m]) over its [location] and
+    ``size`` (width, height) of the measured frames as its camera's (a spec naming another
+    size is refused)."""
+    spec_path = Path(spec_path)
+    raw = read_spec(spec_path)
+    cam = dict(raw.get("camera", {}))
+    for key, n in zip(("width", "height"), size or ()):
+        if key in cam and int(cam[key]) != n:
+            raise SpecError(f"[camera] {key} = {cam[key]} but the photographs are "
+                            f"{size[0]}x{size[1]}; drop {key} from the spec or give the camera "
+                            "of these photographs.")
+        cam[key] = n
+    raw["camera"] = cam
+    loc = dict(raw.get("location", {}))
+    if site is not None:
+        loc.update(latitude_deg=site[0], longitude_deg=site[1],
+                   **({"elevation_m": site[2]} if len(site) > 2 else {}))
+    loc.setdefault("timezone", tz or times[0].isoformat()[-6:])
+    raw["location"] = loc
+    raw["time"] = {"times": [t.isoformat() for t in times]}
+    raw["render"] = {**raw.get("render", {}), "below_horizon": "skip"}
+    return raw, validate_spec(raw, spec_path.parent)
+
+
 def _run_id(paths, spec_raw, options):
     h = hashlib.sha256()
     for p in paths:
@@ -276,25 +303,8 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
             raise SkyfitError(f"{a.name} and {b.name} were both taken at {ta.isoformat()}; a "
                               "sequence has one frame per time: drop one of them.")
 
-    spec_path = Path(spec_path)
-    raw = read_spec(spec_path)
     h, w = photos[0].values.shape[:2]
-    cam = dict(raw.get("camera", {}))
-    for key, size in (("width", w), ("height", h)):
-        if key in cam and int(cam[key]) != size:
-            raise SpecError(f"[camera] {key} = {cam[key]} but the photographs are {w}x{h}; drop "
-                            f"{key} from the spec or give the camera of these photographs.")
-        cam[key] = size
-    raw["camera"] = cam
-    loc = dict(raw.get("location", {}))
-    if site is not None:
-        loc.update(latitude_deg=site[0], longitude_deg=site[1],
-                   **({"elevation_m": site[2]} if len(site) > 2 else {}))
-    loc.setdefault("timezone", tz or times[0].isoformat()[-6:])
-    raw["location"] = loc
-    raw["time"] = {"times": [t.isoformat() for t in times]}
-    raw["render"] = {**raw.get("render", {}), "below_horizon": "skip"}
-    spec = validate_spec(raw, spec_path.parent)
+    raw, spec = spec_for_times(spec_path, times, tz, site, (w, h))
     night = [paths[f.index].name for f in spec.frames if f.skipped]
     if len(night) == len(paths):
         raise SkyfitError(f"every frame was taken with the sun below the horizon (first: "

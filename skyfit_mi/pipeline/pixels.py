@@ -101,9 +101,15 @@ def scene_labels(manifest):
 def material_regions(manifest):
     """(name, pixels) of every Ward material the camera sees, from the scene's label image:
     the pixels inside each material's area (edge pixels, which also see a neighbour, left
-    out); SkyfitError when it sees none."""
+    out); SkyfitError when it sees none.  For an observation table, (name, None) of each
+    region it measures."""
     from scipy.ndimage import binary_erosion
 
+    from .observation_table import is_table, table_regions
+
+    doc, root = load_manifest(manifest)
+    if is_table(doc):                      # (name, None): every point of the region
+        return [(name, None) for name in table_regions(root)]
     doc, _, labels, ids = scene_labels(manifest)
     ward = set(doc["scene"]["materials"])
     regions = []

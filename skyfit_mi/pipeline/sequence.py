@@ -197,11 +197,13 @@ def frame_record(frame, seed):
 
 
 def finish(out, manifest, exposure):
-    """Write the contact sheet and the complete manifest; returns the rendered frames' count."""
+    """Write the contact sheet (of the frames with images) and the complete manifest; returns
+    the rendered frames' count."""
     from ..render.image import contact_sheet, read_exr, write_png
 
     manifest["status"] = "complete"
-    rendered = [read_exr(out / r["radiance"]) for r in manifest["frames"] if r["status"] == "rendered"]
+    rendered = [read_exr(out / r["radiance"]) for r in manifest["frames"]
+                if r["status"] == "rendered" and "radiance" in r]
     if rendered:
         write_png(out / "contact_sheet.png", contact_sheet(rendered, exposure))
     write_manifest(out, manifest)

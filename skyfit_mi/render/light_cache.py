@@ -203,6 +203,26 @@ class LightCache:
         return G + beta * np.einsum("pts,ptsc->ptc", albedo / S - estimate, self.mirror_sky)
 
 
+@dataclass
+class PointRays:
+    """Rays that meet measured points (an observation table's), one per point and frame:
+    ``origins`` and unit ``directions`` (P, T, 3) in the world frame [scene units]; each ray
+    starts just off the surface on the instrument's side and points at the surface."""
+
+    origins: np.ndarray
+    directions: np.ndarray
+
+    def __len__(self):
+        return len(self.origins)
+
+
+def point_rays(positions, views, offset):
+    """:class:`PointRays` to ``positions`` (P, 3) seen from unit directions ``views`` (P, T, 3)
+    (surface toward instrument), starting ``offset`` scene units off the surface."""
+    views = np.asarray(views, dtype=float)
+    return PointRays(np.asarray(positions, dtype=float)[:, None, :] + offset * views, -views)
+
+
 def _has_sun(sky):
     """Whether the frame's sun gives any light (shining, and above the horizon)."""
     return bool(np.max(sky.sun_radiance) > 0 and sky.sun_direction[2] > 0)
@@ -281,7 +301,8 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     ----------
     scene, params : a loaded spec scene and its ``mi.traverse`` parameters
     skies : list of :class:`~skyfit_mi.physics.sky.Sky`, one per frame
-    pixels : (P, 2) int array of (x, y) pixel coordinates
+    pixels : (P, 2) int array of (x, y) pixel coordinates, or :class:`PointRays` (measured
+        points: one ray per point and frame)
     bsdf_id : str, the material whose surface the pixels must show
     positions, directions : samples per pixel: positions over the pixel's area,
         and light directions at each
@@ -298,10 +319,12 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
 
     from .daylight import opaque_value, update_sky
 
-    pixels = np.asarray(pixels, dtype=int)
+    rays = pixels if isinstance(pixels, PointRays) else None
+    if rays is None:
+        pixels = np.asarray(pixels, dtype=int)
+        sensor = scene.sensors()[0]
+        w, h = sensor.film().crop_size()
     P, S, K = len(pixels), int(positions), int(directions)
-    sensor = scene.sensors()[0]
-    w, h = sensor.film().crop_size()
     emitter = scene.environment()
     integrator = mi.load_dict({"type": "path", "max_depth": int(max_depth)})
     lobes = [mi.load_dict({"type": "ward", "rho_d": 0.0, "rho_s": 1.0, "sigma_alpha": s})
@@ -325,10 +348,15 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         update_sky(params, sky, "sky.")
         comp = _components(K, _has_sun(sky))
         frac = [float(np.sum(comp == c)) / K for c in range(n_comp)]
-        # primary rays: S stratified positions in each pixel
-        pos = (pixels[:, None, :] + _stratified(rng, S)[None]).reshape(P * S, 2) / [w, h]
-        ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
-                                   mi.Point2f(pos[:, 0], pos[:, 1]), mi.Point2f(0.5, 0.5))
+        if rays is None:
+            # primary rays: S stratified positions in each pixel
+            pos = (pixels[:, None, :] + _stratified(rng, S)[None]).reshape(P * S, 2) / [w, h]
+            ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
+                                       mi.Point2f(pos[:, 0], pos[:, 1]), mi.Point2f(0.5, 0.5))
+        else:
+            # a point's S positions are the same ray (a measured point has no pixel area)
+            o, d = (np.repeat(a[:, t], S, axis=0) for a in (rays.origins, rays.directions))
+            ray = mi.Ray3f(mi.Point3f(*o.T), mi.Vector3f(*d.T))
         si = scene.ray_intersect(ray)
         on = np.zeros(P * S, bool)
         for shape in target:

@@ -1,0 +1,259 @@
+"""Observations without images: a table of measured radiances (pipeline/observation_table.py).
+
+The fit test's table is traced by Radiance (rtrace with gensky's skies and a Radiance
+``plastic``), not by the project: three points of a disc seen by an instrument from three
+directions, one of them moving through the day like a goniometer.  The table becomes a
+sequence folder with ``skyfit ingest --table`` and ``fit`` must find the material within
+its intervals, with no image anywhere.
+"""
+import json
+
+import numpy as np
+import pytest
+from scipy.stats import chi2 as chi2_dist
+
+from skyfit_mi.conventions import direction_from_angles
+from skyfit_mi.errors import SkyfitError
+
+HOURS = (7.0, 9.0, 11.0, 13.0, 15.0, 17.0)
+#: Radiance plastic of the disc: colour, specularity, roughness (the truth).
+C, SPEC, ROUGH = (0.5, 0.35, 0.2), 0.06, 0.12
+#: Points on the disc [scene units] and their view (zenith, azimuth) [deg]; the third's
+#: azimuth turns with the hour (a goniometer).
+POINTS = {"a": ((0.0, 0.0, 0.0), (45.0, 90.0)), "b": ((0.3, 0.2, 0.0), (30.0, 180.0)),
+          "c": ((-0.2, 0.4, 0.0), (55.0, None))}
+NOISE = 0.01
+
+
+def _spec(skies, tmp):
+    spec = {"name": "table-disc",
+            "location": {"latitude_deg": 40.0, "longitude_deg": 0.0, "timezone": "UTC"},
+            "time": {"date": "2026-06-21", "times": ["12:00"]},
+            "sky": skies, "scene": {"file": "disc.xml"},
+            "camera": {"azimuth_deg": 90.0, "angle_deg": 45.0, "distance": 5.0, "fov_deg": 8.0,
+                       "width": 8, "height": 8}}
+    path = tmp / "spec.json"
+    path.write_text(json.dumps(spec))
+    return path
+
+
+def _view(name, hour):
+    zen, az = POINTS[name][1]
+    return direction_from_angles(np.radians(zen), np.radians(200.0 + 10.0 * hour if az is None
+                                                             else az))
+
+
+def _radiance_table(radiance, tmp, colour, luminance=False):
+    """(spec path, table path, Radiance's values (P, T, 3)) of a Radiance-traced table of
+    the disc in plastic of ``colour`` (module docstring); ``luminance``: the table gives
+    each value's luminance Y (SRGB_LUMINANCE-weighted) instead of r, g, b."""
+    from independent import GEOMETRY, gensky_entries
+    from skyfit_mi.physics.colour import SRGB_LUMINANCE
+
+    skies = gensky_entries(radiance, "2026-06-21", HOURS, 40.0, 0.0, "+s")
+    rng = np.random.default_rng(7)
+    values = "luminance,sigma" if luminance else "r,g,b,sigma"
+    rows = ["time,region,point,x,y,z,view_zenith_deg,view_azimuth_deg," + values]
+    traced = []
+    for hour, sky in zip(HOURS, skies):
+        rad = tmp / "scene.rad"
+        rad.write_text(sky["gensky"] + "\nskyfunc glow sky_glow 0 0 4 1 1 1 0\n"
+                       "sky_glow source sky 0 0 4 0 0 1 360\n"
+                       f"void plastic mat 0 0 5 {colour[0]} {colour[1]} {colour[2]} {SPEC} "
+                       f"{ROUGH}\n" + GEOMETRY["disc"])
+        (tmp / "scene.oct").write_bytes(radiance("oconv", rad, binary=True))
+        rays = ""
+        for name, (p, _) in POINTS.items():
+            v = _view(name, hour)
+            o = np.asarray(p) + v
+            rays += f"{o[0]} {o[1]} {o[2]} {-v[0]} {-v[1]} {-v[2]}\n" * 8
+        txt = radiance("rtrace", "-h", "-ab", 1, "-ad", 8192, "-as", 0, "-aa", 0, "-ss", 64,
+                       "-st", 0, "-lw", 1e-7, tmp / "scene.oct", input=rays)
+        L = np.array(txt.split(), dtype=float).reshape(len(POINTS), 8, 3).mean(axis=1)
+        traced.append(L)
+        for (name, (p, (zen, _))), value in zip(POINTS.items(), L):
+            az = np.degrees(np.arctan2(*_view(name, hour)[:2])) % 360.0
+            if luminance:
+                value = np.array([value @ SRGB_LUMINANCE])
+            sigma = NOISE * value.mean()
+            y = value + sigma * rng.standard_normal(value.shape)
+            rows.append(f"2026-06-21T{int(hour):02d}:00:00+00:00,disc,{name},{p[0]},{p[1]},"
+                        f"{p[2]},{zen},{az}," + ",".join(f"{x:.6g}" for x in (*y, sigma)))
+    table = tmp / ("lum.csv" if luminance else "obs.csv")
+    table.write_text("\n".join(rows) + "\n")
+    return _spec(skies, tmp), table, np.stack(traced, axis=1)
+
+
+@pytest.fixture(scope="module")
+def table_day(radiance, tmp_path_factory):
+    """(spec path, table path, Radiance's values (P, T, 3), tmp) of the coloured disc."""
+    tmp = tmp_path_factory.mktemp("table_day")
+    return (*_radiance_table(radiance, tmp, C), tmp)
+
+
+def test_a_radiance_table_is_modelled_and_fitted_without_images(table_day):
+    """The fit model at the truth reproduces Radiance's values at the points, and the truth
+    lies in the fit's joint 99.9% confidence region (one realisation; per-parameter coverage
+    is what the image test's slow replicate sweep judges)."""
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.pipeline.observation_table import ingest_table
+    from skyfit_mi.pipeline.pixels import material_regions
+
+    spec, table, traced, tmp = table_day
+    out = tmp / "seq"
+    doc = ingest_table(table, spec, out, log=lambda *a: None)
+    assert [f["observations"]["kind"] for f in doc["frames"]] == ["table"] * len(HOURS)
+    assert not list((out / "frames").glob("*.exr"))          # no image, no throw-away render
+    assert material_regions(out) == [("disc", None)]
+    s = FitSession(out, "disc", None, model="colour", normalisation="balanced")
+    truth = np.array([*C, SPEC, ROUGH])
+    ratio = s.wm.radiance(truth) / traced
+    print("model / Radiance per point, frame and channel:", ratio.round(4).tolist())
+    np.testing.assert_allclose(ratio, 1.0, atol=0.01)
+    r = s.run("global", log=print)
+    assert r["points"] == ["a", "b", "c"] and r["truth"] is None
+    assert "pixels" not in r
+    assert r["dof"] == 3 * len(HOURS) * 3 - 5
+    rise = s.problem.chi2(truth) - r["chi2"]
+    assert 0.0 <= rise <= chi2_dist.ppf(0.999, 5) * r["interval_scale_s2"] \
+        + r["cache_noise_chi2"], rise
+    assert 0.3 < r["chi2_per_dof"] < 2.0, r["chi2_per_dof"]
+
+
+def _write(tmp, text, name="t.csv"):
+    p = tmp / name
+    p.write_text(text)
+    return p
+
+
+HEAD = "time,region,r,g,b,sigma\n"
+ROW = "2026-06-21T12:00:00+00:00,disc,1,1,1,0.1\n"
+
+
+@pytest.mark.parametrize("text, message", [
+    ("", "has no rows"),
+    ("time,region,r,g,b\n" + ROW[:-5] + "\n", "no column sigma"),
+    ("time,region,r,g,b,sigma,colour\n" + ROW[:-1] + ",x\n", "unknown column 'colour'"),
+    ("time,region,r,g,b,sigma,x\n" + ROW[:-1] + ",1\n", "give all of x, y, z"),
+    (HEAD + ROW.replace(",1,1,1,", ",1,one,1,"), "g = 'one' is not a number"),
+    (HEAD + ROW.replace(",0.1", ",0"), "sigma must be positive"),
+    (HEAD + ROW.replace(",1,1,1,", ",1,nan,1,"), "is not finite"),
+    (HEAD + ROW + ROW, "measured again"),
+    (HEAD + ROW.replace("+00:00", ""), "has no UTC offset"),
+    (HEAD + ROW.replace("2026-06-21T12", "21/06/2026 12"), "not an ISO 8601"),
+    (HEAD + ROW.replace(",disc,", ",,"), "the region is empty"),
+    ("time,region,r,g,b,sigma,view_x,view_y,view_z\n" + ROW[:-1] + ",0,0,0\n",
+     "view vector is zero"),
+    ("time,region,point,x,y,z,r,g,b,sigma\n"
+     "2026-06-21T12:00:00+00:00,disc,p,0,0,0,1,1,1,0.1\n"
+     "2026-06-21T13:00:00+00:00,disc,p,0.5,0,0,1,1,1,0.1\n", "moves from row to row"),
+])
+def test_bad_tables_are_refused_with_one_line(tmp_path, text, message):
+    from skyfit_mi.pipeline.observation_table import read_observation_table
+
+    with pytest.raises(SkyfitError, match=message) as exc:
+        read_observation_table(_write(tmp_path, text))
+    assert "\n" not in str(exc.value)
+
+
+def test_naive_times_take_the_given_zone(tmp_path):
+    from skyfit_mi.pipeline.observation_table import read_observation_table
+
+    t = read_observation_table(_write(tmp_path, HEAD + ROW.replace("+00:00", "")),
+                               tz="Europe/London")
+    assert t.times[0].utcoffset().total_seconds() == 3600.0
+    assert t.points == ["disc"] and np.allclose(t.sigma, 0.1)
+
+
+def _table(tmp, extra_cols, extra_values):
+    rows = [f"time,region,r,g,b,sigma{extra_cols}"]
+    for h in (9, 12, 15):
+        rows.append(f"2026-06-21T{h:02d}:00:00+00:00,disc,1,1,1,0.1{extra_values}")
+    return _write(tmp, "\n".join(rows) + "\n", "obs.csv")
+
+
+@pytest.mark.parametrize("cols, values, message", [
+    (",x,y,z", ",3,0,0", "is not on a surface of the scene"),
+    (",normal_x,normal_y,normal_z", ",1,0,0", "the scene's normal there is"),
+    (",view_x,view_y,view_z", ",0,0,-1", "viewed from behind"),
+    (",region2", ",x", "unknown column"),
+])
+def test_points_off_their_surface_are_refused(tmp_path, cols, values, message, mi):
+    from skyfit_mi.pipeline.observation_table import ingest_table
+
+    spec = _spec({"type": "clear"}, tmp_path)
+    with pytest.raises(SkyfitError, match=message):
+        ingest_table(_table(tmp_path, cols, values), spec, tmp_path / "out", log=lambda *a: None)
+    assert not (tmp_path / "out").exists()          # checked before anything is written
+
+
+def test_a_region_that_is_no_material_is_refused(tmp_path, mi):
+    from skyfit_mi.pipeline.observation_table import ingest_table
+
+    spec = _spec({"type": "clear"}, tmp_path)
+    table = _write(tmp_path, "time,region,r,g,b,sigma\n" + "".join(
+        f"2026-06-21T{h:02d}:00:00+00:00,wall,1,1,1,0.1\n" for h in (9, 12)))
+    with pytest.raises(SkyfitError, match="region 'wall' is no material"):
+        ingest_table(table, spec, tmp_path / "out", log=lambda *a: None)
+
+
+def test_the_cli_takes_a_table_and_refuses_photo_options_with_it(tmp_path, mi):
+    from skyfit_mi.cli import main
+
+    spec = _spec({"type": "clear"}, tmp_path)
+    table = _table(tmp_path, "", "")
+    assert main(["ingest", str(spec), "--table", str(table), "--exposure", "1", "-o",
+                 str(tmp_path / "o")]) == 2
+    assert main(["ingest", str(spec), "-o", str(tmp_path / "o")]) == 2
+    assert main(["ingest", str(spec), "--table", str(table), "-o", str(tmp_path / "o")]) == 0
+    assert main(["fit", str(tmp_path / "o"), "--region", "disc=rect:0,0,1,1"]) == 2
+    doc = json.loads((tmp_path / "o" / "manifest.json").read_text())
+    assert doc["source"] == "ingest" and len(doc["frames"]) == 3
+
+
+def test_a_table_fit_predicts_the_tables_other_times_within_its_band(table_day):
+    """Fit on the first four times, relight (no images) onto the table: the region means of
+    every time inside the predicted 95% band, and the report says there is no image."""
+    from skyfit_mi.fitting.fit import fit_region
+    from skyfit_mi.fitting.relight import load_fits, relight
+    from skyfit_mi.fitting.report import write_fit
+    from skyfit_mi.pipeline.observation_table import ingest_table
+
+    spec, table, traced, tmp = table_day
+    seq = tmp / "seq_relight"
+    ingest_table(table, spec, seq, log=lambda *a: None)
+    res = fit_region(seq, "disc", None, model="colour", normalisation="balanced",
+                     frames=[0, 1, 2, 3], log=lambda *a: None)
+    write_fit(res, tmp / "fits" / "fit_disc")
+    errors = relight(load_fits([tmp / "fits" / "fit_disc.json"]), seq, tmp / "relit",
+                     images=False, draws=100, log=lambda *a: None)
+    assert "observations" in errors and errors["regions"] == {}
+    assert errors["band_coverage"]["share"] >= 0.9, errors["band_coverage"]
+    assert errors["region_means"]["disc"]["fit"] < 0.05
+
+
+def test_a_luminance_table_fits_the_achromatic_model_and_refuses_colour(radiance, tmp_path):
+    """A luminance meter's table of a grey plastic disc (Radiance): the 3-parameter model,
+    L = R ((1 - rho_s) D + rho_s G), is that plastic with R = c (1 - s) + s and rho_s = s / R;
+    it reproduces Radiance's luminance and the fit holds the truth in its joint 99.9% region.
+    The colour model is refused: luminance cannot tell colour."""
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.physics.colour import SRGB_LUMINANCE
+    from skyfit_mi.pipeline.observation_table import ingest_table
+
+    grey = 0.4
+    spec, table, traced = _radiance_table(radiance, tmp_path, (grey,) * 3, luminance=True)
+    out = tmp_path / "lum_seq"
+    ingest_table(table, spec, out, log=lambda *a: None)
+    with pytest.raises(SkyfitError, match="cannot tell colour"):
+        FitSession(out, "disc", None, model="colour", normalisation="balanced")
+    s = FitSession(out, "disc", None, model="achromatic", normalisation="balanced")
+    assert s.problem.n_data == 3 * len(HOURS)                 # one value per point and time
+    R = grey * (1 - SPEC) + SPEC
+    truth = np.array([R, SPEC / R, ROUGH])
+    ratio = s.wm.radiance(truth)[..., 0] / (traced @ SRGB_LUMINANCE)
+    np.testing.assert_allclose(ratio, 1.0, atol=0.01)
+    r = s.run("global", log=lambda *a: None)
+    rise = s.problem.chi2(truth) - r["chi2"]
+    assert 0.0 <= rise <= chi2_dist.ppf(0.999, 3) * r["interval_scale_s2"] \
+        + r["cache_noise_chi2"], (rise, r["parameters"])
