@@ -162,7 +162,10 @@ def _fit_regions(args):
                           "which material).")
     if args.label:
         from .fitting.chi2 import region_from_mask
-        regions += [(name, region_from_mask(args.mask, value)) for name, value in args.label]
+        from .pipeline.manifest import load_manifest
+        cam = load_manifest(args.manifest)[0]["camera"]
+        regions += [(name, region_from_mask(args.mask, value, (cam["height"], cam["width"])))
+                    for name, value in args.label]
     if args.all:
         from .pipeline.pixels import material_regions
         regions += material_regions(args.manifest)
@@ -202,7 +205,28 @@ def _fit(args):
     _, root = load_manifest(args.manifest)
     if args.start is not None:
         check_start(model, args.start)
+    map_only = [f"--{k.replace('_', '-')}" for k in ("patch", "workers", "scheduler", "chunk")
+                if getattr(args, k) not in (None, 1)] + (["--overwrite"] if args.overwrite else [])
+    if map_only and not args.per_pixel:
+        raise SkyfitError(f"{map_only[0]} belongs to a map: add --per-pixel (or leave it out).")
     regions = _fit_regions(args)
+    if args.per_pixel:
+        from .fitting.pixel_map import CHUNK, run_map
+
+        if any(px is None for _, px in regions):
+            raise SkyfitError("an observation table has no pixels to map; fit its regions "
+                              "without --per-pixel.")
+        out = Path(args.output) if args.output else root / "pixel_map"
+        s = run_map(args.manifest, regions, out, model=model, normalisation=args.normalisation,
+                    seed=args.seed, patch=args.patch, chunk=args.chunk or CHUNK,
+                    workers=args.workers, scheduler=args.scheduler, overwrite=args.overwrite,
+                    progress=not args.quiet)
+        for name, r in s["regions"].items():
+            med = ", ".join(f"{k} = {v:.4g}" for k, v in r["median"].items() if v is not None)
+            print(f"{name}: {r['determined']} of {r['mapped']} pixels determined"
+                  + (f"; medians {med}" if med else ""))
+        print(f"wrote the maps and map_summary.json in {out} ({s['wall_time_s']:.1f} s)")
+        return
     out = ensure_dir(Path(args.output) if args.output else root)
     for name, pixels in regions:
         kept = pixels if pixels is None else subsample_region(pixels, args.max_pixels or None,
@@ -387,6 +411,22 @@ def build_parser():
                      help="the mask value of material NAME")
     fit.add_argument("--all", action="store_true",
                      help="fit every Ward material the camera sees (regions from the label image)")
+    fit.add_argument("--per-pixel", action="store_true",
+                     help="a material map: every pixel of the regions (or every --patch) its own "
+                     "fit, with intervals and warnings, as EXR/PNG maps (on Dask)")
+    fit.add_argument("--patch", type=_int_in(1, 4096), default=1, metavar="N",
+                     help="with --per-pixel: fit N x N blocks of pixels (default 1)")
+    fit.add_argument("--workers", type=_int_in(1, 1024), default=None,
+                     help="with --per-pixel: worker processes of the local Dask cluster "
+                     "(default: one per core)")
+    fit.add_argument("--scheduler", metavar="ADDRESS",
+                     help="with --per-pixel: an existing Dask scheduler (e.g. tcp://host:8786) "
+                     "instead of a cluster on this machine")
+    fit.add_argument("--chunk", type=_int_in(1, 1 << 20), default=None, metavar="N",
+                     help="with --per-pixel: fits per Dask task (default 256)")
+    fit.add_argument("--overwrite", action="store_true",
+                     help="with --per-pixel: replace another map in the output folder")
+    fit.add_argument("-q", "--quiet", action="store_true", help="with --per-pixel: no progress bar")
     fit.add_argument("--max-pixels", type=_int_in(0), default=64,
                      help="fit at most this many pixels of a region, a seeded random subset "
                      "(default 64; 0 = every pixel)")

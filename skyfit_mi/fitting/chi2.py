@@ -81,9 +81,9 @@ def parse_region(text):
                       "y1 >= y0) or 'pixels:x,y;x,y' (at least one pixel).")
 
 
-def region_from_mask(path, label):
+def region_from_mask(path, label, shape=None):
     """Pixels of a label-mask image (8- or 16-bit PNG; first channel) equal to ``label``,
-    as (P, 2) (x, y)."""
+    as (P, 2) (x, y); ``shape`` (height, width): the frames', which the mask must have."""
     from PIL import Image
 
     try:
@@ -93,6 +93,10 @@ def region_from_mask(path, label):
         raise SkyfitError(f"cannot read mask {path} ({str(exc).splitlines()[0]}); give the PNG "
                           "`skyfit labels` wrote, or another label image.") from None
     m = m[..., 0] if m.ndim == 3 else m
+    if shape is not None and m.shape != tuple(shape):
+        raise SkyfitError(f"mask {path} is {m.shape[1]}x{m.shape[0]} but the frames are "
+                          f"{shape[1]}x{shape[0]}; give a label image of the frames' size "
+                          "(`skyfit labels` writes one).")
     ys, xs = np.nonzero(m == int(label))
     if len(xs) == 0:
         raise SkyfitError(f"label {label} does not occur in mask {path}; its values are "

@@ -7,10 +7,12 @@ from ..files import atomic_write
 
 
 def write_exr(path, image):
-    """Write a linear float32 RGB image (H, W, 3) [W m^-2 sr^-1] as OpenEXR."""
+    """Write a linear float32 RGB image (H, W, 3) [W m^-2 sr^-1], or a one-channel map (H, W)
+    (channel Y), as OpenEXR."""
     import mitsuba as mi
 
-    bmp = mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), mi.Bitmap.PixelFormat.RGB)
+    fmt = mi.Bitmap.PixelFormat.Y if np.ndim(image) == 2 else mi.Bitmap.PixelFormat.RGB
+    bmp = mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), fmt)
     return atomic_write(path, lambda p: bmp.write(p))
 
 

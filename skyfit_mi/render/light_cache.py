@@ -294,7 +294,8 @@ def _sky_integrals(mi, emitter, si, lobe):
 
 
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
-                      directions=DIRECTIONS, seed=0, max_depth=3, normalisation="ward"):
+                      directions=DIRECTIONS, seed=0, max_depth=3, normalisation="ward",
+                      sky_positions=None):
     """Trace the light arriving at ``pixels`` for every sky in ``skies``.
 
     Parameters
@@ -309,6 +310,10 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     seed : int, the seed of every random choice (recorded by the caller)
     max_depth : path depth for light arriving from the rest of the scene
     normalisation : the Ward normalisation the cache's sky integrals are for
+    sky_positions : None: the sky's integrals (the control variate's deterministic part) at
+        every position; k: at the first k of each pixel's positions (a random subset of its
+        i.i.d. positions, so their mean is still an unbiased estimate of the pixel's), the
+        mean given to all: positions / k times cheaper, for maps of many pixels
 
     Returns
     -------
@@ -412,8 +417,18 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         out["mirror_cos"].append(np.array(mi.Frame3f.cos_theta(si.wi), np.float32).reshape(P, S))
         out["hit"].append(on.reshape(P, S).all(axis=1))
         out["sun_half_cos"].append(_sun_half_cos(mi, si, sky).reshape(P, S))
-        diffuse, lobe = _sky_integrals(mi, emitter, si, lobe_plugin)
-        out["diffuse_sky"].append(diffuse.reshape(P, S, 3))
-        out["lobe_sky"].append(lobe.reshape(P, S, -1, 3))
+        if sky_positions is None or int(sky_positions) >= S:
+            diffuse, lobe = _sky_integrals(mi, emitter, si, lobe_plugin)
+            out["diffuse_sky"].append(diffuse.reshape(P, S, 3))
+            out["lobe_sky"].append(lobe.reshape(P, S, -1, 3))
+        else:
+            k = max(1, int(sky_positions))
+            sub = mi.UInt32((np.arange(P)[:, None] * S + np.arange(k)[None, :]).ravel())
+            diffuse, lobe = _sky_integrals(mi, emitter, dr.gather(mi.SurfaceInteraction3f, si,
+                                                                  sub), lobe_plugin)
+            mean = [np.broadcast_to(a.reshape(P, k, *a.shape[1:]).mean(axis=1, keepdims=True),
+                                    (P, S) + a.shape[1:]) for a in (diffuse, lobe)]
+            out["diffuse_sky"].append(mean[0])
+            out["lobe_sky"].append(mean[1])
     return LightCache(**{k: np.stack(v, axis=1) for k, v in out.items()},
                       normalisation=normalisation)

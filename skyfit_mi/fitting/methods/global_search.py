@@ -64,61 +64,72 @@ def _linearise(problem):
 
 def _weighted_sums(y, w, D, G, keep):
     """The weighted inner products <D,D>, <D,G_k>, <G_k,G_k>, <y,D>, <y,G_k>, <y,y>,
-    summed over pixels and frames, and over channels too unless ``keep`` = 'c'."""
+    summed over frames and over the axes of 'ptc' (pixels, channels) not in ``keep`` ('', 'c',
+    'p' or 'pc': kept axes stay, in that order, after the K of the G terms)."""
     Dw, yw = D * w, y * w
     return (np.einsum(f"ptc,ptc->{keep}", Dw, D), np.einsum(f"ptc,kptc->k{keep}", Dw, G),
             np.einsum(f"ptc,kptc->k{keep}", w, G * G), np.einsum(f"ptc,ptc->{keep}", yw, D),
             np.einsum(f"ptc,kptc->k{keep}", yw, G), np.einsum(f"ptc,ptc->{keep}", yw, y))
 
 
-def grid_chi2(model, y, w, D, G, rho=RHO_GRID):
+def grid_chi2(model, y, w, D, G, rho=RHO_GRID, per_pixel=False):
     """Linearised chi^2 and the closed-form linear parameters at every (sigma[, rho_s]) point.
 
-    Returns (chi2, thetas) with chi2 of shape (K, R) and thetas (K, R, n_params).
+    Returns (chi2, thetas) with chi2 of shape (K, R) and thetas (K, R, n_params); with
+    ``per_pixel`` every pixel its own fit: (K, R, P) and (K, R, P, n_params).
     """
+    p = "p" if per_pixel else ""
     if model == "two":
         H = G - D                                                    # (K,P,T,3)
-        A = np.einsum("ptc,ptc->", w * (y - D), y - D)
-        B = np.einsum("ptc,kptc->k", w * (y - D), H)
-        C = np.einsum("ptc,kptc->k", w, H * H)
-        chi2 = A - 2 * rho[None, :] * B[:, None] + rho[None, :] ** 2 * C[:, None]
-        thetas = np.stack([np.broadcast_to(rho, chi2.shape), np.zeros_like(chi2)], axis=-1)
+        A = np.einsum(f"ptc,ptc->{p}", w * (y - D), y - D)
+        B = np.einsum(f"ptc,kptc->k{p}", w * (y - D), H)
+        C = np.einsum(f"ptc,kptc->k{p}", w, H * H)
+        r = _along_rho(rho, np.ndim(A))
+        chi2 = A - 2 * r * B[:, None] + r ** 2 * C[:, None]
+        thetas = np.stack([np.broadcast_to(r, chi2.shape), np.zeros_like(chi2)], axis=-1)
         return chi2, thetas
-    zz, yh, hh = linear_quadratics(model, y, w, D, G, rho)
-    L = np.clip(yh / np.maximum(hh, 1e-300), 0.0, 1.0)          # R, or C per channel
-    chi2 = np.sum(zz - 2 * L * yh + L**2 * hh, axis=-1)
-    rho_col = np.broadcast_to(rho[None, :, None], L.shape[:2] + (1,))
-    thetas = np.concatenate([L, rho_col, np.zeros(L.shape[:2] + (1,))], axis=-1)
+    L, chi2 = solve_quadratics(*linear_quadratics(model, y, w, D, G, rho, per_pixel))
+    rho_col = np.broadcast_to(_along_rho(rho, L.ndim - 3)[..., None], L.shape[:-1] + (1,))
+    thetas = np.concatenate([L, rho_col, np.zeros(L.shape[:-1] + (1,))], axis=-1)
     return chi2, thetas
 
 
-def linear_quadratics(model, y, w, D, G, rho):
+def solve_quadratics(zz, yh, hh):
+    """The bounded minimum of chi^2 = sum over groups of zz - 2 L yh + L^2 hh: each group's
+    linear parameter L in [0, 1] (R, or C per channel; last axis) and the chi^2 there."""
+    L = np.clip(yh / np.maximum(hh, 1e-300), 0.0, 1.0)
+    return L, np.sum(zz - 2 * L * yh + L**2 * hh, axis=-1)
+
+
+def _along_rho(rho, extra):
+    """``rho`` shaped (1, R, 1, ...) with ``extra`` trailing axes, to broadcast against
+    per-sigma arrays (K, R, ...)."""
+    return np.reshape(rho, (1, -1) + (1,) * extra)
+
+
+def linear_quadratics(model, y, w, D, G, rho, per_pixel=False):
     """The 3- and 5-parameter models' linearised chi^2 at each (sigma_k, rho_s) grid point as
     a quadratic in the linear parameter of each channel group (R over all channels, or C_c
     per channel): chi^2 = sum over groups of zz - 2 L yh + L^2 hh.  Returns (zz, yh, hh),
-    each (K, R, groups) with 1 group (R) or 3 (C_r, C_g, C_b)."""
+    each (K, R, groups) with 1 group (R) or 3 (C_r, C_g, C_b); (K, R, P, groups) with
+    ``per_pixel``."""
+    p = "p" if per_pixel else ""
     # h = (1 - rho) D + rho G: (K, R, P, T, 3) built lazily by channel sums
+    a, b, c, yd, yg, yy = _weighted_sums(y, w, D, G, p if model == "achromatic" else p + "c")
+    r2 = _along_rho(rho, np.ndim(a))
+    r1 = 1 - r2
+    b, c, yg = b[:, None], c[:, None], yg[:, None]
+    hh = r1**2 * a + 2 * r1 * r2 * b + r2**2 * c
+    yh = r1 * yd + r2 * yg
     if model == "achromatic":
-        a, b, c, yd, yg, yy = _weighted_sums(y, w, D, G, "")
-        r1 = (1 - rho)[None, :]
-        r2 = rho[None, :]
-        hh = r1**2 * a + 2 * r1 * r2 * b[:, None] + r2**2 * c[:, None]
-        yh = r1 * yd + r2 * yg[:, None]
         return np.broadcast_to(yy, hh.shape)[..., None], yh[..., None], hh[..., None]
-    # colour: per channel sums
-    a, b, c, yd, yg, yy = _weighted_sums(y, w, D, G, "c")
-    r1 = (1 - rho)[None, :, None]
-    r2 = rho[None, :, None]
-    metal = (rho >= METAL_THRESHOLD)[None, :, None]
-    # metal: h = r1 D + r2 G, L = C h
-    hh_m = r1**2 * a + 2 * r1 * r2 * b[:, None] + r2**2 * c[:, None]
-    yh_m = r1 * yd + r2 * yg[:, None]
-    # plastic: L = C r1 D + r2 G  ->  residual (y - r2 G) - C r1 D
-    hh_p = r1**2 * a * np.ones_like(hh_m)
-    yh_p = r1 * (yd - r2 * b[:, None])
-    zz_p = yy - 2 * r2 * yg[:, None] + r2**2 * c[:, None]        # |y - r2 G|^2
-    return (np.where(metal, yy, zz_p), np.where(metal, yh_m, yh_p),
-            np.where(metal, hh_m, hh_p))
+    # colour, per channel: metal h = r1 D + r2 G, L = C h (hh, yh above); plastic
+    # L = C r1 D + r2 G  ->  residual (y - r2 G) - C r1 D
+    metal = r2 >= METAL_THRESHOLD
+    hh_p = r1**2 * a * np.ones_like(hh)
+    yh_p = r1 * (yd - r2 * b)
+    zz_p = yy - 2 * r2 * yg + r2**2 * c                           # |y - r2 G|^2
+    return (np.where(metal, yy, zz_p), np.where(metal, yh, yh_p), np.where(metal, hh, hh_p))
 
 
 def global_search(problem, start, lower, upper, candidates=3, profile=True, grid_basis=None, **_):

@@ -1,0 +1,258 @@
+"""Every pixel its own Ward fit, many at once: the per-pixel half of a material map.
+
+A region fit (:mod:`.fit`) finds one material for many pixels; a map needs one for each
+pixel (or each N x N patch).  All of a chunk's pixels share one light-cache trace and one
+basis pass (:meth:`~skyfit_mi.render.fit_model.WardModel.basis` on the roughness grid
+SIGMA_GRID: one Dr.Jit launch per roughness for all pixels), and the global method's grid
+(:func:`~.methods.global_search.grid_chi2` with ``per_pixel``) scores every (sigma_alpha,
+rho_s) point of every pixel with its linear parameters (R, or C per channel) in closed form,
+vectorised over pixels.  There is no per-pixel nonlinear polish: the estimate is the grid's
+best point, the linearised chi-square of the region fit's grid (same models, normalisations,
+the sensor response inverted, values within 3 sigma of saturation left out as the region
+grid does), which limits sigma_alpha to the grid's spacing (8% steps) and rho_s to 0.01.
+
+The light is cached with fewer samples than a region fit's (MAP_CACHE; the sky's integrals at
+one position per pixel, :func:`~skyfit_mi.render.light_cache.build_light_cache`), and the
+cache's own Monte Carlo error is measured per pixel from its two halves (each fitted alike)
+and added to the intervals in quadrature.
+
+Intervals are the grid's profile: the 95% set {chi^2 <= chi^2_min + 3.84 s^2}, with
+s^2 = max(1, chi^2_min / dof) (a misfit widens them, as in region fits); sigma_alpha's and
+rho_s's are that set's extent widened by half a grid step, a linear parameter's the union over
+the set of its conditional range L +- sqrt((threshold - chi^2) / hh).  Warnings are a bit
+field (:data:`WARNINGS`); a pixel whose parameters the sequence cannot determine is flagged,
+and one off its material gets NaN.
+"""
+
+import numpy as np
+
+from ..errors import SkyfitError
+from .chi2 import Problem, load_observations
+from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
+                                    linear_quadratics)
+
+#: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
+#: fit's, so that a chunk of pixels fits in memory (about 0.3 MB per pixel and frame set of 13).
+MAP_CACHE = (8, 64)
+#: Warning bits of a map pixel.
+WARNINGS = {"misfit": 1, "sigma_alpha undetermined": 2, "rho_s undetermined": 4,
+            "reflectance undetermined": 8, "few values": 16, "off the material": 32}
+#: The bits that mean "a parameter is not determined": such a pixel is not a confident value.
+UNDETERMINED = (WARNINGS["sigma_alpha undetermined"] | WARNINGS["rho_s undetermined"]
+                | WARNINGS["reflectance undetermined"] | WARNINGS["off the material"])
+#: A parameter is undetermined when its 95% interval spans more than this share of its range
+#: (reflectances) or this factor in roughness.
+SPAN_UNDETERMINED, SIGMA_FACTOR_UNDETERMINED = 0.5, 4.0
+#: chi^2 quantile above which a pixel's fit is a misfit (the data are not described).
+MISFIT_QUANTILE = 0.999
+#: Delta chi^2 of a single parameter's 95% profile interval.
+DELTA_95 = 3.841458820694124
+
+
+def patch_groups(pixels, patch):
+    """Group indices (P,) of pixels (P, 2) into ``patch`` x ``patch`` blocks of the image, and
+    each group's block corner (G, 2); ``patch`` 1: every pixel its own group."""
+    pixels = np.asarray(pixels, dtype=int)
+    blocks = pixels // int(patch)
+    corners, index = np.unique(blocks, axis=0, return_inverse=True)
+    return index.ravel(), corners * int(patch)
+
+
+def _stack_groups(x, groups, n_groups):
+    """(P, T, ...) values regrouped as (G, T * m, ...), each group's pixels laid along the
+    frame axis (m the largest group; missing entries zero)."""
+    P, T = x.shape[:2]
+    m = int(np.bincount(groups, minlength=n_groups).max())
+    out = np.zeros((n_groups, m, T) + x.shape[2:], dtype=x.dtype)
+    slot = np.zeros(P, dtype=int)
+    seen = np.zeros(n_groups, dtype=int)
+    for i, g in enumerate(groups):
+        slot[i] = seen[g]
+        seen[g] += 1
+    out[groups, slot] = x
+    return out.reshape((n_groups, m * T) + x.shape[2:])
+
+
+def fit_pixels(manifest_path, name, pixels, model="colour", normalisation="ward", seed=0,
+               positions=MAP_CACHE[0], directions=MAP_CACHE[1], patch=1):
+    """Fit every pixel of ``pixels`` (P, 2) on material ``name`` (or every ``patch`` x ``patch``
+    block of them) on its own; the light is traced once for all.
+
+    Returns a dict of arrays over the G groups (pixels, or patches): ``pixels`` (G, 2) each
+    group's first pixel (its block corner for patches), ``theta``, ``lo``, ``hi`` (G, n)
+    (95% intervals), ``chi2``, ``dof``, ``warnings`` (G,), and ``names`` the parameters.
+    Everything is rebuilt from the manifest, so a worker of another process can run it.
+    """
+    from ..pipeline.manifest import frame_sky, load_manifest
+    from ..render import setup
+    from ..render.fit_model import PARAMETERS, WardModel, bounds, reflectances
+    from ..render.light_cache import build_light_cache
+
+    pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
+    doc, _ = load_manifest(manifest_path)
+    obs = load_observations(manifest_path, pixels)
+    frames = {f["index"]: f for f in doc["frames"]}
+    mi = setup(doc["render"]["variant"])
+    scene = mi.load_string(doc["scene"]["xml"])
+    cache = build_light_cache(scene, mi.traverse(scene), [frame_sky(frames[i]) for i in obs.frames],
+                              pixels, name, positions=positions, directions=directions,
+                              seed=seed, max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
+                              normalisation=normalisation, sky_positions=1)
+    wm = WardModel(cache, model, normalisation)
+    y, w = _linearise(_ChunkProblem(obs, wm, cache.hit))
+    bases = wm.basis(SIGMA_GRID, halves=True)            # the whole cache, and its two halves
+    groups, corners = patch_groups(pixels, patch)
+    first, hit = pixels, cache.hit.all(axis=1)
+    if patch > 1:
+        n = len(corners)
+        y, w = (_stack_groups(a, groups, n) for a in (y, w))
+        bases = [(_stack_groups(D, groups, n), np.stack([_stack_groups(g, groups, n) for g in G]))
+                 for D, G in bases]
+        first = corners
+        hit = np.bincount(groups, weights=hit, minlength=n) > 0
+    names = PARAMETERS[model]
+    half_a, half_b = (_grid_fit(model, names, y, w, D, G, first) for D, G in bases[1:])
+    # the chi^2 the cache's own noise adds at each group's fit: its halves' model values
+    # differ by twice the whole's Monte Carlo error over (as :meth:`WardModel.
+    # radiance_and_variance` measures it per position)
+    fit = _grid_fit(model, names, y, w, *bases[0], first)
+    rd, sp = (np.array(v) for v in zip(*(reflectances(model, t)[:2] for t in fit["theta"])))
+    cols = np.arange(len(rd))
+    La, Lb = (rd[:, None] * D + sp[:, None] * G[fit["sigma_index"], cols]
+              for D, G in bases[1:])
+    noise = np.sum(w * ((La - Lb) / 2.0) ** 2, axis=(1, 2))
+    fit = _grid_fit(model, names, y, w, *bases[0], first, noise)
+    fit["model_noise_chi2"] = noise
+    # the cache's own Monte Carlo error, from its halves (as region fits do): each half's
+    # estimate differs from the other's by twice the whole's error over
+    sd = np.abs(half_a["theta"] - half_b["theta"]) / 2.0
+    fit["cache_error_sd"] = sd
+    spread = 1.959963984540054 * sd
+    theta = fit["theta"]
+    lower, upper = bounds(model)
+    fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
+    fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)
+    fit["warnings"] = _flags(model, names, fit, hit)
+    for k in ("theta", "lo", "hi", "cache_error_sd"):
+        fit[k][~hit] = np.nan
+    for k in ("chi2", "chi2_grid"):
+        fit[k] = np.where(hit, fit[k], np.nan)
+    return fit
+
+
+class _ChunkProblem(Problem):
+    """The chunk's observations and model as a :class:`~.chi2.Problem` for the linearisation,
+    without the region's data count check (each pixel is judged on its own)."""
+
+    def __init__(self, obs, model, valid):
+        self.obs, self.model = obs, model
+        self.mask = np.isfinite(obs.sigma) & (obs.sigma > 0) & valid[..., None]
+
+
+def _grid_fit(model, names, y, w, D, G, first, model_noise=0.0):
+    """The per-group grid fit of the module docstring on linearised data ``y``, weights ``w``
+    (G, T', 3) and the basis D (G, T', 3), G (K, G, T', 3); ``model_noise`` (G,) the chi^2
+    that the cache's own noise adds (left out of s^2)."""
+    n_par = len(names)
+    chi2, thetas = grid_chi2(model, y, w, D, G, per_pixel=True)     # (K, R, G), (K, R, G, n)
+    thetas[..., -1] = SIGMA_GRID[:, None, None]
+    K, R, n_groups = chi2.shape
+    flat = chi2.reshape(K * R, n_groups)
+    best = np.argmin(flat, axis=0)
+    cols = np.arange(n_groups)
+    theta = thetas.reshape(K * R, n_groups, n_par)[best, cols]
+    chi2_min = flat[best, cols]
+    n_data = np.count_nonzero(w > 0, axis=(1, 2))
+    dof = n_data - n_par
+    # the grid's best point lies above the continuous minimum by up to its resolution: on
+    # precise data that excess alone would read as misfit, so s^2 and the misfit test take the
+    # minimum of a parabola through each profile's best point and its neighbours
+    vertex = np.minimum(_vertex(chi2.min(axis=1)), _vertex(chi2.min(axis=0)))
+    s2 = np.maximum(1.0, (vertex - model_noise) / np.maximum(dof, 1))
+    thr = chi2_min + DELTA_95 * s2
+    ok = chi2 <= thr                                                   # (K, R, G)
+    lo, hi = np.empty((n_groups, n_par)), np.empty((n_groups, n_par))
+    # sigma_alpha: the set's extent on the grid, half a (log) step wider each side
+    k_ok = ok.any(axis=1)                                              # (K, G)
+    k_lo = np.argmax(k_ok, axis=0)
+    k_hi = K - 1 - np.argmax(k_ok[::-1], axis=0)
+    step = np.sqrt(SIGMA_GRID[2] / SIGMA_GRID[1])
+    lo[:, -1] = np.where(k_lo <= 1, 0.0, SIGMA_GRID[k_lo] / step)
+    hi[:, -1] = np.minimum(SIGMA_GRID[k_hi] * step, SIGMA_GRID[-1])
+    # rho_s
+    j_ok = ok.any(axis=0)                                              # (R, G)
+    half = 0.5 * (RHO_GRID[1] - RHO_GRID[0])
+    r = names.index("rho_s")
+    lo[:, r] = np.clip(RHO_GRID[np.argmax(j_ok, axis=0)] - half, 0, 1)
+    hi[:, r] = np.clip(RHO_GRID[R - 1 - np.argmax(j_ok[::-1], axis=0)] + half, 0, 1)
+    if model != "two":
+        # a linear parameter's union of conditional ranges over the 95% set
+        _, _, hh = linear_quadratics(model, y, w, D, G, RHO_GRID, per_pixel=True)
+        L = thetas[..., :-2]                                           # (K, R, G, groups)
+        reach = np.sqrt(np.maximum(thr[None, None, :] - chi2, 0.0)[..., None]
+                        / np.maximum(hh, 1e-300))
+        inside = ok[..., None]
+        low = np.where(inside, L - reach, np.inf).min(axis=(0, 1))
+        high = np.where(inside, L + reach, -np.inf).max(axis=(0, 1))
+        # the grid's resolution: L halfway to each neighbour of the set (in sigma and rho_s)
+        # lies within it too, as half a grid step does for sigma and rho_s themselves
+        for axis in (0, 1):
+            for a, b in ((slice(1, None), slice(None, -1)), (slice(None, -1), slice(1, None))):
+                at = [slice(None)] * 2
+                at[axis] = a
+                nb = [slice(None)] * 2
+                nb[axis] = b
+                mid = 0.5 * (L[tuple(at)] + L[tuple(nb)])
+                ins = inside[tuple(at)]
+                low = np.minimum(low, np.where(ins, mid, np.inf).min(axis=(0, 1)))
+                high = np.maximum(high, np.where(ins, mid, -np.inf).max(axis=(0, 1)))
+        lo[:, :-2], hi[:, :-2] = np.clip(low, 0, 1), np.clip(high, 0, 1)
+    return {"pixels": np.asarray(first, dtype=int), "names": list(names), "theta": theta,
+            "lo": lo, "hi": hi, "chi2": vertex, "chi2_grid": chi2_min, "dof": dof,
+            "sigma_index": best // R}
+
+
+def _vertex(profile):
+    """Each column's minimum of ``profile`` (N, G) refined by the parabola through its lowest
+    point and the two beside it (the lowest point itself at either end), never above it."""
+    n, g = profile.shape
+    i = np.clip(np.argmin(profile, axis=0), 1, n - 2)
+    cols = np.arange(g)
+    a, b, c = profile[i - 1, cols], profile[i, cols], profile[i + 1, cols]
+    curv = a - 2 * b + c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = b - (c - a) ** 2 / (8 * curv)
+    low = profile.min(axis=0)
+    return np.where((curv > 0) & np.isfinite(v), np.clip(v, 0.0, low), low)
+
+
+def _flags(model, names, fit, hit):
+    """The warning bits (:data:`WARNINGS`) of each group's fit (intervals final)."""
+    from scipy.stats import chi2 as chi2_dist
+
+    lo, hi, dof, n_par = fit["lo"], fit["hi"], fit["dof"], len(names)
+    r = names.index("rho_s")
+    bits = np.zeros(len(dof), dtype=np.int32)
+    with np.errstate(invalid="ignore"):
+        misfit = (dof > 0) & (fit["chi2"] - fit["model_noise_chi2"]
+                              > chi2_dist.ppf(MISFIT_QUANTILE, np.maximum(dof, 1)))
+    bits |= np.where(misfit, WARNINGS["misfit"], 0)
+    bits |= np.where(hi[:, -1] > SIGMA_FACTOR_UNDETERMINED * np.maximum(lo[:, -1], SIGMA_GRID[1]),
+                     WARNINGS["sigma_alpha undetermined"], 0)
+    bits |= np.where(hi[:, r] - lo[:, r] > SPAN_UNDETERMINED, WARNINGS["rho_s undetermined"], 0)
+    if model != "two":
+        bits |= np.where((hi[:, :-2] - lo[:, :-2] > SPAN_UNDETERMINED).any(axis=1),
+                         WARNINGS["reflectance undetermined"], 0)
+    bits |= np.where(dof < 2 * n_par, WARNINGS["few values"], 0)
+    return bits | np.where(~hit, WARNINGS["off the material"], 0)
+
+def check_map_region(pixels, shape):
+    """SkyfitError unless ``pixels`` (P, 2) is a non-empty set inside an image of ``shape``
+    (height, width)."""
+    pixels = np.asarray(pixels).reshape(-1, 2)
+    if len(pixels) == 0:
+        raise SkyfitError("the map's mask selects no pixel; give a mask with the label's value "
+                          "on the material.")
+    h, w = shape
+    if (pixels < 0).any() or (pixels[:, 0] >= w).any() or (pixels[:, 1] >= h).any():
+        raise SkyfitError(f"the map's pixels fall outside the {w}x{h} frames.")

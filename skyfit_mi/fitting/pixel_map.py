@@ -1,0 +1,263 @@
+"""Material maps over whole images: per-pixel fits in chunks, on Dask, into a Zarr store.
+
+``skyfit fit DIR --per-pixel`` maps every pixel (or every N x N patch, ``--patch``) of the
+chosen regions with :func:`~.pixel_fit.fit_pixels`.  The pixels are cut into chunks (whole
+patches each, at most ``chunk`` fits); each chunk is a Dask task that rebuilds what it needs
+from the manifest, so the same code runs on a ``LocalCluster`` of this machine (the default:
+one single-threaded worker process per core) or on an existing cluster (``--scheduler``).
+Results go into ``pixel_map.zarr`` as each chunk finishes, with the chunk marked done, so an
+interrupted map resumes where it stopped and loses nothing; a chunk's seed is derived from the
+map's seed and the chunk's index alone, so a map is the same from any number of workers.
+
+Outputs in the map folder: one EXR per parameter (full precision, NaN outside the regions),
+its 95% interval width, chi^2 per degree of freedom and the warning bits
+(:data:`~.pixel_fit.WARNINGS`); PNG previews with colour bars in which undetermined pixels
+are grey, not coloured; ``map_summary.json`` with each region's medians over its determined
+pixels, the settings, seeds and timings.
+"""
+
+import hashlib
+import json
+import os
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SkyfitError
+from ..files import ensure_dir, write_json
+from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, fit_pixels, patch_groups
+
+#: The Zarr store of a map, in the map folder.
+STORE = "pixel_map.zarr"
+#: Fits (pixels, or patches) per chunk: a chunk's peak memory is about 2.5 MB per fit
+#: (docs/BENCHMARKS.md), so 256 keep a worker under 1 GB.
+CHUNK = 256
+#: Seconds to wait for a given scheduler to answer.
+SCHEDULER_TIMEOUT_S = 10
+
+
+def plan_chunks(regions, patch, chunk):
+    """[(region name, pixels (P, 2))] chunks of whole patches, at most ``chunk`` fits each."""
+    out = []
+    for name, pixels in regions:
+        pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
+        groups, _ = patch_groups(pixels, patch)
+        order = np.argsort(groups, kind="stable")
+        bounds = np.searchsorted(groups[order], np.arange(0, groups.max() + 1, chunk))
+        for a, b in zip(bounds, list(bounds[1:]) + [len(order)]):
+            out.append((name, pixels[order[a:b]]))
+    return out
+
+
+def chunk_seed(seed, index):
+    """The seed of chunk ``index`` of a map of ``seed`` (independent of workers and order)."""
+    return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0])
+
+
+def _settings(doc, regions, model, normalisation, seed, patch, chunk, cache):
+    digest = [(n, np.asarray(p).tolist()) for n, p in regions]
+    return {"sequence_run_id": doc.get("run_id"), "model": model, "normalisation": normalisation,
+            "seed": int(seed), "patch": int(patch), "chunk": int(chunk), "cache": list(cache),
+            "regions": hashlib.sha256(json.dumps(digest).encode()).hexdigest()[:16]}
+
+
+def _open_store(path, settings, shape, n_par, n_chunks, overwrite):
+    """The map's Zarr group, new or resumed (refused if it holds another map's settings)."""
+    import zarr
+
+    if path.exists() and not overwrite:
+        try:
+            g = zarr.open_group(str(path), mode="r+")
+            old = dict(g.attrs.get("settings", {}))
+        except Exception:                                      # damaged or not a store
+            old = None
+        if old != settings:
+            raise SkyfitError(f"{path} holds another map (or a damaged one); give another -o, "
+                              "or pass --overwrite to replace it.")
+        return g
+    if path.exists():
+        shutil.rmtree(path)
+    g = zarr.open_group(str(path), mode="w")
+    h, w = shape
+    for name, dims in (("theta", (n_par, h, w)), ("lo", (n_par, h, w)), ("hi", (n_par, h, w)),
+                       ("cache_error_sd", (n_par, h, w)), ("chi2", (h, w)), ("dof", (h, w)),
+                       ("warnings", (h, w))):
+        g.create_array(name, shape=dims, dtype="f4" if name not in ("dof", "warnings") else "i4",
+                       fill_value=np.nan if name not in ("dof", "warnings") else -1,
+                       chunks=dims[:-2] + (min(h, 256), min(w, 256)))
+    g.create_array("done", shape=(n_chunks,), dtype="bool", fill_value=False)
+    g.attrs["settings"] = settings
+    return g
+
+
+def _write_chunk(store, pixels, patch, res):
+    """Scatter one chunk's fits (per group) onto its pixels in the store."""
+    groups, _ = patch_groups(pixels, patch)
+    x, y = pixels[:, 0], pixels[:, 1]
+    for key in ("theta", "lo", "hi", "cache_error_sd"):
+        arr = store[key][:, y.min():y.max() + 1, x.min():x.max() + 1]
+        arr[:, y - y.min(), x - x.min()] = res[key][groups].T
+        store[key][:, y.min():y.max() + 1, x.min():x.max() + 1] = arr
+    for key in ("chi2", "dof", "warnings"):
+        arr = store[key][y.min():y.max() + 1, x.min():x.max() + 1]
+        arr[y - y.min(), x - x.min()] = res[key][groups]
+        store[key][y.min():y.max() + 1, x.min():x.max() + 1] = arr
+
+
+def _client(workers, scheduler, memory_per_worker):
+    """A Dask client: of the cluster at ``scheduler``, or of a new LocalCluster."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s"), None
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise SkyfitError(f"the Dask scheduler at {scheduler} does not answer "
+                              f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__});"
+                              " start it (`dask scheduler`), check the address, or leave out "
+                              "--scheduler for a cluster on this machine.") from None
+    cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
+                           memory_limit=memory_per_worker, dashboard_address=None,
+                           silence_logs=40)
+    return Client(cluster), cluster
+
+
+def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward", seed=0,
+            patch=1, chunk=CHUNK, workers=None, scheduler=None, overwrite=False, progress=True,
+            log=print, cache=MAP_CACHE, memory_per_worker="4GiB"):
+    """Map ``regions`` ([(material, pixels (P, 2))]) of a sequence; returns the summary dict
+    (module docstring).  ``workers``: LocalCluster processes (default: the machine's cores)."""
+    from ..pipeline.manifest import load_manifest
+    from ..render.fit_model import PARAMETERS
+    from .pixel_fit import check_map_region
+
+    doc, _ = load_manifest(manifest_path)
+    shape = (doc["camera"]["height"], doc["camera"]["width"])
+    for _, px in regions:
+        check_map_region(px, shape)
+    if int(patch) < 1 or int(chunk) < 1:
+        raise SkyfitError("--patch and --chunk take whole numbers of at least 1.")
+    names = list(PARAMETERS[model])
+    chunks = plan_chunks(regions, patch, chunk)
+    settings = _settings(doc, regions, model, normalisation, seed, patch, chunk, cache)
+    out = ensure_dir(Path(out_dir))
+    store = _open_store(out / STORE, settings, shape, len(names), len(chunks), overwrite)
+    done = store["done"][:]
+    pending = [i for i in range(len(chunks)) if not done[i]]
+    if len(pending) < len(chunks):
+        log(f"resuming: {len(chunks) - len(pending)} of {len(chunks)} chunks already mapped")
+    t0 = time.perf_counter()
+    n_workers = int(workers or os.cpu_count() or 1)
+    if pending:
+        client, cluster = _client(n_workers, scheduler, memory_per_worker)
+        try:
+            _map_pending(client, manifest_path, chunks, pending, store, model, normalisation,
+                         seed, patch, cache, progress)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    summary = write_map_outputs(out, store, names, regions, settings)
+    summary.update(wall_time_s=time.perf_counter() - t0, chunks=len(chunks),
+                   chunks_this_run=len(pending), workers=None if scheduler else n_workers,
+                   scheduler=scheduler or "LocalCluster", memory_per_worker=memory_per_worker,
+                   chunk_seeds="numpy SeedSequence([seed, chunk index])")
+    write_json(out / "map_summary.json", summary)
+    return summary
+
+
+def _map_pending(client, manifest_path, chunks, pending, store, model, normalisation, seed,
+                 patch, cache, progress):
+    """Submit every pending chunk and write each result as it comes."""
+    from distributed import as_completed
+
+    futures = {client.submit(fit_pixels, str(manifest_path), chunks[i][0], chunks[i][1],
+                             model=model, normalisation=normalisation, seed=chunk_seed(seed, i),
+                             positions=cache[0], directions=cache[1], patch=patch,
+                             pure=False): i for i in pending}
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=sum(len(chunks[i][1]) for i in pending), desc="map", unit="px")
+    for fut in as_completed(futures):
+        i = futures[fut]
+        try:
+            res = fut.result()
+        except SkyfitError:
+            for f in futures:
+                f.cancel()
+            raise
+        _write_chunk(store, chunks[i][1], patch, res)
+        store["done"][i] = True                 # after the chunk's values: a resume redoes it
+        if bar is not None:
+            bar.update(len(chunks[i][1]))
+    if bar is not None:
+        bar.close()
+
+
+def write_map_outputs(out, store, names, regions, settings):
+    """The map's EXRs, PNG previews and summary (returned) from the store."""
+    from ..render.image import write_exr
+
+    theta, lo, hi = (store[k][:] for k in ("theta", "lo", "hi"))
+    chi2, dof, bits = store["chi2"][:], store["dof"][:], store["warnings"][:]
+    mapped = bits >= 0
+    determined = mapped & ((bits & UNDETERMINED) == 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        per_dof = np.where(mapped & (dof > 0), chi2 / dof, np.nan)
+    images = {"chi2_per_dof": per_dof, "warnings": np.where(mapped, bits, np.nan)}
+    for i, n in enumerate(names):
+        images[n] = theta[i]
+        images[f"{n}_width95"] = hi[i] - lo[i]
+    for key, img in images.items():
+        write_exr(out / f"{key}.exr", img.astype(np.float32))
+    for i, n in enumerate(names):
+        _preview(out / f"{n}.png", theta[i], mapped, determined, n)
+    _preview(out / "chi2_per_dof.png", per_dof, mapped, mapped, "chi^2 / dof")
+    summary = {"settings": settings, "parameters": names, "store": STORE,
+               "warning_bits": WARNINGS, "units": "reflectances unitless, sigma_alpha rms slope; "
+               "widths of 95% intervals; EXR maps NaN outside the regions",
+               "regions": {}}
+    for name, px in regions:
+        px = np.asarray(px).reshape(-1, 2)
+        sel = np.zeros(mapped.shape, bool)
+        sel[px[:, 1], px[:, 0]] = True
+        ok = sel & determined
+        summary["regions"][name] = {
+            "pixels": int(sel.sum()), "mapped": int((sel & mapped).sum()),
+            "determined": int(ok.sum()),
+            "warnings": {w: int(((bits & b) > 0)[sel & mapped].sum()) for w, b in WARNINGS.items()},
+            "median": {n: _stat(np.median, theta[i][ok]) for i, n in enumerate(names)},
+            "iqr": {n: _stat(lambda v: float(np.subtract(*np.percentile(v, [75, 25]))),
+                             theta[i][ok]) for i, n in enumerate(names)},
+            "median_width95": {n: _stat(np.median, (hi[i] - lo[i])[ok])
+                               for i, n in enumerate(names)}}
+    return summary
+
+
+def _stat(f, v):
+    return float(f(v)) if len(v) else None
+
+
+def _preview(path, image, mapped, determined, label):
+    """A PNG of ``image`` with a colour bar; mapped pixels that are not determined grey, the
+    rest of the frame white."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..files import save_figure
+
+    fig, ax = plt.subplots(figsize=(5.2, 4.2))
+    shown = np.where(determined, image, np.nan)
+    im = ax.imshow(shown, cmap="viridis", interpolation="nearest")
+    grey = np.where(mapped & ~determined, 0.6, np.nan)
+    ax.imshow(grey, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+    fig.colorbar(im, ax=ax, fraction=0.046, label=label)
+    n_u = int((mapped & ~determined).sum())
+    ax.set_title(f"{label}" + (f" ({n_u} undetermined pixels grey)" if n_u else ""), fontsize=9)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    save_figure(fig, path)
