@@ -204,8 +204,9 @@ def latlong_table(image, projection, north_rotation_deg=0.0, scale=1.0, rows=Non
     return (table * np.float32(scale)).astype(np.float32), invalid
 
 
-def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, direct_normal=None, sun_mask_deg=None,
-               ground_albedo=0.0, sun_solid_angle=None, info=None):
+def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=None,
+               direct_normal=None, sun_mask_deg=None, ground_albedo=0.0, sun_solid_angle=None,
+               info=None):
     """A :class:`~skyfit_mi.physics.sky.Sky` lit by a world-frame lat-long ``table``
     (:func:`latlong_table`) [W m^-2 sr^-1], with the sun given apart from the map.
 
@@ -229,6 +230,10 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, direct_normal=None, su
         (zero for a fisheye).
     sun_solid_angle : float, optional
         The disc's solid angle [sr] (default: the sun's, :data:`~skyfit_mi.physics.sun.SUN_SOLID_ANGLE`).
+    diffuse_horizontal : float, optional
+        Measured diffuse horizontal irradiance [W m^-2]: the map (after the mask) is scaled so
+        that its luminance-weighted horizontal irradiance equals it, a photograph's
+        calibration (:meth:`~skyfit_mi.physics.sky.Sky.scaled`).
     info : dict, optional
         Recorded in the Sky's ``info`` (e.g. the map's file and projection).
     """
@@ -248,6 +253,9 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, direct_normal=None, su
         info["sun_mask_deg"] = float(sun_mask_deg)
     sky = Sky(s, envmap=table, sun_solid_angle=SUN_SOLID_ANGLE if sun_solid_angle is None
               else sun_solid_angle, info=info)
+    if diffuse_horizontal is not None:
+        info["diffuse_horizontal_W_m2"] = float(diffuse_horizontal)
+        sky = sky.scaled(diffuse_horizontal=diffuse_horizontal)
     if direct_normal is not None:
         info["direct_normal_W_m2"] = float(direct_normal)
         if sun_zenith_deg < 90.0:
