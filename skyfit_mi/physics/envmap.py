@@ -194,7 +194,10 @@ def latlong_table(image, projection, north_rotation_deg=0.0, scale=1.0, rows=Non
     N = img.shape[0] if projection == "latlong" else 2 * (min(img.shape[:2]) // 2)
     if rows is None:
         rows = min(N, MAX_ROWS)
-    rows = int(check_range("envmap rows", rows, 2, 4096))
+    check_range("envmap rows", rows, 2, 4096)
+    if rows != int(rows):
+        raise SkyfitError(f"envmap rows must be a whole number, got {rows!r}.")
+    rows = int(rows)
     if projection == "latlong" and rows == N and north_rotation_deg == 0.0:
         table = img
     else:

@@ -488,8 +488,10 @@ def directional_sky(direction, irradiance, solid_angle=SUN_SOLID_ANGLE):
                           f"z up] toward the source, got {direction!r}.")
     d = d / n
     if d[2] <= 0:
-        raise SkyfitError(f"the directional light's direction {list(np.round(d, 6))} is at or "
-                          "below the horizon (z <= 0); give a source above it (z > 0).")
+        raise SkyfitError(f"the directional light's direction ({d[0]:.4g}, {d[1]:.4g}, "
+                          f"{d[2]:.4g}) is at or below the horizon (zenith "
+                          f"{np.degrees(np.arccos(np.clip(d[2], -1, 1))):.4g} degrees); give a "
+                          "source above it (z > 0).")
     e = _rgb(irradiance, "directional irradiance")
     check_range("directional irradiance", e, 0.0, 1e6, "W m^-2")
     check_range("directional solid angle", solid_angle, 1e-7, 0.5, "sr")

@@ -480,8 +480,10 @@ def _check_light_keys(e):
                 raise SpecError(f"[sky] a {kind} sky takes {', '.join(sorted(_ALLOWED_WITH[kind]))}"
                                 f"; drop {', '.join(bad)}.")
         elif own & set(e):
-            raise SpecError(f"[sky] {', '.join(sorted(own & set(e)))} belong to type = "
-                            f"'{kind}', not to a {e['type']} sky.")
+            keys = sorted(own & set(e))
+            raise SpecError(f"[sky] {', '.join(keys)}: only type = '{kind}' takes "
+                            f"{'this key' if len(keys) == 1 else 'these keys'}, not a {e['type']} "
+                            f"sky; drop {'it' if len(keys) == 1 else 'them'} or set type = '{kind}'.")
     if e["type"] == "envmap" and "file" not in e:
         raise SpecError("[sky] an envmap sky needs file = 'maps/sky_{index:03d}.exr' (an HDR map "
                         "beside the spec; {index} and {time:%H%M} name each frame's).")
