@@ -81,7 +81,7 @@ def test_rotation_moves_a_feature_to_its_compass_azimuth():
     assert invalid == 0 and out.shape == t.shape
     i, j = np.unravel_index(np.argmax(out[..., 0]), out.shape[:2])
     assert i == 10 and j == 8 + 16                 # + 90 degrees = 16 columns of 5.625
-    np.testing.assert_allclose(out.sum(), t.sum() * 1, rtol=1e-6)       # nothing lost
+    np.testing.assert_allclose(out.sum(), t.sum(), rtol=1e-6)           # nothing lost
     # and a fraction of a column splits the feature between two
     half, _ = latlong_table(t, "latlong", north_rotation_deg=0.5 * 360 / 64)
     np.testing.assert_allclose(half[10, 8:10, 0], [0.5, 0.5], rtol=1e-6)
