@@ -105,7 +105,7 @@ def mitsuba_frames(out, material_id, bsdf_xml, spp=1024, seed=5, sensor_seed=99)
     from skyfit_mi.render.daylight import update_sky
     from skyfit_mi.render.frame import render_with_error
 
-    doc, _ = load_manifest(out)
+    doc, root = load_manifest(out)
     xml = doc["scene"]["xml"]
     pattern = re.compile(rf'<bsdf type="ward" id="{material_id}">.*?</bsdf>', re.S)
     if not pattern.search(xml):
@@ -115,7 +115,7 @@ def mitsuba_frames(out, material_id, bsdf_xml, spp=1024, seed=5, sensor_seed=99)
     params = mi.traverse(scene)
 
     def trace(frame, _):
-        update_sky(params, frame_sky(frame), "sky.")
+        update_sky(params, frame_sky(frame, root), "sky.")
         img, _ = render_with_error(mi, scene, params, seed + frame["index"], spp // 2)
         return img
     _copy_frames(out, doc["frames"], sensor_seed, trace)

@@ -78,9 +78,13 @@ def test_invalid_frame_is_named(day):
     with pytest.raises(ManifestError, match=r"frames\[2\]\.illumination"):
         validate_manifest(doc)
     doc["frames"][2]["illumination"]["projection"] = "latlong"
+    validate_manifest(doc)
+    with pytest.raises(ManifestError, match=r"frame 2: envmap illumination: .*x\.exr: does not"):
+        frame_sky(doc["frames"][2], day)                 # the map's file is named
+    doc["frames"][2]["illumination"] = {"kind": "irradiance", "global_horizontal_W_m2": 300.0}
     validate_manifest(doc)                               # a valid kind of the contract ...
-    with pytest.raises(ManifestError, match="kind 'envmap' .* can only light"):
-        frame_sky(doc["frames"][2])                      # ... that this version cannot light yet
+    with pytest.raises(ManifestError, match="kind 'irradiance' .* can only light"):
+        frame_sky(doc["frames"][2], day)                 # ... that this version cannot light yet
 
 
 def test_write_refuses_an_invalid_document_and_keeps_the_old_file(day, tmp_path):

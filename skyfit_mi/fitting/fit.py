@@ -75,7 +75,7 @@ class FitSession:
         check_choice("model", model, tuple(PARAMETERS))
         check_fit_normalisation(normalisation)          # before the light is traced
         t0 = time.perf_counter()
-        doc, _ = load_manifest(manifest_path)
+        doc, root = load_manifest(manifest_path)
         self.run_id = doc.get("run_id")
         if is_table(doc):
             self.obs = load_table_observations(manifest_path, name, pixels, frames, min_frames)
@@ -89,7 +89,7 @@ class FitSession:
             raise SkyfitError(f"region {name!r} names no material of the scene; its materials are: "
                               f"{', '.join(mats)}.")
         frames = {f["index"]: f for f in doc["frames"]}
-        self.skies = [frame_sky(frames[i]) for i in self.obs.frames]
+        self.skies = [frame_sky(frames[i], root) for i in self.obs.frames]
         self.doc, self.name, self.model, self.normalisation = doc, name, model, normalisation
         self.names = PARAMETERS[model]
         self.lower, self.upper = bounds(model)

@@ -11,7 +11,9 @@ weighted sum of fixed angular patterns, each weight a linear-sRGB radiance
 * ``intermediate``: the Matsuura intermediate pattern used by Radiance's
   ``gensky +i`` (only reached through :func:`skyfit_mi.physics.gensky.from_gensky`),
 
-plus a uniform ``ground`` radiance below the horizon.  The thesis's skies
+plus a uniform ``ground`` radiance below the horizon, and optionally a tabulated radiance
+over the whole sphere, ``envmap`` (an HDR environment map on a latitude-longitude grid,
+:mod:`skyfit_mi.physics.envmap`), added to both.  The thesis's skies
 (eqs. 4.10-4.18) and Radiance's ``skybright.cal`` skies are both exact
 members of this family, and the ``cie_sky`` Mitsuba emitter evaluates the
 same sum, so a frame's sky changes by changing numbers, never code.
@@ -22,8 +24,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .colour import SRGB_LUMINANCE, cct_to_rgb
-from ..conventions import direction_from_angles
+from ..conventions import angles_from_direction, direction_from_angles
 from ..errors import SkyfitError, check_choice, check_range
+from .envmap import latlong_radiance
 from .sun import SUN_SOLID_ANGLE, direct_normal_irradiance, sun_rgb
 
 #: Luminous efficacy of clear-sky light [lm W^-1] (thesis 4.2.2).
@@ -185,6 +188,10 @@ class Sky:
     perez_coefficients : ndarray (5,)
         a, b, c, d, e of the Perez pattern (:func:`perez_pattern`); zeros give l_v = 1, but
         the pattern counts only where ``perez`` is non-zero.
+    envmap : ndarray (H, W, 3) or None
+        A tabulated radiance [W m^-2 sr^-1] over the whole sphere, world frame, in the lat-long
+        layout of :mod:`skyfit_mi.physics.envmap` (bilinear between cell centres), added to the
+        patterns above the horizon and to the ground below it; float32, non-negative.
     ground : ndarray (3,)
         Radiance of the ground below the horizon [W m^-2 sr^-1].
     horizon_blend : bool
@@ -205,6 +212,7 @@ class Sky:
     intermediate: np.ndarray = field(default_factory=lambda: np.zeros(3))
     perez: np.ndarray = field(default_factory=lambda: np.zeros(3))
     perez_coefficients: np.ndarray = field(default_factory=lambda: np.zeros(5))
+    envmap: np.ndarray = None
     ground: np.ndarray = field(default_factory=lambda: np.zeros(3))
     horizon_blend: bool = False
     sun_radiance: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -224,6 +232,12 @@ class Sky:
             raise SkyfitError(f"perez_coefficients must be 5 finite numbers a, b, c, d, e with "
                               f"b <= 0, got {self.perez_coefficients!r}.")
         object.__setattr__(self, "perez_coefficients", c)
+        if self.envmap is not None:
+            t = np.asarray(self.envmap, dtype=np.float32)
+            if t.ndim != 3 or t.shape[2] != 3 or not np.all(np.isfinite(t)) or np.any(t < 0):
+                raise SkyfitError(f"envmap must be a lat-long table (rows, columns, 3) of finite, "
+                                  f"non-negative radiances, got shape {np.shape(self.envmap)}.")
+            object.__setattr__(self, "envmap", t)
         check_range("sun_solid_angle", self.sun_solid_angle, 1e-7, 0.5, "sr")
 
     # ---- evaluation -------------------------------------------------------
@@ -252,8 +266,12 @@ class Sky:
             sky = sky + perez_pattern(d, s, self.perez_coefficients)[..., None] * self.perez
         if self.horizon_blend:
             w = horizon_blend_weight(d[..., 2])[..., None]
-            return w * sky + (1.0 - w) * self.ground
-        return np.where(d[..., 2:3] > 0.0, sky, self.ground)
+            out = w * sky + (1.0 - w) * self.ground
+        else:
+            out = np.where(d[..., 2:3] > 0.0, sky, self.ground)
+        if self.envmap is not None:
+            out = out + latlong_radiance(self.envmap, d)
+        return out
 
     def sun_mask(self, directions):
         """True where ``directions`` fall inside the solar disc."""
@@ -293,7 +311,7 @@ class Sky:
         ----------
         diffuse_horizontal : float, optional
             Measured horizontal diffuse (sky) irradiance [W m^-2]; the sky
-            patterns (not the ground) are scaled so that the luminance-weighted
+            patterns and the map (not the ground) are scaled so that the luminance-weighted
             sky irradiance equals it.
         direct_normal : float, optional
             Measured direct normal irradiance [W m^-2]; sets the sun disc.
@@ -309,7 +327,8 @@ class Sky:
                 raise SkyfitError("this sky is black above the horizon; cannot scale it to a "
                                   "measured irradiance. Build it with a non-zero level first.")
             k = diffuse_horizontal / now
-            out = replace(out, **{p: getattr(out, p) * k for p in _PATTERNS})
+            out = replace(out, **{p: getattr(out, p) * k for p in _PATTERNS},
+                          envmap=None if out.envmap is None else out.envmap * np.float32(k))
         if direct_normal is not None:
             check_range("direct normal irradiance", direct_normal, 0, 1500, "W m^-2")
             lum = float(out.sun_radiance @ SRGB_LUMINANCE)
@@ -442,3 +461,41 @@ def cie_sky(kind, sun_zenith_deg, sun_azimuth_deg, *, phi=None, day=172,
                     "overcast_zenith_luminance_cd_m2": float(lz_oc),
                     "ground_albedo": ground_albedo})
     return replace(sky, ground=ground_albedo * sky.horizontal_irradiance() / np.pi)
+
+
+def directional_sky(direction, irradiance, solid_angle=SUN_SOLID_ANGLE):
+    """A lab light as a :class:`Sky`: a disc of uniform radiance E / Omega toward ``direction``,
+    no sky, no ground.
+
+    The disc's normal irradiance is then E (radiance times solid angle, exact for a uniform disc
+    seen head on), and a horizontal surface receives E cos(theta) from it.
+
+    Parameters
+    ----------
+    direction : array_like (3,)
+        Toward the source, world frame (+X east, +Y north, +Z up); normalised here.  It must lie
+        above the horizon (z > 0): skyfit treats a source at or below it as no sun (frames are
+        skipped or unlit, the fit's light cache takes no samples of it).
+    irradiance : float or array_like (3,)
+        Irradiance normal to the beam [W m^-2], linear sRGB (one number: grey), >= 0.
+    solid_angle : float
+        The source's solid angle seen from the scene [sr] (default the sun's), in [1e-7, 0.5].
+    """
+    d = np.asarray(direction, dtype=float)
+    n = np.linalg.norm(d) if d.shape == (3,) else 0.0
+    if not np.isfinite(n) or n == 0:
+        raise SkyfitError(f"a directional light needs a non-zero direction [x east, y north, "
+                          f"z up] toward the source, got {direction!r}.")
+    d = d / n
+    if d[2] <= 0:
+        raise SkyfitError(f"the directional light's direction ({d[0]:.4g}, {d[1]:.4g}, "
+                          f"{d[2]:.4g}) is at or below the horizon (zenith "
+                          f"{np.degrees(np.arccos(np.clip(d[2], -1, 1))):.4g} degrees); give a "
+                          "source above it (z > 0).")
+    e = _rgb(irradiance, "directional irradiance")
+    check_range("directional irradiance", e, 0.0, 1e6, "W m^-2")
+    check_range("directional solid angle", solid_angle, 1e-7, 0.5, "sr")
+    zenith, azimuth = (float(np.degrees(a)) for a in angles_from_direction(d))
+    return Sky(d, sun_radiance=e / solid_angle, sun_solid_angle=solid_angle,
+               info={"kind": "directional", "irradiance_W_m2": e.tolist(),
+                     "sun_zenith_deg": zenith, "sun_azimuth_deg": azimuth})

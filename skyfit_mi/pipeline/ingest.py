@@ -403,7 +403,7 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, fa
         from tqdm import tqdm
         bar = tqdm(total=len(paths), desc="ingest", unit="frame")
     for f, p, photo, v in zip(spec.frames, paths, photos, values):
-        rec = frame_record(f, 0)
+        rec = frame_record(f, 0, out)
         rec.pop("seed")
         rec["photo"] = {"file": p.name, **{k: x for k, x in photo.metadata.items()
                                             if isinstance(x, (str, int, float, type(None)))}}

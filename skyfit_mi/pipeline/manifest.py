@@ -37,7 +37,7 @@ SCHEMA_FILE = Path(__file__).with_name("manifest.schema.json")
 FILENAME = "manifest.json"
 #: The illumination kinds the schema defines, and those the sky model can build today.
 ILLUMINATION_KINDS = ("sky", "gensky", "irradiance", "envmap", "directional")
-SKY_KINDS = ("sky", "gensky")
+SKY_KINDS = ("sky", "gensky", "envmap", "directional")
 #: The SensorModel fields a manifest's ``sensor`` record carries.
 SENSOR_FIELDS = ("exposure", "response", "gamma", "bits", "noise_percent", "cos4")
 
@@ -154,8 +154,18 @@ def versions():
 
 # ---- illumination -----------------------------------------------------------
 
-def illumination_record(sky):
-    """The ``illumination`` record (kind ``sky``) of a :class:`~skyfit_mi.physics.sky.Sky`."""
+def illumination_record(sky, folder):
+    """The ``illumination`` record of a :class:`~skyfit_mi.physics.sky.Sky` in a manifest in
+    ``folder``: kind ``envmap`` for a sky lit by a map file (the file relative to ``folder``
+    and its options, not its numbers), ``directional`` for a lab light, else ``sky``."""
+    from .illumination import directional_record, envmap_record
+
+    common = {"info": {k: v for k, v in sky.info.items() if k != "file"},
+              "horizontal_irradiance_W_m2": sky.horizontal_irradiance()}
+    if sky.envmap is not None:
+        return {**envmap_record(sky, folder), **common}
+    if sky.info.get("kind") == "directional":
+        return {**directional_record(sky), **common}
     return {"kind": "sky", "sun_direction": sky.sun_direction, "sun_radiance": sky.sun_radiance,
             "sun_solid_angle_sr": sky.sun_solid_angle, "clear": sky.clear,
             "overcast": sky.overcast, "uniform": sky.uniform, "intermediate": sky.intermediate,
@@ -165,15 +175,18 @@ def illumination_record(sky):
             "units": "weights and radiances W m^-2 sr^-1, linear sRGB"}
 
 
-def frame_sky(frame):
-    """The :class:`~skyfit_mi.physics.sky.Sky` of a manifest frame's illumination.
+def frame_sky(frame, folder):
+    """The :class:`~skyfit_mi.physics.sky.Sky` of a manifest frame's illumination; ``folder``
+    is the manifest's (an ``envmap`` record's file is relative to it).
 
-    Kinds ``sky`` and ``gensky`` become a sky; the others (measured irradiance, HDR
-    maps, lab lights) are part of the contract but not yet turned into light by this
-    version: a :class:`ManifestError` says so.
+    Kinds ``sky``, ``gensky``, ``envmap`` (with the frame's ``sun_zenith_deg`` and
+    ``sun_azimuth_deg`` placing the sun) and ``directional`` become a sky; ``irradiance`` is
+    part of the contract but not yet turned into light by this version: a
+    :class:`ManifestError` says so, as it says what is wrong with a map or a light.
     """
     from ..physics.gensky import from_gensky
     from ..physics.sky import Sky
+    from .illumination import directional_from_record, envmap_from_record
 
     rec = frame.get("illumination")
     if rec is None:
@@ -181,6 +194,18 @@ def frame_sky(frame):
     kind = rec.get("kind")
     if kind == "gensky":
         return from_gensky(rec["text"])
+    try:
+        if kind == "directional":
+            return directional_from_record(rec)
+        if kind == "envmap":
+            if "sun_zenith_deg" not in frame or "sun_azimuth_deg" not in frame:
+                raise SkyfitError("an envmap frame needs sun_zenith_deg and sun_azimuth_deg "
+                                  "(they place the solar disc and the sun's mask); add them")
+            return envmap_from_record(rec, folder, frame["sun_zenith_deg"],
+                                      frame["sun_azimuth_deg"])
+    except SkyfitError as exc:
+        raise ManifestError(f"frame {frame.get('index')}: {kind} illumination: "
+                            f"{str(exc).rstrip('.')}.") from None
     if kind != "sky":
         raise ManifestError(f"frame {frame.get('index')}: illumination kind {kind!r} is part of "
                             f"the manifest format but this version of skyfit-mi can only light "

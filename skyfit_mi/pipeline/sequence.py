@@ -187,13 +187,14 @@ def render_record(spec, renderer):
             "+ 2^31; noise rng = numpy.random.default_rng([seed, index])"}
 
 
-def frame_record(frame, seed):
-    """A spec frame's manifest record without its files (time, sun, illumination, seed)."""
+def frame_record(frame, seed, out):
+    """A spec frame's manifest record without its files (time, sun, illumination, seed), for
+    the manifest in folder ``out`` (an environment map's file is written relative to it)."""
     return {"index": frame.index, "time": frame.time.isoformat(),
             "time_utc": frame.time.astimezone(dt.timezone.utc).isoformat(),
             "sun_zenith_deg": frame.sun_zenith_deg, "sun_azimuth_deg": frame.sun_azimuth_deg,
             "below_horizon": frame.sun_zenith_deg >= 90.0,
-            "illumination": illumination_record(frame.sky), "seed": seed + frame.index}
+            "illumination": illumination_record(frame.sky, out), "seed": seed + frame.index}
 
 
 def finish(out, manifest, exposure):
@@ -239,7 +240,7 @@ def _render(spec, out, overwrite, progress, log, source):
         from tqdm import tqdm
         bar = tqdm(total=len(spec.frames), desc="render", unit="frame", initial=len(done))
     for f in spec.frames:
-        rec = frame_record(f, renderer.seed)
+        rec = frame_record(f, renderer.seed, out)
         if f.skipped:
             rec["status"] = "skipped"
             log(f"frame {f.index} at {f.time:%H:%M}: sun below the horizon, skipped as the spec says")

@@ -43,7 +43,9 @@ _SCHEMA = {
             "ground_albedo", "extinction", "solar_constant", "sun", "gensky", "gensky_file",
             "clear_zenith_luminance", "overcast_zenith_luminance",
             "diffuse_horizontal_W_m2", "direct_normal_W_m2", "diffuse_horizontal_lux",
-            "global_horizontal_W_m2", "decomposition", "cct", "irradiance_file"},
+            "global_horizontal_W_m2", "decomposition", "cct", "irradiance_file",
+            "file", "projection", "north_rotation_deg", "scale", "rows", "sun_mask_deg",
+            "direction", "zenith_deg", "azimuth_deg", "irradiance_W_m2", "solid_angle_sr"},
     "scene": {"file", "ground_albedo"},
     "materials": None,
     "camera": {"azimuth_deg", "angle_deg", "distance", "target", "origin", "up", "matrix",
@@ -51,12 +53,21 @@ _SCHEMA = {
     "sensor": {"exposure", "response", "gamma", "bits", "noise_percent", "cos4"},
     "render": {"spp", "seed", "variant", "max_depth", "below_horizon", "sampler"},
 }
-SKY_KINDS = tuple(SKY_TYPES) + ("gensky", "perez")
+SKY_KINDS = tuple(SKY_TYPES) + ("gensky", "perez", "envmap", "directional")
 #: [sky] keys whose values are numbers (their ranges are checked where they are used).
 _SKY_NUMBERS = {"phi", "efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
                 "ground_albedo", "extinction", "solar_constant", "clear_zenith_luminance",
                 "overcast_zenith_luminance", "diffuse_horizontal_W_m2", "direct_normal_W_m2",
-                "diffuse_horizontal_lux", "global_horizontal_W_m2", "cct"}
+                "diffuse_horizontal_lux", "global_horizontal_W_m2", "cct", "north_rotation_deg",
+                "scale", "rows", "sun_mask_deg", "zenith_deg", "azimuth_deg", "solid_angle_sr"}
+#: The keys of an HDR environment map sky and of a directional lab light
+#: (:mod:`skyfit_mi.pipeline.illumination`), and the other keys each takes.
+_ENVMAP_KEYS = {"file", "projection", "north_rotation_deg", "scale", "rows", "sun_mask_deg"}
+_DIRECTIONAL_KEYS = {"direction", "zenith_deg", "azimuth_deg", "irradiance_W_m2", "solid_angle_sr"}
+_ALLOWED_WITH = {"envmap": _ENVMAP_KEYS | {"type", "time", "diffuse_horizontal_W_m2",
+                                          "direct_normal_W_m2", "ground_albedo",
+                                          "irradiance_file"},
+                 "directional": _DIRECTIONAL_KEYS | {"type", "time"}}
 #: [sky] keys a measured series (``irradiance_file``) fills per frame, by the series' column.
 _SERIES_KEYS = {"ghi": "global_horizontal_W_m2", "dhi": "diffuse_horizontal_W_m2",
                 "dni": "direct_normal_W_m2"}
@@ -168,8 +179,12 @@ class Spec:
     frames: list = field(default_factory=list)
 
     def run_id(self):
-        """Hash of everything that determines the output (the resolved spec)."""
+        """Hash of everything that determines the output (the resolved spec, and the contents
+        of its environment maps)."""
         doc = {"spec": self.raw, "scene": self.scene_file.read_text(), "materials": self.materials}
+        maps = sorted({f.sky.info["file"] for f in self.frames if f.sky.envmap is not None})
+        if maps:
+            doc["envmaps"] = {p: hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in maps}
         return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
@@ -247,7 +262,9 @@ def validate_spec(raw, base_dir="."):
     frames = []
     for i, (t, z, a, entry) in enumerate(zip(times, np.atleast_1d(pos.zenith_deg),
                                              np.atleast_1d(pos.azimuth_deg), entries)):
-        sky = _make_sky(entry, float(z), float(a), t, base_dir)
+        sky = _make_sky(entry, float(z), float(a), t, base_dir, i)
+        if entry["type"] == "directional":      # the lab light is the frame's sun
+            z, a = sky.info["sun_zenith_deg"], sky.info["sun_azimuth_deg"]
         below = (sky.sun_direction[2] <= 0.0) if entry.get("type") == "gensky" else z >= 90.0
         frames.append(Frame(i, t, float(z), float(a), sky,
                             skipped=bool(below and render["below_horizon"] == "skip"),
@@ -430,7 +447,8 @@ def _sky_entries(sec, times, tz):
     for e in out:
         for k in _SKY_NUMBERS & set(e):
             _num("sky", k, e[k])
-        for k in {"type", "gensky", "gensky_file", "decomposition", "irradiance_file"} & set(e):
+        for k in {"type", "gensky", "gensky_file", "decomposition", "irradiance_file", "file",
+                  "projection"} & set(e):
             _text("sky", k, e[k])
         if "sun" in e and not isinstance(e["sun"], bool):
             raise SpecError(f"[sky] sun must be true or false (draw the sun's disc), got {e['sun']!r}.")
@@ -448,7 +466,44 @@ def _sky_entries(sec, times, tz):
         if perez_only and e["type"] != "perez":
             raise SpecError(f"[sky] {', '.join(perez_only)} belong to a Perez sky (type = "
                             f"'perez'), not to a {e['type']} one.")
+        _check_light_keys(e)
     return out
+
+
+def _check_light_keys(e):
+    """Refuse the keys of an envmap or directional sky on other types, and other types' keys
+    on those."""
+    for kind, own in (("envmap", _ENVMAP_KEYS), ("directional", _DIRECTIONAL_KEYS)):
+        if e["type"] == kind:
+            bad = sorted(set(e) - _ALLOWED_WITH[kind])
+            if bad:
+                raise SpecError(f"[sky] a {kind} sky takes {', '.join(sorted(_ALLOWED_WITH[kind]))}"
+                                f"; drop {', '.join(bad)}.")
+        elif own & set(e):
+            keys = sorted(own & set(e))
+            raise SpecError(f"[sky] {', '.join(keys)}: only type = '{kind}' takes "
+                            f"{'this key' if len(keys) == 1 else 'these keys'}, not a {e['type']} "
+                            f"sky; drop {'it' if len(keys) == 1 else 'them'} or set type = '{kind}'.")
+    if e["type"] == "envmap" and "file" not in e:
+        raise SpecError("[sky] an envmap sky needs file = 'maps/sky_{index:03d}.exr' (an HDR map "
+                        "beside the spec; {index} and {time:%H%M} name each frame's).")
+    if e["type"] == "directional":
+        if "irradiance_W_m2" not in e:
+            raise SpecError("[sky] a directional light needs irradiance_W_m2 (normal to the beam, "
+                            "one number or [r, g, b]).")
+        if ("direction" in e) == ("zenith_deg" in e or "azimuth_deg" in e) \
+                or ("direction" not in e and not {"zenith_deg", "azimuth_deg"} <= set(e)):
+            raise SpecError("[sky] give a directional light's direction either as direction = "
+                            "[x east, y north, z up] or as zenith_deg and azimuth_deg.")
+        for key, n in (("direction", (3,)), ("irradiance_W_m2", (1, 3))):
+            if key not in e:
+                continue
+            v = [e[key]] if isinstance(e[key], (int, float)) and key == "irradiance_W_m2" else e[key]
+            if not isinstance(v, list) or len(v) not in n:
+                raise SpecError(f"[sky] {key} must be {' or '.join(map(str, n))} numbers, got "
+                                f"{e[key]!r}.")
+            for i, x in enumerate(v):
+                _num("sky", f"{key}[{i}]", x)
 
 
 def _with_series(entries, times, tz, base_dir):
@@ -505,10 +560,38 @@ def _perez(e, zenith, azimuth, t):
                       sun=e.get("sun", True))
 
 
-def _make_sky(e, zenith, azimuth, t, base_dir):
+def _light(e, zenith, azimuth, t, index, base_dir):
+    """The Sky of an envmap or directional [sky] entry (:mod:`.illumination`)."""
+    from ..conventions import direction_from_angles
+    from .illumination import directional_from_record, envmap_from_record
+
+    if e["type"] == "directional":
+        rec = {k: e[k] for k in ("direction", "irradiance_W_m2") if k in e}
+        if "direction" not in rec:
+            _num("sky", "zenith_deg", e["zenith_deg"], 0, 180)
+            rec["direction"] = direction_from_angles(np.radians(e["zenith_deg"]),
+                                                     np.radians(e["azimuth_deg"]))
+        if "solid_angle_sr" in e:
+            rec["solid_angle_sr"] = e["solid_angle_sr"]
+        return directional_from_record(rec)
+    try:
+        name = e["file"].format(index=index, time=t)
+    except (KeyError, IndexError, ValueError, AttributeError) as exc:
+        raise SpecError(f"[sky] file {e['file']!r} is not a pattern of {{index}} and {{time}} "
+                        f"({type(exc).__name__}: {exc}); write e.g. 'sky_{{index:03d}}.exr' or "
+                        "'sky_{time:%H%M}.exr'.") from None
+    rec = {"file": name, **{k: e[k] for k in ("projection", "north_rotation_deg", "scale", "rows",
+                                              "sun_mask_deg", "diffuse_horizontal_W_m2",
+                                              "direct_normal_W_m2", "ground_albedo") if k in e}}
+    return envmap_from_record(rec, base_dir, zenith, azimuth)
+
+
+def _make_sky(e, zenith, azimuth, t, base_dir, index):
     measured = {k: e[k] for k in ("diffuse_horizontal_W_m2", "direct_normal_W_m2",
                                   "diffuse_horizontal_lux") if k in e}
     try:
+        if e["type"] in ("envmap", "directional"):
+            return _light(e, zenith, azimuth, t, index, base_dir)
         if e["type"] == "perez":
             return _perez(e, zenith, azimuth, t)
         if e["type"] == "gensky":

@@ -21,7 +21,17 @@ def sky_dict(sky, scene_radius=1e4):
         d[k] = mi.ScalarVector3f(*map(float, getattr(sky, k)))
     for k, v in zip(PEREZ_KEYS, sky.perez_coefficients):
         d[k] = float(v)
+    if sky.envmap is not None:
+        d["envmap"] = mi.TensorXf(envmap_table(sky.envmap))
     return d
+
+
+def envmap_table(envmap):
+    """The emitter's ``envmap`` table of a Sky's ``envmap`` (H, W, 3) [W m^-2 sr^-1]: the map
+    as float32, or for None a single black cell (its lookup adds zero)."""
+    import numpy as np
+
+    return np.zeros((1, 1, 3), np.float32) if envmap is None else np.asarray(envmap, np.float32)
 
 
 def opaque_value(cls, values):
@@ -57,4 +67,5 @@ def update_sky(params, sky, prefix):
         params[prefix + k] = opaque_value(mi.Color3f, getattr(sky, k))
     for k, v in zip(PEREZ_KEYS, sky.perez_coefficients):
         params[prefix + k] = opaque_value(mi.Float, float(v))
+    params[prefix + "envmap"] = mi.TensorXf(envmap_table(sky.envmap))
     params.update()

@@ -5,7 +5,9 @@ sum, term by term) and importance-samples it: the sun disc by a uniform cone,
 the sky by a piecewise-constant table over an equal-area (azimuth,
 cos theta) grid built from the NumPy sky whenever its parameters change.
 Every number lives in an opaque Dr.Jit variable, so changing the sky from
-frame to frame (``mi.traverse`` + ``params.update()``) recompiles nothing.
+frame to frame (``mi.traverse`` + ``params.update()``) recompiles nothing; an environment
+map is a flat array read by ``dr.gather`` with its rows and columns opaque, so a new map
+(of any size) recompiles nothing either.
 
 Parameters (all linear sRGB radiance in W m^-2 sr^-1 unless stated; none
 differentiable; all exposed by ``traverse`` and updatable):
@@ -23,6 +25,8 @@ name                  type      default                     meaning
 ``perez``             rgb       0                           weight of the Perez all-weather pattern
 ``perez_a`` .. ``_e`` float     0                           the Perez pattern's coefficients (b <= 0)
 ``ground``            rgb       0                           radiance below the horizon
+``envmap``            tensor    none                        lat-long radiance table (H, W, 3), world
+                                                            frame (:mod:`skyfit_mi.physics.envmap`)
 ``horizon_blend``     bool      false                       Radiance's sky-to-ground blend
 ``scene_radius``      float     1e4                         distance [scene units] beyond all geometry
 ====================  ========  ==========================  ==========================================
@@ -37,8 +41,9 @@ import mitsuba as mi
 import numpy as np
 
 from ...physics.colour import SRGB_LUMINANCE
+from ...physics.envmap import latlong_texel
 from ...physics.sky import PEREZ_HORIZON_COS, Sky
-from ..daylight import PEREZ_KEYS as _PEREZ_KEYS, RGB_KEYS as _RGB_KEYS, opaque_value
+from ..daylight import PEREZ_KEYS as _PEREZ_KEYS, RGB_KEYS as _RGB_KEYS, envmap_table, opaque_value
 from .properties import property_values
 
 #: Sampling table resolution: azimuth cells x cos(theta) cells.
@@ -47,6 +52,11 @@ TABLE_NU, TABLE_NV = 128, 64
 TABLE_SUPERSAMPLE = 3
 #: Share of the sky's sampling density spread uniformly over the sphere.
 UNIFORM_FLOOR = 0.02
+
+
+def _envmap(table):
+    """The Sky's ``envmap`` of an emitter's table: None when it is all zero."""
+    return table if np.any(table) else None
 
 
 def _triple(props, name, default):
@@ -80,7 +90,9 @@ class CIESkyEmitter(mi.Emitter):
                   **{k: _triple(props, k, 0.0) for k in _RGB_KEYS},
                   perez_coefficients=[float(props.get(k, 0.0)) for k in _PEREZ_KEYS],
                   horizon_blend=bool(props.get("horizon_blend", False)),
-                  sun_solid_angle=float(props.get("sun_solid_angle", 6e-5)))
+                  sun_solid_angle=float(props.get("sun_solid_angle", 6e-5)),
+                  envmap=_envmap(np.array(props["envmap"], dtype=np.float32))
+                  if "envmap" in props else None)
         self.scene_radius = mi.Float(float(props.get("scene_radius", 1e4)))
         self.sun_direction = mi.Vector3f(*map(float, sky.sun_direction))
         self.sun_solid_angle = mi.Float(float(sky.sun_solid_angle))
@@ -89,6 +101,7 @@ class CIESkyEmitter(mi.Emitter):
         for k, v in zip(_PEREZ_KEYS, sky.perez_coefficients):
             setattr(self, k, mi.Float(float(v)))
         self.horizon_blend = mi.Bool(bool(sky.horizon_blend))
+        self.envmap = mi.TensorXf(envmap_table(sky.envmap))
         self._build_sampling(sky)
 
     # ---- parameters -------------------------------------------------------
@@ -118,6 +131,10 @@ class CIESkyEmitter(mi.Emitter):
         # data would shift the other fields' alignment from frame to frame, and with it
         # the kernel's hash (a recompilation per frame)
         self.blend_weight = opaque_value(mi.Float, float(sky.horizon_blend))
+        # the map as a flat array of RGB triples with its size opaque: any map, one kernel
+        self.envmap_data = self.envmap.array
+        self.envmap_rows = opaque_value(mi.Float, float(self.envmap.shape[0]))
+        self.envmap_cols = opaque_value(mi.Float, float(self.envmap.shape[1]))
         for k in ("sun_direction", "sun_solid_angle", "blend_weight", "p_sun", "sun_chord2",
                   "scene_radius") + _RGB_KEYS + _PEREZ_KEYS:
             dr.make_opaque(getattr(self, k))
@@ -129,6 +146,7 @@ class CIESkyEmitter(mi.Emitter):
         for k in _RGB_KEYS + _PEREZ_KEYS:
             cb.put(k, getattr(self, k), flag)
         cb.put("horizon_blend", self.horizon_blend, flag)
+        cb.put("envmap", self.envmap, flag)
         cb.put("scene_radius", self.scene_radius, flag)
 
     def parameters_changed(self, keys=[]):
@@ -137,7 +155,8 @@ class CIESkyEmitter(mi.Emitter):
         sky = Sky(arr(self.sun_direction), **{k: arr(getattr(self, k)) for k in _RGB_KEYS},
                   perez_coefficients=[arr(getattr(self, k))[0] for k in _PEREZ_KEYS],
                   horizon_blend=bool(arr(self.horizon_blend)[0]),
-                  sun_solid_angle=float(arr(self.sun_solid_angle)[0]))
+                  sun_solid_angle=float(arr(self.sun_solid_angle)[0]),
+                  envmap=_envmap(np.array(self.envmap, dtype=np.float32)))
         self._build_sampling(sky)
 
     # ---- evaluation -------------------------------------------------------
@@ -167,7 +186,21 @@ class CIESkyEmitter(mi.Emitter):
         w = a / (a + dr.rcp(a))
         blended = w * sky + (1.0 - w) * self.ground
         sharp = dr.select(dz > 0.0, sky, self.ground)
-        return dr.select(self.blend_weight > 0.5, blended, sharp)
+        return dr.select(self.blend_weight > 0.5, blended, sharp) + self.envmap_eval(d)
+
+    def envmap_eval(self, d):
+        """The map's radiance toward world directions d: Sky.envmap's bilinear lookup
+        (:func:`~skyfit_mi.physics.envmap.latlong_texel`) [W m^-2 sr^-1]."""
+        rows, cols = self.envmap_rows, self.envmap_cols
+        i0, i1, fy, j0, j1, fx = latlong_texel(dr.acos(dr.clip(d.z, -1.0, 1.0)),
+                                               dr.atan2(d.x, d.y), rows, cols, dr.floor, dr.clip)
+        n = mi.UInt32(cols)
+        r0, r1, c0, c1 = mi.UInt32(i0) * n, mi.UInt32(i1) * n, mi.UInt32(j0), mi.UInt32(j1)
+
+        def texel(r, c):
+            return dr.gather(mi.Color3f, self.envmap_data, r + c)
+        return (1.0 - fy) * ((1.0 - fx) * texel(r0, c0) + fx * texel(r0, c1)) \
+            + fy * ((1.0 - fx) * texel(r1, c0) + fx * texel(r1, c1))
 
     def _in_sun(self, d):
         # |d - s|^2 <= 2 (1 - cos alpha): exact for unit vectors and, unlike d.s >= cos alpha,

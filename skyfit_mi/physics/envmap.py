@@ -1,0 +1,268 @@
+"""HDR environment maps as sky light: a tabulated radiance on a latitude-longitude grid.
+
+A measured sky (an HDR photograph of the whole sky) enters a :class:`~skyfit_mi.physics.sky.Sky`
+as one more term of its pattern sum, ``Sky.envmap``: a table of linear-sRGB radiance
+[W m^-2 sr^-1] over the whole sphere, in the world frame.  This module is the one home of the
+table's convention, of its lookup (shared, line for line, with the ``cie_sky`` emitter through
+:func:`latlong_texel`), and of the conversions of captured maps into it.
+
+The lat-long table
+------------------
+A table ``T`` of shape (H, W, 3):
+
+* row ``i`` covers the zenith angles theta in [i pi/H, (i + 1) pi/H]; its centre is
+  (i + 1/2) pi/H.  Row 0 touches the zenith, row H - 1 the nadir.
+* column ``j`` covers the compass azimuths phi (from north toward east, ``docs/CONVENTIONS.md``)
+  in [j 2 pi/W, (j + 1) 2 pi/W]; its centre is (j + 1/2) 2 pi/W.  Column 0 begins at north,
+  and the columns run north, east, south, west: a panorama's left-to-right for a
+  photographer turning clockwise seen from above.
+* between cell centres the radiance is bilinear in (phi, theta), periodic in azimuth (the last
+  column blends into the first), and held at the first (last) row's values between that row's
+  centre and the zenith (nadir).
+
+The captured maps
+-----------------
+* ``latlong``: an equirectangular image in the table's layout (top row at the zenith, left
+  edge at the map's azimuth origin, azimuth increasing to the right).
+* ``fisheye``: an equidistant ("angular") fisheye of the upper hemisphere, as Radiance's
+  ``rpict -vta -vd 0 0 1 -vu 0 1 0`` renders it and as all-sky cameras record it: the circle
+  of radius R = min(rows, columns)/2 centred in the image holds the hemisphere, the zenith at
+  its centre and the horizon on its rim, a point at zenith angle theta at r = R theta/(pi/2)
+  from the centre.  The image's top is the map's azimuth origin and azimuth increases
+  counter-clockwise in the image (east to the left of north: the sky seen from below).  It
+  becomes a lat-long table whose lower half is zero (the ``ground`` term lights it).
+* ``north_rotation_deg`` is the compass azimuth of the map's azimuth origin [degrees]: world
+  azimuth = map azimuth + north_rotation_deg (0: the map's origin already points north).
+* ``scale`` multiplies the map's values into W m^-2 sr^-1 (a photograph's calibration).
+
+The sun in a photograph is almost always clipped, so the measured map under-states the direct
+light by orders of magnitude.  :func:`envmap_sky` takes the sun separately (its position from
+the frame's time and site, its direct normal irradiance measured) and can blank the map's cells
+within ``sun_mask_deg`` of it, filling them with the median of the ring around them.
+"""
+
+import numpy as np
+
+from ..conventions import angles_from_direction, direction_from_angles
+from ..errors import SkyfitError, check_choice, check_range
+
+#: The map projections :func:`envmap_sky` reads.
+PROJECTIONS = ("latlong", "fisheye")
+#: Rows of the lat-long table a map is resampled to at most (columns: twice as many); larger
+#: maps are averaged down to it [cells].  256 rows: 0.7 degree cells, 1.5 MB per frame in float32.
+MAX_ROWS = 256
+#: Sub-samples per cell side at most when a map is averaged onto the table.
+MAX_SUPERSAMPLE = 8
+#: Table rows resampled at once (bounds the memory :func:`resample` takes).
+RESAMPLE_BLOCK = 16
+
+
+def latlong_texel(theta, phi, rows, cols, floor, clip):
+    """The bilinear lookup of the lat-long table (module docstring) at zenith ``theta`` and
+    compass azimuth ``phi`` [rad]: rows i0, i1 with the weight ``fy`` of i1, and columns j0,
+    j1 (wrapped) with the weight ``fx`` of j1, all as floats.
+
+    ``floor`` and ``clip`` come from NumPy or Dr.Jit, so that the NumPy sky and the emitter
+    share this one definition; ``rows`` and ``cols`` may be Dr.Jit values.  ``phi`` may lie
+    outside [0, 2 pi) (it wraps).
+    """
+    y = clip(theta * (rows / np.pi) - 0.5, 0.0, rows - 1.0)
+    i0 = floor(y)
+    i1 = clip(i0 + 1.0, 0.0, rows - 1.0)
+    x = phi * (cols / (2.0 * np.pi)) - 0.5
+    j = floor(x)
+    j0 = j - cols * floor(j / cols)
+    j1 = j0 + 1.0
+    j1 = j1 - cols * floor(j1 / cols)
+    return i0, i1, y - i0, j0, j1, x - j
+
+
+def latlong_lookup(table, theta, phi):
+    """Radiance of the lat-long ``table`` (H, W, 3) at zenith ``theta`` and compass azimuth
+    ``phi`` [rad] (broadcast), by bilinear interpolation (module docstring); shape (..., 3) in
+    the table's units."""
+    t = np.asarray(table)
+    H, W = t.shape[:2]
+    i0, i1, fy, j0, j1, fx = (np.asarray(a) for a in latlong_texel(
+        np.asarray(theta, dtype=float), np.asarray(phi, dtype=float), float(H), float(W),
+        np.floor, np.clip))
+    i0, i1, j0, j1 = (a.astype(int) for a in (i0, i1, j0, j1))
+    fy, fx = fy[..., None], fx[..., None]
+    return ((1 - fy) * ((1 - fx) * t[i0, j0] + fx * t[i0, j1])
+            + fy * ((1 - fx) * t[i1, j0] + fx * t[i1, j1]))
+
+
+def latlong_radiance(table, directions):
+    """Radiance of the lat-long ``table`` toward world ``directions`` (..., 3), shape (..., 3)."""
+    theta, phi = angles_from_direction(directions)
+    return latlong_lookup(table, theta, phi)
+
+
+def latlong_centres(rows, cols):
+    """Zenith angles (rows,) and compass azimuths (cols,) of the table's cell centres [rad]."""
+    return (np.arange(rows) + 0.5) * np.pi / rows, (np.arange(cols) + 0.5) * 2 * np.pi / cols
+
+
+def fisheye_lookup(image, theta, phi):
+    """Radiance of an equidistant fisheye ``image`` (N, M, 3) of the upper hemisphere (module
+    docstring) at zenith ``theta`` and map azimuth ``phi`` [rad], bilinear between pixel centres
+    (clamped at the image's edges); 0 below the horizon.  Shape (..., 3)."""
+    img = np.asarray(image)
+    N, M = img.shape[:2]
+    R = min(N, M) / 2.0
+    theta, phi = np.broadcast_arrays(np.asarray(theta, dtype=float), np.asarray(phi, dtype=float))
+    r = R * theta / (np.pi / 2)
+    # image x to the right, y down; the map's azimuth origin up, azimuth counter-clockwise
+    x = M / 2.0 - r * np.sin(phi) - 0.5
+    y = N / 2.0 - r * np.cos(phi) - 0.5
+    x, y = np.clip(x, 0.0, M - 1.0), np.clip(y, 0.0, N - 1.0)
+    c0, r0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    c1, r1 = np.minimum(c0 + 1, M - 1), np.minimum(r0 + 1, N - 1)
+    fx, fy = (x - c0)[..., None], (y - r0)[..., None]
+    v = ((1 - fy) * ((1 - fx) * img[r0, c0] + fx * img[r0, c1])
+         + fy * ((1 - fx) * img[r1, c0] + fx * img[r1, c1]))
+    return np.where((theta <= np.pi / 2)[..., None], v, 0.0)
+
+
+def resample(lookup, rows, north_rotation_deg=0.0, supersample=1):
+    """A world-frame lat-long table (rows, 2 rows, 3): each cell the mean of ``lookup(theta,
+    phi_map)`` over ``supersample`` x ``supersample`` points evenly spaced in (theta, phi) in
+    the cell, with phi_map = phi - north_rotation the map's own azimuth [rad].
+
+    ``lookup`` is :func:`latlong_lookup` or :func:`fisheye_lookup` bound to a map.  Rows are
+    done in blocks of :data:`RESAMPLE_BLOCK` to bound the memory taken.
+    """
+    k = int(supersample)
+    cols = 2 * int(rows)
+    off = (np.arange(k) + 0.5) / k
+    phi = ((np.arange(cols)[:, None] + off[None, :]) * 2 * np.pi / cols).ravel() \
+        - np.radians(north_rotation_deg)
+    out = np.empty((rows, cols, 3), np.float32)
+    for start in range(0, rows, RESAMPLE_BLOCK):
+        i = np.arange(start, min(start + RESAMPLE_BLOCK, rows))
+        theta = ((i[:, None] + off[None, :]) * np.pi / rows).ravel()
+        v = lookup(theta[:, None], phi[None, :])
+        out[i] = v.reshape(len(i), k, cols, k, 3).mean(axis=(1, 3))
+    return out
+
+
+def valid_pixels(image):
+    """``image`` with its NaN, infinite and negative values set to 0, and their count (values
+    counted per channel)."""
+    img = np.asarray(image, dtype=np.float32)
+    bad = ~np.isfinite(img) | (img < 0)
+    return np.where(bad, np.float32(0.0), img), int(bad.sum())
+
+
+def mask_sun(table, sun_direction, radius_deg):
+    """``table`` with the cells whose centre lies within ``radius_deg`` [degrees] of the
+    ``sun_direction`` (world, unit) filled with the per-channel median of the cells in the ring
+    from ``radius_deg`` to twice it (0 if that ring holds no cell centre); and the count of
+    cells filled.  A photograph's clipped sun and its flare are replaced by the brightness of
+    the sky around it; the sun's own light then comes from the Sky's solar disc."""
+    t = np.array(table, dtype=np.float32)
+    theta, phi = latlong_centres(*t.shape[:2])
+    d = direction_from_angles(theta[:, None], phi[None, :])
+    angle = np.degrees(np.arccos(np.clip(d @ np.asarray(sun_direction, dtype=float), -1, 1)))
+    inner = angle <= radius_deg
+    ring = (angle > radius_deg) & (angle <= 2 * radius_deg)
+    fill = np.median(t[ring], axis=0) if ring.any() else np.zeros(3, np.float32)
+    t[inner] = fill
+    return t, int(inner.sum())
+
+
+def latlong_table(image, projection, north_rotation_deg=0.0, scale=1.0, rows=None):
+    """A captured map (``image`` (N, M, 3), linear, in its ``projection``) as the world-frame
+    lat-long table [W m^-2 sr^-1] of a Sky, float32 (rows, columns, 3), and the count of
+    invalid values set to 0 (:func:`valid_pixels`).
+
+    A lat-long map keeps its own cells when it is not rotated and has at most ``rows`` rows
+    (default :data:`MAX_ROWS`); otherwise, and always for a fisheye, it is averaged onto a
+    table of ``rows`` x 2 ``rows`` cells (default: the map's own resolution, the fisheye's
+    diameter, at most :data:`MAX_ROWS`), through :func:`resample`.
+    """
+    check_choice("envmap projection", projection, PROJECTIONS)
+    check_range("envmap scale", scale, 1e-30, 1e30)
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] != 3 or min(img.shape[:2]) < 2:
+        raise SkyfitError(f"an environment map must be an RGB image of at least 2x2 pixels, got "
+                          f"an array of shape {img.shape}.")
+    img, invalid = valid_pixels(img)
+    if invalid == img.size:
+        raise SkyfitError("every value of the environment map is NaN, infinite or negative; "
+                          "give a linear HDR map (EXR or Radiance HDR).")
+    N = img.shape[0] if projection == "latlong" else 2 * (min(img.shape[:2]) // 2)
+    if rows is None:
+        rows = min(N, MAX_ROWS)
+    check_range("envmap rows", rows, 2, 4096)
+    if rows != int(rows):
+        raise SkyfitError(f"envmap rows must be a whole number, got {rows!r}.")
+    rows = int(rows)
+    if projection == "latlong" and rows == N and north_rotation_deg == 0.0:
+        table = img
+    else:
+        lookup = (latlong_lookup if projection == "latlong" else fisheye_lookup)
+        k = int(np.clip(np.ceil(N / rows), 1, MAX_SUPERSAMPLE))
+        table = resample(lambda th, ph: lookup(img, th, ph), rows, north_rotation_deg, k)
+    return (table * np.float32(scale)).astype(np.float32), invalid
+
+
+def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=None,
+               direct_normal=None, sun_mask_deg=None, ground_albedo=0.0, sun_solid_angle=None,
+               info=None):
+    """A :class:`~skyfit_mi.physics.sky.Sky` lit by a world-frame lat-long ``table``
+    (:func:`latlong_table`) [W m^-2 sr^-1], with the sun given apart from the map.
+
+    Parameters
+    ----------
+    table : ndarray (H, W, 3)
+        The map's radiance [W m^-2 sr^-1], world frame, this module's layout.
+    sun_zenith_deg, sun_azimuth_deg : float
+        The sun's position [degrees] (from the frame's time and site); it places the solar
+        disc and the mask.
+    direct_normal : float, optional
+        Measured direct normal irradiance [W m^-2]: a solar disc of radiance DNI / Omega in
+        the sun's colour (:meth:`~skyfit_mi.physics.sky.Sky.scaled`); none when the sun is
+        below the horizon (``info`` says so).
+    sun_mask_deg : float, optional
+        Fill the map's cells within this angle of the sun [degrees] from the ring around them
+        (:func:`mask_sun`): a clipped captured sun, whose light the disc then carries.
+    ground_albedo : float
+        Reflectance of a Lambertian ground below the horizon, lit by the map and the sun
+        (L = albedo E_h / pi, as the CIE skies' ground), added to the map's own lower half
+        (zero for a fisheye).
+    sun_solid_angle : float, optional
+        The disc's solid angle [sr] (default: the sun's, :data:`~skyfit_mi.physics.sun.SUN_SOLID_ANGLE`).
+    diffuse_horizontal : float, optional
+        Measured diffuse horizontal irradiance [W m^-2]: the map (after the mask) is scaled so
+        that its luminance-weighted horizontal irradiance equals it, a photograph's
+        calibration (:meth:`~skyfit_mi.physics.sky.Sky.scaled`).
+    info : dict, optional
+        Recorded in the Sky's ``info`` (e.g. the map's file and projection).
+    """
+    from dataclasses import replace
+
+    from .sky import Sky
+    from .sun import SUN_SOLID_ANGLE
+
+    check_range("sun zenith", sun_zenith_deg, 0.0, 180.0, "degrees")
+    check_range("ground albedo", ground_albedo, 0.0, 1.0)
+    s = direction_from_angles(np.radians(sun_zenith_deg), np.radians(sun_azimuth_deg))
+    info = {"kind": "envmap", **(info or {}), "sun_zenith_deg": float(sun_zenith_deg),
+            "sun_azimuth_deg": float(sun_azimuth_deg), "ground_albedo": float(ground_albedo)}
+    if sun_mask_deg is not None:
+        check_range("sun_mask_deg", sun_mask_deg, 0.0, 45.0, "degrees")
+        table, info["sun_masked_cells"] = mask_sun(table, s, sun_mask_deg)
+        info["sun_mask_deg"] = float(sun_mask_deg)
+    sky = Sky(s, envmap=table, sun_solid_angle=SUN_SOLID_ANGLE if sun_solid_angle is None
+              else sun_solid_angle, info=info)
+    if diffuse_horizontal is not None:
+        info["diffuse_horizontal_W_m2"] = float(diffuse_horizontal)
+        sky = sky.scaled(diffuse_horizontal=diffuse_horizontal)
+    if direct_normal is not None:
+        info["direct_normal_W_m2"] = float(direct_normal)
+        if sun_zenith_deg < 90.0:
+            sky = sky.scaled(direct_normal=direct_normal)
+        else:
+            info["note"] = "sun below the horizon: no solar disc"
+    return replace(sky, ground=ground_albedo * sky.horizontal_irradiance() / np.pi)

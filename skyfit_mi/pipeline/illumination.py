@@ -1,0 +1,90 @@
+"""The light of a frame from an ``envmap`` or ``directional`` illumination record.
+
+The manifest's records (``docs/MANIFEST.md``) and the spec's sky tables of the same types
+(``docs/SPEC.md``) share these fields, so both become a :class:`~skyfit_mi.physics.sky.Sky`
+here, and a rendered frame's record is written back from the Sky (:func:`envmap_record`,
+:func:`directional_record`): the map's file and options, never its numbers.
+
+``envmap``: ``file`` (an HDR image: OpenEXR, Radiance HDR or float TIFF, read by
+:func:`~skyfit_mi.pipeline.photos.read_photo`), ``projection`` (``latlong`` or ``fisheye``),
+``north_rotation_deg`` (0), ``scale`` (1), ``rows`` (the table's rows; default the map's own,
+at most :data:`~skyfit_mi.physics.envmap.MAX_ROWS`), ``diffuse_horizontal_W_m2`` (rescale the
+map to this measured diffuse irradiance), ``direct_normal_W_m2`` (a solar disc at the frame's
+sun position), ``sun_mask_deg`` (fill the map's clipped sun from the ring around it),
+``ground_albedo`` (0), ``sun_solid_angle_sr``.  See :mod:`skyfit_mi.physics.envmap`.
+
+``directional``: ``direction`` (toward the source, world frame), ``irradiance_W_m2`` (RGB or one
+number, normal to the beam), ``solid_angle_sr`` (default the sun's).
+"""
+
+import os
+from pathlib import Path
+
+from ..errors import SkyfitError
+
+#: The envmap record's options, as :func:`envmap_sky` and :func:`latlong_table` name them.
+ENVMAP_OPTIONS = {"projection": "projection", "north_rotation_deg": "north_rotation_deg",
+                  "scale": "scale", "rows": "rows",
+                  "diffuse_horizontal_W_m2": "diffuse_horizontal",
+                  "direct_normal_W_m2": "direct_normal", "sun_mask_deg": "sun_mask_deg",
+                  "ground_albedo": "ground_albedo", "sun_solid_angle_sr": "sun_solid_angle"}
+#: The options that give the table (the rest light it).
+_TABLE_OPTIONS = ("projection", "north_rotation_deg", "scale", "rows")
+
+
+def read_envmap(path):
+    """The pixels (N, M, 3) of the HDR map at ``path`` [the file's linear values].
+
+    Raises :class:`~skyfit_mi.errors.SkyfitError` in one line naming the file: missing, not an
+    image, or integer codes (8/16-bit photographs are not radiance maps).
+    """
+    from .photos import read_photo
+
+    photo = read_photo(path)
+    if photo.kind != "float":
+        raise SkyfitError(f"{path}: holds {photo.bits}-bit codes, not the linear floats of an HDR "
+                          "environment map; give an OpenEXR, Radiance HDR or float TIFF map.")
+    return photo.values
+
+
+def envmap_from_record(rec, folder, sun_zenith_deg, sun_azimuth_deg):
+    """The :class:`~skyfit_mi.physics.sky.Sky` of an ``envmap`` record whose ``file`` is relative
+    to ``folder``, with the sun at (``sun_zenith_deg``, ``sun_azimuth_deg``) [degrees]."""
+    from ..physics.envmap import envmap_sky, latlong_table
+
+    path = (Path(folder) / rec["file"]).resolve()
+    opts = {ENVMAP_OPTIONS[k]: rec[k] for k in ENVMAP_OPTIONS if k in rec}
+    table, invalid = latlong_table(read_envmap(path), opts.pop("projection", "latlong"),
+                                   **{k: opts.pop(k) for k in _TABLE_OPTIONS if k in opts})
+    info = {"file": str(path), "invalid_values": invalid, "rows": int(table.shape[0]),
+            **{k: rec[k] for k in _TABLE_OPTIONS if k in rec and k != "rows"}}
+    info.setdefault("projection", "latlong")
+    return envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, info=info, **opts)
+
+
+def envmap_record(sky, folder):
+    """The ``envmap`` record of a Sky made by :func:`envmap_from_record`, its file relative to
+    ``folder`` (the manifest's)."""
+    info = sky.info
+    if "file" not in info:
+        raise SkyfitError("this sky's environment map was not read from a file, so a manifest "
+                          "cannot refer to it; write the map as EXR and give its file.")
+    rec = {"kind": "envmap", "file": os.path.relpath(info["file"], Path(folder).resolve()),
+           **{k: info[k] for k in ENVMAP_OPTIONS if k in info},
+           "sun_solid_angle_sr": sky.sun_solid_angle}
+    return rec
+
+
+def directional_from_record(rec):
+    """The :class:`~skyfit_mi.physics.sky.Sky` of a ``directional`` record."""
+    from ..physics.sky import directional_sky
+
+    kw = {"solid_angle": rec["solid_angle_sr"]} if "solid_angle_sr" in rec else {}
+    return directional_sky(rec["direction"], rec["irradiance_W_m2"], **kw)
+
+
+def directional_record(sky):
+    """The ``directional`` record of a Sky made by :func:`~skyfit_mi.physics.sky.directional_sky`."""
+    return {"kind": "directional", "direction": sky.sun_direction,
+            "irradiance_W_m2": sky.sun_radiance * sky.sun_solid_angle,
+            "solid_angle_sr": sky.sun_solid_angle}
