@@ -89,14 +89,14 @@ def fit_pixels(manifest_path, name, pixels, model="colour", normalisation="ward"
     from ..render.light_cache import build_light_cache
 
     pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
-    doc, _ = load_manifest(manifest_path)
+    doc, root = load_manifest(manifest_path)
     obs = load_observations(manifest_path, pixels)
     frames = {f["index"]: f for f in doc["frames"]}
     mi = setup(doc["render"]["variant"])
     scene = mi.load_string(doc["scene"]["xml"])
-    cache = build_light_cache(scene, mi.traverse(scene), [frame_sky(frames[i]) for i in obs.frames],
-                              pixels, name, positions=positions, directions=directions,
-                              seed=seed, max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
+    skies = [frame_sky(frames[i], root) for i in obs.frames]
+    cache = build_light_cache(scene, mi.traverse(scene), skies, pixels, name,
+                              positions=positions, directions=directions, seed=seed, max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
                               normalisation=normalisation, sky_positions=1)
     wm = WardModel(cache, model, normalisation)
     y, w = _linearise(_ChunkProblem(obs, wm, cache.hit))

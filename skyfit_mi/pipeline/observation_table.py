@@ -354,7 +354,7 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrit
                                          for k, (r, p) in enumerate(keys)],
                               "ray_offset": offset, "units": "W m^-2 sr^-1, linear sRGB"}
         for f in spec.frames:
-            rec = frame_record(f, 0)
+            rec = frame_record(f, 0, out)
             rec.pop("seed")
             if f.skipped:
                 rec["status"] = "skipped"
