@@ -96,7 +96,8 @@ def fit_pixels(manifest_path, name, pixels, model="colour", normalisation="ward"
     scene = mi.load_string(doc["scene"]["xml"])
     skies = [frame_sky(frames[i], root) for i in obs.frames]
     cache = build_light_cache(scene, mi.traverse(scene), skies, pixels, name,
-                              positions=positions, directions=directions, seed=seed, max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
+                              positions=positions, directions=directions, seed=seed,
+                              max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
                               normalisation=normalisation, sky_positions=1)
     wm = WardModel(cache, model, normalisation)
     y, w = _linearise(_ChunkProblem(obs, wm, cache.hit))
