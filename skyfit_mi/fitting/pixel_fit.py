@@ -28,18 +28,22 @@ import numpy as np
 
 from ..errors import SkyfitError
 from .chi2 import Problem, load_observations
-from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
-                                    linear_quadratics)
+from .methods.global_search import (RHO_GRID, SATURATION_BAND, SIGMA_GRID, _linearise,
+                                    grid_chi2, linear_quadratics)
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
 #: fit's, so that a chunk of pixels fits in memory (about 0.3 MB per pixel and frame set of 13).
 MAP_CACHE = (8, 64)
 #: Warning bits of a map pixel.
 WARNINGS = {"misfit": 1, "sigma_alpha undetermined": 2, "rho_s undetermined": 4,
-            "reflectance undetermined": 8, "few values": 16, "off the material": 32}
+            "reflectance undetermined": 8, "few values": 16, "off the material": 32,
+            "saturated values left out": 64}
 #: The bits that mean "a parameter is not determined": such a pixel is not a confident value.
+#: Saturated values among them: the map's linear grid leaves them out (a region fit's polish
+#: takes them as censored), so a highlight that saturated can mislead a pixel's fit.
 UNDETERMINED = (WARNINGS["sigma_alpha undetermined"] | WARNINGS["rho_s undetermined"]
-                | WARNINGS["reflectance undetermined"] | WARNINGS["off the material"])
+                | WARNINGS["reflectance undetermined"] | WARNINGS["off the material"]
+                | WARNINGS["saturated values left out"])
 #: A parameter is undetermined when its 95% interval spans more than this share of its range
 #: (reflectances) or this factor in roughness.
 SPAN_UNDETERMINED, SIGMA_FACTOR_UNDETERMINED = 0.5, 4.0
@@ -73,15 +77,17 @@ def _stack_groups(x, groups, n_groups):
     return out.reshape((n_groups, m * T) + x.shape[2:])
 
 
-def fit_pixels(manifest_path, name, pixels, model="colour", normalisation="ward", seed=0,
-               positions=MAP_CACHE[0], directions=MAP_CACHE[1], patch=1):
-    """Fit every pixel of ``pixels`` (P, 2) on material ``name`` (or every ``patch`` x ``patch``
-    block of them) on its own; the light is traced once for all.
+def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="ward", seed=0,
+               positions=MAP_CACHE[0], directions=MAP_CACHE[1], groups=None):
+    """Fit every pixel of ``pixels`` (P, 2), or every group of them, on its own; the light is
+    traced once for all.
 
-    Returns a dict of arrays over the G groups (pixels, or patches): ``pixels`` (G, 2) each
-    group's first pixel (its block corner for patches), ``theta``, ``lo``, ``hi`` (G, n)
-    (95% intervals), ``chi2``, ``dof``, ``warnings`` (G,), and ``names`` the parameters.
-    Everything is rebuilt from the manifest, so a worker of another process can run it.
+    ``materials``: the material id the pixels show (one, or one per pixel); ``groups``: each
+    pixel's fit (P,) labels 0..G-1 (a patch's pixels share one; default every pixel its own).
+    Returns a dict of arrays over the G fits: ``pixels`` (G, 2) each fit's first pixel,
+    ``theta``, ``lo``, ``hi``, ``cache_error_sd`` (G, n) (95% intervals), ``chi2``, ``dof``,
+    ``model_noise_chi2``, ``warnings`` (G,), and ``names`` the parameters.  Everything is
+    rebuilt from the manifest, so a worker in another process can run it.
     """
     from ..pipeline.manifest import frame_sky, load_manifest
     from ..render import setup
@@ -89,33 +95,35 @@ def fit_pixels(manifest_path, name, pixels, model="colour", normalisation="ward"
     from ..render.light_cache import build_light_cache
 
     pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
+    groups = np.arange(len(pixels)) if groups is None else np.asarray(groups, dtype=int)
+    n = int(groups.max()) + 1
     doc, root = load_manifest(manifest_path)
     obs = load_observations(manifest_path, pixels)
     frames = {f["index"]: f for f in doc["frames"]}
     mi = setup(doc["render"]["variant"])
     scene = mi.load_string(doc["scene"]["xml"])
     skies = [frame_sky(frames[i], root) for i in obs.frames]
-    cache = build_light_cache(scene, mi.traverse(scene), skies, pixels, name,
+    cache = build_light_cache(scene, mi.traverse(scene), skies, pixels, materials,
                               positions=positions, directions=directions, seed=seed,
                               max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
                               normalisation=normalisation, sky_positions=1)
     wm = WardModel(cache, model, normalisation)
     y, w = _linearise(_ChunkProblem(obs, wm, cache.hit))
+    saturated = np.bincount(groups, weights=((obs.y >= obs.sensor.max_code
+                                              - SATURATION_BAND * obs.sigma)
+                                             & np.isfinite(obs.sigma)).any(axis=(1, 2)),
+                            minlength=n) > 0
     bases = wm.basis(SIGMA_GRID, halves=True)            # the whole cache, and its two halves
-    groups, corners = patch_groups(pixels, patch)
-    first, hit = pixels, cache.hit.all(axis=1)
-    if patch > 1:
-        n = len(corners)
+    hit = np.bincount(groups, weights=cache.hit.all(axis=1), minlength=n) > 0
+    first = pixels[np.unique(groups, return_index=True)[1]]
+    if n < len(pixels):
         y, w = (_stack_groups(a, groups, n) for a in (y, w))
         bases = [(_stack_groups(D, groups, n), np.stack([_stack_groups(g, groups, n) for g in G]))
                  for D, G in bases]
-        first = corners
-        hit = np.bincount(groups, weights=hit, minlength=n) > 0
     names = PARAMETERS[model]
     half_a, half_b = (_grid_fit(model, names, y, w, D, G, first) for D, G in bases[1:])
-    # the chi^2 the cache's own noise adds at each group's fit: its halves' model values
-    # differ by twice the whole's Monte Carlo error over (as :meth:`WardModel.
-    # radiance_and_variance` measures it per position)
+    # the chi^2 the cache's own noise adds at each fit: its halves' model values differ by
+    # twice the whole's Monte Carlo error over
     fit = _grid_fit(model, names, y, w, *bases[0], first)
     rd, sp = (np.array(v) for v in zip(*(reflectances(model, t)[:2] for t in fit["theta"])))
     cols = np.arange(len(rd))
@@ -124,8 +132,7 @@ def fit_pixels(manifest_path, name, pixels, model="colour", normalisation="ward"
     noise = np.sum(w * ((La - Lb) / 2.0) ** 2, axis=(1, 2))
     fit = _grid_fit(model, names, y, w, *bases[0], first, noise)
     fit["model_noise_chi2"] = noise
-    # the cache's own Monte Carlo error, from its halves (as region fits do): each half's
-    # estimate differs from the other's by twice the whole's error over
+    # the cache's own error in each parameter, from its halves' fits (as region fits do)
     sd = np.abs(half_a["theta"] - half_b["theta"]) / 2.0
     fit["cache_error_sd"] = sd
     spread = 1.959963984540054 * sd
@@ -133,7 +140,8 @@ def fit_pixels(manifest_path, name, pixels, model="colour", normalisation="ward"
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)
-    fit["warnings"] = _flags(model, names, fit, hit)
+    fit["warnings"] = _flags(model, names, fit, hit) \
+        | np.where(saturated, WARNINGS["saturated values left out"], 0)
     for k in ("theta", "lo", "hi", "cache_error_sd"):
         fit[k][~hit] = np.nan
     for k in ("chi2", "chi2_grid"):

@@ -2,8 +2,8 @@
 
 ``skyfit fit DIR --per-pixel`` maps every pixel (or every N x N patch, ``--patch``) of the
 chosen regions with :func:`~.pixel_fit.fit_pixels`.  The pixels are cut into chunks (whole
-patches each, at most ``chunk`` fits); each chunk is a Dask task that rebuilds what it needs
-from the manifest, so the same code runs on a ``LocalCluster`` of this machine (the default:
+patches, at most ``chunk`` fits, of one or several regions); each chunk is a Dask task that
+rebuilds what it needs from the manifest, so the same code runs on a ``LocalCluster`` of this machine (the default:
 one single-threaded worker process per core) or on an existing cluster (``--scheduler``).
 Results go into ``pixel_map.zarr`` as each chunk finishes, with the chunk marked done, so an
 interrupted map resumes where it stopped and loses nothing; a chunk's seed is derived from the
@@ -39,15 +39,24 @@ SCHEDULER_TIMEOUT_S = 10
 
 
 def plan_chunks(regions, patch, chunk):
-    """[(region name, pixels (P, 2))] chunks of whole patches, at most ``chunk`` fits each."""
-    out = []
-    for name, pixels in regions:
+    """The map's chunks: dicts of ``pixels`` (P, 2), ``materials`` (P,) the material each
+    shows, and ``groups`` (P,) each pixel's fit (0..G-1 within the chunk; a ``patch`` x
+    ``patch`` block of one region shares one), at most ``chunk`` fits per chunk, whole
+    groups only; regions follow each other, so one chunk may hold several materials."""
+    px, mats, keys = [], [], []
+    for r, (name, pixels) in enumerate(regions):
         pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
-        groups, _ = patch_groups(pixels, patch)
-        order = np.argsort(groups, kind="stable")
-        bounds = np.searchsorted(groups[order], np.arange(0, groups.max() + 1, chunk))
-        for a, b in zip(bounds, list(bounds[1:]) + [len(order)]):
-            out.append((name, pixels[order[a:b]]))
+        g, _ = patch_groups(pixels, patch)
+        px.append(pixels)
+        mats += [name] * len(pixels)
+        keys.append(np.stack([np.full(len(g), r), g], axis=1))
+    px, mats, keys = np.concatenate(px), np.array(mats, dtype=object), np.concatenate(keys)
+    fits, index = np.unique(keys, axis=0, return_inverse=True)
+    index = index.ravel()
+    out = []
+    for start in range(0, len(fits), int(chunk)):
+        sel = (index >= start) & (index < start + int(chunk))
+        out.append({"pixels": px[sel], "materials": mats[sel], "groups": index[sel] - start})
     return out
 
 
@@ -92,18 +101,19 @@ def _open_store(path, settings, shape, n_par, n_chunks, overwrite):
     return g
 
 
-def _write_chunk(store, pixels, patch, res):
-    """Scatter one chunk's fits (per group) onto its pixels in the store."""
-    groups, _ = patch_groups(pixels, patch)
+def _write_chunk(store, chunk, res):
+    """Scatter one chunk's fits onto its pixels in the store."""
+    pixels, groups = chunk["pixels"], chunk["groups"]
     x, y = pixels[:, 0], pixels[:, 1]
+    box = (slice(y.min(), y.max() + 1), slice(x.min(), x.max() + 1))
     for key in ("theta", "lo", "hi", "cache_error_sd"):
-        arr = store[key][:, y.min():y.max() + 1, x.min():x.max() + 1]
+        arr = store[key][(slice(None),) + box]
         arr[:, y - y.min(), x - x.min()] = res[key][groups].T
-        store[key][:, y.min():y.max() + 1, x.min():x.max() + 1] = arr
+        store[key][(slice(None),) + box] = arr
     for key in ("chi2", "dof", "warnings"):
-        arr = store[key][y.min():y.max() + 1, x.min():x.max() + 1]
+        arr = store[key][box]
         arr[y - y.min(), x - x.min()] = res[key][groups]
-        store[key][y.min():y.max() + 1, x.min():x.max() + 1] = arr
+        store[key][box] = arr
 
 
 def _client(workers, scheduler, memory_per_worker):
@@ -154,7 +164,7 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
         client, cluster = _client(n_workers, scheduler, memory_per_worker)
         try:
             _map_pending(client, manifest_path, chunks, pending, store, model, normalisation,
-                         seed, patch, cache, progress)
+                         seed, cache, progress)
         finally:
             client.close()
             if cluster is not None:
@@ -169,18 +179,18 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
 
 
 def _map_pending(client, manifest_path, chunks, pending, store, model, normalisation, seed,
-                 patch, cache, progress):
+                 cache, progress):
     """Submit every pending chunk and write each result as it comes."""
     from distributed import as_completed
 
-    futures = {client.submit(fit_pixels, str(manifest_path), chunks[i][0], chunks[i][1],
-                             model=model, normalisation=normalisation, seed=chunk_seed(seed, i),
-                             positions=cache[0], directions=cache[1], patch=patch,
-                             pure=False): i for i in pending}
+    futures = {client.submit(fit_pixels, str(manifest_path), chunks[i]["materials"],
+                             chunks[i]["pixels"], model=model, normalisation=normalisation,
+                             seed=chunk_seed(seed, i), positions=cache[0], directions=cache[1],
+                             groups=chunks[i]["groups"], pure=False): i for i in pending}
     bar = None
     if progress:
         from tqdm import tqdm
-        bar = tqdm(total=sum(len(chunks[i][1]) for i in pending), desc="map", unit="px")
+        bar = tqdm(total=sum(len(chunks[i]["pixels"]) for i in pending), desc="map", unit="px")
     for fut in as_completed(futures):
         i = futures[fut]
         try:
@@ -189,10 +199,10 @@ def _map_pending(client, manifest_path, chunks, pending, store, model, normalisa
             for f in futures:
                 f.cancel()
             raise
-        _write_chunk(store, chunks[i][1], patch, res)
+        _write_chunk(store, chunks[i], res)
         store["done"][i] = True                 # after the chunk's values: a resume redoes it
         if bar is not None:
-            bar.update(len(chunks[i][1]))
+            bar.update(len(chunks[i]["pixels"]))
     if bar is not None:
         bar.close()
 

@@ -304,7 +304,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     skies : list of :class:`~skyfit_mi.physics.sky.Sky`, one per frame
     pixels : (P, 2) int array of (x, y) pixel coordinates, or :class:`PointRays` (measured
         points: one ray per point and frame)
-    bsdf_id : str, the material whose surface the pixels must show
+    bsdf_id : str, the material whose surface the pixels must show, or one per pixel (P,)
     positions, directions : samples per pixel: positions over the pixel's area,
         and light directions at each
     seed : int, the seed of every random choice (recorded by the caller)
@@ -335,9 +335,13 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     lobes = [mi.load_dict({"type": "ward", "rho_d": 0.0, "rho_s": 1.0, "sigma_alpha": s})
              for s in LOBE_SIGMAS]
     ctx = mi.BSDFContext()
-    target = [s for s in scene.shapes() if s.bsdf().id() == bsdf_id]
-    if not target:
-        raise ValueError(f"no shape of the scene uses material {bsdf_id!r}")
+    # the material each pixel must show (one for all, or one per pixel: a map's chunk)
+    want = np.broadcast_to(np.asarray(bsdf_id, dtype=object), (P,))
+    target = [s for s in scene.shapes() if s.bsdf().id() in set(want)]
+    missing = sorted(set(want) - {s.bsdf().id() for s in target})
+    if missing:
+        raise ValueError(f"no shape of the scene uses material {missing[0]!r}")
+    want_s = np.repeat(want, S)
 
     if K - sum(max(1, int(round(MIX[k] * K))) for k in ("sun", "sky", "cosine")) \
             < len(LOBE_SIGMAS):
@@ -365,7 +369,8 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         si = scene.ray_intersect(ray)
         on = np.zeros(P * S, bool)
         for shape in target:
-            on |= np.array(si.shape == mi.ShapePtr(shape)) & np.array(si.is_valid())
+            on |= np.array(si.shape == mi.ShapePtr(shape)) & np.array(si.is_valid()) \
+                & (want_s == shape.bsdf().id())
         # repeat each position K times
         idx = mi.UInt32(np.repeat(np.arange(P * S), K))
         sik = dr.gather(mi.SurfaceInteraction3f, si, idx)
