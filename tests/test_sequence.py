@@ -56,6 +56,7 @@ def spec(**changes):
     (dict(camera__colour="red"), r"unknown key\(s\) colour in \[camera\]"),
     (dict(location=None), r"no \[location\] section"),
     (dict(render__variant="scalar_rgb"), "valid: 'llvm_ad_rgb' .CPU., 'cuda_ad_rgb'"),
+    (dict(render__integrator="bdpt"), "integrator 'bdpt'; valid: sun_sky_path, path"),
 ])
 def test_spec_errors_name_the_fix(changes, match, tmp_path):
     with pytest.raises(SpecError, match=match):
