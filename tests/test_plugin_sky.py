@@ -139,9 +139,11 @@ def test_real_sun_sampling(mi, name):
     np.testing.assert_allclose(e, sky.horizontal_irradiance(), rtol=0.01)
 
 
-def test_sky_changes_without_recompilation(mi):
+@pytest.mark.parametrize("integrator", ["direct", "sun_sky_path"])
+def test_sky_changes_without_recompilation(mi, integrator):
     """A new frame's sky reuses the kernels: the sky's numbers live in memory, never in a
-    kernel as literals.  Measured by kernel hashes, not by the on-disk cache's hits, so
+    kernel as literals (with Mitsuba's ``direct`` and with the frames' ``sun_sky_path``, which
+    reads the emitter's parameters itself).  Measured by kernel hashes, not by the on-disk cache's hits, so
     the test means the same with an empty kernel cache (a fresh machine) or a warm one.
 
     Dr.Jit packs the emitter's fields into the virtual call's data buffer in an order that
@@ -152,7 +154,7 @@ def test_sky_changes_without_recompilation(mi):
     import drjit as dr
     from skyfit_mi.render.daylight import sky_dict, update_sky
     scene = mi.load_dict({
-        "type": "scene", "integrator": {"type": "direct"},
+        "type": "scene", "integrator": {"type": integrator},
         "sky": sky_dict(SKIES["clear-high"]()),
         "disc": {"type": "disk", "bsdf": {"type": "ward", "rho_d": 0.6, "rho_s": 0.2,
                                           "sigma_alpha": 0.1}},

@@ -56,6 +56,7 @@ def spec(**changes):
     (dict(camera__colour="red"), r"unknown key\(s\) colour in \[camera\]"),
     (dict(location=None), r"no \[location\] section"),
     (dict(render__variant="scalar_rgb"), "valid: 'llvm_ad_rgb' .CPU., 'cuda_ad_rgb'"),
+    (dict(render__integrator="bdpt"), "integrator 'bdpt'; valid: sun_sky_path, path"),
 ])
 def test_spec_errors_name_the_fix(changes, match, tmp_path):
     with pytest.raises(SpecError, match=match):
@@ -236,15 +237,20 @@ def test_sky_given_by_illuminance_uses_its_own_efficacy(tmp_path, kind, efficacy
     assert e == pytest.approx(12000.0 / efficacy, rel=1e-3)
 
 
-def test_monte_carlo_error_estimate_matches_the_scatter_of_independent_renders(tmp_path, mi):
+@pytest.mark.parametrize("integrator, rho_s", [("sun_sky_path", 0.3), ("sun_sky_path", 0.0),
+                                               ("path", 0.3)])
+def test_monte_carlo_error_estimate_matches_the_scatter_of_independent_renders(
+        tmp_path, mi, integrator, rho_s):
     """The render's per-pixel standard error (two half-spp passes, 3x3-smoothed) agrees with the
     scatter of the same frame rendered with eight other seeds: the variance ratio is within
     the sampling error of eight renders, and an estimate off by sqrt(2) (the error of one pass,
-    not of their mean) would fail."""
+    not of their mean) would fail.  Glossy and Lambertian discs (whose noise sun_sky_path makes
+    small, but no less honestly estimated), and Mitsuba's path."""
     from skyfit_mi.pipeline.sequence import FrameRenderer
 
-    raw = spec(materials={"disc": {"model": "two", "rho_s": 0.3, "sigma_alpha": 0.1}},
-               time={"date": "2026-06-21", "times": ["08:00"]}, render__spp=32)
+    raw = spec(materials={"disc": {"model": "two", "rho_s": rho_s, "sigma_alpha": 0.1}},
+               time={"date": "2026-06-21", "times": ["08:00"]}, render__spp=32,
+               render__integrator=integrator)
     s = validate_spec(raw, tmp_path)
     renderer = FrameRenderer(s)
     images, sds = [], []

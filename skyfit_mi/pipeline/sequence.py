@@ -182,7 +182,7 @@ def manifest_header(spec, sensor, scene, render, source="render", run_id=None):
 
 def render_record(spec, renderer):
     """The manifest's ``render`` record of frames rendered by ``renderer`` (settings, seeds)."""
-    return {**spec.render, "spp_rendered": 2 * renderer.half, "integrator": "path",
+    return {**spec.render, "spp_rendered": 2 * renderer.half,
             "seed_rule": "two half-spp passes with mitsuba seeds seed + index and seed + index "
             "+ 2^31; noise rng = numpy.random.default_rng([seed, index])"}
 

@@ -51,7 +51,7 @@ _SCHEMA = {
     "camera": {"azimuth_deg", "angle_deg", "distance", "target", "origin", "up", "matrix",
                "fov_deg", "width", "height"},
     "sensor": {"exposure", "response", "gamma", "bits", "noise_percent", "cos4"},
-    "render": {"spp", "seed", "variant", "max_depth", "below_horizon", "sampler"},
+    "render": {"spp", "seed", "variant", "max_depth", "below_horizon", "sampler", "integrator"},
 }
 SKY_KINDS = tuple(SKY_TYPES) + ("gensky", "perez", "envmap", "directional")
 #: [sky] keys whose values are numbers (their ranges are checked where they are used).
@@ -75,6 +75,10 @@ BELOW_HORIZON = ("sky", "skip")
 #: Mitsuba samplers a spec may choose; multijitter stratifies the sun/sky choice of the
 #: emitter sample and gives about 5x lower noise than independent at equal cost (docs/BENCHMARKS.md).
 SAMPLERS = ("multijitter", "stratified", "ldsampler", "independent")
+#: Integrators a spec may choose: ``sun_sky_path`` (separate sun and sky light samples, the
+#: default; about a fifth of ``path``'s error at equal time on the thesis disc,
+#: docs/BENCHMARKS.md) or Mitsuba's ``path`` (one light sample that picks sun or sky).
+INTEGRATORS = ("sun_sky_path", "path")
 
 
 def _unknown(section, got, allowed):
@@ -234,9 +238,12 @@ def validate_spec(raw, base_dir="."):
     times = _times(raw["time"], tz)
 
     render = {"spp": 64, "seed": 0, "variant": "llvm_ad_rgb", "max_depth": 4, "below_horizon": "sky",
-              "sampler": "multijitter", **raw.get("render", {})}
+              "sampler": "multijitter", "integrator": INTEGRATORS[0], **raw.get("render", {})}
     if render["sampler"] not in SAMPLERS:
         raise SpecError(f"[render] sampler {render['sampler']!r}; valid: {', '.join(SAMPLERS)}.")
+    if render["integrator"] not in INTEGRATORS:
+        raise SpecError(f"[render] integrator {render['integrator']!r}; valid: "
+                        f"{', '.join(INTEGRATORS)}.")
     _num("render", "spp", render["spp"], 1, 1 << 20, integer=True)
     _num("render", "seed", render["seed"], 0, 2**31 - 1, integer=True)
     _num("render", "max_depth", render["max_depth"], 1, 64, integer=True)

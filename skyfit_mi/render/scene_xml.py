@@ -95,7 +95,7 @@ def build_scene_xml(spec):
         b = _sub(g, "bsdf", type="diffuse")
         _sub(b, "rgb", name="reflectance", value=float(ground))
     _sub(root, "emitter", type="cie_sky", id="sky")
-    integ = _sub(root, "integrator", type="path", id="integrator")
+    integ = _sub(root, "integrator", type=spec.render["integrator"], id="integrator")
     _sub(integ, "integer", name="max_depth", value=spec.render["max_depth"])
     cam = spec.camera
     to_world = camera_matrix(cam)

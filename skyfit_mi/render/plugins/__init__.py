@@ -2,11 +2,14 @@
 
 
 def register_plugins():
-    """Register ``cie_sky`` (emitter) and ``ward`` (BSDF) with the current variant."""
+    """Register ``cie_sky`` (emitter), ``ward`` (BSDF) and ``sun_sky_path`` (integrator) with
+    the current variant."""
     import mitsuba as mi
 
     from .cie_sky import CIESkyEmitter
+    from .sun_sky_path import SunSkyPathIntegrator
     from .ward import WardBSDF
 
     mi.register_emitter("cie_sky", lambda props: CIESkyEmitter(props))
     mi.register_bsdf("ward", lambda props: WardBSDF(props))
+    mi.register_integrator("sun_sky_path", lambda props: SunSkyPathIntegrator(props))
