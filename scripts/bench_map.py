@@ -1,0 +1,97 @@
+"""Benchmark: per-pixel material maps (issue 16), their speed, scaling and memory.
+
+In one run, on scenes/specs/disc_clear_east.toml (13 frames) at SIZE x SIZE, the disc made of
+table 7.10's material (C = 0.25, 0.5, 0.75, rho_s 0.2, sigma_alpha 0.05) with 2% sensor
+noise (12 bits):
+1. one chunk of CHUNK pixels fitted in a fresh process (5-parameter model): its wall time and
+   peak resident memory (the cost model's per-chunk time and the memory per pixel);
+2. `skyfit fit --per-pixel --all` of every disc pixel with 1 worker, then with 2 (fresh
+   processes, cluster start and JIT compilation included): pixels per second and the scaling;
+3. from them, the cost model t = overhead + pixels / (rate x workers) and its estimate for a
+   256 x 256 and a 4096 x 4096 map.
+Prints a markdown table.
+
+    .venv/bin/python scripts/bench_map.py [--size 64] [-o DIR]
+"""
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SPEC = ROOT / "scenes" / "specs" / "disc_clear_east.toml"
+MATERIAL = {"model": "colour", "C": [0.25, 0.5, 0.75], "rho_s": 0.2, "sigma_alpha": 0.05}
+CHUNK = 256
+
+ONE_CHUNK = """
+import json, resource, sys, time
+import numpy as np
+from skyfit_mi.fitting.pixel_fit import fit_pixels
+from skyfit_mi.pipeline.pixels import material_regions
+px = dict(material_regions(sys.argv[1]))["disc"][: int(sys.argv[2])]
+fit_pixels(sys.argv[1], "disc", px[:8])                      # imports and JIT compilation
+t = time.perf_counter()
+fit_pixels(sys.argv[1], "disc", px)
+print(json.dumps({"seconds": time.perf_counter() - t, "pixels": len(px),
+                  "peak_rss_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+"""
+
+
+def timed(args):
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "skyfit_mi.cli", *map(str, args)], check=True,
+                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return time.perf_counter() - t0
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--size", type=int, default=64, help="frame width and height (default 64)")
+    ap.add_argument("-o", "--output", help="work folder (default a temporary one)")
+    args = ap.parse_args()
+    work = Path(args.output or tempfile.mkdtemp(prefix="bench_map_"))
+    work.mkdir(parents=True, exist_ok=True)
+    from skyfit_mi.pipeline.pixels import material_regions
+    from skyfit_mi.pipeline.spec import read_spec
+
+    raw = read_spec(SPEC)
+    raw["camera"].update(width=args.size, height=args.size, fov_deg=12.0)
+    raw["materials"] = {"disc": MATERIAL}
+    raw["sensor"].update(bits=12, noise_percent=2.0)
+    spec = work / "day.json"
+    spec.write_text(json.dumps(raw))
+    day = work / "day"
+    timed(["render", spec, "-o", day, "-q", "--overwrite"])
+    n_px = len(dict(material_regions(day))["disc"])
+    chunk = json.loads(subprocess.run([sys.executable, "-c", ONE_CHUNK, str(day), str(CHUNK)],
+                                      check=True, capture_output=True, text=True).stdout
+                       .strip().splitlines()[-1])
+    runs = {}
+    for workers in (1, 2):
+        runs[workers] = timed(["fit", day, "--all", "--per-pixel", "--workers", workers, "-o",
+                               work / f"map{workers}", "--overwrite", "-q"])
+    rate = chunk["pixels"] / chunk["seconds"]                 # pixels per second per worker
+    overhead = {w: runs[w] - n_px / (rate * w) for w in runs}
+    print(f"| step | pixels | workers | wall time [s] | pixels/s |")
+    print("|---|---|---|---|---|")
+    print(f"| one chunk in a warm process | {chunk['pixels']} | 1 | {chunk['seconds']:.1f} | "
+          f"{rate:.1f} |")
+    for w, t in runs.items():
+        print(f"| `skyfit fit --per-pixel --all` | {n_px} | {w} | {t:.1f} | {n_px / t:.1f} |")
+    print(f"\nscaling 1 -> 2 workers: {runs[1] / runs[2]:.2f}x; peak RSS of the chunk process "
+          f"{chunk['peak_rss_MiB']:.0f} MiB ({chunk['peak_rss_MiB'] / chunk['pixels']:.2f} MiB "
+          f"per pixel of a {CHUNK}-pixel chunk, imports included)")
+    print(f"cost model: t = overhead + pixels / ({rate:.1f} px/s x workers); overhead "
+          f"(process, cluster, JIT) {overhead[1]:.0f} s with 1 worker, {overhead[2]:.0f} s with 2")
+    for side in (256, 4096):
+        for w in (2, 16, 64):
+            print(f"estimate {side}x{side} on {w} workers: "
+                  f"{(side * side / (rate * w) + overhead[2]) / 60:.1f} min")
+
+
+if __name__ == "__main__":
+    main()
