@@ -252,6 +252,20 @@ def spec_for_times(spec_path, times, tz=None, site=None, size=None):
     return raw, validate_spec(raw, spec_path.parent)
 
 
+def measured_header(spec, sensor, run_id, what, seed_rule):
+    """The manifest header of measured frames (source ``ingest``): the spec's materials kept
+    as placeholders of the ``what`` (e.g. 'photographed') material, unknown until fitted."""
+    from ..render.scene_xml import build_scene_xml
+
+    xml, materials, to_world = build_scene_xml(spec)
+    for m in materials.values():
+        m["source"] = f"{m.get('source', 'spec')}: a placeholder; the {what} material is " \
+                      "unknown until fitted"
+    return manifest_header(spec, sensor, (xml, materials, to_world),
+                           {**spec.render, "seed_rule": seed_rule}, source="ingest",
+                           run_id=run_id)
+
+
 def _run_id(paths, spec_raw, options):
     h = hashlib.sha256()
     for p in paths:
@@ -381,15 +395,9 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, fa
            float_scale, rel, cal_info, noise_info, options, run_id, progress):
     from .photos import jpeg_error_variance
     from ..render.image import write_exr
-    from ..render.scene_xml import build_scene_xml
 
-    xml, materials, to_world = build_scene_xml(spec)
-    for m in materials.values():
-        m["source"] = f"{m.get('source', 'spec')}: a placeholder; the photographed material is " \
-                      "unknown until fitted"
-    manifest = manifest_header(spec, sensor, (xml, materials, to_world),
-                               {**spec.render, "seed_rule": "none: frames are photographs"},
-                               source="ingest", run_id=run_id)
+    manifest = measured_header(spec, sensor, run_id, "photographed",
+                               "none: frames are photographs")
     manifest["sensor"]["noise_model"] = {**noise_info,
                                          "sigma2_DN2": "Q'(s)^2 (read + shot s M) + 1/12"}
     if flat is not None:

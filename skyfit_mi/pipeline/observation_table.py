@@ -293,8 +293,8 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrit
                  log=print):
     """Turn an observation table into a sequence folder (module docstring); returns the
     manifest dict.  ``tz``: zone of naive times; ``site``: (lat, lon[, alt]) over the spec's."""
-    from .ingest import spec_for_times
-    from .sequence import finish, frame_record, manifest_header, prepare_folder
+    from .ingest import measured_header, spec_for_times
+    from .sequence import finish, frame_record, prepare_folder
     from ..files import write_text
     from ..render.scene_xml import build_scene_xml
 
@@ -342,13 +342,7 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrit
     out = Path(out_dir)
     with FolderLock(out):
         prepare_folder(out, run_id, None, overwrite, log=lambda message: None)
-        xml, materials, to_world = build_scene_xml(spec)
-        for m in materials.values():
-            m["source"] = f"{m.get('source', 'spec')}: a placeholder; the measured material is " \
-                          "unknown until fitted"
-        manifest = manifest_header(spec, sensor, (xml, materials, to_world),
-                                   {**spec.render, "seed_rule": "none: measured values"},
-                                   source="ingest", run_id=run_id)
+        manifest = measured_header(spec, sensor, run_id, "measured", "none: measured values")
         manifest["ingest"] = {"table": str(table.path), "rows": len(table.times),
                               "points": [{"region": r, "point": p, "position": pos[k].tolist()}
                                          for k, (r, p) in enumerate(keys)],

@@ -67,7 +67,10 @@ class SunSkyPathIntegrator(mi.SamplingIntegrator):
         active = mi.Bool(active)
         valid = mi.Bool(active)                   # an environment is always there to be seen
 
-        while dr.hint(active, max_iterations=self.max_depth, label="sun_sky_path"):
+        # the emitter is read, never changed, in the loop: out of its state (traversed, its
+        # environment map's table, of another size than the loop, would be refused as state)
+        while dr.hint(active, max_iterations=self.max_depth, label="sun_sky_path",
+                      exclude=[sky]):
             si = scene.ray_intersect(ray, active)
             miss = active & ~si.is_valid()
             # the environment along the ray, each part with its own MIS weight
