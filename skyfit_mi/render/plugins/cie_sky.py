@@ -133,9 +133,6 @@ class CIESkyEmitter(mi.Emitter):
         self.blend_weight = opaque_value(mi.Float, float(sky.horizon_blend))
         # the map as a flat array of RGB triples with its size opaque: any map, one kernel
         self.envmap_data = self.envmap.array
-        # evaluated, never a literal: a gather from a literal (the all-zero table of a sky
-        # without a map) folds into a value of the table's size, which breaks symbolic loops
-        dr.make_opaque(self.envmap_data)
         self.envmap_rows = opaque_value(mi.Float, float(self.envmap.shape[0]))
         self.envmap_cols = opaque_value(mi.Float, float(self.envmap.shape[1]))
         for k in ("sun_direction", "sun_solid_angle", "blend_weight", "p_sun", "sun_chord2",
