@@ -12,6 +12,7 @@ import sys
 from .errors import SetupError, SkyfitError
 from .physics.ward import NORMALISATIONS
 from .render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS
+from .render.variant import VARIANTS
 
 DESCRIPTION = ("Render daylight image sequences, fit Ward reflection models to them, and map "
                "the materials a camera sees.")
@@ -95,11 +96,16 @@ def _frame_list(text):
 
 # ---- commands ---------------------------------------------------------------------------------
 def _render(args):
-    from .pipeline.sequence import render_sequence
-    from .pipeline.spec import load_spec
+    from pathlib import Path
 
-    render_sequence(load_spec(args.spec), args.output, overwrite=args.overwrite,
-                    progress=not args.quiet)
+    from .pipeline.sequence import render_sequence
+    from .pipeline.spec import read_spec, validate_spec
+
+    raw = read_spec(args.spec)
+    if args.variant:                      # over the spec's [render] variant
+        raw["render"] = {**raw.get("render", {}), "variant": args.variant}
+    render_sequence(validate_spec(raw, Path(args.spec).parent), args.output,
+                    overwrite=args.overwrite, progress=not args.quiet)
 
 
 def _reflectance(text):
@@ -220,7 +226,7 @@ def _fit(args):
         s = run_map(args.manifest, regions, out, model=model, normalisation=args.normalisation,
                     seed=args.seed, patch=args.patch, chunk=args.chunk or CHUNK,
                     workers=args.workers, scheduler=args.scheduler, overwrite=args.overwrite,
-                    progress=not args.quiet)
+                    progress=not args.quiet, variant=args.variant)
         for name, r in s["regions"].items():
             med = ", ".join(f"{k} = {v:.4g}" for k, v in r["median"].items() if v is not None)
             print(f"{name}: {r['determined']} of {r['mapped']} pixels determined"
@@ -237,7 +243,7 @@ def _fit(args):
         res = fit_region(args.manifest, name, kept, model=model, method=args.method,
                          normalisation=args.normalisation, seed=args.seed, start=args.start,
                          positions=args.positions, directions=args.directions,
-                         frames=args.frames)
+                         frames=args.frames, variant=args.variant)
         res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
                                          if pixels is None else len(pixels))
         paths = write_fit(res, out / f"fit_{name}")
@@ -338,6 +344,8 @@ def build_parser():
     render.add_argument("--overwrite", action="store_true",
                         help="replace another run's output in the folder (starts clean)")
     render.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    render.add_argument("--variant", choices=VARIANTS,
+                        help="Mitsuba variant, over the spec's [render] variant (cuda_ad_rgb: GPU)")
     render.set_defaults(func=_render)
 
     ing = sub.add_parser(
@@ -411,6 +419,8 @@ def build_parser():
                      help="the mask value of material NAME")
     fit.add_argument("--all", action="store_true",
                      help="fit every Ward material the camera sees (regions from the label image)")
+    fit.add_argument("--variant", choices=VARIANTS,
+                     help="Mitsuba variant of the fit (default the sequence's; cuda_ad_rgb: GPU)")
     fit.add_argument("--per-pixel", action="store_true",
                      help="a material map: every pixel of the regions (or every --patch) its own "
                      "fit, with intervals and warnings, as EXR/PNG maps (on Dask)")

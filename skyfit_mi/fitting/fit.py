@@ -64,10 +64,11 @@ class FitSession:
     min_frames : rendered frames the sequence must hold (1 to predict a single frame)
     frames : manifest frame indices to use (None: every rendered frame), e.g. to hold some
         out for a prediction test
+    variant : the Mitsuba variant to fit with (default the sequence's), e.g. 'cuda_ad_rgb'
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
-                 positions=None, directions=DIRECTIONS, min_frames=2, frames=None):
+                 positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None):
         from ..render import setup
         from ..render.fit_model import BY_COUNT, PARAMETERS, bounds, check_fit_normalisation
 
@@ -99,7 +100,7 @@ class FitSession:
         self.cache_settings = {"positions": POSITIONS if positions is None else int(positions),
                                "directions": int(directions), "seed": seed,
                                "sized": "from the data" if positions is None else "given"}
-        mi = setup(doc["render"]["variant"])
+        mi = setup(variant or doc["render"]["variant"])
         self.scene = mi.load_string(doc["scene"]["xml"])
         self.params = mi.traverse(self.scene)
         self.cache_time = time.perf_counter() - t0
@@ -499,8 +500,8 @@ class FitSession:
 
 def fit_region(manifest_path, name, pixels, model="two", method="global", normalisation="ward",
                seed=0, start=None, positions=None, directions=DIRECTIONS,
-               method_options=None, log=print, frames=None):
+               method_options=None, log=print, frames=None, variant=None):
     """Fit one material region (see :class:`FitSession`); returns a JSON-ready result dict."""
     session = FitSession(manifest_path, name, pixels, model, normalisation, seed, positions,
-                         directions, frames=frames)
+                         directions, frames=frames, variant=variant)
     return session.run(method, start, seed, method_options, log)

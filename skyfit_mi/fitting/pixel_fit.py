@@ -78,12 +78,13 @@ def _stack_groups(x, groups, n_groups):
 
 
 def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="ward", seed=0,
-               positions=MAP_CACHE[0], directions=MAP_CACHE[1], groups=None):
+               positions=MAP_CACHE[0], directions=MAP_CACHE[1], groups=None, variant=None):
     """Fit every pixel of ``pixels`` (P, 2), or every group of them, on its own; the light is
     traced once for all.
 
     ``materials``: the material id the pixels show (one, or one per pixel); ``groups``: each
-    pixel's fit (P,) labels 0..G-1 (a patch's pixels share one; default every pixel its own).
+    pixel's fit (P,) labels 0..G-1 (a patch's pixels share one; default every pixel its own);
+    ``variant``: the Mitsuba variant (default the sequence's).
     Returns a dict of arrays over the G fits: ``pixels`` (G, 2) each fit's first pixel,
     ``theta``, ``lo``, ``hi``, ``cache_error_sd`` (G, n) (95% intervals), ``chi2``, ``dof``,
     ``model_noise_chi2``, ``warnings`` (G,), and ``names`` the parameters.  Everything is
@@ -100,7 +101,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     doc, root = load_manifest(manifest_path)
     obs = load_observations(manifest_path, pixels)
     frames = {f["index"]: f for f in doc["frames"]}
-    mi = setup(doc["render"]["variant"])
+    mi = setup(variant or doc["render"]["variant"])
     scene = mi.load_string(doc["scene"]["xml"])
     skies = [frame_sky(frames[i], root) for i in obs.frames]
     cache = build_light_cache(scene, mi.traverse(scene), skies, pixels, materials,

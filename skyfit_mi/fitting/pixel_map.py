@@ -136,9 +136,10 @@ def _client(workers, scheduler, memory_per_worker):
 
 def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward", seed=0,
             patch=1, chunk=CHUNK, workers=None, scheduler=None, overwrite=False, progress=True,
-            log=print, cache=MAP_CACHE, memory_per_worker="4GiB"):
+            log=print, cache=MAP_CACHE, memory_per_worker="4GiB", variant=None):
     """Map ``regions`` ([(material, pixels (P, 2))]) of a sequence; returns the summary dict
-    (module docstring).  ``workers``: LocalCluster processes (default: the machine's cores)."""
+    (module docstring).  ``workers``: LocalCluster processes (default: the machine's cores);
+    ``variant``: the Mitsuba variant of the fits (default the sequence's)."""
     from ..pipeline.manifest import load_manifest
     from ..render.fit_model import PARAMETERS
     from .pixel_fit import check_map_region
@@ -164,7 +165,7 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
         client, cluster = _client(n_workers, scheduler, memory_per_worker)
         try:
             _map_pending(client, manifest_path, chunks, pending, store, model, normalisation,
-                         seed, cache, progress)
+                         seed, cache, progress, variant)
         finally:
             client.close()
             if cluster is not None:
@@ -179,14 +180,15 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
 
 
 def _map_pending(client, manifest_path, chunks, pending, store, model, normalisation, seed,
-                 cache, progress):
+                 cache, progress, variant):
     """Submit every pending chunk and write each result as it comes."""
     from distributed import as_completed
 
     futures = {client.submit(fit_pixels, str(manifest_path), chunks[i]["materials"],
                              chunks[i]["pixels"], model=model, normalisation=normalisation,
                              seed=chunk_seed(seed, i), positions=cache[0], directions=cache[1],
-                             groups=chunks[i]["groups"], pure=False): i for i in pending}
+                             groups=chunks[i]["groups"], variant=variant, pure=False): i
+               for i in pending}
     bar = None
     if progress:
         from tqdm import tqdm
