@@ -133,6 +133,7 @@ class CIESkyEmitter(mi.Emitter):
         self.blend_weight = opaque_value(mi.Float, float(sky.horizon_blend))
         # the map as a flat array of RGB triples with its size opaque: any map, one kernel
         self.envmap_data = self.envmap.array
+        self.has_map = sky.envmap is not None
         self.envmap_rows = opaque_value(mi.Float, float(self.envmap.shape[0]))
         self.envmap_cols = opaque_value(mi.Float, float(self.envmap.shape[1]))
         for k in ("sun_direction", "sun_solid_angle", "blend_weight", "p_sun", "sun_chord2",
@@ -186,7 +187,10 @@ class CIESkyEmitter(mi.Emitter):
         w = a / (a + dr.rcp(a))
         blended = w * sky + (1.0 - w) * self.ground
         sharp = dr.select(dz > 0.0, sky, self.ground)
-        return dr.select(self.blend_weight > 0.5, blended, sharp) + self.envmap_eval(d)
+        sky = dr.select(self.blend_weight > 0.5, blended, sharp)
+        # a sky without a map skips the lookup (it doubled the cost of the light cache's sky
+        # integrals); a day mixing skies with and without maps compiles one kernel for each
+        return sky + self.envmap_eval(d) if self.has_map else sky
 
     def envmap_eval(self, d):
         """The map's radiance toward world directions d: Sky.envmap's bilinear lookup
