@@ -435,6 +435,7 @@ def test_the_models_own_noise_is_reported_over_roughness_and_warned_when_data_ar
     assert not any("light cache's own" in w for w in noisy["warnings"])
 
 
+@pytest.mark.slow
 def test_an_automatically_sized_cache_grows_until_its_noise_is_a_small_share(days, monkeypatch):
     """With positions=None the cache is sized from the data: after a fit whose largest model
     noise over the roughness range exceeds CACHE_SHARE of the dof, the positions grow (powers
