@@ -7,8 +7,10 @@ noise (12 bits):
    peak resident memory (the cost model's per-chunk time and the memory per pixel);
 2. `skyfit fit --per-pixel --all` of every disc pixel with 1 worker, then with 2 (fresh
    processes, cluster start and JIT compilation included): pixels per second and the scaling;
-3. from them, the cost model t = overhead + pixels / (rate x workers) and its estimate for a
-   256 x 256 and a 4096 x 4096 map.
+   each also on a 256-pixel region, so that the slope between the two is the marginal rate
+   and the intercept the overhead (processes, cluster, JIT): the cost model t = overhead +
+   pixels / rate, and from it estimates for a 256 x 256 and a 4096 x 4096 map on N such
+   machines (one Dask worker per machine: Dr.Jit already uses every core of one).
 Prints a markdown table.
 
     .venv/bin/python scripts/bench_map.py [--size 64] [-o DIR]
@@ -70,28 +72,37 @@ def main():
     chunk = json.loads(subprocess.run([sys.executable, "-c", ONE_CHUNK, str(day), str(CHUNK)],
                                       check=True, capture_output=True, text=True).stdout
                        .strip().splitlines()[-1])
+    half = args.size // 2
+    small = f"disc=rect:{half - 8},{half - 8},{half + 7},{half + 7}"          # 256 pixels
     runs = {}
     for workers in (1, 2):
-        runs[workers] = timed(["fit", day, "--all", "--per-pixel", "--workers", workers, "-o",
-                               work / f"map{workers}", "--overwrite", "-q"])
-    rate = chunk["pixels"] / chunk["seconds"]                 # pixels per second per worker
-    overhead = {w: runs[w] - n_px / (rate * w) for w in runs}
-    print(f"| step | pixels | workers | wall time [s] | pixels/s |")
+        for what, region in (("small", ["--region", small]), ("all", ["--all"])):
+            runs[workers, what] = timed(["fit", day, *region, "--per-pixel", "--workers",
+                                         workers, "-o", work / f"map{workers}{what}",
+                                         "--overwrite", "-q"])
+    print("| step | pixels | workers | wall time [s] | pixels/s |")
     print("|---|---|---|---|---|")
     print(f"| one chunk in a warm process | {chunk['pixels']} | 1 | {chunk['seconds']:.1f} | "
-          f"{rate:.1f} |")
-    for w, t in runs.items():
-        print(f"| `skyfit fit --per-pixel --all` | {n_px} | {w} | {t:.1f} | {n_px / t:.1f} |")
-    print(f"\nscaling 1 -> 2 workers: {runs[1] / runs[2]:.2f}x; peak RSS of the chunk process "
-          f"{chunk['peak_rss_MiB']:.0f} MiB ({chunk['peak_rss_MiB'] / chunk['pixels']:.2f} MiB "
-          f"per pixel of a {CHUNK}-pixel chunk, imports included)")
-    print(f"cost model: t = overhead + pixels / ({rate:.1f} px/s x workers); overhead "
-          f"(process, cluster, JIT) {overhead[1]:.0f} s with 1 worker, {overhead[2]:.0f} s with 2")
+          f"{chunk['pixels'] / chunk['seconds']:.1f} |")
+    model = {}
+    for (w, what), t in runs.items():
+        n = 256 if what == "small" else n_px
+        print(f"| `skyfit fit --per-pixel` ({what}) | {n} | {w} | {t:.1f} | {n / t:.1f} |")
+    for w in (1, 2):
+        rate = (n_px - 256) / (runs[w, "all"] - runs[w, "small"])     # marginal pixels/s
+        model[w] = (runs[w, "small"] - 256 / rate, rate)
+    print(f"\nscaling 1 -> 2 workers (whole map): {runs[1, 'all'] / runs[2, 'all']:.2f}x; "
+          f"peak RSS of the chunk process {chunk['peak_rss_MiB']:.0f} MiB "
+          f"({chunk['peak_rss_MiB'] / chunk['pixels']:.2f} MiB per pixel of a {CHUNK}-pixel "
+          "chunk, imports included)")
+    for w, (overhead, rate) in model.items():
+        print(f"cost model, {w} worker(s) on this machine: t = {overhead:.0f} s + pixels / "
+              f"{rate:.1f} px/s")
+    overhead, rate = model[2]
     for side in (256, 4096):
-        for w in (2, 16, 64):
-            print(f"estimate {side}x{side} on {w} workers: "
-                  f"{(side * side / (rate * w) + overhead[2]) / 60:.1f} min")
-
+        for machines in (1, 16, 64):
+            print(f"estimate {side}x{side} on {machines} such machine(s): "
+                  f"{(side * side / (rate * machines) + overhead) / 60:.1f} min")
 
 if __name__ == "__main__":
     main()
