@@ -73,8 +73,8 @@ def test_a_profiled_map_is_at_most_the_fixed_one(session, x, y):
     fixed = chi2_map(s, theta, x, y, xs, ys)
     profiled = profiled_map(s, theta, x, y, xs, ys)
     # the freedom lowers many points (share measured: 0.32 for (rho_s, sigma_alpha) on the
-    # sun_sky_path frames, above 0.5 on Mitsuba path's; where the fit's other parameters are
-    # already the best at a point, it cannot)
+    # sun_sky_path frames, above 0.5 on Mitsuba path's): the fitted R is at its upper bound 1
+    # (the truth of this disc), so at the points that would want R > 1 it cannot move
     assert np.mean(profiled < fixed - 1.0) > 0.25
     assert np.all(profiled <= fixed * (1 + 1e-6) + 1e-6)
     assert profiled.min() >= r["chi2"] * (1 - 1e-4)
