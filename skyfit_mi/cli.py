@@ -160,6 +160,10 @@ def _pixels(args):
 
 def _fit_regions(args):
     """(name, pixels) of every region the arguments ask for, checked before any fitting."""
+    from .pipeline.manifest import load_manifest
+    from .pipeline.observation_table import is_table
+
+    doc = load_manifest(args.manifest)[0]
     regions = list(args.region or [])
     if args.label and args.mask is None:
         raise SkyfitError("--label NAME=VALUE needs --mask PNG (a label image of the frames' size).")
@@ -168,17 +172,13 @@ def _fit_regions(args):
                           "which material).")
     if args.label:
         from .fitting.chi2 import region_from_mask
-        from .pipeline.manifest import load_manifest
-        cam = load_manifest(args.manifest)[0]["camera"]
+        cam = doc["camera"]
         regions += [(name, region_from_mask(args.mask, value, (cam["height"], cam["width"])))
                     for name, value in args.label]
     if args.all:
         from .pipeline.pixels import material_regions
         regions += material_regions(args.manifest)
-    from .pipeline.manifest import load_manifest
-    from .pipeline.observation_table import is_table
-
-    if is_table(load_manifest(args.manifest)[0]):
+    if is_table(doc):
         if any(px is not None for _, px in regions):
             raise SkyfitError("the sequence is an observation table: name its regions alone "
                               "(--region NAME, or --all), without pixels or a mask.")

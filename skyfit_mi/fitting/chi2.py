@@ -288,15 +288,19 @@ def censored_term_moments(a, b):
     return mean, np.maximum(second - mean * mean, 0.0)
 
 
+def usable_values(obs, valid=None):
+    """Which of ``obs``'s values (P, T, 3) carry information: a finite, positive sigma, and
+    ``valid`` (P, T) where given (the pixel shows its material)."""
+    ok = np.isfinite(obs.sigma) & (obs.sigma > 0)
+    return ok if valid is None else ok & valid[..., None]
+
+
 class Problem:
     """chi^2(a) for one region: observations, and a radiance model with ``radiance``/``jacobian``."""
 
     def __init__(self, obs, model, valid=None):
         self.obs, self.model = obs, model
-        ok = np.isfinite(obs.sigma) & (obs.sigma > 0)
-        if valid is not None:
-            ok &= valid[..., None]
-        self.mask = ok
+        ok = self.mask = usable_values(obs, valid)
         self.n_data = int(ok.sum())
         self.n_params = len(model.names)
         if self.n_data <= self.n_params:

@@ -151,7 +151,7 @@ def profiled_map(session, theta, x, y, xs, ys):
     # the grids hold the fit's values, so that its start is a grid point
     sigma = axes.get("sigma_alpha", np.union1d(SIGMA_GRID, [theta[-1]]))
     rho = axes.get("rho_s", np.union1d(RHO_GRID, [theta[-2]]))
-    obs, w = _linearise(session.problem)
+    obs, w = _linearise(session.problem.obs, session.problem.mask)
     D, G = session.wm.basis(sigma)
     zz, yh, hh = linear_quadratics(session.model, obs, w, D, G, rho)       # (K, R, groups)
     at_best = np.clip(yh / np.maximum(hh, 1e-300), 0.0, 1.0)

@@ -27,9 +27,9 @@ and one off its material gets NaN.
 import numpy as np
 
 from ..errors import SkyfitError
-from .chi2 import Problem, load_observations
-from .methods.global_search import (RHO_GRID, SATURATION_BAND, SIGMA_GRID, _linearise,
-                                    grid_chi2, linear_quadratics)
+from .chi2 import load_observations, usable_values
+from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
+                                    linear_quadratics, near_saturation)
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
 #: fit's, so that a chunk of pixels fits in memory (about 0.3 MB per pixel and frame set of 13).
@@ -109,11 +109,9 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
                               max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
                               normalisation=normalisation, sky_positions=1)
     wm = WardModel(cache, model, normalisation)
-    y, w = _linearise(_ChunkProblem(obs, wm, cache.hit))
-    saturated = np.bincount(groups, weights=((obs.y >= obs.sensor.max_code
-                                              - SATURATION_BAND * obs.sigma)
-                                             & np.isfinite(obs.sigma)).any(axis=(1, 2)),
-                            minlength=n) > 0
+    y, w = _linearise(obs, usable_values(obs, cache.hit))
+    saturated = np.bincount(groups, weights=(near_saturation(obs) & np.isfinite(obs.sigma))
+                            .any(axis=(1, 2)), minlength=n) > 0
     bases = wm.basis(SIGMA_GRID, halves=True)            # the whole cache, and its two halves
     hit = np.bincount(groups, weights=cache.hit.all(axis=1), minlength=n) > 0
     first = pixels[np.unique(groups, return_index=True)[1]]
@@ -122,17 +120,18 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
         bases = [(_stack_groups(D, groups, n), np.stack([_stack_groups(g, groups, n) for g in G]))
                  for D, G in bases]
     names = PARAMETERS[model]
-    half_a, half_b = (_grid_fit(model, names, y, w, D, G, first) for D, G in bases[1:])
+    search, half_a, half_b = (_grid_search(model, names, y, w, D, G) for D, G in bases)
     # the chi^2 the cache's own noise adds at each fit: its halves' model values differ by
     # twice the whole's Monte Carlo error over
-    fit = _grid_fit(model, names, y, w, *bases[0], first)
-    rd, sp = (np.array(v) for v in zip(*(reflectances(model, t)[:2] for t in fit["theta"])))
+    rd, sp = (np.array(v) for v in zip(*(reflectances(model, t)[:2] for t in search["theta"])))
     cols = np.arange(len(rd))
-    La, Lb = (rd[:, None] * D + sp[:, None] * G[fit["sigma_index"], cols]
+    La, Lb = (rd[:, None] * D + sp[:, None] * G[search["sigma_index"], cols]
               for D, G in bases[1:])
     noise = np.sum(w * ((La - Lb) / 2.0) ** 2, axis=(1, 2))
-    fit = _grid_fit(model, names, y, w, *bases[0], first, noise)
-    fit["model_noise_chi2"] = noise
+    lo, hi = _grid_intervals(model, names, y, w, *bases[0], search, noise)
+    fit = {"pixels": np.asarray(first, dtype=int), "names": list(names),
+           "theta": search["theta"], "lo": lo, "hi": hi, "chi2": search["chi2"],
+           "chi2_grid": search["chi2_grid"], "dof": search["dof"], "model_noise_chi2": noise}
     # the cache's own error in each parameter, from its halves' fits (as region fits do)
     sd = np.abs(half_a["theta"] - half_b["theta"]) / 2.0
     fit["cache_error_sd"] = sd
@@ -150,19 +149,11 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     return fit
 
 
-class _ChunkProblem(Problem):
-    """The chunk's observations and model as a :class:`~.chi2.Problem` for the linearisation,
-    without the region's data count check (each pixel is judged on its own)."""
-
-    def __init__(self, obs, model, valid):
-        self.obs, self.model = obs, model
-        self.mask = np.isfinite(obs.sigma) & (obs.sigma > 0) & valid[..., None]
-
-
-def _grid_fit(model, names, y, w, D, G, first, model_noise=0.0):
-    """The per-group grid fit of the module docstring on linearised data ``y``, weights ``w``
-    (G, T', 3) and the basis D (G, T', 3), G (K, G, T', 3); ``model_noise`` (G,) the chi^2
-    that the cache's own noise adds (left out of s^2)."""
+def _grid_search(model, names, y, w, D, G):
+    """Each group's best point of the grid on linearised data ``y``, weights ``w`` (G, T', 3)
+    and the basis D (G, T', 3), G (K, G, T', 3): a dict of the grid (``chi2`` (K, R, G),
+    ``thetas`` (K, R, G, n)), the best ``theta`` (G, n), its ``chi2_grid``, the refined
+    minimum ``chi2``, ``dof`` and ``sigma_index``."""
     n_par = len(names)
     chi2, thetas = grid_chi2(model, y, w, D, G, per_pixel=True)     # (K, R, G), (K, R, G, n)
     thetas[..., -1] = SIGMA_GRID[:, None, None]
@@ -170,15 +161,24 @@ def _grid_fit(model, names, y, w, D, G, first, model_noise=0.0):
     flat = chi2.reshape(K * R, n_groups)
     best = np.argmin(flat, axis=0)
     cols = np.arange(n_groups)
-    theta = thetas.reshape(K * R, n_groups, n_par)[best, cols]
-    chi2_min = flat[best, cols]
-    n_data = np.count_nonzero(w > 0, axis=(1, 2))
-    dof = n_data - n_par
     # the grid's best point lies above the continuous minimum by up to its resolution: on
     # precise data that excess alone would read as misfit, so s^2 and the misfit test take the
     # minimum of a parabola through each profile's best point and its neighbours
     vertex = np.minimum(_vertex(chi2.min(axis=1)), _vertex(chi2.min(axis=0)))
-    s2 = np.maximum(1.0, (vertex - model_noise) / np.maximum(dof, 1))
+    return {"grid": chi2, "thetas": thetas,
+            "theta": thetas.reshape(K * R, n_groups, n_par)[best, cols],
+            "chi2_grid": flat[best, cols], "chi2": vertex,
+            "dof": np.count_nonzero(w > 0, axis=(1, 2)) - n_par, "sigma_index": best // R}
+
+
+def _grid_intervals(model, names, y, w, D, G, search, model_noise):
+    """The 95% intervals (lo, hi), each (G, n), of a :func:`_grid_search` (module docstring);
+    ``model_noise`` (G,) the chi^2 that the cache's own noise adds (left out of s^2)."""
+    n_par = len(names)
+    chi2, thetas, dof = search["grid"], search["thetas"], search["dof"]
+    K, R, n_groups = chi2.shape
+    s2 = np.maximum(1.0, (search["chi2"] - model_noise) / np.maximum(dof, 1))
+    chi2_min = search["chi2_grid"]
     thr = chi2_min + DELTA_95 * s2
     ok = chi2 <= thr                                                   # (K, R, G)
     lo, hi = np.empty((n_groups, n_par)), np.empty((n_groups, n_par))
@@ -217,9 +217,7 @@ def _grid_fit(model, names, y, w, D, G, first, model_noise=0.0):
                 low = np.minimum(low, np.where(ins, mid, np.inf).min(axis=(0, 1)))
                 high = np.maximum(high, np.where(ins, mid, -np.inf).max(axis=(0, 1)))
         lo[:, :-2], hi[:, :-2] = np.clip(low, 0, 1), np.clip(high, 0, 1)
-    return {"pixels": np.asarray(first, dtype=int), "names": list(names), "theta": theta,
-            "lo": lo, "hi": hi, "chi2": vertex, "chi2_grid": chi2_min, "dof": dof,
-            "sigma_index": best // R}
+    return lo, hi
 
 
 def _vertex(profile):

@@ -252,12 +252,13 @@ def spec_for_times(spec_path, times, tz=None, site=None, size=None):
     return raw, validate_spec(raw, spec_path.parent)
 
 
-def measured_header(spec, sensor, run_id, what, seed_rule):
+def measured_header(spec, sensor, run_id, what, seed_rule, scene=None):
     """The manifest header of measured frames (source ``ingest``): the spec's materials kept
-    as placeholders of the ``what`` (e.g. 'photographed') material, unknown until fitted."""
+    as placeholders of the ``what`` (e.g. 'photographed') material, unknown until fitted.
+    ``scene``: the spec's (xml, materials, to_world) if already built."""
     from ..render.scene_xml import build_scene_xml
 
-    xml, materials, to_world = build_scene_xml(spec)
+    xml, materials, to_world = scene or build_scene_xml(spec)
     for m in materials.values():
         m["source"] = f"{m.get('source', 'spec')}: a placeholder; the {what} material is " \
                       "unknown until fitted"

@@ -77,7 +77,8 @@ class ObservationTable:
     times : aware datetimes (N,);  regions, points : str (N,);  position, view, normal :
     (N, 3) float, NaN where not given;  value, sigma : (N, 3) [W m^-2 sr^-1] (a luminance
     table: Y in the first column, NaN in the others);  lines : the file's line of each row;
-    path : the file;  luminance : whether the values are luminances.
+    path : the file;  luminance : whether the values are luminances;  frames : each row's
+    frame index (the sequence folder's normalised table), else None.
     """
 
     path: Path
@@ -91,6 +92,7 @@ class ObservationTable:
     sigma: np.ndarray
     lines: list
     luminance: bool = False
+    frames: list = None
 
     def point_keys(self):
         """The distinct (region, point) pairs in order of first appearance."""
@@ -168,7 +170,7 @@ def read_observation_table(path, tz=None):
     col = {c: i for i, c in enumerate(header)}
     n = len(rows) - 1
     out = {k: np.full((n, 3), np.nan) for k in ("x", "view", "normal", "value", "sigma")}
-    times, regions, points, lines = [], [], [], []
+    times, regions, points, lines, frames = [], [], [], [], []
     for k, (line, row) in enumerate(rows[1:]):
         if len(row) != len(header):
             raise SkyfitError(f"{path} line {line}: {len(row)} fields, the header has "
@@ -181,6 +183,8 @@ def read_observation_table(path, tz=None):
         regions.append(cell["region"])
         points.append(cell.get("point") or cell["region"])
         lines.append(line)
+        if "frame" in cell:
+            frames.append(int(_number(cell["frame"], path, line, "frame")))
         for name, cols in _VECTORS.items():
             if cols[0] in cell:
                 out[name][k] = [_number(cell[c], path, line, c) for c in cols]
@@ -216,7 +220,8 @@ def read_observation_table(path, tz=None):
                               "average them with their sigma).")
         seen[key] = line
     table = ObservationTable(path, times, regions, points, out["x"], out["view"], out["normal"],
-                             out["value"], out["sigma"], lines, luminance)
+                             out["value"], out["sigma"], lines, luminance,
+                             frames if "frame" in col else None)
     for r, p in table.point_keys():
         rows_p = [i for i in range(n) if table.regions[i] == r and table.points[i] == p]
         pos = table.position[rows_p]
@@ -235,23 +240,23 @@ def _camera(to_world):
     return m[:3, 3], m[:3, 2] / np.linalg.norm(m[:3, 2])
 
 
-def locate_points(spec, table, times):
+def locate_points(spec, scene_xml, table, times):
     """Each point's position (P, 3), its view per frame (P, T, 3) and the scene's offset for
     rays, checked in the spec's scene: a point must lie on its region's surface, seen from
-    the front, with the normal the table gives (if any).  ``times``: the frames' times."""
-    from ..render.points import surface_hits
-    from ..render.scene_xml import build_scene_xml
+    the front, with the normal the table gives (if any).  ``scene_xml``: the spec's
+    (xml, materials, camera to_world); ``times``: the frames' times."""
+    from ..render.points import load_points_scene, surface_hits
 
     keys = table.point_keys()
-    xml, _, to_world = build_scene_xml(spec)
+    xml, _, to_world = scene_xml
+    scene = load_points_scene(xml, spec.render["variant"])
     cam_o, cam_d = _camera(to_world)
     P, T = len(keys), len(times)
     first = {k: next(i for i in range(len(table.times))
                      if (table.regions[i], table.points[i]) == k) for k in keys}
     pos = table.position[[first[k] for k in keys]]
     unplaced = ~np.isfinite(pos).all(axis=1)
-    hits = surface_hits(xml, spec.render["variant"], np.repeat(cam_o[None], P, 0),
-                        np.repeat(cam_d[None], P, 0))
+    hits = surface_hits(scene, np.repeat(cam_o[None], P, 0), np.repeat(cam_d[None], P, 0))
     pos[unplaced] = hits["p"][unplaced]
     view = np.repeat((cam_o[None] - pos)[:, None, :], T, axis=1)
     view /= np.linalg.norm(view, axis=2, keepdims=True)
@@ -260,7 +265,7 @@ def locate_points(spec, table, times):
         if np.isfinite(table.view[i]).all() and t in index:
             view[keys.index((r, p)), index[t]] = table.view[i]
     offset = RAY_OFFSET * hits["scale"]
-    check = surface_hits(xml, spec.render["variant"], (pos[:, None] + offset * view).reshape(-1, 3),
+    check = surface_hits(scene, (pos[:, None] + offset * view).reshape(-1, 3),
                          -view.reshape(-1, 3))
     for j, (r, p) in enumerate(keys):
         line = table.lines[first[(r, p)]]
@@ -303,7 +308,8 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrit
     if len(times) < 2:
         raise SkyfitError(f"{table.path} holds one time; a sequence needs at least 2.")
     raw, spec = spec_for_times(spec_path, times, tz, site)
-    mats = build_scene_xml(spec)[1]
+    scene = build_scene_xml(spec)
+    mats = scene[1]
     for r in dict.fromkeys(table.regions):
         if r not in mats:
             raise SkyfitError(f"{table.path}: region {r!r} is no material of the spec's scene; "
@@ -315,7 +321,7 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrit
     if night:
         log(f"{len(night)} time(s) with the sun below the horizon are kept out of the sequence: "
             f"{', '.join(t.isoformat() for t in night)}")
-    pos, view, offset = locate_points(spec, table, times)
+    pos, view, offset = locate_points(spec, scene, table, times)
     top = float(np.nanmax(np.where(np.isfinite(table.sigma),
                                    table.value + HEADROOM_SIGMAS * table.sigma, np.nan)))
     if top <= 0:
@@ -342,7 +348,8 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrit
     out = Path(out_dir)
     with FolderLock(out):
         prepare_folder(out, run_id, None, overwrite, log=lambda message: None)
-        manifest = measured_header(spec, sensor, run_id, "measured", "none: measured values")
+        manifest = measured_header(spec, sensor, run_id, "measured", "none: measured values",
+                                   scene)
         manifest["ingest"] = {"table": str(table.path), "rows": len(table.times),
                               "points": [{"region": r, "point": p, "position": pos[k].tolist()}
                                          for k, (r, p) in enumerate(keys)],
@@ -377,8 +384,7 @@ def table_observations(doc, root, region, points=None, frames=None):
     row in a frame gets value 0 and sigma inf (no information).  ``points``: the points to
     take (default all of the region's); ``frames``: the frames (default all with a row)."""
     table = read_observation_table(root / TABLE_FILE)
-    with open(root / TABLE_FILE, encoding="utf-8") as fh:
-        frame_col = [int(r["frame"]) for r in csv.DictReader(fh)]
+    frame_col = table.frames
     keys = [p for r, p in table.point_keys() if r == region]
     if not keys:
         regions = ", ".join(dict.fromkeys(table.regions))

@@ -3,17 +3,22 @@
 import numpy as np
 
 
-def surface_hits(xml, variant, origins, directions):
-    """Trace rays (origins, unit directions (N, 3), world frame) through the scene ``xml``.
+def load_points_scene(xml, variant):
+    """The scene ``xml`` loaded in Mitsuba ``variant``, for :func:`surface_hits`."""
+    from . import setup
+
+    return setup(variant).load_string(xml)
+
+
+def surface_hits(scene, origins, directions):
+    """Trace rays (origins, unit directions (N, 3), world frame) through a loaded ``scene``.
 
     Returns a dict: ``p`` hit points (N, 3) (NaN on a miss), ``n`` shading normals (N, 3),
     ``t`` distances (N,) (inf on a miss), ``material`` the hit shape's BSDF id (None on a
     miss), and ``scale`` the scene's bounding-box diagonal [scene units].
     """
-    from . import setup
+    import mitsuba as mi
 
-    mi = setup(variant)
-    scene = mi.load_string(xml)
     o = np.asarray(origins, dtype=float)
     d = np.asarray(directions, dtype=float)
     si = scene.ray_intersect(mi.Ray3f(mi.Point3f(*o.T), mi.Vector3f(*d.T)))

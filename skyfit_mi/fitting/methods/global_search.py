@@ -36,9 +36,9 @@ SATURATION_BAND = 3.0
 POLISH_TOLERANCE = 1e-6
 
 
-def _linearise(problem):
-    """Observed radiance-space values and weights: y_lin (P,T,3), w = 1/sigma_lin^2 (0 = unused)."""
-    obs = problem.obs
+def _linearise(obs, mask):
+    """Observed radiance-space values and weights of observations ``obs`` where ``mask``
+    (P, T, 3; a problem's usable values): y_lin (P,T,3), w = 1/sigma_lin^2 (0 = unused)."""
     sensor = obs.sensor
     v = np.clip(obs.y / sensor.max_code, 0.0, 1.0)
     if sensor.response == "linear":
@@ -57,9 +57,14 @@ def _linearise(problem):
     # or a 1-sigma band still ranks a narrower lobe first in a third to a half of the
     # replicates; 3 sigma in none of 20). A value at code 0 stays: reading it as zero errs by
     # less than its sigma.
-    saturated = obs.y >= sensor.max_code - SATURATION_BAND * obs.sigma
-    w = np.where(problem.mask & ~saturated, (slope / obs.sigma) ** 2, 0.0)
+    w = np.where(mask & ~near_saturation(obs), (slope / obs.sigma) ** 2, 0.0)
     return y, w
+
+
+def near_saturation(obs):
+    """Which values (P, T, 3) of ``obs`` lie within SATURATION_BAND sigma of the top code:
+    the ones the linear grid leaves out (see :func:`_linearise`)."""
+    return obs.y >= obs.sensor.max_code - SATURATION_BAND * obs.sigma
 
 
 def _weighted_sums(y, w, D, G, keep):
@@ -142,7 +147,7 @@ def global_search(problem, start, lower, upper, candidates=3, profile=True, grid
     """
     wm = problem.model
     model = wm.model
-    y, w = _linearise(problem)
+    y, w = _linearise(problem.obs, problem.mask)
     D, G = grid_basis if grid_basis is not None else wm.basis(SIGMA_GRID)
     chi2, thetas = grid_chi2(model, y, w, D, G)
     thetas[..., -1] = SIGMA_GRID[:, None]
