@@ -433,7 +433,7 @@ def build_parser():
                      help="with --per-pixel: an existing Dask scheduler (e.g. tcp://host:8786) "
                      "instead of a cluster on this machine")
     fit.add_argument("--chunk", type=_int_in(1, 1 << 20), default=None, metavar="N",
-                     help="with --per-pixel: fits per Dask task (default 256)")
+                     help="with --per-pixel: fits per Dask task (default 1024, about 1.1 GB a worker)")
     fit.add_argument("--overwrite", action="store_true",
                      help="with --per-pixel: replace another map in the output folder")
     fit.add_argument("-q", "--quiet", action="store_true", help="with --per-pixel: no progress bar")

@@ -168,3 +168,111 @@ def test_patches_share_one_fit_per_block(board):
     assert np.all(res["pixels"] // 2 == corners // 2)            # each fit's first pixel
     assert np.all(res["dof"] > 0)
     json.dumps({k: np.asarray(v).tolist() for k, v in res.items()})     # picklable, plain data
+
+
+def test_chunks_are_compact_tiles_of_whole_patches():
+    """A full 48x32 region in chunks of 64 fits: each chunk an 8x8 tile (so its pixels share
+    the sky integrals' anchors); with 2x2 patches, 16 whole patches in 8x8 pixels."""
+    from skyfit_mi.fitting.pixel_map import plan_chunks
+
+    xy = np.stack(np.meshgrid(np.arange(48), np.arange(32)), -1).reshape(-1, 2)
+    for patch in (1, 2):
+        chunks = plan_chunks([("a", xy)], patch, 64 // patch**2)
+        assert len(chunks) == 24 and sum(len(c["pixels"]) for c in chunks) == len(xy)
+        for c in chunks:
+            span = c["pixels"].max(axis=0) - c["pixels"].min(axis=0)
+            assert np.all(span == 7)
+            assert np.bincount(c["groups"]).tolist() == [patch**2] * (64 // patch**2)
+
+
+def test_device_grid_equals_the_numpy_grid():
+    """The maps' grid on the device (double precision) gives the NumPy grid's chi^2 and
+    linear parameters, for both linear models; the curvature at a few points equals the whole
+    grid's; a descending rho_s grid is refused."""
+    import importlib
+
+    from skyfit_mi.render import setup
+
+    setup()
+    gs = importlib.import_module("skyfit_mi.fitting.methods.global_search")
+    rng = np.random.default_rng(4)
+    P, T, K = 7, 9, 5
+    D = rng.uniform(0.1, 1, (P, T, 3))
+    G = rng.uniform(0, 3, (K, P, T, 3))
+    y = 0.3 * D + 0.2 * G[2] + rng.normal(0, 0.01, (P, T, 3))
+    w = rng.uniform(0, 1e4, (P, T, 3)) * (rng.random((P, T, 3)) > 0.1)
+    for model in ("colour", "achromatic"):
+        chi2, L = gs.grid_chi2_device(model, y, w, D, G)
+        ref, thetas = gs.grid_chi2(model, y, w, D, G, per_pixel=True)
+        np.testing.assert_allclose(chi2, ref, rtol=1e-10, atol=1e-9 * np.abs(ref).max())
+        np.testing.assert_allclose(L, thetas[..., :-2], atol=1e-12)
+        _, _, hh = gs.linear_quadratics(model, y, w, D, G, gs.RHO_GRID, per_pixel=True)
+        k, r, p = rng.integers(0, K, 20), rng.integers(0, len(gs.RHO_GRID), 20), \
+            rng.integers(0, P, 20)
+        np.testing.assert_allclose(gs.linear_curvature(model, w, D, G, gs.RHO_GRID[r], k, p),
+                                   hh[k, r, p], rtol=1e-12)
+    with pytest.raises(ValueError, match="ascending"):
+        gs.grid_chi2("colour", y, w, D, G, gs.RHO_GRID[::-1])
+
+
+def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_path):
+    """On the disc seen from 30 degrees at 96x96 (0.3 degrees a pixel), the sky's integrals
+    interpolated between anchors 4 pixels apart agree with each pixel's own (through its
+    centre) to 5e-4 rms and 2e-3 at worst (measured 3.6e-4, 1.5e-3 at sigma 0.002), in every
+    frame, for narrow and wide lobes; a pixel
+    with an anchor off the disc takes its own; an environment map's sky is never
+    interpolated."""
+    from dataclasses import replace
+
+    import drjit as dr
+
+    from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
+    from skyfit_mi.pipeline.pixels import material_regions
+    from skyfit_mi.pipeline.sequence import render_sequence
+    from skyfit_mi.render import setup
+    from skyfit_mi.render.daylight import update_sky
+    from skyfit_mi.render.light_cache import (SIGMA_TABLE, _anchor_plan, _SharedSky,
+                                              _sky_integrals, build_light_cache)
+    from skyfit_mi.render.sky_control import chebyshev_eval, chebyshev_x
+
+    spec = SCENES_DIR / "specs" / "disc_clear_east.toml"
+    raw = read_spec(spec)
+    raw["camera"].update(width=96, height=96)
+    raw["time"].update(step_minutes=180)
+    raw["render"] = {"spp": 1}
+    render_sequence(validate_spec(raw, spec.parent), tmp_path / "day", progress=False, **QUIET)
+    doc, root = load_manifest(tmp_path / "day")
+    mi = setup(doc["render"]["variant"])
+    scene = mi.load_string(doc["scene"]["xml"])
+    params = mi.traverse(scene)
+    sensor = scene.sensors()[0]
+    lobe = mi.load_dict({"type": "ward", "model": "two", "rho_s": 1.0, "sigma_alpha": 0.1})
+    (name, px), = material_regions(tmp_path / "day")
+    target = [s for s in scene.shapes() if s.bsdf().id() == name]
+    share = _SharedSky(mi, scene, sensor, px, 4, (96, 96), target)
+    anchors, corner, _ = _anchor_plan(px, 4, 96, 96)
+    on = {tuple(p) for p in px.tolist()}
+    near = {(x + i, y + j) for x, y in on for i in (-1, 0, 1) for j in (-1, 0, 1)}
+    off = ~np.array([all(tuple(anchors[c]) in near for c in cs) for cs in corner])
+    assert off.any() and not share.ok[off].any()          # an anchor surely off the disc
+    skies = [frame_sky(f, root) for f in doc["frames"]]
+    shared = 0
+    for sky in skies:
+        update_sky(params, sky, "sky.")
+        own_d, own_l = _sky_integrals(mi, scene.environment(), share.si_p, lobe)
+        d, l, n = share.integrals(mi, dr, scene.environment(), lobe, sky.sun_direction)
+        shared += n
+        for s in (0.002, 0.02, 0.2, 0.5):
+            x = chebyshev_x(s, *SIGMA_TABLE, np.log, np.clip)
+            a, b = (chebyshev_eval(np.moveaxis(v, 1, 0), x) for v in (own_l, l))
+            rel = np.abs(b - a) / np.abs(a)
+            assert np.sqrt(np.mean(rel**2)) < 5e-4 and rel.max() < 2e-3, (s, rel.max())
+        assert np.abs(d / own_d - 1).max() < 1e-3
+    assert shared > 0.5 * len(px) * len(skies)
+    stats = {}
+    inner = px[share.ok][:16]
+    build_light_cache(scene, params, skies[:1], inner, name, 2, 32, sky_spacing=4, stats=stats)
+    assert stats["shared"] > 0
+    envmap = replace(skies[0], envmap=np.full((8, 16, 3), 0.05, np.float32))
+    build_light_cache(scene, params, [envmap], inner, name, 2, 32, sky_spacing=4, stats=stats)
+    assert stats["shared"] == 0

@@ -4,15 +4,17 @@ A region fit (:mod:`.fit`) finds one material for many pixels; a map needs one f
 pixel (or each N x N patch).  All of a chunk's pixels share one light-cache trace and one
 basis pass (:meth:`~skyfit_mi.render.fit_model.WardModel.basis` on the roughness grid
 SIGMA_GRID: one Dr.Jit launch per roughness for all pixels), and the global method's grid
-(:func:`~.methods.global_search.grid_chi2` with ``per_pixel``) scores every (sigma_alpha,
-rho_s) point of every pixel with its linear parameters (R, or C per channel) in closed form,
-vectorised over pixels.  There is no per-pixel nonlinear polish: the estimate is the grid's
+scores every (sigma_alpha, rho_s) point of every pixel with its linear parameters (R, or C
+per channel) in closed form, in one double-precision Dr.Jit kernel per block of GRID_BLOCK
+fits (:func:`~.methods.global_search.grid_chi2_device`, equal to the NumPy grid of region
+fits).  There is no per-pixel nonlinear polish: the estimate is the grid's
 best point, the linearised chi-square of the region fit's grid (same models, normalisations,
 the sensor response inverted, values within 3 sigma of saturation left out as the region
 grid does), which limits sigma_alpha to the grid's spacing (8% steps) and rho_s to 0.01.
 
-The light is cached with fewer samples than a region fit's (MAP_CACHE; the sky's integrals at
-one position per pixel, :func:`~skyfit_mi.render.light_cache.build_light_cache`), and the
+The light is cached with fewer samples than a region fit's (MAP_CACHE; the sky's integrals
+through each pixel's centre, interpolated between anchors every SKY_SPACING pixels where that
+is accurate, :func:`~skyfit_mi.render.light_cache.build_light_cache`), and the
 cache's own Monte Carlo error is measured per pixel from its two halves (each fitted alike)
 and added to the intervals in quadrature.
 
@@ -29,11 +31,17 @@ import numpy as np
 from ..errors import SkyfitError
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
-                                    linear_quadratics, near_saturation)
+                                    grid_chi2_device, linear_curvature, near_saturation)
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
 #: fit's, so that a chunk of pixels fits in memory (about 0.3 MB per pixel and frame set of 13).
 MAP_CACHE = (8, 64)
+#: Pixels between the anchors at which a map's light cache integrates the sky; pixels between
+#: them interpolate where that is accurate (:func:`~skyfit_mi.render.light_cache.build_light_cache`).
+SKY_SPACING = 4
+#: Fits whose grids are searched at once: bounds the grids' memory (about 1 MB a fit) whatever
+#: the chunk's size, and keeps their arrays small enough to stay in the processor's caches.
+GRID_BLOCK = 64
 #: Warning bits of a map pixel.
 WARNINGS = {"misfit": 1, "sigma_alpha undetermined": 2, "rho_s undetermined": 4,
             "reflectance undetermined": 8, "few values": 16, "off the material": 32,
@@ -92,7 +100,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     """
     from ..pipeline.manifest import frame_sky, load_manifest
     from ..render import setup
-    from ..render.fit_model import PARAMETERS, WardModel, bounds, reflectances
+    from ..render.fit_model import PARAMETERS, WardModel, bounds
     from ..render.light_cache import build_light_cache
 
     pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
@@ -107,7 +115,8 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     cache = build_light_cache(scene, mi.traverse(scene), skies, pixels, materials,
                               positions=positions, directions=directions, seed=seed,
                               max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
-                              normalisation=normalisation, sky_positions=1)
+                              normalisation=normalisation, sky_positions=1,
+                              sky_spacing=SKY_SPACING)
     wm = WardModel(cache, model, normalisation)
     y, w = _linearise(obs, usable_values(obs, cache.hit))
     saturated = np.bincount(groups, weights=(near_saturation(obs) & np.isfinite(obs.sigma))
@@ -120,21 +129,11 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
         bases = [(_stack_groups(D, groups, n), np.stack([_stack_groups(g, groups, n) for g in G]))
                  for D, G in bases]
     names = PARAMETERS[model]
-    search, half_a, half_b = (_grid_search(model, names, y, w, D, G) for D, G in bases)
-    # the chi^2 the cache's own noise adds at each fit: its halves' model values differ by
-    # twice the whole's Monte Carlo error over
-    rd, sp = (np.array(v) for v in zip(*(reflectances(model, t)[:2] for t in search["theta"])))
-    cols = np.arange(len(rd))
-    La, Lb = (rd[:, None] * D + sp[:, None] * G[search["sigma_index"], cols]
-              for D, G in bases[1:])
-    noise = np.sum(w * ((La - Lb) / 2.0) ** 2, axis=(1, 2))
-    lo, hi = _grid_intervals(model, names, y, w, *bases[0], search, noise)
-    fit = {"pixels": np.asarray(first, dtype=int), "names": list(names),
-           "theta": search["theta"], "lo": lo, "hi": hi, "chi2": search["chi2"],
-           "chi2_grid": search["chi2_grid"], "dof": search["dof"], "model_noise_chi2": noise}
-    # the cache's own error in each parameter, from its halves' fits (as region fits do)
-    sd = np.abs(half_a["theta"] - half_b["theta"]) / 2.0
-    fit["cache_error_sd"] = sd
+    parts = [_fit_block(model, names, y[b], w[b], [(D[b], G[:, b]) for D, G in bases])
+             for b in (slice(i, i + GRID_BLOCK) for i in range(0, n, GRID_BLOCK))]
+    fit = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    fit.update(pixels=np.asarray(first, dtype=int), names=list(names))
+    sd = fit["cache_error_sd"]
     spread = 1.959963984540054 * sd
     theta = fit["theta"]
     lower, upper = bounds(model)
@@ -149,25 +148,51 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     return fit
 
 
+def _fit_block(model, names, y, w, bases):
+    """The grid fits of a block of groups: ``y``, ``w`` (G, T', 3), ``bases`` [(D, G)] of the
+    whole cache and its halves.  A dict of ``theta``, ``lo``, ``hi`` (before the cache's
+    error), ``cache_error_sd``, ``chi2``, ``chi2_grid``, ``dof``, ``model_noise_chi2``."""
+    from ..render.fit_model import reflectances
+
+    search, half_a, half_b = (_grid_search(model, names, y, w, D, G) for D, G in bases)
+    # the chi^2 the cache's own noise adds at each fit: its halves' model values differ by
+    # twice the whole's Monte Carlo error over
+    rd, sp = (np.array(v) for v in zip(*(reflectances(model, t)[:2] for t in search["theta"])))
+    cols = np.arange(len(rd))
+    La, Lb = (rd[:, None] * D + sp[:, None] * G[search["sigma_index"], cols]
+              for D, G in bases[1:])
+    noise = np.sum(w * ((La - Lb) / 2.0) ** 2, axis=(1, 2))
+    lo, hi = _grid_intervals(model, names, y, w, *bases[0], search, noise)
+    # the cache's own error in each parameter, from its halves' fits (as region fits do)
+    return {"theta": search["theta"], "lo": lo, "hi": hi, "chi2": search["chi2"],
+            "chi2_grid": search["chi2_grid"], "dof": search["dof"], "model_noise_chi2": noise,
+            "cache_error_sd": np.abs(half_a["theta"] - half_b["theta"]) / 2.0}
+
+
 def _grid_search(model, names, y, w, D, G):
     """Each group's best point of the grid on linearised data ``y``, weights ``w`` (G, T', 3)
-    and the basis D (G, T', 3), G (K, G, T', 3): a dict of the grid (``chi2`` (K, R, G),
-    ``thetas`` (K, R, G, n)), the best ``theta`` (G, n), its ``chi2_grid``, the refined
-    minimum ``chi2``, ``dof`` and ``sigma_index``."""
+    and the basis D (G, T', 3), G (K, G, T', 3): a dict of the grid (``chi2`` (K, R, G) and
+    the linear parameters ``L`` (K, R, G, groups): none for the 2-parameter model), the best
+    ``theta`` (G, n), its ``chi2_grid``, the refined minimum ``chi2``, ``dof`` and
+    ``sigma_index``.  The 3- and 5-parameter grids run on the device
+    (:func:`~.methods.global_search.grid_chi2_device`)."""
     n_par = len(names)
-    chi2, thetas = grid_chi2(model, y, w, D, G, per_pixel=True)     # (K, R, G), (K, R, G, n)
-    thetas[..., -1] = SIGMA_GRID[:, None, None]
+    if model == "two":
+        chi2, thetas = grid_chi2(model, y, w, D, G, per_pixel=True)
+        L = thetas[..., :0]
+    else:
+        chi2, L = grid_chi2_device(model, y, w, D, G, RHO_GRID)
     K, R, n_groups = chi2.shape
     flat = chi2.reshape(K * R, n_groups)
     best = np.argmin(flat, axis=0)
     cols = np.arange(n_groups)
+    theta = np.concatenate([L.reshape(K * R, n_groups, -1)[best, cols],
+                            RHO_GRID[best % R, None], SIGMA_GRID[best // R, None]], axis=1)
     # the grid's best point lies above the continuous minimum by up to its resolution: on
     # precise data that excess alone would read as misfit, so s^2 and the misfit test take the
     # minimum of a parabola through each profile's best point and its neighbours
     vertex = np.minimum(_vertex(chi2.min(axis=1)), _vertex(chi2.min(axis=0)))
-    return {"grid": chi2, "thetas": thetas,
-            "theta": thetas.reshape(K * R, n_groups, n_par)[best, cols],
-            "chi2_grid": flat[best, cols], "chi2": vertex,
+    return {"grid": chi2, "L": L, "theta": theta, "chi2_grid": flat[best, cols], "chi2": vertex,
             "dof": np.count_nonzero(w > 0, axis=(1, 2)) - n_par, "sigma_index": best // R}
 
 
@@ -175,7 +200,7 @@ def _grid_intervals(model, names, y, w, D, G, search, model_noise):
     """The 95% intervals (lo, hi), each (G, n), of a :func:`_grid_search` (module docstring);
     ``model_noise`` (G,) the chi^2 that the cache's own noise adds (left out of s^2)."""
     n_par = len(names)
-    chi2, thetas, dof = search["grid"], search["thetas"], search["dof"]
+    chi2, L_grid, dof = search["grid"], search["L"], search["dof"]
     K, R, n_groups = chi2.shape
     s2 = np.maximum(1.0, (search["chi2"] - model_noise) / np.maximum(dof, 1))
     chi2_min = search["chi2_grid"]
@@ -196,26 +221,25 @@ def _grid_intervals(model, names, y, w, D, G, search, model_noise):
     lo[:, r] = np.clip(RHO_GRID[np.argmax(j_ok, axis=0)] - half, 0, 1)
     hi[:, r] = np.clip(RHO_GRID[R - 1 - np.argmax(j_ok[::-1], axis=0)] + half, 0, 1)
     if model != "two":
-        # a linear parameter's union of conditional ranges over the 95% set
-        _, _, hh = linear_quadratics(model, y, w, D, G, RHO_GRID, per_pixel=True)
-        L = thetas[..., :-2]                                           # (K, R, G, groups)
-        reach = np.sqrt(np.maximum(thr[None, None, :] - chi2, 0.0)[..., None]
+        # a linear parameter's union of conditional ranges over the 95% set, L +- reach, at
+        # the set's points only (it is a small share of the grid on determined pixels)
+        kk, rr, gg = np.nonzero(ok)
+        L = L_grid[kk, rr, gg]                                         # (n, groups)
+        hh = linear_curvature(model, w, D, G, RHO_GRID[rr], kk, gg)
+        reach = np.sqrt(np.maximum(thr[gg] - chi2[kk, rr, gg], 0.0)[:, None]
                         / np.maximum(hh, 1e-300))
-        inside = ok[..., None]
-        low = np.where(inside, L - reach, np.inf).min(axis=(0, 1))
-        high = np.where(inside, L + reach, -np.inf).max(axis=(0, 1))
+        low = np.full((n_groups, L.shape[1]), np.inf)
+        high = np.full_like(low, -np.inf)
+        np.minimum.at(low, gg, L - reach)
+        np.maximum.at(high, gg, L + reach)
         # the grid's resolution: L halfway to each neighbour of the set (in sigma and rho_s)
         # lies within it too, as half a grid step does for sigma and rho_s themselves
-        for axis in (0, 1):
-            for a, b in ((slice(1, None), slice(None, -1)), (slice(None, -1), slice(1, None))):
-                at = [slice(None)] * 2
-                at[axis] = a
-                nb = [slice(None)] * 2
-                nb[axis] = b
-                mid = 0.5 * (L[tuple(at)] + L[tuple(nb)])
-                ins = inside[tuple(at)]
-                low = np.minimum(low, np.where(ins, mid, np.inf).min(axis=(0, 1)))
-                high = np.maximum(high, np.where(ins, mid, -np.inf).max(axis=(0, 1)))
+        for dk, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            k2, r2 = kk + dk, rr + dj
+            on = (k2 >= 0) & (k2 < K) & (r2 >= 0) & (r2 < R)
+            mid = 0.5 * (L[on] + L_grid[k2[on], r2[on], gg[on]])
+            np.minimum.at(low, gg[on], mid)
+            np.maximum.at(high, gg[on], mid)
         lo[:, :-2], hi[:, :-2] = np.clip(low, 0, 1), np.clip(high, 0, 1)
     return lo, hi
 

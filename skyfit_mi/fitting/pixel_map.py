@@ -27,13 +27,20 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..files import ensure_dir, write_json
-from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, fit_pixels, patch_groups
+from .pixel_fit import (MAP_CACHE, SKY_SPACING, UNDETERMINED, WARNINGS, fit_pixels,
+                        patch_groups)
 
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
-#: Fits (pixels, or patches) per chunk: a chunk's peak memory is about 2.5 MB per fit
-#: (docs/BENCHMARKS.md), so 256 keep a worker under 1 GB.
-CHUNK = 256
+#: Fits (pixels, or patches) per chunk: a chunk's peak memory is about 0.8 MB per fit plus
+#: 0.25 GB (docs/BENCHMARKS.md), so 1024 keep a worker near 1.1 GB; a chunk's fixed cost
+#: (the scene, its skies, the kernels' tracing: about 1 s) is a tenth of its time.
+CHUNK = 1024
+#: How :func:`plan_chunks` lays fits into chunks (recorded, so that a store laid out otherwise
+#: is not resumed).
+LAYOUT = "tiles"
+#: The Dask setting that gives workers MALLOC_TRIM_THRESHOLD_ (unset for the local cluster).
+TRIM = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
 #: Seconds to wait for a given scheduler to answer.
 SCHEDULER_TIMEOUT_S = 10
 
@@ -42,14 +49,19 @@ def plan_chunks(regions, patch, chunk):
     """The map's chunks: dicts of ``pixels`` (P, 2), ``materials`` (P,) the material each
     shows, and ``groups`` (P,) each pixel's fit (0..G-1 within the chunk; a ``patch`` x
     ``patch`` block of one region shares one), at most ``chunk`` fits per chunk, whole
-    groups only; regions follow each other, so one chunk may hold several materials."""
+    groups only; regions follow each other, so one chunk may hold several materials.  Within a
+    region the fits go tile by tile (square tiles of about ``chunk`` fits), so that a chunk is
+    a compact piece of the image whose pixels share the sky integrals' anchors
+    (:data:`~.pixel_fit.SKY_SPACING`)."""
     px, mats, keys = [], [], []
+    side = int(patch) * max(1, int(np.ceil(np.sqrt(int(chunk)))))
     for r, (name, pixels) in enumerate(regions):
         pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
-        g, _ = patch_groups(pixels, patch)
+        g, corners = patch_groups(pixels, patch)
+        tile = corners[g] // side
         px.append(pixels)
         mats += [name] * len(pixels)
-        keys.append(np.stack([np.full(len(g), r), g], axis=1))
+        keys.append(np.stack([np.full(len(g), r), tile[:, 1], tile[:, 0], g], axis=1))
     px, mats, keys = np.concatenate(px), np.array(mats, dtype=object), np.concatenate(keys)
     fits, index = np.unique(keys, axis=0, return_inverse=True)
     index = index.ravel()
@@ -69,6 +81,7 @@ def _settings(doc, regions, model, normalisation, seed, patch, chunk, cache):
     digest = [(n, np.asarray(p).tolist()) for n, p in regions]
     return {"sequence_run_id": doc.get("run_id"), "model": model, "normalisation": normalisation,
             "seed": int(seed), "patch": int(patch), "chunk": int(chunk), "cache": list(cache),
+            "sky_spacing": SKY_SPACING, "layout": LAYOUT,
             "regions": hashlib.sha256(json.dumps(digest).encode()).hexdigest()[:16]}
 
 
@@ -128,9 +141,15 @@ def _client(workers, scheduler, memory_per_worker):
                               f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__});"
                               " start it (`dask scheduler`), check the address, or leave out "
                               "--scheduler for a cluster on this machine.") from None
-    cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
-                           memory_limit=memory_per_worker, dashboard_address=None,
-                           silence_logs=40)
+    import dask
+
+    # Dask's workers start with MALLOC_TRIM_THRESHOLD_ set, which turns off glibc's dynamic
+    # mmap threshold: every large temporary array is then mapped and faulted in afresh, and a
+    # chunk took 1.4x as long (docs/BENCHMARKS.md); the variable is left unset here
+    with dask.config.set({f"{TRIM}": None}):
+        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
+                               memory_limit=memory_per_worker, dashboard_address=None,
+                               silence_logs=40)
     return Client(cluster), cluster
 
 

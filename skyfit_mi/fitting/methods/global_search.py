@@ -19,6 +19,7 @@ from any start.  The grid also gives the profile chi-square of sigma_alpha and r
 import numpy as np
 
 from ...physics.ward import METAL_THRESHOLD
+from ...render.linear_grid import grid_on_device, linear_form
 from .levenberg_marquardt import polish
 
 #: sigma_alpha grid: the ideal mirror, then log-spaced.
@@ -93,9 +94,16 @@ def grid_chi2(model, y, w, D, G, rho=RHO_GRID, per_pixel=False):
         chi2 = A - 2 * r * B[:, None] + r ** 2 * C[:, None]
         thetas = np.stack([np.broadcast_to(r, chi2.shape), np.zeros_like(chi2)], axis=-1)
         return chi2, thetas
-    L, chi2 = solve_quadratics(*linear_quadratics(model, y, w, D, G, rho, per_pixel))
-    rho_col = np.broadcast_to(_along_rho(rho, L.ndim - 3)[..., None], L.shape[:-1] + (1,))
-    thetas = np.concatenate([L, rho_col, np.zeros(L.shape[:-1] + (1,))], axis=-1)
+    chi2 = thetas = None
+    rho = np.asarray(rho, dtype=float)
+    for idx, zz, yh, hh in _quadratic_parts(model, y, w, D, G, rho, per_pixel):
+        L, c = solve_quadratics(zz, yh, hh)
+        if thetas is None:
+            chi2 = np.empty(c.shape[:1] + (len(rho),) + c.shape[2:])
+            thetas = np.zeros(chi2.shape + (L.shape[-1] + 2,))
+        chi2[:, idx] = c
+        thetas[:, idx, ..., :-2] = L
+        thetas[:, idx, ..., -2] = _along_rho(rho[idx], c.ndim - 2)
     return chi2, thetas
 
 
@@ -103,7 +111,7 @@ def solve_quadratics(zz, yh, hh):
     """The bounded minimum of chi^2 = sum over groups of zz - 2 L yh + L^2 hh: each group's
     linear parameter L in [0, 1] (R, or C per channel; last axis) and the chi^2 there."""
     L = np.clip(yh / np.maximum(hh, 1e-300), 0.0, 1.0)
-    return L, np.sum(zz - 2 * L * yh + L**2 * hh, axis=-1)
+    return L, np.sum(zz - L * (2 * yh - L * hh), axis=-1)
 
 
 def _along_rho(rho, extra):
@@ -118,23 +126,73 @@ def linear_quadratics(model, y, w, D, G, rho, per_pixel=False):
     per channel): chi^2 = sum over groups of zz - 2 L yh + L^2 hh.  Returns (zz, yh, hh),
     each (K, R, groups) with 1 group (R) or 3 (C_r, C_g, C_b); (K, R, P, groups) with
     ``per_pixel``."""
+    out = None
+    for idx, *parts in _quadratic_parts(model, y, w, D, G, rho, per_pixel):
+        if out is None:
+            shape = parts[2].shape[:1] + (len(rho),) + parts[2].shape[2:]
+            out = [np.empty(shape) for _ in parts]
+        for o, v in zip(out, parts):
+            o[:, idx] = v
+    return tuple(out)
+
+
+def linear_curvature(model, w, D, G, rho, k, p):
+    """hh of :func:`linear_quadratics` (per pixel) at listed grid points only: rho_s values
+    ``rho`` (n,), roughness indices ``k`` into G's first axis and pixels ``p``; (n, groups).
+    A linear parameter's chi^2 rises as hh (L - L_best)^2 from its best, so this gives its
+    conditional range at a few points without the whole grid."""
+    keep = "p" if model == "achromatic" else "pc"
+    Dw = D * w
+    a = np.einsum(f"ptc,ptc->{keep}", Dw, D)[p]
+    b = np.einsum(f"ptc,kptc->k{keep}", Dw, G)[k, p]
+    c = np.einsum(f"ptc,kptc->k{keep}", w, G * G)[k, p]
+    r2 = np.asarray(rho, dtype=float).reshape((-1,) + (1,) * (np.ndim(a) - 1))
+    metal = (r2 >= METAL_THRESHOLD) | (model == "achromatic")
+    hh = np.where(metal, *(linear_form(m, r2, a, b, c, 0, 0, 0)[2] for m in (True, False)))
+    return hh[:, None] if model == "achromatic" else hh
+
+
+def _quadratic_parts(model, y, w, D, G, rho, per_pixel):
+    """:func:`linear_quadratics` in parts: (a slice of ``rho``, zz, yh, hh) for the rho_s
+    values of each form (a colour model's plastics, then its metals; the achromatic model has
+    one form), each part computed only for its own rho_s (the grid's costliest step);
+    ``rho`` ascending."""
     p = "p" if per_pixel else ""
     # h = (1 - rho) D + rho G: (K, R, P, T, 3) built lazily by channel sums
     a, b, c, yd, yg, yy = _weighted_sums(y, w, D, G, p if model == "achromatic" else p + "c")
-    r2 = _along_rho(rho, np.ndim(a))
-    r1 = 1 - r2
     b, c, yg = b[:, None], c[:, None], yg[:, None]
-    hh = r1**2 * a + 2 * r1 * r2 * b + r2**2 * c
-    yh = r1 * yd + r2 * yg
-    if model == "achromatic":
-        return np.broadcast_to(yy, hh.shape)[..., None], yh[..., None], hh[..., None]
-    # colour, per channel: metal h = r1 D + r2 G, L = C h (hh, yh above); plastic
-    # L = C r1 D + r2 G  ->  residual (y - r2 G) - C r1 D
-    metal = r2 >= METAL_THRESHOLD
-    hh_p = r1**2 * a * np.ones_like(hh)
-    yh_p = r1 * (yd - r2 * b)
-    zz_p = yy - 2 * r2 * yg + r2**2 * c                           # |y - r2 G|^2
-    return (np.where(metal, yy, zz_p), np.where(metal, yh, yh_p), np.where(metal, hh, hh_p))
+    split = 0 if model == "achromatic" else int(np.searchsorted(_ascending(rho),
+                                                                METAL_THRESHOLD))
+    for form, idx in ((False, slice(0, split)), (True, slice(split, len(rho)))):
+        if idx.stop == idx.start:
+            continue
+        r2 = _along_rho(np.asarray(rho, dtype=float)[idx], np.ndim(a))
+        zz, yh, hh = linear_form(form, r2, a, b, c, yd, yg, yy)
+        zz, hh = (np.broadcast_to(v, yh.shape) for v in (zz, hh))
+        if model == "achromatic":
+            zz, yh, hh = zz[..., None], yh[..., None], hh[..., None]
+        yield idx, zz, yh, hh
+
+
+def _ascending(rho):
+    """``rho`` as floats; ValueError unless ascending."""
+    rho = np.asarray(rho, dtype=float)
+    if np.any(np.diff(rho) < 0):
+        raise ValueError("the rho_s grid must be ascending")
+    return rho
+
+
+def grid_chi2_device(model, y, w, D, G, rho=RHO_GRID):
+    """Every pixel's linearised chi^2 and linear parameters on the (sigma, rho_s) grid, as
+    :func:`grid_chi2` with ``per_pixel`` (3- and 5-parameter models), on the current Mitsuba
+    variant's device (:func:`~skyfit_mi.render.linear_grid.grid_on_device`): only the
+    weighted sums go in, and the grid comes back once.  Returns chi2 (K, R, P) and the linear
+    parameters L (K, R, P, groups)."""
+    achromatic = model == "achromatic"
+    sums = _weighted_sums(y, w, D, G, "p" if achromatic else "pc")
+    if achromatic:
+        sums = tuple(v[..., None] for v in sums)
+    return grid_on_device(sums, _ascending(rho), achromatic)
 
 
 def global_search(problem, start, lower, upper, candidates=3, profile=True, grid_basis=None, **_):
