@@ -45,13 +45,20 @@ GRID_BLOCK = 64
 #: Warning bits of a map pixel.
 WARNINGS = {"misfit": 1, "sigma_alpha undetermined": 2, "rho_s undetermined": 4,
             "reflectance undetermined": 8, "few values": 16, "off the material": 32,
-            "saturated values left out": 64}
+            "saturated values left out": 64, "saturated values contradicted": 128}
 #: The bits that mean "a parameter is not determined": such a pixel is not a confident value.
-#: Saturated values among them: the map's linear grid leaves them out (a region fit's polish
-#: takes them as censored), so a highlight that saturated can mislead a pixel's fit.
+#: The map's linear grid leaves values near saturation out (a region fit's polish takes them
+#: as censored: they say only that the radiance reached the top code); a fit whose model
+#: falls short of such a value (by more than SATURATION_MARGIN sigma) contradicts it, and a
+#: highlight that saturated then misleads the pixel's fit.  A fit that reaches them agrees
+#: with them (their censored terms are zero there), and its intervals, without them, are
+#: if anything wide: it stays determined, bit 64 saying values were left out.
 UNDETERMINED = (WARNINGS["sigma_alpha undetermined"] | WARNINGS["rho_s undetermined"]
                 | WARNINGS["reflectance undetermined"] | WARNINGS["off the material"]
-                | WARNINGS["saturated values left out"])
+                | WARNINGS["saturated values contradicted"])
+#: How far [sigma] a fit's model may fall below a saturated value it left out before it
+#: contradicts it (one-sided, about 0.1%).
+SATURATION_MARGIN = 3.0
 #: A parameter is undetermined when its 95% interval spans more than this share of its range
 #: (reflectances) or this factor in roughness.
 SPAN_UNDETERMINED, SIGMA_FACTOR_UNDETERMINED = 0.5, 4.0
@@ -95,7 +102,8 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     ``variant``: the Mitsuba variant (default the sequence's).
     Returns a dict of arrays over the G fits: ``pixels`` (G, 2) each fit's first pixel,
     ``theta``, ``lo``, ``hi``, ``cache_error_sd`` (G, n) (95% intervals), ``chi2``, ``dof``,
-    ``model_noise_chi2``, ``warnings`` (G,), and ``names`` the parameters.  Everything is
+    ``model_noise_chi2``, ``warnings``, ``sigma_index`` (into SIGMA_GRID) (G,), and ``names``
+    the parameters.  Everything is
     rebuilt from the manifest, so a worker in another process can run it.
     """
     from ..pipeline.manifest import frame_sky, load_manifest
@@ -118,10 +126,11 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
                               normalisation=normalisation, sky_positions=1,
                               sky_spacing=SKY_SPACING)
     wm = WardModel(cache, model, normalisation)
-    y, w = _linearise(obs, usable_values(obs, cache.hit))
-    saturated = np.bincount(groups, weights=(near_saturation(obs) & np.isfinite(obs.sigma))
-                            .any(axis=(1, 2)), minlength=n) > 0
+    usable = usable_values(obs, cache.hit)
+    y, w = _linearise(obs, usable)
+    saturated = usable & near_saturation(obs)
     bases = wm.basis(SIGMA_GRID, halves=True)            # the whole cache, and its two halves
+    whole = bases[0]
     hit = np.bincount(groups, weights=cache.hit.all(axis=1), minlength=n) > 0
     first = pixels[np.unique(groups, return_index=True)[1]]
     if n < len(pixels):
@@ -139,13 +148,35 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)
+    left_out = np.bincount(groups, weights=saturated.any(axis=(1, 2)), minlength=n) > 0
+    contradicted = np.bincount(groups, weights=_contradicts(model, obs, usable, saturated, whole,
+                                                            fit, groups), minlength=n) > 0
     fit["warnings"] = _flags(model, names, fit, hit) \
-        | np.where(saturated, WARNINGS["saturated values left out"], 0)
+        | np.where(left_out, WARNINGS["saturated values left out"], 0) \
+        | np.where(contradicted, WARNINGS["saturated values contradicted"], 0)
     for k in ("theta", "lo", "hi", "cache_error_sd"):
         fit[k][~hit] = np.nan
     for k in ("chi2", "chi2_grid"):
         fit[k] = np.where(hit, fit[k], np.nan)
     return fit
+
+
+def _contradicts(model, obs, usable, saturated, basis, fit, groups):
+    """Which pixels (P,) hold a value near saturation (``saturated``, left out of the grid)
+    that their group's fit falls short of by more than SATURATION_MARGIN sigma: the censored
+    term the value would add is then not zero.  ``basis`` (D, G) per pixel on SIGMA_GRID."""
+    from ..render.fit_model import reflectances
+
+    if not saturated.any():
+        return np.zeros(len(groups), bool)
+    y, w = _linearise(obs, usable, leave_out_saturated=False)
+    rd, sp = (np.array(v) for v in zip(*(reflectances(model, t)[:2] for t in fit["theta"])))
+    D, G = basis
+    px = np.arange(len(groups))
+    g = groups
+    model_values = rd[g][:, None] * D + sp[g][:, None] * G[fit["sigma_index"][g], px]
+    short = model_values < y - SATURATION_MARGIN / np.sqrt(np.maximum(w, 1e-300))
+    return (saturated & short).any(axis=(1, 2))
 
 
 def _fit_block(model, names, y, w, bases):
@@ -166,7 +197,8 @@ def _fit_block(model, names, y, w, bases):
     # the cache's own error in each parameter, from its halves' fits (as region fits do)
     return {"theta": search["theta"], "lo": lo, "hi": hi, "chi2": search["chi2"],
             "chi2_grid": search["chi2_grid"], "dof": search["dof"], "model_noise_chi2": noise,
-            "cache_error_sd": np.abs(half_a["theta"] - half_b["theta"]) / 2.0}
+            "cache_error_sd": np.abs(half_a["theta"] - half_b["theta"]) / 2.0,
+            "sigma_index": search["sigma_index"]}
 
 
 def _grid_search(model, names, y, w, D, G):

@@ -81,7 +81,7 @@ def _settings(doc, regions, model, normalisation, seed, patch, chunk, cache):
     digest = [(n, np.asarray(p).tolist()) for n, p in regions]
     return {"sequence_run_id": doc.get("run_id"), "model": model, "normalisation": normalisation,
             "seed": int(seed), "patch": int(patch), "chunk": int(chunk), "cache": list(cache),
-            "sky_spacing": SKY_SPACING, "layout": LAYOUT,
+            "sky_spacing": SKY_SPACING, "layout": LAYOUT, "undetermined_bits": UNDETERMINED,
             "regions": hashlib.sha256(json.dumps(digest).encode()).hexdigest()[:16]}
 
 

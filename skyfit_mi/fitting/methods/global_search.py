@@ -37,9 +37,10 @@ SATURATION_BAND = 3.0
 POLISH_TOLERANCE = 1e-6
 
 
-def _linearise(obs, mask):
+def _linearise(obs, mask, leave_out_saturated=True):
     """Observed radiance-space values and weights of observations ``obs`` where ``mask``
-    (P, T, 3; a problem's usable values): y_lin (P,T,3), w = 1/sigma_lin^2 (0 = unused)."""
+    (P, T, 3; a problem's usable values): y_lin (P,T,3), w = 1/sigma_lin^2 (0 = unused);
+    values near saturation get weight 0 unless ``leave_out_saturated`` is False."""
     sensor = obs.sensor
     v = np.clip(obs.y / sensor.max_code, 0.0, 1.0)
     if sensor.response == "linear":
@@ -58,7 +59,9 @@ def _linearise(obs, mask):
     # or a 1-sigma band still ranks a narrower lobe first in a third to a half of the
     # replicates; 3 sigma in none of 20). A value at code 0 stays: reading it as zero errs by
     # less than its sigma.
-    w = np.where(mask & ~near_saturation(obs), (slope / obs.sigma) ** 2, 0.0)
+    if leave_out_saturated:
+        mask = mask & ~near_saturation(obs)
+    w = np.where(mask, (slope / obs.sigma) ** 2, 0.0)
     return y, w
 
 
