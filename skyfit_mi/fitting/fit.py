@@ -65,10 +65,14 @@ class FitSession:
     frames : manifest frame indices to use (None: every rendered frame), e.g. to hold some
         out for a prediction test
     variant : the Mitsuba variant to fit with (default the sequence's), e.g. 'cuda_ad_rgb'
+    sky_positions : None, or k: the sky's integrals at k of each pixel's positions
+        (:func:`~skyfit_mi.render.light_cache.build_light_cache`), for predictions of region
+        means, whose pixels average out what a pixel's k positions leave
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
-                 positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None):
+                 positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None,
+                 sky_positions=None):
         from ..render import setup
         from ..render.fit_model import BY_COUNT, PARAMETERS, bounds, check_fit_normalisation
 
@@ -99,7 +103,8 @@ class FitSession:
         self.truth = mats[name] if doc.get("source", "render") in RENDERED_SOURCES else None
         self.cache_settings = {"positions": POSITIONS if positions is None else int(positions),
                                "directions": int(directions), "seed": seed,
-                               "sized": "from the data" if positions is None else "given"}
+                               "sized": "from the data" if positions is None else "given",
+                               "sky_positions": sky_positions}
         mi = setup(variant or doc["render"]["variant"])
         self.scene = mi.load_string(doc["scene"]["xml"])
         self.params = mi.traverse(self.scene)
@@ -134,7 +139,8 @@ class FitSession:
                                        self.name, positions=c["positions"],
                                        directions=c["directions"], seed=c["seed"],
                                        max_depth=max(1, int(self.doc["render"]["max_depth"]) - 1),
-                                       normalisation=self.normalisation)
+                                       normalisation=self.normalisation,
+                                       sky_positions=c["sky_positions"])
         if not self.cache.hit.any():
             raise SkyfitError(f"none of the region's pixels shows material {self.name!r}; check "
                               "the region.")
