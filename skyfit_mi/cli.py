@@ -370,8 +370,9 @@ def build_parser():
                      "'Europe/London', or '+01:00')")
     ing.add_argument("--site", type=_numbers, metavar="LAT,LON[,ALT]",
                      help="site in degrees (north, east) and metres, overriding the spec's")
-    ing.add_argument("--response", choices=("srgb", "gamma", "linear"),
-                     help="the encoding to invert (default: the spec's [sensor], else the files')")
+    ing.add_argument("--response", choices=("srgb", "gamma", "linear", "fit"),
+                     help="the encoding to invert (default: the spec's [sensor], else the "
+                     "files'); fit: chosen and fitted from the --calibrate patches")
     ing.add_argument("--gamma", type=float, help="exponent of a gamma response")
     ing.add_argument("--exposure", type=float, help="absolute exposure of the first frame "
                      "[sr m^2 W^-1] (1 / the radiance at full scale)")

@@ -129,6 +129,75 @@ def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, ingested):
             f"{k}: interval {hi - lo:.4g} wider than 1.5x the clean fit's {chi - clo:.4g}"
 
 
+def test_response_fitted_from_grey_patches(tmp_path):
+    """--response fit on grey steps: the example's board with its dark paint a Lambertian of
+    0.05 beside the grey card's 0.18.  On sRGB photographs the sRGB family is chosen; on
+    photographs encoded with gamma 1.8 the gamma family is, its exponent within 0.05 of 1.8,
+    and the frames' exposures are the true ones within 1% (sRGB) or 3% (the fitted gamma's
+    error moves them; photos.json); with the EXIF
+    exposures gone (every frame calibrated on its own) the same gamma; every family's error is
+    recorded; without patches, or with too little span, it is refused."""
+    from PIL import Image
+
+    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.sequence import render_sequence
+
+    xml = (SCENES_DIR / "photo_board.xml").read_text()
+    paint = xml.index('<bsdf type="diffuse" id="board_paint">')
+    end = xml.index("</bsdf>", paint) + len("</bsdf>")
+    xml = xml[:paint] + ('<bsdf type="ward" id="board_paint"><string name="model" value="raw"/>'
+                         '<rgb name="rho_d" value="0.05, 0.05, 0.05"/>'
+                         '<rgb name="rho_s" value="0, 0, 0"/>'
+                         '<float name="sigma_alpha" value="0.1"/></bsdf>') + xml[end:]
+    (tmp_path / "steps.xml").write_text(xml)
+    spec_path, raw = _small_spec(tmp_path)
+    raw["scene"] = {"file": str(tmp_path / "steps.xml")}
+    raw["render"]["spp"] = 32
+    spec_path.write_text(_toml(raw))
+    render_sequence(validate_spec(raw, tmp_path), tmp_path / "truth", progress=False, **QUIET)
+    steps = {"grey_card": (0.18,) * 3, "board_paint": (0.05,) * 3}
+    day = {"spec": spec_path}
+
+    def run(photos, out, **kw):
+        doc = _ingest({**day, "photos": photos}, tmp_path / out, calibrate=steps,
+                      vignetting="cos4", response="fit", **kw)
+        return doc, doc["ingest"]["calibration"]
+
+    for response, gamma in (("srgb", 2.2), ("gamma", 1.8)):
+        photos = tmp_path / f"photos_{response}"
+        photograph_day(tmp_path / "truth", photos, seed=6, response=response, gamma=gamma,
+                       quality=100)
+        doc, cal = run(photos, response)
+        fit = cal["response_fit"]
+        print(response, fit["families"])
+        assert fit["chosen"] == response and doc["sensor"]["response"] == response, fit
+        assert set(fit["families"]) == {"linear", "srgb", "gamma"}
+        assert fit["families"]["linear"]["rms_rel"] > 5 * fit["families"][response]["rms_rel"]
+        sim = json.loads((photos / "photos.json").read_text())
+        got = np.array([f["exposure"]["exposure"] for f in doc["frames"]])
+        # a fitted gamma's error moves the exposure that matches the patches' codes with it
+        # (measured: gamma 1.789, exposures 1.5% high; sRGB, no shape parameter: 0.04%)
+        np.testing.assert_allclose(got, [f["exposure_sr_m2_W"] for f in sim["frames"]],
+                                   rtol=0.01 if response == "srgb" else 0.03)
+    assert abs(doc["sensor"]["gamma"] - 1.8) < 0.05
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    for p in sorted(photos.glob("*.jpg")):        # EXIF gone: times from a CSV
+        Image.open(p).save(bare / p.name, quality=100, subsampling=0)
+    times = tmp_path / "times.csv"
+    times.write_text("file,time\n" + "".join(f"{f['file']},{f['time']}\n"
+                                             for f in sim["frames"]))
+    doc, cal = run(bare, "bare_seq", times_csv=times)
+    assert cal["per_frame"] and cal["response_fit"]["chosen"] == "gamma"
+    assert abs(doc["sensor"]["gamma"] - 1.8) < 0.05
+    with pytest.raises(SkyfitError, match="--response fit needs patches"):
+        _ingest({**day, "photos": photos}, tmp_path / "none", response="fit", exposure=1.0)
+    with pytest.raises(SkyfitError, match="span a factor"):       # one patch, no EXIF
+        _ingest({**day, "photos": bare}, tmp_path / "one", response="fit", times_csv=times,
+                calibrate={"grey_card": (0.18,) * 3})
+    assert not (tmp_path / "none").exists() and not (tmp_path / "one").exists()
+
+
 @pytest.mark.slow
 def test_a_coarse_jpeg_widens_the_intervals_but_keeps_the_truth(day, tmp_path):
     """Quality 90: its quantisation (from the file's tables) enters sigma, so the intervals

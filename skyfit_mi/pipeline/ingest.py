@@ -12,7 +12,9 @@ sequences use:
   file's 0-65535; floating-point frames (EXR, HDR) are put on a linear 16-bit scale (one
   factor for the day, recorded).  Codes at 0 or the top are censored in the fit, as for
   synthetic frames; NaN values are masked (sigma infinite) and counted;
-* linearisation: the response (``srgb``, ``gamma``, ``linear``) inverts the encoding;
+* linearisation: the response (``srgb``, ``gamma``, ``linear``) inverts the encoding, or is
+  **fitted from the calibration patches** (``--response fit``: the family and gamma whose
+  codes match the patches' rendered radiance, grey steps as the thesis's IT8 target);
 * exposure: relative from EXIF (t ISO / N^2, per frame) when every frame has it, and an
   absolute scale [sr m^2 W^-1] given (``--exposure``, for the first frame) or **fitted from
   patches of known reflectance**: scene materials named as grey Lambertian references
@@ -49,6 +51,13 @@ from .spec import SpecError, read_spec, validate_spec
 FLOAT_HEADROOM = 0.9
 #: Level bins and the least pixels per bin of the noise estimate.
 NOISE_BINS, NOISE_MIN_PIXELS = 16, 200
+#: Responses ``--response fit`` chooses among (:func:`fit_response`), the gamma it accepts,
+#: the least span of the patches' signals at one exposure it needs, and the rms relative
+#: error of the patches' codes beyond which it warns that no family describes them.
+RESPONSE_FAMILIES = ("linear", "srgb", "gamma")
+GAMMA_RANGE = (1.0, 4.0)
+RESPONSE_SPAN_MIN = 2.0
+RESPONSE_RMS_WARN = 0.05
 
 
 # ---- the sensor ------------------------------------------------------------------------
@@ -164,15 +173,11 @@ def _calibration_spec(raw, calibrate, base_dir):
     return validate_spec(raw, base_dir)
 
 
-def calibrate_exposure(spec, photos, values, sensor, falloff, rel, calibrate, log):
-    """Per-frame, per-channel exposure [sr m^2 W^-1] (F, 3) from the calibration materials.
-
-    Each material's pixels (away from its edges) are rendered under each frame's sky as a
-    Lambertian of its known reflectance; exposure = median over pixels of the observed
-    linear signal / (rendered radiance x falloff).  With EXIF exposures ``rel`` the day
-    shares one scale per channel (the median over frames of exposure / rel), and the
-    frames' spread about it is reported.
-    """
+def patch_samples(spec, values, falloff, calibrate):
+    """The calibration materials' pixels in every frame of ``values`` (the spec's lit frames):
+    per frame, (codes (n, 3) [DN], L (n, 3) [W m^-2 sr^-1]) of every material's pixels away
+    from its edges, L the pixel's radiance rendered as a Lambertian of its known reflectance
+    under the frame's sky, times the vignetting ``falloff``."""
     from scipy.ndimage import binary_erosion
 
     from ..render.labels import label_image
@@ -180,7 +185,7 @@ def calibrate_exposure(spec, photos, values, sensor, falloff, rel, calibrate, lo
 
     renderer = FrameRenderer(spec)
     labels, ids = label_image(renderer.scene)
-    masks = {}
+    mask = np.zeros(labels.shape, bool)
     for name in calibrate:
         if name not in ids:
             raise SkyfitError(f"--calibrate {name}: the camera sees no material {name!r}; it sees "
@@ -189,22 +194,107 @@ def calibrate_exposure(spec, photos, values, sensor, falloff, rel, calibrate, lo
         if m.sum() < 4:
             raise SkyfitError(f"--calibrate {name}: fewer than 4 pixels of it lie away from its "
                               "edges; frame the reference patch larger.")
-        masks[name] = m
+        mask |= m
     lit = [f for f in spec.frames if not f.skipped]
-    k = np.full((len(lit), 3), np.nan)
-    for i, (f, v) in enumerate(zip(lit, values)):
+    out = []
+    for f, v in zip(lit, values):
         radiance, _ = renderer.render(f)
-        ratios = []
-        for m in masks.values():
-            y = v[m]
-            ok = np.isfinite(y) & (y > 0) & (y < sensor.max_code)
-            s = sensor.linearise(np.where(ok, y, 0.0))
-            L = radiance[m] * falloff[m][:, None]
-            ok &= L > 0
-            ratios.append(np.where(ok, s / np.where(ok, L, 1.0), np.nan))
-        r = np.concatenate(ratios)
+        out.append((v[mask], radiance[mask] * falloff[mask][:, None]))
+    # each material's pixels are kept apart by their label, for the response fit's levels
+    return out, labels[mask]
+
+
+def fit_response(samples, patch, max_code, rel, log):
+    """The sensor response that the calibration patches' codes follow: (response, gamma, info).
+
+    Per frame, patch and channel the median code v (away from 0 and the top) is set against
+    the median rendered radiance L; each family of :data:`RESPONSE_FAMILIES` is fitted with
+    an exposure per channel (times the frames' EXIF exposures ``rel``), or per frame and channel
+    where ``rel`` is None: 'linear' and 'srgb' have no shape parameter, 'gamma' (v = (k L) ^
+    (1 / gamma), thesis eq. 5.11) fits gamma by least squares in log v.  The family whose codes
+    come closest (rms relative error) is chosen; every family's error is in ``info``.
+    SkyfitError unless the patches' signals span RESPONSE_SPAN_MIN at a fixed exposure.
+    """
+    v, L, group, u = [], [], [], []
+    for f, (codes, radiance) in enumerate(samples):
+        for m in np.unique(patch):
+            sel = patch == m
+            for c in range(3):
+                y, x = codes[sel, c], radiance[sel, c]
+                ok = np.isfinite(y) & (y > 0) & (y < max_code) & (x > 0)
+                if ok.sum() < 4:
+                    continue
+                v.append(np.median(y[ok]) / max_code)
+                L.append(np.median(x[ok]))
+                group.append(c if rel is not None else 3 * f + c)
+                u.append(np.log(L[-1]) + (0.0 if rel is None else np.log(rel[f])))
+    v, L, u = np.array(v), np.array(L), np.array(u)
+    group = np.unique(group, return_inverse=True)[1].ravel() if len(v) else np.array([], int)
+    # what sets the shape: the spread of the signals that share an exposure
+    centred = u - (np.bincount(group, weights=u) / np.maximum(np.bincount(group), 1))[group] \
+        if len(v) else u
+    span = float(np.exp(np.ptp(centred))) if len(v) else 1.0
+    if span < RESPONSE_SPAN_MIN:
+        raise SkyfitError(f"--response fit: the calibration patches' signals span a factor of "
+                          f"{span:.2f} at a fixed exposure (at least {RESPONSE_SPAN_MIN:g} is "
+                          "needed); name patches of more reflectances with --calibrate, keep "
+                          "the EXIF exposures, or give --response.")
+    n_groups = int(group.max()) + 1
+    onehot = np.eye(n_groups)[group]
+    fits = {}
+    for family in RESPONSE_FAMILIES:
+        if family == "gamma":
+            coef, *_ = np.linalg.lstsq(np.column_stack([u, onehot]), np.log(v), rcond=None)
+            gamma = 1.0 / coef[0] if coef[0] > 0 else np.inf
+            pred = np.exp(coef[0] * u + onehot @ coef[1:])
+        else:
+            gamma = None
+            sensor = SensorModel(1.0, response=family, bits=16)
+            log_k = np.log(sensor.linearise(v * sensor.max_code)) - u
+            b = np.array([np.median(log_k[group == g]) for g in range(n_groups)])
+            pred = sensor.respond(np.exp(u + b[group]))
+        rms = float(np.sqrt(np.mean((pred / v - 1.0) ** 2)))
+        fits[family] = {"rms_rel": rms, **({"gamma": float(gamma)} if gamma is not None else {})}
+    usable = {k: f for k, f in fits.items()
+              if k != "gamma" or GAMMA_RANGE[0] <= f["gamma"] <= GAMMA_RANGE[1]}
+    best = min(usable, key=lambda k: usable[k]["rms_rel"])
+    gamma = fits["gamma"]["gamma"] if best == "gamma" else 2.2
+    info = {"families": fits, "chosen": best, "values": int(len(v)), "span": span}
+    log(f"response fitted to {len(v)} patch values (signals spanning {span:.1f}x): "
+        + ", ".join(f"{k}{' ' + format(f['gamma'], '.3g') if 'gamma' in f else ''} "
+                    f"{100 * f['rms_rel']:.2g}%" for k, f in fits.items()) + f"; using {best}")
+    if fits[best]["rms_rel"] > RESPONSE_RMS_WARN:
+        log(f"warning: no response family describes the calibration patches well (best, {best}, "
+            f"misses their codes by {100 * fits[best]['rms_rel']:.1f}% rms); check the patches' "
+            "reflectances, their lighting, or give --response")
+        info["warning"] = "no family describes the patches within " \
+            f"{100 * RESPONSE_RMS_WARN:g}% rms"
+    return best, gamma, info
+
+
+def calibrate_exposure(samples, patch, sensor, photos, rel, log):
+    """Per-frame, per-channel exposure [sr m^2 W^-1] (F, 3) from the calibration patches'
+    :func:`patch_samples` (``patch`` each pixel's material label): per patch the median over
+    its pixels of the observed linear signal / (rendered radiance x falloff), the patches
+    weighted by their pixels times their median signal squared (a dark patch's codes are
+    coarse: its ratio's relative error grows as its signal falls).  With EXIF exposures
+    ``rel`` the day shares one scale per channel (the median over frames of exposure / rel),
+    and the frames' spread about it is reported.
+    """
+    k = np.full((len(samples), 3), np.nan)
+    for i, (y, L) in enumerate(samples):
+        ok = np.isfinite(y) & (y > 0) & (y < sensor.max_code) & (L > 0)
+        s = np.where(ok, sensor.linearise(np.where(ok, y, 0.0)), np.nan)
+        r = s / np.where(ok, L, 1.0)
+        num = den = 0.0
         with np.errstate(all="ignore"):
-            k[i] = np.nanmedian(r, axis=0) if np.isfinite(r).any(axis=0).all() else np.nan
+            for m in np.unique(patch):
+                sel = patch == m
+                n = np.sum(ok[sel], axis=0)
+                weight = np.where(n > 0, n * np.nan_to_num(np.nanmedian(s[sel], axis=0)) ** 2, 0)
+                num = num + weight * np.nan_to_num(np.nanmedian(r[sel], axis=0))
+                den = den + weight
+            k[i] = np.where(den > 0, num / den, np.nan)
     good = np.isfinite(k).all(axis=1)
     if not good.any():
         raise SkyfitError("the calibration patches are saturated, black or unlit in every frame; "
@@ -288,7 +378,8 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
     out_dir : the sequence folder to write
     times_csv, name_pattern, tz : the frames' times (see :func:`.photo_times.frame_times`)
     site : (latitude_deg, longitude_deg[, elevation_m]) overriding the spec's [location]
-    response, gamma : the encoding to invert (default: the spec's [sensor], else the files')
+    response, gamma : the encoding to invert (default: the spec's [sensor], else the files'), or
+        response 'fit': chosen and fitted from the ``calibrate`` patches (:func:`fit_response`)
     exposure : absolute exposure of the first frame [sr m^2 W^-1]
     calibrate : {material: (r, g, b) reflectance} of grey Lambertian references in the scene
     vignetting : 'none', 'cos4', or the path of a flat-field image
@@ -329,8 +420,16 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
         log(f"{len(night)} night frame(s) (sun below the horizon) are kept out of the sequence: "
             f"{', '.join(night)}")
 
-    sensor, float_scale = _sensor(photos, response, gamma, raw.get("sensor", {}),
-                                  vignetting == "cos4")
+    fitted = response == "fit"
+    if fitted and not calibrate:
+        raise SkyfitError("--response fit needs patches of known reflectance: name them with "
+                          "--calibrate MATERIAL=REFLECTANCE (two or more reflectances, or one "
+                          "seen at several EXIF exposures).")
+    sensor, float_scale = _sensor(photos, None if fitted else response, gamma,
+                                  raw.get("sensor", {}), vignetting == "cos4")
+    if fitted and float_scale is not None:
+        raise SkyfitError("--response fit: the frames are floating-point (EXR/HDR), which hold "
+                          "linear values; leave out --response.")
     fov = spec.camera["fov_deg"]
     falloff = sensor.falloff(w, h, fov) if sensor.cos4 else np.ones((h, w))
     flat_rec = None
@@ -353,9 +452,18 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
     cal_info = None
     if calibrate:
         cal_spec = _calibration_spec(spec.raw, calibrate, spec.base_dir)
-        per_frame, cal_info = calibrate_exposure(
-            cal_spec, [photos[i] for i in lit], [values[i] for i in lit], sensor, falloff,
-            None if rel is None else rel[lit], calibrate, log)
+        samples, patch = patch_samples(cal_spec, [values[i] for i in lit], falloff, calibrate)
+        rel_lit = None if rel is None else rel[lit]
+        response_info = None
+        if fitted:
+            chosen, g, response_info = fit_response(samples, patch, sensor.max_code, rel_lit,
+                                                    log)
+            sensor = SensorModel(exposure=1.0, response=chosen, gamma=g, bits=sensor.bits,
+                                 cos4=sensor.cos4)
+        per_frame, cal_info = calibrate_exposure(samples, patch, sensor,
+                                                 [photos[i] for i in lit], rel_lit, log)
+        if response_info is not None:
+            cal_info["response_fit"] = response_info
         e0 = float(per_frame[0] @ SRGB_LUMINANCE)
         exposures = {i: per_frame[j] for j, i in enumerate(lit)}
     else:
@@ -381,7 +489,8 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
         f"({noise_info['source']})")
 
     options = {"times_csv": str(times_csv), "name_pattern": name_pattern, "tz": tz,
-               "response": sensor.response, "gamma": sensor.gamma, "exposure": exposure,
+               "response": "fit: " + sensor.response if fitted else sensor.response,
+               "gamma": sensor.gamma, "exposure": exposure,
                "calibrate": calibrate, "vignetting": str(vignetting), "noise": [a, b]}
     run_id = _run_id(paths, spec.raw, options)
     out = Path(out_dir)
