@@ -116,10 +116,11 @@ def test_fit_after_ingest_recovers_the_material(day, ingested):
         assert abs(t - mid) <= 1.5 * half, f"{k}: truth {t} far outside the fit's [{lo}, {hi}]"
 
 
-@pytest.mark.xfail(strict=False, reason="issue 15 open: the noise estimate from the frames "
-                   "doubles the shot noise (0.041 vs 0.02 DN) and chi2/dof is 0.68; on 64 of "
-                   "the sample's pixels C_b's interval is 1.50x the clean fit's (0.00383 vs "
-                   "0.00255), at the goal's edge, so the outcome may flip: not strict")
+@pytest.mark.xfail(strict=False, reason="issue 15 open: with the noise estimated right "
+                   "(read 0.66 vs 0.64 DN^2, shot 0.028 vs 0.02 DN, chi2/dof 0.96) C_g's "
+                   "interval is 1.59x the clean fit's on 64 of the sample's pixels (rho_s "
+                   "1.46x, C_b 0.64x: the photographs' auto-exposure sets the channels' codes "
+                   "apart from the clean frames'); near the goal's edge, so not strict")
 def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, ingested):
     fit, clean = ingested[2], day["clean"]
     for k in ("C_r", "C_g", "C_b", "rho_s"):
@@ -127,6 +128,37 @@ def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, ingested):
         clo, chi = clean["intervals"][k]["95"]
         assert hi - lo <= 1.5 * (chi - clo), \
             f"{k}: interval {hi - lo:.4g} wider than 1.5x the clean fit's {chi - clo:.4g}"
+
+
+def test_noise_estimate_recovers_read_and_shot_noise():
+    """On smooth frames (seven levels under a vignetting-like falloff) with read and shot noise
+    in linear codes, encoded as 8-bit sRGB: the estimate is the truth within 5% (measured:
+    0.636 vs 0.64 DN^2, 0.0202 vs 0.02 DN); binned by the pixel's own value it was 0.07 and
+    0.015, the bins cutting a flat region's noise short."""
+    from skyfit_mi.physics.camera import SensorModel
+    from skyfit_mi.pipeline.ingest import estimate_noise
+
+    rng = np.random.default_rng(0)
+    sensor = SensorModel(1.0, response="srgb", bits=8)
+    yy, xx = np.mgrid[0:64, 0:64] / 64.0
+    frames = []
+    for level in np.linspace(0.05, 0.6, 7):
+        lin = level * 255.0 * (1 - 0.2 * ((xx - 0.5) ** 2 + (yy - 0.5) ** 2))[..., None] \
+            * np.ones(3)
+        lin = lin + rng.normal(size=lin.shape) * np.sqrt(0.64 + 0.02 * lin)
+        frames.append(np.clip(np.rint(255 * sensor.respond(lin / 255.0)), 0, 255))
+    a, b = estimate_noise(frames, sensor)
+    assert abs(a / 0.64 - 1) < 0.05 and abs(b / 0.02 - 1) < 0.05, (a, b)
+
+
+def test_noise_estimate_of_the_photographs_leaves_out_the_scene_edges(ingested):
+    """The example board's photographs (64x44: card, sample and board edges everywhere; JPEG
+    quality 100): the read noise within 10% (measured 0.66 vs 0.64 DN^2) and the shot noise
+    within 50% (0.028 vs 0.02 DN; the JPEG's error, an upper bound from its tables, is
+    subtracted); before the edges were told by the diagonal neighbours it was 0.041."""
+    model = ingested[1]["sensor"]["noise_model"]
+    assert abs(model["read_DN2"] / 0.64 - 1) < 0.1, model
+    assert abs(model["shot_DN"] / 0.02 - 1) < 0.5, model
 
 
 def test_response_fitted_from_grey_patches(tmp_path):
