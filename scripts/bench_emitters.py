@@ -2,7 +2,8 @@
 
 A white Lambertian disc seen by the thesis's east camera (45 degrees), 256x256,
 64 spp, under a clear sky with sun (40 N 0 E, 21 June 10:00 UTC); sunsky gets
-the same sun direction.  For each emitter: median wall time per 64-spp frame
+the same sun direction, and the cie_sky emitter also renders a Perez all-weather sky of
+that sun (DHI 100, DNI 800 W m^-2; issue 15: "an emitter as fast as cie_sky").  For each: median wall time per 64-spp frame
 (renders alternate between the two emitters, after a warm-up), and the
 relative RMSE (RMSE / mean of the reference) against the emitter's own
 4096-spp reference.  Prints a markdown table.
@@ -37,8 +38,12 @@ def main():
     t = datetime(2026, 6, 21, 10, tzinfo=timezone.utc)
     pos = solar_position(t, 40.0, 0.0)
     sky = cie_sky("clear", pos.zenith_deg, pos.azimuth_deg, day=172)
+    from skyfit_mi.physics.perez import perez_sky
+
+    perez = perez_sky(pos.zenith_deg, pos.azimuth_deg, 172, dhi=100.0, dni=800.0).to_sky()
     emitters = {
         "cie_sky": sky_dict(sky),
+        "cie_sky (Perez)": sky_dict(perez),
         "sunsky": {"type": "sunsky", "sun_direction": mi.ScalarVector3f(*map(float, pos.direction()))},
     }
     white = {"type": "diffuse", "reflectance": {"type": "rgb", "value": 1.0}}

@@ -219,6 +219,38 @@ def test_rgbe_round_trip_to_its_precision(tmp_path, suffix):
     assert np.all(np.abs(ph.values - a) <= tol)
 
 
+def test_float_frames_carry_their_header_times(tmp_path):
+    """An OpenEXR's capDate and utcOffset (UTC = local + utcOffset) and a Radiance RGBE's
+    CAPDATE and GMT lines give the frame's time like EXIF's DateTimeOriginal and offset; GMT
+    alone gives UTC; a header without them gives none (the time must come from elsewhere)."""
+    import datetime as dt
+
+    import mitsuba as mi
+
+    from skyfit_mi.pipeline.photo_times import frame_times
+
+    a = RNG.random((4, 6, 3)).astype(np.float32)
+    b = mi.Bitmap(a, mi.Bitmap.PixelFormat.RGB)
+    b.metadata()["capDate"] = "2026:08:16 12:30:00"
+    b.metadata()["utcOffset"] = -3600.0                   # BST: an hour east of Greenwich
+    b.write(str(tmp_path / "a.exr"))
+    hdr = bitmap_write(tmp_path / "b.hdr", a, "RGB").read_bytes()
+    first = hdr.index(b"\n") + 1
+    (tmp_path / "b.hdr").write_bytes(hdr[:first] + b"CAPDATE= 2026:08:16 13:30:00\n"
+                                     b"GMT= 2026:08:16 12:30:00\n" + hdr[first:])
+    (tmp_path / "c.hdr").write_bytes(hdr[:first] + b"GMT= 2026:08:16 14:30:00\n" + hdr[first:])
+    photos = [read_photo(tmp_path / n) for n in ("a.exr", "b.hdr", "c.hdr")]
+    assert photos[0].metadata["offset_time_original"] == "+01:00"
+    np.testing.assert_allclose(photos[1].values, read_photo(
+        bitmap_write(tmp_path / "d.hdr", a, "RGB")).values)       # pixels unchanged
+    times = frame_times([tmp_path / n for n in ("a.exr", "b.hdr", "c.hdr")],
+                        [p.metadata for p in photos])
+    utc = [t.astimezone(dt.timezone.utc).strftime("%H:%M") for t in times]
+    assert utc == ["11:30", "12:30", "14:30"] and times[1].utcoffset() == dt.timedelta(hours=1)
+    assert read_photo(bitmap_write(tmp_path / "e.exr", a, "RGB")).metadata[
+        "datetime_original"] is None
+
+
 # -------------------------------------------------------------------------------- RAW
 
 def make_dng(path, raw, black=64, white=4095, neutral=(0.5, 1.0, 0.8), orientation=1):

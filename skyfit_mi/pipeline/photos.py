@@ -19,7 +19,9 @@ Formats and decisions
   encoding_hint 'linear' (a PNG sRGB chunk, gAMA 1/2.2, or an ICC profile named sRGB makes it
   'srgb').
 * ``.tif .tiff`` of floats (tifffile), ``.exr`` (Mitsuba), ``.hdr .pic .rgbe`` Radiance RGBE
-  (Mitsuba): kind 'float', bits and max_code None, encoding_hint 'linear'.
+  (Mitsuba): kind 'float', bits and max_code None, encoding_hint 'linear'; an EXR's capture
+  time from its header's ``capDate``/``utcOffset``, an RGBE's from ``CAPDATE=``/``GMT=``, in
+  the metadata's EXIF fields.
 * camera RAW, any suffix in :data:`RAW_SUFFIXES` (rawpy / LibRaw): kind 'integer', bits 16,
   max_code 65535, encoding_hint 'linear'.
 
@@ -491,6 +493,83 @@ def _read_tiff(path):
                 "export it as 8-bit, 16-bit or float TIFF")
 
 
+def _offset_text(seconds):
+    """'+HH:MM' of a UTC offset of ``seconds`` east of Greenwich (EXIF's OffsetTimeOriginal)."""
+    sign = "-" if seconds < 0 else "+"
+    minutes = int(round(abs(seconds) / 60.0))
+    return f"{sign}{minutes // 60:02d}:{minutes % 60:02d}"
+
+
+def exr_header_times(path):
+    """``datetime_original`` and ``offset_time_original`` (EXIF's forms) from an OpenEXR
+    header's standard attributes ``capDate`` ('YYYY:MM:DD hh:mm:ss', local time) and
+    ``utcOffset`` (seconds, UTC = local + utcOffset: west of Greenwich positive); None where
+    absent or unreadable.  The header is a run of (name, type, size, value) up to an empty
+    name (OpenEXR file layout)."""
+    import struct
+
+    out = {"datetime_original": None, "offset_time_original": None}
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(1 << 16)
+    except OSError:
+        return out
+    if data[:4] != b"\x76\x2f\x31\x01":
+        return out
+    i = 8
+    while i < len(data) and data[i] != 0:
+        try:
+            j = data.index(b"\0", i)
+            k = data.index(b"\0", j + 1)
+            name, kind = data[i:j].decode("latin-1"), data[j + 1:k].decode("latin-1")
+            size = struct.unpack_from("<i", data, k + 1)[0]
+        except (ValueError, struct.error):
+            break
+        value = data[k + 5:k + 5 + size]
+        if name == "capDate" and kind == "string":
+            out["datetime_original"] = value.decode("latin-1").strip()
+        elif name == "utcOffset" and kind in ("float", "double") and size in (4, 8):
+            offset = struct.unpack("<f" if size == 4 else "<d", value)[0]
+            out["offset_time_original"] = _offset_text(-offset)
+        i = k + 5 + size
+    return out
+
+
+def rgbe_header_times(path):
+    """``datetime_original`` and ``offset_time_original`` from a Radiance RGBE header's
+    ``CAPDATE=`` (local) and ``GMT=`` (UTC) lines, both 'YYYY:MM:DD hh:mm:ss': the offset is
+    their difference; GMT alone gives the UTC time at +00:00.  None where absent."""
+    import datetime as dt
+
+    lines = {}
+    try:
+        with open(path, "rb") as fh:
+            for raw in iter(lambda: fh.readline(4096), b""):
+                line = raw.decode("latin-1").strip()
+                if not line:
+                    break
+                key, _, value = line.partition("=")
+                lines[key.strip().upper()] = value.strip()
+    except OSError:
+        pass
+    out = {"datetime_original": None, "offset_time_original": None}
+    fmt = "%Y:%m:%d %H:%M:%S"
+
+    def parse(text):
+        try:
+            return dt.datetime.strptime(text, fmt)
+        except (TypeError, ValueError):
+            return None
+    local, utc = parse(lines.get("CAPDATE")), parse(lines.get("GMT"))
+    if local is not None:
+        out["datetime_original"] = lines["CAPDATE"]
+        if utc is not None:
+            out["offset_time_original"] = _offset_text((local - utc).total_seconds())
+    elif utc is not None:
+        out["datetime_original"], out["offset_time_original"] = lines["GMT"], "+00:00"
+    return out
+
+
 def _read_float_bitmap(path, fmt):
     from ..render.image import read_bitmap
 
@@ -503,7 +582,9 @@ def _read_float_bitmap(path, fmt):
     if values.dtype.kind != "f":
         raise _fail(path, f"reads as {values.dtype} codes, not floats",
                     "give it the suffix of its real format")
-    return _float_photo(path, fmt, _rgb(values, channels, path), _empty_metadata())
+    meta = _empty_metadata()
+    meta.update(exr_header_times(path) if fmt == "exr" else rgbe_header_times(path))
+    return _float_photo(path, fmt, _rgb(values, channels, path), meta)
 
 
 def _wb(values):
