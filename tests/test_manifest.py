@@ -81,10 +81,46 @@ def test_invalid_frame_is_named(day):
     validate_manifest(doc)
     with pytest.raises(ManifestError, match=r"frame 2: envmap illumination: .*x\.exr: does not"):
         frame_sky(doc["frames"][2], day)                 # the map's file is named
-    doc["frames"][2]["illumination"] = {"kind": "irradiance", "global_horizontal_W_m2": 300.0}
-    validate_manifest(doc)                               # a valid kind of the contract ...
-    with pytest.raises(ManifestError, match="kind 'irradiance' .* can only light"):
-        frame_sky(doc["frames"][2], day)                 # ... that this version cannot light yet
+    doc["frames"][2]["illumination"] = {"kind": "irradiance", "global_horizontal_W_m2": 300.0,
+                                        "model": "cie"}
+    validate_manifest(doc)
+    with pytest.raises(ManifestError, match="frame 2: irradiance illumination: model 'cie'"):
+        frame_sky(doc["frames"][2], day)
+    frame = {k: v for k, v in doc["frames"][2].items() if k != "time"}
+    frame["illumination"]["model"] = "Perez"
+    with pytest.raises(ManifestError, match="needs its time"):
+        frame_sky(frame, day)
+
+
+def test_measured_irradiance_lights_a_frame_as_the_specs_perez_sky(day):
+    """An ``irradiance`` record (measured DHI and DNI, or GHI split by Erbs) becomes the Perez
+    sky that a spec's ``perez`` sky of the same values gives at the frame's sun and time; its
+    horizontal irradiance is the measured (diffuse within 1%, direct exactly)."""
+    import datetime as dt
+
+    from skyfit_mi.physics.colour import SRGB_LUMINANCE
+    from skyfit_mi.pipeline.illumination import perez_from_irradiance
+
+    doc, _ = load_manifest(day)
+    frame = json.loads(json.dumps(doc["frames"][2]))
+    z, a = frame["sun_zenith_deg"], frame["sun_azimuth_deg"]
+    t = dt.datetime.fromisoformat(frame["time"])
+    for rec in ({"diffuse_horizontal_W_m2": 110.0, "direct_normal_W_m2": 700.0},
+                {"global_horizontal_W_m2": 600.0}):
+        frame["illumination"] = {"kind": "irradiance", **rec}
+        validate_manifest({**doc, "frames": [frame]})
+        sky = frame_sky(frame, day)
+        ref = perez_from_irradiance(rec, z, a, t)
+        np.testing.assert_allclose(sky.perez, ref.perez)
+        np.testing.assert_allclose(sky.sun_radiance, ref.sun_radiance)
+        assert sky.perez.max() > 0
+    frame["illumination"] = {"kind": "irradiance", "diffuse_horizontal_W_m2": 110.0,
+                             "direct_normal_W_m2": 700.0}
+    sky = frame_sky(frame, day)
+    diffuse = sky.sky_horizontal_irradiance() @ SRGB_LUMINANCE
+    sun = sky.sun_horizontal_irradiance() @ SRGB_LUMINANCE
+    assert abs(diffuse / 110.0 - 1) < 0.01, diffuse
+    assert abs(sun / (700.0 * np.cos(np.radians(z))) - 1) < 0.01, sun
 
 
 def test_write_refuses_an_invalid_document_and_keeps_the_old_file(day, tmp_path):

@@ -15,6 +15,9 @@ sun position), ``sun_mask_deg`` (fill the map's clipped sun from the ring around
 
 ``directional``: ``direction`` (toward the source, world frame), ``irradiance_W_m2`` (RGB or one
 number, normal to the beam), ``solid_angle_sr`` (default the sun's).
+
+Measured irradiance (a spec's ``perez`` sky, a manifest's ``irradiance`` record) drives the
+Perez all-weather sky: :func:`perez_from_irradiance`.
 """
 
 import os
@@ -30,6 +33,41 @@ ENVMAP_OPTIONS = {"projection": "projection", "north_rotation_deg": "north_rotat
                   "ground_albedo": "ground_albedo", "sun_solid_angle_sr": "sun_solid_angle"}
 #: The options that give the table (the rest light it).
 _TABLE_OPTIONS = ("projection", "north_rotation_deg", "scale", "rows")
+
+
+def perez_from_irradiance(e, zenith, azimuth, t):
+    """The Perez all-weather sky (:func:`~skyfit_mi.physics.perez.perez_sky`) of measured
+    irradiance at one time ``t`` (aware datetime), sun at ``zenith``, ``azimuth`` [deg]: ``e``
+    a spec [sky] entry or a manifest ``irradiance`` record, with ``diffuse_horizontal_W_m2``
+    and ``direct_normal_W_m2``, or ``global_horizontal_W_m2`` split by ``decomposition``
+    (default 'erbs'), and optional ``cct`` [K], ``ground_albedo``, ``sun`` (False: no disc).
+    The sun below the horizon gives a black sky.  SkyfitError when no irradiance is given."""
+    import numpy as np
+
+    from ..conventions import direction_from_angles
+    from ..physics.perez import perez_sky
+    from ..physics.sky import GROUND_ALBEDO, Sky
+
+    if zenith >= 90.0:              # no daylight model below the horizon: a black sky
+        return Sky(direction_from_angles(np.radians(zenith), np.radians(azimuth)),
+                   info={"kind": "perez", "sun_zenith_deg": zenith, "sun_azimuth_deg": azimuth,
+                         "note": "sun below the horizon: no sky light"})
+    dhi, dni = e.get("diffuse_horizontal_W_m2"), e.get("direct_normal_W_m2")
+    ghi = e.get("global_horizontal_W_m2")
+    if dhi is not None and dni is not None:
+        kw = {"dhi": dhi, "dni": dni}
+    elif ghi is not None:
+        kw = {"ghi": ghi, "decomposition": e.get("decomposition", "erbs")}
+    else:
+        raise SkyfitError("a Perez sky needs measured irradiance: "
+                          "diffuse_horizontal_W_m2 and direct_normal_W_m2, or "
+                          "global_horizontal_W_m2 (split by a decomposition model), or "
+                          "irradiance_file.")
+    sky = perez_sky(zenith, azimuth, t.timetuple().tm_yday, **kw)
+    if ghi is not None and "ghi" not in kw:
+        sky.info["ghi_w_m2"] = float(ghi)
+    return sky.to_sky(cct=e.get("cct"), ground_albedo=e.get("ground_albedo", GROUND_ALBEDO),
+                      sun=e.get("sun", True))
 
 
 def read_envmap(path):

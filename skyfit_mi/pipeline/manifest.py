@@ -35,9 +35,10 @@ SCHEMA = "skyfit-manifest/2"
 READABLE = ("skyfit-manifest/1", SCHEMA)
 SCHEMA_FILE = Path(__file__).with_name("manifest.schema.json")
 FILENAME = "manifest.json"
-#: The illumination kinds the schema defines, and those the sky model can build today.
+#: The illumination kinds the schema defines (each one :func:`frame_sky` lights).
 ILLUMINATION_KINDS = ("sky", "gensky", "irradiance", "envmap", "directional")
-SKY_KINDS = ("sky", "gensky", "envmap", "directional")
+#: The sky models an ``irradiance`` record may name (its ``model``; default the first).
+IRRADIANCE_MODELS = ("perez",)
 #: The SensorModel fields a manifest's ``sensor`` record carries.
 SENSOR_FIELDS = ("exposure", "response", "gamma", "bits", "noise_percent", "cos4")
 
@@ -175,14 +176,34 @@ def illumination_record(sky, folder):
             "units": "weights and radiances W m^-2 sr^-1, linear sRGB"}
 
 
+def _irradiance_sky(frame, rec):
+    """The Perez sky of an ``irradiance`` record at its frame's sun and time."""
+    import datetime as dt
+
+    from .illumination import perez_from_irradiance
+
+    model = str(rec.get("model", "perez")).lower()
+    if model not in IRRADIANCE_MODELS:
+        raise SkyfitError(f"model {rec.get('model')!r}; this version turns measured irradiance "
+                          f"into a {' or '.join(IRRADIANCE_MODELS)} sky")
+    try:
+        t = dt.datetime.fromisoformat(str(frame["time"]))
+    except (KeyError, ValueError):
+        raise SkyfitError("the frame needs its time (ISO 8601), which the Perez sky's "
+                          "clearness depends on; add it") from None
+    return perez_from_irradiance(rec, float(frame["sun_zenith_deg"]),
+                                 float(frame["sun_azimuth_deg"]), t)
+
+
 def frame_sky(frame, folder):
     """The :class:`~skyfit_mi.physics.sky.Sky` of a manifest frame's illumination; ``folder``
     is the manifest's (an ``envmap`` record's file is relative to it).
 
     Kinds ``sky``, ``gensky``, ``envmap`` (with the frame's ``sun_zenith_deg`` and
-    ``sun_azimuth_deg`` placing the sun) and ``directional`` become a sky; ``irradiance`` is
-    part of the contract but not yet turned into light by this version: a
-    :class:`ManifestError` says so, as it says what is wrong with a map or a light.
+    ``sun_azimuth_deg`` placing the sun), ``irradiance`` (the Perez all-weather sky of the
+    measured irradiance at the frame's sun position and ``time``,
+    :func:`~.illumination.perez_from_irradiance`) and ``directional`` become a sky; a
+    :class:`ManifestError` says what is wrong with a record.
     """
     from ..physics.gensky import from_gensky
     from ..physics.sky import Sky
@@ -197,10 +218,13 @@ def frame_sky(frame, folder):
     try:
         if kind == "directional":
             return directional_from_record(rec)
+        if kind in ("envmap", "irradiance") and ("sun_zenith_deg" not in frame
+                                                 or "sun_azimuth_deg" not in frame):
+            raise SkyfitError(f"an {kind} frame needs sun_zenith_deg and sun_azimuth_deg "
+                              "(they place the solar disc and the sky's pattern); add them")
+        if kind == "irradiance":
+            return _irradiance_sky(frame, rec)
         if kind == "envmap":
-            if "sun_zenith_deg" not in frame or "sun_azimuth_deg" not in frame:
-                raise SkyfitError("an envmap frame needs sun_zenith_deg and sun_azimuth_deg "
-                                  "(they place the solar disc and the sun's mask); add them")
             return envmap_from_record(rec, folder, frame["sun_zenith_deg"],
                                       frame["sun_azimuth_deg"])
     except SkyfitError as exc:
@@ -209,7 +233,7 @@ def frame_sky(frame, folder):
     if kind != "sky":
         raise ManifestError(f"frame {frame.get('index')}: illumination kind {kind!r} is part of "
                             f"the manifest format but this version of skyfit-mi can only light "
-                            f"frames of kind {' or '.join(map(repr, SKY_KINDS))}.")
+                            f"frames of kind {' or '.join(map(repr, ILLUMINATION_KINDS))}.")
     keys = ("clear", "overcast", "uniform", "intermediate", "ground", "sun_radiance")
     optional = {k: np.asarray(rec[k], dtype=float) for k in ("perez", "perez_coefficients")
                 if k in rec}                       # absent from manifests before the Perez sky

@@ -539,34 +539,6 @@ def _with_series(entries, times, tz, base_dir):
     return out
 
 
-def _perez(e, zenith, azimuth, t):
-    """The Perez all-weather sky of a [sky] entry (measured irradiance) at one frame."""
-    from ..conventions import direction_from_angles
-    from ..physics.perez import perez_sky
-    from ..physics.sky import GROUND_ALBEDO, Sky
-
-    if zenith >= 90.0:              # no daylight model below the horizon: a black sky
-        return Sky(direction_from_angles(np.radians(zenith), np.radians(azimuth)),
-                   info={"kind": "perez", "sun_zenith_deg": zenith, "sun_azimuth_deg": azimuth,
-                         "note": "sun below the horizon: no sky light"})
-    dhi, dni = e.get("diffuse_horizontal_W_m2"), e.get("direct_normal_W_m2")
-    ghi = e.get("global_horizontal_W_m2")
-    if dhi is not None and dni is not None:
-        kw = {"dhi": dhi, "dni": dni}
-    elif ghi is not None:
-        kw = {"ghi": ghi, "decomposition": e.get("decomposition", "erbs")}
-    else:
-        raise SpecError(f"[sky] at {t:%Y-%m-%d %H:%M}: a Perez sky needs measured irradiance: "
-                        "diffuse_horizontal_W_m2 and direct_normal_W_m2, or "
-                        "global_horizontal_W_m2 (split by a decomposition model), or "
-                        "irradiance_file.")
-    sky = perez_sky(zenith, azimuth, t.timetuple().tm_yday, **kw)
-    if ghi is not None and "ghi" not in kw:
-        sky.info["ghi_w_m2"] = float(ghi)
-    return sky.to_sky(cct=e.get("cct"), ground_albedo=e.get("ground_albedo", GROUND_ALBEDO),
-                      sun=e.get("sun", True))
-
-
 def _light(e, zenith, azimuth, t, index, base_dir):
     """The Sky of an envmap or directional [sky] entry (:mod:`.illumination`)."""
     from ..conventions import direction_from_angles
@@ -600,7 +572,9 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index):
         if e["type"] in ("envmap", "directional"):
             return _light(e, zenith, azimuth, t, index, base_dir)
         if e["type"] == "perez":
-            return _perez(e, zenith, azimuth, t)
+            from .illumination import perez_from_irradiance
+
+            return perez_from_irradiance(e, zenith, azimuth, t)
         if e["type"] == "gensky":
             text = e.get("gensky")
             if text is None:
