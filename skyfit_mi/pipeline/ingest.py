@@ -268,7 +268,7 @@ def fit_response(samples, patch, max_code, rel, log):
     come closest (rms relative error) is chosen; every family's error is in ``info``.
     SkyfitError unless the patches' signals span RESPONSE_SPAN_MIN at a fixed exposure.
     """
-    v, L, group, u = [], [], [], []
+    v, group, u = [], [], []
     for f, (codes, radiance) in enumerate(samples):
         for m in np.unique(patch):
             sel = patch == m
@@ -278,10 +278,9 @@ def fit_response(samples, patch, max_code, rel, log):
                 if ok.sum() < 4:
                     continue
                 v.append(np.median(y[ok]) / max_code)
-                L.append(np.median(x[ok]))
                 group.append(c if rel is not None else 3 * f + c)
-                u.append(np.log(L[-1]) + (0.0 if rel is None else np.log(rel[f])))
-    v, L, u = np.array(v), np.array(L), np.array(u)
+                u.append(np.log(np.median(x[ok])) + (0.0 if rel is None else np.log(rel[f])))
+    v, u = np.array(v), np.array(u)
     group = np.unique(group, return_inverse=True)[1].ravel() if len(v) else np.array([], int)
     # what sets the shape: the spread of the signals that share an exposure
     centred = u - (np.bincount(group, weights=u) / np.maximum(np.bincount(group), 1))[group] \
@@ -298,7 +297,7 @@ def fit_response(samples, patch, max_code, rel, log):
     for family in RESPONSE_FAMILIES:
         if family == "gamma":
             coef, *_ = np.linalg.lstsq(np.column_stack([u, onehot]), np.log(v), rcond=None)
-            gamma = 1.0 / coef[0] if coef[0] > 0 else np.inf
+            gamma = 1.0 / coef[0] if coef[0] > 0 else None       # None: codes fall with signal
             pred = np.exp(coef[0] * u + onehot @ coef[1:])
         else:
             gamma = None
@@ -307,14 +306,16 @@ def fit_response(samples, patch, max_code, rel, log):
             b = np.array([np.median(log_k[group == g]) for g in range(n_groups)])
             pred = sensor.respond(np.exp(u + b[group]))
         rms = float(np.sqrt(np.mean((pred / v - 1.0) ** 2)))
-        fits[family] = {"rms_rel": rms, **({"gamma": float(gamma)} if gamma is not None else {})}
-    usable = {k: f for k, f in fits.items()
-              if k != "gamma" or GAMMA_RANGE[0] <= f["gamma"] <= GAMMA_RANGE[1]}
+        fits[family] = {"rms_rel": rms}
+        if family == "gamma":
+            fits[family]["gamma"] = None if gamma is None else float(gamma)
+    usable = {k: f for k, f in fits.items() if k != "gamma" or (
+        f["gamma"] is not None and GAMMA_RANGE[0] <= f["gamma"] <= GAMMA_RANGE[1])}
     best = min(usable, key=lambda k: usable[k]["rms_rel"])
     gamma = fits["gamma"]["gamma"] if best == "gamma" else 2.2
     info = {"families": fits, "chosen": best, "values": int(len(v)), "span": span}
     log(f"response fitted to {len(v)} patch values (signals spanning {span:.1f}x): "
-        + ", ".join(f"{k}{' ' + format(f['gamma'], '.3g') if 'gamma' in f else ''} "
+        + ", ".join(f"{k}{' ' + format(f['gamma'], '.3g') if f.get('gamma') else ''} "
                     f"{100 * f['rms_rel']:.2g}%" for k, f in fits.items()) + f"; using {best}")
     if fits[best]["rms_rel"] > RESPONSE_RMS_WARN:
         log(f"warning: no response family describes the calibration patches well (best, {best}, "
