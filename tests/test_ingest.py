@@ -130,6 +130,34 @@ def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, ingested):
             f"{k}: interval {hi - lo:.4g} wider than 1.5x the clean fit's {chi - clo:.4g}"
 
 
+@pytest.mark.parametrize("fmt", ["png", "tiff"])
+def test_simulated_png_and_tiff_photographs_carry_their_exif(day, tmp_path, fmt):
+    """The simulator's PNG and TIFF files hold their EXIF (time, offset, exposure) as its JPEGs
+    do (Pillow writes an Exif object's sub-IFD into PNG and TIFF only as bytes)."""
+    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.photos import read_photo
+
+    paths = photograph_day(day["truth"], tmp_path, seed=5, fmt=fmt)
+    sim = json.loads((tmp_path / "photos.json").read_text())
+    for p, f in zip(paths, sim["frames"]):
+        m = read_photo(p).metadata
+        assert m["datetime_original"] == f["time"][:19].replace("-", ":").replace("T", " ")
+        assert m["offset_time_original"] == f["time"][-6:]
+        assert m["exposure_time_s"] == pytest.approx(f["exposure_time_s"], rel=1e-4)
+
+
+def test_an_output_folder_holding_the_photographs_is_refused(day, tmp_path):
+    """The photographs' folder or one above it (--overwrite would clear it, and the next run
+    would read the contact sheet as a photograph) is refused; nothing is written."""
+    photos = tmp_path / "photos"
+    shutil.copytree(day["photos"], photos)
+    before = sorted(p.name for p in photos.iterdir())
+    for out in (photos, tmp_path):
+        with pytest.raises(SkyfitError, match="holds the photographs"):
+            _ingest({**day, "photos": photos}, out, exposure=0.003)
+    assert sorted(p.name for p in photos.iterdir()) == before
+
+
 def test_noise_estimate_recovers_read_and_shot_noise():
     """On smooth frames (seven levels under a vignetting-like falloff) with read and shot noise
     in linear codes, encoded as 8-bit sRGB: the estimate is the truth within 5% (measured:

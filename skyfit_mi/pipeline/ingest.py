@@ -452,6 +452,12 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
             raise SkyfitError(f"{p} does not exist; give photographs or a folder of them.")
     if len(paths) < 2:
         raise SkyfitError(f"{len(paths)} photograph(s) given; a sequence needs at least 2.")
+    target = Path(out_dir).resolve()
+    inside = next((p for p in paths if target in p.resolve().parents), None)
+    if inside is not None:
+        raise SkyfitError(f"the output folder {out_dir} holds the photographs ({inside.name}); "
+                          "give another with -o (--overwrite would clear it, and its contact "
+                          "sheet would be read as a photograph next time).")
     photos = [read_photo(p) for p in paths]
     check_same_size(list(zip(paths, photos)))
     times = frame_times(paths, [p.metadata for p in photos], times_csv=times_csv,

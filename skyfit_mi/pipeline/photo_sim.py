@@ -99,7 +99,7 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
         # 4:2:0 blurs colour across 2x2 blocks, into a region's edge pixels
         kw = {"quality": quality, "subsampling": 0} if fmt == "jpeg" else {}
         atomic_write(path, lambda p, img=img, ex=_exif(time, offset, t), kw=kw:
-                     img.save(p, format=fmt.upper(), exif=ex, **kw))
+                     img.save(p, format=fmt.upper(), exif=ex.tobytes(), **kw))
         paths.append(path)
         record.append({"file": path.name, "time": f["time"], "exposure_time_s": t,
                        "exposure_sr_m2_W": e})
