@@ -261,7 +261,9 @@ def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_pa
     shared = 0
     for sky in skies:
         update_sky(params, sky, "sky.")
-        own_d, own_l = _sky_integrals(mi, scene.environment(), share.si_p, lobe)
+        pixel_si = dr.gather(mi.SurfaceInteraction3f, share.si,
+                             mi.UInt32(share.A + np.arange(len(px))))
+        own_d, own_l = _sky_integrals(mi, scene.environment(), pixel_si, lobe)
         d, l, n = share.integrals(mi, dr, scene.environment(), lobe, sky.sun_direction)
         shared += n
         for s in (0.002, 0.02, 0.2, 0.5):
@@ -287,7 +289,7 @@ def test_saturated_values_left_out_flag_only_fits_that_contradict_them(tmp_path)
     board's determined pixels; the same fits without their lobe (a wrong estimate) contradict
     the values and are flagged."""
     from skyfit_mi.fitting.chi2 import load_observations, usable_values
-    from skyfit_mi.fitting.methods.global_search import SIGMA_GRID, near_saturation
+    from skyfit_mi.fitting.methods.global_search import SIGMA_GRID, _linearise, near_saturation
     from skyfit_mi.fitting.pixel_fit import UNDETERMINED, WARNINGS, _contradicts, fit_pixels
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
@@ -327,7 +329,8 @@ def test_saturated_values_left_out_flag_only_fits_that_contradict_them(tmp_path)
     saturated = usable & near_saturation(obs)
     basis = WardModel(cache, "colour").basis(SIGMA_GRID)
     groups = np.arange(len(px))
-    right = _contradicts("colour", obs, usable, saturated, basis, res, groups)
+    y, w = _linearise(obs, usable, leave_out_saturated=False)
+    right = _contradicts("colour", y, w, saturated, basis, res, groups)
     matte = dict(res, theta=res["theta"] * [1, 1, 1, 0, 1])
-    wrong = _contradicts("colour", obs, usable, saturated, basis, matte, groups)
+    wrong = _contradicts("colour", y, w, saturated, basis, matte, groups)
     assert wrong[left_out].mean() > 0.9 and right[kept].mean() < 0.1

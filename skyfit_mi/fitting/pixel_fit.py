@@ -127,8 +127,10 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
                               sky_spacing=SKY_SPACING)
     wm = WardModel(cache, model, normalisation)
     usable = usable_values(obs, cache.hit)
-    y, w = _linearise(obs, usable)
+    # every usable value's weight, and the grid's: values near saturation left out of it
+    y, w_all = _linearise(obs, usable, leave_out_saturated=False)
     saturated = usable & near_saturation(obs)
+    w = np.where(saturated, 0.0, w_all)
     bases = wm.basis(SIGMA_GRID, halves=True)            # the whole cache, and its two halves
     whole = bases[0]
     hit = np.bincount(groups, weights=cache.hit.all(axis=1), minlength=n) > 0
@@ -149,7 +151,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)
     left_out = np.bincount(groups, weights=saturated.any(axis=(1, 2)), minlength=n) > 0
-    contradicted = np.bincount(groups, weights=_contradicts(model, obs, usable, saturated, whole,
+    contradicted = np.bincount(groups, weights=_contradicts(model, y, w_all, saturated, whole,
                                                             fit, groups), minlength=n) > 0
     fit["warnings"] = _flags(model, names, fit, hit) \
         | np.where(left_out, WARNINGS["saturated values left out"], 0) \
@@ -161,15 +163,15 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     return fit
 
 
-def _contradicts(model, obs, usable, saturated, basis, fit, groups):
+def _contradicts(model, y, w, saturated, basis, fit, groups):
     """Which pixels (P,) hold a value near saturation (``saturated``, left out of the grid)
     that their group's fit falls short of by more than SATURATION_MARGIN sigma: the censored
-    term the value would add is then not zero.  ``basis`` (D, G) per pixel on SIGMA_GRID."""
+    term the value would add is then not zero.  ``y``, ``w`` the linearised values and their
+    weights, saturated ones included (P, T, 3); ``basis`` (D, G) per pixel on SIGMA_GRID."""
     from ..render.fit_model import reflectances
 
     if not saturated.any():
         return np.zeros(len(groups), bool)
-    y, w = _linearise(obs, usable, leave_out_saturated=False)
     rd, sp = (np.array(v) for v in zip(*(reflectances(model, t)[:2] for t in fit["theta"])))
     D, G = basis
     px = np.arange(len(groups))

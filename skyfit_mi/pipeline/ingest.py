@@ -159,7 +159,7 @@ def _fit_noise(parts, sensor, noise):
     rows, rhs, weights = [], [], []
     for r, lvl, spread, cc in parts:
         if noise is not None:
-            keep = spread <= NOISE_FLAT * np.sqrt(pixel_sigma(lvl, sensor, noise) ** 2 + cc)
+            keep = spread <= NOISE_FLAT * pixel_sigma(lvl, sensor, noise, cc)
             r, lvl, cc = r[keep], lvl[keep], cc[keep]
             if len(r) < NOISE_MIN_PIXELS:
                 continue

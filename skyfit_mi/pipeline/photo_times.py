@@ -84,7 +84,8 @@ def parse_tz(tz):
                           "as 'Europe/London' or 'UTC', or an offset such as '+01:00'.") from None
 
 
-def _fmt_offset(td):
+def format_offset(td):
+    """'+HH:MM' of a UTC offset ``td`` (a timedelta; EXIF's OffsetTimeOriginal form)."""
     minutes = round(td.total_seconds() / 60)
     sign = "+" if minutes >= 0 else "-"
     return f"{sign}{abs(minutes) // 60:02d}:{abs(minutes) % 60:02d}"
@@ -104,10 +105,10 @@ def localize(naive, tz, who, no_tz):
                 f"{who}: {naive.isoformat(sep=' ')} does not exist in {tz} (the clocks skip "
                 "that hour); the camera clock was probably not on local time: give the "
                 "frame's offset, e.g. --tz with a fixed offset such as "
-                f"'{_fmt_offset(t0.utcoffset())}', or a CSV of times.")
+                f"'{format_offset(t0.utcoffset())}', or a CSV of times.")
         raise SkyfitError(
             f"{who}: {naive.isoformat(sep=' ')} happens twice in {tz} (at "
-            f"{_fmt_offset(t0.utcoffset())} and {_fmt_offset(t1.utcoffset())}, when the clocks "
+            f"{format_offset(t0.utcoffset())} and {format_offset(t1.utcoffset())}, when the clocks "
             "go back); give the offset: --tz with a fixed offset, or a CSV of times with "
             "offsets.")
     return t0
@@ -117,14 +118,14 @@ def _with_offset(aware, tz, who, source):
     """Keep an instant that carries its own offset; refuse it if ``tz`` disagrees there."""
     off = aware.utcoffset()
     if not UTC_OFFSETS[0] <= off / dt.timedelta(hours=1) <= UTC_OFFSETS[1]:
-        raise SkyfitError(f"{who}: {source} offset {_fmt_offset(off)} is not a civil time "
+        raise SkyfitError(f"{who}: {source} offset {format_offset(off)} is not a civil time "
                           "offset; fix it or give the times in a CSV.")
     if tz is not None:
         zoned = aware.astimezone(tz).utcoffset()
         if zoned != off:
             raise SkyfitError(
-                f"{who}: {source} offset {_fmt_offset(off)} disagrees with the time zone "
-                f"{tz} ({_fmt_offset(zoned)} at that instant); check the camera's time-zone "
+                f"{who}: {source} offset {format_offset(off)} disagrees with the time zone "
+                f"{tz} ({format_offset(zoned)} at that instant); check the camera's time-zone "
                 "setting, then drop --tz to use the file's offset, or give the times in a CSV.")
     return aware
 

@@ -493,20 +493,16 @@ def _read_tiff(path):
                 "export it as 8-bit, 16-bit or float TIFF")
 
 
-def _offset_text(seconds):
-    """'+HH:MM' of a UTC offset of ``seconds`` east of Greenwich (EXIF's OffsetTimeOriginal)."""
-    sign = "-" if seconds < 0 else "+"
-    minutes = int(round(abs(seconds) / 60.0))
-    return f"{sign}{minutes // 60:02d}:{minutes % 60:02d}"
-
-
 def exr_header_times(path):
     """``datetime_original`` and ``offset_time_original`` (EXIF's forms) from an OpenEXR
     header's standard attributes ``capDate`` ('YYYY:MM:DD hh:mm:ss', local time) and
     ``utcOffset`` (seconds, UTC = local + utcOffset: west of Greenwich positive); None where
     absent or unreadable.  The header is a run of (name, type, size, value) up to an empty
     name (OpenEXR file layout)."""
+    import datetime as dt
     import struct
+
+    from .photo_times import format_offset
 
     out = {"datetime_original": None, "offset_time_original": None}
     try:
@@ -530,7 +526,7 @@ def exr_header_times(path):
             out["datetime_original"] = value.decode("latin-1").strip()
         elif name == "utcOffset" and kind in ("float", "double") and size in (4, 8):
             offset = struct.unpack("<f" if size == 4 else "<d", value)[0]
-            out["offset_time_original"] = _offset_text(-offset)
+            out["offset_time_original"] = format_offset(dt.timedelta(seconds=-offset))
         i = k + 5 + size
     return out
 
@@ -540,6 +536,8 @@ def rgbe_header_times(path):
     ``CAPDATE=`` (local) and ``GMT=`` (UTC) lines, both 'YYYY:MM:DD hh:mm:ss': the offset is
     their difference; GMT alone gives the UTC time at +00:00.  None where absent."""
     import datetime as dt
+
+    from .photo_times import format_offset
 
     lines = {}
     try:
@@ -564,7 +562,7 @@ def rgbe_header_times(path):
     if local is not None:
         out["datetime_original"] = lines["CAPDATE"]
         if utc is not None:
-            out["offset_time_original"] = _offset_text((local - utc).total_seconds())
+            out["offset_time_original"] = format_offset(local - utc)
     elif utc is not None:
         out["datetime_original"], out["offset_time_original"] = lines["GMT"], "+00:00"
     return out

@@ -336,8 +336,12 @@ class _SharedSky:
 
     def __init__(self, mi, scene, sensor, pixels, spacing, size, target):
         anchors, self.corner, self.weight = _anchor_plan(pixels, spacing, *size)
-        self.si_a, sid_a, n_a, self.m_a = self._trace(mi, scene, sensor, anchors, size, target)
-        self.si_p, sid_p, n_p, self.m_p = self._trace(mi, scene, sensor, pixels, size, target)
+        # one trace of the anchors (first A points) and the pixels (the rest)
+        self.A = A = len(anchors)
+        self.si, sid, n, m = self._trace(mi, scene, sensor, np.concatenate([anchors, pixels]),
+                                         size, target)
+        sid_a, n_a, self.m_a = sid[:A], n[:A], m[:A]
+        sid_p, n_p, self.m_p = sid[A:], n[A:], m[A:]
         cos_tol = np.cos(np.radians(SHARE_ANGLE_DEG))
         horizon = np.sin(np.radians(SHARE_HORIZON_DEG))
         ok = (sid_p >= 0) & (np.abs(self.m_p[:, 2]) >= horizon)
@@ -368,25 +372,19 @@ class _SharedSky:
         sun = np.asarray(sun, dtype=float)
         ok = self.ok & (self.m_p @ sun < cos_sun) \
             & np.all(self.m_a[self.corner] @ sun < cos_sun, axis=1)
-        P = len(ok)
-        diffuse, lobe_c = np.zeros((P, 3)), None
         used = np.unique(self.corner[ok])
         own = np.flatnonzero(~ok)
-        for which, si, sel in ((ok, self.si_a, used), (own, self.si_p, own)):
-            if sel.size == 0:
-                continue
-            d, c = _sky_integrals(mi, emitter, dr.gather(mi.SurfaceInteraction3f, si,
-                                                         mi.UInt32(sel)), lobe)
-            if lobe_c is None:
-                lobe_c = np.zeros((P,) + c.shape[1:])
-            if which is ok:
-                at = np.full(len(self.m_a), -1)
-                at[used] = np.arange(used.size)
-                k = at[self.corner[ok]]                                     # (n, 4)
-                diffuse[ok] = np.einsum("nc,nck->nk", self.weight[ok], d[k])
-                lobe_c[ok] = np.einsum("nc,nc...->n...", self.weight[ok], c[k])
-            else:
-                diffuse[own], lobe_c[own] = d, c
+        # the anchors used and the pixels that take their own, in one pass
+        d, c = _sky_integrals(mi, emitter, dr.gather(
+            mi.SurfaceInteraction3f, self.si, mi.UInt32(np.concatenate([used, self.A + own]))),
+            lobe)
+        diffuse, lobe_c = np.zeros((len(ok), 3)), np.zeros((len(ok),) + c.shape[1:])
+        at = np.full(self.A, -1)
+        at[used] = np.arange(used.size)
+        k = at[self.corner[ok]]                                             # (n, 4)
+        diffuse[ok] = np.einsum("nc,nck->nk", self.weight[ok], d[k])
+        lobe_c[ok] = np.einsum("nc,nc...->n...", self.weight[ok], c[k])
+        diffuse[own], lobe_c[own] = d[used.size:], c[used.size:]
         return diffuse, lobe_c, int(ok.sum())
 
 

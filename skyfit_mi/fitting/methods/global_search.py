@@ -71,13 +71,19 @@ def near_saturation(obs):
     return obs.y >= obs.sensor.max_code - SATURATION_BAND * obs.sigma
 
 
-def _weighted_sums(y, w, D, G, keep):
-    """The weighted inner products <D,D>, <D,G_k>, <G_k,G_k>, <y,D>, <y,G_k>, <y,y>,
-    summed over frames and over the axes of 'ptc' (pixels, channels) not in ``keep`` ('', 'c',
-    'p' or 'pc': kept axes stay, in that order, after the K of the G terms)."""
-    Dw, yw = D * w, y * w
+def _basis_sums(w, D, G, keep):
+    """The weighted inner products of the basis, <D,D>, <D,G_k>, <G_k,G_k>, summed over frames
+    and over the axes of 'ptc' (pixels, channels) not in ``keep`` ('', 'c', 'p' or 'pc': kept
+    axes stay, in that order, after the K of the G terms)."""
+    Dw = D * w
     return (np.einsum(f"ptc,ptc->{keep}", Dw, D), np.einsum(f"ptc,kptc->k{keep}", Dw, G),
-            np.einsum(f"ptc,kptc->k{keep}", w, G * G), np.einsum(f"ptc,ptc->{keep}", yw, D),
+            np.einsum(f"ptc,kptc->k{keep}", w, G * G))
+
+
+def _weighted_sums(y, w, D, G, keep):
+    """:func:`_basis_sums` and the data's <y,D>, <y,G_k>, <y,y>, reduced alike."""
+    yw = y * w
+    return (*_basis_sums(w, D, G, keep), np.einsum(f"ptc,ptc->{keep}", yw, D),
             np.einsum(f"ptc,kptc->k{keep}", yw, G), np.einsum(f"ptc,ptc->{keep}", yw, y))
 
 
@@ -144,11 +150,8 @@ def linear_curvature(model, w, D, G, rho, k, p):
     ``rho`` (n,), roughness indices ``k`` into G's first axis and pixels ``p``; (n, groups).
     A linear parameter's chi^2 rises as hh (L - L_best)^2 from its best, so this gives its
     conditional range at a few points without the whole grid."""
-    keep = "p" if model == "achromatic" else "pc"
-    Dw = D * w
-    a = np.einsum(f"ptc,ptc->{keep}", Dw, D)[p]
-    b = np.einsum(f"ptc,kptc->k{keep}", Dw, G)[k, p]
-    c = np.einsum(f"ptc,kptc->k{keep}", w, G * G)[k, p]
+    a, b, c = _basis_sums(w, D, G, "p" if model == "achromatic" else "pc")
+    a, b, c = a[p], b[k, p], c[k, p]
     r2 = np.asarray(rho, dtype=float).reshape((-1,) + (1,) * (np.ndim(a) - 1))
     metal = (r2 >= METAL_THRESHOLD) | (model == "achromatic")
     hh = np.where(metal, *(linear_form(m, r2, a, b, c, 0, 0, 0)[2] for m in (True, False)))
