@@ -308,6 +308,9 @@ class SkyModel:
         model's (1 = the model's level is right).
     description : str
         One line for tables.
+    held_out : bool
+        Also score the model as a prediction, its parameter fitted to the other scans
+        (:func:`compare_held_out`); for models with a fitted parameter.
     """
 
     name: str
@@ -316,6 +319,7 @@ class SkyModel:
     parameter_name: str = ""
     absolute: bool = False
     description: str = ""
+    held_out: bool = False
 
 
 def thesis_clear_luminance(directions, scan, parameters):
@@ -389,12 +393,12 @@ MODELS = (
              parameters=tuple(float(t) for t in np.round(np.arange(
                  cie_general.CLEAR_TYPES[0], cie_general.CLEAR_TYPES[-1] + 1e-9,
                  INDEX_STEP), 2)),
-             parameter_name="t",
+             parameter_name="t", held_out=True,
              description="CIE S 011 general sky, type index t in [11, 15] fitted per scan "
                          f"(step {INDEX_STEP}; a, b, c, d, e linear between types)"),
     SkyModel("cie_groups_fit", cie_groups_luminance,
              parameters=tuple((float(g), float(i)) for g in _GROUP_STEPS for i in _GROUP_STEPS),
-             parameter_name="gradation, indicatrix",
+             parameter_name="gradation, indicatrix", held_out=True,
              description="CIE S 011 general sky, gradation index (IV-VI) and indicatrix index "
                          f"(4-6) fitted per scan (step {2 * INDEX_STEP}; linear between groups)"),
     SkyModel("perez_erbs", perez_luminance("erbs"), absolute=True,
@@ -403,6 +407,17 @@ MODELS = (
              description="Perez 1993, DHI from the scan, DNI = (GHI - DHI) / cos Z"),
     SkyModel("uniform", uniform_luminance, description="uniform luminance"),
 )
+
+
+def _errors(scan, model, rotated, exclude_deg):
+    """:func:`relative_rms` and :func:`scale_factor` of every parameter value of ``model``
+    on ``scan`` (points at least ``exclude_deg`` from the sun), shape (k,) each, and the
+    number of points compared."""
+    d = scan.directions(rotated)
+    keep = angle_to_sun_deg(d, scan.sun_direction) >= exclude_deg
+    values = np.asarray(model.luminance(d[keep], scan, model.parameters), dtype=float)
+    return (relative_rms(values, scan.luminance[keep]),
+            scale_factor(values, scan.luminance[keep]), int(keep.sum()))
 
 
 def compare(scan, model, rotated=False, exclude_deg=SUN_EXCLUSION_DEG):
@@ -418,14 +433,43 @@ def compare(scan, model, rotated=False, exclude_deg=SUN_EXCLUSION_DEG):
         ``relative_rms`` [unitless] and ``scale`` (k) of the best parameter value,
         ``parameter`` (None for a model without one), ``n_points`` compared.
     """
-    d = scan.directions(rotated)
-    keep = angle_to_sun_deg(d, scan.sun_direction) >= exclude_deg
-    values = np.asarray(model.luminance(d[keep], scan, model.parameters), dtype=float)
-    err = relative_rms(values, scan.luminance[keep])
+    err, scale, n = _errors(scan, model, rotated, exclude_deg)
     i = int(np.argmin(err))
-    return {"relative_rms": float(err[i]),
-            "scale": float(scale_factor(values[i], scan.luminance[keep])),
-            "parameter": model.parameters[i], "n_points": int(keep.sum())}
+    return {"relative_rms": float(err[i]), "scale": float(scale[i]),
+            "parameter": model.parameters[i], "n_points": n}
+
+
+def held_out_name(model):
+    """Table name of ``model`` with its parameter chosen on the other scans:
+    ``cie_groups_fit`` -> ``cie_groups_fit_heldout``."""
+    return model.name + "_heldout"
+
+
+def compare_held_out(scans, model, rotated=False, exclude_deg=SUN_EXCLUSION_DEG):
+    """``model`` as a prediction: each scan scored at the parameter fitted to the others.
+
+    For scan j the parameter value with the lowest mean :func:`relative_rms` over the other
+    scans (leave-one-out cross-validation) is chosen, and scan j's error at that value
+    reported (its scale k still free, as in :func:`compare`).  Unlike :func:`compare`, which
+    fits the pattern to the scan it scores, this tells how well the model, once set from
+    other measurements, predicts a sky it has not seen.
+
+    Returns
+    -------
+    list of dict
+        One per scan, the keys of :func:`compare`.
+    """
+    if len(scans) < 2:
+        raise SkyfitError("a held-out comparison needs at least two scans; give more.")
+    runs = [_errors(s, model, rotated, exclude_deg) for s in scans]
+    err = np.array([r[0] for r in runs])                  # (scans, parameters)
+    out = []
+    for j, (e, k, n) in enumerate(runs):
+        others = np.delete(err, j, axis=0).mean(axis=0)
+        i = int(np.argmin(others))
+        out.append({"relative_rms": float(e[i]), "scale": float(k[i]),
+                    "parameter": model.parameters[i], "n_points": n})
+    return out
 
 
 def irradiance_comparison(scan):
@@ -464,31 +508,39 @@ def irradiance_comparison(scan):
 
 
 def run_comparison(scans, models=MODELS, rotations=(False, True), exclude_deg=SUN_EXCLUSION_DEG):
-    """:func:`compare` for every scan, model and rotation choice, as one long table.
+    """:func:`compare` for every scan, model and rotation choice, as one long table; models
+    marked ``held_out`` also as predictions (:func:`compare_held_out`, named by
+    :func:`held_out_name`), right after their fit.
 
     Returns
     -------
     pandas.DataFrame
         One row per (rotated, model, scan): ``rotated`` (bool), ``model``, ``capture``,
         ``time`` (HH:MM local), ``relative_rms`` [unitless], ``scale`` (k; the measured level
-        over the model's for ``absolute`` models), ``absolute``, ``parameter`` (the fitted
-        value as text, "" if none), ``n_points``.
+        over the model's for ``absolute`` models), ``absolute``, ``held_out`` (the parameter
+        was fitted to the other scans), ``parameter`` (the fitted value as text, "" if none),
+        ``n_points``.
     """
     import pandas as pd
 
     rows = []
     for rotated in rotations:
         for model in models:
-            for scan in scans:
-                r = compare(scan, model, rotated, exclude_deg)
-                p = r["parameter"]
-                rows.append({"rotated": bool(rotated), "model": model.name,
-                             "capture": scan.capture, "time": scan.label,
-                             "relative_rms": r["relative_rms"], "scale": r["scale"],
-                             "absolute": model.absolute,
-                             "parameter": "" if p is None else " ".join(
-                                 f"{v:g}" for v in np.atleast_1d(p)),
-                             "n_points": r["n_points"]})
+            runs = [(model.name, False, [compare(s, model, rotated, exclude_deg)
+                                         for s in scans])]
+            if model.held_out and len(model.parameters) > 1 and len(scans) > 1:
+                runs.append((held_out_name(model), True,
+                             compare_held_out(scans, model, rotated, exclude_deg)))
+            for name, held_out, results in runs:
+                for scan, r in zip(scans, results):
+                    p = r["parameter"]
+                    rows.append({"rotated": bool(rotated), "model": name,
+                                 "capture": scan.capture, "time": scan.label,
+                                 "relative_rms": r["relative_rms"], "scale": r["scale"],
+                                 "absolute": model.absolute, "held_out": held_out,
+                                 "parameter": "" if p is None else " ".join(
+                                     f"{v:g}" for v in np.atleast_1d(p)),
+                                 "n_points": r["n_points"]})
     return pd.DataFrame(rows)
 
 

@@ -67,7 +67,7 @@ def sunsky_model(turbidities=TURBIDITIES):
     turbidity fitted per scan over ``turbidities``."""
     return SkyModel("sunsky_fit",
                     lambda d, scan, values: sunsky_luminance(d, scan.sun_direction, values),
-                    parameters=tuple(turbidities), parameter_name="turbidity",
+                    parameters=tuple(turbidities), parameter_name="turbidity", held_out=True,
                     description="Mitsuba sunsky (Hosek-Wilkie), sky only, albedo "
                                 f"{GROUND_ALBEDO:g}, turbidity in [1, 10] fitted per scan "
                                 "(step 0.25)")
