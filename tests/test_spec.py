@@ -208,6 +208,72 @@ def test_perez_sky_from_a_tmy3_weather_file(tmp_path):
     assert info["dni_w_m2"] == pytest.approx(row["dni"].mean(), rel=1e-9)
 
 
+# ---- the CIE S 011 general sky as a spec sky type (issue 15) -------------------------------
+
+def test_cie_general_type_12_is_the_thesis_clear_sky(tmp_path):
+    from skyfit_mi.physics.sky import SRGB_LUMINANCE
+    general = _spec(tmp_path, sky='type = "cie_general"\ncie_type = 12')
+    clear = _spec(tmp_path, sky='type = "clear"')
+    rng = np.random.default_rng(3)
+    d = rng.normal(size=(500, 3))
+    d[:, 2] = np.abs(d[:, 2])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    for g, c in zip(general.frames, clear.frames):
+        # the thesis's 0.91 is 1 - 10 exp(-3 pi / 2) to 2e-4 (eq. 4.13)
+        np.testing.assert_allclose(g.sky.sky_radiance(d), c.sky.sky_radiance(d), rtol=3e-4)
+        np.testing.assert_allclose(g.sky.sun_radiance, c.sky.sun_radiance, rtol=1e-12)
+        np.testing.assert_allclose(g.sky.ground, c.sky.ground, rtol=3e-4)
+        assert g.sky.info["kind"] == "cie_general"
+        assert float(g.sky.sky_horizontal_irradiance() @ SRGB_LUMINANCE) == pytest.approx(
+            float(c.sky.sky_horizontal_irradiance() @ SRGB_LUMINANCE), rel=3e-4)
+
+
+def test_cie_general_groups_follow_the_standard_and_measured_light(tmp_path):
+    from skyfit_mi.physics import cie_general as cg
+    from skyfit_mi.physics.sky import SRGB_LUMINANCE
+    spec = _spec(tmp_path, sky='type = "cie_general"\ngradation = 5.98\nindicatrix = 4\n'
+                               'zenith_luminance = 4000\ncct = 9000')
+    f = spec.frames[1]
+    rng = np.random.default_rng(4)
+    d = rng.normal(size=(500, 3))
+    d[:, 2] = np.abs(d[:, 2]) + 0.02
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    luminance = f.sky.sky_radiance(d) @ SRGB_LUMINANCE * 150.0       # default efficacy
+    want = 4000.0 * cg.pattern(d, f.sky.sun_direction, cg.group_parameters(5.98, 4))
+    np.testing.assert_allclose(luminance, want, rtol=1e-6)       # cct's luminance is 1 to 2e-7
+    measured = _spec(tmp_path, sky='type = "cie_general"\ncie_type = 7\n'
+                                   'diffuse_horizontal_W_m2 = 150\ndirect_normal_W_m2 = 300')
+    f = measured.frames[0]
+    assert float(f.sky.sky_horizontal_irradiance() @ SRGB_LUMINANCE) == pytest.approx(150, rel=1e-9)
+    assert float(f.sky.sun_horizontal_irradiance() @ SRGB_LUMINANCE) == pytest.approx(
+        300 * np.cos(np.radians(f.sun_zenith_deg)), rel=1e-9)
+
+
+def test_cie_general_sky_survives_the_manifest(tmp_path):
+    # The manifest records the sky's terms, not its kind's recipe: fit and relight rebuild it.
+    from skyfit_mi.pipeline.manifest import frame_sky, illumination_record
+    spec = _spec(tmp_path, sky='type = "cie_general"\ngradation = 5.98\nindicatrix = 4')
+    sky = spec.frames[0].sky
+    back = frame_sky({"index": 0, "illumination": illumination_record(sky, tmp_path)}, tmp_path)
+    d = np.array([[0.0, 0.0, 1.0], [0.6, -0.3, 0.5], [-0.2, 0.9, 0.1], [0.3, 0.3, -0.5]])
+    np.testing.assert_array_equal(back.radiance(d), sky.radiance(d))
+
+
+@pytest.mark.parametrize("sky, message", [
+    ('type = "cie_general"', "needs either cie_type"),
+    ('type = "cie_general"\ncie_type = 12\ngradation = 5', "not both"),
+    ('type = "cie_general"\ngradation = 5', "both gradation and indicatrix"),
+    ('type = "cie_general"\ncie_type = 16', "does not exist"),
+    ('type = "cie_general"\ngradation = 7\nindicatrix = 4', "gradation group"),
+    ('type = "cie_general"\ncie_type = 12\nefficacy_overcast = 120', "drop efficacy_overcast"),
+    ('type = "clear"\ncie_type = 12', "only type = 'cie_general'"),
+    ('type = "cie_general"\ncie_type = "12"', "cie_type"),
+])
+def test_bad_cie_general_specs_are_refused_by_key(tmp_path, sky, message):
+    with pytest.raises(SpecError, match=message):
+        _spec(tmp_path, sky=sky)
+
+
 @pytest.mark.parametrize("sky, message", [
     ('type = "perez"', "needs measured irradiance"),
     ('type = "clear"\nglobal_horizontal_W_m2 = 500', "belong to a Perez sky"),

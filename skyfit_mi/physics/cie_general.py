@@ -253,3 +253,33 @@ def pattern(directions, sun, params):
     theta_s = np.arccos(np.clip(sun[2], -1.0, 1.0))
     p = np.asarray(params, dtype=float)
     return relative_luminance(d[..., 2], zeta, theta_s, p[..., None, :] if p.ndim > 1 else p)
+
+
+def perez_form(params):
+    """The general sky's pattern in the Perez (1993, eq. 1) form that the ``cie_sky`` emitter
+    renders: f(zeta) phi(theta_p) = k (1 + a e^{b / cos theta_p})(1 + c' e^{d zeta} +
+    e' cos^2 zeta).
+
+    Since f(zeta) = k + c e^{d zeta} + e cos^2 zeta with k = 1 - c e^{d pi / 2} (CIE S 011's
+    indicatrix, :func:`indicatrix`), c' = c / k and e' = e / k.  k > 0 for every standard
+    group and every blend of them (0.705 for group 6, the least).
+
+    Parameters
+    ----------
+    params : array_like, shape (5,)
+        a, b, c [unitless], d [rad^-1], e [unitless] of the general sky.
+
+    Returns
+    -------
+    k : float
+        The factor [unitless].
+    coefficients : ndarray, shape (5,)
+        a, b, c', d, e' of :func:`skyfit_mi.physics.sky.perez_relative_luminance`.
+    """
+    a, b, c, d, e = np.asarray(params, dtype=float)
+    k = 1.0 - c * np.exp(d * np.pi / 2)
+    if not k > 0 or not b < 0:
+        raise SkyfitError(f"CIE general sky parameters {list(map(float, params))} have no "
+                          "positive pattern (need b < 0 and c exp(d pi/2) < 1); use a standard "
+                          "type or group indices.")
+    return float(k), np.array([a, b, c / k, d, e / k])

@@ -463,6 +463,72 @@ def cie_sky(kind, sun_zenith_deg, sun_azimuth_deg, *, phi=None, day=172,
     return replace(sky, ground=ground_albedo * sky.horizontal_irradiance() / np.pi)
 
 
+def cie_general_sky(params, sun_zenith_deg, sun_azimuth_deg, *, day=172, zenith_luminance=None,
+                    efficacy=EFFICACY_CLEAR, cct=CCT_CLEAR, sun=True, extinction=None,
+                    solar_constant=None, sun_solid_angle=SUN_SOLID_ANGLE,
+                    ground_albedo=GROUND_ALBEDO):
+    """A CIE S 011 general sky (:mod:`skyfit_mi.physics.cie_general`) with the thesis's sun.
+
+    L = L_z f(zeta) phi(theta_p) / (f(theta_s) phi(0)) [cd m^-2], rendered through the Perez
+    term of the sky family (:func:`~skyfit_mi.physics.cie_general.perez_form`), turned into
+    radiance by ``efficacy`` and coloured by ``cct``.  The level is the zenith luminance L_z,
+    by default Kittler's (eq. 4.15, the thesis's clear sky), so standard type 12 is the thesis's
+    clear sky (eqs. 4.10-4.15; their 0.91 is 1 - 10 e^{-3 pi/2} to 2e-4).  For other weather
+    give ``zenith_luminance`` or rescale to measured light (:meth:`Sky.scaled`).  The sun disc
+    carries the direct normal irradiance of eq. 4.7; the ground is Lambertian, lit by both.
+
+    Parameters
+    ----------
+    params : array_like, shape (5,)
+        a, b, c, d, e (:func:`~skyfit_mi.physics.cie_general.standard_parameters`,
+        :func:`~skyfit_mi.physics.cie_general.group_parameters`).
+    sun_zenith_deg, sun_azimuth_deg : float
+        Sun position [degrees], zenith in [0, 180], compass azimuth.
+    day : int
+        Day of the year (eq. 4.5).
+    zenith_luminance : float, optional
+        L_z [cd m^-2] (default eq. 4.15).
+    efficacy : float
+        Luminous efficacy of the skylight [lm W^-1].
+    cct : float
+        Sky colour temperature [K].
+    sun, extinction, solar_constant, sun_solid_angle, ground_albedo
+        As :func:`cie_sky`.
+
+    Returns
+    -------
+    Sky
+    """
+    from . import cie_general
+
+    check_range("sun zenith", sun_zenith_deg, 0.0, 180.0, "degrees")
+    check_range("ground albedo", ground_albedo, 0.0, 1.0)
+    check_range("efficacy", efficacy, 1.0, 683.0, "lm W^-1")
+    p = np.asarray(params, dtype=float)
+    k, coefficients = cie_general.perez_form(p)
+    theta_s = np.radians(sun_zenith_deg)
+    lz = kittler_zenith_luminance(sun_zenith_deg) if zenith_luminance is None \
+        else check_range("zenith luminance", zenith_luminance, 0, 1e6, "cd m^-2")
+    norm = float(cie_general.indicatrix(theta_s, *p[2:])
+                 * cie_general.gradation(1.0, *p[:2]))
+    weight = float(lz) * k / norm / efficacy * cct_to_rgb(cct)
+    sun_rad = np.zeros(3)
+    if sun:
+        kw = {name: v for name, v in (("extinction", extinction),
+                                      ("solar_constant", solar_constant)) if v is not None}
+        n = float(direct_normal_irradiance(sun_zenith_deg, day, **kw))
+        sun_rad = n / sun_solid_angle * sun_rgb(sun_zenith_deg)
+    sky = Sky(direction_from_angles(theta_s, np.radians(sun_azimuth_deg)), perez=weight,
+              perez_coefficients=coefficients, sun_radiance=sun_rad,
+              sun_solid_angle=sun_solid_angle,
+              info={"kind": "cie_general", "parameters_abcde": p.tolist(),
+                    "sun_zenith_deg": float(sun_zenith_deg),
+                    "sun_azimuth_deg": float(sun_azimuth_deg),
+                    "zenith_luminance_cd_m2": float(lz), "efficacy_lm_W": float(efficacy),
+                    "ground_albedo": ground_albedo})
+    return replace(sky, ground=ground_albedo * sky.horizontal_irradiance() / np.pi)
+
+
 def directional_sky(direction, irradiance, solid_angle=SUN_SOLID_ANGLE):
     """A lab light as a :class:`Sky`: a disc of uniform radiance E / Omega toward ``direction``,
     no sky, no ground.

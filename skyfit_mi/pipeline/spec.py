@@ -23,7 +23,8 @@ from ..physics.gensky import from_gensky
 from ..render.scene import camera_matrix
 from ..render.scene_xml import resolve_materials
 from ..render.variant import VARIANTS
-from ..physics.sky import EFFICACY_CLEAR, EFFICACY_OVERCAST, SKY_TYPES, cie_sky
+from ..physics.sky import (EFFICACY_CLEAR, EFFICACY_OVERCAST, SKY_TYPES, cie_general_sky,
+                           cie_sky)
 from ..physics.sun import solar_position
 from ..physics.ward import NORMALISATIONS, raw_parameters
 
@@ -45,7 +46,8 @@ _SCHEMA = {
             "diffuse_horizontal_W_m2", "direct_normal_W_m2", "diffuse_horizontal_lux",
             "global_horizontal_W_m2", "decomposition", "cct", "irradiance_file",
             "file", "projection", "north_rotation_deg", "scale", "rows", "sun_mask_deg",
-            "direction", "zenith_deg", "azimuth_deg", "irradiance_W_m2", "solid_angle_sr"},
+            "direction", "zenith_deg", "azimuth_deg", "irradiance_W_m2", "solid_angle_sr",
+            "cie_type", "gradation", "indicatrix", "zenith_luminance"},
     "scene": {"file", "ground_albedo"},
     "materials": None,
     "camera": {"azimuth_deg", "angle_deg", "distance", "target", "origin", "up", "matrix",
@@ -53,18 +55,25 @@ _SCHEMA = {
     "sensor": {"exposure", "response", "gamma", "bits", "noise_percent", "cos4"},
     "render": {"spp", "seed", "variant", "max_depth", "below_horizon", "sampler", "integrator"},
 }
-SKY_KINDS = tuple(SKY_TYPES) + ("gensky", "perez", "envmap", "directional")
+SKY_KINDS = tuple(SKY_TYPES) + ("cie_general", "gensky", "perez", "envmap", "directional")
 #: [sky] keys whose values are numbers (their ranges are checked where they are used).
 _SKY_NUMBERS = {"phi", "efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
                 "ground_albedo", "extinction", "solar_constant", "clear_zenith_luminance",
                 "overcast_zenith_luminance", "diffuse_horizontal_W_m2", "direct_normal_W_m2",
                 "diffuse_horizontal_lux", "global_horizontal_W_m2", "cct", "north_rotation_deg",
-                "scale", "rows", "sun_mask_deg", "zenith_deg", "azimuth_deg", "solid_angle_sr"}
+                "scale", "rows", "sun_mask_deg", "zenith_deg", "azimuth_deg", "solid_angle_sr",
+                "cie_type", "gradation", "indicatrix", "zenith_luminance"}
 #: The keys of an HDR environment map sky and of a directional lab light
 #: (:mod:`skyfit_mi.pipeline.illumination`), and the other keys each takes.
 _ENVMAP_KEYS = {"file", "projection", "north_rotation_deg", "scale", "rows", "sun_mask_deg"}
 _DIRECTIONAL_KEYS = {"direction", "zenith_deg", "azimuth_deg", "irradiance_W_m2", "solid_angle_sr"}
-_ALLOWED_WITH = {"envmap": _ENVMAP_KEYS | {"type", "time", "diffuse_horizontal_W_m2",
+#: The keys of a CIE S 011 general sky (:func:`skyfit_mi.physics.sky.cie_general_sky`).
+_CIE_GENERAL_KEYS = {"cie_type", "gradation", "indicatrix", "zenith_luminance"}
+_ALLOWED_WITH = {"cie_general": _CIE_GENERAL_KEYS | {
+                     "type", "time", "cct", "sun", "extinction", "solar_constant",
+                     "ground_albedo", "diffuse_horizontal_W_m2", "direct_normal_W_m2",
+                     "diffuse_horizontal_lux", "irradiance_file"},
+                 "envmap": _ENVMAP_KEYS | {"type", "time", "diffuse_horizontal_W_m2",
                                           "direct_normal_W_m2", "ground_albedo",
                                           "irradiance_file"},
                  "directional": _DIRECTIONAL_KEYS | {"type", "time"}}
@@ -469,7 +478,8 @@ def _sky_entries(sec, times, tz):
                             f"to a {e['type']} one; drop phi or set type = 'intermediate'.")
         if "phi" in e:
             _num("sky", "phi", e["phi"], 0, 1)
-        perez_only = sorted({"global_horizontal_W_m2", "decomposition", "cct"} & set(e))
+        perez_only = sorted({"global_horizontal_W_m2", "decomposition", "cct"} & set(e)
+                            - ({"cct"} if e["type"] == "cie_general" else set()))
         if perez_only and e["type"] != "perez":
             raise SpecError(f"[sky] {', '.join(perez_only)} belong to a Perez sky (type = "
                             f"'perez'), not to a {e['type']} one.")
@@ -480,7 +490,8 @@ def _sky_entries(sec, times, tz):
 def _check_light_keys(e):
     """Refuse the keys of an envmap or directional sky on other types, and other types' keys
     on those."""
-    for kind, own in (("envmap", _ENVMAP_KEYS), ("directional", _DIRECTIONAL_KEYS)):
+    for kind, own in (("envmap", _ENVMAP_KEYS), ("directional", _DIRECTIONAL_KEYS),
+                      ("cie_general", _CIE_GENERAL_KEYS)):
         if e["type"] == kind:
             bad = sorted(set(e) - _ALLOWED_WITH[kind])
             if bad:
@@ -494,6 +505,8 @@ def _check_light_keys(e):
     if e["type"] == "envmap" and "file" not in e:
         raise SpecError("[sky] an envmap sky needs file = 'maps/sky_{index:03d}.exr' (an HDR map "
                         "beside the spec; {index} and {time:%H%M} name each frame's).")
+    if e["type"] == "cie_general":
+        _cie_general_parameters(e)
     if e["type"] == "directional":
         if "irradiance_W_m2" not in e:
             raise SpecError("[sky] a directional light needs irradiance_W_m2 (normal to the beam, "
@@ -511,6 +524,24 @@ def _check_light_keys(e):
                                 f"{e[key]!r}.")
             for i, x in enumerate(v):
                 _num("sky", f"{key}[{i}]", x)
+
+
+def _cie_general_parameters(e):
+    """a, b, c, d, e of a cie_general [sky] entry: a standard type, or group indices."""
+    from ..physics import cie_general
+
+    by_type, by_groups = "cie_type" in e, bool({"gradation", "indicatrix"} & set(e))
+    if by_type == by_groups or (by_groups and not {"gradation", "indicatrix"} <= set(e)):
+        raise SpecError("[sky] a cie_general sky needs either cie_type (a CIE S 011 standard type "
+                        "1-15; 12 is the CIE clear sky) or both gradation and indicatrix (group "
+                        "indices 1-6, e.g. 5.98 and 4 for the measured clear sky of docs/"
+                        "BENCHMARKS.md), not both.")
+    try:
+        if by_type:
+            return cie_general.standard_parameters(e["cie_type"])
+        return cie_general.group_parameters(e["gradation"], e["indicatrix"])
+    except SkyfitError as exc:
+        raise SpecError(f"[sky] {exc}") from None
 
 
 def _with_series(entries, times, tz, base_dir):
@@ -575,6 +606,11 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index):
             from .illumination import perez_from_irradiance
 
             return perez_from_irradiance(e, zenith, azimuth, t)
+        if e["type"] == "cie_general":
+            kw = {k: e[k] for k in ("cct", "sun", "extinction", "solar_constant",
+                                    "ground_albedo", "zenith_luminance") if k in e}
+            sky = cie_general_sky(_cie_general_parameters(e), zenith, azimuth,
+                                  day=t.timetuple().tm_yday, **kw)
         if e["type"] == "gensky":
             text = e.get("gensky")
             if text is None:
@@ -584,7 +620,7 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index):
                                     "or a file beside the spec.")
                 text = p.read_text()
             sky = from_gensky(text)
-        else:
+        elif e["type"] != "cie_general":
             kw = {k: e[k] for k in ("efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
                                     "ground_albedo", "extinction", "solar_constant", "sun",
                                     "clear_zenith_luminance", "overcast_zenith_luminance") if k in e}
