@@ -132,7 +132,8 @@ def _ingest(args):
         from .pipeline.observation_table import ingest_table
 
         photo_only = [k for k in ("times", "name_pattern", "response", "gamma", "exposure",
-                                  "calibrate", "noise") if getattr(args, k) is not None]
+                                  "calibrate", "colorchecker", "noise")
+                      if getattr(args, k) is not None]
         if args.photos or photo_only or args.vignetting != "none":
             what = "photographs" if args.photos else "--" + (photo_only or ["vignetting"])[0] \
                 .replace("_", "-")
@@ -146,7 +147,7 @@ def _ingest(args):
     ingest(args.photos, args.spec, args.output, times_csv=args.times,
            name_pattern=args.name_pattern, tz=args.tz, site=args.site, response=args.response,
            gamma=args.gamma, exposure=args.exposure, calibrate=dict(args.calibrate or []),
-           vignetting=args.vignetting, noise=args.noise, overwrite=args.overwrite,
+           colorchecker=args.colorchecker, vignetting=args.vignetting, noise=args.noise, overwrite=args.overwrite,
            progress=not args.quiet)
 
 
@@ -372,7 +373,8 @@ def build_parser():
                      help="site in degrees (north, east) and metres, overriding the spec's")
     ing.add_argument("--response", choices=("srgb", "gamma", "linear", "fit"),
                      help="the encoding to invert (default: the spec's [sensor], else the "
-                     "files'); fit: chosen and fitted from the --calibrate patches")
+                     "files'); fit: chosen and fitted from the --calibrate or --colorchecker "
+                     "patches")
     ing.add_argument("--gamma", type=float, help="exponent of a gamma response")
     ing.add_argument("--exposure", type=float, help="absolute exposure of the first frame "
                      "[sr m^2 W^-1] (1 / the radiance at full scale)")
@@ -380,6 +382,10 @@ def build_parser():
                      metavar="MATERIAL=REFLECTANCE", help="a scene material that is a grey "
                      "Lambertian reference of this reflectance (or R,G,B); sets the exposure and "
                      "white balance (repeatable)")
+    ing.add_argument("--colorchecker", metavar="MATERIAL", help="a ColorChecker Classic in the "
+                     "photographs, lying on this scene material: found automatically; its six "
+                     "neutral swatches calibrate like --calibrate greys, its colours check the "
+                     "result (needs colour-checker-detection: pip install 'skyfit-mi[photo]')")
     ing.add_argument("--vignetting", default="none", metavar="none|cos4|FLAT",
                      help="none, the cos^4 law, or a flat-field image (default none)")
     ing.add_argument("--noise", type=_numbers, metavar="READ,SHOT",

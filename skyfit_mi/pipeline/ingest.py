@@ -217,6 +217,11 @@ def pixel_sigma(values, sensor, noise, compression=None):
 
 # ---- calibration from patches of known reflectance ----------------------------------------
 
+#: Patch label of the ColorChecker's first swatch (:func:`patch_samples`); the material it lies
+#: on is rendered as a grey Lambertian of reflectance CHART_GREY, scaled to each swatch's.
+CHART_LABEL, CHART_GREY = 1000, 0.5
+
+
 def _calibration_spec(raw, calibrate, base_dir):
     """The spec with each calibration material a grey (or RGB) Lambertian of its reflectance."""
     raw = json.loads(json.dumps(raw))
@@ -226,11 +231,18 @@ def _calibration_spec(raw, calibrate, base_dir):
     return validate_spec(raw, base_dir)
 
 
-def patch_samples(spec, values, falloff, calibrate):
-    """The calibration materials' pixels in every frame of ``values`` (the spec's lit frames):
-    per frame, (codes (n, 3) [DN], L (n, 3) [W m^-2 sr^-1]) of every material's pixels away
-    from its edges, L the pixel's radiance rendered as a Lambertian of its known reflectance
-    under the frame's sky, times the vignetting ``falloff``."""
+def patch_samples(spec, values, falloff, calibrate, chart=None):
+    """The calibration patches' pixels in every frame of ``values`` (the spec's lit frames).
+
+    Patches are the ``calibrate`` materials' pixels away from their edges (labels 1, 2, ...),
+    and, with ``chart`` = (material, swatch labels (H, W) of
+    :func:`.colorchecker.find_chart`), the ColorChecker's 24 swatches (labels
+    :data:`CHART_LABEL` + swatch index), which must lie on that scene material.  Per frame,
+    (codes (n, 3) [DN], L (n, 3) [W m^-2 sr^-1]), L the pixel's radiance rendered under the
+    frame's sky with the material a Lambertian of its known reflectance (a swatch: of
+    :data:`CHART_GREY`, scaled to the swatch's reference), times the vignetting ``falloff``;
+    and each pixel's patch label (n,).
+    """
     from scipy.ndimage import binary_erosion
 
     from ..render.labels import label_image
@@ -238,8 +250,9 @@ def patch_samples(spec, values, falloff, calibrate):
 
     renderer = FrameRenderer(spec)
     labels, ids = label_image(renderer.scene)
-    mask = np.zeros(labels.shape, bool)
-    for name in calibrate:
+    patch = np.zeros(labels.shape, np.int32)
+    scale = np.ones((CHART_LABEL + 24, 3))
+    for k, name in enumerate(calibrate, start=1):
         if name not in ids:
             raise SkyfitError(f"--calibrate {name}: the camera sees no material {name!r}; it sees "
                               f"{', '.join(ids) or 'none'}.")
@@ -247,14 +260,59 @@ def patch_samples(spec, values, falloff, calibrate):
         if m.sum() < 4:
             raise SkyfitError(f"--calibrate {name}: fewer than 4 pixels of it lie away from its "
                               "edges; frame the reference patch larger.")
-        mask |= m
+        patch[m] = k
+    if chart is not None:
+        from .colorchecker import NAMES, NEUTRAL, reference_rgb
+
+        material, swatches = chart
+        if material not in ids:
+            raise SkyfitError(f"--colorchecker {material}: the camera sees no material "
+                              f"{material!r}; it sees {', '.join(ids) or 'none'}.")
+        on = labels == ids.index(material) + 1
+        off = [NAMES[k] for k in NEUTRAL if not on[swatches == k + 1].all()]
+        if off:
+            raise SkyfitError(f"--colorchecker {material}: the chart's {', '.join(off)} "
+                              f"swatch(es) lie off material {material!r} in the scene; model "
+                              "the chart's surface as that material where the photographs show "
+                              "the chart.")
+        inside = (swatches > 0) & on
+        patch[inside] = CHART_LABEL + swatches[inside] - 1
+        scale[CHART_LABEL:] = reference_rgb() / CHART_GREY
+    mask = patch > 0
     lit = [f for f in spec.frames if not f.skipped]
     out = []
     for f, v in zip(lit, values):
         radiance, _ = renderer.render(f)
-        out.append((v[mask], radiance[mask] * falloff[mask][:, None]))
-    # each material's pixels are kept apart by their label, for the response fit's levels
-    return out, labels[mask]
+        out.append((v[mask], radiance[mask] * falloff[mask][:, None] * scale[patch[mask]]))
+    # each patch's pixels are kept apart by their label, for the response fit's levels
+    return out, patch[mask]
+
+
+def _select(samples, patch, keep):
+    """The samples and labels of the patches whose labels are in ``keep``."""
+    sel = np.isin(patch, list(keep))
+    return [(y[sel], L[sel]) for y, L in samples], patch[sel]
+
+
+def _swatch_ratios(samples, patch, sensor, exposures):
+    """(24, 3) median over frames and pixels of each ColorChecker swatch's observed signal over
+    its calibrated prediction (exposure x rendered radiance), values at 0 or the top left out;
+    NaN where a swatch has none."""
+    ratio = np.full((24, 3), np.nan)
+    parts = {k: [] for k in range(24)}
+    for (y, L), e in zip(samples, exposures):
+        ok = np.isfinite(y) & (y > 0) & (y < sensor.max_code) & (L > 0)
+        with np.errstate(all="ignore"):
+            r = np.where(ok, sensor.linearise(np.where(ok, y, 0.0)) / (e * L), np.nan)
+        for k in range(24):
+            parts[k].append(r[patch == CHART_LABEL + k])
+    for k, rs in parts.items():
+        r = np.concatenate(rs) if rs else np.empty((0, 3))
+        for c in range(3):
+            v = r[:, c][np.isfinite(r[:, c])]
+            if len(v):
+                ratio[k, c] = np.median(v)
+    return ratio
 
 
 def fit_response(samples, patch, max_code, rel, log):
@@ -369,6 +427,23 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log):
 
 # ---- the whole ingest ---------------------------------------------------------------------
 
+def _chart_record(material, chart, samples, patch, sensor, exposures, log):
+    """The manifest's record of a ColorChecker calibration, with its chromatic check."""
+    from .colorchecker import NAMES, NEUTRAL, swatch_check
+
+    check = swatch_check(_swatch_ratios(samples, patch, sensor, exposures))
+    if check["rms"] is not None:
+        log(f"ColorChecker check: the calibrated chromatic swatches are "
+            f"{check['rms']:.1%} rms from their rendered reference (worst {check['worst'][0]}, "
+            f"{check['worst'][1]:.1%}); the neutral swatches calibrated")
+    return {"material": material, "swatches_used": [NAMES[k] for k in NEUTRAL],
+            "outline_px": np.round(chart["corners"], 1).tolist(),
+            "pixels_per_swatch": chart["pixels"].tolist(), "match_rms": chart["match"],
+            "chromatic_check": check,
+            "reference": "linear sRGB of ColorChecker24 - After November 2014 (colour-science, "
+                         "via colour-checker-detection)"}
+
+
 def spec_for_times(spec_path, times, tz=None, site=None, size=None):
     """(raw, validated spec) of ``spec_path`` for measured frames at ``times`` (aware
     datetimes, in order): its [time] replaced by them, frames with the sun below the horizon
@@ -422,7 +497,8 @@ def _run_id(paths, spec_raw, options):
 
 def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None, tz=None,
            site=None, response=None, gamma=None, exposure=None, calibrate=None,
-           vignetting="none", noise=None, overwrite=False, progress=True, log=print):
+           colorchecker=None, vignetting="none", noise=None, overwrite=False, progress=True,
+           log=print):
     """Turn photographs into a sequence folder; returns the manifest dict.
 
     Parameters
@@ -436,6 +512,9 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
         response 'fit': chosen and fitted from the ``calibrate`` patches (:func:`fit_response`)
     exposure : absolute exposure of the first frame [sr m^2 W^-1]
     calibrate : {material: (r, g, b) reflectance} of grey Lambertian references in the scene
+    colorchecker : the scene material a ColorChecker Classic in the photographs lies on: the
+        chart is found (:func:`.colorchecker.find_chart`) and its six neutral swatches join the
+        calibration patches; its chromatic ones check the result (``calibration.colorchecker``)
     vignetting : 'none', 'cos4', or the path of a flat-field image
     noise : (a [DN^2], b [DN]) of the noise model, or None to estimate it from the frames
     """
@@ -481,10 +560,15 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
             f"{', '.join(night)}")
 
     fitted = response == "fit"
-    if fitted and not calibrate:
+    calibrate = dict(calibrate or {})
+    if colorchecker is not None and colorchecker in calibrate:
+        raise SkyfitError(f"{colorchecker!r} is named by both --calibrate and --colorchecker; "
+                          "the chart's material takes its reflectances from the chart's swatches: "
+                          "drop it from --calibrate.")
+    if fitted and not (calibrate or colorchecker):
         raise SkyfitError("--response fit needs patches of known reflectance: name them with "
                           "--calibrate MATERIAL=REFLECTANCE (two or more reflectances, or one "
-                          "seen at several EXIF exposures).")
+                          "seen at several EXIF exposures), or --colorchecker MATERIAL.")
     sensor, float_scale = _sensor(photos, None if fitted else response, gamma,
                                   raw.get("sensor", {}), vignetting == "cos4")
     if fitted and float_scale is not None:
@@ -510,9 +594,21 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
 
     rel = _relative_exposures(photos, log)
     cal_info = None
-    if calibrate:
-        cal_spec = _calibration_spec(spec.raw, calibrate, spec.base_dir)
-        samples, patch = patch_samples(cal_spec, [values[i] for i in lit], falloff, calibrate)
+    chart = None
+    if colorchecker is not None:
+        from .colorchecker import find_chart
+
+        chart = find_chart([sensor.linearise(values[i]) / falloff[..., None] for i in lit], log)
+    if calibrate or chart:
+        from .colorchecker import NEUTRAL
+
+        materials = {**calibrate, **({colorchecker: (CHART_GREY,) * 3} if chart else {})}
+        cal_spec = _calibration_spec(spec.raw, materials, spec.base_dir)
+        all_samples, all_patch = patch_samples(
+            cal_spec, [values[i] for i in lit], falloff, calibrate,
+            None if chart is None else (colorchecker, chart["labels"]))
+        samples, patch = _select(all_samples, all_patch, list(range(1, len(calibrate) + 1))
+                                 + [CHART_LABEL + k for k in NEUTRAL])
         rel_lit = None if rel is None else rel[lit]
         response_info = None
         if fitted:
@@ -524,6 +620,9 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
                                                  [photos[i] for i in lit], rel_lit, log)
         if response_info is not None:
             cal_info["response_fit"] = response_info
+        if chart is not None:
+            cal_info["colorchecker"] = _chart_record(colorchecker, chart, all_samples,
+                                                     all_patch, sensor, per_frame, log)
         e0 = float(per_frame[0] @ SRGB_LUMINANCE)
         exposures = {i: per_frame[j] for j, i in enumerate(lit)}
     else:
@@ -555,7 +654,8 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
     options = {"times_csv": str(times_csv), "name_pattern": name_pattern, "tz": tz,
                "response": "fit: " + sensor.response if fitted else sensor.response,
                "gamma": sensor.gamma, "exposure": exposure,
-               "calibrate": calibrate, "vignetting": str(vignetting), "noise": [a, b]}
+               "calibrate": calibrate, "colorchecker": colorchecker,
+               "vignetting": str(vignetting), "noise": [a, b]}
     run_id = _run_id(paths, spec.raw, options)
     out = Path(out_dir)
     with FolderLock(out):

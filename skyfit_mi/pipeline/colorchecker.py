@@ -1,0 +1,253 @@
+"""A ColorChecker in the photographs: found, oriented, and its swatches as calibration patches.
+
+``skyfit ingest --colorchecker MATERIAL`` calibrates a day of photographs from an X-Rite
+ColorChecker Classic (24 swatches, 4 rows of 6) lying on the scene surface ``MATERIAL`` (its
+geometry gives the swatches' normal, so each frame's sky lights them as it lights the chart).
+The chart is found once for the static camera:
+
+1. the frames are linearised and normalised by their medians, and their per-pixel median
+   taken (one image, whatever the day's light did);
+2. ``colour-checker-detection``'s segmentation (Mansencal et al., colour-science) finds the
+   square swatch contours and the clusters of them shaped like a chart;
+3. the chart's 6 x 4 grid is mapped to the image by a homography: a first guess from each
+   cluster's corners (all eight corner orders), then a least-squares fit to the detected swatch
+   centres nearest the guessed cells, refined twice;
+4. the orientation and the cluster whose sampled swatches match the chart's reference colours
+   best (per-channel scale free, rms log ratio) win;
+5. each swatch's pixels are those whose centres map inside the middle :data:`INNER` of its
+   cell, so edges and the black surround stay out.
+
+The six neutral swatches (white to black, spectrally flat, so their reflectance does not depend
+on the camera's spectral sensitivities) are the grey steps of the calibration
+(:func:`skyfit_mi.pipeline.ingest.fit_response`, :func:`~skyfit_mi.pipeline.ingest.calibrate_exposure`),
+as the thesis's IT8 target's greys.  The chromatic swatches orient the chart and, after the
+calibration, are a check of it (:func:`swatch_check`).
+
+Reference reflectances: the linear-sRGB values of ``colour-checker-detection`` (colour-science's
+"ColorChecker24 - After November 2014", X-Rite's post-2014 formulation, D50, Bradford-adapted to
+sRGB's D65), unitless.
+"""
+
+import numpy as np
+
+from ..errors import SkyfitError
+
+#: Swatch columns and rows of a ColorChecker Classic (row 1 dark skin ... cyan, row 4 the
+#: neutrals white 9.5 ... black 2).
+COLUMNS, ROWS = 6, 4
+#: The neutral swatches' indices (0-based, row by row).
+NEUTRAL = tuple(range(18, 24))
+#: Names of the 24 swatches, for messages and records.
+NAMES = ("dark skin", "light skin", "blue sky", "foliage", "blue flower", "bluish green",
+         "orange", "purplish blue", "moderate red", "purple", "yellow green", "orange yellow",
+         "blue", "green", "red", "yellow", "magenta", "cyan",
+         "white 9.5", "neutral 8", "neutral 6.5", "neutral 5", "neutral 3.5", "black 2")
+#: Share of a swatch's cell (per side, centred) whose pixels are sampled [unitless].
+INNER = 0.5
+#: Least pixels a sampled swatch needs.
+MIN_SWATCH_PIXELS = 4
+#: Aspect ratios of a chart's outline that the segmentation accepts: wider than the library's
+#: default (1.35-1.65 around 1.5) because a chart seen obliquely is foreshortened.
+ASPECT_RANGE = (1.0, 3.0)
+#: Rms log ratio of the sampled swatches to the reference (scale per channel free) above which
+#: a detection is not accepted as the chart [unitless, ~ relative].
+MATCH_MAX = 0.35
+#: Reference reflectances below this are left out of the match (the cyan swatch lies outside
+#: sRGB: its red is negative).
+_MATCH_FLOOR = 0.01
+
+
+def _library():
+    try:
+        from colour_checker_detection.detection import segmentation
+    except ImportError as exc:                        # pragma: no cover - depends on the install
+        raise SkyfitError(f"--colorchecker needs the colour-checker-detection package ({exc}); "
+                          "install it: pip install 'skyfit-mi[photo]'.") from None
+    return segmentation
+
+
+def reference_rgb():
+    """(24, 3) linear-sRGB reflectance of the chart's swatches, row by row [unitless]."""
+    return np.array(_library().SETTINGS_SEGMENTATION_COLORCHECKER_CLASSIC["reference_values"],
+                    dtype=float)
+
+
+def _cell_centres():
+    """(24, 2) grid coordinates (column + 0.5, row + 0.5) of the swatches, row by row."""
+    r, c = np.divmod(np.arange(COLUMNS * ROWS), COLUMNS)
+    return np.stack([c + 0.5, r + 0.5], axis=1).astype(float)
+
+
+def _homography(src, dst):
+    """3x3 H with dst ~ H src (least squares, direct linear transform with normalisation)."""
+    import cv2
+
+    h, _ = cv2.findHomography(np.asarray(src, np.float64), np.asarray(dst, np.float64), 0)
+    return h
+
+
+def _apply(h, pts):
+    p = np.c_[np.asarray(pts, float), np.ones(len(pts))] @ h.T
+    return p[:, :2] / p[:, 2:3]
+
+
+def _to_image(points, shape, working_width):
+    """Working-image coordinates of the segmentation (the frame resized to ``working_width``,
+    turned 90 degrees clockwise first when it is portrait) -> the frame's pixel coordinates."""
+    h, w = shape
+    pts = np.asarray(points, float).reshape(-1, 2)
+    if w < h:                                          # rotated: (x, y) -> (h - 1 - y, x)
+        scale = h / working_width
+        x, y = pts[:, 0] * scale, pts[:, 1] * scale
+        return np.stack([y, h - x], axis=1)
+    scale = w / working_width
+    return pts * scale
+
+
+def _sample(image, h):
+    """Median colour (24, 3) of each swatch's inner pixels, and its pixel count (24,)."""
+    labels = swatch_labels(h, image.shape[:2])
+    out = np.full((COLUMNS * ROWS, 3), np.nan)
+    n = np.bincount(labels.ravel(), minlength=COLUMNS * ROWS + 1)[1:]
+    for k in np.flatnonzero(n):
+        out[k] = np.median(image[labels == k + 1], axis=0)
+    return out, n
+
+
+def _match(sampled, reference):
+    """Rms log ratio of sampled to reference swatches, one scale per channel free."""
+    ok = (reference > _MATCH_FLOOR) & (sampled > 0) & np.isfinite(sampled)
+    if ok.sum() < 30:
+        return np.inf
+    d = np.where(ok, np.log(np.where(ok, sampled, 1.0)) - np.log(np.where(ok, reference, 1.0)),
+                 np.nan)
+    d = d - np.nanmedian(d, axis=0)
+    return float(np.sqrt(np.nanmean(d ** 2)))
+
+
+def swatch_labels(h, shape):
+    """(H, W) int: 1 + the swatch index of each pixel whose centre maps (by the inverse of the
+    grid-to-image homography ``h``) into the middle :data:`INNER` of a swatch's cell, else 0."""
+    rows, cols = shape
+    ys, xs = np.mgrid[0:rows, 0:cols]
+    g = _apply(np.linalg.inv(h), np.c_[xs.ravel() + 0.5, ys.ravel() + 0.5])
+    col, row = np.floor(g[:, 0]), np.floor(g[:, 1])
+    inside = (col >= 0) & (col < COLUMNS) & (row >= 0) & (row < ROWS)
+    half = INNER / 2
+    central = (np.abs(g[:, 0] - col - 0.5) < half) & (np.abs(g[:, 1] - row - 0.5) < half)
+    k = np.where(inside & central, row * COLUMNS + col + 1, 0).astype(np.int32)
+    return k.reshape(rows, cols)
+
+
+def _fit_grid(quad, centres, image, reference):
+    """Best homography grid -> image for one cluster: every corner order of ``quad`` as a
+    first guess, refined on the detected swatch ``centres``; (match, h)."""
+    corners = np.array([[0, 0], [COLUMNS, 0], [COLUMNS, ROWS], [0, ROWS]], float)
+    cells = _cell_centres()
+    best = (np.inf, None)
+    for flip in (False, True):
+        q = quad[::-1] if flip else quad
+        for shift in range(4):
+            h = _homography(corners, np.roll(q, shift, axis=0))
+            for _ in range(3):                          # refine on the swatches found
+                if len(centres) < 8:
+                    break
+                guess = _apply(h, cells)
+                d = np.linalg.norm(guess[:, None, :] - centres[None, :, :], axis=2)
+                pitch = np.median(np.linalg.norm(np.diff(guess.reshape(ROWS, COLUMNS, 2),
+                                                         axis=1), axis=2))
+                near = d.argmin(axis=1)
+                use = d[np.arange(len(cells)), near] < 0.35 * pitch
+                if use.sum() < 8:
+                    break
+                h = _homography(cells[use], centres[near[use]])
+            score = _match(_sample(image, h)[0], reference)
+            if score < best[0]:
+                best = (score, h)
+    return best
+
+
+def find_chart(images, log=print):
+    """Find the ColorChecker in a static camera's frames.
+
+    Parameters
+    ----------
+    images : list of ndarray (H, W, 3)
+        The frames' linear signal (any scale per frame; NaN allowed).
+    log : callable
+        Progress and warnings.
+
+    Returns
+    -------
+    dict
+        ``homography`` (3x3, grid (column, row) -> pixel (x, y)), ``labels`` (H, W) int
+        (:func:`swatch_labels`), ``pixels`` (24,) sampled pixels per swatch, ``match`` (rms log
+        ratio to the reference) and ``corners`` (4, 2) the chart's outline [pixels].
+
+    Raises
+    ------
+    SkyfitError
+        If no chart is found, or its match or swatches are too poor to calibrate from.
+    """
+    seg = _library()
+    stack = []
+    for im in images:
+        im = np.asarray(im, dtype=float)
+        m = np.nanmedian(im)
+        stack.append(im / m if m > 0 else im)
+    image = np.nanmedian(np.stack(stack), axis=0)
+    image = np.clip(np.nan_to_num(image / np.nanpercentile(image, 99.5)), 0.0, 1.0)
+    settings = dict(seg.SETTINGS_SEGMENTATION_COLORCHECKER_CLASSIC)
+    settings.update(aspect_ratio_minimum=ASPECT_RANGE[0], aspect_ratio_maximum=ASPECT_RANGE[1])
+    found = seg.segmenter_default(image.astype(np.float32), additional_data=True, **settings)
+    shape = image.shape[:2]
+    swatches = [_to_image(s, shape, settings["working_width"]) for s in found.swatches]
+    centres = np.array([s.mean(axis=0) for s in swatches]).reshape(-1, 2)
+    reference = reference_rgb()
+    best = (np.inf, None)
+    for quad in found.rectangles:
+        q = _to_image(quad, shape, settings["working_width"])
+        best = min(best, _fit_grid(q, centres, image, reference), key=lambda b: b[0])
+    if best[1] is None:
+        raise SkyfitError("no ColorChecker was found in the frames (no cluster of square "
+                          "swatches shaped like a chart); frame it larger (its swatches at "
+                          "least ~8 pixels wide), unoccluded and in focus, or calibrate from a "
+                          "scene material with --calibrate.")
+    match, h = best
+    if match > MATCH_MAX:
+        raise SkyfitError(f"the chart-like object found matches a ColorChecker's colours only "
+                          f"to {match:.0%} rms (at most {MATCH_MAX:.0%} accepted); is it a "
+                          "ColorChecker Classic, fully visible and lit?")
+    labels = swatch_labels(h, shape)
+    n = np.bincount(labels.ravel(), minlength=COLUMNS * ROWS + 1)[1:]
+    few = [NAMES[k] for k in NEUTRAL if n[k] < MIN_SWATCH_PIXELS]
+    if few:
+        raise SkyfitError(f"the ColorChecker's {', '.join(few)} swatch(es) cover fewer than "
+                          f"{MIN_SWATCH_PIXELS} pixels; frame the chart larger.")
+    corners = _apply(h, np.array([[0, 0], [COLUMNS, 0], [COLUMNS, ROWS], [0, ROWS]], float))
+    log(f"ColorChecker found: outline {np.round(corners).astype(int).tolist()} px, neutral "
+        f"swatches {min(n[k] for k in NEUTRAL)}-{max(n[k] for k in NEUTRAL)} px each, colours "
+        f"matching the reference to {match:.1%} rms")
+    return {"homography": h, "labels": labels, "pixels": n, "match": match,
+            "corners": corners}
+
+
+def swatch_check(ratio):
+    """How far the calibrated chromatic swatches lie from their rendered references.
+
+    ``ratio`` : (24, 3) each swatch's observed signal over its calibrated prediction (NaN where
+    not sampled).  Returns ``{"rms", "worst": [name, error], "per_swatch": {name: [r, g, b]}}``
+    with errors ratio - 1 [unitless] over the chromatic swatches whose reference reflectance
+    is above the match floor (``rms`` None if there are none).
+    """
+    ref = reference_rgb()
+    e = np.asarray(ratio, dtype=float) - 1.0
+    ok = (ref > _MATCH_FLOOR) & np.isfinite(e)
+    chromatic = [k for k in range(COLUMNS * ROWS) if k not in NEUTRAL and ok[k].any()]
+    if not chromatic:
+        return {"rms": None, "worst": None, "per_swatch": {}}
+    worst = max(chromatic, key=lambda k: np.max(np.abs(e[k][ok[k]])))
+    return {"rms": float(np.sqrt(np.mean(np.concatenate([e[k][ok[k]] for k in chromatic]) ** 2))),
+            "worst": [NAMES[worst], float(np.max(np.abs(e[worst][ok[worst]])))],
+            "per_swatch": {NAMES[k]: [float(x) if o else None for x, o in zip(e[k], ok[k])]
+                           for k in chromatic}}
