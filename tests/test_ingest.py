@@ -181,9 +181,9 @@ def test_noise_estimate_recovers_read_and_shot_noise():
 
 def test_noise_estimate_of_the_photographs_leaves_out_the_scene_edges(ingested):
     """The example board's photographs (64x44: card, sample and board edges everywhere; JPEG
-    quality 100): the read noise within 10% (measured 0.66 vs 0.64 DN^2) and the shot noise
-    within 50% (0.028 vs 0.02 DN; the JPEG's error, an upper bound from its tables, is
-    subtracted); before the edges were told by the diagonal neighbours it was 0.041."""
+    quality 100): the read noise within 10% and the shot noise within 50% (the JPEG's effect
+    found by compressing again, skyfit_mi.pipeline.jpeg_noise); before the edges were told by
+    the diagonal neighbours the shot noise was 0.041."""
     model = ingested[1]["sensor"]["noise_model"]
     assert abs(model["read_DN2"] / 0.64 - 1) < 0.1, model
     assert abs(model["shot_DN"] / 0.02 - 1) < 0.5, model
@@ -260,8 +260,9 @@ def test_response_fitted_from_grey_patches(tmp_path):
 
 @pytest.mark.slow
 def test_a_coarse_jpeg_widens_the_intervals_but_keeps_the_truth(day, tmp_path):
-    """Quality 90: its quantisation (from the file's tables) enters sigma, so the intervals
-    widen to what the file can tell, and still hold the truth."""
+    """Quality 90: the JPEG's effect on the noise (found by compressing the scene again,
+    skyfit_mi.pipeline.jpeg_noise) enters sigma, so the intervals are what the file can tell,
+    and hold the truth."""
     from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.pipeline.ingest import ingest
     from skyfit_mi.pipeline.photo_sim import photograph_day

@@ -743,32 +743,3 @@ def check_same_size(photos_by_path):
                 "frame of a sequence must have the same size; remove or re-export the frames "
                 "that differ.")
     return rw, rh
-
-
-#: JFIF's YCbCr -> RGB weights of Cb and Cr in each of R, G, B (ITU-T T.871, eq. 7).
-_JFIF_CHROMA = np.array([[0.0, 1.402], [-0.344136, -0.714136], [1.772, 0.0]])
-
-
-def jpeg_error_variance(path):
-    """The variance a JPEG's quantisation adds to each RGB value [DN^2], shape (3,), from the
-    file's quantisation tables; None for other files.
-
-    Each DCT coefficient k is rounded to a multiple of its table entry q_k, an error uniform
-    over q_k (variance q_k^2 / 12); the DCT is orthonormal, so a pixel's error variance in a
-    channel is the mean of q_k^2 / 12 over the 64 coefficients.  Luma (table 0) and chroma
-    (table 1, both Cb and Cr) variances combine into R, G, B through JFIF's YCbCr -> RGB
-    matrix.  An upper bound where small coefficients round to zero (their error is then the
-    coefficient itself); measured on an 8-bit red sample at quality 95 with 4:4:4 chroma it
-    gives 3.4, 2.2, 4.1 DN against 3.7, 2.2, 3.2 observed.
-    """
-    from PIL import Image
-
-    with Image.open(path) as im:
-        if im.format != "JPEG":
-            return None
-        tables = getattr(im, "quantization", None) or {}
-    if not tables:
-        return None
-    var = {k: float(np.mean(np.asarray(v, dtype=float) ** 2)) / 12.0 for k, v in tables.items()}
-    luma, chroma = var.get(0, 0.0), var.get(1, var.get(0, 0.0))
-    return luma + (_JFIF_CHROMA ** 2).sum(axis=1) * chroma

@@ -1,0 +1,164 @@
+"""What a JPEG does to a photograph's noise, found by compressing the scene again.
+
+A JPEG rounds each 8x8 block's DCT coefficients (of Y, Cb, Cr) to multiples of its quantisation
+tables.  On a smooth surface (the materials skyfit fits) the high frequencies hold only noise,
+and where the table's step exceeds the noise those coefficients round to zero: the JPEG
+*removes* noise there, while it adds rounding error to the coefficients it keeps and mixes the
+channels' errors through YCbCr.  Neither the tables' bound (the mean of q^2 / 12 over the
+coefficients, as if every coefficient were rounded with a uniform error: 4-5 DN rms at quality
+95, against 1.3-1.9 DN measured on smooth materials) nor the frames' pixel-to-pixel differences
+(which miss the errors a block's pixels share) give the error of a decoded value about the
+scene, which chi-square needs.
+
+So each frame's error is found by a parametric bootstrap (:func:`bootstrap_variance`):
+
+1. draws of the scene given the file (:func:`truth_sampler`): every coefficient the file kept,
+   and the low orders (:data:`LOW_ORDER`), anywhere in its rounding interval, the other
+   zeroed ones zero;
+2. each draw photographed again (:func:`recompress`): linearised, the sensor's read and shot
+   noise added (thesis ch. 5's model), encoded by the response, rounded to 8 bits, compressed
+   with the file's own tables and chroma subsampling (Pillow, libjpeg) and decoded;
+3. the mean square difference between copy and draw over :data:`REPLICATES` draws, averaged
+   over each pixel's 3x3 neighbourhood.
+
+Measured on smooth synthetic frames (``tests/test_jpeg_noise.py``) and a rendered day (a
+sample, a grey card and a dark board, 240x180) photographed with known noise: the rms of
+(decoded - noise-free codes) / sigma is 0.9-1.05 at qualities 100, 95 and 90 and 0.8-0.9 at
+85 (4:4:4, 4:2:2, 4:2:0) with the true noise; 0.4-0.7 at 75, where the zeroed coefficients'
+content is overstated.  The sensor's noise itself is estimated from the frames
+(:func:`skyfit_mi.pipeline.ingest.estimate_noise`, with copies of the frames compressed again)
+well at quality 100 and to about 15% in sigma at 95; below that the frames hide it, and it
+should be given.  The bootstrap cannot see content a JPEG zeroed above the low orders (fine
+texture): there sigma is short.  Noise realisations are seeded (:data:`SEED` and the frame's
+index).
+"""
+
+import io
+
+import numpy as np
+
+#: Re-compressed copies per frame for its error variance.
+REPLICATES = 8
+#: Seed of the bootstrap's noise (with the frame's index; recorded in the manifest).
+SEED = 20261125
+#: The DCT coefficients (u + v <= 2: the mean, gradients and curvature) whose rounding
+#: interval always holds the scene's content, zeroed or not: smooth shading and vignetting
+#: live there.
+LOW_ORDER = np.add.outer(np.arange(8), np.arange(8)) <= 2
+
+
+def jpeg_settings(path):
+    """The compression of JPEG ``path`` as Pillow re-applies it: ``{"qtables": ...,
+    "subsampling": 0 (4:4:4) | 1 (4:2:2) | 2 (4:2:0)}``; None for other files."""
+    from PIL import Image, JpegImagePlugin
+
+    with Image.open(path) as im:
+        if im.format != "JPEG" or not getattr(im, "quantization", None):
+            return None
+        sampling = JpegImagePlugin.get_sampling(im)
+        return {"qtables": {k: list(v) for k, v in im.quantization.items()},
+                "subsampling": 2 if sampling < 0 else int(sampling)}
+
+
+def key(settings):
+    """A hashable key of :func:`jpeg_settings` (frames of one camera setting share it)."""
+    return (settings["subsampling"],
+            tuple((k, tuple(v)) for k, v in sorted(settings["qtables"].items())))
+
+
+def block_size(settings):
+    """Side of the JPEG's coding unit [pixels]: 16 with subsampled chroma, else 8."""
+    return 16 if settings["subsampling"] else 8
+
+
+def recompress(values, settings, sensor, noise, rng):
+    """One copy of frame ``values`` (H, W, 3) [DN] with fresh sensor noise (a [DN^2], b [DN]
+    of the linear codes), encoded by ``sensor``'s response to 8 bits and compressed with
+    ``settings``; the decoded codes (H, W, 3) [DN]."""
+    from PIL import Image
+
+    a, b = noise
+    m = sensor.max_code
+    lin = sensor.linearise(np.nan_to_num(values)) * m
+    noisy = lin + rng.normal(size=lin.shape) * np.sqrt(np.maximum(a + b * lin, 0.0))
+    encoded = np.clip(np.rint(sensor.respond(noisy / m) * m), 0, m).astype(np.uint8)
+    buf = io.BytesIO()
+    Image.fromarray(encoded).save(buf, format="JPEG", qtables=settings["qtables"],
+                                  subsampling=settings["subsampling"])
+    buf.seek(0)
+    with Image.open(buf) as im:
+        return np.asarray(im.convert("RGB"), dtype=float)
+
+
+def bootstrap_variance(values, settings, sensor, noise, seed, replicates=REPLICATES):
+    """Each value's error variance [DN^2] (H, W, 3): the mean over ``replicates`` draws of the
+    scene (:func:`truth_sampler`) of the square difference between the draw photographed
+    again (:func:`recompress`) and the draw, averaged over the pixel's 3x3 neighbourhood
+    (edges padded)."""
+    rng = np.random.default_rng(seed)
+    sample = truth_sampler(values, settings)
+    var = 0.0
+    for _ in range(replicates):
+        truth = sample(rng)
+        var = var + (recompress(truth, settings, sensor, noise, rng) - truth) ** 2
+    var = var / replicates
+    pad = np.pad(var, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    h, w = var.shape[:2]
+    return sum(pad[i:i + h, j:j + w] for i in range(3) for j in range(3)) / 9.0
+
+
+#: JFIF's RGB -> YCbCr (ITU-T T.871, eqs. 3-5; Cb, Cr offset by 128) and the weights of Cb and
+#: Cr in each of R, G, B on the way back (eq. 7).
+_RGB_TO_YCC = np.array([[0.299, 0.587, 0.114],
+                        [-0.168736, -0.331264, 0.5],
+                        [0.5, -0.418688, -0.081312]])
+_JFIF_CHROMA = np.array([[0.0, 1.402], [-0.344136, -0.714136], [1.772, 0.0]])
+
+
+def _factors(settings):
+    """Chroma subsampling (rows, columns): 4:4:4 (1, 1), 4:2:2 (1, 2), 4:2:0 (2, 2)."""
+    return {0: (1, 1), 1: (1, 2)}.get(settings["subsampling"], (2, 2))
+
+
+def truth_sampler(values, settings):
+    """Draws of the scene's codes [DN] (H, W, 3) given the decoded frame ``values``:
+    a function of a numpy Generator.
+
+    The frame is turned into JFIF's Y, Cb, Cr (the chroma averaged over the subsampling's
+    cells), each plane's 8x8 blocks into their orthonormal DCT (JPEG's), and every
+    coefficient the file kept (a non-zero multiple of its table entry q: magnitude above
+    q / 2), and every one of :data:`LOW_ORDER`, is moved uniformly within its rounding interval
+    by each draw: the coefficient the scene had is anywhere in it.  A higher one the file
+    zeroed is taken as zero (a smooth surface has no content there).  The moves are turned
+    back into R, G, B by JFIF's inverse.
+    """
+    from scipy.fft import dctn, idctn
+
+    v = np.nan_to_num(np.asarray(values, dtype=float))
+    h, w = v.shape[:2]
+    ycc = v @ _RGB_TO_YCC.T
+    planes = []
+    for c in range(3):
+        fy, fx = (1, 1) if c == 0 else _factors(settings)
+        table = np.asarray(settings["qtables"].get(0 if c == 0 else 1,
+                                                   settings["qtables"][0]), dtype=float)
+        ph, pw = -h % (8 * fy), -w % (8 * fx)
+        plane = np.pad(ycc[..., c], ((0, ph), (0, pw)), mode="edge")
+        plane = plane.reshape(plane.shape[0] // fy, fy, plane.shape[1] // fx, fx).mean(axis=(1, 3))
+        nby, nbx = plane.shape[0] // 8, plane.shape[1] // 8
+        q = table.reshape(8, 8)[None, :, None, :]
+        coeff = dctn(plane.reshape(nby, 8, nbx, 8), axes=(1, 3), norm="ortho")
+        step = np.where((np.abs(coeff) > q / 2.0) | LOW_ORDER[None, :, None, :], q, 0.0)
+        planes.append((step, fy, fx))
+
+    def draw(rng):
+        delta = []
+        for step, fy, fx in planes:
+            move = rng.uniform(-0.5, 0.5, size=step.shape) * step
+            nby, _, nbx, _ = step.shape
+            d = idctn(move, axes=(1, 3), norm="ortho").reshape(nby * 8, nbx * 8)
+            delta.append(np.repeat(np.repeat(d, fy, axis=0), fx, axis=1)[:h, :w])
+        dy, dcb, dcr = delta
+        return v + dy[..., None] + np.stack([dcb, dcr], axis=-1) @ _JFIF_CHROMA.T
+
+    return draw
