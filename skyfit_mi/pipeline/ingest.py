@@ -61,6 +61,9 @@ NOISE_CLIP, NOISE_FLAT, NOISE_PASSES = 3.5, 4.5, 3
 JPEG_NOISE_ITERATIONS, JPEG_NOISE_TOL = 12, 0.01
 #: Below this share of the estimated noise shown by neighbouring pixels a JPEG hides the noise.
 JPEG_NOISE_PASSED_MIN = 0.15
+#: A JPEG block whose values spread about a plane by more than this many sigmas holds an edge
+#: (64 normal values spread more than 8 sigma about once in 10^5).
+JPEG_EDGE_RANGE = 8.0
 JPEG_CALIBRATION_FRAMES, JPEG_CALIBRATION_SIZE = 3, 512
 #: Responses ``--response fit`` chooses among (:func:`fit_response`), the gamma it accepts,
 #: the least span of the patches' signals at one exposure it needs, and the rms relative
@@ -293,17 +296,49 @@ def pixel_sigma(values, sensor, noise, jpeg=None):
     Without compression sqrt(Q'(s)^2 (a + b s M) + 1/12): read and shot noise through the
     response's slope, plus the rounding to whole codes.  For a JPEG, ``jpeg`` =
     {"variance": the frame's :func:`.jpeg_noise.bootstrap_variance`, "shown": the frames'
-    :func:`shown_noise`}: the bootstrap's variance, at least that formula of the shown noise
-    (what neighbouring pixels differ by is error too: a floor where heavy compression leaves
-    the bootstrap little noise to find).
+    :func:`shown_noise`, "settings": its :func:`.jpeg_noise.jpeg_settings`}: the bootstrap's
+    variance, at least that formula of the shown noise (what neighbouring pixels differ by is
+    error too: a floor where heavy compression leaves the bootstrap little noise to find); in
+    blocks holding an edge (values spreading about a plane more than JPEG_EDGE_RANGE of those
+    sigmas), where the JPEG loses the scene's own detail (ringing), which the bootstrap cannot
+    draw, plus the tables' bound (:func:`.jpeg_noise.tables_bound`).
     """
     a, b = noise if jpeg is None else jpeg["shown"]
     s = sensor.linearise(np.nan_to_num(values))
     q = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6))
     var = q * q * (a + b * s * sensor.max_code) + 1.0 / 12.0
     if jpeg is not None:
+        from .jpeg_noise import tables_bound
+
         var = np.maximum(jpeg["variance"], var)
+        edge = edge_blocks(np.nan_to_num(values), var)
+        var = np.where(edge, var + tables_bound(jpeg["settings"]), var)
     return np.where(np.isfinite(values), np.sqrt(var), np.inf).astype(np.float32)
+
+
+def edge_blocks(values, variance, block=8):
+    """(H, W, 1) bool: the pixel's 8x8 JPEG block (from the top left) spreads, about the plane
+    fitted to it, more than JPEG_EDGE_RANGE times its median sigma (of ``variance``) in some
+    channel: an edge (a plane, since shading and vignetting tilt a block without one).  Luma's
+    blocks: the 16-pixel cells of subsampled chroma, whose upsampling leaves steps inside
+    them, would take a quarter of a smooth surface for edges."""
+    h, w = values.shape[:2]
+    ph, pw = -h % block, -w % block
+    nby, nbx = (h + ph) // block, (w + pw) // block
+
+    def blocks(x):
+        x = np.pad(x, ((0, ph), (0, pw), (0, 0)), mode="edge")
+        return x.reshape(nby, block, nbx, block, 3).transpose(0, 2, 1, 3, 4) \
+            .reshape(nby, nbx, block * block, 3)
+
+    yy, xx = np.mgrid[0:block, 0:block]
+    design = np.stack([np.ones(block * block), xx.ravel(), yy.ravel()], axis=1)
+    residual = np.eye(block * block) - design @ np.linalg.pinv(design)
+    r = np.einsum("ij,abjc->abic", residual, blocks(values))
+    spread = r.max(axis=2) - r.min(axis=2)
+    sigma = np.sqrt(np.median(blocks(variance), axis=2))
+    edge = np.any(spread > JPEG_EDGE_RANGE * sigma, axis=-1)
+    return np.repeat(np.repeat(edge, block, axis=0), block, axis=1)[:h, :w, None]
 
 
 # ---- calibration from patches of known reflectance ----------------------------------------
@@ -735,10 +770,14 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
     except SkyfitError:
         if noise is None:
             raise
-    if noise is None:
-        from .jpeg_noise import jpeg_settings
+    from .jpeg_noise import jpeg_settings
 
-        jpeg = [jpeg_settings(paths[i]) if photos[i].format == "jpeg" else None for i in lit]
+    jpeg = [jpeg_settings(paths[i]) if photos[i].format == "jpeg" else None for i in lit]
+    if any(st and st["subsampling"] for st in jpeg):
+        log("the JPEGs' chroma is subsampled (4:2:2 or 4:2:0): colour edges blur by a pixel, "
+            "an error sigma does not hold; keep pixels beside edges out of fits (regions from "
+            "the scene's labels are eroded by a pixel; erode a --region too)")
+    if noise is None:
         a, b = estimate_noise([values[i] for i in lit], sensor, jpeg, shown, log)
         noise_info = {"read_DN2": a, "shot_DN": b, "source": "estimated from the frames",
                       "shown_by_the_frames": list(shown)}
@@ -798,7 +837,7 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, sh
                 jpeg_frames += 1
                 jpeg = {"variance": bootstrap_variance(v, settings, sensor, noise,
                                                        [SEED, f.index]),
-                        "shown": shown}
+                        "shown": shown, "settings": settings}
             sig = pixel_sigma(v, sensor, noise, jpeg)
             s = sensor.linearise(np.nan_to_num(v))
             slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code
@@ -817,6 +856,8 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, sh
                                     if photo.metadata.get(k)}})
             if jpeg is not None:
                 rec["jpeg_error_DN2"] = np.mean(jpeg["variance"], axis=(0, 1)).tolist()
+                rec["jpeg_edge_block_share"] = float(np.mean(sig.astype(float) ** 2 > np.maximum(
+                    jpeg["variance"], pixel_sigma(v, sensor, shown).astype(float) ** 2) + 1e-3))
             bad = int(photo.nan_count + photo.inf_count)
             if bad:
                 rec["non_finite_values"] = bad
@@ -833,8 +874,9 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, sh
                       "averaged", "replicates": REPLICATES, "seed": [SEED, "frame index"]}
         manifest["sensor"]["noise_model"]["sigma2_DN2"] += (
             "; JPEG frames: the bootstrap's variance, at least the formula of the noise the "
-            "frames' neighbouring pixels show (shown_by_the_frames); frame means in "
-            "jpeg_error_DN2")
+            "frames' neighbouring pixels show (shown_by_the_frames), plus the tables' bound "
+            "in blocks holding an edge (share: jpeg_edge_block_share); bootstrap frame means "
+            "in jpeg_error_DN2")
     finish(out, manifest, sensor.exposure)
     return manifest
 

@@ -21,16 +21,16 @@ So each frame's error is found by a parametric bootstrap (:func:`bootstrap_varia
 3. the mean square difference between copy and draw over :data:`REPLICATES` draws, averaged
    over each pixel's 3x3 neighbourhood.
 
-Measured on smooth synthetic frames (``tests/test_jpeg_noise.py``) and a rendered day (a
-sample, a grey card and a dark board, 240x180) photographed with known noise: the rms of
-(decoded - noise-free codes) / sigma is 0.9-1.05 at qualities 100, 95 and 90 and 0.8-0.9 at
-85 (4:4:4, 4:2:2, 4:2:0) with the true noise; 0.4-0.7 at 75, where the zeroed coefficients'
-content is overstated.  The sensor's noise itself is estimated from the frames
+Measured on smooth synthetic frames (``tests/test_jpeg_noise.py``) with known noise: the rms
+of (decoded - noise-free codes) / sigma is 0.9-1.0 at qualities 100 and 95, 0.8-1.0 at 90
+(4:2:2), 0.7-0.85 at 85 (4:2:0) and 0.4-0.7 at 75, where the low orders' content is overstated.
+The bootstrap cannot draw the content a JPEG zeroed above the low orders, which is what rings
+at an edge: :func:`skyfit_mi.pipeline.ingest.pixel_sigma` adds the tables' bound
+(:func:`tables_bound`) in blocks holding an edge (there sigma errs wide: z 0.45-1.0).  The
+sensor's noise itself is estimated from the frames
 (:func:`skyfit_mi.pipeline.ingest.estimate_noise`, with copies of the frames compressed again)
 well at quality 100 and to about 15% in sigma at 95; below that the frames hide it, and it
-should be given.  The bootstrap cannot see content a JPEG zeroed above the low orders (fine
-texture): there sigma is short.  Noise realisations are seeded (:data:`SEED` and the frame's
-index).
+should be given.  Noise realisations are seeded (:data:`SEED` and the frame's index).
 """
 
 import io
@@ -69,6 +69,17 @@ def key(settings):
 def block_size(settings):
     """Side of the JPEG's coding unit [pixels]: 16 with subsampled chroma, else 8."""
     return 16 if settings["subsampling"] else 8
+
+
+def tables_bound(settings):
+    """The error variance [DN^2] per R, G, B if every coefficient were rounded with an error
+    uniform over its table entry q (q^2 / 12, averaged over the 64; luma and chroma combined
+    by JFIF's inverse): an upper bound, reached where the scene has content at every
+    frequency, as at an edge (the JPEG's ringing), shape (3,)."""
+    var = {k: float(np.mean(np.asarray(v, dtype=float) ** 2)) / 12.0
+           for k, v in settings["qtables"].items()}
+    luma, chroma = var.get(0, 0.0), var.get(1, var.get(0, 0.0))
+    return luma + (_JFIF_CHROMA ** 2).sum(axis=1) * chroma
 
 
 def recompress(values, settings, sensor, noise, rng):

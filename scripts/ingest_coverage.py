@@ -1,0 +1,77 @@
+"""Coverage of fits after `skyfit ingest` of JPEG photographs (issue 15).
+
+The example board's day of tests/test_ingest.py (64x44, hourly) is rendered once, then
+photographed with SEEDS noise seeds at each JPEG quality (skyfit_mi.pipeline.photo_sim:
+auto-exposure, cos^4 vignetting, read and shot noise, sRGB), ingested with the grey card's
+calibration and the noise estimated from the frames, and the sample fitted (64 pixels, colour
+model).  Prints a markdown table: per quality, the share of (seed, parameter) pairs whose 95%
+interval holds the truth, the median interval width per parameter, and the mean chi2/dof.
+
+    .venv/bin/python scripts/ingest_coverage.py [--quality 100 95] [--seeds 8] [--scale 1] [-o DIR]
+"""
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+TRUTH = {"C_r": 0.62, "C_g": 0.12, "C_b": 0.10, "rho_s": 0.05, "sigma_alpha": 0.08}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quality", type=int, nargs="+", default=[100, 95])
+    ap.add_argument("--seeds", type=int, default=8)
+    ap.add_argument("--scale", type=int, default=1,
+                    help="frame size as a multiple of the test's 64x44 (more pixels inside the "
+                         "materials, away from the JPEG's edge blocks)")
+    ap.add_argument("-o", "--output", help="work folder (default a temporary one)")
+    args = ap.parse_args()
+    sys.path.insert(0, str(ROOT / "tests"))
+    from test_ingest import _small_spec
+
+    from skyfit_mi.fitting.chi2 import subsample_region
+    from skyfit_mi.fitting.fit import fit_region
+    from skyfit_mi.pipeline.ingest import ingest
+    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.pixels import material_regions
+    from skyfit_mi.pipeline.sequence import render_sequence
+    from skyfit_mi.pipeline.spec import validate_spec
+
+    quiet = {"log": lambda *a: None}
+    work = Path(args.output or tempfile.mkdtemp(prefix="ingest_coverage_"))
+    work.mkdir(parents=True, exist_ok=True)
+    spec_path, raw = _small_spec(work, width=64 * args.scale, height=44 * args.scale)
+    truth = work / "truth"
+    if not (truth / "manifest.json").exists():
+        render_sequence(validate_spec(raw, spec_path.parent), truth, progress=False, **quiet)
+    pixels = subsample_region(dict(material_regions(truth))["sample"], 64, 0)
+    print(f"frames {64 * args.scale}x{44 * args.scale}\n")
+    print("| quality | seeds | coverage | median 95% width C_r / C_g / C_b / rho_s / sigma_alpha "
+          "| mean chi2/dof |")
+    print("|---|---|---|---|---|")
+    for q in args.quality:
+        inside, widths, chi2 = [], [], []
+        for seed in range(args.seeds):
+            photos = work / f"q{q}_s{seed}"
+            photograph_day(truth, photos, seed=seed, quality=q)
+            seq = work / f"seq_q{q}_s{seed}"
+            ingest([photos], spec_path, seq, calibrate={"grey_card": (0.18,) * 3},
+                   vignetting="cos4", overwrite=True, progress=False, **quiet)
+            fit = fit_region(seq, "sample", pixels, model="colour", **quiet)
+            for k, t in TRUTH.items():
+                lo, hi = fit["intervals"][k]["95"]
+                inside.append(lo <= t <= hi)
+            widths.append([fit["intervals"][k]["95"][1] - fit["intervals"][k]["95"][0]
+                           for k in TRUTH])
+            chi2.append(fit["chi2_per_dof"])
+        w = np.median(widths, axis=0)
+        print(f"| {q} | {args.seeds} | {np.mean(inside):.2f} | "
+              f"{' / '.join(f'{x:.3g}' for x in w)} | {np.mean(chi2):.2f} |")
+
+
+if __name__ == "__main__":
+    main()
