@@ -107,6 +107,17 @@ def test_fit_after_ingest_recovers_the_material(day, ingested):
     true = np.array([f["exposure_sr_m2_W"] for f in sim["frames"]])
     np.testing.assert_allclose(got, true, rtol=0.01)      # measured: 0.1%
     assert fit["truth"] is None                            # a photograph's material is unknown
+    # JPEG frames carry their errors' correlation within a block, which the fit's loader uses
+    from skyfit_mi.fitting.chi2 import load_observations
+    rendered = [f for f in doc["frames"] if f["status"] == "rendered"]
+    assert all(0 <= min(f["jpeg_block_correlation"]) for f in rendered)
+    block = np.array([[x, y] for x in range(24, 32) for y in range(16, 24)])   # one 8x8 block
+    one = load_observations(out, block)
+    apart = load_observations(out, block, one_fit=False)
+    rho = np.array([f["jpeg_block_correlation"] for f in rendered])
+    np.testing.assert_allclose(one.sigma / apart.sigma,
+                               np.broadcast_to(np.sqrt(1 + 63 * rho), one.sigma.shape),
+                               rtol=1e-6)
     for k, t in TRUTH.items():
         lo, hi = fit["intervals"][k]["95"]
         # one noise realisation: the truth within 1.5 half-widths of the 95% interval's centre

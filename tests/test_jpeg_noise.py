@@ -54,7 +54,7 @@ def _z(frames, clean, sigmas):
 def _sigmas(frames, settings, noise):
     shown = shown_noise(frames, SENSOR)
     return [pixel_sigma(f, SENSOR, noise, {"variance": jn.bootstrap_variance(
-        f, s, SENSOR, noise, [jn.SEED, i]), "shown": shown, "settings": s})
+        f, s, SENSOR, noise, [jn.SEED, i])[0], "shown": shown, "settings": s})
         for i, (f, s) in enumerate(zip(frames, settings))]
 
 
@@ -135,4 +135,15 @@ def test_the_bootstrap_is_seeded():
     frames, _, settings = _frames(95, 0, n=1)
     a = jn.bootstrap_variance(frames[0], settings[0], SENSOR, NOISE, [7, 0], replicates=2)
     b = jn.bootstrap_variance(frames[0], settings[0], SENSOR, NOISE, [7, 0], replicates=2)
-    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+
+
+def test_pixels_sharing_a_block_widen_their_sigma(tmp_path):
+    """A region's pixels in one 8x8 block share its JPEG errors (correlation rho): a fit
+    widens their sigma by sqrt(1 + (k - 1) rho), Kish's design effect; a map (each pixel its
+    own fit) does not."""
+    from skyfit_mi.fitting.chi2 import block_sharing
+
+    px = np.array([[0, 0], [7, 7], [8, 0], [3, 12], [4, 13], [100, 100]])
+    np.testing.assert_array_equal(block_sharing(px), [2, 2, 1, 2, 2, 1])

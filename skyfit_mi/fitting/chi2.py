@@ -198,7 +198,14 @@ class LuminanceModel:
         return self.inner.gradient(theta, np.tensordot(dloss_dL, self.mix, axes=1))
 
 
-def load_observations(manifest_path, pixels, frames=None, min_frames=2):
+def block_sharing(pixels, block=8):
+    """How many of ``pixels`` (P, 2) (x, y) lie in each one's 8x8 JPEG block, (P,)."""
+    cells = np.asarray(pixels, dtype=int).reshape(-1, 2) // block
+    _, inverse, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
+    return counts[inverse.ravel()].astype(float)
+
+
+def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=True):
     """Read a region's pixel values and sigmas from the rendered frames of a manifest.
 
     Parameters
@@ -210,7 +217,12 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2):
     Each frame file is checked (readable, the camera's size).  Non-finite values or
     sigmas (NaN, a damaged pixel) are left out and counted in ``warnings``; a frame
     with none of the region's values finite is refused by name.  Each frame's own
-    exposure (``exposure`` record, with white balance) sets its gain.
+    exposure (``exposure`` record, with white balance) sets its gain.  A JPEG frame's errors
+    are correlated within its 8x8 blocks (``jpeg_block_correlation`` rho, from ingest's
+    bootstrap): the sigma of a pixel whose block holds k of the region's pixels is widened by
+    sqrt(1 + (k - 1) rho), Kish's design effect, so that the k carry what their correlated
+    errors let them tell (the chi-square stays a sum over pixels as if independent); not when
+    the pixels are fitted each on its own (``one_fit`` False: a map).
     """
     doc, root = load_manifest(manifest_path)
     cam = doc["camera"]
@@ -246,9 +258,13 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2):
                                 "flat", (h, w, 3))
         falloff = falloff * flat[pixels[:, 1], pixels[:, 0], 0]
     ys, sig, gain = [], [], []
+    shared = block_sharing(pixels) if one_fit else np.ones(len(pixels))
     for f in rendered:
         y = _region_values(root, f, "sensor", pixels, (h, w, 3))
         s = _region_values(root, f, "sigma", pixels, (h, w, 3))
+        if "jpeg_block_correlation" in f:          # a JPEG's errors shared within its blocks
+            rho = np.asarray(f["jpeg_block_correlation"], dtype=float)
+            s = s * np.sqrt(1.0 + (shared[:, None] - 1.0) * rho[None, :])
         ok = np.isfinite(y) & ~np.isnan(s) & (s >= 0)
         if not ok.any():
             raise SkyfitError(f"frame {f['index']} ({root / f['sensor']}) has no finite value in "

@@ -115,7 +115,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     groups = np.arange(len(pixels)) if groups is None else np.asarray(groups, dtype=int)
     n = int(groups.max()) + 1
     doc, root = load_manifest(manifest_path)
-    obs = load_observations(manifest_path, pixels)
+    obs = load_observations(manifest_path, pixels, one_fit=False)
     frames = {f["index"]: f for f in doc["frames"]}
     mi = setup(variant or doc["render"]["variant"])
     scene = mi.load_string(doc["scene"]["xml"])

@@ -835,9 +835,8 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, sh
             jpeg = None
             if settings is not None:
                 jpeg_frames += 1
-                jpeg = {"variance": bootstrap_variance(v, settings, sensor, noise,
-                                                       [SEED, f.index]),
-                        "shown": shown, "settings": settings}
+                boot, rho = bootstrap_variance(v, settings, sensor, noise, [SEED, f.index])
+                jpeg = {"variance": boot, "shown": shown, "settings": settings}
             sig = pixel_sigma(v, sensor, noise, jpeg)
             s = sensor.linearise(np.nan_to_num(v))
             slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code
@@ -856,6 +855,7 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, sh
                                     if photo.metadata.get(k)}})
             if jpeg is not None:
                 rec["jpeg_error_DN2"] = np.mean(jpeg["variance"], axis=(0, 1)).tolist()
+                rec["jpeg_block_correlation"] = rho.tolist()
                 rec["jpeg_edge_block_share"] = float(np.mean(sig.astype(float) ** 2 > np.maximum(
                     jpeg["variance"], pixel_sigma(v, sensor, shown).astype(float) ** 2) + 1e-3))
             bad = int(photo.nan_count + photo.inf_count)
@@ -876,7 +876,8 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, sh
             "; JPEG frames: the bootstrap's variance, at least the formula of the noise the "
             "frames' neighbouring pixels show (shown_by_the_frames), plus the tables' bound "
             "in blocks holding an edge (share: jpeg_edge_block_share); bootstrap frame means "
-            "in jpeg_error_DN2")
+            "in jpeg_error_DN2; the errors' correlation within a JPEG block in "
+            "jpeg_block_correlation, by which a fit widens the sigma of pixels sharing a block")
     finish(out, manifest, sensor.exposure)
     return manifest
 

@@ -102,20 +102,36 @@ def recompress(values, settings, sensor, noise, rng):
 
 
 def bootstrap_variance(values, settings, sensor, noise, seed, replicates=REPLICATES):
-    """Each value's error variance [DN^2] (H, W, 3): the mean over ``replicates`` draws of the
-    scene (:func:`truth_sampler`) of the square difference between the draw photographed
-    again (:func:`recompress`) and the draw, averaged over the pixel's 3x3 neighbourhood
-    (edges padded)."""
+    """Each value's error variance [DN^2] (H, W, 3), and the errors' correlation within the
+    JPEG's 8x8 blocks (3,).
+
+    The variance is the mean over ``replicates`` draws of the scene (:func:`truth_sampler`) of
+    the square difference between the draw photographed again (:func:`recompress`) and the
+    draw, averaged over the pixel's 3x3 neighbourhood (edges padded).  The correlation rho is
+    that of two pixels' errors in one block (whole blocks only): from the variance of the
+    errors' block means, var(mean) = var (1 + 63 rho) / 64.  A JPEG's errors are shared within
+    a block (its rounded low orders), so a fit using several pixels of one block learns less
+    than as many independent values would tell (:func:`skyfit_mi.fitting.chi2.load_observations`).
+    """
     rng = np.random.default_rng(seed)
     sample = truth_sampler(values, settings)
-    var = 0.0
+    h, w = np.shape(values)[:2]
+    bh, bw = h // 8 * 8, w // 8 * 8
+    var, block, total = 0.0, 0.0, 0.0
     for _ in range(replicates):
         truth = sample(rng)
-        var = var + (recompress(truth, settings, sensor, noise, rng) - truth) ** 2
+        err = recompress(truth, settings, sensor, noise, rng) - truth
+        var = var + err ** 2
+        e = err[:bh, :bw]
+        block = block + np.mean(e.reshape(bh // 8, 8, bw // 8, 8, 3).mean(axis=(1, 3)) ** 2,
+                                axis=(0, 1))
+        total = total + np.mean(e ** 2, axis=(0, 1))
     var = var / replicates
     pad = np.pad(var, ((1, 1), (1, 1), (0, 0)), mode="edge")
-    h, w = var.shape[:2]
-    return sum(pad[i:i + h, j:j + w] for i in range(3) for j in range(3)) / 9.0
+    smooth = sum(pad[i:i + h, j:j + w] for i in range(3) for j in range(3)) / 9.0
+    with np.errstate(all="ignore"):
+        rho = np.clip(np.nan_to_num((64.0 * block / total - 1.0) / 63.0), 0.0, 1.0)
+    return smooth, rho
 
 
 #: JFIF's RGB -> YCbCr (ITU-T T.871, eqs. 3-5; Cb, Cr offset by 128) and the weights of Cb and
