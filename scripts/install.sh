@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Install skyfit-mi into ./.venv, with libLLVM >= 17 for Mitsuba's CPU variant.
 #   bash scripts/install.sh          # the package
-#   bash scripts/install.sh --test   # the package and the test dependencies (pytest, pyradiance)
+#   bash scripts/install.sh --test   # the package and the test dependencies (pytest, pyradiance,
+#                                    # hypothesis, colour-checker-detection)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
