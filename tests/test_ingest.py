@@ -127,11 +127,12 @@ def test_fit_after_ingest_recovers_the_material(day, ingested):
         assert abs(t - mid) <= 1.5 * half, f"{k}: truth {t} far outside the fit's [{lo}, {hi}]"
 
 
-@pytest.mark.xfail(strict=False, reason="issue 15 open: with the noise estimated right "
-                   "(read 0.66 vs 0.64 DN^2, shot 0.028 vs 0.02 DN, chi2/dof 0.96) C_g's "
-                   "interval is 1.59x the clean fit's on 64 of the sample's pixels (rho_s "
-                   "1.46x, C_b 0.64x: the photographs' auto-exposure sets the channels' codes "
-                   "apart from the clean frames'); near the goal's edge, so not strict")
+@pytest.mark.xfail(strict=False, reason="issue 15 open: C_g's interval is 1.75x the clean "
+                   "fit's on 64 of the sample's pixels (1.59x before JPEG sigma came from a "
+                   "bootstrap of the file's compression and pixels sharing a JPEG block were "
+                   "widened for their correlated errors, 2026-11-25); the photographs' read + "
+                   "shot noise through sRGB is larger in the dark green channel than the clean "
+                   "frames' fixed 0.5% noise, so the goal compares unequal noise; not strict")
 def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, ingested):
     fit, clean = ingested[2], day["clean"]
     for k in ("C_r", "C_g", "C_b", "rho_s"):
