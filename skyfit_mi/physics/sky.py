@@ -371,6 +371,19 @@ def krochmann_seidl_zenith_luminance(sun_zenith_deg):
     return np.maximum(123.0 + 8600.0 * np.cos(np.radians(sun_zenith_deg)), 0.0)
 
 
+def thesis_sun_radiance(sun_zenith_deg, day, extinction, solar_constant, solid_angle, phi):
+    """The sun disc's linear-sRGB radiance [W m^-2 sr^-1] (3,): ``phi`` times the direct
+    normal irradiance of eq. 4.7 (``extinction``, ``solar_constant`` None for the thesis's)
+    over the disc's ``solid_angle`` [sr], in the colour of
+    :func:`~skyfit_mi.physics.sun.sun_rgb`; zero when ``phi`` is 0 (no sun)."""
+    if phi <= 0:
+        return np.zeros(3)
+    kw = {k: v for k, v in (("extinction", extinction), ("solar_constant", solar_constant))
+          if v is not None}
+    n = float(direct_normal_irradiance(sun_zenith_deg, day, **kw))
+    return phi * n / solid_angle * sun_rgb(sun_zenith_deg)
+
+
 #: The thesis's sky types and their sun probability phi (eq. 4.18).
 SKY_TYPES = {"clear": 1.0, "overcast": 0.0, "intermediate": None}
 
@@ -447,12 +460,8 @@ def cie_sky(kind, sun_zenith_deg, sun_azimuth_deg, *, phi=None, day=172,
     clear = phi * float(lz_cl) / norm / efficacy_clear * cct_to_rgb(cct_clear)
     overcast = (1.0 - phi) * float(lz_oc) / efficacy_overcast * cct_to_rgb(cct_overcast)
 
-    sun_rad = np.zeros(3)
-    if sun and phi > 0:
-        kw = {k: v for k, v in (("extinction", extinction), ("solar_constant", solar_constant))
-              if v is not None}
-        n = float(direct_normal_irradiance(sun_zenith_deg, day, **kw))
-        sun_rad = phi * n / sun_solid_angle * sun_rgb(sun_zenith_deg)
+    sun_rad = thesis_sun_radiance(sun_zenith_deg, day, extinction, solar_constant,
+                                  sun_solid_angle, phi if sun else 0.0)
     sky = Sky(s, clear=clear, overcast=overcast, sun_radiance=sun_rad,
               sun_solid_angle=sun_solid_angle,
               info={"kind": kind, "phi": phi, "sun_zenith_deg": float(sun_zenith_deg),
@@ -512,12 +521,8 @@ def cie_general_sky(params, sun_zenith_deg, sun_azimuth_deg, *, day=172, zenith_
     norm = float(cie_general.indicatrix(theta_s, *p[2:])
                  * cie_general.gradation(1.0, *p[:2]))
     weight = float(lz) * k / norm / efficacy * cct_to_rgb(cct)
-    sun_rad = np.zeros(3)
-    if sun:
-        kw = {name: v for name, v in (("extinction", extinction),
-                                      ("solar_constant", solar_constant)) if v is not None}
-        n = float(direct_normal_irradiance(sun_zenith_deg, day, **kw))
-        sun_rad = n / sun_solid_angle * sun_rgb(sun_zenith_deg)
+    sun_rad = thesis_sun_radiance(sun_zenith_deg, day, extinction, solar_constant,
+                                  sun_solid_angle, 1.0 if sun else 0.0)
     sky = Sky(direction_from_angles(theta_s, np.radians(sun_azimuth_deg)), perez=weight,
               perez_coefficients=coefficients, sun_radiance=sun_rad,
               sun_solid_angle=sun_solid_angle,

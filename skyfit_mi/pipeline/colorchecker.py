@@ -55,6 +55,8 @@ MATCH_MAX = 0.35
 #: Reference reflectances below this are left out of the match (the cyan swatch lies outside
 #: sRGB: its red is negative).
 _MATCH_FLOOR = 0.01
+#: The chart's outline in grid coordinates (columns, rows), clockwise from the first swatch.
+_GRID_CORNERS = np.array([[0, 0], [COLUMNS, 0], [COLUMNS, ROWS], [0, ROWS]], float)
 
 
 def _library():
@@ -129,20 +131,29 @@ def swatch_labels(h, shape):
     """(H, W) int: 1 + the swatch index of each pixel whose centre maps (by the inverse of the
     grid-to-image homography ``h``) into the middle :data:`INNER` of a swatch's cell, else 0."""
     rows, cols = shape
-    ys, xs = np.mgrid[0:rows, 0:cols]
+    out = np.zeros(shape, np.int32)
+    # only the chart's bounding box can hold swatch pixels
+    corners = _apply(h, _GRID_CORNERS)
+    (x0, y0), (x1, y1) = np.floor(corners.min(axis=0)), np.ceil(corners.max(axis=0))
+    x0, x1 = int(np.clip(x0, 0, cols)), int(np.clip(x1 + 1, 0, cols))
+    y0, y1 = int(np.clip(y0, 0, rows)), int(np.clip(y1 + 1, 0, rows))
+    if x1 <= x0 or y1 <= y0:
+        return out
+    ys, xs = np.mgrid[y0:y1, x0:x1]
     g = _apply(np.linalg.inv(h), np.c_[xs.ravel() + 0.5, ys.ravel() + 0.5])
     col, row = np.floor(g[:, 0]), np.floor(g[:, 1])
     inside = (col >= 0) & (col < COLUMNS) & (row >= 0) & (row < ROWS)
     half = INNER / 2
     central = (np.abs(g[:, 0] - col - 0.5) < half) & (np.abs(g[:, 1] - row - 0.5) < half)
     k = np.where(inside & central, row * COLUMNS + col + 1, 0).astype(np.int32)
-    return k.reshape(rows, cols)
+    out[y0:y1, x0:x1] = k.reshape(y1 - y0, x1 - x0)
+    return out
 
 
 def _fit_grid(quad, centres, image, reference):
     """Best homography grid -> image for one cluster: every corner order of ``quad`` as a
     first guess, refined on the detected swatch ``centres``; (match, h)."""
-    corners = np.array([[0, 0], [COLUMNS, 0], [COLUMNS, ROWS], [0, ROWS]], float)
+    corners = _GRID_CORNERS
     cells = _cell_centres()
     best = (np.inf, None)
     for flip in (False, True):
@@ -224,7 +235,7 @@ def find_chart(images, log=print):
     if few:
         raise SkyfitError(f"the ColorChecker's {', '.join(few)} swatch(es) cover fewer than "
                           f"{MIN_SWATCH_PIXELS} pixels; frame the chart larger.")
-    corners = _apply(h, np.array([[0, 0], [COLUMNS, 0], [COLUMNS, ROWS], [0, ROWS]], float))
+    corners = _apply(h, _GRID_CORNERS)
     log(f"ColorChecker found: outline {np.round(corners).astype(int).tolist()} px, neutral "
         f"swatches {min(n[k] for k in NEUTRAL)}-{max(n[k] for k in NEUTRAL)} px each, colours "
         f"matching the reference to {match:.1%} rms")

@@ -303,17 +303,24 @@ def pixel_sigma(values, sensor, noise, jpeg=None):
     sigmas), where the JPEG loses the scene's own detail (ringing), which the bootstrap cannot
     draw, plus the tables' bound (:func:`.jpeg_noise.tables_bound`).
     """
+    var, _ = _variance(values, sensor, noise, jpeg)
+    return np.where(np.isfinite(values), np.sqrt(var), np.inf).astype(np.float32)
+
+
+def _variance(values, sensor, noise, jpeg=None):
+    """:func:`pixel_sigma`'s variance [DN^2], and for a JPEG which pixels lie in blocks holding
+    an edge (:func:`edge_blocks`; None without a JPEG)."""
     a, b = noise if jpeg is None else jpeg["shown"]
     s = sensor.linearise(np.nan_to_num(values))
     q = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6))
     var = q * q * (a + b * s * sensor.max_code) + 1.0 / 12.0
-    if jpeg is not None:
-        from .jpeg_noise import tables_bound
+    if jpeg is None:
+        return var, None
+    from .jpeg_noise import tables_bound
 
-        var = np.maximum(jpeg["variance"], var)
-        edge = edge_blocks(np.nan_to_num(values), var)
-        var = np.where(edge, var + tables_bound(jpeg["settings"]), var)
-    return np.where(np.isfinite(values), np.sqrt(var), np.inf).astype(np.float32)
+    var = np.maximum(jpeg["variance"], var)
+    edge = edge_blocks(np.nan_to_num(values), var)
+    return np.where(edge, var + tables_bound(jpeg["settings"]), var), edge
 
 
 def edge_blocks(values, variance, block=8):
@@ -424,21 +431,26 @@ def _swatch_ratios(samples, patch, sensor, exposures):
     """(24, 3) median over frames and pixels of each ColorChecker swatch's observed signal over
     its calibrated prediction (exposure x rendered radiance), values at 0 or the top left out;
     NaN where a swatch has none."""
+    r = np.concatenate([_signal_ratio(y, L, sensor)[1] / e for (y, L), e in zip(samples,
+                                                                               exposures)])
+    labels = np.tile(patch, len(samples))
     ratio = np.full((24, 3), np.nan)
-    parts = {k: [] for k in range(24)}
-    for (y, L), e in zip(samples, exposures):
-        ok = np.isfinite(y) & (y > 0) & (y < sensor.max_code) & (L > 0)
-        with np.errstate(all="ignore"):
-            r = np.where(ok, sensor.linearise(np.where(ok, y, 0.0)) / (e * L), np.nan)
-        for k in range(24):
-            parts[k].append(r[patch == CHART_LABEL + k])
-    for k, rs in parts.items():
-        r = np.concatenate(rs) if rs else np.empty((0, 3))
+    for k in range(24):
         for c in range(3):
-            v = r[:, c][np.isfinite(r[:, c])]
+            v = r[labels == CHART_LABEL + k, c]
+            v = v[np.isfinite(v)]
             if len(v):
                 ratio[k, c] = np.median(v)
     return ratio
+
+
+def _signal_ratio(y, L, sensor):
+    """The linear signal of codes ``y`` (n, 3) [DN] and its ratio to the rendered radiance
+    ``L`` (n, 3) [W m^-2 sr^-1], NaN where a value is clipped (0 or the top), not finite, or
+    unlit: the calibration's one rule for usable patch values."""
+    ok = np.isfinite(y) & (y > 0) & (y < sensor.max_code) & (L > 0)
+    s = np.where(ok, sensor.linearise(np.where(ok, y, 0.0)), np.nan)
+    return s, s / np.where(ok, L, 1.0)
 
 
 def fit_response(samples, patch, max_code, rel, log):
@@ -521,14 +533,12 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log):
     """
     k = np.full((len(samples), 3), np.nan)
     for i, (y, L) in enumerate(samples):
-        ok = np.isfinite(y) & (y > 0) & (y < sensor.max_code) & (L > 0)
-        s = np.where(ok, sensor.linearise(np.where(ok, y, 0.0)), np.nan)
-        r = s / np.where(ok, L, 1.0)
+        s, r = _signal_ratio(y, L, sensor)
         num = den = 0.0
         with np.errstate(all="ignore"):
             for m in np.unique(patch):
                 sel = patch == m
-                n = np.sum(ok[sel], axis=0)
+                n = np.sum(np.isfinite(r[sel]), axis=0)
                 weight = np.where(n > 0, n * np.nan_to_num(np.nanmedian(s[sel], axis=0)) ** 2, 0)
                 num = num + weight * np.nan_to_num(np.nanmedian(r[sel], axis=0))
                 den = den + weight
@@ -772,13 +782,14 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
             raise
     from .jpeg_noise import jpeg_settings
 
-    jpeg = [jpeg_settings(paths[i]) if photos[i].format == "jpeg" else None for i in lit]
-    if any(st and st["subsampling"] for st in jpeg):
+    jpeg = {i: jpeg_settings(paths[i]) for i in lit if photos[i].format == "jpeg"}
+    if any(st and st["subsampling"] for st in jpeg.values()):
         log("the JPEGs' chroma is subsampled (4:2:2 or 4:2:0): colour edges blur by a pixel, "
             "an error sigma does not hold; keep pixels beside edges out of fits (regions from "
             "the scene's labels are eroded by a pixel; erode a --region too)")
     if noise is None:
-        a, b = estimate_noise([values[i] for i in lit], sensor, jpeg, shown, log)
+        a, b = estimate_noise([values[i] for i in lit], sensor, [jpeg.get(i) for i in lit],
+                              shown, log)
         noise_info = {"read_DN2": a, "shot_DN": b, "source": "estimated from the frames",
                       "shown_by_the_frames": list(shown)}
     else:
@@ -797,14 +808,16 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
     with FolderLock(out):
         prepare_folder(out, run_id, (h, w, 3), overwrite, log)
         return _write(out, spec, paths, photos, values, times, sensor, exposures, (a, b),
-                      shown or (0.0, 0.0), falloff, flat_rec, float_scale, rel, cal_info,
+                      shown or (0.0, 0.0), jpeg, falloff, flat_rec, float_scale, rel, cal_info,
                       noise_info, options, run_id, progress)
 
 
-def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, shown, falloff,
-           flat, float_scale, rel, cal_info, noise_info, options, run_id, progress):
+def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, shown, jpeg,
+           falloff, flat, float_scale, rel, cal_info, noise_info, options, run_id, progress):
+    """Write the sequence folder; ``jpeg`` each JPEG frame's :func:`.jpeg_noise.jpeg_settings`
+    by frame index (None where the file holds none)."""
     from ..render.image import write_exr
-    from .jpeg_noise import REPLICATES, SEED, bootstrap_variance, jpeg_settings
+    from .jpeg_noise import REPLICATES, SEED, bootstrap_variance
 
     manifest = measured_header(spec, sensor, run_id, "photographed",
                                "none: frames are photographs")
@@ -831,13 +844,14 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, sh
         else:
             e = exposures[f.index]
             gain = e[None, None, :] * falloff[..., None]
-            settings = jpeg_settings(p) if photo.format == "jpeg" else None
-            jpeg = None
+            settings = jpeg.get(f.index)
+            frame_jpeg = None
             if settings is not None:
                 jpeg_frames += 1
                 boot, rho = bootstrap_variance(v, settings, sensor, noise, [SEED, f.index])
-                jpeg = {"variance": boot, "shown": shown, "settings": settings}
-            sig = pixel_sigma(v, sensor, noise, jpeg)
+                frame_jpeg = {"variance": boot, "shown": shown, "settings": settings}
+            var, edge = _variance(v, sensor, noise, frame_jpeg)
+            sig = np.where(np.isfinite(v), np.sqrt(var), np.inf).astype(np.float32)
             s = sensor.linearise(np.nan_to_num(v))
             slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code
             radiance = np.where(np.isfinite(v), s / gain, np.nan).astype(np.float32)
@@ -853,11 +867,10 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, sh
                                  **{k: photo.metadata[k] for k in ("exposure_time_s", "f_number",
                                                                    "iso")
                                     if photo.metadata.get(k)}})
-            if jpeg is not None:
-                rec["jpeg_error_DN2"] = np.mean(jpeg["variance"], axis=(0, 1)).tolist()
+            if frame_jpeg is not None:
+                rec["jpeg_error_DN2"] = np.mean(boot, axis=(0, 1)).tolist()
                 rec["jpeg_block_correlation"] = rho.tolist()
-                rec["jpeg_edge_block_share"] = float(np.mean(sig.astype(float) ** 2 > np.maximum(
-                    jpeg["variance"], pixel_sigma(v, sensor, shown).astype(float) ** 2) + 1e-3))
+                rec["jpeg_edge_block_share"] = float(np.mean(edge))
             bad = int(photo.nan_count + photo.inf_count)
             if bad:
                 rec["non_finite_values"] = bad

@@ -611,7 +611,7 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index):
                                     "ground_albedo", "zenith_luminance") if k in e}
             sky = cie_general_sky(_cie_general_parameters(e), zenith, azimuth,
                                   day=t.timetuple().tm_yday, **kw)
-        if e["type"] == "gensky":
+        elif e["type"] == "gensky":
             text = e.get("gensky")
             if text is None:
                 p = base_dir / e.get("gensky_file", "")
@@ -620,7 +620,7 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index):
                                     "or a file beside the spec.")
                 text = p.read_text()
             sky = from_gensky(text)
-        elif e["type"] != "cie_general":
+        else:
             kw = {k: e[k] for k in ("efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
                                     "ground_albedo", "extinction", "solar_constant", "sun",
                                     "clear_zenith_luminance", "overcast_zenith_luminance") if k in e}
