@@ -37,7 +37,7 @@ def _frames(quality, subsampling, n=3, seed=0):
         buf = io.BytesIO()
         Image.fromarray(codes).save(buf, format="JPEG", quality=quality, subsampling=subsampling)
         buf.seek(0)
-        frames.append(np.asarray(Image.open(buf).convert("RGB"), dtype=float))
+        frames.append(jn.decode(buf.getvalue()))          # as ingest reads a JPEG
         buf.seek(0)
         settings.append(jn.jpeg_settings(buf))
     return frames, clean, settings
@@ -147,3 +147,45 @@ def test_pixels_sharing_a_block_widen_their_sigma(tmp_path):
 
     px = np.array([[0, 0], [7, 7], [8, 0], [3, 12], [4, 13], [100, 100]])
     np.testing.assert_array_equal(block_sharing(px), [2, 2, 1, 2, 2, 1])
+
+
+@pytest.mark.parametrize("subsampling", [0, 1, 2])
+@pytest.mark.parametrize("shape", [(48, 64), (49, 71)])
+def test_the_float_decoder_agrees_with_libjpeg_to_its_rounding(subsampling, shape):
+    """jn.decode against Pillow's libjpeg decode of the same file (odd sizes: the padding of
+    the chroma's coding unit unused): they differ by libjpeg's rounding of three planes and of
+    R, G, B to whole codes (max ~2.5 DN), not systematically; a grey JPEG stays one channel."""
+    rng = np.random.default_rng(3)
+    codes = np.clip(rng.normal(120, 20, shape + (3,)), 0, 255).astype(np.uint8)
+    for image in (codes, codes[..., 0]):
+        buf = io.BytesIO()
+        Image.fromarray(image).save(buf, format="JPEG", quality=90, subsampling=subsampling)
+        ours = jn.decode(buf.getvalue())
+        with Image.open(buf) as im:
+            theirs = np.asarray(im, dtype=float).reshape(ours.shape)
+        d = ours - theirs
+        assert ours.shape[:2] == shape and ours.shape[2] == image.reshape(shape + (-1,)).shape[2]
+        assert np.abs(d).max() < 3.0 and np.sqrt(np.mean(d ** 2)) < 1.2
+        assert np.all(np.abs(d.mean(axis=(0, 1))) < 0.1)
+
+
+@pytest.mark.parametrize("colour", [(101.4, 94.1, 92.7), (175.2, 76.4, 69.7), (60.3, 80.2, 120.6)])
+def test_a_smooth_patch_decodes_without_a_shared_error(colour):
+    """A uniform patch with noise, compressed at quality 95: the noise is gone from the decoded
+    planes, so libjpeg's rounding of them to whole codes puts one error on every pixel (measured
+    -0.45 DN in blue on the first colour, a grey card's, and +0.46 on the third); decoded in
+    floating point the patch's mean error stays within a sixth of a code (measured <= 0.17)."""
+    rng = np.random.default_rng(5)
+    lin = SENSOR.linearise(np.array(colour)) * 255.0 * np.ones((128, 128, 3))
+    noisy = lin + rng.normal(size=lin.shape) * np.sqrt(NOISE[0] + NOISE[1] * lin)
+    codes = np.clip(np.rint(SENSOR.respond(noisy / 255.0) * 255.0), 0, 255).astype(np.uint8)
+    buf = io.BytesIO()
+    Image.fromarray(codes).save(buf, format="JPEG", quality=95, subsampling=0)
+    err = (jn.decode(buf.getvalue()) - codes).mean(axis=(0, 1))
+    assert np.all(np.abs(err) < 0.25), err
+
+
+def test_a_file_the_decoder_cannot_read_gives_none(tmp_path):
+    """Not a JPEG (or a damaged one): None, and the reader falls back to Pillow's codes."""
+    assert jn.decode(b"not a jpeg at all") is None
+    assert jn.decode(tmp_path / "missing.jpg") is None

@@ -13,7 +13,9 @@ Formats and decisions
 ---------------------
 * ``.jpg .jpeg`` (Pillow), ``.png`` of 8 bits or fewer (Pillow), ``.tif .tiff`` of 8 bits
   (tifffile): kind 'integer', bits 8, max_code 255, encoding_hint 'srgb' (a PNG gAMA 1.0 chunk
-  or an ICC profile named linear makes it 'linear').
+  or an ICC profile named linear makes it 'linear').  A JPEG's codes are decoded in floating
+  point from its DCT coefficients (:func:`.jpeg_noise.decode`; ``metadata['decoder']``):
+  libjpeg's whole-code planes put one shared error on every pixel of a smooth patch.
 * ``.png`` of 16 bits (Mitsuba's Bitmap: Pillow truncates 16-bit RGB PNG to 8 bits) and
   ``.tif .tiff`` of 16 bits (tifffile): kind 'integer', bits 16, max_code 65535,
   encoding_hint 'linear' (a PNG sRGB chunk, gAMA 1/2.2, or an ICC profile named sRGB makes it
@@ -90,9 +92,9 @@ class Photo:
     format : str
         'jpeg', 'png', 'tiff', 'exr', 'rgbe' or 'raw'.
     values : ndarray, float32, shape (H, W, 3)
-        RGB values as stored, after the EXIF orientation is applied: integer codes (0 ..
-        ``max_code``) held as floats for integer formats, the float values for EXR/RGBE/float
-        TIFF.  Writable; the Photo does not copy it.
+        RGB values as stored, after the EXIF orientation is applied: codes (0 ..
+        ``max_code``) held as floats for integer formats (whole codes but for a JPEG's, decoded
+        in floating point), the float values for EXR/RGBE/float TIFF.  Writable; the Photo does not copy it.
     kind : str
         'integer' or 'float'.
     bits : int or None
@@ -392,6 +394,16 @@ def _read_pillow(path, fmt):
                     f"{fmt.upper()}, or remove it") from None
     if codes.ndim == 2:
         codes = codes[:, :, None]
+    if fmt == "jpeg":
+        from .jpeg_noise import decode
+
+        exact = decode(path)
+        if exact is not None and exact.shape == codes.shape:
+            codes = exact
+            meta["decoder"] = "floating point from the DCT coefficients (jpeglib)"
+        else:
+            meta["decoder"] = "libjpeg, whole codes (Pillow): the floating-point decoder " \
+                "could not read the file"
     meta["icc_profile"] = _icc_description(info.get("icc_profile"))
     hint, source = _hint_from_icc(meta["icc_profile"], "srgb")
     if fmt == "png":
