@@ -127,12 +127,14 @@ def test_fit_after_ingest_recovers_the_material(day, ingested):
         assert abs(t - mid) <= 1.5 * half, f"{k}: truth {t} far outside the fit's [{lo}, {hi}]"
 
 
-@pytest.mark.xfail(strict=False, reason="issue 15 open: C_g's interval is 1.75x the clean "
-                   "fit's on 64 of the sample's pixels (1.59x before JPEG sigma came from a "
-                   "bootstrap of the file's compression and pixels sharing a JPEG block were "
-                   "widened for their correlated errors, 2026-11-25); the photographs' read + "
-                   "shot noise through sRGB is larger in the dark green channel than the clean "
-                   "frames' fixed 0.5% noise, so the goal compares unequal noise; not strict")
+@pytest.mark.xfail(strict=False, reason="issue 15 open: on 64 of the sample's pixels the "
+                   "ingested fit's 95% intervals are 1.28 / 1.63 / 0.69 / 1.56x the clean fit's "
+                   "for C_r / C_g / C_b / rho_s (JPEGs decoded in floating point, 2026-11-25). "
+                   "One realisation's widths follow where each fit lands on the rho_s - "
+                   "sigma_alpha ridge more than the noise: with the clean frames' noise raised "
+                   "to the photographs' at the sample (0.72%), the clean fit landed at "
+                   "sigma_alpha = 0 with narrower C intervals (C_r ratio 2.3). The goal needs "
+                   "widths over noise seeds; not strict")
 def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, ingested):
     fit, clean = ingested[2], day["clean"]
     for k in ("C_r", "C_g", "C_b", "rho_s"):

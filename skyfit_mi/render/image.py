@@ -46,10 +46,10 @@ def to_srgb8(image, exposure):
 
 def write_png(path, image8):
     """Write an 8-bit RGB image (H, W, 3) as PNG."""
-    import matplotlib.image
+    from PIL import Image
 
-    return atomic_write(path, lambda p: matplotlib.image.imsave(
-        p, np.asarray(image8, dtype=np.uint8), format="png"))
+    return atomic_write(path, lambda p: Image.fromarray(
+        np.ascontiguousarray(image8, dtype=np.uint8)).save(p, format="png"))
 
 
 def contact_sheet(images, exposure, columns=5, gap=2):
