@@ -539,43 +539,99 @@ def fit_response(samples, patch, max_code, rel, log):
     return best, gamma, info
 
 
-def calibrate_exposure(samples, patch, sensor, photos, rel, log):
-    """Per-frame, per-channel exposure [sr m^2 W^-1] (F, 3) from the calibration patches'
-    :func:`patch_samples` (``patch`` each pixel's material label): per patch the central mean over
-    its pixels of the observed linear signal / (rendered radiance x falloff), the patches
-    weighted by their pixels times their median signal squared (a dark patch's codes are
-    coarse: its ratio's relative error grows as its signal falls).  With EXIF exposures
-    ``rel`` the day shares one scale per channel (the median over frames of exposure / rel),
-    and the frames' spread about it is reported.
-    """
-    k = np.full((len(samples), 3), np.nan)
-    for i, (y, L) in enumerate(samples):
-        s, r = _signal_ratio(y, L, sensor)
+def _patch_exposure(s, r, patch, parts=1):
+    """One frame's exposure (3,) from its patches' signals ``s`` and ratios ``r`` (n, 3) (of
+    :func:`_signal_ratio`): per patch the central mean of its ratios, weighted by its pixels
+    times its median signal squared; with ``parts`` = 2, (2, 3): the same from the first and
+    the second half of each patch's pixels (raster order: its top and bottom, in other JPEG
+    blocks), whose difference measures the estimate's own error."""
+    out = np.zeros((parts, 3))
+    for part in range(parts):
         num = den = 0.0
         with np.errstate(all="ignore"):
             for m in np.unique(patch):
-                sel = patch == m
-                n = np.sum(np.isfinite(r[sel]), axis=0)
-                weight = np.where(n > 0, n * np.nan_to_num(np.nanmedian(s[sel], axis=0)) ** 2, 0)
-                num = num + weight * np.nan_to_num(central_mean(r[sel]))
+                idx = np.flatnonzero(patch == m)
+                idx = np.array_split(idx, parts)[part]
+                n = np.sum(np.isfinite(r[idx]), axis=0)
+                weight = np.where(n > 0, n * np.nan_to_num(np.nanmedian(s[idx], axis=0)) ** 2, 0)
+                num = num + weight * np.nan_to_num(central_mean(r[idx]))
                 den = den + weight
-            k[i] = np.where(den > 0, num / den, np.nan)
+            out[part] = np.where(den > 0, num / den, np.nan)
+    return out if parts > 1 else out[0]
+
+
+#: The p-value of the chi^2 of the frames' exposures about the EXIF relative exposures (their
+#: patches' own noise as sigma) below which each frame's exposure is taken from its patches.
+EXIF_SCATTER_P = 1e-3
+
+
+def calibrate_exposure(samples, patch, sensor, photos, rel, log):
+    """Per-frame, per-channel exposure [sr m^2 W^-1] (F, 3) from the calibration patches'
+    :func:`patch_samples` (``patch`` each pixel's material label), and the calibration's
+    record: per frame :func:`_patch_exposure` (the observed linear signal over the rendered
+    radiance x falloff), its standard error from the difference of the patches' two halves
+    (pooled over the frames).
+
+    With EXIF exposures ``rel`` the day shares one scale per channel (the median over frames of
+    exposure / rel) -- unless the frames scatter about it by more than their patches' noise
+    allows (chi^2 with p below EXIF_SCATTER_P, at least 3 frames: a camera's shutter and
+    aperture miss their nominal values by a few per cent), when each frame takes its own, as
+    without EXIF.  ``scale_relative_sd`` (3,) is the standard error of the exposure the fits
+    use, relative, as it reaches the reflectances: the median's over the frames for one scale,
+    a frame's over the square root of the frames for exposures of their own (each frame's error
+    its own, averaged by a fit over the day); fits widen their intervals by it
+    (:func:`skyfit_mi.fitting.fit.calibration_sd`).
+    """
+    halves = np.full((len(samples), 2, 3), np.nan)
+    k = np.full((len(samples), 3), np.nan)
+    for i, (y, L) in enumerate(samples):
+        s, r = _signal_ratio(y, L, sensor)
+        k[i] = _patch_exposure(s, r, patch)
+        halves[i] = _patch_exposure(s, r, patch, parts=2)
     good = np.isfinite(k).all(axis=1)
     if not good.any():
         raise SkyfitError("the calibration patches are saturated, black or unlit in every frame; "
                           "they cannot set the exposure. Give --exposure instead.")
+    # a frame's relative variance, pooled: var(k) = E[(k_a - k_b)^2] / 4
+    with np.errstate(all="ignore"):
+        d = (halves[:, 0] - halves[:, 1]) / k
+        var_f = np.nanmean(d[good] ** 2, axis=0) / 4.0
+    info = {"frame_relative_sd": np.sqrt(var_f).tolist()}
+    if rel is not None and good.sum() >= 3:
+        scale = np.nanmedian(k[good] / rel[good, None], axis=0)
+        dev = k[good] / (rel[good, None] * scale) - 1.0
+        spread = float(np.std(dev @ SRGB_LUMINANCE))
+        from scipy.stats import chi2 as chi2_dist
+
+        dof = 3 * (int(good.sum()) - 1)
+        with np.errstate(all="ignore"):
+            chi2 = float(np.sum(dev ** 2 / np.maximum(var_f, 1e-12)))
+        info.update(relative_spread=spread, scatter_chi2_per_dof=chi2 / dof)
+        if chi2_dist.sf(chi2, dof) < EXIF_SCATTER_P:
+            missing = [Path(photos[i].path).name for i in np.flatnonzero(~good)]
+            if not missing:
+                log(f"calibration: the frames' exposures scatter by {spread:.1%} about their "
+                    f"EXIF relative exposures, {np.sqrt(chi2 / dof):.1f}x what the patches' "
+                    "noise allows (a shutter or aperture off its nominal value): each frame's "
+                    "exposure is taken from its own patches")
+                rel = None
+                info["exif_relative_exposures"] = "not used: they scatter beyond the patches' noise"
+    elif rel is not None:
+        scale = np.nanmedian(k[good] / rel[good, None], axis=0)
     if rel is None:
         missing = [Path(photos[i].path).name for i in np.flatnonzero(~good)]
         if missing:
             raise SkyfitError(f"{missing[0]}: the calibration patches are saturated, black or "
                               "unlit, and the frame has no EXIF exposure; drop the frame or give "
                               "--exposure.")
-        return k, {"per_frame": True}
-    scale = np.nanmedian(k[good] / rel[good, None], axis=0)
-    spread = float(np.std(k[good] @ SRGB_LUMINANCE / (rel[good] * (scale @ SRGB_LUMINANCE))))
+        info.update(per_frame=True,
+                    scale_relative_sd=np.sqrt(var_f / good.sum()).tolist())
+        return k, info
+    info.update(per_frame=False,
+                scale_relative_sd=np.sqrt(np.pi / 2.0 * var_f / good.sum()).tolist())
     log(f"calibration: exposure {scale @ SRGB_LUMINANCE:.4g} sr m^2 W^-1 (EXIF relative "
-        f"exposures; frame-to-frame spread {100 * spread:.1f}%)")
-    return rel[:, None] * scale[None, :], {"per_frame": False, "relative_spread": spread}
+        f"exposures; frame-to-frame spread {100 * info.get('relative_spread', 0.0):.1f}%)")
+    return rel[:, None] * scale[None, :], info
 
 
 # ---- the whole ingest ---------------------------------------------------------------------

@@ -50,7 +50,7 @@ def _exif(time, offset, exposure_time):
 
 def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="srgb", gamma=2.2,
                    read_noise_DN=0.8, shot_gain=0.02, cos4=True, fmt="jpeg", quality=95,
-                   offset=True, seed=0):
+                   offset=True, shutter_error=0.0, seed=0):
     """Write the rendered frames of ``sequence`` as photographs into ``out_dir``.
 
     Parameters
@@ -65,6 +65,9 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
     cos4 : apply the cos^4 vignetting of the camera's field of view
     fmt : 'jpeg' (chroma at full resolution), 'png' or 'tiff' (8-bit)
     offset : write EXIF OffsetTimeOriginal (without it a reader needs the time zone)
+    shutter_error : relative standard deviation of each frame's true exposure about the
+        nominal one its EXIF records (a real shutter and aperture miss by a few per cent),
+        drawn from numpy.random.default_rng([seed, index, 1]); recorded in photos.json
 
     Returns the list of written paths, in time order.
     """
@@ -89,7 +92,9 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
         stops = SHUTTER_STOPS[SHUTTER_STOPS * 15.0 * p99 <= target]
         t = float(stops[0] if len(stops) else SHUTTER_STOPS[-1])
         e = base * t * 15.0                                   # exposure at this shutter time
-        lin = np.clip(signal * e, 0.0, None) * sensor.max_code
+        miss = float(np.random.default_rng([seed, f["index"], 1]).normal()) * shutter_error
+        e_true = e * (1.0 + miss)                             # what the shutter really gave
+        lin = np.clip(signal * e_true, 0.0, None) * sensor.max_code
         lin = lin + rng.normal(size=lin.shape) * np.sqrt(read_noise_DN ** 2 + shot_gain * lin)
         codes = np.rint(sensor.respond(lin / sensor.max_code) * sensor.max_code)
         img = Image.fromarray(np.clip(codes, 0, 255).astype(np.uint8))
@@ -102,10 +107,11 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
                      img.save(p, format=fmt.upper(), exif=ex.tobytes(), **kw))
         paths.append(path)
         record.append({"file": path.name, "time": f["time"], "exposure_time_s": t,
-                       "exposure_sr_m2_W": e})
+                       "exposure_sr_m2_W": e_true, "nominal_exposure_sr_m2_W": e})
     meta = {"sequence": str(Path(sequence).resolve()), "seed": seed, "response": response,
             "gamma": gamma, "read_noise_DN": read_noise_DN, "shot_gain": shot_gain,
             "cos4": cos4, "format": fmt, "quality": quality, "offset_in_exif": offset,
+            "shutter_error": shutter_error,
             "exposure_at_1_15_s": base, "f_number": SIM_F_NUMBER, "iso": SIM_ISO,
             "frames": record, "units": "exposure sr m^2 W^-1 (signal = exposure x radiance)"}
     write_json(out / "photos.json", meta)
