@@ -1,11 +1,12 @@
 """`skyfit ingest`: photographs in, the manifest contract out (issue 15).
 
 A rendered day (the truth) is photographed by :mod:`skyfit_mi.pipeline.photo_sim`: 8-bit sRGB
-JPEGs (quality 100; a coarser JPEG in a slow test) with an auto-exposure that changes between frames (EXIF shutter times), cos^4
-vignetting, read and shot noise, clipping and JPEG compression.  After ingest, with the
-absolute scale taken from the grey card in the scene, a fit of the sample recovers its
-material: the truth inside the intervals, the intervals at most 1.5x as wide as those of a fit
-to the clean rendered frames.  Bad inputs get one line and leave no output.
+JPEGs (quality 100; a coarser JPEG in a slow test) with an auto-exposure that changes between
+frames (EXIF shutter times), cos^4 vignetting, read and shot noise, clipping and JPEG
+compression.  After ingest, with the absolute scale taken from the grey card in the scene, a
+fit of the sample recovers its material: the truth inside the intervals, and (a slow test,
+medians over noise seeds) the intervals at most 1.5x as wide as those of a fit to the clean
+rendered frames.  Bad inputs get one line and leave no output.
 """
 
 import json
@@ -27,9 +28,13 @@ def _small_spec(tmp, **camera):
     raw["camera"].update({"width": 64, "height": 44, **camera})
     raw["time"]["step_minutes"] = 60
     raw["render"] = {"spp": 128, "seed": 3}
-    # the clean frames: the photographs' noise level (about 1.2 DN at mid-grey) in the same
-    # 8-bit sRGB encoding, without exposure changes, vignetting or compression
-    raw["sensor"] = {"response": "srgb", "bits": 8, "noise_percent": 0.5}
+    # the clean frames: the photographs' sensor noise where the sample is, in the same 8-bit
+    # sRGB encoding, without exposure changes, vignetting or compression: the simulator's
+    # read 0.8 + shot 0.02 linear DN through sRGB's slope at the sample's codes (about 175 /
+    # 76 / 70) is 1.2 / 2.0 / 2.1 DN, rms 1.83 DN = 0.72% of full scale (the render's noise is
+    # one level for every code; 0.5%, the photographs' at mid-grey, left the sample's dark
+    # channels less noise than the photographs give them)
+    raw["sensor"] = {"response": "srgb", "bits": 8, "noise_percent": 0.72}
     path = tmp / "spec.toml"
     path.write_text(_toml(raw))
     return path, raw
@@ -55,9 +60,8 @@ def _toml(raw):
 
 @pytest.fixture(scope="module")
 def day(tmp_path_factory):
-    """The truth rendered, its clean fit, and its photographs (JPEG with offsets in EXIF)."""
+    """The truth rendered and its photographs (JPEG with offsets in EXIF)."""
     from skyfit_mi.fitting.chi2 import subsample_region
-    from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.pipeline.photo_sim import photograph_day
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
@@ -68,11 +72,9 @@ def day(tmp_path_factory):
     render_sequence(validate_spec(raw, spec_path.parent), truth, progress=False, **QUIET)
     # 64 of the sample's pixels, as `skyfit fit` takes by default (--max-pixels)
     regions = {k: subsample_region(v, 64, 0) for k, v in material_regions(truth)}
-    clean = fit_region(truth, "sample", regions["sample"], model="colour", **QUIET)
     photos = tmp / "photos"
     photograph_day(truth, photos, seed=5, quality=100)
-    return {"tmp": tmp, "spec": spec_path, "truth": truth, "regions": regions, "clean": clean,
-            "photos": photos}
+    return {"tmp": tmp, "spec": spec_path, "truth": truth, "regions": regions, "photos": photos}
 
 
 def _ingest(day, out, **kw):
@@ -135,7 +137,7 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
     off by the miss in every frame.  Without a miss (the fixture's day) EXIF's relative
     exposures are kept.  Either way the calibration's standard error reaches the fit's
     intervals (calibration_error_sd)."""
-    from skyfit_mi.fitting.fit import calibration_sd
+    from skyfit_mi.fitting.uncertainty import calibration_sd
     from skyfit_mi.pipeline.photo_sim import photograph_day
 
     _, doc, fit = ingested
@@ -165,21 +167,37 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
     np.testing.assert_allclose(got, true, rtol=0.01)       # measured: 0.44% at most
 
 
-@pytest.mark.xfail(strict=False, reason="issue 15 open: on 64 of the sample's pixels the "
-                   "ingested fit's 95% intervals are 1.28 / 1.63 / 0.69 / 1.56x the clean fit's "
-                   "for C_r / C_g / C_b / rho_s (JPEGs decoded in floating point, 2026-11-25). "
-                   "One realisation's widths follow where each fit lands on the rho_s - "
-                   "sigma_alpha ridge more than the noise: with the clean frames' noise raised "
-                   "to the photographs' at the sample (0.72%), the clean fit landed at "
-                   "sigma_alpha = 0 with narrower C intervals (C_r ratio 2.3). The goal needs "
-                   "widths over noise seeds; not strict")
-def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, ingested):
-    fit, clean = ingested[2], day["clean"]
-    for k in ("C_r", "C_g", "C_b", "rho_s"):
-        lo, hi = fit["intervals"][k]["95"]
-        clo, chi = clean["intervals"][k]["95"]
-        assert hi - lo <= 1.5 * (chi - clo), \
-            f"{k}: interval {hi - lo:.4g} wider than 1.5x the clean fit's {chi - clo:.4g}"
+@pytest.mark.slow
+def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, tmp_path):
+    """The issue's goal on median widths over noise seeds: the clean frames rendered with 4
+    seeds, the photographs taken with 4 noise seeds (quality 100), each ingested with the grey
+    card and fitted on the same 64 pixels.  One realisation's widths follow where its fit
+    lands on the rho_s - sigma_alpha ridge more than the noise (single ratios 0.7-2.3
+    measured), so one pair cannot judge it.  Measured over 6 seeds
+    (`scripts/ingest_coverage.py --quality 100 --seeds 6 --clean`): 1.22 / 0.92 / 1.16 / 1.16
+    for C_r / C_g / C_b / rho_s."""
+    from skyfit_mi.fitting.fit import fit_region
+    from skyfit_mi.pipeline.ingest import ingest
+    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.sequence import render_sequence
+
+    keys = ("C_r", "C_g", "C_b", "rho_s")
+    clean, photo = [], []
+    for seed in range(4):
+        raw = read_spec(day["spec"])
+        raw["render"]["seed"] = 100 + seed
+        seq = tmp_path / f"clean{seed}"
+        render_sequence(validate_spec(raw, day["spec"].parent), seq, progress=False, **QUIET)
+        photos = tmp_path / f"photos{seed}"
+        photograph_day(day["truth"], photos, seed=seed, quality=100)
+        ingest([photos], day["spec"], tmp_path / f"seq{seed}", progress=False,
+               calibrate={"grey_card": (0.18,) * 3}, vignetting="cos4", **QUIET)
+        for out, src in ((clean, seq), (photo, tmp_path / f"seq{seed}")):
+            iv = fit_region(src, "sample", day["regions"]["sample"], model="colour",
+                            **QUIET)["intervals"]
+            out.append([iv[k]["95"][1] - iv[k]["95"][0] for k in keys])
+    ratio = np.median(photo, axis=0) / np.median(clean, axis=0)
+    assert np.all(ratio <= 1.5), dict(zip(keys, ratio.round(2)))
 
 
 @pytest.mark.parametrize("fmt", ["png", "tiff"])

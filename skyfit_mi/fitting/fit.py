@@ -44,22 +44,6 @@ CACHE_GROWTH_MAX, CACHE_BYTES_MAX = 16, 1 << 30
 PROFILE_RIDGE_ITERATIONS = 40
 
 
-def calibration_sd(doc, names, theta):
-    """The standard error (per parameter of ``names`` at ``theta``) that a photographed
-    sequence's calibration gives the fit: the exposure found from patches of known reflectance
-    has a relative error per channel (``ingest.calibration.scale_relative_sd`` of the manifest,
-    :func:`skyfit_mi.pipeline.ingest.calibrate_exposure`), which scales every reflectance
-    measured through it -- C_r, C_g, C_b by their channel's, R and rho_s by the channels' rms --
-    and leaves the roughness alone; zeros without a calibration."""
-    u = ((doc.get("ingest") or {}).get("calibration") or {}).get("scale_relative_sd")
-    if not u:
-        return np.zeros(len(names))
-    u = np.asarray(u, dtype=float)
-    rel = {"C_r": u[0], "C_g": u[1], "C_b": u[2], "R": np.sqrt(np.mean(u ** 2)),
-           "rho_s": np.sqrt(np.mean(u ** 2))}
-    return np.array([rel.get(p, 0.0) * abs(float(t)) for p, t in zip(names, theta)])
-
-
 class FitSession:
     """One region of one sequence, ready to fit: observations, light cache, models, chi-square.
 
@@ -353,7 +337,7 @@ class FitSession:
                 lo, hi = intervals[p][lv]
                 intervals[p][lv] = (min(lo, float(ridge[0][i])), max(hi, float(ridge[1][i])))
         mc_sd = self.cache_error(theta, fit["method"])
-        cal_sd = calibration_sd(self.doc, names, theta)
+        cal_sd = unc.calibration_sd(self.doc, names, theta)
         for i, p in enumerate(names):
             for lv in ("68", "95"):
                 intervals[p][lv] = unc.widen(theta[i], intervals[p][lv],

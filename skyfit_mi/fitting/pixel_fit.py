@@ -16,7 +16,8 @@ The light is cached with fewer samples than a region fit's (MAP_CACHE; the sky's
 through each pixel's centre, interpolated between anchors every SKY_SPACING pixels where that
 is accurate, :func:`~skyfit_mi.render.light_cache.build_light_cache`), and the
 cache's own Monte Carlo error is measured per pixel from its two halves (each fitted alike)
-and added to the intervals in quadrature.
+and added to the intervals in quadrature, as is a photographed sequence's calibration error
+(:func:`~skyfit_mi.fitting.uncertainty.calibration_sd`).
 
 Intervals are the grid's profile: the 95% set {chi^2 <= chi^2_min + 3.84 s^2}, with
 s^2 = max(1, chi^2_min / dof) (a misfit widens them, as in region fits); sigma_alpha's and
@@ -32,6 +33,7 @@ from ..errors import SkyfitError
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
                                     grid_chi2_device, linear_curvature, near_saturation)
+from .uncertainty import calibration_sd
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
 #: fit's, so that a chunk of pixels fits in memory (about 0.3 MB per pixel and frame set of 13).
@@ -145,8 +147,8 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     fit = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     fit.update(pixels=np.asarray(first, dtype=int), names=list(names))
     sd = fit["cache_error_sd"]
-    spread = 1.959963984540054 * sd
     theta = fit["theta"]
+    spread = 1.959963984540054 * np.hypot(sd, calibration_sd(doc, names, theta))
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)

@@ -64,6 +64,23 @@ def widen(value, interval, extra, lower, upper):
             float(min(upper, value + np.hypot(max(hi - value, 0.0), extra))))
 
 
+def calibration_sd(doc, names, theta):
+    """The standard error, per parameter of ``names`` at ``theta`` (n,) or (G, n), that a
+    photographed sequence's calibration gives a fit: the exposure found from patches of known
+    reflectance has a relative error per channel (``ingest.calibration.scale_relative_sd`` of
+    the manifest ``doc``, :func:`skyfit_mi.pipeline.ingest.calibrate_exposure`), which scales
+    every reflectance measured through it -- C_r, C_g, C_b by their channel's, R and rho_s by
+    the channels' rms -- and leaves the roughness alone; zeros without a calibration."""
+    theta = np.asarray(theta, dtype=float)
+    u = ((doc.get("ingest") or {}).get("calibration") or {}).get("scale_relative_sd")
+    if not u:
+        return np.zeros(theta.shape)
+    u = np.asarray(u, dtype=float)
+    grey = float(np.sqrt(np.mean(u ** 2)))
+    rel = {"C_r": u[0], "C_g": u[1], "C_b": u[2], "R": grey, "rho_s": grey}
+    return np.array([rel.get(p, 0.0) for p in names]) * np.abs(theta)
+
+
 def profile_interval(grid, profile, s2=1.0, ripple=0.0):
     """{level: (lo, hi)} where profile <= min + Delta s^2 + ripple, edges interpolated linearly.
 
