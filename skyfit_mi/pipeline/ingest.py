@@ -374,7 +374,7 @@ def patch_samples(spec, values, falloff, calibrate, chart=None):
     (codes (n, 3) [DN], L (n, 3) [W m^-2 sr^-1]), L the pixel's radiance rendered under the
     frame's sky with the material a Lambertian of its known reflectance (a swatch: of
     :data:`CHART_GREY`, scaled to the swatch's reference), times the vignetting ``falloff``;
-    and each pixel's patch label (n,).
+    each pixel's patch label (n,); and where the n pixels lie, an (H, W) mask.
     """
     from scipy.ndimage import binary_erosion
 
@@ -418,7 +418,7 @@ def patch_samples(spec, values, falloff, calibrate, chart=None):
         radiance, _ = renderer.render(f)
         out.append((v[mask], radiance[mask] * falloff[mask][:, None] * scale[patch[mask]]))
     # each patch's pixels are kept apart by their label, for the response fit's levels
-    return out, patch[mask]
+    return out, patch[mask], mask
 
 
 def _select(samples, patch, keep):
@@ -704,6 +704,47 @@ def _run_id(paths, spec_raw, options):
     return h.hexdigest()[:16]
 
 
+def _neutral(samples, patch, calibrate):
+    """The samples and labels of the patches that set the exposure: the ``calibrate``
+    materials' and the ColorChecker's neutral swatches."""
+    from .colorchecker import NEUTRAL
+
+    return _select(samples, patch, list(range(1, len(calibrate) + 1))
+                   + [CHART_LABEL + k for k in NEUTRAL])
+
+
+def _unbiased(values, bias, max_code):
+    """``values`` [DN] less the compression's mean error ``bias``, where they are neither
+    clipped (0 or ``max_code``: censored, they stay so) nor missing."""
+    keep = ~np.isfinite(values) | (values <= 0) | (values >= max_code)
+    return np.where(keep, values, np.clip(values - bias, 0.0, max_code)).astype(values.dtype)
+
+
+def _jpeg_errors(values, jpeg, sensor, noise, shown, progress):
+    """Per JPEG frame (index -> settings in ``jpeg``): the bootstrap of its compression
+    (:func:`.jpeg_noise.bootstrap_variance`, with the sensor's ``noise``): {"variance" float32,
+    "rho", "bias" float32, "settings", "shown"}; the frame's ``values`` (a list, changed in
+    place) lose the compression's mean error (:func:`_unbiased`)."""
+    from .jpeg_noise import SEED, bootstrap_variance
+
+    out = {}
+    todo = [i for i, st in jpeg.items() if st is not None]
+    bar = None
+    if progress and todo:
+        from tqdm import tqdm
+        bar = tqdm(total=len(todo), desc="JPEG errors", unit="frame")
+    for i in todo:
+        var, rho, bias = bootstrap_variance(values[i], jpeg[i], sensor, noise, [SEED, i])
+        values[i] = _unbiased(values[i], bias, sensor.max_code)
+        out[i] = {"variance": var.astype(np.float32), "rho": rho,
+                  "bias": bias.astype(np.float32), "settings": jpeg[i], "shown": shown}
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    return out
+
+
 def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None, tz=None,
            site=None, response=None, gamma=None, exposure=None, calibrate=None,
            colorchecker=None, vignetting="none", noise=None, overwrite=False, progress=True,
@@ -802,38 +843,24 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
     lit = [i for i, f in enumerate(spec.frames) if not f.skipped]
 
     rel = _relative_exposures(photos, log)
-    cal_info = None
+    rel_lit = None if rel is None else rel[lit]
+    cal_info = response_info = None
     chart = None
     if colorchecker is not None:
         from .colorchecker import find_chart
 
         chart = find_chart([sensor.linearise(values[i]) / falloff[..., None] for i in lit], log)
     if calibrate or chart:
-        from .colorchecker import NEUTRAL
-
         materials = {**calibrate, **({colorchecker: (CHART_GREY,) * 3} if chart else {})}
         cal_spec = _calibration_spec(spec.raw, materials, spec.base_dir)
-        all_samples, all_patch = patch_samples(
+        all_samples, all_patch, patch_mask = patch_samples(
             cal_spec, [values[i] for i in lit], falloff, calibrate,
             None if chart is None else (colorchecker, chart["labels"]))
-        samples, patch = _select(all_samples, all_patch, list(range(1, len(calibrate) + 1))
-                                 + [CHART_LABEL + k for k in NEUTRAL])
-        rel_lit = None if rel is None else rel[lit]
-        response_info = None
         if fitted:
-            chosen, g, response_info = fit_response(samples, patch, sensor.max_code, rel_lit,
-                                                    log)
+            chosen, g, response_info = fit_response(*_neutral(all_samples, all_patch, calibrate),
+                                                    sensor.max_code, rel_lit, log)
             sensor = SensorModel(exposure=1.0, response=chosen, gamma=g, bits=sensor.bits,
                                  cos4=sensor.cos4)
-        per_frame, cal_info = calibrate_exposure(samples, patch, sensor,
-                                                 [photos[i] for i in lit], rel_lit, log)
-        if response_info is not None:
-            cal_info["response_fit"] = response_info
-        if chart is not None:
-            cal_info["colorchecker"] = _chart_record(colorchecker, chart, all_samples,
-                                                     all_patch, sensor, per_frame, log)
-        e0 = float(per_frame[0] @ SRGB_LUMINANCE)
-        exposures = {i: per_frame[j] for j, i in enumerate(lit)}
     else:
         given = exposure if exposure is not None else (
             spec.sensor.get("exposure") if raw.get("sensor", {}).get("exposure", "auto") != "auto"
@@ -842,11 +869,7 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
             raise SkyfitError("the photographs' absolute scale is unknown: give --exposure E "
                               "[sr m^2 W^-1] for the first frame, or --calibrate MATERIAL="
                               "REFLECTANCE naming a grey reference in the scene.")
-        e0 = float(given)
-        r = np.ones(len(paths)) if rel is None else rel
-        exposures = {i: np.full(3, e0 * r[i]) for i in lit}
-    sensor = SensorModel(exposure=e0, response=sensor.response, gamma=sensor.gamma,
-                         bits=sensor.bits, cos4=sensor.cos4)
+
     shown = None
     try:
         shown = shown_noise([values[i] for i in lit], sensor)
@@ -870,6 +893,32 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
         noise_info = {"read_DN2": a, "shot_DN": b, "source": "given"}
     log(f"noise model: read {np.sqrt(a):.3g} DN rms, shot {b:.3g} DN per linear DN "
         f"({noise_info['source']})")
+    jpeg_errors = _jpeg_errors(values, jpeg, sensor, (a, b), shown or (0.0, 0.0), progress)
+
+    if calibrate or chart:
+        # the calibration patches' codes with the compression's mean error taken out, as the
+        # frames' values
+        for j, i in enumerate(lit):
+            if i in jpeg_errors:
+                y, L = all_samples[j]
+                all_samples[j] = (_unbiased(y, jpeg_errors[i]["bias"][patch_mask],
+                                            sensor.max_code), L)
+        samples, patch = _neutral(all_samples, all_patch, calibrate)
+        per_frame, cal_info = calibrate_exposure(samples, patch, sensor,
+                                                 [photos[i] for i in lit], rel_lit, log)
+        if response_info is not None:
+            cal_info["response_fit"] = response_info
+        if chart is not None:
+            cal_info["colorchecker"] = _chart_record(colorchecker, chart, all_samples,
+                                                     all_patch, sensor, per_frame, log)
+        e0 = float(per_frame[0] @ SRGB_LUMINANCE)
+        exposures = {i: per_frame[j] for j, i in enumerate(lit)}
+    else:
+        e0 = float(given)
+        r = np.ones(len(paths)) if rel is None else rel
+        exposures = {i: np.full(3, e0 * r[i]) for i in lit}
+    sensor = SensorModel(exposure=e0, response=sensor.response, gamma=sensor.gamma,
+                         bits=sensor.bits, cos4=sensor.cos4)
 
     options = {"times_csv": str(times_csv), "name_pattern": name_pattern, "tz": tz,
                "response": "fit: " + sensor.response if fitted else sensor.response,
@@ -881,16 +930,16 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
     with FolderLock(out):
         prepare_folder(out, run_id, (h, w, 3), overwrite, log)
         return _write(out, spec, paths, photos, values, times, sensor, exposures, (a, b),
-                      shown or (0.0, 0.0), jpeg, falloff, flat_rec, float_scale, rel, cal_info,
-                      noise_info, options, run_id, progress)
+                      jpeg_errors, falloff, flat_rec, float_scale, rel, cal_info, noise_info,
+                      options, run_id, progress)
 
 
-def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, shown, jpeg,
+def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, jpeg_errors,
            falloff, flat, float_scale, rel, cal_info, noise_info, options, run_id, progress):
-    """Write the sequence folder; ``jpeg`` each JPEG frame's :func:`.jpeg_noise.jpeg_settings`
-    by frame index (None where the file holds none)."""
+    """Write the sequence folder; ``jpeg_errors`` each JPEG frame's :func:`_jpeg_errors` by
+    frame index."""
     from ..render.image import write_exr
-    from .jpeg_noise import REPLICATES, SEED, bootstrap_variance
+    from .jpeg_noise import REPLICATES, SEED
 
     manifest = measured_header(spec, sensor, run_id, "photographed",
                                "none: frames are photographs")
@@ -917,12 +966,8 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, sh
         else:
             e = exposures[f.index]
             gain = e[None, None, :] * falloff[..., None]
-            settings = jpeg.get(f.index)
-            frame_jpeg = None
-            if settings is not None:
-                jpeg_frames += 1
-                boot, rho = bootstrap_variance(v, settings, sensor, noise, [SEED, f.index])
-                frame_jpeg = {"variance": boot, "shown": shown, "settings": settings}
+            frame_jpeg = jpeg_errors.get(f.index)
+            jpeg_frames += frame_jpeg is not None
             var, edge = _variance(v, sensor, noise, frame_jpeg)
             sig = np.where(np.isfinite(v), np.sqrt(var), np.inf).astype(np.float32)
             s = sensor.linearise(np.nan_to_num(v))
@@ -941,9 +986,10 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, sh
                                                                    "iso")
                                     if photo.metadata.get(k)}})
             if frame_jpeg is not None:
-                rec["jpeg_error_DN2"] = np.mean(boot, axis=(0, 1)).tolist()
-                rec["jpeg_block_correlation"] = rho.tolist()
+                rec["jpeg_error_DN2"] = np.mean(frame_jpeg["variance"], axis=(0, 1)).tolist()
+                rec["jpeg_block_correlation"] = frame_jpeg["rho"].tolist()
                 rec["jpeg_edge_block_share"] = float(np.mean(edge))
+                rec["jpeg_bias_removed_DN"] = np.nanmean(frame_jpeg["bias"], axis=(0, 1)).tolist()
             bad = int(photo.nan_count + photo.inf_count)
             if bad:
                 rec["non_finite_values"] = bad
@@ -957,7 +1003,9 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, sh
             "method": "parametric bootstrap: draws of the scene given each frame's DCT "
                       "coefficients, photographed again with fresh sensor noise and the "
                       "frame's own tables; the mean square error over the copies, 3x3 "
-                      "averaged", "replicates": REPLICATES, "seed": [SEED, "frame index"]}
+                      "averaged; their mean error over each coding unit taken out of the values "
+                      "(frame means in jpeg_bias_removed_DN)", "replicates": REPLICATES,
+            "seed": [SEED, "frame index"]}
         manifest["sensor"]["noise_model"]["sigma2_DN2"] += (
             "; JPEG frames: the bootstrap's variance, at least the formula of the noise the "
             "frames' neighbouring pixels show (shown_by_the_frames), plus the tables' bound "
