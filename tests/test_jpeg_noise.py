@@ -43,6 +43,18 @@ def _frames(quality, subsampling, n=3, seed=0):
     return frames, clean, settings
 
 
+def _patch_jpeg(colour, size, seed):
+    """A size x size patch of one colour (its codes, before noise) with read and shot noise in
+    linear codes, 8-bit sRGB: its codes (uint8) and the JPEG of them (quality 95, 4:4:4)."""
+    rng = np.random.default_rng(seed)
+    lin = SENSOR.linearise(np.array(colour)) * 255.0 * np.ones((size, size, 3))
+    noisy = lin + rng.normal(size=lin.shape) * np.sqrt(NOISE[0] + NOISE[1] * lin)
+    codes = np.clip(np.rint(SENSOR.respond(noisy / 255.0) * 255.0), 0, 255).astype(np.uint8)
+    buf = io.BytesIO()
+    Image.fromarray(codes).save(buf, format="JPEG", quality=95, subsampling=0)
+    return codes, buf
+
+
 def _z(frames, clean, sigmas):
     """rms of (decoded - clean) / sigma per channel, away from the patches' seam and edges."""
     z = [((f - c) / s)[8:-8, 8:-8] for f, c, s in zip(frames, clean, sigmas)]
@@ -148,12 +160,7 @@ def test_the_bootstrap_finds_the_compressions_mean_error(colour):
     error falls within 0.1 DN."""
     from skyfit_mi.pipeline.ingest import _unbiased
 
-    rng = np.random.default_rng(11)
-    lin = SENSOR.linearise(np.array(colour)) * 255.0 * np.ones((96, 96, 3))
-    noisy = lin + rng.normal(size=lin.shape) * np.sqrt(NOISE[0] + NOISE[1] * lin)
-    codes = np.clip(np.rint(SENSOR.respond(noisy / 255.0) * 255.0), 0, 255).astype(np.uint8)
-    buf = io.BytesIO()
-    Image.fromarray(codes).save(buf, format="JPEG", quality=95, subsampling=0)
+    codes, buf = _patch_jpeg(colour, 96, 11)
     decoded = jn.decode(buf.getvalue())
     _, _, bias = jn.bootstrap_variance(decoded, jn.jpeg_settings(buf), SENSOR, NOISE, [3, 0])
     cells = bias.reshape(12, 8, 12, 8, 3)
@@ -200,12 +207,7 @@ def test_a_smooth_patch_decodes_without_a_shared_error(colour):
     planes, so libjpeg's rounding of them to whole codes puts one error on every pixel (measured
     -0.45 DN in blue on the first colour, a grey card's, and +0.46 on the third); decoded in
     floating point the patch's mean error stays within a sixth of a code (measured <= 0.17)."""
-    rng = np.random.default_rng(5)
-    lin = SENSOR.linearise(np.array(colour)) * 255.0 * np.ones((128, 128, 3))
-    noisy = lin + rng.normal(size=lin.shape) * np.sqrt(NOISE[0] + NOISE[1] * lin)
-    codes = np.clip(np.rint(SENSOR.respond(noisy / 255.0) * 255.0), 0, 255).astype(np.uint8)
-    buf = io.BytesIO()
-    Image.fromarray(codes).save(buf, format="JPEG", quality=95, subsampling=0)
+    codes, buf = _patch_jpeg(colour, 128, 5)
     err = (jn.decode(buf.getvalue()) - codes).mean(axis=(0, 1))
     assert np.all(np.abs(err) < 0.25), err
 

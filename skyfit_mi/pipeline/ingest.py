@@ -303,24 +303,24 @@ def pixel_sigma(values, sensor, noise, jpeg=None):
     sigmas), where the JPEG loses the scene's own detail (ringing), which the bootstrap cannot
     draw, plus the tables' bound (:func:`.jpeg_noise.tables_bound`).
     """
-    var, _ = _variance(values, sensor, noise, jpeg)
-    return np.where(np.isfinite(values), np.sqrt(var), np.inf).astype(np.float32)
+    return _sigma(values, sensor, noise, jpeg)[0]
 
 
-def _variance(values, sensor, noise, jpeg=None):
-    """:func:`pixel_sigma`'s variance [DN^2], and for a JPEG which pixels lie in blocks holding
-    an edge (:func:`edge_blocks`; None without a JPEG)."""
+def _sigma(values, sensor, noise, jpeg=None):
+    """:func:`pixel_sigma`, and for a JPEG which pixels lie in blocks holding an edge
+    (:func:`edge_blocks`; None without a JPEG)."""
     a, b = noise if jpeg is None else jpeg["shown"]
     s = sensor.linearise(np.nan_to_num(values))
     q = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6))
     var = q * q * (a + b * s * sensor.max_code) + 1.0 / 12.0
-    if jpeg is None:
-        return var, None
-    from .jpeg_noise import tables_bound
+    edge = None
+    if jpeg is not None:
+        from .jpeg_noise import tables_bound
 
-    var = np.maximum(jpeg["variance"], var)
-    edge = edge_blocks(np.nan_to_num(values), var)
-    return np.where(edge, var + tables_bound(jpeg["settings"]), var), edge
+        var = np.maximum(jpeg["variance"], var)
+        edge = edge_blocks(np.nan_to_num(values), var)
+        var = np.where(edge, var + tables_bound(jpeg["settings"]), var)
+    return np.where(np.isfinite(values), np.sqrt(var), np.inf).astype(np.float32), edge
 
 
 def edge_blocks(values, variance, block=8):
@@ -428,9 +428,9 @@ def _select(samples, patch, keep):
 
 
 def _swatch_ratios(samples, patch, sensor, exposures):
-    """(24, 3) :func:`central_mean` over frames and pixels of each ColorChecker swatch's observed signal over
-    its calibrated prediction (exposure x rendered radiance), values at 0 or the top left out;
-    NaN where a swatch has none."""
+    """(24, 3) :func:`central_mean` over frames and pixels of each ColorChecker swatch's
+    observed signal over its calibrated prediction (exposure x rendered radiance), values at 0
+    or the top left out; NaN where a swatch has none."""
     r = np.concatenate([_signal_ratio(y, L, sensor)[1] / e for (y, L), e in zip(samples,
                                                                                exposures)])
     labels = np.tile(patch, len(samples))
@@ -473,10 +473,9 @@ def fit_response(samples, patch, max_code, rel, log):
     """The sensor response that the calibration patches' codes follow: (response, gamma, info).
 
     Per frame, patch and channel the central code v (:func:`central_mean`, away from 0 and the
-    top) is set against
-    the central rendered radiance L; each family of :data:`RESPONSE_FAMILIES` is fitted with
-    an exposure per channel (times the frames' EXIF exposures ``rel``), or per frame and channel
-    where ``rel`` is None: 'linear' and 'srgb' have no shape parameter, 'gamma' (v = (k L) ^
+    top) is set against the central rendered radiance L; each family of
+    :data:`RESPONSE_FAMILIES` is fitted with an exposure per channel (times the frames' EXIF
+    exposures ``rel``), or per frame and channel where ``rel`` is None: 'linear' and 'srgb' have no shape parameter, 'gamma' (v = (k L) ^
     (1 / gamma), thesis eq. 5.11) fits gamma by least squares in log v.  The family whose codes
     come closest (rms relative error) is chosen; every family's error is in ``info``.
     SkyfitError unless the patches' signals span RESPONSE_SPAN_MIN at a fixed exposure.
@@ -580,8 +579,10 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log):
     use, relative, as it reaches the reflectances: the median's over the frames for one scale,
     a frame's over the square root of the frames for exposures of their own (each frame's error
     its own, averaged by a fit over the day); fits widen their intervals by it
-    (:func:`skyfit_mi.fitting.fit.calibration_sd`).
+    (:func:`skyfit_mi.fitting.uncertainty.calibration_sd`).
     """
+    from scipy.stats import chi2 as chi2_dist
+
     halves = np.full((len(samples), 2, 3), np.nan)
     k = np.full((len(samples), 3), np.nan)
     for i, (y, L) in enumerate(samples):
@@ -597,29 +598,24 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log):
         d = (halves[:, 0] - halves[:, 1]) / k
         var_f = np.nanmean(d[good] ** 2, axis=0) / 4.0
     info = {"frame_relative_sd": np.sqrt(var_f).tolist()}
-    if rel is not None and good.sum() >= 3:
+    missing = [Path(photos[i].path).name for i in np.flatnonzero(~good)]
+    if rel is not None:
         scale = np.nanmedian(k[good] / rel[good, None], axis=0)
+    if rel is not None and good.sum() >= 3:
         dev = k[good] / (rel[good, None] * scale) - 1.0
         spread = float(np.std(dev @ SRGB_LUMINANCE))
-        from scipy.stats import chi2 as chi2_dist
-
         dof = 3 * (int(good.sum()) - 1)
         with np.errstate(all="ignore"):
             chi2 = float(np.sum(dev ** 2 / np.maximum(var_f, 1e-12)))
         info.update(relative_spread=spread, scatter_chi2_per_dof=chi2 / dof)
-        if chi2_dist.sf(chi2, dof) < EXIF_SCATTER_P:
-            missing = [Path(photos[i].path).name for i in np.flatnonzero(~good)]
-            if not missing:
-                log(f"calibration: the frames' exposures scatter by {spread:.1%} about their "
-                    f"EXIF relative exposures, {np.sqrt(chi2 / dof):.1f}x what the patches' "
-                    "noise allows (a shutter or aperture off its nominal value): each frame's "
-                    "exposure is taken from its own patches")
-                rel = None
-                info["exif_relative_exposures"] = "not used: they scatter beyond the patches' noise"
-    elif rel is not None:
-        scale = np.nanmedian(k[good] / rel[good, None], axis=0)
+        if chi2_dist.sf(chi2, dof) < EXIF_SCATTER_P and not missing:
+            log(f"calibration: the frames' exposures scatter by {spread:.1%} about their EXIF "
+                f"relative exposures, {np.sqrt(chi2 / dof):.1f}x what the patches' noise "
+                "allows (a shutter or aperture off its nominal value): each frame's exposure "
+                "is taken from its own patches")
+            rel = None
+            info["exif_relative_exposures"] = "not used: they scatter beyond the patches' noise"
     if rel is None:
-        missing = [Path(photos[i].path).name for i in np.flatnonzero(~good)]
         if missing:
             raise SkyfitError(f"{missing[0]}: the calibration patches are saturated, black or "
                               "unlit, and the frame has no EXIF exposure; drop the frame or give "
@@ -968,8 +964,7 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, jp
             gain = e[None, None, :] * falloff[..., None]
             frame_jpeg = jpeg_errors.get(f.index)
             jpeg_frames += frame_jpeg is not None
-            var, edge = _variance(v, sensor, noise, frame_jpeg)
-            sig = np.where(np.isfinite(v), np.sqrt(var), np.inf).astype(np.float32)
+            sig, edge = _sigma(v, sensor, noise, frame_jpeg)
             s = sensor.linearise(np.nan_to_num(v))
             slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code
             radiance = np.where(np.isfinite(v), s / gain, np.nan).astype(np.float32)

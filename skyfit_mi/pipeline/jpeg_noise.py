@@ -202,9 +202,8 @@ def bootstrap_variance(values, settings, sensor, noise, seed, replicates=REPLICA
         truth = sample(rng)
         err = recompress(truth, settings, sensor, noise, rng) - truth
         var = var + err ** 2
-        e = err[:bh, :bw]
-        block = block + np.mean(e.reshape(bh // 8, 8, bw // 8, 8, 3).mean(axis=(1, 3)) ** 2,
-                                axis=(0, 1))
+        e = err[:bh, :bw]                                  # whole 8x8 blocks
+        block = block + np.mean(_cell_means(e, 8) ** 2, axis=(0, 1))
         total = total + np.mean(e ** 2, axis=(0, 1))
         cells = _cell_means(err, n)
         cell_sum, cell_sq = cell_sum + cells, cell_sq + cells ** 2
