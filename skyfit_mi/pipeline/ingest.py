@@ -475,8 +475,9 @@ def fit_response(samples, patch, max_code, rel, log):
     Per frame, patch and channel the central code v (:func:`central_mean`, away from 0 and the
     top) is set against the central rendered radiance L; each family of
     :data:`RESPONSE_FAMILIES` is fitted with an exposure per channel (times the frames' EXIF
-    exposures ``rel``), or per frame and channel where ``rel`` is None: 'linear' and 'srgb' have no shape parameter, 'gamma' (v = (k L) ^
-    (1 / gamma), thesis eq. 5.11) fits gamma by least squares in log v.  The family whose codes
+    exposures ``rel``), or per frame and channel where ``rel`` is None: 'linear' and 'srgb'
+    have no shape parameter, 'gamma' (v = (k L) ^ (1 / gamma), thesis eq. 5.11) fits gamma by
+    least squares in log v.  The family whose codes
     come closest (rms relative error) is chosen; every family's error is in ``info``.
     SkyfitError unless the patches' signals span RESPONSE_SPAN_MIN at a fixed exposure.
     """
