@@ -215,3 +215,49 @@ def test_plastic_metal_rule_agrees_in_single_precision_at_the_threshold(days):
         rho_d, spec, _, _ = reflectances("colour", theta)
         np.testing.assert_allclose(s.wm.radiance(theta), rho_d * D + spec * G[0], rtol=1e-4,
                                    atol=1e-6 * np.max(D), err_msg=str(rho_s))
+
+
+@pytest.mark.parametrize("sky_positions", [None, 1])
+def test_frozen_frames_replay_the_traced_ones_exactly(session, sky_positions):
+    """The light cache replays its first frames' recorded kernels for the others
+    (``dr.freeze``): every array equals a trace of every frame from Python, over a day that
+    mixes skies with and without an environment map (a different recording) and with the sun
+    set (no sun samples)."""
+    from dataclasses import replace
+
+    from skyfit_mi.render.light_cache import build_light_cache
+
+    skies = list(session.skies)
+    envmap = np.full((4, 8, 3), 0.02, np.float32)
+    skies += [replace(skies[2], envmap=envmap), skies[3],
+              replace(skies[4], sun_radiance=np.zeros(3))]
+    pixels = session.obs.pixels[:6]
+    caches = [build_light_cache(session.scene, session.params, skies, pixels, "disc",
+                                positions=4, directions=32, seed=7,
+                                sky_positions=sky_positions, freeze=freeze)
+              for freeze in (True, False)]
+    for name, value in vars(caches[0]).items():
+        if isinstance(value, np.ndarray):
+            np.testing.assert_array_equal(value, getattr(caches[1], name), err_msg=name)
+    assert caches[0].hit.all() and np.isnan(caches[0].sun_half_cos[:, -1]).all()
+
+
+def test_a_scene_the_freeze_cannot_record_is_traced_from_python(session, monkeypatch):
+    """If ``dr.freeze`` cannot record a frame (a scene object whose members it cannot see),
+    the cache traces every frame from Python instead: the same values, no error."""
+    import drjit as dr
+
+    from skyfit_mi.render.light_cache import build_light_cache
+
+    def unrecordable(f, *args, **kwargs):
+        def call(*a, **k):
+            raise RuntimeError("record(): a variable was created before recording")
+        return call
+    pixels = session.obs.pixels[:3]
+    want = build_light_cache(session.scene, session.params, session.skies[:3], pixels, "disc",
+                             positions=2, directions=32, seed=3, freeze=False)
+    monkeypatch.setattr(dr, "freeze", unrecordable)
+    got = build_light_cache(session.scene, session.params, session.skies[:3], pixels, "disc",
+                            positions=2, directions=32, seed=3)
+    np.testing.assert_array_equal(got.weight, want.weight)
+    np.testing.assert_array_equal(got.lobe_sky, want.lobe_sky)

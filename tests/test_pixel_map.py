@@ -235,7 +235,7 @@ def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_pa
     from skyfit_mi.render.daylight import update_sky
     from skyfit_mi.render.light_cache import (SIGMA_TABLE, _anchor_plan, _SharedSky,
                                               _sky_integrals, build_light_cache)
-    from skyfit_mi.render.sky_control import chebyshev_eval, chebyshev_x
+    from skyfit_mi.render.sky_control import chebyshev_eval, chebyshev_x, quadrature
 
     spec = SCENES_DIR / "specs" / "disc_clear_east.toml"
     raw = read_spec(spec)
@@ -248,7 +248,7 @@ def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_pa
     scene = mi.load_string(doc["scene"]["xml"])
     params = mi.traverse(scene)
     sensor = scene.sensors()[0]
-    lobe = mi.load_dict({"type": "ward", "model": "two", "rho_s": 1.0, "sigma_alpha": 0.1})
+    quad = quadrature(*SIGMA_TABLE, "ward")
     (name, px), = material_regions(tmp_path / "day")
     target = [s for s in scene.shapes() if s.bsdf().id() == name]
     share = _SharedSky(mi, scene, sensor, px, 4, (96, 96), target)
@@ -263,8 +263,8 @@ def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_pa
         update_sky(params, sky, "sky.")
         pixel_si = dr.gather(mi.SurfaceInteraction3f, share.si,
                              mi.UInt32(share.A + np.arange(len(px))))
-        own_d, own_l = _sky_integrals(mi, scene.environment(), pixel_si, lobe)
-        d, l, n = share.integrals(mi, dr, scene.environment(), lobe, sky.sun_direction)
+        own_d, own_l = _sky_integrals(scene.environment(), pixel_si, quad)
+        d, l, n = share.integrals(mi, dr, scene.environment(), quad, sky.sun_direction)
         shared += n
         for s in (0.002, 0.02, 0.2, 0.5):
             x = chebyshev_x(s, *SIGMA_TABLE, np.log, np.clip)

@@ -59,6 +59,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..physics.ward import SIGMA_MIRROR
+from .sky_control import chebyshev_coefficients, quadrature, sky_integrals, to_numpy
 
 #: Roughnesses of the Ward sampling lobes in the direction mixture.
 LOBE_SIGMAS = (0.002, 0.006, 0.02, 0.06, 0.15, 0.3)
@@ -247,14 +248,11 @@ def _components(K, has_sun):
                            3 + np.sort(np.arange(n_l) % len(LOBE_SIGMAS))])
 
 
-def _sun_half_cos(mi, si, sky):
-    """cos(delta) per surface interaction of ``si``: delta the angle between the normal and the
-    half vector of the sun's and the view's directions (Ward's highlight angle, thesis eq. 3.19);
-    NaN where the sun gives no light there (none in ``sky``, below the horizon, or behind the
-    surface)."""
-    sun = np.array(si.to_local(mi.Vector3f(*(float(c) for c in sky.sun_direction))),
-                   dtype=float).T
-    view = np.array(si.wi, dtype=float).T
+def _sun_half_cos(sun, view, sky):
+    """cos(delta) per surface interaction: delta the angle between the normal and the half
+    vector of the sun's and the view's directions (Ward's highlight angle, thesis eq. 3.19),
+    from the sun's and the view's local directions ``sun``, ``view`` (Q, 3); NaN where the sun
+    gives no light there (none in ``sky``, below the horizon, or behind the surface)."""
     h = sun + view
     cos = h[:, 2] / np.maximum(np.linalg.norm(h, axis=1), 1e-12)
     lit = _has_sun(sky) & (sun[:, 2] > 0) & (view[:, 2] > 0)
@@ -289,16 +287,18 @@ def _stratified(rng, n, count=None):
     return u[0] if count is None else u
 
 
-def _sky_integrals(mi, emitter, si, lobe):
-    """I_d (Q, 3) and the Chebyshev coefficients of I_s (Q, M, 3) of every surface interaction
-    in ``si`` under the emitter's current sky (:mod:`.sky_control`); ``lobe`` a rho_s = 1
-    ``ward`` plugin of the fit's normalisation."""
-    from .sky_control import chebyshev_coefficients, chebyshev_nodes, diffuse_integral, lobe_integral
+def _sky_numpy(diffuse, values):
+    """I_d (Q, 3) and the Chebyshev coefficients of I_s (Q, M, 3) from the Dr.Jit values of
+    :func:`~.sky_control.sky_integrals`."""
+    return to_numpy(diffuse), chebyshev_coefficients(np.stack([to_numpy(v) for v in values],
+                                                            axis=1), axis=1)
 
-    up = si.to_local(mi.Vector3f(0.0, 0.0, 1.0))
-    lobe_values = [lobe_integral(emitter, si, up, lobe, s) for s in chebyshev_nodes(*SIGMA_TABLE)]
-    return diffuse_integral(emitter, si, up), \
-        chebyshev_coefficients(np.stack(lobe_values, axis=1), axis=1)
+
+def _sky_integrals(emitter, si, quad):
+    """I_d (Q, 3) and the Chebyshev coefficients of I_s (Q, M, 3) of every surface interaction
+    in ``si`` under the emitter's current sky (:mod:`.sky_control`); ``quad`` its
+    :func:`~.sky_control.quadrature` on SIGMA_TABLE."""
+    return _sky_numpy(*sky_integrals(emitter, si, quad))
 
 
 def _anchor_plan(pixels, spacing, width, height):
@@ -363,7 +363,7 @@ class _SharedSky:
         m = np.array(si.to_world(mi.reflect(si.wi)), dtype=float).T
         return si, _shape_index(mi, si, target), n, m
 
-    def integrals(self, mi, dr, emitter, lobe, sun):
+    def integrals(self, mi, dr, emitter, quad, sun):
         """I_d (P, 3) and I_s's coefficients (P, M, 3) of each pixel under the emitter's
         current sky (``sun`` its sun's direction, world): interpolated where allowed and the
         mirror directions are SHARE_SUN_DEG from the sun, the pixel's own elsewhere; and the
@@ -375,9 +375,9 @@ class _SharedSky:
         used = np.unique(self.corner[ok])
         own = np.flatnonzero(~ok)
         # the anchors used and the pixels that take their own, in one pass
-        d, c = _sky_integrals(mi, emitter, dr.gather(
+        d, c = _sky_integrals(emitter, dr.gather(
             mi.SurfaceInteraction3f, self.si, mi.UInt32(np.concatenate([used, self.A + own]))),
-            lobe)
+            quad)
         diffuse, lobe_c = np.zeros((len(ok), 3)), np.zeros((len(ok),) + c.shape[1:])
         at = np.full(self.A, -1)
         at[used] = np.arange(used.size)
@@ -388,9 +388,70 @@ class _SharedSky:
         return diffuse, lobe_c, int(ok.sum())
 
 
+def _trace_frame(mi, dr, scene, integrator, target, lobes, quad, fixed, x, static):
+    """One frame of :func:`build_light_cache` in Dr.Jit alone (nothing read back), so that
+    ``dr.freeze`` records its kernels once and replays them for every other frame: tracing
+    the scene, the sky plugin and the lobes from Python took most of a small cache's time.
+
+    ``lobes`` the sampling lobes, ``quad`` the sky integrals' :func:`~.sky_control.quadrature`
+    and ``fixed`` the index arrays and the sampler shared by every frame: Dr.Jit inputs, never
+    captured.
+    ``x`` the frame's values: the primary rays' ``origin`` and ``direction`` (made outside:
+    not every sensor's members are visible to ``dr.freeze``), the directions' samples ``u`` and ``component``, each component's
+    ``share`` of them, the samplers' ``seeds`` and the ``sun``'s direction (all opaque).
+    ``static`` holds what the recording depends on (widths, the sky integrals' mode
+    ``own``/``subset``/``shared``, whether the sky has a map), so each variant is recorded once.
+    Returns a dict of Dr.Jit values (see the caller)."""
+    emitter = scene.environment()
+    si = scene.ray_intersect(mi.Ray3f(x["origin"], x["direction"]))
+    # the index into ``target`` of the shape each position lies on, -1 elsewhere
+    shape = dr.full(mi.Int32, -1, static["positions"])
+    for j, s in enumerate(target):
+        shape = dr.select(si.is_valid() & (si.shape == mi.ShapePtr(s)), j, shape)
+    # each position repeated for its directions; candidates from every component, then each
+    # sample's own
+    sik = dr.gather(mi.SurfaceInteraction3f, si, fixed["repeat"])
+    u2, ctx = x["u"], mi.BSDFContext()
+    cands = [emitter.sample_sun(u2), emitter.sample_sky(u2),
+             sik.to_world(mi.warp.square_to_cosine_hemisphere(u2))]
+    for b in lobes:
+        bs, _ = b.sample(ctx, sik, mi.Float(0.0), u2)
+        cands.append(sik.to_world(bs.wo))
+    d = cands[0]
+    for c in range(1, len(cands)):
+        d = dr.select(x["component"] == c, cands[c], d)
+    # mixture density of each chosen direction under every component (balance heuristic)
+    share = x["share"]
+    wl = sik.to_local(d)
+    p_mix = share[0] * emitter.pdf_sun(d) + share[1] * emitter.pdf_sky(d) \
+        + share[2] * dr.maximum(mi.Frame3f.cos_theta(wl), 0.0) * dr.inv_pi
+    for j, b in enumerate(lobes):
+        p_mix += share[3 + j] * b.pdf(ctx, sik, wl)
+    sampler = fixed["sampler"]
+    sampler.seed(x["seeds"][0], static["lanes"])
+    li, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(sik.spawn_ray(d)))
+    ok = (p_mix > 0) & (mi.Frame3f.cos_theta(wl) > 0)
+    inv_pdf = dr.select(ok, dr.rcp(dr.maximum(p_mix, 1e-30)) / static["samples"], 0.0)
+    weight = (li - emitter.sky_eval(d)) * inv_pdf                # the control variate's rest
+    # mirror direction at each position
+    sampler.seed(x["seeds"][1], static["positions"])
+    ray_m = mi.RayDifferential3f(si.spawn_ray(si.to_world(mi.reflect(si.wi))))
+    lm, _, _ = integrator.sample(scene, sampler, ray_m)
+    # the same without the solar disc: the control variate's constant
+    sun_seen = ~scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
+    lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0) - emitter.sky_eval(ray_m.d)
+    out = {"wo": si.wi, "wi": wl, "weight": weight, "inv_pdf": inv_pdf, "mirror": lm,
+           "mirror_sky": lm_sky, "shape": shape, "sun": si.to_local(x["sun"])}
+    if static["sky"] != "shared":
+        at = si if static["sky"] == "own" else dr.gather(mi.SurfaceInteraction3f, si,
+                                                          fixed["subset"])
+        out["diffuse"], out["lobe"] = sky_integrals(emitter, at, quad)
+    return out
+
+
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
                       directions=DIRECTIONS, seed=0, max_depth=3, normalisation="ward",
-                      sky_positions=None, sky_spacing=None, stats=None):
+                      sky_positions=None, sky_spacing=None, stats=None, freeze=True):
     """Trace the light arriving at ``pixels`` for every sky in ``skies``.
 
     Parameters
@@ -417,6 +478,9 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         order in the anchors' spacing (docs/BENCHMARKS.md)
     stats : None, or a dict that receives ``shared``, the number of (pixel, frame) pairs whose
         sky integrals were interpolated
+    freeze : replay the first frame's Dr.Jit recording for every other frame (``dr.freeze``,
+        :func:`_trace_frame`); False traces every frame from Python (the same values: the
+        reference the replay is tested against)
 
     Returns
     -------
@@ -437,7 +501,6 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     integrator = mi.load_dict({"type": "path", "max_depth": int(max_depth)})
     lobes = [mi.load_dict({"type": "ward", "rho_d": 0.0, "rho_s": 1.0, "sigma_alpha": s})
              for s in LOBE_SIGMAS]
-    ctx = mi.BSDFContext()
     # the material each pixel must show (one for all, or one per pixel: a map's chunk)
     want = np.broadcast_to(np.asarray(bsdf_id, dtype=object), (P,))
     target = [s for s in scene.shapes() if s.bsdf().id() in set(want)]
@@ -457,97 +520,85 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     if stats is not None:
         stats["shared"] = 0
     rng = np.random.default_rng(seed)
-    lobe_plugin = mi.load_dict({"type": "ward", "model": "two", "rho_s": 1.0, "sigma_alpha": 0.1,
-                                "normalisation": normalisation})
+    quad = quadrature(*SIGMA_TABLE, normalisation)
+    # the sky's integrals at every position, at the first k of each pixel's (a random subset
+    # of its i.i.d. positions: their mean is still an unbiased estimate of the pixel's), or
+    # shared between anchors (computed apart, with _SharedSky's own trace)
+    k = S if sky_positions is None else min(max(1, int(sky_positions)), S)
+    static = {"lanes": P * S * K, "positions": P * S, "samples": S * K}
+    # (an object made inside a recording would change Dr.Jit's registry, and with it the
+    # recording's key: the sampler is made once, outside)
+    fixed = {"repeat": mi.UInt32(np.repeat(np.arange(P * S), K)),
+             "sampler": mi.load_dict({"type": "independent"})}
+    if k < S:
+        fixed["subset"] = mi.UInt32((np.arange(P)[:, None] * S + np.arange(k)[None, :]).ravel())
+
+    def trace(scene, lobes, quad, fixed, x, static):
+        return _trace_frame(mi, dr, scene, integrator, target, lobes, quad, fixed, x, static)
+    # traced once from Python and replayed for every other frame (see _trace_frame)
+    frame = dr.freeze(trace) if freeze else trace
     out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos",
                            "hit", "sun_half_cos", "diffuse_sky", "lobe_sky")}
+    ids = np.array([shape.bsdf().id() for shape in target], dtype=object)
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
         comp = _components(K, _has_sun(sky))
-        frac = [float(np.sum(comp == c)) / K for c in range(n_comp)]
+        x = {"share": [opaque_value(mi.Float, np.sum(comp == c) / K) for c in range(n_comp)],
+             "component": mi.UInt32(np.tile(comp, P * S)),
+             "seeds": [opaque_value(mi.UInt32, int(rng.integers(2**31))) for _ in range(2)],
+             "sun": opaque_value(mi.Vector3f, sky.sun_direction)}
         if rays is None:
             # primary rays: S stratified positions in each pixel
             pos = (pixels[:, None, :] + _stratified(rng, S)[None]).reshape(P * S, 2) / [w, h]
             ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
                                        mi.Point2f(pos[:, 0], pos[:, 1]), mi.Point2f(0.5, 0.5))
+            x["origin"], x["direction"] = ray.o, ray.d
         else:
             # a point's S positions are the same ray (a measured point has no pixel area)
             o, d = (np.repeat(a[:, t], S, axis=0) for a in (rays.origins, rays.directions))
-            ray = mi.Ray3f(mi.Point3f(*o.T), mi.Vector3f(*d.T))
-        si = scene.ray_intersect(ray)
-        sid = _shape_index(mi, si, target)
-        ids = np.array([shape.bsdf().id() for shape in target], dtype=object)
-        on = (sid >= 0) & (want_s == ids[np.maximum(sid, 0)])
-        # repeat each position K times
-        idx = mi.UInt32(np.repeat(np.arange(P * S), K))
-        sik = dr.gather(mi.SurfaceInteraction3f, si, idx)
-        comp_all = np.tile(comp, P * S)
+            x["origin"], x["direction"] = mi.Point3f(*o.T), mi.Vector3f(*d.T)
         # stratified within each component's block of directions
         u = np.concatenate([_stratified(rng, int(np.sum(comp == c)), P * S)
                             for c in range(n_comp)], axis=1).reshape(P * S * K, 2)
-        u2 = mi.Point2f(u[:, 0], u[:, 1])
-        # candidate directions from every component, then pick each sample's own
-        cands = [emitter.sample_sun(u2), emitter.sample_sky(u2),
-                 sik.to_world(mi.warp.square_to_cosine_hemisphere(u2))]
-        for b in lobes:
-            bs, _ = b.sample(ctx, sik, mi.Float(0.0), u2)
-            cands.append(sik.to_world(bs.wo))
-        cmask = mi.UInt32(comp_all)
-        d = cands[0]
-        for c in range(1, n_comp):
-            d = dr.select(cmask == c, cands[c], d)
-        # mixture density of each chosen direction under every component (balance heuristic)
-        wl = sik.to_local(d)
-        p_mix = frac[0] * emitter.pdf_sun(d) + frac[1] * emitter.pdf_sky(d) \
-            + frac[2] * dr.maximum(mi.Frame3f.cos_theta(wl), 0.0) * dr.inv_pi
-        for j, b in enumerate(lobes):
-            p_mix += frac[3 + j] * b.pdf(ctx, sik, wl)
-        sampler = mi.load_dict({"type": "independent"})
-        sampler.seed(opaque_value(mi.UInt32, int(rng.integers(2**31))), P * S * K)
-        li, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(sik.spawn_ray(d)))
-        ok = (p_mix > 0) & (mi.Frame3f.cos_theta(wl) > 0)
-        inv_pdf = dr.select(ok, dr.rcp(dr.maximum(p_mix, 1e-30)) / (K * S), 0.0)
-        weight = (li - emitter.sky_eval(d)) * inv_pdf                # the control variate's rest
-        # mirror direction at each position
-        wm = mi.reflect(si.wi)
-        sampler.seed(opaque_value(mi.UInt32, int(rng.integers(2**31))), P * S)
-        ray_m = mi.RayDifferential3f(si.spawn_ray(si.to_world(wm)))
-        lm, _, _ = integrator.sample(scene, sampler, ray_m)
-        # the same without the solar disc: the control variate's constant
-        sun_seen = ~scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
-        lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0) - emitter.sky_eval(ray_m.d)
-        dr.eval(weight, inv_pdf, lm, lm_sky)              # together: the mixture density once
+        x["u"] = mi.Point2f(u[:, 0], u[:, 1])
+        shared = share is not None and sky.envmap is None
+        mode = dict(static, has_map=sky.envmap is not None,
+                    sky="shared" if shared else "own" if k >= S else "subset")
+        try:
+            r = frame(scene, lobes, quad, fixed, x, mode)
+        except RuntimeError:
+            if frame is trace:
+                raise
+            # a scene object whose members dr.freeze cannot see: every frame from Python
+            frame = trace
+            r = frame(scene, lobes, quad, fixed, x, mode)
 
         def np3(v, n):
             return np.array(v, dtype=np.float32).T.reshape(P, n, 3)
-        out["wo"].append(np.repeat(np3(si.wi, S), K, axis=1))
-        out["wi"].append(np3(wl, S * K))
-        out["weight"].append(np3(weight, S * K))
-        out["inv_pdf"].append(np.array(inv_pdf, dtype=np.float32).reshape(P, S * K))
-        out["mirror_sky"].append(np3(lm_sky, S))
-        out["mirror"].append(np3(lm, S) / S)
-        out["mirror_cos"].append(np.array(mi.Frame3f.cos_theta(si.wi), np.float32).reshape(P, S))
+        sid = np.array(r["shape"], dtype=np.int64)
+        on = (sid >= 0) & (want_s == ids[np.maximum(sid, 0)])
+        view = np.array(r["wo"], dtype=float).T
+        out["wo"].append(np.repeat(np3(r["wo"], S), K, axis=1))
+        out["wi"].append(np3(r["wi"], S * K))
+        out["weight"].append(np3(r["weight"], S * K))
+        out["inv_pdf"].append(np.array(r["inv_pdf"], dtype=np.float32).reshape(P, S * K))
+        out["mirror_sky"].append(np3(r["mirror_sky"], S))
+        out["mirror"].append(np3(r["mirror"], S) / S)
+        out["mirror_cos"].append(view[:, 2].astype(np.float32).reshape(P, S))
         out["hit"].append(on.reshape(P, S).all(axis=1))
-        out["sun_half_cos"].append(_sun_half_cos(mi, si, sky).reshape(P, S))
-        if share is not None and sky.envmap is None:
-            diffuse, lobe, n_shared = share.integrals(mi, dr, emitter, lobe_plugin,
-                                                      sky.sun_direction)
+        out["sun_half_cos"].append(_sun_half_cos(np.array(r["sun"], dtype=float).T, view,
+                                                 sky).reshape(P, S))
+        if shared:
+            diffuse, lobe, n_shared = share.integrals(mi, dr, emitter, quad, sky.sun_direction)
             if stats is not None:
                 stats["shared"] += n_shared
-            out["diffuse_sky"].append(np.broadcast_to(diffuse[:, None], (P, S, 3)))
-            out["lobe_sky"].append(np.broadcast_to(lobe[:, None], (P, S) + lobe.shape[1:]))
-        elif sky_positions is None or int(sky_positions) >= S:
-            diffuse, lobe = _sky_integrals(mi, emitter, si, lobe_plugin)
-            out["diffuse_sky"].append(diffuse.reshape(P, S, 3))
-            out["lobe_sky"].append(lobe.reshape(P, S, -1, 3))
+            diffuse, lobe = diffuse[:, None], lobe[:, None]
         else:
-            k = max(1, int(sky_positions))
-            sub = mi.UInt32((np.arange(P)[:, None] * S + np.arange(k)[None, :]).ravel())
-            diffuse, lobe = _sky_integrals(mi, emitter, dr.gather(mi.SurfaceInteraction3f, si,
-                                                                  sub), lobe_plugin)
-            mean = [np.broadcast_to(a.reshape(P, k, *a.shape[1:]).mean(axis=1, keepdims=True),
-                                    (P, S) + a.shape[1:]) for a in (diffuse, lobe)]
-            out["diffuse_sky"].append(mean[0])
-            out["lobe_sky"].append(mean[1])
+            diffuse, lobe = (a.reshape(P, -1, *a.shape[1:])
+                             for a in _sky_numpy(r["diffuse"], r["lobe"]))
+            if k < S:                                  # the subset's mean for every position
+                diffuse, lobe = (a.mean(axis=1, keepdims=True) for a in (diffuse, lobe))
+        out["diffuse_sky"].append(np.broadcast_to(diffuse, (P, S, 3)))
+        out["lobe_sky"].append(np.broadcast_to(lobe, (P, S) + lobe.shape[2:]))
     return LightCache(**{k: np.stack(v, axis=1) for k, v in out.items()},
                       normalisation=normalisation)

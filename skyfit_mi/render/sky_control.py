@@ -68,13 +68,18 @@ def _tables(n_rays, n, smoothstep):
     return grid[0].ravel(), grid[1].ravel(), y[grid[2].ravel()], wy[grid[2].ravel()]
 
 
+def _table_arrays(mi, n_rays, n, smoothstep):
+    """:func:`_tables` as Dr.Jit arrays."""
+    return [mi.Float(np.asarray(t, np.float32)) for t in _tables(n_rays, n, smoothstep)]
+
+
 def _per_node(mi, dr, Q, tables):
-    """Index of each node's surface point, and its table values as Dr.Jit arrays."""
-    J = len(tables[0])
+    """Index of each node's surface point, and its table values (``tables``:
+    :func:`_table_arrays`) gathered for every node."""
+    J = dr.width(tables[0])
     i = dr.arange(mi.UInt32, Q * J)
     q, j = i // J, i % J
-    phi, piece, y, wy = (dr.gather(mi.Float, mi.Float(np.asarray(t, np.float32)), j)
-                         for t in tables)
+    phi, piece, y, wy = (dr.gather(mi.Float, t, j) for t in tables)
     return q, J, phi, piece, y, wy
 
 
@@ -91,7 +96,7 @@ def lobe_resolution(sigma):
     return next((n, k) for top, n, k in LOBE_RESOLUTION if sigma <= top)
 
 
-def lobe_directions(wo, up, sigma, n_rays, n_radial):
+def lobe_directions(wo, up, sigma, n_rays, n_radial, tables=None):
     """Light directions and solid-angle weights of the lobe quadrature.
 
     Parameters
@@ -100,6 +105,7 @@ def lobe_directions(wo, up, sigma, n_rays, n_radial):
     up : mi.Vector3f (Q)  the world's zenith in each local frame
     sigma : mi.Float (1)  the lobe's roughness
     n_rays, n_radial : its resolution (:func:`lobe_resolution`)
+    tables : that resolution's :func:`_table_arrays` (made here if None)
 
     Returns wi (Q J) local light directions, weights (Q J) [sr], each node's point index q and
     J, nodes per point:
@@ -110,7 +116,9 @@ def lobe_directions(wo, up, sigma, n_rays, n_radial):
     import drjit as dr
     import mitsuba as mi
 
-    q, J, phi, piece, y, wy = _per_node(mi, dr, dr.width(wo), _tables(n_rays, n_radial, True))
+    if tables is None:
+        tables = _table_arrays(mi, n_rays, n_radial, True)
+    q, J, phi, piece, y, wy = _per_node(mi, dr, dr.width(wo), tables)
     wo, up = dr.gather(mi.Vector3f, wo, q), dr.gather(mi.Vector3f, up, q)
     s, c = dr.sincos(phi)
     ko, ku, uo = wo.x * c + wo.y * s, up.x * c + up.y * s, dr.dot(up, wo)
@@ -141,17 +149,20 @@ def lobe_directions(wo, up, sigma, n_rays, n_radial):
     return wi, 4.0 * oh * h.z * h.z * h.z * area, q, J
 
 
-def diffuse_directions(up, n_rays=DIFFUSE_AZIMUTHS, n_polar=DIFFUSE_POLAR):
+def diffuse_directions(up, n_rays=DIFFUSE_AZIMUTHS, n_polar=DIFFUSE_POLAR, tables=None):
     """Light directions and cosine-weighted solid-angle weights of the diffuse quadrature.
 
-    ``up`` (Q) the world's zenith in each local frame.  Returns wi (Q J), weights (Q J), each
+    ``up`` (Q) the world's zenith in each local frame; ``tables`` the resolution's
+    :func:`_table_arrays` (made here if None).  Returns wi (Q J), weights (Q J), each
     node's point index q and J: integral g(wi) cos(theta_i) / pi dwi ~ sum of g(wi) weight [unitless], the polar
     angle of each azimuth's ray split at the world's horizon.
     """
     import drjit as dr
     import mitsuba as mi
 
-    q, J, phi, piece, y, wy = _per_node(mi, dr, dr.width(up), _tables(n_rays, n_polar, False))
+    if tables is None:
+        tables = _table_arrays(mi, n_rays, n_polar, False)
+    q, J, phi, piece, y, wy = _per_node(mi, dr, dr.width(up), tables)
     up = dr.gather(mi.Vector3f, up, q)
     s, c = dr.sincos(phi)
     ku = up.x * c + up.y * s
@@ -166,10 +177,25 @@ def diffuse_directions(up, n_rays=DIFFUSE_AZIMUTHS, n_polar=DIFFUSE_POLAR):
 
 def _sky_sum(mi, dr, emitter, si, wi, w, q, J, f=1.0):
     """Sum over each point's J nodes of f h(wi) w, h the emitter's sky function toward the
-    nodes' directions (local to each point's frame) [W m^-2 sr^-1], (Q, 3) NumPy."""
+    nodes' directions (local to each point's frame) [W m^-2 sr^-1], (Q) Dr.Jit colours."""
     frame = dr.gather(mi.Frame3f, si.sh_frame, q)
-    return np.array(dr.block_sum(f * emitter.sky_eval(frame.to_world(wi)) * w, J),
-                    dtype=np.float64).T
+    return dr.block_sum(f * emitter.sky_eval(frame.to_world(wi)) * w, J)
+
+
+def _lobe_sum(mi, dr, emitter, si, up, lobe, sigma, resolution, tables=None):
+    """I_s of every interaction of ``si`` through ``lobe`` (a rho_s = 1 ``ward`` plugin whose
+    roughness is ``sigma``, an opaque mi.Float) at quadrature ``resolution`` (Q) Dr.Jit."""
+    wi, w, q, J = lobe_directions(si.wi, up, sigma, *resolution, tables=tables)
+    at_node = dr.zeros(mi.SurfaceInteraction3f, dr.width(wi))
+    at_node.wi = dr.gather(mi.Vector3f, si.wi, q)
+    glossy = mi.BSDFContext()
+    glossy.component = 1
+    return _sky_sum(mi, dr, emitter, si, wi, w, q, J, lobe.eval(glossy, at_node, wi))
+
+
+def to_numpy(colours):
+    """Dr.Jit colours (Q) as a (Q, 3) float64 array."""
+    return np.array(colours, dtype=np.float64).T
 
 
 def diffuse_integral(emitter, si, up):
@@ -178,7 +204,7 @@ def diffuse_integral(emitter, si, up):
     import drjit as dr
     import mitsuba as mi
 
-    return _sky_sum(mi, dr, emitter, si, *diffuse_directions(up))
+    return to_numpy(_sky_sum(mi, dr, emitter, si, *diffuse_directions(up)))
 
 
 def lobe_integral(emitter, si, up, lobe, sigma):
@@ -188,17 +214,60 @@ def lobe_integral(emitter, si, up, lobe, sigma):
     import drjit as dr
     import mitsuba as mi
 
+    s = _set_roughness(mi, dr, lobe, sigma)
+    return to_numpy(_lobe_sum(mi, dr, emitter, si, up, lobe, s, lobe_resolution(sigma)))
+
+
+def _set_roughness(mi, dr, lobe, sigma):
+    """Set the ``ward`` plugin ``lobe``'s roughness to ``sigma`` as an opaque value (one kernel
+    for every sigma); returns that value."""
     s = mi.Float(float(sigma))
-    dr.make_opaque(s)                         # one kernel for every sigma
+    dr.make_opaque(s)
     params = mi.traverse(lobe)
     params["sigma_alpha"] = s
     params.update()
-    wi, w, q, J = lobe_directions(si.wi, up, s, *lobe_resolution(sigma))
-    at_node = dr.zeros(mi.SurfaceInteraction3f, dr.width(wi))
-    at_node.wi = dr.gather(mi.Vector3f, si.wi, q)
-    glossy = mi.BSDFContext()
-    glossy.component = 1
-    return _sky_sum(mi, dr, emitter, si, wi, w, q, J, lobe.eval(glossy, at_node, wi))
+    return s
+
+
+def quadrature(lo, hi, normalisation):
+    """The fixed inputs of :func:`sky_integrals` for the Chebyshev series on [lo, hi]: the
+    quadratures' tables as Dr.Jit arrays and, per node, a rho_s = 1 ``ward`` lobe of
+    ``normalisation`` at the node's roughness (opaque).  A dict of Dr.Jit values and plugins,
+    so that a frozen function (``dr.freeze``) takes it as an input and never captures it."""
+    import drjit as dr
+    import mitsuba as mi
+
+    tables = {}
+
+    def table(res, smoothstep):
+        key = f"{res[0]}x{res[1]}{'s' if smoothstep else ''}"
+        if key not in tables:
+            tables[key] = _table_arrays(mi, *res, smoothstep)
+        return key
+    nodes = []
+    for sigma in chebyshev_nodes(lo, hi):
+        lobe = mi.load_dict({"type": "ward", "model": "two", "rho_s": 1.0,
+                             "sigma_alpha": float(sigma), "normalisation": normalisation})
+        res = lobe_resolution(sigma)
+        nodes.append({"lobe": lobe, "sigma": _set_roughness(mi, dr, lobe, sigma),
+                      "resolution": res, "table": table(res, True)})
+    diffuse = table((DIFFUSE_AZIMUTHS, DIFFUSE_POLAR), False)
+    return {"tables": tables, "diffuse": diffuse, "nodes": nodes}
+
+
+def sky_integrals(emitter, si, quad):
+    """I_d and I_s at each Chebyshev node of ``quad`` (:func:`quadrature`) for every surface
+    interaction of ``si`` (Q) under the emitter's current sky: Dr.Jit colours (Q) and a list
+    of them [W m^-2 sr^-1].  Dr.Jit only (no read back), so ``dr.freeze`` can record it."""
+    import drjit as dr
+    import mitsuba as mi
+
+    up = si.to_local(mi.Vector3f(0.0, 0.0, 1.0))
+    tables = quad["tables"]
+    diffuse = _sky_sum(mi, dr, emitter, si, *diffuse_directions(
+        up, DIFFUSE_AZIMUTHS, DIFFUSE_POLAR, tables[quad["diffuse"]]))
+    return diffuse, [_lobe_sum(mi, dr, emitter, si, up, n["lobe"], n["sigma"], n["resolution"],
+                               tables[n["table"]]) for n in quad["nodes"]]
 
 
 def chebyshev_nodes(lo, hi, n=CHEBYSHEV_NODES):

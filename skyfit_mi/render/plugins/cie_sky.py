@@ -110,9 +110,10 @@ class CIESkyEmitter(mi.Emitter):
 
         The traversed parameters stay the same Dr.Jit variables (``params.update()``
         writes into them); only derived data are replaced.  All are made opaque so
-        that new values never change a kernel.
+        that new values never change a kernel, and the emitter keeps no other Python
+        state that changes with the sky (``dr.freeze`` compares such state by value, so a
+        frozen function would record again for every sky).
         """
-        self.sky = sky
         lum = sky.sky_radiance(_TABLE_DIRS) @ SRGB_LUMINANCE               # (cells, sub)
         cell = np.maximum(lum.mean(axis=1), 0.0)
         sky_power = cell.mean() * 4 * np.pi                      # integral of luminance over the sphere
@@ -292,4 +293,4 @@ class CIESkyEmitter(mi.Emitter):
                                   "from surfaces (path, prb, direct), not light tracing.")
 
     def to_string(self):
-        return f"CIESkyEmitter[{self.sky.info or 'custom'}]"
+        return f"CIESkyEmitter[{'with' if self.has_map else 'no'} environment map]"
