@@ -489,8 +489,9 @@ def build_parser():
     relit.add_argument("--overwrite", action="store_true",
                        help="replace another run's output in the folder (starts clean)")
     relit.add_argument("--no-images", action="store_true",
-                       help="predict the regions' values only (prediction.csv/png), from the "
-                       "fits' cached model of the target folder's light; no frame is rendered")
+                       help="predict the regions' values only (prediction.csv, relight.json), from "
+                       "the fits' cached model of the target folder's light; no frame is "
+                       "rendered and no image or plot written")
     relit.add_argument("--reference", action="store_true",
                        help="a synthetic target: also render its own materials again with "
                        "other seeds (reference/), to measure the Monte Carlo floor that "

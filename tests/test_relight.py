@@ -153,9 +153,9 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
 
 
 def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day, tmp_path):
-    """--no-images renders nothing; a fit whose roughness is unknown (interval 0-0.5) gets a
-    band that holds the observed values, and a zero-width fit of the wrong reflectance gets
-    a narrow band that misses them."""
+    """--no-images renders nothing and writes numbers alone (no plot); a fit whose roughness
+    is unknown (interval 0-0.5) gets a band that holds the observed values, and a zero-width
+    fit of the wrong reflectance gets a narrow band that misses them."""
     params = {"rho_s": 0.0, "sigma_alpha": 0.0}
     fit = tmp_path / "fit_disc.json"
     fit.write_text(json.dumps({
@@ -165,7 +165,7 @@ def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day
     out = tmp_path / "pred"
     assert main(["relight", str(fit), "--target", str(day / "day"), "-o", str(out), "-q",
                  "--no-images", "--draws", "50"]) == 0
-    assert not (out / "manifest.json").exists()
+    assert not (out / "manifest.json").exists() and not (out / "prediction.png").exists()
     errors = json.loads((out / "relight.json").read_text())
     assert errors["band_coverage"]["share"] == 1.0
     rows = list(csv.reader((out / "prediction.csv").read_text().splitlines()))[1:]

@@ -98,16 +98,24 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     from ..files import ensure_dir
     from ..pipeline.sequence import render_sequence
 
-    spec, doc = target_spec(target, fits)
-    if all(f.below_horizon for f in spec.frames):
-        raise SkyfitError(f"the target's sun is below the horizon at every time "
-                          f"({', '.join(f'{f.time:%H:%M}' for f in spec.frames)}); give times "
-                          "of day with the sun up.")
-    if doc is not None and Path(out).resolve() == manifest_file(target).parent.resolve():
-        raise SkyfitError("the output folder is the target's; give another with -o.")
-    if not images and doc is None:
+    is_folder = Path(target).is_dir() or Path(target).name == "manifest.json"
+    if not images and not is_folder:
         raise SkyfitError("a prediction without images needs a sequence folder as --target "
                           "(its light is traced there); give one, or leave out --no-images.")
+    if images:
+        spec, doc = target_spec(target, fits)
+        times = [(f.time.strftime("%H:%M"), f.below_horizon) for f in spec.frames]
+    else:
+        # the prediction takes the folder's light as recorded: its spec is not validated again
+        # (which would compute every sun position anew)
+        spec, (doc, _) = None, load_manifest(target)
+        times = [(f["time"][11:16], f.get("below_horizon", False)) for f in doc["frames"]]
+    if all(below for _, below in times):
+        raise SkyfitError(f"the target's sun is below the horizon at every time "
+                          f"({', '.join(t for t, _ in times)}); give times of day with the sun "
+                          "up.")
+    if doc is not None and Path(out).resolve() == manifest_file(target).parent.resolve():
+        raise SkyfitError("the output folder is the target's; give another with -o.")
     observed = doc is not None and bool(rendered_frames(doc))
     table = doc is not None and is_table(doc)      # observations without images
     if reference and not (images and observed and not table
@@ -121,7 +129,7 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     where = target if observed or not images else out
     pixels = target_pixels(fits, where, seed)
     rows, means = predict(fits, where, pixels, draws, seed, log)
-    write_prediction(rows, out, "observed" if observed else "relit render")
+    write_prediction(rows, out, "observed" if observed else "relit render", plot=images)
     if not observed:
         return None
     errors = {"regions": {}}
@@ -373,11 +381,25 @@ def _contact_row(panels, lim):
     return np.asarray(canvas)
 
 
-def write_prediction(rows, out, image_kind):
+def write_prediction(rows, out, image_kind, plot=True):
     """``prediction.csv`` (one row per region, frame and channel, R, G, B or a luminance
     table's Y; radiance in W m^-2 sr^-1)
-    and ``prediction.png``: per region the predicted series with its 95% band and the
-    image values (``image_kind``: the observed frames, or the relit render) (thesis fig 7.14)."""
+    and with ``plot`` ``prediction.png``: per region the predicted series with its 95% band and
+    the image values (``image_kind``: the observed frames, or the relit render) (thesis fig
+    7.14)."""
+    column = image_kind.replace(" ", "_")
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["region", "frame", "time", "channel", "predicted [W m^-2 sr^-1]",
+                "lo95 [W m^-2 sr^-1]", "hi95 [W m^-2 sr^-1]", f"{column} [W m^-2 sr^-1]"])
+    w.writerows([(*row[:4], *(f"{v:.6g}" for v in row[4:])) for row in rows])
+    write_text(Path(out) / "prediction.csv", buf.getvalue())
+    if plot:
+        plot_prediction(rows, out, image_kind)
+
+
+def plot_prediction(rows, out, image_kind):
+    """``prediction.png`` of :func:`write_prediction`'s ``rows``."""
     import datetime as dt
 
     import matplotlib
@@ -386,13 +408,6 @@ def write_prediction(rows, out, image_kind):
 
     from ..files import save_figure
 
-    column = image_kind.replace(" ", "_")
-    buf = io.StringIO()
-    w = csv.writer(buf)
-    w.writerow(["region", "frame", "time", "channel", "predicted [W m^-2 sr^-1]",
-                "lo95 [W m^-2 sr^-1]", "hi95 [W m^-2 sr^-1]", f"{column} [W m^-2 sr^-1]"])
-    w.writerows([(*row[:4], *(f"{v:.6g}" for v in row[4:])) for row in rows])
-    write_text(Path(out) / "prediction.csv", buf.getvalue())
     regions = sorted({row[0] for row in rows})
     fig, axes = plt.subplots(len(regions), 1, figsize=(7, 3.2 * len(regions)), squeeze=False)
     for ax, region in zip(axes[:, 0], regions):
