@@ -261,3 +261,24 @@ def test_a_scene_the_freeze_cannot_record_is_traced_from_python(session, monkeyp
                             positions=2, directions=32, seed=3)
     np.testing.assert_array_equal(got.weight, want.weight)
     np.testing.assert_array_equal(got.lobe_sky, want.lobe_sky)
+
+
+def test_the_frozen_frame_is_recorded_twice_not_per_frame(session, monkeypatch):
+    """Dr.Jit records a frozen function twice (then it knows which inputs change) and replays
+    it: an input whose buffer's alignment changed from frame to frame (arrays from NumPy)
+    used to make it record again on most frames (measured 4-11 of 13)."""
+    import drjit as dr
+
+    from skyfit_mi.render.light_cache import build_light_cache
+
+    made, freeze = [], dr.freeze
+
+    def keep(f, *args, **kwargs):
+        made.append(freeze(f, *args, **kwargs))
+        return made[-1]
+    monkeypatch.setattr(dr, "freeze", keep)
+    skies = [s for s in session.skies if s.envmap is None]
+    build_light_cache(session.scene, session.params, skies, session.obs.pixels[:4], "disc",
+                      positions=2, directions=32, seed=11)
+    assert len(skies) >= 6 and len(made) == 1
+    assert made[0].n_recordings <= 2, made[0].n_recordings

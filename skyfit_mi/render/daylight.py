@@ -34,14 +34,40 @@ def envmap_table(envmap):
     return np.zeros((1, 1, 3), np.float32) if envmap is None else np.asarray(envmap, np.float32)
 
 
+def jit_array(cls, *columns):
+    """A Dr.Jit array of type ``cls`` from NumPy ``columns`` (one per component of a vector
+    type such as ``mi.Point2f``), each copied first into a 64-byte aligned buffer of the
+    type's dtype.
+
+    On the CPU Dr.Jit uses a NumPy buffer as it is and flags it unaligned unless its address
+    is a multiple of the SIMD width (up to 64 bytes); ``dr.freeze`` keys its recordings on
+    that flag, so inputs in buffers at arbitrary addresses made a frozen function record
+    again whenever an alignment changed (the light cache: on most frames).  A GPU copies the
+    data anyway.
+    """
+    import drjit as dr
+    import numpy as np
+
+    dtype = np.dtype(dr.type_v(cls).name.lower())
+    out = []
+    for column in columns:
+        column = np.asarray(column).ravel()
+        buf = np.empty(column.size + 64 // dtype.itemsize, dtype)
+        start = (-buf.ctypes.data % 64) // dtype.itemsize
+        out.append(buf[start:start + column.size])
+        out[-1][:] = column
+    return cls(*out)
+
+
 def opaque_value(cls, values):
     """An opaque Dr.Jit value of type ``cls`` holding ``values`` (a scalar or a triple).
 
     Opaque: a kernel reads it from memory, never as a literal compiled in, so every frame's
-    sky (or sampler seed) reuses the same kernels.  Made from Python numbers and then made opaque, never from a
-    NumPy buffer: Dr.Jit reads a size-1 array made from NumPy with an alignment that varies
-    with the buffer's address (``align 1`` or ``align 4`` in the kernel), and every variant
-    is a kernel of its own (measured: one compilation per frame in the light cache).
+    sky (or sampler seed) reuses the same kernels.  Made from Python numbers and then made
+    opaque, never from a NumPy buffer: Dr.Jit reads a size-1 array made from NumPy with an
+    alignment that varies with the buffer's address (``align 1`` or ``align 4`` in the
+    kernel), and every variant is a kernel of its own (measured: one compilation per frame in
+    the light cache; :func:`jit_array` for longer arrays).
     """
     import drjit as dr
     import numpy as np
@@ -67,5 +93,6 @@ def update_sky(params, sky, prefix):
         params[prefix + k] = opaque_value(mi.Color3f, getattr(sky, k))
     for k, v in zip(PEREZ_KEYS, sky.perez_coefficients):
         params[prefix + k] = opaque_value(mi.Float, float(v))
-    params[prefix + "envmap"] = mi.TensorXf(envmap_table(sky.envmap))
+    table = envmap_table(sky.envmap)
+    params[prefix + "envmap"] = mi.TensorXf(jit_array(mi.Float, table), table.shape)
     params.update()

@@ -390,15 +390,17 @@ class _SharedSky:
 
 def _trace_frame(mi, dr, scene, integrator, target, lobes, quad, fixed, x, static):
     """One frame of :func:`build_light_cache` in Dr.Jit alone (nothing read back), so that
-    ``dr.freeze`` records its kernels once and replays them for every other frame: tracing
-    the scene, the sky plugin and the lobes from Python took most of a small cache's time.
+    ``dr.freeze`` records its kernels and replays them for the other frames (it records twice,
+    then sees which inputs change): tracing the scene, the sky plugin and the lobes from
+    Python took most of a small cache's time.
 
     ``lobes`` the sampling lobes, ``quad`` the sky integrals' :func:`~.sky_control.quadrature`
     and ``fixed`` the index arrays and the sampler shared by every frame: Dr.Jit inputs, never
-    captured.
-    ``x`` the frame's values: the primary rays' ``origin`` and ``direction`` (made outside:
-    not every sensor's members are visible to ``dr.freeze``), the directions' samples ``u`` and ``component``, each component's
-    ``share`` of them, the samplers' ``seeds`` and the ``sun``'s direction (all opaque).
+    captured.  ``x`` the frame's values: the primary rays' ``origin`` and ``direction`` (made
+    outside: not every sensor's members are visible to ``dr.freeze``), the directions'
+    samples ``u`` and ``component``, each component's ``share`` of them, the samplers'
+    ``seeds`` and the ``sun``'s direction (opaque values, or arrays from
+    :func:`~.daylight.jit_array`: an input's alignment is part of a recording's key).
     ``static`` holds what the recording depends on (widths, the sky integrals' mode
     ``own``/``subset``/``shared``, whether the sky has a map), so each variant is recorded once.
     Returns a dict of Dr.Jit values (see the caller)."""
@@ -489,7 +491,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     import drjit as dr
     import mitsuba as mi
 
-    from .daylight import opaque_value, update_sky
+    from .daylight import jit_array, opaque_value, update_sky
 
     rays = pixels if isinstance(pixels, PointRays) else None
     if rays is None:
@@ -544,7 +546,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         update_sky(params, sky, "sky.")
         comp = _components(K, _has_sun(sky))
         x = {"share": [opaque_value(mi.Float, np.sum(comp == c) / K) for c in range(n_comp)],
-             "component": mi.UInt32(np.tile(comp, P * S)),
+             "component": jit_array(mi.UInt32, np.tile(comp, P * S)),
              "seeds": [opaque_value(mi.UInt32, int(rng.integers(2**31))) for _ in range(2)],
              "sun": opaque_value(mi.Vector3f, sky.sun_direction)}
         if rays is None:
@@ -556,11 +558,12 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         else:
             # a point's S positions are the same ray (a measured point has no pixel area)
             o, d = (np.repeat(a[:, t], S, axis=0) for a in (rays.origins, rays.directions))
-            x["origin"], x["direction"] = mi.Point3f(*o.T), mi.Vector3f(*d.T)
+            x["origin"] = jit_array(mi.Point3f, *o.T)
+            x["direction"] = jit_array(mi.Vector3f, *d.T)
         # stratified within each component's block of directions
         u = np.concatenate([_stratified(rng, int(np.sum(comp == c)), P * S)
                             for c in range(n_comp)], axis=1).reshape(P * S * K, 2)
-        x["u"] = mi.Point2f(u[:, 0], u[:, 1])
+        x["u"] = jit_array(mi.Point2f, u[:, 0], u[:, 1])
         shared = share is not None and sky.envmap is None
         mode = dict(static, has_map=sky.envmap is not None,
                     sky="shared" if shared else "own" if k >= S else "subset")

@@ -43,7 +43,8 @@ import numpy as np
 from ...physics.colour import SRGB_LUMINANCE
 from ...physics.envmap import latlong_texel
 from ...physics.sky import PEREZ_HORIZON_COS, Sky
-from ..daylight import PEREZ_KEYS as _PEREZ_KEYS, RGB_KEYS as _RGB_KEYS, envmap_table, opaque_value
+from ..daylight import PEREZ_KEYS as _PEREZ_KEYS, RGB_KEYS as _RGB_KEYS
+from ..daylight import envmap_table, jit_array, opaque_value
 from .properties import property_values
 
 #: Sampling table resolution: azimuth cells x cos(theta) cells.
@@ -124,8 +125,8 @@ class CIESkyEmitter(mi.Emitter):
         sun_power = float(sky.sun_radiance @ SRGB_LUMINANCE) * sky.sun_solid_angle
         total = sun_power + sky_power
         p_sun = sun_power / total if total > 0 else 0.0
-        self.pmf = mi.Float(pmf.astype(np.float32))
-        self.cdf = mi.Float(cdf.astype(np.float32))
+        self.pmf = jit_array(mi.Float, pmf)
+        self.cdf = jit_array(mi.Float, cdf)
         self.p_sun = opaque_value(mi.Float, p_sun)
         self.sun_chord2 = opaque_value(mi.Float, sky.sun_chord2)
         # the kernel reads the blend switch as a float: a 1-byte Bool among the emitter's
