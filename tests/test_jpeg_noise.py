@@ -233,3 +233,34 @@ def test_a_camera_jpeg_decodes_as_libjpeg_does_to_its_rounding():
     assert ours.shape == theirs.shape == (600, 512, 3)
     assert np.sqrt(np.mean(d ** 2)) < 0.8 and np.mean(np.abs(d).max(axis=2) > 3) < 0.005
     assert np.all(np.abs(d.mean(axis=(0, 1))) < 0.2)
+
+
+def test_rgb_coded_and_progressive_jpegs_decode_as_libjpeg_does(tmp_path):
+    """A JPEG coded in R, G, B (no YCbCr transform: Adobe's files, written here with jpeglib)
+    is taken as it is, not converted from YCbCr (which put it 107 DN rms off); a progressive
+    JPEG reads like a baseline one."""
+    import jpeglib
+
+    rng = np.random.default_rng(5)
+    codes = np.clip(rng.normal(120, 15, (32, 48, 3)) + [0, 60, -60], 0, 255).astype(np.uint8)
+    rgb = jpeglib.from_spatial(codes)
+    rgb.jpeg_color_space = jpeglib.Colorspace.JCS_RGB
+    rgb.write_spatial(str(tmp_path / "rgb.jpg"), qt=95)
+    Image.fromarray(codes).save(tmp_path / "progressive.jpg", quality=90, progressive=True)
+    for name in ("rgb.jpg", "progressive.jpg"):
+        ours = jn.decode(tmp_path / name)
+        with Image.open(tmp_path / name) as im:
+            theirs = np.asarray(im, dtype=float)
+        assert np.sqrt(np.mean((ours - theirs) ** 2)) < 0.8, name
+
+
+def test_a_jpeg_the_float_decoder_misreads_falls_back_to_libjpeg(tmp_path, monkeypatch):
+    """Should the floating-point decoder disagree with libjpeg beyond its rounding (a coding
+    it does not follow), the reader keeps libjpeg's codes and says why in the metadata."""
+    from skyfit_mi.pipeline import photos
+
+    Image.fromarray(np.full((16, 16, 3), 90, np.uint8)).save(tmp_path / "a.jpg", quality=95)
+    monkeypatch.setattr(jn, "decode", lambda path: np.full((16, 16, 3), 200.0))
+    photo = photos.read_photo(tmp_path / "a.jpg")
+    assert "disagrees with libjpeg by 110 DN rms" in photo.metadata["decoder"]
+    assert photo.values.max() < 100

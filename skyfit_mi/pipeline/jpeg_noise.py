@@ -103,12 +103,17 @@ def recompress(values, settings, sensor, noise, rng):
     return decode(buf.getvalue())
 
 
+#: The colour spaces in which :func:`decode` reads a JPEG's planes, and their planes.
+_DECODED_SPACES = {"JCS_YCbCr": 3, "JCS_RGB": 3, "JCS_GRAYSCALE": 1}
+
+
 def decode(source):
     """The RGB codes [DN] (H, W, 3) float, or (H, W, 1) for a grey JPEG, that JPEG ``source``
     (a path, or the file's bytes) holds, decoded in floating point from its DCT coefficients
     (read by jpeglib, lossless): dequantised, inverse DCT (JPEG's is the orthonormal DCT-II),
     chroma upsampled by linear interpolation between sample centres (libjpeg's "fancy"
-    upsampling), and JFIF's YCbCr -> RGB (ITU-T T.871, eq. 7), with nothing rounded.
+    upsampling), and JFIF's YCbCr -> RGB (ITU-T T.871, eq. 7; a file coded in RGB or grey is
+    taken as it is), with nothing rounded.
 
     libjpeg's own decoder (Pillow's) rounds the Y, Cb and Cr planes to whole codes before the
     colour conversion.  Where the compression has removed the noise (a smooth surface at
@@ -117,7 +122,7 @@ def decode(source):
     (1% of its linear signal, which biased the calibration's blue exposure) against -0.13 DN
     decoded here.  Values are clamped to [0, 255], and those within half a code of either end
     set to it: what libjpeg's rounding reads as clipped stays clipped.  None where jpeglib
-    cannot read the file."""
+    cannot read the file, or it is coded in another colour space (CMYK, YCCK)."""
     import jpeglib
     from scipy.fft import idctn
 
@@ -128,8 +133,10 @@ def decode(source):
             f.write(bytes(source))
     try:
         im = jpeglib.read_dct(str(path))
+        space = str(im.jpeg_color_space)
         comps = [im.Y] + ([im.Cb, im.Cr] if im.has_chrominance else [])
-        if im.has_black or any(c is None for c in comps):
+        if im.has_black or any(c is None for c in comps) or space not in _DECODED_SPACES \
+                or len(comps) != _DECODED_SPACES[space]:
             return None
         h, w = int(im.height), int(im.width)
         factors = np.asarray(im.samp_factor, dtype=int).reshape(-1, 2)
@@ -148,6 +155,8 @@ def decode(source):
             os.unlink(path)
     if len(planes) == 1:
         rgb = planes[0][..., None]
+    elif space == "JCS_RGB":                 # coded as R, G, B (an Adobe file, say): as they are
+        rgb = np.stack(planes, axis=-1)
     else:
         y, cb, cr = planes
         rgb = y[..., None] + np.stack([cb - 128.0, cr - 128.0], axis=-1) @ _JFIF_CHROMA.T
