@@ -264,3 +264,43 @@ def test_a_jpeg_the_float_decoder_misreads_falls_back_to_libjpeg(tmp_path, monke
     photo = photos.read_photo(tmp_path / "a.jpg")
     assert "disagrees with libjpeg by 110 DN rms" in photo.metadata["decoder"]
     assert photo.values.max() < 100
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_a_turned_frames_block_grid_is_the_files(orientation):
+    """block_offset against the file's blocks carried through the turn itself (odd sizes, so
+    every reversed axis moves the grid), and stored() undoes what the reader applied."""
+    from skyfit_mi.fitting.chi2 import block_sharing
+    from skyfit_mi.pipeline.photos import apply_orientation
+
+    h, w = 21, 30                                          # the file's
+    yy, xx = np.mgrid[0:h, 0:w]
+    block_of = apply_orientation((yy // 8) * 100 + xx // 8, orientation)    # displayed
+    ox, oy = jn.block_offset(orientation, block_of.shape)
+    dy, dx = np.mgrid[0:block_of.shape[0], 0:block_of.shape[1]]
+    ours = ((dy - oy) // 8) * 1000 + (dx - ox) // 8
+    # the same partition of the displayed pixels into blocks
+    pairs = {(int(a), int(b)) for a, b in zip(block_of.ravel(), ours.ravel())}
+    assert len(pairs) == len(np.unique(block_of)) == len(np.unique(ours))
+    px = np.stack([dx.ravel(), dy.ravel()], axis=1)
+    counts = np.unique(block_of, return_counts=True)[1]
+    np.testing.assert_array_equal(np.sort(block_sharing(px, offset=(ox, oy))),
+                                  np.sort(np.repeat(counts, counts)))
+    settings = {"orientation": orientation}
+    values = np.arange(h * w * 3.0).reshape(h, w, 3)
+    np.testing.assert_array_equal(jn.stored(jn.displayed(values, settings), settings), values)
+
+
+def test_the_bootstrap_of_a_turned_frame_is_the_files_turned():
+    """A frame shown turned (EXIF 6, size not a multiple of 8) is bootstrapped in the file's
+    layout, where its blocks are: the result is the unturned frame's, turned."""
+    from skyfit_mi.pipeline.photos import apply_orientation
+
+    codes, buf = _patch_jpeg((101.4, 94.1, 92.7), 44, 5)
+    values = jn.decode(buf.getvalue())[:, :37]
+    settings = jn.jpeg_settings(buf)
+    plain = jn.bootstrap_variance(values, settings, SENSOR, NOISE, [4, 0], replicates=2)
+    turned = jn.bootstrap_variance(apply_orientation(values, 6), {**settings, "orientation": 6},
+                                   SENSOR, NOISE, [4, 0], replicates=2)
+    for a, b in zip(plain, turned):
+        np.testing.assert_array_equal(apply_orientation(a, 6) if np.ndim(a) == 3 else a, b)

@@ -198,9 +198,11 @@ class LuminanceModel:
         return self.inner.gradient(theta, np.tensordot(dloss_dL, self.mix, axes=1))
 
 
-def block_sharing(pixels, block=8):
-    """How many of ``pixels`` (P, 2) (x, y) lie in each one's 8x8 JPEG block, (P,)."""
-    cells = np.asarray(pixels, dtype=int).reshape(-1, 2) // block
+def block_sharing(pixels, block=8, offset=(0, 0)):
+    """How many of ``pixels`` (P, 2) (x, y) lie in each one's 8x8 JPEG block, (P,); the
+    blocks start at ``offset`` (x, y) (a turned frame's, ``jpeg_block_offset``)."""
+    cells = (np.asarray(pixels, dtype=int).reshape(-1, 2) - np.asarray(offset, dtype=int)) \
+        // block
     _, inverse, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
     return counts[inverse.ravel()].astype(float)
 
@@ -258,11 +260,12 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
                                 "flat", (h, w, 3))
         falloff = falloff * flat[pixels[:, 1], pixels[:, 0], 0]
     ys, sig, gain = [], [], []
-    shared = block_sharing(pixels) if one_fit else np.ones(len(pixels))
     for f in rendered:
         y = _region_values(root, f, "sensor", pixels, (h, w, 3))
         s = _region_values(root, f, "sigma", pixels, (h, w, 3))
         if "jpeg_block_correlation" in f:          # a JPEG's errors shared within its blocks
+            shared = block_sharing(pixels, offset=f.get("jpeg_block_offset", (0, 0))) \
+                if one_fit else np.ones(len(pixels))
             rho = np.asarray(f["jpeg_block_correlation"], dtype=float)
             s = s * np.sqrt(1.0 + (shared[:, None] - 1.0) * rho[None, :])
         ok = np.isfinite(y) & ~np.isnan(s) & (s >= 0)

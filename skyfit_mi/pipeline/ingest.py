@@ -155,10 +155,13 @@ def estimate_noise(values, sensor, jpeg=None, shown=None, log=None):
     """
     shown = shown_noise(values, sensor) if shown is None else shown
     jpeg = list(jpeg or [None] * len(values))
-    pairs = [(v, st) for v, st in zip(values, jpeg) if st is not None]
+    from .jpeg_noise import SEED, block_size, recompress, stored
+
+    # in each file's own layout (its blocks from the top left); the estimate does not depend on
+    # the turn (a pixel's four neighbours)
+    pairs = [(stored(v, st), st) for v, st in zip(values, jpeg) if st is not None]
     if not pairs:
         return shown
-    from .jpeg_noise import SEED, block_size, recompress
 
     picks = np.unique(np.linspace(0, len(pairs) - 1, JPEG_CALIBRATION_FRAMES).round()
                       .astype(int))
@@ -315,10 +318,11 @@ def _sigma(values, sensor, noise, jpeg=None):
     var = q * q * (a + b * s * sensor.max_code) + 1.0 / 12.0
     edge = None
     if jpeg is not None:
-        from .jpeg_noise import tables_bound
+        from .jpeg_noise import displayed, stored, tables_bound
 
         var = np.maximum(jpeg["variance"], var)
-        edge = edge_blocks(np.nan_to_num(values), var)
+        st = jpeg["settings"]
+        edge = displayed(edge_blocks(stored(np.nan_to_num(values), st), stored(var, st)), st)
         var = np.where(edge, var + tables_bound(jpeg["settings"]), var)
     return np.where(np.isfinite(values), np.sqrt(var), np.inf).astype(np.float32), edge
 
@@ -876,6 +880,9 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
     from .jpeg_noise import jpeg_settings
 
     jpeg = {i: jpeg_settings(paths[i]) for i in lit if photos[i].format == "jpeg"}
+    for i, st in jpeg.items():
+        if st is not None:                      # the blocks lie in the file's own layout
+            st["orientation"] = photos[i].metadata.get("orientation", 1)
     if any(st and st["subsampling"] for st in jpeg.values()):
         log("the JPEGs' chroma is subsampled (4:2:2 or 4:2:0): colour edges blur by a pixel, "
             "an error sigma does not hold; keep pixels beside edges out of fits (regions from "
@@ -936,7 +943,7 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, jp
     """Write the sequence folder; ``jpeg_errors`` each JPEG frame's :func:`_jpeg_errors` by
     frame index."""
     from ..render.image import write_exr
-    from .jpeg_noise import REPLICATES, SEED
+    from .jpeg_noise import REPLICATES, SEED, block_offset
 
     manifest = measured_header(spec, sensor, run_id, "photographed",
                                "none: frames are photographs")
@@ -984,6 +991,8 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, jp
             if frame_jpeg is not None:
                 rec["jpeg_error_DN2"] = np.mean(frame_jpeg["variance"], axis=(0, 1)).tolist()
                 rec["jpeg_block_correlation"] = frame_jpeg["rho"].tolist()
+                rec["jpeg_block_offset"] = list(block_offset(
+                    frame_jpeg["settings"].get("orientation", 1), v.shape))
                 rec["jpeg_edge_block_share"] = float(np.mean(edge))
                 rec["jpeg_bias_removed_DN"] = np.nanmean(frame_jpeg["bias"], axis=(0, 1)).tolist()
             bad = int(photo.nan_count + photo.inf_count)

@@ -64,6 +64,40 @@ def jpeg_settings(path):
                 "subsampling": 2 if sampling < 0 else int(sampling)}
 
 
+def stored(values, settings):
+    """``values`` (H, W, ...) of a JPEG frame as the file lays them out, its EXIF orientation
+    (``settings["orientation"]``, from the caller) undone: its blocks start at the top left."""
+    from .photos import undo_orientation
+
+    return undo_orientation(values, settings.get("orientation", 1))
+
+
+def displayed(values, settings):
+    """The inverse of :func:`stored`: a contiguous array as the frame is displayed."""
+    from .photos import apply_orientation
+
+    return np.ascontiguousarray(apply_orientation(values, settings.get("orientation", 1)))
+
+
+#: Per EXIF orientation, which axis of the file (0 its x, 1 its y) each displayed axis (x, y)
+#: runs along, and whether reversed (:func:`~.photos.apply_orientation`'s turns).
+_AXES = {1: ((0, False), (1, False)), 2: ((0, True), (1, False)), 3: ((0, True), (1, True)),
+         4: ((0, False), (1, True)), 5: ((1, False), (0, False)), 6: ((1, True), (0, False)),
+         7: ((1, True), (0, True)), 8: ((1, False), (0, True))}
+
+
+def block_offset(orientation, shape, block=8):
+    """(x, y) of the JPEG's block grid in a frame displayed with ``shape`` (H, W, ...) after
+    EXIF ``orientation``, each in [0, block): a displayed pixel (x, y) lies in block
+    ((x - ox) // block, (y - oy) // block).  The file's blocks start at its top left; a turn
+    that reverses an axis of the file moves them by its length modulo ``block`` (zero for
+    lengths that are multiples of it)."""
+    h, w = shape[:2]
+    size = (w, h) if orientation in (None, 1, 2, 3, 4) else (h, w)       # the file's (x, y)
+    return tuple(int(size[axis] % block) if reverse else 0
+                 for axis, reverse in _AXES.get(orientation, _AXES[1]))
+
+
 def key(settings):
     """A hashable key of :func:`jpeg_settings` (frames of one camera setting share it)."""
     return (settings["subsampling"],
@@ -182,7 +216,8 @@ def _upsample(plane, fy, fx, h, w):
 
 def bootstrap_variance(values, settings, sensor, noise, seed, replicates=REPLICATES):
     """Each value's error variance [DN^2] (H, W, 3), the errors' correlation within the JPEG's
-    8x8 blocks (3,), and their mean [DN] (H, W, 3).
+    8x8 blocks (3,), and their mean [DN] (H, W, 3); ``values`` as displayed, the work done in
+    the file's layout (:func:`stored`).
 
     The variance is the mean over ``replicates`` draws of the scene (:func:`truth_sampler`) of
     the square difference between the draw photographed again (:func:`recompress`) and the
@@ -201,6 +236,7 @@ def bootstrap_variance(values, settings, sensor, noise, seed, replicates=REPLICA
     added to the variance.
     """
     rng = np.random.default_rng(seed)
+    values = stored(values, settings)
     sample = truth_sampler(values, settings)
     h, w = np.shape(values)[:2]
     bh, bw = h // 8 * 8, w // 8 * 8
@@ -225,7 +261,7 @@ def bootstrap_variance(values, settings, sensor, noise, seed, replicates=REPLICA
     spread = (cell_sq - replicates * mean ** 2) / max(replicates - 1, 1)
     mean_var = np.mean(np.maximum(spread, 0.0), axis=(0, 1)) / replicates
     bias = np.repeat(np.repeat(mean, n, axis=0), n, axis=1)[:h, :w]
-    return smooth + mean_var, rho, bias
+    return displayed(smooth + mean_var, settings), rho, displayed(bias, settings)
 
 
 def _cell_means(x, n):

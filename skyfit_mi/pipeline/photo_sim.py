@@ -19,10 +19,12 @@ from ..errors import SkyfitError
 from ..files import atomic_write, ensure_dir, write_json
 from ..physics.camera import SensorModel
 from .manifest import load_manifest, read_frame_image, rendered_frames
+from .photos import undo_orientation
 
 #: EXIF tags (the Exif sub-IFD 0x8769) written for each frame.
 EXIF_IFD, DATETIME_ORIGINAL, OFFSET_TIME_ORIGINAL = 0x8769, 0x9003, 0x9011
 EXPOSURE_TIME, F_NUMBER, ISO = 0x829A, 0x829D, 0x8827
+ORIENTATION = 0x0112
 #: The simulated camera's aperture and ISO (only their ratio to the exposure time matters).
 SIM_F_NUMBER, SIM_ISO = 8.0, 100
 #: Shutter times of the auto-exposure [s]: third stops from 1/4000 to 1/15 s.
@@ -30,7 +32,7 @@ SHUTTER_STOPS = 2.0 ** (-np.arange(36) / 3.0) / 15.0
 FORMATS = {"jpeg": ".jpg", "png": ".png", "tiff": ".tif"}
 
 
-def _exif(time, offset, exposure_time):
+def _exif(time, offset, exposure_time, orientation=1):
     from fractions import Fraction
 
     from PIL import Image
@@ -45,12 +47,14 @@ def _exif(time, offset, exposure_time):
     ifd[EXPOSURE_TIME] = IFDRational(fr.numerator, fr.denominator)
     ifd[F_NUMBER] = IFDRational(int(SIM_F_NUMBER * 10), 10)
     ifd[ISO] = SIM_ISO
+    if orientation != 1:
+        ex[ORIENTATION] = int(orientation)
     return ex
 
 
 def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="srgb", gamma=2.2,
                    read_noise_DN=0.8, shot_gain=0.02, cos4=True, fmt="jpeg", quality=95,
-                   offset=True, shutter_error=0.0, seed=0):
+                   offset=True, shutter_error=0.0, orientation=1, seed=0):
     """Write the rendered frames of ``sequence`` as photographs into ``out_dir``.
 
     Parameters
@@ -68,6 +72,8 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
     shutter_error : relative standard deviation of each frame's true exposure about the
         nominal one its EXIF records (a real shutter and aperture miss by a few per cent),
         drawn from numpy.random.default_rng([seed, index, 1]); recorded in photos.json
+    orientation : EXIF orientation code: the file holds the frame turned back, as a camera
+        held on its side stores it, and the tag says how to show it (the frame as rendered)
 
     Returns the list of written paths, in time order.
     """
@@ -97,13 +103,14 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
         lin = np.clip(signal * e_true, 0.0, None) * sensor.max_code
         lin = lin + rng.normal(size=lin.shape) * np.sqrt(read_noise_DN ** 2 + shot_gain * lin)
         codes = np.rint(sensor.respond(lin / sensor.max_code) * sensor.max_code)
-        img = Image.fromarray(np.clip(codes, 0, 255).astype(np.uint8))
+        img = Image.fromarray(np.ascontiguousarray(undo_orientation(
+            np.clip(codes, 0, 255).astype(np.uint8), orientation)))
         time = dt.datetime.fromisoformat(f["time"])
         path = out / f"IMG_{f['index']:04d}{FORMATS[fmt]}"
         # full-resolution chroma (4:4:4), as a camera's finest JPEG setting: Pillow's default
         # 4:2:0 blurs colour across 2x2 blocks, into a region's edge pixels
         kw = {"quality": quality, "subsampling": 0} if fmt == "jpeg" else {}
-        atomic_write(path, lambda p, img=img, ex=_exif(time, offset, t), kw=kw:
+        atomic_write(path, lambda p, img=img, ex=_exif(time, offset, t, orientation), kw=kw:
                      img.save(p, format=fmt.upper(), exif=ex.tobytes(), **kw))
         paths.append(path)
         record.append({"file": path.name, "time": f["time"], "exposure_time_s": t,
@@ -111,6 +118,7 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
     meta = {"sequence": str(Path(sequence).resolve()), "seed": seed, "response": response,
             "gamma": gamma, "read_noise_DN": read_noise_DN, "shot_gain": shot_gain,
             "cos4": cos4, "format": fmt, "quality": quality, "offset_in_exif": offset,
+            "orientation": orientation,
             "shutter_error": shutter_error,
             "exposure_at_1_15_s": base, "f_number": SIM_F_NUMBER, "iso": SIM_ISO,
             "frames": record, "units": "exposure sr m^2 W^-1 (signal = exposure x radiance)"}

@@ -216,6 +216,12 @@ def apply_orientation(values, orientation):
     return turn[orientation](values)
 
 
+def undo_orientation(values, orientation):
+    """The inverse of :func:`apply_orientation`: an (H, W, ...) array as displayed back in the
+    file's own layout (where a JPEG's blocks start at the top left)."""
+    return apply_orientation(values, {6: 8, 8: 6}.get(orientation, orientation))
+
+
 def _tag(tags, key):
     v = tags.get(key)
     return None if v is None else getattr(v, "values", v)
