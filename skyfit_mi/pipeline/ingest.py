@@ -320,7 +320,7 @@ def _sigma(values, sensor, noise, jpeg=None):
     if jpeg is not None:
         from .jpeg_noise import displayed, stored, tables_bound
 
-        var = np.maximum(jpeg["variance"], var)
+        var = np.maximum(jpeg["variance"].astype(np.float32), var)
         st = jpeg["settings"]
         edge = displayed(edge_blocks(stored(np.nan_to_num(values), st), stored(var, st)), st)
         var = np.where(edge, var + tables_bound(jpeg["settings"]), var)
@@ -721,11 +721,15 @@ def _unbiased(values, bias, max_code):
     return np.where(keep, values, np.clip(values - bias, 0.0, max_code)).astype(values.dtype)
 
 
-def _jpeg_errors(values, jpeg, sensor, noise, shown, progress):
+def _jpeg_errors(values, jpeg, sensor, noise, shown, progress, patches=None):
     """Per JPEG frame (index -> settings in ``jpeg``): the bootstrap of its compression
-    (:func:`.jpeg_noise.bootstrap_variance`, with the sensor's ``noise``): {"variance" float32,
-    "rho", "bias" float32, "settings", "shown"}; the frame's ``values`` (a list, changed in
-    place) lose the compression's mean error (:func:`_unbiased`)."""
+    (:func:`.jpeg_noise.bootstrap_variance`, with the sensor's ``noise``): {"variance",
+    "rho", "bias_mean" (the frame's mean bias per channel), "bias_patches" (the bias at the
+    (H, W) mask ``patches``, the calibration's pixels; None without), "settings", "shown"};
+    the frame's ``values`` (a list, changed in place) lose the compression's mean error
+    (:func:`_unbiased`).  The variance is kept as float16 (3 significant digits: 0.05% in
+    sigma) and the bias not at all: a frame's own values take two bytes more a value, not
+    eight."""
     from .jpeg_noise import SEED, bootstrap_variance
 
     out = {}
@@ -737,8 +741,10 @@ def _jpeg_errors(values, jpeg, sensor, noise, shown, progress):
     for i in todo:
         var, rho, bias = bootstrap_variance(values[i], jpeg[i], sensor, noise, [SEED, i])
         values[i] = _unbiased(values[i], bias, sensor.max_code)
-        out[i] = {"variance": var.astype(np.float32), "rho": rho,
-                  "bias": bias.astype(np.float32), "settings": jpeg[i], "shown": shown}
+        out[i] = {"variance": var.astype(np.float16), "rho": rho,
+                  "bias_mean": np.nanmean(bias, axis=(0, 1)),
+                  "bias_patches": None if patches is None else bias[patches].astype(np.float32),
+                  "settings": jpeg[i], "shown": shown}
         if bar is not None:
             bar.update(1)
     if bar is not None:
@@ -851,6 +857,7 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
         from .colorchecker import find_chart
 
         chart = find_chart([sensor.linearise(values[i]) / falloff[..., None] for i in lit], log)
+    patch_mask = None
     if calibrate or chart:
         materials = {**calibrate, **({colorchecker: (CHART_GREY,) * 3} if chart else {})}
         cal_spec = _calibration_spec(spec.raw, materials, spec.base_dir)
@@ -897,7 +904,8 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
         noise_info = {"read_DN2": a, "shot_DN": b, "source": "given"}
     log(f"noise model: read {np.sqrt(a):.3g} DN rms, shot {b:.3g} DN per linear DN "
         f"({noise_info['source']})")
-    jpeg_errors = _jpeg_errors(values, jpeg, sensor, (a, b), shown or (0.0, 0.0), progress)
+    jpeg_errors = _jpeg_errors(values, jpeg, sensor, (a, b), shown or (0.0, 0.0), progress,
+                               patch_mask)
 
     if calibrate or chart:
         # the calibration patches' codes with the compression's mean error taken out, as the
@@ -905,7 +913,7 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
         for j, i in enumerate(lit):
             if i in jpeg_errors:
                 y, L = all_samples[j]
-                all_samples[j] = (_unbiased(y, jpeg_errors[i]["bias"][patch_mask],
+                all_samples[j] = (_unbiased(y, jpeg_errors[i]["bias_patches"],
                                             sensor.max_code), L)
         samples, patch = _neutral(all_samples, all_patch, calibrate)
         per_frame, cal_info = calibrate_exposure(samples, patch, sensor,
@@ -989,12 +997,13 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, jp
                                                                    "iso")
                                     if photo.metadata.get(k)}})
             if frame_jpeg is not None:
-                rec["jpeg_error_DN2"] = np.mean(frame_jpeg["variance"], axis=(0, 1)).tolist()
+                rec["jpeg_error_DN2"] = np.mean(frame_jpeg["variance"], axis=(0, 1),
+                                                 dtype=np.float64).tolist()
                 rec["jpeg_block_correlation"] = frame_jpeg["rho"].tolist()
                 rec["jpeg_block_offset"] = list(block_offset(
                     frame_jpeg["settings"].get("orientation", 1), v.shape))
                 rec["jpeg_edge_block_share"] = float(np.mean(edge))
-                rec["jpeg_bias_removed_DN"] = np.nanmean(frame_jpeg["bias"], axis=(0, 1)).tolist()
+                rec["jpeg_bias_removed_DN"] = frame_jpeg["bias_mean"].tolist()
             bad = int(photo.nan_count + photo.inf_count)
             if bad:
                 rec["non_finite_values"] = bad
