@@ -13,7 +13,7 @@ widths over the clean ones' (the issue's 1.5x goal, judged on widths over noise 
 than one realisation's, which follow where each fit lands on the rho_s - sigma_alpha ridge).
 
     .venv/bin/python scripts/ingest_coverage.py [--quality 100 95] [--seeds 8] [--scale 1]
-        [--clean [--clean-noise PERCENT]] [-o DIR]
+        [--clean [--clean-noise PERCENT]] [--true-noise] [-o DIR]
 """
 
 import argparse
@@ -25,6 +25,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 TRUTH = {"C_r": 0.62, "C_g": 0.12, "C_b": 0.10, "rho_s": 0.05, "sigma_alpha": 0.08}
+#: photo_sim.photograph_day's default sensor noise: read 0.8 DN rms, shot gain 0.02 DN
+TRUE_NOISE = (0.8 ** 2, 0.02)
 
 
 def main():
@@ -39,6 +41,9 @@ def main():
     ap.add_argument("--clean-noise", type=float, default=None, metavar="PERCENT",
                     help="the clean frames' sensor noise [%% of full scale] (default the "
                          "test's)")
+    ap.add_argument("--true-noise", action="store_true",
+                    help="give ingest the simulator's own sensor noise (--noise) instead of "
+                         "estimating it from the frames")
     ap.add_argument("-o", "--output", help="work folder (default a temporary one)")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT / "tests"))
@@ -101,7 +106,8 @@ def main():
             photograph_day(truth, photos, seed=seed, quality=q)
             seq = work / f"seq_q{q}_s{seed}"
             ingest([photos], spec_path, seq, calibrate={"grey_card": (0.18,) * 3},
-                   vignetting="cos4", overwrite=True, progress=False, **quiet)
+                   vignetting="cos4", overwrite=True, progress=False,
+                   noise=TRUE_NOISE if args.true_noise else None, **quiet)
             sequences.append(seq)
         medians[q] = row(q, sequences)
     if args.clean:

@@ -44,8 +44,7 @@ def _quadrature(mi, sky, si, sigma=None):
     up = si.to_local(mi.Vector3f(0.0, 0.0, 1.0))
     if sigma is None:
         return diffuse_integral(emitter, si, up)
-    lobe = mi.load_dict({"type": "ward", "model": "two", "rho_s": 1.0, "sigma_alpha": 0.1})
-    return lobe_integral(emitter, si, up, lobe, sigma)
+    return lobe_integral(emitter, si, up, sigma)
 
 
 def _brute_diffuse(sky, frame, n=1500):

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..physics.ward import METAL_THRESHOLD, PLASTIC_MAX, SIGMA_MIRROR, lobe_albedo_nodes
 from .light_cache import CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED, SIGMA_TABLE, control_weight
+from .daylight import jit_array
 from .sky_control import chebyshev_eval, chebyshev_x
 
 #: Fitted parameters of each model (thesis 7.1), in order; C is three numbers.
@@ -154,6 +155,13 @@ def material_dict(model, theta, normalisation="ward"):
     return d
 
 
+def _dr_array(cls, a, k=1):
+    """NumPy ``a`` (..., k) as a Dr.Jit array of ``cls`` of its k columns, in aligned buffers
+    (:func:`~.daylight.jit_array`: a NumPy buffer's alignment compiles kernels anew)."""
+    a = np.asarray(a).reshape(-1, k)
+    return jit_array(cls, *(a[:, i] for i in range(k)))
+
+
 class WardModel:
     """Radiance of region pixels as a differentiable function of Ward parameters.
 
@@ -177,38 +185,37 @@ class WardModel:
         self.n = cache.weight.shape[2]
         P, T, N, _ = cache.weight.shape
         S = cache.mirror.shape[2]
-        flat = lambda a, k: [np.ascontiguousarray(a.reshape(-1, k)[:, i]) for i in range(k)]
         self.si = dr.zeros(mi.SurfaceInteraction3f, P * T * N)
-        self.si.wi = mi.Vector3f(*flat(cache.wo, 3))
-        self.wi = mi.Vector3f(*flat(cache.wi, 3))
-        self.weight = mi.Color3f(*flat(cache.weight, 3))
+        self.si.wi = _dr_array(mi.Vector3f, cache.wo, 3)
+        self.wi = _dr_array(mi.Vector3f, cache.wi, 3)
+        self.weight = _dr_array(mi.Color3f, cache.weight, 3)
         self.si_m = dr.zeros(mi.SurfaceInteraction3f, P * T * S)
         # the mirror sample only needs the view direction
         wo_m = np.zeros((P, T, S, 3), np.float32)
         c = cache.mirror_cos
         wo_m[..., 0] = np.sqrt(np.clip(1 - c**2, 0, 1))
         wo_m[..., 2] = c
-        self.si_m.wi = mi.Vector3f(*flat(wo_m, 3))
-        self.mirror = mi.Color3f(*flat(cache.mirror, 3))
+        self.si_m.wi = _dr_array(mi.Vector3f, wo_m, 3)
+        self.mirror = _dr_array(mi.Color3f, cache.mirror, 3)
         self.S = S
         # the lobe's control variate (see .light_cache): the inverse densities, the estimate of
         # the diffuse albedo per position (rho_d times it is the diffuse part of the estimated
         # albedo), the constant c, and the albedo quadrature's nodes around each view direction
-        self.inv_pdf = mi.Float(cache.inv_pdf.ravel())
+        self.inv_pdf = _dr_array(mi.Float, cache.inv_pdf)
         up = (cache.wi[..., 2] > 0) & (cache.wo[..., 2] > 0)
         d_hat = (np.clip(cache.wi[..., 2], 0, None) / np.pi * up * cache.inv_pdf)
-        self.d_hat = mi.Float(d_hat.reshape(P * T * S, -1).sum(axis=1))
-        self.c = mi.Color3f(*flat(cache.mirror_sky, 3))
+        self.d_hat = _dr_array(mi.Float, d_hat.reshape(P * T * S, -1).sum(axis=1))
+        self.c = _dr_array(mi.Color3f, cache.mirror_sky, 3)
         # the sky function's integrals (.sky_control), per position's share
         cache.check_normalisation(normalisation)
-        self.diffuse_sky = mi.Color3f(*flat(cache.diffuse_sky / S, 3))
-        self.lobe_sky = [mi.Color3f(*flat(cache.lobe_sky[:, :, :, m] / S, 3))
+        self.diffuse_sky = _dr_array(mi.Color3f, cache.diffuse_sky / S, 3)
+        self.lobe_sky = [_dr_array(mi.Color3f, cache.lobe_sky[:, :, :, m] / S, 3)
                          for m in range(cache.lobe_sky.shape[3])]
         a, b, c = lobe_albedo_nodes()
         self.J = len(a)
         self.si_q = dr.zeros(mi.SurfaceInteraction3f, P * T * S * self.J)
-        self.si_q.wi = mi.Vector3f(*flat(np.repeat(wo_m, self.J, axis=2), 3))
-        self.nodes = [mi.Float(np.tile(x, P * T * S)) for x in (a, b, c)]
+        self.si_q.wi = _dr_array(mi.Vector3f, np.repeat(wo_m, self.J, axis=2), 3)
+        self.nodes = [_dr_array(mi.Float, np.tile(x, P * T * S)) for x in (a, b, c)]
         # the model's plugin, and a two-parameter one for the basis L = rho_d D + rho_s G(sigma)
         # of the Jacobian (rho_s = 0: D; rho_s = 1: G), each with the literal values it keeps
         # between evaluations
@@ -447,9 +454,9 @@ class RegionRenderModel:
         rng = np.random.default_rng(seed)
         pos = (np.repeat(self.pixels, self.spp, axis=0) + rng.random((len(self.pixels) * self.spp, 2)))
         pos = pos / [w, h]
-        self.rays = mi.RayDifferential3f(
-            sensor.sample_ray(mi.Float(0.0), mi.Float(0.5), mi.Point2f(pos[:, 0], pos[:, 1]),
-                              mi.Point2f(0.5, 0.5))[0])
+        self.rays = mi.RayDifferential3f(sensor.sample_ray(
+            mi.Float(0.0), mi.Float(0.5), jit_array(mi.Point2f, pos[:, 0], pos[:, 1]),
+            mi.Point2f(0.5, 0.5))[0])
         self.evaluations = 0
         spp, n, integrator = self.spp, len(self.pixels) * self.spp, self.integrator
 

@@ -59,6 +59,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..physics.ward import SIGMA_MIRROR
+from .daylight import jit_array
 from .sky_control import chebyshev_coefficients, quadrature, sky_integrals, to_numpy
 
 #: Roughnesses of the Ward sampling lobes in the direction mixture.
@@ -357,7 +358,8 @@ class _SharedSky:
         into ``target`` (-1 elsewhere), world normals and mirror directions (Q, 3)."""
         pos = (np.asarray(xy) + 0.5) / np.asarray(size, dtype=float)
         ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
-                                   mi.Point2f(pos[:, 0], pos[:, 1]), mi.Point2f(0.5, 0.5))
+                                   jit_array(mi.Point2f, pos[:, 0], pos[:, 1]),
+                                   mi.Point2f(0.5, 0.5))
         si = scene.ray_intersect(ray)
         n = np.array(si.sh_frame.n, dtype=float).T
         m = np.array(si.to_world(mi.reflect(si.wi)), dtype=float).T
@@ -375,9 +377,8 @@ class _SharedSky:
         used = np.unique(self.corner[ok])
         own = np.flatnonzero(~ok)
         # the anchors used and the pixels that take their own, in one pass
-        d, c = _sky_integrals(emitter, dr.gather(
-            mi.SurfaceInteraction3f, self.si, mi.UInt32(np.concatenate([used, self.A + own]))),
-            quad)
+        index = jit_array(mi.UInt32, np.concatenate([used, self.A + own]))
+        d, c = _sky_integrals(emitter, dr.gather(mi.SurfaceInteraction3f, self.si, index), quad)
         diffuse, lobe_c = np.zeros((len(ok), 3)), np.zeros((len(ok),) + c.shape[1:])
         at = np.full(self.A, -1)
         at[used] = np.arange(used.size)
@@ -388,22 +389,24 @@ class _SharedSky:
         return diffuse, lobe_c, int(ok.sum())
 
 
-def _trace_frame(mi, dr, scene, integrator, target, lobes, quad, fixed, x, static):
-    """One frame of :func:`build_light_cache` in Dr.Jit alone (nothing read back), so that
-    ``dr.freeze`` records its kernels and replays them for the other frames (it records twice,
-    then sees which inputs change): tracing the scene, the sky plugin and the lobes from
-    Python took most of a small cache's time.
+def _trace_frame(mi, dr, scene, integrator, target, fixed, x, static):
+    """One frame's light of :func:`build_light_cache` at its sampled directions, in Dr.Jit
+    (nothing read back): ``fixed`` the index arrays and sampler
+    shared by every frame, ``x`` the frame's values (the primary rays' ``origin`` and
+    ``direction``, the directions' samples ``u`` and ``component``, each component's
+    ``share`` of them, the samplers' ``seeds`` and the ``sun``'s direction), ``static`` the
+    widths.  Returns a dict of Dr.Jit values (see the caller), ``at`` the surface
+    interactions whose sky integrals the caller takes.
 
-    ``lobes`` the sampling lobes, ``quad`` the sky integrals' :func:`~.sky_control.quadrature`
-    and ``fixed`` the index arrays and the sampler shared by every frame: Dr.Jit inputs, never
-    captured.  ``x`` the frame's values: the primary rays' ``origin`` and ``direction`` (made
-    outside: not every sensor's members are visible to ``dr.freeze``), the directions'
-    samples ``u`` and ``component``, each component's ``share`` of them, the samplers'
-    ``seeds`` and the ``sun``'s direction (opaque values, or arrays from
-    :func:`~.daylight.jit_array`: an input's alignment is part of a recording's key).
-    ``static`` holds what the recording depends on (widths, the sky integrals' mode
-    ``own``/``subset``/``shared``, whether the sky has a map), so each variant is recorded once.
-    Returns a dict of Dr.Jit values (see the caller)."""
+    The sampling lobes and the sky's lobe integrals use the Ward lobe as functions
+    (:mod:`.plugins.ward`), not plugins: every registered BSDF is one more target of the path
+    integrator's virtual calls, traced in every frame (22 such plugins made a prediction's
+    cache 1.7x slower).  (Recording a frame with ``dr.freeze`` and replaying it was tried:
+    in Mitsuba 3.9.1 / Dr.Jit 1.5.0 the replayed path integrator's radiance came out NaN in
+    a few dozen lanes of one frame in about one build of five, and recording only the sky's
+    integrals saved 6%.)"""
+    from .plugins.ward import glossy_pdf, sample_glossy
+
     emitter = scene.environment()
     si = scene.ray_intersect(mi.Ray3f(x["origin"], x["direction"]))
     # the index into ``target`` of the shape each position lies on, -1 elsewhere
@@ -413,12 +416,10 @@ def _trace_frame(mi, dr, scene, integrator, target, lobes, quad, fixed, x, stati
     # each position repeated for its directions; candidates from every component, then each
     # sample's own
     sik = dr.gather(mi.SurfaceInteraction3f, si, fixed["repeat"])
-    u2, ctx = x["u"], mi.BSDFContext()
+    u2 = x["u"]
     cands = [emitter.sample_sun(u2), emitter.sample_sky(u2),
              sik.to_world(mi.warp.square_to_cosine_hemisphere(u2))]
-    for b in lobes:
-        bs, _ = b.sample(ctx, sik, mi.Float(0.0), u2)
-        cands.append(sik.to_world(bs.wo))
+    cands += [sik.to_world(sample_glossy(sik.wi, u2, s)) for s in LOBE_SIGMAS]
     d = cands[0]
     for c in range(1, len(cands)):
         d = dr.select(x["component"] == c, cands[c], d)
@@ -427,8 +428,9 @@ def _trace_frame(mi, dr, scene, integrator, target, lobes, quad, fixed, x, stati
     wl = sik.to_local(d)
     p_mix = share[0] * emitter.pdf_sun(d) + share[1] * emitter.pdf_sky(d) \
         + share[2] * dr.maximum(mi.Frame3f.cos_theta(wl), 0.0) * dr.inv_pi
-    for j, b in enumerate(lobes):
-        p_mix += share[3 + j] * b.pdf(ctx, sik, wl)
+    facing = (mi.Frame3f.cos_theta(sik.wi) > 0) & (mi.Frame3f.cos_theta(wl) > 0)
+    for j, s in enumerate(LOBE_SIGMAS):
+        p_mix += share[3 + j] * dr.select(facing, glossy_pdf(sik.wi, wl, s), 0.0)
     sampler = fixed["sampler"]
     sampler.seed(x["seeds"][0], static["lanes"])
     li, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(sik.spawn_ray(d)))
@@ -442,18 +444,15 @@ def _trace_frame(mi, dr, scene, integrator, target, lobes, quad, fixed, x, stati
     # the same without the solar disc: the control variate's constant
     sun_seen = ~scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
     lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0) - emitter.sky_eval(ray_m.d)
-    out = {"wo": si.wi, "wi": wl, "weight": weight, "inv_pdf": inv_pdf, "mirror": lm,
-           "mirror_sky": lm_sky, "shape": shape, "sun": si.to_local(x["sun"])}
-    if static["sky"] != "shared":
-        at = si if static["sky"] == "own" else dr.gather(mi.SurfaceInteraction3f, si,
-                                                          fixed["subset"])
-        out["diffuse"], out["lobe"] = sky_integrals(emitter, at, quad)
-    return out
+    return {"wo": si.wi, "wi": wl, "weight": weight, "inv_pdf": inv_pdf, "mirror": lm,
+            "mirror_sky": lm_sky, "shape": shape, "sun": si.to_local(x["sun"]),
+            "at": si if "subset" not in fixed else dr.gather(mi.SurfaceInteraction3f, si,
+                                                              fixed["subset"])}
 
 
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
                       directions=DIRECTIONS, seed=0, max_depth=3, normalisation="ward",
-                      sky_positions=None, sky_spacing=None, stats=None, freeze=True):
+                      sky_positions=None, sky_spacing=None, stats=None):
     """Trace the light arriving at ``pixels`` for every sky in ``skies``.
 
     Parameters
@@ -480,9 +479,6 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         order in the anchors' spacing (docs/BENCHMARKS.md)
     stats : None, or a dict that receives ``shared``, the number of (pixel, frame) pairs whose
         sky integrals were interpolated
-    freeze : replay the first frame's Dr.Jit recording for every other frame (``dr.freeze``,
-        :func:`_trace_frame`); False traces every frame from Python (the same values: the
-        reference the replay is tested against)
 
     Returns
     -------
@@ -491,7 +487,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     import drjit as dr
     import mitsuba as mi
 
-    from .daylight import jit_array, opaque_value, update_sky
+    from .daylight import opaque_value, update_sky
 
     rays = pixels if isinstance(pixels, PointRays) else None
     if rays is None:
@@ -501,8 +497,6 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     P, S, K = len(pixels), int(positions), int(directions)
     emitter = scene.environment()
     integrator = mi.load_dict({"type": "path", "max_depth": int(max_depth)})
-    lobes = [mi.load_dict({"type": "ward", "rho_d": 0.0, "rho_s": 1.0, "sigma_alpha": s})
-             for s in LOBE_SIGMAS]
     # the material each pixel must show (one for all, or one per pixel: a map's chunk)
     want = np.broadcast_to(np.asarray(bsdf_id, dtype=object), (P,))
     target = [s for s in scene.shapes() if s.bsdf().id() in set(want)]
@@ -528,17 +522,11 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     # shared between anchors (computed apart, with _SharedSky's own trace)
     k = S if sky_positions is None else min(max(1, int(sky_positions)), S)
     static = {"lanes": P * S * K, "positions": P * S, "samples": S * K}
-    # (an object made inside a recording would change Dr.Jit's registry, and with it the
-    # recording's key: the sampler is made once, outside)
-    fixed = {"repeat": mi.UInt32(np.repeat(np.arange(P * S), K)),
+    fixed = {"repeat": jit_array(mi.UInt32, np.repeat(np.arange(P * S), K)),
              "sampler": mi.load_dict({"type": "independent"})}
     if k < S:
-        fixed["subset"] = mi.UInt32((np.arange(P)[:, None] * S + np.arange(k)[None, :]).ravel())
+        fixed["subset"] = jit_array(mi.UInt32, np.arange(P)[:, None] * S + np.arange(k)[None, :])
 
-    def trace(scene, lobes, quad, fixed, x, static):
-        return _trace_frame(mi, dr, scene, integrator, target, lobes, quad, fixed, x, static)
-    # traced once from Python and replayed for every other frame (see _trace_frame)
-    frame = dr.freeze(trace) if freeze else trace
     out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos",
                            "hit", "sun_half_cos", "diffuse_sky", "lobe_sky")}
     ids = np.array([shape.bsdf().id() for shape in target], dtype=object)
@@ -553,7 +541,8 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
             # primary rays: S stratified positions in each pixel
             pos = (pixels[:, None, :] + _stratified(rng, S)[None]).reshape(P * S, 2) / [w, h]
             ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
-                                       mi.Point2f(pos[:, 0], pos[:, 1]), mi.Point2f(0.5, 0.5))
+                                       jit_array(mi.Point2f, pos[:, 0], pos[:, 1]),
+                                       mi.Point2f(0.5, 0.5))
             x["origin"], x["direction"] = ray.o, ray.d
         else:
             # a point's S positions are the same ray (a measured point has no pixel area)
@@ -565,16 +554,10 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
                             for c in range(n_comp)], axis=1).reshape(P * S * K, 2)
         x["u"] = jit_array(mi.Point2f, u[:, 0], u[:, 1])
         shared = share is not None and sky.envmap is None
-        mode = dict(static, has_map=sky.envmap is not None,
-                    sky="shared" if shared else "own" if k >= S else "subset")
-        try:
-            r = frame(scene, lobes, quad, fixed, x, mode)
-        except RuntimeError:
-            if frame is trace:
-                raise
-            # a scene object whose members dr.freeze cannot see: every frame from Python
-            frame = trace
-            r = frame(scene, lobes, quad, fixed, x, mode)
+        r = _trace_frame(mi, dr, scene, integrator, target, fixed, x, static)
+        if not shared:
+            r["diffuse"], r["lobe"] = sky_integrals(emitter, r.pop("at"), quad)
+        dr.eval(r)                    # together: shared parts (the mixture density...) once
 
         def np3(v, n):
             return np.array(v, dtype=np.float32).T.reshape(P, n, 3)

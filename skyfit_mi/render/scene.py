@@ -4,6 +4,7 @@ import numpy as np
 
 from ..conventions import direction_from_angles
 from ..errors import SkyfitError, check_range
+from .daylight import jit_array
 
 
 def camera_origin(azimuth_deg, angle_deg, distance, target=(0.0, 0.0, 0.0)):
@@ -103,6 +104,6 @@ def pixel_views(scene, pixels, m=8):
     g = (np.arange(m) + 0.5) / m
     u = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
     pos = (np.asarray(pixels)[:, None, :] + u[None]).reshape(-1, 2) / [w, h]
-    ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5), mi.Point2f(pos[:, 0], pos[:, 1]),
-                               mi.Point2f(0.5, 0.5))
+    ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
+                               jit_array(mi.Point2f, pos[:, 0], pos[:, 1]), mi.Point2f(0.5, 0.5))
     return -np.array(ray.d, dtype=float).T.reshape(len(pixels), m * m, 3)

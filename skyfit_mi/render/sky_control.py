@@ -70,7 +70,9 @@ def _tables(n_rays, n, smoothstep):
 
 def _table_arrays(mi, n_rays, n, smoothstep):
     """:func:`_tables` as Dr.Jit arrays."""
-    return [mi.Float(np.asarray(t, np.float32)) for t in _tables(n_rays, n, smoothstep)]
+    from .daylight import jit_array
+
+    return [jit_array(mi.Float, t) for t in _tables(n_rays, n, smoothstep)]
 
 
 def _per_node(mi, dr, Q, tables):
@@ -182,15 +184,14 @@ def _sky_sum(mi, dr, emitter, si, wi, w, q, J, f=1.0):
     return dr.block_sum(f * emitter.sky_eval(frame.to_world(wi)) * w, J)
 
 
-def _lobe_sum(mi, dr, emitter, si, up, lobe, sigma, resolution, tables=None):
-    """I_s of every interaction of ``si`` through ``lobe`` (a rho_s = 1 ``ward`` plugin whose
-    roughness is ``sigma``, an opaque mi.Float) at quadrature ``resolution`` (Q) Dr.Jit."""
+def _lobe_sum(mi, dr, emitter, si, up, sigma, resolution, normalisation, tables=None):
+    """I_s of every interaction of ``si`` through the rho_s = 1 lobe of ``normalisation`` at
+    roughness ``sigma`` (a Dr.Jit value) and quadrature ``resolution``: (Q) Dr.Jit colours."""
+    from .plugins.ward import lobe
+
     wi, w, q, J = lobe_directions(si.wi, up, sigma, *resolution, tables=tables)
-    at_node = dr.zeros(mi.SurfaceInteraction3f, dr.width(wi))
-    at_node.wi = dr.gather(mi.Vector3f, si.wi, q)
-    glossy = mi.BSDFContext()
-    glossy.component = 1
-    return _sky_sum(mi, dr, emitter, si, wi, w, q, J, lobe.eval(glossy, at_node, wi))
+    f = lobe(dr.gather(mi.Vector3f, si.wi, q), wi, sigma, normalisation) * wi.z
+    return _sky_sum(mi, dr, emitter, si, wi, w, q, J, f)
 
 
 def to_numpy(colours):
@@ -207,35 +208,27 @@ def diffuse_integral(emitter, si, up):
     return to_numpy(_sky_sum(mi, dr, emitter, si, *diffuse_directions(up)))
 
 
-def lobe_integral(emitter, si, up, lobe, sigma):
-    """I_s(sigma) of every surface interaction in ``si`` (Q): the sky function through the lobe
-    of ``lobe``, a ``ward`` plugin of rho_s = 1 (its roughness is set to ``sigma``), times
-    cos(theta_i); (Q, 3) [W m^-2 sr^-1]."""
+def lobe_integral(emitter, si, up, sigma, normalisation="ward"):
+    """I_s(sigma) of every surface interaction in ``si`` (Q): the sky function through the
+    rho_s = 1 lobe of ``normalisation`` at roughness ``sigma``, times cos(theta_i); (Q, 3)
+    [W m^-2 sr^-1]."""
     import drjit as dr
     import mitsuba as mi
 
-    s = _set_roughness(mi, dr, lobe, sigma)
-    return to_numpy(_lobe_sum(mi, dr, emitter, si, up, lobe, s, lobe_resolution(sigma)))
+    from .daylight import opaque_value
 
-
-def _set_roughness(mi, dr, lobe, sigma):
-    """Set the ``ward`` plugin ``lobe``'s roughness to ``sigma`` as an opaque value (one kernel
-    for every sigma); returns that value."""
-    s = mi.Float(float(sigma))
-    dr.make_opaque(s)
-    params = mi.traverse(lobe)
-    params["sigma_alpha"] = s
-    params.update()
-    return s
+    return to_numpy(_lobe_sum(mi, dr, emitter, si, up, opaque_value(mi.Float, sigma),
+                              lobe_resolution(sigma), normalisation))
 
 
 def quadrature(lo, hi, normalisation):
-    """The fixed inputs of :func:`sky_integrals` for the Chebyshev series on [lo, hi]: the
-    quadratures' tables as Dr.Jit arrays and, per node, a rho_s = 1 ``ward`` lobe of
-    ``normalisation`` at the node's roughness (opaque).  A dict of Dr.Jit values and plugins,
-    so that a frozen function (``dr.freeze``) takes it as an input and never captures it."""
-    import drjit as dr
+    """The fixed inputs of :func:`sky_integrals` for the Chebyshev series on [lo, hi] of the
+    lobe of ``normalisation``: the quadratures' tables as Dr.Jit arrays and, per node, its
+    roughness (opaque) and resolution.  A dict, so that a frozen function (``dr.freeze``)
+    takes it as an input and never captures it."""
     import mitsuba as mi
+
+    from .daylight import opaque_value
 
     tables = {}
 
@@ -244,15 +237,10 @@ def quadrature(lo, hi, normalisation):
         if key not in tables:
             tables[key] = _table_arrays(mi, *res, smoothstep)
         return key
-    nodes = []
-    for sigma in chebyshev_nodes(lo, hi):
-        lobe = mi.load_dict({"type": "ward", "model": "two", "rho_s": 1.0,
-                             "sigma_alpha": float(sigma), "normalisation": normalisation})
-        res = lobe_resolution(sigma)
-        nodes.append({"lobe": lobe, "sigma": _set_roughness(mi, dr, lobe, sigma),
-                      "resolution": res, "table": table(res, True)})
+    nodes = [{"sigma": opaque_value(mi.Float, sigma), "resolution": lobe_resolution(sigma),
+              "table": table(lobe_resolution(sigma), True)} for sigma in chebyshev_nodes(lo, hi)]
     diffuse = table((DIFFUSE_AZIMUTHS, DIFFUSE_POLAR), False)
-    return {"tables": tables, "diffuse": diffuse, "nodes": nodes}
+    return {"tables": tables, "diffuse": diffuse, "nodes": nodes, "normalisation": normalisation}
 
 
 def sky_integrals(emitter, si, quad):
@@ -266,8 +254,9 @@ def sky_integrals(emitter, si, quad):
     tables = quad["tables"]
     diffuse = _sky_sum(mi, dr, emitter, si, *diffuse_directions(
         up, DIFFUSE_AZIMUTHS, DIFFUSE_POLAR, tables[quad["diffuse"]]))
-    return diffuse, [_lobe_sum(mi, dr, emitter, si, up, n["lobe"], n["sigma"], n["resolution"],
-                               tables[n["table"]]) for n in quad["nodes"]]
+    return diffuse, [_lobe_sum(mi, dr, emitter, si, up, n["sigma"], n["resolution"],
+                               quad["normalisation"], tables[n["table"]])
+                     for n in quad["nodes"]]
 
 
 def chebyshev_nodes(lo, hi, n=CHEBYSHEV_NODES):

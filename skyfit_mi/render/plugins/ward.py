@@ -104,25 +104,6 @@ class WardBSDF(mi.BSDF):
         spec = dr.select(ps >= METAL_THRESHOLD, c * ps, mi.Color3f(ps))
         return c * (1.0 - ps), spec, sigma
 
-    def _lobe(self, wi, wo, sigma):
-        """Specular lobe value (no rho_s) [sr^-1], as skyfit_mi.physics.ward.specular_lobe."""
-        ci, co = mi.Frame3f.cos_theta(wi), mi.Frame3f.cos_theta(wo)
-        hu = wi + wo
-        hz = hu.z
-        hh = dr.squared_norm(hu)
-        s2 = dr.square(dr.maximum(sigma, SIGMA_MIRROR))
-        hz2 = dr.maximum(dr.square(hz), 1e-20)
-        # tan^2 delta from the tangential components: (hh - hz^2) cancels in single precision
-        # (an error of 0.15% in the exponent at sigma = 0.01)
-        e = dr.exp(-(dr.square(hu.x) + dr.square(hu.y)) / (hz2 * s2))
-        if self.normalisation == "ward":
-            f = e / (4.0 * dr.pi * s2 * dr.safe_sqrt(ci * co))                   # eq. 3.19
-        elif self.normalisation == "duer":
-            f = e / (4.0 * dr.pi * s2 * ci * co)
-        else:
-            f = e * hh / (dr.pi * s2 * dr.square(hz2))
-        return dr.select((ci > 0) & (co > 0) & (sigma > SIGMA_MIRROR), f, 0.0)
-
     def _mirror_fraction(self, cos_i):
         return dr.clip(cos_i, 0.0, 1.0) if self.normalisation == "ward" else mi.Float(1.0)
 
@@ -151,15 +132,6 @@ class WardBSDF(mi.BSDF):
                 ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 1),
                 ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 2))
 
-    def _glossy_pdf(self, wi, wo, sigma):
-        """Walter's half-vector density mapped to wo [sr^-1]."""
-        h = dr.normalize(wi + wo)
-        cz = dr.maximum(h.z, 1e-6)
-        s2 = dr.square(dr.maximum(sigma, SIGMA_MIRROR))
-        tan2 = (dr.square(h.x) + dr.square(h.y)) / (cz * cz)
-        d_h = dr.exp(-tan2 / s2) / (dr.pi * s2 * cz * cz * cz)
-        return d_h / (4.0 * dr.maximum(dr.abs(dr.dot(wo, h)), 1e-6))
-
     def eval(self, ctx, si, wo, active=True):
         wi = si.wi
         ci, co = mi.Frame3f.cos_theta(wi), mi.Frame3f.cos_theta(wo)
@@ -172,7 +144,7 @@ class WardBSDF(mi.BSDF):
                                  * (1.0 - self._fresnel(co, rho_s, sigma)))
             f += rho_d * dr.inv_pi
         if en_g:
-            f += rho_s * self._lobe(wi, wo, sigma)
+            f += rho_s * lobe(wi, wo, sigma, self.normalisation)
         valid = mi.Bool(active) & (ci > 0) & (co > 0)
         return mi.Spectrum(dr.select(valid, f * co, 0.0))
 
@@ -188,7 +160,7 @@ class WardBSDF(mi.BSDF):
         if en_d:
             pdf += (1.0 - p_spec) * co * dr.inv_pi
         if en_g:
-            pdf += dr.select(mirror, 0.0, p_spec * self._glossy_pdf(wi, wo, sigma))
+            pdf += dr.select(mirror, 0.0, p_spec * glossy_pdf(wi, wo, sigma))
         valid = mi.Bool(active) & (ci > 0) & (co > 0)
         return dr.select(valid, pdf, 0.0)
 
@@ -209,14 +181,7 @@ class WardBSDF(mi.BSDF):
         if not en_delta:
             pick_spec &= ~mirror
 
-        # Walter: tan^2 delta = -sigma^2 ln(1 - u), phi = 2 pi v
-        s2 = dr.square(dr.maximum(sigma, SIGMA_MIRROR))
-        tan2 = -s2 * dr.log(dr.maximum(1.0 - sample2.x, 1e-12))
-        cos_h = dr.rsqrt(1.0 + tan2)
-        sin_h = dr.safe_sqrt(1.0 - cos_h * cos_h)
-        sp, cp = dr.sincos(2.0 * dr.pi * sample2.y)
-        h = mi.Vector3f(sin_h * cp, sin_h * sp, cos_h)
-        wo_glossy = mi.reflect(wi, h)
+        wo_glossy = sample_glossy(wi, sample2, sigma)
         wo_mirror = mi.reflect(wi)
         wo_diffuse = mi.warp.square_to_cosine_hemisphere(sample2)
 
@@ -244,3 +209,48 @@ class WardBSDF(mi.BSDF):
     def to_string(self):
         vals = ", ".join(f"{k}={getattr(self, k)}" for k in self.names)
         return f"WardBSDF[model={self.model}, normalisation={self.normalisation}, {vals}]"
+
+
+# ---- the glossy lobe as functions of the roughness (the light cache's sampling lobes and the
+# sky's lobe integrals use them without plugins: every registered BSDF is one more target of
+# the path integrator's virtual calls, traced in each frame) ----------------------------------
+def lobe(wi, wo, sigma, normalisation):
+    """Specular lobe value (no rho_s) [sr^-1] at roughness ``sigma`` (any Dr.Jit value), as
+    skyfit_mi.physics.ward.specular_lobe; 0 below either horizon and for a mirror."""
+    ci, co = mi.Frame3f.cos_theta(wi), mi.Frame3f.cos_theta(wo)
+    hu = wi + wo
+    hz = hu.z
+    hh = dr.squared_norm(hu)
+    s2 = dr.square(dr.maximum(sigma, SIGMA_MIRROR))
+    hz2 = dr.maximum(dr.square(hz), 1e-20)
+    # tan^2 delta from the tangential components: (hh - hz^2) cancels in single precision
+    # (an error of 0.15% in the exponent at sigma = 0.01)
+    e = dr.exp(-(dr.square(hu.x) + dr.square(hu.y)) / (hz2 * s2))
+    if normalisation == "ward":
+        f = e / (4.0 * dr.pi * s2 * dr.safe_sqrt(ci * co))                       # eq. 3.19
+    elif normalisation == "duer":
+        f = e / (4.0 * dr.pi * s2 * ci * co)
+    else:
+        f = e * hh / (dr.pi * s2 * dr.square(hz2))
+    return dr.select((ci > 0) & (co > 0) & (sigma > SIGMA_MIRROR), f, 0.0)
+
+
+def glossy_pdf(wi, wo, sigma):
+    """Walter's half-vector density mapped to wo [sr^-1] (:func:`sample_glossy`'s)."""
+    h = dr.normalize(wi + wo)
+    cz = dr.maximum(h.z, 1e-6)
+    s2 = dr.square(dr.maximum(sigma, SIGMA_MIRROR))
+    tan2 = (dr.square(h.x) + dr.square(h.y)) / (cz * cz)
+    d_h = dr.exp(-tan2 / s2) / (dr.pi * s2 * cz * cz * cz)
+    return d_h / (4.0 * dr.maximum(dr.abs(dr.dot(wo, h)), 1e-6))
+
+
+def sample_glossy(wi, sample2, sigma):
+    """A direction reflected about a half vector from Walter's sampling of the lobe:
+    tan^2 delta = -sigma^2 ln(1 - u), phi = 2 pi v."""
+    s2 = dr.square(dr.maximum(sigma, SIGMA_MIRROR))
+    tan2 = -s2 * dr.log(dr.maximum(1.0 - sample2.x, 1e-12))
+    cos_h = dr.rsqrt(1.0 + tan2)
+    sin_h = dr.safe_sqrt(1.0 - cos_h * cos_h)
+    sp, cp = dr.sincos(2.0 * dr.pi * sample2.y)
+    return mi.reflect(wi, mi.Vector3f(sin_h * cp, sin_h * sp, cos_h))
