@@ -224,8 +224,7 @@ def lobe_integral(emitter, si, up, sigma, normalisation="ward"):
 def quadrature(lo, hi, normalisation):
     """The fixed inputs of :func:`sky_integrals` for the Chebyshev series on [lo, hi] of the
     lobe of ``normalisation``: the quadratures' tables as Dr.Jit arrays and, per node, its
-    roughness (opaque) and resolution.  A dict, so that a frozen function (``dr.freeze``)
-    takes it as an input and never captures it."""
+    roughness (opaque: one kernel for all) and resolution; made once for every frame."""
     import mitsuba as mi
 
     from .daylight import opaque_value
@@ -246,7 +245,7 @@ def quadrature(lo, hi, normalisation):
 def sky_integrals(emitter, si, quad):
     """I_d and I_s at each Chebyshev node of ``quad`` (:func:`quadrature`) for every surface
     interaction of ``si`` (Q) under the emitter's current sky: Dr.Jit colours (Q) and a list
-    of them [W m^-2 sr^-1].  Dr.Jit only (no read back), so ``dr.freeze`` can record it."""
+    of them [W m^-2 sr^-1], not yet evaluated (the caller evaluates them with the rest)."""
     import drjit as dr
     import mitsuba as mi
 
