@@ -13,7 +13,7 @@ widths over the clean ones' (the issue's 1.5x goal, judged on widths over noise 
 than one realisation's, which follow where each fit lands on the rho_s - sigma_alpha ridge).
 
     .venv/bin/python scripts/ingest_coverage.py [--quality 100 95] [--seeds 8] [--scale 1]
-        [--clean [--clean-noise PERCENT]] [--true-noise] [-o DIR]
+        [--first-seed N] [--clean [--clean-noise PERCENT]] [--true-noise] [-o DIR]
 """
 
 import argparse
@@ -33,6 +33,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quality", type=int, nargs="+", default=[100, 95])
     ap.add_argument("--seeds", type=int, default=8)
+    ap.add_argument("--first-seed", type=int, default=0,
+                    help="photograph with seeds FIRST .. FIRST + SEEDS - 1 (to add seeds to a run)")
     ap.add_argument("--scale", type=int, default=1,
                     help="frame size as a multiple of the test's 64x44 (more pixels inside the "
                          "materials, away from the JPEG's edge blocks)")
@@ -74,9 +76,14 @@ def main():
         inside, widths, chi2 = [], [], []
         for seq in sequences:
             fit = fit_region(seq, "sample", pixels, model="colour", **quiet)
+            missed = []
             for k, t in TRUTH.items():
                 lo, hi = fit["intervals"][k]["95"]
                 inside.append(lo <= t <= hi)
+                if not inside[-1]:
+                    missed.append(f"{k} {fit['parameters'][k]:.4g} [{lo:.4g}, {hi:.4g}]")
+            if missed:
+                print(f"<!-- {seq.name} misses: {'; '.join(missed)} -->", flush=True)
             widths.append([fit["intervals"][k]["95"][1] - fit["intervals"][k]["95"][0]
                            for k in TRUTH])
             chi2.append(fit["chi2_per_dof"])
@@ -101,7 +108,7 @@ def main():
         medians["clean"] = row("clean", clean)
     for q in args.quality:
         sequences = []
-        for seed in range(args.seeds):
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
             photos = work / f"q{q}_s{seed}"
             photograph_day(truth, photos, seed=seed, quality=q)
             seq = work / f"seq_q{q}_s{seed}"

@@ -389,14 +389,14 @@ class _SharedSky:
         return diffuse, lobe_c, int(ok.sum())
 
 
-def _trace_frame(mi, dr, scene, integrator, target, fixed, x, static):
+def _trace_frame(mi, dr, scene, integrator, fixed, x, static):
     """One frame's light of :func:`build_light_cache` at its sampled directions, in Dr.Jit
     (nothing read back): ``fixed`` the index arrays and sampler
     shared by every frame, ``x`` the frame's values (the primary rays' ``origin`` and
     ``direction``, the directions' samples ``u`` and ``component``, each component's
     ``share`` of them, the samplers' ``seeds`` and the ``sun``'s direction), ``static`` the
-    widths.  Returns a dict of Dr.Jit values (see the caller), ``at`` the surface
-    interactions whose sky integrals the caller takes.
+    widths.  Returns a dict of Dr.Jit values (see the caller), ``si`` the surface
+    interactions at the positions.
 
     The sampling lobes and the sky's lobe integrals use the Ward lobe as functions
     (:mod:`.plugins.ward`), not plugins: every registered BSDF is one more target of the path
@@ -409,10 +409,6 @@ def _trace_frame(mi, dr, scene, integrator, target, fixed, x, static):
 
     emitter = scene.environment()
     si = scene.ray_intersect(mi.Ray3f(x["origin"], x["direction"]))
-    # the index into ``target`` of the shape each position lies on, -1 elsewhere
-    shape = dr.full(mi.Int32, -1, static["positions"])
-    for j, s in enumerate(target):
-        shape = dr.select(si.is_valid() & (si.shape == mi.ShapePtr(s)), j, shape)
     # each position repeated for its directions; candidates from every component, then each
     # sample's own
     sik = dr.gather(mi.SurfaceInteraction3f, si, fixed["repeat"])
@@ -444,10 +440,8 @@ def _trace_frame(mi, dr, scene, integrator, target, fixed, x, static):
     # the same without the solar disc: the control variate's constant
     sun_seen = ~scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
     lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0) - emitter.sky_eval(ray_m.d)
-    return {"wo": si.wi, "wi": wl, "weight": weight, "inv_pdf": inv_pdf, "mirror": lm,
-            "mirror_sky": lm_sky, "shape": shape, "sun": si.to_local(x["sun"]),
-            "at": si if "subset" not in fixed else dr.gather(mi.SurfaceInteraction3f, si,
-                                                              fixed["subset"])}
+    return {"si": si, "wi": wl, "weight": weight, "inv_pdf": inv_pdf, "mirror": lm,
+            "mirror_sky": lm_sky, "sun": si.to_local(x["sun"])}
 
 
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
@@ -554,14 +548,17 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
                             for c in range(n_comp)], axis=1).reshape(P * S * K, 2)
         x["u"] = jit_array(mi.Point2f, u[:, 0], u[:, 1])
         shared = share is not None and sky.envmap is None
-        r = _trace_frame(mi, dr, scene, integrator, target, fixed, x, static)
+        r = _trace_frame(mi, dr, scene, integrator, fixed, x, static)
+        si = r.pop("si")
+        r["wo"] = si.wi
         if not shared:
-            r["diffuse"], r["lobe"] = sky_integrals(emitter, r.pop("at"), quad)
+            at = si if k >= S else dr.gather(mi.SurfaceInteraction3f, si, fixed["subset"])
+            r["diffuse"], r["lobe"] = sky_integrals(emitter, at, quad)
         dr.eval(r)                    # together: shared parts (the mixture density...) once
 
         def np3(v, n):
             return np.array(v, dtype=np.float32).T.reshape(P, n, 3)
-        sid = np.array(r["shape"], dtype=np.int64)
+        sid = _shape_index(mi, si, target)
         on = (sid >= 0) & (want_s == ids[np.maximum(sid, 0)])
         view = np.array(r["wo"], dtype=float).T
         out["wo"].append(np.repeat(np3(r["wo"], S), K, axis=1))
