@@ -79,23 +79,24 @@ def displayed(values, settings):
     return np.ascontiguousarray(apply_orientation(values, settings.get("orientation", 1)))
 
 
-#: Per EXIF orientation, which axis of the file (0 its x, 1 its y) each displayed axis (x, y)
-#: runs along, and whether reversed (:func:`~.photos.apply_orientation`'s turns).
-_AXES = {1: ((0, False), (1, False)), 2: ((0, True), (1, False)), 3: ((0, True), (1, True)),
-         4: ((0, False), (1, True)), 5: ((1, False), (0, False)), 6: ((1, True), (0, False)),
-         7: ((1, True), (0, True)), 8: ((1, False), (0, True))}
-
-
 def block_offset(orientation, shape, block=8):
     """(x, y) of the JPEG's block grid in a frame displayed with ``shape`` (H, W, ...) after
     EXIF ``orientation``, each in [0, block): a displayed pixel (x, y) lies in block
     ((x - ox) // block, (y - oy) // block).  The file's blocks start at its top left; a turn
-    that reverses an axis of the file moves them by its length modulo ``block`` (zero for
-    lengths that are multiples of it)."""
-    h, w = shape[:2]
-    size = (w, h) if orientation in (None, 1, 2, 3, 4) else (h, w)       # the file's (x, y)
-    return tuple(int(size[axis] % block) if reverse else 0
-                 for axis, reverse in _AXES.get(orientation, _AXES[1]))
+    that reverses an axis of the file moves them by its length modulo ``block``.  Found by
+    turning (:func:`~.photos.apply_orientation`) the block indices of a small file with the
+    same lengths modulo ``block``."""
+    from .photos import apply_orientation
+
+    settings = {"orientation": orientation}
+    fh, fw = stored(np.broadcast_to(False, tuple(shape[:2])), settings).shape
+    yy, xx = np.mgrid[0:fh % block + block, 0:fw % block + block] // block
+    shown = apply_orientation(np.stack([yy, xx], axis=-1), orientation)
+
+    def first_edge(line):                      # where the block changes first, modulo block
+        edges = np.flatnonzero(np.any(line[1:] != line[:-1], axis=-1))
+        return int(edges[0] + 1) % block if edges.size else 0
+    return first_edge(shown[0]), first_edge(shown[:, 0])
 
 
 def key(settings):

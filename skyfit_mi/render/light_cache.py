@@ -389,61 +389,6 @@ class _SharedSky:
         return diffuse, lobe_c, int(ok.sum())
 
 
-def _trace_frame(mi, dr, scene, integrator, fixed, x, static):
-    """One frame's light of :func:`build_light_cache` at its sampled directions, in Dr.Jit
-    (nothing read back): ``fixed`` the index arrays and sampler
-    shared by every frame, ``x`` the frame's values (the primary rays' ``origin`` and
-    ``direction``, the directions' samples ``u`` and ``component``, each component's
-    ``share`` of them, the samplers' ``seeds`` and the ``sun``'s direction), ``static`` the
-    widths.  Returns a dict of Dr.Jit values (see the caller), ``si`` the surface
-    interactions at the positions.
-
-    The sampling lobes and the sky's lobe integrals use the Ward lobe as functions
-    (:mod:`.plugins.ward`), not plugins: every registered BSDF is one more target of the path
-    integrator's virtual calls, traced in every frame (22 such plugins made a prediction's
-    cache 1.7x slower).  (Recording a frame with ``dr.freeze`` and replaying it was tried:
-    in Mitsuba 3.9.1 / Dr.Jit 1.5.0 the replayed path integrator's radiance came out NaN in
-    a few dozen lanes of one frame in about one build of five, and recording only the sky's
-    integrals saved 6%.)"""
-    from .plugins.ward import glossy_pdf, sample_glossy
-
-    emitter = scene.environment()
-    si = scene.ray_intersect(mi.Ray3f(x["origin"], x["direction"]))
-    # each position repeated for its directions; candidates from every component, then each
-    # sample's own
-    sik = dr.gather(mi.SurfaceInteraction3f, si, fixed["repeat"])
-    u2 = x["u"]
-    cands = [emitter.sample_sun(u2), emitter.sample_sky(u2),
-             sik.to_world(mi.warp.square_to_cosine_hemisphere(u2))]
-    cands += [sik.to_world(sample_glossy(sik.wi, u2, s)) for s in LOBE_SIGMAS]
-    d = cands[0]
-    for c in range(1, len(cands)):
-        d = dr.select(x["component"] == c, cands[c], d)
-    # mixture density of each chosen direction under every component (balance heuristic)
-    share = x["share"]
-    wl = sik.to_local(d)
-    p_mix = share[0] * emitter.pdf_sun(d) + share[1] * emitter.pdf_sky(d) \
-        + share[2] * dr.maximum(mi.Frame3f.cos_theta(wl), 0.0) * dr.inv_pi
-    facing = (mi.Frame3f.cos_theta(sik.wi) > 0) & (mi.Frame3f.cos_theta(wl) > 0)
-    for j, s in enumerate(LOBE_SIGMAS):
-        p_mix += share[3 + j] * dr.select(facing, glossy_pdf(sik.wi, wl, s), 0.0)
-    sampler = fixed["sampler"]
-    sampler.seed(x["seeds"][0], static["lanes"])
-    li, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(sik.spawn_ray(d)))
-    ok = (p_mix > 0) & (mi.Frame3f.cos_theta(wl) > 0)
-    inv_pdf = dr.select(ok, dr.rcp(dr.maximum(p_mix, 1e-30)) / static["samples"], 0.0)
-    weight = (li - emitter.sky_eval(d)) * inv_pdf                # the control variate's rest
-    # mirror direction at each position
-    sampler.seed(x["seeds"][1], static["positions"])
-    ray_m = mi.RayDifferential3f(si.spawn_ray(si.to_world(mi.reflect(si.wi))))
-    lm, _, _ = integrator.sample(scene, sampler, ray_m)
-    # the same without the solar disc: the control variate's constant
-    sun_seen = ~scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
-    lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0) - emitter.sky_eval(ray_m.d)
-    return {"si": si, "wi": wl, "weight": weight, "inv_pdf": inv_pdf, "mirror": lm,
-            "mirror_sky": lm_sky, "sun": si.to_local(x["sun"])}
-
-
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
                       directions=DIRECTIONS, seed=0, max_depth=3, normalisation="ward",
                       sky_positions=None, sky_spacing=None, stats=None):
@@ -482,6 +427,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     import mitsuba as mi
 
     from .daylight import opaque_value, update_sky
+    from .plugins.ward import glossy_pdf, sample_glossy
 
     rays = pixels if isinstance(pixels, PointRays) else None
     if rays is None:
@@ -515,61 +461,85 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     # of its i.i.d. positions: their mean is still an unbiased estimate of the pixel's), or
     # shared between anchors (computed apart, with _SharedSky's own trace)
     k = S if sky_positions is None else min(max(1, int(sky_positions)), S)
-    static = {"lanes": P * S * K, "positions": P * S, "samples": S * K}
-    fixed = {"repeat": jit_array(mi.UInt32, np.repeat(np.arange(P * S), K)),
-             "sampler": mi.load_dict({"type": "independent"})}
-    if k < S:
-        fixed["subset"] = jit_array(mi.UInt32, np.arange(P)[:, None] * S + np.arange(k)[None, :])
-
+    subset = None if k >= S else jit_array(
+        mi.UInt32, np.arange(P)[:, None] * S + np.arange(k)[None, :])
+    repeat = jit_array(mi.UInt32, np.repeat(np.arange(P * S), K))   # each position K times
+    sampler = mi.load_dict({"type": "independent"})
     out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos",
                            "hit", "sun_half_cos", "diffuse_sky", "lobe_sky")}
     ids = np.array([shape.bsdf().id() for shape in target], dtype=object)
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
         comp = _components(K, _has_sun(sky))
-        x = {"share": [opaque_value(mi.Float, np.sum(comp == c) / K) for c in range(n_comp)],
-             "component": jit_array(mi.UInt32, np.tile(comp, P * S)),
-             "seeds": [opaque_value(mi.UInt32, int(rng.integers(2**31))) for _ in range(2)],
-             "sun": opaque_value(mi.Vector3f, sky.sun_direction)}
+        # each component's share of the directions, opaque: one kernel with and without a sun
+        frac = [opaque_value(mi.Float, np.sum(comp == c) / K) for c in range(n_comp)]
+        seeds = [opaque_value(mi.UInt32, int(rng.integers(2**31))) for _ in range(2)]
         if rays is None:
             # primary rays: S stratified positions in each pixel
             pos = (pixels[:, None, :] + _stratified(rng, S)[None]).reshape(P * S, 2) / [w, h]
             ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
                                        jit_array(mi.Point2f, pos[:, 0], pos[:, 1]),
                                        mi.Point2f(0.5, 0.5))
-            x["origin"], x["direction"] = ray.o, ray.d
         else:
             # a point's S positions are the same ray (a measured point has no pixel area)
             o, d = (np.repeat(a[:, t], S, axis=0) for a in (rays.origins, rays.directions))
-            x["origin"] = jit_array(mi.Point3f, *o.T)
-            x["direction"] = jit_array(mi.Vector3f, *d.T)
+            ray = mi.Ray3f(jit_array(mi.Point3f, *o.T), jit_array(mi.Vector3f, *d.T))
+        si = scene.ray_intersect(ray)
+        sik = dr.gather(mi.SurfaceInteraction3f, si, repeat)
         # stratified within each component's block of directions
         u = np.concatenate([_stratified(rng, int(np.sum(comp == c)), P * S)
                             for c in range(n_comp)], axis=1).reshape(P * S * K, 2)
-        x["u"] = jit_array(mi.Point2f, u[:, 0], u[:, 1])
+        u2 = jit_array(mi.Point2f, u[:, 0], u[:, 1])
+        # candidate directions from every component, then pick each sample's own (the lobes
+        # as functions, not plugins: every registered BSDF is one more target of the path
+        # integrator's virtual calls, traced in every frame)
+        cands = [emitter.sample_sun(u2), emitter.sample_sky(u2),
+                 sik.to_world(mi.warp.square_to_cosine_hemisphere(u2))]
+        cands += [sik.to_world(sample_glossy(sik.wi, u2, s)) for s in LOBE_SIGMAS]
+        cmask = jit_array(mi.UInt32, np.tile(comp, P * S))
+        d = cands[0]
+        for c in range(1, n_comp):
+            d = dr.select(cmask == c, cands[c], d)
+        # mixture density of each chosen direction under every component (balance heuristic)
+        wl = sik.to_local(d)
+        p_mix = frac[0] * emitter.pdf_sun(d) + frac[1] * emitter.pdf_sky(d) \
+            + frac[2] * dr.maximum(mi.Frame3f.cos_theta(wl), 0.0) * dr.inv_pi
+        facing = (mi.Frame3f.cos_theta(sik.wi) > 0) & (mi.Frame3f.cos_theta(wl) > 0)
+        for j, s in enumerate(LOBE_SIGMAS):
+            p_mix += frac[3 + j] * dr.select(facing, glossy_pdf(sik.wi, wl, s), 0.0)
+        sampler.seed(seeds[0], P * S * K)
+        li, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(sik.spawn_ray(d)))
+        ok = (p_mix > 0) & (mi.Frame3f.cos_theta(wl) > 0)
+        inv_pdf = dr.select(ok, dr.rcp(dr.maximum(p_mix, 1e-30)) / (K * S), 0.0)
+        weight = (li - emitter.sky_eval(d)) * inv_pdf                # the control variate's rest
+        # mirror direction at each position
+        sampler.seed(seeds[1], P * S)
+        ray_m = mi.RayDifferential3f(si.spawn_ray(si.to_world(mi.reflect(si.wi))))
+        lm, _, _ = integrator.sample(scene, sampler, ray_m)
+        # the same without the solar disc: the control variate's constant
+        sun_seen = ~scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
+        lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0) - emitter.sky_eval(ray_m.d)
+        sun = si.to_local(opaque_value(mi.Vector3f, sky.sun_direction))
         shared = share is not None and sky.envmap is None
-        r = _trace_frame(mi, dr, scene, integrator, fixed, x, static)
-        si = r.pop("si")
-        r["wo"] = si.wi
-        if not shared:
-            at = si if k >= S else dr.gather(mi.SurfaceInteraction3f, si, fixed["subset"])
-            r["diffuse"], r["lobe"] = sky_integrals(emitter, at, quad)
-        dr.eval(r)                    # together: shared parts (the mixture density...) once
+        own = None if shared else sky_integrals(
+            emitter, si if subset is None else dr.gather(mi.SurfaceInteraction3f, si, subset),
+            quad)
+        dr.eval(si.wi, wl, weight, inv_pdf, lm, lm_sky, sun, own)   # together: shared parts once
 
         def np3(v, n):
             return np.array(v, dtype=np.float32).T.reshape(P, n, 3)
         sid = _shape_index(mi, si, target)
         on = (sid >= 0) & (want_s == ids[np.maximum(sid, 0)])
-        view = np.array(r["wo"], dtype=float).T
-        out["wo"].append(np.repeat(np3(r["wo"], S), K, axis=1))
-        out["wi"].append(np3(r["wi"], S * K))
-        out["weight"].append(np3(r["weight"], S * K))
-        out["inv_pdf"].append(np.array(r["inv_pdf"], dtype=np.float32).reshape(P, S * K))
-        out["mirror_sky"].append(np3(r["mirror_sky"], S))
-        out["mirror"].append(np3(r["mirror"], S) / S)
+        view = np.array(si.wi, dtype=float).T
+        out["wo"].append(np.repeat(view.astype(np.float32).reshape(P, S, 3), K, axis=1))
+        out["wi"].append(np3(wl, S * K))
+        out["weight"].append(np3(weight, S * K))
+        out["inv_pdf"].append(np.array(inv_pdf, dtype=np.float32).reshape(P, S * K))
+        out["mirror_sky"].append(np3(lm_sky, S))
+        out["mirror"].append(np3(lm, S) / S)
         out["mirror_cos"].append(view[:, 2].astype(np.float32).reshape(P, S))
         out["hit"].append(on.reshape(P, S).all(axis=1))
-        out["sun_half_cos"].append(_sun_half_cos(np.array(r["sun"], dtype=float).T, view,
+        out["sun_half_cos"].append(_sun_half_cos(np.array(sun, dtype=float).T, view,
                                                  sky).reshape(P, S))
         if shared:
             diffuse, lobe, n_shared = share.integrals(mi, dr, emitter, quad, sky.sun_direction)
@@ -577,8 +547,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
                 stats["shared"] += n_shared
             diffuse, lobe = diffuse[:, None], lobe[:, None]
         else:
-            diffuse, lobe = (a.reshape(P, -1, *a.shape[1:])
-                             for a in _sky_numpy(r["diffuse"], r["lobe"]))
+            diffuse, lobe = (a.reshape(P, -1, *a.shape[1:]) for a in _sky_numpy(*own))
             if k < S:                                  # the subset's mean for every position
                 diffuse, lobe = (a.mean(axis=1, keepdims=True) for a in (diffuse, lobe))
         out["diffuse_sky"].append(np.broadcast_to(diffuse, (P, S, 3)))
