@@ -11,7 +11,9 @@ scenes/specs/disc_clear_east.toml at 256x256, 64 spp, its disc made of table 7.1
 5. `skyfit relight --no-images` (the prediction alone);
 6. `skyfit chi2map` 60 x 60 over (rho_s, sigma_alpha), others at the fit;
 7. the same with `--profile` (C at its best for each point).
-Prints a markdown table of wall times and the ratio of each to the render's.
+Prints a markdown table of wall times and the ratio of each to the render's; then, in this
+warm process, ``--warm`` predictions without images (the fast path per sequence): each one's
+wall time, its light cache's, and the kernels compiled during it (Dr.Jit's kernel history).
 
     .venv/bin/python scripts/bench_relight.py [-o DIR]
 """
@@ -39,6 +41,8 @@ def timed(args):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-o", "--output", help="work folder (default a temporary one)")
+    ap.add_argument("--warm", type=int, default=4,
+                    help="predictions without images timed in this process (default 4)")
     args = ap.parse_args()
     work = Path(args.output or tempfile.mkdtemp(prefix="bench_relight_"))
     work.mkdir(parents=True, exist_ok=True)
@@ -72,6 +76,40 @@ def main():
     print("| step | wall time [s] | / render |\n|---|---|---|")
     for name, t in rows:
         print(f"| {name} | {t:.1f} | {t / peer:.2f} |")
+    warm(fits, day, work / "warm", args.warm)
+
+
+def warm(fits, day, out, n):
+    """``n`` predictions without images of ``fits`` onto ``day`` in this process, each timed
+    (the first loads Mitsuba and the compiled kernels from disk)."""
+    import drjit as dr
+
+    from skyfit_mi.fitting.relight import load_fits, relight
+    from skyfit_mi.render import light_cache
+
+    cache_time = []
+    build = light_cache.build_light_cache
+
+    def timed_build(*a, **k):
+        t0 = time.perf_counter()
+        c = build(*a, **k)
+        cache_time.append(time.perf_counter() - t0)
+        return c
+    light_cache.build_light_cache = timed_build        # FitSession imports it at each use
+    print("\n| warm prediction | wall time [s] | light cache [s] | kernels compiled |\n"
+          "|---|---|---|---|")
+    loaded = load_fits([fits])
+    for i in range(n):
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        dr.kernel_history()                                   # clears it
+        t0 = time.perf_counter()
+        relight(loaded, day, out, images=False, log=lambda *a: None, progress=False,
+                overwrite=True)
+        wall = time.perf_counter() - t0
+        compiled = sum(1 for k in dr.kernel_history() if "cache_hit" in k and not k["cache_hit"])
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+        print(f"| {i + 1} | {wall:.2f} | {cache_time[-1]:.2f} | {compiled} |", flush=True)
+    light_cache.build_light_cache = build
 
 
 if __name__ == "__main__":

@@ -13,7 +13,8 @@ widths over the clean ones' (the issue's 1.5x goal, judged on widths over noise 
 than one realisation's, which follow where each fit lands on the rho_s - sigma_alpha ridge).
 
     .venv/bin/python scripts/ingest_coverage.py [--quality 100 95] [--seeds 8] [--scale 1]
-        [--first-seed N] [--clean [--clean-noise PERCENT]] [--true-noise] [-o DIR]
+        [--first-seed N] [--clean [--clean-noise PERCENT]] [--true-noise]
+        [--sigma-floor-sensor] [--diagnose] [-o DIR]
 """
 
 import argparse
@@ -46,6 +47,12 @@ def main():
     ap.add_argument("--true-noise", action="store_true",
                     help="give ingest the simulator's own sensor noise (--noise) instead of "
                          "estimating it from the frames")
+    ap.add_argument("--sigma-floor-sensor", action="store_true",
+                    help="experiment: a JPEG pixel's sigma at least the sensor's noise formula "
+                         "(ingest's floor is the noise the compressed frames show)")
+    ap.add_argument("--diagnose", action="store_true",
+                    help="per missed sequence: chi2 at the truth minus at the fit, and the z "
+                         "of the values about the truth (rms, mean, per-frame pixel means)")
     ap.add_argument("-o", "--output", help="work folder (default a temporary one)")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT / "tests"))
@@ -60,6 +67,14 @@ def main():
     from skyfit_mi.pipeline.spec import validate_spec
 
     quiet = {"log": lambda *a: None}
+    if args.sigma_floor_sensor:
+        import skyfit_mi.pipeline.ingest as ingest_module
+        shown_floor = ingest_module._sigma
+
+        def sensor_floor(values, sensor, noise, jpeg=None):
+            return shown_floor(values, sensor, noise,
+                               None if jpeg is None else dict(jpeg, shown=noise))
+        ingest_module._sigma = sensor_floor
     work = Path(args.output or tempfile.mkdtemp(prefix="ingest_coverage_"))
     work.mkdir(parents=True, exist_ok=True)
     spec_path, raw = _small_spec(work, width=64 * args.scale, height=44 * args.scale)
@@ -84,6 +99,8 @@ def main():
                     missed.append(f"{k} {fit['parameters'][k]:.4g} [{lo:.4g}, {hi:.4g}]")
             if missed:
                 print(f"<!-- {seq.name} misses: {'; '.join(missed)} -->", flush=True)
+                if args.diagnose:
+                    diagnose(seq, pixels, fit)
             widths.append([fit["intervals"][k]["95"][1] - fit["intervals"][k]["95"][0]
                            for k in TRUTH])
             chi2.append(fit["chi2_per_dof"])
@@ -122,6 +139,25 @@ def main():
               "sigma_alpha |\n|---|---|")
         for q in args.quality:
             print(f"| {q} | {' / '.join(f'{x:.2f}' for x in medians[q] / medians['clean'])} |")
+
+
+def diagnose(seq, pixels, fit):
+    """chi2 at the truth minus at the fit (the fit's own problem), and the z of the values
+    about the model at the truth: rms and mean per channel, and the rms of the per-frame
+    means over pixels times sqrt(pixels) (1 for independent errors)."""
+    from skyfit_mi.fitting.fit import FitSession
+
+    s = FitSession(seq, "sample", pixels, model="colour")
+    names = list(TRUTH)
+    truth = np.array([TRUTH[k] for k in names])
+    best = np.array([fit["parameters"][k] for k in names])
+    excess = s.problem.chi2(truth) - s.problem.chi2(best)
+    z = (s.obs.y - s.problem.predict(s.wm.radiance(truth))) / s.obs.sigma      # (P, T, 3)
+    frame_means = np.sqrt(np.mean(np.mean(z, axis=0) ** 2, axis=0) * z.shape[0])
+    print(f"<!-- {seq.name}: chi2(truth) - chi2(fit) = {excess:.1f}; z rms "
+          f"{np.round(np.sqrt(np.mean(z ** 2, axis=(0, 1))), 2)}, mean "
+          f"{np.round(np.mean(z, axis=(0, 1)), 2)}, frame means x sqrt(P) "
+          f"{np.round(frame_means, 2)} -->", flush=True)
 
 
 if __name__ == "__main__":
