@@ -37,6 +37,26 @@ def test_rendered_manifest_follows_the_shipped_schema(day):
     assert f["time_utc"].endswith("+00:00")
 
 
+def test_a_manifest_read_again_is_validated_again_only_when_its_text_changed(day, tmp_path,
+                                                                          monkeypatch):
+    from skyfit_mi.pipeline import manifest
+
+    out = _copy(day, tmp_path)
+    calls = []
+    check = manifest.validate_manifest
+    monkeypatch.setattr(manifest, "validate_manifest", lambda d, s: calls.append(s) or check(d, s))
+    load_manifest(out)
+    load_manifest(out)                     # the same text, seen by another step of a command
+    seen = len(calls)
+    assert seen <= 1                       # (none when an earlier test read this text)
+    doc = json.loads((out / "manifest.json").read_text())
+    doc["camera"]["width"] = "wide"
+    (out / "manifest.json").write_text(json.dumps(doc))
+    with pytest.raises(ManifestError, match=r"camera\.width"):
+        load_manifest(out)
+    assert len(calls) == seen + 1
+
+
 def test_a_version_1_manifest_is_upgraded(day, tmp_path):
     out = _copy(day, tmp_path)
     doc = json.loads((out / "manifest.json").read_text())

@@ -72,6 +72,26 @@ def test_relit_with_the_true_material_reproduces_the_target(day, tmp_path):
     assert all((out / n).stat().st_size > 0 for n in errors["comparison_images"])
 
 
+def test_a_folder_target_keeps_the_sun_its_render_computed(day, tmp_path, monkeypatch):
+    """The target folder's spec is validated with the sun positions its manifest recorded
+    (SPA is not run again): the same frames as computing them."""
+    from skyfit_mi.fitting.relight import load_fits, target_spec
+    from skyfit_mi.pipeline import spec as spec_module
+
+    fits = load_fits([_fit_json(tmp_path / "fit_disc.json")])
+    computed, _ = target_spec(day / "day.json", fits)
+
+    def no_spa(*args, **kwargs):
+        raise AssertionError("the sun was computed again")
+    monkeypatch.setattr(spec_module, "solar_position", no_spa)
+    recorded, _ = target_spec(day / "day", fits)
+    assert len(recorded.frames) == len(computed.frames)
+    for a, b in zip(recorded.frames, computed.frames):
+        assert (a.time, a.sun_zenith_deg, a.sun_azimuth_deg) == \
+            (b.time, b.sun_zenith_deg, b.sun_azimuth_deg)
+        assert np.array_equal(a.sky.sun_direction, b.sky.sun_direction)
+
+
 def test_a_wrong_material_shows_as_prediction_error(day, tmp_path):
     """Half the target's reflectance (R = 0.5 Lambertian where the target is white): the relit
     radiance is half the observed in every frame (the same seeds trace the same paths), so

@@ -179,6 +179,9 @@ class LuminanceModel:
     def radiance(self, theta):
         return self._mix(self.inner.radiance(theta))
 
+    def radiances(self, thetas):
+        return self._mix(self.inner.radiances(thetas))
+
     def radiance_and_variance(self, theta):
         L, var = self.inner.radiance_and_variance(theta)
         # channels' estimates share their samples: the variance of a sum is at most the square

@@ -76,13 +76,17 @@ def target_spec(target, fits):
             raise SkyfitError(f"{target} was not rendered from a spec (source "
                               f"{doc.get('source', '?')}); give a spec file as --target.")
         raw, base = doc["spec"], Path(doc.get("spec_dir", "."))
+        # the sun where the folder's render put it (not for lab lights: their frames record
+        # the light's direction)
+        sun = {f["time"]: (f["sun_zenith_deg"], f["sun_azimuth_deg"]) for f in doc["frames"]
+               if f.get("illumination", {}).get("kind") == "sky" and "sun_zenith_deg" in f}
     else:
-        doc, raw, base = None, read_spec(target), target.parent
+        doc, raw, base, sun = None, read_spec(target), target.parent, None
     raw = dict(raw)
     raw["materials"] = {**raw.get("materials", {}),
                         **{region: {"fit": str(Path(p).resolve())}
                            for region, (p, _) in fits.items()}}
-    return validate_spec(raw, base), doc
+    return validate_spec(raw, base, sun=sun), doc
 
 
 def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progress=True,
@@ -479,7 +483,7 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
 
         def region_mean(x):
             return np.sum(x * have, axis=0)
-        means = np.stack([region_mean(s.wm.radiance(t)) for t in sets])     # (draws, T, 3)
+        means = np.stack([region_mean(L) for L in s.wm.radiances(sets)])   # (draws, T, 3)
         lo, hi = np.percentile(means[1:], [2.5, 97.5], axis=0)
         # widened by what the parameters leave out: the image's own noise (the sensor model's
         # sigma in radiance) and the model's Monte Carlo error, both of the region mean

@@ -258,12 +258,16 @@ class Sky:
         d = np.asarray(directions, dtype=float)
         d = d / np.linalg.norm(d, axis=-1, keepdims=True)
         s = self.sun_direction
-        sky = (clear_pattern(d, s)[..., None] * self.clear
-               + overcast_pattern(d)[..., None] * self.overcast
-               + self.uniform
-               + intermediate_pattern(d, s)[..., None] * self.intermediate)
-        if np.any(self.perez):
-            sky = sky + perez_pattern(d, s, self.perez_coefficients)[..., None] * self.perez
+        # the patterns with a weight, summed in this order (a term without one is exactly
+        # zero and left out)
+        sky = np.zeros(d.shape[:-1] + (3,))
+        for weight, pattern in ((self.clear, lambda: clear_pattern(d, s)),
+                                (self.overcast, lambda: overcast_pattern(d)),
+                                (self.uniform, lambda: 1.0),
+                                (self.intermediate, lambda: intermediate_pattern(d, s)),
+                                (self.perez, lambda: perez_pattern(d, s, self.perez_coefficients))):
+            if np.any(weight):
+                sky = sky + np.asarray(pattern())[..., None] * weight
         if self.horizon_blend:
             w = horizon_blend_weight(d[..., 2])[..., None]
             out = w * sky + (1.0 - w) * self.ground

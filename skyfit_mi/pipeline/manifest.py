@@ -19,6 +19,7 @@ Version 1 manifests (skyfit-mi before the layered package) are upgraded on readi
 
 import datetime as dt
 import functools
+import hashlib
 import json
 from importlib import metadata
 from pathlib import Path
@@ -60,12 +61,18 @@ def _where(path_parts):
     return out or "(top level)"
 
 
+@functools.lru_cache(maxsize=1)
+def _validator():
+    import jsonschema
+
+    return jsonschema.Draft202012Validator(schema())
+
+
 def validate_manifest(doc, source="manifest"):
     """Check ``doc`` against the schema; raise :class:`ManifestError` naming the first problem."""
     import jsonschema
 
-    validator = jsonschema.Draft202012Validator(schema())
-    err = jsonschema.exceptions.best_match(validator.iter_errors(doc))
+    err = jsonschema.exceptions.best_match(_validator().iter_errors(doc))
     if err is not None:
         raise ManifestError(f"{source} is not a valid {SCHEMA} manifest: at "
                             f"{_where(err.absolute_path)}: {err.message}. See docs/MANIFEST.md.")
@@ -112,7 +119,8 @@ def load_manifest(path):
         raise ManifestError(f"no manifest at {str(p)!r}; give a folder written by `skyfit render` "
                             "(or its manifest.json).")
     try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
+        text = p.read_text(encoding="utf-8")
+        doc = json.loads(text)
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ManifestError(f"{p} is damaged (not complete JSON: {exc}); render it afresh "
                             "with `skyfit render SPEC -o DIR --overwrite`.") \
@@ -126,7 +134,18 @@ def load_manifest(path):
         raise ManifestError(f"{p} has schema {doc['schema']!r}, which this skyfit-mi "
                             f"({__version__}) cannot read (it reads {', '.join(READABLE)}); "
                             "upgrade skyfit-mi.")
-    return validate_manifest(upgrade(doc), str(p)), p.parent
+    # a text this process has validated (the manifest read again by the steps of one command)
+    # is not validated again
+    key = hashlib.sha256(text.encode("utf-8")).digest()
+    doc = upgrade(doc)
+    if key not in _VALIDATED:
+        validate_manifest(doc, str(p))
+        _VALIDATED.add(key)
+    return doc, p.parent
+
+
+#: Digests of the manifest texts :func:`load_manifest` has validated in this process.
+_VALIDATED = set()
 
 
 def write_manifest(path, doc):

@@ -219,8 +219,12 @@ def load_spec(path):
     return validate_spec(read_spec(path), Path(path).parent)
 
 
-def validate_spec(raw, base_dir="."):
-    """Validate a spec dictionary and resolve its frames; returns :class:`Spec`."""
+def validate_spec(raw, base_dir=".", sun=None):
+    """Validate a spec dictionary and resolve its frames; returns :class:`Spec`.
+
+    ``sun``: {ISO time: the sun's (zenith, azimuth) [degrees]} as a sequence rendered from this
+    spec recorded them (its manifest): used, when it holds every time of the spec, instead of
+    computing them again (NREL SPA through pvlib, whose import alone takes about a second)."""
     raw = _plain(copy.deepcopy(raw))
     base_dir = Path(base_dir)
     if not isinstance(raw, dict):
@@ -272,12 +276,15 @@ def validate_spec(raw, base_dir="."):
     except SkyfitError as exc:
         raise SpecError(f"[materials] {exc}") from None
 
-    pos = solar_position(times, lat, lon, elevation=elevation)
+    if sun and all(t.isoformat() in sun for t in times):
+        zeniths, azimuths = np.array([sun[t.isoformat()] for t in times], dtype=float).T
+    else:
+        pos = solar_position(times, lat, lon, elevation=elevation)
+        zeniths, azimuths = np.atleast_1d(pos.zenith_deg), np.atleast_1d(pos.azimuth_deg)
     entries = _with_series(_sky_entries(raw.get("sky", {"type": "clear"}), times, tz), times, tz,
                            base_dir)
     frames = []
-    for i, (t, z, a, entry) in enumerate(zip(times, np.atleast_1d(pos.zenith_deg),
-                                             np.atleast_1d(pos.azimuth_deg), entries)):
+    for i, (t, z, a, entry) in enumerate(zip(times, zeniths, azimuths, entries)):
         sky = _make_sky(entry, float(z), float(a), t, base_dir, i)
         if entry["type"] == "directional":      # the lab light is the frame's sun
             z, a = sky.info["sun_zenith_deg"], sky.info["sun_azimuth_deg"]
