@@ -14,7 +14,7 @@ than one realisation's, which follow where each fit lands on the rho_s - sigma_a
 
     .venv/bin/python scripts/ingest_coverage.py [--quality 100 95] [--seeds 8] [--scale 1]
         [--first-seed N] [--clean [--clean-noise PERCENT]] [--true-noise]
-        [--sigma-floor-sensor] [--diagnose] [-o DIR]
+        [--sigma-floor-sensor] [--diagnose] [--refit] [-o DIR]
 """
 
 import argparse
@@ -53,6 +53,9 @@ def main():
     ap.add_argument("--diagnose", action="store_true",
                     help="per missed sequence: chi2 at the truth minus at the fit, and the z "
                          "of the values about the truth (rms, mean, per-frame pixel means)")
+    ap.add_argument("--refit", action="store_true",
+                    help="fit the sequences an earlier run ingested into -o DIR again, without "
+                         "photographing and ingesting them anew (after a change in the fit)")
     ap.add_argument("-o", "--output", help="work folder (default a temporary one)")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT / "tests"))
@@ -127,11 +130,12 @@ def main():
         sequences = []
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             photos = work / f"q{q}_s{seed}"
-            photograph_day(truth, photos, seed=seed, quality=q)
             seq = work / f"seq_q{q}_s{seed}"
-            ingest([photos], spec_path, seq, calibrate={"grey_card": (0.18,) * 3},
-                   vignetting="cos4", overwrite=True, progress=False,
-                   noise=TRUE_NOISE if args.true_noise else None, **quiet)
+            if not (args.refit and (seq / "manifest.json").exists()):
+                photograph_day(truth, photos, seed=seed, quality=q)
+                ingest([photos], spec_path, seq, calibrate={"grey_card": (0.18,) * 3},
+                       vignetting="cos4", overwrite=True, progress=False,
+                       noise=TRUE_NOISE if args.true_noise else None, **quiet)
             sequences.append(seq)
         medians[q] = row(q, sequences)
     if args.clean:

@@ -276,6 +276,30 @@ def test_labels_and_mask_regions(days, tmp_path):
         region_from_mask(tmp_path / "labels.png", 7)
 
 
+@pytest.mark.parametrize("rho", [0.0, 0.5])
+def test_correlated_channels_widen_the_shared_parameters_by_the_design_effect(rho):
+    # residuals of (P, T) values in 3 channels with correlation rho between channels; a
+    # parameter per channel (an offset of its own channel) and a slope shared by all three
+    # (its regressor the same in each): the slope's variance is (1 + 2 rho) times that of
+    # independent channels, the offsets' unchanged
+    from skyfit_mi.fitting.uncertainty import channel_factors
+    rng = np.random.default_rng(5)
+    cov = np.full((3, 3), rho) + (1 - rho) * np.eye(3)
+    r = rng.standard_normal((400, 7, 3)) @ np.linalg.cholesky(cov).T
+    J = np.zeros((400, 7, 3, 4))
+    for c in range(3):
+        J[..., c, c] = 1.0
+    J[..., 3] = rng.standard_normal((400, 7, 1))
+    usable = np.ones(r.shape, dtype=bool)
+    f2, R = channel_factors(r, J, usable)
+    assert np.allclose(R[np.triu_indices(3, 1)], rho, atol=0.05)
+    assert f2 == pytest.approx([1.0, 1.0, 1.0, 1.0 + 2 * rho], abs=0.08)
+    # a channel left out (clipped or missing) everywhere: no correlation with it
+    usable[..., 2] = False
+    f2, R = channel_factors(r, J, usable)
+    assert R[0, 2] == R[1, 2] == 0.0 and f2 == pytest.approx([1.0, 1.0, 1.0, 1.0 + rho], abs=0.08)
+
+
 def test_colour_model_plastic_metal_ambiguity_for_grey_c():
     from skyfit_mi.fitting.uncertainty import colour_rule_ambiguity
     grey = {k: (0.194, 0.196) for k in ("C_r", "C_g", "C_b")}

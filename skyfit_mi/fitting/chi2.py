@@ -412,10 +412,12 @@ class Problem:
         L, var = self.model.radiance_and_variance(theta)
         return float(np.sum((self.slope(L) ** 2 * var / self.obs.sigma**2)[self.mask]))
 
-    def jacobian(self, theta):
-        """(residuals, d residuals / d theta) with the model's forward-mode derivatives."""
+    def jacobian(self, theta, full=False):
+        """(residuals, d residuals / d theta) with the model's forward-mode derivatives, over
+        the usable values (flat); with ``full`` every value's, shapes (P, T, 3) and
+        (P, T, 3, n_params) (``mask`` says which are usable)."""
         self.evaluations += 1
         L, dL = self.model.jacobian(theta)
         r, dr = self.residual_terms(L)
         J = (dr * self.slope(L))[..., None] * dL
-        return r[self.mask], J[self.mask]
+        return (r, J) if full else (r[self.mask], J[self.mask])

@@ -42,6 +42,9 @@ CACHE_GROWTH_MAX, CACHE_BYTES_MAX = 16, 1 << 30
 #: Iterations of each constrained fit that profiles a parameter along a ridge (another
 #: parameter poorly determined): the conditional-mean start is poor there.
 PROFILE_RIDGE_ITERATIONS = 40
+#: The widening of a variance by correlated channels (:func:`~.uncertainty.channel_factors`)
+#: above which the fit says so.
+CHANNEL_NOTE = 1.1
 
 
 class FitSession:
@@ -270,17 +273,22 @@ class FitSession:
         evaluations = problem.evaluations + wm.basis_evaluations
         t_method = time.perf_counter() - t0
         # uncertainty: covariance at the optimum
-        r, J = problem.jacobian(theta)
+        r_all, J_all = problem.jacobian(theta, full=True)
+        r, J = r_all[problem.mask], J_all[problem.mask]
         chi2 = float(r @ r)
         noise_chi2 = problem.noise_chi2(theta)           # what noise alone gives (clipping)
         s2 = unc.scale(chi2, noise_chi2[0])
         curv_inv = unc.covariance(J)
+        # errors shared by a value's channels widen each parameter's variance by f2
+        low, high = problem.clipped()
+        f2, channels = unc.channel_factors(r_all, J_all, problem.mask & ~low & ~high)
         # the global minimum: its grid gives the profiles; a local method is judged against it
         g = res if method == "global" else global_search(problem, start, self.lower, self.upper,
                                                         candidates=2, grid_basis=grid_basis)
         fit = {"method": method, "theta": theta, "chi2": chi2, "s2": s2, "curv_inv": curv_inv,
-               "cov": curv_inv * s2, "result": res, "global": g, "noise_by_sigma": noise,
-               "noise_chi2": noise_chi2}
+               "f2": f2, "channel_correlation": channels,
+               "cov": curv_inv * s2 * np.sqrt(np.outer(f2, f2)), "result": res, "global": g,
+               "noise_by_sigma": noise, "noise_chi2": noise_chi2}
         self._intervals(fit)
         warnings = self._warnings(fit)
         wall = time.perf_counter() - t0 + self.cache_time
@@ -297,12 +305,13 @@ class FitSession:
         mc_sd): the covariance's, or for rho_s and sigma_alpha of a global fit the profile's;
         each widened by the light cache's own Monte Carlo error."""
         problem, theta, names = self.problem, fit["theta"], self.names
-        lower, upper, s2 = self.lower, self.upper, fit["s2"]
+        lower, upper = self.lower, self.upper
+        s2k = fit["s2"] * fit["f2"]                  # each parameter's scale of Delta chi^2
         cov_iv = unc.covariance_intervals(theta, fit["cov"], lower, upper)
         grid = fit["global"]["profile_linearised"]
         prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
                 "rho_s": (grid["rho_s"], grid["chi2_rho"])}
-        ripple = self._model_noise_allowance(theta, *prof["sigma_alpha"], s2)
+        ripple = self._model_noise_allowance(theta, *prof["sigma_alpha"], s2k[-1])
         # the profiles describe the global minimum; a local method is judged against it
         glob = fit["method"] == "global"
         intervals, rise, walked = {}, {}, []
@@ -316,11 +325,11 @@ class FitSession:
                     # chi^2's (see methods/profile.py): the first is offset where the sensor
                     # clips, the second inherits the cache's narrow-lobe error (a mirror fit
                     # of the board's polished steel, truth sigma_alpha 0.02: 95% edge 0.002)
-                    iv = unc.profile_interval(*prof[p], s2, ripple)
+                    iv = unc.profile_interval(*prof[p], s2k[i], ripple)
                     levels = list(iv)
                     exact, _, points = profile_edges(
                         problem, theta, fit["chi2"], i,
-                        [unc.LEVELS[lv] * s2 + ripple for lv in levels], lower, upper,
+                        [unc.LEVELS[lv] * s2k[i] + ripple for lv in levels], lower, upper,
                         fit["curv_inv"])
                     walked += points
                     iv = {lv: (min(iv[lv][0], e[0] if e[0] is not None else np.inf),
@@ -332,10 +341,11 @@ class FitSession:
             walked += self._profile_the_rest(fit, intervals, ripple)
         for lv in ("68", "95"):
             # every point the profiles walked within the level lies inside every interval
-            ridge = ridge_intervals(walked, fit["chi2"], unc.LEVELS[lv] * s2 + ripple)
-            for i, p in enumerate(names if ridge is not None else ()):
-                lo, hi = intervals[p][lv]
-                intervals[p][lv] = (min(lo, float(ridge[0][i])), max(hi, float(ridge[1][i])))
+            for i, p in enumerate(names):
+                ridge = ridge_intervals(walked, fit["chi2"], unc.LEVELS[lv] * s2k[i] + ripple)
+                if ridge is not None:
+                    lo, hi = intervals[p][lv]
+                    intervals[p][lv] = (min(lo, float(ridge[0][i])), max(hi, float(ridge[1][i])))
         mc_sd = self.cache_error(theta, fit["method"])
         cal_sd = unc.calibration_sd(self.doc, names, theta)
         for i, p in enumerate(names):
@@ -389,7 +399,8 @@ class FitSession:
                 continue
             exact, _, points = profile_edges(
                 self.problem, fit["theta"], fit["chi2"], i,
-                [unc.LEVELS[lv] * fit["s2"] + ripple for lv in levels], self.lower, self.upper,
+                [unc.LEVELS[lv] * fit["s2"] * fit["f2"][i] + ripple for lv in levels],
+                self.lower, self.upper,
                 fit["curv_inv"], rtol=0.01, iterations=PROFILE_RIDGE_ITERATIONS)
             walked += points
             for lv, e in zip(levels, exact):
@@ -451,7 +462,16 @@ class FitSession:
         warnings += unc.misfit(chi2, self.problem.dof, fit["s2"], fit["ripple"],
                                fit["noise_chi2"])
         warnings += unc.identifiability(names, iv95, self.lower, self.upper, fit["rise"],
-                                        fit["s2"], fit["ripple"])
+                                        fit["s2"] * fit["f2"], fit["ripple"])
+        if np.max(fit["f2"]) > CHANNEL_NOTE:
+            R = fit["channel_correlation"]
+            off = R[np.triu_indices(len(R), 1)]
+            warnings.append(
+                f"the errors of a value's R, G and B are correlated (correlation "
+                f"{off.min():.2f} to {off.max():.2f} between channels, as in a JPEG, a "
+                "demosaiced raw or a render's Monte Carlo noise, or where the model misses "
+                "the brightness): the data tell less than as many independent values, and the "
+                f"intervals are widened for it, by up to {np.sqrt(np.max(fit['f2'])):.2f}x.")
         warnings += geometry_warnings(self.geometry, float(theta[-1]))
         worst = max(fit["noise_by_sigma"], key=fit["noise_by_sigma"].get)
         if fit["noise_by_sigma"][worst] > NOISE_SHARE * self.problem.dof:
@@ -487,6 +507,8 @@ class FitSession:
             "parameters": dict(zip(names, theta.tolist())),
             "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof,
             "chi2_expected_from_noise": fit["noise_chi2"][0], "interval_scale_s2": fit["s2"],
+            "interval_scale_channels": dict(zip(names, fit["f2"].tolist())),
+            "channel_correlation": fit["channel_correlation"].tolist(),
             "intervals": fit["intervals"],
             "readings": [unc.reading(p, theta[i], fit["intervals"][p]["95"], self.lower[i],
                                      self.upper[i]) for i, p in enumerate(names)],

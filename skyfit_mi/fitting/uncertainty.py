@@ -49,6 +49,45 @@ def covariance(J, s2=1.0):
     return c * s2
 
 
+def channel_factors(r, J, usable):
+    """Per parameter, the factor f^2 >= 1 by which correlated errors of a value's R, G and B
+    widen its variance, and the channels' correlation R (C, C) it comes from.
+
+    ``r`` (P, T, C) residuals at the fit, ``J`` (P, T, C, n) their derivatives, ``usable``
+    (P, T, C) the values that are measured (not clipped, not left out).  A JPEG codes a
+    pixel's brightness once for its three channels, a raw converter demosaics each from its
+    neighbours', a renderer's Monte Carlo paths carry all three, and a model that misses the
+    brightness misses it in all three: their errors are then correlated, while chi-square
+    sums them as independent.  R is the residuals' correlation between channels over the
+    pixels and frames where both are measured (a pair's taken as zero unless it exceeds twice
+    its standard error under independence, 2 / sqrt(n)); the parameters' covariance is then
+    the sandwich (J^T J)^-1 J^T R J (J^T J)^-1, and f^2 its diagonal over that of (J^T J)^-1
+    (the thesis's covariance, the inverse of eq. 6.11's curvature matrix, when R = I).
+    MEASURED
+    """
+    n_par = J.shape[-1]
+    C = r.shape[-1]
+    R = np.eye(C)
+    for i in range(C):
+        for j in range(i + 1, C):
+            both = usable[..., i] & usable[..., j]
+            n = int(both.sum())
+            if n < 10:
+                continue
+            a, b = r[..., i][both], r[..., j][both]
+            rho = float(np.sum(a * b) / max(np.sqrt(np.sum(a * a) * np.sum(b * b)), 1e-300))
+            if abs(rho) > 2.0 / np.sqrt(n):
+                R[i, j] = R[j, i] = rho
+    w, v = np.linalg.eigh(R)
+    R = (v * np.clip(w, 0.0, None)) @ v.T                      # positive semi-definite
+    Jz = np.where(usable[..., None], J, 0.0).reshape(-1, C, n_par)
+    M = np.einsum("nck,cd,ndl->kl", Jz, R, Jz)
+    Hi = covariance(Jz.reshape(-1, n_par))
+    with np.errstate(all="ignore"):
+        f2 = np.diag(Hi @ M @ Hi) / np.diag(Hi)
+    return np.where(np.isfinite(f2), np.maximum(f2, 1.0), 1.0), R
+
+
 def covariance_intervals(theta, cov, lower, upper):
     """{level: (lo, hi) arrays} from the covariance, clipped to the bounds."""
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -106,13 +145,15 @@ def profile_interval(grid, profile, s2=1.0, ripple=0.0):
 
 
 def identifiability(names, intervals95, lower, upper, profile_rise, s2, ripple=0.0):
-    """Warnings for parameters the data do not determine."""
+    """Warnings for parameters the data do not determine (``s2`` the scale of Delta chi^2, one
+    for all or one per parameter)."""
     warnings = []
     span = np.asarray(upper) - np.asarray(lower)
+    s2 = np.broadcast_to(np.asarray(s2, dtype=float), (len(names),))
     for i, name in enumerate(names):
         lo, hi = intervals95[name]
         rise = profile_rise.get(name)
-        flat = rise is not None and rise < LEVELS["95"] * s2 + ripple
+        flat = rise is not None and rise < LEVELS["95"] * s2[i] + ripple
         if flat or (hi - lo) > 0.5 * span[i]:
             why = (f"chi-square changes by only {rise:.3g} across its whole range" if flat else
                    f"its 95% interval {lo:.3g}-{hi:.3g} covers over half its range")
