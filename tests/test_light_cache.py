@@ -166,6 +166,10 @@ def test_many_parameter_sets_through_the_basis_equal_the_model(session):
         assert wm.evaluations + wm.basis_evaluations < len(sets)
         direct = np.stack([wm.radiance(t) for t in sets])
         assert np.max(np.abs(fast - direct)) <= 1e-5 * np.max(np.abs(direct))
+        # a linear reduction (a region's mean) applied to the basis: the same means
+        means = wm.radiances(sets, lambda L: L.mean(axis=0))
+        assert means.shape == (len(sets),) + direct.shape[2:]
+        assert np.max(np.abs(means - direct.mean(axis=1))) <= 1e-5 * np.max(np.abs(direct))
 
 
 @pytest.mark.slow

@@ -179,8 +179,8 @@ class LuminanceModel:
     def radiance(self, theta):
         return self._mix(self.inner.radiance(theta))
 
-    def radiances(self, thetas):
-        return self._mix(self.inner.radiances(thetas))
+    def radiances(self, thetas, reduce=None):
+        return self._mix(self.inner.radiances(thetas, reduce))
 
     def radiance_and_variance(self, theta):
         L, var = self.inner.radiance_and_variance(theta)

@@ -483,7 +483,7 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
 
         def region_mean(x):
             return np.sum(x * have, axis=0)
-        means = np.stack([region_mean(L) for L in s.wm.radiances(sets)])   # (draws, T, 3)
+        means = s.wm.radiances(sets, region_mean)                           # (draws, T, 3)
         lo, hi = np.percentile(means[1:], [2.5, 97.5], axis=0)
         # widened by what the parameters leave out: the image's own noise (the sensor model's
         # sigma in radiance) and the model's Monte Carlo error, both of the region mean

@@ -340,8 +340,10 @@ class WardModel:
         self.evaluations += 1
         return self._np(self._radiance_dr(*self._variables(theta)))
 
-    def radiances(self, thetas):
-        """L [W m^-2 sr^-1] at many parameter sets ``thetas`` (n, n_params): (n, P, T, 3).
+    def radiances(self, thetas, reduce=None):
+        """L [W m^-2 sr^-1] at many parameter sets ``thetas`` (n, n_params): (n, P, T, 3), or
+        ``reduce`` of each (a linear map of a (P, T, 3) radiance, such as a region's mean over
+        its pixels: applied to the basis, so that only what it keeps is interpolated).
 
         Through the basis L = rho_d D + s G(sigma) (thesis eq. 3.19, exact: the model is
         linear in the reflectances), with G from a few basis evaluations instead of n: below
@@ -357,18 +359,20 @@ class WardModel:
         sig = thetas[:, -1]
         refl = np.array([reflectances(self.model, th)[:2] for th in thetas])   # (n, 2, 3)
         piece = np.searchsorted([SIGMA_RESOLVED, CONTROL_FULL, CONTROL_SIGMA], sig, "right")
-        D = self._diffuse_shares().sum(axis=2)
-        G0, G1 = self._lobe(0.0), self._lobe(SIGMA_RESOLVED)
+        reduce = reduce or (lambda x: x)
+        D = np.asarray(reduce(self._diffuse_shares().sum(axis=2)))
+        G0, G1 = (np.asarray(reduce(self._lobe(v))) for v in (0.0, SIGMA_RESOLVED))
         G = np.empty((len(sig),) + D.shape)
         low = piece == 0                                      # the mirror's interpolation
-        G[low] = G0 + (sig[low] / SIGMA_RESOLVED)[:, None, None, None] * (G1 - G0)
+        G[low] = G0 + (sig[low] / SIGMA_RESOLVED).reshape((-1,) + (1,) * D.ndim) * (G1 - G0)
         for k in set(piece[~low].tolist()):
             at = np.flatnonzero(piece == k)
-            G[at] = self._interpolated_lobe(sig[at], C)
-        return refl[:, 0, None, None] * D + refl[:, 1, None, None] * G
+            G[at] = self._interpolated_lobe(sig[at], C, reduce)
+        return refl[:, 0].reshape(refl.shape[:1] + (1,) * (D.ndim - 1) + (3,)) * D \
+            + refl[:, 1].reshape(refl.shape[:1] + (1,) * (D.ndim - 1) + (3,)) * G
 
-    def _interpolated_lobe(self, sig, C):
-        """G at roughnesses ``sig`` of one smooth piece (see :meth:`radiances`)."""
+    def _interpolated_lobe(self, sig, C, reduce):
+        """``reduce`` of G at roughnesses ``sig`` of one smooth piece (see :meth:`radiances`)."""
         lo, hi = np.log(sig.min()), np.log(sig.max())
         u = 2 * (np.log(sig) - lo) / max(hi - lo, 1e-300) - 1
         known, last, n = {}, None, RADIANCES_NODES
@@ -376,7 +380,7 @@ class WardModel:
             x = np.cos(np.pi * np.arange(n + 1) / n)                  # nested as n doubles
             for v in x:
                 if v not in known:
-                    known[v] = self._lobe(np.exp(lo + (v + 1) * (hi - lo) / 2))
+                    known[v] = np.asarray(reduce(self._lobe(np.exp(lo + (v + 1) * (hi - lo) / 2))))
             values = np.stack([known[v] for v in x])
             coef = np.linalg.solve(C.chebvander(x, n), values.reshape(n + 1, -1))
             now = (C.chebvander(u, n) @ coef).reshape((len(sig),) + values.shape[1:])
@@ -384,7 +388,7 @@ class WardModel:
                     <= RADIANCES_RTOL * max(np.max(np.abs(now)), 1e-30):
                 return now
             last, n = now, 2 * n
-        return np.stack([self._lobe(v) for v in sig])
+        return np.stack([np.asarray(reduce(self._lobe(v))) for v in sig])
 
     def _lobe(self, sigma):
         """G(sigma) (P, T, 3): the basis plugin's L at rho_s = 1 (the lobe alone)."""

@@ -60,7 +60,7 @@ import numpy as np
 
 from ..physics.ward import SIGMA_MIRROR
 from .daylight import jit_array
-from .sky_control import chebyshev_coefficients, quadrature, sky_integrals, to_numpy
+from .sky_control import FrameSkies, chebyshev_coefficients, quadrature, sky_integrals, to_numpy
 
 #: Roughnesses of the Ward sampling lobes in the direction mixture.
 LOBE_SIGMAS = (0.002, 0.006, 0.02, 0.06, 0.15, 0.3)
@@ -468,6 +468,10 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos",
                            "hit", "sun_half_cos", "diffuse_sky", "lobe_sky")}
     ids = np.array([shape.bsdf().id() for shape in target], dtype=object)
+    # the sky's integrals at the positions of every frame in one pass after the frames, each
+    # point under its frame's sky (FrameSkies), unless shared between anchors or under maps
+    together = share is None and all(sky.envmap is None for sky in skies)
+    at_positions = []
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
         comp = _components(K, _has_sun(sky))
@@ -521,10 +525,10 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0) - emitter.sky_eval(ray_m.d)
         sun = si.to_local(opaque_value(mi.Vector3f, sky.sun_direction))
         shared = share is not None and sky.envmap is None
-        own = None if shared else sky_integrals(
-            emitter, si if subset is None else dr.gather(mi.SurfaceInteraction3f, si, subset),
-            quad)
-        dr.eval(si.wi, wl, weight, inv_pdf, lm, lm_sky, sun, own)   # together: shared parts once
+        sub = si if subset is None else dr.gather(mi.SurfaceInteraction3f, si, subset)
+        own = sub if together else None if shared else sky_integrals(emitter, sub, quad)
+        dr.eval(si.wi, wl, weight, inv_pdf, lm, lm_sky, sun,       # together: shared parts once
+                (own.wi, own.sh_frame) if together else own)
 
         def np3(v, n):
             return np.array(v, dtype=np.float32).T.reshape(P, n, 3)
@@ -541,16 +545,37 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         out["hit"].append(on.reshape(P, S).all(axis=1))
         out["sun_half_cos"].append(_sun_half_cos(np.array(sun, dtype=float).T, view,
                                                  sky).reshape(P, S))
+        if together:
+            at_positions.append([np.array(v, dtype=np.float32).T for v in
+                                 (own.wi, own.sh_frame.s, own.sh_frame.t, own.sh_frame.n)])
+            continue
         if shared:
             diffuse, lobe, n_shared = share.integrals(mi, dr, emitter, quad, sky.sun_direction)
             if stats is not None:
                 stats["shared"] += n_shared
-            diffuse, lobe = diffuse[:, None], lobe[:, None]
         else:
-            diffuse, lobe = (a.reshape(P, -1, *a.shape[1:]) for a in _sky_numpy(*own))
-            if k < S:                                  # the subset's mean for every position
-                diffuse, lobe = (a.mean(axis=1, keepdims=True) for a in (diffuse, lobe))
-        out["diffuse_sky"].append(np.broadcast_to(diffuse, (P, S, 3)))
-        out["lobe_sky"].append(np.broadcast_to(lobe, (P, S) + lobe.shape[2:]))
+            diffuse, lobe = _sky_numpy(*own)
+        _add_sky(out, diffuse, lobe, P, S)
+    if together:
+        # every frame's positions as one set of interactions, each under its frame's sky
+        wi, s, t, n = (np.concatenate(a) for a in zip(*at_positions))
+        si_all = dr.zeros(mi.SurfaceInteraction3f, len(wi))
+        si_all.wi = jit_array(mi.Vector3f, *wi.T)
+        si_all.sh_frame = mi.Frame3f(jit_array(mi.Vector3f, *s.T), jit_array(mi.Vector3f, *t.T),
+                                     jit_array(mi.Vector3f, *n.T))
+        frame = np.repeat(np.arange(len(skies)), len(wi) // len(skies))
+        diffuse, lobe = _sky_numpy(*sky_integrals(FrameSkies(skies, frame), si_all, quad))
+        for d, c in zip(np.split(diffuse, len(skies)), np.split(lobe, len(skies))):
+            _add_sky(out, d, c, P, S)
     return LightCache(**{k: np.stack(v, axis=1) for k, v in out.items()},
                       normalisation=normalisation)
+
+
+def _add_sky(out, diffuse, lobe, P, S):
+    """Append one frame's I_d (P k, 3) and I_s coefficients (P k, M, 3) at k of each pixel's S
+    positions (their mean given to all S when k < S) to the cache's lists ``out``."""
+    diffuse, lobe = (a.reshape(P, -1, *a.shape[1:]) for a in (diffuse, lobe))
+    if diffuse.shape[1] < S:                           # the subset's mean for every position
+        diffuse, lobe = (a.mean(axis=1, keepdims=True) for a in (diffuse, lobe))
+    out["diffuse_sky"].append(np.broadcast_to(diffuse, (P, S, 3)))
+    out["lobe_sky"].append(np.broadcast_to(lobe, (P, S) + lobe.shape[2:]))

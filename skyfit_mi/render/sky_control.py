@@ -179,9 +179,56 @@ def diffuse_directions(up, n_rays=DIFFUSE_AZIMUTHS, n_polar=DIFFUSE_POLAR, table
 
 def _sky_sum(mi, dr, emitter, si, wi, w, q, J, f=1.0):
     """Sum over each point's J nodes of f h(wi) w, h the emitter's sky function toward the
-    nodes' directions (local to each point's frame) [W m^-2 sr^-1], (Q) Dr.Jit colours."""
+    nodes' directions (local to each point's frame) [W m^-2 sr^-1], (Q) Dr.Jit colours;
+    ``emitter`` a ``cie_sky`` emitter or :class:`FrameSkies` (each point its own frame's sky)."""
     frame = dr.gather(mi.Frame3f, si.sh_frame, q)
-    return dr.block_sum(f * emitter.sky_eval(frame.to_world(wi)) * w, J)
+    sky = emitter.at(q) if isinstance(emitter, FrameSkies) else emitter
+    return dr.block_sum(f * sky.sky_eval(frame.to_world(wi)) * w, J)
+
+
+class FrameSkies:
+    """The sky functions of several frames at once, for :func:`sky_integrals` over the points
+    of all of them in one pass (the light cache's frames): ``skies`` the frames'
+    :class:`~skyfit_mi.physics.sky.Sky` (without maps), ``frame`` (Q,) each point's frame."""
+
+    _FLOATS = ("perez_a", "perez_b", "perez_c", "perez_d", "perez_e", "blend_weight")
+
+    def __init__(self, skies, frame):
+        import mitsuba as mi
+
+        from .daylight import RGB_KEYS, jit_array
+
+        if any(sky.envmap is not None for sky in skies):
+            raise ValueError("FrameSkies takes skies without environment maps")
+        self.frame = jit_array(mi.UInt32, np.asarray(frame, dtype=np.uint32))
+        col = {k: np.array([getattr(sky, k) for sky in skies], dtype=float) for k in RGB_KEYS}
+        self.values = {k: jit_array(mi.Color3f, *v.T) for k, v in col.items()}
+        self.values["sun_direction"] = jit_array(
+            mi.Vector3f, *np.array([sky.sun_direction for sky in skies], dtype=float).T)
+        coef = np.array([sky.perez_coefficients for sky in skies], dtype=float).reshape(-1, 5)
+        floats = np.column_stack([coef, [float(sky.horizon_blend) for sky in skies]])
+        self.values.update({k: jit_array(mi.Float, floats[:, i])
+                            for i, k in enumerate(self._FLOATS)})
+
+    def at(self, q):
+        """The parameters of the frame of each point ``q`` (a lane each), with ``sky_eval``."""
+        import drjit as dr
+        import mitsuba as mi
+
+        index = dr.gather(mi.UInt32, self.frame, q)
+        return _SkyLanes({k: dr.gather(type(v), v, index) for k, v in self.values.items()})
+
+
+class _SkyLanes:
+    """A sky's parameters, one per lane, with the emitter's ``sky_eval`` (:class:`FrameSkies`)."""
+
+    def __init__(self, values):
+        self.__dict__.update(values)
+
+    def sky_eval(self, d):
+        from .plugins.cie_sky import sky_function
+
+        return sky_function(self, d)
 
 
 def _lobe_sum(mi, dr, emitter, si, up, sigma, resolution, normalisation, tables=None):
@@ -244,8 +291,9 @@ def quadrature(lo, hi, normalisation):
 
 def sky_integrals(emitter, si, quad):
     """I_d and I_s at each Chebyshev node of ``quad`` (:func:`quadrature`) for every surface
-    interaction of ``si`` (Q) under the emitter's current sky: Dr.Jit colours (Q) and a list
-    of them [W m^-2 sr^-1], not yet evaluated (the caller evaluates them with the rest)."""
+    interaction of ``si`` (Q) under the emitter's current sky (or each under its frame's,
+    ``emitter`` a :class:`FrameSkies`): Dr.Jit colours (Q) and a list of them
+    [W m^-2 sr^-1], not yet evaluated (the caller evaluates them with the rest)."""
     import drjit as dr
     import mitsuba as mi
 

@@ -36,6 +36,8 @@ Build the dictionary from a :class:`~skyfit_mi.physics.sky.Sky` with
 :func:`skyfit_mi.render.daylight.update_sky`.
 """
 
+import functools
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -78,7 +80,45 @@ def _table_directions():
     return d.reshape(TABLE_NV * TABLE_NU, s * s, 3)
 
 
-_TABLE_DIRS = _table_directions()
+@functools.lru_cache(maxsize=None)
+def _table_directions_jit(variant=None):
+    """:func:`_table_directions` flat (cell by cell) as a Dr.Jit Vector3f of the current
+    variant (``variant`` keys the cache; default mi.variant())."""
+    if variant is None:
+        return _table_directions_jit(mi.variant())
+    d = _table_directions().reshape(-1, 3)
+    return jit_array(mi.Vector3f, d[:, 0], d[:, 1], d[:, 2])
+
+
+def sky_function(p, d):
+    """The sky's radiance without sun or map toward world directions ``d`` [W m^-2 sr^-1] for
+    the parameters of ``p``: an emitter, or any object with its fields (sun_direction, the
+    pattern weights clear ... perez and ground, perez_a .. perez_e, blend_weight), scalars or
+    one per lane of ``d`` (the light cache's frames at once).  Sky.sky_radiance in Dr.Jit."""
+    s = p.sun_direction
+    cos_z = dr.clip(dr.dot(d, s), -1.0, 1.0)
+    zeta = dr.acos(cos_z)
+    dz = d.z
+    gamma_f = dr.select(dz > 0.01, 1.0 - dr.exp(-0.32 / dr.maximum(dz, 0.01)), 1.0)  # eq. 4.12
+    clear = (0.91 + 10.0 * dr.exp(-3.0 * zeta) + 0.45 * cos_z * cos_z) * gamma_f      # eq. 4.13
+    overcast = (1.0 + 2.0 * dz) / 3.0                                                 # eq. 4.16
+    eta = dr.acos(dr.clip(dz, -1.0, 1.0))
+    zt = dr.acos(dr.clip(s.z, -1.0, 1.0))
+    inter = (((1.35 * dr.sin(5.631 - 3.59 * eta) + 3.12) * dr.sin(4.396 - 2.6 * zt)
+              + 6.37 - eta) / 2.326
+             * dr.exp(zeta * -0.563 * ((2.629 - eta) * (1.562 - zt) + 0.812)))
+    # Perez et al. 1993 eq. 1, cos theta_p held at 0.01 below it, clamped at 0 (Sky.perez)
+    mu = dr.maximum(dz, PEREZ_HORIZON_COS)
+    perez = dr.maximum((1.0 + p.perez_a * dr.exp(p.perez_b / mu))
+                       * (1.0 + p.perez_c * dr.exp(p.perez_d * zeta)
+                          + p.perez_e * cos_z * cos_z), 0.0)
+    sky = p.clear * clear + p.overcast * overcast + p.uniform \
+        + p.intermediate * inter + p.perez * perez
+    a = dr.power(dz + 1.01, 10.0)
+    w = a / (a + dr.rcp(a))
+    blended = w * sky + (1.0 - w) * p.ground
+    sharp = dr.select(dz > 0.0, sky, p.ground)
+    return dr.select(p.blend_weight > 0.5, blended, sharp)
 
 
 class CIESkyEmitter(mi.Emitter):
@@ -115,8 +155,26 @@ class CIESkyEmitter(mi.Emitter):
         state that changes with the sky (``dr.freeze`` compares such state by value, so a
         frozen function would record again for every sky).
         """
-        lum = sky.sky_radiance(_TABLE_DIRS) @ SRGB_LUMINANCE               # (cells, sub)
-        cell = np.maximum(lum.mean(axis=1), 0.0)
+        # the sky's own fields first, opaque: the table evaluates the sky through them
+        self.sun_chord2 = opaque_value(mi.Float, sky.sun_chord2)
+        # the kernel reads the blend switch as a float: a 1-byte Bool among the emitter's
+        # data would shift the other fields' alignment from frame to frame, and with it
+        # the kernel's hash (a recompilation per frame)
+        self.blend_weight = opaque_value(mi.Float, float(sky.horizon_blend))
+        # the map as a flat array of RGB triples with its size opaque: any map, one kernel
+        self.envmap_data = self.envmap.array
+        self.has_map = sky.envmap is not None
+        self.envmap_rows = opaque_value(mi.Float, float(self.envmap.shape[0]))
+        self.envmap_cols = opaque_value(mi.Float, float(self.envmap.shape[1]))
+        for k in ("sun_direction", "sun_solid_angle", "blend_weight", "sun_chord2",
+                  "scene_radius") + _RGB_KEYS + _PEREZ_KEYS:
+            dr.make_opaque(getattr(self, k))
+        # the luminance of each cell's sub-samples, averaged, by the emitter's own sky_eval (one
+        # kernel; the NumPy twin Sky.sky_radiance took ten times as long for each new sky)
+        rgb = self.sky_eval(_table_directions_jit())
+        lum = sum(w * rgb[c] for c, w in enumerate(SRGB_LUMINANCE.tolist()))
+        cell = np.maximum(np.array(dr.block_sum(lum, TABLE_SUPERSAMPLE ** 2), dtype=float)
+                          / TABLE_SUPERSAMPLE ** 2, 0.0)
         sky_power = cell.mean() * 4 * np.pi                      # integral of luminance over the sphere
         pmf = cell / cell.sum() if cell.sum() > 0 else np.full(cell.size, 1.0 / cell.size)
         pmf = (1 - UNIFORM_FLOOR) * pmf + UNIFORM_FLOOR / pmf.size
@@ -128,19 +186,6 @@ class CIESkyEmitter(mi.Emitter):
         self.pmf = jit_array(mi.Float, pmf)
         self.cdf = jit_array(mi.Float, cdf)
         self.p_sun = opaque_value(mi.Float, p_sun)
-        self.sun_chord2 = opaque_value(mi.Float, sky.sun_chord2)
-        # the kernel reads the blend switch as a float: a 1-byte Bool among the emitter's
-        # data would shift the other fields' alignment from frame to frame, and with it
-        # the kernel's hash (a recompilation per frame)
-        self.blend_weight = opaque_value(mi.Float, float(sky.horizon_blend))
-        # the map as a flat array of RGB triples with its size opaque: any map, one kernel
-        self.envmap_data = self.envmap.array
-        self.has_map = sky.envmap is not None
-        self.envmap_rows = opaque_value(mi.Float, float(self.envmap.shape[0]))
-        self.envmap_cols = opaque_value(mi.Float, float(self.envmap.shape[1]))
-        for k in ("sun_direction", "sun_solid_angle", "blend_weight", "p_sun", "sun_chord2",
-                  "scene_radius") + _RGB_KEYS + _PEREZ_KEYS:
-            dr.make_opaque(getattr(self, k))
 
     def traverse(self, cb):
         flag = mi.ParamFlags.NonDifferentiable
@@ -166,30 +211,7 @@ class CIESkyEmitter(mi.Emitter):
     def sky_eval(self, d):
         """Sky radiance (no sun) toward world directions d [W m^-2 sr^-1]: Sky.sky_radiance in
         Dr.Jit (the light cache's control variate integrates it, :mod:`..sky_control`)."""
-        s = self.sun_direction
-        cos_z = dr.clip(dr.dot(d, s), -1.0, 1.0)
-        zeta = dr.acos(cos_z)
-        dz = d.z
-        gamma_f = dr.select(dz > 0.01, 1.0 - dr.exp(-0.32 / dr.maximum(dz, 0.01)), 1.0)  # eq. 4.12
-        clear = (0.91 + 10.0 * dr.exp(-3.0 * zeta) + 0.45 * cos_z * cos_z) * gamma_f  # eq. 4.13
-        overcast = (1.0 + 2.0 * dz) / 3.0                                             # eq. 4.16
-        eta = dr.acos(dr.clip(dz, -1.0, 1.0))
-        zt = dr.acos(dr.clip(s.z, -1.0, 1.0))
-        inter = (((1.35 * dr.sin(5.631 - 3.59 * eta) + 3.12) * dr.sin(4.396 - 2.6 * zt)
-                  + 6.37 - eta) / 2.326
-                 * dr.exp(zeta * -0.563 * ((2.629 - eta) * (1.562 - zt) + 0.812)))
-        # Perez et al. 1993 eq. 1, cos theta_p held at 0.01 below it, clamped at 0 (Sky.perez)
-        mu = dr.maximum(dz, PEREZ_HORIZON_COS)
-        perez = dr.maximum((1.0 + self.perez_a * dr.exp(self.perez_b / mu))
-                           * (1.0 + self.perez_c * dr.exp(self.perez_d * zeta)
-                              + self.perez_e * cos_z * cos_z), 0.0)
-        sky = self.clear * clear + self.overcast * overcast + self.uniform \
-            + self.intermediate * inter + self.perez * perez
-        a = dr.power(dz + 1.01, 10.0)
-        w = a / (a + dr.rcp(a))
-        blended = w * sky + (1.0 - w) * self.ground
-        sharp = dr.select(dz > 0.0, sky, self.ground)
-        sky = dr.select(self.blend_weight > 0.5, blended, sharp)
+        sky = sky_function(self, d)
         # a sky without a map skips the lookup (it doubled the cost of the light cache's sky
         # integrals); a day mixing skies with and without maps compiles one kernel for each
         return sky + self.envmap_eval(d) if self.has_map else sky
