@@ -107,3 +107,34 @@ def test_chebyshev_series_interpolates_between_its_roughness_nodes(mi, points):
         series = chebyshev_eval(coef, chebyshev_x(sigma, *SIGMA_TABLE, np.log, np.clip))
         direct = _quadrature(mi, sky, si, sigma)
         assert np.max(np.abs(series / direct - 1)) < tol, (sigma, series / direct - 1)
+
+
+def test_every_frames_integrals_in_one_pass_equal_each_frames_own(mi, points):
+    # FrameSkies: each point under its own frame's sky (per-lane parameters) gives what the
+    # emitter loaded with that frame's sky gives, for skies of every kind (Perez's too) and a blended horizon
+    import dataclasses
+
+    import drjit as dr
+
+    from skyfit_mi.physics.perez import perez_sky
+    from skyfit_mi.physics.sky import cie_sky
+    from skyfit_mi.render.daylight import sky_dict
+    from skyfit_mi.render.sky_control import FrameSkies, quadrature, sky_integrals, to_numpy
+
+    si, _, _ = points
+    Q = len(SURFACES)
+    skies = [_sky("clear"), _sky("overcast"), _sky("intermediate"),
+             dataclasses.replace(cie_sky("clear", 80.0, 100.0), horizon_blend=True),
+             perez_sky(50.0, 150.0, 172, dhi=120.0, dni=500.0)]
+    quad = quadrature(0.002, 0.5, "ward")
+    own = []
+    for sky in skies:
+        d, lobes = sky_integrals(mi.load_dict(sky_dict(sky)), si, quad)
+        own.append(np.stack([to_numpy(v) for v in [d, *lobes]]))
+    index = mi.UInt32(np.tile(np.arange(Q, dtype=np.uint32), len(skies)))
+    every = dr.gather(mi.SurfaceInteraction3f, si, index)
+    d, lobes = sky_integrals(FrameSkies(skies, np.repeat(np.arange(len(skies)), Q)), every, quad)
+    together = np.stack([to_numpy(v) for v in [d, *lobes]])             # (17, T Q, 3)
+    for t, values in enumerate(own):
+        part = together[:, t * Q:(t + 1) * Q]
+        assert np.allclose(part, values, rtol=1e-5, atol=1e-6 * np.abs(values).max()), t
