@@ -125,7 +125,7 @@ def test_every_frames_integrals_in_one_pass_equal_each_frames_own(mi, points):
     Q = len(SURFACES)
     skies = [_sky("clear"), _sky("overcast"), _sky("intermediate"),
              dataclasses.replace(cie_sky("clear", 80.0, 100.0), horizon_blend=True),
-             perez_sky(50.0, 150.0, 172, dhi=120.0, dni=500.0)]
+             perez_sky(50.0, 150.0, 172, dhi=120.0, dni=500.0).to_sky()]
     quad = quadrature(0.002, 0.5, "ward")
     own = []
     for sky in skies:
