@@ -84,6 +84,10 @@ CACHE_SHARE = 0.1
 #: peak, which a narrow lobe resolves); otherwise its own integrals are computed.  Skies with
 #: an environment map (arbitrary structure) are never interpolated.
 SHARE_ANGLE_DEG, SHARE_HORIZON_DEG, SHARE_SUN_DEG = 2.0, 5.0, 5.0
+#: Points whose sky integrals one pass takes (frames' positions together, each under its
+#: frame's sky): a prediction's few points of every frame at once, larger caches frame by frame
+#: (their quadratures' arrays grow with the points).
+SKY_PASS_POINTS = 2048
 #: Share of directions from the solar disc, the sky table, cosine, and all lobes together; fixed
 #: counts, so the sun's share does not fluctuate from pixel to pixel.
 MIX = {"sun": 0.25, "sky": 0.20, "cosine": 0.15, "lobes": 0.40}
@@ -556,16 +560,19 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         else:
             diffuse, lobe = _sky_numpy(*own)
         _add_sky(out, diffuse, lobe, P, S)
-    if together:
-        # every frame's positions as one set of interactions, each under its frame's sky
-        wi, s, t, n = (np.concatenate(a) for a in zip(*at_positions))
+    # frames' positions in passes of up to SKY_PASS_POINTS, each under its frame's sky
+    per_frame = len(at_positions[0][0]) if at_positions else 1
+    step = max(1, SKY_PASS_POINTS // per_frame)
+    for first in range(0, len(at_positions), step):
+        group = at_positions[first:first + step]
+        wi, s, t, n = (np.concatenate(a) for a in zip(*group))
         si_all = dr.zeros(mi.SurfaceInteraction3f, len(wi))
         si_all.wi = jit_array(mi.Vector3f, *wi.T)
         si_all.sh_frame = mi.Frame3f(jit_array(mi.Vector3f, *s.T), jit_array(mi.Vector3f, *t.T),
                                      jit_array(mi.Vector3f, *n.T))
-        frame = np.repeat(np.arange(len(skies)), len(wi) // len(skies))
-        diffuse, lobe = _sky_numpy(*sky_integrals(FrameSkies(skies, frame), si_all, quad))
-        for d, c in zip(np.split(diffuse, len(skies)), np.split(lobe, len(skies))):
+        frames = FrameSkies(skies[first:first + step], np.repeat(np.arange(len(group)), per_frame))
+        diffuse, lobe = _sky_numpy(*sky_integrals(frames, si_all, quad))
+        for d, c in zip(np.split(diffuse, len(group)), np.split(lobe, len(group))):
             _add_sky(out, d, c, P, S)
     return LightCache(**{k: np.stack(v, axis=1) for k, v in out.items()},
                       normalisation=normalisation)
