@@ -71,11 +71,13 @@ class FitSession:
     sky_positions : None, or k: the sky's integrals at k of each pixel's positions
         (:func:`~skyfit_mi.render.light_cache.build_light_cache`), for predictions of region
         means, whose pixels average out what a pixel's k positions leave
+    sky_spacing : None, or n: the sky's integrals interpolated between anchors every n pixels
+        where accurate (``build_light_cache``'s), for predictions of compact regions
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
                  positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None,
-                 sky_positions=None):
+                 sky_positions=None, sky_spacing=None):
         from ..render import setup
         from ..render.fit_model import BY_COUNT, PARAMETERS, bounds, check_fit_normalisation
 
@@ -107,7 +109,7 @@ class FitSession:
         self.cache_settings = {"positions": POSITIONS if positions is None else int(positions),
                                "directions": int(directions), "seed": seed,
                                "sized": "from the data" if positions is None else "given",
-                               "sky_positions": sky_positions}
+                               "sky_positions": sky_positions, "sky_spacing": sky_spacing}
         mi = setup(variant or doc["render"]["variant"])
         self.scene = mi.load_string(doc["scene"]["xml"])
         self.params = mi.traverse(self.scene)
@@ -143,7 +145,8 @@ class FitSession:
                                        directions=c["directions"], seed=c["seed"],
                                        max_depth=max(1, int(self.doc["render"]["max_depth"]) - 1),
                                        normalisation=self.normalisation,
-                                       sky_positions=c["sky_positions"])
+                                       sky_positions=c["sky_positions"],
+                                       sky_spacing=c.get("sky_spacing"))
         if not self.cache.hit.any():
             raise SkyfitError(f"none of the region's pixels shows material {self.name!r}; check "
                               "the region.")

@@ -347,6 +347,7 @@ class _SharedSky:
                                          size, target)
         sid_a, n_a, self.m_a = sid[:A], n[:A], m[:A]
         sid_p, n_p, self.m_p = sid[A:], n[A:], m[A:]
+        self._points = None
         cos_tol = np.cos(np.radians(SHARE_ANGLE_DEG))
         horizon = np.sin(np.radians(SHARE_HORIZON_DEG))
         ok = (sid_p >= 0) & (np.abs(self.m_p[:, 2]) >= horizon)
@@ -369,20 +370,23 @@ class _SharedSky:
         m = np.array(si.to_world(mi.reflect(si.wi)), dtype=float).T
         return si, _shape_index(mi, si, target), n, m
 
-    def integrals(self, mi, dr, emitter, quad, sun):
-        """I_d (P, 3) and I_s's coefficients (P, M, 3) of each pixel under the emitter's
-        current sky (``sun`` its sun's direction, world): interpolated where allowed and the
-        mirror directions are SHARE_SUN_DEG from the sun, the pixel's own elsewhere; and the
-        number interpolated."""
+    def plan(self, sun):
+        """Which pixels interpolate under a sky whose sun lies toward ``sun`` (world): where
+        allowed and every mirror direction is SHARE_SUN_DEG from the sun; the others take their
+        own.  Returns (ok (P,), the anchors used, the pixels taking their own, the indices into
+        the traced interactions of both, in that order)."""
         cos_sun = np.cos(np.radians(SHARE_SUN_DEG))
         sun = np.asarray(sun, dtype=float)
         ok = self.ok & (self.m_p @ sun < cos_sun) \
             & np.all(self.m_a[self.corner] @ sun < cos_sun, axis=1)
         used = np.unique(self.corner[ok])
         own = np.flatnonzero(~ok)
-        # the anchors used and the pixels that take their own, in one pass
-        index = jit_array(mi.UInt32, np.concatenate([used, self.A + own]))
-        d, c = _sky_integrals(emitter, dr.gather(mi.SurfaceInteraction3f, self.si, index), quad)
+        return ok, used, own, np.concatenate([used, self.A + own])
+
+    def combine(self, plan, d, c):
+        """I_d (P, 3) and I_s's coefficients (P, M, 3) of each pixel from the integrals ``d``,
+        ``c`` at the points of ``plan`` (:meth:`plan`); and the number interpolated."""
+        ok, used, own, _ = plan
         diffuse, lobe_c = np.zeros((len(ok), 3)), np.zeros((len(ok),) + c.shape[1:])
         at = np.full(self.A, -1)
         at[used] = np.arange(used.size)
@@ -391,6 +395,23 @@ class _SharedSky:
         lobe_c[ok] = np.einsum("nc,nc...->n...", self.weight[ok], c[k])
         diffuse[own], lobe_c[own] = d[used.size:], c[used.size:]
         return diffuse, lobe_c, int(ok.sum())
+
+    def points(self, index):
+        """The interactions at ``index`` as NumPy arrays (wi, frame s, t, n), each (Q, 3)."""
+        if self._points is None:
+            self._points = [np.array(v, dtype=np.float32).T for v in
+                            (self.si.wi, self.si.sh_frame.s, self.si.sh_frame.t,
+                             self.si.sh_frame.n)]
+        return [a[index] for a in self._points]
+
+    def integrals(self, mi, dr, emitter, quad, sun):
+        """I_d (P, 3) and I_s's coefficients (P, M, 3) of each pixel under the emitter's
+        current sky (``sun`` its sun's direction, world): interpolated as :meth:`plan` allows,
+        the pixel's own elsewhere; and the number interpolated."""
+        plan = self.plan(sun)
+        index = jit_array(mi.UInt32, plan[3])
+        d, c = _sky_integrals(emitter, dr.gather(mi.SurfaceInteraction3f, self.si, index), quad)
+        return self.combine(plan, d, c)
 
 
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
@@ -419,7 +440,8 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         pixel taking the bilinear interpolation of the four around it where that is accurate
         (SHARE_ANGLE_DEG, SHARE_HORIZON_DEG, SHARE_SUN_DEG; never under an environment map),
         its own elsewhere: about n^2 times cheaper on smooth surfaces, with an error second
-        order in the anchors' spacing (docs/BENCHMARKS.md)
+        order in the anchors' spacing (docs/BENCHMARKS.md); not where the anchors would
+        outnumber the pixels (scattered pixels), which then take ``sky_positions``
     stats : None, or a dict that receives ``shared``, the number of (pixel, frame) pairs whose
         sky integrals were interpolated
 
@@ -455,7 +477,8 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     n_comp = 3 + len(LOBE_SIGMAS)
 
     share = None
-    if sky_spacing is not None and int(sky_spacing) > 1 and rays is None:
+    if sky_spacing is not None and int(sky_spacing) > 1 and rays is None \
+            and len(_anchor_plan(pixels, int(sky_spacing), w, h)[0]) < P:
         share = _SharedSky(mi, scene, sensor, pixels, int(sky_spacing), (w, h), target)
     if stats is not None:
         stats["shared"] = 0
@@ -472,10 +495,10 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos",
                            "hit", "sun_half_cos", "diffuse_sky", "lobe_sky")}
     ids = np.array([shape.bsdf().id() for shape in target], dtype=object)
-    # the sky's integrals at the positions of every frame in one pass after the frames, each
-    # point under its frame's sky (FrameSkies), unless shared between anchors or under maps
-    together = share is None and all(sky.envmap is None for sky in skies)
-    at_positions = []
+    # the sky's integrals of every frame after the frames, in passes of many frames' points each
+    # under its own frame's sky (FrameSkies), unless a frame's sky has a map
+    together = all(sky.envmap is None for sky in skies)
+    pending = []                          # per frame: (points, the shared sky's plan or None)
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
         comp = _components(K, _has_sun(sky))
@@ -530,9 +553,9 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         sun = si.to_local(opaque_value(mi.Vector3f, sky.sun_direction))
         shared = share is not None and sky.envmap is None
         sub = si if subset is None else dr.gather(mi.SurfaceInteraction3f, si, subset)
-        own = sub if together else None if shared else sky_integrals(emitter, sub, quad)
+        own = None if shared else sub if together else sky_integrals(emitter, sub, quad)
         dr.eval(si.wi, wl, weight, inv_pdf, lm, lm_sky, sun,       # together: shared parts once
-                (own.wi, own.sh_frame) if together else own)
+                (own.wi, own.sh_frame) if together and not shared else own)
 
         def np3(v, n):
             return np.array(v, dtype=np.float32).T.reshape(P, n, 3)
@@ -549,9 +572,13 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         out["hit"].append(on.reshape(P, S).all(axis=1))
         out["sun_half_cos"].append(_sun_half_cos(np.array(sun, dtype=float).T, view,
                                                  sky).reshape(P, S))
+        if together and shared:
+            plan = share.plan(sky.sun_direction)
+            pending.append((share.points(plan[3]), plan))
+            continue
         if together:
-            at_positions.append([np.array(v, dtype=np.float32).T for v in
-                                 (own.wi, own.sh_frame.s, own.sh_frame.t, own.sh_frame.n)])
+            pending.append(([np.array(v, dtype=np.float32).T for v in
+                             (own.wi, own.sh_frame.s, own.sh_frame.t, own.sh_frame.n)], None))
             continue
         if shared:
             diffuse, lobe, n_shared = share.integrals(mi, dr, emitter, quad, sky.sun_direction)
@@ -560,20 +587,31 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         else:
             diffuse, lobe = _sky_numpy(*own)
         _add_sky(out, diffuse, lobe, P, S)
-    # frames' positions in passes of up to SKY_PASS_POINTS, each under its frame's sky
-    per_frame = len(at_positions[0][0]) if at_positions else 1
-    step = max(1, SKY_PASS_POINTS // per_frame)
-    for first in range(0, len(at_positions), step):
-        group = at_positions[first:first + step]
-        wi, s, t, n = (np.concatenate(a) for a in zip(*group))
+    # frames' points in passes of up to SKY_PASS_POINTS (at least a frame), each point under
+    # its frame's sky
+    first = 0
+    while first < len(pending):
+        last, count = first + 1, len(pending[first][0][0])
+        while last < len(pending) and count + len(pending[last][0][0]) <= SKY_PASS_POINTS:
+            count += len(pending[last][0][0])
+            last += 1
+        group = pending[first:last]
+        sizes = [len(points[0]) for points, _ in group]
+        wi, s, t, n = (np.concatenate(a) for a in zip(*(points for points, _ in group)))
         si_all = dr.zeros(mi.SurfaceInteraction3f, len(wi))
         si_all.wi = jit_array(mi.Vector3f, *wi.T)
         si_all.sh_frame = mi.Frame3f(jit_array(mi.Vector3f, *s.T), jit_array(mi.Vector3f, *t.T),
                                      jit_array(mi.Vector3f, *n.T))
-        frames = FrameSkies(skies[first:first + step], np.repeat(np.arange(len(group)), per_frame))
+        frames = FrameSkies(skies[first:last], np.repeat(np.arange(len(group)), sizes))
         diffuse, lobe = _sky_numpy(*sky_integrals(frames, si_all, quad))
-        for d, c in zip(np.split(diffuse, len(group)), np.split(lobe, len(group))):
+        cut = np.cumsum(sizes)[:-1]
+        for (_, plan), d, c in zip(group, np.split(diffuse, cut), np.split(lobe, cut)):
+            if plan is not None:
+                d, c, n_shared = share.combine(plan, d, c)
+                if stats is not None:
+                    stats["shared"] += n_shared
             _add_sky(out, d, c, P, S)
+        first = last
     return LightCache(**{k: np.stack(v, axis=1) for k, v in out.items()},
                       normalisation=normalisation)
 
