@@ -294,6 +294,12 @@ def test_correlated_channels_widen_the_shared_parameters_by_the_design_effect(rh
     f2, R = channel_factors(r, J, usable)
     assert np.allclose(R[np.triu_indices(3, 1)], rho, atol=0.05)
     assert f2 == pytest.approx([1.0, 1.0, 1.0, 1.0 + 2 * rho], abs=0.08)
+    # clipped values stay in the curvature but share nothing: the shared slope's factor
+    # falls toward that of independent values, never below it
+    clipped = usable.copy()
+    clipped[:200, :, 0] = False
+    f2c, _ = channel_factors(r, J, clipped, usable)
+    assert 1.0 <= f2c[3] <= f2[3] + 1e-9
     # a channel left out (clipped or missing) everywhere: no correlation with it
     usable[..., 2] = False
     f2, R = channel_factors(r, J, usable)

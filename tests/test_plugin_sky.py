@@ -215,3 +215,17 @@ def test_lambertian_disc_radiance_equals_irradiance_over_pi(mi, name):
     img = np.array(mi.render(scene, seed=0)).reshape(-1, 3)
     expected = sky.horizontal_irradiance() / np.pi
     np.testing.assert_allclose(img.mean(axis=0), expected, rtol=0.01)
+
+
+def test_the_sampling_tables_directions_follow_the_variant(mi, monkeypatch):
+    # the table's directions are made once per variant: an emitter of another variant (a GPU
+    # after a CPU render in one process) must not get the first variant's array
+    from skyfit_mi.render.plugins import cie_sky
+
+    a = cie_sky._table_directions_jit()
+    assert cie_sky._table_directions_jit() is a
+    monkeypatch.setattr(cie_sky.mi, "variant", lambda: "cuda_ad_rgb")
+    try:
+        assert cie_sky._table_directions_jit() is not a          # made anew for that variant
+    finally:
+        cie_sky._table_directions_of.cache_clear()   # the stand-in is not a CUDA array

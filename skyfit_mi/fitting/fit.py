@@ -284,7 +284,8 @@ class FitSession:
         curv_inv = unc.covariance(J)
         # errors shared by a value's channels widen each parameter's variance by f2
         low, high = problem.clipped()
-        f2, channels = unc.channel_factors(r_all, J_all, problem.mask & ~low & ~high)
+        f2, channels = unc.channel_factors(r_all, J_all, problem.mask & ~low & ~high,
+                                           problem.mask)
         # the global minimum: its grid gives the profiles; a local method is judged against it
         g = res if method == "global" else global_search(problem, start, self.lower, self.upper,
                                                         candidates=2, grid_basis=grid_basis)

@@ -49,12 +49,13 @@ def covariance(J, s2=1.0):
     return c * s2
 
 
-def channel_factors(r, J, usable):
+def channel_factors(r, J, usable, in_chi2=None):
     """Per parameter, the factor f^2 >= 1 by which correlated errors of a value's R, G and B
     widen its variance, and the channels' correlation R (C, C) it comes from.
 
     ``r`` (P, T, C) residuals at the fit, ``J`` (P, T, C, n) their derivatives, ``usable``
-    (P, T, C) the values that are measured (not clipped, not left out).  A JPEG codes a
+    (P, T, C) the values that are measured (not clipped, not left out), ``in_chi2`` those in
+    chi-square (default ``usable``; clipped values enter as censored terms, uncorrelated).  A JPEG codes a
     pixel's brightness once for its three channels, a raw converter demosaics each from its
     neighbours', a renderer's Monte Carlo paths carry all three, and a model that misses the
     brightness misses it in all three: their errors are then correlated, while chi-square
@@ -69,6 +70,7 @@ def channel_factors(r, J, usable):
     """
     n_par = J.shape[-1]
     C = r.shape[-1]
+    in_chi2 = usable if in_chi2 is None else in_chi2
     R = np.eye(C)
     for i in range(C):
         for j in range(i + 1, C):
@@ -82,9 +84,13 @@ def channel_factors(r, J, usable):
                 R[i, j] = R[j, i] = rho
     w, v = np.linalg.eigh(R)
     R = (v * np.clip(w, 0.0, None)) @ v.T                      # positive semi-definite
+    # every value of chi-square in the curvature; the correlation between measured ones only
+    # (a clipped value's censored term shares nothing with the others)
+    Jall = np.where(in_chi2[..., None], J, 0.0).reshape(-1, C, n_par)
     Jz = np.where(usable[..., None], J, 0.0).reshape(-1, C, n_par)
-    M = np.einsum("nck,cd,ndl->kl", Jz, R, Jz)
-    Hi = covariance(Jz.reshape(-1, n_par))
+    Hi = covariance(Jall.reshape(-1, n_par))
+    M = Jall.reshape(-1, n_par).T @ Jall.reshape(-1, n_par) \
+        + np.einsum("nck,cd,ndl->kl", Jz, R - np.eye(C), Jz)
     with np.errstate(all="ignore"):
         f2 = np.diag(Hi @ M @ Hi) / np.diag(Hi)
     return np.where(np.isfinite(f2), np.maximum(f2, 1.0), 1.0), R

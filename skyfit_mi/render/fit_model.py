@@ -372,23 +372,26 @@ class WardModel:
             + refl[:, 1].reshape(refl.shape[:1] + (1,) * (D.ndim - 1) + (3,)) * G
 
     def _interpolated_lobe(self, sig, C, reduce):
-        """``reduce`` of G at roughnesses ``sig`` of one smooth piece (see :meth:`radiances`)."""
-        lo, hi = np.log(sig.min()), np.log(sig.max())
-        u = 2 * (np.log(sig) - lo) / max(hi - lo, 1e-300) - 1
+        """``reduce`` of G at roughnesses ``sig`` of one smooth piece (see :meth:`radiances`):
+        interpolated only while that takes fewer evaluations than its distinct roughnesses."""
+        uniq, inverse = np.unique(sig, return_inverse=True)
+        lo, hi = np.log(uniq[0]), np.log(uniq[-1])
+        u = 2 * (np.log(uniq) - lo) / max(hi - lo, 1e-300) - 1
         known, last, n = {}, None, RADIANCES_NODES
-        while hi - lo > 1e-9 and n <= RADIANCES_MAX_NODES and n < len(sig):
+        while hi - lo > 1e-9 and n <= RADIANCES_MAX_NODES and n + 1 < len(uniq) \
+                and (last is not None or 2 * n + 1 < len(uniq)):
             x = np.cos(np.pi * np.arange(n + 1) / n)                  # nested as n doubles
             for v in x:
                 if v not in known:
                     known[v] = np.asarray(reduce(self._lobe(np.exp(lo + (v + 1) * (hi - lo) / 2))))
             values = np.stack([known[v] for v in x])
             coef = np.linalg.solve(C.chebvander(x, n), values.reshape(n + 1, -1))
-            now = (C.chebvander(u, n) @ coef).reshape((len(sig),) + values.shape[1:])
+            now = (C.chebvander(u, n) @ coef).reshape((len(uniq),) + values.shape[1:])
             if last is not None and np.max(np.abs(now - last)) \
                     <= RADIANCES_RTOL * max(np.max(np.abs(now)), 1e-30):
-                return now
+                return now[inverse]
             last, n = now, 2 * n
-        return np.stack([np.asarray(reduce(self._lobe(v))) for v in sig])
+        return np.stack([np.asarray(reduce(self._lobe(v))) for v in uniq])[inverse]
 
     def _lobe(self, sigma):
         """G(sigma) (P, T, 3): the basis plugin's L at rho_s = 1 (the lobe alone)."""

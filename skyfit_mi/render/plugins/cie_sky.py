@@ -80,12 +80,14 @@ def _table_directions():
     return d.reshape(TABLE_NV * TABLE_NU, s * s, 3)
 
 
-@functools.lru_cache(maxsize=None)
-def _table_directions_jit(variant=None):
+def _table_directions_jit():
     """:func:`_table_directions` flat (cell by cell) as a Dr.Jit Vector3f of the current
-    variant (``variant`` keys the cache; default mi.variant())."""
-    if variant is None:
-        return _table_directions_jit(mi.variant())
+    variant (made once per variant)."""
+    return _table_directions_of(mi.variant())
+
+
+@functools.lru_cache(maxsize=None)
+def _table_directions_of(variant):
     d = _table_directions().reshape(-1, 3)
     return jit_array(mi.Vector3f, d[:, 0], d[:, 1], d[:, 2])
 
