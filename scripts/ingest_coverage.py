@@ -18,6 +18,7 @@ than one realisation's, which follow where each fit lands on the rho_s - sigma_a
 """
 
 import argparse
+import inspect
 import sys
 import tempfile
 from pathlib import Path
@@ -26,8 +27,13 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 TRUTH = {"C_r": 0.62, "C_g": 0.12, "C_b": 0.10, "rho_s": 0.05, "sigma_alpha": 0.08}
-#: photo_sim.photograph_day's default sensor noise: read 0.8 DN rms, shot gain 0.02 DN
-TRUE_NOISE = (0.8 ** 2, 0.02)
+
+
+def true_noise(photograph_day):
+    """The simulator's own sensor noise (``photograph_day``'s defaults) as ingest's ``noise``:
+    (read variance [DN^2], shot gain [DN])."""
+    p = inspect.signature(photograph_day).parameters
+    return p["read_noise_DN"].default ** 2, p["shot_gain"].default
 
 
 def main():
@@ -135,7 +141,7 @@ def main():
                 photograph_day(truth, photos, seed=seed, quality=q)
                 ingest([photos], spec_path, seq, calibrate={"grey_card": (0.18,) * 3},
                        vignetting="cos4", overwrite=True, progress=False,
-                       noise=TRUE_NOISE if args.true_noise else None, **quiet)
+                       noise=true_noise(photograph_day) if args.true_noise else None, **quiet)
             sequences.append(seq)
         medians[q] = row(q, sequences)
     if args.clean:

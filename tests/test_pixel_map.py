@@ -217,6 +217,16 @@ def test_device_grid_equals_the_numpy_grid():
         gs.grid_chi2("colour", y, w, D, G, gs.RHO_GRID[::-1])
 
 
+def _shared_integrals(mi, dr, share, emitter, quad, sun):
+    """One frame's interpolated integrals under the emitter's current sky (as the light cache
+    takes them: the anchors used and the pixels' own, then combined)."""
+    from skyfit_mi.render.light_cache import _sky_integrals
+
+    plan = share.plan(sun)
+    at = dr.gather(mi.SurfaceInteraction3f, share.si, mi.UInt32(plan[3]))
+    return share.combine(plan, *_sky_integrals(emitter, at, quad))
+
+
 def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_path):
     """On the disc seen from 30 degrees at 96x96 (0.3 degrees a pixel), the sky's integrals
     interpolated between anchors 4 pixels apart agree with each pixel's own (through its
@@ -264,7 +274,7 @@ def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_pa
         pixel_si = dr.gather(mi.SurfaceInteraction3f, share.si,
                              mi.UInt32(share.A + np.arange(len(px))))
         own_d, own_l = _sky_integrals(scene.environment(), pixel_si, quad)
-        d, l, n = share.integrals(mi, dr, scene.environment(), quad, sky.sun_direction)
+        d, l, n = _shared_integrals(mi, dr, share, scene.environment(), quad, sky.sun_direction)
         shared += n
         for s in (0.002, 0.02, 0.2, 0.5):
             x = chebyshev_x(s, *SIGMA_TABLE, np.log, np.clip)
@@ -282,7 +292,7 @@ def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_pa
     cache = build_light_cache(scene, params, skies, inner, name, 2, 32, sky_spacing=4)
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
-        d, l, _ = share.integrals(mi, dr, scene.environment(), quad, sky.sun_direction)
+        d, l, _ = _shared_integrals(mi, dr, share, scene.environment(), quad, sky.sun_direction)
         assert np.allclose(cache.diffuse_sky[:, t, 0], d[share.ok][:16], rtol=1e-5)
         assert np.allclose(cache.lobe_sky[:, t, 0], l[share.ok][:16], rtol=1e-4,
                            atol=1e-5 * np.abs(l).max())

@@ -111,7 +111,8 @@ def test_chebyshev_series_interpolates_between_its_roughness_nodes(mi, points):
 
 def test_every_frames_integrals_in_one_pass_equal_each_frames_own(mi, points):
     # FrameSkies: each point under its own frame's sky (per-lane parameters) gives what the
-    # emitter loaded with that frame's sky gives, for skies of every kind (Perez's too) and a blended horizon
+    # emitter loaded with that frame's sky gives, for skies of every kind (Perez's too) and a
+    # blended horizon
     import dataclasses
 
     import drjit as dr

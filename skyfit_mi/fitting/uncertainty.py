@@ -55,15 +55,16 @@ def channel_factors(r, J, usable, in_chi2=None):
 
     ``r`` (P, T, C) residuals at the fit, ``J`` (P, T, C, n) their derivatives, ``usable``
     (P, T, C) the values that are measured (not clipped, not left out), ``in_chi2`` those in
-    chi-square (default ``usable``; clipped values enter as censored terms, uncorrelated).  A JPEG codes a
-    pixel's brightness once for its three channels, a raw converter demosaics each from its
-    neighbours', a renderer's Monte Carlo paths carry all three, and a model that misses the
-    brightness misses it in all three: their errors are then correlated, while chi-square
-    sums them as independent.  R is the residuals' correlation between channels over the
-    pixels and frames where both are measured (a pair's taken as zero unless it exceeds twice
-    its standard error under independence, 2 / sqrt(n)); the parameters' covariance is then
-    the sandwich (J^T J)^-1 J^T R J (J^T J)^-1, and f^2 its diagonal over that of (J^T J)^-1
-    (the thesis's covariance, the inverse of eq. 6.11's curvature matrix, when R = I).
+    chi-square (default ``usable``; clipped values enter as censored terms, uncorrelated).
+    A JPEG codes a pixel's brightness once for its three channels, a raw converter demosaics
+    each from its neighbours', a renderer's Monte Carlo paths carry all three, and a model
+    that misses the brightness misses it in all three: their errors are then correlated,
+    while chi-square sums them as independent.  R is the residuals' correlation between
+    channels over the pixels and frames where both are measured (a pair's taken as zero
+    unless it exceeds twice its standard error under independence, 2 / sqrt(n)); the
+    parameters' covariance is then the sandwich (J^T J)^-1 J^T R J (J^T J)^-1, and f^2 its
+    diagonal over that of (J^T J)^-1 (the thesis's covariance, the inverse of eq. 6.11's
+    curvature matrix, when R = I).
     Measured on quality-95 JPEG days (``scripts/ingest_coverage.py --scale 3``, 18 noise
     seeds, docs/BENCHMARKS.md): R's off-diagonal 0.3-0.56, f 1.1-1.34, and the 95% intervals'
     coverage 0.88 -> 0.94; at quality 100 (12 seeds) f 1.00-1.06, coverage 1.00 as before.

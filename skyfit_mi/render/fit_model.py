@@ -13,7 +13,8 @@ import itertools
 import numpy as np
 
 from ..physics.ward import METAL_THRESHOLD, PLASTIC_MAX, SIGMA_MIRROR, lobe_albedo_nodes
-from .light_cache import CONTROL_FULL, CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED, SIGMA_TABLE, control_weight
+from .light_cache import (CONTROL_FULL, CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
+                          SIGMA_TABLE, control_weight)
 from .daylight import jit_array
 from .sky_control import chebyshev_eval, chebyshev_x
 

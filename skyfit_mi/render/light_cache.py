@@ -301,9 +301,26 @@ def _sky_numpy(diffuse, values):
 
 def _sky_integrals(emitter, si, quad):
     """I_d (Q, 3) and the Chebyshev coefficients of I_s (Q, M, 3) of every surface interaction
-    in ``si`` under the emitter's current sky (:mod:`.sky_control`); ``quad`` its
-    :func:`~.sky_control.quadrature` on SIGMA_TABLE."""
+    in ``si`` under the emitter's current sky, or each under its frame's (``emitter`` a
+    :class:`~.sky_control.FrameSkies`); ``quad`` the :func:`~.sky_control.quadrature` on
+    SIGMA_TABLE."""
     return _sky_numpy(*sky_integrals(emitter, si, quad))
+
+
+def _interaction_arrays(si):
+    """What the sky's integrals need of interactions ``si`` as NumPy arrays, each (Q, 3): the
+    view direction and the shading frame's s, t, n (rebuilt by :func:`_interactions`)."""
+    return [np.array(v, dtype=np.float32).T
+            for v in (si.wi, si.sh_frame.s, si.sh_frame.t, si.sh_frame.n)]
+
+
+def _interactions(mi, dr, wi, s, t, n):
+    """Surface interactions with view directions ``wi`` and shading frames (s, t, n), each
+    (Q, 3) NumPy (:func:`_interaction_arrays`)."""
+    si = dr.zeros(mi.SurfaceInteraction3f, len(wi))
+    si.wi = jit_array(mi.Vector3f, *wi.T)
+    si.sh_frame = mi.Frame3f(*(jit_array(mi.Vector3f, *a.T) for a in (s, t, n)))
+    return si
 
 
 def _anchor_plan(pixels, spacing, width, height):
@@ -347,7 +364,7 @@ class _SharedSky:
                                          size, target)
         sid_a, n_a, self.m_a = sid[:A], n[:A], m[:A]
         sid_p, n_p, self.m_p = sid[A:], n[A:], m[A:]
-        self._points = None
+        self.arrays = _interaction_arrays(self.si)
         cos_tol = np.cos(np.radians(SHARE_ANGLE_DEG))
         horizon = np.sin(np.radians(SHARE_HORIZON_DEG))
         ok = (sid_p >= 0) & (np.abs(self.m_p[:, 2]) >= horizon)
@@ -397,21 +414,8 @@ class _SharedSky:
         return diffuse, lobe_c, int(ok.sum())
 
     def points(self, index):
-        """The interactions at ``index`` as NumPy arrays (wi, frame s, t, n), each (Q, 3)."""
-        if self._points is None:
-            self._points = [np.array(v, dtype=np.float32).T for v in
-                            (self.si.wi, self.si.sh_frame.s, self.si.sh_frame.t,
-                             self.si.sh_frame.n)]
-        return [a[index] for a in self._points]
-
-    def integrals(self, mi, dr, emitter, quad, sun):
-        """I_d (P, 3) and I_s's coefficients (P, M, 3) of each pixel under the emitter's
-        current sky (``sun`` its sun's direction, world): interpolated as :meth:`plan` allows,
-        the pixel's own elsewhere; and the number interpolated."""
-        plan = self.plan(sun)
-        index = jit_array(mi.UInt32, plan[3])
-        d, c = _sky_integrals(emitter, dr.gather(mi.SurfaceInteraction3f, self.si, index), quad)
-        return self.combine(plan, d, c)
+        """The traced interactions at ``index`` as :func:`_interaction_arrays`."""
+        return [a[index] for a in self.arrays]
 
 
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
@@ -495,9 +499,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos",
                            "hit", "sun_half_cos", "diffuse_sky", "lobe_sky")}
     ids = np.array([shape.bsdf().id() for shape in target], dtype=object)
-    # the sky's integrals of every frame after the frames, in passes of many frames' points each
-    # under its own frame's sky (FrameSkies), unless a frame's sky has a map
-    together = all(sky.envmap is None for sky in skies)
+    # the sky's integrals of every frame after the frames (below)
     pending = []                          # per frame: (points, the shared sky's plan or None)
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
@@ -552,10 +554,10 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0) - emitter.sky_eval(ray_m.d)
         sun = si.to_local(opaque_value(mi.Vector3f, sky.sun_direction))
         shared = share is not None and sky.envmap is None
-        sub = si if subset is None else dr.gather(mi.SurfaceInteraction3f, si, subset)
-        own = None if shared else sub if together else sky_integrals(emitter, sub, quad)
+        own = None if shared else \
+            si if subset is None else dr.gather(mi.SurfaceInteraction3f, si, subset)
         dr.eval(si.wi, wl, weight, inv_pdf, lm, lm_sky, sun,       # together: shared parts once
-                (own.wi, own.sh_frame) if together and not shared else own)
+                None if shared else (own.wi, own.sh_frame))
 
         def np3(v, n):
             return np.array(v, dtype=np.float32).T.reshape(P, n, 3)
@@ -572,38 +574,31 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         out["hit"].append(on.reshape(P, S).all(axis=1))
         out["sun_half_cos"].append(_sun_half_cos(np.array(sun, dtype=float).T, view,
                                                  sky).reshape(P, S))
-        if together and shared:
+        if shared:
             plan = share.plan(sky.sun_direction)
             pending.append((share.points(plan[3]), plan))
-            continue
-        if together:
-            pending.append(([np.array(v, dtype=np.float32).T for v in
-                             (own.wi, own.sh_frame.s, own.sh_frame.t, own.sh_frame.n)], None))
-            continue
-        if shared:
-            diffuse, lobe, n_shared = share.integrals(mi, dr, emitter, quad, sky.sun_direction)
-            if stats is not None:
-                stats["shared"] += n_shared
         else:
-            diffuse, lobe = _sky_numpy(*own)
-        _add_sky(out, diffuse, lobe, P, S)
-    # frames' points in passes of up to SKY_PASS_POINTS (at least a frame), each point under
-    # its frame's sky
+            pending.append((_interaction_arrays(own), None))
+    # every frame's sky integrals in passes of up to SKY_PASS_POINTS points (at least a frame),
+    # each point under its own frame's sky (FrameSkies); a frame whose sky has a map alone,
+    # under the emitter set to that sky
     first = 0
     while first < len(pending):
         last, count = first + 1, len(pending[first][0][0])
-        while last < len(pending) and count + len(pending[last][0][0]) <= SKY_PASS_POINTS:
+        while last < len(pending) and skies[first].envmap is None \
+                and skies[last].envmap is None \
+                and count + len(pending[last][0][0]) <= SKY_PASS_POINTS:
             count += len(pending[last][0][0])
             last += 1
         group = pending[first:last]
         sizes = [len(points[0]) for points, _ in group]
-        wi, s, t, n = (np.concatenate(a) for a in zip(*(points for points, _ in group)))
-        si_all = dr.zeros(mi.SurfaceInteraction3f, len(wi))
-        si_all.wi = jit_array(mi.Vector3f, *wi.T)
-        si_all.sh_frame = mi.Frame3f(jit_array(mi.Vector3f, *s.T), jit_array(mi.Vector3f, *t.T),
-                                     jit_array(mi.Vector3f, *n.T))
-        frames = FrameSkies(skies[first:last], np.repeat(np.arange(len(group)), sizes))
-        diffuse, lobe = _sky_numpy(*sky_integrals(frames, si_all, quad))
+        at = _interactions(mi, dr, *(np.concatenate(a) for a in zip(*(p for p, _ in group))))
+        if skies[first].envmap is None:
+            light = FrameSkies(skies[first:last], np.repeat(np.arange(len(group)), sizes))
+        else:
+            update_sky(params, skies[first], "sky.")
+            light = emitter
+        diffuse, lobe = _sky_integrals(light, at, quad)
         cut = np.cumsum(sizes)[:-1]
         for (_, plan), d, c in zip(group, np.split(diffuse, cut), np.split(lobe, cut)):
             if plan is not None:

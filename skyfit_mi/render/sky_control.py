@@ -191,12 +191,10 @@ class FrameSkies:
     of all of them in one pass (the light cache's frames): ``skies`` the frames'
     :class:`~skyfit_mi.physics.sky.Sky` (without maps), ``frame`` (Q,) each point's frame."""
 
-    _FLOATS = ("perez_a", "perez_b", "perez_c", "perez_d", "perez_e", "blend_weight")
-
     def __init__(self, skies, frame):
         import mitsuba as mi
 
-        from .daylight import RGB_KEYS, jit_array
+        from .daylight import PEREZ_KEYS, RGB_KEYS, jit_array
 
         if any(sky.envmap is not None for sky in skies):
             raise ValueError("FrameSkies takes skies without environment maps")
@@ -208,7 +206,7 @@ class FrameSkies:
         coef = np.array([sky.perez_coefficients for sky in skies], dtype=float).reshape(-1, 5)
         floats = np.column_stack([coef, [float(sky.horizon_blend) for sky in skies]])
         self.values.update({k: jit_array(mi.Float, floats[:, i])
-                            for i, k in enumerate(self._FLOATS)})
+                            for i, k in enumerate(PEREZ_KEYS + ("blend_weight",))})
 
     def at(self, q):
         """The parameters of the frame of each point ``q`` (a lane each), with ``sky_eval``."""
