@@ -14,8 +14,11 @@ scenes/specs/disc_clear_east.toml at 256x256, 64 spp, its disc made of table 7.1
 Prints a markdown table of wall times and the ratio of each to the render's; then, in this
 warm process, ``--warm`` predictions without images (the fast path per sequence): each one's
 wall time, its light cache's, and the kernels compiled during it (Dr.Jit's kernel history).
+With ``--board``, the same for the README's several regions: the sample board's day
+(scenes/specs/board_east_37.toml as it is), `fit --all --model 5` of its eight samples, then
+relight with images and without (a few minutes more, most of them the fits).
 
-    .venv/bin/python scripts/bench_relight.py [-o DIR]
+    .venv/bin/python scripts/bench_relight.py [-o DIR] [--board]
 """
 
 import argparse
@@ -43,6 +46,8 @@ def main():
     ap.add_argument("-o", "--output", help="work folder (default a temporary one)")
     ap.add_argument("--warm", type=int, default=4,
                     help="predictions without images timed in this process (default 4)")
+    ap.add_argument("--board", action="store_true",
+                    help="also the sample board's day with its eight regions (README)")
     args = ap.parse_args()
     work = Path(args.output or tempfile.mkdtemp(prefix="bench_relight_"))
     work.mkdir(parents=True, exist_ok=True)
@@ -72,11 +77,36 @@ def main():
     rows.append(("chi2map 60 x 60 --profile",
                  timed(["chi2map", day, fits / "fit_disc.json", "-o", work / "profile",
                         "--profile"])))
+    table(rows)
+    warm(fits, day, work / "warm", args.warm)
+    if args.board:
+        board(work / "board")
+
+
+def table(rows):
+    """Print ``rows`` [(step, wall time)] as markdown, each also over the first's."""
     peer = rows[0][1]
     print("| step | wall time [s] | / render |\n|---|---|---|")
     for name, t in rows:
-        print(f"| {name} | {t:.1f} | {t / peer:.2f} |")
-    warm(fits, day, work / "warm", args.warm)
+        print(f"| {name} | {t:.1f} | {t / peer:.2f} |", flush=True)
+
+
+def board(work):
+    """The README's day: render, fit of every sample, relight with and without images."""
+    day, fits = work / "day", work / "fits"
+    rows = [("board: render (the peer)",
+             timed(["render", ROOT / "scenes" / "specs" / "board_east_37.toml", "-o", day, "-q",
+                    "--overwrite"]))]
+    rows.append(("board: fit --all --model 5 (8 regions)",
+                 timed(["fit", day, "--all", "--model", "5", "-o", fits])))
+    rows.append(("board: relight (8 regions)",
+                 timed(["relight", fits, "--target", day, "-o", work / "relit", "-q",
+                        "--overwrite"])))
+    rows.append(("board: relight --no-images (8 regions)",
+                 timed(["relight", fits, "--target", day, "-o", work / "predicted", "-q",
+                        "--no-images", "--overwrite"])))
+    print()
+    table(rows)
 
 
 def warm(fits, day, out, n):

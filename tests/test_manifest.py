@@ -6,6 +6,7 @@ import shutil
 import numpy as np
 import pytest
 
+from skyfit_mi.errors import SkyfitError
 from skyfit_mi.pipeline.manifest import (SCHEMA, ManifestError, frame_exposure, frame_sky,
                                          load_manifest, schema, upgrade, validate_manifest,
                                          write_manifest)
@@ -55,6 +56,25 @@ def test_a_manifest_read_again_is_validated_again_only_when_its_text_changed(day
     with pytest.raises(ManifestError, match=r"camera\.width"):
         load_manifest(out)
     assert len(calls) == seen + 1
+
+
+def test_a_frame_read_again_is_shared_until_its_file_changes(day, tmp_path):
+    """read_frame_image keeps what it read lately: the next reader of an unchanged file gets the
+    same (read-only) array; a file written again is read anew."""
+    from skyfit_mi.pipeline.manifest import read_frame_image
+    from skyfit_mi.render.image import write_exr
+
+    out = _copy(day, tmp_path)
+    doc, root = load_manifest(out)
+    f = doc["frames"][4]
+    a = read_frame_image(root, f, "radiance", (12, 12, 3))
+    assert read_frame_image(root, f, "radiance", (12, 12, 3)) is a and not a.flags.writeable
+    write_exr(out / f["radiance"], a * 2)                  # written again (atomically)
+    b = read_frame_image(root, f, "radiance", (12, 12, 3))
+    assert b is not a and np.array_equal(b, a * 2)
+    (out / f["radiance"]).write_bytes((out / f["radiance"]).read_bytes()[:200])   # in place
+    with pytest.raises(SkyfitError, match="frame 4: cannot read"):
+        read_frame_image(root, f, "radiance", (12, 12, 3))
 
 
 def test_a_version_1_manifest_is_upgraded(day, tmp_path):
@@ -180,7 +200,6 @@ def test_per_frame_exposure_and_white_balance_reach_the_fit(day, tmp_path):
 
 
 def test_frames_are_checked_on_load(day, tmp_path):
-    from skyfit_mi.errors import SkyfitError
     from skyfit_mi.fitting.chi2 import load_observations
     from skyfit_mi.render.image import read_exr, write_exr
 
@@ -206,7 +225,6 @@ def test_frames_are_checked_on_load(day, tmp_path):
 
 
 def test_incomplete_render_is_warned_and_frames_can_be_chosen(day, tmp_path):
-    from skyfit_mi.errors import SkyfitError
     from skyfit_mi.fitting.chi2 import load_observations
 
     out = _copy(day, tmp_path)

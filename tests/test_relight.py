@@ -287,3 +287,48 @@ def test_a_fit_of_ward_data_predicts_another_sky_and_camera_within_its_band(
     # the same from the true material: noise alone, which the fit's error is compared with
     means = errors["region_means"]["disc"]
     assert means["fit"] == pytest.approx(err, rel=1e-3) and means["truth"] < 0.02
+
+
+def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
+    """FitSession.sharing_light: one light cache over several regions' pixels (each pixel its
+    region's material) gives each region what a trace of its own gives: bit for bit for a
+    single region (the same seed and samples), and for three regions on the sample board
+    region means within the two caches' Monte Carlo error."""
+    from skyfit_mi.fitting.chi2 import subsample_region
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.pipeline.pixels import material_regions
+    from skyfit_mi.pipeline.sequence import render_sequence
+    from skyfit_mi.pipeline.spec import SCENES_DIR, read_spec, validate_spec
+
+    spec = SCENES_DIR / "specs" / "board_east_37.toml"
+    raw = read_spec(spec)
+    raw["camera"].update(width=48, height=36)
+    raw["time"].update(step_minutes=120)
+    raw["render"] = {"spp": 16, "seed": 2}
+    render_sequence(validate_spec(raw, spec.parent), tmp_path / "day", progress=False,
+                    log=lambda *a: None)
+    seen = dict(material_regions(tmp_path / "day"))
+    names = ["white_paper", "red_gloss_paint", "polished_mild_steel"]
+    pixels = {n: subsample_region(seen[n], 12, 0) for n in names}
+    fits = {n: {"region": n, "model": "colour", "normalisation": "ward"} for n in names}
+    options = dict(seed=5, positions=4, directions=64, sky_positions=1, min_frames=1,
+                   sky_spacing=4)
+    alone = FitSession.from_fit(fits[names[0]], tmp_path / "day", pixels[names[0]], **options)
+    one = FitSession.sharing_light({names[0]: fits[names[0]]}, tmp_path / "day", pixels,
+                                   **options)[names[0]]
+    for k, v in vars(alone.cache).items():
+        if isinstance(v, np.ndarray):
+            assert np.array_equal(v, getattr(one.cache, k), equal_nan=True), k
+    together = FitSession.sharing_light(fits, tmp_path / "day", pixels, **options)
+    theta = np.array([0.5, 0.4, 0.3, 0.1, 0.1])
+    z = []
+    for n in names:
+        own = FitSession.from_fit(fits[n], tmp_path / "day", pixels[n], **options)
+        s = together[n]
+        assert len(s.cache.hit) == len(pixels[n]) and s.cache.hit.all()
+        (a, va), (b, vb) = (x.wm.radiance_and_variance(theta) for x in (s, own))
+        m = len(pixels[n])
+        z.append((a.mean(axis=0) - b.mean(axis=0))
+                 / np.sqrt((va.sum(axis=0) + vb.sum(axis=0)) / m**2))
+    z = np.concatenate([x.ravel() for x in z])
+    assert np.all(np.abs(z) < 5) and np.sqrt(np.mean(z**2)) < 2, z

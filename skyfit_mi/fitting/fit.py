@@ -73,11 +73,12 @@ class FitSession:
         means, whose pixels average out what a pixel's k positions leave
     sky_spacing : None, or n: the sky's integrals interpolated between anchors every n pixels
         where accurate (``build_light_cache``'s), for predictions of compact regions
+    trace : False leaves the light cache to the caller (:meth:`sharing_light`)
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
                  positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None,
-                 sky_positions=None, sky_spacing=None):
+                 sky_positions=None, sky_spacing=None, trace=True):
         from ..render import setup
         from ..render.fit_model import BY_COUNT, PARAMETERS, bounds, check_fit_normalisation
 
@@ -110,11 +111,11 @@ class FitSession:
                                "directions": int(directions), "seed": seed,
                                "sized": "from the data" if positions is None else "given",
                                "sky_positions": sky_positions, "sky_spacing": sky_spacing}
-        mi = setup(variant or doc["render"]["variant"])
-        self.scene = mi.load_string(doc["scene"]["xml"])
-        self.params = mi.traverse(self.scene)
+        self._mi = setup(variant or doc["render"]["variant"])
+        self._loaded = None                         # the scene and its parameters (scene)
         self.cache_time = time.perf_counter() - t0
-        self._trace_cache()
+        if trace:
+            self._trace_cache()
 
     @classmethod
     def from_fit(cls, result, manifest_path, pixels=None, **options):
@@ -133,28 +134,87 @@ class FitSession:
                    model=result["model"], normalisation=result.get("normalisation", "ward"),
                    **options)
 
+    @classmethod
+    def sharing_light(cls, results, manifest_path, pixels, **options):
+        """Sessions {region: FitSession} of several fits (``results`` {region: fit result}) on
+        one sequence, at ``pixels`` {region: (P, 2)}, whose light is traced once for all: one
+        light cache over every region's pixels (each pixel its region's material) per
+        normalisation, of which each session takes its own rows.  The path tracer's cost is
+        mostly tracing the scene's kernels, paid per frame and cache, not per pixel, so several
+        regions cost about as much as one.  A region of an observation table traces its own.
+        ``options`` as the constructor's."""
+        sessions = {name: cls.from_fit(r, manifest_path, pixels[name], trace=False, **options)
+                    for name, r in results.items()}
+        groups = {}
+        for name, s in sessions.items():
+            if s.obs.rays is not None:
+                s._trace_cache()
+            else:
+                groups.setdefault((s.normalisation, tuple(s.obs.frames)), []).append(s)
+        for group in groups.values():
+            t0 = time.perf_counter()
+            at = np.concatenate([s.obs.pixels for s in group])
+            cache = group[0]._build_cache(at, np.repeat([s.name for s in group],
+                                                        [len(s.obs.pixels) for s in group]))
+            share = (time.perf_counter() - t0) / len(group)
+            start = 0
+            for s in group:
+                n = len(s.obs.pixels)
+                s._use_cache(cache.subset(slice(start, start + n)))
+                s.cache_time += share
+                start += n
+        return sessions
+
     def _trace_cache(self):
         """(Re)build the light cache at ``cache_settings`` and everything made from it."""
+        t0 = time.perf_counter()
+        cache = self._build_cache(self.obs.pixels if self.obs.rays is None else self.obs.rays,
+                                  self.name)
+        self.cache_time += time.perf_counter() - t0
+        self._use_cache(cache)
+
+    def _build_cache(self, at, bsdf_id):
+        """A light cache at ``cache_settings`` of the sequence's scene and frames at ``at``
+        (pixels or rays) on material ``bsdf_id`` (one, or one per pixel)."""
         from ..render.light_cache import build_light_cache
 
-        t0 = time.perf_counter()
         c = self.cache_settings
-        at = self.obs.pixels if self.obs.rays is None else self.obs.rays
-        self.cache = build_light_cache(self.scene, self.params, self.skies, at,
-                                       self.name, positions=c["positions"],
-                                       directions=c["directions"], seed=c["seed"],
-                                       max_depth=max(1, int(self.doc["render"]["max_depth"]) - 1),
-                                       normalisation=self.normalisation,
-                                       sky_positions=c["sky_positions"],
-                                       sky_spacing=c.get("sky_spacing"))
-        if not self.cache.hit.any():
+        return build_light_cache(self.scene, self.params, self.skies, at, bsdf_id,
+                                 positions=c["positions"], directions=c["directions"],
+                                 seed=c["seed"],
+                                 max_depth=max(1, int(self.doc["render"]["max_depth"]) - 1),
+                                 normalisation=self.normalisation,
+                                 sky_positions=c["sky_positions"],
+                                 sky_spacing=c.get("sky_spacing"))
+
+    @property
+    def scene(self):
+        """The sequence's Mitsuba scene, loaded when first needed (to trace the light): every
+        live scene's materials are targets of the path tracer's virtual calls, traced in each
+        frame, so sessions that share one trace (:meth:`sharing_light`) load one."""
+        return self._scene_and_params()[0]
+
+    @property
+    def params(self):
+        """The scene's parameters (``mi.traverse``)."""
+        return self._scene_and_params()[1]
+
+    def _scene_and_params(self):
+        if self._loaded is None:
+            scene = self._mi.load_string(self.doc["scene"]["xml"])
+            self._loaded = scene, self._mi.traverse(scene)
+        return self._loaded
+
+    def _use_cache(self, cache):
+        """Take ``cache`` (of the region's pixels) and make the models and chi-square on it."""
+        if not cache.hit.any():
             raise SkyfitError(f"none of the region's pixels shows material {self.name!r}; check "
                               "the region.")
-        self.cache_time += time.perf_counter() - t0
-        self.geometry = highlight_geometry(np.where(self.cache.hit[..., None],
-                                                    self.cache.sun_half_cos, np.nan))
-        self.wm = self._model(self.cache)
-        self.problem = Problem(self.obs, self.wm, valid=self.cache.hit)
+        self.cache = cache
+        self.geometry = highlight_geometry(np.where(cache.hit[..., None], cache.sun_half_cos,
+                                                    np.nan))
+        self.wm = self._model(cache)
+        self.problem = Problem(self.obs, self.wm, valid=cache.hit)
         self._halves = self._bases = None
 
     def _model(self, cache):

@@ -473,14 +473,18 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
 
     rng = np.random.default_rng(seed)
     rows, summary = [], {}
+    # image regions: the light at all their pixels traced at once; a table's few points take
+    # the fit's own cache size: the small one averages out only over an image region's pixels
+    in_images = {region: r for region, (_, r) in fits.items() if pixels[region] is not None}
+    sessions = FitSession.sharing_light(in_images, target, pixels, seed=seed,
+                                        positions=PREDICTION_CACHE[0],
+                                        directions=PREDICTION_CACHE[1],
+                                        sky_positions=PREDICTION_CACHE[2], min_frames=1,
+                                        sky_spacing=PREDICTION_SKY_SPACING)
     for region, (_, r) in sorted(fits.items()):
-        # a table's few points take the fit's own cache size: the small one averages out
-        # only over an image region's many pixels
-        image = pixels[region] is not None
-        size = PREDICTION_CACHE if image else (POSITIONS, DIRECTIONS, None)
-        s = FitSession.from_fit(r, target, pixels[region], seed=seed, positions=size[0],
-                                directions=size[1], sky_positions=size[2], min_frames=1,
-                                sky_spacing=PREDICTION_SKY_SPACING if image else None)
+        s = sessions.get(region) or FitSession.from_fit(r, target, None, seed=seed,
+                                                        positions=POSITIONS,
+                                                        directions=DIRECTIONS, min_frames=1)
         sets = parameter_draws(r, s.names, s.lower, s.upper, draws, rng)
         # the region's mean over its pixels; over a table's points measured in each frame
         have = np.ones(s.obs.y.shape) if s.obs.rays is None else np.isfinite(s.obs.sigma) * 1.0

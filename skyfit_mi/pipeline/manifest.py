@@ -17,10 +17,12 @@ observations (image files, or a table of measured values).
 Version 1 manifests (skyfit-mi before the layered package) are upgraded on reading.
 """
 
+import collections
 import datetime as dt
 import functools
 import hashlib
 import json
+import threading
 from importlib import metadata
 from pathlib import Path
 
@@ -298,18 +300,43 @@ def rendered_frames(doc):
     return [f for f in doc["frames"] if f.get("status") == "rendered"]
 
 
+#: Bytes of decoded frame images kept to be read again (each of a relight's or a prediction's
+#: regions reads the same frames); a file written again (a new inode or time) is read anew.
+FRAME_CACHE_BYTES = 256 << 20
+_FRAMES = collections.OrderedDict()      # (path, inode, mtime, size, shape) -> read-only image
+_FRAMES_LOCK = threading.Lock()
+
+
 def read_frame_image(root, frame, key, shape):
     """Frame record ``frame``'s image ``key`` ('radiance', 'radiance_sigma', 'sensor',
     'sigma') of the sequence in folder ``root``, checked to read as an image of ``shape``
     (H, W, 3); a missing, damaged or foreign file raises SkyfitError naming the frame and the
-    fix."""
+    fix.  The array is read-only: images read lately are kept (FRAME_CACHE_BYTES) and shared
+    by the next reader of the same unchanged file."""
     from ..render.image import read_exr_checked
 
     if key not in frame:
         raise SkyfitError(f"frame {frame['index']} has no {key} image (an older render, or a "
                           "sequence without it); render the sequence again with --overwrite.")
+    path = Path(root) / frame[key]
     try:
-        return read_exr_checked(Path(root) / frame[key], shape)
+        st = path.stat()
+        ident = (str(path.resolve()), st.st_ino, st.st_mtime_ns, st.st_size, tuple(shape))
+    except OSError:
+        ident = None                               # missing: read_exr_checked says so
+    with _FRAMES_LOCK:
+        if ident in _FRAMES:
+            _FRAMES.move_to_end(ident)
+            return _FRAMES[ident]
+    try:
+        img = read_exr_checked(path, shape)
     except SkyfitError as exc:
         raise SkyfitError(f"frame {frame['index']}: {exc}; render the sequence again (it resumes "
                           "and replaces damaged frames).") from None
+    img.flags.writeable = False
+    if ident is not None and img.nbytes <= FRAME_CACHE_BYTES // 8:
+        with _FRAMES_LOCK:
+            _FRAMES[ident] = img
+            while sum(v.nbytes for v in _FRAMES.values()) > FRAME_CACHE_BYTES:
+                _FRAMES.popitem(last=False)
+    return img

@@ -144,6 +144,12 @@ class LightCache:
         """Memory the cache's arrays take [bytes]."""
         return sum(v.nbytes for v in vars(self).values() if isinstance(v, np.ndarray))
 
+    def subset(self, rows):
+        """The cache of the pixels ``rows`` (an index or slice of the first axis): a region's
+        share of a cache traced for several regions at once."""
+        return replace(self, **{k: v[rows] for k, v in vars(self).items()
+                                if isinstance(v, np.ndarray)})
+
     def halves(self):
         """Two independent caches, each from half of every pixel's positions (weights doubled).
 
