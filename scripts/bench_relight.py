@@ -7,8 +7,9 @@ scenes/specs/disc_clear_east.toml at 256x256, 64 spp, its disc made of table 7.1
 2. `skyfit fit` of the disc's central 8x8 pixels (64 pixels, --model 5);
 3. `skyfit relight` of that fit onto the day (render, prediction with its band, comparison
    images, the noise floor from the sigma images);
-4. the same with `--reference` (the target's own materials rendered again: a second render);
-5. `skyfit relight --no-images` (the prediction alone);
+4. `skyfit relight --no-images` (the prediction alone);
+5. the same as 3 with `--reference` (the target's own materials rendered again: a second
+   render);
 6. `skyfit chi2map` 60 x 60 over (rho_s, sigma_alpha), others at the fit;
 7. the same with `--profile` (C at its best for each point).
 Prints a markdown table of wall times and the ratio of each to the render's; then, in this
@@ -63,15 +64,10 @@ def main():
     rows = [("render (the peer)", timed(["render", spec, "-o", day, "-q", "--overwrite"]))]
     rows.append(("fit, 64 pixels, --model 5",
                  timed(["fit", day, "--region", "disc=rect:124,124,131,131", "-o", fits])))
-    rows.append(("relight (images, band, comparisons)",
-                 timed(["relight", fits, "--target", day, "-o", work / "relit", "-q",
-                        "--overwrite"])))
+    rows += relights(fits, day, work)
     rows.append(("relight --reference (also the truth rendered again)",
                  timed(["relight", fits, "--target", day, "-o", work / "relit", "-q",
                         "--overwrite", "--reference"])))
-    rows.append(("relight --no-images (prediction and band only)",
-                 timed(["relight", fits, "--target", day, "-o", work / "predicted", "-q",
-                        "--no-images", "--overwrite"])))
     rows.append(("chi2map 60 x 60, 64 pixels",
                  timed(["chi2map", day, fits / "fit_disc.json", "-o", work / "map"])))
     rows.append(("chi2map 60 x 60 --profile",
@@ -99,14 +95,19 @@ def board(work):
                     "--overwrite"]))]
     rows.append(("board: fit --all --model 5 (8 regions)",
                  timed(["fit", day, "--all", "--model", "5", "-o", fits])))
-    rows.append(("board: relight (8 regions)",
-                 timed(["relight", fits, "--target", day, "-o", work / "relit", "-q",
-                        "--overwrite"])))
-    rows.append(("board: relight --no-images (8 regions)",
-                 timed(["relight", fits, "--target", day, "-o", work / "predicted", "-q",
-                        "--no-images", "--overwrite"])))
+    rows += relights(fits, day, work, "board, 8 regions: ")
     print()
     table(rows)
+
+
+def relights(fits, day, work, label=""):
+    """Rows of ``fits`` relit onto ``day`` with images, then without (``--no-images``)."""
+    return [(f"{label}relight (images, band, comparisons)",
+             timed(["relight", fits, "--target", day, "-o", work / "relit", "-q",
+                    "--overwrite"])),
+            (f"{label}relight --no-images (prediction and band only)",
+             timed(["relight", fits, "--target", day, "-o", work / "predicted", "-q",
+                    "--no-images", "--overwrite"]))]
 
 
 def warm(fits, day, out, n):

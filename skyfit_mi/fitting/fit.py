@@ -50,8 +50,9 @@ CHANNEL_NOTE = 1.1
 class FitSession:
     """One region of one sequence, ready to fit: observations, light cache, models, chi-square.
 
-    Building it traces the light at the region's pixels once; :meth:`run` then fits by any
-    method and start without tracing again.
+    Building it traces the light at the region's pixels once (or :meth:`sharing_light`, for
+    several regions at once); :meth:`run` then fits by any method and start without tracing
+    again.
 
     Parameters
     ----------
@@ -137,20 +138,27 @@ class FitSession:
     @classmethod
     def sharing_light(cls, results, manifest_path, pixels, **options):
         """Sessions {region: FitSession} of several fits (``results`` {region: fit result}) on
-        one sequence, at ``pixels`` {region: (P, 2)}, whose light is traced once for all: one
-        light cache over every region's pixels (each pixel its region's material) per
-        normalisation, of which each session takes its own rows.  The path tracer's cost is
-        mostly tracing the scene's kernels, paid per frame and cache, not per pixel, so several
-        regions cost about as much as one.  A region of an observation table traces its own.
-        ``options`` as the constructor's."""
+        one sequence, at ``pixels`` {region: (P, 2)}, whose light is traced together: one light
+        cache over the pixels of every region (each pixel its region's material) that takes
+        the sky's anchors as the region alone would (``sky_spacing``) and has its
+        normalisation; each session takes its own rows.  Each frame's kernels are traced once
+        instead of once a region: the README board's eight regions take 3.3 s instead of 8
+        (docs/BENCHMARKS.md).  A region of an observation table traces its own.  Meant for
+        the small caches of predictions: the regions' caches are held together.  ``options``
+        as the constructor's."""
+        from ..render.light_cache import anchors_pay
+
         sessions = {name: cls.from_fit(r, manifest_path, pixels[name], trace=False, **options)
                     for name, r in results.items()}
         groups = {}
-        for name, s in sessions.items():
+        for s in sessions.values():
             if s.obs.rays is not None:
                 s._trace_cache()
-            else:
-                groups.setdefault((s.normalisation, tuple(s.obs.frames)), []).append(s)
+                continue
+            cam = s.doc["camera"]
+            anchored = anchors_pay(s.obs.pixels, s.cache_settings["sky_spacing"],
+                                   cam["width"], cam["height"])
+            groups.setdefault((s.normalisation, tuple(s.obs.frames), anchored), []).append(s)
         for group in groups.values():
             t0 = time.perf_counter()
             at = np.concatenate([s.obs.pixels for s in group])

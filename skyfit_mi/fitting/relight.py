@@ -482,9 +482,10 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
                                         sky_positions=PREDICTION_CACHE[2], min_frames=1,
                                         sky_spacing=PREDICTION_SKY_SPACING)
     for region, (_, r) in sorted(fits.items()):
-        s = sessions.get(region) or FitSession.from_fit(r, target, None, seed=seed,
-                                                        positions=POSITIONS,
-                                                        directions=DIRECTIONS, min_frames=1)
+        # each let go when done with
+        s = sessions.pop(region) if region in sessions else FitSession.from_fit(
+            r, target, None, seed=seed, positions=POSITIONS, directions=DIRECTIONS,
+            min_frames=1)
         sets = parameter_draws(r, s.names, s.lower, s.upper, draws, rng)
         # the region's mean over its pixels; over a table's points measured in each frame
         have = np.ones(s.obs.y.shape) if s.obs.rays is None else np.isfinite(s.obs.sigma) * 1.0

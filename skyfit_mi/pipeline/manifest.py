@@ -300,43 +300,57 @@ def rendered_frames(doc):
     return [f for f in doc["frames"] if f.get("status") == "rendered"]
 
 
-#: Bytes of decoded frame images kept to be read again (each of a relight's or a prediction's
-#: regions reads the same frames); a file written again (a new inode or time) is read anew.
+#: Bytes of decoded frame images kept to be read again (each of a prediction's or a relight's
+#: regions reads the same frames), least recently read first out; an image over an eighth of
+#: it is not kept.  A file written again (another inode, time or size) is read anew.
 FRAME_CACHE_BYTES = 256 << 20
-_FRAMES = collections.OrderedDict()      # (path, inode, mtime, size, shape) -> read-only image
+_FRAMES = collections.OrderedDict()      # file identity and shape -> read-only image
 _FRAMES_LOCK = threading.Lock()
+_FRAMES_BYTES = [0]
+
+
+def _file_identity(path):
+    """What changes when the file at ``path`` is written again, or None (no such file)."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (str(path.resolve()), st.st_dev, st.st_ino, st.st_mtime_ns, st.st_ctime_ns,
+            st.st_size)
 
 
 def read_frame_image(root, frame, key, shape):
     """Frame record ``frame``'s image ``key`` ('radiance', 'radiance_sigma', 'sensor',
     'sigma') of the sequence in folder ``root``, checked to read as an image of ``shape``
     (H, W, 3); a missing, damaged or foreign file raises SkyfitError naming the frame and the
-    fix.  The array is read-only: images read lately are kept (FRAME_CACHE_BYTES) and shared
-    by the next reader of the same unchanged file."""
+    fix.  The array is read-only and may be shared: images read lately are kept
+    (FRAME_CACHE_BYTES) for the next reader of the same unchanged file."""
     from ..render.image import read_exr_checked
 
     if key not in frame:
         raise SkyfitError(f"frame {frame['index']} has no {key} image (an older render, or a "
                           "sequence without it); render the sequence again with --overwrite.")
     path = Path(root) / frame[key]
-    try:
-        st = path.stat()
-        ident = (str(path.resolve()), st.st_ino, st.st_mtime_ns, st.st_size, tuple(shape))
-    except OSError:
-        ident = None                               # missing: read_exr_checked says so
-    with _FRAMES_LOCK:
-        if ident in _FRAMES:
-            _FRAMES.move_to_end(ident)
-            return _FRAMES[ident]
+    ident = _file_identity(path)
+    if ident is not None:
+        ident += (tuple(shape),)
+        with _FRAMES_LOCK:
+            if ident in _FRAMES:
+                _FRAMES.move_to_end(ident)
+                return _FRAMES[ident]
     try:
         img = read_exr_checked(path, shape)
     except SkyfitError as exc:
         raise SkyfitError(f"frame {frame['index']}: {exc}; render the sequence again (it resumes "
                           "and replaces damaged frames).") from None
     img.flags.writeable = False
-    if ident is not None and img.nbytes <= FRAME_CACHE_BYTES // 8:
+    # kept only if the file did not change while it was read
+    if ident is not None and img.nbytes <= FRAME_CACHE_BYTES // 8 \
+            and (_file_identity(path) or ()) + (tuple(shape),) == ident:
         with _FRAMES_LOCK:
-            _FRAMES[ident] = img
-            while sum(v.nbytes for v in _FRAMES.values()) > FRAME_CACHE_BYTES:
-                _FRAMES.popitem(last=False)
+            if ident not in _FRAMES:
+                _FRAMES[ident] = img
+                _FRAMES_BYTES[0] += img.nbytes
+            while _FRAMES_BYTES[0] > FRAME_CACHE_BYTES:
+                _FRAMES_BYTES[0] -= _FRAMES.popitem(last=False)[1].nbytes
     return img

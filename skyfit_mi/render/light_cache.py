@@ -346,6 +346,14 @@ def _anchor_plan(pixels, spacing, width, height):
     return anchors, index.reshape(-1, 4), weights
 
 
+def anchors_pay(pixels, spacing, width, height):
+    """Whether the sky's anchors every ``spacing`` pixels (``build_light_cache``'s
+    ``sky_spacing``) are fewer than the ``pixels`` (P, 2) of a ``width`` x ``height`` image:
+    a compact region's are, a scattered subset's are not (its pixels then take their own)."""
+    return spacing is not None and int(spacing) > 1 \
+        and len(_anchor_plan(pixels, int(spacing), width, height)[0]) < len(pixels)
+
+
 def _shape_index(mi, si, target):
     """Index into ``target`` of the shape each interaction of ``si`` lies on, -1 elsewhere."""
     import drjit as dr
@@ -362,7 +370,7 @@ class _SharedSky:
     interpolate between them, from the geometry alone (the camera and scene are the same in
     every frame): anchors and pixels are traced once, through their centres."""
 
-    def __init__(self, mi, scene, sensor, pixels, spacing, size, target):
+    def __init__(self, mi, scene, sensor, pixels, spacing, size, target, want=None):
         anchors, self.corner, self.weight = _anchor_plan(pixels, spacing, *size)
         # one trace of the anchors (first A points) and the pixels (the rest)
         self.A = A = len(anchors)
@@ -374,6 +382,9 @@ class _SharedSky:
         cos_tol = np.cos(np.radians(SHARE_ANGLE_DEG))
         horizon = np.sin(np.radians(SHARE_HORIZON_DEG))
         ok = (sid_p >= 0) & (np.abs(self.m_p[:, 2]) >= horizon)
+        if want is not None:         # each pixel's centre on its own material (several ones)
+            ids = np.array([shape.bsdf().id() for shape in target], dtype=object)
+            ok &= ids[np.maximum(sid_p, 0)] == want
         for a in self.corner.T:
             ok &= (sid_a[a] == sid_p) & (np.abs(self.m_a[a, 2]) >= horizon) \
                 & (np.sum(n_a[a] * n_p, axis=1) >= cos_tol) \
@@ -487,9 +498,8 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     n_comp = 3 + len(LOBE_SIGMAS)
 
     share = None
-    if sky_spacing is not None and int(sky_spacing) > 1 and rays is None \
-            and len(_anchor_plan(pixels, int(sky_spacing), w, h)[0]) < P:
-        share = _SharedSky(mi, scene, sensor, pixels, int(sky_spacing), (w, h), target)
+    if rays is None and anchors_pay(pixels, sky_spacing, w, h):
+        share = _SharedSky(mi, scene, sensor, pixels, int(sky_spacing), (w, h), target, want)
     if stats is not None:
         stats["shared"] = 0
     rng = np.random.default_rng(seed)
