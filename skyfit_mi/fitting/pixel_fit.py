@@ -30,6 +30,7 @@ and one off its material gets NaN.
 import numpy as np
 
 from ..errors import SkyfitError
+from ..render.light_cache import SKY_SPACING
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
                                     grid_chi2_device, linear_curvature, near_saturation)
@@ -38,9 +39,6 @@ from .uncertainty import calibration_sd
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
 #: fit's, so that a chunk of pixels fits in memory (about 0.3 MB per pixel and frame set of 13).
 MAP_CACHE = (8, 64)
-#: Pixels between the anchors at which a map's light cache integrates the sky; pixels between
-#: them interpolate where that is accurate (:func:`~skyfit_mi.render.light_cache.build_light_cache`).
-SKY_SPACING = 4
 #: Fits whose grids are searched at once: bounds the grids' memory (about 1 MB a fit) whatever
 #: the chunk's size, and keeps their arrays small enough to stay in the processor's caches.
 GRID_BLOCK = 64

@@ -27,8 +27,8 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..files import ensure_dir, write_json
-from .pixel_fit import (MAP_CACHE, SKY_SPACING, UNDETERMINED, WARNINGS, fit_pixels,
-                        patch_groups)
+from ..render.light_cache import SKY_SPACING
+from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, fit_pixels, patch_groups
 
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
@@ -52,7 +52,7 @@ def plan_chunks(regions, patch, chunk):
     groups only; regions follow each other, so one chunk may hold several materials.  Within a
     region the fits go tile by tile (square tiles of about ``chunk`` fits), so that a chunk is
     a compact piece of the image whose pixels share the sky integrals' anchors
-    (:data:`~.pixel_fit.SKY_SPACING`)."""
+    (:data:`~skyfit_mi.render.light_cache.SKY_SPACING`)."""
     px, mats, keys = [], [], []
     side = int(patch) * max(1, int(np.ceil(np.sqrt(int(chunk)))))
     for r, (name, pixels) in enumerate(regions):
