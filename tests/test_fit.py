@@ -154,9 +154,7 @@ def test_lm_failure_from_a_bad_start_is_explained(days):
     # from a lobe far narrower than the truth the model misses the highlight: LM stops at the
     # mirror edge (thesis 7.2's local minimum). From the rough edge it now succeeds: the
     # saturated highlight values enter as censored, not dropped, and point the way.
-    # (a fit's own cache: with FAST's two positions a pixel, whether that shallow minimum
-    # holds LM depends on the cache's noise)
-    r = fit(days["noisy"], method="lm", start=[0.6, 0.01], positions=None)
+    r = fit(days["noisy"], method="lm", start=[0.6, 0.01])
     assert r["parameters"]["sigma_alpha"] < 0.01                # stuck at the mirror edge
     assert any("global search finds" in w and "local minimum" in w for w in r["warnings"])
 
@@ -195,10 +193,7 @@ def test_the_days_geometry_is_reported_and_warned_from(days):
     """The fit JSON states the closest sun half-angle; a camera on the sun's side (south, the
     highlight 30 degrees away) is warned of, an east camera (3 degrees) is not, and an
     overcast day is warned to have no sun."""
-    # south with a fit's own cache: its flat landscape's minimum in sigma_alpha moves with
-    # the noise of FAST's two positions a pixel
-    east, overcast = (fit(days[d]) for d in ("noisy", "overcast"))
-    south = fit(days["south"], positions=None)
+    east, south, overcast = (fit(days[d]) for d in ("noisy", "south", "overcast"))
     assert east["geometry"]["frames_with_sun"] == east["geometry"]["frames"] == 13
     assert east["geometry"]["closest_highlight_half_angle_deg"] < 5
     assert not any("highlight never comes closer" in w for w in east["warnings"])

@@ -21,7 +21,7 @@ from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION
 from .methods.profile import profile_edges, ridge_intervals
 from ..render.fit_model import check_start, other_readings
-from ..render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS, SIGMA_RESOLVED, SKY_SPACING
+from ..render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS, SIGMA_RESOLVED
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
 from ..pipeline.observation_table import is_table
 from ..physics.ward import METAL_THRESHOLD
@@ -69,20 +69,17 @@ class FitSession:
     frames : manifest frame indices to use (None: every rendered frame), e.g. to hold some
         out for a prediction test
     variant : the Mitsuba variant to fit with (default the sequence's), e.g. 'cuda_ad_rgb'
-    sky_spacing, sky_positions : where the sky's integrals (the light cache's control
-        variate, a deterministic quadrature at each point) are taken
-        (:func:`~skyfit_mi.render.light_cache.build_light_cache`): where anchors every
-        ``sky_spacing`` pixels are fewer than the pixels (None: never), through each pixel's
-        centre, interpolated between the anchors where accurate; otherwise at
-        ``sky_positions`` of each pixel's positions (None: all of them).  By default
-        SKY_SPACING and 1: the fits of docs/BENCHMARKS.md agree with those on every
-        position's integrals within 3% of their intervals' widths, in half the time.
+    sky_positions : None, or k: the sky's integrals at k of each pixel's positions
+        (:func:`~skyfit_mi.render.light_cache.build_light_cache`), for predictions of region
+        means, whose pixels average out what a pixel's k positions leave
+    sky_spacing : None, or n: the sky's integrals interpolated between anchors every n pixels
+        where accurate (``build_light_cache``'s), for predictions of compact regions
     trace : False leaves the light cache to the caller (:meth:`sharing_light`)
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
                  positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None,
-                 sky_positions=1, sky_spacing=SKY_SPACING, trace=True):
+                 sky_positions=None, sky_spacing=None, trace=True):
         from ..render import setup
         from ..render.fit_model import BY_COUNT, PARAMETERS, bounds, check_fit_normalisation
 

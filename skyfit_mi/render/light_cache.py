@@ -76,10 +76,10 @@ POSITIONS, DIRECTIONS = 32, 128
 #: Share of a fit's degrees of freedom that an automatically sized cache's largest noise over
 #: the roughness range is grown to stay under (:meth:`~skyfit_mi.fitting.fit.FitSession.run`).
 CACHE_SHARE = 0.1
-#: Pixels between the anchors at which a light cache integrates the sky by default (fits,
-#: predictions and maps; ``sky_spacing`` of :func:`build_light_cache`): the pixels between
-#: them interpolate where that is accurate, with an error second order in the spacing, a few
-#: 1e-4 of the radiance at 4 pixels (docs/BENCHMARKS.md).
+#: Pixels between the anchors at which the light caches of predictions and maps integrate the
+#: sky (``sky_spacing`` of :func:`build_light_cache`; a fit's takes every position's own): the
+#: pixels between them interpolate where that is accurate, with an error second order in the
+#: spacing, a few 1e-4 of the radiance at 4 pixels (docs/BENCHMARKS.md).
 SKY_SPACING = 4
 #: Sky integrals shared by interpolation (``sky_spacing`` of :func:`build_light_cache`): a
 #: pixel takes the bilinear interpolation of the four anchors around it only when they lie on
