@@ -145,7 +145,7 @@ class FitSession:
         instead of once a region: the README board's eight regions take 3.3 s instead of 8
         (docs/BENCHMARKS.md).  A region of an observation table traces its own.  Meant for
         the small caches of predictions: the regions' caches are held together.  ``options``
-        as the constructor's."""
+        as the constructor's, ``trace`` excepted."""
         from ..render.light_cache import anchors_pay
 
         sessions = {name: cls.from_fit(r, manifest_path, pixels[name], trace=False, **options)
