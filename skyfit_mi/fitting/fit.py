@@ -358,7 +358,7 @@ class FitSession:
         g = res if method == "global" else global_search(problem, start, self.lower, self.upper,
                                                         candidates=2, grid_basis=grid_basis)
         fit = {"method": method, "theta": theta, "chi2": chi2, "s2": s2, "curv_inv": curv_inv,
-               "f2": f2, "channel_correlation": channels,
+               "f2": f2, "s2k": s2 * f2, "channel_correlation": channels,
                "cov": curv_inv * s2 * np.sqrt(np.outer(f2, f2)), "result": res, "global": g,
                "noise_by_sigma": noise, "noise_chi2": noise_chi2}
         self._intervals(fit)
@@ -378,7 +378,7 @@ class FitSession:
         each widened by the light cache's own Monte Carlo error."""
         problem, theta, names = self.problem, fit["theta"], self.names
         lower, upper = self.lower, self.upper
-        s2k = fit["s2"] * fit["f2"]                  # each parameter's scale of Delta chi^2
+        s2k = fit["s2k"]                             # each parameter's scale of Delta chi^2
         cov_iv = unc.covariance_intervals(theta, fit["cov"], lower, upper)
         grid = fit["global"]["profile_linearised"]
         prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
@@ -471,7 +471,7 @@ class FitSession:
                 continue
             exact, _, points = profile_edges(
                 self.problem, fit["theta"], fit["chi2"], i,
-                [unc.LEVELS[lv] * fit["s2"] * fit["f2"][i] + ripple for lv in levels],
+                [unc.LEVELS[lv] * fit["s2k"][i] + ripple for lv in levels],
                 self.lower, self.upper,
                 fit["curv_inv"], rtol=0.01, iterations=PROFILE_RIDGE_ITERATIONS)
             walked += points
@@ -534,7 +534,7 @@ class FitSession:
         warnings += unc.misfit(chi2, self.problem.dof, fit["s2"], fit["ripple"],
                                fit["noise_chi2"])
         warnings += unc.identifiability(names, iv95, self.lower, self.upper, fit["rise"],
-                                        fit["s2"] * fit["f2"], fit["ripple"])
+                                        fit["s2k"], fit["ripple"])
         if np.max(fit["f2"]) > CHANNEL_NOTE:
             R = fit["channel_correlation"]
             off = R[np.triu_indices(len(R), 1)]

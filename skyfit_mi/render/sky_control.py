@@ -291,7 +291,7 @@ def sky_integrals(emitter, si, quad):
     """I_d and I_s at each Chebyshev node of ``quad`` (:func:`quadrature`) for every surface
     interaction of ``si`` (Q) under the emitter's current sky (or each under its frame's,
     ``emitter`` a :class:`FrameSkies`): Dr.Jit colours (Q) and a list of them
-    [W m^-2 sr^-1], not yet evaluated (the caller evaluates them with the rest)."""
+    [W m^-2 sr^-1], not yet evaluated."""
     import drjit as dr
     import mitsuba as mi
 
