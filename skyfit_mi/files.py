@@ -96,16 +96,30 @@ def write_json(path, doc):
     return write_text(path, to_json(doc) + "\n")
 
 
-def save_figure(fig, path, dpi=120, close=True):
-    """Save a matplotlib figure as PNG atomically and close it (unless not ``close``: a figure
+def write_bytes(path, data):
+    """Write ``data`` (bytes) to ``path`` atomically."""
+    return atomic_write(path, lambda p: Path(p).write_bytes(data))
+
+
+def figure_png(fig, dpi=120, close=True):
+    """A matplotlib figure as PNG bytes; the figure is closed unless not ``close`` (a figure
     redrawn for the next file)."""
+    import io
+
     import matplotlib.pyplot as plt
 
+    buf = io.BytesIO()
     try:
-        return atomic_write(path, lambda p: fig.savefig(p, dpi=dpi, format="png"))
+        fig.savefig(buf, dpi=dpi, format="png")
     finally:
         if close:
             plt.close(fig)
+    return buf.getvalue()
+
+
+def save_figure(fig, path, dpi=120, close=True):
+    """Save a matplotlib figure as PNG atomically (:func:`figure_png`)."""
+    return write_bytes(path, figure_png(fig, dpi, close))
 
 
 #: Name of the lock file a writer holds in its output folder.

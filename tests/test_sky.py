@@ -92,3 +92,17 @@ def test_bad_sky_input(kwargs, match):
     kind = kwargs.pop("kind")
     with pytest.raises(SkyfitError, match=match):
         sk.cie_sky(kind, 30, 180, **kwargs)
+
+
+def test_a_skys_irradiance_is_computed_once_and_a_changed_copy_computes_its_own():
+    from dataclasses import replace
+
+    from skyfit_mi.physics.sky import cie_sky, hemisphere_integral
+
+    sky = cie_sky("clear", 40.0, 120.0)
+    e = sky.sky_horizontal_irradiance()
+    assert sky.sky_horizontal_irradiance() is e and not e.flags.writeable
+    assert np.array_equal(e, hemisphere_integral(sky.sky_radiance))
+    assert sky.sky_horizontal_irradiance(8) is not e                    # per node count
+    brighter = replace(sky, clear=2 * sky.clear)
+    assert np.allclose(brighter.sky_horizontal_irradiance(), 2 * e)

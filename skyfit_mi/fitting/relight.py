@@ -18,12 +18,14 @@ comes out with the wide band its undetermined roughness implies.
 
 import csv
 import io
+from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
 
+from ..background import Beside
 from ..errors import SkyfitError
-from ..files import write_json, write_text
+from ..files import write_bytes, write_json, write_text
 from .report import fit_files
 from ..pipeline.fit_result import read_fit_result
 from ..pipeline.manifest import (RENDERED_SOURCES, load_manifest, manifest_file,
@@ -69,12 +71,14 @@ def load_fits(paths):
     return out
 
 
-def target_spec(target, fits):
-    """The validated spec of ``target`` (a spec file or a sequence folder) with each fitted
-    region's material taken from its fit; returns (spec, target manifest or None)."""
+def target_spec(target, fits, doc=None):
+    """The validated spec of ``target`` (a spec file or a sequence folder, whose manifest
+    ``doc`` is read unless given) with each fitted region's material taken from its fit;
+    returns (spec, target manifest or None)."""
     target = Path(target)
     if target.is_dir() or target.name == "manifest.json":
-        doc, _ = load_manifest(target)
+        if doc is None:
+            doc, _ = load_manifest(target)
         if not isinstance(doc.get("spec"), dict):
             raise SkyfitError(f"{target} was not rendered from a spec (source "
                               f"{doc.get('source', '?')}); give a spec file as --target.")
@@ -109,18 +113,7 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if not images and not is_folder:
         raise SkyfitError("a prediction without images needs a sequence folder as --target "
                           "(its light is traced there); give one, or leave out --no-images.")
-    if images:
-        spec, doc = target_spec(target, fits)
-        times = [(f.time.strftime("%H:%M"), f.below_horizon) for f in spec.frames]
-    else:
-        # the prediction takes the folder's light as recorded: its spec is not validated again
-        # (which would compute every sun position anew)
-        spec, (doc, _) = None, load_manifest(target)
-        times = [(f["time"][11:16], f.get("below_horizon", False)) for f in doc["frames"]]
-    if all(below for _, below in times):
-        raise SkyfitError(f"the target's sun is below the horizon at every time "
-                          f"({', '.join(t for t, _ in times)}); give times of day with the sun "
-                          "up.")
+    doc = load_manifest(target)[0] if is_folder else None
     if doc is not None and Path(out).resolve() == manifest_file(target).parent.resolve():
         raise SkyfitError("the output folder is the target's; give another with -o.")
     observed = doc is not None and bool(rendered_frames(doc))
@@ -129,43 +122,45 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
                           and doc.get("source") in RENDERED_SOURCES):
         raise SkyfitError("--reference renders a synthetic target's own materials again; it "
                           "needs a target folder that skyfit rendered, and images.")
-    if images:
-        render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log,
-                        source="relight")
-    ensure_dir(Path(out))
-    where = target if observed or not images else out
-    pixels = target_pixels(fits, where, seed)
-    rows, means = predict(fits, where, pixels, draws, seed, log)
-    write_prediction(rows, out, "observed" if observed else "relit render", plot=images)
+    kind = "observed" if observed else "relit render"
+    # with observations, the prediction with its plot is made beside the spec's validation and
+    # the render, in a child at low priority that fills the cores they leave idle
+    # (background.Beside); a bad input found meanwhile ends it
+    ahead = images and observed
+    beside = (Beside("skyfit_mi.fitting.relight:prediction_files", fits, target, None, draws,
+                     seed, kind) if ahead else nullcontext())
+    with beside:
+        if images:
+            spec, _ = target_spec(target, fits, doc)
+            times = [(f.time.strftime("%H:%M"), f.below_horizon) for f in spec.frames]
+        else:
+            # the prediction takes the folder's light as recorded: its spec is not validated
+            # again (which would compute every sun position anew)
+            spec = None
+            times = [(f["time"][11:16], f.get("below_horizon", False)) for f in doc["frames"]]
+        if all(below for _, below in times):
+            raise SkyfitError(f"the target's sun is below the horizon at every time "
+                              f"({', '.join(t for t, _ in times)}); give times of day with the "
+                              "sun up.")
+        # the target's pixels (a region it does not show is refused before the render), or
+        # without observations the relit render's own (its label image)
+        pixels = target_pixels(fits, target, seed) if observed or not images else None
+        if images:
+            render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log,
+                            source="relight")
+        ensure_dir(Path(out))
+        if pixels is None:
+            pixels = target_pixels(fits, out, seed)
+        if not ahead:
+            made = prediction_files(fits, out if images and not observed else target, pixels,
+                                    draws, seed, kind, plot=images)
+        errors = observed_errors(fits, target, out, pixels, doc, spec, images, table, log) \
+            if observed else None
+        if ahead:
+            made = beside.result()
+    rows, means = write_prediction(made, out, log)
     if not observed:
         return None
-    errors = {"regions": {}}
-    if table:
-        errors["observations"] = ("an observation table: the relit images have no observed "
-                                  "frames to compare with; region_means compares the table's "
-                                  "values")
-    elif images:
-        errors = prediction_errors(fits, target, out, pixels)
-        errors["shares_target_seeds"] = doc.get("source") in RENDERED_SOURCES and \
-            int(doc["render"]["seed"]) == int(spec.render["seed"])
-        if errors["shares_target_seeds"]:
-            errors["noise"] = ("common random numbers: the relit day is rendered with the "
-                               "target's seeds, so their Monte Carlo noise largely cancels, "
-                               "the true materials give zero error, and the relit error is "
-                               "the fitted materials' difference")
-        elif all("radiance_sigma" in f for f in rendered_frames(doc)):
-            floor = noise_floor(target, out, pixels, errors["frames"])
-            for region, e in errors["regions"].items():
-                e["noise_floor_rel_rms"] = floor["regions"][region]
-            errors["noise_floor_rel_rms"] = floor["all"]
-            errors["noise"] = ("independent noise: noise_floor_rel_rms is the error the two "
-                               "sequences' noise alone gives (their radiance_sigma images)")
-        else:
-            errors["noise"] = ("unknown: the target's frames have no radiance_sigma image, so "
-                               "the error that noise alone gives is not known")
-            log("the target's frames carry no radiance_sigma image: the error that noise "
-                "alone gives is not reported")
-        errors["comparison_images"] = write_comparisons(target, out)
     errors["region_means"] = means
     errors["region_means_note"] = (
         "relative RMS error of each region's mean radiance per frame as predicted by the fit's "
@@ -206,6 +201,41 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
             "the materials' difference)" if errors["shares_target_seeds"] else ""))
     log(f"observed region means inside the predicted 95% band: "
         f"{errors['band_coverage']['share']:.0%} of {len(inside)}")
+    return errors
+
+
+def observed_errors(fits, target, out, pixels, doc, spec, images, table, log=print):
+    """The relit images against the target's observed frames (:func:`prediction_errors`),
+    with what the two sequences' noise alone gives (:func:`noise_floor`, or common random
+    numbers) and the comparison images (:func:`write_comparisons`); for an observation table,
+    or without images, only the note of what is compared."""
+    errors = {"regions": {}}
+    if table:
+        errors["observations"] = ("an observation table: the relit images have no observed "
+                                  "frames to compare with; region_means compares the table's "
+                                  "values")
+    elif images:
+        errors = prediction_errors(fits, target, out, pixels)
+        errors["shares_target_seeds"] = doc.get("source") in RENDERED_SOURCES and \
+            int(doc["render"]["seed"]) == int(spec.render["seed"])
+        if errors["shares_target_seeds"]:
+            errors["noise"] = ("common random numbers: the relit day is rendered with the "
+                               "target's seeds, so their Monte Carlo noise largely cancels, "
+                               "the true materials give zero error, and the relit error is "
+                               "the fitted materials' difference")
+        elif all("radiance_sigma" in f for f in rendered_frames(doc)):
+            floor = noise_floor(target, out, pixels, errors["frames"])
+            for region, e in errors["regions"].items():
+                e["noise_floor_rel_rms"] = floor["regions"][region]
+            errors["noise_floor_rel_rms"] = floor["all"]
+            errors["noise"] = ("independent noise: noise_floor_rel_rms is the error the two "
+                               "sequences' noise alone gives (their radiance_sigma images)")
+        else:
+            errors["noise"] = ("unknown: the target's frames have no radiance_sigma image, so "
+                               "the error that noise alone gives is not known")
+            log("the target's frames carry no radiance_sigma image: the error that noise "
+                "alone gives is not reported")
+        errors["comparison_images"] = write_comparisons(target, out)
     return errors
 
 
@@ -388,32 +418,52 @@ def _contact_row(panels, lim):
     return np.asarray(canvas)
 
 
-def write_prediction(rows, out, image_kind, plot=True):
-    """``prediction.csv`` (one row per region, frame and channel, R, G, B or a luminance
-    table's Y; radiance in W m^-2 sr^-1)
-    and with ``plot`` ``prediction.png``: per region the predicted series with its 95% band and
-    the image values (``image_kind``: the observed frames, or the relit render) (thesis fig
-    7.14)."""
+def prediction_files(fits, target, pixels, draws, seed, image_kind, plot=True):
+    """:func:`predict` (at ``pixels``, or if None :func:`target_pixels`) and the files
+    :func:`write_prediction` writes, made but not written (so that a child process can make
+    them, :class:`~skyfit_mi.background.Beside`): (rows, region means, {file name: bytes},
+    the lines predict logs).
+
+    ``prediction.csv`` has one row per region, frame and channel (R, G, B or a luminance
+    table's Y; radiance in W m^-2 sr^-1); with ``plot``, ``prediction.png`` shows per region
+    the predicted series with its 95% band and the image values (``image_kind``: the observed
+    frames, or the relit render) (thesis fig 7.14)."""
+    lines = []
+    if pixels is None:
+        pixels = target_pixels(fits, target, seed)
+    rows, means = predict(fits, target, pixels, draws, seed, lines.append)
     column = image_kind.replace(" ", "_")
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["region", "frame", "time", "channel", "predicted [W m^-2 sr^-1]",
                 "lo95 [W m^-2 sr^-1]", "hi95 [W m^-2 sr^-1]", f"{column} [W m^-2 sr^-1]"])
     w.writerows([(*row[:4], *(f"{v:.6g}" for v in row[4:])) for row in rows])
-    write_text(Path(out) / "prediction.csv", buf.getvalue())
+    files = {"prediction.csv": buf.getvalue().encode()}
     if plot:
-        plot_prediction(rows, out, image_kind)
+        files["prediction.png"] = plot_prediction(rows, image_kind)
+    return rows, means, files, lines
 
 
-def plot_prediction(rows, out, image_kind):
-    """``prediction.png`` of :func:`write_prediction`'s ``rows``."""
+def write_prediction(made, out, log=print):
+    """Write the files of :func:`prediction_files`' result ``made`` into ``out`` and log its
+    lines; returns its (rows, region means)."""
+    rows, means, files, lines = made
+    for name, data in files.items():
+        write_bytes(Path(out) / name, data)
+    for line in lines:
+        log(line)
+    return rows, means
+
+
+def plot_prediction(rows, image_kind):
+    """``prediction.png`` of :func:`prediction_files`' ``rows``, as PNG bytes."""
     import datetime as dt
 
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..files import save_figure
+    from ..files import figure_png
 
     regions = sorted({row[0] for row in rows})
     fig, axes = plt.subplots(len(regions), 1, figsize=(7, 3.2 * len(regions)), squeeze=False)
@@ -431,7 +481,7 @@ def plot_prediction(rows, out, image_kind):
         ax.set_ylabel("radiance [W m^-2 sr^-1]")
         ax.legend(fontsize=6, ncol=2)
     fig.autofmt_xdate()
-    save_figure(fig, Path(out) / "prediction.png")
+    return figure_png(fig)
 
 
 def parameter_draws(result, names, lower, upper, n, rng):

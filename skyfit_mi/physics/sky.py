@@ -295,9 +295,14 @@ class Sky:
         """Horizontal irradiance from the sky alone [W m^-2], RGB (3,).
 
         Independent quadrature of eq. 4.19: Gauss-Legendre in cos(theta) over
-        the upper hemisphere (``n`` nodes) by ``2 n`` azimuths.
+        the upper hemisphere (``n`` nodes) by ``2 n`` azimuths.  Computed once per sky and
+        ``n`` (a frame's manifest record, exposure and ground each ask for it), read-only.
         """
-        return hemisphere_integral(self.sky_radiance, n)
+        known = self.__dict__.setdefault("_sky_irradiance", {})   # not a field: a frozen
+        if n not in known:                                         # copy starts anew
+            known[n] = hemisphere_integral(self.sky_radiance, n)
+            known[n].flags.writeable = False
+        return known[n]
 
     def sun_horizontal_irradiance(self):
         """Horizontal irradiance from the solar disc [W m^-2], RGB (3,)."""

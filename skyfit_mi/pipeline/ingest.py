@@ -43,7 +43,7 @@ from ..errors import SkyfitError
 from ..files import FolderLock
 from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
-from .sequence import finish, frame_names, frame_record, manifest_header, prepare_folder
+from .sequence import finish, frame_record, manifest_header, prepare_folder, write_frame
 from .spec import SpecError, read_spec, validate_spec
 
 #: Floating-point frames are scaled so that the day's brightest finite value is this share of
@@ -985,11 +985,7 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, jp
             slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code
             radiance = np.where(np.isfinite(v), s / gain, np.nan).astype(np.float32)
             rad_sd = np.where(np.isfinite(v), sig / (slope * gain), np.inf).astype(np.float32)
-            names = frame_names(f.index)
-            write_exr(out / names["radiance"], radiance)
-            write_exr(out / names["radiance_sigma"], rad_sd)
-            write_exr(out / names["sensor"], v.astype(np.float32))
-            write_exr(out / names["sigma"], sig)
+            names = write_frame(out, f.index, radiance, rad_sd, v, sig)
             rec.update(status="rendered", **names,
                        exposure={"exposure": float(e @ SRGB_LUMINANCE),
                                  "white_balance": (e / float(e @ SRGB_LUMINANCE)).tolist(),

@@ -345,12 +345,29 @@ def read_frame_image(root, frame, key, shape):
                           "and replaces damaged frames).") from None
     img.flags.writeable = False
     # kept only if the file did not change while it was read
-    if ident is not None and img.nbytes <= FRAME_CACHE_BYTES // 8 \
-            and (_file_identity(path) or ()) + (tuple(shape),) == ident:
-        with _FRAMES_LOCK:
-            if ident not in _FRAMES:
-                _FRAMES[ident] = img
-                _FRAMES_BYTES[0] += img.nbytes
-            while _FRAMES_BYTES[0] > FRAME_CACHE_BYTES:
-                _FRAMES_BYTES[0] -= _FRAMES.popitem(last=False)[1].nbytes
+    if ident is not None and (_file_identity(path) or ()) + (tuple(shape),) == ident:
+        _keep(ident, img)
     return img
+
+
+def keep_frame_image(path, image):
+    """Keep a copy of ``image`` (H, W, 3), just written to ``path`` as float32 EXR (which reads
+    back bit for bit), for :func:`read_frame_image`'s next reader of that file: a relight
+    compares the frames it has just rendered."""
+    ident = _file_identity(Path(path))
+    if ident is not None:
+        img = np.array(image, dtype=np.float32)
+        img.flags.writeable = False
+        _keep(ident + (img.shape,), img)
+
+
+def _keep(ident, img):
+    """Put read-only ``img`` in the frame cache under ``ident`` (file identity and shape)."""
+    if img.nbytes > FRAME_CACHE_BYTES // 8:
+        return
+    with _FRAMES_LOCK:
+        if ident not in _FRAMES:
+            _FRAMES[ident] = img
+            _FRAMES_BYTES[0] += img.nbytes
+        while _FRAMES_BYTES[0] > FRAME_CACHE_BYTES:
+            _FRAMES_BYTES[0] -= _FRAMES.popitem(last=False)[1].nbytes

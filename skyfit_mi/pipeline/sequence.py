@@ -33,8 +33,9 @@ from ..files import FolderLock, ensure_dir
 from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
 from ..render.scene_xml import pass_spp
-from .manifest import (SCHEMA, illumination_record, load_manifest, manifest_file,
-                       sensor_record, versions, write_manifest)
+from .manifest import (SCHEMA, illumination_record, keep_frame_image, load_manifest,
+                       manifest_file, read_frame_image, sensor_record, versions,
+                       write_manifest)
 
 #: The files of one frame, by kind: the radiance, its standard error (Monte Carlo)
 #: [W m^-2 sr^-1], the sensor's values and their sigma [DN].
@@ -148,15 +149,15 @@ def capture_frame(sensor, radiance, radiance_sd, seed, index, fov_deg):
 
 
 def write_frame(out, index, radiance, radiance_sd, values, sigma):
-    """Write one frame's EXRs (:data:`FRAME_FILES`) atomically; returns their relative paths
-    by kind."""
+    """Write one frame's EXRs (:data:`FRAME_FILES`) atomically, each kept for the frame reader
+    (:func:`~skyfit_mi.pipeline.manifest.keep_frame_image`); returns their relative paths by
+    kind."""
     from ..render.image import write_exr
 
     names = frame_names(index)
-    write_exr(out / names["radiance"], radiance)
-    write_exr(out / names["radiance_sigma"], radiance_sd)
-    write_exr(out / names["sensor"], values.astype(np.float32))
-    write_exr(out / names["sigma"], sigma)
+    for key, image in (("radiance", radiance), ("radiance_sigma", radiance_sd),
+                       ("sensor", values), ("sigma", sigma)):
+        keep_frame_image(write_exr(out / names[key], image), image)
     return names
 
 
@@ -200,12 +201,13 @@ def frame_record(frame, seed, out):
 def finish(out, manifest, exposure):
     """Write the contact sheet (of the frames with images) and the complete manifest; returns
     the rendered frames' count."""
-    from ..render.image import contact_sheet, read_exr, write_png
+    from ..render.image import contact_sheet, write_png
 
     manifest["status"] = "complete"
-    rendered = [read_exr(out / r["radiance"]) for r in manifest["frames"]
-                if r["status"] == "rendered" and "radiance" in r]
+    rendered = [r for r in manifest["frames"] if r["status"] == "rendered" and "radiance" in r]
     if rendered:
+        shape = (manifest["camera"]["height"], manifest["camera"]["width"], 3)
+        rendered = [read_frame_image(out, r, "radiance", shape) for r in rendered]
         write_png(out / "contact_sheet.png", contact_sheet(rendered, exposure))
     write_manifest(out, manifest)
     return len(rendered)
