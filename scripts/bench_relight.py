@@ -19,11 +19,14 @@ With ``--board``, the same for the README's several regions: the sample board's 
 (scenes/specs/board_east_37.toml as it is), `fit --all --model 5` of its eight samples, then
 relight with images and without (a few minutes more, most of them the fits).
 
-    .venv/bin/python scripts/bench_relight.py [-o DIR] [--board]
+With ``--pairs N``, then N renders and relights one after the other, for the ratio's spread.
+
+    .venv/bin/python scripts/bench_relight.py [-o DIR] [--board] [--pairs N]
 """
 
 import argparse
 import json
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -49,6 +52,9 @@ def main():
                     help="predictions without images timed in this process (default 4)")
     ap.add_argument("--board", action="store_true",
                     help="also the sample board's day with its eight regions (README)")
+    ap.add_argument("--pairs", type=int, default=0,
+                    help="then render and relight (with images) alternately this many times "
+                    "more, each pair's ratio and their median (the machine's spread)")
     args = ap.parse_args()
     work = Path(args.output or tempfile.mkdtemp(prefix="bench_relight_"))
     work.mkdir(parents=True, exist_ok=True)
@@ -77,6 +83,13 @@ def main():
     warm(fits, day, work / "warm", args.warm)
     if args.board:
         board(work / "board")
+    if args.pairs:
+        pairs("disc", ["render", spec, "-o", day, "-q", "--overwrite"], fits, day, work,
+              args.pairs)
+    if args.pairs and args.board:
+        b = work / "board"
+        pairs("board", ["render", ROOT / "scenes" / "specs" / "board_east_37.toml", "-o",
+                        b / "day", "-q", "--overwrite"], b / "fits", b / "day", b, args.pairs)
 
 
 def table(rows):
@@ -108,6 +121,20 @@ def relights(fits, day, work, label=""):
             (f"{label}relight --no-images (prediction and band only)",
              timed(["relight", fits, "--target", day, "-o", work / "predicted", "-q",
                     "--no-images", "--overwrite"]))]
+
+
+def pairs(name, render, fits, day, work, n):
+    """``n`` times a render (command ``render``, which writes ``day`` again as it was) and a
+    relight of ``fits`` onto ``day`` with images, one after the other: each pair's times and
+    ratio, and the median ratio."""
+    print(f"\n| {name}: pair | render [s] | relight [s] | relight / render |\n|---|---|---|---|")
+    ratios = []
+    for i in range(n):
+        a = timed(render)
+        b = timed(["relight", fits, "--target", day, "-o", work / "relit", "-q", "--overwrite"])
+        ratios.append(b / a)
+        print(f"| {i + 1} | {a:.2f} | {b:.2f} | {b / a:.3f} |", flush=True)
+    print(f"| median | | | {statistics.median(ratios):.3f} |")
 
 
 def warm(fits, day, out, n):

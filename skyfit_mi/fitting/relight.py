@@ -467,7 +467,7 @@ def plot_prediction(rows, image_kind):
 
     regions = sorted({row[0] for row in rows})
     fig, axes = plt.subplots(len(regions), 1, figsize=(7, 3.2 * len(regions)), squeeze=False)
-    for ax, region in zip(axes[:, 0], regions):
+    for i, (ax, region) in enumerate(zip(axes[:, 0], regions)):
         for ch, col in zip("RGBY", ("r", "g", "b", "k")):
             sel = [row for row in rows if row[0] == region and row[3] == ch]
             if not sel:
@@ -479,7 +479,8 @@ def plot_prediction(rows, image_kind):
             ax.plot(t, img, "o", color=col, ms=4, label=f"{image_kind} {ch}")
         ax.set_title(f"{region}: region mean", fontsize=9)
         ax.set_ylabel("radiance [W m^-2 sr^-1]")
-        ax.legend(fontsize=6, ncol=2)
+        if i == 0:                  # the same for every panel: once (a quarter of the plot)
+            ax.legend(fontsize=6, ncol=2)
     fig.autofmt_xdate()
     return figure_png(fig)
 
