@@ -6,53 +6,89 @@ almost no time from the render's threads and fills those idle moments: a relight
 prediction and its plot, which need nothing the render makes, come nearly free beside it
 (docs/BENCHMARKS.md, "eighth measurement").
 
-The child is a fresh interpreter (``sys.executable -c``), so the caller's main module is
-never run again in it (as ``multiprocessing``'s 'spawn' would); the call and its arguments
-go to it pickled on its stdin, the result comes back pickled on its stdout.  Ctrl-C is the
+The child is a fresh, isolated interpreter (``sys.executable -I -c``: the current folder is
+not on its path), so the caller's main module is never run again in it (as
+``multiprocessing``'s 'spawn' would); it takes the parent's ``sys.path``, then the call and
+its arguments, pickled on its stdin, and answers pickled on its stdout.  Ctrl-C is the
 parent's to handle: the child ignores it and is killed when the parent lets go of it.
+
+When the parent comes for the result, a child still working is given the parent's priority
+back where the system allows it; where it does not, and other work keeps the child from a
+core (less than STARVED of a core over WATCH_S seconds), the call is run again in the parent,
+so that a busy machine never leaves a nice-19 child waited on for minutes.
 """
 
 import os
 import pickle
+import select
 import subprocess
 import sys
+import time
 
-from .errors import SkyfitError
+from .errors import SetupError, SkyfitError
 
 #: Niceness of the child (Linux: 19 is the lowest priority).
 NICE = 19
+#: While waited on, a child that gets less than STARVED of a core over WATCH_S seconds is
+#: given up and its call run in the parent.
+STARVED, WATCH_S = 0.2, 1.0
+#: Seconds a child that has answered is given to exit before it is killed.
+EXIT_S = 5.0
 
-#: The child's program.  It keeps its stdout for the reply and points file descriptor 1
-#: (where a native library may print) at stderr, lowers its priority, takes the parent's
-#: ``sys.path`` and the call from stdin, and runs :func:`_serve`.
+#: The child's program: stdout kept for the reply and file descriptor 1 (where a native
+#: library may print) pointed at stderr; lower priority; the parent's ``sys.path`` first, so
+#: that the call's arguments unpickle as they would in the parent; then :func:`_serve`.
 _CHILD_SOURCE = """\
 import os, pickle, signal, sys
 signal.signal(signal.SIGINT, signal.SIG_IGN)
 reply = os.fdopen(os.dup(1), "wb")
 os.dup2(2, 1)
 os.nice({nice})
-sys.path[:], call, args, kwargs = pickle.load(sys.stdin.buffer)
+sys.path[:] = pickle.load(sys.stdin.buffer)
 from skyfit_mi.background import _serve
-_serve(call, args, kwargs, reply)
+_serve(sys.stdin.buffer, reply)
 """
 
 
-def _serve(call, args, kwargs, reply):
-    """Run ``call`` ('module:function') with ``args`` and ``kwargs``; write ``('ok', result)``,
-    ``('refused', SkyfitError)`` (bad input, raised again in the parent as it is) or
-    ``('failed', traceback text)`` to ``reply``."""
+def _call(call, args, kwargs):
+    """``call`` ('module:function') applied to ``args`` and ``kwargs``."""
     import importlib
+
+    module, _, name = call.partition(":")
+    return getattr(importlib.import_module(module), name)(*args, **kwargs)
+
+
+def _serve(requests, reply):
+    """Read (call, args, kwargs) from ``requests``, run it, and write to ``reply`` one of
+    ``('ok', result)``, ``('refused', error)`` (bad input or a back-end that cannot start,
+    raised again in the parent as it is, or as a SkyfitError of its message if it does not
+    pickle) or ``('failed', traceback text)``."""
     import traceback
 
     try:
-        module, _, name = call.partition(":")
-        out = ("ok", getattr(importlib.import_module(module), name)(*args, **kwargs))
-    except SkyfitError as exc:
+        out = ("ok", _call(*pickle.load(requests)))
+    except (SkyfitError, SetupError) as exc:
         out = ("refused", exc)
     except Exception:                                # noqa: BLE001 -- sent to the parent
         out = ("failed", traceback.format_exc())
-    pickle.dump(out, reply, protocol=pickle.HIGHEST_PROTOCOL)
+    try:
+        data = pickle.dumps(out, protocol=pickle.HIGHEST_PROTOCOL)
+        pickle.loads(data)
+    except Exception:                                # noqa: BLE001 -- e.g. an odd exception
+        data = pickle.dumps(("refused", SkyfitError(str(out[1]))) if out[0] == "refused"
+                            else ("failed", traceback.format_exc()))
+    reply.write(data)
     reply.flush()
+
+
+def _cpu_seconds(pid):
+    """CPU time [s] process ``pid`` has used (Linux /proc), or None where it cannot be read."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 class Beside:
@@ -62,41 +98,69 @@ class Beside:
     was not taken (an error in the parent's own work, Ctrl-C)."""
 
     def __init__(self, call, *args, nice=NICE, **kwargs):
-        self.call = call
-        self._proc = subprocess.Popen([sys.executable, "-c", _CHILD_SOURCE.format(nice=nice)],
-                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        self.call, self._request = call, (call, args, kwargs)
+        self._proc = subprocess.Popen(
+            [sys.executable, "-I", "-c", _CHILD_SOURCE.format(nice=int(nice))],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE)
         try:
-            pickle.dump((list(sys.path), call, args, kwargs), self._proc.stdin,
-                        protocol=pickle.HIGHEST_PROTOCOL)
+            for message in (list(sys.path), self._request):
+                pickle.dump(message, self._proc.stdin, protocol=pickle.HIGHEST_PROTOCOL)
             self._proc.stdin.close()
         except BaseException:
             self.close()
             raise
 
     def result(self):
-        """The call's result.  A :class:`SkyfitError` it raised is raised here; any other
-        failure, or the child's death, raises RuntimeError with the child's traceback or
-        exit status."""
+        """The call's result.  A :class:`SkyfitError` (or SetupError) it raised is raised
+        here; any other failure, or the child's death, raises RuntimeError with the child's
+        traceback or exit status.  A starved child's call is run here instead (module doc)."""
+        if self._proc.stdout.closed:
+            raise RuntimeError(f"the result of {self.call} was already taken")
+        reply = None
         try:
-            kind, value = pickle.load(self._proc.stdout)
-        except (EOFError, pickle.UnpicklingError):
+            reply = pickle.load(self._proc.stdout) if self._wait() else None
+        except Exception:                            # noqa: BLE001 -- EOF, a broken reply
             code = self._proc.wait()
             raise RuntimeError(f"the child process running {self.call} ended without a "
                                f"result (exit status {code})") from None
-        finally:
-            self.close()
+        finally:                                     # a child that answered exits by itself
+            self.close(grace=EXIT_S if reply is not None else 0.0)
+        if reply is None:                            # starved: the call is made here
+            return _call(*self._request)
+        kind, value = reply
         if kind == "ok":
             return value
         if kind == "refused":
             raise value
         raise RuntimeError(f"{self.call} failed in a child process:\n{value}")
 
-    def close(self):
-        """Kill the child if it still runs, and reap it."""
-        if self._proc.poll() is None:
+    def _wait(self):
+        """Wait until the child's reply can be read (True), first giving the child this
+        process's priority where allowed; False if it is starved of a core."""
+        pid = self._proc.pid
+        try:
+            os.setpriority(os.PRIO_PROCESS, pid, os.getpriority(os.PRIO_PROCESS, 0))
+            raised = True
+        except OSError:                              # not allowed (unprivileged), or gone
+            raised = False
+        used, since = _cpu_seconds(pid), time.monotonic()
+        while not select.select([self._proc.stdout], [], [], WATCH_S)[0]:
+            now, cpu = time.monotonic(), _cpu_seconds(pid)
+            if not raised and used is not None and cpu is not None:
+                if cpu - used < STARVED * (now - since):
+                    return False
+                used, since = cpu, now
+        return True
+
+    def close(self, grace=0.0):
+        """Kill the child if it still runs after ``grace`` seconds, and reap it."""
+        try:
+            self._proc.wait(timeout=grace)
+        except subprocess.TimeoutExpired:
             self._proc.kill()
-        self._proc.wait()
-        self._proc.stdout.close()
+            self._proc.wait()
+        for pipe in (self._proc.stdin, self._proc.stdout):
+            pipe.close()
 
     def __enter__(self):
         return self
@@ -104,4 +168,3 @@ class Beside:
     def __exit__(self, *exc):
         self.close()
         return False
-

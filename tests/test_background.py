@@ -38,3 +38,56 @@ def test_leaving_without_the_result_ends_the_child():
     with Beside("time:sleep", 60) as job:
         proc = job._proc
     assert proc.returncode is not None and time.perf_counter() - t0 < 30
+
+
+FAILING = """
+from skyfit_mi.errors import SetupError, SkyfitError
+
+
+class OddError(SkyfitError):
+    def __init__(self, what, why):
+        super().__init__(f"{what}: {why}")
+
+
+def no_backend():
+    raise SetupError("no libLLVM >= 17 was found")
+
+
+def odd():
+    raise OddError("frame 3", "too dark")
+"""
+
+
+def test_setup_and_odd_errors_come_back_as_one_line_and_a_result_is_taken_once(tmp_path,
+                                                                               monkeypatch):
+    """A SetupError comes back as it is; a SkyfitError that does not pickle as a SkyfitError of
+    its message; a result cannot be taken twice."""
+    from skyfit_mi.errors import SetupError
+
+    (tmp_path / "failing_calls.py").write_text(FAILING)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with Beside("failing_calls:no_backend") as job:
+        with pytest.raises(SetupError, match="no libLLVM"):
+            job.result()
+        with pytest.raises(RuntimeError, match="already taken"):
+            job.result()
+    with Beside("failing_calls:odd") as job:
+        with pytest.raises(SkyfitError, match="^frame 3: too dark$"):
+            job.result()
+
+
+def test_a_child_starved_of_a_core_is_given_up_and_the_call_made_here(monkeypatch):
+    """Where the child cannot be given the parent's priority back (an unprivileged user) and
+    gets less than STARVED of a core, the parent kills it and makes the call itself."""
+    import skyfit_mi.background as bg
+
+    def refused(*args):
+        raise PermissionError("not allowed")
+    monkeypatch.setattr(bg.os, "setpriority", refused)
+    monkeypatch.setattr(bg, "WATCH_S", 0.2)
+    with Beside("time:sleep", 1.0) as job:           # asleep: no CPU, as if starved
+        t0 = time.perf_counter()
+        assert job.result() is None
+        assert job._proc.returncode == -9 and time.perf_counter() - t0 >= 1.0
+    with Beside("builtins:sum", [1, 2, 3]) as job:   # a quick answer is still the child's
+        assert job.result() == 6 and job._proc.returncode == 0

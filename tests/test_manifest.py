@@ -77,29 +77,34 @@ def test_a_frame_read_again_is_shared_until_its_file_changes(day, tmp_path):
         read_frame_image(root, f, "radiance", (12, 12, 3))
 
 
-
-def test_a_frame_just_written_is_read_from_memory_bit_for_bit(tmp_path):
-    """write_frame keeps what it wrote for read_frame_image: the same values the file reads
-    back as (NaN and inf of an ingested frame included), and a later write of the file is read
-    anew."""
-    from skyfit_mi.pipeline.manifest import read_frame_image
+def test_a_frame_just_written_is_read_from_memory_bit_for_bit(tmp_path, monkeypatch):
+    """write_frame keeps the radiance and its error it wrote for read_frame_image, with the
+    values the file reads back as (NaN and inf of an ingested frame included); a later write
+    of the file is read anew."""
+    from skyfit_mi.pipeline import manifest
     from skyfit_mi.pipeline.sequence import write_frame
-    from skyfit_mi.render.image import read_exr
+    from skyfit_mi.render.image import read_exr, read_exr_checked
 
     rng = np.random.default_rng(5)
     images = [rng.random((6, 7, 3)) * 10 ** rng.uniform(-3, 3) for _ in range(4)]
     images[0][0, 0], images[1][1, 1] = np.nan, np.inf
-    rec = write_frame(tmp_path, 2, *images)
-    rec["index"] = 2
-    for key, image in zip(("radiance", "radiance_sigma", "sensor", "sigma"), images):
-        kept = read_frame_image(tmp_path, rec, key, (6, 7, 3))
+    rec = dict(write_frame(tmp_path, 2, *images), index=2)
+
+    def no_reads(path, shape):
+        raise AssertionError(f"{path} was read from the file")
+    monkeypatch.setattr("skyfit_mi.render.image.read_exr_checked", no_reads)
+    for key, image in zip(("radiance", "radiance_sigma"), images):
+        kept = manifest.read_frame_image(tmp_path, rec, key, (6, 7, 3))
         assert not kept.flags.writeable
         assert np.array_equal(kept, read_exr(tmp_path / rec[key]), equal_nan=True)
         assert np.array_equal(kept, image.astype(np.float32), equal_nan=True)
-        assert read_frame_image(tmp_path, rec, key, (6, 7, 3)) is kept
     write_frame(tmp_path, 2, *(2 * im for im in images))
-    assert np.array_equal(read_frame_image(tmp_path, rec, "sensor", (6, 7, 3)),
-                          (2 * images[2]).astype(np.float32))
+    with pytest.raises(AssertionError, match="read from the file"):
+        manifest.read_frame_image(tmp_path, rec, "sensor", (6, 7, 3))      # not kept
+    monkeypatch.setattr("skyfit_mi.render.image.read_exr_checked", read_exr_checked)
+    assert np.array_equal(manifest.read_frame_image(tmp_path, rec, "radiance", (6, 7, 3)),
+                          (2 * images[0]).astype(np.float32), equal_nan=True)
+
 
 def test_a_version_1_manifest_is_upgraded(day, tmp_path):
     out = _copy(day, tmp_path)

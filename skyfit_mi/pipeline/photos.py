@@ -664,8 +664,9 @@ class _ChildReader:
     reading can rule out every such fault in OpenEXR's or Mitsuba's decoders, so the reader
     runs in a child, whose death :meth:`read` turns into :class:`_ReaderCrashed`.
 
-    The child is a fresh interpreter (``sys.executable -c``), so the caller's main module is
-    never run again in it (as ``multiprocessing``'s 'spawn' would); it exits when this
+    The child is a fresh, isolated interpreter (``sys.executable -I -c``: the current folder
+    is not on its path), so the caller's main module is never run again in it (as
+    ``multiprocessing``'s 'spawn' would); it exits when this
     process closes its stdin (at exit, or on :meth:`close`).  Starting it costs ~0.3 s once;
     each read adds the copy of its pixels through a pipe (~0.1-0.2 s per 100 MB).
 
@@ -688,7 +689,7 @@ class _ChildReader:
             self._proc = self._log = None
         self.close()
         self._log = tempfile.TemporaryFile(buffering=0)
-        self._proc = subprocess.Popen([sys.executable, "-c", _CHILD_SOURCE],
+        self._proc = subprocess.Popen([sys.executable, "-I", "-c", _CHILD_SOURCE],
                                       stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                       stderr=self._log)
         self._pid = os.getpid()

@@ -149,15 +149,17 @@ def capture_frame(sensor, radiance, radiance_sd, seed, index, fov_deg):
 
 
 def write_frame(out, index, radiance, radiance_sd, values, sigma):
-    """Write one frame's EXRs (:data:`FRAME_FILES`) atomically, each kept for the frame reader
-    (:func:`~skyfit_mi.pipeline.manifest.keep_frame_image`); returns their relative paths by
-    kind."""
+    """Write one frame's EXRs (:data:`FRAME_FILES`) atomically, the radiance and its error
+    kept for the frame reader (:func:`~skyfit_mi.pipeline.manifest.keep_frame_image`: the
+    contact sheet and a relight's comparisons read them next); returns their relative paths
+    by kind."""
     from ..render.image import write_exr
 
     names = frame_names(index)
-    for key, image in (("radiance", radiance), ("radiance_sigma", radiance_sd),
-                       ("sensor", values), ("sigma", sigma)):
+    for key, image in (("radiance", radiance), ("radiance_sigma", radiance_sd)):
         keep_frame_image(write_exr(out / names[key], image), image)
+    write_exr(out / names["sensor"], values.astype(np.float32))
+    write_exr(out / names["sigma"], sigma)
     return names
 
 
