@@ -87,6 +87,38 @@ def test_narrow_lobe_matches_an_independent_quadrature(session):
     assert np.sqrt(np.mean((model / quad - 1) ** 2)) < 0.004                 # 0.21%
 
 
+
+def test_wide_nodes_are_each_halfs_mean_of_a_few_positions_and_narrow_ones_every_positions(
+        session):
+    """A fit's cache (wide_positions): the diffuse integral and the lobe's nodes of roughness
+    >= WIDE_SIGMA are each half's mean over its first two positions (random ones: unbiased),
+    the narrower nodes every position's own, with the same samples as a cache of every
+    position's integrals."""
+    from skyfit_mi.render.light_cache import SIGMA_TABLE, WIDE_SIGMA, build_light_cache
+    from skyfit_mi.render.sky_control import chebyshev_coefficients, chebyshev_nodes
+
+    args = (session.scene, session.params, session.skies[4:7], session.obs.pixels[:6], "disc")
+    few = build_light_cache(*args, positions=8, directions=32, seed=3, wide_positions=4)
+    every = build_light_cache(*args, positions=8, directions=32, seed=3, wide_positions=None)
+    assert np.array_equal(few.weight, every.weight) and np.array_equal(few.wi, every.wi)
+    n = every.lobe_sky.shape[3]
+    x = np.cos(np.pi * (np.arange(n) + 0.5) / n)
+    values = np.einsum("jk,ptskc->ptsjc", np.cos(np.outer(np.arccos(x), np.arange(n))),
+                       every.lobe_sky.astype(float))                      # at the nodes
+    wide = chebyshev_nodes(*SIGMA_TABLE) >= WIDE_SIGMA
+    assert 0 < wide.sum() < n
+    want_d = np.empty_like(every.diffuse_sky, dtype=float)
+    want_v = values.copy()
+    for half, first in ((slice(0, 4), 0), (slice(4, 8), 4)):
+        want_d[:, :, half] = every.diffuse_sky[:, :, first:first + 2].mean(axis=2, keepdims=True)
+        want_v[:, :, half][..., wide, :] = \
+            values[:, :, first:first + 2][..., wide, :].mean(axis=2, keepdims=True)
+    assert np.allclose(few.diffuse_sky, want_d, rtol=1e-5)
+    want = chebyshev_coefficients(want_v, axis=3)
+    tol = dict(rtol=1e-4, atol=1e-5 * np.abs(want).max())
+    assert np.allclose(few.lobe_sky, want, **tol)
+    assert not np.allclose(every.lobe_sky, want, **tol)     # the positions' values do differ
+
 def _fd_tolerance(L, fd, h):
     """What a derivative may differ from the central difference ``fd`` of step ``h``: 0.2% of
     its scale, plus the difference quotient's own error, single-precision rounding of L / 2 h."""

@@ -220,11 +220,18 @@ def test_device_grid_equals_the_numpy_grid():
 def _shared_integrals(mi, dr, share, emitter, quad, sun):
     """One frame's interpolated integrals under the emitter's current sky (as the light cache
     takes them: the anchors used and the pixels' own, then combined)."""
-    from skyfit_mi.render.light_cache import _sky_integrals
-
     plan = share.plan(sun)
     at = dr.gather(mi.SurfaceInteraction3f, share.si, mi.UInt32(plan[3]))
     return share.combine(plan, *_sky_integrals(emitter, at, quad))
+
+
+def _sky_integrals(emitter, si, quad):
+    """I_d and the Chebyshev coefficients of I_s at interactions ``si`` (the light cache's)."""
+    from skyfit_mi.render.light_cache import _sky_values
+    from skyfit_mi.render.sky_control import chebyshev_coefficients
+
+    diffuse, values = _sky_values(emitter, si, quad)
+    return diffuse, chebyshev_coefficients(values, axis=1)
 
 
 def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_path):
@@ -244,7 +251,7 @@ def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_pa
     from skyfit_mi.render import setup
     from skyfit_mi.render.daylight import update_sky
     from skyfit_mi.render.light_cache import (SIGMA_TABLE, _anchor_plan, _SharedSky,
-                                              _sky_integrals, build_light_cache)
+                                              build_light_cache)
     from skyfit_mi.render.sky_control import chebyshev_eval, chebyshev_x, quadrature
 
     spec = SCENES_DIR / "specs" / "disc_clear_east.toml"

@@ -60,7 +60,8 @@ import numpy as np
 
 from ..physics.ward import SIGMA_MIRROR
 from .daylight import jit_array
-from .sky_control import FrameSkies, chebyshev_coefficients, quadrature, sky_integrals, to_numpy
+from .sky_control import (FrameSkies, chebyshev_coefficients, chebyshev_nodes, quadrature,
+                          sky_integrals, to_numpy)
 
 #: Roughnesses of the Ward sampling lobes in the direction mixture.
 LOBE_SIGMAS = (0.002, 0.006, 0.02, 0.06, 0.15, 0.3)
@@ -77,8 +78,8 @@ POSITIONS, DIRECTIONS = 32, 128
 #: the roughness range is grown to stay under (:meth:`~skyfit_mi.fitting.fit.FitSession.run`).
 CACHE_SHARE = 0.1
 #: Pixels between the anchors at which the light caches of predictions and maps integrate the
-#: sky (``sky_spacing`` of :func:`build_light_cache`; a fit's takes every position's own): the
-#: pixels between them interpolate where that is accurate, with an error second order in the
+#: sky (``sky_spacing`` of :func:`build_light_cache`; a fit's takes its positions' own,
+#: WIDE_POSITIONS): the pixels between them interpolate where that is accurate, with an error second order in the
 #: spacing, a few 1e-4 of the radiance at 4 pixels (docs/BENCHMARKS.md).
 SKY_SPACING = 4
 #: Sky integrals shared by interpolation (``sky_spacing`` of :func:`build_light_cache`): a
@@ -89,6 +90,15 @@ SKY_SPACING = 4
 #: peak, which a narrow lobe resolves); otherwise its own integrals are computed.  Skies with
 #: an environment map (arbitrary structure) are never interpolated.
 SHARE_ANGLE_DEG, SHARE_HORIZON_DEG, SHARE_SUN_DEG = 2.0, 5.0, 5.0
+#: A fit's sky integrals: the diffuse one and the lobe's Chebyshev nodes of roughness at least
+#: WIDE_SIGMA [rad] change little across a pixel and carry most of the quadratures'
+#: directions, so they are taken at WIDE_POSITIONS of each pixel's random positions, half of
+#: them in each half of its positions (LightCache.halves stay independent and see the
+#: subset's noise), each half's mean given to its positions: unbiased, about 3x cheaper; the
+#: narrower nodes, which resolve the pixel, at every position (``wide_positions`` of
+#: build_light_cache).  Not the pixel centres: docs/BENCHMARKS.md, "A fit's sky integrals
+#: through pixel centres: tried, not adopted".
+WIDE_SIGMA, WIDE_POSITIONS = 0.15, 4
 #: Points whose sky integrals one pass takes (frames' positions together, each under its
 #: frame's sky): a prediction's few points of every frame at once, larger caches frame by frame
 #: (their quadratures' arrays grow with the points).
@@ -303,19 +313,14 @@ def _stratified(rng, n, count=None):
     return u[0] if count is None else u
 
 
-def _sky_numpy(diffuse, values):
-    """I_d (Q, 3) and the Chebyshev coefficients of I_s (Q, M, 3) from the Dr.Jit values of
-    :func:`~.sky_control.sky_integrals`."""
-    return to_numpy(diffuse), chebyshev_coefficients(np.stack([to_numpy(v) for v in values],
-                                                            axis=1), axis=1)
-
-
-def _sky_integrals(emitter, si, quad):
-    """I_d (Q, 3) and the Chebyshev coefficients of I_s (Q, M, 3) of every surface interaction
-    in ``si`` under the emitter's current sky, or each under its frame's (``emitter`` a
-    :class:`~.sky_control.FrameSkies`); ``quad`` the :func:`~.sky_control.quadrature` on
-    SIGMA_TABLE."""
-    return _sky_numpy(*sky_integrals(emitter, si, quad))
+def _sky_values(emitter, si, quad):
+    """I_d (Q, 3) or None (``quad['diffuse']`` None) and I_s at the nodes of ``quad`` (Q, n, 3)
+    of every surface interaction in ``si`` under the emitter's current sky, or each under its
+    frame's (``emitter`` a :class:`~.sky_control.FrameSkies`); ``quad`` a
+    :func:`~.sky_control.quadrature` on SIGMA_TABLE, or its nodes' subset."""
+    diffuse, values = sky_integrals(emitter, si, quad)
+    return (None if diffuse is None else to_numpy(diffuse),
+            np.stack([to_numpy(v) for v in values], axis=1))
 
 
 def _interaction_arrays(si):
@@ -442,7 +447,8 @@ class _SharedSky:
 
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
                       directions=DIRECTIONS, seed=0, max_depth=3, normalisation="ward",
-                      sky_positions=None, sky_spacing=None, stats=None):
+                      sky_positions=None, sky_spacing=None, wide_positions=WIDE_POSITIONS,
+                      stats=None):
     """Trace the light arriving at ``pixels`` for every sky in ``skies``.
 
     Parameters
@@ -468,6 +474,10 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         its own elsewhere: about n^2 times cheaper on smooth surfaces, with an error second
         order in the anchors' spacing (docs/BENCHMARKS.md); not where the anchors would
         outnumber the pixels (scattered pixels), which then take ``sky_positions``
+    wide_positions : None, or k >= 2: where the integrals are taken at every position (neither
+        ``sky_positions`` nor shared anchors), the diffuse one and the nodes of roughness at
+        least WIDE_SIGMA at k of each pixel's positions, k / 2 in each half of them, each
+        half's mean given to its positions (WIDE_POSITIONS); None: all at every position
     stats : None, or a dict that receives ``shared``, the number of (pixel, frame) pairs whose
         sky integrals were interpolated
 
@@ -515,6 +525,16 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     k = S if sky_positions is None else min(max(1, int(sky_positions)), S)
     subset = None if k >= S else jit_array(
         mi.UInt32, np.arange(P)[:, None] * S + np.arange(k)[None, :])
+    # a fit's: the wide nodes and the diffuse integral at k / 2 positions of each half
+    half, kw = S // 2, 0 if wide_positions is None else int(wide_positions) // 2
+    wide = k >= S and share is None and 1 <= kw < half
+    if wide:
+        cols = np.concatenate([np.arange(kw), half + np.arange(kw)])
+        wide_index = jit_array(mi.UInt32, (np.arange(P)[:, None] * S + cols[None, :]).ravel())
+        is_wide = chebyshev_nodes(*SIGMA_TABLE) >= WIDE_SIGMA
+        quads = (dict(quad, nodes=[n for n, w in zip(quad["nodes"], is_wide) if w]),
+                 dict(quad, nodes=[n for n, w in zip(quad["nodes"], is_wide) if not w],
+                      diffuse=None))
     repeat = jit_array(mi.UInt32, np.repeat(np.arange(P * S), K))   # each position K times
     sampler = mi.load_dict({"type": "independent"})
     out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos",
@@ -577,8 +597,10 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         shared = share is not None and sky.envmap is None
         own = None if shared else \
             si if subset is None else dr.gather(mi.SurfaceInteraction3f, si, subset)
+        few = dr.gather(mi.SurfaceInteraction3f, si, wide_index) if wide else None
         dr.eval(si.wi, wl, weight, inv_pdf, lm, lm_sky, sun,       # together: shared parts once
-                None if shared else (own.wi, own.sh_frame))
+                None if shared else (own.wi, own.sh_frame),
+                None if few is None else (few.wi, few.sh_frame))
 
         def np3(v, n):
             return np.array(v, dtype=np.float32).T.reshape(P, n, 3)
@@ -598,36 +620,56 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         if shared:
             plan = share.plan(sky.sun_direction)
             pending.append((share.points(plan[3]), plan))
+        elif wide:
+            pending.append(((_interaction_arrays(few), _interaction_arrays(own)), None))
         else:
             pending.append((_interaction_arrays(own), None))
     # every frame's sky integrals in passes of up to SKY_PASS_POINTS points (at least a frame),
     # each point under its own frame's sky (FrameSkies); a frame whose sky has a map alone,
     # under the emitter set to that sky
-    first = 0
-    while first < len(pending):
-        last, count = first + 1, len(pending[first][0][0])
-        while last < len(pending) and skies[first].envmap is None \
-                and skies[last].envmap is None \
-                and count + len(pending[last][0][0]) <= SKY_PASS_POINTS:
-            count += len(pending[last][0][0])
-            last += 1
-        group = pending[first:last]
-        sizes = [len(points[0]) for points, _ in group]
-        at = _interactions(mi, dr, *(np.concatenate(a) for a in zip(*(p for p, _ in group))))
-        if skies[first].envmap is None:
-            light = FrameSkies(skies[first:last], np.repeat(np.arange(len(group)), sizes))
-        else:
-            update_sky(params, skies[first], "sky.")
-            light = emitter
-        diffuse, lobe = _sky_integrals(light, at, quad)
-        cut = np.cumsum(sizes)[:-1]
-        for (_, plan), d, c in zip(group, np.split(diffuse, cut), np.split(lobe, cut)):
+    def integrate(points, q):
+        """Per frame, :func:`_sky_values` under ``quad`` ``q`` at its ``points``."""
+        res, first = [], 0
+        while first < len(points):
+            last, count = first + 1, len(points[first][0])
+            while last < len(points) and skies[first].envmap is None \
+                    and skies[last].envmap is None \
+                    and count + len(points[last][0]) <= SKY_PASS_POINTS:
+                count += len(points[last][0])
+                last += 1
+            sizes = [len(p[0]) for p in points[first:last]]
+            at = _interactions(mi, dr, *(np.concatenate(a) for a in zip(*points[first:last])))
+            if skies[first].envmap is None:
+                light = FrameSkies(skies[first:last], np.repeat(np.arange(last - first), sizes))
+            else:
+                update_sky(params, skies[first], "sky.")
+                light = emitter
+            d, v = _sky_values(light, at, q)
+            cut = np.cumsum(sizes)[:-1]
+            res += zip([None] * len(sizes) if d is None else np.split(d, cut), np.split(v, cut))
+            first = last
+        return res
+
+    if wide:
+        for (d, v_wide), (_, v_narrow) in zip(integrate([p[0] for p, _ in pending], quads[0]),
+                                              integrate([p[1] for p, _ in pending], quads[1])):
+            # each half's mean over its k / 2 positions, given to the half's positions
+            d, v_wide = (np.repeat(a.reshape(P, 2, kw, *a.shape[1:]).mean(axis=2),
+                                   [half, S - half], axis=1) for a in (d, v_wide))
+            values = np.empty((P, S, len(is_wide), 3))
+            values[:, :, is_wide] = v_wide
+            values[:, :, ~is_wide] = v_narrow.reshape(P, S, -1, 3)
+            _add_sky(out, d.reshape(P * S, 3),
+                     chebyshev_coefficients(values, axis=2).reshape(P * S, len(is_wide), 3),
+                     P, S)
+    else:
+        for (_, plan), (d, v) in zip(pending, integrate([p for p, _ in pending], quad)):
+            c = chebyshev_coefficients(v, axis=1)
             if plan is not None:
                 d, c, n_shared = share.combine(plan, d, c)
                 if stats is not None:
                     stats["shared"] += n_shared
             _add_sky(out, d, c, P, S)
-        first = last
     return LightCache(**{k: np.stack(v, axis=1) for k, v in out.items()},
                       normalisation=normalisation)
 

@@ -291,14 +291,15 @@ def sky_integrals(emitter, si, quad):
     """I_d and I_s at each Chebyshev node of ``quad`` (:func:`quadrature`) for every surface
     interaction of ``si`` (Q) under the emitter's current sky (or each under its frame's,
     ``emitter`` a :class:`FrameSkies`): Dr.Jit colours (Q) and a list of them
-    [W m^-2 sr^-1], not yet evaluated."""
+    [W m^-2 sr^-1], not yet evaluated (I_d None where ``quad['diffuse']`` is None)."""
     import drjit as dr
     import mitsuba as mi
 
     up = si.to_local(mi.Vector3f(0.0, 0.0, 1.0))
     tables = quad["tables"]
-    diffuse = _sky_sum(mi, dr, emitter, si, *diffuse_directions(
-        up, DIFFUSE_AZIMUTHS, DIFFUSE_POLAR, tables[quad["diffuse"]]))
+    diffuse = None if quad["diffuse"] is None else _sky_sum(
+        mi, dr, emitter, si, *diffuse_directions(up, DIFFUSE_AZIMUTHS, DIFFUSE_POLAR,
+                                                 tables[quad["diffuse"]]))
     return diffuse, [_lobe_sum(mi, dr, emitter, si, up, n["sigma"], n["resolution"],
                                quad["normalisation"], tables[n["table"]])
                      for n in quad["nodes"]]
