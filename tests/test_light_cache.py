@@ -90,7 +90,7 @@ def test_narrow_lobe_matches_an_independent_quadrature(session):
 
 def test_wide_nodes_are_each_halfs_mean_of_a_few_positions_and_narrow_ones_every_positions(
         session):
-    """A fit's cache (wide_positions): the diffuse integral and the lobe's nodes of roughness
+    """A fit's cache (wide_share) on a plane: the diffuse integral and the lobe's nodes of roughness
     >= WIDE_SIGMA are each half's mean over its first two positions (random ones: unbiased),
     the narrower nodes every position's own, with the same samples as a cache of every
     position's integrals."""
@@ -98,8 +98,8 @@ def test_wide_nodes_are_each_halfs_mean_of_a_few_positions_and_narrow_ones_every
     from skyfit_mi.render.sky_control import chebyshev_coefficients, chebyshev_nodes
 
     args = (session.scene, session.params, session.skies[4:7], session.obs.pixels[:6], "disc")
-    few = build_light_cache(*args, positions=8, directions=32, seed=3, wide_positions=4)
-    every = build_light_cache(*args, positions=8, directions=32, seed=3, wide_positions=None)
+    few = build_light_cache(*args, positions=8, directions=32, seed=3, wide_share=0.5)
+    every = build_light_cache(*args, positions=8, directions=32, seed=3, wide_share=None)
     assert np.array_equal(few.weight, every.weight) and np.array_equal(few.wi, every.wi)
     n = every.lobe_sky.shape[3]
     x = np.cos(np.pi * (np.arange(n) + 0.5) / n)
@@ -118,6 +118,29 @@ def test_wide_nodes_are_each_halfs_mean_of_a_few_positions_and_narrow_ones_every
     tol = dict(rtol=1e-4, atol=1e-5 * np.abs(want).max())
     assert np.allclose(few.lobe_sky, want, **tol)
     assert not np.allclose(every.lobe_sky, want, **tol)     # the positions' values do differ
+
+
+def test_a_curved_or_coarse_footprint_keeps_the_wide_parts_at_every_position():
+    """_small_footprints: a plane seen in a fine pixel passes; normals or mirror directions
+    spread by more than WIDE_SPREAD_DEG in one pixel (a sphere, a coarse pixel), or a position
+    off every surface, send the cache back to every position's integrals."""
+    from skyfit_mi.render.light_cache import WIDE_SPREAD_DEG, _small_footprints
+
+    rng = np.random.default_rng(2)
+    P, S = 5, 8
+
+    def spread(deg):                 # directions within deg of +z, per pixel and position
+        a = np.radians(deg) * np.sqrt(rng.random((P, S)))
+        phi = 2 * np.pi * rng.random((P, S))
+        return np.stack([np.sin(a) * np.cos(phi), np.sin(a) * np.sin(phi), np.cos(a)],
+                        axis=-1).reshape(P * S, 3)
+    plane, fine = np.tile([0.0, 0.0, 1.0], (P * S, 1)), spread(0.3 * WIDE_SPREAD_DEG)
+    assert _small_footprints(plane, fine, P, S)
+    assert not _small_footprints(spread(3 * WIDE_SPREAD_DEG), fine, P, S)     # curved
+    assert not _small_footprints(plane, spread(3 * WIDE_SPREAD_DEG), P, S)    # coarse
+    off = plane.copy()
+    off[7] = 0.0                                                  # a position that missed
+    assert not _small_footprints(off, fine, P, S)
 
 def _fd_tolerance(L, fd, h):
     """What a derivative may differ from the central difference ``fd`` of step ``h``: 0.2% of

@@ -79,7 +79,7 @@ POSITIONS, DIRECTIONS = 32, 128
 CACHE_SHARE = 0.1
 #: Pixels between the anchors at which the light caches of predictions and maps integrate the
 #: sky (``sky_spacing`` of :func:`build_light_cache`; a fit's takes its positions' own,
-#: WIDE_POSITIONS): the pixels between them interpolate where that is accurate, with an error second order in the
+#: WIDE_SHARE): the pixels between them interpolate where that is accurate, with an error second order in the
 #: spacing, a few 1e-4 of the radiance at 4 pixels (docs/BENCHMARKS.md).
 SKY_SPACING = 4
 #: Sky integrals shared by interpolation (``sky_spacing`` of :func:`build_light_cache`): a
@@ -92,13 +92,17 @@ SKY_SPACING = 4
 SHARE_ANGLE_DEG, SHARE_HORIZON_DEG, SHARE_SUN_DEG = 2.0, 5.0, 5.0
 #: A fit's sky integrals: the diffuse one and the lobe's Chebyshev nodes of roughness at least
 #: WIDE_SIGMA [rad] change little across a pixel and carry most of the quadratures'
-#: directions, so they are taken at WIDE_POSITIONS of each pixel's random positions, half of
-#: them in each half of its positions (LightCache.halves stay independent and see the
-#: subset's noise), each half's mean given to its positions: unbiased, about 3x cheaper; the
-#: narrower nodes, which resolve the pixel, at every position (``wide_positions`` of
-#: build_light_cache).  Not the pixel centres: docs/BENCHMARKS.md, "A fit's sky integrals
-#: through pixel centres: tried, not adopted".
-WIDE_SIGMA, WIDE_POSITIONS = 0.15, 4
+#: directions, so they are taken at WIDE_SHARE of each pixel's random positions (at least one
+#: in each half of them: LightCache.halves stay independent and see the subset's noise), each
+#: half's mean given to its positions: unbiased, the cache about 2.6x faster; the narrower
+#: nodes, which resolve the pixel, at every position (``wide_share`` of build_light_cache).
+#: Only where every pixel's footprint is small against those lobes: its positions' normals and
+#: mirror directions within WIDE_SPREAD_DEG of their mean (planes seen in pixels of a fraction
+#: of a degree); a curved surface or a coarse pixel takes them at every position, so that the
+#: positions' spread (the model's own noise estimate) keeps seeing how they change.  Not the
+#: pixel centres: docs/BENCHMARKS.md, "A fit's sky integrals through pixel centres: tried, not
+#: adopted".
+WIDE_SIGMA, WIDE_SHARE, WIDE_SPREAD_DEG = 0.15, 1 / 8, 1.0
 #: Points whose sky integrals one pass takes (frames' positions together, each under its
 #: frame's sky): a prediction's few points of every frame at once, larger caches frame by frame
 #: (their quadratures' arrays grow with the points).
@@ -447,7 +451,7 @@ class _SharedSky:
 
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
                       directions=DIRECTIONS, seed=0, max_depth=3, normalisation="ward",
-                      sky_positions=None, sky_spacing=None, wide_positions=WIDE_POSITIONS,
+                      sky_positions=None, sky_spacing=None, wide_share=WIDE_SHARE,
                       stats=None):
     """Trace the light arriving at ``pixels`` for every sky in ``skies``.
 
@@ -474,10 +478,12 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         its own elsewhere: about n^2 times cheaper on smooth surfaces, with an error second
         order in the anchors' spacing (docs/BENCHMARKS.md); not where the anchors would
         outnumber the pixels (scattered pixels), which then take ``sky_positions``
-    wide_positions : None, or k >= 2: where the integrals are taken at every position (neither
-        ``sky_positions`` nor shared anchors), the diffuse one and the nodes of roughness at
-        least WIDE_SIGMA at k of each pixel's positions, k / 2 in each half of them, each
-        half's mean given to its positions (WIDE_POSITIONS); None: all at every position
+    wide_share : None, or a share of the positions: where the integrals are taken at every
+        position (neither ``sky_positions`` nor shared anchors) and every pixel's footprint
+        is small (WIDE_SPREAD_DEG), the diffuse one and the nodes of roughness at least
+        WIDE_SIGMA at that share of each pixel's positions, at least one in each half of
+        them, each half's mean given to its positions (WIDE_SHARE); None: all at every
+        position
     stats : None, or a dict that receives ``shared``, the number of (pixel, frame) pairs whose
         sky integrals were interpolated
 
@@ -526,12 +532,13 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     subset = None if k >= S else jit_array(
         mi.UInt32, np.arange(P)[:, None] * S + np.arange(k)[None, :])
     # a fit's: the wide nodes and the diffuse integral at k / 2 positions of each half
-    half, kw = S // 2, 0 if wide_positions is None else int(wide_positions) // 2
-    wide = k >= S and share is None and 1 <= kw < half
+    half = S // 2
+    kw = 0 if wide_share is None else max(1, int(S * float(wide_share)) // 2)
+    is_wide = chebyshev_nodes(*SIGMA_TABLE) >= WIDE_SIGMA
+    wide = k >= S and share is None and 1 <= kw < half and 0 < is_wide.sum() < len(is_wide)
     if wide:
         cols = np.concatenate([np.arange(kw), half + np.arange(kw)])
         wide_index = jit_array(mi.UInt32, (np.arange(P)[:, None] * S + cols[None, :]).ravel())
-        is_wide = chebyshev_nodes(*SIGMA_TABLE) >= WIDE_SIGMA
         quads = (dict(quad, nodes=[n for n, w in zip(quad["nodes"], is_wide) if w]),
                  dict(quad, nodes=[n for n, w in zip(quad["nodes"], is_wide) if not w],
                       diffuse=None))
@@ -597,6 +604,10 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         shared = share is not None and sky.envmap is None
         own = None if shared else \
             si if subset is None else dr.gather(mi.SurfaceInteraction3f, si, subset)
+        if wide and t == 0:             # the pixels' footprints, from the first frame's
+            wide = _small_footprints(                                  # positions
+                np.array(si.sh_frame.n, dtype=float).T,
+                np.array(si.to_world(mi.reflect(si.wi)), dtype=float).T, P, S)
         few = dr.gather(mi.SurfaceInteraction3f, si, wide_index) if wide else None
         dr.eval(si.wi, wl, weight, inv_pdf, lm, lm_sky, sun,       # together: shared parts once
                 None if shared else (own.wi, own.sh_frame),
@@ -672,6 +683,21 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
             _add_sky(out, d, c, P, S)
     return LightCache(**{k: np.stack(v, axis=1) for k, v in out.items()},
                       normalisation=normalisation)
+
+
+def _small_footprints(normals, mirrors, P, S):
+    """Whether every pixel's positions' world ``normals`` and mirror directions (P S, 3) lie
+    within WIDE_SPREAD_DEG of their pixel's mean (a position off every surface fails)."""
+    cos_max = np.cos(np.radians(WIDE_SPREAD_DEG))
+    for d in (normals, mirrors):
+        d = d.reshape(P, S, 3)
+        mean = d.sum(axis=1, keepdims=True)
+        mean = mean / np.maximum(np.linalg.norm(mean, axis=2, keepdims=True), 1e-30)
+        with np.errstate(invalid="ignore"):
+            cos = np.sum(d * mean, axis=2) / np.linalg.norm(d, axis=2)
+        if not np.all(cos >= cos_max):                                # NaN fails too
+            return False
+    return True
 
 
 def _add_sky(out, diffuse, lobe, P, S):
