@@ -72,8 +72,7 @@ def main():
                  timed(["fit", day, "--region", "disc=rect:124,124,131,131", "-o", fits])))
     rows += relights(fits, day, work)
     rows.append(("relight --reference (also the truth rendered again)",
-                 timed(["relight", fits, "--target", day, "-o", work / "relit", "-q",
-                        "--overwrite", "--reference"])))
+                 timed(relight_args(fits, day, work / "relit", "--reference"))))
     rows.append(("chi2map 60 x 60, 64 pixels",
                  timed(["chi2map", day, fits / "fit_disc.json", "-o", work / "map"])))
     rows.append(("chi2map 60 x 60 --profile",
@@ -90,6 +89,12 @@ def main():
         b = work / "board"
         pairs("board", ["render", ROOT / "scenes" / "specs" / "board_east_37.toml", "-o",
                         b / "day", "-q", "--overwrite"], b / "fits", b / "day", b, args.pairs)
+
+
+def relight_args(fits, day, out, *flags):
+    """The arguments of `skyfit relight` of ``fits`` onto ``day`` into ``out`` (quiet, over an
+    earlier run), with ``flags``."""
+    return ["relight", fits, "--target", day, "-o", out, "-q", "--overwrite", *flags]
 
 
 def table(rows):
@@ -116,11 +121,9 @@ def board(work):
 def relights(fits, day, work, label=""):
     """Rows of ``fits`` relit onto ``day`` with images, then without (``--no-images``)."""
     return [(f"{label}relight (images, band, comparisons)",
-             timed(["relight", fits, "--target", day, "-o", work / "relit", "-q",
-                    "--overwrite"])),
+             timed(relight_args(fits, day, work / "relit"))),
             (f"{label}relight --no-images (prediction and band only)",
-             timed(["relight", fits, "--target", day, "-o", work / "predicted", "-q",
-                    "--no-images", "--overwrite"]))]
+             timed(relight_args(fits, day, work / "predicted", "--no-images")))]
 
 
 def pairs(name, render, fits, day, work, n):
@@ -131,7 +134,7 @@ def pairs(name, render, fits, day, work, n):
     ratios = []
     for i in range(n):
         a = timed(render)
-        b = timed(["relight", fits, "--target", day, "-o", work / "relit", "-q", "--overwrite"])
+        b = timed(relight_args(fits, day, work / "relit"))
         ratios.append(b / a)
         print(f"| {i + 1} | {a:.2f} | {b:.2f} | {b / a:.3f} |", flush=True)
     print(f"| median | | | {statistics.median(ratios):.3f} |")

@@ -79,8 +79,8 @@ POSITIONS, DIRECTIONS = 32, 128
 CACHE_SHARE = 0.1
 #: Pixels between the anchors at which the light caches of predictions and maps integrate the
 #: sky (``sky_spacing`` of :func:`build_light_cache`; a fit's takes its positions' own,
-#: WIDE_SHARE): the pixels between them interpolate where that is accurate, with an error second order in the
-#: spacing, a few 1e-4 of the radiance at 4 pixels (docs/BENCHMARKS.md).
+#: WIDE_SHARE): the pixels between them interpolate where that is accurate, with an error
+#: second order in the spacing, a few 1e-4 of the radiance at 4 pixels (docs/BENCHMARKS.md).
 SKY_SPACING = 4
 #: Sky integrals shared by interpolation (``sky_spacing`` of :func:`build_light_cache`): a
 #: pixel takes the bilinear interpolation of the four anchors around it only when they lie on
