@@ -1,4 +1,5 @@
-"""background.Beside: one call in a low-priority child process, its result, its failures."""
+"""background.Beside: one call in a low-priority child process, its result, its failures;
+each test with the child a fork and a fresh interpreter."""
 
 import os
 import time
@@ -6,7 +7,17 @@ import time
 import pytest
 
 from skyfit_mi.background import NICE, Beside
+from skyfit_mi.background import _forkable as forkable
 from skyfit_mi.errors import SkyfitError, UnknownNameError
+
+
+@pytest.fixture(autouse=True, params=["fork", "fresh interpreter"])
+def start(request, monkeypatch):
+    """Each test with either way of starting the child (background._forkable says which)."""
+    import skyfit_mi.background as bg
+
+    monkeypatch.setattr(bg, "_forkable", lambda: request.param == "fork")
+    return request.param
 
 
 def test_the_call_runs_in_a_child_at_low_priority_and_returns_its_result():
@@ -93,3 +104,23 @@ def test_a_child_starved_of_a_core_is_given_up_and_the_call_made_here(monkeypatc
     with Beside("os:getpid") as job:                 # an answer given is the child's
         job._proc.wait()
         assert job.result() == job._proc.pid != os.getpid()
+
+
+def test_the_child_is_a_fork_only_before_drjit_is_loaded_and_with_no_other_thread(monkeypatch):
+    """Dr.Jit's thread pool and LLVM, and another thread's locks, do not survive a fork."""
+    import sys
+    import threading
+
+    monkeypatch.delitem(sys.modules, "drjit", raising=False)
+    assert forkable() == sys.platform.startswith("linux")
+    monkeypatch.setitem(sys.modules, "drjit", None)
+    assert not forkable()
+    monkeypatch.delitem(sys.modules, "drjit")
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        assert not forkable()
+    finally:
+        stop.set()
+        other.join()
