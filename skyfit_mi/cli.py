@@ -6,13 +6,22 @@ written stay); ``--debug`` shows the traceback of any error.
 """
 
 import argparse
+import os
 import re
 import sys
 
-from .errors import SetupError, SkyfitError
-from .physics.ward import NORMALISATIONS
-from .render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS
-from .render.variant import VARIANTS
+#: NumPy's BLAS (OpenBLAS) on one thread in a `skyfit` process unless the environment says
+#: otherwise; set before NumPy loads.  Dr.Jit's pool does the heavy work on every core, and
+#: OpenBLAS's threads, spinning after each small product NumPy does between its kernels, took
+#: 0.5 CPU-seconds of a 13-frame render from it and from a relight's prediction beside it
+#: (docs/BENCHMARKS.md, "tenth measurement"); fits and maps were no slower.  Dask's workers
+#: are set so too.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from .errors import SetupError, SkyfitError  # noqa: E402 -- after the BLAS setting
+from .physics.ward import NORMALISATIONS  # noqa: E402
+from .render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS  # noqa: E402
+from .render.variant import VARIANTS  # noqa: E402
 
 DESCRIPTION = ("Render daylight image sequences, fit Ward reflection models to them, and map "
                "the materials a camera sees.")
