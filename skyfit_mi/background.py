@@ -42,11 +42,12 @@ STARVED, WATCH_S = 0.2, 1.0
 #: Seconds a child that has answered is given to exit before it is killed.
 EXIT_S = 5.0
 
-#: The fresh interpreter's program: the reply on a copy of its stdout, the parent's
-#: ``sys.path`` first (so that the call's arguments unpickle as they would in the parent), then
-#: :func:`_child` with the call read from stdin.
+#: The fresh interpreter's program: Ctrl-C ignored from the start, the reply on a copy of its
+#: stdout, the parent's ``sys.path`` first (so that the call's arguments unpickle as they would
+#: in the parent), then :func:`_child` with the call read from stdin.
 _CHILD_SOURCE = """\
-import os, pickle, sys
+import os, pickle, signal, sys
+signal.signal(signal.SIGINT, signal.SIG_IGN)
 reply = os.dup(1)
 sys.path[:] = pickle.load(sys.stdin.buffer)
 from skyfit_mi.background import _child
