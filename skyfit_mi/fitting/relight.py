@@ -18,6 +18,8 @@ comes out with the wide band its undetermined roughness implies.
 
 import csv
 import io
+import os
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
 from pathlib import Path
 
@@ -369,17 +371,21 @@ def write_comparisons(observed, relit):
     images = [(read_frame_image(obs_root, a, "radiance", shape),
                read_frame_image(new_root, b, "radiance", shape)) for a, b in pairs]
     scale = np.percentile(np.concatenate([o.ravel() for o, _ in images]), 99) or 1.0
-    names = []
-    for (a, _), (o, r) in zip(pairs, images):
+
+    def compare(frame, o, r):
         err = (r - o).mean(axis=2) / scale
         lim = max(float(np.abs(err).max()), 1e-6)
-        panels = [(to_srgb8(o, 0.8 / scale), f"observed, {a['time']}"),
-                  (to_srgb8(r, 0.8 / scale), f"relit, {a['time']}"),
+        panels = [(to_srgb8(o, 0.8 / scale), f"observed, {frame['time']}"),
+                  (to_srgb8(r, 0.8 / scale), f"relit, {frame['time']}"),
                   (_diverging(err / lim), "relit - observed (/ observed 99th pct.)")]
-        name = f"compare_{a['index']:04d}.png"
+        name = f"compare_{frame['index']:04d}.png"
         write_png(Path(relit) / name, _contact_row(panels, lim))
-        names.append(name)
-    return names
+        return name
+    # frames on threads (NumPy and Pillow's encoder let go of the GIL): a core the prediction
+    # beside the render has left idle takes some (0.39 -> 0.29 s for 13 frames)
+    _diverging(np.zeros((1, 1)))                    # the colour map built before the threads
+    with ThreadPoolExecutor(min(len(pairs), os.cpu_count() or 1)) as pool:
+        return list(pool.map(compare, [a for a, _ in pairs], *zip(*images)))
 
 
 #: Smallest panel width of a comparison image [pixels] (small frames are enlarged to it).
