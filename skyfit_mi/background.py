@@ -20,7 +20,8 @@ to handle: the child ignores it and is killed when the parent lets go of it.
 When the parent comes for the result, a child still working is given the parent's priority
 back where the system allows it; where it does not, and other work keeps the child from a
 core (less than STARVED of a core over WATCH_S seconds), the call is run again in the parent,
-so that a busy machine never leaves a nice-19 child waited on for minutes.
+so that a busy machine never leaves a nice-19 child waited on for minutes.  A child that
+stops using a core altogether (STALLED over STALLED_S: stuck) is given up alike.
 """
 
 import os
@@ -37,8 +38,10 @@ from .errors import SetupError, SkyfitError
 #: Niceness of the child (Linux: 19 is the lowest priority).
 NICE = 19
 #: While waited on, a child that gets less than STARVED of a core over WATCH_S seconds is
-#: given up and its call run in the parent.
+#: given up and its call run in the parent; one given the parent's priority, only if it uses
+#: less than STALLED of a core over STALLED_S seconds (stuck: a deadlock would wait forever).
 STARVED, WATCH_S = 0.2, 1.0
+STALLED, STALLED_S = 0.01, 10.0
 #: Seconds a child that has answered is given to exit before it is killed.
 EXIT_S = 5.0
 
@@ -194,20 +197,24 @@ class Beside:
 
     def _wait(self):
         """Wait until the child's reply can be read (True), first giving the child this
-        process's priority where allowed; False if it is starved of a core."""
+        process's priority where allowed; False if it is starved of a core, or stuck."""
         pid = self._proc.pid
         try:
             os.setpriority(os.PRIO_PROCESS, pid, os.getpriority(os.PRIO_PROCESS, 0))
             raised = True
         except OSError:                              # not allowed (unprivileged), or gone
             raised = False
+        # starved: less than STARVED of a core over WATCH_S; given this process's priority, only
+        # a stuck child (a deadlock) uses less than STALLED of one over STALLED_S
+        share, window = (STALLED, STALLED_S) if raised else (STARVED, WATCH_S)
         used, since = _cpu_seconds(pid), time.monotonic()
         while not select.select([self._proc.stdout], [], [], WATCH_S)[0]:
             now, cpu = time.monotonic(), _cpu_seconds(pid)
-            if not raised and used is not None and cpu is not None:
-                if cpu - used < STARVED * (now - since):
-                    return False
-                used, since = cpu, now
+            if used is None or cpu is None or now - since < window:
+                continue
+            if cpu - used < share * (now - since):
+                return False
+            used, since = cpu, now
         return True
 
     def close(self, grace=0.0):

@@ -124,3 +124,16 @@ def test_the_child_is_a_fork_only_before_drjit_is_loaded_and_with_no_other_threa
     finally:
         stop.set()
         other.join()
+
+
+def test_a_stuck_child_is_given_up_and_the_call_made_here(monkeypatch):
+    """A child that uses no core while waited on (a deadlock would wait forever) is killed and
+    its call made in the parent, also where it has been given the parent's priority."""
+    import skyfit_mi.background as bg
+
+    monkeypatch.setattr(bg, "WATCH_S", 0.1)
+    monkeypatch.setattr(bg, "STALLED_S", 0.3)
+    with Beside("time:sleep", 1.0) as job:           # asleep: no CPU, as if stuck
+        t0 = time.perf_counter()
+        assert job.result() is None
+        assert job._proc.returncode == -9 and time.perf_counter() - t0 >= 1.0
