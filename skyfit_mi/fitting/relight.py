@@ -382,8 +382,8 @@ def write_comparisons(observed, relit):
         write_png(Path(relit) / name, _contact_row(panels, lim))
         return name
     # frames on threads (NumPy and Pillow's encoder let go of the GIL): a core the prediction
-    # beside the render has left idle takes some (0.39 -> 0.29 s for 13 frames)
-    _diverging(np.zeros((1, 1)))                    # the colour map built before the threads
+    # beside the render has left idle takes some (0.39 -> 0.29 s for 13 frames); each call of
+    # _diverging takes its own copy of the colour map
     with ThreadPoolExecutor(min(len(pairs), os.cpu_count() or 1)) as pool:
         return list(pool.map(compare, [a for a, _ in pairs], *zip(*images)))
 
