@@ -10,7 +10,7 @@ import skyfit_mi
 PKG = Path(skyfit_mi.__file__).parent
 #: Bottom to top; a module may import from its own layer and those before it.
 LAYERS = ["ground", "physics", "render", "pipeline", "fitting", "cli"]
-GROUND = {"errors", "conventions", "files", "background", "__init__"}
+GROUND = {"errors", "conventions", "files", "child", "__init__"}
 
 
 def _layer(module):

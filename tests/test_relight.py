@@ -220,34 +220,6 @@ def test_fit_on_some_frames_and_relight_onto_the_same_folder_reports_the_held_ou
     assert [row[4] for row in rows[1:5]] == ["no", "no", "yes", "yes"]
 
 
-FORKED_RELIGHT = """
-import sys
-import skyfit_mi.background as bg
-from skyfit_mi.cli import main
-forks = []
-start = bg._Fork.__init__
-bg._Fork.__init__ = lambda self, *a: (forks.append(1), start(self, *a))[1]
-code = main(sys.argv[1:])
-sys.exit(code if code or forks == [1] else 9)
-"""
-
-
-def test_the_command_makes_its_prediction_in_a_forked_child_as_in_a_fresh_one(day, tmp_path):
-    """`skyfit relight` in a new process forks its prediction's child (Dr.Jit not yet loaded);
-    here, with Dr.Jit loaded, the child is a fresh interpreter: the same files."""
-    import subprocess
-    import sys
-
-    fit = _fit_json(tmp_path / "fit_disc.json")
-    args = ["relight", str(fit), "--target", str(day / "day"), "-q", "--draws", "20", "-o"]
-    subprocess.run([sys.executable, "-c", FORKED_RELIGHT, *args, str(tmp_path / "forked")],
-                   check=True, stdout=subprocess.DEVNULL)
-    assert main([*args, str(tmp_path / "fresh")]) == 0
-    for name in ("prediction.csv", "relight.csv"):
-        assert (tmp_path / "forked" / name).read_bytes() == (tmp_path / "fresh" / name).read_bytes()
-    assert (tmp_path / "forked" / "prediction.png").stat().st_size > 0
-
-
 @pytest.mark.parametrize("text", ["6-2", "a", "1,,2", "-1"])
 def test_bad_frame_lists_get_one_line(day, capsys, text):
     assert main(["fit", str(day / "day"), "--all", "--frames", text]) == 2

@@ -20,12 +20,10 @@ import csv
 import io
 import os
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
 
-from ..background import Beside
 from ..errors import SkyfitError
 from ..files import write_bytes, write_json, write_text
 from .report import fit_files
@@ -125,41 +123,31 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
         raise SkyfitError("--reference renders a synthetic target's own materials again; it "
                           "needs a target folder that skyfit rendered, and images.")
     kind = "observed" if observed else "relit render"
-    # with observations, the prediction with its plot is made beside the spec's validation and
-    # the render, in a child at low priority that fills the cores they leave idle
-    # (background.Beside); a bad input found meanwhile ends it
-    ahead = images and observed
-    beside = (Beside("skyfit_mi.fitting.relight:prediction_files", fits, target, None, draws,
-                     seed, kind) if ahead else nullcontext())
-    with beside:
-        if images:
-            spec, _ = target_spec(target, fits, doc)
-            times = [(f.time.strftime("%H:%M"), f.below_horizon) for f in spec.frames]
-        else:
-            # the prediction takes the folder's light as recorded: its spec is not validated
-            # again (which would compute every sun position anew)
-            spec = None
-            times = [(f["time"][11:16], f.get("below_horizon", False)) for f in doc["frames"]]
-        if all(below for _, below in times):
-            raise SkyfitError(f"the target's sun is below the horizon at every time "
-                              f"({', '.join(t for t, _ in times)}); give times of day with the "
-                              "sun up.")
-        # the target's pixels (a region it does not show is refused before the render), or
-        # without observations the relit render's own (its label image)
-        pixels = target_pixels(fits, target, seed) if observed or not images else None
-        if images:
-            render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log,
-                            source="relight")
-        ensure_dir(Path(out))
-        if pixels is None:
-            pixels = target_pixels(fits, out, seed)
-        if not ahead:
-            made = prediction_files(fits, out if images and not observed else target, pixels,
-                                    draws, seed, kind, plot=images)
-        errors = observed_errors(fits, target, out, pixels, doc, spec, images, table, log) \
-            if observed else None
-        if ahead:
-            made = beside.result()
+    if images:
+        spec, _ = target_spec(target, fits, doc)
+        times = [(f.time.strftime("%H:%M"), f.below_horizon) for f in spec.frames]
+    else:
+        # the prediction takes the folder's light as recorded: its spec is not validated
+        # again (which would compute every sun position anew)
+        spec = None
+        times = [(f["time"][11:16], f.get("below_horizon", False)) for f in doc["frames"]]
+    if all(below for _, below in times):
+        raise SkyfitError(f"the target's sun is below the horizon at every time "
+                          f"({', '.join(t for t, _ in times)}); give times of day with the "
+                          "sun up.")
+    # the target's pixels (a region it does not show is refused before the render), or
+    # without observations the relit render's own (its label image)
+    pixels = target_pixels(fits, target, seed) if observed or not images else None
+    if images:
+        render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log,
+                        source="relight")
+    ensure_dir(Path(out))
+    if pixels is None:
+        pixels = target_pixels(fits, out, seed)
+    made = prediction_files(fits, out if images and not observed else target, pixels,
+                            draws, seed, kind, plot=images)
+    errors = observed_errors(fits, target, out, pixels, doc, spec, images, table, log) \
+        if observed else None
     rows, means = write_prediction(made, out, log)
     if not observed:
         return None
@@ -381,8 +369,7 @@ def write_comparisons(observed, relit):
         name = f"compare_{frame['index']:04d}.png"
         write_png(Path(relit) / name, _contact_row(panels, lim))
         return name
-    # frames on threads (NumPy and Pillow's encoder let go of the GIL): a core the prediction
-    # beside the render has left idle takes some (0.39 -> 0.29 s for 13 frames); each call of
+    # frames on threads (NumPy and Pillow's encoder let go of the GIL); each call of
     # _diverging takes its own copy of the colour map
     with ThreadPoolExecutor(min(len(pairs), os.cpu_count() or 1)) as pool:
         return list(pool.map(compare, [a for a, _ in pairs], *zip(*images)))
@@ -426,9 +413,8 @@ def _contact_row(panels, lim):
 
 def prediction_files(fits, target, pixels, draws, seed, image_kind, plot=True):
     """:func:`predict` (at ``pixels``, or if None :func:`target_pixels`) and the files
-    :func:`write_prediction` writes, made but not written (so that a child process can make
-    them, :class:`~skyfit_mi.background.Beside`): (rows, region means, {file name: bytes},
-    the lines predict logs).
+    :func:`write_prediction` writes, made but not written: (rows, region means, {file name:
+    bytes}, the lines predict logs).
 
     ``prediction.csv`` has one row per region, frame and channel (R, G, B or a luminance
     table's Y; radiance in W m^-2 sr^-1); with ``plot``, ``prediction.png`` shows per region

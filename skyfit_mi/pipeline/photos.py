@@ -23,10 +23,10 @@ Formats and decisions
 * ``.tif .tiff`` of floats (tifffile), ``.exr`` (Mitsuba), ``.hdr .pic .rgbe`` Radiance RGBE
   (Mitsuba): kind 'float', bits and max_code None, encoding_hint 'linear'; an EXR's capture
   time from its header's ``capDate``/``utcOffset``, an RGBE's from ``CAPDATE=``/``GMT=``, in
-  the metadata's EXIF fields.  Mitsuba reads EXR and RGBE pixels in a child process (one,
-  started at the first such file and kept for the rest): a damaged file can abort that
-  native reader (:class:`_ChildReader`), which then ends the child, not the caller, and
-  the file gets one error line.
+  the metadata's EXIF fields.  Mitsuba reads EXR and RGBE pixels in a child process
+  (:data:`_BITMAPS`, started at the first such file and kept for the rest): a damaged file
+  can abort that native reader, which then ends the child, not the caller, and the file gets
+  one error line.
 * camera RAW, any suffix in :data:`RAW_SUFFIXES` (rawpy / LibRaw): kind 'integer', bits 16,
   max_code 65535, encoding_hint 'linear'.
 
@@ -49,24 +49,17 @@ Formats and decisions
 
 from __future__ import annotations
 
-import atexit
 import contextlib
 import io
 import logging
 import math
-import os
-import pickle
-import signal
-import subprocess
-import sys
-import tempfile
-import threading
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..child import CallFailed, Child, ChildDied, one_line
 from ..errors import SkyfitError
 
 #: Camera RAW suffixes handed to rawpy (LibRaw), lower case.
@@ -172,11 +165,10 @@ def _fail(path, what, fix=None):
 
 def _first_line(exc):
     """A one-line summary of a library exception (Mitsuba's messages span many lines)."""
-    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
-    text = lines[-1] if lines else type(exc).__name__
+    text = one_line(exc)
     if text.startswith(']".'):           # Mitsuba: '...FileStream[ ... ]". The reason.'
         text = text[3:].strip()
-    return text[:200]
+    return text
 
 
 def _rgb(values, channels, path):
@@ -605,188 +597,34 @@ def rgbe_header_times(path):
     return out
 
 
-class _ReaderCrashed(Exception):
-    """The child process reading an image died; the message says how, in one line."""
-
-
-class _ReaderRefused(Exception):
-    """The reader in the child raised on the image; the message is its one line."""
-
-
-#: The child's program.  It keeps its stdout for replies and points file descriptor 1 (where
-#: a native library may print) at stderr, takes the parent's ``sys.path`` and the reader
-#: ('module:function') from the first message, then serves :func:`_serve_reads`.
-_CHILD_SOURCE = """\
-import os, pickle, sys
-replies = os.fdopen(os.dup(1), "wb")
-os.dup2(2, 1)
-requests = sys.stdin.buffer
-sys.path[:], reader = pickle.load(requests)
-from skyfit_mi.pipeline.photos import _serve_reads
-_serve_reads(reader, requests, replies)
-"""
-
-
-def _serve_reads(reader, requests, replies):
-    """The child's loop: take a path from ``requests``, reply ``('ok', values, channels)`` or
-    ``('error', one line)`` on ``replies``, until the parent closes ``requests``.  ``reader``
-    names the function, 'module:function', taking a path and returning what
-    :func:`skyfit_mi.render.image.read_bitmap` returns."""
-    import importlib
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)      # Ctrl-C is the parent's to handle
-    read = None
-    while True:
-        try:
-            path = pickle.load(requests)
-        except EOFError:
-            return
-        try:
-            if read is None:
-                module, _, name = reader.partition(":")
-                read = getattr(importlib.import_module(module), name)
-            values, channels = read(path)
-            reply = ("ok", values, list(channels))
-        except Exception as exc:                    # noqa: BLE001 -- Mitsuba: RuntimeError
-            reply = ("error", _first_line(exc))
-        pickle.dump(reply, replies, protocol=pickle.HIGHEST_PROTOCOL)
-        replies.flush()
-
-
-class _ChildReader:
-    """Mitsuba's ``Bitmap`` reader run in a child process, one child for every read of this
-    process (started at the first, started again after a crash).
-
-    A damaged file can make a native reader abort the process instead of raising: Mitsuba
-    3.9.1's RGBE reader, meeting a scanline after the first that is not run-length encoded,
-    reads the whole image's worth of flat pixels from there into the image buffer, past its
-    end, and glibc aborts (SIGABRT) on the corrupted heap.  No check of the file before
-    reading can rule out every such fault in OpenEXR's or Mitsuba's decoders, so the reader
-    runs in a child, whose death :meth:`read` turns into :class:`_ReaderCrashed`.
-
-    The child is a fresh, isolated interpreter (``sys.executable -I -c``: the current folder
-    is not on its path), so the caller's main module is never run again in it (as
-    ``multiprocessing``'s 'spawn' would); it exits when this
-    process closes its stdin (at exit, or on :meth:`close`).  Starting it costs ~0.3 s once;
-    each read adds the copy of its pixels through a pipe (~0.1-0.2 s per 100 MB).
-
-    Parameters
-    ----------
-    reader : str
-        'module:function' run in the child on each path (tests name one that crashes).
-    """
-
-    def __init__(self, reader="skyfit_mi.render.image:read_bitmap"):
-        self.reader = reader
-        self._proc = None
-        self._pid = None                 # the process that started the child
-        self._log = None                 # the child's stderr since its last good reply
-        self._lock = threading.Lock()
-        self._at_exit = False
-
-    def _start(self):
-        if self._pid != os.getpid():     # a fork's copy: the child is the parent's
-            self._proc = self._log = None
-        self.close()
-        self._log = tempfile.TemporaryFile(buffering=0)
-        self._proc = subprocess.Popen([sys.executable, "-I", "-c", _CHILD_SOURCE],
-                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                      stderr=self._log)
-        self._pid = os.getpid()
-        pickle.dump((list(sys.path), self.reader), self._proc.stdin)
-        if not self._at_exit:
-            atexit.register(self.close)
-            self._at_exit = True
-
-    def read(self, path):
-        """``(values, channels)`` of ``path`` as :func:`skyfit_mi.render.image.read_bitmap`
-        returns them, read in the child.
-
-        Raises
-        ------
-        _ReaderRefused
-            The reader raised (an unreadable file); its message in one line.
-        _ReaderCrashed
-            The child died on the file (a signal or an exit); how, in one line.
-        """
-        with self._lock:
-            if self._proc is None or self._pid != os.getpid() or self._proc.poll() is not None:
-                self._start()
-            proc = self._proc
-            try:
-                pickle.dump(str(path), proc.stdin)
-                proc.stdin.flush()
-                reply = pickle.load(proc.stdout)
-            except MemoryError:
-                self.close(kill=True)
-                raise
-            except Exception as exc:                # noqa: BLE001 -- EOF, broken pipe..
-                why = self._death(proc, exc)
-                self.close(kill=True)
-                raise _ReaderCrashed(why) from None
-            except BaseException:                   # Ctrl-C: leave no child reading
-                self.close(kill=True)
-                raise
-            self._log.seek(0)
-            self._log.truncate()
-        if reply[0] == "ok":
-            return reply[1], reply[2]
-        raise _ReaderRefused(reply[1])
-
-    def _death(self, proc, exc):
-        """How the child died, in one line: its signal or exit status and the last line it
-        wrote to stderr (e.g. glibc's 'free(): corrupted unsorted chunks')."""
-        try:
-            code = proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            return f"its reply was unreadable ({type(exc).__name__})"
-        if code < 0:
-            try:
-                how = signal.Signals(-code).name
-            except ValueError:
-                how = f"signal {-code}"
-        else:
-            how = f"exit status {code}"
-        self._log.seek(0)
-        tail = [ln.strip() for ln in self._log.read()[-4000:].decode("utf-8", "replace")
-                .splitlines() if ln.strip()]
-        return f"{how}, {tail[-1][:160]}" if tail else how
-
-    def close(self, kill=False):
-        """End the child: close its stdin and wait for it (``kill``: kill it first)."""
-        proc, log, self._proc, self._log = self._proc, self._log, None, None
-        if proc is not None:
-            if kill:
-                proc.kill()
-            for pipe in (proc.stdin, proc.stdout):
-                try:
-                    pipe.close()
-                except OSError:                     # a dead child's pipe: nothing to flush
-                    pass
-            try:
-                proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        if log is not None:
-            log.close()
-
-
-#: The one child reader of this process (see :class:`_ChildReader`).
-_BITMAPS = _ChildReader()
+#: The function that reads an EXR or RGBE file in the child process (tests name one that
+#: crashes).
+READ_BITMAP = "skyfit_mi.render.image:read_bitmap"
+#: Deadline of one such read [s]: READ_DEADLINE[0] plus READ_DEADLINE[1] per MB of the file
+#: (a read takes well under a second per 100 MB; a child that overran its heap can spin).
+READ_DEADLINE = (60.0, 0.1)
+#: The child process that reads EXR and RGBE files for this process: Mitsuba 3.9.1's RGBE
+#: reader, meeting a scanline after the first that is not run-length encoded, reads the whole
+#: image's worth of flat pixels from there into the image buffer, past its end, and glibc
+#: aborts (SIGABRT) on the corrupted heap, or the child spins (READ_DEADLINE); the child dies
+#: instead of the caller.  Each read
+#: adds the copy of its pixels through a pipe (~0.1-0.2 s per 100 MB).
+_BITMAPS = Child()
 
 
 def _read_float_bitmap(path, fmt):
     """An OpenEXR or Radiance RGBE file through Mitsuba's Bitmap, read in the child process
-    of :data:`_BITMAPS` (its values exactly as :func:`.render.image.read_bitmap` gives them)."""
+    :data:`_BITMAPS` (its values exactly as :func:`.render.image.read_bitmap` gives them)."""
     name = "an OpenEXR" if fmt == "exr" else "a Radiance RGBE"
     try:
-        values, channels = _BITMAPS.read(path)
-    except _ReaderCrashed as exc:
+        values, channels = _BITMAPS.call(
+            READ_BITMAP, str(path),
+            timeout=READ_DEADLINE[0] + READ_DEADLINE[1] * path.stat().st_size / 1e6)
+    except ChildDied as exc:
         raise _fail(path, f"cannot be read as {name} image (the image reader crashed on it: "
                     f"{exc})", "check that the file is complete, or remove it") from None
-    except _ReaderRefused as exc:
-        raise _fail(path, f"cannot be read as {name} image ({exc})",
+    except CallFailed as exc:
+        raise _fail(path, f"cannot be read as {name} image ({_first_line(exc)})",
                     "check that the file is complete, or remove it") from None
     if values.dtype.kind != "f":
         raise _fail(path, f"reads as {values.dtype} codes, not floats",
