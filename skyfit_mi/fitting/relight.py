@@ -17,22 +17,30 @@ comes out with the wide band its undetermined roughness implies.
 """
 
 import csv
+import datetime as dt
 import io
 import os
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import SkyfitError
-from ..files import write_bytes, write_json, write_text
+from ..files import ensure_dir, figure_png, write_bytes, write_json, write_text
+from .chi2 import subsample_region
+from .fit import FitSession
+from .landscape import truth_parameters
 from .report import fit_files
+from .uncertainty import widen
 from ..pipeline.fit_result import read_fit_result
 from ..pipeline.manifest import (RENDERED_SOURCES, load_manifest, manifest_file,
-                                 rendered_frames)
-from ..pipeline.pixels import frame_values
+                                 read_frame_image, rendered_frames)
+from ..pipeline.pixels import frame_values, material_regions
 from ..pipeline.observation_table import is_table, table_regions
+from ..pipeline.sequence import render_sequence
 from ..pipeline.spec import read_spec, validate_spec
+from ..render.image import to_srgb8, write_png
 from ..render.light_cache import DIRECTIONS, POSITIONS, SKY_SPACING
 
 #: Seed offset of the reference render of a synthetic target (its own materials, other noise).
@@ -96,6 +104,66 @@ def target_spec(target, fits, doc=None):
     return validate_spec(raw, base, sun=sun), doc
 
 
+@dataclass(frozen=True)
+class Plan:
+    """What a relight makes of its target (:func:`plan_relight`)."""
+
+    target: Path
+    #: the target folder's manifest; None for a spec file
+    doc: dict | None
+    #: the relit images are rendered (else only the prediction, from the target's light)
+    render: bool
+    #: the target holds observations (frames, or a table's values): errors are reported
+    observed: bool
+    #: those observations are an observation table (values, no images)
+    table: bool
+    #: the target's own materials are rendered again with other seeds
+    reference: bool
+
+    @property
+    def image_kind(self):
+        """What the prediction is compared with: the observed frames, or the relit render."""
+        return "observed" if self.observed else "relit render"
+
+    def predicted_from(self, out):
+        """The sequence whose light and images the prediction takes: the target, or, without
+        observations, the relit render in ``out``."""
+        return Path(out) if self.render and not self.observed else self.target
+
+
+def plan_relight(target, out, images=True, reference=False):
+    """The :class:`Plan` of relighting ``target`` into ``out``; inputs that cannot be relit
+    so are refused before anything is made."""
+    target = Path(target)
+    is_folder = target.is_dir() or target.name == "manifest.json"
+    if not images and not is_folder:
+        raise SkyfitError("a prediction without images needs a sequence folder as --target "
+                          "(its light is traced there); give one, or leave out --no-images.")
+    doc = load_manifest(target)[0] if is_folder else None
+    if doc is not None and Path(out).resolve() == manifest_file(target).parent.resolve():
+        raise SkyfitError("the output folder is the target's; give another with -o.")
+    observed = doc is not None and bool(rendered_frames(doc))
+    table = doc is not None and is_table(doc)
+    if reference and not (images and observed and not table
+                          and doc.get("source") in RENDERED_SOURCES):
+        raise SkyfitError("--reference renders a synthetic target's own materials again; it "
+                          "needs a target folder that skyfit rendered, and images.")
+    return Plan(target, doc, images, observed, table, reference)
+
+
+def check_sun_up(plan, spec):
+    """Refuse a target whose sun is below the horizon at every time: the frames of ``spec``
+    (the relit spec), or without it (a prediction alone) the target folder's as recorded."""
+    if spec is not None:
+        times = [(f.time.strftime("%H:%M"), f.below_horizon) for f in spec.frames]
+    else:
+        times = [(f["time"][11:16], f.get("below_horizon", False)) for f in plan.doc["frames"]]
+    if all(below for _, below in times):
+        raise SkyfitError(f"the target's sun is below the horizon at every time "
+                          f"({', '.join(t for t, _ in times)}); give times of day with the "
+                          "sun up.")
+
+
 def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progress=True,
             overwrite=False, reference=False):
     """Render ``target`` with the fitted materials into ``out`` (``images``) and predict each
@@ -106,115 +174,65 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     prediction is made, from the fits' cached model (no frame is rendered).  ``reference``
     (a synthetic target) also renders the target's own materials again with other seeds, and
     reports their error: Monte Carlo noise measured rather than estimated."""
-    from ..files import ensure_dir
-    from ..pipeline.sequence import render_sequence
-
-    is_folder = Path(target).is_dir() or Path(target).name == "manifest.json"
-    if not images and not is_folder:
-        raise SkyfitError("a prediction without images needs a sequence folder as --target "
-                          "(its light is traced there); give one, or leave out --no-images.")
-    doc = load_manifest(target)[0] if is_folder else None
-    if doc is not None and Path(out).resolve() == manifest_file(target).parent.resolve():
-        raise SkyfitError("the output folder is the target's; give another with -o.")
-    observed = doc is not None and bool(rendered_frames(doc))
-    table = doc is not None and is_table(doc)      # observations without images
-    if reference and not (images and observed and not table
-                          and doc.get("source") in RENDERED_SOURCES):
-        raise SkyfitError("--reference renders a synthetic target's own materials again; it "
-                          "needs a target folder that skyfit rendered, and images.")
-    kind = "observed" if observed else "relit render"
-    if images:
-        spec, _ = target_spec(target, fits, doc)
-        times = [(f.time.strftime("%H:%M"), f.below_horizon) for f in spec.frames]
-    else:
-        # the prediction takes the folder's light as recorded: its spec is not validated
-        # again (which would compute every sun position anew)
-        spec = None
-        times = [(f["time"][11:16], f.get("below_horizon", False)) for f in doc["frames"]]
-    if all(below for _, below in times):
-        raise SkyfitError(f"the target's sun is below the horizon at every time "
-                          f"({', '.join(t for t, _ in times)}); give times of day with the "
-                          "sun up.")
-    # the target's pixels (a region it does not show is refused before the render), or
-    # without observations the relit render's own (its label image)
-    pixels = target_pixels(fits, target, seed) if observed or not images else None
-    if images:
+    plan = plan_relight(target, out, images, reference)
+    # the prediction alone takes the folder's light as recorded: its spec is not validated
+    # again (which would compute every sun position anew)
+    spec = target_spec(plan.target, fits, plan.doc)[0] if plan.render else None
+    check_sun_up(plan, spec)
+    # the predicted sequence's pixels: the target's before the render (a region it does not
+    # show is refused first), or the relit render's own after it (its label image)
+    predicted = plan.predicted_from(out)
+    pixels = target_pixels(fits, predicted, seed) if predicted == plan.target else None
+    if plan.render:
         render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log,
                         source="relight")
     ensure_dir(Path(out))
     if pixels is None:
-        pixels = target_pixels(fits, out, seed)
-    made = prediction_files(fits, out if images and not observed else target, pixels,
-                            draws, seed, kind, plot=images)
-    errors = observed_errors(fits, target, out, pixels, doc, spec, images, table, log) \
-        if observed else None
-    rows, means = write_prediction(made, out, log)
-    if not observed:
+        pixels = target_pixels(fits, predicted, seed)
+    prediction = predict(fits, predicted, pixels, draws, seed, log)
+    write_prediction(prediction, out, plan.image_kind, plot=plan.render)
+    if not plan.observed:
         return None
-    errors["region_means"] = means
-    errors["region_means_note"] = (
-        "relative RMS error of each region's mean radiance per frame as predicted by the fit's "
-        "cached model, at the fit and (a synthetic target in the fit's model and "
-        "normalisation) at the true material, whose error is noise alone")
-    if reference:
-        raw = {**doc["spec"], "render": {**doc["spec"].get("render", {}),
-                                         "seed": int(doc["render"]["seed"]) + REFERENCE_SEED}}
-        ref = Path(out) / "reference"
-        render_sequence(validate_spec(raw, Path(doc.get("spec_dir", "."))), ref,
-                        overwrite=overwrite, progress=False, log=lambda *a: None,
-                        source=doc["source"])
-        measured = prediction_errors(fits, target, ref, pixels)
-        for region, e in errors["regions"].items():
-            e["reference_rel_rms"] = measured["regions"][region]["rel_rms"]
-        errors["reference_rel_rms"] = measured["rel_rms"]
-        errors["reference"] = ("the target's own materials rendered again with seed + "
-                               f"{REFERENCE_SEED} (in reference/): its error is what "
-                               "independent Monte Carlo noise alone gives")
-    inside = [lo <= o <= hi for *_, lo, hi, o in rows]
-    errors["band_coverage"] = {"share": float(np.mean(inside)), "values": len(inside),
-                               "band": "95%, from the fits' intervals"}
+    errors = observed_errors(fits, plan, out, pixels, spec, log)
+    errors["region_means"] = {region: asdict(m) for region, m in prediction.region_means.items()}
+    errors["region_means_note"] = REGION_MEANS_NOTE
+    if plan.reference:
+        add_reference_errors(errors, fits, plan, out, pixels, overwrite)
+    errors["band_coverage"] = band_coverage(prediction.rows)
     write_errors(errors, out)
-    for region, e in errors["regions"].items():
-        held, floor = e.get("held_out_rel_rms"), e.get("noise_floor_rel_rms")
-        log(f"{region}: relit radiance differs from the observed by {e['rel_rms']:.2%} rms "
-            f"({e['frames']} frames, {e['pixels']} pixels)"
-            + (f"; {held:.2%} on the frames the fit did not see" if held is not None else "")
-            + (f"; noise alone gives {floor:.2%}" if floor is not None else "")
-            + (f", a re-render of the truth {e['reference_rel_rms']:.2%}"
-               if "reference_rel_rms" in e else ""))
-    for region, m in means.items():
-        log(f"{region}: predicted region means differ from the observed by {m['fit']:.2%} rms"
-            + ("" if m["truth"] is None else f" (the true material's: {m['truth']:.2%})"))
-    if images and not table:
-        log(f"overall: {errors['rel_rms']:.2%} rms" + (
-            " (relit with the target's seeds: Monte Carlo noise largely cancels, so this is "
-            "the materials' difference)" if errors["shares_target_seeds"] else ""))
-    log(f"observed region means inside the predicted 95% band: "
-        f"{errors['band_coverage']['share']:.0%} of {len(inside)}")
+    log_errors(errors, plan, log)
     return errors
 
 
-def observed_errors(fits, target, out, pixels, doc, spec, images, table, log=print):
-    """The relit images against the target's observed frames (:func:`prediction_errors`),
-    with what the two sequences' noise alone gives (:func:`noise_floor`, or common random
-    numbers) and the comparison images (:func:`write_comparisons`); for an observation table,
-    or without images, only the note of what is compared."""
+#: What relight.json's region_means are.
+REGION_MEANS_NOTE = (
+    "relative RMS error of each region's mean radiance per frame as predicted by the fit's "
+    "cached model, at the fit and (a synthetic target in the fit's model and normalisation) "
+    "at the true material, whose error is noise alone")
+
+
+def observed_errors(fits, plan, out, pixels, spec, log=print):
+    """The relit images in ``out`` against the target's observed frames
+    (:func:`prediction_errors`), with what the two sequences' noise alone gives
+    (:func:`noise_floor`, or common random numbers) and the comparison images
+    (:func:`write_comparisons`); for an observation table, or without images, only the note
+    of what is compared."""
     errors = {"regions": {}}
-    if table:
+    if plan.table:
         errors["observations"] = ("an observation table: the relit images have no observed "
                                   "frames to compare with; region_means compares the table's "
                                   "values")
-    elif images:
-        errors = prediction_errors(fits, target, out, pixels)
-        errors["shares_target_seeds"] = doc.get("source") in RENDERED_SOURCES and \
-            int(doc["render"]["seed"]) == int(spec.render["seed"])
+    elif plan.render:
+        errors = prediction_errors(fits, plan.target, out, pixels)
+        errors["shares_target_seeds"] = plan.doc.get("source") in RENDERED_SOURCES and \
+            int(plan.doc["render"]["seed"]) == int(spec.render["seed"])
         if errors["shares_target_seeds"]:
             errors["noise"] = ("common random numbers: the relit day is rendered with the "
                                "target's seeds, so their Monte Carlo noise largely cancels, "
                                "the true materials give zero error, and the relit error is "
                                "the fitted materials' difference")
-        elif all("radiance_sigma" in f for f in rendered_frames(doc)):
-            floor = noise_floor(target, out, pixels, errors["frames"])
+        elif all("radiance_sigma" in f for f in rendered_frames(plan.doc)):
+            floor = noise_floor(plan.target, out, pixels, errors["frames"])
             for region, e in errors["regions"].items():
                 e["noise_floor_rel_rms"] = floor["regions"][region]
             errors["noise_floor_rel_rms"] = floor["all"]
@@ -225,8 +243,58 @@ def observed_errors(fits, target, out, pixels, doc, spec, images, table, log=pri
                                "the error that noise alone gives is not known")
             log("the target's frames carry no radiance_sigma image: the error that noise "
                 "alone gives is not reported")
-        errors["comparison_images"] = write_comparisons(target, out)
+        errors["comparison_images"] = write_comparisons(plan.target, out)
     return errors
+
+
+def add_reference_errors(errors, fits, plan, out, pixels, overwrite=False):
+    """Render the synthetic target's own materials again with its seeds + REFERENCE_SEED into
+    ``out/reference``, and add their error to ``errors`` (per region and overall): what
+    independent Monte Carlo noise alone gives."""
+    doc = plan.doc
+    raw = {**doc["spec"], "render": {**doc["spec"].get("render", {}),
+                                     "seed": int(doc["render"]["seed"]) + REFERENCE_SEED}}
+    ref = Path(out) / "reference"
+    render_sequence(validate_spec(raw, Path(doc.get("spec_dir", "."))), ref,
+                    overwrite=overwrite, progress=False, log=lambda *a: None,
+                    source=doc["source"])
+    measured = prediction_errors(fits, plan.target, ref, pixels)
+    for region, e in errors["regions"].items():
+        e["reference_rel_rms"] = measured["regions"][region]["rel_rms"]
+    errors["reference_rel_rms"] = measured["rel_rms"]
+    errors["reference"] = ("the target's own materials rendered again with seed + "
+                           f"{REFERENCE_SEED} (in reference/): its error is what "
+                           "independent Monte Carlo noise alone gives")
+
+
+def band_coverage(rows):
+    """The share of the image values of prediction ``rows`` inside their predicted band."""
+    inside = [row.inside for row in rows]
+    return {"share": float(np.mean(inside)), "values": len(inside),
+            "band": "95%, from the fits' intervals"}
+
+
+def log_errors(errors, plan, log=print):
+    """Log the errors of :func:`relight`: per region, of its region means, overall (images)
+    and the band's coverage."""
+    for region, e in errors["regions"].items():
+        held, floor = e.get("held_out_rel_rms"), e.get("noise_floor_rel_rms")
+        log(f"{region}: relit radiance differs from the observed by {e['rel_rms']:.2%} rms "
+            f"({e['frames']} frames, {e['pixels']} pixels)"
+            + (f"; {held:.2%} on the frames the fit did not see" if held is not None else "")
+            + (f"; noise alone gives {floor:.2%}" if floor is not None else "")
+            + (f", a re-render of the truth {e['reference_rel_rms']:.2%}"
+               if "reference_rel_rms" in e else ""))
+    for region, m in errors["region_means"].items():
+        log(f"{region}: predicted region means differ from the observed by {m['fit']:.2%} rms"
+            + ("" if m["truth"] is None else f" (the true material's: {m['truth']:.2%})"))
+    if plan.render and not plan.table:
+        log(f"overall: {errors['rel_rms']:.2%} rms" + (
+            " (relit with the target's seeds: Monte Carlo noise largely cancels, so this is "
+            "the materials' difference)" if errors["shares_target_seeds"] else ""))
+    coverage = errors["band_coverage"]
+    log(f"observed region means inside the predicted 95% band: {coverage['share']:.0%} of "
+        f"{coverage['values']}")
 
 
 def target_pixels(fits, target, seed=0, max_pixels=64):
@@ -234,9 +302,6 @@ def target_pixels(fits, target, seed=0, max_pixels=64):
     folder): the fit's own pixels on its own sequence (the same run), otherwise the material's
     interior in the target's label image (another camera sees it elsewhere), a seeded subset
     of at most ``max_pixels``; for an observation table, None (all the region's points)."""
-    from .chi2 import subsample_region
-    from ..pipeline.pixels import material_regions
-
     doc, root = load_manifest(target)
     out, seen = {}, None
     if is_table(doc):                       # an observation table: every point of the region
@@ -346,9 +411,6 @@ def write_comparisons(observed, relit):
     colour map with its scale bar).  Both images at one exposure (the observed day's 99th
     percentile to 80% white).  Composed as pixels (Pillow), not plotted: a matplotlib figure
     a frame cost about 0.1 s each.  Returns the file names."""
-    from ..pipeline.manifest import read_frame_image
-    from ..render.image import to_srgb8, write_png
-
     obs_doc, obs_root = load_manifest(observed)
     new_doc, new_root = load_manifest(relit)
     shape = (obs_doc["camera"]["height"], obs_doc["camera"]["width"], 3)
@@ -411,64 +473,87 @@ def _contact_row(panels, lim):
     return np.asarray(canvas)
 
 
-def prediction_files(fits, target, pixels, draws, seed, image_kind, plot=True):
-    """:func:`predict` (at ``pixels``, or if None :func:`target_pixels`) and the files
-    :func:`write_prediction` writes, made but not written: (rows, region means, {file name:
-    bytes}, the lines predict logs).
+@dataclass(frozen=True)
+class PredictionRow:
+    """One predicted value [W m^-2 sr^-1]: a region's mean radiance in one frame and
+    channel."""
 
-    ``prediction.csv`` has one row per region, frame and channel (R, G, B or a luminance
-    table's Y; radiance in W m^-2 sr^-1); with ``plot``, ``prediction.png`` shows per region
-    the predicted series with its 95% band and the image values (``image_kind``: the observed
-    frames, or the relit render) (thesis fig 7.14)."""
-    lines = []
-    if pixels is None:
-        pixels = target_pixels(fits, target, seed)
-    rows, means = predict(fits, target, pixels, draws, seed, lines.append)
+    region: str
+    frame: int
+    #: the frame's time (ISO, local)
+    time: str
+    #: 'R', 'G', 'B', or a luminance table's 'Y'
+    channel: str
+    #: at the fit
+    predicted: float
+    #: the 95% band
+    lo95: float
+    hi95: float
+    #: the image's value: the observed (a target holding frames), or the relit render's
+    image: float
+
+    @property
+    def inside(self):
+        """Whether the image's value lies in the band."""
+        return self.lo95 <= self.image <= self.hi95
+
+
+@dataclass(frozen=True)
+class MeansError:
+    """Relative RMS error of a region's predicted means against the image's: at the fit, and
+    at the true material (None where it is not known in the fit's model)."""
+
+    fit: float
+    truth: float | None
+
+
+@dataclass
+class Prediction:
+    """:func:`predict`'s result: its rows and, per region, the error of its means."""
+
+    rows: list
+    region_means: dict
+
+
+def write_prediction(prediction, out, image_kind, plot=True):
+    """``prediction.csv`` in ``out``: one row per region, frame and channel (R, G, B or a
+    luminance table's Y; radiance in W m^-2 sr^-1), with the image's value (``image_kind``:
+    the observed frames, or the relit render); with ``plot``, ``prediction.png``
+    (:func:`plot_prediction`)."""
     column = image_kind.replace(" ", "_")
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["region", "frame", "time", "channel", "predicted [W m^-2 sr^-1]",
                 "lo95 [W m^-2 sr^-1]", "hi95 [W m^-2 sr^-1]", f"{column} [W m^-2 sr^-1]"])
-    w.writerows([(*row[:4], *(f"{v:.6g}" for v in row[4:])) for row in rows])
-    files = {"prediction.csv": buf.getvalue().encode()}
+    w.writerows([(r.region, r.frame, r.time, r.channel,
+                  *(f"{v:.6g}" for v in (r.predicted, r.lo95, r.hi95, r.image)))
+                 for r in prediction.rows])
+    write_text(Path(out) / "prediction.csv", buf.getvalue())
     if plot:
-        files["prediction.png"] = plot_prediction(rows, image_kind)
-    return rows, means, files, lines
-
-
-def write_prediction(made, out, log=print):
-    """Write the files of :func:`prediction_files`' result ``made`` into ``out`` and log its
-    lines; returns its (rows, region means)."""
-    rows, means, files, lines = made
-    for name, data in files.items():
-        write_bytes(Path(out) / name, data)
-    for line in lines:
-        log(line)
-    return rows, means
+        write_bytes(Path(out) / "prediction.png", plot_prediction(prediction.rows, image_kind))
 
 
 def plot_prediction(rows, image_kind):
-    """``prediction.png`` of :func:`prediction_files`' ``rows``, as PNG bytes."""
-    import datetime as dt
-
+    """PNG bytes of the prediction ``rows``: per region the predicted series with its 95%
+    band and the image's values (``image_kind``) (thesis fig 7.14)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..files import figure_png
-
-    regions = sorted({row[0] for row in rows})
+    regions = sorted({row.region for row in rows})
     fig, axes = plt.subplots(len(regions), 1, figsize=(7, 3.2 * len(regions)), squeeze=False)
     for i, (ax, region) in enumerate(zip(axes[:, 0], regions)):
         for ch, col in zip("RGBY", ("r", "g", "b", "k")):
-            sel = [row for row in rows if row[0] == region and row[3] == ch]
+            sel = [row for row in rows if row.region == region and row.channel == ch]
             if not sel:
                 continue
-            t = [dt.datetime.fromisoformat(row[2]) for row in sel]
-            pred, lo, hi, img = (np.array([row[k] for row in sel]) for k in (4, 5, 6, 7))
-            ax.fill_between(t, lo, hi, color=col, alpha=0.15, lw=0)
-            ax.plot(t, pred, "-", color=col, label=f"predicted {ch} (95% band)")
-            ax.plot(t, img, "o", color=col, ms=4, label=f"{image_kind} {ch}")
+            t = [dt.datetime.fromisoformat(row.time) for row in sel]
+            ax.fill_between(t, [row.lo95 for row in sel], [row.hi95 for row in sel],
+                            color=col, alpha=0.15, lw=0)
+            ax.plot(t, [row.predicted for row in sel], "-", color=col,
+                    label=f"predicted {ch} (95% band)")
+            ax.plot(t, [row.image for row in sel], "o", color=col, ms=4,
+                    label=f"{image_kind} {ch}")
         ax.set_title(f"{region}: region mean", fontsize=9)
         ax.set_ylabel("radiance [W m^-2 sr^-1]")
         if i == 0:                  # the same for every panel: once (a quarter of the plot)
@@ -504,18 +589,13 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
     region's mean per frame and channel at the fit and its 95% band (2.5-97.5 percentiles
     over :func:`parameter_draws`, widened in quadrature by the image's noise and the model's
     Monte Carlo error), with the image's mean (the observed, where the target holds frames).
-    Returns rows (region, frame, time, channel, predicted, lo95, hi95, observed)
-    [W m^-2 sr^-1], and per region the relative RMS error of its predicted means against the
-    image's, at the fit and, where the target's material is known in the fit's model (a
-    synthetic target), at the truth: the truth's error is the Monte Carlo noise alone, so the
-    fit's excess over it is the fit's error.
+    Returns a :class:`Prediction`: its :class:`PredictionRow` s, and per region the relative
+    RMS error of its predicted means against the image's, at the fit and, where the target's
+    material is known in the fit's model (a synthetic target), at the truth: the truth's
+    error is the Monte Carlo noise alone, so the fit's excess over it is the fit's error.
     """
-    from .fit import FitSession
-    from .landscape import truth_parameters
-    from .uncertainty import widen
-
     rng = np.random.default_rng(seed)
-    rows, summary = [], {}
+    rows, means = [], {}
     # image regions: the light at all their pixels traced at once; a table's few points take
     # the fit's own cache size: the small one averages out only over an image region's pixels
     in_images = {region: r for region, (_, r) in fits.items() if pixels[region] is not None}
@@ -529,41 +609,59 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
         s = sessions.pop(region) if region in sessions else FitSession.from_fit(
             r, target, None, seed=seed, positions=POSITIONS, directions=DIRECTIONS,
             min_frames=1)
-        sets = parameter_draws(r, s.names, s.lower, s.upper, draws, rng)
-        # the region's mean over its pixels; over a table's points measured in each frame
-        have = np.ones(s.obs.y.shape) if s.obs.rays is None else np.isfinite(s.obs.sigma) * 1.0
-        have = have / np.maximum(have.sum(axis=0), 1.0)
-
-        def region_mean(x):
-            return np.sum(x * have, axis=0)
-        means = s.wm.radiances(sets, region_mean)                           # (draws, T, 3)
-        lo, hi = np.percentile(means[1:], [2.5, 97.5], axis=0)
-        # widened by what the parameters leave out: the image's own noise (the sensor model's
-        # sigma in radiance) and the model's Monte Carlo error, both of the region mean
-        _, model_var = s.wm.radiance_and_variance(sets[0])
-        if s.obs.rays is None:
-            image = frame_values(target, s.obs.pixels, s.obs.frames)
-        else:                                # a table's values, back in W m^-2 sr^-1
-            image = s.obs.y / (s.obs.gain * s.obs.sensor.max_code)
-        slope = s.problem.slope(image)
-        usable = np.isfinite(s.obs.sigma) & (slope > 0)     # not saturated or left out
-        image_var = np.where(usable, s.obs.sigma / np.where(usable, slope, 1.0), 0.0) ** 2
-        n = len(s.obs.pixels)
-        extra = 1.959963984540054 * np.sqrt((np.sum(image_var, axis=0)
-                                             + np.sum(model_var, axis=0)) / n**2)
-        observed = region_mean(image)
-        # a luminance table predicts its one quantity: Y, the models' first channel
-        names = "Y" if s.obs.luminance else "RGB"
-        means, observed = means[..., :len(names)], observed[..., :len(names)]
-        for j, (i, t) in enumerate(zip(s.obs.frames, s.obs.times)):
-            for c, ch in enumerate(names):
-                band = widen(means[0, j, c], (lo[j, c], hi[j, c]), extra[j, c], 0.0, np.inf)
-                rows.append((region, int(i), t, ch, float(means[0, j, c]), *band,
-                             float(observed[j, c])))
-        truth = truth_parameters(s.truth, s.model, s.names, s.normalisation)
-        summary[region] = {
-            "fit": float(rel_rms(means[0], observed)),
-            "truth": None if truth is None
-            else float(rel_rms(region_mean(s.wm.radiance(truth))[..., :len(names)], observed))}
+        region_rows, means[region] = _predict_region(s, r, target, draws, rng)
+        rows += region_rows
         log(f"{region}: predicted {len(s.obs.frames)} frames from {draws} parameter draws")
-    return rows, summary
+    return Prediction(rows, means)
+
+
+def _predict_region(s, result, target, draws, rng):
+    """The prediction of one region (:func:`predict`) from its session ``s`` on the target
+    and its fit ``result``: (its rows, its :class:`MeansError`)."""
+    sets = parameter_draws(result, s.names, s.lower, s.upper, draws, rng)
+    # the region's mean over its pixels; over a table's points measured in each frame
+    have = np.ones(s.obs.y.shape) if s.obs.rays is None else np.isfinite(s.obs.sigma) * 1.0
+    have = have / np.maximum(have.sum(axis=0), 1.0)
+
+    def region_mean(x):
+        return np.sum(x * have, axis=0)
+    means = s.wm.radiances(sets, region_mean)                               # (draws, T, 3)
+    lo, hi = np.percentile(means[1:], [2.5, 97.5], axis=0)
+    # widened by what the parameters leave out: the image's own noise (the sensor model's
+    # sigma in radiance) and the model's Monte Carlo error, both of the region mean
+    _, model_var = s.wm.radiance_and_variance(sets[0])
+    image = image_values(s, target)
+    n = len(s.obs.pixels)
+    extra = 1.959963984540054 * np.sqrt((np.sum(image_noise_variance(s, image), axis=0)
+                                         + np.sum(model_var, axis=0)) / n**2)
+    observed = region_mean(image)
+    # a luminance table predicts its one quantity: Y, the models' first channel
+    names = "Y" if s.obs.luminance else "RGB"
+    means, observed = means[..., :len(names)], observed[..., :len(names)]
+    rows = []
+    for j, (i, t) in enumerate(zip(s.obs.frames, s.obs.times)):
+        for c, ch in enumerate(names):
+            band = widen(means[0, j, c], (lo[j, c], hi[j, c]), extra[j, c], 0.0, np.inf)
+            rows.append(PredictionRow(region=s.name, frame=int(i), time=t, channel=ch,
+                                      predicted=float(means[0, j, c]), lo95=float(band[0]),
+                                      hi95=float(band[1]), image=float(observed[j, c])))
+    truth = truth_parameters(s.truth, s.model, s.names, s.normalisation)
+    at_truth = None if truth is None else float(
+        rel_rms(region_mean(s.wm.radiance(truth))[..., :len(names)], observed))
+    return rows, MeansError(fit=float(rel_rms(means[0], observed)), truth=at_truth)
+
+
+def image_values(s, target):
+    """The image's values at session ``s``'s pixels in ``target`` (P, T, 3)
+    [W m^-2 sr^-1]: its radiance frames, or a table's values."""
+    if s.obs.rays is None:
+        return frame_values(target, s.obs.pixels, s.obs.frames)
+    return s.obs.y / (s.obs.gain * s.obs.sensor.max_code)
+
+
+def image_noise_variance(s, image):
+    """The variance of session ``s``'s ``image`` values (P, T, 3) [(W m^-2 sr^-1)^2]: the
+    sensor model's sigma in radiance; 0 where a value is saturated or left out."""
+    slope = s.problem.slope(image)
+    usable = np.isfinite(s.obs.sigma) & (slope > 0)
+    return np.where(usable, s.obs.sigma / np.where(usable, slope, 1.0), 0.0) ** 2
