@@ -6,6 +6,7 @@ directions, one of them moving through the day like a goniometer.  The table bec
 sequence folder with ``skyfit ingest --table`` and ``fit`` must find the material within
 its intervals, with no image anywhere.
 """
+import csv
 import json
 
 import numpy as np
@@ -211,9 +212,13 @@ def test_the_cli_takes_a_table_and_refuses_photo_options_with_it(tmp_path, mi):
     assert doc["source"] == "ingest" and len(doc["frames"]) == 3
 
 
-def test_a_table_fit_predicts_the_tables_other_times_within_its_band(table_day):
-    """Fit on the first four times, relight (no images) onto the table: the region means of
-    every time inside the predicted 95% band, and the report says there is no image."""
+def test_a_table_fit_predicts_every_point_of_the_tables_other_times_within_its_band(
+        table_day):
+    """Fit on the first four times, relight (no images) onto the table: every point's value
+    in every frame is predicted with its band (prediction.csv), close to what Radiance traced
+    and holding the table's values; the errors per point and frame (relight.csv), per region
+    and on the two times the fit did not see (relight.json).  Onto a table that lacks a row,
+    that value alone is missing."""
     from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.fitting.relight import load_fits, relight
     from skyfit_mi.fitting.report import write_fit
@@ -225,11 +230,47 @@ def test_a_table_fit_predicts_the_tables_other_times_within_its_band(table_day):
     res = fit_region(seq, "disc", None, model="colour", normalisation="balanced",
                      frames=[0, 1, 2, 3], log=lambda *a: None)
     write_fit(res, tmp / "fits" / "fit_disc")
-    errors = relight(load_fits([tmp / "fits" / "fit_disc.json"]), seq, tmp / "relit",
-                     images=False, draws=100, log=lambda *a: None)
-    assert "observations" in errors and errors["regions"] == {}
+    fits = load_fits([tmp / "fits" / "fit_disc.json"])
+    out = tmp / "relit"
+    errors = relight(fits, seq, out, images=False, draws=100, log=lambda *a: None)
+    n = len(POINTS) * len(HOURS) * 3
+    e = errors["regions"]["disc"]
+    assert (e["points"], e["frames"], e["values"]) == (len(POINTS), len(HOURS), n)
+    assert e["trained_frames"] == [0, 1, 2, 3] and set(e["per_point"]) == set(POINTS)
+    assert e["rel_rms"] < 0.05 and e["held_out_rel_rms"] < 0.05, e
+    assert errors["band_coverage"]["values"] == n
     assert errors["band_coverage"]["share"] >= 0.9, errors["band_coverage"]
     assert errors["region_means"]["disc"]["fit"] < 0.05
+    rows = list(csv.DictReader((out / "prediction.csv").read_text().splitlines()))
+    assert len(rows) == n
+    given = {(r["point"], HOURS.index(int(r["time"][11:13])), c): float(r[c])
+             for r in csv.DictReader(table.read_text().splitlines()) for c in "rgb"}
+    names = list(POINTS)
+    for row in rows:
+        key = (row["point"], int(row["frame"]), row["channel"].lower())
+        assert float(row["observed [W m^-2 sr^-1]"]) == pytest.approx(given[key], rel=1e-5)
+        truth = traced[names.index(key[0]), key[1], "rgb".index(key[2])]
+        assert float(row["predicted [W m^-2 sr^-1]"]) == pytest.approx(truth, rel=0.06)
+        assert float(row["lo95 [W m^-2 sr^-1]"]) < float(row["predicted [W m^-2 sr^-1]"]) \
+            < float(row["hi95 [W m^-2 sr^-1]"])
+    lines = list(csv.reader((out / "relight.csv").read_text().splitlines()))
+    assert lines[0] == ["region", "point", "frame", "time", "rel_rms_error", "held_out"]
+    assert [row[5] for row in lines[1:7]] == ["no"] * 4 + ["yes"] * 2       # point a
+    assert lines[-2][:3] == ["disc", "all", "held out"] and lines[-1][:3] == ["all"] * 3
+    assert len(lines) == 1 + len(POINTS) * len(HOURS) + 3
+
+    text = table.read_text().splitlines()
+    lacking = tmp / "lacking.csv"
+    lacking.write_text("\n".join(line for line in text if not line.startswith(
+        "2026-06-21T11:00:00+00:00,disc,b,")) + "\n")
+    ingest_table(lacking, spec, tmp / "seq_lacking", log=lambda *a: None)
+    errors = relight(fits, tmp / "seq_lacking", tmp / "relit_lacking", images=False, draws=20,
+                     log=lambda *a: None)
+    e = errors["regions"]["disc"]
+    assert e["values"] == n - 3 and "held_out_rel_rms" not in e      # another run: no held out
+    rows = list(csv.DictReader((tmp / "relit_lacking" / "prediction.csv").read_text()
+                               .splitlines()))
+    assert len(rows) == n - 3 and not [r for r in rows if (r["point"], r["frame"]) == ("b", "2")]
 
 
 def test_a_luminance_table_fits_the_achromatic_model_and_refuses_colour(radiance, tmp_path):

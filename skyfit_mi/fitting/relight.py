@@ -13,7 +13,9 @@ overall (thesis fig. 7.14's comparison, as numbers).
 :func:`predict` gives the numbers without images: each region's radiance per frame from the
 fitted parameters and the target's light (the fit's own cached model, traced once), with a
 95% band from the fit's intervals, so that a highlight the training sequence never showed
-comes out with the wide band its undetermined roughness implies.
+comes out with the wide band its undetermined roughness implies.  On an observation table it
+predicts every point's value in every frame, and the errors are those of the points' values
+against the table's.
 """
 
 import csv
@@ -37,7 +39,7 @@ from ..pipeline.fit_result import read_fit_result
 from ..pipeline.manifest import (RENDERED_SOURCES, load_manifest, manifest_file,
                                  read_frame_image, rendered_frames)
 from ..pipeline.pixels import frame_values, material_regions
-from ..pipeline.observation_table import is_table, table_regions
+from ..pipeline.observation_table import is_table, table_points
 from ..pipeline.sequence import render_sequence
 from ..pipeline.spec import read_spec, validate_spec
 from ..render.image import to_srgb8, write_png
@@ -193,13 +195,19 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     write_prediction(prediction, out, plan.image_kind, plot=plan.render)
     if not plan.observed:
         return None
-    errors = observed_errors(fits, plan, out, pixels, spec, log)
+    point_errors = None
+    if plan.table:
+        errors, point_errors = table_errors(fits, plan, prediction)
+    elif plan.render:
+        errors = image_errors(fits, plan, out, pixels, spec, log)
+    else:                   # a prediction alone of observed frames: no relit image to compare
+        errors = {"regions": {}}
     errors["region_means"] = {region: asdict(m) for region, m in prediction.region_means.items()}
     errors["region_means_note"] = REGION_MEANS_NOTE
     if plan.reference:
         add_reference_errors(errors, fits, plan, out, pixels, overwrite)
     errors["band_coverage"] = band_coverage(prediction.rows)
-    write_errors(errors, out)
+    write_errors(errors, out, point_errors)
     log_errors(errors, plan, log)
     return errors
 
@@ -211,40 +219,90 @@ REGION_MEANS_NOTE = (
     "at the true material, whose error is noise alone")
 
 
-def observed_errors(fits, plan, out, pixels, spec, log=print):
+def image_errors(fits, plan, out, pixels, spec, log=print):
     """The relit images in ``out`` against the target's observed frames
     (:func:`prediction_errors`), with what the two sequences' noise alone gives
     (:func:`noise_floor`, or common random numbers) and the comparison images
-    (:func:`write_comparisons`); for an observation table, or without images, only the note
-    of what is compared."""
-    errors = {"regions": {}}
-    if plan.table:
-        errors["observations"] = ("an observation table: the relit images have no observed "
-                                  "frames to compare with; region_means compares the table's "
-                                  "values")
-    elif plan.render:
-        errors = prediction_errors(fits, plan.target, out, pixels)
-        errors["shares_target_seeds"] = plan.doc.get("source") in RENDERED_SOURCES and \
-            int(plan.doc["render"]["seed"]) == int(spec.render["seed"])
-        if errors["shares_target_seeds"]:
-            errors["noise"] = ("common random numbers: the relit day is rendered with the "
-                               "target's seeds, so their Monte Carlo noise largely cancels, "
-                               "the true materials give zero error, and the relit error is "
-                               "the fitted materials' difference")
-        elif all("radiance_sigma" in f for f in rendered_frames(plan.doc)):
-            floor = noise_floor(plan.target, out, pixels, errors["frames"])
-            for region, e in errors["regions"].items():
-                e["noise_floor_rel_rms"] = floor["regions"][region]
-            errors["noise_floor_rel_rms"] = floor["all"]
-            errors["noise"] = ("independent noise: noise_floor_rel_rms is the error the two "
-                               "sequences' noise alone gives (their radiance_sigma images)")
-        else:
-            errors["noise"] = ("unknown: the target's frames have no radiance_sigma image, so "
-                               "the error that noise alone gives is not known")
-            log("the target's frames carry no radiance_sigma image: the error that noise "
-                "alone gives is not reported")
-        errors["comparison_images"] = write_comparisons(plan.target, out)
+    (:func:`write_comparisons`)."""
+    errors = prediction_errors(fits, plan.target, out, pixels)
+    errors["shares_target_seeds"] = plan.doc.get("source") in RENDERED_SOURCES and \
+        int(plan.doc["render"]["seed"]) == int(spec.render["seed"])
+    if errors["shares_target_seeds"]:
+        errors["noise"] = ("common random numbers: the relit day is rendered with the "
+                           "target's seeds, so their Monte Carlo noise largely cancels, the "
+                           "true materials give zero error, and the relit error is the fitted "
+                           "materials' difference")
+    elif all("radiance_sigma" in f for f in rendered_frames(plan.doc)):
+        floor = noise_floor(plan.target, out, pixels, errors["frames"])
+        for region, e in errors["regions"].items():
+            e["noise_floor_rel_rms"] = floor["regions"][region]
+        errors["noise_floor_rel_rms"] = floor["all"]
+        errors["noise"] = ("independent noise: noise_floor_rel_rms is the error the two "
+                           "sequences' noise alone gives (their radiance_sigma images)")
+    else:
+        errors["noise"] = ("unknown: the target's frames have no radiance_sigma image, so the "
+                           "error that noise alone gives is not known")
+        log("the target's frames carry no radiance_sigma image: the error that noise alone "
+            "gives is not reported")
+    errors["comparison_images"] = write_comparisons(plan.target, out)
     return errors
+
+
+@dataclass(frozen=True)
+class PointError:
+    """The relative RMS error of the prediction at one point of an observation table in one
+    frame (over its measured channels), against the table's value."""
+
+    region: str
+    point: str
+    frame: int
+    time: str
+    rel_rms: float
+    #: whether the fit did not train on the frame (None: the table is not the fit's own)
+    held_out: bool | None
+
+
+def table_errors(fits, plan, prediction):
+    """The prediction at every point of an observation table against the table's values
+    (its rows with a point, :func:`predict`): a :class:`PointError` per point and frame, and
+    ``relight.json``'s errors per region (over all its values, per frame, per point, and on
+    the frames the fit did not see where the table is the fit's own) and overall.  Returns
+    (errors, point errors)."""
+    def error(rows):
+        return float(rel_rms(np.array([r.predicted for r in rows]),
+                             np.array([r.image for r in rows])))
+
+    times = {row.frame: row.time for row in prediction.rows}
+    frames = sorted(times)
+    regions, point_errors = {}, []
+    for region, (path, r) in sorted(fits.items()):
+        rows = [row for row in prediction.rows if row.region == region]
+        trained = (set(r["frames"]) if r.get("sequence_run_id") == plan.doc.get("run_id")
+                   and "frames" in r else None)
+        by_value, by_frame, by_point = {}, {}, {}
+        for row in rows:
+            by_value.setdefault((row.point, row.frame), []).append(row)
+            by_frame.setdefault(row.frame, []).append(row)
+            by_point.setdefault(row.point, []).append(row)
+        point_errors += [PointError(region, point, frame, times[frame], error(values),
+                                    None if trained is None else frame not in trained)
+                         for (point, frame), values in by_value.items()]
+        e = regions[region] = {
+            "fit": str(path), "points": len(by_point), "frames": len(by_frame),
+            "values": len(rows), "rel_rms": error(rows),
+            "per_frame": [error(by_frame[f]) if f in by_frame else None for f in frames],
+            "per_point": {point: error(values) for point, values in by_point.items()}}
+        if trained is not None:
+            held = [row for row in rows if row.frame not in trained]
+            e["trained_frames"] = [int(i) for i in r["frames"]]
+            e["held_out_rel_rms"] = error(held) if held else None
+    errors = {"regions": regions, "times": [times[f] for f in frames], "frames": frames,
+              "rel_rms": error(prediction.rows),
+              "unit": "relative RMS of radiance (unitless)",
+              "observations": ("an observation table: each point's value predicted at the fit "
+                               "(prediction.csv) against the table's; relight.csv per point "
+                               "and frame")}
+    return errors, point_errors
 
 
 def add_reference_errors(errors, fits, plan, out, pixels, overwrite=False):
@@ -277,10 +335,12 @@ def band_coverage(rows):
 def log_errors(errors, plan, log=print):
     """Log the errors of :func:`relight`: per region, of its region means, overall (images)
     and the band's coverage."""
+    compared = ("predicted values differ from the table's" if plan.table
+                else "relit radiance differs from the observed")
     for region, e in errors["regions"].items():
         held, floor = e.get("held_out_rel_rms"), e.get("noise_floor_rel_rms")
-        log(f"{region}: relit radiance differs from the observed by {e['rel_rms']:.2%} rms "
-            f"({e['frames']} frames, {e['pixels']} pixels)"
+        where = f"{e['points']} points" if plan.table else f"{e['pixels']} pixels"
+        log(f"{region}: {compared} by {e['rel_rms']:.2%} rms ({e['frames']} frames, {where})"
             + (f"; {held:.2%} on the frames the fit did not see" if held is not None else "")
             + (f"; noise alone gives {floor:.2%}" if floor is not None else "")
             + (f", a re-render of the truth {e['reference_rel_rms']:.2%}"
@@ -293,24 +353,25 @@ def log_errors(errors, plan, log=print):
             " (relit with the target's seeds: Monte Carlo noise largely cancels, so this is "
             "the materials' difference)" if errors["shares_target_seeds"] else ""))
     coverage = errors["band_coverage"]
-    log(f"observed region means inside the predicted 95% band: {coverage['share']:.0%} of "
-        f"{coverage['values']}")
+    log(f"{'table values' if plan.table else 'observed region means'} inside the predicted "
+        f"95% band: {coverage['share']:.0%} of {coverage['values']}")
 
 
 def target_pixels(fits, target, seed=0, max_pixels=64):
     """{region: (P, 2) pixels} at which each fit is compared in ``target`` (a sequence
     folder): the fit's own pixels on its own sequence (the same run), otherwise the material's
     interior in the target's label image (another camera sees it elsewhere), a seeded subset
-    of at most ``max_pixels``; for an observation table, None (all the region's points)."""
+    of at most ``max_pixels``; for an observation table, the names of every point it
+    measures on the region."""
     doc, root = load_manifest(target)
     out, seen = {}, None
-    if is_table(doc):                       # an observation table: every point of the region
-        measured = table_regions(root)
+    if is_table(doc):
+        measured = table_points(root)
         for region in fits:
             if region not in measured:
                 raise SkyfitError(f"the target's observation table measures no point of region "
                                   f"{region!r}; it measures: {', '.join(measured)}.")
-        return {region: None for region in fits}
+        return {region: measured[region] for region in fits}
     for region, (_, r) in fits.items():
         if r.get("sequence_run_id") == doc.get("run_id"):
             out[region] = np.asarray(r["pixels"], dtype=int)
@@ -384,24 +445,37 @@ def noise_floor(observed, relit, pixels, frames):
                                                  / np.mean(np.concatenate(ref))))}
 
 
-def write_errors(errors, out):
-    """``relight.json`` and ``relight.csv`` (region, frame, time, relative RMS error; 'all' rows
-    per region and overall) in ``out``."""
+def write_errors(errors, out, point_errors=None):
+    """``relight.json`` and ``relight.csv`` in ``out``: the relative RMS error per region and
+    frame, or for an observation table per region, point and frame (``point_errors``), with
+    whether the fit did not see the frame (held_out); then per region its 'all' and 'held
+    out' rows, and the overall 'all'."""
     write_json(Path(out) / "relight.json", errors)
     if not errors["regions"]:
         return
+    table = point_errors is not None
     buf = io.StringIO()
     w = csv.writer(buf)
-    w.writerow(["region", "frame", "time", "rel_rms_error", "held_out"])
+    w.writerow(["region", *(["point"] if table else []), "frame", "time", "rel_rms_error",
+                "held_out"])
+
+    def held(flag):
+        return "" if flag is None else "yes" if flag else "no"
+
+    def summary(region, label, value, flag=None):
+        w.writerow([region, *(["all"] if table else []), label, "", f"{value:.6f}", held(flag)])
     for region, e in errors["regions"].items():
-        trained = set(e.get("trained_frames", ()))
-        for i, t, v in zip(errors["frames"], errors["times"], e["per_frame"]):
-            w.writerow([region, i, t, f"{v:.6f}",
-                        ("no" if i in trained else "yes") if trained else ""])
-        w.writerow([region, "all", "", f"{e['rel_rms']:.6f}", ""])
+        if table:
+            w.writerows([region, p.point, p.frame, p.time, f"{p.rel_rms:.6f}", held(p.held_out)]
+                        for p in point_errors if p.region == region)
+        else:
+            trained = set(e.get("trained_frames", ()))
+            w.writerows([region, i, t, f"{v:.6f}", held(i not in trained if trained else None)]
+                        for i, t, v in zip(errors["frames"], errors["times"], e["per_frame"]))
+        summary(region, "all", e["rel_rms"])
         if e.get("held_out_rel_rms") is not None:
-            w.writerow([region, "held out", "", f"{e['held_out_rel_rms']:.6f}", "yes"])
-    w.writerow(["all", "all", "", f"{errors['rel_rms']:.6f}", ""])
+            summary(region, "held out", e["held_out_rel_rms"], True)
+    summary("all", "all", errors["rel_rms"])
     write_text(Path(out) / "relight.csv", buf.getvalue())
 
 
@@ -476,7 +550,7 @@ def _contact_row(panels, lim):
 @dataclass(frozen=True)
 class PredictionRow:
     """One predicted value [W m^-2 sr^-1]: a region's mean radiance in one frame and
-    channel."""
+    channel, or for an observation table one point's value."""
 
     region: str
     frame: int
@@ -489,8 +563,11 @@ class PredictionRow:
     #: the 95% band
     lo95: float
     hi95: float
-    #: the image's value: the observed (a target holding frames), or the relit render's
+    #: the image's value: the observed (a target holding frames, a table's value), or the
+    #: relit render's
     image: float
+    #: the table's point (None: the region's mean)
+    point: str | None = None
 
     @property
     def inside(self):
@@ -517,29 +594,64 @@ class Prediction:
 
 def write_prediction(prediction, out, image_kind, plot=True):
     """``prediction.csv`` in ``out``: one row per region, frame and channel (R, G, B or a
-    luminance table's Y; radiance in W m^-2 sr^-1), with the image's value (``image_kind``:
-    the observed frames, or the relit render); with ``plot``, ``prediction.png``
+    luminance table's Y; radiance in W m^-2 sr^-1), for an observation table per region,
+    point, frame and measured channel, with the image's value (``image_kind``: the observed
+    frames or table, or the relit render); with ``plot``, ``prediction.png``
     (:func:`plot_prediction`)."""
     column = image_kind.replace(" ", "_")
+    points = any(r.point is not None for r in prediction.rows)
     buf = io.StringIO()
     w = csv.writer(buf)
-    w.writerow(["region", "frame", "time", "channel", "predicted [W m^-2 sr^-1]",
-                "lo95 [W m^-2 sr^-1]", "hi95 [W m^-2 sr^-1]", f"{column} [W m^-2 sr^-1]"])
-    w.writerows([(r.region, r.frame, r.time, r.channel,
+    w.writerow(["region", *(["point"] if points else []), "frame", "time", "channel",
+                "predicted [W m^-2 sr^-1]", "lo95 [W m^-2 sr^-1]", "hi95 [W m^-2 sr^-1]",
+                f"{column} [W m^-2 sr^-1]"])
+    w.writerows([(r.region, *([r.point] if points else []), r.frame, r.time, r.channel,
                   *(f"{v:.6g}" for v in (r.predicted, r.lo95, r.hi95, r.image)))
                  for r in prediction.rows])
     write_text(Path(out) / "prediction.csv", buf.getvalue())
     if plot:
-        write_bytes(Path(out) / "prediction.png", plot_prediction(prediction.rows, image_kind))
+        write_bytes(Path(out) / "prediction.png", (plot_points if points else plot_prediction)(
+            prediction.rows, image_kind))
+
+
+def _pyplot():
+    """matplotlib's pyplot on the Agg back-end (files only)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_points(rows, image_kind):
+    """PNG bytes of an observation table's prediction ``rows``: per region each point's
+    predicted value in each frame, with its 95% band, against the table's (``image_kind``)."""
+    plt = _pyplot()
+    regions = sorted({row.region for row in rows})
+    fig, axes = plt.subplots(len(regions), 1, figsize=(5, 4.5 * len(regions)), squeeze=False)
+    for ax, region in zip(axes[:, 0], regions):
+        mine = [row for row in rows if row.region == region]
+        for ch, col in zip("RGBY", ("r", "g", "b", "k")):
+            sel = [row for row in mine if row.channel == ch]
+            if sel:
+                ax.errorbar([row.image for row in sel], [row.predicted for row in sel],
+                            yerr=[[row.predicted - row.lo95 for row in sel],
+                                  [row.hi95 - row.predicted for row in sel]],
+                            fmt="o", color=col, ms=3, lw=0.8, label=f"{ch} (95% band)")
+        ends = [min(min(r.image, r.lo95) for r in mine), max(max(r.image, r.hi95) for r in mine)]
+        ax.plot(ends, ends, ":", color="0.5", lw=0.8)
+        ax.set_title(f"{region}: each point and frame", fontsize=9)
+        ax.set_xlabel(f"{image_kind} [W m^-2 sr^-1]")
+        ax.set_ylabel("predicted [W m^-2 sr^-1]")
+        ax.legend(fontsize=6)
+    fig.tight_layout()
+    return figure_png(fig)
 
 
 def plot_prediction(rows, image_kind):
     """PNG bytes of the prediction ``rows``: per region the predicted series with its 95%
     band and the image's values (``image_kind``) (thesis fig 7.14)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = _pyplot()
     regions = sorted({row.region for row in rows})
     fig, axes = plt.subplots(len(regions), 1, figsize=(7, 3.2 * len(regions)), squeeze=False)
     for i, (ax, region) in enumerate(zip(axes[:, 0], regions)):
@@ -588,43 +700,50 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
     """Radiance of each fitted region in the target's frames, without rendering images: the
     region's mean per frame and channel at the fit and its 95% band (2.5-97.5 percentiles
     over :func:`parameter_draws`, widened in quadrature by the image's noise and the model's
-    Monte Carlo error), with the image's mean (the observed, where the target holds frames).
-    Returns a :class:`Prediction`: its :class:`PredictionRow` s, and per region the relative
-    RMS error of its predicted means against the image's, at the fit and, where the target's
-    material is known in the fit's model (a synthetic target), at the truth: the truth's
-    error is the Monte Carlo noise alone, so the fit's excess over it is the fit's error.
+    Monte Carlo error), with the image's mean (the observed, where the target holds frames);
+    on an observation table, each point's value in each frame and channel it measures, with
+    its band and the table's value.  Returns a :class:`Prediction`: its
+    :class:`PredictionRow` s, and per region the relative RMS error of its predicted means
+    against the image's, at the fit and, where the target's material is known in the fit's
+    model (a synthetic target), at the truth: the truth's error is the Monte Carlo noise
+    alone, so the fit's excess over it is the fit's error.
     """
     rng = np.random.default_rng(seed)
+    if is_table(load_manifest(target)[0]):
+        # a table's few points take the fit's own cache size (the small one averages out only
+        # over an image region's pixels), each region's light traced when its turn comes
+        predict_region = _predict_points
+        sessions = ((region, FitSession.from_fit(
+            r, target, pixels[region], seed=seed, positions=POSITIONS, directions=DIRECTIONS,
+            min_frames=1)) for region, (_, r) in sorted(fits.items()))
+    else:
+        # image regions: the light at all their pixels traced at once
+        predict_region = _predict_means
+        shared = FitSession.sharing_light({region: r for region, (_, r) in fits.items()},
+                                          target, pixels, seed=seed,
+                                          positions=PREDICTION_CACHE[0],
+                                          directions=PREDICTION_CACHE[1],
+                                          sky_positions=PREDICTION_CACHE[2], min_frames=1,
+                                          sky_spacing=SKY_SPACING)
+        sessions = ((region, shared.pop(region)) for region in sorted(fits))
     rows, means = [], {}
-    # image regions: the light at all their pixels traced at once; a table's few points take
-    # the fit's own cache size: the small one averages out only over an image region's pixels
-    in_images = {region: r for region, (_, r) in fits.items() if pixels[region] is not None}
-    sessions = FitSession.sharing_light(in_images, target, pixels, seed=seed,
-                                        positions=PREDICTION_CACHE[0],
-                                        directions=PREDICTION_CACHE[1],
-                                        sky_positions=PREDICTION_CACHE[2], min_frames=1,
-                                        sky_spacing=SKY_SPACING)
-    for region, (_, r) in sorted(fits.items()):
-        # each let go when done with
-        s = sessions.pop(region) if region in sessions else FitSession.from_fit(
-            r, target, None, seed=seed, positions=POSITIONS, directions=DIRECTIONS,
-            min_frames=1)
-        region_rows, means[region] = _predict_region(s, r, target, draws, rng)
+    for region, s in sessions:                          # each let go when done with
+        region_rows, means[region] = predict_region(s, fits[region][1], target, draws, rng)
         rows += region_rows
         log(f"{region}: predicted {len(s.obs.frames)} frames from {draws} parameter draws")
     return Prediction(rows, means)
 
 
-def _predict_region(s, result, target, draws, rng):
-    """The prediction of one region (:func:`predict`) from its session ``s`` on the target
-    and its fit ``result``: (its rows, its :class:`MeansError`)."""
-    sets = parameter_draws(result, s.names, s.lower, s.upper, draws, rng)
-    # the region's mean over its pixels; over a table's points measured in each frame
-    have = np.ones(s.obs.y.shape) if s.obs.rays is None else np.isfinite(s.obs.sigma) * 1.0
-    have = have / np.maximum(have.sum(axis=0), 1.0)
+#: Values (draws x points x frames x channels) of a table's prediction held at once: the
+#: draws' radiances are made a chunk of points at a time (128 MB).
+CHUNK_VALUES = 2**24
 
-    def region_mean(x):
-        return np.sum(x * have, axis=0)
+
+def _predict_means(s, result, target, draws, rng):
+    """The prediction of one image region (:func:`predict`) from its session ``s`` on the
+    target and its fit ``result``: (its rows, its :class:`MeansError`)."""
+    sets = parameter_draws(result, s.names, s.lower, s.upper, draws, rng)
+    region_mean = _region_mean(s)
     means = s.wm.radiances(sets, region_mean)                               # (draws, T, 3)
     lo, hi = np.percentile(means[1:], [2.5, 97.5], axis=0)
     # widened by what the parameters leave out: the image's own noise (the sensor model's
@@ -635,8 +754,7 @@ def _predict_region(s, result, target, draws, rng):
     extra = 1.959963984540054 * np.sqrt((np.sum(image_noise_variance(s, image), axis=0)
                                          + np.sum(model_var, axis=0)) / n**2)
     observed = region_mean(image)
-    # a luminance table predicts its one quantity: Y, the models' first channel
-    names = "Y" if s.obs.luminance else "RGB"
+    names = _channels(s)
     means, observed = means[..., :len(names)], observed[..., :len(names)]
     rows = []
     for j, (i, t) in enumerate(zip(s.obs.frames, s.obs.times)):
@@ -645,10 +763,65 @@ def _predict_region(s, result, target, draws, rng):
             rows.append(PredictionRow(region=s.name, frame=int(i), time=t, channel=ch,
                                       predicted=float(means[0, j, c]), lo95=float(band[0]),
                                       hi95=float(band[1]), image=float(observed[j, c])))
+    return rows, _means_error(s, means[0], observed, region_mean)
+
+
+def _predict_points(s, result, target, draws, rng):
+    """The prediction of one region of an observation table (:func:`predict`): each point's
+    value at the fit in each frame and channel it measures, its 95% band (percentiles over
+    the draws, widened in quadrature by the value's own noise and the model's Monte Carlo
+    error) and the table's value; (its rows, the :class:`MeansError` of its region means)."""
+    sets = parameter_draws(result, s.names, s.lower, s.upper, draws, rng)
+    at_fit, lo, hi = (np.empty(s.obs.y.shape) for _ in range(3))
+    P, T = s.obs.y.shape[:2]
+    step = max(1, CHUNK_VALUES // (len(sets) * T * 3))
+    for start in range(0, P, step):
+        part = slice(start, start + step)
+        values = s.wm.radiances(sets, lambda x: x[part])                # (draws, points, T, 3)
+        at_fit[part] = values[0]
+        lo[part], hi[part] = np.percentile(values[1:], [2.5, 97.5], axis=0)
+    _, model_var = s.wm.radiance_and_variance(sets[0])
+    image = image_values(s, target)
+    extra = 1.959963984540054 * np.sqrt(image_noise_variance(s, image) + model_var)
+    names = _channels(s)
+    measured = np.isfinite(s.obs.sigma[..., :len(names)])
+    rows = []
+    for p, j, c in zip(*np.nonzero(measured)):
+        band = widen(at_fit[p, j, c], (lo[p, j, c], hi[p, j, c]), extra[p, j, c], 0.0, np.inf)
+        rows.append(PredictionRow(region=s.name, frame=int(s.obs.frames[j]),
+                                  time=s.obs.times[j], channel=names[c],
+                                  predicted=float(at_fit[p, j, c]), lo95=float(band[0]),
+                                  hi95=float(band[1]), image=float(image[p, j, c]),
+                                  point=str(s.obs.pixels[p])))
+    region_mean = _region_mean(s)
+    return rows, _means_error(s, region_mean(at_fit)[..., :len(names)],
+                              region_mean(image)[..., :len(names)], region_mean)
+
+
+def _channels(s):
+    """The channels session ``s`` predicts: a luminance table's one quantity Y (the models'
+    first channel), else R, G and B."""
+    return "Y" if s.obs.luminance else "RGB"
+
+
+def _region_mean(s):
+    """The region's mean of session ``s``'s values (P, T, 3) -> (T, 3): over its pixels, or
+    over a table's points measured in each frame."""
+    have = np.ones(s.obs.y.shape) if s.obs.rays is None else np.isfinite(s.obs.sigma) * 1.0
+    have = have / np.maximum(have.sum(axis=0), 1.0)
+
+    def region_mean(x):
+        return np.sum(x * have, axis=0)
+    return region_mean
+
+
+def _means_error(s, fit_means, observed, region_mean):
+    """The :class:`MeansError` of session ``s``'s region means at the fit, ``fit_means``,
+    against the ``observed`` ones (T, channels), and of those at the truth where known."""
     truth = truth_parameters(s.truth, s.model, s.names, s.normalisation)
-    at_truth = None if truth is None else float(
-        rel_rms(region_mean(s.wm.radiance(truth))[..., :len(names)], observed))
-    return rows, MeansError(fit=float(rel_rms(means[0], observed)), truth=at_truth)
+    at_truth = None if truth is None else float(rel_rms(
+        region_mean(s.wm.radiance(truth))[..., :observed.shape[-1]], observed))
+    return MeansError(fit=float(rel_rms(fit_means, observed)), truth=at_truth)
 
 
 def image_values(s, target):

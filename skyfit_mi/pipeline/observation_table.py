@@ -372,9 +372,18 @@ def is_table(doc):
     return any(f.get("observations", {}).get("kind") == "table" for f in doc["frames"])
 
 
+def table_points(root):
+    """{region: its point names} of an observation-table sequence in folder ``root``, both in
+    table order."""
+    out = {}
+    for region, point in read_observation_table(Path(root) / TABLE_FILE).point_keys():
+        out.setdefault(region, []).append(point)
+    return out
+
+
 def table_regions(root):
     """The regions an observation-table sequence in folder ``root`` measures, in table order."""
-    return list(dict.fromkeys(read_observation_table(Path(root) / TABLE_FILE).regions))
+    return list(table_points(root))
 
 
 def table_observations(doc, root, region, points=None, frames=None):
