@@ -333,3 +333,23 @@ def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
                  / np.sqrt((va.sum(axis=0) + vb.sum(axis=0)) / m**2))
     z = np.concatenate([x.ravel() for x in z])
     assert np.all(np.abs(z) < 5) and np.sqrt(np.mean(z**2)) < 2, z
+
+
+@pytest.mark.parametrize("regions", [1, 8])
+def test_the_prediction_plot_has_no_empty_bands_above_or_below_its_panels(regions):
+    """The figure is laid out to its panels: however many regions, ink starts and ends within
+    a few percent of the image's top and bottom."""
+    import io
+
+    from PIL import Image
+
+    from skyfit_mi.fitting.relight import PredictionRow, plot_prediction
+
+    rows = [PredictionRow(f"r{k}", j, f"2026-08-16T{6 + j:02d}:00:00+01:00", ch, v, v - 5,
+                          v + 5, v + 1)
+            for k in range(regions) for j in range(13)
+            for c, ch in enumerate("RGB") for v in [100 + 30 * np.sin(j / 3 + c)]]
+    image = np.asarray(Image.open(io.BytesIO(plot_prediction(rows, "observed"))).convert("L"))
+    inked = np.flatnonzero((image < 250).any(axis=1))
+    assert inked[0] < 0.03 * len(image) and inked[-1] > 0.97 * len(image), \
+        (inked[0], inked[-1], len(image))

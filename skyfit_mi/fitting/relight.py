@@ -628,7 +628,8 @@ def plot_points(rows, image_kind):
     predicted value in each frame, with its 95% band, against the table's (``image_kind``)."""
     plt = _pyplot()
     regions = sorted({row.region for row in rows})
-    fig, axes = plt.subplots(len(regions), 1, figsize=(5, 4.5 * len(regions)), squeeze=False)
+    fig, axes = plt.subplots(len(regions), 1, figsize=(5, 4.5 * len(regions)), squeeze=False,
+                             layout="constrained")
     for ax, region in zip(axes[:, 0], regions):
         mine = [row for row in rows if row.region == region]
         for ch, col in zip("RGBY", ("r", "g", "b", "k")):
@@ -644,7 +645,6 @@ def plot_points(rows, image_kind):
         ax.set_xlabel(f"{image_kind} [W m^-2 sr^-1]")
         ax.set_ylabel("predicted [W m^-2 sr^-1]")
         ax.legend(fontsize=6)
-    fig.tight_layout()
     return figure_png(fig)
 
 
@@ -653,7 +653,10 @@ def plot_prediction(rows, image_kind):
     band and the image's values (``image_kind``) (thesis fig 7.14)."""
     plt = _pyplot()
     regions = sorted({row.region for row in rows})
-    fig, axes = plt.subplots(len(regions), 1, figsize=(7, 3.2 * len(regions)), squeeze=False)
+    # laid out to the panels (constrained): the default margins, shares of the figure's
+    # height, left empty bands above and below a tall figure of many regions
+    fig, axes = plt.subplots(len(regions), 1, figsize=(7, 0.5 + 2.8 * len(regions)),
+                             squeeze=False, layout="constrained")
     for i, (ax, region) in enumerate(zip(axes[:, 0], regions)):
         for ch, col in zip("RGBY", ("r", "g", "b", "k")):
             sel = [row for row in rows if row.region == region and row.channel == ch]
