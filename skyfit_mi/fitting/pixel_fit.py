@@ -13,9 +13,8 @@ the sensor response inverted, values within 3 sigma of saturation left out as th
 grid does), which limits sigma_alpha to the grid's spacing (8% steps) and rho_s to 0.01.
 
 The light is cached with fewer samples than a region fit's (MAP_CACHE; the sky's integrals
-through each pixel's centre, interpolated between anchors every SKY_SPACING pixels where that
-is accurate, :func:`~skyfit_mi.render.light_cache.build_light_cache`), and the
-cache's own Monte Carlo error is measured per pixel from its two halves (each fitted alike)
+through each pixel's centre, interpolated between anchors where that is accurate: the
+``anchors`` plan of :data:`~skyfit_mi.render.light_cache.SKY_PLANS`), and the cache's own Monte Carlo error is measured per pixel from its two halves (each fitted alike)
 and added to the intervals in quadrature, as is a photographed sequence's calibration error
 (:func:`~skyfit_mi.fitting.uncertainty.calibration_sd`).
 
@@ -30,7 +29,6 @@ and one off its material gets NaN.
 import numpy as np
 
 from ..errors import SkyfitError
-from ..render.light_cache import SKY_SPACING
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
                                     grid_chi2_device, linear_curvature, near_saturation)
@@ -123,8 +121,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     cache = build_light_cache(scene, mi.traverse(scene), skies, pixels, materials,
                               positions=positions, directions=directions, seed=seed,
                               max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
-                              normalisation=normalisation, sky_positions=1,
-                              sky_spacing=SKY_SPACING)
+                              normalisation=normalisation, plan="anchors")
     wm = WardModel(cache, model, normalisation)
     usable = usable_values(obs, cache.hit)
     # every usable value's weight, and the grid's: values near saturation left out of it
