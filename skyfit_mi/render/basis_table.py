@@ -41,9 +41,11 @@ DEGREES, MAX_DEGREE, TABLE_RTOL, CHECKS = (16, 6, 32), 128, 2e-6, 3
 #: Degrees of the Lobatto nodes (among each piece's first DEGREES') at which the table keeps
 #: the positions' spread, the model's Monte Carlo variance: it changes slowly with sigma.
 VARIANCE_DEGREES = (16, 3, 16)
-#: Light-cache samples traced and tabulated at once (:func:`trace_table`): about 100 bytes
-#: each in the cache's arrays and the model's Dr.Jit copies, so a block stays near 0.8 GB.
-CHUNK_SAMPLES = 1 << 23
+#: Light-cache samples traced and tabulated at once (:func:`trace_table`): 140 bytes each at
+#: the peak (the cache's arrays, the model's Dr.Jit copies and the tracer's; 3.4 million
+#: samples in one block peaked 475 MB above a one-pixel fit, tests/test_memory.py), so a
+#: block takes about 0.6 GB.
+CHUNK_SAMPLES = 1 << 22
 
 
 def _lobatto(n):
@@ -312,7 +314,7 @@ def _lobe_at(lobe, x, lo, hi):
     return lobe(float(_sigma(x, lo, hi))).reshape(1, -1)
 
 
-def chunks(P, T, per_value, budget=CHUNK_SAMPLES):
+def chunks(P, T, per_value, budget):
     """(rows, frames) slices that split P points x T frames, each with ``per_value`` samples,
     into blocks of at most ``budget`` samples (at least one point of one frame): as many
     points per block as fit (the light cache's kernels run over a block's points), then as
@@ -324,11 +326,12 @@ def chunks(P, T, per_value, budget=CHUNK_SAMPLES):
 
 
 def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
-                directions=DIRECTIONS, budget=CHUNK_SAMPLES, **options):
+                directions=DIRECTIONS, budget=None, **options):
     """The :class:`BasisTable` of points ``at`` (pixels (P, 2) or
     :class:`~.light_cache.PointRays`) on material ``bsdf_id`` (one, or one per point) under
     ``skies``: the light cache traced (:func:`~.light_cache.build_light_cache`, ``options``
-    its own) and tabulated block by block (:func:`chunks`, ``budget`` samples each), so that
+    its own) and tabulated block by block (:func:`chunks`, ``budget`` samples each,
+    CHUNK_SAMPLES by default), so that
     memory stays bounded whatever the points and frames.  ``model_of(cache)`` makes the
     :class:`~.fit_model.WardModel` of a block's cache.  One block takes ``seed`` itself (the
     same samples as an untabulated cache); several take seeds drawn from it.
@@ -338,7 +341,7 @@ def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=P
     rays = at if isinstance(at, PointRays) else None
     P, T = len(at), len(skies)
     ids = np.broadcast_to(np.asarray(bsdf_id, dtype=object), (P,))
-    blocks = chunks(P, T, int(positions) * int(directions), budget)
+    blocks = chunks(P, T, int(positions) * int(directions), budget or CHUNK_SAMPLES)
     seeds = [seed] if len(blocks) == 1 else \
         np.random.SeedSequence(seed).generate_state(len(blocks)).tolist()
     by_frames = []
