@@ -19,12 +19,14 @@ from .geometry import geometry_warnings, highlight_geometry
 from ..errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
-from .methods.levenberg_marquardt import SINGULAR_CONDITION
+from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
-from ..render.basis_table import TableModel
-from ..render.fit_model import check_start, other_readings
+from ..render import setup
+from ..render.basis_table import TableModel, trace_table
+from ..render.fit_model import (BY_COUNT, PARAMETERS, WardModel, bounds, check_fit_normalisation,
+                                check_start, other_readings)
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POSITIONS, SIGMA_RESOLVED,
-                                  SKY_PLANS, PointRays)
+                                  SKY_PLANS, PointRays, anchors_pay, build_light_cache)
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
 from ..pipeline.observation_table import is_table
 from ..physics.ward import METAL_THRESHOLD
@@ -127,9 +129,6 @@ class FitSession:
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
                  positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None,
                  sky_plan="fit", trace=True):
-        from ..render import setup
-        from ..render.fit_model import BY_COUNT, PARAMETERS, bounds, check_fit_normalisation
-
         model = BY_COUNT.get(model, model)
         check_choice("model", model, tuple(PARAMETERS))
         check_fit_normalisation(normalisation)          # before the light is traced
@@ -190,8 +189,6 @@ class FitSession:
         the sky plan's anchors pay (as each region alone would take them).  A region of an
         observation table traces its own.  ``options`` as the constructor's, ``trace``
         excepted."""
-        from ..render.light_cache import anchors_pay
-
         sessions = {name: cls.from_fit(r, manifest_path, pixels[name], trace=False, **options)
                     for name, r in results.items()}
         groups = {}
@@ -258,9 +255,6 @@ class FitSession:
         """The :class:`~skyfit_mi.render.basis_table.BasisTable` of the light at
         ``cache_settings`` of the sequence's scene and frames at ``at`` (pixels or rays) on
         material ``bsdf_id`` (one, or one per pixel), traced in blocks of bounded memory."""
-        from ..render.basis_table import trace_table
-        from ..render.fit_model import WardModel
-
         c = self.cache_settings
         table, c["blocks"] = trace_table(
             self.scene, self.params, self.skies, at, bsdf_id,
@@ -296,8 +290,6 @@ class FitSession:
         """The region's raw :class:`~skyfit_mi.render.light_cache.LightCache` at
         ``cache_settings`` in one block, its samples kept (for diagnostics and tests of the
         Dr.Jit model: a fit keeps only their table)."""
-        from ..render.light_cache import build_light_cache
-
         return build_light_cache(self.scene, self.params, self.skies,
                                  self.obs.pixels if self.obs.rays is None else self.obs.rays,
                                  self.name, **self._cache_options())
@@ -349,8 +341,6 @@ class FitSession:
         but it keeps intervals honest when the data are precise enough for the cache's noise
         to ripple chi-square by more than the 95% threshold.
         """
-        from .methods.levenberg_marquardt import levenberg_marquardt
-
         if self._halves is None:
             self._halves = [Problem(self.obs, self._model(self.table.part(j)),
                                     valid=self.table.hit) for j in (1, 2)]
@@ -372,8 +362,6 @@ class FitSession:
         """A half cache's ``fit`` on ``theta``'s side of the colour rule: when C is grey (within
         GREY_SPREAD) and the fit is across the rule, Levenberg-Marquardt on that half from the
         fit's twin reading; otherwise the fit itself."""
-        from .methods.levenberg_marquardt import levenberg_marquardt
-
         def side(x):
             return x[3] >= METAL_THRESHOLD
         if np.ptp(fit[:3]) > GREY_SPREAD:
