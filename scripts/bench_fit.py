@@ -79,7 +79,7 @@ def main():
         t1 = time.perf_counter()
         model = RegionRenderModel(doc["scene"]["xml"], "disc", session.skies, session.obs.pixels,
                                   "colour", spp=args.render_spp, seed=args.seed)
-        problem = Problem(session.obs, model, valid=session.cache.hit)
+        problem = Problem(session.obs, model, valid=session.table.hit)
         budget = {"max_evaluations": args.baseline_evaluations} if args.baseline_evaluations else {}
         # the thesis's annealing: one cooling cycle (our further cycles are left out; its
         # end game still probes the box's faces and restarts the converged simplex)

@@ -179,7 +179,7 @@ def mitsuba_case(case, root, replicates):
     def error(theta, j):
         """Relative RMS error of the radiance predicted at camera j (against Mitsuba's)."""
         pred = sessions[j].wm.radiance(theta)
-        ok = sessions[j].cache.hit
+        ok = sessions[j].table.hit
         return float(rel_rms(pred[ok], radiance[j][ok]))
 
     rows = []

@@ -211,7 +211,7 @@ def _fit(args):
 
     from .files import ensure_dir
     from .fitting.chi2 import subsample_region
-    from .fitting.fit import fit_region
+    from .fitting.fit import fit_regions
     from .fitting.report import write_fit, write_summary
     from .pipeline.manifest import load_manifest
     from .render.fit_model import BY_COUNT, check_fit_normalisation, check_start
@@ -244,16 +244,19 @@ def _fit(args):
         print(f"wrote the maps and map_summary.json in {out} ({s['wall_time_s']:.1f} s)")
         return
     out = ensure_dir(Path(args.output) if args.output else root)
+    kept = {}
     for name, pixels in regions:
-        kept = pixels if pixels is None else subsample_region(pixels, args.max_pixels or None,
-                                                              args.seed)
-        if pixels is not None and len(kept) < len(pixels):
-            print(f"{name}: fitting {len(kept)} of its {len(pixels)} pixels (--max-pixels, seed "
-                  f"{args.seed})")
-        res = fit_region(args.manifest, name, kept, model=model, method=args.method,
-                         normalisation=args.normalisation, seed=args.seed, start=args.start,
-                         positions=args.positions, directions=args.directions,
-                         frames=args.frames, variant=args.variant)
+        kept[name] = pixels if pixels is None else subsample_region(
+            pixels, args.max_pixels or None, args.seed)
+        if pixels is not None and len(kept[name]) < len(pixels):
+            print(f"{name}: fitting {len(kept[name])} of its {len(pixels)} pixels "
+                  f"(--max-pixels, seed {args.seed})")
+    # the light of every region traced together (each frame's kernels once)
+    results = fit_regions(args.manifest, list(kept.items()), model=model, method=args.method,
+                          normalisation=args.normalisation, seed=args.seed, start=args.start,
+                          positions=args.positions, directions=args.directions,
+                          frames=args.frames, variant=args.variant)
+    for (name, pixels), res in zip(regions, results):
         res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
                                          if pixels is None else len(pixels))
         paths = write_fit(res, out / f"fit_{name}")

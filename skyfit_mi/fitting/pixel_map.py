@@ -33,9 +33,10 @@ from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, fit_pixels, patch_grou
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
 #: Fits (pixels, or patches) per chunk: a chunk's peak memory is about 0.8 MB per fit plus
-#: 0.25 GB (docs/BENCHMARKS.md, "Per-pixel maps: speed and memory"), so 1024 keep a worker
-#: near 1.1 GB; a chunk's fixed cost (the scene, its skies, the kernels' tracing: about 1 s)
-#: is a tenth of its time.
+#: 0.25 GB on a 13-frame day (docs/BENCHMARKS.md, "Per-pixel maps: speed and memory"), so
+#: 1024 keep a worker near 1.1 GB; a longer day's light is traced in blocks of bounded size
+#: (basis_table.CHUNK_SAMPLES); a chunk's fixed cost (the scene, its skies, the kernels'
+#: tracing: about 1 s) is a tenth of its time.
 CHUNK = 1024
 #: How :func:`plan_chunks` lays fits into chunks (recorded, so that a store laid out otherwise
 #: is not resumed).

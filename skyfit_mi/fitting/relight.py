@@ -35,19 +35,18 @@ from ..pipeline.manifest import (RENDERED_SOURCES, load_manifest, manifest_file,
 from ..pipeline.pixels import frame_values
 from ..pipeline.observation_table import is_table, table_regions
 from ..pipeline.spec import read_spec, validate_spec
-from ..render.light_cache import DIRECTIONS, POSITIONS, SKY_SPACING
+from ..render.light_cache import DIRECTIONS, POSITIONS
 
 #: Seed offset of the reference render of a synthetic target (its own materials, other noise).
 REFERENCE_SEED = 1_000_003
-#: Light-cache samples per pixel of a prediction (positions, directions, and the positions of
-#: the sky's deterministic integrals): it predicts region means, whose Monte Carlo error (in
-#: the band) falls with the region's pixels, so it is a sixteenth of a fit's cache, whose
-#: chi-square needs every pixel accurate, with the sky's integrals at one random position of
-#: each pixel (unbiased; 1.7x faster a prediction: 3.0 -> 1.8 s for 64 pixels x 13 frames),
-#: or, for a compact region, through the pixels' centres interpolated between anchors every
-#: light_cache.SKY_SPACING pixels (the maps' rule).  Not a fit's: docs/BENCHMARKS.md, "A fit's
-#: sky integrals through pixel centres: tried, not adopted".
-PREDICTION_CACHE = (4, 64, 1)
+#: Light-cache samples per pixel of a prediction (positions, directions): it predicts region
+#: means, whose Monte Carlo error (in the band) falls with the region's pixels, so it is a
+#: sixteenth of a fit's cache, whose chi-square needs every pixel accurate; the sky's
+#: integrals by the ``anchors`` plan (light_cache.SKY_PLANS: through the pixels' centres
+#: interpolated between anchors where accurate, else at one random position of each pixel,
+#: unbiased).  Not a fit's: docs/BENCHMARKS.md, "A fit's sky integrals through pixel
+#: centres: tried, not adopted".
+PREDICTION_CACHE = (4, 64)
 
 
 def load_fits(paths):
@@ -536,8 +535,7 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
     sessions = FitSession.sharing_light(in_images, target, pixels, seed=seed,
                                         positions=PREDICTION_CACHE[0],
                                         directions=PREDICTION_CACHE[1],
-                                        sky_positions=PREDICTION_CACHE[2], min_frames=1,
-                                        sky_spacing=SKY_SPACING)
+                                        sky_plan="anchors", min_frames=1)
     for region, (_, r) in sorted(fits.items()):
         # each let go when done with
         s = sessions.pop(region) if region in sessions else FitSession.from_fit(

@@ -17,6 +17,7 @@ ripples by about that much from one parameter value to the next.
 """
 
 import numpy as np
+from scipy.special import chdtrc
 
 from ..physics.ward import METAL_THRESHOLD, colour_rule_twin
 
@@ -204,13 +205,11 @@ def misfit(chi2, dof, s2, model_noise=0.0, noise=None):
     (widening intervals by s^2 does not repair a wrong model); a significant smaller excess
     (p < MISFIT_P) widens the intervals by s^2.
     """
-    from scipy.stats import chi2 as chi2_dist
-
     mean, var = noise if noise is not None else (float(dof), 2.0 * dof)
     expected = mean + max(model_noise, 0.0)
     k = 2.0 * mean * mean / var if var > 0 else float(dof)
     ratio = chi2 / expected
-    p = float(chi2_dist.sf(chi2 * k / expected, k))
+    p = float(chdtrc(k, chi2 * k / expected))                 # chi-square's survival function
     by = (f"noise and the model's Monte Carlo error ({model_noise:.3g}) explain"
           if model_noise > 0.01 * mean else "noise explains")
     of = (f"chi-square is {ratio:.3g} times what {by} (p = {p:.2g}; noise alone varies it by "
