@@ -25,8 +25,9 @@ from ..render import setup
 from ..render.basis_table import TableModel, trace_table
 from ..render.fit_model import (BY_COUNT, PARAMETERS, WardModel, bounds, check_fit_normalisation,
                                 check_start, other_readings)
-from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POSITIONS, SIGMA_RESOLVED,
-                                  SKY_PLANS, PointRays, anchors_pay, build_light_cache)
+from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
+                                  SIGMA_RESOLVED, SKY_PLANS, PointRays, anchors_pay,
+                                  build_light_cache)
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
 from ..pipeline.observation_table import is_table
 from ..physics.ward import METAL_THRESHOLD
@@ -114,8 +115,9 @@ class FitSession:
     normalisation : Ward normalisation of the model ('ward' = thesis eq. 3.19)
     seed : seeds the light cache
     positions, directions : samples per pixel of the light cache; ``positions=None`` sizes
-        it from the data (:meth:`run`): POSITIONS, grown after a fit whose cache noise
-        exceeds CACHE_SHARE of the degrees of freedom
+        it from the data (:meth:`run`): POSITIONS (POINT_POSITIONS for a table's points),
+        grown after a fit whose cache noise exceeds CACHE_SHARE of the chi-square the data's
+        scatter gives (:meth:`cache_growth`)
     min_frames : rendered frames the sequence must hold (1 to predict a single frame)
     frames : manifest frame indices to use (None: every rendered frame), e.g. to hold some
         out for a prediction test
@@ -154,7 +156,8 @@ class FitSession:
         # a material is the truth only where skyfit rendered the frames with it; an ingested
         # sequence's spec materials are placeholders for the unknown photographed surface
         self.truth = mats[name] if doc.get("source", "render") in RENDERED_SOURCES else None
-        self.cache_settings = {"positions": POSITIONS if positions is None else int(positions),
+        first = POSITIONS if self.obs.rays is None else POINT_POSITIONS
+        self.cache_settings = {"positions": first if positions is None else int(positions),
                                "directions": int(directions), "seed": seed,
                                "sized": "from the data" if positions is None else "given",
                                "sky_plan": check_choice("sky plan", sky_plan, tuple(SKY_PLANS))}
@@ -323,7 +326,8 @@ class FitSession:
         if self.cache_settings["sized"] == "given":
             return 1
         need = max(noise_by_sigma.values()) / (CACHE_SHARE * self.problem.dof * max(1.0, s2))
-        room = min(CACHE_GROWTH_MAX * POSITIONS / self.cache_settings["positions"],
+        first = POSITIONS if self.obs.rays is None else POINT_POSITIONS
+        room = min(CACHE_GROWTH_MAX * first / self.cache_settings["positions"],
                    CACHE_TIME_BUDGET / max(self.cache_time, 1e-3))
         factor = 1
         while factor < need and 2 * factor <= room:

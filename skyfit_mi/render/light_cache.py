@@ -73,6 +73,10 @@ SIGMA_TABLE = (SIGMA_RESOLVED, SIGMA_LARGEST)
 #: Samples per pixel by default: positions over the pixel's area (a highlight's radiance can
 #: vary by tens of per cent across one pixel) and light directions at each position.
 POSITIONS, DIRECTIONS = 32, 128
+#: Positions of a measured point by default: a point has no area, so its positions only
+#: repeat the directions' sampling (two halves for the cache's own error); an automatically
+#: sized cache grows them where the data need it.
+POINT_POSITIONS = 4
 #: Share of a fit's degrees of freedom that an automatically sized cache's largest noise over
 #: the roughness range is grown to stay under (:meth:`~skyfit_mi.fitting.fit.FitSession.run`).
 CACHE_SHARE = 0.1
