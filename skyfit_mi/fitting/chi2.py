@@ -197,6 +197,12 @@ class LuminanceModel:
         mixed = [(self._mix(D), self._mix(G)) for D, G in (out if halves else [out])]
         return mixed if halves else mixed[0]
 
+    def lobes(self, sigmas, halves=False):
+        out = self.inner.lobes(sigmas, halves)
+        mixed = [(self._mix(D), G.map(self._mix) if hasattr(G, "map") else self._mix(G))
+                 for D, G in (out if halves else [out])]
+        return mixed if halves else mixed[0]
+
     def gradient(self, theta, dloss_dL):
         return self.inner.gradient(theta, np.tensordot(dloss_dL, self.mix, axes=1))
 

@@ -22,7 +22,7 @@ from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
 from ..render import setup
-from ..render.basis_table import TableModel, trace_table
+from ..render.basis_table import TableModel, available_memory, memory_estimate, trace_table
 from ..render.fit_model import (BY_COUNT, PARAMETERS, WardModel, bounds, check_fit_normalisation,
                                 check_start, other_readings)
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
@@ -259,6 +259,13 @@ class FitSession:
         ``cache_settings`` of the sequence's scene and frames at ``at`` (pixels or rays) on
         material ``bsdf_id`` (one, or one per pixel), traced in blocks of bounded memory."""
         c = self.cache_settings
+        need, have = memory_estimate(len(at), len(self.skies), c["positions"]), \
+            available_memory()
+        if have is not None and need > have:
+            raise SkyfitError(
+                f"fitting {len(at)} points in {len(self.skies)} frames needs up to "
+                f"{need / 2**30:.1f} GB, but this machine has {have / 2**30:.1f} GB available; "
+                "fit fewer pixels (--max-pixels) or frames (--frames), or a region at a time.")
         table, c["blocks"] = trace_table(
             self.scene, self.params, self.skies, at, bsdf_id,
             lambda cache: WardModel(cache, self.model, self.normalisation), **self._cache_options())
@@ -379,10 +386,11 @@ class FitSession:
         return fit
 
     def grid_bases(self):
-        """The global search's basis on its sigma grid for the whole cache and each half,
-        computed once per session (it does not depend on the data)."""
+        """The global search's basis on its sigma grid for the whole cache and each half, made
+        once per session (it does not depend on the data); its lobes lazy
+        (:class:`~skyfit_mi.render.basis_table.Lobes`), a few roughness values at a time."""
         if self._bases is None:
-            self._bases = self.wm.basis(SIGMA_GRID, halves=True)
+            self._bases = self.wm.lobes(SIGMA_GRID, halves=True)
         return self._bases
 
     def random_start(self, rng):

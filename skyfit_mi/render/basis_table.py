@@ -32,13 +32,13 @@ from .light_cache import (CONTROL_FULL, CONTROL_SIGMA, DIRECTIONS, POSITIONS, SI
 #: The smooth pieces of G(sigma) above SIGMA_RESOLVED (log sigma ends) and the first degree
 #: of each piece's Chebyshev series: doubled (the Lobatto nodes are nested, so every value is
 #: kept) until the series agrees with the model within TABLE_RTOL of the piece's largest value
-#: at CHECKS points between its nodes, up to MAX_DEGREE.  A board region of 64 pixels with 32
+#: at CHECKS points between its nodes, or stops improving, up to MAX_DEGREE.  A board region of 64 pixels with 32
 #: positions needs 16, 6 and 32; the disc's with 8 positions 32 in the narrow piece (fewer
 #: samples, sharper sums of lobes).  TABLE_RTOL is far under any light cache's Monte Carlo
 #: error (~1e-3 per value).
 PIECES = ((SIGMA_RESOLVED, CONTROL_FULL), (CONTROL_FULL, CONTROL_SIGMA),
           (CONTROL_SIGMA, SIGMA_LARGEST))
-DEGREES, MAX_DEGREE, TABLE_RTOL, CHECKS = (16, 6, 32), 128, 2e-6, 3
+DEGREES, MAX_DEGREE, TABLE_RTOL, CHECKS = (16, 6, 32), 64, 1e-5, 3
 #: Degrees of the Lobatto nodes (among each piece's first DEGREES') at which the table keeps
 #: the positions' spread, the model's Monte Carlo variance: it changes slowly with sigma.
 VARIANCE_DEGREES = (16, 3, 16)
@@ -46,7 +46,7 @@ VARIANCE_DEGREES = (16, 3, 16)
 #: the peak (the cache's arrays, the model's Dr.Jit copies and the tracer's; 3.4 million
 #: samples in one block peaked 475 MB above a one-pixel fit, tests/test_memory.py), so a
 #: block takes about 0.6 GB.
-CHUNK_SAMPLES = 1 << 22
+CHUNK_SAMPLES, BYTES_PER_SAMPLE = 1 << 22, 140
 
 
 def _lobatto(n):
@@ -294,25 +294,57 @@ def variance_sigmas():
 def _piece(lobe, lo, hi, n):
     """Chebyshev coefficients (2, n + 1, P, T, 3) of ``lobe(sigma)`` (the halves' mean and half
     difference of G) on the piece [lo, hi] in log sigma, the degree n doubled until the series
-    holds at CHECKS points between its nodes (TABLE_RTOL, MAX_DEGREE)."""
+    holds at CHECKS points between its nodes (TABLE_RTOL), or stops improving (the model's
+    own float32 rounding: a tiny light such as a lab's directional one makes the lobe's
+    exponent large), or reaches MAX_DEGREE."""
     C = np.polynomial.chebyshev
+    last = np.inf
     while True:
         x = _lobatto(n)
         values = np.stack([lobe(float(s)) for s in _sigma(x, lo, hi)])     # (n + 1, 2, ...)
         flat = np.linalg.solve(C.chebvander(x, n), values.reshape(n + 1, -1))
+        if n >= MAX_DEGREE:
+            break
         # between nodes: the midpoints of CHECKS of the widest gaps, spread over the piece
         mid = np.cos(np.pi * (np.linspace(0, n - 1, CHECKS).round() + 0.5) / n)
         worst = max(np.max(np.abs(C.chebvander([m], n) @ flat - _lobe_at(lobe, m, lo, hi)))
-                    for m in mid) if n < MAX_DEGREE else 0.0
-        if worst <= TABLE_RTOL * max(np.max(np.abs(values[:, 0])), 1e-30):
+                    for m in mid) / max(np.max(np.abs(values[:, 0])), 1e-30)
+        if worst <= TABLE_RTOL or worst > 0.5 * last:
             break
-        n *= 2
+        last, n = worst, 2 * n
     return np.moveaxis(flat.reshape(values.shape), 0, 1).astype(np.float32)
 
 
 def _lobe_at(lobe, x, lo, hi):
     """``lobe`` at the coordinate ``x`` of the piece [lo, hi], flattened."""
     return lobe(float(_sigma(x, lo, hi))).reshape(1, -1)
+
+
+#: Bytes a fit takes per value (pixel or point, frame and channel) beside its table: the
+#: observations, the model's arrays and the search's (a 400-point x 96-light table's run
+#: peaked 74 MB above its trace, 0.64 kB a value), and the process's base [bytes].
+FIT_BYTES_PER_VALUE, BASE_BYTES = 1024, 300 << 20
+
+
+def memory_estimate(P, T, positions):
+    """The most a fit of P points (or pixels) in T frames takes [bytes]: its table at
+    MAX_DEGREE in every piece, the fit's own arrays, one block of the light and the base."""
+    arrays = 2 * sum(MAX_DEGREE + 1 for _ in PIECES) + 2 * len(variance_sigmas()) + 7
+    per_value = 4 * arrays + 4 * positions / 3 + FIT_BYTES_PER_VALUE
+    return int(P * T * 3 * per_value + CHUNK_SAMPLES * BYTES_PER_SAMPLE + BASE_BYTES)
+
+
+def available_memory():
+    """The memory this machine can give a new allocation [bytes] (Linux's MemAvailable;
+    elsewhere None)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
 
 
 def chunks(P, T, per_value, budget):
@@ -361,6 +393,27 @@ def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=P
         by_frames[-1][1].append(table)
     table = BasisTable.join([BasisTable.join(t, "pixels") for _, t in by_frames], "frames")
     return table, len(blocks)
+
+
+class Lobes:
+    """The lobe basis G at roughness values ``sigmas``, made a few at a time when used:
+    ``lobe(sigmas)`` gives (k, P, T, 3); ``chunks()`` yields (slice, values) of ``chunk``
+    roughness values (the global search's sums, :func:`~skyfit_mi.fitting.methods.
+    global_search.sigma_chunks`), so that the grid's (K, P, T, 3) never exists at once;
+    ``map(f)`` applies f to every chunk's values."""
+
+    def __init__(self, lobe, sigmas, chunk=8):
+        self.lobe, self.sigmas, self.chunk = lobe, np.asarray(sigmas, dtype=float), int(chunk)
+
+    def __len__(self):
+        return len(self.sigmas)
+
+    def chunks(self):
+        for k in range(0, len(self), self.chunk):
+            yield slice(k, k + self.chunk), self.lobe(self.sigmas[k:k + self.chunk])
+
+    def map(self, f):
+        return Lobes(lambda s: f(self.lobe(s)), self.sigmas, self.chunk)
 
 
 class TableModel:
@@ -429,6 +482,22 @@ class TableModel:
             return D, G
         dD, dG = t.D[1].astype(float), t.lobe(sigmas, half_difference=True)
         return [(D, G), (D + dD, G + dG), (D - dD, G - dG)]
+
+    def lobes(self, sigmas, halves=False):
+        """As :meth:`basis`, with each G a lazy :class:`Lobes` (memory of a few roughness
+        values' arrays, whatever the points and frames)."""
+        sigmas = np.asarray(sigmas, dtype=float)
+        t = self.table
+        D = t.D[0].astype(float)
+        self.basis_evaluations += len(sigmas)
+        whole = Lobes(t.lobe, sigmas)
+        if not halves:
+            return D, whole
+        dD = t.D[1].astype(float)
+
+        def half(sign):
+            return Lobes(lambda s: t.lobe(s) + sign * t.lobe(s, half_difference=True), sigmas)
+        return [(D, whole), (D + dD, half(1.0)), (D - dD, half(-1.0))]
 
     def radiances(self, thetas, reduce=None):
         """L at many parameter sets ``thetas`` (n, n_params): (n, P, T, 3), or ``reduce`` of

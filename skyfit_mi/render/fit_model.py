@@ -434,6 +434,10 @@ class WardModel:
         out = [(a[0], np.stack(a[1:])) for a in acc]
         return out if halves else out[0]
 
+    def lobes(self, sigmas, halves=False):
+        """:meth:`basis` (its arrays serve wherever lazy lobes do)."""
+        return self.basis(sigmas, halves)
+
     def _shares(self, rho_s, sigma):
         """Each position's share (P, T, S, 3) of the basis plugin's L (rho_s = 0: the diffuse
         basis; 1: the lobe at sigma)."""
