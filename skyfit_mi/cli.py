@@ -146,7 +146,7 @@ def _ingest(args):
         if args.photos or photo_only or args.vignetting != "none":
             what = "photographs" if args.photos else "--" + (photo_only or ["vignetting"])[0] \
                 .replace("_", "-")
-            raise SkyfitError(f"--table takes no {what}: the table gives times, values and "
+            raise SkyfitError(f"--table takes no {what}: the table gives frames, values and "
                               "sigmas; give either photographs or --table.")
         ingest_table(args.table, args.spec, args.output, tz=args.tz, site=args.site,
                      overwrite=args.overwrite)
@@ -373,7 +373,8 @@ def build_parser():
                      "PNG, JPEG, camera RAW)")
     ing.add_argument("--table", metavar="CSV", help="instead of photographs: a table of measured "
                      "radiances (time, region, r, g, b, sigma, optional point, x,y,z, view, "
-                     "normal; see docs/MANIFEST.md)")
+                     "normal, saturated; for lab lights, a spec of directional [[sky]] without "
+                     "[time], frame instead of time; see docs/MANIFEST.md)")
     ing.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
     ing.add_argument("--times", metavar="CSV", help="CSV file,time giving each frame's time "
                      "(instead of EXIF DateTimeOriginal)")
