@@ -2,6 +2,8 @@
 
 import numpy as np
 
+from .daylight import jit_array
+
 
 def load_points_scene(xml, variant):
     """The scene ``xml`` loaded in Mitsuba ``variant``, for :func:`surface_hits`."""
@@ -33,3 +35,16 @@ def surface_hits(scene, origins, directions):
             "n": np.array(si.sh_frame.n, dtype=float).T,
             "t": np.where(valid, np.array(si.t, dtype=float), np.inf), "material": ids,
             "scale": scale}
+
+
+def pixel_points(scene, pixels):
+    """Where the central rays of ``pixels`` ((P, 2) x, y) of the scene's first sensor meet the
+    scene: :func:`surface_hits`' dict (``p`` NaN where a ray misses)."""
+    import mitsuba as mi
+
+    sensor = scene.sensors()[0]
+    w, h = sensor.film().crop_size()
+    uv = (np.asarray(pixels, dtype=float).reshape(-1, 2) + 0.5) / [w, h]
+    ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
+                               jit_array(mi.Point2f, uv[:, 0], uv[:, 1]), mi.Point2f(0.5, 0.5))
+    return surface_hits(scene, np.array(ray.o, dtype=float).T, np.array(ray.d, dtype=float).T)
