@@ -141,7 +141,7 @@ def _ingest(args):
         from .pipeline.observation_table import ingest_table
 
         photo_only = [k for k in ("times", "name_pattern", "response", "gamma", "exposure",
-                                  "calibrate", "colorchecker", "noise")
+                                  "colorchecker", "noise")
                       if getattr(args, k) is not None]
         if args.photos or photo_only or args.vignetting != "none":
             what = "photographs" if args.photos else "--" + (photo_only or ["vignetting"])[0] \
@@ -149,7 +149,7 @@ def _ingest(args):
             raise SkyfitError(f"--table takes no {what}: the table gives frames, values and "
                               "sigmas; give either photographs or --table.")
         ingest_table(args.table, args.spec, args.output, tz=args.tz, site=args.site,
-                     overwrite=args.overwrite)
+                     calibrate=dict(args.calibrate or []), overwrite=args.overwrite)
         return
     if not args.photos:
         raise SkyfitError("give photographs (files or folders), or --table OBS.csv.")
@@ -394,7 +394,8 @@ def build_parser():
     ing.add_argument("--calibrate", action="append", type=_reflectance,
                      metavar="MATERIAL=REFLECTANCE", help="a scene material that is a grey "
                      "Lambertian reference of this reflectance (or R,G,B); sets the exposure and "
-                     "white balance (repeatable)")
+                     "white balance (repeatable); with --table, the table's values are in its "
+                     "own units (e.g. DN), scaled to radiance by its rows on this material")
     ing.add_argument("--colorchecker", metavar="MATERIAL", help="a ColorChecker Classic in the "
                      "photographs, lying on this scene material: found automatically; its six "
                      "neutral swatches calibrate like --calibrate greys, its colours check the "

@@ -6,7 +6,9 @@ import csv
 import json
 import re
 
+import numpy as np
 import pytest
+from scipy.stats import chi2 as chi2_dist
 
 from skyfit_mi.cli import main
 from skyfit_mi.errors import SkyfitError
@@ -178,3 +180,98 @@ def test_each_row_is_checked_from_its_own_view(tmp_path, mi):
                                        "1,sphere,w,-1,0,1,1,1,1,0.1"],
                             "frame,region,point,x,y,z,r,g,b,sigma"),
                      spec, tmp_path / "default", log=lambda *a: None)
+
+
+# ---- a table in its own units, scaled by a reference of known reflectance ------------------
+
+RIG = """<scene version="3.0.0">
+ <bsdf type="ward" id="sample"><string name="model" value="colour"/>
+  <rgb name="C" value="0.5, 0.35, 0.25"/><float name="rho_s" value="0.06"/>
+  <float name="sigma_alpha" value="0.15"/></bsdf>
+ <bsdf type="ward" id="white"><string name="model" value="colour"/>
+  <rgb name="C" value="0.9, 0.9, 0.9"/><float name="rho_s" value="0.0"/>
+  <float name="sigma_alpha" value="0.1"/></bsdf>
+ <shape type="rectangle"><transform name="to_world"><scale value="0.4"/>
+  <translate x="-0.45"/></transform><ref id="sample"/></shape>
+ <shape type="rectangle"><transform name="to_world"><scale value="0.4"/>
+  <translate x="0.45"/></transform><ref id="white"/></shape>
+</scene>"""
+#: The instrument's units (DN) per W m^-2 sr^-1, per channel: unknown to the ingest.
+DN_PER_RADIANCE = np.array([800.0, 1000.0, 1300.0])
+
+
+@pytest.fixture(scope="module")
+def dn_rig(tmp_path_factory, mi):
+    """(folder, spec, a table of a sample and a white Lambertian reference (reflectance 0.9)
+    under six lab lights in the instrument's DN) made from a render."""
+    from skyfit_mi.pipeline.pixels import material_regions
+    from skyfit_mi.pipeline.sequence import render_sequence
+    from skyfit_mi.pipeline.table_sim import measure_table
+
+    tmp = tmp_path_factory.mktemp("dn")
+    (tmp / "rig.xml").write_text(RIG)
+    raw = _lab(scene="rig.xml", camera={**CAMERA, "angle_deg": 10.0, "fov_deg": 28.0,
+                                        "width": 16, "height": 16},
+               lights=[(15, 0), (20, 180), (35, 60), (35, 300), (50, 120), (50, 240)])
+    raw["render"] = {"spp": 64}
+    spec = _write(tmp, raw)
+    render_sequence(validate_spec(raw, tmp), tmp / "render", progress=False, log=lambda *a: None)
+    rng = np.random.default_rng(1)
+    px = np.concatenate([v[rng.choice(len(v), 4, replace=False)]
+                         for _, v in material_regions(tmp / "render")])
+    rows = list(csv.DictReader(measure_table(tmp / "render", px, tmp / "radiance.csv").open()))
+    for r in rows:
+        for c, k in zip("rgb", DN_PER_RADIANCE):
+            r[c], r[f"sigma_{c}"] = (f"{float(r[key]) * k:.6g}" for key in (c, f"sigma_{c}"))
+    with (tmp / "dn.csv").open("w") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    return tmp, spec, tmp / "dn.csv"
+
+
+def test_a_table_in_its_own_units_is_scaled_by_its_reference(dn_rig):
+    """--calibrate white=0.9 finds the instrument's scale within its standard error (a joint
+    99.9% test over the channels), the sample's fit holds the truth in its joint 99.9% region
+    and carries the scale's error in its intervals; without the reference the reflectances
+    run into their bound of 1."""
+    from skyfit_mi.fitting.fit import FitSession
+
+    tmp, spec, table = dn_rig
+    assert main(["ingest", str(spec), "--table", str(table), "--calibrate", "white=0.9", "-o",
+                 str(tmp / "seq")]) == 0
+    cal = load_manifest(tmp / "seq")[0]["ingest"]["calibration"]
+    dev = np.array(cal["scale_W_m2_sr_per_unit"]) * DN_PER_RADIANCE - 1.0
+    assert np.sum((dev / cal["scale_relative_sd"]) ** 2) < chi2_dist.ppf(0.999, 3), cal
+    assert cal["references"] == {"white": [0.9, 0.9, 0.9]} and cal["reference_rows"] == 24
+    s = FitSession(tmp / "seq", "sample", None, model="colour")
+    r = s.run("global", log=lambda *a: None)
+    assert set(r["calibration_error_sd"]) == set(s.names) and r["calibration_error_sd"]["C_r"] > 0
+    truth = np.array([0.5, 0.35, 0.25, 0.06, 0.15])
+    rise = s.problem.chi2(truth) - r["chi2"]
+    assert 0.0 <= rise <= chi2_dist.ppf(0.999, 5) * r["interval_scale_s2"] \
+        + r["cache_noise_chi2"], (rise, r["parameters"])
+    assert main(["ingest", str(spec), "--table", str(table), "-o", str(tmp / "raw")]) == 0
+    raw = FitSession(tmp / "raw", "sample", None, model="colour").run("global",
+                                                                     log=lambda *a: None)
+    assert raw["parameters"]["C_r"] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("reference, message", [
+    ("wall=0.9", "--calibrate wall: no material 'wall' in the spec's scene"),
+    ("white=0.9", "--calibrate white: .* has no unsaturated row on region 'white'"),
+])
+def test_a_reference_must_be_in_the_scene_and_the_table(dn_rig, tmp_path, capsys, reference,
+                                                        message):
+    """A table of the sample alone: a reference the scene lacks, or one the table does not
+    measure, is refused in one line before anything is written."""
+    _, spec, table = dn_rig
+    lines = table.read_text().splitlines()
+    only_sample = tmp_path / "sample.csv"
+    only_sample.write_text("\n".join([lines[0]] + [x for x in lines[1:] if ",sample," in x])
+                           + "\n")
+    assert main(["ingest", str(spec), "--table", str(only_sample), "--calibrate", reference,
+                 "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and re.search(message, err), err
+    assert not (tmp_path / "out").exists()

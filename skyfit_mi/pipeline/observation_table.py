@@ -53,12 +53,16 @@ as censored at its level, as an image's top code
 through the model's luminance (the first channel;
 :class:`~skyfit_mi.fitting.chi2.LuminanceModel`): it cannot tell colour, so only the 2- and
 3-parameter models take it.
+
+Values in an instrument's own units (DN: an unknown radiometric scale) are scaled to radiance
+by rows on reference materials of known Lambertian reflectance (``ingest --table --calibrate
+MATERIAL=REFLECTANCE``, :func:`reference_scale`); without one, the values are radiances.
 """
 
 import csv
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -424,11 +428,84 @@ def _table_spec(spec_path, table, tz, site, log):
     return spec, [frame_of[t] for t in table.times]
 
 
-def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrite=False,
-                 log=print):
+def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calibrate):
+    """The radiance of one unit of a table in its own scale (an instrument's DN), per channel,
+    from its rows on reference materials of known Lambertian reflectance, and the record of
+    that calibration: ((3,) [W m^-2 sr^-1 per unit], record).
+
+    ``calibrate`` {material: (r, g, b) reflectance}; ``rows``: the rows of the sequence (lit
+    frames); ``pos``, ``view``, ``offset``: :func:`locate_points`'.  Each reference point's
+    radiance as a white Lambertian, L, is traced as a fit traces its points
+    (:func:`~skyfit_mi.render.points.lambertian_radiance`); the table's values y ~ a rho L, a
+    [units per W m^-2 sr^-1] by weighted least squares over the unsaturated reference rows
+    (weights 1 / (sigma^2 + a^2 rho^2 var L), var L the trace's Monte Carlo variance), its
+    standard error widened by the scatter about the fit where that exceeds the sigmas
+    (chi^2/dof > 1).  The record's ``scale_relative_sd`` widens every fit's intervals of
+    reflectances (:func:`skyfit_mi.fitting.uncertainty.calibration_sd`)."""
+    from ..physics.colour import SRGB_LUMINANCE
+    from ..render.light_cache import point_rays
+    from ..render.points import lambertian_radiance
+
+    keys = table.point_keys()
+    ref = [i for i in rows if table.regions[i] in calibrate and not table.saturated[i].all()]
+    missing = [m for m in calibrate if m not in {table.regions[i] for i in ref}]
+    if missing:
+        raise SkyfitError(f"--calibrate {missing[0]}: {table.path} has no unsaturated row on "
+                          f"region {missing[0]!r} in a lit frame; measure the reference in the "
+                          "table (rows with that region).")
+    points = list(dict.fromkeys((table.regions[i], table.points[i]) for i in ref))
+    frames = sorted({row_frames[i] for i in ref})
+    P, T = len(points), len(frames)
+    v = np.zeros((P, T, 3))
+    y, sig = np.zeros((P, T, 3)), np.full((P, T, 3), np.inf)
+    for i in ref:
+        p, t = points.index((table.regions[i], table.points[i])), frames.index(row_frames[i])
+        v[p, t], y[p, t] = view[i], np.nan_to_num(table.value[i])
+        sig[p, t] = np.where(table.saturated[i], np.inf, table.sigma[i])
+    for p in range(P):                # a frame without the point's row: any view of it
+        have = np.isfinite(sig[p, :, 0])
+        v[p, ~have] = v[p, np.argmax(have)]
+    material = np.array([m for m, _ in points], dtype=object)
+    L, var = lambertian_radiance(xml, spec.render["variant"], [spec.frames[j].sky for j in frames],
+                                 point_rays(pos[[keys.index(k) for k in points]], v, offset),
+                                 material, max(1, int(spec.render["max_depth"]) - 1))
+    rho = np.array([calibrate[m] for m in material], dtype=float)[:, None, :]
+    m, m_var = rho * L, rho ** 2 * var
+    if table.luminance:                  # one quantity: Y (its variance bounded, as the fit's)
+        m = np.repeat((m @ SRGB_LUMINANCE)[..., None], 3, axis=2)
+        m_var = np.repeat((np.sqrt(m_var) @ SRGB_LUMINANCE)[..., None] ** 2, 3, axis=2)
+        y, sig = np.repeat(y[..., :1], 3, axis=2), np.repeat(sig[..., :1], 3, axis=2)
+    ok = np.isfinite(sig) & (m > 0)
+    a = np.zeros(3)
+    for _ in range(2):                   # the weights take the trace's variance at a
+        w = np.where(ok, 1.0 / (np.where(ok, sig, 1.0) ** 2 + a ** 2 * m_var), 0.0)
+        mm = np.einsum("ptc,ptc->c", w * m, m)
+        a = np.einsum("ptc,ptc->c", w * m, y) / np.where(mm > 0, mm, np.nan)
+    n = ok.sum(axis=(0, 1))
+    if not np.all(np.isfinite(a) & (a > 0)):
+        raise SkyfitError(f"--calibrate: the reference rows of {table.path} give no positive "
+                          "scale (unlit, or their values zero); check the reference's rows and "
+                          "its reflectance.")
+    chi2 = np.einsum("ptc,ptc->c", w, (y - a * m) ** 2)
+    s2 = np.maximum(1.0, chi2 / np.maximum(n - 1, 1))
+    rel_sd = np.sqrt(s2 / mm) / a
+    record = {"references": {k: list(map(float, v)) for k, v in calibrate.items()},
+              "reference_rows": len(ref), "scale_W_m2_sr_per_unit": (1.0 / a).tolist(),
+              "scale_relative_sd": rel_sd.tolist(),
+              "chi2_per_dof": (chi2 / np.maximum(n - 1, 1)).tolist(),
+              "method": "the table's values in its own units (e.g. DN) scaled to radiance by "
+                        "its rows on reference materials of known Lambertian reflectance, "
+                        "traced as white Lambertians under each frame's light"}
+    return 1.0 / a, record
+
+
+def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrate=None,
+                 overwrite=False, log=print):
     """Turn an observation table into a sequence folder (module docstring); returns the
     manifest dict.  ``tz``: zone of naive times; ``site``: (lat, lon[, alt]) over the spec's
-    (neither for lab lights)."""
+    (neither for lab lights); ``calibrate``: {material: (r, g, b) reflectance} of Lambertian
+    references measured in the table, whose values are then in its own units, scaled to
+    radiance by them (:func:`reference_scale`)."""
     from .ingest import measured_header
     from .sequence import finish, frame_record, prepare_folder
     from ..files import write_text
@@ -442,8 +519,24 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrit
         if r not in mats:
             raise SkyfitError(f"{table.path}: region {r!r} is no material of the spec's scene; "
                               f"its materials are: {', '.join(mats)}.")
+    for name, rho in (calibrate or {}).items():
+        if name not in mats:
+            raise SkyfitError(f"--calibrate {name}: no material {name!r} in the spec's scene; "
+                              f"its materials are: {', '.join(mats)}.")
+        if len(rho) != 3 or not all(0.0 < r <= 1.0 for r in rho):
+            raise SkyfitError(f"--calibrate {name}: give the reference's reflectance as one "
+                              "number or R,G,B, each in (0, 1].")
     keep = [i for i in range(len(row_frames)) if not spec.frames[row_frames[i]].skipped]
     pos, view, offset = locate_points(spec, scene, table, row_frames)
+    calibration = None
+    if calibrate:
+        scale, calibration = reference_scale(spec, scene[0], table, keep, row_frames, pos, view,
+                                             offset, calibrate)
+        table = replace(table, value=table.value * scale, sigma=table.sigma * scale)
+        log(f"calibration: one unit of {table.path.name} is "
+            f"{', '.join(f'{v:.4g}' for v in scale)} W m^-2 sr^-1 (R, G, B), to "
+            f"{', '.join(f'{v:.1%}' for v in calibration['scale_relative_sd'])} (standard "
+            f"error), from {calibration['reference_rows']} reference rows")
     top = float(np.nanmax(np.where(np.isfinite(table.sigma),
                                    table.value + HEADROOM_SIGMAS * table.sigma, np.nan)))
     if top <= 0:
@@ -483,6 +576,8 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrit
                               "ray_offset": offset, "units": "W m^-2 sr^-1, linear sRGB"}
         if saturated:
             manifest["ingest"]["saturated_values"] = int(table.saturated[keep].sum())
+        if calibration is not None:
+            manifest["ingest"]["calibration"] = calibration
         for f in spec.frames:
             rec = frame_record(f, 0, out)
             rec.pop("seed")
