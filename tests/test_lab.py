@@ -275,3 +275,22 @@ def test_a_reference_must_be_in_the_scene_and_the_table(dn_rig, tmp_path, capsys
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and re.search(message, err), err
     assert not (tmp_path / "out").exists()
+
+
+def test_photographs_of_lab_lights_are_refused_by_name(tmp_path, capsys):
+    """Photographs are placed by their times, which lab lights do not have: one line naming
+    the spec and the table route."""
+    from PIL import Image
+
+    names = []
+    for i in range(2):
+        Image.fromarray(np.full((8, 8, 3), 100, np.uint8)).save(tmp_path / f"p{i}.png")
+        names.append(str(tmp_path / f"p{i}.png"))
+    times = tmp_path / "times.csv"
+    times.write_text("file,time\np0.png,2026-06-21T10:00:00+00:00\n"
+                     "p1.png,2026-06-21T11:00:00+00:00\n")
+    assert main(["ingest", str(_write(tmp_path, _lab())), *names, "--times", str(times),
+                 "--exposure", "1", "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "has lab lights (frames by index, no [time])" in err \
+        and "ingest --table with a frame column" in err, err
