@@ -89,7 +89,79 @@ def misfit(out, checkout, tag):
             "chi2_per_dof": r["chi2_per_dof"], "positions": r["light_cache"]["positions"]}
 
 
-CASES = {"board": board, "misfit": misfit}
+#: The table's material (colour model) and its lights: irradiance [W m^-2], zenith range [deg].
+TABLE_TRUTH = {"C": (0.6, 0.45, 0.3), "rho_s": 0.08, "sigma_alpha": 0.12}
+LIGHTS, LIGHT_E, LIGHT_ZENITH = 96, 100.0, (10.0, 60.0)
+
+
+def make_table(folder, n_points, seed=0):
+    """A photometric-stereo table: ``n_points`` points on the disc, seen from above (a camera
+    10 units up), under LIGHTS directional lights spread over the zenith range (a spiral);
+    values from the NumPy Ward reference with 1% noise.  Returns (spec, table) paths."""
+    from skyfit_mi.conventions import direction_from_angles
+    from skyfit_mi.physics.ward import raw_parameters, ward_brdf
+
+    folder.mkdir(parents=True, exist_ok=True)
+    k = np.arange(LIGHTS)
+    zen = np.radians(np.interp(k, [0, LIGHTS - 1], LIGHT_ZENITH))
+    az = np.radians((k * 137.508) % 360.0)
+    skies = [{"type": "directional", "zenith_deg": float(np.degrees(z)),
+              "azimuth_deg": float(np.degrees(a)), "irradiance_W_m2": LIGHT_E}
+             for z, a in zip(zen, az)]
+    times = [f"{i // 60:02d}:{i % 60:02d}" for i in k]
+    spec = {"name": f"table-{n_points}", "location": {"latitude_deg": 0.0, "longitude_deg": 0.0,
+                                                    "timezone": "UTC"},
+            "time": {"date": "2026-06-21", "times": times}, "sky": skies,
+            "scene": {"file": "disc.xml"},
+            "camera": {"origin": [0.0, 0.0, 10.0], "target": [0.0, 0.0, 0.0],
+                       "up": [0.0, 1.0, 0.0], "fov_deg": 12.0, "width": 8, "height": 8}}
+    rng = np.random.default_rng(seed)
+    r, t = 0.9 * np.sqrt(rng.random(n_points)), 2 * np.pi * rng.random(n_points)
+    pts = np.stack([r * np.cos(t), r * np.sin(t), np.zeros(n_points)], axis=1)
+    rho_d, spec_r, sigma = raw_parameters("colour", **TABLE_TRUTH)
+    rows = ["time,region,point,x,y,z,view_zenith_deg,view_azimuth_deg,r,g,b,sigma"]
+    wo = np.array([0.0, 0.0, 10.0]) - pts                 # the disc is horizontal: local = world
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    vz, va = np.degrees(np.arccos(wo[:, 2])), np.degrees(np.arctan2(wo[:, 0], wo[:, 1])) % 360
+    for j, (z, a) in enumerate(zip(zen, az)):
+        wi = np.broadcast_to(direction_from_angles(z, a), wo.shape)
+        value = ward_brdf(wi, wo, rho_d, spec_r, sigma) * LIGHT_E * wi[:, 2:]
+        noise = 0.01 * value.mean(axis=1)
+        y = value + noise[:, None] * rng.standard_normal(value.shape)
+        rows += [f"2026-06-21T{times[j]}:00+00:00,disc,p{i},{p[0]:.6f},{p[1]:.6f},0,"
+                 f"{vz[i]:.6f},{va[i]:.6f}," + ",".join(f"{v:.6g}" for v in (*y[i], noise[i]))
+                 for i, p in enumerate(pts)]
+    (folder / "spec.json").write_text(json.dumps(spec))
+    (folder / "table.csv").write_text("\n".join(rows) + "\n")
+    return folder / "spec.json", folder / "table.csv"
+
+
+def table(n_points):
+    """The ``tableN`` case: ingest, fit and relight (--no-images) of :func:`make_table`."""
+    def case(out, checkout, tag):
+        src = out / f"table{n_points}-input"
+        if not (src / "table.csv").exists():
+            make_table(src, n_points)
+        day, fits, relit = (out / f"table{n_points}-{k}-{tag}" for k in ("day", "fits", "relit"))
+        for f in (day, fits, relit):
+            shutil.rmtree(f, ignore_errors=True)
+        res = {}
+        for step, args in (("ingest", ["ingest", src / "spec.json", "--table",
+                                       src / "table.csv", "-o", day]),
+                           ("fit", ["fit", day, "--all", "--model", 5, "-o", fits]),
+                           ("relight", ["relight", fits, "--target", day, "-o", relit,
+                                        "--no-images"])):
+            wall, rss = run(checkout, args, out / f"{step}-table{n_points}-{tag}.log")
+            res[f"{step}_s"], res[f"{step}_peak_MB"] = wall, rss
+        r = json.loads((fits / "fit_disc.json").read_text())
+        res.update(command_s=res["fit_s"], peak_MB=res["fit_peak_MB"],
+                   region_s=r["wall_time_s"], chi2_per_dof=r["chi2_per_dof"],
+                   parameters=r["parameters"])
+        return res
+    return case
+
+
+CASES = {"board": board, "misfit": misfit, "table400": table(400), "table4000": table(4000)}
 
 
 def main():

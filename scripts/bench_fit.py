@@ -33,7 +33,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--render-spp", type=int, default=1024,
                     help="samples per pixel of the full-render baseline (256 is 23x less accurate "
-                    "than the global method on this fit, 1024 about 6x; docs/BENCHMARKS.md)")
+                    "than the global method on this fit, 1024 about 6x; docs/BENCHMARKS.md, "
+                    "'Fit: methods against full-render annealing')")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--methods", default="global,anneal,lm,adam")
     ap.add_argument("--baseline-evaluations", type=int, default=None,

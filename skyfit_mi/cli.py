@@ -14,7 +14,7 @@ import sys
 #: otherwise; set before NumPy loads.  Dr.Jit's pool does the heavy work on every core, and
 #: OpenBLAS's threads, spinning after each small product NumPy does between its kernels, took
 #: 0.5 CPU-seconds of a 13-frame render from it and from a relight's prediction beside it
-#: (docs/BENCHMARKS.md, "tenth measurement"); fits and chi2map were no slower.  A map's Dask
+#: (docs/BENCHMARKS.md, "One BLAS thread"); fits and chi2map were no slower.  A map's Dask
 #: workers are set so by ``distributed`` already.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 

@@ -19,12 +19,15 @@ from .geometry import geometry_warnings, highlight_geometry
 from ..errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
-from .methods.levenberg_marquardt import SINGULAR_CONDITION
+from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
-from ..render.basis_table import TableModel
-from ..render.fit_model import check_start, other_readings
-from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POSITIONS, SIGMA_RESOLVED,
-                                  SKY_PLANS, PointRays)
+from ..render import setup
+from ..render.basis_table import TableModel, trace_table
+from ..render.fit_model import (BY_COUNT, PARAMETERS, WardModel, bounds, check_fit_normalisation,
+                                check_start, other_readings)
+from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
+                                  SIGMA_RESOLVED, SKY_PLANS, PointRays, anchors_pay,
+                                  build_light_cache)
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
 from ..pipeline.observation_table import is_table
 from ..physics.ward import METAL_THRESHOLD
@@ -112,8 +115,9 @@ class FitSession:
     normalisation : Ward normalisation of the model ('ward' = thesis eq. 3.19)
     seed : seeds the light cache
     positions, directions : samples per pixel of the light cache; ``positions=None`` sizes
-        it from the data (:meth:`run`): POSITIONS, grown after a fit whose cache noise
-        exceeds CACHE_SHARE of the degrees of freedom
+        it from the data (:meth:`run`): POSITIONS (POINT_POSITIONS for a table's points),
+        grown after a fit whose cache noise exceeds CACHE_SHARE of the chi-square the data's
+        scatter gives (:meth:`cache_growth`)
     min_frames : rendered frames the sequence must hold (1 to predict a single frame)
     frames : manifest frame indices to use (None: every rendered frame), e.g. to hold some
         out for a prediction test
@@ -127,9 +131,6 @@ class FitSession:
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
                  positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None,
                  sky_plan="fit", trace=True):
-        from ..render import setup
-        from ..render.fit_model import BY_COUNT, PARAMETERS, bounds, check_fit_normalisation
-
         model = BY_COUNT.get(model, model)
         check_choice("model", model, tuple(PARAMETERS))
         check_fit_normalisation(normalisation)          # before the light is traced
@@ -155,7 +156,8 @@ class FitSession:
         # a material is the truth only where skyfit rendered the frames with it; an ingested
         # sequence's spec materials are placeholders for the unknown photographed surface
         self.truth = mats[name] if doc.get("source", "render") in RENDERED_SOURCES else None
-        self.cache_settings = {"positions": POSITIONS if positions is None else int(positions),
+        first = POSITIONS if self.obs.rays is None else POINT_POSITIONS
+        self.cache_settings = {"positions": first if positions is None else int(positions),
                                "directions": int(directions), "seed": seed,
                                "sized": "from the data" if positions is None else "given",
                                "sky_plan": check_choice("sky plan", sky_plan, tuple(SKY_PLANS))}
@@ -190,8 +192,6 @@ class FitSession:
         the sky plan's anchors pay (as each region alone would take them).  A region of an
         observation table traces its own.  ``options`` as the constructor's, ``trace``
         excepted."""
-        from ..render.light_cache import anchors_pay
-
         sessions = {name: cls.from_fit(r, manifest_path, pixels[name], trace=False, **options)
                     for name, r in results.items()}
         groups = {}
@@ -258,9 +258,6 @@ class FitSession:
         """The :class:`~skyfit_mi.render.basis_table.BasisTable` of the light at
         ``cache_settings`` of the sequence's scene and frames at ``at`` (pixels or rays) on
         material ``bsdf_id`` (one, or one per pixel), traced in blocks of bounded memory."""
-        from ..render.basis_table import trace_table
-        from ..render.fit_model import WardModel
-
         c = self.cache_settings
         table, c["blocks"] = trace_table(
             self.scene, self.params, self.skies, at, bsdf_id,
@@ -296,8 +293,6 @@ class FitSession:
         """The region's raw :class:`~skyfit_mi.render.light_cache.LightCache` at
         ``cache_settings`` in one block, its samples kept (for diagnostics and tests of the
         Dr.Jit model: a fit keeps only their table)."""
-        from ..render.light_cache import build_light_cache
-
         return build_light_cache(self.scene, self.params, self.skies,
                                  self.obs.pixels if self.obs.rays is None else self.obs.rays,
                                  self.name, **self._cache_options())
@@ -331,7 +326,8 @@ class FitSession:
         if self.cache_settings["sized"] == "given":
             return 1
         need = max(noise_by_sigma.values()) / (CACHE_SHARE * self.problem.dof * max(1.0, s2))
-        room = min(CACHE_GROWTH_MAX * POSITIONS / self.cache_settings["positions"],
+        first = POSITIONS if self.obs.rays is None else POINT_POSITIONS
+        room = min(CACHE_GROWTH_MAX * first / self.cache_settings["positions"],
                    CACHE_TIME_BUDGET / max(self.cache_time, 1e-3))
         factor = 1
         while factor < need and 2 * factor <= room:
@@ -349,8 +345,6 @@ class FitSession:
         but it keeps intervals honest when the data are precise enough for the cache's noise
         to ripple chi-square by more than the 95% threshold.
         """
-        from .methods.levenberg_marquardt import levenberg_marquardt
-
         if self._halves is None:
             self._halves = [Problem(self.obs, self._model(self.table.part(j)),
                                     valid=self.table.hit) for j in (1, 2)]
@@ -372,8 +366,6 @@ class FitSession:
         """A half cache's ``fit`` on ``theta``'s side of the colour rule: when C is grey (within
         GREY_SPREAD) and the fit is across the rule, Levenberg-Marquardt on that half from the
         fit's twin reading; otherwise the fit itself."""
-        from .methods.levenberg_marquardt import levenberg_marquardt
-
         def side(x):
             return x[3] >= METAL_THRESHOLD
         if np.ptp(fit[:3]) > GREY_SPREAD:

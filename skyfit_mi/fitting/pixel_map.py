@@ -33,10 +33,10 @@ from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, fit_pixels, patch_grou
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
 #: Fits (pixels, or patches) per chunk: a chunk's peak memory is about 0.8 MB per fit plus
-#: 0.25 GB on a 13-frame day (docs/BENCHMARKS.md), so 1024 keep a worker near 1.1 GB; a
-#: longer day's light is traced in blocks of bounded size (basis_table.CHUNK_SAMPLES); a
-#: chunk's fixed cost (the scene, its skies, the kernels' tracing: about 1 s) is a tenth of
-#: its time.
+#: 0.25 GB on a 13-frame day (docs/BENCHMARKS.md, "Per-pixel maps: speed and memory"), so
+#: 1024 keep a worker near 1.1 GB; a longer day's light is traced in blocks of bounded size
+#: (basis_table.CHUNK_SAMPLES); a chunk's fixed cost (the scene, its skies, the kernels'
+#: tracing: about 1 s) is a tenth of its time.
 CHUNK = 1024
 #: How :func:`plan_chunks` lays fits into chunks (recorded, so that a store laid out otherwise
 #: is not resumed).
@@ -147,7 +147,8 @@ def _client(workers, scheduler, memory_per_worker):
 
     # Dask's workers start with MALLOC_TRIM_THRESHOLD_ set, which turns off glibc's dynamic
     # mmap threshold: every large temporary array is then mapped and faulted in afresh, and a
-    # chunk took 1.4x as long (docs/BENCHMARKS.md); the variable is left unset here
+    # chunk took 1.4x as long (docs/BENCHMARKS.md, "Per-pixel maps: speed and memory"); the
+    # variable is left unset here
     with dask.config.set({f"{TRIM}": None}):
         cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
                                memory_limit=memory_per_worker, dashboard_address=None,

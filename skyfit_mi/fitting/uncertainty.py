@@ -67,8 +67,9 @@ def channel_factors(r, J, usable, in_chi2=None):
     diagonal over that of (J^T J)^-1 (the thesis's covariance, the inverse of eq. 6.11's
     curvature matrix, when R = I).
     Measured on quality-95 JPEG days (``scripts/ingest_coverage.py --scale 3``, 18 noise
-    seeds, docs/BENCHMARKS.md): R's off-diagonal 0.3-0.56, f 1.1-1.34, and the 95% intervals'
-    coverage 0.88 -> 0.94; at quality 100 (12 seeds) f 1.00-1.06, coverage 1.00 as before.
+    seeds, docs/BENCHMARKS.md, "Errors shared by a pixel's channels"): R's off-diagonal
+    0.3-0.56, f 1.1-1.34, and the 95% intervals' coverage 0.88 -> 0.94; at quality 100 (12
+    seeds) f 1.00-1.06, coverage 1.00 as before.
     """
     n_par = J.shape[-1]
     C = r.shape[-1]

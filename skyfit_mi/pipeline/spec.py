@@ -82,11 +82,13 @@ _SERIES_KEYS = {"ghi": "global_horizontal_W_m2", "dhi": "diffuse_horizontal_W_m2
                 "dni": "direct_normal_W_m2"}
 BELOW_HORIZON = ("sky", "skip")
 #: Mitsuba samplers a spec may choose; multijitter stratifies the sun/sky choice of the
-#: emitter sample and gives about 5x lower noise than independent at equal cost (docs/BENCHMARKS.md).
+#: emitter sample and gives about 6x lower noise than independent at equal samples
+#: (docs/BENCHMARKS.md, "sun_sky_path against path and Radiance rpict").
 SAMPLERS = ("multijitter", "stratified", "ldsampler", "independent")
 #: Integrators a spec may choose: ``sun_sky_path`` (separate sun and sky light samples, the
-#: default; about a fifth of ``path``'s error at equal time on the thesis disc,
-#: docs/BENCHMARKS.md) or Mitsuba's ``path`` (one light sample that picks sun or sky).
+#: default; about a fifth of ``path``'s error at equal time on the thesis disc, docs/BENCHMARKS.md,
+#: "sun_sky_path against path and Radiance rpict") or Mitsuba's ``path`` (one light sample
+#: that picks sun or sky).
 INTEGRATORS = ("sun_sky_path", "path")
 
 

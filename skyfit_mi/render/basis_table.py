@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .fit_model import PARAMETERS, reflectances
 from .light_cache import (CONTROL_FULL, CONTROL_SIGMA, DIRECTIONS, POSITIONS, SIGMA_LARGEST,
                           SIGMA_RESOLVED, PointRays, build_light_cache)
 
@@ -374,8 +375,6 @@ class TableModel:
     """
 
     def __init__(self, table, model):
-        from .fit_model import PARAMETERS
-
         self.table, self.model = table, model
         self.normalisation = table.normalisation
         self.names = PARAMETERS[model]
@@ -387,8 +386,6 @@ class TableModel:
         return TableModel(self.table.part(j), self.model)
 
     def _parts(self, theta, derivative=False):
-        from .fit_model import reflectances
-
         rho_d, spec, d_rho_d, d_spec = reflectances(self.model, theta)
         G = self.table.lobe(theta[-1], derivative)
         return rho_d, spec, d_rho_d, d_spec, G
@@ -436,8 +433,6 @@ class TableModel:
     def radiances(self, thetas, reduce=None):
         """L at many parameter sets ``thetas`` (n, n_params): (n, P, T, 3), or ``reduce`` of
         each (a linear map of a (P, T, 3) radiance, applied to the basis)."""
-        from .fit_model import reflectances
-
         thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
         reduce = reduce or (lambda x: x)
         uniq, inverse = np.unique(thetas[:, -1], return_inverse=True)

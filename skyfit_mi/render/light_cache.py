@@ -24,10 +24,9 @@ Most of that light is the sky itself, a known function h (the ``cie_sky`` emitte
 sum).  It is the estimate's control variate (:mod:`.sky_control`): the samples carry only
 L_i - h (the sun, the scene's geometry and its shadows, which h does not know), and the
 integrals of h through the diffuse term and through the lobe at every sigma are computed
-deterministically, per position, once.  Without it the sampled sky cost 1.5-1.9% rms per
-value above sigma_alpha = 0.05 and pulled fits toward smooth lobes, where the estimate was
-almost exact; with it the whole range is as accurate as the narrow end (docs/BENCHMARKS.md,
-"the light cache's accuracy at every roughness").
+deterministically, per position, once.  Without it the sampled sky's own error was 0.28-0.30%
+rms per value under a clear sky and 0.47-0.55% under an overcast one at every roughness; with
+it 0.005-0.09% (docs/BENCHMARKS.md, "The light cache's accuracy at every roughness").
 
 A narrow lobe sees what h does not know (a reflected object, say) through a few of the fixed
 directions, so that part's estimate
@@ -74,13 +73,18 @@ SIGMA_TABLE = (SIGMA_RESOLVED, SIGMA_LARGEST)
 #: Samples per pixel by default: positions over the pixel's area (a highlight's radiance can
 #: vary by tens of per cent across one pixel) and light directions at each position.
 POSITIONS, DIRECTIONS = 32, 128
+#: Positions of a measured point by default: a point has no area, so its positions only
+#: repeat the directions' sampling (two halves for the cache's own error); an automatically
+#: sized cache grows them where the data need it.
+POINT_POSITIONS = 4
 #: Share of a fit's degrees of freedom that an automatically sized cache's largest noise over
 #: the roughness range is grown to stay under (:meth:`~skyfit_mi.fitting.fit.FitSession.run`).
 CACHE_SHARE = 0.1
 #: Pixels between the anchors at which the light caches of predictions and maps integrate the
 #: sky (the ``anchors`` :class:`SkyPlan`; a fit's takes its positions' own,
 #: WIDE_SHARE): the pixels between them interpolate where that is accurate, with an error
-#: second order in the spacing, a few 1e-4 of the radiance at 4 pixels (docs/BENCHMARKS.md).
+#: second order in the spacing, a few 1e-4 of the radiance at 4 pixels (docs/BENCHMARKS.md,
+#: "Sky integrals interpolated between anchors").
 SKY_SPACING = 4
 #: Sky integrals shared by interpolation (a :class:`SkyPlan`'s ``spacing``): a
 #: pixel takes the bilinear interpolation of the four anchors around it only when they lie on
@@ -94,7 +98,8 @@ SHARE_ANGLE_DEG, SHARE_HORIZON_DEG, SHARE_SUN_DEG = 2.0, 5.0, 5.0
 #: WIDE_SIGMA [rad] change little across a pixel and carry most of the quadratures'
 #: directions, so they are taken at WIDE_SHARE of each pixel's random positions (at least one
 #: in each half of them: LightCache.halves stay independent and see the subset's noise), each
-#: half's mean given to its positions: unbiased, the cache about 2.6x faster; the narrower
+#: half's mean given to its positions: unbiased, the cache about 2.6x faster (docs/
+#: BENCHMARKS.md, "A fit's wide sky integrals at a few positions"); the narrower
 #: nodes, which resolve the pixel, at every position (the ``fit`` :class:`SkyPlan`).
 #: Only where every pixel's footprint is small against those lobes: its positions' normals and
 #: mirror directions within WIDE_SPREAD_DEG of their mean (planes seen in pixels of a fraction
