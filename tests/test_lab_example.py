@@ -98,7 +98,10 @@ def test_the_example_relights_and_maps_by_frame_index(example):
     rows = _rows(out / "prediction.csv")
     assert sorted({int(r["frame"]) for r in rows}) == list(range(12))
     assert {r["time"] for r in rows} == {""}
-    assert json.loads((out / "relight.json").read_text())["band_coverage"]["share"] >= 0.8
+    errors = json.loads((out / "relight.json").read_text())
+    assert errors["band_coverage"]["share"] >= 0.8
+    # the clipped highlight's values, lower bounds only, are left out of the region means
+    assert errors["region_means"]["disc"]["fit"] < 0.02, errors["region_means"]
     assert main(["chi2map", str(seq), str(fit), "--n", "6", "-o", str(tmp / "map")]) == 0
     assert (tmp / "map.csv").is_file()
     # the rendered lab frames relit with the fit, images and all

@@ -543,8 +543,10 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
             r, target, None, seed=seed, positions=POSITIONS, directions=DIRECTIONS,
             min_frames=1)
         sets = parameter_draws(r, s.names, s.lower, s.upper, draws, rng)
-        # the region's mean over its pixels; over a table's points measured in each frame
-        have = np.ones(s.obs.y.shape) if s.obs.rays is None else np.isfinite(s.obs.sigma) * 1.0
+        # the region's mean over its pixels; over a table's points measured in each frame,
+        # but for saturated values (at the top code), which only bound theirs from below
+        have = np.ones(s.obs.y.shape) if s.obs.rays is None else \
+            (np.isfinite(s.obs.sigma) & (s.obs.y < s.obs.sensor.max_code)) * 1.0
         have = have / np.maximum(have.sum(axis=0), 1.0)
 
         def region_mean(x):
