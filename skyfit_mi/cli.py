@@ -141,15 +141,15 @@ def _ingest(args):
         from .pipeline.observation_table import ingest_table
 
         photo_only = [k for k in ("times", "name_pattern", "response", "gamma", "exposure",
-                                  "calibrate", "colorchecker", "noise")
+                                  "colorchecker", "noise")
                       if getattr(args, k) is not None]
         if args.photos or photo_only or args.vignetting != "none":
             what = "photographs" if args.photos else "--" + (photo_only or ["vignetting"])[0] \
                 .replace("_", "-")
-            raise SkyfitError(f"--table takes no {what}: the table gives times, values and "
+            raise SkyfitError(f"--table takes no {what}: the table gives frames, values and "
                               "sigmas; give either photographs or --table.")
         ingest_table(args.table, args.spec, args.output, tz=args.tz, site=args.site,
-                     overwrite=args.overwrite)
+                     calibrate=dict(args.calibrate or []), overwrite=args.overwrite)
         return
     if not args.photos:
         raise SkyfitError("give photographs (files or folders), or --table OBS.csv.")
@@ -373,7 +373,8 @@ def build_parser():
                      "PNG, JPEG, camera RAW)")
     ing.add_argument("--table", metavar="CSV", help="instead of photographs: a table of measured "
                      "radiances (time, region, r, g, b, sigma, optional point, x,y,z, view, "
-                     "normal; see docs/MANIFEST.md)")
+                     "normal, saturated; for lab lights, a spec of directional [[sky]] without "
+                     "[time], frame instead of time; see docs/MANIFEST.md)")
     ing.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
     ing.add_argument("--times", metavar="CSV", help="CSV file,time giving each frame's time "
                      "(instead of EXIF DateTimeOriginal)")
@@ -393,7 +394,8 @@ def build_parser():
     ing.add_argument("--calibrate", action="append", type=_reflectance,
                      metavar="MATERIAL=REFLECTANCE", help="a scene material that is a grey "
                      "Lambertian reference of this reflectance (or R,G,B); sets the exposure and "
-                     "white balance (repeatable)")
+                     "white balance (repeatable); with --table, the table's values are in its "
+                     "own units (e.g. DN), scaled to radiance by its rows on this material")
     ing.add_argument("--colorchecker", metavar="MATERIAL", help="a ColorChecker Classic in the "
                      "photographs, lying on this scene material: found automatically; its six "
                      "neutral swatches calibrate like --calibrate greys, its colours check the "

@@ -130,7 +130,8 @@ def test_relight_onto_a_new_day_has_no_observations(day, tmp_path):
     ("into the target", "the output folder is the target's"),
     ("another model", "is not a fit result of `skyfit fit`"),
     ("bad interval", "is not a fit result of `skyfit fit`"),
-    ("no sun", "the target's sun is below the horizon at every time (01:00, 23:00)"),
+    ("no sun", "the target's sun is below the horizon in every frame (frame 0 at 01:00, frame 1 at "
+                "23:00)"),
     ("no region in the target", "does not see region 'disc'"),
 ])
 def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
