@@ -120,3 +120,18 @@ def test_light_traced_in_blocks_agrees_with_one_block(traced):
     z = (a.mean(axis=0) - b.mean(axis=0)) / np.sqrt((va.sum(axis=0) + vb.sum(axis=0))
                                                     / len(a) ** 2)
     assert np.all(np.abs(z) < 5) and np.sqrt(np.mean(z**2)) < 2.5, z
+
+
+def test_a_fit_beyond_the_machines_memory_is_refused_up_front_with_its_estimate(days,
+                                                                                monkeypatch):
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.render import basis_table
+
+    monkeypatch.setattr("skyfit_mi.fitting.fit.available_memory", lambda: 100 << 20)
+    need = basis_table.memory_estimate(16, 13, 8, 128)
+    assert need > 100 << 20
+    with pytest.raises(SkyfitError, match=r"needs up to 0\.\d GB, but this machine has 0\.1 GB "
+                                          r"available; fit fewer pixels \(--max-pixels\)") as e:
+        FitSession(days["clean"], "disc", REGION, positions=8, directions=128)
+    assert "\n" not in str(e.value)

@@ -259,8 +259,8 @@ class FitSession:
         ``cache_settings`` of the sequence's scene and frames at ``at`` (pixels or rays) on
         material ``bsdf_id`` (one, or one per pixel), traced in blocks of bounded memory."""
         c = self.cache_settings
-        need, have = memory_estimate(len(at), len(self.skies), c["positions"]), \
-            available_memory()
+        need = memory_estimate(len(at), len(self.skies), c["positions"], c["directions"])
+        have = available_memory()
         if have is not None and need > have:
             raise SkyfitError(
                 f"fitting {len(at)} points in {len(self.skies)} frames needs up to "

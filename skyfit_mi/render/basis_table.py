@@ -326,12 +326,13 @@ def _lobe_at(lobe, x, lo, hi):
 FIT_BYTES_PER_VALUE, BASE_BYTES = 1024, 300 << 20
 
 
-def memory_estimate(P, T, positions):
+def memory_estimate(P, T, positions, directions):
     """The most a fit of P points (or pixels) in T frames takes [bytes]: its table at
     MAX_DEGREE in every piece, the fit's own arrays, one block of the light and the base."""
     arrays = 2 * sum(MAX_DEGREE + 1 for _ in PIECES) + 2 * len(variance_sigmas()) + 7
     per_value = 4 * arrays + 4 * positions / 3 + FIT_BYTES_PER_VALUE
-    return int(P * T * 3 * per_value + CHUNK_SAMPLES * BYTES_PER_SAMPLE + BASE_BYTES)
+    block = min(CHUNK_SAMPLES, P * T * positions * directions)
+    return int(P * T * 3 * per_value + block * BYTES_PER_SAMPLE + BASE_BYTES)
 
 
 def available_memory():
