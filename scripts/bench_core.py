@@ -108,18 +108,15 @@ def make_table(folder, n_points, seed=0):
     skies = [{"type": "directional", "zenith_deg": float(np.degrees(z)),
               "azimuth_deg": float(np.degrees(a)), "irradiance_W_m2": LIGHT_E}
              for z, a in zip(zen, az)]
-    times = [f"{i // 60:02d}:{i % 60:02d}" for i in k]
-    spec = {"name": f"table-{n_points}", "location": {"latitude_deg": 0.0, "longitude_deg": 0.0,
-                                                    "timezone": "UTC"},
-            "time": {"date": "2026-06-21", "times": times}, "sky": skies,
-            "scene": {"file": "disc.xml"},
+    # lab lights: no time and no site, the frames are the lights by index
+    spec = {"name": f"table-{n_points}", "sky": skies, "scene": {"file": "disc.xml"},
             "camera": {"origin": [0.0, 0.0, 10.0], "target": [0.0, 0.0, 0.0],
                        "up": [0.0, 1.0, 0.0], "fov_deg": 12.0, "width": 8, "height": 8}}
     rng = np.random.default_rng(seed)
     r, t = 0.9 * np.sqrt(rng.random(n_points)), 2 * np.pi * rng.random(n_points)
     pts = np.stack([r * np.cos(t), r * np.sin(t), np.zeros(n_points)], axis=1)
     rho_d, spec_r, sigma = raw_parameters("colour", **TABLE_TRUTH)
-    rows = ["time,region,point,x,y,z,view_zenith_deg,view_azimuth_deg,r,g,b,sigma"]
+    rows = ["frame,region,point,x,y,z,view_zenith_deg,view_azimuth_deg,r,g,b,sigma"]
     wo = np.array([0.0, 0.0, 10.0]) - pts                 # the disc is horizontal: local = world
     wo /= np.linalg.norm(wo, axis=1, keepdims=True)
     vz, va = np.degrees(np.arccos(wo[:, 2])), np.degrees(np.arctan2(wo[:, 0], wo[:, 1])) % 360
@@ -128,7 +125,7 @@ def make_table(folder, n_points, seed=0):
         value = ward_brdf(wi, wo, rho_d, spec_r, sigma) * LIGHT_E * wi[:, 2:]
         noise = 0.01 * value.mean(axis=1)
         y = value + noise[:, None] * rng.standard_normal(value.shape)
-        rows += [f"2026-06-21T{times[j]}:00+00:00,disc,p{i},{p[0]:.6f},{p[1]:.6f},0,"
+        rows += [f"{j},disc,p{i},{p[0]:.6f},{p[1]:.6f},0,"
                  f"{vz[i]:.6f},{va[i]:.6f}," + ",".join(f"{v:.6g}" for v in (*y[i], noise[i]))
                  for i, p in enumerate(pts)]
     (folder / "spec.json").write_text(json.dumps(spec))
