@@ -132,6 +132,14 @@ class ObservationTable:
         """The distinct (region, point) pairs in order of first appearance."""
         return list(dict.fromkeys(zip(self.regions, self.points)))
 
+    def point_rows(self):
+        """{(region, point): its rows' indices}, in order of first appearance (one pass:
+        a table of thousands of points x frames is grouped in linear time)."""
+        out = {}
+        for i, k in enumerate(zip(self.regions, self.points)):
+            out.setdefault(k, []).append(i)
+        return out
+
 
 def _number(text, path, line, column):
     try:
@@ -295,8 +303,7 @@ def read_observation_table(path, tz=None):
                               f"again (first on line {seen[key]}); keep one row (or average "
                               "them with their sigma).")
         seen[key] = line
-    for r, p in table.point_keys():
-        rows_p = [i for i in range(n) if table.regions[i] == r and table.points[i] == p]
+    for (r, p), rows_p in table.point_rows().items():
         pos = table.position[rows_p]
         if np.isfinite(pos).any() and not np.allclose(pos, pos[0], rtol=0, atol=1e-9):
             raise SkyfitError(f"{path} line {lines[rows_p[0]]}: point {p!r} of {r!r} moves from "
@@ -321,18 +328,20 @@ def locate_points(spec, scene_xml, table, row_frames):
     ``row_frames``: each row's frame index in the sequence (for messages)."""
     from ..render.points import load_points_scene, surface_hits
 
-    keys = table.point_keys()
+    groups = table.point_rows()
+    keys = list(groups)
     xml, _, to_world = scene_xml
     scene = load_points_scene(xml, spec.render["variant"])
     cam_o, cam_d = _camera(to_world)
     P = len(keys)
-    first = {k: next(i for i in range(len(table.regions))
-                     if (table.regions[i], table.points[i]) == k) for k in keys}
+    first = {k: rows[0] for k, rows in groups.items()}
     pos = table.position[[first[k] for k in keys]]
     unplaced = ~np.isfinite(pos).all(axis=1)
     hits = surface_hits(scene, np.repeat(cam_o[None], P, 0), np.repeat(cam_d[None], P, 0))
     pos[unplaced] = hits["p"][unplaced]
-    point = np.array([keys.index(k) for k in zip(table.regions, table.points)])
+    point = np.empty(len(table.regions), dtype=int)
+    for j, rows in enumerate(groups.values()):
+        point[rows] = j
     given = np.isfinite(table.view).all(axis=1)
     toward_camera = cam_o[None] - pos[point]
     toward_camera /= np.linalg.norm(toward_camera, axis=1, keepdims=True)
@@ -446,7 +455,7 @@ def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calib
     from ..render.light_cache import point_rays
     from ..render.points import lambertian_radiance
 
-    keys = table.point_keys()
+    index = {k: j for j, k in enumerate(table.point_keys())}
     ref = [i for i in rows if table.regions[i] in calibrate and not table.saturated[i].all()]
     missing = [m for m in calibrate if m not in {table.regions[i] for i in ref}]
     if missing:
@@ -458,8 +467,10 @@ def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calib
     P, T = len(points), len(frames)
     v = np.zeros((P, T, 3))
     y, sig = np.zeros((P, T, 3)), np.full((P, T, 3), np.inf)
+    at_point = {k: j for j, k in enumerate(points)}
+    at_frame = {f: j for j, f in enumerate(frames)}
     for i in ref:
-        p, t = points.index((table.regions[i], table.points[i])), frames.index(row_frames[i])
+        p, t = at_point[(table.regions[i], table.points[i])], at_frame[row_frames[i]]
         v[p, t], y[p, t] = view[i], np.nan_to_num(table.value[i])
         sig[p, t] = np.where(table.saturated[i], np.inf, table.sigma[i])
     for p in range(P):                # a frame without the point's row: any view of it
@@ -467,7 +478,7 @@ def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calib
         v[p, ~have] = v[p, np.argmax(have)]
     material = np.array([m for m, _ in points], dtype=object)
     L, var = lambertian_radiance(xml, spec.render["variant"], [spec.frames[j].sky for j in frames],
-                                 point_rays(pos[[keys.index(k) for k in points]], v, offset),
+                                 point_rays(pos[[index[k] for k in points]], v, offset),
                                  material, max(1, int(spec.render["max_depth"]) - 1))
     rho = np.array([calibrate[m] for m in material], dtype=float)[:, None, :]
     m, m_var = rho * L, rho ** 2 * var
@@ -544,7 +555,7 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
                           "radiances [W m^-2 sr^-1].")
     sensor = SensorModel(exposure=SCALE_SHARE / top, response="linear", bits=16)
 
-    keys = table.point_keys()
+    index = {k: j for j, k in enumerate(table.point_keys())}
     saturated = bool(table.saturated.any())
     columns = ["frame", *([] if table.by_index else ["time"]), "region", "point", "x", "y", "z",
                "view_x", "view_y", "view_z",
@@ -554,7 +565,7 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
                  if saturated else [])]
     lines = [",".join(columns)]
     for i in sorted(keep, key=lambda i: (row_frames[i], i)):
-        k = keys.index((table.regions[i], table.points[i]))
+        k = index[(table.regions[i], table.points[i])]
         channels = slice(0, 1) if table.luminance else slice(0, 3)
         nums = [*pos[k], *view[i], *table.value[i, channels], *table.sigma[i, channels]]
         flags = [str(int(v)) for v in table.saturated[i, channels]] if saturated else []
@@ -572,7 +583,7 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
                                    scene)
         manifest["ingest"] = {"table": str(table.path), "rows": len(table.regions),
                               "points": [{"region": r, "point": p, "position": pos[k].tolist()}
-                                         for k, (r, p) in enumerate(keys)],
+                                         for (r, p), k in index.items()],
                               "ray_offset": offset, "units": "W m^-2 sr^-1, linear sRGB"}
         if saturated:
             manifest["ingest"]["saturated_values"] = int(table.saturated[keep].sum())
@@ -637,10 +648,12 @@ def table_observations(doc, root, region, points=None, frames=None):
             raise SkyfitError(f"region {region!r} has no point {unknown[0]!r}; its points are: "
                               f"{', '.join(keys)}.")
         keys = list(points)
+    wanted = set(keys)
     rows = [i for i in range(len(frame_col)) if table.regions[i] == region
-            and table.points[i] in keys]
+            and table.points[i] in wanted]
     fr = sorted({frame_col[i] for i in rows} if frames is None else set(frames))
     P, T = len(keys), len(fr)
+    at_point, at_frame = {p: j for j, p in enumerate(keys)}, {f: j for j, f in enumerate(fr)}
     pos = np.zeros((P, 3))
     view = np.zeros((P, T, 3))
     view[..., 2] = 1.0
@@ -649,7 +662,7 @@ def table_observations(doc, root, region, points=None, frames=None):
     for i in rows:
         if frame_col[i] not in fr:
             continue
-        p, t = keys.index(table.points[i]), fr.index(frame_col[i])
+        p, t = at_point[table.points[i]], at_frame[frame_col[i]]
         pos[p], view[p, t] = table.position[i], table.view[i]
         y[p, t], sig[p, t] = np.nan_to_num(table.value[i]), table.sigma[i]
         sat[p, t] = table.saturated[i]
