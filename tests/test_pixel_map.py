@@ -313,10 +313,11 @@ def test_saturated_values_left_out_flag_only_fits_that_contradict_them(tmp_path)
     noise): the map's grid leaves those values out, and a pixel stays determined only where
     its fit reaches them.  Such pixels hold the truth in their intervals as often as the
     board's determined pixels; the same fits without their lobe (a wrong estimate) contradict
-    the values and are flagged."""
+    the values and are flagged; patches of such pixels are fitted and flagged alike."""
     from skyfit_mi.fitting.chi2 import load_observations, usable_values
     from skyfit_mi.fitting.methods.global_search import SIGMA_GRID, _linearise, near_saturation
-    from skyfit_mi.fitting.pixel_fit import UNDETERMINED, WARNINGS, _contradicts, fit_pixels
+    from skyfit_mi.fitting.pixel_fit import (UNDETERMINED, WARNINGS, _contradicts, fit_pixels,
+                                             patch_groups)
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
 
@@ -338,6 +339,13 @@ def test_saturated_values_left_out_flag_only_fits_that_contradict_them(tmp_path)
     print(f"{left_out.sum()} of {len(px)} pixels with saturated values left out, {kept.sum()} "
           f"determined; truth inside: {inside.mean():.3f}")
     assert inside.mean() >= 0.8
+    # patches of pixels that saturate: one fit per patch, flagged like a pixel's
+    groups, corners = patch_groups(px, 4)
+    patched = fit_pixels(tmp_path / "day", name, px, groups=groups)
+    assert len(patched["theta"]) == len(corners) < len(px)
+    patch_left_out = np.bincount(groups, weights=left_out, minlength=len(corners)) > 0
+    assert np.array_equal((patched["warnings"] & WARNINGS["saturated values left out"]) > 0,
+                          patch_left_out)
     # the same fits without their lobe (a fit that missed the highlight): short of the
     # saturated values
     from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
