@@ -211,6 +211,23 @@ def test_the_cli_takes_a_table_and_refuses_photo_options_with_it(tmp_path, mi):
     assert doc["source"] == "ingest" and len(doc["frames"]) == 3
 
 
+def test_times_of_mixed_utc_offsets_are_taken_as_their_instants(tmp_path, mi):
+    """A table across a change of summer time (or from two instruments): each time keeps its
+    offset, and its sun is that of its instant in UTC."""
+    from skyfit_mi.pipeline.observation_table import ingest_table
+
+    spec = _spec({"type": "clear"}, tmp_path)
+    table = _write(tmp_path, "time,region,r,g,b,sigma\n" + "".join(
+        f"{t},disc,1,1,1,0.1\n" for t in ("2026-06-21T09:00:00+00:00",
+                                          "2026-06-21T13:00:00+01:00",
+                                          "2026-06-21T15:00:00+00:00")))
+    doc = ingest_table(table, spec, tmp_path / "out", log=lambda *a: None)
+    assert [f["time_utc"][11:16] for f in doc["frames"]] == ["09:00", "12:00", "15:00"]
+    assert doc["frames"][1]["time"].endswith("+01:00")
+    noon = ingest_table(_table(tmp_path, "", ""), spec, tmp_path / "utc", log=lambda *a: None)
+    assert doc["frames"][1]["sun_zenith_deg"] == noon["frames"][1]["sun_zenith_deg"]
+
+
 def test_a_table_fit_predicts_the_tables_other_times_within_its_band(table_day):
     """Fit on the first four times, relight (no images) onto the table: the region means of
     every time inside the predicted 95% band, and the report says there is no image."""
