@@ -191,8 +191,14 @@ def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day
     rows = list(csv.reader((out / "prediction.csv").read_text().splitlines()))[1:]
     assert all(float(r[6]) - float(r[5]) > 0.02 * float(r[4]) for r in rows)
     _fit_json(fit, model="achromatic", R=0.8, rho_s=0.0, sigma_alpha=0.0)
+    # another prediction into the folder replaces it only with --overwrite
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    for images in ([], ["--no-images"]):
+        assert main(["relight", str(fit), "--target", str(day / "day"), "-o", str(out), "-q",
+                     *images, "--draws", "20"]) == 2
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert main(["relight", str(fit), "--target", str(day / "day"), "-o", str(out), "-q",
-                 "--no-images", "--draws", "20"]) == 0
+                 "--no-images", "--draws", "20", "--overwrite"]) == 0
     assert json.loads((out / "relight.json").read_text())["band_coverage"]["share"] == 0.0
 
 
@@ -218,6 +224,15 @@ def test_fit_on_some_frames_and_relight_onto_the_same_folder_reports_the_held_ou
     assert errors["band_coverage"]["share"] >= 0.75          # measured 1.0 (12 values)
     rows = list(csv.reader((out / "relight.csv").read_text().splitlines()))
     assert [row[4] for row in rows[1:5]] == ["no", "no", "yes", "yes"]
+    # a prediction without images does not mix into the relit sequence; with --overwrite it
+    # replaces it whole
+    before = sorted(p.name for p in out.iterdir())
+    assert main(["relight", str(fits), "--target", str(day / "day"), "-o", str(out), "-q",
+                 "--no-images", "--draws", "20"]) == 2
+    assert sorted(p.name for p in out.iterdir()) == before
+    assert main(["relight", str(fits), "--target", str(day / "day"), "-o", str(out), "-q",
+                 "--no-images", "--draws", "20", "--overwrite"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["prediction.csv", "relight.json"]
 
 
 FORKED_RELIGHT = """

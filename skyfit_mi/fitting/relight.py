@@ -50,6 +50,49 @@ REFERENCE_SEED = 1_000_003
 PREDICTION_CACHE = (4, 64, 1)
 
 
+#: The files a relight writes beside its sequence's (a render's): the prediction and the errors
+#: (and compare_NNNN.png, and the reference render in reference/).
+RELIGHT_FILES = ("prediction.csv", "prediction.png", "relight.json", "relight.csv")
+
+
+def check_output(out, images, overwrite):
+    """Refuse an output folder ``out`` that holds another run's output, unless ``overwrite``.
+    A relight without images writes no manifest to tell its run by, so a sequence's or a
+    relight's files there are another run's; with images, a folder holding a sequence is the
+    render's to judge (it resumes its own run and refuses another's), and a relight's files
+    without one are another run's (one without images)."""
+    out = Path(out)
+    if overwrite or not out.is_dir():
+        return
+    sequence = (out / "manifest.json").exists()
+    if images and sequence:
+        return
+    held = (["manifest.json"] if sequence else []) + [n for n in RELIGHT_FILES
+                                                      if (out / n).exists()]
+    if held:
+        raise SkyfitError(f"{out} holds another run's output ({held[0]}); relight into another "
+                          "folder, or pass --overwrite to replace it.")
+
+
+def clear_output(out):
+    """Remove an earlier relight from ``out`` (--overwrite): its sequence, prediction, errors,
+    comparison images and reference render, and nothing else."""
+    from ..files import FolderLock
+    from ..pipeline.sequence import clear_run
+
+    out = Path(out)
+    if not out.is_dir():
+        return
+    with FolderLock(out):
+        for folder in (out, out / "reference"):
+            clear_run(folder)
+        for p in [*(out / n for n in RELIGHT_FILES), *out.glob("compare_[0-9]*.png")]:
+            p.unlink(missing_ok=True)
+        for d in (out / "frames", out / "reference" / "frames", out / "reference"):
+            if d.is_dir() and not any(d.iterdir()):
+                d.rmdir()
+
+
 def load_fits(paths):
     """{region: (path, fit result)} from fit JSONs, a fit folder's ``fits.csv`` (the
     ``fit_*.json`` beside it), or a folder of fits; a region given twice is refused."""
@@ -118,6 +161,7 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     doc = load_manifest(target)[0] if is_folder else None
     if doc is not None and Path(out).resolve() == manifest_file(target).parent.resolve():
         raise SkyfitError("the output folder is the target's; give another with -o.")
+    check_output(out, images, overwrite)
     observed = doc is not None and bool(rendered_frames(doc))
     table = doc is not None and is_table(doc)      # observations without images
     if reference and not (images and observed and not table
@@ -147,6 +191,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
         # the target's pixels (a region it does not show is refused before the render), or
         # without observations the relit render's own (its label image)
         pixels = target_pixels(fits, target, seed) if observed or not images else None
+        if overwrite:
+            clear_output(out)
         if images:
             render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log,
                             source="relight")

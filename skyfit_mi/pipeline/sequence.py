@@ -73,7 +73,7 @@ def spec_sensor(spec):
                                                       "cos4")})
 
 
-def _clear(out):
+def clear_run(out):
     """Remove an earlier run's files (only the names a render writes) from ``out``."""
     for p in [out / "manifest.json", out / "contact_sheet.png",
               *(out / "frames").glob("*_[0-9][0-9][0-9]*.exr")]:
@@ -94,7 +94,7 @@ def prepare_folder(out, run_id, shape, overwrite=False, log=print):
 
     ensure_dir(out / "frames")
     if overwrite:
-        _clear(out)
+        clear_run(out)
         return {}
     if not manifest_file(out).exists():
         return {}
