@@ -211,6 +211,24 @@ def test_the_cli_takes_a_table_and_refuses_photo_options_with_it(tmp_path, mi):
     assert doc["source"] == "ingest" and len(doc["frames"]) == 3
 
 
+def test_a_table_in_the_output_folder_is_not_overwritten(tmp_path):
+    """The user's own observations.csv in the output folder (the name ingest writes) is the
+    input or a file of no sequence: refused before anything is read or written."""
+    from skyfit_mi.pipeline.observation_table import ingest_table
+
+    spec = _spec({"type": "clear"}, tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    own = _write(out, HEAD + ROW, "observations.csv")
+    for overwrite in (False, True):
+        with pytest.raises(SkyfitError, match="output folder's own observations.csv"):
+            ingest_table(own, spec, out, overwrite=overwrite, log=lambda *a: None)
+    with pytest.raises(SkyfitError, match="holds a file observations.csv of no skyfit sequence"):
+        ingest_table(_table(tmp_path, "", ""), spec, out, log=lambda *a: None)
+    assert sorted(p.name for p in out.iterdir()) == ["observations.csv"]
+    assert own.read_text() == HEAD + ROW
+
+
 def test_times_of_mixed_utc_offsets_are_taken_as_their_instants(tmp_path, mi):
     """A table across a change of summer time (or from two instruments): each time keeps its
     offset, and its sun is that of its instant in UTC."""

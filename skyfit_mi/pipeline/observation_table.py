@@ -303,6 +303,14 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrit
     from ..files import write_text
     from ..render.scene_xml import build_scene_xml
 
+    out = Path(out_dir)
+    mine = out / TABLE_FILE
+    if mine.exists() and mine.resolve() == Path(table_path).resolve():
+        raise SkyfitError(f"the table {table_path} is the output folder's own {TABLE_FILE}, which "
+                          "ingest writes; give another folder with -o.")
+    if mine.exists() and not (out / "manifest.json").exists() and not overwrite:
+        raise SkyfitError(f"{out} holds a file {TABLE_FILE} of no skyfit sequence; give another folder "
+                          "with -o, or pass --overwrite to replace it.")
     table = read_observation_table(table_path, tz)
     times = sorted(set(table.times), key=lambda t: t.timestamp())
     if len(times) < 2:
@@ -345,7 +353,6 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrit
     text = "\n".join(lines) + "\n"
     run_id = hashlib.sha256(json.dumps([text, spec.raw], sort_keys=True, default=str)
                             .encode()).hexdigest()[:16]
-    out = Path(out_dir)
     with FolderLock(out):
         prepare_folder(out, run_id, None, overwrite, log=lambda message: None)
         manifest = measured_header(spec, sensor, run_id, "measured", "none: measured values",
