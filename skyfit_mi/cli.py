@@ -275,8 +275,8 @@ def _chi2map(args):
     import numpy as np
 
     from .fitting.fit import FitSession
-    from .fitting.landscape import (chi2_map, map_axes, profiled_map, truth_parameters,
-                                    write_chi2_map)
+    from .fitting.landscape import (chi2_map, map_axes, map_prefix, profiled_map,
+                                    truth_parameters, write_chi2_map)
     from .pipeline.fit_result import read_fit_result
     from .pipeline.manifest import load_manifest
     from .render.fit_model import PARAMETERS
@@ -286,6 +286,8 @@ def _chi2map(args):
     names = list(PARAMETERS[r["model"]])
     xs, ys = map_axes(r["model"], args.x, args.y, args.x_range, args.y_range, args.n,
                       args.profile)
+    name = f"chi2map_{r['region']}_{args.x}_{args.y}"
+    prefix = map_prefix(args.output or root, name, args.overwrite)
     s = FitSession.from_fit(r, args.manifest, seed=args.seed, frames=r.get("frames"))
     theta = np.array([r["parameters"][k] for k in names])
     chi2 = (profiled_map(s, theta, args.x, args.y, xs, ys) if args.profile
@@ -298,7 +300,6 @@ def _chi2map(args):
         marks["truth"] = (truth[ix], truth[iy])
     walk = np.asarray(r.get("trace") or [], dtype=float)
     walk = walk[:, [ix, iy]] if args.walk and walk.ndim == 2 and len(walk) > 1 else None
-    prefix = Path(args.output) if args.output else root / f"chi2map_{r['region']}_{args.x}_{args.y}"
     others = "at their best" if args.profile else "at the fit"
     paths = write_chi2_map(prefix, args.x, args.y, xs, ys, chi2, marks, walk, others)
     print(f"{r['region']}: chi2 minimum {chi2.min():.6g} at {args.x} = {xs[i]:.4g}, "
@@ -537,7 +538,10 @@ def build_parser():
     cmap.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,
                       help="seed of the light cache (default 0)")
     cmap.add_argument("-o", "--output",
-                      help="output path prefix (default MANIFEST/chi2map_REGION_X_Y)")
+                      help="output path prefix, or a folder to write into (default "
+                      "MANIFEST/chi2map_REGION_X_Y)")
+    cmap.add_argument("--overwrite", action="store_true",
+                      help="replace files of the prefix's names that are not an earlier map's")
     cmap.set_defaults(func=_chi2map)
     return parser
 

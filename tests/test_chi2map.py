@@ -96,3 +96,25 @@ def test_a_two_parameter_fit_has_nothing_to_profile(fitted, tmp_path, capsys):
     (tmp_path / "fit_two.json").write_text(json.dumps(two))
     assert main(["chi2map", str(day), str(tmp_path / "fit_two.json"), "--profile"]) == 2
     assert "no other parameter to profile" in capsys.readouterr().err
+
+
+def test_a_map_does_not_replace_a_fit_folders_files(fitted, tmp_path, capsys):
+    """-o onto a fit folder's files (fits.csv, a fit's PNG) is refused unless --overwrite; a
+    folder as -o takes the map under its default name, and an earlier map is replaced."""
+    import shutil
+
+    day, fit = fitted
+    folder = tmp_path / "fits"
+    shutil.copytree(fit.parent, folder)
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    for prefix in ("fits", "fit_disc"):
+        assert main(["chi2map", str(day), str(fit), "--n", "3", "-o", str(folder / prefix)]) == 2
+        err = capsys.readouterr().err
+        assert "is not a chi-square map's" in err and len(err.splitlines()) == 1
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+    for _ in range(2):
+        assert main(["chi2map", str(day), str(fit), "--n", "3", "-o", str(folder)]) == 0
+    assert (folder / "chi2map_disc_rho_s_sigma_alpha.csv").exists()
+    assert main(["chi2map", str(day), str(fit), "--n", "3", "-o", str(folder / "fit_disc"),
+                 "--overwrite"]) == 0
+    assert (folder / "fit_disc.png").read_bytes() != before["fit_disc.png"]
