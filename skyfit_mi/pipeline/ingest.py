@@ -778,6 +778,11 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
     from .photo_times import frame_times
     from .photos import SUFFIXES, check_same_size, read_photo
 
+    if noise is not None and not (len(noise) == 2 and np.all(np.isfinite(noise))
+                                  and min(noise) >= 0):
+        raise SkyfitError(f"--noise {','.join(f'{v:g}' for v in noise)}: give the read variance "
+                          "[DN^2] and the shot gain [DN] as two finite numbers of at least 0 "
+                          "(e.g. 0.64,0.02), or leave --noise out to estimate them.")
     paths = []
     for p in map(Path, photo_paths):
         if p.is_dir():
