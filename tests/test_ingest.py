@@ -465,6 +465,19 @@ def test_a_noise_model_is_two_finite_non_negative_numbers(noise):
     assert "\n" not in str(exc.value)
 
 
+def test_options_that_would_be_ignored_are_refused(day, tmp_path):
+    """--exposure beside a calibration, and --gamma with a response that has no exponent,
+    would be silently unused: refused, nothing written."""
+    with pytest.raises(SkyfitError, match="--exposure is not used when --calibrate"):
+        _ingest(day, tmp_path / "o", exposure=1e-3, calibrate={"grey_card": (0.18,) * 3})
+    with pytest.raises(SkyfitError, match="the response is 'srgb'; add --response gamma"):
+        _ingest(day, tmp_path / "o", exposure=1e-3, gamma=2.0)
+    with pytest.raises(SkyfitError, match="the response is fitted"):
+        _ingest(day, tmp_path / "o", response="fit", gamma=2.0,
+                calibrate={"grey_card": (0.18,) * 3})
+    assert not (tmp_path / "o").exists()
+
+
 def test_cli_ingest_error_is_one_line_exit_2(day, tmp_path, capsys):
     from skyfit_mi.cli import main
 
