@@ -10,6 +10,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from scipy.stats import chi2 as chi2_dist
 
 from skyfit_mi.conventions import direction_from_angles
@@ -137,6 +139,9 @@ ROW = "2026-06-21T12:00:00+00:00,disc,1,1,1,0.1\n"
     ("time,region,r,g,b,sigma,x\n" + ROW[:-1] + ",1\n", "give all of x, y, z"),
     (HEAD + ROW.replace(",1,1,1,", ",1,one,1,"), "g = 'one' is not a number"),
     (HEAD + ROW.replace(",0.1", ",0"), "sigma must be positive"),
+    (HEAD + ROW.replace(",1,1,1,", ",1,1e308,1,"), "g = 1e[+]308 is beyond any radiance"),
+    (HEAD + ROW.replace(",0.1", ",1e300"), "sigma = 1e[+]300 is beyond any radiance"),
+    (HEAD + ROW.replace(",1,1,1,", ",-1,-2,0,"), "every value of region 'disc' is zero or"),
     (HEAD + ROW.replace(",1,1,1,", ",1,nan,1,"), "is not finite"),
     (HEAD + ROW + ROW, "measured again"),
     (HEAD + ROW.replace("+00:00", ""), "has no UTC offset"),
@@ -154,6 +159,56 @@ def test_bad_tables_are_refused_with_one_line(tmp_path, text, message):
     with pytest.raises(SkyfitError, match=message) as exc:
         read_observation_table(_write(tmp_path, text))
     assert "\n" not in str(exc.value)
+
+
+def _mostly(good, bad, odds=20):
+    """``good``, and ``bad`` once in ``odds`` draws."""
+    return st.integers(0, odds - 1).flatmap(lambda i: bad if i == odds // 2 else good)
+
+
+_NUMBER = _mostly(st.floats(1e-3, 1e3).map(repr), st.one_of(
+    st.floats(-1e9, 1e9).map(repr),
+    st.sampled_from(["nan", "inf", "-1", "0", "1e308", "1e-300", "x", ""])))
+_CELLS = {"time": _mostly(st.sampled_from(["2026-06-21T12:00:00+00:00",
+                                           "2026-06-21T13:00:00+01:00",
+                                           "2026-06-21T14:30:00-02:00",
+                                           "2026-06-21T15:00:00+00:00", "2026-06-21T12:00"]),
+                          st.sampled_from(["noon", "2026-06-21T25:00"])),
+          "region": _mostly(st.sampled_from(["disc", "plate"]), st.just("")),
+          "point": st.sampled_from(["a", "b"]),
+          "view_zenith_deg": _mostly(st.sampled_from(["10", "45"]), st.sampled_from(["95", "x"]))}
+_HEADERS = st.one_of(
+    st.tuples(st.sampled_from([["r", "g", "b", "sigma"], ["luminance", "sigma"],
+                               ["r", "g", "b", "sigma_r", "sigma_g", "sigma_b"]]),
+              st.sampled_from([[], ["point"], ["view_zenith_deg", "view_azimuth_deg"]])
+              ).map(lambda v: ["time", "region", *v[0], *v[1]]),
+    st.lists(st.sampled_from(["time", "region", "r", "g", "b", "sigma", "luminance", "x",
+                              "colour"]), min_size=1, max_size=7))
+
+
+@settings(max_examples=300, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(_HEADERS.flatmap(lambda cols: st.tuples(st.just(cols), st.lists(
+    st.tuples(*(_CELLS.get(c, _NUMBER) for c in cols)), min_size=1, max_size=4))))
+def test_any_table_is_read_or_refused_in_one_line(tmp_path, table):
+    """Whatever the columns and cells, the reader returns a table of positive sigmas and
+    values within MAX_RADIANCE, with a positive value in each region, or refuses it in one
+    line naming the file."""
+    from skyfit_mi.pipeline.observation_table import MAX_RADIANCE, read_observation_table
+
+    columns, rows = table
+    text = ",".join(columns) + "\n" + "".join(",".join(row) + "\n" for row in rows)
+    path = _write(tmp_path, text)
+    try:
+        t = read_observation_table(path, tz="UTC")
+    except SkyfitError as exc:
+        assert "\n" not in str(exc) and str(path) in str(exc), str(exc)
+        return
+    value = t.value[:, :1] if t.luminance else t.value
+    assert np.all(np.abs(value) <= MAX_RADIANCE) and np.all(t.sigma[:, 0] <= MAX_RADIANCE)
+    assert np.all(t.sigma > 0)
+    for r in set(t.regions):
+        assert np.nanmax(value[[x == r for x in t.regions]]) > 0
 
 
 def test_naive_times_take_the_given_zone(tmp_path):

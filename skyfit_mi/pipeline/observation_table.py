@@ -52,6 +52,7 @@ import numpy as np
 from ..errors import SkyfitError
 from ..files import FolderLock
 from ..physics.camera import SensorModel
+from ..physics.sun import SOLAR_CONSTANT, SUN_SOLID_ANGLE
 from ..conventions import direction_from_angles
 
 #: File name of the normalised table in a sequence folder.
@@ -60,6 +61,9 @@ TABLE_FILE = "observations.csv"
 NORMAL_TOLERANCE_DEG = 5.0
 #: Ray start off the surface, as a share of the scene's bounding-box diagonal.
 RAY_OFFSET = 1e-4
+#: Largest radiance, value or sigma, a table may give [W m^-2 sr^-1]: ten times the solar
+#: disc's above the atmosphere (no surface reflects more than its brightest source).
+MAX_RADIANCE = 10.0 * SOLAR_CONSTANT / SUN_SOLID_ANGLE
 #: Share of the 16-bit full scale that the brightest value plus HEADROOM_SIGMAS sigma takes.
 SCALE_SHARE, HEADROOM_SIGMAS = 0.5, 5.0
 
@@ -203,6 +207,16 @@ def read_observation_table(path, tz=None):
         if not np.all(out["sigma"][k] > 0):
             raise SkyfitError(f"{path} line {line}: sigma must be positive (the value's standard "
                               "deviation, in its units).")
+        for name, single in (("value", "luminance"), ("sigma", "sigma")):
+            v = out[name][k]
+            big = np.isfinite(v) & (np.abs(v) > MAX_RADIANCE)
+            if big.any():
+                i = int(np.argmax(big))
+                column = single if single in cell else _VECTORS[name][i]
+                raise SkyfitError(f"{path} line {line}: {column} = {v[i]:g} is "
+                                  f"beyond any radiance (at most {MAX_RADIANCE:.2g} W m^-2 "
+                                  "sr^-1, ten times the sun's disc); give radiances in "
+                                  "W m^-2 sr^-1.")
         for name in ("view", "normal"):
             v = out[name][k]
             if np.isfinite(v).all():
@@ -219,6 +233,10 @@ def read_observation_table(path, tz=None):
                               f"measured again (first on line {seen[key]}); keep one row (or "
                               "average them with their sigma).")
         seen[key] = line
+    for r in dict.fromkeys(regions):
+        if not np.nanmax(out["value"][[i for i in range(n) if regions[i] == r]]) > 0:
+            raise SkyfitError(f"{path}: every value of region {r!r} is zero or negative; give "
+                              "measured radiances [W m^-2 sr^-1] (a radiance is positive).")
     table = ObservationTable(path, times, regions, points, out["x"], out["view"], out["normal"],
                              out["value"], out["sigma"], lines, luminance,
                              frames if "frame" in col else None)
@@ -332,9 +350,6 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrit
     pos, view, offset = locate_points(spec, scene, table, times)
     top = float(np.nanmax(np.where(np.isfinite(table.sigma),
                                    table.value + HEADROOM_SIGMAS * table.sigma, np.nan)))
-    if top <= 0:
-        raise SkyfitError(f"{table.path}: every value is zero or negative; give measured "
-                          "radiances [W m^-2 sr^-1].")
     sensor = SensorModel(exposure=SCALE_SHARE / top, response="linear", bits=16)
 
     keys = table.point_keys()
