@@ -36,7 +36,8 @@ goniometer).  A point without a row at some time carries no information there.  
 are put on a linear 16-bit scale for the fit (the brightest value plus 5 sigma at half scale,
 one factor recorded as the sensor's exposure), so chi-square is eq. 6.2 in the table's own
 units; a value at or below zero, which a radiance cannot be, is taken as censored at zero
-(the fit's rule for code 0).  A luminance table is fitted through the model's luminance (the
+(the fit's rule for code 0), but a region needs a positive value, and a value or sigma beyond
+any radiance (:data:`MAX_RADIANCE`) is refused.  A luminance table is fitted through the model's luminance (the
 first channel; :class:`~skyfit_mi.fitting.chi2.LuminanceModel`): it cannot tell colour, so
 only the 2- and 3-parameter models take it.
 """
