@@ -118,3 +118,32 @@ def test_a_map_does_not_replace_a_fit_folders_files(fitted, tmp_path, capsys):
     assert main(["chi2map", str(day), str(fit), "--n", "3", "-o", str(folder / "fit_disc"),
                  "--overwrite"]) == 0
     assert (folder / "fit_disc.png").read_bytes() != before["fit_disc.png"]
+
+
+@pytest.mark.parametrize("change, phrase", [
+    ({"parameters": {"rho_s": 1.5}}, "rho_s = 1.5 is outside its bounds [0, 1]"),
+    ({"intervals": {"rho_s": {"95": [0.5, 0.1]}}}, "runs backwards (lo > hi)"),
+    ({"covariance": [[1.0, 0.0], [0.0, 1.0]]}, "covariance must be"),
+    ({"frames": "all"}, "frames must be a list of manifest frame indices"),
+])
+def test_a_hand_edited_fit_is_refused_by_name(fitted, tmp_path, capsys, change, phrase):
+    """chi2map and relight read a fit JSON through one reader: a parameter beyond its bounds,
+    an interval running backwards, a covariance or frames of the wrong shape are refused,
+    not mapped (or crashed on)."""
+    day, fit = fitted
+    r = json.loads(fit.read_text())
+    for key, value in change.items():
+        if isinstance(value, dict):
+            for k, v in value.items():
+                r[key][k] = v
+        else:
+            r[key] = value
+    bad = tmp_path / "fit_disc.json"
+    bad.write_text(json.dumps(r))
+    for argv in (["chi2map", str(day), str(bad), "--n", "3", "-o", str(tmp_path / "m")],
+                 ["relight", str(bad), "--target", str(day), "-o", str(tmp_path / "r"),
+                  "--no-images"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert phrase in err and str(bad) in err and len(err.splitlines()) == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fit_disc.json"]

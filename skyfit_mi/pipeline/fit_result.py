@@ -16,9 +16,11 @@ from ..errors import SkyfitError
 def read_fit_result(path):
     """The fit result in ``path``, checked: a region name, a model of
     :data:`~skyfit_mi.render.fit_model.PARAMETERS`, that model's parameters as finite numbers
-    and a 95% interval [lo, hi] of each, and pixels (if any) as [x, y] pairs.  SkyfitError
-    saying what is wrong otherwise."""
-    from ..render.fit_model import PARAMETERS
+    within their bounds and a 95% interval [lo, hi] of each (lo <= hi), pixels (if any) as
+    [x, y] pairs, and, where present, the frames as manifest indices and the covariance as
+    its parameters' names and a square matrix of them.  SkyfitError saying what is wrong
+    otherwise."""
+    from ..render.fit_model import PARAMETERS, bounds
 
     path = Path(path)
     try:
@@ -35,7 +37,39 @@ def read_fit_result(path):
     params = r["parameters"]
     if not all(isinstance(v, (int, float)) and np.isfinite(v) for v in params.values()):
         raise SkyfitError(f"{path} has parameters that are not finite numbers.")
+    names = PARAMETERS[r["model"]]
+    for k, lo, hi in zip(names, *bounds(r["model"])):
+        if not lo <= params[k] <= hi:
+            raise SkyfitError(f"{path}: {k} = {params[k]:g} is outside its bounds [{lo:g}, "
+                              f"{hi:g}]; give a fit_NAME.json that `skyfit fit` wrote.")
+        a, b = r["intervals"][k]["95"]
+        if a > b:
+            raise SkyfitError(f"{path}: the 95% interval of {k}, [{a:g}, {b:g}], runs backwards "
+                              "(lo > hi); give a fit_NAME.json that `skyfit fit` wrote.")
+    frames = r.get("frames", [])
+    if not (isinstance(frames, list) and all(isinstance(i, int) and not isinstance(i, bool)
+                                             and i >= 0 for i in frames)):
+        raise SkyfitError(f"{path}: frames must be a list of manifest frame indices (whole "
+                          "numbers from 0).")
+    cov = r.get("covariance")
+    if cov is not None and not _is_covariance(cov):
+        raise SkyfitError(f"{path}: covariance must be {{\"names\": [{', '.join(names)}], "
+                          "\"matrix\": a square list of lists of numbers, one row each}.")
     return r
+
+
+def _is_covariance(cov):
+    """Whether ``cov`` is {"names": a list of parameter names, "matrix": one row of numbers
+    (or null) per name}; names of another model are allowed (relight then takes the
+    intervals alone)."""
+    if not isinstance(cov, dict) or not isinstance(cov.get("names"), list) \
+            or not isinstance(cov.get("matrix"), list):
+        return False
+    n = len(cov["names"])
+    return (all(isinstance(k, str) for k in cov["names"]) and len(cov["matrix"]) == n
+            and all(isinstance(row, list) and len(row) == n
+                    and all(v is None or (isinstance(v, (int, float)) and not isinstance(v, bool))
+                            for v in row) for row in cov["matrix"]))
 
 
 def _is_fit_result(r, parameters):
