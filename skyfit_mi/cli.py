@@ -277,12 +277,13 @@ def _chi2map(args):
     from .fitting.fit import FitSession
     from .fitting.landscape import (chi2_map, map_axes, map_prefix, profiled_map,
                                     truth_parameters, write_chi2_map)
-    from .pipeline.fit_result import read_fit_result
+    from .pipeline.fit_result import check_fit_sequence, read_fit_result
     from .pipeline.manifest import load_manifest
     from .render.fit_model import PARAMETERS
 
-    _, root = load_manifest(args.manifest)
+    doc, root = load_manifest(args.manifest)
     r = read_fit_result(args.fit)
+    check_fit_sequence(r, args.fit, doc, args.manifest)
     names = list(PARAMETERS[r["model"]])
     xs, ys = map_axes(r["model"], args.x, args.y, args.x_range, args.y_range, args.n,
                       args.profile)

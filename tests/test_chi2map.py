@@ -147,3 +147,21 @@ def test_a_hand_edited_fit_is_refused_by_name(fitted, tmp_path, capsys, change, 
         err = capsys.readouterr().err
         assert phrase in err and str(bad) in err and len(err.splitlines()) == 1, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fit_disc.json"]
+
+
+@pytest.mark.parametrize("change, phrase", [
+    ({"points": ["disc"]}, "is a fit of an observation table's points, but"),
+    ({"frames": [0, 99]}, "lists frame 99, which"),
+    ({"sequence_run_id": "0123456789abcdef"}, "was fitted to another sequence (run 0123"),
+])
+def test_a_fit_of_another_sequence_is_refused_with_the_cause(fitted, tmp_path, capsys, change,
+                                                             phrase):
+    """chi2map maps a fit's own chi-square: a fit of a table's points, of another run, or of
+    frames the sequence lacks is refused saying so (not 'frame 4 is not a rendered frame' or
+    an internal error)."""
+    day, fit = fitted
+    bad = tmp_path / "fit_disc.json"
+    bad.write_text(json.dumps({**json.loads(fit.read_text()), **change}))
+    assert main(["chi2map", str(day), str(bad), "--n", "3", "-o", str(tmp_path / "m")]) == 2
+    err = capsys.readouterr().err
+    assert phrase in err and len(err.splitlines()) == 1, err

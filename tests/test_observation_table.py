@@ -301,6 +301,25 @@ def test_times_of_mixed_utc_offsets_are_taken_as_their_instants(tmp_path, mi):
     assert doc["frames"][1]["sun_zenith_deg"] == noon["frames"][1]["sun_zenith_deg"]
 
 
+def test_an_image_fit_predicts_a_tables_points(tmp_path, mi):
+    """A fit of image pixels relit onto a table target predicts every point of its region in
+    the table (its pixels mean nothing there); chi2map refuses it on the table."""
+    from skyfit_mi.cli import main
+
+    spec = _spec({"type": "clear"}, tmp_path)
+    assert main(["ingest", str(spec), "--table", str(_table(tmp_path, "", "")), "-o",
+                 str(tmp_path / "t")]) == 0
+    fit = tmp_path / "fit_disc.json"
+    fit.write_text(json.dumps({"region": "disc", "model": "two", "parameters": {
+        "rho_s": 0.1, "sigma_alpha": 0.1}, "intervals": {"rho_s": {"95": [0.0, 0.2]},
+        "sigma_alpha": {"95": [0.05, 0.2]}}, "pixels": [[3, 3], [4, 4]]}))
+    assert main(["relight", str(fit), "--target", str(tmp_path / "t"), "-o",
+                 str(tmp_path / "p"), "--no-images", "--draws", "10", "-q"]) == 0
+    rows = (tmp_path / "p" / "prediction.csv").read_text().splitlines()[1:]
+    assert len(rows) == 3 * 3 and all(r.startswith("disc,") for r in rows)
+    assert main(["chi2map", str(tmp_path / "t"), str(fit), "--n", "3"]) == 2
+
+
 def test_a_table_fit_predicts_the_tables_other_times_within_its_band(table_day):
     """Fit on the first four times, relight (no images) onto the table: the region means of
     every time inside the predicted 95% band, and the report says there is no image."""

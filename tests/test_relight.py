@@ -132,6 +132,8 @@ def test_relight_onto_a_new_day_has_no_observations(day, tmp_path):
     ("bad interval", "is not a fit result of `skyfit fit`"),
     ("no sun", "the target's sun is below the horizon at every time (01:00, 23:00)"),
     ("no region in the target", "does not see region 'disc'"),
+    ("nothing rendered", "made at the target's rendered frames, and"),
+    ("frames the target lacks", "lists frame 9, which"),
 ])
 def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
     fit = _fit_json(tmp_path / "fit_disc.json")
@@ -155,6 +157,20 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
         r["intervals"]["rho_s"]["95"] = [0.0, None]
         fit.write_text(json.dumps(r))
     target = day / "day"
+    more = []
+    if case == "nothing rendered":                   # a folder whose frames are all pending
+        doc = json.loads((target / "manifest.json").read_text())
+        doc.update(status="incomplete", frames=[{"index": f["index"], "status": "pending"}
+                                                for f in doc["frames"]])
+        target = tmp_path / "pending"
+        target.mkdir()
+        (target / "manifest.json").write_text(json.dumps(doc))
+        more = ["--no-images"]
+    elif case == "frames the target lacks":
+        r = json.loads(fit.read_text())
+        r.update(frames=[0, 9], sequence_run_id=json.loads(
+            (target / "manifest.json").read_text())["run_id"])
+        fit.write_text(json.dumps(r))
     if case in ("no sun", "no region in the target"):
         raw = copy.deepcopy(TINY)
         if case == "no sun":
@@ -167,9 +183,10 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
         if case == "no region in the target":
             assert main(["render", str(target), "-o", str(tmp_path / "away"), "-q"]) == 0
             target = tmp_path / "away"
-    assert main(["relight", *args, "--target", str(target), "-o", str(out), "-q"]) == 2
+    assert main(["relight", *args, "--target", str(target), "-o", str(out), "-q", *more]) == 2
     err = capsys.readouterr().err.strip()
     assert phrase in err and len(err.splitlines()) == 1, err
+    assert case == "into the target" or not out.exists()          # nothing written
 
 
 def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day, tmp_path):

@@ -137,8 +137,9 @@ def load_table_observations(manifest_path, region, points=None, frames=None, min
         raise SkyfitError(f"frame {missing[0]} is not an observed frame of the sequence; its "
                           f"frames are {sorted(known)}.")
     if len(fr) < min_frames:
-        raise SkyfitError(f"region {region!r} is measured at fewer than {min_frames} times; a "
-                          "fit needs a sequence.")
+        raise SkyfitError(f"region {region!r} is measured at {len(fr)} time(s); at least "
+                          f"{min_frames} are needed: measure it at more times (or choose more "
+                          "frames).")
     sensor = sensor_from_record(doc["sensor"])
     scale = sensor.exposure * sensor.max_code
     gain = np.full(y.shape, sensor.exposure)
@@ -249,8 +250,9 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
                               f"rendered frames are {sorted(known)}.")
         rendered = [f for f in rendered if f["index"] in set(frames)]
     if len(rendered) < min_frames:
-        raise SkyfitError(f"the sequence has fewer than {min_frames} rendered frames; a fit "
-                          "needs a sequence.")
+        raise SkyfitError(f"{root} has {len(rendered)} rendered frame(s)"
+                          f"{' of those chosen' if frames is not None else ''}; at least "
+                          f"{min_frames} are needed: render the sequence (or choose more frames).")
     warnings = []
     if doc.get("status") != "complete":
         warnings.append("the sequence's render is incomplete (manifest status "

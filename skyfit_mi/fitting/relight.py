@@ -29,7 +29,7 @@ from ..background import Beside
 from ..errors import SkyfitError
 from ..files import write_bytes, write_json, write_text
 from .report import fit_files
-from ..pipeline.fit_result import read_fit_result
+from ..pipeline.fit_result import check_fit_sequence, read_fit_result
 from ..pipeline.manifest import (RENDERED_SOURCES, load_manifest, manifest_file,
                                  rendered_frames)
 from ..pipeline.pixels import frame_values
@@ -161,6 +161,11 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     doc = load_manifest(target)[0] if is_folder else None
     if doc is not None and Path(out).resolve() == manifest_file(target).parent.resolve():
         raise SkyfitError("the output folder is the target's; give another with -o.")
+    for path, r in fits.values() if doc is not None else ():
+        check_fit_sequence(r, path, doc, target, own=False)
+    if not images and not rendered_frames(doc):
+        raise SkyfitError(f"a prediction without images is made at the target's rendered frames, "
+                          f"and {target} has none; render it, or leave out --no-images.")
     check_output(out, images, overwrite)
     observed = doc is not None and bool(rendered_frames(doc))
     table = doc is not None and is_table(doc)      # observations without images
@@ -586,9 +591,10 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
                                         sky_spacing=SKY_SPACING)
     for region, (_, r) in sorted(fits.items()):
         # each let go when done with
-        s = sessions.pop(region) if region in sessions else FitSession.from_fit(
-            r, target, None, seed=seed, positions=POSITIONS, directions=DIRECTIONS,
-            min_frames=1)
+        # a table target: all the region's points in the target's table, whatever the fit's
+        s = sessions.pop(region) if region in sessions else FitSession(
+            target, region, None, model=r["model"], normalisation=r.get("normalisation", "ward"),
+            seed=seed, positions=POSITIONS, directions=DIRECTIONS, min_frames=1)
         sets = parameter_draws(r, s.names, s.lower, s.upper, draws, rng)
         # the region's mean over its pixels; over a table's points measured in each frame
         have = np.ones(s.obs.y.shape) if s.obs.rays is None else np.isfinite(s.obs.sigma) * 1.0

@@ -91,3 +91,34 @@ def _pair(value, kind=(int, float)):
     return (isinstance(value, list) and len(value) == 2
             and all(isinstance(v, kind) and not isinstance(v, bool) and np.isfinite(v)
                     for v in value))
+
+
+def check_fit_sequence(result, path, doc, where, own=True):
+    """SkyfitError unless the fit ``result`` (read from ``path``) can be used on the sequence
+    whose manifest ``doc`` is at ``where``.  ``own`` (a use of the fit's own chi-square, such
+    as chi2map): the sequence must be the one it was fitted to (its run, where the fit names
+    one), of its kind (image pixels or a table's points), with every frame the fit lists
+    rendered; otherwise (a relight's target) only the frames are checked, and only on the
+    fit's own sequence when it holds observations."""
+    from .manifest import rendered_frames
+    from .observation_table import is_table
+
+    same_run = result.get("sequence_run_id") == doc.get("run_id")
+    if own:
+        table, of_points = is_table(doc), "points" in result
+        if table != of_points:
+            fitted = "an observation table's points" if of_points else "image pixels"
+            held = "an observation table" if table else "a sequence of images"
+            raise SkyfitError(f"{path} is a fit of {fitted}, but {where} is {held}; give the "
+                              "sequence the fit was made on.")
+        if "sequence_run_id" in result and not same_run:
+            raise SkyfitError(f"{path} was fitted to another sequence (run "
+                              f"{result['sequence_run_id']}), not to {where} (run "
+                              f"{doc.get('run_id')}); give the sequence the fit was made on.")
+    rendered = sorted(f["index"] for f in rendered_frames(doc))
+    if own or (same_run and rendered):
+        missing = sorted(set(result.get("frames", [])) - set(rendered))
+        if missing:
+            raise SkyfitError(f"{path} lists frame {missing[0]}, which {where} has not rendered "
+                              f"(its rendered frames: {rendered}); give the fit JSON that "
+                              "`skyfit fit` wrote on this sequence.")
