@@ -133,6 +133,7 @@ def test_relight_onto_a_new_day_has_no_observations(day, tmp_path):
     ("no sun", "the target's sun is below the horizon at every time (01:00, 23:00)"),
     ("no region in the target", "does not see region 'disc'"),
     ("nothing rendered", "made at the target's rendered frames, and"),
+    ("damaged in a folder", "fit_other.json is not readable JSON"),
     ("frames the target lacks", "lists frame 9, which"),
 ])
 def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
@@ -148,6 +149,9 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
         args = [str(_fit_json(tmp_path / "fit_plate.json", region="plate"))]
     elif case == "twice":
         args = [str(fit), str(tmp_path)]
+    elif case == "damaged in a folder":
+        (tmp_path / "fit_other.json").write_text(fit.read_text()[:50])
+        args = [str(tmp_path)]
     elif case == "into the target":
         out = day / "day"
     elif case == "another model":

@@ -28,7 +28,6 @@ import numpy as np
 from ..background import Beside
 from ..errors import SkyfitError
 from ..files import write_bytes, write_json, write_text
-from .report import fit_files
 from ..pipeline.fit_result import check_fit_sequence, read_fit_result
 from ..pipeline.manifest import (RENDERED_SOURCES, load_manifest, manifest_file,
                                  rendered_frames)
@@ -95,24 +94,27 @@ def clear_output(out):
 
 def load_fits(paths):
     """{region: (path, fit result)} from fit JSONs, a fit folder's ``fits.csv`` (the
-    ``fit_*.json`` beside it), or a folder of fits; a region given twice is refused."""
+    ``fit_*.json`` beside it), or a folder of fits; a damaged fit JSON in a folder is named,
+    and a region given twice is refused."""
     out = {}
     for p in map(Path, paths):
         if p.is_dir() or p.name == "fits.csv":
-            found = fit_files(p if p.is_dir() else p.parent)
-            if not found:
-                raise SkyfitError(f"no fit_*.json beside {p}; give the folder `skyfit fit` wrote.")
+            folder = p if p.is_dir() else p.parent
+            files = sorted(folder.glob("fit_*.json"))
+            if not files:
+                raise SkyfitError(f"no fit_*.json in {folder}; give the folder `skyfit fit` "
+                                  "wrote.")
         elif p.is_file():
-            r = read_fit_result(p)
-            found = {r["region"]: (p, r)}
+            files = [p]
         else:
             raise SkyfitError(f"fit {str(p)!r} does not exist; give fit_NAME.json files, a "
                               "fits.csv or the folder `skyfit fit` wrote.")
-        for region in found:
-            if region in out:
-                raise SkyfitError(f"region {region!r} is fitted twice ({out[region][0]} and "
-                                  f"{found[region][0]}); give one fit per region.")
-        out.update(found)
+        for f in files:
+            r = read_fit_result(f)
+            if r["region"] in out:
+                raise SkyfitError(f"region {r['region']!r} is fitted twice ({out[r['region']][0]} "
+                                  f"and {f}); give one fit per region.")
+            out[r["region"]] = (f, r)
     return out
 
 

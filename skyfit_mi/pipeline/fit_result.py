@@ -29,7 +29,8 @@ def read_fit_result(path):
         raise SkyfitError(f"fit file {path} does not exist; give a fit_NAME.json that "
                           "`skyfit fit` wrote.") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise SkyfitError(f"fit file {path} is not readable JSON ({exc}).") from None
+        raise SkyfitError(f"fit file {path} is not readable JSON ({exc}); fit the region again "
+                          "with `skyfit fit`, or leave the file out.") from None
     if not _is_fit_result(r, PARAMETERS):
         raise SkyfitError(f"{path} is not a fit result of `skyfit fit` (fit_NAME.json: a "
                           f"region, a model of {', '.join(PARAMETERS)}, its parameters and "
