@@ -134,6 +134,8 @@ def test_relight_onto_a_new_day_has_no_observations(day, tmp_path):
     ("no region in the target", "does not see region 'disc'"),
     ("nothing rendered", "made at the target's rendered frames, and"),
     ("damaged in a folder", "fit_other.json is not readable JSON"),
+    ("a target frame missing", "frame 2: cannot read"),
+    ("a target light damaged", "frame 1: sky illumination: sun_radiance"),
     ("frames the target lacks", "lists frame 9, which"),
 ])
 def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
@@ -170,6 +172,17 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
         target.mkdir()
         (target / "manifest.json").write_text(json.dumps(doc))
         more = ["--no-images"]
+    elif case in ("a target frame missing", "a target light damaged"):
+        import shutil
+
+        target = tmp_path / "damaged"
+        shutil.copytree(day / "day", target)
+        if case == "a target frame missing":
+            (target / "frames" / "radiance_002.exr").unlink()
+        else:
+            doc = json.loads((target / "manifest.json").read_text())
+            doc["frames"][1]["illumination"]["sun_radiance"] = [-1.0, 0.0, 0.0]
+            (target / "manifest.json").write_text(json.dumps(doc))
     elif case == "frames the target lacks":
         r = json.loads(fit.read_text())
         r.update(frames=[0, 9], sequence_run_id=json.loads(

@@ -29,8 +29,8 @@ from ..background import Beside
 from ..errors import SkyfitError
 from ..files import write_bytes, write_json, write_text
 from ..pipeline.fit_result import check_fit_sequence, read_fit_result
-from ..pipeline.manifest import (RENDERED_SOURCES, load_manifest, manifest_file,
-                                 rendered_frames)
+from ..pipeline.manifest import (RENDERED_SOURCES, check_frames, load_manifest,
+                                 manifest_file, rendered_frames)
 from ..pipeline.pixels import frame_values
 from ..pipeline.observation_table import is_table, table_regions
 from ..pipeline.spec import read_spec, validate_spec
@@ -168,6 +168,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if not images and not rendered_frames(doc):
         raise SkyfitError(f"a prediction without images is made at the target's rendered frames, "
                           f"and {target} has none; render it, or leave out --no-images.")
+    if doc is not None:                 # the target's frames and light, before any writing
+        check_frames(doc, manifest_file(target).parent)
     check_output(out, images, overwrite)
     observed = doc is not None and bool(rendered_frames(doc))
     table = doc is not None and is_table(doc)      # observations without images

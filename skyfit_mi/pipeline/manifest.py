@@ -313,6 +313,25 @@ def rendered_frames(doc):
     return [f for f in doc["frames"] if f.get("status") == "rendered"]
 
 
+def check_frames(doc, root, kinds=("radiance", "sensor", "sigma"), frames=None):
+    """Light every rendered frame (``frames``: of these indices only) of the sequence ``doc``
+    in folder ``root`` (:func:`frame_sky`) and read its images of ``kinds`` (and its
+    ``radiance_sigma``, where it has one, when ``kinds`` holds 'radiance'), so that a bad
+    record or a missing, damaged or foreign-size file is refused before a command writes
+    anything; the images stay in the frame cache for the command's own reads.  A table's
+    frames have no images."""
+    shape = (doc["camera"]["height"], doc["camera"]["width"], 3)
+    for f in rendered_frames(doc):
+        if frames is not None and f["index"] not in frames:
+            continue
+        frame_sky(f, root)
+        if f.get("observations", {}).get("kind") == "table":
+            continue
+        extra = ("radiance_sigma",) if "radiance" in kinds and "radiance_sigma" in f else ()
+        for key in (*kinds, *extra):
+            read_frame_image(root, f, key, shape)
+
+
 #: Bytes of decoded frame images kept to be read again (each of a prediction's or a relight's
 #: regions reads the same frames), least recently read first out; an image over an eighth of
 #: it is not kept.  A file written again (another inode, time or size) is read anew.
