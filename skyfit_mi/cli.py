@@ -209,8 +209,8 @@ def _fit_regions(args):
 def _fit(args):
     from pathlib import Path
 
-    from .files import ensure_dir
-    from .fitting.chi2 import subsample_region
+    from .files import check_dir
+    from .fitting.chi2 import check_regions, subsample_region
     from .fitting.fit import fit_region
     from .fitting.report import write_fit, write_summary
     from .pipeline.manifest import load_manifest
@@ -243,10 +243,11 @@ def _fit(args):
                   + (f"; medians {med}" if med else ""))
         print(f"wrote the maps and map_summary.json in {out} ({s['wall_time_s']:.1f} s)")
         return
-    out = ensure_dir(Path(args.output) if args.output else root)
-    for name, pixels in regions:
-        kept = pixels if pixels is None else subsample_region(pixels, args.max_pixels or None,
-                                                              args.seed)
+    out = check_dir(Path(args.output) if args.output else root)     # created by the first write
+    kept = [pixels if pixels is None else subsample_region(pixels, args.max_pixels or None,
+                                                           args.seed) for _, pixels in regions]
+    check_regions(args.manifest, [(name, k) for (name, _), k in zip(regions, kept)], args.frames)
+    for (name, pixels), kept in zip(regions, kept):
         if pixels is not None and len(kept) < len(pixels):
             print(f"{name}: fitting {len(kept)} of its {len(pixels)} pixels (--max-pixels, seed "
                   f"{args.seed})")

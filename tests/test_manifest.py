@@ -212,6 +212,7 @@ def test_a_negative_radiance_in_a_manifest_is_refused_by_frame(day, tmp_path, ca
     err = capsys.readouterr().err
     assert f"{out / 'manifest.json'} frame 3: sky illumination: sun_radiance" in err
     assert "is negative" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "f").exists()
 
 
 def test_measured_irradiance_lights_a_frame_as_the_specs_perez_sky(day):

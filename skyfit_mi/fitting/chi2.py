@@ -22,8 +22,8 @@ import numpy as np
 
 from ..physics.camera import SensorModel
 from ..errors import SkyfitError
-from ..pipeline.manifest import (frame_exposure, load_manifest, read_frame_image, rendered_frames,
-                                  sensor_from_record)
+from ..pipeline.manifest import (check_frames, frame_exposure, load_manifest, read_frame_image,
+                                 rendered_frames, sensor_from_record)
 
 #: Values below this [DN] read as code 0.
 LOW_CODE = 0.5
@@ -286,6 +286,26 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
     return Observations(pixels, [f["index"] for f in rendered], [f["time"] for f in rendered],
                         np.stack(ys, 1).astype(float), np.stack(sig, 1).astype(float),
                         np.stack(gain, 1), sensor, warnings)
+
+
+def check_regions(manifest_path, regions, frames=None):
+    """Load the observations of every region [(material, pixels, or None for a table's
+    points)] and light their frames (``frames``: these indices only), so that a bad region,
+    frame or light is refused before the first region's fit is written; the frames' images
+    stay in the frame cache for the fits."""
+    from ..pipeline.observation_table import is_table
+
+    doc, root = load_manifest(manifest_path)
+    materials = doc["scene"]["materials"]
+    for name, pixels in regions:
+        if name not in materials:
+            raise SkyfitError(f"region {name!r} names no material of the scene; its materials "
+                              f"are: {', '.join(materials)}.")
+        if is_table(doc):
+            load_table_observations(manifest_path, name, pixels, frames)
+        else:
+            load_observations(manifest_path, pixels, frames)
+    check_frames(doc, root, kinds=(), frames=frames)
 
 
 def censored_term_moments(a, b):
