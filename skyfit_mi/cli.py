@@ -8,7 +8,10 @@ written stay); ``--debug`` shows the traceback of any error.
 import argparse
 import os
 import re
+import signal
 import sys
+import threading
+from contextlib import contextmanager
 
 #: NumPy's BLAS (OpenBLAS) on one thread in a `skyfit` process unless the environment says
 #: otherwise; set before NumPy loads.  Dr.Jit's pool does the heavy work on every core, and
@@ -236,7 +239,7 @@ def _fit(args):
         s = run_map(args.manifest, regions, out, model=model, normalisation=args.normalisation,
                     seed=args.seed, patch=args.patch, chunk=args.chunk or CHUNK,
                     workers=args.workers, scheduler=args.scheduler, overwrite=args.overwrite,
-                    progress=not args.quiet, variant=args.variant)
+                    progress=not args.quiet, variant=args.variant, dask_logs=args.debug)
         for name, r in s["regions"].items():
             med = ", ".join(f"{k} = {v:.4g}" for k, v in r["median"].items() if v is not None)
             print(f"{name}: {r['determined']} of {r['mapped']} pixels determined"
@@ -344,7 +347,7 @@ def build_parser():
 
     parser = _Parser(prog="skyfit", description=DESCRIPTION)
     parser.add_argument("--version", action="version", version=f"skyfit-mi {__version__}")
-    debug_help = "show the full traceback of an error (for bug reports)"
+    debug_help = "show the full traceback of an error, and a map's Dask log (for bug reports)"
     parser.add_argument("--debug", action="store_true", help=debug_help)
     common = _Parser(add_help=False)               # --debug also after the command
     common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=debug_help)
@@ -552,6 +555,31 @@ def _oneline(exc):
     return " ".join(str(exc).split())
 
 
+@contextmanager
+def _ctrl_c_noted():
+    """Ctrl-C raises KeyboardInterrupt as usual, and is noted: an error raised while it unwinds
+    (a C++ extension's, or a file reader's that wrapped it) is the Ctrl-C, not a bug or a bad
+    input.  In the main thread only."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pressed = []
+
+    def on_ctrl_c(signum, frame):
+        pressed.append(True)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, on_ctrl_c)
+    try:
+        yield
+    except Exception as exc:
+        if pressed:
+            raise KeyboardInterrupt from exc
+        raise
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def main(argv=None):
     """Run ``skyfit`` with ``argv``; returns the exit code."""
     try:
@@ -559,7 +587,8 @@ def main(argv=None):
     except SystemExit as exc:              # --help, --version, or a usage error (already printed)
         return exc.code
     try:
-        args.func(args)
+        with _ctrl_c_noted():
+            args.func(args)
     except KeyboardInterrupt:
         if args.debug:
             raise
