@@ -450,7 +450,7 @@ def build_parser():
                      help="with --per-pixel: fit N x N blocks of pixels (default 1)")
     fit.add_argument("--workers", type=_int_in(1, 1024), default=None,
                      help="with --per-pixel: worker processes of the local Dask cluster "
-                     "(default: one per core)")
+                     "(default and most: one per core, and as many as the free memory holds)")
     fit.add_argument("--scheduler", metavar="ADDRESS",
                      help="with --per-pixel: an existing Dask scheduler (e.g. tcp://host:8786) "
                      "instead of a cluster on this machine")
