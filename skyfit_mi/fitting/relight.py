@@ -168,8 +168,6 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if not images and not rendered_frames(doc):
         raise SkyfitError(f"a prediction without images is made at the target's rendered frames, "
                           f"and {target} has none; render it, or leave out --no-images.")
-    if doc is not None:                 # the target's frames and light, before any writing
-        check_frames(doc, manifest_file(target).parent)
     check_output(out, images, overwrite)
     observed = doc is not None and bool(rendered_frames(doc))
     table = doc is not None and is_table(doc)      # observations without images
@@ -185,6 +183,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     beside = (Beside("skyfit_mi.fitting.relight:prediction_files", fits, target, None, draws,
                      seed, kind) if ahead else nullcontext())
     with beside:
+        if doc is not None:             # the target's frames and light, before any writing
+            check_frames(doc, manifest_file(target).parent)
         if images:
             spec, _ = target_spec(target, fits, doc)
             times = [(f.time.strftime("%H:%M"), f.below_horizon) for f in spec.frames]
