@@ -200,6 +200,46 @@ def test_any_illumination_record_lights_a_frame_or_is_refused_naming_it(day, ind
         assert np.all(np.isfinite(v)) and np.all(v >= 0)
 
 
+_PLACES = [("camera", "width"), ("camera", "fov_deg"), ("camera", "to_world"),
+           ("sensor", "exposure"), ("sensor", "bits"), ("sensor", "response"),
+           ("sensor", "gamma"), ("sensor", "noise_percent"), ("render", "variant"),
+           ("frames", 1, "time"), ("frames", 1, "status"), ("frames", 1, "exposure"),
+           ("frames", 1, "sun_zenith_deg"), ("frames", 1, "sensor"), ("frames", 1, "index"),
+           ("run_id",), ("status",), ("schema",)]
+
+
+@settings(max_examples=150, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(st.sampled_from(_PLACES), st.one_of(
+    *[st.integers(-2, 4096)] * 3, *[st.floats(-10.0, 1e4)] * 3, _VALUES,
+    st.fixed_dictionaries({"exposure": _NUMBERS}, optional={"white_balance": st.lists(
+        _NUMBERS, min_size=3, max_size=3)}))), min_size=1, max_size=2))
+def test_any_hand_edited_manifest_is_read_or_refused_in_one_line(day, tmp_path, changes):
+    """A hand-edited manifest (any of its fields set to any value): it loads, and each frame
+    lights, has an exposure and reads as a sensor record, or a SkyfitError refuses it in one
+    line (never another exception)."""
+    from skyfit_mi.pipeline.manifest import rendered_frames, sensor_from_record
+
+    doc = json.loads((day / "manifest.json").read_text())
+    for place, value in changes:
+        *parents, key = place
+        node = doc
+        for k in parents:
+            node = node[k]
+        node[key] = value
+    folder = tmp_path / "edited"
+    folder.mkdir(exist_ok=True)
+    (folder / "manifest.json").write_text(json.dumps(doc))
+    try:
+        doc, root = load_manifest(folder)
+        sensor_from_record(doc["sensor"])
+        for f in rendered_frames(doc):
+            frame_sky(f, day)
+            assert np.all(frame_exposure(doc, f) > 0)
+    except SkyfitError as exc:
+        assert "\n" not in str(exc), str(exc)
+
+
 def test_a_negative_radiance_in_a_manifest_is_refused_by_frame(day, tmp_path, capsys):
     """A hand-edited negative sun radiance: the fit refuses it naming the manifest and frame."""
     from skyfit_mi.cli import main
