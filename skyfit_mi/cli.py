@@ -17,7 +17,7 @@ from contextlib import contextmanager
 #: otherwise; set before NumPy loads.  Dr.Jit's pool does the heavy work on every core, and
 #: OpenBLAS's threads, spinning after each small product NumPy does between its kernels, took
 #: 0.5 CPU-seconds of a 13-frame render from it and from a relight's prediction beside it
-#: (docs/BENCHMARKS.md, "tenth measurement"); fits and chi2map were no slower.  A map's Dask
+#: (docs/BENCHMARKS.md, "One BLAS thread"); fits and chi2map were no slower.  A map's Dask
 #: workers are set so by ``distributed`` already.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
@@ -144,15 +144,15 @@ def _ingest(args):
         from .pipeline.observation_table import ingest_table
 
         photo_only = [k for k in ("times", "name_pattern", "response", "gamma", "exposure",
-                                  "calibrate", "colorchecker", "noise")
+                                  "colorchecker", "noise")
                       if getattr(args, k) is not None]
         if args.photos or photo_only or args.vignetting != "none":
             what = "photographs" if args.photos else "--" + (photo_only or ["vignetting"])[0] \
                 .replace("_", "-")
-            raise SkyfitError(f"--table takes no {what}: the table gives times, values and "
+            raise SkyfitError(f"--table takes no {what}: the table gives frames, values and "
                               "sigmas; give either photographs or --table.")
         ingest_table(args.table, args.spec, args.output, tz=args.tz, site=args.site,
-                     overwrite=args.overwrite)
+                     calibrate=dict(args.calibrate or []), overwrite=args.overwrite)
         return
     if not args.photos:
         raise SkyfitError("give photographs (files or folders), or --table OBS.csv.")
@@ -213,8 +213,8 @@ def _fit(args):
     from pathlib import Path
 
     from .files import check_dir
-    from .fitting.chi2 import check_regions, subsample_region
-    from .fitting.fit import fit_region
+    from .fitting.chi2 import subsample_region
+    from .fitting.fit import fit_regions
     from .fitting.report import write_fit, write_summary
     from .pipeline.manifest import load_manifest
     from .render.fit_model import BY_COUNT, check_fit_normalisation, check_start
@@ -246,18 +246,21 @@ def _fit(args):
                   + (f"; medians {med}" if med else ""))
         print(f"wrote the maps and map_summary.json in {out} ({s['wall_time_s']:.1f} s)")
         return
-    out = check_dir(Path(args.output) if args.output else root)     # created by the first write
-    kept = [pixels if pixels is None else subsample_region(pixels, args.max_pixels or None,
-                                                           args.seed) for _, pixels in regions]
-    check_regions(args.manifest, [(name, k) for (name, _), k in zip(regions, kept)], args.frames)
-    for (name, pixels), kept in zip(regions, kept):
-        if pixels is not None and len(kept) < len(pixels):
-            print(f"{name}: fitting {len(kept)} of its {len(pixels)} pixels (--max-pixels, seed "
-                  f"{args.seed})")
-        res = fit_region(args.manifest, name, kept, model=model, method=args.method,
-                         normalisation=args.normalisation, seed=args.seed, start=args.start,
-                         positions=args.positions, directions=args.directions,
-                         frames=args.frames, variant=args.variant)
+    out = check_dir(Path(args.output) if args.output else root)     # made by the first write
+    kept = {}
+    for name, pixels in regions:
+        kept[name] = pixels if pixels is None else subsample_region(
+            pixels, args.max_pixels or None, args.seed)
+        if pixels is not None and len(kept[name]) < len(pixels):
+            print(f"{name}: fitting {len(kept[name])} of its {len(pixels)} pixels "
+                  f"(--max-pixels, seed {args.seed})")
+    # the light of every region traced together (each frame's kernels once), every region
+    # checked before the first is fitted and written
+    results = fit_regions(args.manifest, list(kept.items()), model=model, method=args.method,
+                          normalisation=args.normalisation, seed=args.seed, start=args.start,
+                          positions=args.positions, directions=args.directions,
+                          frames=args.frames, variant=args.variant)
+    for (name, pixels), res in zip(regions, results):
         res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
                                          if pixels is None else len(pixels))
         paths = write_fit(res, out / f"fit_{name}")
@@ -376,7 +379,8 @@ def build_parser():
                      "PNG, JPEG, camera RAW)")
     ing.add_argument("--table", metavar="CSV", help="instead of photographs: a table of measured "
                      "radiances (time, region, r, g, b, sigma, optional point, x,y,z, view, "
-                     "normal; see docs/MANIFEST.md)")
+                     "normal, saturated; for lab lights, a spec of directional [[sky]] without "
+                     "[time], frame instead of time; see docs/MANIFEST.md)")
     ing.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
     ing.add_argument("--times", metavar="CSV", help="CSV file,time giving each frame's time "
                      "(instead of EXIF DateTimeOriginal)")
@@ -396,7 +400,8 @@ def build_parser():
     ing.add_argument("--calibrate", action="append", type=_reflectance,
                      metavar="MATERIAL=REFLECTANCE", help="a scene material that is a grey "
                      "Lambertian reference of this reflectance (or R,G,B); sets the exposure and "
-                     "white balance (repeatable)")
+                     "white balance (repeatable); with --table, the table's values are in its "
+                     "own units (e.g. DN), scaled to radiance by its rows on this material")
     ing.add_argument("--colorchecker", metavar="MATERIAL", help="a ColorChecker Classic in the "
                      "photographs, lying on this scene material: found automatically; its six "
                      "neutral swatches calibrate like --calibrate greys, its colours check the "

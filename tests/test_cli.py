@@ -122,7 +122,7 @@ def test_damaged_inputs_get_one_line(day, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("args, phrase", [
-    (["--region", "disc=rect:1,1,2,2", "--region", "plate=rect:3,3,4,4"], "'plate' names no"),
+    (["--region", "disc=rect:1,1,2,2", "--region", "plate=rect:6,6,7,7"], "'plate' names no"),
     (["--region", "disc=rect:1,1,2,2", "--frames", "1-5"], "frame 3 is not a rendered frame"),
     (["--region", "disc=rect:3,3,4,4"], "frame 1 (nan/frames/sensor_001.exr) has no finite"),
 ])
@@ -151,6 +151,11 @@ def test_debug_shows_the_traceback(tmp_path):
         main(["--debug", "labels", str(tmp_path)])
 
 
+def _fake_fits(manifest, regions, **kw):
+    for name, pixels in regions:
+        yield _fake_fit(manifest, name, pixels, **kw)
+
+
 def _fake_fit(manifest, name, pixels, **kw):
     return {"region": name, "model": "two", "method": kw["method"], "pixels": pixels.tolist(),
             "parameters": {"rho_s": 0.3 + 0.01 * kw["seed"], "sigma_alpha": 0.1},
@@ -163,10 +168,7 @@ def test_fits_csv_merges_by_region_and_survives_ctrl_c(day, tmp_path, capsys, mo
     import skyfit_mi.fitting.fit as fit
     import skyfit_mi.fitting.report as report
 
-    from skyfit_mi.fitting import chi2
-
-    monkeypatch.setattr(fit, "fit_region", _fake_fit)
-    monkeypatch.setattr(chi2, "check_regions", lambda *a: None)       # regions a-d are fake
+    monkeypatch.setattr(fit, "fit_regions", _fake_fits)
     monkeypatch.setattr(report, "write_fit", lambda res, prefix: (
         report.write_json(prefix.with_suffix(".json"), res),))
     out = tmp_path / "fits"
@@ -183,13 +185,14 @@ def test_fits_csv_merges_by_region_and_survives_ctrl_c(day, tmp_path, capsys, mo
 
     calls = []
 
-    def interrupted(*a, **kw):
-        calls.append(a[1])
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        return _fake_fit(*a, **kw)
+    def interrupted(manifest, regions, **kw):
+        for name, pixels in regions:
+            calls.append(name)
+            if len(calls) == 2:
+                raise KeyboardInterrupt
+            yield _fake_fit(manifest, name, pixels, **kw)
 
-    monkeypatch.setattr(fit, "fit_region", interrupted)
+    monkeypatch.setattr(fit, "fit_regions", interrupted)
     code = main(["fit", str(day), "--region", "c=rect:1,1,2,2", "--region", "d=rect:3,3,4,4",
                  "-o", str(out)])
     assert code == 130 and "interrupted" in capsys.readouterr().err

@@ -355,11 +355,11 @@ def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_pa
     assert shared > 0.5 * len(px) * len(skies)
     stats = {}
     inner = px[share.ok][:16]
-    build_light_cache(scene, params, skies[:1], inner, name, 2, 32, sky_spacing=4, stats=stats)
+    build_light_cache(scene, params, skies[:1], inner, name, 2, 32, plan="anchors", stats=stats)
     assert stats["shared"] > 0
     # the cache takes every frame's anchors in passes after the frames (each under its own
     # frame's sky): the integrals of each frame alone
-    cache = build_light_cache(scene, params, skies, inner, name, 2, 32, sky_spacing=4)
+    cache = build_light_cache(scene, params, skies, inner, name, 2, 32, plan="anchors")
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
         d, l, _ = _shared_integrals(mi, dr, share, scene.environment(), quad, sky.sun_direction)
@@ -367,7 +367,7 @@ def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_pa
         assert np.allclose(cache.lobe_sky[:, t, 0], l[share.ok][:16], rtol=1e-4,
                            atol=1e-5 * np.abs(l).max())
     envmap = replace(skies[0], envmap=np.full((8, 16, 3), 0.05, np.float32))
-    build_light_cache(scene, params, [envmap], inner, name, 2, 32, sky_spacing=4, stats=stats)
+    build_light_cache(scene, params, [envmap], inner, name, 2, 32, plan="anchors", stats=stats)
     assert stats["shared"] == 0
 
 

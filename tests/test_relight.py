@@ -130,7 +130,8 @@ def test_relight_onto_a_new_day_has_no_observations(day, tmp_path):
     ("into the target", "the output folder is the target's"),
     ("another model", "is not a fit result of `skyfit fit`"),
     ("bad interval", "is not a fit result of `skyfit fit`"),
-    ("no sun", "the target's sun is below the horizon at every time (01:00, 23:00)"),
+    ("no sun", "the target's sun is below the horizon in every frame (frame 0 at 01:00, frame 1 at "
+                "23:00)"),
     ("no region in the target", "does not see region 'disc'"),
     ("nothing rendered", "made at the target's rendered frames, and"),
     ("damaged in a folder", "fit_other.json is not readable JSON"),
@@ -388,14 +389,14 @@ def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
     names = ["white_paper", "red_gloss_paint", "polished_mild_steel"]
     pixels = {n: subsample_region(seen[n], 12, 0) for n in names}
     fits = {n: {"region": n, "model": "colour", "normalisation": "ward"} for n in names}
-    options = dict(seed=5, positions=4, directions=64, sky_positions=1, min_frames=1,
-                   sky_spacing=4)
+    options = dict(seed=5, positions=4, directions=64, sky_plan="anchors", min_frames=1)
     alone = FitSession.from_fit(fits[names[0]], tmp_path / "day", pixels[names[0]], **options)
     one = FitSession.sharing_light({names[0]: fits[names[0]]}, tmp_path / "day", pixels,
                                    **options)[names[0]]
-    for k, v in vars(alone.cache).items():
-        if isinstance(v, np.ndarray):
-            assert np.array_equal(v, getattr(one.cache, k), equal_nan=True), k
+    for k in ("D", "G0", "G1", "coef", "hit", "sun_half_cos"):
+        for a, b in zip(*(np.atleast_1d(getattr(x.table, k)) if k != "coef"
+                          else getattr(x.table, k) for x in (alone, one))):
+            assert np.array_equal(a, b, equal_nan=True), k
     together = FitSession.sharing_light(fits, tmp_path / "day", pixels, **options)
     theta = np.array([0.5, 0.4, 0.3, 0.1, 0.1])
     z = []
@@ -403,7 +404,7 @@ def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
         own = FitSession.from_fit(fits[n], tmp_path / "day", pixels[n], **{**options,
                                                                           "seed": 6})
         s = together[n]
-        assert len(s.cache.hit) == len(pixels[n]) and s.cache.hit.all()
+        assert len(s.table.hit) == len(pixels[n]) and s.table.hit.all()
         (a, va), (b, vb) = (x.wm.radiance_and_variance(theta) for x in (s, own))
         m = len(pixels[n])
         z.append((a.mean(axis=0) - b.mean(axis=0))

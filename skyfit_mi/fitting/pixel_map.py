@@ -39,7 +39,8 @@ from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, fit_pixels, patch_grou
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
 #: A worker's peak memory [bytes]: a fixed part (the imports and kernels) and a part per fit
-#: of its chunk (docs/BENCHMARKS.md).
+#: of its chunk, on a 13-frame day (docs/BENCHMARKS.md, "Per-pixel maps: speed and memory";
+#: a longer day's light is traced in blocks of bounded size, basis_table.CHUNK_SAMPLES).
 WORKER_BYTES, FIT_BYTES = 0.25e9, 0.8e6
 #: Fits (pixels, or patches) per chunk: 1024 keep a worker near 1.1 GB (WORKER_BYTES +
 #: CHUNK * FIT_BYTES); a chunk's fixed cost (the scene, its skies, the kernels' tracing: about
@@ -227,7 +228,8 @@ def _client(workers, scheduler, memory_per_worker, dask_logs=False):
 
     # Dask's workers start with MALLOC_TRIM_THRESHOLD_ set, which turns off glibc's dynamic
     # mmap threshold: every large temporary array is then mapped and faulted in afresh, and a
-    # chunk took 1.4x as long (docs/BENCHMARKS.md); the variable is left unset here
+    # chunk took 1.4x as long (docs/BENCHMARKS.md, "Per-pixel maps: speed and memory"); the
+    # variable is left unset here
     with dask.config.set({f"{TRIM}": None}), _stderr_to_null(keep=dask_logs), \
             warnings.catch_warnings():
         if not dask_logs:                     # e.g. its own web server's port taken

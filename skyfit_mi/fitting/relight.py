@@ -29,24 +29,23 @@ from ..background import Beside
 from ..errors import SkyfitError
 from ..files import write_bytes, write_json, write_text
 from ..pipeline.fit_result import check_fit_sequence, read_fit_result
-from ..pipeline.manifest import (RENDERED_SOURCES, check_frames, load_manifest,
-                                 manifest_file, rendered_frames)
+from ..pipeline.manifest import (RENDERED_SOURCES, check_frames, frame_axis, frame_label,
+                                 load_manifest, manifest_file, rendered_frames)
 from ..pipeline.pixels import frame_values
 from ..pipeline.observation_table import is_table, table_regions
 from ..pipeline.spec import read_spec, validate_spec
-from ..render.light_cache import DIRECTIONS, POSITIONS, SKY_SPACING
+from ..render.light_cache import DIRECTIONS, POSITIONS
 
 #: Seed offset of the reference render of a synthetic target (its own materials, other noise).
 REFERENCE_SEED = 1_000_003
-#: Light-cache samples per pixel of a prediction (positions, directions, and the positions of
-#: the sky's deterministic integrals): it predicts region means, whose Monte Carlo error (in
-#: the band) falls with the region's pixels, so it is a sixteenth of a fit's cache, whose
-#: chi-square needs every pixel accurate, with the sky's integrals at one random position of
-#: each pixel (unbiased; 1.7x faster a prediction: 3.0 -> 1.8 s for 64 pixels x 13 frames),
-#: or, for a compact region, through the pixels' centres interpolated between anchors every
-#: light_cache.SKY_SPACING pixels (the maps' rule).  Not a fit's: docs/BENCHMARKS.md, "A fit's
-#: sky integrals through pixel centres: tried, not adopted".
-PREDICTION_CACHE = (4, 64, 1)
+#: Light-cache samples per pixel of a prediction (positions, directions): it predicts region
+#: means, whose Monte Carlo error (in the band) falls with the region's pixels, so it is a
+#: sixteenth of a fit's cache, whose chi-square needs every pixel accurate; the sky's
+#: integrals by the ``anchors`` plan (light_cache.SKY_PLANS: through the pixels' centres
+#: interpolated between anchors where accurate, else at one random position of each pixel,
+#: unbiased).  Not a fit's: docs/BENCHMARKS.md, "A fit's sky integrals through pixel
+#: centres: tried, not adopted".
+PREDICTION_CACHE = (4, 64)
 
 
 #: The files a relight writes beside its sequence's (a render's): the prediction and the errors
@@ -187,16 +186,17 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
             check_frames(doc, manifest_file(target).parent)
         if images:
             spec, _ = target_spec(target, fits, doc)
-            times = [(f.time.strftime("%H:%M"), f.below_horizon) for f in spec.frames]
+            frames = [(frame_label(f.index, f.time), f.below_horizon) for f in spec.frames]
         else:
             # the prediction takes the folder's light as recorded: its spec is not validated
             # again (which would compute every sun position anew)
             spec = None
-            times = [(f["time"][11:16], f.get("below_horizon", False)) for f in doc["frames"]]
-        if all(below for _, below in times):
-            raise SkyfitError(f"the target's sun is below the horizon at every time "
-                              f"({', '.join(t for t, _ in times)}); give times of day with the "
-                              "sun up.")
+            frames = [(frame_label(f["index"], f.get("time")), f.get("below_horizon", False))
+                      for f in doc["frames"]]
+        if all(below for _, below in frames):
+            raise SkyfitError(f"the target's sun is below the horizon in every frame "
+                              f"({', '.join(t for t, _ in frames)}); give times of day with the "
+                              "sun up (or lab lights above the horizon).")
         # the target's pixels (a region it does not show is refused before the render), or
         # without observations the relit render's own (its label image)
         pixels = target_pixels(fits, target, seed) if observed or not images else None
@@ -346,7 +346,7 @@ def prediction_errors(fits, observed, relit, pixels):
                   & {f["index"] for f in rendered_frames(new_doc)})
     if not both:
         raise SkyfitError("the target and the relit sequence share no rendered frame.")
-    times = [f["time"] for f in obs_doc["frames"] if f["index"] in both]
+    times = [f.get("time") for f in obs_doc["frames"] if f["index"] in both]
     regions, all_pred, all_obs = {}, [], []
     for region, (path, r) in sorted(fits.items()):
         px = pixels[region]
@@ -430,8 +430,9 @@ def write_comparisons(observed, relit):
     def compare(frame, o, r):
         err = (r - o).mean(axis=2) / scale
         lim = max(float(np.abs(err).max()), 1e-6)
-        panels = [(to_srgb8(o, 0.8 / scale), f"observed, {frame['time']}"),
-                  (to_srgb8(r, 0.8 / scale), f"relit, {frame['time']}"),
+        label = frame_label(frame["index"], frame.get("time"))
+        panels = [(to_srgb8(o, 0.8 / scale), f"observed, {label}"),
+                  (to_srgb8(r, 0.8 / scale), f"relit, {label}"),
                   (_diverging(err / lim), "relit - observed (/ observed 99th pct.)")]
         name = f"compare_{frame['index']:04d}.png"
         write_png(Path(relit) / name, _contact_row(panels, lim))
@@ -518,8 +519,6 @@ def write_prediction(made, out, log=print):
 
 def plot_prediction(rows, image_kind):
     """``prediction.png`` of :func:`prediction_files`' ``rows``, as PNG bytes."""
-    import datetime as dt
-
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -533,13 +532,14 @@ def plot_prediction(rows, image_kind):
             sel = [row for row in rows if row[0] == region and row[3] == ch]
             if not sel:
                 continue
-            t = [dt.datetime.fromisoformat(row[2]) for row in sel]
+            t, t_label = frame_axis([row[1] for row in sel], [row[2] for row in sel])
             pred, lo, hi, img = (np.array([row[k] for row in sel]) for k in (4, 5, 6, 7))
             ax.fill_between(t, lo, hi, color=col, alpha=0.15, lw=0)
             ax.plot(t, pred, "-", color=col, label=f"predicted {ch} (95% band)")
             ax.plot(t, img, "o", color=col, ms=4, label=f"{image_kind} {ch}")
         ax.set_title(f"{region}: region mean", fontsize=9)
         ax.set_ylabel("radiance [W m^-2 sr^-1]")
+        ax.set_xlabel(t_label)
         if i == 0:                  # the same for every panel: once (a quarter of the plot)
             ax.legend(fontsize=6, ncol=2)
     fig.autofmt_xdate()
@@ -591,8 +591,7 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
     sessions = FitSession.sharing_light(in_images, target, pixels, seed=seed,
                                         positions=PREDICTION_CACHE[0],
                                         directions=PREDICTION_CACHE[1],
-                                        sky_positions=PREDICTION_CACHE[2], min_frames=1,
-                                        sky_spacing=SKY_SPACING)
+                                        sky_plan="anchors", min_frames=1)
     for region, (_, r) in sorted(fits.items()):
         # each let go when done with
         # a table target: all the region's points in the target's table, whatever the fit's
@@ -600,8 +599,10 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
             target, region, None, model=r["model"], normalisation=r.get("normalisation", "ward"),
             seed=seed, positions=POSITIONS, directions=DIRECTIONS, min_frames=1)
         sets = parameter_draws(r, s.names, s.lower, s.upper, draws, rng)
-        # the region's mean over its pixels; over a table's points measured in each frame
-        have = np.ones(s.obs.y.shape) if s.obs.rays is None else np.isfinite(s.obs.sigma) * 1.0
+        # the region's mean over its pixels; over a table's points measured in each frame,
+        # but for saturated values (at the top code), which only bound theirs from below
+        have = np.ones(s.obs.y.shape) if s.obs.rays is None else \
+            (np.isfinite(s.obs.sigma) & (s.obs.y < s.obs.sensor.max_code)) * 1.0
         have = have / np.maximum(have.sum(axis=0), 1.0)
 
         def region_mean(x):

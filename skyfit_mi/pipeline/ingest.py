@@ -662,6 +662,11 @@ def spec_for_times(spec_path, times, tz=None, site=None, size=None):
     size is refused)."""
     spec_path = Path(spec_path)
     raw = read_spec(spec_path)
+    if "time" not in raw:
+        raise SpecError(f"{spec_path.name} has lab lights (frames by index, no [time]), but "
+                        "measured frames are placed by their times: give a spec of the day "
+                        "([location], [time], its sky), or the lab values as a table (ingest "
+                        "--table with a frame column).")
     cam = dict(raw.get("camera", {}))
     for key, n in zip(("width", "height"), size or ()):
         if key in cam and int(cam[key]) != n:

@@ -304,6 +304,23 @@ def frame_exposure(doc, frame):
                                                dtype=float)
 
 
+def frame_label(index, time=None):
+    """How a frame is named to people: 'frame 3 at 12:00' ([time] local time, a datetime or ISO
+    string), or 'frame 3' for a lab light, which has no time (frames by index)."""
+    if time is None:
+        return f"frame {index}"
+    return f"frame {index} at {(time if isinstance(time, str) else time.isoformat())[11:16]}"
+
+
+def frame_axis(frames, times):
+    """(x values, axis label) to plot a series over manifest frames ``frames`` (indices) at
+    ``times`` (ISO strings; None for lab lights): local time when every frame has one, else
+    the frame index."""
+    if all(t is not None for t in times):
+        return [dt.datetime.fromisoformat(t) for t in times], "local time"
+    return [int(i) for i in frames], "frame (lab light, by index)"
+
+
 #: Manifest sources whose frames skyfit rendered (their materials are known: synthetic).
 RENDERED_SOURCES = ("render", "relight")
 
