@@ -14,7 +14,7 @@ Cases (``--cases``):
   ``relight --no-images`` of the fit onto the table.
 
 Each command runs in a new process (``python -m skyfit_mi.cli``, the checkout first on
-``PYTHONPATH``); its peak resident memory is the process's ``ru_maxrss``.  Prints a markdown
+``PYTHONPATH``); its peak resident memory is the process's own ``VmHWM``.  Prints a markdown
 table and writes ``DIR/bench_core.json``.
 
     .venv/bin/python scripts/bench_core.py -o DIR [--peer PATH] [--cases board,misfit,table400]
@@ -37,18 +37,34 @@ GOLD = ('<bsdf type="roughconductor"><string name="material" value="Au"/>'
         '<string name="distribution" value="beckmann"/><float name="alpha" value="0.15"/></bsdf>')
 
 
+#: Runs the CLI and writes the process's own peak resident memory (VmHWM: ru_maxrss would
+#: carry a forking parent's across exec) [kB] to the file named by its first argument.
+CLI = """
+import atexit, runpy, sys
+out = sys.argv.pop(1)
+def peak():
+    with open("/proc/self/status") as f:
+        kb = next(int(l.split()[1]) for l in f if l.startswith("VmHWM:"))
+    with open(out, "w") as f:
+        f.write(str(kb))
+atexit.register(peak)
+sys.argv[0] = "skyfit"
+runpy.run_module("skyfit_mi.cli", run_name="__main__")
+"""
+
+
 def run(checkout, args, log):
     """Run ``skyfit ARGS`` with ``checkout``'s package: (wall time [s], peak RSS [MB])."""
     env = dict(os.environ, PYTHONPATH=str(checkout))
+    peak = Path(str(log) + ".peak_kB")
     t0 = time.perf_counter()
     with open(log, "w") as out:
-        p = subprocess.Popen([sys.executable, "-m", "skyfit_mi.cli", *map(str, args)], env=env,
-                             stdout=out, stderr=subprocess.STDOUT, cwd=checkout)
-        _, status, usage = os.wait4(p.pid, 0)
+        code = subprocess.run([sys.executable, "-c", CLI, str(peak), *map(str, args)], env=env,
+                              stdout=out, stderr=subprocess.STDOUT, cwd=checkout).returncode
     wall = time.perf_counter() - t0
-    if os.waitstatus_to_exitcode(status) != 0:
+    if code != 0:
         raise SystemExit(f"{' '.join(map(str, args))} failed in {checkout}; see {log}")
-    return wall, usage.ru_maxrss / 1024
+    return wall, int(peak.read_text()) / 1024
 
 
 def region_times(folder):

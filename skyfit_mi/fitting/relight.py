@@ -34,7 +34,7 @@ from ..pipeline.manifest import (RENDERED_SOURCES, check_frames, frame_axis, fra
 from ..pipeline.pixels import frame_values
 from ..pipeline.observation_table import is_table, table_regions
 from ..pipeline.spec import read_spec, validate_spec
-from ..render.light_cache import DIRECTIONS, POSITIONS
+from ..render.light_cache import DIRECTIONS
 
 #: Seed offset of the reference render of a synthetic target (its own materials, other noise).
 REFERENCE_SEED = 1_000_003
@@ -585,8 +585,9 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
 
     rng = np.random.default_rng(seed)
     rows, summary = [], {}
-    # image regions: the light at all their pixels traced at once; a table's few points take
-    # the fit's own cache size: the small one averages out only over an image region's pixels
+    # image regions: the light at all their pixels traced at once; a table's points take a
+    # fit's first cache size (POINT_POSITIONS): the small one averages out only over an image
+    # region's pixels
     in_images = {region: r for region, (_, r) in fits.items() if pixels[region] is not None}
     sessions = FitSession.sharing_light(in_images, target, pixels, seed=seed,
                                         positions=PREDICTION_CACHE[0],
@@ -594,10 +595,11 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
                                         sky_plan="anchors", min_frames=1)
     for region, (_, r) in sorted(fits.items()):
         # each let go when done with
-        # a table target: all the region's points in the target's table, whatever the fit's
+        # a table target: all the region's points in the target's table, whatever the fit's;
+        # a fit's first cache size for points (positions None)
         s = sessions.pop(region) if region in sessions else FitSession(
             target, region, None, model=r["model"], normalisation=r.get("normalisation", "ward"),
-            seed=seed, positions=POSITIONS, directions=DIRECTIONS, min_frames=1)
+            seed=seed, directions=DIRECTIONS, min_frames=1)
         sets = parameter_draws(r, s.names, s.lower, s.upper, draws, rng)
         # the region's mean over its pixels; over a table's points measured in each frame,
         # but for saturated values (at the top code), which only bound theirs from below
