@@ -8,7 +8,10 @@ written stay); ``--debug`` shows the traceback of any error.
 import argparse
 import os
 import re
+import signal
 import sys
+import threading
+from contextlib import contextmanager
 
 #: NumPy's BLAS (OpenBLAS) on one thread in a `skyfit` process unless the environment says
 #: otherwise; set before NumPy loads.  Dr.Jit's pool does the heavy work on every core, and
@@ -209,7 +212,7 @@ def _fit_regions(args):
 def _fit(args):
     from pathlib import Path
 
-    from .files import ensure_dir
+    from .files import check_dir
     from .fitting.chi2 import subsample_region
     from .fitting.fit import fit_regions
     from .fitting.report import write_fit, write_summary
@@ -236,14 +239,14 @@ def _fit(args):
         s = run_map(args.manifest, regions, out, model=model, normalisation=args.normalisation,
                     seed=args.seed, patch=args.patch, chunk=args.chunk or CHUNK,
                     workers=args.workers, scheduler=args.scheduler, overwrite=args.overwrite,
-                    progress=not args.quiet, variant=args.variant)
+                    progress=not args.quiet, variant=args.variant, dask_logs=args.debug)
         for name, r in s["regions"].items():
             med = ", ".join(f"{k} = {v:.4g}" for k, v in r["median"].items() if v is not None)
             print(f"{name}: {r['determined']} of {r['mapped']} pixels determined"
                   + (f"; medians {med}" if med else ""))
         print(f"wrote the maps and map_summary.json in {out} ({s['wall_time_s']:.1f} s)")
         return
-    out = ensure_dir(Path(args.output) if args.output else root)
+    out = check_dir(Path(args.output) if args.output else root)     # made by the first write
     kept = {}
     for name, pixels in regions:
         kept[name] = pixels if pixels is None else subsample_region(
@@ -251,7 +254,8 @@ def _fit(args):
         if pixels is not None and len(kept[name]) < len(pixels):
             print(f"{name}: fitting {len(kept[name])} of its {len(pixels)} pixels "
                   f"(--max-pixels, seed {args.seed})")
-    # the light of every region traced together (each frame's kernels once)
+    # the light of every region traced together (each frame's kernels once), every region
+    # checked before the first is fitted and written
     results = fit_regions(args.manifest, list(kept.items()), model=model, method=args.method,
                           normalisation=args.normalisation, seed=args.seed, start=args.start,
                           positions=args.positions, directions=args.directions,
@@ -278,17 +282,20 @@ def _chi2map(args):
     import numpy as np
 
     from .fitting.fit import FitSession
-    from .fitting.landscape import (chi2_map, map_axes, profiled_map, truth_parameters,
-                                    write_chi2_map)
-    from .pipeline.fit_result import read_fit_result
+    from .fitting.landscape import (chi2_map, map_axes, map_prefix, profiled_map,
+                                    truth_parameters, write_chi2_map)
+    from .pipeline.fit_result import check_fit_sequence, read_fit_result
     from .pipeline.manifest import load_manifest
     from .render.fit_model import PARAMETERS
 
-    _, root = load_manifest(args.manifest)
+    doc, root = load_manifest(args.manifest)
     r = read_fit_result(args.fit)
+    check_fit_sequence(r, args.fit, doc, args.manifest)
     names = list(PARAMETERS[r["model"]])
     xs, ys = map_axes(r["model"], args.x, args.y, args.x_range, args.y_range, args.n,
                       args.profile)
+    name = f"chi2map_{r['region']}_{args.x}_{args.y}"
+    prefix = map_prefix(args.output or root, name, args.overwrite)
     s = FitSession.from_fit(r, args.manifest, seed=args.seed, frames=r.get("frames"))
     theta = np.array([r["parameters"][k] for k in names])
     chi2 = (profiled_map(s, theta, args.x, args.y, xs, ys) if args.profile
@@ -301,7 +308,6 @@ def _chi2map(args):
         marks["truth"] = (truth[ix], truth[iy])
     walk = np.asarray(r.get("trace") or [], dtype=float)
     walk = walk[:, [ix, iy]] if args.walk and walk.ndim == 2 and len(walk) > 1 else None
-    prefix = Path(args.output) if args.output else root / f"chi2map_{r['region']}_{args.x}_{args.y}"
     others = "at their best" if args.profile else "at the fit"
     paths = write_chi2_map(prefix, args.x, args.y, xs, ys, chi2, marks, walk, others)
     print(f"{r['region']}: chi2 minimum {chi2.min():.6g} at {args.x} = {xs[i]:.4g}, "
@@ -344,7 +350,7 @@ def build_parser():
 
     parser = _Parser(prog="skyfit", description=DESCRIPTION)
     parser.add_argument("--version", action="version", version=f"skyfit-mi {__version__}")
-    debug_help = "show the full traceback of an error (for bug reports)"
+    debug_help = "show the full traceback of an error, and a map's Dask log (for bug reports)"
     parser.add_argument("--debug", action="store_true", help=debug_help)
     common = _Parser(add_help=False)               # --debug also after the command
     common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=debug_help)
@@ -449,7 +455,7 @@ def build_parser():
                      help="with --per-pixel: fit N x N blocks of pixels (default 1)")
     fit.add_argument("--workers", type=_int_in(1, 1024), default=None,
                      help="with --per-pixel: worker processes of the local Dask cluster "
-                     "(default: one per core)")
+                     "(default and most: one per core, and as many as the free memory holds)")
     fit.add_argument("--scheduler", metavar="ADDRESS",
                      help="with --per-pixel: an existing Dask scheduler (e.g. tcp://host:8786) "
                      "instead of a cluster on this machine")
@@ -542,13 +548,41 @@ def build_parser():
     cmap.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,
                       help="seed of the light cache (default 0)")
     cmap.add_argument("-o", "--output",
-                      help="output path prefix (default MANIFEST/chi2map_REGION_X_Y)")
+                      help="output path prefix, or a folder to write into (default "
+                      "MANIFEST/chi2map_REGION_X_Y)")
+    cmap.add_argument("--overwrite", action="store_true",
+                      help="replace files of the prefix's names that are not an earlier map's")
     cmap.set_defaults(func=_chi2map)
     return parser
 
 
 def _oneline(exc):
     return " ".join(str(exc).split())
+
+
+@contextmanager
+def _ctrl_c_noted():
+    """Ctrl-C raises KeyboardInterrupt as usual, and is noted: an error raised while it unwinds
+    (a C++ extension's, or a file reader's that wrapped it) is the Ctrl-C, not a bug or a bad
+    input.  In the main thread only."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pressed = []
+
+    def on_ctrl_c(signum, frame):
+        pressed.append(True)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, on_ctrl_c)
+    try:
+        yield
+    except Exception as exc:
+        if pressed:
+            raise KeyboardInterrupt from exc
+        raise
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def main(argv=None):
@@ -558,7 +592,8 @@ def main(argv=None):
     except SystemExit as exc:              # --help, --version, or a usage error (already printed)
         return exc.code
     try:
-        args.func(args)
+        with _ctrl_c_noted():
+            args.func(args)
     except KeyboardInterrupt:
         if args.debug:
             raise

@@ -133,6 +133,11 @@ def test_relight_onto_a_new_day_has_no_observations(day, tmp_path):
     ("no sun", "the target's sun is below the horizon in every frame (frame 0 at 01:00, frame 1 at "
                 "23:00)"),
     ("no region in the target", "does not see region 'disc'"),
+    ("nothing rendered", "made at the target's rendered frames, and"),
+    ("damaged in a folder", "fit_other.json is not readable JSON"),
+    ("a target frame missing", "frame 2: cannot read"),
+    ("a target light damaged", "frame 1: sky illumination: sun_radiance"),
+    ("frames the target lacks", "lists frame 9, which"),
 ])
 def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
     fit = _fit_json(tmp_path / "fit_disc.json")
@@ -147,6 +152,9 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
         args = [str(_fit_json(tmp_path / "fit_plate.json", region="plate"))]
     elif case == "twice":
         args = [str(fit), str(tmp_path)]
+    elif case == "damaged in a folder":
+        (tmp_path / "fit_other.json").write_text(fit.read_text()[:50])
+        args = [str(tmp_path)]
     elif case == "into the target":
         out = day / "day"
     elif case == "another model":
@@ -156,6 +164,31 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
         r["intervals"]["rho_s"]["95"] = [0.0, None]
         fit.write_text(json.dumps(r))
     target = day / "day"
+    more = []
+    if case == "nothing rendered":                   # a folder whose frames are all pending
+        doc = json.loads((target / "manifest.json").read_text())
+        doc.update(status="incomplete", frames=[{"index": f["index"], "status": "pending"}
+                                                for f in doc["frames"]])
+        target = tmp_path / "pending"
+        target.mkdir()
+        (target / "manifest.json").write_text(json.dumps(doc))
+        more = ["--no-images"]
+    elif case in ("a target frame missing", "a target light damaged"):
+        import shutil
+
+        target = tmp_path / "damaged"
+        shutil.copytree(day / "day", target)
+        if case == "a target frame missing":
+            (target / "frames" / "radiance_002.exr").unlink()
+        else:
+            doc = json.loads((target / "manifest.json").read_text())
+            doc["frames"][1]["illumination"]["sun_radiance"] = [-1.0, 0.0, 0.0]
+            (target / "manifest.json").write_text(json.dumps(doc))
+    elif case == "frames the target lacks":
+        r = json.loads(fit.read_text())
+        r.update(frames=[0, 9], sequence_run_id=json.loads(
+            (target / "manifest.json").read_text())["run_id"])
+        fit.write_text(json.dumps(r))
     if case in ("no sun", "no region in the target"):
         raw = copy.deepcopy(TINY)
         if case == "no sun":
@@ -168,9 +201,10 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
         if case == "no region in the target":
             assert main(["render", str(target), "-o", str(tmp_path / "away"), "-q"]) == 0
             target = tmp_path / "away"
-    assert main(["relight", *args, "--target", str(target), "-o", str(out), "-q"]) == 2
+    assert main(["relight", *args, "--target", str(target), "-o", str(out), "-q", *more]) == 2
     err = capsys.readouterr().err.strip()
     assert phrase in err and len(err.splitlines()) == 1, err
+    assert case == "into the target" or not out.exists()          # nothing written
 
 
 def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day, tmp_path):
@@ -192,8 +226,14 @@ def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day
     rows = list(csv.reader((out / "prediction.csv").read_text().splitlines()))[1:]
     assert all(float(r[6]) - float(r[5]) > 0.02 * float(r[4]) for r in rows)
     _fit_json(fit, model="achromatic", R=0.8, rho_s=0.0, sigma_alpha=0.0)
+    # another prediction into the folder replaces it only with --overwrite
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    for images in ([], ["--no-images"]):
+        assert main(["relight", str(fit), "--target", str(day / "day"), "-o", str(out), "-q",
+                     *images, "--draws", "20"]) == 2
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert main(["relight", str(fit), "--target", str(day / "day"), "-o", str(out), "-q",
-                 "--no-images", "--draws", "20"]) == 0
+                 "--no-images", "--draws", "20", "--overwrite"]) == 0
     assert json.loads((out / "relight.json").read_text())["band_coverage"]["share"] == 0.0
 
 
@@ -219,6 +259,15 @@ def test_fit_on_some_frames_and_relight_onto_the_same_folder_reports_the_held_ou
     assert errors["band_coverage"]["share"] >= 0.75          # measured 1.0 (12 values)
     rows = list(csv.reader((out / "relight.csv").read_text().splitlines()))
     assert [row[4] for row in rows[1:5]] == ["no", "no", "yes", "yes"]
+    # a prediction without images does not mix into the relit sequence; with --overwrite it
+    # replaces it whole
+    before = sorted(p.name for p in out.iterdir())
+    assert main(["relight", str(fits), "--target", str(day / "day"), "-o", str(out), "-q",
+                 "--no-images", "--draws", "20"]) == 2
+    assert sorted(p.name for p in out.iterdir()) == before
+    assert main(["relight", str(fits), "--target", str(day / "day"), "-o", str(out), "-q",
+                 "--no-images", "--draws", "20", "--overwrite"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["prediction.csv", "relight.json"]
 
 
 FORKED_RELIGHT = """

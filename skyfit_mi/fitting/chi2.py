@@ -24,8 +24,8 @@ import numpy as np
 
 from ..physics.camera import SensorModel
 from ..errors import SkyfitError
-from ..pipeline.manifest import (frame_exposure, load_manifest, read_frame_image, rendered_frames,
-                                  sensor_from_record)
+from ..pipeline.manifest import (check_frames, frame_exposure, load_manifest, read_frame_image,
+                                 rendered_frames, sensor_from_record)
 
 #: Values below this [DN] read as code 0.
 LOW_CODE = 0.5
@@ -147,8 +147,9 @@ def load_table_observations(manifest_path, region, points=None, frames=None, min
         raise SkyfitError(f"frame {missing[0]} is not an observed frame of the sequence; its "
                           f"frames are {sorted(known)}.")
     if len(fr) < min_frames:
-        raise SkyfitError(f"region {region!r} is measured in fewer than {min_frames} frames; a "
-                          "fit needs a sequence.")
+        raise SkyfitError(f"region {region!r} is measured in {len(fr)} frame(s); at least "
+                          f"{min_frames} are needed: measure it in more frames (or choose more "
+                          "frames).")
     sensor = sensor_from_record(doc["sensor"])
     top = float(sensor.max_code)
     sat = rows.saturated
@@ -271,8 +272,9 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
                               f"rendered frames are {sorted(known)}.")
         rendered = [f for f in rendered if f["index"] in set(frames)]
     if len(rendered) < min_frames:
-        raise SkyfitError(f"the sequence has fewer than {min_frames} rendered frames; a fit "
-                          "needs a sequence.")
+        raise SkyfitError(f"{root} has {len(rendered)} rendered frame(s)"
+                          f"{' of those chosen' if frames is not None else ''}; at least "
+                          f"{min_frames} are needed: render the sequence (or choose more frames).")
     warnings = []
     if doc.get("status") != "complete":
         warnings.append("the sequence's render is incomplete (manifest status "
@@ -306,6 +308,26 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
     return Observations(pixels, [f["index"] for f in rendered], [f.get("time") for f in rendered],
                         np.stack(ys, 1).astype(float), np.stack(sig, 1).astype(float),
                         np.stack(gain, 1), sensor, warnings)
+
+
+def check_regions(manifest_path, regions, frames=None):
+    """Load the observations of every region [(material, pixels, or None for a table's
+    points)] and light their frames (``frames``: these indices only), so that a bad region,
+    frame or light is refused before the first region's fit is written; the frames' images
+    stay in the frame cache for the fits."""
+    from ..pipeline.observation_table import is_table
+
+    doc, root = load_manifest(manifest_path)
+    materials = doc["scene"]["materials"]
+    for name, pixels in regions:
+        if name not in materials:
+            raise SkyfitError(f"region {name!r} names no material of the scene; its materials "
+                              f"are: {', '.join(materials)}.")
+        if is_table(doc):
+            load_table_observations(manifest_path, name, pixels, frames)
+        else:
+            load_observations(manifest_path, pixels, frames)
+    check_frames(doc, root, kinds=(), frames=frames)
 
 
 def censored_term_moments(a, b):

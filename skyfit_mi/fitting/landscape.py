@@ -195,6 +195,28 @@ def profiled_map(session, theta, x, y, xs, ys):
     return out
 
 
+def map_prefix(prefix, default_name, overwrite=False):
+    """The path prefix of a map's files: ``prefix`` (an existing folder: the map goes into it
+    as ``default_name``), checked not to replace files that are not an earlier map's unless
+    ``overwrite``: a map's CSV has the header X,Y,chi2, and its PNG is the one beside it."""
+    prefix = Path(prefix)
+    if prefix.is_dir():
+        prefix = prefix / default_name
+    table, image = prefix.with_suffix(".csv"), prefix.with_suffix(".png")
+    if overwrite or not (table.exists() or image.exists()):
+        return prefix
+    try:
+        with open(table, newline="", encoding="utf-8") as f:
+            header = next(csv.reader(f), [])
+    except (OSError, UnicodeDecodeError):
+        header = []
+    if len(header) != 3 or header[2] != "chi2":
+        held = table if table.exists() else image
+        raise SkyfitError(f"{held} exists and is not a chi-square map's; give another -o, or "
+                          "pass --overwrite to replace it.")
+    return prefix
+
+
 def write_chi2_map(prefix, x, y, xs, ys, chi2, marks, walk=None, others="at the fit"):
     """``<prefix>.csv`` (x, y, chi2 per grid point) and ``<prefix>.png`` (:func:`draw_chi2_map`
     with ``marks`` {label: (x, y)} such as the fit, the map's minimum and the truth, and an

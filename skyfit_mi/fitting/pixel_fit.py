@@ -136,6 +136,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     whole = bases[0]
     hit = np.bincount(groups, weights=table.hit.all(axis=1), minlength=n) > 0
     first = pixels[np.unique(groups, return_index=True)[1]]
+    y_pixels = y                                         # per pixel, for _contradicts
     if n < len(pixels):
         y, w = (_stack_groups(a, groups, n) for a in (y, w))
         bases = [(_stack_groups(D, groups, n), np.stack([_stack_groups(g, groups, n) for g in G]))
@@ -152,8 +153,8 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)
     left_out = np.bincount(groups, weights=saturated.any(axis=(1, 2)), minlength=n) > 0
-    contradicted = np.bincount(groups, weights=_contradicts(model, y, w_all, saturated, whole,
-                                                            fit, groups), minlength=n) > 0
+    contradicted = np.bincount(groups, weights=_contradicts(model, y_pixels, w_all, saturated,
+                                                            whole, fit, groups), minlength=n) > 0
     fit["warnings"] = _flags(model, names, fit, hit) \
         | np.where(left_out, WARNINGS["saturated values left out"], 0) \
         | np.where(contradicted, WARNINGS["saturated values contradicted"], 0)

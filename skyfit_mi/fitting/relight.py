@@ -28,10 +28,9 @@ import numpy as np
 from ..background import Beside
 from ..errors import SkyfitError
 from ..files import write_bytes, write_json, write_text
-from .report import fit_files
-from ..pipeline.fit_result import read_fit_result
-from ..pipeline.manifest import (RENDERED_SOURCES, frame_axis, frame_label, load_manifest,
-                                 manifest_file, rendered_frames)
+from ..pipeline.fit_result import check_fit_sequence, read_fit_result
+from ..pipeline.manifest import (RENDERED_SOURCES, check_frames, frame_axis, frame_label,
+                                 load_manifest, manifest_file, rendered_frames)
 from ..pipeline.pixels import frame_values
 from ..pipeline.observation_table import is_table, table_regions
 from ..pipeline.spec import read_spec, validate_spec
@@ -49,26 +48,72 @@ REFERENCE_SEED = 1_000_003
 PREDICTION_CACHE = (4, 64)
 
 
+#: The files a relight writes beside its sequence's (a render's): the prediction and the errors
+#: (and compare_NNNN.png, and the reference render in reference/).
+RELIGHT_FILES = ("prediction.csv", "prediction.png", "relight.json", "relight.csv")
+
+
+def check_output(out, images, overwrite):
+    """Refuse an output folder ``out`` that holds another run's output, unless ``overwrite``.
+    A relight without images writes no manifest to tell its run by, so a sequence's or a
+    relight's files there are another run's; with images, a folder holding a sequence is the
+    render's to judge (it resumes its own run and refuses another's), and a relight's files
+    without one are another run's (one without images)."""
+    out = Path(out)
+    if overwrite or not out.is_dir():
+        return
+    sequence = (out / "manifest.json").exists()
+    if images and sequence:
+        return
+    held = (["manifest.json"] if sequence else []) + [n for n in RELIGHT_FILES
+                                                      if (out / n).exists()]
+    if held:
+        raise SkyfitError(f"{out} holds another run's output ({held[0]}); relight into another "
+                          "folder, or pass --overwrite to replace it.")
+
+
+def clear_output(out):
+    """Remove an earlier relight from ``out`` (--overwrite): its sequence, prediction, errors,
+    comparison images and reference render, and nothing else."""
+    from ..files import FolderLock
+    from ..pipeline.sequence import clear_run
+
+    out = Path(out)
+    if not out.is_dir():
+        return
+    with FolderLock(out):
+        for folder in (out, out / "reference"):
+            clear_run(folder)
+        for p in [*(out / n for n in RELIGHT_FILES), *out.glob("compare_[0-9]*.png")]:
+            p.unlink(missing_ok=True)
+        for d in (out / "frames", out / "reference" / "frames", out / "reference"):
+            if d.is_dir() and not any(d.iterdir()):
+                d.rmdir()
+
+
 def load_fits(paths):
     """{region: (path, fit result)} from fit JSONs, a fit folder's ``fits.csv`` (the
-    ``fit_*.json`` beside it), or a folder of fits; a region given twice is refused."""
+    ``fit_*.json`` beside it), or a folder of fits; a damaged fit JSON in a folder is named,
+    and a region given twice is refused."""
     out = {}
     for p in map(Path, paths):
         if p.is_dir() or p.name == "fits.csv":
-            found = fit_files(p if p.is_dir() else p.parent)
-            if not found:
-                raise SkyfitError(f"no fit_*.json beside {p}; give the folder `skyfit fit` wrote.")
+            folder = p if p.is_dir() else p.parent
+            files = sorted(folder.glob("fit_*.json"))
+            if not files:
+                raise SkyfitError(f"no fit_*.json in {folder}; give the folder `skyfit fit` "
+                                  "wrote.")
         elif p.is_file():
-            r = read_fit_result(p)
-            found = {r["region"]: (p, r)}
+            files = [p]
         else:
             raise SkyfitError(f"fit {str(p)!r} does not exist; give fit_NAME.json files, a "
                               "fits.csv or the folder `skyfit fit` wrote.")
-        for region in found:
-            if region in out:
-                raise SkyfitError(f"region {region!r} is fitted twice ({out[region][0]} and "
-                                  f"{found[region][0]}); give one fit per region.")
-        out.update(found)
+        for f in files:
+            r = read_fit_result(f)
+            if r["region"] in out:
+                raise SkyfitError(f"region {r['region']!r} is fitted twice ({out[r['region']][0]} "
+                                  f"and {f}); give one fit per region.")
+            out[r["region"]] = (f, r)
     return out
 
 
@@ -117,6 +162,12 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     doc = load_manifest(target)[0] if is_folder else None
     if doc is not None and Path(out).resolve() == manifest_file(target).parent.resolve():
         raise SkyfitError("the output folder is the target's; give another with -o.")
+    for path, r in fits.values() if doc is not None else ():
+        check_fit_sequence(r, path, doc, target, own=False)
+    if not images and not rendered_frames(doc):
+        raise SkyfitError(f"a prediction without images is made at the target's rendered frames, "
+                          f"and {target} has none; render it, or leave out --no-images.")
+    check_output(out, images, overwrite)
     observed = doc is not None and bool(rendered_frames(doc))
     table = doc is not None and is_table(doc)      # observations without images
     if reference and not (images and observed and not table
@@ -131,6 +182,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     beside = (Beside("skyfit_mi.fitting.relight:prediction_files", fits, target, None, draws,
                      seed, kind) if ahead else nullcontext())
     with beside:
+        if doc is not None:             # the target's frames and light, before any writing
+            check_frames(doc, manifest_file(target).parent)
         if images:
             spec, _ = target_spec(target, fits, doc)
             frames = [(frame_label(f.index, f.time), f.below_horizon) for f in spec.frames]
@@ -147,6 +200,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
         # the target's pixels (a region it does not show is refused before the render), or
         # without observations the relit render's own (its label image)
         pixels = target_pixels(fits, target, seed) if observed or not images else None
+        if overwrite:
+            clear_output(out)
         if images:
             render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log,
                             source="relight")
@@ -540,8 +595,11 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
                                         sky_plan="anchors", min_frames=1)
     for region, (_, r) in sorted(fits.items()):
         # each let go when done with
-        s = sessions.pop(region) if region in sessions else FitSession.from_fit(
-            r, target, None, seed=seed, directions=DIRECTIONS, min_frames=1)
+        # a table target: all the region's points in the target's table, whatever the fit's;
+        # a fit's first cache size for points (positions None)
+        s = sessions.pop(region) if region in sessions else FitSession(
+            target, region, None, model=r["model"], normalisation=r.get("normalisation", "ward"),
+            seed=seed, directions=DIRECTIONS, min_frames=1)
         sets = parameter_draws(r, s.names, s.lower, s.upper, draws, rng)
         # the region's mean over its pixels; over a table's points measured in each frame,
         # but for saturated values (at the top code), which only bound theirs from below

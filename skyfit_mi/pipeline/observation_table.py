@@ -49,8 +49,9 @@ brightest value plus 5 sigma at half scale, one factor recorded as the sensor's 
 chi-square is eq. 6.2 in the table's own units; a value at or below zero, which a radiance
 cannot be, is taken as censored at zero (the fit's rule for code 0), and a saturated value
 as censored at its level, as an image's top code
-(:func:`skyfit_mi.fitting.chi2.load_table_observations`).  A luminance table is fitted
-through the model's luminance (the first channel;
+(:func:`skyfit_mi.fitting.chi2.load_table_observations`); but a region needs a positive value,
+and a radiance or sigma beyond any radiance (:data:`MAX_RADIANCE`) is refused.  A luminance
+table is fitted through the model's luminance (the first channel;
 :class:`~skyfit_mi.fitting.chi2.LuminanceModel`): it cannot tell colour, so only the 2- and
 3-parameter models take it.
 
@@ -70,6 +71,7 @@ import numpy as np
 from ..errors import SkyfitError
 from ..files import FolderLock
 from ..physics.camera import SensorModel
+from ..physics.sun import SOLAR_CONSTANT, SUN_SOLID_ANGLE
 from ..conventions import direction_from_angles
 from .manifest import frame_label
 
@@ -79,6 +81,9 @@ TABLE_FILE = "observations.csv"
 NORMAL_TOLERANCE_DEG = 5.0
 #: Ray start off the surface, as a share of the scene's bounding-box diagonal.
 RAY_OFFSET = 1e-4
+#: Largest radiance, value or sigma, a table may give [W m^-2 sr^-1]: ten times the solar
+#: disc's above the atmosphere (no surface reflects more than its brightest source).
+MAX_RADIANCE = 10.0 * SOLAR_CONSTANT / SUN_SOLID_ANGLE
 #: Share of the 16-bit full scale that the brightest value plus HEADROOM_SIGMAS sigma takes.
 SCALE_SHARE, HEADROOM_SIGMAS = 0.5, 5.0
 
@@ -294,6 +299,10 @@ def read_observation_table(path, tz=None):
                              out["view"], out["normal"], out["value"], out["sigma"],
                              out["saturated"] > 0, lines, luminance,
                              frames if "frame" in col else None)
+    for r in dict.fromkeys(regions):
+        if not np.nanmax(out["value"][[i for i in range(n) if regions[i] == r]]) > 0:
+            raise SkyfitError(f"{path}: every value of region {r!r} is zero or negative; give "
+                              "measured values (a radiance is positive).")
     seen = {}
     for f, r, p, line in zip(table.frame_keys(), regions, points, lines):
         key = (f, r, p)
@@ -510,6 +519,22 @@ def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calib
     return 1.0 / a, record
 
 
+def check_radiances(table, scaled=None):
+    """SkyfitError naming the line and column of the first value or sigma of ``table`` (in
+    W m^-2 sr^-1, ``scaled`` by what, if not given so) beyond :data:`MAX_RADIANCE`."""
+    for name, single in (("value", "luminance"), ("sigma", "sigma")):
+        v = getattr(table, name)
+        big = np.isfinite(v) & (np.abs(v) > MAX_RADIANCE)
+        if big.any():
+            k, i = np.argwhere(big)[0]
+            column = single if table.luminance or name == "sigma" and i == 0 else \
+                _VECTORS[name][i]
+            raise SkyfitError(f"{table.path} line {table.lines[k]}: {column} = {v[k, i]:g} W m^-2 "
+                              f"sr^-1{f' (by {scaled})' if scaled else ''} is beyond any "
+                              f"radiance (at most {MAX_RADIANCE:.2g}, ten times the sun's disc); "
+                              "give radiances in W m^-2 sr^-1.")
+
+
 def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrate=None,
                  overwrite=False, log=print):
     """Turn an observation table into a sequence folder (module docstring); returns the
@@ -522,6 +547,14 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
     from ..files import write_text
     from ..render.scene_xml import build_scene_xml
 
+    out = Path(out_dir)
+    mine = out / TABLE_FILE
+    if mine.exists() and mine.resolve() == Path(table_path).resolve():
+        raise SkyfitError(f"the table {table_path} is the output folder's own {TABLE_FILE}, which "
+                          "ingest writes; give another folder with -o.")
+    if mine.exists() and not (out / "manifest.json").exists() and not overwrite:
+        raise SkyfitError(f"{out} holds a file {TABLE_FILE} of no skyfit sequence; give another "
+                          "folder with -o, or pass --overwrite to replace it.")
     table = read_observation_table(table_path, tz)
     spec, row_frames = _table_spec(spec_path, table, tz, site, log)
     scene = build_scene_xml(spec)
@@ -548,11 +581,9 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
             f"{', '.join(f'{v:.4g}' for v in scale)} W m^-2 sr^-1 (R, G, B), to "
             f"{', '.join(f'{v:.1%}' for v in calibration['scale_relative_sd'])} (standard "
             f"error), from {calibration['reference_rows']} reference rows")
+    check_radiances(table, "its reference's scale" if calibrate else None)
     top = float(np.nanmax(np.where(np.isfinite(table.sigma),
                                    table.value + HEADROOM_SIGMAS * table.sigma, np.nan)))
-    if top <= 0:
-        raise SkyfitError(f"{table.path}: every value is zero or negative; give measured "
-                          "radiances [W m^-2 sr^-1].")
     sensor = SensorModel(exposure=SCALE_SHARE / top, response="linear", bits=16)
 
     index = {k: j for j, k in enumerate(table.point_keys())}
@@ -576,7 +607,6 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
     text = "\n".join(lines) + "\n"
     run_id = hashlib.sha256(json.dumps([text, spec.raw], sort_keys=True, default=str)
                             .encode()).hexdigest()[:16]
-    out = Path(out_dir)
     with FolderLock(out):
         prepare_folder(out, run_id, None, overwrite, log=lambda message: None)
         manifest = measured_header(spec, sensor, run_id, "measured", "none: measured values",

@@ -73,7 +73,7 @@ def spec_sensor(spec):
                                                       "cos4")})
 
 
-def _clear(out):
+def clear_run(out):
     """Remove an earlier run's files (only the names a render writes) from ``out``."""
     for p in [out / "manifest.json", out / "contact_sheet.png",
               *(out / "frames").glob("*_[0-9][0-9][0-9]*.exr")]:
@@ -94,7 +94,7 @@ def prepare_folder(out, run_id, shape, overwrite=False, log=print):
 
     ensure_dir(out / "frames")
     if overwrite:
-        _clear(out)
+        clear_run(out)
         return {}
     if not manifest_file(out).exists():
         return {}
@@ -226,17 +226,17 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print, so
     this run is resumed (its verified frames are kept).
     """
     out = Path(out_dir)
+    sensor = spec_sensor(spec)                # its exposure checked before the folder is made
     with FolderLock(out) as lock:
         if lock.stale is not None:
             log(f"{out}: took over the lock of a run that no longer exists "
                 f"(process {lock.stale.get('pid')}); resuming")
-        return _render(spec, out, overwrite, progress, log, source)
+        return _render(spec, sensor, out, overwrite, progress, log, source)
 
 
-def _render(spec, out, overwrite, progress, log, source):
+def _render(spec, sensor, out, overwrite, progress, log, source):
     cam = spec.camera
     done = prepare_folder(out, spec.run_id(), (cam["height"], cam["width"], 3), overwrite, log)
-    sensor = spec_sensor(spec)
     renderer = FrameRenderer(spec)
     manifest = manifest_header(spec, sensor, (renderer.xml, renderer.materials,
                                               renderer.to_world),
