@@ -33,7 +33,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--render-spp", type=int, default=1024,
                     help="samples per pixel of the full-render baseline (256 is 23x less accurate "
-                    "than the global method on this fit, 1024 about 6x; docs/BENCHMARKS.md)")
+                    "than the global method on this fit, 1024 about 6x; docs/BENCHMARKS.md, "
+                    "'Fit: methods against full-render annealing')")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--methods", default="global,anneal,lm,adam")
     ap.add_argument("--baseline-evaluations", type=int, default=None,
@@ -78,7 +79,7 @@ def main():
         t1 = time.perf_counter()
         model = RegionRenderModel(doc["scene"]["xml"], "disc", session.skies, session.obs.pixels,
                                   "colour", spp=args.render_spp, seed=args.seed)
-        problem = Problem(session.obs, model, valid=session.cache.hit)
+        problem = Problem(session.obs, model, valid=session.table.hit)
         budget = {"max_evaluations": args.baseline_evaluations} if args.baseline_evaluations else {}
         # the thesis's annealing: one cooling cycle (our further cycles are left out; its
         # end game still probes the box's faces and restarts the converged simplex)

@@ -16,7 +16,8 @@ Ward fit possible, the fit to all three cameras at once.  Goal: within 1.2x.
     .venv/bin/python scripts/independent_set.py [--replicates 20] [--mitsuba-replicates 3]
         [--cases NAME,...] [-o DIR]
 
-writes DIR/independent_set.json and prints the tables (docs/BENCHMARKS.md).
+writes DIR/independent_set.json and prints the tables (docs/BENCHMARKS.md, "The independent
+test set").
 """
 import argparse
 import json
@@ -178,7 +179,7 @@ def mitsuba_case(case, root, replicates):
     def error(theta, j):
         """Relative RMS error of the radiance predicted at camera j (against Mitsuba's)."""
         pred = sessions[j].wm.radiance(theta)
-        ok = sessions[j].cache.hit
+        ok = sessions[j].table.hit
         return float(rel_rms(pred[ok], radiance[j][ok]))
 
     rows = []

@@ -8,13 +8,16 @@ written stay); ``--debug`` shows the traceback of any error.
 import argparse
 import os
 import re
+import signal
 import sys
+import threading
+from contextlib import contextmanager
 
 #: NumPy's BLAS (OpenBLAS) on one thread in a `skyfit` process unless the environment says
 #: otherwise; set before NumPy loads.  Dr.Jit's pool does the heavy work on every core, and
 #: OpenBLAS's threads, spinning after each small product NumPy does between its kernels, took
-#: 0.5 CPU-seconds of a 13-frame render from it (docs/BENCHMARKS.md); fits and chi2map were
-#: no slower.  A map's Dask
+#: 0.5 CPU-seconds of a 13-frame render from it (docs/BENCHMARKS.md, "One BLAS thread"); fits
+#: and chi2map were no slower.  A map's Dask
 #: workers are set so by ``distributed`` already.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
@@ -141,15 +144,15 @@ def _ingest(args):
         from .pipeline.observation_table import ingest_table
 
         photo_only = [k for k in ("times", "name_pattern", "response", "gamma", "exposure",
-                                  "calibrate", "colorchecker", "noise")
+                                  "colorchecker", "noise")
                       if getattr(args, k) is not None]
         if args.photos or photo_only or args.vignetting != "none":
             what = "photographs" if args.photos else "--" + (photo_only or ["vignetting"])[0] \
                 .replace("_", "-")
-            raise SkyfitError(f"--table takes no {what}: the table gives times, values and "
+            raise SkyfitError(f"--table takes no {what}: the table gives frames, values and "
                               "sigmas; give either photographs or --table.")
         ingest_table(args.table, args.spec, args.output, tz=args.tz, site=args.site,
-                     overwrite=args.overwrite)
+                     calibrate=dict(args.calibrate or []), overwrite=args.overwrite)
         return
     if not args.photos:
         raise SkyfitError("give photographs (files or folders), or --table OBS.csv.")
@@ -209,9 +212,9 @@ def _fit_regions(args):
 def _fit(args):
     from pathlib import Path
 
-    from .files import ensure_dir
+    from .files import check_dir
     from .fitting.chi2 import subsample_region
-    from .fitting.fit import fit_region
+    from .fitting.fit import fit_regions
     from .fitting.report import write_fit, write_summary
     from .pipeline.manifest import load_manifest
     from .render.fit_model import BY_COUNT, check_fit_normalisation, check_start
@@ -236,24 +239,28 @@ def _fit(args):
         s = run_map(args.manifest, regions, out, model=model, normalisation=args.normalisation,
                     seed=args.seed, patch=args.patch, chunk=args.chunk or CHUNK,
                     workers=args.workers, scheduler=args.scheduler, overwrite=args.overwrite,
-                    progress=not args.quiet, variant=args.variant)
+                    progress=not args.quiet, variant=args.variant, dask_logs=args.debug)
         for name, r in s["regions"].items():
             med = ", ".join(f"{k} = {v:.4g}" for k, v in r["median"].items() if v is not None)
             print(f"{name}: {r['determined']} of {r['mapped']} pixels determined"
                   + (f"; medians {med}" if med else ""))
         print(f"wrote the maps and map_summary.json in {out} ({s['wall_time_s']:.1f} s)")
         return
-    out = ensure_dir(Path(args.output) if args.output else root)
+    out = check_dir(Path(args.output) if args.output else root)     # made by the first write
+    kept = {}
     for name, pixels in regions:
-        kept = pixels if pixels is None else subsample_region(pixels, args.max_pixels or None,
-                                                              args.seed)
-        if pixels is not None and len(kept) < len(pixels):
-            print(f"{name}: fitting {len(kept)} of its {len(pixels)} pixels (--max-pixels, seed "
-                  f"{args.seed})")
-        res = fit_region(args.manifest, name, kept, model=model, method=args.method,
-                         normalisation=args.normalisation, seed=args.seed, start=args.start,
-                         positions=args.positions, directions=args.directions,
-                         frames=args.frames, variant=args.variant)
+        kept[name] = pixels if pixels is None else subsample_region(
+            pixels, args.max_pixels or None, args.seed)
+        if pixels is not None and len(kept[name]) < len(pixels):
+            print(f"{name}: fitting {len(kept[name])} of its {len(pixels)} pixels "
+                  f"(--max-pixels, seed {args.seed})")
+    # the light of every region traced together (each frame's kernels once), every region
+    # checked before the first is fitted and written
+    results = fit_regions(args.manifest, list(kept.items()), model=model, method=args.method,
+                          normalisation=args.normalisation, seed=args.seed, start=args.start,
+                          positions=args.positions, directions=args.directions,
+                          frames=args.frames, variant=args.variant)
+    for (name, pixels), res in zip(regions, results):
         res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
                                          if pixels is None else len(pixels))
         paths = write_fit(res, out / f"fit_{name}")
@@ -275,17 +282,20 @@ def _chi2map(args):
     import numpy as np
 
     from .fitting.fit import FitSession
-    from .fitting.landscape import (chi2_map, map_axes, profiled_map, truth_parameters,
-                                    write_chi2_map)
-    from .pipeline.fit_result import read_fit_result
+    from .fitting.landscape import (chi2_map, map_axes, map_prefix, profiled_map,
+                                    truth_parameters, write_chi2_map)
+    from .pipeline.fit_result import check_fit_sequence, read_fit_result
     from .pipeline.manifest import load_manifest
     from .render.fit_model import PARAMETERS
 
-    _, root = load_manifest(args.manifest)
+    doc, root = load_manifest(args.manifest)
     r = read_fit_result(args.fit)
+    check_fit_sequence(r, args.fit, doc, args.manifest)
     names = list(PARAMETERS[r["model"]])
     xs, ys = map_axes(r["model"], args.x, args.y, args.x_range, args.y_range, args.n,
                       args.profile)
+    name = f"chi2map_{r['region']}_{args.x}_{args.y}"
+    prefix = map_prefix(args.output or root, name, args.overwrite)
     s = FitSession.from_fit(r, args.manifest, seed=args.seed, frames=r.get("frames"))
     theta = np.array([r["parameters"][k] for k in names])
     chi2 = (profiled_map(s, theta, args.x, args.y, xs, ys) if args.profile
@@ -298,7 +308,6 @@ def _chi2map(args):
         marks["truth"] = (truth[ix], truth[iy])
     walk = np.asarray(r.get("trace") or [], dtype=float)
     walk = walk[:, [ix, iy]] if args.walk and walk.ndim == 2 and len(walk) > 1 else None
-    prefix = Path(args.output) if args.output else root / f"chi2map_{r['region']}_{args.x}_{args.y}"
     others = "at their best" if args.profile else "at the fit"
     paths = write_chi2_map(prefix, args.x, args.y, xs, ys, chi2, marks, walk, others)
     print(f"{r['region']}: chi2 minimum {chi2.min():.6g} at {args.x} = {xs[i]:.4g}, "
@@ -341,7 +350,7 @@ def build_parser():
 
     parser = _Parser(prog="skyfit", description=DESCRIPTION)
     parser.add_argument("--version", action="version", version=f"skyfit-mi {__version__}")
-    debug_help = "show the full traceback of an error (for bug reports)"
+    debug_help = "show the full traceback of an error, and a map's Dask log (for bug reports)"
     parser.add_argument("--debug", action="store_true", help=debug_help)
     common = _Parser(add_help=False)               # --debug also after the command
     common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=debug_help)
@@ -370,7 +379,8 @@ def build_parser():
                      "PNG, JPEG, camera RAW)")
     ing.add_argument("--table", metavar="CSV", help="instead of photographs: a table of measured "
                      "radiances (time, region, r, g, b, sigma, optional point, x,y,z, view, "
-                     "normal; see docs/MANIFEST.md)")
+                     "normal, saturated; for lab lights, a spec of directional [[sky]] without "
+                     "[time], frame instead of time; see docs/MANIFEST.md)")
     ing.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
     ing.add_argument("--times", metavar="CSV", help="CSV file,time giving each frame's time "
                      "(instead of EXIF DateTimeOriginal)")
@@ -390,7 +400,8 @@ def build_parser():
     ing.add_argument("--calibrate", action="append", type=_reflectance,
                      metavar="MATERIAL=REFLECTANCE", help="a scene material that is a grey "
                      "Lambertian reference of this reflectance (or R,G,B); sets the exposure and "
-                     "white balance (repeatable)")
+                     "white balance (repeatable); with --table, the table's values are in its "
+                     "own units (e.g. DN), scaled to radiance by its rows on this material")
     ing.add_argument("--colorchecker", metavar="MATERIAL", help="a ColorChecker Classic in the "
                      "photographs, lying on this scene material: found automatically; its six "
                      "neutral swatches calibrate like --calibrate greys, its colours check the "
@@ -444,7 +455,7 @@ def build_parser():
                      help="with --per-pixel: fit N x N blocks of pixels (default 1)")
     fit.add_argument("--workers", type=_int_in(1, 1024), default=None,
                      help="with --per-pixel: worker processes of the local Dask cluster "
-                     "(default: one per core)")
+                     "(default and most: one per core, and as many as the free memory holds)")
     fit.add_argument("--scheduler", metavar="ADDRESS",
                      help="with --per-pixel: an existing Dask scheduler (e.g. tcp://host:8786) "
                      "instead of a cluster on this machine")
@@ -537,13 +548,41 @@ def build_parser():
     cmap.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,
                       help="seed of the light cache (default 0)")
     cmap.add_argument("-o", "--output",
-                      help="output path prefix (default MANIFEST/chi2map_REGION_X_Y)")
+                      help="output path prefix, or a folder to write into (default "
+                      "MANIFEST/chi2map_REGION_X_Y)")
+    cmap.add_argument("--overwrite", action="store_true",
+                      help="replace files of the prefix's names that are not an earlier map's")
     cmap.set_defaults(func=_chi2map)
     return parser
 
 
 def _oneline(exc):
     return " ".join(str(exc).split())
+
+
+@contextmanager
+def _ctrl_c_noted():
+    """Ctrl-C raises KeyboardInterrupt as usual, and is noted: an error raised while it unwinds
+    (a C++ extension's, or a file reader's that wrapped it) is the Ctrl-C, not a bug or a bad
+    input.  In the main thread only."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pressed = []
+
+    def on_ctrl_c(signum, frame):
+        pressed.append(True)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, on_ctrl_c)
+    try:
+        yield
+    except Exception as exc:
+        if pressed:
+            raise KeyboardInterrupt from exc
+        raise
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def main(argv=None):
@@ -553,7 +592,8 @@ def main(argv=None):
     except SystemExit as exc:              # --help, --version, or a usage error (already printed)
         return exc.code
     try:
-        args.func(args)
+        with _ctrl_c_noted():
+            args.func(args)
     except KeyboardInterrupt:
         if args.debug:
             raise

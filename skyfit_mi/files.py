@@ -38,6 +38,24 @@ def ensure_dir(path, what="output folder"):
     return path
 
 
+def check_dir(path, what="output folder"):
+    """``path`` as a Path, or :class:`OutputError` unless it is a writable folder or one that
+    :func:`ensure_dir` could create (its nearest existing parent a writable folder); nothing
+    is created, so an input refused later leaves no empty folder behind."""
+    path = Path(path)
+    if path.exists():
+        if not path.is_dir():
+            raise OutputError(f"{what} {str(path)!r} is a file, not a folder; give a folder path.")
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise OutputError(f"{what} {str(path)!r} is not writable; give a writable folder.")
+        return path
+    parent = next(p for p in path.absolute().parents if p.exists())
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        why = "Not a directory" if not parent.is_dir() else "Permission denied"
+        raise OutputError(f"cannot create {what} {str(path)!r}: {why}; give a writable folder.")
+    return path
+
+
 def atomic_write(path, write):
     """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it to ``path``.
 

@@ -96,3 +96,72 @@ def test_a_two_parameter_fit_has_nothing_to_profile(fitted, tmp_path, capsys):
     (tmp_path / "fit_two.json").write_text(json.dumps(two))
     assert main(["chi2map", str(day), str(tmp_path / "fit_two.json"), "--profile"]) == 2
     assert "no other parameter to profile" in capsys.readouterr().err
+
+
+def test_a_map_does_not_replace_a_fit_folders_files(fitted, tmp_path, capsys):
+    """-o onto a fit folder's files (fits.csv, a fit's PNG) is refused unless --overwrite; a
+    folder as -o takes the map under its default name, and an earlier map is replaced."""
+    import shutil
+
+    day, fit = fitted
+    folder = tmp_path / "fits"
+    shutil.copytree(fit.parent, folder)
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    for prefix in ("fits", "fit_disc"):
+        assert main(["chi2map", str(day), str(fit), "--n", "3", "-o", str(folder / prefix)]) == 2
+        err = capsys.readouterr().err
+        assert "is not a chi-square map's" in err and len(err.splitlines()) == 1
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+    for _ in range(2):
+        assert main(["chi2map", str(day), str(fit), "--n", "3", "-o", str(folder)]) == 0
+    assert (folder / "chi2map_disc_rho_s_sigma_alpha.csv").exists()
+    assert main(["chi2map", str(day), str(fit), "--n", "3", "-o", str(folder / "fit_disc"),
+                 "--overwrite"]) == 0
+    assert (folder / "fit_disc.png").read_bytes() != before["fit_disc.png"]
+
+
+@pytest.mark.parametrize("change, phrase", [
+    ({"parameters": {"rho_s": 1.5}}, "rho_s = 1.5 is outside its bounds [0, 1]"),
+    ({"intervals": {"rho_s": {"95": [0.5, 0.1]}}}, "runs backwards (lo > hi)"),
+    ({"covariance": [[1.0, 0.0], [0.0, 1.0]]}, "covariance must be"),
+    ({"frames": "all"}, "frames must be a list of manifest frame indices"),
+])
+def test_a_hand_edited_fit_is_refused_by_name(fitted, tmp_path, capsys, change, phrase):
+    """chi2map and relight read a fit JSON through one reader: a parameter beyond its bounds,
+    an interval running backwards, a covariance or frames of the wrong shape are refused,
+    not mapped (or crashed on)."""
+    day, fit = fitted
+    r = json.loads(fit.read_text())
+    for key, value in change.items():
+        if isinstance(value, dict):
+            for k, v in value.items():
+                r[key][k] = v
+        else:
+            r[key] = value
+    bad = tmp_path / "fit_disc.json"
+    bad.write_text(json.dumps(r))
+    for argv in (["chi2map", str(day), str(bad), "--n", "3", "-o", str(tmp_path / "m")],
+                 ["relight", str(bad), "--target", str(day), "-o", str(tmp_path / "r"),
+                  "--no-images"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert phrase in err and str(bad) in err and len(err.splitlines()) == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fit_disc.json"]
+
+
+@pytest.mark.parametrize("change, phrase", [
+    ({"points": ["disc"]}, "is a fit of an observation table's points, but"),
+    ({"frames": [0, 99]}, "lists frame 99, which"),
+    ({"sequence_run_id": "0123456789abcdef"}, "was fitted to another sequence (run 0123"),
+])
+def test_a_fit_of_another_sequence_is_refused_with_the_cause(fitted, tmp_path, capsys, change,
+                                                             phrase):
+    """chi2map maps a fit's own chi-square: a fit of a table's points, of another run, or of
+    frames the sequence lacks is refused saying so (not 'frame 4 is not a rendered frame' or
+    an internal error)."""
+    day, fit = fitted
+    bad = tmp_path / "fit_disc.json"
+    bad.write_text(json.dumps({**json.loads(fit.read_text()), **change}))
+    assert main(["chi2map", str(day), str(bad), "--n", "3", "-o", str(tmp_path / "m")]) == 2
+    err = capsys.readouterr().err
+    assert phrase in err and len(err.splitlines()) == 1, err

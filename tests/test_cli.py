@@ -121,11 +121,39 @@ def test_damaged_inputs_get_one_line(day, tmp_path, capsys):
     _one_line_error(err, "is 8x5", "not the camera's 8x8")
 
 
+@pytest.mark.parametrize("args, phrase", [
+    (["--region", "disc=rect:1,1,2,2", "--region", "plate=rect:6,6,7,7"], "'plate' names no"),
+    (["--region", "disc=rect:1,1,2,2", "--frames", "1-5"], "frame 3 is not a rendered frame"),
+    (["--region", "disc=rect:3,3,4,4"], "frame 1 (nan/frames/sensor_001.exr) has no finite"),
+])
+def test_a_refused_fit_writes_nothing(day, tmp_path, capsys, monkeypatch, args, phrase):
+    """Every region, its frames and their light are checked before the first fit is written:
+    a bad second region, frame list or frame leaves no output folder (not an empty one, nor
+    the first region's fit)."""
+    from skyfit_mi.render.image import write_exr
+
+    monkeypatch.chdir(tmp_path)
+    shutil.copytree(day, tmp_path / "nan")
+    frame = json.loads((day / "manifest.json").read_text())["frames"][1]
+    image = np.ones((8, 8, 3), np.float32)
+    image[3:5, 3:5] = np.nan
+    write_exr(tmp_path / "nan" / frame["sensor"], image)
+    code, err = _run(capsys, "fit", "nan", *args, "--model", "2", "-o", "out")
+    assert code == 2
+    _one_line_error(err, phrase)
+    assert not (tmp_path / "out").exists()
+
+
 def test_debug_shows_the_traceback(tmp_path):
     with pytest.raises(SkyfitError, match="no manifest"):
         main(["fit", str(tmp_path), "--all", "--debug"])
     with pytest.raises(SkyfitError, match="no manifest"):
         main(["--debug", "labels", str(tmp_path)])
+
+
+def _fake_fits(manifest, regions, **kw):
+    for name, pixels in regions:
+        yield _fake_fit(manifest, name, pixels, **kw)
 
 
 def _fake_fit(manifest, name, pixels, **kw):
@@ -140,7 +168,7 @@ def test_fits_csv_merges_by_region_and_survives_ctrl_c(day, tmp_path, capsys, mo
     import skyfit_mi.fitting.fit as fit
     import skyfit_mi.fitting.report as report
 
-    monkeypatch.setattr(fit, "fit_region", _fake_fit)
+    monkeypatch.setattr(fit, "fit_regions", _fake_fits)
     monkeypatch.setattr(report, "write_fit", lambda res, prefix: (
         report.write_json(prefix.with_suffix(".json"), res),))
     out = tmp_path / "fits"
@@ -157,13 +185,14 @@ def test_fits_csv_merges_by_region_and_survives_ctrl_c(day, tmp_path, capsys, mo
 
     calls = []
 
-    def interrupted(*a, **kw):
-        calls.append(a[1])
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        return _fake_fit(*a, **kw)
+    def interrupted(manifest, regions, **kw):
+        for name, pixels in regions:
+            calls.append(name)
+            if len(calls) == 2:
+                raise KeyboardInterrupt
+            yield _fake_fit(manifest, name, pixels, **kw)
 
-    monkeypatch.setattr(fit, "fit_region", interrupted)
+    monkeypatch.setattr(fit, "fit_regions", interrupted)
     code = main(["fit", str(day), "--region", "c=rect:1,1,2,2", "--region", "d=rect:3,3,4,4",
                  "-o", str(out)])
     assert code == 130 and "interrupted" in capsys.readouterr().err

@@ -141,7 +141,8 @@ def test_interval_coverage_sweep(days, noise):
     rho_s / sigma_alpha): 95% coverage 99/100, 93/99, 93/99; 68% 92/98, 81/79, 78/71 (wide at
     2%: the light cache's error allowance dominates there, width 1.36/1.72 CRB); RMSE/CRB
     1.07/1.02, 1.09/0.99, 1.17/1.51 (sigma_alpha at 10% on 16 pixels misses the benchmark's
-    1.2, a finite-sample excess of the maximum-likelihood estimate, see docs/BENCHMARKS.md)."""
+    1.2, a finite-sample excess of the maximum-likelihood estimate, see docs/BENCHMARKS.md, "RMSE
+    above the Cramer-Rao bound on 16 pixels: a finite-sample excess")."""
     c95, c68, rmse_crb, width, chi2_dof = _coverage(days["clean"], 100, noise)
     assert np.all(c95 >= 90), c95
     assert np.all(c68 >= 58), c68

@@ -92,7 +92,7 @@ def test_intervals_cover_the_truth_over_replicates_of_the_radiance_day(radiance_
     """Over 40 noise replicates of the Radiance-traced frames (``pytest -m slow``) each
     parameter's 95% interval contains the truth in at least 90% of them (issue 13's goal).
     Measured 2026-11-23: C_r 0.95, C_g 0.975, C_b 0.975, rho_s 1.0, sigma_alpha 1.0 (C_r 0.925
-    once s^2 came from the expected chi^2 of clipped values, eleventh session); before the
+    once s^2 came from the expected chi^2 of clipped values, at 499d051); before the
     profiles walked the ridge (continuation) and lent their points to every interval, C_r
     0.775-0.825 and rho_s 0.925."""
     s, truth, traced = _session(radiance_day)

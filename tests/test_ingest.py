@@ -14,6 +14,8 @@ import shutil
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from skyfit_mi.errors import SkyfitError
 from skyfit_mi.pipeline.spec import read_spec, validate_spec, SCENES_DIR
@@ -447,6 +449,33 @@ def test_float_frames_with_nan_are_masked_and_counted(day, tmp_path):
     ref = read_exr(root / doc["frames"][0]["radiance"])
     ok = np.isfinite(rad) & (ref > 0)
     assert np.median(rad[ok] / ref[ok]) == pytest.approx(1.0, rel=0.02)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=2, max_size=2))
+def test_a_noise_model_is_two_finite_non_negative_numbers(noise):
+    """--noise is checked before any photograph is read: NaN, infinite or negative values are
+    refused by name (they made NaN or infinite sigma images)."""
+    from skyfit_mi.pipeline.ingest import ingest
+
+    good = all(np.isfinite(noise)) and min(noise) >= 0
+    with pytest.raises(SkyfitError, match="does not exist" if good else "^--noise ") as exc:
+        ingest(["/nonexistent/photos"], SPEC, "/nonexistent/out", noise=noise, exposure=1e-3,
+               progress=False, **QUIET)
+    assert "\n" not in str(exc.value)
+
+
+def test_options_that_would_be_ignored_are_refused(day, tmp_path):
+    """--exposure beside a calibration, and --gamma with a response that has no exponent,
+    would be silently unused: refused, nothing written."""
+    with pytest.raises(SkyfitError, match="--exposure is not used when --calibrate"):
+        _ingest(day, tmp_path / "o", exposure=1e-3, calibrate={"grey_card": (0.18,) * 3})
+    with pytest.raises(SkyfitError, match="the response is 'srgb'; add --response gamma"):
+        _ingest(day, tmp_path / "o", exposure=1e-3, gamma=2.0)
+    with pytest.raises(SkyfitError, match="the response is fitted"):
+        _ingest(day, tmp_path / "o", response="fit", gamma=2.0,
+                calibrate={"grey_card": (0.18,) * 3})
+    assert not (tmp_path / "o").exists()
 
 
 def test_cli_ingest_error_is_one_line_exit_2(day, tmp_path, capsys):

@@ -33,10 +33,22 @@ def test_radiance_normalisation_is_refused_by_the_basis():
         assert "\n" not in str(e.value)
 
 
+def _raw(session):
+    """What these tests need of a FitSession, with its raw light cache (samples kept) and the
+    Dr.Jit model on it (a fit itself keeps only the cache's table)."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.render.fit_model import WardModel
+    cache = session.light_cache()
+    return SimpleNamespace(obs=session.obs, scene=session.scene, params=session.params,
+                           skies=session.skies, cache=cache,
+                           wm=WardModel(cache, session.model, session.normalisation))
+
+
 @pytest.fixture(scope="module")
 def session(days):
     from skyfit_mi.fitting.fit import FitSession
-    return FitSession(days["clean"], "disc", REGION, model="two", seed=5)
+    return _raw(FitSession(days["clean"], "disc", REGION, model="two", seed=5, trace=False))
 
 
 def test_cache_matches_the_render_without_bias(session, days):
@@ -90,16 +102,17 @@ def test_narrow_lobe_matches_an_independent_quadrature(session):
 
 def test_wide_nodes_are_each_halfs_mean_of_a_few_positions_and_narrow_ones_every_positions(
         session):
-    """A fit's cache (wide_share) on a plane: the diffuse integral and the lobe's nodes of roughness
+    """A fit's cache (a plan's wide_share) on a plane: the diffuse integral and the lobe's nodes of roughness
     >= WIDE_SIGMA are each half's mean over its first two positions (random ones: unbiased),
     the narrower nodes every position's own, with the same samples as a cache of every
     position's integrals."""
-    from skyfit_mi.render.light_cache import SIGMA_TABLE, WIDE_SIGMA, build_light_cache
+    from skyfit_mi.render.light_cache import SIGMA_TABLE, WIDE_SIGMA, SkyPlan, build_light_cache
     from skyfit_mi.render.sky_control import chebyshev_coefficients, chebyshev_nodes
 
     args = (session.scene, session.params, session.skies[4:7], session.obs.pixels[:6], "disc")
-    few = build_light_cache(*args, positions=8, directions=32, seed=3, wide_share=0.5)
-    every = build_light_cache(*args, positions=8, directions=32, seed=3, wide_share=None)
+    few = build_light_cache(*args, positions=8, directions=32, seed=3,
+                            plan=SkyPlan("half", wide_share=0.5))
+    every = build_light_cache(*args, positions=8, directions=32, seed=3, plan="every")
     assert np.array_equal(few.weight, every.weight) and np.array_equal(few.wi, every.wi)
     n = every.lobe_sky.shape[3]
     x = np.cos(np.pi * (np.arange(n) + 0.5) / n)
@@ -268,7 +281,8 @@ def test_the_sky_control_variate_makes_an_overcast_cache_nearly_exact(days):
     from skyfit_mi.render.fit_model import WardModel
 
     assert light_cache._components(128, False).min() == 1          # no sun component
-    session = FitSession(days["overcast"], "disc", REGION, positions=8, directions=256, seed=3)
+    session = _raw(FitSession(days["overcast"], "disc", REGION, positions=8, directions=256,
+                              seed=3, trace=False))
     for sigma in (0.01, 0.1, 0.3):
         a, b = (WardModel(c, "two").radiance([0.3, sigma]) for c in session.cache.halves())
         assert np.sqrt(np.mean(((a - b) / (a + b)) ** 2)) < 1e-3, sigma
@@ -303,7 +317,7 @@ def test_new_frames_reuse_the_compiled_kernels(session):
 
     def build(seed, skies):
         build_light_cache(session.scene, session.params, skies, session.obs.pixels[:5], "disc",
-                          positions=2, directions=32, seed=seed, sky_positions=1)
+                          positions=2, directions=32, seed=seed, plan="one")
     build(0, session.skies[:2])
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:

@@ -5,6 +5,8 @@ import shutil
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from skyfit_mi.errors import SkyfitError
 from skyfit_mi.pipeline.manifest import (SCHEMA, ManifestError, frame_exposure, frame_sky,
@@ -148,7 +150,8 @@ def test_invalid_frame_is_named(day):
         validate_manifest(doc)
     doc["frames"][2]["illumination"]["projection"] = "latlong"
     validate_manifest(doc)
-    with pytest.raises(ManifestError, match=r"frame 2: envmap illumination: .*x\.exr: does not"):
+    with pytest.raises(ManifestError, match=r"manifest\.json frame 2: envmap illumination: "
+                                            r".*x\.exr: does not"):
         frame_sky(doc["frames"][2], day)                 # the map's file is named
     doc["frames"][2]["illumination"] = {"kind": "irradiance", "global_horizontal_W_m2": 300.0,
                                         "model": "cie"}
@@ -159,6 +162,97 @@ def test_invalid_frame_is_named(day):
     frame["illumination"]["model"] = "Perez"
     with pytest.raises(ManifestError, match="needs its time"):
         frame_sky(frame, day)
+
+
+_FIELDS = ["kind", "sun_direction", "sun_radiance", "sun_solid_angle_sr", "clear", "overcast",
+           "uniform", "intermediate", "perez", "perez_coefficients", "ground", "horizon_blend",
+           "text", "file", "projection", "direction", "irradiance_W_m2", "solid_angle_sr",
+           "global_horizontal_W_m2", "diffuse_horizontal_W_m2", "direct_normal_W_m2", "model"]
+_NUMBERS = st.floats(-1e6, 1e6) | st.sampled_from([0.0, -1.0, 1e308])
+_VALUES = (_NUMBERS | st.lists(_NUMBERS, min_size=0, max_size=6) | st.booleans() | st.none()
+           | st.sampled_from(["sky", "gensky", "envmap", "directional", "irradiance", "perez",
+                              "latlong", "nosuch.exr", "# gensky 6 21 12 +s\n"]))
+
+
+@settings(max_examples=200, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.sampled_from([0, 1, 2]), st.lists(st.tuples(st.sampled_from(_FIELDS), _VALUES),
+                                            min_size=1, max_size=3))
+def test_any_illumination_record_lights_a_frame_or_is_refused_naming_it(day, index, changes):
+    """A hand-edited illumination record (any field set to any value): the manifest's schema
+    refuses it, or its frame lights with a sky of finite, non-negative radiances, or a
+    ManifestError in one line names the manifest and the frame (never another exception)."""
+    doc, _ = load_manifest(day)
+    frame = json.loads(json.dumps(doc["frames"][index]))
+    for key, value in changes:
+        frame["illumination"][key] = value
+    try:
+        validate_manifest({**doc, "frames": [frame]})
+    except ManifestError as exc:
+        assert "\n" not in str(exc)
+        return
+    try:
+        sky = frame_sky(frame, day)
+    except ManifestError as exc:
+        assert f"{day / 'manifest.json'} frame {index}: " in str(exc) and "\n" not in str(exc)
+        return
+    for v in (sky.sun_radiance, sky.ground, sky.clear, sky.overcast, sky.perez):
+        assert np.all(np.isfinite(v)) and np.all(v >= 0)
+
+
+_PLACES = [("camera", "width"), ("camera", "fov_deg"), ("camera", "to_world"),
+           ("sensor", "exposure"), ("sensor", "bits"), ("sensor", "response"),
+           ("sensor", "gamma"), ("sensor", "noise_percent"), ("render", "variant"),
+           ("frames", 1, "time"), ("frames", 1, "status"), ("frames", 1, "exposure"),
+           ("frames", 1, "sun_zenith_deg"), ("frames", 1, "sensor"), ("frames", 1, "index"),
+           ("run_id",), ("status",), ("schema",)]
+
+
+@settings(max_examples=150, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(st.sampled_from(_PLACES), st.one_of(
+    *[st.integers(-2, 4096)] * 3, *[st.floats(-10.0, 1e4)] * 3, _VALUES,
+    st.fixed_dictionaries({"exposure": _NUMBERS}, optional={"white_balance": st.lists(
+        _NUMBERS, min_size=3, max_size=3)}))), min_size=1, max_size=2))
+def test_any_hand_edited_manifest_is_read_or_refused_in_one_line(day, tmp_path, changes):
+    """A hand-edited manifest (any of its fields set to any value): it loads, and each frame
+    lights, has an exposure and reads as a sensor record, or a SkyfitError refuses it in one
+    line (never another exception)."""
+    from skyfit_mi.pipeline.manifest import rendered_frames, sensor_from_record
+
+    doc = json.loads((day / "manifest.json").read_text())
+    for place, value in changes:
+        *parents, key = place
+        node = doc
+        for k in parents:
+            node = node[k]
+        node[key] = value
+    folder = tmp_path / "edited"
+    folder.mkdir(exist_ok=True)
+    (folder / "manifest.json").write_text(json.dumps(doc))
+    try:
+        doc, root = load_manifest(folder)
+        sensor_from_record(doc["sensor"])
+        for f in rendered_frames(doc):
+            frame_sky(f, day)
+            assert np.all(frame_exposure(doc, f) > 0)
+    except SkyfitError as exc:
+        assert "\n" not in str(exc), str(exc)
+
+
+def test_a_negative_radiance_in_a_manifest_is_refused_by_frame(day, tmp_path, capsys):
+    """A hand-edited negative sun radiance: the fit refuses it naming the manifest and frame."""
+    from skyfit_mi.cli import main
+
+    out = _copy(day, tmp_path)
+    doc = json.loads((out / "manifest.json").read_text())
+    doc["frames"][3]["illumination"]["sun_radiance"] = [-1e6, 1e6, 1e6]
+    (out / "manifest.json").write_text(json.dumps(doc))
+    assert main(["fit", str(out), "--region", "disc=rect:4,4,7,7", "-o", str(tmp_path / "f")]) == 2
+    err = capsys.readouterr().err
+    assert f"{out / 'manifest.json'} frame 3: sky illumination: sun_radiance" in err
+    assert "is negative" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "f").exists()
 
 
 def test_measured_irradiance_lights_a_frame_as_the_specs_perez_sky(day):

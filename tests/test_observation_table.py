@@ -11,6 +11,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from scipy.stats import chi2 as chi2_dist
 
 from skyfit_mi.conventions import direction_from_angles
@@ -138,6 +140,7 @@ ROW = "2026-06-21T12:00:00+00:00,disc,1,1,1,0.1\n"
     ("time,region,r,g,b,sigma,x\n" + ROW[:-1] + ",1\n", "give all of x, y, z"),
     (HEAD + ROW.replace(",1,1,1,", ",1,one,1,"), "g = 'one' is not a number"),
     (HEAD + ROW.replace(",0.1", ",0"), "sigma must be positive"),
+    (HEAD + ROW.replace(",1,1,1,", ",-1,-2,0,"), "every value of region 'disc' is zero or"),
     (HEAD + ROW.replace(",1,1,1,", ",1,nan,1,"), "is not finite"),
     (HEAD + ROW + ROW, "measured again"),
     (HEAD + ROW.replace("+00:00", ""), "has no UTC offset"),
@@ -155,6 +158,54 @@ def test_bad_tables_are_refused_with_one_line(tmp_path, text, message):
     with pytest.raises(SkyfitError, match=message) as exc:
         read_observation_table(_write(tmp_path, text))
     assert "\n" not in str(exc.value)
+
+
+def _mostly(good, bad, odds=20):
+    """``good``, and ``bad`` once in ``odds`` draws."""
+    return st.integers(0, odds - 1).flatmap(lambda i: bad if i == odds // 2 else good)
+
+
+_NUMBER = _mostly(st.floats(1e-3, 1e3).map(repr), st.one_of(
+    st.floats(-1e9, 1e9).map(repr),
+    st.sampled_from(["nan", "inf", "-1", "0", "1e308", "1e-300", "x", ""])))
+_CELLS = {"time": _mostly(st.sampled_from(["2026-06-21T12:00:00+00:00",
+                                           "2026-06-21T13:00:00+01:00",
+                                           "2026-06-21T14:30:00-02:00",
+                                           "2026-06-21T15:00:00+00:00", "2026-06-21T12:00"]),
+                          st.sampled_from(["noon", "2026-06-21T25:00"])),
+          "region": _mostly(st.sampled_from(["disc", "plate"]), st.just("")),
+          "point": st.sampled_from(["a", "b"]),
+          "view_zenith_deg": _mostly(st.sampled_from(["10", "45"]), st.sampled_from(["95", "x"]))}
+_HEADERS = st.one_of(
+    st.tuples(st.sampled_from([["r", "g", "b", "sigma"], ["luminance", "sigma"],
+                               ["r", "g", "b", "sigma_r", "sigma_g", "sigma_b"]]),
+              st.sampled_from([[], ["point"], ["view_zenith_deg", "view_azimuth_deg"]])
+              ).map(lambda v: ["time", "region", *v[0], *v[1]]),
+    st.lists(st.sampled_from(["time", "region", "r", "g", "b", "sigma", "luminance", "x",
+                              "colour"]), min_size=1, max_size=7))
+
+
+@settings(max_examples=300, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(_HEADERS.flatmap(lambda cols: st.tuples(st.just(cols), st.lists(
+    st.tuples(*(_CELLS.get(c, _NUMBER) for c in cols)), min_size=1, max_size=4))))
+def test_any_table_is_read_or_refused_in_one_line(tmp_path, table):
+    """Whatever the columns and cells, the reader returns a table of finite values and positive
+    sigmas, with a positive value in each region, or refuses it in one line naming the file."""
+    from skyfit_mi.pipeline.observation_table import read_observation_table
+
+    columns, rows = table
+    text = ",".join(columns) + "\n" + "".join(",".join(row) + "\n" for row in rows)
+    path = _write(tmp_path, text)
+    try:
+        t = read_observation_table(path, tz="UTC")
+    except SkyfitError as exc:
+        assert "\n" not in str(exc) and str(path) in str(exc), str(exc)
+        return
+    value = t.value[:, :1] if t.luminance else t.value
+    assert np.all(np.isfinite(value)) and np.all(t.sigma > 0)
+    for r in set(t.regions):
+        assert np.nanmax(value[[x == r for x in t.regions]]) > 0
 
 
 def test_naive_times_take_the_given_zone(tmp_path):
@@ -210,6 +261,77 @@ def test_the_cli_takes_a_table_and_refuses_photo_options_with_it(tmp_path, mi):
     assert main(["fit", str(tmp_path / "o"), "--region", "disc=rect:0,0,1,1"]) == 2
     doc = json.loads((tmp_path / "o" / "manifest.json").read_text())
     assert doc["source"] == "ingest" and len(doc["frames"]) == 3
+
+
+@pytest.mark.parametrize("values, message", [
+    (",1,1e308,1,0.1", "line 2: g = 1e[+]308 W m.-2 sr.-1 is beyond"),
+    (",1,1,1,1e300", "line 2: sigma = 1e[+]300 W m.-2 sr.-1 is beyond"),
+])
+def test_a_value_beyond_any_radiance_is_refused(tmp_path, values, message, mi):
+    """A radiance or sigma above ten times the sun's disc (1e308 made the fit fail inside)."""
+    from skyfit_mi.pipeline.observation_table import ingest_table
+
+    spec = _spec({"type": "clear"}, tmp_path)
+    table = _write(tmp_path, "time,region,r,g,b,sigma\n" + "".join(
+        f"2026-06-21T{h:02d}:00:00+00:00,disc{values if h == 9 else ',1,1,1,0.1'}\n"
+        for h in (9, 12)))
+    with pytest.raises(SkyfitError, match=message):
+        ingest_table(table, spec, tmp_path / "out", log=lambda *a: None)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_table_in_the_output_folder_is_not_overwritten(tmp_path):
+    """The user's own observations.csv in the output folder (the name ingest writes) is the
+    input or a file of no sequence: refused before anything is read or written."""
+    from skyfit_mi.pipeline.observation_table import ingest_table
+
+    spec = _spec({"type": "clear"}, tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    own = _write(out, HEAD + ROW, "observations.csv")
+    for overwrite in (False, True):
+        with pytest.raises(SkyfitError, match="output folder's own observations.csv"):
+            ingest_table(own, spec, out, overwrite=overwrite, log=lambda *a: None)
+    with pytest.raises(SkyfitError, match="holds a file observations.csv of no skyfit sequence"):
+        ingest_table(_table(tmp_path, "", ""), spec, out, log=lambda *a: None)
+    assert sorted(p.name for p in out.iterdir()) == ["observations.csv"]
+    assert own.read_text() == HEAD + ROW
+
+
+def test_times_of_mixed_utc_offsets_are_taken_as_their_instants(tmp_path, mi):
+    """A table across a change of summer time (or from two instruments): each time keeps its
+    offset, and its sun is that of its instant in UTC."""
+    from skyfit_mi.pipeline.observation_table import ingest_table
+
+    spec = _spec({"type": "clear"}, tmp_path)
+    table = _write(tmp_path, "time,region,r,g,b,sigma\n" + "".join(
+        f"{t},disc,1,1,1,0.1\n" for t in ("2026-06-21T09:00:00+00:00",
+                                          "2026-06-21T13:00:00+01:00",
+                                          "2026-06-21T15:00:00+00:00")))
+    doc = ingest_table(table, spec, tmp_path / "out", log=lambda *a: None)
+    assert [f["time_utc"][11:16] for f in doc["frames"]] == ["09:00", "12:00", "15:00"]
+    assert doc["frames"][1]["time"].endswith("+01:00")
+    noon = ingest_table(_table(tmp_path, "", ""), spec, tmp_path / "utc", log=lambda *a: None)
+    assert doc["frames"][1]["sun_zenith_deg"] == noon["frames"][1]["sun_zenith_deg"]
+
+
+def test_an_image_fit_predicts_a_tables_points(tmp_path, mi):
+    """A fit of image pixels relit onto a table target predicts every point of its region in
+    the table (its pixels mean nothing there); chi2map refuses it on the table."""
+    from skyfit_mi.cli import main
+
+    spec = _spec({"type": "clear"}, tmp_path)
+    assert main(["ingest", str(spec), "--table", str(_table(tmp_path, "", "")), "-o",
+                 str(tmp_path / "t")]) == 0
+    fit = tmp_path / "fit_disc.json"
+    fit.write_text(json.dumps({"region": "disc", "model": "two", "parameters": {
+        "rho_s": 0.1, "sigma_alpha": 0.1}, "intervals": {"rho_s": {"95": [0.0, 0.2]},
+        "sigma_alpha": {"95": [0.05, 0.2]}}, "pixels": [[3, 3], [4, 4]]}))
+    assert main(["relight", str(fit), "--target", str(tmp_path / "t"), "-o",
+                 str(tmp_path / "p"), "--no-images", "--draws", "10", "-q"]) == 0
+    rows = (tmp_path / "p" / "prediction.csv").read_text().splitlines()[1:]
+    assert len(rows) == 3 * 3 and all(r.startswith("disc,") for r in rows)
+    assert main(["chi2map", str(tmp_path / "t"), str(fit), "--n", "3"]) == 2
 
 
 def test_a_table_fit_predicts_every_point_of_the_tables_other_times_within_its_band(

@@ -6,12 +6,14 @@ own median 95% interval; a map resumed after losing half its chunks, recomputed 
 worker, must equal the uninterrupted map made by two; bad inputs get one line.
 """
 import json
+import os
 import shutil
 
 import numpy as np
 import pytest
 
 from skyfit_mi.errors import SkyfitError
+from skyfit_mi.fitting.pixel_map import STORE
 from skyfit_mi.pipeline.spec import SCENES_DIR, read_spec, validate_spec
 
 SPEC = SCENES_DIR / "specs" / "board_east_37.toml"
@@ -157,6 +159,67 @@ def test_bad_map_inputs_get_one_line(board, monkeypatch, capsys):
         pixel_map.run_map(day, regions[:1], tmp / "nowhere", scheduler="tcp://127.0.0.1:9",
                           progress=False, **QUIET)
     assert "\n" not in str(exc.value)
+    assert not (tmp / "nowhere").exists()               # tried before the store is written
+    with pytest.raises(SkyfitError, match="with --scheduler the cluster's own workers"):
+        pixel_map.run_map(day, regions[:1], tmp / "nowhere", scheduler="tcp://127.0.0.1:9",
+                          workers=2, progress=False, **QUIET)
+    # a bad light record: refused by its frame before any worker starts or the store is written
+    bad = tmp / "bad_light"
+    shutil.copytree(tmp / "day", bad)
+    doc = json.loads((bad / "manifest.json").read_text())
+    doc["frames"][2]["illumination"]["ground"] = [-1.0, 0.0, 0.0]
+    (bad / "manifest.json").write_text(json.dumps(doc))
+    assert main(["fit", str(bad), "--per-pixel", "--all", "-o", str(tmp / "nowhere")]) == 2
+    err = capsys.readouterr().err
+    assert "frame 2: sky illumination: ground" in err and len(err.splitlines()) == 1, err
+    assert not (tmp / "nowhere").exists()
+
+
+def test_workers_are_capped_by_cores_and_memory(monkeypatch):
+    """--workers 1000 started more than 120 processes that never finished: a map starts at
+    most one worker per core and as many as the free memory holds, and says so."""
+    import psutil
+
+    from skyfit_mi.fitting.pixel_map import CHUNK, FIT_BYTES, WORKER_BYTES, worker_count
+
+    notes = []
+    cores = os.cpu_count()
+    assert worker_count(1000, CHUNK, notes.append) <= cores
+    assert notes and f"not 1000: this machine has {cores} core(s)" in notes[0]
+    assert worker_count(1, CHUNK, notes.append) == 1 and len(notes) == 1
+    free = type("Memory", (), {"available": 1.5 * (WORKER_BYTES + 64 * FIT_BYTES)})
+    monkeypatch.setattr(psutil, "virtual_memory", lambda: free)
+    assert worker_count(None, 64, notes.append) == 1
+    assert cores == 1 or "GiB free" in notes[-1]
+
+
+def test_ctrl_c_during_a_map_exits_130_in_one_line_and_the_map_resumes(board, tmp_path):
+    """Ctrl-C at the terminal (SIGINT to the whole process group, the Dask workers included)
+    while a map runs: exit 130 and one line, no worker's traceback; the same command then
+    resumes the map."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    tmp, _, _ = board
+    out = tmp_path / "map"
+    argv = [sys.executable, "-m", "skyfit_mi.cli", "fit", str(tmp / "day"), "--per-pixel",
+            "--all", "--model", "3", "--chunk", "8", "--workers", "2", "-q", "-o", str(out)]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True, text=True)
+    deadline = time.time() + 120
+    while not (out / STORE / "done").exists() and proc.poll() is None and time.time() < deadline:
+        time.sleep(0.2)
+    time.sleep(1.0)                                       # some chunks running
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["skyfit: interrupted; finished work is kept (run the "
+                                        "same command again: a render resumes, written fits "
+                                        "stay)."]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0 and "wrote the maps" in done.stdout, done.stderr
 
 
 def test_patches_share_one_fit_per_block(board):
@@ -292,11 +355,11 @@ def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_pa
     assert shared > 0.5 * len(px) * len(skies)
     stats = {}
     inner = px[share.ok][:16]
-    build_light_cache(scene, params, skies[:1], inner, name, 2, 32, sky_spacing=4, stats=stats)
+    build_light_cache(scene, params, skies[:1], inner, name, 2, 32, plan="anchors", stats=stats)
     assert stats["shared"] > 0
     # the cache takes every frame's anchors in passes after the frames (each under its own
     # frame's sky): the integrals of each frame alone
-    cache = build_light_cache(scene, params, skies, inner, name, 2, 32, sky_spacing=4)
+    cache = build_light_cache(scene, params, skies, inner, name, 2, 32, plan="anchors")
     for t, sky in enumerate(skies):
         update_sky(params, sky, "sky.")
         d, l, _ = _shared_integrals(mi, dr, share, scene.environment(), quad, sky.sun_direction)
@@ -304,7 +367,7 @@ def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_pa
         assert np.allclose(cache.lobe_sky[:, t, 0], l[share.ok][:16], rtol=1e-4,
                            atol=1e-5 * np.abs(l).max())
     envmap = replace(skies[0], envmap=np.full((8, 16, 3), 0.05, np.float32))
-    build_light_cache(scene, params, [envmap], inner, name, 2, 32, sky_spacing=4, stats=stats)
+    build_light_cache(scene, params, [envmap], inner, name, 2, 32, plan="anchors", stats=stats)
     assert stats["shared"] == 0
 
 
@@ -313,10 +376,11 @@ def test_saturated_values_left_out_flag_only_fits_that_contradict_them(tmp_path)
     noise): the map's grid leaves those values out, and a pixel stays determined only where
     its fit reaches them.  Such pixels hold the truth in their intervals as often as the
     board's determined pixels; the same fits without their lobe (a wrong estimate) contradict
-    the values and are flagged."""
+    the values and are flagged; patches of such pixels are fitted and flagged alike."""
     from skyfit_mi.fitting.chi2 import load_observations, usable_values
     from skyfit_mi.fitting.methods.global_search import SIGMA_GRID, _linearise, near_saturation
-    from skyfit_mi.fitting.pixel_fit import UNDETERMINED, WARNINGS, _contradicts, fit_pixels
+    from skyfit_mi.fitting.pixel_fit import (UNDETERMINED, WARNINGS, _contradicts, fit_pixels,
+                                             patch_groups)
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
 
@@ -338,6 +402,13 @@ def test_saturated_values_left_out_flag_only_fits_that_contradict_them(tmp_path)
     print(f"{left_out.sum()} of {len(px)} pixels with saturated values left out, {kept.sum()} "
           f"determined; truth inside: {inside.mean():.3f}")
     assert inside.mean() >= 0.8
+    # patches of pixels that saturate: one fit per patch, flagged like a pixel's
+    groups, corners = patch_groups(px, 4)
+    patched = fit_pixels(tmp_path / "day", name, px, groups=groups)
+    assert len(patched["theta"]) == len(corners) < len(px)
+    patch_left_out = np.bincount(groups, weights=left_out, minlength=len(corners)) > 0
+    assert np.array_equal((patched["warnings"] & WARNINGS["saturated values left out"]) > 0,
+                          patch_left_out)
     # the same fits without their lobe (a fit that missed the highlight): short of the
     # saturated values
     from skyfit_mi.pipeline.manifest import frame_sky, load_manifest

@@ -130,8 +130,14 @@ def test_relight_onto_a_new_day_has_no_observations(day, tmp_path):
     ("into the target", "the output folder is the target's"),
     ("another model", "is not a fit result of `skyfit fit`"),
     ("bad interval", "is not a fit result of `skyfit fit`"),
-    ("no sun", "the target's sun is below the horizon at every time (01:00, 23:00)"),
+    ("no sun", "the target's sun is below the horizon in every frame (frame 0 at 01:00, frame 1 at "
+                "23:00)"),
     ("no region in the target", "does not see region 'disc'"),
+    ("nothing rendered", "made at the target's rendered frames, and"),
+    ("damaged in a folder", "fit_other.json is not readable JSON"),
+    ("a target frame missing", "frame 2: cannot read"),
+    ("a target light damaged", "frame 1: sky illumination: sun_radiance"),
+    ("frames the target lacks", "lists frame 9, which"),
 ])
 def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
     fit = _fit_json(tmp_path / "fit_disc.json")
@@ -146,6 +152,9 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
         args = [str(_fit_json(tmp_path / "fit_plate.json", region="plate"))]
     elif case == "twice":
         args = [str(fit), str(tmp_path)]
+    elif case == "damaged in a folder":
+        (tmp_path / "fit_other.json").write_text(fit.read_text()[:50])
+        args = [str(tmp_path)]
     elif case == "into the target":
         out = day / "day"
     elif case == "another model":
@@ -155,6 +164,31 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
         r["intervals"]["rho_s"]["95"] = [0.0, None]
         fit.write_text(json.dumps(r))
     target = day / "day"
+    more = []
+    if case == "nothing rendered":                   # a folder whose frames are all pending
+        doc = json.loads((target / "manifest.json").read_text())
+        doc.update(status="incomplete", frames=[{"index": f["index"], "status": "pending"}
+                                                for f in doc["frames"]])
+        target = tmp_path / "pending"
+        target.mkdir()
+        (target / "manifest.json").write_text(json.dumps(doc))
+        more = ["--no-images"]
+    elif case in ("a target frame missing", "a target light damaged"):
+        import shutil
+
+        target = tmp_path / "damaged"
+        shutil.copytree(day / "day", target)
+        if case == "a target frame missing":
+            (target / "frames" / "radiance_002.exr").unlink()
+        else:
+            doc = json.loads((target / "manifest.json").read_text())
+            doc["frames"][1]["illumination"]["sun_radiance"] = [-1.0, 0.0, 0.0]
+            (target / "manifest.json").write_text(json.dumps(doc))
+    elif case == "frames the target lacks":
+        r = json.loads(fit.read_text())
+        r.update(frames=[0, 9], sequence_run_id=json.loads(
+            (target / "manifest.json").read_text())["run_id"])
+        fit.write_text(json.dumps(r))
     if case in ("no sun", "no region in the target"):
         raw = copy.deepcopy(TINY)
         if case == "no sun":
@@ -167,9 +201,10 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
         if case == "no region in the target":
             assert main(["render", str(target), "-o", str(tmp_path / "away"), "-q"]) == 0
             target = tmp_path / "away"
-    assert main(["relight", *args, "--target", str(target), "-o", str(out), "-q"]) == 2
+    assert main(["relight", *args, "--target", str(target), "-o", str(out), "-q", *more]) == 2
     err = capsys.readouterr().err.strip()
     assert phrase in err and len(err.splitlines()) == 1, err
+    assert case == "into the target" or not out.exists()          # nothing written
 
 
 def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day, tmp_path):
@@ -191,8 +226,14 @@ def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day
     rows = list(csv.reader((out / "prediction.csv").read_text().splitlines()))[1:]
     assert all(float(r[6]) - float(r[5]) > 0.02 * float(r[4]) for r in rows)
     _fit_json(fit, model="achromatic", R=0.8, rho_s=0.0, sigma_alpha=0.0)
+    # another prediction into the folder replaces it only with --overwrite
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    for images in ([], ["--no-images"]):
+        assert main(["relight", str(fit), "--target", str(day / "day"), "-o", str(out), "-q",
+                     *images, "--draws", "20"]) == 2
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert main(["relight", str(fit), "--target", str(day / "day"), "-o", str(out), "-q",
-                 "--no-images", "--draws", "20"]) == 0
+                 "--no-images", "--draws", "20", "--overwrite"]) == 0
     assert json.loads((out / "relight.json").read_text())["band_coverage"]["share"] == 0.0
 
 
@@ -218,6 +259,15 @@ def test_fit_on_some_frames_and_relight_onto_the_same_folder_reports_the_held_ou
     assert errors["band_coverage"]["share"] >= 0.75          # measured 1.0 (12 values)
     rows = list(csv.reader((out / "relight.csv").read_text().splitlines()))
     assert [row[4] for row in rows[1:5]] == ["no", "no", "yes", "yes"]
+    # a prediction without images does not mix into the relit sequence; with --overwrite it
+    # replaces it whole
+    before = sorted(p.name for p in out.iterdir())
+    assert main(["relight", str(fits), "--target", str(day / "day"), "-o", str(out), "-q",
+                 "--no-images", "--draws", "20"]) == 2
+    assert sorted(p.name for p in out.iterdir()) == before
+    assert main(["relight", str(fits), "--target", str(day / "day"), "-o", str(out), "-q",
+                 "--no-images", "--draws", "20", "--overwrite"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["prediction.csv", "relight.json"]
 
 
 @pytest.mark.parametrize("text", ["6-2", "a", "1,,2", "-1"])
@@ -311,14 +361,14 @@ def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
     names = ["white_paper", "red_gloss_paint", "polished_mild_steel"]
     pixels = {n: subsample_region(seen[n], 12, 0) for n in names}
     fits = {n: {"region": n, "model": "colour", "normalisation": "ward"} for n in names}
-    options = dict(seed=5, positions=4, directions=64, sky_positions=1, min_frames=1,
-                   sky_spacing=4)
+    options = dict(seed=5, positions=4, directions=64, sky_plan="anchors", min_frames=1)
     alone = FitSession.from_fit(fits[names[0]], tmp_path / "day", pixels[names[0]], **options)
     one = FitSession.sharing_light({names[0]: fits[names[0]]}, tmp_path / "day", pixels,
                                    **options)[names[0]]
-    for k, v in vars(alone.cache).items():
-        if isinstance(v, np.ndarray):
-            assert np.array_equal(v, getattr(one.cache, k), equal_nan=True), k
+    for k in ("D", "G0", "G1", "coef", "hit", "sun_half_cos"):
+        for a, b in zip(*(np.atleast_1d(getattr(x.table, k)) if k != "coef"
+                          else getattr(x.table, k) for x in (alone, one))):
+            assert np.array_equal(a, b, equal_nan=True), k
     together = FitSession.sharing_light(fits, tmp_path / "day", pixels, **options)
     theta = np.array([0.5, 0.4, 0.3, 0.1, 0.1])
     z = []
@@ -326,7 +376,7 @@ def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
         own = FitSession.from_fit(fits[n], tmp_path / "day", pixels[n], **{**options,
                                                                           "seed": 6})
         s = together[n]
-        assert len(s.cache.hit) == len(pixels[n]) and s.cache.hit.all()
+        assert len(s.table.hit) == len(pixels[n]) and s.table.hit.all()
         (a, va), (b, vb) = (x.wm.radiance_and_variance(theta) for x in (s, own))
         m = len(pixels[n])
         z.append((a.mean(axis=0) - b.mean(axis=0))

@@ -84,6 +84,17 @@ def test_black_frames_are_reported(tmp_path, mi):
     assert "2 dark" in logs[-1] and sum("black at this exposure" in s for s in logs) == 2
 
 
+def test_an_auto_exposure_of_a_dark_day_is_refused_before_the_folder_is_made(tmp_path):
+    raw = thesis_disc_spec("polar", {"model": "two", "rho_s": 0.3, "sigma_alpha": 0.1}, size=8,
+                           spp=4)
+    raw["location"]["latitude_deg"] = 80.0
+    raw["time"] = {"date": "2026-12-21", "times": ["06:00", "12:00"]}
+    raw["sensor"]["exposure"] = "auto"
+    with pytest.raises(SkyfitError, match="every frame is dark"):
+        _render(validate_spec(raw, tmp_path), tmp_path / "polar")
+    assert not (tmp_path / "polar").exists()
+
+
 def test_clean_runs_agree_to_float32_rounding(tmp_path, mi):
     """The promise (README, docs/MANIFEST.md): a render of the same spec in another process,
     even from an empty kernel cache, gives the same sensor values and radiance and sigma equal

@@ -4,6 +4,8 @@ from zoneinfo import ZoneInfo
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from skyfit_mi.physics import sun
 from skyfit_mi.errors import SkyfitError
@@ -74,3 +76,25 @@ def test_bad_input():
         sun.solar_position(datetime(2026, 6, 21, 12, tzinfo=timezone.utc), 95, 0)
     with pytest.raises(SkyfitError, match="valid values are: 'spa', 'thesis'"):
         sun.solar_position(datetime(2026, 6, 21, 12, tzinfo=timezone.utc), 40, 0, method="x")
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 23 * 60), st.integers(-12 * 4, 14 * 4)), min_size=2,
+                max_size=6))
+def test_times_of_mixed_utc_offsets_are_the_same_instants(times):
+    """Times of several UTC offsets (a day across a change of summer time, photographs from two
+    cameras) place the sun as the same instants in UTC do."""
+    base = datetime(2026, 3, 29, tzinfo=timezone.utc)
+    utc = [base + timedelta(minutes=m) for m, _ in times]
+    mixed = [t.astimezone(timezone(timedelta(minutes=15 * q))) for t, (_, q) in zip(utc, times)]
+    for method in ("spa", "thesis"):
+        a = sun.solar_position(mixed, 51.5, -0.1, method=method)
+        b = sun.solar_position(utc, 51.5, -0.1, method=method)
+        np.testing.assert_array_equal(a.zenith_deg, b.zenith_deg)
+        np.testing.assert_array_equal(a.azimuth_deg, b.azimuth_deg)
+
+
+def test_unreadable_times_are_named_as_written():
+    with pytest.raises(SkyfitError, match=r"cannot read 2026-06-21T12:00:00\+01:00, noon as"):
+        sun.solar_position([datetime(2026, 6, 21, 12, tzinfo=timezone(timedelta(hours=1))),
+                            "noon"], 51.5, -0.1)

@@ -13,7 +13,9 @@ downward) under strong noise, so each contributes -2 ln P(y = 0) =
 -2 ln Phi((0.5 - y(x; a)) / sigma), or -2 ln P(y = max) = -2 ln Phi((y(x; a) -
 max + 0.5) / sigma), instead of its squared residual (the Tobit likelihood);
 chi^2 stays -2 ln(likelihood) up to a constant, and is eq. 6.2 when nothing is
-clipped.
+clipped.  An observation table's saturated value (the level its instrument clipped at) enters
+exactly so: :func:`load_table_observations` puts it at the top code, with a gain of its own
+that takes its level to max - 0.5.
 """
 
 from dataclasses import dataclass, field
@@ -22,8 +24,8 @@ import numpy as np
 
 from ..physics.camera import SensorModel
 from ..errors import SkyfitError
-from ..pipeline.manifest import (frame_exposure, load_manifest, read_frame_image, rendered_frames,
-                                  sensor_from_record)
+from ..pipeline.manifest import (check_frames, frame_exposure, load_manifest, read_frame_image,
+                                 rendered_frames, sensor_from_record)
 
 #: Values below this [DN] read as code 0.
 LOW_CODE = 0.5
@@ -37,7 +39,8 @@ class Observations:
     gain : (P, T, 3) radiance -> signal factor [sr m^2 W^-1] (each frame's exposure and white
     balance, times the pixel's off-axis falloff);  pixels : (P, 2) (x, y), or for an
     observation table the points' names (P,);  frames : manifest frame indices (T,);  times :
-    ISO strings;  warnings : what the loading noticed (incomplete render, values left out);
+    ISO strings (None for a lab light: frames by index);  warnings : what the loading
+    noticed (incomplete render, values left out);
     rays : for a table, the :class:`~skyfit_mi.render.light_cache.PointRays` that meet its
     points (None for pixels);  luminance : the values are luminances (first channel; the
     model's must be mixed by :class:`LuminanceModel`).
@@ -124,28 +127,42 @@ def _region_values(root, frame, key, pixels, shape):
 def load_table_observations(manifest_path, region, points=None, frames=None, min_frames=2):
     """A region's values and sigmas from a sequence's observation table
     (:mod:`~skyfit_mi.pipeline.observation_table`), on the linear scale of its sensor record,
-    with the rays that meet its points; ``points`` (names) default to all of the region's."""
+    with the rays that meet its points; ``points`` (names) default to all of the region's.
+
+    A saturated value v (the level its instrument clipped at) is read as an image's clipped
+    pixel: at the top code, with a gain of its own, (max - 0.5) / (max v), that takes radiance
+    v to the clip point max - 0.5 and its sigma alike, so that its censored term is
+    -2 ln Phi((L - v) / sigma) [radiance units] for a model radiance L up to v, and the model's
+    signal clips at the top as a sensor's does (the censored term then constant): the Tobit
+    term of an image's top code, and left out of the global search's linear grid as it is."""
     from ..pipeline.observation_table import table_observations
     from ..render.light_cache import point_rays
 
     doc, root = load_manifest(manifest_path)
-    names, fr, pos, view, y, sig, luminance = table_observations(doc, root, region, points,
-                                                                 frames)
+    rows = table_observations(doc, root, region, points, frames)
+    fr = rows.frames
     known = {f["index"]: f for f in rendered_frames(doc)}
     missing = [i for i in fr if i not in known]
     if missing:
         raise SkyfitError(f"frame {missing[0]} is not an observed frame of the sequence; its "
                           f"frames are {sorted(known)}.")
     if len(fr) < min_frames:
-        raise SkyfitError(f"region {region!r} is measured at fewer than {min_frames} times; a "
-                          "fit needs a sequence.")
+        raise SkyfitError(f"region {region!r} is measured in {len(fr)} frame(s); at least "
+                          f"{min_frames} are needed: measure it in more frames (or choose more "
+                          "frames).")
     sensor = sensor_from_record(doc["sensor"])
-    scale = sensor.exposure * sensor.max_code
-    gain = np.full(y.shape, sensor.exposure)
-    return Observations(np.array(names, dtype=object), fr, [known[i]["time"] for i in fr],
-                        y * scale, sig * scale, gain, sensor,
-                        rays=point_rays(pos, view, doc["ingest"]["ray_offset"]),
-                        luminance=luminance)
+    top = float(sensor.max_code)
+    sat = rows.saturated
+    # radiance -> normalised signal: the sensor's exposure; a saturated value's own, which
+    # takes its level to the clip point (top - LOW_CODE) / top
+    gain = np.where(sat, (top - LOW_CODE) / (top * np.where(sat, rows.value, 1.0)),
+                    sensor.exposure)
+    return Observations(np.array(rows.names, dtype=object), fr,
+                        [known[i].get("time") for i in fr],
+                        np.where(sat, top, rows.value * gain * top), rows.sigma * gain * top,
+                        gain, sensor,
+                        rays=point_rays(rows.position, rows.view, doc["ingest"]["ray_offset"]),
+                        luminance=rows.luminance)
 
 
 class LuminanceModel:
@@ -195,6 +212,12 @@ class LuminanceModel:
     def basis(self, sigmas, halves=False):
         out = self.inner.basis(sigmas, halves)
         mixed = [(self._mix(D), self._mix(G)) for D, G in (out if halves else [out])]
+        return mixed if halves else mixed[0]
+
+    def lobes(self, sigmas, halves=False):
+        out = self.inner.lobes(sigmas, halves)
+        mixed = [(self._mix(D), G.map(self._mix) if hasattr(G, "map") else self._mix(G))
+                 for D, G in (out if halves else [out])]
         return mixed if halves else mixed[0]
 
     def gradient(self, theta, dloss_dL):
@@ -249,8 +272,9 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
                               f"rendered frames are {sorted(known)}.")
         rendered = [f for f in rendered if f["index"] in set(frames)]
     if len(rendered) < min_frames:
-        raise SkyfitError(f"the sequence has fewer than {min_frames} rendered frames; a fit "
-                          "needs a sequence.")
+        raise SkyfitError(f"{root} has {len(rendered)} rendered frame(s)"
+                          f"{' of those chosen' if frames is not None else ''}; at least "
+                          f"{min_frames} are needed: render the sequence (or choose more frames).")
     warnings = []
     if doc.get("status") != "complete":
         warnings.append("the sequence's render is incomplete (manifest status "
@@ -281,9 +305,29 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
         ys.append(np.where(ok, y, 0.0))
         sig.append(np.where(ok, s, np.inf))
         gain.append(falloff[:, None] * frame_exposure(doc, f)[None, :])
-    return Observations(pixels, [f["index"] for f in rendered], [f["time"] for f in rendered],
+    return Observations(pixels, [f["index"] for f in rendered], [f.get("time") for f in rendered],
                         np.stack(ys, 1).astype(float), np.stack(sig, 1).astype(float),
                         np.stack(gain, 1), sensor, warnings)
+
+
+def check_regions(manifest_path, regions, frames=None):
+    """Load the observations of every region [(material, pixels, or None for a table's
+    points)] and light their frames (``frames``: these indices only), so that a bad region,
+    frame or light is refused before the first region's fit is written; the frames' images
+    stay in the frame cache for the fits."""
+    from ..pipeline.observation_table import is_table
+
+    doc, root = load_manifest(manifest_path)
+    materials = doc["scene"]["materials"]
+    for name, pixels in regions:
+        if name not in materials:
+            raise SkyfitError(f"region {name!r} names no material of the scene; its materials "
+                              f"are: {', '.join(materials)}.")
+        if is_table(doc):
+            load_table_observations(manifest_path, name, pixels, frames)
+        else:
+            load_observations(manifest_path, pixels, frames)
+    check_frames(doc, root, kinds=(), frames=frames)
 
 
 def censored_term_moments(a, b):

@@ -9,6 +9,7 @@ plot (thesis fig. 7.14).
 """
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -18,10 +19,15 @@ from .geometry import geometry_warnings, highlight_geometry
 from ..errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
-from .methods.levenberg_marquardt import SINGULAR_CONDITION
+from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
-from ..render.fit_model import check_start, other_readings
-from ..render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS, SIGMA_RESOLVED
+from ..render import setup
+from ..render.basis_table import TableModel, available_memory, memory_estimate, trace_table
+from ..render.fit_model import (BY_COUNT, PARAMETERS, WardModel, bounds, check_fit_normalisation,
+                                check_start, other_readings)
+from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
+                                  SIGMA_RESOLVED, SKY_PLANS, PointRays, anchors_pay,
+                                  build_light_cache)
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
 from ..pipeline.observation_table import is_table
 from ..physics.ward import METAL_THRESHOLD
@@ -36,15 +42,61 @@ GREY_SPREAD = 0.02
 NOISE_SIGMAS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5)
 #: Share of the degrees of freedom above which the model's own noise is warned of.
 NOISE_SHARE = 0.25
-#: Largest growth of an automatically sized cache's positions, and the largest cache it may
-#: reach [bytes] (40 bytes a sample; the model's Dr.Jit copies take about as much again).
-CACHE_GROWTH_MAX, CACHE_BYTES_MAX = 16, 1 << 30
+#: Largest growth of an automatically sized cache's positions, and the time a grown cache's
+#: trace may take [s] (estimated from the first trace's): the data's need, within a budget.
+CACHE_GROWTH_MAX, CACHE_TIME_BUDGET = 16, 20.0
 #: Iterations of each constrained fit that profiles a parameter along a ridge (another
 #: parameter poorly determined): the conditional-mean start is poor there.
 PROFILE_RIDGE_ITERATIONS = 40
 #: The widening of a variance by correlated channels (:func:`~.uncertainty.channel_factors`)
 #: above which the fit says so.
 CHANNEL_NOTE = 1.1
+
+
+@dataclass
+class FitState:
+    """A region's fit while its intervals and warnings are worked out (:meth:`FitSession.run`).
+
+    method, theta, chi2 : the method, its minimum and chi-square there
+    interval_scale : s^2, the scale of chi-square's rise for an interval (chi-square over what
+        the noise gives, where the model misses the data; else 1)
+    curvature_inverse : (J^T J)^-1 at the minimum
+    channel_factors : each parameter's widening of its variance by errors shared by a value's
+        channels (:func:`~.uncertainty.channel_factors`), and ``channel_correlation`` theirs
+    covariance : the parameters' covariance (curvature, scale and channel factors)
+    method_result, global_result : the method's result dict and the global search's (the same
+        for the global method): its grid gives the profiles
+    model_noise_by_sigma : the light cache's own share of chi-square by roughness
+    noise_chi2 : mean and variance of the chi-square noise alone gives at the fit
+    intervals, rise, cache_noise_chi2, cache_sd, calibration_sd : set by
+        :meth:`FitSession._intervals`: every parameter's 68%/95% intervals, the profiles' rise,
+        the chi-square the cache's noise may add (the intervals allow for it), the standard
+        errors from the cache's samples and from a photographed sequence's calibration
+    """
+
+    method: str
+    theta: np.ndarray
+    chi2: float
+    interval_scale: float
+    curvature_inverse: np.ndarray
+    channel_factors: np.ndarray
+    channel_correlation: np.ndarray
+    covariance: np.ndarray
+    method_result: dict
+    global_result: dict
+    model_noise_by_sigma: dict
+    noise_chi2: tuple
+    intervals: dict = None
+    rise: dict = None
+    cache_noise_chi2: float = None
+    cache_sd: np.ndarray = None
+    calibration_sd: np.ndarray = None
+
+    @property
+    def delta_scale(self):
+        """Each parameter's scale of Delta chi^2 for its interval: s^2 times its channel
+        factor."""
+        return self.interval_scale * self.channel_factors
 
 
 class FitSession:
@@ -63,26 +115,22 @@ class FitSession:
     normalisation : Ward normalisation of the model ('ward' = thesis eq. 3.19)
     seed : seeds the light cache
     positions, directions : samples per pixel of the light cache; ``positions=None`` sizes
-        it from the data (:meth:`run`): POSITIONS, grown after a fit whose cache noise
-        exceeds CACHE_SHARE of the degrees of freedom
+        it from the data (:meth:`run`): POSITIONS (POINT_POSITIONS for a table's points),
+        grown after a fit whose cache noise exceeds CACHE_SHARE of the chi-square the data's
+        scatter gives (:meth:`cache_growth`)
     min_frames : rendered frames the sequence must hold (1 to predict a single frame)
     frames : manifest frame indices to use (None: every rendered frame), e.g. to hold some
         out for a prediction test
     variant : the Mitsuba variant to fit with (default the sequence's), e.g. 'cuda_ad_rgb'
-    sky_positions : None, or k: the sky's integrals at k of each pixel's positions
-        (:func:`~skyfit_mi.render.light_cache.build_light_cache`), for predictions of region
-        means, whose pixels average out what a pixel's k positions leave
-    sky_spacing : None, or n: the sky's integrals interpolated between anchors every n pixels
-        where accurate (``build_light_cache``'s), for predictions of compact regions
+    sky_plan : where the light cache takes the sky's integrals, a name of
+        :data:`~skyfit_mi.render.light_cache.SKY_PLANS` (recorded in the fit JSON's
+        ``light_cache``): ``fit`` by default, ``anchors`` for predictions of compact regions
     trace : False leaves the light cache to the caller (:meth:`sharing_light`)
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
                  positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None,
-                 sky_positions=None, sky_spacing=None, trace=True):
-        from ..render import setup
-        from ..render.fit_model import BY_COUNT, PARAMETERS, bounds, check_fit_normalisation
-
+                 sky_plan="fit", trace=True):
         model = BY_COUNT.get(model, model)
         check_choice("model", model, tuple(PARAMETERS))
         check_fit_normalisation(normalisation)          # before the light is traced
@@ -108,10 +156,11 @@ class FitSession:
         # a material is the truth only where skyfit rendered the frames with it; an ingested
         # sequence's spec materials are placeholders for the unknown photographed surface
         self.truth = mats[name] if doc.get("source", "render") in RENDERED_SOURCES else None
-        self.cache_settings = {"positions": POSITIONS if positions is None else int(positions),
+        first = POSITIONS if self.obs.rays is None else POINT_POSITIONS
+        self.cache_settings = {"positions": first if positions is None else int(positions),
                                "directions": int(directions), "seed": seed,
                                "sized": "from the data" if positions is None else "given",
-                               "sky_positions": sky_positions, "sky_spacing": sky_spacing}
+                               "sky_plan": check_choice("sky plan", sky_plan, tuple(SKY_PLANS))}
         self._mi = setup(variant or doc["render"]["variant"])
         self._loaded = None                         # the scene and its parameters (scene)
         self.cache_time = time.perf_counter() - t0
@@ -138,16 +187,11 @@ class FitSession:
     @classmethod
     def sharing_light(cls, results, manifest_path, pixels, **options):
         """Sessions {region: FitSession} of several fits (``results`` {region: fit result}) on
-        one sequence, at ``pixels`` {region: (P, 2)}, whose light is traced together: one light
-        cache over the pixels of every region (each pixel its region's material) that takes
-        the sky's anchors as the region alone would (``sky_spacing``) and has its
-        normalisation; each session takes its own rows.  Each frame's kernels are traced once
-        instead of once a region: the README board's eight regions take 3.3 s instead of 8
-        (docs/BENCHMARKS.md).  A region of an observation table traces its own.  Meant for
-        the small caches of predictions: the regions' caches are held together.  ``options``
-        as the constructor's, ``trace`` excepted."""
-        from ..render.light_cache import anchors_pay
-
+        one sequence, at ``pixels`` {region: (P, 2)}, whose light is traced together
+        (:meth:`trace_together`) where the regions share normalisation, frames and whether
+        the sky plan's anchors pay (as each region alone would take them).  A region of an
+        observation table traces its own.  ``options`` as the constructor's, ``trace``
+        excepted."""
         sessions = {name: cls.from_fit(r, manifest_path, pixels[name], trace=False, **options)
                     for name, r in results.items()}
         groups = {}
@@ -156,44 +200,83 @@ class FitSession:
                 s._trace_cache()
                 continue
             cam = s.doc["camera"]
-            anchored = anchors_pay(s.obs.pixels, s.cache_settings["sky_spacing"],
+            anchored = anchors_pay(s.obs.pixels, SKY_PLANS[s.cache_settings["sky_plan"]].spacing,
                                    cam["width"], cam["height"])
             groups.setdefault((s.normalisation, tuple(s.obs.frames), anchored), []).append(s)
         for group in groups.values():
-            t0 = time.perf_counter()
-            at = np.concatenate([s.obs.pixels for s in group])
-            cache = group[0]._build_cache(at, np.repeat([s.name for s in group],
-                                                        [len(s.obs.pixels) for s in group]))
-            share = (time.perf_counter() - t0) / len(group)
-            start = 0
-            for s in group:
-                n = len(s.obs.pixels)
-                s._use_cache(cache.subset(slice(start, start + n)))
-                s.cache_time += share
-                start += n
+            cls.trace_together(group)
         return sessions
 
-    def _trace_cache(self):
-        """(Re)build the light cache at ``cache_settings`` and everything made from it."""
+    @classmethod
+    def for_regions(cls, manifest_path, regions, **options):
+        """Sessions {region: FitSession} of several regions of one sequence (``regions``
+        [(name, pixels)]), whose light is traced together where they share frames and
+        normalisation (:meth:`trace_together`); ``options`` as the constructor's, ``trace``
+        excepted."""
+        sessions = {name: cls(manifest_path, name, px, trace=False, **options)
+                    for name, px in regions}
+        groups = {}
+        for s in sessions.values():
+            key = (s.normalisation, tuple(s.obs.frames), s.obs.rays is None)
+            groups.setdefault(key, []).append(s)
+        for group in groups.values():
+            cls.trace_together(group)
+        return sessions
+
+    @staticmethod
+    def trace_together(group):
+        """Trace the light of the sessions ``group`` (one sequence, frames and normalisation)
+        in one pass over all their points, each point under its own region's material: each
+        frame's kernels are traced once instead of once a region; each session takes its
+        rows and an equal share of the time."""
         t0 = time.perf_counter()
-        cache = self._build_cache(self.obs.pixels if self.obs.rays is None else self.obs.rays,
-                                  self.name)
+        if group[0].obs.rays is None:
+            at = np.concatenate([s.obs.pixels for s in group])
+        else:
+            at = PointRays(*(np.concatenate([getattr(s.obs.rays, k) for s in group])
+                             for k in ("origins", "directions")))
+        table = group[0]._trace(at, np.repeat([s.name for s in group],
+                                              [len(s.obs.pixels) for s in group]))
+        share = (time.perf_counter() - t0) / len(group)
+        start = 0
+        for s in group:
+            n = len(s.obs.pixels)
+            s.cache_settings["blocks"] = group[0].cache_settings["blocks"]
+            s._use_table(table.subset(slice(start, start + n)))
+            s.cache_time += share
+            start += n
+
+    def _trace_cache(self):
+        """(Re)trace the light at ``cache_settings`` and make everything from its table."""
+        t0 = time.perf_counter()
+        table = self._trace(self.obs.pixels if self.obs.rays is None else self.obs.rays,
+                            self.name)
         self.cache_time += time.perf_counter() - t0
-        self._use_cache(cache)
+        self._use_table(table)
 
-    def _build_cache(self, at, bsdf_id):
-        """A light cache at ``cache_settings`` of the sequence's scene and frames at ``at``
-        (pixels or rays) on material ``bsdf_id`` (one, or one per pixel)."""
-        from ..render.light_cache import build_light_cache
-
+    def _trace(self, at, bsdf_id):
+        """The :class:`~skyfit_mi.render.basis_table.BasisTable` of the light at
+        ``cache_settings`` of the sequence's scene and frames at ``at`` (pixels or rays) on
+        material ``bsdf_id`` (one, or one per pixel), traced in blocks of bounded memory."""
         c = self.cache_settings
-        return build_light_cache(self.scene, self.params, self.skies, at, bsdf_id,
-                                 positions=c["positions"], directions=c["directions"],
-                                 seed=c["seed"],
-                                 max_depth=max(1, int(self.doc["render"]["max_depth"]) - 1),
-                                 normalisation=self.normalisation,
-                                 sky_positions=c["sky_positions"],
-                                 sky_spacing=c.get("sky_spacing"))
+        need = memory_estimate(len(at), len(self.skies), c["positions"], c["directions"])
+        have = available_memory()
+        if have is not None and need > have:
+            raise SkyfitError(
+                f"fitting {len(at)} points in {len(self.skies)} frames needs up to "
+                f"{need / 2**30:.1f} GB, but this machine has {have / 2**30:.1f} GB available; "
+                "fit fewer pixels (--max-pixels) or frames (--frames), or a region at a time.")
+        table, c["blocks"] = trace_table(
+            self.scene, self.params, self.skies, at, bsdf_id,
+            lambda cache: WardModel(cache, self.model, self.normalisation), **self._cache_options())
+        return table
+
+    def _cache_options(self):
+        """build_light_cache's options at ``cache_settings``."""
+        c = self.cache_settings
+        return dict(positions=c["positions"], directions=c["directions"], seed=c["seed"],
+                    max_depth=max(1, int(self.doc["render"]["max_depth"]) - 1),
+                    normalisation=self.normalisation, plan=c["sky_plan"])
 
     @property
     def scene(self):
@@ -213,37 +296,46 @@ class FitSession:
             self._loaded = scene, self._mi.traverse(scene)
         return self._loaded
 
-    def _use_cache(self, cache):
-        """Take ``cache`` (of the region's pixels) and make the models and chi-square on it."""
-        if not cache.hit.any():
+    def light_cache(self):
+        """The region's raw :class:`~skyfit_mi.render.light_cache.LightCache` at
+        ``cache_settings`` in one block, its samples kept (for diagnostics and tests of the
+        Dr.Jit model: a fit keeps only their table)."""
+        return build_light_cache(self.scene, self.params, self.skies,
+                                 self.obs.pixels if self.obs.rays is None else self.obs.rays,
+                                 self.name, **self._cache_options())
+
+    def _use_table(self, table):
+        """Take ``table`` (of the region's pixels) and make the models and chi-square on it."""
+        if not table.hit.any():
             raise SkyfitError(f"none of the region's pixels shows material {self.name!r}; check "
                               "the region.")
-        self.cache = cache
-        self.geometry = highlight_geometry(np.where(cache.hit[..., None], cache.sun_half_cos,
+        self.table = table
+        self.geometry = highlight_geometry(np.where(table.hit[..., None], table.sun_half_cos,
                                                     np.nan))
-        self.wm = self._model(cache)
-        self.problem = Problem(self.obs, self.wm, valid=cache.hit)
+        self.wm = self._model(table)
+        self.problem = Problem(self.obs, self.wm, valid=table.hit)
         self._halves = self._bases = None
 
-    def _model(self, cache):
-        """The fit's radiance model on ``cache``: Ward's, through the luminance where the
+    def _model(self, table):
+        """The fit's radiance model on ``table``: Ward's, through the luminance where the
         observations are luminances."""
-        from ..render.fit_model import WardModel
-
-        wm = WardModel(cache, self.model, self.normalisation)
+        wm = TableModel(table, self.model)
         return LuminanceModel(wm) if self.obs.luminance else wm
 
-    def cache_growth(self, noise_by_sigma):
+    def cache_growth(self, noise_by_sigma, s2=1.0):
         """The factor by which an automatically sized cache's positions must grow so that the
         largest model noise over the roughness range (``noise_by_sigma``, chi-square) falls
-        under CACHE_SHARE of the degrees of freedom (its variance falls as 1 / positions, the
-        directions' share and the pixel footprint's alike): a power of two within
-        CACHE_GROWTH_MAX and CACHE_BYTES_MAX; 1 for a cache of given size."""
+        under CACHE_SHARE of the chi-square the data's own scatter gives (the degrees of
+        freedom, times the interval scale ``s2`` where the model misses the data: a misfit's
+        residuals dwarf the cache's noise, which then needs no more samples); its variance
+        falls as 1 / positions.  A power of two within CACHE_GROWTH_MAX whose trace, estimated
+        from this one's, takes at most CACHE_TIME_BUDGET; 1 for a cache of given size."""
         if self.cache_settings["sized"] == "given":
             return 1
-        need = max(noise_by_sigma.values()) / (CACHE_SHARE * self.problem.dof)
-        room = min(CACHE_GROWTH_MAX * POSITIONS / self.cache_settings["positions"],
-                   CACHE_BYTES_MAX / self.cache.nbytes())
+        need = max(noise_by_sigma.values()) / (CACHE_SHARE * self.problem.dof * max(1.0, s2))
+        first = POSITIONS if self.obs.rays is None else POINT_POSITIONS
+        room = min(CACHE_GROWTH_MAX * first / self.cache_settings["positions"],
+                   CACHE_TIME_BUDGET / max(self.cache_time, 1e-3))
         factor = 1
         while factor < need and 2 * factor <= room:
             factor *= 2
@@ -260,11 +352,9 @@ class FitSession:
         but it keeps intervals honest when the data are precise enough for the cache's noise
         to ripple chi-square by more than the 95% threshold.
         """
-        from .methods.levenberg_marquardt import levenberg_marquardt
-
         if self._halves is None:
-            self._halves = [Problem(self.obs, self._model(c), valid=self.cache.hit)
-                            for c in self.cache.halves()]
+            self._halves = [Problem(self.obs, self._model(self.table.part(j)),
+                                    valid=self.table.hit) for j in (1, 2)]
         if method == "global":
             fits = [global_search(p, theta, self.lower, self.upper, candidates=1, profile=False,
                                   grid_basis=b)["theta"]
@@ -283,8 +373,6 @@ class FitSession:
         """A half cache's ``fit`` on ``theta``'s side of the colour rule: when C is grey (within
         GREY_SPREAD) and the fit is across the rule, Levenberg-Marquardt on that half from the
         fit's twin reading; otherwise the fit itself."""
-        from .methods.levenberg_marquardt import levenberg_marquardt
-
         def side(x):
             return x[3] >= METAL_THRESHOLD
         if np.ptp(fit[:3]) > GREY_SPREAD:
@@ -298,10 +386,11 @@ class FitSession:
         return fit
 
     def grid_bases(self):
-        """The global search's basis on its sigma grid for the whole cache and each half,
-        computed once per session (it does not depend on the data)."""
+        """The global search's basis on its sigma grid for the whole cache and each half, made
+        once per session (it does not depend on the data); its lobes lazy
+        (:class:`~skyfit_mi.render.basis_table.Lobes`), a few roughness values at a time."""
         if self._bases is None:
-            self._bases = self.wm.basis(SIGMA_GRID, halves=True)
+            self._bases = self.wm.lobes(SIGMA_GRID, halves=True)
         return self._bases
 
     def random_start(self, rng):
@@ -328,7 +417,8 @@ class FitSession:
                               **dict(method_options or {}))
         theta = np.asarray(res["theta"], dtype=float)
         noise = self._model_noise_by_sigma(theta)
-        growth = self.cache_growth(noise)
+        growth = self.cache_growth(noise, unc.scale(problem.chi2(theta),
+                                                    problem.noise_chi2(theta)[0]))
         if growth > 1:
             # the data are more precise than the cache: grow it and fit again
             c = self.cache_settings
@@ -357,10 +447,8 @@ class FitSession:
         # the global minimum: its grid gives the profiles; a local method is judged against it
         g = res if method == "global" else global_search(problem, start, self.lower, self.upper,
                                                         candidates=2, grid_basis=grid_basis)
-        fit = {"method": method, "theta": theta, "chi2": chi2, "s2": s2, "curv_inv": curv_inv,
-               "f2": f2, "s2k": s2 * f2, "channel_correlation": channels,
-               "cov": curv_inv * s2 * np.sqrt(np.outer(f2, f2)), "result": res, "global": g,
-               "noise_by_sigma": noise, "noise_chi2": noise_chi2}
+        fit = FitState(method, theta, chi2, s2, curv_inv, f2, channels,
+                       curv_inv * s2 * np.sqrt(np.outer(f2, f2)), res, g, noise, noise_chi2)
         self._intervals(fit)
         warnings = self._warnings(fit)
         wall = time.perf_counter() - t0 + self.cache_time
@@ -373,19 +461,20 @@ class FitSession:
         return out
 
     def _intervals(self, fit):
-        """68% and 95% intervals of every parameter into ``fit`` (keys intervals, rise, ripple,
-        mc_sd): the covariance's, or for rho_s and sigma_alpha of a global fit the profile's;
-        each widened by the light cache's own Monte Carlo error."""
-        problem, theta, names = self.problem, fit["theta"], self.names
+        """68% and 95% intervals of every parameter into the :class:`FitState` ``fit`` (its
+        intervals, rise, cache_noise_chi2, cache_sd, calibration_sd): the covariance's, or for
+        rho_s and sigma_alpha of a global fit the profile's; each widened by the light cache's
+        own Monte Carlo error."""
+        problem, theta, names = self.problem, fit.theta, self.names
         lower, upper = self.lower, self.upper
-        s2k = fit["s2k"]                             # each parameter's scale of Delta chi^2
-        cov_iv = unc.covariance_intervals(theta, fit["cov"], lower, upper)
-        grid = fit["global"]["profile_linearised"]
+        s2k = fit.delta_scale                             # each parameter's scale of Delta chi^2
+        cov_iv = unc.covariance_intervals(theta, fit.covariance, lower, upper)
+        grid = fit.global_result["profile_linearised"]
         prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
                 "rho_s": (grid["rho_s"], grid["chi2_rho"])}
         ripple = self._model_noise_allowance(theta, *prof["sigma_alpha"], s2k[-1])
         # the profiles describe the global minimum; a local method is judged against it
-        glob = fit["method"] == "global"
+        glob = fit.method == "global"
         intervals, rise, walked = {}, {}, []
         for i, p in enumerate(names):
             iv = {lv: (float(cov_iv[lv][0][i]), float(cov_iv[lv][1][i])) for lv in ("68", "95")}
@@ -400,32 +489,33 @@ class FitSession:
                     iv = unc.profile_interval(*prof[p], s2k[i], ripple)
                     levels = list(iv)
                     exact, _, points = profile_edges(
-                        problem, theta, fit["chi2"], i,
+                        problem, theta, fit.chi2, i,
                         [unc.LEVELS[lv] * s2k[i] + ripple for lv in levels], lower, upper,
-                        fit["curv_inv"])
+                        fit.curvature_inverse)
                     walked += points
                     iv = {lv: (min(iv[lv][0], e[0] if e[0] is not None else np.inf),
                                max(iv[lv][1], e[1] if e[1] is not None else -np.inf))
                           for lv, e in zip(levels, exact)}
                     source = "profile"
             intervals[p] = {"68": iv["68"], "95": iv["95"], "from": source}
-        if glob and self._poorly_determined(theta, intervals, prof, fit["cov"]):
+        if glob and self._poorly_determined(theta, intervals, prof, fit.covariance):
             walked += self._profile_the_rest(fit, intervals, ripple)
         for lv in ("68", "95"):
             # every point the profiles walked within the level lies inside every interval
             for i, p in enumerate(names):
-                ridge = ridge_intervals(walked, fit["chi2"], unc.LEVELS[lv] * s2k[i] + ripple)
+                ridge = ridge_intervals(walked, fit.chi2, unc.LEVELS[lv] * s2k[i] + ripple)
                 if ridge is not None:
                     lo, hi = intervals[p][lv]
                     intervals[p][lv] = (min(lo, float(ridge[0][i])), max(hi, float(ridge[1][i])))
-        mc_sd = self.cache_error(theta, fit["method"])
+        mc_sd = self.cache_error(theta, fit.method)
         cal_sd = unc.calibration_sd(self.doc, names, theta)
         for i, p in enumerate(names):
             for lv in ("68", "95"):
                 intervals[p][lv] = unc.widen(theta[i], intervals[p][lv],
                                              unc.Z[lv] * np.hypot(mc_sd[i], cal_sd[i]),
                                              lower[i], upper[i])
-        fit.update(intervals=intervals, rise=rise, ripple=ripple, mc_sd=mc_sd, cal_sd=cal_sd)
+        fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
+        fit.cache_sd, fit.calibration_sd = mc_sd, cal_sd
 
     def _model_noise_by_sigma(self, theta):
         """The model's own Monte Carlo share of chi-square at the fitted reflectances over the
@@ -460,20 +550,20 @@ class FitSession:
         rho_s = 0: R's covariance interval 0-1, its profile 0.83-1).  Returns the points the
         constrained fits walked [(theta, chi2)]."""
         levels, walked = ("68", "95"), []
-        theta = fit["theta"]
+        theta = fit.theta
         span = self.upper - self.lower
-        quadratic = bool(np.all(np.isfinite(fit["curv_inv"]))
+        quadratic = bool(np.all(np.isfinite(fit.curvature_inverse))
                          and np.all(theta > self.lower + 1e-9 * span)
                          and np.all(theta < self.upper - 1e-9 * span)
-                         and np.linalg.cond(fit["curv_inv"]) < SINGULAR_CONDITION)
+                         and np.linalg.cond(fit.curvature_inverse) < SINGULAR_CONDITION)
         for i, p in enumerate(self.names):
             if intervals[p]["from"] != "covariance":
                 continue
             exact, _, points = profile_edges(
-                self.problem, fit["theta"], fit["chi2"], i,
-                [unc.LEVELS[lv] * fit["s2k"][i] + ripple for lv in levels],
+                self.problem, fit.theta, fit.chi2, i,
+                [unc.LEVELS[lv] * fit.delta_scale[i] + ripple for lv in levels],
                 self.lower, self.upper,
-                fit["curv_inv"], rtol=0.01, iterations=PROFILE_RIDGE_ITERATIONS)
+                fit.curvature_inverse, rtol=0.01, iterations=PROFILE_RIDGE_ITERATIONS)
             walked += points
             for lv, e in zip(levels, exact):
                 lo, hi = intervals[p][lv]
@@ -514,8 +604,8 @@ class FitSession:
         """What the user must know about ``fit``: loading, the method's status, a local method's
         distance from the global minimum, misfit, identifiability, the day's geometry, and the
         colour rule's ambiguity."""
-        names, method, theta, chi2 = self.names, fit["method"], fit["theta"], fit["chi2"]
-        res, g, intervals = fit["result"], fit["global"], fit["intervals"]
+        names, method, theta, chi2 = self.names, fit.method, fit.theta, fit.chi2
+        res, g, intervals = fit.method_result, fit.global_result, fit.intervals
         iv95 = {p: intervals[p]["95"] for p in names}
         warnings = []
         if res.get("status") == "failed":
@@ -531,25 +621,26 @@ class FitSession:
                                 f"{k} = {v:.4f}" for k, v in zip(names, g["theta"]))
                             + f": {method} ended in a local minimum or on a flat region of "
                             "chi-square from this start (thesis 6.3, 7.2)")
-        warnings += unc.misfit(chi2, self.problem.dof, fit["s2"], fit["ripple"],
-                               fit["noise_chi2"])
-        warnings += unc.identifiability(names, iv95, self.lower, self.upper, fit["rise"],
-                                        fit["s2k"], fit["ripple"])
-        if np.max(fit["f2"]) > CHANNEL_NOTE:
-            R = fit["channel_correlation"]
+        warnings += unc.misfit(chi2, self.problem.dof, fit.interval_scale, fit.cache_noise_chi2,
+                               fit.noise_chi2)
+        warnings += unc.identifiability(names, iv95, self.lower, self.upper, fit.rise,
+                                        fit.delta_scale, fit.cache_noise_chi2)
+        if np.max(fit.channel_factors) > CHANNEL_NOTE:
+            R = fit.channel_correlation
             off = R[np.triu_indices(len(R), 1)]
             warnings.append(
                 f"the errors of a value's R, G and B are correlated (correlation "
                 f"{off.min():.2f} to {off.max():.2f} between channels, as in a JPEG, a "
                 "demosaiced raw or a render's Monte Carlo noise, or where the model misses "
                 "the brightness): the data tell less than as many independent values, and the "
-                f"intervals are widened for it, by up to {np.sqrt(np.max(fit['f2'])):.2f}x.")
+                "intervals are widened for it, by up to "
+                f"{np.sqrt(np.max(fit.channel_factors)):.2f}x.")
         warnings += geometry_warnings(self.geometry, float(theta[-1]))
-        worst = max(fit["noise_by_sigma"], key=fit["noise_by_sigma"].get)
-        if fit["noise_by_sigma"][worst] > NOISE_SHARE * self.problem.dof:
+        worst = max(fit.model_noise_by_sigma, key=fit.model_noise_by_sigma.get)
+        if fit.model_noise_by_sigma[worst] > NOISE_SHARE * self.problem.dof:
             warnings.append(
                 f"the light cache's own Monte Carlo error adds up to "
-                f"{fit['noise_by_sigma'][worst]:.3g} to chi-square (at sigma_alpha = {worst}), "
+                f"{fit.model_noise_by_sigma[worst]:.3g} to chi-square (at sigma_alpha = {worst}), "
                 f"over {NOISE_SHARE:.0%} of the {self.problem.dof} degrees of freedom: the data "
                 "are more precise than the model, which pulls fits toward the roughness where "
                 "its error is small (intervals allow for it); use more --directions and "
@@ -567,28 +658,29 @@ class FitSession:
 
     def _record(self, fit, warnings, start, seed, evaluations, wall, t_method):
         """The JSON-ready result of ``fit`` (the layout of ``fit_NAME.json``)."""
-        names, theta, chi2, dof = self.names, fit["theta"], fit["chi2"], self.problem.dof
-        res = fit["result"]
+        names, theta, chi2, dof = self.names, fit.theta, fit.chi2, self.problem.dof
+        res = fit.method_result
         L = self.wm.radiance(theta)
         return {
             "region": self.name, **({"pixels": self.obs.pixels.tolist()} if self.obs.rays is None
                                     else {"points": list(self.obs.pixels)}),
             "model": self.model,
             "normalisation": self.normalisation,
-            "method": fit["method"], "seed": seed, "start": start.tolist(),
+            "method": fit.method, "seed": seed, "start": start.tolist(),
             "parameters": dict(zip(names, theta.tolist())),
             "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof,
-            "chi2_expected_from_noise": fit["noise_chi2"][0], "interval_scale_s2": fit["s2"],
-            "interval_scale_channels": dict(zip(names, fit["f2"].tolist())),
-            "channel_correlation": fit["channel_correlation"].tolist(),
-            "intervals": fit["intervals"],
-            "readings": [unc.reading(p, theta[i], fit["intervals"][p]["95"], self.lower[i],
+            "chi2_expected_from_noise": fit.noise_chi2[0], "interval_scale_s2": fit.interval_scale,
+            "interval_scale_channels": dict(zip(names, fit.channel_factors.tolist())),
+            "channel_correlation": fit.channel_correlation.tolist(),
+            "intervals": fit.intervals,
+            "readings": [unc.reading(p, theta[i], fit.intervals[p]["95"], self.lower[i],
                                      self.upper[i]) for i, p in enumerate(names)],
-            "cache_error_sd": dict(zip(names, fit["mc_sd"].tolist())),
-            **({"calibration_error_sd": dict(zip(names, fit["cal_sd"].tolist()))}
-               if np.any(fit["cal_sd"] > 0) else {}),
-            "cache_noise_chi2": fit["ripple"], "cache_noise_chi2_by_sigma": fit["noise_by_sigma"],
-            "covariance": {"names": list(names), "matrix": fit["cov"].tolist()},
+            "cache_error_sd": dict(zip(names, fit.cache_sd.tolist())),
+            **({"calibration_error_sd": dict(zip(names, fit.calibration_sd.tolist()))}
+               if np.any(fit.calibration_sd > 0) else {}),
+            "cache_noise_chi2": fit.cache_noise_chi2,
+            "cache_noise_chi2_by_sigma": fit.model_noise_by_sigma,
+            "covariance": {"names": list(names), "matrix": fit.covariance.tolist()},
             "evaluations": evaluations, "status": res.get("status"),
             "message": res.get("message"), "warnings": warnings,
             "wall_time_s": wall, "light_cache_time_s": self.cache_time, "method_time_s": t_method,
@@ -602,10 +694,21 @@ class FitSession:
         }
 
 
-def fit_region(manifest_path, name, pixels, model="two", method="global", normalisation="ward",
-               seed=0, start=None, positions=None, directions=DIRECTIONS,
-               method_options=None, log=print, frames=None, variant=None):
-    """Fit one material region (see :class:`FitSession`); returns a JSON-ready result dict."""
-    session = FitSession(manifest_path, name, pixels, model, normalisation, seed, positions,
-                         directions, frames=frames, variant=variant)
-    return session.run(method, start, seed, method_options, log)
+def fit_region(manifest_path, name, pixels, **options):
+    """Fit one material region (see :class:`FitSession`, ``options`` as
+    :func:`fit_regions`'); returns a JSON-ready result dict."""
+    return next(fit_regions(manifest_path, [(name, pixels)], **options))
+
+
+def fit_regions(manifest_path, regions, model="two", method="global", normalisation="ward",
+                seed=0, start=None, positions=None, directions=DIRECTIONS, method_options=None,
+                log=print, frames=None, variant=None):
+    """Fit several regions of one sequence (``regions`` [(name, pixels)]), their light traced
+    together (:meth:`FitSession.for_regions`); yields each region's result dict in turn."""
+    sessions = FitSession.for_regions(manifest_path, regions, model=model,
+                                      normalisation=normalisation, seed=seed,
+                                      positions=positions, directions=directions, frames=frames,
+                                      variant=variant)
+    for name, _ in regions:
+        yield sessions.pop(name).run(method, start, seed, method_options, log)
+

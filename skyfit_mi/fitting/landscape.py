@@ -14,8 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .methods.global_search import RHO_GRID, SIGMA_GRID, _linearise, linear_quadratics
 from ..errors import SkyfitError
-from ..render.fit_model import reflectances
+from ..files import save_figure, write_text
+from ..render.fit_model import PARAMETERS, bounds, reflectances
 
 
 def truth_parameters(truth, model, names, normalisation="ward"):
@@ -39,8 +41,6 @@ def map_axes(model, x, y, x_range=None, y_range=None, n=60, profile=False):
     each range (default the parameter's bounds); SkyfitError for an unknown or repeated
     parameter, a range outside its bounds, or a ``profile`` (:func:`profiled_map`) of the
     2-parameter model, which has no other parameter."""
-    from ..render.fit_model import PARAMETERS, bounds
-
     names, (lower, upper) = list(PARAMETERS[model]), bounds(model)
     if profile and len(names) == 2:
         raise SkyfitError("the 2-parameter model has no other parameter to profile; leave "
@@ -143,8 +143,6 @@ def profiled_map(session, theta, x, y, xs, ys):
     with the others at the fit, and bounds the profile from above.
     The 3- and 5-parameter models (:func:`map_axes` refuses the 2-parameter one).  Returns an
     array (len(ys), len(xs))."""
-    from .methods.global_search import RHO_GRID, SIGMA_GRID, _linearise, linear_quadratics
-
     names = list(session.names)
     theta = np.asarray(theta, dtype=float)
     axes = {x: np.asarray(xs, dtype=float), y: np.asarray(ys, dtype=float)}
@@ -197,6 +195,28 @@ def profiled_map(session, theta, x, y, xs, ys):
     return out
 
 
+def map_prefix(prefix, default_name, overwrite=False):
+    """The path prefix of a map's files: ``prefix`` (an existing folder: the map goes into it
+    as ``default_name``), checked not to replace files that are not an earlier map's unless
+    ``overwrite``: a map's CSV has the header X,Y,chi2, and its PNG is the one beside it."""
+    prefix = Path(prefix)
+    if prefix.is_dir():
+        prefix = prefix / default_name
+    table, image = prefix.with_suffix(".csv"), prefix.with_suffix(".png")
+    if overwrite or not (table.exists() or image.exists()):
+        return prefix
+    try:
+        with open(table, newline="", encoding="utf-8") as f:
+            header = next(csv.reader(f), [])
+    except (OSError, UnicodeDecodeError):
+        header = []
+    if len(header) != 3 or header[2] != "chi2":
+        held = table if table.exists() else image
+        raise SkyfitError(f"{held} exists and is not a chi-square map's; give another -o, or "
+                          "pass --overwrite to replace it.")
+    return prefix
+
+
 def write_chi2_map(prefix, x, y, xs, ys, chi2, marks, walk=None, others="at the fit"):
     """``<prefix>.csv`` (x, y, chi2 per grid point) and ``<prefix>.png`` (:func:`draw_chi2_map`
     with ``marks`` {label: (x, y)} such as the fit, the map's minimum and the truth, and an
@@ -204,8 +224,6 @@ def write_chi2_map(prefix, x, y, xs, ys, chi2, marks, walk=None, others="at the 
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from ..files import save_figure, write_text
 
     prefix = Path(prefix)
     buf = io.StringIO()

@@ -13,10 +13,12 @@ the sensor response inverted, values within 3 sigma of saturation left out as th
 grid does), which limits sigma_alpha to the grid's spacing (8% steps) and rho_s to 0.01.
 
 The light is cached with fewer samples than a region fit's (MAP_CACHE; the sky's integrals
-through each pixel's centre, interpolated between anchors every SKY_SPACING pixels where that
-is accurate, :func:`~skyfit_mi.render.light_cache.build_light_cache`), and the
-cache's own Monte Carlo error is measured per pixel from its two halves (each fitted alike)
-and added to the intervals in quadrature, as is a photographed sequence's calibration error
+through each pixel's centre, interpolated between anchors where that is accurate: the
+``anchors`` plan of :data:`~skyfit_mi.render.light_cache.SKY_PLANS`) and kept as its table
+(:func:`~skyfit_mi.render.basis_table.trace_table`, in blocks of bounded memory whatever the
+frames), and the cache's own Monte Carlo error is measured per pixel from its two halves
+(each fitted alike) and added to the intervals in quadrature, as is a photographed
+sequence's calibration error
 (:func:`~skyfit_mi.fitting.uncertainty.calibration_sd`).
 
 Intervals are the grid's profile: the 95% set {chi^2 <= chi^2_min + 3.84 s^2}, with
@@ -30,7 +32,6 @@ and one off its material gets NaN.
 import numpy as np
 
 from ..errors import SkyfitError
-from ..render.light_cache import SKY_SPACING
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
                                     grid_chi2_device, linear_curvature, near_saturation)
@@ -108,8 +109,8 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     """
     from ..pipeline.manifest import frame_sky, load_manifest
     from ..render import setup
+    from ..render.basis_table import TableModel, trace_table
     from ..render.fit_model import PARAMETERS, WardModel, bounds
-    from ..render.light_cache import build_light_cache
 
     pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
     groups = np.arange(len(pixels)) if groups is None else np.asarray(groups, dtype=int)
@@ -120,21 +121,22 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     mi = setup(variant or doc["render"]["variant"])
     scene = mi.load_string(doc["scene"]["xml"])
     skies = [frame_sky(frames[i], root) for i in obs.frames]
-    cache = build_light_cache(scene, mi.traverse(scene), skies, pixels, materials,
-                              positions=positions, directions=directions, seed=seed,
-                              max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
-                              normalisation=normalisation, sky_positions=1,
-                              sky_spacing=SKY_SPACING)
-    wm = WardModel(cache, model, normalisation)
-    usable = usable_values(obs, cache.hit)
+    table, _ = trace_table(scene, mi.traverse(scene), skies, pixels, materials,
+                           lambda cache: WardModel(cache, model, normalisation),
+                           positions=positions, directions=directions, seed=seed,
+                           max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
+                           normalisation=normalisation, plan="anchors")
+    wm = TableModel(table, model)
+    usable = usable_values(obs, table.hit)
     # every usable value's weight, and the grid's: values near saturation left out of it
     y, w_all = _linearise(obs, usable, leave_out_saturated=False)
     saturated = usable & near_saturation(obs)
     w = np.where(saturated, 0.0, w_all)
     bases = wm.basis(SIGMA_GRID, halves=True)            # the whole cache, and its two halves
     whole = bases[0]
-    hit = np.bincount(groups, weights=cache.hit.all(axis=1), minlength=n) > 0
+    hit = np.bincount(groups, weights=table.hit.all(axis=1), minlength=n) > 0
     first = pixels[np.unique(groups, return_index=True)[1]]
+    y_pixels = y                                         # per pixel, for _contradicts
     if n < len(pixels):
         y, w = (_stack_groups(a, groups, n) for a in (y, w))
         bases = [(_stack_groups(D, groups, n), np.stack([_stack_groups(g, groups, n) for g in G]))
@@ -151,8 +153,8 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)
     left_out = np.bincount(groups, weights=saturated.any(axis=(1, 2)), minlength=n) > 0
-    contradicted = np.bincount(groups, weights=_contradicts(model, y, w_all, saturated, whole,
-                                                            fit, groups), minlength=n) > 0
+    contradicted = np.bincount(groups, weights=_contradicts(model, y_pixels, w_all, saturated,
+                                                            whole, fit, groups), minlength=n) > 0
     fit["warnings"] = _flags(model, names, fit, hit) \
         | np.where(left_out, WARNINGS["saturated values left out"], 0) \
         | np.where(contradicted, WARNINGS["saturated values contradicted"], 0)

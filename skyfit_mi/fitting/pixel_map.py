@@ -18,23 +18,33 @@ pixels, the settings, seeds and timings.
 
 import hashlib
 import json
+import logging
 import os
 import shutil
+import signal
+import sys
+import threading
 import time
+import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import SkyfitError
-from ..files import ensure_dir, write_json
+from ..files import check_dir, ensure_dir, write_json
 from ..render.light_cache import SKY_SPACING
 from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, fit_pixels, patch_groups
 
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
-#: Fits (pixels, or patches) per chunk: a chunk's peak memory is about 0.8 MB per fit plus
-#: 0.25 GB (docs/BENCHMARKS.md), so 1024 keep a worker near 1.1 GB; a chunk's fixed cost
-#: (the scene, its skies, the kernels' tracing: about 1 s) is a tenth of its time.
+#: A worker's peak memory [bytes]: a fixed part (the imports and kernels) and a part per fit
+#: of its chunk, on a 13-frame day (docs/BENCHMARKS.md, "Per-pixel maps: speed and memory";
+#: a longer day's light is traced in blocks of bounded size, basis_table.CHUNK_SAMPLES).
+WORKER_BYTES, FIT_BYTES = 0.25e9, 0.8e6
+#: Fits (pixels, or patches) per chunk: 1024 keep a worker near 1.1 GB (WORKER_BYTES +
+#: CHUNK * FIT_BYTES); a chunk's fixed cost (the scene, its skies, the kernels' tracing: about
+#: 1 s) is a tenth of its time.
 CHUNK = 1024
 #: How :func:`plan_chunks` lays fits into chunks (recorded, so that a store laid out otherwise
 #: is not resumed).
@@ -85,20 +95,32 @@ def _settings(doc, regions, model, normalisation, seed, patch, chunk, cache):
             "regions": hashlib.sha256(json.dumps(digest).encode()).hexdigest()[:16]}
 
 
-def _open_store(path, settings, shape, n_par, n_chunks, overwrite):
-    """The map's Zarr group, new or resumed (refused if it holds another map's settings)."""
+def _check_store(path, settings, overwrite, n_chunks):
+    """Refuse a store at ``path`` that holds another map's settings (or is damaged) unless
+    ``overwrite``; returns whether the map resumes it, and which of its ``n_chunks`` chunks
+    are done."""
     import zarr
 
-    if path.exists() and not overwrite:
-        try:
-            g = zarr.open_group(str(path), mode="r+")
-            old = dict(g.attrs.get("settings", {}))
-        except Exception:                                      # damaged or not a store
-            old = None
-        if old != settings:
-            raise SkyfitError(f"{path} holds another map (or a damaged one); give another -o, "
-                              "or pass --overwrite to replace it.")
-        return g
+    if not path.exists() or overwrite:
+        return False, np.zeros(n_chunks, bool)
+    try:
+        g = zarr.open_group(str(path), mode="r")
+        old, done = dict(g.attrs.get("settings", {})), g["done"][:]
+    except Exception:                                          # damaged or not a store
+        old = done = None
+    if old != settings or len(done) != n_chunks:
+        raise SkyfitError(f"{path} holds another map (or a damaged one); give another -o, or "
+                          "pass --overwrite to replace it.")
+    return True, done
+
+
+def _open_store(path, settings, shape, n_par, n_chunks, resume):
+    """The map's Zarr group: the one at ``path`` if ``resume``, else a new one (replacing
+    whatever is there, which :func:`_check_store` allowed)."""
+    import zarr
+
+    if resume:
+        return zarr.open_group(str(path), mode="r+")
     if path.exists():
         shutil.rmtree(path)
     g = zarr.open_group(str(path), mode="w")
@@ -129,8 +151,69 @@ def _write_chunk(store, chunk, res):
         store[key][box] = arr
 
 
-def _client(workers, scheduler, memory_per_worker):
-    """A Dask client: of the cluster at ``scheduler``, or of a new LocalCluster."""
+def worker_count(workers, chunk, log=print):
+    """The local cluster's worker processes: ``workers`` (default one per core), at most one
+    per core and as many as the free memory holds at a chunk's peak (WORKER_BYTES + ``chunk``
+    FIT_BYTES each); a note says when fewer are started than asked for."""
+    import psutil
+
+    cores = os.cpu_count() or 1
+    need = WORKER_BYTES + int(chunk) * FIT_BYTES
+    free = psutil.virtual_memory().available
+    cap = max(1, min(cores, int(free // need)))
+    n = int(workers or cores)
+    if n > cap:
+        log(f"starting {cap} worker(s), not {n}: this machine has {cores} core(s) and "
+            f"{free / 2**30:.1f} GiB free, about {need / 2**30:.2f} GiB a worker at --chunk "
+            f"{chunk} (more workers than that only wait for a core, or for memory)")
+    return min(n, cap)
+
+
+@contextmanager
+def _ctrl_c_deferred():
+    """A Ctrl-C pressed during the block is raised as KeyboardInterrupt when it ends, not
+    within it: a Dask cluster half started or half closed printed tracebacks at exit.
+    Elsewhere than in the main thread, nothing is changed."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pressed = []
+    handler = signal.signal(signal.SIGINT, lambda *a: pressed.append(True))
+    try:
+        yield
+    except Exception:
+        if pressed:          # e.g. a worker that the Ctrl-C ended while it started
+            raise KeyboardInterrupt from None
+        raise
+    finally:
+        signal.signal(signal.SIGINT, handler)
+    if pressed:
+        raise KeyboardInterrupt
+
+
+@contextmanager
+def _stderr_to_null(keep=False):
+    """Processes started during the block write their standard error to /dev/null (unless
+    ``keep``): a Ctrl-C at the terminal reaches every process of its group, and each Dask
+    worker printed its KeyboardInterrupt (their tasks' errors come back through Dask)."""
+    if keep:
+        yield
+        return
+    sys.stderr.flush()
+    saved, null = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 2)
+    os.close(null)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def _client(workers, scheduler, memory_per_worker, dask_logs=False):
+    """A Dask client: of the cluster at ``scheduler``, or of a new LocalCluster (its logs and
+    its workers' standard error only with ``dask_logs``); start it within
+    :func:`_ctrl_c_deferred`."""
     from distributed import Client, LocalCluster
 
     if scheduler:
@@ -145,22 +228,39 @@ def _client(workers, scheduler, memory_per_worker):
 
     # Dask's workers start with MALLOC_TRIM_THRESHOLD_ set, which turns off glibc's dynamic
     # mmap threshold: every large temporary array is then mapped and faulted in afresh, and a
-    # chunk took 1.4x as long (docs/BENCHMARKS.md); the variable is left unset here
-    with dask.config.set({f"{TRIM}": None}):
+    # chunk took 1.4x as long (docs/BENCHMARKS.md, "Per-pixel maps: speed and memory"); the
+    # variable is left unset here
+    with dask.config.set({f"{TRIM}": None}), _stderr_to_null(keep=dask_logs), \
+            warnings.catch_warnings():
+        if not dask_logs:                     # e.g. its own web server's port taken
+            warnings.simplefilter("ignore")
         cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
                                memory_limit=memory_per_worker, dashboard_address=None,
-                               silence_logs=40)
+                               silence_logs=logging.WARNING if dask_logs else logging.CRITICAL)
     return Client(cluster), cluster
+
+
+def _close(client, cluster):
+    """Close a Dask client and its local cluster (a Ctrl-C meanwhile deferred until they are)."""
+    with _ctrl_c_deferred():
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward", seed=0,
             patch=1, chunk=CHUNK, workers=None, scheduler=None, overwrite=False, progress=True,
-            log=print, cache=MAP_CACHE, memory_per_worker="4GiB", variant=None):
+            log=print, cache=MAP_CACHE, memory_per_worker="4GiB", variant=None, dask_logs=False):
     """Map ``regions`` ([(material, pixels (P, 2))]) of a sequence; returns the summary dict
-    (module docstring).  ``workers``: LocalCluster processes (default: the machine's cores);
-    ``variant``: the Mitsuba variant of the fits (default the sequence's)."""
+    (module docstring).  ``workers``: LocalCluster processes (default: the machine's cores,
+    :func:`worker_count`); ``variant``: the Mitsuba variant of the fits (default the
+    sequence's); ``dask_logs``: show Dask's own log lines (``--debug``).  Every input, the
+    regions' frames and light and a given scheduler included, is checked before the store is
+    written."""
     from ..pipeline.manifest import load_manifest
     from ..render.fit_model import PARAMETERS
+    from .chi2 import check_regions
     from .pixel_fit import check_map_region
 
     doc, _ = load_manifest(manifest_path)
@@ -169,29 +269,35 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
         check_map_region(px, shape)
     if int(patch) < 1 or int(chunk) < 1:
         raise SkyfitError("--patch and --chunk take whole numbers of at least 1.")
+    if scheduler and workers is not None:
+        raise SkyfitError("--workers sizes the cluster on this machine; with --scheduler the "
+                          "cluster's own workers run the map: leave out --workers.")
     names = list(PARAMETERS[model])
     chunks = plan_chunks(regions, patch, chunk)
     settings = _settings(doc, regions, model, normalisation, seed, patch, chunk, cache)
-    out = ensure_dir(Path(out_dir))
-    store = _open_store(out / STORE, settings, shape, len(names), len(chunks), overwrite)
-    done = store["done"][:]
+    out = check_dir(Path(out_dir))
+    resume, done = _check_store(out / STORE, settings, overwrite, len(chunks))
     pending = [i for i in range(len(chunks)) if not done[i]]
-    if len(pending) < len(chunks):
-        log(f"resuming: {len(chunks) - len(pending)} of {len(chunks)} chunks already mapped")
+    n_workers = None if scheduler else worker_count(workers, chunk, log)
     t0 = time.perf_counter()
-    n_workers = int(workers or os.cpu_count() or 1)
-    if pending:
-        client, cluster = _client(n_workers, scheduler, memory_per_worker)
-        try:
+    client = cluster = None
+    try:
+        check_regions(manifest_path, regions)          # the frames and their light
+        if pending:
+            with _ctrl_c_deferred():
+                client, cluster = _client(n_workers, scheduler, memory_per_worker, dask_logs)
+        store = _open_store(ensure_dir(out) / STORE, settings, shape, len(names), len(chunks),
+                            resume)
+        if len(pending) < len(chunks):
+            log(f"resuming: {len(chunks) - len(pending)} of {len(chunks)} chunks already mapped")
+        if pending:
             _map_pending(client, manifest_path, chunks, pending, store, model, normalisation,
                          seed, cache, progress, variant)
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+    finally:
+        _close(client, cluster)
     summary = write_map_outputs(out, store, names, regions, settings)
     summary.update(wall_time_s=time.perf_counter() - t0, chunks=len(chunks),
-                   chunks_this_run=len(pending), workers=None if scheduler else n_workers,
+                   chunks_this_run=len(pending), workers=n_workers,
                    scheduler=scheduler or "LocalCluster", memory_per_worker=memory_per_worker,
                    chunk_seeds="numpy SeedSequence([seed, chunk index])")
     write_json(out / "map_summary.json", summary)

@@ -19,7 +19,6 @@ against the table's.
 """
 
 import csv
-import datetime as dt
 import io
 import os
 from concurrent.futures import ThreadPoolExecutor
@@ -29,55 +28,97 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SkyfitError
-from ..files import ensure_dir, figure_png, write_bytes, write_json, write_text
+from ..files import FolderLock, ensure_dir, figure_png, write_bytes, write_json, write_text
 from .chi2 import subsample_region
 from .fit import FitSession
 from .landscape import truth_parameters
-from .report import fit_files
 from .uncertainty import widen
-from ..pipeline.fit_result import read_fit_result
-from ..pipeline.manifest import (RENDERED_SOURCES, load_manifest, manifest_file,
-                                 read_frame_image, rendered_frames)
+from ..pipeline.fit_result import check_fit_sequence, read_fit_result
+from ..pipeline.manifest import (RENDERED_SOURCES, check_frames, frame_axis, frame_label,
+                                 load_manifest, manifest_file, read_frame_image,
+                                 rendered_frames)
 from ..pipeline.pixels import frame_values, material_regions
-from ..pipeline.observation_table import is_table, table_points
-from ..pipeline.sequence import render_sequence
+from ..pipeline.observation_table import is_table, table_regions
+from ..pipeline.sequence import clear_run, render_sequence
 from ..pipeline.spec import read_spec, validate_spec
 from ..render.image import to_srgb8, write_png
-from ..render.light_cache import DIRECTIONS, POSITIONS, SKY_SPACING
+from ..render.light_cache import DIRECTIONS
 
 #: Seed offset of the reference render of a synthetic target (its own materials, other noise).
 REFERENCE_SEED = 1_000_003
-#: Light-cache samples per pixel of a prediction (positions, directions, and the positions of
-#: the sky's deterministic integrals): it predicts region means, whose Monte Carlo error (in
-#: the band) falls with the region's pixels, so it is a sixteenth of a fit's cache, whose
-#: chi-square needs every pixel accurate, with the sky's integrals at one random position of
-#: each pixel (unbiased; 1.7x faster a prediction: 3.0 -> 1.8 s for 64 pixels x 13 frames),
-#: or, for a compact region, through the pixels' centres interpolated between anchors every
-#: light_cache.SKY_SPACING pixels (the maps' rule).  Not a fit's: docs/BENCHMARKS.md, "A fit's
-#: sky integrals through pixel centres: tried, not adopted".
-PREDICTION_CACHE = (4, 64, 1)
+#: Light-cache samples per pixel of a prediction (positions, directions): it predicts region
+#: means, whose Monte Carlo error (in the band) falls with the region's pixels, so it is a
+#: sixteenth of a fit's cache, whose chi-square needs every pixel accurate; the sky's
+#: integrals by the ``anchors`` plan (light_cache.SKY_PLANS: through the pixels' centres
+#: interpolated between anchors where accurate, else at one random position of each pixel,
+#: unbiased).  Not a fit's: docs/BENCHMARKS.md, "A fit's sky integrals through pixel
+#: centres: tried, not adopted".
+PREDICTION_CACHE = (4, 64)
+
+
+#: The files a relight writes beside its sequence's (a render's): the prediction and the errors
+#: (and compare_NNNN.png, and the reference render in reference/).
+RELIGHT_FILES = ("prediction.csv", "prediction.png", "relight.json", "relight.csv")
+
+
+def check_output(out, images, overwrite):
+    """Refuse an output folder ``out`` that holds another run's output, unless ``overwrite``.
+    A relight without images writes no manifest to tell its run by, so a sequence's or a
+    relight's files there are another run's; with images, a folder holding a sequence is the
+    render's to judge (it resumes its own run and refuses another's), and a relight's files
+    without one are another run's (one without images)."""
+    out = Path(out)
+    if overwrite or not out.is_dir():
+        return
+    sequence = (out / "manifest.json").exists()
+    if images and sequence:
+        return
+    held = (["manifest.json"] if sequence else []) + [n for n in RELIGHT_FILES
+                                                      if (out / n).exists()]
+    if held:
+        raise SkyfitError(f"{out} holds another run's output ({held[0]}); relight into another "
+                          "folder, or pass --overwrite to replace it.")
+
+
+def clear_output(out):
+    """Remove an earlier relight from ``out`` (--overwrite): its sequence, prediction, errors,
+    comparison images and reference render, and nothing else."""
+    out = Path(out)
+    if not out.is_dir():
+        return
+    with FolderLock(out):
+        for folder in (out, out / "reference"):
+            clear_run(folder)
+        for p in [*(out / n for n in RELIGHT_FILES), *out.glob("compare_[0-9]*.png")]:
+            p.unlink(missing_ok=True)
+        for d in (out / "frames", out / "reference" / "frames", out / "reference"):
+            if d.is_dir() and not any(d.iterdir()):
+                d.rmdir()
 
 
 def load_fits(paths):
     """{region: (path, fit result)} from fit JSONs, a fit folder's ``fits.csv`` (the
-    ``fit_*.json`` beside it), or a folder of fits; a region given twice is refused."""
+    ``fit_*.json`` beside it), or a folder of fits; a damaged fit JSON in a folder is named,
+    and a region given twice is refused."""
     out = {}
     for p in map(Path, paths):
         if p.is_dir() or p.name == "fits.csv":
-            found = fit_files(p if p.is_dir() else p.parent)
-            if not found:
-                raise SkyfitError(f"no fit_*.json beside {p}; give the folder `skyfit fit` wrote.")
+            folder = p if p.is_dir() else p.parent
+            files = sorted(folder.glob("fit_*.json"))
+            if not files:
+                raise SkyfitError(f"no fit_*.json in {folder}; give the folder `skyfit fit` "
+                                  "wrote.")
         elif p.is_file():
-            r = read_fit_result(p)
-            found = {r["region"]: (p, r)}
+            files = [p]
         else:
             raise SkyfitError(f"fit {str(p)!r} does not exist; give fit_NAME.json files, a "
                               "fits.csv or the folder `skyfit fit` wrote.")
-        for region in found:
-            if region in out:
-                raise SkyfitError(f"region {region!r} is fitted twice ({out[region][0]} and "
-                                  f"{found[region][0]}); give one fit per region.")
-        out.update(found)
+        for f in files:
+            r = read_fit_result(f)
+            if r["region"] in out:
+                raise SkyfitError(f"region {r['region']!r} is fitted twice ({out[r['region']][0]} "
+                                  f"and {f}); give one fit per region.")
+            out[r["region"]] = (f, r)
     return out
 
 
@@ -133,9 +174,10 @@ class Plan:
         return Path(out) if self.render and not self.observed else self.target
 
 
-def plan_relight(target, out, images=True, reference=False):
-    """The :class:`Plan` of relighting ``target`` into ``out``; inputs that cannot be relit
-    so are refused before anything is made."""
+def plan_relight(fits, target, out, images=True, reference=False, overwrite=False):
+    """The :class:`Plan` of relighting ``fits`` onto ``target`` into ``out``; inputs that
+    cannot be relit so (a fit of frames the target lacks, an output folder holding another
+    run's output without ``overwrite``...) are refused before anything is made."""
     target = Path(target)
     is_folder = target.is_dir() or target.name == "manifest.json"
     if not images and not is_folder:
@@ -144,6 +186,12 @@ def plan_relight(target, out, images=True, reference=False):
     doc = load_manifest(target)[0] if is_folder else None
     if doc is not None and Path(out).resolve() == manifest_file(target).parent.resolve():
         raise SkyfitError("the output folder is the target's; give another with -o.")
+    for path, r in fits.values() if doc is not None else ():
+        check_fit_sequence(r, path, doc, target, own=False)
+    if not images and not rendered_frames(doc):
+        raise SkyfitError(f"a prediction without images is made at the target's rendered frames, "
+                          f"and {target} has none; render it, or leave out --no-images.")
+    check_output(out, images, overwrite)
     observed = doc is not None and bool(rendered_frames(doc))
     table = doc is not None and is_table(doc)
     if reference and not (images and observed and not table
@@ -154,16 +202,17 @@ def plan_relight(target, out, images=True, reference=False):
 
 
 def check_sun_up(plan, spec):
-    """Refuse a target whose sun is below the horizon at every time: the frames of ``spec``
+    """Refuse a target whose sun is below the horizon in every frame: the frames of ``spec``
     (the relit spec), or without it (a prediction alone) the target folder's as recorded."""
     if spec is not None:
-        times = [(f.time.strftime("%H:%M"), f.below_horizon) for f in spec.frames]
+        frames = [(frame_label(f.index, f.time), f.below_horizon) for f in spec.frames]
     else:
-        times = [(f["time"][11:16], f.get("below_horizon", False)) for f in plan.doc["frames"]]
-    if all(below for _, below in times):
-        raise SkyfitError(f"the target's sun is below the horizon at every time "
-                          f"({', '.join(t for t, _ in times)}); give times of day with the "
-                          "sun up.")
+        frames = [(frame_label(f["index"], f.get("time")), f.get("below_horizon", False))
+                  for f in plan.doc["frames"]]
+    if all(below for _, below in frames):
+        raise SkyfitError(f"the target's sun is below the horizon in every frame "
+                          f"({', '.join(t for t, _ in frames)}); give times of day with the "
+                          "sun up (or lab lights above the horizon).")
 
 
 def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progress=True,
@@ -176,7 +225,9 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     prediction is made, from the fits' cached model (no frame is rendered).  ``reference``
     (a synthetic target) also renders the target's own materials again with other seeds, and
     reports their error: Monte Carlo noise measured rather than estimated."""
-    plan = plan_relight(target, out, images, reference)
+    plan = plan_relight(fits, target, out, images, reference, overwrite)
+    if plan.doc is not None:            # the target's frames and light, before any writing
+        check_frames(plan.doc, manifest_file(plan.target).parent)
     # the prediction alone takes the folder's light as recorded: its spec is not validated
     # again (which would compute every sun position anew)
     spec = target_spec(plan.target, fits, plan.doc)[0] if plan.render else None
@@ -185,6 +236,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     # show is refused first), or the relit render's own after it (its label image)
     predicted = plan.predicted_from(out)
     pixels = target_pixels(fits, predicted, seed) if predicted == plan.target else None
+    if overwrite:
+        clear_output(out)
     if plan.render:
         render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log,
                         source="relight")
@@ -266,17 +319,18 @@ def table_errors(fits, plan, prediction):
     """The prediction at every point of an observation table against the table's values
     (its rows with a point, :func:`predict`): a :class:`PointError` per point and frame, and
     ``relight.json``'s errors per region (over all its values, per frame, per point, and on
-    the frames the fit did not see where the table is the fit's own) and overall.  Returns
-    (errors, point errors)."""
+    the frames the fit did not see where the table is the fit's own) and overall; saturated
+    values, lower bounds only, are left out.  Returns (errors, point errors)."""
     def error(rows):
         return float(rel_rms(np.array([r.predicted for r in rows]),
                              np.array([r.image for r in rows])))
 
-    times = {row.frame: row.time for row in prediction.rows}
+    compared = [row for row in prediction.rows if not row.saturated]
+    times = {row.frame: row.time for row in compared}
     frames = sorted(times)
     regions, point_errors = {}, []
     for region, (path, r) in sorted(fits.items()):
-        rows = [row for row in prediction.rows if row.region == region]
+        rows = [row for row in compared if row.region == region]
         trained = (set(r["frames"]) if r.get("sequence_run_id") == plan.doc.get("run_id")
                    and "frames" in r else None)
         by_value, by_frame, by_point = {}, {}, {}
@@ -297,7 +351,7 @@ def table_errors(fits, plan, prediction):
             e["trained_frames"] = [int(i) for i in r["frames"]]
             e["held_out_rel_rms"] = error(held) if held else None
     errors = {"regions": regions, "times": [times[f] for f in frames], "frames": frames,
-              "rel_rms": error(prediction.rows),
+              "rel_rms": error(compared),
               "unit": "relative RMS of radiance (unitless)",
               "observations": ("an observation table: each point's value predicted at the fit "
                                "(prediction.csv) against the table's; relight.csv per point "
@@ -326,8 +380,9 @@ def add_reference_errors(errors, fits, plan, out, pixels, overwrite=False):
 
 
 def band_coverage(rows):
-    """The share of the image values of prediction ``rows`` inside their predicted band."""
-    inside = [row.inside for row in rows]
+    """The share of the image values of prediction ``rows`` inside their predicted band (a
+    table's saturated values, lower bounds only, left out)."""
+    inside = [row.inside for row in rows if not row.saturated]
     return {"share": float(np.mean(inside)), "values": len(inside),
             "band": "95%, from the fits' intervals"}
 
@@ -361,17 +416,16 @@ def target_pixels(fits, target, seed=0, max_pixels=64):
     """{region: (P, 2) pixels} at which each fit is compared in ``target`` (a sequence
     folder): the fit's own pixels on its own sequence (the same run), otherwise the material's
     interior in the target's label image (another camera sees it elsewhere), a seeded subset
-    of at most ``max_pixels``; for an observation table, the names of every point it
-    measures on the region."""
+    of at most ``max_pixels``; for an observation table, None (all the region's points)."""
     doc, root = load_manifest(target)
     out, seen = {}, None
-    if is_table(doc):
-        measured = table_points(root)
+    if is_table(doc):                       # an observation table: every point of the region
+        measured = table_regions(root)
         for region in fits:
             if region not in measured:
                 raise SkyfitError(f"the target's observation table measures no point of region "
                                   f"{region!r}; it measures: {', '.join(measured)}.")
-        return {region: measured[region] for region in fits}
+        return {region: None for region in fits}
     for region, (_, r) in fits.items():
         if r.get("sequence_run_id") == doc.get("run_id"):
             out[region] = np.asarray(r["pixels"], dtype=int)
@@ -405,7 +459,7 @@ def prediction_errors(fits, observed, relit, pixels):
                   & {f["index"] for f in rendered_frames(new_doc)})
     if not both:
         raise SkyfitError("the target and the relit sequence share no rendered frame.")
-    times = [f["time"] for f in obs_doc["frames"] if f["index"] in both]
+    times = [f.get("time") for f in obs_doc["frames"] if f["index"] in both]
     regions, all_pred, all_obs = {}, [], []
     for region, (path, r) in sorted(fits.items()):
         px = pixels[region]
@@ -499,8 +553,9 @@ def write_comparisons(observed, relit):
     def compare(frame, o, r):
         err = (r - o).mean(axis=2) / scale
         lim = max(float(np.abs(err).max()), 1e-6)
-        panels = [(to_srgb8(o, 0.8 / scale), f"observed, {frame['time']}"),
-                  (to_srgb8(r, 0.8 / scale), f"relit, {frame['time']}"),
+        label = frame_label(frame["index"], frame.get("time"))
+        panels = [(to_srgb8(o, 0.8 / scale), f"observed, {label}"),
+                  (to_srgb8(r, 0.8 / scale), f"relit, {label}"),
                   (_diverging(err / lim), "relit - observed (/ observed 99th pct.)")]
         name = f"compare_{frame['index']:04d}.png"
         write_png(Path(relit) / name, _contact_row(panels, lim))
@@ -554,8 +609,8 @@ class PredictionRow:
 
     region: str
     frame: int
-    #: the frame's time (ISO, local)
-    time: str
+    #: the frame's time (ISO, local; None for a lab light's frame)
+    time: str | None
     #: 'R', 'G', 'B', or a luminance table's 'Y'
     channel: str
     #: at the fit
@@ -568,6 +623,8 @@ class PredictionRow:
     image: float
     #: the table's point (None: the region's mean)
     point: str | None = None
+    #: the table's value is saturated: the level its instrument clipped at, a lower bound
+    saturated: bool = False
 
     @property
     def inside(self):
@@ -595,18 +652,19 @@ class Prediction:
 def write_prediction(prediction, out, image_kind, plot=True):
     """``prediction.csv`` in ``out``: one row per region, frame and channel (R, G, B or a
     luminance table's Y; radiance in W m^-2 sr^-1), for an observation table per region,
-    point, frame and measured channel, with the image's value (``image_kind``: the observed
-    frames or table, or the relit render); with ``plot``, ``prediction.png``
-    (:func:`plot_prediction`)."""
+    point, frame and measured channel (and whether the table's value is saturated), with the
+    image's value (``image_kind``: the observed frames or table, or the relit render); with
+    ``plot``, ``prediction.png`` (:func:`plot_prediction`)."""
     column = image_kind.replace(" ", "_")
     points = any(r.point is not None for r in prediction.rows)
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["region", *(["point"] if points else []), "frame", "time", "channel",
                 "predicted [W m^-2 sr^-1]", "lo95 [W m^-2 sr^-1]", "hi95 [W m^-2 sr^-1]",
-                f"{column} [W m^-2 sr^-1]"])
+                f"{column} [W m^-2 sr^-1]", *(["saturated"] if points else [])])
     w.writerows([(r.region, *([r.point] if points else []), r.frame, r.time, r.channel,
-                  *(f"{v:.6g}" for v in (r.predicted, r.lo95, r.hi95, r.image)))
+                  *(f"{v:.6g}" for v in (r.predicted, r.lo95, r.hi95, r.image)),
+                  *([("yes" if r.saturated else "no")] if points else []))
                  for r in prediction.rows])
     write_text(Path(out) / "prediction.csv", buf.getvalue())
     if plot:
@@ -662,7 +720,7 @@ def plot_prediction(rows, image_kind):
             sel = [row for row in rows if row.region == region and row.channel == ch]
             if not sel:
                 continue
-            t = [dt.datetime.fromisoformat(row.time) for row in sel]
+            t, t_label = frame_axis([row.frame for row in sel], [row.time for row in sel])
             ax.fill_between(t, [row.lo95 for row in sel], [row.hi95 for row in sel],
                             color=col, alpha=0.15, lw=0)
             ax.plot(t, [row.predicted for row in sel], "-", color=col,
@@ -671,6 +729,7 @@ def plot_prediction(rows, image_kind):
                     label=f"{image_kind} {ch}")
         ax.set_title(f"{region}: region mean", fontsize=9)
         ax.set_ylabel("radiance [W m^-2 sr^-1]")
+        ax.set_xlabel(t_label)
         if i == 0:                  # the same for every panel: once (a quarter of the plot)
             ax.legend(fontsize=6, ncol=2)
     fig.autofmt_xdate()
@@ -713,12 +772,14 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
     """
     rng = np.random.default_rng(seed)
     if is_table(load_manifest(target)[0]):
-        # a table's few points take the fit's own cache size (the small one averages out only
-        # over an image region's pixels), each region's light traced when its turn comes
+        # all the region's points in the target's table, whatever the fit's, at a fit's first
+        # cache size for points (positions None: the small cache of an image region averages
+        # out only over its pixels), each region's light traced when its turn comes
         predict_region = _predict_points
-        sessions = ((region, FitSession.from_fit(
-            r, target, pixels[region], seed=seed, positions=POSITIONS, directions=DIRECTIONS,
-            min_frames=1)) for region, (_, r) in sorted(fits.items()))
+        sessions = ((region, FitSession(
+            target, region, None, model=r["model"], normalisation=r.get("normalisation", "ward"),
+            seed=seed, directions=DIRECTIONS, min_frames=1))
+            for region, (_, r) in sorted(fits.items()))
     else:
         # image regions: the light at all their pixels traced at once
         predict_region = _predict_means
@@ -726,8 +787,7 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
                                           target, pixels, seed=seed,
                                           positions=PREDICTION_CACHE[0],
                                           directions=PREDICTION_CACHE[1],
-                                          sky_positions=PREDICTION_CACHE[2], min_frames=1,
-                                          sky_spacing=SKY_SPACING)
+                                          sky_plan="anchors", min_frames=1)
         sessions = ((region, shared.pop(region)) for region in sorted(fits))
     rows, means = [], {}
     for region, s in sessions:                          # each let go when done with
@@ -787,18 +847,24 @@ def _predict_points(s, result, target, draws, rng):
     image = image_values(s, target)
     extra = 1.959963984540054 * np.sqrt(image_noise_variance(s, image) + model_var)
     names = _channels(s)
-    measured = np.isfinite(s.obs.sigma[..., :len(names)])
+    saturated = ~_measured(s)
     rows = []
-    for p, j, c in zip(*np.nonzero(measured)):
+    for p, j, c in zip(*np.nonzero(np.isfinite(s.obs.sigma[..., :len(names)]))):
         band = widen(at_fit[p, j, c], (lo[p, j, c], hi[p, j, c]), extra[p, j, c], 0.0, np.inf)
         rows.append(PredictionRow(region=s.name, frame=int(s.obs.frames[j]),
                                   time=s.obs.times[j], channel=names[c],
                                   predicted=float(at_fit[p, j, c]), lo95=float(band[0]),
                                   hi95=float(band[1]), image=float(image[p, j, c]),
-                                  point=str(s.obs.pixels[p])))
+                                  point=str(s.obs.pixels[p]),
+                                  saturated=bool(saturated[p, j, c])))
     region_mean = _region_mean(s)
     return rows, _means_error(s, region_mean(at_fit)[..., :len(names)],
                               region_mean(image)[..., :len(names)], region_mean)
+
+
+def _measured(s):
+    """Where session ``s``'s table holds a value that is not saturated (P, T, 3)."""
+    return np.isfinite(s.obs.sigma) & (s.obs.y < s.obs.sensor.max_code)
 
 
 def _channels(s):
@@ -809,8 +875,9 @@ def _channels(s):
 
 def _region_mean(s):
     """The region's mean of session ``s``'s values (P, T, 3) -> (T, 3): over its pixels, or
-    over a table's points measured in each frame."""
-    have = np.ones(s.obs.y.shape) if s.obs.rays is None else np.isfinite(s.obs.sigma) * 1.0
+    over a table's points measured in each frame but for saturated values (at the top code),
+    which only bound theirs from below."""
+    have = np.ones(s.obs.y.shape) if s.obs.rays is None else _measured(s) * 1.0
     have = have / np.maximum(have.sum(axis=0), 1.0)
 
     def region_mean(x):

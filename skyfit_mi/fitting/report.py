@@ -8,20 +8,19 @@ import numpy as np
 from ..errors import SkyfitError
 from ..files import save_figure, write_json, write_text
 from ..pipeline.fit_result import read_fit_result
+from ..pipeline.manifest import frame_axis
 
 
 def write_fit(result, prefix):
     """Write ``<prefix>.json`` and ``<prefix>.png`` (observed vs model over the day; for
     annealing also its walk)."""
-    import datetime as dt
-
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     prefix = Path(prefix)
     js = write_json(prefix.with_suffix(".json"), result)
-    t = [dt.datetime.fromisoformat(s) for s in result["series"]["times"]]
+    t, t_label = frame_axis(result["frames"], result["series"]["times"])
     y = np.asarray(result["series"]["observed_DN"])
     m = np.asarray(result["series"]["model_DN"])
     walk = np.asarray(result.get("trace") or [])
@@ -43,7 +42,7 @@ def write_fit(result, prefix):
         ax.plot(t, m[..., c].mean(axis=0), "-", color=col, label=f"model {'RGB'[c]}")
     p = result["parameters"]
     ax.set_title(f"{result['region']}: " + ", ".join(f"{k}={v:.3f}" for k, v in p.items()), fontsize=9)
-    ax.set_xlabel("local time")
+    ax.set_xlabel(t_label)
     ax.set_ylabel("region mean pixel value [DN]")
     ax.legend(fontsize=7, ncol=2)
     for label in ax.get_xticklabels():

@@ -17,6 +17,7 @@ ripples by about that much from one parameter value to the next.
 """
 
 import numpy as np
+from scipy.special import chdtrc
 
 from ..physics.ward import METAL_THRESHOLD, colour_rule_twin
 
@@ -66,8 +67,9 @@ def channel_factors(r, J, usable, in_chi2=None):
     diagonal over that of (J^T J)^-1 (the thesis's covariance, the inverse of eq. 6.11's
     curvature matrix, when R = I).
     Measured on quality-95 JPEG days (``scripts/ingest_coverage.py --scale 3``, 18 noise
-    seeds, docs/BENCHMARKS.md): R's off-diagonal 0.3-0.56, f 1.1-1.34, and the 95% intervals'
-    coverage 0.88 -> 0.94; at quality 100 (12 seeds) f 1.00-1.06, coverage 1.00 as before.
+    seeds, docs/BENCHMARKS.md, "Errors shared by a pixel's channels"): R's off-diagonal
+    0.3-0.56, f 1.1-1.34, and the 95% intervals' coverage 0.88 -> 0.94; at quality 100 (12
+    seeds) f 1.00-1.06, coverage 1.00 as before.
     """
     n_par = J.shape[-1]
     C = r.shape[-1]
@@ -203,13 +205,11 @@ def misfit(chi2, dof, s2, model_noise=0.0, noise=None):
     (widening intervals by s^2 does not repair a wrong model); a significant smaller excess
     (p < MISFIT_P) widens the intervals by s^2.
     """
-    from scipy.stats import chi2 as chi2_dist
-
     mean, var = noise if noise is not None else (float(dof), 2.0 * dof)
     expected = mean + max(model_noise, 0.0)
     k = 2.0 * mean * mean / var if var > 0 else float(dof)
     ratio = chi2 / expected
-    p = float(chi2_dist.sf(chi2 * k / expected, k))
+    p = float(chdtrc(k, chi2 * k / expected))                 # chi-square's survival function
     by = (f"noise and the model's Monte Carlo error ({model_noise:.3g}) explain"
           if model_noise > 0.01 * mean else "noise explains")
     of = (f"chi-square is {ratio:.3g} times what {by} (p = {p:.2g}; noise alone varies it by "

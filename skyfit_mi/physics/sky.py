@@ -226,7 +226,11 @@ class Sky:
             raise SkyfitError(f"sun_direction must be a non-zero 3-vector, got {self.sun_direction!r}.")
         object.__setattr__(self, "sun_direction", s / n)
         for name in _PATTERNS + ("ground", "sun_radiance"):
-            object.__setattr__(self, name, _rgb(getattr(self, name), name))
+            v = _rgb(getattr(self, name), name)
+            if np.any(v < 0):
+                raise SkyfitError(f"{name} = {v.tolist()} is negative; a radiance (or a "
+                                  "pattern's weight) [W m^-2 sr^-1] is at least 0.")
+            object.__setattr__(self, name, v)
         c = np.asarray(self.perez_coefficients, dtype=float).ravel()
         if c.shape != (5,) or not np.all(np.isfinite(c)) or c[1] > 0:
             raise SkyfitError(f"perez_coefficients must be 5 finite numbers a, b, c, d, e with "

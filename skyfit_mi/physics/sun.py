@@ -52,13 +52,38 @@ def _times(time):
     try:
         idx = pd.DatetimeIndex(time)
     except (TypeError, ValueError) as exc:
-        raise SkyfitError(f"cannot read {time!r} as times: {exc}") from exc
+        idx = _mixed_offsets(time)
+        if idx is None:
+            raise SkyfitError(f"cannot read {_shown(time)} as times: {exc}") from None
     if idx.tz is None:
         raise SkyfitError(
             "time has no time zone; give a time-zone-aware time, e.g. "
             "datetime(2026, 6, 21, 12, tzinfo=ZoneInfo('Europe/London')) or '2026-06-21T12:00+01:00'."
         )
     return idx
+
+
+def _mixed_offsets(time):
+    """Aware times of several UTC offsets (a day across a change of summer time, photographs
+    from two cameras) as one UTC DatetimeIndex of the same instants; None unless every time
+    reads as an aware instant."""
+    import pandas as pd
+
+    try:
+        stamps = [pd.Timestamp(t) for t in time]
+    except (TypeError, ValueError):
+        return None
+    if not stamps or any(t.tz is None for t in stamps):
+        return None
+    return pd.DatetimeIndex([t.tz_convert("UTC") for t in stamps])
+
+
+def _shown(time):
+    """Times as the user wrote them (ISO 8601), not as Python's repr."""
+    try:
+        return ", ".join(t.isoformat() if hasattr(t, "isoformat") else str(t) for t in time)
+    except TypeError:
+        return repr(time)
 
 
 def _shape_like(time, values):

@@ -16,9 +16,11 @@ from ..errors import SkyfitError
 def read_fit_result(path):
     """The fit result in ``path``, checked: a region name, a model of
     :data:`~skyfit_mi.render.fit_model.PARAMETERS`, that model's parameters as finite numbers
-    and a 95% interval [lo, hi] of each, and pixels (if any) as [x, y] pairs.  SkyfitError
-    saying what is wrong otherwise."""
-    from ..render.fit_model import PARAMETERS
+    within their bounds and a 95% interval [lo, hi] of each (lo <= hi), pixels (if any) as
+    [x, y] pairs, and, where present, the frames as manifest indices and the covariance as
+    its parameters' names and a square matrix of them.  SkyfitError saying what is wrong
+    otherwise."""
+    from ..render.fit_model import PARAMETERS, bounds
 
     path = Path(path)
     try:
@@ -27,7 +29,8 @@ def read_fit_result(path):
         raise SkyfitError(f"fit file {path} does not exist; give a fit_NAME.json that "
                           "`skyfit fit` wrote.") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise SkyfitError(f"fit file {path} is not readable JSON ({exc}).") from None
+        raise SkyfitError(f"fit file {path} is not readable JSON ({exc}); fit the region again "
+                          "with `skyfit fit`, or leave the file out.") from None
     if not _is_fit_result(r, PARAMETERS):
         raise SkyfitError(f"{path} is not a fit result of `skyfit fit` (fit_NAME.json: a "
                           f"region, a model of {', '.join(PARAMETERS)}, its parameters and "
@@ -35,7 +38,39 @@ def read_fit_result(path):
     params = r["parameters"]
     if not all(isinstance(v, (int, float)) and np.isfinite(v) for v in params.values()):
         raise SkyfitError(f"{path} has parameters that are not finite numbers.")
+    names = PARAMETERS[r["model"]]
+    for k, lo, hi in zip(names, *bounds(r["model"])):
+        if not lo <= params[k] <= hi:
+            raise SkyfitError(f"{path}: {k} = {params[k]:g} is outside its bounds [{lo:g}, "
+                              f"{hi:g}]; give a fit_NAME.json that `skyfit fit` wrote.")
+        a, b = r["intervals"][k]["95"]
+        if a > b:
+            raise SkyfitError(f"{path}: the 95% interval of {k}, [{a:g}, {b:g}], runs backwards "
+                              "(lo > hi); give a fit_NAME.json that `skyfit fit` wrote.")
+    frames = r.get("frames", [])
+    if not (isinstance(frames, list) and all(isinstance(i, int) and not isinstance(i, bool)
+                                             and i >= 0 for i in frames)):
+        raise SkyfitError(f"{path}: frames must be a list of manifest frame indices (whole "
+                          "numbers from 0).")
+    cov = r.get("covariance")
+    if cov is not None and not _is_covariance(cov):
+        raise SkyfitError(f"{path}: covariance must be {{\"names\": [{', '.join(names)}], "
+                          "\"matrix\": a square list of lists of numbers, one row each}.")
     return r
+
+
+def _is_covariance(cov):
+    """Whether ``cov`` is {"names": a list of parameter names, "matrix": one row of numbers
+    (or null) per name}; names of another model are allowed (relight then takes the
+    intervals alone)."""
+    if not isinstance(cov, dict) or not isinstance(cov.get("names"), list) \
+            or not isinstance(cov.get("matrix"), list):
+        return False
+    n = len(cov["names"])
+    return (all(isinstance(k, str) for k in cov["names"]) and len(cov["matrix"]) == n
+            and all(isinstance(row, list) and len(row) == n
+                    and all(v is None or (isinstance(v, (int, float)) and not isinstance(v, bool))
+                            for v in row) for row in cov["matrix"]))
 
 
 def _is_fit_result(r, parameters):
@@ -57,3 +92,34 @@ def _pair(value, kind=(int, float)):
     return (isinstance(value, list) and len(value) == 2
             and all(isinstance(v, kind) and not isinstance(v, bool) and np.isfinite(v)
                     for v in value))
+
+
+def check_fit_sequence(result, path, doc, where, own=True):
+    """SkyfitError unless the fit ``result`` (read from ``path``) can be used on the sequence
+    whose manifest ``doc`` is at ``where``.  ``own`` (a use of the fit's own chi-square, such
+    as chi2map): the sequence must be the one it was fitted to (its run, where the fit names
+    one), of its kind (image pixels or a table's points), with every frame the fit lists
+    rendered; otherwise (a relight's target) only the frames are checked, and only on the
+    fit's own sequence when it holds observations."""
+    from .manifest import rendered_frames
+    from .observation_table import is_table
+
+    same_run = result.get("sequence_run_id") == doc.get("run_id")
+    if own:
+        table, of_points = is_table(doc), "points" in result
+        if table != of_points:
+            fitted = "an observation table's points" if of_points else "image pixels"
+            held = "an observation table" if table else "a sequence of images"
+            raise SkyfitError(f"{path} is a fit of {fitted}, but {where} is {held}; give the "
+                              "sequence the fit was made on.")
+        if "sequence_run_id" in result and not same_run:
+            raise SkyfitError(f"{path} was fitted to another sequence (run "
+                              f"{result['sequence_run_id']}), not to {where} (run "
+                              f"{doc.get('run_id')}); give the sequence the fit was made on.")
+    rendered = sorted(f["index"] for f in rendered_frames(doc))
+    if own or (same_run and rendered):
+        missing = sorted(set(result.get("frames", [])) - set(rendered))
+        if missing:
+            raise SkyfitError(f"{path} lists frame {missing[0]}, which {where} has not rendered "
+                              f"(its rendered frames: {rendered}); give the fit JSON that "
+                              "`skyfit fit` wrote on this sequence.")

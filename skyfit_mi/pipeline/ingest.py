@@ -662,6 +662,11 @@ def spec_for_times(spec_path, times, tz=None, site=None, size=None):
     size is refused)."""
     spec_path = Path(spec_path)
     raw = read_spec(spec_path)
+    if "time" not in raw:
+        raise SpecError(f"{spec_path.name} has lab lights (frames by index, no [time]), but "
+                        "measured frames are placed by their times: give a spec of the day "
+                        "([location], [time], its sky), or the lab values as a table (ingest "
+                        "--table with a frame column).")
     cam = dict(raw.get("camera", {}))
     for key, n in zip(("width", "height"), size or ()):
         if key in cam and int(cam[key]) != n:
@@ -778,6 +783,14 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
     from .photo_times import frame_times
     from .photos import SUFFIXES, check_same_size, read_photo
 
+    if noise is not None and not (len(noise) == 2 and np.all(np.isfinite(noise))
+                                  and min(noise) >= 0):
+        raise SkyfitError(f"--noise {','.join(f'{v:g}' for v in noise)}: give the read variance "
+                          "[DN^2] and the shot gain [DN] as two finite numbers of at least 0 "
+                          "(e.g. 0.64,0.02), or leave --noise out to estimate them.")
+    if exposure is not None and (calibrate or colorchecker):
+        raise SkyfitError("--exposure is not used when --calibrate or --colorchecker set the "
+                          "exposure from the scene's reference; give one or the other.")
     paths = []
     for p in map(Path, photo_paths):
         if p.is_dir():
@@ -831,6 +844,10 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
     if fitted and float_scale is not None:
         raise SkyfitError("--response fit: the frames are floating-point (EXR/HDR), which hold "
                           "linear values; leave out --response.")
+    if gamma is not None and (fitted or sensor.response != "gamma"):
+        raise SkyfitError(f"--gamma is the exponent of a gamma response, but the response is "
+                          f"{'fitted' if fitted else repr(sensor.response)}; add --response "
+                          "gamma, or leave out --gamma.")
     fov = spec.camera["fov_deg"]
     falloff = sensor.falloff(w, h, fov) if sensor.cos4 else np.ones((h, w))
     flat_rec = None

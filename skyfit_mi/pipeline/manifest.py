@@ -224,37 +224,50 @@ def frame_sky(frame, folder):
     ``sun_azimuth_deg`` placing the sun), ``irradiance`` (the Perez all-weather sky of the
     measured irradiance at the frame's sun position and ``time``,
     :func:`~.illumination.perez_from_irradiance`) and ``directional`` become a sky; a
-    :class:`ManifestError` says what is wrong with a record.
+    :class:`ManifestError` naming the manifest and the frame says what is wrong with a record
+    (a negative radiance, a missing map...).
     """
+    rec = frame.get("illumination")
+    where = f"{Path(folder) / FILENAME} frame {frame.get('index')}"
+    if rec is None:
+        raise ManifestError(f"{where} has no illumination record; render or ingest the sequence "
+                            "again.")
+    kind = rec.get("kind")
+    if kind not in ILLUMINATION_KINDS:
+        raise ManifestError(f"{where}: illumination kind {kind!r} is part of the manifest format "
+                            f"but this version of skyfit-mi can only light frames of kind "
+                            f"{' or '.join(map(repr, ILLUMINATION_KINDS))}.")
+    try:
+        return _record_sky(frame, rec, kind, folder)
+    except SkyfitError as exc:
+        why = " ".join(str(exc).split()).rstrip(".")         # one line, whatever the values
+        raise ManifestError(f"{where}: {kind} illumination: {why}; repair the record, or render "
+                            "or ingest the sequence again.") from None
+    except (KeyError, TypeError, ValueError) as exc:        # a field missing or malformed
+        why = " ".join(f"{type(exc).__name__}: {exc}".split())
+        raise ManifestError(f"{where}: {kind} illumination record is malformed ({why}); repair "
+                            "the record, or render or ingest the sequence again.") from None
+
+
+def _record_sky(frame, rec, kind, folder):
+    """The Sky of one illumination record of kind ``kind`` (:func:`frame_sky`)."""
     from ..physics.gensky import from_gensky
     from ..physics.sky import Sky
     from .illumination import directional_from_record, envmap_from_record
 
-    rec = frame.get("illumination")
-    if rec is None:
-        raise ManifestError(f"frame {frame.get('index')} has no illumination record.")
-    kind = rec.get("kind")
     if kind == "gensky":
         return from_gensky(rec["text"])
-    try:
-        if kind == "directional":
-            return directional_from_record(rec)
-        if kind in ("envmap", "irradiance") and ("sun_zenith_deg" not in frame
-                                                 or "sun_azimuth_deg" not in frame):
-            raise SkyfitError(f"an {kind} frame needs sun_zenith_deg and sun_azimuth_deg "
-                              "(they place the solar disc and the sky's pattern); add them")
-        if kind == "irradiance":
-            return _irradiance_sky(frame, rec)
-        if kind == "envmap":
-            return envmap_from_record(rec, folder, frame["sun_zenith_deg"],
-                                      frame["sun_azimuth_deg"])
-    except SkyfitError as exc:
-        raise ManifestError(f"frame {frame.get('index')}: {kind} illumination: "
-                            f"{str(exc).rstrip('.')}.") from None
-    if kind != "sky":
-        raise ManifestError(f"frame {frame.get('index')}: illumination kind {kind!r} is part of "
-                            f"the manifest format but this version of skyfit-mi can only light "
-                            f"frames of kind {' or '.join(map(repr, ILLUMINATION_KINDS))}.")
+    if kind == "directional":
+        return directional_from_record(rec)
+    if kind in ("envmap", "irradiance") and ("sun_zenith_deg" not in frame
+                                             or "sun_azimuth_deg" not in frame):
+        raise SkyfitError(f"an {kind} frame needs sun_zenith_deg and sun_azimuth_deg "
+                          "(they place the solar disc and the sky's pattern); add them")
+    if kind == "irradiance":
+        return _irradiance_sky(frame, rec)
+    if kind == "envmap":
+        return envmap_from_record(rec, folder, frame["sun_zenith_deg"],
+                                  frame["sun_azimuth_deg"])
     keys = ("clear", "overcast", "uniform", "intermediate", "ground", "sun_radiance")
     optional = {k: np.asarray(rec[k], dtype=float) for k in ("perez", "perez_coefficients")
                 if k in rec}                       # absent from manifests before the Perez sky
@@ -291,6 +304,23 @@ def frame_exposure(doc, frame):
                                                dtype=float)
 
 
+def frame_label(index, time=None):
+    """How a frame is named to people: 'frame 3 at 12:00' ([time] local time, a datetime or ISO
+    string), or 'frame 3' for a lab light, which has no time (frames by index)."""
+    if time is None:
+        return f"frame {index}"
+    return f"frame {index} at {(time if isinstance(time, str) else time.isoformat())[11:16]}"
+
+
+def frame_axis(frames, times):
+    """(x values, axis label) to plot a series over manifest frames ``frames`` (indices) at
+    ``times`` (ISO strings; None for lab lights): local time when every frame has one, else
+    the frame index."""
+    if all(t is not None for t in times):
+        return [dt.datetime.fromisoformat(t) for t in times], "local time"
+    return [int(i) for i in frames], "frame (lab light, by index)"
+
+
 #: Manifest sources whose frames skyfit rendered (their materials are known: synthetic).
 RENDERED_SOURCES = ("render", "relight")
 
@@ -298,6 +328,25 @@ RENDERED_SOURCES = ("render", "relight")
 def rendered_frames(doc):
     """The frames that hold observations (status ``rendered``), in time order."""
     return [f for f in doc["frames"] if f.get("status") == "rendered"]
+
+
+def check_frames(doc, root, kinds=("radiance", "sensor", "sigma"), frames=None):
+    """Light every rendered frame (``frames``: of these indices only) of the sequence ``doc``
+    in folder ``root`` (:func:`frame_sky`) and read its images of ``kinds`` (and its
+    ``radiance_sigma``, where it has one, when ``kinds`` holds 'radiance'), so that a bad
+    record or a missing, damaged or foreign-size file is refused before a command writes
+    anything; the images stay in the frame cache for the command's own reads.  A table's
+    frames have no images."""
+    shape = (doc["camera"]["height"], doc["camera"]["width"], 3)
+    for f in rendered_frames(doc):
+        if frames is not None and f["index"] not in frames:
+            continue
+        frame_sky(f, root)
+        if f.get("observations", {}).get("kind") == "table":
+            continue
+        extra = ("radiance_sigma",) if "radiance" in kinds and "radiance_sigma" in f else ()
+        for key in (*kinds, *extra):
+            read_frame_image(root, f, key, shape)
 
 
 #: Bytes of decoded frame images kept to be read again (each of a prediction's or a relight's

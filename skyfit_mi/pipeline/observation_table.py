@@ -8,12 +8,19 @@ with each frame's ``observations = {"kind": "table", "file": "observations.csv"}
 then fits the table's regions with the same light cache, chi-square and intervals as image
 regions, without any image or throw-away render.
 
+Lab lights (a photometric-stereo rig: one directional ``[[sky]]`` per light, a spec without
+``[time]`` or ``[location]``) have no time: the table's ``frame`` column names each row's
+light by its index in the spec's ``[[sky]]`` list, and the sequence keeps every light as a
+frame of that index.
+
 The table (CSV, header names in any order, case ignored):
 
 ===========================  ==================================================================
 column                       meaning
 ===========================  ==================================================================
 ``time``                     ISO 8601 date-time; with an offset, or naive with ``--tz``
+``frame``                    instead of ``time``, for lab lights: the 0-based index of the
+                             row's light among the spec's ``[[sky]]`` (frames by index)
 ``region``                   the scene material the point lies on (a ``ward`` material id)
 ``point``                    optional: the point's name within its region (default the region's)
 ``x``, ``y``, ``z``          optional: the point, world frame [scene units]; default: where the
@@ -29,22 +36,34 @@ column                       meaning
                              luminance-weighted radiance Y = 0.2126 R + 0.7152 G + 0.0722 B
                              [W m^-2 sr^-1] (cd m^-2 divided by the sky's luminous efficacy,
                              e.g. the spec's ``efficacy_clear``), with ``sigma``
+``saturated``                optional, 0 or 1: the instrument clipped the value (all channels);
+                             or ``saturated_r``.. ``saturated_b`` per channel.  A saturated
+                             value is the level it clipped at: the true value lies at or above
+                             it (censored at the top, as an image's top code)
 ===========================  ==================================================================
 
 A point keeps its position through the day; its view may change from row to row (a
-goniometer).  A point without a row at some time carries no information there.  The values
-are put on a linear 16-bit scale for the fit (the brightest value plus 5 sigma at half scale,
-one factor recorded as the sensor's exposure), so chi-square is eq. 6.2 in the table's own
-units; a value at or below zero, which a radiance cannot be, is taken as censored at zero
-(the fit's rule for code 0).  A luminance table is fitted through the model's luminance (the
-first channel; :class:`~skyfit_mi.fitting.chi2.LuminanceModel`): it cannot tell colour, so
-only the 2- and 3-parameter models take it.
+goniometer), and each row is checked from its own view.  A point without a row at some time
+carries no information there.  The values are put on a linear 16-bit scale for the fit (the
+brightest value plus 5 sigma at half scale, one factor recorded as the sensor's exposure), so
+chi-square is eq. 6.2 in the table's own units; a value at or below zero, which a radiance
+cannot be, is taken as censored at zero (the fit's rule for code 0), and a saturated value
+as censored at its level, as an image's top code
+(:func:`skyfit_mi.fitting.chi2.load_table_observations`); but a region needs a positive value,
+and a radiance or sigma beyond any radiance (:data:`MAX_RADIANCE`) is refused.  A luminance
+table is fitted through the model's luminance (the first channel;
+:class:`~skyfit_mi.fitting.chi2.LuminanceModel`): it cannot tell colour, so only the 2- and
+3-parameter models take it.
+
+Values in an instrument's own units (DN: an unknown radiometric scale) are scaled to radiance
+by rows on reference materials of known Lambertian reflectance (``ingest --table --calibrate
+MATERIAL=REFLECTANCE``, :func:`reference_scale`); without one, the values are radiances.
 """
 
 import csv
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +71,9 @@ import numpy as np
 from ..errors import SkyfitError
 from ..files import FolderLock
 from ..physics.camera import SensorModel
+from ..physics.sun import SOLAR_CONSTANT, SUN_SOLID_ANGLE
 from ..conventions import direction_from_angles
+from .manifest import frame_label
 
 #: File name of the normalised table in a sequence folder.
 TABLE_FILE = "observations.csv"
@@ -60,25 +81,33 @@ TABLE_FILE = "observations.csv"
 NORMAL_TOLERANCE_DEG = 5.0
 #: Ray start off the surface, as a share of the scene's bounding-box diagonal.
 RAY_OFFSET = 1e-4
+#: Largest radiance, value or sigma, a table may give [W m^-2 sr^-1]: ten times the solar
+#: disc's above the atmosphere (no surface reflects more than its brightest source).
+MAX_RADIANCE = 10.0 * SOLAR_CONSTANT / SUN_SOLID_ANGLE
 #: Share of the 16-bit full scale that the brightest value plus HEADROOM_SIGMAS sigma takes.
 SCALE_SHARE, HEADROOM_SIGMAS = 0.5, 5.0
 
 _VECTORS = {"x": ("x", "y", "z"), "view": ("view_x", "view_y", "view_z"),
             "normal": ("normal_x", "normal_y", "normal_z"), "value": ("r", "g", "b"),
-            "sigma": ("sigma_r", "sigma_g", "sigma_b")}
+            "sigma": ("sigma_r", "sigma_g", "sigma_b"),
+            "saturated": ("saturated_r", "saturated_g", "saturated_b")}
 _KNOWN = {"time", "region", "point", "view_zenith_deg", "view_azimuth_deg", "sigma",
-          "luminance", "frame", *(c for v in _VECTORS.values() for c in v)}
+          "luminance", "frame", "saturated", *(c for v in _VECTORS.values() for c in v)}
+#: The spellings of a ``saturated`` cell.
+_FLAGS = {"0": False, "1": True}
 
 
 @dataclass
 class ObservationTable:
     """The rows of an observation table (N rows), checked.
 
-    times : aware datetimes (N,);  regions, points : str (N,);  position, view, normal :
-    (N, 3) float, NaN where not given;  value, sigma : (N, 3) [W m^-2 sr^-1] (a luminance
-    table: Y in the first column, NaN in the others);  lines : the file's line of each row;
-    path : the file;  luminance : whether the values are luminances;  frames : each row's
-    frame index (the sequence folder's normalised table), else None.
+    times : aware datetimes (N,), or None for a table of lab lights (frames by index);
+    regions, points : str (N,);  position, view, normal : (N, 3) float, NaN where not given;
+    value, sigma : (N, 3) [W m^-2 sr^-1] (a luminance table: Y in the first column, NaN in the
+    others);  saturated : (N, 3) bool, the value is the level the instrument clipped at;
+    lines : the file's line of each row;  path : the file;  luminance : whether the values
+    are luminances;  frames : each row's frame index (a lab table's, or the sequence folder's
+    normalised table), else None.
     """
 
     path: Path
@@ -90,13 +119,31 @@ class ObservationTable:
     normal: np.ndarray
     value: np.ndarray
     sigma: np.ndarray
+    saturated: np.ndarray
     lines: list
     luminance: bool = False
     frames: list = None
 
+    @property
+    def by_index(self):
+        """Whether the rows name their frames by index alone (lab lights, no time)."""
+        return self.times is None
+
+    def frame_keys(self):
+        """Each row's frame as the table names it: its time, or its index (lab lights)."""
+        return self.frames if self.by_index else self.times
+
     def point_keys(self):
         """The distinct (region, point) pairs in order of first appearance."""
         return list(dict.fromkeys(zip(self.regions, self.points)))
+
+    def point_rows(self):
+        """{(region, point): its rows' indices}, in order of first appearance (one pass:
+        a table of thousands of points x frames is grouped in linear time)."""
+        out = {}
+        for i, k in enumerate(zip(self.regions, self.points)):
+            out.setdefault(k, []).append(i)
+        return out
 
 
 def _number(text, path, line, column):
@@ -108,6 +155,23 @@ def _number(text, path, line, column):
         raise SkyfitError(f"{path} line {line}: {column} = {text!r} is not finite; drop the row "
                           "or give a measured value.")
     return v
+
+
+def _frame(text, path, line):
+    """A row's frame index: a whole number from 0."""
+    v = _number(text, path, line, "frame")
+    if v != int(v) or v < 0:
+        raise SkyfitError(f"{path} line {line}: frame = {text!r} is not a frame index; give the "
+                          "0-based index of the row's light among the spec's [[sky]].")
+    return int(v)
+
+
+def _flag(text, path, line, column):
+    """A ``saturated`` cell: 0 or 1."""
+    if text not in _FLAGS:
+        raise SkyfitError(f"{path} line {line}: {column} = {text!r}; write 1 (the instrument "
+                          "clipped the value) or 0.")
+    return float(_FLAGS[text])
 
 
 def _time(text, tz, path, line):
@@ -141,10 +205,11 @@ def read_observation_table(path, tz=None):
     header = [c.strip().lower() for c in rows[0][1]]
     unknown = [c for c in header if c not in _KNOWN]
     if unknown:
-        raise SkyfitError(f"{path}: unknown column {unknown[0]!r}; the columns are time, region, "
-                          "point, x,y,z, view_x,view_y,view_z (or view_zenith_deg, "
-                          "view_azimuth_deg), normal_x,normal_y,normal_z, r,g,b, "
-                          "sigma_r,sigma_g,sigma_b (or sigma).")
+        raise SkyfitError(f"{path}: unknown column {unknown[0]!r}; the columns are time (or "
+                          "frame), region, point, x,y,z, view_x,view_y,view_z (or "
+                          "view_zenith_deg, view_azimuth_deg), normal_x,normal_y,normal_z, r,g,b "
+                          "(or luminance), sigma_r,sigma_g,sigma_b (or sigma), saturated (or "
+                          "saturated_r,saturated_g,saturated_b).")
     twice = sorted({c for c in header if header.count(c) > 1})
     if twice:
         raise SkyfitError(f"{path}: column {twice[0]!r} appears twice; keep one.")
@@ -152,12 +217,20 @@ def read_observation_table(path, tz=None):
     if luminance and any(c in header for c in ("r", "g", "b", "sigma_r", "sigma_g", "sigma_b")):
         raise SkyfitError(f"{path}: give luminance with one sigma, or r, g, b with their sigma, "
                           "not both.")
-    needed = ["time", "region"] + ([] if luminance else ["r", "g", "b"])
+    if "time" not in header and "frame" not in header:
+        raise SkyfitError(f"{path}: no column time (or frame); give each row's time (ISO 8601), "
+                          "or for lab lights the 0-based index of its [[sky]] light as frame.")
+    needed = ["region"] + ([] if luminance else ["r", "g", "b"])
     missing = [c for c in needed if c not in header]
     if missing or not ("sigma" in header or all(c in header for c in _VECTORS["sigma"])):
         what = missing[0] if missing else "sigma (or sigma_r, sigma_g, sigma_b)"
-        raise SkyfitError(f"{path}: no column {what}; a table needs time, region, r, g, b (or "
-                          "luminance) and sigma (standard deviations, the values' units).")
+        raise SkyfitError(f"{path}: no column {what}; a table needs time (or frame), region, "
+                          "r, g, b (or luminance) and sigma (standard deviations, the values' "
+                          "units).")
+    if "saturated" in header and any(c in header for c in _VECTORS["saturated"]) or (
+            luminance and any(c in header for c in _VECTORS["saturated"])):
+        raise SkyfitError(f"{path}: give saturated (every channel; a luminance table's one) or "
+                          "saturated_r, saturated_g, saturated_b, not both.")
     for name, cols in _VECTORS.items():
         some = [c in header for c in cols]
         if any(some) and not all(some):
@@ -170,13 +243,15 @@ def read_observation_table(path, tz=None):
     col = {c: i for i, c in enumerate(header)}
     n = len(rows) - 1
     out = {k: np.full((n, 3), np.nan) for k in ("x", "view", "normal", "value", "sigma")}
+    out["saturated"] = np.zeros((n, 3))
     times, regions, points, lines, frames = [], [], [], [], []
     for k, (line, row) in enumerate(rows[1:]):
         if len(row) != len(header):
             raise SkyfitError(f"{path} line {line}: {len(row)} fields, the header has "
                               f"{len(header)}.")
         cell = {c: row[i].strip() for c, i in col.items()}
-        times.append(_time(cell["time"], tz, path, line))
+        if "time" in cell:
+            times.append(_time(cell["time"], tz, path, line))
         if not cell["region"]:
             raise SkyfitError(f"{path} line {line}: the region is empty; name the scene material "
                               "the point lies on.")
@@ -184,12 +259,15 @@ def read_observation_table(path, tz=None):
         points.append(cell.get("point") or cell["region"])
         lines.append(line)
         if "frame" in cell:
-            frames.append(int(_number(cell["frame"], path, line, "frame")))
+            frames.append(_frame(cell["frame"], path, line))
         for name, cols in _VECTORS.items():
             if cols[0] in cell:
-                out[name][k] = [_number(cell[c], path, line, c) for c in cols]
+                out[name][k] = [(_flag if name == "saturated" else _number)(cell[c], path, line, c)
+                                for c in cols]
         if "sigma" in cell:
             out["sigma"][k] = _number(cell["sigma"], path, line, "sigma")
+        if "saturated" in cell:
+            out["saturated"][k] = _flag(cell["saturated"], path, line, "saturated")
         if luminance:
             out["value"][k, 0] = _number(cell["luminance"], path, line, "luminance")
             out["sigma"][k, 1:] = np.inf             # no colour: G and B carry nothing
@@ -203,6 +281,12 @@ def read_observation_table(path, tz=None):
         if not np.all(out["sigma"][k] > 0):
             raise SkyfitError(f"{path} line {line}: sigma must be positive (the value's standard "
                               "deviation, in its units).")
+        if luminance:
+            out["saturated"][k, 1:] = 0.0
+        clipped = out["saturated"][k] > 0
+        if np.any(clipped & ~(out["value"][k] > 0)):
+            raise SkyfitError(f"{path} line {line}: a saturated value must be the positive level "
+                              "the instrument clipped at; give that level, or saturated = 0.")
         for name in ("view", "normal"):
             v = out[name][k]
             if np.isfinite(v).all():
@@ -211,19 +295,24 @@ def read_observation_table(path, tz=None):
                     raise SkyfitError(f"{path} line {line}: the {name} vector is zero; give a "
                                       "direction.")
                 out[name][k] = v / norm
-    seen = {}
-    for t, r, p, line in zip(times, regions, points, lines):
-        key = (t, r, p)
-        if key in seen:
-            raise SkyfitError(f"{path} line {line}: point {p!r} of {r!r} at {t.isoformat()} is "
-                              f"measured again (first on line {seen[key]}); keep one row (or "
-                              "average them with their sigma).")
-        seen[key] = line
-    table = ObservationTable(path, times, regions, points, out["x"], out["view"], out["normal"],
-                             out["value"], out["sigma"], lines, luminance,
+    table = ObservationTable(path, times if "time" in col else None, regions, points, out["x"],
+                             out["view"], out["normal"], out["value"], out["sigma"],
+                             out["saturated"] > 0, lines, luminance,
                              frames if "frame" in col else None)
-    for r, p in table.point_keys():
-        rows_p = [i for i in range(n) if table.regions[i] == r and table.points[i] == p]
+    for r in dict.fromkeys(regions):
+        if not np.nanmax(out["value"][[i for i in range(n) if regions[i] == r]]) > 0:
+            raise SkyfitError(f"{path}: every value of region {r!r} is zero or negative; give "
+                              "measured values (a radiance is positive).")
+    seen = {}
+    for f, r, p, line in zip(table.frame_keys(), regions, points, lines):
+        key = (f, r, p)
+        if key in seen:
+            when = f"in frame {f}" if table.by_index else f"at {f.isoformat()}"
+            raise SkyfitError(f"{path} line {line}: point {p!r} of {r!r} {when} is measured "
+                              f"again (first on line {seen[key]}); keep one row (or average "
+                              "them with their sigma).")
+        seen[key] = line
+    for (r, p), rows_p in table.point_rows().items():
         pos = table.position[rows_p]
         if np.isfinite(pos).any() and not np.allclose(pos, pos[0], rtol=0, atol=1e-9):
             raise SkyfitError(f"{path} line {lines[rows_p[0]]}: point {p!r} of {r!r} moves from "
@@ -240,80 +329,112 @@ def _camera(to_world):
     return m[:3, 3], m[:3, 2] / np.linalg.norm(m[:3, 2])
 
 
-def locate_points(spec, scene_xml, table, times):
-    """Each point's position (P, 3), its view per frame (P, T, 3) and the scene's offset for
-    rays, checked in the spec's scene: a point must lie on its region's surface, seen from
-    the front, with the normal the table gives (if any).  ``scene_xml``: the spec's
-    (xml, materials, camera to_world); ``times``: the frames' times."""
+def locate_points(spec, scene_xml, table, row_frames):
+    """Each point's position (P, 3), each row's view (N, 3) and the scene's offset for rays,
+    checked in the spec's scene: a point must lie on its region's surface, and each row's
+    view (the table's, else toward the camera) must see it from the front, with the normal
+    the table gives (if any).  ``scene_xml``: the spec's (xml, materials, camera to_world);
+    ``row_frames``: each row's frame index in the sequence (for messages)."""
     from ..render.points import load_points_scene, surface_hits
 
-    keys = table.point_keys()
+    groups = table.point_rows()
+    keys = list(groups)
     xml, _, to_world = scene_xml
     scene = load_points_scene(xml, spec.render["variant"])
     cam_o, cam_d = _camera(to_world)
-    P, T = len(keys), len(times)
-    first = {k: next(i for i in range(len(table.times))
-                     if (table.regions[i], table.points[i]) == k) for k in keys}
+    P = len(keys)
+    first = {k: rows[0] for k, rows in groups.items()}
     pos = table.position[[first[k] for k in keys]]
     unplaced = ~np.isfinite(pos).all(axis=1)
     hits = surface_hits(scene, np.repeat(cam_o[None], P, 0), np.repeat(cam_d[None], P, 0))
     pos[unplaced] = hits["p"][unplaced]
-    view = np.repeat((cam_o[None] - pos)[:, None, :], T, axis=1)
-    view /= np.linalg.norm(view, axis=2, keepdims=True)
-    index = {t: j for j, t in enumerate(times)}
-    for i, (t, r, p) in enumerate(zip(table.times, table.regions, table.points)):
-        if np.isfinite(table.view[i]).all() and t in index:
-            view[keys.index((r, p)), index[t]] = table.view[i]
+    point = np.empty(len(table.regions), dtype=int)
+    for j, rows in enumerate(groups.values()):
+        point[rows] = j
+    given = np.isfinite(table.view).all(axis=1)
+    toward_camera = cam_o[None] - pos[point]
+    toward_camera /= np.linalg.norm(toward_camera, axis=1, keepdims=True)
+    view = np.where(given[:, None], table.view, toward_camera)
     offset = RAY_OFFSET * hits["scale"]
-    check = surface_hits(scene, (pos[:, None] + offset * view).reshape(-1, 3),
-                         -view.reshape(-1, 3))
-    for j, (r, p) in enumerate(keys):
-        line = table.lines[first[(r, p)]]
-        where = f"{table.path} line {line}: point {p!r}"
-        sl = slice(j * T, (j + 1) * T)
-        mats, dist = check["material"][sl], check["t"][sl]
-        if not np.all(np.abs(dist - offset) <= 2 * offset):
-            raise SkyfitError(f"{where} at {np.round(pos[j], 4).tolist()} is not on a surface of "
-                              "the scene seen from its view (or the camera's central ray misses "
-                              "it); give x,y,z on the sample.")
-        if any(m != r for m in mats):
-            raise SkyfitError(f"{where} lies on material {next(m for m in mats if m != r)!r}, "
-                              f"not {r!r}; check its position or its region.")
-        n_scene = check["n"][sl][0]
-        given = table.normal[first[(r, p)]]
-        if np.isfinite(given).all() and np.degrees(np.arccos(np.clip(
-                given @ n_scene, -1, 1))) > NORMAL_TOLERANCE_DEG:
+    check = surface_hits(scene, pos[point] + offset * view, -view)
+    for i, (r, p) in enumerate(zip(table.regions, table.points)):
+        j = point[i]
+        where = (f"{table.path} line {table.lines[i]}: point {p!r} of {r!r} ("
+                 f"{frame_label(row_frames[i], None if table.by_index else table.times[i])})")
+        at = np.round(pos[j], 4).tolist()
+        if not abs(check["t"][i] - offset) <= 2 * offset:
+            raise SkyfitError(f"{where} at {at} is not on a surface of the scene seen from its "
+                              "view (or the camera's central ray misses it); give x,y,z on the "
+                              "sample.")
+        if check["material"][i] != r:
+            raise SkyfitError(f"{where} lies on material {check['material'][i]!r}, not {r!r}; "
+                              "check its position or its region.")
+        n_scene = check["n"][i]
+        normal = table.normal[first[(r, p)]]
+        if np.isfinite(normal).all() and np.degrees(np.arccos(np.clip(
+                normal @ n_scene, -1, 1))) > NORMAL_TOLERANCE_DEG:
             raise SkyfitError(f"{where}: the scene's normal there is {np.round(n_scene, 3).tolist()}"
-                              f", not the table's {np.round(given, 3).tolist()}; check the "
+                              f", not the table's {np.round(normal, 3).tolist()}; check the "
                               "position, the scene or the normal.")
-        if np.any(view[j] @ n_scene <= 0.0):
-            raise SkyfitError(f"{where} is viewed from behind its surface; the view points from "
-                              "the surface toward the instrument.")
+        if view[i] @ n_scene <= 0.0:
+            angle = np.degrees(np.arccos(np.clip(view[i] @ n_scene, -1, 1)))
+            source = ("the row's view columns" if given[i] else
+                      f"toward the camera at {np.round(cam_o, 3).tolist()}: the row gives no "
+                      "view")
+            raise SkyfitError(f"{where} at {at} is viewed from behind its surface: its view "
+                              f"{np.round(view[i], 3).tolist()} ({source}) is {angle:.0f} deg from "
+                              f"the scene's normal {np.round(n_scene, 3).tolist()}; the view "
+                              "points from the surface toward the instrument, so give the row's "
+                              "view on the normal's side (or check the point's position and "
+                              "region).")
     return pos, view, offset
 
 
 # ---- the sequence folder ---------------------------------------------------------------
 
-def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrite=False,
-                 log=print):
-    """Turn an observation table into a sequence folder (module docstring); returns the
-    manifest dict.  ``tz``: zone of naive times; ``site``: (lat, lon[, alt]) over the spec's."""
-    from .ingest import measured_header, spec_for_times
-    from .sequence import finish, frame_record, prepare_folder
-    from ..files import write_text
-    from ..render.scene_xml import build_scene_xml
+def _lab_spec(spec_path, table, tz, site):
+    """The validated spec of a table of lab lights (frames by index): its lights are the
+    frames; every row's frame one of them."""
+    from .spec import load_spec
 
-    table = read_observation_table(table_path, tz)
+    for name, given in (("--tz", tz), ("--site", site)):
+        if given is not None:
+            raise SkyfitError(f"{name}: {table.path} names its frames by index (lab lights), "
+                              "which have no time or site; leave it out.")
+    spec = load_spec(spec_path)
+    if not spec.lab:
+        raise SkyfitError(f"{table.path} names its frames by index (a frame column, no time), "
+                          f"but {spec_path} has [time]: give the table each row's time, or a "
+                          "spec of lab lights (directional [[sky]], no [time] or [location]).")
+    n = len(spec.frames)
+    for f, line in zip(table.frames, table.lines):
+        if f >= n:
+            raise SkyfitError(f"{table.path} line {line}: frame {f} is not one of the spec's "
+                              f"{n} lights (0 to {n - 1}); give the index of the row's light "
+                              "in its [[sky]] list.")
+    return spec
+
+
+def _table_spec(spec_path, table, tz, site, log):
+    """(validated spec, each row's frame index) of an observation table: the spec's lights by
+    index, or for a table of times the spec at those times (:func:`.ingest.spec_for_times`:
+    a time with the sun below the horizon is kept out, as a skipped frame)."""
+    from .ingest import spec_for_times
+    from .spec import read_spec
+
+    if table.by_index:
+        spec = _lab_spec(spec_path, table, tz, site)
+        if len(set(table.frames)) < 2:
+            raise SkyfitError(f"{table.path} measures one frame; a sequence needs at least 2.")
+        return spec, list(table.frames)
     times = sorted(set(table.times), key=lambda t: t.timestamp())
     if len(times) < 2:
         raise SkyfitError(f"{table.path} holds one time; a sequence needs at least 2.")
-    raw, spec = spec_for_times(spec_path, times, tz, site)
-    scene = build_scene_xml(spec)
-    mats = scene[1]
-    for r in dict.fromkeys(table.regions):
-        if r not in mats:
-            raise SkyfitError(f"{table.path}: region {r!r} is no material of the spec's scene; "
-                              f"its materials are: {', '.join(mats)}.")
+    if "time" not in read_spec(spec_path):
+        raise SkyfitError(f"{spec_path} has lab lights (frames by index, no [time]) but "
+                          f"{table.path} gives times: name each row's light by its 0-based "
+                          "index in a frame column instead of time.")
+    _, spec = spec_for_times(spec_path, times, tz, site)
     night = [t for t, f in zip(times, spec.frames) if f.skipped]
     if len(night) == len(times):
         raise SkyfitError(f"every time of {table.path} has the sun below the horizon; check the "
@@ -321,39 +442,183 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, overwrit
     if night:
         log(f"{len(night)} time(s) with the sun below the horizon are kept out of the sequence: "
             f"{', '.join(t.isoformat() for t in night)}")
-    pos, view, offset = locate_points(spec, scene, table, times)
+    frame_of = {t: j for j, t in enumerate(times)}
+    return spec, [frame_of[t] for t in table.times]
+
+
+def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calibrate):
+    """The radiance of one unit of a table in its own scale (an instrument's DN), per channel,
+    from its rows on reference materials of known Lambertian reflectance, and the record of
+    that calibration: ((3,) [W m^-2 sr^-1 per unit], record).
+
+    ``calibrate`` {material: (r, g, b) reflectance}; ``rows``: the rows of the sequence (lit
+    frames); ``pos``, ``view``, ``offset``: :func:`locate_points`'.  Each reference point's
+    radiance as a white Lambertian, L, is traced as a fit traces its points
+    (:func:`~skyfit_mi.render.points.lambertian_radiance`); the table's values y ~ a rho L, a
+    [units per W m^-2 sr^-1] by weighted least squares over the unsaturated reference rows
+    (weights 1 / (sigma^2 + a^2 rho^2 var L), var L the trace's Monte Carlo variance), its
+    standard error widened by the scatter about the fit where that exceeds the sigmas
+    (chi^2/dof > 1).  The record's ``scale_relative_sd`` widens every fit's intervals of
+    reflectances (:func:`skyfit_mi.fitting.uncertainty.calibration_sd`)."""
+    from ..physics.colour import SRGB_LUMINANCE
+    from ..render.light_cache import point_rays
+    from ..render.points import lambertian_radiance
+
+    index = {k: j for j, k in enumerate(table.point_keys())}
+    ref = [i for i in rows if table.regions[i] in calibrate and not table.saturated[i].all()]
+    missing = [m for m in calibrate if m not in {table.regions[i] for i in ref}]
+    if missing:
+        raise SkyfitError(f"--calibrate {missing[0]}: {table.path} has no unsaturated row on "
+                          f"region {missing[0]!r} in a lit frame; measure the reference in the "
+                          "table (rows with that region).")
+    points = list(dict.fromkeys((table.regions[i], table.points[i]) for i in ref))
+    frames = sorted({row_frames[i] for i in ref})
+    P, T = len(points), len(frames)
+    v = np.zeros((P, T, 3))
+    y, sig = np.zeros((P, T, 3)), np.full((P, T, 3), np.inf)
+    at_point = {k: j for j, k in enumerate(points)}
+    at_frame = {f: j for j, f in enumerate(frames)}
+    for i in ref:
+        p, t = at_point[(table.regions[i], table.points[i])], at_frame[row_frames[i]]
+        v[p, t], y[p, t] = view[i], np.nan_to_num(table.value[i])
+        sig[p, t] = np.where(table.saturated[i], np.inf, table.sigma[i])
+    for p in range(P):                # a frame without the point's row: any view of it
+        have = np.isfinite(sig[p, :, 0])
+        v[p, ~have] = v[p, np.argmax(have)]
+    material = np.array([m for m, _ in points], dtype=object)
+    L, var = lambertian_radiance(xml, spec.render["variant"], [spec.frames[j].sky for j in frames],
+                                 point_rays(pos[[index[k] for k in points]], v, offset),
+                                 material, max(1, int(spec.render["max_depth"]) - 1))
+    rho = np.array([calibrate[m] for m in material], dtype=float)[:, None, :]
+    m, m_var = rho * L, rho ** 2 * var
+    if table.luminance:                  # one quantity: Y (its variance bounded, as the fit's)
+        m = np.repeat((m @ SRGB_LUMINANCE)[..., None], 3, axis=2)
+        m_var = np.repeat((np.sqrt(m_var) @ SRGB_LUMINANCE)[..., None] ** 2, 3, axis=2)
+        y, sig = np.repeat(y[..., :1], 3, axis=2), np.repeat(sig[..., :1], 3, axis=2)
+    ok = np.isfinite(sig) & (m > 0)
+    a = np.zeros(3)
+    for _ in range(2):                   # the weights take the trace's variance at a
+        w = np.where(ok, 1.0 / (np.where(ok, sig, 1.0) ** 2 + a ** 2 * m_var), 0.0)
+        mm = np.einsum("ptc,ptc->c", w * m, m)
+        a = np.einsum("ptc,ptc->c", w * m, y) / np.where(mm > 0, mm, np.nan)
+    n = ok.sum(axis=(0, 1))
+    if not np.all(np.isfinite(a) & (a > 0)):
+        raise SkyfitError(f"--calibrate: the reference rows of {table.path} give no positive "
+                          "scale (unlit, or their values zero); check the reference's rows and "
+                          "its reflectance.")
+    chi2 = np.einsum("ptc,ptc->c", w, (y - a * m) ** 2)
+    s2 = np.maximum(1.0, chi2 / np.maximum(n - 1, 1))
+    rel_sd = np.sqrt(s2 / mm) / a
+    record = {"references": {k: list(map(float, v)) for k, v in calibrate.items()},
+              "reference_rows": len(ref), "scale_W_m2_sr_per_unit": (1.0 / a).tolist(),
+              "scale_relative_sd": rel_sd.tolist(),
+              "chi2_per_dof": (chi2 / np.maximum(n - 1, 1)).tolist(),
+              "method": "the table's values in its own units (e.g. DN) scaled to radiance by "
+                        "its rows on reference materials of known Lambertian reflectance, "
+                        "traced as white Lambertians under each frame's light"}
+    return 1.0 / a, record
+
+
+def check_radiances(table, scaled=None):
+    """SkyfitError naming the line and column of the first value or sigma of ``table`` (in
+    W m^-2 sr^-1, ``scaled`` by what, if not given so) beyond :data:`MAX_RADIANCE`."""
+    for name, single in (("value", "luminance"), ("sigma", "sigma")):
+        v = getattr(table, name)
+        big = np.isfinite(v) & (np.abs(v) > MAX_RADIANCE)
+        if big.any():
+            k, i = np.argwhere(big)[0]
+            column = single if table.luminance or name == "sigma" and i == 0 else \
+                _VECTORS[name][i]
+            raise SkyfitError(f"{table.path} line {table.lines[k]}: {column} = {v[k, i]:g} W m^-2 "
+                              f"sr^-1{f' (by {scaled})' if scaled else ''} is beyond any "
+                              f"radiance (at most {MAX_RADIANCE:.2g}, ten times the sun's disc); "
+                              "give radiances in W m^-2 sr^-1.")
+
+
+def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrate=None,
+                 overwrite=False, log=print):
+    """Turn an observation table into a sequence folder (module docstring); returns the
+    manifest dict.  ``tz``: zone of naive times; ``site``: (lat, lon[, alt]) over the spec's
+    (neither for lab lights); ``calibrate``: {material: (r, g, b) reflectance} of Lambertian
+    references measured in the table, whose values are then in its own units, scaled to
+    radiance by them (:func:`reference_scale`)."""
+    from .ingest import measured_header
+    from .sequence import finish, frame_record, prepare_folder
+    from ..files import write_text
+    from ..render.scene_xml import build_scene_xml
+
+    out = Path(out_dir)
+    mine = out / TABLE_FILE
+    if mine.exists() and mine.resolve() == Path(table_path).resolve():
+        raise SkyfitError(f"the table {table_path} is the output folder's own {TABLE_FILE}, which "
+                          "ingest writes; give another folder with -o.")
+    if mine.exists() and not (out / "manifest.json").exists() and not overwrite:
+        raise SkyfitError(f"{out} holds a file {TABLE_FILE} of no skyfit sequence; give another "
+                          "folder with -o, or pass --overwrite to replace it.")
+    table = read_observation_table(table_path, tz)
+    spec, row_frames = _table_spec(spec_path, table, tz, site, log)
+    scene = build_scene_xml(spec)
+    mats = scene[1]
+    for r in dict.fromkeys(table.regions):
+        if r not in mats:
+            raise SkyfitError(f"{table.path}: region {r!r} is no material of the spec's scene; "
+                              f"its materials are: {', '.join(mats)}.")
+    for name, rho in (calibrate or {}).items():
+        if name not in mats:
+            raise SkyfitError(f"--calibrate {name}: no material {name!r} in the spec's scene; "
+                              f"its materials are: {', '.join(mats)}.")
+        if len(rho) != 3 or not all(0.0 < r <= 1.0 for r in rho):
+            raise SkyfitError(f"--calibrate {name}: give the reference's reflectance as one "
+                              "number or R,G,B, each in (0, 1].")
+    keep = [i for i in range(len(row_frames)) if not spec.frames[row_frames[i]].skipped]
+    pos, view, offset = locate_points(spec, scene, table, row_frames)
+    calibration = None
+    if calibrate:
+        scale, calibration = reference_scale(spec, scene[0], table, keep, row_frames, pos, view,
+                                             offset, calibrate)
+        table = replace(table, value=table.value * scale, sigma=table.sigma * scale)
+        log(f"calibration: one unit of {table.path.name} is "
+            f"{', '.join(f'{v:.4g}' for v in scale)} W m^-2 sr^-1 (R, G, B), to "
+            f"{', '.join(f'{v:.1%}' for v in calibration['scale_relative_sd'])} (standard "
+            f"error), from {calibration['reference_rows']} reference rows")
+    check_radiances(table, "its reference's scale" if calibrate else None)
     top = float(np.nanmax(np.where(np.isfinite(table.sigma),
                                    table.value + HEADROOM_SIGMAS * table.sigma, np.nan)))
-    if top <= 0:
-        raise SkyfitError(f"{table.path}: every value is zero or negative; give measured "
-                          "radiances [W m^-2 sr^-1].")
     sensor = SensorModel(exposure=SCALE_SHARE / top, response="linear", bits=16)
 
-    keys = table.point_keys()
-    frame_of = {t: j for j, t in enumerate(times)}
-    values = "luminance,sigma" if table.luminance else "r,g,b,sigma_r,sigma_g,sigma_b"
-    lines = ["frame,time,region,point,x,y,z,view_x,view_y,view_z," + values]
-    for i in sorted(range(len(table.times)), key=lambda i: (frame_of[table.times[i]], i)):
-        j = frame_of[table.times[i]]
-        if spec.frames[j].skipped:
-            continue
-        k = keys.index((table.regions[i], table.points[i]))
-        nums = [*pos[k], *view[k, j], *((table.value[i, 0], table.sigma[i, 0]) if table.luminance
-                                        else (*table.value[i], *table.sigma[i]))]
-        lines.append(",".join([str(j), table.times[i].isoformat(), table.regions[i],
-                               table.points[i]] + [repr(float(v)) for v in nums]))
+    index = {k: j for j, k in enumerate(table.point_keys())}
+    saturated = bool(table.saturated.any())
+    columns = ["frame", *([] if table.by_index else ["time"]), "region", "point", "x", "y", "z",
+               "view_x", "view_y", "view_z",
+               *(["luminance", "sigma"] if table.luminance else
+                 [*_VECTORS["value"], *_VECTORS["sigma"]]),
+               *((["saturated"] if table.luminance else list(_VECTORS["saturated"]))
+                 if saturated else [])]
+    lines = [",".join(columns)]
+    for i in sorted(keep, key=lambda i: (row_frames[i], i)):
+        k = index[(table.regions[i], table.points[i])]
+        channels = slice(0, 1) if table.luminance else slice(0, 3)
+        nums = [*pos[k], *view[i], *table.value[i, channels], *table.sigma[i, channels]]
+        flags = [str(int(v)) for v in table.saturated[i, channels]] if saturated else []
+        lines.append(",".join([str(row_frames[i]),
+                               *([] if table.by_index else [table.times[i].isoformat()]),
+                               table.regions[i], table.points[i]]
+                              + [repr(float(v)) for v in nums] + flags))
     text = "\n".join(lines) + "\n"
     run_id = hashlib.sha256(json.dumps([text, spec.raw], sort_keys=True, default=str)
                             .encode()).hexdigest()[:16]
-    out = Path(out_dir)
     with FolderLock(out):
         prepare_folder(out, run_id, None, overwrite, log=lambda message: None)
         manifest = measured_header(spec, sensor, run_id, "measured", "none: measured values",
                                    scene)
-        manifest["ingest"] = {"table": str(table.path), "rows": len(table.times),
+        manifest["ingest"] = {"table": str(table.path), "rows": len(table.regions),
                               "points": [{"region": r, "point": p, "position": pos[k].tolist()}
-                                         for k, (r, p) in enumerate(keys)],
+                                         for (r, p), k in index.items()],
                               "ray_offset": offset, "units": "W m^-2 sr^-1, linear sRGB"}
+        if saturated:
+            manifest["ingest"]["saturated_values"] = int(table.saturated[keep].sum())
+        if calibration is not None:
+            manifest["ingest"]["calibration"] = calibration
         for f in spec.frames:
             rec = frame_record(f, 0, out)
             rec.pop("seed")
@@ -372,26 +637,34 @@ def is_table(doc):
     return any(f.get("observations", {}).get("kind") == "table" for f in doc["frames"])
 
 
-def table_points(root):
-    """{region: its point names} of an observation-table sequence in folder ``root``, both in
-    table order."""
-    out = {}
-    for region, point in read_observation_table(Path(root) / TABLE_FILE).point_keys():
-        out.setdefault(region, []).append(point)
-    return out
-
-
 def table_regions(root):
     """The regions an observation-table sequence in folder ``root`` measures, in table order."""
-    return list(table_points(root))
+    return list(dict.fromkeys(read_observation_table(Path(root) / TABLE_FILE).regions))
+
+
+@dataclass
+class RegionRows:
+    """A region's rows of a table sequence, by point and frame: names (P,) of the points;
+    frames (T,) their manifest indices;  position (P, 3);  view (P, T, 3) unit, surface toward
+    instrument;  value, sigma (P, T, 3) [W m^-2 sr^-1] (no row: value 0, sigma inf, no
+    information);  saturated (P, T, 3) bool (the value is the level the instrument clipped
+    at);  luminance: the values are luminances (in the first channel, the others' sigma
+    inf)."""
+
+    names: list
+    frames: list
+    position: np.ndarray
+    view: np.ndarray
+    value: np.ndarray
+    sigma: np.ndarray
+    saturated: np.ndarray
+    luminance: bool
 
 
 def table_observations(doc, root, region, points=None, frames=None):
-    """The table rows of ``region`` in a table sequence: (point names (P,), frame indices
-    (T,), positions (P, 3), views (P, T, 3), values (P, T, 3), sigmas (P, T, 3), whether
-    they are luminances (in the first channel, the others' sigma inf)); a point without a
-    row in a frame gets value 0 and sigma inf (no information).  ``points``: the points to
-    take (default all of the region's); ``frames``: the frames (default all with a row)."""
+    """The :class:`RegionRows` of ``region`` in a table sequence (folder ``root``);
+    ``points``: the points to take (default all of the region's); ``frames``: the frames
+    (default all with a row)."""
     table = read_observation_table(root / TABLE_FILE)
     frame_col = table.frames
     keys = [p for r, p in table.point_keys() if r == region]
@@ -405,21 +678,25 @@ def table_observations(doc, root, region, points=None, frames=None):
             raise SkyfitError(f"region {region!r} has no point {unknown[0]!r}; its points are: "
                               f"{', '.join(keys)}.")
         keys = list(points)
+    wanted = set(keys)
     rows = [i for i in range(len(frame_col)) if table.regions[i] == region
-            and table.points[i] in keys]
+            and table.points[i] in wanted]
     fr = sorted({frame_col[i] for i in rows} if frames is None else set(frames))
     P, T = len(keys), len(fr)
+    at_point, at_frame = {p: j for j, p in enumerate(keys)}, {f: j for j, f in enumerate(fr)}
     pos = np.zeros((P, 3))
     view = np.zeros((P, T, 3))
     view[..., 2] = 1.0
     y, sig = np.zeros((P, T, 3)), np.full((P, T, 3), np.inf)
+    sat = np.zeros((P, T, 3), bool)
     for i in rows:
         if frame_col[i] not in fr:
             continue
-        p, t = keys.index(table.points[i]), fr.index(frame_col[i])
+        p, t = at_point[table.points[i]], at_frame[frame_col[i]]
         pos[p], view[p, t] = table.position[i], table.view[i]
         y[p, t], sig[p, t] = np.nan_to_num(table.value[i]), table.sigma[i]
+        sat[p, t] = table.saturated[i]
     for p in range(P):                   # a frame without a row: the view of another frame
         have = np.isfinite(sig[p, :, 0])
         view[p, ~have] = view[p, np.argmax(have)]
-    return keys, fr, pos, view, y, sig, table.luminance
+    return RegionRows(keys, fr, pos, view, y, sig, sat, table.luminance)

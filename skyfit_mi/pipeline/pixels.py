@@ -1,7 +1,6 @@
 """Pixel values across a rendered sequence (thesis figs. 6.3, 6.14, 6.17): CSV and a plot."""
 
 import csv
-import datetime as dt
 import io
 from pathlib import Path
 
@@ -9,7 +8,7 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..files import save_figure, write_text
-from .manifest import load_manifest, read_frame_image
+from .manifest import frame_axis, load_manifest, read_frame_image
 
 SOURCES = {"radiance": "W m^-2 sr^-1", "radiance_sigma": "W m^-2 sr^-1", "sensor": "DN",
            "sigma": "DN"}
@@ -40,7 +39,7 @@ def pixel_series(manifest_path, pixels, source="radiance"):
             continue
         img = read_frame_image(root, f, source, (h, w, 3))
         for x, y in pixels:
-            rows.append((f["index"], f["time"], x, y, *map(float, img[y, x])))
+            rows.append((f["index"], f.get("time", ""), x, y, *map(float, img[y, x])))
     return rows, SOURCES[source]
 
 
@@ -74,12 +73,12 @@ def write_pixels(manifest_path, pixels, out_prefix=None, source="radiance"):
     styles = ["-", "--", ":", "-."]
     for k, (x, y) in enumerate(pixels):
         sel = [r for r in rows if r[2] == x and r[3] == y]
-        t = [dt.datetime.fromisoformat(r[1]) for r in sel]
+        t, t_label = frame_axis([r[0] for r in sel], [r[1] or None for r in sel])
         vals = np.array([r[4:] for r in sel])
         for c, colour in enumerate("rgb"):
             ax.plot(t, vals[:, c], styles[k % 4], color=colour, marker="o", ms=3,
                     label=f"({x},{y}) {'RGB'[c]}")
-    ax.set_xlabel("local time")
+    ax.set_xlabel(t_label)
     ax.set_ylabel(f"{source} [{unit}]")
     ax.set_title(f"pixel values across the sequence ({source})")
     ax.legend(fontsize=7, ncol=len(pixels))

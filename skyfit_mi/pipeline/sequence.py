@@ -33,7 +33,7 @@ from ..files import FolderLock, ensure_dir
 from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
 from ..render.scene_xml import pass_spp
-from .manifest import (SCHEMA, illumination_record, keep_frame_image, load_manifest,
+from .manifest import (SCHEMA, frame_label, illumination_record, keep_frame_image, load_manifest,
                        manifest_file, read_frame_image, sensor_record, versions,
                        write_manifest)
 
@@ -73,7 +73,7 @@ def spec_sensor(spec):
                                                       "cos4")})
 
 
-def _clear(out):
+def clear_run(out):
     """Remove an earlier run's files (only the names a render writes) from ``out``."""
     for p in [out / "manifest.json", out / "contact_sheet.png",
               *(out / "frames").glob("*_[0-9][0-9][0-9]*.exr")]:
@@ -94,7 +94,7 @@ def prepare_folder(out, run_id, shape, overwrite=False, log=print):
 
     ensure_dir(out / "frames")
     if overwrite:
-        _clear(out)
+        clear_run(out)
         return {}
     if not manifest_file(out).exists():
         return {}
@@ -175,7 +175,7 @@ def manifest_header(spec, sensor, scene, render, source="render", run_id=None):
         "name": spec.raw.get("name"), "status": "incomplete",
         "created": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
         "spec": spec.raw, "spec_dir": spec.base_dir.resolve(),
-        "location": spec.raw["location"],
+        **({"location": spec.raw["location"]} if "location" in spec.raw else {}),
         "scene": {"file": spec.scene_file, "xml": xml, "materials": materials},
         "camera": {"to_world": to_world, "fov_deg": cam["fov_deg"], "fov_axis": "x",
                    "width": cam["width"], "height": cam["height"]},
@@ -193,8 +193,10 @@ def render_record(spec, renderer):
 def frame_record(frame, seed, out):
     """A spec frame's manifest record without its files (time, sun, illumination, seed), for
     the manifest in folder ``out`` (an environment map's file is written relative to it)."""
-    return {"index": frame.index, "time": frame.time.isoformat(),
-            "time_utc": frame.time.astimezone(dt.timezone.utc).isoformat(),
+    when = {} if frame.time is None else {     # a lab light: by index alone
+        "time": frame.time.isoformat(),
+        "time_utc": frame.time.astimezone(dt.timezone.utc).isoformat()}
+    return {"index": frame.index, **when,
             "sun_zenith_deg": frame.sun_zenith_deg, "sun_azimuth_deg": frame.sun_azimuth_deg,
             "below_horizon": frame.sun_zenith_deg >= 90.0,
             "illumination": illumination_record(frame.sky, out), "seed": seed + frame.index}
@@ -224,17 +226,17 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print, so
     this run is resumed (its verified frames are kept).
     """
     out = Path(out_dir)
+    sensor = spec_sensor(spec)                # its exposure checked before the folder is made
     with FolderLock(out) as lock:
         if lock.stale is not None:
             log(f"{out}: took over the lock of a run that no longer exists "
                 f"(process {lock.stale.get('pid')}); resuming")
-        return _render(spec, out, overwrite, progress, log, source)
+        return _render(spec, sensor, out, overwrite, progress, log, source)
 
 
-def _render(spec, out, overwrite, progress, log, source):
+def _render(spec, sensor, out, overwrite, progress, log, source):
     cam = spec.camera
     done = prepare_folder(out, spec.run_id(), (cam["height"], cam["width"], 3), overwrite, log)
-    sensor = spec_sensor(spec)
     renderer = FrameRenderer(spec)
     manifest = manifest_header(spec, sensor, (renderer.xml, renderer.materials,
                                               renderer.to_world),
@@ -247,7 +249,8 @@ def _render(spec, out, overwrite, progress, log, source):
         rec = frame_record(f, renderer.seed, out)
         if f.skipped:
             rec["status"] = "skipped"
-            log(f"frame {f.index} at {f.time:%H:%M}: sun below the horizon, skipped as the spec says")
+            log(f"{frame_label(f.index, f.time)}: sun below the horizon, skipped as the spec "
+                "says")
         elif f.index in done:
             rec.update(status="rendered", **{k: done[f.index][k] for k in FRAME_FILES},
                        **({"dark": True} if done[f.index].get("dark") else {}))
@@ -260,7 +263,7 @@ def _render(spec, out, overwrite, progress, log, source):
             rec.update(status="rendered", **write_frame(out, f.index, img, img_sd, values, sigma))
             if dark:
                 rec["dark"] = True
-                log(f"frame {f.index} at {f.time:%H:%M}: black at this exposure (no light reached "
+                log(f"{frame_label(f.index, f.time)}: black at this exposure (no light reached "
                     "the camera); kept and marked dark in the manifest")
             if bar is not None:
                 bar.update(1)

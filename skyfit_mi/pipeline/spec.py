@@ -82,11 +82,13 @@ _SERIES_KEYS = {"ghi": "global_horizontal_W_m2", "dhi": "diffuse_horizontal_W_m2
                 "dni": "direct_normal_W_m2"}
 BELOW_HORIZON = ("sky", "skip")
 #: Mitsuba samplers a spec may choose; multijitter stratifies the sun/sky choice of the
-#: emitter sample and gives about 5x lower noise than independent at equal cost (docs/BENCHMARKS.md).
+#: emitter sample and gives about 6x lower noise than independent at equal samples
+#: (docs/BENCHMARKS.md, "sun_sky_path against path and Radiance rpict").
 SAMPLERS = ("multijitter", "stratified", "ldsampler", "independent")
 #: Integrators a spec may choose: ``sun_sky_path`` (separate sun and sky light samples, the
-#: default; about a fifth of ``path``'s error at equal time on the thesis disc,
-#: docs/BENCHMARKS.md) or Mitsuba's ``path`` (one light sample that picks sun or sky).
+#: default; about a fifth of ``path``'s error at equal time on the thesis disc, docs/BENCHMARKS.md,
+#: "sun_sky_path against path and Radiance rpict") or Mitsuba's ``path`` (one light sample
+#: that picks sun or sky).
 INTEGRATORS = ("sun_sky_path", "path")
 
 
@@ -167,7 +169,8 @@ def _clock(s, date, tz, key):
 
 @dataclass
 class Frame:
-    """One resolved frame: its time, sun and sky, and whether it is rendered."""
+    """One resolved frame: its time (None for a lab light: frames by index), sun (a lab
+    light's direction) and sky, and whether it is rendered."""
 
     index: int
     time: dt.datetime
@@ -190,6 +193,11 @@ class Spec:
     sensor: dict
     render: dict
     frames: list = field(default_factory=list)
+
+    @property
+    def lab(self):
+        """Whether the frames are lab lights identified by index (no [time], no site)."""
+        return "time" not in self.raw
 
     def run_id(self):
         """Hash of everything that determines the output (the resolved spec, and the contents
@@ -230,7 +238,8 @@ def validate_spec(raw, base_dir=".", sun=None):
     if not isinstance(raw, dict):
         raise SpecError("a spec must be a table of sections ([location], [time], ...).")
     _unknown("spec", raw, _SCHEMA)
-    for sec in ("location", "time", "scene", "camera"):
+    lab = "time" not in raw                 # lab lights: frames by index, no time or site
+    for sec in ("scene", "camera") + (() if lab else ("location",)):
         if sec not in raw:
             raise SpecError(f"the spec has no [{sec}] section; it is required (see scenes/specs/ "
                             "for examples).")
@@ -240,15 +249,21 @@ def validate_spec(raw, base_dir=".", sun=None):
                 raise SpecError(f"[{sec}] must be a table.")
             _unknown(sec, raw[sec], keys)
 
-    loc = raw["location"]
-    for k in ("latitude_deg", "longitude_deg", "timezone"):
-        if k not in loc:
-            raise SpecError(f"[location] needs {k}.")
-    lat = _num("location", "latitude_deg", loc["latitude_deg"], -90, 90)
-    lon = _num("location", "longitude_deg", loc["longitude_deg"], -180, 180)
-    elevation = _num("location", "elevation_m", loc.get("elevation_m", 0.0), -500, 9000)
-    tz = _tz(loc["timezone"])
-    times = _times(raw["time"], tz)
+    if lab:
+        if "location" in raw:
+            raise SpecError("the spec has [location] but no [time]; a sequence of lab lights "
+                            "(every [[sky]] directional) takes neither, a day needs both.")
+        times, tz = None, None
+    else:
+        loc = raw["location"]
+        for k in ("latitude_deg", "longitude_deg", "timezone"):
+            if k not in loc:
+                raise SpecError(f"[location] needs {k}.")
+        lat = _num("location", "latitude_deg", loc["latitude_deg"], -90, 90)
+        lon = _num("location", "longitude_deg", loc["longitude_deg"], -180, 180)
+        elevation = _num("location", "elevation_m", loc.get("elevation_m", 0.0), -500, 9000)
+        tz = _tz(loc["timezone"])
+        times = _times(raw["time"], tz)
 
     render = {"spp": 64, "seed": 0, "variant": "llvm_ad_rgb", "max_depth": 4, "below_horizon": "sky",
               "sampler": "multijitter", "integrator": INTEGRATORS[0], **raw.get("render", {})}
@@ -276,13 +291,18 @@ def validate_spec(raw, base_dir=".", sun=None):
     except SkyfitError as exc:
         raise SpecError(f"[materials] {exc}") from None
 
-    if sun and all(t.isoformat() in sun for t in times):
-        zeniths, azimuths = np.array([sun[t.isoformat()] for t in times], dtype=float).T
+    if lab:
+        entries = _lab_entries(raw.get("sky"))
+        times = [None] * len(entries)
+        zeniths = azimuths = [np.nan] * len(entries)      # each light's own, below
     else:
-        pos = solar_position(times, lat, lon, elevation=elevation)
-        zeniths, azimuths = np.atleast_1d(pos.zenith_deg), np.atleast_1d(pos.azimuth_deg)
-    entries = _with_series(_sky_entries(raw.get("sky", {"type": "clear"}), times, tz), times, tz,
-                           base_dir)
+        if sun and all(t.isoformat() in sun for t in times):
+            zeniths, azimuths = np.array([sun[t.isoformat()] for t in times], dtype=float).T
+        else:
+            pos = solar_position(times, lat, lon, elevation=elevation)
+            zeniths, azimuths = np.atleast_1d(pos.zenith_deg), np.atleast_1d(pos.azimuth_deg)
+        entries = _with_series(_sky_entries(raw.get("sky", {"type": "clear"}), times, tz), times,
+                               tz, base_dir)
     frames = []
     for i, (t, z, a, entry) in enumerate(zip(times, zeniths, azimuths, entries)):
         sky = _make_sky(entry, float(z), float(a), t, base_dir, i)
@@ -293,6 +313,22 @@ def validate_spec(raw, base_dir=".", sun=None):
                             skipped=bool(below and render["below_horizon"] == "skip"),
                             below_horizon=bool(below)))
     return Spec(raw, base_dir, scene_file, materials, camera, sensor, render, frames)
+
+
+def _lab_entries(sec):
+    """The [[sky]] entries of a spec without [time]: lab lights, one frame each in the order
+    listed, every one directional (frames by index: no time, date or site)."""
+    if sec is None:
+        raise SpecError("the spec has no [time] section; it is required unless every [[sky]] is "
+                        "a directional lab light (then the frames are the lights, by index).")
+    entries = _sky_entries(sec, None, None)
+    other = next((i for i, e in enumerate(entries) if e["type"] != "directional"), None)
+    if other is not None:
+        which = "[sky]" if isinstance(sec, dict) and "frames" not in sec else f"[[sky]] {other}"
+        raise SpecError(f"the spec has no [time] section, but {which} is a "
+                        f"{entries[other]['type']} sky; frames by index are for directional lab "
+                        "lights only: give [time] and [location] for a day's sky.")
+    return entries
 
 
 def _times(sec, tz):
@@ -447,8 +483,15 @@ def _sky_entries(sec, times, tz):
     else:
         raise SpecError("[sky] must be a table, or [[sky]] a list of tables (one per frame).")
     _unknown("sky", base, _SCHEMA["sky"] - {"frames"})
+    if times is None and any("time" in e for e in [base, *(entries or [])]):
+        raise SpecError("[sky] time: lab lights without [time] are frames by index, in the order "
+                        "listed; drop time (or give [time] and [location] for a day).")
     if entries is None:
-        out = [dict(base) for _ in times]
+        out = [dict(base) for _ in (times or [None])]
+    elif times is None:
+        for e in entries:
+            _unknown("sky", e, _SCHEMA["sky"])
+        out = [{**base, **e} for e in entries]
     else:
         if all("time" in e for e in entries):
             by_time = {}

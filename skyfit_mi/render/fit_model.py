@@ -12,7 +12,9 @@ import itertools
 
 import numpy as np
 
-from ..physics.ward import METAL_THRESHOLD, PLASTIC_MAX, SIGMA_MIRROR, lobe_albedo_nodes
+from ..errors import SkyfitError, check_choice
+from ..physics.ward import (METAL_THRESHOLD, NORMALISATIONS, PLASTIC_MAX, SIGMA_MIRROR,
+                            colour_rule_twin, lobe_albedo_nodes, raw_parameters)
 from .light_cache import (CONTROL_FULL, CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
                           SIGMA_TABLE, control_weight)
 from .daylight import jit_array
@@ -37,9 +39,6 @@ def check_fit_normalisation(normalisation):
     """``normalisation``, or SkyfitError unless the fitting model can represent it: every one
     of :data:`~skyfit_mi.physics.ward.NORMALISATIONS` but ``'radiance'``, whose Fresnel term
     for an ideal mirror is outside the basis L = rho_d D + s G(sigma) (the render side takes it)."""
-    from ..errors import SkyfitError, check_choice
-    from ..physics.ward import NORMALISATIONS
-
     check_choice("Ward normalisation", normalisation, NORMALISATIONS)
     if normalisation == "radiance":
         raise SkyfitError("normalisation 'radiance' cannot be fitted: its Fresnel term at "
@@ -59,8 +58,6 @@ def bounds(model):
 def check_start(model, start):
     """``start`` as an array, or SkyfitError unless it has one value per parameter of
     ``model``, each within its bounds (nothing is clipped or broadcast silently)."""
-    from ..errors import SkyfitError
-
     names, (lo, hi) = PARAMETERS[model], bounds(model)
     v = np.asarray(start, dtype=float).ravel()
     if v.size != len(names):
@@ -106,8 +103,6 @@ def other_readings(model, theta):
     """Parameter points that chi^2 should also be tried at because the model jumps between
     them and ``theta``: for the colour model the reading across the plastic/metal rule
     (:func:`~skyfit_mi.physics.ward.colour_rule_twin`), clipped to the bounds and its side of the rule."""
-    from ..physics.ward import colour_rule_twin
-
     if model != "colour":
         return []
     c2, rho2 = colour_rule_twin(theta[:3], theta[3])
@@ -124,8 +119,6 @@ def reflectances(model, theta):
     sigma_alpha column is zero.  For the colour model the derivative is that of the rule on
     theta's side of rho_s = 0.5.
     """
-    from ..physics.ward import raw_parameters
-
     th = np.asarray(theta, dtype=float)
     rho_d, spec, _ = raw_parameters(**{k: v for k, v in material_dict(model, th).items()
                                        if k != "normalisation"})
@@ -440,6 +433,10 @@ class WardModel:
         self.basis_evaluations += len(sigmas)
         out = [(a[0], np.stack(a[1:])) for a in acc]
         return out if halves else out[0]
+
+    def lobes(self, sigmas, halves=False):
+        """:meth:`basis` (its arrays serve wherever lazy lobes do)."""
+        return self.basis(sigmas, halves)
 
     def _shares(self, rho_s, sigma):
         """Each position's share (P, T, S, 3) of the basis plugin's L (rho_s = 0: the diffuse

@@ -24,10 +24,9 @@ Most of that light is the sky itself, a known function h (the ``cie_sky`` emitte
 sum).  It is the estimate's control variate (:mod:`.sky_control`): the samples carry only
 L_i - h (the sun, the scene's geometry and its shadows, which h does not know), and the
 integrals of h through the diffuse term and through the lobe at every sigma are computed
-deterministically, per position, once.  Without it the sampled sky cost 1.5-1.9% rms per
-value above sigma_alpha = 0.05 and pulled fits toward smooth lobes, where the estimate was
-almost exact; with it the whole range is as accurate as the narrow end (docs/BENCHMARKS.md,
-"the light cache's accuracy at every roughness").
+deterministically, per position, once.  Without it the sampled sky's own error was 0.28-0.30%
+rms per value under a clear sky and 0.47-0.55% under an overcast one at every roughness; with
+it 0.005-0.09% (docs/BENCHMARKS.md, "The light cache's accuracy at every roughness").
 
 A narrow lobe sees what h does not know (a reflected object, say) through a few of the fixed
 directions, so that part's estimate
@@ -74,15 +73,20 @@ SIGMA_TABLE = (SIGMA_RESOLVED, SIGMA_LARGEST)
 #: Samples per pixel by default: positions over the pixel's area (a highlight's radiance can
 #: vary by tens of per cent across one pixel) and light directions at each position.
 POSITIONS, DIRECTIONS = 32, 128
+#: Positions of a measured point by default: a point has no area, so its positions only
+#: repeat the directions' sampling (two halves for the cache's own error); an automatically
+#: sized cache grows them where the data need it.
+POINT_POSITIONS = 4
 #: Share of a fit's degrees of freedom that an automatically sized cache's largest noise over
 #: the roughness range is grown to stay under (:meth:`~skyfit_mi.fitting.fit.FitSession.run`).
 CACHE_SHARE = 0.1
 #: Pixels between the anchors at which the light caches of predictions and maps integrate the
-#: sky (``sky_spacing`` of :func:`build_light_cache`; a fit's takes its positions' own,
+#: sky (the ``anchors`` :class:`SkyPlan`; a fit's takes its positions' own,
 #: WIDE_SHARE): the pixels between them interpolate where that is accurate, with an error
-#: second order in the spacing, a few 1e-4 of the radiance at 4 pixels (docs/BENCHMARKS.md).
+#: second order in the spacing, a few 1e-4 of the radiance at 4 pixels (docs/BENCHMARKS.md,
+#: "Sky integrals interpolated between anchors").
 SKY_SPACING = 4
-#: Sky integrals shared by interpolation (``sky_spacing`` of :func:`build_light_cache`): a
+#: Sky integrals shared by interpolation (a :class:`SkyPlan`'s ``spacing``): a
 #: pixel takes the bilinear interpolation of the four anchors around it only when they lie on
 #: its shape, their normals and mirror directions within SHARE_ANGLE_DEG of its own, and every
 #: mirror direction at least SHARE_HORIZON_DEG from the world's horizon (where the sky
@@ -94,8 +98,9 @@ SHARE_ANGLE_DEG, SHARE_HORIZON_DEG, SHARE_SUN_DEG = 2.0, 5.0, 5.0
 #: WIDE_SIGMA [rad] change little across a pixel and carry most of the quadratures'
 #: directions, so they are taken at WIDE_SHARE of each pixel's random positions (at least one
 #: in each half of them: LightCache.halves stay independent and see the subset's noise), each
-#: half's mean given to its positions: unbiased, the cache about 2.6x faster; the narrower
-#: nodes, which resolve the pixel, at every position (``wide_share`` of build_light_cache).
+#: half's mean given to its positions: unbiased, the cache about 2.6x faster (docs/
+#: BENCHMARKS.md, "A fit's wide sky integrals at a few positions"); the narrower
+#: nodes, which resolve the pixel, at every position (the ``fit`` :class:`SkyPlan`).
 #: Only where every pixel's footprint is small against those lobes: its positions' normals and
 #: mirror directions within WIDE_SPREAD_DEG of their mean (planes seen in pixels of a fraction
 #: of a degree); a curved surface or a coarse pixel takes them at every position, so that the
@@ -114,6 +119,40 @@ MIX = {"sun": 0.25, "sky": 0.20, "cosine": 0.15, "lobes": 0.40}
 #: which it has its full weight; its quadrature of the lobe's albedo is exact to 1e-6 below
 #: CONTROL_SIGMA up to 70 degrees from the normal.
 CONTROL_FULL, CONTROL_SIGMA = 0.035, 0.05
+
+
+@dataclass(frozen=True)
+class SkyPlan:
+    """Where a light cache takes the sky's integrals (the control variate's deterministic
+    part, :mod:`.sky_control`), which cost most of its time.
+
+    positions : None, at every position of a pixel; k, at the first k of its positions (a
+        random subset of its i.i.d. positions, so their mean is still an unbiased estimate
+        of the pixel's), their mean given to all
+    spacing : None, or n > 1: at anchors every n pixels (pixels only), each pixel taking the
+        bilinear interpolation of the four around it where that is accurate
+        (SHARE_ANGLE_DEG, SHARE_HORIZON_DEG, SHARE_SUN_DEG; never under an environment map),
+        ``positions``' elsewhere: about n^2 times cheaper on smooth surfaces, with an error
+        second order in the spacing; not where the anchors would outnumber the pixels
+    wide_share : None, or a share of the positions: at every position, except the diffuse
+        integral and the nodes of roughness at least WIDE_SIGMA, at that share of each
+        pixel's positions where every pixel's footprint is small (WIDE_SPREAD_DEG), at least
+        one in each half of them, each half's mean given to its positions
+    """
+
+    name: str
+    positions: int = None
+    spacing: int = None
+    wide_share: float = None
+
+
+#: The light caches' sky plans: ``every`` position (the reference); a ``fit``'s (the wide
+#: parts at a share of the positions, the narrow ones, which resolve the pixel, at every
+#: one); ``one`` position per pixel (predictions of means over many pixels, which average
+#: out what one position leaves); ``anchors`` (predictions and maps of compact regions).
+SKY_PLANS = {p.name: p for p in (SkyPlan("every"), SkyPlan("fit", wide_share=WIDE_SHARE),
+                                 SkyPlan("one", positions=1),
+                                 SkyPlan("anchors", positions=1, spacing=SKY_SPACING))}
 
 
 @dataclass
@@ -361,9 +400,9 @@ def _anchor_plan(pixels, spacing, width, height):
 
 
 def anchors_pay(pixels, spacing, width, height):
-    """Whether the sky's anchors every ``spacing`` pixels (``build_light_cache``'s
-    ``sky_spacing``) are fewer than the ``pixels`` (P, 2) of a ``width`` x ``height`` image:
-    a compact region's are, a scattered subset's are not (its pixels then take their own)."""
+    """Whether the sky's anchors every ``spacing`` pixels (a :class:`SkyPlan`'s) are fewer
+    than the ``pixels`` (P, 2) of a ``width`` x ``height`` image: a compact region's are, a
+    scattered subset's are not (its pixels then take their own)."""
     return spacing is not None and int(spacing) > 1 \
         and len(_anchor_plan(pixels, int(spacing), width, height)[0]) < len(pixels)
 
@@ -380,7 +419,7 @@ def _shape_index(mi, si, target):
 
 
 class _SharedSky:
-    """The anchors of ``sky_spacing`` (:func:`build_light_cache`) and which pixels may
+    """The anchors every ``spacing`` pixels (:class:`SkyPlan`) and which pixels may
     interpolate between them, from the geometry alone (the camera and scene are the same in
     every frame): anchors and pixels are traced once, through their centres."""
 
@@ -451,8 +490,7 @@ class _SharedSky:
 
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
                       directions=DIRECTIONS, seed=0, max_depth=3, normalisation="ward",
-                      sky_positions=None, sky_spacing=None, wide_share=WIDE_SHARE,
-                      stats=None):
+                      plan="fit", stats=None):
     """Trace the light arriving at ``pixels`` for every sky in ``skies``.
 
     Parameters
@@ -467,23 +505,9 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     seed : int, the seed of every random choice (recorded by the caller)
     max_depth : path depth for light arriving from the rest of the scene
     normalisation : the Ward normalisation the cache's sky integrals are for
-    sky_positions : None: the sky's integrals (the control variate's deterministic part) at
-        every position; k: at the first k of each pixel's positions (a random subset of its
-        i.i.d. positions, so their mean is still an unbiased estimate of the pixel's), the
-        mean given to all: positions / k times cheaper, for maps of many pixels
-    sky_spacing : None, or n > 1: the sky's integrals at anchors every n pixels (pixels only;
-        replaces ``sky_positions``: every integral is taken through a pixel's centre), each
-        pixel taking the bilinear interpolation of the four around it where that is accurate
-        (SHARE_ANGLE_DEG, SHARE_HORIZON_DEG, SHARE_SUN_DEG; never under an environment map),
-        its own elsewhere: about n^2 times cheaper on smooth surfaces, with an error second
-        order in the anchors' spacing (docs/BENCHMARKS.md); not where the anchors would
-        outnumber the pixels (scattered pixels), which then take ``sky_positions``
-    wide_share : None, or a share of the positions: where the integrals are taken at every
-        position (neither ``sky_positions`` nor shared anchors) and every pixel's footprint
-        is small (WIDE_SPREAD_DEG), the diffuse one and the nodes of roughness at least
-        WIDE_SIGMA at that share of each pixel's positions, at least one in each half of
-        them, each half's mean given to its positions (WIDE_SHARE); None: all at every
-        position
+    plan : a :class:`SkyPlan` or its name in SKY_PLANS: where the sky's integrals (the
+        control variate's deterministic part) are taken; measured points take theirs once
+        (their positions are one ray)
     stats : None, or a dict that receives ``shared``, the number of (pixel, frame) pairs whose
         sky integrals were interpolated
 
@@ -518,9 +542,10 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         raise ValueError(f"directions = {K} is too few; use at least 32")
     n_comp = 3 + len(LOBE_SIGMAS)
 
+    plan = SKY_PLANS[plan] if isinstance(plan, str) else plan
     share = None
-    if rays is None and anchors_pay(pixels, sky_spacing, w, h):
-        share = _SharedSky(mi, scene, sensor, pixels, int(sky_spacing), (w, h), target, want)
+    if rays is None and anchors_pay(pixels, plan.spacing, w, h):
+        share = _SharedSky(mi, scene, sensor, pixels, int(plan.spacing), (w, h), target, want)
     if stats is not None:
         stats["shared"] = 0
     rng = np.random.default_rng(seed)
@@ -528,12 +553,14 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     # the sky's integrals at every position, at the first k of each pixel's (a random subset
     # of its i.i.d. positions: their mean is still an unbiased estimate of the pixel's), or
     # shared between anchors (computed apart, with _SharedSky's own trace)
-    k = S if sky_positions is None else min(max(1, int(sky_positions)), S)
+    k = S if plan.positions is None else min(max(1, int(plan.positions)), S)
+    if rays is not None:
+        k = 1            # a measured point's positions are one ray: its integrals are one
     subset = None if k >= S else jit_array(
         mi.UInt32, np.arange(P)[:, None] * S + np.arange(k)[None, :])
     # a fit's: the wide nodes and the diffuse integral at k / 2 positions of each half
     half = S // 2
-    kw = 0 if wide_share is None else max(1, int(S * float(wide_share)) // 2)
+    kw = 0 if plan.wide_share is None else max(1, int(S * float(plan.wide_share)) // 2)
     is_wide = chebyshev_nodes(*SIGMA_TABLE) >= WIDE_SIGMA
     wide = k >= S and share is None and 1 <= kw < half and 0 < is_wide.sum() < len(is_wide)
     if wide:

@@ -1,6 +1,12 @@
-"""Where rays meet a scene: the surface, its material and normal (for measured points)."""
+"""Where rays meet a scene: the surface, its material and normal (for measured points), and
+the light a white Lambertian surface reflects there (an observation table's reference)."""
 
 import numpy as np
+
+from .basis_table import TableModel, trace_table
+from .daylight import jit_array
+from .fit_model import WardModel
+from .light_cache import DIRECTIONS, POSITIONS
 
 
 def load_points_scene(xml, variant):
@@ -33,3 +39,34 @@ def surface_hits(scene, origins, directions):
             "n": np.array(si.sh_frame.n, dtype=float).T,
             "t": np.where(valid, np.array(si.t, dtype=float), np.inf), "material": ids,
             "scale": scale}
+
+
+def pixel_points(scene, pixels):
+    """Where the central rays of ``pixels`` ((P, 2) x, y) of the scene's first sensor meet the
+    scene: :func:`surface_hits`' dict (``p`` NaN where a ray misses)."""
+    import mitsuba as mi
+
+    sensor = scene.sensors()[0]
+    w, h = sensor.film().crop_size()
+    uv = (np.asarray(pixels, dtype=float).reshape(-1, 2) + 0.5) / [w, h]
+    ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
+                               jit_array(mi.Point2f, uv[:, 0], uv[:, 1]), mi.Point2f(0.5, 0.5))
+    return surface_hits(scene, np.array(ray.o, dtype=float).T, np.array(ray.d, dtype=float).T)
+
+
+def lambertian_radiance(xml, variant, skies, rays, material, max_depth, seed=0,
+                        positions=POSITIONS, directions=DIRECTIONS):
+    """The radiance a white Lambertian surface (reflectance 1) on ``material`` reflects along
+    ``rays`` (:class:`~.light_cache.PointRays`, P points x T frames) under ``skies`` (T) in
+    scene ``xml`` loaded in ``variant``, traced by the light cache as a fit traces its points
+    (``max_depth`` for the light arriving from the rest of the scene), and its Monte Carlo
+    variance: (P, T, 3) [W m^-2 sr^-1] and [(W m^-2 sr^-1)^2]."""
+    from . import setup
+
+    scene = load_points_scene(xml, variant)
+    table, _ = trace_table(scene, setup(variant).traverse(scene), list(skies), rays, material,
+                           lambda cache: WardModel(cache, "colour", "ward"), seed=seed,
+                           positions=positions, directions=directions, max_depth=max_depth)
+    # the colour model at C = 1, rho_s = 0: rho_d = 1, no lobe (its roughness is moot)
+    return TableModel(table, "colour").radiance_and_variance(np.array([1.0, 1.0, 1.0, 0.0,
+                                                                        0.1]))

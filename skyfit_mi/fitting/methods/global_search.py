@@ -25,6 +25,8 @@ from .levenberg_marquardt import polish
 #: sigma_alpha grid: the ideal mirror, then log-spaced.
 SIGMA_GRID = np.concatenate([[0.0], np.geomspace(0.004, 0.5, 64)])
 RHO_GRID = np.linspace(0.0, 1.0, 101)
+#: Roughness values whose lobe arrays (P, T, 3) the grid's sums take at once.
+SIGMA_CHUNK = 8
 #: Resolution of the profiles near the optimum.
 RHO_FINE = np.linspace(0.0, 1.0, 2001)
 SIGMA_FINE_POINTS = 21
@@ -71,20 +73,45 @@ def near_saturation(obs):
     return obs.y >= obs.sensor.max_code - SATURATION_BAND * obs.sigma
 
 
+def sigma_chunks(G):
+    """(slice, values) over the roughness axis of the lobe basis ``G``: an array (K, P, T, 3)
+    in slices of SIGMA_CHUNK, or a lazy :class:`~skyfit_mi.render.basis_table.Lobes` in its
+    own chunks, so that only a few roughness values' arrays exist at once."""
+    if hasattr(G, "chunks"):
+        yield from G.chunks()
+        return
+    for k in range(0, len(G), SIGMA_CHUNK):
+        yield slice(k, k + SIGMA_CHUNK), G[k:k + SIGMA_CHUNK]
+
+
+def _per_sigma(G, *terms):
+    """Each of ``terms`` (functions of a chunk of G) over all of G's roughness values,
+    concatenated along the first axis."""
+    parts = [[] for _ in terms]
+    for _, g in sigma_chunks(G):
+        for out, f in zip(parts, terms):
+            out.append(f(g))
+    return tuple(np.concatenate(p) for p in parts)
+
+
 def _basis_sums(w, D, G, keep):
     """The weighted inner products of the basis, <D,D>, <D,G_k>, <G_k,G_k>, summed over frames
     and over the axes of 'ptc' (pixels, channels) not in ``keep`` ('', 'c', 'p' or 'pc': kept
     axes stay, in that order, after the K of the G terms)."""
     Dw = D * w
-    return (np.einsum(f"ptc,ptc->{keep}", Dw, D), np.einsum(f"ptc,kptc->k{keep}", Dw, G),
-            np.einsum(f"ptc,kptc->k{keep}", w, G * G))
+    return (np.einsum(f"ptc,ptc->{keep}", Dw, D),
+            *_per_sigma(G, lambda g: np.einsum(f"ptc,kptc->k{keep}", Dw, g),
+                        lambda g: np.einsum(f"ptc,kptc->k{keep}", w, g * g)))
 
 
 def _weighted_sums(y, w, D, G, keep):
     """:func:`_basis_sums` and the data's <y,D>, <y,G_k>, <y,y>, reduced alike."""
-    yw = y * w
-    return (*_basis_sums(w, D, G, keep), np.einsum(f"ptc,ptc->{keep}", yw, D),
-            np.einsum(f"ptc,kptc->k{keep}", yw, G), np.einsum(f"ptc,ptc->{keep}", yw, y))
+    yw, Dw = y * w, D * w
+    dg, gg, yg = _per_sigma(G, lambda g: np.einsum(f"ptc,kptc->k{keep}", Dw, g),
+                            lambda g: np.einsum(f"ptc,kptc->k{keep}", w, g * g),
+                            lambda g: np.einsum(f"ptc,kptc->k{keep}", yw, g))
+    return (np.einsum(f"ptc,ptc->{keep}", Dw, D), dg, gg, np.einsum(f"ptc,ptc->{keep}", yw, D),
+            yg, np.einsum(f"ptc,ptc->{keep}", yw, y))
 
 
 def grid_chi2(model, y, w, D, G, rho=RHO_GRID, per_pixel=False):
@@ -95,10 +122,11 @@ def grid_chi2(model, y, w, D, G, rho=RHO_GRID, per_pixel=False):
     """
     p = "p" if per_pixel else ""
     if model == "two":
-        H = G - D                                                    # (K,P,T,3)
-        A = np.einsum(f"ptc,ptc->{p}", w * (y - D), y - D)
-        B = np.einsum(f"ptc,kptc->k{p}", w * (y - D), H)
-        C = np.einsum(f"ptc,kptc->k{p}", w, H * H)
+        # with H = G - D (K, P, T, 3), a few roughness values at a time
+        r = w * (y - D)
+        A = np.einsum(f"ptc,ptc->{p}", r, y - D)
+        B, C = _per_sigma(G, lambda g: np.einsum(f"ptc,kptc->k{p}", r, g - D),
+                          lambda g: np.einsum(f"ptc,kptc->k{p}", w, (g - D) ** 2))
         r = _along_rho(rho, np.ndim(A))
         chi2 = A - 2 * r * B[:, None] + r ** 2 * C[:, None]
         thetas = np.stack([np.broadcast_to(r, chi2.shape), np.zeros_like(chi2)], axis=-1)
@@ -206,13 +234,13 @@ def global_search(problem, start, lower, upper, candidates=3, profile=True, grid
 
     ``start`` is not needed (the search is global); it is accepted for a uniform interface.
     ``profile`` = False skips the refined profiles (when only the minimum is wanted).
-    ``grid_basis`` = (D, G) on SIGMA_GRID from ``problem.model.basis``, if already computed
+    ``grid_basis`` = (D, G) on SIGMA_GRID from ``problem.model.lobes``, if already made
     (it depends on the light cache only, not on the data).
     """
     wm = problem.model
     model = wm.model
     y, w = _linearise(problem.obs, problem.mask)
-    D, G = grid_basis if grid_basis is not None else wm.basis(SIGMA_GRID)
+    D, G = grid_basis if grid_basis is not None else wm.lobes(SIGMA_GRID)
     chi2, thetas = grid_chi2(model, y, w, D, G)
     thetas[..., -1] = SIGMA_GRID[:, None]
     # candidates: best grid point, then the best ones at other roughness (distinct minima),
@@ -255,7 +283,7 @@ def refined_profile(wm, y, w, D, G, chi2, sigma_best):
     lo = SIGMA_GRID[max(k - 3, 1)] if sigma_best > 0 else 0.0
     hi = SIGMA_GRID[min(k + 3, len(SIGMA_GRID) - 1)]
     fine = np.geomspace(max(lo, 1e-3), hi, SIGMA_FINE_POINTS)
-    _, Gf = wm.basis(fine)
+    _, Gf = wm.lobes(fine)
     chi2_f, _ = grid_chi2(wm.model, y, w, D, Gf, RHO_FINE)
     chi2_all, _ = grid_chi2(wm.model, y, w, D, G, RHO_FINE)
     sig = np.concatenate([SIGMA_GRID, fine])

@@ -1,0 +1,513 @@
+"""A region's fitting model as a table: L = rho_d D + s G(sigma) with G tabulated in sigma.
+
+Ward's model is linear in its reflectances (thesis eq. 3.19): per pixel, frame and channel
+the cached light gives L = rho_d D + s G(sigma), with D the diffuse basis and G the lobe of
+rho_s = 1 (:class:`~.fit_model.WardModel`).  Only sigma_alpha enters non-linearly, so a fit
+needs the light's samples only through D and the one-dimensional function G(sigma).
+:func:`tabulate` evaluates them once with the ``ward`` plugin on the cached samples and keeps
+G as Chebyshev series in log sigma on each smooth piece of the model's sigma range (the
+pieces end where the model's form changes: the linear interpolation to the mirror below
+SIGMA_RESOLVED, and the lobe control variate's weight, a smoothstep between CONTROL_FULL and
+CONTROL_SIGMA).  Every later evaluation (search, polish, intervals, profiles, predictions)
+is then NumPy arithmetic on arrays of one value per pixel, frame and channel: the samples,
+which are 4096 times larger, can be dropped as soon as the table is made, so a sequence is
+traced in chunks of bounded size (:func:`~skyfit_mi.fitting.fit.FitSession`).
+
+The table keeps each half of every pixel's light-cache positions apart (as their mean M and
+half difference Delta, so that the whole cache is M and the halves are M +- Delta): the two
+halves are independent estimates, whose fits give the cache's own error on the parameters.
+The model's own Monte Carlo variance comes from the spread of the positions' estimates, as
+their covariances of D and G at a few roughness values (``VARIANCE_DEGREES``): the
+variance of rho_d D + s G is bilinear in the reflectances.
+"""
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .fit_model import PARAMETERS, reflectances
+from .light_cache import (CONTROL_FULL, CONTROL_SIGMA, DIRECTIONS, POSITIONS, SIGMA_LARGEST,
+                          SIGMA_RESOLVED, PointRays, build_light_cache)
+
+#: The smooth pieces of G(sigma) above SIGMA_RESOLVED (log sigma ends) and the first degree
+#: of each piece's Chebyshev series: doubled (the Lobatto nodes are nested, so every value is
+#: kept) until the series agrees with the model within TABLE_RTOL of the piece's largest value
+#: at CHECKS points between its nodes, or stops improving, up to MAX_DEGREE.  A board region of 64 pixels with 32
+#: positions needs 16, 6 and 32; the disc's with 8 positions 32 in the narrow piece (fewer
+#: samples, sharper sums of lobes).  TABLE_RTOL is far under any light cache's Monte Carlo
+#: error (~1e-3 per value).
+PIECES = ((SIGMA_RESOLVED, CONTROL_FULL), (CONTROL_FULL, CONTROL_SIGMA),
+          (CONTROL_SIGMA, SIGMA_LARGEST))
+DEGREES, MAX_DEGREE, TABLE_RTOL, CHECKS = (16, 6, 32), 64, 1e-5, 3
+#: Degrees of the Lobatto nodes (among each piece's first DEGREES') at which the table keeps
+#: the positions' spread, the model's Monte Carlo variance: it changes slowly with sigma.
+VARIANCE_DEGREES = (16, 3, 16)
+#: Light-cache samples traced and tabulated at once (:func:`trace_table`): 140 bytes each at
+#: the peak (the cache's arrays, the model's Dr.Jit copies and the tracer's; 3.4 million
+#: samples in one block peaked 475 MB above a one-pixel fit, tests/test_memory.py), so a
+#: block takes about 0.6 GB.
+CHUNK_SAMPLES, BYTES_PER_SAMPLE = 1 << 22, 140
+
+
+def _lobatto(n):
+    """The n + 1 Chebyshev-Lobatto points cos(pi k / n) in [-1, 1], ends included (so that
+    adjacent pieces share their end values)."""
+    return np.cos(np.pi * np.arange(n + 1) / n)
+
+
+def _x(sigma, lo, hi):
+    """sigma's coordinate in [-1, 1] on the piece [lo, hi], in log sigma."""
+    a, b = np.log(lo), np.log(hi)
+    return np.clip((2.0 * np.log(sigma) - (a + b)) / (b - a), -1.0, 1.0)
+
+
+def _sigma(x, lo, hi):
+    """The roughness at coordinates ``x`` of the piece [lo, hi] (its ends exactly)."""
+    a, b = np.log(lo), np.log(hi)
+    s = np.exp(0.5 * (a + b) + 0.5 * (b - a) * np.asarray(x, dtype=float))
+    return np.where(x <= -1, lo, np.where(x >= 1, hi, s))
+
+
+def _chebyshev_rows(x, n, derivative=False):
+    """T_k(x) for k = 0..n at the points ``x`` (K,), a (K, n + 1) array, and with
+    ``derivative`` dT_k/dx = k U_{k-1}(x) too (U the Chebyshev polynomials of the second
+    kind, by their recurrence)."""
+    x = np.atleast_1d(np.asarray(x, dtype=float))
+    T = np.polynomial.chebyshev.chebvander(x, n)
+    if not derivative:
+        return T
+    U = np.zeros_like(T)
+    U[:, 0] = 1.0
+    if n > 0:
+        U[:, 1] = 2.0 * x
+    for k in range(2, n + 1):
+        U[:, k] = 2.0 * x * U[:, k - 1] - U[:, k - 2]
+    dT = np.zeros_like(T)
+    dT[:, 1:] = np.arange(1, n + 1) * U[:, :n]
+    return T, dT
+
+
+@dataclass
+class BasisTable:
+    """D and G(sigma) of P pixels in T frames, three channels, for each half of the light
+    cache's positions (as mean and half difference, an axis of length 2), and the spread of
+    the whole cache's positions (its Monte Carlo variance).
+
+    Attributes
+    ----------
+    D : (2, P, T, 3)  the diffuse basis [W m^-2 sr^-1]
+    G0 : (2, P, T, 3)  G at sigma = 0, the ideal mirror
+    G1 : (2, P, T, 3)  G at SIGMA_RESOLVED (the model is linear in sigma between)
+    coef : one per piece of PIECES, (2, degree + 1, P, T, 3) float32 Chebyshev coefficients
+        of G in log sigma [W m^-2 sr^-1]
+    VDD : (P, T, 3)  var(D) over the positions' estimates / S [(W m^-2 sr^-1)^2]
+    VDG, VGG : (V, P, T, 3)  cov(D, G) and var(G) likewise at the V roughness values
+        ``var_sigmas`` (:func:`variance_sigmas`)
+    hit : (P, T) bool  every position of the pixel lands on the material
+    sun_half_cos : (P, T, S) float32  the light cache's, per position (NaN without sun)
+    normalisation : the Ward normalisation of the lobe
+    """
+
+    D: np.ndarray
+    G0: np.ndarray
+    G1: np.ndarray
+    coef: list
+    VDD: np.ndarray
+    VDG: np.ndarray
+    VGG: np.ndarray
+    hit: np.ndarray
+    sun_half_cos: np.ndarray
+    normalisation: str = "ward"
+
+    #: The pixel axis of each array field (the frame axis follows it).
+    AXES = {"D": 1, "G0": 1, "G1": 1, "coef": 2, "VDD": 0, "VDG": 1, "VGG": 1, "hit": 0,
+            "sun_half_cos": 0}
+
+    @property
+    def shape(self):
+        """(P, T)."""
+        return self.D.shape[1:3]
+
+    @property
+    def var_sigmas(self):
+        return variance_sigmas()
+
+    def nbytes(self):
+        """Memory the table's arrays take [bytes]."""
+        return sum(c.nbytes for c in self.coef) + sum(
+            getattr(self, k).nbytes for k in self.AXES if k != "coef")
+
+    def _map(self, f):
+        """A table with f(array, pixel axis) applied to every array field."""
+        return BasisTable(**{k: [f(c, a) for c in self.coef] if k == "coef"
+                             else f(getattr(self, k), a) for k, a in self.AXES.items()},
+                          normalisation=self.normalisation)
+
+    def subset(self, rows=slice(None), frames=slice(None)):
+        """The table of pixels ``rows`` and frames ``frames`` (indices or slices)."""
+        def cut(x, axis):
+            x = np.take(x, np.arange(x.shape[axis])[rows], axis=axis)
+            return np.take(x, np.arange(x.shape[axis + 1])[frames], axis=axis + 1)
+        return self._map(cut)
+
+    @staticmethod
+    def join(tables, axis):
+        """Tables of the same frames stacked by pixels (``axis`` 'pixels') or of the same pixels
+        by frames ('frames'); series of different degrees padded with zero coefficients."""
+        off = {"pixels": 0, "frames": 1}[axis]
+        t0 = tables[0]
+        out = {k: np.concatenate([getattr(t, k) for t in tables], axis=a + off)
+               for k, a in t0.AXES.items() if k != "coef"}
+        out["coef"] = []
+        for i in range(len(t0.coef)):
+            n = max(t.coef[i].shape[1] for t in tables)
+            out["coef"].append(np.concatenate(
+                [np.pad(t.coef[i], [(0, 0), (0, n - t.coef[i].shape[1])]
+                        + [(0, 0)] * (t.coef[i].ndim - 2)) for t in tables], axis=2 + off))
+        return BasisTable(**out, normalisation=t0.normalisation)
+
+    def part(self, j):
+        """The whole cache's table (j = 0), or that of its first (1) or second (2) half: the
+        same layout, with a zero half difference (the spread stays the whole cache's)."""
+        sign = (0.0, 1.0, -1.0)[j]
+
+        def pick(x):
+            v = x[0] if j == 0 else (x[0] + sign * x[1]).astype(x.dtype)
+            return np.stack([v, np.zeros_like(v)])
+        return replace(self, D=pick(self.D), G0=pick(self.G0), G1=pick(self.G1),
+                       coef=[pick(c) for c in self.coef])
+
+    def variance(self, rho_d, spec, sigma):
+        """The whole cache's Monte Carlo variance of L = rho_d D + s G(sigma), (P, T, 3):
+        the positions' covariances, interpolated between ``var_sigmas`` (in sigma below
+        SIGMA_RESOLVED, in log sigma above; var(G) geometrically, the correlation of D and G
+        linearly)."""
+        v = self.var_sigmas
+        k = int(np.clip(np.searchsorted(v, sigma, side="right") - 1, 0, len(v) - 2))
+        lo, hi = v[k], v[k + 1]
+        if k == 0:
+            t = np.clip((sigma - lo) / (hi - lo), 0.0, 1.0)
+        else:
+            t = np.clip(np.log(max(sigma, lo) / lo) / np.log(hi / lo), 0.0, 1.0)
+        # var(G) geometrically (it grows like exp(-c / sigma^2) where a lobe starts to take in
+        # the sun), the correlation of D and G linearly
+        tiny = 1e-30
+        ends = [np.maximum(self.VGG[i].astype(float), tiny) for i in (k, k + 1)]
+        VGG = ends[0] ** (1 - t) * ends[1] ** t
+        r = [self.VDG[i] / np.sqrt(np.maximum(self.VDD, tiny) * e)
+             for i, e in zip((k, k + 1), ends)]
+        VDG = np.clip((1 - t) * r[0] + t * r[1], -1, 1) * np.sqrt(np.maximum(self.VDD, tiny)
+                                                                 * VGG)
+        return np.maximum(rho_d**2 * self.VDD + 2 * rho_d * spec * VDG + spec**2 * VGG, 0.0)
+
+    def lobe(self, sigma, derivative=False, half_difference=False):
+        """G at the roughness values ``sigma`` (K,): (K, P, T, 3) float64, and with
+        ``derivative`` dG/dsigma too; ``half_difference``: the halves' Delta instead of G."""
+        h = int(half_difference)
+        sigma = np.atleast_1d(np.asarray(sigma, dtype=float))
+        out = np.empty((len(sigma),) + self.D.shape[1:])
+        dout = np.empty_like(out) if derivative else None
+        low = sigma < SIGMA_RESOLVED
+        if low.any():
+            G0, G1 = self.G0[h].astype(float), self.G1[h].astype(float)
+            t = (sigma[low] / SIGMA_RESOLVED)[:, None, None, None]
+            out[low] = G0 + t * (G1 - G0)
+            if derivative:
+                dout[low] = (G1 - G0) / SIGMA_RESOLVED
+        piece = np.searchsorted([p[1] for p in PIECES], sigma, side="left")
+        piece = np.minimum(piece, len(PIECES) - 1)
+        for i, (lo, hi) in enumerate(PIECES):
+            at = np.flatnonzero(~low & (piece == i))
+            if not len(at):
+                continue
+            c = self.coef[i][h]
+            n = c.shape[0] - 1
+            x = _x(sigma[at], lo, hi)
+            T, dT = _chebyshev_rows(x, n, True) if derivative else (_chebyshev_rows(x, n), None)
+            flat = c.reshape(n + 1, -1)
+            out[at] = (T.astype(flat.dtype) @ flat).reshape((len(at),) + out.shape[1:])
+            if derivative:
+                # dx/dsigma = 2 / (sigma (log hi - log lo))
+                scale = 2.0 / (sigma[at] * (np.log(hi) - np.log(lo)))
+                d = (dT.astype(flat.dtype) @ flat).reshape((len(at),) + out.shape[1:])
+                dout[at] = d * scale[:, None, None, None]
+        return (out, dout) if derivative else out
+
+
+def tabulate(cache, wm):
+    """The :class:`BasisTable` of a :class:`~.light_cache.LightCache` ``cache`` through its
+    :class:`~.fit_model.WardModel` ``wm``: D and G at every Chebyshev node of PIECES (one pass
+    of the basis plugin each, per position, the two halves summed apart)."""
+    S = wm.S
+    h = S // 2
+    if h < 1:
+        raise ValueError("a light cache with one position per pixel cannot be tabulated")
+
+    def halves(shares):
+        # each half as an estimate of the whole (weights S / h), then their mean and half
+        # difference; a last odd position belongs to neither half (as LightCache.halves)
+        a = shares[:, :, :h].sum(axis=2) * (S / h)
+        b = shares[:, :, h:2 * h].sum(axis=2) * (S / h)
+        return np.stack([(a + b) / 2, (a - b) / 2])
+
+    def spread(x, y):
+        # the covariance of the positions' estimates (S times each share) / S: the variance
+        # of their mean (WardModel.radiance_and_variance's)
+        xs, ys = x * S, y * S
+        return np.sum((xs - xs.mean(axis=2, keepdims=True)) * (ys - ys.mean(axis=2,
+                      keepdims=True)), axis=2) / ((S - 1) * S) if S > 1 else np.zeros(
+            x.shape[:2] + x.shape[3:])
+
+    d_shares = wm._diffuse_shares()
+    want = set(variance_sigmas().tolist())
+    known, moments = {}, {}
+
+    def lobe(sigma):
+        if sigma not in known:
+            shares = wm._shares(1.0, sigma)
+            wm.basis_evaluations += 1
+            known[sigma] = halves(shares)
+            if sigma in want:
+                moments[sigma] = (spread(d_shares, shares), spread(shares, shares))
+        return known[sigma]
+    D = halves(d_shares)
+    G0, G1 = lobe(0.0), lobe(SIGMA_RESOLVED)
+    coef = [_piece(lobe, lo, hi, n) for (lo, hi), n in zip(PIECES, DEGREES)]
+    f32 = np.float32
+    VDG, VGG = (np.stack([moments[float(v)][i] for v in variance_sigmas()]).astype(f32)
+                for i in (0, 1))
+    return BasisTable(D.astype(f32), G0.astype(f32), G1.astype(f32), coef,
+                      spread(d_shares, d_shares).astype(f32), VDG, VGG, cache.hit,
+                      cache.sun_half_cos.astype(f32), wm.normalisation)
+
+
+def variance_sigmas():
+    """The roughness values at which a table keeps its positions' spread: the mirror, then
+    the Lobatto nodes of degree VARIANCE_DEGREES of every piece (among the nodes of its first
+    series, so always evaluated), ascending."""
+    out = {0.0}
+    for (lo, hi), n, m in zip(PIECES, DEGREES, VARIANCE_DEGREES):
+        out |= set(_sigma(_lobatto(n)[::n // m], lo, hi).tolist())
+    return np.array(sorted(out))
+
+
+def _piece(lobe, lo, hi, n):
+    """Chebyshev coefficients (2, n + 1, P, T, 3) of ``lobe(sigma)`` (the halves' mean and half
+    difference of G) on the piece [lo, hi] in log sigma, the degree n doubled until the series
+    holds at CHECKS points between its nodes (TABLE_RTOL), or stops improving (the model's
+    own float32 rounding: a tiny light such as a lab's directional one makes the lobe's
+    exponent large), or reaches MAX_DEGREE."""
+    C = np.polynomial.chebyshev
+    last = np.inf
+    while True:
+        x = _lobatto(n)
+        values = np.stack([lobe(float(s)) for s in _sigma(x, lo, hi)])     # (n + 1, 2, ...)
+        flat = np.linalg.solve(C.chebvander(x, n), values.reshape(n + 1, -1))
+        if n >= MAX_DEGREE:
+            break
+        # between nodes: the midpoints of CHECKS of the widest gaps, spread over the piece
+        mid = np.cos(np.pi * (np.linspace(0, n - 1, CHECKS).round() + 0.5) / n)
+        worst = max(np.max(np.abs(C.chebvander([m], n) @ flat - _lobe_at(lobe, m, lo, hi)))
+                    for m in mid) / max(np.max(np.abs(values[:, 0])), 1e-30)
+        if worst <= TABLE_RTOL or worst > 0.5 * last:
+            break
+        last, n = worst, 2 * n
+    return np.moveaxis(flat.reshape(values.shape), 0, 1).astype(np.float32)
+
+
+def _lobe_at(lobe, x, lo, hi):
+    """``lobe`` at the coordinate ``x`` of the piece [lo, hi], flattened."""
+    return lobe(float(_sigma(x, lo, hi))).reshape(1, -1)
+
+
+#: Bytes a fit takes per value (pixel or point, frame and channel) beside its table: the
+#: observations, the model's arrays and the search's (a 400-point x 96-light table's run
+#: peaked 74 MB above its trace, 0.64 kB a value), and the process's base [bytes].
+FIT_BYTES_PER_VALUE, BASE_BYTES = 1024, 300 << 20
+
+
+def memory_estimate(P, T, positions, directions):
+    """The most a fit of P points (or pixels) in T frames takes [bytes]: its table at
+    MAX_DEGREE in every piece, the fit's own arrays, one block of the light and the base."""
+    arrays = 2 * sum(MAX_DEGREE + 1 for _ in PIECES) + 2 * len(variance_sigmas()) + 7
+    per_value = 4 * arrays + 4 * positions / 3 + FIT_BYTES_PER_VALUE
+    block = min(CHUNK_SAMPLES, P * T * positions * directions)
+    return int(P * T * 3 * per_value + block * BYTES_PER_SAMPLE + BASE_BYTES)
+
+
+def available_memory():
+    """The memory this machine can give a new allocation [bytes] (Linux's MemAvailable;
+    elsewhere None)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def chunks(P, T, per_value, budget):
+    """(rows, frames) slices that split P points x T frames, each with ``per_value`` samples,
+    into blocks of at most ``budget`` samples (at least one point of one frame): as many
+    points per block as fit (the light cache's kernels run over a block's points), then as
+    many frames."""
+    rows = int(min(P, max(1, budget // per_value)))
+    frames = int(min(T, max(1, budget // (per_value * rows))))
+    return [(slice(r, min(r + rows, P)), slice(f, min(f + frames, T)))
+            for f in range(0, T, frames) for r in range(0, P, rows)]
+
+
+def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
+                directions=DIRECTIONS, budget=None, **options):
+    """The :class:`BasisTable` of points ``at`` (pixels (P, 2) or
+    :class:`~.light_cache.PointRays`) on material ``bsdf_id`` (one, or one per point) under
+    ``skies``: the light cache traced (:func:`~.light_cache.build_light_cache`, ``options``
+    its own) and tabulated block by block (:func:`chunks`, ``budget`` samples each,
+    CHUNK_SAMPLES by default), so that
+    memory stays bounded whatever the points and frames.  ``model_of(cache)`` makes the
+    :class:`~.fit_model.WardModel` of a block's cache.  One block takes ``seed`` itself (the
+    same samples as an untabulated cache); several take seeds drawn from it.
+
+    Returns the table and the number of blocks.
+    """
+    rays = at if isinstance(at, PointRays) else None
+    P, T = len(at), len(skies)
+    ids = np.broadcast_to(np.asarray(bsdf_id, dtype=object), (P,))
+    blocks = chunks(P, T, int(positions) * int(directions), budget or CHUNK_SAMPLES)
+    seeds = [seed] if len(blocks) == 1 else \
+        np.random.SeedSequence(seed).generate_state(len(blocks)).tolist()
+    by_frames = []
+    for (rows, frames), s in zip(blocks, seeds):
+        if rays is None:
+            where = np.asarray(at)[rows]
+        else:
+            where = PointRays(rays.origins[rows, frames], rays.directions[rows, frames])
+        cache = build_light_cache(scene, params, skies[frames], where, ids[rows],
+                                  positions=positions, directions=directions, seed=int(s),
+                                  **options)
+        table = tabulate(cache, model_of(cache))
+        del cache
+        if not by_frames or by_frames[-1][0] != frames:
+            by_frames.append((frames, []))
+        by_frames[-1][1].append(table)
+    table = BasisTable.join([BasisTable.join(t, "pixels") for _, t in by_frames], "frames")
+    return table, len(blocks)
+
+
+class Lobes:
+    """The lobe basis G at roughness values ``sigmas``, made a few at a time when used:
+    ``lobe(sigmas)`` gives (k, P, T, 3); ``chunks()`` yields (slice, values) of ``chunk``
+    roughness values (the global search's sums, :func:`~skyfit_mi.fitting.methods.
+    global_search.sigma_chunks`), so that the grid's (K, P, T, 3) never exists at once;
+    ``map(f)`` applies f to every chunk's values."""
+
+    def __init__(self, lobe, sigmas, chunk=8):
+        self.lobe, self.sigmas, self.chunk = lobe, np.asarray(sigmas, dtype=float), int(chunk)
+
+    def __len__(self):
+        return len(self.sigmas)
+
+    def chunks(self):
+        for k in range(0, len(self), self.chunk):
+            yield slice(k, k + self.chunk), self.lobe(self.sigmas[k:k + self.chunk])
+
+    def map(self, f):
+        return Lobes(lambda s: f(self.lobe(s)), self.sigmas, self.chunk)
+
+
+class TableModel:
+    """The fitting model of a region on its :class:`BasisTable`: the interface of
+    :class:`~.fit_model.WardModel` (radiance, Jacobian, variance, the global search's basis,
+    gradients) in NumPy, exact to the table's interpolation.
+
+    Parameters
+    ----------
+    table : BasisTable
+    model : {'two', 'achromatic', 'colour'}
+    """
+
+    def __init__(self, table, model):
+        self.table, self.model = table, model
+        self.normalisation = table.normalisation
+        self.names = PARAMETERS[model]
+        self.shape = table.shape
+        self.evaluations = self.basis_evaluations = 0
+
+    def half(self, j):
+        """The model of the first (j = 1) or second (j = 2) half of the cache's positions."""
+        return TableModel(self.table.part(j), self.model)
+
+    def _parts(self, theta, derivative=False):
+        rho_d, spec, d_rho_d, d_spec = reflectances(self.model, theta)
+        G = self.table.lobe(theta[-1], derivative)
+        return rho_d, spec, d_rho_d, d_spec, G
+
+    def radiance(self, theta):
+        """L [W m^-2 sr^-1] for parameters ``theta``, shape (P, T, 3)."""
+        self.evaluations += 1
+        rho_d, spec, _, _, G = self._parts(theta)
+        return rho_d * self.table.D[0] + spec * G[0]
+
+    def radiance_and_variance(self, theta):
+        """``radiance(theta)`` and its Monte Carlo variance [(W m^-2 sr^-1)^2], (P, T, 3): the
+        spread of the positions' estimates (:meth:`BasisTable.variance`)."""
+        self.evaluations += 1
+        rho_d, spec, _, _, G = self._parts(theta)
+        L = rho_d * self.table.D[0] + spec * G[0]
+        return L, self.table.variance(rho_d, spec, float(theta[-1]))
+
+    def jacobian(self, theta):
+        """(L, dL/dtheta) with shapes (P, T, 3) and (P, T, 3, n_params)."""
+        self.evaluations += 1
+        rho_d, spec, d_rho_d, d_spec, (G, dG) = self._parts(theta, derivative=True)
+        D = self.table.D[0].astype(float)
+        J = D[..., None] * d_rho_d + G[0][..., None] * d_spec
+        J[..., -1] = spec * dG[0]
+        return rho_d * D + spec * G[0], J
+
+    def gradient(self, theta, dloss_dL):
+        """d(loss)/d(theta) given dloss/dL (P, T, 3)."""
+        _, J = self.jacobian(theta)
+        return np.einsum("ptc,ptcn->n", dloss_dL, J)
+
+    def basis(self, sigmas, halves=False):
+        """D (P, T, 3) and G (K, P, T, 3) at the K ``sigmas``; with ``halves`` a list of them
+        for the whole cache and each half (as :meth:`~.fit_model.WardModel.basis`)."""
+        sigmas = np.asarray(sigmas, dtype=float)
+        t = self.table
+        D, G = t.D[0].astype(float), t.lobe(sigmas)
+        self.basis_evaluations += len(sigmas)
+        if not halves:
+            return D, G
+        dD, dG = t.D[1].astype(float), t.lobe(sigmas, half_difference=True)
+        return [(D, G), (D + dD, G + dG), (D - dD, G - dG)]
+
+    def lobes(self, sigmas, halves=False):
+        """As :meth:`basis`, with each G a lazy :class:`Lobes` (memory of a few roughness
+        values' arrays, whatever the points and frames)."""
+        sigmas = np.asarray(sigmas, dtype=float)
+        t = self.table
+        D = t.D[0].astype(float)
+        self.basis_evaluations += len(sigmas)
+        whole = Lobes(t.lobe, sigmas)
+        if not halves:
+            return D, whole
+        dD = t.D[1].astype(float)
+
+        def half(sign):
+            return Lobes(lambda s: t.lobe(s) + sign * t.lobe(s, half_difference=True), sigmas)
+        return [(D, whole), (D + dD, half(1.0)), (D - dD, half(-1.0))]
+
+    def radiances(self, thetas, reduce=None):
+        """L at many parameter sets ``thetas`` (n, n_params): (n, P, T, 3), or ``reduce`` of
+        each (a linear map of a (P, T, 3) radiance, applied to the basis)."""
+        thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
+        reduce = reduce or (lambda x: x)
+        uniq, inverse = np.unique(thetas[:, -1], return_inverse=True)
+        D = np.asarray(reduce(self.table.D[0].astype(float)))
+        G = np.stack([np.asarray(reduce(g)) for g in self.table.lobe(uniq)])[inverse.ravel()]
+        refl = np.array([reflectances(self.model, th)[:2] for th in thetas])   # (n, 2, 3)
+        shape = (len(thetas),) + (1,) * (D.ndim - 1) + (3,)
+        return refl[:, 0].reshape(shape) * D + refl[:, 1].reshape(shape) * G

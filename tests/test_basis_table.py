@@ -1,0 +1,137 @@
+"""The fit's tabulated model (render/basis_table.py) against the Dr.Jit model it tabulates, and
+the light traced in blocks of bounded size."""
+
+import numpy as np
+import pytest
+
+from skyfit_mi.fitting.chi2 import parse_region
+
+REGION = parse_region("rect:4,4,7,7")          # 16 pixels, all on the disc
+
+
+@pytest.fixture(scope="module")
+def traced(days):
+    """A session's raw light cache, the Dr.Jit model on it and its table."""
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.render.basis_table import tabulate
+    from skyfit_mi.render.fit_model import WardModel
+
+    s = FitSession(days["clean"], "disc", REGION, model="colour", positions=8, directions=128,
+                   seed=2, trace=False)
+    cache = s.light_cache()
+    wm = WardModel(cache, "colour")
+    return s, cache, wm, tabulate(cache, wm)
+
+
+# every piece, its ends, the mirror's interpolation and the mirror itself
+SIGMAS = [0.0, 1e-4, 0.001, 0.002, 0.0031, 0.011, 0.035, 0.042, 0.05, 0.07, 0.13, 0.31, 0.5]
+
+
+@pytest.mark.parametrize("sigma", SIGMAS)
+def test_table_equals_the_dr_jit_model(traced, sigma):
+    from skyfit_mi.render.basis_table import TableModel
+
+    _, _, wm, table = traced
+    theta = np.array([0.7, 0.4, 0.2, 0.3, sigma])
+    a, b = wm.radiance(theta), TableModel(table, "colour").radiance(theta)
+    # float32 evaluation on both sides; the interpolation adds < 1e-6 (DEGREES)
+    assert np.max(np.abs(a - b)) <= 2e-6 * np.max(np.abs(a)), sigma
+
+
+@pytest.mark.parametrize("sigma", [0.001, 0.004, 0.02, 0.045, 0.2])
+def test_table_jacobian_matches_its_finite_differences(traced, sigma):
+    from skyfit_mi.render.basis_table import TableModel
+
+    from dataclasses import replace
+
+    t = traced[3]
+    # in double precision, so that small steps see the derivative, not float32's rounding
+    m = TableModel(replace(t, D=t.D.astype(float), G0=t.G0.astype(float),
+                           G1=t.G1.astype(float), coef=[c.astype(float) for c in t.coef]),
+                   "colour")
+    theta = np.array([0.6, 0.5, 0.3, 0.2, sigma])
+    L, J = m.jacobian(theta)
+    assert np.allclose(L, m.radiance(theta))
+    for i, h in enumerate([1e-4] * 4 + [1e-4 * sigma]):
+        d = np.zeros(5)
+        d[i] = h
+        fd = (m.radiance(theta + d) - m.radiance(theta - d)) / (2 * h)
+        assert np.max(np.abs(J[..., i] - fd)) <= 1e-4 * np.max(np.abs(fd)) + 1e-9, i
+
+
+def test_halves_are_the_caches_halves_and_the_spread_its_positions(traced):
+    """The table's halves are the LightCache's halves; its variance is the Dr.Jit model's
+    (the spread of the positions' estimates): exact at the roughness values it keeps,
+    interpolated between them (geometrically: the variance climbs steeply where a lobe starts
+    to take in the sun)."""
+    from skyfit_mi.render.basis_table import TableModel, variance_sigmas
+    from skyfit_mi.render.fit_model import WardModel
+
+    _, cache, wm, table = traced
+    m = TableModel(table, "colour")
+    theta = np.array([0.5, 0.5, 0.5, 0.2, 0.08])
+    for j, half in zip((1, 2), cache.halves()):
+        a = WardModel(half, "colour").radiance(theta)
+        b = m.half(j).radiance(theta)
+        assert np.max(np.abs(a - b)) <= 2e-6 * np.max(np.abs(a))
+    for sigma in variance_sigmas()[::3]:
+        theta[-1] = sigma
+        (a, va), (b, vb) = wm.radiance_and_variance(theta), m.radiance_and_variance(theta)
+        assert np.allclose(vb, va, rtol=1e-3, atol=1e-6 * va.max()), sigma
+    ratios = []
+    for sigma in np.geomspace(0.0025, 0.5, 30):
+        theta[-1] = sigma
+        ratios.append(m.radiance_and_variance(theta)[1].sum()
+                      / wm.radiance_and_variance(theta)[1].sum())
+    assert 0.7 < min(ratios) and max(ratios) < 1.4, np.round(ratios, 2)
+
+
+def test_blocks_cover_every_point_and_frame_once_within_the_budget():
+    from skyfit_mi.render.basis_table import chunks
+
+    for P, T, per, budget in ((16, 13, 256, 10**9), (400, 96, 4096, 1 << 23), (5, 7, 100, 250),
+                              (3, 2, 1000, 10)):
+        seen = np.zeros((P, T), int)
+        for rows, frames in chunks(P, T, per, budget):
+            seen[rows, frames] += 1
+            n = (rows.stop - rows.start) * (frames.stop - frames.start)
+            assert n == 1 or n * per <= budget
+        assert (seen == 1).all()
+    assert len(chunks(16, 13, 256, 10**9)) == 1
+
+
+def test_light_traced_in_blocks_agrees_with_one_block(traced):
+    """A small budget splits the trace into blocks of points and frames, each with its own
+    seed: the table has the same layout, and its radiance agrees with the one-block table's
+    within their Monte Carlo errors."""
+    from skyfit_mi.render.basis_table import TableModel, trace_table
+    from skyfit_mi.render.fit_model import WardModel
+
+    s, _, _, table = traced
+    opts = s._cache_options()
+    budget = 5 * 13 * opts["positions"] * opts["directions"]        # 5 pixels of all frames
+    blocks, n = trace_table(s.scene, s.params, s.skies, s.obs.pixels, "disc",
+                            lambda c: WardModel(c, "colour"), budget=budget, **opts)
+    assert n == 4 and blocks.shape == table.shape and blocks.hit.all()
+    theta = np.array([0.5, 0.6, 0.7, 0.25, 0.1])
+    (a, va), (b, vb) = (TableModel(t, "colour").radiance_and_variance(theta)
+                        for t in (table, blocks))
+    # region means per frame and channel
+    z = (a.mean(axis=0) - b.mean(axis=0)) / np.sqrt((va.sum(axis=0) + vb.sum(axis=0))
+                                                    / len(a) ** 2)
+    assert np.all(np.abs(z) < 5) and np.sqrt(np.mean(z**2)) < 2.5, z
+
+
+def test_a_fit_beyond_the_machines_memory_is_refused_up_front_with_its_estimate(days,
+                                                                                monkeypatch):
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.render import basis_table
+
+    monkeypatch.setattr("skyfit_mi.fitting.fit.available_memory", lambda: 100 << 20)
+    need = basis_table.memory_estimate(16, 13, 8, 128)
+    assert need > 100 << 20
+    with pytest.raises(SkyfitError, match=r"needs up to 0\.\d GB, but this machine has 0\.1 GB "
+                                          r"available; fit fewer pixels \(--max-pixels\)") as e:
+        FitSession(days["clean"], "disc", REGION, positions=8, directions=128)
+    assert "\n" not in str(e.value)
