@@ -159,8 +159,8 @@ def _ingest(args):
     ingest(args.photos, args.spec, args.output, times_csv=args.times,
            name_pattern=args.name_pattern, tz=args.tz, site=args.site, response=args.response,
            gamma=args.gamma, exposure=args.exposure, calibrate=dict(args.calibrate or []),
-           colorchecker=args.colorchecker, vignetting=args.vignetting, noise=args.noise, overwrite=args.overwrite,
-           progress=not args.quiet)
+           colorchecker=args.colorchecker, vignetting=args.vignetting, noise=args.noise,
+           overwrite=args.overwrite, progress=not args.quiet)
 
 
 def _pixels(args):

@@ -35,6 +35,7 @@ writes it (frames atomically, manifest last) and a second run into it is refused
 
 import hashlib
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +44,8 @@ from ..errors import SkyfitError
 from ..files import FolderLock
 from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
+from .photo_times import frame_times
+from .photos import SUFFIXES, check_same_size, read_photo
 from .sequence import finish, frame_record, manifest_header, prepare_folder, write_frame
 from .spec import SpecError, read_spec, validate_spec
 
@@ -757,40 +760,169 @@ def _jpeg_errors(values, jpeg, sensor, noise, shown, progress, patches=None):
     return out
 
 
-def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None, tz=None,
-           site=None, response=None, gamma=None, exposure=None, calibrate=None,
-           colorchecker=None, vignetting="none", noise=None, overwrite=False, progress=True,
-           log=print):
+@dataclass
+class IngestOptions:
+    """What the user chose for an ingest (:func:`ingest`'s keywords, the CLI's options)."""
+
+    times_csv: object = None
+    name_pattern: str = None
+    tz: str = None
+    site: tuple = None
+    response: str = None
+    gamma: float = None
+    exposure: float = None
+    calibrate: dict = None
+    colorchecker: str = None
+    vignetting: str = "none"
+    noise: tuple = None
+
+    @property
+    def fitted(self):
+        """Whether the response is fitted from the calibration patches."""
+        return self.response == "fit"
+
+
+@dataclass
+class Frames:
+    """The photographs, in time order, with their times and the spec's frames for them."""
+
+    paths: list
+    photos: list
+    times: list
+    raw: dict
+    spec: object
+    lit: list                                      # indices of the frames with the sun up
+
+    @property
+    def size(self):
+        """(height, width)."""
+        return self.photos[0].values.shape[:2]
+
+
+@dataclass
+class Linear:
+    """The frames' encoding: the sensor model to invert, the float frames' scale [DN per
+    unit], the vignetting (h, w) and a measured flat field (or None), and the values [DN]."""
+
+    sensor: SensorModel
+    float_scale: float
+    falloff: np.ndarray
+    flat: np.ndarray
+    values: list
+
+
+@dataclass
+class Patches:
+    """The calibration's references seen in the lit frames (or, without any, the given first
+    exposure), the chart found, the response fitted from them, and the EXIF's relative
+    exposures."""
+
+    sensor: SensorModel
+    rel: np.ndarray
+    samples: list = None
+    patch: object = None
+    mask: np.ndarray = None
+    chart: dict = None
+    response_info: dict = None
+    given: float = None
+
+
+@dataclass
+class Noise:
+    """The read + shot noise model (a [DN^2], b [DN]), its record, and each JPEG frame's
+    errors (:func:`_jpeg_errors`) by frame index."""
+
+    a: float
+    b: float
+    info: dict
+    jpeg_errors: dict
+
+
+@dataclass
+class Exposures:
+    """Each lit frame's RGB exposure [sr m^2 W^-1] by index, the sensor at the first frame's,
+    the calibration's record (or None) and the EXIF's relative exposures (or None)."""
+
+    sensor: SensorModel
+    by_frame: dict
+    calibration: dict
+    rel: np.ndarray
+
+
+def ingest(photo_paths, spec_path, out_dir, *, overwrite=False, progress=True, log=print,
+           **choices):
     """Turn photographs into a sequence folder; returns the manifest dict.
+
+    Its stages, each with a typed result: :func:`check_choices`, :func:`read_frames`
+    (photographs, times and the spec's frames), :func:`linearise` (encoding and vignetting),
+    :func:`calibration_patches` (references, chart, fitted response), :func:`noise_model`
+    (read + shot noise and JPEG errors), :func:`frame_exposures`, then :func:`_write`.
 
     Parameters
     ----------
     photo_paths : list of paths (files, or folders whose images are taken in name order)
     spec_path : the spec (TOML/JSON) giving site, camera, scene and sky; its [time] is unused
     out_dir : the sequence folder to write
-    times_csv, name_pattern, tz : the frames' times (see :func:`.photo_times.frame_times`)
-    site : (latitude_deg, longitude_deg[, elevation_m]) overriding the spec's [location]
-    response, gamma : the encoding to invert (default: the spec's [sensor], else the files'), or
-        response 'fit': chosen and fitted from the ``calibrate`` patches (:func:`fit_response`)
-    exposure : absolute exposure of the first frame [sr m^2 W^-1]
-    calibrate : {material: (r, g, b) reflectance} of grey Lambertian references in the scene
-    colorchecker : the scene material a ColorChecker Classic in the photographs lies on: the
-        chart is found (:func:`.colorchecker.find_chart`) and its six neutral swatches join the
-        calibration patches; its chromatic ones check the result (``calibration.colorchecker``)
-    vignetting : 'none', 'cos4', or the path of a flat-field image
-    noise : (a [DN^2], b [DN]) of the noise model, or None to estimate it from the frames
+    choices : :class:`IngestOptions`' fields:
+        times_csv, name_pattern, tz : the frames' times (see :func:`.photo_times.frame_times`)
+        site : (latitude_deg, longitude_deg[, elevation_m]) overriding the spec's [location]
+        response, gamma : the encoding to invert (default: the spec's [sensor], else the
+            files'), or response 'fit': chosen and fitted from the ``calibrate`` patches
+            (:func:`fit_response`)
+        exposure : absolute exposure of the first frame [sr m^2 W^-1]
+        calibrate : {material: (r, g, b) reflectance} of grey Lambertian references in the scene
+        colorchecker : the scene material a ColorChecker Classic in the photographs lies on:
+            the chart is found (:func:`.colorchecker.find_chart`) and its six neutral swatches
+            join the calibration patches; its chromatic ones check the result
+            (``calibration.colorchecker``)
+        vignetting : 'none', 'cos4', or the path of a flat-field image
+        noise : (a [DN^2], b [DN]) of the noise model, or None to estimate it from the frames
     """
-    from .photo_times import frame_times
-    from .photos import SUFFIXES, check_same_size, read_photo
+    o = check_choices(IngestOptions(**choices))
+    frames = read_frames(photo_paths, spec_path, out_dir, o, log)
+    linear = linearise(frames, o)
+    patches = calibration_patches(frames, linear, o, log)
+    noise = noise_model(frames, linear.values, patches, o, progress, log)
+    exposures = frame_exposures(frames, patches, noise, o, log)
+    options = {"times_csv": str(o.times_csv), "name_pattern": o.name_pattern, "tz": o.tz,
+               "response": ("fit: " if o.fitted else "") + exposures.sensor.response,
+               "gamma": exposures.sensor.gamma, "exposure": o.exposure,
+               "calibrate": o.calibrate, "colorchecker": o.colorchecker,
+               "vignetting": str(o.vignetting), "noise": [noise.a, noise.b]}
+    run_id = _run_id(frames.paths, frames.spec.raw, options)
+    out = Path(out_dir)
+    with FolderLock(out):
+        prepare_folder(out, run_id, frames.size + (3,), overwrite, log)
+        return _write(out, frames, linear, noise, exposures, options, run_id, progress)
 
-    if noise is not None and not (len(noise) == 2 and np.all(np.isfinite(noise))
-                                  and min(noise) >= 0):
-        raise SkyfitError(f"--noise {','.join(f'{v:g}' for v in noise)}: give the read variance "
-                          "[DN^2] and the shot gain [DN] as two finite numbers of at least 0 "
-                          "(e.g. 0.64,0.02), or leave --noise out to estimate them.")
-    if exposure is not None and (calibrate or colorchecker):
+
+def check_choices(o):
+    """``o`` (:class:`IngestOptions`, its calibrate made a dict), or SkyfitError for choices
+    that contradict each other or cannot be used, before any photograph is read."""
+    o.calibrate = dict(o.calibrate or {})
+    if o.noise is not None and not (len(o.noise) == 2 and np.all(np.isfinite(o.noise))
+                                    and min(o.noise) >= 0):
+        raise SkyfitError(f"--noise {','.join(f'{v:g}' for v in o.noise)}: give the read "
+                          "variance [DN^2] and the shot gain [DN] as two finite numbers of at "
+                          "least 0 (e.g. 0.64,0.02), or leave --noise out to estimate them.")
+    if o.exposure is not None and (o.calibrate or o.colorchecker):
         raise SkyfitError("--exposure is not used when --calibrate or --colorchecker set the "
                           "exposure from the scene's reference; give one or the other.")
+    if o.colorchecker is not None and o.colorchecker in o.calibrate:
+        raise SkyfitError(f"{o.colorchecker!r} is named by both --calibrate and --colorchecker; "
+                          "the chart's material takes its reflectances from the chart's swatches: "
+                          "drop it from --calibrate.")
+    if o.fitted and not (o.calibrate or o.colorchecker):
+        raise SkyfitError("--response fit needs patches of known reflectance: name them with "
+                          "--calibrate MATERIAL=REFLECTANCE (two or more reflectances, or one "
+                          "seen at several EXIF exposures), or --colorchecker MATERIAL.")
+    return o
+
+
+def read_frames(photo_paths, spec_path, out_dir, o, log):
+    """The :class:`Frames` of the photographs (files, or folders of them in name order): read,
+    timed (:func:`.photo_times.frame_times`), sorted by time, and the spec made for their
+    times; night frames are kept out of the lit ones."""
     paths = []
     for p in map(Path, photo_paths):
         if p.is_dir():
@@ -809,17 +941,16 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
                           "sheet would be read as a photograph next time).")
     photos = [read_photo(p) for p in paths]
     check_same_size(list(zip(paths, photos)))
-    times = frame_times(paths, [p.metadata for p in photos], times_csv=times_csv,
-                        name_pattern=name_pattern, tz=tz, warn=log)
+    times = frame_times(paths, [p.metadata for p in photos], times_csv=o.times_csv,
+                        name_pattern=o.name_pattern, tz=o.tz, warn=log)
     order = np.argsort([t.timestamp() for t in times], kind="stable")
     paths, photos, times = ([x[i] for i in order] for x in (paths, photos, times))
     for a, b, ta, tb in zip(paths, paths[1:], times, times[1:]):
         if ta == tb:
             raise SkyfitError(f"{a.name} and {b.name} were both taken at {ta.isoformat()}; a "
                               "sequence has one frame per time: drop one of them.")
-
     h, w = photos[0].values.shape[:2]
-    raw, spec = spec_for_times(spec_path, times, tz, site, (w, h))
+    raw, spec = spec_for_times(spec_path, times, o.tz, o.site, (w, h))
     night = [paths[f.index].name for f in spec.frames if f.skipped]
     if len(night) == len(paths):
         raise SkyfitError(f"every frame was taken with the sun below the horizon (first: "
@@ -828,158 +959,165 @@ def ingest(photo_paths, spec_path, out_dir, *, times_csv=None, name_pattern=None
     if night:
         log(f"{len(night)} night frame(s) (sun below the horizon) are kept out of the sequence: "
             f"{', '.join(night)}")
+    return Frames(paths, photos, times, raw, spec,
+                  [i for i, f in enumerate(spec.frames) if not f.skipped])
 
-    fitted = response == "fit"
-    calibrate = dict(calibrate or {})
-    if colorchecker is not None and colorchecker in calibrate:
-        raise SkyfitError(f"{colorchecker!r} is named by both --calibrate and --colorchecker; "
-                          "the chart's material takes its reflectances from the chart's swatches: "
-                          "drop it from --calibrate.")
-    if fitted and not (calibrate or colorchecker):
-        raise SkyfitError("--response fit needs patches of known reflectance: name them with "
-                          "--calibrate MATERIAL=REFLECTANCE (two or more reflectances, or one "
-                          "seen at several EXIF exposures), or --colorchecker MATERIAL.")
-    sensor, float_scale = _sensor(photos, None if fitted else response, gamma,
-                                  raw.get("sensor", {}), vignetting == "cos4")
-    if fitted and float_scale is not None:
+
+def linearise(frames, o):
+    """The :class:`Linear` encoding of ``frames``: the response to invert (the files', the
+    spec's or the option's; a fitted one is set by :func:`calibration_patches`) and the
+    vignetting (cos^4 or a flat field)."""
+    photos, (h, w) = frames.photos, frames.size
+    sensor, float_scale = _sensor(photos, None if o.fitted else o.response, o.gamma,
+                                  frames.raw.get("sensor", {}), o.vignetting == "cos4")
+    if o.fitted and float_scale is not None:
         raise SkyfitError("--response fit: the frames are floating-point (EXR/HDR), which hold "
                           "linear values; leave out --response.")
-    if gamma is not None and (fitted or sensor.response != "gamma"):
+    if o.gamma is not None and (o.fitted or sensor.response != "gamma"):
         raise SkyfitError(f"--gamma is the exponent of a gamma response, but the response is "
-                          f"{'fitted' if fitted else repr(sensor.response)}; add --response "
+                          f"{'fitted' if o.fitted else repr(sensor.response)}; add --response "
                           "gamma, or leave out --gamma.")
-    fov = spec.camera["fov_deg"]
-    falloff = sensor.falloff(w, h, fov) if sensor.cos4 else np.ones((h, w))
-    flat_rec = None
-    if vignetting not in ("none", "cos4"):
-        flat = read_photo(Path(vignetting))
-        if flat.values.shape[:2] != (h, w):
-            raise SkyfitError(f"flat field {vignetting} is {flat.values.shape[1]}x"
-                              f"{flat.values.shape[0]}, the frames {w}x{h}; give one of their size.")
-        fl = np.nanmean(flat.values if flat.kind == "float" else
-                        SensorModel(1.0, response=flat.encoding_hint, bits=flat.bits)
-                        .linearise(flat.values), axis=2)
+    falloff = sensor.falloff(w, h, frames.spec.camera["fov_deg"]) if sensor.cos4 \
+        else np.ones((h, w))
+    flat = None
+    if o.vignetting not in ("none", "cos4"):
+        image = read_photo(Path(o.vignetting))
+        if image.values.shape[:2] != (h, w):
+            raise SkyfitError(f"flat field {o.vignetting} is {image.values.shape[1]}x"
+                              f"{image.values.shape[0]}, the frames {w}x{h}; give one of their "
+                              "size.")
+        fl = np.nanmean(image.values if image.kind == "float" else
+                        SensorModel(1.0, response=image.encoding_hint, bits=image.bits)
+                        .linearise(image.values), axis=2)
         if not np.all(np.isfinite(fl)) or fl.max() <= 0:
-            raise SkyfitError(f"flat field {vignetting} has non-finite or no positive values.")
-        falloff = fl / fl.max()
-        flat_rec = falloff
+            raise SkyfitError(f"flat field {o.vignetting} has non-finite or no positive values.")
+        falloff = flat = fl / fl.max()
     values = [(p.values * float_scale) if float_scale else p.values for p in photos]
-    lit = [i for i, f in enumerate(spec.frames) if not f.skipped]
+    return Linear(sensor, float_scale, falloff, flat, values)
 
-    rel = _relative_exposures(photos, log)
-    rel_lit = None if rel is None else rel[lit]
-    cal_info = response_info = None
-    chart = None
-    if colorchecker is not None:
+
+def calibration_patches(frames, linear, o, log):
+    """The :class:`Patches` of the lit frames: the ``calibrate`` references and a
+    ColorChecker's greys sampled (and the response fitted from them with ``--response fit``),
+    or, without references, the first frame's given exposure (the option's or the spec's)."""
+    lit, values, sensor = frames.lit, linear.values, linear.sensor
+    rel = _relative_exposures(frames.photos, log)
+    out = Patches(sensor, rel)
+    if o.colorchecker is not None:
         from .colorchecker import find_chart
 
-        chart = find_chart([sensor.linearise(values[i]) / falloff[..., None] for i in lit], log)
-    patch_mask = None
-    if calibrate or chart:
-        materials = {**calibrate, **({colorchecker: (CHART_GREY,) * 3} if chart else {})}
-        cal_spec = _calibration_spec(spec.raw, materials, spec.base_dir)
-        all_samples, all_patch, patch_mask = patch_samples(
-            cal_spec, [values[i] for i in lit], falloff, calibrate,
-            None if chart is None else (colorchecker, chart["labels"]))
-        if fitted:
-            chosen, g, response_info = fit_response(*_neutral(all_samples, all_patch, calibrate),
-                                                    sensor.max_code, rel_lit, log)
-            sensor = SensorModel(exposure=1.0, response=chosen, gamma=g, bits=sensor.bits,
-                                 cos4=sensor.cos4)
-    else:
-        given = exposure if exposure is not None else (
-            spec.sensor.get("exposure") if raw.get("sensor", {}).get("exposure", "auto") != "auto"
-            else None)
-        if given is None:
-            raise SkyfitError("the photographs' absolute scale is unknown: give --exposure E "
-                              "[sr m^2 W^-1] for the first frame, or --calibrate MATERIAL="
-                              "REFLECTANCE naming a grey reference in the scene.")
+        out.chart = find_chart([sensor.linearise(values[i]) / linear.falloff[..., None]
+                                for i in lit], log)
+    if o.calibrate or out.chart:
+        materials = {**o.calibrate, **({o.colorchecker: (CHART_GREY,) * 3} if out.chart else {})}
+        cal_spec = _calibration_spec(frames.spec.raw, materials, frames.spec.base_dir)
+        out.samples, out.patch, out.mask = patch_samples(
+            cal_spec, [values[i] for i in lit], linear.falloff, o.calibrate,
+            None if out.chart is None else (o.colorchecker, out.chart["labels"]))
+        if o.fitted:
+            chosen, g, out.response_info = fit_response(
+                *_neutral(out.samples, out.patch, o.calibrate), sensor.max_code,
+                None if rel is None else rel[lit], log)
+            out.sensor = SensorModel(exposure=1.0, response=chosen, gamma=g, bits=sensor.bits,
+                                     cos4=sensor.cos4)
+        return out
+    raw = frames.raw
+    out.given = o.exposure if o.exposure is not None else (
+        frames.spec.sensor.get("exposure")
+        if raw.get("sensor", {}).get("exposure", "auto") != "auto" else None)
+    if out.given is None:
+        raise SkyfitError("the photographs' absolute scale is unknown: give --exposure E "
+                          "[sr m^2 W^-1] for the first frame, or --calibrate MATERIAL="
+                          "REFLECTANCE naming a grey reference in the scene.")
+    return out
 
+
+def noise_model(frames, values, patches, o, progress, log):
+    """The :class:`Noise` of the lit frames: read + shot noise estimated from them (or the
+    option's), and each JPEG frame's compression errors by bootstrap."""
+    from .jpeg_noise import jpeg_settings
+
+    lit, sensor = frames.lit, patches.sensor
     shown = None
     try:
         shown = shown_noise([values[i] for i in lit], sensor)
     except SkyfitError:
-        if noise is None:
+        if o.noise is None:
             raise
-    from .jpeg_noise import jpeg_settings
-
-    jpeg = {i: jpeg_settings(paths[i]) for i in lit if photos[i].format == "jpeg"}
+    jpeg = {i: jpeg_settings(frames.paths[i]) for i in lit
+            if frames.photos[i].format == "jpeg"}
     for i, st in jpeg.items():
         if st is not None:                      # the blocks lie in the file's own layout
-            st["orientation"] = photos[i].metadata.get("orientation", 1)
+            st["orientation"] = frames.photos[i].metadata.get("orientation", 1)
     if any(st and st["subsampling"] for st in jpeg.values()):
         log("the JPEGs' chroma is subsampled (4:2:2 or 4:2:0): colour edges blur by a pixel, "
             "an error sigma does not hold; keep pixels beside edges out of fits (regions from "
             "the scene's labels are eroded by a pixel; erode a --region too)")
-    if noise is None:
+    if o.noise is None:
         a, b = estimate_noise([values[i] for i in lit], sensor, [jpeg.get(i) for i in lit],
                               shown, log)
-        noise_info = {"read_DN2": a, "shot_DN": b, "source": "estimated from the frames",
-                      "shown_by_the_frames": list(shown)}
+        info = {"read_DN2": a, "shot_DN": b, "source": "estimated from the frames",
+                "shown_by_the_frames": list(shown)}
     else:
-        a, b = (float(x) for x in noise)
-        noise_info = {"read_DN2": a, "shot_DN": b, "source": "given"}
+        a, b = (float(x) for x in o.noise)
+        info = {"read_DN2": a, "shot_DN": b, "source": "given"}
     log(f"noise model: read {np.sqrt(a):.3g} DN rms, shot {b:.3g} DN per linear DN "
-        f"({noise_info['source']})")
-    jpeg_errors = _jpeg_errors(values, jpeg, sensor, (a, b), shown or (0.0, 0.0), progress,
-                               patch_mask)
+        f"({info['source']})")
+    return Noise(a, b, info, _jpeg_errors(values, jpeg, sensor, (a, b), shown or (0.0, 0.0),
+                                          progress, patches.mask))
 
-    if calibrate or chart:
-        # the calibration patches' codes with the compression's mean error taken out, as the
-        # frames' values
+
+def frame_exposures(frames, patches, noise, o, log):
+    """The :class:`Exposures` of the lit frames: calibrated on the references (their codes
+    with the compression's mean error taken out, as the frames' values are), or the given
+    first exposure scaled by the EXIF's relative exposures."""
+    lit, sensor, rel = frames.lit, patches.sensor, patches.rel
+    calibration = None
+    if patches.samples is not None:
+        samples = list(patches.samples)
         for j, i in enumerate(lit):
-            if i in jpeg_errors:
-                y, L = all_samples[j]
-                all_samples[j] = (_unbiased(y, jpeg_errors[i]["bias_patches"],
-                                            sensor.max_code), L)
-        samples, patch = _neutral(all_samples, all_patch, calibrate)
-        per_frame, cal_info = calibrate_exposure(samples, patch, sensor,
-                                                 [photos[i] for i in lit], rel_lit, log)
-        if response_info is not None:
-            cal_info["response_fit"] = response_info
-        if chart is not None:
-            cal_info["colorchecker"] = _chart_record(colorchecker, chart, all_samples,
-                                                     all_patch, sensor, per_frame, log)
+            if i in noise.jpeg_errors:
+                y, L = samples[j]
+                samples[j] = (_unbiased(y, noise.jpeg_errors[i]["bias_patches"],
+                                        sensor.max_code), L)
+        per_frame, calibration = calibrate_exposure(
+            *_neutral(samples, patches.patch, o.calibrate), sensor,
+            [frames.photos[i] for i in lit], None if rel is None else rel[lit], log)
+        if patches.response_info is not None:
+            calibration["response_fit"] = patches.response_info
+        if patches.chart is not None:
+            calibration["colorchecker"] = _chart_record(o.colorchecker, patches.chart, samples,
+                                                        patches.patch, sensor, per_frame, log)
         e0 = float(per_frame[0] @ SRGB_LUMINANCE)
-        exposures = {i: per_frame[j] for j, i in enumerate(lit)}
+        by_frame = {i: per_frame[j] for j, i in enumerate(lit)}
     else:
-        e0 = float(given)
-        r = np.ones(len(paths)) if rel is None else rel
-        exposures = {i: np.full(3, e0 * r[i]) for i in lit}
-    sensor = SensorModel(exposure=e0, response=sensor.response, gamma=sensor.gamma,
-                         bits=sensor.bits, cos4=sensor.cos4)
-
-    options = {"times_csv": str(times_csv), "name_pattern": name_pattern, "tz": tz,
-               "response": "fit: " + sensor.response if fitted else sensor.response,
-               "gamma": sensor.gamma, "exposure": exposure,
-               "calibrate": calibrate, "colorchecker": colorchecker,
-               "vignetting": str(vignetting), "noise": [a, b]}
-    run_id = _run_id(paths, spec.raw, options)
-    out = Path(out_dir)
-    with FolderLock(out):
-        prepare_folder(out, run_id, (h, w, 3), overwrite, log)
-        return _write(out, spec, paths, photos, values, times, sensor, exposures, (a, b),
-                      jpeg_errors, falloff, flat_rec, float_scale, rel, cal_info, noise_info,
-                      options, run_id, progress)
+        e0 = float(patches.given)
+        r = np.ones(len(frames.paths)) if rel is None else rel
+        by_frame = {i: np.full(3, e0 * r[i]) for i in lit}
+    return Exposures(SensorModel(exposure=e0, response=sensor.response, gamma=sensor.gamma,
+                                 bits=sensor.bits, cos4=sensor.cos4), by_frame, calibration, rel)
 
 
-def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, jpeg_errors,
-           falloff, flat, float_scale, rel, cal_info, noise_info, options, run_id, progress):
-    """Write the sequence folder; ``jpeg_errors`` each JPEG frame's :func:`_jpeg_errors` by
-    frame index."""
+def _write(out, frames, linear, noise, exposures, options, run_id, progress):
+    """Write the sequence folder of the ingest's stages' results."""
     from ..render.image import write_exr
     from .jpeg_noise import REPLICATES, SEED, block_offset
 
+    spec, paths, photos, values = frames.spec, frames.paths, frames.photos, linear.values
+    sensor, falloff, flat, jpeg_errors = exposures.sensor, linear.falloff, linear.flat, \
+        noise.jpeg_errors
+    rel, model = exposures.rel, (noise.a, noise.b)
     manifest = measured_header(spec, sensor, run_id, "photographed",
                                "none: frames are photographs")
-    manifest["sensor"]["noise_model"] = {**noise_info,
+    manifest["sensor"]["noise_model"] = {**noise.info,
                                          "sigma2_DN2": "Q'(s)^2 (read + shot s M) + 1/12"}
     jpeg_frames = 0
     if flat is not None:
         write_exr(out / "frames" / "flat_field.exr", np.repeat(flat[..., None], 3, axis=2))
         manifest["sensor"]["flat_field"] = "frames/flat_field.exr"
     manifest["ingest"] = {"photos": [p.name for p in paths], "options": options,
-                          "float_scale_DN": float_scale, "calibration": cal_info,
+                          "float_scale_DN": linear.float_scale,
+                          "calibration": exposures.calibration,
                           "relative_exposure_from_exif": None if rel is None else rel.tolist()}
     bar = None
     if progress:
@@ -993,11 +1131,11 @@ def _write(out, spec, paths, photos, values, times, sensor, exposures, noise, jp
         if f.skipped:
             rec["status"] = "skipped"
         else:
-            e = exposures[f.index]
+            e = exposures.by_frame[f.index]
             gain = e[None, None, :] * falloff[..., None]
             frame_jpeg = jpeg_errors.get(f.index)
             jpeg_frames += frame_jpeg is not None
-            sig, edge = _sigma(v, sensor, noise, frame_jpeg)
+            sig, edge = _sigma(v, sensor, model, frame_jpeg)
             s = sensor.linearise(np.nan_to_num(v))
             slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code
             radiance = np.where(np.isfinite(v), s / gain, np.nan).astype(np.float32)

@@ -40,13 +40,18 @@ PIECES = ((SIGMA_RESOLVED, CONTROL_FULL), (CONTROL_FULL, CONTROL_SIGMA),
           (CONTROL_SIGMA, SIGMA_LARGEST))
 DEGREES, MAX_DEGREE, TABLE_RTOL, CHECKS = (16, 6, 32), 64, 1e-5, 3
 #: Degrees of the Lobatto nodes (among each piece's first DEGREES') at which the table keeps
-#: the positions' spread, the model's Monte Carlo variance: it changes slowly with sigma.
-VARIANCE_DEGREES = (16, 3, 16)
+#: the positions' spread, the model's Monte Carlo variance: it changes slowly with sigma,
+#: except where a lobe starts to take in the sun (the narrow piece, kept denser; within
+#: 0.7-1.4x of the positions' own there, tests/test_basis_table.py).
+VARIANCE_DEGREES = (16, 3, 8)
 #: Light-cache samples traced and tabulated at once (:func:`trace_table`): 140 bytes each at
 #: the peak (the cache's arrays, the model's Dr.Jit copies and the tracer's; 3.4 million
 #: samples in one block peaked 475 MB above a one-pixel fit, tests/test_memory.py), so a
 #: block takes about 0.6 GB.
 CHUNK_SAMPLES, BYTES_PER_SAMPLE = 1 << 22, 140
+#: The peak a fit aims at [bytes]: a large table's blocks shrink (block_budget) down to
+#: MIN_CHUNK_SAMPLES so that the table and a block fit in it.
+MEMORY_TARGET, MIN_CHUNK_SAMPLES = 2 << 30, 1 << 19
 
 
 def _lobatto(n):
@@ -326,12 +331,26 @@ def _lobe_at(lobe, x, lo, hi):
 FIT_BYTES_PER_VALUE, BASE_BYTES = 1024, 300 << 20
 
 
+def _bytes_per_value(degrees, positions):
+    """A fit's bytes per value (pixel or point, frame and channel) with series of
+    ``degrees``: its table's arrays and the fit's own."""
+    arrays = 2 * sum(n + 1 for n in degrees) + 2 * len(variance_sigmas()) + 7
+    return 4 * arrays + 4 * positions / 3 + FIT_BYTES_PER_VALUE
+
+
+def block_budget(P, T, positions):
+    """Samples per block of a fit of P points in T frames: CHUNK_SAMPLES, or fewer (down to
+    MIN_CHUNK_SAMPLES) where the fit's table, at its first degrees, leaves less of
+    MEMORY_TARGET for the block."""
+    room = MEMORY_TARGET - BASE_BYTES - P * T * 3 * _bytes_per_value(DEGREES, positions)
+    return int(np.clip(room / BYTES_PER_SAMPLE, MIN_CHUNK_SAMPLES, CHUNK_SAMPLES))
+
+
 def memory_estimate(P, T, positions, directions):
     """The most a fit of P points (or pixels) in T frames takes [bytes]: its table at
     MAX_DEGREE in every piece, the fit's own arrays, one block of the light and the base."""
-    arrays = 2 * sum(MAX_DEGREE + 1 for _ in PIECES) + 2 * len(variance_sigmas()) + 7
-    per_value = 4 * arrays + 4 * positions / 3 + FIT_BYTES_PER_VALUE
-    block = min(CHUNK_SAMPLES, P * T * positions * directions)
+    per_value = _bytes_per_value([MAX_DEGREE] * len(PIECES), positions)
+    block = min(block_budget(P, T, positions), P * T * positions * directions)
     return int(P * T * 3 * per_value + block * BYTES_PER_SAMPLE + BASE_BYTES)
 
 
@@ -365,7 +384,7 @@ def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=P
     :class:`~.light_cache.PointRays`) on material ``bsdf_id`` (one, or one per point) under
     ``skies``: the light cache traced (:func:`~.light_cache.build_light_cache`, ``options``
     its own) and tabulated block by block (:func:`chunks`, ``budget`` samples each,
-    CHUNK_SAMPLES by default), so that
+    :func:`block_budget` by default), so that
     memory stays bounded whatever the points and frames.  ``model_of(cache)`` makes the
     :class:`~.fit_model.WardModel` of a block's cache.  One block takes ``seed`` itself (the
     same samples as an untabulated cache); several take seeds drawn from it.
@@ -375,7 +394,8 @@ def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=P
     rays = at if isinstance(at, PointRays) else None
     P, T = len(at), len(skies)
     ids = np.broadcast_to(np.asarray(bsdf_id, dtype=object), (P,))
-    blocks = chunks(P, T, int(positions) * int(directions), budget or CHUNK_SAMPLES)
+    blocks = chunks(P, T, int(positions) * int(directions),
+                    budget or block_budget(P, T, positions))
     seeds = [seed] if len(blocks) == 1 else \
         np.random.SeedSequence(seed).generate_state(len(blocks)).tolist()
     by_frames = []
