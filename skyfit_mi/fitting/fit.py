@@ -316,10 +316,10 @@ class FitSession:
         self.problem = Problem(self.obs, self.wm, valid=table.hit)
         self._halves = self._bases = None
 
-    def _model(self, table):
-        """The fit's radiance model on ``table``: Ward's, through the luminance where the
-        observations are luminances."""
-        wm = TableModel(table, self.model)
+    def _model(self, table, part=0):
+        """The fit's radiance model on ``table`` (its whole cache, or a half: ``part`` 1, 2):
+        Ward's, through the luminance where the observations are luminances."""
+        wm = TableModel(table, self.model, part)
         return LuminanceModel(wm) if self.obs.luminance else wm
 
     def cache_growth(self, noise_by_sigma, s2=1.0):
@@ -353,7 +353,7 @@ class FitSession:
         to ripple chi-square by more than the 95% threshold.
         """
         if self._halves is None:
-            self._halves = [Problem(self.obs, self._model(self.table.part(j)),
+            self._halves = [Problem(self.obs, self._model(self.table, part=j),
                                     valid=self.table.hit) for j in (1, 2)]
         if method == "global":
             fits = [global_search(p, theta, self.lower, self.upper, candidates=1, profile=False,

@@ -158,29 +158,39 @@ class BasisTable:
     @staticmethod
     def join(tables, axis):
         """Tables of the same frames stacked by pixels (``axis`` 'pixels') or of the same pixels
-        by frames ('frames'); series of different degrees padded with zero coefficients."""
+        by frames ('frames'); series of different degrees padded with zero coefficients.  The
+        given tables are emptied array by array as they are copied (at most one array's
+        copy is held beside them)."""
         off = {"pixels": 0, "frames": 1}[axis]
         t0 = tables[0]
-        out = {k: np.concatenate([getattr(t, k) for t in tables], axis=a + off)
-               for k, a in t0.AXES.items() if k != "coef"}
+
+        def take(get, put, axis):
+            parts = [get(t) for t in tables]
+            for t in tables:
+                put(t)
+            return np.concatenate(parts, axis=axis)
+        out = {}
+        for k, a in t0.AXES.items():
+            if k != "coef":
+                out[k] = take(lambda t: getattr(t, k), lambda t: setattr(t, k, None), a + off)
         out["coef"] = []
         for i in range(len(t0.coef)):
             n = max(t.coef[i].shape[1] for t in tables)
-            out["coef"].append(np.concatenate(
-                [np.pad(t.coef[i], [(0, 0), (0, n - t.coef[i].shape[1])]
-                        + [(0, 0)] * (t.coef[i].ndim - 2)) for t in tables], axis=2 + off))
+
+            def padded(t):
+                c = t.coef[i]
+                return c if c.shape[1] == n else np.pad(
+                    c, [(0, 0), (0, n - c.shape[1])] + [(0, 0)] * (c.ndim - 2))
+            out["coef"].append(take(padded, lambda t: t.coef.__setitem__(i, None), 2 + off))
         return BasisTable(**out, normalisation=t0.normalisation)
 
-    def part(self, j):
-        """The whole cache's table (j = 0), or that of its first (1) or second (2) half: the
-        same layout, with a zero half difference (the spread stays the whole cache's)."""
-        sign = (0.0, 1.0, -1.0)[j]
+    #: The whole cache (part 0), its first (1) or second (2) half, and the halves' half
+    #: difference ('delta'), as weights of the stored (mean, half difference).
+    PARTS = {0: (1.0, 0.0), 1: (1.0, 1.0), 2: (1.0, -1.0), "delta": (0.0, 1.0)}
 
-        def pick(x):
-            v = x[0] if j == 0 else (x[0] + sign * x[1]).astype(x.dtype)
-            return np.stack([v, np.zeros_like(v)])
-        return replace(self, D=pick(self.D), G0=pick(self.G0), G1=pick(self.G1),
-                       coef=[pick(c) for c in self.coef])
+    def diffuse(self, part=0):
+        """D of ``part`` (PARTS), (P, T, 3) float64."""
+        return sum(w * self.D[h].astype(float) for h, w in enumerate(self.PARTS[part]) if w)
 
     def variance(self, rho_d, spec, sigma):
         """The whole cache's Monte Carlo variance of L = rho_d D + s G(sigma), (P, T, 3):
@@ -205,10 +215,18 @@ class BasisTable:
                                                                  * VGG)
         return np.maximum(rho_d**2 * self.VDD + 2 * rho_d * spec * VDG + spec**2 * VGG, 0.0)
 
-    def lobe(self, sigma, derivative=False, half_difference=False):
-        """G at the roughness values ``sigma`` (K,): (K, P, T, 3) float64, and with
-        ``derivative`` dG/dsigma too; ``half_difference``: the halves' Delta instead of G."""
-        h = int(half_difference)
+    def lobe(self, sigma, derivative=False, part=0):
+        """G of ``part`` (PARTS: the whole cache, a half, or the halves' half difference) at
+        the roughness values ``sigma`` (K,): (K, P, T, 3) float64, and with ``derivative``
+        dG/dsigma too; a half is made from the stored arrays as it is asked for, never kept."""
+        terms = [self._series(sigma, derivative, h) for h, w in enumerate(self.PARTS[part]) if w]
+        weights = [w for w in self.PARTS[part] if w]
+        if derivative:
+            return tuple(sum(w * t[k] for w, t in zip(weights, terms)) for k in (0, 1))
+        return sum(w * t for w, t in zip(weights, terms))
+
+    def _series(self, sigma, derivative, h):
+        """G's stored mean (h = 0) or half difference (1) at ``sigma``, and dG/dsigma."""
         sigma = np.atleast_1d(np.asarray(sigma, dtype=float))
         out = np.empty((len(sigma),) + self.D.shape[1:])
         dout = np.empty_like(out) if derivative else None
@@ -448,41 +466,42 @@ class TableModel:
     model : {'two', 'achromatic', 'colour'}
     """
 
-    def __init__(self, table, model):
-        self.table, self.model = table, model
+    def __init__(self, table, model, part=0):
+        self.table, self.model, self.part = table, model, part
         self.normalisation = table.normalisation
         self.names = PARAMETERS[model]
         self.shape = table.shape
         self.evaluations = self.basis_evaluations = 0
 
     def half(self, j):
-        """The model of the first (j = 1) or second (j = 2) half of the cache's positions."""
-        return TableModel(self.table.part(j), self.model)
+        """The model of the first (j = 1) or second (j = 2) half of the cache's positions (on
+        the same table: nothing is copied)."""
+        return TableModel(self.table, self.model, j)
 
     def _parts(self, theta, derivative=False):
         rho_d, spec, d_rho_d, d_spec = reflectances(self.model, theta)
-        G = self.table.lobe(theta[-1], derivative)
+        G = self.table.lobe(theta[-1], derivative, self.part)
         return rho_d, spec, d_rho_d, d_spec, G
 
     def radiance(self, theta):
         """L [W m^-2 sr^-1] for parameters ``theta``, shape (P, T, 3)."""
         self.evaluations += 1
         rho_d, spec, _, _, G = self._parts(theta)
-        return rho_d * self.table.D[0] + spec * G[0]
+        return rho_d * self.table.diffuse(self.part) + spec * G[0]
 
     def radiance_and_variance(self, theta):
         """``radiance(theta)`` and its Monte Carlo variance [(W m^-2 sr^-1)^2], (P, T, 3): the
         spread of the positions' estimates (:meth:`BasisTable.variance`)."""
         self.evaluations += 1
         rho_d, spec, _, _, G = self._parts(theta)
-        L = rho_d * self.table.D[0] + spec * G[0]
+        L = rho_d * self.table.diffuse(self.part) + spec * G[0]
         return L, self.table.variance(rho_d, spec, float(theta[-1]))
 
     def jacobian(self, theta):
         """(L, dL/dtheta) with shapes (P, T, 3) and (P, T, 3, n_params)."""
         self.evaluations += 1
         rho_d, spec, d_rho_d, d_spec, (G, dG) = self._parts(theta, derivative=True)
-        D = self.table.D[0].astype(float)
+        D = self.table.diffuse(self.part)
         J = D[..., None] * d_rho_d + G[0][..., None] * d_spec
         J[..., -1] = spec * dG[0]
         return rho_d * D + spec * G[0], J
@@ -497,28 +516,20 @@ class TableModel:
         for the whole cache and each half (as :meth:`~.fit_model.WardModel.basis`)."""
         sigmas = np.asarray(sigmas, dtype=float)
         t = self.table
-        D, G = t.D[0].astype(float), t.lobe(sigmas)
         self.basis_evaluations += len(sigmas)
-        if not halves:
-            return D, G
-        dD, dG = t.D[1].astype(float), t.lobe(sigmas, half_difference=True)
-        return [(D, G), (D + dD, G + dG), (D - dD, G - dG)]
+        parts = (0, 1, 2) if halves else (self.part,)
+        out = [(t.diffuse(j), t.lobe(sigmas, part=j)) for j in parts]
+        return out if halves else out[0]
 
     def lobes(self, sigmas, halves=False):
         """As :meth:`basis`, with each G a lazy :class:`Lobes` (memory of a few roughness
         values' arrays, whatever the points and frames)."""
         sigmas = np.asarray(sigmas, dtype=float)
         t = self.table
-        D = t.D[0].astype(float)
         self.basis_evaluations += len(sigmas)
-        whole = Lobes(t.lobe, sigmas)
-        if not halves:
-            return D, whole
-        dD = t.D[1].astype(float)
-
-        def half(sign):
-            return Lobes(lambda s: t.lobe(s) + sign * t.lobe(s, half_difference=True), sigmas)
-        return [(D, whole), (D + dD, half(1.0)), (D - dD, half(-1.0))]
+        parts = (0, 1, 2) if halves else (self.part,)
+        out = [(t.diffuse(j), Lobes(lambda s, j=j: t.lobe(s, part=j), sigmas)) for j in parts]
+        return out if halves else out[0]
 
     def radiances(self, thetas, reduce=None):
         """L at many parameter sets ``thetas`` (n, n_params): (n, P, T, 3), or ``reduce`` of
@@ -526,8 +537,9 @@ class TableModel:
         thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
         reduce = reduce or (lambda x: x)
         uniq, inverse = np.unique(thetas[:, -1], return_inverse=True)
-        D = np.asarray(reduce(self.table.D[0].astype(float)))
-        G = np.stack([np.asarray(reduce(g)) for g in self.table.lobe(uniq)])[inverse.ravel()]
+        D = np.asarray(reduce(self.table.diffuse(self.part)))
+        lobes = self.table.lobe(uniq, part=self.part)
+        G = np.stack([np.asarray(reduce(g)) for g in lobes])[inverse.ravel()]
         refl = np.array([reflectances(self.model, th)[:2] for th in thetas])   # (n, 2, 3)
         shape = (len(thetas),) + (1,) * (D.ndim - 1) + (3,)
         return refl[:, 0].reshape(shape) * D + refl[:, 1].reshape(shape) * G
