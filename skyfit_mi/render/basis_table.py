@@ -158,30 +158,35 @@ class BasisTable:
     @staticmethod
     def join(tables, axis):
         """Tables of the same frames stacked by pixels (``axis`` 'pixels') or of the same pixels
-        by frames ('frames'); series of different degrees padded with zero coefficients.  The
-        given tables are emptied array by array as they are copied (at most one array's
-        copy is held beside them)."""
+        by frames ('frames'); series of different degrees padded with zero coefficients.  Each
+        array is made once at its full size and filled block by block, the given tables
+        emptied as they are copied (at most one array's copy beside them)."""
         off = {"pixels": 0, "frames": 1}[axis]
         t0 = tables[0]
 
-        def take(get, put, axis):
-            parts = [get(t) for t in tables]
+        def gather(get, clear, axis, degree=None):
+            first = get(t0)
+            shape = list(first.shape)
+            shape[axis] = sum(get(t).shape[axis] for t in tables)
+            if degree is not None:
+                shape[1] = degree
+            out = np.zeros(shape, first.dtype)
+            at = 0
             for t in tables:
-                put(t)
-            return np.concatenate(parts, axis=axis)
-        out = {}
-        for k, a in t0.AXES.items():
-            if k != "coef":
-                out[k] = take(lambda t: getattr(t, k), lambda t: setattr(t, k, None), a + off)
-        out["coef"] = []
-        for i in range(len(t0.coef)):
-            n = max(t.coef[i].shape[1] for t in tables)
-
-            def padded(t):
-                c = t.coef[i]
-                return c if c.shape[1] == n else np.pad(
-                    c, [(0, 0), (0, n - c.shape[1])] + [(0, 0)] * (c.ndim - 2))
-            out["coef"].append(take(padded, lambda t: t.coef.__setitem__(i, None), 2 + off))
+                x = get(t)
+                where = [slice(None)] * out.ndim
+                where[axis] = slice(at, at + x.shape[axis])
+                if degree is not None:
+                    where[1] = slice(0, x.shape[1])
+                out[tuple(where)] = x
+                at += x.shape[axis]
+                clear(t)
+            return out
+        out = {k: gather(lambda t, k=k: getattr(t, k), lambda t, k=k: setattr(t, k, None),
+                         a + off) for k, a in t0.AXES.items() if k != "coef"}
+        out["coef"] = [gather(lambda t, i=i: t.coef[i], lambda t, i=i: t.coef.__setitem__(i, None),
+                              2 + off, max(t.coef[i].shape[1] for t in tables))
+                       for i in range(len(t0.coef))]
         return BasisTable(**out, normalisation=t0.normalisation)
 
     #: The whole cache (part 0), its first (1) or second (2) half, and the halves' half
