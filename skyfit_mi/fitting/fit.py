@@ -156,8 +156,8 @@ class FitSession:
         # a material is the truth only where skyfit rendered the frames with it; an ingested
         # sequence's spec materials are placeholders for the unknown photographed surface
         self.truth = mats[name] if doc.get("source", "render") in RENDERED_SOURCES else None
-        first = POSITIONS if self.obs.rays is None else POINT_POSITIONS
-        self.cache_settings = {"positions": first if positions is None else int(positions),
+        self.cache_settings = {"positions": self.first_positions if positions is None
+                               else int(positions),
                                "directions": int(directions), "seed": seed,
                                "sized": "from the data" if positions is None else "given",
                                "sky_plan": check_choice("sky plan", sky_plan, tuple(SKY_PLANS))}
@@ -279,6 +279,12 @@ class FitSession:
                     normalisation=self.normalisation, plan=c["sky_plan"])
 
     @property
+    def first_positions(self):
+        """An automatically sized cache's first positions: POSITIONS a pixel, POINT_POSITIONS a
+        measured point."""
+        return POSITIONS if self.obs.rays is None else POINT_POSITIONS
+
+    @property
     def scene(self):
         """The sequence's Mitsuba scene, loaded when first needed (to trace the light): every
         live scene's materials are targets of the path tracer's virtual calls, traced in each
@@ -333,8 +339,7 @@ class FitSession:
         if self.cache_settings["sized"] == "given":
             return 1
         need = max(noise_by_sigma.values()) / (CACHE_SHARE * self.problem.dof * max(1.0, s2))
-        first = POSITIONS if self.obs.rays is None else POINT_POSITIONS
-        room = min(CACHE_GROWTH_MAX * first / self.cache_settings["positions"],
+        room = min(CACHE_GROWTH_MAX * self.first_positions / self.cache_settings["positions"],
                    CACHE_TIME_BUDGET / max(self.cache_time, 1e-3))
         factor = 1
         while factor < need and 2 * factor <= room:

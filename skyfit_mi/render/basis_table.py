@@ -137,11 +137,6 @@ class BasisTable:
     def var_sigmas(self):
         return variance_sigmas()
 
-    def nbytes(self):
-        """Memory the table's arrays take [bytes]."""
-        return sum(c.nbytes for c in self.coef) + sum(
-            getattr(self, k).nbytes for k in self.AXES if k != "coef")
-
     def _map(self, f):
         """A table with f(array, pixel axis) applied to every array field."""
         return BasisTable(**{k: [f(c, a) for c in self.coef] if k == "coef"

@@ -198,10 +198,6 @@ class LightCache:
     lobe_sky: np.ndarray
     normalisation: str = "ward"
 
-    def nbytes(self):
-        """Memory the cache's arrays take [bytes]."""
-        return sum(v.nbytes for v in vars(self).values() if isinstance(v, np.ndarray))
-
     def subset(self, rows):
         """The cache of the pixels ``rows`` (an index or slice of the first axis): a region's
         share of a cache traced for several regions at once."""
