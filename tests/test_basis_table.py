@@ -122,6 +122,24 @@ def test_light_traced_in_blocks_agrees_with_one_block(traced):
     assert np.all(np.abs(z) < 5) and np.sqrt(np.mean(z**2)) < 2.5, z
 
 
+def test_a_subset_by_slices_is_a_view_and_by_indices_the_same_values(traced):
+    """Regions traced together take their rows of one table without copying it."""
+    from skyfit_mi.render.basis_table import TableModel
+
+    _, _, _, table = traced
+    view = table.subset(slice(3, 9), slice(2, 7))
+    picked = table.subset(np.arange(3, 9), np.arange(2, 7))
+    assert view.shape == picked.shape == (6, 5)
+    assert np.shares_memory(view.D, table.D) and all(
+        np.shares_memory(a, b) for a, b in zip(view.coef, table.coef))
+    assert not np.shares_memory(picked.D, table.D)
+    theta = np.array([0.5, 0.6, 0.7, 0.25, 0.03])
+    whole = TableModel(table, "colour").radiance_and_variance(theta)
+    for part in (view, picked):
+        for got, want in zip(TableModel(part, "colour").radiance_and_variance(theta), whole):
+            np.testing.assert_array_equal(got, want[3:9, 2:7])
+
+
 def test_a_fit_beyond_the_machines_memory_is_refused_up_front_with_its_estimate(days,
                                                                                 monkeypatch):
     from skyfit_mi.errors import SkyfitError

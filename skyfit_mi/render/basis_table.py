@@ -144,10 +144,15 @@ class BasisTable:
                           normalisation=self.normalisation)
 
     def subset(self, rows=slice(None), frames=slice(None)):
-        """The table of pixels ``rows`` and frames ``frames`` (indices or slices)."""
+        """The table of pixels ``rows`` and frames ``frames``: slices give views of this
+        table's arrays (nothing is copied: regions traced together share one table), index
+        arrays copies."""
         def cut(x, axis):
-            x = np.take(x, np.arange(x.shape[axis])[rows], axis=axis)
-            return np.take(x, np.arange(x.shape[axis + 1])[frames], axis=axis + 1)
+            where = [slice(None)] * x.ndim
+            where[axis], where[axis + 1] = rows, slice(None)
+            x = x[tuple(where)]
+            where[axis], where[axis + 1] = slice(None), frames
+            return x[tuple(where)]
         return self._map(cut)
 
     @staticmethod
