@@ -452,19 +452,10 @@ def chunks(P, T, per_value, budget):
             for f in range(0, T, frames) for r in range(0, P, rows)]
 
 
-def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
-                directions=DIRECTIONS, budget=None, **options):
-    """The :class:`BasisTable` of points ``at`` (pixels (P, 2) or
-    :class:`~.light_cache.PointRays`) on material ``bsdf_id`` (one, or one per point) under
-    ``skies``: the light cache traced (:func:`~.light_cache.build_light_cache`, ``options``
-    its own) and tabulated block by block (:func:`chunks`, ``budget`` samples each,
-    :func:`block_budget` by default), so that
-    memory stays bounded whatever the points and frames.  ``model_of(cache)`` makes the
-    :class:`~.fit_model.WardModel` of a block's cache.  One block takes ``seed`` itself (the
-    same samples as an untabulated cache); several take seeds drawn from it.
-
-    Returns the table and the number of blocks.
-    """
+def _traced_blocks(scene, params, skies, at, bsdf_id, seed, positions, directions, budget,
+                   options):
+    """The light cache of points ``at`` under ``skies`` traced block by block (see
+    :func:`trace_table`): yields (rows, frames, cache) and the number of blocks first."""
     rays = at if isinstance(at, PointRays) else None
     P, T = len(at), len(skies)
     ids = np.broadcast_to(np.asarray(bsdf_id, dtype=object), (P,))
@@ -472,21 +463,61 @@ def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=P
                     budget or block_budget(P, T, positions))
     seeds = [seed] if len(blocks) == 1 else \
         np.random.SeedSequence(seed).generate_state(len(blocks)).tolist()
-    table = None
+    yield len(blocks)
     for (rows, frames), s in zip(blocks, seeds):
         if rays is None:
             where = np.asarray(at)[rows]
         else:
             where = PointRays(rays.origins[rows, frames], rays.directions[rows, frames])
-        cache = build_light_cache(scene, params, skies[frames], where, ids[rows],
-                                  positions=positions, directions=directions, seed=int(s),
-                                  **options)
+        yield rows, frames, build_light_cache(scene, params, skies[frames], where, ids[rows],
+                                              positions=positions, directions=directions,
+                                              seed=int(s), **options)
+
+
+def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
+                directions=DIRECTIONS, budget=None, **options):
+    """The :class:`BasisTable` of points ``at`` (pixels (P, 2) or
+    :class:`~.light_cache.PointRays`) on material ``bsdf_id`` (one, or one per point) under
+    ``skies``: the light cache traced (:func:`~.light_cache.build_light_cache`, ``options``
+    its own) and tabulated block by block (:func:`chunks`, ``budget`` samples each,
+    :func:`block_budget` by default), so that memory stays bounded whatever the points and
+    frames.  ``model_of(cache)`` makes the :class:`~.fit_model.WardModel` of a block's cache.
+    One block takes ``seed`` itself (the same samples as an untabulated cache); several take
+    seeds drawn from it.
+
+    Returns the table and the number of blocks.
+    """
+    traced = _traced_blocks(scene, params, skies, at, bsdf_id, seed, positions, directions,
+                            budget, options)
+    n, table = next(traced), None
+    for rows, frames, cache in traced:
         block = tabulate(cache, model_of(cache))
         del cache
         if table is None:
-            table = BasisTable.empty(P, T, block.sun_half_cos.shape[-1], block.normalisation)
+            table = BasisTable.empty(len(at), len(skies), block.sun_half_cos.shape[-1],
+                                     block.normalisation)
         table.place(block, rows, frames)
-    return table, len(blocks)
+    return table, n
+
+
+def trace_diffuse(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
+                  directions=DIRECTIONS, budget=None, **options):
+    """The diffuse basis alone (a white Lambertian's radiance, thesis eq. 3.19's rho_d term
+    at rho_d = 1) of points ``at`` under ``skies``, traced in blocks as :func:`trace_table`
+    (its arguments), without the lobe's table: D and its Monte Carlo variance, (P, T, 3)
+    [W m^-2 sr^-1] and [(W m^-2 sr^-1)^2]."""
+    traced = _traced_blocks(scene, params, skies, at, bsdf_id, seed, positions, directions,
+                            budget, options)
+    next(traced)
+    D, var = np.zeros((2, len(at), len(skies), 3))
+    for rows, frames, cache in traced:
+        wm = model_of(cache)
+        shares = wm._diffuse_shares()
+        S = shares.shape[2]
+        D[rows, frames] = shares.sum(axis=2)
+        if S > 1:
+            var[rows, frames] = np.var(shares * S, axis=2, ddof=1) / S
+    return D, var
 
 
 class Lobes:
