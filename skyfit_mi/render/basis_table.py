@@ -520,6 +520,17 @@ def trace_diffuse(scene, params, skies, at, bsdf_id, model_of, seed=0, positions
     return D, var
 
 
+#: The most roughness values whose lobe arrays (P, T, 3) a search takes at once, and the most
+#: bytes of such a chunk in float64: a large table's chunks take fewer values
+#: (:func:`sigma_chunk`).
+SIGMA_CHUNK, CHUNK_BYTES = 8, 64 << 20
+
+
+def sigma_chunk(shape):
+    """Roughness values per chunk of lobe arrays of ``shape`` (P, T, 3)."""
+    return int(np.clip(CHUNK_BYTES // (8 * int(np.prod(shape))), 1, SIGMA_CHUNK))
+
+
 class Lobes:
     """The lobe basis G at roughness values ``sigmas``, made a few at a time when used:
     ``lobe(sigmas)`` gives (k, P, T, 3); ``chunks()`` yields (slice, values) of ``chunk``
@@ -527,7 +538,7 @@ class Lobes:
     global_search.sigma_chunks`), so that the grid's (K, P, T, 3) never exists at once;
     ``map(f)`` applies f to every chunk's values."""
 
-    def __init__(self, lobe, sigmas, chunk=8):
+    def __init__(self, lobe, sigmas, chunk=SIGMA_CHUNK):
         self.lobe, self.sigmas, self.chunk = lobe, np.asarray(sigmas, dtype=float), int(chunk)
 
     def __len__(self):
@@ -614,7 +625,9 @@ class TableModel:
         t = self.table
         self.basis_evaluations += len(sigmas)
         parts = (0, 1, 2) if halves else (self.part,)
-        out = [(t.diffuse(j), Lobes(lambda s, j=j: t.lobe(s, part=j), sigmas)) for j in parts]
+        chunk = sigma_chunk(t.D.shape[1:])
+        out = [(t.diffuse(j), Lobes(lambda s, j=j: t.lobe(s, part=j), sigmas, chunk))
+               for j in parts]
         return out if halves else out[0]
 
     def radiances(self, thetas, reduce=None):
