@@ -234,7 +234,7 @@ def test_a_table_in_its_own_units_is_scaled_by_its_reference(dn_rig):
     """--calibrate white=0.9 finds the instrument's scale within its standard error (a joint
     99.9% test over the channels), the sample's fit holds the truth in its joint 99.9% region
     and carries the scale's error in its intervals; without the reference the reflectances
-    run into their bound of 1."""
+    run into their bound of 1, and the fit says so with the fix."""
     from skyfit_mi.fitting.fit import FitSession
 
     tmp, spec, table = dn_rig
@@ -255,6 +255,8 @@ def test_a_table_in_its_own_units_is_scaled_by_its_reference(dn_rig):
     raw = FitSession(tmp / "raw", "sample", None, model="colour").run("global",
                                                                      log=lambda *a: None)
     assert raw["parameters"]["C_r"] == pytest.approx(1.0)
+    assert any("C_r" in w and "at the upper bound of 1" in w and "--unknown-scale" in w
+               for w in raw["warnings"]), raw["warnings"]
 
 
 def test_a_table_of_unknown_scale_gives_relative_reflectances_without_a_bound(dn_rig,

@@ -625,6 +625,16 @@ class FitSession:
         warnings += self.obs.warnings                       # what loading the frames noticed
         if relative_scale(self.doc):
             warnings.append(self.doc["ingest"]["scale"]["meaning"])
+        top = [p for i, p in enumerate(names)
+               if p != "sigma_alpha" and theta[i] >= self.upper[i] - 1e-3]
+        if top:
+            fix = ("if its values are not radiances in W m^-2 sr^-1 (an instrument's DN), "
+                   "ingest the table with --calibrate MATERIAL=REFLECTANCE or --unknown-scale"
+                   if is_table(self.doc) else "check the exposure (--exposure, --calibrate or "
+                   "--colorchecker at ingest)")
+            warnings.append(f"{', '.join(top)} at the upper bound of 1: the data are brighter "
+                            "than any such surface under the frames' light, so the bound, not "
+                            f"the data, decides the fit; {fix}.")
         if method != "global" and g["chi2"] < chi2 - max(1.0, 1e-3 * chi2):
             # compare with the global minimum: explains local failures (thesis 7.2)
             warnings.insert(0, f"{method} stopped at chi2 = {chi2:.6g}, but the global search finds "
