@@ -101,7 +101,7 @@ def check_fit_sequence(result, path, doc, where, own=True):
     one), of its kind (image pixels or a table's points), with every frame the fit lists
     rendered; otherwise (a relight's target) only the frames are checked, and only on the
     fit's own sequence when it holds observations."""
-    from .observation_table import is_table    # a cycle at the top: it imports spec, spec us
+    from .observation_table import is_table    # not at the top: a cycle through spec
 
     same_run = result.get("sequence_run_id") == doc.get("run_id")
     if own:
