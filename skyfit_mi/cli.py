@@ -157,8 +157,12 @@ def _ingest(args):
             raise SkyfitError(f"--table takes no {what}: the table gives frames, values and "
                               "sigmas; give either photographs or --table.")
         ingest_table(args.table, args.spec, args.output, tz=args.tz, site=args.site,
-                     calibrate=dict(args.calibrate or []), overwrite=args.overwrite)
+                     calibrate=dict(args.calibrate or []), scale_unknown=args.unknown_scale,
+                     overwrite=args.overwrite)
         return
+    if args.unknown_scale:
+        raise SkyfitError("--unknown-scale belongs to --table (photographs take their scale "
+                          "from --exposure, --calibrate or --colorchecker).")
     if not args.photos:
         raise SkyfitError("give photographs (files or folders), or --table OBS.csv.")
     ingest(args.photos, args.spec, args.output, times_csv=args.times,
@@ -393,6 +397,11 @@ def build_parser():
                      "Lambertian reference of this reflectance (or R,G,B); sets the exposure and "
                      "white balance (repeatable); with --table, the table's values are in its "
                      "own units (e.g. DN), scaled to radiance by its rows on this material")
+    ing.add_argument("--unknown-scale", action="store_true", help="with --table: the values "
+                     "are in the instrument's own units (e.g. DN) and no reference is measured; "
+                     "they are put on a relative scale (the brightest apparent albedo reads "
+                     "0.5), so fitted reflectances are relative and roughness and ratios "
+                     "absolute")
     ing.add_argument("--colorchecker", metavar="MATERIAL", help="a ColorChecker Classic in the "
                      "photographs, lying on this scene material: found automatically; its six "
                      "neutral swatches calibrate like --calibrate greys, its colours check the "

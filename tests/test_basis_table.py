@@ -47,7 +47,7 @@ def test_table_jacobian_matches_its_finite_differences(traced, sigma):
     t = traced[3]
     # in double precision, so that small steps see the derivative, not float32's rounding
     m = TableModel(replace(t, D=t.D.astype(float), G0=t.G0.astype(float),
-                           G1=t.G1.astype(float), coef=[c.astype(float) for c in t.coef]),
+                           G1=t.G1.astype(float), coef=[c.map(lambda a: a.astype(float)) for c in t.coef]),
                    "colour")
     theta = np.array([0.6, 0.5, 0.3, 0.2, sigma])
     L, J = m.jacobian(theta)
@@ -122,22 +122,31 @@ def test_light_traced_in_blocks_agrees_with_one_block(traced):
     assert np.all(np.abs(z) < 5) and np.sqrt(np.mean(z**2)) < 2.5, z
 
 
-def test_a_subset_by_slices_is_a_view_and_by_indices_the_same_values(traced):
-    """Regions traced together take their rows of one table without copying it."""
-    from skyfit_mi.render.basis_table import TableModel
+def test_regions_take_views_of_a_table_traced_in_blocks(traced):
+    """Regions traced together take their rows of one table without copying it, also where a
+    region's rows cross the blocks of the trace (each keeping its own series)."""
+    from skyfit_mi.render.basis_table import BasisTable, TableModel
 
     _, _, _, table = traced
-    view = table.subset(slice(3, 9), slice(2, 7))
-    picked = table.subset(np.arange(3, 9), np.arange(2, 7))
-    assert view.shape == picked.shape == (6, 5)
-    assert np.shares_memory(view.D, table.D) and all(
-        np.shares_memory(a, b) for a, b in zip(view.coef, table.coef))
-    assert not np.shares_memory(picked.D, table.D)
+    P, T = table.shape
+    # the same table as four blocks: 2 x 2 of pixels and frames
+    blocks = BasisTable.empty(P, T, table.sun_half_cos.shape[-1], table.normalisation)
+    for rows in (slice(0, 5), slice(5, P)):
+        for frames in (slice(0, 4), slice(4, T)):
+            blocks.place(table.subset(rows, frames), rows, frames)
+    assert [len(c.blocks) for c in blocks.coef] == [4] * len(table.coef)
     theta = np.array([0.5, 0.6, 0.7, 0.25, 0.03])
     whole = TableModel(table, "colour").radiance_and_variance(theta)
-    for part in (view, picked):
-        for got, want in zip(TableModel(part, "colour").radiance_and_variance(theta), whole):
+    for t in (table, blocks):
+        view = t.subset(slice(3, 9), slice(2, 7))
+        assert view.shape == (6, 5)
+        assert np.shares_memory(view.D, t.D) and all(
+            any(np.shares_memory(b, c) for _, _, c in t.coef[i].blocks)
+            for i, series in enumerate(view.coef) for _, _, b in series.blocks)
+        for got, want in zip(TableModel(view, "colour").radiance_and_variance(theta), whole):
             np.testing.assert_array_equal(got, want[3:9, 2:7])
+        L, J = TableModel(view, "colour").jacobian(theta)
+        np.testing.assert_array_equal(J, TableModel(t, "colour").jacobian(theta)[1][3:9, 2:7])
 
 
 def test_a_fit_beyond_the_machines_memory_is_refused_up_front_with_its_estimate(days,

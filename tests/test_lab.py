@@ -234,7 +234,7 @@ def test_a_table_in_its_own_units_is_scaled_by_its_reference(dn_rig):
     """--calibrate white=0.9 finds the instrument's scale within its standard error (a joint
     99.9% test over the channels), the sample's fit holds the truth in its joint 99.9% region
     and carries the scale's error in its intervals; without the reference the reflectances
-    run into their bound of 1."""
+    run into their bound of 1, and the fit says so with the fix."""
     from skyfit_mi.fitting.fit import FitSession
 
     tmp, spec, table = dn_rig
@@ -255,6 +255,54 @@ def test_a_table_in_its_own_units_is_scaled_by_its_reference(dn_rig):
     raw = FitSession(tmp / "raw", "sample", None, model="colour").run("global",
                                                                      log=lambda *a: None)
     assert raw["parameters"]["C_r"] == pytest.approx(1.0)
+    assert any("C_r" in w and "at the upper bound of 1" in w and "--unknown-scale" in w
+               for w in raw["warnings"]), raw["warnings"]
+
+
+def test_a_table_of_unknown_scale_gives_relative_reflectances_without_a_bound(dn_rig,
+                                                                              tmp_path, capsys):
+    """--unknown-scale (no reference, the channels sharing one unknown gain) puts the values
+    on a relative scale, recorded: the fit holds the truth times that scale in its joint
+    99.9% region, says its reflectances are relative, and no bound decides it; the
+    2-parameter model (a white surface) and --calibrate with it are refused in one line."""
+    from skyfit_mi.fitting.fit import FitSession
+
+    tmp, spec, _ = dn_rig
+    gain = 1000.0                                          # DN per W m^-2 sr^-1, unknown
+    rows = list(csv.DictReader((tmp / "radiance.csv").open()))
+    for r in rows:
+        for c in "rgb":
+            r[c], r[f"sigma_{c}"] = (f"{float(r[k]) * gain:.6g}" for k in (c, f"sigma_{c}"))
+    table = tmp_path / "dn.csv"
+    with table.open("w") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    assert main(["ingest", str(spec), "--table", str(table), "--unknown-scale", "--calibrate",
+                 "white=0.9", "-o", str(tmp_path / "both")]) == 2
+    assert "leave out --unknown-scale" in capsys.readouterr().err
+    assert main(["ingest", str(spec), "--table", str(table), "--unknown-scale", "-o",
+                 str(tmp_path / "seq")]) == 0
+    scale = load_manifest(tmp_path / "seq")[0]["ingest"]["scale"]
+    assert scale["known"] is False and scale["brightest_apparent_albedo_reads"] == 0.5
+    f = scale["scale_per_unit"] * gain                     # relative units per radiance
+    for name, (C, rho_s, sigma) in {"sample": ((0.5, 0.35, 0.25), 0.06, 0.15),
+                                    "white": ((0.9, 0.9, 0.9), 0.0, 0.1)}.items():
+        s = FitSession(tmp_path / "seq", name, None, model="colour")
+        r = s.run("global", log=lambda *a: None)
+        assert r["radiometric_scale"] == scale and "relative" in r["units"]
+        assert any("scale is unknown" in x for x in r["warnings"]), r["warnings"]
+        theta = np.array(list(r["parameters"].values()))
+        assert np.all(theta[:4] < s.upper[:4] - 1e-3), r["parameters"]
+        # the truth on the relative scale: rho_d and the (white) specular reflectance times f
+        truth = np.r_[f * np.array(C) * (1 - rho_s) / (1 - f * rho_s), f * rho_s, sigma]
+        rise = s.problem.chi2(truth) - r["chi2"]
+        assert 0.0 <= rise <= chi2_dist.ppf(0.999, 5) * r["interval_scale_s2"] \
+            + r["cache_noise_chi2"], (name, rise, r["parameters"], truth)
+    capsys.readouterr()
+    assert main(["fit", str(tmp_path / "seq"), "--region", "sample", "--model", "2"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "fit it with --model 3 or 5" in err, err
 
 
 @pytest.mark.parametrize("reference, message", [

@@ -220,26 +220,6 @@ def test_jacobian_through_the_basis_matches_the_plugin(session, model, theta):
         assert np.max(np.abs(J[..., i] - fd)) < _fd_tolerance(L, fd, h), i
 
 
-def test_many_parameter_sets_through_the_basis_equal_the_model(session):
-    # the prediction's draws: a few basis evaluations (linear below the resolved lobe,
-    # Chebyshev in log sigma above), checked, give what evaluating each set gives
-    from skyfit_mi.render.fit_model import WardModel
-    wm = WardModel(session.cache, "colour")
-    rng = np.random.default_rng(3)
-    for lo, hi in ((0.04, 0.06), (1e-4, 0.4)):
-        sets = np.column_stack([rng.uniform(0.1, 0.9, (200, 3)), rng.uniform(0.0, 0.3, 200),
-                                np.exp(rng.uniform(np.log(lo), np.log(hi), 200))])
-        wm.evaluations = wm.basis_evaluations = 0
-        fast = wm.radiances(sets)
-        assert wm.evaluations + wm.basis_evaluations < len(sets)
-        direct = np.stack([wm.radiance(t) for t in sets])
-        assert np.max(np.abs(fast - direct)) <= 1e-5 * np.max(np.abs(direct))
-        # a linear reduction (a region's mean) applied to the basis: the same means
-        means = wm.radiances(sets, lambda L: L.mean(axis=0))
-        assert means.shape == (len(sets),) + direct.shape[2:]
-        assert np.max(np.abs(means - direct.mean(axis=1))) <= 1e-5 * np.max(np.abs(direct))
-
-
 @pytest.mark.slow
 def test_full_render_model_replays_new_parameters_and_agrees_with_the_cache(session, days):
     """The full-render baseline of the benchmarks (scripts/bench_fit.py), 36 s of frozen-function

@@ -29,7 +29,7 @@ from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSI
                                   SIGMA_RESOLVED, SKY_PLANS, PointRays, anchors_pay,
                                   build_light_cache)
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
-from ..pipeline.observation_table import is_table
+from ..pipeline.observation_table import is_table, relative_scale
 from ..physics.ward import METAL_THRESHOLD
 
 
@@ -142,6 +142,10 @@ class FitSession:
             if self.obs.luminance and model == "colour":
                 raise SkyfitError(f"region {name!r} is measured as luminance, which cannot tell "
                                   "colour; fit it with --model 2 or 3.")
+            if relative_scale(doc) and model == "two":
+                raise SkyfitError("the table's scale is unknown (ingest --unknown-scale), and the "
+                                  "2-parameter model's surface is white (rho_d + rho_s = 1), "
+                                  "which needs the scale; fit it with --model 3 or 5.")
         else:
             self.obs = load_observations(manifest_path, pixels, frames, min_frames)
         mats = doc["scene"]["materials"]
@@ -619,6 +623,18 @@ class FitSession:
             warnings.append(f"{method} did not converge (status {res['status']}): "
                             f"{res['message']}")
         warnings += self.obs.warnings                       # what loading the frames noticed
+        if relative_scale(self.doc):
+            warnings.append(self.doc["ingest"]["scale"]["meaning"])
+        top = [p for i, p in enumerate(names)
+               if p != "sigma_alpha" and theta[i] >= self.upper[i] - 1e-3]
+        if top:
+            fix = ("if its values are not radiances in W m^-2 sr^-1 (an instrument's DN), "
+                   "ingest the table with --calibrate MATERIAL=REFLECTANCE or --unknown-scale"
+                   if is_table(self.doc) else "check the exposure (--exposure, --calibrate or "
+                   "--colorchecker at ingest)")
+            warnings.append(f"{', '.join(top)} at the upper bound of 1: the data are brighter "
+                            "than any such surface under the frames' light, so the bound, not "
+                            f"the data, decides the fit; {fix}.")
         if method != "global" and g["chi2"] < chi2 - max(1.0, 1e-3 * chi2):
             # compare with the global minimum: explains local failures (thesis 7.2)
             warnings.insert(0, f"{method} stopped at chi2 = {chi2:.6g}, but the global search finds "
@@ -691,8 +707,12 @@ class FitSession:
             "wall_time_s": wall, "light_cache_time_s": self.cache_time, "method_time_s": t_method,
             "light_cache": self.cache_settings, "geometry": self.geometry,
             "trace": res.get("trace", []), "schedule": res.get("schedule"),
-            "truth": self.truth, "units": "reflectances unitless, sigma_alpha rms slope; chi2 in "
+            "truth": self.truth, "units": "reflectances unitless" + (
+                " and relative (the table's scale is unknown: radiometric_scale)"
+                if relative_scale(self.doc) else "") + ", sigma_alpha rms slope; chi2 in "
             "(DN/DN)^2; observed/model values in DN",
+            **({"radiometric_scale": self.doc["ingest"]["scale"]} if relative_scale(self.doc)
+               else {}),
             "sequence_run_id": self.run_id, "frames": [int(i) for i in self.obs.frames],
             "series": {"times": self.obs.times, "observed_DN": self.obs.y.tolist(),
                        "model_DN": self.problem.predict(L).tolist()},

@@ -53,8 +53,7 @@ from ..conventions import direction_from_angles
 from ..errors import InputRangeError, SkyfitError, check_choice, check_range
 from .colour import cct_to_rgb
 from .sky import (CCT_CLEAR, CCT_OVERCAST, GROUND_ALBEDO, IRRADIANCE_NODES, Sky,
-                  hemisphere_integral as sky_hemisphere_integral, perez_pattern,
-                  perez_relative_luminance as relative_luminance)
+                  hemisphere_integral as sky_hemisphere_integral, perez_pattern)
 from .sun import SUN_SOLID_ANGLE, sun_rgb
 
 #: Lower edges of the eight sky-clearness bins, then +inf (Perez et al. 1990, Table 1;
@@ -397,7 +396,7 @@ class PerezSky:
     sun_direction : ndarray (3,)
         Unit vector toward the sun, world frame (+X east, +Y north, +Z up).
     coefficients : ndarray (5,)
-        a, b, c, d, e of :func:`relative_luminance`.
+        a, b, c, d, e of :func:`~skyfit_mi.physics.sky.perez_relative_luminance`.
     scale : float
         Radiance per unit relative luminance [W m^-2 sr^-1]: the sky's horizontal
         irradiance equals the diffuse horizontal irradiance.
@@ -484,7 +483,7 @@ def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=Non
     """A Perez all-weather sky (1993) scaled to measured irradiance.
 
     epsilon and Delta come from :func:`clearness` and :func:`brightness`, the pattern from
-    :func:`coefficients` and :func:`relative_luminance` (negative values clamped at 0, as
+    :func:`coefficients` and :func:`~skyfit_mi.physics.sky.perez_relative_luminance` (negative values clamped at 0, as
     Radiance's gendaymtx does), and its level from the diffuse horizontal irradiance:
     scale = E_dh / integral of l_v cos theta_p dOmega (1993, eq. 3), by
     :func:`hemisphere_integral`.  Luminance uses :func:`diffuse_efficacy`.

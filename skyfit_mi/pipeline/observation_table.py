@@ -74,7 +74,7 @@ from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sun import SOLAR_CONSTANT, SUN_SOLID_ANGLE
 from ..conventions import direction_from_angles
-from ..render.light_cache import point_rays
+from ..render.light_cache import POINT_POSITIONS, point_rays
 from ..render.points import lambertian_radiance, load_points_scene, surface_hits
 from ..render.scene_xml import build_scene_xml
 from .ingest import measured_header, spec_for_times
@@ -514,6 +514,72 @@ def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calib
     return 1.0 / a, record
 
 
+#: Where an unknown scale puts the table's brightest apparent albedo (pi L / E, the
+#: radiance over a white Lambertian's at that point and light): at 0.5 no Ward material's
+#: reflectance can reach a bound (a lobe's peak apparent albedo is at least its rho_s, so a
+#: plastic's rho_s stays under 0.5 and a metal's C under 1), so no bound decides a fit.
+UNKNOWN_SCALE_ALBEDO = 0.5
+
+
+def unknown_scale(spec, xml, table, rows, row_frames, pos, view, offset):
+    """The factor that puts a table of unknown radiometric scale (DN, no reference) on the
+    scale of :data:`UNKNOWN_SCALE_ALBEDO`, and its record: (factor, record).
+
+    Every unsaturated row's apparent albedo y / L (L a white Lambertian's radiance at its
+    point under its frame's light, traced as :func:`reference_scale` traces references) is
+    taken; the largest, over rows and channels, becomes UNKNOWN_SCALE_ALBEDO.  Fitted
+    reflectances are then relative: the true ones times one unknown factor, the same for every
+    material and channel of the table.  Roughness, the colour's ratios and the ratio of
+    specular to diffuse reflectance do not depend on it."""
+    index = {k: j for j, k in enumerate(table.point_keys())}
+    lit = [i for i in rows if not table.saturated[i].all()
+           and np.nanmax(np.where(table.saturated[i], np.nan, table.value[i])) > 0]
+    if not lit:
+        raise SkyfitError(f"{table.path} has no unsaturated positive value in a lit frame, so "
+                          "its scale cannot be found; check its values.")
+    points = list(dict.fromkeys((table.regions[i], table.points[i]) for i in lit))
+    frames = sorted({row_frames[i] for i in lit})
+    at_point = {k: j for j, k in enumerate(points)}
+    at_frame = {f: j for j, f in enumerate(frames)}
+    v = np.zeros((len(points), len(frames), 3))
+    have = np.zeros(v.shape[:2], bool)
+    for i in lit:
+        p, t = at_point[(table.regions[i], table.points[i])], at_frame[row_frames[i]]
+        v[p, t], have[p, t] = view[i], True
+    for p in range(len(points)):           # a frame without the point's row: any view of it
+        v[p, ~have[p]] = v[p, np.argmax(have[p])]
+    material = np.array([m for m, _ in points], dtype=object)
+    L, _ = lambertian_radiance(xml, spec.render["variant"], [spec.frames[j].sky for j in frames],
+                               point_rays(pos[[index[k] for k in points]], v, offset),
+                               material, max(1, int(spec.render["max_depth"]) - 1),
+                               positions=POINT_POSITIONS)
+    channels = 1 if table.luminance else 3
+    best = 0.0
+    for i in lit:
+        white = L[at_point[(table.regions[i], table.points[i])], at_frame[row_frames[i]]]
+        if table.luminance:
+            white = np.array([white @ SRGB_LUMINANCE])
+        y = np.where(table.saturated[i, :channels], np.nan, table.value[i, :channels])
+        lit_enough = white[:channels] > 1e-3 * np.max(L)      # not at grazing light
+        if lit_enough.any():
+            best = max(best, float(np.nanmax(np.where(lit_enough, y / white[:channels],
+                                                      np.nan))))
+    if not best > 0:
+        raise SkyfitError(f"{table.path}: no value lies where the light reaches its point, so "
+                          "its scale cannot be found; check the lights and the points.")
+    factor = UNKNOWN_SCALE_ALBEDO / best
+    record = {"known": False, "brightest_apparent_albedo_per_unit": best,
+              "scale_per_unit": factor, "brightest_apparent_albedo_reads": UNKNOWN_SCALE_ALBEDO,
+              "rows": len(lit),
+              "meaning": "the table's radiometric scale is unknown: its values were multiplied "
+                         f"by {factor:.6g} so that its brightest apparent albedo (pi L / E) "
+                         f"reads {UNKNOWN_SCALE_ALBEDO}; fitted reflectances (C, R, rho_s) are "
+                         "the true ones times one unknown factor, the same for every material "
+                         "and channel; sigma_alpha, the colour's ratios and the ratio of "
+                         "specular to diffuse reflectance are absolute"}
+    return factor, record
+
+
 def check_radiances(table, scaled=None):
     """SkyfitError naming the line and column of the first value or sigma of ``table`` (in
     W m^-2 sr^-1, ``scaled`` by what, if not given so) beyond :data:`MAX_RADIANCE`."""
@@ -531,12 +597,13 @@ def check_radiances(table, scaled=None):
 
 
 def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrate=None,
-                 overwrite=False, log=print):
+                 scale_unknown=False, overwrite=False, log=print):
     """Turn an observation table into a sequence folder (module docstring); returns the
     manifest dict.  ``tz``: zone of naive times; ``site``: (lat, lon[, alt]) over the spec's
     (neither for lab lights); ``calibrate``: {material: (r, g, b) reflectance} of Lambertian
     references measured in the table, whose values are then in its own units, scaled to
-    radiance by them (:func:`reference_scale`)."""
+    radiance by them (:func:`reference_scale`); ``scale_unknown``: values in the table's own
+    units without a reference, put on a relative scale (:func:`unknown_scale`)."""
     out = Path(out_dir)
     mine = out / TABLE_FILE
     if mine.exists() and mine.resolve() == Path(table_path).resolve():
@@ -560,6 +627,9 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
         if len(rho) != 3 or not all(0.0 < r <= 1.0 for r in rho):
             raise SkyfitError(f"--calibrate {name}: give the reference's reflectance as one "
                               "number or R,G,B, each in (0, 1].")
+    if calibrate and scale_unknown:
+        raise SkyfitError("--calibrate gives the table's scale from its references; leave out "
+                          "--unknown-scale (or --calibrate, for a relative scale).")
     keep = [i for i in range(len(row_frames)) if not spec.frames[row_frames[i]].skipped]
     pos, view, offset = locate_points(spec, scene, table, row_frames)
     calibration = None
@@ -571,7 +641,15 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
             f"{', '.join(f'{v:.4g}' for v in scale)} W m^-2 sr^-1 (R, G, B), to "
             f"{', '.join(f'{v:.1%}' for v in calibration['scale_relative_sd'])} (standard "
             f"error), from {calibration['reference_rows']} reference rows")
-    check_radiances(table, "its reference's scale" if calibrate else None)
+    elif scale_unknown:
+        factor, calibration = unknown_scale(spec, scene[0], table, keep, row_frames, pos, view,
+                                            offset)
+        table = replace(table, value=table.value * factor, sigma=table.sigma * factor)
+        log(f"scale: unknown (no reference); the values are multiplied by {factor:.4g} so that "
+            f"the brightest apparent albedo reads {UNKNOWN_SCALE_ALBEDO}: fitted reflectances "
+            "will be relative, roughness and ratios absolute")
+    check_radiances(table, "its reference's scale" if calibrate else
+                    "the relative scale" if scale_unknown else None)
     top = float(np.nanmax(np.where(np.isfinite(table.sigma),
                                    table.value + HEADROOM_SIGMAS * table.sigma, np.nan)))
     sensor = SensorModel(exposure=SCALE_SHARE / top, response="linear", bits=16)
@@ -608,7 +686,7 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
         if saturated:
             manifest["ingest"]["saturated_values"] = int(table.saturated[keep].sum())
         if calibration is not None:
-            manifest["ingest"]["calibration"] = calibration
+            manifest["ingest"]["scale" if scale_unknown else "calibration"] = calibration
         for f in spec.frames:
             rec = frame_record(f, 0, out)
             rec.pop("seed")
@@ -620,6 +698,12 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
         write_text(out / TABLE_FILE, text)
         finish(out, manifest, sensor.exposure)
     return manifest
+
+
+def relative_scale(doc):
+    """Whether a manifest's values are on a relative scale (an observation table of unknown
+    radiometric scale, :func:`unknown_scale`)."""
+    return ((doc.get("ingest") or {}).get("scale") or {}).get("known") is False
 
 
 def is_table(doc):

@@ -21,7 +21,7 @@ their covariances of D and G at a few roughness values (``VARIANCE_DEGREES``): t
 variance of rho_d D + s G is bilinear in the reflectances.
 """
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -92,6 +92,75 @@ def _chebyshev_rows(x, n, derivative=False):
     return T, dT
 
 
+def _cut(x, axis, rows, frames):
+    """``x`` at pixels ``rows`` and frames ``frames`` (slices: a view) on its pixel ``axis``
+    (the frame axis follows it)."""
+    where = [slice(None)] * x.ndim
+    where[axis], where[axis + 1] = rows, frames
+    return x[tuple(where)]
+
+
+def _within(part, whole):
+    """The slice ``part`` of range(whole's stop) as (its slice of the block ``whole``, where
+    that lands in ``part``), or None where they do not meet (both slices of step 1)."""
+    lo, hi = max(part.start, whole.start), min(part.stop, whole.stop)
+    if lo >= hi:
+        return None
+    return slice(lo - whole.start, hi - whole.start), slice(lo - part.start, hi - part.start)
+
+
+@dataclass
+class Series:
+    """One piece's Chebyshev coefficients of G in log sigma, kept in the blocks they were
+    traced in (:func:`trace_table`): each block of pixels x frames keeps the degree its own
+    light needed, so no block is padded to another's degree and the table is never copied
+    into one array.
+
+    ``blocks``: [(rows, frames, coef)] with ``rows``, ``frames`` slices of the table and
+    ``coef`` (2, n + 1, p, t, 3) the stored mean and half difference (:attr:`BasisTable.PARTS`).
+    """
+
+    blocks: list
+
+    @property
+    def degree(self):
+        """The highest degree of any block."""
+        return max(c.shape[1] - 1 for _, _, c in self.blocks)
+
+    def subset(self, rows, frames):
+        """The series of the table's pixels ``rows`` and frames ``frames`` (slices of step
+        1): views of the blocks that meet them."""
+        out = []
+        for r, f, c in self.blocks:
+            rr, ff = _within(rows, r), _within(frames, f)
+            if rr is not None and ff is not None:
+                out.append((rr[1], ff[1], _cut(c, 2, rr[0], ff[0])))
+        return Series(out)
+
+    def map(self, f):
+        """The series with ``f`` applied to every block's coefficients."""
+        return Series([(r, fr, f(c)) for r, fr, c in self.blocks])
+
+    def evaluate(self, x, h, shape, derivative=False):
+        """The stored mean (``h`` = 0) or half difference (1) at the coordinates ``x`` (K,)
+        of the piece: (K,) + ``shape`` float64, and its derivative in x."""
+        out = np.empty((len(x),) + tuple(shape))
+        dout = np.empty_like(out) if derivative else None
+        rows_of = {}
+        for r, f, c in self.blocks:
+            n = c.shape[1] - 1
+            if n not in rows_of:
+                rows_of[n] = _chebyshev_rows(x, n, True) if derivative else \
+                    (_chebyshev_rows(x, n), None)
+            T, dT = rows_of[n]
+            flat = c[h].reshape(n + 1, -1)
+            size = (len(x),) + c.shape[2:]
+            out[:, r, f] = (T.astype(flat.dtype) @ flat).reshape(size)
+            if derivative:
+                dout[:, r, f] = (dT.astype(flat.dtype) @ flat).reshape(size)
+        return (out, dout) if derivative else out
+
+
 @dataclass
 class BasisTable:
     """D and G(sigma) of P pixels in T frames, three channels, for each half of the light
@@ -103,8 +172,8 @@ class BasisTable:
     D : (2, P, T, 3)  the diffuse basis [W m^-2 sr^-1]
     G0 : (2, P, T, 3)  G at sigma = 0, the ideal mirror
     G1 : (2, P, T, 3)  G at SIGMA_RESOLVED (the model is linear in sigma between)
-    coef : one per piece of PIECES, (2, degree + 1, P, T, 3) float32 Chebyshev coefficients
-        of G in log sigma [W m^-2 sr^-1]
+    coef : one :class:`Series` per piece of PIECES, float32 Chebyshev coefficients of G in log
+        sigma [W m^-2 sr^-1]
     VDD : (P, T, 3)  var(D) over the positions' estimates / S [(W m^-2 sr^-1)^2]
     VDG, VGG : (V, P, T, 3)  cov(D, G) and var(G) likewise at the V roughness values
         ``var_sigmas`` (:func:`variance_sigmas`)
@@ -125,7 +194,7 @@ class BasisTable:
     normalisation: str = "ward"
 
     #: The pixel axis of each array field (the frame axis follows it).
-    AXES = {"D": 1, "G0": 1, "G1": 1, "coef": 2, "VDD": 0, "VDG": 1, "VGG": 1, "hit": 0,
+    AXES = {"D": 1, "G0": 1, "G1": 1, "VDD": 0, "VDG": 1, "VGG": 1, "hit": 0,
             "sun_half_cos": 0}
 
     @property
@@ -137,57 +206,40 @@ class BasisTable:
     def var_sigmas(self):
         return variance_sigmas()
 
-    def _map(self, f):
-        """A table with f(array, pixel axis) applied to every array field."""
-        return BasisTable(**{k: [f(c, a) for c in self.coef] if k == "coef"
-                             else f(getattr(self, k), a) for k, a in self.AXES.items()},
-                          normalisation=self.normalisation)
+    @property
+    def degrees(self):
+        """Each piece's highest degree."""
+        return [c.degree for c in self.coef]
 
     def subset(self, rows=slice(None), frames=slice(None)):
-        """The table of pixels ``rows`` and frames ``frames``: slices give views of this
-        table's arrays (nothing is copied: regions traced together share one table), index
-        arrays copies."""
-        def cut(x, axis):
-            where = [slice(None)] * x.ndim
-            where[axis], where[axis + 1] = rows, slice(None)
-            x = x[tuple(where)]
-            where[axis], where[axis + 1] = slice(None), frames
-            return x[tuple(where)]
-        return self._map(cut)
+        """The table of pixels ``rows`` and frames ``frames`` (slices of step 1): views of this
+        table's arrays, nothing copied (regions traced together share one table)."""
+        rows = slice(*rows.indices(self.shape[0]))
+        frames = slice(*frames.indices(self.shape[1]))
+        return BasisTable(**{k: _cut(getattr(self, k), a, rows, frames)
+                             for k, a in self.AXES.items()},
+                          coef=[c.subset(rows, frames) for c in self.coef],
+                          normalisation=self.normalisation)
 
-    @staticmethod
-    def join(tables, axis):
-        """Tables of the same frames stacked by pixels (``axis`` 'pixels') or of the same pixels
-        by frames ('frames'); series of different degrees padded with zero coefficients.  Each
-        array is made once at its full size and filled block by block, the given tables
-        emptied as they are copied (at most one array's copy beside them)."""
-        off = {"pixels": 0, "frames": 1}[axis]
-        t0 = tables[0]
+    @classmethod
+    def empty(cls, P, T, S, normalisation):
+        """A table of P pixels in T frames with S positions, to be filled block by block
+        (:meth:`place`)."""
+        f32 = np.float32
+        V = len(variance_sigmas())
+        return cls(np.zeros((2, P, T, 3), f32), np.zeros((2, P, T, 3), f32),
+                   np.zeros((2, P, T, 3), f32), [Series([]) for _ in PIECES],
+                   np.zeros((P, T, 3), f32), np.zeros((V, P, T, 3), f32),
+                   np.zeros((V, P, T, 3), f32), np.zeros((P, T), bool),
+                   np.zeros((P, T, S), f32), normalisation)
 
-        def gather(get, clear, axis, degree=None):
-            first = get(t0)
-            shape = list(first.shape)
-            shape[axis] = sum(get(t).shape[axis] for t in tables)
-            if degree is not None:
-                shape[1] = degree
-            out = np.zeros(shape, first.dtype)
-            at = 0
-            for t in tables:
-                x = get(t)
-                where = [slice(None)] * out.ndim
-                where[axis] = slice(at, at + x.shape[axis])
-                if degree is not None:
-                    where[1] = slice(0, x.shape[1])
-                out[tuple(where)] = x
-                at += x.shape[axis]
-                clear(t)
-            return out
-        out = {k: gather(lambda t, k=k: getattr(t, k), lambda t, k=k: setattr(t, k, None),
-                         a + off) for k, a in t0.AXES.items() if k != "coef"}
-        out["coef"] = [gather(lambda t, i=i: t.coef[i], lambda t, i=i: t.coef.__setitem__(i, None),
-                              2 + off, max(t.coef[i].shape[1] for t in tables))
-                       for i in range(len(t0.coef))]
-        return BasisTable(**out, normalisation=t0.normalisation)
+    def place(self, block, rows, frames):
+        """Copy the table ``block`` into pixels ``rows`` and frames ``frames`` (slices); its
+        series are kept as they are, as blocks of this table's."""
+        for k, a in self.AXES.items():
+            _cut(getattr(self, k), a, rows, frames)[...] = getattr(block, k)
+        for mine, theirs in zip(self.coef, block.coef):
+            mine.blocks += [(rows, frames, c) for _, _, c in theirs.blocks]
 
     #: The whole cache (part 0), its first (1) or second (2) half, and the halves' half
     #: difference ('delta'), as weights of the stored (mean, half difference).
@@ -248,17 +300,14 @@ class BasisTable:
             at = np.flatnonzero(~low & (piece == i))
             if not len(at):
                 continue
-            c = self.coef[i][h]
-            n = c.shape[0] - 1
             x = _x(sigma[at], lo, hi)
-            T, dT = _chebyshev_rows(x, n, True) if derivative else (_chebyshev_rows(x, n), None)
-            flat = c.reshape(n + 1, -1)
-            out[at] = (T.astype(flat.dtype) @ flat).reshape((len(at),) + out.shape[1:])
+            got = self.coef[i].evaluate(x, h, out.shape[1:], derivative)
             if derivative:
                 # dx/dsigma = 2 / (sigma (log hi - log lo))
                 scale = 2.0 / (sigma[at] * (np.log(hi) - np.log(lo)))
-                d = (dT.astype(flat.dtype) @ flat).reshape((len(at),) + out.shape[1:])
-                dout[at] = d * scale[:, None, None, None]
+                out[at], dout[at] = got[0], got[1] * scale[:, None, None, None]
+            else:
+                out[at] = got
         return (out, dout) if derivative else out
 
 
@@ -300,7 +349,9 @@ def tabulate(cache, wm):
         return known[sigma]
     D = halves(d_shares)
     G0, G1 = lobe(0.0), lobe(SIGMA_RESOLVED)
-    coef = [_piece(lobe, lo, hi, n) for (lo, hi), n in zip(PIECES, DEGREES)]
+    P, T = D.shape[1:3]
+    coef = [Series([(slice(0, P), slice(0, T), _piece(lobe, lo, hi, n))])
+            for (lo, hi), n in zip(PIECES, DEGREES)]
     f32 = np.float32
     VDG, VGG = (np.stack([moments[float(v)][i] for v in variance_sigmas()]).astype(f32)
                 for i in (0, 1))
@@ -401,19 +452,10 @@ def chunks(P, T, per_value, budget):
             for f in range(0, T, frames) for r in range(0, P, rows)]
 
 
-def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
-                directions=DIRECTIONS, budget=None, **options):
-    """The :class:`BasisTable` of points ``at`` (pixels (P, 2) or
-    :class:`~.light_cache.PointRays`) on material ``bsdf_id`` (one, or one per point) under
-    ``skies``: the light cache traced (:func:`~.light_cache.build_light_cache`, ``options``
-    its own) and tabulated block by block (:func:`chunks`, ``budget`` samples each,
-    :func:`block_budget` by default), so that
-    memory stays bounded whatever the points and frames.  ``model_of(cache)`` makes the
-    :class:`~.fit_model.WardModel` of a block's cache.  One block takes ``seed`` itself (the
-    same samples as an untabulated cache); several take seeds drawn from it.
-
-    Returns the table and the number of blocks.
-    """
+def _traced_blocks(scene, params, skies, at, bsdf_id, seed, positions, directions, budget,
+                   options):
+    """The light cache of points ``at`` under ``skies`` traced block by block (see
+    :func:`trace_table`): yields (rows, frames, cache) and the number of blocks first."""
     rays = at if isinstance(at, PointRays) else None
     P, T = len(at), len(skies)
     ids = np.broadcast_to(np.asarray(bsdf_id, dtype=object), (P,))
@@ -421,22 +463,72 @@ def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=P
                     budget or block_budget(P, T, positions))
     seeds = [seed] if len(blocks) == 1 else \
         np.random.SeedSequence(seed).generate_state(len(blocks)).tolist()
-    by_frames = []
+    yield len(blocks)
     for (rows, frames), s in zip(blocks, seeds):
         if rays is None:
             where = np.asarray(at)[rows]
         else:
             where = PointRays(rays.origins[rows, frames], rays.directions[rows, frames])
-        cache = build_light_cache(scene, params, skies[frames], where, ids[rows],
-                                  positions=positions, directions=directions, seed=int(s),
-                                  **options)
-        table = tabulate(cache, model_of(cache))
+        yield rows, frames, build_light_cache(scene, params, skies[frames], where, ids[rows],
+                                              positions=positions, directions=directions,
+                                              seed=int(s), **options)
+
+
+def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
+                directions=DIRECTIONS, budget=None, **options):
+    """The :class:`BasisTable` of points ``at`` (pixels (P, 2) or
+    :class:`~.light_cache.PointRays`) on material ``bsdf_id`` (one, or one per point) under
+    ``skies``: the light cache traced (:func:`~.light_cache.build_light_cache`, ``options``
+    its own) and tabulated block by block (:func:`chunks`, ``budget`` samples each,
+    :func:`block_budget` by default), so that memory stays bounded whatever the points and
+    frames.  ``model_of(cache)`` makes the :class:`~.fit_model.WardModel` of a block's cache.
+    One block takes ``seed`` itself (the same samples as an untabulated cache); several take
+    seeds drawn from it.
+
+    Returns the table and the number of blocks.
+    """
+    traced = _traced_blocks(scene, params, skies, at, bsdf_id, seed, positions, directions,
+                            budget, options)
+    n, table = next(traced), None
+    for rows, frames, cache in traced:
+        block = tabulate(cache, model_of(cache))
         del cache
-        if not by_frames or by_frames[-1][0] != frames:
-            by_frames.append((frames, []))
-        by_frames[-1][1].append(table)
-    table = BasisTable.join([BasisTable.join(t, "pixels") for _, t in by_frames], "frames")
-    return table, len(blocks)
+        if table is None:
+            table = BasisTable.empty(len(at), len(skies), block.sun_half_cos.shape[-1],
+                                     block.normalisation)
+        table.place(block, rows, frames)
+    return table, n
+
+
+def trace_diffuse(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
+                  directions=DIRECTIONS, budget=None, **options):
+    """The diffuse basis alone (a white Lambertian's radiance, thesis eq. 3.19's rho_d term
+    at rho_d = 1) of points ``at`` under ``skies``, traced in blocks as :func:`trace_table`
+    (its arguments), without the lobe's table: D and its Monte Carlo variance, (P, T, 3)
+    [W m^-2 sr^-1] and [(W m^-2 sr^-1)^2]."""
+    traced = _traced_blocks(scene, params, skies, at, bsdf_id, seed, positions, directions,
+                            budget, options)
+    next(traced)
+    D, var = np.zeros((2, len(at), len(skies), 3))
+    for rows, frames, cache in traced:
+        wm = model_of(cache)
+        shares = wm._diffuse_shares()
+        S = shares.shape[2]
+        D[rows, frames] = shares.sum(axis=2)
+        if S > 1:
+            var[rows, frames] = np.var(shares * S, axis=2, ddof=1) / S
+    return D, var
+
+
+#: The most roughness values whose lobe arrays (P, T, 3) a search takes at once, and the most
+#: bytes of such a chunk in float64: a large table's chunks take fewer values
+#: (:func:`sigma_chunk`).
+SIGMA_CHUNK, CHUNK_BYTES = 8, 64 << 20
+
+
+def sigma_chunk(shape):
+    """Roughness values per chunk of lobe arrays of ``shape`` (P, T, 3)."""
+    return int(np.clip(CHUNK_BYTES // (8 * int(np.prod(shape))), 1, SIGMA_CHUNK))
 
 
 class Lobes:
@@ -446,7 +538,7 @@ class Lobes:
     global_search.sigma_chunks`), so that the grid's (K, P, T, 3) never exists at once;
     ``map(f)`` applies f to every chunk's values."""
 
-    def __init__(self, lobe, sigmas, chunk=8):
+    def __init__(self, lobe, sigmas, chunk=SIGMA_CHUNK):
         self.lobe, self.sigmas, self.chunk = lobe, np.asarray(sigmas, dtype=float), int(chunk)
 
     def __len__(self):
@@ -533,7 +625,9 @@ class TableModel:
         t = self.table
         self.basis_evaluations += len(sigmas)
         parts = (0, 1, 2) if halves else (self.part,)
-        out = [(t.diffuse(j), Lobes(lambda s, j=j: t.lobe(s, part=j), sigmas)) for j in parts]
+        chunk = sigma_chunk(t.D.shape[1:])
+        out = [(t.diffuse(j), Lobes(lambda s, j=j: t.lobe(s, part=j), sigmas, chunk))
+               for j in parts]
         return out if halves else out[0]
 
     def radiances(self, thetas, reduce=None):

@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import SkyfitError, check_choice
 from ..physics.ward import (METAL_THRESHOLD, NORMALISATIONS, PLASTIC_MAX, SIGMA_MIRROR,
                             colour_rule_twin, lobe_albedo_nodes, raw_parameters)
-from .light_cache import (CONTROL_FULL, CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
+from .light_cache import (CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
                           SIGMA_TABLE, control_weight)
 from .daylight import jit_array, update_sky
 from .scene_xml import _ward_element
@@ -28,10 +28,6 @@ PARAMETERS = {"two": ("rho_s", "sigma_alpha"),
               "colour": ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha")}
 #: Models by their number of free parameters (the CLI's --model 2/3/5).
 BY_COUNT = {2: "two", 3: "achromatic", 5: "colour"}
-#: :meth:`WardModel.radiances`: the first and the most Chebyshev intervals in log sigma for
-#: the lobe basis G(sigma) (doubled until two successive interpolations agree), and their
-#: agreement relative to the largest value (far below any Monte Carlo error of the cache).
-RADIANCES_NODES, RADIANCES_MAX_NODES, RADIANCES_RTOL = 8, 64, 1e-5
 #: Bounds of every parameter: reflectances in [0, 1], sigma_alpha in [0, 0.5].
 BOUNDS = {"rho_s": (0.0, 1.0), "sigma_alpha": (0.0, SIGMA_LARGEST), "R": (0.0, 1.0),
           "C_r": (0.0, 1.0), "C_g": (0.0, 1.0), "C_b": (0.0, 1.0)}
@@ -335,65 +331,6 @@ class WardModel:
         """L [W m^-2 sr^-1] for parameters ``theta``, shape (P, T, 3)."""
         self.evaluations += 1
         return self._np(self._radiance_dr(*self._variables(theta)))
-
-    def radiances(self, thetas, reduce=None):
-        """L [W m^-2 sr^-1] at many parameter sets ``thetas`` (n, n_params): (n, P, T, 3), or
-        ``reduce`` of each (a linear map of a (P, T, 3) radiance, such as a region's mean over
-        its pixels: applied to the basis, so that only what it keeps is interpolated).
-
-        Through the basis L = rho_d D + s G(sigma) (thesis eq. 3.19, exact: the model is
-        linear in the reflectances), with G from a few basis evaluations instead of n: below
-        SIGMA_RESOLVED linear in sigma (as the model is), above it interpolated in log sigma
-        at Chebyshev points spanning the sets' roughnesses, piecewise between the control
-        variate's CONTROL_FULL and CONTROL_SIGMA (where its weight's curvature jumps).  The
-        points are doubled (nested: each set reuses the last) until two successive
-        interpolations agree within RADIANCES_RTOL of the largest value at every set; a piece
-        with fewer sets than that needs is evaluated set by set.
-        """
-        C = np.polynomial.chebyshev
-        thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
-        sig = thetas[:, -1]
-        refl = np.array([reflectances(self.model, th)[:2] for th in thetas])   # (n, 2, 3)
-        piece = np.searchsorted([SIGMA_RESOLVED, CONTROL_FULL, CONTROL_SIGMA], sig, "right")
-        reduce = reduce or (lambda x: x)
-        D = np.asarray(reduce(self._diffuse_shares().sum(axis=2)))
-        G0, G1 = (np.asarray(reduce(self._lobe(v))) for v in (0.0, SIGMA_RESOLVED))
-        G = np.empty((len(sig),) + D.shape)
-        low = piece == 0                                      # the mirror's interpolation
-        G[low] = G0 + (sig[low] / SIGMA_RESOLVED).reshape((-1,) + (1,) * D.ndim) * (G1 - G0)
-        for k in set(piece[~low].tolist()):
-            at = np.flatnonzero(piece == k)
-            G[at] = self._interpolated_lobe(sig[at], C, reduce)
-        return refl[:, 0].reshape(refl.shape[:1] + (1,) * (D.ndim - 1) + (3,)) * D \
-            + refl[:, 1].reshape(refl.shape[:1] + (1,) * (D.ndim - 1) + (3,)) * G
-
-    def _interpolated_lobe(self, sig, C, reduce):
-        """``reduce`` of G at roughnesses ``sig`` of one smooth piece (see :meth:`radiances`):
-        interpolated only while that takes fewer evaluations than its distinct roughnesses."""
-        uniq, inverse = np.unique(sig, return_inverse=True)
-        lo, hi = np.log(uniq[0]), np.log(uniq[-1])
-        u = 2 * (np.log(uniq) - lo) / max(hi - lo, 1e-300) - 1
-        known, last, n = {}, None, RADIANCES_NODES
-        while hi - lo > 1e-9 and n <= RADIANCES_MAX_NODES and n + 1 < len(uniq) \
-                and (last is not None or 2 * n + 1 < len(uniq)):
-            x = np.cos(np.pi * np.arange(n + 1) / n)                  # nested as n doubles
-            for v in x:
-                if v not in known:
-                    known[v] = np.asarray(reduce(self._lobe(np.exp(lo + (v + 1) * (hi - lo) / 2))))
-            values = np.stack([known[v] for v in x])
-            coef = np.linalg.solve(C.chebvander(x, n), values.reshape(n + 1, -1))
-            now = (C.chebvander(u, n) @ coef).reshape((len(uniq),) + values.shape[1:])
-            if last is not None and np.max(np.abs(now - last)) \
-                    <= RADIANCES_RTOL * max(np.max(np.abs(now)), 1e-30):
-                return now[inverse]
-            last, n = now, 2 * n
-        return np.stack([np.asarray(reduce(self._lobe(v))) for v in uniq])[inverse]
-
-    def _lobe(self, sigma):
-        """G(sigma) (P, T, 3): the basis plugin's L at rho_s = 1 (the lobe alone)."""
-        self.basis_evaluations += 1
-        return self._np(self._radiance_dr(*self._variables([1.0, sigma], model="two"),
-                                          plugin="basis"))
 
     def jacobian(self, theta):
         """(L, dL/dtheta) with shapes (P, T, 3) and (P, T, 3, n_params).

@@ -4,7 +4,7 @@ the light a white Lambertian surface reflects there (an observation table's refe
 import numpy as np
 
 from . import setup
-from .basis_table import TableModel, trace_table
+from .basis_table import trace_diffuse
 from .daylight import jit_array
 from .fit_model import WardModel
 from .light_cache import DIRECTIONS, POSITIONS
@@ -61,9 +61,6 @@ def lambertian_radiance(xml, variant, skies, rays, material, max_depth, seed=0,
     (``max_depth`` for the light arriving from the rest of the scene), and its Monte Carlo
     variance: (P, T, 3) [W m^-2 sr^-1] and [(W m^-2 sr^-1)^2]."""
     scene = load_points_scene(xml, variant)
-    table, _ = trace_table(scene, setup(variant).traverse(scene), list(skies), rays, material,
-                           lambda cache: WardModel(cache, "colour", "ward"), seed=seed,
-                           positions=positions, directions=directions, max_depth=max_depth)
-    # the colour model at C = 1, rho_s = 0: rho_d = 1, no lobe (its roughness is moot)
-    return TableModel(table, "colour").radiance_and_variance(np.array([1.0, 1.0, 1.0, 0.0,
-                                                                        0.1]))
+    return trace_diffuse(scene, setup(variant).traverse(scene), list(skies), rays, material,
+                         lambda cache: WardModel(cache, "colour", "ward"), seed=seed,
+                         positions=positions, directions=directions, max_depth=max_depth)

@@ -19,14 +19,13 @@ from any start.  The grid also gives the profile chi-square of sigma_alpha and r
 import numpy as np
 
 from ...physics.ward import METAL_THRESHOLD
+from ...render.basis_table import sigma_chunk
 from ...render.linear_grid import grid_on_device, linear_form
 from .levenberg_marquardt import polish
 
 #: sigma_alpha grid: the ideal mirror, then log-spaced.
 SIGMA_GRID = np.concatenate([[0.0], np.geomspace(0.004, 0.5, 64)])
 RHO_GRID = np.linspace(0.0, 1.0, 101)
-#: Roughness values whose lobe arrays (P, T, 3) the grid's sums take at once.
-SIGMA_CHUNK = 8
 #: Resolution of the profiles near the optimum.
 RHO_FINE = np.linspace(0.0, 1.0, 2001)
 SIGMA_FINE_POINTS = 21
@@ -75,13 +74,14 @@ def near_saturation(obs):
 
 def sigma_chunks(G):
     """(slice, values) over the roughness axis of the lobe basis ``G``: an array (K, P, T, 3)
-    in slices of SIGMA_CHUNK, or a lazy :class:`~skyfit_mi.render.basis_table.Lobes` in its
+    in slices of :func:`~skyfit_mi.render.basis_table.sigma_chunk`, or a lazy :class:`~skyfit_mi.render.basis_table.Lobes` in its
     own chunks, so that only a few roughness values' arrays exist at once."""
     if hasattr(G, "chunks"):
         yield from G.chunks()
         return
-    for k in range(0, len(G), SIGMA_CHUNK):
-        yield slice(k, k + SIGMA_CHUNK), G[k:k + SIGMA_CHUNK]
+    n = sigma_chunk(G.shape[1:])
+    for k in range(0, len(G), n):
+        yield slice(k, k + n), G[k:k + n]
 
 
 def _per_sigma(G, *terms):
