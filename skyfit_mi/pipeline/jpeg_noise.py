@@ -40,6 +40,9 @@ import os
 import tempfile
 
 import numpy as np
+from scipy.fft import dctn, idctn
+
+from .photos import apply_orientation, undo_orientation
 
 #: Re-compressed copies per frame for its error variance.
 REPLICATES = 8
@@ -67,15 +70,11 @@ def jpeg_settings(path):
 def stored(values, settings):
     """``values`` (H, W, ...) of a JPEG frame as the file lays them out, its EXIF orientation
     (``settings["orientation"]``, from the caller) undone: its blocks start at the top left."""
-    from .photos import undo_orientation
-
     return undo_orientation(values, settings.get("orientation", 1))
 
 
 def displayed(values, settings):
     """The inverse of :func:`stored`: a contiguous array as the frame is displayed."""
-    from .photos import apply_orientation
-
     return np.ascontiguousarray(apply_orientation(values, settings.get("orientation", 1)))
 
 
@@ -86,8 +85,6 @@ def block_offset(orientation, shape, block=8):
     that reverses an axis of the file moves them by its length modulo ``block``.  Found by
     turning (:func:`~.photos.apply_orientation`) the block indices of a small file with the
     same lengths modulo ``block``."""
-    from .photos import apply_orientation
-
     settings = {"orientation": orientation}
     fh, fw = stored(np.broadcast_to(False, tuple(shape[:2])), settings).shape
     yy, xx = np.mgrid[0:fh % block + block, 0:fw % block + block] // block
@@ -159,7 +156,6 @@ def decode(source):
     set to it: what libjpeg's rounding reads as clipped stays clipped.  None where jpeglib
     cannot read the file, or it is coded in another colour space (CMYK, YCCK)."""
     import jpeglib
-    from scipy.fft import idctn
 
     path = source
     if not isinstance(source, (str, os.PathLike)):
@@ -301,8 +297,6 @@ def truth_sampler(values, settings):
     zeroed is taken as zero (a smooth surface has no content there).  The moves are turned
     back into R, G, B by JFIF's inverse.
     """
-    from scipy.fft import dctn, idctn
-
     v = np.nan_to_num(np.asarray(values, dtype=float))
     h, w = v.shape[:2]
     ycc = v @ _RGB_TO_YCC.T
