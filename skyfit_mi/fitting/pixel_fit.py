@@ -30,7 +30,6 @@ and one off its material gets NaN.
 """
 
 import numpy as np
-from scipy.stats import chi2 as chi2_dist
 
 from ..errors import SkyfitError
 from ..pipeline.manifest import frame_sky, load_manifest
@@ -292,6 +291,8 @@ def _vertex(profile):
 
 def _flags(model, names, fit, hit):
     """The warning bits (:data:`WARNINGS`) of each group's fit (intervals final)."""
+    from scipy.stats import chi2 as chi2_dist
+
     lo, hi, dof, n_par = fit["lo"], fit["hi"], fit["dof"], len(names)
     r = names.index("rho_s")
     bits = np.zeros(len(dof), dtype=np.int32)

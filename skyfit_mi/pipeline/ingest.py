@@ -39,9 +39,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.ndimage import binary_erosion
-from scipy.optimize import nnls
-from scipy.stats import chi2 as chi2_dist, norm
 
 from ..errors import SkyfitError
 from ..files import FolderLock
@@ -272,6 +269,8 @@ def _noise_bins(parts, sensor, noise):
 
 def _nnls(rows, rhs, weights):
     """(a, b) >= 0 minimising the weighted squares of rows @ (a, b) - rhs."""
+    from scipy.optimize import nnls
+
     w = weights / np.mean(weights)
     (a, b), _ = nnls(rows * w[:, None], np.maximum(rhs, 0.0) * w)
     return float(a), float(b)
@@ -289,6 +288,8 @@ def _clipped_variance(r):
     median within NOISE_CLIP robust standard deviations, iterated, corrected for the normal
     distribution's share beyond the clip.  Unlike a squared MAD it is not biased by codes that
     are whole numbers (a MAD of residuals of 1-DN noise falls on a few discrete values)."""
+    from scipy.stats import norm
+
     r = r - np.median(r)
     q75, q25 = np.percentile(r, [75, 25])
     var = max(((q75 - q25) / 1.349) ** 2, 1e-12)
@@ -386,6 +387,8 @@ def patch_samples(spec, values, falloff, calibrate, chart=None):
     :data:`CHART_GREY`, scaled to the swatch's reference), times the vignetting ``falloff``;
     each pixel's patch label (n,); and where the n pixels lie, an (H, W) mask.
     """
+    from scipy.ndimage import binary_erosion
+
     renderer = FrameRenderer(spec)
     labels, ids = label_image(renderer.scene)
     patch = np.zeros(labels.shape, np.int32)
@@ -585,6 +588,8 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log):
     its own, averaged by a fit over the day); fits widen their intervals by it
     (:func:`skyfit_mi.fitting.uncertainty.calibration_sd`).
     """
+    from scipy.stats import chi2 as chi2_dist
+
     halves = np.full((len(samples), 2, 3), np.nan)
     k = np.full((len(samples), 3), np.nan)
     for i, (y, L) in enumerate(samples):

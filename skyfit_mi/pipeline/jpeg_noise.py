@@ -40,7 +40,6 @@ import os
 import tempfile
 
 import numpy as np
-from scipy.fft import dctn, idctn
 
 from .photos import apply_orientation, undo_orientation
 
@@ -156,6 +155,7 @@ def decode(source):
     set to it: what libjpeg's rounding reads as clipped stays clipped.  None where jpeglib
     cannot read the file, or it is coded in another colour space (CMYK, YCCK)."""
     import jpeglib
+    from scipy.fft import idctn
 
     path = source
     if not isinstance(source, (str, os.PathLike)):
@@ -297,6 +297,8 @@ def truth_sampler(values, settings):
     zeroed is taken as zero (a smooth surface has no content there).  The moves are turned
     back into R, G, B by JFIF's inverse.
     """
+    from scipy.fft import dctn, idctn
+
     v = np.nan_to_num(np.asarray(values, dtype=float))
     h, w = v.shape[:2]
     ycc = v @ _RGB_TO_YCC.T

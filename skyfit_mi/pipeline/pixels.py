@@ -5,7 +5,6 @@ import io
 from pathlib import Path
 
 import numpy as np
-from scipy.ndimage import binary_erosion
 
 from ..errors import SkyfitError
 from ..files import save_figure, write_text
@@ -103,6 +102,8 @@ def material_regions(manifest):
     the pixels inside each material's area (edge pixels, which also see a neighbour, left
     out); SkyfitError when it sees none.  For an observation table, (name, None) of each
     region it measures."""
+    from scipy.ndimage import binary_erosion
+
     doc, root = load_manifest(manifest)
     if is_table(doc):                      # (name, None): every point of the region
         return [(name, None) for name in table_regions(root)]
