@@ -472,6 +472,11 @@ def _traced_blocks(scene, params, skies, at, bsdf_id, seed, positions, direction
         yield rows, frames, build_light_cache(scene, params, skies[frames], where, ids[rows],
                                               positions=positions, directions=directions,
                                               seed=int(s), **options)
+    # Dr.Jit keeps freed buffers for reuse: the last block's, not needed once the light is
+    # tabulated (a 1,000-point table's trace: 206 MB of a 1.1 GB process)
+    import drjit as dr
+
+    dr.flush_malloc_cache()
 
 
 def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
