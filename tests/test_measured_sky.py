@@ -149,7 +149,7 @@ def test_measured_day_writes_maps_and_a_spec_that_renders_them(scans, tmp_path, 
     template = thesis_disc_spec("t", {"model": "two", "rho_s": 0.1, "sigma_alpha": 0.1})
     path = measured_day(scans[:2], tmp_path, template, rows=16)
     assert path == tmp_path / SPEC_FILE and (tmp_path / "maps" / "sky_0945.exr").is_file()
-    assert len((tmp_path / SUMMARY_FILE).read_text().splitlines()) == 4
+    assert len((tmp_path / SUMMARY_FILE).read_text().splitlines()) == 3
     spec = load_spec(path)
     for frame, scan in zip(spec.frames, scans[:2]):
         direct = ms.scan_envmap(scan, rows=16, ground_albedo=0.2)
