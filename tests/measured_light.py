@@ -83,16 +83,18 @@ LIGHTS = {"measured envmap": None, "thesis CIE clear": thesis_clear,
           "CIE clear at measured DHI, DNI": thesis_clear_scaled}
 
 
-def fit(day, region="rect:4,4,7,7"):
-    """The colour-model fit of the disc region of ``day``: (result dict, chi-square rise at
-    the truth over the minimum, its joint 99.9% bound chi2_5(0.999) s^2 + the cache's noise)."""
+def fit(day, region="rect:4,4,7,7", positions=2, directions=512):
+    """The colour-model fit of the disc region of ``day`` (light cache of ``positions`` and
+    ``directions`` a pixel; ``positions=None`` sizes it from the data): (result dict,
+    chi-square rise at the truth over the minimum, its joint 99.9% bound chi2_5(0.999) s^2 +
+    the cache's noise)."""
     from scipy.stats import chi2 as chi2_dist
 
     from skyfit_mi.fitting.chi2 import parse_region
     from skyfit_mi.fitting.fit import FitSession
 
-    s = FitSession(day, "disc", parse_region(region), model="colour", positions=2,
-                   directions=512)
+    s = FitSession(day, "disc", parse_region(region), model="colour", positions=positions,
+                   directions=directions)
     r = s.run("global", log=lambda *a: None)
     rise = float(s.problem.chi2(TRUTH) - r["chi2"])
     bound = float(chi2_dist.ppf(0.999, len(TRUTH)) * r["interval_scale_s2"]
