@@ -2,8 +2,9 @@
 
 For each of the 15 scans of 2013-05-27 (Ithaca NY) and each sky (the thesis's CIE clear sky,
 the CIE S 011 general sky with fitted turbidity-like indices (fitted to each scan, and
-fitted to the other scans: a prediction), Perez from the measured
-irradiance, Mitsuba's sunsky, a uniform sky): the relative rms error of the luminance pattern
+fitted to the other scans: a prediction), Perez from the measured irradiance, the Perez
+pattern with its clearness bin and brightness fitted (to each scan, and to the other scans),
+Mitsuba's sunsky, a uniform sky): the relative rms error of the luminance pattern
 with one free scale per scan, points within 10 degrees of the sun left out, in the nominal
 scanner frame and turned by the data README's scanner rotation; then measured against
 modelled horizontal irradiance.  Prints markdown tables; writes ``errors.csv``,

@@ -12,6 +12,7 @@ import signal
 import sys
 import threading
 from contextlib import contextmanager
+from pathlib import Path
 
 #: NumPy's BLAS (OpenBLAS) on one thread in a `skyfit` process unless the environment says
 #: otherwise; set before NumPy loads.  Dr.Jit's pool does the heavy work on every core, and
@@ -21,10 +22,16 @@ from contextlib import contextmanager
 #: workers are set so by ``distributed`` already.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from .errors import SetupError, SkyfitError  # noqa: E402 -- after the BLAS setting
+import numpy as np  # noqa: E402 -- after the BLAS setting
+
+from . import __version__  # noqa: E402
+from .errors import SetupError, SkyfitError  # noqa: E402
+from .files import check_dir, write_json  # noqa: E402
 from .physics.ward import NORMALISATIONS  # noqa: E402
 from .render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS  # noqa: E402
 from .render.variant import VARIANTS  # noqa: E402
+# The modules above are light; each command imports those that do its work when it runs, so
+# that `skyfit --help` and a usage error start fast and load neither Mitsuba nor matplotlib.
 
 DESCRIPTION = ("Render daylight image sequences, fit Ward reflection models to them, and map "
                "the materials a camera sees.")
@@ -108,8 +115,6 @@ def _frame_list(text):
 
 # ---- commands ---------------------------------------------------------------------------------
 def _render(args):
-    from pathlib import Path
-
     from .pipeline.sequence import render_sequence
     from .pipeline.spec import read_spec, validate_spec
 
@@ -214,9 +219,6 @@ def _fit_regions(args):
 
 
 def _fit(args):
-    from pathlib import Path
-
-    from .files import check_dir
     from .fitting.chi2 import subsample_region
     from .fitting.fit import fit_regions
     from .fitting.report import write_fit, write_summary
@@ -281,10 +283,6 @@ def _relight(args):
 
 
 def _chi2map(args):
-    from pathlib import Path
-
-    import numpy as np
-
     from .fitting.fit import FitSession
     from .fitting.landscape import (chi2_map, map_axes, map_prefix, profiled_map,
                                     truth_parameters, write_chi2_map)
@@ -327,11 +325,6 @@ def _range(text):
 
 
 def _labels(args):
-    from pathlib import Path
-
-    import numpy as np
-
-    from .files import write_json
     from .pipeline.pixels import scene_labels
     from .render.image import write_png
 
@@ -350,8 +343,6 @@ def _labels(args):
 
 def build_parser():
     """The ``skyfit`` argument parser."""
-    from . import __version__
-
     parser = _Parser(prog="skyfit", description=DESCRIPTION)
     parser.add_argument("--version", action="version", version=f"skyfit-mi {__version__}")
     debug_help = "show the full traceback of an error, and a map's Dask log (for bug reports)"

@@ -4,6 +4,8 @@ Every error raised on bad user input is a :class:`SkyfitError` (a
 ``ValueError``), and its message says what was wrong and how to fix it.
 """
 
+import numpy as np
+
 
 class SkyfitError(ValueError):
     """Base class of every error raised on bad input to skyfit-mi."""
@@ -34,8 +36,6 @@ def check_range(name, value, lo, hi, unit=""):
 
     ``value`` may be a scalar or an array; NaN is rejected.
     """
-    import numpy as np
-
     v = np.asarray(value, dtype=float)
     if v.size and not (np.all(v >= lo) and np.all(v <= hi)):
         bad = v[~((v >= lo) & (v <= hi))].ravel()[0]

@@ -7,10 +7,14 @@ final name, and a path that cannot be written gives one clear
 """
 
 import datetime as dt
+import io
 import json
 import os
+import socket
 import tempfile
 from pathlib import Path
+
+import numpy as np
 
 from .errors import OutputError
 
@@ -91,8 +95,6 @@ def write_text(path, text):
 
 def jsonable(x):
     """JSON form of the NumPy scalars/arrays, dates and paths found in skyfit documents."""
-    import numpy as np
-
     if isinstance(x, np.ndarray):
         return x.tolist()
     if isinstance(x, (np.floating, np.integer, np.bool_)):
@@ -122,8 +124,6 @@ def write_bytes(path, data):
 def figure_png(fig, dpi=120, close=True):
     """A matplotlib figure as PNG bytes; the figure is closed unless not ``close`` (a figure
     redrawn for the next file)."""
-    import io
-
     import matplotlib.pyplot as plt
 
     buf = io.BytesIO()
@@ -177,8 +177,6 @@ class FolderLock:
             return None
 
     def __enter__(self):
-        import socket
-
         ensure_dir(self.path.parent, self.what)
         me = {"host": socket.gethostname(), "pid": os.getpid(),
               "since": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")}

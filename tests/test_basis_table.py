@@ -162,3 +162,20 @@ def test_a_fit_beyond_the_machines_memory_is_refused_up_front_with_its_estimate(
                                           r"available; fit fewer pixels \(--max-pixels\)") as e:
         FitSession(days["clean"], "disc", REGION, positions=8, directions=128)
     assert "\n" not in str(e.value)
+
+
+def test_many_parameter_sets_at_once_equal_each_set(traced):
+    """A prediction's draws through the table's basis, a few roughness values at a time, give
+    each set's radiance, and a linear reduction (a region's mean) applied to the basis the
+    same means."""
+    from skyfit_mi.render.basis_table import TableModel
+
+    m = TableModel(traced[3], "colour")
+    rng = np.random.default_rng(3)
+    sets = np.column_stack([rng.uniform(0.1, 0.9, (40, 3)), rng.uniform(0.0, 0.3, 40),
+                            np.exp(rng.uniform(np.log(1e-4), np.log(0.4), 40))])
+    sets[5:10, -1] = sets[0, -1]                               # repeated roughness values
+    direct = np.stack([m.radiance(t) for t in sets])
+    np.testing.assert_allclose(m.radiances(sets), direct, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(m.radiances(sets, lambda L: L.mean(axis=0)),
+                               direct.mean(axis=1), rtol=1e-12)

@@ -94,7 +94,7 @@ def test_a_frame_just_written_is_read_from_memory_bit_for_bit(tmp_path, monkeypa
 
     def no_reads(path, shape):
         raise AssertionError(f"{path} was read from the file")
-    monkeypatch.setattr("skyfit_mi.render.image.read_exr_checked", no_reads)
+    monkeypatch.setattr(manifest, "read_exr_checked", no_reads)
     for key, image in zip(("radiance", "radiance_sigma"), images):
         kept = manifest.read_frame_image(tmp_path, rec, key, (6, 7, 3))
         assert not kept.flags.writeable
@@ -103,7 +103,7 @@ def test_a_frame_just_written_is_read_from_memory_bit_for_bit(tmp_path, monkeypa
     write_frame(tmp_path, 2, *(2 * im for im in images))
     with pytest.raises(AssertionError, match="read from the file"):
         manifest.read_frame_image(tmp_path, rec, "sensor", (6, 7, 3))      # not kept
-    monkeypatch.setattr("skyfit_mi.render.image.read_exr_checked", read_exr_checked)
+    monkeypatch.setattr(manifest, "read_exr_checked", read_exr_checked)
     assert np.array_equal(manifest.read_frame_image(tmp_path, rec, "radiance", (6, 7, 3)),
                           (2 * images[0]).astype(np.float32), equal_nan=True)
 

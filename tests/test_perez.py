@@ -9,6 +9,7 @@ import pytest
 from skyfit_mi.conventions import direction_from_angles
 from skyfit_mi.errors import SkyfitError
 from skyfit_mi.physics import perez
+from skyfit_mi.physics.sky import perez_relative_luminance
 
 # --------------------------------------------------------------------------
 # Hand-derived values
@@ -95,11 +96,11 @@ def test_relative_luminance_by_hand_and_at_the_horizon():
     # Zenith point, sun at Z = 30 deg so zeta = 0.5235988 rad (coefficients above):
     # (1 - 0.973471 e^-0.186531) = 0.192182;
     # 1 + 21.758266 e^(-5.651501 * 0.5235988) + 1.378685 * 0.75 = 3.162497;  l_v = 0.607775.
-    assert perez.relative_luminance(1.0, np.radians(30.0), c) == pytest.approx(0.607775, abs=1e-6)
+    assert perez_relative_luminance(1.0, np.radians(30.0), c) == pytest.approx(0.607775, abs=1e-6)
     # Horizon: cos theta_p is held at 0.01 (Radiance's perezlum.cal): no division by zero, no
     # overflow below the horizon, continuous at 0.01.
     with np.errstate(all="raise"):
-        lv = perez.relative_luminance(np.array([0.01, 0.0, -0.5]), 1.0, c)
+        lv = perez_relative_luminance(np.array([0.01, 0.0, -0.5]), 1.0, c)
     assert lv[0] == lv[1] == lv[2]
     assert lv[0] == pytest.approx(
         (1 + c[0] * np.exp(c[1] / 0.01)) * (1 + c[2] * np.exp(c[3]) + c[4] * np.cos(1.0) ** 2))
@@ -152,7 +153,7 @@ def tregenza_sum(sky):
                      + np.concatenate([np.arange(n) * 360.0 / n for _, n in rows]))
     d = direction_from_angles(theta, phi)
     zeta = np.arccos(np.clip(d @ sky.sun_direction, -1.0, 1.0))
-    lv = perez.relative_luminance(d[:, 2], zeta, sky.coefficients)
+    lv = perez_relative_luminance(d[:, 2], zeta, sky.coefficients)
     return np.sum(lv * d[:, 2]) * 2 * np.pi / 145
 
 
@@ -276,7 +277,7 @@ def test_negative_model_values_are_clamped_at_zero():
     sky = perez.perez_sky(45.0, 180.0, 172, dhi=48.0, dni=8.0, delta_floor=None)
     d = sky_grid()
     zeta = np.arccos(np.clip(d @ sky.sun_direction, -1.0, 1.0))
-    assert perez.relative_luminance(d[..., 2], zeta, sky.coefficients).min() < -0.5
+    assert perez_relative_luminance(d[..., 2], zeta, sky.coefficients).min() < -0.5
     L = sky.radiance(d)
     assert L.min() == 0.0 and L.max() > 0.0
 
@@ -291,6 +292,45 @@ def test_luminance_is_efficacy_times_radiance_and_the_ground_is_dark():
         sky.info["epsilon"], sky.info["delta"], 40.0))
     # the illuminance from the sky is the diffuse irradiance times the efficacy
     assert perez.hemisphere_integral(sky.luminance) == pytest.approx(150.0 * sky.efficacy)
+
+
+def test_indices_agree_with_pvlib_perez_transposition():
+    # pvlib's Perez (1990) transposition computes epsilon, Delta and the clearness bin
+    # independently (Z in radians, relative air mass, the extraterrestrial irradiance it is
+    # given) and exposes them through its brightening coefficients: on a horizontal plane the
+    # circumsolar part is DHI max(F1, 0) (A / B = 1 for a sun below 85 deg zenith), on a
+    # vertical one the horizon part is DHI F2, with F = f1 + f2 Delta + f3 Z per bin.  The
+    # same F from this module's clearness_bin, brightness and Z must agree.
+    import pvlib
+    from pvlib.atmosphere import get_relative_airmass
+
+    rng = np.random.default_rng(3)
+    zen = rng.uniform(0.0, 84.0, 400)
+    dhi = rng.uniform(20.0, 500.0, 400)
+    eps = np.exp(rng.uniform(0.0, np.log(15.0), 400))
+    # every bin edge from just above and just below
+    edges = perez.CLEARNESS_BIN_EDGES[1:-1]
+    eps[:14] = np.concatenate([edges * (1 + 1e-6), edges * (1 - 1e-6)])
+    kz3 = perez.KAPPA * np.radians(zen) ** 3
+    ratio = eps * (1 + kz3) - kz3 - 1                      # eq. 1 solved for E_dn / E_dh
+    dhi = np.minimum(dhi, 1400.0 / np.maximum(ratio, 1e-9))   # E_dn <= 1400 W m^-2
+    dni = dhi * ratio
+    np.testing.assert_allclose(perez.clearness(dhi, dni, zen), eps, rtol=1e-12)
+    e0 = 1361.0
+    am = get_relative_airmass(zen)
+    parts = [pvlib.irradiance.perez(tilt, 180.0, dhi, dni, e0, zen, 180.0, am,
+                                    return_components=True) for tilt in (0.0, 90.0)]
+    f1_pvlib = parts[0]["poa_circumsolar"] / dhi
+    f2_pvlib = parts[1]["poa_horizon"] / dhi
+    f1c, f2c = pvlib.irradiance._get_perez_coefficients("allsitescomposite1990")
+    k = perez.clearness_bin(perez.clearness(dhi, dni, zen))
+    delta = perez.brightness(dhi, zen, extraterrestrial=e0)
+    z = np.radians(zen)
+    np.testing.assert_allclose(np.maximum(f1c[k, 0] + f1c[k, 1] * delta + f1c[k, 2] * z, 0.0),
+                               f1_pvlib, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(f2c[k, 0] + f2c[k, 1] * delta + f2c[k, 2] * z, f2_pvlib,
+                               rtol=1e-12, atol=1e-14)
+    assert set(np.unique(k)) == set(range(8))
 
 
 def test_global_irradiance_is_split_by_the_chosen_model():
@@ -404,7 +444,7 @@ def test_realistic_skies_are_positive_and_finite_in_every_bin(delta_floor, max_z
     sun = direction_from_angles(np.radians(z), 0.0)                # (N, 3)
     zeta = np.arccos(np.clip(np.einsum("ijk,nk->nij", d, sun), -1.0, 1.0))
     with np.errstate(all="raise"):
-        lv = perez.relative_luminance(d[..., 2], zeta, c[:, None, None, :])
+        lv = perez_relative_luminance(d[..., 2], zeta, c[:, None, None, :])
     assert np.all(np.isfinite(lv))
     for k in range(8):
         assert lv[bins == k].min() > 0.0, f"bin {k + 1}"

@@ -105,12 +105,12 @@ def _render(raw, out, tmp_path, **kw):
 
 
 def test_interrupted_render_resumes_to_identical_frames(tmp_path, mi, monkeypatch):
-    from skyfit_mi.render import image
+    from skyfit_mi.pipeline import sequence
     from skyfit_mi.render.image import read_exr
     ref = _render(spec(), tmp_path / "a", tmp_path)
 
     calls = {"n": 0}
-    real = image.write_exr
+    real = sequence.write_exr
 
     def dying(path, img):
         calls["n"] += 1
@@ -118,10 +118,10 @@ def test_interrupted_render_resumes_to_identical_frames(tmp_path, mi, monkeypatc
             raise KeyboardInterrupt
         return real(path, img)
 
-    monkeypatch.setattr(image, "write_exr", dying)
+    monkeypatch.setattr(sequence, "write_exr", dying)
     with pytest.raises(KeyboardInterrupt):
         _render(spec(), tmp_path / "b", tmp_path)
-    monkeypatch.setattr(image, "write_exr", real)
+    monkeypatch.setattr(sequence, "write_exr", real)
     partial = json.loads((tmp_path / "b" / "manifest.json").read_text())
     assert partial["status"] == "incomplete"
     assert [f["status"] for f in partial["frames"]] == ["rendered", "pending", "pending", "pending"]

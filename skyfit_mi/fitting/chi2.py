@@ -24,8 +24,11 @@ import numpy as np
 
 from ..physics.camera import SensorModel
 from ..errors import SkyfitError
+from ..physics.colour import SRGB_LUMINANCE
 from ..pipeline.manifest import (check_frames, frame_exposure, load_manifest, read_frame_image,
                                  rendered_frames, sensor_from_record)
+from ..pipeline.observation_table import is_table, table_observations
+from ..render.light_cache import point_rays
 
 #: Values below this [DN] read as code 0.
 LOW_CODE = 0.5
@@ -135,9 +138,6 @@ def load_table_observations(manifest_path, region, points=None, frames=None, min
     -2 ln Phi((L - v) / sigma) [radiance units] for a model radiance L up to v, and the model's
     signal clips at the top as a sensor's does (the censored term then constant): the Tobit
     term of an image's top code, and left out of the global search's linear grid as it is."""
-    from ..pipeline.observation_table import table_observations
-    from ..render.light_cache import point_rays
-
     doc, root = load_manifest(manifest_path)
     rows = table_observations(doc, root, region, points, frames)
     fr = rows.frames
@@ -173,8 +173,6 @@ class LuminanceModel:
     the grid and the intervals see Y.  Attributes not mixed pass through to ``model`` (its ``model`` name among them)."""
 
     def __init__(self, model):
-        from ..physics.colour import SRGB_LUMINANCE
-
         self.inner = model
         self.mix = np.eye(3)
         self.mix[0] = SRGB_LUMINANCE
@@ -315,8 +313,6 @@ def check_regions(manifest_path, regions, frames=None):
     points)] and light their frames (``frames``: these indices only), so that a bad region,
     frame or light is refused before the first region's fit is written; the frames' images
     stay in the frame cache for the fits."""
-    from ..pipeline.observation_table import is_table
-
     doc, root = load_manifest(manifest_path)
     materials = doc["scene"]["materials"]
     for name, pixels in regions:

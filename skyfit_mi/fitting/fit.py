@@ -322,11 +322,11 @@ class FitSession:
         self.table = table
         self.geometry = highlight_geometry(np.where(table.hit[..., None], table.sun_half_cos,
                                                     np.nan))
-        self.wm = self._model(table)
+        self.wm = self.model_on(table)
         self.problem = Problem(self.obs, self.wm, valid=table.hit)
         self._halves = self._bases = None
 
-    def _model(self, table, part=0):
+    def model_on(self, table, part=0):
         """The fit's radiance model on ``table`` (its whole cache, or a half: ``part`` 1, 2):
         Ward's, through the luminance where the observations are luminances."""
         wm = TableModel(table, self.model, part)
@@ -362,7 +362,7 @@ class FitSession:
         to ripple chi-square by more than the 95% threshold.
         """
         if self._halves is None:
-            self._halves = [Problem(self.obs, self._model(self.table, part=j),
+            self._halves = [Problem(self.obs, self.model_on(self.table, part=j),
                                     valid=self.table.hit) for j in (1, 2)]
         if method == "global":
             fits = [global_search(p, theta, self.lower, self.upper, candidates=1, profile=False,

@@ -32,6 +32,10 @@ and one off its material gets NaN.
 import numpy as np
 
 from ..errors import SkyfitError
+from ..pipeline.manifest import frame_sky, load_manifest
+from ..render import setup
+from ..render.basis_table import TableModel, trace_table
+from ..render.fit_model import PARAMETERS, WardModel, bounds, reflectances
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
                                     grid_chi2_device, linear_curvature, near_saturation)
@@ -107,11 +111,6 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     the parameters.  Everything is
     rebuilt from the manifest, so a worker in another process can run it.
     """
-    from ..pipeline.manifest import frame_sky, load_manifest
-    from ..render import setup
-    from ..render.basis_table import TableModel, trace_table
-    from ..render.fit_model import PARAMETERS, WardModel, bounds
-
     pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
     groups = np.arange(len(pixels)) if groups is None else np.asarray(groups, dtype=int)
     n = int(groups.max()) + 1
@@ -170,8 +169,6 @@ def _contradicts(model, y, w, saturated, basis, fit, groups):
     that their group's fit falls short of by more than SATURATION_MARGIN sigma: the censored
     term the value would add is then not zero.  ``y``, ``w`` the linearised values and their
     weights, saturated ones included (P, T, 3); ``basis`` (D, G) per pixel on SIGMA_GRID."""
-    from ..render.fit_model import reflectances
-
     if not saturated.any():
         return np.zeros(len(groups), bool)
     rd, sp = (np.array(v) for v in zip(*(reflectances(model, t)[:2] for t in fit["theta"])))
@@ -187,8 +184,6 @@ def _fit_block(model, names, y, w, bases):
     """The grid fits of a block of groups: ``y``, ``w`` (G, T', 3), ``bases`` [(D, G)] of the
     whole cache and its halves.  A dict of ``theta``, ``lo``, ``hi`` (before the cache's
     error), ``cache_error_sd``, ``chi2``, ``chi2_grid``, ``dof``, ``model_noise_chi2``."""
-    from ..render.fit_model import reflectances
-
     search, half_a, half_b = (_grid_search(model, names, y, w, D, G) for D, G in bases)
     # the chi^2 the cache's own noise adds at each fit: its halves' model values differ by
     # twice the whole's Monte Carlo error over

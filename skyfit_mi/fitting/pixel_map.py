@@ -32,9 +32,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SkyfitError
-from ..files import check_dir, ensure_dir, write_json
+from ..files import check_dir, ensure_dir, save_figure, write_json
+from ..pipeline.manifest import load_manifest
+from ..render.fit_model import PARAMETERS
+from ..render.image import write_exr
 from ..render.light_cache import SKY_SPACING
-from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, fit_pixels, patch_groups
+from .chi2 import check_regions
+from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, check_map_region, fit_pixels, patch_groups
 
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
@@ -258,11 +262,6 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
     sequence's); ``dask_logs``: show Dask's own log lines (``--debug``).  Every input, the
     regions' frames and light and a given scheduler included, is checked before the store is
     written."""
-    from ..pipeline.manifest import load_manifest
-    from ..render.fit_model import PARAMETERS
-    from .chi2 import check_regions
-    from .pixel_fit import check_map_region
-
     doc, _ = load_manifest(manifest_path)
     shape = (doc["camera"]["height"], doc["camera"]["width"])
     for _, px in regions:
@@ -336,8 +335,6 @@ def _map_pending(client, manifest_path, chunks, pending, store, model, normalisa
 
 def write_map_outputs(out, store, names, regions, settings):
     """The map's EXRs, PNG previews and summary (returned) from the store."""
-    from ..render.image import write_exr
-
     theta, lo, hi = (store[k][:] for k in ("theta", "lo", "hi"))
     chi2, dof, bits = store["chi2"][:], store["dof"][:], store["warnings"][:]
     mapped = bits >= 0
@@ -384,8 +381,6 @@ def _preview(path, image, mapped, determined, label):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from ..files import save_figure
 
     fig, ax = plt.subplots(figsize=(5.2, 4.2))
     shown = np.where(determined, image, np.nan)

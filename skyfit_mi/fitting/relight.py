@@ -798,8 +798,9 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
 
 
 #: Values (draws x points x frames x channels) of a table's prediction held at once: the
-#: draws' radiances are made a chunk of points at a time (128 MB).
-CHUNK_VALUES = 2**24
+#: draws' radiances are made a chunk of points at a time, from views of the table's rows
+#: (64 MB, a few times over in the percentiles).
+CHUNK_VALUES = 2**23
 
 
 def _predict_means(s, result, target, draws, rng):
@@ -840,7 +841,7 @@ def _predict_points(s, result, target, draws, rng):
     step = max(1, CHUNK_VALUES // (len(sets) * T * 3))
     for start in range(0, P, step):
         part = slice(start, start + step)
-        values = s.wm.radiances(sets, lambda x: x[part])                # (draws, points, T, 3)
+        values = s.model_on(s.table.subset(part)).radiances(sets)       # (draws, points, T, 3)
         at_fit[part] = values[0]
         lo[part], hi[part] = np.percentile(values[1:], [2.5, 97.5], axis=0)
     _, model_var = s.wm.radiance_and_variance(sets[0])

@@ -1,5 +1,7 @@
 """A fit's outputs: ``fit_NAME.json``, the observed-vs-model plot (thesis fig. 7.14) and ``fits.csv``."""
 
+import csv
+import io
 import json
 from pathlib import Path
 
@@ -89,9 +91,6 @@ def write_summary(folder):
     runs into a bound), chi2/dof, truth, warnings.  Units: reflectances
     unitless, sigma_alpha rms slope, times in seconds.
     """
-    import csv
-    import io
-
     fits = read_fits(folder)
     results = [fits[k] for k in sorted(fits)]
 

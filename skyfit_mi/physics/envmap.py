@@ -41,10 +41,13 @@ the frame's time and site, its direct normal irradiance measured) and can blank 
 within ``sun_mask_deg`` of it, filling them with the median of the ring around them.
 """
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..conventions import angles_from_direction, direction_from_angles
 from ..errors import SkyfitError, check_choice, check_range
+from .sun import SUN_SOLID_ANGLE
 
 #: The map projections :func:`envmap_sky` reads.
 PROJECTIONS = ("latlong", "fisheye")
@@ -240,10 +243,7 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=Non
     info : dict, optional
         Recorded in the Sky's ``info`` (e.g. the map's file and projection).
     """
-    from dataclasses import replace
-
-    from .sky import Sky
-    from .sun import SUN_SOLID_ANGLE
+    from .sky import Sky            # not at the top: sky imports this module
 
     check_range("sun zenith", sun_zenith_deg, 0.0, 180.0, "degrees")
     check_range("ground albedo", ground_albedo, 0.0, 1.0)

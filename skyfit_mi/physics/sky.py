@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from . import cie_general
 from .colour import SRGB_LUMINANCE, cct_to_rgb
 from ..conventions import angles_from_direction, direction_from_angles
 from ..errors import SkyfitError, check_choice, check_range
@@ -521,8 +522,6 @@ def cie_general_sky(params, sun_zenith_deg, sun_azimuth_deg, *, day=172, zenith_
     -------
     Sky
     """
-    from . import cie_general
-
     check_range("sun zenith", sun_zenith_deg, 0.0, 180.0, "degrees")
     check_range("ground albedo", ground_albedo, 0.0, 1.0)
     check_range("efficacy", efficacy, 1.0, 683.0, "lm W^-1")

@@ -38,8 +38,8 @@ from ..conventions import direction_from_angles
 from ..errors import SkyfitError, check_choice
 from . import cie_general
 from .colour import SRGB_LUMINANCE
-from .perez import perez_sky
-from .sky import EFFICACY_CLEAR, cie_sky
+from .perez import CLEARNESS_BIN_EDGES, coefficients, perez_sky
+from .sky import EFFICACY_CLEAR, cie_sky, perez_pattern
 from .sun import solar_position
 
 #: Environment variable naming the data folder, overriding :data:`DEFAULT_DATA_DIR`.
@@ -358,6 +358,20 @@ def perez_luminance(source):
     return luminance
 
 
+def perez_shape_luminance(directions, scan, parameters):
+    """The Perez (1993) pattern l_v for (epsilon, Delta) pairs (k, 2) at the scan's sun, (k, n):
+    the shape alone, its indices given instead of computed from irradiance
+    (:func:`~skyfit_mi.physics.perez.coefficients`, as published: no Delta floor).  Pairs whose
+    b > 0 (a sky growing without bound toward the horizon, which
+    :func:`~skyfit_mi.physics.perez.perez_sky` refuses) give NaN rows, so :func:`compare`
+    passes them over."""
+    eps, delta = np.asarray(parameters, dtype=float).T
+    c = coefficients(eps, delta, scan.sun_zenith_deg)                      # (k, 5)
+    values = perez_pattern(np.asarray(directions, dtype=float), scan.sun_direction,
+                           c[:, None, :])
+    return np.where(c[:, 1:2] > 0.0, np.nan, values)
+
+
 def cie_type_luminance(directions, scan, parameters):
     """CIE general sky L / L_z (:func:`skyfit_mi.physics.cie_general.pattern`) for clear-sky
     type indices t (:func:`~skyfit_mi.physics.cie_general.clear_parameters`), (k, n)."""
@@ -382,6 +396,15 @@ def uniform_luminance(directions, scan, parameters):
 INDEX_STEP = 0.01
 _LO, _HI = cie_general.CLEAR_GROUPS
 _GROUP_STEPS = np.round(np.arange(_LO, _HI + 1e-9, 2 * INDEX_STEP), 2)
+
+#: Step and range of the Perez sky brightness Delta fitted per scan [unitless]: Radiance's
+#: gendaylit holds Delta to [0.01, 0.6], the range of the data the model was fitted to.
+PEREZ_DELTA_STEP = 0.005
+_PEREZ_DELTAS = np.round(np.arange(0.01, 0.6 + 1e-9, PEREZ_DELTA_STEP), 3)
+#: (epsilon, Delta) pairs tried by ``perez_fit``: each clearness bin by its lower edge (the
+#: pattern depends on epsilon only through its bin) with every Delta step.
+PEREZ_SHAPE_GRID = tuple((float(e), float(d)) for e in CLEARNESS_BIN_EDGES[:-1]
+                         for d in _PEREZ_DELTAS)
 
 #: The NumPy skies the project offers, in table order (Mitsuba's sunsky is in
 #: :mod:`skyfit_mi.render.sunsky_reference`).
@@ -409,6 +432,10 @@ MODELS = (
              description="Perez 1993, pyranometer GHI split by Erbs (primary)"),
     SkyModel("perez_scan", perez_luminance("scan"), absolute=True,
              description="Perez 1993, DHI from the scan, DNI = (GHI - DHI) / cos Z"),
+    SkyModel("perez_fit", perez_shape_luminance, parameters=PEREZ_SHAPE_GRID,
+             parameter_name="epsilon bin's lower edge, Delta", held_out=True,
+             description="Perez 1993 pattern, clearness bin and brightness Delta fitted per "
+                         f"scan (Delta 0.01-0.6, step {PEREZ_DELTA_STEP}; no irradiance)"),
     SkyModel("uniform", uniform_luminance, description="uniform luminance"),
 )
 
@@ -416,12 +443,22 @@ MODELS = (
 def _errors(scan, model, rotated, exclude_deg):
     """:func:`relative_rms` and :func:`scale_factor` of every parameter value of ``model``
     on ``scan`` (points at least ``exclude_deg`` from the sun), shape (k,) each, and the
-    number of points compared."""
+    number of points compared.  A value whose model is not positive and finite at every
+    compared point is no candidate: error inf, scale NaN."""
     d = scan.directions(rotated)
     keep = angle_to_sun_deg(d, scan.sun_direction) >= exclude_deg
     values = np.asarray(model.luminance(d[keep], scan, model.parameters), dtype=float)
-    return (relative_rms(values, scan.luminance[keep]),
-            scale_factor(values, scan.luminance[keep]), int(keep.sum()))
+    values = np.atleast_2d(values)
+    valid = np.all(np.isfinite(values) & (values > 0.0), axis=-1)
+    if not valid.any():
+        raise SkyfitError(f"the sky model {model.name!r} is not positive at every compared "
+                          f"point of the scan {scan.label} for any of its parameter values; "
+                          "give values for which it is.")
+    err = np.full(len(values), np.inf)
+    scale = np.full(len(values), np.nan)
+    err[valid] = relative_rms(values[valid], scan.luminance[keep])
+    scale[valid] = scale_factor(values[valid], scan.luminance[keep])
+    return err, scale, int(keep.sum())
 
 
 def compare(scan, model, rotated=False, exclude_deg=SUN_EXCLUSION_DEG):
@@ -429,7 +466,8 @@ def compare(scan, model, rotated=False, exclude_deg=SUN_EXCLUSION_DEG):
 
     The model is evaluated toward the scan's directions (turned by the scanner rotation if
     ``rotated``) that lie at least ``exclude_deg`` [degrees] from the sun, and each
-    parameter value's :func:`relative_rms` computed with its own :func:`scale_factor`.
+    parameter value's :func:`relative_rms` computed with its own :func:`scale_factor`; values
+    whose model is not positive at every compared point are passed over.
 
     Returns
     -------

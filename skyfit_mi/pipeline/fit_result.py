@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SkyfitError
+from ..render.fit_model import PARAMETERS, bounds
+from .manifest import rendered_frames
 
 
 def read_fit_result(path):
@@ -20,8 +22,6 @@ def read_fit_result(path):
     [x, y] pairs, and, where present, the frames as manifest indices and the covariance as
     its parameters' names and a square matrix of them.  SkyfitError saying what is wrong
     otherwise."""
-    from ..render.fit_model import PARAMETERS, bounds
-
     path = Path(path)
     try:
         r = json.loads(path.read_text(encoding="utf-8"))
@@ -101,8 +101,7 @@ def check_fit_sequence(result, path, doc, where, own=True):
     one), of its kind (image pixels or a table's points), with every frame the fit lists
     rendered; otherwise (a relight's target) only the frames are checked, and only on the
     fit's own sequence when it holds observations."""
-    from .manifest import rendered_frames
-    from .observation_table import is_table
+    from .observation_table import is_table    # not at the top: a cycle through spec
 
     same_run = result.get("sequence_run_id") == doc.get("run_id")
     if own:

@@ -23,7 +23,14 @@ Perez all-weather sky: :func:`perez_from_irradiance`.
 import os
 from pathlib import Path
 
+import numpy as np
+
+from ..conventions import direction_from_angles
 from ..errors import SkyfitError
+from ..physics.envmap import envmap_sky, latlong_table
+from ..physics.perez import perez_sky
+from ..physics.sky import GROUND_ALBEDO, Sky, directional_sky
+from .photos import read_photo
 
 #: The envmap record's options, as :func:`envmap_sky` and :func:`latlong_table` name them.
 ENVMAP_OPTIONS = {"projection": "projection", "north_rotation_deg": "north_rotation_deg",
@@ -42,12 +49,6 @@ def perez_from_irradiance(e, zenith, azimuth, t):
     and ``direct_normal_W_m2``, or ``global_horizontal_W_m2`` split by ``decomposition``
     (default 'erbs'), and optional ``cct`` [K], ``ground_albedo``, ``sun`` (False: no disc).
     The sun below the horizon gives a black sky.  SkyfitError when no irradiance is given."""
-    import numpy as np
-
-    from ..conventions import direction_from_angles
-    from ..physics.perez import perez_sky
-    from ..physics.sky import GROUND_ALBEDO, Sky
-
     if zenith >= 90.0:              # no daylight model below the horizon: a black sky
         return Sky(direction_from_angles(np.radians(zenith), np.radians(azimuth)),
                    info={"kind": "perez", "sun_zenith_deg": zenith, "sun_azimuth_deg": azimuth,
@@ -76,8 +77,6 @@ def read_envmap(path):
     Raises :class:`~skyfit_mi.errors.SkyfitError` in one line naming the file: missing, not an
     image, or integer codes (8/16-bit photographs are not radiance maps).
     """
-    from .photos import read_photo
-
     photo = read_photo(path)
     if photo.kind != "float":
         raise SkyfitError(f"{path}: holds {photo.bits}-bit codes, not the linear floats of an HDR "
@@ -88,8 +87,6 @@ def read_envmap(path):
 def envmap_from_record(rec, folder, sun_zenith_deg, sun_azimuth_deg):
     """The :class:`~skyfit_mi.physics.sky.Sky` of an ``envmap`` record whose ``file`` is relative
     to ``folder``, with the sun at (``sun_zenith_deg``, ``sun_azimuth_deg``) [degrees]."""
-    from ..physics.envmap import envmap_sky, latlong_table
-
     path = (Path(folder) / rec["file"]).resolve()
     opts = {ENVMAP_OPTIONS[k]: rec[k] for k in ENVMAP_OPTIONS if k in rec}
     table, invalid = latlong_table(read_envmap(path), opts.pop("projection", "latlong"),
@@ -115,8 +112,6 @@ def envmap_record(sky, folder):
 
 def directional_from_record(rec):
     """The :class:`~skyfit_mi.physics.sky.Sky` of a ``directional`` record."""
-    from ..physics.sky import directional_sky
-
     kw = {"solid_angle": rec["solid_angle_sr"]} if "solid_angle_sr" in rec else {}
     return directional_sky(rec["direction"], rec["irradiance_W_m2"], **kw)
 

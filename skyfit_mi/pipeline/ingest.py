@@ -44,9 +44,16 @@ from ..errors import SkyfitError
 from ..files import FolderLock
 from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
+from ..render.image import write_exr
+from ..render.labels import label_image
+from ..render.scene_xml import build_scene_xml
+from .colorchecker import NAMES, NEUTRAL, find_chart, reference_rgb, swatch_check
+from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance, displayed,
+                         jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import frame_times
 from .photos import SUFFIXES, check_same_size, read_photo
-from .sequence import finish, frame_record, manifest_header, prepare_folder, write_frame
+from .sequence import (FrameRenderer, finish, frame_record, manifest_header, prepare_folder,
+                       write_frame)
 from .spec import SpecError, read_spec, validate_spec
 
 #: Floating-point frames are scaled so that the day's brightest finite value is this share of
@@ -158,7 +165,6 @@ def estimate_noise(values, sensor, jpeg=None, shown=None, log=None):
     """
     shown = shown_noise(values, sensor) if shown is None else shown
     jpeg = list(jpeg or [None] * len(values))
-    from .jpeg_noise import SEED, block_size, recompress, stored
 
     # in each file's own layout (its blocks from the top left); the estimate does not depend on
     # the turn (a pixel's four neighbours)
@@ -321,8 +327,6 @@ def _sigma(values, sensor, noise, jpeg=None):
     var = q * q * (a + b * s * sensor.max_code) + 1.0 / 12.0
     edge = None
     if jpeg is not None:
-        from .jpeg_noise import displayed, stored, tables_bound
-
         var = np.maximum(jpeg["variance"].astype(np.float32), var)
         st = jpeg["settings"]
         edge = displayed(edge_blocks(stored(np.nan_to_num(values), st), stored(var, st)), st)
@@ -385,9 +389,6 @@ def patch_samples(spec, values, falloff, calibrate, chart=None):
     """
     from scipy.ndimage import binary_erosion
 
-    from ..render.labels import label_image
-    from .sequence import FrameRenderer
-
     renderer = FrameRenderer(spec)
     labels, ids = label_image(renderer.scene)
     patch = np.zeros(labels.shape, np.int32)
@@ -402,8 +403,6 @@ def patch_samples(spec, values, falloff, calibrate, chart=None):
                               "edges; frame the reference patch larger.")
         patch[m] = k
     if chart is not None:
-        from .colorchecker import NAMES, NEUTRAL, reference_rgb
-
         material, swatches = chart
         if material not in ids:
             raise SkyfitError(f"--colorchecker {material}: the camera sees no material "
@@ -642,8 +641,6 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log):
 
 def _chart_record(material, chart, samples, patch, sensor, exposures, log):
     """The manifest's record of a ColorChecker calibration, with its chromatic check."""
-    from .colorchecker import NAMES, NEUTRAL, swatch_check
-
     check = swatch_check(_swatch_ratios(samples, patch, sensor, exposures))
     if check["rms"] is not None:
         log(f"ColorChecker check: the calibrated chromatic swatches are "
@@ -693,8 +690,6 @@ def measured_header(spec, sensor, run_id, what, seed_rule, scene=None):
     """The manifest header of measured frames (source ``ingest``): the spec's materials kept
     as placeholders of the ``what`` (e.g. 'photographed') material, unknown until fitted.
     ``scene``: the spec's (xml, materials, to_world) if already built."""
-    from ..render.scene_xml import build_scene_xml
-
     xml, materials, to_world = scene or build_scene_xml(spec)
     for m in materials.values():
         m["source"] = f"{m.get('source', 'spec')}: a placeholder; the {what} material is " \
@@ -716,8 +711,6 @@ def _run_id(paths, spec_raw, options):
 def _neutral(samples, patch, calibrate):
     """The samples and labels of the patches that set the exposure: the ``calibrate``
     materials' and the ColorChecker's neutral swatches."""
-    from .colorchecker import NEUTRAL
-
     return _select(samples, patch, list(range(1, len(calibrate) + 1))
                    + [CHART_LABEL + k for k in NEUTRAL])
 
@@ -738,8 +731,6 @@ def _jpeg_errors(values, jpeg, sensor, noise, shown, progress, patches=None):
     (:func:`_unbiased`).  The variance is kept as float16 (3 significant digits: 0.05% in
     sigma) and the bias not at all: a frame's own values take two bytes more a value, not
     eight."""
-    from .jpeg_noise import SEED, bootstrap_variance
-
     out = {}
     todo = [i for i, st in jpeg.items() if st is not None]
     bar = None
@@ -1004,8 +995,6 @@ def calibration_patches(frames, linear, o, log):
     rel = _relative_exposures(frames.photos, log)
     out = Patches(sensor, rel)
     if o.colorchecker is not None:
-        from .colorchecker import find_chart
-
         out.chart = find_chart([sensor.linearise(values[i]) / linear.falloff[..., None]
                                 for i in lit], log)
     if o.calibrate or out.chart:
@@ -1035,8 +1024,6 @@ def calibration_patches(frames, linear, o, log):
 def noise_model(frames, values, patches, o, progress, log):
     """The :class:`Noise` of the lit frames: read + shot noise estimated from them (or the
     option's), and each JPEG frame's compression errors by bootstrap."""
-    from .jpeg_noise import jpeg_settings
-
     lit, sensor = frames.lit, patches.sensor
     shown = None
     try:
@@ -1100,9 +1087,6 @@ def frame_exposures(frames, patches, noise, o, log):
 
 def _write(out, frames, linear, noise, exposures, options, run_id, progress):
     """Write the sequence folder of the ingest's stages' results."""
-    from ..render.image import write_exr
-    from .jpeg_noise import REPLICATES, SEED, block_offset
-
     spec, paths, photos, values = frames.spec, frames.paths, frames.photos, linear.values
     sensor, falloff, flat, jpeg_errors = exposures.sensor, linear.falloff, linear.flat, \
         noise.jpeg_errors

@@ -41,6 +41,8 @@ import tempfile
 
 import numpy as np
 
+from .photos import apply_orientation, undo_orientation
+
 #: Re-compressed copies per frame for its error variance.
 REPLICATES = 8
 #: Seed of the bootstrap's noise (with the frame's index; recorded in the manifest).
@@ -67,15 +69,11 @@ def jpeg_settings(path):
 def stored(values, settings):
     """``values`` (H, W, ...) of a JPEG frame as the file lays them out, its EXIF orientation
     (``settings["orientation"]``, from the caller) undone: its blocks start at the top left."""
-    from .photos import undo_orientation
-
     return undo_orientation(values, settings.get("orientation", 1))
 
 
 def displayed(values, settings):
     """The inverse of :func:`stored`: a contiguous array as the frame is displayed."""
-    from .photos import apply_orientation
-
     return np.ascontiguousarray(apply_orientation(values, settings.get("orientation", 1)))
 
 
@@ -86,8 +84,6 @@ def block_offset(orientation, shape, block=8):
     that reverses an axis of the file moves them by its length modulo ``block``.  Found by
     turning (:func:`~.photos.apply_orientation`) the block indices of a small file with the
     same lengths modulo ``block``."""
-    from .photos import apply_orientation
-
     settings = {"orientation": orientation}
     fh, fw = stored(np.broadcast_to(False, tuple(shape[:2])), settings).shape
     yy, xx = np.mgrid[0:fh % block + block, 0:fw % block + block] // block

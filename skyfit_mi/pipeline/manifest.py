@@ -30,8 +30,13 @@ import numpy as np
 
 from .. import __version__
 from ..errors import SkyfitError
-from ..files import write_json
+from ..files import jsonable, write_json
 from ..physics.camera import SensorModel
+from ..physics.gensky import from_gensky
+from ..physics.sky import Sky
+from ..render.image import read_exr_checked
+from .illumination import (directional_from_record, directional_record, envmap_from_record,
+                           envmap_record, perez_from_irradiance)
 
 SCHEMA = "skyfit-manifest/2"
 #: Schemas this version reads (older ones are upgraded in memory).
@@ -152,15 +157,9 @@ _VALIDATED = set()
 
 def write_manifest(path, doc):
     """Validate ``doc`` and write it atomically to ``path`` (a folder or the file)."""
-    doc = json.loads(json.dumps(doc, default=_jsonable_default))   # the form a reader sees
+    doc = json.loads(json.dumps(doc, default=jsonable))   # the form a reader sees
     validate_manifest(doc, "the manifest to write")
     return write_json(manifest_file(path) if Path(path).is_dir() else Path(path), doc)
-
-
-def _jsonable_default(x):
-    from ..files import jsonable
-
-    return jsonable(x)
 
 
 def versions():
@@ -180,8 +179,6 @@ def illumination_record(sky, folder):
     """The ``illumination`` record of a :class:`~skyfit_mi.physics.sky.Sky` in a manifest in
     ``folder``: kind ``envmap`` for a sky lit by a map file (the file relative to ``folder``
     and its options, not its numbers), ``directional`` for a lab light, else ``sky``."""
-    from .illumination import directional_record, envmap_record
-
     common = {"info": {k: v for k, v in sky.info.items() if k != "file"},
               "horizontal_irradiance_W_m2": sky.horizontal_irradiance()}
     if sky.envmap is not None:
@@ -199,10 +196,6 @@ def illumination_record(sky, folder):
 
 def _irradiance_sky(frame, rec):
     """The Perez sky of an ``irradiance`` record at its frame's sun and time."""
-    import datetime as dt
-
-    from .illumination import perez_from_irradiance
-
     model = str(rec.get("model", "perez")).lower()
     if model not in IRRADIANCE_MODELS:
         raise SkyfitError(f"model {rec.get('model')!r}; this version turns measured irradiance "
@@ -251,10 +244,6 @@ def frame_sky(frame, folder):
 
 def _record_sky(frame, rec, kind, folder):
     """The Sky of one illumination record of kind ``kind`` (:func:`frame_sky`)."""
-    from ..physics.gensky import from_gensky
-    from ..physics.sky import Sky
-    from .illumination import directional_from_record, envmap_from_record
-
     if kind == "gensky":
         return from_gensky(rec["text"])
     if kind == "directional":
@@ -374,8 +363,6 @@ def read_frame_image(root, frame, key, shape):
     (H, W, 3); a missing, damaged or foreign file raises SkyfitError naming the frame and the
     fix.  The array is read-only and may be shared: images read lately are kept
     (FRAME_CACHE_BYTES) for the next reader of the same unchanged file."""
-    from ..render.image import read_exr_checked
-
     if key not in frame:
         raise SkyfitError(f"frame {frame['index']} has no {key} image (an older render, or a "
                           "sequence without it); render the sequence again with --overwrite.")

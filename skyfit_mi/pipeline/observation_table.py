@@ -69,12 +69,19 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SkyfitError
-from ..files import FolderLock
+from ..files import FolderLock, write_text
 from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sun import SOLAR_CONSTANT, SUN_SOLID_ANGLE
 from ..conventions import direction_from_angles
+from ..render.light_cache import POINT_POSITIONS, point_rays
+from ..render.points import lambertian_radiance, load_points_scene, surface_hits
+from ..render.scene_xml import build_scene_xml
+from .ingest import measured_header, spec_for_times
 from .manifest import frame_label
+from .photo_times import _iso, localize, parse_tz
+from .sequence import finish, frame_record, prepare_folder
+from .spec import load_spec, read_spec
 
 #: File name of the normalised table in a sequence folder.
 TABLE_FILE = "observations.csv"
@@ -176,8 +183,6 @@ def _flag(text, path, line, column):
 
 
 def _time(text, tz, path, line):
-    from .photo_times import _iso, localize, parse_tz
-
     try:
         t = _iso(text)
     except ValueError:
@@ -336,8 +341,6 @@ def locate_points(spec, scene_xml, table, row_frames):
     view (the table's, else toward the camera) must see it from the front, with the normal
     the table gives (if any).  ``scene_xml``: the spec's (xml, materials, camera to_world);
     ``row_frames``: each row's frame index in the sequence (for messages)."""
-    from ..render.points import load_points_scene, surface_hits
-
     groups = table.point_rows()
     keys = list(groups)
     xml, _, to_world = scene_xml
@@ -396,8 +399,6 @@ def locate_points(spec, scene_xml, table, row_frames):
 def _lab_spec(spec_path, table, tz, site):
     """The validated spec of a table of lab lights (frames by index): its lights are the
     frames; every row's frame one of them."""
-    from .spec import load_spec
-
     for name, given in (("--tz", tz), ("--site", site)):
         if given is not None:
             raise SkyfitError(f"{name}: {table.path} names its frames by index (lab lights), "
@@ -420,9 +421,6 @@ def _table_spec(spec_path, table, tz, site, log):
     """(validated spec, each row's frame index) of an observation table: the spec's lights by
     index, or for a table of times the spec at those times (:func:`.ingest.spec_for_times`:
     a time with the sun below the horizon is kept out, as a skipped frame)."""
-    from .ingest import spec_for_times
-    from .spec import read_spec
-
     if table.by_index:
         spec = _lab_spec(spec_path, table, tz, site)
         if len(set(table.frames)) < 2:
@@ -461,9 +459,6 @@ def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calib
     standard error widened by the scatter about the fit where that exceeds the sigmas
     (chi^2/dof > 1).  The record's ``scale_relative_sd`` widens every fit's intervals of
     reflectances (:func:`skyfit_mi.fitting.uncertainty.calibration_sd`)."""
-    from ..render.light_cache import point_rays
-    from ..render.points import lambertian_radiance
-
     index = {k: j for j, k in enumerate(table.point_keys())}
     ref = [i for i in rows if table.regions[i] in calibrate and not table.saturated[i].all()]
     missing = [m for m in calibrate if m not in {table.regions[i] for i in ref}]
@@ -536,9 +531,6 @@ def unknown_scale(spec, xml, table, rows, row_frames, pos, view, offset):
     reflectances are then relative: the true ones times one unknown factor, the same for every
     material and channel of the table.  Roughness, the colour's ratios and the ratio of
     specular to diffuse reflectance do not depend on it."""
-    from ..render.light_cache import POINT_POSITIONS, point_rays
-    from ..render.points import lambertian_radiance
-
     index = {k: j for j, k in enumerate(table.point_keys())}
     lit = [i for i in rows if not table.saturated[i].all()
            and np.nanmax(np.where(table.saturated[i], np.nan, table.value[i])) > 0]
@@ -612,11 +604,6 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
     references measured in the table, whose values are then in its own units, scaled to
     radiance by them (:func:`reference_scale`); ``scale_unknown``: values in the table's own
     units without a reference, put on a relative scale (:func:`unknown_scale`)."""
-    from .ingest import measured_header
-    from .sequence import finish, frame_record, prepare_folder
-    from ..files import write_text
-    from ..render.scene_xml import build_scene_xml
-
     out = Path(out_dir)
     mine = out / TABLE_FILE
     if mine.exists() and mine.resolve() == Path(table_path).resolve():

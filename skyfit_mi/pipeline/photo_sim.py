@@ -11,6 +11,7 @@ from ``numpy.random.default_rng([seed, frame index])`` and the seed is written i
 """
 
 import datetime as dt
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -33,8 +34,6 @@ FORMATS = {"jpeg": ".jpg", "png": ".png", "tiff": ".tif"}
 
 
 def _exif(time, offset, exposure_time, orientation=1):
-    from fractions import Fraction
-
     from PIL import Image
     from PIL.TiffImagePlugin import IFDRational
 

@@ -50,9 +50,11 @@ Formats and decisions
 from __future__ import annotations
 
 import contextlib
+import datetime as dt
 import io
 import logging
 import math
+import struct
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,6 +63,8 @@ import numpy as np
 
 from ..child import CallFailed, Child, ChildDied, one_line
 from ..errors import SkyfitError
+from ..render.image import read_bitmap
+from .photo_times import format_offset
 
 #: Camera RAW suffixes handed to rawpy (LibRaw), lower case.
 RAW_SUFFIXES = frozenset({
@@ -409,7 +413,7 @@ def _read_pillow(path, fmt):
     if codes.ndim == 2:
         codes = codes[:, :, None]
     if fmt == "jpeg":
-        from .jpeg_noise import decode
+        from .jpeg_noise import decode      # not at the top: jpeg_noise imports this module
 
         exact = decode(path)
         differ = None if exact is None or exact.shape != codes.shape else \
@@ -455,7 +459,6 @@ def _read_png(path):
     if depth <= 8:
         return _read_pillow(path, "png")
     # Pillow reads 16-bit RGB PNG as 8 bits; Mitsuba's Bitmap (libpng) keeps all 16.
-    from ..render.image import read_bitmap
     from PIL import Image
 
     meta = read_exif(path)
@@ -528,11 +531,6 @@ def exr_header_times(path):
     ``utcOffset`` (seconds, UTC = local + utcOffset: west of Greenwich positive); None where
     absent or unreadable.  The header is a run of (name, type, size, value) up to an empty
     name (OpenEXR file layout)."""
-    import datetime as dt
-    import struct
-
-    from .photo_times import format_offset
-
     out = {"datetime_original": None, "offset_time_original": None}
     try:
         with open(path, "rb") as fh:
@@ -564,10 +562,6 @@ def rgbe_header_times(path):
     """``datetime_original`` and ``offset_time_original`` from a Radiance RGBE header's
     ``CAPDATE=`` (local) and ``GMT=`` (UTC) lines, both 'YYYY:MM:DD hh:mm:ss': the offset is
     their difference; GMT alone gives the UTC time at +00:00.  None where absent."""
-    import datetime as dt
-
-    from .photo_times import format_offset
-
     lines = {}
     try:
         with open(path, "rb") as fh:

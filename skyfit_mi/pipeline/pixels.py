@@ -8,7 +8,10 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..files import save_figure, write_text
+from ..render import setup
+from ..render.labels import label_image
 from .manifest import frame_axis, load_manifest, read_frame_image
+from .observation_table import is_table, table_regions
 
 SOURCES = {"radiance": "W m^-2 sr^-1", "radiance_sigma": "W m^-2 sr^-1", "sensor": "DN",
            "sigma": "DN"}
@@ -89,9 +92,6 @@ def write_pixels(manifest_path, pixels, out_prefix=None, source="radiance"):
 
 def scene_labels(manifest):
     """(manifest document, its folder, label image, material ids) of a rendered sequence."""
-    from ..render import setup
-    from ..render.labels import label_image
-
     doc, root = load_manifest(manifest)
     mi = setup(doc["render"]["variant"])
     return (doc, root, *label_image(mi.load_string(doc["scene"]["xml"])))
@@ -103,8 +103,6 @@ def material_regions(manifest):
     out); SkyfitError when it sees none.  For an observation table, (name, None) of each
     region it measures."""
     from scipy.ndimage import binary_erosion
-
-    from .observation_table import is_table, table_regions
 
     doc, root = load_manifest(manifest)
     if is_table(doc):                      # (name, None): every point of the region

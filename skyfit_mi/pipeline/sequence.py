@@ -32,7 +32,11 @@ from ..errors import SkyfitError
 from ..files import FolderLock, ensure_dir
 from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
-from ..render.scene_xml import pass_spp
+from ..render import setup
+from ..render.daylight import update_sky
+from ..render.frame import render_with_error
+from ..render.image import contact_sheet, read_exr_checked, write_exr, write_png
+from ..render.scene_xml import load_scene, pass_spp
 from .manifest import (SCHEMA, frame_label, illumination_record, keep_frame_image, load_manifest,
                        manifest_file, read_frame_image, sensor_record, versions,
                        write_manifest)
@@ -90,8 +94,6 @@ def prepare_folder(out, run_id, shape, overwrite=False, log=print):
     resume, each kept frame's files are read back and checked (readable, of the camera's
     ``shape``); a damaged frame is rendered again.
     """
-    from ..render.image import read_exr_checked
-
     ensure_dir(out / "frames")
     if overwrite:
         clear_run(out)
@@ -122,9 +124,6 @@ class FrameRenderer:
     """A spec's scene in Mitsuba: the radiance of each frame's sky and its Monte Carlo error."""
 
     def __init__(self, spec):
-        from ..render import setup
-        from ..render.scene_xml import load_scene
-
         self.mi = setup(spec.render["variant"])
         self.scene, self.params, self.materials, self.to_world, self.xml = load_scene(spec)
         self.seed = int(spec.render["seed"])
@@ -132,9 +131,6 @@ class FrameRenderer:
 
     def render(self, frame):
         """(radiance (H, W, 3) [W m^-2 sr^-1], its standard error) of a spec frame."""
-        from ..render.daylight import update_sky
-        from ..render.frame import render_with_error
-
         update_sky(self.params, frame.sky, "sky.")
         return render_with_error(self.mi, self.scene, self.params, self.seed + frame.index,
                                  self.half)
@@ -153,8 +149,6 @@ def write_frame(out, index, radiance, radiance_sd, values, sigma):
     kept for the frame reader (:func:`~skyfit_mi.pipeline.manifest.keep_frame_image`: the
     contact sheet and a relight's comparisons read them next); returns their relative paths
     by kind."""
-    from ..render.image import write_exr
-
     names = frame_names(index)
     for key, image in (("radiance", radiance), ("radiance_sigma", radiance_sd)):
         keep_frame_image(write_exr(out / names[key], image), image)
@@ -205,8 +199,6 @@ def frame_record(frame, seed, out):
 def finish(out, manifest, exposure):
     """Write the contact sheet (of the frames with images) and the complete manifest; returns
     the rendered frames' count."""
-    from ..render.image import contact_sheet, write_png
-
     manifest["status"] = "complete"
     rendered = [r for r in manifest["frames"] if r["status"] == "rendered" and "radiance" in r]
     if rendered:

@@ -17,9 +17,12 @@ from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 import numpy as np
 
+from ..conventions import direction_from_angles
+from ..physics import cie_general
 from ..physics.camera import SensorModel
 from ..errors import SkyfitError
 from ..physics.gensky import from_gensky
+from ..render.fit_model import PARAMETERS, material_dict
 from ..render.scene import camera_matrix
 from ..render.scene_xml import resolve_materials
 from ..render.variant import VARIANTS
@@ -27,6 +30,9 @@ from ..physics.sky import (EFFICACY_CLEAR, EFFICACY_OVERCAST, SKY_TYPES, cie_gen
                            cie_sky)
 from ..physics.sun import solar_position
 from ..physics.ward import NORMALISATIONS, raw_parameters
+from .fit_result import read_fit_result
+from .illumination import directional_from_record, envmap_from_record, perez_from_irradiance
+from .irradiance import irradiance_at, read_irradiance
 
 #: Where the shipped scenes live; a spec's ``scene.file`` is looked up beside the spec first.
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
@@ -431,9 +437,6 @@ def _camera(sec):
 def _fitted_material(name, m, base_dir):
     """The material a fit JSON (``fit_NAME.json`` of ``skyfit fit``) describes: its model,
     normalisation and fitted parameters, with ``source`` naming the file and region."""
-    from ..render.fit_model import PARAMETERS, material_dict
-    from .fit_result import read_fit_result
-
     if set(m) != {"fit"}:
         raise SpecError(f"[materials.{name}] takes either fit = \"fit_NAME.json\" or a model "
                         f"and its parameters, not both (got {', '.join(sorted(m))}).")
@@ -578,8 +581,6 @@ def _check_light_keys(e):
 
 def _cie_general_parameters(e):
     """a, b, c, d, e of a cie_general [sky] entry: a standard type, or group indices."""
-    from ..physics import cie_general
-
     by_type, by_groups = "cie_type" in e, bool({"gradation", "indicatrix"} & set(e))
     if by_type == by_groups or (by_groups and not {"gradation", "indicatrix"} <= set(e)):
         raise SpecError("[sky] a cie_general sky needs either cie_type (a CIE S 011 standard type "
@@ -596,8 +597,6 @@ def _cie_general_parameters(e):
 
 def _with_series(entries, times, tz, base_dir):
     """Entries with ``irradiance_file`` get that series' values at their frame's time."""
-    from .irradiance import irradiance_at, read_irradiance
-
     series = {}
     out = []
     for e, t in zip(entries, times):
@@ -622,9 +621,6 @@ def _with_series(entries, times, tz, base_dir):
 
 def _light(e, zenith, azimuth, t, index, base_dir):
     """The Sky of an envmap or directional [sky] entry (:mod:`.illumination`)."""
-    from ..conventions import direction_from_angles
-    from .illumination import directional_from_record, envmap_from_record
-
     if e["type"] == "directional":
         rec = {k: e[k] for k in ("direction", "irradiance_W_m2") if k in e}
         if "direction" not in rec:
@@ -653,8 +649,6 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index):
         if e["type"] in ("envmap", "directional"):
             return _light(e, zenith, azimuth, t, index, base_dir)
         if e["type"] == "perez":
-            from .illumination import perez_from_irradiance
-
             return perez_from_irradiance(e, zenith, azimuth, t)
         if e["type"] == "cie_general":
             kw = {k: e[k] for k in ("cct", "sun", "extinction", "solar_constant",

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..files import write_json, write_text
+from ..render.points import load_points_scene, pixel_points
 from .manifest import load_manifest, read_frame_image, rendered_frames
 
 
@@ -32,8 +33,6 @@ def measure_table(sequence, pixels, out, *, noise=0.01, seed=0, saturate=None):
         ``radiance_sigma``), the row's sigma_r, sigma_g, sigma_b [W m^-2 sr^-1]
     saturate : level [W m^-2 sr^-1] at which the instrument clips (per channel), or None
     """
-    from ..render.points import load_points_scene, pixel_points
-
     doc, root = load_manifest(sequence)
     frames = rendered_frames(doc)
     if not frames:

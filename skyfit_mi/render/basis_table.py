@@ -632,13 +632,16 @@ class TableModel:
 
     def radiances(self, thetas, reduce=None):
         """L at many parameter sets ``thetas`` (n, n_params): (n, P, T, 3), or ``reduce`` of
-        each (a linear map of a (P, T, 3) radiance, applied to the basis)."""
+        each (a linear map of a (P, T, 3) radiance, applied to the basis, a few roughness
+        values' lobes at a time)."""
         thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
         reduce = reduce or (lambda x: x)
         uniq, inverse = np.unique(thetas[:, -1], return_inverse=True)
         D = np.asarray(reduce(self.table.diffuse(self.part)))
-        lobes = self.table.lobe(uniq, part=self.part)
-        G = np.stack([np.asarray(reduce(g)) for g in lobes])[inverse.ravel()]
+        lobes = Lobes(lambda s: self.table.lobe(s, part=self.part), uniq,
+                      sigma_chunk(self.table.D.shape[1:]))
+        G = np.concatenate([np.stack([np.asarray(reduce(g)) for g in chunk])
+                            for _, chunk in lobes.chunks()])[inverse.ravel()]
         refl = np.array([reflectances(self.model, th)[:2] for th in thetas])   # (n, 2, 3)
         shape = (len(thetas),) + (1,) * (D.ndim - 1) + (3,)
         return refl[:, 0].reshape(shape) * D + refl[:, 1].reshape(shape) * G

@@ -4,6 +4,8 @@ Importable before a variant is set; the functions need one (see
 :func:`skyfit_mi.render.setup`).
 """
 
+import numpy as np
+
 #: The emitter's RGB parameters, named as the :class:`~skyfit_mi.physics.sky.Sky` fields.
 RGB_KEYS = ("sun_radiance", "clear", "overcast", "uniform", "intermediate", "perez", "ground")
 #: The emitter's float parameters holding the Sky's ``perez_coefficients`` a..e.
@@ -29,8 +31,6 @@ def sky_dict(sky, scene_radius=1e4):
 def envmap_table(envmap):
     """The emitter's ``envmap`` table of a Sky's ``envmap`` (H, W, 3) [W m^-2 sr^-1]: the map
     as float32, or for None a single black cell (its lookup adds zero)."""
-    import numpy as np
-
     return np.zeros((1, 1, 3), np.float32) if envmap is None else np.asarray(envmap, np.float32)
 
 
@@ -46,7 +46,6 @@ def jit_array(cls, *columns):
     six warm builds, none aligned).  A GPU copies the data anyway.
     """
     import drjit as dr
-    import numpy as np
 
     dtype = np.dtype(dr.type_v(cls).name.lower())
     out = []
@@ -70,7 +69,6 @@ def opaque_value(cls, values):
     the light cache; :func:`jit_array` for longer arrays).
     """
     import drjit as dr
-    import numpy as np
 
     v = cls(*(x.item() for x in np.atleast_1d(np.asarray(values)).ravel()))
     dr.make_opaque(v)

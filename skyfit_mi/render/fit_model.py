@@ -9,6 +9,7 @@ on a grid of sigma is the global search's.
 """
 
 import itertools
+import xml.etree.ElementTree as ET
 
 import numpy as np
 
@@ -17,7 +18,8 @@ from ..physics.ward import (METAL_THRESHOLD, NORMALISATIONS, PLASTIC_MAX, SIGMA_
                             colour_rule_twin, lobe_albedo_nodes, raw_parameters)
 from .light_cache import (CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
                           SIGMA_TABLE, control_weight)
-from .daylight import jit_array
+from .daylight import jit_array, update_sky
+from .scene_xml import _ward_element
 from .sky_control import chebyshev_eval, chebyshev_x
 
 #: Fitted parameters of each model (thesis 7.1), in order; C is three numbers.
@@ -419,13 +421,8 @@ class RegionRenderModel:
 
     def __init__(self, scene_xml, material, skies, pixels, model, spp=256, seed=0, max_depth=4,
                  normalisation="ward"):
-        import xml.etree.ElementTree as ET
-
         import drjit as dr
         import mitsuba as mi
-
-        from .daylight import update_sky
-        from .scene_xml import _ward_element
 
         root = ET.fromstring(scene_xml)
         for el in root.iter("bsdf"):

@@ -57,10 +57,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..physics.ward import SIGMA_MIRROR
-from .daylight import jit_array
-from .sky_control import (FrameSkies, chebyshev_coefficients, chebyshev_nodes, quadrature,
-                          sky_integrals, to_numpy)
+from ..physics.ward import SIGMA_MIRROR, lobe_albedo, mirror_reflectance, specular_lobe
+from .daylight import jit_array, opaque_value, update_sky
+from .sky_control import (FrameSkies, chebyshev_coefficients, chebyshev_eval, chebyshev_nodes,
+                          chebyshev_x, quadrature, sky_integrals, to_numpy)
 
 #: Roughnesses of the Ward sampling lobes in the direction mixture.
 LOBE_SIGMAS = (0.002, 0.006, 0.02, 0.06, 0.15, 0.3)
@@ -239,8 +239,6 @@ class LightCache:
 
     def lobe_sky_integral(self, sigma_alpha):
         """I_s(sigma) per position (P, T, S, 3): the sky function through the lobe."""
-        from .sky_control import chebyshev_eval, chebyshev_x
-
         x = chebyshev_x(sigma_alpha, *SIGMA_TABLE, np.log, np.clip)
         return chebyshev_eval(np.moveaxis(self.lobe_sky, 3, 0), x)
 
@@ -251,8 +249,7 @@ class LightCache:
         below SIGMA_RESOLVED (as the Dr.Jit model does).  ``'radiance'`` is refused
         (:func:`~skyfit_mi.render.fit_model.check_fit_normalisation`).
         """
-        from ..physics.ward import lobe_albedo, mirror_reflectance, specular_lobe
-        from .fit_model import check_fit_normalisation
+        from .fit_model import check_fit_normalisation     # fit_model imports this module
 
         check_fit_normalisation(normalisation)
         self.check_normalisation(normalisation)
@@ -514,8 +511,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     import drjit as dr
     import mitsuba as mi
 
-    from .daylight import opaque_value, update_sky
-    from .plugins.ward import glossy_pdf, sample_glossy
+    from .plugins.ward import glossy_pdf, sample_glossy     # a plugin: needs the variant set
 
     rays = pixels if isinstance(pixels, PointRays) else None
     if rays is None:

@@ -3,6 +3,7 @@ the light a white Lambertian surface reflects there (an observation table's refe
 
 import numpy as np
 
+from . import setup
 from .basis_table import trace_diffuse
 from .daylight import jit_array
 from .fit_model import WardModel
@@ -11,8 +12,6 @@ from .light_cache import DIRECTIONS, POSITIONS
 
 def load_points_scene(xml, variant):
     """The scene ``xml`` loaded in Mitsuba ``variant``, for :func:`surface_hits`."""
-    from . import setup
-
     return setup(variant).load_string(xml)
 
 
@@ -61,8 +60,6 @@ def lambertian_radiance(xml, variant, skies, rays, material, max_depth, seed=0,
     scene ``xml`` loaded in ``variant``, traced by the light cache as a fit traces its points
     (``max_depth`` for the light arriving from the rest of the scene), and its Monte Carlo
     variance: (P, T, 3) [W m^-2 sr^-1] and [(W m^-2 sr^-1)^2]."""
-    from . import setup
-
     scene = load_points_scene(xml, variant)
     return trace_diffuse(scene, setup(variant).traverse(scene), list(skies), rays, material,
                          lambda cache: WardModel(cache, "colour", "ward"), seed=seed,

@@ -35,6 +35,8 @@ circumsolar peak limits them to a few 1e-4.
 
 import numpy as np
 
+from .daylight import PEREZ_KEYS, RGB_KEYS, jit_array, opaque_value
+
 #: Roughness values at which I_s is integrated: the Chebyshev series' degree + 1.
 CHEBYSHEV_NODES = 16
 #: The lobe quadrature's resolution by roughness: (largest sigma, rays of the half vector's
@@ -70,8 +72,6 @@ def _tables(n_rays, n, smoothstep):
 
 def _table_arrays(mi, n_rays, n, smoothstep):
     """:func:`_tables` as Dr.Jit arrays."""
-    from .daylight import jit_array
-
     return [jit_array(mi.Float, t) for t in _tables(n_rays, n, smoothstep)]
 
 
@@ -194,8 +194,6 @@ class FrameSkies:
     def __init__(self, skies, frame):
         import mitsuba as mi
 
-        from .daylight import PEREZ_KEYS, RGB_KEYS, jit_array
-
         if any(sky.envmap is not None for sky in skies):
             raise ValueError("FrameSkies takes skies without environment maps")
         self.frame = jit_array(mi.UInt32, np.asarray(frame, dtype=np.uint32))
@@ -224,7 +222,7 @@ class _SkyLanes:
         self.__dict__.update(values)
 
     def sky_eval(self, d):
-        from .plugins.cie_sky import sky_function
+        from .plugins.cie_sky import sky_function      # a plugin: needs the variant set
 
         return sky_function(self, d)
 
@@ -232,7 +230,7 @@ class _SkyLanes:
 def _lobe_sum(mi, dr, emitter, si, up, sigma, resolution, normalisation, tables=None):
     """I_s of every interaction of ``si`` through the rho_s = 1 lobe of ``normalisation`` at
     roughness ``sigma`` (a Dr.Jit value) and quadrature ``resolution``: (Q) Dr.Jit colours."""
-    from .plugins.ward import lobe
+    from .plugins.ward import lobe      # a plugin: needs the variant set
 
     wi, w, q, J = lobe_directions(si.wi, up, sigma, *resolution, tables=tables)
     f = lobe(dr.gather(mi.Vector3f, si.wi, q), wi, sigma, normalisation) * wi.z
@@ -260,8 +258,6 @@ def lobe_integral(emitter, si, up, sigma, normalisation="ward"):
     import drjit as dr
     import mitsuba as mi
 
-    from .daylight import opaque_value
-
     return to_numpy(_lobe_sum(mi, dr, emitter, si, up, opaque_value(mi.Float, sigma),
                               lobe_resolution(sigma), normalisation))
 
@@ -271,8 +267,6 @@ def quadrature(lo, hi, normalisation):
     lobe of ``normalisation``: the quadratures' tables as Dr.Jit arrays and, per node, its
     roughness (opaque: one kernel for all) and resolution; made once for every frame."""
     import mitsuba as mi
-
-    from .daylight import opaque_value
 
     tables = {}
 

@@ -14,6 +14,7 @@ import re
 import sys
 
 from ..errors import SetupError, check_choice
+from .plugins import register_plugins
 
 MIN_LLVM = 17
 #: Variants this project supports; the default is the CPU one.
@@ -87,7 +88,5 @@ def setup(variant=DEFAULT_VARIANT):
                          "here; use 'llvm_ad_rgb' (the default) on this machine.")
     if mi.variant() != variant:
         mi.set_variant(variant)
-    from .plugins import register_plugins
-
     register_plugins()
     return mi

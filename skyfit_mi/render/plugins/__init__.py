@@ -6,6 +6,7 @@ def register_plugins():
     the current variant."""
     import mitsuba as mi
 
+    # each plugin module subclasses the variant's Mitsuba classes: imported once it is set
     from .cie_sky import CIESkyEmitter
     from .sun_sky_path import SunSkyPathIntegrator
     from .ward import WardBSDF
