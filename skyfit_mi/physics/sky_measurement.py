@@ -61,7 +61,7 @@ SCANNER_ROTATION_DEG = (1.473, -0.45, -11.521)
 #: Points closer than this to the sun are left out of every comparison [degrees].
 SUN_EXCLUSION_DEG = 10.0
 _RADIANCE_COLUMNS = ["capture", "time_local", "point_index", "azimuth_deg", "elevation_deg",
-                     "luminance_cd_m2"]
+                     "luminance_cd_m2", "X", "Y", "Z"]
 _DHI_COLUMN = "diffuse_horizontal_irradiance_350_2500nm_W_m2_est"
 _ILLUMINANCE_COLUMN = "diffuse_horizontal_illuminance_lx_est"
 
@@ -131,6 +131,8 @@ class Scan:
         Diffuse horizontal illuminance integrated from the scan [lx].
     note : str
         The data's note on the scan (empty when none).
+    xyz : ndarray (81, 3) or None
+        Measured CIE 1931 X, Y, Z [cd m^-2] (Y = ``luminance``).
     """
 
     capture: str
@@ -146,6 +148,7 @@ class Scan:
     dhi_scan: float
     diffuse_illuminance_scan: float
     note: str = ""
+    xyz: np.ndarray = None
 
     @property
     def label(self):
@@ -205,7 +208,8 @@ def load_scans(folder=None):
                  ghi_sun_zenith_deg=float(sun_ghi.zenith_deg[i]),
                  dhi_scan=float(caps.loc[name, _DHI_COLUMN]),
                  diffuse_illuminance_scan=float(caps.loc[name, _ILLUMINANCE_COLUMN]),
-                 note=str(caps.loc[name, "note"]))
+                 note=str(caps.loc[name, "note"]),
+                 xyz=g[["X", "Y", "Z"]].to_numpy(float))
             for i, ((name, g), t) in enumerate(zip(groups, times))]
 
 

@@ -1,0 +1,403 @@
+"""A sky measured in a few directions as an HDR environment map: interpolated, with the sun.
+
+A sky scanner (or a spectroradiometer on a mount) reads the sky's luminance and colour in a
+few dozen directions; a pyranometer reads the global horizontal irradiance (GHI).  This module
+makes from them a lat-long table of linear-sRGB radiance over the sky hemisphere
+(:mod:`skyfit_mi.physics.envmap`) and the direct normal irradiance (DNI) of the solar disc,
+so that the measured sky lights frames and fits as any ``envmap`` sky does.
+
+Interpolation
+-------------
+Measured luminance varies by a factor of 10-50 over a clear sky, most steeply toward the sun
+and the horizon, where the points are sparsest.  It is not interpolated directly:
+
+1. A CIE S 011 general sky (:mod:`skyfit_mi.physics.cie_general`, continuous gradation and
+   indicatrix indices on a grid of :data:`GROUP_STEP`) is fitted to the points, with the
+   zenith luminance L_z free, by least squares in log luminance over the points at least
+   ``exclude_deg`` from the sun (:func:`fit_general_shape`).  It carries the shape the points
+   cannot resolve: the circumsolar peak and the brightening toward the horizon.
+2. The log of the measured luminance over that model, ln(L / L_model), and the log
+   chromaticity ratios ln(X / Y), ln(Z / Y), are interpolated over the sphere by a radial
+   basis function in the 3D unit vectors (``scipy.interpolate.RBFInterpolator``, kernel
+   :data:`KERNEL` plus a linear polynomial).  These fields are smooth (a few per cent across
+   the sky), so the interpolant passes through every point without the overshoot that the
+   raw luminance's steep gradients would cause, and the result is positive everywhere.
+3. Below the lowest measured elevation the fields are held at their values at that
+   elevation, at the same azimuth: toward the horizon the luminance follows the fitted model's
+   gradation instead of an extrapolated polynomial.
+
+The kernel: the polyharmonic spline phi(r) = -r ("linear", the minimum-energy interpolant in
+3D) holds each point's value without ringing between the scanner's rings.  On the shared
+measured clear day (Kider et al. 2014, :mod:`skyfit_mi.physics.sky_measurement`) its
+leave-one-out error (:func:`leave_one_out`) is lower than the thin-plate spline's, which
+overshoots around an outlying point.
+
+Units
+-----
+The package's skies are linear sRGB radiances whose luminance-weighted value
+(:data:`~skyfit_mi.physics.colour.SRGB_LUMINANCE`) is the broadband radiance
+[W m^-2 sr^-1] (the CIE skies: luminance over a luminous efficacy, thesis 4.2.2; the sun:
+DNI over its solid angle).  A measured CIE XYZ [cd m^-2] becomes linear sRGB by
+:data:`~skyfit_mi.physics.colour.XYZ_TO_SRGB` (IEC 61966-2-1; components outside the gamut
+clipped at 0), divided by the skylight's luminous efficacy K [lm W^-1]:
+
+.. math:: (R, G, B) = M_{XYZ \\to sRGB} (X, Y, Z) / K
+
+so that the map's horizontal irradiance is in the pyranometer's units.  The sun's disc then
+takes what the pyranometer saw that the map does not hold (:func:`direct_normal_from_global`):
+
+.. math:: E_{bn} = \\frac{E_{gh} - E_{dh,\\,map}}{\\cos\\theta_s}
+
+with E_dh,map the map's own diffuse horizontal irradiance (eq. 4.19 by quadrature,
+:meth:`~skyfit_mi.physics.sky.Sky.sky_horizontal_irradiance`): sky and sun together give the
+measured GHI exactly, and the circumsolar light counts once (in the map, not also in the disc,
+as a pyrheliometer's 2.5 degree field would).
+
+References
+----------
+J. T. Kider Jr. et al., "A Framework for the Experimental Comparison of Solar and Skydome
+Illumination", ACM Transactions on Graphics 33(6), 2014 (the measured day).
+ISO 15469:2004 / CIE S 011/E:2003 (the general sky).
+G. E. Fasshauer, Meshfree Approximation Methods with MATLAB, World Scientific, 2007, ch. 8
+(polyharmonic splines; conditionally positive definite kernels with a polynomial term).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..conventions import angles_from_direction, direction_from_angles
+from ..errors import SkyfitError, check_range
+from . import cie_general
+from .colour import SRGB_LUMINANCE, XYZ_TO_SRGB
+from .envmap import envmap_sky, resample
+
+#: RBF kernel of the interpolated fields (scipy.interpolate.RBFInterpolator's name).
+KERNEL = "linear"
+#: Step of the gradation and indicatrix indices searched by :func:`fit_general_shape` [unitless].
+GROUP_STEP = 0.05
+#: Points closer than this to the sun are left out of the model's fit [degrees] (the
+#: circumsolar peak is undersampled; :data:`skyfit_mi.physics.sky_measurement.SUN_EXCLUSION_DEG`).
+EXCLUDE_DEG = 10.0
+#: Rows of the lat-long table by default (1.4 degree cells; columns twice as many): the
+#: table reproduces the measured points to 0.6% rms (64 rows: 1.3%).
+ROWS = 128
+#: Sub-samples per cell side when the table's cells are averaged (:func:`~.envmap.resample`).
+SUPERSAMPLE = 2
+
+
+def _unit(directions):
+    d = np.asarray(directions, dtype=float)
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def _grid(step):
+    g = np.round(np.arange(1.0, 6.0 + 1e-9, step), 6)
+    gg, ii = np.meshgrid(g, g, indexing="ij")
+    return np.stack([gg.ravel(), ii.ravel()], -1)
+
+
+def _log_residuals(directions, luminance, sun, step):
+    """The grid of (gradation, indicatrix) indices (m, 2) and ln L - ln(L / L_z of each) (m, n)."""
+    groups = _grid(step)
+    model = cie_general.pattern(directions, sun, cie_general.group_parameters(*groups.T))
+    return groups, np.log(luminance)[None, :] - np.log(model)
+
+
+def fit_general_shape(directions, luminance, sun, exclude_deg=EXCLUDE_DEG, step=GROUP_STEP):
+    """The CIE general sky that best fits measured luminance, in log luminance.
+
+    Minimises over the gradation and indicatrix indices g, i in [1, 6] (a grid of ``step``,
+    :func:`~skyfit_mi.physics.cie_general.group_parameters`) and the zenith luminance L_z
+
+    .. math:: \\sum_k \\big(\\ln L_k - \\ln L_z - \\ln P(d_k; g, i)\\big)^2
+
+    over the points at least ``exclude_deg`` from the sun; for each (g, i), ln L_z is the
+    mean log ratio (closed form).
+
+    Parameters
+    ----------
+    directions : array_like (n, 3)
+        World unit vectors of the points (+X east, +Y north, +Z up), above the horizon.
+    luminance : array_like (n,)
+        Measured luminance [cd m^-2], > 0.
+    sun : array_like (3,)
+        Unit vector toward the sun.
+    exclude_deg : float
+        Points closer to the sun are left out of the fit [degrees].
+    step : float
+        Grid step of the indices [unitless].
+
+    Returns
+    -------
+    groups : ndarray (2,)
+        Gradation and indicatrix index.
+    params : ndarray (5,)
+        a, b, c, d, e of the fitted sky.
+    zenith_luminance : float
+        L_z [cd m^-2].
+    """
+    d, y, sun = _check_points(directions, luminance, sun)
+    keep = _far_from_sun(d, sun, exclude_deg)
+    groups, r = _log_residuals(d, y, sun, step)
+    c = r[:, keep].mean(axis=1)
+    i = int(np.argmin(((r[:, keep] - c[:, None]) ** 2).mean(axis=1)))
+    return groups[i], cie_general.group_parameters(*groups[i]), float(np.exp(c[i]))
+
+
+def _check_points(directions, luminance, sun):
+    d = _unit(directions)
+    y = np.asarray(luminance, dtype=float)
+    if d.ndim != 2 or d.shape[1] != 3 or y.shape != (len(d),) or len(d) < 5:
+        raise SkyfitError(f"a measured sky needs at least 5 directions (n, 3) with one luminance "
+                          f"each, got directions {np.shape(directions)} and luminance "
+                          f"{np.shape(luminance)}.")
+    if not (np.all(np.isfinite(y)) and np.all(y > 0)):
+        raise SkyfitError("every measured luminance must be a positive number [cd m^-2] (the "
+                          "sky is interpolated in log luminance); leave out the points that "
+                          "are not.")
+    if np.any(d[:, 2] <= 0):
+        raise SkyfitError("a measured sky's directions must lie above the horizon (z > 0).")
+    s = _unit(sun)
+    return d, y, s
+
+
+def _far_from_sun(d, sun, exclude_deg):
+    keep = d @ sun <= np.cos(np.radians(exclude_deg))
+    if keep.sum() < 3:
+        raise SkyfitError(f"fewer than 3 measured points lie {exclude_deg:g} degrees or more "
+                          "from the sun; measure more of the sky, or lower exclude_deg.")
+    return keep
+
+
+@dataclass(frozen=True)
+class MeasuredSky:
+    """A sky's luminance and colour interpolated from measurements (module docstring).
+
+    Attributes
+    ----------
+    sun : ndarray (3,)
+        Unit vector toward the sun, world frame.
+    groups : ndarray (2,)
+        Gradation and indicatrix index of the fitted CIE general sky.
+    params : ndarray (5,)
+        Its a, b, c, d, e.
+    zenith_luminance : float
+        Its L_z [cd m^-2].
+    fields : scipy.interpolate.RBFInterpolator
+        Unit vectors (..., 3) -> ln(L / L_model), ln(X / Y), ln(Z / Y) [unitless].
+    min_elevation : float
+        Lowest measured elevation [rad]; below it the fields are held (module docstring).
+    """
+
+    sun: np.ndarray
+    groups: np.ndarray
+    params: np.ndarray
+    zenith_luminance: float
+    fields: object
+    min_elevation: float
+
+    def model_luminance(self, directions):
+        """The fitted CIE general sky's luminance toward ``directions`` (..., 3) [cd m^-2]."""
+        d = _unit(directions)
+        flat = d.reshape(-1, 3)
+        return (self.zenith_luminance
+                * cie_general.pattern(flat, self.sun, self.params)).reshape(d.shape[:-1])
+
+    def xyz(self, directions):
+        """CIE XYZ toward world ``directions`` (..., 3) [cd m^-2]; 0 at and below the horizon."""
+        d = _unit(directions)
+        theta, phi = angles_from_direction(d)
+        held = direction_from_angles(np.minimum(theta, np.pi / 2 - self.min_elevation), phi)
+        f = self.fields(held.reshape(-1, 3)).reshape(d.shape[:-1] + (3,))
+        up = d[..., 2] > 0
+        y = np.where(up, self.model_luminance(np.where(up[..., None], d, [0.0, 0.0, 1.0]))
+                     * np.exp(f[..., 0]), 0.0)
+        return np.stack([y * np.exp(f[..., 1]), y, y * np.exp(f[..., 2])], -1)
+
+    def luminance(self, directions):
+        """Luminance toward world ``directions`` (..., 3) [cd m^-2]."""
+        return self.xyz(directions)[..., 1]
+
+    def radiance(self, directions, efficacy):
+        """Linear-sRGB radiance toward ``directions`` (..., 3) [W m^-2 sr^-1]: XYZ in sRGB
+        (negative components clipped), over the luminous ``efficacy`` [lm W^-1]."""
+        return np.maximum(self.xyz(directions) @ XYZ_TO_SRGB.T, 0.0) / efficacy
+
+
+def _fields(xyz, model):
+    """ln(L / L_model), ln(X / Y), ln(Z / Y) at the points (n, 3)."""
+    y = xyz[:, 1]
+    return np.stack([np.log(y) - np.log(model), np.log(xyz[:, 0] / y),
+                     np.log(xyz[:, 2] / y)], -1)
+
+
+def _check_xyz(directions, xyz, sun):
+    """Unit directions (n, 3), XYZ (n, 3) and the unit sun (3,), checked."""
+    v = np.asarray(xyz, dtype=float)
+    n = len(np.asarray(directions))
+    if v.shape != (n, 3) or not (np.all(np.isfinite(v)) and np.all(v > 0)):
+        raise SkyfitError(f"a measured sky needs positive CIE X, Y, Z [cd m^-2] for each of its "
+                          f"{n} directions, got an array of shape {v.shape}.")
+    d, _, s = _check_points(directions, v[:, 1], sun)
+    return d, v, s
+
+
+def interpolate_sky(directions, xyz, sun, exclude_deg=EXCLUDE_DEG, step=GROUP_STEP):
+    """A :class:`MeasuredSky` through measured CIE XYZ (module docstring).
+
+    Parameters
+    ----------
+    directions : array_like (n, 3)
+        World unit vectors of the points, above the horizon.
+    xyz : array_like (n, 3)
+        Measured CIE 1931 X, Y, Z [cd m^-2] (Y the luminance), > 0.
+    sun : array_like (3,)
+        Unit vector toward the sun.
+    exclude_deg, step
+        As :func:`fit_general_shape`.
+    """
+    from scipy.interpolate import RBFInterpolator
+
+    d, v, s = _check_xyz(directions, xyz, sun)
+    groups, params, lz = fit_general_shape(d, v[:, 1], s, exclude_deg, step)
+    model = lz * cie_general.pattern(d, s, params)
+    fields = RBFInterpolator(d, _fields(v, model), kernel=KERNEL, degree=1)
+    return MeasuredSky(s, groups, params, lz, fields, float(np.arcsin(d[:, 2].min())))
+
+
+def leave_one_out(directions, xyz, sun, exclude_deg=EXCLUDE_DEG, step=GROUP_STEP):
+    """Each point's luminance predicted from the others: the interpolated sky's and the fitted
+    CIE general sky's alone (both refitted without the point).
+
+    Returns
+    -------
+    interpolated, model : ndarray (n,)
+        Predicted luminance [cd m^-2] at each point held out.
+    """
+    from scipy.interpolate import RBFInterpolator
+
+    d, v, s = _check_xyz(directions, xyz, sun)
+    y = v[:, 1]
+    keep = _far_from_sun(d, s, exclude_deg).astype(float)
+    groups, r = _log_residuals(d, y, s, step)
+    # the model's fit without point j, for every j at once: sums over the kept points less j's
+    s0 = keep.sum() - keep
+    s1 = (r * keep).sum(axis=1)[:, None] - r * keep
+    s2 = (r ** 2 * keep).sum(axis=1)[:, None] - r ** 2 * keep
+    best = np.argmin(s2 / s0 - (s1 / s0) ** 2, axis=0)                  # (n,)
+    interpolated, model = np.empty(len(d)), np.empty(len(d))
+    for j in range(len(d)):
+        others = np.arange(len(d)) != j
+        params = cie_general.group_parameters(*groups[best[j]])
+        lz = np.exp(s1[best[j], j] / s0[j])
+        m = lz * cie_general.pattern(d, s, params)
+        f = RBFInterpolator(d[others], _fields(v[others], m[others]),
+                            kernel=KERNEL, degree=1)
+        held = MeasuredSky(s, groups[best[j]], params, lz, f,
+                           float(np.arcsin(d[others, 2].min())))
+        interpolated[j] = held.luminance(d[j])
+        model[j] = m[j]
+    return interpolated, model
+
+
+def sky_table(sky, efficacy, rows=ROWS, supersample=SUPERSAMPLE):
+    """The lat-long table (rows, 2 rows, 3) of a :class:`MeasuredSky` [W m^-2 sr^-1], float32,
+    linear sRGB (:meth:`MeasuredSky.radiance`), each cell the mean of ``supersample`` squared
+    points (:func:`~skyfit_mi.physics.envmap.resample`); its lower half is 0 (a ground term
+    lights it).
+
+    ``efficacy`` [lm W^-1] is the skylight's luminous efficacy in the band of the irradiance
+    the sun is set from (module docstring).
+    """
+    check_range("luminous efficacy", efficacy, 1.0, 683.0, "lm W^-1")
+    check_range("envmap rows", rows, 2, 4096)
+    return resample(lambda theta, phi: sky.radiance(direction_from_angles(theta, phi), efficacy),
+                    int(rows), 0.0, int(supersample))
+
+
+def direct_normal_from_global(ghi, diffuse_horizontal, sun_zenith_deg):
+    """Direct normal irradiance (GHI - DHI) / cos theta_s [W m^-2] (module docstring).
+
+    Parameters
+    ----------
+    ghi : float
+        Measured global horizontal irradiance [W m^-2].
+    diffuse_horizontal : float
+        The sky's own diffuse horizontal irradiance (the map's) [W m^-2].
+    sun_zenith_deg : float
+        Solar zenith at the GHI's time [degrees], below 90.
+    """
+    check_range("global horizontal irradiance", ghi, 0.0, 2000.0, "W m^-2")
+    check_range("sun zenith", sun_zenith_deg, 0.0, 89.0, "degrees")
+    if ghi < diffuse_horizontal:
+        raise SkyfitError(f"the measured GHI ({ghi:.4g} W m^-2) is below the measured sky's own "
+                          f"diffuse horizontal irradiance ({diffuse_horizontal:.4g} W m^-2): the "
+                          "sun was hidden, or the two are on different scales or times; give "
+                          "the direct normal irradiance measured, or check the efficacy.")
+    return float((ghi - diffuse_horizontal) / np.cos(np.radians(sun_zenith_deg)))
+
+
+def measured_envmap(sky, efficacy, ghi, sun_zenith_deg, sun_azimuth_deg, *,
+                    ghi_sun_zenith_deg=None, rows=ROWS, ground_albedo=0.0, info=None):
+    """The :class:`~skyfit_mi.physics.sky.Sky` of a measured sky: its table
+    (:func:`sky_table`) and a solar disc of :func:`direct_normal_from_global`.
+
+    Parameters
+    ----------
+    sky : MeasuredSky
+    efficacy : float
+        Luminous efficacy of the skylight [lm W^-1] (:func:`sky_table`).
+    ghi : float
+        Measured global horizontal irradiance [W m^-2].
+    sun_zenith_deg, sun_azimuth_deg : float
+        The sun at the measurement [degrees].
+    ghi_sun_zenith_deg : float, optional
+        The sun's zenith when the GHI was read, if at another time [degrees].
+    rows : int
+        Rows of the table.
+    ground_albedo : float
+        A Lambertian ground below the horizon (:func:`~skyfit_mi.physics.envmap.envmap_sky`).
+    info : dict, optional
+        Recorded in the Sky's ``info``.
+
+    Returns
+    -------
+    Sky
+        ``info`` holds ``direct_normal_W_m2``, ``map_diffuse_horizontal_W_m2`` (the map's),
+        ``efficacy_lm_W``, ``cie_groups`` and ``zenith_luminance_cd_m2`` of the fitted model.
+    """
+    table = sky_table(sky, efficacy, rows)
+    dhi = float(envmap_sky(table, sun_zenith_deg, sun_azimuth_deg).sky_horizontal_irradiance()
+                @ SRGB_LUMINANCE)
+    dni = direct_normal_from_global(ghi, dhi, sun_zenith_deg if ghi_sun_zenith_deg is None
+                                    else ghi_sun_zenith_deg)
+    info = {"kind": "envmap", "source": "measured", **(info or {}),
+            "map_diffuse_horizontal_W_m2": dhi, "global_horizontal_W_m2": float(ghi),
+            "efficacy_lm_W": float(efficacy), "cie_groups": sky.groups.tolist(),
+            "zenith_luminance_cd_m2": sky.zenith_luminance}
+    return envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, direct_normal=dni,
+                      ground_albedo=ground_albedo, info=info)
+
+
+def scan_envmap(scan, rows=ROWS, rotated=True, ground_albedo=0.0):
+    """The envmap :class:`~skyfit_mi.physics.sky.Sky` of one scan of the measured clear day
+    (:class:`~skyfit_mi.physics.sky_measurement.Scan`, Kider et al. 2014).
+
+    The scan's 81 points (turned by the scanner rotation the data's README fits if
+    ``rotated``, so that the measured circumsolar light surrounds the computed sun) are
+    interpolated (:func:`interpolate_sky`); the efficacy is the scan's own, its diffuse
+    horizontal illuminance over its irradiance 350-2500 nm (both integrated from the scan by
+    the data's authors, 134-137 lm W^-1 on that day); the disc carries the pyranometer's GHI
+    less the map's diffuse irradiance (:func:`measured_envmap`), with the sun at the GHI's
+    minute (13:00 for the 13:30 scan, whose log starts at 13:00).
+    """
+    from .sky_measurement import CITATION
+
+    sky = interpolate_sky(scan.directions(rotated), scan.xyz, scan.sun_direction)
+    return measured_envmap(sky, scan.diffuse_illuminance_scan / scan.dhi_scan, scan.ghi,
+                           scan.sun_zenith_deg, scan.sun_azimuth_deg,
+                           ghi_sun_zenith_deg=scan.ghi_sun_zenith_deg, rows=rows,
+                           ground_albedo=ground_albedo,
+                           info={"capture": scan.capture, "rotated": bool(rotated),
+                                 "data": CITATION})
