@@ -93,20 +93,8 @@ def _render(spec, out):
                     overwrite=True)
 
 
-def _held(names, intervals, warnings, truth):
-    """Per parameter: 'in' (95% holds the truth), 'warned' (outside, a warning names it),
-    or 'MISSED'."""
-    out = {}
-    for p, t in zip(names, truth):
-        lo, hi = intervals[p]["95"]
-        out[p] = "in" if lo <= t <= hi else (
-            "warned" if any(w.startswith(p) or "not reliable" in w for w in warnings)
-            else "MISSED")
-    return out
-
-
 def radiance_case(case, root, replicates, run):
-    from independent import gensky_entries, radiance_frames
+    from independent import gensky_entries, held_or_warned, radiance_frames
     from skyfit_mi.fitting.chi2 import parse_region
     from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.pipeline.pixels import frame_values
@@ -124,7 +112,7 @@ def radiance_case(case, root, replicates, run):
     for r in range(replicates):
         s.obs.recapture(traced, np.random.default_rng([31, r]))
         res = s.run("global", seed=r, log=lambda *a: None)
-        held = _held(s.names, res["intervals"], res["warnings"], truth)
+        held = held_or_warned(s.names, res["intervals"], res["warnings"], truth)
         covered.append([res["intervals"][p]["95"][0] <= t <= res["intervals"][p]["95"][1]
                         for p, t in zip(s.names, truth)])
         rows.append({"parameters": res["parameters"], "held": held,

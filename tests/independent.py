@@ -10,7 +10,8 @@ sensor); then every frame's radiance is replaced by another renderer's and captu
   ``roughconductor``, ``principled``) in place of the region's Ward BSDF, as stand-ins for real
   materials that no Ward model matches exactly.
 
-Used by tests/test_independent_radiance.py and scripts/independent_set.py.
+Used by tests/test_independent_radiance.py, scripts/independent_set.py and
+scripts/sky_test_set.py.
 """
 import os
 import re
@@ -119,3 +120,15 @@ def mitsuba_frames(out, material_id, bsdf_xml, spp=1024, seed=5, sensor_seed=99)
         img, _ = render_with_error(mi, scene, params, seed + frame["index"], spp // 2)
         return img
     _copy_frames(out, doc["frames"], sensor_seed, trace)
+
+
+def held_or_warned(names, intervals, warnings, truth):
+    """Per parameter: 'in' (its 95% interval holds the truth), 'warned' (outside, but a warning
+    names it or says no parameter is reliable), or 'MISSED' (confidently wrong)."""
+    out = {}
+    for p, t in zip(names, truth):
+        lo, hi = intervals[p]["95"]
+        out[p] = "in" if lo <= t <= hi else (
+            "warned" if any(w.startswith(p) or "not reliable" in w for w in warnings)
+            else "MISSED")
+    return out
