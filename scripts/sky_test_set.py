@@ -211,8 +211,8 @@ def markdown(cases, totals):
         chi = float(np.median([f["chi2_per_dof"] for f in c["fits"]]))
         lines.append(f"| {c['sky']} | {c['scene']} | {c['camera_deg']:g} | {c['material']} | "
                      f"{chi:.2f} | " + " | ".join(_cell(c, p) for p in NAMES) + " |")
-    lines += ["", "| sky | (parameter, replicate) pairs | held | held or warned | "
-              "confidently wrong |", "|---|---|---|---|---|"]
+    lines += ["", ("| sky | (parameter, replicate) pairs | held | held or warned | "
+                   "confidently wrong |"), "|---|---|---|---|---|"]
     for name, t in [*totals["by_sky"].items(), ("**all**", totals)]:
         lines.append(f"| {name} | {t['n']} | {t['held']:.0%} | {t['held_or_warned']:.0%} | "
                      f"{t['confidently_wrong']:.0%} ({t['missed']}) |")
