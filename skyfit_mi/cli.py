@@ -235,6 +235,9 @@ def _fit(args):
     if map_only and not args.per_pixel:
         raise SkyfitError(f"{map_only[0]} belongs to a map: add --per-pixel (or leave it out).")
     regions = _fit_regions(args)
+    if args.per_pixel and args.sky != "spec":
+        raise SkyfitError("--sky fit fits the sky with regions' materials; a map takes the "
+                          "spec's sky (leave out --per-pixel or --sky).")
     if args.per_pixel:
         from .fitting.pixel_map import CHUNK, run_map
 
@@ -265,7 +268,7 @@ def _fit(args):
     results = fit_regions(args.manifest, list(kept.items()), model=model, method=args.method,
                           normalisation=args.normalisation, seed=args.seed, start=args.start,
                           positions=args.positions, directions=args.directions,
-                          frames=args.frames, variant=args.variant)
+                          frames=args.frames, variant=args.variant, sky=args.sky)
     for (name, pixels), res in zip(regions, results):
         res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
                                          if pixels is None else len(pixels))
@@ -470,6 +473,11 @@ def build_parser():
     fit.add_argument("--model", choices=("2", "3", "5"), default="5",
                      help="5 (default): C (RGB diffuse colour), rho_s, sigma_alpha; "
                      "3: R, rho_s, sigma_alpha; 2: rho_s, sigma_alpha (thesis 7.1)")
+    fit.add_argument("--sky", choices=("spec", "fit"), default="spec",
+                     help="spec (default): the spec's sky as it is; fit: its level against the "
+                     "sun's fitted with the materials, one for every region of the command, "
+                     "its error in every interval (the sun and sky traced apart: about twice "
+                     "the light's time)")
     fit.add_argument("--method", choices=("global", "lm", "anneal", "adam"), default="global",
                      help="global (default: grid over sigma_alpha then Levenberg-Marquardt; "
                      "right from any start), lm (the thesis's baseline), anneal (simulated "

@@ -21,8 +21,10 @@ from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
+from .sky_fit import fit_sky_scale
 from ..render import setup
-from ..render.basis_table import TableModel, available_memory, memory_estimate, trace_table
+from ..render.basis_table import (TableModel, available_memory, memory_estimate, mixed,
+                                  trace_table)
 from ..render.fit_model import (BY_COUNT, PARAMETERS, WardModel, bounds, check_fit_normalisation,
                                 check_start, other_readings)
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
@@ -126,11 +128,14 @@ class FitSession:
         :data:`~skyfit_mi.render.light_cache.SKY_PLANS` (recorded in the fit JSON's
         ``light_cache``): ``fit`` by default, ``anchors`` for predictions of compact regions
     trace : False leaves the light cache to the caller (:meth:`sharing_light`)
+    split_sky : trace the sun's light and the rest of the sky's apart, so that the fit can
+        scale them against each other (:meth:`set_sky_scale`, :func:`fit_regions`'s
+        ``sky='fit'``)
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
                  positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None,
-                 sky_plan="fit", trace=True):
+                 sky_plan="fit", trace=True, split_sky=False):
         model = BY_COUNT.get(model, model)
         check_choice("model", model, tuple(PARAMETERS))
         check_fit_normalisation(normalisation)          # before the light is traced
@@ -167,6 +172,11 @@ class FitSession:
                                "sky_plan": check_choice("sky plan", sky_plan, tuple(SKY_PLANS))}
         self._mi = setup(variant or doc["render"]["variant"])
         self._loaded = None                         # the scene and its parameters (scene)
+        # the light's tables: one, or the sun's and the rest's (split_sky) mixed at sky_scale
+        self.split_sky, self.sky_scale, self.parts = bool(split_sky), 1.0, None
+        # the fitted sky's share of each parameter's error, whether it leaves them open, and
+        # its record (sky_fit.fit_sky_scale)
+        self.sky_sd, self.sky_open, self.sky_record = None, False, None
         self.cache_time = time.perf_counter() - t0
         if trace:
             self._trace_cache()
@@ -239,41 +249,55 @@ class FitSession:
         else:
             at = PointRays(*(np.concatenate([getattr(s.obs.rays, k) for s in group])
                              for k in ("origins", "directions")))
-        table = group[0]._trace(at, np.repeat([s.name for s in group],
+        parts = group[0]._trace(at, np.repeat([s.name for s in group],
                                               [len(s.obs.pixels) for s in group]))
         share = (time.perf_counter() - t0) / len(group)
         start = 0
         for s in group:
             n = len(s.obs.pixels)
             s.cache_settings["blocks"] = group[0].cache_settings["blocks"]
-            s._use_table(table.subset(slice(start, start + n)))
+            s._use_parts([t.subset(slice(start, start + n)) for t in parts])
             s.cache_time += share
             start += n
 
     def _trace_cache(self):
         """(Re)trace the light at ``cache_settings`` and make everything from its table."""
         t0 = time.perf_counter()
-        table = self._trace(self.obs.pixels if self.obs.rays is None else self.obs.rays,
+        parts = self._trace(self.obs.pixels if self.obs.rays is None else self.obs.rays,
                             self.name)
         self.cache_time += time.perf_counter() - t0
-        self._use_table(table)
+        self._use_parts(parts)
 
     def _trace(self, at, bsdf_id):
         """The :class:`~skyfit_mi.render.basis_table.BasisTable` of the light at
         ``cache_settings`` of the sequence's scene and frames at ``at`` (pixels or rays) on
-        material ``bsdf_id`` (one, or one per pixel), traced in blocks of bounded memory."""
+        material ``bsdf_id`` (one, or one per pixel), traced in blocks of bounded memory: a
+        list of one table, or with ``split_sky`` the sun's and the rest's (their samples
+        independent)."""
         c = self.cache_settings
-        need = memory_estimate(len(at), len(self.skies), c["positions"], c["directions"])
+        # the split light's two tables and their mix
+        need = (3 if self.split_sky else 1) * memory_estimate(
+            len(at), len(self.skies), c["positions"], c["directions"])
         have = available_memory()
         if have is not None and need > have:
             raise SkyfitError(
                 f"fitting {len(at)} points in {len(self.skies)} frames needs up to "
                 f"{need / 2**30:.1f} GB, but this machine has {have / 2**30:.1f} GB available; "
                 "fit fewer pixels (--max-pixels) or frames (--frames), or a region at a time.")
-        table, c["blocks"] = trace_table(
-            self.scene, self.params, self.skies, at, bsdf_id,
-            lambda cache: WardModel(cache, self.model, self.normalisation), **self._cache_options())
-        return table
+        model_of = lambda cache: WardModel(cache, self.model, self.normalisation)  # noqa: E731
+        if not self.split_sky:
+            table, c["blocks"] = trace_table(self.scene, self.params, self.skies, at, bsdf_id,
+                                             model_of, **self._cache_options())
+            return [table]
+        sun, rest = zip(*(sky.split() for sky in self.skies))
+        options = self._cache_options()
+        seeds = np.random.SeedSequence(options.pop("seed")).generate_state(2).tolist()
+        parts = []
+        for skies, seed in zip((list(sun), list(rest)), seeds):
+            table, c["blocks"] = trace_table(self.scene, self.params, skies, at, bsdf_id,
+                                             model_of, seed=int(seed), **options)
+            parts.append(table)
+        return parts
 
     def _cache_options(self):
         """build_light_cache's options at ``cache_settings``."""
@@ -313,6 +337,20 @@ class FitSession:
         return build_light_cache(self.scene, self.params, self.skies,
                                  self.obs.pixels if self.obs.rays is None else self.obs.rays,
                                  self.name, **self._cache_options())
+
+    def _use_parts(self, parts):
+        """Take the light's tables ``parts`` (:meth:`_trace`) and fit on their mix."""
+        self.parts = list(parts)
+        self._use_table(self.parts[0] if len(self.parts) == 1 else
+                        mixed(*self.parts, self.sky_scale))
+
+    def set_sky_scale(self, k):
+        """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
+        to the sun, and make the models and chi-square on it."""
+        if len(self.parts or ()) != 2:
+            raise ValueError("the sky's scale needs a session traced with split_sky")
+        self.sky_scale = float(k)
+        self._use_parts(self.parts)
 
     def _use_table(self, table):
         """Take ``table`` (of the region's pixels) and make the models and chi-square on it."""
@@ -518,11 +556,13 @@ class FitSession:
                     intervals[p][lv] = (min(lo, float(ridge[0][i])), max(hi, float(ridge[1][i])))
         mc_sd = self.cache_error(theta, fit.method)
         cal_sd = unc.calibration_sd(self.doc, names, theta)
+        sky_sd = np.zeros(len(names)) if self.sky_sd is None else self.sky_sd
         for i, p in enumerate(names):
             for lv in ("68", "95"):
-                intervals[p][lv] = unc.widen(theta[i], intervals[p][lv],
-                                             unc.Z[lv] * np.hypot(mc_sd[i], cal_sd[i]),
-                                             lower[i], upper[i])
+                intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * np.sqrt(
+                    mc_sd[i] ** 2 + cal_sd[i] ** 2 + sky_sd[i] ** 2), lower[i], upper[i])
+                if self.sky_open:                  # the sky's level is not determined
+                    intervals[p][lv] = (float(lower[i]), float(upper[i]))
         fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
         fit.cache_sd, fit.calibration_sd = mc_sd, cal_sd
 
@@ -625,6 +665,18 @@ class FitSession:
         warnings += self.obs.warnings                       # what loading the frames noticed
         if relative_scale(self.doc):
             warnings.append(self.doc["ingest"]["scale"]["meaning"])
+        if self.sky_record is not None:
+            warnings += self.sky_record["warnings"]
+            own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
+            k = self.sky_record
+            for i, p in enumerate(names):
+                if self.sky_sd is not None and self.sky_sd[i] > own[i]:
+                    warnings.append(
+                        f"{p} depends on the sky: the fitted sky level k = {k['k']:.3g} (95%: "
+                        f"{k['interval95'][0]:.3g}-{k['interval95'][1]:.3g}) moves it by "
+                        f"+-{unc.Z['95'] * self.sky_sd[i]:.3g} (95%), more than the data's own "
+                        "error; its interval includes that, and more materials or a grey card "
+                        "in the fit would narrow it.")
         top = [p for i, p in enumerate(names)
                if p != "sigma_alpha" and theta[i] >= self.upper[i] - 1e-3]
         if top:
@@ -699,6 +751,9 @@ class FitSession:
             "cache_error_sd": dict(zip(names, fit.cache_sd.tolist())),
             **({"calibration_error_sd": dict(zip(names, fit.calibration_sd.tolist()))}
                if np.any(fit.calibration_sd > 0) else {}),
+            **({"sky": {**self.sky_record, "error_sd": dict(zip(names, (
+                self.sky_sd if self.sky_sd is not None else np.zeros(len(names))).tolist()))}}
+               if self.sky_record is not None else {}),
             "cache_noise_chi2": fit.cache_noise_chi2,
             "cache_noise_chi2_by_sigma": fit.model_noise_by_sigma,
             "covariance": {"names": list(names), "matrix": fit.covariance.tolist()},
@@ -727,13 +782,18 @@ def fit_region(manifest_path, name, pixels, **options):
 
 def fit_regions(manifest_path, regions, model="two", method="global", normalisation="ward",
                 seed=0, start=None, positions=None, directions=DIRECTIONS, method_options=None,
-                log=print, frames=None, variant=None):
+                log=print, frames=None, variant=None, sky="spec"):
     """Fit several regions of one sequence (``regions`` [(name, pixels)]), their light traced
-    together (:meth:`FitSession.for_regions`); yields each region's result dict in turn."""
+    together (:meth:`FitSession.for_regions`); yields each region's result dict in turn.
+    ``sky``: 'spec' takes the spec's sky as it is; 'fit' fits its level against the sun's
+    with the materials, one for all regions (:func:`~.sky_fit.fit_sky_scale`)."""
+    check_choice("sky", sky, ("spec", "fit"))
     sessions = FitSession.for_regions(manifest_path, regions, model=model,
                                       normalisation=normalisation, seed=seed,
                                       positions=positions, directions=directions, frames=frames,
-                                      variant=variant)
+                                      variant=variant, split_sky=sky == "fit")
+    if sky == "fit":
+        fit_sky_scale(list(sessions.values()), seed, log)
     for name, _ in regions:
         yield sessions.pop(name).run(method, start, seed, method_options, log)
 

@@ -353,6 +353,14 @@ class Sky:
         ratio = np.divide(after, before, out=np.ones(3), where=before > 0)
         return replace(out, ground=self.ground * ratio)
 
+    def split(self):
+        """(the sun disc alone, everything else: the sky's patterns, its map and the ground):
+        two skies whose light adds up to this one's, which a fit of the sun-to-sky level
+        scales apart (radiance is linear in the light)."""
+        sun = replace(self, **{p: np.zeros(3) for p in _PATTERNS}, envmap=None,
+                      ground=np.zeros(3))
+        return sun, replace(self, sun_radiance=np.zeros(3))
+
     def scaled_to_illuminance(self, diffuse_horizontal_lux, efficacy):
         """A copy scaled to a measured horizontal diffuse illuminance [lx].
 

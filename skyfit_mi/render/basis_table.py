@@ -452,6 +452,28 @@ def chunks(P, T, per_value, budget):
             for f in range(0, T, frames) for r in range(0, P, rows)]
 
 
+def mixed(a, b, k):
+    """The table of the light a + k b, from the tables ``a`` and ``b`` of two parts of one
+    light (:meth:`~skyfit_mi.physics.sky.Sky.split`) traced at the same points in the same
+    blocks with independent samples: every basis is linear in the light, and the positions'
+    spreads of independent traces add (k^2 for the scaled part)."""
+    coef = []
+    for sa, sb in zip(a.coef, b.coef):
+        blocks = []
+        for (r, f, ca), (rb, fb, cb) in zip(sa.blocks, sb.blocks):
+            if (r, f) != (rb, fb):
+                raise ValueError("the two parts' tables were traced in different blocks")
+            c = np.zeros((2, max(ca.shape[1], cb.shape[1])) + ca.shape[2:], np.float32)
+            c[:, :ca.shape[1]] += ca
+            c[:, :cb.shape[1]] += np.float32(k) * cb
+            blocks.append((r, f, c))
+        coef.append(Series(blocks))
+    k32, k2 = np.float32(k), np.float32(k * k)
+    return BasisTable(a.D + k32 * b.D, a.G0 + k32 * b.G0, a.G1 + k32 * b.G1, coef,
+                      a.VDD + k2 * b.VDD, a.VDG + k2 * b.VDG, a.VGG + k2 * b.VGG,
+                      a.hit & b.hit, a.sun_half_cos, a.normalisation)
+
+
 def _traced_blocks(scene, params, skies, at, bsdf_id, seed, positions, directions, budget,
                    options):
     """The light cache of points ``at`` under ``skies`` traced block by block (see

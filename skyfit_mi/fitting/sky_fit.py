@@ -1,0 +1,115 @@
+"""The sky's level fitted with the materials: one sun-to-sky scale shared by every region of a day.
+
+A fit takes the light from the sequence's spec, whose sky is never the real one: the CIE and
+Perez skies put 20-30% too much light in the sky and too little in the sun on a measured clear
+day (docs/BENCHMARKS.md, "Measured light"), and the materials absorb the difference silently
+("Fits under skies other than the spec's").  The thesis names joint estimation of the light as
+future work (ch. 8.2).  Here the light is split into the sun's disc and the rest of the sky
+(patterns, map and ground, :meth:`~skyfit_mi.physics.sky.Sky.split`), traced apart, and the
+rest is scaled by one factor k shared by all regions and frames: radiance is linear in the
+light, so every k's table is the sun's plus k times the sky's
+(:func:`~skyfit_mi.render.basis_table.mixed`), and no k needs a trace of its own.
+
+k is found by profiling: the sum over regions of each one's least chi-square (the global
+search), first on a geometric grid (:data:`SCALE_GRID`), then by a parabola in log k about its
+least point.  Its 95% interval is where that sum rises by 3.84 s^2 (s^2 the regions' pooled
+Birge ratio).  Each region's parameters move with k; their slope at k times k's standard error
+is the sky's share of their error, added to the data's and the cache's (every interval
+includes it), and a parameter whose sky share exceeds the data's own is warned.  With one
+region the frames alone tell k, through how the sun's share of the light changes over the
+day; more materials and a grey card tell it better.
+"""
+
+import numpy as np
+
+from . import uncertainty as unc
+from .methods import global_search
+
+#: Sky scales k searched first: a geometric grid from a quarter to four times the spec's sky.
+SCALE_GRID = np.geomspace(0.25, 4.0, 9)
+#: Half the spacing in log k of the points that refine the profile's least point.
+REFINE_STEP = 0.1
+
+
+def _least(sessions, k, starts):
+    """Every region's least chi-square and its parameters at sky scale ``k``."""
+    out = []
+    for s, start in zip(sessions, starts):
+        s.set_sky_scale(k)
+        g = global_search(s.problem, start, s.lower, s.upper, candidates=2, profile=False,
+                          grid_basis=s.grid_bases()[0])
+        out.append((float(g["chi2"]), np.asarray(g["theta"], dtype=float)))
+    return out
+
+
+def _parabola(u, chi2):
+    """(vertex, curvature b of chi2 = a + b (u - vertex)^2) through three points."""
+    c2, c1, _ = np.polyfit(u, chi2, 2)
+    return (-c1 / (2 * c2), c2) if c2 > 0 else (None, c2)
+
+
+def fit_sky_scale(sessions, seed=0, log=print):
+    """Fit the sky scale k of ``sessions`` (FitSessions of one day, traced with
+    ``split_sky``) and leave each at the fitted k with its ``sky_sd`` (the sky's share of
+    each parameter's standard error) and ``sky_record`` set; returns the record."""
+    rng = np.random.default_rng(seed)
+    starts = [s.random_start(rng) for s in sessions]
+    profile = {}
+
+    def total(u):
+        at = _least(sessions, float(np.exp(u)), starts)
+        profile[float(u)] = at
+        return sum(c for c, _ in at)
+
+    grid = np.log(SCALE_GRID)
+    chi2 = np.array([total(u) for u in grid])
+    i = int(np.argmin(chi2))
+    edge = i in (0, len(grid) - 1)
+    j = min(max(i, 1), len(grid) - 2)
+    u0, _ = _parabola(grid[j - 1:j + 2], chi2[j - 1:j + 2])
+    u0 = float(np.clip(grid[i] if u0 is None or edge else u0, grid[0], grid[-1]))
+    near = np.array([u0 - REFINE_STEP, u0, u0 + REFINE_STEP])
+    vertex, b = _parabola(near, [total(u) for u in near])
+    if vertex is not None and abs(vertex - u0) < 2 * REFINE_STEP and not edge:
+        u0 = float(vertex)
+    best = _least(sessions, float(np.exp(u0)), starts)
+    profile[u0] = best
+    chi2_best = sum(c for c, _ in best)
+    dof = sum(s.problem.dof for s in sessions)
+    noise = sum(s.problem.noise_chi2(th)[0] for s, (_, th) in zip(sessions, best))
+    s2 = unc.scale(chi2_best, noise)
+    # k's standard error in log k from the profile's curvature (Delta chi^2 = s^2 at 1 sd)
+    sd_u = float(np.sqrt(s2 / b)) if b is not None and b > 0 else np.inf
+    lo, hi = (np.exp(u0 - unc.Z["95"] * sd_u), np.exp(u0 + unc.Z["95"] * sd_u))
+    k = float(np.exp(u0))
+    warnings = []
+    if edge:
+        warnings.append(f"the sky's fitted scale ran to the search's end (k = {k:.3g}): the "
+                        "spec's sky is far from the light the data show, or the data cannot tell "
+                        "the sky from the sun; check the spec's sky and sun.")
+    if not np.isfinite(sd_u):
+        warnings.append("the data do not determine the sky's scale (chi-square is flat in it): "
+                        "every parameter's interval is open on the sky's side; fit several "
+                        "materials or a grey card together.")
+    # each region's parameters at k e^(+-REFINE_STEP): their slope in log k
+    up, down = (_least(sessions, float(np.exp(u0 + d)), starts) for d in (REFINE_STEP,
+                                                                           -REFINE_STEP))
+    for s, (_, t_up), (_, t_down) in zip(sessions, up, down):
+        slope = (t_up - t_down) / (2 * REFINE_STEP)
+        s.set_sky_scale(k)
+        s.sky_sd = np.abs(slope) * (sd_u if np.isfinite(sd_u) else 0.0)
+        s.sky_open = not np.isfinite(sd_u)
+    record = {"fitted": "the sky's level (all but the sun's disc) against the spec's, relative "
+                        "to the sun: k, shared by every region and frame of the fit",
+              "k": k, "interval95": [float(lo), float(hi)],
+              "regions": [s.name for s in sessions], "chi2": chi2_best, "dof": dof,
+              "interval_scale_s2": s2,
+              "profile": {"k": [float(np.exp(u)) for u in sorted(profile)],
+                          "chi2": [sum(c for c, _ in profile[u]) for u in sorted(profile)]},
+              "warnings": warnings}
+    for s in sessions:
+        s.sky_record = record
+    log(f"sky: the sky's level fitted with {len(sessions)} region(s): k = {k:.3f} (95%: "
+        f"{lo:.3f}-{hi:.3f}) times the spec's, against the sun"
+        + "".join(f"\n  warning: {w}" for w in warnings))
+    return record

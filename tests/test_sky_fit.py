@@ -1,0 +1,92 @@
+"""The sky's level fitted with the materials (fitting/sky_fit.py, ``fit --sky fit``)."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from skyfit_mi.cli import main
+from skyfit_mi.fitting.chi2 import parse_region
+
+REGION = parse_region("rect:2,2,9,9")        # 64 pixels of the disc
+TRUTH = {"C_r": 1.0, "C_g": 1.0, "C_b": 1.0, "rho_s": 0.3, "sigma_alpha": 0.1}
+DIMMER = 1.5                                 # the spec's sky is this much too dim
+
+
+def test_the_sun_and_the_rest_of_a_sky_add_up_to_it():
+    from skyfit_mi.physics.sky import Sky
+
+    sky = Sky(np.array([0.3, -0.2, 0.8]), clear=[30.0, 38.0, 66.0], overcast=[5.0, 5.0, 6.0],
+              ground=[40.0, 41.0, 39.0], sun_radiance=[1.5e7, 1.2e7, 1e7])
+    sun, rest = sky.split()
+    d = np.random.default_rng(0).normal(size=(500, 3))
+    d = np.vstack([d / np.linalg.norm(d, axis=1, keepdims=True), sky.sun_direction])
+    np.testing.assert_allclose(sun.radiance(d) + rest.radiance(d), sky.radiance(d), rtol=1e-12)
+    assert np.all(rest.sun_radiance == 0) and np.all(sun.ground == 0)
+    assert sun.radiance(sky.sun_direction[None])[0, 0] > 1e6
+
+
+def test_the_split_lights_mix_is_the_whole_lights_table(days):
+    """The sun's table plus k = 1 times the rest's (independent samples) gives the whole
+    light's radiance within their Monte Carlo errors; k scales only the sky's share."""
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.render.basis_table import TableModel, mixed
+
+    opts = dict(model="colour", positions=4, directions=128, seed=3)
+    whole = FitSession(days["clean"], "disc", REGION, **opts)
+    split = FitSession(days["clean"], "disc", REGION, split_sky=True, **opts)
+    sun, rest = split.parts
+    theta = np.array([0.8, 0.7, 0.6, 0.2, 0.1])
+    (a, va), (b, vb) = (TableModel(t, "colour").radiance_and_variance(theta)
+                        for t in (whole.table, mixed(sun, rest, 1.0)))
+    z = (a.mean(axis=0) - b.mean(axis=0)) / np.sqrt((va.sum(axis=0) + vb.sum(axis=0))
+                                                    / len(a) ** 2)
+    assert np.all(np.abs(z) < 5) and np.sqrt(np.mean(z ** 2)) < 2.5, z
+    L_sun, L_rest = (TableModel(t, "colour").radiance(theta) for t in (sun, rest))
+    np.testing.assert_allclose(TableModel(mixed(sun, rest, 2.0), "colour").radiance(theta),
+                               L_sun + 2.0 * L_rest, rtol=1e-5)
+
+
+@pytest.fixture(scope="module")
+def dim_sky(days, tmp_path_factory):
+    """The noisy disc day whose manifest's sky (all but the sun) is DIMMER times too dim."""
+    out = tmp_path_factory.mktemp("dim") / "day"
+    shutil.copytree(days["noisy"], out)
+    m = json.loads((out / "manifest.json").read_text())
+    for f in m["frames"]:
+        il = f["illumination"]
+        for k in ("clear", "overcast", "uniform", "intermediate", "perez", "ground"):
+            il[k] = [v / DIMMER for v in il[k]]
+    (out / "manifest.json").write_text(json.dumps(m))
+    return out
+
+
+def test_a_sky_of_the_wrong_level_is_fitted_and_the_materials_held(dim_sky):
+    """With the spec's sky too dim the materials absorb it (rho_s's interval misses the
+    truth, the reflectances run to their bound); fitted with the materials, the sky's level
+    holds the truth in its 95% interval, the spec's level outside it, and every parameter's
+    interval holds the truth, the sky's share of its error included."""
+    from skyfit_mi.fitting.fit import fit_regions
+
+    logs = []
+    spec = next(fit_regions(dim_sky, [("disc", REGION)], model="colour",
+                            log=lambda *a: None))
+    lo, hi = spec["intervals"]["rho_s"]["95"]
+    assert not lo <= TRUTH["rho_s"] <= hi, spec["intervals"]["rho_s"]
+    r = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky="fit",
+                         log=logs.append))
+    k = r["sky"]
+    assert k["interval95"][0] < DIMMER < k["interval95"][1] and k["interval95"][0] > 1.0, k
+    assert set(k["error_sd"]) == set(TRUTH) and k["regions"] == ["disc"]
+    assert any("sky: the sky's level fitted" in x for x in logs)
+    for p, v in TRUTH.items():
+        lo, hi = r["intervals"][p]["95"]
+        assert lo - 1e-9 <= v <= hi + 1e-9, (p, r["intervals"][p], r["parameters"])
+
+
+def test_sky_fit_is_for_regions_not_maps(days, capsys):
+    assert main(["fit", str(days["clean"]), "--region", "disc=rect:2,2,9,9", "--per-pixel",
+                 "--sky", "fit"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--sky fit" in err, err
