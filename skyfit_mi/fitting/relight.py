@@ -602,7 +602,7 @@ def _contact_row(panels, lim):
     return np.asarray(canvas)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class PredictionRow:
     """One predicted value [W m^-2 sr^-1]: a region's mean radiance in one frame and
     channel, or for an observation table one point's value."""
@@ -849,14 +849,14 @@ def _predict_points(s, result, target, draws, rng):
     extra = 1.959963984540054 * np.sqrt(image_noise_variance(s, image) + model_var)
     names = _channels(s)
     saturated = ~_measured(s)
-    rows = []
+    rows, points = [], [str(x) for x in s.obs.pixels]      # one string a point, shared
     for p, j, c in zip(*np.nonzero(np.isfinite(s.obs.sigma[..., :len(names)]))):
         band = widen(at_fit[p, j, c], (lo[p, j, c], hi[p, j, c]), extra[p, j, c], 0.0, np.inf)
         rows.append(PredictionRow(region=s.name, frame=int(s.obs.frames[j]),
                                   time=s.obs.times[j], channel=names[c],
                                   predicted=float(at_fit[p, j, c]), lo95=float(band[0]),
                                   hi95=float(band[1]), image=float(image[p, j, c]),
-                                  point=str(s.obs.pixels[p]),
+                                  point=points[p],
                                   saturated=bool(saturated[p, j, c])))
     region_mean = _region_mean(s)
     return rows, _means_error(s, region_mean(at_fit)[..., :len(names)],
