@@ -135,8 +135,9 @@ def render_day(folder, spec, sky, scans=None):
     return out
 
 
-def fit_replicates(day, scene, truth, replicates, positions=None, directions=512):
-    """Fit ``day`` with the spec's sky (the thesis's CIE clear sky at each frame's sun) on
+def fit_replicates(day, scene, truth, replicates, positions=None, directions=512, sky="spec"):
+    """Fit ``day`` with the spec's sky (the thesis's CIE clear sky at each frame's sun; with
+    ``sky`` 'fit' its level fitted with the material, ``fit --sky fit``) on
     ``replicates`` captures of its radiance; one record per replicate: parameters, 95%
     intervals, warnings, each parameter's 'in'/'warned'/'MISSED', the chi-square rise at the
     truth and its joint 99.9% bound.  The light cache is sized from the data (``positions``
@@ -146,21 +147,26 @@ def fit_replicates(day, scene, truth, replicates, positions=None, directions=512
     from scipy.stats import chi2 as chi2_dist
 
     from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.sky_fit import fit_sky_scale
     from skyfit_mi.pipeline.pixels import frame_values
 
     fitted = relabelled(day, Path(day).parent / "fit_cie_clear", thesis_clear)
     region, _, pixels = SCENES[scene]
     s = FitSession(fitted, region, pixels, model="colour", positions=positions,
-                   directions=directions)
+                   directions=directions, split_sky=sky == "fit")
     radiance = frame_values(fitted, s.obs.pixels, s.obs.frames)
     out = []
     for r in range(replicates):
         s.obs.recapture(radiance, np.random.default_rng([36, r]))
+        if sky == "fit":
+            fit_sky_scale([s], seed=r, log=lambda *a: None)
         res = s.run("global", seed=r, log=lambda *a: None)
         out.append({"parameters": res["parameters"],
                     "intervals_95": {p: res["intervals"][p]["95"] for p in NAMES},
                     "status": held_or_warned(NAMES, res["intervals"], res["warnings"], truth),
                     "chi2_per_dof": res["chi2_per_dof"], "warnings": res["warnings"],
+                    **({"sky_scale": res["sky"]["k"], "sky_interval95": res["sky"]["interval95"]}
+                       if "sky" in res else {}),
                     "truth_rise": float(s.problem.chi2(np.asarray(truth)) - res["chi2"]),
                     "joint_999_bound": float(chi2_dist.ppf(0.999, len(NAMES))
                                              * res["interval_scale_s2"]
@@ -219,13 +225,14 @@ def markdown(cases, totals):
     return "\n".join(lines)
 
 
-def run_case(folder, sky_name, sky, scene, camera, material_name, replicates, hours, scans):
+def run_case(folder, sky_name, sky, scene, camera, material_name, replicates, hours, scans,
+             fit_sky="spec"):
     """Render and fit one (sky, scene, camera, material); returns its record."""
     material = MATERIALS[material_name]
     t0 = time.perf_counter()
     day = render_day(folder, template(scene, material, camera, hours), sky, scans)
     t1 = time.perf_counter()
-    fits = fit_replicates(day, scene, truth_of(material), replicates)
+    fits = fit_replicates(day, scene, truth_of(material), replicates, sky=fit_sky)
     return {"sky": sky_name, "scene": scene, "camera_deg": camera, "material": material_name,
             "truth": dict(zip(NAMES, truth_of(material))), "fits": fits,
             "render_s": t1 - t0, "fit_s": time.perf_counter() - t1}
@@ -241,6 +248,8 @@ def main(argv=None):
     ap.add_argument("--replicates", type=int, default=None, help="noise replicates (2 quick, 3)")
     ap.add_argument("-o", "--out", type=Path, default=Path("out/sky_test_set"))
     ap.add_argument("--data", type=Path, default=None, help="the measured scans' folder")
+    ap.add_argument("--sky", choices=("spec", "fit"), default="spec",
+                    help="fit with the spec's sky as it is, or its level fitted (fit --sky fit)")
     args = ap.parse_args(argv)
     setup()
     replicates = args.replicates or (2 if args.quick else 3)
@@ -258,7 +267,7 @@ def main(argv=None):
                 for material in materials:
                     folder = args.out / f"sky{i}-{scene}-{camera:g}-{materials.index(material)}"
                     c = run_case(folder, sky_name, sky, scene, camera, material, replicates,
-                                 hours, scans)
+                                 hours, scans, args.sky)
                     cases.append(c)
                     st = [v for f in c["fits"] for v in f["status"].values()]
                     print(f"{sky_name} | {scene} | {camera:g} | {material}: "
@@ -266,7 +275,7 @@ def main(argv=None):
                           f"({c['render_s']:.0f} + {c['fit_s']:.0f} s)", flush=True)
     totals = summary(cases)
     write_json(args.out / "sky_test_set.json",
-               {"quick": args.quick, "replicates": replicates, "hours_utc": list(hours),
+               {"quick": args.quick, "replicates": replicates, "fit_sky": args.sky, "hours_utc": list(hours),
                 "scans": [s.label for s in scans], "cases": cases, "summary": totals,
                 "wall_s": time.perf_counter() - t_start, "data": CITATION})
     print("\n" + markdown(cases, totals))
