@@ -51,8 +51,7 @@ REFERENCE_SEED = 1_000_003
 #: sixteenth of a fit's cache, whose chi-square needs every pixel accurate; the sky's
 #: integrals by the ``anchors`` plan (light_cache.SKY_PLANS: through the pixels' centres
 #: interpolated between anchors where accurate, else at one random position of each pixel,
-#: unbiased).  Not a fit's: docs/BENCHMARKS.md, "A fit's sky integrals through pixel
-#: centres: tried, not adopted".
+#: unbiased).  Not a fit's: docs/BENCHMARKS.md, "Tried, not adopted".
 PREDICTION_CACHE = (4, 64)
 
 

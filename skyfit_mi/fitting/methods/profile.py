@@ -19,7 +19,7 @@ budget is put conservatively: at the nearest point found outside, or at the boun
 The fit reports the union of this interval and the grid's: the true chi^2 is that of the
 light cache, whose narrow lobes carry an error of their own (for a mirror fit, sigma_alpha
 just above 0 can look excluded when it is not), and the grid's profile was measured to cover
-there (docs/BENCHMARKS.md, "Profile intervals on the true chi-square").
+there (docs/BENCHMARKS.md, "Coverage and RMSE against the Cramer-Rao bound").
 """
 
 import numpy as np
