@@ -21,7 +21,7 @@ from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
-from .sky_fit import fit_sky_scale
+from .sky_fit import SKY_DOMINATES, fit_sky_scale
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, memory_estimate, mixed,
                                   trace_table)
@@ -670,13 +670,13 @@ class FitSession:
             own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
             k = self.sky_record
             for i, p in enumerate(names):
-                if self.sky_sd is not None and self.sky_sd[i] > own[i]:
+                if self.sky_sd is not None and self.sky_sd[i] > SKY_DOMINATES * own[i]:
                     warnings.append(
                         f"{p} depends on the sky: the fitted sky level k = {k['k']:.3g} (95%: "
                         f"{k['interval95'][0]:.3g}-{k['interval95'][1]:.3g}) moves it by "
-                        f"+-{unc.Z['95'] * self.sky_sd[i]:.3g} (95%), more than the data's own "
-                        "error; its interval includes that, and more materials or a grey card "
-                        "in the fit would narrow it.")
+                        f"+-{unc.Z['95'] * self.sky_sd[i]:.3g} (95%), at least doubling its "
+                        "interval, which includes that; more materials or a grey card in the "
+                        "fit would narrow it.")
         top = [p for i, p in enumerate(names)
                if p != "sigma_alpha" and theta[i] >= self.upper[i] - 1e-3]
         if top:

@@ -13,12 +13,15 @@ light, so every k's table is the sun's plus k times the sky's
 k is found by profiling: the sum over regions of each one's least chi-square (the global
 search), first on a geometric grid (:data:`SCALE_GRID`), then by a parabola in log k about its
 least point.  Its 95% interval is where that sum rises by 3.84 s^2 (s^2 the regions' pooled
-Birge ratio).  Each region's parameters move with k; their slope at k times k's standard error
-is the sky's share of their error, added to the data's and the cache's (every interval
-includes it), and a parameter whose sky share exceeds the data's own is warned.  With one
+Birge ratio).  Each region's parameters move with k; their slope at k (the Gauss-Newton response
+to the residuals' change) times k's standard error is the sky's share of their error, added to the data's and the cache's (every interval
+includes it), and a parameter whose interval the sky at least doubles is warned
+(:data:`SKY_DOMINATES`).  With one
 region the frames alone tell k, through how the sun's share of the light changes over the
 day; more materials and a grey card tell it better.
 """
+
+import time
 
 import numpy as np
 
@@ -27,6 +30,9 @@ from .methods import global_search
 
 #: Sky scales k searched first: a geometric grid from a quarter to four times the spec's sky.
 SCALE_GRID = np.geomspace(0.25, 4.0, 9)
+#: The sky's share of a parameter's standard error, against the data's own, from which the
+#: fit warns that the parameter depends on the sky: sqrt(3) doubles its interval.
+SKY_DOMINATES = 3 ** 0.5
 #: Half the spacing in log k of the points that refine the profile's least point.
 REFINE_STEP = 0.1
 
@@ -52,6 +58,7 @@ def fit_sky_scale(sessions, seed=0, log=print):
     """Fit the sky scale k of ``sessions`` (FitSessions of one day, traced with
     ``split_sky``) and leave each at the fitted k with its ``sky_sd`` (the sky's share of
     each parameter's standard error) and ``sky_record`` set; returns the record."""
+    t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     starts = [s.random_start(rng) for s in sessions]
     profile = {}
@@ -91,12 +98,16 @@ def fit_sky_scale(sessions, seed=0, log=print):
         warnings.append("the data do not determine the sky's scale (chi-square is flat in it): "
                         "every parameter's interval is open on the sky's side; fit several "
                         "materials or a grey card together.")
-    # each region's parameters at k e^(+-REFINE_STEP): their slope in log k
-    up, down = (_least(sessions, float(np.exp(u0 + d)), starts) for d in (REFINE_STEP,
-                                                                           -REFINE_STEP))
-    for s, (_, t_up), (_, t_down) in zip(sessions, up, down):
-        slope = (t_up - t_down) / (2 * REFINE_STEP)
+    # each region's parameters' response to log k at its fit (Gauss-Newton: the least-squares
+    # change of theta that follows the residuals' change), smooth where a refit may jump
+    for s, (_, theta) in zip(sessions, best):
+        change = []
+        for d in (REFINE_STEP, -REFINE_STEP):
+            s.set_sky_scale(k * np.exp(d))
+            change.append(s.problem.residuals(theta))
         s.set_sky_scale(k)
+        _, J = s.problem.jacobian(theta)
+        slope = -np.linalg.lstsq(J, (change[0] - change[1]) / (2 * REFINE_STEP), rcond=None)[0]
         s.sky_sd = np.abs(slope) * (sd_u if np.isfinite(sd_u) else 0.0)
         s.sky_open = not np.isfinite(sd_u)
     record = {"fitted": "the sky's level (all but the sun's disc) against the spec's, relative "
@@ -106,10 +117,10 @@ def fit_sky_scale(sessions, seed=0, log=print):
               "interval_scale_s2": s2,
               "profile": {"k": [float(np.exp(u)) for u in sorted(profile)],
                           "chi2": [sum(c for c, _ in profile[u]) for u in sorted(profile)]},
-              "warnings": warnings}
+              "warnings": warnings, "time_s": time.perf_counter() - t0}
     for s in sessions:
         s.sky_record = record
     log(f"sky: the sky's level fitted with {len(sessions)} region(s): k = {k:.3f} (95%: "
-        f"{lo:.3f}-{hi:.3f}) times the spec's, against the sun"
+        f"{lo:.3f}-{hi:.3f}) times the spec's, against the sun ({record['time_s']:.1f} s)"
         + "".join(f"\n  warning: {w}" for w in warnings))
     return record

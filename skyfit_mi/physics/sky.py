@@ -353,6 +353,13 @@ class Sky:
         ratio = np.divide(after, before, out=np.ones(3), where=before > 0)
         return replace(out, ground=self.ground * ratio)
 
+    @property
+    def lit_by_sky(self):
+        """Whether any light comes from other than the sun's disc: a pattern, the map or the
+        ground."""
+        return bool(any(np.any(getattr(self, p) > 0) for p in _PATTERNS + ("ground",))
+                    or self.envmap is not None)
+
     def split(self):
         """(the sun disc alone, everything else: the sky's patterns, its map and the ground):
         two skies whose light adds up to this one's, which a fit of the sun-to-sky level

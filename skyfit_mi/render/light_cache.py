@@ -680,7 +680,11 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
             first = last
         return res
 
-    if wide:
+    if not any(sky.lit_by_sky for sky in skies):
+        # the sun alone (Sky.split's first part): the sky function is zero, so are its integrals
+        for _ in pending:
+            _add_sky(out, np.zeros((P, 3)), np.zeros((P, len(is_wide), 3)), P, S)
+    elif wide:
         for (d, v_wide), (_, v_narrow) in zip(integrate([p[0] for p, _ in pending], quads[0]),
                                               integrate([p[1] for p, _ in pending], quads[1])):
             # each half's mean over its k / 2 positions, given to the half's positions
