@@ -90,3 +90,16 @@ def test_sky_fit_is_for_regions_not_maps(days, capsys):
                  "--sky", "fit"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--sky fit" in err, err
+
+
+def test_the_fitted_sky_lights_its_own_day_again(dim_sky, tmp_path):
+    """A session made again from a sky fit's result (chi2map, predictions) traces the split
+    light at the fitted level, so that its chi-square is the fit's at the fit's parameters."""
+    from skyfit_mi.fitting.fit import FitSession, fit_regions
+
+    r = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky="fit",
+                         log=lambda *a: None))
+    again = FitSession.from_fit(r, dim_sky)
+    assert again.split_sky and again.sky_scale == pytest.approx(r["sky"]["k"])
+    theta = np.array(list(r["parameters"].values()))
+    assert again.problem.chi2(theta) == pytest.approx(r["chi2"], rel=1e-6)

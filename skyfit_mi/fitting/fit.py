@@ -186,7 +186,9 @@ class FitSession:
         """The session of the region that a fit ``result`` (a fit JSON, checked by
         :func:`~skyfit_mi.pipeline.fit_result.read_fit_result`) measured, in its model and
         normalisation, on the sequence ``manifest_path`` (its own, or a target's); ``pixels``
-        default to the fit's own; ``options`` as the constructor's."""
+        default to the fit's own; ``options`` as the constructor's.  A fit of the sky's level
+        (``fit --sky fit``) lights its own sequence with that level; another sequence's sky is
+        its spec's (the level belongs to the fitted day's sky)."""
         if pixels is None and "points" in result:           # a fit of an observation table
             pixels = result["points"]
         elif pixels is None:
@@ -194,9 +196,14 @@ class FitSession:
                 raise SkyfitError(f"the fit of region {result['region']!r} lists no pixels; "
                                   "give the fit_NAME.json that `skyfit fit` wrote.")
             pixels = result["pixels"]
-        return cls(manifest_path, result["region"], pixels,
-                   model=result["model"], normalisation=result.get("normalisation", "ward"),
-                   **options)
+        trace = options.pop("trace", True)
+        s = cls(manifest_path, result["region"], pixels, model=result["model"],
+                normalisation=result.get("normalisation", "ward"), trace=False, **options)
+        if result.get("sky") is not None and result.get("sequence_run_id") == s.run_id:
+            s.split_sky, s.sky_scale = True, float(result["sky"]["k"])
+        if trace:
+            s._trace_cache()
+        return s
 
     @classmethod
     def sharing_light(cls, results, manifest_path, pixels, **options):
