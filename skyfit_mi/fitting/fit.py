@@ -223,7 +223,8 @@ class FitSession:
             cam = s.doc["camera"]
             anchored = anchors_pay(s.obs.pixels, SKY_PLANS[s.cache_settings["sky_plan"]].spacing,
                                    cam["width"], cam["height"])
-            groups.setdefault((s.normalisation, tuple(s.obs.frames), anchored), []).append(s)
+            groups.setdefault((s.normalisation, tuple(s.obs.frames), anchored, s.split_sky),
+                              []).append(s)
         for group in groups.values():
             cls.trace_together(group)
         return sessions
