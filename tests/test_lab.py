@@ -281,6 +281,8 @@ def test_a_table_of_unknown_scale_gives_relative_reflectances_without_a_bound(dn
     assert main(["ingest", str(spec), "--table", str(table), "--unknown-scale", "--calibrate",
                  "white=0.9", "-o", str(tmp_path / "both")]) == 2
     assert "leave out --unknown-scale" in capsys.readouterr().err
+    assert main(["ingest", str(spec), "--unknown-scale", "-o", str(tmp_path / "photos")]) == 2
+    assert "--unknown-scale belongs to --table" in capsys.readouterr().err
     assert main(["ingest", str(spec), "--table", str(table), "--unknown-scale", "-o",
                  str(tmp_path / "seq")]) == 0
     scale = load_manifest(tmp_path / "seq")[0]["ingest"]["scale"]
