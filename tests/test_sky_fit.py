@@ -103,3 +103,33 @@ def test_the_fitted_sky_lights_its_own_day_again(dim_sky, tmp_path):
     assert again.split_sky and again.sky_scale == pytest.approx(r["sky"]["k"])
     theta = np.array(list(r["parameters"].values()))
     assert again.problem.chi2(theta) == pytest.approx(r["chi2"], rel=1e-6)
+
+
+def test_a_sky_level_beyond_the_search_is_undetermined_and_widens_every_interval(days, tmp_path):
+    """A spec's sky 20 times too dim: k runs to the search's end, is recorded as not
+    determined with its interval open there, and every parameter's interval takes in its
+    values over the k the profile could not tell apart."""
+    from skyfit_mi.fitting.fit import fit_regions
+
+    out = tmp_path / "day"
+    shutil.copytree(days["noisy"], out)
+    m = json.loads((out / "manifest.json").read_text())
+    for f in m["frames"]:
+        for k in ("clear", "overcast", "uniform", "intermediate", "perez", "ground"):
+            f["illumination"][k] = [v / 20.0 for v in f["illumination"][k]]
+    (out / "manifest.json").write_text(json.dumps(m))
+    r = next(fit_regions(out, [("disc", REGION)], model="colour", sky="fit",
+                         log=lambda *a: None))
+    sky = r["sky"]
+    assert not sky["determined"] and sky["interval95"][1] is None and sky["k"] >= 4.0
+    assert any("do not determine the sky's level" in w for w in r["warnings"])
+    assert all("undetermined sky level" in r["intervals"][p]["from"] for p in TRUTH)
+
+
+def test_a_day_without_sun_cannot_fit_the_sky_against_it(days):
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.fitting.fit import fit_regions
+
+    with pytest.raises(SkyfitError, match="no frame of the sequence has the sun"):
+        next(fit_regions(days["overcast"], [("disc", REGION)], model="colour", sky="fit",
+                         log=lambda *a: None))

@@ -176,10 +176,10 @@ class FitSession:
         self.split_sky, self.sky_scale, self.parts = bool(split_sky), 1.0, None
         # the fitted sky's share of each parameter's error, whether it leaves them open, and
         # its record (sky_fit.fit_sky_scale)
-        self.sky_sd, self.sky_open, self.sky_record = None, False, None
+        self.sky_sd, self.sky_span, self.sky_record = None, None, None
         self.cache_time = time.perf_counter() - t0
         if trace:
-            self._trace_cache()
+            self.trace_light()
 
     @classmethod
     def from_fit(cls, result, manifest_path, pixels=None, **options):
@@ -199,11 +199,17 @@ class FitSession:
         trace = options.pop("trace", True)
         s = cls(manifest_path, result["region"], pixels, model=result["model"],
                 normalisation=result.get("normalisation", "ward"), trace=False, **options)
-        if result.get("sky") is not None and result.get("sequence_run_id") == s.run_id:
-            s.split_sky, s.sky_scale = True, float(result["sky"]["k"])
+        s.use_fitted_sky(result)
         if trace:
-            s._trace_cache()
+            s.trace_light()
         return s
+
+    def use_fitted_sky(self, result):
+        """Light the sequence at a sky fit's level (``fit --sky fit``, in ``result``) where the
+        fit measured this very sequence (its run_id), before the light is traced: another
+        day's sky is its spec's (the level belongs to the fitted day's sky)."""
+        if result.get("sky") is not None and result.get("sequence_run_id") == self.run_id:
+            self.split_sky, self.sky_scale = True, float(result["sky"]["k"])
 
     @classmethod
     def sharing_light(cls, results, manifest_path, pixels, **options):
@@ -218,7 +224,7 @@ class FitSession:
         groups = {}
         for s in sessions.values():
             if s.obs.rays is not None:
-                s._trace_cache()
+                s.trace_light()
                 continue
             cam = s.doc["camera"]
             anchored = anchors_pay(s.obs.pixels, SKY_PLANS[s.cache_settings["sky_plan"]].spacing,
@@ -268,7 +274,7 @@ class FitSession:
             s.cache_time += share
             start += n
 
-    def _trace_cache(self):
+    def trace_light(self):
         """(Re)trace the light at ``cache_settings`` and make everything from its table."""
         t0 = time.perf_counter()
         parts = self._trace(self.obs.pixels if self.obs.rays is None else self.obs.rays,
@@ -484,7 +490,7 @@ class FitSession:
                 f"chi-square ({self.problem.dof} degrees of freedom); tracing it again with "
                 f"{growth * c['positions']} positions per pixel")
             c["positions"] *= growth
-            self._trace_cache()
+            self.trace_light()
             return self.run(method, start, seed, method_options, log)
         evaluations = problem.evaluations + wm.basis_evaluations
         t_method = time.perf_counter() - t0
@@ -569,8 +575,12 @@ class FitSession:
             for lv in ("68", "95"):
                 intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * np.sqrt(
                     mc_sd[i] ** 2 + cal_sd[i] ** 2 + sky_sd[i] ** 2), lower[i], upper[i])
-                if self.sky_open:                  # the sky's level is not determined
-                    intervals[p][lv] = (float(lower[i]), float(upper[i]))
+                if self.sky_span is not None:      # the sky's level is not determined
+                    lo, hi = intervals[p][lv]
+                    intervals[p][lv] = (min(lo, float(self.sky_span[0][i])),
+                                        max(hi, float(self.sky_span[1][i])))
+                    if lv == "95":
+                        intervals[p]["from"] += ", and over the undetermined sky level"
         fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
         fit.cache_sd, fit.calibration_sd = mc_sd, cal_sd
 
@@ -801,6 +811,11 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
                                       positions=positions, directions=directions, frames=frames,
                                       variant=variant, split_sky=sky == "fit")
     if sky == "fit":
+        first = next(iter(sessions.values()))
+        if not any(np.any(k.sun_radiance > 0) and k.sun_direction[2] > 0 for k in first.skies):
+            raise SkyfitError("--sky fit scales the sky against the sun, and no frame of the "
+                              "sequence has the sun's disc above the horizon; fit with the "
+                              "spec's sky (leave out --sky).")
         fit_sky_scale(list(sessions.values()), seed, log)
     for name, _ in regions:
         yield sessions.pop(name).run(method, start, seed, method_options, log)

@@ -775,10 +775,8 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
         # cache size for points (positions None: the small cache of an image region averages
         # out only over its pixels), each region's light traced when its turn comes
         predict_region = _predict_points
-        sessions = ((region, FitSession(
-            target, region, None, model=r["model"], normalisation=r.get("normalisation", "ward"),
-            seed=seed, directions=DIRECTIONS, min_frames=1))
-            for region, (_, r) in sorted(fits.items()))
+        sessions = ((region, _table_session(target, region, r, seed))
+                    for region, (_, r) in sorted(fits.items()))
     else:
         # image regions: the light at all their pixels traced at once
         predict_region = _predict_means
@@ -794,6 +792,17 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
         rows += region_rows
         log(f"{region}: predicted {len(s.obs.frames)} frames from {draws} parameter draws")
     return Prediction(rows, means)
+
+
+def _table_session(target, region, result, seed):
+    """The session of every point of ``region`` in the target's table, lit as the fit
+    ``result`` saw its own day (its fitted sky level, :meth:`FitSession.use_fitted_sky`)."""
+    s = FitSession(target, region, None, model=result["model"],
+                   normalisation=result.get("normalisation", "ward"), seed=seed,
+                   directions=DIRECTIONS, min_frames=1, trace=False)
+    s.use_fitted_sky(result)
+    s.trace_light()
+    return s
 
 
 #: Values (draws x points x frames x channels) of a table's prediction held at once: the

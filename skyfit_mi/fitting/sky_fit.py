@@ -73,34 +73,45 @@ def fit_sky_scale(sessions, seed=0, log=print):
     i = int(np.argmin(chi2))
     edge = i in (0, len(grid) - 1)
     j = min(max(i, 1), len(grid) - 2)
-    u0, _ = _parabola(grid[j - 1:j + 2], chi2[j - 1:j + 2])
-    u0 = float(np.clip(grid[i] if u0 is None or edge else u0, grid[0], grid[-1]))
+    u0, b_grid = _parabola(grid[j - 1:j + 2], chi2[j - 1:j + 2])
+    u0 = float(grid[i] if u0 is None or edge else np.clip(u0, grid[j - 1], grid[j + 1]))
     near = np.array([u0 - REFINE_STEP, u0, u0 + REFINE_STEP])
     vertex, b = _parabola(near, [total(u) for u in near])
     if vertex is not None and abs(vertex - u0) < 2 * REFINE_STEP and not edge:
-        u0 = float(vertex)
-    best = _least(sessions, float(np.exp(u0)), starts)
-    profile[u0] = best
+        total(float(vertex))
+    # the least point evaluated; the curvature near it, or the grid's where the near points'
+    # search jitter leaves none
+    u0 = min(profile, key=lambda u: sum(c for c, _ in profile[u]))
+    b = b if b is not None and b > 0 else b_grid
+    best = profile[u0]
     chi2_best = sum(c for c, _ in best)
     dof = sum(s.problem.dof for s in sessions)
     noise = sum(s.problem.noise_chi2(th)[0] for s, (_, th) in zip(sessions, best))
     s2 = unc.scale(chi2_best, noise)
-    # k's standard error in log k from the profile's curvature (Delta chi^2 = s^2 at 1 sd)
-    sd_u = float(np.sqrt(s2 / b)) if b is not None and b > 0 else np.inf
-    lo, hi = (np.exp(u0 - unc.Z["95"] * sd_u), np.exp(u0 + unc.Z["95"] * sd_u))
+    # k's standard error in log k from the profile's curvature (Delta chi^2 = s^2 at 1 sd);
+    # at the grid's end the minimum may lie beyond it: k is not determined
+    sd_u = float(np.sqrt(s2 / b)) if b is not None and b > 0 and not edge else np.inf
     k = float(np.exp(u0))
+    within = [u for u in profile
+              if sum(c for c, _ in profile[u]) <= chi2_best + unc.LEVELS["95"] * s2]
+    if np.isfinite(sd_u):
+        interval = [float(np.exp(u0 - unc.Z["95"] * sd_u)), float(np.exp(u0 + unc.Z["95"] * sd_u))]
+    else:                               # what the profile saw, open where it reached the grid's end
+        interval = [None if min(within) <= grid[0] else float(np.exp(min(within))),
+                    None if max(within) >= grid[-1] else float(np.exp(max(within)))]
     warnings = []
-    if edge:
-        warnings.append(f"the sky's fitted scale ran to the search's end (k = {k:.3g}): the "
-                        "spec's sky is far from the light the data show, or the data cannot tell "
-                        "the sky from the sun; check the spec's sky and sun.")
     if not np.isfinite(sd_u):
-        warnings.append("the data do not determine the sky's scale (chi-square is flat in it): "
-                        "every parameter's interval is open on the sky's side; fit several "
-                        "materials or a grey card together.")
+        warnings.append(
+            f"the data do not determine the sky's level (k = {k:.3g}, chi-square "
+            f"{'at the search' + chr(39) + 's end' if edge else 'flat'} over k = "
+            f"{np.exp(min(within)):.3g}-{np.exp(max(within)):.3g}): every parameter's interval "
+            "takes in its values over that range of k"
+            + (", at least (the level may lie beyond the search: the spec's sky may be far "
+               "from the light the data show)" if edge else "")
+            + "; fit several materials with different normals, or a grey card, together.")
     # each region's parameters' response to log k at its fit (Gauss-Newton: the least-squares
     # change of theta that follows the residuals' change), smooth where a refit may jump
-    for s, (_, theta) in zip(sessions, best):
+    for n, (s, (_, theta)) in enumerate(zip(sessions, best)):
         change = []
         for d in (REFINE_STEP, -REFINE_STEP):
             s.set_sky_scale(k * np.exp(d))
@@ -109,10 +120,12 @@ def fit_sky_scale(sessions, seed=0, log=print):
         _, J = s.problem.jacobian(theta)
         slope = -np.linalg.lstsq(J, (change[0] - change[1]) / (2 * REFINE_STEP), rcond=None)[0]
         s.sky_sd = np.abs(slope) * (sd_u if np.isfinite(sd_u) else 0.0)
-        s.sky_open = not np.isfinite(sd_u)
+        # an undetermined k: the parameters' range over the k the profile could not tell apart
+        thetas = np.array([profile[u][n][1] for u in within])
+        s.sky_span = None if np.isfinite(sd_u) else (thetas.min(axis=0), thetas.max(axis=0))
     record = {"fitted": "the sky's level (all but the sun's disc) against the spec's, relative "
                         "to the sun: k, shared by every region and frame of the fit",
-              "k": k, "interval95": [float(lo), float(hi)],
+              "k": k, "interval95": interval, "determined": bool(np.isfinite(sd_u)),
               "regions": [s.name for s in sessions], "chi2": chi2_best, "dof": dof,
               "interval_scale_s2": s2,
               "profile": {"k": [float(np.exp(u)) for u in sorted(profile)],
@@ -120,7 +133,8 @@ def fit_sky_scale(sessions, seed=0, log=print):
               "warnings": warnings, "time_s": time.perf_counter() - t0}
     for s in sessions:
         s.sky_record = record
+    ends = [f"{v:.3f}" if v is not None else "open" for v in interval]
     log(f"sky: the sky's level fitted with {len(sessions)} region(s): k = {k:.3f} (95%: "
-        f"{lo:.3f}-{hi:.3f}) times the spec's, against the sun ({record['time_s']:.1f} s)"
+        f"{ends[0]}-{ends[1]}) times the spec's, against the sun ({record['time_s']:.1f} s)"
         + "".join(f"\n  warning: {w}" for w in warnings))
     return record

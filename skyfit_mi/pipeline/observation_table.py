@@ -516,8 +516,8 @@ def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calib
 
 #: Where an unknown scale puts the table's brightest apparent albedo (pi L / E, the
 #: radiance over a white Lambertian's at that point and light): at 0.5 no Ward material's
-#: reflectance can reach a bound (a lobe's peak apparent albedo is at least its rho_s, so a
-#: plastic's rho_s stays under 0.5 and a metal's C under 1), so no bound decides a fit.
+#: reflectance that reproduces the data needs a bound (a lobe's peak apparent albedo is at
+#: least its rho_s, so a plastic's rho_s stays under 0.5 and a metal's C under 1).
 UNKNOWN_SCALE_ALBEDO = 0.5
 
 
@@ -525,18 +525,20 @@ def unknown_scale(spec, xml, table, rows, row_frames, pos, view, offset):
     """The factor that puts a table of unknown radiometric scale (DN, no reference) on the
     scale of :data:`UNKNOWN_SCALE_ALBEDO`, and its record: (factor, record).
 
-    Every unsaturated row's apparent albedo y / L (L a white Lambertian's radiance at its
-    point under its frame's light, traced as :func:`reference_scale` traces references) is
-    taken; the largest, over rows and channels, becomes UNKNOWN_SCALE_ALBEDO.  Fitted
-    reflectances are then relative: the true ones times one unknown factor, the same for every
-    material and channel of the table.  Roughness, the colour's ratios and the ratio of
-    specular to diffuse reflectance do not depend on it."""
+    Every row's apparent albedo y / L (L a white Lambertian's radiance at its point under its
+    frame's light, traced as :func:`reference_scale` traces references; a saturated value's a
+    lower bound of its own) is taken; the largest, over rows and channels, becomes
+    UNKNOWN_SCALE_ALBEDO.  Fitted reflectances are then relative: the true ones times one
+    unknown factor, the same for every material and channel of the table.  Roughness and the
+    ratio of specular to diffuse reflectance do not depend on it.  (Under the spec's light;
+    a fitted sky level, or data whose shape the model misses, can still take a parameter to
+    a bound, which the fit then says.)"""
     index = {k: j for j, k in enumerate(table.point_keys())}
-    lit = [i for i in rows if not table.saturated[i].all()
-           and np.nanmax(np.where(table.saturated[i], np.nan, table.value[i])) > 0]
+    # a saturated value is a lower bound of the true one: its albedo counts as at least that
+    lit = [i for i in rows if np.nanmax(table.value[i]) > 0]
     if not lit:
-        raise SkyfitError(f"{table.path} has no unsaturated positive value in a lit frame, so "
-                          "its scale cannot be found; check its values.")
+        raise SkyfitError(f"{table.path} has no positive value in a lit frame, so its scale "
+                          "cannot be found; check its values.")
     points = list(dict.fromkeys((table.regions[i], table.points[i]) for i in lit))
     frames = sorted({row_frames[i] for i in lit})
     at_point = {k: j for j, k in enumerate(points)}
@@ -559,7 +561,7 @@ def unknown_scale(spec, xml, table, rows, row_frames, pos, view, offset):
         white = L[at_point[(table.regions[i], table.points[i])], at_frame[row_frames[i]]]
         if table.luminance:
             white = np.array([white @ SRGB_LUMINANCE])
-        y = np.where(table.saturated[i, :channels], np.nan, table.value[i, :channels])
+        y = table.value[i, :channels]
         lit_enough = white[:channels] > 1e-3 * np.max(L)      # not at grazing light
         if lit_enough.any():
             best = max(best, float(np.nanmax(np.where(lit_enough, y / white[:channels],
