@@ -133,3 +133,18 @@ def test_a_day_without_sun_cannot_fit_the_sky_against_it(days):
     with pytest.raises(SkyfitError, match="no frame of the sequence has the sun"):
         next(fit_regions(days["overcast"], [("disc", REGION)], model="colour", sky="fit",
                          log=lambda *a: None))
+
+
+def test_another_days_prediction_says_its_sky_is_the_spec_s(dim_sky, days):
+    """A sky fit relit onto another day (another run_id) takes that day's spec sky, and the
+    prediction says so."""
+    from skyfit_mi.fitting.fit import fit_regions
+    from skyfit_mi.fitting.relight import predict
+
+    r = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky="fit",
+                         log=lambda *a: None))
+    logs = []
+    predict({"disc": (None, r)}, days["clean"], {"disc": np.asarray(r["pixels"])}, draws=8,
+            seed=0, log=logs.append)
+    assert any("under the target's spec sky" in x and "belongs to its own day" in x
+               for x in logs), logs

@@ -790,7 +790,10 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
     for region, s in sessions:                          # each let go when done with
         region_rows, means[region] = predict_region(s, fits[region][1], target, draws, rng)
         rows += region_rows
-        log(f"{region}: predicted {len(s.obs.frames)} frames from {draws} parameter draws")
+        log(f"{region}: predicted {len(s.obs.frames)} frames from {draws} parameter draws"
+            + (f" (under the target's spec sky: the fit's sky level k = "
+               f"{fits[region][1]['sky']['k']:.3g} belongs to its own day)"
+               if fits[region][1].get("sky") is not None and not s.split_sky else ""))
     return Prediction(rows, means)
 
 
