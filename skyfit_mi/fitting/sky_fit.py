@@ -64,9 +64,11 @@ def fit_sky_scale(sessions, seed=0, log=print):
     profile = {}
 
     def total(u):
-        at = _least(sessions, float(np.exp(u)), starts)
-        profile[float(u)] = at
-        return sum(c for c, _ in at)
+        """The regions' summed least chi-square at log k = ``u``, each k searched once."""
+        u = float(u)
+        if u not in profile:
+            profile[u] = _least(sessions, float(np.exp(u)), starts)
+        return sum(c for c, _ in profile[u])
 
     grid = np.log(SCALE_GRID)
     chi2 = np.array([total(u) for u in grid])
@@ -81,10 +83,10 @@ def fit_sky_scale(sessions, seed=0, log=print):
         total(float(vertex))
     # the least point evaluated; the curvature near it, or the grid's where the near points'
     # search jitter leaves none
-    u0 = min(profile, key=lambda u: sum(c for c, _ in profile[u]))
+    u0 = min(profile, key=total)
     b = b if b is not None and b > 0 else b_grid
     best = profile[u0]
-    chi2_best = sum(c for c, _ in best)
+    chi2_best = total(u0)
     dof = sum(s.problem.dof for s in sessions)
     noise = sum(s.problem.noise_chi2(th)[0] for s, (_, th) in zip(sessions, best))
     s2 = unc.scale(chi2_best, noise)
@@ -93,7 +95,7 @@ def fit_sky_scale(sessions, seed=0, log=print):
     sd_u = float(np.sqrt(s2 / b)) if b is not None and b > 0 and not edge else np.inf
     k = float(np.exp(u0))
     within = [u for u in profile
-              if sum(c for c, _ in profile[u]) <= chi2_best + unc.LEVELS["95"] * s2]
+              if total(u) <= chi2_best + unc.LEVELS["95"] * s2]
     if np.isfinite(sd_u):
         interval = [float(np.exp(u0 - unc.Z["95"] * sd_u)), float(np.exp(u0 + unc.Z["95"] * sd_u))]
     else:                               # what the profile saw, open where it reached the grid's end
@@ -129,7 +131,7 @@ def fit_sky_scale(sessions, seed=0, log=print):
               "regions": [s.name for s in sessions], "chi2": chi2_best, "dof": dof,
               "interval_scale_s2": s2,
               "profile": {"k": [float(np.exp(u)) for u in sorted(profile)],
-                          "chi2": [sum(c for c, _ in profile[u]) for u in sorted(profile)]},
+                          "chi2": [total(u) for u in sorted(profile)]},
               "warnings": warnings, "time_s": time.perf_counter() - t0}
     for s in sessions:
         s.sky_record = record

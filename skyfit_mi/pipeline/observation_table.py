@@ -445,6 +445,34 @@ def _table_spec(spec_path, table, tz, site, log):
     return spec, [frame_of[t] for t in table.times]
 
 
+def white_at_rows(spec, xml, table, rows, row_frames, pos, view, offset, **trace):
+    """The radiance a white Lambertian reflects at the points of the table's ``rows`` under
+    their frames' light, traced as a fit traces its points
+    (:func:`~skyfit_mi.render.points.lambertian_radiance`, ``trace`` its options), each from
+    its row's own view (a frame without the point's row: any of its views); ``pos``,
+    ``view``, ``offset``: :func:`locate_points`'.  Returns L and its Monte Carlo variance
+    (P, T, 3) over the rows' points and frames, each row's (p, t) cell, and the points
+    [(region, point)]."""
+    index = {k: j for j, k in enumerate(table.point_keys())}
+    points = list(dict.fromkeys((table.regions[i], table.points[i]) for i in rows))
+    frames = sorted({row_frames[i] for i in rows})
+    at_point = {k: j for j, k in enumerate(points)}
+    at_frame = {f: j for j, f in enumerate(frames)}
+    cell = {i: (at_point[(table.regions[i], table.points[i])], at_frame[row_frames[i]])
+            for i in rows}
+    v = np.zeros((len(points), len(frames), 3))
+    have = np.zeros(v.shape[:2], bool)
+    for i, (p, t) in cell.items():
+        v[p, t], have[p, t] = view[i], True
+    for p in range(len(points)):
+        v[p, ~have[p]] = v[p, np.argmax(have[p])]
+    material = np.array([m for m, _ in points], dtype=object)
+    L, var = lambertian_radiance(xml, spec.render["variant"], [spec.frames[j].sky for j in frames],
+                                 point_rays(pos[[index[k] for k in points]], v, offset),
+                                 material, max(1, int(spec.render["max_depth"]) - 1), **trace)
+    return L, var, cell, points
+
+
 def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calibrate):
     """The radiance of one unit of a table in its own scale (an instrument's DN), per channel,
     from its rows on reference materials of known Lambertian reflectance, and the record of
@@ -459,31 +487,18 @@ def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calib
     standard error widened by the scatter about the fit where that exceeds the sigmas
     (chi^2/dof > 1).  The record's ``scale_relative_sd`` widens every fit's intervals of
     reflectances (:func:`skyfit_mi.fitting.uncertainty.calibration_sd`)."""
-    index = {k: j for j, k in enumerate(table.point_keys())}
     ref = [i for i in rows if table.regions[i] in calibrate and not table.saturated[i].all()]
     missing = [m for m in calibrate if m not in {table.regions[i] for i in ref}]
     if missing:
         raise SkyfitError(f"--calibrate {missing[0]}: {table.path} has no unsaturated row on "
                           f"region {missing[0]!r} in a lit frame; measure the reference in the "
                           "table (rows with that region).")
-    points = list(dict.fromkeys((table.regions[i], table.points[i]) for i in ref))
-    frames = sorted({row_frames[i] for i in ref})
-    P, T = len(points), len(frames)
-    v = np.zeros((P, T, 3))
-    y, sig = np.zeros((P, T, 3)), np.full((P, T, 3), np.inf)
-    at_point = {k: j for j, k in enumerate(points)}
-    at_frame = {f: j for j, f in enumerate(frames)}
-    for i in ref:
-        p, t = at_point[(table.regions[i], table.points[i])], at_frame[row_frames[i]]
-        v[p, t], y[p, t] = view[i], np.nan_to_num(table.value[i])
+    L, var, cell, points = white_at_rows(spec, xml, table, ref, row_frames, pos, view, offset)
+    y, sig = np.zeros(L.shape), np.full(L.shape, np.inf)
+    for i, (p, t) in cell.items():
+        y[p, t] = np.nan_to_num(table.value[i])
         sig[p, t] = np.where(table.saturated[i], np.inf, table.sigma[i])
-    for p in range(P):                # a frame without the point's row: any view of it
-        have = np.isfinite(sig[p, :, 0])
-        v[p, ~have] = v[p, np.argmax(have)]
     material = np.array([m for m, _ in points], dtype=object)
-    L, var = lambertian_radiance(xml, spec.render["variant"], [spec.frames[j].sky for j in frames],
-                                 point_rays(pos[[index[k] for k in points]], v, offset),
-                                 material, max(1, int(spec.render["max_depth"]) - 1))
     rho = np.array([calibrate[m] for m in material], dtype=float)[:, None, :]
     m, m_var = rho * L, rho ** 2 * var
     if table.luminance:                  # one quantity: Y (its variance bounded, as the fit's)
@@ -533,32 +548,17 @@ def unknown_scale(spec, xml, table, rows, row_frames, pos, view, offset):
     ratio of specular to diffuse reflectance do not depend on it.  (Under the spec's light;
     a fitted sky level, or data whose shape the model misses, can still take a parameter to
     a bound, which the fit then says.)"""
-    index = {k: j for j, k in enumerate(table.point_keys())}
     # a saturated value is a lower bound of the true one: its albedo counts as at least that
     lit = [i for i in rows if np.nanmax(table.value[i]) > 0]
     if not lit:
         raise SkyfitError(f"{table.path} has no positive value in a lit frame, so its scale "
                           "cannot be found; check its values.")
-    points = list(dict.fromkeys((table.regions[i], table.points[i]) for i in lit))
-    frames = sorted({row_frames[i] for i in lit})
-    at_point = {k: j for j, k in enumerate(points)}
-    at_frame = {f: j for j, f in enumerate(frames)}
-    v = np.zeros((len(points), len(frames), 3))
-    have = np.zeros(v.shape[:2], bool)
-    for i in lit:
-        p, t = at_point[(table.regions[i], table.points[i])], at_frame[row_frames[i]]
-        v[p, t], have[p, t] = view[i], True
-    for p in range(len(points)):           # a frame without the point's row: any view of it
-        v[p, ~have[p]] = v[p, np.argmax(have[p])]
-    material = np.array([m for m, _ in points], dtype=object)
-    L, _ = lambertian_radiance(xml, spec.render["variant"], [spec.frames[j].sky for j in frames],
-                               point_rays(pos[[index[k] for k in points]], v, offset),
-                               material, max(1, int(spec.render["max_depth"]) - 1),
-                               positions=POINT_POSITIONS)
+    L, _, cell, _ = white_at_rows(spec, xml, table, lit, row_frames, pos, view, offset,
+                                  positions=POINT_POSITIONS)
     channels = 1 if table.luminance else 3
     best = 0.0
-    for i in lit:
-        white = L[at_point[(table.regions[i], table.points[i])], at_frame[row_frames[i]]]
+    for i, (p, t) in cell.items():
+        white = L[p, t]
         if table.luminance:
             white = np.array([white @ SRGB_LUMINANCE])
         y = table.value[i, :channels]

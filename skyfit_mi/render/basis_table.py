@@ -122,11 +122,6 @@ class Series:
 
     blocks: list
 
-    @property
-    def degree(self):
-        """The highest degree of any block."""
-        return max(c.shape[1] - 1 for _, _, c in self.blocks)
-
     def subset(self, rows, frames):
         """The series of the table's pixels ``rows`` and frames ``frames`` (slices of step
         1): views of the blocks that meet them."""
@@ -205,11 +200,6 @@ class BasisTable:
     @property
     def var_sigmas(self):
         return variance_sigmas()
-
-    @property
-    def degrees(self):
-        """Each piece's highest degree."""
-        return [c.degree for c in self.coef]
 
     def subset(self, rows=slice(None), frames=slice(None)):
         """The table of pixels ``rows`` and frames ``frames`` (slices of step 1): views of this
