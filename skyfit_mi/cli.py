@@ -270,7 +270,7 @@ def _fit(args):
                           normalisation=args.normalisation, seed=args.seed, start=args.start,
                           positions=args.positions, directions=args.directions,
                           frames=args.frames, variant=args.variant, sky=args.sky,
-                          sun_sd=args.sun_sd)
+                          sun_sd=args.sun_sd, sky_terms=args.sky_terms)
     for (name, pixels), res in zip(regions, results):
         res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
                                          if pixels is None else len(pixels))
@@ -484,6 +484,10 @@ def build_parser():
                      "on that level from how measured skies scatter about the models. fit and "
                      "prior also count the sun's own level (--sun-sd) in the reflectances' "
                      "intervals")
+    fit.add_argument("--sky-terms", type=int, default=1,
+                     help="with --sky fit or prior: 1 (default) one sky level for the day; 2-4 "
+                     "a level that changes smoothly over the day (changing weather: log k as "
+                     "that many Legendre polynomials in time, the change under a prior)")
     fit.add_argument("--sun-sd", type=float, default=None,
                      help="with --sky fit or prior: the relative uncertainty of the spec's sun "
                      f"level, in the reflectances' intervals (default {SUN_LEVEL_SD} for "

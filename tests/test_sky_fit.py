@@ -253,7 +253,7 @@ def test_relit_images_take_the_fitted_sky_level_of_their_own_day():
 
     doc = {"run_id": "a"}
     fit = lambda k, run="a": {"sky": {"k": k}, "sequence_run_id": run}   # noqa: E731
-    assert fitted_sky_level({"x": (None, fit(1.4)), "y": (None, fit(1.4))}, doc) == 1.4
+    assert fitted_sky_level({"x": (None, fit(1.4)), "y": (None, fit(1.4))}, doc)["k"] == 1.4
     assert fitted_sky_level({"x": (None, fit(1.4, run="b"))}, doc) is None
     assert fitted_sky_level({"x": (None, {"sequence_run_id": "a"})}, doc) is None
     logs = []
@@ -267,3 +267,57 @@ def test_a_bad_sun_sd_is_one_line(days, capsys):
                  "--sun-sd", "2"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--sun-sd" in err, err
+
+
+DRIFT = 0.4           # log k's true change from the day's middle to its ends
+
+
+@pytest.fixture(scope="module")
+def drifting_sky(days, tmp_path_factory):
+    """The noisy disc day whose manifest's sky (all but the sun) is exp(-DRIFT x) times its
+    own, x from -1 at the first frame to 1 at the last: the real sky's level against the
+    spec's, k(t) = exp(DRIFT x), rises through the day."""
+    out = tmp_path_factory.mktemp("drift") / "day"
+    shutil.copytree(days["noisy"], out)
+    m = json.loads((out / "manifest.json").read_text())
+    x = np.linspace(-1.0, 1.0, len(m["frames"]))
+    for f, xi in zip(m["frames"], x):
+        il = f["illumination"]
+        for k in ("clear", "overcast", "uniform", "intermediate", "perez", "ground"):
+            il[k] = [v * np.exp(-DRIFT * xi) for v in il[k]]
+    (out / "manifest.json").write_text(json.dumps(m))
+    return out
+
+
+def test_a_sky_that_changes_over_the_day_is_fitted_as_a_smooth_curve(drifting_sky):
+    """With --sky-terms 2 the fit finds log k's slope over the day within its interval, the
+    level's at the spec's, k per frame rising, and every parameter's interval holds the
+    truth; the curve lights the day again in a session made from the fit."""
+    from skyfit_mi.fitting.fit import FitSession, fit_regions
+
+    r = next(fit_regions(drifting_sky, [("disc", REGION)], model="colour", sky="fit",
+                         sky_terms=2, log=lambda *a: None))
+    terms = r["sky"]["terms"]
+    u, sd = np.array(terms["coefficients"]), np.sqrt(np.diag(terms["covariance"]))
+    for j, truth in enumerate((0.0, DRIFT)):
+        assert abs(u[j] - truth) < 1.96 * sd[j] + 0.02, (j, u, sd)
+    assert sd[1] < 0.5 * DRIFT
+    k = [v[0] for v in terms["k_by_frame"].values()]
+    assert np.all(np.diff(k) > 0)
+    for p, v in TRUTH.items():
+        lo, hi = r["intervals"][p]["95"]
+        assert lo - 1e-9 <= v <= hi + 1e-9, (p, r["intervals"][p], r["parameters"])
+    again = FitSession.from_fit(r, drifting_sky)
+    np.testing.assert_allclose(again.sky_scale, k, rtol=1e-6)
+
+
+def test_sky_terms_need_a_fitted_sky_and_frames(days):
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.fitting.fit import fit_regions
+
+    with pytest.raises(SkyfitError, match="--sky spec"):
+        next(fit_regions(days["clean"], [("disc", REGION)], model="colour", sky="spec",
+                         sky_terms=2, log=lambda *a: None))
+    with pytest.raises(SkyfitError, match="give 1"):
+        next(fit_regions(days["clean"], [("disc", REGION)], model="colour", sky="fit",
+                         sky_terms=9, log=lambda *a: None))

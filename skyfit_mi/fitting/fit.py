@@ -21,7 +21,8 @@ from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
-from .sky_fit import SKY_DOMINATES, default_sky, fit_sky_scale, light_level_sd
+from .sky_fit import (SKY_DOMINATES, check_terms, default_sky, fit_sky_scale, light_level_sd,
+                      sky_level_at)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, memory_estimate, mixed,
                                   trace_table)
@@ -214,7 +215,8 @@ class FitSession:
         fit measured this very sequence (its run_id), before the light is traced: another
         day's sky is its spec's (the level belongs to the fitted day's sky)."""
         if result.get("sky") is not None and result.get("sequence_run_id") == self.run_id:
-            self.split_sky, self.sky_scale = True, float(result["sky"]["k"])
+            k = sky_level_at(result["sky"], self.obs.times)
+            self.split_sky, self.sky_scale = True, float(k[0]) if np.ptp(k) == 0 else k
 
     @classmethod
     def sharing_light(cls, results, manifest_path, pixels, **options):
@@ -372,10 +374,11 @@ class FitSession:
 
     def set_sky_scale(self, k):
         """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
-        to the sun, and make the models and chi-square on it."""
+        to the sun (one factor, or one per frame of the session), and make the models and
+        chi-square on it."""
         if len(self.parts or ()) != 2:
             raise ValueError("the sky's scale needs a session traced with split_sky")
-        self.sky_scale = float(k)
+        self.sky_scale = float(k) if np.ndim(k) == 0 else np.asarray(k, dtype=float)
         self._use_parts(self.parts)
 
     def _use_table(self, table):
@@ -831,7 +834,7 @@ def fit_region(manifest_path, name, pixels, **options):
 
 def fit_regions(manifest_path, regions, model="two", method="global", normalisation="ward",
                 seed=0, start=None, positions=None, directions=DIRECTIONS, method_options=None,
-                log=print, frames=None, variant=None, sky=None, sun_sd=None):
+                log=print, frames=None, variant=None, sky=None, sun_sd=None, sky_terms=1):
     """Fit several regions of one sequence (``regions`` [(name, pixels)]), their light traced
     together (:meth:`FitSession.for_regions`); yields each region's result dict in turn.
     ``sky``: None chooses (:func:`~.sky_fit.default_sky`); 'spec' takes the spec's light as it is; 'fit' fits the sky's level against the
@@ -839,7 +842,8 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
     'prior' the same with the level's prior (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`);
     both count the sun's own level, known to a relative ``sun_sd`` (None: 0 for a sequence
     skyfit rendered, :data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD` for photographs), in the
-    reflectances' intervals (:func:`~.sky_fit.light_level_sd`)."""
+    reflectances' intervals (:func:`~.sky_fit.light_level_sd`); ``sky_terms`` > 1 lets the
+    sky's level change smoothly over the day (:func:`~.sky_fit.fit_sky_scale`)."""
     if sky is not None:
         check_choice("sky", sky, SKY_CHOICES)
     if sun_sd is not None:
@@ -868,8 +872,13 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
                 else SUN_LEVEL_SD
         for s in sessions.values():
             s.sun_sd = float(sun_sd)
+        check_terms(sky_terms, len(first.obs.frames))
         fit_sky_scale(list(sessions.values()), seed, log,
-                      prior_sd=SKY_LEVEL_SD if sky == "prior" else None)
+                      prior_sd=SKY_LEVEL_SD if sky == "prior" else None, terms=int(sky_terms))
+    elif sky_terms != 1:
+        raise SkyfitError(f"--sky-terms {sky_terms} changes a fitted sky's level over the day; "
+                          "the spec's sky is taken as it is (--sky spec): give --sky fit or "
+                          "prior, or leave out --sky-terms.")
     for name, _ in regions:
         yield sessions.pop(name).run(method, start, seed, method_options, log)
 

@@ -36,11 +36,14 @@ Two things the data cannot tell well are stated as priors:
   0.03``).  A sequence skyfit rendered was lit by its spec's sun: 0 unless given.
 """
 
+import datetime as dt
 import time
 
 import numpy as np
 
 from . import uncertainty as unc
+from ..errors import SkyfitError
+from .methods.levenberg_marquardt import levenberg_marquardt
 from ..pipeline.manifest import RENDERED_SOURCES
 from .methods import global_search
 
@@ -51,6 +54,18 @@ SCALE_GRID = np.geomspace(0.25, 4.0, 9)
 SKY_DOMINATES = 3 ** 0.5
 #: Half the spacing in log k of the points that refine the profile's least point.
 REFINE_STEP = 0.1
+#: The most terms of the sky's level over the day (``fit --sky-terms``), and the frames each
+#: term needs at least.
+MAX_TERMS, FRAMES_PER_TERM = 4, 3
+#: The prior's standard deviation of each term of log k beyond the day's level (Legendre
+#: polynomials in time over the fitted frames, :func:`time_basis`): its change between the
+#: day's middle and its ends.  Passing haze and cloud change the sky's share of the light by
+#: tens of percent within hours; 0.35 is the level's own prior (:data:`SKY_LEVEL_SD`).
+DRIFT_SD = 0.35
+#: Step in each term's coefficient of the finite differences of the residuals.
+DRIFT_STEP = 1e-3
+#: Gauss-Newton iterations of the terms at most.
+DRIFT_ITERATIONS = 8
 #: The parameters that scale with the light's absolute level (the reflectances); the
 #: roughness does not.
 LEVEL_SCALED = ("C_r", "C_g", "C_b", "R", "rho_s")
@@ -79,6 +94,30 @@ def light_level_sd(doc, names, sun_sd):
     return np.array([float(sun_sd) if p in LEVEL_SCALED else 0.0 for p in names])
 
 
+def _seconds(times):
+    """Seconds since the epoch of ISO ``times``."""
+    return np.array([dt.datetime.fromisoformat(t).timestamp() for t in times])
+
+
+def time_basis(times, span, terms):
+    """(T, ``terms``) Legendre polynomials P_0 .. P_terms-1 of the frames' ``times`` (ISO)
+    mapped onto [-1, 1] over ``span`` (first, last) [s since the epoch], held at the ends
+    outside it: log k(t) = basis @ coefficients."""
+    t0, t1 = span
+    x = np.clip(2.0 * (_seconds(times) - t0) / max(t1 - t0, 1.0) - 1.0, -1.0, 1.0)
+    return np.polynomial.legendre.legvander(x, terms - 1)
+
+
+def sky_level_at(record, times):
+    """The sky's level k at the frames' ``times`` (ISO) by a sky fit's ``record``: the day's
+    one level, or its smooth curve over the day (``terms``; held at the fitted span's ends)."""
+    terms = record.get("terms")
+    if terms is None:
+        return np.full(len(times), float(record["k"]))
+    return np.exp(time_basis(times, terms["span_s"], len(terms["coefficients"]))
+                  @ np.asarray(terms["coefficients"]))
+
+
 def _least(sessions, k, starts):
     """Every region's least chi-square and its parameters at sky scale ``k``."""
     out = []
@@ -96,12 +135,92 @@ def _parabola(u, chi2):
     return (-c1 / (2 * c2), c2) if c2 > 0 else (None, c2)
 
 
-def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None):
+def check_terms(terms, frames):
+    """Refuse ``terms`` of the sky's level over ``frames`` frames that they cannot carry."""
+    if not 1 <= int(terms) <= MAX_TERMS:
+        raise SkyfitError(f"--sky-terms {terms}: give 1 (one sky level for the day) to "
+                          f"{MAX_TERMS}.")
+    if int(terms) > 1 and frames < FRAMES_PER_TERM * int(terms):
+        raise SkyfitError(f"--sky-terms {terms} needs at least {FRAMES_PER_TERM * int(terms)} "
+                          f"frames, and the fit has {frames}; give fewer terms.")
+
+
+def _fit_terms(sessions, thetas, u0, terms, prior_sd, s2):
+    """log k over the day as ``terms`` Legendre polynomials in time, fitted with the regions'
+    parameters from the day's level ``u0`` (log k) and each region's ``thetas`` there:
+    Gauss-Newton on the coefficients with every region's parameters profiled out (each
+    region's Jacobian in the coefficients projected off its parameters' own; the parameters
+    then polished by Levenberg-Marquardt), under the priors N(0, ``prior_sd``^2) on the level
+    (none if None) and N(0, :data:`DRIFT_SD`^2) on each further term.  Leaves each session at
+    the fitted curve; returns (coefficients, their covariance, the span [s], each region's
+    parameters' response to the coefficients (n, terms))."""
+    times = [t for s in sessions for t in s.obs.times]
+    span = (float(_seconds(times).min()), float(_seconds(times).max()))
+    bases = [time_basis(s.obs.times, span, terms) for s in sessions]
+    P = np.diag([0.0 if prior_sd is None else prior_sd ** -2] + [DRIFT_SD ** -2] * (terms - 1))
+    u = np.r_[u0, np.zeros(terms - 1)]
+    thetas = [np.asarray(t, dtype=float) for t in thetas]
+
+    def put(u):
+        for s, B in zip(sessions, bases):
+            s.set_sky_scale(np.exp(B @ u))
+
+    def objective(u, thetas):
+        put(u)
+        return sum(s.problem.chi2(t) for s, t in zip(sessions, thetas)) + u @ P @ u
+
+    def linearised(u, thetas):
+        """The profiled normal equations (H, g) at (u, thetas) and each region's response."""
+        H, g, responses = P.copy(), P @ u, []
+        for s, B, theta in zip(sessions, bases, thetas):
+            Ju = []
+            for j in range(terms):
+                r = []
+                for sign in (1, -1):
+                    s.set_sky_scale(np.exp(B @ (u + sign * DRIFT_STEP * np.eye(terms)[j])))
+                    r.append(s.problem.residuals(theta))
+                Ju.append((r[0] - r[1]) / (2 * DRIFT_STEP))
+            Ju = np.column_stack(Ju)
+            s.set_sky_scale(np.exp(B @ u))
+            r, Jt = s.problem.jacobian(theta)
+            response = -np.linalg.lstsq(Jt, Ju, rcond=None)[0]
+            Jp = Ju + Jt @ response                     # what the parameters cannot absorb
+            rp = r - Jt @ np.linalg.lstsq(Jt, r, rcond=None)[0]
+            H += Jp.T @ Jp
+            g += Jp.T @ rp
+            responses.append(response)
+        return H, g, responses
+
+    current = objective(u, thetas)
+    for _ in range(DRIFT_ITERATIONS):
+        H, g, _ = linearised(u, thetas)
+        step = -np.linalg.solve(H, g)
+        for _ in range(6):                              # halved until chi-square falls
+            put(u + step)
+            moved = [levenberg_marquardt(s.problem, t, s.lower, s.upper)["theta"]
+                     for s, t in zip(sessions, thetas)]
+            new = objective(u + step, moved)
+            if new < current:
+                break
+            step = step / 2
+        else:
+            break
+        u, thetas, gain, current = u + step, moved, current - new, new
+        if gain < 1e-3 * max(1.0, s2) or np.max(np.abs(step)) < 1e-4:
+            break
+    put(u)
+    H, _, responses = linearised(u, thetas)
+    return u, s2 * np.linalg.inv(H), span, responses
+
+
+def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
     """Fit the sky scale k of ``sessions`` (FitSessions of one day, traced with
     ``split_sky``) and leave each at the fitted k with its ``sky_sd`` (the sky's share of
     each parameter's standard error) and ``sky_record`` set; returns the record.
     ``prior_sd``: the standard deviation of a normal prior on log k about the spec's level
-    (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`), None for none (k from the data alone)."""
+    (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`), None for none (k from the data alone).
+    ``terms`` > 1: log k changes smoothly over the day (changing weather), as that many
+    Legendre polynomials in time (:func:`_fit_terms`), from the day's level found first."""
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     starts = [s.random_start(rng) for s in sessions]
@@ -177,8 +296,39 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None):
         # an undetermined k: the parameters' range over the k the profile could not tell apart
         thetas = np.array([profile[u][n][1] for u in within])
         s.sky_span = None if np.isfinite(sd_u) else (thetas.min(axis=0), thetas.max(axis=0))
+    curve = None
+    if terms > 1 and not np.isfinite(sd_u):
+        warnings.append(f"the sky's change over the day (--sky-terms {terms}) is not fitted: "
+                        "its level is not determined.")
+    elif terms > 1:
+        u, C, span, responses = _fit_terms(sessions, [th for _, th in best], u0, terms,
+                                           prior_sd, s2)
+        sd = np.sqrt(np.diag(C))
+        for s, response in zip(sessions, responses):
+            s.sky_sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", response, C, response), 0))
+        k, sd_u = float(np.exp(u[0])), float(sd[0])
+        interval = [float(np.exp(u[0] - unc.Z["95"] * sd[0])),
+                    float(np.exp(u[0] + unc.Z["95"] * sd[0]))]
+        frames = sorted({(i, t) for s in sessions for i, t in zip(s.obs.frames, s.obs.times)})
+        B = time_basis([t for _, t in frames], span, terms)
+        half = unc.Z["95"] * np.sqrt(np.einsum("ij,jk,ik->i", B, C, B))
+        curve = {"meaning": "log k(t) = sum_j coefficients[j] P_j(x), P_j Legendre "
+                            "polynomials, x = -1 at span_s[0] and 1 at span_s[1] (held beyond)",
+                 "coefficients": u.tolist(), "covariance": C.tolist(),
+                 "correlation": (C / np.outer(sd, sd)).tolist(), "span_s": list(span),
+                 "drift_prior_sd": DRIFT_SD,
+                 "k_by_frame": {int(i): [float(np.exp(v)), float(np.exp(v - h)),
+                                         float(np.exp(v + h))]
+                                for (i, _), v, h in zip(frames, B @ u, half)}}
+        vague = [j for j in range(1, terms) if sd[j] > 0.7 * DRIFT_SD]
+        if vague:
+            warnings.append(f"the data hardly tell how the sky changes over the day (terms "
+                            f"{', '.join(map(str, vague))} of --sky-terms {terms}): their "
+                            "prior holds them, and the intervals include that.")
     record = {"fitted": "the sky's level (all but the sun's disc) against the spec's, relative "
-                        "to the sun: k, shared by every region and frame of the fit",
+                        "to the sun: k, shared by every region"
+                        + (" and frame of the fit" if curve is None else
+                           ", smooth over the day (terms)"),
               "k": k, "interval95": interval, "determined": bool(np.isfinite(sd_u)),
               "regions": [s.name for s in sessions], "chi2": chi2_best, "dof": dof,
               "interval_scale_s2": s2,
@@ -188,6 +338,7 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None):
                   "sd)^2 is in the profile"},
               "profile": {"k": [float(np.exp(u)) for u in sorted(profile)],
                           "chi2": [data(u) for u in sorted(profile)]},
+              "terms": curve,
               "warnings": warnings, "time_s": time.perf_counter() - t0}
     for s in sessions:
         s.sky_record = record
@@ -195,6 +346,9 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None):
     log(f"sky: the sky's level fitted with {len(sessions)} region(s)"
         + ("" if prior_sd is None else f" and its prior (sd {prior_sd:g} in log k)")
         + f": k = {k:.3f} (95%: "
-        f"{ends[0]}-{ends[1]}) times the spec's, against the sun ({record['time_s']:.1f} s)"
+        f"{ends[0]}-{ends[1]}) times the spec's, against the sun"
+        + ("" if curve is None else f", changing over the day as {terms} terms: k = "
+           + ", ".join(f"{v[0]:.2f}" for v in curve["k_by_frame"].values()) + " by frame")
+        + f" ({record['time_s']:.1f} s)"
         + "".join(f"\n  warning: {w}" for w in warnings))
     return record
