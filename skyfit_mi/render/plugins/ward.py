@@ -170,7 +170,7 @@ class WardBSDF(mi.BSDF):
             pdf += (1.0 - p_spec) * co * dr.inv_pi
         if en_g:
             pdf += dr.select(mirror, 0.0, p_spec * glossy_pdf(wi, wo, sigma,
-                                                              _distribution(self.normalisation)))
+                                                              lobe_distribution(self.normalisation)))
         valid = mi.Bool(active) & (ci > 0) & (co > 0)
         return dr.select(valid, pdf, 0.0)
 
@@ -191,7 +191,7 @@ class WardBSDF(mi.BSDF):
         if not en_delta:
             pick_spec &= ~mirror
 
-        wo_glossy = sample_glossy(wi, sample2, sigma, _distribution(self.normalisation))
+        wo_glossy = sample_glossy(wi, sample2, sigma, lobe_distribution(self.normalisation))
         wo_mirror = mi.reflect(wi)
         wo_diffuse = mi.warp.square_to_cosine_hemisphere(sample2)
 
@@ -249,9 +249,9 @@ def lobe(wi, wo, sigma, normalisation):
 
 
 # ---- microfacet lobes (skyfit_mi.physics.microfacet, Mitsuba's MicrofacetDistribution) ----
-def _distribution(normalisation):
-    """The half vectors' distribution that samples the lobe ``normalisation``: 'ggx' for GGX
-    lobes, else 'beckmann' (Ward's lobes are Walter's Beckmann sampling)."""
+def lobe_distribution(normalisation):
+    """The half vectors' distribution of the lobe ``normalisation`` (its sampling and its sky
+    quadrature's): 'ggx' for GGX lobes, else 'beckmann' (Ward's lobes: Walter's sampling)."""
     return split(normalisation)[0] if normalisation in LOBES else "beckmann"
 
 
