@@ -112,3 +112,30 @@ def test_a_mitsuba_plastic_is_fitted_best_by_its_own_family(plastic_day):
         assert lo <= v <= hi, (k, v, lo, hi, chi2)
     assert chi2["ggx_plastic"] < 2.0, chi2
     assert chi2["ggx_plastic"] < 0.5 * min(chi2["beckmann_plastic"], chi2["ward"]), chi2
+
+
+def test_model_auto_ranks_the_true_family_first_and_writes_the_ranking(plastic_day, tmp_path):
+    """``fit --model auto`` on the Mitsuba plastic: GGX plastic ranked first by held-out frames,
+    the two-parameter model chosen (the one-standard-error rule), its fit written with the
+    ranking (JSON and fits.csv), and relight takes the chosen lobe from the JSON."""
+    import csv
+    import json
+
+    from skyfit_mi.cli import main
+
+    out = tmp_path / "auto"
+    main(["fit", str(plastic_day), "--region", "disc=rect:4,4,7,7",
+          "--model", "auto", "--positions", "4", "--directions", "256", "--output", str(out),
+          "--quiet"])
+    r = json.loads((out / "fit_disc.json").read_text())
+    sel = r["model_selection"]
+    assert sel["ranking"][0]["normalisation"] == "ggx_plastic"
+    assert sel["chosen"] == {"normalisation": "ggx_plastic", "model": "two",
+                             "rank": sel["chosen"]["rank"]}
+    assert (r["model"], r["normalisation"]) == ("two", "ggx_plastic")
+    assert len(sel["ranking"]) == 18 and set(sel["trace_time_s"]) >= {"ggx_plastic", "ward"}
+    lo, hi = r["intervals"]["sigma_alpha"]["95"]
+    assert lo <= TRUTH["sigma_alpha"] <= hi
+    rows = list(csv.DictReader((out / "fits.csv").open()))
+    assert rows[0]["normalisation"] == "ggx_plastic"
+    assert rows[0]["model_ranking"].startswith("1 ggx_plastic/")
