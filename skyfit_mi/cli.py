@@ -27,6 +27,7 @@ import numpy as np  # noqa: E402 -- after the BLAS setting
 from . import __version__  # noqa: E402
 from .errors import SetupError, SkyfitError  # noqa: E402
 from .files import check_dir, write_json  # noqa: E402
+from .physics.sky import SKY_CHOICES, SUN_LEVEL_SD  # noqa: E402
 from .physics.ward import NORMALISATIONS  # noqa: E402
 from .render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS  # noqa: E402
 from .render.variant import VARIANTS  # noqa: E402
@@ -228,7 +229,7 @@ def _fit(args):
     auto = args.model == "auto"
     model = "two" if auto else BY_COUNT[int(args.model)]
     check_fit_normalisation(args.normalisation)          # before the costly light cache
-    if auto and (args.per_pixel or args.sky != "spec" or args.method != "global"
+    if auto and (args.per_pixel or args.sky not in (None, "spec") or args.method != "global"
                  or args.start is not None):
         raise SkyfitError("--model auto ranks every lobe and parameter count by the global "
                           "method on the spec's sky for regions: leave out --per-pixel, --sky, "
@@ -241,9 +242,9 @@ def _fit(args):
     if map_only and not args.per_pixel:
         raise SkyfitError(f"{map_only[0]} belongs to a map: add --per-pixel (or leave it out).")
     regions = _fit_regions(args)
-    if args.per_pixel and args.sky != "spec":
-        raise SkyfitError("--sky fit fits the sky with regions' materials; a map takes the "
-                          "spec's sky (leave out --per-pixel or --sky).")
+    if args.per_pixel and args.sky not in (None, "spec"):
+        raise SkyfitError(f"--sky {args.sky} fits the sky with regions' materials; a map takes "
+                          "the spec's sky (leave out --per-pixel or --sky).")
     if args.per_pixel:
         from .fitting.pixel_map import CHUNK, run_map
 
@@ -282,7 +283,7 @@ def _fit(args):
                               method=args.method, normalisation=args.normalisation,
                               seed=args.seed, start=args.start, positions=args.positions,
                               directions=args.directions, frames=args.frames,
-                              variant=args.variant, sky=args.sky)
+                              variant=args.variant, sky=args.sky, sun_sd=args.sun_sd)
     for (name, pixels), res in zip(regions, results):
         res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
                                          if pixels is None else len(pixels))
@@ -490,11 +491,21 @@ def build_parser():
                      "every lobe (Ward, balanced, Beckmann and GGX plastic and metal) and "
                      "parameter count ranked by held-out frames (4-fold), AIC and BIC beside, "
                      "the chosen one fitted (the light traced once per lobe)")
-    fit.add_argument("--sky", choices=("spec", "fit"), default="spec",
-                     help="spec (default): the spec's sky as it is; fit: its level against the "
-                     "sun's fitted with the materials, one for every region of the command, "
-                     "its error in every interval (the sun and sky traced apart: about twice "
-                     "the light's time)")
+    fit.add_argument("--sky", choices=SKY_CHOICES, default=None,
+                     help="spec: the spec's light as it is (the default for sequences skyfit "
+                     "rendered); fit: the sky's level against the sun's fitted with the "
+                     "materials, one for every region of the command, its error in every "
+                     "interval (the sun and sky traced apart: about 1.5 times the fit's time); "
+                     "prior (the default for photographs under the sun): the same with a prior "
+                     "on that level from how measured skies scatter about the models. fit and "
+                     "prior also count the sun's own level (--sun-sd) in the reflectances' "
+                     "intervals")
+    fit.add_argument("--sun-sd", type=float, default=None,
+                     help="with --sky fit or prior: the relative uncertainty of the spec's sun "
+                     f"level, in the reflectances' intervals (default {SUN_LEVEL_SD} for "
+                     "photographs: a modelled sun; about 0.03 for a measured direct normal "
+                     "irradiance; 0 for a sequence skyfit rendered; unused where a reference "
+                     "calibrates the frames)")
     fit.add_argument("--method", choices=("global", "lm", "anneal", "adam"), default="global",
                      help="global (default: grid over sigma_alpha then Levenberg-Marquardt; "
                      "right from any start), lm (the thesis's baseline), anneal (simulated "

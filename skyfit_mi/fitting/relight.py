@@ -231,6 +231,10 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     # again (which would compute every sun position anew)
     spec = target_spec(plan.target, fits, plan.doc)[0] if plan.render else None
     check_sun_up(plan, spec)
+    k = fitted_sky_level(fits, plan.doc, log)
+    if spec is not None and k is not None:
+        for f in spec.frames:
+            f.sky = f.sky.sky_scaled(k)
     # the predicted sequence's pixels: the target's before the render (a region it does not
     # show is refused first), or the relit render's own after it (its label image)
     predicted = plan.predicted_from(out)
@@ -262,6 +266,28 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     write_errors(errors, out, point_errors)
     log_errors(errors, plan, log)
     return errors
+
+
+def fitted_sky_level(fits, doc, log=print):
+    """The sky level k (``fit --sky fit`` or ``prior``) at which the fits saw the target
+    sequence ``doc`` itself (its run_id), for the relit images; None for another day (the
+    level belongs to the fitted day's sky), a fit of the spec's sky, or fits whose levels
+    differ (fitted in separate commands: then the spec's, and the log says so)."""
+    if doc is None:
+        return None
+    levels = {r["sky"]["k"] for _, r in fits.values()
+              if r.get("sky") is not None and r.get("sequence_run_id") == doc.get("run_id")}
+    if len(levels) > 1:
+        log(f"the fits' sky levels differ ({', '.join(f'{k:.3g}' for k in sorted(levels))}: "
+            "fitted in separate commands); the images take the spec's sky: fit the regions "
+            "together (fit --all) for one level")
+        return None
+    if levels:
+        k = levels.pop()
+        log(f"the images take the fitted sky level: k = {k:.3g} times the spec's sky against "
+            "the sun")
+        return k
+    return None
 
 
 #: What relight.json's region_means are.

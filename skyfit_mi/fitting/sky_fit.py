@@ -19,6 +19,21 @@ includes it), and a parameter whose interval the sky at least doubles is warned
 (:data:`SKY_DOMINATES`).  With one
 region the frames alone tell k, through how the sun's share of the light changes over the
 day; more materials and a grey card tell it better.
+
+Two things the data cannot tell well are stated as priors:
+
+* the sky's level against the sun's (``fit --sky prior``, the default for photographs under the
+  sun): log k ~ N(0, sd^2) with sd :data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`, whose penalty
+  (log k / sd)^2 joins the regions' chi-square, so that the profile is the posterior's and k
+  stays near the spec's where the data alone would leave it open;
+* the sun's own level, with ``--sky fit`` or ``prior`` on photographs (``--sun-sd``, default
+  :data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD`): the light's absolute scale trades exactly
+  with the reflectances (every reflectance times a fits the light times 1/a), so no data tell
+  it, and each reflectance's relative error gains it in quadrature (:func:`light_level_sd`),
+  the roughness none.  A reference in the scene (``ingest --calibrate``, ``--colorchecker``)
+  or a relative scale (``--unknown-scale``) ties the reflectances to the data instead, and a
+  measured direct normal irradiance tells it to a pyrheliometer's accuracy (``--sun-sd
+  0.03``).  A sequence skyfit rendered was lit by its spec's sun: 0 unless given.
 """
 
 import time
@@ -26,6 +41,7 @@ import time
 import numpy as np
 
 from . import uncertainty as unc
+from ..pipeline.manifest import RENDERED_SOURCES
 from .methods import global_search
 
 #: Sky scales k searched first: a geometric grid from a quarter to four times the spec's sky.
@@ -35,6 +51,32 @@ SCALE_GRID = np.geomspace(0.25, 4.0, 9)
 SKY_DOMINATES = 3 ** 0.5
 #: Half the spacing in log k of the points that refine the profile's least point.
 REFINE_STEP = 0.1
+#: The parameters that scale with the light's absolute level (the reflectances); the
+#: roughness does not.
+LEVEL_SCALED = ("C_r", "C_g", "C_b", "R", "rho_s")
+
+
+def default_sky(doc, skies):
+    """How a fit takes the sky when not told (``fit --sky``): with its prior ('prior') where
+    the frames were photographed under a sky with the sun (the spec's light is then a model of
+    the real one), else the spec's ('spec': skyfit rendered the frames under that very light,
+    or no sun lights them to scale the sky against)."""
+    sunny = any(np.any(k.sun_radiance > 0) and k.sun_direction[2] > 0 and k.lit_by_sky
+                for k in skies)
+    return "prior" if sunny and doc.get("source", "render") not in RENDERED_SOURCES else "spec"
+
+
+def light_level_sd(doc, names, sun_sd):
+    """Each parameter's relative error (``names``) from the sun's level known to a relative
+    ``sun_sd`` (a standard deviation of its log): the reflectances', the roughness none; zeros
+    where a reference in the scene (a calibration) or a relative scale ties the reflectances to
+    the data (the manifest ``doc``), and for the white 2-parameter model (rho_d + rho_s = 1
+    fixes the scale, so a wrong level shows as misfit instead)."""
+    ingest = doc.get("ingest") or {}
+    anchored = bool(ingest.get("calibration")) or (ingest.get("scale") or {}).get("known") is False
+    if anchored or not sun_sd or "C_r" not in names and "R" not in names:
+        return np.zeros(len(names))
+    return np.array([float(sun_sd) if p in LEVEL_SCALED else 0.0 for p in names])
 
 
 def _least(sessions, k, starts):
@@ -54,21 +96,31 @@ def _parabola(u, chi2):
     return (-c1 / (2 * c2), c2) if c2 > 0 else (None, c2)
 
 
-def fit_sky_scale(sessions, seed=0, log=print):
+def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None):
     """Fit the sky scale k of ``sessions`` (FitSessions of one day, traced with
     ``split_sky``) and leave each at the fitted k with its ``sky_sd`` (the sky's share of
-    each parameter's standard error) and ``sky_record`` set; returns the record."""
+    each parameter's standard error) and ``sky_record`` set; returns the record.
+    ``prior_sd``: the standard deviation of a normal prior on log k about the spec's level
+    (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`), None for none (k from the data alone)."""
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     starts = [s.random_start(rng) for s in sessions]
     profile = {}
 
-    def total(u):
+    def penalty(u):
+        """The prior's share of the profile at log k = ``u`` (chi-square units)."""
+        return 0.0 if prior_sd is None else (float(u) / prior_sd) ** 2
+
+    def data(u):
         """The regions' summed least chi-square at log k = ``u``, each k searched once."""
         u = float(u)
         if u not in profile:
             profile[u] = _least(sessions, float(np.exp(u)), starts)
         return sum(c for c, _ in profile[u])
+
+    def total(u):
+        """The profile: the data's chi-square and the prior's penalty at log k = ``u``."""
+        return data(u) + penalty(u)
 
     grid = np.log(SCALE_GRID)
     chi2 = np.array([total(u) for u in grid])
@@ -86,7 +138,7 @@ def fit_sky_scale(sessions, seed=0, log=print):
     u0 = min(profile, key=total)
     b = b if b is not None and b > 0 else b_grid
     best = profile[u0]
-    chi2_best = total(u0)
+    chi2_best = data(u0)
     dof = sum(s.problem.dof for s in sessions)
     noise = sum(s.problem.noise_chi2(th)[0] for s, (_, th) in zip(sessions, best))
     s2 = unc.scale(chi2_best, noise)
@@ -95,7 +147,7 @@ def fit_sky_scale(sessions, seed=0, log=print):
     sd_u = float(np.sqrt(s2 / b)) if b is not None and b > 0 and not edge else np.inf
     k = float(np.exp(u0))
     within = [u for u in profile
-              if total(u) <= chi2_best + unc.LEVELS["95"] * s2]
+              if total(u) <= total(u0) + unc.LEVELS["95"] * s2]
     if np.isfinite(sd_u):
         interval = [float(np.exp(u0 - unc.Z["95"] * sd_u)), float(np.exp(u0 + unc.Z["95"] * sd_u))]
     else:                               # what the profile saw, open where it reached the grid's end
@@ -130,13 +182,19 @@ def fit_sky_scale(sessions, seed=0, log=print):
               "k": k, "interval95": interval, "determined": bool(np.isfinite(sd_u)),
               "regions": [s.name for s in sessions], "chi2": chi2_best, "dof": dof,
               "interval_scale_s2": s2,
+              "prior": None if prior_sd is None else {
+                  "log_k_sd": prior_sd, "meaning": "log k ~ N(0, sd^2) about the spec's sky, "
+                  "from how measured skies scatter about the models; its penalty (log k / "
+                  "sd)^2 is in the profile"},
               "profile": {"k": [float(np.exp(u)) for u in sorted(profile)],
-                          "chi2": [total(u) for u in sorted(profile)]},
+                          "chi2": [data(u) for u in sorted(profile)]},
               "warnings": warnings, "time_s": time.perf_counter() - t0}
     for s in sessions:
         s.sky_record = record
     ends = [f"{v:.3f}" if v is not None else "open" for v in interval]
-    log(f"sky: the sky's level fitted with {len(sessions)} region(s): k = {k:.3f} (95%: "
+    log(f"sky: the sky's level fitted with {len(sessions)} region(s)"
+        + ("" if prior_sd is None else f" and its prior (sd {prior_sd:g} in log k)")
+        + f": k = {k:.3f} (95%: "
         f"{ends[0]}-{ends[1]}) times the spec's, against the sun ({record['time_s']:.1f} s)"
         + "".join(f"\n  warning: {w}" for w in warnings))
     return record
