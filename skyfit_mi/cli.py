@@ -226,8 +226,14 @@ def _fit(args):
     from .pipeline.manifest import load_manifest
     from .render.fit_model import BY_COUNT, check_fit_normalisation, check_start
 
-    model = BY_COUNT[int(args.model)]
+    auto = args.model == "auto"
+    model = "two" if auto else BY_COUNT[int(args.model)]
     check_fit_normalisation(args.normalisation)          # before the costly light cache
+    if auto and (args.per_pixel or args.sky not in (None, "spec") or args.method != "global"
+                 or args.start is not None):
+        raise SkyfitError("--model auto ranks every lobe and parameter count by the global "
+                          "method on the spec's sky for regions: leave out --per-pixel, --sky, "
+                          "--method and --start (or give a model: 2, 3 or 5).")
     _, root = load_manifest(args.manifest)
     if args.start is not None:
         check_start(model, args.start)
@@ -266,11 +272,19 @@ def _fit(args):
                   f"(--max-pixels, seed {args.seed})")
     # the light of every region traced together (each frame's kernels once), every region
     # checked before the first is fitted and written
-    results = fit_regions(args.manifest, list(kept.items()), model=model, method=args.method,
-                          normalisation=args.normalisation, seed=args.seed, start=args.start,
-                          positions=args.positions, directions=args.directions,
-                          frames=args.frames, variant=args.variant, sky=args.sky,
-                          sun_sd=args.sun_sd, sky_terms=args.sky_terms)
+    if auto:
+        from .fitting.selection import fit_auto
+
+        results = fit_auto(args.manifest, list(kept.items()), seed=args.seed,
+                           positions=args.positions, directions=args.directions,
+                           frames=args.frames, variant=args.variant)
+    else:
+        results = fit_regions(args.manifest, list(kept.items()), model=model,
+                              method=args.method, normalisation=args.normalisation,
+                              seed=args.seed, start=args.start, positions=args.positions,
+                              directions=args.directions, frames=args.frames,
+                              variant=args.variant, sky=args.sky, sun_sd=args.sun_sd,
+                              sky_terms=args.sky_terms)
     for (name, pixels), res in zip(regions, results):
         res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
                                          if pixels is None else len(pixels))
@@ -472,9 +486,12 @@ def build_parser():
     fit.add_argument("--max-pixels", type=_int_in(0), default=64,
                      help="fit at most this many pixels of a region, a seeded random subset "
                      "(default 64; 0 = every pixel)")
-    fit.add_argument("--model", choices=("2", "3", "5"), default="5",
+    fit.add_argument("--model", choices=("2", "3", "5", "auto"), default="5",
                      help="5 (default): C (RGB diffuse colour), rho_s, sigma_alpha; "
-                     "3: R, rho_s, sigma_alpha; 2: rho_s, sigma_alpha (thesis 7.1)")
+                     "3: R, rho_s, sigma_alpha; 2: rho_s, sigma_alpha (thesis 7.1); auto: "
+                     "every lobe (Ward, balanced, Beckmann and GGX plastic and metal) and "
+                     "parameter count ranked by held-out frames (4-fold), AIC and BIC beside, "
+                     "the chosen one fitted (the light traced once per lobe)")
     fit.add_argument("--sky", choices=SKY_CHOICES, default=None,
                      help="spec: the spec's light as it is (the default for sequences skyfit "
                      "rendered); fit: the sky's level against the sun's fitted with the "
@@ -499,9 +516,11 @@ def build_parser():
                      "right from any start), lm (the thesis's baseline), anneal (simulated "
                      "annealing over full renders), adam (gradient descent)")
     fit.add_argument("--normalisation", choices=NORMALISATIONS, default="ward",
-                     help="normalisation of Ward's specular lobe (default ward, the thesis's; "
+                     help="the specular lobe (default ward, the thesis's; "
                      "balanced is Radiance 6's lobe; radiance, that lobe plus Radiance's "
-                     "Fresnel estimate for smooth surfaces, renders but cannot be fitted)")
+                     "Fresnel estimate for smooth surfaces, renders but cannot be fitted; "
+                     "beckmann_/ggx_ plastic/metal: microfacet lobes with Smith shadowing and "
+                     "a dielectric (eta 1.5) or a metal's Fresnel, alpha = sigma_alpha)")
     fit.add_argument("--start", type=_numbers, metavar="A,B,...",
                      help="starting parameters in the model's order, comma-separated (lm, anneal,"
                      " adam; default a seeded random start)")
