@@ -21,8 +21,8 @@ from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
-from .sky_fit import (SKY_DOMINATES, check_terms, default_sky, fit_sky_scale, light_level_sd,
-                      sky_level_at)
+from .sky_fit import (SKY_DOMINATES, check_shape, check_terms, default_sky, fit_sky_scale,
+                      light_level_sd, sky_level_at)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, memory_estimate, mixed,
                                   trace_table)
@@ -135,11 +135,14 @@ class FitSession:
     split_sky : trace the sun's light and the rest of the sky's apart, so that the fit can
         scale them against each other (:meth:`set_sky_scale`, :func:`fit_regions`'s
         ``sky='fit'``)
+    sky_shape : with ``split_sky``, also trace the sky's shape variants
+        (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), so that the fit can mix them
+        (:meth:`set_sky_shape`)
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
                  positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None,
-                 sky_plan="fit", trace=True, split_sky=False):
+                 sky_plan="fit", trace=True, split_sky=False, sky_shape=False):
         model = BY_COUNT.get(model, model)
         check_choice("model", model, tuple(PARAMETERS))
         check_fit_normalisation(normalisation)          # before the light is traced
@@ -176,8 +179,10 @@ class FitSession:
                                "sky_plan": check_choice("sky plan", sky_plan, tuple(SKY_PLANS))}
         self._mi = setup(variant or doc["render"]["variant"])
         self._loaded = None                         # the scene and its parameters (scene)
-        # the light's tables: one, or the sun's and the rest's (split_sky) mixed at sky_scale
+        # the light's tables: one, or the sun's, the rest's (split_sky) and the rest's shape
+        # variants (sky_shape), mixed at sky_scale and the shape's mix sky_shape_mix
         self.split_sky, self.sky_scale, self.parts = bool(split_sky), 1.0, None
+        self.sky_shape, self.sky_shape_mix = bool(sky_shape), None
         # the fitted sky's share of each parameter's error, whether it leaves them open, and
         # its record (sky_fit.fit_sky_scale)
         self.sky_sd, self.sky_span, self.sky_record = None, None, None
@@ -211,12 +216,16 @@ class FitSession:
         return s
 
     def use_fitted_sky(self, result):
-        """Light the sequence at a sky fit's level (``fit --sky fit``, in ``result``) where the
-        fit measured this very sequence (its run_id), before the light is traced: another
-        day's sky is its spec's (the level belongs to the fitted day's sky)."""
-        if result.get("sky") is not None and result.get("sequence_run_id") == self.run_id:
-            k = sky_level_at(result["sky"], self.obs.times)
+        """Light the sequence at a sky fit's level and shape (``fit --sky fit``, in ``result``)
+        where the fit measured this very sequence (its run_id), before the light is traced:
+        another day's sky is its spec's (the fit belongs to the fitted day's sky)."""
+        sky = result.get("sky")
+        if sky is not None and result.get("sequence_run_id") == self.run_id:
+            k = sky_level_at(sky, self.obs.times)
             self.split_sky, self.sky_scale = True, float(k[0]) if np.ptp(k) == 0 else k
+            if sky.get("shape") is not None:
+                self.sky_shape = True
+                self.sky_shape_mix = np.asarray(sky["shape"]["mix"], dtype=float)
 
     @classmethod
     def sharing_light(cls, results, manifest_path, pixels, **options):
@@ -236,7 +245,8 @@ class FitSession:
             cam = s.doc["camera"]
             anchored = anchors_pay(s.obs.pixels, SKY_PLANS[s.cache_settings["sky_plan"]].spacing,
                                    cam["width"], cam["height"])
-            groups.setdefault((s.normalisation, tuple(s.obs.frames), anchored, s.split_sky),
+            groups.setdefault((s.normalisation, tuple(s.obs.frames), anchored, s.split_sky,
+                               s.sky_shape),
                               []).append(s)
         for group in groups.values():
             cls.trace_together(group)
@@ -303,8 +313,9 @@ class FitSession:
         list of one table, or with ``split_sky`` the sun's and the rest's (their samples
         independent)."""
         c = self.cache_settings
-        # the split light's two tables and their mix
-        need = (3 if self.split_sky else 1) * memory_estimate(
+        # the split light's tables and their mix
+        lights = self._sky_parts() if self.split_sky else None
+        need = (len(lights) + 1 if lights else 1) * memory_estimate(
             len(at), len(self.skies), c["positions"], c["directions"])
         have = available_memory()
         if have is not None and need > have:
@@ -317,15 +328,26 @@ class FitSession:
             table, c["blocks"] = trace_table(self.scene, self.params, self.skies, at, bsdf_id,
                                              model_of, **self._cache_options())
             return [table]
-        sun, rest = zip(*(sky.split() for sky in self.skies))
         options = self._cache_options()
-        seeds = np.random.SeedSequence(options.pop("seed")).generate_state(2).tolist()
+        seeds = np.random.SeedSequence(options.pop("seed")).generate_state(len(lights)).tolist()
         parts = []
-        for skies, seed in zip((list(sun), list(rest)), seeds):
+        for skies, seed in zip(lights, seeds):
             table, c["blocks"] = trace_table(self.scene, self.params, skies, at, bsdf_id,
                                              model_of, seed=int(seed), **options)
             parts.append(table)
         return parts
+
+    def _sky_parts(self):
+        """The light's parts, each a list of the frames' skies: the sun's and the rest's
+        (:meth:`~skyfit_mi.physics.sky.Sky.split`), and with ``sky_shape`` the rest's shape
+        variants (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`)."""
+        sun, rest = zip(*(sky.split() for sky in self.skies))
+        lights = [list(sun), list(rest)]
+        if self.sky_shape:
+            check_shape(self.skies)
+            variants = [sky.shape_variants() for sky in self.skies]
+            lights += [[v[j][1] for v in variants] for j in range(len(variants[0]))]
+        return lights
 
     def _cache_options(self):
         """build_light_cache's options at ``cache_settings``."""
@@ -369,16 +391,30 @@ class FitSession:
     def _use_parts(self, parts):
         """Take the light's tables ``parts`` (:meth:`_trace`) and fit on their mix."""
         self.parts = list(parts)
-        self._use_table(self.parts[0] if len(self.parts) == 1 else
-                        mixed(*self.parts, self.sky_scale))
+        if len(self.parts) == 1:
+            self._use_table(self.parts[0])
+            return
+        k = self.sky_scale
+        mix = np.zeros(len(self.parts) - 2) if self.sky_shape_mix is None else self.sky_shape_mix
+        self._use_table(mixed(self.parts[0], self.parts[1:],
+                              [k * (1.0 - mix.sum())] + [k * m for m in mix]))
 
     def set_sky_scale(self, k):
         """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
         to the sun (one factor, or one per frame of the session), and make the models and
         chi-square on it."""
-        if len(self.parts or ()) != 2:
+        if len(self.parts or ()) < 2:
             raise ValueError("the sky's scale needs a session traced with split_sky")
         self.sky_scale = float(k) if np.ndim(k) == 0 else np.asarray(k, dtype=float)
+        self._use_parts(self.parts)
+
+    def set_sky_shape(self, mix):
+        """Mix the sky's shape variants into the spec's sky: (1 - sum(mix)) of it and mix[j]
+        of variant j (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), at the level
+        ``sky_scale``, and make the models and chi-square on it."""
+        if len(self.parts or ()) != 2 + len(mix):
+            raise ValueError("the sky's shape needs a session traced with sky_shape")
+        self.sky_shape_mix = np.asarray(mix, dtype=float)
         self._use_parts(self.parts)
 
     def _use_table(self, table):
@@ -834,7 +870,8 @@ def fit_region(manifest_path, name, pixels, **options):
 
 def fit_regions(manifest_path, regions, model="two", method="global", normalisation="ward",
                 seed=0, start=None, positions=None, directions=DIRECTIONS, method_options=None,
-                log=print, frames=None, variant=None, sky=None, sun_sd=None, sky_terms=1):
+                log=print, frames=None, variant=None, sky=None, sun_sd=None, sky_terms=1,
+                sky_shape=False):
     """Fit several regions of one sequence (``regions`` [(name, pixels)]), their light traced
     together (:meth:`FitSession.for_regions`); yields each region's result dict in turn.
     ``sky``: None chooses (:func:`~.sky_fit.default_sky`); 'spec' takes the spec's light as it is; 'fit' fits the sky's level against the
@@ -843,7 +880,8 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
     both count the sun's own level, known to a relative ``sun_sd`` (None: 0 for a sequence
     skyfit rendered, :data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD` for photographs), in the
     reflectances' intervals (:func:`~.sky_fit.light_level_sd`); ``sky_terms`` > 1 lets the
-    sky's level change smoothly over the day (:func:`~.sky_fit.fit_sky_scale`)."""
+    sky's level change smoothly over the day, and ``sky_shape`` fits a CIE sky's gradation
+    and indicatrix too (:func:`~.sky_fit.fit_sky_scale`)."""
     if sky is not None:
         check_choice("sky", sky, SKY_CHOICES)
     if sun_sd is not None:
@@ -859,26 +897,28 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
             log(f"sky: photographs under the sun and a sky: the spec's light is a model of "
                 f"theirs, so its level is fitted with its prior (--sky {sky}; --sky spec takes "
                 "it as exact)")
-    for s in sessions.values():
-        s.split_sky = sky != "spec"
-    FitSession.trace_groups(sessions)
-    if sky != "spec":
+    if sky == "spec" and (sky_terms != 1 or sky_shape):
+        raise SkyfitError(f"{'--sky-terms' if sky_terms != 1 else '--sky-shape'} belongs to a "
+                          "fitted sky, and the spec's is taken as it is (--sky spec): give --sky "
+                          "fit or prior.")
+    if sky != "spec":                                   # refused before the light is traced
         if not any(np.any(k.sun_radiance > 0) and k.sun_direction[2] > 0 for k in first.skies):
             raise SkyfitError(f"--sky {sky} scales the sky against the sun, and no frame of the "
                               "sequence has the sun's disc above the horizon; fit with the "
                               "spec's sky (--sky spec).")
+        check_terms(sky_terms, len(first.obs.frames))
+        if sky_shape:
+            check_shape(first.skies)
         if sun_sd is None:
             sun_sd = 0.0 if first.doc.get("source", "render") in RENDERED_SOURCES \
                 else SUN_LEVEL_SD
-        for s in sessions.values():
-            s.sun_sd = float(sun_sd)
-        check_terms(sky_terms, len(first.obs.frames))
+    for s in sessions.values():
+        s.split_sky, s.sky_shape = sky != "spec", bool(sky_shape)
+        s.sun_sd = 0.0 if sky == "spec" else float(sun_sd)
+    FitSession.trace_groups(sessions)
+    if sky != "spec":
         fit_sky_scale(list(sessions.values()), seed, log,
                       prior_sd=SKY_LEVEL_SD if sky == "prior" else None, terms=int(sky_terms))
-    elif sky_terms != 1:
-        raise SkyfitError(f"--sky-terms {sky_terms} changes a fitted sky's level over the day; "
-                          "the spec's sky is taken as it is (--sky spec): give --sky fit or "
-                          "prior, or leave out --sky-terms.")
     for name, _ in regions:
         yield sessions.pop(name).run(method, start, seed, method_options, log)
 

@@ -291,7 +291,9 @@ def fitted_sky_level(fits, doc, log=print):
     if levels:
         level = levels.popitem()[1]
         log(f"the images take the fitted sky level: k = {level['k']:.3g} times the spec's sky "
-            "against the sun" + (", changing over the day" if level.get("terms") else ""))
+            "against the sun" + (", changing over the day" if level.get("terms") else "")
+            + ("; its fitted shape is in the predictions, the images keep the spec's pattern"
+               if level.get("shape") else ""))
         return level
     return None
 
