@@ -437,7 +437,11 @@ class Problem:
         model's at ``theta``.  The observed value, not the model's: under a misfit, weights
         that follow the model's own misses (a lobe short of the highlight weighting the
         highlight up) swing the fit between readings, each one's weights favouring the other
-        (a two-lobe material: a broad and a narrow Ward lobe in turn, never settling)."""
+        (a two-lobe material: a broad and a narrow Ward lobe in turn, never settling), while
+        the observed value is the surface's own (the model's error is not in the data).
+        Where the error is random instead (the values themselves scattered by kappa), a value
+        scattered low weighs more, and the reflectances come out low by about 2 kappa^2
+        (2.3% measured at kappa 0.1)."""
         measured = self.obs.sensor.linearise(self.obs.y) / self.obs.gain
         low, high = self.clipped()
         L = np.where(low | high, self.model.radiance(theta), measured)
