@@ -211,16 +211,20 @@ def test_the_days_geometry_is_reported_and_warned_from(days):
 
 
 def test_a_model_that_cannot_describe_the_data_is_called_unreliable(days):
-    """The noisy day fits at chi2/dof ~ 1 without a misfit warning; the same values with a
-    tenth of their sigma (a wrong sensor model) are called unreliable."""
+    """The noisy day fits at chi2/dof ~ 1 without a misfit warning or model error; the same
+    values with a tenth of their sigma (a wrong sensor model) are told the model does not
+    describe them, with the model's error fitted and said."""
     from skyfit_mi.fitting.fit import FitSession
 
     s = FitSession(days["noisy"], "disc", REGION, **FAST)
     good = s.run("global", log=lambda *a: None)
     assert not any("misfit" in w or "does not describe" in w for w in good["warnings"])
+    assert good["model_error"]["kappa"] == 0.0
     s.obs.sigma = s.obs.sigma / 10
     bad = s.run("global", log=lambda *a: None)
-    assert any(w.startswith("the model does not describe these data") for w in bad["warnings"])
+    assert bad["model_error"]["kappa"] > 0
+    assert any(w.startswith("the model does not describe these data") and
+               "the model misses the data by about" in w for w in bad["warnings"])
 
 
 def test_region_errors(days):

@@ -132,3 +132,19 @@ def test_the_bands_of_a_material_the_model_cannot_describe_hold_held_out_values(
     assert main(["relight", str(tmp_path / "fits"), "--target", str(day), "-o",
                  str(tmp_path / "without"), "--no-images", "-q"]) == 0
     assert _held_out_coverage(tmp_path / "without" / "prediction.csv")[0] < 0.6
+
+
+def test_a_hand_edited_model_error_is_refused_in_one_line(tmp_path):
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.pipeline.fit_result import read_fit_result
+
+    fit = {"region": "disc", "model": "two", "parameters": {"rho_s": 0.1, "sigma_alpha": 0.1},
+           "intervals": {"rho_s": {"95": [0.0, 0.2]}, "sigma_alpha": {"95": [0.0, 0.2]}}}
+    path = tmp_path / "fit_disc.json"
+    for kappa in (-0.1, "0.1", None):
+        path.write_text(json.dumps({**fit, "model_error": {"kappa": kappa}}))
+        with pytest.raises(SkyfitError, match=r"model_error must be \{\"kappa\": a finite "
+                           r"number >= 0"):
+            read_fit_result(path)
+    path.write_text(json.dumps({**fit, "model_error": {"kappa": 0.05}}))
+    assert read_fit_result(path)["model_error"]["kappa"] == 0.05
