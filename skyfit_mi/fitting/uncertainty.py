@@ -220,7 +220,9 @@ def misfit(chi2, dof, s2, model_noise=0.0, noise=None, model_error=False):
     by = (f"noise and the model's Monte Carlo error ({model_noise:.3g}) explain"
           if model_noise > 0.01 * test.noise_mean else "noise explains")
     if model_error:
-        by = by.replace("noise", "noise, the fitted model error", 1)
+        by = (f"noise, the fitted model error and the model's Monte Carlo error "
+              f"({model_noise:.3g}) explain" if model_noise > 0.01 * test.noise_mean
+              else "noise and the fitted model error explain")
     of = (f"chi-square is {test.ratio:.3g} times what {by} (p = {test.p:.2g}; noise alone "
           f"varies it by +- {np.sqrt(2 / test.k):.2g})")
     if test.ratio > MISFIT_UNRELIABLE and test.p < MISFIT_P:
