@@ -15,7 +15,7 @@ from skyfit_mi.fitting import uncertainty as unc
 from skyfit_mi.physics.ward import raw_parameters, ward_brdf
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
-from bench_core import TABLE_TRUTH, make_table  # noqa: E402
+from bench_core import TABLE_TRUTH, make_table
 
 #: Points and lights of the tables: 30 points under 48 lights, 4320 values.
 POINTS, LIGHTS = 30, 48

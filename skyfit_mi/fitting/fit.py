@@ -476,9 +476,10 @@ class FitSession:
     def run(self, method="global", start=None, seed=0, method_options=None, log=print):
         """Fit by ``method`` from ``start`` (random within bounds, seeded, if None); a result dict.
 
-        The steps: the method's minimum, its covariance, the global minimum (whose grid gives
-        the profiles and judges a local method), intervals (:meth:`_intervals`), warnings
-        (:meth:`_warnings`), and the JSON-ready record (:meth:`_record`).
+        The steps: the method's minimum, the model's error where the model cannot reproduce
+        the data (:meth:`_fit_model_error`), the covariance, the global minimum (whose grid
+        gives the profiles and judges a local method), intervals (:meth:`_intervals`),
+        warnings (:meth:`_warnings`), and the JSON-ready record (:meth:`_record`).
         """
         check_choice("fit method", method, tuple(METHODS))
         problem, wm = self.problem, self.wm
