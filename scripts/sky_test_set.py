@@ -137,7 +137,8 @@ def render_day(folder, spec, sky, scans=None):
 
 def fit_replicates(day, scene, truth, replicates, positions=None, directions=512, sky="spec"):
     """Fit ``day`` with the spec's sky (the thesis's CIE clear sky at each frame's sun; with
-    ``sky`` 'fit' its level fitted with the material, ``fit --sky fit``) on
+    ``sky`` 'fit' its level fitted with the material, ``fit --sky fit``, or 'prior' with its
+    prior, ``fit --sky prior``; both with the sun's level uncertain as a modelled sun's) on
     ``replicates`` captures of its radiance; one record per replicate: parameters, 95%
     intervals, warnings, each parameter's 'in'/'warned'/'MISSED', the chi-square rise at the
     truth and its joint 99.9% bound.  The light cache is sized from the data (``positions``
@@ -148,18 +149,21 @@ def fit_replicates(day, scene, truth, replicates, positions=None, directions=512
 
     from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.fitting.sky_fit import fit_sky_scale
+    from skyfit_mi.physics.sky import SKY_LEVEL_SD, SUN_LEVEL_SD
     from skyfit_mi.pipeline.pixels import frame_values
 
     fitted = relabelled(day, Path(day).parent / "fit_cie_clear", thesis_clear)
     region, _, pixels = SCENES[scene]
     s = FitSession(fitted, region, pixels, model="colour", positions=positions,
-                   directions=directions, split_sky=sky == "fit")
+                   directions=directions, split_sky=sky != "spec")
+    s.sun_sd = 0.0 if sky == "spec" else SUN_LEVEL_SD
     radiance = frame_values(fitted, s.obs.pixels, s.obs.frames)
     out = []
     for r in range(replicates):
         s.obs.recapture(radiance, np.random.default_rng([36, r]))
-        if sky == "fit":
-            fit_sky_scale([s], seed=r, log=lambda *a: None)
+        if sky != "spec":
+            fit_sky_scale([s], seed=r, log=lambda *a: None,
+                          prior_sd=SKY_LEVEL_SD if sky == "prior" else None)
         res = s.run("global", seed=r, log=lambda *a: None)
         out.append({"parameters": res["parameters"],
                     "intervals_95": {p: res["intervals"][p]["95"] for p in NAMES},
@@ -240,6 +244,7 @@ def run_case(folder, sky_name, sky, scene, camera, material_name, replicates, ho
 
 def main(argv=None):
     from skyfit_mi.files import ensure_dir, write_json
+    from skyfit_mi.physics.sky import SKY_CHOICES
     from skyfit_mi.physics.sky_measurement import CITATION, load_scans
     from skyfit_mi.render import setup
 
@@ -248,8 +253,9 @@ def main(argv=None):
     ap.add_argument("--replicates", type=int, default=None, help="noise replicates (2 quick, 3)")
     ap.add_argument("-o", "--out", type=Path, default=Path("out/sky_test_set"))
     ap.add_argument("--data", type=Path, default=None, help="the measured scans' folder")
-    ap.add_argument("--sky", choices=("spec", "fit"), default="spec",
-                    help="fit with the spec's sky as it is, or its level fitted (fit --sky fit)")
+    ap.add_argument("--sky", choices=SKY_CHOICES, default="spec",
+                    help="fit with the spec's sky as it is, its level fitted (fit --sky fit) "
+                    "or fitted with its prior (fit --sky prior)")
     args = ap.parse_args(argv)
     setup()
     replicates = args.replicates or (2 if args.quick else 3)

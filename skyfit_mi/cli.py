@@ -27,6 +27,7 @@ import numpy as np  # noqa: E402 -- after the BLAS setting
 from . import __version__  # noqa: E402
 from .errors import SetupError, SkyfitError  # noqa: E402
 from .files import check_dir, write_json  # noqa: E402
+from .physics.sky import SKY_CHOICES, SUN_LEVEL_SD  # noqa: E402
 from .physics.ward import NORMALISATIONS  # noqa: E402
 from .render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS  # noqa: E402
 from .render.variant import VARIANTS  # noqa: E402
@@ -225,8 +226,14 @@ def _fit(args):
     from .pipeline.manifest import load_manifest
     from .render.fit_model import BY_COUNT, check_fit_normalisation, check_start
 
-    model = BY_COUNT[int(args.model)]
+    auto = args.model == "auto"
+    model = "two" if auto else BY_COUNT[int(args.model)]
     check_fit_normalisation(args.normalisation)          # before the costly light cache
+    if auto and (args.per_pixel or args.sky not in (None, "spec") or args.method != "global"
+                 or args.start is not None):
+        raise SkyfitError("--model auto ranks every lobe and parameter count by the global "
+                          "method on the spec's sky for regions: leave out --per-pixel, --sky, "
+                          "--method and --start (or give a model: 2, 3 or 5).")
     _, root = load_manifest(args.manifest)
     if args.start is not None:
         check_start(model, args.start)
@@ -235,9 +242,9 @@ def _fit(args):
     if map_only and not args.per_pixel:
         raise SkyfitError(f"{map_only[0]} belongs to a map: add --per-pixel (or leave it out).")
     regions = _fit_regions(args)
-    if args.per_pixel and args.sky != "spec":
-        raise SkyfitError("--sky fit fits the sky with regions' materials; a map takes the "
-                          "spec's sky (leave out --per-pixel or --sky).")
+    if args.per_pixel and args.sky not in (None, "spec"):
+        raise SkyfitError(f"--sky {args.sky} fits the sky with regions' materials; a map takes "
+                          "the spec's sky (leave out --per-pixel or --sky).")
     if args.per_pixel:
         from .fitting.pixel_map import CHUNK, run_map
 
@@ -265,10 +272,19 @@ def _fit(args):
                   f"(--max-pixels, seed {args.seed})")
     # the light of every region traced together (each frame's kernels once), every region
     # checked before the first is fitted and written
-    results = fit_regions(args.manifest, list(kept.items()), model=model, method=args.method,
-                          normalisation=args.normalisation, seed=args.seed, start=args.start,
-                          positions=args.positions, directions=args.directions,
-                          frames=args.frames, variant=args.variant, sky=args.sky)
+    if auto:
+        from .fitting.selection import fit_auto
+
+        results = fit_auto(args.manifest, list(kept.items()), seed=args.seed,
+                           positions=args.positions, directions=args.directions,
+                           frames=args.frames, variant=args.variant)
+    else:
+        results = fit_regions(args.manifest, list(kept.items()), model=model,
+                              method=args.method, normalisation=args.normalisation,
+                              seed=args.seed, start=args.start, positions=args.positions,
+                              directions=args.directions, frames=args.frames,
+                              variant=args.variant, sky=args.sky, sun_sd=args.sun_sd,
+                              sky_terms=args.sky_terms)
     for (name, pixels), res in zip(regions, results):
         res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
                                          if pixels is None else len(pixels))
@@ -470,22 +486,41 @@ def build_parser():
     fit.add_argument("--max-pixels", type=_int_in(0), default=64,
                      help="fit at most this many pixels of a region, a seeded random subset "
                      "(default 64; 0 = every pixel)")
-    fit.add_argument("--model", choices=("2", "3", "5"), default="5",
+    fit.add_argument("--model", choices=("2", "3", "5", "auto"), default="5",
                      help="5 (default): C (RGB diffuse colour), rho_s, sigma_alpha; "
-                     "3: R, rho_s, sigma_alpha; 2: rho_s, sigma_alpha (thesis 7.1)")
-    fit.add_argument("--sky", choices=("spec", "fit"), default="spec",
-                     help="spec (default): the spec's sky as it is; fit: its level against the "
-                     "sun's fitted with the materials, one for every region of the command, "
-                     "its error in every interval (the sun and sky traced apart: about twice "
-                     "the light's time)")
+                     "3: R, rho_s, sigma_alpha; 2: rho_s, sigma_alpha (thesis 7.1); auto: "
+                     "every lobe (Ward, balanced, Beckmann and GGX plastic and metal) and "
+                     "parameter count ranked by held-out frames (4-fold), AIC and BIC beside, "
+                     "the chosen one fitted (the light traced once per lobe)")
+    fit.add_argument("--sky", choices=SKY_CHOICES, default=None,
+                     help="spec: the spec's light as it is (the default for sequences skyfit "
+                     "rendered); fit: the sky's level against the sun's fitted with the "
+                     "materials, one for every region of the command, its error in every "
+                     "interval (the sun and sky traced apart: about 1.5 times the fit's time); "
+                     "prior (the default for photographs under the sun): the same with a prior "
+                     "on that level from how measured skies scatter about the models. fit and "
+                     "prior also count the sun's own level (--sun-sd) in the reflectances' "
+                     "intervals")
+    fit.add_argument("--sky-terms", type=int, default=1,
+                     help="with --sky fit or prior: 1 (default) one sky level for the day; 2-4 "
+                     "a level that changes smoothly over the day (changing weather: log k as "
+                     "that many Legendre polynomials in time, the change under a prior)")
+    fit.add_argument("--sun-sd", type=float, default=None,
+                     help="with --sky fit or prior: the relative uncertainty of the spec's sun "
+                     f"level, in the reflectances' intervals (default {SUN_LEVEL_SD} for "
+                     "photographs: a modelled sun; about 0.03 for a measured direct normal "
+                     "irradiance; 0 for a sequence skyfit rendered; unused where a reference "
+                     "calibrates the frames)")
     fit.add_argument("--method", choices=("global", "lm", "anneal", "adam"), default="global",
                      help="global (default: grid over sigma_alpha then Levenberg-Marquardt; "
                      "right from any start), lm (the thesis's baseline), anneal (simulated "
                      "annealing over full renders), adam (gradient descent)")
     fit.add_argument("--normalisation", choices=NORMALISATIONS, default="ward",
-                     help="normalisation of Ward's specular lobe (default ward, the thesis's; "
+                     help="the specular lobe (default ward, the thesis's; "
                      "balanced is Radiance 6's lobe; radiance, that lobe plus Radiance's "
-                     "Fresnel estimate for smooth surfaces, renders but cannot be fitted)")
+                     "Fresnel estimate for smooth surfaces, renders but cannot be fitted; "
+                     "beckmann_/ggx_ plastic/metal: microfacet lobes with Smith shadowing and "
+                     "a dielectric (eta 1.5) or a metal's Fresnel, alpha = sigma_alpha)")
     fit.add_argument("--start", type=_numbers, metavar="A,B,...",
                      help="starting parameters in the model's order, comma-separated (lm, anneal,"
                      " adam; default a seeded random start)")

@@ -248,8 +248,8 @@ def test_cli_fit_writes_json_and_plot(days, tmp_path):
     assert res["truth"]["rho_s"] == 0.3
     assert (tmp_path / "fit_disc.png").stat().st_size > 10000
     summary = (tmp_path / "fits.csv").read_text().splitlines()
-    assert summary[0].startswith("region,model,method,pixels_fitted,pixels_total,rho_s,")
-    assert summary[1].startswith("disc,two,global,16,16,")
+    assert summary[0].startswith("region,model,normalisation,method,pixels_fitted,pixels_total,rho_s,")
+    assert summary[1].startswith("disc,two,ward,global,16,16,")
     assert main(["fit", str(days["noisy"]), "--region", "disc=box"]) == 2
 
 

@@ -190,7 +190,7 @@ def test_a_fisheye_hdr_of_the_measured_sky_with_a_clipped_sun_lights_a_spec_as_t
     misses the clipped light in the irradiance (0.2-0.3%)."""
     from test_envmap import _fisheye_of
 
-    from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
+    from skyfit_mi.pipeline.spec import SpecError, thesis_disc_spec, validate_spec
     from skyfit_mi.render.image import write_exr
 
     chosen = [scans[0], scans[8]]
@@ -229,3 +229,17 @@ def test_a_fisheye_hdr_of_the_measured_sky_with_a_clipped_sun_lights_a_spec_as_t
         for sky, lo, hi in ((frame.sky, 0.01, 0.04), (own.sky, -0.01, 0.01)):
             err = sky.sky_radiance(far) @ SRGB_LUMINANCE / truth - 1
             assert lo < err.mean() < hi and err.std() < 0.01, scan.label
+    # a pyranometer's GHI alone beside the calibrated fisheye: the sun takes what the map
+    # leaves of it, the measured one to the map's missed circumsolar light (0.2-0.3%)
+    (tmp_path / "ghi.csv").write_text("time,ghi\n" + "".join(
+        f"{s.time.isoformat()},{env.horizontal_irradiance() @ SRGB_LUMINANCE:.4f}\n"
+        for s, env in zip(chosen, maps)))
+    raw["sky"] = {"type": "envmap", "file": "sky/sky_{time:%H%M}.exr", "projection": "fisheye",
+                  "scale": 1.0, "sun_mask_deg": 3.0, "irradiance_file": "ghi.csv"}
+    for frame, env in zip(validate_spec(raw, tmp_path).frames, maps):
+        np.testing.assert_allclose(frame.sky.horizontal_irradiance() @ SRGB_LUMINANCE,
+                                   env.horizontal_irradiance() @ SRGB_LUMINANCE, rtol=1e-5)
+        np.testing.assert_allclose(frame.sky.sun_radiance, env.sun_radiance, rtol=0.01)
+    raw["sky"]["direct_normal_W_m2"] = 500.0
+    with pytest.raises(SpecError, match="not both"):
+        validate_spec(raw, tmp_path)

@@ -148,3 +148,176 @@ def test_another_days_prediction_says_its_sky_is_the_spec_s(dim_sky, days):
             seed=0, log=logs.append)
     assert any("under the target's spec sky" in x and "belongs to its own day" in x
                for x in logs), logs
+
+
+def test_the_sky_scaled_is_the_sun_plus_k_times_the_rest():
+    from skyfit_mi.physics.sky import Sky
+
+    sky = Sky(np.array([0.3, -0.2, 0.8]), clear=[30.0, 38.0, 66.0], overcast=[5.0, 5.0, 6.0],
+              ground=[40.0, 41.0, 39.0], sun_radiance=[1.5e7, 1.2e7, 1e7],
+              envmap=np.full((4, 8, 3), 2.0, np.float32))
+    sun, rest = sky.split()
+    d = np.random.default_rng(1).normal(size=(300, 3))
+    d = np.vstack([d / np.linalg.norm(d, axis=1, keepdims=True), sky.sun_direction])
+    np.testing.assert_allclose(sky.sky_scaled(1.7).radiance(d),
+                               sun.radiance(d) + 1.7 * rest.radiance(d), rtol=1e-6)
+
+
+def test_the_suns_level_is_a_factor_on_the_reflectances_only_where_nothing_anchors_them():
+    from skyfit_mi.fitting.sky_fit import light_level_sd
+    from skyfit_mi.fitting.uncertainty import widen_relative
+
+    names = ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha")
+    np.testing.assert_array_equal(light_level_sd({}, names, 0.2), [0.2] * 4 + [0.0])
+    calibrated = {"ingest": {"calibration": {"scale_relative_sd": [0.01] * 3}}}
+    relative = {"ingest": {"scale": {"known": False}}}
+    for doc in (calibrated, relative):
+        assert not light_level_sd(doc, names, 0.2).any()
+    assert not light_level_sd({}, ("rho_s", "sigma_alpha"), 0.2).any()   # white: no freedom
+    # a factor: e^(+-z sd) about the value, in quadrature (in log) with the data's own
+    lo, hi = widen_relative(0.5, (0.5, 0.5), 1.96 * 0.2, 0.0, 1.0)
+    assert lo == pytest.approx(0.5 * np.exp(-0.392)) and hi == pytest.approx(0.5 * np.exp(0.392))
+    lo, hi = widen_relative(0.5, (0.4, 0.6), 0.3, 0.0, 0.7)
+    assert lo == pytest.approx(0.5 * np.exp(-np.hypot(np.log(1.25), 0.3)))
+    assert hi == 0.7                                                     # clipped at the bound
+
+
+def test_which_sky_a_fit_takes_when_not_told():
+    from skyfit_mi.fitting.sky_fit import default_sky
+    from skyfit_mi.physics.sky import cie_sky, directional_sky
+
+    sunny, overcast = cie_sky("clear", 40.0, 180.0), cie_sky("overcast", 40.0, 180.0)
+    lab = directional_sky(np.array([0.0, 0.3, 1.0]), 100.0)
+    assert default_sky({"source": "ingest"}, [sunny]) == "prior"
+    assert default_sky({"source": "render"}, [sunny]) == "spec"
+    assert default_sky({"source": "ingest"}, [overcast]) == "spec"      # no sun to scale against
+    assert default_sky({"source": "ingest"}, [lab]) == "spec"            # lab lights: no sky
+
+
+@pytest.fixture(scope="module")
+def bright_sun(days, tmp_path_factory):
+    """The noisy disc day whose manifest's sun is SUN_BRIGHTER times too bright (a modelled
+    sun over a hazy day)."""
+    out = tmp_path_factory.mktemp("sun") / "day"
+    shutil.copytree(days["noisy"], out)
+    m = json.loads((out / "manifest.json").read_text())
+    for f in m["frames"]:
+        il = f["illumination"]
+        il["sun_radiance"] = [v * SUN_BRIGHTER for v in il["sun_radiance"]]
+    m["source"] = "ingest"          # a photographed day: its spec's sun is a model
+    (out / "manifest.json").write_text(json.dumps(m))
+    return out
+
+
+SUN_BRIGHTER = 1.2
+
+
+def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun):
+    """The spec's sun 1.2 times too bright scales every reflectance down by about as much,
+    and no data tell (the level trades exactly with them): with the sky taken as exact the
+    diffuse colour's interval misses the truth; by default a photographed day's fit counts
+    the sun's level (SUN_LEVEL_SD) with the sky's prior, holds every truth, warns that the
+    reflectances rest on it, and leaves sigma_alpha's interval as the data make it."""
+    from skyfit_mi.fitting.fit import fit_regions
+
+    exact = next(fit_regions(bright_sun, [("disc", REGION)], model="colour", sky="spec",
+                             log=lambda *a: None))
+    lo, hi = exact["intervals"]["C_g"]["95"]
+    assert hi < TRUTH["C_g"], exact["intervals"]["C_g"]
+    logs = []
+    r = next(fit_regions(bright_sun, [("disc", REGION)], model="colour", log=logs.append))
+    assert r["sky"]["prior"]["log_k_sd"] > 0 and r["sky"]["sun_level_sd"] == 0.2
+    assert any("--sky prior" in x for x in logs), logs
+    for p, v in TRUTH.items():
+        lo, hi = r["intervals"][p]["95"]
+        assert lo - 1e-9 <= v <= hi + 1e-9, (p, r["intervals"][p], r["parameters"])
+    assert r["sky"]["sun_level_error_sd"]["sigma_alpha"] == 0
+    assert any("scale with the sun's level" in w for w in r["warnings"]), r["warnings"]
+
+
+def test_the_sky_prior_holds_k_nearer_the_spec_and_no_wider(dim_sky):
+    """The prior on the sky's level pulls k toward the spec's (log k = 0) and narrows its
+    interval: a posterior is at most as wide as the data's alone."""
+    from skyfit_mi.fitting.fit import fit_regions
+
+    alone, prior = (next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky=sky,
+                                     log=lambda *a: None))["sky"] for sky in ("fit", "prior"))
+    assert 1.0 < prior["k"] <= alone["k"] * 1.001
+    assert (np.log(prior["interval95"][1] / prior["interval95"][0])
+            <= np.log(alone["interval95"][1] / alone["interval95"][0]) * 1.001)
+    assert prior["interval95"][0] < DIMMER < prior["interval95"][1]
+
+
+def test_relit_images_take_the_fitted_sky_level_of_their_own_day():
+    from skyfit_mi.fitting.relight import fitted_sky_level
+
+    doc = {"run_id": "a"}
+    fit = lambda k, run="a": {"sky": {"k": k}, "sequence_run_id": run}   # noqa: E731
+    assert fitted_sky_level({"x": (None, fit(1.4)), "y": (None, fit(1.4))}, doc)["k"] == 1.4
+    assert fitted_sky_level({"x": (None, fit(1.4, run="b"))}, doc) is None
+    assert fitted_sky_level({"x": (None, {"sequence_run_id": "a"})}, doc) is None
+    logs = []
+    assert fitted_sky_level({"x": (None, fit(1.4)), "y": (None, fit(0.9))}, doc,
+                            logs.append) is None
+    assert "differ" in logs[0]
+
+
+def test_a_bad_sun_sd_is_one_line(days, capsys):
+    assert main(["fit", str(days["clean"]), "--region", "disc=rect:2,2,9,9", "--sky", "fit",
+                 "--sun-sd", "2"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--sun-sd" in err, err
+
+
+DRIFT = 0.4           # log k's true change from the day's middle to its ends
+
+
+@pytest.fixture(scope="module")
+def drifting_sky(days, tmp_path_factory):
+    """The noisy disc day whose manifest's sky (all but the sun) is exp(-DRIFT x) times its
+    own, x from -1 at the first frame to 1 at the last: the real sky's level against the
+    spec's, k(t) = exp(DRIFT x), rises through the day."""
+    out = tmp_path_factory.mktemp("drift") / "day"
+    shutil.copytree(days["noisy"], out)
+    m = json.loads((out / "manifest.json").read_text())
+    x = np.linspace(-1.0, 1.0, len(m["frames"]))
+    for f, xi in zip(m["frames"], x):
+        il = f["illumination"]
+        for k in ("clear", "overcast", "uniform", "intermediate", "perez", "ground"):
+            il[k] = [v * np.exp(-DRIFT * xi) for v in il[k]]
+    (out / "manifest.json").write_text(json.dumps(m))
+    return out
+
+
+def test_a_sky_that_changes_over_the_day_is_fitted_as_a_smooth_curve(drifting_sky):
+    """With --sky-terms 2 the fit finds log k's slope over the day within its interval, the
+    level's at the spec's, k per frame rising, and every parameter's interval holds the
+    truth; the curve lights the day again in a session made from the fit."""
+    from skyfit_mi.fitting.fit import FitSession, fit_regions
+
+    r = next(fit_regions(drifting_sky, [("disc", REGION)], model="colour", sky="fit",
+                         sky_terms=2, log=lambda *a: None))
+    terms = r["sky"]["terms"]
+    u, sd = np.array(terms["coefficients"]), np.sqrt(np.diag(terms["covariance"]))
+    for j, truth in enumerate((0.0, DRIFT)):
+        assert abs(u[j] - truth) < 1.96 * sd[j] + 0.02, (j, u, sd)
+    assert sd[1] < 0.5 * DRIFT
+    k = [v[0] for v in terms["k_by_frame"].values()]
+    assert np.all(np.diff(k) > 0)
+    for p, v in TRUTH.items():
+        lo, hi = r["intervals"][p]["95"]
+        assert lo - 1e-9 <= v <= hi + 1e-9, (p, r["intervals"][p], r["parameters"])
+    again = FitSession.from_fit(r, drifting_sky)
+    np.testing.assert_allclose(again.sky_scale, k, rtol=1e-6)
+
+
+def test_sky_terms_need_a_fitted_sky_and_frames(days):
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.fitting.fit import fit_regions
+
+    with pytest.raises(SkyfitError, match="--sky spec"):
+        next(fit_regions(days["clean"], [("disc", REGION)], model="colour", sky="spec",
+                         sky_terms=2, log=lambda *a: None))
+    with pytest.raises(SkyfitError, match="give 1"):
+        next(fit_regions(days["clean"], [("disc", REGION)], model="colour", sky="fit",
+                         sky_terms=9, log=lambda *a: None))

@@ -16,12 +16,13 @@ import numpy as np
 from . import uncertainty as unc
 from .chi2 import LuminanceModel, Problem, load_observations, load_table_observations
 from .geometry import geometry_warnings, highlight_geometry
-from ..errors import SkyfitError, check_choice
+from ..errors import SkyfitError, check_choice, check_range
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
-from .sky_fit import SKY_DOMINATES, fit_sky_scale
+from .sky_fit import (SKY_DOMINATES, check_terms, default_sky, fit_sky_scale, light_level_sd,
+                      sky_level_at)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, memory_estimate, mixed,
                                   trace_table)
@@ -32,6 +33,7 @@ from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSI
                                   build_light_cache)
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
 from ..pipeline.observation_table import is_table, relative_scale
+from ..physics.sky import SKY_CHOICES, SKY_LEVEL_SD, SUN_LEVEL_SD
 from ..physics.ward import METAL_THRESHOLD
 
 
@@ -80,10 +82,11 @@ class FitState:
         for the global method): its grid gives the profiles
     model_noise_by_sigma : the light cache's own share of chi-square by roughness
     noise_chi2 : mean and variance of the chi-square noise alone gives at the fit
-    intervals, rise, cache_noise_chi2, cache_sd, calibration_sd : set by
+    intervals, rise, cache_noise_chi2, cache_sd, calibration_sd, sun_level_sd : set by
         :meth:`FitSession._intervals`: every parameter's 68%/95% intervals, the profiles' rise,
         the chi-square the cache's noise may add (the intervals allow for it), the standard
-        errors from the cache's samples and from a photographed sequence's calibration
+        errors from the cache's samples, from a photographed sequence's calibration and from
+        the sun's level (:func:`~.sky_fit.light_level_sd`)
     """
 
     method: str
@@ -107,6 +110,7 @@ class FitState:
     cache_noise_chi2: float = None
     cache_sd: np.ndarray = None
     calibration_sd: np.ndarray = None
+    sun_level_sd: np.ndarray = None
 
     @property
     def delta_scale(self):
@@ -191,6 +195,8 @@ class FitSession:
         # the fitted sky's share of each parameter's error, whether it leaves them open, and
         # its record (sky_fit.fit_sky_scale)
         self.sky_sd, self.sky_span, self.sky_record = None, None, None
+        # the sun's level's relative uncertainty, in the reflectances' intervals (sky_fit)
+        self.sun_sd = 0.0
         self.cache_time = time.perf_counter() - t0
         if trace:
             self.trace_light()
@@ -223,7 +229,8 @@ class FitSession:
         fit measured this very sequence (its run_id), before the light is traced: another
         day's sky is its spec's (the level belongs to the fitted day's sky)."""
         if result.get("sky") is not None and result.get("sequence_run_id") == self.run_id:
-            self.split_sky, self.sky_scale = True, float(result["sky"]["k"])
+            k = sky_level_at(result["sky"], self.obs.times)
+            self.split_sky, self.sky_scale = True, float(k[0]) if np.ptp(k) == 0 else k
 
     @classmethod
     def sharing_light(cls, results, manifest_path, pixels, **options):
@@ -250,20 +257,27 @@ class FitSession:
         return sessions
 
     @classmethod
-    def for_regions(cls, manifest_path, regions, **options):
+    def for_regions(cls, manifest_path, regions, trace=True, **options):
         """Sessions {region: FitSession} of several regions of one sequence (``regions``
         [(name, pixels)]), whose light is traced together where they share frames and
-        normalisation (:meth:`trace_together`); ``options`` as the constructor's, ``trace``
-        excepted."""
+        normalisation (:meth:`trace_groups`; ``trace`` False leaves it to the caller);
+        ``options`` as the constructor's."""
         sessions = {name: cls(manifest_path, name, px, trace=False, **options)
                     for name, px in regions}
+        if trace:
+            cls.trace_groups(sessions)
+        return sessions
+
+    @classmethod
+    def trace_groups(cls, sessions):
+        """Trace the light of ``sessions`` {region: FitSession} of one sequence together where
+        they share frames and normalisation (:meth:`trace_together`)."""
         groups = {}
         for s in sessions.values():
             key = (s.normalisation, tuple(s.obs.frames), s.obs.rays is None)
             groups.setdefault(key, []).append(s)
         for group in groups.values():
             cls.trace_together(group)
-        return sessions
 
     @staticmethod
     def trace_together(group):
@@ -374,10 +388,11 @@ class FitSession:
 
     def set_sky_scale(self, k):
         """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
-        to the sun, and make the models and chi-square on it."""
+        to the sun (one factor, or one per frame of the session), and make the models and
+        chi-square on it."""
         if len(self.parts or ()) != 2:
             raise ValueError("the sky's scale needs a session traced with split_sky")
-        self.sky_scale = float(k)
+        self.sky_scale = float(k) if np.ndim(k) == 0 else np.asarray(k, dtype=float)
         self._use_parts(self.parts)
 
     def _use_table(self, table):
@@ -595,9 +610,10 @@ class FitSession:
 
     def _intervals(self, fit):
         """68% and 95% intervals of every parameter into the :class:`FitState` ``fit`` (its
-        intervals, rise, cache_noise_chi2, cache_sd, calibration_sd): the covariance's, or for
-        rho_s and sigma_alpha of a global fit the profile's; each widened by the light cache's
-        own Monte Carlo error."""
+        intervals, rise, cache_noise_chi2, cache_sd, calibration_sd, sun_level_sd): the
+        covariance's, or for rho_s and sigma_alpha of a global fit the profile's; each widened
+        by the light cache's own Monte Carlo error, the calibration's, the fitted sky's and, a
+        factor on the reflectances, the sun's level's."""
         problem, theta, names = fit.problem, fit.theta, self.names
         lower, upper = self.lower, self.upper
         s2k = fit.delta_scale                             # each parameter's scale of Delta chi^2
@@ -643,10 +659,14 @@ class FitSession:
         mc_sd = self.cache_error(theta, fit.method, problem)
         cal_sd = unc.calibration_sd(self.doc, names, theta)
         sky_sd = np.zeros(len(names)) if self.sky_sd is None else self.sky_sd
+        sun_rel = light_level_sd(self.doc, names, self.sun_sd)
         for i, p in enumerate(names):
             for lv in ("68", "95"):
                 intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * np.sqrt(
                     mc_sd[i] ** 2 + cal_sd[i] ** 2 + sky_sd[i] ** 2), lower[i], upper[i])
+                # the sun's level: a factor on every reflectance, lopsided
+                intervals[p][lv] = unc.widen_relative(theta[i], intervals[p][lv],
+                                                      unc.Z[lv] * sun_rel[i], lower[i], upper[i])
                 if self.sky_span is not None:      # the sky's level is not determined
                     lo, hi = intervals[p][lv]
                     intervals[p][lv] = (min(lo, float(self.sky_span[0][i])),
@@ -655,6 +675,7 @@ class FitSession:
                         intervals[p]["from"] += ", and over the undetermined sky level"
         fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
         fit.cache_sd, fit.calibration_sd = mc_sd, cal_sd
+        fit.sun_level_sd = sun_rel * np.abs(theta)
 
     def _model_noise_by_sigma(self, theta, problem=None):
         """The model's own Monte Carlo share of chi-square (``problem``'s, default the
@@ -769,6 +790,17 @@ class FitSession:
                         f"+-{unc.Z['95'] * self.sky_sd[i]:.3g} (95%), at least doubling its "
                         "interval, which includes that; more materials or a grey card in the "
                         "fit would narrow it.")
+            level = [p for i, p in enumerate(names)
+                     if fit.sun_level_sd[i] > SKY_DOMINATES * own[i]]
+            if level:
+                warnings.append(
+                    f"{', '.join(level)} scale with the sun's level, which no data tell (the "
+                    f"light's absolute scale trades exactly with the reflectances) and which "
+                    f"is known to +-{100 * self.sun_sd:.0f}% (1 sd, --sun-sd): that, more than "
+                    "the data, sets their intervals; their ratios and sigma_alpha do not "
+                    "depend on it. A reference of known reflectance in the scene (ingest "
+                    "--calibrate or --colorchecker) or a measured direct normal irradiance "
+                    "(--sun-sd 0.03) narrows them.")
         top = [p for i, p in enumerate(names)
                if p != "sigma_alpha" and theta[i] >= self.upper[i] - 1e-3]
         if top:
@@ -850,7 +882,9 @@ class FitSession:
             **({"calibration_error_sd": dict(zip(names, fit.calibration_sd.tolist()))}
                if np.any(fit.calibration_sd > 0) else {}),
             **({"sky": {**self.sky_record, "error_sd": dict(zip(names, (
-                self.sky_sd if self.sky_sd is not None else np.zeros(len(names))).tolist()))}}
+                self.sky_sd if self.sky_sd is not None else np.zeros(len(names))).tolist())),
+                "sun_level_sd": self.sun_sd,
+                "sun_level_error_sd": dict(zip(names, fit.sun_level_sd.tolist()))}}
                if self.sky_record is not None else {}),
             "cache_noise_chi2": fit.cache_noise_chi2,
             "cache_noise_chi2_by_sigma": fit.model_noise_by_sigma,
@@ -900,23 +934,51 @@ def fit_region(manifest_path, name, pixels, **options):
 
 def fit_regions(manifest_path, regions, model="two", method="global", normalisation="ward",
                 seed=0, start=None, positions=None, directions=DIRECTIONS, method_options=None,
-                log=print, frames=None, variant=None, sky="spec"):
+                log=print, frames=None, variant=None, sky=None, sun_sd=None, sky_terms=1):
     """Fit several regions of one sequence (``regions`` [(name, pixels)]), their light traced
     together (:meth:`FitSession.for_regions`); yields each region's result dict in turn.
-    ``sky``: 'spec' takes the spec's sky as it is; 'fit' fits its level against the sun's
-    with the materials, one for all regions (:func:`~.sky_fit.fit_sky_scale`)."""
-    check_choice("sky", sky, ("spec", "fit"))
+    ``sky``: None chooses (:func:`~.sky_fit.default_sky`); 'spec' takes the spec's light as it is; 'fit' fits the sky's level against the
+    sun's with the materials, one for all regions (:func:`~.sky_fit.fit_sky_scale`), and
+    'prior' the same with the level's prior (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`);
+    both count the sun's own level, known to a relative ``sun_sd`` (None: 0 for a sequence
+    skyfit rendered, :data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD` for photographs), in the
+    reflectances' intervals (:func:`~.sky_fit.light_level_sd`); ``sky_terms`` > 1 lets the
+    sky's level change smoothly over the day (:func:`~.sky_fit.fit_sky_scale`)."""
+    if sky is not None:
+        check_choice("sky", sky, SKY_CHOICES)
+    if sun_sd is not None:
+        check_range("--sun-sd", sun_sd, 0.0, 1.0, "(relative)")
     sessions = FitSession.for_regions(manifest_path, regions, model=model,
                                       normalisation=normalisation, seed=seed,
                                       positions=positions, directions=directions, frames=frames,
-                                      variant=variant, split_sky=sky == "fit")
-    if sky == "fit":
-        first = next(iter(sessions.values()))
+                                      variant=variant, trace=False)
+    first = next(iter(sessions.values()))
+    if sky is None:
+        sky = default_sky(first.doc, first.skies)
+        if sky != "spec":
+            log(f"sky: photographs under the sun and a sky: the spec's light is a model of "
+                f"theirs, so its level is fitted with its prior (--sky {sky}; --sky spec takes "
+                "it as exact)")
+    for s in sessions.values():
+        s.split_sky = sky != "spec"
+    FitSession.trace_groups(sessions)
+    if sky != "spec":
         if not any(np.any(k.sun_radiance > 0) and k.sun_direction[2] > 0 for k in first.skies):
-            raise SkyfitError("--sky fit scales the sky against the sun, and no frame of the "
+            raise SkyfitError(f"--sky {sky} scales the sky against the sun, and no frame of the "
                               "sequence has the sun's disc above the horizon; fit with the "
-                              "spec's sky (leave out --sky).")
-        fit_sky_scale(list(sessions.values()), seed, log)
+                              "spec's sky (--sky spec).")
+        if sun_sd is None:
+            sun_sd = 0.0 if first.doc.get("source", "render") in RENDERED_SOURCES \
+                else SUN_LEVEL_SD
+        for s in sessions.values():
+            s.sun_sd = float(sun_sd)
+        check_terms(sky_terms, len(first.obs.frames))
+        fit_sky_scale(list(sessions.values()), seed, log,
+                      prior_sd=SKY_LEVEL_SD if sky == "prior" else None, terms=int(sky_terms))
+    elif sky_terms != 1:
+        raise SkyfitError(f"--sky-terms {sky_terms} changes a fitted sky's level over the day; "
+                          "the spec's sky is taken as it is (--sky spec): give --sky fit or "
+                          "prior, or leave out --sky-terms.")
     for name, _ in regions:
         yield sessions.pop(name).run(method, start, seed, method_options, log)
 

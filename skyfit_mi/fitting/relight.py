@@ -20,6 +20,7 @@ against the table's.
 
 import csv
 import io
+import json
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass
@@ -32,6 +33,7 @@ from ..files import FolderLock, ensure_dir, figure_png, write_bytes, write_json,
 from .chi2 import subsample_region
 from .fit import FitSession
 from .landscape import truth_parameters
+from .sky_fit import sky_level_at
 from .uncertainty import widen
 from ..pipeline.fit_result import check_fit_sequence, read_fit_result
 from ..pipeline.manifest import (RENDERED_SOURCES, check_frames, frame_axis, frame_label,
@@ -231,6 +233,11 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     # again (which would compute every sun position anew)
     spec = target_spec(plan.target, fits, plan.doc)[0] if plan.render else None
     check_sun_up(plan, spec)
+    level = fitted_sky_level(fits, plan.doc, log)
+    if spec is not None and level is not None:
+        for f in spec.frames:
+            k = sky_level_at(level, [f.time.isoformat()])[0] if f.time else level["k"]
+            f.sky = f.sky.sky_scaled(k)
     # the predicted sequence's pixels: the target's before the render (a region it does not
     # show is refused first), or the relit render's own after it (its label image)
     predicted = plan.predicted_from(out)
@@ -262,6 +269,31 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     write_errors(errors, out, point_errors)
     log_errors(errors, plan, log)
     return errors
+
+
+def fitted_sky_level(fits, doc, log=print):
+    """The sky fit's record (``fit --sky fit`` or ``prior``: its level k, maybe changing over
+    the day, :func:`~.sky_fit.sky_level_at`) by which the fits saw the target sequence ``doc``
+    itself (its run_id), for the relit images; None for another day (the level belongs to the
+    fitted day's sky), a fit of the spec's sky, or fits whose levels differ (fitted in
+    separate commands: then the spec's, and the log says so)."""
+    if doc is None:
+        return None
+    levels = {json.dumps([r["sky"]["k"], r["sky"].get("terms")], sort_keys=True): r["sky"]
+              for _, r in fits.values()
+              if r.get("sky") is not None and r.get("sequence_run_id") == doc.get("run_id")}
+    if len(levels) > 1:
+        ks = sorted(f"{v['k']:.3g}" for v in levels.values())
+        log(f"the fits' sky levels differ ({', '.join(ks)}: "
+            "fitted in separate commands); the images take the spec's sky: fit the regions "
+            "together (fit --all) for one level")
+        return None
+    if levels:
+        level = levels.popitem()[1]
+        log(f"the images take the fitted sky level: k = {level['k']:.3g} times the spec's sky "
+            "against the sun" + (", changing over the day" if level.get("terms") else ""))
+        return level
+    return None
 
 
 #: What relight.json's region_means are.

@@ -83,28 +83,40 @@ def read_fits(folder):
     return {k: r for k, (_, r) in fit_files(folder).items()}
 
 
+def _ranking(selection, first=5):
+    """``fit --model auto``'s ranking in one cell: its first candidates by held-out chi2, with
+    AIC and BIC (the fit JSON's ``model_selection`` has them all)."""
+    if not selection:
+        return ""
+    return " | ".join(f"{r['rank']} {r['normalisation']}/{r['model']}: held-out chi2 "
+                      f"{r['held_out_chi2']:.5g}, AIC {r['aic']:.5g}, BIC {r['bic']:.5g}"
+                      for r in selection["ranking"][:first])
+
+
 def write_summary(folder):
     """Write ``folder/fits.csv`` from every fit result in the folder (one row per region,
     sorted), so that it always agrees with the ``fit_*.json`` files there; returns its path.
 
     Columns: parameters with 95% intervals, how each reads (one-sided limits where an interval
-    runs into a bound), chi2/dof, truth, warnings.  Units: reflectances
+    runs into a bound), chi2/dof, truth, warnings, and ``fit --model auto``'s ranking.  Units: reflectances
     unitless, sigma_alpha rms slope, times in seconds.
     """
     fits = read_fits(folder)
     results = [fits[k] for k in sorted(fits)]
 
     names = list(dict.fromkeys(n for r in results for n in r["parameters"]))
-    cols = ["region", "model", "method", "pixels_fitted", "pixels_total"]
+    cols = ["region", "model", "normalisation", "method", "pixels_fitted", "pixels_total"]
     for n in names:
         cols += [n, f"{n}_95_lo", f"{n}_95_hi"]
-    cols += ["readings", "chi2_per_dof", "evaluations", "wall_time_s", "truth", "warnings"]
+    cols += ["readings", "chi2_per_dof", "evaluations", "wall_time_s", "truth", "warnings",
+             "model_ranking"]
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(cols)
     for r in results:
         n = len(r.get("pixels") or r.get("points") or [])    # pixels, or a table's points
-        row = [r["region"], r["model"], r["method"], n, r.get("region_pixels_total", n)]
+        row = [r["region"], r["model"], r.get("normalisation", "ward"), r["method"], n,
+               r.get("region_pixels_total", n)]
         for n in names:
             if n in r["parameters"]:
                 row += [f"{r['parameters'][n]:.5f}", *(f"{v:.5f}" for v in r["intervals"][n]["95"])]
@@ -112,6 +124,7 @@ def write_summary(folder):
                 row += ["", "", ""]
         row += [" | ".join(r.get("readings", [])),
                 f"{r['chi2_per_dof']:.4g}", r["evaluations"], f"{r['wall_time_s']:.2f}",
-                json.dumps(r["truth"]) if r.get("truth") else "", " | ".join(r["warnings"])]
+                json.dumps(r["truth"]) if r.get("truth") else "", " | ".join(r["warnings"]),
+                _ranking(r.get("model_selection"))]
         w.writerow(row)
     return write_text(Path(folder) / SUMMARY_NAME, buf.getvalue())

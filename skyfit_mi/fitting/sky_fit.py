@@ -19,13 +19,32 @@ includes it), and a parameter whose interval the sky at least doubles is warned
 (:data:`SKY_DOMINATES`).  With one
 region the frames alone tell k, through how the sun's share of the light changes over the
 day; more materials and a grey card tell it better.
+
+Two things the data cannot tell well are stated as priors:
+
+* the sky's level against the sun's (``fit --sky prior``, the default for photographs under the
+  sun): log k ~ N(0, sd^2) with sd :data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`, whose penalty
+  (log k / sd)^2 joins the regions' chi-square, so that the profile is the posterior's and k
+  stays near the spec's where the data alone would leave it open;
+* the sun's own level, with ``--sky fit`` or ``prior`` on photographs (``--sun-sd``, default
+  :data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD`): the light's absolute scale trades exactly
+  with the reflectances (every reflectance times a fits the light times 1/a), so no data tell
+  it, and each reflectance's relative error gains it in quadrature (:func:`light_level_sd`),
+  the roughness none.  A reference in the scene (``ingest --calibrate``, ``--colorchecker``)
+  or a relative scale (``--unknown-scale``) ties the reflectances to the data instead, and a
+  measured direct normal irradiance tells it to a pyrheliometer's accuracy (``--sun-sd
+  0.03``).  A sequence skyfit rendered was lit by its spec's sun: 0 unless given.
 """
 
+import datetime as dt
 import time
 
 import numpy as np
 
 from . import uncertainty as unc
+from ..errors import SkyfitError
+from .methods.levenberg_marquardt import levenberg_marquardt
+from ..pipeline.manifest import RENDERED_SOURCES
 from .methods import global_search
 
 #: Sky scales k searched first: a geometric grid from a quarter to four times the spec's sky.
@@ -35,6 +54,68 @@ SCALE_GRID = np.geomspace(0.25, 4.0, 9)
 SKY_DOMINATES = 3 ** 0.5
 #: Half the spacing in log k of the points that refine the profile's least point.
 REFINE_STEP = 0.1
+#: The most terms of the sky's level over the day (``fit --sky-terms``), and the frames each
+#: term needs at least.
+MAX_TERMS, FRAMES_PER_TERM = 4, 3
+#: The prior's standard deviation of each term of log k beyond the day's level (Legendre
+#: polynomials in time over the fitted frames, :func:`time_basis`): its change between the
+#: day's middle and its ends.  Passing haze and cloud change the sky's share of the light by
+#: tens of percent within hours; 0.35 is the level's own prior (:data:`SKY_LEVEL_SD`).
+DRIFT_SD = 0.35
+#: Step in each term's coefficient of the finite differences of the residuals.
+DRIFT_STEP = 1e-3
+#: Gauss-Newton iterations of the terms at most.
+DRIFT_ITERATIONS = 8
+#: The parameters that scale with the light's absolute level (the reflectances); the
+#: roughness does not.
+LEVEL_SCALED = ("C_r", "C_g", "C_b", "R", "rho_s")
+
+
+def default_sky(doc, skies):
+    """How a fit takes the sky when not told (``fit --sky``): with its prior ('prior') where
+    the frames were photographed under a sky with the sun (the spec's light is then a model of
+    the real one), else the spec's ('spec': skyfit rendered the frames under that very light,
+    or no sun lights them to scale the sky against)."""
+    sunny = any(np.any(k.sun_radiance > 0) and k.sun_direction[2] > 0 and k.lit_by_sky
+                for k in skies)
+    return "prior" if sunny and doc.get("source", "render") not in RENDERED_SOURCES else "spec"
+
+
+def light_level_sd(doc, names, sun_sd):
+    """Each parameter's relative error (``names``) from the sun's level known to a relative
+    ``sun_sd`` (a standard deviation of its log): the reflectances', the roughness none; zeros
+    where a reference in the scene (a calibration) or a relative scale ties the reflectances to
+    the data (the manifest ``doc``), and for the white 2-parameter model (rho_d + rho_s = 1
+    fixes the scale, so a wrong level shows as misfit instead)."""
+    ingest = doc.get("ingest") or {}
+    anchored = bool(ingest.get("calibration")) or (ingest.get("scale") or {}).get("known") is False
+    if anchored or not sun_sd or "C_r" not in names and "R" not in names:
+        return np.zeros(len(names))
+    return np.array([float(sun_sd) if p in LEVEL_SCALED else 0.0 for p in names])
+
+
+def _seconds(times):
+    """Seconds since the epoch of ISO ``times``."""
+    return np.array([dt.datetime.fromisoformat(t).timestamp() for t in times])
+
+
+def time_basis(times, span, terms):
+    """(T, ``terms``) Legendre polynomials P_0 .. P_terms-1 of the frames' ``times`` (ISO)
+    mapped onto [-1, 1] over ``span`` (first, last) [s since the epoch], held at the ends
+    outside it: log k(t) = basis @ coefficients."""
+    t0, t1 = span
+    x = np.clip(2.0 * (_seconds(times) - t0) / max(t1 - t0, 1.0) - 1.0, -1.0, 1.0)
+    return np.polynomial.legendre.legvander(x, terms - 1)
+
+
+def sky_level_at(record, times):
+    """The sky's level k at the frames' ``times`` (ISO) by a sky fit's ``record``: the day's
+    one level, or its smooth curve over the day (``terms``; held at the fitted span's ends)."""
+    terms = record.get("terms")
+    if terms is None:
+        return np.full(len(times), float(record["k"]))
+    return np.exp(time_basis(times, terms["span_s"], len(terms["coefficients"]))
+                  @ np.asarray(terms["coefficients"]))
 
 
 def _least(sessions, k, starts):
@@ -54,21 +135,111 @@ def _parabola(u, chi2):
     return (-c1 / (2 * c2), c2) if c2 > 0 else (None, c2)
 
 
-def fit_sky_scale(sessions, seed=0, log=print):
+def check_terms(terms, frames):
+    """Refuse ``terms`` of the sky's level over ``frames`` frames that they cannot carry."""
+    if not 1 <= int(terms) <= MAX_TERMS:
+        raise SkyfitError(f"--sky-terms {terms}: give 1 (one sky level for the day) to "
+                          f"{MAX_TERMS}.")
+    if int(terms) > 1 and frames < FRAMES_PER_TERM * int(terms):
+        raise SkyfitError(f"--sky-terms {terms} needs at least {FRAMES_PER_TERM * int(terms)} "
+                          f"frames, and the fit has {frames}; give fewer terms.")
+
+
+def _fit_terms(sessions, thetas, u0, terms, prior_sd, s2):
+    """log k over the day as ``terms`` Legendre polynomials in time, fitted with the regions'
+    parameters from the day's level ``u0`` (log k) and each region's ``thetas`` there:
+    Gauss-Newton on the coefficients with every region's parameters profiled out (each
+    region's Jacobian in the coefficients projected off its parameters' own; the parameters
+    then polished by Levenberg-Marquardt), under the priors N(0, ``prior_sd``^2) on the level
+    (none if None) and N(0, :data:`DRIFT_SD`^2) on each further term.  Leaves each session at
+    the fitted curve; returns (coefficients, their covariance, the span [s], each region's
+    parameters' response to the coefficients (n, terms))."""
+    times = [t for s in sessions for t in s.obs.times]
+    span = (float(_seconds(times).min()), float(_seconds(times).max()))
+    bases = [time_basis(s.obs.times, span, terms) for s in sessions]
+    P = np.diag([0.0 if prior_sd is None else prior_sd ** -2] + [DRIFT_SD ** -2] * (terms - 1))
+    u = np.r_[u0, np.zeros(terms - 1)]
+    thetas = [np.asarray(t, dtype=float) for t in thetas]
+
+    def put(u):
+        for s, B in zip(sessions, bases):
+            s.set_sky_scale(np.exp(B @ u))
+
+    def objective(u, thetas):
+        put(u)
+        return sum(s.problem.chi2(t) for s, t in zip(sessions, thetas)) + u @ P @ u
+
+    def linearised(u, thetas):
+        """The profiled normal equations (H, g) at (u, thetas) and each region's response."""
+        H, g, responses = P.copy(), P @ u, []
+        for s, B, theta in zip(sessions, bases, thetas):
+            Ju = []
+            for j in range(terms):
+                r = []
+                for sign in (1, -1):
+                    s.set_sky_scale(np.exp(B @ (u + sign * DRIFT_STEP * np.eye(terms)[j])))
+                    r.append(s.problem.residuals(theta))
+                Ju.append((r[0] - r[1]) / (2 * DRIFT_STEP))
+            Ju = np.column_stack(Ju)
+            s.set_sky_scale(np.exp(B @ u))
+            r, Jt = s.problem.jacobian(theta)
+            response = -np.linalg.lstsq(Jt, Ju, rcond=None)[0]
+            Jp = Ju + Jt @ response                     # what the parameters cannot absorb
+            rp = r - Jt @ np.linalg.lstsq(Jt, r, rcond=None)[0]
+            H += Jp.T @ Jp
+            g += Jp.T @ rp
+            responses.append(response)
+        return H, g, responses
+
+    current = objective(u, thetas)
+    for _ in range(DRIFT_ITERATIONS):
+        H, g, _ = linearised(u, thetas)
+        step = -np.linalg.solve(H, g)
+        for _ in range(6):                              # halved until chi-square falls
+            put(u + step)
+            moved = [levenberg_marquardt(s.problem, t, s.lower, s.upper)["theta"]
+                     for s, t in zip(sessions, thetas)]
+            new = objective(u + step, moved)
+            if new < current:
+                break
+            step = step / 2
+        else:
+            break
+        u, thetas, gain, current = u + step, moved, current - new, new
+        if gain < 1e-3 * max(1.0, s2) or np.max(np.abs(step)) < 1e-4:
+            break
+    put(u)
+    H, _, responses = linearised(u, thetas)
+    return u, s2 * np.linalg.inv(H), span, responses
+
+
+def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
     """Fit the sky scale k of ``sessions`` (FitSessions of one day, traced with
     ``split_sky``) and leave each at the fitted k with its ``sky_sd`` (the sky's share of
-    each parameter's standard error) and ``sky_record`` set; returns the record."""
+    each parameter's standard error) and ``sky_record`` set; returns the record.
+    ``prior_sd``: the standard deviation of a normal prior on log k about the spec's level
+    (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`), None for none (k from the data alone).
+    ``terms`` > 1: log k changes smoothly over the day (changing weather), as that many
+    Legendre polynomials in time (:func:`_fit_terms`), from the day's level found first."""
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     starts = [s.random_start(rng) for s in sessions]
     profile = {}
 
-    def total(u):
+    def penalty(u):
+        """The prior's share of the profile at log k = ``u`` (chi-square units)."""
+        return 0.0 if prior_sd is None else (float(u) / prior_sd) ** 2
+
+    def data(u):
         """The regions' summed least chi-square at log k = ``u``, each k searched once."""
         u = float(u)
         if u not in profile:
             profile[u] = _least(sessions, float(np.exp(u)), starts)
         return sum(c for c, _ in profile[u])
+
+    def total(u):
+        """The profile: the data's chi-square and the prior's penalty at log k = ``u``."""
+        return data(u) + penalty(u)
 
     grid = np.log(SCALE_GRID)
     chi2 = np.array([total(u) for u in grid])
@@ -86,7 +257,7 @@ def fit_sky_scale(sessions, seed=0, log=print):
     u0 = min(profile, key=total)
     b = b if b is not None and b > 0 else b_grid
     best = profile[u0]
-    chi2_best = total(u0)
+    chi2_best = data(u0)
     dof = sum(s.problem.dof for s in sessions)
     noise = sum(s.problem.noise_chi2(th)[0] for s, (_, th) in zip(sessions, best))
     s2 = unc.scale(chi2_best, noise)
@@ -95,7 +266,7 @@ def fit_sky_scale(sessions, seed=0, log=print):
     sd_u = float(np.sqrt(s2 / b)) if b is not None and b > 0 and not edge else np.inf
     k = float(np.exp(u0))
     within = [u for u in profile
-              if total(u) <= chi2_best + unc.LEVELS["95"] * s2]
+              if total(u) <= total(u0) + unc.LEVELS["95"] * s2]
     if np.isfinite(sd_u):
         interval = [float(np.exp(u0 - unc.Z["95"] * sd_u)), float(np.exp(u0 + unc.Z["95"] * sd_u))]
     else:                               # what the profile saw, open where it reached the grid's end
@@ -125,18 +296,59 @@ def fit_sky_scale(sessions, seed=0, log=print):
         # an undetermined k: the parameters' range over the k the profile could not tell apart
         thetas = np.array([profile[u][n][1] for u in within])
         s.sky_span = None if np.isfinite(sd_u) else (thetas.min(axis=0), thetas.max(axis=0))
+    curve = None
+    if terms > 1 and not np.isfinite(sd_u):
+        warnings.append(f"the sky's change over the day (--sky-terms {terms}) is not fitted: "
+                        "its level is not determined.")
+    elif terms > 1:
+        u, C, span, responses = _fit_terms(sessions, [th for _, th in best], u0, terms,
+                                           prior_sd, s2)
+        sd = np.sqrt(np.diag(C))
+        for s, response in zip(sessions, responses):
+            s.sky_sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", response, C, response), 0))
+        k, sd_u = float(np.exp(u[0])), float(sd[0])
+        interval = [float(np.exp(u[0] - unc.Z["95"] * sd[0])),
+                    float(np.exp(u[0] + unc.Z["95"] * sd[0]))]
+        frames = sorted({(i, t) for s in sessions for i, t in zip(s.obs.frames, s.obs.times)})
+        B = time_basis([t for _, t in frames], span, terms)
+        half = unc.Z["95"] * np.sqrt(np.einsum("ij,jk,ik->i", B, C, B))
+        curve = {"meaning": "log k(t) = sum_j coefficients[j] P_j(x), P_j Legendre "
+                            "polynomials, x = -1 at span_s[0] and 1 at span_s[1] (held beyond)",
+                 "coefficients": u.tolist(), "covariance": C.tolist(),
+                 "correlation": (C / np.outer(sd, sd)).tolist(), "span_s": list(span),
+                 "drift_prior_sd": DRIFT_SD,
+                 "k_by_frame": {int(i): [float(np.exp(v)), float(np.exp(v - h)),
+                                         float(np.exp(v + h))]
+                                for (i, _), v, h in zip(frames, B @ u, half)}}
+        vague = [j for j in range(1, terms) if sd[j] > 0.7 * DRIFT_SD]
+        if vague:
+            warnings.append(f"the data hardly tell how the sky changes over the day (terms "
+                            f"{', '.join(map(str, vague))} of --sky-terms {terms}): their "
+                            "prior holds them, and the intervals include that.")
     record = {"fitted": "the sky's level (all but the sun's disc) against the spec's, relative "
-                        "to the sun: k, shared by every region and frame of the fit",
+                        "to the sun: k, shared by every region"
+                        + (" and frame of the fit" if curve is None else
+                           ", smooth over the day (terms)"),
               "k": k, "interval95": interval, "determined": bool(np.isfinite(sd_u)),
               "regions": [s.name for s in sessions], "chi2": chi2_best, "dof": dof,
               "interval_scale_s2": s2,
+              "prior": None if prior_sd is None else {
+                  "log_k_sd": prior_sd, "meaning": "log k ~ N(0, sd^2) about the spec's sky, "
+                  "from how measured skies scatter about the models; its penalty (log k / "
+                  "sd)^2 is in the profile"},
               "profile": {"k": [float(np.exp(u)) for u in sorted(profile)],
-                          "chi2": [total(u) for u in sorted(profile)]},
+                          "chi2": [data(u) for u in sorted(profile)]},
+              "terms": curve,
               "warnings": warnings, "time_s": time.perf_counter() - t0}
     for s in sessions:
         s.sky_record = record
     ends = [f"{v:.3f}" if v is not None else "open" for v in interval]
-    log(f"sky: the sky's level fitted with {len(sessions)} region(s): k = {k:.3f} (95%: "
-        f"{ends[0]}-{ends[1]}) times the spec's, against the sun ({record['time_s']:.1f} s)"
+    log(f"sky: the sky's level fitted with {len(sessions)} region(s)"
+        + ("" if prior_sd is None else f" and its prior (sd {prior_sd:g} in log k)")
+        + f": k = {k:.3f} (95%: "
+        f"{ends[0]}-{ends[1]}) times the spec's, against the sun"
+        + ("" if curve is None else f", changing over the day as {terms} terms: k = "
+           + ", ".join(f"{v[0]:.2f}" for v in curve["k_by_frame"].values()) + " by frame")
+        + f" ({record['time_s']:.1f} s)"
         + "".join(f"\n  warning: {w}" for w in warnings))
     return record

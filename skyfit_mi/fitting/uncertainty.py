@@ -123,6 +123,20 @@ def widen(value, interval, extra, lower, upper):
             float(min(upper, value + np.hypot(max(hi - value, 0.0), extra))))
 
 
+def widen_relative(value, interval, extra, lower, upper):
+    """(lo, hi) with a relative error ``extra`` (a standard deviation of log value times z,
+    such as a scale common to every reflectance) added in quadrature to each side's log
+    half-width, clipped to the bounds: a scale's error is a factor, so its interval is
+    lopsided (e^-x, e^x), not additive; a side at or below zero is left."""
+    lo, hi = interval
+    if value <= 0 or extra <= 0:
+        return float(lo), float(hi)
+    down = np.log(value / lo) if lo > 0 else np.inf
+    up = np.log(hi / value) if hi > value else 0.0
+    return (float(max(lower, value * np.exp(-np.hypot(down, extra)))),
+            float(min(upper, value * np.exp(np.hypot(up, extra)))))
+
+
 def calibration_sd(doc, names, theta):
     """The standard error, per parameter of ``names`` at ``theta`` (n,) or (G, n), that a
     photographed sequence's calibration gives a fit: the exposure found from patches of known

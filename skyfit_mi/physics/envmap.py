@@ -47,6 +47,7 @@ import numpy as np
 
 from ..conventions import angles_from_direction, direction_from_angles
 from ..errors import SkyfitError, check_choice, check_range
+from .colour import SRGB_LUMINANCE
 from .sun import SUN_SOLID_ANGLE
 
 #: The map projections :func:`envmap_sky` reads.
@@ -56,6 +57,10 @@ PROJECTIONS = ("latlong", "fisheye")
 MAX_ROWS = 256
 #: Sub-samples per cell side at most when a map is averaged onto the table.
 MAX_SUPERSAMPLE = 8
+#: The sun's zenith [degrees] at most where its direct normal irradiance is found from the
+#: global horizontal (:func:`direct_normal_from_global`): nearer the horizon 1 / cos theta_s
+#: magnifies the pyranometer's error beyond use.
+MAX_ZENITH_FROM_GLOBAL_DEG = 89.0
 #: Table rows resampled at once (bounds the memory :func:`resample` takes).
 RESAMPLE_BLOCK = 16
 
@@ -210,9 +215,31 @@ def latlong_table(image, projection, north_rotation_deg=0.0, scale=1.0, rows=Non
     return (table * np.float32(scale)).astype(np.float32), invalid
 
 
+def direct_normal_from_global(ghi, diffuse_horizontal, sun_zenith_deg):
+    """Direct normal irradiance (GHI - DHI) / cos theta_s [W m^-2] (module docstring).
+
+    Parameters
+    ----------
+    ghi : float
+        Measured global horizontal irradiance [W m^-2].
+    diffuse_horizontal : float
+        The sky's own diffuse horizontal irradiance (the map's) [W m^-2].
+    sun_zenith_deg : float
+        Solar zenith at the GHI's time [degrees], below 90.
+    """
+    check_range("global horizontal irradiance", ghi, 0.0, 2000.0, "W m^-2")
+    check_range("sun zenith", sun_zenith_deg, 0.0, MAX_ZENITH_FROM_GLOBAL_DEG, "degrees")
+    if ghi < diffuse_horizontal:
+        raise SkyfitError(f"the measured GHI ({ghi:.4g} W m^-2) is below the measured sky's own "
+                          f"diffuse horizontal irradiance ({diffuse_horizontal:.4g} W m^-2): the "
+                          "sun was hidden, or the two are on different scales or times; give "
+                          "the direct normal irradiance measured, or check the efficacy.")
+    return float((ghi - diffuse_horizontal) / np.cos(np.radians(sun_zenith_deg)))
+
+
 def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=None,
-               direct_normal=None, sun_mask_deg=None, ground_albedo=0.0, sun_solid_angle=None,
-               info=None):
+               direct_normal=None, global_horizontal=None, sun_mask_deg=None, ground_albedo=0.0,
+               sun_solid_angle=None, info=None):
     """A :class:`~skyfit_mi.physics.sky.Sky` lit by a world-frame lat-long ``table``
     (:func:`latlong_table`) [W m^-2 sr^-1], with the sun given apart from the map.
 
@@ -240,6 +267,11 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=Non
         Measured diffuse horizontal irradiance [W m^-2]: the map (after the mask) is scaled so
         that its luminance-weighted horizontal irradiance equals it, a photograph's
         calibration (:meth:`~skyfit_mi.physics.sky.Sky.scaled`).
+    global_horizontal : float, optional
+        Measured global horizontal irradiance [W m^-2] (a pyranometer beside the fisheye),
+        instead of ``direct_normal``: the sun takes what the map's own horizontal irradiance
+        (luminance-weighted, after the mask and ``diffuse_horizontal``) leaves of it, (GHI -
+        E_map) / cos theta_s (:func:`direct_normal_from_global`).
     info : dict, optional
         Recorded in the Sky's ``info`` (e.g. the map's file and projection).
     """
@@ -259,6 +291,20 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=Non
     if diffuse_horizontal is not None:
         info["diffuse_horizontal_W_m2"] = float(diffuse_horizontal)
         sky = sky.scaled(diffuse_horizontal=diffuse_horizontal)
+    if global_horizontal is not None:
+        if direct_normal is not None:
+            raise SkyfitError("give the sun's direct normal irradiance or the global horizontal "
+                              "irradiance it is found from, not both.")
+        info["global_horizontal_W_m2"] = float(global_horizontal)
+        if sun_zenith_deg <= MAX_ZENITH_FROM_GLOBAL_DEG:
+            dni = direct_normal_from_global(
+                global_horizontal, float(sky.sky_horizontal_irradiance() @ SRGB_LUMINANCE),
+                sun_zenith_deg)
+            info["direct_normal_from_global_W_m2"] = dni
+            sky = sky.scaled(direct_normal=dni)
+        else:
+            info["note"] = ("sun within 1 degree of the horizon: its direct light is not found "
+                            "from the global irradiance, no solar disc")
     if direct_normal is not None:
         info["direct_normal_W_m2"] = float(direct_normal)
         if sun_zenith_deg < 90.0:

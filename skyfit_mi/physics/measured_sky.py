@@ -70,7 +70,7 @@ from ..conventions import angles_from_direction, direction_from_angles
 from ..errors import SkyfitError, check_range
 from . import cie_general
 from .colour import SRGB_LUMINANCE, XYZ_TO_SRGB
-from .envmap import envmap_sky, resample
+from .envmap import direct_normal_from_global, envmap_sky, resample
 
 #: RBF kernel of the interpolated fields (scipy.interpolate.RBFInterpolator's name).
 KERNEL = "linear"
@@ -314,28 +314,6 @@ def sky_table(sky, efficacy, rows=ROWS, supersample=SUPERSAMPLE):
     check_range("envmap rows", rows, 2, 4096)
     return resample(lambda theta, phi: sky.radiance(direction_from_angles(theta, phi), efficacy),
                     int(rows), 0.0, int(supersample))
-
-
-def direct_normal_from_global(ghi, diffuse_horizontal, sun_zenith_deg):
-    """Direct normal irradiance (GHI - DHI) / cos theta_s [W m^-2] (module docstring).
-
-    Parameters
-    ----------
-    ghi : float
-        Measured global horizontal irradiance [W m^-2].
-    diffuse_horizontal : float
-        The sky's own diffuse horizontal irradiance (the map's) [W m^-2].
-    sun_zenith_deg : float
-        Solar zenith at the GHI's time [degrees], below 90.
-    """
-    check_range("global horizontal irradiance", ghi, 0.0, 2000.0, "W m^-2")
-    check_range("sun zenith", sun_zenith_deg, 0.0, 89.0, "degrees")
-    if ghi < diffuse_horizontal:
-        raise SkyfitError(f"the measured GHI ({ghi:.4g} W m^-2) is below the measured sky's own "
-                          f"diffuse horizontal irradiance ({diffuse_horizontal:.4g} W m^-2): the "
-                          "sun was hidden, or the two are on different scales or times; give "
-                          "the direct normal irradiance measured, or check the efficacy.")
-    return float((ghi - diffuse_horizontal) / np.cos(np.radians(sun_zenith_deg)))
 
 
 def measured_envmap(sky, efficacy, ghi, sun_zenith_deg, sun_azimuth_deg, *,

@@ -47,6 +47,22 @@ KITTLER_MIN_ZENITH_DEG = 10.0
 
 _PATTERNS = ("clear", "overcast", "uniform", "intermediate", "perez")
 
+# What a fit may assume of a spec's light against the real one (skyfit_mi/fitting/sky_fit.py)
+#: The prior's standard deviation of log k, the sky's level against the sun's about the spec's
+#: (``fit --sky prior``): on the shared measured clear day the CIE clear sky holds 1.2-1.3 times
+#: the scans' diffuse light and Perez from Erbs's split of the measured GHI 1.49-1.78 times
+#: (docs/BENCHMARKS.md, "Measured light", "Perez from irradiance"); 0.35 puts 1.8 at 1.7 sd.
+SKY_LEVEL_SD = 0.35
+#: The prior's standard deviation of the log of the sun's level when the spec models the sun
+#: (thesis eq. 4.7 with a fixed extinction): on the shared clear day its direct light is 13-20%
+#: under the measured (BENCHMARKS, "Measured light"), and clear-sky direct normal irradiance
+#: spans about +-20% over common turbidities (Linke 2-6); a measured DNI is known to about
+#: 0.03 (a first-class pyrheliometer), given as ``--sun-sd``.
+SUN_LEVEL_SD = 0.2
+#: How a fit takes the sky (``fit --sky``): the spec's as it is, its level fitted, or fitted
+#: with its prior.
+SKY_CHOICES = ("spec", "fit", "prior")
+
 
 # --------------------------------------------------------------------------
 # The angular patterns (shared, term by term, with the Mitsuba emitter)
@@ -367,6 +383,15 @@ class Sky:
         sun = replace(self, **{p: np.zeros(3) for p in _PATTERNS}, envmap=None,
                       ground=np.zeros(3))
         return sun, replace(self, sun_radiance=np.zeros(3))
+
+    def sky_scaled(self, k):
+        """A copy whose light other than the sun's disc (the patterns, the map and the ground:
+        :meth:`split`'s second part) is ``k`` times this one's: the sky at a fitted level
+        against the sun (``fit --sky fit``)."""
+        check_range("sky scale", k, 0.0, 1e3, "(relative)")
+        return replace(self, **{p: getattr(self, p) * k for p in _PATTERNS},
+                       envmap=None if self.envmap is None else self.envmap * np.float32(k),
+                       ground=self.ground * k)
 
     def scaled_to_illuminance(self, diffuse_horizontal_lux, efficacy):
         """A copy scaled to a measured horizontal diffuse illuminance [lx].

@@ -53,8 +53,11 @@ of the chosen normalisation (:func:`mirror_albedo` its whole reflectance, with
 import numpy as np
 
 from ..errors import SkyfitError, check_choice, check_range
+from .microfacet import LOBES, albedo_nodes, microfacet_lobe, mirror_fraction, split
 
-NORMALISATIONS = ("ward", "duer", "balanced", "radiance")
+#: The specular lobes: Ward's normalisations, then the microfacet lobes of :mod:`.microfacet`
+#: (``<distribution>_<fresnel>``, their alpha the roughness sigma_alpha).
+NORMALISATIONS = ("ward", "duer", "balanced", "radiance") + LOBES
 MODELS = {"raw": ("rho_d", "rho_s", "sigma_alpha"),
           "two": ("rho_s", "sigma_alpha"),
           "achromatic": ("R", "rho_s", "sigma_alpha"),
@@ -201,9 +204,12 @@ def specular_lobe(wi, wo, sigma_alpha, normalisation="ward"):
     """The Ward specular lobe without rho_s [sr^-1]; 0 where either direction is below.
 
     exp(-tan^2 delta / sigma^2) times the normalisation's factor; delta is
-    the angle between the normal and the half vector.
+    the angle between the normal and the half vector.  A microfacet lobe's name (LOBES)
+    gives :func:`~.microfacet.microfacet_lobe` with alpha = sigma_alpha.
     """
     check_choice("Ward normalisation", normalisation, NORMALISATIONS)
+    if normalisation in LOBES:
+        return microfacet_lobe(wi, wo, max(sigma_alpha, SIGMA_MIRROR), normalisation)
     wi, wo = np.asarray(wi, dtype=float), np.asarray(wo, dtype=float)
     ci, co = _cos(wi), _cos(wo)
     up = (ci > 0) & (co > 0)
@@ -245,9 +251,12 @@ def mirror_reflectance(cos_theta_i, normalisation="ward"):
 
     The small-sigma integral of each lobe: Ward 1992 gives cos(theta_i) (its
     lobe loses energy toward grazing), Duer and the balanced form give 1 (and so
-    ``'radiance'``, whose Fresnel term :func:`mirror_albedo` adds).
+    ``'radiance'``, whose Fresnel term :func:`mirror_albedo` adds); a microfacet lobe its
+    Fresnel term (:func:`~.microfacet.mirror_fraction`).
     """
     check_choice("Ward normalisation", normalisation, NORMALISATIONS)
+    if normalisation in LOBES:
+        return mirror_fraction(cos_theta_i, normalisation)
     c = np.asarray(cos_theta_i, dtype=float)
     return np.clip(c, 0.0, 1.0) if normalisation == "ward" else np.ones_like(c)
 
@@ -261,6 +270,15 @@ def mirror_albedo(cos_theta, rho_s, normalisation="ward", specularity=None):
     c = np.asarray(cos_theta, dtype=float)
     f = smooth_fresnel(c, rho_s, 0.0, normalisation, specularity)[..., None]
     return (rho_s + f * (1 - rho_s)) * mirror_reflectance(c, normalisation)[..., None]
+
+
+def albedo_nodes_of(normalisation):
+    """The nodes of :func:`lobe_albedo`'s quadrature for the lobe ``normalisation``: Ward's and
+    Beckmann's :func:`lobe_albedo_nodes`, GGX's :func:`~.microfacet.albedo_nodes` (its long
+    tails)."""
+    if normalisation in LOBES and split(normalisation)[0] == "ggx":
+        return albedo_nodes()
+    return lobe_albedo_nodes()
 
 
 def lobe_albedo_nodes(n_u=3, n_phi=6):
@@ -307,7 +325,7 @@ def lobe_albedo(wo, sigma_alpha, normalisation="ward", nodes=None):
     for 0.05 up to 70 degrees from the normal, 5e-4 at 80 degrees; the light cache's control
     variate needs the albedo that precisely.
     """
-    nodes = lobe_albedo_nodes() if nodes is None else nodes
+    nodes = albedo_nodes_of(normalisation) if nodes is None else nodes
     wi, w = lobe_albedo_directions(wo, sigma_alpha, nodes)
     wo_b = np.broadcast_to(np.asarray(wo, dtype=float)[..., None, :], wi.shape)
     lobe = specular_lobe(wi, wo_b, sigma_alpha, normalisation)

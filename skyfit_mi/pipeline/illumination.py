@@ -36,7 +36,8 @@ from .photos import read_photo
 ENVMAP_OPTIONS = {"projection": "projection", "north_rotation_deg": "north_rotation_deg",
                   "scale": "scale", "rows": "rows",
                   "diffuse_horizontal_W_m2": "diffuse_horizontal",
-                  "direct_normal_W_m2": "direct_normal", "sun_mask_deg": "sun_mask_deg",
+                  "direct_normal_W_m2": "direct_normal",
+                  "global_horizontal_W_m2": "global_horizontal", "sun_mask_deg": "sun_mask_deg",
                   "ground_albedo": "ground_albedo", "sun_solid_angle_sr": "sun_solid_angle"}
 #: The options that give the table (the rest light it).
 _TABLE_OPTIONS = ("projection", "north_rotation_deg", "scale", "rows")

@@ -80,8 +80,8 @@ _ALLOWED_WITH = {"cie_general": _CIE_GENERAL_KEYS | {
                      "ground_albedo", "diffuse_horizontal_W_m2", "direct_normal_W_m2",
                      "diffuse_horizontal_lux", "irradiance_file"},
                  "envmap": _ENVMAP_KEYS | {"type", "time", "diffuse_horizontal_W_m2",
-                                          "direct_normal_W_m2", "ground_albedo",
-                                          "irradiance_file"},
+                                          "direct_normal_W_m2", "global_horizontal_W_m2",
+                                          "ground_albedo", "irradiance_file"},
                  "directional": _DIRECTIONAL_KEYS | {"type", "time"}}
 #: [sky] keys a measured series (``irradiance_file``) fills per frame, by the series' column.
 _SERIES_KEYS = {"ghi": "global_horizontal_W_m2", "dhi": "diffuse_horizontal_W_m2",
@@ -532,10 +532,15 @@ def _sky_entries(sec, times, tz):
         if "phi" in e:
             _num("sky", "phi", e["phi"], 0, 1)
         perez_only = sorted({"global_horizontal_W_m2", "decomposition", "cct"} & set(e)
-                            - ({"cct"} if e["type"] == "cie_general" else set()))
+                            - ({"cct"} if e["type"] == "cie_general" else set())
+                            - ({"global_horizontal_W_m2"} if e["type"] == "envmap" else set()))
         if perez_only and e["type"] != "perez":
             raise SpecError(f"[sky] {', '.join(perez_only)} belong to a Perez sky (type = "
                             f"'perez'), not to a {e['type']} one.")
+        if e["type"] == "envmap" and {"global_horizontal_W_m2", "direct_normal_W_m2"} <= set(e):
+            raise SpecError("[sky] an envmap's sun takes direct_normal_W_m2 or the "
+                            "global_horizontal_W_m2 it is found from (with the map's own "
+                            "diffuse light), not both; drop one.")
         _check_light_keys(e)
     return out
 
@@ -608,11 +613,16 @@ def _with_series(entries, times, tz, base_dir):
                 values = irradiance_at(series[path], [t], path)[0]
             except SkyfitError as exc:
                 raise SpecError(f"[sky] irradiance_file: {exc}") from None
-            if e["type"] != "perez" and not {"dhi", "dni"} <= set(values):
+            ghi_alone = e["type"] == "envmap" and "ghi" in values and "dni" not in values
+            if e["type"] not in ("perez", "envmap") and not {"dhi", "dni"} <= set(values) \
+                    or e["type"] == "envmap" and not ghi_alone and "dni" not in values:
                 raise SpecError(f"[sky] irradiance_file {e['irradiance_file']!r} gives "
                                 f"{', '.join(values)}; a {e['type']} sky is scaled by dhi and "
-                                "dni, so give both, or use type = 'perez' (ghi alone is split).")
-            if e["type"] != "perez":
+                                "dni, so give both"
+                                + (" (or ghi: the sun takes what the map leaves of it)"
+                                   if e["type"] == "envmap" else "")
+                                + ", or use type = 'perez' (ghi alone is split).")
+            if e["type"] != "perez" and not ghi_alone:
                 values.pop("ghi", None)
             e = {**e, **{_SERIES_KEYS[k]: v for k, v in values.items()}}
         out.append(e)
@@ -638,7 +648,8 @@ def _light(e, zenith, azimuth, t, index, base_dir):
                         "'sky_{time:%H%M}.exr'.") from None
     rec = {"file": name, **{k: e[k] for k in ("projection", "north_rotation_deg", "scale", "rows",
                                               "sun_mask_deg", "diffuse_horizontal_W_m2",
-                                              "direct_normal_W_m2", "ground_albedo") if k in e}}
+                                              "direct_normal_W_m2", "global_horizontal_W_m2",
+                                              "ground_albedo") if k in e}}
     return envmap_from_record(rec, base_dir, zenith, azimuth)
 
 

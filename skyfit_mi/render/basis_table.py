@@ -446,7 +446,11 @@ def mixed(a, b, k):
     """The table of the light a + k b, from the tables ``a`` and ``b`` of two parts of one
     light (:meth:`~skyfit_mi.physics.sky.Sky.split`) traced at the same points in the same
     blocks with independent samples: every basis is linear in the light, and the positions'
-    spreads of independent traces add (k^2 for the scaled part)."""
+    spreads of independent traces add (k^2 for the scaled part).  ``k``: one factor, or one
+    per frame of the tables (T,)."""
+    k = np.asarray(k, dtype=np.float32)
+    per_frame = k.ndim == 1
+    kt = k[:, None] if per_frame else k                # against (..., T, 3)
     coef = []
     for sa, sb in zip(a.coef, b.coef):
         blocks = []
@@ -455,11 +459,11 @@ def mixed(a, b, k):
                 raise ValueError("the two parts' tables were traced in different blocks")
             c = np.zeros((2, max(ca.shape[1], cb.shape[1])) + ca.shape[2:], np.float32)
             c[:, :ca.shape[1]] += ca
-            c[:, :cb.shape[1]] += np.float32(k) * cb
+            c[:, :cb.shape[1]] += (kt[f] if per_frame else kt) * cb
             blocks.append((r, f, c))
         coef.append(Series(blocks))
-    k32, k2 = np.float32(k), np.float32(k * k)
-    return BasisTable(a.D + k32 * b.D, a.G0 + k32 * b.G0, a.G1 + k32 * b.G1, coef,
+    k2 = kt * kt
+    return BasisTable(a.D + kt * b.D, a.G0 + kt * b.G0, a.G1 + kt * b.G1, coef,
                       a.VDD + k2 * b.VDD, a.VDG + k2 * b.VDG, a.VGG + k2 * b.VGG,
                       a.hit & b.hit, a.sun_half_cos, a.normalisation)
 

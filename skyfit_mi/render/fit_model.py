@@ -15,7 +15,7 @@ import numpy as np
 
 from ..errors import SkyfitError, check_choice
 from ..physics.ward import (METAL_THRESHOLD, NORMALISATIONS, PLASTIC_MAX, SIGMA_MIRROR,
-                            colour_rule_twin, lobe_albedo_nodes, raw_parameters)
+                            albedo_nodes_of, colour_rule_twin, raw_parameters)
 from .light_cache import (CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
                           SIGMA_TABLE, control_weight)
 from .daylight import jit_array, update_sky
@@ -165,8 +165,9 @@ class WardModel:
     ----------
     cache : LightCache
     model : {'two', 'achromatic', 'colour'}
-    normalisation : {'ward', 'duer', 'balanced'}
-        ('radiance' is refused: :func:`check_fit_normalisation`)
+    normalisation : {'ward', 'duer', 'balanced'} or a microfacet lobe
+        (:data:`~skyfit_mi.physics.microfacet.LOBES`; 'radiance' is refused:
+        :func:`check_fit_normalisation`)
     """
 
     def __init__(self, cache, model, normalisation="ward"):
@@ -207,7 +208,7 @@ class WardModel:
         self.diffuse_sky = _dr_array(mi.Color3f, cache.diffuse_sky / S, 3)
         self.lobe_sky = [_dr_array(mi.Color3f, cache.lobe_sky[:, :, :, m] / S, 3)
                          for m in range(cache.lobe_sky.shape[3])]
-        a, b, c = lobe_albedo_nodes()
+        a, b, c = albedo_nodes_of(normalisation)
         self.J = len(a)
         self.si_q = dr.zeros(mi.SurfaceInteraction3f, P * T * S * self.J)
         self.si_q.wi = _dr_array(mi.Vector3f, np.repeat(wo_m, self.J, axis=2), 3)

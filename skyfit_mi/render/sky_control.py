@@ -44,6 +44,9 @@ CHEBYSHEV_NODES = 16
 #: circumsolar peak, the horizon); against brute force (tests/test_sky_control.py) the
 #: integral is exact to 1e-4 up to sigma 0.1, 3e-4 at 0.2 and 1e-3 at 0.5.
 LOBE_RESOLUTION = ((0.12, 16, 6), (0.25, 32, 8), (float("inf"), 64, 12))
+#: The same for GGX lobes, whose long tails see the whole sky (the circumsolar peak from any
+#: view): exact to 1.5e-4 up to sigma 0.12 and 1e-4 at 0.3 (16 rays of 6 nodes: 7e-3).
+GGX_RESOLUTION = ((0.12, 32, 24), (float("inf"), 64, 24))
 #: The diffuse quadrature's rays of azimuth and Gauss-Legendre nodes per piece: exact to 2e-4.
 DIFFUSE_AZIMUTHS, DIFFUSE_POLAR = 64, 24
 #: Where the lobe's rays end: tan delta = TRUNCATION sigma, exp(-TRUNCATION^2) of the peak.
@@ -93,12 +96,14 @@ def _pieces(dr, piece, y, wy, mid, end, start=0.0):
     return lo + (hi - lo) * y, (hi - lo) * wy
 
 
-def lobe_resolution(sigma):
-    """(rays, nodes per piece) of the lobe quadrature at roughness ``sigma`` (LOBE_RESOLUTION)."""
-    return next((n, k) for top, n, k in LOBE_RESOLUTION if sigma <= top)
+def lobe_resolution(sigma, distribution="beckmann"):
+    """(rays, nodes per piece) of the lobe quadrature at roughness ``sigma`` (LOBE_RESOLUTION,
+    or GGX_RESOLUTION for the ``distribution`` 'ggx')."""
+    table = GGX_RESOLUTION if distribution == "ggx" else LOBE_RESOLUTION
+    return next((n, k) for top, n, k in table if sigma <= top)
 
 
-def lobe_directions(wo, up, sigma, n_rays, n_radial, tables=None):
+def lobe_directions(wo, up, sigma, n_rays, n_radial, tables=None, distribution="beckmann"):
     """Light directions and solid-angle weights of the lobe quadrature.
 
     Parameters
@@ -108,12 +113,16 @@ def lobe_directions(wo, up, sigma, n_rays, n_radial, tables=None):
     sigma : mi.Float (1)  the lobe's roughness
     n_rays, n_radial : its resolution (:func:`lobe_resolution`)
     tables : that resolution's :func:`_table_arrays` (made here if None)
+    distribution : 'beckmann' (Ward's lobes and Beckmann's) or 'ggx': the radial variable
 
     Returns wi (Q J) local light directions, weights (Q J) [sr], each node's point index q and
     J, nodes per point:
     integral g(wi) dwi ~ sum over each point's J nodes of g(wi) weight, for g with the
     lobe's e^(-tan^2 delta / sigma^2) (Walter's change of variables to the half vector h,
-    dwi = 4 (wo.h) cos^3 delta d(slope area)).
+    dwi = 4 (wo.h) cos^3 delta d(slope area)); for GGX's lobe the radial variable is
+    tau = sigma^2 / (sigma^2 + tan^2 delta), in which GGX's D cos^4 delta times the slope area is
+    constant, and the rays end at the surface's horizon only (its tails hold 1/17 of the lobe
+    beyond 4 sigma).
     """
     import drjit as dr
     import mitsuba as mi
@@ -124,9 +133,11 @@ def lobe_directions(wo, up, sigma, n_rays, n_radial, tables=None):
     wo, up = dr.gather(mi.Vector3f, wo, q), dr.gather(mi.Vector3f, up, q)
     s, c = dr.sincos(phi)
     ko, ku, uo = wo.x * c + wo.y * s, up.x * c + up.y * s, dr.dot(up, wo)
+    ggx = distribution == "ggx"
     # the surface's horizon along the ray (wi.z = 0), and the lobe's truncation
-    end = dr.minimum((ko + dr.sqrt(ko * ko + wo.z * wo.z)) / dr.maximum(wo.z, 1e-12),
-                     TRUNCATION * sigma)
+    end = (ko + dr.sqrt(ko * ko + wo.z * wo.z)) / dr.maximum(wo.z, 1e-12)
+    if not ggx:
+        end = dr.minimum(end, TRUNCATION * sigma)
     # the world's horizon: up.wi = 0 where A r^2 + B r + C = 0
     A, B, C = 2.0 * ko * ku - uo, 2.0 * (wo.z * ku + up.z * ko), 2.0 * wo.z * up.z - uo
     disc = B * B - 4.0 * A * C
@@ -136,18 +147,26 @@ def lobe_directions(wo, up, sigma, n_rays, n_radial, tables=None):
     def inside(r):
         return dr.select((disc >= 0) & dr.isfinite(r) & (r > 0) & (r < end), r, end)
     cross = dr.minimum(inside(r1), inside(r2))        # a second crossing is rare: left inside
-    # nodes in tau = exp(-r^2 / sigma^2), in which the lobe is constant: r dr = sigma^2 dtau /
-    # (2 tau)
     s2 = sigma * sigma
-
-    def tau(r):
-        return dr.exp(-r * r / s2)
-    t, wt = _pieces(dr, piece, y, wy, tau(cross), tau(end), start=1.0)
-    r = dr.sqrt(dr.maximum(-dr.log(t), 0.0) * s2)
+    if ggx:
+        # tau = sigma^2 / (sigma^2 + r^2): r dr = sigma^2 dtau / (2 tau^2)
+        def tau(r):
+            return s2 / (s2 + r * r)
+        t, wt = _pieces(dr, piece, y, wy, tau(cross), tau(end), start=1.0)
+        r = sigma * dr.safe_sqrt((1.0 - t) / t)
+        jac = s2 / (2.0 * t * t)
+    else:
+        # nodes in tau = exp(-r^2 / sigma^2), in which the lobe is constant: r dr = sigma^2 dtau
+        # / (2 tau)
+        def tau(r):
+            return dr.exp(-r * r / s2)
+        t, wt = _pieces(dr, piece, y, wy, tau(cross), tau(end), start=1.0)
+        r = dr.sqrt(dr.maximum(-dr.log(t), 0.0) * s2)
+        jac = s2 / (2.0 * t)
     h = dr.normalize(mi.Vector3f(r * c, r * s, 1.0))
     oh = dr.dot(wo, h)
     wi = 2.0 * oh * h - wo
-    area = s2 * dr.abs(wt) / (2.0 * t) * (2.0 * np.pi / n_rays)
+    area = jac * dr.abs(wt) * (2.0 * np.pi / n_rays)
     return wi, 4.0 * oh * h.z * h.z * h.z * area, q, J
 
 
@@ -230,9 +249,10 @@ class _SkyLanes:
 def _lobe_sum(mi, dr, emitter, si, up, sigma, resolution, normalisation, tables=None):
     """I_s of every interaction of ``si`` through the rho_s = 1 lobe of ``normalisation`` at
     roughness ``sigma`` (a Dr.Jit value) and quadrature ``resolution``: (Q) Dr.Jit colours."""
-    from .plugins.ward import lobe      # a plugin: needs the variant set
+    from .plugins.ward import lobe, lobe_distribution      # a plugin: needs the variant set
 
-    wi, w, q, J = lobe_directions(si.wi, up, sigma, *resolution, tables=tables)
+    wi, w, q, J = lobe_directions(si.wi, up, sigma, *resolution, tables=tables,
+                                  distribution=lobe_distribution(normalisation))
     f = lobe(dr.gather(mi.Vector3f, si.wi, q), wi, sigma, normalisation) * wi.z
     return _sky_sum(mi, dr, emitter, si, wi, w, q, J, f)
 
@@ -258,8 +278,11 @@ def lobe_integral(emitter, si, up, sigma, normalisation="ward"):
     import drjit as dr
     import mitsuba as mi
 
+    from .plugins.ward import lobe_distribution      # a plugin: needs the variant set
+
     return to_numpy(_lobe_sum(mi, dr, emitter, si, up, opaque_value(mi.Float, sigma),
-                              lobe_resolution(sigma), normalisation))
+                              lobe_resolution(sigma, lobe_distribution(normalisation)),
+                              normalisation))
 
 
 def quadrature(lo, hi, normalisation):
@@ -268,6 +291,9 @@ def quadrature(lo, hi, normalisation):
     roughness (opaque: one kernel for all) and resolution; made once for every frame."""
     import mitsuba as mi
 
+    from .plugins.ward import lobe_distribution      # a plugin: needs the variant set
+
+    distribution = lobe_distribution(normalisation)
     tables = {}
 
     def table(res, smoothstep):
@@ -275,8 +301,10 @@ def quadrature(lo, hi, normalisation):
         if key not in tables:
             tables[key] = _table_arrays(mi, *res, smoothstep)
         return key
-    nodes = [{"sigma": opaque_value(mi.Float, sigma), "resolution": lobe_resolution(sigma),
-              "table": table(lobe_resolution(sigma), True)} for sigma in chebyshev_nodes(lo, hi)]
+    nodes = [{"sigma": opaque_value(mi.Float, sigma),
+              "resolution": lobe_resolution(sigma, distribution),
+              "table": table(lobe_resolution(sigma, distribution), True)}
+             for sigma in chebyshev_nodes(lo, hi)]
     diffuse = table((DIFFUSE_AZIMUTHS, DIFFUSE_POLAR), False)
     return {"tables": tables, "diffuse": diffuse, "nodes": nodes, "normalisation": normalisation}
 

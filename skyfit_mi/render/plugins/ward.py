@@ -17,13 +17,19 @@ Parameters (reflectances unitless, sigma_alpha the rms slope):
 name               type       range         default        notes
 =================  =========  ============  =============  ===============================================
 ``model``          string     see below     ``raw``        which parameters the plugin takes
-``normalisation``  string     see below     ``ward``       ``ward`` (eq. 3.19), ``duer``, ``balanced``, ``radiance``
+``normalisation``  string     see below     ``ward``       ``ward`` (eq. 3.19), ``duer``, ``balanced``, ``radiance``,
+                                                           or a microfacet lobe (``ggx_plastic``...)
 ``rho_d``          rgb/float  [0, 1]        0.5            ``raw`` only; rho_d + rho_s <= 1
 ``rho_s``          rgb/float  [0, 1]        0.05           rgb in ``raw``, float in the other models
 ``sigma_alpha``    float      [0, 1]        0.1            0 = mirror
 ``R``              float      [0, 1]        1.0            ``achromatic`` only (eq. 3.20)
 ``C``              rgb        [0, 1]        (1, 1, 1)      ``colour`` only; plastic/metal rule at rho_s 0.5
 =================  =========  ============  =============  ===============================================
+
+A microfacet ``normalisation`` (:mod:`skyfit_mi.physics.microfacet`: ``beckmann_plastic``,
+``beckmann_metal``, ``ggx_plastic``, ``ggx_metal``) replaces Ward's lobe by F D G1 G1 / (4 cos_i
+cos_o) with alpha = sigma_alpha, sampled by its own distribution of half vectors; its ideal
+mirror reflects rho_s F(cos_o).
 
 Models: ``raw`` (rho_d, rho_s, sigma_alpha), ``two`` (rho_s, sigma_alpha; rho_d = 1 - rho_s),
 ``achromatic`` (R, rho_s, sigma_alpha), ``colour`` (C, rho_s, sigma_alpha).  ``traverse``
@@ -39,6 +45,7 @@ import numpy as np
 from ...errors import check_choice
 from .properties import property_values
 from ...physics.colour import SRGB_LUMINANCE
+from ...physics.microfacet import ETA_PLASTIC, LOBES, split
 from ...physics.ward import (METAL_THRESHOLD, MODELS, NORMALISATIONS, RADIANCE_FRESNEL_K,
                               RADIANCE_FRESNEL_MIN, SIGMA_MAX, SIGMA_MIRROR, raw_parameters)
 
@@ -105,6 +112,8 @@ class WardBSDF(mi.BSDF):
         return c * (1.0 - ps), spec, sigma
 
     def _mirror_fraction(self, cos_i):
+        if self.normalisation in LOBES:
+            return _fresnel(cos_i, split(self.normalisation)[1])
         return dr.clip(cos_i, 0.0, 1.0) if self.normalisation == "ward" else mi.Float(1.0)
 
     def _fresnel(self, cos, rho_s, sigma):
@@ -160,7 +169,8 @@ class WardBSDF(mi.BSDF):
         if en_d:
             pdf += (1.0 - p_spec) * co * dr.inv_pi
         if en_g:
-            pdf += dr.select(mirror, 0.0, p_spec * glossy_pdf(wi, wo, sigma))
+            pdf += dr.select(mirror, 0.0, p_spec * glossy_pdf(wi, wo, sigma,
+                                                              lobe_distribution(self.normalisation)))
         valid = mi.Bool(active) & (ci > 0) & (co > 0)
         return dr.select(valid, pdf, 0.0)
 
@@ -181,7 +191,7 @@ class WardBSDF(mi.BSDF):
         if not en_delta:
             pick_spec &= ~mirror
 
-        wo_glossy = sample_glossy(wi, sample2, sigma)
+        wo_glossy = sample_glossy(wi, sample2, sigma, lobe_distribution(self.normalisation))
         wo_mirror = mi.reflect(wi)
         wo_diffuse = mi.warp.square_to_cosine_hemisphere(sample2)
 
@@ -218,6 +228,9 @@ def lobe(wi, wo, sigma, normalisation):
     """Specular lobe value (no rho_s) [sr^-1] at roughness ``sigma`` (any Dr.Jit value), as
     skyfit_mi.physics.ward.specular_lobe; 0 below either horizon and for a mirror."""
     ci, co = mi.Frame3f.cos_theta(wi), mi.Frame3f.cos_theta(wo)
+    valid = (ci > 0) & (co > 0) & (sigma > SIGMA_MIRROR)
+    if normalisation in LOBES:
+        return dr.select(valid, _microfacet(wi, wo, sigma, normalisation), 0.0)
     hu = wi + wo
     hz = hu.z
     hh = dr.squared_norm(hu)
@@ -232,24 +245,82 @@ def lobe(wi, wo, sigma, normalisation):
         f = e / (4.0 * dr.pi * s2 * ci * co)
     else:
         f = e * hh / (dr.pi * s2 * dr.square(hz2))
-    return dr.select((ci > 0) & (co > 0) & (sigma > SIGMA_MIRROR), f, 0.0)
+    return dr.select(valid, f, 0.0)
 
 
-def glossy_pdf(wi, wo, sigma):
-    """Walter's half-vector density mapped to wo [sr^-1] (:func:`sample_glossy`'s)."""
+# ---- microfacet lobes (skyfit_mi.physics.microfacet, Mitsuba's MicrofacetDistribution) ----
+def lobe_distribution(normalisation):
+    """The half vectors' distribution of the lobe ``normalisation`` (its sampling and its sky
+    quadrature's): 'ggx' for GGX lobes, else 'beckmann' (Ward's lobes: Walter's sampling)."""
+    return split(normalisation)[0] if normalisation in LOBES else "beckmann"
+
+
+def _fresnel(cos, kind):
+    """F at cosine ``cos`` for the lobe's Fresnel ``kind`` (microfacet.fresnel)."""
+    if kind != "plastic":
+        return mi.Float(1.0)
+    c = dr.clip(dr.abs(cos), 0.0, 1.0)
+    eta = ETA_PLASTIC
+    ct = dr.safe_sqrt(1.0 - (1.0 - c * c) / (eta * eta))
+    rs = (c - eta * ct) / (c + eta * ct)
+    rp = (eta * c - ct) / (eta * c + ct)
+    return 0.5 * (rs * rs + rp * rp)
+
+
+def _tan2(x, y, z):
+    """tan^2 of a direction (x, y, z) from its tangential part (no cancellation)."""
+    return (dr.square(x) + dr.square(y)) / dr.maximum(dr.square(z), 1e-20)
+
+
+def _smith_g1(v, alpha, kind):
+    """Smith's G1 of the local direction ``v`` (microfacet.smith_g1)."""
+    t2 = dr.square(alpha) * _tan2(v.x, v.y, v.z)
+    if kind == "beckmann":
+        a = dr.rsqrt(dr.maximum(t2, 1e-30))
+        g = dr.select(a >= 1.6, 1.0, (3.535 * a + 2.181 * a * a)
+                      / (1.0 + 2.276 * a + 2.577 * a * a))
+    else:
+        g = 2.0 / (1.0 + dr.sqrt(1.0 + t2))
+    return dr.select(v.z > 0, g, 0.0)
+
+
+def _ndf(h, alpha, kind):
+    """D(h) [sr^-1] of unit half vectors ``h`` (microfacet.distribution)."""
+    a2 = dr.square(dr.maximum(alpha, SIGMA_MIRROR))
+    t2 = _tan2(h.x, h.y, h.z)
+    c4 = dr.square(dr.square(h.z))
+    if kind == "beckmann":
+        return dr.exp(-t2 / a2) / (dr.pi * a2 * c4)
+    return a2 / (dr.pi * c4 * dr.square(a2 + t2))
+
+
+def _microfacet(wi, wo, alpha, normalisation):
+    """F(wi.h) D(h) G1(wi) G1(wo) / (4 cos_i cos_o) (microfacet.microfacet_lobe)."""
+    dist, kind = split(normalisation)
+    h = dr.normalize(wi + wo)
+    f = _fresnel(dr.dot(wi, h), kind) * _ndf(h, alpha, dist) * _smith_g1(wi, alpha, dist) \
+        * _smith_g1(wo, alpha, dist)
+    return f / (4.0 * dr.maximum(mi.Frame3f.cos_theta(wi) * mi.Frame3f.cos_theta(wo), 1e-20))
+
+
+def glossy_pdf(wi, wo, sigma, distribution="beckmann"):
+    """Walter's half-vector density D(h) cos(theta_h) of ``distribution`` mapped to wo
+    [sr^-1] (:func:`sample_glossy`'s)."""
     h = dr.normalize(wi + wo)
     cz = dr.maximum(h.z, 1e-6)
-    s2 = dr.square(dr.maximum(sigma, SIGMA_MIRROR))
-    tan2 = (dr.square(h.x) + dr.square(h.y)) / (cz * cz)
-    d_h = dr.exp(-tan2 / s2) / (dr.pi * s2 * cz * cz * cz)
+    d_h = _ndf(mi.Vector3f(h.x, h.y, cz), sigma, distribution) * cz
     return d_h / (4.0 * dr.maximum(dr.abs(dr.dot(wo, h)), 1e-6))
 
 
-def sample_glossy(wi, sample2, sigma):
-    """A direction reflected about a half vector from Walter's sampling of the lobe:
-    tan^2 delta = -sigma^2 ln(1 - u), phi = 2 pi v."""
+def sample_glossy(wi, sample2, sigma, distribution="beckmann"):
+    """A direction reflected about a half vector from Walter's sampling of D(h) cos(theta_h):
+    Beckmann tan^2 delta = -sigma^2 ln(1 - u), GGX sigma^2 u / (1 - u); phi = 2 pi v."""
     s2 = dr.square(dr.maximum(sigma, SIGMA_MIRROR))
-    tan2 = -s2 * dr.log(dr.maximum(1.0 - sample2.x, 1e-12))
+    if distribution == "ggx":
+        u = dr.minimum(sample2.x, 1.0 - 1e-7)
+        tan2 = s2 * u / (1.0 - u)
+    else:
+        tan2 = -s2 * dr.log(dr.maximum(1.0 - sample2.x, 1e-12))
     cos_h = dr.rsqrt(1.0 + tan2)
     sin_h = dr.safe_sqrt(1.0 - cos_h * cos_h)
     sp, cp = dr.sincos(2.0 * dr.pi * sample2.y)

@@ -1,0 +1,122 @@
+"""Model selection: lobe families and parameter counts ranked by held-out frames.
+
+Every candidate is a lobe (a ``normalisation``: Ward's, Duer's, the balanced one or a microfacet
+lobe of :mod:`~skyfit_mi.physics.microfacet`) with a parameterisation (``two``, ``achromatic``,
+``colour``: 2, 3 or 5 parameters).  The light is traced once per lobe (its table holds the
+lobe's series; the parameterisations share it) and each candidate is judged by K-fold
+cross-validation over frames: the frames split into K interleaved folds (frame t in fold
+t mod K), each fold's chi-square (thesis eq. 6.2) at the global minimum of the other folds'
+frames, summed.  The held-out chi-square rewards what predicts unseen light (the sun's
+other positions), not what follows the noise of the frames fitted; AIC (chi2 + 2 k) and BIC
+(chi2 + k ln n) of the full fit are reported beside it.
+"""
+
+import time
+
+import numpy as np
+
+from ..render.basis_table import TableModel
+from ..render.fit_model import PARAMETERS, bounds
+from .chi2 import LuminanceModel, Problem
+from .methods.global_search import global_search
+
+#: The candidates of ``--model auto``: the thesis's Ward lobe, the balanced one, and the four
+#: microfacet lobes; every parameterisation of each.
+FAMILIES = ("ward", "balanced", "beckmann_plastic", "ggx_plastic", "beckmann_metal",
+            "ggx_metal")
+MODELS = tuple(PARAMETERS)
+#: Folds of the cross-validation over frames.
+FOLDS = 4
+
+
+def _fit(problem, grid_basis):
+    """The global minimum of ``problem`` (theta, chi2), its grid on ``grid_basis``."""
+    lo, hi = bounds(problem.model.model)
+    res = global_search(problem, 0.5 * (lo + hi), lo, hi, profile=False, grid_basis=grid_basis)
+    return np.asarray(res["theta"], dtype=float), float(res["chi2"])
+
+
+def cross_validate(session, model, folds=FOLDS):
+    """One candidate on a traced :class:`~.fit.FitSession` (its table, its lobe): the summed
+    held-out chi-square over ``folds`` interleaved folds of frames, the full fit's chi-square,
+    parameters and degrees of freedom, AIC and BIC."""
+    obs, table = session.obs, session.table
+    wm = TableModel(table, model)
+    wm = LuminanceModel(wm) if obs.luminance else wm
+    grid_basis = session.grid_bases()[0]          # the table's lobes: the same for any model
+    T = table.shape[1]
+    k = min(int(folds), T)
+    held_out, n_held = 0.0, 0
+    for f in range(k):
+        test = (np.arange(T) % k) == f
+        theta, _ = _fit(Problem(obs, wm, valid=table.hit & ~test[None, :]), grid_basis)
+        r = Problem(obs, wm, valid=table.hit & test[None, :]).residuals(theta)
+        held_out += float(r @ r)
+        n_held += r.size
+    full = Problem(obs, wm, valid=table.hit)
+    theta, chi2 = _fit(full, grid_basis)
+    n, p = full.n_data, full.n_params
+    return {"normalisation": table.normalisation, "model": model, "parameters": p,
+            "held_out_chi2": held_out, "held_out_values": n_held,
+            "held_out_chi2_per_value": held_out / max(n_held, 1),
+            "chi2": chi2, "dof": full.dof, "aic": chi2 + 2 * p, "bic": chi2 + p * np.log(n),
+            "theta": dict(zip(PARAMETERS[model], theta.tolist()))}
+
+
+def rank(sessions, models=MODELS, folds=FOLDS, log=print):
+    """Every candidate of the traced ``sessions`` (one per lobe) and parameterisation in
+    ``models``, best first by held-out chi-square; each with its rank and the time it took."""
+    rows = []
+    for s in sessions:
+        for m in models:
+            t0 = time.perf_counter()
+            row = cross_validate(s, m, folds)
+            row["wall_time_s"] = time.perf_counter() - t0
+            rows.append(row)
+            log(f"{s.name}: {row['normalisation']} {m}: held-out chi2 "
+                f"{row['held_out_chi2']:.5g}, AIC {row['aic']:.5g}, BIC {row['bic']:.5g}")
+    rows.sort(key=lambda r: r["held_out_chi2"])
+    for i, r in enumerate(rows):
+        r["rank"] = i + 1
+    return rows
+
+
+def choose(rows):
+    """The chosen candidate of a ranking (best first): the one-standard-error rule, the fewest
+    parameters among those whose held-out chi-square is within sqrt(2 n) of the best (n the
+    held-out values: chi-square's own spread), the best held-out chi-square among those."""
+    best = rows[0]["held_out_chi2"]
+    near = [r for r in rows
+            if r["held_out_chi2"] <= best + np.sqrt(2.0 * max(r["held_out_values"], 1))]
+    return min(near, key=lambda r: (r["parameters"], r["held_out_chi2"]))
+
+
+def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOLDS, seed=0,
+             log=print, **options):
+    """``fit --model auto``: every region's candidates ranked (:func:`rank`; the light traced
+    once per lobe, every region of a lobe together), then the chosen one fitted in full by the
+    global method; yields each region's result dict with its ``model_selection`` (the
+    ranking, the choice, the folds and each lobe's tracing time)."""
+    from .fit import FitSession
+
+    sessions, trace_s = {}, {}
+    for fam in families:
+        t0 = time.perf_counter()
+        sessions[fam] = FitSession.for_regions(manifest_path, regions, model="two",
+                                               normalisation=fam, seed=seed, **options)
+        trace_s[fam] = time.perf_counter() - t0
+    for name, pixels in regions:
+        rows = rank([sessions[fam].pop(name) for fam in families], models, folds, log)
+        pick = choose(rows)
+        log(f"{name}: chose {pick['normalisation']} {pick['model']} (rank {pick['rank']} of "
+            f"{len(rows)} by held-out chi2 over {folds} folds of frames)")
+        s = FitSession(manifest_path, name, pixels, model=pick["model"],
+                       normalisation=pick["normalisation"], seed=seed, **options)
+        out = s.run("global", None, seed, None, log)
+        out["model_selection"] = {
+            "criterion": f"held-out chi2, {folds}-fold over frames (frame t in fold t mod "
+                         f"{folds}); the fewest parameters within sqrt(2 n) of the best",
+            "folds": int(folds), "chosen": {"normalisation": pick["normalisation"],
+                                            "model": pick["model"], "rank": pick["rank"]},
+            "trace_time_s": trace_s, "ranking": rows}
+        yield out

@@ -1,0 +1,141 @@
+"""The microfacet lobe families in the fit: their light cache and table against the Dr.Jit model
+they tabulate, and a day rendered with Mitsuba's own ``roughplastic`` fitted by each family."""
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from skyfit_mi.fitting.chi2 import parse_region
+
+REGION = parse_region("rect:4,4,7,7")          # 16 pixels, all on the disc
+#: The rendered plastic: rho_d = 0.2 and a GGX coat (eta 1.5) of alpha 0.08 at s = 0.8; the
+#: ``two`` model's reading (rho_d = 1 - rho_s).
+TRUTH = {"rho_s": 0.8, "sigma_alpha": 0.08}
+
+
+@pytest.fixture(scope="module")
+def traced(days):
+    """A GGX plastic's light cache on the clean day, the Dr.Jit model on it and its table."""
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.render.basis_table import tabulate
+    from skyfit_mi.render.fit_model import WardModel
+
+    s = FitSession(days["clean"], "disc", REGION, model="two", normalisation="ggx_plastic",
+                   positions=8, directions=128, seed=2, trace=False)
+    cache = s.light_cache()
+    wm = WardModel(cache, "two", "ggx_plastic")
+    return cache, wm, tabulate(cache, wm)
+
+
+@pytest.mark.parametrize("sigma", [0.0, 0.001, 0.0031, 0.011, 0.042, 0.07, 0.31, 0.5])
+def test_a_microfacet_table_equals_the_dr_jit_model(traced, sigma):
+    """The table's Chebyshev series of the GGX lobe hold the Dr.Jit model to float32's
+    rounding, as Ward's do (tests/test_basis_table.py)."""
+    from skyfit_mi.render.basis_table import TableModel
+
+    _, wm, table = traced
+    assert table.normalisation == "ggx_plastic"
+    theta = np.array([0.7, sigma])
+    a, b = wm.radiance(theta), TableModel(table, "two").radiance(theta)
+    assert np.max(np.abs(a - b)) <= 2e-6 * np.max(np.abs(a)), sigma
+
+
+@pytest.mark.parametrize("sigma", [0.01, 0.042, 0.2])
+def test_the_numpy_basis_equals_the_dr_jit_model(traced, sigma):
+    """The NumPy twin (physics.microfacet through ward.specular_lobe and lobe_albedo, the control
+    variate's GGX nodes) and the Dr.Jit model (the plugin) on the same cache."""
+    cache, wm, _ = traced
+    basis = 0.3 * cache.diffuse_basis() + 0.7 * cache.specular_basis(sigma, "ggx_plastic")
+    assert np.allclose(basis, wm.radiance([0.7, sigma]), rtol=1e-4)
+
+
+def _mitsuba_plastic(xml, rho_d, s, alpha):
+    """The scene ``xml`` with the disc's material made of Mitsuba's own BSDFs: a blend of
+    ``diffuse`` and ``roughplastic`` without its diffuse part (GGX, eta 1.5), half each, so
+    f_r = rho_d / pi + s F D G1 G1 / (4 cos_i cos_o)."""
+    root = ET.fromstring(xml)
+    for el in root.iter("bsdf"):
+        if el.get("id") == "disc":
+            for child in list(el):
+                el.remove(child)
+            el.attrib = {"type": "blendbsdf", "id": "disc"}
+            ET.SubElement(el, "float", name="weight", value="0.5")
+            d = ET.SubElement(el, "bsdf", type="diffuse")
+            ET.SubElement(d, "rgb", name="reflectance", value=repr(2 * rho_d))
+            p = ET.SubElement(el, "bsdf", type="roughplastic")
+            for k, v in (("distribution", "ggx"), ("alpha", alpha), ("int_ior", 1.5),
+                         ("ext_ior", 1.0), ("diffuse_reflectance", 0.0),
+                         ("specular_reflectance", 2 * s)):
+                ET.SubElement(p, "string" if isinstance(v, str) else "float", name=k,
+                              value=str(v))
+    return ET.tostring(root, encoding="unicode")
+
+
+@pytest.fixture(scope="module")
+def plastic_day(tmp_path_factory, mi):
+    """The disc day (tests/conftest.py's) rendered with the Mitsuba plastic of TRUTH, 1%
+    noise."""
+    from skyfit_mi.render import scene_xml
+    from skyfit_mi.pipeline.sequence import render_sequence
+    from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
+
+    tmp = tmp_path_factory.mktemp("plastic")
+    raw = thesis_disc_spec("plastic", {"model": "two", **TRUTH}, size=12, noise_percent=1.0,
+                           spp=1024, seed=11, exposure=0.0015)
+    build = scene_xml.build_scene_xml
+
+    def mitsuba_scene(spec):
+        xml, mats, to_world = build(spec)
+        return _mitsuba_plastic(xml, 1 - TRUTH["rho_s"], TRUTH["rho_s"],
+                                TRUTH["sigma_alpha"]), mats, to_world
+    scene_xml.build_scene_xml = mitsuba_scene
+    try:
+        render_sequence(validate_spec(raw, tmp), tmp / "plastic", progress=False,
+                        log=lambda *a: None)
+    finally:
+        scene_xml.build_scene_xml = build
+    return tmp / "plastic"
+
+
+def test_a_mitsuba_plastic_is_fitted_best_by_its_own_family(plastic_day):
+    """GGX plastic fits the day rendered with Mitsuba's roughplastic at chi2/dof near 1, its
+    roughness and reflectance within their intervals; Ward's lobe and Beckmann's cannot."""
+    from skyfit_mi.fitting.fit import fit_region
+
+    r = {n: fit_region(plastic_day, "disc", REGION, normalisation=n, positions=4,
+                       directions=256, log=lambda *a: None)
+         for n in ("ggx_plastic", "beckmann_plastic", "ward")}
+    chi2 = {n: v["chi2_per_dof"] for n, v in r.items()}
+    g = r["ggx_plastic"]
+    for k, v in TRUTH.items():
+        lo, hi = g["intervals"][k]["95"]
+        assert lo <= v <= hi, (k, v, lo, hi, chi2)
+    assert chi2["ggx_plastic"] < 2.0, chi2
+    assert chi2["ggx_plastic"] < 0.5 * min(chi2["beckmann_plastic"], chi2["ward"]), chi2
+
+
+def test_model_auto_ranks_the_true_family_first_and_writes_the_ranking(plastic_day, tmp_path):
+    """``fit --model auto`` on the Mitsuba plastic: GGX plastic ranked first by held-out frames,
+    the two-parameter model chosen (the one-standard-error rule), its fit written with the
+    ranking (JSON and fits.csv), and relight takes the chosen lobe from the JSON."""
+    import csv
+    import json
+
+    from skyfit_mi.cli import main
+
+    out = tmp_path / "auto"
+    main(["fit", str(plastic_day), "--region", "disc=rect:4,4,7,7",
+          "--model", "auto", "--positions", "4", "--directions", "256", "--output", str(out),
+          "--quiet"])
+    r = json.loads((out / "fit_disc.json").read_text())
+    sel = r["model_selection"]
+    assert sel["ranking"][0]["normalisation"] == "ggx_plastic"
+    assert sel["chosen"] == {"normalisation": "ggx_plastic", "model": "two",
+                             "rank": sel["chosen"]["rank"]}
+    assert (r["model"], r["normalisation"]) == ("two", "ggx_plastic")
+    assert len(sel["ranking"]) == 18 and set(sel["trace_time_s"]) >= {"ggx_plastic", "ward"}
+    lo, hi = r["intervals"]["sigma_alpha"]["95"]
+    assert lo <= TRUTH["sigma_alpha"] <= hi
+    rows = list(csv.DictReader((out / "fits.csv").open()))
+    assert rows[0]["normalisation"] == "ggx_plastic"
+    assert rows[0]["model_ranking"].startswith("1 ggx_plastic/")
