@@ -55,15 +55,25 @@ PROFILE_RIDGE_ITERATIONS = 40
 #: The widening of a variance by correlated channels (:func:`~.uncertainty.channel_factors`)
 #: above which the fit says so.
 CHANNEL_NOTE = 1.1
+#: Rounds of the model error's fit (kappa from the residuals, the parameters again at it) at
+#: most, and the relative change of kappa at which they stop (:meth:`FitSession._fit_model_error`).
+MODEL_ERROR_ROUNDS, MODEL_ERROR_RTOL = 8, 0.02
 
 
 @dataclass
 class FitState:
     """A region's fit while its intervals and warnings are worked out (:meth:`FitSession.run`).
 
-    method, theta, chi2 : the method, its minimum and chi-square there
+    method, theta, chi2 : the method, its minimum and chi-square there (``problem``'s: with
+        the model's error where fitted)
+    problem : the chi-square the fit minimised (:class:`~.chi2.Problem`): the session's, or
+        with each value's sigma widened by the model's error
+    model_error : the model's error (:class:`~.uncertainty.ModelError`) where chi-square
+        exceeded what noise explains significantly, else None; ``model_error_rounds`` its
+        fit's (:meth:`FitSession._fit_model_error`), and ``misfit`` the
+        :class:`~.uncertainty.MisfitTest` of the chi-square without it
     interval_scale : s^2, the scale of chi-square's rise for an interval (chi-square over what
-        the noise gives, where the model misses the data; else 1)
+        the noise and the model's error give, where the model still misses the data; else 1)
     curvature_inverse : (J^T J)^-1 at the minimum
     channel_factors : each parameter's widening of its variance by errors shared by a value's
         channels (:func:`~.uncertainty.channel_factors`), and ``channel_correlation`` theirs
@@ -91,6 +101,10 @@ class FitState:
     global_result: dict
     model_noise_by_sigma: dict
     noise_chi2: tuple
+    problem: object = None
+    model_error: object = None
+    model_error_rounds: dict = None
+    misfit: object = None
     intervals: dict = None
     rise: dict = None
     cache_noise_chi2: float = None
@@ -453,8 +467,9 @@ class FitSession:
             factor *= 2
         return factor
 
-    def cache_error(self, theta, method):
-        """Standard error each parameter owes to the light cache's Monte Carlo samples.
+    def cache_error(self, theta, method, problem=None):
+        """Standard error each parameter owes to the light cache's Monte Carlo samples (on the
+        chi-square of ``problem``'s observations, default the session's).
 
         The fit is repeated on each of two independent half caches (by the global method
         when that found ``theta``, else by Levenberg-Marquardt from ``theta``, which finds
@@ -464,8 +479,9 @@ class FitSession:
         but it keeps intervals honest when the data are precise enough for the cache's noise
         to ripple chi-square by more than the 95% threshold.
         """
-        if self._halves is None:
-            self._halves = [Problem(self.obs, self.model_on(self.table, part=j),
+        obs = (problem or self.problem).obs
+        if self._halves is None or self._halves[0].obs is not obs:
+            self._halves = [Problem(obs, self.model_on(self.table, part=j),
                                     valid=self.table.hit) for j in (1, 2)]
         if method == "global":
             fits = [global_search(p, theta, self.lower, self.upper, candidates=1, profile=False,
@@ -511,9 +527,10 @@ class FitSession:
     def run(self, method="global", start=None, seed=0, method_options=None, log=print):
         """Fit by ``method`` from ``start`` (random within bounds, seeded, if None); a result dict.
 
-        The steps: the method's minimum, its covariance, the global minimum (whose grid gives
-        the profiles and judges a local method), intervals (:meth:`_intervals`), warnings
-        (:meth:`_warnings`), and the JSON-ready record (:meth:`_record`).
+        The steps: the method's minimum, the model's error where the model cannot reproduce
+        the data (:meth:`_fit_model_error`), the covariance, the global minimum (whose grid
+        gives the profiles and judges a local method), intervals (:meth:`_intervals`),
+        warnings (:meth:`_warnings`), and the JSON-ready record (:meth:`_record`).
         """
         check_choice("fit method", method, tuple(METHODS))
         problem, wm = self.problem, self.wm
@@ -543,7 +560,15 @@ class FitSession:
             c["positions"] *= growth
             self.trace_light()
             return self.run(method, start, seed, method_options, log)
-        evaluations = problem.evaluations + wm.basis_evaluations
+        # where the model cannot reproduce the data, its error is fitted with the parameters
+        misfit = unc.misfit_test(problem.chi2(theta), problem.dof,
+                                 problem.model_noise_chi2(theta), problem.noise_chi2(theta))
+        res, problem, merr, rounds = self._fit_model_error(method, res, misfit, seed,
+                                                           method_options)
+        theta = np.asarray(res["theta"], dtype=float)
+        if merr is not None:
+            noise = self._model_noise_by_sigma(theta, problem)
+        evaluations = self.problem.evaluations + wm.basis_evaluations + rounds["evaluations"]
         t_method = time.perf_counter() - t0
         # uncertainty: covariance at the optimum
         r_all, J_all = problem.jacobian(theta, full=True)
@@ -560,17 +585,64 @@ class FitSession:
         g = res if method == "global" else global_search(problem, start, self.lower, self.upper,
                                                         candidates=2, grid_basis=grid_basis)
         fit = FitState(method, theta, chi2, s2, curv_inv, f2, channels,
-                       curv_inv * s2 * np.sqrt(np.outer(f2, f2)), res, g, noise, noise_chi2)
+                       curv_inv * s2 * np.sqrt(np.outer(f2, f2)), res, g, noise, noise_chi2,
+                       problem, merr, rounds, misfit)
         self._intervals(fit)
         warnings = self._warnings(fit)
         wall = time.perf_counter() - t0 + self.cache_time
         out = self._record(fit, warnings, start, seed, evaluations, wall, t_method)
         log(f"{self.name}: {self.model} fit by {method}: "
             + ", ".join(f"{k} = {v:.4f}" for k, v in out["parameters"].items())
-            + f"; chi2/dof = {out['chi2_per_dof']:.3g}; {evaluations} evaluations; {wall:.1f} s"
+            + f"; chi2/dof = {out['chi2_per_dof']:.3g}"
+            + (f"; model error kappa = {merr.kappa:.3g} (95%: {merr.interval95[0]:.3g}-"
+               f"{merr.interval95[1]:.3g}): {merr.meaning}" if merr is not None else "")
+            + f"; {evaluations} evaluations; {wall:.1f} s"
             + "".join(f"\n  {r}" for r in out["readings"] if "=" not in r)
             + "".join(f"\n  warning: {w}" for w in warnings))
         return out
+
+    def _fit_model_error(self, method, res, misfit, seed, method_options):
+        """The model's error fitted with the parameters, where chi-square exceeds what noise
+        explains beyond chance (``misfit``, a :class:`~.uncertainty.MisfitTest` at the
+        method's minimum ``res``): kappa from the residuals at the parameters
+        (:meth:`~.chi2.Problem.model_error`), then the parameters again with every sigma
+        widened by it (:meth:`~.chi2.Problem.with_model_error`), in turn, until kappa changes
+        by less than MODEL_ERROR_RTOL (at most MODEL_ERROR_ROUNDS): each step lowers the same
+        restricted likelihood.  The global method searches again each round (the weights can
+        move its minimum), the others polish by Levenberg-Marquardt.
+
+        Returns (the method's result, the chi-square it minimised, the
+        :class:`~.uncertainty.ModelError` or None, {rounds, settled, evaluations}); without
+        significant misfit, or at a kappa of 0, the method's result on the session's
+        chi-square, unchanged."""
+        rounds = {"rounds": 0, "settled": True, "evaluations": 0}
+        base, theta = self.problem, np.asarray(res["theta"], dtype=float)
+        if not misfit.significant:
+            return res, base, None, rounds
+        est = base.model_error(theta)
+        if est.kappa == 0.0:
+            return res, base, None, rounds
+        rounds["settled"] = False
+        for _ in range(MODEL_ERROR_ROUNDS):
+            problem = base.with_model_error(est.kappa, theta)
+            if method == "global":
+                res = global_search(problem, theta, self.lower, self.upper, seed=seed,
+                                    grid_basis=self.grid_bases()[0],
+                                    **dict(method_options or {}))
+            else:
+                polish = levenberg_marquardt(problem, theta, self.lower, self.upper)
+                res = {**res, "theta": polish["theta"], "chi2": polish["chi2"],
+                       "message": f"{res.get('message')}; then polished by "
+                                  f"Levenberg-Marquardt with the model's error: "
+                                  f"{polish['message']}"}
+            theta = np.asarray(res["theta"], dtype=float)
+            rounds["rounds"] += 1
+            rounds["evaluations"] += problem.evaluations
+            before, est = est.kappa, base.model_error(theta)
+            if abs(est.kappa - before) <= MODEL_ERROR_RTOL * before:
+                rounds["settled"] = True
+                break
+        return res, base.with_model_error(est.kappa, theta), est, rounds
 
     def _intervals(self, fit):
         """68% and 95% intervals of every parameter into the :class:`FitState` ``fit`` (its
@@ -578,14 +650,14 @@ class FitSession:
         covariance's, or for rho_s and sigma_alpha of a global fit the profile's; each widened
         by the light cache's own Monte Carlo error, the calibration's, the fitted sky's and, a
         factor on the reflectances, the sun's level's."""
-        problem, theta, names = self.problem, fit.theta, self.names
+        problem, theta, names = fit.problem, fit.theta, self.names
         lower, upper = self.lower, self.upper
         s2k = fit.delta_scale                             # each parameter's scale of Delta chi^2
         cov_iv = unc.covariance_intervals(theta, fit.covariance, lower, upper)
         grid = fit.global_result["profile_linearised"]
         prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
                 "rho_s": (grid["rho_s"], grid["chi2_rho"])}
-        ripple = self._model_noise_allowance(theta, *prof["sigma_alpha"], s2k[-1])
+        ripple = self._model_noise_allowance(problem, theta, *prof["sigma_alpha"], s2k[-1])
         # the profiles describe the global minimum; a local method is judged against it
         glob = fit.method == "global"
         intervals, rise, walked = {}, {}, []
@@ -620,7 +692,7 @@ class FitSession:
                 if ridge is not None:
                     lo, hi = intervals[p][lv]
                     intervals[p][lv] = (min(lo, float(ridge[0][i])), max(hi, float(ridge[1][i])))
-        mc_sd = self.cache_error(theta, fit.method)
+        mc_sd = self.cache_error(theta, fit.method, problem)
         cal_sd = unc.calibration_sd(self.doc, names, theta)
         sky_sd = np.zeros(len(names)) if self.sky_sd is None else self.sky_sd
         sun_rel = light_level_sd(self.doc, names, self.sun_sd)
@@ -641,11 +713,13 @@ class FitSession:
         fit.cache_sd, fit.calibration_sd = mc_sd, cal_sd
         fit.sun_level_sd = sun_rel * np.abs(theta)
 
-    def _model_noise_by_sigma(self, theta):
-        """The model's own Monte Carlo share of chi-square at the fitted reflectances over the
-        roughness range (NOISE_SIGMAS): where it is a sizeable share of the degrees of freedom
-        it pulls fits toward the roughness where it is small."""
-        return {f"{v:g}": self.problem.model_noise_chi2(np.r_[theta[:-1], v])
+    def _model_noise_by_sigma(self, theta, problem=None):
+        """The model's own Monte Carlo share of chi-square (``problem``'s, default the
+        session's) at the fitted reflectances over the roughness range (NOISE_SIGMAS): where
+        it is a sizeable share of the degrees of freedom it pulls fits toward the roughness
+        where it is small."""
+        problem = problem or self.problem
+        return {f"{v:g}": problem.model_noise_chi2(np.r_[theta[:-1], v])
                 for v in NOISE_SIGMAS}
 
     def _poorly_determined(self, theta, intervals, profiled, cov):
@@ -684,7 +758,7 @@ class FitSession:
             if intervals[p]["from"] != "covariance":
                 continue
             exact, _, points = profile_edges(
-                self.problem, fit.theta, fit.chi2, i,
+                fit.problem, fit.theta, fit.chi2, i,
                 [unc.LEVELS[lv] * fit.delta_scale[i] + ripple for lv in levels],
                 self.lower, self.upper,
                 fit.curvature_inverse, rtol=0.01, iterations=PROFILE_RIDGE_ITERATIONS)
@@ -697,7 +771,7 @@ class FitSession:
             intervals[p]["from"] = "profile (another parameter is poorly determined)"
         return walked
 
-    def _model_noise_allowance(self, theta, sigmas, profile, s2):
+    def _model_noise_allowance(self, problem, theta, sigmas, profile, s2):
         """The chi-square the model's own Monte Carlo error may add, as the largest over the
         sigma_alpha profile's 95% region (not only at the fit: the cache's error grows with
         sigma_alpha, and the truth may lie where it is larger).  At each roughness the model
@@ -705,7 +779,7 @@ class FitSession:
         and the narrowest resolved lobe's); the region widens with the allowance, so it is
         found again until it stops growing."""
         def at(sigma):
-            return self.problem.model_noise_chi2(np.r_[theta[:-1], sigma])
+            return problem.model_noise_chi2(np.r_[theta[:-1], sigma])
 
         def noise(sigma):
             return at(sigma) if sigma >= SIGMA_RESOLVED else max(at(sigma), at(SIGMA_RESOLVED))
@@ -780,8 +854,10 @@ class FitSession:
                                 f"{k} = {v:.4f}" for k, v in zip(names, g["theta"]))
                             + f": {method} ended in a local minimum or on a flat region of "
                             "chi-square from this start (thesis 6.3, 7.2)")
-        warnings += unc.misfit(chi2, self.problem.dof, fit.interval_scale, fit.cache_noise_chi2,
-                               fit.noise_chi2)
+        if fit.model_error is not None:
+            warnings.append(unc.model_error_warning(fit.misfit, fit.model_error))
+        warnings += unc.misfit(chi2, fit.problem.dof, fit.interval_scale, fit.cache_noise_chi2,
+                               fit.noise_chi2, model_error=fit.model_error is not None)
         warnings += unc.identifiability(names, iv95, self.lower, self.upper, fit.rise,
                                         fit.delta_scale, fit.cache_noise_chi2)
         if np.max(fit.channel_factors) > CHANNEL_NOTE:
@@ -796,11 +872,11 @@ class FitSession:
                 f"{np.sqrt(np.max(fit.channel_factors)):.2f}x.")
         warnings += geometry_warnings(self.geometry, float(theta[-1]))
         worst = max(fit.model_noise_by_sigma, key=fit.model_noise_by_sigma.get)
-        if fit.model_noise_by_sigma[worst] > NOISE_SHARE * self.problem.dof:
+        if fit.model_noise_by_sigma[worst] > NOISE_SHARE * fit.problem.dof:
             warnings.append(
                 f"the light cache's own Monte Carlo error adds up to "
                 f"{fit.model_noise_by_sigma[worst]:.3g} to chi-square (at sigma_alpha = {worst}), "
-                f"over {NOISE_SHARE:.0%} of the {self.problem.dof} degrees of freedom: the data "
+                f"over {NOISE_SHARE:.0%} of the {fit.problem.dof} degrees of freedom: the data "
                 "are more precise than the model, which pulls fits toward the roughness where "
                 "its error is small (intervals allow for it); use more --directions and "
                 "--positions.")
@@ -817,9 +893,10 @@ class FitSession:
 
     def _record(self, fit, warnings, start, seed, evaluations, wall, t_method):
         """The JSON-ready result of ``fit`` (the layout of ``fit_NAME.json``)."""
-        names, theta, chi2, dof = self.names, fit.theta, fit.chi2, self.problem.dof
+        names, theta, dof = self.names, fit.theta, self.problem.dof
         res = fit.method_result
         L = self.wm.radiance(theta)
+        chi2 = fit.chi2 if fit.model_error is None else self.problem.chi2(theta)
         return {
             "region": self.name, **({"pixels": self.obs.pixels.tolist()} if self.obs.rays is None
                                     else {"points": list(self.obs.pixels)}),
@@ -828,7 +905,10 @@ class FitSession:
             "method": fit.method, "seed": seed, "start": start.tolist(),
             "parameters": dict(zip(names, theta.tolist())),
             "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof,
-            "chi2_expected_from_noise": fit.noise_chi2[0], "interval_scale_s2": fit.interval_scale,
+            "chi2_expected_from_noise": fit.noise_chi2[0] if fit.model_error is None
+            else self.problem.noise_chi2(theta)[0],
+            "model_error": self._model_error_record(fit),
+            "interval_scale_s2": fit.interval_scale,
             "interval_scale_channels": dict(zip(names, fit.channel_factors.tolist())),
             "channel_correlation": fit.channel_correlation.tolist(),
             "intervals": fit.intervals,
@@ -860,6 +940,26 @@ class FitSession:
             "series": {"times": self.obs.times, "observed_DN": self.obs.y.tolist(),
                        "model_DN": self.problem.predict(L).tolist()},
         }
+
+    def _model_error_record(self, fit):
+        """The fit JSON's ``model_error``: kappa (0 where chi-square is within what noise
+        explains), what it means, and with a fitted kappa its 95% interval and the
+        chi-square with it (the fit's, whose intervals include the model's error)."""
+        me, test = fit.model_error, fit.misfit
+        form = ("each value's variance is its noise's plus (kappa x the value)^2 (a clipped "
+                "value's: the model's); kappa by restricted maximum likelihood with the "
+                f"parameters, where chi-square exceeds what noise explains (p < {unc.MISFIT_P:g});"
+                " a prediction's band adds kappa x the predicted value")
+        if me is None:
+            return {"kappa": 0.0, "form": form, "meaning": (
+                "not fitted: chi-square is within what noise explains (p = "
+                f"{test.p:.2g}), so the model reproduces the data to their noise"
+                if not test.significant else "fitted as 0: the likelihood is largest without "
+                "a model error")}
+        return {"kappa": me.kappa, "interval95": list(me.interval95), "meaning": me.meaning,
+                "form": form, "chi2": fit.chi2, "chi2_per_dof": fit.chi2 / fit.problem.dof,
+                "values": me.values, **{k: fit.model_error_rounds[k]
+                                        for k in ("rounds", "settled")}}
 
 
 def fit_region(manifest_path, name, pixels, **options):
