@@ -135,10 +135,12 @@ def render_day(folder, spec, sky, scans=None):
     return out
 
 
-def fit_replicates(day, scene, truth, replicates, positions=None, directions=512, sky="spec"):
+def fit_replicates(day, scene, truth, replicates, positions=None, directions=512, sky="spec",
+                   shape=False):
     """Fit ``day`` with the spec's sky (the thesis's CIE clear sky at each frame's sun; with
     ``sky`` 'fit' its level fitted with the material, ``fit --sky fit``, or 'prior' with its
-    prior, ``fit --sky prior``; both with the sun's level uncertain as a modelled sun's) on
+    prior, ``fit --sky prior``; both with the sun's level uncertain as a modelled sun's; with
+    ``shape`` the CIE sky's shape fitted too, ``--sky-shape``) on
     ``replicates`` captures of its radiance; one record per replicate: parameters, 95%
     intervals, warnings, each parameter's 'in'/'warned'/'MISSED', the chi-square rise at the
     truth and its joint 99.9% bound.  The light cache is sized from the data (``positions``
@@ -155,7 +157,7 @@ def fit_replicates(day, scene, truth, replicates, positions=None, directions=512
     fitted = relabelled(day, Path(day).parent / "fit_cie_clear", thesis_clear)
     region, _, pixels = SCENES[scene]
     s = FitSession(fitted, region, pixels, model="colour", positions=positions,
-                   directions=directions, split_sky=sky != "spec")
+                   directions=directions, split_sky=sky != "spec", sky_shape=shape)
     s.sun_sd = 0.0 if sky == "spec" else SUN_LEVEL_SD
     radiance = frame_values(fitted, s.obs.pixels, s.obs.frames)
     out = []
@@ -230,13 +232,13 @@ def markdown(cases, totals):
 
 
 def run_case(folder, sky_name, sky, scene, camera, material_name, replicates, hours, scans,
-             fit_sky="spec"):
+             fit_sky="spec", shape=False):
     """Render and fit one (sky, scene, camera, material); returns its record."""
     material = MATERIALS[material_name]
     t0 = time.perf_counter()
     day = render_day(folder, template(scene, material, camera, hours), sky, scans)
     t1 = time.perf_counter()
-    fits = fit_replicates(day, scene, truth_of(material), replicates, sky=fit_sky)
+    fits = fit_replicates(day, scene, truth_of(material), replicates, sky=fit_sky, shape=shape)
     return {"sky": sky_name, "scene": scene, "camera_deg": camera, "material": material_name,
             "truth": dict(zip(NAMES, truth_of(material))), "fits": fits,
             "render_s": t1 - t0, "fit_s": time.perf_counter() - t1}
@@ -256,6 +258,8 @@ def main(argv=None):
     ap.add_argument("--sky", choices=SKY_CHOICES, default="spec",
                     help="fit with the spec's sky as it is, its level fitted (fit --sky fit) "
                     "or fitted with its prior (fit --sky prior)")
+    ap.add_argument("--sky-shape", action="store_true",
+                    help="with --sky fit or prior: fit the CIE sky's shape too (fit --sky-shape)")
     args = ap.parse_args(argv)
     setup()
     replicates = args.replicates or (2 if args.quick else 3)
@@ -273,7 +277,7 @@ def main(argv=None):
                 for material in materials:
                     folder = args.out / f"sky{i}-{scene}-{camera:g}-{materials.index(material)}"
                     c = run_case(folder, sky_name, sky, scene, camera, material, replicates,
-                                 hours, scans, args.sky)
+                                 hours, scans, args.sky, args.sky_shape)
                     cases.append(c)
                     st = [v for f in c["fits"] for v in f["status"].values()]
                     print(f"{sky_name} | {scene} | {camera:g} | {material}: "
@@ -281,7 +285,8 @@ def main(argv=None):
                           f"({c['render_s']:.0f} + {c['fit_s']:.0f} s)", flush=True)
     totals = summary(cases)
     write_json(args.out / "sky_test_set.json",
-               {"quick": args.quick, "replicates": replicates, "fit_sky": args.sky, "hours_utc": list(hours),
+               {"quick": args.quick, "replicates": replicates, "fit_sky": args.sky,
+                "sky_shape": args.sky_shape, "hours_utc": list(hours),
                 "scans": [s.label for s in scans], "cases": cases, "summary": totals,
                 "wall_s": time.perf_counter() - t_start, "data": CITATION})
     print("\n" + markdown(cases, totals))

@@ -36,7 +36,8 @@ def test_the_split_lights_mix_is_the_whole_lights_table(days):
     from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.render.basis_table import TableModel, mixed
 
-    opts = dict(model="colour", positions=4, directions=128, seed=3)
+    # 16 positions: the spread of 4 understates the error of the low sun's frames
+    opts = dict(model="colour", positions=16, directions=128, seed=3)
     whole = FitSession(days["clean"], "disc", REGION, **opts)
     split = FitSession(days["clean"], "disc", REGION, split_sky=True, **opts)
     sun, rest = split.parts
@@ -330,7 +331,7 @@ def test_a_cie_skys_shape_variants_keep_its_light_and_move_one_group():
     for _, v in variants:
         np.testing.assert_allclose(v.sky_horizontal_irradiance(),
                                    sky.sky_horizontal_irradiance(), rtol=1e-6)
-        np.testing.assert_array_equal(v.ground, sky.ground)
+        np.testing.assert_array_equal(v.ground, sky.split()[1].ground)     # the sky-lit ground
         assert not v.sun_radiance.any()
     # the gradation variant is the CIE general sky of groups (6, 4), rescaled
     d = np.random.default_rng(2).normal(size=(200, 3))

@@ -247,6 +247,8 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     starts = [s.random_start(rng) for s in sessions]
+    for s in sessions:                                  # the level first, in the spec's shape
+        s.sky_shape_mix = None
     profile = {}
 
     def penalty(u):
