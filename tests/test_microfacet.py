@@ -72,14 +72,9 @@ def test_the_mirror_reflects_rho_s_times_fresnel(mi, name):
 @pytest.mark.parametrize("theta_i", [10.0, 60.0])
 @pytest.mark.parametrize("name", ["ggx_plastic", "beckmann_metal"])
 def test_chi2_sampling(mi, alpha, theta_i, name):
-    from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
-    t = np.radians(theta_i)
-    sample, pdf = BSDFAdapter("ward", {"type": "ward", "rho_d": 0.5, "rho_s": 0.4,
-                                       "sigma_alpha": alpha, "normalisation": name},
-                              wi=[float(np.sin(t)), 0.0, float(np.cos(t))])
-    chi2 = ChiSquareTest(domain=SphericalDomain(), sample_func=sample, pdf_func=pdf,
-                         sample_dim=3, res=361 if alpha < 0.05 else 101, ires=8, seed=3)
-    assert chi2.run(), chi2.messages
+    from test_plugin_ward import assert_samples_its_pdf
+
+    assert_samples_its_pdf(alpha, theta_i, name)
 
 
 ALBEDO_CASES = [(n, a) for n in mf.LOBES for a in (0.005, 0.02, 0.05)]

@@ -141,6 +141,12 @@ def test_reciprocity(mi, normalisation):
 @pytest.mark.parametrize("theta_i", [10.0, 45.0, 75.0])
 @pytest.mark.parametrize("normalisation", ["ward", "balanced"])
 def test_chi2_sampling(mi, sigma, theta_i, normalisation):
+    assert_samples_its_pdf(sigma, theta_i, normalisation)
+
+
+def assert_samples_its_pdf(sigma, theta_i, normalisation):
+    """Mitsuba's chi-square test of the plugin's sampling against its pdf, the lobe at
+    roughness ``sigma`` seen at ``theta_i`` degrees (also the microfacet lobes')."""
     from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
     t = np.radians(theta_i)
     sample, pdf = BSDFAdapter("ward", {"type": "ward", "rho_d": 0.5, "rho_s": 0.4,
