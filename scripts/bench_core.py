@@ -110,11 +110,13 @@ TABLE_TRUTH = {"C": (0.6, 0.45, 0.3), "rho_s": 0.08, "sigma_alpha": 0.12}
 LIGHTS, LIGHT_E, LIGHT_ZENITH = 96, 100.0, (10.0, 60.0)
 
 
-def make_table(folder, n_points, seed=0, lights=LIGHTS, reflect=None):
+def make_table(folder, n_points, seed=0, lights=LIGHTS, reflect=None, noise_floor=0.0):
     """A photometric-stereo table: ``n_points`` points on the disc, seen from above (a camera
     10 units up), under ``lights`` directional lights spread over the zenith range (a spiral);
     values of the BRDF ``reflect(wi, wo, rng)`` -> (P, 3) [sr^-1] (default the NumPy Ward
-    reference at TABLE_TRUTH) with 1% noise.  Returns (spec, table) paths."""
+    reference at TABLE_TRUTH) with 1% noise, in quadrature with an instrument's ``noise_floor``
+    [W m^-2 sr^-1] (a metal's values far from its lobe are otherwise known to 1% of almost
+    nothing).  Returns (spec, table) paths."""
     from skyfit_mi.conventions import direction_from_angles
     from skyfit_mi.physics.ward import raw_parameters, ward_brdf
 
@@ -144,7 +146,7 @@ def make_table(folder, n_points, seed=0, lights=LIGHTS, reflect=None):
     for j, (z, a) in enumerate(zip(zen, az)):
         wi = np.broadcast_to(direction_from_angles(z, a), wo.shape)
         value = reflect(wi, wo, rng) * LIGHT_E * wi[:, 2:]
-        noise = 0.01 * value.mean(axis=1)
+        noise = np.hypot(0.01 * value.mean(axis=1), noise_floor)
         y = value + noise[:, None] * rng.standard_normal(value.shape)
         rows += [f"{j},disc,p{i},{p[0]:.6f},{p[1]:.6f},0,"
                  f"{vz[i]:.6f},{va[i]:.6f}," + ",".join(f"{v:.6g}" for v in (*y[i], noise[i]))

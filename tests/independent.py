@@ -10,8 +10,10 @@ sensor); then every frame's radiance is replaced by another renderer's and captu
   ``roughconductor``, ``principled``) in place of the region's Ward BSDF, as stand-ins for real
   materials that no Ward model matches exactly.
 
-Used by tests/test_independent_radiance.py, scripts/independent_set.py and
-scripts/sky_test_set.py.
+and :func:`mitsuba_brdf` evaluates such a material at given directions, for observation tables.
+
+Used by tests/test_independent_radiance.py, tests/test_brdf_test_set.py,
+scripts/independent_set.py, scripts/sky_test_set.py and scripts/brdf_test_set.py.
 """
 import os
 import re
@@ -120,6 +122,30 @@ def mitsuba_frames(out, material_id, bsdf_xml, spp=1024, seed=5, sensor_seed=99)
         img, _ = render_with_error(mi, scene, params, seed + frame["index"], spp // 2)
         return img
     _copy_frames(out, doc["frames"], sensor_seed, trace)
+
+
+def mitsuba_brdf(bsdf_xml):
+    """``reflect(wi, wo, rng)`` -> (P, 3) [sr^-1]: Mitsuba's ``bsdf_xml`` (a <bsdf> element)
+    evaluated on a horizontal surface (local frame = world frame) for light arriving from the
+    unit directions ``wi`` (P, 3), seen from ``wo`` (P, 3): its ``eval`` (which includes the
+    light's cosine) divided by that cosine; the form scripts/bench_core.py ``make_table``
+    takes (``rng`` unused: the values are exact)."""
+    from skyfit_mi.render import setup
+
+    mi = setup()
+    bsdf = mi.load_string(re.sub(r"<bsdf ", '<bsdf version="3.0.0" ', bsdf_xml.strip(),
+                                 count=1))
+
+    def reflect(wi, wo, rng):
+        wi, wo = (np.asarray(v, dtype=float) for v in (wi, wo))
+        si = mi.SurfaceInteraction3f()
+        si.n = mi.Vector3f(0.0, 0.0, 1.0)
+        si.sh_frame = mi.Frame3f(mi.Vector3f(0.0, 0.0, 1.0))
+        si.wi = mi.Vector3f(*(wo[:, k] for k in range(3)))
+        si.uv = mi.Point2f(0.5, 0.5)
+        f = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*(wi[:, k] for k in range(3))))
+        return np.stack([np.asarray(f[k]) for k in range(3)], axis=1) / wi[:, 2:]
+    return reflect
 
 
 def held_or_warned(names, intervals, warnings, truth):
