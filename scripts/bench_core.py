@@ -110,16 +110,17 @@ TABLE_TRUTH = {"C": (0.6, 0.45, 0.3), "rho_s": 0.08, "sigma_alpha": 0.12}
 LIGHTS, LIGHT_E, LIGHT_ZENITH = 96, 100.0, (10.0, 60.0)
 
 
-def make_table(folder, n_points, seed=0):
+def make_table(folder, n_points, seed=0, lights=LIGHTS, reflect=None):
     """A photometric-stereo table: ``n_points`` points on the disc, seen from above (a camera
-    10 units up), under LIGHTS directional lights spread over the zenith range (a spiral);
-    values from the NumPy Ward reference with 1% noise.  Returns (spec, table) paths."""
+    10 units up), under ``lights`` directional lights spread over the zenith range (a spiral);
+    values of the BRDF ``reflect(wi, wo, rng)`` -> (P, 3) [sr^-1] (default the NumPy Ward
+    reference at TABLE_TRUTH) with 1% noise.  Returns (spec, table) paths."""
     from skyfit_mi.conventions import direction_from_angles
     from skyfit_mi.physics.ward import raw_parameters, ward_brdf
 
     folder.mkdir(parents=True, exist_ok=True)
-    k = np.arange(LIGHTS)
-    zen = np.radians(np.interp(k, [0, LIGHTS - 1], LIGHT_ZENITH))
+    k = np.arange(lights)
+    zen = np.radians(np.interp(k, [0, lights - 1], LIGHT_ZENITH))
     az = np.radians((k * 137.508) % 360.0)
     skies = [{"type": "directional", "zenith_deg": float(np.degrees(z)),
               "azimuth_deg": float(np.degrees(a)), "irradiance_W_m2": LIGHT_E}
@@ -131,14 +132,18 @@ def make_table(folder, n_points, seed=0):
     rng = np.random.default_rng(seed)
     r, t = 0.9 * np.sqrt(rng.random(n_points)), 2 * np.pi * rng.random(n_points)
     pts = np.stack([r * np.cos(t), r * np.sin(t), np.zeros(n_points)], axis=1)
-    rho_d, spec_r, sigma = raw_parameters("colour", **TABLE_TRUTH)
+    if reflect is None:
+        rho_d, spec_r, sigma = raw_parameters("colour", **TABLE_TRUTH)
+
+        def reflect(wi, wo, rng):
+            return ward_brdf(wi, wo, rho_d, spec_r, sigma)
     rows = ["frame,region,point,x,y,z,view_zenith_deg,view_azimuth_deg,r,g,b,sigma"]
     wo = np.array([0.0, 0.0, 10.0]) - pts                 # the disc is horizontal: local = world
     wo /= np.linalg.norm(wo, axis=1, keepdims=True)
     vz, va = np.degrees(np.arccos(wo[:, 2])), np.degrees(np.arctan2(wo[:, 0], wo[:, 1])) % 360
     for j, (z, a) in enumerate(zip(zen, az)):
         wi = np.broadcast_to(direction_from_angles(z, a), wo.shape)
-        value = ward_brdf(wi, wo, rho_d, spec_r, sigma) * LIGHT_E * wi[:, 2:]
+        value = reflect(wi, wo, rng) * LIGHT_E * wi[:, 2:]
         noise = 0.01 * value.mean(axis=1)
         y = value + noise[:, None] * rng.standard_normal(value.shape)
         rows += [f"{j},disc,p{i},{p[0]:.6f},{p[1]:.6f},0,"

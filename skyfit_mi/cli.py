@@ -284,7 +284,7 @@ def _fit(args):
                               seed=args.seed, start=args.start, positions=args.positions,
                               directions=args.directions, frames=args.frames,
                               variant=args.variant, sky=args.sky, sun_sd=args.sun_sd,
-                              sky_terms=args.sky_terms)
+                              sky_terms=args.sky_terms, sky_shape=args.sky_shape)
     for (name, pixels), res in zip(regions, results):
         res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
                                          if pixels is None else len(pixels))
@@ -505,6 +505,11 @@ def build_parser():
                      help="with --sky fit or prior: 1 (default) one sky level for the day; 2-4 "
                      "a level that changes smoothly over the day (changing weather: log k as "
                      "that many Legendre polynomials in time, the change under a prior)")
+    fit.add_argument("--sky-shape", action="store_true",
+                     help="with --sky fit or prior and a CIE sky (clear, cie_general): fit its "
+                     "shape too, its gradation and indicatrix indices as mixes of the spec's "
+                     "pattern with the next CIE group's, under a prior of one group (two more "
+                     "traces of the light)")
     fit.add_argument("--sun-sd", type=float, default=None,
                      help="with --sky fit or prior: the relative uncertainty of the spec's sun "
                      f"level, in the reflectances' intervals (default {SUN_LEVEL_SD} for "

@@ -211,16 +211,20 @@ def test_the_days_geometry_is_reported_and_warned_from(days):
 
 
 def test_a_model_that_cannot_describe_the_data_is_called_unreliable(days):
-    """The noisy day fits at chi2/dof ~ 1 without a misfit warning; the same values with a
-    tenth of their sigma (a wrong sensor model) are called unreliable."""
+    """The noisy day fits at chi2/dof ~ 1 without a misfit warning or model error; the same
+    values with a tenth of their sigma (a wrong sensor model) are told the model does not
+    describe them, with the model's error fitted and said."""
     from skyfit_mi.fitting.fit import FitSession
 
     s = FitSession(days["noisy"], "disc", REGION, **FAST)
     good = s.run("global", log=lambda *a: None)
     assert not any("misfit" in w or "does not describe" in w for w in good["warnings"])
+    assert good["model_error"]["kappa"] == 0.0
     s.obs.sigma = s.obs.sigma / 10
     bad = s.run("global", log=lambda *a: None)
-    assert any(w.startswith("the model does not describe these data") for w in bad["warnings"])
+    assert bad["model_error"]["kappa"] > 0
+    assert any(w.startswith("the model does not describe these data") and
+               "the model misses the data by about" in w for w in bad["warnings"])
 
 
 def test_region_errors(days):
@@ -423,10 +427,9 @@ def test_model_noise_allowance_is_the_largest_over_the_profiles_region():
         def model_noise_chi2(self, theta):
             return 200.0 * theta[-1]
     s = FitSession.__new__(FitSession)
-    s.problem = Noise()
     sigmas = np.linspace(0.0, 0.5, 501)
     profile = 1e4 * (sigmas - 0.05) ** 2          # minimum at 0.05
-    allowance = s._model_noise_allowance(np.array([0.3, 0.05]), sigmas, profile, 1.0)
+    allowance = s._model_noise_allowance(Noise(), np.array([0.3, 0.05]), sigmas, profile, 1.0)
     # at the fit 10; the region (chi2 rise <= 3.84 + allowance) grows to the fixed point
     # 1e4 (s - 0.05)^2 = 3.84 + 200 s, s = 0.0985, where the noise is 19.7
     assert allowance == pytest.approx(19.7, rel=0.02)

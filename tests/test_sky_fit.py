@@ -23,8 +23,11 @@ def test_the_sun_and_the_rest_of_a_sky_add_up_to_it():
     d = np.random.default_rng(0).normal(size=(500, 3))
     d = np.vstack([d / np.linalg.norm(d, axis=1, keepdims=True), sky.sun_direction])
     np.testing.assert_allclose(sun.radiance(d) + rest.radiance(d), sky.radiance(d), rtol=1e-12)
-    assert np.all(rest.sun_radiance == 0) and np.all(sun.ground == 0)
+    assert np.all(rest.sun_radiance == 0) and not sun.clear.any() and not sun.overcast.any()
     assert sun.radiance(sky.sun_direction[None])[0, 0] > 1e6
+    # the ground's shares as the sun's and the sky's horizontal irradiance
+    e_sun, e_sky = sky.sun_horizontal_irradiance(), sky.sky_horizontal_irradiance()
+    np.testing.assert_allclose(sun.ground / rest.ground, e_sun / e_sky, rtol=1e-12)
 
 
 def test_the_split_lights_mix_is_the_whole_lights_table(days):
@@ -39,27 +42,29 @@ def test_the_split_lights_mix_is_the_whole_lights_table(days):
     sun, rest = split.parts
     theta = np.array([0.8, 0.7, 0.6, 0.2, 0.1])
     (a, va), (b, vb) = (TableModel(t, "colour").radiance_and_variance(theta)
-                        for t in (whole.table, mixed(sun, rest, 1.0)))
+                        for t in (whole.table, mixed(sun, [rest], [1.0])))
     z = (a.mean(axis=0) - b.mean(axis=0)) / np.sqrt((va.sum(axis=0) + vb.sum(axis=0))
                                                     / len(a) ** 2)
     assert np.all(np.abs(z) < 5) and np.sqrt(np.mean(z ** 2)) < 2.5, z
     L_sun, L_rest = (TableModel(t, "colour").radiance(theta) for t in (sun, rest))
-    np.testing.assert_allclose(TableModel(mixed(sun, rest, 2.0), "colour").radiance(theta),
+    np.testing.assert_allclose(TableModel(mixed(sun, [rest], [2.0]), "colour").radiance(theta),
                                L_sun + 2.0 * L_rest, rtol=1e-5)
+
+
+def rescaled_sky(day, out, factor):
+    """A copy of ``day`` in ``out`` whose manifest's sky (all but the sun: the patterns and
+    the sky-lit ground, :meth:`~skyfit_mi.physics.sky.Sky.sky_scaled`) is ``factor(frame)``
+    times its own."""
+    from measured_light import relabelled
+
+    return relabelled(day, out, lambda frame, sky: sky.sky_scaled(factor(frame)))
 
 
 @pytest.fixture(scope="module")
 def dim_sky(days, tmp_path_factory):
     """The noisy disc day whose manifest's sky (all but the sun) is DIMMER times too dim."""
-    out = tmp_path_factory.mktemp("dim") / "day"
-    shutil.copytree(days["noisy"], out)
-    m = json.loads((out / "manifest.json").read_text())
-    for f in m["frames"]:
-        il = f["illumination"]
-        for k in ("clear", "overcast", "uniform", "intermediate", "perez", "ground"):
-            il[k] = [v / DIMMER for v in il[k]]
-    (out / "manifest.json").write_text(json.dumps(m))
-    return out
+    return rescaled_sky(days["noisy"], tmp_path_factory.mktemp("dim") / "day",
+                        lambda frame: 1.0 / DIMMER)
 
 
 def test_a_sky_of_the_wrong_level_is_fitted_and_the_materials_held(dim_sky):
@@ -111,13 +116,7 @@ def test_a_sky_level_beyond_the_search_is_undetermined_and_widens_every_interval
     values over the k the profile could not tell apart."""
     from skyfit_mi.fitting.fit import fit_regions
 
-    out = tmp_path / "day"
-    shutil.copytree(days["noisy"], out)
-    m = json.loads((out / "manifest.json").read_text())
-    for f in m["frames"]:
-        for k in ("clear", "overcast", "uniform", "intermediate", "perez", "ground"):
-            f["illumination"][k] = [v / 20.0 for v in f["illumination"][k]]
-    (out / "manifest.json").write_text(json.dumps(m))
+    out = rescaled_sky(days["noisy"], tmp_path / "day", lambda frame: 1.0 / 20.0)
     r = next(fit_regions(out, [("disc", REGION)], model="colour", sky="fit",
                          log=lambda *a: None))
     sky = r["sky"]
@@ -161,6 +160,7 @@ def test_the_sky_scaled_is_the_sun_plus_k_times_the_rest():
     d = np.vstack([d / np.linalg.norm(d, axis=1, keepdims=True), sky.sun_direction])
     np.testing.assert_allclose(sky.sky_scaled(1.7).radiance(d),
                                sun.radiance(d) + 1.7 * rest.radiance(d), rtol=1e-6)
+    assert np.all(sky.sky_scaled(1.7).ground < 1.7 * sky.ground)      # the sun-lit share stays
 
 
 def test_the_suns_level_is_a_factor_on_the_reflectances_only_where_nothing_anchors_them():
@@ -277,16 +277,10 @@ def drifting_sky(days, tmp_path_factory):
     """The noisy disc day whose manifest's sky (all but the sun) is exp(-DRIFT x) times its
     own, x from -1 at the first frame to 1 at the last: the real sky's level against the
     spec's, k(t) = exp(DRIFT x), rises through the day."""
-    out = tmp_path_factory.mktemp("drift") / "day"
-    shutil.copytree(days["noisy"], out)
-    m = json.loads((out / "manifest.json").read_text())
-    x = np.linspace(-1.0, 1.0, len(m["frames"]))
-    for f, xi in zip(m["frames"], x):
-        il = f["illumination"]
-        for k in ("clear", "overcast", "uniform", "intermediate", "perez", "ground"):
-            il[k] = [v * np.exp(-DRIFT * xi) for v in il[k]]
-    (out / "manifest.json").write_text(json.dumps(m))
-    return out
+    frames = json.loads((days["noisy"] / "manifest.json").read_text())["frames"]
+    x = dict(zip((f["index"] for f in frames), np.linspace(-1.0, 1.0, len(frames))))
+    return rescaled_sky(days["noisy"], tmp_path_factory.mktemp("drift") / "day",
+                        lambda frame: np.exp(-DRIFT * x[frame["index"]]))
 
 
 def test_a_sky_that_changes_over_the_day_is_fitted_as_a_smooth_curve(drifting_sky):
@@ -321,3 +315,74 @@ def test_sky_terms_need_a_fitted_sky_and_frames(days):
     with pytest.raises(SkyfitError, match="give 1"):
         next(fit_regions(days["clean"], [("disc", REGION)], model="colour", sky="fit",
                          sky_terms=9, log=lambda *a: None))
+
+
+def test_a_cie_skys_shape_variants_keep_its_light_and_move_one_group():
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.fitting.sky_fit import check_shape
+    from skyfit_mi.physics import cie_general
+    from skyfit_mi.physics.sky import cie_general_sky, cie_sky
+
+    sky = cie_sky("clear", 35.0, 160.0)
+    variants = sky.shape_variants()
+    assert [label for label, _ in variants] == ["gradation group 5 -> 6",
+                                                "indicatrix group 4 -> 5"]
+    for _, v in variants:
+        np.testing.assert_allclose(v.sky_horizontal_irradiance(),
+                                   sky.sky_horizontal_irradiance(), rtol=1e-6)
+        np.testing.assert_array_equal(v.ground, sky.ground)
+        assert not v.sun_radiance.any()
+    # the gradation variant is the CIE general sky of groups (6, 4), rescaled
+    d = np.random.default_rng(2).normal(size=(200, 3))
+    d[:, 2] = np.abs(d[:, 2]) + 0.05
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    six = cie_general_sky(cie_general.group_parameters(6, 4), 35.0, 160.0).sky_radiance(d)
+    ratio = variants[0][1].sky_radiance(d)[:, 1] / six[:, 1]
+    np.testing.assert_allclose(ratio, ratio[0], rtol=1e-6)
+    # the most turbid group moves toward the clearer
+    turbid = cie_general_sky(cie_general.group_parameters(6, 6), 35.0, 160.0)
+    assert [label for label, _ in turbid.shape_variants()] == ["gradation group 6 -> 5",
+                                                               "indicatrix group 6 -> 5"]
+    assert cie_sky("overcast", 35.0, 160.0).shape_variants() == []
+    with pytest.raises(SkyfitError, match="not a CIE sky"):
+        check_shape([sky, cie_sky("overcast", 35.0, 160.0)])
+
+
+@pytest.fixture(scope="module")
+def gradation_4(days, tmp_path_factory):
+    """The noisy disc day (rendered under the CIE clear sky: gradation group 5, indicatrix 4)
+    whose manifest names the CIE general sky of gradation group 4, indicatrix 4."""
+    import datetime as dt
+
+    from measured_light import relabelled
+
+    from skyfit_mi.physics import cie_general
+    from skyfit_mi.physics.sky import cie_general_sky
+
+    p = cie_general.group_parameters(4, 4)
+
+    def light(frame, sky):
+        return cie_general_sky(p, frame["sun_zenith_deg"], frame["sun_azimuth_deg"],
+                               day=dt.datetime.fromisoformat(frame["time"]).timetuple().tm_yday)
+    return relabelled(days["noisy"], tmp_path_factory.mktemp("shape") / "day", light)
+
+
+def test_the_skys_shape_is_fitted_with_the_materials_and_says_what_one_region_cannot_tell(
+        gradation_4):
+    """The spec's sky one gradation group off: with --sky-shape the fit mixes the CIE
+    gradation and indicatrix variants; their indices' 95% intervals hold the truth (5, 4),
+    every parameter's interval holds its truth, the record carries the coefficients'
+    correlation, and one flat region, which hardly tells the shape, says so."""
+    from skyfit_mi.fitting.fit import fit_regions
+
+    r = next(fit_regions(gradation_4, [("disc", REGION)], model="colour", sky="fit",
+                         sky_shape=True, log=lambda *a: None))
+    shape = r["sky"]["shape"]
+    for name, truth in (("gradation", 5.0), ("indicatrix", 4.0)):
+        index, half = shape["index"][name]
+        assert abs(index - truth) <= half, (name, shape["index"])
+    assert r["sky"]["correlation"]["names"] == ["log k", "mix gradation", "mix indicatrix"]
+    for p, v in TRUTH.items():
+        lo, hi = r["intervals"][p]["95"]
+        assert lo - 1e-9 <= v <= hi + 1e-9, (p, r["intervals"][p], r["parameters"])
+    assert any("hardly tell the sky's" in w for w in r["warnings"]), r["warnings"]

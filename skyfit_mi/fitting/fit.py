@@ -21,8 +21,8 @@ from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
-from .sky_fit import (SKY_DOMINATES, check_terms, default_sky, fit_sky_scale, light_level_sd,
-                      sky_level_at)
+from .sky_fit import (SKY_DOMINATES, check_shape, check_terms, default_sky, fit_sky_scale,
+                      light_level_sd, sky_level_at)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, memory_estimate, mixed,
                                   trace_table)
@@ -57,15 +57,25 @@ PROFILE_RIDGE_ITERATIONS = 40
 #: The widening of a variance by correlated channels (:func:`~.uncertainty.channel_factors`)
 #: above which the fit says so.
 CHANNEL_NOTE = 1.1
+#: Rounds of the model error's fit (kappa from the residuals, the parameters again at it) at
+#: most, and the relative change of kappa at which they stop (:meth:`FitSession._fit_model_error`).
+MODEL_ERROR_ROUNDS, MODEL_ERROR_RTOL = 8, 0.02
 
 
 @dataclass
 class FitState:
     """A region's fit while its intervals and warnings are worked out (:meth:`FitSession.run`).
 
-    method, theta, chi2 : the method, its minimum and chi-square there
+    method, theta, chi2 : the method, its minimum and chi-square there (``problem``'s: with
+        the model's error where fitted)
+    problem : the chi-square the fit minimised (:class:`~.chi2.Problem`): the session's, or
+        with each value's sigma widened by the model's error
+    model_error : the model's error (:class:`~.uncertainty.ModelError`) where chi-square
+        exceeded what noise explains significantly, else None; ``model_error_rounds`` its
+        fit's (:meth:`FitSession._fit_model_error`), and ``misfit`` the
+        :class:`~.uncertainty.MisfitTest` of the chi-square without it
     interval_scale : s^2, the scale of chi-square's rise for an interval (chi-square over what
-        the noise gives, where the model misses the data; else 1)
+        the noise and the model's error give, where the model still misses the data; else 1)
     curvature_inverse : (J^T J)^-1 at the minimum
     channel_factors : each parameter's widening of its variance by errors shared by a value's
         channels (:func:`~.uncertainty.channel_factors`), and ``channel_correlation`` theirs
@@ -95,6 +105,10 @@ class FitState:
     global_result: dict
     model_noise_by_sigma: dict
     noise_chi2: tuple
+    problem: object = None
+    model_error: object = None
+    model_error_rounds: dict = None
+    misfit: object = None
     intervals: dict = None
     rise: dict = None
     cache_noise_chi2: float = None
@@ -140,11 +154,14 @@ class FitSession:
     split_sky : trace the sun's light and the rest of the sky's apart, so that the fit can
         scale them against each other (:meth:`set_sky_scale`, :func:`fit_regions`'s
         ``sky='fit'``)
+    sky_shape : with ``split_sky``, also trace the sky's shape variants
+        (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), so that the fit can mix them
+        (:meth:`set_sky_shape`)
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
                  positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None,
-                 sky_plan="fit", trace=True, split_sky=False):
+                 sky_plan="fit", trace=True, split_sky=False, sky_shape=False):
         model = BY_COUNT.get(model, model)
         check_choice("model", model, tuple(PARAMETERS))
         check_fit_normalisation(normalisation)          # before the light is traced
@@ -181,8 +198,10 @@ class FitSession:
                                "sky_plan": check_choice("sky plan", sky_plan, tuple(SKY_PLANS))}
         self._mi = setup(variant or doc["render"]["variant"])
         self._loaded = None                         # the scene and its parameters (scene)
-        # the light's tables: one, or the sun's and the rest's (split_sky) mixed at sky_scale
+        # the light's tables: one, or the sun's, the rest's (split_sky) and the rest's shape
+        # variants (sky_shape), mixed at sky_scale and the shape's mix sky_shape_mix
         self.split_sky, self.sky_scale, self.parts = bool(split_sky), 1.0, None
+        self.sky_shape, self.sky_shape_mix = bool(sky_shape), None
         # the fitted sky's share of each parameter's error, whether it leaves them open, and
         # its record (sky_fit.fit_sky_scale)
         self.sky_sd, self.sky_span, self.sky_record = None, None, None
@@ -216,12 +235,16 @@ class FitSession:
         return s
 
     def use_fitted_sky(self, result):
-        """Light the sequence at a sky fit's level (``fit --sky fit``, in ``result``) where the
-        fit measured this very sequence (its run_id), before the light is traced: another
-        day's sky is its spec's (the level belongs to the fitted day's sky)."""
-        if result.get("sky") is not None and result.get("sequence_run_id") == self.run_id:
-            k = sky_level_at(result["sky"], self.obs.times)
+        """Light the sequence at a sky fit's level and shape (``fit --sky fit``, in ``result``)
+        where the fit measured this very sequence (its run_id), before the light is traced:
+        another day's sky is its spec's (the fit belongs to the fitted day's sky)."""
+        sky = result.get("sky")
+        if sky is not None and result.get("sequence_run_id") == self.run_id:
+            k = sky_level_at(sky, self.obs.times)
             self.split_sky, self.sky_scale = True, float(k[0]) if np.ptp(k) == 0 else k
+            if sky.get("shape") is not None:
+                self.sky_shape = True
+                self.sky_shape_mix = np.asarray(sky["shape"]["mix"], dtype=float)
 
     @classmethod
     def sharing_light(cls, results, manifest_path, pixels, **options):
@@ -241,7 +264,8 @@ class FitSession:
             cam = s.doc["camera"]
             anchored = anchors_pay(s.obs.pixels, SKY_PLANS[s.cache_settings["sky_plan"]].spacing,
                                    cam["width"], cam["height"])
-            groups.setdefault((s.normalisation, tuple(s.obs.frames), anchored, s.split_sky),
+            groups.setdefault((s.normalisation, tuple(s.obs.frames), anchored, s.split_sky,
+                               s.sky_shape),
                               []).append(s)
         for group in groups.values():
             cls.trace_together(group)
@@ -308,8 +332,9 @@ class FitSession:
         list of one table, or with ``split_sky`` the sun's and the rest's (their samples
         independent)."""
         c = self.cache_settings
-        # the split light's two tables and their mix
-        need = (3 if self.split_sky else 1) * memory_estimate(
+        # the split light's tables and their mix
+        lights = self._sky_parts() if self.split_sky else None
+        need = (len(lights) + 1 if lights else 1) * memory_estimate(
             len(at), len(self.skies), c["positions"], c["directions"])
         have = available_memory()
         if have is not None and need > have:
@@ -322,15 +347,26 @@ class FitSession:
             table, c["blocks"] = trace_table(self.scene, self.params, self.skies, at, bsdf_id,
                                              model_of, **self._cache_options())
             return [table]
-        sun, rest = zip(*(sky.split() for sky in self.skies))
         options = self._cache_options()
-        seeds = np.random.SeedSequence(options.pop("seed")).generate_state(2).tolist()
+        seeds = np.random.SeedSequence(options.pop("seed")).generate_state(len(lights)).tolist()
         parts = []
-        for skies, seed in zip((list(sun), list(rest)), seeds):
+        for skies, seed in zip(lights, seeds):
             table, c["blocks"] = trace_table(self.scene, self.params, skies, at, bsdf_id,
                                              model_of, seed=int(seed), **options)
             parts.append(table)
         return parts
+
+    def _sky_parts(self):
+        """The light's parts, each a list of the frames' skies: the sun's and the rest's
+        (:meth:`~skyfit_mi.physics.sky.Sky.split`), and with ``sky_shape`` the rest's shape
+        variants (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`)."""
+        sun, rest = zip(*(sky.split() for sky in self.skies))
+        lights = [list(sun), list(rest)]
+        if self.sky_shape:
+            check_shape(self.skies)
+            variants = [sky.shape_variants() for sky in self.skies]
+            lights += [[v[j][1] for v in variants] for j in range(len(variants[0]))]
+        return lights
 
     def _cache_options(self):
         """build_light_cache's options at ``cache_settings``."""
@@ -374,16 +410,30 @@ class FitSession:
     def _use_parts(self, parts):
         """Take the light's tables ``parts`` (:meth:`_trace`) and fit on their mix."""
         self.parts = list(parts)
-        self._use_table(self.parts[0] if len(self.parts) == 1 else
-                        mixed(*self.parts, self.sky_scale))
+        if len(self.parts) == 1:
+            self._use_table(self.parts[0])
+            return
+        k = self.sky_scale
+        mix = np.zeros(len(self.parts) - 2) if self.sky_shape_mix is None else self.sky_shape_mix
+        self._use_table(mixed(self.parts[0], self.parts[1:],
+                              [k * (1.0 - mix.sum())] + [k * m for m in mix]))
 
     def set_sky_scale(self, k):
         """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
         to the sun (one factor, or one per frame of the session), and make the models and
         chi-square on it."""
-        if len(self.parts or ()) != 2:
+        if len(self.parts or ()) < 2:
             raise ValueError("the sky's scale needs a session traced with split_sky")
         self.sky_scale = float(k) if np.ndim(k) == 0 else np.asarray(k, dtype=float)
+        self._use_parts(self.parts)
+
+    def set_sky_shape(self, mix):
+        """Mix the sky's shape variants into the spec's sky: (1 - sum(mix)) of it and mix[j]
+        of variant j (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), at the level
+        ``sky_scale``, and make the models and chi-square on it."""
+        if len(self.parts or ()) != 2 + len(mix):
+            raise ValueError("the sky's shape needs a session traced with sky_shape")
+        self.sky_shape_mix = np.asarray(mix, dtype=float)
         self._use_parts(self.parts)
 
     def _use_table(self, table):
@@ -422,8 +472,9 @@ class FitSession:
             factor *= 2
         return factor
 
-    def cache_error(self, theta, method):
-        """Standard error each parameter owes to the light cache's Monte Carlo samples.
+    def cache_error(self, theta, method, problem=None):
+        """Standard error each parameter owes to the light cache's Monte Carlo samples (on the
+        chi-square of ``problem``'s observations, default the session's).
 
         The fit is repeated on each of two independent half caches (by the global method
         when that found ``theta``, else by Levenberg-Marquardt from ``theta``, which finds
@@ -433,8 +484,9 @@ class FitSession:
         but it keeps intervals honest when the data are precise enough for the cache's noise
         to ripple chi-square by more than the 95% threshold.
         """
-        if self._halves is None:
-            self._halves = [Problem(self.obs, self.model_on(self.table, part=j),
+        obs = (problem or self.problem).obs
+        if self._halves is None or self._halves[0].obs is not obs:
+            self._halves = [Problem(obs, self.model_on(self.table, part=j),
                                     valid=self.table.hit) for j in (1, 2)]
         if method == "global":
             fits = [global_search(p, theta, self.lower, self.upper, candidates=1, profile=False,
@@ -480,9 +532,10 @@ class FitSession:
     def run(self, method="global", start=None, seed=0, method_options=None, log=print):
         """Fit by ``method`` from ``start`` (random within bounds, seeded, if None); a result dict.
 
-        The steps: the method's minimum, its covariance, the global minimum (whose grid gives
-        the profiles and judges a local method), intervals (:meth:`_intervals`), warnings
-        (:meth:`_warnings`), and the JSON-ready record (:meth:`_record`).
+        The steps: the method's minimum, the model's error where the model cannot reproduce
+        the data (:meth:`_fit_model_error`), the covariance, the global minimum (whose grid
+        gives the profiles and judges a local method), intervals (:meth:`_intervals`),
+        warnings (:meth:`_warnings`), and the JSON-ready record (:meth:`_record`).
         """
         check_choice("fit method", method, tuple(METHODS))
         problem, wm = self.problem, self.wm
@@ -512,7 +565,15 @@ class FitSession:
             c["positions"] *= growth
             self.trace_light()
             return self.run(method, start, seed, method_options, log)
-        evaluations = problem.evaluations + wm.basis_evaluations
+        # where the model cannot reproduce the data, its error is fitted with the parameters
+        misfit = unc.misfit_test(problem.chi2(theta), problem.dof,
+                                 problem.model_noise_chi2(theta), problem.noise_chi2(theta))
+        res, problem, merr, rounds = self._fit_model_error(method, res, misfit, seed,
+                                                           method_options)
+        theta = np.asarray(res["theta"], dtype=float)
+        if merr is not None:
+            noise = self._model_noise_by_sigma(theta, problem)
+        evaluations = self.problem.evaluations + wm.basis_evaluations + rounds["evaluations"]
         t_method = time.perf_counter() - t0
         # uncertainty: covariance at the optimum
         r_all, J_all = problem.jacobian(theta, full=True)
@@ -529,18 +590,66 @@ class FitSession:
         g = res if method == "global" else global_search(problem, start, self.lower, self.upper,
                                                         candidates=2, grid_basis=grid_basis)
         fit = FitState(method, theta, chi2, s2, curv_inv, f2, channels,
-                       curv_inv * s2 * np.sqrt(np.outer(f2, f2)), res, g, noise, noise_chi2)
-        fit.jpeg_shared_sd = self._jpeg_shared_sd(J_all, problem.mask & ~low & ~high, curv_inv)
+                       curv_inv * s2 * np.sqrt(np.outer(f2, f2)), res, g, noise, noise_chi2,
+                       problem, merr, rounds, misfit)
+        fit.jpeg_shared_sd = self._jpeg_shared_sd(J_all, problem.mask & ~low & ~high,
+                                                  problem.obs.sigma, curv_inv)
         self._intervals(fit)
         warnings = self._warnings(fit)
         wall = time.perf_counter() - t0 + self.cache_time
         out = self._record(fit, warnings, start, seed, evaluations, wall, t_method)
         log(f"{self.name}: {self.model} fit by {method}: "
             + ", ".join(f"{k} = {v:.4f}" for k, v in out["parameters"].items())
-            + f"; chi2/dof = {out['chi2_per_dof']:.3g}; {evaluations} evaluations; {wall:.1f} s"
+            + f"; chi2/dof = {out['chi2_per_dof']:.3g}"
+            + (f"; model error kappa = {merr.kappa:.3g} (95%: {merr.interval95[0]:.3g}-"
+               f"{merr.interval95[1]:.3g}): {merr.meaning}" if merr is not None else "")
+            + f"; {evaluations} evaluations; {wall:.1f} s"
             + "".join(f"\n  {r}" for r in out["readings"] if "=" not in r)
             + "".join(f"\n  warning: {w}" for w in warnings))
         return out
+
+    def _fit_model_error(self, method, res, misfit, seed, method_options):
+        """The model's error fitted with the parameters, where chi-square exceeds what noise
+        explains beyond chance (``misfit``, a :class:`~.uncertainty.MisfitTest` at the
+        method's minimum ``res``): kappa from the residuals at the parameters
+        (:meth:`~.chi2.Problem.model_error`), then the parameters again with every sigma
+        widened by it (:meth:`~.chi2.Problem.with_model_error`), in turn, until kappa changes
+        by less than MODEL_ERROR_RTOL (at most MODEL_ERROR_ROUNDS): each step lowers the same
+        restricted likelihood.  The global method searches again each round (the weights can
+        move its minimum), the others polish by Levenberg-Marquardt.
+
+        Returns (the method's result, the chi-square it minimised, the
+        :class:`~.uncertainty.ModelError` or None, {rounds, settled, evaluations}); without
+        significant misfit, or at a kappa of 0, the method's result on the session's
+        chi-square, unchanged."""
+        rounds = {"rounds": 0, "settled": True, "evaluations": 0}
+        base, theta = self.problem, np.asarray(res["theta"], dtype=float)
+        if not misfit.significant:
+            return res, base, None, rounds
+        est = base.model_error(theta)
+        if est.kappa == 0.0:
+            return res, base, None, rounds
+        rounds["settled"] = False
+        for _ in range(MODEL_ERROR_ROUNDS):
+            problem = base.with_model_error(est.kappa, theta)
+            if method == "global":
+                res = global_search(problem, theta, self.lower, self.upper, seed=seed,
+                                    grid_basis=self.grid_bases()[0],
+                                    **dict(method_options or {}))
+            else:
+                polish = levenberg_marquardt(problem, theta, self.lower, self.upper)
+                res = {**res, "theta": polish["theta"], "chi2": polish["chi2"],
+                       "message": f"{res.get('message')}; then polished by "
+                                  f"Levenberg-Marquardt with the model's error: "
+                                  f"{polish['message']}"}
+            theta = np.asarray(res["theta"], dtype=float)
+            rounds["rounds"] += 1
+            rounds["evaluations"] += problem.evaluations
+            before, est = est.kappa, base.model_error(theta)
+            if abs(est.kappa - before) <= MODEL_ERROR_RTOL * before:
+                rounds["settled"] = True
+                break
+        return res, base.with_model_error(est.kappa, theta), est, rounds
 
     def _intervals(self, fit):
         """68% and 95% intervals of every parameter into the :class:`FitState` ``fit`` (its
@@ -549,14 +658,14 @@ class FitSession:
         by the light cache's own Monte Carlo error, the calibration's, the fitted sky's and, a
         factor on the reflectances, the sun's level's; and by the rounding a JPEG frame's
         blocks share over the region (``jpeg_shared_sd``)."""
-        problem, theta, names = self.problem, fit.theta, self.names
+        problem, theta, names = fit.problem, fit.theta, self.names
         lower, upper = self.lower, self.upper
         s2k = fit.delta_scale                             # each parameter's scale of Delta chi^2
         cov_iv = unc.covariance_intervals(theta, fit.covariance, lower, upper)
         grid = fit.global_result["profile_linearised"]
         prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
                 "rho_s": (grid["rho_s"], grid["chi2_rho"])}
-        ripple = self._model_noise_allowance(theta, *prof["sigma_alpha"], s2k[-1])
+        ripple = self._model_noise_allowance(problem, theta, *prof["sigma_alpha"], s2k[-1])
         # the profiles describe the global minimum; a local method is judged against it
         glob = fit.method == "global"
         intervals, rise, walked = {}, {}, []
@@ -591,7 +700,7 @@ class FitSession:
                 if ridge is not None:
                     lo, hi = intervals[p][lv]
                     intervals[p][lv] = (min(lo, float(ridge[0][i])), max(hi, float(ridge[1][i])))
-        mc_sd = self.cache_error(theta, fit.method)
+        mc_sd = self.cache_error(theta, fit.method, problem)
         cal_sd = unc.calibration_sd(self.doc, names, theta)
         sky_sd = np.zeros(len(names)) if self.sky_sd is None else self.sky_sd
         sun_rel = light_level_sd(self.doc, names, self.sun_sd)
@@ -613,12 +722,13 @@ class FitSession:
         fit.cache_sd, fit.calibration_sd = mc_sd, cal_sd
         fit.sun_level_sd = sun_rel * np.abs(theta)
 
-    def _jpeg_shared_sd(self, J, usable, curvature_inverse):
+    def _jpeg_shared_sd(self, J, usable, sigma, curvature_inverse):
         """Each parameter's standard error (n,) from the rounding of the block means that the
         region's pixels share in each JPEG frame (Y, Cb, Cr; ingest's ``jpeg_dc`` record,
         :func:`~skyfit_mi.pipeline.jpeg_noise.shared_error_sd`, with the sensor's noise before
         compression from the manifest's noise model), carried to the parameters by
-        :func:`~.uncertainty.shared_error_sd`; zeros without JPEG frames."""
+        :func:`~.uncertainty.shared_error_sd`, ``sigma`` the values' in chi-square); zeros
+        without JPEG frames."""
         n = len(self.names)
         by_index = {f["index"]: f for f in self.doc["frames"]}
         records = [by_index.get(i, {}).get("jpeg_dc") for i in self.obs.frames]
@@ -632,14 +742,15 @@ class FitSession:
             if rec and ok.any():
                 y = self.obs.y[ok, t]
                 shared[t] = shared_error_sd(y, pixel_sigma(y, self.obs.sensor, noise) ** 2, rec)
-        return unc.shared_error_sd(J, usable, self.obs.sigma, shared, YCC_TO_RGB,
-                                   curvature_inverse)
+        return unc.shared_error_sd(J, usable, sigma, shared, YCC_TO_RGB, curvature_inverse)
 
-    def _model_noise_by_sigma(self, theta):
-        """The model's own Monte Carlo share of chi-square at the fitted reflectances over the
-        roughness range (NOISE_SIGMAS): where it is a sizeable share of the degrees of freedom
-        it pulls fits toward the roughness where it is small."""
-        return {f"{v:g}": self.problem.model_noise_chi2(np.r_[theta[:-1], v])
+    def _model_noise_by_sigma(self, theta, problem=None):
+        """The model's own Monte Carlo share of chi-square (``problem``'s, default the
+        session's) at the fitted reflectances over the roughness range (NOISE_SIGMAS): where
+        it is a sizeable share of the degrees of freedom it pulls fits toward the roughness
+        where it is small."""
+        problem = problem or self.problem
+        return {f"{v:g}": problem.model_noise_chi2(np.r_[theta[:-1], v])
                 for v in NOISE_SIGMAS}
 
     def _poorly_determined(self, theta, intervals, profiled, cov):
@@ -678,7 +789,7 @@ class FitSession:
             if intervals[p]["from"] != "covariance":
                 continue
             exact, _, points = profile_edges(
-                self.problem, fit.theta, fit.chi2, i,
+                fit.problem, fit.theta, fit.chi2, i,
                 [unc.LEVELS[lv] * fit.delta_scale[i] + ripple for lv in levels],
                 self.lower, self.upper,
                 fit.curvature_inverse, rtol=0.01, iterations=PROFILE_RIDGE_ITERATIONS)
@@ -691,7 +802,7 @@ class FitSession:
             intervals[p]["from"] = "profile (another parameter is poorly determined)"
         return walked
 
-    def _model_noise_allowance(self, theta, sigmas, profile, s2):
+    def _model_noise_allowance(self, problem, theta, sigmas, profile, s2):
         """The chi-square the model's own Monte Carlo error may add, as the largest over the
         sigma_alpha profile's 95% region (not only at the fit: the cache's error grows with
         sigma_alpha, and the truth may lie where it is larger).  At each roughness the model
@@ -699,7 +810,7 @@ class FitSession:
         and the narrowest resolved lobe's); the region widens with the allowance, so it is
         found again until it stops growing."""
         def at(sigma):
-            return self.problem.model_noise_chi2(np.r_[theta[:-1], sigma])
+            return problem.model_noise_chi2(np.r_[theta[:-1], sigma])
 
         def noise(sigma):
             return at(sigma) if sigma >= SIGMA_RESOLVED else max(at(sigma), at(SIGMA_RESOLVED))
@@ -774,8 +885,10 @@ class FitSession:
                                 f"{k} = {v:.4f}" for k, v in zip(names, g["theta"]))
                             + f": {method} ended in a local minimum or on a flat region of "
                             "chi-square from this start (thesis 6.3, 7.2)")
-        warnings += unc.misfit(chi2, self.problem.dof, fit.interval_scale, fit.cache_noise_chi2,
-                               fit.noise_chi2)
+        if fit.model_error is not None:
+            warnings.append(unc.model_error_warning(fit.misfit, fit.model_error))
+        warnings += unc.misfit(chi2, fit.problem.dof, fit.interval_scale, fit.cache_noise_chi2,
+                               fit.noise_chi2, model_error=fit.model_error is not None)
         warnings += unc.identifiability(names, iv95, self.lower, self.upper, fit.rise,
                                         fit.delta_scale, fit.cache_noise_chi2)
         if np.max(fit.channel_factors) > CHANNEL_NOTE:
@@ -790,11 +903,11 @@ class FitSession:
                 f"{np.sqrt(np.max(fit.channel_factors)):.2f}x.")
         warnings += geometry_warnings(self.geometry, float(theta[-1]))
         worst = max(fit.model_noise_by_sigma, key=fit.model_noise_by_sigma.get)
-        if fit.model_noise_by_sigma[worst] > NOISE_SHARE * self.problem.dof:
+        if fit.model_noise_by_sigma[worst] > NOISE_SHARE * fit.problem.dof:
             warnings.append(
                 f"the light cache's own Monte Carlo error adds up to "
                 f"{fit.model_noise_by_sigma[worst]:.3g} to chi-square (at sigma_alpha = {worst}), "
-                f"over {NOISE_SHARE:.0%} of the {self.problem.dof} degrees of freedom: the data "
+                f"over {NOISE_SHARE:.0%} of the {fit.problem.dof} degrees of freedom: the data "
                 "are more precise than the model, which pulls fits toward the roughness where "
                 "its error is small (intervals allow for it); use more --directions and "
                 "--positions.")
@@ -811,9 +924,10 @@ class FitSession:
 
     def _record(self, fit, warnings, start, seed, evaluations, wall, t_method):
         """The JSON-ready result of ``fit`` (the layout of ``fit_NAME.json``)."""
-        names, theta, chi2, dof = self.names, fit.theta, fit.chi2, self.problem.dof
+        names, theta, dof = self.names, fit.theta, self.problem.dof
         res = fit.method_result
         L = self.wm.radiance(theta)
+        chi2 = fit.chi2 if fit.model_error is None else self.problem.chi2(theta)
         return {
             "region": self.name, **({"pixels": self.obs.pixels.tolist()} if self.obs.rays is None
                                     else {"points": list(self.obs.pixels)}),
@@ -822,7 +936,10 @@ class FitSession:
             "method": fit.method, "seed": seed, "start": start.tolist(),
             "parameters": dict(zip(names, theta.tolist())),
             "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof,
-            "chi2_expected_from_noise": fit.noise_chi2[0], "interval_scale_s2": fit.interval_scale,
+            "chi2_expected_from_noise": fit.noise_chi2[0] if fit.model_error is None
+            else self.problem.noise_chi2(theta)[0],
+            "model_error": self._model_error_record(fit),
+            "interval_scale_s2": fit.interval_scale,
             "interval_scale_channels": dict(zip(names, fit.channel_factors.tolist())),
             "channel_correlation": fit.channel_correlation.tolist(),
             "intervals": fit.intervals,
@@ -860,6 +977,26 @@ class FitSession:
                        "model_DN": self.problem.predict(L).tolist()},
         }
 
+    def _model_error_record(self, fit):
+        """The fit JSON's ``model_error``: kappa (0 where chi-square is within what noise
+        explains), what it means, and with a fitted kappa its 95% interval and the
+        chi-square with it (the fit's, whose intervals include the model's error)."""
+        me, test = fit.model_error, fit.misfit
+        form = ("each value's variance is its noise's plus (kappa x the value)^2 (a clipped "
+                "value's: the model's); kappa by restricted maximum likelihood with the "
+                f"parameters, where chi-square exceeds what noise explains (p < {unc.MISFIT_P:g});"
+                " a prediction's band adds kappa x the predicted value")
+        if me is None:
+            return {"kappa": 0.0, "form": form, "meaning": (
+                "not fitted: chi-square is within what noise explains (p = "
+                f"{test.p:.2g}), so the model reproduces the data to their noise"
+                if not test.significant else "fitted as 0: the likelihood is largest without "
+                "a model error")}
+        return {"kappa": me.kappa, "interval95": list(me.interval95), "meaning": me.meaning,
+                "form": form, "chi2": fit.chi2, "chi2_per_dof": fit.chi2 / fit.problem.dof,
+                "values": me.values, **{k: fit.model_error_rounds[k]
+                                        for k in ("rounds", "settled")}}
+
 
 def fit_region(manifest_path, name, pixels, **options):
     """Fit one material region (see :class:`FitSession`, ``options`` as
@@ -869,7 +1006,8 @@ def fit_region(manifest_path, name, pixels, **options):
 
 def fit_regions(manifest_path, regions, model="two", method="global", normalisation="ward",
                 seed=0, start=None, positions=None, directions=DIRECTIONS, method_options=None,
-                log=print, frames=None, variant=None, sky=None, sun_sd=None, sky_terms=1):
+                log=print, frames=None, variant=None, sky=None, sun_sd=None, sky_terms=1,
+                sky_shape=False):
     """Fit several regions of one sequence (``regions`` [(name, pixels)]), their light traced
     together (:meth:`FitSession.for_regions`); yields each region's result dict in turn.
     ``sky``: None chooses (:func:`~.sky_fit.default_sky`); 'spec' takes the spec's light as it is; 'fit' fits the sky's level against the
@@ -878,7 +1016,8 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
     both count the sun's own level, known to a relative ``sun_sd`` (None: 0 for a sequence
     skyfit rendered, :data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD` for photographs), in the
     reflectances' intervals (:func:`~.sky_fit.light_level_sd`); ``sky_terms`` > 1 lets the
-    sky's level change smoothly over the day (:func:`~.sky_fit.fit_sky_scale`)."""
+    sky's level change smoothly over the day, and ``sky_shape`` fits a CIE sky's gradation
+    and indicatrix too (:func:`~.sky_fit.fit_sky_scale`)."""
     if sky is not None:
         check_choice("sky", sky, SKY_CHOICES)
     if sun_sd is not None:
@@ -894,26 +1033,28 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
             log(f"sky: photographs under the sun and a sky: the spec's light is a model of "
                 f"theirs, so its level is fitted with its prior (--sky {sky}; --sky spec takes "
                 "it as exact)")
-    for s in sessions.values():
-        s.split_sky = sky != "spec"
-    FitSession.trace_groups(sessions)
-    if sky != "spec":
+    if sky == "spec" and (sky_terms != 1 or sky_shape):
+        raise SkyfitError(f"{'--sky-terms' if sky_terms != 1 else '--sky-shape'} belongs to a "
+                          "fitted sky, and the spec's is taken as it is (--sky spec): give --sky "
+                          "fit or prior.")
+    if sky != "spec":                                   # refused before the light is traced
         if not any(np.any(k.sun_radiance > 0) and k.sun_direction[2] > 0 for k in first.skies):
             raise SkyfitError(f"--sky {sky} scales the sky against the sun, and no frame of the "
                               "sequence has the sun's disc above the horizon; fit with the "
                               "spec's sky (--sky spec).")
+        check_terms(sky_terms, len(first.obs.frames))
+        if sky_shape:
+            check_shape(first.skies)
         if sun_sd is None:
             sun_sd = 0.0 if first.doc.get("source", "render") in RENDERED_SOURCES \
                 else SUN_LEVEL_SD
-        for s in sessions.values():
-            s.sun_sd = float(sun_sd)
-        check_terms(sky_terms, len(first.obs.frames))
+    for s in sessions.values():
+        s.split_sky, s.sky_shape = sky != "spec", bool(sky_shape)
+        s.sun_sd = 0.0 if sky == "spec" else float(sun_sd)
+    FitSession.trace_groups(sessions)
+    if sky != "spec":
         fit_sky_scale(list(sessions.values()), seed, log,
                       prior_sd=SKY_LEVEL_SD if sky == "prior" else None, terms=int(sky_terms))
-    elif sky_terms != 1:
-        raise SkyfitError(f"--sky-terms {sky_terms} changes a fitted sky's level over the day; "
-                          "the spec's sky is taken as it is (--sky spec): give --sky fit or "
-                          "prior, or leave out --sky-terms.")
     for name, _ in regions:
         yield sessions.pop(name).run(method, start, seed, method_options, log)
 

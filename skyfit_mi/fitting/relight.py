@@ -291,7 +291,9 @@ def fitted_sky_level(fits, doc, log=print):
     if levels:
         level = levels.popitem()[1]
         log(f"the images take the fitted sky level: k = {level['k']:.3g} times the spec's sky "
-            "against the sun" + (", changing over the day" if level.get("terms") else ""))
+            "against the sun" + (", changing over the day" if level.get("terms") else "")
+            + ("; its fitted shape is in the predictions, the images keep the spec's pattern"
+               if level.get("shape") else ""))
         return level
     return None
 
@@ -792,8 +794,8 @@ def parameter_draws(result, names, lower, upper, n, rng):
 def predict(fits, target, pixels, draws=200, seed=0, log=print):
     """Radiance of each fitted region in the target's frames, without rendering images: the
     region's mean per frame and channel at the fit and its 95% band (2.5-97.5 percentiles
-    over :func:`parameter_draws`, widened in quadrature by the image's noise and the model's
-    Monte Carlo error), with the image's mean (the observed, where the target holds frames);
+    over :func:`parameter_draws`, widened in quadrature by the image's noise, the model's
+    Monte Carlo error and the fit's model error, :func:`model_error_kappa`), with the image's mean (the observed, where the target holds frames);
     on an observation table, each point's value in each frame and channel it measures, with
     its band and the table's value.  Returns a :class:`Prediction`: its
     :class:`PredictionRow` s, and per region the relative RMS error of its predicted means
@@ -858,8 +860,11 @@ def _predict_means(s, result, target, draws, rng):
     _, model_var = s.wm.radiance_and_variance(sets[0])
     image = image_values(s, target)
     n = len(s.obs.pixels)
+    # and by the model's error, kappa times the mean: shared by the region's pixels, which
+    # see the light alike (a highlight the model misses, it misses in all of them)
     extra = 1.959963984540054 * np.sqrt((np.sum(image_noise_variance(s, image), axis=0)
-                                         + np.sum(model_var, axis=0)) / n**2)
+                                         + np.sum(model_var, axis=0)) / n**2
+                                        + (model_error_kappa(result) * means[0]) ** 2)
     observed = region_mean(image)
     names = _channels(s)
     means, observed = means[..., :len(names)], observed[..., :len(names)]
@@ -876,8 +881,8 @@ def _predict_means(s, result, target, draws, rng):
 def _predict_points(s, result, target, draws, rng):
     """The prediction of one region of an observation table (:func:`predict`): each point's
     value at the fit in each frame and channel it measures, its 95% band (percentiles over
-    the draws, widened in quadrature by the value's own noise and the model's Monte Carlo
-    error) and the table's value; (its rows, the :class:`MeansError` of its region means)."""
+    the draws, widened in quadrature by the value's own noise, the model's Monte Carlo
+    error and the fit's model error) and the table's value; (its rows, the :class:`MeansError` of its region means)."""
     sets = parameter_draws(result, s.names, s.lower, s.upper, draws, rng)
     at_fit, lo, hi = (np.empty(s.obs.y.shape) for _ in range(3))
     P, T = s.obs.y.shape[:2]
@@ -889,7 +894,8 @@ def _predict_points(s, result, target, draws, rng):
         lo[part], hi[part] = np.percentile(values[1:], [2.5, 97.5], axis=0)
     _, model_var = s.wm.radiance_and_variance(sets[0])
     image = image_values(s, target)
-    extra = 1.959963984540054 * np.sqrt(image_noise_variance(s, image) + model_var)
+    extra = 1.959963984540054 * np.sqrt(image_noise_variance(s, image) + model_var
+                                        + (model_error_kappa(result) * at_fit) ** 2)
     names = _channels(s)
     saturated = ~_measured(s)
     rows, points = [], [str(x) for x in s.obs.pixels]      # one string a point, shared
@@ -904,6 +910,14 @@ def _predict_points(s, result, target, draws, rng):
     region_mean = _region_mean(s)
     return rows, _means_error(s, region_mean(at_fit)[..., :len(names)],
                               region_mean(image)[..., :len(names)], region_mean)
+
+
+def model_error_kappa(result):
+    """The relative model error kappa of a fit ``result`` (its ``model_error``, fitted where
+    the model cannot reproduce the data; 0 without): a new value's own error beyond its noise
+    is kappa times its value, of which the prediction stands for it, and every prediction
+    band adds that to the parameters' spread."""
+    return float((result.get("model_error") or {}).get("kappa", 0.0))
 
 
 def _measured(s):

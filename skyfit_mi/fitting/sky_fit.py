@@ -62,6 +62,12 @@ MAX_TERMS, FRAMES_PER_TERM = 4, 3
 #: day's middle and its ends.  Passing haze and cloud change the sky's share of the light by
 #: tens of percent within hours; 0.35 is the level's own prior (:data:`SKY_LEVEL_SD`).
 DRIFT_SD = 0.35
+#: The prior's standard deviation of the mix of each of the sky's shape variants (``fit
+#: --sky-shape``, :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`): 1 is one CIE group of
+#: gradation or indicatrix.  The shape fitted to the shared measured clear day's scans lies
+#: one gradation group from the thesis's clear sky (5.98 against 5, indicatrix 4: BENCHMARKS,
+#: "Sky models against a measured clear sky").
+SHAPE_SD = 1.0
 #: Step in each term's coefficient of the finite differences of the residuals.
 DRIFT_STEP = 1e-3
 #: Gauss-Newton iterations of the terms at most.
@@ -135,6 +141,15 @@ def _parabola(u, chi2):
     return (-c1 / (2 * c2), c2) if c2 > 0 else (None, c2)
 
 
+def check_shape(skies):
+    """Refuse a fit of the sky's shape (``--sky-shape``) where some frame's spec sky has no
+    shape variants (not a CIE sky)."""
+    if not all(sky.shape_variants() for sky in skies):
+        raise SkyfitError("--sky-shape mixes a CIE sky's gradation and indicatrix, and the "
+                          "spec's sky of some frames is not a CIE sky (type clear or "
+                          "cie_general); leave out --sky-shape.")
+
+
 def check_terms(terms, frames):
     """Refuse ``terms`` of the sky's level over ``frames`` frames that they cannot carry."""
     if not 1 <= int(terms) <= MAX_TERMS:
@@ -145,28 +160,34 @@ def check_terms(terms, frames):
                           f"frames, and the fit has {frames}; give fewer terms.")
 
 
-def _fit_terms(sessions, thetas, u0, terms, prior_sd, s2):
-    """log k over the day as ``terms`` Legendre polynomials in time, fitted with the regions'
-    parameters from the day's level ``u0`` (log k) and each region's ``thetas`` there:
-    Gauss-Newton on the coefficients with every region's parameters profiled out (each
-    region's Jacobian in the coefficients projected off its parameters' own; the parameters
-    then polished by Levenberg-Marquardt), under the priors N(0, ``prior_sd``^2) on the level
-    (none if None) and N(0, :data:`DRIFT_SD`^2) on each further term.  Leaves each session at
-    the fitted curve; returns (coefficients, their covariance, the span [s], each region's
-    parameters' response to the coefficients (n, terms))."""
+def _fit_curve(sessions, thetas, u0, terms, shape, prior_sd, s2):
+    """The sky's coefficients fitted with the regions' parameters, from the day's level ``u0``
+    (log k) and each region's ``thetas`` there: log k over the day as ``terms`` Legendre
+    polynomials in time, and with ``shape`` (J) the mix of the sky's shape variants
+    (:meth:`~.fit.FitSession.set_sky_shape`).  Gauss-Newton on the coefficients with every
+    region's parameters profiled out (each region's Jacobian in the coefficients projected off
+    its parameters' own; the parameters then polished by Levenberg-Marquardt), under the
+    priors N(0, ``prior_sd``^2) on the level (none if None), N(0, :data:`DRIFT_SD`^2) on each
+    further term and N(0, :data:`SHAPE_SD`^2) on each shape's mix.  Leaves each session at the
+    fit; returns (coefficients, their covariance, the span [s], each region's parameters'
+    response to the coefficients (n, terms + J))."""
     times = [t for s in sessions for t in s.obs.times]
     span = (float(_seconds(times).min()), float(_seconds(times).max()))
     bases = [time_basis(s.obs.times, span, terms) for s in sessions]
-    P = np.diag([0.0 if prior_sd is None else prior_sd ** -2] + [DRIFT_SD ** -2] * (terms - 1))
-    u = np.r_[u0, np.zeros(terms - 1)]
+    n = terms + shape
+    P = np.diag([0.0 if prior_sd is None else prior_sd ** -2] + [DRIFT_SD ** -2] * (terms - 1)
+                + [SHAPE_SD ** -2] * shape)
+    u = np.r_[u0, np.zeros(n - 1)]
     thetas = [np.asarray(t, dtype=float) for t in thetas]
 
-    def put(u):
-        for s, B in zip(sessions, bases):
-            s.set_sky_scale(np.exp(B @ u))
+    def put(s, B, u):
+        if shape:
+            s.sky_shape_mix = np.asarray(u[terms:], dtype=float)
+        s.set_sky_scale(np.exp(B @ u[:terms]))
 
     def objective(u, thetas):
-        put(u)
+        for s, B in zip(sessions, bases):
+            put(s, B, u)
         return sum(s.problem.chi2(t) for s, t in zip(sessions, thetas)) + u @ P @ u
 
     def linearised(u, thetas):
@@ -174,14 +195,14 @@ def _fit_terms(sessions, thetas, u0, terms, prior_sd, s2):
         H, g, responses = P.copy(), P @ u, []
         for s, B, theta in zip(sessions, bases, thetas):
             Ju = []
-            for j in range(terms):
+            for j in range(n):
                 r = []
                 for sign in (1, -1):
-                    s.set_sky_scale(np.exp(B @ (u + sign * DRIFT_STEP * np.eye(terms)[j])))
+                    put(s, B, u + sign * DRIFT_STEP * np.eye(n)[j])
                     r.append(s.problem.residuals(theta))
                 Ju.append((r[0] - r[1]) / (2 * DRIFT_STEP))
             Ju = np.column_stack(Ju)
-            s.set_sky_scale(np.exp(B @ u))
+            put(s, B, u)
             r, Jt = s.problem.jacobian(theta)
             response = -np.linalg.lstsq(Jt, Ju, rcond=None)[0]
             Jp = Ju + Jt @ response                     # what the parameters cannot absorb
@@ -196,7 +217,8 @@ def _fit_terms(sessions, thetas, u0, terms, prior_sd, s2):
         H, g, _ = linearised(u, thetas)
         step = -np.linalg.solve(H, g)
         for _ in range(6):                              # halved until chi-square falls
-            put(u + step)
+            for s, B in zip(sessions, bases):
+                put(s, B, u + step)
             moved = [levenberg_marquardt(s.problem, t, s.lower, s.upper)["theta"]
                      for s, t in zip(sessions, thetas)]
             new = objective(u + step, moved)
@@ -208,7 +230,7 @@ def _fit_terms(sessions, thetas, u0, terms, prior_sd, s2):
         u, thetas, gain, current = u + step, moved, current - new, new
         if gain < 1e-3 * max(1.0, s2) or np.max(np.abs(step)) < 1e-4:
             break
-    put(u)
+    objective(u, thetas)
     H, _, responses = linearised(u, thetas)
     return u, s2 * np.linalg.inv(H), span, responses
 
@@ -220,7 +242,8 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
     ``prior_sd``: the standard deviation of a normal prior on log k about the spec's level
     (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`), None for none (k from the data alone).
     ``terms`` > 1: log k changes smoothly over the day (changing weather), as that many
-    Legendre polynomials in time (:func:`_fit_terms`), from the day's level found first."""
+    Legendre polynomials in time; sessions traced with ``sky_shape`` also fit the mix of the
+    sky's shape variants (:func:`_fit_curve`), both from the day's level found first."""
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     starts = [s.random_start(rng) for s in sessions]
@@ -296,12 +319,13 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
         # an undetermined k: the parameters' range over the k the profile could not tell apart
         thetas = np.array([profile[u][n][1] for u in within])
         s.sky_span = None if np.isfinite(sd_u) else (thetas.min(axis=0), thetas.max(axis=0))
-    curve = None
-    if terms > 1 and not np.isfinite(sd_u):
-        warnings.append(f"the sky's change over the day (--sky-terms {terms}) is not fitted: "
-                        "its level is not determined.")
-    elif terms > 1:
-        u, C, span, responses = _fit_terms(sessions, [th for _, th in best], u0, terms,
+    curve = shape = correlation = None
+    J = len(sessions[0].parts) - 2                       # the shape variants traced
+    if (terms > 1 or J) and not np.isfinite(sd_u):
+        warnings.append("the sky's change over the day and its shape are not fitted: its level "
+                        "is not determined.")
+    elif terms > 1 or J:
+        u, C, span, responses = _fit_curve(sessions, [th for _, th in best], u0, terms, J,
                                            prior_sd, s2)
         sd = np.sqrt(np.diag(C))
         for s, response in zip(sessions, responses):
@@ -309,22 +333,48 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
         k, sd_u = float(np.exp(u[0])), float(sd[0])
         interval = [float(np.exp(u[0] - unc.Z["95"] * sd[0])),
                     float(np.exp(u[0] + unc.Z["95"] * sd[0]))]
-        frames = sorted({(i, t) for s in sessions for i, t in zip(s.obs.frames, s.obs.times)})
-        B = time_basis([t for _, t in frames], span, terms)
-        half = unc.Z["95"] * np.sqrt(np.einsum("ij,jk,ik->i", B, C, B))
-        curve = {"meaning": "log k(t) = sum_j coefficients[j] P_j(x), P_j Legendre "
-                            "polynomials, x = -1 at span_s[0] and 1 at span_s[1] (held beyond)",
-                 "coefficients": u.tolist(), "covariance": C.tolist(),
-                 "correlation": (C / np.outer(sd, sd)).tolist(), "span_s": list(span),
-                 "drift_prior_sd": DRIFT_SD,
-                 "k_by_frame": {int(i): [float(np.exp(v)), float(np.exp(v - h)),
-                                         float(np.exp(v + h))]
-                                for (i, _), v, h in zip(frames, B @ u, half)}}
-        vague = [j for j in range(1, terms) if sd[j] > 0.7 * DRIFT_SD]
-        if vague:
-            warnings.append(f"the data hardly tell how the sky changes over the day (terms "
-                            f"{', '.join(map(str, vague))} of --sky-terms {terms}): their "
-                            "prior holds them, and the intervals include that.")
+        names = ["log k"] + [f"log k term {j}" for j in range(1, terms)]
+        if terms > 1:
+            frames = sorted({(i, t) for s in sessions for i, t in zip(s.obs.frames,
+                                                                      s.obs.times)})
+            B = time_basis([t for _, t in frames], span, terms)
+            Ct = C[:terms, :terms]
+            half = unc.Z["95"] * np.sqrt(np.einsum("ij,jk,ik->i", B, Ct, B))
+            curve = {"meaning": "log k(t) = sum_j coefficients[j] P_j(x), P_j Legendre "
+                                "polynomials, x = -1 at span_s[0] and 1 at span_s[1] (held "
+                                "beyond)",
+                     "coefficients": u[:terms].tolist(), "covariance": Ct.tolist(),
+                     "span_s": list(span), "drift_prior_sd": DRIFT_SD,
+                     "k_by_frame": {int(i): [float(np.exp(v)), float(np.exp(v - h)),
+                                             float(np.exp(v + h))]
+                                    for (i, _), v, h in zip(frames, B @ u[:terms], half)}}
+            vague = [j for j in range(1, terms) if sd[j] > 0.7 * DRIFT_SD]
+            if vague:
+                warnings.append(f"the data hardly tell how the sky changes over the day (terms "
+                                f"{', '.join(map(str, vague))} of --sky-terms {terms}): their "
+                                "prior holds them, and the intervals include that.")
+        if J:
+            variants = [v.info for _, v in sessions[0].skies[0].shape_variants()]
+            mix, msd = u[terms:], sd[terms:]
+            shape = {"meaning": "the sky other than the sun is (1 - sum(mix)) times the spec's "
+                                "pattern plus mix[j] times variant j (the spec's CIE pattern "
+                                "with its gradation, or indicatrix, one CIE group on, at the "
+                                "same horizontal irradiance): mix 1 is the variant's group; "
+                                "index = from + mix (to - from), linear between the patterns",
+                     "variants": [f"{v['of']} group {v['from_group']} -> {v['to_group']}"
+                                  for v in variants],
+                     "mix": mix.tolist(), "mix_sd": msd.tolist(), "prior_sd": SHAPE_SD,
+                     "index": {v["of"]: [float(v["from_group"] + m * (v["to_group"]
+                                                                     - v["from_group"])),
+                                         float(unc.Z["95"] * sd_m)]
+                               for v, m, sd_m in zip(variants, mix, msd)}}
+            names += [f"mix {v['of']}" for v in variants]
+            vague = [v["of"] for v, sd_m in zip(variants, msd) if sd_m > 0.7 * SHAPE_SD]
+            if vague:
+                warnings.append(f"the data hardly tell the sky's {' and '.join(vague)} (its "
+                                "shape): the prior holds it, and the intervals include that; "
+                                "regions with other normals, or a grey card, tell it better.")
+        correlation = {"names": names, "matrix": (C / np.outer(sd, sd)).tolist()}
     record = {"fitted": "the sky's level (all but the sun's disc) against the spec's, relative "
                         "to the sun: k, shared by every region"
                         + (" and frame of the fit" if curve is None else
@@ -338,7 +388,7 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
                   "sd)^2 is in the profile"},
               "profile": {"k": [float(np.exp(u)) for u in sorted(profile)],
                           "chi2": [data(u) for u in sorted(profile)]},
-              "terms": curve,
+              "terms": curve, "shape": shape, "correlation": correlation,
               "warnings": warnings, "time_s": time.perf_counter() - t0}
     for s in sessions:
         s.sky_record = record
@@ -349,6 +399,8 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
         f"{ends[0]}-{ends[1]}) times the spec's, against the sun"
         + ("" if curve is None else f", changing over the day as {terms} terms: k = "
            + ", ".join(f"{v[0]:.2f}" for v in curve["k_by_frame"].values()) + " by frame")
+        + ("" if shape is None else "; its shape: " + ", ".join(
+            f"{name} index {v[0]:.2f} +- {v[1]:.2f}" for name, v in shape["index"].items()))
         + f" ({record['time_s']:.1f} s)"
         + "".join(f"\n  warning: {w}" for w in warnings))
     return record

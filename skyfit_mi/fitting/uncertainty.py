@@ -8,15 +8,24 @@ Two estimates, both reported:
   3.84 (95%) for one parameter;
 * covariance: C = (J^T J)^-1 at the optimum, intervals +- 1 and 1.96 standard deviations.
 
-When chi^2/dof > 1 (the model or the sigmas are imperfect, e.g. render noise in the
-data) both are widened by s^2 = chi^2/dof (Birge ratio), and the output says so.  The
-model's own Monte Carlo error (the light cache's samples, estimated by fitting on two
-independent halves of it) is then added in quadrature to each interval's half-widths,
-and the profile threshold is raised by the chi^2 that noise contributes, since chi^2
-ripples by about that much from one parameter value to the next.
+Where chi^2 exceeds what noise explains beyond chance (p < MISFIT_P: the model cannot
+reproduce the data), the model's error is fitted with the parameters (:func:`model_error`):
+each value's variance becomes sigma^2 + (kappa y)^2, a relative error kappa of the value
+beyond its noise, kappa by restricted maximum likelihood, so that the fit weights each value
+by what the model can reproduce and its intervals and predictions include that error.  What
+chi^2 still exceeds then (or any excess of a fit without significant misfit) widens both by
+s^2 = chi^2 / (what noise gives) (Birge ratio), and the output says so; once kappa is fitted
+s^2 is about 1, so the misfit is not counted twice.  The model's own Monte Carlo error (the
+light cache's samples, estimated by fitting on two independent halves of it) is then added
+in quadrature to each interval's half-widths, and the profile threshold is raised by the
+chi^2 that noise contributes, since chi^2 ripples by about that much from one parameter
+value to the next.
 """
 
+from dataclasses import dataclass
+
 import numpy as np
+from scipy.optimize import brentq, minimize_scalar
 from scipy.special import chdtrc
 
 from ..physics.ward import METAL_THRESHOLD, colour_rule_twin
@@ -227,7 +236,7 @@ def reading(name, value, interval95, lower, upper):
     return f"{name} = {value:.4g} (95%: {lo:.3g}-{hi:.3g})"
 
 
-def misfit(chi2, dof, s2, model_noise=0.0, noise=None):
+def misfit(chi2, dof, s2, model_noise=0.0, noise=None, model_error=False):
     """Warnings when chi-square is larger than the data's noise explains (thesis 6.2).
 
     ``noise`` = (mean, variance) of the chi-square noise alone gives
@@ -238,25 +247,140 @@ def misfit(chi2, dof, s2, model_noise=0.0, noise=None):
     of freedom; k = dof when nothing clips), its size says what to do.  Above MISFIT_UNRELIABLE
     times the expectation the model does not describe the data and no parameter can be trusted
     (widening intervals by s^2 does not repair a wrong model); a significant smaller excess
-    (p < MISFIT_P) widens the intervals by s^2.
+    (p < MISFIT_P) widens the intervals by s^2.  With ``model_error`` the chi-square is the
+    fit's with the model's error (:func:`model_error_warning` tells of that): these are what it
+    leaves unexplained.
     """
-    mean, var = noise if noise is not None else (float(dof), 2.0 * dof)
-    expected = mean + max(model_noise, 0.0)
-    k = 2.0 * mean * mean / var if var > 0 else float(dof)
-    ratio = chi2 / expected
-    p = float(chdtrc(k, chi2 * k / expected))                 # chi-square's survival function
+    test = misfit_test(chi2, dof, model_noise, noise)
     by = (f"noise and the model's Monte Carlo error ({model_noise:.3g}) explain"
-          if model_noise > 0.01 * mean else "noise explains")
-    of = (f"chi-square is {ratio:.3g} times what {by} (p = {p:.2g}; noise alone varies it by "
-          f"+- {np.sqrt(2 / k):.2g})")
-    if ratio > MISFIT_UNRELIABLE and p < MISFIT_P:
+          if model_noise > 0.01 * test.noise_mean else "noise explains")
+    if model_error:
+        by = (f"noise, the fitted model error and the model's Monte Carlo error "
+              f"({model_noise:.3g}) explain" if model_noise > 0.01 * test.noise_mean
+              else "noise and the fitted model error explain")
+    of = (f"chi-square is {test.ratio:.3g} times what {by} (p = {test.p:.2g}; noise alone "
+          f"varies it by +- {np.sqrt(2 / test.k):.2g})")
+    if test.ratio > MISFIT_UNRELIABLE and test.p < MISFIT_P:
         return [f"the model does not describe these data: {of}; its parameters and intervals are "
                 "not reliable. Check the sensor model and sigmas, the region (one material "
                 "only?), or use another reflection model."]
-    if p < MISFIT_P:
+    if test.p < MISFIT_P:
         return [f"more misfit than the noise explains: {of}; intervals are widened by "
                 f"s^2 = {s2:.3g}."]
     return []
+
+
+def model_error_warning(test, model_error):
+    """The warning of a fit whose model's error was fitted (a :class:`ModelError`) because
+    chi-square without it exceeded what noise explains (``test``, its :class:`MisfitTest`):
+    how far, what kappa means, and what the intervals now include."""
+    me = model_error
+    of = (f"chi-square is {test.ratio:.3g} times what noise explains (p = {test.p:.2g}); "
+          f"{me.meaning} (kappa = {me.kappa:.3g}, 95%: {me.interval95[0]:.3g}-"
+          f"{me.interval95[1]:.3g}). The fit weights each value by what the model can "
+          "reproduce, and its intervals and predictions include this error")
+    if test.ratio > MISFIT_UNRELIABLE:
+        return (f"the model does not describe these data: {of}; its parameters are this "
+                "model's best description of the data, not necessarily the surface's own. "
+                "Check the sensor model and sigmas, the region (one material only?), or use "
+                "another reflection model.")
+    return f"more misfit than the noise explains: {of}."
+
+
+@dataclass(frozen=True)
+class MisfitTest:
+    """chi-square against what noise and the model's Monte Carlo error explain
+    (:func:`misfit_test`): their ``ratio``, its p-value ``p`` on ``k`` degrees of freedom, and
+    the mean chi-square noise alone gives, ``noise_mean``."""
+
+    ratio: float
+    p: float
+    k: float
+    noise_mean: float
+
+    @property
+    def significant(self):
+        """Whether chi-square exceeds what noise explains beyond chance (p < MISFIT_P)."""
+        return self.p < MISFIT_P
+
+
+def misfit_test(chi2, dof, model_noise=0.0, noise=None):
+    """The :class:`MisfitTest` of ``chi2`` (arguments as :func:`misfit`'s): a chi-square
+    distribution matched to the mean noise and the model's noise give and to the noise's
+    variance (k = 2 mean^2 / variance degrees of freedom; k = dof when nothing clips)."""
+    mean, var = noise if noise is not None else (float(dof), 2.0 * dof)
+    expected = mean + max(model_noise, 0.0)
+    k = 2.0 * mean * mean / var if var > 0 else float(dof)
+    return MisfitTest(ratio=chi2 / expected, p=float(chdtrc(k, chi2 * k / expected)), k=k,
+                      noise_mean=mean)
+
+
+#: The model errors searched, relative to the prediction: 0 and a geometric grid up to ten
+#: times the value (refined between its points).
+KAPPA_GRID = np.r_[0.0, np.geomspace(1e-4, 10.0, 81)]
+
+
+@dataclass(frozen=True)
+class ModelError:
+    """A model's relative error beyond the data's noise (:func:`model_error`): ``kappa``, its
+    95% interval ``interval95`` (lo, hi) at the parameters it was estimated at, and the
+    values it was estimated from."""
+
+    kappa: float
+    interval95: tuple
+    values: int
+
+    @property
+    def meaning(self):
+        """kappa in a sentence."""
+        return (f"the model misses the data by about {self.kappa:.2g} (= {self.kappa:.1%}) of "
+                "each value beyond their noise: each value's variance is its noise's plus "
+                f"({self.kappa:.3g} x the value)^2")
+
+
+def model_error(e, v, a, dof):
+    """The relative model error kappa of residuals ``e`` [DN] (observed - model, measured
+    values only) with noise variances ``v`` [DN^2] and values ``a`` [DN] (each value's
+    radiance through the sensor's slope, :meth:`~skyfit_mi.fitting.chi2.Problem.value_scale`),
+    by restricted maximum likelihood: each residual is Gaussian of variance
+    V = v + kappa^2 a^2, and kappa minimises
+
+    .. math:: -2 \\ln L_R = \\sum e^2 / V + (\\nu / n) \\sum \\ln V
+
+    (n values, nu = ``dof`` of them left by the fitted parameters, which take up the rest of
+    the residuals' variance: the log-determinant's weight nu / n is REML's correction in its
+    simplest form, and keeps kappa from coming out low).  Its stationary point weights each
+    value by a^2 / V: kappa is told by the values whose model error exceeds their noise.
+    The 95% interval is where -2 ln L_R rises by 3.84 (at fixed parameters).  kappa is 0 where
+    the likelihood is largest without it; searched over KAPPA_GRID.  Returns a
+    :class:`ModelError`."""
+    e2, v, a2 = np.asarray(e, float) ** 2, np.asarray(v, float), np.asarray(a, float) ** 2
+    weight = dof / max(len(e2), 1)
+
+    def nll(kappa):
+        V = v + kappa * kappa * a2
+        return float(np.sum(e2 / V) + weight * np.sum(np.log(V)))
+
+    grid = KAPPA_GRID
+    f = np.array([nll(k) for k in grid])
+    i = int(np.argmin(f))
+    kappa, fmin = float(grid[i]), float(f[i])
+    if 0 < i < len(grid) - 1:
+        best = minimize_scalar(nll, bounds=(grid[i - 1], grid[i + 1]), method="bounded",
+                               options={"xatol": 1e-6 * grid[i]})
+        if best.fun < fmin:
+            kappa, fmin = float(best.x), float(best.fun)
+    thr = fmin + LEVELS["95"]
+
+    def edge(j, step):
+        """Where -2 ln L_R crosses the threshold going from the minimum by ``step``."""
+        while 0 <= j + step < len(grid) and f[j + step] <= thr:
+            j += step
+        if not 0 <= j + step < len(grid):
+            return float(grid[j])
+        inner = kappa if j == i else grid[j]
+        return float(brentq(lambda k: nll(k) - thr, *sorted((inner, grid[j + step]))))
+    return ModelError(kappa, (edge(i, -1), edge(i, 1)), len(e2))
 
 
 def colour_rule_ambiguity(theta, intervals95):

@@ -377,21 +377,68 @@ class Sky:
                     or self.envmap is not None)
 
     def split(self):
-        """(the sun disc alone, everything else: the sky's patterns, its map and the ground):
-        two skies whose light adds up to this one's, which a fit of the sun-to-sky level
-        scales apart (radiance is linear in the light)."""
+        """(the sun's light: its disc and the ground's share lit by it; the sky's: its patterns,
+        its map and the ground's share lit by them): two skies whose light adds up to this
+        one's, which a fit of the sun-to-sky level scales apart (radiance is linear in the
+        light).  The ground, a Lambertian reflector of the horizontal irradiance (L = albedo E
+        / pi), is shared channel by channel as the sun's and the sky's horizontal irradiance
+        (:meth:`sun_horizontal_irradiance`, :meth:`sky_horizontal_irradiance`): a sky scaled
+        by k leaves the sun-lit ground as it is."""
+        e_sun, e_sky = self.sun_horizontal_irradiance(), self.sky_horizontal_irradiance()
+        total = e_sun + e_sky
+        lit = np.divide(e_sun, total, out=np.zeros(3), where=total > 0)
         sun = replace(self, **{p: np.zeros(3) for p in _PATTERNS}, envmap=None,
-                      ground=np.zeros(3))
-        return sun, replace(self, sun_radiance=np.zeros(3))
+                      ground=self.ground * lit)
+        return sun, replace(self, sun_radiance=np.zeros(3), ground=self.ground * (1.0 - lit))
+
+    def shape_variants(self):
+        """The skies a fit of the sky's shape mixes with this one (``fit --sky-shape``): for a
+        CIE sky (the thesis's clear sky, standard type 12, or a CIE S 011 general sky,
+        :mod:`~skyfit_mi.physics.cie_general`), its pattern with the gradation, then the
+        indicatrix, moved to the next CIE group toward the more turbid (from the most turbid,
+        toward the clearer), lit as this sky's light other than the sun: the same
+        luminance-weighted horizontal irradiance, colour, sky-lit ground (:meth:`split`) and
+        horizon.  A mix
+        (1 - a_g - a_i) this + a_g V_g + a_i V_i moves the shape continuously between them:
+        a = 1 is the variant's group exactly.  Returns [(label, Sky)], empty for other skies."""
+        kind = self.info.get("kind")
+        if kind == "clear":
+            p0 = cie_general.standard_parameters(12)
+        elif kind == "cie_general":
+            p0 = np.asarray(self.info["parameters_abcde"], dtype=float)
+        else:
+            return []
+        e_sky = self.sky_horizontal_irradiance()
+        lum = float(e_sky @ SRGB_LUMINANCE)
+        if lum <= 0:
+            return []
+        zenith, azimuth = (np.degrees(a) for a in angles_from_direction(self.sun_direction))
+        out = []
+        for name, table, at in (("gradation", cie_general.GRADATION_GROUPS, slice(0, 2)),
+                                ("indicatrix", cie_general.INDICATRIX_GROUPS, slice(2, 5))):
+            group = int(np.argmin(np.abs(table - p0[at]).sum(axis=1))) + 1
+            to = group + 1 if group < len(table) else group - 1
+            p = p0.copy()
+            p[at] = table[to - 1]
+            v = cie_general_sky(p, zenith, azimuth, sun=False, ground_albedo=0.0)
+            scale = lum / float(v.sky_horizontal_irradiance() @ SRGB_LUMINANCE)
+            weight = float(v.perez @ SRGB_LUMINANCE) * scale * e_sky / lum
+            out.append((f"{name} group {group} -> {to}",
+                        replace(v, perez=weight, ground=self.split()[1].ground,
+                                horizon_blend=self.horizon_blend,
+                                info={"kind": "shape variant", "parameters_abcde": p.tolist(),
+                                      "from_group": group, "to_group": to, "of": name})))
+        return out
 
     def sky_scaled(self, k):
-        """A copy whose light other than the sun's disc (the patterns, the map and the ground:
-        :meth:`split`'s second part) is ``k`` times this one's: the sky at a fitted level
-        against the sun (``fit --sky fit``)."""
+        """A copy whose sky's light (:meth:`split`'s second part: the patterns, the map and the
+        sky-lit ground) is ``k`` times this one's: the sky at a fitted level against the sun
+        (``fit --sky fit``)."""
         check_range("sky scale", k, 0.0, 1e3, "(relative)")
+        sun, sky = self.split()
         return replace(self, **{p: getattr(self, p) * k for p in _PATTERNS},
                        envmap=None if self.envmap is None else self.envmap * np.float32(k),
-                       ground=self.ground * k)
+                       ground=sun.ground + sky.ground * k)
 
     def scaled_to_illuminance(self, diffuse_horizontal_lux, efficacy):
         """A copy scaled to a measured horizontal diffuse illuminance [lx].

@@ -19,8 +19,9 @@ def read_fit_result(path):
     """The fit result in ``path``, checked: a region name, a model of
     :data:`~skyfit_mi.render.fit_model.PARAMETERS`, that model's parameters as finite numbers
     within their bounds and a 95% interval [lo, hi] of each (lo <= hi), pixels (if any) as
-    [x, y] pairs, and, where present, the frames as manifest indices and the covariance as
-    its parameters' names and a square matrix of them.  SkyfitError saying what is wrong
+    [x, y] pairs, and, where present, the frames as manifest indices, the model's relative
+    error kappa as a finite number >= 0 and the covariance as its parameters' names and a
+    square matrix of them.  SkyfitError saying what is wrong
     otherwise."""
     path = Path(path)
     try:
@@ -52,6 +53,12 @@ def read_fit_result(path):
                                              and i >= 0 for i in frames)):
         raise SkyfitError(f"{path}: frames must be a list of manifest frame indices (whole "
                           "numbers from 0).")
+    me = r.get("model_error")
+    if me is not None and not (isinstance(me, dict) and isinstance(me.get("kappa"), (int, float))
+                               and not isinstance(me["kappa"], bool)
+                               and np.isfinite(me["kappa"]) and me["kappa"] >= 0):
+        raise SkyfitError(f"{path}: model_error must be {{\"kappa\": a finite number >= 0, "
+                          "...}; give a fit_NAME.json that `skyfit fit` wrote.")
     cov = r.get("covariance")
     if cov is not None and not _is_covariance(cov):
         raise SkyfitError(f"{path}: covariance must be {{\"names\": [{', '.join(names)}], "

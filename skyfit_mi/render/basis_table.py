@@ -442,30 +442,38 @@ def chunks(P, T, per_value, budget):
             for f in range(0, T, frames) for r in range(0, P, rows)]
 
 
-def mixed(a, b, k):
-    """The table of the light a + k b, from the tables ``a`` and ``b`` of two parts of one
-    light (:meth:`~skyfit_mi.physics.sky.Sky.split`) traced at the same points in the same
+def mixed(a, others, weights):
+    """The table of the light a + sum_j w_j b_j, from the tables ``a`` and ``others`` [b_j] of
+    parts of one light (:meth:`~skyfit_mi.physics.sky.Sky.split`,
+    :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`) traced at the same points in the same
     blocks with independent samples: every basis is linear in the light, and the positions'
-    spreads of independent traces add (k^2 for the scaled part).  ``k``: one factor, or one
-    per frame of the tables (T,)."""
-    k = np.asarray(k, dtype=np.float32)
-    per_frame = k.ndim == 1
-    kt = k[:, None] if per_frame else k                # against (..., T, 3)
+    spreads of independent traces add (w_j^2 for each).  Each weight is one factor or one per
+    frame of the tables (T,); weights may be negative (a shape's mix extrapolated)."""
+    ws = [np.asarray(w, dtype=np.float32) for w in weights]
+    wt = [w[:, None] if w.ndim == 1 else w for w in ws]        # against (..., T, 3)
     coef = []
-    for sa, sb in zip(a.coef, b.coef):
+    for n, sa in enumerate(a.coef):
         blocks = []
-        for (r, f, ca), (rb, fb, cb) in zip(sa.blocks, sb.blocks):
-            if (r, f) != (rb, fb):
-                raise ValueError("the two parts' tables were traced in different blocks")
-            c = np.zeros((2, max(ca.shape[1], cb.shape[1])) + ca.shape[2:], np.float32)
+        for i, (r, f, ca) in enumerate(sa.blocks):
+            cs = [b.coef[n].blocks[i] for b in others]
+            if any((rb, fb) != (r, f) for rb, fb, _ in cs):
+                raise ValueError("the parts' tables were traced in different blocks")
+            c = np.zeros((2, max([ca.shape[1]] + [cb.shape[1] for _, _, cb in cs]))
+                         + ca.shape[2:], np.float32)
             c[:, :ca.shape[1]] += ca
-            c[:, :cb.shape[1]] += (kt[f] if per_frame else kt) * cb
+            for (_, _, cb), w, wf in zip(cs, ws, wt):
+                c[:, :cb.shape[1]] += (wf[f] if w.ndim == 1 else wf) * cb
             blocks.append((r, f, c))
         coef.append(Series(blocks))
-    k2 = kt * kt
-    return BasisTable(a.D + kt * b.D, a.G0 + kt * b.G0, a.G1 + kt * b.G1, coef,
-                      a.VDD + k2 * b.VDD, a.VDG + k2 * b.VDG, a.VGG + k2 * b.VGG,
-                      a.hit & b.hit, a.sun_half_cos, a.normalisation)
+
+    def add(name, square=False):
+        return getattr(a, name) + sum((w * w if square else w) * getattr(b, name)
+                                      for b, w in zip(others, wt))
+    hit = a.hit
+    for b in others:
+        hit = hit & b.hit
+    return BasisTable(add("D"), add("G0"), add("G1"), coef, add("VDD", True), add("VDG", True),
+                      add("VGG", True), hit, a.sun_half_cos, a.normalisation)
 
 
 def _traced_blocks(scene, params, skies, at, bsdf_id, seed, positions, directions, budget,
