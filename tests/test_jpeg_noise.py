@@ -304,3 +304,57 @@ def test_the_bootstrap_of_a_turned_frame_is_the_files_turned():
                                    SENSOR, NOISE, [4, 0], replicates=2)
     for a, b in zip(plain, turned):
         np.testing.assert_array_equal(apply_orientation(a, 6) if np.ndim(a) == 3 else a, b)
+
+
+@pytest.mark.parametrize("quality, subsampling", [(85, 2), (90, 2), (95, 2)])
+def test_shared_error_sd_is_the_error_of_a_region_mean(quality, subsampling):
+    """A patch of one colour, photographed again and again at random levels: the error of its
+    mean over 4096 pixels is the rounding of its blocks' means, shared by all of them, not the
+    pixels' errors over sqrt(pixels); shared_error_sd (with the pixels' own errors over
+    sqrt(pixels)) predicts its size: the measured rms is 0.9-1.06 times it at quality 85
+    (4:2:0), where the shared error is 4-7x the independent one; at 95, 1.3-1.6 times (0.04-0.07
+    DN: a remainder the rounding of the blocks' means does not explain)."""
+    rng = np.random.default_rng(1)
+    got, want, independent = [], [], []
+    for _ in range(40):
+        colour = rng.choice([[0.62, 0.12, 0.10], [0.10, 0.45, 0.12], [0.55, 0.68, 0.85]])
+        lin = np.broadcast_to(rng.uniform(0.3, 0.9) * 255.0 * np.asarray(colour), (64, 64, 3))
+        clean = SENSOR.respond(lin / 255.0) * 255.0
+        noisy = lin + rng.normal(size=lin.shape) * np.sqrt(NOISE[0] + NOISE[1] * lin)
+        codes = np.clip(np.rint(SENSOR.respond(noisy / 255.0) * 255.0), 0, 255).astype(np.uint8)
+        buf = io.BytesIO()
+        Image.fromarray(codes).save(buf, format="JPEG", quality=quality, subsampling=subsampling)
+        buf.seek(0)
+        decoded = jn.decode(buf.getvalue())
+        with Image.open(io.BytesIO(buf.getvalue())) as im:
+            settings = {"qtables": {k: list(v) for k, v in im.quantization.items()},
+                        "subsampling": subsampling}
+        _, _, bias = jn.bootstrap_variance(decoded, settings, SENSOR, NOISE, 7)
+        values = (decoded - bias).reshape(-1, 3)             # as ingest takes them
+        var = pixel_sigma(values, SENSOR, NOISE) ** 2
+        got.append(np.mean(decoded - bias - clean, axis=(0, 1)))
+        want.append(jn.YCC_TO_RGB ** 2 @ jn.shared_error_sd(values, var, jn.dc_record(settings)) ** 2)
+        independent.append(np.mean(var, axis=0) / values.shape[0])
+    rms = np.sqrt(np.mean(np.square(got), axis=0))
+    independent = np.mean(independent, axis=0)
+    predicted = np.sqrt(np.mean(want, axis=0) + independent)
+    assert np.all(rms > 1.5 * np.sqrt(independent))                    # not 1 / sqrt(pixels)
+    np.testing.assert_allclose(predicted, rms, rtol=0.2 if quality == 85 else 0.45)
+
+
+def test_a_shared_error_reaches_a_mean_whole():
+    """A mean fitted to P pixels of T frames, each frame's pixels sharing an error of sd s in
+    one channel: the mean's standard error from it is s / sqrt(T) however many pixels, and
+    the YCbCr mixing takes a Cb error to B by 1.772 and to G by -0.344."""
+    from skyfit_mi.fitting.uncertainty import covariance, shared_error_sd
+
+    P, T, sigma, s = 400, 4, 2.0, 0.3
+    J = np.zeros((P, T, 3, 3))
+    for c in range(3):
+        J[:, :, c, c] = -1.0 / sigma                       # r = (y - theta_c) / sigma
+    usable = np.ones((P, T, 3), bool)
+    shared = np.tile([0.0, s, 0.0], (T, 1))                # Cb only
+    sd = shared_error_sd(J, usable, np.full((P, T, 3), sigma), shared, jn.YCC_TO_RGB,
+                         covariance(J.reshape(-1, 3)))
+    np.testing.assert_allclose(sd, np.abs(jn.YCC_TO_RGB[:, 1]) * s / np.sqrt(T), atol=1e-12)
+    assert sd[2] > 5 * sigma / np.sqrt(P * T)             # far above the pixels' own error

@@ -31,6 +31,8 @@ from ..render.fit_model import (BY_COUNT, PARAMETERS, WardModel, bounds, check_f
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
                                   SIGMA_RESOLVED, SKY_PLANS, PointRays, anchors_pay,
                                   build_light_cache)
+from ..pipeline.ingest import pixel_sigma
+from ..pipeline.jpeg_noise import YCC_TO_RGB, shared_error_sd
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
 from ..pipeline.observation_table import is_table, relative_scale
 from ..physics.sky import SKY_CHOICES, SKY_LEVEL_SD, SUN_LEVEL_SD
@@ -87,6 +89,8 @@ class FitState:
         the chi-square the cache's noise may add (the intervals allow for it), the standard
         errors from the cache's samples, from a photographed sequence's calibration and from
         the sun's level (:func:`~.sky_fit.light_level_sd`)
+    jpeg_shared_sd : the standard errors from the rounding a JPEG frame's blocks share over
+        the region (:func:`~.uncertainty.shared_error_sd`; zeros without JPEG frames)
     """
 
     method: str
@@ -111,6 +115,7 @@ class FitState:
     cache_sd: np.ndarray = None
     calibration_sd: np.ndarray = None
     sun_level_sd: np.ndarray = None
+    jpeg_shared_sd: np.ndarray = None
 
     @property
     def delta_scale(self):
@@ -587,6 +592,8 @@ class FitSession:
         fit = FitState(method, theta, chi2, s2, curv_inv, f2, channels,
                        curv_inv * s2 * np.sqrt(np.outer(f2, f2)), res, g, noise, noise_chi2,
                        problem, merr, rounds, misfit)
+        fit.jpeg_shared_sd = self._jpeg_shared_sd(J_all, problem.mask & ~low & ~high,
+                                                  problem.obs.sigma, curv_inv)
         self._intervals(fit)
         warnings = self._warnings(fit)
         wall = time.perf_counter() - t0 + self.cache_time
@@ -649,7 +656,8 @@ class FitSession:
         intervals, rise, cache_noise_chi2, cache_sd, calibration_sd, sun_level_sd): the
         covariance's, or for rho_s and sigma_alpha of a global fit the profile's; each widened
         by the light cache's own Monte Carlo error, the calibration's, the fitted sky's and, a
-        factor on the reflectances, the sun's level's."""
+        factor on the reflectances, the sun's level's; and by the rounding a JPEG frame's
+        blocks share over the region (``jpeg_shared_sd``)."""
         problem, theta, names = fit.problem, fit.theta, self.names
         lower, upper = self.lower, self.upper
         s2k = fit.delta_scale                             # each parameter's scale of Delta chi^2
@@ -699,7 +707,8 @@ class FitSession:
         for i, p in enumerate(names):
             for lv in ("68", "95"):
                 intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * np.sqrt(
-                    mc_sd[i] ** 2 + cal_sd[i] ** 2 + sky_sd[i] ** 2), lower[i], upper[i])
+                    mc_sd[i] ** 2 + cal_sd[i] ** 2 + sky_sd[i] ** 2
+                    + fit.jpeg_shared_sd[i] ** 2), lower[i], upper[i])
                 # the sun's level: a factor on every reflectance, lopsided
                 intervals[p][lv] = unc.widen_relative(theta[i], intervals[p][lv],
                                                       unc.Z[lv] * sun_rel[i], lower[i], upper[i])
@@ -712,6 +721,28 @@ class FitSession:
         fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
         fit.cache_sd, fit.calibration_sd = mc_sd, cal_sd
         fit.sun_level_sd = sun_rel * np.abs(theta)
+
+    def _jpeg_shared_sd(self, J, usable, sigma, curvature_inverse):
+        """Each parameter's standard error (n,) from the rounding of the block means that the
+        region's pixels share in each JPEG frame (Y, Cb, Cr; ingest's ``jpeg_dc`` record,
+        :func:`~skyfit_mi.pipeline.jpeg_noise.shared_error_sd`, with the sensor's noise before
+        compression from the manifest's noise model), carried to the parameters by
+        :func:`~.uncertainty.shared_error_sd`, ``sigma`` the values' in chi-square); zeros
+        without JPEG frames."""
+        n = len(self.names)
+        by_index = {f["index"]: f for f in self.doc["frames"]}
+        records = [by_index.get(i, {}).get("jpeg_dc") for i in self.obs.frames]
+        model = self.doc["sensor"].get("noise_model") or {}
+        if self.obs.rays is not None or not any(records) or "read_DN2" not in model:
+            return np.zeros(n)
+        noise = (model["read_DN2"], model["shot_DN"])
+        shared = np.zeros((len(records), 3))
+        for t, rec in enumerate(records):
+            ok = np.all(np.isfinite(self.obs.sigma[:, t]), axis=1)
+            if rec and ok.any():
+                y = self.obs.y[ok, t]
+                shared[t] = shared_error_sd(y, pixel_sigma(y, self.obs.sensor, noise) ** 2, rec)
+        return unc.shared_error_sd(J, usable, sigma, shared, YCC_TO_RGB, curvature_inverse)
 
     def _model_noise_by_sigma(self, theta, problem=None):
         """The model's own Monte Carlo share of chi-square (``problem``'s, default the
@@ -917,6 +948,11 @@ class FitSession:
             "cache_error_sd": dict(zip(names, fit.cache_sd.tolist())),
             **({"calibration_error_sd": dict(zip(names, fit.calibration_sd.tolist()))}
                if np.any(fit.calibration_sd > 0) else {}),
+            **({"jpeg_shared_error_sd": dict(zip(names, fit.jpeg_shared_sd.tolist())),
+                "jpeg_shared_error": "the standard error each parameter takes from the JPEG "
+                "frames' rounding of their blocks' means (Y, Cb, Cr), which every pixel of "
+                "the region shares in a frame; added in quadrature to the intervals"}
+               if np.any(fit.jpeg_shared_sd > 0) else {}),
             **({"sky": {**self.sky_record, "error_sd": dict(zip(names, (
                 self.sky_sd if self.sky_sd is not None else np.zeros(len(names))).tolist())),
                 "sun_level_sd": self.sun_sd,

@@ -99,6 +99,8 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     ranking, the choice, the folds and each lobe's tracing time)."""
     from .fit import FitSession
 
+    log("model selection takes the spec's light as it is (no sky fit or sky prior: fit the "
+        "chosen model again with --sky to add them)")
     sessions, trace_s = {}, {}
     for fam in families:
         t0 = time.perf_counter()

@@ -154,6 +154,27 @@ def calibration_sd(doc, names, theta):
     return np.array([rel.get(p, 0.0) for p in names]) * np.abs(theta)
 
 
+def shared_error_sd(J, usable, sigma, shared_sd, mixing, curvature_inverse):
+    """The standard error per parameter (n,) from errors that every value of a region shares
+    within one frame: a frame's JPEG rounds its blocks' means of Y, Cb and Cr alike over a
+    surface of one colour (:func:`skyfit_mi.pipeline.jpeg_noise.shared_error_sd`), an error
+    that chi-square, summing the pixels as independent, lets shrink as 1 / sqrt(pixels).
+
+    ``J`` (P, T, C, n) the residuals' derivatives, ``usable`` (P, T, C) the measured values
+    (the error moves them by its size over their ``sigma`` (P, T, C)), ``shared_sd`` (T, K)
+    each frame's shared errors' standard deviations (independent of each other and between
+    frames), ``mixing`` (C, K) how each reaches the channels.  A shared error e moves the fit
+    by (J^T J)^-1 g e, g = sum over the frame's values of J mixing / sigma: the covariance
+    (``curvature_inverse`` (J^T J)^-1) sum_(T,K) sd^2 (J^T J)^-1 g g^T (J^T J)^-1, the
+    sandwich's share of the correlated errors (generalised least squares' covariance for the
+    weights chi-square uses)."""
+    w = np.where(usable[..., None], J / np.where(usable, sigma, np.inf)[..., None], 0.0)
+    g = np.einsum("ptcn,ck->tkn", w, np.asarray(mixing, dtype=float))      # (T, K, n)
+    g = g * np.asarray(shared_sd, dtype=float)[..., None]
+    d = g.reshape(-1, g.shape[-1]) @ curvature_inverse
+    return np.sqrt(np.sum(d * d, axis=0))
+
+
 def profile_interval(grid, profile, s2=1.0, ripple=0.0):
     """{level: (lo, hi)} where profile <= min + Delta s^2 + ripple, edges interpolated linearly.
 

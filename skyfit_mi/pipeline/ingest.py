@@ -48,8 +48,8 @@ from ..render.image import write_exr
 from ..render.labels import label_image
 from ..render.scene_xml import build_scene_xml
 from .colorchecker import NAMES, NEUTRAL, find_chart, reference_rgb, swatch_check
-from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance, displayed,
-                         jpeg_settings, recompress, stored, tables_bound)
+from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance,
+                         dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import frame_times
 from .photos import SUFFIXES, check_same_size, read_photo
 from .sequence import (FrameRenderer, finish, frame_record, manifest_header, prepare_folder,
@@ -1139,6 +1139,7 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
                     frame_jpeg["settings"].get("orientation", 1), v.shape))
                 rec["jpeg_edge_block_share"] = float(np.mean(edge))
                 rec["jpeg_bias_removed_DN"] = frame_jpeg["bias_mean"].tolist()
+                rec["jpeg_dc"] = dc_record(frame_jpeg["settings"])
             bad = int(photo.nan_count + photo.inf_count)
             if bad:
                 rec["non_finite_values"] = bad
@@ -1160,7 +1161,9 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
             "frames' neighbouring pixels show (shown_by_the_frames), plus the tables' bound "
             "in blocks holding an edge (share: jpeg_edge_block_share); bootstrap frame means "
             "in jpeg_error_DN2; the errors' correlation within a JPEG block in "
-            "jpeg_block_correlation, by which a fit widens the sigma of pixels sharing a block")
+            "jpeg_block_correlation, by which a fit widens the sigma of pixels sharing a block; "
+            "the tables' steps of the blocks' means (Y, Cb, Cr) and the chroma's subsampling "
+            "in jpeg_dc, from which a fit finds the rounding error a region's blocks share")
     finish(out, manifest, sensor.exposure)
     return manifest
 

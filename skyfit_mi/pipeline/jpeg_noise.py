@@ -327,3 +327,59 @@ def truth_sampler(values, settings):
         return v + dy[..., None] + np.stack([dcb, dcr], axis=-1) @ _JFIF_CHROMA.T
 
     return draw
+
+
+#: JFIF's Y, Cb, Cr -> R, G, B (columns: a unit error of each plane in each channel).
+YCC_TO_RGB = np.column_stack([np.ones(3), _JFIF_CHROMA])
+#: Harmonics of the rounding error's sawtooth summed by :func:`shared_error_sd`.
+_HARMONICS = np.arange(1, 33)
+
+
+def dc_record(settings):
+    """What a fit needs of JPEG ``settings`` to find the error a region shares
+    (:func:`shared_error_sd`): the quantisation step of the blocks' means (the DC entry of
+    the tables) of Y, Cb and Cr, and the chroma's subsampling (rows, columns)."""
+    tables = settings["qtables"]
+    luma, chroma = tables[0][0], tables.get(1, tables[0])[0]
+    return {"dc_step": [float(luma), float(chroma), float(chroma)],
+            "chroma_subsampling": list(_factors(settings))}
+
+
+def shared_error_sd(values, noise_var, record):
+    """The standard deviation [DN] (3,) of the error that the pixels of one region of one
+    JPEG frame share in Y, Cb and Cr (:data:`YCC_TO_RGB` takes it to R, G, B): the rounding of
+    their blocks' means.
+
+    A block's mean is coded as its DC coefficient (8 x the mean), rounded to a multiple of the
+    table's step q (``record``, :func:`dc_record`).  On a surface of one colour every block of
+    the region has nearly the same mean, so every block rounds it the same way: one error for
+    the whole region, which no number of pixels averages away, and which the bootstrap (each
+    block's coefficients moved on their own, :func:`truth_sampler`) counts as independent from
+    block to block.  Two things decorrelate the blocks' errors: the sensor's noise in the
+    block means (sd s, in units of q; ``noise_var`` (P, 3) each value's variance [DN^2] before
+    compression, in R, G, B, mixed into Y, Cb, Cr and averaged over the block's 64 samples,
+    each a mean of the subsampling's pixels) dithers the rounding, and a spread of the means
+    over the region (a range R in units of q, from the variance of ``values`` (P, 3) [DN] in
+    each plane beyond the noise's, as if uniform) spreads them over the rounding's period.
+    The rounding error of the means x is the sawtooth sum_k (-1)^(k+1) q sin(2 pi k x / q) /
+    (pi k); noise damps each harmonic by exp(-2 pi^2 k^2 s^2), averaging over the range by
+    sinc(k R), and the variance over the means' unknown place within the step is
+    q^2 sum_k exp(-4 pi^2 k^2 s^2) sinc^2(k R) / (2 pi^2 k^2) (q^2 / 12 without noise or
+    spread); a pixel carries 1/8 of its block's DC error."""
+    values = np.asarray(values, dtype=float).reshape(-1, 3)
+    noise_var = np.asarray(noise_var, dtype=float).reshape(-1, 3)
+    ok = np.all(np.isfinite(values) & np.isfinite(noise_var), axis=1)
+    if ok.sum() < 1:
+        return np.zeros(3)
+    ycc = values[ok] @ _RGB_TO_YCC.T
+    plane_var = np.mean(noise_var[ok], axis=0) @ (_RGB_TO_YCC ** 2).T        # (3,) per pixel
+    fy, fx = record["chroma_subsampling"]
+    cells = np.array([1.0, fy * fx, fy * fx])               # pixels per sample of each plane
+    q = np.asarray(record["dc_step"], dtype=float)
+    s = 8.0 * np.sqrt(plane_var / (64.0 * cells)) / q       # the DC's noise, in steps
+    spread = np.var(ycc, axis=0) - plane_var if ok.sum() > 1 else np.zeros(3)
+    r = 8.0 * np.sqrt(12.0 * np.maximum(spread, 0.0)) / q   # the DCs' range, in steps
+    k = _HARMONICS[:, None]
+    v = np.sum(np.exp(-4.0 * np.pi ** 2 * k ** 2 * s ** 2) * np.sinc(k * r) ** 2
+               / (2.0 * np.pi ** 2 * k ** 2), axis=0)
+    return np.sqrt(v) * q / 8.0

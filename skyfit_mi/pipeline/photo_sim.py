@@ -53,7 +53,7 @@ def _exif(time, offset, exposure_time, orientation=1):
 
 def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="srgb", gamma=2.2,
                    read_noise_DN=0.8, shot_gain=0.02, cos4=True, fmt="jpeg", quality=95,
-                   offset=True, shutter_error=0.0, orientation=1, seed=0):
+                   offset=True, shutter_error=0.0, orientation=1, subsampling=0, seed=0):
     """Write the rendered frames of ``sequence`` as photographs into ``out_dir``.
 
     Parameters
@@ -66,7 +66,10 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
     response, gamma : the encoding (``srgb``, ``gamma``, ``linear``)
     read_noise_DN, shot_gain : noise in linear 8-bit codes: sigma^2 = read^2 + shot_gain x code
     cos4 : apply the cos^4 vignetting of the camera's field of view
-    fmt : 'jpeg' (chroma at full resolution), 'png' or 'tiff' (8-bit)
+    fmt : 'jpeg', 'png' or 'tiff' (8-bit)
+    subsampling : a JPEG's chroma: 0 at full resolution (4:4:4, a camera's finest setting), 1
+        halved across (4:2:2), 2 halved both ways (4:2:0, most cameras' and Pillow's default),
+        which blurs colour across 2x2 pixels and into a region's edge pixels
     offset : write EXIF OffsetTimeOriginal (without it a reader needs the time zone)
     shutter_error : relative standard deviation of each frame's true exposure about the
         nominal one its EXIF records (a real shutter and aperture miss by a few per cent),
@@ -106,9 +109,7 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
             np.clip(codes, 0, 255).astype(np.uint8), orientation)))
         time = dt.datetime.fromisoformat(f["time"])
         path = out / f"IMG_{f['index']:04d}{FORMATS[fmt]}"
-        # full-resolution chroma (4:4:4), as a camera's finest JPEG setting: Pillow's default
-        # 4:2:0 blurs colour across 2x2 blocks, into a region's edge pixels
-        kw = {"quality": quality, "subsampling": 0} if fmt == "jpeg" else {}
+        kw = {"quality": quality, "subsampling": subsampling} if fmt == "jpeg" else {}
         atomic_write(path, lambda p, img=img, ex=_exif(time, offset, t, orientation), kw=kw:
                      img.save(p, format=fmt.upper(), exif=ex.tobytes(), **kw))
         paths.append(path)
@@ -117,6 +118,7 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
     meta = {"sequence": str(Path(sequence).resolve()), "seed": seed, "response": response,
             "gamma": gamma, "read_noise_DN": read_noise_DN, "shot_gain": shot_gain,
             "cos4": cos4, "format": fmt, "quality": quality, "offset_in_exif": offset,
+            **({"subsampling": subsampling} if fmt == "jpeg" else {}),
             "orientation": orientation,
             "shutter_error": shutter_error,
             "exposure_at_1_15_s": base, "f_number": SIM_F_NUMBER, "iso": SIM_ISO,

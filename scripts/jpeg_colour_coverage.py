@@ -1,0 +1,172 @@
+"""Coverage of C on saturated and pale colours after `skyfit ingest` of subsampled JPEGs.
+
+A board of five samples (saturated red, green, blue and yellow paint, a pale blue paper; all
+rho_s 0.05, sigma_alpha 0.08) beside a grey card (written into the work folder) is rendered
+once, hourly over a clear day, then photographed (skyfit_mi.pipeline.photo_sim) with SEEDS
+noise seeds at each JPEG quality with the chroma subsampling asked (default 4:2:0), or as PNG
+(``--quality 0``: lossless), ingested with the grey card's calibration and the noise estimated
+from the frames, and every sample fitted (64 pixels each, colour model).  Prints a markdown
+table per quality: per material the share of seeds whose 95% interval holds the truth, for
+C_r, C_g, C_b, rho_s and sigma_alpha, and the median relative 95% half-width of C; and the
+share of C's intervals holding the truth without the JPEG's shared rounding error
+(``jpeg_shared_error_sd`` of the fit taken out of each half-width in quadrature);
+``--diagnose`` adds, per quality and channel, the z of the region means per frame
+((ingested - true radiance) / sigma, averaged over the region's pixels) times sqrt(pixels): 1
+for independent errors, more where the pixels share their errors.
+
+    .venv/bin/python scripts/jpeg_colour_coverage.py [--quality 85 90 95] [--seeds 4]
+        [--subsampling 2] [--diagnose] [-o DIR]
+"""
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLES = {"red": (0.70, 0.08, 0.05), "green": (0.10, 0.45, 0.12), "blue": (0.08, 0.15, 0.60),
+           "yellow": (0.85, 0.70, 0.08), "pale_blue": (0.55, 0.68, 0.85)}
+RHO_S, SIGMA_ALPHA = 0.05, 0.08
+NAMES = ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha")
+
+
+def scene_xml():
+    """The board: the grey card and SAMPLES in a 2 x 3 grid of 0.4 m squares, 0.1 m apart."""
+    cells = [(-0.5, 0.25), (0.0, 0.25), (0.5, 0.25), (-0.5, -0.25), (0.0, -0.25), (0.5, -0.25)]
+    parts = ['<scene version="3.0.0">',
+             '<bsdf type="ward" id="grey_card"><string name="model" value="raw"/>'
+             '<rgb name="rho_d" value="0.18, 0.18, 0.18"/><rgb name="rho_s" value="0, 0, 0"/>'
+             '<float name="sigma_alpha" value="0.1"/></bsdf>']
+    for name, c in SAMPLES.items():
+        parts.append(f'<bsdf type="ward" id="{name}"><string name="model" value="colour"/>'
+                     f'<rgb name="C" value="{c[0]}, {c[1]}, {c[2]}"/>'
+                     f'<float name="rho_s" value="{RHO_S}"/>'
+                     f'<float name="sigma_alpha" value="{SIGMA_ALPHA}"/></bsdf>')
+    for (x, y), name in zip(cells, ["grey_card", *SAMPLES]):
+        parts.append(f'<shape type="rectangle" id="{name}_shape"><transform name="to_world">'
+                     f'<scale value="0.2"/><translate x="{x}" y="{y}" z="0.001"/></transform>'
+                     f'<ref id="{name}"/></shape>')
+    parts.append('<shape type="rectangle" id="board"><transform name="to_world">'
+                 '<scale x="0.8" y="0.55" z="1"/></transform>'
+                 '<bsdf type="diffuse"><rgb name="reflectance" value="0.05"/></bsdf></shape>')
+    return "\n".join(parts + ["</scene>"])
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quality", type=int, nargs="+", default=[85, 90, 95],
+                    help="JPEG qualities (0: PNG, lossless)")
+    ap.add_argument("--subsampling", type=int, default=2, choices=(0, 1, 2),
+                    help="chroma: 0 4:4:4, 1 4:2:2, 2 4:2:0 (default)")
+    ap.add_argument("--seeds", type=int, default=4)
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--diagnose", action="store_true")
+    ap.add_argument("--refit", action="store_true",
+                    help="fit the sequences an earlier run ingested into -o DIR again")
+    ap.add_argument("-o", "--output", help="work folder (default a temporary one)")
+    args = ap.parse_args()
+    sys.path.insert(0, str(ROOT / "tests"))
+    from test_ingest import _small_spec
+
+    from skyfit_mi.fitting.chi2 import subsample_region
+    from skyfit_mi.fitting.fit import fit_regions
+    from skyfit_mi.pipeline.ingest import ingest
+    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.pixels import material_regions
+    from skyfit_mi.pipeline.sequence import render_sequence
+    from skyfit_mi.pipeline.spec import validate_spec
+
+    quiet = {"log": lambda *a: None}
+    work = Path(args.output or tempfile.mkdtemp(prefix="jpeg_colour_"))
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "colour_board.xml").write_text(scene_xml())
+    spec_path, raw = _small_spec(work, width=128, height=88)
+    raw["scene"] = {**raw["scene"], "file": "colour_board.xml"}
+    from test_ingest import _toml
+    spec_path.write_text(_toml(raw))
+    truth = work / "truth"
+    if not (truth / "manifest.json").exists():
+        render_sequence(validate_spec(raw, spec_path.parent), truth, progress=False, **quiet)
+    regions = [(k, subsample_region(v, 64, 0)) for k, v in material_regions(truth)
+               if k in SAMPLES]
+    print(f"subsampling {args.subsampling}; {args.seeds} seeds\n")
+    print("| quality | material | coverage C_r / C_g / C_b / rho_s / sigma_alpha | "
+          "median C 95% half-width [%] | median C error [%] |")
+    print("|---|---|---|---|---|")
+    for q in args.quality:
+        inside = {k: [] for k, _ in regions}
+        half = {k: [] for k, _ in regions}
+        err = {k: [] for k, _ in regions}
+        zs, without = [], []
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
+            tag = f"q{q}_c{args.subsampling}_s{seed}"
+            photos, seq = work / f"photos_{tag}", work / f"seq_{tag}"
+            if not (args.refit and (seq / "manifest.json").exists()):
+                photograph_day(truth, photos, seed=seed, quality=q,
+                               fmt="jpeg" if q else "png", subsampling=args.subsampling)
+                ingest([photos], spec_path, seq, calibrate={"grey_card": (0.18,) * 3},
+                       vignetting="cos4", overwrite=True, progress=False, **quiet)
+            for fit in fit_regions(seq, regions, model="colour", **quiet):
+                name = fit["region"]
+                truth_v = (*SAMPLES[name], RHO_S, SIGMA_ALPHA)
+                ok, h, e = [], [], []
+                for k, t in zip(NAMES, truth_v):
+                    lo, hi = fit["intervals"][k]["95"]
+                    ok.append(lo <= t <= hi)
+                    if k.startswith("C_"):
+                        h.append(50 * (hi - lo) / t)
+                        sd = 1.96 * fit.get("jpeg_shared_error_sd", {}).get(k, 0.0)
+                        v = fit["parameters"][k]
+                        without.append(v - np.sqrt(max((v - lo) ** 2 - sd ** 2, 0.0)) <= t
+                                       <= v + np.sqrt(max((hi - v) ** 2 - sd ** 2, 0.0)))
+                        e.append(100 * (fit["parameters"][k] / t - 1))
+                inside[name].append(ok)
+                half[name].append(h)
+                err[name].append(e)
+                if not all(ok):
+                    print(f"<!-- {tag} {name} misses: " + "; ".join(
+                        f"{k} {fit['parameters'][k]:.4g} {fit['intervals'][k]['95']}"
+                        for k, o in zip(NAMES, ok) if not o) + " -->", flush=True)
+            if args.diagnose:
+                zs.append(region_z(seq, truth, regions))
+        for name in inside:
+            cov = np.mean(inside[name], axis=0)
+            print(f"| {q or 'png'} | {name} | {' / '.join(f'{c:.2f}' for c in cov)} | "
+                  f"{' / '.join(f'{x:.2f}' for x in np.median(half[name], axis=0))} | "
+                  f"{' / '.join(f'{x:+.2f}' for x in np.median(err[name], axis=0))} |",
+                  flush=True)
+        allc = np.concatenate([np.asarray(v)[:, :3].ravel() for v in inside.values()])
+        print(f"| {q or 'png'} | all C | {np.mean(allc):.2f} (without the shared rounding "
+              f"error {np.mean(without):.2f}) | | |", flush=True)
+        if zs:
+            z = np.sqrt(np.mean(np.concatenate(zs, axis=1) ** 2, axis=1))     # (regions, 3)
+            for (name, _), zz in zip(regions, z):
+                print(f"<!-- q{q} {name}: region-mean z x sqrt(P) per channel "
+                      f"{np.round(zz, 2)} -->", flush=True)
+
+
+def region_z(seq, truth, regions):
+    """Per region, frame and channel the mean over the region's pixels of (ingested - true
+    radiance) / sigma, times sqrt(pixels): (regions, frames, 3)."""
+    from skyfit_mi.pipeline.manifest import load_manifest, read_frame_image, rendered_frames
+
+    doc, root = load_manifest(seq)
+    tdoc, troot = load_manifest(truth)
+    shape = (doc["camera"]["height"], doc["camera"]["width"], 3)
+    tframes = {f["time"]: f for f in rendered_frames(tdoc)}
+    out = []
+    for _, px in regions:
+        rows = []
+        for f in rendered_frames(doc):
+            got = read_frame_image(root, f, "radiance", shape)[px[:, 1], px[:, 0]]
+            sd = read_frame_image(root, f, "radiance_sigma", shape)[px[:, 1], px[:, 0]]
+            t = read_frame_image(troot, tframes[f["time"]], "radiance", shape)[px[:, 1], px[:, 0]]
+            rows.append(np.mean((got - t) / sd, axis=0) * np.sqrt(len(px)))
+        out.append(rows)
+    return np.asarray(out)
+
+
+if __name__ == "__main__":
+    main()
