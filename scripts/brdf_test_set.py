@@ -30,9 +30,11 @@ is compared with the oracle's: every family and parameter count fitted to ALL th
 (both cameras, every light), the smallest held-out error of those.  Goal: the ratio's median
 <= 1.2, none > 3.
 
-A slow sweep.  ``--quick`` (a few minutes a material): three materials, the day's 6 frames.
+A slow sweep (about 15 minutes on 2 cores).  ``--quick`` (about 4.5 minutes): three materials,
+the day's 6 frames, 32 lights.
 
-    .venv/bin/python scripts/brdf_test_set.py [--quick] [--materials NAME,...] [-o DIR]
+    .venv/bin/python scripts/brdf_test_set.py [--quick] [--materials 0,2,...] [--data day,table]
+        [-o DIR]
 
 writes DIR/brdf_test_set.json and prints the table.
 """
@@ -279,7 +281,7 @@ def main():
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true",
-                    help="three materials, 6 frames, 32 lights (a few minutes each)")
+                    help="three materials, 6 frames, 32 lights (about 4.5 minutes)")
     ap.add_argument("--materials", help="comma-separated indices into MATERIALS (0-4)")
     ap.add_argument("--data", default="day,table", help="day, table or both (default)")
     ap.add_argument("-o", "--output", type=Path, default=Path("skyfit-out/brdf-test-set"))
