@@ -496,7 +496,7 @@ def build_parser():
                      help="spec: the spec's light as it is (the default for sequences skyfit "
                      "rendered); fit: the sky's level against the sun's fitted with the "
                      "materials, one for every region of the command, its error in every "
-                     "interval (the sun and sky traced apart: about 1.5 times the fit's time); "
+                     "interval (the sun and sky traced apart: about twice the fit's time); "
                      "prior (the default for photographs under the sun): the same with a prior "
                      "on that level from how measured skies scatter about the models. fit and "
                      "prior also count the sun's own level (--sun-sd) in the reflectances' "

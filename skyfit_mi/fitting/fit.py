@@ -1021,7 +1021,7 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
     if sky is not None:
         check_choice("sky", sky, SKY_CHOICES)
     if sun_sd is not None:
-        check_range("--sun-sd", sun_sd, 0.0, 1.0, "(relative)")
+        check_range("--sun-sd", sun_sd, 0.0, 1.0)
     sessions = FitSession.for_regions(manifest_path, regions, model=model,
                                       normalisation=normalisation, seed=seed,
                                       positions=positions, directions=directions, frames=frames,
