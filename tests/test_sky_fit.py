@@ -68,7 +68,18 @@ def dim_sky(days, tmp_path_factory):
                         lambda frame: 1.0 / DIMMER)
 
 
-def test_a_sky_of_the_wrong_level_is_fitted_and_the_materials_held(dim_sky):
+@pytest.fixture(scope="module")
+def dim_fit(dim_sky):
+    """The dim-sky day fitted with its level (``fit --sky fit``): (result, log lines)."""
+    from skyfit_mi.fitting.fit import fit_regions
+
+    logs = []
+    r = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky="fit",
+                         log=logs.append))
+    return r, logs
+
+
+def test_a_sky_of_the_wrong_level_is_fitted_and_the_materials_held(dim_sky, dim_fit):
     """With the spec's sky too dim the materials absorb it (rho_s's interval misses the
     truth, the reflectances run to their bound); fitted with the materials, the sky's level
     holds the truth in its 95% interval, the spec's level outside it, and every parameter's
@@ -80,8 +91,7 @@ def test_a_sky_of_the_wrong_level_is_fitted_and_the_materials_held(dim_sky):
                             log=lambda *a: None))
     lo, hi = spec["intervals"]["rho_s"]["95"]
     assert not lo <= TRUTH["rho_s"] <= hi, spec["intervals"]["rho_s"]
-    r = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky="fit",
-                         log=logs.append))
+    r, logs = dim_fit
     k = r["sky"]
     assert k["interval95"][0] < DIMMER < k["interval95"][1] and k["interval95"][0] > 1.0, k
     assert set(k["error_sd"]) == set(TRUTH) and k["regions"] == ["disc"]
@@ -98,13 +108,12 @@ def test_sky_fit_is_for_regions_not_maps(days, capsys):
     assert len(err.splitlines()) == 1 and "--sky fit" in err, err
 
 
-def test_the_fitted_sky_lights_its_own_day_again(dim_sky, tmp_path):
+def test_the_fitted_sky_lights_its_own_day_again(dim_sky, dim_fit):
     """A session made again from a sky fit's result (chi2map, predictions) traces the split
     light at the fitted level, so that its chi-square is the fit's at the fit's parameters."""
-    from skyfit_mi.fitting.fit import FitSession, fit_regions
+    from skyfit_mi.fitting.fit import FitSession
 
-    r = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky="fit",
-                         log=lambda *a: None))
+    r = dim_fit[0]
     again = FitSession.from_fit(r, dim_sky)
     assert again.split_sky and again.sky_scale == pytest.approx(r["sky"]["k"])
     theta = np.array(list(r["parameters"].values()))
@@ -135,14 +144,12 @@ def test_a_day_without_sun_cannot_fit_the_sky_against_it(days):
                          log=lambda *a: None))
 
 
-def test_another_days_prediction_says_its_sky_is_the_spec_s(dim_sky, days):
+def test_another_days_prediction_says_its_sky_is_the_spec_s(dim_fit, days):
     """A sky fit relit onto another day (another run_id) takes that day's spec sky, and the
     prediction says so."""
-    from skyfit_mi.fitting.fit import fit_regions
     from skyfit_mi.fitting.relight import predict
 
-    r = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky="fit",
-                         log=lambda *a: None))
+    r = dim_fit[0]
     logs = []
     predict({"disc": (None, r)}, days["clean"], {"disc": np.asarray(r["pixels"])}, draws=8,
             seed=0, log=logs.append)
@@ -236,13 +243,14 @@ def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun):
     assert any("scale with the sun's level" in w for w in r["warnings"]), r["warnings"]
 
 
-def test_the_sky_prior_holds_k_nearer_the_spec_and_no_wider(dim_sky):
+def test_the_sky_prior_holds_k_nearer_the_spec_and_no_wider(dim_sky, dim_fit):
     """The prior on the sky's level pulls k toward the spec's (log k = 0) and narrows its
     interval: a posterior is at most as wide as the data's alone."""
     from skyfit_mi.fitting.fit import fit_regions
 
-    alone, prior = (next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky=sky,
-                                     log=lambda *a: None))["sky"] for sky in ("fit", "prior"))
+    alone = dim_fit[0]["sky"]
+    prior = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky="prior",
+                             log=lambda *a: None))["sky"]
     assert 1.0 < prior["k"] <= alone["k"] * 1.001
     assert (np.log(prior["interval95"][1] / prior["interval95"][0])
             <= np.log(alone["interval95"][1] / alone["interval95"][0]) * 1.001)
