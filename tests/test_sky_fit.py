@@ -328,7 +328,7 @@ def test_sky_terms_need_a_fitted_sky_and_frames(days):
 
 def test_a_cie_skys_shape_variants_keep_its_light_and_move_one_group():
     from skyfit_mi.errors import SkyfitError
-    from skyfit_mi.fitting.sky_fit import check_shape
+    from skyfit_mi.fitting.sky_fit import shape_variants
     from skyfit_mi.physics import cie_general
     from skyfit_mi.physics.sky import cie_general_sky, cie_sky
 
@@ -354,7 +354,7 @@ def test_a_cie_skys_shape_variants_keep_its_light_and_move_one_group():
                                                                "indicatrix group 6 -> 5"]
     assert cie_sky("overcast", 35.0, 160.0).shape_variants() == []
     with pytest.raises(SkyfitError, match="not a CIE sky"):
-        check_shape([sky, cie_sky("overcast", 35.0, 160.0)])
+        shape_variants([sky, cie_sky("overcast", 35.0, 160.0)])
 
 
 @pytest.fixture(scope="module")

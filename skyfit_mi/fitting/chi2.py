@@ -21,6 +21,7 @@ that takes its level to max - 0.5.
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.special import log_ndtr, ndtr
 
 from . import uncertainty as unc
 from ..physics.camera import SensorModel
@@ -336,8 +337,6 @@ def censored_term_moments(a, b):
     int_a^b e^2 phi = [Phi - e phi]_a^b and int_a^b e^4 phi = [3 Phi - (e^3 + 3 e) phi]_a^b.
     Returns (mean, variance) arrays; (1, 2) for values far from both ends.
     """
-    from scipy.special import ndtr
-
     a = np.clip(np.asarray(a, float), -40.0, 40.0)
     b = np.clip(np.asarray(b, float), -40.0, 40.0)
     phi = lambda e: np.exp(-0.5 * e * e) / np.sqrt(2.0 * np.pi)  # noqa: E731
@@ -396,8 +395,6 @@ class Problem:
         Measured values: (y - m) / sigma.  Clipped ones: sqrt(-2 ln P(clipped)), with
         z = -(m - 0.5) / sigma at the bottom and (m - max + 0.5) / sigma at the top.
         """
-        from scipy.special import log_ndtr
-
         m = self.predict(radiance)
         sig = self.obs.sigma
         r, dr = (self.obs.y - m) / sig, -1.0 / sig

@@ -21,8 +21,8 @@ from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
-from .sky_fit import (SKY_DOMINATES, check_shape, check_terms, default_sky, fit_sky_scale,
-                      light_level_sd, sky_level_at)
+from .sky_fit import (SKY_DOMINATES, check_terms, default_sky, default_sun_sd, fit_sky_scale,
+                      light_level_sd, shape_variants, sky_level_at, sun_up)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, memory_estimate, mixed,
                                   trace_table)
@@ -35,7 +35,7 @@ from ..pipeline.ingest import pixel_sigma
 from ..pipeline.jpeg_noise import YCC_TO_RGB, shared_error_sd
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
 from ..pipeline.observation_table import is_table, relative_scale
-from ..physics.sky import SKY_CHOICES, SKY_LEVEL_SD, SUN_LEVEL_SD
+from ..physics.sky import SKY_CHOICES, SKY_LEVEL_SD
 from ..physics.ward import METAL_THRESHOLD
 
 
@@ -152,11 +152,11 @@ class FitSession:
         ``light_cache``): ``fit`` by default, ``anchors`` for predictions of compact regions
     trace : False leaves the light cache to the caller (:meth:`sharing_light`)
     split_sky : trace the sun's light and the rest of the sky's apart, so that the fit can
-        scale them against each other (:meth:`set_sky_scale`, :func:`fit_regions`'s
+        scale them against each other (:meth:`set_sky`, :func:`fit_regions`'s
         ``sky='fit'``)
     sky_shape : with ``split_sky``, also trace the sky's shape variants
         (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), so that the fit can mix them
-        (:meth:`set_sky_shape`)
+        (:meth:`set_sky`)
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
@@ -363,8 +363,7 @@ class FitSession:
         sun, rest = zip(*(sky.split() for sky in self.skies))
         lights = [list(sun), list(rest)]
         if self.sky_shape:
-            check_shape(self.skies)
-            variants = [sky.shape_variants() for sky in self.skies]
+            variants = shape_variants(self.skies)
             lights += [[v[j][1] for v in variants] for j in range(len(variants[0]))]
         return lights
 
@@ -418,23 +417,25 @@ class FitSession:
         self._use_table(mixed(self.parts[0], self.parts[1:],
                               [k * (1.0 - mix.sum())] + [k * m for m in mix]))
 
-    def set_sky_scale(self, k):
+    def set_sky(self, k, mix=None):
         """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
-        to the sun (one factor, or one per frame of the session), and make the models and
+        to the sun (one factor, or one per frame of the session), in the spec's shape or with
+        ``mix[j]`` of its shape variant j and (1 - sum(mix)) of its own pattern
+        (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), and make the models and
         chi-square on it."""
-        if len(self.parts or ()) < 2:
-            raise ValueError("the sky's scale needs a session traced with split_sky")
+        if len(self.parts or ()) < 2 + (0 if mix is None else len(mix)):
+            raise ValueError("the sky's level needs a session traced with split_sky, its "
+                             "shape one traced with sky_shape")
         self.sky_scale = float(k) if np.ndim(k) == 0 else np.asarray(k, dtype=float)
+        self.sky_shape_mix = None if mix is None else np.asarray(mix, dtype=float)
         self._use_parts(self.parts)
 
-    def set_sky_shape(self, mix):
-        """Mix the sky's shape variants into the spec's sky: (1 - sum(mix)) of it and mix[j]
-        of variant j (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), at the level
-        ``sky_scale``, and make the models and chi-square on it."""
-        if len(self.parts or ()) != 2 + len(mix):
-            raise ValueError("the sky's shape needs a session traced with sky_shape")
-        self.sky_shape_mix = np.asarray(mix, dtype=float)
-        self._use_parts(self.parts)
+    def take_light(self, other):
+        """Fit on the light ``other`` (a traced session of the same region, sequence and
+        lobe, in any parameterisation: the table does not depend on it) traced."""
+        self.cache_settings = dict(other.cache_settings)
+        self.cache_time += other.cache_time
+        self._use_parts(other.parts)
 
     def _use_table(self, table):
         """Take ``table`` (of the region's pixels) and make the models and chi-square on it."""
@@ -1010,11 +1011,11 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
                 sky_shape=False):
     """Fit several regions of one sequence (``regions`` [(name, pixels)]), their light traced
     together (:meth:`FitSession.for_regions`); yields each region's result dict in turn.
-    ``sky``: None chooses (:func:`~.sky_fit.default_sky`); 'spec' takes the spec's light as it is; 'fit' fits the sky's level against the
-    sun's with the materials, one for all regions (:func:`~.sky_fit.fit_sky_scale`), and
+    ``sky``: None chooses (:func:`~.sky_fit.default_sky`); 'spec' takes the spec's light as it
+    is; 'fit' fits the sky's level against the sun's with the materials, one for all regions (:func:`~.sky_fit.fit_sky_scale`), and
     'prior' the same with the level's prior (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`);
-    both count the sun's own level, known to a relative ``sun_sd`` (None: 0 for a sequence
-    skyfit rendered, :data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD` for photographs), in the
+    both count the sun's own level, known to a relative ``sun_sd`` (None:
+    :func:`~.sky_fit.default_sun_sd`), in the
     reflectances' intervals (:func:`~.sky_fit.light_level_sd`); ``sky_terms`` > 1 lets the
     sky's level change smoothly over the day, and ``sky_shape`` fits a CIE sky's gradation
     and indicatrix too (:func:`~.sky_fit.fit_sky_scale`)."""
@@ -1038,16 +1039,15 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
                           "fitted sky, and the spec's is taken as it is (--sky spec): give --sky "
                           "fit or prior.")
     if sky != "spec":                                   # refused before the light is traced
-        if not any(np.any(k.sun_radiance > 0) and k.sun_direction[2] > 0 for k in first.skies):
+        if not sun_up(first.skies):
             raise SkyfitError(f"--sky {sky} scales the sky against the sun, and no frame of the "
                               "sequence has the sun's disc above the horizon; fit with the "
                               "spec's sky (--sky spec).")
         check_terms(sky_terms, len(first.obs.frames))
         if sky_shape:
-            check_shape(first.skies)
+            shape_variants(first.skies)
         if sun_sd is None:
-            sun_sd = 0.0 if first.doc.get("source", "render") in RENDERED_SOURCES \
-                else SUN_LEVEL_SD
+            sun_sd = default_sun_sd(first.doc)
     for s in sessions.values():
         s.split_sky, s.sky_shape = sky != "spec", bool(sky_shape)
         s.sun_sd = 0.0 if sky == "spec" else float(sun_sd)

@@ -795,8 +795,8 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
     """Radiance of each fitted region in the target's frames, without rendering images: the
     region's mean per frame and channel at the fit and its 95% band (2.5-97.5 percentiles
     over :func:`parameter_draws`, widened in quadrature by the image's noise, the model's
-    Monte Carlo error and the fit's model error, :func:`model_error_kappa`), with the image's mean (the observed, where the target holds frames);
-    on an observation table, each point's value in each frame and channel it measures, with
+    Monte Carlo error and the fit's model error, :func:`model_error_kappa`), with the image's
+    mean (the observed, where the target holds frames); on an observation table, each point's value in each frame and channel it measures, with
     its band and the table's value.  Returns a :class:`Prediction`: its
     :class:`PredictionRow` s, and per region the relative RMS error of its predicted means
     against the image's, at the fit and, where the target's material is known in the fit's
@@ -882,7 +882,8 @@ def _predict_points(s, result, target, draws, rng):
     """The prediction of one region of an observation table (:func:`predict`): each point's
     value at the fit in each frame and channel it measures, its 95% band (percentiles over
     the draws, widened in quadrature by the value's own noise, the model's Monte Carlo
-    error and the fit's model error) and the table's value; (its rows, the :class:`MeansError` of its region means)."""
+    error and the fit's model error) and the table's value; (its rows, the
+    :class:`MeansError` of its region means)."""
     sets = parameter_draws(result, s.names, s.lower, s.upper, draws, rng)
     at_fit, lo, hi = (np.empty(s.obs.y.shape) for _ in range(3))
     P, T = s.obs.y.shape[:2]

@@ -95,7 +95,7 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
              log=print, **options):
     """``fit --model auto``: every region's candidates ranked (:func:`rank`; the light traced
     once per lobe, every region of a lobe together), then the chosen one fitted in full by the
-    global method; yields each region's result dict with its ``model_selection`` (the
+    global method on its lobe's light; yields each region's result dict with its ``model_selection`` (the
     ranking, the choice, the folds and each lobe's tracing time)."""
     from .fit import FitSession
 
@@ -108,12 +108,17 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
                                                normalisation=fam, seed=seed, **options)
         trace_s[fam] = time.perf_counter() - t0
     for name, pixels in regions:
-        rows = rank([sessions[fam].pop(name) for fam in families], models, folds, log)
+        traced = {fam: sessions[fam].pop(name) for fam in families}
+        rows = rank(list(traced.values()), models, folds, log)
         pick = choose(rows)
         log(f"{name}: chose {pick['normalisation']} {pick['model']} (rank {pick['rank']} of "
             f"{len(rows)} by held-out chi2 over {folds} folds of frames)")
+        # on the light its lobe's candidates were ranked on (the table is the same for any
+        # parameterisation)
         s = FitSession(manifest_path, name, pixels, model=pick["model"],
-                       normalisation=pick["normalisation"], seed=seed, **options)
+                       normalisation=pick["normalisation"], seed=seed, trace=False, **options)
+        s.take_light(traced[pick["normalisation"]])
+        del traced
         out = s.run("global", None, seed, None, log)
         out["model_selection"] = {
             "criterion": f"held-out chi2, {folds}-fold over frames (frame t in fold t mod "

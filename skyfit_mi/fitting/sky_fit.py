@@ -45,6 +45,7 @@ from . import uncertainty as unc
 from ..errors import SkyfitError
 from .methods.levenberg_marquardt import levenberg_marquardt
 from ..pipeline.manifest import RENDERED_SOURCES
+from ..physics.sky import SUN_LEVEL_SD
 from .methods import global_search
 
 #: Sky scales k searched first: a geometric grid from a quarter to four times the spec's sky.
@@ -77,14 +78,32 @@ DRIFT_ITERATIONS = 8
 LEVEL_SCALED = ("C_r", "C_g", "C_b", "R", "rho_s")
 
 
+def sun_up(skies):
+    """Whether the sun's disc lights any of ``skies`` from above the horizon (a fitted sky is
+    scaled against it)."""
+    return any(np.any(k.sun_radiance > 0) and k.sun_direction[2] > 0 for k in skies)
+
+
+def _photographed(doc):
+    """Whether a manifest's frames were not rendered by skyfit (their light is the real one,
+    the spec's a model of it)."""
+    return doc.get("source", "render") not in RENDERED_SOURCES
+
+
 def default_sky(doc, skies):
     """How a fit takes the sky when not told (``fit --sky``): with its prior ('prior') where
     the frames were photographed under a sky with the sun (the spec's light is then a model of
     the real one), else the spec's ('spec': skyfit rendered the frames under that very light,
     or no sun lights them to scale the sky against)."""
-    sunny = any(np.any(k.sun_radiance > 0) and k.sun_direction[2] > 0 and k.lit_by_sky
-                for k in skies)
-    return "prior" if sunny and doc.get("source", "render") not in RENDERED_SOURCES else "spec"
+    sunny = sun_up(skies) and any(k.lit_by_sky for k in skies)
+    return "prior" if sunny and _photographed(doc) else "spec"
+
+
+def default_sun_sd(doc):
+    """The relative uncertainty of the sun's level a fitted sky counts when not told (``fit
+    --sun-sd``): a modelled sun's (:data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD`) for
+    photographs, 0 for a sequence skyfit rendered under that very sun."""
+    return SUN_LEVEL_SD if _photographed(doc) else 0.0
 
 
 def light_level_sd(doc, names, sun_sd):
@@ -128,7 +147,7 @@ def _least(sessions, k, starts):
     """Every region's least chi-square and its parameters at sky scale ``k``."""
     out = []
     for s, start in zip(sessions, starts):
-        s.set_sky_scale(k)
+        s.set_sky(k)
         g = global_search(s.problem, start, s.lower, s.upper, candidates=2, profile=False,
                           grid_basis=s.grid_bases()[0])
         out.append((float(g["chi2"]), np.asarray(g["theta"], dtype=float)))
@@ -141,13 +160,16 @@ def _parabola(u, chi2):
     return (-c1 / (2 * c2), c2) if c2 > 0 else (None, c2)
 
 
-def check_shape(skies):
-    """Refuse a fit of the sky's shape (``--sky-shape``) where some frame's spec sky has no
-    shape variants (not a CIE sky)."""
-    if not all(sky.shape_variants() for sky in skies):
+def shape_variants(skies):
+    """Each frame's shape variants (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`) of
+    ``skies``, for a fit of the sky's shape (``--sky-shape``); refused where some frame's spec
+    sky has none (not a CIE sky)."""
+    variants = [sky.shape_variants() for sky in skies]
+    if not all(variants):
         raise SkyfitError("--sky-shape mixes a CIE sky's gradation and indicatrix, and the "
                           "spec's sky of some frames is not a CIE sky (type clear or "
                           "cie_general); leave out --sky-shape.")
+    return variants
 
 
 def check_terms(terms, frames):
@@ -164,7 +186,7 @@ def _fit_curve(sessions, thetas, u0, terms, shape, prior_sd, s2):
     """The sky's coefficients fitted with the regions' parameters, from the day's level ``u0``
     (log k) and each region's ``thetas`` there: log k over the day as ``terms`` Legendre
     polynomials in time, and with ``shape`` (J) the mix of the sky's shape variants
-    (:meth:`~.fit.FitSession.set_sky_shape`).  Gauss-Newton on the coefficients with every
+    (:meth:`~.fit.FitSession.set_sky`).  Gauss-Newton on the coefficients with every
     region's parameters profiled out (each region's Jacobian in the coefficients projected off
     its parameters' own; the parameters then polished by Levenberg-Marquardt), under the
     priors N(0, ``prior_sd``^2) on the level (none if None), N(0, :data:`DRIFT_SD`^2) on each
@@ -181,9 +203,7 @@ def _fit_curve(sessions, thetas, u0, terms, shape, prior_sd, s2):
     thetas = [np.asarray(t, dtype=float) for t in thetas]
 
     def put(s, B, u):
-        if shape:
-            s.sky_shape_mix = np.asarray(u[terms:], dtype=float)
-        s.set_sky_scale(np.exp(B @ u[:terms]))
+        s.set_sky(np.exp(B @ u[:terms]), u[terms:] if shape else None)
 
     def objective(u, thetas):
         for s, B in zip(sessions, bases):
@@ -247,9 +267,7 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     starts = [s.random_start(rng) for s in sessions]
-    for s in sessions:                                  # the level first, in the spec's shape
-        s.sky_shape_mix = None
-    profile = {}
+    profile = {}                                        # the level first, in the spec's shape
 
     def penalty(u):
         """The prior's share of the profile at log k = ``u`` (chi-square units)."""
@@ -312,9 +330,9 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
     for n, (s, (_, theta)) in enumerate(zip(sessions, best)):
         change = []
         for d in (REFINE_STEP, -REFINE_STEP):
-            s.set_sky_scale(k * np.exp(d))
+            s.set_sky(k * np.exp(d))
             change.append(s.problem.residuals(theta))
-        s.set_sky_scale(k)
+        s.set_sky(k)
         _, J = s.problem.jacobian(theta)
         slope = -np.linalg.lstsq(J, (change[0] - change[1]) / (2 * REFINE_STEP), rcond=None)[0]
         s.sky_sd = np.abs(slope) * (sd_u if np.isfinite(sd_u) else 0.0)

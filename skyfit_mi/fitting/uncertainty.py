@@ -25,7 +25,6 @@ value to the next.
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq, minimize_scalar
 from scipy.special import chdtrc
 
 from ..physics.ward import METAL_THRESHOLD, colour_rule_twin
@@ -354,6 +353,8 @@ def model_error(e, v, a, dof):
     The 95% interval is where -2 ln L_R rises by 3.84 (at fixed parameters).  kappa is 0 where
     the likelihood is largest without it; searched over KAPPA_GRID.  Returns a
     :class:`ModelError`."""
+    from scipy.optimize import brentq, minimize_scalar    # lazy: only a misfit needs it
+
     e2, v, a2 = np.asarray(e, float) ** 2, np.asarray(v, float), np.asarray(a, float) ** 2
     weight = dof / max(len(e2), 1)
 

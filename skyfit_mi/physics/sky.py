@@ -413,6 +413,7 @@ class Sky:
         if lum <= 0:
             return []
         zenith, azimuth = (np.degrees(a) for a in angles_from_direction(self.sun_direction))
+        ground = self.split()[1].ground                       # the sky-lit share
         out = []
         for name, table, at in (("gradation", cie_general.GRADATION_GROUPS, slice(0, 2)),
                                 ("indicatrix", cie_general.INDICATRIX_GROUPS, slice(2, 5))):
@@ -424,7 +425,7 @@ class Sky:
             scale = lum / float(v.sky_horizontal_irradiance() @ SRGB_LUMINANCE)
             weight = float(v.perez @ SRGB_LUMINANCE) * scale * e_sky / lum
             out.append((f"{name} group {group} -> {to}",
-                        replace(v, perez=weight, ground=self.split()[1].ground,
+                        replace(v, perez=weight, ground=ground,
                                 horizon_blend=self.horizon_blend,
                                 info={"kind": "shape variant", "parameters_abcde": p.tolist(),
                                       "from_group": group, "to_group": to, "of": name})))

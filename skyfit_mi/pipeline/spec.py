@@ -537,10 +537,6 @@ def _sky_entries(sec, times, tz):
         if perez_only and e["type"] != "perez":
             raise SpecError(f"[sky] {', '.join(perez_only)} belong to a Perez sky (type = "
                             f"'perez'), not to a {e['type']} one.")
-        if e["type"] == "envmap" and {"global_horizontal_W_m2", "direct_normal_W_m2"} <= set(e):
-            raise SpecError("[sky] an envmap's sun takes direct_normal_W_m2 or the "
-                            "global_horizontal_W_m2 it is found from (with the map's own "
-                            "diffuse light), not both; drop one.")
         _check_light_keys(e)
     return out
 
