@@ -353,8 +353,67 @@ def test_a_cie_skys_shape_variants_keep_its_light_and_move_one_group():
     assert [label for label, _ in turbid.shape_variants()] == ["gradation group 6 -> 5",
                                                                "indicatrix group 6 -> 5"]
     assert cie_sky("overcast", 35.0, 160.0).shape_variants() == []
-    with pytest.raises(SkyfitError, match="not a CIE sky"):
+    with pytest.raises(SkyfitError, match="is neither"):
         shape_variants([sky, cie_sky("overcast", 35.0, 160.0)])
+
+
+def test_a_perez_skys_shape_variants_keep_its_light_and_move_one_bin_or_one_step():
+    """A Perez sky's variants: the next clearness bin (at its centre's epsilon) and Delta one
+    step on, each the published pattern of its epsilon and Delta lit as the spec's sky part;
+    Delta's floor as perez_sky applies it; every frame moved the same way; no variants for an
+    envmap."""
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.fitting.sky_fit import shape_variants
+    from skyfit_mi.physics import perez
+    from skyfit_mi.physics.envmap import envmap_sky
+    from skyfit_mi.physics.sky import perez_pattern
+
+    d = np.random.default_rng(4).normal(size=(200, 3))
+    d[:, 2] = np.abs(d[:, 2]) + 0.05
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    step = perez.BRIGHTNESS_STEP
+    # clear (epsilon 7.96, the last bin, Delta 0.087): toward the more overcast bin, Delta up
+    sky = perez.perez_sky(30.0, 160.0, 172, dhi=100.0, dni=800.0).to_sky()
+    eps, delta = sky.info["epsilon"], sky.info["delta"]
+    variants = sky.shape_variants()
+    assert [label for label, _ in variants] == [f"clearness epsilon {eps:.4g} -> 5.35",
+                                                f"brightness Delta {delta:.4g} -> "
+                                                f"{delta * step:.4g}"]
+    for (_, v), (e, dl) in zip(variants, ((5.35, delta), (eps, delta * step))):
+        np.testing.assert_allclose(v.sky_horizontal_irradiance(),
+                                   sky.split()[1].sky_horizontal_irradiance(), rtol=1e-6)
+        np.testing.assert_array_equal(v.ground, sky.split()[1].ground)     # the sky-lit ground
+        assert not v.sun_radiance.any() and v.info["kind"] == "shape variant"
+        c = perez.coefficients(e, dl, 30.0)
+        np.testing.assert_allclose(v.perez_coefficients, c, rtol=1e-12)
+        ratio = v.sky_radiance(d) / perez_pattern(d, sky.sun_direction, c)[:, None]
+        np.testing.assert_allclose(ratio, ratio[:1].repeat(len(d), axis=0), rtol=1e-9)
+    assert variants[0][1].info["clearness_bin"] == 6 and variants[0][1].info["from"] == eps
+    # a low sun, where Delta one step up gives b > 0 (the model refuses it): Delta moves down,
+    # and a day with both frames moves both down (the mix is shared)
+    low = perez.perez_sky(80.0, 250.0, 172, dhi=40.0, dni=900.0).to_sky()
+    assert perez.coefficients(low.info["epsilon"], low.info["delta"] * step, 80.0)[1] > 0
+    (_, c_low), (_, b_low) = low.shape_variants()
+    assert b_low.info["to"] == pytest.approx(low.info["delta"] / step)
+    day = shape_variants([sky, low])
+    assert [v[1][1].info["to"] < v[1][1].info["from"] for v in day] == [True, True]
+    with pytest.raises(SkyfitError, match="cannot move up"):
+        low.shape_variants(toward={"clearness": 1})                  # no bin above the last
+    # Delta 0.055 in the bin of epsilon 1.67 is raised to the floor 0.2 for the coefficients
+    # (perez_sky, as Radiance): the variants move from the floor, never below it
+    dim = perez.perez_sky(35.0, 160.0, 172, dhi=60.0, dni=50.0).to_sky()
+    assert dim.info["delta_coefficients"] == perez.RADIANCE_DELTA_FLOOR
+    clearer, brighter = (v for _, v in dim.shape_variants())
+    np.testing.assert_allclose(clearer.perez_coefficients,
+                               perez.coefficients(2.375, perez.RADIANCE_DELTA_FLOOR, 35.0))
+    assert brighter.info["from"] == perez.RADIANCE_DELTA_FLOOR
+    with pytest.raises(SkyfitError, match="brightness .* cannot move down"):
+        dim.shape_variants(toward={"brightness": -1})
+    # an envmap has no shape variants, and --sky-shape refuses it
+    mapped = envmap_sky(np.full((8, 16, 3), 5.0, np.float32), 30.0, 160.0)
+    assert mapped.shape_variants() == []
+    with pytest.raises(SkyfitError, match="neither .*cie_general or perez"):
+        shape_variants([sky, mapped])
 
 
 @pytest.fixture(scope="module")

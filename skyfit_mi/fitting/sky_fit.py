@@ -65,9 +65,11 @@ MAX_TERMS, FRAMES_PER_TERM = 4, 3
 DRIFT_SD = 0.35
 #: The prior's standard deviation of the mix of each of the sky's shape variants (``fit
 #: --sky-shape``, :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`): 1 is one CIE group of
-#: gradation or indicatrix.  The shape fitted to the shared measured clear day's scans lies
-#: one gradation group from the thesis's clear sky (5.98 against 5, indicatrix 4: BENCHMARKS,
-#: "Sky models against a measured clear sky").
+#: gradation or indicatrix, one Perez clearness bin, or one step of the Perez brightness
+#: (:data:`~skyfit_mi.physics.perez.BRIGHTNESS_STEP`, itself one sd of the sky's level).  The
+#: shape fitted to the shared measured clear day's scans lies one gradation group from the
+#: thesis's clear sky (5.98 against 5, indicatrix 4: BENCHMARKS, "Sky models against a
+#: measured clear sky").
 SHAPE_SD = 1.0
 #: Step in each term's coefficient of the finite differences of the residuals.
 DRIFT_STEP = 1e-3
@@ -162,14 +164,55 @@ def _parabola(u, chi2):
 
 def shape_variants(skies):
     """Each frame's shape variants (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`) of
-    ``skies``, for a fit of the sky's shape (``--sky-shape``); refused where some frame's spec
-    sky has none (not a CIE sky)."""
+    ``skies``, for a fit of the sky's shape (``--sky-shape``), every frame's index moved the
+    same way (the fit shares each variant's mix over the frames): +1 where every frame can,
+    else -1.  Refused where some frame's spec sky has none (neither a CIE nor a Perez sky),
+    where the frames' skies move different indices, or where no way suits every frame."""
     variants = [sky.shape_variants() for sky in skies]
     if not all(variants):
-        raise SkyfitError("--sky-shape mixes a CIE sky's gradation and indicatrix, and the "
-                          "spec's sky of some frames is not a CIE sky (type clear or "
-                          "cie_general); leave out --sky-shape.")
+        raise SkyfitError("--sky-shape moves a CIE sky's gradation and indicatrix or a Perez "
+                          "sky's clearness and brightness, and the spec's sky of some frames is "
+                          "neither (type clear, cie_general or perez); leave out --sky-shape.")
+    if len({tuple(v.info["of"] for _, v in vs) for vs in variants}) > 1:
+        raise SkyfitError("--sky-shape needs one kind of spec sky over the fitted frames, and "
+                          "they mix CIE and Perez skies; fit them apart (--frames) or leave "
+                          "out --sky-shape.")
+    back = {v.info["of"]: -1 for vs in variants for _, v in vs if v.info["to"] < v.info["from"]}
+    if back and any(v.info["of"] in back and v.info["to"] > v.info["from"]
+                    for vs in variants for _, v in vs):
+        variants = [sky.shape_variants(toward=back) for sky in skies]
     return variants
+
+
+def _shape_record(session, mix, mix_sd):
+    """The JSON record of the sky's fitted shape, and the indices' names for the log: the
+    ``mix`` of the shape variants of ``session``'s frames (:func:`shape_variants`) with its
+    standard deviations ``mix_sd``, and each variant's index, from + mix (to - from), with its
+    95% half-width: the frames' mean, and each frame's where the spec's index differs between
+    frames (a Perez sky)."""
+    infos = [[v.info for _, v in vs] for vs in shape_variants(session.skies)]
+    ends = np.array([[[v["from"], v["to"]] for v in row] for row in infos], dtype=float)
+    mean = ends.mean(axis=0)                                          # (J, 2)
+    first = infos[0]
+
+    def index(e):
+        return {v["of"]: [float(a + m * (b - a)), float(unc.Z["95"] * sd_m * abs(b - a))]
+                for v, (a, b), m, sd_m in zip(first, e, mix, mix_sd)}
+
+    record = {"meaning": "the sky other than the sun is (1 - sum(mix)) times the spec's pattern "
+                         "plus mix[j] times variant j (the spec's pattern with one index moved: "
+                         "a CIE gradation or indicatrix one group on, a Perez clearness one bin "
+                         "on or its brightness Delta one step, at the same horizontal "
+                         "irradiance): mix 1 is the variant's index; index = from + mix "
+                         "(to - from), linear between the patterns, the frames' mean",
+              "variants": [f"{v['of']} {v['index']} {a:.4g} -> {b:.4g}"
+                           for v, (a, b) in zip(first, mean)],
+              "mix": np.asarray(mix).tolist(), "mix_sd": np.asarray(mix_sd).tolist(),
+              "prior_sd": SHAPE_SD, "index": index(mean)}
+    if np.ptp(ends, axis=0).any():
+        record["index_by_frame"] = {int(i): index(e) for i, e in zip(session.obs.frames, ends)}
+    # the log's names of the indices: a CIE group's, as the index it is; epsilon, Delta
+    return record, [v["index"] if v["index"] != "group" else "index" for v in first]
 
 
 def check_terms(terms, frames):
@@ -374,22 +417,9 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
                                 f"{', '.join(map(str, vague))} of --sky-terms {terms}): their "
                                 "prior holds them, and the intervals include that.")
         if J:
-            variants = [v.info for _, v in sessions[0].skies[0].shape_variants()]
-            mix, msd = u[terms:], sd[terms:]
-            shape = {"meaning": "the sky other than the sun is (1 - sum(mix)) times the spec's "
-                                "pattern plus mix[j] times variant j (the spec's CIE pattern "
-                                "with its gradation, or indicatrix, one CIE group on, at the "
-                                "same horizontal irradiance): mix 1 is the variant's group; "
-                                "index = from + mix (to - from), linear between the patterns",
-                     "variants": [f"{v['of']} group {v['from_group']} -> {v['to_group']}"
-                                  for v in variants],
-                     "mix": mix.tolist(), "mix_sd": msd.tolist(), "prior_sd": SHAPE_SD,
-                     "index": {v["of"]: [float(v["from_group"] + m * (v["to_group"]
-                                                                     - v["from_group"])),
-                                         float(unc.Z["95"] * sd_m)]
-                               for v, m, sd_m in zip(variants, mix, msd)}}
-            names += [f"mix {v['of']}" for v in variants]
-            vague = [v["of"] for v, sd_m in zip(variants, msd) if sd_m > 0.7 * SHAPE_SD]
+            shape, index_names = _shape_record(sessions[0], u[terms:], sd[terms:])
+            names += [f"mix {of}" for of in shape["index"]]
+            vague = [of for of, sd_m in zip(shape["index"], sd[terms:]) if sd_m > 0.7 * SHAPE_SD]
             if vague:
                 warnings.append(f"the data hardly tell the sky's {' and '.join(vague)} (its "
                                 "shape): the prior holds it, and the intervals include that; "
@@ -420,7 +450,9 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
         + ("" if curve is None else f", changing over the day as {terms} terms: k = "
            + ", ".join(f"{v[0]:.2f}" for v in curve["k_by_frame"].values()) + " by frame")
         + ("" if shape is None else "; its shape: " + ", ".join(
-            f"{name} index {v[0]:.2f} +- {v[1]:.2f}" for name, v in shape["index"].items()))
+            f"{of} {name} {v[0]:.{2 if abs(v[0]) >= 1 else 3}f} +- "
+            f"{v[1]:.{2 if abs(v[0]) >= 1 else 3}f}"
+            for (of, v), name in zip(shape["index"].items(), index_names)))
         + f" ({record['time_s']:.1f} s)"
         + "".join(f"\n  warning: {w}" for w in warnings))
     return record

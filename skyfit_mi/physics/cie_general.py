@@ -283,3 +283,35 @@ def perez_form(params):
                           "positive pattern (need b < 0 and c exp(d pi/2) < 1); use a standard "
                           "type or group indices.")
     return float(k), np.array([a, b, c / k, d, e / k])
+
+
+def shape_moves(params):
+    """The moves of a general sky's shape that a fit mixes with it (``fit --sky-shape``,
+    :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`): its gradation (a, b), then its
+    indicatrix (c, d, e), from the nearest group to the next toward the more turbid (+1) or
+    the clearer (-1), the rest of ``params`` (5,) kept.
+
+    Returns
+    -------
+    list of dict
+        One per index: ``of`` ('gradation', 'indicatrix'), ``index`` ('group'), ``from``
+        (the nearest group, 1-6) and ``moves`` {+1, -1: None beyond groups 1-6, else ``to``
+        (the group), ``parameters_abcde`` and ``coefficients`` (:func:`perez_form`)}.
+    """
+    p0 = np.asarray(params, dtype=float)
+    out = []
+    for name, table, at in (("gradation", GRADATION_GROUPS, slice(0, 2)),
+                            ("indicatrix", INDICATRIX_GROUPS, slice(2, 5))):
+        group = int(np.argmin(np.abs(table - p0[at]).sum(axis=1))) + 1
+        moves = {}
+        for sign in (1, -1):
+            to = group + sign
+            if not 1 <= to <= len(table):
+                moves[sign] = None
+                continue
+            p = p0.copy()
+            p[at] = table[to - 1]
+            moves[sign] = {"to": to, "parameters_abcde": p.tolist(),
+                           "coefficients": perez_form(p)[1].tolist()}
+        out.append({"of": name, "index": "group", "from": group, "moves": moves})
+    return out

@@ -52,7 +52,7 @@ import numpy as np
 from ..conventions import direction_from_angles
 from ..errors import InputRangeError, SkyfitError, check_choice, check_range
 from .colour import cct_to_rgb
-from .sky import (CCT_CLEAR, CCT_OVERCAST, GROUND_ALBEDO, IRRADIANCE_NODES, Sky,
+from .sky import (CCT_CLEAR, CCT_OVERCAST, GROUND_ALBEDO, IRRADIANCE_NODES, SKY_LEVEL_SD, Sky,
                   hemisphere_integral as sky_hemisphere_integral, perez_pattern)
 from .sun import SUN_SOLID_ANGLE, sun_rgb
 
@@ -123,6 +123,27 @@ PEREZ_SOLAR_CONSTANT = 1367.0
 #: Radiance's lower limit on Delta for 1.065 < epsilon < 2.8 (gendaylit.c, gendaymtx.c),
 #: the default of :func:`perez_sky`.
 RADIANCE_DELTA_FLOOR = 0.2
+#: Radiance's gendaylit clamps epsilon below this value [unitless]: the top this module gives
+#: the open clear bin where it needs one (:data:`CLEARNESS_BIN_CENTRES`).
+GENDAYLIT_MAX_CLEARNESS = 12.01
+#: The clearness that stands for each bin in a fit of the sky's shape (``fit --sky-shape``,
+#: :func:`shape_moves`): the bin's centre, the open clear bin's taken to
+#: :data:`GENDAYLIT_MAX_CLEARNESS` (9.1; the clear skies of pvlib's two TMY3 files have
+#: epsilon 6.7-8.5 between quartiles, 10.1-10.6 at the 99th percentile) [unitless].  Within a
+#: bin the pattern depends on epsilon only through the bin (1993, Table 1): the value names the
+#: bin on the clearness scale of a fitted index.
+CLEARNESS_BIN_CENTRES = 0.5 * (CLEARNESS_BIN_EDGES[:-1]
+                               + np.r_[CLEARNESS_BIN_EDGES[1:-1], GENDAYLIT_MAX_CLEARNESS])
+#: The factor by which a fit of the sky's shape (``fit --sky-shape``, :func:`shape_moves`)
+#: moves the sky brightness Delta: e^0.35 = 1.42, one standard deviation of the sky's level
+#: in a fit (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`), since Delta = E_dh m / E_0 is
+#: proportional to the diffuse irradiance whose level that prior doubts.  In log, that is 1-3
+#: times Delta's spread within one clearness bin (relative standard deviation 0.11-0.14 in the
+#: bins of epsilon >= 2.8 and 0.22-0.31 in those below 1.23, in pvlib's TMY3 files 723170TYA,
+#: Greensboro NC, and 703165TY, Sand Point AK, over their hours with the sun above 5 degrees):
+#: one step, the shape prior's standard deviation, is a change of sky that the spec's
+#: irradiance could plausibly miss.
+BRIGHTNESS_STEP = float(np.exp(SKY_LEVEL_SD))
 #: Atmospheric precipitable water assumed by Radiance's gendaylit (dew point 11 C) [cm].
 PRECIPITABLE_WATER = 2.0
 
@@ -335,6 +356,16 @@ def coefficients(epsilon, delta, sun_zenith_deg):
     out[..., 3] = np.where(overcast, -np.exp(dlt * (d1 + d2 * z)) + d3 + dlt * d4,           # eq. 8
                            out[..., 3])
     return out
+
+
+def floored_delta(epsilon, delta, delta_floor=RADIANCE_DELTA_FLOOR):
+    """The Delta [unitless] that :func:`perez_sky` gives :func:`coefficients` for a sky of
+    clearness ``epsilon`` and brightness ``delta``: raised to ``delta_floor`` where
+    1.065 < epsilon < 2.8, as Radiance's gendaylit and gendaymtx do; ``delta`` itself
+    elsewhere or when ``delta_floor`` is None (numbers, not arrays)."""
+    if delta_floor is None or not 1.065 < epsilon < 2.8:
+        return float(delta)
+    return max(float(delta), float(delta_floor))
 
 
 def diffuse_efficacy(epsilon, delta, sun_zenith_deg, precipitable_water=PRECIPITABLE_WATER):
@@ -550,11 +581,9 @@ def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=Non
 
     eps = float(clearness(dhi, dni, z))
     delta = float(brightness(dhi, z, day_of_year, airmass_model=airmass_model))
-    delta_c = delta
     if delta_floor is not None:
         check_range("delta_floor", delta_floor, 0.0, 1.0)
-        if 1.065 < eps < 2.8:
-            delta_c = max(delta, delta_floor)
+    delta_c = floored_delta(eps, delta, delta_floor)
     coeffs = coefficients(eps, delta_c, z)
     if coeffs[1] > 0:
         raise SkyfitError(f"the Perez coefficient b = {coeffs[1]:.4g} > 0 for epsilon = {eps:.4g}, "
@@ -577,3 +606,56 @@ def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=Non
             "precipitable_water_cm": float(precipitable_water)}
     return PerezSky(sun, coeffs, float(dhi) / total,
                     float(diffuse_efficacy(eps, delta, z, precipitable_water)), info)
+
+
+def shape_moves(info):
+    """The moves of a Perez sky's shape that a fit mixes with it (``fit --sky-shape``,
+    :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), for the sky of :func:`perez_sky`'s
+    ``info`` (epsilon, delta, delta_coefficients, sun_zenith_deg):
+
+    * ``clearness``: the pattern of the next clearness bin toward the clearer (+1) or the more
+      overcast (-1), at the spec's Delta (raised by :func:`floored_delta` where that bin
+      takes it), its epsilon the bin's :data:`CLEARNESS_BIN_CENTRES` value;
+    * ``brightness``: the spec's clearness at the coefficients' Delta times (+1) or over (-1)
+      :data:`BRIGHTNESS_STEP`.
+
+    A move is None beyond the first or last bin, below the Delta floor of the spec's bin
+    (which the spec's coefficients already use), or where its coefficients leave the model
+    (b > 0, or a black sky: :func:`perez_sky` refuses these too).
+
+    Returns
+    -------
+    list of dict
+        One per index: ``of`` ('clearness', 'brightness'), ``index`` ('epsilon', 'Delta'),
+        ``from`` (the spec's epsilon, or the Delta of its coefficients) and ``moves``
+        {+1, -1: None or ``to`` (the index), ``epsilon``, ``delta_coefficients``,
+        ``clearness_bin`` and ``coefficients`` (a..e)}.  Empty for a sky without epsilon
+        (the sun below the horizon).
+    """
+    if "epsilon" not in info:
+        return []
+    eps, delta, z = float(info["epsilon"]), float(info["delta"]), float(info["sun_zenith_deg"])
+    delta_c = float(info.get("delta_coefficients", delta))
+    k = int(clearness_bin(eps))
+    sun = direction_from_angles(np.radians(z), 0.0)
+
+    def move(to, epsilon, delta_to, k_to):
+        c = coefficients(epsilon, delta_to, z)
+        if not (np.all(np.isfinite(c)) and c[1] <= 0 and hemisphere_integral(
+                PerezSky(sun, c, 1.0, 1.0).relative_luminance) > 0):
+            return None
+        return {"to": float(to), "epsilon": float(epsilon), "delta_coefficients": delta_to,
+                "clearness_bin": k_to, "coefficients": c.tolist()}
+
+    clearer = {}
+    for sign in (1, -1):
+        k_to = k + sign
+        clearer[sign] = None if not 0 <= k_to < len(CLEARNESS_BIN_CENTRES) else move(
+            CLEARNESS_BIN_CENTRES[k_to], CLEARNESS_BIN_CENTRES[k_to],
+            floored_delta(CLEARNESS_BIN_CENTRES[k_to], delta), k_to)
+    brighter = {}
+    for sign in (1, -1):
+        to = delta_c * BRIGHTNESS_STEP ** sign
+        brighter[sign] = None if floored_delta(eps, to) != to else move(to, eps, to, k)
+    return [{"of": "clearness", "index": "epsilon", "from": eps, "moves": clearer},
+            {"of": "brightness", "index": "Delta", "from": delta_c, "moves": brighter}]

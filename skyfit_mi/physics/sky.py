@@ -391,45 +391,80 @@ class Sky:
                       ground=self.ground * lit)
         return sun, replace(self, sun_radiance=np.zeros(3), ground=self.ground * (1.0 - lit))
 
-    def shape_variants(self):
-        """The skies a fit of the sky's shape mixes with this one (``fit --sky-shape``): for a
-        CIE sky (the thesis's clear sky, standard type 12, or a CIE S 011 general sky,
-        :mod:`~skyfit_mi.physics.cie_general`), its pattern with the gradation, then the
-        indicatrix, moved to the next CIE group toward the more turbid (from the most turbid,
-        toward the clearer), lit as this sky's light other than the sun: the same
-        luminance-weighted horizontal irradiance, colour, sky-lit ground (:meth:`split`) and
-        horizon.  A mix
-        (1 - a_g - a_i) this + a_g V_g + a_i V_i moves the shape continuously between them:
-        a = 1 is the variant's group exactly.  Returns [(label, Sky)], empty for other skies."""
+    def shape_variants(self, toward=None):
+        """The skies a fit of the sky's shape mixes with this one (``fit --sky-shape``): one
+        index of its pattern moved at a time, lit as this sky's light other than the sun
+        (:meth:`_pattern_as_sky_part`).  For a CIE sky (the thesis's clear sky, standard type
+        12, or a CIE S 011 general sky, :mod:`~skyfit_mi.physics.cie_general`) its gradation,
+        then its indicatrix, moved one CIE group on
+        (:func:`~skyfit_mi.physics.cie_general.shape_moves`); for a Perez sky
+        (:mod:`~skyfit_mi.physics.perez`) its clearness moved one bin and its brightness Delta
+        one step (:func:`~skyfit_mi.physics.perez.shape_moves`).  A mix (1 - sum(a)) this
+        + sum a_j V_j moves the shape continuously between them: a_j = 1 is variant j's index
+        exactly.
+
+        Parameters
+        ----------
+        toward : dict, optional
+            {index name (``of``): +1 or -1}: the way to move that index, +1 toward the more
+            turbid CIE group, the clearer Perez bin, the brighter Delta; an index not named
+            moves +1 where it can, else -1.
+
+        Returns
+        -------
+        list of (label, Sky)
+            The labels as 'gradation group 5 -> 6'; the skies' info ``kind`` 'shape variant',
+            ``of``, ``index``, ``from``, ``to`` and the move's coefficients.  Empty for other
+            skies, or a sky black above the horizon.
+
+        Raises
+        ------
+        SkyfitError
+            Where ``toward`` names a way this sky's index cannot move.
+        """
         kind = self.info.get("kind")
         if kind == "clear":
-            p0 = cie_general.standard_parameters(12)
+            moves = cie_general.shape_moves(cie_general.standard_parameters(12))
         elif kind == "cie_general":
-            p0 = np.asarray(self.info["parameters_abcde"], dtype=float)
+            moves = cie_general.shape_moves(self.info["parameters_abcde"])
+        elif kind == "perez":
+            from . import perez             # not at the top: perez imports this module
+            moves = perez.shape_moves(self.info)
         else:
             return []
-        e_sky = self.sky_horizontal_irradiance()
-        lum = float(e_sky @ SRGB_LUMINANCE)
-        if lum <= 0:
+        if float(self.sky_horizontal_irradiance() @ SRGB_LUMINANCE) <= 0:
             return []
-        zenith, azimuth = (np.degrees(a) for a in angles_from_direction(self.sun_direction))
-        ground = self.split()[1].ground                       # the sky-lit share
+        toward = toward or {}
         out = []
-        for name, table, at in (("gradation", cie_general.GRADATION_GROUPS, slice(0, 2)),
-                                ("indicatrix", cie_general.INDICATRIX_GROUPS, slice(2, 5))):
-            group = int(np.argmin(np.abs(table - p0[at]).sum(axis=1))) + 1
-            to = group + 1 if group < len(table) else group - 1
-            p = p0.copy()
-            p[at] = table[to - 1]
-            v = cie_general_sky(p, zenith, azimuth, sun=False, ground_albedo=0.0)
-            scale = lum / float(v.sky_horizontal_irradiance() @ SRGB_LUMINANCE)
-            weight = float(v.perez @ SRGB_LUMINANCE) * scale * e_sky / lum
-            out.append((f"{name} group {group} -> {to}",
-                        replace(v, perez=weight, ground=ground,
-                                horizon_blend=self.horizon_blend,
-                                info={"kind": "shape variant", "parameters_abcde": p.tolist(),
-                                      "from_group": group, "to_group": to, "of": name})))
+        for m in moves:
+            sign = toward.get(m["of"], 1 if m["moves"][1] is not None else -1)
+            move = m["moves"][sign]
+            if move is None:
+                raise SkyfitError(
+                    f"the {m['of']} of the spec's {kind} sky at sun zenith "
+                    f"{np.degrees(np.arccos(self.sun_direction[2])):.1f} degrees ({m['index']} "
+                    f"{m['from']:.4g}) cannot move {'up' if sign > 0 else 'down'} as the other "
+                    f"frames' must; fit these frames apart (--frames) or leave out --sky-shape.")
+            out.append((f"{m['of']} {m['index']} {m['from']:.4g} -> {move['to']:.4g}",
+                        self._pattern_as_sky_part(move["coefficients"], {
+                            "kind": "shape variant", "of": m["of"], "index": m["index"],
+                            "from": m["from"], **move})))
         return out
+
+    def _pattern_as_sky_part(self, coefficients, info=None):
+        """The Perez-form pattern of ``coefficients`` (a..e, :func:`perez_pattern`) lit as this
+        sky's light other than the sun: the same horizontal irradiance channel by channel
+        (:meth:`sky_horizontal_irradiance`, so the same luminance-weighted irradiance and
+        colour), the sky-lit ground (:meth:`split`), the same horizon; no sun, and ``info``."""
+        c = np.asarray(coefficients, dtype=float)
+        total = float(hemisphere_integral(lambda d: perez_pattern(d, self.sun_direction, c)))
+        if not total > 0:
+            raise SkyfitError(f"the Perez-form pattern {c.tolist()} is black above the "
+                              "horizon; it cannot carry this sky's light.")
+        return Sky(self.sun_direction, perez=self.sky_horizontal_irradiance() / total,
+                   perez_coefficients=c, ground=self.split()[1].ground,
+                   horizon_blend=self.horizon_blend, sun_solid_angle=self.sun_solid_angle,
+                   info=dict(info or {}))
 
     def sky_scaled(self, k):
         """A copy whose sky's light (:meth:`split`'s second part: the patterns, the map and the
