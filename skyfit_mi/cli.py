@@ -506,10 +506,11 @@ def build_parser():
                      "a level that changes smoothly over the day (changing weather: log k as "
                      "that many Legendre polynomials in time, the change under a prior)")
     fit.add_argument("--sky-shape", action="store_true",
-                     help="with --sky fit or prior and a CIE sky (clear, cie_general): fit its "
-                     "shape too, its gradation and indicatrix indices as mixes of the spec's "
-                     "pattern with the next CIE group's, under a prior of one group (two more "
-                     "traces of the light)")
+                     help="with --sky fit or prior and a CIE sky (clear, cie_general) or a "
+                     "Perez sky (perez): fit its shape too, as mixes of the spec's pattern with "
+                     "the next CIE group's gradation and indicatrix, or with the next Perez "
+                     "clearness bin's and with Delta one step (x1.42) on, under a prior of one "
+                     "group, bin or step (two more traces of the light)")
     fit.add_argument("--sun-sd", type=float, default=None,
                      help="with --sky fit or prior: the relative uncertainty of the spec's sun "
                      f"level, in the reflectances' intervals (default {SUN_LEVEL_SD} for "
