@@ -440,11 +440,15 @@ class Sky:
             sign = toward.get(m["of"], 1 if m["moves"][1] is not None else -1)
             move = m["moves"][sign]
             if move is None:
+                where = (f"the {m['of']} of the spec's {kind} sky at sun zenith "
+                         f"{np.degrees(np.arccos(self.sun_direction[2])):.1f} degrees "
+                         f"({m['index']} {m['from']:.4g})")
                 raise SkyfitError(
-                    f"the {m['of']} of the spec's {kind} sky at sun zenith "
-                    f"{np.degrees(np.arccos(self.sun_direction[2])):.1f} degrees ({m['index']} "
-                    f"{m['from']:.4g}) cannot move {'up' if sign > 0 else 'down'} as the other "
-                    f"frames' must; fit these frames apart (--frames) or leave out --sky-shape.")
+                    f"{where} cannot move {'up' if sign > 0 else 'down'} as the other frames' "
+                    "must; fit these frames apart (--frames) or leave out --sky-shape."
+                    if m["of"] in toward else
+                    f"{where} has no neighbour either way that the model allows; leave out "
+                    "--sky-shape.")
             out.append((f"{m['of']} {m['index']} {m['from']:.4g} -> {move['to']:.4g}",
                         self._pattern_as_sky_part(move["coefficients"], {
                             "kind": "shape variant", "of": m["of"], "index": m["index"],
