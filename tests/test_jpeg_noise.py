@@ -358,3 +358,34 @@ def test_a_shared_error_reaches_a_mean_whole():
                          covariance(J.reshape(-1, 3)))
     np.testing.assert_allclose(sd, np.abs(jn.YCC_TO_RGB[:, 1]) * s / np.sqrt(T), atol=1e-12)
     assert sd[2] > 5 * sigma / np.sqrt(P * T)             # far above the pixels' own error
+
+
+@pytest.mark.parametrize("subsampling, offset", [(2, 0), (2, 1), (1, 0), (1, 1)])
+def test_subsampled_colour_reaches_no_further_than_colour_reach(subsampling, offset):
+    """Two saturated paints meeting at a straight edge (at an even or odd column, and across
+    the rows), coded at quality 100 with chroma subsampled (4:2:0, 4:2:2) and decoded as
+    ingest does: the colour bleeds across the edge -- by tens of codes on the pixels beside
+    it -- but a pixel :func:`colour_mixed` keeps (``colour_reach``: 2 + 1 pixels) decodes
+    within 2 codes of its paint, as a pixel of a plain patch does; without subsampling the
+    reach is 0."""
+    from skyfit_mi.pipeline.pixels import colour_mixed, colour_reach
+
+    h, w = 48, 64
+    labels = np.ones((h, w), np.int32)
+    labels[:, 31 + offset:] = 2
+    labels[23 + offset:, :8] = 3                        # an edge across the rows too
+    paint = np.array([[0, 0, 0], [200, 30, 20], [40, 60, 190], [230, 200, 30]], np.uint8)
+    codes = paint[labels]
+    buf = io.BytesIO()
+    Image.fromarray(codes).save(buf, format="JPEG", quality=100, subsampling=subsampling)
+    decoded = jn.decode(buf.getvalue())
+    factors = jn._factors(jn.jpeg_settings(io.BytesIO(buf.getvalue())))
+    doc = {"frames": [{"jpeg_dc": {"chroma_subsampling": list(factors)}}, {}]}
+    reach = colour_reach(doc)
+    assert reach == 3
+    err = np.abs(decoded - codes).max(axis=-1)
+    mixed = colour_mixed(labels, reach)
+    assert err[mixed].max() > 20                       # the bleed is real
+    assert err[~mixed].max() < 2.5, err[~mixed].max()
+    assert colour_reach({"frames": [{"jpeg_dc": {"chroma_subsampling": [1, 1]}}]}) == 0
+    assert not colour_mixed(labels, 0).any()

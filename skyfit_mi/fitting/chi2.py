@@ -18,6 +18,7 @@ exactly so: :func:`load_table_observations` puts it at the top code, with a gain
 that takes its level to max - 0.5.
 """
 
+import functools
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -30,6 +31,7 @@ from ..physics.colour import SRGB_LUMINANCE
 from ..pipeline.manifest import (check_frames, frame_exposure, load_manifest, read_frame_image,
                                  rendered_frames, sensor_from_record)
 from ..pipeline.observation_table import is_table, table_observations
+from ..pipeline.pixels import colour_mixed, colour_reach, scene_labels
 from ..render.light_cache import point_rays
 
 #: Values below this [DN] read as code 0.
@@ -233,6 +235,13 @@ def block_sharing(pixels, block=8, offset=(0, 0)):
     return counts[inverse.ravel()].astype(float)
 
 
+@functools.lru_cache(maxsize=4)
+def _colour_mixed(root, run_id, reach):
+    """:func:`~skyfit_mi.pipeline.pixels.colour_mixed` of the sequence in ``root`` (its
+    ``run_id`` keys the cache: the label image is a ray cast of the scene)."""
+    return colour_mixed(scene_labels(root)[2], reach)
+
+
 def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=True):
     """Read a region's pixel values and sigmas from the rendered frames of a manifest.
 
@@ -250,7 +259,10 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
     bootstrap): the sigma of a pixel whose block holds k of the region's pixels is widened by
     sqrt(1 + (k - 1) rho), Kish's design effect, so that the k carry what their correlated
     errors let them tell (the chi-square stays a sum over pixels as if independent); not when
-    the pixels are fitted each on its own (``one_fit`` False: a map).
+    the pixels are fitted each on its own (``one_fit`` False: a map).  Pixels whose colour a
+    JPEG with subsampled chroma mixes with another material's
+    (:func:`~skyfit_mi.pipeline.pixels.colour_reach`) are left out of a region's fit, with a
+    warning (a map keeps them).
     """
     doc, root = load_manifest(manifest_path)
     cam = doc["camera"]
@@ -280,6 +292,18 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
         warnings.append("the sequence's render is incomplete (manifest status "
                         f"{doc.get('status')!r}): only {len(rendered)} of its "
                         f"{len(doc['frames'])} frames are fitted; finish it with `skyfit render`.")
+    reach = colour_reach(doc)
+    mixed = np.zeros(len(pixels), bool)
+    if reach and one_fit:
+        mixed = _colour_mixed(str(root), doc.get("run_id"), reach)[pixels[:, 1], pixels[:, 0]]
+        if mixed.all():
+            raise SkyfitError(f"every pixel of the region lies within {reach} pixels of another "
+                              "material, where the JPEGs' subsampled colour mixes the two; give "
+                              "a region further inside the material.")
+        if mixed.any():
+            warnings.append(f"{int(mixed.sum())} of the region's {len(pixels)} pixels lie within "
+                            f"{reach} pixels of another material, where the JPEGs' subsampled "
+                            "colour mixes the two, and are left out.")
     sensor = sensor_from_record(doc["sensor"])
     falloff = sensor.gain(w, h, cam["fov_deg"])[pixels[:, 1], pixels[:, 0]] / sensor.exposure
     if doc["sensor"].get("flat_field"):         # a measured vignetting (ingest), per pixel
@@ -296,12 +320,13 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
             rho = np.asarray(f["jpeg_block_correlation"], dtype=float)
             s = s * np.sqrt(1.0 + (shared[:, None] - 1.0) * rho[None, :])
         ok = np.isfinite(y) & ~np.isnan(s) & (s >= 0)
-        if not ok.any():
+        if not ok[~mixed].any():
             raise SkyfitError(f"frame {f['index']} ({root / f['sensor']}) has no finite value in "
                               "the region; repair or re-render that frame.")
-        if not ok.all():
-            warnings.append(f"frame {f['index']}: {int((~ok).sum())} of the region's values are "
-                            "not finite (NaN) and are left out.")
+        if not ok[~mixed].all():
+            warnings.append(f"frame {f['index']}: {int((~ok[~mixed]).sum())} of the region's "
+                            "values are not finite (NaN) and are left out.")
+        ok[mixed] = False
         ys.append(np.where(ok, y, 0.0))
         sig.append(np.where(ok, s, np.inf))
         gain.append(falloff[:, None] * frame_exposure(doc, f)[None, :])

@@ -84,13 +84,15 @@ class FitState:
         for the global method): its grid gives the profiles
     model_noise_by_sigma : the light cache's own share of chi-square by roughness
     noise_chi2 : mean and variance of the chi-square noise alone gives at the fit
-    intervals, rise, cache_noise_chi2, cache_sd, calibration_sd, sun_level_sd : set by
+    intervals, rise, cache_noise_chi2, cache_sd, sun_level_sd : set by
         :meth:`FitSession._intervals`: every parameter's 68%/95% intervals, the profiles' rise,
         the chi-square the cache's noise may add (the intervals allow for it), the standard
-        errors from the cache's samples, from a photographed sequence's calibration and from
-        the sun's level (:func:`~.sky_fit.light_level_sd`)
-    jpeg_shared_sd : the standard errors from the rounding a JPEG frame's blocks share over
-        the region (:func:`~.uncertainty.shared_error_sd`; zeros without JPEG frames)
+        errors from the cache's samples and from the sun's level
+        (:func:`~.sky_fit.light_level_sd`)
+    jpeg_shared_sd, calibration_sd : the standard errors from the rounding a JPEG frame's
+        blocks share over the region and from a photographed sequence's calibration, errors
+        every value of a frame shares (:func:`~.uncertainty.shared_error_sd`; zeros without
+        JPEG frames, or calibration)
     """
 
     method: str
@@ -595,6 +597,7 @@ class FitSession:
                        problem, merr, rounds, misfit)
         fit.jpeg_shared_sd = self._jpeg_shared_sd(J_all, problem.mask & ~low & ~high,
                                                   problem.obs.sigma, curv_inv)
+        fit.calibration_sd = self._calibration_sd(J_all, problem, theta, curv_inv)
         self._intervals(fit)
         warnings = self._warnings(fit)
         wall = time.perf_counter() - t0 + self.cache_time
@@ -654,9 +657,9 @@ class FitSession:
 
     def _intervals(self, fit):
         """68% and 95% intervals of every parameter into the :class:`FitState` ``fit`` (its
-        intervals, rise, cache_noise_chi2, cache_sd, calibration_sd, sun_level_sd): the
-        covariance's, or for rho_s and sigma_alpha of a global fit the profile's; each widened
-        by the light cache's own Monte Carlo error, the calibration's, the fitted sky's and, a
+        intervals, rise, cache_noise_chi2, cache_sd, sun_level_sd): the covariance's, or for
+        rho_s and sigma_alpha of a global fit the profile's; each widened by the light cache's
+        own Monte Carlo error, the calibration's (``calibration_sd``), the fitted sky's and, a
         factor on the reflectances, the sun's level's; and by the rounding a JPEG frame's
         blocks share over the region (``jpeg_shared_sd``)."""
         problem, theta, names = fit.problem, fit.theta, self.names
@@ -702,7 +705,7 @@ class FitSession:
                     lo, hi = intervals[p][lv]
                     intervals[p][lv] = (min(lo, float(ridge[0][i])), max(hi, float(ridge[1][i])))
         mc_sd = self.cache_error(theta, fit.method, problem)
-        cal_sd = unc.calibration_sd(self.doc, names, theta)
+        cal_sd = fit.calibration_sd
         sky_sd = np.zeros(len(names)) if self.sky_sd is None else self.sky_sd
         sun_rel = light_level_sd(self.doc, names, self.sun_sd)
         for i, p in enumerate(names):
@@ -720,8 +723,35 @@ class FitSession:
                     if lv == "95":
                         intervals[p]["from"] += ", and over the undetermined sky level"
         fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
-        fit.cache_sd, fit.calibration_sd = mc_sd, cal_sd
+        fit.cache_sd = mc_sd
         fit.sun_level_sd = sun_rel * np.abs(theta)
+
+    def _calibration_sd(self, J, problem, theta, curvature_inverse):
+        """Each parameter's standard error (n,) from a photographed sequence's calibration on
+        patches of known reflectance (ingest's ``calibration`` record): each frame's exposure
+        errs per channel by ``frame_relative_sd`` where the frames take their own
+        (``per_frame``), or the day's by ``scale_relative_sd`` where they share one.  An
+        error e moves every value of its frame and channel by e times the value
+        (:meth:`~.chi2.Problem.value_scale`), carried to the parameters by
+        :func:`~.uncertainty.shared_error_sd`: not a mere scale on the reflectances, since
+        frames erring apart bend the day's curve, which the specular share and the roughness
+        follow (a board's yellow paint, its sun's highlight never seen: C_b 2.3% off, where
+        the scale alone widened its 95% interval to 1.5%).  A table's, without frames
+        photographed, is :func:`~.uncertainty.calibration_sd`."""
+        cal = (self.doc.get("ingest") or {}).get("calibration") or {}
+        if self.obs.rays is not None or not cal.get("scale_relative_sd"):
+            return unc.calibration_sd(self.doc, self.names, theta)
+        low, high = problem.clipped()
+        usable = problem.mask & ~low & ~high
+        Js = J * problem.value_scale(theta)[..., None]          # per relative error of a value
+        sigma = problem.obs.sigma
+        if cal.get("per_frame"):
+            shared = np.tile(np.asarray(cal["frame_relative_sd"], dtype=float), (J.shape[1], 1))
+        else:                                         # one error per channel for every frame
+            P, T, C, n = J.shape
+            Js, usable, sigma = (a.reshape((P * T, 1) + a.shape[2:]) for a in (Js, usable, sigma))
+            shared = np.asarray(cal["scale_relative_sd"], dtype=float)[None, :]
+        return unc.shared_error_sd(Js, usable, sigma, shared, np.eye(3), curvature_inverse)
 
     def _jpeg_shared_sd(self, J, usable, sigma, curvature_inverse):
         """Each parameter's standard error (n,) from the rounding of the block means that the
@@ -1017,8 +1047,9 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
     both count the sun's own level, known to a relative ``sun_sd`` (None:
     :func:`~.sky_fit.default_sun_sd`), in the
     reflectances' intervals (:func:`~.sky_fit.light_level_sd`); ``sky_terms`` > 1 lets the
-    sky's level change smoothly over the day, and ``sky_shape`` fits a CIE sky's gradation
-    and indicatrix too (:func:`~.sky_fit.fit_sky_scale`)."""
+    sky's level change smoothly over the day, and ``sky_shape`` fits the sky's shape too (a CIE
+    sky's gradation and indicatrix, a Perez sky's clearness and brightness;
+    :func:`~.sky_fit.fit_sky_scale`)."""
     if sky is not None:
         check_choice("sky", sky, SKY_CHOICES)
     if sun_sd is not None:

@@ -97,11 +97,41 @@ def scene_labels(manifest):
     return (doc, root, *label_image(mi.load_string(doc["scene"]["xml"])))
 
 
+def colour_reach(doc):
+    """How many pixels from itself a frame of the sequence ``doc`` mixes a pixel's colour
+    with others', at most over its frames: 0 but for JPEGs with subsampled chroma.  A JPEG of
+    chroma subsampled by f (2 for 4:2:0 and 4:2:2) averages each f x f cell's colour into one
+    sample, and the decoder interpolates between neighbouring samples (libjpeg's "fancy"
+    upsampling, :func:`~.jpeg_noise.decode`): a pixel's colour then draws on pixels up to f
+    away.  One more covers a camera's encoder that smooths its chroma before subsampling.  At
+    a boundary between materials the mix is a bias, not noise (measured on a board of
+    saturated paints at quality 95, 4:2:0: the blue of yellow paint +26% on the ring next to
+    the boundary), so a fit leaves such pixels out (:func:`colour_mixed`)."""
+    factors = [max(f["jpeg_dc"]["chroma_subsampling"]) for f in doc.get("frames", ())
+               if "jpeg_dc" in f]
+    f = max(factors, default=1)
+    return f + 1 if f > 1 else 0
+
+
+def colour_mixed(labels, reach):
+    """(H, W) bool: the pixels of the label image ``labels`` (:func:`scene_labels`) within
+    ``reach`` pixels (a square's half-width) of a pixel of another label, whose colour a
+    frame mixes with another material's (:func:`colour_reach`); none for ``reach`` 0."""
+    from scipy.ndimage import maximum_filter, minimum_filter
+
+    if reach <= 0:
+        return np.zeros(labels.shape, dtype=bool)
+    size = 2 * int(reach) + 1
+    return maximum_filter(labels, size, mode="nearest") \
+        != minimum_filter(labels, size, mode="nearest")
+
+
 def material_regions(manifest):
     """(name, pixels) of every Ward material the camera sees, from the scene's label image:
     the pixels inside each material's area (edge pixels, which also see a neighbour, left
-    out); SkyfitError when it sees none.  For an observation table, (name, None) of each
-    region it measures."""
+    out, and in JPEGs with subsampled chroma those whose colour mixes a neighbour's,
+    :func:`colour_reach`); SkyfitError when it sees none.  For an observation table,
+    (name, None) of each region it measures."""
     from scipy.ndimage import binary_erosion
 
     doc, root = load_manifest(manifest)
@@ -109,12 +139,14 @@ def material_regions(manifest):
         return [(name, None) for name in table_regions(root)]
     doc, _, labels, ids = scene_labels(manifest)
     ward = set(doc["scene"]["materials"])
+    mixed = colour_mixed(labels, colour_reach(doc))
     regions = []
     for k, name in enumerate(ids):
-        ys, xs = np.nonzero(binary_erosion(labels == k + 1, border_value=1))
+        ys, xs = np.nonzero(binary_erosion(labels == k + 1, border_value=1) & ~mixed)
         if name in ward and len(xs):
             regions.append((name, np.stack([xs, ys], axis=1)))
     if not regions:
-        raise SkyfitError(f"the camera sees no Ward material of {manifest} away from its edges; "
-                          "give regions with --region.")
+        raise SkyfitError(f"the camera sees no Ward material of {manifest} away from its edges"
+                          f"{' and the colour its JPEGs mix across them' if mixed.any() else ''};"
+                          " give regions with --region.")
     return regions
