@@ -1,21 +1,25 @@
-"""Coverage of C on saturated and pale colours after `skyfit ingest` of subsampled JPEGs.
+"""Coverage of C on saturated and pale colours after `skyfit ingest` of JPEGs or camera RAWs.
 
 A board of five samples (saturated red, green, blue and yellow paint, a pale blue paper; all
 rho_s 0.05, sigma_alpha 0.08) beside a grey card (written into the work folder) is rendered
 once, hourly over a clear day, then photographed (skyfit_mi.pipeline.photo_sim) with SEEDS
 noise seeds at each JPEG quality with the chroma subsampling asked (default 4:2:0), or as PNG
-(``--quality 0``: lossless), ingested with the grey card's calibration and the noise estimated
+(``--quality 0``: lossless), or with ``--format dng`` as camera RAWs (a Bayer mosaic in the
+camera's RGB, demosaiced by LibRaw on ingest) at each ``--matrix-error`` (the DNG colour
+matrix's relative error), ingested with the grey card's calibration and the noise estimated
 from the frames, and every sample fitted (64 pixels each, colour model).  Prints a markdown
-table per quality: per material the share of seeds whose 95% interval holds the truth, for
-C_r, C_g, C_b, rho_s and sigma_alpha, and the median relative 95% half-width of C; and the
-share of C's intervals holding the truth without the JPEG's shared rounding error
+table per quality (or matrix error): per material the share of seeds whose 95% interval holds
+the truth, for C_r, C_g, C_b, rho_s and sigma_alpha, and the median relative 95% half-width
+of C; and the share of C's intervals holding the truth without the JPEG's shared rounding error
 (``jpeg_shared_error_sd`` of the fit taken out of each half-width in quadrature);
 ``--diagnose`` adds, per quality and channel, the z of the region means per frame
 ((ingested - true radiance) / sigma, averaged over the region's pixels) times sqrt(pixels): 1
-for independent errors, more where the pixels share their errors.
+for independent errors, more where the pixels share their errors; and over the board's pixels
+the relative error of the ingested radiance by distance to another material, the rms of the
+per-pixel z, its correlation between neighbouring pixels and between channels.
 
     .venv/bin/python scripts/jpeg_colour_coverage.py [--quality 85 90 95] [--seeds 4]
-        [--subsampling 2] [--diagnose] [-o DIR]
+        [--subsampling 2] [--format dng --matrix-error 0 0.03] [--diagnose] [-o DIR]
 """
 
 import argparse
@@ -60,6 +64,10 @@ def main():
                     help="JPEG qualities (0: PNG, lossless)")
     ap.add_argument("--subsampling", type=int, default=2, choices=(0, 1, 2),
                     help="chroma: 0 4:4:4, 1 4:2:2, 2 4:2:0 (default)")
+    ap.add_argument("--format", choices=("jpeg", "dng"), default="jpeg",
+                    help="dng: camera RAWs at each --matrix-error instead of JPEG qualities")
+    ap.add_argument("--matrix-error", type=float, nargs="+", default=[0.0, 0.03],
+                    help="the DNG colour matrix's relative errors (--format dng)")
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--diagnose", action="store_true")
@@ -91,21 +99,27 @@ def main():
         render_sequence(validate_spec(raw, spec_path.parent), truth, progress=False, **quiet)
     regions = [(k, subsample_region(v, 64, 0)) for k, v in material_regions(truth)
                if k in SAMPLES]
-    print(f"subsampling {args.subsampling}; {args.seeds} seeds\n")
-    print("| quality | material | coverage C_r / C_g / C_b / rho_s / sigma_alpha | "
-          "median C 95% half-width [%] | median C error [%] |")
+    raw = args.format == "dng"
+    print(("camera RAW (DNG)" if raw else f"subsampling {args.subsampling}")
+          + f"; {args.seeds} seeds\n")
+    print(f"| {'matrix error' if raw else 'quality'} | material | coverage C_r / C_g / C_b / "
+          "rho_s / sigma_alpha | median C 95% half-width [%] | median C error [%] |")
     print("|---|---|---|---|---|")
-    for q in args.quality:
+    for q in (args.matrix_error if raw else args.quality):
+        label = f"{q:g}" if raw else (q or "png")
         inside = {k: [] for k, _ in regions}
         half = {k: [] for k, _ in regions}
         err = {k: [] for k, _ in regions}
-        zs, without = [], []
+        zs, without, pix = [], [], []
         for seed in range(args.first_seed, args.first_seed + args.seeds):
-            tag = f"q{q}_c{args.subsampling}_s{seed}"
+            tag = f"dng_m{q:g}_s{seed}" if raw else f"q{q}_c{args.subsampling}_s{seed}"
             photos, seq = work / f"photos_{tag}", work / f"seq_{tag}"
             if not (args.refit and (seq / "manifest.json").exists()):
-                photograph_day(truth, photos, seed=seed, quality=q,
-                               fmt="jpeg" if q else "png", subsampling=args.subsampling)
+                if raw:
+                    photograph_day(truth, photos, seed=seed, fmt="dng", matrix_error=q)
+                else:
+                    photograph_day(truth, photos, seed=seed, quality=q,
+                                   fmt="jpeg" if q else "png", subsampling=args.subsampling)
                 ingest([photos], spec_path, seq, calibrate={"grey_card": (0.18,) * 3},
                        vignetting="cos4", overwrite=True, progress=False, **quiet)
             for fit in fit_regions(seq, regions, model="colour", **quiet):
@@ -131,20 +145,22 @@ def main():
                         for k, o in zip(NAMES, ok) if not o) + " -->", flush=True)
             if args.diagnose:
                 zs.append(region_z(seq, truth, regions))
+                pix.append(pixel_errors(seq, truth))
         for name in inside:
             cov = np.mean(inside[name], axis=0)
-            print(f"| {q or 'png'} | {name} | {' / '.join(f'{c:.2f}' for c in cov)} | "
+            print(f"| {label} | {name} | {' / '.join(f'{c:.2f}' for c in cov)} | "
                   f"{' / '.join(f'{x:.2f}' for x in np.median(half[name], axis=0))} | "
                   f"{' / '.join(f'{x:+.2f}' for x in np.median(err[name], axis=0))} |",
                   flush=True)
         allc = np.concatenate([np.asarray(v)[:, :3].ravel() for v in inside.values()])
-        print(f"| {q or 'png'} | all C | {np.mean(allc):.2f} (without the shared rounding "
+        print(f"| {label} | all C | {np.mean(allc):.2f} (without the shared rounding "
               f"error {np.mean(without):.2f}) | | |", flush=True)
         if zs:
             z = np.sqrt(np.mean(np.concatenate(zs, axis=1) ** 2, axis=1))     # (regions, 3)
             for (name, _), zz in zip(regions, z):
-                print(f"<!-- q{q} {name}: region-mean z x sqrt(P) per channel "
+                print(f"<!-- {label} {name}: region-mean z x sqrt(P) per channel "
                       f"{np.round(zz, 2)} -->", flush=True)
+            report_pixels(label, pix)
 
 
 def region_z(seq, truth, regions):
@@ -166,6 +182,73 @@ def region_z(seq, truth, regions):
             rows.append(np.mean((got - t) / sd, axis=0) * np.sqrt(len(px)))
         out.append(rows)
     return np.asarray(out)
+
+
+#: Distances [px] to another material at which pixel_errors takes the bias; from the last on
+#: a pixel is inside, where it takes the noise's statistics.
+DISTANCES = range(1, 9)
+
+
+def pixel_errors(seq, truth):
+    """Over the board's sample pixels and every frame: per material and distance to another
+    material (DISTANCES; chessboard) the mean relative error of the ingested radiance per
+    channel (materials, distances, 3); inside, the per-pixel z = (ingested - truth) / sigma as
+    (pixels, frames, 3) with each pixel's right and lower neighbours' (for correlations)."""
+    from scipy.ndimage import distance_transform_cdt
+
+    from skyfit_mi.pipeline.manifest import load_manifest, read_frame_image, rendered_frames
+    from skyfit_mi.pipeline.pixels import scene_labels
+
+    doc, root = load_manifest(seq)
+    tdoc, troot = load_manifest(truth)
+    _, _, labels, ids = scene_labels(truth)
+    shape = labels.shape + (3,)
+    dist = np.zeros(labels.shape, int)
+    for k in range(1, len(ids) + 1):
+        inside = labels == k
+        dist[inside] = distance_transform_cdt(inside, "chessboard")[inside]
+    tframes = {f["time"]: f for f in rendered_frames(tdoc)}
+    names = [n for n in SAMPLES if n in ids]
+    bias = np.zeros((len(names), len(DISTANCES), 3))
+    z, zx, zy = [], [], []
+    frames = rendered_frames(doc)
+    for f in frames:
+        got = read_frame_image(root, f, "radiance", shape)
+        sd = read_frame_image(root, f, "radiance_sigma", shape)
+        t = read_frame_image(troot, tframes[f["time"]], "radiance", shape)
+        rel = got / np.where(t > 0, t, np.nan) - 1.0
+        zz = (got - t) / sd
+        for m, name in enumerate(names):
+            mat = labels == ids.index(name) + 1
+            for j, d in enumerate(DISTANCES):
+                sel = mat & (dist == d)
+                bias[m, j] += np.nanmean(rel[sel], axis=0) / len(frames)
+            core = mat & (dist >= DISTANCES[-1])
+            ys, xs = np.nonzero(core[:-1, :-1])
+            z.append(zz[ys, xs])
+            zx.append(zz[ys, xs + 1])
+            zy.append(zz[ys + 1, xs])
+    return bias, np.concatenate(z), np.concatenate(zx), np.concatenate(zy)
+
+
+def report_pixels(label, pix):
+    """Print :func:`pixel_errors` over the seeds as comments."""
+    bias = np.mean([p[0] for p in pix], axis=0)
+    for m, name in enumerate(n for n in SAMPLES):
+        print(f"<!-- {label} {name}: relative error [%] by distance to another material "
+              + "; ".join(f"{d}px {np.round(100 * b, 1).tolist()}"
+                          for d, b in zip(DISTANCES, bias[m])) + " -->")
+    z, zx, zy = (np.concatenate([p[k] for p in pix]) for k in (1, 2, 3))
+    ok = np.all(np.isfinite(z) & np.isfinite(zx) & np.isfinite(zy), axis=1)
+    z, zx, zy = z[ok], zx[ok], zy[ok]
+    corr = [np.corrcoef(z[:, c], z[:, (c + 1) % 3])[0, 1] for c in range(3)]
+    right = [np.corrcoef(z[:, c], zx[:, c])[0, 1] for c in range(3)]
+    lower = [np.corrcoef(z[:, c], zy[:, c])[0, 1] for c in range(3)]
+    print(f"<!-- {label} inside (>= {DISTANCES[-1]} px from an edge, {len(z)} values): rms z "
+          f"{np.round(np.sqrt(np.mean(z ** 2, axis=0)), 2).tolist()}, mean z "
+          f"{np.round(np.mean(z, axis=0), 2).tolist()}; correlation with the right neighbour "
+          f"{np.round(right, 2).tolist()}, the lower {np.round(lower, 2).tolist()}"
+          f"; between channels RG/GB/BR {np.round(corr, 2).tolist()} -->", flush=True)
 
 
 if __name__ == "__main__":

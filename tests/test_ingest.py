@@ -215,10 +215,11 @@ def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, tmp_path):
     assert np.all(ratio <= 1.5), dict(zip(keys, ratio.round(2)))
 
 
-@pytest.mark.parametrize("fmt", ["png", "tiff"])
+@pytest.mark.parametrize("fmt", ["png", "tiff", "dng"])
 def test_simulated_png_and_tiff_photographs_carry_their_exif(day, tmp_path, fmt):
-    """The simulator's PNG and TIFF files hold their EXIF (time, offset, exposure) as its JPEGs
-    do (Pillow writes an Exif object's sub-IFD into PNG and TIFF only as bytes)."""
+    """The simulator's PNG, TIFF and DNG files hold their EXIF (time, offset, exposure) as its
+    JPEGs do (Pillow writes an Exif object's sub-IFD into PNG and TIFF only as bytes; a DNG's is
+    appended to tifffile's file)."""
     from skyfit_mi.pipeline.photo_sim import photograph_day
     from skyfit_mi.pipeline.photos import read_photo
 

@@ -261,23 +261,40 @@ def test_float_frames_carry_their_header_times(tmp_path):
 # -------------------------------------------------------------------------------- RAW
 
 def make_dng(path, raw, black=64, white=4095, neutral=(0.5, 1.0, 0.8), orientation=1):
-    """A minimal valid DNG: one 16-bit RGGB CFA image with the tags LibRaw needs (LibRaw
+    """A minimal valid DNG: one 16-bit RGGB CFA image, the camera's RGB taken as sRGB's (LibRaw
     refuses images under 22 pixels a side)."""
-    import tifffile
+    from skyfit_mi.physics.colour import XYZ_TO_SRGB
+    from skyfit_mi.pipeline.photo_sim import write_dng
 
-    def rat(vals, den=10000):
-        return [x for v in vals for x in (int(round(v * den)), den)]
-
-    tags = [(271, "s", 0, "Skyfit", True), (272, "s", 0, "Test", True),
-            (274, "H", 1, orientation, True),
-            (33421, "H", 2, (2, 2), True), (33422, "B", 4, (0, 1, 1, 2), True),
-            (50706, "B", 4, (1, 4, 0, 0), True), (50707, "B", 4, (1, 1, 0, 0), True),
-            (50708, "s", 0, "Skyfit Test", True), (50714, "H", 1, black, True),
-            (50717, "H", 1, white, True), (50721, "2i", 9, rat([1, 0, 0, 0, 1, 0, 0, 0, 1]), True),
-            (50778, "H", 1, 21, True), (50728, "2I", 3, rat(neutral), True)]
-    tifffile.imwrite(path, np.asarray(raw, np.uint16), photometric=32803, subfiletype=0,
-                     extratags=tags)
+    write_dng(path, raw, XYZ_TO_SRGB, neutral, black=black, white=white, orientation=orientation)
     return path
+
+
+def test_a_simulated_raw_reads_back_as_its_linear_srgb(tmp_path):
+    """A DNG of photo_sim's camera (its RGB far from sRGB's: the red channel sees as much
+    green as red), with its ColorMatrix1 exact: a grey and a saturated blue come back from
+    LibRaw's demosaicing and colour conversion at their linear sRGB values, within the noise."""
+    pytest.importorskip("rawpy")
+    from skyfit_mi.physics.colour import XYZ_TO_SRGB
+    from skyfit_mi.pipeline.photo_sim import (RAW_BITS, RAW_BLACK, RAW_READ_NOISE_DN,
+                                              RAW_SHOT_GAIN, _mosaic, raw_camera_matrix,
+                                              write_dng)
+
+    a = raw_camera_matrix()
+    assert a[0, 1] > 0.8 * a[0, 0] and np.all(a.sum(axis=1) <= 1.0 + 1e-12)
+    truth = np.zeros((48, 64, 3))
+    truth[:, :32] = 0.3                                       # grey, of full scale
+    truth[:, 32:] = (0.064, 0.12, 0.48)                       # saturated blue
+    span = 2 ** RAW_BITS - 1 - RAW_BLACK
+    dn = _mosaic(truth @ a.T) * span
+    dn = dn + np.random.default_rng(1).normal(size=dn.shape) * np.sqrt(
+        RAW_READ_NOISE_DN ** 2 + RAW_SHOT_GAIN * dn)
+    path = write_dng(tmp_path / "a.dng", np.rint(dn + RAW_BLACK), a @ XYZ_TO_SRGB, a.sum(axis=1))
+    got = read_photo(path).values / 65535.0
+    for cols in (slice(4, 28), slice(36, 60)):                # away from the edge and the border
+        # the grey's green at 0.3 of full scale: sigma of a mean of 960 pixels ~0.1%
+        np.testing.assert_allclose(got[4:-4, cols].mean(axis=(0, 1)),
+                                   truth[24, cols.start], rtol=5e-3)
 
 
 def test_raw_dng_linear_and_metadata(tmp_path):

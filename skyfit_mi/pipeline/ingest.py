@@ -106,8 +106,9 @@ def _sensor(photos, response, gamma, spec_sensor, cos4):
         depth = 16
     else:
         depth = int(first.bits)
-    if response is None and first.kind == "float":
-        response = "linear"                       # EXR/HDR hold linear values whatever the spec
+    if response is None and (first.kind == "float" or all(p.format == "raw" for p in photos)):
+        response = "linear"           # EXR/HDR and RAWs as read hold linear values, whatever
+                                      # the spec
     if response is None:
         response = spec_sensor.get("response") if "response" in spec_sensor else None
     if response is None:

@@ -1,16 +1,23 @@
-"""A rendered day as a camera would have photographed it: JPEG/PNG/TIFF frames with EXIF.
+"""A rendered day as a camera would have photographed it: JPEG/PNG/TIFF/DNG frames with EXIF.
 
 For tests of ``skyfit ingest`` and for the shipped example, a sequence folder written by
 ``render`` becomes image files degraded the way photographs are: an auto-exposure that
 changes from frame to frame (shutter time steps recorded in EXIF, as t ISO / N^2), the cos^4
 vignetting of a lens (thesis eq. 5.6), Gaussian read noise and shot noise in linear codes, the
-sRGB (or a gamma) encoding, clipping at the top code, quantisation, and JPEG compression.  EXIF
-carries DateTimeOriginal with or without OffsetTimeOriginal.  Every random choice is drawn
-from ``numpy.random.default_rng([seed, frame index])`` and the seed is written into
-``photos.json`` beside the images, with each frame's true exposure [sr m^2 W^-1].
+sRGB (or a gamma) encoding, clipping at the top code, quantisation, and JPEG compression.  Or
+a camera RAW (``fmt="dng"``): the scene in the camera's own RGB (:data:`RAW_XYZ_TO_CAMERA`)
+sampled through an RGGB Bayer filter, read and shot noise in raw codes above a black level,
+clipped and quantised to RAW_BITS, in a DNG whose ColorMatrix1 lets the reader (LibRaw)
+demosaic and convert it back to linear sRGB, exactly or, with ``matrix_error``, with the error
+of a maker's matrix that does not match the sensor.  EXIF carries DateTimeOriginal with or
+without OffsetTimeOriginal.  Every random choice is drawn from
+``numpy.random.default_rng([seed, frame index])`` (the matrix's error from
+``default_rng(seed)``) and the seed is written into ``photos.json`` beside the
+images, with each frame's true exposure [sr m^2 W^-1].
 """
 
 import datetime as dt
+import struct
 from fractions import Fraction
 from pathlib import Path
 
@@ -19,6 +26,7 @@ import numpy as np
 from ..errors import SkyfitError
 from ..files import atomic_write, ensure_dir, write_json
 from ..physics.camera import SensorModel
+from ..physics.colour import XYZ_TO_SRGB
 from .manifest import load_manifest, read_frame_image, rendered_frames
 from .photos import undo_orientation
 
@@ -30,7 +38,57 @@ ORIENTATION = 0x0112
 SIM_F_NUMBER, SIM_ISO = 8.0, 100
 #: Shutter times of the auto-exposure [s]: third stops from 1/4000 to 1/15 s.
 SHUTTER_STOPS = 2.0 ** (-np.arange(36) / 3.0) / 15.0
-FORMATS = {"jpeg": ".jpg", "png": ".png", "tiff": ".tif"}
+FORMATS = {"jpeg": ".jpg", "png": ".png", "tiff": ".tif", "dng": ".dng"}
+#: The RAW camera of ``fmt="dng"``: XYZ (D65) -> camera RGB of the Canon EOS 5D Mark II, the
+#: ColorMatrix Adobe's DNG Converter gives it (dcraw's and LibRaw's ``adobe_coeff`` table, its
+#: entries x 10^-4): its rows are far from diagonal (the red channel sees as much green as
+#: red), as a real sensor's are.
+RAW_XYZ_TO_CAMERA = np.array([[4716, 603, -830], [-7798, 15474, 2480],
+                              [-1496, 1937, 6651]]) / 1e4
+#: The RAW sensor: bits, black level [DN] (the 5D Mark II's at 14 bits), read noise [DN rms]
+#: and shot noise [DN^2 per DN of signal] (about 3.9 electrons per DN: a full well of 60000
+#: electrons over the 15360 DN above black).
+RAW_BITS, RAW_BLACK, RAW_READ_NOISE_DN, RAW_SHOT_GAIN = 14, 1024, 6.0, 0.26
+#: DNG tags written (TIFF/EP and DNG 1.4 specifications).
+_DNG_CFA_REPEAT, _DNG_CFA_PATTERN, _DNG_VERSION, _DNG_BACKWARD = 33421, 33422, 50706, 50707
+_DNG_MODEL, _DNG_BLACK, _DNG_WHITE = 50708, 50714, 50717
+_DNG_COLOR_MATRIX_1, _DNG_ILLUMINANT_1, _DNG_NEUTRAL = 50721, 50778, 50728
+_TIFF_MAKE, _TIFF_MODEL, _TIFF_ORIENTATION = 271, 272, 274
+#: CalibrationIlluminant1: D65 (EXIF LightSource 21), the white of linear sRGB.
+_D65 = 21
+
+
+def raw_camera_matrix(xyz_to_camera=RAW_XYZ_TO_CAMERA):
+    """A (3, 3): the camera's raw RGB = A @ linear sRGB for an XYZ (D65) -> camera matrix,
+    scaled so that green's row sums to 1 (white of signal 1 fills the green channel)."""
+    a = np.asarray(xyz_to_camera, dtype=float) @ np.linalg.inv(XYZ_TO_SRGB)
+    return a / a[1].sum()
+
+
+def _mosaic(camera):
+    """(H, W) of an (H, W, 3) camera image sampled through an RGGB Bayer filter."""
+    h, w = camera.shape[:2]
+    channel = np.array([[0, 1], [1, 2]])[np.arange(h)[:, None] % 2, np.arange(w)[None, :] % 2]
+    return np.take_along_axis(camera, channel[..., None], axis=2)[..., 0]
+
+
+def _rationals(values, den=1_000_000):
+    return [x for v in np.ravel(values) for x in (int(round(float(v) * den)), den)]
+
+
+def _ifd(entries, start):
+    """A little-endian TIFF IFD at file offset ``start``: ``entries`` [(tag, type, count,
+    bytes)] sorted by tag, values over 4 bytes placed after it."""
+    head = struct.pack("<H", len(entries))
+    data, table = b"", b""
+    tail = start + 2 + 12 * len(entries) + 4
+    for tag, kind, count, value in sorted(entries):
+        if len(value) <= 4:
+            table += struct.pack("<HHI", tag, kind, count) + value.ljust(4, b"\0")
+        else:
+            table += struct.pack("<HHII", tag, kind, count, tail + len(data))
+            data += value + b"\0" * (len(value) % 2)
+    return head + table + struct.pack("<I", 0) + data
 
 
 def _exif(time, offset, exposure_time, orientation=1):
@@ -51,9 +109,66 @@ def _exif(time, offset, exposure_time, orientation=1):
     return ex
 
 
+def _exif_entries(time, offset, exposure_time):
+    """The EXIF sub-IFD's entries [(tag, type, count, bytes)] of :func:`_exif`'s fields."""
+    def ascii(text):
+        b = text.encode("ascii") + b"\0"
+        return (2, len(b), b)
+    fr = Fraction(exposure_time).limit_denominator(100000)
+    entries = [(EXPOSURE_TIME, 5, 1, struct.pack("<II", fr.numerator, fr.denominator)),
+               (F_NUMBER, 5, 1, struct.pack("<II", int(SIM_F_NUMBER * 10), 10)),
+               (ISO, 3, 1, struct.pack("<H", SIM_ISO)),
+               (DATETIME_ORIGINAL, *ascii(time.strftime("%Y:%m:%d %H:%M:%S")))]
+    if offset:
+        entries.append((OFFSET_TIME_ORIGINAL, *ascii(time.isoformat()[-6:])))
+    return entries
+
+
+def write_dng(path, mosaic, xyz_to_camera, neutral, *, black=RAW_BLACK, white=2 ** RAW_BITS - 1,
+              exif=(), orientation=1):
+    """A DNG of one RGGB CFA image ``mosaic`` (H, W) [raw DN] with the tags LibRaw needs:
+    ``xyz_to_camera`` as ColorMatrix1 (D65), AsShotNeutral ``neutral`` (the camera's raw
+    response to white, green 1), black and white levels, the EXIF sub-IFD's ``exif`` entries
+    (:func:`_exif_entries`) and ``orientation``; returns ``path``.  tifffile writes the image
+    and its tags; the EXIF sub-IFD, whose pointer (tag 0x8769) it does not write, is appended
+    with a copy of IFD0 that points to it, and the header to that copy."""
+    import tifffile
+
+    tags = [(_TIFF_MAKE, "s", 0, "Skyfit", True), (_TIFF_MODEL, "s", 0, "Simulated RAW", True),
+            (_TIFF_ORIENTATION, "H", 1, int(orientation), True),
+            (_DNG_CFA_REPEAT, "H", 2, (2, 2), True), (_DNG_CFA_PATTERN, "B", 4, (0, 1, 1, 2), True),
+            (_DNG_VERSION, "B", 4, (1, 4, 0, 0), True), (_DNG_BACKWARD, "B", 4, (1, 1, 0, 0), True),
+            (_DNG_MODEL, "s", 0, "Skyfit Simulated RAW", True),
+            (_DNG_BLACK, "H", 1, int(black), True), (_DNG_WHITE, "H", 1, int(white), True),
+            (_DNG_COLOR_MATRIX_1, "2i", 9, _rationals(xyz_to_camera), True),
+            (_DNG_ILLUMINANT_1, "H", 1, _D65, True),
+            (_DNG_NEUTRAL, "2I", 3, _rationals(neutral), True)]
+    tifffile.imwrite(path, np.asarray(mosaic, np.uint16), photometric=32803, subfiletype=0,
+                     byteorder="<", bigtiff=False, extratags=tags)
+    if not exif:
+        return path
+    with open(path, "r+b") as fh:
+        data = fh.read()
+        ifd0 = struct.unpack_from("<I", data, 4)[0]
+        n = struct.unpack_from("<H", data, ifd0)[0]
+        entries = [data[ifd0 + 2 + 12 * k:ifd0 + 14 + 12 * k] for k in range(n)]
+        following = data[ifd0 + 2 + 12 * n:ifd0 + 6 + 12 * n]
+        start = len(data) + len(data) % 2                # the copy of IFD0, word aligned
+        sub = start + 2 + 12 * (n + 1) + 4                # the EXIF IFD after it
+        entries.append(struct.pack("<HHII", EXIF_IFD, 4, 1, sub))
+        entries.sort(key=lambda e: struct.unpack_from("<H", e)[0])
+        fh.seek(len(data))
+        fh.write(b"\0" * (start - len(data)) + struct.pack("<H", n + 1) + b"".join(entries)
+                 + following + _ifd(list(exif), sub))
+        fh.seek(4)
+        fh.write(struct.pack("<I", start))
+    return path
+
+
 def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="srgb", gamma=2.2,
-                   read_noise_DN=0.8, shot_gain=0.02, cos4=True, fmt="jpeg", quality=95,
-                   offset=True, shutter_error=0.0, orientation=1, subsampling=0, seed=0):
+                   read_noise_DN=None, shot_gain=None, cos4=True, fmt="jpeg", quality=95,
+                   offset=True, shutter_error=0.0, orientation=1, subsampling=0,
+                   matrix_error=0.0, seed=0):
     """Write the rendered frames of ``sequence`` as photographs into ``out_dir``.
 
     Parameters
@@ -63,10 +178,12 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
         exposure times 2, so that the auto-exposure has room to shorten
     target : the auto-exposure puts the frame's 99th-percentile linear signal at or below this
         share of full scale, stepping the shutter in thirds of a stop
-    response, gamma : the encoding (``srgb``, ``gamma``, ``linear``)
-    read_noise_DN, shot_gain : noise in linear 8-bit codes: sigma^2 = read^2 + shot_gain x code
+    response, gamma : the encoding (``srgb``, ``gamma``, ``linear``; not a RAW's)
+    read_noise_DN, shot_gain : noise in linear codes, sigma^2 = read^2 + shot_gain x code:
+        default 0.8 and 0.02 of 8-bit codes, for a RAW RAW_READ_NOISE_DN and RAW_SHOT_GAIN of
+        its raw codes above black
     cos4 : apply the cos^4 vignetting of the camera's field of view
-    fmt : 'jpeg', 'png' or 'tiff' (8-bit)
+    fmt : 'jpeg', 'png' or 'tiff' (8-bit), or 'dng' (a RAW of RAW_BITS: the module docstring)
     subsampling : a JPEG's chroma: 0 at full resolution (4:4:4, a camera's finest setting), 1
         halved across (4:2:2), 2 halved both ways (4:2:0, most cameras' and Pillow's default),
         which blurs colour across 2x2 pixels and into a region's edge pixels
@@ -76,6 +193,11 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
         drawn from numpy.random.default_rng([seed, index, 1]); recorded in photos.json
     orientation : EXIF orientation code: the file holds the frame turned back, as a camera
         held on its side stores it, and the tag says how to show it (the frame as rendered)
+    matrix_error : a RAW's: the DNG's ColorMatrix1 is the camera's XYZ -> camera matrix
+        times (I + matrix_error G), G 3 x 3 standard normal from default_rng(seed): the
+        reader's linear sRGB is then the truth times about (I - matrix_error G), each channel
+        mixing that share of every channel's, as a maker's matrix fitted to another sensor of
+        the model, or to another light, does; the matrices are recorded in photos.json
 
     Returns the list of written paths, in time order.
     """
@@ -84,6 +206,17 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
     doc, root = load_manifest(sequence)
     if fmt not in FORMATS:
         raise SkyfitError(f"format {fmt!r}; give one of {', '.join(FORMATS)}.")
+    raw = fmt == "dng"
+    if read_noise_DN is None:
+        read_noise_DN = RAW_READ_NOISE_DN if raw else 0.8
+    if shot_gain is None:
+        shot_gain = RAW_SHOT_GAIN if raw else 0.02
+    if raw:
+        white = 2 ** RAW_BITS - 1
+        to_camera = raw_camera_matrix()
+        error = np.random.default_rng(seed).normal(size=(3, 3)) * float(matrix_error)
+        written = to_camera @ (np.eye(3) + error) @ XYZ_TO_SRGB      # XYZ -> camera
+        neutral = to_camera.sum(axis=1)                   # the raw response to white
     cam = doc["camera"]
     h, w = cam["height"], cam["width"]
     base = 2.0 * float(doc["sensor"]["exposure"]) if exposure is None else float(exposure)
@@ -102,16 +235,25 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
         e = base * t * 15.0                                   # exposure at this shutter time
         miss = float(np.random.default_rng([seed, f["index"], 1]).normal()) * shutter_error
         e_true = e * (1.0 + miss)                             # what the shutter really gave
-        lin = np.clip(signal * e_true, 0.0, None) * sensor.max_code
-        lin = lin + rng.normal(size=lin.shape) * np.sqrt(read_noise_DN ** 2 + shot_gain * lin)
-        codes = np.rint(sensor.respond(lin / sensor.max_code) * sensor.max_code)
-        img = Image.fromarray(np.ascontiguousarray(undo_orientation(
-            np.clip(codes, 0, 255).astype(np.uint8), orientation)))
         time = dt.datetime.fromisoformat(f["time"])
         path = out / f"IMG_{f['index']:04d}{FORMATS[fmt]}"
-        kw = {"quality": quality, "subsampling": subsampling} if fmt == "jpeg" else {}
-        atomic_write(path, lambda p, img=img, ex=_exif(time, offset, t, orientation), kw=kw:
-                     img.save(p, format=fmt.upper(), exif=ex.tobytes(), **kw))
+        if raw:
+            camera = np.clip(signal * e_true @ to_camera.T, 0.0, None) * (white - RAW_BLACK)
+            dn = _mosaic(undo_orientation(camera, orientation))
+            dn = dn + rng.normal(size=dn.shape) * np.sqrt(read_noise_DN ** 2 + shot_gain * dn)
+            mosaic = np.clip(np.rint(dn + RAW_BLACK), 0, white)
+            atomic_write(path, lambda p, m=mosaic, ex=_exif_entries(time, offset, t):
+                         write_dng(p, m, written, neutral, exif=ex, orientation=orientation))
+        else:
+            lin = np.clip(signal * e_true, 0.0, None) * sensor.max_code
+            lin = lin + rng.normal(size=lin.shape) * np.sqrt(read_noise_DN ** 2
+                                                             + shot_gain * lin)
+            codes = np.rint(sensor.respond(lin / sensor.max_code) * sensor.max_code)
+            img = Image.fromarray(np.ascontiguousarray(undo_orientation(
+                np.clip(codes, 0, 255).astype(np.uint8), orientation)))
+            kw = {"quality": quality, "subsampling": subsampling} if fmt == "jpeg" else {}
+            atomic_write(path, lambda p, img=img, ex=_exif(time, offset, t, orientation), kw=kw:
+                         img.save(p, format=fmt.upper(), exif=ex.tobytes(), **kw))
         paths.append(path)
         record.append({"file": path.name, "time": f["time"], "exposure_time_s": t,
                        "exposure_sr_m2_W": e_true, "nominal_exposure_sr_m2_W": e})
@@ -121,6 +263,13 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
             **({"subsampling": subsampling} if fmt == "jpeg" else {}),
             "orientation": orientation,
             "shutter_error": shutter_error,
+            **({"raw": {"bits": RAW_BITS, "black_DN": RAW_BLACK, "white_DN": white,
+                        "cfa": "RGGB", "camera_from_linear_srgb": to_camera.tolist(),
+                        "matrix_error": float(matrix_error), "matrix_error_G": (
+                            error / matrix_error if matrix_error else error).tolist(),
+                        "color_matrix_1": written.tolist(), "as_shot_neutral": neutral.tolist(),
+                        "source": "XYZ -> camera of the Canon EOS 5D Mark II (Adobe DNG "
+                                  "Converter, via dcraw's adobe_coeff)"}} if raw else {}),
             "exposure_at_1_15_s": base, "f_number": SIM_F_NUMBER, "iso": SIM_ISO,
             "frames": record, "units": "exposure sr m^2 W^-1 (signal = exposure x radiance)"}
     write_json(out / "photos.json", meta)
