@@ -150,7 +150,7 @@ def _ingest(args):
         from .pipeline.observation_table import ingest_table
 
         photo_only = [k for k in ("times", "name_pattern", "response", "gamma", "exposure",
-                                  "colorchecker", "noise")
+                                  "colorchecker", "noise", "colour_matrix_error")
                       if getattr(args, k) is not None]
         if args.photos or photo_only or args.vignetting != "none":
             what = "photographs" if args.photos else "--" + (photo_only or ["vignetting"])[0] \
@@ -170,7 +170,8 @@ def _ingest(args):
            name_pattern=args.name_pattern, tz=args.tz, site=args.site, response=args.response,
            gamma=args.gamma, exposure=args.exposure, calibrate=dict(args.calibrate or []),
            colorchecker=args.colorchecker, vignetting=args.vignetting, noise=args.noise,
-           overwrite=args.overwrite, progress=not args.quiet)
+           colour_matrix_error=args.colour_matrix_error, overwrite=args.overwrite,
+           progress=not args.quiet)
 
 
 def _pixels(args):
@@ -429,7 +430,13 @@ def build_parser():
                      help="none, the cos^4 law, or a flat-field image (default none)")
     ing.add_argument("--noise", type=_numbers, metavar="READ,SHOT",
                      help="noise model: read variance [DN^2] and shot gain [DN] of the linear "
-                     "codes (default: estimated from the frames)")
+                     "codes, a RAW's of its photosites above black (default: estimated from "
+                     "the frames)")
+    ing.add_argument("--colour-matrix-error", type=float, metavar="SD",
+                     help="relative error of each entry of the camera's colour matrix (to "
+                     "linear sRGB), which a grey card cannot calibrate; fits widen their "
+                     "intervals by it (default 0.03 for RAWs, developed with the file's own "
+                     "matrix; 0 for other files)")
     ing.add_argument("--overwrite", action="store_true",
                      help="replace another run's output in the folder (starts clean)")
     ing.add_argument("-q", "--quiet", action="store_true", help="no progress bar")

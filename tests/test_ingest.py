@@ -533,3 +533,85 @@ def test_pixels_whose_jpeg_colour_mixes_a_neighbours_are_left_out(ingested, tmp_
     assert any(f"{left_out.sum()} of the region's {len(whole)} pixels lie within 3 pixels"
                in w for w in obs.warnings)
     assert not any("pixels lie within" in w for w in load_observations(out, whole).warnings)
+
+
+@pytest.mark.parametrize("sd", [-0.01, 1.0, float("nan")])
+def test_a_colour_matrix_error_is_a_share_below_one(sd):
+    """--colour-matrix-error is checked before any photograph is read."""
+    from skyfit_mi.pipeline.ingest import ingest
+
+    with pytest.raises(SkyfitError, match="^--colour-matrix-error .*a number in \\[0, 1\\)"):
+        ingest(["/nonexistent/photos"], SPEC, "/nonexistent/out", colour_matrix_error=sd,
+               exposure=1e-3, progress=False, **QUIET)
+
+
+@pytest.fixture(scope="module")
+def raw_ingested(day):
+    """The day photographed as camera RAWs whose DNG colour matrix is off by 3% (photo_sim),
+    ingested with the grey card (the photosites' noise given: the frames' CFA planes are too
+    small to estimate it, tests/test_raw_noise.py does), and the sample fitted."""
+    pytest.importorskip("rawpy")
+    from skyfit_mi.fitting.fit import fit_region
+    from skyfit_mi.pipeline.photo_sim import RAW_READ_NOISE_DN, RAW_SHOT_GAIN, photograph_day
+
+    photos, out = day["tmp"] / "raw_photos", day["tmp"] / "raw_seq"
+    photograph_day(day["truth"], photos, seed=5, fmt="dng", matrix_error=0.03)
+    doc = _ingest({**day, "photos": photos}, out, calibrate={"grey_card": (0.18,) * 3},
+                  vignetting="cos4", noise=(RAW_READ_NOISE_DN ** 2, RAW_SHOT_GAIN))
+    fit = fit_region(out, "sample", day["regions"]["sample"], model="colour", **QUIET)
+    return photos, out, doc, fit
+
+
+def test_raw_frames_carry_their_demosaiced_noise_and_colour_matrix(day, raw_ingested):
+    """RAWs are linear whatever the spec says (its sRGB made them read 2-3x bright); each
+    frame records its demosaicing (AHD, colour reach 2) and its developed noise's correlation
+    between neighbouring pixels; the sigma images hold the developed noise (z about the true
+    radiance of rms near 1, where the neighbouring pixels' differences gave 1.4-3.3); a
+    region's pixels are widened by their design effect, a map's are not; and the fit carries
+    the colour matrix's prior, which the grey card cannot see, into C's intervals, most into
+    the red sample's weak green and blue."""
+    from skyfit_mi.fitting.chi2 import load_observations
+    from skyfit_mi.pipeline.manifest import load_manifest, read_frame_image, rendered_frames
+    from skyfit_mi.pipeline.pixels import scene_labels
+
+    photos, out, doc, fit = raw_ingested
+    assert doc["sensor"]["response"] == "linear"
+    sim = json.loads((photos / "photos.json").read_text())
+    got = np.array([f["exposure"]["exposure"] for f in doc["frames"]])
+    np.testing.assert_allclose(got, [f["exposure_sr_m2_W"] for f in sim["frames"]], rtol=0.01)
+    assert doc["ingest"]["colour_matrix"]["relative_sd"] == 0.03
+    frames = rendered_frames(doc)
+    for f in frames:
+        rec = f["raw_demosaic"]
+        corr = np.asarray(rec["noise_correlation"])
+        assert rec["colour_reach_px"] == 2 and corr.shape == (3, 5, 5)
+        assert np.allclose(corr[:, 2, 2], 1.0) and np.all(corr[:, 2, 3] > 0.2)
+    # the developed noise's sigma against the truth as the matrix mixes it (a grey untouched,
+    # so the grey card's calibration leaves the mix), away from the materials' edges
+    mix = np.asarray(sim["raw"]["developed_from_true_linear_srgb"])
+    _, root = load_manifest(out)
+    tdoc, troot = load_manifest(day["truth"])
+    _, _, labels, ids = scene_labels(day["truth"])
+    from scipy.ndimage import binary_erosion
+    inside = binary_erosion(labels == ids.index("sample") + 1, iterations=3)
+    z = []
+    for f, t in zip(frames, rendered_frames(tdoc)):
+        shape = labels.shape + (3,)
+        got = read_frame_image(root, f, "radiance", shape)[inside]
+        sd = read_frame_image(root, f, "radiance_sigma", shape)[inside]
+        z.append((got - read_frame_image(troot, t, "radiance", shape)[inside] @ mix.T) / sd)
+    rms = np.sqrt(np.mean(np.square(z), axis=(0, 1)))
+    assert np.all((rms > 0.6) & (rms < 1.3)), rms
+    px = day["regions"]["sample"]
+    one, apart = load_observations(out, px), load_observations(out, px, one_fit=False)
+    ratio = one.sigma / apart.sigma
+    ok = np.isfinite(ratio)
+    assert np.all(ratio[ok] >= 1.0) and np.max(ratio[ok]) > 1.2
+    # the fit: the truth inside, the matrix's share named
+    for k in ("C_r", "C_g", "C_b"):
+        lo, hi = fit["intervals"][k]["95"]
+        assert lo <= TRUTH[k] <= hi, (k, fit["parameters"][k], (lo, hi))
+    rel = {k: fit["colour_matrix_error_sd"][k] / fit["parameters"][k]
+           for k in ("C_r", "C_g", "C_b")}
+    assert rel["C_g"] > 3 * rel["C_r"] and rel["C_b"] > 3 * rel["C_r"]
+    assert "a grey card cannot see" in fit["colour_matrix_error"]

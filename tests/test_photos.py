@@ -270,15 +270,17 @@ def make_dng(path, raw, black=64, white=4095, neutral=(0.5, 1.0, 0.8), orientati
     return path
 
 
-def test_a_simulated_raw_reads_back_as_its_linear_srgb(tmp_path):
+@pytest.mark.parametrize("matrix_error", [0.0, 0.05])
+def test_a_simulated_raw_reads_back_as_its_linear_srgb(tmp_path, matrix_error):
     """A DNG of photo_sim's camera (its RGB far from sRGB's: the red channel sees as much
     green as red), with its ColorMatrix1 exact: a grey and a saturated blue come back from
-    LibRaw's demosaicing and colour conversion at their linear sRGB values, within the noise."""
+    LibRaw's demosaicing and colour conversion at their linear sRGB values, within the noise;
+    with a matrix off by 5%, the grey still, the blue as photo_sim's mix makes it (its red
+    -16%)."""
     pytest.importorskip("rawpy")
-    from skyfit_mi.physics.colour import XYZ_TO_SRGB
     from skyfit_mi.pipeline.photo_sim import (RAW_BITS, RAW_BLACK, RAW_READ_NOISE_DN,
-                                              RAW_SHOT_GAIN, _mosaic, raw_camera_matrix,
-                                              write_dng)
+                                              RAW_SHOT_GAIN, _mosaic, colour_matrix_1,
+                                              matrix_error_mix, raw_camera_matrix, write_dng)
 
     a = raw_camera_matrix()
     assert a[0, 1] > 0.8 * a[0, 0] and np.all(a.sum(axis=1) <= 1.0 + 1e-12)
@@ -289,12 +291,18 @@ def test_a_simulated_raw_reads_back_as_its_linear_srgb(tmp_path):
     dn = _mosaic(truth @ a.T) * span
     dn = dn + np.random.default_rng(1).normal(size=dn.shape) * np.sqrt(
         RAW_READ_NOISE_DN ** 2 + RAW_SHOT_GAIN * dn)
-    path = write_dng(tmp_path / "a.dng", np.rint(dn + RAW_BLACK), a @ XYZ_TO_SRGB, a.sum(axis=1))
+    mix = matrix_error_mix(matrix_error, 2)
+    path = write_dng(tmp_path / "a.dng", np.rint(dn + RAW_BLACK), colour_matrix_1(mix, a),
+                     a.sum(axis=1))
     got = read_photo(path).values / 65535.0
     for cols in (slice(4, 28), slice(36, 60)):                # away from the edge and the border
-        # the grey's green at 0.3 of full scale: sigma of a mean of 960 pixels ~0.1%
+        # a developed pixel's sigma is up to 0.006 of full scale (the grey's red), its
+        # neighbours' correlated with it (a design effect of about 3.5): the sigma of a mean
+        # of 960 pixels up to 3.5e-4; the tolerance about 3 of them
         np.testing.assert_allclose(got[4:-4, cols].mean(axis=(0, 1)),
-                                   truth[24, cols.start], rtol=5e-3)
+                                   mix @ truth[24, cols.start], rtol=0, atol=1e-3)
+    if matrix_error:
+        assert abs(mix[0] @ truth[24, 40] / truth[24, 40, 0] - 1) > 0.1
 
 
 def test_raw_dng_linear_and_metadata(tmp_path):

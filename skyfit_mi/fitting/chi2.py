@@ -235,6 +235,26 @@ def block_sharing(pixels, block=8, offset=(0, 0)):
     return counts[inverse.ravel()].astype(float)
 
 
+def neighbour_sharing(pixels, correlation):
+    """Kish's design effect of each of ``pixels`` (P, 2) (x, y) per channel, (P, 3): 1 plus
+    the sum of its error's correlation with the others' within R pixels, ``correlation`` (3,
+    2 R + 1, 2 R + 1) by offset (dy, dx) from the centre (a RAW frame's
+    ``raw_demosaic.noise_correlation``: demosaicing draws a pixel's colours from its
+    neighbours' photosites); at least 1."""
+    px = np.asarray(pixels, dtype=int).reshape(-1, 2)
+    corr = np.asarray(correlation, dtype=float)
+    n = corr.shape[-1] // 2
+    x, y = px[:, 0] - px[:, 0].min() + n, px[:, 1] - px[:, 1].min() + n
+    grid = np.zeros((y.max() + n + 1, x.max() + n + 1), dtype=bool)
+    grid[y, x] = True
+    out = np.ones((len(px), 3))
+    for dy in range(-n, n + 1):
+        for dx in range(-n, n + 1):
+            if dy or dx:
+                out += grid[y + dy, x + dx][:, None] * corr[None, :, dy + n, dx + n]
+    return np.maximum(out, 1.0)
+
+
 @functools.lru_cache(maxsize=4)
 def _colour_mixed(root, run_id, reach):
     """:func:`~skyfit_mi.pipeline.pixels.colour_mixed` of the sequence in ``root`` (its
@@ -258,11 +278,13 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
     are correlated within its 8x8 blocks (``jpeg_block_correlation`` rho, from ingest's
     bootstrap): the sigma of a pixel whose block holds k of the region's pixels is widened by
     sqrt(1 + (k - 1) rho), Kish's design effect, so that the k carry what their correlated
-    errors let them tell (the chi-square stays a sum over pixels as if independent); not when
-    the pixels are fitted each on its own (``one_fit`` False: a map).  Pixels whose colour a
-    JPEG with subsampled chroma mixes with another material's
-    (:func:`~skyfit_mi.pipeline.pixels.colour_reach`) are left out of a region's fit, with a
-    warning (a map keeps them).
+    errors let them tell (the chi-square stays a sum over pixels as if independent); a RAW
+    frame's, whose demosaicing correlates neighbouring pixels' errors
+    (``raw_demosaic.noise_correlation``), by the square root of :func:`neighbour_sharing`;
+    neither when the pixels are fitted each on its own (``one_fit`` False: a map).  Pixels
+    whose colour a frame mixes with another material's (a JPEG's subsampled chroma, a RAW's
+    demosaicing: :func:`~skyfit_mi.pipeline.pixels.colour_reach`) are left out of a region's
+    fit, with a warning (a map keeps them).
     """
     doc, root = load_manifest(manifest_path)
     cam = doc["camera"]
@@ -293,17 +315,19 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
                         f"{doc.get('status')!r}): only {len(rendered)} of its "
                         f"{len(doc['frames'])} frames are fitted; finish it with `skyfit render`.")
     reach = colour_reach(doc)
+    mixing = "a RAW's demosaicing" if any("raw_demosaic" in f for f in rendered) \
+        else "the JPEGs' subsampled chroma"
     mixed = np.zeros(len(pixels), bool)
     if reach and one_fit:
         mixed = _colour_mixed(str(root), doc.get("run_id"), reach)[pixels[:, 1], pixels[:, 0]]
         if mixed.all():
             raise SkyfitError(f"every pixel of the region lies within {reach} pixels of another "
-                              "material, where the JPEGs' subsampled colour mixes the two; give "
-                              "a region further inside the material.")
+                              f"material, where the frames mix the two's colours ({mixing}); "
+                              "give a region further inside the material.")
         if mixed.any():
             warnings.append(f"{int(mixed.sum())} of the region's {len(pixels)} pixels lie within "
-                            f"{reach} pixels of another material, where the JPEGs' subsampled "
-                            "colour mixes the two, and are left out.")
+                            f"{reach} pixels of another material, where the frames mix the "
+                            f"two's colours ({mixing}), and are left out.")
     sensor = sensor_from_record(doc["sensor"])
     falloff = sensor.gain(w, h, cam["fov_deg"])[pixels[:, 1], pixels[:, 0]] / sensor.exposure
     if doc["sensor"].get("flat_field"):         # a measured vignetting (ingest), per pixel
@@ -319,6 +343,11 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
                 if one_fit else np.ones(len(pixels))
             rho = np.asarray(f["jpeg_block_correlation"], dtype=float)
             s = s * np.sqrt(1.0 + (shared[:, None] - 1.0) * rho[None, :])
+        if "raw_demosaic" in f and one_fit:        # a RAW's errors shared by neighbours
+            deff = np.ones((len(pixels), 3))
+            deff[~mixed] = neighbour_sharing(pixels[~mixed],
+                                             f["raw_demosaic"]["noise_correlation"])
+            s = s * np.sqrt(deff)
         ok = np.isfinite(y) & ~np.isnan(s) & (s >= 0)
         if not ok[~mixed].any():
             raise SkyfitError(f"frame {f['index']} ({root / f['sensor']}) has no finite value in "

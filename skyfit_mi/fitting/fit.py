@@ -93,6 +93,8 @@ class FitState:
         blocks share over the region and from a photographed sequence's calibration, errors
         every value of a frame shares (:func:`~.uncertainty.shared_error_sd`; zeros without
         JPEG frames, or calibration)
+    matrix_sd : the standard errors from the camera's colour matrix, an error every value of
+        the day shares (:meth:`FitSession._matrix_sd`; zeros without its prior)
     """
 
     method: str
@@ -118,6 +120,7 @@ class FitState:
     calibration_sd: np.ndarray = None
     sun_level_sd: np.ndarray = None
     jpeg_shared_sd: np.ndarray = None
+    matrix_sd: np.ndarray = None
 
     @property
     def delta_scale(self):
@@ -598,6 +601,7 @@ class FitSession:
         fit.jpeg_shared_sd = self._jpeg_shared_sd(J_all, problem.mask & ~low & ~high,
                                                   problem.obs.sigma, curv_inv)
         fit.calibration_sd = self._calibration_sd(J_all, problem, theta, curv_inv)
+        fit.matrix_sd = self._matrix_sd(J_all, problem, theta, curv_inv)
         self._intervals(fit)
         warnings = self._warnings(fit)
         wall = time.perf_counter() - t0 + self.cache_time
@@ -660,8 +664,9 @@ class FitSession:
         intervals, rise, cache_noise_chi2, cache_sd, sun_level_sd): the covariance's, or for
         rho_s and sigma_alpha of a global fit the profile's; each widened by the light cache's
         own Monte Carlo error, the calibration's (``calibration_sd``), the fitted sky's and, a
-        factor on the reflectances, the sun's level's; and by the rounding a JPEG frame's
-        blocks share over the region (``jpeg_shared_sd``)."""
+        factor on the reflectances, the sun's level's; by the rounding a JPEG frame's blocks
+        share over the region (``jpeg_shared_sd``) and the camera's colour matrix's error
+        (``matrix_sd``)."""
         problem, theta, names = fit.problem, fit.theta, self.names
         lower, upper = self.lower, self.upper
         s2k = fit.delta_scale                             # each parameter's scale of Delta chi^2
@@ -712,7 +717,7 @@ class FitSession:
             for lv in ("68", "95"):
                 intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * np.sqrt(
                     mc_sd[i] ** 2 + cal_sd[i] ** 2 + sky_sd[i] ** 2
-                    + fit.jpeg_shared_sd[i] ** 2), lower[i], upper[i])
+                    + fit.jpeg_shared_sd[i] ** 2 + fit.matrix_sd[i] ** 2), lower[i], upper[i])
                 # the sun's level: a factor on every reflectance, lopsided
                 intervals[p][lv] = unc.widen_relative(theta[i], intervals[p][lv],
                                                       unc.Z[lv] * sun_rel[i], lower[i], upper[i])
@@ -752,6 +757,47 @@ class FitSession:
             Js, usable, sigma = (a.reshape((P * T, 1) + a.shape[2:]) for a in (Js, usable, sigma))
             shared = np.asarray(cal["scale_relative_sd"], dtype=float)[None, :]
         return unc.shared_error_sd(Js, usable, sigma, shared, np.eye(3), curvature_inverse)
+
+    def _matrix_sd(self, J, problem, theta, curvature_inverse):
+        """Each parameter's standard error (n,) from the camera's colour matrix (ingest's
+        ``colour_matrix`` record: each entry of its error E, in linear sRGB, relative_sd): a
+        developed value of channel c reads L_c + sum_j E_cj L_j, whose grey-card calibration
+        (which scales each channel to the grey's truth) leaves L_c + sum_(j != c) E_cj (L_j -
+        L_c), nothing on a grey and most on a saturated colour's weak channels.  Each of the
+        six E_cj is one error for the whole day (one camera, one matrix), carried to the
+        parameters by :func:`~.uncertainty.shared_error_sd` with the ratios L_j / L_c of the
+        model at ``theta``; zeros without the record or for a table."""
+        rel = ((self.doc.get("ingest") or {}).get("colour_matrix") or {}).get("relative_sd")
+        n = len(self.names)
+        if self.obs.rays is not None or not rel:
+            return np.zeros(n)
+        low, high = problem.clipped()
+        usable = problem.mask & ~low & ~high
+        L = problem.model.radiance(theta)
+        value = problem.value_scale(theta)
+        P, T, C, _ = J.shape
+        flat = (P * T, 1, C, n)
+        var = np.zeros(n)
+        for c in range(C):
+            for j in range(C):
+                if j == c:
+                    continue
+                with np.errstate(all="ignore"):
+                    move = np.nan_to_num(value[..., c] * (L[..., j] / L[..., c] - 1.0))
+                Jk = np.zeros_like(J)
+                Jk[..., c, :] = J[..., c, :] * move[..., None]
+                var += unc.shared_error_sd(Jk.reshape(flat), usable.reshape(flat[:3]),
+                                           problem.obs.sigma.reshape(flat[:3]), [[rel]],
+                                           np.ones((C, 1)), curvature_inverse) ** 2
+        return np.sqrt(var)
+
+    def _matrix_note(self):
+        """What the colour matrix's error in a fit's intervals is and where it came from."""
+        rec = self.doc["ingest"]["colour_matrix"]
+        return (f"the camera's colour matrix is taken to err by {100 * rec['relative_sd']:.3g}% "
+                f"per entry ({rec['source']}), an error a grey card cannot see (it calibrates "
+                "each channel on a grey, whose channels the error mixes alike) and that moves "
+                "a saturated colour's weak channels most; the intervals include it")
 
     def _jpeg_shared_sd(self, J, usable, sigma, curvature_inverse):
         """Each parameter's standard error (n,) from the rounding of the block means that the
@@ -899,6 +945,11 @@ class FitSession:
                     "depend on it. A reference of known reflectance in the scene (ingest "
                     "--calibrate or --colorchecker) or a measured direct normal irradiance "
                     "(--sun-sd 0.03) narrows them.")
+        own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
+        led = [p for i, p in enumerate(names) if fit.matrix_sd[i] > SKY_DOMINATES * own[i]]
+        if led:
+            warnings.append(f"{', '.join(led)}: {self._matrix_note()}; it, more than the "
+                            "data, sets their intervals.")
         top = [p for i, p in enumerate(names)
                if p != "sigma_alpha" and theta[i] >= self.upper[i] - 1e-3]
         if top:
@@ -984,6 +1035,9 @@ class FitSession:
                 "frames' rounding of their blocks' means (Y, Cb, Cr), which every pixel of "
                 "the region shares in a frame; added in quadrature to the intervals"}
                if np.any(fit.jpeg_shared_sd > 0) else {}),
+            **({"colour_matrix_error_sd": dict(zip(names, fit.matrix_sd.tolist())),
+                "colour_matrix_error": self._matrix_note()}
+               if np.any(fit.matrix_sd > 0) else {}),
             **({"sky": {**self.sky_record, "error_sd": dict(zip(names, (
                 self.sky_sd if self.sky_sd is not None else np.zeros(len(names))).tolist())),
                 "sun_level_sd": self.sun_sd,

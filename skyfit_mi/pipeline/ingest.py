@@ -51,7 +51,11 @@ from .colorchecker import NAMES, NEUTRAL, find_chart, reference_rgb, swatch_chec
 from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance,
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import frame_times
-from .photos import SUFFIXES, check_same_size, read_photo
+from .photos import RAW_COLOUR_REACH, SUFFIXES, check_same_size, read_photo
+from .raw_noise import REPLICATES as RAW_REPLICATES
+from .raw_noise import SEED as RAW_SEED
+from .raw_noise import SMOOTH as RAW_SMOOTH
+from .raw_noise import bootstrap, cfa_planes
 from .sequence import (FrameRenderer, finish, frame_record, manifest_header, prepare_folder,
                        write_frame)
 from .spec import SpecError, read_spec, validate_spec
@@ -80,6 +84,12 @@ JPEG_CALIBRATION_FRAMES, JPEG_CALIBRATION_SIZE = 3, 512
 #: error of the patches' codes beyond which it warns that no family describes them.
 RESPONSE_FAMILIES = ("linear", "srgb", "gamma")
 GAMMA_RANGE = (1.0, 4.0)
+#: The prior relative error of each entry of a RAW's colour matrix (its maker's or Adobe's
+#: for the camera model, in linear sRGB) when none is given: such a matrix is a least-squares
+#: fit of a chart under one light for one sensor of the model, and mixes a few per cent of
+#: each channel into the others on another sensor or light.  A prior, not a measurement; it
+#: is the error photo_sim's ``matrix_error`` gives its RAWs in scripts/jpeg_colour_coverage.py.
+RAW_MATRIX_ERROR = 0.03
 RESPONSE_SPAN_MIN = 2.0
 RESPONSE_RMS_WARN = 0.05
 
@@ -790,6 +800,7 @@ class IngestOptions:
     colorchecker: str = None
     vignetting: str = "none"
     noise: tuple = None
+    colour_matrix_error: float = None
 
     @property
     def fitted(self):
@@ -844,13 +855,15 @@ class Patches:
 
 @dataclass
 class Noise:
-    """The read + shot noise model (a [DN^2], b [DN]), its record, and each JPEG frame's
-    errors (:func:`_jpeg_errors`) by frame index."""
+    """The read + shot noise model (a [DN^2], b [DN]; a RAW's of its photosites [raw DN]), its
+    record, each JPEG frame's errors (:func:`_jpeg_errors`) by frame index, and for RAWs each
+    frame's developed noise (:func:`_raw_noise`: its sd and correlations) by index."""
 
     a: float
     b: float
     info: dict
     jpeg_errors: dict
+    raw: dict = None
 
 
 @dataclass
@@ -903,7 +916,8 @@ def ingest(photo_paths, spec_path, out_dir, *, overwrite=False, progress=True, l
                "response": ("fit: " if o.fitted else "") + exposures.sensor.response,
                "gamma": exposures.sensor.gamma, "exposure": o.exposure,
                "calibrate": o.calibrate, "colorchecker": o.colorchecker,
-               "vignetting": str(o.vignetting), "noise": [noise.a, noise.b]}
+               "vignetting": str(o.vignetting), "noise": [noise.a, noise.b],
+               "colour_matrix_error": o.colour_matrix_error}
     run_id = _run_id(frames.paths, frames.spec.raw, options)
     out = Path(out_dir)
     with FolderLock(out):
@@ -920,6 +934,11 @@ def check_choices(o):
         raise SkyfitError(f"--noise {','.join(f'{v:g}' for v in o.noise)}: give the read "
                           "variance [DN^2] and the shot gain [DN] as two finite numbers of at "
                           "least 0 (e.g. 0.64,0.02), or leave --noise out to estimate them.")
+    if o.colour_matrix_error is not None and not (np.isfinite(o.colour_matrix_error)
+                                                  and 0 <= o.colour_matrix_error < 1):
+        raise SkyfitError(f"--colour-matrix-error {o.colour_matrix_error:g}: give the relative "
+                          "error of the colour matrix's entries as a number in [0, 1) (e.g. "
+                          "0.03), or leave it out.")
     if o.exposure is not None and (o.calibrate or o.colorchecker):
         raise SkyfitError("--exposure is not used when --calibrate or --colorchecker set the "
                           "exposure from the scene's reference; give one or the other.")
@@ -1047,8 +1066,13 @@ def calibration_patches(frames, linear, o, log):
 
 def noise_model(frames, values, patches, o, progress, log):
     """The :class:`Noise` of the lit frames: read + shot noise estimated from them (or the
-    option's), and each JPEG frame's compression errors by bootstrap."""
+    option's), and each JPEG frame's compression errors by bootstrap; for RAWs of a Bayer
+    filter, :func:`_raw_noise`."""
     lit, sensor = frames.lit, patches.sensor
+    if all(frames.photos[i].format == "raw" for i in lit):
+        planes = [cfa_planes(frames.paths[i]) for i in lit]
+        if all(p is not None for p in planes):
+            return _raw_noise(frames, values, planes, o, progress, log)
     shown = None
     try:
         shown = shown_noise([values[i] for i in lit], sensor)
@@ -1076,6 +1100,46 @@ def noise_model(frames, values, patches, o, progress, log):
         f"({info['source']})")
     return Noise(a, b, info, _jpeg_errors(values, jpeg, sensor, (a, b), shown or (0.0, 0.0),
                                           progress, patches.mask))
+
+
+def _raw_noise(frames, values, planes, o, progress, log):
+    """The :class:`Noise` of RAW frames (:mod:`.raw_noise`): the photosites' read and shot
+    noise [raw DN above black] estimated on the frames' CFA planes ``planes`` (or the
+    option's), then each lit frame developed again with fresh noise of it: each frame's
+    developed noise's standard deviation (float16: 3 significant digits, as a JPEG's variance)
+    and correlations."""
+    lit = frames.lit
+    if o.noise is None:
+        a, b = shown_noise([p for ps in planes for p in ps], SensorModel(1.0, "linear", bits=16))
+        info = {"read_DN2": a, "shot_DN": b,
+                "source": "estimated from the RAWs' photosites (CFA planes)"}
+    else:
+        a, b = (float(x) for x in o.noise)
+        info = {"read_DN2": a, "shot_DN": b, "source": "given"}
+    info["units"] = "the photosites' raw DN above black"
+    log(f"noise model of the RAWs' photosites: read {np.sqrt(a):.3g} raw DN rms, shot {b:.3g} "
+        f"raw DN per DN ({info['source']})")
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(lit), desc="RAW noise", unit="frame")
+    draws = {}
+    for i in lit:
+        draws[i] = bootstrap(frames.paths[i], (a, b), [RAW_SEED, i])
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    info["raw"] = {
+        "method": "parametric bootstrap: the frame's photosites smoothed (each CFA plane over "
+                  f"{RAW_SMOOTH}x{RAW_SMOOTH} of its sites), given fresh read and shot noise "
+                  "and developed as ingest develops them; the mean square of the differences "
+                  f"from the smoothed sites developed, over each pixel's {RAW_SMOOTH}x"
+                  f"{RAW_SMOOTH} neighbourhood", "replicates": RAW_REPLICATES,
+        "seed": [RAW_SEED, "frame index"]}
+    return Noise(a, b, info, {}, {i: {"sd": np.sqrt(draws[i][0]).astype(np.float16),
+                                      "noise_correlation": draws[i][1],
+                                      "channel_correlation": draws[i][2]} for i in lit})
 
 
 def frame_exposures(frames, patches, noise, o, log):
@@ -1115,6 +1179,21 @@ def frame_exposures(frames, patches, noise, o, log):
                                  bits=sensor.bits, cos4=sensor.cos4), by_frame, calibration, rel)
 
 
+def colour_matrix(photos, given):
+    """The manifest's ``colour_matrix`` record: the relative error of each entry of the
+    camera's colour matrix ``given`` (the option's), or for RAWs the prior
+    :data:`RAW_MATRIX_ERROR`; None for other files without one (their camera's matrix is
+    unknown: a JPEG's is inside the camera), or 0."""
+    raw = all(p.format == "raw" for p in photos)
+    if given is None and raw:
+        return {"relative_sd": RAW_MATRIX_ERROR,
+                "source": "a prior for RAWs developed with their file's colour matrix, "
+                          "--colour-matrix-error"}
+    if not given:
+        return None
+    return {"relative_sd": float(given), "source": "given, --colour-matrix-error"}
+
+
 def _write(out, frames, linear, noise, exposures, options, run_id, progress):
     """Write the sequence folder of the ingest's stages' results."""
     spec, paths, photos, values = frames.spec, frames.paths, frames.photos, linear.values
@@ -1132,6 +1211,7 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
     manifest["ingest"] = {"photos": [p.name for p in paths], "options": options,
                           "float_scale_DN": linear.float_scale,
                           "calibration": exposures.calibration,
+                          "colour_matrix": colour_matrix(photos, options["colour_matrix_error"]),
                           "relative_exposure_from_exif": None if rel is None else rel.tolist()}
     bar = None
     if progress:
@@ -1149,7 +1229,11 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
             gain = e[None, None, :] * falloff[..., None]
             frame_jpeg = jpeg_errors.get(f.index)
             jpeg_frames += frame_jpeg is not None
-            sig, edge = _sigma(v, sensor, model, frame_jpeg)
+            if noise.raw is not None:
+                var = noise.raw[f.index]["sd"].astype(np.float32) ** 2 + np.float32(1.0 / 12)
+                sig = np.where(np.isfinite(v), np.sqrt(var), np.inf).astype(np.float32)
+            else:
+                sig, edge = _sigma(v, sensor, model, frame_jpeg)
             s = sensor.linearise(np.nan_to_num(v))
             slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code
             radiance = np.where(np.isfinite(v), s / gain, np.nan).astype(np.float32)
@@ -1170,6 +1254,12 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
                 rec["jpeg_edge_block_share"] = float(np.mean(edge))
                 rec["jpeg_bias_removed_DN"] = frame_jpeg["bias_mean"].tolist()
                 rec["jpeg_dc"] = dc_record(frame_jpeg["settings"])
+            if noise.raw is not None:
+                rec["raw_demosaic"] = {
+                    "algorithm": "AHD", "colour_reach_px": RAW_COLOUR_REACH,
+                    "noise_correlation": np.round(
+                        noise.raw[f.index]["noise_correlation"], 4).tolist(),
+                    "channel_correlation": noise.raw[f.index]["channel_correlation"]}
             bad = int(photo.nan_count + photo.inf_count)
             if bad:
                 rec["non_finite_values"] = bad
@@ -1178,6 +1268,11 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
             bar.update(1)
     if bar is not None:
         bar.close()
+    if noise.raw is not None:
+        manifest["sensor"]["noise_model"]["sigma2_DN2"] = (
+            "RAWs: the variance of the developed noise by bootstrap (noise_model.raw), + 1/12; "
+            "each frame's raw_demosaic.noise_correlation, between pixels up to "
+            "colour_reach_px apart, by which a fit widens the sigma of a region's pixels")
     if jpeg_frames:
         manifest["sensor"]["noise_model"]["jpeg"] = {
             "method": "parametric bootstrap: draws of the scene given each frame's DCT "

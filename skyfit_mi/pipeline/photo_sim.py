@@ -12,8 +12,8 @@ demosaic and convert it back to linear sRGB, exactly or, with ``matrix_error``, 
 of a maker's matrix that does not match the sensor.  EXIF carries DateTimeOriginal with or
 without OffsetTimeOriginal.  Every random choice is drawn from
 ``numpy.random.default_rng([seed, frame index])`` (the matrix's error from
-``default_rng(seed)``) and the seed is written into ``photos.json`` beside the
-images, with each frame's true exposure [sr m^2 W^-1].
+``default_rng(seed)``, :func:`matrix_error_mix`) and the seed is written into
+``photos.json`` beside the images, with each frame's true exposure [sr m^2 W^-1].
 """
 
 import datetime as dt
@@ -63,6 +63,26 @@ def raw_camera_matrix(xyz_to_camera=RAW_XYZ_TO_CAMERA):
     scaled so that green's row sums to 1 (white of signal 1 fills the green channel)."""
     a = np.asarray(xyz_to_camera, dtype=float) @ np.linalg.inv(XYZ_TO_SRGB)
     return a / a[1].sum()
+
+
+def matrix_error_mix(matrix_error, seed):
+    """(3, 3): what a DNG colour matrix off by ``matrix_error`` makes of the truth, developed
+    linear sRGB = mix @ true linear sRGB: I + matrix_error G, G's off-diagonal entries standard
+    normal from default_rng(seed), each row summing to 0 (a grey stays grey, as LibRaw's
+    development, which maps the camera's white to sRGB's, keeps it): each channel takes
+    matrix_error x N(0, 1) of every other channel's difference from it."""
+    g = np.random.default_rng(seed).normal(size=(3, 3))
+    np.fill_diagonal(g, 0.0)
+    g -= np.diag(g.sum(axis=1))
+    return np.eye(3) + float(matrix_error) * g
+
+
+def colour_matrix_1(mix, to_camera=None):
+    """The DNG ColorMatrix1 (XYZ -> camera, any row scale) through which LibRaw develops the
+    camera ``to_camera`` (:func:`raw_camera_matrix`) into ``mix`` @ linear sRGB (for a white
+    balance from the camera's own response to white, AsShotNeutral)."""
+    a = raw_camera_matrix() if to_camera is None else to_camera
+    return a @ np.linalg.inv(mix) @ XYZ_TO_SRGB
 
 
 def _mosaic(camera):
@@ -193,11 +213,11 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
         drawn from numpy.random.default_rng([seed, index, 1]); recorded in photos.json
     orientation : EXIF orientation code: the file holds the frame turned back, as a camera
         held on its side stores it, and the tag says how to show it (the frame as rendered)
-    matrix_error : a RAW's: the DNG's ColorMatrix1 is the camera's XYZ -> camera matrix
-        times (I + matrix_error G), G 3 x 3 standard normal from default_rng(seed): the
-        reader's linear sRGB is then the truth times about (I - matrix_error G), each channel
-        mixing that share of every channel's, as a maker's matrix fitted to another sensor of
-        the model, or to another light, does; the matrices are recorded in photos.json
+    matrix_error : a RAW's: the DNG's ColorMatrix1 is off so that the developed linear sRGB
+        is the truth times :func:`matrix_error_mix` (each channel takes matrix_error x N(0, 1)
+        of every other channel's difference from it, a grey untouched), as a maker's matrix
+        fitted to another sensor of the model, or under another light, errs; the matrices are
+        recorded in photos.json
 
     Returns the list of written paths, in time order.
     """
@@ -214,8 +234,8 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
     if raw:
         white = 2 ** RAW_BITS - 1
         to_camera = raw_camera_matrix()
-        error = np.random.default_rng(seed).normal(size=(3, 3)) * float(matrix_error)
-        written = to_camera @ (np.eye(3) + error) @ XYZ_TO_SRGB      # XYZ -> camera
+        mix = matrix_error_mix(matrix_error, seed)
+        written = colour_matrix_1(mix, to_camera)
         neutral = to_camera.sum(axis=1)                   # the raw response to white
     cam = doc["camera"]
     h, w = cam["height"], cam["width"]
@@ -265,8 +285,8 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
             "shutter_error": shutter_error,
             **({"raw": {"bits": RAW_BITS, "black_DN": RAW_BLACK, "white_DN": white,
                         "cfa": "RGGB", "camera_from_linear_srgb": to_camera.tolist(),
-                        "matrix_error": float(matrix_error), "matrix_error_G": (
-                            error / matrix_error if matrix_error else error).tolist(),
+                        "matrix_error": float(matrix_error),
+                        "developed_from_true_linear_srgb": mix.tolist(),
                         "color_matrix_1": written.tolist(), "as_shot_neutral": neutral.tolist(),
                         "source": "XYZ -> camera of the Canon EOS 5D Mark II (Adobe DNG "
                                   "Converter, via dcraw's adobe_coeff)"}} if raw else {}),

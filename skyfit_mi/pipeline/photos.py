@@ -93,6 +93,16 @@ ORIENTATIONS = {1: "as stored", 2: "mirrored left-right", 3: "rotated 180",
 #: LibRaw's ``sizes.flip`` -> the EXIF orientation code of the same turn.
 _LIBRAW_FLIP_TO_EXIF = {0: 1, 3: 3, 5: 8, 6: 6}
 
+#: How a RAW is developed (rawpy's ``postprocess``, :func:`develop`): AHD demosaicing, linear
+#: 16-bit, the camera's as-shot white balance, no brightening or per-frame white level.
+RAW_DEVELOP = {"gamma": (1, 1), "no_auto_bright": True, "output_bps": 16, "use_camera_wb": True,
+               "adjust_maximum_thr": 0.0}
+#: How far [pixels] AHD demosaicing mixes a pixel's colour with its neighbours': measured on a
+#: board of saturated paints (scripts/jpeg_colour_coverage.py --format dng --diagnose), the
+#: pixels next to another paint read its colour (yellow's blue +100%), those two pixels from it
+#: still 8% (yellow's blue) and 3% (blue's red), those three from it within the noise (0.5%).
+RAW_COLOUR_REACH = 2
+
 
 @dataclass(frozen=True, eq=False)
 class Photo:
@@ -632,6 +642,14 @@ def _wb(values):
     return [float(x) for x in values] if values is not None else None
 
 
+def develop(raw):
+    """An open rawpy image developed as :data:`RAW_DEVELOP` says, into sRGB primaries: (H, W,
+    3) uint16, turned by the file's orientation."""
+    import rawpy
+
+    return raw.postprocess(**RAW_DEVELOP, output_color=rawpy.ColorSpace.sRGB)
+
+
 def _read_raw(path):
     import rawpy
 
@@ -663,9 +681,7 @@ def _read_raw(path):
                             "f_number": getattr(other, "aperture", None)}
             except Exception:                    # noqa: BLE001 -- older rawpy
                 fallback = {}
-            rgb = raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16,
-                                  use_camera_wb=True, output_color=rawpy.ColorSpace.sRGB,
-                                  adjust_maximum_thr=0.0)
+            rgb = develop(raw)
     except (rawpy.LibRawError, OSError, ValueError) as exc:
         kind = type(exc).__name__
         why = {"LibRawFileUnsupportedError": "is not a camera RAW file LibRaw supports",

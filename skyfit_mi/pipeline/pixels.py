@@ -99,7 +99,10 @@ def scene_labels(manifest):
 
 def colour_reach(doc):
     """How many pixels from itself a frame of the sequence ``doc`` mixes a pixel's colour
-    with others', at most over its frames: 0 but for JPEGs with subsampled chroma.  A JPEG of
+    with others', at most over its frames: 0 but for JPEGs with subsampled chroma and RAWs.
+    A RAW's demosaicing draws a pixel's missing colours from photosites around it (AHD's
+    reach, :data:`~.photos.RAW_COLOUR_REACH`, recorded in each frame's ``raw_demosaic``).  A
+    JPEG of
     chroma subsampled by f (2 for 4:2:0 and 4:2:2) averages each f x f cell's colour into one
     sample, and the decoder interpolates between neighbouring samples (libjpeg's "fancy"
     upsampling, :func:`~.jpeg_noise.decode`): a pixel's colour then draws on pixels up to f
@@ -107,10 +110,11 @@ def colour_reach(doc):
     a boundary between materials the mix is a bias, not noise (measured on a board of
     saturated paints at quality 95, 4:2:0: the blue of yellow paint +26% on the ring next to
     the boundary), so a fit leaves such pixels out (:func:`colour_mixed`)."""
-    factors = [max(f["jpeg_dc"]["chroma_subsampling"]) for f in doc.get("frames", ())
-               if "jpeg_dc" in f]
+    frames = doc.get("frames", ())
+    factors = [max(f["jpeg_dc"]["chroma_subsampling"]) for f in frames if "jpeg_dc" in f]
     f = max(factors, default=1)
-    return f + 1 if f > 1 else 0
+    return max([f + 1 if f > 1 else 0] + [int(f["raw_demosaic"]["colour_reach_px"])
+                                          for f in frames if "raw_demosaic" in f])
 
 
 def colour_mixed(labels, reach):
@@ -129,8 +133,8 @@ def colour_mixed(labels, reach):
 def material_regions(manifest):
     """(name, pixels) of every Ward material the camera sees, from the scene's label image:
     the pixels inside each material's area (edge pixels, which also see a neighbour, left
-    out, and in JPEGs with subsampled chroma those whose colour mixes a neighbour's,
-    :func:`colour_reach`); SkyfitError when it sees none.  For an observation table,
+    out, and in JPEGs with subsampled chroma or demosaiced RAWs those whose colour mixes a
+    neighbour's, :func:`colour_reach`); SkyfitError when it sees none.  For an observation table,
     (name, None) of each region it measures."""
     from scipy.ndimage import binary_erosion
 
@@ -147,6 +151,6 @@ def material_regions(manifest):
             regions.append((name, np.stack([xs, ys], axis=1)))
     if not regions:
         raise SkyfitError(f"the camera sees no Ward material of {manifest} away from its edges"
-                          f"{' and the colour its JPEGs mix across them' if mixed.any() else ''};"
+                          f"{' and the colour its frames mix across them' if mixed.any() else ''};"
                           " give regions with --region.")
     return regions

@@ -1,0 +1,163 @@
+"""What developing a camera RAW does to its noise, found by developing the frame again.
+
+A RAW's photosites carry independent read and shot noise, one colour each through the Bayer
+filter.  Developing it (:func:`.photos.develop`: LibRaw's AHD demosaicing, the white
+balance, the colour matrix from the camera's RGB to sRGB's) gives each pixel the two colours
+it lacks from its neighbours, and mixes the channels through the matrix, whose rows are far
+from diagonal: a developed pixel's noise is then (measured on photo_sim's camera, the Canon
+EOS 5D Mark II's matrix) 1.4-3.3x what its neighbouring pixels differ by, correlated with its
+neighbours' (0.4-0.6 between adjacent pixels), larger in red and blue than in green at one
+level, and set by all three channels' signals, not by the channel's own.  The frames' pixel
+differences (:func:`skyfit_mi.pipeline.ingest.estimate_noise`) cannot tell it.  So:
+
+1. the sensor's noise is estimated on the mosaic itself (:func:`cfa_planes`): each CFA
+   colour a plane of photosites two pixels apart, whose neighbours' noise is independent,
+   read a [raw DN^2] and shot b [raw DN per DN], as ingest estimates any frame's;
+2. a parametric bootstrap (:func:`bootstrap`): the frame's photosites smoothed (each CFA
+   plane over :data:`SMOOTH` of its sites: the scene, as far as a flat surface goes), given
+   fresh noise of that model and developed by LibRaw as ingest develops them,
+   :data:`REPLICATES` times; the differences from the smoothed sites developed are draws of
+   the developed noise: their mean square, averaged over each pixel's SMOOTH x SMOOTH
+   neighbourhood, is its variance (within 5% of the spread of 16 frames of one scene, each
+   its own noise, on a grey and a saturated blue: ``tests/test_raw_noise.py``), and each
+   channel's correlation between pixels up to :data:`.photos.RAW_COLOUR_REACH` apart gives a
+   fit its design effect (:func:`skyfit_mi.fitting.chi2.neighbour_sharing`).
+
+Noise draws are seeded (:data:`SEED` and the frame's index).  A RAW whose filter is not a 2x2
+Bayer pattern (X-Trans, Foveon) has no planes here: :func:`cfa_planes` returns None, and
+ingest estimates its noise from the developed frames.
+"""
+
+import numpy as np
+
+from .photos import RAW_COLOUR_REACH, develop
+
+#: Developed copies per frame.
+REPLICATES = 8
+#: Seed of the bootstrap's noise (with the frame's index; recorded in the manifest).
+SEED = 20261127
+#: The bootstrap develops a smoothed copy of the frame's photosites (each CFA colour's plane
+#: averaged over SMOOTH x SMOOTH of its sites) with and without fresh noise: AHD chooses its
+#: interpolation's directions from the data, and on the frame itself, which holds noise
+#: already, the fresh noise moved those choices as the scene's noise alone does not, and the
+#: developed variance came out 15-30% high (against the spread of 16 frames of one scene, each
+#: its own noise; noise scaled down to a quarter, to probe the development's linear response,
+#: came out 2-3x high: every choice it moved added its own error).
+SMOOTH = 5
+
+
+def _mosaic(raw):
+    """(photosite values above black (H, W) float, their CFA colour indices (H, W), the
+    white level above black) of an open rawpy image, over its whole raw buffer."""
+    colours = np.asarray(raw.raw_colors)
+    black = np.asarray(raw.black_level_per_channel, dtype=float)[colours]
+    values = np.asarray(raw.raw_image, dtype=float) - black
+    return values, colours, float(raw.white_level) - black
+
+
+def cfa_planes(path):
+    """The photosites of RAW ``path`` above black as an (H/2, W/2, 3) image per colour plane
+    of its 2x2 filter (R, the first G, B; then the second G with R and B again), NaN where
+    clipped, for the noise estimate: [(H/2, W/2, 3), (H/2, W/2, 3)]; None for a filter that is
+    not a 2x2 Bayer pattern."""
+    import rawpy
+
+    with rawpy.imread(str(path)) as raw:
+        pattern = np.asarray(raw.raw_pattern)
+        if pattern.shape != (2, 2):
+            return None
+        values, _, white = _mosaic(raw)
+        values = np.where(values < white, values, np.nan)
+        names = raw.color_desc.decode("ascii", "replace")
+        sites = {}
+        for i in range(2):
+            for j in range(2):
+                sites.setdefault(names[pattern[i, j]], []).append(values[i::2, j::2])
+    if sorted(sites) != ["B", "G", "R"] or len(sites["G"]) != 2:
+        return None
+    h = min(p.shape[0] for ps in sites.values() for p in ps)
+    w = min(p.shape[1] for ps in sites.values() for p in ps)
+    r, b = sites["R"][0][:h, :w], sites["B"][0][:h, :w]
+    return [np.stack([r, g[:h, :w], b], axis=-1) for g in sites["G"]]
+
+
+def _smoothed(values, pattern):
+    """Photosite ``values`` (H, W) with each site of the 2x2 CFA ``pattern`` the mean of its
+    colour's plane over SMOOTH x SMOOTH of its sites (NaN-free, edges by reflection)."""
+    from scipy.ndimage import uniform_filter
+
+    out = np.array(values, dtype=float, copy=True)
+    for i in range(2):
+        for j in range(2):
+            out[i::2, j::2] = uniform_filter(values[i::2, j::2], SMOOTH, mode="reflect")
+    return out
+
+
+def bootstrap(path, noise, seed, replicates=REPLICATES):
+    """Draws of the developed noise of RAW ``path``: its photosites smoothed (SMOOTH), given
+    fresh read and shot noise ``noise`` = (a [raw DN^2], b [raw DN per DN]) and developed as
+    :func:`.photos.read_photo` develops them, against the smoothed sites developed.
+
+    Returns (the draws' mean square per pixel averaged over the unclipped pixels of its SMOOTH x
+    SMOOTH neighbourhood (none: the frame's most) (H, W, 3) [DN^2], float32; each channel's
+    correlation between pixels (3, 2 R + 1, 2 R + 1), R = RAW_COLOUR_REACH, offsets (dy, dx)
+    from the centre; the correlation between a pixel's channels, R-G, G-B, B-R)."""
+    import rawpy
+    from scipy.ndimage import uniform_filter
+
+    rng = np.random.default_rng(seed)
+    a, b = noise
+    n = RAW_COLOUR_REACH
+    with rawpy.imread(str(path)) as raw:
+        frame = develop(raw)
+        clipped = np.any((frame <= 0) | (frame >= 65535), axis=-1)
+        del frame
+        original = np.array(raw.raw_image, copy=True)
+        values = _mosaic(raw)[0]
+        black = original - values
+        smooth = _smoothed(values, raw.raw_pattern)
+        sd = np.sqrt(a + b * np.clip(smooth, 0.0, None))
+        top = np.iinfo(original.dtype).max
+
+        def developed(sites):
+            raw.raw_image[...] = np.clip(np.rint(sites + black), 0, top).astype(original.dtype)
+            out = develop(raw).astype(np.float32)
+            return out, np.any((out <= 0) | (out >= 65535), axis=-1)
+
+        base, cut = developed(smooth)
+        clipped |= cut
+        draws = []
+        for _ in range(replicates):
+            copy, cut = developed(smooth + rng.normal(size=sd.shape) * sd)
+            clipped |= cut
+            draws.append(copy - base)
+        raw.raw_image[...] = original
+    h, w = base.shape[:2]
+    square = np.zeros((h, w, 3))
+    lag = np.zeros((3, 2 * n + 1, 2 * n + 1, 3))           # sums of d d', d^2, d'^2
+    cross = np.zeros((3, 3))
+    for d in draws:
+        d = np.where(clipped[..., None], 0.0, d)
+        square += d ** 2
+        for dy in range(-n, n + 1):
+            for dx in range(-n, n + 1):
+                one = d[max(dy, 0):h + min(dy, 0), max(dx, 0):w + min(dx, 0)]
+                two = d[max(-dy, 0):h + min(-dy, 0), max(-dx, 0):w + min(-dx, 0)]
+                lag[:, dy + n, dx + n] += np.stack([np.sum(one * two, axis=(0, 1)),
+                                                    np.sum(one ** 2, axis=(0, 1)),
+                                                    np.sum(two ** 2, axis=(0, 1))], axis=-1)
+        cross += np.einsum("hwc,hwk->ck", d, d)
+    corr = lag[..., 0] / np.sqrt(lag[..., 1] * lag[..., 2])
+    channels = [float(cross[c, (c + 1) % 3] / np.sqrt(cross[c, c] * cross[(c + 1) % 3,
+                                                                           (c + 1) % 3]))
+                for c in range(3)]
+    # the neighbourhood's mean over its unclipped pixels; where all are clipped, the most of the
+    # frame's (a clipped channel is censored, but its pixel's others are values)
+    keep = (~clipped).astype(float)[..., None]
+    size = (SMOOTH, SMOOTH, 1)
+    with np.errstate(all="ignore"):
+        variance = uniform_filter(square / replicates, size) / uniform_filter(keep, size)
+    variance = np.where(np.isfinite(variance), variance,
+                        np.nanmax(np.where(np.isfinite(variance), variance, np.nan), axis=(0, 1)))
+    variance = variance.astype(np.float32)
+    return variance, corr, channels
