@@ -862,7 +862,7 @@ def _predict_means(s, result, target, draws, rng):
     n = len(s.obs.pixels)
     # and by the model's error, kappa times the mean: shared by the region's pixels, which
     # see the light alike (a highlight the model misses, it misses in all of them)
-    extra = 1.959963984540054 * np.sqrt((np.sum(image_noise_variance(s, image), axis=0)
+    extra = 1.959963984540054 * np.sqrt((np.sum(image_noise_variance(s, image, target), axis=0)
                                          + np.sum(model_var, axis=0)) / n**2
                                         + (model_error_kappa(result) * means[0]) ** 2)
     observed = region_mean(image)
@@ -895,7 +895,7 @@ def _predict_points(s, result, target, draws, rng):
         lo[part], hi[part] = np.percentile(values[1:], [2.5, 97.5], axis=0)
     _, model_var = s.wm.radiance_and_variance(sets[0])
     image = image_values(s, target)
-    extra = 1.959963984540054 * np.sqrt(image_noise_variance(s, image) + model_var
+    extra = 1.959963984540054 * np.sqrt(image_noise_variance(s, image, target) + model_var
                                         + (model_error_kappa(result) * at_fit) ** 2)
     names = _channels(s)
     saturated = ~_measured(s)
@@ -961,9 +961,17 @@ def image_values(s, target):
     return s.obs.y / (s.obs.gain * s.obs.sensor.max_code)
 
 
-def image_noise_variance(s, image):
-    """The variance of session ``s``'s ``image`` values (P, T, 3) [(W m^-2 sr^-1)^2]: the
-    sensor model's sigma in radiance; 0 where a value is saturated or left out."""
+def image_noise_variance(s, image, target):
+    """The variance of session ``s``'s ``image`` values (P, T, 3) [(W m^-2 sr^-1)^2] in
+    ``target``: the sensor model's sigma in radiance (a photograph's radiance frames are its
+    codes, a table's values its measurements); 0 where a value is saturated or left out.  A
+    render's radiance frames are the scene before its sensor: their error is the render's
+    Monte Carlo error (``radiance_sigma``), the sensor's noise only in its sensor frames (with
+    the sensor's noise, a disc's day at 5% noise drew 95% bands of +-8.4% median about region
+    means its fit missed by 1.1%: +-3.6% without)."""
+    if s.obs.rays is None and s.doc.get("source") == "render":
+        sd = frame_values(target, s.obs.pixels, s.obs.frames, source="radiance_sigma")
+        return np.where(np.isfinite(sd), sd, 0.0) ** 2
     slope = s.problem.slope(image)
     usable = np.isfinite(s.obs.sigma) & (slope > 0)
     return np.where(usable, s.obs.sigma / np.where(usable, slope, 1.0), 0.0) ** 2
