@@ -19,7 +19,8 @@ the relative error of the ingested radiance by distance to another material, the
 per-pixel z, its correlation between neighbouring pixels and between channels.
 
     .venv/bin/python scripts/jpeg_colour_coverage.py [--quality 85 90 95] [--seeds 4]
-        [--subsampling 2] [--format dng --matrix-error 0 0.03] [--diagnose] [-o DIR]
+        [--subsampling 2] [--format dng --matrix-error 0 0.03 [--colour-matrix-error SD]]
+        [--diagnose] [-o DIR]
 """
 
 import argparse
@@ -68,6 +69,9 @@ def main():
                     help="dng: camera RAWs at each --matrix-error instead of JPEG qualities")
     ap.add_argument("--matrix-error", type=float, nargs="+", default=[0.0, 0.03],
                     help="the DNG colour matrix's relative errors (--format dng)")
+    ap.add_argument("--colour-matrix-error", type=float,
+                    help="the colour matrix's prior error ingest gives the fits (default: "
+                    "ingest's, 0.03 for RAWs)")
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--diagnose", action="store_true")
@@ -112,7 +116,8 @@ def main():
         err = {k: [] for k, _ in regions}
         zs, without, pix = [], [], []
         for seed in range(args.first_seed, args.first_seed + args.seeds):
-            tag = f"dng_m{q:g}_s{seed}" if raw else f"q{q}_c{args.subsampling}_s{seed}"
+            tag = (f"dng_m{q:g}_p{args.colour_matrix_error}_s{seed}" if raw
+                   else f"q{q}_c{args.subsampling}_s{seed}")
             photos, seq = work / f"photos_{tag}", work / f"seq_{tag}"
             if not (args.refit and (seq / "manifest.json").exists()):
                 if raw:
@@ -121,7 +126,8 @@ def main():
                     photograph_day(truth, photos, seed=seed, quality=q,
                                    fmt="jpeg" if q else "png", subsampling=args.subsampling)
                 ingest([photos], spec_path, seq, calibrate={"grey_card": (0.18,) * 3},
-                       vignetting="cos4", overwrite=True, progress=False, **quiet)
+                       vignetting="cos4", colour_matrix_error=args.colour_matrix_error,
+                       overwrite=True, progress=False, **quiet)
             for fit in fit_regions(seq, regions, model="colour", **quiet):
                 name = fit["region"]
                 truth_v = (*SAMPLES[name], RHO_S, SIGMA_ALPHA)
