@@ -45,7 +45,12 @@ def test_geometry_warnings():
     far = {"frames": 5, "frames_with_sun": 5, "closest_highlight_half_angle_deg": 20.0}
     w = geometry_warnings(far, 0.05)
     assert len(w) == 1 and "never comes closer than 20.0 degrees" in w[0]
+    assert w[0].startswith("sigma_alpha")                 # names what it warns about
     assert geometry_warnings(far, 0.3) == []
+    # a sky whose shape the fit took from a model: rho_s too rests on the sky's reflection
+    modelled = geometry_warnings(far, 0.05, sky_shape_known=False)
+    assert modelled[0] == w[0] and modelled[1].startswith("rho_s rests on the sky's reflection")
+    assert geometry_warnings(far, 0.3, sky_shape_known=False) == []
     near = {"frames": 5, "frames_with_sun": 5, "closest_highlight_half_angle_deg": 1.0}
     assert geometry_warnings(near, 0.01) == []
 

@@ -983,7 +983,9 @@ class FitSession:
                 "the brightness): the data tell less than as many independent values, and the "
                 "intervals are widened for it, by up to "
                 f"{np.sqrt(np.max(fit.channel_factors)):.2f}x.")
-        warnings += geometry_warnings(self.geometry, float(theta[-1]))
+        warnings += geometry_warnings(
+            self.geometry, float(theta[-1]), sky_shape_known=self.sky_record is None
+            or self.sky_record.get("shape") is not None)
         worst = max(fit.model_noise_by_sigma, key=fit.model_noise_by_sigma.get)
         if fit.model_noise_by_sigma[worst] > NOISE_SHARE * fit.problem.dof:
             warnings.append(

@@ -50,20 +50,32 @@ def traceless_roughness(half_angle_deg):
     return float(sig[idx[-1]]) if idx.size else 0.0
 
 
-def geometry_warnings(geometry, sigma_alpha):
+def geometry_warnings(geometry, sigma_alpha, sky_shape_known=True):
     """Warnings from the day's geometry for a fit at ``sigma_alpha``: no sun on the surface at
     all, or a closest highlight too far from the camera's view for the sun to show a lobe this
-    narrow."""
+    narrow.  Then the lobe is seen in the sky's reflection alone, and where the sky's shape
+    is a model the fit has not fitted (``sky_shape_known`` False: a sky fitted or held by
+    its prior in level only), so is rho_s: its reading depends on the sky's pattern near the
+    mirror direction (a disc under a measured sky, its highlight never seen: rho_s 0, 95% up
+    to 0.074, truth 0.08)."""
     if geometry["frames_with_sun"] == 0:
         return ["no frame has the sun on this surface (an overcast sky, or the sun behind it): "
                 "rho_s and sigma_alpha rest on the sky's reflection alone and are weakly "
                 "determined; a sequence with direct sun is needed to measure the lobe."]
     delta = geometry["closest_highlight_half_angle_deg"]
     limit = traceless_roughness(delta)
-    if sigma_alpha < limit:
-        return [f"the sun's highlight never comes closer than {delta:.1f} degrees (half-angle) "
-                f"to the camera's view, and lobes narrower than sigma_alpha = {limit:.3g} show no "
-                f"sun there: sigma_alpha = {sigma_alpha:.3g} rests on the sky's reflection alone; "
-                f"treat it as not determined below {limit:.3g} (a camera nearer the sun's mirror "
-                "direction would measure it)."]
-    return []
+    if sigma_alpha >= limit:
+        return []
+    out = [f"sigma_alpha: the sun's highlight never comes closer than {delta:.1f} degrees "
+           f"(half-angle) to the camera's view, and lobes narrower than sigma_alpha = "
+           f"{limit:.3g} show no sun there: sigma_alpha = {sigma_alpha:.3g} rests on the sky's "
+           f"reflection alone; treat it as not determined below {limit:.3g} (a camera nearer "
+           "the sun's mirror direction would measure it)."]
+    if not sky_shape_known:
+        out.append("rho_s rests on the sky's reflection alone (the sun's highlight is never "
+                   "seen at this roughness), so it depends on the sky's pattern near the mirror "
+                   "direction, which the spec's sky only models and the fit did not fit (its "
+                   "level only): treat rho_s as that sky model's reading (--sky-shape fits a "
+                   "CIE or Perez sky's shape; a camera nearer the sun's mirror direction "
+                   "measures rho_s from the sun).")
+    return out
