@@ -156,3 +156,40 @@ def test_bad_chart_options_are_refused_before_any_output(chart_day):
         with pytest.raises(SkyfitError, match=message):
             ingest([photos], chart_day["spec"], out, progress=False, **QUIET, **kw)
         assert not out.exists()
+
+
+def test_matrix_error_recovers_a_white_preserving_mixing():
+    """Swatches read through (I + G), G's rows summing to 0: the chromatic swatches' ratios
+    give G back exactly, with no residual; a grey is left alone by it."""
+    rng = np.random.default_rng(1)
+    G = rng.normal(0.0, 0.03, (3, 3))
+    G -= np.diag(G.sum(axis=1))                            # rows sum to 0
+    L = cc.reference_rgb() * [1.0, 0.9, 0.8]               # a slightly warm light
+    ratio = (L @ (np.eye(3) + G).T) / L
+    got = cc.matrix_error(ratio, L)
+    np.testing.assert_allclose(got["mixing"], G, atol=1e-9)
+    assert got["residual_rms"] < 1e-9
+    np.testing.assert_allclose((np.eye(3) + G) @ np.ones(3), np.ones(3))
+    assert cc.matrix_error(np.full((24, 3), np.nan), L) is None
+
+
+def test_a_raws_colour_matrix_error_is_measured_on_the_chart_and_corrected(chart_day):
+    """RAWs developed with a colour matrix off by 3% (photo_sim's matrix_error): the chart's
+    chromatic swatches measure the channels' mixing (within 0.01 of the simulated one per
+    entry), the frames are corrected by it, and the fits' matrix error is its standard error,
+    not the 3% prior."""
+    from skyfit_mi.pipeline.ingest import RAW_MATRIX_ERROR, ingest
+    from skyfit_mi.pipeline.photo_sim import matrix_error_mix, photograph_day
+
+    pytest.importorskip("rawpy")
+    tmp = chart_day["tmp"]
+    photos = tmp / "photos_dng"
+    photograph_day(chart_day["truth"], photos, seed=6, fmt="dng", matrix_error=0.03)
+    doc = ingest([photos], chart_day["spec"], tmp / "seq_dng", colorchecker="chart",
+                 vignetting="cos4", progress=False, **QUIET)
+    measured = doc["ingest"]["calibration"]["colorchecker"]["colour_matrix"]
+    want = matrix_error_mix(0.03, 6) - np.eye(3)
+    np.testing.assert_allclose(measured["mixing"], want, atol=0.01)
+    record = doc["ingest"]["colour_matrix"]
+    assert record["source"].startswith("measured on the ColorChecker")
+    assert record["relative_sd"] < RAW_MATRIX_ERROR / 2

@@ -262,3 +262,41 @@ def swatch_check(ratio):
             "worst": [NAMES[worst], float(np.max(np.abs(e[worst][ok[worst]])))],
             "per_swatch": {NAMES[k]: [float(x) if o else None for x, o in zip(e[k], ok[k])]
                            for k in chromatic}}
+
+
+def matrix_error(ratio, predicted):
+    """The error of the camera's colour matrix that the chromatic swatches show, as a
+    white-preserving mixing of the channels: a camera whose matrix errs reads a colour L as
+    (I + G) L, G's rows summing to 0 (a grey stays grey, as the neutral swatches calibrate
+    it), so that swatch k's channel c reads L_kc + sum_(j != c) G_cj (L_kj - L_kc): its ratio
+    to the prediction is 1 + sum_(j != c) G_cj (L_kj / L_kc - 1).
+
+    ``ratio`` (24, 3) each swatch's observed signal over its calibrated prediction (NaN where
+    not sampled), ``predicted`` (24, 3) its predicted signal (any common scale).  Least
+    squares per channel over the chromatic swatches whose reference reflectance in every
+    channel is above the match floor.  Returns ``{"mixing": G (3, 3), "standard_error": (3,
+    3) of G's entries, "residual_rms": the ratios' rms after it}`` or None with fewer than 4
+    such swatches (then the matrix's error stays a prior).
+    """
+    ratio = np.asarray(ratio, dtype=float)
+    L = np.asarray(predicted, dtype=float)
+    ok = np.all(reference_rgb() > _MATCH_FLOOR, axis=1) & np.all(np.isfinite(ratio), axis=1) \
+        & np.all(L > 0, axis=1)
+    ok[list(NEUTRAL)] = False
+    if ok.sum() < 4:
+        return None
+    G, se, res = np.zeros((3, 3)), np.zeros((3, 3)), []
+    for c in range(3):
+        others = [j for j in range(3) if j != c]
+        X = L[ok][:, others] / L[ok][:, [c]] - 1.0
+        y = ratio[ok, c] - 1.0
+        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+        r = y - X @ coef
+        dof = max(len(y) - len(others), 1)
+        cov = np.linalg.pinv(X.T @ X) * float(r @ r) / dof
+        G[c, others], se[c, others] = coef, np.sqrt(np.clip(np.diag(cov), 0, None))
+        G[c, c] = -coef.sum()
+        se[c, c] = float(np.sqrt(np.clip(cov.sum(), 0, None)))
+        res.append(r)
+    return {"mixing": G, "standard_error": se,
+            "residual_rms": float(np.sqrt(np.mean(np.concatenate(res) ** 2)))}

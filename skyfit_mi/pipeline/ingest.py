@@ -47,7 +47,7 @@ from ..physics.colour import SRGB_LUMINANCE
 from ..render.image import write_exr
 from ..render.labels import label_image
 from ..render.scene_xml import build_scene_xml
-from .colorchecker import NAMES, NEUTRAL, find_chart, reference_rgb, swatch_check
+from .colorchecker import NAMES, NEUTRAL, find_chart, matrix_error, reference_rgb, swatch_check
 from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance,
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import frame_times
@@ -670,16 +670,32 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None):
 # ---- the whole ingest ---------------------------------------------------------------------
 
 def _chart_record(material, chart, samples, patch, sensor, exposures, log):
-    """The manifest's record of a ColorChecker calibration, with its chromatic check."""
-    check = swatch_check(_swatch_ratios(samples, patch, sensor, exposures))
+    """The manifest's record of a ColorChecker calibration, with its chromatic check and the
+    colour matrix's error the chromatic swatches measure (:func:`.colorchecker.matrix_error`;
+    ``colour_matrix``, None where too few swatches tell it)."""
+    ratio = _swatch_ratios(samples, patch, sensor, exposures)
+    check = swatch_check(ratio)
     if check["rms"] is not None:
         log(f"ColorChecker check: the calibrated chromatic swatches are "
             f"{check['rms']:.1%} rms from their rendered reference (worst {check['worst'][0]}, "
             f"{check['worst'][1]:.1%}); the neutral swatches calibrated")
+    labels = np.tile(patch, len(samples))
+    L = np.concatenate([x for _, x in samples])
+    predicted = np.array([np.nanmean(L[labels == CHART_LABEL + k], axis=0)
+                          if np.any(labels == CHART_LABEL + k) else np.full(3, np.nan)
+                          for k in range(24)])
+    mixing = matrix_error(ratio, predicted)
+    if mixing is not None:
+        log(f"ColorChecker colour: the camera's colour matrix mixes its channels by up to "
+            f"{np.max(np.abs(mixing['mixing'])):.1%} (each entry +-"
+            f"{np.sqrt(np.mean(mixing['standard_error'] ** 2)):.1%}); the frames are corrected "
+            f"by it, leaving the chromatic swatches {mixing['residual_rms']:.1%} rms")
+        mixing = {k: (v.tolist() if isinstance(v, np.ndarray) else v)
+                  for k, v in mixing.items()}
     return {"material": material, "swatches_used": [NAMES[k] for k in NEUTRAL],
             "outline_px": np.round(chart["corners"], 1).tolist(),
             "pixels_per_swatch": chart["pixels"].tolist(), "match_rms": chart["match"],
-            "chromatic_check": check,
+            "chromatic_check": check, "colour_matrix": mixing,
             "reference": "linear sRGB of ColorChecker24 - After November 2014 (colour-science, "
                          "via colour-checker-detection)"}
 
@@ -1179,11 +1195,30 @@ def frame_exposures(frames, patches, noise, o, log):
                                  bits=sensor.bits, cos4=sensor.cos4), by_frame, calibration, rel)
 
 
-def colour_matrix(photos, given):
+def _unmix(values, mixing, sensor):
+    """Codes ``values`` (H, W, 3) [DN] with the colour matrix's error ``mixing`` G (3, 3)
+    (:func:`.colorchecker.matrix_error`: the camera read (I + G) L) taken out of their linear
+    signal, (I + G)^-1 s; a pixel with a channel clipped (0 or the top) or missing keeps its
+    codes, whose clipped channel tells a bound only."""
+    top = sensor.max_code
+    ok = np.all(np.isfinite(values) & (values > 0) & (values < top), axis=-1)
+    s = sensor.linearise(np.where(ok[..., None], values, 0.0))
+    fixed = np.clip(s @ np.linalg.inv(np.eye(3) + np.asarray(mixing, dtype=float)).T, 0.0, 1.0)
+    return np.where(ok[..., None], sensor.respond(fixed) * top, values).astype(values.dtype)
+
+
+def colour_matrix(photos, given, measured=None):
     """The manifest's ``colour_matrix`` record: the relative error of each entry of the
-    camera's colour matrix ``given`` (the option's), or for RAWs the prior
+    camera's colour matrix ``given`` (the option's); else as a ColorChecker ``measured`` it
+    (the chart record's ``colour_matrix``: the frames are corrected by the mixing it found,
+    and what is left is the mixing's standard error); else for RAWs the prior
     :data:`RAW_MATRIX_ERROR`; None for other files without one (their camera's matrix is
     unknown: a JPEG's is inside the camera), or 0."""
+    if given is None and measured is not None:
+        return {"relative_sd": float(np.sqrt(np.mean(np.square(measured["standard_error"])))),
+                "source": "measured on the ColorChecker's chromatic swatches (the frames "
+                          "corrected by the mixing found: ingest.calibration.colorchecker."
+                          "colour_matrix); its standard error"}
     raw = all(p.format == "raw" for p in photos)
     if given is None and raw:
         return {"relative_sd": RAW_MATRIX_ERROR,
@@ -1200,6 +1235,7 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
     sensor, falloff, flat, jpeg_errors = exposures.sensor, linear.falloff, linear.flat, \
         noise.jpeg_errors
     rel, model = exposures.rel, (noise.a, noise.b)
+    mixing = ((exposures.calibration or {}).get("colorchecker") or {}).get("colour_matrix")
     manifest = measured_header(spec, sensor, run_id, "photographed",
                                "none: frames are photographs")
     manifest["sensor"]["noise_model"] = {**noise.info,
@@ -1211,7 +1247,8 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
     manifest["ingest"] = {"photos": [p.name for p in paths], "options": options,
                           "float_scale_DN": linear.float_scale,
                           "calibration": exposures.calibration,
-                          "colour_matrix": colour_matrix(photos, options["colour_matrix_error"]),
+                          "colour_matrix": colour_matrix(photos, options["colour_matrix_error"],
+                                                         mixing),
                           "relative_exposure_from_exif": None if rel is None else rel.tolist()}
     bar = None
     if progress:
@@ -1234,6 +1271,8 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
                 sig = np.where(np.isfinite(v), np.sqrt(var), np.inf).astype(np.float32)
             else:
                 sig, edge = _sigma(v, sensor, model, frame_jpeg)
+            if mixing is not None:
+                v = _unmix(v, mixing["mixing"], sensor)
             s = sensor.linearise(np.nan_to_num(v))
             slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code
             radiance = np.where(np.isfinite(v), s / gain, np.nan).astype(np.float32)

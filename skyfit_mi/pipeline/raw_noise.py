@@ -159,5 +159,6 @@ def bootstrap(path, noise, seed, replicates=REPLICATES):
         variance = uniform_filter(square / replicates, size) / uniform_filter(keep, size)
     variance = np.where(np.isfinite(variance), variance,
                         np.nanmax(np.where(np.isfinite(variance), variance, np.nan), axis=(0, 1)))
-    variance = variance.astype(np.float32)
+    # the running sums of uniform_filter can leave -1e-17 where a neighbourhood holds none
+    variance = np.maximum(variance, 0.0).astype(np.float32)
     return variance, corr, channels
