@@ -740,9 +740,10 @@ class FitSession:
         (:meth:`~.chi2.Problem.value_scale`), carried to the parameters by
         :func:`~.uncertainty.shared_error_sd`: not a mere scale on the reflectances, since
         frames erring apart bend the day's curve, which the specular share and the roughness
-        follow (a board's yellow paint, its sun's highlight never seen: C_b 2.3% off, where
-        the scale alone widened its 95% interval to 1.5%).  A table's, without frames
-        photographed, is :func:`~.uncertainty.calibration_sd`."""
+        follow (a board's yellow paint, its sun's highlight never seen, frames calibrated
+        each on its own: C_b's standard error from the calibration 0.21%, where a scale gave
+        0.07%).  A table's, without frames photographed, is
+        :func:`~.uncertainty.calibration_sd`."""
         cal = (self.doc.get("ingest") or {}).get("calibration") or {}
         if self.obs.rays is not None or not cal.get("scale_relative_sd"):
             return unc.calibration_sd(self.doc, self.names, theta)

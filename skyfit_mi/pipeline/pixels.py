@@ -102,19 +102,19 @@ def colour_reach(doc):
     with others', at most over its frames: 0 but for JPEGs with subsampled chroma and RAWs.
     A RAW's demosaicing draws a pixel's missing colours from photosites around it (AHD's
     reach, :data:`~.photos.RAW_COLOUR_REACH`, recorded in each frame's ``raw_demosaic``).  A
-    JPEG of
-    chroma subsampled by f (2 for 4:2:0 and 4:2:2) averages each f x f cell's colour into one
-    sample, and the decoder interpolates between neighbouring samples (libjpeg's "fancy"
+    JPEG of chroma subsampled by f (2 for 4:2:0 and 4:2:2) averages each f x f cell's colour
+    into one sample, and the decoder interpolates between neighbouring samples (libjpeg's "fancy"
     upsampling, :func:`~.jpeg_noise.decode`): a pixel's colour then draws on pixels up to f
     away.  One more covers a camera's encoder that smooths its chroma before subsampling.  At
     a boundary between materials the mix is a bias, not noise (measured on a board of
     saturated paints at quality 95, 4:2:0: the blue of yellow paint +26% on the ring next to
     the boundary), so a fit leaves such pixels out (:func:`colour_mixed`)."""
     frames = doc.get("frames", ())
-    factors = [max(f["jpeg_dc"]["chroma_subsampling"]) for f in frames if "jpeg_dc" in f]
-    f = max(factors, default=1)
-    return max([f + 1 if f > 1 else 0] + [int(f["raw_demosaic"]["colour_reach_px"])
-                                          for f in frames if "raw_demosaic" in f])
+    factor = max((max(f["jpeg_dc"]["chroma_subsampling"]) for f in frames if "jpeg_dc" in f),
+                 default=1)
+    jpeg = factor + 1 if factor > 1 else 0
+    return max([jpeg] + [int(f["raw_demosaic"]["colour_reach_px"]) for f in frames
+                         if "raw_demosaic" in f])
 
 
 def colour_mixed(labels, reach):
