@@ -53,7 +53,7 @@ def test_the_bootstrap_gives_the_developed_noise(frames):
     within 5%; adjacent pixels' correlation 0.61 / 0.37 / 0.53 in R / G / B, the frames'
     0.63 / 0.38 / 0.48), where their neighbouring pixels' differences show a fraction."""
     paths, values = frames
-    variance, corr, channels = raw_noise.bootstrap(paths[0], (READ, SHOT), [1, 0])
+    variance, corr, channels = raw_noise.bootstrap(paths[0], (READ, SHOT), [1, 0], values[0])
     spread = np.var(values, axis=0, ddof=1)
     d = values - values.mean(axis=0)
     n = raw_noise.RAW_COLOUR_REACH

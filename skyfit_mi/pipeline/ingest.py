@@ -1141,7 +1141,7 @@ def _raw_noise(frames, values, planes, o, progress, log):
         bar = tqdm(total=len(lit), desc="RAW noise", unit="frame")
     draws = {}
     for i in lit:
-        draws[i] = bootstrap(frames.paths[i], (a, b), [RAW_SEED, i])
+        draws[i] = bootstrap(frames.paths[i], (a, b), [RAW_SEED, i], values[i])
         if bar is not None:
             bar.update(1)
     if bar is not None:

@@ -668,8 +668,9 @@ def _read_raw(path):
                 "color_desc": raw.color_desc.decode("ascii", "replace"),
                 "applied_white_balance": "camera (as shot)" if use_camera
                 else "daylight (the file has no as-shot balance)",
-                "applied": {"demosaic": "AHD", "gamma": [1, 1], "no_auto_bright": True,
-                            "adjust_maximum_thr": 0.0, "output_bps": 16,
+                "applied": {"demosaic": "AHD",
+                            **{k: list(v) if isinstance(v, tuple) else v
+                               for k, v in RAW_DEVELOP.items() if k != "use_camera_wb"},
                             "output_color": "sRGB primaries, linear",
                             "black_subtracted": True, "white_level_to": 65535,
                             "highlight_mode": "clip", "libraw_flip": flip},

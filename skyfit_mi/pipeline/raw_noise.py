@@ -93,10 +93,11 @@ def _smoothed(values, pattern):
     return out
 
 
-def bootstrap(path, noise, seed, replicates=REPLICATES):
+def bootstrap(path, noise, seed, frame, replicates=REPLICATES):
     """Draws of the developed noise of RAW ``path``: its photosites smoothed (SMOOTH), given
     fresh read and shot noise ``noise`` = (a [raw DN^2], b [raw DN per DN]) and developed as
-    :func:`.photos.read_photo` develops them, against the smoothed sites developed.
+    :func:`.photos.read_photo` develops them, against the smoothed sites developed; ``frame``
+    (H, W, 3) the file as read (its clipped pixels are left out), not developed again.
 
     Returns (the draws' mean square per pixel averaged over the unclipped pixels of its SMOOTH x
     SMOOTH neighbourhood (none: the frame's most) (H, W, 3) [DN^2], float32; each channel's
@@ -108,10 +109,8 @@ def bootstrap(path, noise, seed, replicates=REPLICATES):
     rng = np.random.default_rng(seed)
     a, b = noise
     n = RAW_COLOUR_REACH
+    clipped = np.any((frame <= 0) | (frame >= 65535), axis=-1)
     with rawpy.imread(str(path)) as raw:
-        frame = develop(raw)
-        clipped = np.any((frame <= 0) | (frame >= 65535), axis=-1)
-        del frame
         original = np.array(raw.raw_image, copy=True)
         values = _mosaic(raw)[0]
         black = original - values
