@@ -244,6 +244,21 @@ def _client(workers, scheduler, memory_per_worker, dask_logs=False):
     return Client(cluster), cluster
 
 
+@contextmanager
+def _dask_logs_quiet(keep=False):
+    """Dask's log lines in this process (the scheduler's and the client's) shown only at
+    CRITICAL during the block, unless ``keep``.  The cluster's own ``silence_logs`` ends when
+    it closes, and after a Ctrl-C its scheduler could still log the workers' closed
+    connections, with a traceback, before the loop stopped."""
+    if keep:
+        yield
+        return
+    from distributed.utils import silence_logging_cmgr
+
+    with silence_logging_cmgr(logging.CRITICAL):
+        yield
+
+
 def _close(client, cluster):
     """Close a Dask client and its local cluster (a Ctrl-C meanwhile deferred until they are)."""
     with _ctrl_c_deferred():
@@ -280,20 +295,23 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
     n_workers = None if scheduler else worker_count(workers, chunk, log)
     t0 = time.perf_counter()
     client = cluster = None
-    try:
-        check_regions(manifest_path, regions)          # the frames and their light
-        if pending:
-            with _ctrl_c_deferred():
-                client, cluster = _client(n_workers, scheduler, memory_per_worker, dask_logs)
-        store = _open_store(ensure_dir(out) / STORE, settings, shape, len(names), len(chunks),
-                            resume)
-        if len(pending) < len(chunks):
-            log(f"resuming: {len(chunks) - len(pending)} of {len(chunks)} chunks already mapped")
-        if pending:
-            _map_pending(client, manifest_path, chunks, pending, store, model, normalisation,
-                         seed, cache, progress, variant)
-    finally:
-        _close(client, cluster)
+    with _dask_logs_quiet(keep=dask_logs):
+        try:
+            check_regions(manifest_path, regions)          # the frames and their light
+            if pending:
+                with _ctrl_c_deferred():
+                    client, cluster = _client(n_workers, scheduler, memory_per_worker,
+                                              dask_logs)
+            store = _open_store(ensure_dir(out) / STORE, settings, shape, len(names),
+                                len(chunks), resume)
+            if len(pending) < len(chunks):
+                log(f"resuming: {len(chunks) - len(pending)} of {len(chunks)} chunks already "
+                    "mapped")
+            if pending:
+                _map_pending(client, manifest_path, chunks, pending, store, model,
+                             normalisation, seed, cache, progress, variant)
+        finally:
+            _close(client, cluster)
     summary = write_map_outputs(out, store, names, regions, settings)
     summary.update(wall_time_s=time.perf_counter() - t0, chunks=len(chunks),
                    chunks_this_run=len(pending), workers=n_workers,
