@@ -111,6 +111,9 @@ def test_a_mitsuba_plastic_is_fitted_best_by_its_own_family(plastic_day):
         lo, hi = g["intervals"][k]["95"]
         assert lo <= v <= hi, (k, v, lo, hi, chi2)
     assert chi2["ggx_plastic"] < 2.0, chi2
+    # its frames predicted from the others as well as noise and the parameters' spread say
+    assert g["model_error"]["held_out"]["kappa"] == 0.0, g["model_error"]
+    assert not any(w.startswith("frames left out") for w in g["warnings"])
     assert chi2["ggx_plastic"] < 0.5 * min(chi2["beckmann_plastic"], chi2["ward"]), chi2
 
 

@@ -21,6 +21,7 @@ from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
+from .selection import HELD_OUT_FRAMES, held_out_error
 from .sky_fit import (SKY_DOMINATES, check_terms, default_sky, default_sun_sd, fit_sky_scale,
                       light_level_sd, shape_variants, sky_level_at, sun_up)
 from ..render import setup
@@ -95,6 +96,9 @@ class FitState:
         JPEG frames, or calibration)
     matrix_sd : the standard errors from the camera's colour matrix, an error every value of
         the day shares (:meth:`FitSession._matrix_sd`; zeros without its prior)
+    held_out : how well the fit predicts frames it was not fitted to
+        (:func:`~.selection.held_out_error`, on ``problem``: its kappa is the error beyond the
+        in-sample model error's), None with too few frames
     """
 
     method: str
@@ -121,6 +125,7 @@ class FitState:
     sun_level_sd: np.ndarray = None
     jpeg_shared_sd: np.ndarray = None
     matrix_sd: np.ndarray = None
+    held_out: dict = None
 
     @property
     def delta_scale(self):
@@ -603,6 +608,10 @@ class FitSession:
         fit.calibration_sd = self._calibration_sd(J_all, problem, theta, curv_inv)
         fit.matrix_sd = self._matrix_sd(J_all, problem, theta, curv_inv)
         self._intervals(fit)
+        iv95 = np.array([fit.intervals[p]["95"] for p in self.names])
+        fit.held_out = held_out_error(
+            problem, theta, self.lower, self.upper,
+            within=lambda th: bool(np.all((th >= iv95[:, 0]) & (th <= iv95[:, 1]))))
         warnings = self._warnings(fit)
         wall = time.perf_counter() - t0 + self.cache_time
         out = self._record(fit, warnings, start, seed, evaluations, wall, t_method)
@@ -970,6 +979,17 @@ class FitSession:
                             "chi-square from this start (thesis 6.3, 7.2)")
         if fit.model_error is not None:
             warnings.append(unc.model_error_warning(fit.misfit, fit.model_error))
+        held = self._held_out_record(fit)
+        if held.get("interval95") is not None:
+            warnings.append(
+                f"frames left out of the fit are predicted worse than noise and the "
+                f"parameters' spread explain (held-out chi-square {held['chi2_per_value']:.3g} "
+                f"per value, p = {held['p']:.2g}, {held['folds']} folds of frames): the model "
+                f"misses light it was not fitted to by about {held['kappa']:.1%} of each value "
+                f"(95%: {held['interval95'][0]:.1%}-{held['interval95'][1]:.1%}), which "
+                "predictions (relight) include; the parameters describe these frames' "
+                "light and may not carry to other light; another model may predict better "
+                "(--model auto ranks them by held-out frames).")
         warnings += unc.misfit(chi2, fit.problem.dof, fit.interval_scale, fit.cache_noise_chi2,
                                fit.noise_chi2, model_error=fit.model_error is not None)
         warnings += unc.identifiability(names, iv95, self.lower, self.upper, fit.rise,
@@ -1072,18 +1092,44 @@ class FitSession:
         me, test = fit.model_error, fit.misfit
         form = ("each value's variance is its noise's plus (kappa x the value)^2 (a clipped "
                 "value's: the model's); kappa by restricted maximum likelihood with the "
-                f"parameters, where chi-square exceeds what noise explains (p < {unc.MISFIT_P:g});"
-                " a prediction's band adds kappa x the predicted value")
+                f"parameters, where chi-square exceeds what noise explains (p < {unc.MISFIT_P:g})"
+                "; a prediction's band adds held_out.kappa x the predicted value, the error "
+                "with which frames left out of the fit are predicted")
         if me is None:
             return {"kappa": 0.0, "form": form, "meaning": (
                 "not fitted: chi-square is within what noise explains (p = "
                 f"{test.p:.2g}), so the model reproduces the data to their noise"
                 if not test.significant else "fitted as 0: the likelihood is largest without "
-                "a model error")}
+                "a model error"), "held_out": self._held_out_record(fit)}
         return {"kappa": me.kappa, "interval95": list(me.interval95), "meaning": me.meaning,
                 "form": form, "chi2": fit.chi2, "chi2_per_dof": fit.chi2 / fit.problem.dof,
                 "values": me.values, **{k: fit.model_error_rounds[k]
-                                        for k in ("rounds", "settled")}}
+                                        for k in ("rounds", "settled")},
+                "held_out": self._held_out_record(fit)}
+
+    @staticmethod
+    def _held_out_record(fit):
+        """The fit JSON's ``model_error.held_out``: the relative error with which the fit
+        predicts frames it was not fitted to (:func:`~.selection.held_out_error`), the
+        in-sample model error's and any beyond it together; what predictions add."""
+        held, kappa = fit.held_out, 0.0 if fit.model_error is None else fit.model_error.kappa
+        if held is None:
+            return {"kappa": kappa, "meaning": "not tested: fewer than "
+                    f"{HELD_OUT_FRAMES} frames; predictions take the in-sample kappa"}
+        out = {**held, "kappa": float(np.hypot(kappa, held["kappa"]))}
+        if "interval95" in held:
+            out["interval95"] = [float(np.hypot(kappa, k)) for k in held["interval95"]]
+            out["meaning"] = (f"each held-out value missed by about {out['kappa']:.2g} of itself "
+                              "beyond its noise and the prediction's spread: predictions "
+                              "(relight) add this kappa x the value")
+        elif not held["values"]:
+            out["meaning"] = ("not tested: without any fold's frames the parameters leave "
+                              "their 95% intervals; predictions take the in-sample kappa")
+        else:
+            out["meaning"] = ("held-out frames are predicted within their noise and the "
+                              "prediction's spread" + (" and the in-sample model error"
+                                                       if kappa else ""))
+        return out
 
 
 def fit_region(manifest_path, name, pixels, **options):

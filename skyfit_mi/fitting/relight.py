@@ -914,11 +914,13 @@ def _predict_points(s, result, target, draws, rng):
 
 
 def model_error_kappa(result):
-    """The relative model error kappa of a fit ``result`` (its ``model_error``, fitted where
-    the model cannot reproduce the data; 0 without): a new value's own error beyond its noise
-    is kappa times its value, of which the prediction stands for it, and every prediction
-    band adds that to the parameters' spread."""
-    return float((result.get("model_error") or {}).get("kappa", 0.0))
+    """The relative model error kappa of a fit ``result`` for a prediction: the error with
+    which it predicted frames it was not fitted to (its ``model_error.held_out``), else its
+    in-sample one (fitted where the model cannot reproduce the data; 0 without).  A new
+    value's own error beyond its noise is kappa times its value, of which the prediction
+    stands for it, and every prediction band adds that to the parameters' spread."""
+    me = result.get("model_error") or {}
+    return float(max(me.get("kappa", 0.0), (me.get("held_out") or {}).get("kappa", 0.0)))
 
 
 def _measured(s):

@@ -54,16 +54,23 @@ def read_fit_result(path):
         raise SkyfitError(f"{path}: frames must be a list of manifest frame indices (whole "
                           "numbers from 0).")
     me = r.get("model_error")
-    if me is not None and not (isinstance(me, dict) and isinstance(me.get("kappa"), (int, float))
-                               and not isinstance(me["kappa"], bool)
-                               and np.isfinite(me["kappa"]) and me["kappa"] >= 0):
+    held = me.get("held_out") if isinstance(me, dict) else None
+    if me is not None and not (_is_kappa(me) and (held is None or _is_kappa(held))):
         raise SkyfitError(f"{path}: model_error must be {{\"kappa\": a finite number >= 0, "
-                          "...}; give a fit_NAME.json that `skyfit fit` wrote.")
+                          "\"held_out\": {\"kappa\": the same, ...}, ...}; give a "
+                          "fit_NAME.json that `skyfit fit` wrote.")
     cov = r.get("covariance")
     if cov is not None and not _is_covariance(cov):
         raise SkyfitError(f"{path}: covariance must be {{\"names\": [{', '.join(names)}], "
                           "\"matrix\": a square list of lists of numbers, one row each}.")
     return r
+
+
+def _is_kappa(record):
+    """Whether ``record`` is a dict whose kappa is a finite number >= 0."""
+    k = record.get("kappa") if isinstance(record, dict) else None
+    return isinstance(k, (int, float)) and not isinstance(k, bool) and bool(np.isfinite(k)) \
+        and k >= 0
 
 
 def _is_covariance(cov):
