@@ -611,7 +611,8 @@ class FitSession:
         iv95 = np.array([fit.intervals[p]["95"] for p in self.names])
         fit.held_out = held_out_error(
             problem, theta, self.lower, self.upper,
-            within=lambda th: bool(np.all((th >= iv95[:, 0]) & (th <= iv95[:, 1]))))
+            within=lambda th: bool(np.all((th >= iv95[:, 0]) & (th <= iv95[:, 1]))),
+            frame_sd=self._frame_calibration_sd())
         warnings = self._warnings(fit)
         wall = time.perf_counter() - t0 + self.cache_time
         out = self._record(fit, warnings, start, seed, evaluations, wall, t_method)
@@ -761,12 +762,20 @@ class FitSession:
         Js = J * problem.value_scale(theta)[..., None]          # per relative error of a value
         sigma = problem.obs.sigma
         if cal.get("per_frame"):
-            shared = np.tile(np.asarray(cal["frame_relative_sd"], dtype=float), (J.shape[1], 1))
+            shared = np.tile(np.asarray(self._frame_calibration_sd(), dtype=float),
+                             (J.shape[1], 1))
         else:                                         # one error per channel for every frame
             P, T, C, n = J.shape
             Js, usable, sigma = (a.reshape((P * T, 1) + a.shape[2:]) for a in (Js, usable, sigma))
             shared = np.asarray(cal["scale_relative_sd"], dtype=float)[None, :]
         return unc.shared_error_sd(Js, usable, sigma, shared, np.eye(3), curvature_inverse)
+
+    def _frame_calibration_sd(self):
+        """The relative error (3,) every value of a photographed frame and channel shares from
+        its own calibration (ingest's ``calibration.frame_relative_sd`` where each frame took
+        its own), else None."""
+        cal = (self.doc.get("ingest") or {}).get("calibration") or {}
+        return cal["frame_relative_sd"] if cal.get("per_frame") else None
 
     def _matrix_sd(self, J, problem, theta, curvature_inverse):
         """Each parameter's standard error (n,) from the camera's colour matrix (ingest's

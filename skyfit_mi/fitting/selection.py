@@ -77,7 +77,7 @@ def cross_validate(session, model, folds=FOLDS):
 HELD_OUT_FRAMES = FOLDS + 2
 
 
-def held_out_error(problem, theta, lower, upper, folds=FOLDS, within=None):
+def held_out_error(problem, theta, lower, upper, folds=FOLDS, within=None, frame_sd=None):
     """How well a fit at ``theta`` predicts frames it was not fitted to: each of ``folds``
     interleaved folds of ``problem``'s frames predicted from the others' minimum nearest the
     fit (Levenberg-Marquardt from ``theta`` within ``lower``/``upper``: a fifth of the time
@@ -87,7 +87,8 @@ def held_out_error(problem, theta, lower, upper, folds=FOLDS, within=None):
     (its pixels see the light alike, so a highlight the model misses it misses in all of
     them), a table's every value.  Each held-out residual e [DN] has the variance of its
     noise (with the model's Monte Carlo error; a mean's, of its values' taken as
-    independent) plus that of the prediction, D C D^T from the parameters' spread C on the
+    independent, and an error every value of a frame and channel shares, ``frame_sd`` (3,)
+    relative: a photographed frame's calibration) plus that of the prediction, D C D^T from the parameters' spread C on the
     other folds (linearised; D the prediction's derivatives).  The excess beyond these is
     the model's error on light it did not see: kappa by maximum likelihood
     (:func:`~.uncertainty.model_error`, no parameters fitted to these values), where the
@@ -131,6 +132,8 @@ def held_out_error(problem, theta, lower, upper, folds=FOLDS, within=None):
             n = np.maximum(n, 1)
             e, v, a = e.sum(0) / n, v.sum(0) / n ** 2, a.sum(0) / n
             D = D.sum(0) / n[..., None]
+        if frame_sd is not None:
+            v = v + (np.asarray(frame_sd, dtype=float) * a) ** 2
         es.append(e[use])
         scales.append(a[use])
         vs.append(v[use] + np.einsum("ij,jk,ik->i", D[use], cov, D[use]))
