@@ -435,16 +435,22 @@ def gradation_4(days, tmp_path_factory):
     return relabelled(days["noisy"], tmp_path_factory.mktemp("shape") / "day", light)
 
 
+@pytest.fixture(scope="module")
+def shape_fit(gradation_4):
+    """The disc of ``gradation_4`` fitted with its sky's level and shape (--sky-shape)."""
+    from skyfit_mi.fitting.fit import fit_regions
+
+    return next(fit_regions(gradation_4, [("disc", REGION)], model="colour", sky="fit",
+                            sky_shape=True, log=lambda *a: None))
+
+
 def test_the_skys_shape_is_fitted_with_the_materials_and_says_what_one_region_cannot_tell(
-        gradation_4):
+        shape_fit):
     """The spec's sky one gradation group off: with --sky-shape the fit mixes the CIE
     gradation and indicatrix variants; their indices' 95% intervals hold the truth (5, 4),
     every parameter's interval holds its truth, the record carries the coefficients'
     correlation, and one flat region, which hardly tells the shape, says so."""
-    from skyfit_mi.fitting.fit import fit_regions
-
-    r = next(fit_regions(gradation_4, [("disc", REGION)], model="colour", sky="fit",
-                         sky_shape=True, log=lambda *a: None))
+    r = shape_fit
     shape = r["sky"]["shape"]
     for name, truth in (("gradation", 5.0), ("indicatrix", 4.0)):
         index, half = shape["index"][name]
@@ -454,6 +460,52 @@ def test_the_skys_shape_is_fitted_with_the_materials_and_says_what_one_region_ca
         lo, hi = r["intervals"][p]["95"]
         assert lo - 1e-9 <= v <= hi + 1e-9, (p, r["intervals"][p], r["parameters"])
     assert any("hardly tell the sky's" in w for w in r["warnings"]), r["warnings"]
+
+
+def test_relit_images_take_the_fitted_skys_shape(shape_fit, gradation_4, tmp_path):
+    """relight of the fitted day renders each frame under the fitted shape: an environment
+    map of the day's pattern mixed with its variants at level k (sky_maps/, named by the relit
+    manifest's envmap record, which reads back as the sky rendered), whose horizontal
+    irradiance is the mix's.  Its region means are the fit's own prediction (the light
+    tables of the fitted shape, ``--no-images``) within 1%, closer than the day's pattern at
+    the same level renders them."""
+    import csv
+
+    from skyfit_mi.files import write_json
+    from skyfit_mi.fitting.relight import load_fits, relight
+    from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
+    from skyfit_mi.pipeline.pixels import frame_values
+
+    shape = shape_fit["sky"]["shape"]
+    for name, record in (("shaped", shape), ("pattern", None)):
+        fits = tmp_path / f"fits_{name}"
+        write_json(fits / "fit_disc.json", {**shape_fit, "sky": {**shape_fit["sky"],
+                                                                 "shape": record}})
+        relight(load_fits([fits]), gradation_4, tmp_path / name, log=lambda *a: None,
+                progress=False)
+    relight(load_fits([tmp_path / "fits_shaped"]), gradation_4, tmp_path / "predicted",
+            images=False, log=lambda *a: None, progress=False)
+    doc, root = load_manifest(tmp_path / "shaped")
+    day_doc, day_root = load_manifest(gradation_4)
+    k, mix = shape_fit["sky"]["k"], shape["mix"]
+    for f, g in zip(doc["frames"], day_doc["frames"]):
+        assert f["illumination"]["kind"] == "envmap", f["illumination"]
+        assert (root / f["illumination"]["file"]).parent.name == "sky_maps"
+        sky, day_sky = frame_sky(f, root), frame_sky(g, day_root)
+        _, rest = day_sky.split()
+        variants = [v for _, v in day_sky.shape_variants(toward=shape["toward"])]
+        want = k * ((1 - sum(mix)) * rest.sky_horizontal_irradiance()
+                    + sum(m * v.sky_horizontal_irradiance() for m, v in zip(mix, variants)))
+        assert np.allclose(sky.sky_horizontal_irradiance(), want, rtol=2e-3), f["index"]
+        assert np.allclose(sky.sun_radiance, day_sky.sun_radiance, rtol=1e-6)
+    rows = list(csv.DictReader((tmp_path / "predicted" / "prediction.csv").open()))
+    frames = sorted({int(r["frame"]) for r in rows})
+    predicted = np.array([[float(r["predicted [W m^-2 sr^-1]"]) for r in rows
+                           if int(r["frame"]) == i] for i in frames])          # (T, 3)
+    px = np.asarray(shape_fit["pixels"])
+    miss = {n: float(np.sqrt(np.mean((frame_values(tmp_path / n, px, frames).mean(axis=0)
+                                      / predicted - 1) ** 2))) for n in ("shaped", "pattern")}
+    assert miss["shaped"] < 0.01 and miss["shaped"] < miss["pattern"], miss
 
 
 #: The Perez test day: its diffuse horizontal irradiance [W m^-2] (Delta 0.07-0.1 over its

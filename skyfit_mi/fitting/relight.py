@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..conventions import angles_from_direction
 from ..errors import SkyfitError
 from ..files import FolderLock, ensure_dir, figure_png, write_bytes, write_json, write_text
 from .chi2 import subsample_region
@@ -35,15 +36,17 @@ from .fit import FitSession
 from .landscape import truth_parameters
 from .sky_fit import sky_level_at
 from .uncertainty import widen
+from ..physics.colour import SRGB_LUMINANCE
 from ..pipeline.fit_result import check_fit_sequence, read_fit_result
+from ..pipeline.illumination import envmap_from_record
 from ..pipeline.manifest import (RENDERED_SOURCES, check_frames, frame_axis, frame_label,
-                                 load_manifest, manifest_file, read_frame_image,
+                                 frame_sky, load_manifest, manifest_file, read_frame_image,
                                  rendered_frames)
 from ..pipeline.pixels import frame_values, material_regions
 from ..pipeline.observation_table import is_table, table_regions
 from ..pipeline.sequence import clear_run, render_sequence
 from ..pipeline.spec import read_spec, validate_spec
-from ..render.image import to_srgb8, write_png
+from ..render.image import to_srgb8, write_exr, write_png
 from ..render.light_cache import DIRECTIONS
 
 #: Seed offset of the reference render of a synthetic target (its own materials, other noise).
@@ -60,6 +63,9 @@ PREDICTION_CACHE = (4, 64)
 #: The files a relight writes beside its sequence's (a render's): the prediction and the errors
 #: (and compare_NNNN.png, and the reference render in reference/).
 RELIGHT_FILES = ("prediction.csv", "prediction.png", "relight.json", "relight.csv")
+#: The folder of the relit frames' sky maps where a fit's sky shape lights them
+#: (:func:`light_as_fitted`).
+SKY_MAPS = "sky_maps"
 
 
 def check_output(out, images, overwrite):
@@ -90,9 +96,11 @@ def clear_output(out):
     with FolderLock(out):
         for folder in (out, out / "reference"):
             clear_run(folder)
-        for p in [*(out / n for n in RELIGHT_FILES), *out.glob("compare_[0-9]*.png")]:
+        for p in [*(out / n for n in RELIGHT_FILES), *out.glob("compare_[0-9]*.png"),
+                  *(out / SKY_MAPS).glob("frame_[0-9]*.exr")]:
             p.unlink(missing_ok=True)
-        for d in (out / "frames", out / "reference" / "frames", out / "reference"):
+        for d in (out / "frames", out / "reference" / "frames", out / "reference",
+                  out / SKY_MAPS):
             if d.is_dir() and not any(d.iterdir()):
                 d.rmdir()
 
@@ -234,16 +242,14 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     spec = target_spec(plan.target, fits, plan.doc)[0] if plan.render else None
     check_sun_up(plan, spec)
     level = fitted_sky_level(fits, plan.doc, log)
-    if spec is not None and level is not None:
-        for f in spec.frames:
-            k = sky_level_at(level, [f.time.isoformat()])[0] if f.time else level["k"]
-            f.sky = f.sky.sky_scaled(k)
     # the predicted sequence's pixels: the target's before the render (a region it does not
     # show is refused first), or the relit render's own after it (its label image)
     predicted = plan.predicted_from(out)
     pixels = target_pixels(fits, predicted, seed) if predicted == plan.target else None
     if overwrite:
         clear_output(out)
+    if spec is not None and level is not None:
+        light_as_fitted(spec, level, plan.target, out, log)
     if plan.render:
         render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log,
                         source="relight")
@@ -271,6 +277,57 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     return errors
 
 
+def light_as_fitted(spec, level, target, out, log=print):
+    """Light each frame of ``spec`` (of the fitted sequence ``target``) as the sky fit
+    ``level`` saw it: the frame's sky as the target's manifest records it (the fit's light:
+    the spec's, unless the sequence was lit otherwise), k times against the sun (k by the
+    frame's time,
+    :func:`~.sky_fit.sky_level_at`), and with a fitted shape the spec's pattern mixed with its
+    shape variants, moved the way the fit moved them (:meth:`~skyfit_mi.physics.sky.Sky.shaped`):
+    an environment map, written to ``out``/SKY_MAPS as EXR, which the relit manifest's
+    ``envmap`` record names, with the sun's direct normal irradiance.  A frame whose sky
+    cannot move that way (one the fit did not see) keeps the spec's pattern at level k, and
+    the log says so."""
+    doc, root = load_manifest(target)
+    seen = {g["index"]: g for g in doc["frames"] if "illumination" in g}
+    shape = level.get("shape")
+    kept = []
+    for f in spec.frames:
+        if f.index in seen:
+            f.sky = frame_sky(seen[f.index], root)
+        k = sky_level_at(level, [f.time.isoformat()])[0] if f.time else level["k"]
+        variants = []
+        if shape is not None:
+            try:
+                variants = [v for _, v in f.sky.shape_variants(toward=shape.get("toward"))]
+            except SkyfitError:
+                pass
+            if len(variants) != len(shape["mix"]):
+                kept.append(frame_label(f.index, f.time))
+                variants = []
+        f.sky = _sky_map(f, f.sky.shaped(k, shape["mix"], variants), out) if variants \
+            else f.sky.sky_scaled(k)
+    if kept:
+        log(f"{', '.join(kept)}: the spec's sky cannot take the fitted shape's moves there; "
+            "the spec's pattern at the fitted level")
+
+
+def _sky_map(frame, sky, out):
+    """The shaped ``sky`` (:meth:`~skyfit_mi.physics.sky.Sky.shaped`) of ``frame`` as the
+    relit manifest will read it back: its map written to ``out``/SKY_MAPS, an ``envmap``
+    record of it with the sun's direct normal irradiance (luminance-weighted; the disc in
+    the colour of :func:`~skyfit_mi.physics.sun.sun_rgb`, as the spec's skies have it)."""
+    path = ensure_dir(Path(out) / SKY_MAPS) / f"frame_{frame.index:03d}.exr"
+    write_exr(path, sky.envmap)
+    zenith, azimuth = (float(np.degrees(a)) for a in angles_from_direction(sky.sun_direction))
+    rec = {"file": os.path.relpath(path, Path(out)), "ground_albedo": 0.0,
+           "sun_solid_angle_sr": sky.sun_solid_angle,
+           "direct_normal_W_m2": float(sky.sun_radiance @ SRGB_LUMINANCE) * sky.sun_solid_angle}
+    made = envmap_from_record(rec, out, zenith, azimuth)
+    made.info.update({k: sky.info[k] for k in ("shape_mix", "sky_level")})
+    return made
+
+
 def fitted_sky_level(fits, doc, log=print):
     """The sky fit's record (``fit --sky fit`` or ``prior``: its level k, maybe changing over
     the day, :func:`~.sky_fit.sky_level_at`) by which the fits saw the target sequence ``doc``
@@ -292,7 +349,7 @@ def fitted_sky_level(fits, doc, log=print):
         level = levels.popitem()[1]
         log(f"the images take the fitted sky level: k = {level['k']:.3g} times the spec's sky "
             "against the sun" + (", changing over the day" if level.get("terms") else "")
-            + ("; its fitted shape is in the predictions, the images keep the spec's pattern"
+            + ("; and its fitted shape (the images' sky an environment map of it)"
                if level.get("shape") else ""))
         return level
     return None

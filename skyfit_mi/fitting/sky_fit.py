@@ -204,9 +204,11 @@ def _shape_record(session, mix, mix_sd):
                          "a CIE gradation or indicatrix one group on, a Perez clearness one bin "
                          "on or its brightness Delta one step, at the same horizontal "
                          "irradiance): mix 1 is the variant's index; index = from + mix "
-                         "(to - from), linear between the patterns, the frames' mean",
+                         "(to - from), linear between the patterns, the frames' mean; "
+                         "toward: the way each index moved (+1 up)",
               "variants": [f"{v['of']} {v['index']} {a:.4g} -> {b:.4g}"
                            for v, (a, b) in zip(first, mean)],
+              "toward": {v["of"]: 1 if v["to"] > v["from"] else -1 for v in first},
               "mix": np.asarray(mix).tolist(), "mix_sd": np.asarray(mix_sd).tolist(),
               "prior_sd": SHAPE_SD, "index": index(mean)}
     if np.ptp(ends, axis=0).any():

@@ -27,7 +27,7 @@ from . import cie_general
 from .colour import SRGB_LUMINANCE, cct_to_rgb
 from ..conventions import angles_from_direction, direction_from_angles
 from ..errors import SkyfitError, check_choice, check_range
-from .envmap import latlong_radiance
+from .envmap import MAX_ROWS, latlong_radiance, resample
 from .sun import SUN_SOLID_ANGLE, direct_normal_irradiance, sun_rgb
 
 #: Luminous efficacy of clear-sky light [lm W^-1] (thesis 4.2.2).
@@ -46,6 +46,8 @@ PEREZ_HORIZON_COS = 0.01
 KITTLER_MIN_ZENITH_DEG = 10.0
 
 _PATTERNS = ("clear", "overcast", "uniform", "intermediate", "perez")
+#: Sub-samples per cell side of the environment map of a fitted sky shape (:meth:`Sky.shaped`).
+SHAPED_SUPERSAMPLE = 2
 
 # What a fit may assume of a spec's light against the real one (skyfit_mi/fitting/sky_fit.py)
 #: The prior's standard deviation of log k, the sky's level against the sun's about the spec's
@@ -479,6 +481,28 @@ class Sky:
         return replace(self, **{p: getattr(self, p) * k for p in _PATTERNS},
                        envmap=None if self.envmap is None else self.envmap * np.float32(k),
                        ground=sun.ground + sky.ground * k)
+
+    def shaped(self, k, mix, variants, rows=MAX_ROWS, supersample=SHAPED_SUPERSAMPLE):
+        """A copy lit as a fit of the sky's level and shape saw it (``fit --sky-shape``): the
+        sun's light (:meth:`split`) as this one's, the rest ``k`` times (1 - sum(mix)) this
+        sky's own plus ``mix[j]`` times ``variants[j]`` (:meth:`shape_variants`' skies).  The
+        variants' patterns have Perez coefficients of their own, which one Sky cannot hold
+        beside this one's, so the rest becomes an environment map: a lat-long table of
+        ``rows`` rows (:mod:`~skyfit_mi.physics.envmap`), each cell the mean over
+        ``supersample`` x ``supersample`` directions, the ground below the horizon included
+        (its ``ground`` term 0): an ``envmap`` record's sky with the sun's direct normal
+        irradiance and no albedo of its own (:func:`~skyfit_mi.physics.envmap.envmap_sky`)."""
+        mix = np.asarray(mix, dtype=float)
+        sun, rest = self.split()
+        parts = [(1.0, sun), (k * (1.0 - mix.sum()), rest)] + [(k * m, v)
+                                                               for m, v in zip(mix, variants)]
+
+        def lookup(theta, phi):
+            d = direction_from_angles(theta, phi)
+            return sum(w * p.sky_radiance(d) for w, p in parts if w != 0.0)
+        table = np.clip(resample(lookup, int(rows), supersample=supersample), 0.0, None)
+        return replace(sun, envmap=table, ground=np.zeros(3),
+                       info={**self.info, "shape_mix": mix.tolist(), "sky_level": float(k)})
 
     def scaled_to_illuminance(self, diffuse_horizontal_lux, efficacy):
         """A copy scaled to a measured horizontal diffuse illuminance [lx].
