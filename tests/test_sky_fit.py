@@ -467,8 +467,8 @@ def test_relit_images_take_the_fitted_skys_shape(shape_fit, gradation_4, tmp_pat
     map of the day's pattern mixed with its variants at level k (sky_maps/, named by the relit
     manifest's envmap record, which reads back as the sky rendered), whose horizontal
     irradiance is the mix's.  Its region means are the fit's own prediction (the light
-    tables of the fitted shape, ``--no-images``) within 1%, closer than the day's pattern at
-    the same level renders them."""
+    tables of the fitted shape, ``--no-images``) within 1%, and closer than to its
+    prediction under the day's pattern at the same level."""
     import csv
 
     from skyfit_mi.files import write_json
@@ -481,10 +481,10 @@ def test_relit_images_take_the_fitted_skys_shape(shape_fit, gradation_4, tmp_pat
         fits = tmp_path / f"fits_{name}"
         write_json(fits / "fit_disc.json", {**shape_fit, "sky": {**shape_fit["sky"],
                                                                  "shape": record}})
-        relight(load_fits([fits]), gradation_4, tmp_path / name, log=lambda *a: None,
-                progress=False)
-    relight(load_fits([tmp_path / "fits_shaped"]), gradation_4, tmp_path / "predicted",
-            images=False, log=lambda *a: None, progress=False)
+        relight(load_fits([fits]), gradation_4, tmp_path / f"predicted_{name}", images=False,
+                log=lambda *a: None, progress=False)
+    relight(load_fits([tmp_path / "fits_shaped"]), gradation_4, tmp_path / "shaped",
+            log=lambda *a: None, progress=False)
     doc, root = load_manifest(tmp_path / "shaped")
     day_doc, day_root = load_manifest(gradation_4)
     k, mix = shape_fit["sky"]["k"], shape["mix"]
@@ -498,13 +498,14 @@ def test_relit_images_take_the_fitted_skys_shape(shape_fit, gradation_4, tmp_pat
                     + sum(m * v.sky_horizontal_irradiance() for m, v in zip(mix, variants)))
         assert np.allclose(sky.sky_horizontal_irradiance(), want, rtol=2e-3), f["index"]
         assert np.allclose(sky.sun_radiance, day_sky.sun_radiance, rtol=1e-6)
-    rows = list(csv.DictReader((tmp_path / "predicted" / "prediction.csv").open()))
-    frames = sorted({int(r["frame"]) for r in rows})
-    predicted = np.array([[float(r["predicted [W m^-2 sr^-1]"]) for r in rows
-                           if int(r["frame"]) == i] for i in frames])          # (T, 3)
-    px = np.asarray(shape_fit["pixels"])
-    miss = {n: float(np.sqrt(np.mean((frame_values(tmp_path / n, px, frames).mean(axis=0)
-                                      / predicted - 1) ** 2))) for n in ("shaped", "pattern")}
+    miss = {}
+    for name in ("shaped", "pattern"):
+        rows = list(csv.DictReader((tmp_path / f"predicted_{name}" / "prediction.csv").open()))
+        frames = sorted({int(r["frame"]) for r in rows})
+        predicted = np.array([[float(r["predicted [W m^-2 sr^-1]"]) for r in rows
+                               if int(r["frame"]) == i] for i in frames])          # (T, 3)
+        relit = frame_values(tmp_path / "shaped", np.asarray(shape_fit["pixels"]), frames)
+        miss[name] = float(np.sqrt(np.mean((relit.mean(axis=0) / predicted - 1) ** 2)))
     assert miss["shaped"] < 0.01 and miss["shaped"] < miss["pattern"], miss
 
 
