@@ -193,3 +193,19 @@ def test_a_raws_colour_matrix_error_is_measured_on_the_chart_and_corrected(chart
     record = doc["ingest"]["colour_matrix"]
     assert record["source"].startswith("measured on the ColorChecker")
     assert record["relative_sd"] < RAW_MATRIX_ERROR / 2
+
+
+def test_a_chart_whose_channels_are_mixed_still_matches_and_a_shuffled_one_does_not():
+    """A camera whose colour matrix errs mixes its channels: the reference mixed by I plus 0.15
+    off the diagonal (a white-preserving mixing, rows summing to 1) misses the per-channel
+    match (above MATCH_MAX) but matches once mixed, to rounding; the swatches shuffled match
+    neither way."""
+    from skyfit_mi.pipeline.colorchecker import MATCH_MAX, _match, reference_rgb
+
+    ref = reference_rgb()
+    g = np.array([[0.0, 0.15, -0.15], [-0.15, 0.0, 0.15], [0.15, -0.15, 0.0]])
+    sampled = ref @ (np.eye(3) + g).T * np.array([2.0, 1.5, 1.2])
+    assert _match(sampled, ref) > MATCH_MAX
+    assert _match(sampled, ref, mixing=True) < 1e-6
+    shuffled = sampled[np.random.default_rng(0).permutation(len(sampled))]
+    assert min(_match(shuffled, ref), _match(shuffled, ref, mixing=True)) > MATCH_MAX

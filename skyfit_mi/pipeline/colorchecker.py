@@ -52,6 +52,9 @@ ASPECT_RANGE = (1.0, 3.0)
 #: Rms log ratio of the sampled swatches to the reference (scale per channel free) above which
 #: a detection is not accepted as the chart [unitless, ~ relative].
 MATCH_MAX = 0.35
+#: Swatches measured in every channel that the match's mixing (:func:`_match`) needs at least:
+#: four times its nine coefficients' worth of values.
+MIN_MIXING_SWATCHES = 12
 #: Reference reflectances below this are left out of the match (the cyan swatch lies outside
 #: sRGB: its red is negative).
 _MATCH_FLOOR = 0.01
@@ -116,8 +119,17 @@ def _sample(image, h):
     return out, n
 
 
-def _match(sampled, reference):
-    """Rms log ratio of sampled to reference swatches, one scale per channel free."""
+def _match(sampled, reference, mixing=False):
+    """Rms log ratio of sampled to reference swatches, one scale per channel free; with
+    ``mixing`` the reference first mixed by the 3x3 matrix that best turns it into the sampled
+    colours (least squares over the swatches measured in every channel): a camera whose
+    colour matrix errs mixes its channels (:func:`matrix_error`), which a scale per channel
+    cannot follow on the saturated swatches."""
+    if mixing:
+        rows = np.all((reference > _MATCH_FLOOR) & np.isfinite(sampled), axis=1)
+        if rows.sum() >= MIN_MIXING_SWATCHES:
+            m, *_ = np.linalg.lstsq(reference[rows], sampled[rows], rcond=None)
+            reference = reference @ m
     ok = (reference > _MATCH_FLOOR) & (sampled > 0) & np.isfinite(sampled)
     if ok.sum() < 30:
         return np.inf
@@ -226,9 +238,17 @@ def find_chart(images, log=print):
                           "scene material with --calibrate.")
     match, h = best
     if match > MATCH_MAX:
-        raise SkyfitError(f"the chart-like object found matches a ColorChecker's colours only "
-                          f"to {match:.0%} rms (at most {MATCH_MAX:.0%} accepted); is it a "
-                          "ColorChecker Classic, fully visible and lit?")
+        # a camera's colours mixed (its colour matrix off, a JPEG's rendering): judged once
+        # the reference is mixed as they are; ingest's --colorchecker measures the mixing
+        mixed = _match(_sample(image, h)[0], reference, mixing=True)
+        if mixed > MATCH_MAX:
+            raise SkyfitError(f"the chart-like object found matches a ColorChecker's colours "
+                              f"only to {match:.0%} rms ({mixed:.0%} with the channels mixed; "
+                              f"at most {MATCH_MAX:.0%} accepted); is it a ColorChecker "
+                              "Classic, fully visible and lit?")
+        log(f"the chart's colours match the reference to {match:.0%} rms with a scale per "
+            f"channel, {mixed:.1%} with the channels mixed: the camera's colours are mixed")
+        match = mixed
     labels = swatch_labels(h, shape)
     n = np.bincount(labels.ravel(), minlength=COLUMNS * ROWS + 1)[1:]
     few = [NAMES[k] for k in NEUTRAL if n[k] < MIN_SWATCH_PIXELS]
