@@ -1132,8 +1132,9 @@ class FitSession:
                               "beyond its noise and the prediction's spread: predictions "
                               "(relight) add this kappa x the value")
         elif not held["values"]:
-            out["meaning"] = ("not tested: without any fold's frames the parameters leave "
-                              "their 95% intervals; predictions take the in-sample kappa")
+            out["meaning"] = ("not tested: every fold either moved the parameters out of "
+                              "their 95% intervals or held too few values (folds_outside, "
+                              "folds_too_small); predictions take the in-sample kappa")
         else:
             out["meaning"] = ("held-out frames are predicted within their noise and the "
                               "prediction's spread" + (" and the in-sample model error"

@@ -18,6 +18,7 @@ import numpy as np
 from ..render.basis_table import TableModel
 from ..render.fit_model import PARAMETERS, bounds
 from . import uncertainty as unc
+from ..errors import SkyfitError
 from .chi2 import LuminanceModel, Problem
 from .methods.global_search import global_search
 from .methods.levenberg_marquardt import levenberg_marquardt
@@ -38,15 +39,14 @@ def _fit(problem, grid_basis):
     return np.asarray(res["theta"], dtype=float), float(res["chi2"])
 
 
-def _folds(problem, folds=FOLDS):
-    """(fit on, held out) :class:`~.chi2.Problem` s of ``problem``'s K interleaved folds of
-    frames (frame t in fold t mod K, K = min(``folds``, frames))."""
-    T = problem.valid.shape[1]
+def _folds(valid, folds=FOLDS):
+    """(fit on, held out) masks of values ``valid`` (P, T) in K interleaved folds of frames
+    (frame t in fold t mod K, K = min(``folds``, frames))."""
+    T = valid.shape[1]
     k = min(int(folds), T)
     for f in range(k):
         test = (np.arange(T) % k) == f
-        yield (Problem(problem.obs, problem.model, valid=problem.valid & ~test[None, :]),
-               Problem(problem.obs, problem.model, valid=problem.valid & test[None, :]))
+        yield valid & ~test[None, :], valid & test[None, :]
 
 
 def cross_validate(session, model, folds=FOLDS):
@@ -59,7 +59,8 @@ def cross_validate(session, model, folds=FOLDS):
     grid_basis = session.grid_bases()[0]          # the table's lobes: the same for any model
     full = Problem(obs, wm, valid=table.hit)
     held_out, n_held = 0.0, 0
-    for train, test in _folds(full, folds):
+    for train, test in _folds(full.valid, folds):
+        train, test = Problem(obs, wm, valid=train), Problem(obs, wm, valid=test)
         r = test.residuals(_fit(train, grid_basis)[0])
         held_out += float(r @ r)
         n_held += r.size
@@ -101,17 +102,24 @@ def held_out_error(problem, theta, lower, upper, folds=FOLDS, within=None, frame
     frames the parameters depend on (a glossy paint's one highlight frame: its own lobe,
     fitted without it, missed it by 2.4x); its misses tell how the day was sampled, which the
     linearised spread cannot follow, not the model's error, and it is left out
-    (``folds_outside``).
+    (``folds_outside``); so is a fold with fewer values than parameters to fit on or to hold
+    out (``folds_too_small``).
 
     Returns {kappa, interval95 (only where kappa was fitted), chi2_per_value, p, values,
-    folds, folds_outside, level, wall_time_s}; None with fewer than HELD_OUT_FRAMES frames."""
+    folds, folds_outside, folds_too_small, level, wall_time_s}; None with fewer than HELD_OUT_FRAMES frames."""
     if problem.valid.shape[1] < HELD_OUT_FRAMES:
         return None
     t0 = time.perf_counter()
     means = problem.obs.rays is None
     es, vs, scales = [], [], []
-    outside = 0
-    for train, test in _folds(problem, folds):
+    outside = small = 0
+    for train, test in _folds(problem.valid, folds):
+        try:
+            train = Problem(problem.obs, problem.model, valid=train)
+            test = Problem(problem.obs, problem.model, valid=test)
+        except SkyfitError:             # too few values to fit on, or to hold out
+            small += 1
+            continue
         th = np.asarray(levenberg_marquardt(train, theta, lower, upper)["theta"], dtype=float)
         if within is not None and not within(th):
             outside += 1
@@ -138,7 +146,7 @@ def held_out_error(problem, theta, lower, upper, folds=FOLDS, within=None, frame
         scales.append(a[use])
         vs.append(v[use] + np.einsum("ij,jk,ik->i", D[use], cov, D[use]))
     out = {"kappa": 0.0, "values": 0, "folds": min(int(folds), problem.valid.shape[1]),
-           "folds_outside": outside,
+           "folds_outside": outside, "folds_too_small": small,
            "level": "region mean per frame and channel" if means else "value"}
     if es:
         e, v, a = (np.concatenate(x) for x in (es, vs, scales))
