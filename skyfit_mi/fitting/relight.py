@@ -298,12 +298,11 @@ def light_as_fitted(spec, level, target, out, log=print):
         k = sky_level_at(level, [f.time.isoformat()])[0] if f.time else level["k"]
         variants = []
         if shape is not None:
-            try:
+            try:          # none for a sky black above the horizon (the sun down): nothing to mix
                 variants = [v for _, v in f.sky.shape_variants(toward=shape.get("toward"))]
             except SkyfitError:
-                pass
-            if len(variants) != len(shape["mix"]):
                 kept.append(frame_label(f.index, f.time))
+            if len(variants) != len(shape["mix"]):
                 variants = []
         f.sky = _sky_map(f, f.sky.shaped(k, shape["mix"], variants), out) if variants \
             else f.sky.sky_scaled(k)
