@@ -618,3 +618,26 @@ def test_sky_shape_refuses_a_sky_it_cannot_move_in_one_line(days, tmp_path, caps
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "neither (type clear, cie_general or perez)" in err, err
     assert not list(day.glob("fit_*"))
+
+
+def test_a_hand_edited_sky_record_is_refused_in_one_line(tmp_path):
+    """relight and chi2map read a fit's sky record (level, curve, shape): one not as `fit`
+    writes it is refused naming what it must be; `fit`'s own passes."""
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.pipeline.fit_result import read_fit_result
+
+    fit = {"region": "disc", "model": "two", "parameters": {"rho_s": 0.1, "sigma_alpha": 0.1},
+           "intervals": {"rho_s": {"95": [0.0, 0.2]}, "sigma_alpha": {"95": [0.0, 0.2]}}}
+    good = {"k": 1.2, "terms": {"coefficients": [0.1, 0.2], "span_s": [0.0, 3600.0]},
+            "shape": {"mix": [0.3, -0.1], "toward": {"gradation": 1, "indicatrix": -1}}}
+    path = tmp_path / "fit_disc.json"
+    bad = [{"k": 0.0}, {"k": "1"}, {**good, "terms": {"coefficients": []}},
+           {**good, "terms": {"coefficients": [0.1], "span_s": [0.0]}},
+           {**good, "shape": {"mix": [float("nan")]}},
+           {**good, "shape": {"mix": [0.1], "toward": {"gradation": 2}}}, []]
+    for sky in bad:
+        path.write_text(json.dumps({**fit, "sky": sky}))
+        with pytest.raises(SkyfitError, match=r"sky must be \{\"k\": a finite number > 0"):
+            read_fit_result(path)
+    path.write_text(json.dumps({**fit, "sky": good}))
+    assert read_fit_result(path)["sky"]["shape"]["toward"]["indicatrix"] == -1

@@ -59,11 +59,38 @@ def read_fit_result(path):
         raise SkyfitError(f"{path}: model_error must be {{\"kappa\": a finite number >= 0, "
                           "\"held_out\": {\"kappa\": the same, ...}, ...}; give a "
                           "fit_NAME.json that `skyfit fit` wrote.")
+    if r.get("sky") is not None and not _is_sky(r["sky"]):
+        raise SkyfitError(f"{path}: sky must be {{\"k\": a finite number > 0, \"terms\": null or "
+                          "{\"coefficients\": [numbers], \"span_s\": [start, end]}, \"shape\": "
+                          "null or {\"mix\": [numbers], \"toward\": {index: 1 or -1}}, ...}; give "
+                          "a fit_NAME.json that `skyfit fit` wrote.")
     cov = r.get("covariance")
     if cov is not None and not _is_covariance(cov):
         raise SkyfitError(f"{path}: covariance must be {{\"names\": [{', '.join(names)}], "
                           "\"matrix\": a square list of lists of numbers, one row each}.")
     return r
+
+
+def _numbers(v, n=None):
+    """Whether ``v`` is a list of finite numbers (``n`` of them, if given)."""
+    return isinstance(v, list) and (n is None or len(v) == n) and all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in v)
+
+
+def _is_sky(sky):
+    """Whether ``sky`` is a sky fit's record as relight and chi2map read it: its level k, its
+    curve over the day (``terms``) and its shape (``shape``: the variants' mix and the way
+    each index moved)."""
+    if not (isinstance(sky, dict) and _numbers([sky.get("k")]) and sky["k"] > 0):
+        return False
+    terms, shape = sky.get("terms"), sky.get("shape")
+    if terms is not None and not (isinstance(terms, dict) and _numbers(terms.get("coefficients"))
+                                  and terms["coefficients"] and _numbers(terms.get("span_s"), 2)):
+        return False
+    return shape is None or (isinstance(shape, dict) and _numbers(shape.get("mix"))
+                             and isinstance(shape.get("toward", {}), dict)
+                             and all(v in (1, -1) and not isinstance(v, bool)
+                                     for v in shape.get("toward", {}).values()))
 
 
 def _is_kappa(record):
