@@ -280,14 +280,13 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
 def light_as_fitted(spec, level, target, out, log=print):
     """Light each frame of ``spec`` (of the fitted sequence ``target``) as the sky fit
     ``level`` saw it: the frame's sky as the target's manifest records it (the fit's light:
-    the spec's, unless the sequence was lit otherwise), k times against the sun (k by the
-    frame's time,
-    :func:`~.sky_fit.sky_level_at`), and with a fitted shape the spec's pattern mixed with its
-    shape variants, moved the way the fit moved them (:meth:`~skyfit_mi.physics.sky.Sky.shaped`):
-    an environment map, written to ``out``/SKY_MAPS as EXR, which the relit manifest's
-    ``envmap`` record names, with the sun's direct normal irradiance.  A frame whose sky
-    cannot move that way (one the fit did not see) keeps the spec's pattern at level k, and
-    the log says so."""
+    the spec's, unless the sequence was lit otherwise), its sky k times against the sun (k
+    at the frame's time, :func:`~.sky_fit.sky_level_at`), and with a fitted shape its
+    pattern mixed with its shape variants, moved the way the fit moved them
+    (:meth:`~skyfit_mi.physics.sky.Sky.shaped`): an environment map, written to
+    ``out``/SKY_MAPS as EXR, which the relit manifest's ``envmap`` record names, with the
+    sun's direct normal irradiance.  A frame whose sky cannot move that way (one the fit did
+    not see) keeps its pattern at level k, and the log says so."""
     doc, root = load_manifest(target)
     seen = {g["index"]: g for g in doc["frames"] if "illumination" in g}
     shape = level.get("shape")

@@ -85,23 +85,24 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
                    frame_sd=None):
     """How well a fit at ``theta`` predicts frames it was not fitted to: each of ``folds``
     interleaved folds of ``problem``'s frames (each frame alone where there are no more)
-    predicted from the others' minimum nearest the
-    fit (Levenberg-Marquardt from ``theta`` within ``lower``/``upper``: a fifth of the time
-    of a global search, and the same minimum on the days measured).
+    predicted from the others' minimum nearest the fit (Levenberg-Marquardt from ``theta``
+    within ``lower``/``upper``: a fifth of the time of a global search, and the same minimum
+    on the days measured).
 
     What is predicted is what relight predicts: an image region's mean per frame and channel
     (its pixels see the light alike, so a highlight the model misses it misses in all of
     them), a table's every value.  Each held-out residual e [DN] has the variance of its
-    noise (with the model's Monte Carlo error; a mean's, of its values' taken as
-    independent, and an error every value of a frame and channel shares, ``frame_sd`` (3,)
-    relative: a photographed frame's calibration) plus that of the prediction, D C D^T from the parameters' spread C on the
-    other folds (linearised; D the prediction's derivatives).  The excess beyond these is
-    the model's error on light it did not see: kappa by maximum likelihood
-    (:func:`~.uncertainty.model_error`, no parameters fitted to these values), where the
-    held-out chi-square exceeds them beyond chance (p < MISFIT_P).  A model error fitted
-    in-sample sees only the fitted frames' residuals, which the parameters bend to: Ward's
-    lobe on a rough gold conductor passed through the highlights it was fitted on at chi2/dof
-    1.23 and missed the ones between them by 36-64% (BENCHMARKS, "Model error").
+    noise (with the model's Monte Carlo error; a mean's from its values' taken as
+    independent, plus an error that every value of a frame and channel shares, ``frame_sd``
+    (3,) relative: a photographed frame's calibration) plus that of the prediction, D C D^T
+    from the parameters' spread C on the other folds (linearised; D the prediction's
+    derivatives).  The excess beyond these is the model's error on light it did not see:
+    kappa by maximum likelihood (:func:`~.uncertainty.model_error`, no parameters fitted to
+    these values), where the held-out chi-square exceeds them beyond chance (p < MISFIT_P).
+    A model error fitted in-sample sees only the fitted frames' residuals, which the
+    parameters bend to: Ward's lobe on a rough gold conductor passed through the highlights
+    it was fitted on at chi2/dof 1.23 and missed the ones between them by 36-64%
+    (BENCHMARKS, "Real surfaces").
 
     A fold whose parameters leave the fit's 95% intervals (``within`` (theta) False) lost
     frames the parameters depend on (a glossy paint's one highlight frame: its own lobe,
@@ -111,7 +112,8 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
     out (``folds_too_small``).
 
     Returns {kappa, interval95 (only where kappa was fitted), chi2_per_value, p, values,
-    folds, folds_outside, folds_too_small, level, wall_time_s}; None with fewer than HELD_OUT_FRAMES frames."""
+    folds, folds_outside, folds_too_small, level, wall_time_s}; None with fewer than
+    HELD_OUT_FRAMES frames."""
     if problem.valid.shape[1] < HELD_OUT_FRAMES:
         return None
     t0 = time.perf_counter()

@@ -491,7 +491,8 @@ class Sky:
         ``rows`` rows (:mod:`~skyfit_mi.physics.envmap`), each cell the mean over
         ``supersample`` x ``supersample`` directions, the ground below the horizon included
         (its ``ground`` term 0): an ``envmap`` record's sky with the sun's direct normal
-        irradiance and no albedo of its own (:func:`~skyfit_mi.physics.envmap.envmap_sky`)."""
+        irradiance and no albedo of its own (:func:`~skyfit_mi.physics.envmap.envmap_sky`).
+        Radiances linear sRGB [W m^-2 sr^-1]; ``k`` and ``mix`` unitless."""
         mix = np.asarray(mix, dtype=float)
         sun, rest = self.split()
         parts = [(1.0, sun), (k * (1.0 - mix.sum()), rest)] + [(k * m, v)
