@@ -243,3 +243,34 @@ def test_a_fisheye_hdr_of_the_measured_sky_with_a_clipped_sun_lights_a_spec_as_t
     raw["sky"]["direct_normal_W_m2"] = 500.0
     with pytest.raises(SpecError, match="not both"):
         validate_spec(raw, tmp_path)
+
+
+def test_a_fitted_sky_level_on_a_measured_day_is_in_the_relit_manifest(scans, tmp_path, mi):
+    """Relit with a sky fit's level k, a day lit by measured maps takes k times the map's sky
+    and sky-lit ground (the sun and the sun-lit ground as they were), as a map of its own in
+    sky_maps/ whose envmap record reads back as that sky; before, the record named the
+    original map file, unscaled."""
+    from measured_light import measured_disc_day
+
+    from skyfit_mi.fitting.relight import light_as_fitted, target_spec
+    from skyfit_mi.pipeline.manifest import frame_sky, illumination_record, load_manifest
+
+    day = measured_disc_day(tmp_path, [scans[i] for i in (0, 7)], size=4, spp=4, rows=16)
+    spec, doc = target_spec(day, {})
+    k = 1.3
+    light_as_fitted(spec, {"k": k}, day, tmp_path / "relit", log=lambda *a: None)
+    _, root = load_manifest(day)
+    d = np.random.default_rng(1).normal(size=(4000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    for f, g in zip(spec.frames, doc["frames"]):
+        rec = illumination_record(f.sky, tmp_path / "relit")
+        assert rec["kind"] == "envmap" and rec["file"].startswith("sky_maps/"), rec
+        again = frame_sky({**g, "illumination": rec}, tmp_path / "relit")
+        sun, rest = frame_sky(g, root).split()
+        want = sun.sky_radiance(d) + k * rest.sky_radiance(d)
+        up = d[:, 2] > 0.05
+        np.testing.assert_allclose(again.sky_radiance(d)[up], want[up], rtol=0.05)
+        np.testing.assert_allclose(again.sky_horizontal_irradiance(),
+                                   sun.sky_horizontal_irradiance()
+                                   + k * rest.sky_horizontal_irradiance(), rtol=5e-3)
+        np.testing.assert_allclose(again.sun_radiance, sun.sun_radiance, rtol=1e-6)

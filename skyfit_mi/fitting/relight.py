@@ -285,8 +285,9 @@ def light_as_fitted(spec, level, target, out, log=print):
     pattern mixed with its shape variants, moved the way the fit moved them
     (:meth:`~skyfit_mi.physics.sky.Sky.shaped`): an environment map, written to
     ``out``/SKY_MAPS as EXR, which the relit manifest's ``envmap`` record names, with the
-    sun's direct normal irradiance.  A frame whose sky cannot move that way (one the fit did
-    not see) keeps its pattern at level k, and the log says so."""
+    sun's direct normal irradiance; so is a frame lit by a map (a measured sky), whose
+    record would otherwise name its own file, unscaled.  A frame whose sky cannot move the
+    fit's way (one the fit did not see) keeps its pattern at level k, and the log says so."""
     doc, root = load_manifest(target)
     seen = {g["index"]: g for g in doc["frames"] if "illumination" in g}
     shape = level.get("shape")
@@ -303,8 +304,13 @@ def light_as_fitted(spec, level, target, out, log=print):
                 kept.append(frame_label(f.index, f.time))
             if len(variants) != len(shape["mix"]):
                 variants = []
-        f.sky = _sky_map(f, f.sky.shaped(k, shape["mix"], variants), out) if variants \
-            else f.sky.sky_scaled(k)
+        if variants or f.sky.envmap is not None:
+            # a mix that no one Sky holds, or a map the manifest names by its file (which k
+            # does not scale): a map of its own
+            f.sky = _sky_map(f, f.sky.shaped(k, shape["mix"] if variants else [], variants),
+                             out)
+        else:
+            f.sky = f.sky.sky_scaled(k)
     if kept:
         log(f"{', '.join(kept)}: the spec's sky cannot take the fitted shape's moves there; "
             "the spec's pattern at the fitted level")
