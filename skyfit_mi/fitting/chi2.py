@@ -443,6 +443,12 @@ class Problem:
         """Boolean masks of the values clipped at the lowest and at the highest code."""
         return self.mask & (self.obs.y <= 0), self.mask & (self.obs.y >= self.obs.sensor.max_code)
 
+    def measured(self):
+        """Boolean mask of the usable values that are not clipped: those that tell a
+        residual (a clipped one tells only a bound)."""
+        low, high = self.clipped()
+        return self.mask & ~low & ~high
+
     def residual_terms(self, radiance):
         """Residuals of every value (P, T, 3) and their derivative d r / d(model value).
 
@@ -504,8 +510,7 @@ class Problem:
         values (clipped ones tell no residual); each value's noise variance includes the
         model's own Monte Carlo variance, which is not the model's error."""
         L, var = self.model.radiance_and_variance(theta)
-        low, high = self.clipped()
-        use = self.mask & ~low & ~high
+        use = self.measured()
         return unc.model_error((self.obs.y - self.predict(L))[use],
                                (self.obs.sigma ** 2 + self.slope(L) ** 2 * var)[use],
                                self.value_scale(theta)[use], self.dof)

@@ -594,19 +594,17 @@ class FitSession:
         s2 = unc.scale(chi2, noise_chi2[0])
         curv_inv = unc.covariance(J)
         # errors shared by a value's channels widen each parameter's variance by f2
-        low, high = problem.clipped()
-        f2, channels = unc.channel_factors(r_all, J_all, problem.mask & ~low & ~high,
-                                           problem.mask)
+        measured = problem.measured()
+        f2, channels = unc.channel_factors(r_all, J_all, measured, problem.mask)
         # the global minimum: its grid gives the profiles; a local method is judged against it
         g = res if method == "global" else global_search(problem, start, self.lower, self.upper,
                                                         candidates=2, grid_basis=grid_basis)
         fit = FitState(method, theta, chi2, s2, curv_inv, f2, channels,
                        curv_inv * s2 * np.sqrt(np.outer(f2, f2)), res, g, noise, noise_chi2,
                        problem, merr, rounds, misfit)
-        fit.jpeg_shared_sd = self._jpeg_shared_sd(J_all, problem.mask & ~low & ~high,
-                                                  problem.obs.sigma, curv_inv)
-        fit.calibration_sd = self._calibration_sd(J_all, problem, theta, curv_inv)
-        fit.matrix_sd = self._matrix_sd(J_all, problem, theta, curv_inv)
+        fit.jpeg_shared_sd = self._jpeg_shared_sd(J_all, measured, problem.obs.sigma, curv_inv)
+        fit.calibration_sd = self._calibration_sd(J_all, problem, measured, theta, curv_inv)
+        fit.matrix_sd = self._matrix_sd(J_all, problem, measured, theta, curv_inv)
         self._intervals(fit)
         iv95 = np.array([fit.intervals[p]["95"] for p in self.names])
         fit.held_out = held_out_error(
@@ -741,7 +739,7 @@ class FitSession:
         fit.cache_sd = mc_sd
         fit.sun_level_sd = sun_rel * np.abs(theta)
 
-    def _calibration_sd(self, J, problem, theta, curvature_inverse):
+    def _calibration_sd(self, J, problem, usable, theta, curvature_inverse):
         """Each parameter's standard error (n,) from a photographed sequence's calibration on
         patches of known reflectance (ingest's ``calibration`` record): each frame's exposure
         errs per channel by ``frame_relative_sd`` where the frames take their own
@@ -757,8 +755,6 @@ class FitSession:
         cal = (self.doc.get("ingest") or {}).get("calibration") or {}
         if self.obs.rays is not None or not cal.get("scale_relative_sd"):
             return unc.calibration_sd(self.doc, self.names, theta)
-        low, high = problem.clipped()
-        usable = problem.mask & ~low & ~high
         Js = J * problem.value_scale(theta)[..., None]          # per relative error of a value
         sigma = problem.obs.sigma
         if cal.get("per_frame"):
@@ -777,7 +773,7 @@ class FitSession:
         cal = (self.doc.get("ingest") or {}).get("calibration") or {}
         return cal["frame_relative_sd"] if cal.get("per_frame") else None
 
-    def _matrix_sd(self, J, problem, theta, curvature_inverse):
+    def _matrix_sd(self, J, problem, usable, theta, curvature_inverse):
         """Each parameter's standard error (n,) from the camera's colour matrix (ingest's
         ``colour_matrix`` record: each entry of its error E, in linear sRGB, relative_sd): a
         developed value of channel c reads L_c + sum_j E_cj L_j, whose grey-card calibration
@@ -790,8 +786,6 @@ class FitSession:
         n = len(self.names)
         if self.obs.rays is not None or not rel:
             return np.zeros(n)
-        low, high = problem.clipped()
-        usable = problem.mask & ~low & ~high
         L = problem.model.radiance(theta)
         value = problem.value_scale(theta)
         P, T, C, _ = J.shape

@@ -134,8 +134,7 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
         cov = unc.covariance(train.jacobian(th)[1])
         L, model_var = test.model.radiance_and_variance(th)
         _, J = test.jacobian(th, full=True)               # d r / d theta, r in sigma units
-        low, high = test.clipped()
-        use = test.mask & ~low & ~high
+        use = test.measured()
         sigma = np.where(use, test.obs.sigma, 0.0)
         e = np.where(use, test.obs.y - test.predict(L), 0.0)
         v = np.where(use, sigma ** 2 + test.slope(L) ** 2 * model_var, 0.0)

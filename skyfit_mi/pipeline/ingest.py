@@ -52,9 +52,7 @@ from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_v
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import frame_times
 from .photos import RAW_COLOUR_REACH, SUFFIXES, check_same_size, read_photo
-from .raw_noise import REPLICATES as RAW_REPLICATES
-from .raw_noise import SEED as RAW_SEED
-from .raw_noise import SMOOTH as RAW_SMOOTH
+from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
 from .raw_noise import bootstrap, cfa_planes
 from .sequence import (FrameRenderer, finish, frame_record, manifest_header, prepare_folder,
                        write_frame)
@@ -781,23 +779,17 @@ def _jpeg_errors(values, jpeg, sensor, noise, shown, progress, patches=None):
     (:func:`_unbiased`).  The variance is kept as float16 (3 significant digits: 0.05% in
     sigma) and the bias not at all: a frame's own values take two bytes more a value, not
     eight."""
+    from tqdm import tqdm
+
     out = {}
     todo = [i for i, st in jpeg.items() if st is not None]
-    bar = None
-    if progress and todo:
-        from tqdm import tqdm
-        bar = tqdm(total=len(todo), desc="JPEG errors", unit="frame")
-    for i in todo:
+    for i in tqdm(todo, desc="JPEG errors", unit="frame", disable=not (progress and todo)):
         var, rho, bias = bootstrap_variance(values[i], jpeg[i], sensor, noise, [SEED, i])
         values[i] = _unbiased(values[i], bias, sensor.max_code)
         out[i] = {"variance": var.astype(np.float16), "rho": rho,
                   "bias_mean": np.nanmean(bias, axis=(0, 1)),
                   "bias_patches": None if patches is None else bias[patches].astype(np.float32),
                   "settings": jpeg[i], "shown": shown}
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
     return out
 
 
@@ -1135,17 +1127,10 @@ def _raw_noise(frames, values, planes, o, progress, log):
     info["units"] = "the photosites' raw DN above black"
     log(f"noise model of the RAWs' photosites: read {np.sqrt(a):.3g} raw DN rms, shot {b:.3g} "
         f"raw DN per DN ({info['source']})")
-    bar = None
-    if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=len(lit), desc="RAW noise", unit="frame")
-    draws = {}
-    for i in lit:
-        draws[i] = bootstrap(frames.paths[i], (a, b), [RAW_SEED, i], values[i])
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
+    from tqdm import tqdm
+
+    draws = {i: bootstrap(frames.paths[i], (a, b), [RAW_SEED, i], values[i])
+             for i in tqdm(lit, desc="RAW noise", unit="frame", disable=not progress)}
     info["raw"] = {
         "method": "parametric bootstrap: the frame's photosites smoothed (each CFA plane over "
                   f"{RAW_SMOOTH}x{RAW_SMOOTH} of its sites), given fresh read and shot noise "
