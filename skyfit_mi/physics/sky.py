@@ -378,6 +378,13 @@ class Sky:
         return bool(any(np.any(getattr(self, p) > 0) for p in _PATTERNS + ("ground",))
                     or self.envmap is not None)
 
+    @property
+    def ground_only(self):
+        """Whether the only light other than the sun's disc is the ground's (the sun's part of
+        :meth:`split`): no pattern, no map."""
+        return bool(not any(np.any(getattr(self, p) > 0) for p in _PATTERNS)
+                    and self.envmap is None and np.any(self.ground > 0))
+
     def split(self):
         """(the sun's light: its disc and the ground's share lit by it; the sky's: its patterns,
         its map and the ground's share lit by them): two skies whose light adds up to this

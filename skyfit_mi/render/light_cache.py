@@ -135,9 +135,10 @@ class SkyPlan:
         ``positions``' elsewhere: about n^2 times cheaper on smooth surfaces, with an error
         second order in the spacing; not where the anchors would outnumber the pixels
     wide_share : None, or a share of the positions: at every position, except the diffuse
-        integral and the nodes of roughness at least WIDE_SIGMA, at that share of each
-        pixel's positions where every pixel's footprint is small (WIDE_SPREAD_DEG), at least
-        one in each half of them, each half's mean given to its positions
+        integral and the nodes of roughness at least WIDE_SIGMA (every node where the sky
+        function is the ground's alone: the sun's part of a split light), at that share of
+        each pixel's positions where every pixel's footprint is small (WIDE_SPREAD_DEG), at
+        least one in each half of them, each half's mean given to its positions
     """
 
     name: str
@@ -554,7 +555,13 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     half = S // 2
     kw = 0 if plan.wide_share is None else max(1, int(S * float(plan.wide_share)) // 2)
     is_wide = chebyshev_nodes(*SIGMA_TABLE) >= WIDE_SIGMA
-    wide = k >= S and share is None and 1 <= kw < half and 0 < is_wide.sum() < len(is_wide)
+    if all(sky.ground_only for sky in skies):
+        # the sun's part of a split light (Sky.split): its sky function is the sun-lit ground
+        # alone, uniform below the horizon, which changes across a small footprint only for
+        # lobes that straddle the horizon: every node is taken as a wide one (a tilted
+        # plane's pixel means move 0.3% of the ground's share, tests/test_light_cache.py)
+        is_wide[:] = True
+    wide = k >= S and share is None and 1 <= kw < half and 0 < is_wide.sum()
     if wide:
         cols = np.concatenate([np.arange(kw), half + np.arange(kw)])
         wide_index = jit_array(mi.UInt32, (np.arange(P)[:, None] * S + cols[None, :]).ravel())
@@ -685,14 +692,17 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         for _ in pending:
             _add_sky(out, np.zeros((P, 3)), np.zeros((P, len(is_wide), 3)), P, S)
     elif wide:
+        narrow = integrate([p[1] for p, _ in pending], quads[1]) if not is_wide.all() else \
+            [(None, None)] * len(pending)
         for (d, v_wide), (_, v_narrow) in zip(integrate([p[0] for p, _ in pending], quads[0]),
-                                              integrate([p[1] for p, _ in pending], quads[1])):
+                                              narrow):
             # each half's mean over its k / 2 positions, given to the half's positions
             d, v_wide = (np.repeat(a.reshape(P, 2, kw, *a.shape[1:]).mean(axis=2),
                                    [half, S - half], axis=1) for a in (d, v_wide))
             values = np.empty((P, S, len(is_wide), 3))
             values[:, :, is_wide] = v_wide
-            values[:, :, ~is_wide] = v_narrow.reshape(P, S, -1, 3)
+            if v_narrow is not None:
+                values[:, :, ~is_wide] = v_narrow.reshape(P, S, -1, 3)
             _add_sky(out, d.reshape(P * S, 3),
                      chebyshev_coefficients(values, axis=2).reshape(P * S, len(is_wide), 3),
                      P, S)
