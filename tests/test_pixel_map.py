@@ -88,6 +88,8 @@ def test_determined_pixels_hold_their_samples_truth(board):
     print("coverage of determined pixels:", coverage, "medians checked:", medians)
     assert coverage >= 0.8 and medians >= 10
     assert (tmp / "map" / "C_r.exr").exists() and (tmp / "map" / "C_r.png").exists()
+    # a rendered day: the widths take in the cache's error, no calibration or colour matrix
+    assert len(summary["widths_include"]) == 1 and "Monte Carlo" in summary["widths_include"][0]
 
 
 def test_a_resumed_map_from_one_worker_equals_the_uninterrupted_map_of_two(board):

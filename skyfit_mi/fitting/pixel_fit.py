@@ -17,9 +17,10 @@ through each pixel's centre, interpolated between anchors where that is accurate
 ``anchors`` plan of :data:`~skyfit_mi.render.light_cache.SKY_PLANS`) and kept as its table
 (:func:`~skyfit_mi.render.basis_table.trace_table`, in blocks of bounded memory whatever the
 frames), and the cache's own Monte Carlo error is measured per pixel from its two halves
-(each fitted alike) and added to the intervals in quadrature, as is a photographed
+(each fitted alike) and added to the intervals in quadrature, as are a photographed
 sequence's calibration error
-(:func:`~skyfit_mi.fitting.uncertainty.calibration_sd`).
+(:func:`~skyfit_mi.fitting.uncertainty.calibration_sd`) and its camera's colour-matrix error
+(:func:`~skyfit_mi.fitting.uncertainty.colour_matrix_sd`).
 
 Intervals are the grid's profile: the 95% set {chi^2 <= chi^2_min + 3.84 s^2}, with
 s^2 = max(1, chi^2_min / dof) (a misfit widens them, as in region fits); sigma_alpha's and
@@ -39,7 +40,7 @@ from ..render.fit_model import PARAMETERS, WardModel, bounds, reflectances
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
                                     grid_chi2_device, linear_curvature, near_saturation)
-from .uncertainty import calibration_sd
+from .uncertainty import calibration_sd, colour_matrix_sd
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
 #: fit's, so that a chunk of pixels fits in memory (about 0.3 MB per pixel and frame set of 13).
@@ -147,7 +148,8 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     fit.update(pixels=np.asarray(first, dtype=int), names=list(names))
     sd = fit["cache_error_sd"]
     theta = fit["theta"]
-    spread = 1.959963984540054 * np.hypot(sd, calibration_sd(doc, names, theta))
+    spread = 1.959963984540054 * np.sqrt(sd ** 2 + calibration_sd(doc, names, theta) ** 2
+                                         + colour_matrix_sd(doc, names, theta) ** 2)
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)

@@ -313,7 +313,8 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
         finally:
             _close(client, cluster)
     summary = write_map_outputs(out, store, names, regions, settings)
-    summary.update(wall_time_s=time.perf_counter() - t0, chunks=len(chunks),
+    summary.update(widths_include=_widths_include(doc), wall_time_s=time.perf_counter() - t0,
+                   chunks=len(chunks),
                    chunks_this_run=len(pending), workers=n_workers,
                    scheduler=scheduler or "LocalCluster", memory_per_worker=memory_per_worker,
                    chunk_seeds="numpy SeedSequence([seed, chunk index])")
@@ -387,6 +388,21 @@ def write_map_outputs(out, store, names, regions, settings):
             "median_width95": {n: _stat(np.median, (hi[i] - lo[i])[ok])
                                for i, n in enumerate(names)}}
     return summary
+
+
+def _widths_include(doc):
+    """What the maps' 95% widths take in besides the data's noise (their grid's profile, a
+    misfit's scale): the map's light cache's error, and a photographed sequence's calibration
+    and camera colour matrix where its manifest ``doc`` records them."""
+    ingest = doc.get("ingest") or {}
+    out = ["the light cache's Monte Carlo error (from its two halves)"]
+    if (ingest.get("calibration") or {}).get("scale_relative_sd"):
+        out.append("the exposure calibration's error (ingest.calibration)")
+    rel = (ingest.get("colour_matrix") or {}).get("relative_sd")
+    if rel:
+        out.append(f"the camera colour matrix's error, {100 * rel:.3g}% per entry "
+                   "(ingest.colour_matrix), on C")
+    return out
 
 
 def _stat(f, v):

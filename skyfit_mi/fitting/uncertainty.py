@@ -153,6 +153,28 @@ def calibration_sd(doc, names, theta):
     return np.array([rel.get(p, 0.0) for p in names]) * np.abs(theta)
 
 
+def colour_matrix_sd(doc, names, theta):
+    """The standard error, per parameter of ``names`` at ``theta`` (n,) or (G, n), that the
+    camera's colour matrix gives a fit of a pixel on its own (a map's; a region's carries it
+    through its Jacobian, :meth:`~.fit.FitSession._matrix_sd`): each entry E_cj of the
+    matrix's error errs by ``ingest.colour_matrix.relative_sd`` of the manifest ``doc``, and
+    channel c, calibrated on a grey, reads L_c + sum_(j != c) E_cj (L_j - L_c).  With the
+    diffuse colour's ratios for L_j / L_c, C_c errs by relative_sd sqrt(sum_(j != c) (C_j -
+    C_c)^2): nothing on a grey, most on a saturated colour's weak channels (a white lobe
+    brings the channels together, so this bounds a glossy pixel's).  The other parameters
+    and the achromatic models: zeros, as without the record."""
+    theta = np.asarray(theta, dtype=float)
+    rel = ((doc.get("ingest") or {}).get("colour_matrix") or {}).get("relative_sd")
+    out = np.zeros(theta.shape)
+    if not rel or "C_r" not in names:
+        return out
+    i = [list(names).index(p) for p in ("C_r", "C_g", "C_b")]
+    C = theta[..., i]                                                    # (..., 3)
+    out[..., i] = float(rel) * np.sqrt(np.sum((C[..., None, :] - C[..., :, None]) ** 2,
+                                              axis=-1))
+    return out
+
+
 def shared_error_sd(J, usable, sigma, shared_sd, mixing, curvature_inverse):
     """The standard error per parameter (n,) from errors that every value of a region shares
     within one frame: a frame's JPEG rounds its blocks' means of Y, Cb and Cr alike over a
