@@ -127,3 +127,42 @@ def test_censored_term_moments_match_sampling():
         mean, var = censored_term_moments(a, b)
         assert mean == pytest.approx(t.mean(), abs=5 * t.std() / np.sqrt(t.size))
         assert var == pytest.approx(t.var(), rel=0.03)
+
+
+class _ByFrame(_Flat):
+    """Radiance ``levels[t]`` in frame t at every pixel and channel (no parameter used)."""
+
+    def __init__(self, levels, shape):
+        super().__init__(shape)
+        self.levels = np.asarray(levels, dtype=float)
+
+    def radiance(self, theta):
+        return np.broadcast_to(self.levels[None, :, None], self.shape).copy()
+
+
+def test_the_measured_range_runs_from_the_dimmest_mean_told_to_the_brightest_value_measured():
+    """Three frames at 2, 100 and 254 DN of 255 (1% noise, 16 pixels): the dim one's mean is
+    not told to 10% (standard error 32% of it), the bright one holds values clipped at the top
+    code, so the region means' range runs from the middle frame's level to the brightest
+    value below the top code; each value on its own (a table's points) alike.  relight's
+    beyond_data places a prediction against it."""
+    from skyfit_mi.fitting.relight import beyond_data
+
+    sensor = SensorModel(exposure=1.0, bits=8, noise_percent=1.0)
+    levels = np.array([2.0, 100.0, 254.0])
+    shape = (16, 3, 3)
+    rng = np.random.default_rng(2)
+    y = np.clip(np.rint(levels[None, :, None] + rng.normal(0, sensor.sigma, shape)), 0,
+                sensor.max_code)
+    assert (y[:, 2] >= sensor.max_code).any() and (y[:, 2] < sensor.max_code).any()
+    obs = Observations(np.zeros((16, 2), int), [0, 1, 2], ["a", "b", "c"], y,
+                       np.full(shape, sensor.sigma), np.ones(shape), sensor)
+    radiance = levels / sensor.max_code
+    problem = Problem(obs, _ByFrame(radiance, shape))
+    L = problem.model.radiance(None)
+    for means in (True, False):
+        ranges = problem.measured_range(L, means=means)
+        assert ranges == [[pytest.approx(radiance[1]), pytest.approx(radiance[2])]] * 3
+    result = {"measured_range": {"by_channel": {"R": [1.0, 2.0], "G": None}}}
+    assert [beyond_data(result, "R", v) for v in (0.5, 1.5, 3.0)] == ["below", "", "above"]
+    assert beyond_data(result, "G", 1.5) == "unmeasured" and beyond_data({}, "R", 9.0) == ""

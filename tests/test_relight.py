@@ -210,13 +210,16 @@ def test_bad_relight_inputs_get_one_line(day, tmp_path, capsys, case, phrase):
 def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day, tmp_path):
     """--no-images renders nothing and writes numbers alone (no plot); a fit whose roughness
     is unknown (interval 0-0.5) gets a band that holds the observed values, and a zero-width
-    fit of the wrong reflectance gets a narrow band that misses them."""
+    fit of the wrong reflectance gets a narrow band that misses them.  Values beyond the
+    radiance the fit's data measured (here: its blue nowhere, its green below 1e6) are marked
+    in prediction.csv and counted apart in relight.json."""
     params = {"rho_s": 0.0, "sigma_alpha": 0.0}
     fit = tmp_path / "fit_disc.json"
     fit.write_text(json.dumps({
         "region": "disc", "model": "two", "normalisation": "ward", "parameters": params,
         "intervals": {"rho_s": {"95": [0.0, 0.3]}, "sigma_alpha": {"95": [0.0, 0.5]}},
-        "pixels": PIXELS}))
+        "pixels": PIXELS,
+        "measured_range": {"by_channel": {"R": [0.0, 1e9], "G": [1e6, 1e9], "B": None}}}))
     out = tmp_path / "pred"
     assert main(["relight", str(fit), "--target", str(day / "day"), "-o", str(out), "-q",
                  "--no-images", "--draws", "50"]) == 0
@@ -225,6 +228,11 @@ def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day
     assert errors["band_coverage"]["share"] == 1.0
     rows = list(csv.reader((out / "prediction.csv").read_text().splitlines()))[1:]
     assert all(float(r[6]) - float(r[5]) > 0.02 * float(r[4]) for r in rows)
+    assert [r[-1] for r in rows] == [{"R": "", "G": "below", "B": "unmeasured"}[r[3]]
+                                     for r in rows]
+    coverage = errors["band_coverage"]
+    assert coverage["beyond_measured"] == 2 * len(rows) // 3
+    assert coverage["within_measured"] == {"share": 1.0, "values": len(rows) // 3}
     _fit_json(fit, model="achromatic", R=0.8, rho_s=0.0, sigma_alpha=0.0)
     # another prediction into the folder replaces it only with --overwrite
     before = {p.name: p.read_bytes() for p in out.iterdir()}
@@ -404,3 +412,23 @@ def test_the_prediction_plot_has_no_empty_bands_above_or_below_its_panels(region
     inked = np.flatnonzero((image < 250).any(axis=1))
     assert inked[0] < 0.03 * len(image) and inked[-1] > 0.97 * len(image), \
         (inked[0], inked[-1], len(image))
+
+
+def test_a_hand_edited_measured_range_is_refused_in_one_line(tmp_path):
+    """relight reads a fit's measured_range (the radiance its data measured, per channel):
+    one not as `fit` writes it is refused naming what it must be; `fit`'s own form passes."""
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.pipeline.fit_result import read_fit_result
+
+    fit = {"region": "disc", "model": "two", "parameters": {"rho_s": 0.1, "sigma_alpha": 0.1},
+           "intervals": {"rho_s": {"95": [0.0, 0.2]}, "sigma_alpha": {"95": [0.0, 0.2]}}}
+    path = tmp_path / "fit_disc.json"
+    for bad in ([1, 2], {"by_channel": [1, 2]}, {"by_channel": {"R": [2.0, 1.0]}},
+                {"by_channel": {"R": [1.0]}}, {"by_channel": {"G": "dim"}}):
+        path.write_text(json.dumps({**fit, "measured_range": bad}))
+        with pytest.raises(SkyfitError, match=r"measured_range must be \{\"by_channel\"") as e:
+            read_fit_result(path)
+        assert "\n" not in str(e.value)
+    good = {"unit": "W m^-2 sr^-1", "by_channel": {"R": [1.0, 2.0], "G": None, "B": [0, 5]}}
+    path.write_text(json.dumps({**fit, "measured_range": good}))
+    assert read_fit_result(path)["measured_range"]["by_channel"]["G"] is None

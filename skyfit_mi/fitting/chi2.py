@@ -36,6 +36,10 @@ from ..render.light_cache import point_rays
 
 #: Values below this [DN] read as code 0.
 LOW_CODE = 0.5
+#: A region's mean in a frame and channel (a table's value on its own) that the data measured:
+#: none of its values clipped and its standard error at most this share of it
+#: (:meth:`Problem.measured_range`).
+MEASURED_SE = 0.1
 
 
 @dataclass
@@ -448,6 +452,28 @@ class Problem:
         residual (a clipped one tells only a bound)."""
         low, high = self.clipped()
         return self.mask & ~low & ~high
+
+    def measured_range(self, radiance, means=True):
+        """Per channel, the radiance range [lo, hi] [W m^-2 sr^-1] that the data measured, or
+        None for a channel they measured nowhere: from the least region mean over the frames
+        (``means``; else the least value, a table's points) that holds no value clipped at the
+        top code and whose standard error (the unclipped values' sigma through the response's
+        slope at ``radiance``, the model's) is at most MEASURED_SE of it, to the greatest value
+        not clipped.  A prediction beyond it rests on the model alone: dimmer than the noise
+        let the data tell, or brighter than any value the sensor measured."""
+        _, high = self.clipped()
+        slope = self.slope(radiance)
+        ok = self.measured() & (slope > 0)
+        var = np.where(ok, self.obs.sigma / np.where(ok, slope, 1.0), 0.0) ** 2
+        if means:
+            n = self.mask.sum(axis=0)
+            level = np.where(self.mask, radiance, 0.0).sum(axis=0) / np.maximum(n, 1)
+            told = (n > 0) & ~high.any(axis=0) & (np.sqrt(var.sum(axis=0)) / np.maximum(n, 1)
+                                                  <= MEASURED_SE * level)
+        else:
+            level, told = radiance, ok & (np.sqrt(var) <= MEASURED_SE * radiance)
+        return [[float(level[..., c][told[..., c]].min()), float(radiance[..., c][ok[..., c]].max())]
+                if told[..., c].any() else None for c in range(radiance.shape[-1])]
 
     def residual_terms(self, radiance):
         """Residuals of every value (P, T, 3) and their derivative d r / d(model value).

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import uncertainty as unc
-from .chi2 import LuminanceModel, Problem, load_observations, load_table_observations
+from .chi2 import (MEASURED_SE, LuminanceModel, Problem, load_observations,
+                   load_table_observations)
 from .geometry import geometry_warnings, highlight_geometry
 from ..errors import SkyfitError, check_choice, check_range
 from .methods import METHODS, global_search
@@ -1086,7 +1087,24 @@ class FitSession:
             "sequence_run_id": self.run_id, "frames": [int(i) for i in self.obs.frames],
             "series": {"times": self.obs.times, "observed_DN": self.obs.y.tolist(),
                        "model_DN": self.problem.predict(L).tolist()},
+            "measured_range": self._measured_range(L),
         }
+
+    def _measured_range(self, L):
+        """The fit JSON's ``measured_range``: per channel, the radiance the fit's data measured
+        (:meth:`~.chi2.Problem.measured_range` at the model's ``L``: region means, a table's
+        values on their own), against which relight flags predictions that rest on the model
+        alone."""
+        channels = "Y" if self.obs.luminance else "RGB"
+        ranges = self.problem.measured_range(L, means=self.obs.rays is None)
+        return {"unit": "W m^-2 sr^-1",
+                "meaning": "from the least " + ("region mean over the fitted frames"
+                                                 if self.obs.rays is None else "value")
+                           + f" that the data measured (none of its values at the top code, "
+                           f"its standard error at most {MEASURED_SE:g} of it) to the greatest "
+                           "value below the top code; null: none. A prediction beyond this "
+                           "rests on the model alone",
+                "by_channel": dict(zip(channels, ranges))}
 
     def _model_error_record(self, fit):
         """The fit JSON's ``model_error``: kappa (0 where chi-square is within what noise

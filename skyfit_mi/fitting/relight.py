@@ -475,10 +475,18 @@ def add_reference_errors(errors, fits, plan, out, pixels, overwrite=False):
 
 def band_coverage(rows):
     """The share of the image values of prediction ``rows`` inside their predicted band (a
-    table's saturated values, lower bounds only, left out)."""
-    inside = [row.inside for row in rows if not row.saturated]
-    return {"share": float(np.mean(inside)), "values": len(inside),
-            "band": "95%, from the fits' intervals"}
+    table's saturated values, lower bounds only, left out), and that share within the
+    radiance the fits' data measured, with the number of values beyond it (:func:`beyond_data`:
+    their bands are the model's alone)."""
+    rows = [row for row in rows if not row.saturated]
+    within = [row.inside for row in rows if not row.beyond]
+    return {"share": float(np.mean([row.inside for row in rows])), "values": len(rows),
+            "within_measured": {"share": float(np.mean(within)) if within else None,
+                                "values": len(within)},
+            "beyond_measured": len(rows) - len(within),
+            "band": "95%, from the fits' intervals; beyond_measured: values predicted beyond "
+                    "the radiance the fits' data measured (dimmer than their noise let them "
+                    "tell, or brighter than the top code), where the band is the model's alone"}
 
 
 def log_errors(errors, plan, log=print):
@@ -502,8 +510,15 @@ def log_errors(errors, plan, log=print):
             " (relit with the target's seeds: Monte Carlo noise largely cancels, so this is "
             "the materials' difference)" if errors["shares_target_seeds"] else ""))
     coverage = errors["band_coverage"]
+    within, beyond = coverage["within_measured"], coverage["beyond_measured"]
     log(f"{'table values' if plan.table else 'observed region means'} inside the predicted "
-        f"95% band: {coverage['share']:.0%} of {coverage['values']}")
+        f"95% band: {coverage['share']:.0%} of {coverage['values']}"
+        + (f" ({within['share']:.0%} of the {within['values']} within the radiance the fit's "
+           f"data measured; {beyond} beyond it, dimmer than their noise let them tell or "
+           "brighter than the top code, rest on the model alone)"
+           if beyond and within["values"] else
+           f" (all {beyond} beyond the radiance the fit's data measured: the model's alone)"
+           if beyond else ""))
 
 
 def target_pixels(fits, target, seed=0, max_pixels=64):
@@ -719,6 +734,9 @@ class PredictionRow:
     point: str | None = None
     #: the table's value is saturated: the level its instrument clipped at, a lower bound
     saturated: bool = False
+    #: beyond the radiance the fit's data measured (:func:`beyond_data`): 'below', 'above',
+    #: 'unmeasured', or '' within it
+    beyond: str = ""
 
     @property
     def inside(self):
@@ -755,10 +773,11 @@ def write_prediction(prediction, out, image_kind, plot=True):
     w = csv.writer(buf)
     w.writerow(["region", *(["point"] if points else []), "frame", "time", "channel",
                 "predicted [W m^-2 sr^-1]", "lo95 [W m^-2 sr^-1]", "hi95 [W m^-2 sr^-1]",
-                f"{column} [W m^-2 sr^-1]", *(["saturated"] if points else [])])
+                f"{column} [W m^-2 sr^-1]", *(["saturated"] if points else []),
+                "beyond_fit_data"])
     w.writerows([(r.region, *([r.point] if points else []), r.frame, r.time, r.channel,
                   *(f"{v:.6g}" for v in (r.predicted, r.lo95, r.hi95, r.image)),
-                  *([("yes" if r.saturated else "no")] if points else []))
+                  *([("yes" if r.saturated else "no")] if points else []), r.beyond)
                  for r in prediction.rows])
     write_text(Path(out) / "prediction.csv", buf.getvalue())
     if plot:
@@ -831,13 +850,16 @@ def plot_prediction(rows, image_kind):
 
 
 def parameter_draws(result, names, lower, upper, n, rng):
-    """``n`` parameter sets spread as the fit's uncertainty: Gaussian with each parameter's
-    standard deviation from its 95% interval (half-width / 1.96, so profile and one-sided
-    intervals count at their full width) and the covariance's correlations, clipped to the
-    bounds; the first row is the fit itself."""
+    """``n`` parameter sets spread as the fit's uncertainty: each parameter a split normal
+    about the fit whose sides reach the two ends of its 95% interval (standard deviations
+    (fit - lo) / 1.96 below it, (hi - fit) / 1.96 above, so that a profile's lopsided or
+    one-sided interval counts at its own width on each side: a gold disc's C_r, 0.974 in
+    0.896-1, had been drawn as 0.974 +- 0.052), with the covariance's correlations, clipped
+    to the bounds; the first row is the fit itself."""
     theta = np.array([result["parameters"][k] for k in names], dtype=float)
     iv = np.array([result["intervals"][k]["95"] for k in names], dtype=float)
-    sd = (iv[:, 1] - iv[:, 0]) / (2 * 1.959963984540054)
+    below, above = (np.maximum(a, 0.0) / 1.959963984540054 for a in (theta - iv[:, 0],
+                                                                   iv[:, 1] - theta))
     corr = np.eye(len(names))
     cov = result.get("covariance", {})
     if cov.get("names") == list(names):
@@ -848,7 +870,7 @@ def parameter_draws(result, names, lower, upper, n, rng):
     w, v = np.linalg.eigh(corr)
     root = v * np.sqrt(np.clip(w, 0, None))              # corr = root root^T (PSD)
     z = rng.standard_normal((n - 1, len(names))) @ root.T
-    draws = np.clip(theta + z * sd, lower, upper)
+    draws = np.clip(theta + z * np.where(z < 0, below, above), lower, upper)
     return np.vstack([theta, draws])
 
 
@@ -935,8 +957,23 @@ def _predict_means(s, result, target, draws, rng):
             band = widen(means[0, j, c], (lo[j, c], hi[j, c]), extra[j, c], 0.0, np.inf)
             rows.append(PredictionRow(region=s.name, frame=int(i), time=t, channel=ch,
                                       predicted=float(means[0, j, c]), lo95=float(band[0]),
-                                      hi95=float(band[1]), image=float(observed[j, c])))
+                                      hi95=float(band[1]), image=float(observed[j, c]),
+                                      beyond=beyond_data(result, ch, means[0, j, c])))
     return rows, _means_error(s, means[0], observed, region_mean)
+
+
+def beyond_data(result, channel, value):
+    """Where a predicted ``value`` [W m^-2 sr^-1] of ``channel`` lies against the radiance the
+    fit ``result``'s data measured (its ``measured_range``): '' within it, 'below' or
+    'above' it, 'unmeasured' where they measured that channel nowhere; '' for a fit that
+    does not record it.  Beyond it the prediction and its band rest on the model alone."""
+    ranges = (result.get("measured_range") or {}).get("by_channel")
+    if ranges is None or channel not in ranges:
+        return ""
+    lo_hi = ranges[channel]
+    if lo_hi is None:
+        return "unmeasured"
+    return "below" if value < lo_hi[0] else "above" if value > lo_hi[1] else ""
 
 
 def _predict_points(s, result, target, draws, rng):
@@ -968,7 +1005,8 @@ def _predict_points(s, result, target, draws, rng):
                                   predicted=float(at_fit[p, j, c]), lo95=float(band[0]),
                                   hi95=float(band[1]), image=float(image[p, j, c]),
                                   point=points[p],
-                                  saturated=bool(saturated[p, j, c])))
+                                  saturated=bool(saturated[p, j, c]),
+                                  beyond=beyond_data(result, names[c], at_fit[p, j, c])))
     region_mean = _region_mean(s)
     return rows, _means_error(s, region_mean(at_fit)[..., :len(names)],
                               region_mean(image)[..., :len(names)], region_mean)

@@ -20,8 +20,8 @@ def read_fit_result(path):
     :data:`~skyfit_mi.render.fit_model.PARAMETERS`, that model's parameters as finite numbers
     within their bounds and a 95% interval [lo, hi] of each (lo <= hi), pixels (if any) as
     [x, y] pairs, and, where present, the frames as manifest indices, the model's relative
-    error kappa as a finite number >= 0 and the covariance as its parameters' names and a
-    square matrix of them.  SkyfitError saying what is wrong
+    error kappa as a finite number >= 0, the radiance range its data measured as [lo, hi]
+    per channel and the covariance as its parameters' names and a square matrix of them.  SkyfitError saying what is wrong
     otherwise."""
     path = Path(path)
     try:
@@ -64,6 +64,10 @@ def read_fit_result(path):
                           "{\"coefficients\": [numbers], \"span_s\": [start, end]}, \"shape\": "
                           "null or {\"mix\": [numbers], \"toward\": {index: 1 or -1}}, ...}; give "
                           "a fit_NAME.json that `skyfit fit` wrote.")
+    if r.get("measured_range") is not None and not _is_measured_range(r["measured_range"]):
+        raise SkyfitError(f"{path}: measured_range must be {{\"by_channel\": {{channel: null or "
+                          "[lo, hi] radiance, lo <= hi}, ...}; give a fit_NAME.json that "
+                          "`skyfit fit` wrote.")
     cov = r.get("covariance")
     if cov is not None and not _is_covariance(cov):
         raise SkyfitError(f"{path}: covariance must be {{\"names\": [{', '.join(names)}], "
@@ -91,6 +95,14 @@ def _is_sky(sky):
                              and isinstance(shape.get("toward", {}), dict)
                              and all(v in (1, -1) and not isinstance(v, bool)
                                      for v in shape.get("toward", {}).values()))
+
+
+def _is_measured_range(record):
+    """Whether ``record`` is the radiance range a fit's data measured, as relight reads it:
+    {"by_channel": {channel: null or [lo, hi] (lo <= hi)}}."""
+    ranges = record.get("by_channel") if isinstance(record, dict) else None
+    return isinstance(ranges, dict) and all(
+        v is None or (_numbers(v, 2) and v[0] <= v[1]) for v in ranges.values())
 
 
 def _is_kappa(record):
