@@ -850,16 +850,15 @@ def plot_prediction(rows, image_kind):
 
 
 def parameter_draws(result, names, lower, upper, n, rng):
-    """``n`` parameter sets spread as the fit's uncertainty: each parameter a split normal
-    about the fit whose sides reach the two ends of its 95% interval (standard deviations
-    (fit - lo) / 1.96 below it, (hi - fit) / 1.96 above, so that a profile's lopsided or
-    one-sided interval counts at its own width on each side: a gold disc's C_r, 0.974 in
-    0.896-1, had been drawn as 0.974 +- 0.052), with the covariance's correlations, clipped
-    to the bounds; the first row is the fit itself."""
+    """``n`` parameter sets spread as the fit's uncertainty: Gaussian with each parameter's
+    standard deviation from its 95% interval (half-width / 1.96, so profile and one-sided
+    intervals count at their full width) and the covariance's correlations, clipped to the
+    bounds; the first row is the fit itself.  (A split normal reaching each end of a lopsided
+    interval was tried: a gold disc's held-out means in band 14 -> 15 of 18, but a copper
+    one's 36 -> 32 of 39; docs/BENCHMARKS.md, "Real surfaces".)"""
     theta = np.array([result["parameters"][k] for k in names], dtype=float)
     iv = np.array([result["intervals"][k]["95"] for k in names], dtype=float)
-    below, above = (np.maximum(a, 0.0) / 1.959963984540054 for a in (theta - iv[:, 0],
-                                                                   iv[:, 1] - theta))
+    sd = (iv[:, 1] - iv[:, 0]) / (2 * 1.959963984540054)
     corr = np.eye(len(names))
     cov = result.get("covariance", {})
     if cov.get("names") == list(names):
@@ -870,7 +869,7 @@ def parameter_draws(result, names, lower, upper, n, rng):
     w, v = np.linalg.eigh(corr)
     root = v * np.sqrt(np.clip(w, 0, None))              # corr = root root^T (PSD)
     z = rng.standard_normal((n - 1, len(names))) @ root.T
-    draws = np.clip(theta + z * np.where(z < 0, below, above), lower, upper)
+    draws = np.clip(theta + z * sd, lower, upper)
     return np.vstack([theta, draws])
 
 
