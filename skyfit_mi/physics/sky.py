@@ -375,15 +375,18 @@ class Sky:
     def lit_by_sky(self):
         """Whether any light comes from other than the sun's disc: a pattern, the map or the
         ground."""
-        return bool(any(np.any(getattr(self, p) > 0) for p in _PATTERNS + ("ground",))
-                    or self.envmap is not None)
+        return self._patterned or self.envmap is not None or bool(np.any(self.ground > 0))
 
     @property
     def ground_only(self):
         """Whether the only light other than the sun's disc is the ground's (the sun's part of
         :meth:`split`): no pattern, no map."""
-        return bool(not any(np.any(getattr(self, p) > 0) for p in _PATTERNS)
-                    and self.envmap is None and np.any(self.ground > 0))
+        return not self._patterned and self.envmap is None and bool(np.any(self.ground > 0))
+
+    @property
+    def _patterned(self):
+        """Whether any of the sky's patterns gives light."""
+        return any(bool(np.any(getattr(self, p) > 0)) for p in _PATTERNS)
 
     def split(self):
         """(the sun's light: its disc and the ground's share lit by it; the sky's: its patterns,

@@ -21,8 +21,8 @@ def read_fit_result(path):
     within their bounds and a 95% interval [lo, hi] of each (lo <= hi), pixels (if any) as
     [x, y] pairs, and, where present, the frames as manifest indices, the model's relative
     error kappa as a finite number >= 0, the radiance range its data measured as [lo, hi]
-    per channel and the covariance as its parameters' names and a square matrix of them.  SkyfitError saying what is wrong
-    otherwise."""
+    per channel and the covariance as its parameters' names and a square matrix of them.
+    SkyfitError saying what is wrong otherwise."""
     path = Path(path)
     try:
         r = json.loads(path.read_text(encoding="utf-8"))
