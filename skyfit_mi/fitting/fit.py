@@ -992,8 +992,10 @@ class FitSession:
                 f"misses light it was not fitted to by about {held['kappa']:.1%} of each value "
                 f"(95%: {held['interval95'][0]:.1%}-{held['interval95'][1]:.1%}), which "
                 "predictions (relight) include; the parameters describe these frames' "
-                "light and may not carry to other light; another model may predict better "
-                "(--model auto ranks them by held-out frames).")
+                "light, not necessarily the surface's: they may not carry to other light, "
+                "and their intervals may not hold (not reliable as the surface's own). "
+                "Another model (--model auto ranks them by held-out frames) or, under a sky, "
+                "its shape fitted with the materials (--sky-shape) may predict better.")
         warnings += unc.misfit(chi2, fit.problem.dof, fit.interval_scale, fit.cache_noise_chi2,
                                fit.noise_chi2, model_error=fit.model_error is not None)
         warnings += unc.identifiability(names, iv95, self.lower, self.upper, fit.rise,

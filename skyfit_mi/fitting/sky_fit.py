@@ -367,8 +367,9 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
             f"{'at the search' + chr(39) + 's end' if edge else 'flat'} over k = "
             f"{np.exp(min(within)):.3g}-{np.exp(max(within)):.3g}): every parameter's interval "
             "takes in its values over that range of k"
-            + (", at least (the level may lie beyond the search: the spec's sky may be far "
-               "from the light the data show)" if edge else "")
+            + (", at least: the level may lie beyond the search (the spec's sky may be far "
+               "from the light the data show), so the parameters and their intervals are not "
+               "reliable" if edge else "")
             + "; fit several materials with different normals, or a grey card, together.")
     # each region's parameters' response to log k at its fit (Gauss-Newton: the least-squares
     # change of theta that follows the residuals' change), smooth where a refit may jump
