@@ -108,8 +108,7 @@ def _is_measured_range(record):
 def _is_kappa(record):
     """Whether ``record`` is a dict whose kappa is a finite number >= 0."""
     k = record.get("kappa") if isinstance(record, dict) else None
-    return isinstance(k, (int, float)) and not isinstance(k, bool) and bool(np.isfinite(k)) \
-        and k >= 0
+    return _numbers([k]) and k >= 0
 
 
 def _is_covariance(cov):
