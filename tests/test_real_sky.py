@@ -244,7 +244,7 @@ def test_a_predicted_sky_beats_the_thesis_on_every_scan(results, rotated):
         [m.name for m in sm.MODELS if m.held_out])]
     held = sub[sub["held_out"]]
     assert set(held["model"]) == {"cie_type_fit_heldout", "cie_groups_fit_heldout",
-                                  "perez_fit_heldout"}
+                                  "perez_fit_heldout", "turbid_fit_heldout"}
     best = sm.best_models(sub)
     assert set(best["best"]) == {"cie_groups_fit_heldout"}
     assert (best["margin"] > 0.02).all()
@@ -281,6 +281,22 @@ def test_perez_from_irradiance_and_its_fitted_shape(results, scans):
     wide = {name: np.mean([sm.compare(s, models[name], exclude_deg=15.0)["relative_rms"]
                            for s in scans]) for name in ("perez_scan", "cie_clear_thesis")}
     assert wide["perez_scan"] < wide["cie_clear_thesis"] - 0.005
+
+
+@needs_data
+def test_the_turbid_skys_pattern_fitted_to_other_scans(results):
+    # Preetham's pattern with the turbidity fitted on the other 14 scans (2.2 on every fold)
+    # misses the measured day by 0.159 / 0.134 (nominal / rotated): about the thesis's clear
+    # sky and Mitsuba's Hosek-Wilkie sunsky (0.169 / 0.132, BENCHMARKS), far from the CIE
+    # general sky's fitted groups.  The day's own irradiances read T_L 2.0-2.9 (Ineichen and
+    # Perez), so one turbidity describes both.
+    for rotated, expected in ((False, 0.159), (True, 0.134)):
+        held = _day_mean(results, "turbid_fit_heldout", rotated)
+        assert held == pytest.approx(expected, abs=0.002)
+        assert abs(held - _day_mean(results, "cie_clear_thesis", rotated)) < 0.01
+        assert held > _day_mean(results, "cie_groups_fit_heldout", rotated) + 0.02
+        sub = results[(results["model"] == "turbid_fit_heldout") & (results["rotated"] == rotated)]
+        assert set(sub["parameter"].astype(float)) == {2.2}
 
 
 def test_perez_shape_is_the_pattern_of_its_indices():

@@ -353,7 +353,7 @@ def test_a_cie_skys_shape_variants_keep_its_light_and_move_one_group():
     assert [label for label, _ in turbid.shape_variants()] == ["gradation group 6 -> 5",
                                                                "indicatrix group 6 -> 5"]
     assert cie_sky("overcast", 35.0, 160.0).shape_variants() == []
-    with pytest.raises(SkyfitError, match="is neither"):
+    with pytest.raises(SkyfitError, match="is none of these"):
         shape_variants([sky, cie_sky("overcast", 35.0, 160.0)])
 
 
@@ -605,7 +605,7 @@ def test_a_perez_skys_clearness_and_brightness_are_fitted_with_the_materials(per
 
 
 def test_sky_shape_refuses_a_sky_it_cannot_move_in_one_line(days, tmp_path, capsys):
-    """--sky-shape on a day whose spec sky is neither CIE nor Perez (here the thesis's
+    """--sky-shape on a day whose spec sky is not CIE, Perez or turbid (here the thesis's
     intermediate sky) is refused before the light is traced, in one line."""
     from measured_light import relabelled
 
@@ -616,7 +616,7 @@ def test_sky_shape_refuses_a_sky_it_cannot_move_in_one_line(days, tmp_path, caps
     assert main(["fit", str(day), "--region", "disc=rect:2,2,9,9", "--sky", "fit",
                  "--sky-shape"]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "neither (type clear, cie_general or perez)" in err, err
+    assert len(err.splitlines()) == 1 and "(type clear, cie_general, perez or turbid)" in err, err
     assert not list(day.glob("fit_*"))
 
 

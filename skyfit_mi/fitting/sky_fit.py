@@ -166,13 +166,14 @@ def shape_variants(skies):
     """Each frame's shape variants (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`) of
     ``skies``, for a fit of the sky's shape (``--sky-shape``), every frame's index moved the
     same way (the fit shares each variant's mix over the frames): +1 where every frame can,
-    else -1.  Refused where some frame's spec sky has none (neither a CIE nor a Perez sky),
+    else -1.  Refused where some frame's spec sky has none (not a CIE, Perez or turbid sky),
     where the frames' skies move different indices, or where no way suits every frame."""
     variants = [sky.shape_variants() for sky in skies]
     if not all(variants):
-        raise SkyfitError("--sky-shape moves a CIE sky's gradation and indicatrix or a Perez "
-                          "sky's clearness and brightness, and the spec's sky of some frames is "
-                          "neither (type clear, cie_general or perez); leave out --sky-shape.")
+        raise SkyfitError("--sky-shape moves a CIE sky's gradation and indicatrix, a Perez "
+                          "sky's clearness and brightness or a turbid sky's turbidity, and the "
+                          "spec's sky of some frames is none of these (type clear, cie_general, "
+                          "perez or turbid); leave out --sky-shape.")
     if len({tuple(v.info["of"] for _, v in vs) for vs in variants}) > 1:
         raise SkyfitError("--sky-shape needs one kind of spec sky over the fitted frames, and "
                           "they mix CIE and Perez skies; fit them apart (--frames) or leave "

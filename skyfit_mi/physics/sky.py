@@ -411,16 +411,17 @@ class Sky:
         then its indicatrix, moved one CIE group on
         (:func:`~skyfit_mi.physics.cie_general.shape_moves`); for a Perez sky
         (:mod:`~skyfit_mi.physics.perez`) its clearness moved one bin and its brightness Delta
-        one step (:func:`~skyfit_mi.physics.perez.shape_moves`).  A mix (1 - sum(a)) this
-        + sum a_j V_j moves the shape continuously between them: a_j = 1 is variant j's index
-        exactly.
+        one step (:func:`~skyfit_mi.physics.perez.shape_moves`); for a turbid sky
+        (:mod:`~skyfit_mi.physics.turbid_sky`) its turbidity moved one step.  A mix
+        (1 - sum(a)) this + sum a_j V_j moves the shape continuously between them: a_j = 1 is
+        variant j's index exactly.
 
         Parameters
         ----------
         toward : dict, optional
             {index name (``of``): +1 or -1}: the way to move that index, +1 toward the more
-            turbid CIE group, the clearer Perez bin, the brighter Delta; an index not named
-            moves +1 where it can, else -1.
+            turbid CIE group, the clearer Perez bin, the brighter Delta, the higher turbidity;
+            an index not named moves +1 where it can, else -1.
 
         Returns
         -------
@@ -442,6 +443,9 @@ class Sky:
         elif kind == "perez":
             from . import perez             # not at the top: perez imports this module
             moves = perez.shape_moves(self.info)
+        elif kind == "turbid":
+            from . import turbid_sky        # not at the top: it imports this module
+            moves = turbid_sky.shape_moves(self.info)
         else:
             return []
         if float(self.sky_horizontal_irradiance() @ SRGB_LUMINANCE) <= 0:

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..conventions import direction_from_angles
 from ..errors import SkyfitError, check_choice
-from . import cie_general
+from . import cie_general, turbid_sky
 from .colour import SRGB_LUMINANCE
 from .perez import CLEARNESS_BIN_EDGES, coefficients, perez_sky
 from .sky import EFFICACY_CLEAR, cie_sky, perez_pattern
@@ -387,11 +387,20 @@ def cie_groups_luminance(directions, scan, parameters):
     return cie_general.pattern(directions, scan.sun_direction, params)
 
 
+def turbid_luminance(directions, scan, parameters):
+    """Preetham's turbid-sky pattern (:func:`~skyfit_mi.physics.turbid_sky.coefficients`) for
+    turbidities (k,) at the scan's sun, (k, n)."""
+    c = turbid_sky.coefficients(np.asarray(parameters, dtype=float))            # (k, 5)
+    return perez_pattern(np.asarray(directions, dtype=float), scan.sun_direction, c[:, None, :])
+
+
 def uniform_luminance(directions, scan, parameters):
     """A sky of uniform luminance, (1, n) ones."""
     return np.ones((1, len(directions)))
 
 
+#: Step of the turbidity fitted per scan [unitless].
+TURBIDITY_STEP = 0.05
 #: Step of the continuous CIE general-sky indices fitted per scan [unitless].
 INDEX_STEP = 0.01
 _LO, _HI = cie_general.CLEAR_GROUPS
@@ -436,6 +445,13 @@ MODELS = (
              parameter_name="epsilon bin's lower edge, Delta", held_out=True,
              description="Perez 1993 pattern, clearness bin and brightness Delta fitted per "
                          f"scan (Delta 0.01-0.6, step {PEREZ_DELTA_STEP}; no irradiance)"),
+    SkyModel("turbid_fit", turbid_luminance,
+             parameters=tuple(float(t) for t in np.round(np.arange(
+                 turbid_sky.TURBIDITY_RANGE[0], turbid_sky.TURBIDITY_RANGE[1] + 1e-9,
+                 TURBIDITY_STEP), 2)),
+             parameter_name="turbidity", held_out=True,
+             description="Preetham 1999 turbid-sky pattern, turbidity fitted per scan "
+                         f"(2-10, step {TURBIDITY_STEP})"),
     SkyModel("uniform", uniform_luminance, description="uniform luminance"),
 )
 

@@ -33,6 +33,7 @@ from ..physics.ward import NORMALISATIONS, raw_parameters
 from .fit_result import read_fit_result
 from .illumination import directional_from_record, envmap_from_record, perez_from_irradiance
 from .irradiance import irradiance_at, read_irradiance
+from ..physics.turbid_sky import TURBIDITY_RANGE, turbid_sky
 
 #: Where the shipped scenes live; a spec's ``scene.file`` is looked up beside the spec first.
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
@@ -53,7 +54,7 @@ _SCHEMA = {
             "global_horizontal_W_m2", "decomposition", "cct", "irradiance_file",
             "file", "projection", "north_rotation_deg", "scale", "rows", "sun_mask_deg",
             "direction", "zenith_deg", "azimuth_deg", "irradiance_W_m2", "solid_angle_sr",
-            "cie_type", "gradation", "indicatrix", "zenith_luminance"},
+            "cie_type", "gradation", "indicatrix", "zenith_luminance", "turbidity"},
     "scene": {"file", "ground_albedo"},
     "materials": None,
     "camera": {"azimuth_deg", "angle_deg", "distance", "target", "origin", "up", "matrix",
@@ -61,21 +62,25 @@ _SCHEMA = {
     "sensor": {"exposure", "response", "gamma", "bits", "noise_percent", "cos4"},
     "render": {"spp", "seed", "variant", "max_depth", "below_horizon", "sampler", "integrator"},
 }
-SKY_KINDS = tuple(SKY_TYPES) + ("cie_general", "gensky", "perez", "envmap", "directional")
+SKY_KINDS = tuple(SKY_TYPES) + ("cie_general", "turbid", "gensky", "perez", "envmap",
+                                 "directional")
 #: [sky] keys whose values are numbers (their ranges are checked where they are used).
 _SKY_NUMBERS = {"phi", "efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
                 "ground_albedo", "extinction", "solar_constant", "clear_zenith_luminance",
                 "overcast_zenith_luminance", "diffuse_horizontal_W_m2", "direct_normal_W_m2",
                 "diffuse_horizontal_lux", "global_horizontal_W_m2", "cct", "north_rotation_deg",
                 "scale", "rows", "sun_mask_deg", "zenith_deg", "azimuth_deg", "solid_angle_sr",
-                "cie_type", "gradation", "indicatrix", "zenith_luminance"}
+                "cie_type", "gradation", "indicatrix", "zenith_luminance", "turbidity"}
 #: The keys of an HDR environment map sky and of a directional lab light
 #: (:mod:`skyfit_mi.pipeline.illumination`), and the other keys each takes.
 _ENVMAP_KEYS = {"file", "projection", "north_rotation_deg", "scale", "rows", "sun_mask_deg"}
 _DIRECTIONAL_KEYS = {"direction", "zenith_deg", "azimuth_deg", "irradiance_W_m2", "solid_angle_sr"}
 #: The keys of a CIE S 011 general sky (:func:`skyfit_mi.physics.sky.cie_general_sky`).
 _CIE_GENERAL_KEYS = {"cie_type", "gradation", "indicatrix", "zenith_luminance"}
-_ALLOWED_WITH = {"cie_general": _CIE_GENERAL_KEYS | {
+#: The keys of a turbid clear sky (:func:`skyfit_mi.physics.turbid_sky.turbid_sky`).
+_TURBID_KEYS = {"turbidity"}
+_ALLOWED_WITH = {"turbid": _TURBID_KEYS | {"type", "time", "cct", "sun", "ground_albedo"},
+                 "cie_general": _CIE_GENERAL_KEYS | {
                      "type", "time", "cct", "sun", "extinction", "solar_constant",
                      "ground_albedo", "diffuse_horizontal_W_m2", "direct_normal_W_m2",
                      "diffuse_horizontal_lux", "irradiance_file"},
@@ -259,7 +264,7 @@ def validate_spec(raw, base_dir=".", sun=None):
         if "location" in raw:
             raise SpecError("the spec has [location] but no [time]; a sequence of lab lights "
                             "(every [[sky]] directional) takes neither, a day needs both.")
-        times, tz = None, None
+        times, tz, elevation = None, None, 0.0
     else:
         loc = raw["location"]
         for k in ("latitude_deg", "longitude_deg", "timezone"):
@@ -311,7 +316,7 @@ def validate_spec(raw, base_dir=".", sun=None):
                                tz, base_dir)
     frames = []
     for i, (t, z, a, entry) in enumerate(zip(times, zeniths, azimuths, entries)):
-        sky = _make_sky(entry, float(z), float(a), t, base_dir, i)
+        sky = _make_sky(entry, float(z), float(a), t, base_dir, i, elevation)
         if entry["type"] == "directional":      # the lab light is the frame's sun
             z, a = sky.info["sun_zenith_deg"], sky.info["sun_azimuth_deg"]
         below = (sky.sun_direction[2] <= 0.0) if entry.get("type") == "gensky" else z >= 90.0
@@ -545,7 +550,7 @@ def _check_light_keys(e):
     """Refuse the keys of an envmap or directional sky on other types, and other types' keys
     on those."""
     for kind, own in (("envmap", _ENVMAP_KEYS), ("directional", _DIRECTIONAL_KEYS),
-                      ("cie_general", _CIE_GENERAL_KEYS)):
+                      ("cie_general", _CIE_GENERAL_KEYS), ("turbid", _TURBID_KEYS)):
         if e["type"] == kind:
             bad = sorted(set(e) - _ALLOWED_WITH[kind])
             if bad:
@@ -561,6 +566,12 @@ def _check_light_keys(e):
                         "beside the spec; {index} and {time:%H%M} name each frame's).")
     if e["type"] == "cie_general":
         _cie_general_parameters(e)
+    if e["type"] == "turbid":
+        if "turbidity" not in e:
+            raise SpecError("[sky] a turbid sky needs turbidity (the Linke turbidity, "
+                            f"{TURBIDITY_RANGE[0]:g}-{TURBIDITY_RANGE[1]:g}: about 2 very clear, "
+                            "3-4 a common clear day, 5-7 hazy).")
+        _num("sky", "turbidity", e["turbidity"], *TURBIDITY_RANGE)
     if e["type"] == "directional":
         if "irradiance_W_m2" not in e:
             raise SpecError("[sky] a directional light needs irradiance_W_m2 (normal to the beam, "
@@ -649,7 +660,7 @@ def _light(e, zenith, azimuth, t, index, base_dir):
     return envmap_from_record(rec, base_dir, zenith, azimuth)
 
 
-def _make_sky(e, zenith, azimuth, t, base_dir, index):
+def _make_sky(e, zenith, azimuth, t, base_dir, index, elevation=0.0):
     measured = {k: e[k] for k in ("diffuse_horizontal_W_m2", "direct_normal_W_m2",
                                   "diffuse_horizontal_lux") if k in e}
     try:
@@ -657,6 +668,10 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index):
             return _light(e, zenith, azimuth, t, index, base_dir)
         if e["type"] == "perez":
             return perez_from_irradiance(e, zenith, azimuth, t)
+        if e["type"] == "turbid":
+            return turbid_sky(e["turbidity"], zenith, azimuth, day=t.timetuple().tm_yday,
+                              elevation_m=elevation, **{k: e[k] for k in (
+                                  "cct", "sun", "ground_albedo") if k in e})
         if e["type"] == "cie_general":
             kw = {k: e[k] for k in ("cct", "sun", "extinction", "solar_constant",
                                     "ground_albedo", "zenith_luminance") if k in e}
