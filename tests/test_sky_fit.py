@@ -50,6 +50,10 @@ def test_the_split_lights_mix_is_the_whole_lights_table(days):
     L_sun, L_rest = (TableModel(t, "colour").radiance(theta) for t in (sun, rest))
     np.testing.assert_allclose(TableModel(mixed(sun, [rest], [2.0]), "colour").radiance(theta),
                                L_sun + 2.0 * L_rest, rtol=1e-5)
+    w = np.linspace(0.6, 1.0, L_sun.shape[1])             # a weight on the sun, frame by frame
+    np.testing.assert_allclose(
+        TableModel(mixed(sun, [rest], [2.0], w), "colour").radiance(theta),
+        w[:, None] * L_sun + 2.0 * L_rest, rtol=1e-5)
 
 
 def rescaled_sky(day, out, factor):
@@ -412,7 +416,7 @@ def test_a_perez_skys_shape_variants_keep_its_light_and_move_one_bin_or_one_step
     # an envmap has no shape variants, and --sky-shape refuses it
     mapped = envmap_sky(np.full((8, 16, 3), 5.0, np.float32), 30.0, 160.0)
     assert mapped.shape_variants() == []
-    with pytest.raises(SkyfitError, match="neither .*cie_general or perez"):
+    with pytest.raises(SkyfitError, match="none of these .*cie_general, perez or turbid"):
         shape_variants([sky, mapped])
 
 

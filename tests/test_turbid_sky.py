@@ -83,6 +83,28 @@ def test_a_turbid_skys_shape_variant_keeps_its_light_and_moves_one_step():
     assert shape_moves({"turbidity": TURBIDITY_RANGE[0]})[0]["moves"][-1] is None
 
 
+def test_a_fitted_turbidity_moves_both_levels_and_a_shaped_sky_takes_them():
+    """level_factors at mix 0 leave each frame's light as it is; at mix 1 they are the
+    levels of the variant's turbidity over the spec's, the sun's falling more for the lower
+    sun; a turbid sky shaped at that mix lights its sun and sky at them."""
+    from skyfit_mi.physics.turbid_sky import level_factors
+
+    skies = [turbid_sky(3.0, z, 120.0, day=200) for z in (20.0, 50.0, 75.0)]
+    variants = [s.shape_variants()[0][1] for s in skies]
+    infos, vinfos = [s.info for s in skies], [v.info for v in variants]
+    np.testing.assert_allclose(level_factors(infos, vinfos, 0.0), np.ones((2, 3)))
+    sun, sky = level_factors(infos, vinfos, 1.0)
+    for a, b, z in zip(sun, sky, (20.0, 50.0, 75.0)):
+        (dni4, dhi4), (dni3, dhi3) = levels(4.0, z, 200), levels(3.0, z, 200)
+        assert (a, b) == pytest.approx((dni4 / dni3, dhi4 / dhi3))
+    assert sun[0] > sun[1] > sun[2] and np.all(sky > 1)
+    shaped = skies[1].shaped(0.9, [1.0], [variants[1]], rows=32)
+    np.testing.assert_allclose(shaped.sun_radiance, skies[1].sun_radiance * sun[1])
+    want = 0.9 * sky[1] * float(variants[1].sky_horizontal_irradiance() @ SRGB_LUMINANCE)
+    got = float(shaped.sky_horizontal_irradiance() @ SRGB_LUMINANCE)
+    assert got == pytest.approx(want, rel=0.02)        # the map's cells, a 32-row table
+
+
 def test_a_spec_takes_a_turbid_sky_and_says_what_is_wrong_in_one_line(tmp_path):
     """[sky] type = 'turbid' with its turbidity lights each frame by the site's sun and
     elevation; a missing or out-of-range turbidity, or another type's key, is one SpecError
@@ -109,12 +131,13 @@ def test_a_spec_takes_a_turbid_sky_and_says_what_is_wrong_in_one_line(tmp_path):
 
 def test_a_turbid_skys_turbidity_is_fitted_with_the_materials(mi, tmp_path):
     """The sphere in tests/measured_light.py's paint under a turbid sky of T 4.5, in a copy
-    whose manifest names T 3 (the truth's sun and ground): ``--sky fit --sky-shape`` puts the
-    sky's level above the spec's (T 4.5 holds about 1.5x T 3's diffuse light), its turbidity's
-    95% interval holds 4.5, and every material parameter's interval holds its truth.  5
-    frames, a quarter of the sphere's pixels: about 15 s."""
+    whose manifest names T 3, its sun too (13-25% too bright over the day, which the spec's
+    sky as it is puts into C: 0.543, 0.537-0.550, truth 0.6): ``--sky fit --sky-shape``
+    moves the sun's level and the sky's with the fitted turbidity, whose 95% interval holds
+    4.5; the sky's level k over that holds 1, and every material parameter's interval holds its
+    truth, with warnings that C depends on the sky.  5 frames, a quarter of the sphere's
+    pixels: about 15 s."""
     import datetime as dt
-    from dataclasses import replace
 
     from measured_light import MATERIAL, TRUTH, relabelled
 
@@ -134,9 +157,8 @@ def test_a_turbid_skys_turbidity_is_fitted_with_the_materials(mi, tmp_path):
                     log=lambda *a: None)
 
     def spec_sky(frame, truth):
-        sky = turbid_sky(3.0, frame["sun_zenith_deg"], frame["sun_azimuth_deg"],
-                         day=dt.datetime.fromisoformat(frame["time"]).timetuple().tm_yday)
-        return replace(sky, sun_radiance=truth.sun_radiance, ground=truth.ground)
+        return turbid_sky(3.0, frame["sun_zenith_deg"], frame["sun_azimuth_deg"],
+                          day=dt.datetime.fromisoformat(frame["time"]).timetuple().tm_yday)
     day = relabelled(tmp_path / "truth", tmp_path / "spec", spec_sky)
     (_, pixels), = material_regions(day)
     r = next(fit_regions(day, [("sphere", pixels[pixels.sum(axis=1) % 2 == 0][::2])],
@@ -144,7 +166,12 @@ def test_a_turbid_skys_turbidity_is_fitted_with_the_materials(mi, tmp_path):
     assert r["sky"]["shape"]["variants"] == ["turbidity T 3 -> 4"]
     index, half = r["sky"]["shape"]["index"]["turbidity"]
     assert abs(index - 4.5) <= half, r["sky"]["shape"]
-    assert r["sky"]["interval95"][0] > 1.0, r["sky"]
+    lo, hi = r["sky"]["interval95"]
+    assert lo < 1.0 < hi, r["sky"]
+    levels_by_frame = r["sky"]["shape"]["levels_by_frame"]
+    sun = [levels_by_frame[i]["sun"] for i in r["frames"]]
+    assert all(0.7 < a < 0.95 for a in sun) and sun[0] < max(sun), levels_by_frame
+    assert any(w.startswith("C_r depends on the sky") for w in r["warnings"]), r["warnings"]
     for p, v in zip(("C_r", "C_g", "C_b", "rho_s", "sigma_alpha"), TRUTH):
         lo, hi = r["intervals"][p]["95"]
         assert lo - 1e-9 <= v <= hi + 1e-9, (p, r["intervals"][p], r["parameters"])

@@ -38,6 +38,7 @@ from ..pipeline.jpeg_noise import YCC_TO_RGB, shared_error_sd
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
 from ..pipeline.observation_table import is_table, relative_scale
 from ..physics.sky import SKY_CHOICES, SKY_LEVEL_SD
+from ..physics.turbid_sky import level_factors
 from ..physics.ward import METAL_THRESHOLD
 
 
@@ -213,6 +214,7 @@ class FitSession:
         # variants (sky_shape), mixed at sky_scale and the shape's mix sky_shape_mix
         self.split_sky, self.sky_scale, self.parts = bool(split_sky), 1.0, None
         self.sky_shape, self.sky_shape_mix = bool(sky_shape), None
+        self._variants = None                       # the shape variants (_shape_variants)
         # the fitted sky's share of each parameter's error, whether it leaves them open, and
         # its record (sky_fit.fit_sky_scale)
         self.sky_sd, self.sky_span, self.sky_record = None, None, None
@@ -374,9 +376,25 @@ class FitSession:
         sun, rest = zip(*(sky.split() for sky in self.skies))
         lights = [list(sun), list(rest)]
         if self.sky_shape:
-            variants = shape_variants(self.skies)
+            variants = self._shape_variants()
             lights += [[v[j][1] for v in variants] for j in range(len(variants[0]))]
         return lights
+
+    def _shape_variants(self):
+        """Each frame's shape variants of the spec's sky (:func:`~.sky_fit.shape_variants`),
+        made once."""
+        if self._variants is None:
+            self._variants = shape_variants(self.skies)
+        return self._variants
+
+    def light_levels(self, mix):
+        """(sun, sky): the factors on each frame's sun and sky (T,) that the shape's ``mix``
+        brings with it: a turbid sky's turbidity sets both levels
+        (:func:`~skyfit_mi.physics.turbid_sky.level_factors`); 1 for other skies, or no mix."""
+        if mix is None or not all(s.info.get("kind") == "turbid" for s in self.skies):
+            return 1.0, 1.0
+        return level_factors([s.info for s in self.skies],
+                             [v[0][1].info for v in self._shape_variants()], mix[0])
 
     def _cache_options(self):
         """build_light_cache's options at ``cache_settings``."""
@@ -423,10 +441,11 @@ class FitSession:
         if len(self.parts) == 1:
             self._use_table(self.parts[0])
             return
-        k = self.sky_scale
+        sun, sky = self.light_levels(self.sky_shape_mix)
+        k = self.sky_scale * sky
         mix = np.zeros(len(self.parts) - 2) if self.sky_shape_mix is None else self.sky_shape_mix
         self._use_table(mixed(self.parts[0], self.parts[1:],
-                              [k * (1.0 - mix.sum())] + [k * m for m in mix]))
+                              [k * (1.0 - mix.sum())] + [k * m for m in mix], sun))
 
     def set_sky(self, k, mix=None):
         """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative

@@ -214,6 +214,14 @@ def _shape_record(session, mix, mix_sd):
               "prior_sd": SHAPE_SD, "index": index(mean)}
     if np.ptp(ends, axis=0).any():
         record["index_by_frame"] = {int(i): index(e) for i, e in zip(session.obs.frames, ends)}
+    sun, sky = session.light_levels(mix)
+    if np.ndim(sun):                      # a turbid sky: its turbidity moved both levels
+        record["levels_by_frame"] = {
+            "meaning": "the fitted turbidity's direct normal (sun) and diffuse horizontal (sky) "
+                       "irradiance over the spec's, frame by frame (Ineichen and Perez); the "
+                       "sky's level k multiplies the sky's",
+            **{int(i): {"sun": float(a), "sky": float(b)}
+               for i, a, b in zip(session.obs.frames, sun, sky)}}
     # the log's names of the indices: a CIE group's, as the index it is; epsilon, Delta
     return record, [v["index"] if v["index"] != "group" else "index" for v in first]
 

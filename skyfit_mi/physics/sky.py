@@ -499,16 +499,22 @@ class Sky:
     def shaped(self, k, mix, variants, rows=MAX_ROWS, supersample=SHAPED_SUPERSAMPLE):
         """A copy lit as a fit of the sky's level and shape saw it (``fit --sky-shape``): the
         sun's light (:meth:`split`) as this one's, the rest ``k`` times (1 - sum(mix)) this
-        sky's own plus ``mix[j]`` times ``variants[j]`` (:meth:`shape_variants`' skies).  The
-        variants' patterns have Perez coefficients of their own, which one Sky cannot hold
-        beside this one's, so the rest becomes an environment map: a lat-long table of
-        ``rows`` rows (:mod:`~skyfit_mi.physics.envmap`), each cell the mean over
+        sky's own plus ``mix[j]`` times ``variants[j]`` (:meth:`shape_variants`' skies); for a
+        turbid sky both levels moved too, as its fitted turbidity sets them
+        (:func:`~skyfit_mi.physics.turbid_sky.level_factors`).  The variants' patterns have
+        Perez coefficients of their own, which one Sky cannot hold beside this one's, so the
+        rest becomes an environment map: a lat-long table of ``rows`` rows (:mod:`~skyfit_mi.physics.envmap`), each cell the mean over
         ``supersample`` x ``supersample`` directions, the ground below the horizon included
         (its ``ground`` term 0): an ``envmap`` record's sky with the sun's direct normal
         irradiance and no albedo of its own (:func:`~skyfit_mi.physics.envmap.envmap_sky`).
         Radiances linear sRGB [W m^-2 sr^-1]; ``k`` and ``mix`` unitless."""
         mix = np.asarray(mix, dtype=float)
         sun, rest = self.split()
+        if self.info.get("kind") == "turbid" and len(mix):     # its turbidity sets the levels
+            from .turbid_sky import level_factors
+            (a,), (b,) = level_factors([self.info], [variants[0].info], mix[0])
+            k = k * b
+            sun = replace(sun, sun_radiance=sun.sun_radiance * a, ground=sun.ground * a)
         parts = [(1.0, sun), (k * (1.0 - mix.sum()), rest)] + [(k * m, v)
                                                                for m, v in zip(mix, variants)]
 

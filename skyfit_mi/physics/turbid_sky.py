@@ -100,8 +100,8 @@ def turbid_sky(turbidity, sun_zenith_deg, sun_azimuth_deg, *, day=172, elevation
     sun ``sun_zenith_deg``, ``sun_azimuth_deg`` [degrees]; ``day`` of the year; the site
     ``elevation_m`` [m].  With the sun at or below the horizon, a black sky.
 
-    Info: kind 'turbid', turbidity, the sun's angles, the two irradiances [W m^-2] and the
-    ground albedo."""
+    Info: kind 'turbid', turbidity, the sun's angles, the day, the elevation, the two
+    irradiances [W m^-2] and the ground albedo."""
     check_range("ground albedo", ground_albedo, 0.0, 1.0)
     c = coefficients(turbidity)
     dni, dhi = levels(turbidity, sun_zenith_deg, day, elevation_m)
@@ -114,6 +114,7 @@ def turbid_sky(turbidity, sun_zenith_deg, sun_azimuth_deg, *, day=172, elevation
               info={"kind": "turbid", "turbidity": float(turbidity),
                     "sun_zenith_deg": float(sun_zenith_deg),
                     "sun_azimuth_deg": float(sun_azimuth_deg),
+                    "day_of_year": int(day), "elevation_m": float(elevation_m),
                     "direct_normal_W_m2": dni, "diffuse_horizontal_W_m2": dhi,
                     "ground_albedo": ground_albedo})
     return replace(sky, ground=ground_albedo * sky.horizontal_irradiance() / np.pi)
@@ -139,3 +140,22 @@ def shape_moves(info):
         moves[sign] = ({"to": to, "coefficients": coefficients(to).tolist()}
                        if TURBIDITY_RANGE[0] <= to <= TURBIDITY_RANGE[1] else None)
     return [{"of": "turbidity", "index": "T", "from": t, "moves": moves}]
+
+
+def level_factors(infos, variant_infos, mix):
+    """(sun, sky), each (T,): how a fitted turbidity moves each frame's light, as the direct
+    normal and the diffuse horizontal irradiance (:func:`levels`) at it over those of the
+    frame's turbid sky (``infos``: :func:`turbid_sky`'s).  The turbidity is the one a fit of
+    the sky's shape reads (``fit --sky-shape``): from + ``mix`` (to - from) of each frame's
+    shape variant (``variant_infos``: :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`'
+    skies' info), held to :data:`TURBIDITY_RANGE`.  So one number moves the sky's shape, the
+    sky's level and the sun's, the sun's the more the lower it stands (the beam's longer path
+    through the haze)."""
+    sun, sky = [], []
+    for info, v in zip(infos, variant_infos):
+        t = float(np.clip(v["from"] + float(mix) * (v["to"] - v["from"]), *TURBIDITY_RANGE))
+        dni, dhi = levels(t, info["sun_zenith_deg"], info["day_of_year"], info["elevation_m"])
+        sun.append(dni / info["direct_normal_W_m2"] if info["direct_normal_W_m2"] > 0 else 1.0)
+        sky.append(dhi / info["diffuse_horizontal_W_m2"]
+                   if info["diffuse_horizontal_W_m2"] > 0 else 1.0)
+    return np.array(sun), np.array(sky)

@@ -442,15 +442,17 @@ def chunks(P, T, per_value, budget):
             for f in range(0, T, frames) for r in range(0, P, rows)]
 
 
-def mixed(a, others, weights):
-    """The table of the light a + sum_j w_j b_j, from the tables ``a`` and ``others`` [b_j] of
-    parts of one light (:meth:`~skyfit_mi.physics.sky.Sky.split`,
+def mixed(a, others, weights, a_weight=1.0):
+    """The table of the light w_a a + sum_j w_j b_j, from the tables ``a`` and ``others`` [b_j]
+    of parts of one light (:meth:`~skyfit_mi.physics.sky.Sky.split`,
     :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`) traced at the same points in the same
     blocks with independent samples: every basis is linear in the light, and the positions'
-    spreads of independent traces add (w_j^2 for each).  Each weight is one factor or one per
-    frame of the tables (T,); weights may be negative (a shape's mix extrapolated)."""
-    ws = [np.asarray(w, dtype=np.float32) for w in weights]
+    spreads of independent traces add (w^2 for each).  Each weight (``a_weight`` w_a, and
+    ``weights``) is one factor or one per frame of the tables (T,); weights may be negative (a
+    shape's mix extrapolated)."""
+    ws = [np.asarray(w, dtype=np.float32) for w in [a_weight, *weights]]
     wt = [w[:, None] if w.ndim == 1 else w for w in ws]        # against (..., T, 3)
+    (wa, *ws), (wta, *wt) = ws, wt
     coef = []
     for n, sa in enumerate(a.coef):
         blocks = []
@@ -460,15 +462,15 @@ def mixed(a, others, weights):
                 raise ValueError("the parts' tables were traced in different blocks")
             c = np.zeros((2, max([ca.shape[1]] + [cb.shape[1] for _, _, cb in cs]))
                          + ca.shape[2:], np.float32)
-            c[:, :ca.shape[1]] += ca
+            c[:, :ca.shape[1]] += (wta[f] if wa.ndim == 1 else wta) * ca
             for (_, _, cb), w, wf in zip(cs, ws, wt):
                 c[:, :cb.shape[1]] += (wf[f] if w.ndim == 1 else wf) * cb
             blocks.append((r, f, c))
         coef.append(Series(blocks))
 
     def add(name, square=False):
-        return getattr(a, name) + sum((w * w if square else w) * getattr(b, name)
-                                      for b, w in zip(others, wt))
+        return sum((w * w if square else w) * getattr(b, name)
+                   for b, w in zip([a, *others], [wta, *wt]))
     hit = a.hit
     for b in others:
         hit = hit & b.hit
