@@ -226,6 +226,13 @@ def _shape_record(session, mix, mix_sd):
     return record, [v["index"] if v["index"] != "group" else "index" for v in first]
 
 
+def _ranges(levels_by_frame):
+    """(least, most) of the sun's factor, then of the sky's, over a turbid shape's frames."""
+    by = [v for k, v in levels_by_frame.items() if k != "meaning"]
+    sun, sky = [v["sun"] for v in by], [v["sky"] for v in by]
+    return min(sun), max(sun), min(sky), max(sky)
+
+
 def check_terms(terms, frames):
     """Refuse ``terms`` of the sky's level over ``frames`` frames that they cannot carry."""
     if not 1 <= int(terms) <= MAX_TERMS:
@@ -465,6 +472,9 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
             f"{of} {name} {v[0]:.{2 if abs(v[0]) >= 1 else 3}f} +- "
             f"{v[1]:.{2 if abs(v[0]) >= 1 else 3}f}"
             for (of, v), name in zip(shape["index"].items(), index_names)))
+        + ("" if shape is None or "levels_by_frame" not in shape else
+           ", which puts the sun's light at {:.2f}-{:.2f} and the sky's at {:.2f}-{:.2f} of the "
+           "spec's over the frames".format(*_ranges(shape["levels_by_frame"])))
         + f" ({record['time_s']:.1f} s)"
         + "".join(f"\n  warning: {w}" for w in warnings))
     return record
