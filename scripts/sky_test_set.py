@@ -59,8 +59,8 @@ SCENES = {"disc": ("disc", {}, _GRID // 2 + 4),                       # 16 pixel
                      _GRID)}                                          # normals out to ~30 deg
 #: Perez skies: clearness epsilon and the direct normal irradiance's share of eq. 4.7's.
 PEREZ = {10.0: 1.0, 4.0: 0.7, 2.0: 0.45}
-#: Turbid clear skies: Linke turbidities (2.5: the shared measured clear day's, 2.0-2.9 from
-#: its irradiances; 5: a hazy summer day).
+#: Turbid clear skies: Linke turbidities (2.5: about the shared measured clear day's, whose
+#: diffuse light reads 2.7-2.9; 5: a hazy summer day).
 TURBID = (2.5, 5.0)
 #: CIE general skies (at the thesis's zenith luminance): by standard type or group indices.
 CIE_GENERAL = {"CIE type 11 (white-blue, corona)": {"cie_type": 11},

@@ -5,6 +5,7 @@ bands of a material the model cannot describe hold the held-out values."""
 import csv
 import json
 import sys
+from types import SimpleNamespace
 from pathlib import Path
 
 import numpy as np
@@ -157,3 +158,24 @@ def test_a_hand_edited_model_error_is_refused_in_one_line(tmp_path):
             read_fit_result(path)
     path.write_text(json.dumps({**fit, "model_error": {"kappa": 0.05}}))
     assert read_fit_result(path)["model_error"]["kappa"] == 0.05
+
+
+def test_the_held_out_folds_extrapolate_no_day_end_below_six_frames():
+    """From END_FRAMES_FROM frames every frame is held out in turn; with fewer, only frames
+    between the first and last with values (so a fold never predicts the day beyond its
+    fitted frames); below HELD_OUT_FRAMES there is no check."""
+    from skyfit_mi.fitting.selection import (END_FRAMES_FROM, HELD_OUT_FRAMES, _folds,
+                                             held_out_error)
+
+    def held(valid, ends):
+        return [np.flatnonzero(test.any(axis=0)).tolist() for _, test in _folds(valid, 16, ends)]
+
+    assert (HELD_OUT_FRAMES, END_FRAMES_FROM) == (5, 6)
+    assert held(np.ones((3, 6), bool), True) == [[0], [1], [2], [3], [4], [5]]
+    assert held(np.ones((3, 5), bool), False) == [[1], [2], [3]]
+    valid = np.ones((3, 5), bool)
+    valid[:, 0] = False                               # no values in the first frame
+    assert held(valid, False) == [[2], [3]]
+    for train, test in _folds(np.ones((3, 5), bool), 16, False):
+        assert not (train & test).any()
+    assert held_out_error(SimpleNamespace(valid=np.ones((3, 4), bool)), None, None, None) is None

@@ -116,6 +116,8 @@ def test_a_spec_takes_a_turbid_sky_and_says_what_is_wrong_in_one_line(tmp_path):
     raw["location"]["elevation_m"] = 1500.0
     spec = validate_spec(raw, tmp_path)
     skies = [f.sky for f in spec.frames]
+    warm = validate_spec({**raw, "sky": {**raw["sky"], "cct": 9000.0}}, tmp_path).frames[6].sky
+    assert not np.allclose(warm.perez / warm.perez.sum(), skies[6].perez / skies[6].perez.sum())
     assert all(s.info["kind"] == "turbid" and s.info["turbidity"] == 4.5 for s in skies)
     noon = min(skies, key=lambda s: s.info["sun_zenith_deg"])
     dni, _ = levels(4.5, noon.info["sun_zenith_deg"], 172, elevation_m=1500.0)
@@ -171,7 +173,7 @@ def test_a_turbid_skys_turbidity_is_fitted_with_the_materials(mi, tmp_path):
     lo, hi = r["sky"]["interval95"]
     assert lo < 1.0 < hi, r["sky"]
     levels_by_frame = r["sky"]["shape"]["levels_by_frame"]
-    sun = [levels_by_frame[i]["sun"] for i in r["frames"]]
+    sun = [levels_by_frame["frames"][i]["sun"] for i in r["frames"]]
     assert all(0.7 < a < 0.95 for a in sun) and sun[0] < max(sun), levels_by_frame
     assert any(w.startswith("C_r depends on the sky") for w in r["warnings"]), r["warnings"]
     for p, v in zip(("C_r", "C_g", "C_b", "rho_s", "sigma_alpha"), TRUTH):

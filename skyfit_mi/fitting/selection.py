@@ -42,9 +42,9 @@ def _fit(problem, grid_basis):
 def _folds(valid, folds=FOLDS, ends=True):
     """(fit on, held out) masks of values ``valid`` (P, T) in K interleaved folds of frames
     (frame t in fold t mod K, K = min(``folds``, frames)); without ``ends``, the first and
-    last frames are never held out (each fold's frames lie between fitted ones)."""
+    last frames with values are never held out (each fold's frames lie between fitted ones)."""
     T = valid.shape[1]
-    held = np.arange(T) if ends else np.arange(1, T - 1)
+    held = np.arange(T) if ends else np.flatnonzero(valid.any(axis=0))[1:-1]
     k = min(int(folds), len(held))
     for f in range(k):
         test = np.isin(np.arange(T), held[np.arange(len(held)) % k == f])
@@ -123,13 +123,12 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
     HELD_OUT_FRAMES frames."""
     if problem.valid.shape[1] < HELD_OUT_FRAMES:
         return None
-    frames = problem.valid.shape[1]
-    ends = frames >= END_FRAMES_FROM
+    folds = list(_folds(problem.valid, folds, problem.valid.shape[1] >= END_FRAMES_FROM))
     t0 = time.perf_counter()
     means = problem.obs.rays is None
     es, vs, scales = [], [], []
     outside = small = 0
-    for train, test in _folds(problem.valid, folds, ends):
+    for train, test in folds:
         try:
             train = Problem(problem.obs, problem.model, valid=train)
             test = Problem(problem.obs, problem.model, valid=test)
@@ -160,8 +159,7 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
         es.append(e[use])
         scales.append(a[use])
         vs.append(v[use] + np.einsum("ij,jk,ik->i", D[use], cov, D[use]))
-    out = {"kappa": 0.0, "values": 0,
-           "folds": min(int(folds), frames if ends else frames - 2),
+    out = {"kappa": 0.0, "values": 0, "folds": len(folds),
            "folds_outside": outside, "folds_too_small": small,
            "level": "region mean per frame and channel" if means else "value"}
     if es:

@@ -46,6 +46,7 @@ from ..errors import SkyfitError
 from .methods.levenberg_marquardt import levenberg_marquardt
 from ..pipeline.manifest import RENDERED_SOURCES
 from ..physics.sky import SUN_LEVEL_SD
+from ..physics.turbid_sky import TURBIDITY_RANGE
 from .methods import global_search
 
 #: Sky scales k searched first: a geometric grid from a quarter to four times the spec's sky.
@@ -170,14 +171,18 @@ def shape_variants(skies):
     where the frames' skies move different indices, or where no way suits every frame."""
     variants = [sky.shape_variants() for sky in skies]
     if not all(variants):
+        kinds = sorted({str(sky.info.get("kind")) for sky, v in zip(skies, variants) if not v})
         raise SkyfitError("--sky-shape moves a CIE sky's gradation and indicatrix, a Perez "
                           "sky's clearness and brightness or a turbid sky's turbidity, and the "
-                          "spec's sky of some frames is none of these (type clear, cie_general, "
-                          "perez or turbid); leave out --sky-shape.")
-    if len({tuple(v.info["of"] for _, v in vs) for vs in variants}) > 1:
+                          f"spec's sky of some frames ({', '.join(kinds)}) is none of these "
+                          "(type clear, cie_general, perez or turbid) or is black above the "
+                          "horizon; leave out --sky-shape, or those frames (--frames).")
+    kinds = {tuple(v.info["of"] for _, v in vs) for vs in variants}
+    if len(kinds) > 1:
+        kinds = sorted({str(sky.info.get("kind")) for sky in skies})
         raise SkyfitError("--sky-shape needs one kind of spec sky over the fitted frames, and "
-                          "they mix CIE and Perez skies; fit them apart (--frames) or leave "
-                          "out --sky-shape.")
+                          f"they mix {', '.join(kinds)} skies; fit them apart (--frames) or "
+                          "leave out --sky-shape.")
     back = {v.info["of"]: -1 for vs in variants for _, v in vs if v.info["to"] < v.info["from"]}
     if back and any(v.info["of"] in back and v.info["to"] > v.info["from"]
                     for vs in variants for _, v in vs):
@@ -203,10 +208,11 @@ def _shape_record(session, mix, mix_sd):
     record = {"meaning": "the sky other than the sun is (1 - sum(mix)) times the spec's pattern "
                          "plus mix[j] times variant j (the spec's pattern with one index moved: "
                          "a CIE gradation or indicatrix one group on, a Perez clearness one bin "
-                         "on or its brightness Delta one step, at the same horizontal "
-                         "irradiance): mix 1 is the variant's index; index = from + mix "
-                         "(to - from), linear between the patterns, the frames' mean; "
-                         "toward: the way each index moved (+1 up)",
+                         "on or its brightness Delta one step, a turbid sky's turbidity one "
+                         "step, at the same horizontal irradiance; a turbid sky's fitted "
+                         "turbidity also sets both levels: levels_by_frame): mix 1 is the "
+                         "variant's index; index = from + mix (to - from), linear between the "
+                         "patterns, the frames' mean; toward: the way each index moved (+1 up)",
               "variants": [f"{v['of']} {v['index']} {a:.4g} -> {b:.4g}"
                            for v, (a, b) in zip(first, mean)],
               "toward": {v["of"]: 1 if v["to"] > v["from"] else -1 for v in first},
@@ -220,15 +226,15 @@ def _shape_record(session, mix, mix_sd):
             "meaning": "the fitted turbidity's direct normal (sun) and diffuse horizontal (sky) "
                        "irradiance over the spec's, frame by frame (Ineichen and Perez); the "
                        "sky's level k multiplies the sky's",
-            **{int(i): {"sun": float(a), "sky": float(b)}
-               for i, a, b in zip(session.obs.frames, sun, sky)}}
+            "frames": {int(i): {"sun": float(a), "sky": float(b)}
+                       for i, a, b in zip(session.obs.frames, sun, sky)}}
     # the log's names of the indices: a CIE group's, as the index it is; epsilon, Delta
     return record, [v["index"] if v["index"] != "group" else "index" for v in first]
 
 
 def _ranges(levels_by_frame):
     """(least, most) of the sun's factor, then of the sky's, over a turbid shape's frames."""
-    by = [v for k, v in levels_by_frame.items() if k != "meaning"]
+    by = levels_by_frame["frames"].values()
     sun, sky = [v["sun"] for v in by], [v["sky"] for v in by]
     return min(sun), max(sun), min(sky), max(sky)
 
@@ -443,6 +449,14 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
                 warnings.append(f"the data hardly tell the sky's {' and '.join(vague)} (its "
                                 "shape): the prior holds it, and the intervals include that; "
                                 "regions with other normals, or a grey card, tell it better.")
+            t = shape["index"].get("turbidity")
+            if t is not None and not TURBIDITY_RANGE[0] <= t[0] <= TURBIDITY_RANGE[1]:
+                warnings.append(f"the fitted turbidity {t[0]:.3g} lies beyond the turbid sky's "
+                                f"{TURBIDITY_RANGE[0]:g}-{TURBIDITY_RANGE[1]:g}, where its "
+                                "levels are held at the edge: the light is not a turbid clear "
+                                "sky's, so the parameters and their intervals are not "
+                                "reliable; give the spec a sky nearer the day's (a measured "
+                                "one: perez with measured irradiance, or envmap).")
         correlation = {"names": names, "matrix": (C / np.outer(sd, sd)).tolist()}
     record = {"fitted": "the sky's level (all but the sun's disc) against the spec's, relative "
                         "to the sun: k, shared by every region"

@@ -510,13 +510,13 @@ class Sky:
         Radiances linear sRGB [W m^-2 sr^-1]; ``k`` and ``mix`` unitless."""
         mix = np.asarray(mix, dtype=float)
         sun, rest = self.split()
+        a, b = 1.0, 1.0
         if self.info.get("kind") == "turbid" and len(mix):     # its turbidity sets the levels
             from .turbid_sky import level_factors
             (a,), (b,) = level_factors([self.info], [variants[0].info], mix[0])
-            k = k * b
             sun = replace(sun, sun_radiance=sun.sun_radiance * a, ground=sun.ground * a)
-        parts = [(1.0, sun), (k * (1.0 - mix.sum()), rest)] + [(k * m, v)
-                                                               for m, v in zip(mix, variants)]
+        parts = [(1.0, sun), (k * b * (1.0 - mix.sum()), rest)] + [
+            (k * b * m, v) for m, v in zip(mix, variants)]
 
         def lookup(theta, phi):
             d = direction_from_angles(theta, phi)

@@ -400,7 +400,7 @@ def uniform_luminance(directions, scan, parameters):
 
 
 #: Step of the turbidity fitted per scan [unitless].
-TURBIDITY_STEP = 0.05
+TURBIDITY_GRID_STEP = 0.05
 #: Step of the continuous CIE general-sky indices fitted per scan [unitless].
 INDEX_STEP = 0.01
 _LO, _HI = cie_general.CLEAR_GROUPS
@@ -448,10 +448,10 @@ MODELS = (
     SkyModel("turbid_fit", turbid_luminance,
              parameters=tuple(float(t) for t in np.round(np.arange(
                  turbid_sky.TURBIDITY_RANGE[0], turbid_sky.TURBIDITY_RANGE[1] + 1e-9,
-                 TURBIDITY_STEP), 2)),
+                 TURBIDITY_GRID_STEP), 2)),
              parameter_name="turbidity", held_out=True,
              description="Preetham 1999 turbid-sky pattern, turbidity fitted per scan "
-                         f"(2-10, step {TURBIDITY_STEP})"),
+                         f"(2-10, step {TURBIDITY_GRID_STEP})"),
     SkyModel("uniform", uniform_luminance, description="uniform luminance"),
 )
 

@@ -10,12 +10,21 @@ day, 5-7 hazy), sets both:
 
 * the levels: the sun's direct normal irradiance and the sky's diffuse horizontal irradiance
   of Ineichen and Perez's clear-sky model (2002), through pvlib
-  (``pvlib.clearsky.ineichen``, its Kasten-Young air mass at the site's pressure altitude);
+  (``pvlib.clearsky.ineichen``, with the Kasten-Young air mass at the site's pressure and its
+  altitude, as pvlib's own ``Location.get_clearsky`` calls it);
 * the shape: Preetham, Shirley and Smits's luminance distribution (1999, appendix A.2), the
   Perez form (:func:`~skyfit_mi.physics.sky.perez_relative_luminance`) with coefficients
-  linear in the turbidity (:data:`LUMINANCE_TURBIDITY`).  Preetham's turbidity is the ratio of
-  the haze's and the air's optical depth, close to but not the Linke factor (which counts
-  water vapour's absorption too); taking one for the other is this module's approximation.
+  linear in the turbidity (:data:`LUMINANCE_TURBIDITY`).
+
+The two turbidities are not the same scale.  Preetham's T = (tau_air + tau_haze) / tau_air
+counts the haze's scattering in the visible; the Linke factor counts the whole broadband
+extinction, water vapour's absorption too, and runs about 1 higher for the same air (0.9-1.4
+for 0.5-3 cm of precipitable water, Preetham's haze carried through pvlib's Bird-Hulstrom
+aerosol depth and Kasten's Linke formula).  This module takes one number for both: its pattern
+is Preetham's at the Linke value, so about one step hazier than Preetham's own for that air.
+On the shared measured clear day the pattern fitted to the scans alone read 2.2 and the day's
+diffuse light T_L 2.7-2.9 (``tests/test_real_sky.py``), about that offset.  A fit that moves
+the turbidity (``fit --sky-shape``) moves both together.
 
 The sky's colour is uniform (a colour temperature, thesis 4.2.3) and the sun's that of its
 air mass (:func:`~skyfit_mi.physics.sun.sun_rgb`); Preetham's chromaticity distribution is not
@@ -124,8 +133,9 @@ def shape_moves(info):
     """The move of a turbid sky's shape that a fit mixes with it (``fit --sky-shape``,
     :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), for the sky of :func:`turbid_sky`'s
     ``info``: Preetham's pattern at the turbidity :data:`TURBIDITY_STEP` higher (+1) or lower
-    (-1); None beyond :data:`TURBIDITY_RANGE`.  The variants keep the sky's levels (a fit
-    scales them apart).
+    (-1); None beyond :data:`TURBIDITY_RANGE`.  The variant is lit as the sky is
+    (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`); the levels a fitted turbidity
+    brings are :func:`level_factors`'.
 
     Returns
     -------
@@ -142,6 +152,12 @@ def shape_moves(info):
     return [{"of": "turbidity", "index": "T", "from": t, "moves": moves}]
 
 
+#: The largest sun zenith [degrees] at which :func:`level_factors` follows the model: Ineichen
+#: and Perez fitted it to the sun above about 4 degrees, and nearer the horizon its diffuse
+#: light falls to 0 (pvlib issues 435, 1064); a lower sun's factors are its at this zenith.
+FACTOR_ZENITH_DEG = 85.0
+
+
 def level_factors(infos, variant_infos, mix):
     """(sun, sky), each (T,): how a fitted turbidity moves each frame's light, as the direct
     normal and the diffuse horizontal irradiance (:func:`levels`) at it over those of the
@@ -150,12 +166,14 @@ def level_factors(infos, variant_infos, mix):
     shape variant (``variant_infos``: :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`'
     skies' info), held to :data:`TURBIDITY_RANGE`.  So one number moves the sky's shape, the
     sky's level and the sun's, the sun's the more the lower it stands (the beam's longer path
-    through the haze)."""
+    through the haze), held at :data:`FACTOR_ZENITH_DEG` for a lower sun."""
     sun, sky = [], []
     for info, v in zip(infos, variant_infos):
         t = float(np.clip(v["from"] + float(mix) * (v["to"] - v["from"]), *TURBIDITY_RANGE))
-        dni, dhi = levels(t, info["sun_zenith_deg"], info["day_of_year"], info["elevation_m"])
-        sun.append(dni / info["direct_normal_W_m2"] if info["direct_normal_W_m2"] > 0 else 1.0)
-        sky.append(dhi / info["diffuse_horizontal_W_m2"]
-                   if info["diffuse_horizontal_W_m2"] > 0 else 1.0)
+        z = min(float(info["sun_zenith_deg"]), FACTOR_ZENITH_DEG)
+        at = [levels(x, z, info["day_of_year"], info["elevation_m"])
+              for x in (t, float(info["turbidity"]))]
+        (dni, dhi), (dni0, dhi0) = at
+        sun.append(dni / dni0 if dni0 > 0 else 1.0)
+        sky.append(dhi / dhi0 if dhi0 > 0 else 1.0)
     return np.array(sun), np.array(sky)

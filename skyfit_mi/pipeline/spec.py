@@ -537,7 +537,7 @@ def _sky_entries(sec, times, tz):
         if "phi" in e:
             _num("sky", "phi", e["phi"], 0, 1)
         perez_only = sorted({"global_horizontal_W_m2", "decomposition", "cct"} & set(e)
-                            - ({"cct"} if e["type"] == "cie_general" else set())
+                            - ({"cct"} if e["type"] in ("cie_general", "turbid") else set())
                             - ({"global_horizontal_W_m2"} if e["type"] == "envmap" else set()))
         if perez_only and e["type"] != "perez":
             raise SpecError(f"[sky] {', '.join(perez_only)} belong to a Perez sky (type = "
