@@ -42,7 +42,7 @@ def spec(**changes):
     (dict(time={"date": "2026-06-21"}), "needs times = \\[...\\] or start, end and step_minutes"),
     (dict(time={"date": "21/06/2026", "times": ["12:00"]}), "write 'YYYY-MM-DD'"),
     (dict(time={"date": "2026-06-21", "times": ["noon"]}), "write 'HH:MM'"),
-    (dict(sky={"type": "stormy"}), "valid: clear, overcast, intermediate, cie_general, gensky"),
+    (dict(sky={"type": "stormy"}), "valid: clear, overcast, intermediate, cie_general, turbid, gensky"),
     (dict(sky={"type": "intermediate"}), "needs phi"),
     (dict(sky={"type": "intermediate", "phi": 2}), r"phi = 2 is outside \[0, 1\]"),
     (dict(scene={"file": "nothere.xml"}), "shipped: disc.xml, photo_board.xml, sample_board.xml, sphere.xml"),

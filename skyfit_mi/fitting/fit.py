@@ -1163,7 +1163,8 @@ class FitSession:
             out["interval95"] = [float(np.hypot(kappa, k)) for k in held["interval95"]]
             out["meaning"] = (f"each held-out value missed by about {out['kappa']:.2g} of itself "
                               "beyond its noise and the prediction's spread: predictions "
-                              "(relight) add this kappa x the value")
+                              "(relight) add this kappa x the value, averaged over its "
+                              "interval")
         elif not held["values"]:
             out["meaning"] = ("not tested: every fold either moved the parameters out of "
                               "their 95% intervals or held too few values (folds_outside, "

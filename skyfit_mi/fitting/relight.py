@@ -35,7 +35,7 @@ from .chi2 import subsample_region
 from .fit import FitSession
 from .landscape import truth_parameters
 from .sky_fit import sky_level_at
-from .uncertainty import widen
+from .uncertainty import band_half_width, widen
 from ..physics.colour import SRGB_LUMINANCE
 from ..pipeline.fit_result import check_fit_sequence, read_fit_result
 from ..pipeline.illumination import envmap_from_record
@@ -944,9 +944,9 @@ def _predict_means(s, result, target, draws, rng):
     n = len(s.obs.pixels)
     # and by the model's error, kappa times the mean: shared by the region's pixels, which
     # see the light alike (a highlight the model misses, it misses in all of them)
-    extra = 1.959963984540054 * np.sqrt((np.sum(image_noise_variance(s, image, target), axis=0)
-                                         + np.sum(model_var, axis=0)) / n**2
-                                        + (model_error_kappa(result) * means[0]) ** 2)
+    extra = band_half_width((np.sum(image_noise_variance(s, image, target), axis=0)
+                             + np.sum(model_var, axis=0)) / n**2, means[0],
+                            *model_error_kappa(result))
     observed = region_mean(image)
     names = _channels(s)
     means, observed = means[..., :len(names)], observed[..., :len(names)]
@@ -992,8 +992,8 @@ def _predict_points(s, result, target, draws, rng):
         lo[part], hi[part] = np.percentile(values[1:], [2.5, 97.5], axis=0)
     _, model_var = s.wm.radiance_and_variance(sets[0])
     image = image_values(s, target)
-    extra = 1.959963984540054 * np.sqrt(image_noise_variance(s, image, target) + model_var
-                                        + (model_error_kappa(result) * at_fit) ** 2)
+    extra = band_half_width(image_noise_variance(s, image, target) + model_var, at_fit,
+                            *model_error_kappa(result))
     names = _channels(s)
     saturated = ~_measured(s)
     rows, points = [], [str(x) for x in s.obs.pixels]      # one string a point, shared
@@ -1012,13 +1012,18 @@ def _predict_points(s, result, target, draws, rng):
 
 
 def model_error_kappa(result):
-    """The relative model error kappa of a fit ``result`` for a prediction: the error with
-    which it predicted frames it was not fitted to (its ``model_error.held_out``), else its
-    in-sample one (fitted where the model cannot reproduce the data; 0 without).  A new
-    value's own error beyond its noise is kappa times its value, of which the prediction
-    stands for it, and every prediction band adds that to the parameters' spread."""
+    """The relative model error kappa of a fit ``result`` for a prediction, with its 95%
+    interval (None where not fitted): the error with which it predicted frames it was not
+    fitted to (its ``model_error.held_out``), else its in-sample one (fitted where the model
+    cannot reproduce the data; 0 without).  A new value's own error beyond its noise is kappa
+    times its value, of which the prediction stands for it, and every prediction band adds
+    that to the parameters' spread, averaged over kappa's uncertainty
+    (:func:`~.uncertainty.band_half_width`)."""
     me = result.get("model_error") or {}
-    return float(max(me.get("kappa", 0.0), (me.get("held_out") or {}).get("kappa", 0.0)))
+    held = me.get("held_out") or {}
+    if held.get("kappa", 0.0) >= me.get("kappa", 0.0):
+        return float(held.get("kappa", 0.0)), held.get("interval95")
+    return float(me["kappa"]), me.get("interval95")
 
 
 def _measured(s):

@@ -25,7 +25,7 @@ value to the next.
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import chdtrc
+from scipy.special import chdtrc, ndtr, ndtri
 
 from ..physics.ward import METAL_THRESHOLD, colour_rule_twin
 
@@ -112,6 +112,41 @@ def covariance_intervals(theta, cov, lower, upper):
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     return {lv: (np.clip(theta - z * sd, lower, upper), np.clip(theta + z * sd, lower, upper))
             for lv, z in Z.items()}
+
+
+#: Gauss-Hermite nodes over which :func:`band_half_width` averages an uncertain model error.
+KAPPA_NODES = 24
+
+
+def band_half_width(variance, value, kappa, interval95=None, level=0.95):
+    """The half-width of the central ``level`` band of a new value's error beyond the
+    prediction: Gaussian of variance ``variance`` (its noise, the model's Monte Carlo error)
+    plus (kappa x ``value``)^2 (the model's error), arrays alike.  A model error estimated
+    from few values is itself uncertain: with its 95% ``interval95`` (lo, hi) the error is
+    averaged over kappa (the band of the predictive distribution, not of kappa's point), kappa
+    log-normal about its estimate with each side's spread from its side of the interval
+    (ln(kappa / lo) / 1.96 below, ln(hi / kappa) / 1.96 above; Gauss-Hermite nodes).  Without
+    an interval, or kappa 0, z (variance + (kappa value)^2)^0.5."""
+    variance, value = np.broadcast_arrays(np.asarray(variance, float), np.asarray(value, float))
+    z = float(ndtri(0.5 + level / 2))
+    if not kappa or interval95 is None:
+        return z * np.sqrt(variance + (kappa * value) ** 2)
+    lo, hi = (float(x) for x in interval95)
+    x, w = np.polynomial.hermite_e.hermegauss(KAPPA_NODES)        # standard normal nodes
+    w = w / w.sum()
+    spread = np.where(x < 0, np.log(kappa / lo) if lo > 0 else np.log(hi / kappa),
+                      np.log(hi / kappa)) / 1.959963984540054
+    kappas = kappa * np.exp(spread * x)
+    sds = np.sqrt(variance[..., None] + (kappas * value[..., None]) ** 2)   # (..., nodes)
+
+    def outside(h):
+        return np.sum(w * 2.0 * ndtr(-h[..., None] / sds), axis=-1)
+    a, b = np.zeros(variance.shape), z * sds.max(axis=-1) * 2.0      # bisection on h
+    for _ in range(60):
+        mid = 0.5 * (a + b)
+        big = outside(mid) > 1.0 - level
+        a, b = np.where(big, mid, a), np.where(big, b, mid)
+    return 0.5 * (a + b)
 
 
 def widen(value, interval, extra, lower, upper):
