@@ -503,14 +503,15 @@ class Sky:
         turbid sky both levels moved too, as its fitted turbidity sets them
         (:func:`~skyfit_mi.physics.turbid_sky.level_factors`).  The variants' patterns have
         Perez coefficients of their own, which one Sky cannot hold beside this one's, so the
-        rest becomes an environment map: a lat-long table of ``rows`` rows (:mod:`~skyfit_mi.physics.envmap`), each cell the mean over
-        ``supersample`` x ``supersample`` directions, the ground below the horizon included
+        rest becomes an environment map: a lat-long table of ``rows`` rows
+        (:mod:`~skyfit_mi.physics.envmap`), each cell the mean over ``supersample`` x
+        ``supersample`` directions, the ground below the horizon included
         (its ``ground`` term 0): an ``envmap`` record's sky with the sun's direct normal
         irradiance and no albedo of its own (:func:`~skyfit_mi.physics.envmap.envmap_sky`).
         Radiances linear sRGB [W m^-2 sr^-1]; ``k`` and ``mix`` unitless."""
         mix = np.asarray(mix, dtype=float)
         sun, rest = self.split()
-        a, b = 1.0, 1.0
+        b = 1.0
         if self.info.get("kind") == "turbid" and len(mix):     # its turbidity sets the levels
             from .turbid_sky import level_factors
             (a,), (b,) = level_factors([self.info], [variants[0].info], mix[0])

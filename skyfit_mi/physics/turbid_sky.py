@@ -5,8 +5,8 @@ it names skies for polluted and turbid atmospheres, driven by a turbidity factor
 extension (section 4.2.1).  Haze takes light from the sun's beam, more of it the longer the
 beam's path through the air (so more in the morning and evening), and spreads it over the sky,
 brightest toward the horizon and around the sun.  Here one number, the Linke turbidity T_L
-(the atmosphere's optical depth in clean, dry air's: about 2 very clear, 3-4 a common clear
-day, 5-7 hazy), sets both:
+(the atmosphere's optical depth in units of a clean, dry atmosphere's: about 2 very clear, 3-4
+a common clear day, 5-7 hazy), sets both:
 
 * the levels: the sun's direct normal irradiance and the sky's diffuse horizontal irradiance
   of Ineichen and Perez's clear-sky model (2002), through pvlib
