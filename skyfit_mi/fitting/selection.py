@@ -123,12 +123,12 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
     HELD_OUT_FRAMES frames."""
     if problem.valid.shape[1] < HELD_OUT_FRAMES:
         return None
-    folds = list(_folds(problem.valid, folds, problem.valid.shape[1] >= END_FRAMES_FROM))
+    splits = list(_folds(problem.valid, folds, problem.valid.shape[1] >= END_FRAMES_FROM))
     t0 = time.perf_counter()
     means = problem.obs.rays is None
     es, vs, scales = [], [], []
     outside = small = 0
-    for train, test in folds:
+    for train, test in splits:
         try:
             train = Problem(problem.obs, problem.model, valid=train)
             test = Problem(problem.obs, problem.model, valid=test)
@@ -159,7 +159,7 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
         es.append(e[use])
         scales.append(a[use])
         vs.append(v[use] + np.einsum("ij,jk,ik->i", D[use], cov, D[use]))
-    out = {"kappa": 0.0, "values": 0, "folds": len(folds),
+    out = {"kappa": 0.0, "values": 0, "folds": len(splits),
            "folds_outside": outside, "folds_too_small": small,
            "level": "region mean per frame and channel" if means else "value"}
     if es:

@@ -450,27 +450,24 @@ def mixed(a, others, weights, a_weight=1.0):
     spreads of independent traces add (w^2 for each).  Each weight (``a_weight`` w_a, and
     ``weights``) is one factor or one per frame of the tables (T,); weights may be negative (a
     shape's mix extrapolated)."""
+    parts = [a, *others]
     ws = [np.asarray(w, dtype=np.float32) for w in [a_weight, *weights]]
     wt = [w[:, None] if w.ndim == 1 else w for w in ws]        # against (..., T, 3)
-    (wa, *ws), (wta, *wt) = ws, wt
     coef = []
     for n, sa in enumerate(a.coef):
         blocks = []
         for i, (r, f, ca) in enumerate(sa.blocks):
-            cs = [b.coef[n].blocks[i] for b in others]
+            cs = [b.coef[n].blocks[i] for b in parts]
             if any((rb, fb) != (r, f) for rb, fb, _ in cs):
                 raise ValueError("the parts' tables were traced in different blocks")
-            c = np.zeros((2, max([ca.shape[1]] + [cb.shape[1] for _, _, cb in cs]))
-                         + ca.shape[2:], np.float32)
-            c[:, :ca.shape[1]] += (wta[f] if wa.ndim == 1 else wta) * ca
+            c = np.zeros((2, max(cb.shape[1] for _, _, cb in cs)) + ca.shape[2:], np.float32)
             for (_, _, cb), w, wf in zip(cs, ws, wt):
                 c[:, :cb.shape[1]] += (wf[f] if w.ndim == 1 else wf) * cb
             blocks.append((r, f, c))
         coef.append(Series(blocks))
 
     def add(name, square=False):
-        return sum((w * w if square else w) * getattr(b, name)
-                   for b, w in zip([a, *others], [wta, *wt]))
+        return sum((w * w if square else w) * getattr(b, name) for b, w in zip(parts, wt))
     hit = a.hit
     for b in others:
         hit = hit & b.hit
