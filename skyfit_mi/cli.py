@@ -508,10 +508,12 @@ def build_parser():
                      "on that level from how measured skies scatter about the models. fit and "
                      "prior also count the sun's own level (--sun-sd) in the reflectances' "
                      "intervals")
-    fit.add_argument("--sky-terms", type=int, default=1,
-                     help="with --sky fit or prior: 1 (default) one sky level for the day; 2-4 "
-                     "a level that changes smoothly over the day (changing weather: log k as "
-                     "that many Legendre polynomials in time, the change under a prior)")
+    fit.add_argument("--sky-terms", type=int, default=None,
+                     help="with --sky fit or prior: how the sky's level may change over the day, "
+                     "as log k in that many Legendre polynomials in time, each beyond the "
+                     "level under a prior: 1 one level for the day; 2-4 a smooth change (the "
+                     "sun's height, changing weather); default 3 (the level, its drift and "
+                     "its curve), fewer for under 5 frames")
     fit.add_argument("--sky-shape", action="store_true",
                      help="with --sky fit or prior and a CIE sky (clear, cie_general) or a "
                      "Perez sky (perez): fit its shape too, as mixes of the spec's pattern with "

@@ -79,7 +79,7 @@ def dim_fit(dim_sky):
 
     logs = []
     r = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky="fit",
-                         log=logs.append))
+                         sky_terms=1, log=logs.append))
     return r, logs
 
 
@@ -254,7 +254,7 @@ def test_the_sky_prior_holds_k_nearer_the_spec_and_no_wider(dim_sky, dim_fit):
 
     alone = dim_fit[0]["sky"]
     prior = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky="prior",
-                             log=lambda *a: None))["sky"]
+                             sky_terms=1, log=lambda *a: None))["sky"]
     assert 1.0 < prior["k"] <= alone["k"] * 1.001
     assert (np.log(prior["interval95"][1] / prior["interval95"][0])
             <= np.log(alone["interval95"][1] / alone["interval95"][0]) * 1.001)
@@ -316,6 +316,70 @@ def test_a_sky_that_changes_over_the_day_is_fitted_as_a_smooth_curve(drifting_sk
         assert lo - 1e-9 <= v <= hi + 1e-9, (p, r["intervals"][p], r["parameters"])
     again = FitSession.from_fit(r, drifting_sky)
     np.testing.assert_allclose(again.sky_scale, k, rtol=1e-6)
+
+
+def test_a_clear_skys_share_of_the_light_follows_the_suns_height_by_the_air():
+    """DEFAULT_TERMS' grounds: in Ineichen and Perez's clear-sky model (pvlib) the slope of
+    log(DHI / DNI) in log air mass (1-3) runs from about -0.4 at Linke turbidity 2.5 to +0.17
+    at 7, rising with the turbidity: how the sky's share moves with the sun's height depends
+    on the air, so one model sky's level cannot hold over a day."""
+    import pvlib
+
+    m = np.linspace(1.0, 3.0, 21)
+    zenith = np.degrees(np.arccos(1.0 / m))
+    am = pvlib.atmosphere.get_relative_airmass(zenith, "kastenyoung1989")
+    slopes = []
+    for t in (2.5, 4.0, 7.0):
+        sky = pvlib.clearsky.ineichen(zenith, pvlib.atmosphere.get_absolute_airmass(am), t)
+        slopes.append(np.polyfit(np.log(am), np.log(sky["dhi"] / sky["dni"]), 1)[0])
+    assert -0.45 < slopes[0] < -0.35 and 0.12 < slopes[2] < 0.22, slopes
+    assert np.all(np.diff(slopes) > 0), slopes
+
+
+#: log k's true slope in the log of the sun's air mass (the sky's share grows as the sun sinks)
+HEIGHT = 0.3
+
+
+@pytest.fixture(scope="module")
+def height_sky(days, tmp_path_factory):
+    """The noisy disc day whose manifest's sky (all but the sun) is m^-HEIGHT times its own
+    (m the sun's air mass, 1 / cos z): the real sky's level against the spec's,
+    k = m^HEIGHT, is least at noon and rises toward both ends of the day, as the sky's share of
+    a clear day's light does against a model of another atmosphere."""
+    return rescaled_sky(days["noisy"], tmp_path_factory.mktemp("height") / "day",
+                        lambda frame: np.cos(np.radians(frame["sun_zenith_deg"])) ** HEIGHT)
+
+
+def test_by_default_the_skys_level_follows_the_suns_height_and_weather(height_sky):
+    """Not told, a fitted sky's level changes smoothly over the day (DEFAULT_TERMS: level,
+    drift, curve), each term beyond the level under its prior: on a day whose sky-to-sun
+    ratio follows the sun's height the curve bends up toward both ends, k at the frames holds
+    the truth, every parameter's interval holds its truth, and the terms the data hardly tell
+    raise no warning (the prior holds them, and the intervals include that); fewer frames take
+    fewer terms.  One level for the day puts the diffuse colour outside its interval."""
+    from skyfit_mi.fitting.fit import fit_regions
+    from skyfit_mi.fitting.sky_fit import DEFAULT_TERMS, default_terms
+
+    logs = []
+    r = next(fit_regions(height_sky, [("disc", REGION)], model="colour", sky="prior",
+                         log=logs.append))
+    terms = r["sky"]["terms"]
+    assert len(terms["coefficients"]) == DEFAULT_TERMS and terms["coefficients"][2] > 0
+    assert any("changing over the day as 3 terms" in x for x in logs), logs
+    assert not any("hardly tell how the sky changes" in w for w in r["warnings"])
+    frames = json.loads((height_sky / "manifest.json").read_text())["frames"]
+    truth = {f["index"]: np.cos(np.radians(f["sun_zenith_deg"])) ** -HEIGHT for f in frames}
+    held = [lo <= truth[int(i)] <= hi for i, (_, lo, hi) in terms["k_by_frame"].items()]
+    assert np.mean(held) >= 0.8, (terms["k_by_frame"], truth)
+    for p, v in TRUTH.items():
+        lo, hi = r["intervals"][p]["95"]
+        assert lo - 1e-9 <= v <= hi + 1e-9, (p, r["intervals"][p], r["parameters"])
+    assert [default_terms(n) for n in (1, 3, 4, 5, 13)] == [1, 1, 2, 3, 3]
+    # one level for the day (--sky-terms 1) puts the diffuse colour low, outside its interval
+    one = next(fit_regions(height_sky, [("disc", REGION)], model="colour", sky="prior",
+                           sky_terms=1, log=lambda *a: None))
+    lo, hi = one["intervals"]["C_b"]["95"]
+    assert hi < TRUTH["C_b"], one["intervals"]["C_b"]
 
 
 def test_sky_terms_need_a_fitted_sky_and_frames(days):
@@ -445,7 +509,7 @@ def shape_fit(gradation_4):
     from skyfit_mi.fitting.fit import fit_regions
 
     return next(fit_regions(gradation_4, [("disc", REGION)], model="colour", sky="fit",
-                            sky_shape=True, log=lambda *a: None))
+                            sky_terms=1, sky_shape=True, log=lambda *a: None))
 
 
 def test_the_skys_shape_is_fitted_with_the_materials_and_says_what_one_region_cannot_tell(
@@ -590,7 +654,7 @@ def test_a_perez_skys_clearness_and_brightness_are_fitted_with_the_materials(per
     day, pixels = perez_day
     logs = []
     r = next(fit_regions(day, [("sphere", pixels)], model="colour", sky="fit", sky_shape=True,
-                         log=logs.append))
+                         sky_terms=1, log=logs.append))
     shape = r["sky"]["shape"]
     assert shape["variants"][0] == f"clearness epsilon {PEREZ_SPEC:.4g} -> 5.35"
     index, half = shape["index"]["clearness"]

@@ -165,7 +165,8 @@ def test_a_turbid_skys_turbidity_is_fitted_with_the_materials(mi, tmp_path):
     (_, pixels), = material_regions(day)
     logs = []
     r = next(fit_regions(day, [("sphere", pixels[pixels.sum(axis=1) % 2 == 0][::2])],
-                         model="colour", sky="fit", sky_shape=True, log=logs.append))
+                         model="colour", sky="fit", sky_shape=True, sky_terms=1,
+                         log=logs.append))
     assert any("turbidity T" in x and "puts the sun's light at 0." in x for x in logs), logs
     assert r["sky"]["shape"]["variants"] == ["turbidity T 3 -> 4"]
     index, half = r["sky"]["shape"]["index"]["turbidity"]

@@ -1184,7 +1184,7 @@ def fit_region(manifest_path, name, pixels, **options):
 
 def fit_regions(manifest_path, regions, model="two", method="global", normalisation="ward",
                 seed=0, start=None, positions=None, directions=DIRECTIONS, method_options=None,
-                log=print, frames=None, variant=None, sky=None, sun_sd=None, sky_terms=1,
+                log=print, frames=None, variant=None, sky=None, sun_sd=None, sky_terms=None,
                 sky_shape=False):
     """Fit several regions of one sequence (``regions`` [(name, pixels)]), their light traced
     together (:meth:`FitSession.for_regions`); yields each region's result dict in turn.
@@ -1194,7 +1194,8 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
     both count the sun's own level, known to a relative ``sun_sd`` (None:
     :func:`~.sky_fit.default_sun_sd`), in the
     reflectances' intervals (:func:`~.sky_fit.light_level_sd`); ``sky_terms`` > 1 lets the
-    sky's level change smoothly over the day, and ``sky_shape`` fits the sky's shape too (a CIE
+    sky's level change smoothly over the day, 1 holds it (None: :func:`~.sky_fit.default_terms`
+    of the frames), and ``sky_shape`` fits the sky's shape too (a CIE
     sky's gradation and indicatrix, a Perez sky's clearness and brightness;
     :func:`~.sky_fit.fit_sky_scale`)."""
     if sky is not None:
@@ -1212,8 +1213,9 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
             log(f"sky: photographs under the sun and a sky: the spec's light is a model of "
                 f"theirs, so its level is fitted with its prior (--sky {sky}; --sky spec takes "
                 "it as exact)")
-    if sky == "spec" and (sky_terms != 1 or sky_shape):
-        raise SkyfitError(f"{'--sky-terms' if sky_terms != 1 else '--sky-shape'} belongs to a "
+    asked = sky_terms not in (None, 1)
+    if sky == "spec" and (asked or sky_shape):
+        raise SkyfitError(f"{'--sky-terms' if asked else '--sky-shape'} belongs to a "
                           "fitted sky, and the spec's is taken as it is (--sky spec): give --sky "
                           "fit or prior.")
     if sky != "spec":                                   # refused before the light is traced
@@ -1221,7 +1223,8 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
             raise SkyfitError(f"--sky {sky} scales the sky against the sun, and no frame of the "
                               "sequence has the sun's disc above the horizon; fit with the "
                               "spec's sky (--sky spec).")
-        check_terms(sky_terms, len(first.obs.frames))
+        if sky_terms is not None:
+            check_terms(sky_terms, len(first.obs.frames))
         if sky_shape:
             shape_variants(first.skies)
         if sun_sd is None:
@@ -1232,7 +1235,8 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
     FitSession.trace_groups(sessions)
     if sky != "spec":
         fit_sky_scale(list(sessions.values()), seed, log,
-                      prior_sd=SKY_LEVEL_SD if sky == "prior" else None, terms=int(sky_terms))
+                      prior_sd=SKY_LEVEL_SD if sky == "prior" else None,
+                      terms=None if sky_terms is None else int(sky_terms))
     for name, _ in regions:
         yield sessions.pop(name).run(method, start, seed, method_options, log)
 

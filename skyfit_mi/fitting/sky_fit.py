@@ -6,9 +6,11 @@ day (docs/BENCHMARKS.md, "Measured light"), and the materials absorb the differe
 ("Fits under skies other than the spec's").  The thesis names joint estimation of the light as
 future work (ch. 8.2).  Here the light is split into the sun's disc and the rest of the sky
 (patterns, map and ground, :meth:`~skyfit_mi.physics.sky.Sky.split`), traced apart, and the
-rest is scaled by one factor k shared by all regions and frames: radiance is linear in the
-light, so every k's table is the sun's plus k times the sky's
-(:func:`~skyfit_mi.render.basis_table.mixed`), and no k needs a trace of its own.
+rest is scaled by a factor k shared by all regions: radiance is linear in the light, so every
+k's table is the sun's plus k times the sky's (:func:`~skyfit_mi.render.basis_table.mixed`), and
+no k needs a trace of its own.  k is first one level for the day, then (by default,
+:data:`DEFAULT_TERMS`) a smooth curve over it: the sky's share against the sun's follows the
+sun's height and the weather, which no model sky knows.
 
 k is found by profiling: the sum over regions of each one's least chi-square (the global
 search), first on a geometric grid (:data:`SCALE_GRID`), then by a parabola in log k about its
@@ -57,8 +59,19 @@ SKY_DOMINATES = 3 ** 0.5
 #: Half the spacing in log k of the points that refine the profile's least point.
 REFINE_STEP = 0.1
 #: The most terms of the sky's level over the day (``fit --sky-terms``), and the frames each
-#: term needs at least.
+#: term needs at least when asked for.
 MAX_TERMS, FRAMES_PER_TERM = 4, 3
+#: The terms of the sky's level over the day when not told (:func:`default_terms`): the day's
+#: level, its drift (P_1) and its curve (P_2), the last two under the prior :data:`DRIFT_SD`.
+#: The sky's share of the light against the sun's is not the model's, nor constant: it moves
+#: with the sun's height (the air the sun's light crosses: in Ineichen and Perez's clear-sky
+#: model the slope of log(DHI / DNI) in log air mass ranges from -0.4 to +0.17 over Linke
+#: turbidities 2.5-7, tests/test_sky_fit.py) and with the weather, and a clear sky's change
+#: with the sun's height is about even about noon (P_2).  One level for the day let a sky
+#: other than the spec's bend the roughness instead: a disc under a Perez sky of clearness 4,
+#: its sky-to-sun ratio 1.2-2.0 times the CIE clear sky's over the day, read sigma_alpha 0.092
+#: (0.086-0.097) for 0.08 with no warning (docs/BENCHMARKS.md, "the sky test set").
+DEFAULT_TERMS = 3
 #: The prior's standard deviation of each term of log k beyond the day's level (Legendre
 #: polynomials in time over the fitted frames, :func:`time_basis`): its change between the
 #: day's middle and its ends.  Passing haze and cloud change the sky's share of the light by
@@ -239,6 +252,12 @@ def _ranges(levels_by_frame):
     return min(sun), max(sun), min(sky), max(sky)
 
 
+def default_terms(frames):
+    """The terms of the sky's level over ``frames`` frames when not told: :data:`DEFAULT_TERMS`,
+    fewer where the frames are fewer than two more than that (one level for up to 3 frames)."""
+    return int(max(1, min(DEFAULT_TERMS, int(frames) - 2)))
+
+
 def check_terms(terms, frames):
     """Refuse ``terms`` of the sky's level over ``frames`` frames that they cannot carry."""
     if not 1 <= int(terms) <= MAX_TERMS:
@@ -322,16 +341,21 @@ def _fit_curve(sessions, thetas, u0, terms, shape, prior_sd, s2):
     return u, s2 * np.linalg.inv(H), span, responses
 
 
-def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
+def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
     """Fit the sky scale k of ``sessions`` (FitSessions of one day, traced with
     ``split_sky``) and leave each at the fitted k with its ``sky_sd`` (the sky's share of
     each parameter's standard error) and ``sky_record`` set; returns the record.
     ``prior_sd``: the standard deviation of a normal prior on log k about the spec's level
     (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`), None for none (k from the data alone).
-    ``terms`` > 1: log k changes smoothly over the day (changing weather), as that many
-    Legendre polynomials in time; sessions traced with ``sky_shape`` also fit the mix of the
+    ``terms`` > 1: log k changes smoothly over the day (the sun's height, changing weather),
+    as that many Legendre polynomials in time; None: :func:`default_terms` of the frames, and
+    no warning where the data hardly tell the terms beyond the level (their prior holds them,
+    as it does the intervals); sessions traced with ``sky_shape`` also fit the mix of the
     sky's shape variants (:func:`_fit_curve`), both from the day's level found first."""
     t0 = time.perf_counter()
+    told = terms is not None
+    if not told:
+        terms = default_terms(len({i for s in sessions for i in s.obs.frames}))
     rng = np.random.default_rng(seed)
     starts = [s.random_start(rng) for s in sessions]
     profile = {}                                        # the level first, in the spec's shape
@@ -409,9 +433,11 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
         s.sky_span = None if np.isfinite(sd_u) else (thetas.min(axis=0), thetas.max(axis=0))
     curve = shape = correlation = None
     J = len(sessions[0].parts) - 2                       # the shape variants traced
-    if (terms > 1 or J) and not np.isfinite(sd_u):
+    if (told and terms > 1 or J) and not np.isfinite(sd_u):
         warnings.append("the sky's change over the day and its shape are not fitted: its level "
                         "is not determined.")
+    elif not np.isfinite(sd_u):
+        terms = 1                                       # one (undetermined) level for the day
     elif terms > 1 or J:
         u, C, span, responses = _fit_curve(sessions, [th for _, th in best], u0, terms, J,
                                            prior_sd, s2)
@@ -437,7 +463,7 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=1):
                                              float(np.exp(v + h))]
                                     for (i, _), v, h in zip(frames, B @ u[:terms], half)}}
             vague = [j for j in range(1, terms) if sd[j] > 0.7 * DRIFT_SD]
-            if vague:
+            if vague and told:
                 warnings.append(f"the data hardly tell how the sky changes over the day (terms "
                                 f"{', '.join(map(str, vague))} of --sky-terms {terms}): their "
                                 "prior holds them, and the intervals include that.")
