@@ -26,12 +26,14 @@ wrong: tests/independent.py ``held_or_warned``).  Goal of the joint sky estimati
 item 5): >= 90% in, none missed.  ``--spec-turbidity T`` fits with a turbid clear sky of Linke
 turbidity T as the spec instead (``type = "turbid"``; the CIE clear day is then one more sky
 other than the spec's), with ``--sky-shape`` its turbidity fitted with both levels.
+``--sky-terms N`` sets the terms of the fitted sky's level over the day (``fit --sky-terms``; 1
+is one level, as before the default became a curve).
 
 A slow sweep.  ``--quick`` (a few minutes): five skies other than the spec's and the control,
 five frames, both scenes from both cameras, one paint, two replicates.
 
     .venv/bin/python scripts/sky_test_set.py [--quick] [--replicates N] [--sky fit|prior]
-        [--sky-shape] [--spec-turbidity T] [-o DIR]
+        [--sky-terms N] [--sky-shape] [--spec-turbidity T] [-o DIR]
 
 writes DIR/sky_test_set.json and prints the tables.
 """
@@ -160,11 +162,12 @@ def spec_turbid(turbidity):
 
 
 def fit_replicates(day, scene, truth, replicates, positions=None, directions=512, sky="spec",
-                   shape=False, spec_turbidity=None):
+                   shape=False, spec_turbidity=None, terms=None):
     """Fit ``day`` with the spec's sky (the thesis's CIE clear sky at each frame's sun; with
     ``sky`` 'fit' its level fitted with the material, ``fit --sky fit``, or 'prior' with its
     prior, ``fit --sky prior``; both with the sun's level uncertain as a modelled sun's; with
-    ``shape`` the CIE sky's shape fitted too, ``--sky-shape``) on
+    ``shape`` the CIE sky's shape fitted too, ``--sky-shape``; ``terms`` those of the sky's
+    level over the day, ``--sky-terms``, None fit's default) on
     ``replicates`` captures of its radiance; one record per replicate: parameters, 95%
     intervals, warnings, each parameter's 'in'/'warned'/'MISSED', the chi-square rise at the
     truth and its joint 99.9% bound.  The light cache is sized from the data (``positions``
@@ -192,7 +195,7 @@ def fit_replicates(day, scene, truth, replicates, positions=None, directions=512
         s.obs.recapture(radiance, np.random.default_rng([36, r]))
         if sky != "spec":
             fit_sky_scale([s], seed=r, log=lambda *a: None,
-                          prior_sd=SKY_LEVEL_SD if sky == "prior" else None)
+                          prior_sd=SKY_LEVEL_SD if sky == "prior" else None, terms=terms)
         res = s.run("global", seed=r, log=lambda *a: None)
         out.append({"parameters": res["parameters"],
                     "intervals_95": {p: res["intervals"][p]["95"] for p in NAMES},
@@ -259,14 +262,14 @@ def markdown(cases, totals):
 
 
 def run_case(folder, sky_name, sky, scene, camera, material_name, replicates, hours, scans,
-             fit_sky="spec", shape=False, spec_turbidity=None):
+             fit_sky="spec", shape=False, spec_turbidity=None, terms=None):
     """Render and fit one (sky, scene, camera, material); returns its record."""
     material = MATERIALS[material_name]
     t0 = time.perf_counter()
     day = render_day(folder, template(scene, material, camera, hours), sky, scans)
     t1 = time.perf_counter()
     fits = fit_replicates(day, scene, truth_of(material), replicates, sky=fit_sky, shape=shape,
-                          spec_turbidity=spec_turbidity)
+                          spec_turbidity=spec_turbidity, terms=terms)
     return {"sky": sky_name, "scene": scene, "camera_deg": camera, "material": material_name,
             "truth": dict(zip(NAMES, truth_of(material))), "fits": fits,
             "render_s": t1 - t0, "fit_s": time.perf_counter() - t1}
@@ -288,6 +291,9 @@ def main(argv=None):
                     "or fitted with its prior (fit --sky prior)")
     ap.add_argument("--sky-shape", action="store_true",
                     help="with --sky fit or prior: fit the spec sky's shape too (fit --sky-shape)")
+    ap.add_argument("--sky-terms", type=int, default=None,
+                    help="with --sky fit or prior: the terms of the sky's level over the day "
+                    "(fit --sky-terms; default: fit's own, 3 where the frames allow; 1 one level)")
     ap.add_argument("--spec-turbidity", type=float, default=None,
                     help="fit with a turbid clear sky of this Linke turbidity as the spec "
                     "(type turbid) instead of the thesis's CIE clear sky")
@@ -308,7 +314,8 @@ def main(argv=None):
                 for material in materials:
                     folder = args.out / f"sky{i}-{scene}-{camera:g}-{materials.index(material)}"
                     c = run_case(folder, sky_name, sky, scene, camera, material, replicates,
-                                 hours, scans, args.sky, args.sky_shape, args.spec_turbidity)
+                                 hours, scans, args.sky, args.sky_shape, args.spec_turbidity,
+                                 args.sky_terms)
                     cases.append(c)
                     st = [v for f in c["fits"] for v in f["status"].values()]
                     print(f"{sky_name} | {scene} | {camera:g} | {material}: "
@@ -318,6 +325,7 @@ def main(argv=None):
     write_json(args.out / "sky_test_set.json",
                {"quick": args.quick, "replicates": replicates, "fit_sky": args.sky,
                 "sky_shape": args.sky_shape, "spec_turbidity": args.spec_turbidity,
+                "sky_terms": args.sky_terms,
                 "hours_utc": list(hours),
                 "scans": [s.label for s in scans], "cases": cases, "summary": totals,
                 "wall_s": time.perf_counter() - t_start, "data": CITATION})
