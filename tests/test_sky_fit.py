@@ -238,7 +238,9 @@ def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun):
     assert hi < TRUTH["C_g"], exact["intervals"]["C_g"]
     logs = []
     r = next(fit_regions(bright_sun, [("disc", REGION)], model="colour", log=logs.append))
-    assert r["sky"]["prior"]["log_k_sd"] > 0 and r["sky"]["sun_level_sd"] == 0.2
+    assert r["sky"]["prior"]["log_k_sd"] > 0 and r["sky"]["sun_coupling"]["given_sd"] == 0.2
+    # the modelled sun's sd widened by the sky's departure from the spec's (SUN_SKY_COUPLING)
+    assert r["sky"]["sun_level_sd"] == pytest.approx(np.hypot(0.2, 0.35 * np.log(r["sky"]["k"])))
     assert any("--sky prior" in x for x in logs), logs
     for p, v in TRUTH.items():
         lo, hi = r["intervals"][p]["95"]
@@ -336,6 +338,27 @@ def test_a_clear_skys_share_of_the_light_follows_the_suns_height_by_the_air():
     assert np.all(np.diff(slopes) > 0), slopes
 
 
+def test_a_modelled_suns_level_moves_with_the_skys_by_the_air():
+    """SUN_SKY_COUPLING's grounds: over Linke turbidities 2-7 in Ineichen and Perez's model, at
+    air mass 1.1-2, log DNI falls 0.29-0.39 per unit rise of log(DHI / DNI): a sky brighter
+    against the sun than a model's comes with a sun dimmer than the model's."""
+    import pvlib
+
+    from skyfit_mi.physics.sky import SUN_SKY_COUPLING
+
+    turbidity = np.array([2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0])
+    slopes = []
+    for m in (1.1, 1.5, 2.0):
+        zenith = np.degrees(np.arccos(1.0 / m))
+        am = pvlib.atmosphere.get_relative_airmass(zenith, "kastenyoung1989")
+        sky = [pvlib.clearsky.ineichen(zenith, pvlib.atmosphere.get_absolute_airmass(am), t)
+               for t in turbidity]
+        dni, dhi = (np.array([float(x[c]) for x in sky]) for c in ("dni", "dhi"))
+        slopes.append(-np.polyfit(np.log(dhi / dni), np.log(dni), 1)[0])
+    assert 0.27 < min(slopes) and max(slopes) < 0.41, slopes
+    assert min(slopes) <= SUN_SKY_COUPLING <= max(slopes)
+
+
 #: log k's true slope in the log of the sun's air mass (the sky's share grows as the sun sinks)
 HEIGHT = 0.3
 
@@ -365,7 +388,8 @@ def test_by_default_the_skys_level_follows_the_suns_height_and_weather(height_sk
                          log=logs.append))
     terms = r["sky"]["terms"]
     assert len(terms["coefficients"]) == DEFAULT_TERMS and terms["coefficients"][2] > 0
-    assert any("changing over the day as 3 terms" in x for x in logs), logs
+    assert any("changing over the day as 3 terms: k = " in x and "over the 13 frames" in x
+               for x in logs), logs
     assert not any("hardly tell how the sky changes" in w for w in r["warnings"])
     frames = json.loads((height_sky / "manifest.json").read_text())["frames"]
     truth = {f["index"]: np.cos(np.radians(f["sun_zenith_deg"])) ** -HEIGHT for f in frames}

@@ -218,8 +218,10 @@ class FitSession:
         # the fitted sky's share of each parameter's error, whether it leaves them open, and
         # its record (sky_fit.fit_sky_scale)
         self.sky_sd, self.sky_span, self.sky_record = None, None, None
-        # the sun's level's relative uncertainty, in the reflectances' intervals (sky_fit)
-        self.sun_sd = 0.0
+        # the sun's level's relative uncertainty, in the reflectances' intervals (sky_fit):
+        # as given, whether it is a modelled sun's, and what the fitted sky's departure from the
+        # spec's adds to a modelled one (sun_level_sd)
+        self.sun_sd, self.sun_modelled, self.sun_widening = 0.0, False, 0.0
         self.cache_time = time.perf_counter() - t0
         if trace:
             self.trace_light()
@@ -386,6 +388,13 @@ class FitSession:
         if self._variants is None:
             self._variants = shape_variants(self.skies)
         return self._variants
+
+    @property
+    def sun_level_sd(self):
+        """The sun's level's relative uncertainty (sd of its log) in the reflectances'
+        intervals: ``sun_sd`` as given, widened by ``sun_widening`` (a modelled sun under a sky
+        fitted away from the spec's, :func:`~.sky_fit.fit_sky_scale`)."""
+        return float(np.hypot(self.sun_sd, self.sun_widening))
 
     def light_levels(self, mix):
         """(sun, sky): the factors on each frame's sun and sky (T,) that the shape's ``mix``
@@ -740,7 +749,7 @@ class FitSession:
         mc_sd = self.cache_error(theta, fit.method, problem)
         cal_sd = fit.calibration_sd
         sky_sd = np.zeros(len(names)) if self.sky_sd is None else self.sky_sd
-        sun_rel = light_level_sd(self.doc, names, self.sun_sd)
+        sun_rel = light_level_sd(self.doc, names, self.sun_level_sd)
         for i, p in enumerate(names):
             for lv in ("68", "95"):
                 intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * np.sqrt(
@@ -973,7 +982,11 @@ class FitSession:
                 warnings.append(
                     f"{', '.join(level)} scale with the sun's level, which no data tell (the "
                     f"light's absolute scale trades exactly with the reflectances) and which "
-                    f"is known to +-{100 * self.sun_sd:.0f}% (1 sd, --sun-sd): that, more than "
+                    f"is known to +-{100 * self.sun_level_sd:.0f}% (1 sd, "
+                    + ("--sun-sd" if not self.sun_widening else
+                       f"--sun-sd's {100 * self.sun_sd:.0f}% widened as the fitted sky departs "
+                       "from the spec's")
+                    + "): that, more than "
                     "the data, sets their intervals; their ratios and sigma_alpha do not "
                     "depend on it. A reference of known reflectance in the scene (ingest "
                     "--calibrate or --colorchecker) or a measured direct normal irradiance "
@@ -1088,7 +1101,7 @@ class FitSession:
                if np.any(fit.matrix_sd > 0) else {}),
             **({"sky": {**self.sky_record, "error_sd": dict(zip(names, (
                 self.sky_sd if self.sky_sd is not None else np.zeros(len(names))).tolist())),
-                "sun_level_sd": self.sun_sd,
+                "sun_level_sd": self.sun_level_sd,
                 "sun_level_error_sd": dict(zip(names, fit.sun_level_sd.tolist()))}}
                if self.sky_record is not None else {}),
             "cache_noise_chi2": fit.cache_noise_chi2,
@@ -1193,7 +1206,9 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
     'prior' the same with the level's prior (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`);
     both count the sun's own level, known to a relative ``sun_sd`` (None:
     :func:`~.sky_fit.default_sun_sd`), in the
-    reflectances' intervals (:func:`~.sky_fit.light_level_sd`); ``sky_terms`` > 1 lets the
+    reflectances' intervals (:func:`~.sky_fit.light_level_sd`; not given, widened where the
+    fitted sky departs from the spec's, :data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`);
+    ``sky_terms`` > 1 lets the
     sky's level change smoothly over the day, 1 holds it (None: :func:`~.sky_fit.default_terms`
     of the frames), and ``sky_shape`` fits the sky's shape too (a CIE
     sky's gradation and indicatrix, a Perez sky's clearness and brightness;
@@ -1202,6 +1217,7 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
         check_choice("sky", sky, SKY_CHOICES)
     if sun_sd is not None:
         check_range("--sun-sd", sun_sd, 0.0, 1.0)
+    modelled = sun_sd is None            # the spec's modelled sun, not a level given to sun_sd
     sessions = FitSession.for_regions(manifest_path, regions, model=model,
                                       normalisation=normalisation, seed=seed,
                                       positions=positions, directions=directions, frames=frames,
@@ -1232,6 +1248,7 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
     for s in sessions.values():
         s.split_sky, s.sky_shape = sky != "spec", bool(sky_shape)
         s.sun_sd = 0.0 if sky == "spec" else float(sun_sd)
+        s.sun_modelled = sky != "spec" and modelled
     FitSession.trace_groups(sessions)
     if sky != "spec":
         fit_sky_scale(list(sessions.values()), seed, log,

@@ -35,7 +35,10 @@ Two things the data cannot tell well are stated as priors:
   the roughness none.  A reference in the scene (``ingest --calibrate``, ``--colorchecker``)
   or a relative scale (``--unknown-scale``) ties the reflectances to the data instead, and a
   measured direct normal irradiance tells it to a pyrheliometer's accuracy (``--sun-sd
-  0.03``).  A sequence skyfit rendered was lit by its spec's sun: 0 unless given.
+  0.03``).  A sequence skyfit rendered was lit by its spec's sun: 0 unless given.  A modelled
+  sun's (not given) widens as the fitted sky departs from the spec's
+  (:data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`): air that is not the model's changes the
+  sun's light too.
 """
 
 import datetime as dt
@@ -47,7 +50,7 @@ from . import uncertainty as unc
 from ..errors import SkyfitError
 from .methods.levenberg_marquardt import levenberg_marquardt
 from ..pipeline.manifest import RENDERED_SOURCES
-from ..physics.sky import SUN_LEVEL_SD
+from ..physics.sky import SUN_LEVEL_SD, SUN_SKY_COUPLING
 from ..physics.turbid_sky import TURBIDITY_RANGE
 from .methods import global_search
 
@@ -72,6 +75,8 @@ MAX_TERMS, FRAMES_PER_TERM = 4, 3
 #: its sky-to-sun ratio 1.2-2.0 times the CIE clear sky's over the day, read sigma_alpha 0.092
 #: (0.086-0.097) for 0.08 with no warning (docs/BENCHMARKS.md, "the sky test set").
 DEFAULT_TERMS = 3
+#: The most frames whose sky level the log lists one by one (more: its ends and range).
+CURVE_LISTED = 8
 #: The prior's standard deviation of each term of log k beyond the day's level (Legendre
 #: polynomials in time over the fitted frames, :func:`time_basis`): its change between the
 #: day's middle and its ends.  Passing haze and cloud change the sky's share of the light by
@@ -256,6 +261,15 @@ def default_terms(frames):
     """The terms of the sky's level over ``frames`` frames when not told: :data:`DEFAULT_TERMS`,
     fewer where the frames are fewer than two more than that (one level for up to 3 frames)."""
     return int(max(1, min(DEFAULT_TERMS, int(frames) - 2)))
+
+
+def _curve_text(k):
+    """The log's words for the sky's level ``k`` at each frame, in order: every value for a
+    few frames, else its ends and range."""
+    if len(k) <= CURVE_LISTED:
+        return "k = " + ", ".join(f"{v:.2f}" for v in k) + " by frame"
+    return (f"k = {k[0]:.2f} at the first frame, {k[-1]:.2f} at the last, {min(k):.2f}-"
+            f"{max(k):.2f} over the {len(k)} frames")
 
 
 def check_terms(terms, frames):
@@ -484,6 +498,18 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
                                 "reliable; give the spec a sky nearer the day's (a measured "
                                 "one: perez with measured irradiance, or envmap).")
         correlation = {"names": names, "matrix": (C / np.outer(sd, sd)).tolist()}
+    # a modelled sun's level is less sure where the sky departs from the spec's
+    coupling = None
+    for s in sessions:
+        s.sun_widening = SUN_SKY_COUPLING * abs(np.log(k)) if s.sun_modelled and s.sun_sd else 0.0
+        if s.sun_widening:
+            coupling = {"given_sd": s.sun_sd, "coupling": SUN_SKY_COUPLING,
+                        "sd": s.sun_level_sd,
+                        "meaning": "the modelled sun's level's sd (of its log) in the "
+                                   "reflectances' intervals: hypot(given_sd, coupling |log k|), a "
+                                   "sky fitted brighter or dimmer against the sun than the "
+                                   "spec's saying that the air is not the model's, nor then "
+                                   "its sun"}
     record = {"fitted": "the sky's level (all but the sun's disc) against the spec's, relative "
                         "to the sun: k, shared by every region"
                         + (" and frame of the fit" if curve is None else
@@ -498,6 +524,7 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
               "profile": {"k": [float(np.exp(u)) for u in sorted(profile)],
                           "chi2": [data(u) for u in sorted(profile)]},
               "terms": curve, "shape": shape, "correlation": correlation,
+              "sun_coupling": coupling,
               "warnings": warnings, "time_s": time.perf_counter() - t0}
     for s in sessions:
         s.sky_record = record
@@ -506,8 +533,8 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
         + ("" if prior_sd is None else f" and its prior (sd {prior_sd:g} in log k)")
         + f": k = {k:.3f} (95%: "
         f"{ends[0]}-{ends[1]}) times the spec's, against the sun"
-        + ("" if curve is None else f", changing over the day as {terms} terms: k = "
-           + ", ".join(f"{v[0]:.2f}" for v in curve["k_by_frame"].values()) + " by frame")
+        + ("" if curve is None else f", changing over the day as {terms} terms: "
+           + _curve_text([v[0] for v in curve["k_by_frame"].values()]))
         + ("" if shape is None else "; its shape: " + ", ".join(
             f"{of} {name} {v[0]:.{2 if abs(v[0]) >= 1 else 3}f} +- "
             f"{v[1]:.{2 if abs(v[0]) >= 1 else 3}f}"
