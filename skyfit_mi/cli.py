@@ -523,7 +523,8 @@ def build_parser():
     fit.add_argument("--sun-sd", type=float, default=None,
                      help="with --sky fit or prior: the relative uncertainty of the spec's sun "
                      f"level, in the reflectances' intervals (default {SUN_LEVEL_SD} for "
-                     "photographs: a modelled sun; about 0.03 for a measured direct normal "
+                     "photographs: a modelled sun, widened as the fitted sky departs from the "
+                     "spec's; given, it is kept as it is: about 0.03 for a measured direct normal "
                      "irradiance; 0 for a sequence skyfit rendered; unused where a reference "
                      "calibrates the frames)")
     fit.add_argument("--method", choices=("global", "lm", "anneal", "adam"), default="global",
