@@ -239,8 +239,16 @@ def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun):
     logs = []
     r = next(fit_regions(bright_sun, [("disc", REGION)], model="colour", log=logs.append))
     assert r["sky"]["prior"]["log_k_sd"] > 0 and r["sky"]["sun_coupling"]["given_sd"] == 0.2
-    # the modelled sun's sd widened by the sky's departure from the spec's (SUN_SKY_COUPLING)
-    assert r["sky"]["sun_level_sd"] == pytest.approx(np.hypot(0.2, 0.35 * np.log(r["sky"]["k"])))
+    # the modelled sun's sd widened by the sky's departure from the spec's (SUN_SKY_COUPLING:
+    # log k's rms over the frames of the curve)
+    log_k = np.log([v[0] for v in r["sky"]["terms"]["k_by_frame"].values()])
+    assert r["sky"]["sun_level_sd"] == pytest.approx(np.hypot(0.2, 0.35 * np.sqrt(np.mean(
+        log_k ** 2))))
+    assert any("the modelled sun's 20% widened" in w for w in r["warnings"]), r["warnings"]
+    # a level given to --sun-sd is kept as it is
+    given = next(fit_regions(bright_sun, [("disc", REGION)], model="colour", sun_sd=0.1,
+                             log=lambda *a: None))
+    assert given["sky"]["sun_level_sd"] == 0.1 and given["sky"]["sun_coupling"] is None
     assert any("--sky prior" in x for x in logs), logs
     for p, v in TRUTH.items():
         lo, hi = r["intervals"][p]["95"]

@@ -984,8 +984,8 @@ class FitSession:
                     f"light's absolute scale trades exactly with the reflectances) and which "
                     f"is known to +-{100 * self.sun_level_sd:.0f}% (1 sd, "
                     + ("--sun-sd" if not self.sun_widening else
-                       f"--sun-sd's {100 * self.sun_sd:.0f}% widened as the fitted sky departs "
-                       "from the spec's")
+                       f"the modelled sun's {100 * self.sun_sd:.0f}% widened as the fitted sky "
+                       "departs from the spec's")
                     + "): that, more than "
                     "the data, sets their intervals; their ratios and sigma_alpha do not "
                     "depend on it. A reference of known reflectance in the scene (ingest "

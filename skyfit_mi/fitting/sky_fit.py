@@ -61,9 +61,9 @@ SCALE_GRID = np.geomspace(0.25, 4.0, 9)
 SKY_DOMINATES = 3 ** 0.5
 #: Half the spacing in log k of the points that refine the profile's least point.
 REFINE_STEP = 0.1
-#: The most terms of the sky's level over the day (``fit --sky-terms``), and the frames each
-#: term needs at least when asked for.
-MAX_TERMS, FRAMES_PER_TERM = 4, 3
+#: The most terms of the sky's level over the day (``fit --sky-terms``), and the frames beyond
+#: the terms a curve needs at least (every term past the level is held by its prior).
+MAX_TERMS, FRAMES_BEYOND_TERMS = 4, 2
 #: The terms of the sky's level over the day when not told (:func:`default_terms`): the day's
 #: level, its drift (P_1) and its curve (P_2), the last two under the prior :data:`DRIFT_SD`.
 #: The sky's share of the light against the sun's is not the model's, nor constant: it moves
@@ -260,7 +260,7 @@ def _ranges(levels_by_frame):
 def default_terms(frames):
     """The terms of the sky's level over ``frames`` frames when not told: :data:`DEFAULT_TERMS`,
     fewer where the frames are fewer than two more than that (one level for up to 3 frames)."""
-    return int(max(1, min(DEFAULT_TERMS, int(frames) - 2)))
+    return int(max(1, min(DEFAULT_TERMS, int(frames) - FRAMES_BEYOND_TERMS)))
 
 
 def _curve_text(k):
@@ -277,9 +277,9 @@ def check_terms(terms, frames):
     if not 1 <= int(terms) <= MAX_TERMS:
         raise SkyfitError(f"--sky-terms {terms}: give 1 (one sky level for the day) to "
                           f"{MAX_TERMS}.")
-    if int(terms) > 1 and frames < FRAMES_PER_TERM * int(terms):
-        raise SkyfitError(f"--sky-terms {terms} needs at least {FRAMES_PER_TERM * int(terms)} "
-                          f"frames, and the fit has {frames}; give fewer terms.")
+    if int(terms) > 1 and frames < int(terms) + FRAMES_BEYOND_TERMS:
+        raise SkyfitError(f"--sky-terms {terms} needs at least {int(terms) + FRAMES_BEYOND_TERMS}"
+                          f" frames, and the fit has {frames}; give fewer terms.")
 
 
 def _fit_curve(sessions, thetas, u0, terms, shape, prior_sd, s2):
@@ -448,8 +448,9 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
     curve = shape = correlation = None
     J = len(sessions[0].parts) - 2                       # the shape variants traced
     if (told and terms > 1 or J) and not np.isfinite(sd_u):
-        warnings.append("the sky's change over the day and its shape are not fitted: its level "
-                        "is not determined.")
+        parts = ["change over the day"] * (told and terms > 1) + ["shape"] * bool(J)
+        warnings.append(f"the sky's {' and its '.join(parts)} {'are' if len(parts) > 1 else 'is'}"
+                        " not fitted: its level is not determined.")
     elif not np.isfinite(sd_u):
         terms = 1                                       # one (undetermined) level for the day
     elif terms > 1 or J:
@@ -499,14 +500,24 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
                                 "one: perez with measured irradiance, or envmap).")
         correlation = {"names": names, "matrix": (C / np.outer(sd, sd)).tolist()}
     # a modelled sun's level is less sure where the sky departs from the spec's
+    # (its departure: log k's rms over the frames of a curve; over the levels the profile could
+    # not tell apart where k is not determined)
+    if curve is not None:
+        departure = float(np.sqrt(np.mean(np.log([v[0] for v in curve["k_by_frame"].values()])
+                                          ** 2)))
+    elif not np.isfinite(sd_u):
+        departure = float(max(abs(u) for u in within))
+    else:
+        departure = abs(float(np.log(k)))
     coupling = None
     for s in sessions:
-        s.sun_widening = SUN_SKY_COUPLING * abs(np.log(k)) if s.sun_modelled and s.sun_sd else 0.0
+        s.sun_widening = SUN_SKY_COUPLING * departure if s.sun_modelled and s.sun_sd else 0.0
         if s.sun_widening:
             coupling = {"given_sd": s.sun_sd, "coupling": SUN_SKY_COUPLING,
                         "sd": s.sun_level_sd,
                         "meaning": "the modelled sun's level's sd (of its log) in the "
-                                   "reflectances' intervals: hypot(given_sd, coupling |log k|), a "
+                                   "reflectances' intervals: hypot(given_sd, coupling |log k|; "
+                                   "log k's rms over the frames), a "
                                    "sky fitted brighter or dimmer against the sun than the "
                                    "spec's saying that the air is not the model's, nor then "
                                    "its sun"}
