@@ -467,6 +467,7 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
             frames = sorted({(i, t) for s in sessions for i, t in zip(s.obs.frames,
                                                                       s.obs.times)})
             B = time_basis([t for _, t in frames], span, terms)
+            log_k = B @ u[:terms]
             Ct = C[:terms, :terms]
             half = unc.Z["95"] * np.sqrt(np.einsum("ij,jk,ik->i", B, Ct, B))
             curve = {"meaning": "log k(t) = sum_j coefficients[j] P_j(x), P_j Legendre "
@@ -476,7 +477,7 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
                      "span_s": list(span), "drift_prior_sd": DRIFT_SD,
                      "k_by_frame": {int(i): [float(np.exp(v)), float(np.exp(v - h)),
                                              float(np.exp(v + h))]
-                                    for (i, _), v, h in zip(frames, B @ u[:terms], half)}}
+                                    for (i, _), v, h in zip(frames, log_k, half)}}
             vague = [j for j in range(1, terms) if sd[j] > 0.7 * DRIFT_SD]
             if vague and told:
                 warnings.append(f"the data hardly tell how the sky changes over the day (terms "
@@ -502,13 +503,10 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
     # a modelled sun's level is less sure where the sky departs from the spec's
     # (its departure: log k's rms over the frames of a curve; over the levels the profile could
     # not tell apart where k is not determined)
-    if curve is not None:
-        departure = float(np.sqrt(np.mean(np.log([v[0] for v in curve["k_by_frame"].values()])
-                                          ** 2)))
-    elif not np.isfinite(sd_u):
-        departure = float(max(abs(u) for u in within))
+    if np.isfinite(sd_u):
+        departure = float(np.sqrt(np.mean((log_k if curve is not None else np.log(k)) ** 2)))
     else:
-        departure = abs(float(np.log(k)))
+        departure = float(max(abs(u) for u in within))
     coupling = None
     for s in sessions:
         s.sun_widening = SUN_SKY_COUPLING * departure if s.sun_modelled and s.sun_sd else 0.0
