@@ -939,12 +939,12 @@ def _predict_means(s, result, target, draws, rng):
     lo, hi = np.percentile(means[1:], [2.5, 97.5], axis=0)
     # widened by what the parameters leave out: the image's own noise (the sensor model's
     # sigma in radiance) and the model's Monte Carlo error, both of the region mean
-    _, model_var = s.wm.radiance_and_variance(sets[0])
+    at_fit, model_var = s.wm.radiance_and_variance(sets[0])
     image = image_values(s, target)
     n = len(s.obs.pixels)
     # and by the model's error, kappa times the mean: shared by the region's pixels, which
     # see the light alike (a highlight the model misses, it misses in all of them)
-    extra = band_half_width((np.sum(image_noise_variance(s, image, target), axis=0)
+    extra = band_half_width((np.sum(image_noise_variance(s, at_fit, target), axis=0)
                              + np.sum(model_var, axis=0)) / n**2, means[0],
                             *model_error_kappa(result))
     observed = region_mean(image)
@@ -979,7 +979,8 @@ def _predict_points(s, result, target, draws, rng):
     """The prediction of one region of an observation table (:func:`predict`): each point's
     value at the fit in each frame and channel it measures, its 95% band (percentiles over
     the draws, widened in quadrature by the value's own noise, the model's Monte Carlo
-    error and the fit's model error) and the table's value; (its rows, the
+    error and the fit's model error: the band of a measured value, which reaches below zero
+    where its noise does, as a table's values may) and the table's value; (its rows, the
     :class:`MeansError` of its region means)."""
     sets = parameter_draws(result, s.names, s.lower, s.upper, draws, rng)
     at_fit, lo, hi = (np.empty(s.obs.y.shape) for _ in range(3))
@@ -992,13 +993,14 @@ def _predict_points(s, result, target, draws, rng):
         lo[part], hi[part] = np.percentile(values[1:], [2.5, 97.5], axis=0)
     _, model_var = s.wm.radiance_and_variance(sets[0])
     image = image_values(s, target)
-    extra = band_half_width(image_noise_variance(s, image, target) + model_var, at_fit,
+    extra = band_half_width(image_noise_variance(s, at_fit, target) + model_var, at_fit,
                             *model_error_kappa(result))
     names = _channels(s)
     saturated = ~_measured(s)
     rows, points = [], [str(x) for x in s.obs.pixels]      # one string a point, shared
     for p, j, c in zip(*np.nonzero(np.isfinite(s.obs.sigma[..., :len(names)]))):
-        band = widen(at_fit[p, j, c], (lo[p, j, c], hi[p, j, c]), extra[p, j, c], 0.0, np.inf)
+        band = widen(at_fit[p, j, c], (lo[p, j, c], hi[p, j, c]), extra[p, j, c], -np.inf,
+                     np.inf)
         rows.append(PredictionRow(region=s.name, frame=int(s.obs.frames[j]),
                                   time=s.obs.times[j], channel=names[c],
                                   predicted=float(at_fit[p, j, c]), lo95=float(band[0]),
@@ -1066,10 +1068,14 @@ def image_values(s, target):
     return s.obs.y / (s.obs.gain * s.obs.sensor.max_code)
 
 
-def image_noise_variance(s, image, target):
-    """The variance of session ``s``'s ``image`` values (P, T, 3) [(W m^-2 sr^-1)^2] in
-    ``target``: the sensor model's sigma in radiance (a photograph's radiance frames are its
-    codes, a table's values its measurements); 0 where a value is saturated or left out.  A
+def image_noise_variance(s, radiance, target):
+    """The variance of session ``s``'s image values (P, T, 3) [(W m^-2 sr^-1)^2] in ``target``
+    where the model predicts ``radiance`` (P, T, 3): the sensor model's sigma in radiance
+    through the response's slope at the prediction (a photograph's radiance frames are its
+    codes, a table's values its measurements), not at the value observed, which noise can put
+    at or below zero, where the slope is 0 (a lab table's 204 values below zero of 1,728 had
+    bands without their noise: gold's band coverage 0.84 -> 0.95); 0 where a value is saturated
+    or left out.  A
     render's radiance frames are the scene before its sensor: their error is the render's
     Monte Carlo error (``radiance_sigma``), the sensor's noise only in its sensor frames (with
     the sensor's noise, a disc's day at 5% noise drew 95% bands of +-8.4% median about region
@@ -1077,6 +1083,6 @@ def image_noise_variance(s, image, target):
     if s.obs.rays is None and s.doc.get("source") == "render":
         sd = frame_values(target, s.obs.pixels, s.obs.frames, source="radiance_sigma")
         return np.where(np.isfinite(sd), sd, 0.0) ** 2
-    slope = s.problem.slope(image)
+    slope = s.problem.slope(radiance)
     usable = np.isfinite(s.obs.sigma) & (slope > 0)
     return np.where(usable, s.obs.sigma / np.where(usable, slope, 1.0), 0.0) ** 2
