@@ -189,7 +189,7 @@ def fit_replicates(day, scene, truth, replicates, positions=None, directions=512
     s = FitSession(fitted, region, pixels, model="colour", positions=positions,
                    directions=directions, split_sky=sky != "spec", sky_shape=shape)
     s.sun_sd = 0.0 if sky == "spec" else SUN_LEVEL_SD
-    s.sun_modelled = sky != "spec"                      # a photographed day's default
+    s.sun_source = "modelled" if sky != "spec" else "given"     # a photographed day's default
     radiance = frame_values(fitted, s.obs.pixels, s.obs.frames)
     out = []
     for r in range(replicates):

@@ -27,7 +27,7 @@ import numpy as np  # noqa: E402 -- after the BLAS setting
 from . import __version__  # noqa: E402
 from .errors import SetupError, SkyfitError  # noqa: E402
 from .files import check_dir, write_json  # noqa: E402
-from .physics.sky import SKY_CHOICES, SUN_LEVEL_SD  # noqa: E402
+from .physics.sky import MEASURED_SUN_SD, SKY_CHOICES, SUN_LEVEL_SD  # noqa: E402
 from .physics.ward import NORMALISATIONS  # noqa: E402
 from .render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS  # noqa: E402
 from .render.variant import VARIANTS  # noqa: E402
@@ -522,11 +522,11 @@ def build_parser():
                      "group, bin or step (two more traces of the light)")
     fit.add_argument("--sun-sd", type=float, default=None,
                      help="with --sky fit or prior: the relative uncertainty of the spec's sun "
-                     f"level, in the reflectances' intervals (default {SUN_LEVEL_SD} for "
-                     "photographs: a modelled sun, widened as the fitted sky departs from the "
-                     "spec's; given, it is kept as it is: about 0.03 for a measured direct normal "
-                     "irradiance; 0 for a sequence skyfit rendered; unused where a reference "
-                     "calibrates the frames)")
+                     f"level, in the reflectances' intervals (default for photographs "
+                     f"{SUN_LEVEL_SD} for a modelled sun, widened as the fitted sky departs "
+                     f"from the spec's, {MEASURED_SUN_SD} where the spec gives the measured "
+                     "direct normal irradiance; 0 for a sequence skyfit rendered; given, it is "
+                     "kept as it is; unused where a reference calibrates the frames)")
     fit.add_argument("--method", choices=("global", "lm", "anneal", "adam"), default="global",
                      help="global (default: grid over sigma_alpha then Levenberg-Marquardt; "
                      "right from any start), lm (the thesis's baseline), anneal (simulated "

@@ -2,6 +2,7 @@
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -206,6 +207,42 @@ def test_which_sky_a_fit_takes_when_not_told():
     assert default_sky({"source": "ingest"}, [lab]) == "spec"            # lab lights: no sky
 
 
+def test_a_measured_suns_level_is_known_to_the_instruments_accuracy():
+    """Where the spec gives the measured direct normal irradiance (a CIE sky's
+    direct_normal_W_m2, a Perez sky's dhi and dni, a map's direct_normal) the sun is
+    'measured' and a photographed day's fit counts MEASURED_SUN_SD of it, not widened; a split
+    of the global irradiance (Erbs; a map's sun from the GHI) or the thesis's eq. 4.7 is a
+    model's (SUN_LEVEL_SD), and a rendered day's sun is exact."""
+    import datetime as dt
+
+    from skyfit_mi.fitting.sky_fit import default_sun_sd, sun_source
+    from skyfit_mi.physics.envmap import envmap_sky
+    from skyfit_mi.physics.sky import MEASURED_SUN_SD, SUN_LEVEL_SD, cie_sky
+    from skyfit_mi.pipeline.illumination import perez_from_irradiance
+    from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
+
+    raw = thesis_disc_spec("dni", {"model": "two", "rho_s": 0.5, "sigma_alpha": 0.1})
+    scenes = Path(__file__).resolve().parents[1] / "scenes"
+    modelled = [f.sky for f in validate_spec(raw, scenes).frames]
+    raw["sky"].update(direct_normal_W_m2=700.0, diffuse_horizontal_W_m2=120.0)
+    measured = [f.sky for f in validate_spec(raw, scenes).frames]
+    t = dt.datetime(2026, 6, 21, 12, tzinfo=dt.timezone.utc)
+    perez = perez_from_irradiance({"diffuse_horizontal_W_m2": 120.0,
+                                   "direct_normal_W_m2": 700.0}, 30.0, 180.0, t)
+    erbs = perez_from_irradiance({"global_horizontal_W_m2": 800.0}, 30.0, 180.0, t)
+    table = np.full((16, 32, 3), 20.0, dtype=np.float32)
+    mapped = envmap_sky(table, 30.0, 180.0, direct_normal=700.0)
+    from_ghi = envmap_sky(table, 30.0, 180.0, global_horizontal=800.0)
+    for skies in (measured, [perez], [mapped]):
+        assert sun_source(skies) == "measured"
+        assert default_sun_sd({"source": "ingest"}, skies) == MEASURED_SUN_SD
+    for skies in (modelled, [erbs], [from_ghi], [cie_sky("clear", 40.0, 180.0)],
+                  [perez, erbs]):
+        assert sun_source(skies) == "modelled"
+        assert default_sun_sd({"source": "ingest"}, skies) == SUN_LEVEL_SD
+    assert default_sun_sd({"source": "render"}, measured) == 0.0
+
+
 @pytest.fixture(scope="module")
 def bright_sun(days, tmp_path_factory):
     """The noisy disc day whose manifest's sun is SUN_BRIGHTER times too bright (a modelled
@@ -231,6 +268,7 @@ def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun):
     the sun's level (SUN_LEVEL_SD) with the sky's prior, holds every truth, warns that the
     reflectances rest on it, and leaves sigma_alpha's interval as the data make it."""
     from skyfit_mi.fitting.fit import fit_regions
+    from skyfit_mi.physics.sky import MEASURED_SUN_SD
 
     exact = next(fit_regions(bright_sun, [("disc", REGION)], model="colour", sky="spec",
                              log=lambda *a: None))
@@ -249,6 +287,19 @@ def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun):
     given = next(fit_regions(bright_sun, [("disc", REGION)], model="colour", sun_sd=0.1,
                              log=lambda *a: None))
     assert given["sky"]["sun_level_sd"] == 0.1 and given["sky"]["sun_coupling"] is None
+    assert given["sky"]["sun_source"] == "given" and r["sky"]["sun_source"] == "modelled"
+    # a sun whose spec gave its measured direct normal irradiance: known to the instrument's
+    # accuracy, not widened
+    m = json.loads((bright_sun / "manifest.json").read_text())
+    for f in m["frames"]:
+        f["illumination"]["info"]["sun_measured"] = True
+    (bright_sun / "manifest.json").write_text(json.dumps(m))
+    measured = next(fit_regions(bright_sun, [("disc", REGION)], model="colour",
+                                log=lambda *a: None))
+    assert measured["sky"]["sun_source"] == "measured" and measured["sky"]["sun_coupling"] is None
+    assert measured["sky"]["sun_level_sd"] == MEASURED_SUN_SD
+    assert any("the spec's measured direct normal" in w for w in measured["warnings"]), \
+        measured["warnings"]
     assert any("--sky prior" in x for x in logs), logs
     for p, v in TRUTH.items():
         lo, hi = r["intervals"][p]["95"]

@@ -24,7 +24,7 @@ from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
 from .selection import HELD_OUT_FRAMES, held_out_error
 from .sky_fit import (SKY_DOMINATES, check_terms, default_sky, default_sun_sd, fit_sky_scale,
-                      light_level_sd, shape_variants, sky_level_at, sun_up)
+                      light_level_sd, shape_variants, sky_level_at, sun_source, sun_up)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, memory_estimate, mixed,
                                   trace_table)
@@ -219,9 +219,9 @@ class FitSession:
         # its record (sky_fit.fit_sky_scale)
         self.sky_sd, self.sky_span, self.sky_record = None, None, None
         # the sun's level's relative uncertainty, in the reflectances' intervals (sky_fit):
-        # as given, whether it is a modelled sun's, and what the fitted sky's departure from the
-        # spec's adds to a modelled one (sun_level_sd)
-        self.sun_sd, self.sun_modelled, self.sun_widening = 0.0, False, 0.0
+        # its sd, where it comes from (SUN_SOURCES), and what the fitted sky's departure from
+        # the spec's adds to a modelled sun's (sun_level_sd)
+        self.sun_sd, self.sun_source, self.sun_widening = 0.0, "given", 0.0
         self.cache_time = time.perf_counter() - t0
         if trace:
             self.trace_light()
@@ -970,9 +970,13 @@ class FitSession:
             k = self.sky_record
             for i, p in enumerate(names):
                 if self.sky_sd is not None and self.sky_sd[i] > SKY_DOMINATES * own[i]:
+                    parts = [part for part, told in ((", its change over the day",
+                                                       k["terms"]),
+                                                      (", its shape", k["shape"])) if told]
                     warnings.append(
-                        f"{p} depends on the sky: the fitted sky level k = {k['k']:.3g} (95%: "
-                        f"{k['interval95'][0]:.3g}-{k['interval95'][1]:.3g}) moves it by "
+                        f"{p} depends on the sky: the uncertainty of the fitted sky (its level "
+                        f"k = {k['k']:.3g}, 95%: {k['interval95'][0]:.3g}-"
+                        f"{k['interval95'][1]:.3g}{''.join(parts)}) moves it by "
                         f"+-{unc.Z['95'] * self.sky_sd[i]:.3g} (95%), at least doubling its "
                         "interval, which includes that; more materials or a grey card in the "
                         "fit would narrow it.")
@@ -983,14 +987,18 @@ class FitSession:
                     f"{', '.join(level)} scale with the sun's level, which no data tell (the "
                     f"light's absolute scale trades exactly with the reflectances) and which "
                     f"is known to +-{100 * self.sun_level_sd:.0f}% (1 sd, "
-                    + ("--sun-sd" if not self.sun_widening else
-                       f"the modelled sun's {100 * self.sun_sd:.0f}% widened as the fitted sky "
-                       "departs from the spec's")
-                    + "): that, more than "
-                    "the data, sets their intervals; their ratios and sigma_alpha do not "
-                    "depend on it. A reference of known reflectance in the scene (ingest "
-                    "--calibrate or --colorchecker) or a measured direct normal irradiance "
-                    "(--sun-sd 0.03) narrows them.")
+                    + {"given": "--sun-sd",
+                       "measured": "the spec's measured direct normal irradiance",
+                       "modelled": f"the modelled sun's {100 * self.sun_sd:.0f}%"
+                       + (" widened as the fitted sky departs from the spec's"
+                          if self.sun_widening else "")}[self.sun_source]
+                    + "): that, more than the data, sets their intervals; their ratios and "
+                    "sigma_alpha do not depend on it. A reference of known reflectance in the "
+                    "scene (ingest --calibrate or --colorchecker)"
+                    + ("" if self.sun_source == "measured" else
+                       " or a measured direct normal irradiance in the spec "
+                       "(direct_normal_W_m2, or a dni column)")
+                    + " narrows them.")
         own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
         led = [p for i, p in enumerate(names) if fit.matrix_sd[i] > SKY_DOMINATES * own[i]]
         if led:
@@ -1101,7 +1109,7 @@ class FitSession:
                if np.any(fit.matrix_sd > 0) else {}),
             **({"sky": {**self.sky_record, "error_sd": dict(zip(names, (
                 self.sky_sd if self.sky_sd is not None else np.zeros(len(names))).tolist())),
-                "sun_level_sd": self.sun_level_sd,
+                "sun_level_sd": self.sun_level_sd, "sun_source": self.sun_source,
                 "sun_level_error_sd": dict(zip(names, fit.sun_level_sd.tolist()))}}
                if self.sky_record is not None else {}),
             "cache_noise_chi2": fit.cache_noise_chi2,
@@ -1206,8 +1214,9 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
     'prior' the same with the level's prior (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`);
     both count the sun's own level, known to a relative ``sun_sd`` (None:
     :func:`~.sky_fit.default_sun_sd`), in the
-    reflectances' intervals (:func:`~.sky_fit.light_level_sd`; not given, widened where the
-    fitted sky departs from the spec's, :data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`);
+    reflectances' intervals (:func:`~.sky_fit.light_level_sd`; not given, a modelled sun's is
+    widened where the fitted sky departs from the spec's,
+    :data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`, a measured one's is not);
     ``sky_terms`` > 1 lets the
     sky's level change smoothly over the day, 1 holds it (None: :func:`~.sky_fit.default_terms`
     of the frames), and ``sky_shape`` fits the sky's shape too (a CIE
@@ -1217,7 +1226,6 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
         check_choice("sky", sky, SKY_CHOICES)
     if sun_sd is not None:
         check_range("--sun-sd", sun_sd, 0.0, 1.0)
-    modelled = sun_sd is None            # the spec's modelled sun, not a level given to sun_sd
     sessions = FitSession.for_regions(manifest_path, regions, model=model,
                                       normalisation=normalisation, seed=seed,
                                       positions=positions, directions=directions, frames=frames,
@@ -1243,12 +1251,13 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
             check_terms(sky_terms, len(first.obs.frames))
         if sky_shape:
             shape_variants(first.skies)
+        source = "given" if sun_sd is not None else sun_source(first.skies)
         if sun_sd is None:
-            sun_sd = default_sun_sd(first.doc)
+            sun_sd = default_sun_sd(first.doc, first.skies)
     for s in sessions.values():
         s.split_sky, s.sky_shape = sky != "spec", bool(sky_shape)
         s.sun_sd = 0.0 if sky == "spec" else float(sun_sd)
-        s.sun_modelled = sky != "spec" and modelled
+        s.sun_source = "given" if sky == "spec" else source
     FitSession.trace_groups(sessions)
     if sky != "spec":
         fit_sky_scale(list(sessions.values()), seed, log,

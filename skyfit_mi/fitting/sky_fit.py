@@ -34,9 +34,9 @@ Two things the data cannot tell well are stated as priors:
   it, and each reflectance's relative error gains it in quadrature (:func:`light_level_sd`),
   the roughness none.  A reference in the scene (``ingest --calibrate``, ``--colorchecker``)
   or a relative scale (``--unknown-scale``) ties the reflectances to the data instead, and a
-  measured direct normal irradiance tells it to a pyrheliometer's accuracy (``--sun-sd
-  0.03``).  A sequence skyfit rendered was lit by its spec's sun: 0 unless given.  A modelled
-  sun's (not given) widens as the fitted sky departs from the spec's
+  measured direct normal irradiance in the spec tells it to a pyrheliometer's accuracy
+  (:data:`~skyfit_mi.physics.sky.MEASURED_SUN_SD`, :func:`sun_source`).  A sequence skyfit
+  rendered was lit by its spec's sun: 0 unless given.  A modelled sun's (not given) widens as the fitted sky departs from the spec's
   (:data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`): air that is not the model's changes the
   sun's light too.
 """
@@ -50,7 +50,7 @@ from . import uncertainty as unc
 from ..errors import SkyfitError
 from .methods.levenberg_marquardt import levenberg_marquardt
 from ..pipeline.manifest import RENDERED_SOURCES
-from ..physics.sky import SUN_LEVEL_SD, SUN_SKY_COUPLING
+from ..physics.sky import MEASURED_SUN_SD, SUN_LEVEL_SD, SUN_SKY_COUPLING
 from ..physics.turbid_sky import TURBIDITY_RANGE
 from .methods import global_search
 
@@ -99,10 +99,15 @@ DRIFT_ITERATIONS = 8
 LEVEL_SCALED = ("C_r", "C_g", "C_b", "R", "rho_s")
 
 
+def _sunlit(skies):
+    """Those of ``skies`` whose sun's disc lights the scene from above the horizon."""
+    return [k for k in skies if np.any(k.sun_radiance > 0) and k.sun_direction[2] > 0]
+
+
 def sun_up(skies):
     """Whether the sun's disc lights any of ``skies`` from above the horizon (a fitted sky is
     scaled against it)."""
-    return any(np.any(k.sun_radiance > 0) and k.sun_direction[2] > 0 for k in skies)
+    return bool(_sunlit(skies))
 
 
 def _photographed(doc):
@@ -120,11 +125,24 @@ def default_sky(doc, skies):
     return "prior" if sunny and _photographed(doc) else "spec"
 
 
-def default_sun_sd(doc):
+def sun_source(skies):
+    """Where the level of the sun of ``skies`` comes from, when ``fit --sun-sd`` does not give
+    it: 'measured' where every sky with the sun up carries a measured direct normal irradiance
+    (its ``info["sun_measured"]``), else 'modelled' (the thesis's eq. 4.7, a clear-sky model,
+    or a split of the global irradiance)."""
+    lit = _sunlit(skies)
+    return "measured" if lit and all(k.info.get("sun_measured") for k in lit) else "modelled"
+
+
+def default_sun_sd(doc, skies):
     """The relative uncertainty of the sun's level a fitted sky counts when not told (``fit
-    --sun-sd``): a modelled sun's (:data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD`) for
-    photographs, 0 for a sequence skyfit rendered under that very sun."""
-    return SUN_LEVEL_SD if _photographed(doc) else 0.0
+    --sun-sd``): for photographs a measured sun's
+    (:data:`~skyfit_mi.physics.sky.MEASURED_SUN_SD`) or a modelled one's
+    (:data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD`, :func:`sun_source`); 0 for a sequence
+    skyfit rendered under that very sun."""
+    if not _photographed(doc):
+        return 0.0
+    return MEASURED_SUN_SD if sun_source(skies) == "measured" else SUN_LEVEL_SD
 
 
 def light_level_sd(doc, names, sun_sd):
@@ -509,7 +527,8 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
         departure = float(max(abs(u) for u in within))
     coupling = None
     for s in sessions:
-        s.sun_widening = SUN_SKY_COUPLING * departure if s.sun_modelled and s.sun_sd else 0.0
+        s.sun_widening = (SUN_SKY_COUPLING * departure if s.sun_source == "modelled" and s.sun_sd
+                          else 0.0)
         if s.sun_widening:
             coupling = {"given_sd": s.sun_sd, "coupling": SUN_SKY_COUPLING,
                         "sd": s.sun_level_sd,

@@ -307,6 +307,7 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=Non
                             "from the global irradiance, no solar disc")
     if direct_normal is not None:
         info["direct_normal_W_m2"] = float(direct_normal)
+        info["sun_measured"] = True
         if sun_zenith_deg < 90.0:
             sky = sky.scaled(direct_normal=direct_normal)
         else:

@@ -486,7 +486,9 @@ class PerezSky:
                   sun_radiance=dni / sun_solid_angle * sun_rgb(z),
                   sun_solid_angle=sun_solid_angle,
                   info={**self.info, "kind": "perez", "ground_albedo": float(ground_albedo),
-                        "efficacy_lm_W": self.efficacy})
+                        "efficacy_lm_W": self.efficacy,
+                        "sun_measured": bool(sun) and "decomposition" in self.info
+                        and self.info["decomposition"] is None})
         return replace(sky, ground=ground_albedo * sky.horizontal_irradiance() / np.pi)
 
 

@@ -58,9 +58,13 @@ SKY_LEVEL_SD = 0.35
 #: The prior's standard deviation of the log of the sun's level when the spec models the sun
 #: (thesis eq. 4.7 with a fixed extinction): on the shared clear day its direct light is 13-20%
 #: under the measured (BENCHMARKS, "Measured light"), and clear-sky direct normal irradiance
-#: spans about +-20% over common turbidities (Linke 2-6); a measured DNI is known to about
-#: 0.03 (a first-class pyrheliometer), given as ``--sun-sd``.
+#: spans about +-20% over common turbidities (Linke 2-6).
 SUN_LEVEL_SD = 0.2
+#: The same where the spec's sun carries a measured direct normal irradiance (its sky's
+#: ``info["sun_measured"]``: a spec's ``direct_normal_W_m2`` or ``dni`` column): a first-class
+#: pyrheliometer (ISO 9060) reads DNI to about 2-3% (95%) in the field; 0.03 as one sd of
+#: the log leaves room for its alignment and for the time between reading and frame.
+MEASURED_SUN_SD = 0.03
 #: How much the log of a modelled sun's level moves, more than SUN_LEVEL_SD allows, with the
 #: log of the sky's fitted level against the spec's: in Ineichen and Perez's clear-sky model
 #: over Linke turbidities 2-7 at air mass 1.1-2, log DNI falls 0.29-0.39 per unit rise of

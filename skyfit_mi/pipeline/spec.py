@@ -11,7 +11,7 @@ import datetime as dt
 import hashlib
 import json
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
@@ -701,6 +701,8 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index, elevation=0.0):
                     EFFICACY_OVERCAST if overcast else EFFICACY_CLEAR))
             sky = sky.scaled(diffuse_horizontal=measured.get("diffuse_horizontal_W_m2"),
                              direct_normal=measured.get("direct_normal_W_m2"))
+            if "direct_normal_W_m2" in measured:
+                sky = replace(sky, info={**sky.info, "sun_measured": True})
     except SpecError:
         raise
     except SkyfitError as exc:
