@@ -310,7 +310,7 @@ def _fit_curve(sessions, thetas, u0, terms, shape, prior_sd, s2):
     priors N(0, ``prior_sd``^2) on the level (none if None), N(0, :data:`DRIFT_SD`^2) on each
     further term and N(0, :data:`SHAPE_SD`^2) on each shape's mix.  Leaves each session at the
     fit; returns (coefficients, their covariance, the span [s], each region's parameters'
-    response to the coefficients (n, terms + J))."""
+    response to the coefficients (n, terms + J), the regions' summed chi-square there)."""
     times = [t for s in sessions for t in s.obs.times]
     span = (float(_seconds(times).min()), float(_seconds(times).max()))
     bases = [time_basis(s.obs.times, span, terms) for s in sessions]
@@ -368,9 +368,9 @@ def _fit_curve(sessions, thetas, u0, terms, shape, prior_sd, s2):
         u, thetas, gain, current = u + step, moved, current - new, new
         if gain < 1e-3 * max(1.0, s2) or np.max(np.abs(step)) < 1e-4:
             break
-    objective(u, thetas)
+    chi2 = objective(u, thetas) - u @ P @ u
     H, _, responses = linearised(u, thetas)
-    return u, s2 * np.linalg.inv(H), span, responses
+    return u, s2 * np.linalg.inv(H), span, responses, float(chi2)
 
 
 def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
@@ -472,8 +472,8 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
     elif not np.isfinite(sd_u):
         terms = 1                                       # one (undetermined) level for the day
     elif terms > 1 or J:
-        u, C, span, responses = _fit_curve(sessions, [th for _, th in best], u0, terms, J,
-                                           prior_sd, s2)
+        u, C, span, responses, chi2_best = _fit_curve(sessions, [th for _, th in best], u0,
+                                                      terms, J, prior_sd, s2)
         sd = np.sqrt(np.diag(C))
         for s, response in zip(sessions, responses):
             s.sky_sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", response, C, response), 0))
@@ -549,7 +549,10 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
                   "log_k_sd": prior_sd, "meaning": "log k ~ N(0, sd^2) about the spec's sky, "
                   "from how measured skies scatter about the models; its penalty (log k / "
                   "sd)^2 is in the profile"},
-              "profile": {"k": [float(np.exp(u)) for u in sorted(profile)],
+              "profile": {"meaning": "the regions' least chi-square over one level k for "
+                                     "the day, the search's first stage (chi2 above: at the "
+                                     "fitted sky, its curve and shape included)",
+                          "k": [float(np.exp(u)) for u in sorted(profile)],
                           "chi2": [data(u) for u in sorted(profile)]},
               "terms": curve, "shape": shape, "correlation": correlation,
               "sun_coupling": coupling,
