@@ -944,7 +944,7 @@ def _predict_means(s, result, target, draws, rng):
     n = len(s.obs.pixels)
     # and by the model's error, kappa times the mean: shared by the region's pixels, which
     # see the light alike (a highlight the model misses, it misses in all of them)
-    extra = band_half_width((np.sum(image_noise_variance(s, at_fit, target), axis=0)
+    extra = band_half_width((np.sum(image_noise_variance(s, image, at_fit, target), axis=0)
                              + np.sum(model_var, axis=0)) / n**2, means[0],
                             *model_error_kappa(result))
     observed = region_mean(image)
@@ -993,7 +993,7 @@ def _predict_points(s, result, target, draws, rng):
         lo[part], hi[part] = np.percentile(values[1:], [2.5, 97.5], axis=0)
     _, model_var = s.wm.radiance_and_variance(sets[0])
     image = image_values(s, target)
-    extra = band_half_width(image_noise_variance(s, at_fit, target) + model_var, at_fit,
+    extra = band_half_width(image_noise_variance(s, image, at_fit, target) + model_var, at_fit,
                             *model_error_kappa(result))
     names = _channels(s)
     saturated = ~_measured(s)
@@ -1068,14 +1068,15 @@ def image_values(s, target):
     return s.obs.y / (s.obs.gain * s.obs.sensor.max_code)
 
 
-def image_noise_variance(s, radiance, target):
-    """The variance of session ``s``'s image values (P, T, 3) [(W m^-2 sr^-1)^2] in ``target``
-    where the model predicts ``radiance`` (P, T, 3): the sensor model's sigma in radiance
-    through the response's slope at the prediction (a photograph's radiance frames are its
-    codes, a table's values its measurements), not at the value observed, which noise can put
-    at or below zero, where the slope is 0 (a lab table's 204 values below zero of 1,728 had
-    bands without their noise: gold's band coverage 0.84 -> 0.95); 0 where a value is saturated
-    or left out.  A
+def image_noise_variance(s, image, radiance, target):
+    """The variance of session ``s``'s ``image`` values (P, T, 3) [(W m^-2 sr^-1)^2] in
+    ``target`` where the model predicts ``radiance`` (P, T, 3): the sensor model's sigma in
+    radiance through the response's slope at the prediction (a photograph's radiance frames
+    are its codes, a table's values its measurements), not at the value observed, which noise
+    can put at or below zero, where the slope is 0 (a lab table's 204 values below zero of
+    1,728 had bands without their noise: gold's band coverage 0.84 -> 0.95); at the value
+    where the prediction lies beyond the top code; 0 where a value is saturated or left out.
+    A
     render's radiance frames are the scene before its sensor: their error is the render's
     Monte Carlo error (``radiance_sigma``), the sensor's noise only in its sensor frames (with
     the sensor's noise, a disc's day at 5% noise drew 95% bands of +-8.4% median about region
@@ -1084,5 +1085,6 @@ def image_noise_variance(s, radiance, target):
         sd = frame_values(target, s.obs.pixels, s.obs.frames, source="radiance_sigma")
         return np.where(np.isfinite(sd), sd, 0.0) ** 2
     slope = s.problem.slope(radiance)
-    usable = np.isfinite(s.obs.sigma) & (slope > 0)
+    slope = np.where(slope > 0, slope, s.problem.slope(image))
+    usable = np.isfinite(s.obs.sigma) & (slope > 0) & ~s.problem.clipped()[1]
     return np.where(usable, s.obs.sigma / np.where(usable, slope, 1.0), 0.0) ** 2
