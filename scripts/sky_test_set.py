@@ -277,7 +277,9 @@ def run_case(folder, sky_name, sky, scene, camera, material_name, replicates, ho
 
 
 def main(argv=None):
+    from skyfit_mi.errors import SkyfitError
     from skyfit_mi.files import ensure_dir, write_json
+    from skyfit_mi.fitting.sky_fit import check_terms
     from skyfit_mi.physics.sky import SKY_CHOICES
     from skyfit_mi.physics.sky_measurement import CITATION, load_scans
     from skyfit_mi.render import setup
@@ -299,9 +301,16 @@ def main(argv=None):
                     help="fit with a turbid clear sky of this Linke turbidity as the spec "
                     "(type turbid) instead of the thesis's CIE clear sky")
     args = ap.parse_args(argv)
-    setup()
     replicates = args.replicates or (2 if args.quick else 3)
     hours = QUICK_HOURS if args.quick else HOURS
+    if args.sky_terms is not None:
+        if args.sky == "spec":
+            ap.error("--sky-terms belongs to a fitted sky: give --sky fit or prior")
+        try:
+            check_terms(args.sky_terms, len(hours))
+        except SkyfitError as exc:
+            ap.error(str(exc))
+    setup()
     scans = load_scans(args.data)
     if args.quick:
         scans = [scans[i] for i in QUICK_SCANS]
