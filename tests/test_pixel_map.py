@@ -237,6 +237,46 @@ def test_patches_share_one_fit_per_block(board):
     json.dumps({k: np.asarray(v).tolist() for k, v in res.items()})     # picklable, plain data
 
 
+def test_a_photographed_days_map_counts_the_suns_level_in_its_reflectances(board):
+    """The board's day relabelled as photographed (its spec's sun then a model of the real
+    one): the same pixels' reflectance intervals take the sun's level as a factor known to
+    SUN_LEVEL_SD (each side's log half-width in quadrature with 1.96 x 0.2), sigma_alpha's
+    are unchanged, and the summary says what the widths take in, and that the sky is the
+    spec's as it is."""
+    from skyfit_mi.fitting.pixel_fit import fit_pixels
+    from skyfit_mi.fitting.pixel_map import _widths_include
+    from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
+
+    tmp, regions, _ = board
+    photo = tmp / "photographed"
+    if not photo.exists():
+        shutil.copytree(tmp / "day", photo)
+        m = json.loads((photo / "manifest.json").read_text())
+        m["source"] = "ingest"
+        (photo / "manifest.json").write_text(json.dumps(m))
+    name, px = regions[0]
+    px = px[:12]
+    rendered, photographed = (fit_pixels(d, name, px, model="colour") for d in
+                              (tmp / "day", photo))
+    ok = np.isfinite(rendered["theta"][:, 0])
+    assert ok.sum() >= 8
+    theta = rendered["theta"][ok]
+    np.testing.assert_allclose(photographed["theta"][ok], theta)
+    for i in range(4):                                   # the reflectances: C and rho_s
+        lo, hi = rendered["lo"][ok, i], rendered["hi"][ok, i]
+        up = np.log(photographed["hi"][ok, i] / theta[:, i])
+        expected = np.minimum(np.hypot(np.log(hi / theta[:, i]), 1.96 * 0.2), np.log(
+            1.0 / theta[:, i]))                          # the bound: 1
+        np.testing.assert_allclose(up, expected, rtol=1e-3)
+        assert np.all(photographed["lo"][ok, i] < lo)
+    np.testing.assert_array_equal(photographed["lo"][ok, 4], rendered["lo"][ok, 4])
+    np.testing.assert_array_equal(photographed["hi"][ok, 4], rendered["hi"][ok, 4])
+    doc, root = load_manifest(photo)
+    notes = _widths_include(doc, [frame_sky(f, root) for f in doc["frames"]])
+    assert any("the sun's level, known to +-20%" in n and "spec's, taken as exact" in n
+               for n in notes), notes
+
+
 def test_chunks_are_compact_tiles_of_whole_patches():
     """A full 48x32 region in chunks of 64 fits: each chunk an 8x8 tile (so its pixels share
     the sky integrals' anchors); with 2x2 patches, 16 whole patches in 8x8 pixels."""

@@ -20,7 +20,11 @@ frames), and the cache's own Monte Carlo error is measured per pixel from its tw
 (each fitted alike) and added to the intervals in quadrature, as are a photographed
 sequence's calibration error
 (:func:`~skyfit_mi.fitting.uncertainty.calibration_sd`) and its camera's colour-matrix error
-(:func:`~skyfit_mi.fitting.uncertainty.colour_matrix_sd`).
+(:func:`~skyfit_mi.fitting.uncertainty.colour_matrix_sd`); on a photographed day without a
+reference in the scene, the reflectances' intervals also take the sun's level as a factor
+(:func:`~skyfit_mi.fitting.sky_fit.light_level_sd`, as region fits do: a modelled sun's 20%,
+a measured one's 3%).  The sky's own level and shape are the spec's, taken as exact: a region
+fit (``--sky prior``, the default for photographs) measures how far that holds.
 
 Intervals are the grid's profile: the 95% set {chi^2 <= chi^2_min + 3.84 s^2}, with
 s^2 = max(1, chi^2_min / dof) (a misfit widens them, as in region fits); sigma_alpha's and
@@ -40,7 +44,8 @@ from ..render.fit_model import PARAMETERS, WardModel, bounds, reflectances
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
                                     grid_chi2_device, linear_curvature, near_saturation)
-from .uncertainty import calibration_sd, colour_matrix_sd
+from .sky_fit import default_sun_sd, light_level_sd
+from .uncertainty import calibration_sd, colour_matrix_sd, widen_relative
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
 #: fit's, so that a chunk of pixels fits in memory (about 0.3 MB per pixel and frame set of 13).
@@ -153,6 +158,10 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)
+    # a photographed day's sun: its level, a factor on every reflectance that no data tell
+    # (as a region fit's, sky_fit.light_level_sd), known to its model's or its measurement's sd
+    sun = 1.959963984540054 * light_level_sd(doc, names, default_sun_sd(doc, skies))
+    fit["lo"], fit["hi"] = widen_relative(theta, (fit["lo"], fit["hi"]), sun, lower, upper)
     left_out = np.bincount(groups, weights=saturated.any(axis=(1, 2)), minlength=n) > 0
     contradicted = np.bincount(groups, weights=_contradicts(model, y_pixels, w_all, saturated,
                                                             whole, fit, groups), minlength=n) > 0

@@ -33,12 +33,13 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..files import check_dir, ensure_dir, save_figure, write_json
-from ..pipeline.manifest import load_manifest
+from ..pipeline.manifest import frame_sky, load_manifest
 from ..render.fit_model import PARAMETERS
 from ..render.image import write_exr
 from ..render.light_cache import SKY_SPACING
 from .chi2 import check_regions
 from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, check_map_region, fit_pixels, patch_groups
+from .sky_fit import default_sun_sd, light_level_sd, sun_source
 
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
@@ -277,7 +278,7 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
     sequence's); ``dask_logs``: show Dask's own log lines (``--debug``).  Every input, the
     regions' frames and light and a given scheduler included, is checked before the store is
     written."""
-    doc, _ = load_manifest(manifest_path)
+    doc, root = load_manifest(manifest_path)
     shape = (doc["camera"]["height"], doc["camera"]["width"])
     for _, px in regions:
         check_map_region(px, shape)
@@ -313,7 +314,8 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
         finally:
             _close(client, cluster)
     summary = write_map_outputs(out, store, names, regions, settings)
-    summary.update(widths_include=_widths_include(doc), wall_time_s=time.perf_counter() - t0,
+    skies = [frame_sky(f, root) for f in doc["frames"] if "illumination" in f]
+    summary.update(widths_include=_widths_include(doc, skies), wall_time_s=time.perf_counter() - t0,
                    chunks=len(chunks),
                    chunks_this_run=len(pending), workers=n_workers,
                    scheduler=scheduler or "LocalCluster", memory_per_worker=memory_per_worker,
@@ -390,12 +392,18 @@ def write_map_outputs(out, store, names, regions, settings):
     return summary
 
 
-def _widths_include(doc):
+def _widths_include(doc, skies):
     """What the maps' 95% widths take in besides the data's noise (their grid's profile, a
-    misfit's scale): the map's light cache's error, and a photographed sequence's calibration
-    and camera colour matrix where its manifest ``doc`` records them."""
+    misfit's scale): the map's light cache's error, and a photographed sequence's calibration,
+    camera colour matrix and sun's level where its manifest ``doc`` and its frames' ``skies``
+    call for them (:func:`~.pixel_fit.fit_pixels`)."""
     ingest = doc.get("ingest") or {}
     out = ["the light cache's Monte Carlo error (from its two halves)"]
+    sun = default_sun_sd(doc, skies)
+    if light_level_sd(doc, ("C_r", "rho_s"), sun).any():
+        out.append(f"the sun's level, known to +-{100 * sun:.0f}% (1 sd, a {sun_source(skies)} "
+                   "sun), on the reflectances; the sky's level and shape are the spec's, taken "
+                   "as exact (a region fit, --sky prior, measures how far that holds)")
     if (ingest.get("calibration") or {}).get("scale_relative_sd"):
         out.append("the exposure calibration's error (ingest.calibration)")
     rel = (ingest.get("colour_matrix") or {}).get("relative_sd")

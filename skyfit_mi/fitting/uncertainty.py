@@ -161,14 +161,20 @@ def widen_relative(value, interval, extra, lower, upper):
     """(lo, hi) with a relative error ``extra`` (a standard deviation of log value times z,
     such as a scale common to every reflectance) added in quadrature to each side's log
     half-width, clipped to the bounds: a scale's error is a factor, so its interval is
-    lopsided (e^-x, e^x), not additive; a side at or below zero is left."""
-    lo, hi = interval
-    if value <= 0 or extra <= 0:
-        return float(lo), float(hi)
-    down = np.log(value / lo) if lo > 0 else np.inf
-    up = np.log(hi / value) if hi > value else 0.0
-    return (float(max(lower, value * np.exp(-np.hypot(down, extra)))),
-            float(min(upper, value * np.exp(np.hypot(up, extra)))))
+    lopsided (e^-x, e^x), not additive; left as it is where the value is not above zero or
+    ``extra`` is 0.  Scalars give floats; arrays (broadcasting) give arrays (a map's
+    pixels)."""
+    value, lo, hi, extra = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (
+        value, *interval, extra)))
+    moved = (value > 0) & (extra > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        down = np.where(moved & (lo > 0), np.log(value / lo), np.inf)
+        up = np.where(moved & (hi > value), np.log(hi / value), 0.0)
+        new_lo = np.where(moved, np.maximum(lower, value * np.exp(-np.hypot(down, extra))), lo)
+        new_hi = np.where(moved, np.minimum(upper, value * np.exp(np.hypot(up, extra))), hi)
+    if new_lo.ndim == 0:
+        return float(new_lo), float(new_hi)
+    return new_lo, new_hi
 
 
 def calibration_sd(doc, names, theta):
