@@ -272,9 +272,12 @@ def test_a_photographed_days_map_counts_the_suns_level_in_its_reflectances(board
     np.testing.assert_array_equal(photographed["lo"][ok, 4], rendered["lo"][ok, 4])
     np.testing.assert_array_equal(photographed["hi"][ok, 4], rendered["hi"][ok, 4])
     doc, root = load_manifest(photo)
-    notes = _widths_include(doc, [frame_sky(f, root) for f in doc["frames"]])
+    skies = [frame_sky(f, root) for f in doc["frames"]]
+    notes = _widths_include(doc, skies, ["C_r", "C_g", "C_b", "rho_s", "sigma_alpha"])
     assert any("the sun's level, known to +-20%" in n and "spec's, taken as exact" in n
                for n in notes), notes
+    # the white model's reflectances sum to 1, which fixes the light's scale: nothing to add
+    assert len(_widths_include(doc, skies, ["rho_s", "sigma_alpha"])) == 1
 
 
 def test_chunks_are_compact_tiles_of_whole_patches():

@@ -290,16 +290,20 @@ def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun):
     assert given["sky"]["sun_source"] == "given" and r["sky"]["sun_source"] == "modelled"
     # a sun whose spec gave its measured direct normal irradiance: known to the instrument's
     # accuracy, not widened
-    m = json.loads((bright_sun / "manifest.json").read_text())
+    day = bright_sun.parent / "measured_sun"
+    shutil.copytree(bright_sun, day)
+    m = json.loads((day / "manifest.json").read_text())
     for f in m["frames"]:
         f["illumination"]["info"]["sun_measured"] = True
-    (bright_sun / "manifest.json").write_text(json.dumps(m))
-    measured = next(fit_regions(bright_sun, [("disc", REGION)], model="colour",
-                                log=lambda *a: None))
+    (day / "manifest.json").write_text(json.dumps(m))
+    measured = next(fit_regions(day, [("disc", REGION)], model="colour", log=lambda *a: None))
     assert measured["sky"]["sun_source"] == "measured" and measured["sky"]["sun_coupling"] is None
     assert measured["sky"]["sun_level_sd"] == MEASURED_SUN_SD
     assert any("the spec's measured direct normal" in w for w in measured["warnings"]), \
         measured["warnings"]
+    for p in ("C_r", "C_g", "C_b", "rho_s"):
+        assert (np.subtract(*measured["intervals"][p]["95"][::-1])
+                < 0.6 * np.subtract(*r["intervals"][p]["95"][::-1])), p
     assert any("--sky prior" in x for x in logs), logs
     for p, v in TRUTH.items():
         lo, hi = r["intervals"][p]["95"]

@@ -37,7 +37,7 @@ from ..pipeline.ingest import pixel_sigma
 from ..pipeline.jpeg_noise import YCC_TO_RGB, shared_error_sd
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
 from ..pipeline.observation_table import is_table, relative_scale
-from ..physics.sky import SKY_CHOICES, SKY_LEVEL_SD
+from ..physics.sky import MEASURED_SUN_SD, SKY_CHOICES, SKY_LEVEL_SD
 from ..physics.turbid_sky import level_factors
 from ..physics.ward import METAL_THRESHOLD
 
@@ -219,7 +219,8 @@ class FitSession:
         # its record (sky_fit.fit_sky_scale)
         self.sky_sd, self.sky_span, self.sky_record = None, None, None
         # the sun's level's relative uncertainty, in the reflectances' intervals (sky_fit):
-        # its sd, where it comes from (SUN_SOURCES), and what the fitted sky's departure from
+        # its sd, where it comes from ('given' by --sun-sd, the spec's 'measured' or 'modelled'
+        # sun, a 'rendered' day's own), and what the fitted sky's departure from
         # the spec's adds to a modelled sun's (sun_level_sd)
         self.sun_sd, self.sun_source, self.sun_widening = 0.0, "given", 0.0
         self.cache_time = time.perf_counter() - t0
@@ -991,13 +992,15 @@ class FitSession:
                        "measured": "the spec's measured direct normal irradiance",
                        "modelled": f"the modelled sun's {100 * self.sun_sd:.0f}%"
                        + (" widened as the fitted sky departs from the spec's"
-                          if self.sun_widening else "")}[self.sun_source]
+                          if self.sun_widening else "")}.get(self.sun_source, "--sun-sd")
                     + "): that, more than the data, sets their intervals; their ratios and "
                     "sigma_alpha do not depend on it. A reference of known reflectance in the "
                     "scene (ingest --calibrate or --colorchecker)"
-                    + ("" if self.sun_source == "measured" else
-                       " or a measured direct normal irradiance in the spec "
-                       "(direct_normal_W_m2, or a dni column)")
+                    + {"measured": "",
+                       "given": " or a smaller --sun-sd where the sun's level is known better "
+                                f"(a measured direct normal irradiance: {MEASURED_SUN_SD:g})"
+                       }.get(self.sun_source, " or a measured direct normal irradiance in the "
+                             "spec (direct_normal_W_m2, or a dni column)")
                     + " narrows them.")
         own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
         led = [p for i, p in enumerate(names) if fit.matrix_sd[i] > SKY_DOMINATES * own[i]]
@@ -1251,9 +1254,10 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
             check_terms(sky_terms, len(first.obs.frames))
         if sky_shape:
             shape_variants(first.skies)
-        source = "given" if sun_sd is not None else sun_source(first.skies)
+        source = "given"
         if sun_sd is None:
             sun_sd = default_sun_sd(first.doc, first.skies)
+            source = sun_source(first.skies) if sun_sd else "rendered"
     for s in sessions.values():
         s.split_sky, s.sky_shape = sky != "spec", bool(sky_shape)
         s.sun_sd = 0.0 if sky == "spec" else float(sun_sd)

@@ -44,8 +44,8 @@ from ..render.fit_model import PARAMETERS, WardModel, bounds, reflectances
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
                                     grid_chi2_device, linear_curvature, near_saturation)
-from .sky_fit import default_sun_sd, light_level_sd
-from .uncertainty import calibration_sd, colour_matrix_sd, widen_relative
+from .sky_fit import light_level_sd, untold_sun_sd
+from .uncertainty import Z, calibration_sd, colour_matrix_sd, widen_relative
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
 #: fit's, so that a chunk of pixels fits in memory (about 0.3 MB per pixel and frame set of 13).
@@ -153,14 +153,14 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     fit.update(pixels=np.asarray(first, dtype=int), names=list(names))
     sd = fit["cache_error_sd"]
     theta = fit["theta"]
-    spread = 1.959963984540054 * np.sqrt(sd ** 2 + calibration_sd(doc, names, theta) ** 2
+    spread = Z["95"] * np.sqrt(sd ** 2 + calibration_sd(doc, names, theta) ** 2
                                          + colour_matrix_sd(doc, names, theta) ** 2)
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)
     # a photographed day's sun: its level, a factor on every reflectance that no data tell
     # (as a region fit's, sky_fit.light_level_sd), known to its model's or its measurement's sd
-    sun = 1.959963984540054 * light_level_sd(doc, names, default_sun_sd(doc, skies))
+    sun = Z["95"] * light_level_sd(doc, names, untold_sun_sd(doc, skies))
     fit["lo"], fit["hi"] = widen_relative(theta, (fit["lo"], fit["hi"]), sun, lower, upper)
     left_out = np.bincount(groups, weights=saturated.any(axis=(1, 2)), minlength=n) > 0
     contradicted = np.bincount(groups, weights=_contradicts(model, y_pixels, w_all, saturated,

@@ -39,7 +39,7 @@ from ..render.image import write_exr
 from ..render.light_cache import SKY_SPACING
 from .chi2 import check_regions
 from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, check_map_region, fit_pixels, patch_groups
-from .sky_fit import default_sun_sd, light_level_sd, sun_source
+from .sky_fit import light_level_sd, sun_source, untold_sun_sd
 
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
@@ -279,6 +279,7 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
     regions' frames and light and a given scheduler included, is checked before the store is
     written."""
     doc, root = load_manifest(manifest_path)
+    skies = [frame_sky(f, root) for f in doc["frames"] if "illumination" in f]
     shape = (doc["camera"]["height"], doc["camera"]["width"])
     for _, px in regions:
         check_map_region(px, shape)
@@ -314,8 +315,7 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
         finally:
             _close(client, cluster)
     summary = write_map_outputs(out, store, names, regions, settings)
-    skies = [frame_sky(f, root) for f in doc["frames"] if "illumination" in f]
-    summary.update(widths_include=_widths_include(doc, skies), wall_time_s=time.perf_counter() - t0,
+    summary.update(widths_include=_widths_include(doc, skies, names), wall_time_s=time.perf_counter() - t0,
                    chunks=len(chunks),
                    chunks_this_run=len(pending), workers=n_workers,
                    scheduler=scheduler or "LocalCluster", memory_per_worker=memory_per_worker,
@@ -392,15 +392,15 @@ def write_map_outputs(out, store, names, regions, settings):
     return summary
 
 
-def _widths_include(doc, skies):
-    """What the maps' 95% widths take in besides the data's noise (their grid's profile, a
-    misfit's scale): the map's light cache's error, and a photographed sequence's calibration,
-    camera colour matrix and sun's level where its manifest ``doc`` and its frames' ``skies``
-    call for them (:func:`~.pixel_fit.fit_pixels`)."""
+def _widths_include(doc, skies, names):
+    """What the maps' 95% widths of parameters ``names`` take in besides the data's noise
+    (their grid's profile, a misfit's scale): the map's light cache's error, and a
+    photographed sequence's calibration, camera colour matrix and sun's level where its
+    manifest ``doc`` and its frames' ``skies`` call for them (:func:`~.pixel_fit.fit_pixels`)."""
     ingest = doc.get("ingest") or {}
     out = ["the light cache's Monte Carlo error (from its two halves)"]
-    sun = default_sun_sd(doc, skies)
-    if light_level_sd(doc, ("C_r", "rho_s"), sun).any():
+    sun = untold_sun_sd(doc, skies)
+    if light_level_sd(doc, names, sun).any():
         out.append(f"the sun's level, known to +-{100 * sun:.0f}% (1 sd, a {sun_source(skies)} "
                    "sun), on the reflectances; the sky's level and shape are the spec's, taken "
                    "as exact (a region fit, --sky prior, measures how far that holds)")

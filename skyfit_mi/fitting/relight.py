@@ -326,7 +326,8 @@ def _sky_map(frame, sky, out):
     zenith, azimuth = (float(np.degrees(a)) for a in angles_from_direction(sky.sun_direction))
     rec = {"file": os.path.relpath(path, Path(out)), "ground_albedo": 0.0,
            "sun_solid_angle_sr": sky.sun_solid_angle,
-           "direct_normal_W_m2": float(sky.sun_radiance @ SRGB_LUMINANCE) * sky.sun_solid_angle}
+           "direct_normal_W_m2": float(sky.sun_radiance @ SRGB_LUMINANCE) * sky.sun_solid_angle,
+           "sun_measured": bool(sky.info.get("sun_measured"))}
     made = envmap_from_record(rec, out, zenith, azimuth)
     made.info.update({k: sky.info[k] for k in ("shape_mix", "sky_level")})
     return made
@@ -1076,15 +1077,14 @@ def image_noise_variance(s, image, radiance, target):
     can put at or below zero, where the slope is 0 (a lab table's 204 values below zero of
     1,728 had bands without their noise: gold's band coverage 0.84 -> 0.95); at the value
     where the prediction lies beyond the top code; 0 where a value is saturated or left out.
-    A
-    render's radiance frames are the scene before its sensor: their error is the render's
+    A render's radiance frames are the scene before its sensor: their error is the render's
     Monte Carlo error (``radiance_sigma``), the sensor's noise only in its sensor frames (with
     the sensor's noise, a disc's day at 5% noise drew 95% bands of +-8.4% median about region
     means its fit missed by 1.1%: +-3.6% without)."""
     if s.obs.rays is None and s.doc.get("source") == "render":
         sd = frame_values(target, s.obs.pixels, s.obs.frames, source="radiance_sigma")
         return np.where(np.isfinite(sd), sd, 0.0) ** 2
-    slope = s.problem.slope(radiance)
+    slope = s.problem.slope(np.maximum(radiance, np.finfo(float).tiny))   # a dark prediction too
     slope = np.where(slope > 0, slope, s.problem.slope(image))
     usable = np.isfinite(s.obs.sigma) & (slope > 0) & ~s.problem.clipped()[1]
     return np.where(usable, s.obs.sigma / np.where(usable, slope, 1.0), 0.0) ** 2

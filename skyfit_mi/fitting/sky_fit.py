@@ -36,9 +36,10 @@ Two things the data cannot tell well are stated as priors:
   or a relative scale (``--unknown-scale``) ties the reflectances to the data instead, and a
   measured direct normal irradiance in the spec tells it to a pyrheliometer's accuracy
   (:data:`~skyfit_mi.physics.sky.MEASURED_SUN_SD`, :func:`sun_source`).  A sequence skyfit
-  rendered was lit by its spec's sun: 0 unless given.  A modelled sun's (not given) widens as the fitted sky departs from the spec's
-  (:data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`): air that is not the model's changes the
-  sun's light too.
+  rendered was lit by its spec's sun: 0 unless given.  A modelled sun's (not given) widens as
+  the fitted sky departs from the spec's (:data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`):
+  air that is not the model's changes the sun's light too.  A manifest written before skies
+  recorded ``sun_measured`` reads its sun as modelled until ingested again.
 """
 
 import datetime as dt
@@ -143,6 +144,14 @@ def default_sun_sd(doc, skies):
     if not _photographed(doc):
         return 0.0
     return MEASURED_SUN_SD if sun_source(skies) == "measured" else SUN_LEVEL_SD
+
+
+def untold_sun_sd(doc, skies):
+    """The sun level's relative uncertainty that a fit told neither ``--sky`` nor ``--sun-sd``
+    counts (a map's, which cannot be told them): :func:`default_sun_sd` where it fits the sky
+    (:func:`default_sky`: photographs under the sun and a sky), else 0 (a rendered day, no sun,
+    lab lights: the spec's light as it is)."""
+    return default_sun_sd(doc, skies) if default_sky(doc, skies) != "spec" else 0.0
 
 
 def light_level_sd(doc, names, sun_sd):
@@ -543,7 +552,8 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
                         + (" and frame of the fit" if curve is None else
                            ", smooth over the day (terms)"),
               "k": k, "interval95": interval, "determined": bool(np.isfinite(sd_u)),
-              "regions": [s.name for s in sessions], "chi2": chi2_best, "dof": dof,
+              "regions": [s.name for s in sessions], "chi2": chi2_best,
+              "dof": dof - (1 if curve is None and shape is None else len(correlation["names"])),
               "interval_scale_s2": s2,
               "prior": None if prior_sd is None else {
                   "log_k_sd": prior_sd, "meaning": "log k ~ N(0, sd^2) about the spec's sky, "

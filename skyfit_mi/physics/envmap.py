@@ -239,7 +239,7 @@ def direct_normal_from_global(ghi, diffuse_horizontal, sun_zenith_deg):
 
 def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=None,
                direct_normal=None, global_horizontal=None, sun_mask_deg=None, ground_albedo=0.0,
-               sun_solid_angle=None, info=None):
+               sun_solid_angle=None, info=None, sun_measured=None):
     """A :class:`~skyfit_mi.physics.sky.Sky` lit by a world-frame lat-long ``table``
     (:func:`latlong_table`) [W m^-2 sr^-1], with the sun given apart from the map.
 
@@ -274,6 +274,10 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=Non
         E_map) / cos theta_s (:func:`direct_normal_from_global`).
     info : dict, optional
         Recorded in the Sky's ``info`` (e.g. the map's file and projection).
+    sun_measured : bool, optional
+        Whether ``direct_normal`` was measured (a pyrheliometer's), not a model's: the Sky's
+        ``info["sun_measured"]``, by which a fit knows the sun's level
+        (:func:`~skyfit_mi.fitting.sky_fit.sun_source`); default: whether it is given.
     """
     from .sky import Sky            # not at the top: sky imports this module
 
@@ -307,7 +311,7 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=Non
                             "from the global irradiance, no solar disc")
     if direct_normal is not None:
         info["direct_normal_W_m2"] = float(direct_normal)
-        info["sun_measured"] = True
+        info["sun_measured"] = True if sun_measured is None else bool(sun_measured)
         if sun_zenith_deg < 90.0:
             sky = sky.scaled(direct_normal=direct_normal)
         else:

@@ -38,7 +38,8 @@ ENVMAP_OPTIONS = {"projection": "projection", "north_rotation_deg": "north_rotat
                   "diffuse_horizontal_W_m2": "diffuse_horizontal",
                   "direct_normal_W_m2": "direct_normal",
                   "global_horizontal_W_m2": "global_horizontal", "sun_mask_deg": "sun_mask_deg",
-                  "ground_albedo": "ground_albedo", "sun_solid_angle_sr": "sun_solid_angle"}
+                  "ground_albedo": "ground_albedo", "sun_solid_angle_sr": "sun_solid_angle",
+                  "sun_measured": "sun_measured"}
 #: The options that give the table (the rest light it).
 _TABLE_OPTIONS = ("projection", "north_rotation_deg", "scale", "rows")
 
