@@ -645,5 +645,6 @@ def test_a_raw_days_map_carries_the_colour_matrix_in_its_intervals(day, raw_inge
           np.median(half, axis=0).round(4))
     assert ok.sum() >= 8 and inside.mean() >= 0.9            # measured 0.98; 0.5, 0, 0 without
     from skyfit_mi.fitting.pixel_map import _widths_include
-    assert any("colour matrix's error, 3% per entry" in w for w in _widths_include(doc, []))
+    assert any("colour matrix's error, 3% per entry" in w
+               for w in _widths_include(doc, [], names))
     assert np.all(np.median(half[:, 1:], axis=0) > 1.96 * 0.8 * closed[1:3])
