@@ -513,7 +513,8 @@ def build_parser():
                      "as log k in that many Legendre polynomials in time, each beyond the "
                      "level under a prior: 1 one level for the day; 2-4 a smooth change (the "
                      "sun's height, changing weather); default 3 (the level, its drift and "
-                     "its curve), fewer for under 5 frames")
+                     "its curve), fewer for under 5 frames, 1 where a reference calibrates the "
+                     "frames")
     fit.add_argument("--sky-shape", action="store_true",
                      help="with --sky fit or prior and a CIE sky (clear, cie_general) or a "
                      "Perez sky (perez): fit its shape too, as mixes of the spec's pattern with "

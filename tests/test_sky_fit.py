@@ -462,6 +462,7 @@ def test_by_default_the_skys_level_follows_the_suns_height_and_weather(height_sk
         lo, hi = r["intervals"][p]["95"]
         assert lo - 1e-9 <= v <= hi + 1e-9, (p, r["intervals"][p], r["parameters"])
     assert [default_terms(n) for n in (1, 3, 4, 5, 13)] == [1, 1, 2, 3, 3]
+    assert default_terms(13, referenced=True) == 1       # a reference calibrates the frames
     # one level for the day (--sky-terms 1) puts the diffuse colour low, outside its interval
     one = next(fit_regions(height_sky, [("disc", REGION)], model="colour", sky="prior",
                            sky_terms=1, log=lambda *a: None))

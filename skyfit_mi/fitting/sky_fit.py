@@ -160,8 +160,8 @@ def light_level_sd(doc, names, sun_sd):
     where a reference in the scene (a calibration) or a relative scale ties the reflectances to
     the data (the manifest ``doc``), and for the white 2-parameter model (rho_d + rho_s = 1
     fixes the scale, so a wrong level shows as misfit instead)."""
-    ingest = doc.get("ingest") or {}
-    anchored = bool(ingest.get("calibration")) or (ingest.get("scale") or {}).get("known") is False
+    scale = (doc.get("ingest") or {}).get("scale") or {}
+    anchored = _referenced(doc) or scale.get("known") is False
     if anchored or not sun_sd or "C_r" not in names and "R" not in names:
         return np.zeros(len(names))
     return np.array([float(sun_sd) if p in LEVEL_SCALED else 0.0 for p in names])
@@ -284,10 +284,27 @@ def _ranges(levels_by_frame):
     return min(sun), max(sun), min(sky), max(sky)
 
 
-def default_terms(frames):
+def default_terms(frames, referenced=False):
     """The terms of the sky's level over ``frames`` frames when not told: :data:`DEFAULT_TERMS`,
-    fewer where the frames are fewer than two more than that (one level for up to 3 frames)."""
+    fewer where the frames are fewer than two more than that (one level for up to 3 frames);
+    one level where a reference of known reflectance calibrates the frames (``referenced``,
+    :func:`_referenced`).  There the reflectances' scale is the reference's, seen under the
+    same light, and on a scene of one normal the curve is nearly collinear with a scale on
+    the reflectances (a sky whose share follows the sun's height, as the sun's own light does),
+    so it adds a valley, not information: a calibrated JPEG board at quality 85 (sky level 1)
+    took a curve at k 0.65-0.76 and read every C 3-15% high, its chi-square 7 lower than one
+    level's, while one level held every C within 3%; its half-widths were 2-3 times one
+    level's on PNG (scripts/jpeg_colour_coverage.py, docs/BENCHMARKS.md).  The reference itself
+    in the sky's fit would tell the curve (its reflectance is known); that is not done yet."""
+    if referenced:
+        return 1
     return int(max(1, min(DEFAULT_TERMS, int(frames) - FRAMES_BEYOND_TERMS)))
+
+
+def _referenced(doc):
+    """Whether a reference of known reflectance in the scene calibrates a manifest's frames
+    (``ingest --calibrate``, ``--colorchecker``)."""
+    return bool((doc.get("ingest") or {}).get("calibration"))
 
 
 def _curve_text(k):
@@ -396,7 +413,8 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
     t0 = time.perf_counter()
     told = terms is not None
     if not told:
-        terms = default_terms(len({i for s in sessions for i in s.obs.frames}))
+        terms = default_terms(len({i for s in sessions for i in s.obs.frames}),
+                              _referenced(sessions[0].doc))
     rng = np.random.default_rng(seed)
     starts = [s.random_start(rng) for s in sessions]
     profile = {}                                        # the level first, in the spec's shape
