@@ -111,6 +111,9 @@ def test_fit_after_ingest_recovers_the_material(day, ingested):
     true = np.array([f["exposure_sr_m2_W"] for f in sim["frames"]])
     np.testing.assert_allclose(got, true, rtol=0.01)      # measured: 0.1%
     assert fit["truth"] is None                            # a photograph's material is unknown
+    # the sky's level fitted by default, one for the day: a reference calibrates the frames
+    # (sky_fit.default_terms)
+    assert fit["sky"]["prior"] is not None and fit["sky"]["terms"] is None
     # JPEG frames carry their errors' correlation within a block, which the fit's loader uses
     from skyfit_mi.fitting.chi2 import load_observations
     rendered = [f for f in doc["frames"] if f["status"] == "rendered"]
