@@ -432,3 +432,26 @@ def test_a_hand_edited_measured_range_is_refused_in_one_line(tmp_path):
     good = {"unit": "W m^-2 sr^-1", "by_channel": {"R": [1.0, 2.0], "G": None, "B": [0, 5]}}
     path.write_text(json.dumps({**fit, "measured_range": good}))
     assert read_fit_result(path)["measured_range"]["by_channel"]["G"] is None
+
+
+def test_a_predicted_values_noise_is_taken_at_the_prediction():
+    """relight's image_noise_variance: each value's sigma through the response's slope at the
+    model's prediction (a value noise put at or below zero keeps its noise, and so does a dark
+    prediction), at the observed value where the prediction lies beyond the top code, none for
+    a value clipped at the top (it tells only a bound)."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.fitting.relight import image_noise_variance
+
+    top, sigma = 10.0, 0.5
+
+    def slope(radiance):                      # a linear response that clips at 0 and at top
+        return np.where((radiance > 0) & (radiance < top), 2.0, 0.0)
+    observed = np.array([[[-0.3, 5.0, 9.0, 10.0, 0.2]]])          # (P, T, channels)
+    predicted = np.array([[[0.4, 5.0, 11.0, 9.5, 0.0]]])
+    obs = SimpleNamespace(rays=np.zeros(1), sigma=np.full(observed.shape, sigma))
+    s = SimpleNamespace(obs=obs, doc={"source": "ingest"},
+                        problem=SimpleNamespace(slope=slope, clipped=lambda: (
+                            observed <= 0, observed >= top)))
+    var = image_noise_variance(s, observed, predicted, None)
+    np.testing.assert_allclose(var[0, 0], [(sigma / 2) ** 2] * 3 + [0.0, (sigma / 2) ** 2])
