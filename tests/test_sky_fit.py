@@ -361,6 +361,7 @@ def drifting_sky(days, tmp_path_factory):
                         lambda frame: np.exp(-DRIFT * x[frame["index"]]))
 
 
+@pytest.mark.slow       # 33 s; the default curve's test below fits a curve by default
 def test_a_sky_that_changes_over_the_day_is_fitted_as_a_smooth_curve(drifting_sky):
     """With --sky-terms 2 the fit finds log k's slope over the day within its interval, the
     level's at the spec's, k per frame rising, and every parameter's interval holds the
