@@ -154,7 +154,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     sd = fit["cache_error_sd"]
     theta = fit["theta"]
     spread = Z["95"] * np.sqrt(sd ** 2 + calibration_sd(doc, names, theta) ** 2
-                                         + colour_matrix_sd(doc, names, theta) ** 2)
+                               + colour_matrix_sd(doc, names, theta) ** 2)
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)

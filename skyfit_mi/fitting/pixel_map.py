@@ -315,8 +315,8 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
         finally:
             _close(client, cluster)
     summary = write_map_outputs(out, store, names, regions, settings)
-    summary.update(widths_include=_widths_include(doc, skies, names), wall_time_s=time.perf_counter() - t0,
-                   chunks=len(chunks),
+    summary.update(widths_include=_widths_include(doc, skies, names),
+                   wall_time_s=time.perf_counter() - t0, chunks=len(chunks),
                    chunks_this_run=len(pending), workers=n_workers,
                    scheduler=scheduler or "LocalCluster", memory_per_worker=memory_per_worker,
                    chunk_seeds="numpy SeedSequence([seed, chunk index])")

@@ -571,7 +571,7 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
                            ", smooth over the day (terms)"),
               "k": k, "interval95": interval, "determined": bool(np.isfinite(sd_u)),
               "regions": [s.name for s in sessions], "chi2": chi2_best,
-              "dof": dof - (1 if curve is None and shape is None else len(correlation["names"])),
+              "dof": dof - (len(correlation["names"]) if correlation else 1),
               "interval_scale_s2": s2,
               "prior": None if prior_sd is None else {
                   "log_k_sd": prior_sd, "meaning": "log k ~ N(0, sd^2) about the spec's sky, "
