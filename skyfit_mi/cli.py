@@ -243,9 +243,10 @@ def _fit(args):
     if map_only and not args.per_pixel:
         raise SkyfitError(f"{map_only[0]} belongs to a map: add --per-pixel (or leave it out).")
     regions = _fit_regions(args)
-    if args.per_pixel and args.sky not in (None, "spec"):
-        raise SkyfitError(f"--sky {args.sky} fits the sky with regions' materials; a map takes "
-                          "the spec's sky (leave out --per-pixel or --sky).")
+    if args.per_pixel and args.sky_shape:
+        raise SkyfitError("--sky-shape belongs to region fits; a map takes the spec's sky's "
+                          "shape at the level its regions fit (leave out --per-pixel or "
+                          "--sky-shape).")
     if args.per_pixel:
         from .fitting.pixel_map import CHUNK, run_map
 
@@ -256,7 +257,9 @@ def _fit(args):
         s = run_map(args.manifest, regions, out, model=model, normalisation=args.normalisation,
                     seed=args.seed, patch=args.patch, chunk=args.chunk or CHUNK,
                     workers=args.workers, scheduler=args.scheduler, overwrite=args.overwrite,
-                    progress=not args.quiet, variant=args.variant, dask_logs=args.debug)
+                    progress=not args.quiet, variant=args.variant, dask_logs=args.debug,
+                    sky=args.sky, sun_sd=args.sun_sd, sky_terms=args.sky_terms,
+                    light_pixels=args.max_pixels)
         for name, r in s["regions"].items():
             med = ", ".join(f"{k} = {v:.4g}" for k, v in r["median"].items() if v is not None)
             print(f"{name}: {r['determined']} of {r['mapped']} pixels determined"
@@ -492,7 +495,8 @@ def build_parser():
     fit.add_argument("-q", "--quiet", action="store_true", help="with --per-pixel: no progress bar")
     fit.add_argument("--max-pixels", type=_int_in(0), default=64,
                      help="fit at most this many pixels of a region, a seeded random subset "
-                     "(default 64; 0 = every pixel)")
+                     "(default 64; 0 = every pixel); with --per-pixel, those of the fit that "
+                     "finds the sky's level for the map")
     fit.add_argument("--model", choices=("2", "3", "5", "auto"), default="5",
                      help="5 (default): C (RGB diffuse colour), rho_s, sigma_alpha; "
                      "3: R, rho_s, sigma_alpha; 2: rho_s, sigma_alpha (thesis 7.1); auto: "
@@ -507,7 +511,8 @@ def build_parser():
                      "prior (the default for photographs under the sun): the same with a prior "
                      "on that level from how measured skies scatter about the models. fit and "
                      "prior also count the sun's own level (--sun-sd) in the reflectances' "
-                     "intervals")
+                     "intervals. With --per-pixel the level is fitted first with the regions' "
+                     "materials (up to --max-pixels of each), and the map takes that light")
     fit.add_argument("--sky-terms", type=int, default=None,
                      help="with --sky fit or prior: how the sky's level may change over the day, "
                      "as log k in that many Legendre polynomials in time, each beyond the "

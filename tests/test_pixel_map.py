@@ -280,6 +280,46 @@ def test_a_photographed_days_map_counts_the_suns_level_in_its_reflectances(board
     assert len(_widths_include(doc, skies, ["rho_s", "sigma_alpha"])) == 1
 
 
+def test_a_photographed_days_map_takes_the_sky_level_its_regions_fit(board):
+    """The board's day relabelled as photographed under a spec whose sky (all but the sun) is
+    1.5 times too dim: a map on the spec's sky as it is reads the samples' colours high;
+    by default (``--sky prior``) the sky's level is fitted first with the regions' materials
+    (its 95% interval holds 1.5, not 1), the map's pixels are lit at that level and their
+    medians come nearer the truth, and their intervals, the sky's share of each region's error
+    in them, hold it; the summary says which light the map took.  (Both maps' reflectance
+    intervals take the modelled sun's level, +-40% or more, which hides the spec's bias.)"""
+    from measured_light import relabelled
+
+    from skyfit_mi.fitting.pixel_fit import fit_pixels
+    from skyfit_mi.fitting.pixel_map import _sky_summary, _widths_include, map_light
+    from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
+
+    tmp, regions, _ = board
+    day = relabelled(tmp / "day", tmp / "dim_sky", lambda frame, sky: sky.sky_scaled(1 / 1.5))
+    m = json.loads((day / "manifest.json").read_text())
+    m["source"] = "ingest"
+    (day / "manifest.json").write_text(json.dumps(m))
+    chosen = [r for r in regions if r[0] in ("white_paper", "pale_blue_paper", "red_gloss_paint")]
+    light = map_light(day, chosen, sky="prior", sky_terms=1, log=lambda *a: None)
+    lo, hi = light["sky"]["interval95"]
+    assert lo < 1.5 < hi and lo > 1.0, light["sky"]
+    for name, px in chosen:
+        truth = np.array([*MATERIALS[name][0], MATERIALS[name][1], MATERIALS[name][2]])
+        spec, fitted = (fit_pixels(day, name, px, model="colour", light=lt) for lt in (None, light))
+        errors, held = [], []
+        for m in (spec, fitted):
+            ok = np.isfinite(m["theta"][:, 0])
+            errors.append(np.abs(np.median(m["theta"][ok, :3], axis=0) / truth[:3] - 1))
+            held.append(np.mean((m["lo"][ok] <= truth) & (truth <= m["hi"][ok]), axis=0))
+        assert np.all(errors[1] < errors[0]), (name, errors)    # measured: 7-20% -> 0.1-3%
+        assert np.all(held[1] >= 0.85), (name, held)               # measured: 0.92-1
+    doc, root = load_manifest(day)
+    notes = _widths_include(doc, [frame_sky(f, root) for f in doc["frames"]],
+                            ["C_r", "C_g", "C_b", "rho_s", "sigma_alpha"], light)
+    assert any("the fitted sky level's error" in n for n in notes), notes
+    assert _sky_summary(light)["k"] == light["sky"]["k"]
+
+
 def test_chunks_are_compact_tiles_of_whole_patches():
     """A full 48x32 region in chunks of 64 fits: each chunk an 8x8 tile (so its pixels share
     the sky integrals' anchors); with 2x2 patches, 16 whole patches in 8x8 pixels."""

@@ -106,11 +106,11 @@ def test_a_sky_of_the_wrong_level_is_fitted_and_the_materials_held(dim_sky, dim_
         assert lo - 1e-9 <= v <= hi + 1e-9, (p, r["intervals"][p], r["parameters"])
 
 
-def test_sky_fit_is_for_regions_not_maps(days, capsys):
+def test_sky_shape_is_for_regions_not_maps(days, capsys):
     assert main(["fit", str(days["clean"]), "--region", "disc=rect:2,2,9,9", "--per-pixel",
-                 "--sky", "fit"]) == 2
+                 "--sky", "fit", "--sky-shape"]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "--sky fit" in err, err
+    assert len(err.splitlines()) == 1 and "--sky-shape" in err, err
 
 
 def test_the_fitted_sky_lights_its_own_day_again(dim_sky, dim_fit):

@@ -1112,6 +1112,8 @@ class FitSession:
                if np.any(fit.matrix_sd > 0) else {}),
             **({"sky": {**self.sky_record, "error_sd": dict(zip(names, (
                 self.sky_sd if self.sky_sd is not None else np.zeros(len(names))).tolist())),
+                **({} if self.sky_span is None else {"undetermined_span": {
+                    p: [float(lo), float(hi)] for p, lo, hi in zip(names, *self.sky_span)}}),
                 "sun_level_sd": self.sun_level_sd, "sun_source": self.sun_source,
                 "sun_level_error_sd": dict(zip(names, fit.sun_level_sd.tolist()))}}
                if self.sky_record is not None else {}),

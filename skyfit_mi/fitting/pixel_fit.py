@@ -23,8 +23,11 @@ sequence's calibration error
 (:func:`~skyfit_mi.fitting.uncertainty.colour_matrix_sd`); on a photographed day without a
 reference in the scene, the reflectances' intervals also take the sun's level as a factor
 (:func:`~skyfit_mi.fitting.sky_fit.light_level_sd`, as region fits do: a modelled sun's 20%,
-a measured one's 3%).  The sky's own level and shape are the spec's, taken as exact: a region
-fit (``--sky prior``, the default for photographs) measures how far that holds.
+a measured one's 3%).  One pixel's values hardly tell the sky's level against the sun's, so
+a map of a photographed day (``--sky prior``, the default there, or ``fit``) takes the level
+its regions' fit finds first (:func:`~.pixel_map.map_light`): each frame's sky at that level,
+and each pixel's intervals with its region's share of the sky's error (a reflectance's in
+proportion to its value).  The sky's shape is the spec's.
 
 Intervals are the grid's profile: the 95% set {chi^2 <= chi^2_min + 3.84 s^2}, with
 s^2 = max(1, chi^2_min / dof) (a misfit widens them, as in region fits); sigma_alpha's and
@@ -44,7 +47,7 @@ from ..render.fit_model import PARAMETERS, WardModel, bounds, reflectances
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
                                     grid_chi2_device, linear_curvature, near_saturation)
-from .sky_fit import light_level_sd, untold_sun_sd
+from .sky_fit import LEVEL_SCALED, light_level_sd, sky_level_at, untold_sun_sd
 from .uncertainty import Z, calibration_sd, colour_matrix_sd, widen_relative
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
@@ -104,13 +107,17 @@ def _stack_groups(x, groups, n_groups):
 
 
 def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="ward", seed=0,
-               positions=MAP_CACHE[0], directions=MAP_CACHE[1], groups=None, variant=None):
+               positions=MAP_CACHE[0], directions=MAP_CACHE[1], groups=None, variant=None,
+               light=None):
     """Fit every pixel of ``pixels`` (P, 2), or every group of them, on its own; the light is
     traced once for all.
 
     ``materials``: the material id the pixels show (one, or one per pixel); ``groups``: each
     pixel's fit (P,) labels 0..G-1 (a patch's pixels share one; default every pixel its own);
-    ``variant``: the Mitsuba variant (default the sequence's).
+    ``variant``: the Mitsuba variant (default the sequence's); ``light``: None for the spec's
+    sky as it is, or the sky its regions' fit found (:func:`~.pixel_map.map_light`): each
+    frame's sky at the fitted level, the sky's share of each region's errors carried to its
+    pixels, and the sun's level as that fit counted it.
     Returns a dict of arrays over the G fits: ``pixels`` (G, 2) each fit's first pixel,
     ``theta``, ``lo``, ``hi``, ``cache_error_sd`` (G, n) (95% intervals), ``chi2``, ``dof``,
     ``model_noise_chi2``, ``warnings``, ``sigma_index`` (into SIGMA_GRID) (G,), and ``names``
@@ -126,6 +133,9 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     mi = setup(variant or doc["render"]["variant"])
     scene = mi.load_string(doc["scene"]["xml"])
     skies = [frame_sky(frames[i], root) for i in obs.frames]
+    if light is not None:
+        levels = sky_level_at(light["sky"], obs.times)
+        skies = [sky.sky_scaled(k) for sky, k in zip(skies, levels)]
     table, _ = trace_table(scene, mi.traverse(scene), skies, pixels, materials,
                            lambda cache: WardModel(cache, model, normalisation),
                            positions=positions, directions=directions, seed=seed,
@@ -153,15 +163,23 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     fit.update(pixels=np.asarray(first, dtype=int), names=list(names))
     sd = fit["cache_error_sd"]
     theta = fit["theta"]
+    material = np.broadcast_to(np.asarray(materials, dtype=object), (len(pixels),))[
+        np.unique(groups, return_index=True)[1]]
+    sky_sd, sky_span = _sky_errors(light, material, names, theta)
     spread = Z["95"] * np.sqrt(sd ** 2 + calibration_sd(doc, names, theta) ** 2
-                               + colour_matrix_sd(doc, names, theta) ** 2)
+                               + colour_matrix_sd(doc, names, theta) ** 2 + sky_sd ** 2)
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)
     # a photographed day's sun: its level, a factor on every reflectance that no data tell
     # (as a region fit's, sky_fit.light_level_sd), known to its model's or its measurement's sd
-    sun = Z["95"] * light_level_sd(doc, names, untold_sun_sd(doc, skies))
+    # (with a fitted sky, as its regions' fit counted it)
+    sun = Z["95"] * light_level_sd(doc, names, untold_sun_sd(doc, skies) if light is None
+                                   else light["sun_level_sd"])
     fit["lo"], fit["hi"] = widen_relative(theta, (fit["lo"], fit["hi"]), sun, lower, upper)
+    if sky_span is not None:                  # the regions' sky level was not determined
+        fit["lo"] = np.maximum(np.minimum(fit["lo"], sky_span[0]), lower)
+        fit["hi"] = np.minimum(np.maximum(fit["hi"], sky_span[1]), upper)
     left_out = np.bincount(groups, weights=saturated.any(axis=(1, 2)), minlength=n) > 0
     contradicted = np.bincount(groups, weights=_contradicts(model, y_pixels, w_all, saturated,
                                                             whole, fit, groups), minlength=n) > 0
@@ -173,6 +191,32 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     for k in ("chi2", "chi2_grid"):
         fit[k] = np.where(hit, fit[k], np.nan)
     return fit
+
+
+def _sky_errors(light, material, names, theta):
+    """The fitted sky's share of each fit's error (G, n) and, where the regions' fit could not
+    determine the sky's level, the (lo, hi) (G, n) its range of levels reaches (else None):
+    each fit takes its region's (``light``'s ``regions``, by ``material`` (G,)), a
+    reflectance's relative to the region's value (the light's level scales it), the roughness's
+    as it is (zeros and None without ``light``)."""
+    sd = np.zeros_like(theta)
+    if light is None:
+        return sd, None
+    span = None
+    for name, region in light["regions"].items():
+        at = material == name
+        value = np.array([region["value"][p] for p in names])
+        scale = np.where(np.isin(names, LEVEL_SCALED) & (value > 0),
+                         theta[at] / np.where(value > 0, value, 1.0), 1.0)
+        sd[at] = scale * [region["sd"][p] for p in names]
+        if region.get("span") is not None:
+            if span is None:
+                span = [theta.copy(), theta.copy()]
+            for side, ends in zip(span, region["span"]):
+                ends = np.array([ends[p] for p in names])
+                side[at] = np.where(np.isin(names, LEVEL_SCALED), scale * ends,
+                                    theta[at] + ends - value)
+    return sd, span
 
 
 def _contradicts(model, y, w, saturated, basis, fit, groups):

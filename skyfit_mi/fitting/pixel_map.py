@@ -37,9 +37,10 @@ from ..pipeline.manifest import frame_sky, load_manifest
 from ..render.fit_model import PARAMETERS
 from ..render.image import write_exr
 from ..render.light_cache import SKY_SPACING
-from .chi2 import check_regions
+from .chi2 import check_regions, subsample_region
+from .fit import fit_regions
 from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, check_map_region, fit_pixels, patch_groups
-from .sky_fit import light_level_sd, sun_source, untold_sun_sd
+from .sky_fit import default_sky, light_level_sd, sun_source, untold_sun_sd
 
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
@@ -54,6 +55,9 @@ CHUNK = 1024
 #: How :func:`plan_chunks` lays fits into chunks (recorded, so that a store laid out otherwise
 #: is not resumed).
 LAYOUT = "tiles"
+#: Pixels of each region (at most; a seeded subset) whose fit finds a photographed day's sky
+#: for its map (:func:`map_light`): a region fit's default (``fit --max-pixels``).
+LIGHT_PIXELS = 64
 #: The Dask setting that gives workers MALLOC_TRIM_THRESHOLD_ (unset for the local cluster).
 TRIM = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
 #: Seconds to wait for a given scheduler to answer.
@@ -92,12 +96,50 @@ def chunk_seed(seed, index):
     return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0])
 
 
-def _settings(doc, regions, model, normalisation, seed, patch, chunk, cache):
+def _settings(doc, regions, model, normalisation, seed, patch, chunk, cache, sky):
+    """What a stored map was made with (a resume needs the same); ``sky``: how its light was
+    found (:func:`map_light`'s choices; the same choices find the same light)."""
     digest = [(n, np.asarray(p).tolist()) for n, p in regions]
     return {"sequence_run_id": doc.get("run_id"), "model": model, "normalisation": normalisation,
             "seed": int(seed), "patch": int(patch), "chunk": int(chunk), "cache": list(cache),
             "sky_spacing": SKY_SPACING, "layout": LAYOUT, "undetermined_bits": UNDETERMINED,
-            "regions": hashlib.sha256(json.dumps(digest).encode()).hexdigest()[:16]}
+            "regions": hashlib.sha256(json.dumps(digest).encode()).hexdigest()[:16], "sky": sky}
+
+
+def map_light(manifest_path, regions, model="colour", normalisation="ward", seed=0, sky="prior",
+              sun_sd=None, sky_terms=None, max_pixels=LIGHT_PIXELS, variant=None, log=print):
+    """The light of a map (:func:`~.pixel_fit.fit_pixels`' ``light``) under a fitted sky
+    (``sky`` 'fit' or 'prior', as ``fit --sky``): the sky's level is fitted first with the
+    materials of ``regions`` ([(material, pixels)], up to ``max_pixels`` of each, a seeded
+    subset), as their region fits do it (:func:`~.fit.fit_regions`, with ``sun_sd`` and
+    ``sky_terms``); returns its record (``sky``), each region's parameters, the sky's share
+    of their standard errors and, where the level is not determined, their range over the
+    levels it could not tell apart (``regions``), and the sun's level's sd as that fit
+    counts it.  Per-pixel maps cannot fit the sky themselves: one pixel's values hardly
+    tell it."""
+    kept = [(name, subsample_region(px, max_pixels or None, seed)) for name, px in regions]
+    log(f"sky: its level fitted first with the materials of {len(kept)} region(s) (up to "
+        f"{max_pixels} pixels each, seed {seed}); the map takes that light")
+    light = {"fitted": sky, "regions": {}}
+
+    def sky_lines(line):
+        """The sky fit's own log lines (its warnings with them), not the regions' results."""
+        if line.startswith("sky:"):
+            log(line)
+    for (name, _), r in zip(kept, fit_regions(manifest_path, kept, model=model,
+                                              normalisation=normalisation, seed=seed,
+                                              variant=variant, sky=sky, sun_sd=sun_sd,
+                                              sky_terms=sky_terms, log=sky_lines)):
+        rec = r["sky"]
+        span = rec.get("undetermined_span")
+        light["regions"][name] = {
+            "value": r["parameters"], "sd": rec["error_sd"],
+            "span": None if span is None else [{p: v[i] for p, v in span.items()}
+                                               for i in (0, 1)]}
+        light["sky"] = {k: rec[k] for k in ("k", "interval95", "determined", "terms",
+                                            "regions", "prior", "warnings")}
+        light.update(sun_level_sd=rec["sun_level_sd"], sun_source=rec["sun_source"])
+    return light
 
 
 def _check_store(path, settings, overwrite, n_chunks):
@@ -271,15 +313,25 @@ def _close(client, cluster):
 
 def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward", seed=0,
             patch=1, chunk=CHUNK, workers=None, scheduler=None, overwrite=False, progress=True,
-            log=print, cache=MAP_CACHE, memory_per_worker="4GiB", variant=None, dask_logs=False):
+            log=print, cache=MAP_CACHE, memory_per_worker="4GiB", variant=None, dask_logs=False,
+            sky=None, sun_sd=None, sky_terms=None, light_pixels=LIGHT_PIXELS):
     """Map ``regions`` ([(material, pixels (P, 2))]) of a sequence; returns the summary dict
     (module docstring).  ``workers``: LocalCluster processes (default: the machine's cores,
     :func:`worker_count`); ``variant``: the Mitsuba variant of the fits (default the
-    sequence's); ``dask_logs``: show Dask's own log lines (``--debug``).  Every input, the
-    regions' frames and light and a given scheduler included, is checked before the store is
-    written."""
+    sequence's); ``dask_logs``: show Dask's own log lines (``--debug``); ``sky``: 'spec' takes
+    the spec's sky as it is, 'fit' or 'prior' its level fitted with the regions' materials
+    first (:func:`map_light`, with ``sun_sd``, ``sky_terms`` and up to ``light_pixels`` of
+    each region), None chooses as region fits do (:func:`~.sky_fit.default_sky`: 'prior'
+    for photographs under the sun).  Every input, the regions' frames and light and a given
+    scheduler included, is checked before the store is written."""
     doc, root = load_manifest(manifest_path)
     skies = [frame_sky(f, root) for f in doc["frames"] if "illumination" in f]
+    if sky is None:
+        sky = default_sky(doc, skies)
+    if sky == "spec" and (sun_sd is not None or sky_terms is not None):
+        raise SkyfitError(f"{'--sun-sd' if sun_sd is not None else '--sky-terms'} belongs to a "
+                          "fitted sky, and the map takes the spec's as it is (--sky spec): give "
+                          "--sky fit or prior.")
     shape = (doc["camera"]["height"], doc["camera"]["width"])
     for _, px in regions:
         check_map_region(px, shape)
@@ -290,7 +342,9 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
                           "cluster's own workers run the map: leave out --workers.")
     names = list(PARAMETERS[model])
     chunks = plan_chunks(regions, patch, chunk)
-    settings = _settings(doc, regions, model, normalisation, seed, patch, chunk, cache)
+    settings = _settings(doc, regions, model, normalisation, seed, patch, chunk, cache,
+                         {"sky": sky, "sun_sd": sun_sd, "sky_terms": sky_terms,
+                          "pixels": light_pixels} if sky != "spec" else "spec")
     out = check_dir(Path(out_dir))
     resume, done = _check_store(out / STORE, settings, overwrite, len(chunks))
     pending = [i for i in range(len(chunks)) if not done[i]]
@@ -300,6 +354,9 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
     with _dask_logs_quiet(keep=dask_logs):
         try:
             check_regions(manifest_path, regions)          # the frames and their light
+            light = None if sky == "spec" else map_light(
+                manifest_path, regions, model, normalisation, seed, sky, sun_sd, sky_terms,
+                light_pixels, variant, log)
             if pending:
                 with _ctrl_c_deferred():
                     client, cluster = _client(n_workers, scheduler, memory_per_worker,
@@ -311,11 +368,12 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
                     "mapped")
             if pending:
                 _map_pending(client, manifest_path, chunks, pending, store, model,
-                             normalisation, seed, cache, progress, variant)
+                             normalisation, seed, cache, progress, variant, light)
         finally:
             _close(client, cluster)
     summary = write_map_outputs(out, store, names, regions, settings)
-    summary.update(widths_include=_widths_include(doc, skies, names),
+    summary.update(widths_include=_widths_include(doc, skies, names, light),
+                   sky=_sky_summary(light),
                    wall_time_s=time.perf_counter() - t0, chunks=len(chunks),
                    chunks_this_run=len(pending), workers=n_workers,
                    scheduler=scheduler or "LocalCluster", memory_per_worker=memory_per_worker,
@@ -325,14 +383,15 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
 
 
 def _map_pending(client, manifest_path, chunks, pending, store, model, normalisation, seed,
-                 cache, progress, variant):
+                 cache, progress, variant, light):
     """Submit every pending chunk and write each result as it comes."""
     from distributed import as_completed
 
     futures = {client.submit(fit_pixels, str(manifest_path), chunks[i]["materials"],
                              chunks[i]["pixels"], model=model, normalisation=normalisation,
                              seed=chunk_seed(seed, i), positions=cache[0], directions=cache[1],
-                             groups=chunks[i]["groups"], variant=variant, pure=False): i
+                             groups=chunks[i]["groups"], variant=variant, light=light,
+                             pure=False): i
                for i in pending}
     bar = None
     if progress:
@@ -392,18 +451,39 @@ def write_map_outputs(out, store, names, regions, settings):
     return summary
 
 
-def _widths_include(doc, skies, names):
+def _sky_summary(light):
+    """The map summary's record of the sky the map took (``light``: :func:`map_light`'s)."""
+    if light is None:
+        return {"source": "the spec's, taken as exact (--sky spec)"}
+    return {"source": f"the spec's, its level fitted first with the regions' materials (--sky "
+                      f"{light['fitted']}; their shape is the spec's)", **light["sky"],
+            "sun_level_sd": light["sun_level_sd"], "sun_source": light["sun_source"],
+            "error_sd_by_region": {n: r["sd"] for n, r in light["regions"].items()},
+            "meaning": "each frame lit by the spec's sky at level k (against the sun; a curve "
+                       "over the day where terms); a pixel's interval takes in its region's "
+                       "error_sd (a reflectance's in proportion to its value), or its range "
+                       "over the levels a fit could not tell apart"}
+
+
+def _widths_include(doc, skies, names, light=None):
     """What the maps' 95% widths of parameters ``names`` take in besides the data's noise
-    (their grid's profile, a misfit's scale): the map's light cache's error, and a
-    photographed sequence's calibration, camera colour matrix and sun's level where its
-    manifest ``doc`` and its frames' ``skies`` call for them (:func:`~.pixel_fit.fit_pixels`)."""
+    (their grid's profile, a misfit's scale): the map's light cache's error, a fitted sky's
+    share (``light``, :func:`map_light`), and a photographed sequence's calibration, camera
+    colour matrix and sun's level where its manifest ``doc`` and its frames' ``skies`` call
+    for them (:func:`~.pixel_fit.fit_pixels`)."""
     ingest = doc.get("ingest") or {}
     out = ["the light cache's Monte Carlo error (from its two halves)"]
-    sun = untold_sun_sd(doc, skies)
+    if light is not None:
+        out.append("the fitted sky level's error, each pixel its region's share (a "
+                   "reflectance's in proportion to its value; over the levels the fit could "
+                   "not tell apart where it did not determine the level); the sky's shape is "
+                   "the spec's")
+    sun = untold_sun_sd(doc, skies) if light is None else light["sun_level_sd"]
+    source = sun_source(skies) if light is None else light["sun_source"]
     if light_level_sd(doc, names, sun).any():
-        out.append(f"the sun's level, known to +-{100 * sun:.0f}% (1 sd, a {sun_source(skies)} "
-                   "sun), on the reflectances; the sky's level and shape are the spec's, taken "
-                   "as exact (a region fit, --sky prior, measures how far that holds)")
+        out.append(f"the sun's level, known to +-{100 * sun:.0f}% (1 sd, a {source} sun), on "
+                   "the reflectances" + ("; the sky's level and shape are the spec's, taken as "
+                                         "exact (--sky spec)" if light is None else ""))
     if (ingest.get("calibration") or {}).get("scale_relative_sd"):
         out.append("the exposure calibration's error (ingest.calibration)")
     rel = (ingest.get("colour_matrix") or {}).get("relative_sd")
