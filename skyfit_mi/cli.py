@@ -230,11 +230,12 @@ def _fit(args):
     auto = args.model == "auto"
     model = "two" if auto else BY_COUNT[int(args.model)]
     check_fit_normalisation(args.normalisation)          # before the costly light cache
-    if auto and (args.per_pixel or args.sky not in (None, "spec") or args.method != "global"
+    if auto and (args.per_pixel or args.sky_shape or args.method != "global"
                  or args.start is not None):
         raise SkyfitError("--model auto ranks every lobe and parameter count by the global "
-                          "method on the spec's sky for regions: leave out --per-pixel, --sky, "
-                          "--method and --start (or give a model: 2, 3 or 5).")
+                          "method for regions, on the spec's sky's shape: leave out "
+                          "--per-pixel, --sky-shape, --method and --start (or give a model: 2, "
+                          "3 or 5).")
     _, root = load_manifest(args.manifest)
     if args.start is not None:
         check_start(model, args.start)
@@ -281,7 +282,8 @@ def _fit(args):
 
         results = fit_auto(args.manifest, list(kept.items()), seed=args.seed,
                            positions=args.positions, directions=args.directions,
-                           frames=args.frames, variant=args.variant)
+                           frames=args.frames, variant=args.variant, sky=args.sky,
+                           sun_sd=args.sun_sd, sky_terms=args.sky_terms)
     else:
         results = fit_regions(args.manifest, list(kept.items()), model=model,
                               method=args.method, normalisation=args.normalisation,

@@ -142,3 +142,35 @@ def test_model_auto_ranks_the_true_family_first_and_writes_the_ranking(plastic_d
     rows = list(csv.DictReader((out / "fits.csv").open()))
     assert rows[0]["normalisation"] == "ggx_plastic"
     assert rows[0]["model_ranking"].startswith("1 ggx_plastic/")
+
+
+def test_model_auto_on_photographs_fits_the_chosen_model_with_the_skys_level(plastic_day,
+                                                                           tmp_path):
+    """The plastic's day called photographed (the spec's sky then a model of the real one):
+    ``--model auto`` ranks on the spec's light as it is, then fits each region's chosen model
+    with the sky's level (``--sky prior``, the default for photographs), whose interval holds
+    the day's own (1); the sigma_alpha interval holds the truth and the result keeps its
+    ranking. A sky option a fit cannot take is refused before any light is traced."""
+    import json
+    import shutil
+
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.fitting.selection import fit_auto
+
+    day = tmp_path / "photographed"
+    shutil.copytree(plastic_day, day)
+    m = json.loads((day / "manifest.json").read_text())
+    (day / "manifest.json").write_text(json.dumps({**m, "source": "ingest"}))
+    pixels = np.stack(np.meshgrid(np.arange(4, 8), np.arange(4, 8)), -1).reshape(-1, 2)
+    logs = []
+    r = next(fit_auto(day, [("disc", pixels)], families=("ward", "ggx_plastic"),
+                      models=("two",), positions=4, directions=256, log=logs.append))
+    assert r["model_selection"]["chosen"]["normalisation"] == "ggx_plastic"
+    assert r["normalisation"] == "ggx_plastic" and r["sky"]["regions"] == ["disc"]
+    lo, hi = r["sky"]["interval95"]
+    assert lo < 1.0 < hi, r["sky"]
+    lo, hi = r["intervals"]["sigma_alpha"]["95"]
+    assert lo <= TRUTH["sigma_alpha"] <= hi, r["intervals"]["sigma_alpha"]
+    assert any("with the sky's level (--sky prior)" in x for x in logs), logs
+    with pytest.raises(SkyfitError, match="--sky-terms 9"):
+        next(fit_auto(day, [("disc", pixels)], sky="fit", sky_terms=9, log=logs.append))

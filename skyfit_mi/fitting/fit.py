@@ -1227,48 +1227,68 @@ def fit_regions(manifest_path, regions, model="two", method="global", normalisat
     of the frames), and ``sky_shape`` fits the sky's shape too (a CIE
     sky's gradation and indicatrix, a Perez sky's clearness and brightness;
     :func:`~.sky_fit.fit_sky_scale`)."""
-    if sky is not None:
-        check_choice("sky", sky, SKY_CHOICES)
-    if sun_sd is not None:
-        check_range("--sun-sd", sun_sd, 0.0, 1.0)
     sessions = FitSession.for_regions(manifest_path, regions, model=model,
                                       normalisation=normalisation, seed=seed,
                                       positions=positions, directions=directions, frames=frames,
                                       variant=variant, trace=False)
-    first = next(iter(sessions.values()))
+    yield from fit_sessions(sessions, method, seed, start, method_options, log, sky, sun_sd,
+                            sky_terms, sky_shape)
+
+
+def sky_setup(doc, skies, n_frames, sky=None, sun_sd=None, sky_terms=None, sky_shape=False,
+              log=print):
+    """Check a fit's sky options against a sequence (its manifest ``doc``, its frames'
+    ``skies``, ``n_frames`` fitted) before any light is traced, as :func:`fit_regions`
+    describes them; returns (sky, the sun level's sd, where it comes from): ``sky`` None
+    chosen (:func:`~.sky_fit.default_sky`, and said), ``sun_sd`` None its default."""
+    if sky is not None:
+        check_choice("sky", sky, SKY_CHOICES)
+    if sun_sd is not None:
+        check_range("--sun-sd", sun_sd, 0.0, 1.0)
     if sky is None:
-        sky = default_sky(first.doc, first.skies)
+        sky = default_sky(doc, skies)
         if sky != "spec":
             log(f"sky: photographs under the sun and a sky: the spec's light is a model of "
                 f"theirs, so its level is fitted with its prior (--sky {sky}; --sky spec takes "
                 "it as exact)")
     asked = sky_terms not in (None, 1)
-    if sky == "spec" and (asked or sky_shape):
-        raise SkyfitError(f"{'--sky-terms' if asked else '--sky-shape'} belongs to a "
-                          "fitted sky, and the spec's is taken as it is (--sky spec): give --sky "
-                          "fit or prior.")
-    if sky != "spec":                                   # refused before the light is traced
-        if not sun_up(first.skies):
-            raise SkyfitError(f"--sky {sky} scales the sky against the sun, and no frame of the "
-                              "sequence has the sun's disc above the horizon; fit with the "
-                              "spec's sky (--sky spec).")
-        if sky_terms is not None:
-            check_terms(sky_terms, len(first.obs.frames))
-        if sky_shape:
-            shape_variants(first.skies)
-        source = "given"
-        if sun_sd is None:
-            sun_sd = default_sun_sd(first.doc, first.skies)
-            source = sun_source(first.skies) if sun_sd else "rendered"
+    if sky == "spec" and (asked or sky_shape or sun_sd is not None):
+        given = "--sky-terms" if asked else "--sky-shape" if sky_shape else "--sun-sd"
+        raise SkyfitError(f"{given} belongs to a fitted sky, and the spec's is taken as it is "
+                          "(--sky spec): give --sky fit or prior.")
+    if sky == "spec":
+        return sky, 0.0, "given"
+    if not sun_up(skies):                               # refused before the light is traced
+        raise SkyfitError(f"--sky {sky} scales the sky against the sun, and no frame of the "
+                          "sequence has the sun's disc above the horizon; fit with the "
+                          "spec's sky (--sky spec).")
+    if sky_terms is not None:
+        check_terms(sky_terms, n_frames)
+    if sky_shape:
+        shape_variants(skies)
+    if sun_sd is not None:
+        return sky, float(sun_sd), "given"
+    sun_sd = default_sun_sd(doc, skies)
+    return sky, sun_sd, sun_source(skies) if sun_sd else "rendered"
+
+
+def fit_sessions(sessions, method="global", seed=0, start=None, method_options=None, log=print,
+                 sky=None, sun_sd=None, sky_terms=None, sky_shape=False):
+    """Trace and fit ``sessions`` ({region: FitSession} of one sequence, not yet traced; each
+    its own model and lobe) under the light ``sky`` chooses, as :func:`fit_regions` describes
+    (the sky's level fitted once for all of them); yields each region's result dict in turn,
+    in the order of ``sessions``."""
+    first = next(iter(sessions.values()))
+    sky, sun_sd, source = sky_setup(first.doc, first.skies, len(first.obs.frames), sky, sun_sd,
+                                    sky_terms, sky_shape, log)
     for s in sessions.values():
         s.split_sky, s.sky_shape = sky != "spec", bool(sky_shape)
-        s.sun_sd = 0.0 if sky == "spec" else float(sun_sd)
-        s.sun_source = "given" if sky == "spec" else source
+        s.sun_sd, s.sun_source = sun_sd, source
     FitSession.trace_groups(sessions)
     if sky != "spec":
         fit_sky_scale(list(sessions.values()), seed, log,
                       prior_sd=SKY_LEVEL_SD if sky == "prior" else None,
                       terms=None if sky_terms is None else int(sky_terms))
-    for name, _ in regions:
+    for name in list(sessions):
         yield sessions.pop(name).run(method, start, seed, method_options, log)
 

@@ -38,9 +38,9 @@ from ..render.fit_model import PARAMETERS
 from ..render.image import write_exr
 from ..render.light_cache import SKY_SPACING
 from .chi2 import check_regions, subsample_region
-from .fit import fit_regions
+from .fit import fit_regions, sky_setup
 from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, check_map_region, fit_pixels, patch_groups
-from .sky_fit import default_sky, light_level_sd, sun_source, untold_sun_sd
+from .sky_fit import light_level_sd, sun_source, untold_sun_sd
 
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
@@ -326,12 +326,7 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
     scheduler included, is checked before the store is written."""
     doc, root = load_manifest(manifest_path)
     skies = [frame_sky(f, root) for f in doc["frames"] if "illumination" in f]
-    if sky is None:
-        sky = default_sky(doc, skies)
-    if sky == "spec" and (sun_sd is not None or sky_terms is not None):
-        raise SkyfitError(f"{'--sun-sd' if sun_sd is not None else '--sky-terms'} belongs to a "
-                          "fitted sky, and the map takes the spec's as it is (--sky spec): give "
-                          "--sky fit or prior.")
+    sky = sky_setup(doc, skies, len(skies), sky, sun_sd, sky_terms, log=log)[0]
     shape = (doc["camera"]["height"], doc["camera"]["width"])
     for _, px in regions:
         check_map_region(px, shape)

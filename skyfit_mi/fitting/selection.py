@@ -203,21 +203,30 @@ def choose(rows):
 
 
 def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOLDS, seed=0,
-             log=print, **options):
+             log=print, sky=None, sun_sd=None, sky_terms=None, **options):
     """``fit --model auto``: every region's candidates ranked (:func:`rank`; the light traced
-    once per lobe, every region of a lobe together), then the chosen one fitted in full by the
-    global method on its lobe's light; yields each region's result dict with its ``model_selection`` (the
-    ranking, the choice, the folds and each lobe's tracing time)."""
-    from .fit import FitSession
+    once per lobe, every region of a lobe together, the spec's as it is), then the chosen one
+    fitted in full by the global method: on its lobe's light where the spec's sky is taken as
+    it is (``sky`` 'spec', or None where :func:`~.sky_fit.default_sky` chooses it), else with
+    the sky's level fitted once for every region's choice (``sky``, ``sun_sd``, ``sky_terms``
+    as :func:`~.fit.fit_regions`' ; the light traced again, split); yields each region's
+    result dict with its ``model_selection`` (the ranking, the choice, the folds and each
+    lobe's tracing time)."""
+    from .fit import FitSession, fit_sessions, sky_setup
 
-    log("model selection takes the spec's light as it is (no sky fit or sky prior: fit the "
-        "chosen model again with --sky to add them)")
+    first = FitSession(manifest_path, *regions[0], trace=False, **options)
+    sky = sky_setup(first.doc, first.skies, len(first.obs.frames), sky, sun_sd, sky_terms,
+                    log=log)[0]                         # checked before any light is traced
     sessions, trace_s = {}, {}
     for fam in families:
         t0 = time.perf_counter()
         sessions[fam] = FitSession.for_regions(manifest_path, regions, model="two",
                                                normalisation=fam, seed=seed, **options)
         trace_s[fam] = time.perf_counter() - t0
+    log("model selection ranks on the spec's light as it is; the chosen models are fitted "
+        + ("on it too (fit the chosen model again with --sky to add the sky's level)"
+           if sky == "spec" else f"with the sky's level (--sky {sky})"))
+    chosen, selection = {}, {}
     for name, pixels in regions:
         traced = {fam: sessions[fam].pop(name) for fam in families}
         rows = rank(list(traced.values()), models, folds, log)
@@ -225,16 +234,26 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         log(f"{name}: chose {pick['normalisation']} {pick['model']} (rank {pick['rank']} of "
             f"{len(rows)} by held-out chi2 over {folds} folds of frames)")
         # on the light its lobe's candidates were ranked on (the table is the same for any
-        # parameterisation)
+        # parameterisation), or on the split light traced again below
         s = FitSession(manifest_path, name, pixels, model=pick["model"],
                        normalisation=pick["normalisation"], seed=seed, trace=False, **options)
-        s.take_light(traced[pick["normalisation"]])
+        if sky == "spec":
+            s.take_light(traced[pick["normalisation"]])
         del traced
-        out = s.run("global", None, seed, None, log)
-        out["model_selection"] = {
+        chosen[name] = s
+        selection[name] = {
             "criterion": f"held-out chi2, {folds}-fold over frames (frame t in fold t mod "
-                         f"{folds}); the fewest parameters within sqrt(2 n) of the best",
+                         f"{folds}); the fewest parameters within sqrt(2 n) of the best, "
+                         "ranked on the spec's light as it is",
             "folds": int(folds), "chosen": {"normalisation": pick["normalisation"],
                                             "model": pick["model"], "rank": pick["rank"]},
             "trace_time_s": trace_s, "ranking": rows}
-        yield out
+        if sky == "spec":
+            out = chosen.pop(name).run("global", None, seed, None, log)
+            out["model_selection"] = selection.pop(name)
+            yield out
+    if chosen:
+        for out in fit_sessions(chosen, "global", seed, log=log, sky=sky, sun_sd=sun_sd,
+                                sky_terms=sky_terms):
+            out["model_selection"] = selection[out["region"]]
+            yield out
