@@ -89,6 +89,16 @@ SKY_CHOICES = ("spec", "fit", "prior")
 IRRADIANCE_NODES = 128
 
 
+def unit_vector(v):
+    """``v`` (a finite 3-vector, any magnitude: its largest component divided out first, so
+    that no square overflows) as a unit vector, or None where it is not one or is zero."""
+    v = np.asarray(v, dtype=float)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        return None
+    m = np.max(np.abs(v))
+    return None if m == 0 else v / m / np.linalg.norm(v / m)
+
+
 def hemisphere_integral(f, n=IRRADIANCE_NODES):
     """Integral of f(d) cos(theta) dOmega over the upper hemisphere (thesis eq. 4.19).
 
@@ -252,11 +262,10 @@ class Sky:
     info: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        s = np.asarray(self.sun_direction, dtype=float)
-        n = np.linalg.norm(s)
-        if s.shape != (3,) or not np.isfinite(n) or n == 0:
+        s = unit_vector(self.sun_direction)
+        if s is None:
             raise SkyfitError(f"sun_direction must be a non-zero 3-vector, got {self.sun_direction!r}.")
-        object.__setattr__(self, "sun_direction", s / n)
+        object.__setattr__(self, "sun_direction", s)
         for name in _PATTERNS + ("ground", "sun_radiance"):
             v = _rgb(getattr(self, name), name)
             if np.any(v < 0):
@@ -750,12 +759,10 @@ def directional_sky(direction, irradiance, solid_angle=SUN_SOLID_ANGLE):
     solid_angle : float
         The source's solid angle seen from the scene [sr] (default the sun's), in [1e-7, 0.5].
     """
-    d = np.asarray(direction, dtype=float)
-    n = np.linalg.norm(d) if d.shape == (3,) else 0.0
-    if not np.isfinite(n) or n == 0:
+    d = unit_vector(direction)
+    if d is None:
         raise SkyfitError(f"a directional light needs a non-zero direction [x east, y north, "
                           f"z up] toward the source, got {direction!r}.")
-    d = d / n
     if d[2] <= 0:
         raise SkyfitError(f"the directional light's direction ({d[0]:.4g}, {d[1]:.4g}, "
                           f"{d[2]:.4g}) is at or below the horizon (zenith "
