@@ -6,7 +6,7 @@ noise) is rendered under each sky of SKIES; its manifest then names the spec's s
 CIE clear sky (tests/measured_light.py ``relabelled``), and calls the frames photographed, as a
 user's photographs would be. Every sample pixel is fitted on its own (``fit_pixels``), lit by
 the spec's sky as it is (``--sky spec``; before, every map's light), and by the spec's sky at
-the level its regions' fit finds first (``pixel_map.map_light``, the default ``--sky prior``:
+the level its regions' fit finds first (``pixel_map.first_fits``, the default ``--sky prior``:
 the level a curve over the day, the sun's level a modelled one's). Both count the modelled sun's
 level in the reflectances' intervals, as maps of photographs do; ``--sun-sd 0`` takes it as
 exact (these days' sun is the spec's), so that the reflectances' intervals show the sky's share
@@ -48,7 +48,7 @@ def main():
     from test_pixel_map import MATERIALS, SPEC
 
     from skyfit_mi.fitting.pixel_fit import UNDETERMINED, fit_pixels
-    from skyfit_mi.fitting.pixel_map import map_light
+    from skyfit_mi.fitting.pixel_map import first_fits
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import read_spec, validate_spec
@@ -79,8 +79,8 @@ def main():
         truth = np.array([[*MATERIALS[m][0], *MATERIALS[m][1:]] for m in mats])
         for label in ("spec", "prior"):
             t0 = time.perf_counter()
-            light = None if label == "spec" else map_light(
-                day, regions, sky="prior", sun_sd=args.sun_sd, log=lambda *a: None)
+            light = None if label == "spec" else first_fits(
+                day, regions, sky="prior", sun_sd=args.sun_sd, log=lambda *a: None)[1]
             if light is None and args.sun_sd is not None:          # the spec's sky, that sun
                 light = {"sky": {"k": 1.0}, "regions": {}, "sun_level_sd": args.sun_sd}
             res = fit_pixels(day, list(mats), px, light=light)

@@ -230,12 +230,10 @@ def _fit(args):
     auto = args.model == "auto"
     model = "two" if auto else BY_COUNT[int(args.model)]
     check_fit_normalisation(args.normalisation)          # before the costly light cache
-    if auto and (args.per_pixel or args.sky_shape or args.method != "global"
-                 or args.start is not None):
+    if auto and (args.sky_shape or args.method != "global" or args.start is not None):
         raise SkyfitError("--model auto ranks every lobe and parameter count by the global "
-                          "method for regions, on the spec's sky's shape: leave out "
-                          "--per-pixel, --sky-shape, --method and --start (or give a model: 2, "
-                          "3 or 5).")
+                          "method, on the spec's sky's shape: leave out --sky-shape, --method "
+                          "and --start (or give a model: 2, 3 or 5).")
     _, root = load_manifest(args.manifest)
     if args.start is not None:
         check_start(model, args.start)
@@ -255,7 +253,8 @@ def _fit(args):
             raise SkyfitError("an observation table has no pixels to map; fit its regions "
                               "without --per-pixel.")
         out = Path(args.output) if args.output else root / "pixel_map"
-        s = run_map(args.manifest, regions, out, model=model, normalisation=args.normalisation,
+        s = run_map(args.manifest, regions, out, model="auto" if auto else model,
+                    normalisation=args.normalisation,
                     seed=args.seed, patch=args.patch, chunk=args.chunk or CHUNK,
                     workers=args.workers, scheduler=args.scheduler, overwrite=args.overwrite,
                     progress=not args.quiet, variant=args.variant, dask_logs=args.debug,
@@ -263,7 +262,8 @@ def _fit(args):
                     light_pixels=args.max_pixels)
         for name, r in s["regions"].items():
             med = ", ".join(f"{k} = {v:.4g}" for k, v in r["median"].items() if v is not None)
-            print(f"{name}: {r['determined']} of {r['mapped']} pixels determined"
+            kind = f" ({r['normalisation']} {r['model']})" if auto else ""
+            print(f"{name}{kind}: {r['determined']} of {r['mapped']} pixels determined"
                   + (f"; medians {med}" if med else ""))
         print(f"wrote the maps and map_summary.json in {out} ({s['wall_time_s']:.1f} s)")
         return

@@ -174,3 +174,30 @@ def test_model_auto_on_photographs_fits_the_chosen_model_with_the_skys_level(pla
     assert any("with the sky's level (--sky prior)" in x for x in logs), logs
     with pytest.raises(SkyfitError, match="--sky-terms 9"):
         next(fit_auto(day, [("disc", pixels)], sky="fit", sky_terms=9, log=logs.append))
+
+
+def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(plastic_day, tmp_path,
+                                                                   monkeypatch):
+    """``fit --per-pixel --model auto``: the region's model and lobe ranked first (on up to
+    --max-pixels of its pixels), then every pixel mapped in them: GGX plastic, the map's planes
+    its model's parameters alone, the pixels' roughness about the truth.  (Two lobes and a
+    small light cache in the ranking, for time.)"""
+    import functools
+
+    from skyfit_mi.fitting import pixel_map
+    from skyfit_mi.fitting.pixel_map import run_map
+    from skyfit_mi.fitting.selection import fit_auto
+
+    monkeypatch.setattr(pixel_map, "fit_auto", functools.partial(
+        fit_auto, families=("ward", "ggx_plastic"), positions=4, directions=256))
+
+    pixels = np.stack(np.meshgrid(np.arange(3, 9), np.arange(3, 9)), -1).reshape(-1, 2)
+    logs = []
+    s = run_map(plastic_day, [("disc", pixels)], tmp_path / "map", model="auto", workers=1,
+                chunk=18, progress=False, log=logs.append, light_pixels=16)
+    disc = s["regions"]["disc"]
+    assert (disc["normalisation"], disc["model"]) == ("ggx_plastic", "two"), disc
+    assert s["parameters"] == ["rho_s", "sigma_alpha"] and "ranked" in s["models"]
+    assert not (tmp_path / "map" / "C_r.exr").exists()
+    assert abs(disc["median"]["sigma_alpha"] / TRUTH["sigma_alpha"] - 1) < 0.15, disc
+    assert any(": chose ggx_plastic two" in x for x in logs), logs

@@ -291,7 +291,7 @@ def test_a_photographed_days_map_takes_the_sky_level_its_regions_fit(board):
     from measured_light import relabelled
 
     from skyfit_mi.fitting.pixel_fit import fit_pixels
-    from skyfit_mi.fitting.pixel_map import _sky_summary, _widths_include, map_light
+    from skyfit_mi.fitting.pixel_map import _sky_summary, _widths_include, first_fits
     from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
 
     tmp, regions, _ = board
@@ -300,7 +300,7 @@ def test_a_photographed_days_map_takes_the_sky_level_its_regions_fit(board):
     m["source"] = "ingest"
     (day / "manifest.json").write_text(json.dumps(m))
     chosen = [r for r in regions if r[0] in ("white_paper", "pale_blue_paper", "red_gloss_paint")]
-    light = map_light(day, chosen, sky="prior", sky_terms=1, log=lambda *a: None)
+    _, light = first_fits(day, chosen, sky="prior", sky_terms=1, log=lambda *a: None)
     lo, hi = light["sky"]["interval95"]
     assert lo < 1.5 < hi and lo > 1.0, light["sky"]
     for name, px in chosen:
@@ -333,6 +333,38 @@ def test_chunks_are_compact_tiles_of_whole_patches():
             span = c["pixels"].max(axis=0) - c["pixels"].min(axis=0)
             assert np.all(span == 7)
             assert np.bincount(c["groups"]).tolist() == [patch**2] * (64 // patch**2)
+
+
+def test_regions_of_other_models_map_onto_their_own_planes():
+    """Regions whose chosen models differ (``--model auto``): each chunk holds one (model,
+    lobe), the map's planes are every parameter some model has, in one order, and a chunk's
+    fits land on its model's planes alone."""
+    from skyfit_mi.fitting.pixel_map import _write_chunk, map_parameters, plan_map
+
+    a = np.stack(np.meshgrid(np.arange(4), np.arange(4)), -1).reshape(-1, 2)
+    regions = [("paper", a), ("gloss", a + [4, 0]), ("metal", a + [0, 4])]
+    choices = {"paper": ("colour", "ward"), "gloss": ("two", "ggx_plastic"),
+               "metal": ("colour", "ward")}
+    names = map_parameters(choices)
+    assert names == ["C_r", "C_g", "C_b", "rho_s", "sigma_alpha"]
+    assert map_parameters({"x": ("achromatic", "ward"), "y": ("two", "ward")}) == \
+        ["R", "rho_s", "sigma_alpha"]
+    chunks = plan_map(regions, choices, 1, 8)
+    for c in chunks:
+        assert {choices[m] for m in c["materials"]} == {(c["model"], c["normalisation"])}
+    assert sum(len(c["pixels"]) for c in chunks) == 48
+    store = {k: np.full((len(names), 8, 8), np.nan) for k in ("theta", "lo", "hi",
+                                                              "cache_error_sd")}
+    store.update({k: np.full((8, 8), -1.0) for k in ("chi2", "dof", "warnings")})
+    gloss = next(c for c in chunks if c["model"] == "two")
+    G = gloss["groups"].max() + 1
+    res = {k: np.tile([0.06, 0.04], (G, 1)) for k in ("theta", "lo", "hi", "cache_error_sd")}
+    res.update(names=["rho_s", "sigma_alpha"], chi2=np.ones(G), dof=np.ones(G),
+               warnings=np.zeros(G))
+    _write_chunk(store, gloss, res, names)
+    x, y = gloss["pixels"].T
+    assert np.all(store["theta"][3, y, x] == 0.06) and np.all(store["theta"][4, y, x] == 0.04)
+    assert np.all(np.isnan(store["theta"][:3, y, x]))
 
 
 def test_device_grid_equals_the_numpy_grid():

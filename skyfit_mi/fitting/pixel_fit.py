@@ -25,7 +25,7 @@ reference in the scene, the reflectances' intervals also take the sun's level as
 (:func:`~skyfit_mi.fitting.sky_fit.light_level_sd`, as region fits do: a modelled sun's 20%,
 a measured one's 3%).  One pixel's values hardly tell the sky's level against the sun's, so
 a map of a photographed day (``--sky prior``, the default there, or ``fit``) takes the level
-its regions' fit finds first (:func:`~.pixel_map.map_light`): each frame's sky at that level,
+its regions' fit finds first (:func:`~.pixel_map.first_fits`): each frame's sky at that level,
 and each pixel's intervals with its region's share of the sky's error (a reflectance's in
 proportion to its value).  The sky's shape is the spec's.
 
@@ -47,7 +47,7 @@ from ..render.fit_model import PARAMETERS, WardModel, bounds, reflectances
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
                                     grid_chi2_device, linear_curvature, near_saturation)
-from .sky_fit import LEVEL_SCALED, light_level_sd, sky_level_at, untold_sun_sd
+from .sky_fit import LEVEL_SCALED, light_level_sd, skies_at_level, untold_sun_sd
 from .uncertainty import Z, calibration_sd, colour_matrix_sd, widen_relative
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
@@ -115,7 +115,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     ``materials``: the material id the pixels show (one, or one per pixel); ``groups``: each
     pixel's fit (P,) labels 0..G-1 (a patch's pixels share one; default every pixel its own);
     ``variant``: the Mitsuba variant (default the sequence's); ``light``: None for the spec's
-    sky as it is, or the sky its regions' fit found (:func:`~.pixel_map.map_light`): each
+    sky as it is, or the sky its regions' fit found (:func:`~.pixel_map.first_fits`): each
     frame's sky at the fitted level, the sky's share of each region's errors carried to its
     pixels, and the sun's level as that fit counted it.
     Returns a dict of arrays over the G fits: ``pixels`` (G, 2) each fit's first pixel,
@@ -134,8 +134,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     scene = mi.load_string(doc["scene"]["xml"])
     skies = [frame_sky(frames[i], root) for i in obs.frames]
     if light is not None:
-        levels = sky_level_at(light["sky"], obs.times)
-        skies = [sky.sky_scaled(k) for sky, k in zip(skies, levels)]
+        skies = skies_at_level(skies, light["sky"], obs.times)
     table, _ = trace_table(scene, mi.traverse(scene), skies, pixels, materials,
                            lambda cache: WardModel(cache, model, normalisation),
                            positions=positions, directions=directions, seed=seed,
@@ -205,6 +204,8 @@ def _sky_errors(light, material, names, theta):
     span = None
     for name, region in light["regions"].items():
         at = material == name
+        if not at.any():                     # a region of another chunk (maybe another model)
+            continue
         value = np.array([region["value"][p] for p in names])
         scale = np.where(np.isin(names, LEVEL_SCALED) & (value > 0),
                          theta[at] / np.where(value > 0, value, 1.0), 1.0)

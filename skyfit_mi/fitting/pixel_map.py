@@ -39,6 +39,7 @@ from ..render.image import write_exr
 from ..render.light_cache import SKY_SPACING
 from .chi2 import check_regions, subsample_region
 from .fit import fit_regions, sky_setup
+from .selection import fit_auto
 from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, check_map_region, fit_pixels, patch_groups
 from .sky_fit import light_level_sd, sun_source, untold_sun_sd
 
@@ -55,9 +56,12 @@ CHUNK = 1024
 #: How :func:`plan_chunks` lays fits into chunks (recorded, so that a store laid out otherwise
 #: is not resumed).
 LAYOUT = "tiles"
-#: Pixels of each region (at most; a seeded subset) whose fit finds a photographed day's sky
-#: for its map (:func:`map_light`): a region fit's default (``fit --max-pixels``).
+#: Pixels of each region (at most; a seeded subset) whose fits a map takes first (:func:
+#: `first_fits`: a photographed day's sky, the models ranked): a region fit's default (``fit
+#: --max-pixels``).
 LIGHT_PIXELS = 64
+#: The order of a map's parameter planes (each model's parameters in it).
+PARAMETER_ORDER = ("C_r", "C_g", "C_b", "R", "rho_s", "sigma_alpha")
 #: The Dask setting that gives workers MALLOC_TRIM_THRESHOLD_ (unset for the local cluster).
 TRIM = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
 #: Seconds to wait for a given scheduler to answer.
@@ -98,7 +102,7 @@ def chunk_seed(seed, index):
 
 def _settings(doc, regions, model, normalisation, seed, patch, chunk, cache, sky):
     """What a stored map was made with (a resume needs the same); ``sky``: how its light was
-    found (:func:`map_light`'s choices; the same choices find the same light)."""
+    found (:func:`first_fits`' choices; the same choices find the same light)."""
     digest = [(n, np.asarray(p).tolist()) for n, p in regions]
     return {"sequence_run_id": doc.get("run_id"), "model": model, "normalisation": normalisation,
             "seed": int(seed), "patch": int(patch), "chunk": int(chunk), "cache": list(cache),
@@ -106,30 +110,43 @@ def _settings(doc, regions, model, normalisation, seed, patch, chunk, cache, sky
             "regions": hashlib.sha256(json.dumps(digest).encode()).hexdigest()[:16], "sky": sky}
 
 
-def map_light(manifest_path, regions, model="colour", normalisation="ward", seed=0, sky="prior",
-              sun_sd=None, sky_terms=None, max_pixels=LIGHT_PIXELS, variant=None, log=print):
-    """The light of a map (:func:`~.pixel_fit.fit_pixels`' ``light``) under a fitted sky
-    (``sky`` 'fit' or 'prior', as ``fit --sky``): the sky's level is fitted first with the
-    materials of ``regions`` ([(material, pixels)], up to ``max_pixels`` of each, a seeded
-    subset), as their region fits do it (:func:`~.fit.fit_regions`, with ``sun_sd`` and
-    ``sky_terms``); returns its record (``sky``), each region's parameters, the sky's share
-    of their standard errors and, where the level is not determined, their range over the
-    levels it could not tell apart (``regions``), and the sun's level's sd as that fit
-    counts it.  Per-pixel maps cannot fit the sky themselves: one pixel's values hardly
-    tell it."""
+def first_fits(manifest_path, regions, model="colour", normalisation="ward", seed=0,
+               sky="spec", sun_sd=None, sky_terms=None, max_pixels=LIGHT_PIXELS, variant=None,
+               log=print):
+    """What a map takes from fits of its ``regions`` ([(material, pixels)]) first, on up to
+    ``max_pixels`` of each (a seeded subset): each region's (model, normalisation), the
+    ones ranked best by held-out frames where ``model`` is 'auto'
+    (:func:`~.selection.fit_auto`), else ``model`` and ``normalisation`` for all; and the light
+    (:func:`~.pixel_fit.fit_pixels`' ``light``: None for the spec's sky as it is, ``sky``
+    'spec') under a fitted sky (``sky`` 'fit' or 'prior', with ``sun_sd`` and ``sky_terms``,
+    as ``fit --sky``): the sky's level as those fits find it, its record (``sky``), each
+    region's parameters, the sky's share of their standard errors and, where the level is not
+    determined, their range over the levels it could not tell apart (``regions``), and the
+    sun's level's sd as they count it.  One pixel's values hardly tell the sky or the model.
+    Returns (choices {region: (model, normalisation)}, light)."""
     kept = [(name, subsample_region(px, max_pixels or None, seed)) for name, px in regions]
-    log(f"sky: its level fitted first with the materials of {len(kept)} region(s) (up to "
-        f"{max_pixels} pixels each, seed {seed}); the map takes that light")
-    light = {"fitted": sky, "regions": {}}
+    what = [["every lobe and parameter count ranked"] if model == "auto" else [],
+            [] if sky == "spec" else ["the sky's level fitted"]]
+    log(f"map: {' and '.join(w for ws in what for w in ws)} first with {len(kept)} region(s) "
+        f"(up to {max_pixels} pixels each, seed {seed}); the map takes "
+        + ("each region's choice" if model == "auto" else "that light"))
 
-    def sky_lines(line):
-        """The sky fit's own log lines (its warnings with them), not the regions' results."""
-        if line.startswith("sky:"):
+    def shown(line):
+        """The first fits' own lines on the sky and the choices, not the regions' results."""
+        if line.startswith("sky:") or ": chose " in line:
             log(line)
-    for (name, _), r in zip(kept, fit_regions(manifest_path, kept, model=model,
-                                              normalisation=normalisation, seed=seed,
-                                              variant=variant, sky=sky, sun_sd=sun_sd,
-                                              sky_terms=sky_terms, log=sky_lines)):
+    if model == "auto":
+        results = fit_auto(manifest_path, kept, seed=seed, variant=variant, sky=sky,
+                           sun_sd=sun_sd, sky_terms=sky_terms, log=shown)
+    else:
+        results = fit_regions(manifest_path, kept, model=model, normalisation=normalisation,
+                              seed=seed, variant=variant, sky=sky, sun_sd=sun_sd,
+                              sky_terms=sky_terms, log=shown)
+    choices, light = {}, None if sky == "spec" else {"fitted": sky, "regions": {}}
+    for (name, _), r in zip(kept, results):
+        choices[name] = (r["model"], r["normalisation"])
+        if light is None:
+            continue
         rec = r["sky"]
         span = rec.get("undetermined_span")
         light["regions"][name] = {
@@ -139,26 +156,46 @@ def map_light(manifest_path, regions, model="colour", normalisation="ward", seed
         light["sky"] = {k: rec[k] for k in ("k", "interval95", "determined", "terms",
                                             "regions", "prior", "warnings")}
         light.update(sun_level_sd=rec["sun_level_sd"], sun_source=rec["sun_source"])
-    return light
+    return choices, light
 
 
-def _check_store(path, settings, overwrite, n_chunks):
+def plan_map(regions, choices, patch, chunk):
+    """The map's chunks (:func:`plan_chunks`) over the regions of each (model, normalisation)
+    of ``choices`` in turn, each chunk with its ``model`` and ``normalisation`` (a chunk's
+    light is traced for one lobe)."""
+    out = []
+    for kind in dict.fromkeys(choices[name] for name, _ in regions):
+        for c in plan_chunks([r for r in regions if choices[r[0]] == kind], patch, chunk):
+            out.append({**c, "model": kind[0], "normalisation": kind[1]})
+    return out
+
+
+def map_parameters(choices):
+    """The map's parameter planes: every parameter some region's model has, in one order."""
+    used = {p for m, _ in choices.values() for p in PARAMETERS[m]}
+    return [p for p in PARAMETER_ORDER if p in used]
+
+
+def _check_store(path, settings, overwrite):
     """Refuse a store at ``path`` that holds another map's settings (or is damaged) unless
-    ``overwrite``; returns whether the map resumes it, and which of its ``n_chunks`` chunks
-    are done."""
+    ``overwrite``; returns which of its chunks are done (None: a new map)."""
     import zarr
 
     if not path.exists() or overwrite:
-        return False, np.zeros(n_chunks, bool)
+        return None
     try:
         g = zarr.open_group(str(path), mode="r")
         old, done = dict(g.attrs.get("settings", {})), g["done"][:]
     except Exception:                                          # damaged or not a store
         old = done = None
-    if old != settings or len(done) != n_chunks:
-        raise SkyfitError(f"{path} holds another map (or a damaged one); give another -o, or "
-                          "pass --overwrite to replace it.")
-    return True, done
+    if old != settings:
+        _another_map(path)
+    return done
+
+
+def _another_map(path):
+    raise SkyfitError(f"{path} holds another map (or a damaged one); give another -o, or "
+                      "pass --overwrite to replace it.")
 
 
 def _open_store(path, settings, shape, n_par, n_chunks, resume):
@@ -183,14 +220,17 @@ def _open_store(path, settings, shape, n_par, n_chunks, resume):
     return g
 
 
-def _write_chunk(store, chunk, res):
-    """Scatter one chunk's fits onto its pixels in the store."""
+def _write_chunk(store, chunk, res, names):
+    """Scatter one chunk's fits onto its pixels in the store, each parameter of its model on
+    its plane of the map's ``names``."""
     pixels, groups = chunk["pixels"], chunk["groups"]
     x, y = pixels[:, 0], pixels[:, 1]
     box = (slice(y.min(), y.max() + 1), slice(x.min(), x.max() + 1))
+    planes = [names.index(p) for p in res["names"]]
     for key in ("theta", "lo", "hi", "cache_error_sd"):
         arr = store[key][(slice(None),) + box]
-        arr[:, y - y.min(), x - x.min()] = res[key][groups].T
+        for j, plane in enumerate(planes):
+            arr[plane, y - y.min(), x - x.min()] = res[key][groups, j]
         store[key][(slice(None),) + box] = arr
     for key in ("chi2", "dof", "warnings"):
         arr = store[key][box]
@@ -316,12 +356,14 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
             log=print, cache=MAP_CACHE, memory_per_worker="4GiB", variant=None, dask_logs=False,
             sky=None, sun_sd=None, sky_terms=None, light_pixels=LIGHT_PIXELS):
     """Map ``regions`` ([(material, pixels (P, 2))]) of a sequence; returns the summary dict
-    (module docstring).  ``workers``: LocalCluster processes (default: the machine's cores,
-    :func:`worker_count`); ``variant``: the Mitsuba variant of the fits (default the
-    sequence's); ``dask_logs``: show Dask's own log lines (``--debug``); ``sky``: 'spec' takes
-    the spec's sky as it is, 'fit' or 'prior' its level fitted with the regions' materials
-    first (:func:`map_light`, with ``sun_sd``, ``sky_terms`` and up to ``light_pixels`` of
-    each region), None chooses as region fits do (:func:`~.sky_fit.default_sky`: 'prior'
+    (module docstring).  ``model`` 'auto': each region in the model and lobe ranked best by
+    held-out frames on up to ``light_pixels`` of its pixels first (:func:`first_fits`), the
+    map's planes every parameter some region's model has; ``workers``: LocalCluster processes
+    (default: the machine's cores, :func:`worker_count`); ``variant``: the Mitsuba variant of
+    the fits (default the sequence's); ``dask_logs``: show Dask's own log lines
+    (``--debug``); ``sky``: 'spec' takes the spec's sky as it is, 'fit' or 'prior' its level
+    fitted with the regions' materials first (:func:`first_fits`, with ``sun_sd`` and
+    ``sky_terms``), None chooses as region fits do (:func:`~.sky_fit.default_sky`: 'prior'
     for photographs under the sun).  Every input, the regions' frames and light and a given
     scheduler included, is checked before the store is written."""
     doc, root = load_manifest(manifest_path)
@@ -335,23 +377,30 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
     if scheduler and workers is not None:
         raise SkyfitError("--workers sizes the cluster on this machine; with --scheduler the "
                           "cluster's own workers run the map: leave out --workers.")
-    names = list(PARAMETERS[model])
-    chunks = plan_chunks(regions, patch, chunk)
+    first = model == "auto" or sky != "spec"            # fits of the regions come first
     settings = _settings(doc, regions, model, normalisation, seed, patch, chunk, cache,
-                         {"sky": sky, "sun_sd": sun_sd, "sky_terms": sky_terms,
-                          "pixels": light_pixels} if sky != "spec" else "spec")
+                         {"sky": sky, "sun_sd": sun_sd, "sky_terms": sky_terms}
+                         if sky != "spec" else "spec")
+    if first:
+        settings["first_fits_pixels"] = light_pixels
     out = check_dir(Path(out_dir))
-    resume, done = _check_store(out / STORE, settings, overwrite, len(chunks))
-    pending = [i for i in range(len(chunks)) if not done[i]]
+    done = _check_store(out / STORE, settings, overwrite)
     n_workers = None if scheduler else worker_count(workers, chunk, log)
     t0 = time.perf_counter()
     client = cluster = None
     with _dask_logs_quiet(keep=dask_logs):
         try:
             check_regions(manifest_path, regions)          # the frames and their light
-            light = None if sky == "spec" else map_light(
+            choices, light = first_fits(
                 manifest_path, regions, model, normalisation, seed, sky, sun_sd, sky_terms,
-                light_pixels, variant, log)
+                light_pixels, variant, log) if first else (
+                {name: (model, normalisation) for name, _ in regions}, None)
+            names = map_parameters(choices)
+            chunks = plan_map(regions, choices, patch, chunk)
+            resume = done is not None
+            if resume and len(done) != len(chunks):
+                _another_map(out / STORE)
+            pending = [i for i in range(len(chunks)) if not resume or not done[i]]
             if pending:
                 with _ctrl_c_deferred():
                     client, cluster = _client(n_workers, scheduler, memory_per_worker,
@@ -362,13 +411,18 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
                 log(f"resuming: {len(chunks) - len(pending)} of {len(chunks)} chunks already "
                     "mapped")
             if pending:
-                _map_pending(client, manifest_path, chunks, pending, store, model,
-                             normalisation, seed, cache, progress, variant, light)
+                _map_pending(client, manifest_path, chunks, pending, store, names, seed,
+                             cache, progress, variant, light)
         finally:
             _close(client, cluster)
     summary = write_map_outputs(out, store, names, regions, settings)
+    for name, _ in regions:
+        summary["regions"][name].update(model=choices[name][0], normalisation=choices[name][1])
     summary.update(widths_include=_widths_include(doc, skies, names, light),
                    sky=_sky_summary(light),
+                   models=("each region's ranked best by held-out frames (fit --model auto) on "
+                           f"up to {light_pixels} of its pixels" if model == "auto" else
+                           "as given"),
                    wall_time_s=time.perf_counter() - t0, chunks=len(chunks),
                    chunks_this_run=len(pending), workers=n_workers,
                    scheduler=scheduler or "LocalCluster", memory_per_worker=memory_per_worker,
@@ -377,13 +431,14 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
     return summary
 
 
-def _map_pending(client, manifest_path, chunks, pending, store, model, normalisation, seed,
-                 cache, progress, variant, light):
+def _map_pending(client, manifest_path, chunks, pending, store, names, seed, cache, progress,
+                 variant, light):
     """Submit every pending chunk and write each result as it comes."""
     from distributed import as_completed
 
     futures = {client.submit(fit_pixels, str(manifest_path), chunks[i]["materials"],
-                             chunks[i]["pixels"], model=model, normalisation=normalisation,
+                             chunks[i]["pixels"], model=chunks[i]["model"],
+                             normalisation=chunks[i]["normalisation"],
                              seed=chunk_seed(seed, i), positions=cache[0], directions=cache[1],
                              groups=chunks[i]["groups"], variant=variant, light=light,
                              pure=False): i
@@ -400,7 +455,7 @@ def _map_pending(client, manifest_path, chunks, pending, store, model, normalisa
             for f in futures:
                 f.cancel()
             raise
-        _write_chunk(store, chunks[i], res)
+        _write_chunk(store, chunks[i], res, names)
         store["done"][i] = True                 # after the chunk's values: a resume redoes it
         if bar is not None:
             bar.update(len(chunks[i]["pixels"]))
@@ -443,11 +498,14 @@ def write_map_outputs(out, store, names, regions, settings):
                              theta[i][ok]) for i, n in enumerate(names)},
             "median_width95": {n: _stat(np.median, (hi[i] - lo[i])[ok])
                                for i, n in enumerate(names)}}
+        for stat in ("median", "iqr", "median_width95"):   # parameters its model has
+            summary["regions"][name][stat] = {n: v for n, v in summary["regions"][name][
+                stat].items() if np.isfinite(theta[names.index(n)][sel & mapped]).any()}
     return summary
 
 
 def _sky_summary(light):
-    """The map summary's record of the sky the map took (``light``: :func:`map_light`'s)."""
+    """The map summary's record of the sky the map took (``light``: :func:`first_fits`')."""
     if light is None:
         return {"source": "the spec's, taken as exact (--sky spec)"}
     return {"source": f"the spec's, its level fitted first with the regions' materials (--sky "
@@ -463,7 +521,7 @@ def _sky_summary(light):
 def _widths_include(doc, skies, names, light=None):
     """What the maps' 95% widths of parameters ``names`` take in besides the data's noise
     (their grid's profile, a misfit's scale): the map's light cache's error, a fitted sky's
-    share (``light``, :func:`map_light`), and a photographed sequence's calibration, camera
+    share (``light``, :func:`first_fits`), and a photographed sequence's calibration, camera
     colour matrix and sun's level where its manifest ``doc`` and its frames' ``skies`` call
     for them (:func:`~.pixel_fit.fit_pixels`)."""
     ingest = doc.get("ingest") or {}

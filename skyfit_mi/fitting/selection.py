@@ -22,6 +22,7 @@ from ..errors import SkyfitError
 from .chi2 import LuminanceModel, Problem
 from .methods.global_search import global_search
 from .methods.levenberg_marquardt import levenberg_marquardt
+from .sky_fit import skies_at_level
 
 #: The candidates of ``--model auto``: the thesis's Ward lobe, the balanced one, and the four
 #: microfacet lobes; every parameterisation of each.
@@ -212,20 +213,35 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     as :func:`~.fit.fit_regions`' ; the light traced again, split); yields each region's
     result dict with its ``model_selection`` (the ranking, the choice, the folds and each
     lobe's tracing time)."""
-    from .fit import FitSession, fit_sessions, sky_setup
+    from .fit import FitSession, fit_regions, fit_sessions, sky_setup
 
     first = FitSession(manifest_path, *regions[0], trace=False, **options)
     sky = sky_setup(first.doc, first.skies, len(first.obs.frames), sky, sun_sd, sky_terms,
                     log=log)[0]                         # checked before any light is traced
+    level = None
+    if sky != "spec":
+        # the light the candidates are ranked in: the spec's sky at the level a fit of Ward's
+        # lobe finds (a lobe ranked on a sky of the wrong level is one that bends to it)
+        baseline = "colour" if "colour" in models else models[-1]
+        level = next(fit_regions(manifest_path, regions, model=baseline, seed=seed, sky=sky,
+                                 sun_sd=sun_sd, sky_terms=sky_terms,
+                                 log=lambda *a: None, **options))["sky"]
+    log("model selection ranks on the spec's light "
+        + ("as it is; the chosen models are fitted on it too (fit the chosen model again "
+           "with --sky to add the sky's level)" if sky == "spec" else
+           f"at the level fitted with Ward's lobe (k = {level['k']:.3g}); the chosen models "
+           f"are fitted with the sky's level (--sky {sky})"))
     sessions, trace_s = {}, {}
     for fam in families:
         t0 = time.perf_counter()
         sessions[fam] = FitSession.for_regions(manifest_path, regions, model="two",
-                                               normalisation=fam, seed=seed, **options)
+                                               normalisation=fam, seed=seed, trace=False,
+                                               **options)
+        for s in sessions[fam].values():
+            if level is not None:
+                s.skies = skies_at_level(s.skies, level, s.obs.times)
+        FitSession.trace_groups(sessions[fam])
         trace_s[fam] = time.perf_counter() - t0
-    log("model selection ranks on the spec's light as it is; the chosen models are fitted "
-        + ("on it too (fit the chosen model again with --sky to add the sky's level)"
-           if sky == "spec" else f"with the sky's level (--sky {sky})"))
     chosen, selection = {}, {}
     for name, pixels in regions:
         traced = {fam: sessions[fam].pop(name) for fam in families}

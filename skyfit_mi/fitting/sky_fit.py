@@ -191,6 +191,12 @@ def sky_level_at(record, times):
                   @ np.asarray(terms["coefficients"]))
 
 
+def skies_at_level(skies, record, times):
+    """The frames' ``skies`` (at ISO ``times``) with their sky at a sky fit's level (``record``,
+    :func:`sky_level_at`) against the sun: the spec's light as a fit of the day found it."""
+    return [sky.sky_scaled(k) for sky, k in zip(skies, sky_level_at(record, times))]
+
+
 def _least(sessions, k, starts):
     """Every region's least chi-square and its parameters at sky scale ``k``."""
     out = []
