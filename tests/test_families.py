@@ -180,8 +180,9 @@ def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(plastic_day, 
                                                                    monkeypatch):
     """``fit --per-pixel --model auto``: the region's model and lobe ranked first (on up to
     --max-pixels of its pixels), then every pixel mapped in them: GGX plastic, the map's planes
-    its model's parameters alone, the pixels' roughness about the truth.  (Two lobes and a
-    small light cache in the ranking, for time.)"""
+    its model's parameters alone, the pixels' roughness about the truth; run again, the map
+    resumes with the choices its store holds.  (Two lobes and a small light cache in the
+    ranking, for time.)"""
     import functools
 
     from skyfit_mi.fitting import pixel_map
@@ -201,3 +202,9 @@ def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(plastic_day, 
     assert not (tmp_path / "map" / "C_r.exr").exists()
     assert abs(disc["median"]["sigma_alpha"] / TRUTH["sigma_alpha"] - 1) < 0.15, disc
     assert any(": chose ggx_plastic two" in x for x in logs), logs
+    # the same command again resumes the store with the choices it holds, ranking nothing
+    monkeypatch.setattr(pixel_map, "fit_auto", None)
+    again = run_map(plastic_day, [("disc", pixels)], tmp_path / "map", model="auto",
+                    workers=1, chunk=18, progress=False, log=logs.append, light_pixels=16)
+    assert again["chunks_this_run"] == 0 and again["regions"]["disc"]["normalisation"] == \
+        "ggx_plastic"

@@ -178,7 +178,8 @@ def map_parameters(choices):
 
 def _check_store(path, settings, overwrite):
     """Refuse a store at ``path`` that holds another map's settings (or is damaged) unless
-    ``overwrite``; returns which of its chunks are done (None: a new map)."""
+    ``overwrite``; returns which of its chunks are done and what its regions' first fits
+    found (``first_fits``: None where it took none), or None for a new map."""
     import zarr
 
     if not path.exists() or overwrite:
@@ -186,11 +187,12 @@ def _check_store(path, settings, overwrite):
     try:
         g = zarr.open_group(str(path), mode="r")
         old, done = dict(g.attrs.get("settings", {})), g["done"][:]
+        first = g.attrs.get("first_fits")
     except Exception:                                          # damaged or not a store
-        old = done = None
+        old = done = first = None
     if old != settings:
         _another_map(path)
-    return done
+    return done, first
 
 
 def _another_map(path):
@@ -198,9 +200,10 @@ def _another_map(path):
                       "pass --overwrite to replace it.")
 
 
-def _open_store(path, settings, shape, n_par, n_chunks, resume):
+def _open_store(path, settings, shape, n_par, n_chunks, resume, first=None):
     """The map's Zarr group: the one at ``path`` if ``resume``, else a new one (replacing
-    whatever is there, which :func:`_check_store` allowed)."""
+    whatever is there, which :func:`_check_store` allowed), with what its regions' ``first``
+    fits found (a resume takes them again, not fits that might choose otherwise)."""
     import zarr
 
     if resume:
@@ -217,6 +220,7 @@ def _open_store(path, settings, shape, n_par, n_chunks, resume):
                        chunks=dims[:-2] + (min(h, 256), min(w, 256)))
     g.create_array("done", shape=(n_chunks,), dtype="bool", fill_value=False)
     g.attrs["settings"] = settings
+    g.attrs["first_fits"] = first
     return g
 
 
@@ -384,29 +388,34 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
     if first:
         settings["first_fits_pixels"] = light_pixels
     out = check_dir(Path(out_dir))
-    done = _check_store(out / STORE, settings, overwrite)
+    stored = _check_store(out / STORE, settings, overwrite)
     n_workers = None if scheduler else worker_count(workers, chunk, log)
     t0 = time.perf_counter()
     client = cluster = None
     with _dask_logs_quiet(keep=dask_logs):
         try:
             check_regions(manifest_path, regions)          # the frames and their light
-            choices, light = first_fits(
-                manifest_path, regions, model, normalisation, seed, sky, sun_sd, sky_terms,
-                light_pixels, variant, log) if first else (
-                {name: (model, normalisation) for name, _ in regions}, None)
+            resume = stored is not None
+            if resume and first and stored[1] is not None:     # what the store's map took
+                choices = {n: tuple(c) for n, c in stored[1]["choices"].items()}
+                light = stored[1]["light"]
+            elif first:
+                choices, light = first_fits(manifest_path, regions, model, normalisation, seed,
+                                            sky, sun_sd, sky_terms, light_pixels, variant, log)
+            else:
+                choices, light = {name: (model, normalisation) for name, _ in regions}, None
             names = map_parameters(choices)
             chunks = plan_map(regions, choices, patch, chunk)
-            resume = done is not None
-            if resume and len(done) != len(chunks):
+            if resume and len(stored[0]) != len(chunks):
                 _another_map(out / STORE)
-            pending = [i for i in range(len(chunks)) if not resume or not done[i]]
+            pending = [i for i in range(len(chunks)) if not resume or not stored[0][i]]
             if pending:
                 with _ctrl_c_deferred():
                     client, cluster = _client(n_workers, scheduler, memory_per_worker,
                                               dask_logs)
             store = _open_store(ensure_dir(out) / STORE, settings, shape, len(names),
-                                len(chunks), resume)
+                                len(chunks), resume, {"choices": choices, "light": light}
+                                if first else None)
             if len(pending) < len(chunks):
                 log(f"resuming: {len(chunks) - len(pending)} of {len(chunks)} chunks already "
                     "mapped")
