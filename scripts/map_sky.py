@@ -5,17 +5,17 @@ The board of tests/test_pixel_map.py (eight known materials, 48x36, hourly 12:00
 noise) is rendered under each sky of SKIES; its manifest then names the spec's sky, the thesis's
 CIE clear sky (tests/measured_light.py ``relabelled``), and calls the frames photographed, as a
 user's photographs would be. Every sample pixel is fitted on its own (``fit_pixels``), lit by
-the spec's sky as it is (``--sky spec``; before, every map's light), and by the spec's sky at
-the level its regions' fit finds first (``pixel_map.first_fits``, the default ``--sky prior``:
-the level a curve over the day, the sun's level a modelled one's). Both count the modelled sun's
-level in the reflectances' intervals, as maps of photographs do; ``--sun-sd 0`` takes it as
-exact (these days' sun is the spec's), so that the reflectances' intervals show the sky's share
-alone. Prints a markdown table: per sky and light, the fitted level (its day's mean), the
-determined pixels of those mapped, the share of the mapped pixels' (pixel, parameter) pairs
-whose 95% interval holds the truth (the reflectances', the roughness'), and the samples' median
-errors (of their mapped pixels' medians: C relative, rho_s and sigma_alpha absolute).
+the spec's sky and sun as they are (``--sky spec``), and by the spec's sky at the level its
+regions' fit finds first (``pixel_map.first_fits``, the default ``--sky prior``: the level a
+curve over the day, the sun's level a modelled one's, in the reflectances' intervals);
+``--sun-sd 0`` takes the sun as exact there too (these days' sun is the spec's), so that the
+reflectances' intervals show the sky's share alone. Prints a markdown table: per sky and
+light, the fitted level (its day's mean), the determined pixels of those mapped, the share of
+the mapped pixels' (pixel, parameter) pairs whose 95% interval holds the truth (the
+reflectances', the roughness'), and the samples' median errors (of their mapped pixels'
+medians: C relative, rho_s and sigma_alpha absolute).
 
-    .venv/bin/python scripts/map_sky.py [-o DIR]
+    .venv/bin/python scripts/map_sky.py [-o DIR] [--sun-sd 0]
 """
 
 import argparse
@@ -81,23 +81,20 @@ def main():
             t0 = time.perf_counter()
             light = None if label == "spec" else first_fits(
                 day, regions, sky="prior", sun_sd=args.sun_sd, log=lambda *a: None)[1]
-            if light is None and args.sun_sd is not None:          # the spec's sky, that sun
-                light = {"sky": {"k": 1.0}, "regions": {}, "sun_level_sd": args.sun_sd}
             res = fit_pixels(day, list(mats), px, light=light)
             mapped = np.isfinite(res["theta"][:, 0])
             determined = mapped & ((res["warnings"] & UNDETERMINED) == 0)
-            ok = mapped
-            inside = (res["lo"][ok] <= truth[ok]) & (truth[ok] <= res["hi"][ok])
+            inside = (res["lo"][mapped] <= truth[mapped]) & (truth[mapped] <= res["hi"][mapped])
             errors = []
             for m in MATERIALS:
-                sel = ok & (mats == m)
+                sel = mapped & (mats == m)
                 if sel.any():
                     med = np.median(res["theta"][sel], axis=0)
                     errors.append([*np.abs(med[:3] / truth[sel][0, :3] - 1),
                                    *np.abs(med[3:] - truth[sel][0, 3:])])
             e = np.median(errors, axis=0)
-            k = "-" if label == "spec" else "{:.2f} ({:.2f}-{:.2f})".format(
-                light["sky"]["k"], *light["sky"]["interval95"])
+            k = "-" if light is None else "{:.2f} ({})".format(light["sky"]["k"], "-".join(
+                "open" if v is None else f"{v:.2f}" for v in light["sky"]["interval95"]))
             print(f"| {name} | {label} | {k} | {determined.sum()} of {mapped.sum()} | "
                   f"{inside[:, :4].mean():.2f} / {inside[:, 4].mean():.2f} | "
                   f"{100 * np.median(e[:3]):.1f}% / {e[3]:.3f} / {e[4]:.3f} | "

@@ -28,6 +28,7 @@ from . import __version__  # noqa: E402
 from .errors import SetupError, SkyfitError  # noqa: E402
 from .files import check_dir, write_json  # noqa: E402
 from .physics.sky import MEASURED_SUN_SD, SKY_CHOICES, SUN_LEVEL_SD  # noqa: E402
+from .fitting.chi2 import REGION_PIXELS  # noqa: E402
 from .physics.ward import NORMALISATIONS  # noqa: E402
 from .render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS  # noqa: E402
 from .render.variant import VARIANTS  # noqa: E402
@@ -241,6 +242,14 @@ def _fit(args):
                 if getattr(args, k) not in (None, 1)] + (["--overwrite"] if args.overwrite else [])
     if map_only and not args.per_pixel:
         raise SkyfitError(f"{map_only[0]} belongs to a map: add --per-pixel (or leave it out).")
+    region_only = [f"--{k}" for k, default in (("frames", None), ("positions", None),
+                                               ("directions", DIRECTIONS), ("method", "global"),
+                                               ("start", None))
+                   if getattr(args, k) != default]
+    if region_only and args.per_pixel:
+        raise SkyfitError(f"{region_only[0]} belongs to region fits; a map fits every frame "
+                          "by its own grid and light cache: leave out --per-pixel or "
+                          f"{region_only[0]}.")
     regions = _fit_regions(args)
     if args.per_pixel and args.sky_shape:
         raise SkyfitError("--sky-shape belongs to region fits; a map takes the spec's sky's "
@@ -495,16 +504,17 @@ def build_parser():
     fit.add_argument("--overwrite", action="store_true",
                      help="with --per-pixel: replace another map in the output folder")
     fit.add_argument("-q", "--quiet", action="store_true", help="with --per-pixel: no progress bar")
-    fit.add_argument("--max-pixels", type=_int_in(0), default=64,
+    fit.add_argument("--max-pixels", type=_int_in(0), default=REGION_PIXELS,
                      help="fit at most this many pixels of a region, a seeded random subset "
-                     "(default 64; 0 = every pixel); with --per-pixel, those of the fit that "
-                     "finds the sky's level for the map")
+                     f"(default {REGION_PIXELS}; 0 = every pixel); with --per-pixel, those of "
+                     "the fits a map takes first (the sky's level, --model auto's ranking)")
     fit.add_argument("--model", choices=("2", "3", "5", "auto"), default="5",
                      help="5 (default): C (RGB diffuse colour), rho_s, sigma_alpha; "
                      "3: R, rho_s, sigma_alpha; 2: rho_s, sigma_alpha (thesis 7.1); auto: "
                      "every lobe (Ward, balanced, Beckmann and GGX plastic and metal) and "
                      "parameter count ranked by held-out frames (4-fold), AIC and BIC beside, "
-                     "the chosen one fitted (the light traced once per lobe)")
+                     "the chosen one fitted (the light traced once per lobe); with --per-pixel "
+                     "each region ranked first and mapped in its choice")
     fit.add_argument("--sky", choices=SKY_CHOICES, default=None,
                      help="spec: the spec's light as it is (the default for sequences skyfit "
                      "rendered); fit: the sky's level against the sun's fitted with the "

@@ -239,10 +239,11 @@ def test_patches_share_one_fit_per_block(board):
 
 def test_a_photographed_days_map_counts_the_suns_level_in_its_reflectances(board):
     """The board's day relabelled as photographed (its spec's sun then a model of the real
-    one): the same pixels' reflectance intervals take the sun's level as a factor known to
-    SUN_LEVEL_SD (each side's log half-width in quadrature with 1.96 x 0.2), sigma_alpha's
-    are unchanged, and the summary says what the widths take in, and that the sky is the
-    spec's as it is."""
+    one), lit at the spec's own level with a modelled sun (a fitted light at k = 1, its sun's
+    sd SUN_LEVEL_SD): the same pixels' reflectance intervals take the sun's level as a factor
+    (each side's log half-width in quadrature with 1.96 x 0.2), sigma_alpha's are unchanged;
+    with the spec's sky as it is (``--sky spec``) nothing is added, as in a region fit; the
+    summary says which."""
     from skyfit_mi.fitting.pixel_fit import fit_pixels
     from skyfit_mi.fitting.pixel_map import _widths_include
     from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
@@ -256,12 +257,16 @@ def test_a_photographed_days_map_counts_the_suns_level_in_its_reflectances(board
         (photo / "manifest.json").write_text(json.dumps(m))
     name, px = regions[0]
     px = px[:12]
-    rendered, photographed = (fit_pixels(d, name, px, model="colour") for d in
-                              (tmp / "day", photo))
+    light = {"sky": {"k": 1.0}, "regions": {}, "sun_level_sd": 0.2, "sun_source": "modelled"}
+    rendered, exact, photographed = (fit_pixels(d, name, px, model="colour", light=lt)
+                                     for d, lt in ((tmp / "day", None), (photo, None),
+                                                   (photo, light)))
     ok = np.isfinite(rendered["theta"][:, 0])
     assert ok.sum() >= 8
     theta = rendered["theta"][ok]
     np.testing.assert_allclose(photographed["theta"][ok], theta)
+    for k in ("lo", "hi"):
+        np.testing.assert_array_equal(exact[k][ok], rendered[k][ok])
     for i in range(4):                                   # the reflectances: C and rho_s
         lo, hi = rendered["lo"][ok, i], rendered["hi"][ok, i]
         up = np.log(photographed["hi"][ok, i] / theta[:, i])
@@ -273,11 +278,12 @@ def test_a_photographed_days_map_counts_the_suns_level_in_its_reflectances(board
     np.testing.assert_array_equal(photographed["hi"][ok, 4], rendered["hi"][ok, 4])
     doc, root = load_manifest(photo)
     skies = [frame_sky(f, root) for f in doc["frames"]]
-    notes = _widths_include(doc, skies, ["C_r", "C_g", "C_b", "rho_s", "sigma_alpha"])
-    assert any("the sun's level, known to +-20%" in n and "spec's, taken as exact" in n
-               for n in notes), notes
+    names = ["C_r", "C_g", "C_b", "rho_s", "sigma_alpha"]
+    assert any("the sun's level, known to +-20% (1 sd, a modelled sun)" in n
+               for n in _widths_include(doc, skies, names, light))
+    assert any("taken as exact (--sky spec)" in n for n in _widths_include(doc, skies, names))
     # the white model's reflectances sum to 1, which fixes the light's scale: nothing to add
-    assert len(_widths_include(doc, skies, ["rho_s", "sigma_alpha"])) == 1
+    assert len(_widths_include(doc, skies, ["rho_s", "sigma_alpha"], light)) == 2
 
 
 def test_a_photographed_days_map_takes_the_sky_level_its_regions_fit(board):
@@ -317,7 +323,9 @@ def test_a_photographed_days_map_takes_the_sky_level_its_regions_fit(board):
     notes = _widths_include(doc, [frame_sky(f, root) for f in doc["frames"]],
                             ["C_r", "C_g", "C_b", "rho_s", "sigma_alpha"], light)
     assert any("the fitted sky level's error" in n for n in notes), notes
-    assert _sky_summary(light)["k"] == light["sky"]["k"]
+    record = _sky_summary(light)
+    assert "--sky prior" in record["source"] and set(record["error_sd_by_region"]) == {
+        name for name, _ in chosen}
 
 
 def test_chunks_are_compact_tiles_of_whole_patches():

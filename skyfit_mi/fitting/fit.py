@@ -1245,7 +1245,8 @@ def sky_setup(doc, skies, n_frames, sky=None, sun_sd=None, sky_terms=None, sky_s
         check_choice("sky", sky, SKY_CHOICES)
     if sun_sd is not None:
         check_range("--sun-sd", sun_sd, 0.0, 1.0)
-    if sky is None:
+    chosen = sky is None
+    if chosen:
         sky = default_sky(doc, skies)
         if sky != "spec":
             log(f"sky: photographs under the sun and a sky: the spec's light is a model of "
@@ -1255,7 +1256,9 @@ def sky_setup(doc, skies, n_frames, sky=None, sun_sd=None, sky_terms=None, sky_s
     if sky == "spec" and (asked or sky_shape or sun_sd is not None):
         given = "--sky-terms" if asked else "--sky-shape" if sky_shape else "--sun-sd"
         raise SkyfitError(f"{given} belongs to a fitted sky, and the spec's is taken as it is "
-                          "(--sky spec): give --sky fit or prior.")
+                          + ("(the default where skyfit rendered the frames or no sun lights "
+                             "them)" if chosen else "(--sky spec)")
+                          + ": give --sky fit or prior.")
     if sky == "spec":
         return sky, 0.0, "given"
     if not sun_up(skies):                               # refused before the light is traced
@@ -1278,6 +1281,16 @@ def fit_sessions(sessions, method="global", seed=0, start=None, method_options=N
     its own model and lobe) under the light ``sky`` chooses, as :func:`fit_regions` describes
     (the sky's level fitted once for all of them); yields each region's result dict in turn,
     in the order of ``sessions``."""
+    prepare_sessions(sessions, seed, log, sky, sun_sd, sky_terms, sky_shape)
+    for name in list(sessions):
+        yield sessions.pop(name).run(method, start, seed, method_options, log)
+
+
+def prepare_sessions(sessions, seed=0, log=print, sky=None, sun_sd=None, sky_terms=None,
+                     sky_shape=False):
+    """Trace the light of ``sessions`` ({region: FitSession}, not yet traced) as ``sky``
+    chooses (:func:`sky_setup`) and fit the sky's level with them where it is not the spec's
+    (each session's ``sky_record``), ready to run (:func:`fit_sessions`)."""
     first = next(iter(sessions.values()))
     sky, sun_sd, source = sky_setup(first.doc, first.skies, len(first.obs.frames), sky, sun_sd,
                                     sky_terms, sky_shape, log)
@@ -1289,6 +1302,4 @@ def fit_sessions(sessions, method="global", seed=0, start=None, method_options=N
         fit_sky_scale(list(sessions.values()), seed, log,
                       prior_sd=SKY_LEVEL_SD if sky == "prior" else None,
                       terms=None if sky_terms is None else int(sky_terms))
-    for name in list(sessions):
-        yield sessions.pop(name).run(method, start, seed, method_options, log)
 

@@ -20,14 +20,15 @@ frames), and the cache's own Monte Carlo error is measured per pixel from its tw
 (each fitted alike) and added to the intervals in quadrature, as are a photographed
 sequence's calibration error
 (:func:`~skyfit_mi.fitting.uncertainty.calibration_sd`) and its camera's colour-matrix error
-(:func:`~skyfit_mi.fitting.uncertainty.colour_matrix_sd`); on a photographed day without a
-reference in the scene, the reflectances' intervals also take the sun's level as a factor
-(:func:`~skyfit_mi.fitting.sky_fit.light_level_sd`, as region fits do: a modelled sun's 20%,
-a measured one's 3%).  One pixel's values hardly tell the sky's level against the sun's, so
-a map of a photographed day (``--sky prior``, the default there, or ``fit``) takes the level
-its regions' fit finds first (:func:`~.pixel_map.first_fits`): each frame's sky at that level,
-and each pixel's intervals with its region's share of the sky's error (a reflectance's in
-proportion to its value).  The sky's shape is the spec's.
+(:func:`~skyfit_mi.fitting.uncertainty.colour_matrix_sd`).  One pixel's values hardly tell
+the sky's level against the sun's, so a map of a photographed day (``--sky prior``, the
+default there, or ``fit``) takes the level its regions' fit finds first
+(:func:`~.pixel_map.first_fits`): each frame's sky at that level, each pixel's intervals with
+its region's share of the sky's error (a reflectance's in proportion to its value) and, on
+a day without a reference in the scene, the sun's level as a factor on the reflectances
+(:func:`~skyfit_mi.fitting.sky_fit.light_level_sd`, as that fit counts it: a modelled sun's
+20% widened by the sky's departure, a measured one's 3%).  The sky's shape is the spec's;
+``--sky spec`` takes the spec's sky and sun as exact, as region fits do.
 
 Intervals are the grid's profile: the 95% set {chi^2 <= chi^2_min + 3.84 s^2}, with
 s^2 = max(1, chi^2_min / dof) (a misfit widens them, as in region fits); sigma_alpha's and
@@ -47,7 +48,7 @@ from ..render.fit_model import PARAMETERS, WardModel, bounds, reflectances
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
                                     grid_chi2_device, linear_curvature, near_saturation)
-from .sky_fit import LEVEL_SCALED, light_level_sd, skies_at_level, untold_sun_sd
+from .sky_fit import LEVEL_SCALED, light_level_sd, skies_at_level
 from .uncertainty import Z, calibration_sd, colour_matrix_sd, widen_relative
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
@@ -170,11 +171,10 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)
-    # a photographed day's sun: its level, a factor on every reflectance that no data tell
-    # (as a region fit's, sky_fit.light_level_sd), known to its model's or its measurement's sd
-    # (with a fitted sky, as its regions' fit counted it)
-    sun = Z["95"] * light_level_sd(doc, names, untold_sun_sd(doc, skies) if light is None
-                                   else light["sun_level_sd"])
+    # under a fitted sky, the sun's level: a factor on every reflectance that no data tell
+    # (as a region fit's, sky_fit.light_level_sd), known as its regions' fit counted it (the
+    # spec's sky as it is takes its sun as exact, as a region fit does)
+    sun = Z["95"] * light_level_sd(doc, names, 0.0 if light is None else light["sun_level_sd"])
     fit["lo"], fit["hi"] = widen_relative(theta, (fit["lo"], fit["hi"]), sun, lower, upper)
     if sky_span is not None:                  # the regions' sky level was not determined
         fit["lo"] = np.maximum(np.minimum(fit["lo"], sky_span[0]), lower)

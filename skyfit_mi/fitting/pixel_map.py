@@ -34,14 +34,14 @@ import numpy as np
 from ..errors import SkyfitError
 from ..files import check_dir, ensure_dir, save_figure, write_json
 from ..pipeline.manifest import frame_sky, load_manifest
-from ..render.fit_model import PARAMETERS
+from ..render.fit_model import PARAMETER_ORDER, PARAMETERS
 from ..render.image import write_exr
 from ..render.light_cache import SKY_SPACING
-from .chi2 import check_regions, subsample_region
+from .chi2 import REGION_PIXELS, check_regions, subsample_region
 from .fit import fit_regions, sky_setup
 from .selection import fit_auto
 from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, check_map_region, fit_pixels, patch_groups
-from .sky_fit import light_level_sd, sun_source, untold_sun_sd
+from .sky_fit import default_sky, light_level_sd
 
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
@@ -59,9 +59,7 @@ LAYOUT = "tiles"
 #: Pixels of each region (at most; a seeded subset) whose fits a map takes first (:func:
 #: `first_fits`: a photographed day's sky, the models ranked): a region fit's default (``fit
 #: --max-pixels``).
-LIGHT_PIXELS = 64
-#: The order of a map's parameter planes (each model's parameters in it).
-PARAMETER_ORDER = ("C_r", "C_g", "C_b", "R", "rho_s", "sigma_alpha")
+LIGHT_PIXELS = REGION_PIXELS
 #: The Dask setting that gives workers MALLOC_TRIM_THRESHOLD_ (unset for the local cluster).
 TRIM = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
 #: Seconds to wait for a given scheduler to answer.
@@ -125,11 +123,11 @@ def first_fits(manifest_path, regions, model="colour", normalisation="ward", see
     sun's level's sd as they count it.  One pixel's values hardly tell the sky or the model.
     Returns (choices {region: (model, normalisation)}, light)."""
     kept = [(name, subsample_region(px, max_pixels or None, seed)) for name, px in regions]
-    what = [["every lobe and parameter count ranked"] if model == "auto" else [],
-            [] if sky == "spec" else ["the sky's level fitted"]]
-    log(f"map: {' and '.join(w for ws in what for w in ws)} first with {len(kept)} region(s) "
-        f"(up to {max_pixels} pixels each, seed {seed}); the map takes "
-        + ("each region's choice" if model == "auto" else "that light"))
+    what = " and ".join((["every lobe and parameter count ranked"] if model == "auto" else [])
+                        + ([] if sky == "spec" else ["the sky's level fitted"]))
+    log(f"map: {what} first with {len(kept)} region(s) ("
+        + (f"up to {max_pixels} pixels each, seed {seed}" if max_pixels else "every pixel")
+        + "); the map takes " + ("each region's choice" if model == "auto" else "that light"))
 
     def shown(line):
         """The first fits' own lines on the sky and the choices, not the regions' results."""
@@ -143,7 +141,15 @@ def first_fits(manifest_path, regions, model="colour", normalisation="ward", see
                               seed=seed, variant=variant, sky=sky, sun_sd=sun_sd,
                               sky_terms=sky_terms, log=shown)
     choices, light = {}, None if sky == "spec" else {"fitted": sky, "regions": {}}
-    for (name, _), r in zip(kept, results):
+    try:
+        fits = list(zip(kept, results))
+    except SkyfitError as exc:
+        raise SkyfitError(f"{str(exc).rstrip('.')}; the map has {what} first with every "
+                          "region: leave that region out"
+                          + (", or map with --sky spec" if sky != "spec" else "")
+                          + (" and a model (--model 2, 3 or 5)" if model == "auto" else "")
+                          + ".") from None
+    for (name, _), r in fits:
         choices[name] = (r["model"], r["normalisation"])
         if light is None:
             continue
@@ -396,6 +402,10 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
         try:
             check_regions(manifest_path, regions)          # the frames and their light
             resume = stored is not None
+            if not (resume and np.all(stored[0])):  # a given scheduler answers before any fit
+                with _ctrl_c_deferred():
+                    client, cluster = _client(n_workers, scheduler, memory_per_worker,
+                                              dask_logs)
             if resume and first and stored[1] is not None:     # what the store's map took
                 choices = {n: tuple(c) for n, c in stored[1]["choices"].items()}
                 light = stored[1]["light"]
@@ -409,10 +419,6 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
             if resume and len(stored[0]) != len(chunks):
                 _another_map(out / STORE)
             pending = [i for i in range(len(chunks)) if not resume or not stored[0][i]]
-            if pending:
-                with _ctrl_c_deferred():
-                    client, cluster = _client(n_workers, scheduler, memory_per_worker,
-                                              dask_logs)
             store = _open_store(ensure_dir(out) / STORE, settings, shape, len(names),
                                 len(chunks), resume, {"choices": choices, "light": light}
                                 if first else None)
@@ -424,7 +430,7 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
                              cache, progress, variant, light)
         finally:
             _close(client, cluster)
-    summary = write_map_outputs(out, store, names, regions, settings)
+    summary = write_map_outputs(out, store, names, regions, settings, choices)
     for name, _ in regions:
         summary["regions"][name].update(model=choices[name][0], normalisation=choices[name][1])
     summary.update(widths_include=_widths_include(doc, skies, names, light),
@@ -472,8 +478,9 @@ def _map_pending(client, manifest_path, chunks, pending, store, names, seed, cac
         bar.close()
 
 
-def write_map_outputs(out, store, names, regions, settings):
-    """The map's EXRs, PNG previews and summary (returned) from the store."""
+def write_map_outputs(out, store, names, regions, settings, choices):
+    """The map's EXRs, PNG previews and summary (returned) from the store; ``choices``
+    {region: (model, normalisation)} (a region's pixels have its model's planes alone)."""
     theta, lo, hi = (store[k][:] for k in ("theta", "lo", "hi"))
     chi2, dof, bits = store["chi2"][:], store["dof"][:], store["warnings"][:]
     mapped = bits >= 0
@@ -486,8 +493,13 @@ def write_map_outputs(out, store, names, regions, settings):
         images[f"{n}_width95"] = hi[i] - lo[i]
     for key, img in images.items():
         write_exr(out / f"{key}.exr", img.astype(np.float32))
+    has = np.zeros((len(names),) + mapped.shape, bool)        # the planes of each pixel's model
+    for name, px in regions:
+        px = np.asarray(px).reshape(-1, 2)
+        for i, n in enumerate(names):
+            has[i, px[:, 1], px[:, 0]] = n in PARAMETERS[choices[name][0]]
     for i, n in enumerate(names):
-        _preview(out / f"{n}.png", theta[i], mapped, determined, n)
+        _preview(out / f"{n}.png", theta[i], mapped & has[i], determined & has[i], n)
     _preview(out / "chi2_per_dof.png", per_dof, mapped, mapped, "chi^2 / dof")
     summary = {"settings": settings, "parameters": names, "store": STORE,
                "warning_bits": WARNINGS, "units": "reflectances unitless, sigma_alpha rms slope; "
@@ -507,9 +519,10 @@ def write_map_outputs(out, store, names, regions, settings):
                              theta[i][ok]) for i, n in enumerate(names)},
             "median_width95": {n: _stat(np.median, (hi[i] - lo[i])[ok])
                                for i, n in enumerate(names)}}
-        for stat in ("median", "iqr", "median_width95"):   # parameters its model has
+        own = PARAMETERS[choices[name][0]]
+        for stat in ("median", "iqr", "median_width95"):   # the parameters its model has
             summary["regions"][name][stat] = {n: v for n, v in summary["regions"][name][
-                stat].items() if np.isfinite(theta[names.index(n)][sel & mapped]).any()}
+                stat].items() if n in own}
     return summary
 
 
@@ -518,7 +531,7 @@ def _sky_summary(light):
     if light is None:
         return {"source": "the spec's, taken as exact (--sky spec)"}
     return {"source": f"the spec's, its level fitted first with the regions' materials (--sky "
-                      f"{light['fitted']}; their shape is the spec's)", **light["sky"],
+                      f"{light['fitted']}; its shape is the spec's)", **light["sky"],
             "sun_level_sd": light["sun_level_sd"], "sun_source": light["sun_source"],
             "error_sd_by_region": {n: r["sd"] for n, r in light["regions"].items()},
             "meaning": "each frame lit by the spec's sky at level k (against the sun; a curve "
@@ -540,12 +553,12 @@ def _widths_include(doc, skies, names, light=None):
                    "reflectance's in proportion to its value; over the levels the fit could "
                    "not tell apart where it did not determine the level); the sky's shape is "
                    "the spec's")
-    sun = untold_sun_sd(doc, skies) if light is None else light["sun_level_sd"]
-    source = sun_source(skies) if light is None else light["sun_source"]
-    if light_level_sd(doc, names, sun).any():
-        out.append(f"the sun's level, known to +-{100 * sun:.0f}% (1 sd, a {source} sun), on "
-                   "the reflectances" + ("; the sky's level and shape are the spec's, taken as "
-                                         "exact (--sky spec)" if light is None else ""))
+    if light is None and default_sky(doc, skies) != "spec":
+        out.append("no error of the light's: the spec's sky and sun are taken as exact "
+                   "(--sky spec)")
+    elif light is not None and light_level_sd(doc, names, light["sun_level_sd"]).any():
+        out.append(f"the sun's level, known to +-{100 * light['sun_level_sd']:.0f}% (1 sd, a "
+                   f"{light['sun_source']} sun), on the reflectances")
     if (ingest.get("calibration") or {}).get("scale_relative_sd"):
         out.append("the exposure calibration's error (ingest.calibration)")
     rel = (ingest.get("colour_matrix") or {}).get("relative_sd")

@@ -206,14 +206,15 @@ def choose(rows):
 def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOLDS, seed=0,
              log=print, sky=None, sun_sd=None, sky_terms=None, **options):
     """``fit --model auto``: every region's candidates ranked (:func:`rank`; the light traced
-    once per lobe, every region of a lobe together, the spec's as it is), then the chosen one
-    fitted in full by the global method: on its lobe's light where the spec's sky is taken as
-    it is (``sky`` 'spec', or None where :func:`~.sky_fit.default_sky` chooses it), else with
-    the sky's level fitted once for every region's choice (``sky``, ``sun_sd``, ``sky_terms``
-    as :func:`~.fit.fit_regions`' ; the light traced again, split); yields each region's
-    result dict with its ``model_selection`` (the ranking, the choice, the folds and each
-    lobe's tracing time)."""
-    from .fit import FitSession, fit_regions, fit_sessions, sky_setup
+    once per lobe, every region of a lobe together), then the chosen one fitted in full by
+    the global method.  Where the spec's sky is taken as it is (``sky`` 'spec', or None where
+    :func:`~.sky_fit.default_sky` chooses it) the ranking and the fit are in the spec's light;
+    else (``sky``, ``sun_sd``, ``sky_terms`` as :func:`~.fit.fit_regions`') the candidates
+    are ranked in the spec's sky at the level a fit of Ward's lobe finds first, and the chosen
+    ones fitted with the sky's level, once for every region (the light traced again, split).
+    Yields each region's result dict with its ``model_selection`` (the ranking, the choice,
+    the folds, the light of the ranking and each lobe's tracing time)."""
+    from .fit import FitSession, fit_sessions, prepare_sessions, sky_setup
 
     first = FitSession(manifest_path, *regions[0], trace=False, **options)
     sky = sky_setup(first.doc, first.skies, len(first.obs.frames), sky, sun_sd, sky_terms,
@@ -222,15 +223,17 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     if sky != "spec":
         # the light the candidates are ranked in: the spec's sky at the level a fit of Ward's
         # lobe finds (a lobe ranked on a sky of the wrong level is one that bends to it)
-        baseline = "colour" if "colour" in models else models[-1]
-        level = next(fit_regions(manifest_path, regions, model=baseline, seed=seed, sky=sky,
-                                 sun_sd=sun_sd, sky_terms=sky_terms,
-                                 log=lambda *a: None, **options))["sky"]
-    log("model selection ranks on the spec's light "
-        + ("as it is; the chosen models are fitted on it too (fit the chosen model again "
-           "with --sky to add the sky's level)" if sky == "spec" else
-           f"at the level fitted with Ward's lobe (k = {level['k']:.3g}); the chosen models "
-           f"are fitted with the sky's level (--sky {sky})"))
+        ward = FitSession.for_regions(manifest_path, regions, seed=seed, trace=False,
+                                      model="achromatic" if first.obs.luminance else "colour",
+                                      **options)
+        prepare_sessions(ward, seed, lambda *a: None, sky, sun_sd, sky_terms)
+        level = next(iter(ward.values())).sky_record
+        del ward
+    light = ("the spec's light as it is" if level is None else "the spec's sky at the level "
+             f"a fit of Ward's lobe found first (k = {level['k']:.3g})")
+    log(f"model selection ranks in {light}; the chosen models are fitted "
+        + ("in it too (fit the chosen model again with --sky to add the sky's level)"
+           if sky == "spec" else f"with the sky's level (--sky {sky})"))
     sessions, trace_s = {}, {}
     for fam in families:
         t0 = time.perf_counter()
@@ -260,7 +263,9 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         selection[name] = {
             "criterion": f"held-out chi2, {folds}-fold over frames (frame t in fold t mod "
                          f"{folds}); the fewest parameters within sqrt(2 n) of the best, "
-                         "ranked on the spec's light as it is",
+                         f"ranked in {light}",
+            "ranked_at_sky": None if level is None else {
+                k: level[k] for k in ("k", "interval95", "terms")},
             "folds": int(folds), "chosen": {"normalisation": pick["normalisation"],
                                             "model": pick["model"], "rank": pick["rank"]},
             "trace_time_s": trace_s, "ranking": rows}

@@ -146,14 +146,6 @@ def default_sun_sd(doc, skies):
     return MEASURED_SUN_SD if sun_source(skies) == "measured" else SUN_LEVEL_SD
 
 
-def untold_sun_sd(doc, skies):
-    """The sun level's relative uncertainty that a fit told neither ``--sky`` nor ``--sun-sd``
-    counts (a map's, which cannot be told them): :func:`default_sun_sd` where it fits the sky
-    (:func:`default_sky`: photographs under the sun and a sky), else 0 (a rendered day, no sun,
-    lab lights: the spec's light as it is)."""
-    return default_sun_sd(doc, skies) if default_sky(doc, skies) != "spec" else 0.0
-
-
 def light_level_sd(doc, names, sun_sd):
     """Each parameter's relative error (``names``) from the sun's level known to a relative
     ``sun_sd`` (a standard deviation of its log): the reflectances', the roughness none; zeros

@@ -26,6 +26,8 @@ from .sky_control import chebyshev_eval, chebyshev_x
 PARAMETERS = {"two": ("rho_s", "sigma_alpha"),
               "achromatic": ("R", "rho_s", "sigma_alpha"),
               "colour": ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha")}
+#: Every model's parameters in one order (a map's planes, each region's model's in it).
+PARAMETER_ORDER = ("C_r", "C_g", "C_b", "R", "rho_s", "sigma_alpha")
 #: Models by their number of free parameters (the CLI's --model 2/3/5).
 BY_COUNT = {2: "two", 3: "achromatic", 5: "colour"}
 #: Bounds of every parameter: reflectances in [0, 1], sigma_alpha in [0, 0.5].
