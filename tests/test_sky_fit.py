@@ -469,6 +469,12 @@ def test_by_default_the_skys_level_follows_the_suns_height_and_weather(height_sk
                            sky_terms=1, log=lambda *a: None))
     lo, hi = one["intervals"]["C_b"]["95"]
     assert hi < TRUTH["C_b"], one["intervals"]["C_b"]
+    # each record's chi2 and dof are its final fit's, less the coefficients it fitted; the
+    # curve's chi-square is no higher (measured: 1.1 lower), the one level's the profile's at k
+    assert r["sky"]["dof"] == r["dof"] - DEFAULT_TERMS and one["sky"]["dof"] == one["dof"] - 1
+    assert r["sky"]["chi2"] <= one["sky"]["chi2"], (r["sky"]["chi2"], one["sky"]["chi2"])
+    profile = dict(zip(one["sky"]["profile"]["k"], one["sky"]["profile"]["chi2"]))
+    assert one["sky"]["chi2"] == pytest.approx(profile[one["sky"]["k"]], rel=1e-12)
 
 
 def test_sky_terms_need_a_fitted_sky_and_frames(days):
