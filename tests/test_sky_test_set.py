@@ -58,3 +58,16 @@ def test_a_day_under_a_hazier_perez_sky_fitted_with_the_specs_is_confidently_wro
     assert fit["truth_rise"] > 10 * fit["joint_999_bound"]
     assert list(fit["status"].values()).count("MISSED") >= 3
     assert fit["parameters"]["C_r"] < 0.5 and not fit["warnings"]
+
+
+@pytest.mark.parametrize("argv, says", [(["--sky-terms", "2"], "--sky fit or prior"),
+                                        (["--sky", "prior", "--sky-terms", "9"], "give 1"),
+                                        (["--sky", "prior", "--quick", "--sky-terms", "4"],
+                                         "frames")])
+def test_sky_terms_the_set_cannot_take_are_refused_in_one_line(argv, says, capsys, tmp_path):
+    """--sky-terms is checked as fit checks it, before anything is rendered or written."""
+    with pytest.raises(SystemExit) as exc:
+        sts.main([*argv, "-o", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exc.value.code == 2 and says in err[-1], err
+    assert not (tmp_path / "out").exists()
