@@ -343,6 +343,30 @@ def test_chunks_are_compact_tiles_of_whole_patches():
             assert np.bincount(c["groups"]).tolist() == [patch**2] * (64 // patch**2)
 
 
+def test_a_pixels_sky_errors_follow_its_regions_share_and_undetermined_span():
+    """A pixel takes its region's sky share (a reflectance's in proportion to its value, the
+    roughness's as it is) and, where the regions' fit did not determine the sky's level, the
+    region's range over it moved to the pixel's value; pixels of other regions take nothing
+    of it; no light, no share."""
+    from skyfit_mi.fitting.pixel_fit import _sky_errors
+
+    names = ["C_r", "C_g", "C_b", "rho_s", "sigma_alpha"]
+    value = dict(zip(names, [0.5, 0.4, 0.2, 0.1, 0.1]))
+    light = {"regions": {
+        "paint": {"value": value, "sd": dict(zip(names, [0.05, 0.04, 0.02, 0.01, 0.02])),
+                  "span": [dict(zip(names, [0.4, 0.3, 0.1, 0.05, 0.05])),
+                           dict(zip(names, [0.6, 0.5, 0.3, 0.2, 0.2]))]},
+        "other": {"value": value, "sd": dict(zip(names, [0.5] * 5)), "span": None}}}
+    theta = np.array([[1.0, 0.8, 0.4, 0.2, 0.15], [0.5, 0.4, 0.2, 0.1, 0.1]])
+    sd, span = _sky_errors(light, np.array(["paint", "nowhere"], dtype=object), names, theta)
+    np.testing.assert_allclose(sd[0], [0.1, 0.08, 0.04, 0.02, 0.02])   # x2, the roughness as is
+    np.testing.assert_array_equal(sd[1], 0.0)
+    np.testing.assert_allclose(span[0][0], [0.8, 0.6, 0.2, 0.1, 0.1])
+    np.testing.assert_allclose(span[1][0], [1.2, 1.0, 0.6, 0.4, 0.25])
+    np.testing.assert_array_equal(span[0][1], theta[1])
+    assert _sky_errors(None, np.array(["paint"], dtype=object), names, theta[:1])[1] is None
+
+
 def test_regions_of_other_models_map_onto_their_own_planes():
     """Regions whose chosen models differ (``--model auto``): each chunk holds one (model,
     lobe), the map's planes are every parameter some model has, in one order, and a chunk's

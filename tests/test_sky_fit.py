@@ -340,11 +340,19 @@ def test_relit_images_take_the_fitted_sky_level_of_their_own_day():
     assert "differ" in logs[0]
 
 
-def test_a_bad_sun_sd_is_one_line(days, capsys):
-    assert main(["fit", str(days["clean"]), "--region", "disc=rect:2,2,9,9", "--sky", "fit",
-                 "--sun-sd", "2"]) == 2
+@pytest.mark.parametrize("argv, says", [
+    (["--sky", "fit", "--sun-sd", "2"], "--sun-sd = 2"),
+    (["--sky", "spec", "--sun-sd", "0.1"], "(--sky spec): give --sky fit or prior"),
+    (["--sun-sd", "0.1"], "the default where skyfit rendered the frames"),
+    (["--per-pixel", "--sky", "spec", "--sun-sd", "0.1"], "--sun-sd belongs to a fitted sky"),
+    (["--model", "auto", "--sky-shape"], "--model auto ranks every lobe"),
+    (["--per-pixel", "--directions", "64"], "--directions belongs to region fits")])
+def test_a_sun_sd_or_option_a_fit_cannot_take_is_one_line(days, capsys, tmp_path, argv, says):
+    assert main(["fit", str(days["clean"]), "--region", "disc=rect:2,2,9,9", *argv,
+                 "-o", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "--sun-sd" in err, err
+    assert len(err.splitlines()) == 1 and says in err, err
+    assert not (tmp_path / "out").exists()
 
 
 DRIFT = 0.4           # log k's true change from the day's middle to its ends
