@@ -436,8 +436,8 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
     summary.update(widths_include=_widths_include(doc, skies, names, light),
                    sky=_sky_summary(light),
                    models=("each region's ranked best by held-out frames (fit --model auto) on "
-                           f"up to {light_pixels} of its pixels" if model == "auto" else
-                           "as given"),
+                           + (f"up to {light_pixels} of its pixels" if light_pixels else
+                              "every pixel") if model == "auto" else "as given"),
                    wall_time_s=time.perf_counter() - t0, chunks=len(chunks),
                    chunks_this_run=len(pending), workers=n_workers,
                    scheduler=scheduler or "LocalCluster", memory_per_worker=memory_per_worker,

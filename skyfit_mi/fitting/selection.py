@@ -240,8 +240,8 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         sessions[fam] = FitSession.for_regions(manifest_path, regions, model="two",
                                                normalisation=fam, seed=seed, trace=False,
                                                **options)
-        for s in sessions[fam].values():
-            if level is not None:
+        if level is not None:
+            for s in sessions[fam].values():
                 s.skies = skies_at_level(s.skies, level, s.obs.times)
         FitSession.trace_groups(sessions[fam])
         trace_s[fam] = time.perf_counter() - t0
