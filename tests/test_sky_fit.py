@@ -267,8 +267,9 @@ def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun):
     diffuse colour's interval misses the truth; by default a photographed day's fit counts
     the sun's level (SUN_LEVEL_SD) with the sky's prior, holds every truth, warns that the
     reflectances rest on it, and leaves sigma_alpha's interval as the data make it."""
-    from skyfit_mi.fitting.fit import fit_regions
+    from skyfit_mi.fitting.fit import fit_regions, sky_setup
     from skyfit_mi.physics.sky import MEASURED_SUN_SD
+    from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
 
     exact = next(fit_regions(bright_sun, [("disc", REGION)], model="colour", sky="spec",
                              log=lambda *a: None))
@@ -283,11 +284,13 @@ def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun):
     assert r["sky"]["sun_level_sd"] == pytest.approx(np.hypot(0.2, 0.35 * np.sqrt(np.mean(
         log_k ** 2))))
     assert any("the modelled sun's 20% widened" in w for w in r["warnings"]), r["warnings"]
-    # a level given to --sun-sd is kept as it is
-    given = next(fit_regions(bright_sun, [("disc", REGION)], model="colour", sun_sd=0.1,
-                             log=lambda *a: None))
-    assert given["sky"]["sun_level_sd"] == 0.1 and given["sky"]["sun_coupling"] is None
-    assert given["sky"]["sun_source"] == "given" and r["sky"]["sun_source"] == "modelled"
+    # a level given to --sun-sd is kept as it is (its source 'given': not widened, as the
+    # measured sun's below is not)
+    doc, root = load_manifest(bright_sun)
+    skies = [frame_sky(f, root) for f in doc["frames"]]
+    assert sky_setup(doc, skies, len(skies), None, 0.1, log=lambda *a: None) == (
+        "prior", 0.1, "given")
+    assert r["sky"]["sun_source"] == "modelled"
     # a sun whose spec gave its measured direct normal irradiance: known to the instrument's
     # accuracy, not widened
     day = bright_sun.parent / "measured_sun"
