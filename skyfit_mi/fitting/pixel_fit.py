@@ -202,21 +202,20 @@ def _sky_errors(light, material, names, theta):
     if light is None:
         return sd, None
     span = None
+    scaled = np.isin(names, LEVEL_SCALED)
     for name, region in light["regions"].items():
         at = material == name
         if not at.any():                     # a region of another chunk (maybe another model)
             continue
         value = np.array([region["value"][p] for p in names])
-        scale = np.where(np.isin(names, LEVEL_SCALED) & (value > 0),
-                         theta[at] / np.where(value > 0, value, 1.0), 1.0)
+        scale = np.where(scaled & (value > 0), theta[at] / np.where(value > 0, value, 1.0), 1.0)
         sd[at] = scale * [region["sd"][p] for p in names]
         if region.get("span") is not None:
             if span is None:
                 span = [theta.copy(), theta.copy()]
             for side, ends in zip(span, region["span"]):
                 ends = np.array([ends[p] for p in names])
-                side[at] = np.where(np.isin(names, LEVEL_SCALED), scale * ends,
-                                    theta[at] + ends - value)
+                side[at] = np.where(scaled, scale * ends, theta[at] + ends - value)
     return sd, span
 
 

@@ -159,6 +159,7 @@ def first_fits(manifest_path, regions, model="colour", normalisation="ward", see
             "value": r["parameters"], "sd": rec["error_sd"],
             "span": None if span is None else [{p: v[i] for p, v in span.items()}
                                                for i in (0, 1)]}
+    if light is not None:                         # one sky record, shared by every region
         light["sky"] = {k: rec[k] for k in ("k", "interval95", "determined", "terms",
                                             "regions", "prior", "warnings")}
         light.update(sun_level_sd=rec["sun_level_sd"], sun_source=rec["sun_source"])
