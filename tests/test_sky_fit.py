@@ -113,13 +113,18 @@ def test_sky_shape_is_for_regions_not_maps(days, capsys):
     assert len(err.splitlines()) == 1 and "--sky-shape" in err, err
 
 
-def test_the_fitted_sky_lights_its_own_day_again(dim_sky, dim_fit):
-    """A session made again from a sky fit's result (chi2map, predictions) traces the split
-    light at the fitted level, so that its chi-square is the fit's at the fit's parameters."""
+@pytest.fixture(scope="module")
+def again(dim_sky, dim_fit):
+    """The dim-sky fit's session made again from its result (``FitSession.from_fit``)."""
     from skyfit_mi.fitting.fit import FitSession
 
+    return FitSession.from_fit(dim_fit[0], dim_sky)
+
+
+def test_the_fitted_sky_lights_its_own_day_again(dim_fit, again):
+    """A session made again from a sky fit's result (chi2map, predictions) traces the split
+    light at the fitted level, so that its chi-square is the fit's at the fit's parameters."""
     r = dim_fit[0]
-    again = FitSession.from_fit(r, dim_sky)
     assert again.split_sky and again.sky_scale == pytest.approx(r["sky"]["k"])
     theta = np.array(list(r["parameters"].values()))
     assert again.problem.chi2(theta) == pytest.approx(r["chi2"], rel=1e-6)
@@ -138,6 +143,44 @@ def test_a_sky_level_beyond_the_search_is_undetermined_and_widens_every_interval
     assert not sky["determined"] and sky["interval95"][1] is None and sky["k"] >= 4.0
     assert any("do not determine the sky's level" in w for w in r["warnings"])
     assert all("undetermined sky level" in r["intervals"][p]["from"] for p in TRUTH)
+
+
+def test_where_the_data_alone_put_the_skys_level_is_read_from_their_profile():
+    from skyfit_mi.fitting.sky_fit import SCALE_GRID, _data_beyond_search
+
+    grid = np.log(SCALE_GRID)
+    assert _data_beyond_search({u: (u - 0.3) ** 2 for u in grid}, grid) == 0
+    assert _data_beyond_search({u: -u for u in grid}, grid) == 1
+    # a refining point below the grid's end is beyond it too
+    assert _data_beyond_search({**{u: u for u in grid}, grid[0] - 0.1: grid[0] - 0.1},
+                               grid) == -1
+
+
+def test_a_prior_holding_a_level_the_data_put_beyond_the_search_is_warned(again, dim_fit,
+                                                                           monkeypatch):
+    """Under the prior the profile's least point can lie inside the search while the data's
+    own runs to its end (their chi-square falls gently beyond k = 4, as a hazy day's under a
+    clear spec did: Perez clearness 2 in the sky test set); the fit then says that no
+    parameter is reliable.  Where the data's own least point lies inside, it does not."""
+    from skyfit_mi.fitting import sky_fit
+
+    theta = np.array(list(dim_fit[0]["parameters"].values()))
+    base = float(again.problem.chi2(theta))
+    level = again.sky_scale
+    try:
+        for slope, warned in ((3.0, True), (None, False)):
+            def least(sessions, k, starts):
+                u = np.log(k)
+                return [(base + (-slope * u if slope else 40.0 * u * u), theta)]
+            monkeypatch.setattr(sky_fit, "_least", least)
+            r = sky_fit.fit_sky_scale([again], log=lambda *a: None, prior_sd=0.35, terms=1)
+            said = [w for w in r["warnings"] if "the data alone put the sky's level" in w]
+            assert r["determined"]
+            assert 1.0 < r["k"] < 1.5 if warned else abs(np.log(r["k"])) < 0.1, r["k"]
+            assert bool(said) == warned, r["warnings"]
+            assert not said or ("upper end (k >= 4" in said[0] and "not reliable" in said[0])
+    finally:
+        again.set_sky(level)                       # the fixture's level again
 
 
 def test_a_day_without_sun_cannot_fit_the_sky_against_it(days):

@@ -299,6 +299,18 @@ def default_terms(frames, referenced=False):
     return int(max(1, min(DEFAULT_TERMS, int(frames) - FRAMES_BEYOND_TERMS)))
 
 
+def _data_beyond_search(data, grid):
+    """Where the data alone put the sky's level: ``data`` {log k: the regions' summed least
+    chi-square} (the profile without the prior), ``grid`` the search's log k (:data:`SCALE_GRID`);
+    -1 or +1 where the data's least point lies at or beyond the search's lower or upper end, 0
+    within it.  Under ``--sky prior`` the profile's least point may lie well inside while the
+    data's own runs to an end: the prior then holds a level the data do not show, a light
+    further from the spec's than the prior allows (a hazy day's sky fitted with a clear
+    spec: docs/BENCHMARKS.md, "the sky test set")."""
+    u = min(data, key=data.get)
+    return -1 if u <= grid[0] else 1 if u >= grid[-1] else 0
+
+
 def _referenced(doc):
     """Whether a reference of known reflectance in the scene calibrates a manifest's frames
     (``ingest --calibrate``, ``--colorchecker``)."""
@@ -474,6 +486,17 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
                "from the light the data show), so the parameters and their intervals are not "
                "reliable" if edge else "")
             + "; fit several materials with different normals, or a grey card, together.")
+    side = _data_beyond_search({u: data(u) for u in profile}, grid)
+    if prior_sd is not None and side and not edge:
+        warnings.append(
+            f"the data alone put the sky's level at the search's {'upper' if side > 0 else 'lower'}"
+            f" end (k {'>=' if side > 0 else '<='} {np.exp(grid[-1 if side > 0 else 0]):.3g} "
+            f"times the spec's, {abs(grid[-1 if side > 0 else 0]) / prior_sd:.1f} sd of its "
+            f"prior), and the prior holds it at k = {k:.3g}: the light the data show departs "
+            "from the spec's more than the prior allows, so the parameters and their intervals "
+            "are not reliable; give the spec a sky nearer the day's (a measured one: perez with "
+            "measured irradiance, or envmap), or fit several materials with different normals, "
+            "or a grey card, together.")
     # each region's parameters' response to log k at its fit (Gauss-Newton: the least-squares
     # change of theta that follows the residuals' change), smooth where a refit may jump
     for n, (s, (_, theta)) in enumerate(zip(sessions, best)):
