@@ -161,14 +161,15 @@ def test_a_prior_holding_a_level_the_data_put_beyond_the_search_is_warned(again,
     """Under the prior the profile's least point can lie inside the search while the data's
     own runs to its end (their chi-square falls gently beyond k = 4, as a hazy day's under a
     clear spec did: Perez clearness 2 in the sky test set); the fit then says that no
-    parameter is reliable.  Where the data's own least point lies inside, it does not."""
+    parameter is reliable.  Where the data's own least point lies inside, or the data hardly
+    tell the level (the prior holds it without conflict), it does not."""
     from skyfit_mi.fitting import sky_fit
 
     theta = np.array(list(dim_fit[0]["parameters"].values()))
     base = float(again.problem.chi2(theta))
     level = again.sky_scale
     try:
-        for slope, warned in ((3.0, True), (None, False)):
+        for slope, warned in ((5.0, True), (0.3, False), (None, False)):
             def least(sessions, k, starts):
                 u = np.log(k)
                 return [(base + (-slope * u if slope else 40.0 * u * u), theta)]
@@ -176,7 +177,7 @@ def test_a_prior_holding_a_level_the_data_put_beyond_the_search_is_warned(again,
             r = sky_fit.fit_sky_scale([again], log=lambda *a: None, prior_sd=0.35, terms=1)
             said = [w for w in r["warnings"] if "the data alone put the sky's level" in w]
             assert r["determined"]
-            assert 1.0 < r["k"] < 1.5 if warned else abs(np.log(r["k"])) < 0.1, r["k"]
+            assert 1.2 < r["k"] < 1.5 if warned else abs(np.log(r["k"])) < 0.1, r["k"]
             assert bool(said) == warned, r["warnings"]
             assert not said or ("upper end (k >= 4" in said[0] and "not reliable" in said[0])
     finally:

@@ -306,7 +306,11 @@ def _data_beyond_search(data, grid):
     within it.  Under ``--sky prior`` the profile's least point may lie well inside while the
     data's own runs to an end: the prior then holds a level the data do not show, a light
     further from the spec's than the prior allows (a hazy day's sky fitted with a clear
-    spec: docs/BENCHMARKS.md, "the sky test set")."""
+    spec: docs/BENCHMARKS.md, "the sky test set").  :func:`fit_sky_scale` warns where the
+    prior's hold is also significant: the data's rise from their least point to the fitted
+    level (over s^2) plus the prior's penalty there, the prior-data conflict, which is chi-square
+    with one degree of freedom where the prior holds, above its 95% point (data that hardly
+    tell the level are held by the prior quietly, wherever their least point lies)."""
     u = min(data, key=data.get)
     return -1 if u <= grid[0] else 1 if u >= grid[-1] else 0
 
@@ -487,7 +491,8 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
                "reliable" if edge else "")
             + "; fit several materials with different normals, or a grey card, together.")
     side = _data_beyond_search({u: data(u) for u in profile}, grid)
-    if prior_sd is not None and side and not edge:
+    if prior_sd is not None and side and not edge and \
+            (chi2_best - min(data(u) for u in profile)) / s2 + penalty(u0) > unc.LEVELS["95"]:
         warnings.append(
             f"the data alone put the sky's level at the search's {'upper' if side > 0 else 'lower'}"
             f" end (k {'>=' if side > 0 else '<='} {np.exp(grid[-1 if side > 0 else 0]):.3g} "
