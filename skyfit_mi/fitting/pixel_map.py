@@ -500,7 +500,8 @@ def write_map_outputs(out, store, names, regions, settings, choices):
         for i, n in enumerate(names):
             has[i, px[:, 1], px[:, 0]] = n in PARAMETERS[choices[name][0]]
     for i, n in enumerate(names):
-        _preview(out / f"{n}.png", theta[i], mapped & has[i], determined & has[i], n)
+        lack = [name for name, _ in regions if n not in PARAMETERS[choices[name][0]]]
+        _preview(out / f"{n}.png", theta[i], mapped & has[i], determined & has[i], n, lack)
     _preview(out / "chi2_per_dof.png", per_dof, mapped, mapped, "chi^2 / dof")
     summary = {"settings": settings, "parameters": names, "store": STORE,
                "warning_bits": WARNINGS, "units": "reflectances unitless, sigma_alpha rms slope; "
@@ -573,9 +574,10 @@ def _stat(f, v):
     return float(f(v)) if len(v) else None
 
 
-def _preview(path, image, mapped, determined, label):
+def _preview(path, image, mapped, determined, label, lacking=()):
     """A PNG of ``image`` with a colour bar; mapped pixels that are not determined grey, the
-    rest of the frame white."""
+    rest of the frame white, the title naming the regions ``lacking`` (white: their model has
+    no such parameter)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -587,7 +589,9 @@ def _preview(path, image, mapped, determined, label):
     ax.imshow(grey, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
     fig.colorbar(im, ax=ax, fraction=0.046, label=label)
     n_u = int((mapped & ~determined).sum())
-    ax.set_title(f"{label}" + (f" ({n_u} undetermined pixels grey)" if n_u else ""), fontsize=9)
+    notes = ([f"{n_u} undetermined pixels grey"] if n_u else []) + (
+        [f"not in the model of {', '.join(lacking)}"] if lacking else [])
+    ax.set_title(label + (f" ({'; '.join(notes)})" if notes else ""), fontsize=9)
     ax.set_xticks([])
     ax.set_yticks([])
     save_figure(fig, path)
