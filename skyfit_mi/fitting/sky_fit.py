@@ -498,9 +498,9 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
             f" end (k {'>=' if side > 0 else '<='} {np.exp(grid[-1 if side > 0 else 0]):.3g} "
             f"times the spec's, {abs(grid[-1 if side > 0 else 0]) / prior_sd:.1f} sd of its "
             f"prior) as one level for the day, and the prior holds it at k = {k:.3g}: the light "
-            "the data show departs from the spec's more than the prior allows (a level that "
-            "changes over the day may take some of that up), so the parameters and their "
-            "intervals may not be reliable; give the spec a sky nearer the day's (a measured "
+            "the data show departs from the spec's more than the prior allows, so the "
+            "parameters and their intervals are not reliable unless the level's change over "
+            "the day takes that up; give the spec a sky nearer the day's (a measured "
             "one: perez with measured irradiance, or envmap), or fit several materials with "
             "different normals, or a grey card, together.")
     # each region's parameters' response to log k at its fit (Gauss-Newton: the least-squares
