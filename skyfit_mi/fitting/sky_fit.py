@@ -308,9 +308,10 @@ def _data_beyond_search(data, grid):
     further from the spec's than the prior allows (a hazy day's sky fitted with a clear
     spec: docs/BENCHMARKS.md, "the sky test set").  :func:`fit_sky_scale` warns where the
     prior's hold is also significant: the data's rise from their least point to the fitted
-    level (over s^2) plus the prior's penalty there, the prior-data conflict, which is chi-square
-    with one degree of freedom where the prior holds, above its 95% point (data that hardly
-    tell the level are held by the prior quietly, wherever their least point lies)."""
+    level plus the prior's penalty there, over s^2 as the profile's intervals take it (the
+    prior-data conflict, chi-square with one degree of freedom where the prior holds), above
+    its 95% point (data that hardly tell the level are held by the prior quietly, wherever
+    their least point lies)."""
     u = min(data, key=data.get)
     return -1 if u <= grid[0] else 1 if u >= grid[-1] else 0
 
@@ -491,18 +492,20 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
                "reliable" if edge else "")
             + "; fit several materials with different normals, or a grey card, together.")
     side = _data_beyond_search({u: data(u) for u in profile}, grid)
-    if prior_sd is not None and side and not edge and \
-            (chi2_best - min(data(u) for u in profile)) / s2 + penalty(u0) > unc.LEVELS["95"]:
+    # the prior-data conflict, over s^2 as the profile's intervals take it
+    conflict = (total(u0) - min(data(u) for u in profile)) / s2
+    if prior_sd is not None and side and not edge and conflict > unc.LEVELS["95"]:
+        end = grid[-1 if side > 0 else 0]
         warnings.append(
             f"the data alone put the sky's level at the search's {'upper' if side > 0 else 'lower'}"
-            f" end (k {'>=' if side > 0 else '<='} {np.exp(grid[-1 if side > 0 else 0]):.3g} "
-            f"times the spec's, {abs(grid[-1 if side > 0 else 0]) / prior_sd:.1f} sd of its "
-            f"prior) as one level for the day, and the prior holds it at k = {k:.3g}: the light "
-            "the data show departs from the spec's more than the prior allows, so the "
-            "parameters and their intervals are not reliable unless the level's change over "
-            "the day takes that up; give the spec a sky nearer the day's (a measured "
-            "one: perez with measured irradiance, or envmap), or fit several materials with "
-            "different normals, or a grey card, together.")
+            f" end (k near {np.exp(end):.3g} times the spec's or beyond, "
+            f"{abs(end) / prior_sd:.1f} sd of its prior) as one level for the day, and the prior "
+            f"holds that level at k = {k:.3g}: the light the data show departs from the spec's "
+            "more than the prior allows, so the parameters and their intervals are not reliable"
+            + (" unless the level's change over the day takes that up" if terms > 1 else "")
+            + "; give the spec a sky nearer the day's (a measured one: perez with measured "
+            "irradiance, or envmap), or fit several materials with different normals, or a grey "
+            "card, together.")
     # each region's parameters' response to log k at its fit (Gauss-Newton: the least-squares
     # change of theta that follows the residuals' change), smooth where a refit may jump
     for n, (s, (_, theta)) in enumerate(zip(sessions, best)):
