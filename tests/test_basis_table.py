@@ -151,7 +151,7 @@ def test_regions_take_views_of_a_table_traced_in_blocks(traced):
         # view's rows otherwise than the whole array's (on some machines)
         for got, want in zip(TableModel(view, "colour").radiance_and_variance(theta), whole):
             np.testing.assert_allclose(got, want[3:9, 2:7], rtol=FLOAT32_RTOL)
-        np.testing.assert_array_equal(view.D, t.D[3:9, 2:7])        # the rows themselves
+        np.testing.assert_array_equal(view.D, t.D[:, 3:9, 2:7])     # the rows themselves
         L, J = TableModel(view, "colour").jacobian(theta)
         J_whole = TableModel(t, "colour").jacobian(theta)[1][3:9, 2:7]
         np.testing.assert_allclose(J, J_whole, rtol=FLOAT32_RTOL,
