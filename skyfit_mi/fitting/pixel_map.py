@@ -494,14 +494,19 @@ def write_map_outputs(out, store, names, regions, settings, choices):
         images[f"{n}_width95"] = hi[i] - lo[i]
     for key, img in images.items():
         write_exr(out / f"{key}.exr", img.astype(np.float32))
-    has = np.zeros((len(names),) + mapped.shape, bool)        # the planes of each pixel's model
+    # the planes of each region's model: its pixels on them, the regions without them
+    own = {name: [(i, n) for i, n in enumerate(names) if n in PARAMETERS[choices[name][0]]]
+           for name, _ in regions}
+    has = np.zeros((len(names),) + mapped.shape, bool)
+    lacking = {n: [name for name, _ in regions] for n in names}
     for name, px in regions:
         px = np.asarray(px).reshape(-1, 2)
-        for i, n in enumerate(names):
-            has[i, px[:, 1], px[:, 0]] = n in PARAMETERS[choices[name][0]]
+        for i, n in own[name]:
+            has[i, px[:, 1], px[:, 0]] = True
+            lacking[n].remove(name)
     for i, n in enumerate(names):
-        lack = [name for name, _ in regions if n not in PARAMETERS[choices[name][0]]]
-        _preview(out / f"{n}.png", theta[i], mapped & has[i], determined & has[i], n, lack)
+        _preview(out / f"{n}.png", theta[i], mapped & has[i], determined & has[i], n,
+                 lacking[n])
     _preview(out / "chi2_per_dof.png", per_dof, mapped, mapped, "chi^2 / dof")
     summary = {"settings": settings, "parameters": names, "store": STORE,
                "warning_bits": WARNINGS, "units": "reflectances unitless, sigma_alpha rms slope; "
@@ -516,15 +521,10 @@ def write_map_outputs(out, store, names, regions, settings, choices):
             "pixels": int(sel.sum()), "mapped": int((sel & mapped).sum()),
             "determined": int(ok.sum()),
             "warnings": {w: int(((bits & b) > 0)[sel & mapped].sum()) for w, b in WARNINGS.items()},
-            "median": {n: _stat(np.median, theta[i][ok]) for i, n in enumerate(names)},
+            "median": {n: _stat(np.median, theta[i][ok]) for i, n in own[name]},
             "iqr": {n: _stat(lambda v: float(np.subtract(*np.percentile(v, [75, 25]))),
-                             theta[i][ok]) for i, n in enumerate(names)},
-            "median_width95": {n: _stat(np.median, (hi[i] - lo[i])[ok])
-                               for i, n in enumerate(names)}}
-        own = PARAMETERS[choices[name][0]]
-        for stat in ("median", "iqr", "median_width95"):   # the parameters its model has
-            summary["regions"][name][stat] = {n: v for n, v in summary["regions"][name][
-                stat].items() if n in own}
+                             theta[i][ok]) for i, n in own[name]},
+            "median_width95": {n: _stat(np.median, (hi[i] - lo[i])[ok]) for i, n in own[name]}}
     return summary
 
 

@@ -491,9 +491,10 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
                "from the light the data show), so the parameters and their intervals are not "
                "reliable" if edge else "")
             + "; fit several materials with different normals, or a grey card, together.")
-    side = _data_beyond_search({u: data(u) for u in profile}, grid)
+    alone = {u: data(u) for u in profile}               # the profile without the prior
+    side = _data_beyond_search(alone, grid)
     # the prior-data conflict, over s^2 as the profile's intervals take it
-    conflict = (total(u0) - min(data(u) for u in profile)) / s2
+    conflict = (total(u0) - min(alone.values())) / s2
     if prior_sd is not None and side and not edge and conflict > unc.LEVELS["95"]:
         end = grid[-1 if side > 0 else 0]
         warnings.append(
