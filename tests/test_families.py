@@ -144,23 +144,31 @@ def test_model_auto_ranks_the_true_family_first_and_writes_the_ranking(plastic_d
     assert rows[0]["model_ranking"].startswith("1 ggx_plastic/")
 
 
-def test_model_auto_on_photographs_fits_the_chosen_model_with_the_skys_level(plastic_day,
-                                                                           tmp_path):
+@pytest.fixture(scope="module")
+def photographed_plastic(plastic_day, tmp_path_factory):
+    """The plastic's day called photographed (``source`` 'ingest'): its spec's sky is then a
+    model of the real one, and fits take its level with their prior (``--sky prior``)."""
+    import json
+    import shutil
+
+    day = tmp_path_factory.mktemp("photographed") / "day"
+    shutil.copytree(plastic_day, day)
+    m = json.loads((day / "manifest.json").read_text())
+    (day / "manifest.json").write_text(json.dumps({**m, "source": "ingest"}))
+    return day
+
+
+def test_model_auto_on_photographs_fits_the_chosen_model_with_the_skys_level(
+        photographed_plastic):
     """The plastic's day called photographed (the spec's sky then a model of the real one):
     ``--model auto`` ranks on the spec's light as it is, then fits each region's chosen model
     with the sky's level (``--sky prior``, the default for photographs), whose interval holds
     the day's own (1); the sigma_alpha interval holds the truth and the result keeps its
     ranking. A sky option a fit cannot take is refused before any light is traced."""
-    import json
-    import shutil
-
     from skyfit_mi.errors import SkyfitError
     from skyfit_mi.fitting.selection import fit_auto
 
-    day = tmp_path / "photographed"
-    shutil.copytree(plastic_day, day)
-    m = json.loads((day / "manifest.json").read_text())
-    (day / "manifest.json").write_text(json.dumps({**m, "source": "ingest"}))
+    day = photographed_plastic
     pixels = np.stack(np.meshgrid(np.arange(4, 8), np.arange(4, 8)), -1).reshape(-1, 2)
     logs = []
     r = next(fit_auto(day, [("disc", pixels)], families=("ward", "ggx_plastic"),
@@ -176,8 +184,8 @@ def test_model_auto_on_photographs_fits_the_chosen_model_with_the_skys_level(pla
         next(fit_auto(day, [("disc", pixels)], sky="fit", sky_terms=9, log=logs.append))
 
 
-def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(plastic_day, tmp_path,
-                                                                   monkeypatch):
+def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(photographed_plastic,
+                                                                   tmp_path, monkeypatch):
     """``fit --per-pixel --model auto`` on the plastic's day called photographed: the region's
     model and lobe ranked first (on up to --max-pixels of its pixels) and the sky's level
     fitted with them (its interval holding the day's own), then every pixel mapped in them
@@ -185,8 +193,6 @@ def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(plastic_day, 
     roughness about the truth; run again, the map resumes with the choices and light its
     store holds.  (Two lobes and a small light cache in the ranking, for time.)"""
     import functools
-    import json
-    import shutil
 
     from skyfit_mi.fitting import pixel_map
     from skyfit_mi.fitting.pixel_map import run_map
@@ -195,10 +201,7 @@ def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(plastic_day, 
 
     monkeypatch.setattr(pixel_map, "fit_auto", functools.partial(
         fit_auto, families=("ward", "ggx_plastic"), positions=4, directions=256))
-    day = tmp_path / "photographed"                   # the sky's level is fitted first too
-    shutil.copytree(plastic_day, day)
-    m = json.loads((day / "manifest.json").read_text())
-    (day / "manifest.json").write_text(json.dumps({**m, "source": "ingest"}))
+    day = photographed_plastic                        # the sky's level is fitted first too
     pixels = np.stack(np.meshgrid(np.arange(3, 9), np.arange(3, 9)), -1).reshape(-1, 2)
     logs = []
     s = run_map(day, [("disc", pixels)], tmp_path / "map", model="auto", workers=1,
