@@ -343,3 +343,37 @@ def test_new_frames_reuse_the_compiled_kernels(session):
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     assert jit and all(k["cache_hit"] for k in jit), [(k["size"], k.get("operation_count")) for k in jit if not k["cache_hit"]]
+
+
+def test_lights_traced_with_shared_samples_each_take_their_own_radiance(days):
+    """A light's shape variants traced with the rest's samples (build_light_cache's
+    ``others``): the first light's cache is the one it traces alone, a copy of it traced
+    alongside is identical, and a variant's sky integrals and mirror rays (the same positions
+    and random numbers) are those of its own trace with the seed; only the sampled
+    directions' weights differ (its own trace samples its own sky)."""
+    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.render.light_cache import OWN_ARRAYS, build_light_cache
+
+    s = FitSession(days["clean"], "disc", REGION, model="two", trace=False, split_sky=True,
+                   sky_shape=True)
+    _, rest, variant, _ = (light[3:6] for light in s._sky_parts())
+    args = (s.scene, s.params)
+    where = (s.obs.pixels[:6], "disc")
+    options = dict(positions=8, directions=32, seed=3)
+    shared = build_light_cache(*args, rest, *where, others=[rest, variant], **options)
+    alone = build_light_cache(*args, rest, *where, **options)
+    own = build_light_cache(*args, variant, *where, **options)
+    fields = ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos", "hit",
+              "diffuse_sky", "lobe_sky")
+    for k in fields:
+        assert np.array_equal(getattr(shared[0], k), getattr(alone, k)), k
+        assert np.array_equal(getattr(shared[1], k), getattr(alone, k)), k
+    for k in ("mirror", "mirror_sky", "diffuse_sky", "lobe_sky"):
+        a, b = getattr(shared[2], k), getattr(own, k)
+        assert np.allclose(a, b, rtol=1e-5, atol=1e-6 * np.abs(b).max()), k
+    # (the variant keeps the sky's horizontal irradiance: the level disc's I_d hardly moves)
+    assert not np.allclose(shared[2].lobe_sky[..., 0, :], alone.lobe_sky[..., 0, :], rtol=1e-2)
+    assert not np.array_equal(shared[2].wi, own.wi)            # its own trace samples its sky
+    assert set(OWN_ARRAYS) < set(fields)
+    with pytest.raises(ValueError, match="one sky without a map per frame"):
+        build_light_cache(*args, rest, *where, others=[variant[:2]], **options)

@@ -9,7 +9,7 @@ plot (thesis fig. 7.14).
 """
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -26,8 +26,8 @@ from .selection import HELD_OUT_FRAMES, held_out_error
 from .sky_fit import (SKY_DOMINATES, check_terms, default_sky, default_sun_sd, fit_sky_scale,
                       light_level_sd, shape_variants, sky_level_at, sun_source, sun_up)
 from ..render import setup
-from ..render.basis_table import (TableModel, available_memory, memory_estimate, mixed,
-                                  trace_table)
+from ..render.basis_table import (TableModel, available_memory, block_budget, memory_estimate,
+                                  mixed, trace_table, trace_tables)
 from ..render.fit_model import (BY_COUNT, PARAMETERS, WardModel, bounds, check_fit_normalisation,
                                 check_start, other_readings)
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
@@ -213,6 +213,7 @@ class FitSession:
         # the light's tables: one, or the sun's, the rest's (split_sky) and the rest's shape
         # variants (sky_shape), mixed at sky_scale and the shape's mix sky_shape_mix
         self.split_sky, self.sky_scale, self.parts = bool(split_sky), 1.0, None
+        self.parts_cov = None           # the covariances of parts traced with shared samples
         self.sky_shape, self.sky_shape_mix = bool(sky_shape), None
         self._variants = None                       # the shape variants (_shape_variants)
         # the fitted sky's share of each parameter's error, whether it leaves them open, and
@@ -322,31 +323,34 @@ class FitSession:
         else:
             at = PointRays(*(np.concatenate([getattr(s.obs.rays, k) for s in group])
                              for k in ("origins", "directions")))
-        parts = group[0]._trace(at, np.repeat([s.name for s in group],
-                                              [len(s.obs.pixels) for s in group]))
+        parts, cov = group[0]._trace(at, np.repeat([s.name for s in group],
+                                                   [len(s.obs.pixels) for s in group]))
         share = (time.perf_counter() - t0) / len(group)
         start = 0
         for s in group:
             n = len(s.obs.pixels)
             s.cache_settings["blocks"] = group[0].cache_settings["blocks"]
-            s._use_parts([t.subset(slice(start, start + n)) for t in parts])
+            rows = slice(start, start + n)
+            s._use_parts([t.subset(rows) for t in parts], None if cov is None else cov.subset(rows))
             s.cache_time += share
             start += n
 
     def trace_light(self):
         """(Re)trace the light at ``cache_settings`` and make everything from its table."""
         t0 = time.perf_counter()
-        parts = self._trace(self.obs.pixels if self.obs.rays is None else self.obs.rays,
-                            self.name)
+        parts, cov = self._trace(self.obs.pixels if self.obs.rays is None else self.obs.rays,
+                                 self.name)
         self.cache_time += time.perf_counter() - t0
-        self._use_parts(parts)
+        self._use_parts(parts, cov)
 
     def _trace(self, at, bsdf_id):
         """The :class:`~skyfit_mi.render.basis_table.BasisTable` of the light at
         ``cache_settings`` of the sequence's scene and frames at ``at`` (pixels or rays) on
         material ``bsdf_id`` (one, or one per pixel), traced in blocks of bounded memory: a
         list of one table, or with ``split_sky`` the sun's and the rest's (their samples
-        independent)."""
+        independent) and with ``sky_shape`` the rest's shape variants (traced with the rest's
+        samples); and the :class:`~skyfit_mi.render.basis_table.Covariances` of the parts
+        traced together (None where there are none)."""
         c = self.cache_settings
         # the split light's tables and their mix
         lights = self._sky_parts() if self.split_sky else None
@@ -362,15 +366,20 @@ class FitSession:
         if not self.split_sky:
             table, c["blocks"] = trace_table(self.scene, self.params, self.skies, at, bsdf_id,
                                              model_of, **self._cache_options())
-            return [table]
+            return [table], None
         options = self._cache_options()
-        seeds = np.random.SeedSequence(options.pop("seed")).generate_state(len(lights)).tolist()
+        seeds = np.random.SeedSequence(options.pop("seed")).generate_state(2).tolist()
+        # the sun's part in the blocks of the rest's group (trace_tables), whose series mix
+        budget = block_budget(len(at), len(self.skies), c["positions"])
         parts = []
-        for skies, seed in zip(lights, seeds):
-            table, c["blocks"] = trace_table(self.scene, self.params, skies, at, bsdf_id,
-                                             model_of, seed=int(seed), **options)
-            parts.append(table)
-        return parts
+        for group, seed, b in zip((lights[:1], lights[1:]), seeds,
+                                  (budget // len(lights[1:]), budget)):
+            tables, cov, c["blocks"] = trace_tables(self.scene, self.params, group, at, bsdf_id,
+                                                    model_of, seed=int(seed), budget=b, **options)
+            parts += tables
+        # the covariances' pairs as indices into the parts (the sun's first)
+        return parts, None if cov is None else replace(cov, pairs=[(j + 1, k + 1)
+                                                                   for j, k in cov.pairs])
 
     def _sky_parts(self):
         """The light's parts, each a list of the frames' skies: the sun's and the rest's
@@ -445,9 +454,10 @@ class FitSession:
                                  self.obs.pixels if self.obs.rays is None else self.obs.rays,
                                  self.name, **self._cache_options())
 
-    def _use_parts(self, parts):
-        """Take the light's tables ``parts`` (:meth:`_trace`) and fit on their mix."""
-        self.parts = list(parts)
+    def _use_parts(self, parts, cov=None):
+        """Take the light's tables ``parts`` and their covariances ``cov`` (:meth:`_trace`) and
+        fit on their mix."""
+        self.parts, self.parts_cov = list(parts), cov
         if len(self.parts) == 1:
             self._use_table(self.parts[0])
             return
@@ -455,7 +465,7 @@ class FitSession:
         k = self.sky_scale * sky
         mix = np.zeros(len(self.parts) - 2) if self.sky_shape_mix is None else self.sky_shape_mix
         self._use_table(mixed(self.parts[0], self.parts[1:],
-                              [k * (1.0 - mix.sum())] + [k * m for m in mix], sun))
+                              [k * (1.0 - mix.sum())] + [k * m for m in mix], sun, cov))
 
     def set_sky(self, k, mix=None):
         """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
@@ -468,14 +478,14 @@ class FitSession:
                              "shape one traced with sky_shape")
         self.sky_scale = float(k) if np.ndim(k) == 0 else np.asarray(k, dtype=float)
         self.sky_shape_mix = None if mix is None else np.asarray(mix, dtype=float)
-        self._use_parts(self.parts)
+        self._use_parts(self.parts, self.parts_cov)
 
     def take_light(self, other):
         """Fit on the light ``other`` (a traced session of the same region, sequence and
         lobe, in any parameterisation: the table does not depend on it) traced."""
         self.cache_settings = dict(other.cache_settings)
         self.cache_time += other.cache_time
-        self._use_parts(other.parts)
+        self._use_parts(other.parts, other.parts_cov)
 
     def _use_table(self, table):
         """Take ``table`` (of the region's pixels) and make the models and chi-square on it."""

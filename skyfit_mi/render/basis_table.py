@@ -301,10 +301,22 @@ class BasisTable:
         return (out, dout) if derivative else out
 
 
-def tabulate(cache, wm):
+def _spread(x, y, S):
+    """The covariance of the positions' estimates (S times each share, shares (P, T, S, ...))
+    / S: the variance of their mean (WardModel.radiance_and_variance's)."""
+    if S < 2:
+        return np.zeros(x.shape[:2] + x.shape[3:])
+    xs, ys = x * S, y * S
+    return np.sum((xs - xs.mean(axis=2, keepdims=True)) * (ys - ys.mean(axis=2, keepdims=True)),
+                  axis=2) / ((S - 1) * S)
+
+
+def tabulate(cache, wm, keep=None):
     """The :class:`BasisTable` of a :class:`~.light_cache.LightCache` ``cache`` through its
     :class:`~.fit_model.WardModel` ``wm``: D and G at every Chebyshev node of PIECES (one pass
-    of the basis plugin each, per position, the two halves summed apart)."""
+    of the basis plugin each, per position, the two halves summed apart).  ``keep``, a dict,
+    receives the positions' shares of D ('D') and of G at every :func:`variance_sigmas` value
+    (for :func:`tabulate_group`)."""
     S = wm.S
     h = S // 2
     if h < 1:
@@ -318,14 +330,11 @@ def tabulate(cache, wm):
         return np.stack([(a + b) / 2, (a - b) / 2])
 
     def spread(x, y):
-        # the covariance of the positions' estimates (S times each share) / S: the variance
-        # of their mean (WardModel.radiance_and_variance's)
-        xs, ys = x * S, y * S
-        return np.sum((xs - xs.mean(axis=2, keepdims=True)) * (ys - ys.mean(axis=2,
-                      keepdims=True)), axis=2) / ((S - 1) * S) if S > 1 else np.zeros(
-            x.shape[:2] + x.shape[3:])
+        return _spread(x, y, S)
 
     d_shares = wm._diffuse_shares()
+    if keep is not None:
+        keep["D"] = d_shares
     want = set(variance_sigmas().tolist())
     known, moments = {}, {}
 
@@ -336,6 +345,8 @@ def tabulate(cache, wm):
             known[sigma] = halves(shares)
             if sigma in want:
                 moments[sigma] = (spread(d_shares, shares), spread(shares, shares))
+                if keep is not None:
+                    keep[sigma] = shares
         return known[sigma]
     D = halves(d_shares)
     G0, G1 = lobe(0.0), lobe(SIGMA_RESOLVED)
@@ -348,6 +359,65 @@ def tabulate(cache, wm):
     return BasisTable(D.astype(f32), G0.astype(f32), G1.astype(f32), coef,
                       spread(d_shares, d_shares).astype(f32), VDG, VGG, cache.hit,
                       cache.sun_half_cos.astype(f32), wm.normalisation)
+
+
+@dataclass
+class Covariances:
+    """The covariances between the tables of lights traced with one trace's samples
+    (:func:`trace_tables`), which :func:`mixed` adds to their variances: for each pair j < k
+    of ``pairs`` (indices into the lights), as a :class:`BasisTable`'s VDD, VDG and VGG (over
+    the positions' estimates / S):
+
+    DD : (n, P, T, 3)  cov(D_j, D_k)
+    DG : (n, V, P, T, 3)  cov(D_j, G_k) + cov(D_k, G_j) at the V ``variance_sigmas``
+    GG : (n, V, P, T, 3)  cov(G_j, G_k)
+    """
+
+    pairs: list
+    DD: np.ndarray
+    DG: np.ndarray
+    GG: np.ndarray
+
+    #: The pixel axis of each array field (the frame axis follows it).
+    AXES = {"DD": 1, "DG": 2, "GG": 2}
+
+    @classmethod
+    def empty(cls, n_lights, P, T):
+        """The covariances of ``n_lights`` lights' tables of P pixels in T frames, to be filled
+        block by block (:meth:`place`)."""
+        pairs = [(j, k) for j in range(n_lights) for k in range(j + 1, n_lights)]
+        V, n = len(variance_sigmas()), len(pairs)
+        return cls(pairs, np.zeros((n, P, T, 3), np.float32),
+                   np.zeros((n, V, P, T, 3), np.float32), np.zeros((n, V, P, T, 3), np.float32))
+
+    def subset(self, rows=slice(None), frames=slice(None)):
+        """Pixels ``rows`` and frames ``frames`` (slices of step 1), as views."""
+        return Covariances(self.pairs, **{k: _cut(getattr(self, k), a, rows, frames)
+                                          for k, a in self.AXES.items()})
+
+    def place(self, block, rows, frames):
+        """Copy the covariances ``block`` into pixels ``rows`` and frames ``frames``."""
+        for k, a in self.AXES.items():
+            _cut(getattr(self, k), a, rows, frames)[...] = getattr(block, k)
+
+
+def tabulate_group(caches, model_of):
+    """The :class:`BasisTable` of each of ``caches`` (light caches of one trace's samples,
+    :func:`~.light_cache.build_light_cache`'s ``others``) through its WardModel
+    ``model_of(cache)`` (one at a time: each holds Dr.Jit copies of the samples), and the
+    :class:`Covariances` between them, from their positions' shares."""
+    kept = [{} for _ in caches]
+    tables = [tabulate(c, model_of(c), keep) for c, keep in zip(caches, kept)]
+    S, sigmas = kept[0]["D"].shape[2], [float(v) for v in variance_sigmas()]
+    P, T = tables[0].shape
+    cov = Covariances.empty(len(caches), P, T)
+    for i, (j, k) in enumerate(cov.pairs):
+        a, b = kept[j], kept[k]
+        cov.DD[i] = _spread(a["D"], b["D"], S)
+        for v, sigma in enumerate(sigmas):
+            cov.DG[i, v] = _spread(a["D"], b[sigma], S) + _spread(b["D"], a[sigma], S)
+            cov.GG[i, v] = _spread(a[sigma], b[sigma], S)
+    return tables, cov
 
 
 def variance_sigmas():
@@ -442,14 +512,15 @@ def chunks(P, T, per_value, budget):
             for f in range(0, T, frames) for r in range(0, P, rows)]
 
 
-def mixed(a, others, weights, a_weight=1.0):
+def mixed(a, others, weights, a_weight=1.0, covariances=None):
     """The table of the light w_a a + sum_j w_j b_j, from the tables ``a`` and ``others`` [b_j]
     of parts of one light (:meth:`~skyfit_mi.physics.sky.Sky.split`,
     :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`) traced at the same points in the same
-    blocks with independent samples: every basis is linear in the light, and the positions'
-    spreads of independent traces add (w^2 for each).  Each weight (``a_weight`` w_a, and
-    ``weights``) is one factor or one per frame of the tables (T,); weights may be negative (a
-    shape's mix extrapolated)."""
+    blocks: every basis is linear in the light, and the positions' spreads of independent
+    traces add (w^2 for each); parts traced with shared samples add their ``covariances``
+    too (:class:`Covariances`, its pairs' indices into ``[a, *others]``: 2 w_j w_k cov).  Each
+    weight (``a_weight`` w_a, and ``weights``) is one factor or one per frame of the tables
+    (T,); weights may be negative (a shape's mix extrapolated)."""
     parts = [a, *others]
     ws = [np.asarray(w, dtype=np.float32) for w in [a_weight, *weights]]
     wt = [w[:, None] if w.ndim == 1 else w for w in ws]        # against (..., T, 3)
@@ -468,19 +539,28 @@ def mixed(a, others, weights, a_weight=1.0):
 
     def add(name, square=False):
         return sum((w * w if square else w) * getattr(b, name) for b, w in zip(parts, wt))
+    var = {k: add(k, True) for k in ("VDD", "VDG", "VGG")}
+    if covariances is not None:
+        for i, (j, k) in enumerate(covariances.pairs):
+            w = wt[j] * wt[k]
+            var["VDD"] = var["VDD"] + 2 * w * covariances.DD[i]
+            var["VDG"] = var["VDG"] + w * covariances.DG[i]
+            var["VGG"] = var["VGG"] + 2 * w * covariances.GG[i]
     hit = a.hit
     for b in others:
         hit = hit & b.hit
-    return BasisTable(add("D"), add("G0"), add("G1"), coef, add("VDD", True), add("VDG", True),
-                      add("VGG", True), hit, a.sun_half_cos, a.normalisation)
+    return BasisTable(add("D"), add("G0"), add("G1"), coef, var["VDD"], var["VDG"], var["VGG"],
+                      hit, a.sun_half_cos, a.normalisation)
 
 
-def _traced_blocks(scene, params, skies, at, bsdf_id, seed, positions, directions, budget,
+def _traced_blocks(scene, params, lights, at, bsdf_id, seed, positions, directions, budget,
                    options):
-    """The light cache of points ``at`` under ``skies`` traced block by block (see
-    :func:`trace_table`): yields (rows, frames, cache) and the number of blocks first."""
+    """The light cache of points ``at`` under ``lights`` (lists of skies, one per frame; the
+    others traced with the first's samples, build_light_cache's ``others``) traced block by
+    block (see :func:`trace_table`): yields (rows, frames, cache, or with several lights a
+    list of caches) and the number of blocks first."""
     rays = at if isinstance(at, PointRays) else None
-    P, T = len(at), len(skies)
+    P, T = len(at), len(lights[0])
     ids = np.broadcast_to(np.asarray(bsdf_id, dtype=object), (P,))
     blocks = chunks(P, T, int(positions) * int(directions),
                     budget or block_budget(P, T, positions))
@@ -492,9 +572,10 @@ def _traced_blocks(scene, params, skies, at, bsdf_id, seed, positions, direction
             where = np.asarray(at)[rows]
         else:
             where = PointRays(rays.origins[rows, frames], rays.directions[rows, frames])
-        yield rows, frames, build_light_cache(scene, params, skies[frames], where, ids[rows],
+        yield rows, frames, build_light_cache(scene, params, lights[0][frames], where, ids[rows],
                                               positions=positions, directions=directions,
-                                              seed=int(s), **options)
+                                              seed=int(s), others=[o[frames] for o in lights[1:]],
+                                              **options)
     # Dr.Jit keeps freed buffers for reuse: the last block's, not needed once the light is
     # tabulated (a 1,000-point table's trace: 206 MB of a 1.1 GB process)
     import drjit as dr
@@ -515,17 +596,39 @@ def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=P
 
     Returns the table and the number of blocks.
     """
-    traced = _traced_blocks(scene, params, skies, at, bsdf_id, seed, positions, directions,
+    tables, _, n = trace_tables(scene, params, [skies], at, bsdf_id, model_of, seed, positions,
+                                directions, budget, **options)
+    return tables[0], n
+
+
+def trace_tables(scene, params, lights, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
+                 directions=DIRECTIONS, budget=None, **options):
+    """:func:`trace_table` of several ``lights`` (lists of skies, one per frame) with one
+    trace's samples (the first light's; build_light_cache's ``others``): their tables, the
+    :class:`Covariances` between them (None for one light) and the number of blocks.  Each
+    light's caches and shares take a block's memory again, so a block takes ``budget`` (or
+    :func:`block_budget`) over the number of lights."""
+    # each light's caches and the tables' shares take a block's memory again: smaller blocks
+    budget = (budget or block_budget(len(at), len(lights[0]), positions)) // len(lights)
+    traced = _traced_blocks(scene, params, lights, at, bsdf_id, seed, positions, directions,
                             budget, options)
-    n, table = next(traced), None
-    for rows, frames, cache in traced:
-        block = tabulate(cache, model_of(cache))
-        del cache
-        if table is None:
-            table = BasisTable.empty(len(at), len(skies), block.sun_half_cos.shape[-1],
-                                     block.normalisation)
-        table.place(block, rows, frames)
-    return table, n
+    n, tables, cov = next(traced), None, None
+    for rows, frames, caches in traced:
+        if len(lights) > 1:
+            blocks, block_cov = tabulate_group(caches, model_of)
+        else:
+            blocks, block_cov = [tabulate(caches, model_of(caches))], None
+        del caches
+        if tables is None:
+            tables = [BasisTable.empty(len(at), len(lights[0]), b.sun_half_cos.shape[-1],
+                                       b.normalisation) for b in blocks]
+            cov = None if block_cov is None else Covariances.empty(len(lights), len(at),
+                                                                   len(lights[0]))
+        for table, block in zip(tables, blocks):
+            table.place(block, rows, frames)
+        if cov is not None:
+            cov.place(block_cov, rows, frames)
+    return tables, cov, n
 
 
 def trace_diffuse(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
@@ -534,7 +637,7 @@ def trace_diffuse(scene, params, skies, at, bsdf_id, model_of, seed=0, positions
     at rho_d = 1) of points ``at`` under ``skies``, traced in blocks as :func:`trace_table`
     (its arguments), without the lobe's table: D and its Monte Carlo variance, (P, T, 3)
     [W m^-2 sr^-1] and [(W m^-2 sr^-1)^2]."""
-    traced = _traced_blocks(scene, params, skies, at, bsdf_id, seed, positions, directions,
+    traced = _traced_blocks(scene, params, [skies], at, bsdf_id, seed, positions, directions,
                             budget, options)
     next(traced)
     D, var = np.zeros((2, len(at), len(skies), 3))

@@ -121,6 +121,11 @@ MIX = {"sun": 0.25, "sky": 0.20, "cosine": 0.15, "lobes": 0.40}
 CONTROL_FULL, CONTROL_SIGMA = 0.035, 0.05
 
 
+#: A light cache's arrays that are each light's own where several lights share one trace's
+#: samples (:func:`build_light_cache`'s ``others``); the rest are the samples' own.
+OWN_ARRAYS = ("weight", "mirror", "mirror_sky", "diffuse_sky", "lobe_sky")
+
+
 @dataclass(frozen=True)
 class SkyPlan:
     """Where a light cache takes the sky's integrals (the control variate's deterministic
@@ -354,10 +359,21 @@ def _sky_values(emitter, si, quad):
     """I_d (Q, 3) or None (``quad['diffuse']`` None) and I_s at the nodes of ``quad`` (Q, n, 3)
     of every surface interaction in ``si`` under the emitter's current sky, or each under its
     frame's (``emitter`` a :class:`~.sky_control.FrameSkies`); ``quad`` a
-    :func:`~.sky_control.quadrature` on SIGMA_TABLE, or its nodes' subset."""
-    diffuse, values = sky_integrals(emitter, si, quad)
-    return (None if diffuse is None else to_numpy(diffuse),
-            np.stack([to_numpy(v) for v in values], axis=1))
+    :func:`~.sky_control.quadrature` on SIGMA_TABLE, or its nodes' subset.  Given a list of
+    emitters, a list of those pairs, one per emitter: each node's integrals under all of them
+    are evaluated together, its directions and lobe once."""
+    import drjit as dr
+
+    emitters = emitter if isinstance(emitter, list) else [emitter]
+    diffuse, values = sky_integrals(emitters, si, quad)
+
+    def numpy(sums):                                   # one kernel for all the emitters
+        dr.eval(*sums)
+        return [to_numpy(v) for v in sums]
+    d = [None] * len(emitters) if diffuse is None else numpy(diffuse)
+    v = [numpy(sums) for sums in values]
+    out = [(d[i], np.stack([node[i] for node in v], axis=1)) for i in range(len(emitters))]
+    return out if isinstance(emitter, list) else out[0]
 
 
 def _interaction_arrays(si):
@@ -484,7 +500,7 @@ class _SharedSky:
 
 def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
                       directions=DIRECTIONS, seed=0, max_depth=3, normalisation="ward",
-                      plan="fit", stats=None):
+                      plan="fit", stats=None, others=()):
     """Trace the light arriving at ``pixels`` for every sky in ``skies``.
 
     Parameters
@@ -504,10 +520,17 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         (their positions are one ray)
     stats : None, or a dict that receives ``shared``, the number of (pixel, frame) pairs whose
         sky integrals were interpolated
+    others : lights traced with this light's samples, each a list of skies without maps, one
+        per frame of ``skies`` and with its sun (a sky's shape variants,
+        :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`): they share every position,
+        direction and path (each light's radiance along them its own, common random
+        numbers) and the sky integrals' nodes, so their estimates are correlated
+        (:func:`~.basis_table.trace_tables` keeps the covariances); about a third of the
+        time of a trace of their own
 
     Returns
     -------
-    LightCache
+    LightCache, or with ``others`` a list of them: this light's, then each of theirs
     """
     import drjit as dr
     import mitsuba as mi
@@ -520,6 +543,11 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         sensor = scene.sensors()[0]
         w, h = sensor.film().crop_size()
     P, S, K = len(pixels), int(positions), int(directions)
+    lights = [skies, *others]
+    if any(len(light) != len(skies) or any(sky.envmap is not None for sky in light)
+           for light in others):
+        raise ValueError("the lights traced with a light's samples need one sky without a "
+                         "map per frame of its")
     emitter = scene.environment()
     integrator = mi.load_dict({"type": "path", "max_depth": int(max_depth)})
     # the material each pixel must show (one for all, or one per pixel: a map's chunk)
@@ -572,6 +600,8 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     sampler = mi.load_dict({"type": "independent"})
     out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos",
                            "hit", "sun_half_cos", "diffuse_sky", "lobe_sky")}
+    # each light's own arrays (the first light's in ``out``, which holds the shared ones)
+    outs = [out] + [{k: [] for k in OWN_ARRAYS} for _ in others]
     ids = np.array([shape.bsdf().id() for shape in target], dtype=object)
     # the sky's integrals of every frame after the frames (below)
     pending = []                          # per frame: (points, the shared sky's plan or None)
@@ -626,6 +656,17 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         # the same without the solar disc: the control variate's constant
         sun_seen = ~scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
         lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0) - emitter.sky_eval(ray_m.d)
+        # the other lights along the same paths: their radiance, with the same random numbers
+        theirs = []
+        for light in others:
+            update_sky(params, light[t], "sky.")
+            sampler.seed(seeds[0], P * S * K)
+            li_o, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(sik.spawn_ray(d)))
+            sampler.seed(seeds[1], P * S)
+            lm_o, _, _ = integrator.sample(scene, sampler, ray_m)
+            theirs.append(((li_o - emitter.sky_eval(d)) * inv_pdf, lm_o,
+                           lm_o - dr.select(sun_seen, emitter.sun_radiance, 0.0)
+                           - emitter.sky_eval(ray_m.d)))
         sun = si.to_local(opaque_value(mi.Vector3f, sky.sun_direction))
         shared = share is not None and sky.envmap is None
         own = None if shared else \
@@ -636,7 +677,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
                 np.array(si.to_world(mi.reflect(si.wi)), dtype=float).T, P, S)
         few = dr.gather(mi.SurfaceInteraction3f, si, wide_index) if wide else None
         dr.eval(si.wi, wl, weight, inv_pdf, lm, lm_sky, sun,       # together: shared parts once
-                None if shared else (own.wi, own.sh_frame),
+                theirs, None if shared else (own.wi, own.sh_frame),
                 None if few is None else (few.wi, few.sh_frame))
 
         def np3(v, n):
@@ -650,6 +691,10 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         out["inv_pdf"].append(np.array(inv_pdf, dtype=np.float32).reshape(P, S * K))
         out["mirror_sky"].append(np3(lm_sky, S))
         out["mirror"].append(np3(lm, S) / S)
+        for o, (w_o, lm_o, lm_sky_o) in zip(outs[1:], theirs):
+            o["weight"].append(np3(w_o, S * K))
+            o["mirror_sky"].append(np3(lm_sky_o, S))
+            o["mirror"].append(np3(lm_o, S) / S)
         out["mirror_cos"].append(view[:, 2].astype(np.float32).reshape(P, S))
         out["hit"].append(on.reshape(P, S).all(axis=1))
         out["sun_half_cos"].append(_sun_half_cos(np.array(sun, dtype=float).T, view,
@@ -664,9 +709,12 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     # every frame's sky integrals in passes of up to SKY_PASS_POINTS points (at least a frame),
     # each point under its own frame's sky (FrameSkies); a frame whose sky has a map alone,
     # under the emitter set to that sky
-    def integrate(points, q):
-        """Per frame, :func:`_sky_values` under ``quad`` ``q`` at its ``points``."""
-        res, first = [], 0
+    def integrate(points, q, which):
+        """Per frame, :func:`_sky_values` under ``quad`` ``q`` at its ``points``, for each
+        light of ``which`` (indices into ``lights``): a list per light.  A pass's nodes hold
+        every light's values at once, so it goes in as many pieces as lights: its memory is
+        one light's."""
+        res, first = [[] for _ in which], 0
         while first < len(points):
             last, count = first + 1, len(points[first][0])
             while last < len(points) and skies[first].envmap is None \
@@ -675,47 +723,61 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
                 count += len(points[last][0])
                 last += 1
             sizes = [len(p[0]) for p in points[first:last]]
-            at = _interactions(mi, dr, *(np.concatenate(a) for a in zip(*points[first:last])))
-            if skies[first].envmap is None:
-                light = FrameSkies(skies[first:last], np.repeat(np.arange(last - first), sizes))
-            else:
-                update_sky(params, skies[first], "sky.")
-                light = emitter
-            d, v = _sky_values(light, at, q)
+            cols = [np.concatenate(a) for a in zip(*points[first:last])]
+            frame = np.repeat(np.arange(last - first), sizes)
+            got = [[] for _ in which]
+            for piece in np.array_split(np.arange(len(frame)), len(which)):
+                at = _interactions(mi, dr, *(c[piece] for c in cols))
+                if skies[first].envmap is None:
+                    light = [FrameSkies(lights[i][first:last], frame[piece]) for i in which]
+                else:                               # one light (others take no maps)
+                    update_sky(params, skies[first], "sky.")
+                    light = [emitter]
+                for g, values in zip(got, _sky_values(light, at, q)):
+                    g.append(values)
             cut = np.cumsum(sizes)[:-1]
-            res += zip([None] * len(sizes) if d is None else np.split(d, cut), np.split(v, cut))
+            for r, pieces in zip(res, got):
+                d, v = ([p[i] for p in pieces] for i in (0, 1))
+                r += zip([None] * len(sizes) if d[0] is None else np.split(np.concatenate(d), cut),
+                         np.split(np.concatenate(v), cut))
             first = last
         return res
 
-    if not any(sky.lit_by_sky for sky in skies):
-        # the sun alone (Sky.split's first part): the sky function is zero, so are its integrals
+    # the sun alone (Sky.split's first part) has a sky function of zero, so are its integrals
+    lit = [i for i, light in enumerate(lights) if any(sky.lit_by_sky for sky in light)]
+    for i in set(range(len(lights))) - set(lit):
         for _ in pending:
-            _add_sky(out, np.zeros((P, 3)), np.zeros((P, len(is_wide), 3)), P, S)
-    elif wide:
-        narrow = integrate([p[1] for p, _ in pending], quads[1]) if not is_wide.all() else \
-            [(None, None)] * len(pending)
-        for (d, v_wide), (_, v_narrow) in zip(integrate([p[0] for p, _ in pending], quads[0]),
-                                              narrow):
-            # each half's mean over its k / 2 positions, given to the half's positions
-            d, v_wide = (np.repeat(a.reshape(P, 2, kw, *a.shape[1:]).mean(axis=2),
-                                   [half, S - half], axis=1) for a in (d, v_wide))
-            values = np.empty((P, S, len(is_wide), 3))
-            values[:, :, is_wide] = v_wide
-            if v_narrow is not None:
-                values[:, :, ~is_wide] = v_narrow.reshape(P, S, -1, 3)
-            _add_sky(out, d.reshape(P * S, 3),
-                     chebyshev_coefficients(values, axis=2).reshape(P * S, len(is_wide), 3),
-                     P, S)
-    else:
-        for (_, plan), (d, v) in zip(pending, integrate([p for p, _ in pending], quad)):
-            c = chebyshev_coefficients(v, axis=1)
-            if plan is not None:
-                d, c, n_shared = share.combine(plan, d, c)
-                if stats is not None:
-                    stats["shared"] += n_shared
-            _add_sky(out, d, c, P, S)
-    return LightCache(**{k: np.stack(v, axis=1) for k, v in out.items()},
-                      normalisation=normalisation)
+            _add_sky(outs[i], np.zeros((P, 3)), np.zeros((P, len(is_wide), 3)), P, S)
+    if lit and wide:
+        narrow = integrate([p[1] for p, _ in pending], quads[1], lit) \
+            if not is_wide.all() else [[(None, None)] * len(pending)] * len(lit)
+        for i, wides, narrows in zip(lit, integrate([p[0] for p, _ in pending], quads[0], lit),
+                                     narrow):
+            for (d, v_wide), (_, v_narrow) in zip(wides, narrows):
+                # each half's mean over its k / 2 positions, given to the half's positions
+                d, v_wide = (np.repeat(a.reshape(P, 2, kw, *a.shape[1:]).mean(axis=2),
+                                       [half, S - half], axis=1) for a in (d, v_wide))
+                values = np.empty((P, S, len(is_wide), 3))
+                values[:, :, is_wide] = v_wide
+                if v_narrow is not None:
+                    values[:, :, ~is_wide] = v_narrow.reshape(P, S, -1, 3)
+                _add_sky(outs[i], d.reshape(P * S, 3),
+                         chebyshev_coefficients(values, axis=2).reshape(P * S, len(is_wide), 3),
+                         P, S)
+    elif lit:
+        for i, each in zip(lit, integrate([p for p, _ in pending], quad, lit)):
+            for (_, plan), (d, v) in zip(pending, each):
+                c = chebyshev_coefficients(v, axis=1)
+                if plan is not None:
+                    d, c, n_shared = share.combine(plan, d, c)
+                    if stats is not None and i == 0:
+                        stats["shared"] += n_shared
+                _add_sky(outs[i], d, c, P, S)
+    # each list freed once stacked
+    common = {k: np.stack(out.pop(k), axis=1) for k in list(out) if k not in OWN_ARRAYS}
+    caches = [LightCache(**common, **{k: np.stack(o.pop(k), axis=1) for k in OWN_ARRAYS},
+                         normalisation=normalisation) for o in outs]
+    return caches if others else caches[0]
 
 
 def _small_footprints(normals, mirrors, P, S):

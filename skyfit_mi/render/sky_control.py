@@ -199,10 +199,17 @@ def diffuse_directions(up, n_rays=DIFFUSE_AZIMUTHS, n_polar=DIFFUSE_POLAR, table
 def _sky_sum(mi, dr, emitter, si, wi, w, q, J, f=1.0):
     """Sum over each point's J nodes of f h(wi) w, h the emitter's sky function toward the
     nodes' directions (local to each point's frame) [W m^-2 sr^-1], (Q) Dr.Jit colours;
-    ``emitter`` a ``cie_sky`` emitter or :class:`FrameSkies` (each point its own frame's sky)."""
+    ``emitter`` a ``cie_sky`` emitter or :class:`FrameSkies` (each point its own frame's sky),
+    or a list of them: then a list of sums, one per sky, over the same nodes (one kernel
+    evaluates them together)."""
     frame = dr.gather(mi.Frame3f, si.sh_frame, q)
-    sky = emitter.at(q) if isinstance(emitter, FrameSkies) else emitter
-    return dr.block_sum(f * sky.sky_eval(frame.to_world(wi)) * w, J)
+    d, fw = frame.to_world(wi), f * w
+    skies = emitter if isinstance(emitter, list) else [emitter]
+    terms = [fw * (e.at(q) if isinstance(e, FrameSkies) else e).sky_eval(d) for e in skies]
+    if len(terms) > 1:
+        dr.eval(*terms)        # one kernel: the nodes' directions and lobe once for every sky
+    sums = [dr.block_sum(t, J) for t in terms]
+    return sums if isinstance(emitter, list) else sums[0]
 
 
 class FrameSkies:
@@ -248,7 +255,8 @@ class _SkyLanes:
 
 def _lobe_sum(mi, dr, emitter, si, up, sigma, resolution, normalisation, tables=None):
     """I_s of every interaction of ``si`` through the rho_s = 1 lobe of ``normalisation`` at
-    roughness ``sigma`` (a Dr.Jit value) and quadrature ``resolution``: (Q) Dr.Jit colours."""
+    roughness ``sigma`` (a Dr.Jit value) and quadrature ``resolution``: (Q) Dr.Jit colours
+    (a list of them for a list of emitters, :func:`_sky_sum`)."""
     from .plugins.ward import lobe, lobe_distribution      # a plugin: needs the variant set
 
     wi, w, q, J = lobe_directions(si.wi, up, sigma, *resolution, tables=tables,
@@ -313,7 +321,8 @@ def sky_integrals(emitter, si, quad):
     """I_d and I_s at each Chebyshev node of ``quad`` (:func:`quadrature`) for every surface
     interaction of ``si`` (Q) under the emitter's current sky (or each under its frame's,
     ``emitter`` a :class:`FrameSkies`): Dr.Jit colours (Q) and a list of them
-    [W m^-2 sr^-1], not yet evaluated (I_d None where ``quad['diffuse']`` is None)."""
+    [W m^-2 sr^-1], not yet evaluated (I_d None where ``quad['diffuse']`` is None).  Given a
+    list of emitters, each value is a list of theirs, from the same nodes (:func:`_sky_sum`)."""
     import drjit as dr
     import mitsuba as mi
 
