@@ -210,8 +210,8 @@ def test_a_mix_of_lights_traced_with_shared_samples_keeps_their_covariances(days
     caches = build_light_cache(s.scene, s.params, rest, s.obs.pixels[:8], "disc",
                                positions=8, directions=64, seed=5, others=[variant])
 
-    def model_of(cache):
-        return WardModel(cache, "colour")
+    def model_of(cache, others=()):
+        return WardModel(cache, "colour", others=others)
     (a, b), cov = tabulate_group(caches, model_of)
     assert cov.pairs == [(0, 1)]
     w = (0.7, np.array([0.2, 0.5, 0.9]))                         # one weight per frame too

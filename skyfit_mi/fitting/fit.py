@@ -27,7 +27,7 @@ from .sky_fit import (SKY_DOMINATES, check_terms, default_sky, default_sun_sd, f
                       light_level_sd, shape_variants, sky_level_at, sun_source, sun_up)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, block_budget, memory_estimate,
-                                  mixed, trace_table, trace_tables)
+                                  mixed, shared_budget, trace_table, trace_tables)
 from ..render.fit_model import (BY_COUNT, PARAMETERS, WardModel, bounds, check_fit_normalisation,
                                 check_start, other_readings)
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
@@ -362,7 +362,8 @@ class FitSession:
                 f"fitting {len(at)} points in {len(self.skies)} frames needs up to "
                 f"{need / 2**30:.1f} GB, but this machine has {have / 2**30:.1f} GB available; "
                 "fit fewer pixels (--max-pixels) or frames (--frames), or a region at a time.")
-        model_of = lambda cache: WardModel(cache, self.model, self.normalisation)  # noqa: E731
+        def model_of(cache, others=()):
+            return WardModel(cache, self.model, self.normalisation, others)
         if not self.split_sky:
             table, c["blocks"] = trace_table(self.scene, self.params, self.skies, at, bsdf_id,
                                              model_of, **self._cache_options())
@@ -373,7 +374,7 @@ class FitSession:
         budget = block_budget(len(at), len(self.skies), c["positions"])
         parts = []
         for group, seed, b in zip((lights[:1], lights[1:]), seeds,
-                                  (budget // len(lights[1:]), budget)):
+                                  (shared_budget(budget, len(lights[1:])), budget)):
             tables, cov, c["blocks"] = trace_tables(self.scene, self.params, group, at, bsdf_id,
                                                     model_of, seed=int(seed), budget=b, **options)
             parts += tables

@@ -170,9 +170,13 @@ class WardModel:
     normalisation : {'ward', 'duer', 'balanced'} or a microfacet lobe
         (:data:`~skyfit_mi.physics.microfacet.LOBES`; 'radiance' is refused:
         :func:`check_fit_normalisation`)
+    others : light caches of other lights traced with ``cache``'s samples
+        (:func:`~.light_cache.build_light_cache`'s ``others``): the basis's shares
+        (:meth:`_shares`) are then every light's, stacked after this one's pixels, from one
+        evaluation of the lobe (:func:`~.basis_table.tabulate_group`)
     """
 
-    def __init__(self, cache, model, normalisation="ward"):
+    def __init__(self, cache, model, normalisation="ward", others=()):
         import drjit as dr
         import mitsuba as mi
 
@@ -187,7 +191,6 @@ class WardModel:
         self.si = dr.zeros(mi.SurfaceInteraction3f, P * T * N)
         self.si.wi = _dr_array(mi.Vector3f, cache.wo, 3)
         self.wi = _dr_array(mi.Vector3f, cache.wi, 3)
-        self.weight = _dr_array(mi.Color3f, cache.weight, 3)
         self.si_m = dr.zeros(mi.SurfaceInteraction3f, P * T * S)
         # the mirror sample only needs the view direction
         wo_m = np.zeros((P, T, S, 3), np.float32)
@@ -195,7 +198,6 @@ class WardModel:
         wo_m[..., 0] = np.sqrt(np.clip(1 - c**2, 0, 1))
         wo_m[..., 2] = c
         self.si_m.wi = _dr_array(mi.Vector3f, wo_m, 3)
-        self.mirror = _dr_array(mi.Color3f, cache.mirror, 3)
         self.S = S
         # the lobe's control variate (see .light_cache): the inverse densities, the estimate of
         # the diffuse albedo per position (rho_d times it is the diffuse part of the estimated
@@ -204,12 +206,8 @@ class WardModel:
         up = (cache.wi[..., 2] > 0) & (cache.wo[..., 2] > 0)
         d_hat = (np.clip(cache.wi[..., 2], 0, None) / np.pi * up * cache.inv_pdf)
         self.d_hat = _dr_array(mi.Float, d_hat.reshape(P * T * S, -1).sum(axis=1))
-        self.c = _dr_array(mi.Color3f, cache.mirror_sky, 3)
-        # the sky function's integrals (.sky_control), per position's share
-        cache.check_normalisation(normalisation)
-        self.diffuse_sky = _dr_array(mi.Color3f, cache.diffuse_sky / S, 3)
-        self.lobe_sky = [_dr_array(mi.Color3f, cache.lobe_sky[:, :, :, m] / S, 3)
-                         for m in range(cache.lobe_sky.shape[3])]
+        # each light's own arrays: this cache's, then the others'
+        self.lights = [self._light_arrays(c, normalisation) for c in (cache, *others)]
         a, b, c = albedo_nodes_of(normalisation)
         self.J = len(a)
         self.si_q = dr.zeros(mi.SurfaceInteraction3f, P * T * S * self.J)
@@ -226,6 +224,19 @@ class WardModel:
         self.bsdf = self.plugins["model"][0]
         self._D_shares = None
         self.evaluations = self.basis_evaluations = 0
+
+    def _light_arrays(self, cache, normalisation):
+        """A light's own arrays (light_cache.OWN_ARRAYS) in Dr.Jit: its samples' weights,
+        its mirror rays, the lobe's control variate's constant c and the sky function's
+        integrals (.sky_control) per position's share."""
+        mi, S = self.mi, self.S
+        cache.check_normalisation(normalisation)
+        return {"weight": _dr_array(mi.Color3f, cache.weight, 3),
+                "mirror": _dr_array(mi.Color3f, cache.mirror, 3),
+                "c": _dr_array(mi.Color3f, cache.mirror_sky, 3),
+                "diffuse_sky": _dr_array(mi.Color3f, cache.diffuse_sky / S, 3),
+                "lobe_sky": [_dr_array(mi.Color3f, cache.lobe_sky[:, :, :, m] / S, 3)
+                             for m in range(cache.lobe_sky.shape[3])]}
 
     def _props(self, d):
         d = dict(d)
@@ -248,10 +259,12 @@ class WardModel:
             self.dr.enable_grad(v[k])
         return v, float(theta[-1])
 
-    def _eval(self, bsdf, sigma, per_position=False):
+    def _eval(self, bsdf, sigma, per_position=False, every=False):
         """L for the plugin's current parameters (``sigma`` its sigma_alpha as a float): the
         BRDF on the cached light with the lobe's control variate, plus the mirror; with
-        ``per_position`` each position's share (size P*T*S) instead of their sum (P*T)."""
+        ``per_position`` each position's share (size P*T*S) instead of their sum (P*T): a
+        list of the first light's alone, or with ``every`` of each light's (``others``), the
+        BRDF evaluated once for all."""
         dr, mi = self.dr, self.mi
         ctx = mi.BSDFContext()
         f = bsdf.eval(ctx, self.si, self.wi)                            # f_r cos(theta_i)
@@ -260,15 +273,11 @@ class WardModel:
         dr.eval(f)
         K = self.n // self.S
         control = SIGMA_MIRROR < sigma < CONTROL_SIGMA
-        L = dr.block_sum(f * self.weight, K)
         bs, w = bsdf.sample(ctx, self.si_m, mi.Float(0.0), mi.Point2f(0.5, 0.5))
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection)
-        L += dr.select(delta, w * bs.pdf, 0.0) * self.mirror
         rho_d, spec, s = bsdf.raw()
-        L += rho_d * self.diffuse_sky
         if sigma > SIGMA_MIRROR:
             x = chebyshev_x(s, *SIGMA_TABLE, dr.log, dr.clip)
-            L += spec * chebyshev_eval(self.lobe_sky, x)
         if control:
             # the lobe's albedo: its estimate from the samples, and the quadrature
             estimate = dr.block_sum(f * self.inv_pdf, K) - rho_d * self.d_hat
@@ -280,8 +289,17 @@ class WardModel:
             g = bsdf.eval(glossy, self.si_q, 2.0 * oh * h - self.si_q.wi)
             dr.eval(g)
             albedo = dr.block_sum(g * (2.0 * dr.square(s) * oh * h.z * dr.square(h.z) * c), self.J)
-            L += control_weight(s, dr.clip) * self.c * (albedo / self.S - estimate)
-        return L if per_position else dr.block_sum(L, self.S)
+        out = []
+        for light in self.lights if every else self.lights[:1]:
+            L = dr.block_sum(f * light["weight"], K)
+            L += dr.select(delta, w * bs.pdf, 0.0) * light["mirror"]
+            L += rho_d * light["diffuse_sky"]
+            if sigma > SIGMA_MIRROR:
+                L += spec * chebyshev_eval(light["lobe_sky"], x)
+            if control:
+                L += control_weight(s, dr.clip) * light["c"] * (albedo / self.S - estimate)
+            out.append(L if per_position else dr.block_sum(L, self.S))
+        return out
 
     def radiance_and_variance(self, theta):
         """``radiance(theta)`` and its Monte Carlo variance [(W m^-2 sr^-1)^2], both (P, T, 3).
@@ -294,9 +312,10 @@ class WardModel:
         est = self._np(shares, per_position=True) * self.S
         return est.mean(axis=2), np.var(est, axis=2, ddof=1) / self.S
 
-    def _radiance_dr(self, v, sigma, per_position=False, plugin="model"):
+    def _radiance_dr(self, v, sigma, per_position=False, plugin="model", every=False):
         """L as a Dr.Jit Color3f of size P*T from parameter values ``v`` (attached to their
-        gradients) of the model's plugin, or of the basis plugin (``plugin='basis'``).
+        gradients) of the model's plugin, or of the basis plugin (``plugin='basis'``); with
+        ``every`` a list of them, one per light (:meth:`_eval`).
 
         Below the cache's resolution (sigma < SIGMA_RESOLVED) L is interpolated linearly in
         sigma between the ideal mirror and the lobe at SIGMA_RESOLVED, so that L stays a
@@ -307,22 +326,22 @@ class WardModel:
             p[k] = x
         if sigma >= SIGMA_RESOLVED:
             p.update()
-            L = self._eval(bsdf, sigma, per_position)
+            L = self._eval(bsdf, sigma, per_position, every)
         else:
             p["sigma_alpha"] = self.mi.Float(SIGMA_RESOLVED)
             p.update()
-            rough = self._eval(bsdf, SIGMA_RESOLVED, per_position)
+            rough = self._eval(bsdf, SIGMA_RESOLVED, per_position, every)
             p["sigma_alpha"] = self.mi.Float(0.0)
             p.update()
-            mirror = self._eval(bsdf, 0.0, per_position)
-            L = mirror + (v["sigma_alpha"] / SIGMA_RESOLVED) * (rough - mirror)
+            mirror = self._eval(bsdf, 0.0, per_position, every)
+            L = [m + (v["sigma_alpha"] / SIGMA_RESOLVED) * (r - m) for r, m in zip(rough, mirror)]
         # L holds the opaque values; the plugin gets literals back, because a frozen function
         # elsewhere in the process (RegionRenderModel) dispatches over every registered BSDF
         # and cannot record foreign opaque state
         for k, x in rest.items():
             p[k] = x
         p.update()
-        return L
+        return L if every else L[0]
 
     def _np(self, v, per_position=False):
         """A Dr.Jit Color3f as (P, T, 3), or (P, T, S, 3) for per-position shares."""
@@ -382,10 +401,11 @@ class WardModel:
 
     def _shares(self, rho_s, sigma):
         """Each position's share (P, T, S, 3) of the basis plugin's L (rho_s = 0: the diffuse
-        basis; 1: the lobe at sigma)."""
+        basis; 1: the lobe at sigma); with ``others``, every light's, stacked (n P, T, S, 3)."""
         L = self._radiance_dr(*self._variables([rho_s, sigma], model="two"), per_position=True,
-                              plugin="basis")
-        return self._np(L, per_position=True)
+                              plugin="basis", every=True)
+        self.dr.eval(*L)                               # one kernel for every light's
+        return np.concatenate([self._np(x, per_position=True) for x in L])
 
     def _diffuse_shares(self):
         """The diffuse basis's shares, computed once: they do not depend on theta."""
