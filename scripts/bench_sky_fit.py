@@ -33,12 +33,15 @@ FIT = ["fit", "--all", "--model", "5", "-q"]
 
 def run(args):
     """Wall time [s] and peak resident memory [GB] of one skyfit command."""
-    t0 = time.perf_counter()
-    p = subprocess.Popen(SKYFIT + args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(p.pid, 0)
-    if status:
-        sys.exit(f"skyfit {' '.join(args[:4])} failed: {p.stderr.read().decode()[-500:]}")
-    return time.perf_counter() - t0, usage.ru_maxrss / 2**20
+    with tempfile.TemporaryFile() as err:
+        t0 = time.perf_counter()
+        p = subprocess.Popen(SKYFIT + args, stdout=subprocess.DEVNULL, stderr=err)
+        _, status, usage = os.wait4(p.pid, 0)
+        t = time.perf_counter() - t0
+        if status:
+            err.seek(0)
+            sys.exit(f"skyfit {' '.join(args[:4])} failed: {err.read().decode()[-500:]}")
+    return t, usage.ru_maxrss / 2**20
 
 
 def separate(day, spec, out):

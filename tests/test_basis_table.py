@@ -193,10 +193,10 @@ def test_many_parameter_sets_at_once_equal_each_set(traced):
 
 
 def test_a_mix_of_lights_traced_with_shared_samples_keeps_their_covariances(days):
-    """The rest of a sky and its shape variant traced with one trace's samples
-    (trace_tables): their mix (basis_table.mixed, with their Covariances) is the table of the
-    mixed light's own cache (the model is linear in each light's arrays), its positions'
-    spread too; adding their variances as if independent would not be."""
+    """The rest of a sky and its two shape variants traced with one trace's samples
+    (tabulate_group): their mix (basis_table.mixed, with their Covariances, every pair) is the
+    table of the mixed light's own cache (the model is linear in each light's arrays), its
+    positions' spread too; adding their variances as if independent would not be."""
     from dataclasses import replace
 
     from skyfit_mi.fitting.fit import FitSession
@@ -206,20 +206,22 @@ def test_a_mix_of_lights_traced_with_shared_samples_keeps_their_covariances(days
 
     s = FitSession(days["clean"], "disc", REGION, model="colour", trace=False, split_sky=True,
                    sky_shape=True)
-    _, rest, variant, _ = (light[3:6] for light in s._sky_parts())
+    _, rest, *variants = (light[3:6] for light in s._sky_parts())
     caches = build_light_cache(s.scene, s.params, rest, s.obs.pixels[:8], "disc",
-                               positions=8, directions=64, seed=5, others=[variant])
+                               positions=8, directions=64, seed=5, others=variants)
 
     def model_of(cache, others=()):
         return WardModel(cache, "colour", others=others)
-    (a, b), cov = tabulate_group(caches, model_of)
-    assert cov.pairs == [(0, 1)]
-    w = (0.7, np.array([0.2, 0.5, 0.9]))                         # one weight per frame too
-    mix = replace(caches[0], **{k: w[0] * getattr(caches[0], k)
-                                + w[1].reshape(1, 3, *[1] * (getattr(caches[0], k).ndim - 2))
-                                * getattr(caches[1], k) for k in OWN_ARRAYS})
+    tables, cov = tabulate_group(caches, model_of)
+    assert cov.pairs == [(0, 1), (0, 2), (1, 2)]
+    w = [0.7, np.array([0.2, 0.5, 0.9]), -0.3]                  # one weight per frame too
+
+    def per_frame(x, ndim):
+        return np.reshape(x, (1, -1) + (1,) * (ndim - 2)) if np.ndim(x) else x
+    mix = replace(caches[0], **{k: sum(per_frame(wj, getattr(c, k).ndim) * getattr(c, k)
+                                       for wj, c in zip(w, caches)) for k in OWN_ARRAYS})
     want = tabulate(mix, model_of(mix))
-    got = mixed(a, [b], [w[1]], w[0], cov)
+    got = mixed(tables[0], tables[1:], w[1:], w[0], cov)
     for k in ("D", "G0", "G1"):
         x, y = getattr(got, k), getattr(want, k)
         assert np.allclose(x, y, rtol=FLOAT32_RTOL, atol=FLOAT32_RTOL * np.abs(y).max()), k
@@ -229,8 +231,8 @@ def test_a_mix_of_lights_traced_with_shared_samples_keeps_their_covariances(days
                            atol=FLOAT32_RTOL * np.abs(y).max())
     # the spread is ~1e-5 of each position's estimate, whose float32 rounding (the mix's own
     # trace rounds its sums in another order) moves it by ~0.3% (measured 0.2% of the largest
-    # at most); as if independent they were 34-50% off
-    apart = mixed(a, [b], [w[1]], w[0])
+    # at most with two lights); as if independent they were 34-50% off
+    apart = mixed(tables[0], tables[1:], w[1:], w[0])
     for k in ("VDD", "VDG", "VGG"):
         x, y, z = getattr(got, k), getattr(want, k), getattr(apart, k)
         assert np.allclose(x, y, rtol=0.01, atol=0.01 * np.abs(y).max()), k

@@ -354,7 +354,8 @@ class FitSession:
         c = self.cache_settings
         # the split light's tables and their mix
         lights = self._sky_parts() if self.split_sky else None
-        need = (len(lights) + 1 if lights else 1) * memory_estimate(
+        # a table per part, and the shape group's covariances about one more
+        need = (len(lights) + 1 + self.sky_shape if lights else 1) * memory_estimate(
             len(at), len(self.skies), c["positions"], c["directions"])
         have = available_memory()
         if have is not None and need > have:

@@ -486,8 +486,8 @@ def block_budget(P, T, positions):
 def shared_budget(budget, lights):
     """A block's samples where ``lights`` lights share one trace's samples
     (:func:`trace_tables`) for a ``budget`` of one light's: each light's own arrays and its
-    tabulation's shares take about a light's memory again (half the budget made the board's
-    shape fit 1 s faster of 150 and its peak 0.80 -> 1.00 GB)."""
+    tabulation's shares take about a light's memory again.  (Half the budget for the board's
+    three: its shape fit no faster, 150 s, and its peak 1.00 GB, not 0.80.)"""
     return int(budget // lights)
 
 

@@ -321,6 +321,9 @@ class WardModel:
         sigma between the ideal mirror and the lobe at SIGMA_RESOLVED, so that L stays a
         continuous function of sigma down to the mirror (see :mod:`.light_cache`).
         """
+        if not every and len(self.lights) > 1:
+            raise ValueError("a model of several lights gives their basis's shares alone "
+                             "(basis_table.tabulate_group)")
         bsdf, p, rest = self.plugins[plugin]
         for k, x in v.items():
             p[k] = x
@@ -404,7 +407,7 @@ class WardModel:
         basis; 1: the lobe at sigma); with ``others``, every light's, stacked (n P, T, S, 3)."""
         L = self._radiance_dr(*self._variables([rho_s, sigma], model="two"), per_position=True,
                               plugin="basis", every=True)
-        self.dr.eval(*L)                               # one kernel for every light's
+        self.dr.eval(*L)                                 # every light's shares together
         return np.concatenate([self._np(x, per_position=True) for x in L])
 
     def _diffuse_shares(self):

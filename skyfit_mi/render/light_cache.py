@@ -521,10 +521,11 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     stats : None, or a dict that receives ``shared``, the number of (pixel, frame) pairs whose
         sky integrals were interpolated
     others : lights traced with this light's samples, each a list of skies without maps, one
-        per frame of ``skies`` and with its sun (a sky's shape variants,
+        per frame of ``skies`` (no map there either) with its frame's sun direction, disc and
+        ground (a sky's shape variants,
         :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`): they share every position,
-        direction and path (each light's radiance along them its own, common random
-        numbers) and the sky integrals' nodes, so their estimates are correlated
+        sampled direction and random number (each light's paths beyond the first bounce and
+        its radiance its own) and the sky integrals' nodes, so their estimates are correlated
         (:func:`~.basis_table.trace_tables` keeps the covariances); each costs a small
         share of a trace of its own (the board's sky and two shape variants, tabulated:
         65 s, the sky alone 57 s)
@@ -545,10 +546,13 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         w, h = sensor.film().crop_size()
     P, S, K = len(pixels), int(positions), int(directions)
     lights = [skies, *others]
-    if any(len(light) != len(skies) or any(sky.envmap is not None for sky in light)
-           for light in others):
+    if others and any(len(light) != len(skies) or any(
+            sky.envmap is not None or k.envmap is not None or _has_sun(sky) != _has_sun(k)
+            or sky.ground_only != k.ground_only
+            or not np.allclose(sky.sun_direction, k.sun_direction) for sky, k in zip(light, skies))
+            for light in others):
         raise ValueError("the lights traced with a light's samples need one sky without a "
-                         "map per frame of its")
+                         "map per frame of its, each with that frame's sun and ground")
     emitter = scene.environment()
     integrator = mi.load_dict({"type": "path", "max_depth": int(max_depth)})
     # the material each pixel must show (one for all, or one per pixel: a map's chunk)
@@ -727,7 +731,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
             cols = [np.concatenate(a) for a in zip(*points[first:last])]
             frame = np.repeat(np.arange(last - first), sizes)
             got = [[] for _ in which]
-            for piece in np.array_split(np.arange(len(frame)), len(which)):
+            for piece in np.array_split(np.arange(len(frame)), min(len(which), len(frame))):
                 at = _interactions(mi, dr, *(c[piece] for c in cols))
                 if skies[first].envmap is None:
                     light = [FrameSkies(lights[i][first:last], frame[piece]) for i in which]
