@@ -367,7 +367,7 @@ def _sky_values(emitter, si, quad):
     emitters = emitter if isinstance(emitter, list) else [emitter]
     diffuse, values = sky_integrals(emitters, si, quad)
 
-    def numpy(sums):                                   # one kernel for all the emitters
+    def numpy(sums):          # (their terms were evaluated in one kernel by _sky_sum)
         dr.eval(*sums)
         return [to_numpy(v) for v in sums]
     d = [None] * len(emitters) if diffuse is None else numpy(diffuse)
@@ -661,7 +661,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         # the same without the solar disc: the control variate's constant
         sun_seen = ~scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
         lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0) - emitter.sky_eval(ray_m.d)
-        # the other lights along the same paths: their radiance, with the same random numbers
+        # the other lights along the same first rays, with the same random numbers beyond
         theirs = []
         for light in others:
             update_sky(params, light[t], "sky.")
