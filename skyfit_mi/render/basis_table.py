@@ -331,9 +331,6 @@ def tabulate(cache, wm, keep=None):
         b = shares[:, :, h:2 * h].sum(axis=2) * (S / h)
         return np.stack([(a + b) / 2, (a - b) / 2])
 
-    def spread(x, y):
-        return _spread(x, y, S)
-
     d_shares = wm._diffuse_shares()
     if keep is not None:
         keep["D"] = d_shares
@@ -346,7 +343,7 @@ def tabulate(cache, wm, keep=None):
             wm.basis_evaluations += 1
             known[sigma] = halves(shares)
             if sigma in want:
-                moments[sigma] = (spread(d_shares, shares), spread(shares, shares))
+                moments[sigma] = (_spread(d_shares, shares, S), _spread(shares, shares, S))
                 if keep is not None:
                     keep[sigma] = shares
         return known[sigma]
@@ -359,7 +356,7 @@ def tabulate(cache, wm, keep=None):
     VDG, VGG = (np.stack([moments[float(v)][i] for v in variance_sigmas()]).astype(f32)
                 for i in (0, 1))
     return BasisTable(D.astype(f32), G0.astype(f32), G1.astype(f32), coef,
-                      spread(d_shares, d_shares).astype(f32), VDG, VGG,
+                      _spread(d_shares, d_shares, S).astype(f32), VDG, VGG,
                       np.tile(cache.hit, (lights, 1)),
                       np.tile(cache.sun_half_cos.astype(f32), (lights, 1, 1)), wm.normalisation)
 

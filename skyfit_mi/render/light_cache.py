@@ -361,17 +361,11 @@ def _sky_values(emitter, si, quad):
     frame's (``emitter`` a :class:`~.sky_control.FrameSkies`); ``quad`` a
     :func:`~.sky_control.quadrature` on SIGMA_TABLE, or its nodes' subset.  Given a list of
     emitters, a list of those pairs, one per emitter: each node's integrals under all of them
-    are evaluated together, its directions and lobe once."""
-    import drjit as dr
-
+    are evaluated together, its directions and lobe once (:func:`~.sky_control._sky_sum`)."""
     emitters = emitter if isinstance(emitter, list) else [emitter]
     diffuse, values = sky_integrals(emitters, si, quad)
-
-    def numpy(sums):          # (their terms were evaluated in one kernel by _sky_sum)
-        dr.eval(*sums)
-        return [to_numpy(v) for v in sums]
-    d = [None] * len(emitters) if diffuse is None else numpy(diffuse)
-    v = [numpy(sums) for sums in values]
+    d = [None] * len(emitters) if diffuse is None else [to_numpy(x) for x in diffuse]
+    v = [[to_numpy(x) for x in sums] for sums in values]
     out = [(d[i], np.stack([node[i] for node in v], axis=1)) for i in range(len(emitters))]
     return out if isinstance(emitter, list) else out[0]
 
