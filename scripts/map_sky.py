@@ -48,6 +48,7 @@ def main():
     from test_pixel_map import MATERIALS, SPEC
 
     from skyfit_mi.fitting.pixel_fit import UNDETERMINED, fit_pixels
+    from skyfit_mi.fitting.light import LightOptions
     from skyfit_mi.fitting.pixel_map import first_fits
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
@@ -80,7 +81,8 @@ def main():
         for label in ("spec", "prior"):
             t0 = time.perf_counter()
             light = None if label == "spec" else first_fits(
-                day, regions, sky="prior", sun_sd=args.sun_sd, log=lambda *a: None)[1]
+                day, regions, light=LightOptions(sky="prior", sun_sd=args.sun_sd),
+                log=lambda *a: None)[1]
             res = fit_pixels(day, list(mats), px, light=light)
             mapped = np.isfinite(res["theta"][:, 0])
             determined = mapped & ((res["warnings"] & UNDETERMINED) == 0)

@@ -177,8 +177,9 @@ def fit_replicates(day, scene, truth, replicates, positions=None, directions=512
     from scipy.stats import chi2 as chi2_dist
 
     from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.light import SPEC_LIGHT, LightPlan
     from skyfit_mi.fitting.sky_fit import fit_sky_scale
-    from skyfit_mi.physics.sky import SKY_LEVEL_SD, SUN_LEVEL_SD
+    from skyfit_mi.physics.sky import SUN_LEVEL_SD
     from skyfit_mi.pipeline.pixels import frame_values
 
     fitted = (relabelled(day, Path(day).parent / "fit_cie_clear", thesis_clear)
@@ -186,18 +187,17 @@ def fit_replicates(day, scene, truth, replicates, positions=None, directions=512
               relabelled(day, Path(day).parent / f"fit_turbid_{spec_turbidity:g}",
                          spec_turbid(spec_turbidity)))
     region, _, pixels = SCENES[scene]
+    # a photographed day's default: the sun's level modelled
+    plan = SPEC_LIGHT if sky == "spec" else LightPlan(sky, SUN_LEVEL_SD, "modelled", terms, shape)
     s = FitSession(fitted, region, pixels, model="colour", positions=positions,
-                   directions=directions, split_sky=sky != "spec", sky_shape=shape)
-    s.sun_sd = 0.0 if sky == "spec" else SUN_LEVEL_SD
-    s.sun_source = "modelled" if sky != "spec" else "given"     # a photographed day's default
+                   directions=directions, light=plan)
     radiance = frame_values(fitted, s.obs.pixels, s.obs.frames)
     out = []
     for r in range(replicates):
         s.obs.recapture(radiance, np.random.default_rng([36, r]))
-        if sky != "spec":
-            fit_sky_scale([s], seed=r, log=lambda *a: None,
-                          prior_sd=SKY_LEVEL_SD if sky == "prior" else None, terms=terms)
-        res = s.run("global", seed=r, log=lambda *a: None)
+        share = (fit_sky_scale([s], plan, seed=r, log=lambda *a: None).shares[s.name]
+                 if plan.split else None)
+        res = s.run("global", seed=r, log=lambda *a: None, sky=share)
         out.append({"parameters": res["parameters"],
                     "intervals_95": {p: res["intervals"][p]["95"] for p in NAMES},
                     "status": held_or_warned(NAMES, res["intervals"], res["warnings"], truth),

@@ -32,6 +32,7 @@ def run(out, truth_t, spec_t, seed):
     from measured_light import MATERIAL, TRUTH, relabelled
 
     from skyfit_mi.fitting.fit import fit_regions
+    from skyfit_mi.fitting.light import LightOptions
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
@@ -48,7 +49,8 @@ def run(out, truth_t, spec_t, seed):
     (_, pixels), = material_regions(day)
     pixels = pixels[pixels.sum(axis=1) % 2 == 0]
     records = {}
-    for name, kw in (("spec", dict(sky="spec")), ("joint", dict(sky="fit", sky_shape=True))):
+    for name, kw in (("spec", dict(light=LightOptions(sky="spec"))),
+                     ("joint", dict(light=LightOptions(sky="fit", shape=True)))):
         t0 = time.perf_counter()
         r = next(fit_regions(day, [("sphere", pixels)], model="colour", log=lambda *a: None,
                              **kw))

@@ -224,6 +224,7 @@ def _fit_regions(args):
 def _fit(args):
     from .fitting.chi2 import subsample_region
     from .fitting.fit import fit_regions
+    from .fitting.light import LightOptions
     from .fitting.report import write_fit, write_summary
     from .pipeline.manifest import load_manifest
     from .render.fit_model import BY_COUNT, check_fit_normalisation, check_start
@@ -251,6 +252,7 @@ def _fit(args):
                           "by its own grid and light cache: leave out --per-pixel or "
                           f"{region_only[0]}.")
     regions = _fit_regions(args)
+    light = LightOptions(args.sky, args.sun_sd, args.sky_terms, args.sky_shape)
     if args.per_pixel and args.sky_shape:
         raise SkyfitError("--sky-shape belongs to region fits; a map takes the spec's sky's "
                           "shape at the level its regions fit (leave out --per-pixel or "
@@ -267,8 +269,7 @@ def _fit(args):
                     seed=args.seed, patch=args.patch, chunk=args.chunk or CHUNK,
                     workers=args.workers, scheduler=args.scheduler, overwrite=args.overwrite,
                     progress=not args.quiet, variant=args.variant, dask_logs=args.debug,
-                    sky=args.sky, sun_sd=args.sun_sd, sky_terms=args.sky_terms,
-                    light_pixels=args.max_pixels)
+                    light=light, light_pixels=args.max_pixels)
         for name, r in s["regions"].items():
             med = ", ".join(f"{k} = {v:.4g}" for k, v in r["median"].items() if v is not None)
             kind = f" ({r['normalisation']} {r['model']})" if auto else ""
@@ -291,15 +292,13 @@ def _fit(args):
 
         results = fit_auto(args.manifest, list(kept.items()), seed=args.seed,
                            positions=args.positions, directions=args.directions,
-                           frames=args.frames, variant=args.variant, sky=args.sky,
-                           sun_sd=args.sun_sd, sky_terms=args.sky_terms)
+                           frames=args.frames, variant=args.variant, light=light)
     else:
         results = fit_regions(args.manifest, list(kept.items()), model=model,
                               method=args.method, normalisation=args.normalisation,
                               seed=args.seed, start=args.start, positions=args.positions,
                               directions=args.directions, frames=args.frames,
-                              variant=args.variant, sky=args.sky, sun_sd=args.sun_sd,
-                              sky_terms=args.sky_terms, sky_shape=args.sky_shape)
+                              variant=args.variant, light=light)
     for (name, pixels), res in zip(regions, results):
         res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
                                          if pixels is None else len(pixels))

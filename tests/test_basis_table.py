@@ -204,9 +204,8 @@ def test_a_mix_of_lights_traced_with_shared_samples_keeps_their_covariances(days
     from skyfit_mi.render.fit_model import WardModel
     from skyfit_mi.render.light_cache import OWN_ARRAYS, build_light_cache
 
-    s = FitSession(days["clean"], "disc", REGION, model="colour", trace=False, split_sky=True,
-                   sky_shape=True)
-    _, rest, *variants = (light[3:6] for light in s._sky_parts())
+    s = FitSession(days["clean"], "disc", REGION, model="colour", trace=False)
+    _, rest, *variants = (light[3:6] for light in s._sky_parts(shape=True))
     caches = build_light_cache(s.scene, s.params, rest, s.obs.pixels[:8], "disc",
                                positions=8, directions=64, seed=5, others=variants)
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from skyfit_mi.fitting.chi2 import parse_region
+from skyfit_mi.fitting.light import LightOptions
 
 REGION = parse_region("rect:4,4,7,7")          # 16 pixels, all on the disc
 #: The rendered plastic: rho_d = 0.2 and a GGX coat (eta 1.5) of alpha 0.08 at s = 0.8; the
@@ -181,7 +182,8 @@ def test_model_auto_on_photographs_fits_the_chosen_model_with_the_skys_level(
     assert lo <= TRUTH["sigma_alpha"] <= hi, r["intervals"]["sigma_alpha"]
     assert any("with the sky's level (--sky prior)" in x for x in logs), logs
     with pytest.raises(SkyfitError, match="--sky-terms 9"):
-        next(fit_auto(day, [("disc", pixels)], sky="fit", sky_terms=9, log=logs.append))
+        next(fit_auto(day, [("disc", pixels)], light=LightOptions(sky="fit", terms=9),
+                      log=logs.append))
 
 
 def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(photographed_plastic,

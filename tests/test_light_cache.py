@@ -354,9 +354,8 @@ def test_lights_traced_with_shared_samples_each_take_their_own_radiance(days):
     from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.render.light_cache import OWN_ARRAYS, build_light_cache
 
-    s = FitSession(days["clean"], "disc", REGION, model="two", trace=False, split_sky=True,
-                   sky_shape=True)
-    _, rest, variant, _ = (light[3:6] for light in s._sky_parts())
+    s = FitSession(days["clean"], "disc", REGION, model="two", trace=False)
+    _, rest, variant, _ = (light[3:6] for light in s._sky_parts(shape=True))
     args = (s.scene, s.params)
     where = (s.obs.pixels[:6], "disc")
     options = dict(positions=8, directions=32, seed=3)

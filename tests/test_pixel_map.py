@@ -297,6 +297,7 @@ def test_a_photographed_days_map_takes_the_sky_level_its_regions_fit(board):
     from measured_light import relabelled
 
     from skyfit_mi.fitting.pixel_fit import fit_pixels
+    from skyfit_mi.fitting.light import LightOptions
     from skyfit_mi.fitting.pixel_map import _sky_summary, _widths_include, first_fits
     from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
 
@@ -306,7 +307,8 @@ def test_a_photographed_days_map_takes_the_sky_level_its_regions_fit(board):
     m["source"] = "ingest"
     (day / "manifest.json").write_text(json.dumps(m))
     chosen = [r for r in regions if r[0] in ("white_paper", "pale_blue_paper", "red_gloss_paint")]
-    _, light = first_fits(day, chosen, sky="prior", sky_terms=1, log=lambda *a: None)
+    _, light = first_fits(day, chosen, light=LightOptions(sky="prior", terms=1),
+                          log=lambda *a: None)
     lo, hi = light["sky"]["interval95"]
     assert lo < 1.5 < hi and lo > 1.0, light["sky"]
     for name, px in chosen:

@@ -348,12 +348,13 @@ def test_a_fit_of_ward_data_predicts_another_sky_and_camera_within_its_band(
 
 
 def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
-    """FitSession.sharing_light: one light cache over several regions' pixels (each pixel its
+    """relight.fitted_sessions (fit.trace_sessions): one light cache over several regions' pixels (each pixel its
     region's material) gives each region what a trace of its own gives: bit for bit for a
     single region (the same seed and samples), and for three regions on the sample board
     region means within the Monte Carlo error of the two caches (independent: other seeds)."""
     from skyfit_mi.fitting.chi2 import subsample_region
     from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.relight import fitted_sessions
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import SCENES_DIR, read_spec, validate_spec
@@ -371,14 +372,14 @@ def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
     fits = {n: {"region": n, "model": "colour", "normalisation": "ward"} for n in names}
     options = dict(seed=5, positions=4, directions=64, sky_plan="anchors", min_frames=1)
     alone = FitSession.from_fit(fits[names[0]], tmp_path / "day", pixels[names[0]], **options)
-    one = FitSession.sharing_light({names[0]: fits[names[0]]}, tmp_path / "day", pixels,
-                                   **options)[names[0]]
+    one = fitted_sessions({names[0]: fits[names[0]]}, tmp_path / "day", pixels,
+                          **options)[names[0]]
     for k in ("D", "G0", "G1", "hit", "sun_half_cos"):
         assert np.array_equal(getattr(alone.table, k), getattr(one.table, k), equal_nan=True), k
     for a, b in zip(alone.table.coef, one.table.coef):                # block by block
         assert [(r, f) for r, f, _ in a.blocks] == [(r, f) for r, f, _ in b.blocks]
         assert all(np.array_equal(x, y) for (_, _, x), (_, _, y) in zip(a.blocks, b.blocks))
-    together = FitSession.sharing_light(fits, tmp_path / "day", pixels, **options)
+    together = fitted_sessions(fits, tmp_path / "day", pixels, **options)
     theta = np.array([0.5, 0.4, 0.3, 0.1, 0.1])
     z = []
     for n in names:

@@ -9,6 +9,7 @@ import pytest
 
 from skyfit_mi.cli import main
 from skyfit_mi.fitting.chi2 import parse_region
+from skyfit_mi.fitting.light import LightOptions
 
 REGION = parse_region("rect:2,2,9,9")        # 64 pixels of the disc
 TRUTH = {"C_r": 1.0, "C_g": 1.0, "C_b": 1.0, "rho_s": 0.3, "sigma_alpha": 0.1}
@@ -35,12 +36,13 @@ def test_the_split_lights_mix_is_the_whole_lights_table(days):
     """The sun's table plus k = 1 times the rest's (independent samples) gives the whole
     light's radiance within their Monte Carlo errors; k scales only the sky's share."""
     from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.light import LightPlan
     from skyfit_mi.render.basis_table import TableModel, mixed
 
     # 16 positions: the spread of 4 understates the error of the low sun's frames
     opts = dict(model="colour", positions=16, directions=128, seed=3)
     whole = FitSession(days["clean"], "disc", REGION, **opts)
-    split = FitSession(days["clean"], "disc", REGION, split_sky=True, **opts)
+    split = FitSession(days["clean"], "disc", REGION, light=LightPlan("fit"), **opts)
     sun, rest = split.parts
     theta = np.array([0.8, 0.7, 0.6, 0.2, 0.1])
     (a, va), (b, vb) = (TableModel(t, "colour").radiance_and_variance(theta)
@@ -79,8 +81,8 @@ def dim_fit(dim_sky):
     from skyfit_mi.fitting.fit import fit_regions
 
     logs = []
-    r = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky="fit",
-                         sky_terms=1, log=logs.append))
+    r = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", light=LightOptions(sky="fit", terms=1),
+                         log=logs.append))
     return r, logs
 
 
@@ -125,7 +127,7 @@ def test_the_fitted_sky_lights_its_own_day_again(dim_fit, again):
     """A session made again from a sky fit's result (chi2map, predictions) traces the split
     light at the fitted level, so that its chi-square is the fit's at the fit's parameters."""
     r = dim_fit[0]
-    assert again.split_sky and again.sky_scale == pytest.approx(r["sky"]["k"])
+    assert again.light.split and again.sky_scale == pytest.approx(r["sky"]["k"])
     theta = np.array(list(r["parameters"].values()))
     assert again.problem.chi2(theta) == pytest.approx(r["chi2"], rel=1e-6)
 
@@ -137,7 +139,7 @@ def test_a_sky_level_beyond_the_search_is_undetermined_and_widens_every_interval
     from skyfit_mi.fitting.fit import fit_regions
 
     out = rescaled_sky(days["noisy"], tmp_path / "day", lambda frame: 1.0 / 20.0)
-    r = next(fit_regions(out, [("disc", REGION)], model="colour", sky="fit",
+    r = next(fit_regions(out, [("disc", REGION)], model="colour", light=LightOptions(sky="fit"),
                          log=lambda *a: None))
     sky = r["sky"]
     assert not sky["determined"] and sky["interval95"][1] is None and sky["k"] >= 4.0
@@ -167,15 +169,17 @@ def test_a_prior_holding_a_level_the_data_put_beyond_the_search_is_warned(again,
 
     theta = np.array(list(dim_fit[0]["parameters"].values()))
     base = float(again.problem.chi2(theta))
-    kept = {a: getattr(again, a) for a in ("sky_scale", "sky_record", "sky_sd", "sky_span",
-                                           "sun_widening")}
+    from skyfit_mi.fitting.light import LightPlan
+
+    kept = again.sky_scale
     try:
         for slope, warned in ((5.0, "upper"), (-5.0, "lower"), (0.3, None), (None, None)):
             def least(sessions, k, starts):
                 u = np.log(k)
                 return [(base + (-slope * u if slope else 40.0 * u * u), theta)]
             monkeypatch.setattr(sky_fit, "_least", least)
-            r = sky_fit.fit_sky_scale([again], log=lambda *a: None, prior_sd=0.35, terms=1)
+            r = sky_fit.fit_sky_scale([again], LightPlan("prior", terms=1),
+                                      log=lambda *a: None).record
             said = [w for w in r["warnings"] if "the data alone put the sky's level" in w]
             assert r["determined"]
             # the posterior's least point of -slope u + (u / 0.35)^2 (the bowl's: 0)
@@ -187,9 +191,7 @@ def test_a_prior_holding_a_level_the_data_put_beyond_the_search_is_warned(again,
                 assert f"{warned} end (k near" in said[0] and "not reliable" in said[0]
                 assert "unless" not in said[0]           # one level: no curve to take it up
     finally:
-        again.set_sky(kept.pop("sky_scale"))            # the fixture as it was
-        for a, v in kept.items():
-            setattr(again, a, v)
+        again.set_sky(kept)                             # the fixture as it was
 
 
 def test_a_day_without_sun_cannot_fit_the_sky_against_it(days):
@@ -197,7 +199,7 @@ def test_a_day_without_sun_cannot_fit_the_sky_against_it(days):
     from skyfit_mi.fitting.fit import fit_regions
 
     with pytest.raises(SkyfitError, match="no frame of the sequence has the sun"):
-        next(fit_regions(days["overcast"], [("disc", REGION)], model="colour", sky="fit",
+        next(fit_regions(days["overcast"], [("disc", REGION)], model="colour", light=LightOptions(sky="fit"),
                          log=lambda *a: None))
 
 
@@ -319,11 +321,12 @@ def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun):
     diffuse colour's interval misses the truth; by default a photographed day's fit counts
     the sun's level (SUN_LEVEL_SD) with the sky's prior, holds every truth, warns that the
     reflectances rest on it, and leaves sigma_alpha's interval as the data make it."""
-    from skyfit_mi.fitting.fit import fit_regions, sky_setup
+    from skyfit_mi.fitting.fit import fit_regions
+    from skyfit_mi.fitting.light import LightPlan
     from skyfit_mi.physics.sky import MEASURED_SUN_SD
     from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
 
-    exact = next(fit_regions(bright_sun, [("disc", REGION)], model="colour", sky="spec",
+    exact = next(fit_regions(bright_sun, [("disc", REGION)], model="colour", light=LightOptions(sky="spec"),
                              log=lambda *a: None))
     lo, hi = exact["intervals"]["C_g"]["95"]
     assert hi < TRUTH["C_g"], exact["intervals"]["C_g"]
@@ -340,8 +343,8 @@ def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun):
     # measured sun's below is not)
     doc, root = load_manifest(bright_sun)
     skies = [frame_sky(f, root) for f in doc["frames"]]
-    assert sky_setup(doc, skies, len(skies), None, 0.1, log=lambda *a: None) == (
-        "prior", 0.1, "given")
+    assert LightOptions(sun_sd=0.1).resolve(doc, skies, len(skies), log=lambda *a: None) == (
+        LightPlan("prior", 0.1, "given"))
     assert r["sky"]["sun_source"] == "modelled"
     # a sun whose spec gave its measured direct normal irradiance: known to the instrument's
     # accuracy, not widened
@@ -373,8 +376,8 @@ def test_the_sky_prior_holds_k_nearer_the_spec_and_no_wider(dim_sky, dim_fit):
     from skyfit_mi.fitting.fit import fit_regions
 
     alone = dim_fit[0]["sky"]
-    prior = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", sky="prior",
-                             sky_terms=1, log=lambda *a: None))["sky"]
+    prior = next(fit_regions(dim_sky, [("disc", REGION)], model="colour", light=LightOptions(sky="prior", terms=1),
+                             log=lambda *a: None))["sky"]
     assert 1.0 < prior["k"] <= alone["k"] * 1.001
     assert (np.log(prior["interval95"][1] / prior["interval95"][0])
             <= np.log(alone["interval95"][1] / alone["interval95"][0]) * 1.001)
@@ -431,8 +434,8 @@ def test_a_sky_that_changes_over_the_day_is_fitted_as_a_smooth_curve(drifting_sk
     truth; the curve lights the day again in a session made from the fit."""
     from skyfit_mi.fitting.fit import FitSession, fit_regions
 
-    r = next(fit_regions(drifting_sky, [("disc", REGION)], model="colour", sky="fit",
-                         sky_terms=2, log=lambda *a: None))
+    r = next(fit_regions(drifting_sky, [("disc", REGION)], model="colour", light=LightOptions(sky="fit", terms=2),
+                         log=lambda *a: None))
     terms = r["sky"]["terms"]
     u, sd = np.array(terms["coefficients"]), np.sqrt(np.diag(terms["covariance"]))
     for j, truth in enumerate((0.0, DRIFT)):
@@ -511,7 +514,7 @@ def test_by_default_the_skys_level_follows_the_suns_height_and_weather(height_sk
     from skyfit_mi.fitting.sky_fit import DEFAULT_TERMS, default_terms
 
     logs = []
-    r = next(fit_regions(height_sky, [("disc", REGION)], model="colour", sky="prior",
+    r = next(fit_regions(height_sky, [("disc", REGION)], model="colour", light=LightOptions(sky="prior"),
                          log=logs.append))
     terms = r["sky"]["terms"]
     assert len(terms["coefficients"]) == DEFAULT_TERMS and terms["coefficients"][2] > 0
@@ -528,8 +531,8 @@ def test_by_default_the_skys_level_follows_the_suns_height_and_weather(height_sk
     assert [default_terms(n) for n in (1, 3, 4, 5, 13)] == [1, 1, 2, 3, 3]
     assert default_terms(13, referenced=True) == 1       # a reference calibrates the frames
     # one level for the day (--sky-terms 1) puts the diffuse colour low, outside its interval
-    one = next(fit_regions(height_sky, [("disc", REGION)], model="colour", sky="prior",
-                           sky_terms=1, log=lambda *a: None))
+    one = next(fit_regions(height_sky, [("disc", REGION)], model="colour", light=LightOptions(sky="prior", terms=1),
+                           log=lambda *a: None))
     lo, hi = one["intervals"]["C_b"]["95"]
     assert hi < TRUTH["C_b"], one["intervals"]["C_b"]
     # each record's chi2 and dof are its final fit's, less the coefficients it fitted; the
@@ -545,11 +548,11 @@ def test_sky_terms_need_a_fitted_sky_and_frames(days):
     from skyfit_mi.fitting.fit import fit_regions
 
     with pytest.raises(SkyfitError, match="--sky spec"):
-        next(fit_regions(days["clean"], [("disc", REGION)], model="colour", sky="spec",
-                         sky_terms=2, log=lambda *a: None))
+        next(fit_regions(days["clean"], [("disc", REGION)], model="colour", light=LightOptions(sky="spec", terms=2),
+                         log=lambda *a: None))
     with pytest.raises(SkyfitError, match="give 1"):
-        next(fit_regions(days["clean"], [("disc", REGION)], model="colour", sky="fit",
-                         sky_terms=9, log=lambda *a: None))
+        next(fit_regions(days["clean"], [("disc", REGION)], model="colour", light=LightOptions(sky="fit", terms=9),
+                         log=lambda *a: None))
 
 
 def test_a_cie_skys_shape_variants_keep_its_light_and_move_one_group():
@@ -666,8 +669,8 @@ def shape_fit(gradation_4):
     """The disc of ``gradation_4`` fitted with its sky's level and shape (--sky-shape)."""
     from skyfit_mi.fitting.fit import fit_regions
 
-    return next(fit_regions(gradation_4, [("disc", REGION)], model="colour", sky="fit",
-                            sky_terms=1, sky_shape=True, log=lambda *a: None))
+    return next(fit_regions(gradation_4, [("disc", REGION)], model="colour", light=LightOptions(sky="fit", terms=1, shape=True),
+                            log=lambda *a: None))
 
 
 def test_the_skys_shape_is_fitted_with_the_materials_and_says_what_one_region_cannot_tell(
@@ -811,8 +814,8 @@ def test_a_perez_skys_clearness_and_brightness_are_fitted_with_the_materials(per
 
     day, pixels = perez_day
     logs = []
-    r = next(fit_regions(day, [("sphere", pixels)], model="colour", sky="fit", sky_shape=True,
-                         sky_terms=1, log=logs.append))
+    r = next(fit_regions(day, [("sphere", pixels)], model="colour", light=LightOptions(sky="fit", shape=True, terms=1),
+                         log=logs.append))
     shape = r["sky"]["shape"]
     assert shape["variants"][0] == f"clearness epsilon {PEREZ_SPEC:.4g} -> 5.35"
     index, half = shape["index"]["clearness"]

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from skyfit_mi.errors import SkyfitError
+from skyfit_mi.fitting.light import LightOptions
 from skyfit_mi.physics.colour import SRGB_LUMINANCE
 from skyfit_mi.physics.turbid_sky import (TURBIDITY_RANGE, coefficients, levels, shape_moves,
                                           turbid_sky)
@@ -165,8 +166,8 @@ def test_a_turbid_skys_turbidity_is_fitted_with_the_materials(mi, tmp_path):
     (_, pixels), = material_regions(day)
     logs = []
     r = next(fit_regions(day, [("sphere", pixels[pixels.sum(axis=1) % 2 == 0][::2])],
-                         model="colour", sky="fit", sky_shape=True, sky_terms=1,
-                         log=logs.append))
+                         model="colour", light=LightOptions(sky="fit", shape=True, terms=1),
+                             log=logs.append))
     assert any("turbidity T" in x and "puts the sun's light at 0." in x for x in logs), logs
     assert r["sky"]["shape"]["variants"] == ["turbidity T 3 -> 4"]
     index, half = r["sky"]["shape"]["index"]["turbidity"]

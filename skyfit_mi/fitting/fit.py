@@ -17,14 +17,15 @@ from . import uncertainty as unc
 from .chi2 import (MEASURED_SE, LuminanceModel, Problem, load_observations,
                    load_table_observations)
 from .geometry import geometry_warnings, highlight_geometry
-from ..errors import SkyfitError, check_choice, check_range
+from ..errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
 from .selection import HELD_OUT_FRAMES, held_out_error
-from .sky_fit import (SKY_DOMINATES, check_terms, default_sky, default_sun_sd, fit_sky_scale,
-                      light_level_sd, shape_variants, sky_level_at, sun_source, sun_up)
+from .light import SPEC_LIGHT, LightOptions, LightPlan
+from .sky_fit import (SKY_DOMINATES, SkyFit, SkyShare, fit_sky_scale, light_level_sd,
+                      shape_variants, skies_at_level, sky_level_at)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, block_budget, memory_estimate,
                                   mixed, shared_budget, trace_table, trace_tables)
@@ -37,7 +38,7 @@ from ..pipeline.ingest import pixel_sigma
 from ..pipeline.jpeg_noise import YCC_TO_RGB, shared_error_sd
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
 from ..pipeline.observation_table import is_table, relative_scale
-from ..physics.sky import MEASURED_SUN_SD, SKY_CHOICES, SKY_LEVEL_SD
+from ..physics.sky import MEASURED_SUN_SD
 from ..physics.turbid_sky import level_factors
 from ..physics.ward import METAL_THRESHOLD
 
@@ -98,6 +99,7 @@ class FitState:
         JPEG frames, or calibration)
     matrix_sd : the standard errors from the camera's colour matrix, an error every value of
         the day shares (:meth:`FitSession._matrix_sd`; zeros without its prior)
+    sky : what the light adds to the parameters' errors (:class:`~.sky_fit.SkyShare`)
     held_out : how well the fit predicts frames it was not fitted to
         (:func:`~.selection.held_out_error`, on ``problem``: its kappa is the error beyond the
         in-sample model error's), None with too few frames
@@ -119,6 +121,7 @@ class FitState:
     model_error: object = None
     model_error_rounds: dict = None
     misfit: object = None
+    sky: object = None
     intervals: dict = None
     rise: dict = None
     cache_noise_chi2: float = None
@@ -139,7 +142,7 @@ class FitState:
 class FitSession:
     """One region of one sequence, ready to fit: observations, light cache, models, chi-square.
 
-    Building it traces the light at the region's pixels once (or :meth:`sharing_light`, for
+    Building it traces the light at the region's pixels once (or :func:`trace_sessions`, for
     several regions at once); :meth:`run` then fits by any method and start without tracing
     again.
 
@@ -162,18 +165,16 @@ class FitSession:
     sky_plan : where the light cache takes the sky's integrals, a name of
         :data:`~skyfit_mi.render.light_cache.SKY_PLANS` (recorded in the fit JSON's
         ``light_cache``): ``fit`` by default, ``anchors`` for predictions of compact regions
-    trace : False leaves the light cache to the caller (:meth:`sharing_light`)
-    split_sky : trace the sun's light and the rest of the sky's apart, so that the fit can
-        scale them against each other (:meth:`set_sky`, :func:`fit_regions`'s
-        ``sky='fit'``)
-    sky_shape : with ``split_sky``, also trace the sky's shape variants
-        (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), so that the fit can mix them
-        (:meth:`set_sky`)
+    trace : False leaves the light cache to the caller (:func:`trace_sessions`)
+    light : the :class:`~.light.LightPlan` traced when ``trace`` (default the spec's light as
+        it is); a fitted sky's splits the sun's light from the rest of the sky's, so that the
+        fit can scale them against each other (:meth:`set_sky`), and with ``shape`` traces the
+        sky's shape variants (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`) too
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
                  positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None,
-                 sky_plan="fit", trace=True, split_sky=False, sky_shape=False):
+                 sky_plan="fit", trace=True, light=SPEC_LIGHT):
         model = BY_COUNT.get(model, model)
         check_choice("model", model, tuple(PARAMETERS))
         check_fit_normalisation(normalisation)          # before the light is traced
@@ -210,23 +211,16 @@ class FitSession:
                                "sky_plan": check_choice("sky plan", sky_plan, tuple(SKY_PLANS))}
         self._mi = setup(variant or doc["render"]["variant"])
         self._loaded = None                         # the scene and its parameters (scene)
-        # the light's tables: one, or the sun's, the rest's (split_sky) and the rest's shape
-        # variants (sky_shape), mixed at sky_scale and the shape's mix sky_shape_mix
-        self.split_sky, self.sky_scale, self.parts = bool(split_sky), 1.0, None
+        # the light traced (a LightPlan) and its tables: one, or the sun's, the rest's (a
+        # fitted sky) and the rest's shape variants, mixed at sky_scale and the shape's mix
+        # sky_shape_mix (set_sky)
+        self.light, self.sky_scale, self.parts = light, 1.0, None
         self.parts_cov = None           # the covariances of parts traced with shared samples
-        self.sky_shape, self.sky_shape_mix = bool(sky_shape), None
+        self.sky_shape_mix = None
         self._variants = None                       # the shape variants (_shape_variants)
-        # the fitted sky's share of each parameter's error, whether it leaves them open, and
-        # its record (sky_fit.fit_sky_scale)
-        self.sky_sd, self.sky_span, self.sky_record = None, None, None
-        # the sun's level's relative uncertainty, in the reflectances' intervals (sky_fit):
-        # its sd, where it comes from ('given' by --sun-sd, the spec's 'measured' or 'modelled'
-        # sun, a 'rendered' day's own), and what the fitted sky's departure from
-        # the spec's adds to a modelled sun's (sun_level_sd)
-        self.sun_sd, self.sun_source, self.sun_widening = 0.0, "given", 0.0
         self.cache_time = time.perf_counter() - t0
         if trace:
-            self.trace_light()
+            self.trace_light(light)
 
     @classmethod
     def from_fit(cls, result, manifest_path, pixels=None, **options):
@@ -246,116 +240,61 @@ class FitSession:
         trace = options.pop("trace", True)
         s = cls(manifest_path, result["region"], pixels, model=result["model"],
                 normalisation=result.get("normalisation", "ward"), trace=False, **options)
-        s.use_fitted_sky(result)
         if trace:
-            s.trace_light()
+            s.trace_light(s.fitted_light(result))
+            s.use_fitted_sky(result)
         return s
 
-    def use_fitted_sky(self, result):
-        """Light the sequence at a sky fit's level and shape (``fit --sky fit``, in ``result``)
-        where the fit measured this very sequence (its run_id), before the light is traced:
-        another day's sky is its spec's (the fit belongs to the fitted day's sky)."""
+    def fitted_light(self, result):
+        """The :class:`~.light.LightPlan` that lights this sequence as a fit ``result`` saw it:
+        a sky fit's (``fit --sky fit``) split light, with its shape variants where it fitted
+        the shape, where the fit measured this very sequence (its run_id); else the spec's
+        (the fitted level belongs to the fitted day's sky)."""
         sky = result.get("sky")
-        if sky is not None and result.get("sequence_run_id") == self.run_id:
+        if sky is None or result.get("sequence_run_id") != self.run_id:
+            return SPEC_LIGHT
+        return LightPlan("fit", shape=sky.get("shape") is not None)
+
+    def light_at_level(self, record):
+        """Take the frames' skies at a sky fit's level (``record``,
+        :func:`~.sky_fit.skies_at_level`) as the spec's light, before the light is traced: the
+        light a lobe is ranked in (:func:`~.selection.fit_auto`)."""
+        self.skies = skies_at_level(self.skies, record, self.obs.times)
+
+    def use_fitted_sky(self, result):
+        """Light the sequence, traced with :meth:`fitted_light`, at a sky fit's level and shape
+        (``fit --sky fit``, in ``result``)."""
+        sky = result.get("sky")
+        if self.light.split:
             k = sky_level_at(sky, self.obs.times)
-            self.split_sky, self.sky_scale = True, float(k[0]) if np.ptp(k) == 0 else k
-            if sky.get("shape") is not None:
-                self.sky_shape = True
-                self.sky_shape_mix = np.asarray(sky["shape"]["mix"], dtype=float)
+            mix = None if sky.get("shape") is None else sky["shape"]["mix"]
+            self.set_sky(float(k[0]) if np.ptp(k) == 0 else k, mix)
 
-    @classmethod
-    def sharing_light(cls, results, manifest_path, pixels, **options):
-        """Sessions {region: FitSession} of several fits (``results`` {region: fit result}) on
-        one sequence, at ``pixels`` {region: (P, 2)}, whose light is traced together
-        (:meth:`trace_together`) where the regions share normalisation, frames and whether
-        the sky plan's anchors pay (as each region alone would take them).  A region of an
-        observation table traces its own.  ``options`` as the constructor's, ``trace``
-        excepted."""
-        sessions = {name: cls.from_fit(r, manifest_path, pixels[name], trace=False, **options)
-                    for name, r in results.items()}
-        groups = {}
-        for s in sessions.values():
-            if s.obs.rays is not None:
-                s.trace_light()
-                continue
-            cam = s.doc["camera"]
-            anchored = anchors_pay(s.obs.pixels, SKY_PLANS[s.cache_settings["sky_plan"]].spacing,
-                                   cam["width"], cam["height"])
-            groups.setdefault((s.normalisation, tuple(s.obs.frames), anchored, s.split_sky,
-                               s.sky_shape),
-                              []).append(s)
-        for group in groups.values():
-            cls.trace_together(group)
-        return sessions
+    def trace_light(self, light=None):
+        """(Re)trace the light (a :class:`~.light.LightPlan`; None: the one traced last) at
+        ``cache_settings`` and make everything from its table."""
+        trace_sessions([self], self.light if light is None else light)
 
-    @classmethod
-    def for_regions(cls, manifest_path, regions, trace=True, **options):
-        """Sessions {region: FitSession} of several regions of one sequence (``regions``
-        [(name, pixels)]), whose light is traced together where they share frames and
-        normalisation (:meth:`trace_groups`; ``trace`` False leaves it to the caller);
-        ``options`` as the constructor's."""
-        sessions = {name: cls(manifest_path, name, px, trace=False, **options)
-                    for name, px in regions}
-        if trace:
-            cls.trace_groups(sessions)
-        return sessions
-
-    @classmethod
-    def trace_groups(cls, sessions):
-        """Trace the light of ``sessions`` {region: FitSession} of one sequence together where
-        they share frames and normalisation (:meth:`trace_together`)."""
-        groups = {}
-        for s in sessions.values():
-            key = (s.normalisation, tuple(s.obs.frames), s.obs.rays is None)
-            groups.setdefault(key, []).append(s)
-        for group in groups.values():
-            cls.trace_together(group)
-
-    @staticmethod
-    def trace_together(group):
-        """Trace the light of the sessions ``group`` (one sequence, frames and normalisation)
-        in one pass over all their points, each point under its own region's material: each
-        frame's kernels are traced once instead of once a region; each session takes its
-        rows and an equal share of the time."""
-        t0 = time.perf_counter()
-        if group[0].obs.rays is None:
-            at = np.concatenate([s.obs.pixels for s in group])
-        else:
-            at = PointRays(*(np.concatenate([getattr(s.obs.rays, k) for s in group])
-                             for k in ("origins", "directions")))
-        parts, cov = group[0]._trace(at, np.repeat([s.name for s in group],
-                                                   [len(s.obs.pixels) for s in group]))
-        share = (time.perf_counter() - t0) / len(group)
-        start = 0
-        for s in group:
-            n = len(s.obs.pixels)
-            s.cache_settings["blocks"] = group[0].cache_settings["blocks"]
-            rows = slice(start, start + n)
-            s._use_parts([t.subset(rows) for t in parts], None if cov is None else cov.subset(rows))
-            s.cache_time += share
-            start += n
-
-    def trace_light(self):
-        """(Re)trace the light at ``cache_settings`` and make everything from its table."""
-        t0 = time.perf_counter()
-        parts, cov = self._trace(self.obs.pixels if self.obs.rays is None else self.obs.rays,
-                                 self.name)
-        self.cache_time += time.perf_counter() - t0
+    def take_parts(self, parts, cov, light, seconds):
+        """Fit on the light ``light`` traced as ``parts`` (:meth:`_trace`, this session's rows)
+        with their covariances ``cov``, its trace having taken ``seconds``."""
+        self.light = light
+        self.cache_time += seconds
         self._use_parts(parts, cov)
 
-    def _trace(self, at, bsdf_id):
+    def _trace(self, at, bsdf_id, light):
         """The :class:`~skyfit_mi.render.basis_table.BasisTable` of the light at
         ``cache_settings`` of the sequence's scene and frames at ``at`` (pixels or rays) on
         material ``bsdf_id`` (one, or one per pixel), traced in blocks of bounded memory: a
-        list of one table, or with ``split_sky`` the sun's and the rest's (their samples
-        independent) and with ``sky_shape`` the rest's shape variants (traced with the rest's
-        samples); and the :class:`~skyfit_mi.render.basis_table.Covariances` of the parts
+        list of one table, or under ``light`` (a :class:`~.light.LightPlan`) that splits the sky
+        the sun's and the rest's (their samples independent) and with its ``shape`` the rest's
+        shape variants (traced with the rest's samples); and the :class:`~skyfit_mi.render.basis_table.Covariances` of the parts
         traced together (None where there are none)."""
         c = self.cache_settings
         # the split light's tables and their mix
-        lights = self._sky_parts() if self.split_sky else None
+        lights = self._sky_parts(light.shape) if light.split else None
         # a table per part, and the shape group's covariances about one more
-        need = (len(lights) + 1 + self.sky_shape if lights else 1) * memory_estimate(
+        need = (len(lights) + 1 + light.shape if lights else 1) * memory_estimate(
             len(at), len(self.skies), c["positions"], c["directions"])
         have = available_memory()
         if have is not None and need > have:
@@ -365,7 +304,7 @@ class FitSession:
                 "fit fewer pixels (--max-pixels) or frames (--frames), or a region at a time.")
         def model_of(cache, others=()):
             return WardModel(cache, self.model, self.normalisation, others)
-        if not self.split_sky:
+        if not light.split:
             table, c["blocks"] = trace_table(self.scene, self.params, self.skies, at, bsdf_id,
                                              model_of, **self._cache_options())
             return [table], None
@@ -383,13 +322,13 @@ class FitSession:
         return parts, None if cov is None else replace(cov, pairs=[(j + 1, k + 1)
                                                                    for j, k in cov.pairs])
 
-    def _sky_parts(self):
+    def _sky_parts(self, shape):
         """The light's parts, each a list of the frames' skies: the sun's and the rest's
-        (:meth:`~skyfit_mi.physics.sky.Sky.split`), and with ``sky_shape`` the rest's shape
+        (:meth:`~skyfit_mi.physics.sky.Sky.split`), and with ``shape`` the rest's shape
         variants (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`)."""
         sun, rest = zip(*(sky.split() for sky in self.skies))
         lights = [list(sun), list(rest)]
-        if self.sky_shape:
+        if shape:
             variants = self._shape_variants()
             lights += [[v[j][1] for v in variants] for j in range(len(variants[0]))]
         return lights
@@ -400,13 +339,6 @@ class FitSession:
         if self._variants is None:
             self._variants = shape_variants(self.skies)
         return self._variants
-
-    @property
-    def sun_level_sd(self):
-        """The sun's level's relative uncertainty (sd of its log) in the reflectances'
-        intervals: ``sun_sd`` as given, widened by ``sun_widening`` (a modelled sun under a sky
-        fitted away from the spec's, :func:`~.sky_fit.fit_sky_scale`)."""
-        return float(np.hypot(self.sun_sd, self.sun_widening))
 
     def light_levels(self, mix):
         """(sun, sky): the factors on each frame's sun and sky (T,) that the shape's ``mix``
@@ -434,7 +366,7 @@ class FitSession:
     def scene(self):
         """The sequence's Mitsuba scene, loaded when first needed (to trace the light): every
         live scene's materials are targets of the path tracer's virtual calls, traced in each
-        frame, so sessions that share one trace (:meth:`sharing_light`) load one."""
+        frame, so sessions that share one trace (:func:`trace_sessions`) load one."""
         return self._scene_and_params()[0]
 
     @property
@@ -476,8 +408,8 @@ class FitSession:
         (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), and make the models and
         chi-square on it."""
         if len(self.parts or ()) < 2 + (0 if mix is None else len(mix)):
-            raise ValueError("the sky's level needs a session traced with split_sky, its "
-                             "shape one traced with sky_shape")
+            raise ValueError("the sky's level needs a session traced with a fitted sky's light, "
+                             "its shape one traced with the sky's shape variants")
         self.sky_scale = float(k) if np.ndim(k) == 0 else np.asarray(k, dtype=float)
         self.sky_shape_mix = None if mix is None else np.asarray(mix, dtype=float)
         self._use_parts(self.parts, self.parts_cov)
@@ -486,8 +418,7 @@ class FitSession:
         """Fit on the light ``other`` (a traced session of the same region, sequence and
         lobe, in any parameterisation: the table does not depend on it) traced."""
         self.cache_settings = dict(other.cache_settings)
-        self.cache_time += other.cache_time
-        self._use_parts(other.parts, other.parts_cov)
+        self.take_parts(other.parts, other.parts_cov, other.light, other.cache_time)
 
     def _use_table(self, table):
         """Take ``table`` (of the region's pixels) and make the models and chi-square on it."""
@@ -582,8 +513,11 @@ class FitSession:
     def random_start(self, rng):
         return self.lower + rng.random(len(self.lower)) * (self.upper - self.lower)
 
-    def run(self, method="global", start=None, seed=0, method_options=None, log=print):
+    def run(self, method="global", start=None, seed=0, method_options=None, log=print,
+            sky=None):
         """Fit by ``method`` from ``start`` (random within bounds, seeded, if None); a result dict.
+        ``sky``: what the light adds to the parameters' errors (a :class:`~.sky_fit.SkyShare`:
+        the sky fit's, :func:`fit_sessions`; None: the traced light's sun level alone).
 
         The steps: the method's minimum, the model's error where the model cannot reproduce
         the data (:meth:`_fit_model_error`), the covariance, the global minimum (whose grid
@@ -617,7 +551,7 @@ class FitSession:
                 f"{growth * c['positions']} positions per pixel")
             c["positions"] *= growth
             self.trace_light()
-            return self.run(method, start, seed, method_options, log)
+            return self.run(method, start, seed, method_options, log, sky)
         # where the model cannot reproduce the data, its error is fitted with the parameters
         misfit = unc.misfit_test(problem.chi2(theta), problem.dof,
                                  problem.model_noise_chi2(theta), problem.noise_chi2(theta))
@@ -643,7 +577,8 @@ class FitSession:
                                                         candidates=2, grid_basis=grid_basis)
         fit = FitState(method, theta, chi2, s2, curv_inv, f2, channels,
                        curv_inv * s2 * np.sqrt(np.outer(f2, f2)), res, g, noise, noise_chi2,
-                       problem, merr, rounds, misfit)
+                       problem, merr, rounds, misfit,
+                       sky or SkyShare(sun_sd=self.light.sun_sd, sun_source=self.light.sun_source))
         fit.jpeg_shared_sd = self._jpeg_shared_sd(J_all, measured, problem.obs.sigma, curv_inv)
         fit.calibration_sd = self._calibration_sd(J_all, problem, measured, theta, curv_inv)
         fit.matrix_sd = self._matrix_sd(J_all, problem, measured, theta, curv_inv)
@@ -761,8 +696,9 @@ class FitSession:
                     intervals[p][lv] = (min(lo, float(ridge[0][i])), max(hi, float(ridge[1][i])))
         mc_sd = self.cache_error(theta, fit.method, problem)
         cal_sd = fit.calibration_sd
-        sky_sd = np.zeros(len(names)) if self.sky_sd is None else self.sky_sd
-        sun_rel = light_level_sd(self.doc, names, self.sun_level_sd)
+        sky = fit.sky
+        sky_sd = np.zeros(len(names)) if sky.sd is None else sky.sd
+        sun_rel = light_level_sd(self.doc, names, sky.sun_level_sd)
         for i, p in enumerate(names):
             for lv in ("68", "95"):
                 intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * np.sqrt(
@@ -771,10 +707,10 @@ class FitSession:
                 # the sun's level: a factor on every reflectance, lopsided
                 intervals[p][lv] = unc.widen_relative(theta[i], intervals[p][lv],
                                                       unc.Z[lv] * sun_rel[i], lower[i], upper[i])
-                if self.sky_span is not None:      # the sky's level is not determined
+                if sky.span is not None:      # the sky's level is not determined
                     lo, hi = intervals[p][lv]
-                    intervals[p][lv] = (min(lo, float(self.sky_span[0][i])),
-                                        max(hi, float(self.sky_span[1][i])))
+                    intervals[p][lv] = (min(lo, float(sky.span[0][i])),
+                                        max(hi, float(sky.span[1][i])))
                     if lv == "95":
                         intervals[p]["from"] += ", and over the undetermined sky level"
         fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
@@ -977,43 +913,7 @@ class FitSession:
         warnings += self.obs.warnings                       # what loading the frames noticed
         if relative_scale(self.doc):
             warnings.append(self.doc["ingest"]["scale"]["meaning"])
-        if self.sky_record is not None:
-            warnings += self.sky_record["warnings"]
-            own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
-            k = self.sky_record
-            for i, p in enumerate(names):
-                if self.sky_sd is not None and self.sky_sd[i] > SKY_DOMINATES * own[i]:
-                    parts = [part for part, told in ((", its change over the day",
-                                                       k["terms"]),
-                                                      (", its shape", k["shape"])) if told]
-                    warnings.append(
-                        f"{p} depends on the sky: the uncertainty of the fitted sky (its level "
-                        f"k = {k['k']:.3g}, 95%: {k['interval95'][0]:.3g}-"
-                        f"{k['interval95'][1]:.3g}{''.join(parts)}) moves it by "
-                        f"+-{unc.Z['95'] * self.sky_sd[i]:.3g} (95%), at least doubling its "
-                        "interval, which includes that; more materials or a grey card in the "
-                        "fit would narrow it.")
-            level = [p for i, p in enumerate(names)
-                     if fit.sun_level_sd[i] > SKY_DOMINATES * own[i]]
-            if level:
-                warnings.append(
-                    f"{', '.join(level)} scale with the sun's level, which no data tell (the "
-                    f"light's absolute scale trades exactly with the reflectances) and which "
-                    f"is known to +-{100 * self.sun_level_sd:.0f}% (1 sd, "
-                    + {"given": "--sun-sd",
-                       "measured": "the spec's measured direct normal irradiance",
-                       "modelled": f"the modelled sun's {100 * self.sun_sd:.0f}%"
-                       + (" widened as the fitted sky departs from the spec's"
-                          if self.sun_widening else "")}.get(self.sun_source, "--sun-sd")
-                    + "): that, more than the data, sets their intervals; their ratios and "
-                    "sigma_alpha do not depend on it. A reference of known reflectance in the "
-                    "scene (ingest --calibrate or --colorchecker)"
-                    + {"measured": "",
-                       "given": " or a smaller --sun-sd where the sun's level is known better "
-                                f"(a measured direct normal irradiance: {MEASURED_SUN_SD:g})"
-                       }.get(self.sun_source, " or a measured direct normal irradiance in the "
-                             "spec (direct_normal_W_m2, or a dni column)")
-                    + " narrows them.")
+        warnings += self._sky_warnings(fit)
         own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
         led = [p for i, p in enumerate(names) if fit.matrix_sd[i] > SKY_DOMINATES * own[i]]
         if led:
@@ -1066,8 +966,8 @@ class FitSession:
                 "intervals are widened for it, by up to "
                 f"{np.sqrt(np.max(fit.channel_factors)):.2f}x.")
         warnings += geometry_warnings(
-            self.geometry, float(theta[-1]), sky_shape_known=self.sky_record is None
-            or self.sky_record.get("shape") is not None)
+            self.geometry, float(theta[-1]), sky_shape_known=fit.sky.record is None
+            or fit.sky.record.get("shape") is not None)
         worst = max(fit.model_noise_by_sigma, key=fit.model_noise_by_sigma.get)
         if fit.model_noise_by_sigma[worst] > NOISE_SHARE * fit.problem.dof:
             warnings.append(
@@ -1088,9 +988,53 @@ class FitSession:
                     "are determined.")
         return warnings
 
+    def _sky_warnings(self, fit):
+        """The fitted sky's warnings (its record's) and those of parameters the sky's or the
+        sun's level, more than the data, sets (:data:`~.sky_fit.SKY_DOMINATES`)."""
+        sky, names = fit.sky, self.names
+        if sky.record is None:
+            return []
+        k = sky.record
+        warnings = list(k["warnings"])
+        own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
+        for i, p in enumerate(names):
+            if sky.sd is not None and sky.sd[i] > SKY_DOMINATES * own[i]:
+                parts = [part for part, told in ((", its change over the day",
+                                                   k["terms"]),
+                                                  (", its shape", k["shape"])) if told]
+                warnings.append(
+                    f"{p} depends on the sky: the uncertainty of the fitted sky (its level "
+                    f"k = {k['k']:.3g}, 95%: {k['interval95'][0]:.3g}-"
+                    f"{k['interval95'][1]:.3g}{''.join(parts)}) moves it by "
+                    f"+-{unc.Z['95'] * sky.sd[i]:.3g} (95%), at least doubling its "
+                    "interval, which includes that; more materials or a grey card in the "
+                    "fit would narrow it.")
+        level = [p for i, p in enumerate(names)
+                 if fit.sun_level_sd[i] > SKY_DOMINATES * own[i]]
+        if level:
+            warnings.append(
+                f"{', '.join(level)} scale with the sun's level, which no data tell (the "
+                f"light's absolute scale trades exactly with the reflectances) and which "
+                f"is known to +-{100 * sky.sun_level_sd:.0f}% (1 sd, "
+                + {"given": "--sun-sd",
+                   "measured": "the spec's measured direct normal irradiance",
+                   "modelled": f"the modelled sun's {100 * sky.sun_sd:.0f}%"
+                   + (" widened as the fitted sky departs from the spec's"
+                      if sky.sun_widening else "")}.get(sky.sun_source, "--sun-sd")
+                + "): that, more than the data, sets their intervals; their ratios and "
+                "sigma_alpha do not depend on it. A reference of known reflectance in the "
+                "scene (ingest --calibrate or --colorchecker)"
+                + {"measured": "",
+                   "given": " or a smaller --sun-sd where the sun's level is known better "
+                            f"(a measured direct normal irradiance: {MEASURED_SUN_SD:g})"
+                   }.get(sky.sun_source, " or a measured direct normal irradiance in the "
+                         "spec (direct_normal_W_m2, or a dni column)")
+                + " narrows them.")
+        return warnings
+
     def _record(self, fit, warnings, start, seed, evaluations, wall, t_method):
         """The JSON-ready result of ``fit`` (the layout of ``fit_NAME.json``)."""
-        names, theta, dof = self.names, fit.theta, self.problem.dof
+        names, theta, dof, sky = self.names, fit.theta, self.problem.dof, fit.sky
         res = fit.method_result
         L = self.wm.radiance(theta)
         chi2 = fit.chi2 if fit.model_error is None else self.problem.chi2(theta)
@@ -1122,13 +1066,13 @@ class FitSession:
             **({"colour_matrix_error_sd": dict(zip(names, fit.matrix_sd.tolist())),
                 "colour_matrix_error": self._matrix_note()}
                if np.any(fit.matrix_sd > 0) else {}),
-            **({"sky": {**self.sky_record, "error_sd": dict(zip(names, (
-                self.sky_sd if self.sky_sd is not None else np.zeros(len(names))).tolist())),
-                **({} if self.sky_span is None else {"undetermined_span": {
-                    p: [float(lo), float(hi)] for p, lo, hi in zip(names, *self.sky_span)}}),
-                "sun_level_sd": self.sun_level_sd, "sun_source": self.sun_source,
+            **({"sky": {**sky.record, "error_sd": dict(zip(names, (
+                sky.sd if sky.sd is not None else np.zeros(len(names))).tolist())),
+                **({} if sky.span is None else {"undetermined_span": {
+                    p: [float(lo), float(hi)] for p, lo, hi in zip(names, *sky.span)}}),
+                "sun_level_sd": sky.sun_level_sd, "sun_source": sky.sun_source,
                 "sun_level_error_sd": dict(zip(names, fit.sun_level_sd.tolist()))}}
-               if self.sky_record is not None else {}),
+               if sky.record is not None else {}),
             "cache_noise_chi2": fit.cache_noise_chi2,
             "cache_noise_chi2_by_sigma": fit.model_noise_by_sigma,
             "covariance": {"names": list(names), "matrix": fit.covariance.tolist()},
@@ -1214,104 +1158,100 @@ class FitSession:
         return out
 
 
+def trace_sessions(sessions, light):
+    """Trace the light ``light`` (a :class:`~.light.LightPlan`, or {region: plan}) of
+    ``sessions`` (FitSessions of one sequence): in one pass over all the points of the sessions
+    that share normalisation, frames, kind of point (pixels or rays), sky plan, whether that
+    plan's anchors pay (as each region alone would take them) and light, each point under its
+    own region's material: each frame's kernels are traced once instead of once a region; each
+    session takes its rows and an equal share of the time."""
+    groups = {}
+    for s in sessions:
+        plan = light[s.name] if isinstance(light, dict) else light
+        c, cam = s.cache_settings, s.doc["camera"]
+        anchored = s.obs.rays is None and anchors_pay(s.obs.pixels,
+                                                      SKY_PLANS[c["sky_plan"]].spacing,
+                                                      cam["width"], cam["height"])
+        key = (s.normalisation, tuple(s.obs.frames), s.obs.rays is None, c["sky_plan"],
+               anchored, plan)
+        groups.setdefault(key, []).append(s)
+    for key, group in groups.items():
+        t0 = time.perf_counter()
+        if group[0].obs.rays is None:
+            at = np.concatenate([s.obs.pixels for s in group])
+        else:
+            at = PointRays(*(np.concatenate([getattr(s.obs.rays, k) for s in group])
+                             for k in ("origins", "directions")))
+        parts, cov = group[0]._trace(at, np.repeat([s.name for s in group],
+                                                   [len(s.obs.pixels) for s in group]), key[-1])
+        share = (time.perf_counter() - t0) / len(group)
+        start = 0
+        for s in group:
+            n = len(s.obs.pixels)
+            s.cache_settings["blocks"] = group[0].cache_settings["blocks"]
+            rows = slice(start, start + n)
+            s.take_parts([t.subset(rows) for t in parts],
+                         None if cov is None else cov.subset(rows), key[-1], share)
+            start += n
+
+
 def fit_region(manifest_path, name, pixels, **options):
     """Fit one material region (see :class:`FitSession`, ``options`` as
     :func:`fit_regions`'); returns a JSON-ready result dict."""
     return next(fit_regions(manifest_path, [(name, pixels)], **options))
 
 
-def fit_regions(manifest_path, regions, model="two", method="global", normalisation="ward",
-                seed=0, start=None, positions=None, directions=DIRECTIONS, method_options=None,
-                log=print, frames=None, variant=None, sky=None, sun_sd=None, sky_terms=None,
-                sky_shape=False):
+def fit_regions(manifest_path, regions, model="two", method="global", seed=0, start=None,
+                method_options=None, log=print, light=LightOptions(), **options):
     """Fit several regions of one sequence (``regions`` [(name, pixels)]), their light traced
-    together (:meth:`FitSession.for_regions`); yields each region's result dict in turn.
-    ``sky``: None chooses (:func:`~.sky_fit.default_sky`); 'spec' takes the spec's light as it
-    is; 'fit' fits the sky's level against the sun's with the materials, one for all regions (:func:`~.sky_fit.fit_sky_scale`), and
-    'prior' the same with the level's prior (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`);
-    both count the sun's own level, known to a relative ``sun_sd`` (None:
-    :func:`~.sky_fit.default_sun_sd`), in the
-    reflectances' intervals (:func:`~.sky_fit.light_level_sd`; not given, a modelled sun's is
-    widened where the fitted sky departs from the spec's,
-    :data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`, a measured one's is not);
-    ``sky_terms`` > 1 lets the
-    sky's level change smoothly over the day, 1 holds it (None: :func:`~.sky_fit.default_terms`
-    of the frames), and ``sky_shape`` fits the sky's shape too (a CIE
-    sky's gradation and indicatrix, a Perez sky's clearness and brightness;
-    :func:`~.sky_fit.fit_sky_scale`)."""
-    sessions = FitSession.for_regions(manifest_path, regions, model=model,
-                                      normalisation=normalisation, seed=seed,
-                                      positions=positions, directions=directions, frames=frames,
-                                      variant=variant, trace=False)
-    yield from fit_sessions(sessions, method, seed, start, method_options, log, sky, sun_sd,
-                            sky_terms, sky_shape)
+    together (:func:`trace_sessions`); yields each region's result dict in turn.
+    ``light``: the :class:`~.light.LightOptions` (or a :class:`~.light.LightPlan` already
+    resolved for the sequence): the sky None chooses (:func:`~.sky_fit.default_sky`); 'spec'
+    takes the spec's light as it is; 'fit' fits the sky's level against the sun's with the
+    materials, one for all regions (:func:`~.sky_fit.fit_sky_scale`), and 'prior' the same
+    with the level's prior (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`); both count the sun's
+    own level, known to a relative ``sun_sd`` (None: :func:`~.sky_fit.default_sun_sd`), in
+    the reflectances' intervals (:func:`~.sky_fit.light_level_sd`; not given, a modelled sun's
+    is widened where the fitted sky departs from the spec's,
+    :data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`, a measured one's is not); ``terms`` > 1
+    lets the sky's level change smoothly over the day, 1 holds it (None:
+    :func:`~.sky_fit.default_terms` of the frames), and ``shape`` fits the sky's shape too (a
+    CIE sky's gradation and indicatrix, a Perez sky's clearness and brightness).  ``options``
+    as :class:`FitSession`'s (normalisation, cache, frames, variant)."""
+    sessions = {name: FitSession(manifest_path, name, px, model=model, seed=seed, trace=False,
+                                 **options)
+                for name, px in regions}
+    yield from fit_sessions(sessions, method, seed, start, method_options, log, light)
 
 
-def sky_setup(doc, skies, n_frames, sky=None, sun_sd=None, sky_terms=None, sky_shape=False,
-              log=print):
-    """Check a fit's sky options against a sequence (its manifest ``doc``, its frames'
-    ``skies``, ``n_frames`` fitted) before any light is traced, as :func:`fit_regions`
-    describes them; returns (sky, the sun level's sd, where it comes from): ``sky`` None
-    chosen (:func:`~.sky_fit.default_sky`, and said), ``sun_sd`` None its default."""
-    if sky is not None:
-        check_choice("sky", sky, SKY_CHOICES)
-    if sun_sd is not None:
-        check_range("--sun-sd", sun_sd, 0.0, 1.0)
-    chosen = sky is None
-    if chosen:
-        sky = default_sky(doc, skies)
-        if sky != "spec":
-            log(f"sky: photographs under the sun and a sky: the spec's light is a model of "
-                f"theirs, so its level is fitted with its prior (--sky {sky}; --sky spec takes "
-                "it as exact)")
-    asked = sky_terms not in (None, 1)
-    if sky == "spec" and (asked or sky_shape or sun_sd is not None):
-        given = "--sky-terms" if asked else "--sky-shape" if sky_shape else "--sun-sd"
-        raise SkyfitError(f"{given} belongs to a fitted sky, and the spec's is taken as it is "
-                          + ("(the default where skyfit rendered the frames or no sun lights "
-                             "them)" if chosen else "(--sky spec)")
-                          + ": give --sky fit or prior.")
-    if sky == "spec":
-        return sky, 0.0, "given"
-    if not sun_up(skies):                               # refused before the light is traced
-        raise SkyfitError(f"--sky {sky} scales the sky against the sun, and no frame of the "
-                          "sequence has the sun's disc above the horizon; fit with the "
-                          "spec's sky (--sky spec).")
-    if sky_terms is not None:
-        check_terms(sky_terms, n_frames)
-    if sky_shape:
-        shape_variants(skies)
-    if sun_sd is not None:
-        return sky, float(sun_sd), "given"
-    sun_sd = default_sun_sd(doc, skies)
-    return sky, sun_sd, sun_source(skies) if sun_sd else "rendered"
+def resolve_light(sessions, light, log=print):
+    """The :class:`~.light.LightPlan` of ``light`` (options, or a plan already resolved) on
+    the sequence of ``sessions`` (its first's manifest, skies and frames)."""
+    if isinstance(light, LightPlan):
+        return light
+    first = next(iter(sessions.values()))
+    return light.resolve(first.doc, first.skies, len(first.obs.frames), log)
 
 
 def fit_sessions(sessions, method="global", seed=0, start=None, method_options=None, log=print,
-                 sky=None, sun_sd=None, sky_terms=None, sky_shape=False):
+                 light=LightOptions()):
     """Trace and fit ``sessions`` ({region: FitSession} of one sequence, not yet traced; each
-    its own model and lobe) under the light ``sky`` chooses, as :func:`fit_regions` describes
-    (the sky's level fitted once for all of them); yields each region's result dict in turn,
-    in the order of ``sessions``."""
-    prepare_sessions(sessions, seed, log, sky, sun_sd, sky_terms, sky_shape)
+    its own model and lobe) under ``light`` as :func:`fit_regions` describes (the sky's level
+    fitted once for all of them); yields each region's result dict in turn, in the order of
+    ``sessions``."""
+    sky = prepare_sessions(sessions, light, seed, log)
     for name in list(sessions):
-        yield sessions.pop(name).run(method, start, seed, method_options, log)
+        yield sessions.pop(name).run(method, start, seed, method_options, log,
+                                     sky.shares.get(name))
 
 
-def prepare_sessions(sessions, seed=0, log=print, sky=None, sun_sd=None, sky_terms=None,
-                     sky_shape=False):
-    """Trace the light of ``sessions`` ({region: FitSession}, not yet traced) as ``sky``
-    chooses (:func:`sky_setup`) and fit the sky's level with them where it is not the spec's
-    (each session's ``sky_record``), ready to run (:func:`fit_sessions`)."""
-    first = next(iter(sessions.values()))
-    sky, sun_sd, source = sky_setup(first.doc, first.skies, len(first.obs.frames), sky, sun_sd,
-                                    sky_terms, sky_shape, log)
-    for s in sessions.values():
-        s.split_sky, s.sky_shape = sky != "spec", bool(sky_shape)
-        s.sun_sd, s.sun_source = sun_sd, source
-    FitSession.trace_groups(sessions)
-    if sky != "spec":
-        fit_sky_scale(list(sessions.values()), seed, log,
-                      prior_sd=SKY_LEVEL_SD if sky == "prior" else None,
-                      terms=None if sky_terms is None else int(sky_terms))
-
+def prepare_sessions(sessions, light=LightOptions(), seed=0, log=print):
+    """Trace the light of ``sessions`` ({region: FitSession}, not yet traced) as ``light``
+    resolves (:meth:`~.light.LightOptions.resolve`) and fit the sky's level with them where it
+    is not the spec's, ready to run (:func:`fit_sessions`); returns the
+    :class:`~.sky_fit.SkyFit` (no record nor shares where the sky is the spec's)."""
+    plan = resolve_light(sessions, light, log)
+    trace_sessions(list(sessions.values()), plan)
+    if not plan.split:
+        return SkyFit(None)
+    return fit_sky_scale(list(sessions.values()), plan, seed, log)

@@ -38,7 +38,8 @@ from ..render.fit_model import PARAMETER_ORDER, PARAMETERS
 from ..render.image import write_exr
 from ..render.light_cache import SKY_SPACING
 from .chi2 import REGION_PIXELS, check_regions, subsample_region
-from .fit import fit_regions, sky_setup
+from .fit import fit_regions
+from .light import SPEC_LIGHT, LightOptions
 from .selection import fit_auto
 from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, check_map_region, fit_pixels, patch_groups
 from .sky_fit import default_sky, light_level_sd
@@ -109,19 +110,20 @@ def _settings(doc, regions, model, normalisation, seed, patch, chunk, cache, sky
 
 
 def first_fits(manifest_path, regions, model="colour", normalisation="ward", seed=0,
-               sky="spec", sun_sd=None, sky_terms=None, max_pixels=LIGHT_PIXELS, variant=None,
+               light=SPEC_LIGHT, max_pixels=LIGHT_PIXELS, variant=None,
                log=print):
     """What a map takes from fits of its ``regions`` ([(material, pixels)]) first, on up to
     ``max_pixels`` of each (a seeded subset): each region's (model, normalisation), the
     ones ranked best by held-out frames where ``model`` is 'auto'
     (:func:`~.selection.fit_auto`), else ``model`` and ``normalisation`` for all; and the light
     (:func:`~.pixel_fit.fit_pixels`' ``light``: None for the spec's sky as it is, ``sky``
-    'spec') under a fitted sky (``sky`` 'fit' or 'prior', with ``sun_sd`` and ``sky_terms``,
-    as ``fit --sky``): the sky's level as those fits find it, its record (``sky``), each
+    'spec') under a fitted sky (``light``, a :class:`~.light.LightPlan` or options, whose sky
+    is 'fit' or 'prior', as ``fit --sky``): the sky's level as those fits find it, its record (``sky``), each
     region's parameters, the sky's share of their standard errors and, where the level is not
     determined, their range over the levels it could not tell apart (``regions``), and the
     sun's level's sd as they count it.  One pixel's values hardly tell the sky or the model.
     Returns (choices {region: (model, normalisation)}, light)."""
+    sky = light.sky                                     # named: a plan, or options that say it
     kept = [(name, subsample_region(px, max_pixels or None, seed)) for name, px in regions]
     what = " and ".join((["every lobe and parameter count ranked"] if model == "auto" else [])
                         + ([] if sky == "spec" else ["the sky's level fitted"]))
@@ -134,12 +136,11 @@ def first_fits(manifest_path, regions, model="colour", normalisation="ward", see
         if line.startswith("sky:") or ": chose " in line:
             log(line)
     if model == "auto":
-        results = fit_auto(manifest_path, kept, seed=seed, variant=variant, sky=sky,
-                           sun_sd=sun_sd, sky_terms=sky_terms, log=shown)
+        results = fit_auto(manifest_path, kept, seed=seed, variant=variant, light=light,
+                           log=shown)
     else:
         results = fit_regions(manifest_path, kept, model=model, normalisation=normalisation,
-                              seed=seed, variant=variant, sky=sky, sun_sd=sun_sd,
-                              sky_terms=sky_terms, log=shown)
+                              seed=seed, variant=variant, light=light, log=shown)
     choices, light = {}, None if sky == "spec" else {"fitted": sky, "regions": {}}
     try:
         fits = list(zip(kept, results))
@@ -365,21 +366,22 @@ def _close(client, cluster):
 def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward", seed=0,
             patch=1, chunk=CHUNK, workers=None, scheduler=None, overwrite=False, progress=True,
             log=print, cache=MAP_CACHE, memory_per_worker="4GiB", variant=None, dask_logs=False,
-            sky=None, sun_sd=None, sky_terms=None, light_pixels=LIGHT_PIXELS):
+            light=LightOptions(), light_pixels=LIGHT_PIXELS):
     """Map ``regions`` ([(material, pixels (P, 2))]) of a sequence; returns the summary dict
     (module docstring).  ``model`` 'auto': each region in the model and lobe ranked best by
     held-out frames on up to ``light_pixels`` of its pixels first (:func:`first_fits`), the
     map's planes every parameter some region's model has; ``workers``: LocalCluster processes
     (default: the machine's cores, :func:`worker_count`); ``variant``: the Mitsuba variant of
     the fits (default the sequence's); ``dask_logs``: show Dask's own log lines
-    (``--debug``); ``sky``: 'spec' takes the spec's sky as it is, 'fit' or 'prior' its level
-    fitted with the regions' materials first (:func:`first_fits`, with ``sun_sd`` and
-    ``sky_terms``), None chooses as region fits do (:func:`~.sky_fit.default_sky`: 'prior'
-    for photographs under the sun).  Every input, the regions' frames and light and a given
+    (``--debug``); ``light`` (:class:`~.light.LightOptions`): its sky 'spec' takes the spec's
+    sky as it is, 'fit' or 'prior' its level fitted with the regions' materials first
+    (:func:`first_fits`, with its ``sun_sd`` and ``terms``), None chooses as region fits do
+    (:func:`~.sky_fit.default_sky`: 'prior' for photographs under the sun).  Every input, the regions' frames and light and a given
     scheduler included, is checked before the store is written."""
     doc, root = load_manifest(manifest_path)
     skies = [frame_sky(f, root) for f in doc["frames"] if "illumination" in f]
-    sky = sky_setup(doc, skies, len(skies), sky, sun_sd, sky_terms, log=log)[0]
+    plan = light.resolve(doc, skies, len(skies), log=log)
+    sky = plan.sky
     shape = (doc["camera"]["height"], doc["camera"]["width"])
     for _, px in regions:
         check_map_region(px, shape)
@@ -390,7 +392,7 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
                           "cluster's own workers run the map: leave out --workers.")
     first = model == "auto" or sky != "spec"            # fits of the regions come first
     settings = _settings(doc, regions, model, normalisation, seed, patch, chunk, cache,
-                         {"sky": sky, "sun_sd": sun_sd, "sky_terms": sky_terms}
+                         {"sky": sky, "sun_sd": light.sun_sd, "sky_terms": light.terms}
                          if sky != "spec" else "spec")
     if first:
         settings["first_fits_pixels"] = light_pixels
@@ -412,7 +414,7 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
                 light = stored[1]["light"]
             elif first:
                 choices, light = first_fits(manifest_path, regions, model, normalisation, seed,
-                                            sky, sun_sd, sky_terms, light_pixels, variant, log)
+                                            plan, light_pixels, variant, log)
             else:
                 choices, light = {name: (model, normalisation) for name, _ in regions}, None
             names = map_parameters(choices)

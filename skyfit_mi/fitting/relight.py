@@ -32,7 +32,7 @@ from ..conventions import angles_from_direction
 from ..errors import SkyfitError
 from ..files import FolderLock, ensure_dir, figure_png, write_bytes, write_json, write_text
 from .chi2 import subsample_region
-from .fit import FitSession
+from .fit import FitSession, trace_sessions
 from .landscape import truth_parameters
 from .sky_fit import sky_level_at
 from .uncertainty import band_half_width, widen
@@ -897,11 +897,10 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
     else:
         # image regions: the light at all their pixels traced at once
         predict_region = _predict_means
-        shared = FitSession.sharing_light({region: r for region, (_, r) in fits.items()},
-                                          target, pixels, seed=seed,
-                                          positions=PREDICTION_CACHE[0],
-                                          directions=PREDICTION_CACHE[1],
-                                          sky_plan="anchors", min_frames=1)
+        shared = fitted_sessions({region: r for region, (_, r) in fits.items()},
+                                 target, pixels, seed=seed, positions=PREDICTION_CACHE[0],
+                                 directions=PREDICTION_CACHE[1], sky_plan="anchors",
+                                 min_frames=1)
         sessions = ((region, shared.pop(region)) for region in sorted(fits))
     rows, means = [], {}
     for region, s in sessions:                          # each let go when done with
@@ -910,7 +909,7 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
         log(f"{region}: predicted {len(s.obs.frames)} frames from {draws} parameter draws"
             + (f" (under the target's spec sky: the fit's sky level k = "
                f"{fits[region][1]['sky']['k']:.3g} belongs to its own day)"
-               if fits[region][1].get("sky") is not None and not s.split_sky else ""))
+               if fits[region][1].get("sky") is not None and not s.light.split else ""))
     return Prediction(rows, means)
 
 
@@ -920,9 +919,23 @@ def _table_session(target, region, result, seed):
     s = FitSession(target, region, None, model=result["model"],
                    normalisation=result.get("normalisation", "ward"), seed=seed,
                    directions=DIRECTIONS, min_frames=1, trace=False)
+    s.trace_light(s.fitted_light(result))
     s.use_fitted_sky(result)
-    s.trace_light()
     return s
+
+
+def fitted_sessions(results, manifest_path, pixels, **options):
+    """Sessions {region: FitSession} of several fits (``results`` {region: fit result}) on one
+    sequence, at ``pixels`` {region: (P, 2)}, each lit as its fit saw the day
+    (:meth:`FitSession.fitted_light`), their light traced together
+    (:func:`~.fit.trace_sessions`); ``options`` as the session's."""
+    sessions = {name: FitSession.from_fit(r, manifest_path, pixels[name], trace=False, **options)
+                for name, r in results.items()}
+    trace_sessions(list(sessions.values()),
+                   {name: s.fitted_light(results[name]) for name, s in sessions.items()})
+    for name, s in sessions.items():
+        s.use_fitted_sky(results[name])
+    return sessions
 
 
 #: Values (draws x points x frames x channels) of a table's prediction held at once: the

@@ -22,7 +22,6 @@ from ..errors import SkyfitError
 from .chi2 import LuminanceModel, Problem
 from .methods.global_search import global_search
 from .methods.levenberg_marquardt import levenberg_marquardt
-from .sky_fit import skies_at_level
 
 #: The candidates of ``--model auto``: the thesis's Ward lobe, the balanced one, and the four
 #: microfacet lobes; every parameterisation of each.
@@ -204,46 +203,45 @@ def choose(rows):
 
 
 def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOLDS, seed=0,
-             log=print, sky=None, sun_sd=None, sky_terms=None, **options):
+             log=print, light=None, **options):
     """``fit --model auto``: every region's candidates ranked (:func:`rank`; the light traced
     once per lobe, every region of a lobe together), then the chosen one fitted in full by
-    the global method.  Where the spec's sky is taken as it is (``sky`` 'spec', or None where
-    :func:`~.sky_fit.default_sky` chooses it) the ranking and the fit are in the spec's light;
-    else (``sky``, ``sun_sd``, ``sky_terms`` as :func:`~.fit.fit_regions`') the candidates
-    are ranked in the spec's sky at the level a fit of Ward's lobe finds first, and the chosen
-    ones fitted with the sky's level, once for every region (the light traced again, split).
-    Yields each region's result dict with its ``model_selection`` (the ranking, the choice,
-    the folds, the light of the ranking and each lobe's tracing time)."""
-    from .fit import FitSession, fit_sessions, prepare_sessions, sky_setup
+    the global method.  Where the spec's sky is taken as it is (``light``, a
+    :class:`~.light.LightOptions` or plan, resolving to 'spec') the ranking and the fit are in
+    the spec's light; else the candidates are ranked in the spec's sky at the level a fit of
+    Ward's lobe finds first, and the chosen ones fitted with the sky's level, once for every
+    region (the light traced again, split).  Yields each region's result dict with its
+    ``model_selection`` (the ranking, the choice, the folds, the light of the ranking and each
+    lobe's tracing time)."""
+    from .fit import FitSession, fit_sessions, prepare_sessions, resolve_light, trace_sessions
+    from .light import SPEC_LIGHT, LightOptions
 
+    def sessions_of(**kw):
+        return {name: FitSession(manifest_path, name, px, seed=seed, trace=False,
+                                 **{**options, **kw})
+                for name, px in regions}
     first = FitSession(manifest_path, *regions[0], trace=False, **options)
-    sky = sky_setup(first.doc, first.skies, len(first.obs.frames), sky, sun_sd, sky_terms,
-                    log=log)[0]                         # checked before any light is traced
+    plan = resolve_light({regions[0][0]: first}, light or LightOptions(), log)   # checked once
     level = None
-    if sky != "spec":
+    if plan.split:
         # the light the candidates are ranked in: the spec's sky at the level a fit of Ward's
         # lobe finds (a lobe ranked on a sky of the wrong level is one that bends to it)
-        ward = FitSession.for_regions(manifest_path, regions, seed=seed, trace=False,
-                                      model="achromatic" if first.obs.luminance else "colour",
-                                      **options)
-        prepare_sessions(ward, seed, lambda *a: None, sky, sun_sd, sky_terms)
-        level = next(iter(ward.values())).sky_record
+        ward = sessions_of(model="achromatic" if first.obs.luminance else "colour")
+        level = prepare_sessions(ward, plan, seed, lambda *a: None).record
         del ward
-    light = ("the spec's light as it is" if level is None else "the spec's sky at the level "
-             f"a fit of Ward's lobe found first (k = {level['k']:.3g})")
-    log(f"model selection ranks in {light}; the chosen models are fitted "
+    ranked_in = ("the spec's light as it is" if level is None else "the spec's sky at the level "
+                 f"a fit of Ward's lobe found first (k = {level['k']:.3g})")
+    log(f"model selection ranks in {ranked_in}; the chosen models are fitted "
         + ("in it too (fit the chosen model again with --sky to add the sky's level)"
-           if sky == "spec" else f"with the sky's level (--sky {sky})"))
+           if not plan.split else f"with the sky's level (--sky {plan.sky})"))
     sessions, trace_s = {}, {}
     for fam in families:
         t0 = time.perf_counter()
-        sessions[fam] = FitSession.for_regions(manifest_path, regions, model="two",
-                                               normalisation=fam, seed=seed, trace=False,
-                                               **options)
+        sessions[fam] = sessions_of(model="two", normalisation=fam)
         if level is not None:
             for s in sessions[fam].values():
-                s.skies = skies_at_level(s.skies, level, s.obs.times)
-        FitSession.trace_groups(sessions[fam])
+                s.light_at_level(level)
+        trace_sessions(list(sessions[fam].values()), SPEC_LIGHT)
         trace_s[fam] = time.perf_counter() - t0
     chosen, selection = {}, {}
     for name, pixels in regions:
@@ -256,25 +254,24 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         # parameterisation), or on the split light traced again below
         s = FitSession(manifest_path, name, pixels, model=pick["model"],
                        normalisation=pick["normalisation"], seed=seed, trace=False, **options)
-        if sky == "spec":
+        if not plan.split:
             s.take_light(traced[pick["normalisation"]])
         del traced
         chosen[name] = s
         selection[name] = {
             "criterion": f"held-out chi2, {folds}-fold over frames (frame t in fold t mod "
                          f"{folds}); the fewest parameters within sqrt(2 n) of the best, "
-                         f"ranked in {light}",
+                         f"ranked in {ranked_in}",
             "ranked_at_sky": None if level is None else {
                 k: level[k] for k in ("k", "interval95", "terms")},
             "folds": int(folds), "chosen": {"normalisation": pick["normalisation"],
                                             "model": pick["model"], "rank": pick["rank"]},
             "trace_time_s": trace_s, "ranking": rows}
-        if sky == "spec":
+        if not plan.split:
             out = chosen.pop(name).run("global", None, seed, None, log)
             out["model_selection"] = selection.pop(name)
             yield out
     if chosen:
-        for out in fit_sessions(chosen, "global", seed, log=log, sky=sky, sun_sd=sun_sd,
-                                sky_terms=sky_terms):
+        for out in fit_sessions(chosen, "global", seed, log=log, light=plan):
             out["model_selection"] = selection[out["region"]]
             yield out

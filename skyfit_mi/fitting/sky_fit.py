@@ -44,6 +44,7 @@ Two things the data cannot tell well are stated as priors:
 
 import datetime as dt
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -98,6 +99,42 @@ DRIFT_ITERATIONS = 8
 #: The parameters that scale with the light's absolute level (the reflectances); the
 #: roughness does not.
 LEVEL_SCALED = ("C_r", "C_g", "C_b", "R", "rho_s")
+
+
+@dataclass(frozen=True)
+class SkyShare:
+    """What the light adds to one region's parameters' errors.
+
+    record : the sky fit's record (:func:`~.sky_fit.fit_sky_scale`), shared by the day's
+        regions; None where the spec's sky is taken as it is
+    sd : the fitted sky's share of each parameter's standard error (None: none)
+    span : where the sky's level is not determined, each parameter's (lowest, highest) over the
+        levels the data could not tell apart (None where it is)
+    sun_sd, sun_source : as :class:`~.light.LightPlan`'s; ``sun_widening`` what a modelled sun's level
+        gains from the fitted sky's departure from the spec's
+        (:data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`)
+    """
+
+    record: dict = None
+    sd: np.ndarray = None
+    span: tuple = None
+    sun_sd: float = 0.0
+    sun_source: str = "given"
+    sun_widening: float = 0.0
+
+    @property
+    def sun_level_sd(self):
+        """The sun's level's relative uncertainty in the reflectances' intervals: ``sun_sd``
+        widened by ``sun_widening``."""
+        return float(np.hypot(self.sun_sd, self.sun_widening))
+
+@dataclass(frozen=True)
+class SkyFit:
+    """The sky fit's result (:func:`fit_sky_scale`): its ``record`` (the fit JSON's ``sky``) and
+    each region's :class:`SkyShare` (``shares`` {region: share})."""
+
+    record: dict
+    shares: dict = field(default_factory=dict)
 
 
 def _sunlit(skies):
@@ -414,17 +451,20 @@ def _fit_curve(sessions, thetas, u0, terms, shape, prior_sd, s2):
     return u, s2 * np.linalg.inv(H), span, responses, float(chi2)
 
 
-def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
-    """Fit the sky scale k of ``sessions`` (FitSessions of one day, traced with
-    ``split_sky``) and leave each at the fitted k with its ``sky_sd`` (the sky's share of
-    each parameter's standard error) and ``sky_record`` set; returns the record.
-    ``prior_sd``: the standard deviation of a normal prior on log k about the spec's level
+def fit_sky_scale(sessions, plan, seed=0, log=print):
+    """Fit the sky scale k of ``sessions`` (FitSessions of one day, traced with the split
+    light of ``plan``, a :class:`~.light.LightPlan`) and leave each lit at the fitted k;
+    returns the :class:`SkyFit`: its record and each region's :class:`SkyShare` (the sky's
+    share of each parameter's standard error, the sun level's sd).
+    ``plan.prior_sd``: the standard deviation of a normal prior on log k about the spec's level
     (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`), None for none (k from the data alone).
-    ``terms`` > 1: log k changes smoothly over the day (the sun's height, changing weather),
-    as that many Legendre polynomials in time; None: :func:`default_terms` of the frames, and
-    no warning where the data hardly tell the terms beyond the level (their prior holds them,
-    as it does the intervals); sessions traced with ``sky_shape`` also fit the mix of the
-    sky's shape variants (:func:`_fit_curve`), both from the day's level found first."""
+    ``plan.terms`` > 1: log k changes smoothly over the day (the sun's height, changing
+    weather), as that many Legendre polynomials in time; None: :func:`default_terms` of the
+    frames, and no warning where the data hardly tell the terms beyond the level (their prior
+    holds them, as it does the intervals); sessions traced with ``plan.shape`` also fit the
+    mix of the sky's shape variants (:func:`_fit_curve`), both from the day's level found
+    first."""
+    prior_sd, terms = plan.prior_sd, plan.terms
     t0 = time.perf_counter()
     told = terms is not None
     if not told:
@@ -509,6 +549,7 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
             "card, together.")
     # each region's parameters' response to log k at its fit (Gauss-Newton: the least-squares
     # change of theta that follows the residuals' change), smooth where a refit may jump
+    sky_sd, sky_span = [], []
     for n, (s, (_, theta)) in enumerate(zip(sessions, best)):
         change = []
         for d in (REFINE_STEP, -REFINE_STEP):
@@ -517,10 +558,10 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
         s.set_sky(k)
         _, J = s.problem.jacobian(theta)
         slope = -np.linalg.lstsq(J, (change[0] - change[1]) / (2 * REFINE_STEP), rcond=None)[0]
-        s.sky_sd = np.abs(slope) * (sd_u if np.isfinite(sd_u) else 0.0)
+        sky_sd.append(np.abs(slope) * (sd_u if np.isfinite(sd_u) else 0.0))
         # an undetermined k: the parameters' range over the k the profile could not tell apart
         thetas = np.array([profile[u][n][1] for u in within])
-        s.sky_span = None if np.isfinite(sd_u) else (thetas.min(axis=0), thetas.max(axis=0))
+        sky_span.append(None if np.isfinite(sd_u) else (thetas.min(axis=0), thetas.max(axis=0)))
     curve = shape = correlation = None
     J = len(sessions[0].parts) - 2                       # the shape variants traced
     if (told and terms > 1 or J) and not np.isfinite(sd_u):
@@ -533,8 +574,8 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
         u, C, span, responses, chi2_best = _fit_curve(sessions, [th for _, th in best], u0,
                                                       terms, J, prior_sd, s2)
         sd = np.sqrt(np.diag(C))
-        for s, response in zip(sessions, responses):
-            s.sky_sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", response, C, response), 0))
+        sky_sd = [np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", response, C, response), 0))
+                  for response in responses]
         k, sd_u = float(np.exp(u[0])), float(sd[0])
         interval = [float(np.exp(u[0] - unc.Z["95"] * sd[0])),
                     float(np.exp(u[0] + unc.Z["95"] * sd[0]))]
@@ -583,19 +624,18 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
         departure = float(np.sqrt(np.mean((log_k if curve is not None else np.log(k)) ** 2)))
     else:
         departure = float(max(abs(u) for u in within))
+    widening = (SUN_SKY_COUPLING * departure if plan.sun_source == "modelled" and plan.sun_sd
+                else 0.0)
     coupling = None
-    for s in sessions:
-        s.sun_widening = (SUN_SKY_COUPLING * departure if s.sun_source == "modelled" and s.sun_sd
-                          else 0.0)
-        if s.sun_widening:
-            coupling = {"given_sd": s.sun_sd, "coupling": SUN_SKY_COUPLING,
-                        "sd": s.sun_level_sd,
-                        "meaning": "the modelled sun's level's sd (of its log) in the "
-                                   "reflectances' intervals: hypot(given_sd, coupling |log k|; "
-                                   "log k's rms over the frames), a "
-                                   "sky fitted brighter or dimmer against the sun than the "
-                                   "spec's saying that the air is not the model's, nor then "
-                                   "its sun"}
+    if widening:
+        coupling = {"given_sd": plan.sun_sd, "coupling": SUN_SKY_COUPLING,
+                    "sd": float(np.hypot(plan.sun_sd, widening)),
+                    "meaning": "the modelled sun's level's sd (of its log) in the "
+                               "reflectances' intervals: hypot(given_sd, coupling |log k|; "
+                               "log k's rms over the frames), a "
+                               "sky fitted brighter or dimmer against the sun than the "
+                               "spec's saying that the air is not the model's, nor then "
+                               "its sun"}
     record = {"fitted": "the sky's level (all but the sun's disc) against the spec's, relative "
                         "to the sun: k, shared by every region"
                         + (" and frame of the fit" if curve is None else
@@ -616,8 +656,8 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
               "terms": curve, "shape": shape, "correlation": correlation,
               "sun_coupling": coupling,
               "warnings": warnings, "time_s": time.perf_counter() - t0}
-    for s in sessions:
-        s.sky_record = record
+    shares = {s.name: SkyShare(record, sd, span, plan.sun_sd, plan.sun_source, widening)
+              for s, sd, span in zip(sessions, sky_sd, sky_span)}
     ends = [f"{v:.3f}" if v is not None else "open" for v in interval]
     log(f"sky: the sky's level fitted with {len(sessions)} region(s)"
         + ("" if prior_sd is None else f" and its prior (sd {prior_sd:g} in log k)")
@@ -634,4 +674,4 @@ def fit_sky_scale(sessions, seed=0, log=print, prior_sd=None, terms=None):
            "spec's over the frames".format(*_ranges(shape["levels_by_frame"])))
         + f" ({record['time_s']:.1f} s)"
         + "".join(f"\n  warning: {w}" for w in warnings))
-    return record
+    return SkyFit(record, shares)
