@@ -382,8 +382,9 @@ def figures(work, out, log=print):
             "| figure | what | the thesis shows | ours |", "|---|---|---|---|", *other_rows, "",
             "### Figs 7.13-7.14: the sample board, fitted and relit", "",
             "The thesis's figures are of its real board sequence; ours is the synthetic board of "
-            "`scenes/specs/board_east_37.toml` (its materials are the truth), until `skyfit "
-            "ingest` (issue 15) brings photographs. fig_7_13.png is the relit day's contact "
+            "`scenes/specs/board_east_37.toml` (its materials are the truth); photographs of a "
+            "real board are read by `skyfit ingest SPEC PHOTOS...` and fitted and relit the same "
+            "way ([cli.md](cli.md)). fig_7_13.png is the relit day's contact "
             "sheet, fig_7_14.png each sample's predicted series with its 95% band and the "
             "observed values.", "",
             "| sample | fitted | truth | truth in the 95% intervals | relit vs observed (rel. "

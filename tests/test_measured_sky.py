@@ -181,13 +181,13 @@ def test_a_day_under_measured_skies_is_recovered_under_them_and_biased_under_the
 
 def test_a_fisheye_hdr_of_the_measured_sky_with_a_clipped_sun_lights_a_spec_as_the_map_does(
         scans, tmp_path, mi):
-    """The README's practical version: an equidistant fisheye HDR of the sky per frame, the
-    brightest circumsolar pixels clipped, read by a spec (``projection = "fisheye"``, the
-    clipped sun filled from the ring around it, DHI and DNI from an ``irradiance_file``) gives
-    the measured sky's light: the same horizontal irradiance and sun; the sky away from the sun
-    2.0-2.8% too bright (measured), since the DHI rescale spreads the clipped circumsolar light
-    over the map.  A map calibrated by its ``scale`` instead keeps the sky (0.1% low) and
-    misses the clipped light in the irradiance (0.2-0.3%)."""
+    """docs/cli.md's practical version ("Measured light"): an equidistant fisheye HDR of the sky
+    per frame, the brightest circumsolar pixels clipped, read by a spec (``projection =
+    "fisheye"``, the clipped sun filled from the ring around it, DHI and DNI from an
+    ``irradiance_file``) gives the measured sky's light: the same horizontal irradiance and sun;
+    the sky away from the sun 2.0-2.8% too bright (measured), since the DHI rescale spreads the
+    clipped circumsolar light over the map.  A map calibrated by its ``scale`` instead keeps the
+    sky (0.1% low) and misses the clipped light in the irradiance (0.2-0.3%)."""
     from test_envmap import _fisheye_of
 
     from skyfit_mi.pipeline.spec import SpecError, thesis_disc_spec, validate_spec

@@ -96,7 +96,7 @@ def test_an_auto_exposure_of_a_dark_day_is_refused_before_the_folder_is_made(tmp
 
 
 def test_clean_runs_agree_to_float32_rounding(tmp_path, mi):
-    """The promise (README, docs/MANIFEST.md): a render of the same spec in another process,
+    """The promise (docs/cli.md, docs/MANIFEST.md): a render of the same spec in another process,
     even from an empty kernel cache, gives the same sensor values and radiance and sigma equal
     to 1e-6 relative (the parallel film accumulation's float32 rounding order may differ)."""
     import subprocess
