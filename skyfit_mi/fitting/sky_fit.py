@@ -451,45 +451,67 @@ def _fit_curve(sessions, thetas, u0, terms, shape, prior_sd, s2):
     return u, s2 * np.linalg.inv(H), span, responses, float(chi2)
 
 
-def fit_sky_scale(sessions, plan, seed=0, log=print):
-    """Fit the sky scale k of ``sessions`` (FitSessions of one day, traced with the split
-    light of ``plan``, a :class:`~.light.LightPlan`) and leave each lit at the fitted k;
-    returns the :class:`SkyFit`: its record and each region's :class:`SkyShare` (the sky's
-    share of each parameter's standard error, the sun level's sd).
-    ``plan.prior_sd``: the standard deviation of a normal prior on log k about the spec's level
-    (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`), None for none (k from the data alone).
-    ``plan.terms`` > 1: log k changes smoothly over the day (the sun's height, changing
-    weather), as that many Legendre polynomials in time; None: :func:`default_terms` of the
-    frames, and no warning where the data hardly tell the terms beyond the level (their prior
-    holds them, as it does the intervals); sessions traced with ``plan.shape`` also fit the
-    mix of the sky's shape variants (:func:`_fit_curve`), both from the day's level found
-    first."""
-    prior_sd, terms = plan.prior_sd, plan.terms
-    t0 = time.perf_counter()
-    told = terms is not None
-    if not told:
-        terms = default_terms(len({i for s in sessions for i in s.obs.frames}),
-                              _referenced(sessions[0].doc))
+@dataclass
+class _Level:
+    """The day's one sky level profiled over log k (:func:`_profile_level`): ``profile``
+    {log k: [(least chi-square, parameters) per region]}, the search's ``grid`` (log k), the
+    prior's sd on log k (None: none), the least point ``u0``, log k's standard error ``sd_u``
+    (inf where not determined), whether the least point lies at the grid's ``edge``, and
+    s^2 (the regions' pooled Birge ratio there)."""
+
+    profile: dict
+    grid: np.ndarray
+    prior_sd: float
+    u0: float = 0.0
+    sd_u: float = np.inf
+    edge: bool = False
+    s2: float = 1.0
+
+    def data(self, u):
+        """The regions' summed least chi-square at log k = ``u``."""
+        return sum(c for c, _ in self.profile[u])
+
+    def total(self, u):
+        """The profile: the data's chi-square and the prior's penalty at log k = ``u``."""
+        return self.data(u) + (0.0 if self.prior_sd is None else (float(u) / self.prior_sd) ** 2)
+
+    @property
+    def determined(self):
+        return bool(np.isfinite(self.sd_u))
+
+    @property
+    def within(self):
+        """The log k the profile cannot tell from the least point (95%)."""
+        return [u for u in self.profile
+                if self.total(u) <= self.total(self.u0) + unc.LEVELS["95"] * self.s2]
+
+    @property
+    def interval(self):
+        """k's 95% interval: from the curvature, or what the profile saw where k is not
+        determined (open where it reached the grid's end)."""
+        if self.determined:
+            return [float(np.exp(self.u0 - unc.Z["95"] * self.sd_u)),
+                    float(np.exp(self.u0 + unc.Z["95"] * self.sd_u))]
+        within = self.within
+        return [None if min(within) <= self.grid[0] else float(np.exp(min(within))),
+                None if max(within) >= self.grid[-1] else float(np.exp(max(within)))]
+
+
+def _profile_level(sessions, prior_sd, seed):
+    """The day's one sky level (:class:`_Level`): the regions' summed least chi-square (the
+    global search from seeded starts) on :data:`SCALE_GRID`, then a parabola in log k about
+    its least point; log k's standard error from the curvature (Delta chi^2 = s^2 at 1 sd)."""
     rng = np.random.default_rng(seed)
     starts = [s.random_start(rng) for s in sessions]
-    profile = {}                                        # the level first, in the spec's shape
-
-    def penalty(u):
-        """The prior's share of the profile at log k = ``u`` (chi-square units)."""
-        return 0.0 if prior_sd is None else (float(u) / prior_sd) ** 2
-
-    def data(u):
-        """The regions' summed least chi-square at log k = ``u``, each k searched once."""
-        u = float(u)
-        if u not in profile:
-            profile[u] = _least(sessions, float(np.exp(u)), starts)
-        return sum(c for c, _ in profile[u])
+    level = _Level({}, np.log(SCALE_GRID), prior_sd)
 
     def total(u):
-        """The profile: the data's chi-square and the prior's penalty at log k = ``u``."""
-        return data(u) + penalty(u)
+        u = float(u)
+        if u not in level.profile:
+            level.profile[u] = _least(sessions, float(np.exp(u)), starts)
+        return level.total(u)
 
-    grid = np.log(SCALE_GRID)
+    grid = level.grid
     chi2 = np.array([total(u) for u in grid])
     i = int(np.argmin(chi2))
     edge = i in (0, len(grid) - 1)
@@ -502,55 +524,59 @@ def fit_sky_scale(sessions, plan, seed=0, log=print):
         total(float(vertex))
     # the least point evaluated; the curvature near it, or the grid's where the near points'
     # search jitter leaves none
-    u0 = min(profile, key=total)
+    level.u0 = min(level.profile, key=level.total)
     b = b if b is not None and b > 0 else b_grid
-    best = profile[u0]
-    chi2_best = data(u0)
-    dof = sum(s.problem.dof for s in sessions)
-    noise = sum(s.problem.noise_chi2(th)[0] for s, (_, th) in zip(sessions, best))
-    s2 = unc.scale(chi2_best, noise)
-    # k's standard error in log k from the profile's curvature (Delta chi^2 = s^2 at 1 sd);
+    noise = sum(s.problem.noise_chi2(th)[0]
+                for s, (_, th) in zip(sessions, level.profile[level.u0]))
+    level.s2 = unc.scale(level.data(level.u0), noise)
+    level.edge = edge
     # at the grid's end the minimum may lie beyond it: k is not determined
-    sd_u = float(np.sqrt(s2 / b)) if b is not None and b > 0 and not edge else np.inf
-    k = float(np.exp(u0))
-    within = [u for u in profile
-              if total(u) <= total(u0) + unc.LEVELS["95"] * s2]
-    if np.isfinite(sd_u):
-        interval = [float(np.exp(u0 - unc.Z["95"] * sd_u)), float(np.exp(u0 + unc.Z["95"] * sd_u))]
-    else:                               # what the profile saw, open where it reached the grid's end
-        interval = [None if min(within) <= grid[0] else float(np.exp(min(within))),
-                    None if max(within) >= grid[-1] else float(np.exp(max(within)))]
-    warnings = []
-    if not np.isfinite(sd_u):
+    level.sd_u = float(np.sqrt(level.s2 / b)) if b is not None and b > 0 and not edge else np.inf
+    return level
+
+
+def _level_warnings(level, terms):
+    """What the day's one level says of itself: not determined, or held by its prior where the
+    data alone put it beyond the search (:func:`_data_beyond_search`)."""
+    warnings, k, within = [], float(np.exp(level.u0)), level.within
+    if not level.determined:
         warnings.append(
             f"the data do not determine the sky's level (k = {k:.3g}, chi-square "
-            f"{'at the search' + chr(39) + 's end' if edge else 'flat'} over k = "
+            f"{'at the search' + chr(39) + 's end' if level.edge else 'flat'} over k = "
             f"{np.exp(min(within)):.3g}-{np.exp(max(within)):.3g}): every parameter's interval "
             "takes in its values over that range of k"
             + (", at least: the level may lie beyond the search (the spec's sky may be far "
                "from the light the data show), so the parameters and their intervals are not "
-               "reliable" if edge else "")
+               "reliable" if level.edge else "")
             + "; fit several materials with different normals, or a grey card, together.")
-    alone = {u: data(u) for u in profile}               # the profile without the prior
-    side = _data_beyond_search(alone, grid)
+    alone = {u: level.data(u) for u in level.profile}   # the profile without the prior
+    side = _data_beyond_search(alone, level.grid)
     # the prior-data conflict, over s^2 as the profile's intervals take it
-    conflict = (total(u0) - min(alone.values())) / s2
-    if prior_sd is not None and side and not edge and conflict > unc.LEVELS["95"]:
-        end = grid[-1 if side > 0 else 0]
+    conflict = (level.total(level.u0) - min(alone.values())) / level.s2
+    if level.prior_sd is not None and side and not level.edge and conflict > unc.LEVELS["95"]:
+        end = level.grid[-1 if side > 0 else 0]
         warnings.append(
             f"the data alone put the sky's level at the search's {'upper' if side > 0 else 'lower'}"
             f" end (k near {np.exp(end):.3g} times the spec's or beyond, "
-            f"{abs(end) / prior_sd:.1f} sd of its prior) as one level for the day, and the prior "
-            f"holds that level at k = {k:.3g}: the light the data show departs from the spec's "
-            "more than the prior allows, so the parameters and their intervals are not reliable"
-            + (" unless the level's change over the day takes that up" if terms > 1 else "")
+            f"{abs(end) / level.prior_sd:.1f} sd of its prior) as one level for the day, and the "
+            f"prior holds that level at k = {k:.3g}: the light the data show departs from the "
+            "spec's more than the prior allows, so the parameters and their intervals are not "
+            "reliable" + (" unless the level's change over the day takes that up" if terms > 1
+                          else "")
             + "; give the spec a sky nearer the day's (a measured one: perez with measured "
             "irradiance, or envmap), or fit several materials with different normals, or a grey "
             "card, together.")
-    # each region's parameters' response to log k at its fit (Gauss-Newton: the least-squares
-    # change of theta that follows the residuals' change), smooth where a refit may jump
-    sky_sd, sky_span = [], []
-    for n, (s, (_, theta)) in enumerate(zip(sessions, best)):
+    return warnings
+
+
+def _level_shares(sessions, level):
+    """Each region's (sky's share of its parameters' standard errors, their span over the
+    levels the profile could not tell apart where k is not determined, else None) under the
+    day's one level: each parameter's response to log k at its fit (Gauss-Newton: the
+    least-squares change of theta that follows the residuals' change), smooth where a refit
+    may jump.  Leaves each session at the level."""
+    k, sd, span = float(np.exp(level.u0)), [], []
+    for n, (s, (_, theta)) in enumerate(zip(sessions, level.profile[level.u0])):
         change = []
         for d in (REFINE_STEP, -REFINE_STEP):
             s.set_sky(k * np.exp(d))
@@ -558,120 +584,198 @@ def fit_sky_scale(sessions, plan, seed=0, log=print):
         s.set_sky(k)
         _, J = s.problem.jacobian(theta)
         slope = -np.linalg.lstsq(J, (change[0] - change[1]) / (2 * REFINE_STEP), rcond=None)[0]
-        sky_sd.append(np.abs(slope) * (sd_u if np.isfinite(sd_u) else 0.0))
-        # an undetermined k: the parameters' range over the k the profile could not tell apart
-        thetas = np.array([profile[u][n][1] for u in within])
-        sky_span.append(None if np.isfinite(sd_u) else (thetas.min(axis=0), thetas.max(axis=0)))
-    curve = shape = correlation = None
+        sd.append(np.abs(slope) * (level.sd_u if level.determined else 0.0))
+        thetas = np.array([level.profile[u][n][1] for u in level.within])
+        span.append(None if level.determined else (thetas.min(axis=0), thetas.max(axis=0)))
+    return sd, span
+
+
+@dataclass
+class _Fitted:
+    """The sky as fitted (:func:`fit_sky_scale`): its level k with its 95% interval and log
+    k's sd, each region's share of its errors (``sd``), the curve's and the shape's records
+    (None where not fitted), each region's parameters' span over the levels the profile could not
+    tell apart where k is not determined (:func:`_level_shares`), the coefficients' correlation, the regions' chi-square there, log
+    k by frame of a curve (else None), and the log's names of the shape's indices."""
+
+    k: float
+    interval: list
+    sd_u: float
+    sd: list
+    span: list
+    chi2: float
+    curve: dict = None
+    shape: dict = None
+    correlation: dict = None
+    log_k: np.ndarray = None
+    index_names: list = None
+
+
+def _fit_terms(sessions, level, terms, told, warnings):
+    """The sky's level over the day (``terms``, ``told`` by ``--sky-terms``) and its shape
+    (the shape variants traced) fitted from the day's ``level`` (:func:`_fit_curve`) where
+    that is determined; a :class:`_Fitted` (the level's own where they are not fitted).
+    Appends what the data hardly tell to ``warnings``."""
+    sd, span = _level_shares(sessions, level)
+    fitted = _Fitted(float(np.exp(level.u0)), level.interval, level.sd_u, sd, span,
+                     level.data(level.u0))
     J = len(sessions[0].parts) - 2                       # the shape variants traced
-    if (told and terms > 1 or J) and not np.isfinite(sd_u):
-        parts = ["change over the day"] * (told and terms > 1) + ["shape"] * bool(J)
-        warnings.append(f"the sky's {' and its '.join(parts)} {'are' if len(parts) > 1 else 'is'}"
-                        " not fitted: its level is not determined.")
-    elif not np.isfinite(sd_u):
-        terms = 1                                       # one (undetermined) level for the day
-    elif terms > 1 or J:
-        u, C, span, responses, chi2_best = _fit_curve(sessions, [th for _, th in best], u0,
-                                                      terms, J, prior_sd, s2)
-        sd = np.sqrt(np.diag(C))
-        sky_sd = [np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", response, C, response), 0))
-                  for response in responses]
-        k, sd_u = float(np.exp(u[0])), float(sd[0])
-        interval = [float(np.exp(u[0] - unc.Z["95"] * sd[0])),
-                    float(np.exp(u[0] + unc.Z["95"] * sd[0]))]
-        names = ["log k"] + [f"log k term {j}" for j in range(1, terms)]
-        if terms > 1:
-            frames = sorted({(i, t) for s in sessions for i, t in zip(s.obs.frames,
-                                                                      s.obs.times)})
-            B = time_basis([t for _, t in frames], span, terms)
-            log_k = B @ u[:terms]
-            Ct = C[:terms, :terms]
-            half = unc.Z["95"] * np.sqrt(np.einsum("ij,jk,ik->i", B, Ct, B))
-            curve = {"meaning": "log k(t) = sum_j coefficients[j] P_j(x), P_j Legendre "
-                                "polynomials, x = -1 at span_s[0] and 1 at span_s[1] (held "
-                                "beyond)",
-                     "coefficients": u[:terms].tolist(), "covariance": Ct.tolist(),
-                     "span_s": list(span), "drift_prior_sd": DRIFT_SD,
-                     "k_by_frame": {int(i): [float(np.exp(v)), float(np.exp(v - h)),
-                                             float(np.exp(v + h))]
-                                    for (i, _), v, h in zip(frames, log_k, half)}}
-            vague = [j for j in range(1, terms) if sd[j] > 0.7 * DRIFT_SD]
-            if vague and told:
-                warnings.append(f"the data hardly tell how the sky changes over the day (terms "
-                                f"{', '.join(map(str, vague))} of --sky-terms {terms}): their "
-                                "prior holds them, and the intervals include that.")
-        if J:
-            shape, index_names = _shape_record(sessions[0], u[terms:], sd[terms:])
-            names += [f"mix {of}" for of in shape["index"]]
-            vague = [of for of, sd_m in zip(shape["index"], sd[terms:]) if sd_m > 0.7 * SHAPE_SD]
-            if vague:
-                warnings.append(f"the data hardly tell the sky's {' and '.join(vague)} (its "
-                                "shape): the prior holds it, and the intervals include that; "
-                                "regions with other normals, or a grey card, tell it better.")
-            t = shape["index"].get("turbidity")
-            if t is not None and not TURBIDITY_RANGE[0] <= t[0] <= TURBIDITY_RANGE[1]:
-                warnings.append(f"the fitted turbidity {t[0]:.3g} lies beyond the turbid sky's "
-                                f"{TURBIDITY_RANGE[0]:g}-{TURBIDITY_RANGE[1]:g}, where its "
-                                "levels are held at the edge: the light is not a turbid clear "
-                                "sky's, so the parameters and their intervals are not "
-                                "reliable; give the spec a sky nearer the day's (a measured "
-                                "one: perez with measured irradiance, or envmap).")
-        correlation = {"names": names, "matrix": (C / np.outer(sd, sd)).tolist()}
-    # a modelled sun's level is less sure where the sky departs from the spec's
-    # (its departure: log k's rms over the frames of a curve; over the levels the profile could
-    # not tell apart where k is not determined)
-    if np.isfinite(sd_u):
-        departure = float(np.sqrt(np.mean((log_k if curve is not None else np.log(k)) ** 2)))
+    if not (terms > 1 or J):
+        return fitted
+    if not level.determined:
+        if told and terms > 1 or J:
+            parts = ["change over the day"] * (told and terms > 1) + ["shape"] * bool(J)
+            warnings.append(f"the sky's {' and its '.join(parts)} "
+                            f"{'are' if len(parts) > 1 else 'is'} not fitted: its level is not "
+                            "determined.")
+        return fitted
+    u, C, span, responses, fitted.chi2 = _fit_curve(
+        sessions, [th for _, th in level.profile[level.u0]], level.u0, terms, J,
+        level.prior_sd, level.s2)
+    sd = np.sqrt(np.diag(C))
+    fitted.sd = [np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", response, C, response), 0))
+                 for response in responses]
+    fitted.k, fitted.sd_u = float(np.exp(u[0])), float(sd[0])
+    fitted.interval = [float(np.exp(u[0] - unc.Z["95"] * sd[0])),
+                       float(np.exp(u[0] + unc.Z["95"] * sd[0]))]
+    names = ["log k"] + [f"log k term {j}" for j in range(1, terms)]
+    if terms > 1:
+        fitted.curve, fitted.log_k = _curve_record(sessions, u[:terms], C[:terms, :terms], span)
+        vague = [j for j in range(1, terms) if sd[j] > 0.7 * DRIFT_SD]
+        if vague and told:
+            warnings.append(f"the data hardly tell how the sky changes over the day (terms "
+                            f"{', '.join(map(str, vague))} of --sky-terms {terms}): their "
+                            "prior holds them, and the intervals include that.")
+    if J:
+        fitted.shape, fitted.index_names = _shape_record(sessions[0], u[terms:], sd[terms:])
+        names += [f"mix {of}" for of in fitted.shape["index"]]
+        warnings += _shape_warnings(fitted.shape, sd[terms:])
+    fitted.correlation = {"names": names, "matrix": (C / np.outer(sd, sd)).tolist()}
+    return fitted
+
+
+def _curve_record(sessions, coefficients, covariance, span):
+    """The JSON record of the sky's level's curve over the day (its Legendre ``coefficients``
+    with their ``covariance`` over ``span`` [s]), and log k at each frame."""
+    frames = sorted({(i, t) for s in sessions for i, t in zip(s.obs.frames, s.obs.times)})
+    B = time_basis([t for _, t in frames], span, len(coefficients))
+    log_k = B @ coefficients
+    half = unc.Z["95"] * np.sqrt(np.einsum("ij,jk,ik->i", B, covariance, B))
+    return {"meaning": "log k(t) = sum_j coefficients[j] P_j(x), P_j Legendre polynomials, "
+                       "x = -1 at span_s[0] and 1 at span_s[1] (held beyond)",
+            "coefficients": coefficients.tolist(), "covariance": covariance.tolist(),
+            "span_s": list(span), "drift_prior_sd": DRIFT_SD,
+            "k_by_frame": {int(i): [float(np.exp(v)), float(np.exp(v - h)),
+                                    float(np.exp(v + h))]
+                           for (i, _), v, h in zip(frames, log_k, half)}}, log_k
+
+
+def _shape_warnings(shape, mix_sd):
+    """What the fitted shape (``shape``'s record, its mix's sd ``mix_sd``) cannot say."""
+    warnings = []
+    vague = [of for of, sd_m in zip(shape["index"], mix_sd) if sd_m > 0.7 * SHAPE_SD]
+    if vague:
+        warnings.append(f"the data hardly tell the sky's {' and '.join(vague)} (its "
+                        "shape): the prior holds it, and the intervals include that; "
+                        "regions with other normals, or a grey card, tell it better.")
+    t = shape["index"].get("turbidity")
+    if t is not None and not TURBIDITY_RANGE[0] <= t[0] <= TURBIDITY_RANGE[1]:
+        warnings.append(f"the fitted turbidity {t[0]:.3g} lies beyond the turbid sky's "
+                        f"{TURBIDITY_RANGE[0]:g}-{TURBIDITY_RANGE[1]:g}, where its "
+                        "levels are held at the edge: the light is not a turbid clear "
+                        "sky's, so the parameters and their intervals are not "
+                        "reliable; give the spec a sky nearer the day's (a measured "
+                        "one: perez with measured irradiance, or envmap).")
+    return warnings
+
+
+def _sun_coupling(plan, level, fitted):
+    """(What a modelled sun's level's sd gains from the fitted sky's departure from the
+    spec's, its record or None): log k's rms over the frames of a curve, its level's, or the
+    largest over the levels the profile could not tell apart where k is not determined."""
+    if fitted.sd_u is not None and np.isfinite(fitted.sd_u):
+        log_k = fitted.log_k if fitted.curve is not None else np.log(fitted.k)
+        departure = float(np.sqrt(np.mean(log_k ** 2)))
     else:
-        departure = float(max(abs(u) for u in within))
+        departure = float(max(abs(u) for u in level.within))
     widening = (SUN_SKY_COUPLING * departure if plan.sun_source == "modelled" and plan.sun_sd
                 else 0.0)
-    coupling = None
-    if widening:
-        coupling = {"given_sd": plan.sun_sd, "coupling": SUN_SKY_COUPLING,
-                    "sd": float(np.hypot(plan.sun_sd, widening)),
-                    "meaning": "the modelled sun's level's sd (of its log) in the "
-                               "reflectances' intervals: hypot(given_sd, coupling |log k|; "
-                               "log k's rms over the frames), a "
-                               "sky fitted brighter or dimmer against the sun than the "
-                               "spec's saying that the air is not the model's, nor then "
-                               "its sun"}
+    if not widening:
+        return 0.0, None
+    return widening, {"given_sd": plan.sun_sd, "coupling": SUN_SKY_COUPLING,
+                      "sd": float(np.hypot(plan.sun_sd, widening)),
+                      "meaning": "the modelled sun's level's sd (of its log) in the "
+                                 "reflectances' intervals: hypot(given_sd, coupling |log k|; "
+                                 "log k's rms over the frames), a sky fitted brighter or "
+                                 "dimmer against the sun than the spec's saying that the air "
+                                 "is not the model's, nor then its sun"}
+
+
+def fit_sky_scale(sessions, plan, seed=0, log=print):
+    """Fit the sky scale k of ``sessions`` (FitSessions of one day, traced with the split
+    light of ``plan``, a :class:`~.light.LightPlan`) and leave each lit at the fitted k;
+    returns the :class:`SkyFit`: its record and each region's :class:`SkyShare` (the sky's
+    share of each parameter's standard error, the sun level's sd).
+    ``plan.prior_sd``: the standard deviation of a normal prior on log k about the spec's level
+    (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`), None for none (k from the data alone).
+    ``plan.terms`` > 1: log k changes smoothly over the day (the sun's height, changing
+    weather), as that many Legendre polynomials in time; None: :func:`default_terms` of the
+    frames, and no warning where the data hardly tell the terms beyond the level (their prior
+    holds them, as it does the intervals); sessions traced with ``plan.shape`` also fit the
+    mix of the sky's shape variants (:func:`_fit_curve`), both from the day's level found
+    first (:func:`_profile_level`)."""
+    t0 = time.perf_counter()
+    terms, told = plan.terms, plan.terms is not None
+    if not told:
+        terms = default_terms(len({i for s in sessions for i in s.obs.frames}),
+                              _referenced(sessions[0].doc))
+    level = _profile_level(sessions, plan.prior_sd, seed)
+    warnings = _level_warnings(level, terms)
+    fitted = _fit_terms(sessions, level, terms, told, warnings)
+    widening, coupling = _sun_coupling(plan, level, fitted)
+    profile = sorted(level.profile)
     record = {"fitted": "the sky's level (all but the sun's disc) against the spec's, relative "
                         "to the sun: k, shared by every region"
-                        + (" and frame of the fit" if curve is None else
+                        + (" and frame of the fit" if fitted.curve is None else
                            ", smooth over the day (terms)"),
-              "k": k, "interval95": interval, "determined": bool(np.isfinite(sd_u)),
-              "regions": [s.name for s in sessions], "chi2": chi2_best,
-              "dof": dof - (len(correlation["names"]) if correlation else 1),
-              "interval_scale_s2": s2,
-              "prior": None if prior_sd is None else {
-                  "log_k_sd": prior_sd, "meaning": "log k ~ N(0, sd^2) about the spec's sky, "
-                  "from how measured skies scatter about the models; its penalty (log k / "
+              "k": fitted.k, "interval95": fitted.interval, "determined": level.determined,
+              "regions": [s.name for s in sessions], "chi2": fitted.chi2,
+              "dof": sum(s.problem.dof for s in sessions)
+              - (len(fitted.correlation["names"]) if fitted.correlation else 1),
+              "interval_scale_s2": level.s2,
+              "prior": None if plan.prior_sd is None else {
+                  "log_k_sd": plan.prior_sd, "meaning": "log k ~ N(0, sd^2) about the spec's "
+                  "sky, from how measured skies scatter about the models; its penalty (log k / "
                   "sd)^2 is in the profile"},
               "profile": {"meaning": "the regions' least chi-square over one level k for "
                                      "the day, the search's first stage (chi2 above: at the "
                                      "fitted sky, its curve and shape included)",
-                          "k": [float(np.exp(u)) for u in sorted(profile)],
-                          "chi2": [data(u) for u in sorted(profile)]},
-              "terms": curve, "shape": shape, "correlation": correlation,
+                          "k": [float(np.exp(u)) for u in profile],
+                          "chi2": [level.data(u) for u in profile]},
+              "terms": fitted.curve, "shape": fitted.shape, "correlation": fitted.correlation,
               "sun_coupling": coupling,
               "warnings": warnings, "time_s": time.perf_counter() - t0}
-    shares = {s.name: SkyShare(record, sd, span, plan.sun_sd, plan.sun_source, widening)
-              for s, sd, span in zip(sessions, sky_sd, sky_span)}
-    ends = [f"{v:.3f}" if v is not None else "open" for v in interval]
-    log(f"sky: the sky's level fitted with {len(sessions)} region(s)"
-        + ("" if prior_sd is None else f" and its prior (sd {prior_sd:g} in log k)")
-        + f": k = {k:.3f} (95%: "
-        f"{ends[0]}-{ends[1]}) times the spec's, against the sun"
-        + ("" if curve is None else f", changing over the day as {terms} terms: "
-           + _curve_text([v[0] for v in curve["k_by_frame"].values()]))
-        + ("" if shape is None else "; its shape: " + ", ".join(
-            f"{of} {name} {v[0]:.{2 if abs(v[0]) >= 1 else 3}f} +- "
-            f"{v[1]:.{2 if abs(v[0]) >= 1 else 3}f}"
-            for (of, v), name in zip(shape["index"].items(), index_names)))
-        + ("" if shape is None or "levels_by_frame" not in shape else
-           ", which puts the sun's light at {:.2f}-{:.2f} and the sky's at {:.2f}-{:.2f} of the "
-           "spec's over the frames".format(*_ranges(shape["levels_by_frame"])))
-        + f" ({record['time_s']:.1f} s)"
-        + "".join(f"\n  warning: {w}" for w in warnings))
-    return SkyFit(record, shares)
+    log(_sky_log(record, fitted, len(sessions), plan.prior_sd, terms))
+    return SkyFit(record, {s.name: SkyShare(record, sd, sp, plan.sun_sd, plan.sun_source,
+                                            widening)
+                           for s, sd, sp in zip(sessions, fitted.sd, fitted.span)})
+
+
+def _sky_log(record, fitted, regions, prior_sd, terms):
+    """The log's lines on the fitted sky (``record``, ``fitted``)."""
+    ends = [f"{v:.3f}" if v is not None else "open" for v in record["interval95"]]
+    curve, shape = fitted.curve, fitted.shape
+    return (f"sky: the sky's level fitted with {regions} region(s)"
+            + ("" if prior_sd is None else f" and its prior (sd {prior_sd:g} in log k)")
+            + f": k = {fitted.k:.3f} (95%: {ends[0]}-{ends[1]}) times the spec's, against the sun"
+            + ("" if curve is None else f", changing over the day as {terms} terms: "
+               + _curve_text([v[0] for v in curve["k_by_frame"].values()]))
+            + ("" if shape is None else "; its shape: " + ", ".join(
+                f"{of} {name} {v[0]:.{2 if abs(v[0]) >= 1 else 3}f} +- "
+                f"{v[1]:.{2 if abs(v[0]) >= 1 else 3}f}"
+                for (of, v), name in zip(shape["index"].items(), fitted.index_names)))
+            + ("" if shape is None or "levels_by_frame" not in shape else
+               ", which puts the sun's light at {:.2f}-{:.2f} and the sky's at {:.2f}-{:.2f} of "
+               "the spec's over the frames".format(*_ranges(shape["levels_by_frame"])))
+            + f" ({record['time_s']:.1f} s)"
+            + "".join(f"\n  warning: {w}" for w in record["warnings"]))
