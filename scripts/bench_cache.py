@@ -35,7 +35,6 @@ def main():
     from skyfit_mi.pipeline.pixels import frame_values
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
-    from skyfit_mi.render.fit_model import WardModel
 
     print(f"Command: `.venv/bin/python scripts/bench_cache.py {' '.join(sys.argv[1:])}`. "
           f"Date: {dt.date.today().isoformat()}.\n")
@@ -55,7 +54,8 @@ def main():
                                seed=1)
                 t = time.perf_counter() - t0
                 theta = [truth["R"], truth["rho_s"], sigma]
-                a, b = (WardModel(c, "achromatic").radiance(theta) for c in s.cache.halves())
+                # the table's two independent halves of the positions (parts 1 and 2)
+                a, b = (s.model_on(s.table, part=j).radiance(theta) for j in (1, 2))
                 own = np.sqrt(np.mean(((a - b) / (a + b)) ** 2))
                 rendered = frame_values(out, s.obs.pixels, s.obs.frames)
                 rel = s.wm.radiance(theta) / rendered - 1

@@ -1,6 +1,9 @@
 """The thesis's figures 6.5-6.21, 7.10 and 7.13-7.14 on skyfit's sequences (issue 14).
 
-Run through ``scripts/reproduce_thesis.py --part figures``.
+Run through ``scripts/reproduce_thesis.py --part figures`` (which writes the section into
+docs/THESIS_TABLES.md), or alone, which prints the section:
+
+    .venv/bin/python scripts/thesis_figures.py [--figures-dir out/thesis_figures]
 
 Chi-square topologies (figs 6.5-6.10, 6.12-6.13, 6.15, 6.18-6.21): for each figure's scene (the
 disc or the sphere, sky, camera side, sensor noise, times) and each of its materials (the
@@ -17,8 +20,10 @@ sample board (``scenes/specs/board_east_37.toml``) fitted per sample and relit w
 relight``: the thesis's were a real sequence; ours is synthetic, its truth known.
 """
 
+import argparse
 import json
 import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -390,3 +395,17 @@ def figures(work, out, log=print):
             "| sample | fitted | truth | truth in the 95% intervals | relit vs observed (rel. "
             "RMS; the relit day shares the target's seeds) | warnings (their first words) |",
             "|---|---|---|---|---|---|", *board_rows, ""]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--figures-dir", default="out/thesis_figures",
+                    help="folder of the figures' PNGs (default out/thesis_figures)")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        section = figures(Path(tmp), Path(args.figures_dir).resolve())
+    print("\n".join(section))
+
+
+if __name__ == "__main__":
+    main()

@@ -33,11 +33,6 @@ class SolarPosition:
     zenith_deg: np.ndarray
     azimuth_deg: np.ndarray
 
-    @property
-    def altitude_deg(self):
-        """Solar altitude above the horizon [degrees]."""
-        return 90.0 - self.zenith_deg
-
     def direction(self):
         """Unit vector(s) toward the sun in the world frame, shape (..., 3)."""
         return direction_from_angles(np.radians(self.zenith_deg), np.radians(self.azimuth_deg))

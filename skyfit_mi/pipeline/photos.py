@@ -750,13 +750,6 @@ def read_photo(path):
                     "check that the file is complete, or remove it") from None
 
 
-def iter_photos(paths):
-    """Yield ``(path, Photo)`` for each path in turn, so that only one image is held at a
-    time by this generator."""
-    for p in paths:
-        yield p, read_photo(p)
-
-
 def check_same_size(photos_by_path):
     """Refuse frames that differ in size or orientation.
 
