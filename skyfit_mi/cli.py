@@ -258,18 +258,18 @@ def _fit(args):
                           "shape at the level its regions fit (leave out --per-pixel or "
                           "--sky-shape).")
     if args.per_pixel:
-        from .fitting.pixel_map import CHUNK, run_map
+        from .fitting.pixel_map import CHUNK, ClusterOptions, MapOptions, run_map
 
         if any(px is None for _, px in regions):
             raise SkyfitError("an observation table has no pixels to map; fit its regions "
                               "without --per-pixel.")
         out = Path(args.output) if args.output else root / "pixel_map"
-        s = run_map(args.manifest, regions, out, model="auto" if auto else model,
-                    normalisation=args.normalisation,
-                    seed=args.seed, patch=args.patch, chunk=args.chunk or CHUNK,
-                    workers=args.workers, scheduler=args.scheduler, overwrite=args.overwrite,
-                    progress=not args.quiet, variant=args.variant, dask_logs=args.debug,
-                    light=light, light_pixels=args.max_pixels)
+        options = MapOptions("auto" if auto else model, args.normalisation, args.seed,
+                             args.patch, args.chunk or CHUNK, variant=args.variant, light=light,
+                             light_pixels=args.max_pixels)
+        cluster = ClusterOptions(args.workers, args.scheduler, dask_logs=args.debug)
+        s = run_map(args.manifest, regions, out, options, cluster, overwrite=args.overwrite,
+                    progress=not args.quiet)
         for name, r in s["regions"].items():
             med = ", ".join(f"{k} = {v:.4g}" for k, v in r["median"].items() if v is not None)
             kind = f" ({r['normalisation']} {r['model']})" if auto else ""

@@ -197,7 +197,7 @@ def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(photographed_
     import functools
 
     from skyfit_mi.fitting import pixel_map
-    from skyfit_mi.fitting.pixel_map import run_map
+    from skyfit_mi.fitting.pixel_map import ClusterOptions, MapOptions, run_map
     from skyfit_mi.fitting.selection import fit_auto
     from skyfit_mi.render.fit_model import PARAMETERS
 
@@ -206,8 +206,9 @@ def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(photographed_
     day = photographed_plastic                        # the sky's level is fitted first too
     pixels = np.stack(np.meshgrid(np.arange(3, 9), np.arange(3, 9)), -1).reshape(-1, 2)
     logs = []
-    s = run_map(day, [("disc", pixels)], tmp_path / "map", model="auto", workers=1,
-                chunk=18, progress=False, log=logs.append, light_pixels=16)
+    s = run_map(day, [("disc", pixels)], tmp_path / "map",
+                MapOptions("auto", chunk=18, light_pixels=16), ClusterOptions(workers=1),
+                progress=False, log=logs.append)
     lo, hi = s["sky"]["interval95"]
     assert lo < 1.0 < hi and any("fitted sky level" in w for w in s["widths_include"]), s["sky"]
     disc = s["regions"]["disc"]
@@ -220,7 +221,8 @@ def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(photographed_
     assert any(f": chose ggx_plastic {disc['model']}" in x for x in logs), logs
     # the same command again resumes the store with the choices it holds, ranking nothing
     monkeypatch.setattr(pixel_map, "fit_auto", None)
-    again = run_map(day, [("disc", pixels)], tmp_path / "map", model="auto", workers=1,
-                    chunk=18, progress=False, log=logs.append, light_pixels=16)
+    again = run_map(day, [("disc", pixels)], tmp_path / "map",
+                    MapOptions("auto", chunk=18, light_pixels=16), ClusterOptions(workers=1),
+                    progress=False, log=logs.append)
     assert again["chunks_this_run"] == 0 and again["regions"]["disc"]["normalisation"] == \
         "ggx_plastic" and again["sky"]["k"] == s["sky"]["k"]

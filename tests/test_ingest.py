@@ -399,7 +399,7 @@ def _copy_photos(day, dst):
     ("mixed sizes", "same size"),
     ("corrupt", "IMG_0003"),
     ("unknown raw", "IMG_0099"),
-    ("duplicate time", "both taken at"),
+    ("duplicate time", "all have the time"),
 ])
 def test_bad_photographs_get_one_line_and_no_output(day, tmp_path, damage, message):
     from PIL import Image

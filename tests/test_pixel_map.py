@@ -34,7 +34,7 @@ MATERIALS = {"white_paper": ((0.8, 0.8, 0.78), 0.05, 0.2),
 @pytest.fixture(scope="module")
 def board(tmp_path_factory):
     """The board's day (small), its regions, and a map of every sample by two workers."""
-    from skyfit_mi.fitting.pixel_map import run_map
+    from skyfit_mi.fitting.pixel_map import ClusterOptions, MapOptions, run_map
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
 
@@ -47,8 +47,8 @@ def board(tmp_path_factory):
                         for k, (c, r, a) in MATERIALS.items()}
     render_sequence(validate_spec(raw, SPEC.parent), tmp / "day", progress=False, **QUIET)
     regions = material_regions(tmp / "day")
-    summary = run_map(tmp / "day", regions, tmp / "map", model="colour", chunk=32, workers=2,
-                      progress=False, **QUIET)
+    summary = run_map(tmp / "day", regions, tmp / "map", MapOptions(chunk=32),
+                      ClusterOptions(workers=2), progress=False, **QUIET)
     return tmp, regions, summary
 
 
@@ -98,7 +98,7 @@ def test_a_resumed_map_from_one_worker_equals_the_uninterrupted_map_of_two(board
     store equals the two-worker map's."""
     import zarr
 
-    from skyfit_mi.fitting.pixel_map import STORE, run_map
+    from skyfit_mi.fitting.pixel_map import STORE, ClusterOptions, MapOptions, run_map
 
     tmp, regions, _ = board
     shutil.copytree(tmp / "map", tmp / "resumed")
@@ -122,8 +122,8 @@ def test_a_resumed_map_from_one_worker_equals_the_uninterrupted_map_of_two(board
         v[:, mask] = np.nan
         g[key][:] = v
     logs = []
-    s = run_map(tmp / "day", regions, tmp / "resumed", model="colour", chunk=32, workers=1,
-                progress=False, log=logs.append)
+    s = run_map(tmp / "day", regions, tmp / "resumed", MapOptions(chunk=32),
+                ClusterOptions(workers=1), progress=False, log=logs.append)
     assert s["chunks_this_run"] == len(lost) and any("resuming" in m for m in logs)
     b = zarr.open_group(str(tmp / "resumed" / STORE), mode="r")
     for k, v in keep.items():
@@ -131,17 +131,18 @@ def test_a_resumed_map_from_one_worker_equals_the_uninterrupted_map_of_two(board
 
 
 def test_another_maps_folder_is_refused_without_overwrite(board):
-    from skyfit_mi.fitting.pixel_map import run_map
+    from skyfit_mi.fitting.pixel_map import ClusterOptions, MapOptions, run_map
 
     tmp, regions, _ = board
     with pytest.raises(SkyfitError, match="holds another map"):
-        run_map(tmp / "day", regions, tmp / "map", model="achromatic", chunk=32, workers=1,
-                progress=False, **QUIET)
+        run_map(tmp / "day", regions, tmp / "map", MapOptions("achromatic", chunk=32),
+                ClusterOptions(workers=1), progress=False, **QUIET)
 
 
 def test_bad_map_inputs_get_one_line(board, monkeypatch, capsys):
     from skyfit_mi.cli import main
     from skyfit_mi.fitting import pixel_map
+    from skyfit_mi.fitting.pixel_map import ClusterOptions
     from PIL import Image
 
     tmp, regions, _ = board
@@ -158,13 +159,15 @@ def test_bad_map_inputs_get_one_line(board, monkeypatch, capsys):
     assert "add --per-pixel" in capsys.readouterr().err
     monkeypatch.setattr(pixel_map, "SCHEDULER_TIMEOUT_S", 1)
     with pytest.raises(SkyfitError, match="does not answer") as exc:
-        pixel_map.run_map(day, regions[:1], tmp / "nowhere", scheduler="tcp://127.0.0.1:9",
+        pixel_map.run_map(day, regions[:1], tmp / "nowhere",
+                          cluster=ClusterOptions(scheduler="tcp://127.0.0.1:9"),
                           progress=False, **QUIET)
     assert "\n" not in str(exc.value)
     assert not (tmp / "nowhere").exists()               # tried before the store is written
     with pytest.raises(SkyfitError, match="with --scheduler the cluster's own workers"):
-        pixel_map.run_map(day, regions[:1], tmp / "nowhere", scheduler="tcp://127.0.0.1:9",
-                          workers=2, progress=False, **QUIET)
+        pixel_map.run_map(day, regions[:1], tmp / "nowhere",
+                          cluster=ClusterOptions(2, "tcp://127.0.0.1:9"), progress=False,
+                          **QUIET)
     # a bad light record: refused by its frame before any worker starts or the store is written
     bad = tmp / "bad_light"
     shutil.copytree(tmp / "day", bad)

@@ -27,6 +27,7 @@ import threading
 import time
 import warnings
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -363,21 +364,59 @@ def _close(client, cluster):
             cluster.close()
 
 
-def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward", seed=0,
-            patch=1, chunk=CHUNK, workers=None, scheduler=None, overwrite=False, progress=True,
-            log=print, cache=MAP_CACHE, memory_per_worker="4GiB", variant=None, dask_logs=False,
-            light=LightOptions(), light_pixels=LIGHT_PIXELS):
-    """Map ``regions`` ([(material, pixels (P, 2))]) of a sequence; returns the summary dict
-    (module docstring).  ``model`` 'auto': each region in the model and lobe ranked best by
-    held-out frames on up to ``light_pixels`` of its pixels first (:func:`first_fits`), the
-    map's planes every parameter some region's model has; ``workers``: LocalCluster processes
-    (default: the machine's cores, :func:`worker_count`); ``variant``: the Mitsuba variant of
-    the fits (default the sequence's); ``dask_logs``: show Dask's own log lines
-    (``--debug``); ``light`` (:class:`~.light.LightOptions`): its sky 'spec' takes the spec's
-    sky as it is, 'fit' or 'prior' its level fitted with the regions' materials first
-    (:func:`first_fits`, with its ``sun_sd`` and ``terms``), None chooses as region fits do
-    (:func:`~.sky_fit.default_sky`: 'prior' for photographs under the sun).  Every input, the regions' frames and light and a given
-    scheduler included, is checked before the store is written."""
+@dataclass(frozen=True)
+class MapOptions:
+    """How a map fits its pixels (:func:`run_map`).
+
+    model, normalisation : every region's model and lobe; ``model`` 'auto': each region in the
+        model and lobe ranked best by held-out frames on up to ``light_pixels`` of its pixels
+        first (:func:`first_fits`), the map's planes every parameter some region's model has
+    seed : the first fits' subsets and each chunk's seed (:func:`chunk_seed`)
+    patch, chunk : pixels a side of a patch fitted as one, and pixels a chunk (:func:`plan_chunks`)
+    cache : the light cache's (positions, directions) a pixel
+    variant : the Mitsuba variant of the fits (default the sequence's)
+    light : the :class:`~.light.LightOptions`: its sky 'spec' takes the spec's sky as it is,
+        'fit' or 'prior' its level fitted with the regions' materials first (:func:`first_fits`,
+        with its ``sun_sd`` and ``terms``), None chooses as region fits do
+        (:func:`~.sky_fit.default_sky`: 'prior' for photographs under the sun)
+    light_pixels : the pixels of each region the first fits take at most
+    """
+
+    model: str = "colour"
+    normalisation: str = "ward"
+    seed: int = 0
+    patch: int = 1
+    chunk: int = CHUNK
+    cache: tuple = MAP_CACHE
+    variant: str = None
+    light: LightOptions = field(default_factory=LightOptions)
+    light_pixels: int = LIGHT_PIXELS
+
+
+@dataclass(frozen=True)
+class ClusterOptions:
+    """Where a map runs (:func:`run_map`): ``workers`` LocalCluster processes (default: the
+    machine's cores, :func:`worker_count`) or a ``scheduler``'s cluster, each worker's memory
+    limit, and whether Dask's own log lines show (``--debug``)."""
+
+    workers: int = None
+    scheduler: str = None
+    memory_per_worker: str = "4GiB"
+    dask_logs: bool = False
+
+
+def run_map(manifest_path, regions, out_dir, options=MapOptions(), cluster=ClusterOptions(),
+            overwrite=False, progress=True, log=print):
+    """Map ``regions`` ([(material, pixels (P, 2))]) of a sequence into ``out_dir`` as
+    ``options`` (:class:`MapOptions`) say, on ``cluster`` (:class:`ClusterOptions`); returns
+    the summary dict (module docstring).  Every input, the regions' frames and light and a
+    given scheduler included, is checked before the store is written; a store of another map
+    is refused unless ``overwrite``."""
+    o, c = options, cluster
+    model, normalisation, seed, patch, chunk, cache = (o.model, o.normalisation, o.seed,
+                                                       o.patch, o.chunk, o.cache)
+    light, light_pixels, variant = o.light, o.light_pixels, o.variant
+    workers, scheduler = c.workers, c.scheduler
     doc, root = load_manifest(manifest_path)
     skies = [frame_sky(f, root) for f in doc["frames"] if "illumination" in f]
     plan = light.resolve(doc, skies, len(skies), log=log)
@@ -400,15 +439,15 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
     stored = _check_store(out / STORE, settings, overwrite)
     n_workers = None if scheduler else worker_count(workers, chunk, log)
     t0 = time.perf_counter()
-    client = cluster = None
-    with _dask_logs_quiet(keep=dask_logs):
+    client = local = None
+    with _dask_logs_quiet(keep=c.dask_logs):
         try:
             check_regions(manifest_path, regions)          # the frames and their light
             resume = stored is not None
             if not (resume and np.all(stored[0])):  # a given scheduler answers before any fit
                 with _ctrl_c_deferred():
-                    client, cluster = _client(n_workers, scheduler, memory_per_worker,
-                                              dask_logs)
+                    client, local = _client(n_workers, scheduler, c.memory_per_worker,
+                                            c.dask_logs)
             if resume and first and stored[1] is not None:     # what the store's map took
                 choices = {n: tuple(c) for n, c in stored[1]["choices"].items()}
                 light = stored[1]["light"]
@@ -429,10 +468,10 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
                 log(f"resuming: {len(chunks) - len(pending)} of {len(chunks)} chunks already "
                     "mapped")
             if pending:
-                _map_pending(client, manifest_path, chunks, pending, store, names, seed,
-                             cache, progress, variant, light)
+                _map_pending(client, manifest_path, chunks, pending, store, names, o,
+                             progress, light)
         finally:
-            _close(client, cluster)
+            _close(client, local)
     summary = write_map_outputs(out, store, names, regions, settings, choices)
     for name, _ in regions:
         summary["regions"][name].update(model=choices[name][0], normalisation=choices[name][1])
@@ -443,22 +482,24 @@ def run_map(manifest_path, regions, out_dir, model="colour", normalisation="ward
                               "every pixel") if model == "auto" else "as given"),
                    wall_time_s=time.perf_counter() - t0, chunks=len(chunks),
                    chunks_this_run=len(pending), workers=n_workers,
-                   scheduler=scheduler or "LocalCluster", memory_per_worker=memory_per_worker,
+                   scheduler=scheduler or "LocalCluster", memory_per_worker=c.memory_per_worker,
                    chunk_seeds="numpy SeedSequence([seed, chunk index])")
     write_json(out / "map_summary.json", summary)
     return summary
 
 
-def _map_pending(client, manifest_path, chunks, pending, store, names, seed, cache, progress,
-                 variant, light):
-    """Submit every pending chunk and write each result as it comes."""
+def _map_pending(client, manifest_path, chunks, pending, store, names, options, progress,
+                 light):
+    """Submit every pending chunk (each fitted as ``options``, a :class:`MapOptions`, say, in
+    the ``light`` the first fits found) and write each result as it comes."""
     from distributed import as_completed
 
     futures = {client.submit(fit_pixels, str(manifest_path), chunks[i]["materials"],
                              chunks[i]["pixels"], model=chunks[i]["model"],
                              normalisation=chunks[i]["normalisation"],
-                             seed=chunk_seed(seed, i), positions=cache[0], directions=cache[1],
-                             groups=chunks[i]["groups"], variant=variant, light=light,
+                             seed=chunk_seed(options.seed, i), positions=options.cache[0],
+                             directions=options.cache[1], groups=chunks[i]["groups"],
+                             variant=options.variant, light=light,
                              pure=False): i
                for i in pending}
     bar = None

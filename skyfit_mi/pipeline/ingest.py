@@ -50,7 +50,7 @@ from ..render.scene_xml import build_scene_xml
 from .colorchecker import NAMES, NEUTRAL, find_chart, matrix_error, reference_rgb, swatch_check
 from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance,
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
-from .photo_times import frame_times
+from .photo_times import check_times, frame_times
 from .photos import RAW_COLOUR_REACH, SUFFIXES, check_same_size, read_photo
 from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
 from .raw_noise import bootstrap, cfa_planes
@@ -985,12 +985,8 @@ def read_frames(photo_paths, spec_path, out_dir, o, log):
     check_same_size(list(zip(paths, photos)))
     times = frame_times(paths, [p.metadata for p in photos], times_csv=o.times_csv,
                         name_pattern=o.name_pattern, tz=o.tz, warn=log)
-    order = np.argsort([t.timestamp() for t in times], kind="stable")
+    order = check_times(paths, times)                  # refuses frames sharing an instant
     paths, photos, times = ([x[i] for i in order] for x in (paths, photos, times))
-    for a, b, ta, tb in zip(paths, paths[1:], times, times[1:]):
-        if ta == tb:
-            raise SkyfitError(f"{a.name} and {b.name} were both taken at {ta.isoformat()}; a "
-                              "sequence has one frame per time: drop one of them.")
     h, w = photos[0].values.shape[:2]
     raw, spec = spec_for_times(spec_path, times, o.tz, o.site, (w, h))
     night = [paths[f.index].name for f in spec.frames if f.skipped]
