@@ -22,7 +22,7 @@ from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
-from .selection import HELD_OUT_FRAMES, held_out_error
+from .held_out import HELD_OUT_FRAMES, held_out_error
 from .sky_fit import (SKY_DOMINATES, check_terms, default_sky, default_sun_sd, fit_sky_scale,
                       light_level_sd, shape_variants, sky_level_at, sun_source, sun_up)
 from ..render import setup
@@ -99,7 +99,7 @@ class FitState:
     matrix_sd : the standard errors from the camera's colour matrix, an error every value of
         the day shares (:meth:`FitSession._matrix_sd`; zeros without its prior)
     held_out : how well the fit predicts frames it was not fitted to
-        (:func:`~.selection.held_out_error`, on ``problem``: its kappa is the error beyond the
+        (:func:`~.held_out.held_out_error`, on ``problem``: its kappa is the error beyond the
         in-sample model error's), None with too few frames
     """
 
@@ -1190,7 +1190,7 @@ class FitSession:
     @staticmethod
     def _held_out_record(fit):
         """The fit JSON's ``model_error.held_out``: the relative error with which the fit
-        predicts frames it was not fitted to (:func:`~.selection.held_out_error`), the
+        predicts frames it was not fitted to (:func:`~.held_out.held_out_error`), the
         in-sample model error's and any beyond it together; what predictions add."""
         held, kappa = fit.held_out, 0.0 if fit.model_error is None else fit.model_error.kappa
         if held is None:
