@@ -167,7 +167,7 @@ class FitSession:
         scale them against each other (:meth:`set_sky`, :func:`fit_regions`'s
         ``sky='fit'``)
     sky_shape : with ``split_sky``, also trace the sky's shape variants
-        (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), so that the fit can mix them
+        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`), so that the fit can mix them
         (:meth:`set_sky`)
     """
 
@@ -386,7 +386,7 @@ class FitSession:
     def _sky_parts(self):
         """The light's parts, each a list of the frames' skies: the sun's and the rest's
         (:meth:`~skyfit_mi.physics.sky.Sky.split`), and with ``sky_shape`` the rest's shape
-        variants (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`)."""
+        variants (:func:`~skyfit_mi.physics.sky_shape.shape_variants`)."""
         sun, rest = zip(*(sky.split() for sky in self.skies))
         lights = [list(sun), list(rest)]
         if self.sky_shape:
@@ -473,7 +473,7 @@ class FitSession:
         """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
         to the sun (one factor, or one per frame of the session), in the spec's shape or with
         ``mix[j]`` of its shape variant j and (1 - sum(mix)) of its own pattern
-        (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), and make the models and
+        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`), and make the models and
         chi-square on it."""
         if len(self.parts or ()) < 2 + (0 if mix is None else len(mix)):
             raise ValueError("the sky's level needs a session traced with split_sky, its "
