@@ -35,8 +35,8 @@ from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSI
                                   build_light_cache)
 from ..pipeline.ingest import pixel_sigma
 from ..pipeline.jpeg_noise import YCC_TO_RGB, shared_error_sd
-from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
-from ..pipeline.observation_table import is_table, relative_scale
+from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, is_table, load_manifest
+from ..pipeline.observation_table import relative_scale
 from ..physics.sky import MEASURED_SUN_SD, SKY_CHOICES, SKY_LEVEL_SD
 from ..physics.turbid_sky import level_factors
 from ..physics.ward import METAL_THRESHOLD

@@ -41,10 +41,10 @@ from ..physics.sky_shape import shape_variants, shaped
 from ..pipeline.fit_result import check_fit_sequence, read_fit_result
 from ..pipeline.illumination import envmap_from_record
 from ..pipeline.manifest import (RENDERED_SOURCES, check_frames, frame_axis, frame_label,
-                                 frame_sky, load_manifest, manifest_file, read_frame_image,
-                                 rendered_frames)
+                                 frame_sky, is_table, load_manifest, manifest_file,
+                                 read_frame_image, rendered_frames)
 from ..pipeline.pixels import frame_values, material_regions
-from ..pipeline.observation_table import is_table, table_regions
+from ..pipeline.observation_table import table_regions
 from ..pipeline.sequence import clear_run, render_sequence
 from ..pipeline.spec import read_spec, validate_spec
 from ..render.image import to_srgb8, write_exr, write_png
