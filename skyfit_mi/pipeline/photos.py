@@ -64,7 +64,7 @@ import numpy as np
 from ..child import CallFailed, Child, ChildDied, one_line
 from ..errors import SkyfitError
 from ..render.image import read_bitmap
-from .jpeg_noise import decode
+from . import jpeg_noise
 from .orientation import ORIENTATIONS, apply_orientation
 from .photo_times import format_offset
 
@@ -396,7 +396,7 @@ def _read_pillow(path, fmt):
     if codes.ndim == 2:
         codes = codes[:, :, None]
     if fmt == "jpeg":
-        exact = decode(path)
+        exact = jpeg_noise.decode(path)
         differ = None if exact is None or exact.shape != codes.shape else \
             float(np.sqrt(np.mean((exact - codes) ** 2)))
         if differ is not None and differ <= DECODER_AGREEMENT_DN:
