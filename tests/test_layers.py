@@ -68,11 +68,12 @@ def _module_name(path):
 def _import_graph():
     """Module -> the package's modules it imports, every import counted (inside functions too).
 
-    ``import a.b`` imports ``a.b``; ``from P import n`` imports ``P.n`` where that is a module,
-    and ``P`` itself, since its ``__init__`` runs, unless ``P`` is the importer's own package
-    (or an ancestor of it) and ``n`` is a module: that package is already initialised before
-    any of its submodules runs, so ``from . import sibling`` adds only the sibling. Nor does
-    being a submodule count as importing the package: a package's ``__init__`` that
+    ``import a.b`` imports ``a.b`` (not the packages above it, whose ``__init__`` runs too:
+    counting those adds no circle today); ``from P import n`` imports ``P.n`` where that is a
+    module, and ``P`` itself, since its ``__init__`` runs, unless ``P`` is the importer's own
+    package (or an ancestor of it) and ``n`` is a module: that package is already initialised
+    before any of its submodules runs, so ``from . import sibling`` adds only the sibling.
+    Nor does being a submodule count as importing the package: a package's ``__init__`` that
     re-exports its submodules is a circle only with a submodule that explicitly imports a
     name from that ``__init__`` (``from . import NAME``, NAME not a module), which does read
     the half-run ``__init__``."""
@@ -140,11 +141,13 @@ def test_no_import_circle():
     ``_import_graph`` for what counts as an import)."""
     graph = _import_graph()
     cycles = _cycles(graph)
+
+    def short(m):
+        return m.removeprefix("skyfit_mi.")
+
     lines = []
     for component in cycles:
-        members = set(component)
-        lines.append(" <-> ".join(m.removeprefix("skyfit_mi.") for m in component) + ": " + "; ".join(
-            f"{m.removeprefix('skyfit_mi.')} -> "
-            + ", ".join(sorted(t.removeprefix('skyfit_mi.') for t in graph[m] & members))
-            for m in component))
+        inner = {m: sorted(map(short, graph[m] & set(component))) for m in component}
+        edges = "; ".join(f"{short(m)} -> {', '.join(t)}" for m, t in inner.items())
+        lines.append(" <-> ".join(map(short, component)) + ": " + edges)
     assert not cycles, "import circles:\n" + "\n".join(lines)
