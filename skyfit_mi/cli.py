@@ -185,8 +185,7 @@ def _pixels(args):
 
 def _fit_regions(args):
     """(name, pixels) of every region the arguments ask for, checked before any fitting."""
-    from .pipeline.manifest import load_manifest
-    from .pipeline.observation_table import is_table
+    from .pipeline.manifest import is_table, load_manifest
 
     doc = load_manifest(args.manifest)[0]
     regions = list(args.region or [])

@@ -1,13 +1,14 @@
 """HDR environment maps (physics/envmap.py) and lab lights (physics/sky.py directional_sky):
-the lat-long lookup against hand-derived values, irradiance, rotation, fisheye resampling, the
-sun given apart from the map; and the emitter and light cache against the analytic sky."""
+the lat-long lookup (physics/latlong.py) against hand-derived values, irradiance, rotation,
+fisheye resampling, the sun given apart from the map; and the emitter and light cache against
+the analytic sky."""
 import numpy as np
 import pytest
 
 from skyfit_mi.conventions import direction_from_angles
 from skyfit_mi.errors import SkyfitError
-from skyfit_mi.physics.envmap import (envmap_sky, fisheye_lookup, latlong_centres, latlong_lookup,
-                                      latlong_table)
+from skyfit_mi.physics.envmap import envmap_sky, fisheye_lookup, latlong_table
+from skyfit_mi.physics.latlong import latlong_centres, latlong_lookup
 from skyfit_mi.physics.sky import Sky, cie_sky, directional_sky
 
 H, W = 4, 8                                      # rows of 45 degrees, columns of 45 degrees

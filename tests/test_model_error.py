@@ -194,11 +194,12 @@ def test_the_held_out_folds_extrapolate_no_day_end_below_six_frames():
     """From END_FRAMES_FROM frames every frame is held out in turn; with fewer, only frames
     between the first and last with values (so a fold never predicts the day beyond its
     fitted frames); below HELD_OUT_FRAMES there is no check."""
-    from skyfit_mi.fitting.selection import (END_FRAMES_FROM, HELD_OUT_FRAMES, _folds,
-                                             held_out_error)
+    from skyfit_mi.fitting.held_out import (END_FRAMES_FROM, HELD_OUT_FRAMES, frame_folds,
+                                            held_out_error)
 
     def held(valid, ends):
-        return [np.flatnonzero(test.any(axis=0)).tolist() for _, test in _folds(valid, 16, ends)]
+        return [np.flatnonzero(test.any(axis=0)).tolist()
+                for _, test in frame_folds(valid, 16, ends)]
 
     assert (HELD_OUT_FRAMES, END_FRAMES_FROM) == (5, 6)
     assert held(np.ones((3, 6), bool), True) == [[0], [1], [2], [3], [4], [5]]
@@ -206,7 +207,7 @@ def test_the_held_out_folds_extrapolate_no_day_end_below_six_frames():
     valid = np.ones((3, 5), bool)
     valid[:, 0] = False                               # no values in the first frame
     assert held(valid, False) == [[2], [3]]
-    for train, test in _folds(np.ones((3, 5), bool), 16, False):
+    for train, test in frame_folds(np.ones((3, 5), bool), 16, False):
         assert not (train & test).any()
     assert held_out_error(SimpleNamespace(valid=np.ones((3, 4), bool)), None, None, None) is None
 

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from skyfit_mi.conventions import direction_from_angles
-from skyfit_mi.physics.envmap import envmap_sky, latlong_centres
+from skyfit_mi.physics.envmap import envmap_sky
+from skyfit_mi.physics.latlong import latlong_centres
 from skyfit_mi.physics.gensky import from_gensky
 from skyfit_mi.physics.perez import perez_sky
 from skyfit_mi.physics.sky import cie_sky

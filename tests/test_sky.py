@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from skyfit_mi.physics import sky as sk
+from skyfit_mi.physics import sky_shape
 from skyfit_mi.conventions import direction_from_angles
 from skyfit_mi.errors import SkyfitError
 
@@ -110,7 +111,7 @@ def test_a_skys_irradiance_is_computed_once_and_a_changed_copy_computes_its_own(
 
 @pytest.mark.parametrize("mix", [(0.0, 0.0), (0.6, -0.3)])
 def test_a_shaped_sky_is_the_mix_of_its_pattern_and_variants(mix):
-    """Sky.shaped (relight's sky of a fitted shape): the sun as the sky's own, the rest k
+    """sky_shape.shaped (relight's sky of a fitted shape): the sun as the sky's own, the rest k
     times the mix of its pattern and its shape variants as a lat-long map, within 0.2% of the
     mix toward every direction 10 degrees from the sun and above the horizon (the map's
     bilinear cells), its horizontal irradiance within 1e-4; at mix 0 and k 1 the sky itself."""
@@ -118,9 +119,9 @@ def test_a_shaped_sky_is_the_mix_of_its_pattern_and_variants(mix):
     from skyfit_mi.physics.sky import cie_general_sky
 
     sky = cie_general_sky(cie_general.group_parameters(4, 4), 40.0, 120.0, day=200)
-    variants = [v for _, v in sky.shape_variants()]
+    variants = [v for _, v in sky_shape.shape_variants(sky)]
     k = 1.0 if not any(mix) else 1.2
-    shaped = sky.shaped(k, mix, variants)
+    shaped = sky_shape.shaped(sky, k, mix, variants)
     d = np.random.default_rng(0).normal(size=(20000, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     sun, rest = sky.split()

@@ -10,6 +10,7 @@ import pytest
 from skyfit_mi.cli import main
 from skyfit_mi.fitting.chi2 import parse_region
 from skyfit_mi.fitting.light import LightOptions
+from skyfit_mi.physics import sky_shape
 
 REGION = parse_region("rect:2,2,9,9")        # 64 pixels of the disc
 TRUTH = {"C_r": 1.0, "C_g": 1.0, "C_b": 1.0, "rho_s": 0.3, "sigma_alpha": 0.1}
@@ -562,7 +563,7 @@ def test_a_cie_skys_shape_variants_keep_its_light_and_move_one_group():
     from skyfit_mi.physics.sky import cie_general_sky, cie_sky
 
     sky = cie_sky("clear", 35.0, 160.0)
-    variants = sky.shape_variants()
+    variants = sky_shape.shape_variants(sky)
     assert [label for label, _ in variants] == ["gradation group 5 -> 6",
                                                 "indicatrix group 4 -> 5"]
     for _, v in variants:
@@ -579,9 +580,9 @@ def test_a_cie_skys_shape_variants_keep_its_light_and_move_one_group():
     np.testing.assert_allclose(ratio, ratio[0], rtol=1e-6)
     # the most turbid group moves toward the clearer
     turbid = cie_general_sky(cie_general.group_parameters(6, 6), 35.0, 160.0)
-    assert [label for label, _ in turbid.shape_variants()] == ["gradation group 6 -> 5",
-                                                               "indicatrix group 6 -> 5"]
-    assert cie_sky("overcast", 35.0, 160.0).shape_variants() == []
+    assert [label for label, _ in sky_shape.shape_variants(turbid)] == [
+        "gradation group 6 -> 5", "indicatrix group 6 -> 5"]
+    assert sky_shape.shape_variants(cie_sky("overcast", 35.0, 160.0)) == []
     with pytest.raises(SkyfitError, match="is none of these"):
         shape_variants([sky, cie_sky("overcast", 35.0, 160.0)])
 
@@ -604,7 +605,7 @@ def test_a_perez_skys_shape_variants_keep_its_light_and_move_one_bin_or_one_step
     # clear (epsilon 7.96, the last bin, Delta 0.087): toward the more overcast bin, Delta up
     sky = perez.perez_sky(30.0, 160.0, 172, dhi=100.0, dni=800.0).to_sky()
     eps, delta = sky.info["epsilon"], sky.info["delta"]
-    variants = sky.shape_variants()
+    variants = sky_shape.shape_variants(sky)
     assert [label for label, _ in variants] == [
         f"clearness epsilon {eps:.4g} -> 5.35",
         f"brightness Delta {delta:.4g} -> {delta * step:.4g}"]
@@ -622,25 +623,25 @@ def test_a_perez_skys_shape_variants_keep_its_light_and_move_one_bin_or_one_step
     # and a day with both frames moves both down (the mix is shared)
     low = perez.perez_sky(80.0, 250.0, 172, dhi=40.0, dni=900.0).to_sky()
     assert perez.coefficients(low.info["epsilon"], low.info["delta"] * step, 80.0)[1] > 0
-    b_low = low.shape_variants()[1][1]
+    b_low = sky_shape.shape_variants(low)[1][1]
     assert b_low.info["to"] == pytest.approx(low.info["delta"] / step)
     day = shape_variants([sky, low])
     assert [v[1][1].info["to"] < v[1][1].info["from"] for v in day] == [True, True]
     with pytest.raises(SkyfitError, match="cannot move up"):
-        low.shape_variants(toward={"clearness": 1})                  # no bin above the last
+        sky_shape.shape_variants(low, toward={"clearness": 1})       # no bin above the last
     # Delta 0.055 in the bin of epsilon 1.67 is raised to the floor 0.2 for the coefficients
     # (perez_sky, as Radiance): the variants move from the floor, never below it
     dim = perez.perez_sky(35.0, 160.0, 172, dhi=60.0, dni=50.0).to_sky()
     assert dim.info["delta_coefficients"] == perez.RADIANCE_DELTA_FLOOR
-    clearer, brighter = (v for _, v in dim.shape_variants())
+    clearer, brighter = (v for _, v in sky_shape.shape_variants(dim))
     np.testing.assert_allclose(clearer.perez_coefficients,
                                perez.coefficients(2.375, perez.RADIANCE_DELTA_FLOOR, 35.0))
     assert brighter.info["from"] == perez.RADIANCE_DELTA_FLOOR
     with pytest.raises(SkyfitError, match="brightness .* cannot move down"):
-        dim.shape_variants(toward={"brightness": -1})
+        sky_shape.shape_variants(dim, toward={"brightness": -1})
     # an envmap has no shape variants, and --sky-shape refuses it
     mapped = envmap_sky(np.full((8, 16, 3), 5.0, np.float32), 30.0, 160.0)
-    assert mapped.shape_variants() == []
+    assert sky_shape.shape_variants(mapped) == []
     with pytest.raises(SkyfitError, match="none of these .*cie_general, perez or turbid"):
         shape_variants([sky, mapped])
 
@@ -722,7 +723,7 @@ def test_relit_images_take_the_fitted_skys_shape(shape_fit, gradation_4, tmp_pat
         assert (root / f["illumination"]["file"]).parent.name == "sky_maps"
         sky, day_sky = frame_sky(f, root), frame_sky(g, day_root)
         _, rest = day_sky.split()
-        variants = [v for _, v in day_sky.shape_variants(toward=shape["toward"])]
+        variants = [v for _, v in sky_shape.shape_variants(day_sky, toward=shape["toward"])]
         want = k * ((1 - sum(mix)) * rest.sky_horizontal_irradiance()
                     + sum(m * v.sky_horizontal_irradiance() for m, v in zip(mix, variants)))
         assert np.allclose(sky.sky_horizontal_irradiance(), want, rtol=2e-3), f["index"]

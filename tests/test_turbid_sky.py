@@ -5,6 +5,7 @@ import pytest
 
 from skyfit_mi.errors import SkyfitError
 from skyfit_mi.fitting.light import LightOptions
+from skyfit_mi.physics import sky_shape
 from skyfit_mi.physics.colour import SRGB_LUMINANCE
 from skyfit_mi.physics.turbid_sky import (TURBIDITY_RANGE, coefficients, levels, shape_moves,
                                           turbid_sky)
@@ -72,14 +73,14 @@ def test_a_turbid_skys_shape_variant_keeps_its_light_and_moves_one_step():
     """--sky-shape mixes the pattern one turbidity step on (down at the range's top), lit
     with the sky's own horizontal irradiance channel by channel."""
     sky = turbid_sky(3.0, 35.0, 160.0)
-    (label, variant), = sky.shape_variants()
+    (label, variant), = sky_shape.shape_variants(sky)
     assert label == "turbidity T 3 -> 4"
     np.testing.assert_allclose(variant.perez_coefficients, coefficients(4.0))
     np.testing.assert_allclose(variant.sky_horizontal_irradiance(),
                                sky.sky_horizontal_irradiance(), rtol=1e-9)
     assert not variant.sun_radiance.any()
     top = turbid_sky(TURBIDITY_RANGE[1], 35.0, 160.0)
-    assert [lab for lab, _ in top.shape_variants()] == [
+    assert [lab for lab, _ in sky_shape.shape_variants(top)] == [
         f"turbidity T {TURBIDITY_RANGE[1]:g} -> {TURBIDITY_RANGE[1] - 1:g}"]
     assert shape_moves({"turbidity": TURBIDITY_RANGE[0]})[0]["moves"][-1] is None
 
@@ -91,7 +92,7 @@ def test_a_fitted_turbidity_moves_both_levels_and_a_shaped_sky_takes_them():
     from skyfit_mi.physics.turbid_sky import level_factors
 
     skies = [turbid_sky(3.0, z, 120.0, day=200) for z in (20.0, 50.0, 75.0)]
-    variants = [s.shape_variants()[0][1] for s in skies]
+    variants = [sky_shape.shape_variants(s)[0][1] for s in skies]
     infos, vinfos = [s.info for s in skies], [v.info for v in variants]
     np.testing.assert_allclose(level_factors(infos, vinfos, 0.0), np.ones((2, 3)))
     sun, sky = level_factors(infos, vinfos, 1.0)
@@ -99,7 +100,7 @@ def test_a_fitted_turbidity_moves_both_levels_and_a_shaped_sky_takes_them():
         (dni4, dhi4), (dni3, dhi3) = levels(4.0, z, 200), levels(3.0, z, 200)
         assert (a, b) == pytest.approx((dni4 / dni3, dhi4 / dhi3))
     assert sun[0] > sun[1] > sun[2] and np.all(sky > 1)
-    shaped = skies[1].shaped(0.9, [1.0], [variants[1]], rows=32)
+    shaped = sky_shape.shaped(skies[1], 0.9, [1.0], [variants[1]], rows=32)
     np.testing.assert_allclose(shaped.sun_radiance, skies[1].sun_radiance * sun[1])
     want = 0.9 * sky[1] * float(variants[1].sky_horizontal_irradiance() @ SRGB_LUMINANCE)
     got = float(shaped.sky_horizontal_irradiance() @ SRGB_LUMINANCE)

@@ -28,9 +28,9 @@ from . import uncertainty as unc
 from ..physics.camera import SensorModel
 from ..errors import SkyfitError
 from ..physics.colour import SRGB_LUMINANCE
-from ..pipeline.manifest import (check_frames, frame_exposure, load_manifest, read_frame_image,
-                                 rendered_frames, sensor_from_record)
-from ..pipeline.observation_table import is_table, table_observations
+from ..pipeline.manifest import (check_frames, frame_exposure, is_table, load_manifest,
+                                 read_frame_image, rendered_frames, sensor_from_record)
+from ..pipeline.observation_table import table_observations
 from ..pipeline.pixels import colour_mixed, colour_reach, scene_labels
 from ..render.light_cache import point_rays
 

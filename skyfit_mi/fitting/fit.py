@@ -22,7 +22,7 @@ from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
 from .methods.profile import profile_edges, ridge_intervals
-from .selection import HELD_OUT_FRAMES, held_out_error
+from .held_out import HELD_OUT_FRAMES, held_out_error
 from .light import SPEC_LIGHT, LightOptions, LightPlan
 from .sky_fit import (SKY_DOMINATES, SkyFit, SkyShare, fit_sky_scale, light_level_sd,
                       shape_variants, skies_at_level, sky_level_at)
@@ -36,8 +36,8 @@ from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSI
                                   build_light_cache)
 from ..pipeline.ingest import pixel_sigma
 from ..pipeline.jpeg_noise import YCC_TO_RGB, shared_error_sd
-from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, load_manifest
-from ..pipeline.observation_table import is_table, relative_scale
+from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, is_table, load_manifest
+from ..pipeline.observation_table import relative_scale
 from ..physics.sky import MEASURED_SUN_SD
 from ..physics.turbid_sky import level_factors
 from ..physics.ward import METAL_THRESHOLD
@@ -101,7 +101,7 @@ class FitState:
         the day shares (:meth:`FitSession._matrix_sd`; zeros without its prior)
     sky : what the light adds to the parameters' errors (:class:`~.sky_fit.SkyShare`)
     held_out : how well the fit predicts frames it was not fitted to
-        (:func:`~.selection.held_out_error`, on ``problem``: its kappa is the error beyond the
+        (:func:`~.held_out.held_out_error`, on ``problem``: its kappa is the error beyond the
         in-sample model error's), None with too few frames
     """
 
@@ -169,7 +169,7 @@ class FitSession:
     light : the :class:`~.light.LightPlan` traced when ``trace`` (default the spec's light as
         it is); a fitted sky's splits the sun's light from the rest of the sky's, so that the
         fit can scale them against each other (:meth:`set_sky`), and with ``shape`` traces the
-        sky's shape variants (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`) too
+        sky's shape variants (:func:`~skyfit_mi.physics.sky_shape.shape_variants`) too
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
@@ -325,7 +325,7 @@ class FitSession:
     def _sky_parts(self, shape):
         """The light's parts, each a list of the frames' skies: the sun's and the rest's
         (:meth:`~skyfit_mi.physics.sky.Sky.split`), and with ``shape`` the rest's shape
-        variants (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`)."""
+        variants (:func:`~skyfit_mi.physics.sky_shape.shape_variants`)."""
         sun, rest = zip(*(sky.split() for sky in self.skies))
         lights = [list(sun), list(rest)]
         if shape:
@@ -405,7 +405,7 @@ class FitSession:
         """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
         to the sun (one factor, or one per frame of the session), in the spec's shape or with
         ``mix[j]`` of its shape variant j and (1 - sum(mix)) of its own pattern
-        (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), and make the models and
+        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`), and make the models and
         chi-square on it."""
         if len(self.parts or ()) < 2 + (0 if mix is None else len(mix)):
             raise ValueError("the sky's level needs a session traced with a fitted sky's light, "
@@ -1134,7 +1134,7 @@ class FitSession:
     @staticmethod
     def _held_out_record(fit):
         """The fit JSON's ``model_error.held_out``: the relative error with which the fit
-        predicts frames it was not fitted to (:func:`~.selection.held_out_error`), the
+        predicts frames it was not fitted to (:func:`~.held_out.held_out_error`), the
         in-sample model error's and any beyond it together; what predictions add."""
         held, kappa = fit.held_out, 0.0 if fit.model_error is None else fit.model_error.kappa
         if held is None:

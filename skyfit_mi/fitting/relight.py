@@ -37,13 +37,14 @@ from .landscape import truth_parameters
 from .sky_fit import sky_level_at
 from .uncertainty import band_half_width, widen
 from ..physics.colour import SRGB_LUMINANCE
+from ..physics.sky_shape import shape_variants, shaped
 from ..pipeline.fit_result import check_fit_sequence, read_fit_result
 from ..pipeline.illumination import envmap_from_record
 from ..pipeline.manifest import (RENDERED_SOURCES, check_frames, frame_axis, frame_label,
-                                 frame_sky, load_manifest, manifest_file, read_frame_image,
-                                 rendered_frames)
+                                 frame_sky, is_table, load_manifest, manifest_file,
+                                 read_frame_image, rendered_frames)
 from ..pipeline.pixels import frame_values, material_regions
-from ..pipeline.observation_table import is_table, table_regions
+from ..pipeline.observation_table import table_regions
 from ..pipeline.sequence import clear_run, render_sequence
 from ..pipeline.spec import read_spec, validate_spec
 from ..render.image import to_srgb8, write_exr, write_png
@@ -283,7 +284,7 @@ def light_as_fitted(spec, level, target, out, log=print):
     the spec's, unless the sequence was lit otherwise), its sky k times against the sun (k
     at the frame's time, :func:`~.sky_fit.sky_level_at`), and with a fitted shape its
     pattern mixed with its shape variants, moved the way the fit moved them
-    (:meth:`~skyfit_mi.physics.sky.Sky.shaped`): an environment map, written to
+    (:func:`~skyfit_mi.physics.sky_shape.shaped`): an environment map, written to
     ``out``/SKY_MAPS as EXR, which the relit manifest's ``envmap`` record names, with the
     sun's direct normal irradiance; so is a frame lit by a map (a measured sky), whose
     record would otherwise name its own file, unscaled.  A frame whose sky cannot move the
@@ -299,7 +300,7 @@ def light_as_fitted(spec, level, target, out, log=print):
         variants = []
         if shape is not None:
             try:          # none for a sky black above the horizon (the sun down): nothing to mix
-                variants = [v for _, v in f.sky.shape_variants(toward=shape.get("toward"))]
+                variants = [v for _, v in shape_variants(f.sky, toward=shape.get("toward"))]
             except SkyfitError:
                 kept.append(frame_label(f.index, f.time))
             if len(variants) != len(shape["mix"]):
@@ -307,7 +308,7 @@ def light_as_fitted(spec, level, target, out, log=print):
         if variants or f.sky.envmap is not None:
             # a mix that no one Sky holds, or a map the manifest names by its file (which k
             # does not scale): a map of its own
-            f.sky = _sky_map(f, f.sky.shaped(k, shape["mix"] if variants else [], variants),
+            f.sky = _sky_map(f, shaped(f.sky, k, shape["mix"] if variants else [], variants),
                              out)
         else:
             f.sky = f.sky.sky_scaled(k)
@@ -317,7 +318,7 @@ def light_as_fitted(spec, level, target, out, log=print):
 
 
 def _sky_map(frame, sky, out):
-    """The shaped ``sky`` (:meth:`~skyfit_mi.physics.sky.Sky.shaped`) of ``frame`` as the
+    """The shaped ``sky`` (:func:`~skyfit_mi.physics.sky_shape.shaped`) of ``frame`` as the
     relit manifest will read it back: its map written to ``out``/SKY_MAPS, an ``envmap``
     record of it with the sun's direct normal irradiance (luminance-weighted; the disc in
     the colour of :func:`~skyfit_mi.physics.sun.sun_rgb`, as the spec's skies have it)."""

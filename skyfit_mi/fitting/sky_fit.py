@@ -52,6 +52,7 @@ from . import uncertainty as unc
 from ..errors import SkyfitError
 from .methods.levenberg_marquardt import levenberg_marquardt
 from ..pipeline.manifest import RENDERED_SOURCES
+from ..physics import sky_shape
 from ..physics.sky import MEASURED_SUN_SD, SUN_LEVEL_SD, SUN_SKY_COUPLING
 from ..physics.turbid_sky import TURBIDITY_RANGE
 from .methods import global_search
@@ -85,7 +86,7 @@ CURVE_LISTED = 8
 #: tens of percent within hours; 0.35 is the level's own prior (:data:`SKY_LEVEL_SD`).
 DRIFT_SD = 0.35
 #: The prior's standard deviation of the mix of each of the sky's shape variants (``fit
-#: --sky-shape``, :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`): 1 is one CIE group of
+#: --sky-shape``, :func:`~skyfit_mi.physics.sky_shape.shape_variants`): 1 is one CIE group of
 #: gradation or indicatrix, one Perez clearness bin, or one step of the Perez brightness
 #: (:data:`~skyfit_mi.physics.perez.BRIGHTNESS_STEP`, itself one sd of the sky's level).  The
 #: shape fitted to the shared measured clear day's scans lies one gradation group from the
@@ -244,12 +245,12 @@ def _parabola(u, chi2):
 
 
 def shape_variants(skies):
-    """Each frame's shape variants (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`) of
+    """Each frame's shape variants (:func:`~skyfit_mi.physics.sky_shape.shape_variants`) of
     ``skies``, for a fit of the sky's shape (``--sky-shape``), every frame's index moved the
     same way (the fit shares each variant's mix over the frames): +1 where every frame can,
     else -1.  Refused where some frame's spec sky has none (not a CIE, Perez or turbid sky),
     where the frames' skies move different indices, or where no way suits every frame."""
-    variants = [sky.shape_variants() for sky in skies]
+    variants = [sky_shape.shape_variants(sky) for sky in skies]
     if not all(variants):
         kinds = sorted({str(sky.info.get("kind")) for sky, v in zip(skies, variants) if not v})
         raise SkyfitError("--sky-shape moves a CIE sky's gradation and indicatrix, a Perez "
@@ -266,7 +267,7 @@ def shape_variants(skies):
     back = {v.info["of"]: -1 for vs in variants for _, v in vs if v.info["to"] < v.info["from"]}
     if back and any(v.info["of"] in back and v.info["to"] > v.info["from"]
                     for vs in variants for _, v in vs):
-        variants = [sky.shape_variants(toward=back) for sky in skies]
+        variants = [sky_shape.shape_variants(sky, toward=back) for sky in skies]
     return variants
 
 

@@ -287,7 +287,7 @@ def perez_form(params):
 
 def shape_moves(params):
     """The moves of a general sky's shape that a fit mixes with it (``fit --sky-shape``,
-    :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`): its gradation (a, b), then its
+    :func:`~skyfit_mi.physics.sky_shape.shape_variants`): its gradation (a, b), then its
     indicatrix (c, d, e), from the nearest group to the next toward the more turbid (+1) or
     the clearer (-1), the rest of ``params`` (5,) kept.
 

@@ -70,7 +70,8 @@ from ..conventions import angles_from_direction, direction_from_angles
 from ..errors import SkyfitError, check_range
 from . import cie_general
 from .colour import SRGB_LUMINANCE, XYZ_TO_SRGB
-from .envmap import direct_normal_from_global, envmap_sky, resample
+from .envmap import direct_normal_from_global, envmap_sky
+from .latlong import resample
 
 #: RBF kernel of the interpolated fields (scipy.interpolate.RBFInterpolator's name).
 KERNEL = "linear"
@@ -82,7 +83,7 @@ EXCLUDE_DEG = 10.0
 #: Rows of the lat-long table by default (1.4 degree cells; columns twice as many): the
 #: table reproduces the measured points to 0.6% rms (64 rows: 1.3%).
 ROWS = 128
-#: Sub-samples per cell side when the table's cells are averaged (:func:`~.envmap.resample`).
+#: Sub-samples per cell side when the table's cells are averaged (:func:`~.latlong.resample`).
 SUPERSAMPLE = 2
 
 
@@ -304,7 +305,7 @@ def leave_one_out(directions, xyz, sun, exclude_deg=EXCLUDE_DEG, step=GROUP_STEP
 def sky_table(sky, efficacy, rows=ROWS, supersample=SUPERSAMPLE):
     """The lat-long table (rows, 2 rows, 3) of a :class:`MeasuredSky` [W m^-2 sr^-1], float32,
     linear sRGB (:meth:`MeasuredSky.radiance`), each cell the mean of ``supersample`` squared
-    points (:func:`~skyfit_mi.physics.envmap.resample`); its lower half is 0 (a ground term
+    points (:func:`~skyfit_mi.physics.latlong.resample`); its lower half is 0 (a ground term
     lights it).
 
     ``efficacy`` [lm W^-1] is the skylight's luminous efficacy in the band of the irradiance

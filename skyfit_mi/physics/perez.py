@@ -612,7 +612,7 @@ def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=Non
 
 def shape_moves(info):
     """The moves of a Perez sky's shape that a fit mixes with it (``fit --sky-shape``,
-    :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), for the sky of :func:`perez_sky`'s
+    :func:`~skyfit_mi.physics.sky_shape.shape_variants`), for the sky of :func:`perez_sky`'s
     ``info`` (epsilon, delta, delta_coefficients, sun_zenith_deg):
 
     * ``clearness``: the pattern of the next clearness bin toward the clearer (+1) or the more

@@ -27,7 +27,7 @@ from . import cie_general
 from .colour import SRGB_LUMINANCE, cct_to_rgb
 from ..conventions import angles_from_direction, direction_from_angles
 from ..errors import SkyfitError, check_choice, check_range
-from .envmap import MAX_ROWS, latlong_radiance, resample
+from .latlong import latlong_radiance
 from .sun import SUN_SOLID_ANGLE, direct_normal_irradiance, sun_rgb
 
 #: Luminous efficacy of clear-sky light [lm W^-1] (thesis 4.2.2).
@@ -46,8 +46,6 @@ PEREZ_HORIZON_COS = 0.01
 KITTLER_MIN_ZENITH_DEG = 10.0
 
 _PATTERNS = ("clear", "overcast", "uniform", "intermediate", "perez")
-#: Sub-samples per cell side of the environment map of a fitted sky shape (:meth:`Sky.shaped`).
-SHAPED_SUPERSAMPLE = 2
 
 # What a fit may assume of a spec's light against the real one (skyfit_mi/fitting/sky_fit.py)
 #: The prior's standard deviation of log k, the sky's level against the sun's about the spec's
@@ -232,7 +230,7 @@ class Sky:
         the pattern counts only where ``perez`` is non-zero.
     envmap : ndarray (H, W, 3) or None
         A tabulated radiance [W m^-2 sr^-1] over the whole sphere, world frame, in the lat-long
-        layout of :mod:`skyfit_mi.physics.envmap` (bilinear between cell centres), added to the
+        layout of :mod:`skyfit_mi.physics.latlong` (bilinear between cell centres), added to the
         patterns above the horizon and to the ground below it; float32, non-negative.
     ground : ndarray (3,)
         Radiance of the ground below the horizon [W m^-2 sr^-1].
@@ -425,89 +423,6 @@ class Sky:
                       ground=self.ground * lit)
         return sun, replace(self, sun_radiance=np.zeros(3), ground=self.ground * (1.0 - lit))
 
-    def shape_variants(self, toward=None):
-        """The skies a fit of the sky's shape mixes with this one (``fit --sky-shape``): one
-        index of its pattern moved at a time, lit as this sky's light other than the sun
-        (:meth:`_pattern_as_sky_part`).  For a CIE sky (the thesis's clear sky, standard type
-        12, or a CIE S 011 general sky, :mod:`~skyfit_mi.physics.cie_general`) its gradation,
-        then its indicatrix, moved one CIE group on
-        (:func:`~skyfit_mi.physics.cie_general.shape_moves`); for a Perez sky
-        (:mod:`~skyfit_mi.physics.perez`) its clearness moved one bin and its brightness Delta
-        one step (:func:`~skyfit_mi.physics.perez.shape_moves`); for a turbid sky
-        (:mod:`~skyfit_mi.physics.turbid_sky`) its turbidity moved one step.  A mix
-        (1 - sum(a)) this + sum a_j V_j moves the shape continuously between them: a_j = 1 is
-        variant j's index exactly.
-
-        Parameters
-        ----------
-        toward : dict, optional
-            {index name (``of``): +1 or -1}: the way to move that index, +1 toward the more
-            turbid CIE group, the clearer Perez bin, the brighter Delta, the higher turbidity;
-            an index not named moves +1 where it can, else -1.
-
-        Returns
-        -------
-        list of (label, Sky)
-            The labels as 'gradation group 5 -> 6'; the skies' info ``kind`` 'shape variant',
-            ``of``, ``index``, ``from``, ``to`` and the move's coefficients.  Empty for other
-            skies, or a sky black above the horizon.
-
-        Raises
-        ------
-        SkyfitError
-            Where ``toward`` names a way this sky's index cannot move.
-        """
-        kind = self.info.get("kind")
-        if kind == "clear":
-            moves = cie_general.shape_moves(cie_general.standard_parameters(12))
-        elif kind == "cie_general":
-            moves = cie_general.shape_moves(self.info["parameters_abcde"])
-        elif kind == "perez":
-            from . import perez             # not at the top: perez imports this module
-            moves = perez.shape_moves(self.info)
-        elif kind == "turbid":
-            from . import turbid_sky        # not at the top: it imports this module
-            moves = turbid_sky.shape_moves(self.info)
-        else:
-            return []
-        if float(self.sky_horizontal_irradiance() @ SRGB_LUMINANCE) <= 0:
-            return []
-        toward = toward or {}
-        out = []
-        for m in moves:
-            sign = toward.get(m["of"], 1 if m["moves"][1] is not None else -1)
-            move = m["moves"][sign]
-            if move is None:
-                where = (f"the {m['of']} of the spec's {kind} sky at sun zenith "
-                         f"{np.degrees(np.arccos(self.sun_direction[2])):.1f} degrees "
-                         f"({m['index']} {m['from']:.4g})")
-                raise SkyfitError(
-                    f"{where} cannot move {'up' if sign > 0 else 'down'} as the other frames' "
-                    "must; fit these frames apart (--frames) or leave out --sky-shape."
-                    if m["of"] in toward else
-                    f"{where} has no neighbour either way that the model allows; leave out "
-                    "--sky-shape.")
-            out.append((f"{m['of']} {m['index']} {m['from']:.4g} -> {move['to']:.4g}",
-                        self._pattern_as_sky_part(move["coefficients"], {
-                            "kind": "shape variant", "of": m["of"], "index": m["index"],
-                            "from": m["from"], **move})))
-        return out
-
-    def _pattern_as_sky_part(self, coefficients, info=None):
-        """The Perez-form pattern of ``coefficients`` (a..e, :func:`perez_pattern`) lit as this
-        sky's light other than the sun: the same horizontal irradiance channel by channel
-        (:meth:`sky_horizontal_irradiance`, so the same luminance-weighted irradiance and
-        colour), the sky-lit ground (:meth:`split`), the same horizon; no sun, and ``info``."""
-        c = np.asarray(coefficients, dtype=float)
-        total = float(hemisphere_integral(lambda d: perez_pattern(d, self.sun_direction, c)))
-        if not total > 0:
-            raise SkyfitError(f"the Perez-form pattern {c.tolist()} is black above the "
-                              "horizon; it cannot carry this sky's light.")
-        return Sky(self.sun_direction, perez=self.sky_horizontal_irradiance() / total,
-                   perez_coefficients=c, ground=self.split()[1].ground,
-                   horizon_blend=self.horizon_blend, sun_solid_angle=self.sun_solid_angle,
-                   info=dict(info or {}))
-
     def sky_scaled(self, k):
         """A copy whose sky's light (:meth:`split`'s second part: the patterns, the map and the
         sky-lit ground) is ``k`` times this one's: the sky at a fitted level against the sun
@@ -517,36 +432,6 @@ class Sky:
         return replace(self, **{p: getattr(self, p) * k for p in _PATTERNS},
                        envmap=None if self.envmap is None else self.envmap * np.float32(k),
                        ground=sun.ground + sky.ground * k)
-
-    def shaped(self, k, mix, variants, rows=MAX_ROWS, supersample=SHAPED_SUPERSAMPLE):
-        """A copy lit as a fit of the sky's level and shape saw it (``fit --sky-shape``): the
-        sun's light (:meth:`split`) as this one's, the rest ``k`` times (1 - sum(mix)) this
-        sky's own plus ``mix[j]`` times ``variants[j]`` (:meth:`shape_variants`' skies); for a
-        turbid sky both levels moved too, as its fitted turbidity sets them
-        (:func:`~skyfit_mi.physics.turbid_sky.level_factors`).  The variants' patterns have
-        Perez coefficients of their own, which one Sky cannot hold beside this one's, so the
-        rest becomes an environment map: a lat-long table of ``rows`` rows
-        (:mod:`~skyfit_mi.physics.envmap`), each cell the mean over ``supersample`` x
-        ``supersample`` directions, the ground below the horizon included
-        (its ``ground`` term 0): an ``envmap`` record's sky with the sun's direct normal
-        irradiance and no albedo of its own (:func:`~skyfit_mi.physics.envmap.envmap_sky`).
-        Radiances linear sRGB [W m^-2 sr^-1]; ``k`` and ``mix`` unitless."""
-        mix = np.asarray(mix, dtype=float)
-        sun, rest = self.split()
-        b = 1.0
-        if self.info.get("kind") == "turbid" and len(mix):     # its turbidity sets the levels
-            from .turbid_sky import level_factors
-            (a,), (b,) = level_factors([self.info], [variants[0].info], mix[0])
-            sun = replace(sun, sun_radiance=sun.sun_radiance * a, ground=sun.ground * a)
-        parts = [(1.0, sun), (k * b * (1.0 - mix.sum()), rest)] + [
-            (k * b * m, v) for m, v in zip(mix, variants)]
-
-        def lookup(theta, phi):
-            d = direction_from_angles(theta, phi)
-            return sum(w * p.sky_radiance(d) for w, p in parts if w != 0.0)
-        table = np.clip(resample(lookup, int(rows), supersample=supersample), 0.0, None)
-        return replace(sun, envmap=table, ground=np.zeros(3),
-                       info={**self.info, "shape_mix": mix.tolist(), "sky_level": float(k)})
 
     def scaled_to_illuminance(self, diffuse_horizontal_lux, efficacy):
         """A copy scaled to a measured horizontal diffuse illuminance [lx].

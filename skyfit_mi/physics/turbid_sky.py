@@ -131,10 +131,10 @@ def turbid_sky(turbidity, sun_zenith_deg, sun_azimuth_deg, *, day=172, elevation
 
 def shape_moves(info):
     """The move of a turbid sky's shape that a fit mixes with it (``fit --sky-shape``,
-    :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`), for the sky of :func:`turbid_sky`'s
+    :func:`~skyfit_mi.physics.sky_shape.shape_variants`), for the sky of :func:`turbid_sky`'s
     ``info``: Preetham's pattern at the turbidity :data:`TURBIDITY_STEP` higher (+1) or lower
     (-1); None beyond :data:`TURBIDITY_RANGE`.  The variant is lit as the sky is
-    (:meth:`~skyfit_mi.physics.sky.Sky.shape_variants`); the levels a fitted turbidity
+    (:func:`~skyfit_mi.physics.sky_shape.shape_variants`); the levels a fitted turbidity
     brings are :func:`level_factors`'.
 
     Returns
@@ -163,7 +163,7 @@ def level_factors(infos, variant_infos, mix):
     normal and the diffuse horizontal irradiance (:func:`levels`) at it over those of the
     frame's turbid sky (``infos``: :func:`turbid_sky`'s).  The turbidity is the one a fit of
     the sky's shape reads (``fit --sky-shape``): from + ``mix`` (to - from) of each frame's
-    shape variant (``variant_infos``: :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`'
+    shape variant (``variant_infos``: :func:`~skyfit_mi.physics.sky_shape.shape_variants`'
     skies' info), held to :data:`TURBIDITY_RANGE`.  So one number moves the sky's shape, the
     sky's level and the sun's, the sun's the more the lower it stands (the beam's longer path
     through the haze), held at :data:`FACTOR_ZENITH_DEG` for a lower sun."""

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..render.fit_model import PARAMETERS, bounds
-from .manifest import rendered_frames
+from .manifest import is_table, rendered_frames
 
 
 def read_fit_result(path):
@@ -153,8 +153,6 @@ def check_fit_sequence(result, path, doc, where, own=True):
     one), of its kind (image pixels or a table's points), with every frame the fit lists
     rendered; otherwise (a relight's target) only the frames are checked, and only on the
     fit's own sequence when it holds observations."""
-    from .observation_table import is_table    # not at the top: a cycle through spec
-
     same_run = result.get("sequence_run_id") == doc.get("run_id")
     if own:
         table, of_points = is_table(doc), "points" in result

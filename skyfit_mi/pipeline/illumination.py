@@ -8,7 +8,7 @@ here, and a rendered frame's record is written back from the Sky (:func:`envmap_
 ``envmap``: ``file`` (an HDR image: OpenEXR, Radiance HDR or float TIFF, read by
 :func:`~skyfit_mi.pipeline.photos.read_photo`), ``projection`` (``latlong`` or ``fisheye``),
 ``north_rotation_deg`` (0), ``scale`` (1), ``rows`` (the table's rows; default the map's own,
-at most :data:`~skyfit_mi.physics.envmap.MAX_ROWS`), ``diffuse_horizontal_W_m2`` (rescale the
+at most :data:`~skyfit_mi.physics.latlong.MAX_ROWS`), ``diffuse_horizontal_W_m2`` (rescale the
 map to this measured diffuse irradiance), ``direct_normal_W_m2`` (a solar disc at the frame's
 sun position), ``sun_mask_deg`` (fill the map's clipped sun from the ring around it),
 ``ground_albedo`` (0), ``sun_solid_angle_sr``.  See :mod:`skyfit_mi.physics.envmap`.

@@ -41,7 +41,7 @@ import tempfile
 
 import numpy as np
 
-from .photos import apply_orientation, undo_orientation
+from .orientation import apply_orientation, undo_orientation
 
 #: Re-compressed copies per frame for its error variance.
 REPLICATES = 8
@@ -82,7 +82,7 @@ def block_offset(orientation, shape, block=8):
     EXIF ``orientation``, each in [0, block): a displayed pixel (x, y) lies in block
     ((x - ox) // block, (y - oy) // block).  The file's blocks start at its top left; a turn
     that reverses an axis of the file moves them by its length modulo ``block``.  Found by
-    turning (:func:`~.photos.apply_orientation`) the block indices of a small file with the
+    turning (:func:`~.orientation.apply_orientation`) the block indices of a small file with the
     same lengths modulo ``block``."""
     settings = {"orientation": orientation}
     fh, fw = stored(np.broadcast_to(False, tuple(shape[:2])), settings).shape

@@ -319,6 +319,11 @@ def rendered_frames(doc):
     return [f for f in doc["frames"] if f.get("status") == "rendered"]
 
 
+def is_table(doc):
+    """Whether a manifest's frames are observed as a table (not images)."""
+    return any(f.get("observations", {}).get("kind") == "table" for f in doc["frames"])
+
+
 def check_frames(doc, root, kinds=("radiance", "sensor", "sigma"), frames=None):
     """Light every rendered frame (``frames``: of these indices only) of the sequence ``doc``
     in folder ``root`` (:func:`frame_sky`) and read its images of ``kinds`` (and its

@@ -708,11 +708,6 @@ def relative_scale(doc):
     return ((doc.get("ingest") or {}).get("scale") or {}).get("known") is False
 
 
-def is_table(doc):
-    """Whether a manifest's frames are observed as a table (not images)."""
-    return any(f.get("observations", {}).get("kind") == "table" for f in doc["frames"])
-
-
 def table_regions(root):
     """The regions an observation-table sequence in folder ``root`` measures, in table order."""
     return list(dict.fromkeys(read_observation_table(Path(root) / TABLE_FILE).regions))

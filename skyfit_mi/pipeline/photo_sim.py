@@ -28,7 +28,7 @@ from ..files import atomic_write, ensure_dir, write_json
 from ..physics.camera import SensorModel
 from ..physics.colour import XYZ_TO_SRGB
 from .manifest import load_manifest, read_frame_image, rendered_frames
-from .photos import undo_orientation
+from .orientation import undo_orientation
 
 #: EXIF tags (the Exif sub-IFD 0x8769) written for each frame.
 EXIF_IFD, DATETIME_ORIGINAL, OFFSET_TIME_ORIGINAL = 0x8769, 0x9003, 0x9011

@@ -64,6 +64,8 @@ import numpy as np
 from ..child import CallFailed, Child, ChildDied, one_line
 from ..errors import SkyfitError
 from ..render.image import read_bitmap
+from . import jpeg_noise
+from .orientation import ORIENTATIONS, apply_orientation
 from .photo_times import format_offset
 
 #: Camera RAW suffixes handed to rawpy (LibRaw), lower case.
@@ -84,11 +86,6 @@ EXR_SUFFIXES = frozenset({".exr"})
 RGBE_SUFFIXES = frozenset({".hdr", ".pic", ".rgbe"})
 #: Every suffix :func:`read_photo` reads.
 SUFFIXES = JPEG_SUFFIXES | PNG_SUFFIXES | TIFF_SUFFIXES | EXR_SUFFIXES | RGBE_SUFFIXES | RAW_SUFFIXES
-
-#: EXIF orientation codes and what they mean (TIFF/EP, EXIF 2.3 tag 0x0112).
-ORIENTATIONS = {1: "as stored", 2: "mirrored left-right", 3: "rotated 180",
-                4: "mirrored top-bottom", 5: "transposed", 6: "rotated 90 CW",
-                7: "transversed", 8: "rotated 90 CCW"}
 
 #: LibRaw's ``sizes.flip`` -> the EXIF orientation code of the same turn.
 _LIBRAW_FLIP_TO_EXIF = {0: 1, 3: 3, 5: 8, 6: 6}
@@ -202,30 +199,6 @@ def _rgb(values, channels, path):
     if c in (1, 2):
         return np.repeat(values[:, :, :1], 3, axis=2)
     raise _fail(path, f"has {c} channels per pixel, not RGB or grey", "save the image as RGB")
-
-
-def apply_orientation(values, orientation):
-    """Turn an (H, W, ...) array as the EXIF ``orientation`` code asks, the way Pillow's
-    ``ImageOps.exif_transpose`` turns an image (1 = unchanged, 6 = rotate 90 CW for display...).
-    Returns a view where possible."""
-    if orientation in (None, 1):
-        return values
-    turn = {
-        2: lambda a: a[:, ::-1],
-        3: lambda a: a[::-1, ::-1],
-        4: lambda a: a[::-1],
-        5: lambda a: a.swapaxes(0, 1),
-        6: lambda a: np.rot90(a, -1),
-        7: lambda a: a[::-1, ::-1].swapaxes(0, 1),
-        8: lambda a: np.rot90(a, 1),
-    }
-    return turn[orientation](values)
-
-
-def undo_orientation(values, orientation):
-    """The inverse of :func:`apply_orientation`: an (H, W, ...) array as displayed back in the
-    file's own layout (where a JPEG's blocks start at the top left)."""
-    return apply_orientation(values, {6: 8, 8: 6}.get(orientation, orientation))
 
 
 def _tag(tags, key):
@@ -423,9 +396,7 @@ def _read_pillow(path, fmt):
     if codes.ndim == 2:
         codes = codes[:, :, None]
     if fmt == "jpeg":
-        from .jpeg_noise import decode      # not at the top: jpeg_noise imports this module
-
-        exact = decode(path)
+        exact = jpeg_noise.decode(path)
         differ = None if exact is None or exact.shape != codes.shape else \
             float(np.sqrt(np.mean((exact - codes) ** 2)))
         if differ is not None and differ <= DECODER_AGREEMENT_DN:

@@ -10,8 +10,8 @@ from ..errors import SkyfitError
 from ..files import save_figure, write_text
 from ..render import setup
 from ..render.labels import label_image
-from .manifest import frame_axis, load_manifest, read_frame_image
-from .observation_table import is_table, table_regions
+from .manifest import frame_axis, is_table, load_manifest, read_frame_image
+from .observation_table import table_regions
 
 SOURCES = {"radiance": "W m^-2 sr^-1", "radiance_sigma": "W m^-2 sr^-1", "sensor": "DN",
            "sigma": "DN"}

@@ -523,7 +523,7 @@ def chunks(P, T, per_value, budget):
 def mixed(a, others, weights, a_weight=1.0, covariances=None):
     """The table of the light w_a a + sum_j w_j b_j, from the tables ``a`` and ``others`` [b_j]
     of parts of one light (:meth:`~skyfit_mi.physics.sky.Sky.split`,
-    :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`) traced at the same points in the same
+    :func:`~skyfit_mi.physics.sky_shape.shape_variants`) traced at the same points in the same
     blocks: every basis is linear in the light, and the positions' spreads of independent
     traces add (w^2 for each); parts traced with shared samples add their ``covariances``
     too (:class:`Covariances`, its pairs' indices into ``[a, *others]``: 2 w_j w_k cov).  Each

@@ -13,11 +13,11 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from ..errors import SkyfitError, check_choice
-from ..physics.ward import (METAL_THRESHOLD, NORMALISATIONS, PLASTIC_MAX, SIGMA_MIRROR,
+from ..errors import SkyfitError
+from ..physics.ward import (METAL_THRESHOLD, PLASTIC_MAX, SIGMA_MIRROR,
                             albedo_nodes_of, colour_rule_twin, raw_parameters)
 from .light_cache import (CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
-                          SIGMA_TABLE, control_weight)
+                          SIGMA_TABLE, check_fit_normalisation, control_weight)
 from .daylight import jit_array, update_sky
 from .scene_xml import _ward_element
 from .sky_control import chebyshev_eval, chebyshev_x
@@ -33,20 +33,6 @@ BY_COUNT = {2: "two", 3: "achromatic", 5: "colour"}
 #: Bounds of every parameter: reflectances in [0, 1], sigma_alpha in [0, 0.5].
 BOUNDS = {"rho_s": (0.0, 1.0), "sigma_alpha": (0.0, SIGMA_LARGEST), "R": (0.0, 1.0),
           "C_r": (0.0, 1.0), "C_g": (0.0, 1.0), "C_b": (0.0, 1.0)}
-
-
-def check_fit_normalisation(normalisation):
-    """``normalisation``, or SkyfitError unless the fitting model can represent it: every one
-    of :data:`~skyfit_mi.physics.ward.NORMALISATIONS` but ``'radiance'``, whose Fresnel term
-    for an ideal mirror is outside the basis L = rho_d D + s G(sigma) (the render side takes it)."""
-    check_choice("Ward normalisation", normalisation, NORMALISATIONS)
-    if normalisation == "radiance":
-        raise SkyfitError("normalisation 'radiance' cannot be fitted: its Fresnel term at "
-                          f"sigma_alpha <= {SIGMA_MIRROR:g} adds light independent of rho_s and "
-                          "scales the diffuse part, outside the light cache's basis L = rho_d D "
-                          "+ rho_s G(sigma); fit with 'balanced' (the same BRDF for sigma_alpha "
-                          f"> {SIGMA_MIRROR:g}) or use 'radiance' only to render.")
-    return normalisation
 
 
 def bounds(model):
@@ -169,7 +155,7 @@ class WardModel:
     model : {'two', 'achromatic', 'colour'}
     normalisation : {'ward', 'duer', 'balanced'} or a microfacet lobe
         (:data:`~skyfit_mi.physics.microfacet.LOBES`; 'radiance' is refused:
-        :func:`check_fit_normalisation`)
+        :func:`~.light_cache.check_fit_normalisation`)
     others : light caches of other lights traced with ``cache``'s samples
         (:func:`~.light_cache.build_light_cache`'s ``others``): the basis's shares
         (:meth:`_shares`) are then every light's, stacked after this one's pixels, from one

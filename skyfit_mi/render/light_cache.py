@@ -57,7 +57,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..physics.ward import SIGMA_MIRROR, lobe_albedo, mirror_reflectance, specular_lobe
+from ..errors import SkyfitError, check_choice
+from ..physics.ward import (NORMALISATIONS, SIGMA_MIRROR, lobe_albedo, mirror_reflectance,
+                            specular_lobe)
 from .daylight import jit_array, opaque_value, update_sky
 from .sky_control import (FrameSkies, chebyshev_coefficients, chebyshev_eval, chebyshev_nodes,
                           chebyshev_x, quadrature, sky_integrals, to_numpy)
@@ -119,6 +121,20 @@ MIX = {"sun": 0.25, "sky": 0.20, "cosine": 0.15, "lobes": 0.40}
 #: which it has its full weight; its quadrature of the lobe's albedo is exact to 1e-6 below
 #: CONTROL_SIGMA up to 70 degrees from the normal.
 CONTROL_FULL, CONTROL_SIGMA = 0.035, 0.05
+
+
+def check_fit_normalisation(normalisation):
+    """``normalisation``, or SkyfitError unless the fitting model can represent it: every one
+    of :data:`~skyfit_mi.physics.ward.NORMALISATIONS` but ``'radiance'``, whose Fresnel term
+    for an ideal mirror is outside the basis L = rho_d D + s G(sigma) (the render side takes it)."""
+    check_choice("Ward normalisation", normalisation, NORMALISATIONS)
+    if normalisation == "radiance":
+        raise SkyfitError("normalisation 'radiance' cannot be fitted: its Fresnel term at "
+                          f"sigma_alpha <= {SIGMA_MIRROR:g} adds light independent of rho_s and "
+                          "scales the diffuse part, outside the light cache's basis L = rho_d D "
+                          "+ rho_s G(sigma); fit with 'balanced' (the same BRDF for sigma_alpha "
+                          f"> {SIGMA_MIRROR:g}) or use 'radiance' only to render.")
+    return normalisation
 
 
 #: A light cache's arrays that are each light's own where several lights share one trace's
@@ -253,10 +269,8 @@ class LightCache:
 
         The mirror term for sigma <= 1e-4, linear interpolation from it to G(SIGMA_RESOLVED)
         below SIGMA_RESOLVED (as the Dr.Jit model does).  ``'radiance'`` is refused
-        (:func:`~skyfit_mi.render.fit_model.check_fit_normalisation`).
+        (:func:`check_fit_normalisation`).
         """
-        from .fit_model import check_fit_normalisation     # fit_model imports this module
-
         check_fit_normalisation(normalisation)
         self.check_normalisation(normalisation)
         if sigma_alpha <= SIGMA_MIRROR:
@@ -517,7 +531,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     others : lights traced with this light's samples, each a list of skies without maps, one
         per frame of ``skies`` (no map there either) with its frame's sun direction, disc and
         ground (a sky's shape variants,
-        :meth:`~skyfit_mi.physics.sky.Sky.shape_variants`): they share every position,
+        :func:`~skyfit_mi.physics.sky_shape.shape_variants`): they share every position,
         sampled direction and random number (each light's paths beyond the first bounce and
         its radiance its own) and the sky integrals' nodes, so their estimates are correlated
         (:func:`~.basis_table.trace_tables` keeps the covariances); each costs a small

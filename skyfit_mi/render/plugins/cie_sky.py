@@ -26,7 +26,7 @@ name                  type      default                     meaning
 ``perez_a`` .. ``_e`` float     0                           the Perez pattern's coefficients (b <= 0)
 ``ground``            rgb       0                           radiance below the horizon
 ``envmap``            tensor    none                        lat-long radiance table (H, W, 3), world
-                                                            frame (:mod:`skyfit_mi.physics.envmap`)
+                                                            frame (:mod:`skyfit_mi.physics.latlong`)
 ``horizon_blend``     bool      false                       Radiance's sky-to-ground blend
 ``scene_radius``      float     1e4                         distance [scene units] beyond all geometry
 ====================  ========  ==========================  ==========================================
@@ -43,7 +43,7 @@ import mitsuba as mi
 import numpy as np
 
 from ...physics.colour import SRGB_LUMINANCE
-from ...physics.envmap import latlong_texel
+from ...physics.latlong import latlong_texel
 from ...physics.sky import PEREZ_HORIZON_COS, Sky
 from ..daylight import PEREZ_KEYS as _PEREZ_KEYS, RGB_KEYS as _RGB_KEYS
 from ..daylight import envmap_table, jit_array, opaque_value
@@ -220,7 +220,7 @@ class CIESkyEmitter(mi.Emitter):
 
     def envmap_eval(self, d):
         """The map's radiance toward world directions d: Sky.envmap's bilinear lookup
-        (:func:`~skyfit_mi.physics.envmap.latlong_texel`) [W m^-2 sr^-1]."""
+        (:func:`~skyfit_mi.physics.latlong.latlong_texel`) [W m^-2 sr^-1]."""
         rows, cols = self.envmap_rows, self.envmap_cols
         i0, i1, fy, j0, j1, fx = latlong_texel(dr.acos(dr.clip(d.z, -1.0, 1.0)),
                                                dr.atan2(d.x, d.y), rows, cols, dr.floor, dr.clip)
