@@ -455,7 +455,7 @@ def _map_pending(client, manifest_path, chunks, pending, store, names, seed, cac
     futures = {client.submit(fit_pixels, str(manifest_path), chunks[i]["materials"],
                              chunks[i]["pixels"], model=chunks[i]["model"],
                              normalisation=chunks[i]["normalisation"],
-                             seed=chunk_seed(seed, i), positions=cache[0], directions=cache[1],
+                             seed=chunk_seed(seed, i), cache=cache,
                              groups=chunks[i]["groups"], variant=variant, light=light,
                              pure=False): i
                for i in pending}
