@@ -50,8 +50,8 @@ def main():
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
 
-    raw = thesis_disc_spec("table-7.10-disc", {"model": "colour", **TRUTH}, size=24, fov_deg=10.0,
-                           seed=5)
+    raw = thesis_disc_spec("table-7.10-disc", {"model": "colour", **TRUTH}, size=24, seed=5)
+    raw["camera"]["fov_deg"] = 10.0
     region = parse_region("rect:8,8,15,15")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -61,7 +61,8 @@ def main():
             if key not in args.cases.split(","):
                 continue
             label, model, truth = CASES[key]
-            raw = thesis_disc_spec(label, {"model": model, **truth}, bits=8, spp=4096, seed=7 + i)
+            raw = thesis_disc_spec(label, {"model": model, **truth}, spp=4096, seed=7 + i)
+            raw["sensor"]["bits"] = 8
             out = Path(tmp) / f"case{i}"
             render_sequence(validate_spec(raw, tmp), out, progress=False, log=lambda *a: None)
             doc, _ = load_manifest(out)

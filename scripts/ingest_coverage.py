@@ -18,7 +18,6 @@ than one realisation's, which follow where each fit lands on the rho_s - sigma_a
 """
 
 import argparse
-import inspect
 import sys
 import tempfile
 from pathlib import Path
@@ -29,11 +28,11 @@ ROOT = Path(__file__).resolve().parents[1]
 TRUTH = {"C_r": 0.62, "C_g": 0.12, "C_b": 0.10, "rho_s": 0.05, "sigma_alpha": 0.08}
 
 
-def true_noise(photograph_day):
-    """The simulator's own sensor noise (``photograph_day``'s defaults) as ingest's ``noise``:
-    (read variance [DN^2], shot gain [DN])."""
-    p = inspect.signature(photograph_day).parameters
-    return p["read_noise_DN"].default ** 2, p["shot_gain"].default
+def true_noise(settings):
+    """The simulator's own sensor noise (a :class:`PhotoSettings`' :meth:`noise`) as ingest's
+    ``noise``: (read variance [DN^2], shot gain [DN])."""
+    read, shot = settings.noise()
+    return read ** 2, shot
 
 
 def main():
@@ -70,7 +69,7 @@ def main():
     from skyfit_mi.fitting.chi2 import subsample_region
     from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import validate_spec
@@ -138,10 +137,11 @@ def main():
             photos = work / f"q{q}_s{seed}"
             seq = work / f"seq_q{q}_s{seed}"
             if not (args.refit and (seq / "manifest.json").exists()):
-                photograph_day(truth, photos, seed=seed, quality=q)
+                camera = PhotoSettings(quality=q)
+                photograph_day(truth, photos, camera, seed=seed)
                 ingest([photos], spec_path, seq, calibrate={"grey_card": (0.18,) * 3},
                        vignetting="cos4", overwrite=True, progress=False,
-                       noise=true_noise(photograph_day) if args.true_noise else None, **quiet)
+                       noise=true_noise(camera) if args.true_noise else None, **quiet)
             sequences.append(seq)
         medians[q] = row(q, sequences)
     if args.clean:

@@ -86,7 +86,7 @@ def main():
     from skyfit_mi.fitting.chi2 import subsample_region
     from skyfit_mi.fitting.fit import fit_regions
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import validate_spec
@@ -126,10 +126,12 @@ def main():
             photos, seq = work / f"photos_{tag}", work / f"seq_{tag}"
             if not (args.refit and (seq / "manifest.json").exists()):
                 if raw:
-                    photograph_day(truth, photos, seed=seed, fmt="dng", matrix_error=q)
+                    photograph_day(truth, photos, PhotoSettings(fmt="dng", matrix_error=q),
+                                   seed=seed)
                 else:
-                    photograph_day(truth, photos, seed=seed, quality=q,
-                                   fmt="jpeg" if q else "png", subsampling=args.subsampling)
+                    photograph_day(truth, photos, PhotoSettings(
+                        quality=q, fmt="jpeg" if q else "png", subsampling=args.subsampling),
+                        seed=seed)
                 ingest([photos], spec_path, seq, calibrate={"grey_card": (0.18,) * 3},
                        vignetting="cos4", colour_matrix_error=args.colour_matrix_error,
                        overwrite=True, progress=False, **quiet)

@@ -7,7 +7,7 @@ read and shot noise; skyfit_mi.pipeline.photo_sim), for `skyfit ingest` to turn 
 import argparse
 from pathlib import Path
 
-from skyfit_mi.pipeline.photo_sim import photograph_day
+from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
 from skyfit_mi.pipeline.sequence import render_sequence
 from skyfit_mi.pipeline.spec import SCENES_DIR, load_spec
 
@@ -20,7 +20,8 @@ def main():
     args = ap.parse_args()
     out = Path(args.output)
     render_sequence(load_spec(SCENES_DIR / "specs" / "photo_board.toml"), out / "truth")
-    paths = photograph_day(out / "truth", out / "photos", quality=args.quality, seed=args.seed)
+    paths = photograph_day(out / "truth", out / "photos", PhotoSettings(quality=args.quality),
+                           seed=args.seed)
     print(f"wrote {len(paths)} photographs and photos.json in {out / 'photos'}")
 
 

@@ -373,15 +373,11 @@ def _labels(args):
           + ", ".join(f"{k}={v}" for k, v in legend.items()))
 
 
-def build_parser():
-    """The ``skyfit`` argument parser."""
-    parser = _Parser(prog="skyfit", description=DESCRIPTION)
-    parser.add_argument("--version", action="version", version=f"skyfit-mi {__version__}")
-    debug_help = "show the full traceback of an error, and a map's Dask log (for bug reports)"
-    parser.add_argument("--debug", action="store_true", help=debug_help)
-    common = _Parser(add_help=False)               # --debug also after the command
-    common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=debug_help)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+_MANIFEST_HELP = "folder written by `skyfit render` (or its manifest.json)"
+
+
+def _add_render(sub, common):
+    """The ``render`` sub-command: a spec -> a sequence folder."""
     render = sub.add_parser("render", parents=[common], help="render the day a sequence spec describes",
                             description="Render the day a sequence spec describes into a folder "
                             "(frames, manifest, contact sheet); an interrupted run resumes.")
@@ -394,6 +390,9 @@ def build_parser():
                         help="Mitsuba variant, over the spec's [render] variant (cuda_ad_rgb: GPU)")
     render.set_defaults(func=_render)
 
+
+def _add_ingest(sub, common):
+    """The ``ingest`` sub-command: photographs (or a table) -> a sequence folder."""
     ing = sub.add_parser(
         "ingest", parents=[common], help="photographs of a day -> a sequence folder",
         description="Turn photographs of a day into the sequence folder `render` writes (frames, "
@@ -454,11 +453,13 @@ def build_parser():
     ing.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     ing.set_defaults(func=_ingest)
 
-    manifest_help = "folder written by `skyfit render` (or its manifest.json)"
+
+def _add_pixels(sub, common):
+    """The ``pixels`` sub-command: chosen pixels across a sequence."""
     pixels = sub.add_parser("pixels", parents=[common], help="values of chosen pixels across a rendered sequence",
                             description="Write chosen pixels' values across a sequence as CSV "
                             "and a plot.")
-    pixels.add_argument("manifest", help=manifest_help)
+    pixels.add_argument("manifest", help=_MANIFEST_HELP)
     pixels.add_argument("--pixel", action="append", required=True, metavar="X,Y",
                         help="pixel column,row from the top left; repeat for more pixels")
     pixels.add_argument("--source", choices=("radiance", "sensor"), default="radiance",
@@ -466,17 +467,23 @@ def build_parser():
     pixels.add_argument("-o", "--output", help="output path prefix (default: MANIFEST/pixels_SOURCE)")
     pixels.set_defaults(func=_pixels)
 
+
+def _add_labels(sub, common):
+    """The ``labels`` sub-command: a label-mask PNG of the materials."""
     labels = sub.add_parser("labels", parents=[common], help="label-mask PNG of the materials each pixel sees",
                             description="Write a label-mask PNG (pixel value = material) and "
                             "its legend JSON, for `skyfit fit --mask`.")
-    labels.add_argument("manifest", help=manifest_help)
+    labels.add_argument("manifest", help=_MANIFEST_HELP)
     labels.add_argument("-o", "--output", help="PNG path (default: MANIFEST/labels.png)")
     labels.set_defaults(func=_labels)
 
+
+def _add_fit(sub, common):
+    """The ``fit`` sub-command: Ward parameters of material regions."""
     fit = sub.add_parser("fit", parents=[common], help="fit Ward parameters to material regions of a sequence",
                          description="Fit Ward reflection parameters, with 95% intervals and "
                          "warnings, to material regions of a rendered sequence.")
-    fit.add_argument("manifest", help=manifest_help)
+    fit.add_argument("manifest", help=_MANIFEST_HELP)
     fit.add_argument("--region", action="append", type=_region, metavar="NAME=rect:x0,y0,x1,y1",
                      help="a material region (NAME = the material id); also NAME=pixels:x,y;x,y")
     fit.add_argument("--mask", help="label-mask PNG (values per material), with --label")
@@ -570,6 +577,9 @@ def build_parser():
     fit.add_argument("-o", "--output", help="output folder (default: the manifest's folder)")
     fit.set_defaults(func=_fit)
 
+
+def _add_relight(sub, common):
+    """The ``relight`` sub-command: render a target with fitted materials."""
     relit = sub.add_parser("relight", parents=[common],
                            help="render a day, sky or camera with fitted materials",
                            description="Render a target (a spec, or a sequence folder: its "
@@ -599,11 +609,14 @@ def build_parser():
     relit.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     relit.set_defaults(func=_relight)
 
+
+def _add_chi2map(sub, common):
+    """The ``chi2map`` sub-command: chi-square over two parameters."""
     cmap = sub.add_parser("chi2map", parents=[common],
                           help="chi-square over two parameters of a fitted region",
                           description="Map chi-square over two parameters of a fitted region, "
                           "the others at the fit (thesis figs 6.5-6.21, 7.10): CSV and PNG.")
-    cmap.add_argument("manifest", help=manifest_help)
+    cmap.add_argument("manifest", help=_MANIFEST_HELP)
     cmap.add_argument("fit", help="the region's fit_NAME.json (its pixels, model and frames)")
     cmap.add_argument("--x", default="rho_s", help="parameter on the x axis (default rho_s)")
     cmap.add_argument("--y", default="sigma_alpha",
@@ -628,6 +641,24 @@ def build_parser():
     cmap.add_argument("--overwrite", action="store_true",
                       help="replace files of the prefix's names that are not an earlier map's")
     cmap.set_defaults(func=_chi2map)
+
+
+def build_parser():
+    """The ``skyfit`` argument parser."""
+    parser = _Parser(prog="skyfit", description=DESCRIPTION)
+    parser.add_argument("--version", action="version", version=f"skyfit-mi {__version__}")
+    debug_help = "show the full traceback of an error, and a map's Dask log (for bug reports)"
+    parser.add_argument("--debug", action="store_true", help=debug_help)
+    common = _Parser(add_help=False)               # --debug also after the command
+    common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=debug_help)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_render(sub, common)
+    _add_ingest(sub, common)
+    _add_pixels(sub, common)
+    _add_labels(sub, common)
+    _add_fit(sub, common)
+    _add_relight(sub, common)
+    _add_chi2map(sub, common)
     return parser
 
 

@@ -32,7 +32,7 @@ def measured_disc_day(folder, scans, size=12, noise_percent=2.0, spp=256, rows=N
 
     template = thesis_disc_spec("measured-sky-disc", MATERIAL,
                                 camera_azimuth_deg=CAMERA_AZIMUTH_DEG, size=size,
-                                noise_percent=noise_percent, spp=spp, seed=seed, bits=12)
+                                noise_percent=noise_percent, spp=spp, seed=seed)
     spec = measured_day(scans, folder, template, rows=rows or ROWS)
     out = Path(folder) / "day"
     render_sequence(load_spec(spec), out, progress=False, log=lambda *a: None)

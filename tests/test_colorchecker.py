@@ -118,12 +118,12 @@ def test_ingest_calibrates_from_the_chart(chart_day, response, gamma):
     fitted gamma within 0.05, its exposures within 3%: the gamma's error moves them); the
     calibrated chromatic swatches agree with their rendered reference within 3% rms."""
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
 
     tmp = chart_day["tmp"]
     photos = tmp / f"photos_{response}"
-    photograph_day(chart_day["truth"], photos, seed=6, response=response, gamma=gamma,
-                   quality=100)
+    photograph_day(chart_day["truth"], photos,
+                   PhotoSettings(response=response, gamma=gamma, quality=100), seed=6)
     doc = ingest([photos], chart_day["spec"], tmp / f"seq_{response}", colorchecker="chart",
                  response="fit", vignetting="cos4", progress=False, **QUIET)
     cal = doc["ingest"]["calibration"]
@@ -143,11 +143,11 @@ def test_ingest_calibrates_from_the_chart(chart_day, response, gamma):
 
 def test_bad_chart_options_are_refused_before_any_output(chart_day):
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
 
     tmp = chart_day["tmp"]
     photos = tmp / "photos_bad"
-    photograph_day(chart_day["truth"], photos, seed=1, quality=100)
+    photograph_day(chart_day["truth"], photos, PhotoSettings(quality=100), seed=1)
     for kw, message in (({"colorchecker": "no_such"}, "'no_such' is not a ward material"),
                         ({"colorchecker": "grey_card"}, "lie off material 'grey_card'"),
                         ({"colorchecker": "chart", "calibrate": {"chart": (0.2,) * 3}},
@@ -179,12 +179,13 @@ def test_a_raws_colour_matrix_error_is_measured_on_the_chart_and_corrected(chart
     entry), the frames are corrected by it, and the fits' matrix error is its standard error,
     not the 3% prior."""
     from skyfit_mi.pipeline.ingest import RAW_MATRIX_ERROR, ingest
-    from skyfit_mi.pipeline.photo_sim import matrix_error_mix, photograph_day
+    from skyfit_mi.pipeline.photo_sim import PhotoSettings, matrix_error_mix, photograph_day
 
     pytest.importorskip("rawpy")
     tmp = chart_day["tmp"]
     photos = tmp / "photos_dng"
-    photograph_day(chart_day["truth"], photos, seed=6, fmt="dng", matrix_error=0.03)
+    photograph_day(chart_day["truth"], photos, PhotoSettings(fmt="dng", matrix_error=0.03),
+                   seed=6)
     doc = ingest([photos], chart_day["spec"], tmp / "seq_dng", colorchecker="chart",
                  vignetting="cos4", progress=False, **QUIET)
     measured = doc["ingest"]["calibration"]["colorchecker"]["colour_matrix"]

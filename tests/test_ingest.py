@@ -64,7 +64,7 @@ def _toml(raw):
 def day(tmp_path_factory):
     """The truth rendered and its photographs (JPEG with offsets in EXIF)."""
     from skyfit_mi.fitting.chi2 import subsample_region
-    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
 
@@ -75,7 +75,7 @@ def day(tmp_path_factory):
     # 64 of the sample's pixels, as `skyfit fit` takes by default (--max-pixels)
     regions = {k: subsample_region(v, 64, 0) for k, v in material_regions(truth)}
     photos = tmp / "photos"
-    photograph_day(truth, photos, seed=5, quality=100)
+    photograph_day(truth, photos, PhotoSettings(quality=100), seed=5)
     return {"tmp": tmp, "spec": spec_path, "truth": truth, "regions": regions, "photos": photos}
 
 
@@ -145,7 +145,7 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
     reflectances; with an exposure per frame, each frame's error moves the fit on its own."""
     from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.fitting.uncertainty import calibration_sd
-    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
 
     _, doc, fit = ingested
     cal = doc["ingest"]["calibration"]
@@ -163,7 +163,7 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
                           [0.5, 0.5, 0.5, 0.1, 0.2]) == pytest.approx(
         [0.005, 0.01, 0.015, 0.1 * np.sqrt((1 + 4 + 9) / 3) / 100, 0.0])
     photos = tmp_path / "photos"
-    photograph_day(day["truth"], photos, seed=5, quality=100, shutter_error=0.03)
+    photograph_day(day["truth"], photos, PhotoSettings(quality=100, shutter_error=0.03), seed=5)
     logs = []
     doc = _ingest({**day, "photos": photos}, tmp_path / "seq",
                   calibrate={"grey_card": (0.18, 0.18, 0.18)}, vignetting="cos4",
@@ -196,7 +196,7 @@ def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, tmp_path):
     for C_r / C_g / C_b / rho_s."""
     from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.sequence import render_sequence
 
     keys = ("C_r", "C_g", "C_b", "rho_s")
@@ -207,7 +207,7 @@ def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, tmp_path):
         seq = tmp_path / f"clean{seed}"
         render_sequence(validate_spec(raw, day["spec"].parent), seq, progress=False, **QUIET)
         photos = tmp_path / f"photos{seed}"
-        photograph_day(day["truth"], photos, seed=seed, quality=100)
+        photograph_day(day["truth"], photos, PhotoSettings(quality=100), seed=seed)
         ingest([photos], day["spec"], tmp_path / f"seq{seed}", progress=False,
                calibrate={"grey_card": (0.18,) * 3}, vignetting="cos4", **QUIET)
         for out, src in ((clean, seq), (photo, tmp_path / f"seq{seed}")):
@@ -223,10 +223,10 @@ def test_simulated_png_and_tiff_photographs_carry_their_exif(day, tmp_path, fmt)
     """The simulator's PNG, TIFF and DNG files hold their EXIF (time, offset, exposure) as its
     JPEGs do (Pillow writes an Exif object's sub-IFD into PNG and TIFF only as bytes; a DNG's is
     appended to tifffile's file)."""
-    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.photos import read_photo
 
-    paths = photograph_day(day["truth"], tmp_path, seed=5, fmt=fmt)
+    paths = photograph_day(day["truth"], tmp_path, PhotoSettings(fmt=fmt), seed=5)
     sim = json.loads((tmp_path / "photos.json").read_text())
     for p, f in zip(paths, sim["frames"]):
         m = read_photo(p).metadata
@@ -288,7 +288,7 @@ def test_response_fitted_from_grey_patches(tmp_path):
     recorded; without patches, or with too little span, it is refused."""
     from PIL import Image
 
-    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.sequence import render_sequence
 
     xml = (SCENES_DIR / "photo_board.xml").read_text()
@@ -314,8 +314,8 @@ def test_response_fitted_from_grey_patches(tmp_path):
 
     for response, gamma in (("srgb", 2.2), ("gamma", 1.8)):
         photos = tmp_path / f"photos_{response}"
-        photograph_day(tmp_path / "truth", photos, seed=6, response=response, gamma=gamma,
-                       quality=100)
+        photograph_day(tmp_path / "truth", photos,
+                       PhotoSettings(response=response, gamma=gamma, quality=100), seed=6)
         doc, cal = run(photos, response)
         fit = cal["response_fit"]
         print(response, fit["families"])
@@ -354,10 +354,10 @@ def test_a_coarse_jpeg_widens_the_intervals_but_keeps_the_truth(day, tmp_path):
     and hold the truth."""
     from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
 
     photos = tmp_path / "q90"
-    photograph_day(day["truth"], photos, seed=5, quality=90)
+    photograph_day(day["truth"], photos, PhotoSettings(quality=90), seed=5)
     ingest([photos], day["spec"], tmp_path / "seq", calibrate={"grey_card": (0.18,) * 3},
            vignetting="cos4", progress=False, **QUIET)
     fit = fit_region(tmp_path / "seq", "sample", day["regions"]["sample"], model="colour", **QUIET)
@@ -367,10 +367,10 @@ def test_a_coarse_jpeg_widens_the_intervals_but_keeps_the_truth(day, tmp_path):
 
 
 def test_offsets_missing_need_tz_and_then_agree(day, tmp_path):
-    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
 
     naive = tmp_path / "naive"
-    photograph_day(day["truth"], naive, seed=5, offset=False)
+    photograph_day(day["truth"], naive, PhotoSettings(offset=False), seed=5)
     from skyfit_mi.pipeline.ingest import ingest
     with pytest.raises(SkyfitError, match="tz"):
         ingest([naive], day["spec"], tmp_path / "no", exposure=1e-3, progress=False, **QUIET)
@@ -555,10 +555,11 @@ def raw_ingested(day):
     small to estimate it, tests/test_raw_noise.py does), and the sample fitted."""
     pytest.importorskip("rawpy")
     from skyfit_mi.fitting.fit import fit_region
-    from skyfit_mi.pipeline.photo_sim import RAW_READ_NOISE_DN, RAW_SHOT_GAIN, photograph_day
+    from skyfit_mi.pipeline.photo_sim import (RAW_READ_NOISE_DN, RAW_SHOT_GAIN, PhotoSettings,
+                                               photograph_day)
 
     photos, out = day["tmp"] / "raw_photos", day["tmp"] / "raw_seq"
-    photograph_day(day["truth"], photos, seed=5, fmt="dng", matrix_error=0.03)
+    photograph_day(day["truth"], photos, PhotoSettings(fmt="dng", matrix_error=0.03), seed=5)
     doc = _ingest({**day, "photos": photos}, out, calibrate={"grey_card": (0.18,) * 3},
                   vignetting="cos4", noise=(RAW_READ_NOISE_DN ** 2, RAW_SHOT_GAIN))
     fit = fit_region(out, "sample", day["regions"]["sample"], model="colour", **QUIET)

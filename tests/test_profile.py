@@ -85,15 +85,15 @@ def test_edges_follow_a_curved_ridge_and_its_points_widen_the_others():
     """The profile's fits continue along their own path, so the edges of a sit where the
     curved ridge's profile crosses the threshold (not the covariance's quadratic), and the
     points walked give b an interval covering its own 95% profile interval's core."""
-    from skyfit_mi.fitting.methods.profile import profile_edges, ridge_intervals
+    from skyfit_mi.fitting.methods.profile import ProfileOptions, profile_edges, ridge_intervals
 
     p = _Banana()
     theta, lower, upper = np.array([0.25, 0.5]), np.zeros(2), np.array([1.0, 1.5])
     r, J = p.jacobian(theta)
     cov = np.linalg.inv(J.T @ J)
     assert 0.25 + 1.96 * np.sqrt(cov[0, 0]) == pytest.approx(0.642, abs=0.002)
-    edges, _, walked = profile_edges(p, theta, 0.0, 0, LEVELS, lower, upper, cov, rtol=0.01,
-                                     iterations=40)
+    edges, _, walked = profile_edges(p, theta, 0.0, 0, LEVELS, lower, upper, cov,
+                                     ProfileOptions(rtol=0.01, iterations=40))
     lo, hi = edges[1]
     assert lo == pytest.approx(0.0117, abs=0.002) and hi == pytest.approx(0.796, rel=0.02)
     b_lo, b_hi = (v[1] for v in ridge_intervals(walked, 0.0, LEVELS[1]))

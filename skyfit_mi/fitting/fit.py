@@ -21,7 +21,7 @@ from ..errors import SkyfitError, check_choice
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
-from .methods.profile import profile_edges, ridge_intervals
+from .methods.profile import ProfileOptions, profile_edges, ridge_intervals
 from .held_out import HELD_OUT_FRAMES, held_out_error
 from .light import SPEC_LIGHT, LightOptions, LightPlan
 from .sky_fit import (SKY_DOMINATES, SkyFit, SkyShare, fit_sky_scale, light_level_sd,
@@ -860,7 +860,8 @@ class FitSession:
                 fit.problem, fit.theta, fit.chi2, i,
                 [unc.LEVELS[lv] * fit.delta_scale[i] + ripple for lv in levels],
                 self.lower, self.upper,
-                fit.curvature_inverse, rtol=0.01, iterations=PROFILE_RIDGE_ITERATIONS)
+                fit.curvature_inverse,
+                ProfileOptions(rtol=0.01, iterations=PROFILE_RIDGE_ITERATIONS))
             walked += points
             for lv, e in zip(levels, exact):
                 lo, hi = intervals[p][lv]

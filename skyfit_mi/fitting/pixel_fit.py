@@ -108,12 +108,12 @@ def _stack_groups(x, groups, n_groups):
 
 
 def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="ward", seed=0,
-               positions=MAP_CACHE[0], directions=MAP_CACHE[1], groups=None, variant=None,
-               light=None):
+               cache=MAP_CACHE, groups=None, variant=None, light=None):
     """Fit every pixel of ``pixels`` (P, 2), or every group of them, on its own; the light is
     traced once for all.
 
-    ``materials``: the material id the pixels show (one, or one per pixel); ``groups``: each
+    ``materials``: the material id the pixels show (one, or one per pixel); ``cache``: the
+    light cache's (positions per pixel, directions per position); ``groups``: each
     pixel's fit (P,) labels 0..G-1 (a patch's pixels share one; default every pixel its own);
     ``variant``: the Mitsuba variant (default the sequence's); ``light``: None for the spec's
     sky as it is, or the sky its regions' fit found (:func:`~.pixel_map.first_fits`): each
@@ -137,8 +137,8 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     if light is not None:
         skies = skies_at_level(skies, light["sky"], obs.times)
     table, _ = trace_table(scene, mi.traverse(scene), skies, pixels, materials,
-                           lambda cache: WardModel(cache, model, normalisation),
-                           positions=positions, directions=directions, seed=seed,
+                           lambda block_cache: WardModel(block_cache, model, normalisation),
+                           positions=cache[0], directions=cache[1], seed=seed,
                            max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
                            normalisation=normalisation, plan="anchors")
     wm = TableModel(table, model)

@@ -497,9 +497,8 @@ def _map_pending(client, manifest_path, chunks, pending, store, names, options, 
     futures = {client.submit(fit_pixels, str(manifest_path), chunks[i]["materials"],
                              chunks[i]["pixels"], model=chunks[i]["model"],
                              normalisation=chunks[i]["normalisation"],
-                             seed=chunk_seed(options.seed, i), positions=options.cache[0],
-                             directions=options.cache[1], groups=chunks[i]["groups"],
-                             variant=options.variant, light=light,
+                             seed=chunk_seed(options.seed, i), cache=options.cache,
+                             groups=chunks[i]["groups"], variant=options.variant, light=light,
                              pure=False): i
                for i in pending}
     bar = None

@@ -196,8 +196,25 @@ def _time(text, tz, path, line):
 
 def read_observation_table(path, tz=None):
     """The checked :class:`ObservationTable` of a CSV file (module docstring); SkyfitError
-    naming the file, line and column of anything wrong."""
+    naming the file, line and column of anything wrong.  The steps: the file's rows
+    (:func:`_csv_rows`), its columns checked (:func:`_check_columns`), each row's cells
+    parsed (:func:`_parse_rows`), and the rows checked together (:func:`_check_rows`)."""
     path = Path(path)
+    rows = _csv_rows(path)
+    header = [c.strip().lower() for c in rows[0][1]]
+    luminance = _check_columns(path, header)
+    times, regions, points, lines, frames, out = _parse_rows(path, header, rows[1:], tz,
+                                                             luminance)
+    table = ObservationTable(path, times if "time" in header else None, regions, points,
+                             out["x"], out["view"], out["normal"], out["value"], out["sigma"],
+                             out["saturated"] > 0, lines, luminance,
+                             frames if "frame" in header else None)
+    _check_rows(table)
+    return table
+
+
+def _csv_rows(path):
+    """The non-blank rows of the CSV file as (line number, cells), the header first."""
     try:
         text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
@@ -208,7 +225,11 @@ def read_observation_table(path, tz=None):
     if len(rows) < 2:
         raise SkyfitError(f"{path} has no rows; write a header (time,region,r,g,b,sigma,...) "
                           "and one row per measurement.")
-    header = [c.strip().lower() for c in rows[0][1]]
+    return rows
+
+
+def _check_columns(path, header):
+    """Refuse unknown, repeated, missing or mixed columns; whether the values are luminances."""
     unknown = [c for c in header if c not in _KNOWN]
     if unknown:
         raise SkyfitError(f"{path}: unknown column {unknown[0]!r}; the columns are time (or "
@@ -245,13 +266,19 @@ def read_observation_table(path, tz=None):
             "view_zenith_deg" in header and "view_x" in header):
         raise SkyfitError(f"{path}: give the view as view_x,view_y,view_z or as view_zenith_deg "
                           "and view_azimuth_deg, not a mix.")
+    return luminance
 
+
+def _parse_rows(path, header, rows, tz, luminance):
+    """Each row's cells parsed and checked: (times, regions, points, lines, frames, {x,
+    view, normal, value, sigma: (N, 3) float, NaN where not given; saturated: (N, 3) 0/1}),
+    view and normal vectors made unit length."""
     col = {c: i for i, c in enumerate(header)}
-    n = len(rows) - 1
+    n = len(rows)
     out = {k: np.full((n, 3), np.nan) for k in ("x", "view", "normal", "value", "sigma")}
     out["saturated"] = np.zeros((n, 3))
     times, regions, points, lines, frames = [], [], [], [], []
-    for k, (line, row) in enumerate(rows[1:]):
+    for k, (line, row) in enumerate(rows):
         if len(row) != len(header):
             raise SkyfitError(f"{path} line {line}: {len(row)} fields, the header has "
                               f"{len(header)}.")
@@ -301,12 +328,16 @@ def read_observation_table(path, tz=None):
                     raise SkyfitError(f"{path} line {line}: the {name} vector is zero; give a "
                                       "direction.")
                 out[name][k] = v / norm
-    table = ObservationTable(path, times if "time" in col else None, regions, points, out["x"],
-                             out["view"], out["normal"], out["value"], out["sigma"],
-                             out["saturated"] > 0, lines, luminance,
-                             frames if "frame" in col else None)
+    return times, regions, points, lines, frames, out
+
+
+def _check_rows(table):
+    """Refuse a region without a positive value, a point measured twice in a frame, and a
+    point whose position changes from row to row."""
+    path, regions, points, lines = table.path, table.regions, table.points, table.lines
+    n = len(regions)
     for r in dict.fromkeys(regions):
-        if not np.nanmax(out["value"][[i for i in range(n) if regions[i] == r]]) > 0:
+        if not np.nanmax(table.value[[i for i in range(n) if regions[i] == r]]) > 0:
             raise SkyfitError(f"{path}: every value of region {r!r} is zero or negative; give "
                               "measured values (a radiance is positive).")
     seen = {}
@@ -324,7 +355,6 @@ def read_observation_table(path, tz=None):
             raise SkyfitError(f"{path} line {lines[rows_p[0]]}: point {p!r} of {r!r} moves from "
                               "row to row; a point keeps its position (name each position as "
                               "its own point).")
-    return table
 
 
 # ---- the points in the scene -------------------------------------------------------------

@@ -18,6 +18,7 @@ without OffsetTimeOriginal.  Every random choice is drawn from
 
 import datetime as dt
 import struct
+from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 
@@ -185,15 +186,10 @@ def write_dng(path, mosaic, xyz_to_camera, neutral, *, black=RAW_BLACK, white=2 
     return path
 
 
-def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="srgb", gamma=2.2,
-                   read_noise_DN=None, shot_gain=None, cos4=True, fmt="jpeg", quality=95,
-                   offset=True, shutter_error=0.0, orientation=1, subsampling=0,
-                   matrix_error=0.0, seed=0):
-    """Write the rendered frames of ``sequence`` as photographs into ``out_dir``.
+@dataclass(frozen=True)
+class PhotoSettings:
+    """The camera of :func:`photograph_day` and how it writes its photographs.
 
-    Parameters
-    ----------
-    sequence : a folder written by ``skyfit render`` (its radiance EXRs are the scene)
     exposure : exposure [sr m^2 W^-1] at 1/15 s, f/8, ISO 100; default: the sequence's sensor
         exposure times 2, so that the auto-exposure has room to shorten
     target : the auto-exposure puts the frame's 99th-percentile linear signal at or below this
@@ -201,47 +197,80 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
     response, gamma : the encoding (``srgb``, ``gamma``, ``linear``; not a RAW's)
     read_noise_DN, shot_gain : noise in linear codes, sigma^2 = read^2 + shot_gain x code:
         default 0.8 and 0.02 of 8-bit codes, for a RAW RAW_READ_NOISE_DN and RAW_SHOT_GAIN of
-        its raw codes above black
+        its raw codes above black (:meth:`noise`)
     cos4 : apply the cos^4 vignetting of the camera's field of view
     fmt : 'jpeg', 'png' or 'tiff' (8-bit), or 'dng' (a RAW of RAW_BITS: the module docstring)
-    subsampling : a JPEG's chroma: 0 at full resolution (4:4:4, a camera's finest setting), 1
-        halved across (4:2:2), 2 halved both ways (4:2:0, most cameras' and Pillow's default),
-        which blurs colour across 2x2 pixels and into a region's edge pixels
+    quality : a JPEG's quality (Pillow's 1-100)
     offset : write EXIF OffsetTimeOriginal (without it a reader needs the time zone)
     shutter_error : relative standard deviation of each frame's true exposure about the
         nominal one its EXIF records (a real shutter and aperture miss by a few per cent),
         drawn from numpy.random.default_rng([seed, index, 1]); recorded in photos.json
     orientation : EXIF orientation code: the file holds the frame turned back, as a camera
         held on its side stores it, and the tag says how to show it (the frame as rendered)
+    subsampling : a JPEG's chroma: 0 at full resolution (4:4:4, a camera's finest setting), 1
+        halved across (4:2:2), 2 halved both ways (4:2:0, most cameras' and Pillow's default),
+        which blurs colour across 2x2 pixels and into a region's edge pixels
     matrix_error : a RAW's: the DNG's ColorMatrix1 is off so that the developed linear sRGB
         is the truth times :func:`matrix_error_mix` (each channel takes matrix_error x N(0, 1)
         of every other channel's difference from it, a grey untouched), as a maker's matrix
         fitted to another sensor of the model, or under another light, errs; the matrices are
         recorded in photos.json
+    """
+
+    exposure: float | None = None
+    target: float = 0.5
+    response: str = "srgb"
+    gamma: float = 2.2
+    read_noise_DN: float | None = None
+    shot_gain: float | None = None
+    cos4: bool = True
+    fmt: str = "jpeg"
+    quality: int = 95
+    offset: bool = True
+    shutter_error: float = 0.0
+    orientation: int = 1
+    subsampling: int = 0
+    matrix_error: float = 0.0
+
+    def noise(self):
+        """(read noise [DN rms], shot gain [DN]) in the format's codes: as given, else 0.8
+        and 0.02 of 8-bit codes, for a RAW RAW_READ_NOISE_DN and RAW_SHOT_GAIN."""
+        raw = self.fmt == "dng"
+        return (self.read_noise_DN if self.read_noise_DN is not None
+                else RAW_READ_NOISE_DN if raw else 0.8,
+                self.shot_gain if self.shot_gain is not None
+                else RAW_SHOT_GAIN if raw else 0.02)
+
+
+def photograph_day(sequence, out_dir, settings=None, seed=0):
+    """Write the rendered frames of ``sequence`` (a folder written by ``skyfit render``: its
+    radiance EXRs are the scene) as photographs into ``out_dir``, taken and written as
+    ``settings`` (a :class:`PhotoSettings`, default its defaults) says; ``seed`` seeds every
+    random choice (the module docstring).
 
     Returns the list of written paths, in time order.
     """
     from PIL import Image
 
+    photo = settings or PhotoSettings()
+    fmt, orientation, offset = photo.fmt, photo.orientation, photo.offset
     doc, root = load_manifest(sequence)
     if fmt not in FORMATS:
         raise SkyfitError(f"format {fmt!r}; give one of {', '.join(FORMATS)}.")
     raw = fmt == "dng"
-    if read_noise_DN is None:
-        read_noise_DN = RAW_READ_NOISE_DN if raw else 0.8
-    if shot_gain is None:
-        shot_gain = RAW_SHOT_GAIN if raw else 0.02
+    read_noise_DN, shot_gain = photo.noise()
     if raw:
         white = 2 ** RAW_BITS - 1
         to_camera = raw_camera_matrix()
-        mix = matrix_error_mix(matrix_error, seed)
+        mix = matrix_error_mix(photo.matrix_error, seed)
         written = colour_matrix_1(mix, to_camera)
         neutral = to_camera.sum(axis=1)                   # the raw response to white
     cam = doc["camera"]
     h, w = cam["height"], cam["width"]
-    base = 2.0 * float(doc["sensor"]["exposure"]) if exposure is None else float(exposure)
-    sensor = SensorModel(exposure=1.0, response=response, gamma=gamma, bits=8)
-    falloff = sensor.falloff(w, h, cam["fov_deg"]) if cos4 else np.ones((h, w))
+    base = (2.0 * float(doc["sensor"]["exposure"]) if photo.exposure is None
+            else float(photo.exposure))
+    sensor = SensorModel(exposure=1.0, response=photo.response, gamma=photo.gamma, bits=8)
+    falloff = sensor.falloff(w, h, cam["fov_deg"]) if photo.cos4 else np.ones((h, w))
     out = Path(out_dir)
     ensure_dir(out)
     paths, record = [], []
@@ -250,10 +279,10 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
         radiance = read_frame_image(root, f, "radiance", (h, w, 3)).astype(float)
         signal = radiance * falloff[..., None]
         p99 = float(np.percentile(signal, 99)) * base
-        stops = SHUTTER_STOPS[SHUTTER_STOPS * 15.0 * p99 <= target]
+        stops = SHUTTER_STOPS[SHUTTER_STOPS * 15.0 * p99 <= photo.target]
         t = float(stops[0] if len(stops) else SHUTTER_STOPS[-1])
         e = base * t * 15.0                                   # exposure at this shutter time
-        miss = float(np.random.default_rng([seed, f["index"], 1]).normal()) * shutter_error
+        miss = float(np.random.default_rng([seed, f["index"], 1]).normal()) * photo.shutter_error
         e_true = e * (1.0 + miss)                             # what the shutter really gave
         time = dt.datetime.fromisoformat(f["time"])
         path = out / f"IMG_{f['index']:04d}{FORMATS[fmt]}"
@@ -271,21 +300,22 @@ def photograph_day(sequence, out_dir, *, exposure=None, target=0.5, response="sr
             codes = np.rint(sensor.respond(lin / sensor.max_code) * sensor.max_code)
             img = Image.fromarray(np.ascontiguousarray(undo_orientation(
                 np.clip(codes, 0, 255).astype(np.uint8), orientation)))
-            kw = {"quality": quality, "subsampling": subsampling} if fmt == "jpeg" else {}
+            kw = ({"quality": photo.quality, "subsampling": photo.subsampling} if fmt == "jpeg"
+                  else {})
             atomic_write(path, lambda p, img=img, ex=_exif(time, offset, t, orientation), kw=kw:
                          img.save(p, format=fmt.upper(), exif=ex.tobytes(), **kw))
         paths.append(path)
         record.append({"file": path.name, "time": f["time"], "exposure_time_s": t,
                        "exposure_sr_m2_W": e_true, "nominal_exposure_sr_m2_W": e})
-    meta = {"sequence": str(Path(sequence).resolve()), "seed": seed, "response": response,
-            "gamma": gamma, "read_noise_DN": read_noise_DN, "shot_gain": shot_gain,
-            "cos4": cos4, "format": fmt, "quality": quality, "offset_in_exif": offset,
-            **({"subsampling": subsampling} if fmt == "jpeg" else {}),
+    meta = {"sequence": str(Path(sequence).resolve()), "seed": seed, "response": photo.response,
+            "gamma": photo.gamma, "read_noise_DN": read_noise_DN, "shot_gain": shot_gain,
+            "cos4": photo.cos4, "format": fmt, "quality": photo.quality, "offset_in_exif": offset,
+            **({"subsampling": photo.subsampling} if fmt == "jpeg" else {}),
             "orientation": orientation,
-            "shutter_error": shutter_error,
+            "shutter_error": photo.shutter_error,
             **({"raw": {"bits": RAW_BITS, "black_DN": RAW_BLACK, "white_DN": white,
                         "cfa": "RGGB", "camera_from_linear_srgb": to_camera.tolist(),
-                        "matrix_error": float(matrix_error),
+                        "matrix_error": float(photo.matrix_error),
                         "developed_from_true_linear_srgb": mix.tolist(),
                         "color_matrix_1": written.tolist(), "as_shot_neutral": neutral.tolist(),
                         "source": "XYZ -> camera of the Canon EOS 5D Mark II (Adobe DNG "

@@ -710,14 +710,17 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index, elevation=0.0):
     return sky
 
 
-def thesis_disc_spec(name, material, camera_azimuth_deg=90.0, size=16, fov_deg=6.0, bits=12,
-                     noise_percent=0.0, spp=1024, seed=0, sky="clear", exposure="auto"):
+def thesis_disc_spec(name, material, camera_azimuth_deg=90.0, size=16, noise_percent=0.0,
+                     spp=1024, seed=0, sky="clear", exposure="auto"):
     """The thesis's synthetic experiment (ch. 7) as a raw spec for :func:`validate_spec`.
 
     The disc (``scenes/disc.xml``) made of ``material`` (a spec material table, e.g.
     ``{"model": "two", "rho_s": 1.0, "sigma_alpha": 0.2}``), seen at 45 degrees from the
     ``camera_azimuth_deg`` side (0 north, 90 east) from 5 m, at 40 N 0 E on 21 June, hourly
-    06:00-18:00 UTC, under a CIE ``sky``; ``size`` x ``size`` pixels over ``fov_deg``.
+    06:00-18:00 UTC, under a CIE ``sky``; ``size`` x ``size`` pixels over 6 degrees, a 12-bit
+    sensor of ``exposure`` [sr m^2 W^-1] (or "auto") and ``noise_percent``; ``spp`` samples
+    per pixel from ``seed``.  Anything else (``camera.fov_deg``, ``sensor.bits``, the scene) is
+    the returned dict's to change.
     """
     return {"name": name,
             "location": {"latitude_deg": 40.0, "longitude_deg": 0.0, "timezone": "UTC"},
@@ -725,8 +728,8 @@ def thesis_disc_spec(name, material, camera_azimuth_deg=90.0, size=16, fov_deg=6
             "sky": {"type": sky}, "scene": {"file": "disc.xml"},
             "materials": {"disc": dict(material)},
             "camera": {"azimuth_deg": float(camera_azimuth_deg), "angle_deg": 45.0,
-                       "distance": 5.0, "fov_deg": float(fov_deg), "width": int(size),
+                       "distance": 5.0, "fov_deg": 6.0, "width": int(size),
                        "height": int(size)},
-            "sensor": {"exposure": exposure, "bits": int(bits),
+            "sensor": {"exposure": exposure, "bits": 12,
                        "noise_percent": float(noise_percent)},
             "render": {"spp": int(spp), "seed": int(seed)}}

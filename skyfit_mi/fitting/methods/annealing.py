@@ -35,6 +35,7 @@ Additions to the thesis's method, for the end game, all measured on its tables 7
 """
 
 import itertools
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -61,154 +62,224 @@ def on_bounds(x, lower, upper, every_face=False):
     return [cols[list(p), range(n)] for p in picks]
 
 
-def simulated_annealing(problem, start, lower, upper, seed=0, schedule=None, max_evaluations=15000,
-                        t_min=0.1, step=0.25, ftol=1e-7, max_restarts=4, reanneal=True,
-                        alternatives=None, **_):
+@dataclass(frozen=True)
+class AnnealingOptions:
+    """The settings of :func:`simulated_annealing`; ``method_options`` of a fit name them.
+
+    ``schedule`` (T0, alpha, m): the starting temperature (a chi^2 of one pixel's sequence),
+    the cooling factor per step and the simplex iterations at each temperature (default the
+    thesis's, :data:`SCHEDULES`, by number of parameters).  ``t_min``: the temperature (per
+    pixel) below which the simplex runs cold.  ``step``: the starting simplex's size, a
+    fraction of each parameter's range.  ``ftol``: the relative spread of the simplex's
+    chi^2 values at which it has converged.  ``max_restarts``: restarts of a converged
+    simplex.  ``reanneal``: the end game of the module's docstring (a further cooling cycle,
+    cold descents from the alternative readings).
+    """
+
+    schedule: tuple | None = None
+    max_evaluations: int = 15000
+    t_min: float = 0.1
+    step: float = 0.25
+    ftol: float = 1e-7
+    max_restarts: int = 4
+    reanneal: bool = True
+
+    @classmethod
+    def of(cls, options=None, settings=()):
+        """``options`` (default the defaults) with those of ``settings`` (a dict of keyword
+        options) it names replaced; other keys (another method's options) are ignored."""
+        known = {f.name for f in fields(cls)}
+        return replace(options or cls(), **{k: v for k, v in dict(settings).items() if k in known})
+
+
+def simulated_annealing(problem, start, lower, upper, seed=0, alternatives=None, options=None,
+                        **settings):
     """Minimise chi^2 by annealing from ``start``; returns a result dict with the walk.
 
-    With ``reanneal`` the end game of the module's docstring follows the first cooling cycle:
-    a further cycle from its best point, and cold descents from ``alternatives(x)`` of every
+    ``options`` an :class:`AnnealingOptions`; its settings may also be given as keywords
+    (``schedule=``, ``max_evaluations=``, ...: a fit's ``method_options``), which replace
+    those of ``options``; keywords of other methods (``grid_basis``) are ignored.  With
+    ``reanneal`` the end game of the module's docstring follows the first cooling cycle: a
+    further cycle from its best point, and cold descents from ``alternatives(x)`` of every
     new best point x (each distinct point once).
     """
-    rng = np.random.default_rng(seed)
-    n = len(start)
-    t0, alpha, m = schedule or SCHEDULES.get(n, (1e6, 0.8, 10))
-    # The thesis's temperatures are chi^2 values of one pixel's sequence; a region of P
-    # pixels sums P such chi^2, so its temperatures are P times higher.
-    pixels = max(1, int(problem.obs.y.shape[0]))
-    t0, t_min = t0 * pixels, t_min * pixels
-    span = np.asarray(upper) - np.asarray(lower)
+    run = _Annealing(problem, start, lower, upper, seed, AnnealingOptions.of(options, settings),
+                     alternatives)
+    return run.result(run.cool())
 
-    def make_simplex(x0, size):
+
+class _Annealing:
+    """One annealing run's state: the simplex and its chi^2 values, the temperature, the best
+    point, the walk and the counts of the end game."""
+
+    def __init__(self, problem, start, lower, upper, seed, opts, alternatives):
+        self.problem, self.lower, self.upper, self.opts = problem, lower, upper, opts
+        self.alternatives = alternatives if opts.reanneal else None
+        self.seed, self.rng = seed, np.random.default_rng(seed)
+        self.n = n = len(start)
+        self.t0, self.alpha, self.m = opts.schedule or SCHEDULES.get(n, (1e6, 0.8, 10))
+        # The thesis's temperatures are chi^2 values of one pixel's sequence; a region of P
+        # pixels sums P such chi^2, so its temperatures are P times higher.
+        self.pixels = max(1, int(problem.obs.y.shape[0]))
+        self.t0, self.t_min = self.t0 * self.pixels, opts.t_min * self.pixels
+        self.span = np.asarray(upper) - np.asarray(lower)
+        self.simplex, self.f = self._simplex(np.clip(np.asarray(start, dtype=float), lower, upper),
+                                             opts.step)
+        self.evals = n + 1
+        self.restarts = self.reanneals = self.descents = 0
+        self.cycles = None  # queued (start or None for the best point, hot?), from 1st freeze
+        self.tried = []      # alternative readings already descended from
+        # The thesis's T0 (1e6, 1e7) exceeded its sequences' chi^2 many times over, so annealing
+        # began as a random walk.  Sequences with more pixels or less noise have larger chi^2:
+        # then start at 10x the initial simplex's largest chi^2 to keep that first phase.
+        self.t0_used = max(self.t0, 10.0 * float(np.max(self.f)))
+        best_i = int(np.argmin(self.f))
+        self.best_x, self.best_f = self.simplex[best_i].copy(), float(self.f[best_i])
+        self.walk = [self.best_x.tolist()]
+        self.temp = self.t0_used
+        self.frozen = False
+
+    def _simplex(self, x0, size):
+        """A simplex of n + 1 points (x0, and x0 moved by ``size`` of the range along each
+        axis, inwards at the upper bound) and their chi^2 (not counted in ``evals``)."""
         pts = [x0]
-        for i in range(n):
-            v = x0.copy()
-            v[i] = v[i] + size * span[i] if v[i] + size * span[i] <= upper[i] else v[i] - size * span[i]
-            pts.append(np.clip(v, lower, upper))
-        return np.array(pts), np.array([problem.chi2(v) for v in pts])
+        for i in range(self.n):
+            v, d = x0.copy(), size * self.span[i]
+            v[i] = v[i] + d if v[i] + d <= self.upper[i] else v[i] - d
+            pts.append(np.clip(v, self.lower, self.upper))
+        return np.array(pts), np.array([self.problem.chi2(v) for v in pts])
 
-    simplex, f = make_simplex(np.clip(np.asarray(start, dtype=float), lower, upper), step)
-    evals = n + 1
-    restarts = reanneals = descents = 0
-    cycles = None        # queued (start or None for the best point, hot?), from the first freeze
-    tried = []           # alternative readings already descended from
-    finished = False
-    # The thesis's T0 (1e6, 1e7) exceeded its sequences' chi^2 many times over, so annealing
-    # began as a random walk.  Sequences with more pixels or less noise have larger chi^2:
-    # then start at 10x the initial simplex's largest chi^2 to keep that first phase.
-    t0_used = max(t0, 10.0 * float(np.max(f)))
-    best_i = int(np.argmin(f))
-    best_x, best_f = simplex[best_i].copy(), float(f[best_i])
-    walk = [best_x.tolist()]
-    temp = t0_used
+    def _try(self, points):
+        """chi^2 at each point; the best point becomes the lowest of them if lower."""
+        for x in points:
+            y = self.problem.chi2(x)
+            self.evals += 1
+            if y < self.best_f:
+                self.best_x, self.best_f = x, y
 
-    def trial(fac):
-        nonlocal evals, best_x, best_f
-        centroid = (simplex.sum(axis=0) - simplex[hi]) / n
-        x = reflect_into(centroid * (1 - fac) + simplex[hi] * fac, lower, upper)
-        y = problem.chi2(x)
-        evals += 1
-        if y < best_f:
-            best_x, best_f = x.copy(), y
-        yflu = y + temp * np.log(rng.random())         # trials get a negative fluctuation
-        if yflu < fluct[hi]:
-            simplex[hi], f[hi], fluct[hi] = x, y, yflu
+    def _trial(self, fac):
+        """The worst vertex moved through the others' centroid by ``fac`` (mirrored into the
+        box), replacing it if better after a negative thermal fluctuation; that value."""
+        simplex, hi = self.simplex, self.hi
+        centroid = (simplex.sum(axis=0) - simplex[hi]) / self.n
+        x = reflect_into(centroid * (1 - fac) + simplex[hi] * fac, self.lower, self.upper)
+        y = self.problem.chi2(x)
+        self.evals += 1
+        if y < self.best_f:
+            self.best_x, self.best_f = x.copy(), y
+        yflu = y + self.temp * np.log(self.rng.random())       # trials get a negative fluctuation
+        if yflu < self.fluct[hi]:
+            simplex[hi], self.f[hi], self.fluct[hi] = x, y, yflu
         return yflu
 
-    def untried_alternatives():
+    def _move(self):
+        """One simplex iteration at the temperature: reflect, then expand, or contract and
+        if that fails shrink toward the best vertex."""
+        n, simplex, f = self.n, self.simplex, self.f
+        self.fluct = f - self.temp * np.log(self.rng.random(n + 1))   # vertices get +T|ln u|
+        order = np.argsort(self.fluct)
+        lo, self.hi, nhi = order[0], order[-1], order[-2]
+        y = self._trial(-1.0)                                # reflect
+        if y <= self.fluct[lo]:
+            self._trial(2.0)                                 # expand
+        elif y >= self.fluct[nhi]:
+            ysave = self.fluct[self.hi]
+            y = self._trial(0.5)                             # contract
+            if y >= ysave:                                   # shrink toward the best
+                for i in range(n + 1):
+                    if i != lo:
+                        simplex[i] = np.clip(0.5 * (simplex[i] + simplex[lo]), self.lower,
+                                             self.upper)
+                        f[i] = self.problem.chi2(simplex[i])
+                        self.evals += 1
+                        if f[i] < self.best_f:
+                            self.best_x, self.best_f = simplex[i].copy(), float(f[i])
+
+    def _converged(self):
+        # relative, and absolute for a minimum at chi^2 = 0 (data made by the model itself)
+        f = self.f
+        return 2 * abs(f.max() - f.min()) <= self.opts.ftol * (abs(f.max()) + abs(f.min())) + 1e-10
+
+    def _untried_alternatives(self):
         """Cold descents from the alternatives to the best point, except near (within 1% of
         the box) one already descended from."""
         out = []
-        for x in (alternatives(best_x) if reanneal and alternatives else []):
-            x = np.clip(np.asarray(x, dtype=float), lower, upper)
-            if not any(np.all(np.abs(x - t) <= 0.01 * span) for t in tried):
-                tried.append(x)
+        for x in (self.alternatives(self.best_x) if self.alternatives else []):
+            x = np.clip(np.asarray(x, dtype=float), self.lower, self.upper)
+            if not any(np.all(np.abs(x - t) <= 0.01 * self.span) for t in self.tried):
+                self.tried.append(x)
                 out.append((x, False))
         return out
 
-    def converged():
-        # relative, and absolute for a minimum at chi^2 = 0 (data made by the model itself)
-        return 2 * abs(f.max() - f.min()) <= ftol * (abs(f.max()) + abs(f.min())) + 1e-10
+    def _next_cycle(self):
+        """At a freeze: on the first, try the best point on every face, edge and corner of the
+        box (points the simplex's mirrored moves rarely reach) and queue a further cooling
+        cycle from the best point; on every one, queue cold descents from the untried
+        alternatives.  Starts the next queued cycle; False if none is left."""
+        if self.cycles is None:
+            self._try(on_bounds(self.best_x, self.lower, self.upper, every_face=True))
+            self.cycles = [(None, True)] if self.opts.reanneal else []
+        self.cycles[:0] = self._untried_alternatives()
+        if not self.cycles:
+            return False
+        x, hot = self.cycles.pop(0)
+        self.simplex, self.f = self._simplex(self.best_x.copy() if x is None else x,
+                                             self.opts.step)
+        self.evals += self.n + 1
+        best_i = int(np.argmin(self.f))
+        if self.f[best_i] < self.best_f:
+            self.best_x, self.best_f = self.simplex[best_i].copy(), float(self.f[best_i])
+        # a further cooling cycle starts hot enough to leave a basin as deep as its start's
+        # chi^2 (Press et al. 10.9); a descent from an alternative, cold
+        self.temp = max(float(self.f[0]), self.t_min / self.alpha) if hot else 0.0
+        self.frozen = False
+        self.reanneals += hot
+        self.descents += not hot
+        return True
 
-    frozen = False
-    while evals < max_evaluations:
-        if temp <= t_min:                   # frozen: plain downhill simplex until it converges
-            temp, frozen = 0.0, True
-        for _ in range(m):
-            fluct = f - temp * np.log(rng.random(n + 1))            # vertices get +T|ln u|
-            order = np.argsort(fluct)
-            lo, hi, nhi = order[0], order[-1], order[-2]
-            y = trial(-1.0)                                  # reflect
-            if y <= fluct[lo]:
-                trial(2.0)                                   # expand
-            elif y >= fluct[nhi]:
-                ysave = fluct[hi]
-                y = trial(0.5)                               # contract
-                if y >= ysave:                               # shrink toward the best
-                    for i in range(n + 1):
-                        if i != lo:
-                            simplex[i] = np.clip(0.5 * (simplex[i] + simplex[lo]), lower, upper)
-                            f[i] = problem.chi2(simplex[i])
-                            evals += 1
-                            if f[i] < best_f:
-                                best_x, best_f = simplex[i].copy(), float(f[i])
-            walk.append(simplex[int(np.argmin(f))].tolist())
-            if evals >= max_evaluations or (frozen and converged()):
-                break
-        if frozen and converged():
-            if evals >= max_evaluations:
-                finished = True
-                break
-            before = best_f
-            if cycles is None:
-                # first freeze: try points the simplex's mirrored moves rarely reach, the best
-                # point on every face, edge and corner of the box; then queue a further cooling
-                # cycle from the best point
-                for x in on_bounds(best_x, lower, upper, every_face=True):
-                    y = problem.chi2(x)
-                    evals += 1
-                    if y < best_f:
-                        best_x, best_f = x, y
-                cycles = [(None, True)] if reanneal else []
-            cycles[:0] = untried_alternatives()
-            if cycles:
-                x, hot = cycles.pop(0)
-                simplex, f = make_simplex(best_x.copy() if x is None else x, step)
-                evals += n + 1
-                best_i = int(np.argmin(f))
-                if f[best_i] < best_f:
-                    best_x, best_f = simplex[best_i].copy(), float(f[best_i])
-                # a further cooling cycle starts hot enough to leave a basin as deep as its
-                # start's chi^2 (Press et al. 10.9); a descent from an alternative, cold
-                temp, frozen = (max(float(f[0]), t_min / alpha) if hot else 0.0), False
-                reanneals += hot
-                descents += not hot
+    def cool(self):
+        """Anneal, with the end game at each freeze, until the simplex has converged for good
+        (True) or the evaluations run out (False)."""
+        opts = self.opts
+        while self.evals < opts.max_evaluations:
+            if self.temp <= self.t_min:     # frozen: plain downhill simplex until it converges
+                self.temp, self.frozen = 0.0, True
+            for _ in range(self.m):
+                self._move()
+                self.walk.append(self.simplex[int(np.argmin(self.f))].tolist())
+                if self.evals >= opts.max_evaluations or (self.frozen and self._converged()):
+                    break
+            if not (self.frozen and self._converged()):
+                self.temp *= self.alpha
                 continue
-            if restarts >= max_restarts:
-                finished = True
-                break
-            for x in on_bounds(best_x, lower, upper):
-                y = problem.chi2(x)
-                evals += 1
-                if y < best_f:
-                    best_x, best_f = x, y
+            if self.evals >= opts.max_evaluations:
+                return True
+            before = self.best_f
+            if self._next_cycle():
+                continue
+            if self.restarts >= opts.max_restarts:
+                return True
+            self._try(on_bounds(self.best_x, self.lower, self.upper))
             # Nelder-Mead can stall on a degenerate simplex: restart around the best point
             # until a restart no longer improves (Press et al. 10.4); the first is full-size
-            simplex, f = make_simplex(best_x.copy(), step if restarts == 0 else 0.05)
-            evals += n + 1
-            restarts += 1
-            if restarts > 1 and before - best_f <= ftol * abs(before):
-                finished = True
-                break
-            continue
-        temp *= alpha
-    return {"theta": best_x, "chi2": float(best_f),
-            "status": "converged" if finished else "max_evaluations",
-            "message": f"cooled to T = 0 in {1 + reanneals} cycles and {descents} cold descents "
-            f"from alternative readings; the simplex converged ({restarts} restarts)" if finished
-            else f"stopped at {evals} evaluations (temperature {temp:.3g})",
-            "trace": walk, "schedule": {"T0": t0 / pixels, "alpha": alpha, "m": m, "seed": seed,
-                                        "temperature_scale_pixels": pixels,
-                                        "T0_used": t0_used, "reanneals": reanneals,
-                                        "descents": descents,
-                                        "evaluations": evals}}
+            self.simplex, self.f = self._simplex(self.best_x.copy(),
+                                                 opts.step if self.restarts == 0 else 0.05)
+            self.evals += self.n + 1
+            self.restarts += 1
+            if self.restarts > 1 and before - self.best_f <= opts.ftol * abs(before):
+                return True
+        return False
+
+    def result(self, finished):
+        """The result dict: the best point, its chi^2, the status and the walk."""
+        return {"theta": self.best_x, "chi2": float(self.best_f),
+                "status": "converged" if finished else "max_evaluations",
+                "message": f"cooled to T = 0 in {1 + self.reanneals} cycles and {self.descents} "
+                f"cold descents from alternative readings; the simplex converged "
+                f"({self.restarts} restarts)" if finished
+                else f"stopped at {self.evals} evaluations (temperature {self.temp:.3g})",
+                "trace": self.walk,
+                "schedule": {"T0": self.t0 / self.pixels, "alpha": self.alpha, "m": self.m,
+                             "seed": self.seed, "temperature_scale_pixels": self.pixels,
+                             "T0_used": self.t0_used, "reanneals": self.reanneals,
+                             "descents": self.descents, "evaluations": self.evals}}

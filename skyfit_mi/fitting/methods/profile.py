@@ -22,25 +22,41 @@ just above 0 can look excluded when it is not), and the grid's profile was measu
 there (docs/BENCHMARKS.md, "Coverage and RMSE against the Cramer-Rao bound").
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .levenberg_marquardt import polish
 
 
-def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, rtol=0.05,
-                  max_fits=10, iterations=5):
+@dataclass(frozen=True)
+class ProfileOptions:
+    """How :func:`profile_edges` searches for each edge.
+
+    ``rtol``: an edge is placed when P_k - chi2_min is within this of the threshold (relative,
+    in h); ``max_fits``: constrained fits per edge at most; ``iterations``: Levenberg-Marquardt
+    iterations of each constrained fit at most (5 where chi^2 is near quadratic; more along a
+    curved ridge, where the conditional mean is a poor start).
+    """
+
+    rtol: float = 0.05
+    max_fits: int = 10
+    iterations: int = 5
+
+
+def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, options=None):
     """Edges of {x : P_k(x) - chi2_min <= thr} for each threshold (ascending chi^2 rises).
 
     ``cov`` is (J^T J)^-1 at ``theta`` (unscaled), for the first guesses and the fits'
-    starts; ``iterations`` bounds each constrained fit (5 where chi^2 is near quadratic; more
-    along a curved ridge, where the conditional mean is a poor start).  Returns ([(lo, hi)]
+    starts; ``options`` a :class:`ProfileOptions` (default its defaults).  Returns ([(lo, hi)]
     per threshold, with None for an edge no fit could be made toward, e.g. where the
     constrained fit's curvature is singular), the number of fits, and every fit's
     (parameters, chi^2): points of the ridge, whose other parameters are admissible where
     their chi^2 is (:func:`ridge_intervals`).
-    An edge is placed when P_k - chi2_min is within ``rtol`` of the threshold (relative, in
-    h), or at the bound if the profile stays below the threshold there.
+    An edge is placed when P_k - chi2_min is within ``options.rtol`` of the threshold
+    (relative, in h), or at the bound if the profile stays below the threshold there.
     """
+    opts = options or ProfileOptions()
     theta = np.asarray(theta, dtype=float)
     x0 = float(theta[k])
     ckk = float(cov[k, k]) if np.isfinite(cov[k, k]) else 0.0
@@ -56,7 +72,8 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, rt
         """sqrt(P_k(x) - chi2_min), and whether it is exact (not just an upper bound)."""
         nonlocal fits
         fits += 1
-        res = polish(problem, start_at(x), lower, upper, max_iterations=iterations, fixed=(k,))
+        res = polish(problem, start_at(x), lower, upper, max_iterations=opts.iterations,
+                     fixed=(k,))
         exact = res["status"] != "failed"
         chi2 = res["chi2"] if exact else problem.chi2(start_at(x))
         if exact:
@@ -110,7 +127,7 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, rt
         pts = [(x0, 0.0)]
         for e, thr in zip(edges, thresholds):
             t = np.sqrt(thr)
-            for _ in range(max_fits):
+            for _ in range(opts.max_fits):
                 x = guess(pts, t, side, bound)
                 if any(x == p[0] for p in pts):         # no new point to try
                     break
@@ -119,7 +136,7 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, rt
                     # no fit there (singular curvature): the next guess halves the step
                     hx = np.inf if hx >= t else hx
                 pts = sorted(pts + [(x, hx)], key=lambda p: abs(p[0] - x0))
-                if abs(hx - t) <= rtol * t:
+                if abs(hx - t) <= opts.rtol * t:
                     e[j] = x
                     break
                 if hx < t and x == bound:
