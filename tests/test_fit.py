@@ -421,15 +421,14 @@ def test_model_noise_allowance_is_the_largest_over_the_profiles_region():
     """The cache's error grows with sigma_alpha: the allowance is the model noise at the top
     of the profile's 95% region, found again as that region widens with it, not the (smaller)
     value at the fit."""
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.intervals import model_noise_allowance
 
     class Noise:                                   # model noise 200 sigma_alpha [chi2]
         def model_noise_chi2(self, theta):
             return 200.0 * theta[-1]
-    s = FitSession.__new__(FitSession)
     sigmas = np.linspace(0.0, 0.5, 501)
     profile = 1e4 * (sigmas - 0.05) ** 2          # minimum at 0.05
-    allowance = s._model_noise_allowance(Noise(), np.array([0.3, 0.05]), sigmas, profile, 1.0)
+    allowance = model_noise_allowance(Noise(), np.array([0.3, 0.05]), sigmas, profile, 1.0)
     # at the fit 10; the region (chi2 rise <= 3.84 + allowance) grows to the fixed point
     # 1e4 (s - 0.05)^2 = 3.84 + 200 s, s = 0.0985, where the noise is 19.7
     assert allowance == pytest.approx(19.7, rel=0.02)

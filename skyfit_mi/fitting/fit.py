@@ -14,31 +14,29 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import uncertainty as unc
-from .chi2 import (MEASURED_SE, LuminanceModel, Problem, load_observations,
-                   load_table_observations)
-from .geometry import geometry_warnings, highlight_geometry
-from ..errors import SkyfitError, check_choice
+from .chi2 import LuminanceModel, Problem, load_observations, load_table_observations
+from .fit_record import fit_record
+from .fit_warnings import fit_warnings
+from .geometry import highlight_geometry
+from .held_out import held_out_error
+from .intervals import (calibration_sd, fit_intervals, frame_calibration_sd, jpeg_shared_sd,
+                        matrix_sd)
+from .light import SPEC_LIGHT, LightOptions, LightPlan
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
-from .methods.levenberg_marquardt import SINGULAR_CONDITION, levenberg_marquardt
-from .methods.profile import ProfileOptions, profile_edges, ridge_intervals
-from .held_out import HELD_OUT_FRAMES, held_out_error
-from .light import SPEC_LIGHT, LightOptions, LightPlan
-from .sky_fit import (SKY_DOMINATES, SkyFit, SkyShare, fit_sky_scale, light_level_sd,
-                      shape_variants, skies_at_level, sky_level_at)
+from .methods.levenberg_marquardt import levenberg_marquardt
+from ..errors import SkyfitError, check_choice
+from .sky_fit import SkyFit, SkyShare, fit_sky_scale, shape_variants, skies_at_level, sky_level_at
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, block_budget, memory_estimate,
                                   mixed, shared_budget, trace_table, trace_tables)
 from ..render.fit_model import (BY_COUNT, PARAMETERS, WardModel, bounds, check_fit_normalisation,
                                 check_start, other_readings)
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
-                                  SIGMA_RESOLVED, SKY_PLANS, PointRays, anchors_pay,
+                                  SKY_PLANS, PointRays, anchors_pay,
                                   build_light_cache)
-from ..pipeline.ingest import pixel_sigma
-from ..pipeline.jpeg_noise import YCC_TO_RGB, shared_error_sd
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, is_table, load_manifest
 from ..pipeline.observation_table import relative_scale
-from ..physics.sky import MEASURED_SUN_SD
 from ..physics.turbid_sky import level_factors
 from ..physics.ward import METAL_THRESHOLD
 
@@ -50,17 +48,9 @@ GREY_SPREAD = 0.02
 
 #: Roughness values at which the model's own noise is reported [rms slope].
 NOISE_SIGMAS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5)
-#: Share of the degrees of freedom above which the model's own noise is warned of.
-NOISE_SHARE = 0.25
 #: Largest growth of an automatically sized cache's positions, and the time a grown cache's
 #: trace may take [s] (estimated from the first trace's): the data's need, within a budget.
 CACHE_GROWTH_MAX, CACHE_TIME_BUDGET = 16, 20.0
-#: Iterations of each constrained fit that profiles a parameter along a ridge (another
-#: parameter poorly determined): the conditional-mean start is poor there.
-PROFILE_RIDGE_ITERATIONS = 40
-#: The widening of a variance by correlated channels (:func:`~.uncertainty.channel_factors`)
-#: above which the fit says so.
-CHANNEL_NOTE = 1.1
 #: Rounds of the model error's fit (kappa from the residuals, the parameters again at it) at
 #: most, and the relative change of kappa at which they stop (:meth:`FitSession._fit_model_error`).
 MODEL_ERROR_ROUNDS, MODEL_ERROR_RTOL = 8, 0.02
@@ -89,7 +79,7 @@ class FitState:
     model_noise_by_sigma : the light cache's own share of chi-square by roughness
     noise_chi2 : mean and variance of the chi-square noise alone gives at the fit
     intervals, rise, cache_noise_chi2, cache_sd, sun_level_sd : set by
-        :meth:`FitSession._intervals`: every parameter's 68%/95% intervals, the profiles' rise,
+        :func:`~.intervals.fit_intervals`: every parameter's 68%/95% intervals, the profiles' rise,
         the chi-square the cache's noise may add (the intervals allow for it), the standard
         errors from the cache's samples and from the sun's level
         (:func:`~.sky_fit.light_level_sd`)
@@ -98,7 +88,7 @@ class FitState:
         every value of a frame shares (:func:`~.uncertainty.shared_error_sd`; zeros without
         JPEG frames, or calibration)
     matrix_sd : the standard errors from the camera's colour matrix, an error every value of
-        the day shares (:meth:`FitSession._matrix_sd`; zeros without its prior)
+        the day shares (:func:`~.intervals.matrix_sd`; zeros without its prior)
     sky : what the light adds to the parameters' errors (:class:`~.sky_fit.SkyShare`)
     held_out : how well the fit predicts frames it was not fitted to
         (:func:`~.held_out.held_out_error`, on ``problem``: its kappa is the error beyond the
@@ -521,8 +511,9 @@ class FitSession:
 
         The steps: the method's minimum, the model's error where the model cannot reproduce
         the data (:meth:`_fit_model_error`), the covariance, the global minimum (whose grid
-        gives the profiles and judges a local method), intervals (:meth:`_intervals`),
-        warnings (:meth:`_warnings`), and the JSON-ready record (:meth:`_record`).
+        gives the profiles and judges a local method), intervals (:func:`~.intervals.fit_intervals`),
+        warnings (:func:`~.fit_warnings.fit_warnings`), and the JSON-ready record
+        (:func:`~.fit_record.fit_record`): each stage a function of the session and the fit.
         """
         check_choice("fit method", method, tuple(METHODS))
         problem, wm = self.problem, self.wm
@@ -579,18 +570,18 @@ class FitSession:
                        curv_inv * s2 * np.sqrt(np.outer(f2, f2)), res, g, noise, noise_chi2,
                        problem, merr, rounds, misfit,
                        sky or SkyShare(sun_sd=self.light.sun_sd, sun_source=self.light.sun_source))
-        fit.jpeg_shared_sd = self._jpeg_shared_sd(J_all, measured, problem.obs.sigma, curv_inv)
-        fit.calibration_sd = self._calibration_sd(J_all, problem, measured, theta, curv_inv)
-        fit.matrix_sd = self._matrix_sd(J_all, problem, measured, theta, curv_inv)
-        self._intervals(fit)
+        fit.jpeg_shared_sd = jpeg_shared_sd(self, J_all, measured, problem.obs.sigma, curv_inv)
+        fit.calibration_sd = calibration_sd(self, J_all, problem, measured, theta, curv_inv)
+        fit.matrix_sd = matrix_sd(self, J_all, problem, measured, theta, curv_inv)
+        fit_intervals(self, fit)
         iv95 = np.array([fit.intervals[p]["95"] for p in self.names])
         fit.held_out = held_out_error(
             problem, theta, self.lower, self.upper,
             within=lambda th: bool(np.all((th >= iv95[:, 0]) & (th <= iv95[:, 1]))),
-            frame_sd=self._frame_calibration_sd())
-        warnings = self._warnings(fit)
+            frame_sd=frame_calibration_sd(self))
+        warnings = fit_warnings(self, fit)
         wall = time.perf_counter() - t0 + self.cache_time
-        out = self._record(fit, warnings, start, seed, evaluations, wall, t_method)
+        out = fit_record(self, fit, warnings, start, seed, evaluations, wall, t_method)
         log(f"{self.name}: {self.model} fit by {method}: "
             + ", ".join(f"{k} = {v:.4f}" for k, v in out["parameters"].items())
             + f"; chi2/dof = {out['chi2_per_dof']:.3g}"
@@ -644,174 +635,6 @@ class FitSession:
                 break
         return res, base.with_model_error(est.kappa, theta), est, rounds
 
-    def _intervals(self, fit):
-        """68% and 95% intervals of every parameter into the :class:`FitState` ``fit`` (its
-        intervals, rise, cache_noise_chi2, cache_sd, sun_level_sd): the covariance's, or for
-        rho_s and sigma_alpha of a global fit the profile's; each widened by the light cache's
-        own Monte Carlo error, the calibration's (``calibration_sd``), the fitted sky's and, a
-        factor on the reflectances, the sun's level's; by the rounding a JPEG frame's blocks
-        share over the region (``jpeg_shared_sd``) and the camera's colour matrix's error
-        (``matrix_sd``)."""
-        problem, theta, names = fit.problem, fit.theta, self.names
-        lower, upper = self.lower, self.upper
-        s2k = fit.delta_scale                             # each parameter's scale of Delta chi^2
-        cov_iv = unc.covariance_intervals(theta, fit.covariance, lower, upper)
-        grid = fit.global_result["profile_linearised"]
-        prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
-                "rho_s": (grid["rho_s"], grid["chi2_rho"])}
-        ripple = self._model_noise_allowance(problem, theta, *prof["sigma_alpha"], s2k[-1])
-        # the profiles describe the global minimum; a local method is judged against it
-        glob = fit.method == "global"
-        intervals, rise, walked = {}, {}, []
-        for i, p in enumerate(names):
-            iv = {lv: (float(cov_iv[lv][0][i]), float(cov_iv[lv][1][i])) for lv in ("68", "95")}
-            source = "covariance"
-            if p in prof:
-                rise[p] = float(np.max(prof[p][1]) - np.min(prof[p][1]))
-                if glob:
-                    # the union of the grid's (linearised) profile interval and the true
-                    # chi^2's (see methods/profile.py): the first is offset where the sensor
-                    # clips, the second inherits the cache's narrow-lobe error (a mirror fit
-                    # of the board's polished steel, truth sigma_alpha 0.02: 95% edge 0.002)
-                    iv = unc.profile_interval(*prof[p], s2k[i], ripple)
-                    levels = list(iv)
-                    exact, _, points = profile_edges(
-                        problem, theta, fit.chi2, i,
-                        [unc.LEVELS[lv] * s2k[i] + ripple for lv in levels], lower, upper,
-                        fit.curvature_inverse)
-                    walked += points
-                    iv = {lv: (min(iv[lv][0], e[0] if e[0] is not None else np.inf),
-                               max(iv[lv][1], e[1] if e[1] is not None else -np.inf))
-                          for lv, e in zip(levels, exact)}
-                    source = "profile"
-            intervals[p] = {"68": iv["68"], "95": iv["95"], "from": source}
-        if glob and self._poorly_determined(theta, intervals, prof, fit.covariance):
-            walked += self._profile_the_rest(fit, intervals, ripple)
-        for lv in ("68", "95"):
-            # every point the profiles walked within the level lies inside every interval
-            for i, p in enumerate(names):
-                ridge = ridge_intervals(walked, fit.chi2, unc.LEVELS[lv] * s2k[i] + ripple)
-                if ridge is not None:
-                    lo, hi = intervals[p][lv]
-                    intervals[p][lv] = (min(lo, float(ridge[0][i])), max(hi, float(ridge[1][i])))
-        mc_sd = self.cache_error(theta, fit.method, problem)
-        cal_sd = fit.calibration_sd
-        sky = fit.sky
-        sky_sd = np.zeros(len(names)) if sky.sd is None else sky.sd
-        sun_rel = light_level_sd(self.doc, names, sky.sun_level_sd)
-        for i, p in enumerate(names):
-            for lv in ("68", "95"):
-                intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * np.sqrt(
-                    mc_sd[i] ** 2 + cal_sd[i] ** 2 + sky_sd[i] ** 2
-                    + fit.jpeg_shared_sd[i] ** 2 + fit.matrix_sd[i] ** 2), lower[i], upper[i])
-                # the sun's level: a factor on every reflectance, lopsided
-                intervals[p][lv] = unc.widen_relative(theta[i], intervals[p][lv],
-                                                      unc.Z[lv] * sun_rel[i], lower[i], upper[i])
-                if sky.span is not None:      # the sky's level is not determined
-                    lo, hi = intervals[p][lv]
-                    intervals[p][lv] = (min(lo, float(sky.span[0][i])),
-                                        max(hi, float(sky.span[1][i])))
-                    if lv == "95":
-                        intervals[p]["from"] += ", and over the undetermined sky level"
-        fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
-        fit.cache_sd = mc_sd
-        fit.sun_level_sd = sun_rel * np.abs(theta)
-
-    def _calibration_sd(self, J, problem, usable, theta, curvature_inverse):
-        """Each parameter's standard error (n,) from a photographed sequence's calibration on
-        patches of known reflectance (ingest's ``calibration`` record): each frame's exposure
-        errs per channel by ``frame_relative_sd`` where the frames take their own
-        (``per_frame``), or the day's by ``scale_relative_sd`` where they share one.  An
-        error e moves every value of its frame and channel by e times the value
-        (:meth:`~.chi2.Problem.value_scale`), carried to the parameters by
-        :func:`~.uncertainty.shared_error_sd`: not a mere scale on the reflectances, since
-        frames erring apart bend the day's curve, which the specular share and the roughness
-        follow (a board's yellow paint, its sun's highlight never seen, frames calibrated
-        each on its own: C_b's standard error from the calibration 0.21%, where a scale gave
-        0.07%).  A table's, without frames photographed, is
-        :func:`~.uncertainty.calibration_sd`."""
-        cal = (self.doc.get("ingest") or {}).get("calibration") or {}
-        if self.obs.rays is not None or not cal.get("scale_relative_sd"):
-            return unc.calibration_sd(self.doc, self.names, theta)
-        Js = J * problem.value_scale(theta)[..., None]          # per relative error of a value
-        sigma = problem.obs.sigma
-        if cal.get("per_frame"):
-            shared = np.tile(np.asarray(self._frame_calibration_sd(), dtype=float),
-                             (J.shape[1], 1))
-        else:                                         # one error per channel for every frame
-            P, T, C, n = J.shape
-            Js, usable, sigma = (a.reshape((P * T, 1) + a.shape[2:]) for a in (Js, usable, sigma))
-            shared = np.asarray(cal["scale_relative_sd"], dtype=float)[None, :]
-        return unc.shared_error_sd(Js, usable, sigma, shared, np.eye(3), curvature_inverse)
-
-    def _frame_calibration_sd(self):
-        """The relative error (3,) every value of a photographed frame and channel shares from
-        its own calibration (ingest's ``calibration.frame_relative_sd`` where each frame took
-        its own), else None."""
-        cal = (self.doc.get("ingest") or {}).get("calibration") or {}
-        return cal["frame_relative_sd"] if cal.get("per_frame") else None
-
-    def _matrix_sd(self, J, problem, usable, theta, curvature_inverse):
-        """Each parameter's standard error (n,) from the camera's colour matrix (ingest's
-        ``colour_matrix`` record: each entry of its error E, in linear sRGB, relative_sd): a
-        developed value of channel c reads L_c + sum_j E_cj L_j, whose grey-card calibration
-        (which scales each channel to the grey's truth) leaves L_c + sum_(j != c) E_cj (L_j -
-        L_c), nothing on a grey and most on a saturated colour's weak channels.  Each of the
-        six E_cj is one error for the whole day (one camera, one matrix), carried to the
-        parameters by :func:`~.uncertainty.shared_error_sd` with the ratios L_j / L_c of the
-        model at ``theta``; zeros without the record or for a table."""
-        rel = ((self.doc.get("ingest") or {}).get("colour_matrix") or {}).get("relative_sd")
-        n = len(self.names)
-        if self.obs.rays is not None or not rel:
-            return np.zeros(n)
-        L = problem.model.radiance(theta)
-        value = problem.value_scale(theta)
-        P, T, C, _ = J.shape
-        flat = (P * T, 1, C, n)
-        var = np.zeros(n)
-        for c in range(C):
-            for j in range(C):
-                if j == c:
-                    continue
-                with np.errstate(all="ignore"):
-                    move = np.nan_to_num(value[..., c] * (L[..., j] / L[..., c] - 1.0))
-                Jk = np.zeros_like(J)
-                Jk[..., c, :] = J[..., c, :] * move[..., None]
-                var += unc.shared_error_sd(Jk.reshape(flat), usable.reshape(flat[:3]),
-                                           problem.obs.sigma.reshape(flat[:3]), [[rel]],
-                                           np.ones((C, 1)), curvature_inverse) ** 2
-        return np.sqrt(var)
-
-    def _matrix_note(self):
-        """What the colour matrix's error in a fit's intervals is and where it came from."""
-        rec = self.doc["ingest"]["colour_matrix"]
-        return (f"the camera's colour matrix is taken to err by {100 * rec['relative_sd']:.3g}% "
-                f"per entry ({rec['source']}), an error a grey card cannot see (it calibrates "
-                "each channel on a grey, whose channels the error mixes alike) and that moves "
-                "a saturated colour's weak channels most; the intervals include it")
-
-    def _jpeg_shared_sd(self, J, usable, sigma, curvature_inverse):
-        """Each parameter's standard error (n,) from the rounding of the block means that the
-        region's pixels share in each JPEG frame (Y, Cb, Cr; ingest's ``jpeg_dc`` record,
-        :func:`~skyfit_mi.pipeline.jpeg_noise.shared_error_sd`, with the sensor's noise before
-        compression from the manifest's noise model), carried to the parameters by
-        :func:`~.uncertainty.shared_error_sd`, ``sigma`` the values' in chi-square); zeros
-        without JPEG frames."""
-        n = len(self.names)
-        by_index = {f["index"]: f for f in self.doc["frames"]}
-        records = [by_index.get(i, {}).get("jpeg_dc") for i in self.obs.frames]
-        model = self.doc["sensor"].get("noise_model") or {}
-        if self.obs.rays is not None or not any(records) or "read_DN2" not in model:
-            return np.zeros(n)
-        noise = (model["read_DN2"], model["shot_DN"])
-        shared = np.zeros((len(records), 3))
-        for t, rec in enumerate(records):
-            ok = np.all(np.isfinite(self.obs.sigma[:, t]), axis=1)
-            if rec and ok.any():
-                y = self.obs.y[ok, t]
-                shared[t] = shared_error_sd(y, pixel_sigma(y, self.obs.sensor, noise) ** 2, rec)
-        return unc.shared_error_sd(J, usable, sigma, shared, YCC_TO_RGB, curvature_inverse)
-
     def _model_noise_by_sigma(self, theta, problem=None):
         """The model's own Monte Carlo share of chi-square (``problem``'s, default the
         session's) at the fitted reflectances over the roughness range (NOISE_SIGMAS): where
@@ -820,343 +643,6 @@ class FitSession:
         problem = problem or self.problem
         return {f"{v:g}": problem.model_noise_chi2(np.r_[theta[:-1], v])
                 for v in NOISE_SIGMAS}
-
-    def _poorly_determined(self, theta, intervals, profiled, cov):
-        """Whether a profiled parameter's 95% interval runs into a bound of its range, covers
-        over half of it, or is not the covariance's (either side under a third or over three times
-        its covariance half-width: chi-square far from quadratic; on a Radiance-traced day rho_s's
-        profile was a cliff on one side and flat on the other): then the others trade off along
-        a ridge that their covariance intervals (a quadratic at the fit) miss."""
-        for i, p in enumerate(self.names):
-            if p in profiled:
-                lo, hi = intervals[p]["95"]
-                span = self.upper[i] - self.lower[i]
-                half = unc.Z["95"] * np.sqrt(max(cov[i, i], 0.0))
-                sides = np.array([theta[i] - lo, hi - theta[i]]) / max(half, 1e-12)
-                if lo <= self.lower[i] + 1e-6 * span or hi >= self.upper[i] - 1e-6 * span \
-                        or hi - lo > 0.5 * span or np.any((sides < 1 / 3) | (sides > 3)):
-                    return True
-        return False
-
-    def _profile_the_rest(self, fit, intervals, ripple):
-        """Profile intervals, on the true chi-square by constrained fits, for the parameters
-        that have only covariance intervals; each the union with its covariance interval (an
-        edge the fits cannot place keeps the covariance's), unless the fit lies on a bound of
-        its range or the curvature is singular there: the covariance's quadratic then runs
-        into the excluded side (rho_s < 0) and means nothing (an overcast day fitted at
-        rho_s = 0: R's covariance interval 0-1, its profile 0.83-1).  Returns the points the
-        constrained fits walked [(theta, chi2)]."""
-        levels, walked = ("68", "95"), []
-        theta = fit.theta
-        span = self.upper - self.lower
-        quadratic = bool(np.all(np.isfinite(fit.curvature_inverse))
-                         and np.all(theta > self.lower + 1e-9 * span)
-                         and np.all(theta < self.upper - 1e-9 * span)
-                         and np.linalg.cond(fit.curvature_inverse) < SINGULAR_CONDITION)
-        for i, p in enumerate(self.names):
-            if intervals[p]["from"] != "covariance":
-                continue
-            exact, _, points = profile_edges(
-                fit.problem, fit.theta, fit.chi2, i,
-                [unc.LEVELS[lv] * fit.delta_scale[i] + ripple for lv in levels],
-                self.lower, self.upper,
-                fit.curvature_inverse,
-                ProfileOptions(rtol=0.01, iterations=PROFILE_RIDGE_ITERATIONS))
-            walked += points
-            for lv, e in zip(levels, exact):
-                lo, hi = intervals[p][lv]
-                keep_lo, keep_hi = (lo, hi) if quadratic else (np.inf, -np.inf)
-                intervals[p][lv] = (min(keep_lo, e[0]) if e[0] is not None else lo,
-                                    max(keep_hi, e[1]) if e[1] is not None else hi)
-            intervals[p]["from"] = "profile (another parameter is poorly determined)"
-        return walked
-
-    def _model_noise_allowance(self, problem, theta, sigmas, profile, s2):
-        """The chi-square the model's own Monte Carlo error may add, as the largest over the
-        sigma_alpha profile's 95% region (not only at the fit: the cache's error grows with
-        sigma_alpha, and the truth may lie where it is larger).  At each roughness the model
-        noise of the larger of two estimators compared (near the mirror, the mirror rays'
-        and the narrowest resolved lobe's); the region widens with the allowance, so it is
-        found again until it stops growing."""
-        def at(sigma):
-            return problem.model_noise_chi2(np.r_[theta[:-1], sigma])
-
-        def noise(sigma):
-            return at(sigma) if sigma >= SIGMA_RESOLVED else max(at(sigma), at(SIGMA_RESOLVED))
-        sigmas, profile = np.asarray(sigmas, dtype=float), np.asarray(profile, dtype=float)
-        ripple, seen = noise(theta[-1]), {float(theta[-1])}
-        for _ in range(4):
-            inside = sigmas[profile <= profile.min() + unc.LEVELS["95"] * s2 + ripple]
-            points = {float(v) for v in np.quantile(inside, [0, 0.25, 0.5, 0.75, 1])} - seen
-            if not points:
-                break
-            seen |= points
-            grown = max(ripple, max(noise(v) for v in points))
-            if grown <= 1.05 * ripple:
-                ripple = grown
-                break
-            ripple = grown
-        return ripple
-
-    def _warnings(self, fit):
-        """What the user must know about ``fit``: loading, the method's status, a local method's
-        distance from the global minimum, misfit, identifiability, the day's geometry, and the
-        colour rule's ambiguity."""
-        names, method, theta, chi2 = self.names, fit.method, fit.theta, fit.chi2
-        res, g, intervals = fit.method_result, fit.global_result, fit.intervals
-        iv95 = {p: intervals[p]["95"] for p in names}
-        warnings = []
-        if res.get("status") == "failed":
-            warnings.append(f"{method} failed: {res['message']}")
-        elif res.get("status") not in (None, "converged"):
-            warnings.append(f"{method} did not converge (status {res['status']}): "
-                            f"{res['message']}")
-        warnings += self.obs.warnings                       # what loading the frames noticed
-        if relative_scale(self.doc):
-            warnings.append(self.doc["ingest"]["scale"]["meaning"])
-        warnings += self._sky_warnings(fit)
-        own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
-        led = [p for i, p in enumerate(names) if fit.matrix_sd[i] > SKY_DOMINATES * own[i]]
-        if led:
-            warnings.append(f"{', '.join(led)}: {self._matrix_note()}; it, more than the "
-                            "data, sets their intervals.")
-        top = [p for i, p in enumerate(names)
-               if p != "sigma_alpha" and theta[i] >= self.upper[i] - 1e-3]
-        if top:
-            fix = ("if its values are not radiances in W m^-2 sr^-1 (an instrument's DN), "
-                   "ingest the table with --calibrate MATERIAL=REFLECTANCE or --unknown-scale"
-                   if is_table(self.doc) else "check the exposure (--exposure, --calibrate or "
-                   "--colorchecker at ingest)")
-            warnings.append(f"{', '.join(top)} at the upper bound of 1: the data are brighter "
-                            "than any such surface under the frames' light, so the bound, not "
-                            f"the data, decides the fit; {fix}.")
-        if method != "global" and g["chi2"] < chi2 - max(1.0, 1e-3 * chi2):
-            # compare with the global minimum: explains local failures (thesis 7.2)
-            warnings.insert(0, f"{method} stopped at chi2 = {chi2:.6g}, but the global search finds "
-                            f"chi2 = {g['chi2']:.6g} at " + ", ".join(
-                                f"{k} = {v:.4f}" for k, v in zip(names, g["theta"]))
-                            + f": {method} ended in a local minimum or on a flat region of "
-                            "chi-square from this start (thesis 6.3, 7.2)")
-        if fit.model_error is not None:
-            warnings.append(unc.model_error_warning(fit.misfit, fit.model_error))
-        held = self._held_out_record(fit)
-        if held.get("interval95") is not None:
-            warnings.append(
-                f"frames left out of the fit are predicted worse than noise and the "
-                f"parameters' spread explain (held-out chi-square {held['chi2_per_value']:.3g} "
-                f"per value, p = {held['p']:.2g}, {held['folds']} folds of frames): the model "
-                f"misses light it was not fitted to by about {held['kappa']:.1%} of each value "
-                f"(95%: {held['interval95'][0]:.1%}-{held['interval95'][1]:.1%}), which "
-                "predictions (relight) include; the parameters describe these frames' "
-                "light, not necessarily the surface's: they may not carry to other light, "
-                "and their intervals may not hold (not reliable as the surface's own). "
-                "Another model (--model auto ranks them by held-out frames) or, under a sky, "
-                "its shape fitted with the materials (--sky-shape) may predict better.")
-        warnings += unc.misfit(chi2, fit.problem.dof, fit.interval_scale, fit.cache_noise_chi2,
-                               fit.noise_chi2, model_error=fit.model_error is not None)
-        warnings += unc.identifiability(names, iv95, self.lower, self.upper, fit.rise,
-                                        fit.delta_scale, fit.cache_noise_chi2)
-        if np.max(fit.channel_factors) > CHANNEL_NOTE:
-            R = fit.channel_correlation
-            off = R[np.triu_indices(len(R), 1)]
-            warnings.append(
-                f"the errors of a value's R, G and B are correlated (correlation "
-                f"{off.min():.2f} to {off.max():.2f} between channels, as in a JPEG, a "
-                "demosaiced raw or a render's Monte Carlo noise, or where the model misses "
-                "the brightness): the data tell less than as many independent values, and the "
-                "intervals are widened for it, by up to "
-                f"{np.sqrt(np.max(fit.channel_factors)):.2f}x.")
-        warnings += geometry_warnings(
-            self.geometry, float(theta[-1]), sky_shape_known=fit.sky.record is None
-            or fit.sky.record.get("shape") is not None)
-        worst = max(fit.model_noise_by_sigma, key=fit.model_noise_by_sigma.get)
-        if fit.model_noise_by_sigma[worst] > NOISE_SHARE * fit.problem.dof:
-            warnings.append(
-                f"the light cache's own Monte Carlo error adds up to "
-                f"{fit.model_noise_by_sigma[worst]:.3g} to chi-square (at sigma_alpha = {worst}), "
-                f"over {NOISE_SHARE:.0%} of the {fit.problem.dof} degrees of freedom: the data "
-                "are more precise than the model, which pulls fits toward the roughness where "
-                "its error is small (intervals allow for it); use more --directions and "
-                "--positions.")
-        if self.model == "colour":
-            other = unc.colour_rule_ambiguity(theta, iv95)
-            if other is not None:
-                kind = "metal" if other[1] >= METAL_THRESHOLD else "plastic"
-                warnings.append(
-                    f"C is grey, so the colour model's plastic and metal readings give the same "
-                    f"BRDF: the {kind} reading C = {other[0]:.3f} (all channels), rho_s = "
-                    f"{other[1]:.3f} fits equally well; only rho_d and the specular reflectance "
-                    "are determined.")
-        return warnings
-
-    def _sky_warnings(self, fit):
-        """The fitted sky's warnings (its record's) and those of parameters the sky's or the
-        sun's level, more than the data, sets (:data:`~.sky_fit.SKY_DOMINATES`)."""
-        sky, names = fit.sky, self.names
-        if sky.record is None:
-            return []
-        k = sky.record
-        warnings = list(k["warnings"])
-        own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
-        for i, p in enumerate(names):
-            if sky.sd is not None and sky.sd[i] > SKY_DOMINATES * own[i]:
-                parts = [part for part, told in ((", its change over the day",
-                                                   k["terms"]),
-                                                  (", its shape", k["shape"])) if told]
-                warnings.append(
-                    f"{p} depends on the sky: the uncertainty of the fitted sky (its level "
-                    f"k = {k['k']:.3g}, 95%: {k['interval95'][0]:.3g}-"
-                    f"{k['interval95'][1]:.3g}{''.join(parts)}) moves it by "
-                    f"+-{unc.Z['95'] * sky.sd[i]:.3g} (95%), at least doubling its "
-                    "interval, which includes that; more materials or a grey card in the "
-                    "fit would narrow it.")
-        level = [p for i, p in enumerate(names)
-                 if fit.sun_level_sd[i] > SKY_DOMINATES * own[i]]
-        if level:
-            warnings.append(
-                f"{', '.join(level)} scale with the sun's level, which no data tell (the "
-                f"light's absolute scale trades exactly with the reflectances) and which "
-                f"is known to +-{100 * sky.sun_level_sd:.0f}% (1 sd, "
-                + {"given": "--sun-sd",
-                   "measured": "the spec's measured direct normal irradiance",
-                   "modelled": f"the modelled sun's {100 * sky.sun_sd:.0f}%"
-                   + (" widened as the fitted sky departs from the spec's"
-                      if sky.sun_widening else "")}.get(sky.sun_source, "--sun-sd")
-                + "): that, more than the data, sets their intervals; their ratios and "
-                "sigma_alpha do not depend on it. A reference of known reflectance in the "
-                "scene (ingest --calibrate or --colorchecker)"
-                + {"measured": "",
-                   "given": " or a smaller --sun-sd where the sun's level is known better "
-                            f"(a measured direct normal irradiance: {MEASURED_SUN_SD:g})"
-                   }.get(sky.sun_source, " or a measured direct normal irradiance in the "
-                         "spec (direct_normal_W_m2, or a dni column)")
-                + " narrows them.")
-        return warnings
-
-    def _record(self, fit, warnings, start, seed, evaluations, wall, t_method):
-        """The JSON-ready result of ``fit`` (the layout of ``fit_NAME.json``)."""
-        names, theta, dof, sky = self.names, fit.theta, self.problem.dof, fit.sky
-        res = fit.method_result
-        L = self.wm.radiance(theta)
-        chi2 = fit.chi2 if fit.model_error is None else self.problem.chi2(theta)
-        return {
-            "region": self.name, **({"pixels": self.obs.pixels.tolist()} if self.obs.rays is None
-                                    else {"points": list(self.obs.pixels)}),
-            "model": self.model,
-            "normalisation": self.normalisation,
-            "method": fit.method, "seed": seed, "start": start.tolist(),
-            "parameters": dict(zip(names, theta.tolist())),
-            "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof,
-            "chi2_expected_from_noise": fit.noise_chi2[0] if fit.model_error is None
-            else self.problem.noise_chi2(theta)[0],
-            "model_error": self._model_error_record(fit),
-            "interval_scale_s2": fit.interval_scale,
-            "interval_scale_channels": dict(zip(names, fit.channel_factors.tolist())),
-            "channel_correlation": fit.channel_correlation.tolist(),
-            "intervals": fit.intervals,
-            "readings": [unc.reading(p, theta[i], fit.intervals[p]["95"], self.lower[i],
-                                     self.upper[i]) for i, p in enumerate(names)],
-            "cache_error_sd": dict(zip(names, fit.cache_sd.tolist())),
-            **({"calibration_error_sd": dict(zip(names, fit.calibration_sd.tolist()))}
-               if np.any(fit.calibration_sd > 0) else {}),
-            **({"jpeg_shared_error_sd": dict(zip(names, fit.jpeg_shared_sd.tolist())),
-                "jpeg_shared_error": "the standard error each parameter takes from the JPEG "
-                "frames' rounding of their blocks' means (Y, Cb, Cr), which every pixel of "
-                "the region shares in a frame; added in quadrature to the intervals"}
-               if np.any(fit.jpeg_shared_sd > 0) else {}),
-            **({"colour_matrix_error_sd": dict(zip(names, fit.matrix_sd.tolist())),
-                "colour_matrix_error": self._matrix_note()}
-               if np.any(fit.matrix_sd > 0) else {}),
-            **({"sky": {**sky.record, "error_sd": dict(zip(names, (
-                sky.sd if sky.sd is not None else np.zeros(len(names))).tolist())),
-                **({} if sky.span is None else {"undetermined_span": {
-                    p: [float(lo), float(hi)] for p, lo, hi in zip(names, *sky.span)}}),
-                "sun_level_sd": sky.sun_level_sd, "sun_source": sky.sun_source,
-                "sun_level_error_sd": dict(zip(names, fit.sun_level_sd.tolist()))}}
-               if sky.record is not None else {}),
-            "cache_noise_chi2": fit.cache_noise_chi2,
-            "cache_noise_chi2_by_sigma": fit.model_noise_by_sigma,
-            "covariance": {"names": list(names), "matrix": fit.covariance.tolist()},
-            "evaluations": evaluations, "status": res.get("status"),
-            "message": res.get("message"), "warnings": warnings,
-            "wall_time_s": wall, "light_cache_time_s": self.cache_time, "method_time_s": t_method,
-            "light_cache": self.cache_settings, "geometry": self.geometry,
-            "trace": res.get("trace", []), "schedule": res.get("schedule"),
-            "truth": self.truth, "units": "reflectances unitless" + (
-                " and relative (the table's scale is unknown: radiometric_scale)"
-                if relative_scale(self.doc) else "") + ", sigma_alpha rms slope; chi2 in "
-            "(DN/DN)^2; observed/model values in DN",
-            **({"radiometric_scale": self.doc["ingest"]["scale"]} if relative_scale(self.doc)
-               else {}),
-            "sequence_run_id": self.run_id, "frames": [int(i) for i in self.obs.frames],
-            "series": {"times": self.obs.times, "observed_DN": self.obs.y.tolist(),
-                       "model_DN": self.problem.predict(L).tolist()},
-            "measured_range": self._measured_range(L),
-        }
-
-    def _measured_range(self, L):
-        """The fit JSON's ``measured_range``: per channel, the radiance the fit's data measured
-        (:meth:`~.chi2.Problem.measured_range` at the model's ``L``: region means, a table's
-        values on their own), against which relight flags predictions that rest on the model
-        alone."""
-        channels = "Y" if self.obs.luminance else "RGB"
-        ranges = self.problem.measured_range(L, means=self.obs.rays is None)
-        return {"unit": "W m^-2 sr^-1",
-                "meaning": "from the least " + ("region mean over the fitted frames"
-                                                 if self.obs.rays is None else "value")
-                           + f" that the data measured (none of its values at the top code, "
-                           f"its standard error at most {MEASURED_SE:g} of it) to the greatest "
-                           "value below the top code; null: none. A prediction beyond this "
-                           "rests on the model alone",
-                "by_channel": dict(zip(channels, ranges))}
-
-    def _model_error_record(self, fit):
-        """The fit JSON's ``model_error``: kappa (0 where chi-square is within what noise
-        explains), what it means, and with a fitted kappa its 95% interval and the
-        chi-square with it (the fit's, whose intervals include the model's error)."""
-        me, test = fit.model_error, fit.misfit
-        form = ("each value's variance is its noise's plus (kappa x the value)^2 (a clipped "
-                "value's: the model's); kappa by restricted maximum likelihood with the "
-                f"parameters, where chi-square exceeds what noise explains (p < {unc.MISFIT_P:g})"
-                "; a prediction's band adds held_out.kappa x the predicted value, the error "
-                "with which frames left out of the fit are predicted")
-        if me is None:
-            return {"kappa": 0.0, "form": form, "meaning": (
-                "not fitted: chi-square is within what noise explains (p = "
-                f"{test.p:.2g}), so the model reproduces the data to their noise"
-                if not test.significant else "fitted as 0: the likelihood is largest without "
-                "a model error"), "held_out": self._held_out_record(fit)}
-        return {"kappa": me.kappa, "interval95": list(me.interval95), "meaning": me.meaning,
-                "form": form, "chi2": fit.chi2, "chi2_per_dof": fit.chi2 / fit.problem.dof,
-                "values": me.values, **{k: fit.model_error_rounds[k]
-                                        for k in ("rounds", "settled")},
-                "held_out": self._held_out_record(fit)}
-
-    @staticmethod
-    def _held_out_record(fit):
-        """The fit JSON's ``model_error.held_out``: the relative error with which the fit
-        predicts frames it was not fitted to (:func:`~.held_out.held_out_error`), the
-        in-sample model error's and any beyond it together; what predictions add."""
-        held, kappa = fit.held_out, 0.0 if fit.model_error is None else fit.model_error.kappa
-        if held is None:
-            return {"kappa": kappa, "meaning": "not tested: fewer than "
-                    f"{HELD_OUT_FRAMES} frames; predictions take the in-sample kappa"}
-        out = {**held, "kappa": float(np.hypot(kappa, held["kappa"]))}
-        if "interval95" in held:
-            out["interval95"] = [float(np.hypot(kappa, k)) for k in held["interval95"]]
-            out["meaning"] = (f"each held-out value missed by about {out['kappa']:.2g} of itself "
-                              "beyond its noise and the prediction's spread: predictions "
-                              "(relight) add this kappa x the value, averaged over its "
-                              "interval")
-        elif not held["values"]:
-            out["meaning"] = ("not tested: every fold either moved the parameters out of "
-                              "their 95% intervals or held too few values (folds_outside, "
-                              "folds_too_small); predictions take the in-sample kappa")
-        else:
-            out["meaning"] = ("held-out frames are predicted within their noise and the "
-                              "prediction's spread" + (" and the in-sample model error"
-                                                       if kappa else ""))
-        return out
 
 
 def trace_sessions(sessions, light):

@@ -197,7 +197,7 @@ def calibration_sd(doc, names, theta):
 def colour_matrix_sd(doc, names, theta):
     """The standard error, per parameter of ``names`` at ``theta`` (n,) or (G, n), that the
     camera's colour matrix gives a fit of a pixel on its own (a map's; a region's carries it
-    through its Jacobian, :meth:`~.fit.FitSession._matrix_sd`): each entry E_cj of the
+    through its Jacobian, :func:`~.intervals.matrix_sd`): each entry E_cj of the
     matrix's error errs by ``ingest.colour_matrix.relative_sd`` of the manifest ``doc``, and
     channel c, calibrated on a grey, reads L_c + sum_(j != c) E_cj (L_j - L_c).  With the
     diffuse colour's ratios for L_j / L_c, C_c errs by relative_sd sqrt(sum_(j != c) (C_j -

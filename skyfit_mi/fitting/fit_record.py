@@ -1,0 +1,139 @@
+"""A fit's record (the last stage of :meth:`~.fit.FitSession.run`): the JSON-ready result,
+the layout of ``fit_NAME.json`` (docs/cli.md), from the region's :class:`~.fit.FitSession`
+``s`` and its :class:`~.fit.FitState` ``fit``."""
+
+import numpy as np
+
+from . import uncertainty as unc
+from .chi2 import MEASURED_SE
+from .held_out import HELD_OUT_FRAMES
+from .intervals import matrix_note
+from ..pipeline.observation_table import relative_scale
+
+
+def fit_record(s, fit, warnings, start, seed, evaluations, wall, t_method):
+    """The JSON-ready result of ``fit`` (the layout of ``fit_NAME.json``)."""
+    names, theta, dof, sky = s.names, fit.theta, s.problem.dof, fit.sky
+    res = fit.method_result
+    L = s.wm.radiance(theta)
+    chi2 = fit.chi2 if fit.model_error is None else s.problem.chi2(theta)
+    return {
+        "region": s.name, **({"pixels": s.obs.pixels.tolist()} if s.obs.rays is None
+                                else {"points": list(s.obs.pixels)}),
+        "model": s.model,
+        "normalisation": s.normalisation,
+        "method": fit.method, "seed": seed, "start": start.tolist(),
+        "parameters": dict(zip(names, theta.tolist())),
+        "chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof,
+        "chi2_expected_from_noise": fit.noise_chi2[0] if fit.model_error is None
+        else s.problem.noise_chi2(theta)[0],
+        "model_error": model_error_record(s, fit),
+        "interval_scale_s2": fit.interval_scale,
+        "interval_scale_channels": dict(zip(names, fit.channel_factors.tolist())),
+        "channel_correlation": fit.channel_correlation.tolist(),
+        "intervals": fit.intervals,
+        "readings": [unc.reading(p, theta[i], fit.intervals[p]["95"], s.lower[i],
+                                 s.upper[i]) for i, p in enumerate(names)],
+        "cache_error_sd": dict(zip(names, fit.cache_sd.tolist())),
+        **({"calibration_error_sd": dict(zip(names, fit.calibration_sd.tolist()))}
+           if np.any(fit.calibration_sd > 0) else {}),
+        **({"jpeg_shared_error_sd": dict(zip(names, fit.jpeg_shared_sd.tolist())),
+            "jpeg_shared_error": "the standard error each parameter takes from the JPEG "
+            "frames' rounding of their blocks' means (Y, Cb, Cr), which every pixel of "
+            "the region shares in a frame; added in quadrature to the intervals"}
+           if np.any(fit.jpeg_shared_sd > 0) else {}),
+        **({"colour_matrix_error_sd": dict(zip(names, fit.matrix_sd.tolist())),
+            "colour_matrix_error": matrix_note(s)}
+           if np.any(fit.matrix_sd > 0) else {}),
+        **({"sky": {**sky.record, "error_sd": dict(zip(names, (
+            sky.sd if sky.sd is not None else np.zeros(len(names))).tolist())),
+            **({} if sky.span is None else {"undetermined_span": {
+                p: [float(lo), float(hi)] for p, lo, hi in zip(names, *sky.span)}}),
+            "sun_level_sd": sky.sun_level_sd, "sun_source": sky.sun_source,
+            "sun_level_error_sd": dict(zip(names, fit.sun_level_sd.tolist()))}}
+           if sky.record is not None else {}),
+        "cache_noise_chi2": fit.cache_noise_chi2,
+        "cache_noise_chi2_by_sigma": fit.model_noise_by_sigma,
+        "covariance": {"names": list(names), "matrix": fit.covariance.tolist()},
+        "evaluations": evaluations, "status": res.get("status"),
+        "message": res.get("message"), "warnings": warnings,
+        "wall_time_s": wall, "light_cache_time_s": s.cache_time, "method_time_s": t_method,
+        "light_cache": s.cache_settings, "geometry": s.geometry,
+        "trace": res.get("trace", []), "schedule": res.get("schedule"),
+        "truth": s.truth, "units": "reflectances unitless" + (
+            " and relative (the table's scale is unknown: radiometric_scale)"
+            if relative_scale(s.doc) else "") + ", sigma_alpha rms slope; chi2 in "
+        "(DN/DN)^2; observed/model values in DN",
+        **({"radiometric_scale": s.doc["ingest"]["scale"]} if relative_scale(s.doc)
+           else {}),
+        "sequence_run_id": s.run_id, "frames": [int(i) for i in s.obs.frames],
+        "series": {"times": s.obs.times, "observed_DN": s.obs.y.tolist(),
+                   "model_DN": s.problem.predict(L).tolist()},
+        "measured_range": measured_range(s, L),
+    }
+
+
+def measured_range(s, L):
+    """The fit JSON's ``measured_range``: per channel, the radiance the fit's data measured
+    (:meth:`~.chi2.Problem.measured_range` at the model's ``L``: region means, a table's
+    values on their own), against which relight flags predictions that rest on the model
+    alone."""
+    channels = "Y" if s.obs.luminance else "RGB"
+    ranges = s.problem.measured_range(L, means=s.obs.rays is None)
+    return {"unit": "W m^-2 sr^-1",
+            "meaning": "from the least " + ("region mean over the fitted frames"
+                                             if s.obs.rays is None else "value")
+                       + f" that the data measured (none of its values at the top code, "
+                       f"its standard error at most {MEASURED_SE:g} of it) to the greatest "
+                       "value below the top code; null: none. A prediction beyond this "
+                       "rests on the model alone",
+            "by_channel": dict(zip(channels, ranges))}
+
+
+def model_error_record(s, fit):
+    """The fit JSON's ``model_error``: kappa (0 where chi-square is within what noise
+    explains), what it means, and with a fitted kappa its 95% interval and the
+    chi-square with it (the fit's, whose intervals include the model's error)."""
+    me, test = fit.model_error, fit.misfit
+    form = ("each value's variance is its noise's plus (kappa x the value)^2 (a clipped "
+            "value's: the model's); kappa by restricted maximum likelihood with the "
+            f"parameters, where chi-square exceeds what noise explains (p < {unc.MISFIT_P:g})"
+            "; a prediction's band adds held_out.kappa x the predicted value, the error "
+            "with which frames left out of the fit are predicted")
+    if me is None:
+        return {"kappa": 0.0, "form": form, "meaning": (
+            "not fitted: chi-square is within what noise explains (p = "
+            f"{test.p:.2g}), so the model reproduces the data to their noise"
+            if not test.significant else "fitted as 0: the likelihood is largest without "
+            "a model error"), "held_out": held_out_record(fit)}
+    return {"kappa": me.kappa, "interval95": list(me.interval95), "meaning": me.meaning,
+            "form": form, "chi2": fit.chi2, "chi2_per_dof": fit.chi2 / fit.problem.dof,
+            "values": me.values, **{k: fit.model_error_rounds[k]
+                                    for k in ("rounds", "settled")},
+            "held_out": held_out_record(fit)}
+
+
+def held_out_record(fit):
+    """The fit JSON's ``model_error.held_out``: the relative error with which the fit
+    predicts frames it was not fitted to (:func:`~.held_out.held_out_error`), the
+    in-sample model error's and any beyond it together; what predictions add."""
+    held, kappa = fit.held_out, 0.0 if fit.model_error is None else fit.model_error.kappa
+    if held is None:
+        return {"kappa": kappa, "meaning": "not tested: fewer than "
+                f"{HELD_OUT_FRAMES} frames; predictions take the in-sample kappa"}
+    out = {**held, "kappa": float(np.hypot(kappa, held["kappa"]))}
+    if "interval95" in held:
+        out["interval95"] = [float(np.hypot(kappa, k)) for k in held["interval95"]]
+        out["meaning"] = (f"each held-out value missed by about {out['kappa']:.2g} of itself "
+                          "beyond its noise and the prediction's spread: predictions "
+                          "(relight) add this kappa x the value, averaged over its "
+                          "interval")
+    elif not held["values"]:
+        out["meaning"] = ("not tested: every fold either moved the parameters out of "
+                          "their 95% intervals or held too few values (folds_outside, "
+                          "folds_too_small); predictions take the in-sample kappa")
+    else:
+        out["meaning"] = ("held-out frames are predicted within their noise and the "
+                          "prediction's spread" + (" and the in-sample model error"
+                                                   if kappa else ""))
+    return out

@@ -1,0 +1,161 @@
+"""What a fit must tell its user (the stage after the intervals,
+:meth:`~.fit.FitSession.run`): the method's status, loading's notes, the fitted sky's and the
+sun's level's hold on the parameters, bounds, misfit and the model's error, held-out frames,
+identifiability, the day's geometry, the light cache's own noise and the colour rule's
+ambiguity.  Each function takes the region's :class:`~.fit.FitSession` ``s`` and its
+:class:`~.fit.FitState` ``fit``."""
+
+import numpy as np
+
+from . import uncertainty as unc
+from .fit_record import held_out_record
+from .geometry import geometry_warnings
+from .intervals import matrix_note
+from .sky_fit import SKY_DOMINATES
+from ..physics.sky import MEASURED_SUN_SD
+from ..physics.ward import METAL_THRESHOLD
+from ..pipeline.manifest import is_table
+from ..pipeline.observation_table import relative_scale
+
+#: Share of the degrees of freedom above which the model's own noise is warned of.
+NOISE_SHARE = 0.25
+#: The widening of a variance by correlated channels (:func:`~.uncertainty.channel_factors`)
+#: above which the fit says so.
+CHANNEL_NOTE = 1.1
+
+
+def fit_warnings(s, fit):
+    """What the user must know about ``fit``: loading, the method's status, a local method's
+    distance from the global minimum, misfit, identifiability, the day's geometry, and the
+    colour rule's ambiguity."""
+    names, method, theta, chi2 = s.names, fit.method, fit.theta, fit.chi2
+    res, g, intervals = fit.method_result, fit.global_result, fit.intervals
+    iv95 = {p: intervals[p]["95"] for p in names}
+    warnings = []
+    if res.get("status") == "failed":
+        warnings.append(f"{method} failed: {res['message']}")
+    elif res.get("status") not in (None, "converged"):
+        warnings.append(f"{method} did not converge (status {res['status']}): "
+                        f"{res['message']}")
+    warnings += s.obs.warnings                       # what loading the frames noticed
+    if relative_scale(s.doc):
+        warnings.append(s.doc["ingest"]["scale"]["meaning"])
+    warnings += sky_warnings(s, fit)
+    own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
+    led = [p for i, p in enumerate(names) if fit.matrix_sd[i] > SKY_DOMINATES * own[i]]
+    if led:
+        warnings.append(f"{', '.join(led)}: {matrix_note(s)}; it, more than the "
+                        "data, sets their intervals.")
+    top = [p for i, p in enumerate(names)
+           if p != "sigma_alpha" and theta[i] >= s.upper[i] - 1e-3]
+    if top:
+        fix = ("if its values are not radiances in W m^-2 sr^-1 (an instrument's DN), "
+               "ingest the table with --calibrate MATERIAL=REFLECTANCE or --unknown-scale"
+               if is_table(s.doc) else "check the exposure (--exposure, --calibrate or "
+               "--colorchecker at ingest)")
+        warnings.append(f"{', '.join(top)} at the upper bound of 1: the data are brighter "
+                        "than any such surface under the frames' light, so the bound, not "
+                        f"the data, decides the fit; {fix}.")
+    if method != "global" and g["chi2"] < chi2 - max(1.0, 1e-3 * chi2):
+        # compare with the global minimum: explains local failures (thesis 7.2)
+        warnings.insert(0, f"{method} stopped at chi2 = {chi2:.6g}, but the global search finds "
+                        f"chi2 = {g['chi2']:.6g} at " + ", ".join(
+                            f"{k} = {v:.4f}" for k, v in zip(names, g["theta"]))
+                        + f": {method} ended in a local minimum or on a flat region of "
+                        "chi-square from this start (thesis 6.3, 7.2)")
+    if fit.model_error is not None:
+        warnings.append(unc.model_error_warning(fit.misfit, fit.model_error))
+    held = held_out_record(fit)
+    if held.get("interval95") is not None:
+        warnings.append(
+            f"frames left out of the fit are predicted worse than noise and the "
+            f"parameters' spread explain (held-out chi-square {held['chi2_per_value']:.3g} "
+            f"per value, p = {held['p']:.2g}, {held['folds']} folds of frames): the model "
+            f"misses light it was not fitted to by about {held['kappa']:.1%} of each value "
+            f"(95%: {held['interval95'][0]:.1%}-{held['interval95'][1]:.1%}), which "
+            "predictions (relight) include; the parameters describe these frames' "
+            "light, not necessarily the surface's: they may not carry to other light, "
+            "and their intervals may not hold (not reliable as the surface's own). "
+            "Another model (--model auto ranks them by held-out frames) or, under a sky, "
+            "its shape fitted with the materials (--sky-shape) may predict better.")
+    warnings += unc.misfit(chi2, fit.problem.dof, fit.interval_scale, fit.cache_noise_chi2,
+                           fit.noise_chi2, model_error=fit.model_error is not None)
+    warnings += unc.identifiability(names, iv95, s.lower, s.upper, fit.rise,
+                                    fit.delta_scale, fit.cache_noise_chi2)
+    if np.max(fit.channel_factors) > CHANNEL_NOTE:
+        R = fit.channel_correlation
+        off = R[np.triu_indices(len(R), 1)]
+        warnings.append(
+            f"the errors of a value's R, G and B are correlated (correlation "
+            f"{off.min():.2f} to {off.max():.2f} between channels, as in a JPEG, a "
+            "demosaiced raw or a render's Monte Carlo noise, or where the model misses "
+            "the brightness): the data tell less than as many independent values, and the "
+            "intervals are widened for it, by up to "
+            f"{np.sqrt(np.max(fit.channel_factors)):.2f}x.")
+    warnings += geometry_warnings(
+        s.geometry, float(theta[-1]), sky_shape_known=fit.sky.record is None
+        or fit.sky.record.get("shape") is not None)
+    worst = max(fit.model_noise_by_sigma, key=fit.model_noise_by_sigma.get)
+    if fit.model_noise_by_sigma[worst] > NOISE_SHARE * fit.problem.dof:
+        warnings.append(
+            f"the light cache's own Monte Carlo error adds up to "
+            f"{fit.model_noise_by_sigma[worst]:.3g} to chi-square (at sigma_alpha = {worst}), "
+            f"over {NOISE_SHARE:.0%} of the {fit.problem.dof} degrees of freedom: the data "
+            "are more precise than the model, which pulls fits toward the roughness where "
+            "its error is small (intervals allow for it); use more --directions and "
+            "--positions.")
+    if s.model == "colour":
+        other = unc.colour_rule_ambiguity(theta, iv95)
+        if other is not None:
+            kind = "metal" if other[1] >= METAL_THRESHOLD else "plastic"
+            warnings.append(
+                f"C is grey, so the colour model's plastic and metal readings give the same "
+                f"BRDF: the {kind} reading C = {other[0]:.3f} (all channels), rho_s = "
+                f"{other[1]:.3f} fits equally well; only rho_d and the specular reflectance "
+                "are determined.")
+    return warnings
+
+
+def sky_warnings(s, fit):
+    """The fitted sky's warnings (its record's) and those of parameters the sky's or the
+    sun's level, more than the data, sets (:data:`~.sky_fit.SKY_DOMINATES`)."""
+    sky, names = fit.sky, s.names
+    if sky.record is None:
+        return []
+    k = sky.record
+    warnings = list(k["warnings"])
+    own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
+    for i, p in enumerate(names):
+        if sky.sd is not None and sky.sd[i] > SKY_DOMINATES * own[i]:
+            parts = [part for part, told in ((", its change over the day",
+                                               k["terms"]),
+                                              (", its shape", k["shape"])) if told]
+            warnings.append(
+                f"{p} depends on the sky: the uncertainty of the fitted sky (its level "
+                f"k = {k['k']:.3g}, 95%: {k['interval95'][0]:.3g}-"
+                f"{k['interval95'][1]:.3g}{''.join(parts)}) moves it by "
+                f"+-{unc.Z['95'] * sky.sd[i]:.3g} (95%), at least doubling its "
+                "interval, which includes that; more materials or a grey card in the "
+                "fit would narrow it.")
+    level = [p for i, p in enumerate(names)
+             if fit.sun_level_sd[i] > SKY_DOMINATES * own[i]]
+    if level:
+        warnings.append(
+            f"{', '.join(level)} scale with the sun's level, which no data tell (the "
+            f"light's absolute scale trades exactly with the reflectances) and which "
+            f"is known to +-{100 * sky.sun_level_sd:.0f}% (1 sd, "
+            + {"given": "--sun-sd",
+               "measured": "the spec's measured direct normal irradiance",
+               "modelled": f"the modelled sun's {100 * sky.sun_sd:.0f}%"
+               + (" widened as the fitted sky departs from the spec's"
+                  if sky.sun_widening else "")}.get(sky.sun_source, "--sun-sd")
+            + "): that, more than the data, sets their intervals; their ratios and "
+            "sigma_alpha do not depend on it. A reference of known reflectance in the "
+            "scene (ingest --calibrate or --colorchecker)"
+            + {"measured": "",
+               "given": " or a smaller --sun-sd where the sun's level is known better "
+                        f"(a measured direct normal irradiance: {MEASURED_SUN_SD:g})"
+               }.get(sky.sun_source, " or a measured direct normal irradiance in the "
+                     "spec (direct_normal_W_m2, or a dni column)")
+            + " narrows them.")
+    return warnings

@@ -1,0 +1,274 @@
+"""A fit's intervals (the stage after the search, :meth:`~.fit.FitSession.run`): every
+parameter's 68% and 95% intervals from the covariance or the profile of chi-square (thesis
+ch. 6), widened by every error the data share: the light cache's own Monte Carlo error, a
+photographed sequence's calibration, the camera's colour matrix, the rounding a JPEG frame's
+blocks share over the region, the fitted sky and the sun's level.  Each function takes the
+region's :class:`~.fit.FitSession` ``s`` and its :class:`~.fit.FitState` ``fit``."""
+
+import numpy as np
+
+from . import uncertainty as unc
+from .methods.levenberg_marquardt import SINGULAR_CONDITION
+from .methods.profile import ProfileOptions, profile_edges, ridge_intervals
+from .sky_fit import light_level_sd
+from ..pipeline.ingest import pixel_sigma
+from ..pipeline.jpeg_noise import YCC_TO_RGB, shared_error_sd
+from ..render.light_cache import SIGMA_RESOLVED
+
+#: Iterations of each constrained fit that profiles a parameter along a ridge (another
+#: parameter poorly determined): the conditional-mean start is poor there.
+PROFILE_RIDGE_ITERATIONS = 40
+
+
+def fit_intervals(s, fit):
+    """68% and 95% intervals of every parameter into the :class:`FitState` ``fit`` (its
+    intervals, rise, cache_noise_chi2, cache_sd, sun_level_sd): the covariance's, or for
+    rho_s and sigma_alpha of a global fit the profile's; each widened by the light cache's
+    own Monte Carlo error, the calibration's (``calibration_sd``), the fitted sky's and, a
+    factor on the reflectances, the sun's level's; by the rounding a JPEG frame's blocks
+    share over the region (``jpeg_shared_sd``) and the camera's colour matrix's error
+    (``matrix_sd``)."""
+    problem, theta, names = fit.problem, fit.theta, s.names
+    lower, upper = s.lower, s.upper
+    s2k = fit.delta_scale                             # each parameter's scale of Delta chi^2
+    cov_iv = unc.covariance_intervals(theta, fit.covariance, lower, upper)
+    grid = fit.global_result["profile_linearised"]
+    prof = {"sigma_alpha": (grid["sigma_alpha"], grid["chi2_sigma"]),
+            "rho_s": (grid["rho_s"], grid["chi2_rho"])}
+    ripple = model_noise_allowance(problem, theta, *prof["sigma_alpha"], s2k[-1])
+    # the profiles describe the global minimum; a local method is judged against it
+    glob = fit.method == "global"
+    intervals, rise, walked = {}, {}, []
+    for i, p in enumerate(names):
+        iv = {lv: (float(cov_iv[lv][0][i]), float(cov_iv[lv][1][i])) for lv in ("68", "95")}
+        source = "covariance"
+        if p in prof:
+            rise[p] = float(np.max(prof[p][1]) - np.min(prof[p][1]))
+            if glob:
+                # the union of the grid's (linearised) profile interval and the true
+                # chi^2's (see methods/profile.py): the first is offset where the sensor
+                # clips, the second inherits the cache's narrow-lobe error (a mirror fit
+                # of the board's polished steel, truth sigma_alpha 0.02: 95% edge 0.002)
+                iv = unc.profile_interval(*prof[p], s2k[i], ripple)
+                levels = list(iv)
+                exact, _, points = profile_edges(
+                    problem, theta, fit.chi2, i,
+                    [unc.LEVELS[lv] * s2k[i] + ripple for lv in levels], lower, upper,
+                    fit.curvature_inverse)
+                walked += points
+                iv = {lv: (min(iv[lv][0], e[0] if e[0] is not None else np.inf),
+                           max(iv[lv][1], e[1] if e[1] is not None else -np.inf))
+                      for lv, e in zip(levels, exact)}
+                source = "profile"
+        intervals[p] = {"68": iv["68"], "95": iv["95"], "from": source}
+    if glob and poorly_determined(s, theta, intervals, prof, fit.covariance):
+        walked += profile_the_rest(s, fit, intervals, ripple)
+    for lv in ("68", "95"):
+        # every point the profiles walked within the level lies inside every interval
+        for i, p in enumerate(names):
+            ridge = ridge_intervals(walked, fit.chi2, unc.LEVELS[lv] * s2k[i] + ripple)
+            if ridge is not None:
+                lo, hi = intervals[p][lv]
+                intervals[p][lv] = (min(lo, float(ridge[0][i])), max(hi, float(ridge[1][i])))
+    mc_sd = s.cache_error(theta, fit.method, problem)
+    cal_sd = fit.calibration_sd
+    sky = fit.sky
+    sky_sd = np.zeros(len(names)) if sky.sd is None else sky.sd
+    sun_rel = light_level_sd(s.doc, names, sky.sun_level_sd)
+    for i, p in enumerate(names):
+        for lv in ("68", "95"):
+            intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * np.sqrt(
+                mc_sd[i] ** 2 + cal_sd[i] ** 2 + sky_sd[i] ** 2
+                + fit.jpeg_shared_sd[i] ** 2 + fit.matrix_sd[i] ** 2), lower[i], upper[i])
+            # the sun's level: a factor on every reflectance, lopsided
+            intervals[p][lv] = unc.widen_relative(theta[i], intervals[p][lv],
+                                                  unc.Z[lv] * sun_rel[i], lower[i], upper[i])
+            if sky.span is not None:      # the sky's level is not determined
+                lo, hi = intervals[p][lv]
+                intervals[p][lv] = (min(lo, float(sky.span[0][i])),
+                                    max(hi, float(sky.span[1][i])))
+                if lv == "95":
+                    intervals[p]["from"] += ", and over the undetermined sky level"
+    fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
+    fit.cache_sd = mc_sd
+    fit.sun_level_sd = sun_rel * np.abs(theta)
+
+
+def calibration_sd(s, J, problem, usable, theta, curvature_inverse):
+    """Each parameter's standard error (n,) from a photographed sequence's calibration on
+    patches of known reflectance (ingest's ``calibration`` record): each frame's exposure
+    errs per channel by ``frame_relative_sd`` where the frames take their own
+    (``per_frame``), or the day's by ``scale_relative_sd`` where they share one.  An
+    error e moves every value of its frame and channel by e times the value
+    (:meth:`~.chi2.Problem.value_scale`), carried to the parameters by
+    :func:`~.uncertainty.shared_error_sd`: not a mere scale on the reflectances, since
+    frames erring apart bend the day's curve, which the specular share and the roughness
+    follow (a board's yellow paint, its sun's highlight never seen, frames calibrated
+    each on its own: C_b's standard error from the calibration 0.21%, where a scale gave
+    0.07%).  A table's, without frames photographed, is
+    :func:`~.uncertainty.calibration_sd`."""
+    cal = (s.doc.get("ingest") or {}).get("calibration") or {}
+    if s.obs.rays is not None or not cal.get("scale_relative_sd"):
+        return unc.calibration_sd(s.doc, s.names, theta)
+    Js = J * problem.value_scale(theta)[..., None]          # per relative error of a value
+    sigma = problem.obs.sigma
+    if cal.get("per_frame"):
+        shared = np.tile(np.asarray(frame_calibration_sd(s), dtype=float),
+                         (J.shape[1], 1))
+    else:                                         # one error per channel for every frame
+        P, T, C, n = J.shape
+        Js, usable, sigma = (a.reshape((P * T, 1) + a.shape[2:]) for a in (Js, usable, sigma))
+        shared = np.asarray(cal["scale_relative_sd"], dtype=float)[None, :]
+    return unc.shared_error_sd(Js, usable, sigma, shared, np.eye(3), curvature_inverse)
+
+
+def frame_calibration_sd(s):
+    """The relative error (3,) every value of a photographed frame and channel shares from
+    its own calibration (ingest's ``calibration.frame_relative_sd`` where each frame took
+    its own), else None."""
+    cal = (s.doc.get("ingest") or {}).get("calibration") or {}
+    return cal["frame_relative_sd"] if cal.get("per_frame") else None
+
+
+def matrix_sd(s, J, problem, usable, theta, curvature_inverse):
+    """Each parameter's standard error (n,) from the camera's colour matrix (ingest's
+    ``colour_matrix`` record: each entry of its error E, in linear sRGB, relative_sd): a
+    developed value of channel c reads L_c + sum_j E_cj L_j, whose grey-card calibration
+    (which scales each channel to the grey's truth) leaves L_c + sum_(j != c) E_cj (L_j -
+    L_c), nothing on a grey and most on a saturated colour's weak channels.  Each of the
+    six E_cj is one error for the whole day (one camera, one matrix), carried to the
+    parameters by :func:`~.uncertainty.shared_error_sd` with the ratios L_j / L_c of the
+    model at ``theta``; zeros without the record or for a table."""
+    rel = ((s.doc.get("ingest") or {}).get("colour_matrix") or {}).get("relative_sd")
+    n = len(s.names)
+    if s.obs.rays is not None or not rel:
+        return np.zeros(n)
+    L = problem.model.radiance(theta)
+    value = problem.value_scale(theta)
+    P, T, C, _ = J.shape
+    flat = (P * T, 1, C, n)
+    var = np.zeros(n)
+    for c in range(C):
+        for j in range(C):
+            if j == c:
+                continue
+            with np.errstate(all="ignore"):
+                move = np.nan_to_num(value[..., c] * (L[..., j] / L[..., c] - 1.0))
+            Jk = np.zeros_like(J)
+            Jk[..., c, :] = J[..., c, :] * move[..., None]
+            var += unc.shared_error_sd(Jk.reshape(flat), usable.reshape(flat[:3]),
+                                       problem.obs.sigma.reshape(flat[:3]), [[rel]],
+                                       np.ones((C, 1)), curvature_inverse) ** 2
+    return np.sqrt(var)
+
+
+def matrix_note(s):
+    """What the colour matrix's error in a fit's intervals is and where it came from."""
+    rec = s.doc["ingest"]["colour_matrix"]
+    return (f"the camera's colour matrix is taken to err by {100 * rec['relative_sd']:.3g}% "
+            f"per entry ({rec['source']}), an error a grey card cannot see (it calibrates "
+            "each channel on a grey, whose channels the error mixes alike) and that moves "
+            "a saturated colour's weak channels most; the intervals include it")
+
+
+def jpeg_shared_sd(s, J, usable, sigma, curvature_inverse):
+    """Each parameter's standard error (n,) from the rounding of the block means that the
+    region's pixels share in each JPEG frame (Y, Cb, Cr; ingest's ``jpeg_dc`` record,
+    :func:`~skyfit_mi.pipeline.jpeg_noise.shared_error_sd`, with the sensor's noise before
+    compression from the manifest's noise model), carried to the parameters by
+    :func:`~.uncertainty.shared_error_sd`, ``sigma`` the values' in chi-square); zeros
+    without JPEG frames."""
+    n = len(s.names)
+    by_index = {f["index"]: f for f in s.doc["frames"]}
+    records = [by_index.get(i, {}).get("jpeg_dc") for i in s.obs.frames]
+    model = s.doc["sensor"].get("noise_model") or {}
+    if s.obs.rays is not None or not any(records) or "read_DN2" not in model:
+        return np.zeros(n)
+    noise = (model["read_DN2"], model["shot_DN"])
+    shared = np.zeros((len(records), 3))
+    for t, rec in enumerate(records):
+        ok = np.all(np.isfinite(s.obs.sigma[:, t]), axis=1)
+        if rec and ok.any():
+            y = s.obs.y[ok, t]
+            shared[t] = shared_error_sd(y, pixel_sigma(y, s.obs.sensor, noise) ** 2, rec)
+    return unc.shared_error_sd(J, usable, sigma, shared, YCC_TO_RGB, curvature_inverse)
+
+
+def poorly_determined(s, theta, intervals, profiled, cov):
+    """Whether a profiled parameter's 95% interval runs into a bound of its range, covers
+    over half of it, or is not the covariance's (either side under a third or over three times
+    its covariance half-width: chi-square far from quadratic; on a Radiance-traced day rho_s's
+    profile was a cliff on one side and flat on the other): then the others trade off along
+    a ridge that their covariance intervals (a quadratic at the fit) miss."""
+    for i, p in enumerate(s.names):
+        if p in profiled:
+            lo, hi = intervals[p]["95"]
+            span = s.upper[i] - s.lower[i]
+            half = unc.Z["95"] * np.sqrt(max(cov[i, i], 0.0))
+            sides = np.array([theta[i] - lo, hi - theta[i]]) / max(half, 1e-12)
+            if lo <= s.lower[i] + 1e-6 * span or hi >= s.upper[i] - 1e-6 * span \
+                    or hi - lo > 0.5 * span or np.any((sides < 1 / 3) | (sides > 3)):
+                return True
+    return False
+
+
+def profile_the_rest(s, fit, intervals, ripple):
+    """Profile intervals, on the true chi-square by constrained fits, for the parameters
+    that have only covariance intervals; each the union with its covariance interval (an
+    edge the fits cannot place keeps the covariance's), unless the fit lies on a bound of
+    its range or the curvature is singular there: the covariance's quadratic then runs
+    into the excluded side (rho_s < 0) and means nothing (an overcast day fitted at
+    rho_s = 0: R's covariance interval 0-1, its profile 0.83-1).  Returns the points the
+    constrained fits walked [(theta, chi2)]."""
+    levels, walked = ("68", "95"), []
+    theta = fit.theta
+    span = s.upper - s.lower
+    quadratic = bool(np.all(np.isfinite(fit.curvature_inverse))
+                     and np.all(theta > s.lower + 1e-9 * span)
+                     and np.all(theta < s.upper - 1e-9 * span)
+                     and np.linalg.cond(fit.curvature_inverse) < SINGULAR_CONDITION)
+    for i, p in enumerate(s.names):
+        if intervals[p]["from"] != "covariance":
+            continue
+        exact, _, points = profile_edges(
+            fit.problem, fit.theta, fit.chi2, i,
+            [unc.LEVELS[lv] * fit.delta_scale[i] + ripple for lv in levels],
+            s.lower, s.upper,
+            fit.curvature_inverse,
+            ProfileOptions(rtol=0.01, iterations=PROFILE_RIDGE_ITERATIONS))
+        walked += points
+        for lv, e in zip(levels, exact):
+            lo, hi = intervals[p][lv]
+            keep_lo, keep_hi = (lo, hi) if quadratic else (np.inf, -np.inf)
+            intervals[p][lv] = (min(keep_lo, e[0]) if e[0] is not None else lo,
+                                max(keep_hi, e[1]) if e[1] is not None else hi)
+        intervals[p]["from"] = "profile (another parameter is poorly determined)"
+    return walked
+
+
+def model_noise_allowance(problem, theta, sigmas, profile, s2):
+    """The chi-square the model's own Monte Carlo error may add, as the largest over the
+    sigma_alpha profile's 95% region (not only at the fit: the cache's error grows with
+    sigma_alpha, and the truth may lie where it is larger).  At each roughness the model
+    noise of the larger of two estimators compared (near the mirror, the mirror rays'
+    and the narrowest resolved lobe's); the region widens with the allowance, so it is
+    found again until it stops growing."""
+    def at(sigma):
+        return problem.model_noise_chi2(np.r_[theta[:-1], sigma])
+
+    def noise(sigma):
+        return at(sigma) if sigma >= SIGMA_RESOLVED else max(at(sigma), at(SIGMA_RESOLVED))
+    sigmas, profile = np.asarray(sigmas, dtype=float), np.asarray(profile, dtype=float)
+    ripple, seen = noise(theta[-1]), {float(theta[-1])}
+    for _ in range(4):
+        inside = sigmas[profile <= profile.min() + unc.LEVELS["95"] * s2 + ripple]
+        points = {float(v) for v in np.quantile(inside, [0, 0.25, 0.5, 0.75, 1])} - seen
+        if not points:
+            break
+        seen |= points
+        grown = max(ripple, max(noise(v) for v in points))
+        if grown <= 1.05 * ripple:
+            ripple = grown
+            break
+        ripple = grown
+    return ripple
