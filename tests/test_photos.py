@@ -1,7 +1,8 @@
 """Reading photographs and deciding frame times (skyfit_mi.pipeline.photos, .photo_times).
 
 Every file is synthetic, written into tmp_path: JPEG/PNG with EXIF by Pillow, 16-bit TIFF by
-tifffile, 16-bit PNG, EXR and RGBE by Mitsuba's Bitmap, a minimal DNG (CFA) by tifffile.
+tifffile, 16-bit PNG, EXR and RGBE by Mitsuba's Bitmap (EXR read back through OpenEXR's
+bindings), a minimal DNG (CFA) by tifffile.
 """
 import datetime as dt
 import os
@@ -392,9 +393,10 @@ def valid_bytes(tmp_path_factory):
 
 
 # derandomize: CI run 2026-11-25 once aborted the process inside Mitsuba's Bitmap reader on a
-# damaged EXR/HDR that hypothesis drew at random.  EXR and RGBE are now read in a child
-# process (photos._BITMAPS), whose crash is one SkyfitError line; the crash itself is
-# tested below (test_a_crash_of_the_native_reader_...), and fixed examples keep CI reproducible.
+# damaged EXR/HDR that hypothesis drew at random.  RGBE is now read in a child process
+# (photos._BITMAPS), whose crash is one SkyfitError line (tested below,
+# test_a_crash_of_the_native_reader_...); EXR through OpenEXR's bindings, which raise on damage
+# in this process.  Fixed examples keep CI reproducible.
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow],
           derandomize=True)
 @given(data=st.data())
@@ -458,20 +460,20 @@ def crashing_reader(tmp_path, monkeypatch):
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals name the death")
 def test_a_crash_of_the_native_reader_is_one_line_and_the_caller_goes_on(tmp_path,
                                                                           crashing_reader):
-    """A float file on which the reader's process dies (abort, segfault, exit) gives one
+    """An RGBE file on which the reader's process dies (abort, segfault, exit) gives one
     SkyfitError line naming the file and how the reader died; this process lives on, and
     the next file is read by a new child, with the same values."""
     a = np.random.default_rng(7).random((5, 7, 3)).astype(np.float32)
-    good = bitmap_write(tmp_path / "good.exr", a, "RGB")
+    good = bitmap_write(tmp_path / "good.hdr", a, "RGB")
     first = read_photo(good)
-    np.testing.assert_array_equal(first.values, a)
+    a = first.values.copy()                      # RGBE's shared exponent: a's values as stored
     assert first.values.flags.writeable
-    for name, died in [("abort.exr", "SIGABRT"), ("segv.hdr", "SIGSEGV"),
-                       ("exit.exr", "exit status 3")]:
+    for name, died in [("abort.hdr", "SIGABRT"), ("segv.hdr", "SIGSEGV"),
+                       ("exit.hdr", "exit status 3")]:
         shutil.copy(good, tmp_path / name)
         child = crashing_reader._proc
         with pytest.raises(SkyfitError, match=rf"^{re.escape(str(tmp_path / name))}: cannot "
-                           rf"be read as an? (OpenEXR|Radiance RGBE) image \(the image reader "
+                           rf"be read as a Radiance RGBE image \(the image reader "
                            rf"crashed on it: {died}.*\); check that the file is complete, or "
                            rf"remove it\.$") as e:
             read_photo(tmp_path / name)
@@ -483,8 +485,8 @@ def test_a_crash_of_the_native_reader_is_one_line_and_the_caller_goes_on(tmp_pat
 
 def test_a_reader_child_that_died_while_idle_is_replaced(tmp_path):
     a = np.random.default_rng(8).random((3, 4, 3)).astype(np.float32)
-    p = bitmap_write(tmp_path / "a.exr", a, "RGB")
-    read_photo(p)
+    p = bitmap_write(tmp_path / "a.hdr", a, "RGB")
+    a = read_photo(p).values
     photos._BITMAPS._proc.kill()                     # e.g. the kernel's OOM killer
     photos._BITMAPS._proc.wait()
     np.testing.assert_array_equal(read_photo(p).values, a)

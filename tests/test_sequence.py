@@ -112,11 +112,11 @@ def test_interrupted_render_resumes_to_identical_frames(tmp_path, mi, monkeypatc
     calls = {"n": 0}
     real = sequence.write_exr
 
-    def dying(path, img):
+    def dying(path, img, meta=None):
         calls["n"] += 1
         if calls["n"] == 5:                        # frame 0: 3 files, frame 1: dies on its 2nd file
             raise KeyboardInterrupt
-        return real(path, img)
+        return real(path, img, meta)
 
     monkeypatch.setattr(sequence, "write_exr", dying)
     with pytest.raises(KeyboardInterrupt):

@@ -29,7 +29,7 @@ from ..physics.camera import SensorModel
 from ..errors import SkyfitError
 from ..physics.colour import SRGB_LUMINANCE
 from ..pipeline.manifest import (check_frames, frame_exposure, is_table, load_manifest,
-                                 read_frame_image, rendered_frames, sensor_from_record)
+                                 read_frame_pixels, rendered_frames, sensor_from_record)
 from ..pipeline.observation_table import table_observations
 from ..pipeline.pixels import colour_mixed, colour_reach, scene_labels
 from ..render.light_cache import point_rays
@@ -137,8 +137,8 @@ def subsample_region(pixels, max_pixels, seed):
 
 def _region_values(root, frame, key, pixels, shape):
     """The region's values in one frame's EXR ``frame[key]``, checked: readable, of the
-    manifest's size."""
-    return read_frame_image(root, frame, key, shape)[pixels[:, 1], pixels[:, 0]]
+    manifest's size; only the region's rows are read."""
+    return read_frame_pixels(root, frame, key, shape, pixels)
 
 
 def load_table_observations(manifest_path, region, points=None, frames=None, min_frames=2):
@@ -341,9 +341,9 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
     sensor = sensor_from_record(doc["sensor"])
     falloff = sensor.gain(w, h, cam["fov_deg"])[pixels[:, 1], pixels[:, 0]] / sensor.exposure
     if doc["sensor"].get("flat_field"):         # a measured vignetting (ingest), per pixel
-        flat = read_frame_image(root, {"index": "flat field", "flat": doc["sensor"]["flat_field"]},
-                                "flat", (h, w, 3))
-        falloff = falloff * flat[pixels[:, 1], pixels[:, 0], 0]
+        flat = read_frame_pixels(root, {"index": "flat field", "flat": doc["sensor"]["flat_field"]},
+                                 "flat", (h, w, 3), pixels)
+        falloff = falloff * flat[:, 0]
     ys, sig, gain = [], [], []
     for f in rendered:
         y = _region_values(root, f, "sensor", pixels, (h, w, 3))

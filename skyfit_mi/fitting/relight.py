@@ -323,7 +323,8 @@ def _sky_map(frame, sky, out):
     record of it with the sun's direct normal irradiance (luminance-weighted; the disc in
     the colour of :func:`~skyfit_mi.physics.sun.sun_rgb`, as the spec's skies have it)."""
     path = ensure_dir(Path(out) / SKY_MAPS) / f"frame_{frame.index:03d}.exr"
-    write_exr(path, sky.envmap)
+    write_exr(path, sky.envmap, {"kind": "sky_map", "units": "W m^-2 sr^-1",
+                                 "frame": frame.index, "time": frame.time})
     zenith, azimuth = (float(np.degrees(a)) for a in angles_from_direction(sky.sun_direction))
     rec = {"file": os.path.relpath(path, Path(out)), "ground_albedo": 0.0,
            "sun_solid_angle_sr": sky.sun_solid_angle,

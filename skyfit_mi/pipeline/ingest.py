@@ -1223,7 +1223,8 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
                                          "sigma2_DN2": "Q'(s)^2 (read + shot s M) + 1/12"}
     jpeg_frames = 0
     if flat is not None:
-        write_exr(out / "frames" / "flat_field.exr", np.repeat(flat[..., None], 3, axis=2))
+        write_exr(out / "frames" / "flat_field.exr", np.repeat(flat[..., None], 3, axis=2),
+                  {"kind": "flat_field", "units": "1"})
         manifest["sensor"]["flat_field"] = "frames/flat_field.exr"
     manifest["ingest"] = {"photos": [p.name for p in paths], "options": options,
                           "float_scale_DN": linear.float_scale,
@@ -1258,7 +1259,7 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
             slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code
             radiance = np.where(np.isfinite(v), s / gain, np.nan).astype(np.float32)
             rad_sd = np.where(np.isfinite(v), sig / (slope * gain), np.inf).astype(np.float32)
-            names = write_frame(out, f.index, radiance, rad_sd, v, sig)
+            names = write_frame(out, f.index, radiance, rad_sd, v, sig, f.time)
             rec.update(status="rendered", **names,
                        exposure={"exposure": float(e @ SRGB_LUMINANCE),
                                  "white_balance": (e / float(e @ SRGB_LUMINANCE)).tolist(),

@@ -34,7 +34,7 @@ from ..files import jsonable, write_json
 from ..physics.camera import SensorModel
 from ..physics.gensky import from_gensky
 from ..physics.sky import Sky
-from ..render.image import read_exr_checked
+from ..render.image import check_exr, read_exr_checked
 from .illumination import (directional_from_record, directional_record, envmap_from_record,
                            envmap_record, perez_from_irradiance)
 
@@ -326,11 +326,13 @@ def is_table(doc):
 
 def check_frames(doc, root, kinds=("radiance", "sensor", "sigma"), frames=None):
     """Light every rendered frame (``frames``: of these indices only) of the sequence ``doc``
-    in folder ``root`` (:func:`frame_sky`) and read its images of ``kinds`` (and its
+    in folder ``root`` (:func:`frame_sky`) and check its images of ``kinds`` (and its
     ``radiance_sigma``, where it has one, when ``kinds`` holds 'radiance'), so that a bad
-    record or a missing, damaged or foreign-size file is refused before a command writes
-    anything; the images stay in the frame cache for the command's own reads.  A table's
-    frames have no images."""
+    record or a missing, truncated, foreign or foreign-size file is refused before a command
+    writes anything.  Only each file's header and chunk table are read
+    (:func:`check_frame_image`): the command then reads the rows it needs
+    (:func:`read_frame_pixels`), and a chunk damaged inside a complete file is refused there,
+    naming its frame.  A table's frames have no images."""
     shape = (doc["camera"]["height"], doc["camera"]["width"], 3)
     for f in rendered_frames(doc):
         if frames is not None and f["index"] not in frames:
@@ -340,7 +342,7 @@ def check_frames(doc, root, kinds=("radiance", "sensor", "sigma"), frames=None):
             continue
         extra = ("radiance_sigma",) if "radiance" in kinds and "radiance_sigma" in f else ()
         for key in (*kinds, *extra):
-            read_frame_image(root, f, key, shape)
+            check_frame_image(root, f, key, shape)
 
 
 #: Bytes of decoded frame images kept to be read again (each of a prediction's or a relight's
@@ -368,10 +370,7 @@ def read_frame_image(root, frame, key, shape):
     (H, W, 3); a missing, damaged or foreign file raises SkyfitError naming the frame and the
     fix.  The array is read-only and may be shared: images read lately are kept
     (FRAME_CACHE_BYTES) for the next reader of the same unchanged file."""
-    if key not in frame:
-        raise SkyfitError(f"frame {frame['index']} has no {key} image (an older render, or a "
-                          "sequence without it); render the sequence again with --overwrite.")
-    path = Path(root) / frame[key]
+    path = _frame_path(root, frame, key)
     ident = _file_identity(path)
     if ident is not None:
         ident += (tuple(shape),)
@@ -382,13 +381,53 @@ def read_frame_image(root, frame, key, shape):
     try:
         img = read_exr_checked(path, shape)
     except SkyfitError as exc:
-        raise SkyfitError(f"frame {frame['index']}: {exc}; render the sequence again (it resumes "
-                          "and replaces damaged frames).") from None
+        raise _frame_failed(frame, exc) from None
     img.flags.writeable = False
     # kept only if the file did not change while it was read
     if ident is not None and (_file_identity(path) or ()) + (tuple(shape),) == ident:
         _keep(ident, img)
     return img
+
+
+def _frame_path(root, frame, key):
+    if key not in frame:
+        raise SkyfitError(f"frame {frame['index']} has no {key} image (an older render, or a "
+                          "sequence without it); render the sequence again with --overwrite.")
+    return Path(root) / frame[key]
+
+
+def _frame_failed(frame, exc):
+    return SkyfitError(f"frame {frame['index']}: {exc}; render the sequence again (it resumes "
+                       "and replaces damaged frames).")
+
+
+def check_frame_image(root, frame, key, shape):
+    """:func:`read_frame_image`'s checks from the file's header and chunk table alone (no
+    pixels decoded): present, OpenEXR, complete, of ``shape`` (H, W, 3)."""
+    path = _frame_path(root, frame, key)
+    try:
+        check_exr(path, shape)
+    except SkyfitError as exc:
+        raise _frame_failed(frame, exc) from None
+
+
+def read_frame_pixels(root, frame, key, shape, pixels):
+    """Frame record ``frame``'s image ``key`` at ``pixels`` ((P, 2) x, y): (P, 3) float32, as
+    :func:`read_frame_image` would give them (the same checks and errors), reading only the
+    pixels' rows of the file (a fit's or a relight's few pixels of each frame); from the frame
+    cache where the whole image is there."""
+    px = np.asarray(pixels, dtype=int).reshape(-1, 2)
+    path = _frame_path(root, frame, key)
+    ident = _file_identity(path)
+    if ident is not None:
+        with _FRAMES_LOCK:
+            img = _FRAMES.get(ident + (tuple(shape),))
+        if img is not None:
+            return img[px[:, 1], px[:, 0]]
+    try:
+        return read_exr_checked(path, shape, px)
+    except SkyfitError as exc:
+        raise _frame_failed(frame, exc) from None
 
 
 def keep_frame_image(path, image):

@@ -20,13 +20,14 @@ Formats and decisions
   ``.tif .tiff`` of 16 bits (tifffile): kind 'integer', bits 16, max_code 65535,
   encoding_hint 'linear' (a PNG sRGB chunk, gAMA 1/2.2, or an ICC profile named sRGB makes it
   'srgb').
-* ``.tif .tiff`` of floats (tifffile), ``.exr`` (Mitsuba), ``.hdr .pic .rgbe`` Radiance RGBE
-  (Mitsuba): kind 'float', bits and max_code None, encoding_hint 'linear'; an EXR's capture
-  time from its header's ``capDate``/``utcOffset``, an RGBE's from ``CAPDATE=``/``GMT=``, in
-  the metadata's EXIF fields.  Mitsuba reads EXR and RGBE pixels in a child process
-  (:data:`_BITMAPS`, started at the first such file and kept for the rest): a damaged file
-  can abort that native reader, which then ends the child, not the caller, and the file gets
-  one error line.
+* ``.tif .tiff`` of floats (tifffile), ``.exr`` (OpenEXR's Python bindings,
+  :func:`.render.image.read_exr_channels`), ``.hdr .pic .rgbe`` Radiance RGBE (Mitsuba): kind
+  'float', bits and max_code None, encoding_hint 'linear'; an EXR's capture time from its
+  header's ``capDate``/``utcOffset``, an RGBE's from ``CAPDATE=``/``GMT=``, in the metadata's
+  EXIF fields.  OpenEXR raises on a damaged file, so EXR is read in this process; Mitsuba
+  reads RGBE pixels in a child process (:data:`_BITMAPS`, started at the first such file and
+  kept for the rest): a damaged file can abort that native reader, which then ends the
+  child, not the caller, and the file gets one error line.
 * camera RAW, any suffix in :data:`RAW_SUFFIXES` (rawpy / LibRaw): kind 'integer', bits 16,
   max_code 65535, encoding_hint 'linear'.
 
@@ -63,7 +64,7 @@ import numpy as np
 
 from ..child import CallFailed, Child, ChildDied, one_line
 from ..errors import SkyfitError
-from ..render.image import read_bitmap
+from ..render.image import ExrError, read_bitmap, read_exr_channels
 from . import jpeg_noise
 from .orientation import ORIENTATIONS, apply_orientation
 from .photo_times import format_offset
@@ -572,13 +573,12 @@ def rgbe_header_times(path):
     return out
 
 
-#: The function that reads an EXR or RGBE file in the child process (tests name one that
-#: crashes).
+#: The function that reads an RGBE file in the child process (tests name one that crashes).
 READ_BITMAP = "skyfit_mi.render.image:read_bitmap"
 #: Deadline of one such read [s]: READ_DEADLINE[0] plus READ_DEADLINE[1] per MB of the file
 #: (a read takes well under a second per 100 MB; a child that overran its heap can spin).
 READ_DEADLINE = (60.0, 0.1)
-#: The child process that reads EXR and RGBE files for this process: Mitsuba 3.9.1's RGBE
+#: The child process that reads RGBE files for this process: Mitsuba 3.9.1's RGBE
 #: reader, meeting a scanline after the first that is not run-length encoded, reads the whole
 #: image's worth of flat pixels from there into the image buffer, past its end, and glibc
 #: aborts (SIGABRT) on the corrupted heap, or the child spins (READ_DEADLINE); the child dies
@@ -587,10 +587,26 @@ READ_DEADLINE = (60.0, 0.1)
 _BITMAPS = Child()
 
 
-def _read_float_bitmap(path, fmt):
-    """An OpenEXR or Radiance RGBE file through Mitsuba's Bitmap, read in the child process
+def _read_exr(path):
+    """An OpenEXR file through OpenEXR's Python bindings, in this process (a damaged file
+    raises: :func:`.render.image.read_exr_channels`)."""
+    try:
+        values, channels = read_exr_channels(path)
+    except ExrError as exc:
+        raise _fail(path, f"cannot be read as an OpenEXR image ({exc.why})",
+                    "check that the file is complete, or remove it") from None
+    if values.dtype.kind != "f":
+        raise _fail(path, f"reads as {values.dtype} codes, not floats",
+                    "give it the suffix of its real format")
+    meta = _empty_metadata()
+    meta.update(exr_header_times(path))
+    return _float_photo(path, "exr", _rgb(values, channels, path), meta)
+
+
+def _read_rgbe(path):
+    """A Radiance RGBE file through Mitsuba's Bitmap, read in the child process
     :data:`_BITMAPS` (its values exactly as :func:`.render.image.read_bitmap` gives them)."""
-    name = "an OpenEXR" if fmt == "exr" else "a Radiance RGBE"
+    name = "a Radiance RGBE"
     try:
         values, channels = _BITMAPS.call(
             READ_BITMAP, str(path),
@@ -605,8 +621,8 @@ def _read_float_bitmap(path, fmt):
         raise _fail(path, f"reads as {values.dtype} codes, not floats",
                     "give it the suffix of its real format")
     meta = _empty_metadata()
-    meta.update(exr_header_times(path) if fmt == "exr" else rgbe_header_times(path))
-    return _float_photo(path, fmt, _rgb(values, channels, path), meta)
+    meta.update(rgbe_header_times(path))
+    return _float_photo(path, "rgbe", _rgb(values, channels, path), meta)
 
 
 def _wb(values):
@@ -683,9 +699,9 @@ for _s in PNG_SUFFIXES:
 for _s in TIFF_SUFFIXES:
     _READERS[_s] = _read_tiff
 for _s in EXR_SUFFIXES:
-    _READERS[_s] = lambda p: _read_float_bitmap(p, "exr")
+    _READERS[_s] = _read_exr
 for _s in RGBE_SUFFIXES:
-    _READERS[_s] = lambda p: _read_float_bitmap(p, "rgbe")
+    _READERS[_s] = _read_rgbe
 for _s in RAW_SUFFIXES:
     _READERS[_s] = _read_raw
 

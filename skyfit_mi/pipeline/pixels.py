@@ -10,7 +10,7 @@ from ..errors import SkyfitError
 from ..files import save_figure, write_text
 from ..render import setup
 from ..render.labels import label_image
-from .manifest import frame_axis, is_table, load_manifest, read_frame_image
+from .manifest import frame_axis, is_table, load_manifest, read_frame_pixels
 from .observation_table import table_regions
 
 SOURCES = {"radiance": "W m^-2 sr^-1", "radiance_sigma": "W m^-2 sr^-1", "sensor": "DN",
@@ -40,20 +40,21 @@ def pixel_series(manifest_path, pixels, source="radiance"):
     for f in doc["frames"]:
         if f.get("status") != "rendered":
             continue
-        img = read_frame_image(root, f, source, (h, w, 3))
-        for x, y in pixels:
-            rows.append((f["index"], f.get("time", ""), x, y, *map(float, img[y, x])))
+        values = read_frame_pixels(root, f, source, (h, w, 3), pixels)
+        for (x, y), v in zip(pixels, values):
+            rows.append((f["index"], f.get("time", ""), x, y, *map(float, v)))
     return rows, SOURCES[source]
 
 
 def frame_values(manifest_path, pixels, frames, source="radiance"):
     """Values of ``pixels`` ((P, 2) x, y) in the frames whose index is in ``frames``, in time
-    order: (P, T, 3) [``SOURCES[source]``]; each frame read and checked as ``fit`` reads it."""
+    order: (P, T, 3) [``SOURCES[source]``]; each frame checked as ``fit`` checks it, and only
+    the pixels' rows read."""
     doc, root = load_manifest(manifest_path)
     shape = (doc["camera"]["height"], doc["camera"]["width"], 3)
     px = np.asarray(pixels, dtype=int)
     wanted = set(int(i) for i in frames)
-    return np.stack([read_frame_image(root, f, source, shape)[px[:, 1], px[:, 0]]
+    return np.stack([read_frame_pixels(root, f, source, shape, px)
                      for f in doc["frames"] if f["index"] in wanted], axis=1).astype(float)
 
 

@@ -44,6 +44,9 @@ from .manifest import (SCHEMA, frame_label, illumination_record, keep_frame_imag
 #: The files of one frame, by kind: the radiance, its standard error (Monte Carlo)
 #: [W m^-2 sr^-1], the sensor's values and their sigma [DN].
 FRAME_FILES = ("radiance", "radiance_sigma", "sensor", "sigma")
+#: The units of each kind of frame file (its EXR header's ``skyfit/units``).
+FRAME_UNITS = {"radiance": "W m^-2 sr^-1", "radiance_sigma": "W m^-2 sr^-1", "sensor": "DN",
+               "sigma": "DN"}
 
 
 def frame_names(index):
@@ -144,16 +147,23 @@ def capture_frame(sensor, radiance, radiance_sd, seed, index, fov_deg):
     return values, sigma, not np.any(values > 0)
 
 
-def write_frame(out, index, radiance, radiance_sd, values, sigma):
-    """Write one frame's EXRs (:data:`FRAME_FILES`) atomically, the radiance and its error
-    kept for the frame reader (:func:`~skyfit_mi.pipeline.manifest.keep_frame_image`: the
-    contact sheet and a relight's comparisons read them next); returns their relative paths
-    by kind."""
+def frame_meta(index, key, time=None):
+    """The EXR header metadata of frame ``index``'s file ``key`` (:func:`.render.image.write_exr`):
+    its kind, units, frame index and, where the frame has one, its time (aware datetime)."""
+    return {"kind": key, "units": FRAME_UNITS[key], "frame": int(index), "time": time}
+
+
+def write_frame(out, index, radiance, radiance_sd, values, sigma, time=None):
+    """Write one frame's EXRs (:data:`FRAME_FILES`) atomically, each with its kind, units,
+    frame index and ``time`` (the frame's, an aware datetime; None for a lab light) in its
+    header (:func:`frame_meta`), the radiance and its error kept for the frame reader
+    (:func:`~skyfit_mi.pipeline.manifest.keep_frame_image`: the contact sheet and a relight's
+    comparisons read them next); returns their relative paths by kind."""
     names = frame_names(index)
     for key, image in (("radiance", radiance), ("radiance_sigma", radiance_sd)):
-        keep_frame_image(write_exr(out / names[key], image), image)
-    write_exr(out / names["sensor"], values.astype(np.float32))
-    write_exr(out / names["sigma"], sigma)
+        keep_frame_image(write_exr(out / names[key], image, frame_meta(index, key, time)), image)
+    write_exr(out / names["sensor"], values.astype(np.float32), frame_meta(index, "sensor", time))
+    write_exr(out / names["sigma"], sigma, frame_meta(index, "sigma", time))
     return names
 
 
@@ -252,7 +262,8 @@ def _render(spec, sensor, out, overwrite, progress, log, source):
             rec["render_seconds"] = time.perf_counter() - t0
             values, sigma, dark = capture_frame(sensor, img, img_sd, renderer.seed, f.index,
                                                 cam["fov_deg"])
-            rec.update(status="rendered", **write_frame(out, f.index, img, img_sd, values, sigma))
+            rec.update(status="rendered", **write_frame(out, f.index, img, img_sd, values, sigma,
+                                                        f.time))
             if dark:
                 rec["dark"] = True
                 log(f"{frame_label(f.index, f.time)}: black at this exposure (no light reached "

@@ -87,7 +87,8 @@ def measured_day(scans, folder, template, template_dir=".", *, rows=ROWS, rotate
     entries, lines = [], [",".join(SUMMARY_COLUMNS)]
     for scan, sky in zip(scans, skies):
         file = MAP_FILE.format(time=scan.time)
-        write_exr(out / file, sky.envmap)
+        write_exr(out / file, sky.envmap, {"kind": "sky_map", "units": "W m^-2 sr^-1",
+                                           "time": scan.time})
         i = sky.info
         entries.append({"type": "envmap", "file": file,
                         "direct_normal_W_m2": round(i["direct_normal_W_m2"], 3),

@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import SkyfitError
 from ..files import write_json, write_text
 from ..render.points import load_points_scene, pixel_points
-from .manifest import load_manifest, read_frame_image, rendered_frames
+from .manifest import load_manifest, read_frame_pixels, rendered_frames
 
 
 def measure_table(sequence, pixels, out, *, noise=0.01, seed=0, saturate=None):
@@ -53,8 +53,8 @@ def measure_table(sequence, pixels, out, *, noise=0.01, seed=0, saturate=None):
                 "sigma_r", "sigma_g", "sigma_b", *flags])
     n_clipped = 0
     for f in frames:
-        L = read_frame_image(root, f, "radiance", shape)[pixels[:, 1], pixels[:, 0]]
-        mc = read_frame_image(root, f, "radiance_sigma", shape)[pixels[:, 1], pixels[:, 0]]
+        L = read_frame_pixels(root, f, "radiance", shape, pixels)
+        mc = read_frame_pixels(root, f, "radiance_sigma", shape, pixels)
         sigma = np.sqrt((noise * L.mean(axis=1, keepdims=True)) ** 2 + mc.astype(float) ** 2)
         value = L + sigma * np.random.default_rng([seed, f["index"]]).standard_normal(L.shape)
         clipped = value >= saturate if saturate is not None else np.zeros(L.shape, bool)

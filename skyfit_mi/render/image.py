@@ -1,40 +1,359 @@
-"""Image output: linear EXR frames and PNG previews, written atomically."""
+"""Image files: linear float32 OpenEXR frames (read and written through OpenEXR's Python
+bindings) and PNG previews, written atomically.
+
+EXR layout
+----------
+:func:`write_exr` writes a single-part scanline image of float32 channels R, G, B (an (H, W, 3)
+image) or Y (an (H, W) map), as Mitsuba's ``Bitmap`` wrote them before, so the files of
+earlier runs (PIZ-compressed) and of this one read alike, and Mitsuba reads these as
+environment maps.  Compression is ZIPS: lossless, one scanline per chunk, so a reader of a
+few pixels (:func:`read_exr_pixels`, a fit's or a relight's 64 per region) decodes only their
+rows.  A frame's metadata (:data:`META_PREFIX` attributes, and the standard ``capDate`` /
+``utcOffset`` of its time) goes in the header; the manifest keeps its own record too.
+
+Reading
+-------
+:func:`read_exr` reads the whole image, or only some rows; a missing, foreign or damaged file
+raises :class:`~skyfit_mi.errors.SkyfitError` of one line naming it.  OpenEXR's C library
+reports a damaged chunk on the process's stderr (and the bindings on stdout) before it
+raises: those lines are taken into the error's message instead (:func:`_native_quiet`).
+OpenEXR's reader is fuzzed upstream (OSS-Fuzz) and raises on damaged input rather than
+aborting, so EXR files are read in this process (no child, unlike Radiance RGBE:
+:mod:`skyfit_mi.pipeline.photos`).
+"""
+
+import contextlib
+import datetime as dt
+import io
+import os
+import sys
+import tempfile
+import threading
 
 import numpy as np
 
 from ..errors import SkyfitError
 from ..files import atomic_write
 
+#: The first four bytes of every OpenEXR file.
+EXR_MAGIC = b"\x76\x2f\x31\x01"
+#: Prefix of skyfit's own header attributes ('skyfit/kind', 'skyfit/frame'...).
+META_PREFIX = "skyfit/"
+#: Scanlines per chunk of each compression (OpenEXR's file layout): a row read decodes its
+#: whole chunk, so rows are read in whole chunks.  Unknown ones: 32 (any count is correct).
+CHUNK_LINES = {"NO_COMPRESSION": 1, "RLE_COMPRESSION": 1, "ZIPS_COMPRESSION": 1,
+               "ZIP_COMPRESSION": 16, "PXR24_COMPRESSION": 16, "PIZ_COMPRESSION": 32,
+               "B44_COMPRESSION": 32, "B44A_COMPRESSION": 32, "DWAA_COMPRESSION": 32,
+               "DWAB_COMPRESSION": 256}
+#: Channel orders read as an image's last axis: RGB(A) and grey as Mitsuba gave them.
+_ORDERS = (("R", "G", "B", "A"), ("R", "G", "B"), ("Y", "A"), ("Y",))
 
-def write_exr(path, image):
-    """Write a linear float32 RGB image (H, W, 3) [W m^-2 sr^-1], or a one-channel map (H, W)
-    (channel Y), as OpenEXR."""
-    import mitsuba as mi
-
-    fmt = mi.Bitmap.PixelFormat.Y if np.ndim(image) == 2 else mi.Bitmap.PixelFormat.RGB
-    bmp = mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), fmt)
-    return atomic_write(path, lambda p: bmp.write(p))
-
-
-def read_exr(path):
-    """Read an EXR written by :func:`write_exr` as a float32 array (H, W, 3)."""
-    import mitsuba as mi
-
-    return np.array(mi.Bitmap(str(path)), dtype=np.float32)
+_NATIVE_LOCK = threading.Lock()
 
 
-def read_exr_checked(path, shape):
-    """:func:`read_exr`, raising SkyfitError (naming the file and what is wrong) unless the
-    file reads as an image of ``shape`` (H, W, 3)."""
+@contextlib.contextmanager
+def _native_quiet():
+    """Take what OpenEXR prints while the block runs (the C library on file descriptor 2, the
+    bindings on ``sys.stdout``): yields a list that holds those lines, last one last, after
+    the block.  On success they are passed on unchanged (another thread's output, not
+    OpenEXR's: a good file prints nothing); on an exception they are kept for its message."""
+    with _NATIVE_LOCK:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        lines = []
+        out = io.StringIO()
+        with tempfile.TemporaryFile() as log:
+            os.dup2(log.fileno(), 2)
+            ok = False
+            try:
+                with contextlib.redirect_stdout(out):
+                    yield lines
+                ok = True
+            finally:
+                os.dup2(saved, 2)
+                os.close(saved)
+                log.seek(0)
+                err = log.read().decode("utf-8", "replace")
+                if ok:
+                    if err:
+                        os.write(2, err.encode())
+                    if out.getvalue():
+                        sys.stdout.write(out.getvalue())
+                else:
+                    lines += [ln.strip() for ln in (out.getvalue() + err).splitlines()
+                              if ln.strip()]
+
+
+def _why(path, exc, lines):
+    """One line saying why ``path`` did not read as OpenEXR (``lines``: what the library
+    printed)."""
     try:
-        img = read_exr(path)
-    except Exception as exc:          # Mitsuba raises RuntimeError for unreadable files
-        raise SkyfitError(f"cannot read {path} ({str(exc).splitlines()[0]})") from None
-    if img.shape != tuple(shape):
-        raise SkyfitError(f"{path} is {img.shape[1]}x{img.shape[0]} with "
-                          f"{img.shape[2] if img.ndim == 3 else 1} channels, not the camera's "
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+    except FileNotFoundError:
+        return "no such file"
+    except OSError as err:
+        return err.strerror or str(err)
+    if head != EXR_MAGIC:
+        return "not an OpenEXR file" + (" (empty)" if not head else "")
+    said = [ln for ln in lines if not ln.startswith("Warning: Exception raised")]
+    detail = said[-1] if said else (str(exc).strip().splitlines() or [type(exc).__name__])[-1]
+    if detail.startswith(f"{path}:"):             # the C library's "<path>: (EXR_ERR_..) .."
+        detail = detail[len(str(path)) + 1:].strip()
+    elif detail.startswith("Unable to open"):     # the bindings': the header did not read
+        detail = "its header does not read"
+    return f"a damaged or truncated OpenEXR file: {detail[:200]}"
+
+
+class ExrError(SkyfitError):
+    """An OpenEXR file that does not read: ``why`` says why, in a few words."""
+
+    def __init__(self, path, why):
+        super().__init__(f"cannot read {path}: {why}")
+        self.path, self.why = str(path), why
+
+
+def _fail(path, exc, lines):
+    return ExrError(path, _why(path, exc, lines))
+
+
+def _header_meta(meta):
+    """Header attributes of a frame's ``meta`` (dict): each under :data:`META_PREFIX` (ints,
+    floats and text as they are, dates as ISO text); a ``time`` (an aware datetime or its ISO
+    text) also as the standard ``capDate`` (local, 'YYYY:MM:DD hh:mm:ss') and ``utcOffset``
+    (seconds, UTC = local + utcOffset)."""
+    out = {}
+    for key, value in (meta or {}).items():
+        if value is None:
+            continue
+        if isinstance(value, str):
+            text = value
+        elif isinstance(value, (dt.datetime, dt.date)):
+            text = value.isoformat()
+        elif isinstance(value, (bool, np.bool_)):
+            text = "true" if value else "false"
+        elif isinstance(value, (int, np.integer)):
+            out[META_PREFIX + key] = int(value)
+            continue
+        elif isinstance(value, (float, np.floating)):
+            out[META_PREFIX + key] = float(value)
+            continue
+        else:
+            raise TypeError(f"EXR header value {key}={value!r}: give text, a number or a date")
+        out[META_PREFIX + key] = text
+    when = (meta or {}).get("time")
+    if isinstance(when, str):
+        when = dt.datetime.fromisoformat(when)
+    if isinstance(when, dt.datetime):
+        out["capDate"] = when.strftime("%Y:%m:%d %H:%M:%S")
+        if when.utcoffset() is not None:
+            out["utcOffset"] = float(-when.utcoffset().total_seconds())
+    return out
+
+
+def write_exr(path, image, meta=None):
+    """Write a linear float32 RGB image (H, W, 3) [W m^-2 sr^-1], or a one-channel map (H, W)
+    (channel Y), as OpenEXR (module doc: layout), atomically.  ``meta``: the frame's metadata
+    for the header (e.g. ``{"kind": "radiance", "frame": 3, "units": "W m^-2 sr^-1",
+    "time": datetime}``; :func:`read_exr_meta` gives it back).  Returns ``path``."""
+    import OpenEXR
+
+    image = np.ascontiguousarray(image, dtype=np.float32)
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    if image.ndim == 2:
+        channels = {"Y": image}
+    elif image.ndim == 3 and image.shape[2] == 3:
+        channels = {"RGB": image}
+    else:
+        raise ValueError(f"write_exr takes (H, W, 3) or (H, W), not {image.shape}")
+    header = {"compression": OpenEXR.ZIPS_COMPRESSION, "type": OpenEXR.scanlineimage,
+              "generatedBy": "skyfit-mi", **_header_meta(meta)}
+
+    def write(tmp):
+        with OpenEXR.File(header, channels) as f:
+            f.write(str(tmp))
+    return atomic_write(path, write)
+
+
+def _layout(header):
+    """(channel names in the order read, (H, W), first row's y, scanlines per chunk) of an
+    EXR ``header`` (OpenEXR.File's dict)."""
+    names = [c.name for c in header["channels"]]
+    order = next((list(o) for o in _ORDERS if set(o) == set(names)), sorted(names))
+    (x0, y0), (x1, y1) = (np.asarray(v) for v in header["dataWindow"])
+    lines = CHUNK_LINES.get(getattr(header.get("compression"), "name", ""), 32)
+    return order, (int(y1 - y0 + 1), int(x1 - x0 + 1)), int(y0), lines
+
+
+def _stack(planes):
+    """Channel planes -> (H, W) for one, (H, W, C) for more, float32."""
+    if len(planes) == 1:
+        return np.array(planes[0], dtype=np.float32)          # a copy of the file's buffer
+    return np.stack(planes, axis=-1).astype(np.float32, copy=False)
+
+
+def read_exr_channels(path):
+    """The whole of OpenEXR ``path`` as stored: (values (H, W, C) in the file's own pixel type
+    -- float32, float16 or uint32 --, channel names in the order of the last axis: R, G, B(, A),
+    or Y(, A), else by name).  A missing, foreign or damaged file raises :class:`ExrError`."""
+    import OpenEXR
+
+    path = str(path)
+    lines = []
+    try:
+        with _native_quiet() as lines:
+            with OpenEXR.File(path, separate_channels=True) as f:
+                chans = f.channels()
+                order, _, _, _ = _layout(f.header())
+                return np.stack([chans[n].pixels for n in order], axis=-1), order
+    except MemoryError:
+        raise
+    except Exception as exc:             # noqa: BLE001 -- RuntimeError, OSError, ValueError..
+        raise _fail(path, exc, lines) from None
+
+
+def read_exr_header(path):
+    """The header of OpenEXR ``path`` (OpenEXR.File's dict; no pixels read); a missing or
+    damaged file raises SkyfitError of one line."""
+    import OpenEXR
+
+    lines = []
+    try:
+        with _native_quiet() as lines:
+            with OpenEXR.File(str(path), header_only=True) as f:
+                return dict(f.header())         # a copy: closing the file empties its own
+    except Exception as exc:             # noqa: BLE001 -- RuntimeError, OSError, ValueError..
+        raise _fail(path, exc, lines) from None
+
+
+def read_exr_meta(path):
+    """The frame metadata :func:`write_exr` put in ``path``'s header: {key: value} of its
+    :data:`META_PREFIX` attributes ({} for a file without them)."""
+    return {k[len(META_PREFIX):]: v for k, v in read_exr_header(path).items()
+            if k.startswith(META_PREFIX)}
+
+
+def read_exr_shape(path):
+    """(H, W, channels) of OpenEXR ``path`` from its header (channels: how many)."""
+    order, (h, w), _, _ = _layout(read_exr_header(path))
+    return (h, w, len(order)) if len(order) > 1 else (h, w)
+
+
+def read_exr(path, rows=None):
+    """Read an OpenEXR file as float32: (H, W, 3) for RGB (R, G, B; RGBA: 4), (H, W) for one
+    channel Y, else its channels in name order on the last axis.
+
+    ``rows`` (ints, from the top of its data window): only those scanlines, in that order,
+    shape (len(rows), W[, C]); only their chunks are read and decoded
+    (:data:`CHUNK_LINES`).  A missing, foreign or damaged file raises SkyfitError of one line
+    naming it ('cannot read <path>: ...').
+    """
+    path = str(path)
+    if rows is None:
+        values = read_exr_channels(path)[0].astype(np.float32, copy=False)
+        return values[..., 0] if values.shape[-1] == 1 else values
+    lines = []
+    try:
+        with _native_quiet() as lines:
+            return _read_rows(path, np.asarray(rows, dtype=int).reshape(-1))
+    except SkyfitError:
+        raise
+    except MemoryError:
+        raise
+    except Exception as exc:             # noqa: BLE001 -- RuntimeError, OSError, ValueError..
+        raise _fail(path, exc, lines) from None
+
+
+def _read_rows(path, rows):
+    """:func:`read_exr`'s rows (module doc): each needed chunk once, neighbouring chunks in one
+    call of OpenEXR's scanline reader (its ``InputFile``; where the bindings no longer have
+    it, the whole image)."""
+    import OpenEXR
+
+    with OpenEXR.File(path, header_only=True) as f:
+        order, (h, w), y0, lines = _layout(dict(f.header()))
+    if rows.size and (rows.min() < 0 or rows.max() >= h):
+        bad = rows[(rows < 0) | (rows >= h)][0]
+        raise SkyfitError(f"cannot read row {bad} of {path}: it has rows 0 to {h - 1}")
+    if not hasattr(OpenEXR, "InputFile"):                 # a future release without it
+        with OpenEXR.File(path, separate_channels=True) as f:
+            chans = f.channels()
+            return _stack([chans[n].pixels[rows] for n in order])
+    import Imath
+
+    chunks = np.unique(rows // lines)
+    # runs of consecutive chunks: [first chunk, last chunk]
+    breaks = np.flatnonzero(np.diff(chunks) > 1)
+    starts = np.concatenate([chunks[:1], chunks[breaks + 1]])
+    ends = np.concatenate([chunks[breaks], chunks[-1:]])
+    out = np.empty((rows.size, w, len(order)), np.float32)
+    pt = Imath.PixelType(Imath.PixelType.FLOAT)
+    src = OpenEXR.InputFile(path)
+    try:
+        for a, b in zip(starts, ends):
+            r0, r1 = int(a * lines), int(min(h - 1, b * lines + lines - 1))
+            data = src.channels(order, pt, y0 + r0, y0 + r1)
+            run = np.stack([np.frombuffer(buf, np.float32).reshape(r1 - r0 + 1, w)
+                            for buf in data], axis=-1)
+            inside = (rows >= r0) & (rows <= r1)
+            out[inside] = run[rows[inside] - r0]
+    finally:
+        src.close()
+    return out[..., 0] if len(order) == 1 else out
+
+
+def read_exr_pixels(path, pixels):
+    """The values of ``pixels`` ((P, 2) x, y) of OpenEXR ``path``: (P, C) float32 ((P,) for one
+    channel), reading only their rows (:func:`read_exr`)."""
+    px = np.asarray(pixels, dtype=int).reshape(-1, 2)
+    rows, at = np.unique(px[:, 1], return_inverse=True)
+    img = read_exr(path, rows)
+    return img[at.reshape(-1), px[:, 0]]
+
+
+def check_exr_shape(path, shape, found):
+    """SkyfitError unless an EXR's image shape ``found`` (H, W[, C]) is ``shape`` (H, W, 3)."""
+    if tuple(found) != tuple(shape):
+        raise SkyfitError(f"{path} is {found[1]}x{found[0]} with "
+                          f"{found[2] if len(found) == 3 else 1} channels, not the camera's "
                           f"{shape[1]}x{shape[0]} RGB")
-    return img
+
+
+def check_exr(path, shape):
+    """SkyfitError of one line unless ``path`` is an OpenEXR of ``shape`` (H, W, 3) whose
+    chunks are all present (its chunk table whole: not cut short), from its header and chunk
+    table alone; damage inside a chunk shows only when its pixels are read."""
+    import OpenEXR
+
+    check_exr_shape(path, shape, read_exr_shape(path))
+    if not hasattr(OpenEXR, "InputFile"):
+        return
+    lines, complete = [], False
+    try:
+        with _native_quiet() as lines:
+            src = OpenEXR.InputFile(str(path))
+            try:
+                complete = src.isComplete()
+            finally:
+                src.close()
+    except Exception as exc:             # noqa: BLE001 -- RuntimeError, OSError, ValueError..
+        raise _fail(path, exc, lines) from None
+    if not complete:
+        raise SkyfitError(f"cannot read {path}: a truncated OpenEXR file (some of its chunks "
+                          "are missing)")
+
+
+def read_exr_checked(path, shape, pixels=None):
+    """:func:`read_exr` (``pixels``: only those, (P, 2) x, y -> (P, 3), :func:`read_exr_pixels`),
+    raising SkyfitError (naming the file and what is wrong) unless the file reads as an image
+    of ``shape`` (H, W, 3)."""
+    if pixels is None:
+        img = read_exr(path)
+        check_exr_shape(path, shape, img.shape)
+        return img
+    check_exr_shape(path, shape, read_exr_shape(path))
+    return read_exr_pixels(path, pixels)
 
 
 def to_srgb8(image, exposure):
