@@ -108,14 +108,14 @@ def test_light_traced_in_blocks_agrees_with_one_block(traced):
     """A small budget splits the trace into blocks of points and frames, each with its own
     seed: the table has the same layout, and its radiance agrees with the one-block table's
     within their Monte Carlo errors."""
-    from skyfit_mi.render.basis_table import TableModel, trace_table
-    from skyfit_mi.render.fit_model import WardModel
+    from skyfit_mi.render.basis_table import TableModel, trace_basis
+    from skyfit_mi.render.light_cache import CacheOptions
 
     s, _, _, table = traced
     opts = s._cache_options()
     budget = 5 * 13 * opts["positions"] * opts["directions"]        # 5 pixels of all frames
-    blocks, n = trace_table(s.scene, s.params, s.skies, s.obs.pixels, "disc",
-                            lambda c: WardModel(c, "colour"), budget=budget, **opts)
+    (blocks,), _, n = trace_basis(s.scene, s.params, [s.skies], s.obs.pixels, "disc",
+                                  CacheOptions(**opts), budget, "colour")
     assert n == 4 and blocks.shape == table.shape and blocks.hit.all()
     theta = np.array([0.5, 0.6, 0.7, 0.25, 0.1])
     (a, va), (b, vb) = (TableModel(t, "colour").radiance_and_variance(theta)
@@ -208,10 +208,7 @@ def test_a_mix_of_lights_traced_with_shared_samples_keeps_their_covariances(days
     _, rest, *variants = (light[3:6] for light in s._sky_parts(shape=True))
     caches = build_light_cache(s.scene, s.params, rest, s.obs.pixels[:8], "disc",
                                positions=8, directions=64, seed=5, others=variants)
-
-    def model_of(cache, others=()):
-        return WardModel(cache, "colour", others=others)
-    tables, cov = tabulate_group(caches, model_of)
+    tables, cov = tabulate_group(caches, "colour")
     assert cov.pairs == [(0, 1), (0, 2), (1, 2)]
     w = [0.7, np.array([0.2, 0.5, 0.9]), -0.3]                  # one weight per frame too
 
@@ -219,7 +216,7 @@ def test_a_mix_of_lights_traced_with_shared_samples_keeps_their_covariances(days
         return np.reshape(x, (1, -1) + (1,) * (ndim - 2)) if np.ndim(x) else x
     mix = replace(caches[0], **{k: sum(per_frame(wj, getattr(c, k).ndim) * getattr(c, k)
                                        for wj, c in zip(w, caches)) for k in OWN_ARRAYS})
-    want = tabulate(mix, model_of(mix))
+    want = tabulate(mix, WardModel(mix, "colour"))
     got = mixed(tables[0], tables[1:], w[1:], w[0], cov)
     for k in ("D", "G0", "G1"):
         x, y = getattr(got, k), getattr(want, k)

@@ -29,11 +29,11 @@ from ..errors import SkyfitError, check_choice
 from .sky_fit import SkyFit, SkyShare, fit_sky_scale, shape_variants, skies_at_level, sky_level_at
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, block_budget, memory_estimate,
-                                  mixed, shared_budget, trace_table, trace_tables)
-from ..render.fit_model import (BY_COUNT, PARAMETERS, WardModel, bounds, check_fit_normalisation,
+                                  mixed, shared_budget, trace_basis)
+from ..render.fit_model import (BY_COUNT, PARAMETERS, bounds, check_fit_normalisation,
                                 check_start, other_readings)
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
-                                  SKY_PLANS, PointRays, anchors_pay,
+                                  SKY_PLANS, CacheOptions, PointRays, anchors_pay,
                                   build_light_cache)
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, is_table, load_manifest
 from ..pipeline.observation_table import relative_scale
@@ -292,21 +292,20 @@ class FitSession:
                 f"fitting {len(at)} points in {len(self.skies)} frames needs up to "
                 f"{need / 2**30:.1f} GB, but this machine has {have / 2**30:.1f} GB available; "
                 "fit fewer pixels (--max-pixels) or frames (--frames), or a region at a time.")
-        def model_of(cache, others=()):
-            return WardModel(cache, self.model, self.normalisation, others)
+        options = CacheOptions(**self._cache_options())
         if not light.split:
-            table, c["blocks"] = trace_table(self.scene, self.params, self.skies, at, bsdf_id,
-                                             model_of, **self._cache_options())
-            return [table], None
-        options = self._cache_options()
-        seeds = np.random.SeedSequence(options.pop("seed")).generate_state(2).tolist()
-        # the sun's part in the blocks of the rest's group (trace_tables), whose series mix
+            tables, _, c["blocks"] = trace_basis(self.scene, self.params, [self.skies], at,
+                                                 bsdf_id, options, model=self.model)
+            return tables, None
+        seeds = np.random.SeedSequence(options.seed).generate_state(2).tolist()
+        # the sun's part in the blocks of the rest's group (shared_budget), whose series mix
         budget = block_budget(len(at), len(self.skies), c["positions"])
         parts = []
         for group, seed, b in zip((lights[:1], lights[1:]), seeds,
                                   (shared_budget(budget, len(lights[1:])), budget)):
-            tables, cov, c["blocks"] = trace_tables(self.scene, self.params, group, at, bsdf_id,
-                                                    model_of, seed=int(seed), budget=b, **options)
+            tables, cov, c["blocks"] = trace_basis(self.scene, self.params, group, at, bsdf_id,
+                                                   replace(options, seed=int(seed)), b,
+                                                   self.model)
             parts += tables
         # the covariances' pairs as indices into the parts (the sun's first)
         return parts, None if cov is None else replace(cov, pairs=[(j + 1, k + 1)

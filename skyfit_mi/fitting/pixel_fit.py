@@ -15,7 +15,7 @@ grid does), which limits sigma_alpha to the grid's spacing (8% steps) and rho_s 
 The light is cached with fewer samples than a region fit's (MAP_CACHE; the sky's integrals
 through each pixel's centre, interpolated between anchors where that is accurate: the
 ``anchors`` plan of :data:`~skyfit_mi.render.light_cache.SKY_PLANS`) and kept as its table
-(:func:`~skyfit_mi.render.basis_table.trace_table`, in blocks of bounded memory whatever the
+(:func:`~skyfit_mi.render.basis_table.trace_basis`, in blocks of bounded memory whatever the
 frames), and the cache's own Monte Carlo error is measured per pixel from its two halves
 (each fitted alike) and added to the intervals in quadrature, as are a photographed
 sequence's calibration error
@@ -43,8 +43,9 @@ import numpy as np
 from ..errors import SkyfitError
 from ..pipeline.manifest import frame_sky, load_manifest
 from ..render import setup
-from ..render.basis_table import TableModel, trace_table
-from ..render.fit_model import PARAMETERS, WardModel, bounds, reflectances
+from ..render.basis_table import TableModel, trace_basis
+from ..render.fit_model import PARAMETERS, bounds, reflectances
+from ..render.light_cache import CacheOptions
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
                                     grid_chi2_device, linear_curvature, near_saturation)
@@ -136,11 +137,10 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     skies = [frame_sky(frames[i], root) for i in obs.frames]
     if light is not None:
         skies = skies_at_level(skies, light["sky"], obs.times)
-    table, _ = trace_table(scene, mi.traverse(scene), skies, pixels, materials,
-                           lambda block_cache: WardModel(block_cache, model, normalisation),
-                           positions=cache[0], directions=cache[1], seed=seed,
-                           max_depth=max(1, int(doc["render"]["max_depth"]) - 1),
-                           normalisation=normalisation, plan="anchors")
+    options = CacheOptions(cache[0], cache[1], seed,
+                           max(1, int(doc["render"]["max_depth"]) - 1), normalisation, "anchors")
+    (table,), _, _ = trace_basis(scene, mi.traverse(scene), [skies], pixels, materials, options,
+                                 model=model)
     wm = TableModel(table, model)
     usable = usable_values(obs, table.hit)
     # every usable value's weight, and the grid's: values near saturation left out of it

@@ -21,13 +21,13 @@ their covariances of D and G at a few roughness values (``VARIANCE_DEGREES``): t
 variance of rho_d D + s G is bilinear in the reflectances.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .fit_model import PARAMETERS, reflectances
-from .light_cache import (CONTROL_FULL, CONTROL_SIGMA, DIRECTIONS, POSITIONS, SIGMA_LARGEST,
-                          SIGMA_RESOLVED, PointRays, build_light_cache)
+from .fit_model import PARAMETERS, WardModel, reflectances
+from .light_cache import (CONTROL_FULL, CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
+                          CacheOptions, PointRays, light_caches)
 
 #: The smooth pieces of G(sigma) above SIGMA_RESOLVED (log sigma ends) and the first degree
 #: of each piece's Chebyshev series: doubled (the Lobatto nodes are nested, so every value is
@@ -44,7 +44,7 @@ DEGREES, MAX_DEGREE, TABLE_RTOL, CHECKS = (16, 6, 32), 64, 1e-5, 3
 #: except where a lobe starts to take in the sun (the narrow piece, kept denser; within
 #: 0.7-1.4x of the positions' own there, tests/test_basis_table.py).
 VARIANCE_DEGREES = (16, 3, 8)
-#: Light-cache samples traced and tabulated at once (:func:`trace_table`): 140 bytes each at
+#: Light-cache samples traced and tabulated at once (:func:`trace_basis`): 140 bytes each at
 #: the peak (the cache's arrays, the model's Dr.Jit copies and the tracer's; 3.4 million
 #: samples in one block peaked 475 MB above a one-pixel fit, tests/test_memory.py), so a
 #: block takes about 0.6 GB.
@@ -112,7 +112,7 @@ def _within(part, whole):
 @dataclass
 class Series:
     """One piece's Chebyshev coefficients of G in log sigma, kept in the blocks they were
-    traced in (:func:`trace_table`): each block of pixels x frames keeps the degree its own
+    traced in (:func:`trace_basis`): each block of pixels x frames keeps the degree its own
     light needed, so no block is padded to another's degree and the table is never copied
     into one array.
 
@@ -364,7 +364,7 @@ def tabulate(cache, wm, keep=None):
 @dataclass
 class Covariances:
     """The covariances between the tables of lights traced with one trace's samples
-    (:func:`trace_tables`), which :func:`mixed` adds to their variances: for each pair j < k
+    (:func:`trace_basis`), which :func:`mixed` adds to their variances: for each pair j < k
     of ``pairs`` (indices into the lights), as a :class:`BasisTable`'s VDD, VDG and VGG (over
     the positions' estimates / S):
 
@@ -401,13 +401,13 @@ class Covariances:
             _cut(getattr(self, k), a, rows, frames)[...] = getattr(block, k)
 
 
-def tabulate_group(caches, model_of):
+def tabulate_group(caches, model, normalisation="ward"):
     """The :class:`BasisTable` of each of ``caches`` (light caches of one trace's samples,
     :func:`~.light_cache.build_light_cache`'s ``others``), tabulated together through one
-    WardModel ``model_of(caches[0], caches[1:])`` (the lobe evaluated once for all), and the
-    :class:`Covariances` between them, from their positions' shares."""
+    :class:`~.fit_model.WardModel` of ``model`` and ``normalisation`` (the lobe evaluated once
+    for all), and the :class:`Covariances` between them, from their positions' shares."""
     keep = {}
-    whole = tabulate(caches[0], model_of(caches[0], caches[1:]), keep)
+    whole = tabulate(caches[0], WardModel(caches[0], model, normalisation, caches[1:]), keep)
     P, T = caches[0].hit.shape
     S, sigmas = keep["D"].shape[2], [float(v) for v in variance_sigmas()]
     cov = Covariances.empty(len(caches), P, T)
@@ -482,7 +482,7 @@ def block_budget(P, T, positions):
 
 def shared_budget(budget, lights):
     """A block's samples where ``lights`` lights share one trace's samples
-    (:func:`trace_tables`) for a ``budget`` of one light's: each light's own arrays and its
+    (:func:`trace_basis`) for a ``budget`` of one light's: each light's own arrays and its
     tabulation's shares take about a light's memory again.  (Half the budget for the board's
     three: its shape fit no faster, 150 s, and its peak 1.00 GB, not 0.80.)"""
     return int(budget // lights)
@@ -561,104 +561,86 @@ def mixed(a, others, weights, a_weight=1.0, covariances=None):
                       hit, a.sun_half_cos, a.normalisation)
 
 
-def _traced_blocks(scene, params, lights, at, bsdf_id, seed, positions, directions, budget,
-                   options):
-    """The light cache of points ``at`` under ``lights`` (lists of skies, one per frame; the
-    others traced with the first's samples, build_light_cache's ``others``) traced block by
-    block (see :func:`trace_table`): yields (rows, frames, cache, or with several lights a
-    list of caches) and the number of blocks first."""
-    rays = at if isinstance(at, PointRays) else None
-    P, T = len(at), len(lights[0])
-    ids = np.broadcast_to(np.asarray(bsdf_id, dtype=object), (P,))
-    blocks = chunks(P, T, int(positions) * int(directions),
-                    budget or block_budget(P, T, positions))
-    seeds = [seed] if len(blocks) == 1 else \
-        np.random.SeedSequence(seed).generate_state(len(blocks)).tolist()
-    yield len(blocks)
-    for (rows, frames), s in zip(blocks, seeds):
-        if rays is None:
-            where = np.asarray(at)[rows]
-        else:
-            where = PointRays(rays.origins[rows, frames], rays.directions[rows, frames])
-        yield rows, frames, build_light_cache(scene, params, lights[0][frames], where, ids[rows],
-                                              positions=positions, directions=directions,
-                                              seed=int(s), others=[o[frames] for o in lights[1:]],
-                                              **options)
-    # Dr.Jit keeps freed buffers for reuse: the last block's, not needed once the light is
-    # tabulated (a 1,000-point table's trace: 206 MB of a 1.1 GB process)
+def trace_basis(scene, params, lights, at, bsdf_id, options=CacheOptions(), budget=None,
+                model="two", diffuse_only=False):
+    """The tables of points ``at`` (pixels (P, 2) or :class:`~.light_cache.PointRays`) on
+    material ``bsdf_id`` (one, or one per point) under ``lights`` (each a list of skies, one
+    per frame; the lights after the first traced on its samples,
+    :func:`~.light_cache.light_caches`): the light cache traced with ``options``
+    (:class:`~.light_cache.CacheOptions`) and tabulated block by block (:func:`chunks`,
+    ``budget`` samples each for one light, :func:`block_budget` by default; several lights'
+    blocks take :func:`shared_budget` of it), so that memory stays bounded whatever the
+    points and frames.  Each block's caches are tabulated through the
+    :class:`~.fit_model.WardModel` of ``model`` and ``options.normalisation``
+    (:func:`tabulate`, :func:`tabulate_group`).  One block takes ``options.seed`` itself (the
+    same samples as an untabulated cache); several take seeds drawn from it.
+
+    Returns (tables, covariances, blocks): each light's :class:`BasisTable`, the
+    :class:`Covariances` between them (None for one light) and the number of blocks.  With
+    ``diffuse_only`` each light's diffuse basis alone instead of its table (a white
+    Lambertian's radiance, thesis eq. 3.19's rho_d term at rho_d = 1), without the lobe's
+    table: (D, its Monte Carlo variance), (P, T, 3) each [W m^-2 sr^-1] and
+    [(W m^-2 sr^-1)^2]; covariances None.
+    """
     import drjit as dr
 
-    dr.flush_malloc_cache()
-
-
-def trace_table(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
-                directions=DIRECTIONS, budget=None, **options):
-    """The :class:`BasisTable` of points ``at`` (pixels (P, 2) or
-    :class:`~.light_cache.PointRays`) on material ``bsdf_id`` (one, or one per point) under
-    ``skies``: the light cache traced (:func:`~.light_cache.build_light_cache`, ``options``
-    its own) and tabulated block by block (:func:`chunks`, ``budget`` samples each,
-    :func:`block_budget` by default), so that memory stays bounded whatever the points and
-    frames.  ``model_of(cache)`` makes the :class:`~.fit_model.WardModel` of a block's cache.
-    One block takes ``seed`` itself (the same samples as an untabulated cache); several take
-    seeds drawn from it.
-
-    Returns the table and the number of blocks.
-    """
-    tables, _, n = trace_tables(scene, params, [skies], at, bsdf_id, model_of, seed, positions,
-                                directions, budget, **options)
-    return tables[0], n
-
-
-def trace_tables(scene, params, lights, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
-                 directions=DIRECTIONS, budget=None, **options):
-    """:func:`trace_table` of several ``lights`` (lists of skies, one per frame) with one
-    trace's samples (the first light's; build_light_cache's ``others``): their tables, the
-    :class:`Covariances` between them (None for one light) and the number of blocks;
-    ``model_of(cache, others)`` makes the model of several lights (:func:`tabulate_group`).
-    The other lights' own arrays take memory too: a block takes :func:`shared_budget` of
-    ``budget`` (or :func:`block_budget`)."""
+    P, T = len(at), len(lights[0])
+    ids = np.broadcast_to(np.asarray(bsdf_id, dtype=object), (P,))
     # each light's caches and the tables' shares take a block's memory again: smaller blocks
-    budget = shared_budget(budget or block_budget(len(at), len(lights[0]), positions),
-                           len(lights))
-    traced = _traced_blocks(scene, params, lights, at, bsdf_id, seed, positions, directions,
-                            budget, options)
-    n, tables, cov = next(traced), None, None
-    for rows, frames, caches in traced:
-        if len(lights) > 1:
-            blocks, block_cov = tabulate_group(caches, model_of)
+    budget = shared_budget(budget or block_budget(P, T, options.positions), len(lights))
+    blocks = chunks(P, T, int(options.positions) * int(options.directions), budget)
+    seeds = [options.seed] if len(blocks) == 1 else \
+        np.random.SeedSequence(options.seed).generate_state(len(blocks)).tolist()
+    tables = cov = None
+    for (rows, frames), seed in zip(blocks, seeds):
+        caches = light_caches(scene, params, [light[frames] for light in lights],
+                              _block_points(at, rows, frames), ids[rows],
+                              replace(options, seed=int(seed)))
+        if diffuse_only:
+            parts, part_cov = _diffuse_parts(caches, model, options.normalisation), None
+        elif len(caches) > 1:
+            parts, part_cov = tabulate_group(caches, model, options.normalisation)
         else:
-            blocks, block_cov = [tabulate(caches, model_of(caches))], None
+            parts = [tabulate(caches[0], WardModel(caches[0], model, options.normalisation))]
+            part_cov = None
         del caches
         if tables is None:
-            tables = [BasisTable.empty(len(at), len(lights[0]), b.sun_half_cos.shape[-1],
-                                       b.normalisation) for b in blocks]
-            cov = None if block_cov is None else Covariances.empty(len(lights), len(at),
-                                                                   len(lights[0]))
-        for table, block in zip(tables, blocks):
-            table.place(block, rows, frames)
+            tables = [(np.zeros((P, T, 3)), np.zeros((P, T, 3))) if diffuse_only else
+                      BasisTable.empty(P, T, b.sun_half_cos.shape[-1], b.normalisation)
+                      for b in parts]
+            cov = None if part_cov is None else Covariances.empty(len(lights), P, T)
+        for table, part in zip(tables, parts):
+            if diffuse_only:
+                for whole, block in zip(table, part):
+                    whole[rows, frames] = block
+            else:
+                table.place(part, rows, frames)
         if cov is not None:
-            cov.place(block_cov, rows, frames)
-    return tables, cov, n
+            cov.place(part_cov, rows, frames)
+    # Dr.Jit keeps freed buffers for reuse: the last block's, not needed once the light is
+    # tabulated (a 1,000-point table's trace: 206 MB of a 1.1 GB process)
+    dr.flush_malloc_cache()
+    return tables, cov, len(blocks)
 
 
-def trace_diffuse(scene, params, skies, at, bsdf_id, model_of, seed=0, positions=POSITIONS,
-                  directions=DIRECTIONS, budget=None, **options):
-    """The diffuse basis alone (a white Lambertian's radiance, thesis eq. 3.19's rho_d term
-    at rho_d = 1) of points ``at`` under ``skies``, traced in blocks as :func:`trace_table`
-    (its arguments), without the lobe's table: D and its Monte Carlo variance, (P, T, 3)
-    [W m^-2 sr^-1] and [(W m^-2 sr^-1)^2]."""
-    traced = _traced_blocks(scene, params, [skies], at, bsdf_id, seed, positions, directions,
-                            budget, options)
-    next(traced)
-    D, var = np.zeros((2, len(at), len(skies), 3))
-    for rows, frames, cache in traced:
-        wm = model_of(cache)
-        shares = wm._diffuse_shares()
-        S = shares.shape[2]
-        D[rows, frames] = shares.sum(axis=2)
-        if S > 1:
-            var[rows, frames] = np.var(shares * S, axis=2, ddof=1) / S
-    return D, var
+def _block_points(at, rows, frames):
+    """The points ``at`` (pixels or :class:`~.light_cache.PointRays`) of a block's ``rows``
+    and ``frames`` (a point's rays are per frame)."""
+    if isinstance(at, PointRays):
+        return PointRays(at.origins[rows, frames], at.directions[rows, frames])
+    return np.asarray(at)[rows]
+
+
+def _diffuse_parts(caches, model, normalisation):
+    """Each light's diffuse basis D and its Monte Carlo variance, (P, T, 3) each, from
+    ``caches`` (light caches of one trace's samples) through one WardModel: the positions'
+    shares summed, and their spread / S."""
+    wm = WardModel(caches[0], model, normalisation, caches[1:])
+    shares = wm._diffuse_shares()
+    P, S = len(caches[0].hit), shares.shape[2]
+    D = shares.sum(axis=2)
+    var = np.var(shares * S, axis=2, ddof=1) / S if S > 1 else np.zeros_like(D)
+    return [(D[m * P:(m + 1) * P], var[m * P:(m + 1) * P]) for m in range(len(caches))]
 
 
 #: The most roughness values whose lobe arrays (P, T, 3) a search takes at once, and the most

@@ -506,10 +506,39 @@ class _SharedSky:
         return [a[index] for a in self.arrays]
 
 
-def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS,
-                      directions=DIRECTIONS, seed=0, max_depth=3, normalisation="ward",
-                      plan="fit", stats=None, others=()):
-    """Trace the light arriving at ``pixels`` for every sky in ``skies``.
+@dataclass(frozen=True)
+class CacheOptions:
+    """How a light cache is traced (:func:`light_caches`): the same options, points and
+    lights give the same samples and the same cache.
+
+    positions, directions : samples per pixel: positions over the pixel's area, and light
+        directions at each
+    seed : int, the seed of every random choice (recorded by the caller)
+    max_depth : path depth for light arriving from the rest of the scene
+    normalisation : the Ward normalisation the cache's sky integrals are for (and the lobe
+        its table is made of, :func:`~.basis_table.trace_basis`)
+    plan : a :class:`SkyPlan` or its name in SKY_PLANS: where the sky's integrals (the
+        control variate's deterministic part) are taken; measured points take theirs once
+        (their positions are one ray)
+    """
+
+    positions: int = POSITIONS
+    directions: int = DIRECTIONS
+    seed: int = 0
+    max_depth: int = 3
+    normalisation: str = "ward"
+    plan: object = "fit"
+
+    @property
+    def sky_plan(self):
+        """The :class:`SkyPlan` of ``plan``."""
+        return SKY_PLANS[self.plan] if isinstance(self.plan, str) else self.plan
+
+
+def build_light_cache(scene, params, skies, pixels, bsdf_id, *settings, stats=None, others=(),
+                      **options):
+    """Trace the light arriving at ``pixels`` for every sky in ``skies``
+    (:func:`light_caches` of one light, or of it and ``others`` on its samples).
 
     Parameters
     ----------
@@ -518,14 +547,8 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     pixels : (P, 2) int array of (x, y) pixel coordinates, or :class:`PointRays` (measured
         points: one ray per point and frame)
     bsdf_id : str, the material whose surface the pixels must show, or one per pixel (P,)
-    positions, directions : samples per pixel: positions over the pixel's area,
-        and light directions at each
-    seed : int, the seed of every random choice (recorded by the caller)
-    max_depth : path depth for light arriving from the rest of the scene
-    normalisation : the Ward normalisation the cache's sky integrals are for
-    plan : a :class:`SkyPlan` or its name in SKY_PLANS: where the sky's integrals (the
-        control variate's deterministic part) are taken; measured points take theirs once
-        (their positions are one ray)
+    settings, options : the fields of :class:`CacheOptions` in its order or by name
+        (positions, directions, seed, max_depth, normalisation, plan)
     stats : None, or a dict that receives ``shared``, the number of (pixel, frame) pairs whose
         sky integrals were interpolated
     others : lights traced with this light's samples, each a list of skies without maps, one
@@ -534,7 +557,7 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         :func:`~skyfit_mi.physics.sky_shape.shape_variants`): they share every position,
         sampled direction and random number (each light's paths beyond the first bounce and
         its radiance its own) and the sky integrals' nodes, so their estimates are correlated
-        (:func:`~.basis_table.trace_tables` keeps the covariances); each costs a small
+        (:func:`~.basis_table.trace_basis` keeps the covariances); each costs a small
         share of a trace of its own (the board's sky and two shape variants, tabulated:
         65 s, the sky alone 57 s)
 
@@ -542,18 +565,61 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
     -------
     LightCache, or with ``others`` a list of them: this light's, then each of theirs
     """
+    caches = light_caches(scene, params, [skies, *others], pixels, bsdf_id,
+                          CacheOptions(*settings, **options), stats)
+    return caches if others else caches[0]
+
+
+def light_caches(scene, params, lights, at, bsdf_id, options=CacheOptions(), stats=None):
+    """The :class:`LightCache` of every light of ``lights`` (each a list of skies, one per
+    frame) at points ``at`` (pixels (P, 2) or :class:`PointRays`) on material ``bsdf_id``
+    (one, or one per point), traced with ``options`` (:class:`CacheOptions`); the lights
+    after the first on the first's samples (:func:`build_light_cache`'s ``others``).
+
+    Three steps: in each frame (a) :func:`sample_frame`, the positions and directions (rays
+    or pixels), and (c) :func:`trace_samples`, the light along them, the first light's and
+    then each other light's re-run on the same samples; after the frames (b)
+    :func:`sky_plan_integrals`, the sky function's integrals where the named plan
+    (``options.plan``, SKY_PLANS) takes them.  ``stats`` as :func:`build_light_cache`'s.
+    Returns a list of caches, one per light.
+    """
     import drjit as dr
-    import mitsuba as mi
 
-    from .plugins.ward import glossy_pdf, sample_glossy     # a plugin: needs the variant set
+    skies, others = lights[0], lights[1:]
+    _check_shared(skies, others)
+    tr = _tracer(scene, at, bsdf_id, options)
+    layout = _sky_layout(tr, skies, options)
+    if stats is not None:
+        stats["shared"] = 0
+    rng = np.random.default_rng(options.seed)
+    outs = [{k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky",
+                             "mirror_cos", "hit", "sun_half_cos", "diffuse_sky", "lobe_sky")}]
+    # each light's own arrays (the first light's in outs[0], which holds the shared ones)
+    outs += [{k: [] for k in OWN_ARRAYS} for _ in others]
+    pending = []                      # per frame: (points, the shared sky's plan or None)
+    for t, sky in enumerate(skies):
+        update_sky(params, sky, "sky.")
+        samples = sample_frame(tr, sky, t, rng)
+        traced = [trace_samples(tr, samples)] + [trace_samples(tr, samples, light[t], params)
+                                                 for light in others]
+        shared, own, few = _frame_points(tr, layout, samples.si, sky, t)
+        weight, lm, lm_sky = traced[0]
+        dr.eval(samples.si.wi, samples.wl, weight, samples.inv_pdf, lm, lm_sky,  # together:
+                samples.sun, traced[1:],                                 # shared parts once
+                None if shared else (own.wi, own.sh_frame),
+                None if few is None else (few.wi, few.sh_frame))
+        _keep_frame(tr, outs, samples, traced, sky)
+        pending.append(_pending(layout, shared, own, few, sky))
+    sky_plan_integrals(tr, params, lights, layout, pending, outs, stats)
+    # each list freed once stacked
+    common = {k: np.stack(outs[0].pop(k), axis=1) for k in list(outs[0]) if k not in OWN_ARRAYS}
+    return [LightCache(**common, **{k: np.stack(o.pop(k), axis=1) for k in OWN_ARRAYS},
+                       normalisation=options.normalisation) for o in outs]
 
-    rays = pixels if isinstance(pixels, PointRays) else None
-    if rays is None:
-        pixels = np.asarray(pixels, dtype=int)
-        sensor = scene.sensors()[0]
-        w, h = sensor.film().crop_size()
-    P, S, K = len(pixels), int(positions), int(directions)
-    lights = [skies, *others]
+
+def _check_shared(skies, others):
+    """ValueError unless every light of ``others`` can be traced on the samples of ``skies``
+    (:func:`build_light_cache`'s ``others``)."""
     if others and any(len(light) != len(skies) or any(
             sky.envmap is not None or k.envmap is not None or _has_sun(sky) != _has_sun(k)
             or sky.ground_only != k.ground_only
@@ -561,34 +627,237 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
             for light in others):
         raise ValueError("the lights traced with a light's samples need one sky without a "
                          "map per frame of its, each with that frame's sun and ground")
-    emitter = scene.environment()
-    integrator = mi.load_dict({"type": "path", "max_depth": int(max_depth)})
+
+
+@dataclass
+class _Tracer:
+    """What every frame of one light cache's trace shares: Mitsuba and Dr.Jit, the scene, its
+    environment emitter (the sky, set frame by frame), the path integrator and the sampler;
+    the points (``pixels`` (P, 2) of the first sensor, of film ``size``, or ``rays``), S
+    positions and K directions each, and the material ``want`` (P,) each must show (the
+    ``target`` shapes carry it, ``ids`` their materials); ``repeat`` each position's index K
+    times."""
+
+    mi: object
+    dr: object
+    scene: object
+    emitter: object
+    integrator: object
+    sampler: object
+    pixels: np.ndarray
+    rays: PointRays
+    sensor: object
+    size: tuple
+    S: int
+    K: int
+    want: np.ndarray
+    target: list
+    ids: np.ndarray
+    repeat: object
+
+    @property
+    def P(self):
+        return len(self.want)
+
+
+def _tracer(scene, at, bsdf_id, options):
+    """The :class:`_Tracer` of points ``at`` (pixels (P, 2) or :class:`PointRays`) on material
+    ``bsdf_id`` (one, or one per point) with ``options``' samples and depth."""
+    import drjit as dr
+    import mitsuba as mi
+
+    rays = at if isinstance(at, PointRays) else None
+    pixels = sensor = size = None
+    if rays is None:
+        pixels = np.asarray(at, dtype=int)
+        sensor = scene.sensors()[0]
+        w, h = sensor.film().crop_size()
+        size = (w, h)
+    P, S, K = len(at), int(options.positions), int(options.directions)
+    integrator = mi.load_dict({"type": "path", "max_depth": int(options.max_depth)})
     # the material each pixel must show (one for all, or one per pixel: a map's chunk)
     want = np.broadcast_to(np.asarray(bsdf_id, dtype=object), (P,))
     target = [s for s in scene.shapes() if s.bsdf().id() in set(want)]
     missing = sorted(set(want) - {s.bsdf().id() for s in target})
     if missing:
         raise ValueError(f"no shape of the scene uses material {missing[0]!r}")
-    want_s = np.repeat(want, S)
-
     if K - sum(max(1, int(round(MIX[k] * K))) for k in ("sun", "sky", "cosine")) \
             < len(LOBE_SIGMAS):
         raise ValueError(f"directions = {K} is too few; use at least 32")
-    n_comp = 3 + len(LOBE_SIGMAS)
+    return _Tracer(mi, dr, scene, scene.environment(), integrator,
+                   mi.load_dict({"type": "independent"}), pixels, rays, sensor, size, S, K,
+                   want, target, np.array([shape.bsdf().id() for shape in target], dtype=object),
+                   jit_array(mi.UInt32, np.repeat(np.arange(P * S), K)))
 
-    plan = SKY_PLANS[plan] if isinstance(plan, str) else plan
+
+@dataclass
+class _Samples:
+    """One frame's samples (:func:`sample_frame`), Dr.Jit values: the first interactions
+    ``si`` (P S) and each repeated K times ``sik``, the sampled directions ``d`` (world) and
+    ``wl`` (local), ``inv_pdf`` 1 / (p_mix N) [sr], the mirror rays ``ray_m`` (P S), whether
+    the solar disc lies along them (``sun_seen``), the sun's direction in each position's
+    local frame (``sun``), and the sampler's ``seeds`` of the directions' and the mirror
+    rays' paths."""
+
+    si: object
+    sik: object
+    d: object
+    wl: object
+    inv_pdf: object
+    ray_m: object
+    sun_seen: object
+    sun: object
+    seeds: list
+
+
+def sample_frame(tr, sky, t, rng):
+    """Step (a) of :func:`light_caches`: frame ``t``'s positions and light directions under
+    ``sky`` (the emitter's current sky, whose sun disc and sky table the directions sample),
+    from ``rng``, as :class:`_Samples`.
+
+    Pixels take S stratified positions each (primary rays jittered over the pixel); a
+    measured point's S positions are its frame's one ray.  At each position K directions
+    in fixed counts per component of the mixture (:func:`_components`: sun, sky, cosine and
+    the Ward lobes of LOBE_SIGMAS), stratified within each component's block, weighted by
+    the mixture's density (multi-sample MIS, balance heuristic).
+    """
+    from .plugins.ward import glossy_pdf, sample_glossy     # a plugin: needs the variant set
+
+    mi, dr, emitter = tr.mi, tr.dr, tr.emitter
+    P, S, K = tr.P, tr.S, tr.K
+    n_comp = 3 + len(LOBE_SIGMAS)
+    comp = _components(K, _has_sun(sky))
+    # each component's share of the directions, opaque: one kernel with and without a sun
+    frac = [opaque_value(mi.Float, np.sum(comp == c) / K) for c in range(n_comp)]
+    seeds = [opaque_value(mi.UInt32, int(rng.integers(2**31))) for _ in range(2)]
+    if tr.rays is None:
+        # primary rays: S stratified positions in each pixel
+        pos = (tr.pixels[:, None, :] + _stratified(rng, S)[None]).reshape(P * S, 2) \
+            / list(tr.size)
+        ray, _ = tr.sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
+                                      jit_array(mi.Point2f, pos[:, 0], pos[:, 1]),
+                                      mi.Point2f(0.5, 0.5))
+    else:
+        # a point's S positions are the same ray (a measured point has no pixel area)
+        o, d = (np.repeat(a[:, t], S, axis=0) for a in (tr.rays.origins, tr.rays.directions))
+        ray = mi.Ray3f(jit_array(mi.Point3f, *o.T), jit_array(mi.Vector3f, *d.T))
+    si = tr.scene.ray_intersect(ray)
+    sik = dr.gather(mi.SurfaceInteraction3f, si, tr.repeat)
+    # stratified within each component's block of directions
+    u = np.concatenate([_stratified(rng, int(np.sum(comp == c)), P * S)
+                        for c in range(n_comp)], axis=1).reshape(P * S * K, 2)
+    u2 = jit_array(mi.Point2f, u[:, 0], u[:, 1])
+    # candidate directions from every component, then pick each sample's own (the lobes
+    # as functions, not plugins: every registered BSDF is one more target of the path
+    # integrator's virtual calls, traced in every frame)
+    cands = [emitter.sample_sun(u2), emitter.sample_sky(u2),
+             sik.to_world(mi.warp.square_to_cosine_hemisphere(u2))]
+    cands += [sik.to_world(sample_glossy(sik.wi, u2, s)) for s in LOBE_SIGMAS]
+    cmask = jit_array(mi.UInt32, np.tile(comp, P * S))
+    d = cands[0]
+    for c in range(1, n_comp):
+        d = dr.select(cmask == c, cands[c], d)
+    # mixture density of each chosen direction under every component (balance heuristic)
+    wl = sik.to_local(d)
+    p_mix = frac[0] * emitter.pdf_sun(d) + frac[1] * emitter.pdf_sky(d) \
+        + frac[2] * dr.maximum(mi.Frame3f.cos_theta(wl), 0.0) * dr.inv_pi
+    facing = (mi.Frame3f.cos_theta(sik.wi) > 0) & (mi.Frame3f.cos_theta(wl) > 0)
+    for j, s in enumerate(LOBE_SIGMAS):
+        p_mix += frac[3 + j] * dr.select(facing, glossy_pdf(sik.wi, wl, s), 0.0)
+    ok = (p_mix > 0) & (mi.Frame3f.cos_theta(wl) > 0)
+    inv_pdf = dr.select(ok, dr.rcp(dr.maximum(p_mix, 1e-30)) / (K * S), 0.0)
+    # mirror direction at each position, and whether the solar disc lies along it
+    ray_m = mi.RayDifferential3f(si.spawn_ray(si.to_world(mi.reflect(si.wi))))
+    sun_seen = ~tr.scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
+    sun = si.to_local(opaque_value(mi.Vector3f, sky.sun_direction))
+    return _Samples(si, sik, d, wl, inv_pdf, ray_m, sun_seen, sun, seeds)
+
+
+def trace_samples(tr, samples, sky=None, params=None):
+    """The light along one frame's ``samples`` (:func:`sample_frame`), Dr.Jit values: the
+    directions' weights (L_i - h) / (p_mix N) [W m^-2 sr^-1 sr] (the control variate's rest),
+    the mirror rays' L_i and their L_i without the solar disc, less h (the control variate's
+    constant) [W m^-2 sr^-1]; under the emitter's current sky, or (step (c) of
+    :func:`light_caches`) under ``sky``, set in the scene's ``params``: another light re-run
+    on the same positions, directions and random numbers (its paths beyond the first bounce
+    and its radiance its own)."""
+    mi, dr, emitter = tr.mi, tr.dr, tr.emitter
+    if sky is not None:
+        update_sky(params, sky, "sky.")
+    tr.sampler.seed(samples.seeds[0], tr.P * tr.S * tr.K)
+    li, _, _ = tr.integrator.sample(tr.scene, tr.sampler,
+                                    mi.RayDifferential3f(samples.sik.spawn_ray(samples.d)))
+    weight = (li - emitter.sky_eval(samples.d)) * samples.inv_pdf
+    tr.sampler.seed(samples.seeds[1], tr.P * tr.S)
+    lm, _, _ = tr.integrator.sample(tr.scene, tr.sampler, samples.ray_m)
+    lm_sky = lm - dr.select(samples.sun_seen, emitter.sun_radiance, 0.0) \
+        - emitter.sky_eval(samples.ray_m.d)
+    return weight, lm, lm_sky
+
+
+def _keep_frame(tr, outs, samples, traced, sky):
+    """Append one frame's arrays, evaluated, to the caches' lists ``outs`` (every light's own,
+    the first light's with the samples' shared ones): the frame's ``samples`` and each light's
+    ``traced`` light (:func:`trace_samples`) under frame sky ``sky``."""
+    P, S, K = tr.P, tr.S, tr.K
+
+    def np3(v, n):
+        return np.array(v, dtype=np.float32).T.reshape(P, n, 3)
+    sid = _shape_index(tr.mi, samples.si, tr.target)
+    on = (sid >= 0) & (np.repeat(tr.want, S) == tr.ids[np.maximum(sid, 0)])
+    view = np.array(samples.si.wi, dtype=float).T
+    out = outs[0]
+    out["wo"].append(np.repeat(view.astype(np.float32).reshape(P, S, 3), K, axis=1))
+    out["wi"].append(np3(samples.wl, S * K))
+    out["inv_pdf"].append(np.array(samples.inv_pdf, dtype=np.float32).reshape(P, S * K))
+    for o, (weight, lm, lm_sky) in zip(outs, traced):
+        o["weight"].append(np3(weight, S * K))
+        o["mirror_sky"].append(np3(lm_sky, S))
+        o["mirror"].append(np3(lm, S) / S)
+    out["mirror_cos"].append(view[:, 2].astype(np.float32).reshape(P, S))
+    out["hit"].append(on.reshape(P, S).all(axis=1))
+    out["sun_half_cos"].append(_sun_half_cos(np.array(samples.sun, dtype=float).T, view,
+                                             sky).reshape(P, S))
+
+
+@dataclass
+class _SkyLayout:
+    """Where one light cache takes the sky's integrals: its :class:`SkyPlan` made concrete for
+    its points (:func:`_sky_layout`).
+
+    quad : the quadrature on SIGMA_TABLE (:func:`~.sky_control.quadrature`)
+    is_wide : (M,) bool, the Chebyshev nodes a fit's plan takes at a few positions
+    share : a :class:`_SharedSky` where anchors pay, else None
+    subset : None (every position), or the Dr.Jit indices of the positions taking them
+    wide : whether the wide nodes and the diffuse integral are taken at ``kw`` positions of
+        each half (``wide_index``, under ``quads[0]``), the rest at every one (``quads[1]``);
+        settled by the first frame's footprints (:func:`_small_footprints`)
+    """
+
+    quad: dict
+    is_wide: np.ndarray
+    share: object = None
+    subset: object = None
+    wide: bool = False
+    kw: int = 0
+    wide_index: object = None
+    quads: tuple = None
+
+
+def _sky_layout(tr, skies, options):
+    """The :class:`_SkyLayout` of ``options``' plan for the points of ``tr`` under ``skies``."""
+    mi, P, S = tr.mi, tr.P, tr.S
+    plan = options.sky_plan
     share = None
-    if rays is None and anchors_pay(pixels, plan.spacing, w, h):
-        share = _SharedSky(mi, scene, sensor, pixels, int(plan.spacing), (w, h), target, want)
-    if stats is not None:
-        stats["shared"] = 0
-    rng = np.random.default_rng(seed)
-    quad = quadrature(*SIGMA_TABLE, normalisation)
+    if tr.rays is None and anchors_pay(tr.pixels, plan.spacing, *tr.size):
+        share = _SharedSky(mi, tr.scene, tr.sensor, tr.pixels, int(plan.spacing), tr.size,
+                           tr.target, tr.want)
+    quad = quadrature(*SIGMA_TABLE, options.normalisation)
     # the sky's integrals at every position, at the first k of each pixel's (a random subset
     # of its i.i.d. positions: their mean is still an unbiased estimate of the pixel's), or
     # shared between anchors (computed apart, with _SharedSky's own trace)
     k = S if plan.positions is None else min(max(1, int(plan.positions)), S)
-    if rays is not None:
+    if tr.rays is not None:
         k = 1            # a measured point's positions are one ray: its integrals are one
     subset = None if k >= S else jit_array(
         mi.UInt32, np.arange(P)[:, None] * S + np.arange(k)[None, :])
@@ -602,195 +871,131 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, positions=POSITIONS
         # lobes that straddle the horizon: every node is taken as a wide one (a tilted
         # plane's pixel means move 0.3% of the ground's share, tests/test_light_cache.py)
         is_wide[:] = True
-    wide = k >= S and share is None and 1 <= kw < half and 0 < is_wide.sum()
-    if wide:
+    layout = _SkyLayout(quad, is_wide, share, subset, kw=kw,
+                        wide=k >= S and share is None and 1 <= kw < half and 0 < is_wide.sum())
+    if layout.wide:
         cols = np.concatenate([np.arange(kw), half + np.arange(kw)])
-        wide_index = jit_array(mi.UInt32, (np.arange(P)[:, None] * S + cols[None, :]).ravel())
-        quads = (dict(quad, nodes=[n for n, w in zip(quad["nodes"], is_wide) if w]),
-                 dict(quad, nodes=[n for n, w in zip(quad["nodes"], is_wide) if not w],
-                      diffuse=None))
-    repeat = jit_array(mi.UInt32, np.repeat(np.arange(P * S), K))   # each position K times
-    sampler = mi.load_dict({"type": "independent"})
-    out = {k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky", "mirror_cos",
-                           "hit", "sun_half_cos", "diffuse_sky", "lobe_sky")}
-    # each light's own arrays (the first light's in ``out``, which holds the shared ones)
-    outs = [out] + [{k: [] for k in OWN_ARRAYS} for _ in others]
-    ids = np.array([shape.bsdf().id() for shape in target], dtype=object)
-    # the sky's integrals of every frame after the frames (below)
-    pending = []                          # per frame: (points, the shared sky's plan or None)
-    for t, sky in enumerate(skies):
-        update_sky(params, sky, "sky.")
-        comp = _components(K, _has_sun(sky))
-        # each component's share of the directions, opaque: one kernel with and without a sun
-        frac = [opaque_value(mi.Float, np.sum(comp == c) / K) for c in range(n_comp)]
-        seeds = [opaque_value(mi.UInt32, int(rng.integers(2**31))) for _ in range(2)]
-        if rays is None:
-            # primary rays: S stratified positions in each pixel
-            pos = (pixels[:, None, :] + _stratified(rng, S)[None]).reshape(P * S, 2) / [w, h]
-            ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
-                                       jit_array(mi.Point2f, pos[:, 0], pos[:, 1]),
-                                       mi.Point2f(0.5, 0.5))
-        else:
-            # a point's S positions are the same ray (a measured point has no pixel area)
-            o, d = (np.repeat(a[:, t], S, axis=0) for a in (rays.origins, rays.directions))
-            ray = mi.Ray3f(jit_array(mi.Point3f, *o.T), jit_array(mi.Vector3f, *d.T))
-        si = scene.ray_intersect(ray)
-        sik = dr.gather(mi.SurfaceInteraction3f, si, repeat)
-        # stratified within each component's block of directions
-        u = np.concatenate([_stratified(rng, int(np.sum(comp == c)), P * S)
-                            for c in range(n_comp)], axis=1).reshape(P * S * K, 2)
-        u2 = jit_array(mi.Point2f, u[:, 0], u[:, 1])
-        # candidate directions from every component, then pick each sample's own (the lobes
-        # as functions, not plugins: every registered BSDF is one more target of the path
-        # integrator's virtual calls, traced in every frame)
-        cands = [emitter.sample_sun(u2), emitter.sample_sky(u2),
-                 sik.to_world(mi.warp.square_to_cosine_hemisphere(u2))]
-        cands += [sik.to_world(sample_glossy(sik.wi, u2, s)) for s in LOBE_SIGMAS]
-        cmask = jit_array(mi.UInt32, np.tile(comp, P * S))
-        d = cands[0]
-        for c in range(1, n_comp):
-            d = dr.select(cmask == c, cands[c], d)
-        # mixture density of each chosen direction under every component (balance heuristic)
-        wl = sik.to_local(d)
-        p_mix = frac[0] * emitter.pdf_sun(d) + frac[1] * emitter.pdf_sky(d) \
-            + frac[2] * dr.maximum(mi.Frame3f.cos_theta(wl), 0.0) * dr.inv_pi
-        facing = (mi.Frame3f.cos_theta(sik.wi) > 0) & (mi.Frame3f.cos_theta(wl) > 0)
-        for j, s in enumerate(LOBE_SIGMAS):
-            p_mix += frac[3 + j] * dr.select(facing, glossy_pdf(sik.wi, wl, s), 0.0)
-        sampler.seed(seeds[0], P * S * K)
-        li, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(sik.spawn_ray(d)))
-        ok = (p_mix > 0) & (mi.Frame3f.cos_theta(wl) > 0)
-        inv_pdf = dr.select(ok, dr.rcp(dr.maximum(p_mix, 1e-30)) / (K * S), 0.0)
-        weight = (li - emitter.sky_eval(d)) * inv_pdf                # the control variate's rest
-        # mirror direction at each position
-        sampler.seed(seeds[1], P * S)
-        ray_m = mi.RayDifferential3f(si.spawn_ray(si.to_world(mi.reflect(si.wi))))
-        lm, _, _ = integrator.sample(scene, sampler, ray_m)
-        # the same without the solar disc: the control variate's constant
-        sun_seen = ~scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
-        lm_sky = lm - dr.select(sun_seen, emitter.sun_radiance, 0.0) - emitter.sky_eval(ray_m.d)
-        # the other lights along the same first rays, with the same random numbers beyond
-        theirs = []
-        for light in others:
-            update_sky(params, light[t], "sky.")
-            sampler.seed(seeds[0], P * S * K)
-            li_o, _, _ = integrator.sample(scene, sampler, mi.RayDifferential3f(sik.spawn_ray(d)))
-            sampler.seed(seeds[1], P * S)
-            lm_o, _, _ = integrator.sample(scene, sampler, ray_m)
-            theirs.append(((li_o - emitter.sky_eval(d)) * inv_pdf, lm_o,
-                           lm_o - dr.select(sun_seen, emitter.sun_radiance, 0.0)
-                           - emitter.sky_eval(ray_m.d)))
-        sun = si.to_local(opaque_value(mi.Vector3f, sky.sun_direction))
-        shared = share is not None and sky.envmap is None
-        own = None if shared else \
-            si if subset is None else dr.gather(mi.SurfaceInteraction3f, si, subset)
-        if wide and t == 0:             # the pixels' footprints, from the first frame's
-            wide = _small_footprints(                                  # positions
-                np.array(si.sh_frame.n, dtype=float).T,
-                np.array(si.to_world(mi.reflect(si.wi)), dtype=float).T, P, S)
-        few = dr.gather(mi.SurfaceInteraction3f, si, wide_index) if wide else None
-        dr.eval(si.wi, wl, weight, inv_pdf, lm, lm_sky, sun,       # together: shared parts once
-                theirs, None if shared else (own.wi, own.sh_frame),
-                None if few is None else (few.wi, few.sh_frame))
+        layout.wide_index = jit_array(mi.UInt32,
+                                      (np.arange(P)[:, None] * S + cols[None, :]).ravel())
+        layout.quads = (dict(quad, nodes=[n for n, w in zip(quad["nodes"], is_wide) if w]),
+                        dict(quad, nodes=[n for n, w in zip(quad["nodes"], is_wide) if not w],
+                             diffuse=None))
+    return layout
 
-        def np3(v, n):
-            return np.array(v, dtype=np.float32).T.reshape(P, n, 3)
-        sid = _shape_index(mi, si, target)
-        on = (sid >= 0) & (want_s == ids[np.maximum(sid, 0)])
-        view = np.array(si.wi, dtype=float).T
-        out["wo"].append(np.repeat(view.astype(np.float32).reshape(P, S, 3), K, axis=1))
-        out["wi"].append(np3(wl, S * K))
-        out["weight"].append(np3(weight, S * K))
-        out["inv_pdf"].append(np.array(inv_pdf, dtype=np.float32).reshape(P, S * K))
-        out["mirror_sky"].append(np3(lm_sky, S))
-        out["mirror"].append(np3(lm, S) / S)
-        for o, (w_o, lm_o, lm_sky_o) in zip(outs[1:], theirs):
-            o["weight"].append(np3(w_o, S * K))
-            o["mirror_sky"].append(np3(lm_sky_o, S))
-            o["mirror"].append(np3(lm_o, S) / S)
-        out["mirror_cos"].append(view[:, 2].astype(np.float32).reshape(P, S))
-        out["hit"].append(on.reshape(P, S).all(axis=1))
-        out["sun_half_cos"].append(_sun_half_cos(np.array(sun, dtype=float).T, view,
-                                                 sky).reshape(P, S))
-        if shared:
-            plan = share.plan(sky.sun_direction)
-            pending.append((share.points(plan[3]), plan))
-        elif wide:
-            pending.append(((_interaction_arrays(few), _interaction_arrays(own)), None))
-        else:
-            pending.append((_interaction_arrays(own), None))
-    # every frame's sky integrals in passes of up to SKY_PASS_POINTS points (at least a frame),
-    # each point under its own frame's sky (FrameSkies); a frame whose sky has a map alone,
-    # under the emitter set to that sky
-    def integrate(points, q, which):
-        """Per frame, :func:`_sky_values` under ``quad`` ``q`` at its ``points``, for each
-        light of ``which`` (indices into ``lights``): a list per light.  A pass's nodes hold
-        every light's values at once, so it goes in as many pieces as lights: its memory is
-        one light's."""
-        res, first = [[] for _ in which], 0
-        while first < len(points):
-            last, count = first + 1, len(points[first][0])
-            while last < len(points) and skies[first].envmap is None \
-                    and skies[last].envmap is None \
-                    and count + len(points[last][0]) <= SKY_PASS_POINTS:
-                count += len(points[last][0])
-                last += 1
-            sizes = [len(p[0]) for p in points[first:last]]
-            cols = [np.concatenate(a) for a in zip(*points[first:last])]
-            frame = np.repeat(np.arange(last - first), sizes)
-            got = [[] for _ in which]
-            for piece in np.array_split(np.arange(len(frame)), min(len(which), len(frame))):
-                at = _interactions(mi, dr, *(c[piece] for c in cols))
-                if skies[first].envmap is None:
-                    light = [FrameSkies(lights[i][first:last], frame[piece]) for i in which]
-                else:                               # one light (others take no maps)
-                    update_sky(params, skies[first], "sky.")
-                    light = [emitter]
-                for g, values in zip(got, _sky_values(light, at, q)):
-                    g.append(values)
-            cut = np.cumsum(sizes)[:-1]
-            for r, pieces in zip(res, got):
-                d, v = ([p[i] for p in pieces] for i in (0, 1))
-                r += zip([None] * len(sizes) if d[0] is None else np.split(np.concatenate(d), cut),
-                         np.split(np.concatenate(v), cut))
-            first = last
-        return res
 
+def _frame_points(tr, layout, si, sky, t):
+    """The interactions of frame ``t`` (``si``, under ``sky``) whose sky integrals ``layout``
+    takes, Dr.Jit values: (shared, whether the anchors' are; own, those at the plan's
+    positions, or None where shared; few, those at the wide nodes' positions, or None); the
+    first frame settles ``layout.wide`` by the pixels' footprints."""
+    mi, dr = tr.mi, tr.dr
+    shared = layout.share is not None and sky.envmap is None
+    own = None if shared else \
+        si if layout.subset is None else dr.gather(mi.SurfaceInteraction3f, si, layout.subset)
+    if layout.wide and t == 0:             # the pixels' footprints, from the first frame's
+        layout.wide = _small_footprints(                                 # positions
+            np.array(si.sh_frame.n, dtype=float).T,
+            np.array(si.to_world(mi.reflect(si.wi)), dtype=float).T, tr.P, tr.S)
+    few = dr.gather(mi.SurfaceInteraction3f, si, layout.wide_index) if layout.wide else None
+    return shared, own, few
+
+
+def _pending(layout, shared, own, few, sky):
+    """A frame's points for :func:`sky_plan_integrals` (from :func:`_frame_points`,
+    evaluated): (the points' :func:`_interaction_arrays`, or with ``layout.wide`` the few
+    positions' and every one's; the shared sky's plan under ``sky`` or None)."""
+    if shared:
+        plan = layout.share.plan(sky.sun_direction)
+        return layout.share.points(plan[3]), plan
+    if layout.wide:
+        return (_interaction_arrays(few), _interaction_arrays(own)), None
+    return _interaction_arrays(own), None
+
+
+def sky_plan_integrals(tr, params, lights, layout, pending, outs, stats=None):
+    """Step (b) of :func:`light_caches`: the sky function's integrals (I_d and I_s's
+    coefficients, :mod:`.sky_control`) of every light at every frame's ``pending`` points
+    (:func:`_pending`) where ``layout`` takes them, appended to each light's lists ``outs``;
+    ``stats['shared']`` counts the first light's interpolated (pixel, frame) pairs."""
+    P, S = tr.P, tr.S
     # the sun alone (Sky.split's first part) has a sky function of zero, so are its integrals
     lit = [i for i, light in enumerate(lights) if any(sky.lit_by_sky for sky in light)]
     for i in set(range(len(lights))) - set(lit):
         for _ in pending:
-            _add_sky(outs[i], np.zeros((P, 3)), np.zeros((P, len(is_wide), 3)), P, S)
-    if lit and wide:
-        narrow = integrate([p[1] for p, _ in pending], quads[1], lit) \
-            if not is_wide.all() else [[(None, None)] * len(pending)] * len(lit)
-        for i, wides, narrows in zip(lit, integrate([p[0] for p, _ in pending], quads[0], lit),
-                                     narrow):
-            for (d, v_wide), (_, v_narrow) in zip(wides, narrows):
-                # each half's mean over its k / 2 positions, given to the half's positions
-                d, v_wide = (np.repeat(a.reshape(P, 2, kw, *a.shape[1:]).mean(axis=2),
-                                       [half, S - half], axis=1) for a in (d, v_wide))
-                values = np.empty((P, S, len(is_wide), 3))
-                values[:, :, is_wide] = v_wide
-                if v_narrow is not None:
-                    values[:, :, ~is_wide] = v_narrow.reshape(P, S, -1, 3)
-                _add_sky(outs[i], d.reshape(P * S, 3),
-                         chebyshev_coefficients(values, axis=2).reshape(P * S, len(is_wide), 3),
-                         P, S)
+            _add_sky(outs[i], np.zeros((P, 3)), np.zeros((P, len(layout.is_wide), 3)), P, S)
+    if lit and layout.wide:
+        _wide_integrals(tr, params, lights, layout, pending, outs, lit)
     elif lit:
-        for i, each in zip(lit, integrate([p for p, _ in pending], quad, lit)):
+        for i, each in zip(lit, _integrate(tr, params, lights, [p for p, _ in pending],
+                                           layout.quad, lit)):
             for (_, plan), (d, v) in zip(pending, each):
                 c = chebyshev_coefficients(v, axis=1)
                 if plan is not None:
-                    d, c, n_shared = share.combine(plan, d, c)
+                    d, c, n_shared = layout.share.combine(plan, d, c)
                     if stats is not None and i == 0:
                         stats["shared"] += n_shared
                 _add_sky(outs[i], d, c, P, S)
-    # each list freed once stacked
-    common = {k: np.stack(out.pop(k), axis=1) for k in list(out) if k not in OWN_ARRAYS}
-    caches = [LightCache(**common, **{k: np.stack(o.pop(k), axis=1) for k in OWN_ARRAYS},
-                         normalisation=normalisation) for o in outs]
-    return caches if others else caches[0]
+
+
+def _wide_integrals(tr, params, lights, layout, pending, outs, lit):
+    """:func:`sky_plan_integrals` of a fit's plan (``layout.wide``): the diffuse integral and
+    the wide nodes at ``layout.kw`` positions of each half, each half's mean given to its
+    positions, the narrow nodes at every position; for the lights ``lit``."""
+    P, S, is_wide, kw = tr.P, tr.S, layout.is_wide, layout.kw
+    half = S // 2
+    narrow = _integrate(tr, params, lights, [p[1] for p, _ in pending], layout.quads[1], lit) \
+        if not is_wide.all() else [[(None, None)] * len(pending)] * len(lit)
+    wide = _integrate(tr, params, lights, [p[0] for p, _ in pending], layout.quads[0], lit)
+    for i, wides, narrows in zip(lit, wide, narrow):
+        for (d, v_wide), (_, v_narrow) in zip(wides, narrows):
+            # each half's mean over its k / 2 positions, given to the half's positions
+            d, v_wide = (np.repeat(a.reshape(P, 2, kw, *a.shape[1:]).mean(axis=2),
+                                   [half, S - half], axis=1) for a in (d, v_wide))
+            values = np.empty((P, S, len(is_wide), 3))
+            values[:, :, is_wide] = v_wide
+            if v_narrow is not None:
+                values[:, :, ~is_wide] = v_narrow.reshape(P, S, -1, 3)
+            _add_sky(outs[i], d.reshape(P * S, 3),
+                     chebyshev_coefficients(values, axis=2).reshape(P * S, len(is_wide), 3),
+                     P, S)
+
+
+def _integrate(tr, params, lights, points, q, which):
+    """Per frame, :func:`_sky_values` under ``quad`` ``q`` at its ``points`` (each frame's
+    :func:`_interaction_arrays`), for each light of ``which`` (indices into ``lights``): a
+    list per light.  Every frame's, in passes of up to SKY_PASS_POINTS points (at least a
+    frame), each point under its own frame's sky (FrameSkies); a frame whose sky has a map
+    alone, under the emitter set to that sky.  A pass's nodes hold every light's values at
+    once, so it goes in as many pieces as lights: its memory is one light's."""
+    skies = lights[0]
+    res, first = [[] for _ in which], 0
+    while first < len(points):
+        last, count = first + 1, len(points[first][0])
+        while last < len(points) and skies[first].envmap is None \
+                and skies[last].envmap is None \
+                and count + len(points[last][0]) <= SKY_PASS_POINTS:
+            count += len(points[last][0])
+            last += 1
+        sizes = [len(p[0]) for p in points[first:last]]
+        cols = [np.concatenate(a) for a in zip(*points[first:last])]
+        frame = np.repeat(np.arange(last - first), sizes)
+        got = [[] for _ in which]
+        for piece in np.array_split(np.arange(len(frame)), min(len(which), len(frame))):
+            at = _interactions(tr.mi, tr.dr, *(c[piece] for c in cols))
+            if skies[first].envmap is None:
+                light = [FrameSkies(lights[i][first:last], frame[piece]) for i in which]
+            else:                               # one light (others take no maps)
+                update_sky(params, skies[first], "sky.")
+                light = [tr.emitter]
+            for g, values in zip(got, _sky_values(light, at, q)):
+                g.append(values)
+        cut = np.cumsum(sizes)[:-1]
+        for r, pieces in zip(res, got):
+            d, v = ([p[i] for p in pieces] for i in (0, 1))
+            r += zip([None] * len(sizes) if d[0] is None else np.split(np.concatenate(d), cut),
+                     np.split(np.concatenate(v), cut))
+        first = last
+    return res
 
 
 def _small_footprints(normals, mirrors, P, S):

@@ -4,10 +4,9 @@ the light a white Lambertian surface reflects there (an observation table's refe
 import numpy as np
 
 from . import setup
-from .basis_table import trace_diffuse
+from .basis_table import trace_basis
 from .daylight import jit_array
-from .fit_model import WardModel
-from .light_cache import DIRECTIONS, POSITIONS
+from .light_cache import DIRECTIONS, POSITIONS, CacheOptions
 
 
 def load_points_scene(xml, variant):
@@ -61,6 +60,7 @@ def lambertian_radiance(xml, variant, skies, rays, material, max_depth, seed=0,
     (``max_depth`` for the light arriving from the rest of the scene), and its Monte Carlo
     variance: (P, T, 3) [W m^-2 sr^-1] and [(W m^-2 sr^-1)^2]."""
     scene = load_points_scene(xml, variant)
-    return trace_diffuse(scene, setup(variant).traverse(scene), list(skies), rays, material,
-                         lambda cache: WardModel(cache, "colour", "ward"), seed=seed,
-                         positions=positions, directions=directions, max_depth=max_depth)
+    options = CacheOptions(positions, directions, seed, max_depth)
+    (diffuse,), _, _ = trace_basis(scene, setup(variant).traverse(scene), [list(skies)], rays,
+                                   material, options, model="colour", diffuse_only=True)
+    return diffuse
