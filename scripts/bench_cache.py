@@ -31,7 +31,7 @@ def main():
     ap.add_argument("--skies", default="clear,overcast")
     args = ap.parse_args()
     from skyfit_mi.fitting.chi2 import parse_region
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.pipeline.pixels import frame_values
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
@@ -51,7 +51,7 @@ def main():
                 render_sequence(validate_spec(raw, tmp), out, progress=False, log=lambda *a: None)
                 t0 = time.perf_counter()
                 s = FitSession(out, "disc", parse_region("rect:6,6,9,9"), model="achromatic",
-                               seed=1)
+                               cache=FitCache(seed=1))
                 t = time.perf_counter() - t0
                 theta = [truth["R"], truth["rho_s"], sigma]
                 # the table's two independent halves of the positions (parts 1 and 2)

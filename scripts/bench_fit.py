@@ -43,7 +43,7 @@ def main():
     args = ap.parse_args()
 
     from skyfit_mi.fitting.chi2 import Problem, parse_region
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.fitting.methods import METHODS
     from skyfit_mi.render.fit_model import RegionRenderModel
     from skyfit_mi.pipeline.manifest import load_manifest
@@ -59,7 +59,7 @@ def main():
         render_sequence(validate_spec(raw, tmp), out, progress=False, log=lambda *a: None)
         rng = np.random.default_rng(args.seed)
         t0 = time.perf_counter()
-        session = FitSession(out, "disc", region, model="colour", seed=args.seed)
+        session = FitSession(out, "disc", region, model="colour", cache=FitCache(seed=args.seed))
         t_cache = time.perf_counter() - t0
         start = session.random_start(rng)
         for method in args.methods.split(","):

@@ -122,10 +122,11 @@ def make_lab_table(out, reflect, lights, points=POINTS, seed=0):
 def sessions(day, region, pixels, families):
     """A traced FitSession of ``day`` per lobe family (model 'two'; other parameter counts use
     its table), every frame."""
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
 
-    return {f: FitSession(day, region, pixels, model="two", normalisation=f, seed=0,
-                          positions=POSITIONS, directions=DIRECTIONS, min_frames=1)
+    return {f: FitSession(day, region, pixels, model="two", normalisation=f,
+                          cache=FitCache(seed=0, positions=POSITIONS, directions=DIRECTIONS),
+                          min_frames=1)
             for f in families}
 
 

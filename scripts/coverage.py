@@ -44,7 +44,7 @@ def main():
 
     from skyfit_mi.fitting import cramer_rao
     from skyfit_mi.fitting.chi2 import parse_region
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.pipeline.manifest import load_manifest, sensor_from_record
     from skyfit_mi.pipeline.pixels import frame_values
     from skyfit_mi.pipeline.sequence import render_sequence
@@ -66,7 +66,7 @@ def main():
             out = Path(tmp) / f"case{i}"
             render_sequence(validate_spec(raw, tmp), out, progress=False, log=lambda *a: None)
             doc, _ = load_manifest(out)
-            session = FitSession(out, "disc", region, model=model, seed=i)
+            session = FitSession(out, "disc", region, model=model, cache=FitCache(seed=i))
             obs = session.obs
             radiance = frame_values(out, obs.pixels, obs.frames)
             tv = truth_vector(model, truth)

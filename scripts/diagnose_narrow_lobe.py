@@ -38,7 +38,7 @@ def main():
     ap.add_argument("--out", help="render folder (kept; resumed); default: a temporary one")
     args = ap.parse_args()
     from skyfit_mi.fitting.chi2 import parse_region
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.physics.colour import SRGB_LUMINANCE
     from skyfit_mi.physics.reflection import reflected_radiance
     from skyfit_mi.render.fit_model import reflectances
@@ -58,7 +58,7 @@ def main():
         render_sequence(validate_spec(raw, tmp), out, progress=False, log=lambda *a: None)
         doc, _ = load_manifest(out)
         s = FitSession(out, "disc", parse_region("rect:6,6,9,9"), model="two",
-                       seed=args.cache_seed, positions=args.positions, directions=args.directions)
+                       cache=FitCache(args.positions, args.directions, args.cache_seed))
         px = s.obs.pixels
         frames = [f for f in doc["frames"] if f["index"] in s.obs.frames]
         rendered = frame_values(out, px, s.obs.frames)

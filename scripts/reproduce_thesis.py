@@ -131,7 +131,7 @@ def main():
 
 def tables(args, command):
     from skyfit_mi.fitting.chi2 import parse_region
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
 
     region = parse_region("rect:6,6,9,9")
     lines = ["# The thesis's tables 7.1-7.12 (and, below, figures 6.5-6.21, 7.10, 7.13-7.14) on skyfit's sequences", "",
@@ -144,7 +144,7 @@ def tables(args, command):
             if args.cases != "all" and not {sa_table, lm_table} & set(args.cases.split(",")):
                 continue
             seq = render_case(tmp, i, model, az, truth)
-            session = FitSession(seq, "disc", region, model=model, seed=i)
+            session = FitSession(seq, "disc", region, model=model, cache=FitCache(seed=i))
             cam = {0.0: "north", 90.0: "east"}[az]
             tv = truth_vector(model, truth)
             if lm_table:

@@ -176,7 +176,7 @@ def fit_replicates(day, scene, truth, replicates, positions=None, directions=512
     from measured_light import relabelled, thesis_clear
     from scipy.stats import chi2 as chi2_dist
 
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.fitting.light import SPEC_LIGHT, LightPlan
     from skyfit_mi.fitting.sky_fit import fit_sky_scale
     from skyfit_mi.physics.sky import SUN_LEVEL_SD
@@ -189,8 +189,8 @@ def fit_replicates(day, scene, truth, replicates, positions=None, directions=512
     region, _, pixels = SCENES[scene]
     # a photographed day's default: the sun's level modelled
     plan = SPEC_LIGHT if sky == "spec" else LightPlan(sky, SUN_LEVEL_SD, "modelled", terms, shape)
-    s = FitSession(fitted, region, pixels, model="colour", positions=positions,
-                   directions=directions, light=plan)
+    s = FitSession(fitted, region, pixels, model="colour",
+                   cache=FitCache(positions=positions, directions=directions), light=plan)
     radiance = frame_values(fitted, s.obs.pixels, s.obs.frames)
     out = []
     for r in range(replicates):

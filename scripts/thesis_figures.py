@@ -222,7 +222,7 @@ def _green(seq, px):
 
 def chi2_maps(renders, out, log):
     """The topology figures; returns markdown rows and the maps by (figure, panel)."""
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.fitting.landscape import chi2_map
 
     rows, maps = [], {}
@@ -231,7 +231,7 @@ def chi2_maps(renders, out, log):
         for k, m in enumerate(materials):
             seq = renders.get(scene, sky, az, noise, hours, m)
             px = pixels(kind, seq, scene)
-            s = FitSession(seq, scene, px, model="two", seed=0)
+            s = FitSession(seq, scene, px, model="two", cache=FitCache(seed=0))
             chi2 = chi2_map(s, np.array(m), "rho_s", "sigma_alpha", RHO, SIGMA)
             panel_maps.append(chi2)
             maps[fig, k] = (chi2, seq, px)
@@ -303,11 +303,11 @@ def random_walk(renders, out):
     """Fig 7.10: annealing over the 4x4-pixel map of table 7.6's smooth metal disc (camera
     east), started in its local minimum; returns a markdown row."""
     from skyfit_mi.fitting.chi2 import parse_region
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.fitting.landscape import chi2_map
 
     seq = renders.get("disc", "clear", 90, 0, None, SMOOTH_METAL)
-    s = FitSession(seq, "disc", parse_region("rect:6,6,9,9"), model="two", seed=0)
+    s = FitSession(seq, "disc", parse_region("rect:6,6,9,9"), model="two", cache=FitCache(seed=0))
     start = (0.2, 0.2)
     r = s.run("anneal", start=start, seed=0, log=lambda *a: None)
     walk = np.asarray(r["trace"], dtype=float)

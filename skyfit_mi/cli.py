@@ -222,7 +222,7 @@ def _fit_regions(args):
 
 def _fit(args):
     from .fitting.chi2 import subsample_region
-    from .fitting.fit import fit_regions
+    from .fitting.fit import FitCache, fit_regions
     from .fitting.light import LightOptions
     from .fitting.report import write_fit, write_summary
     from .pipeline.manifest import load_manifest
@@ -284,19 +284,18 @@ def _fit(args):
         if pixels is not None and len(kept[name]) < len(pixels):
             print(f"{name}: fitting {len(kept[name])} of its {len(pixels)} pixels "
                   f"(--max-pixels, seed {args.seed})")
+    cache = FitCache(args.positions, args.directions)    # seeded by --seed with the method
     # the light of every region traced together (each frame's kernels once), every region
     # checked before the first is fitted and written
     if auto:
         from .fitting.selection import fit_auto
 
-        results = fit_auto(args.manifest, list(kept.items()), seed=args.seed,
-                           positions=args.positions, directions=args.directions,
+        results = fit_auto(args.manifest, list(kept.items()), seed=args.seed, cache=cache,
                            frames=args.frames, variant=args.variant, light=light)
     else:
         results = fit_regions(args.manifest, list(kept.items()), model=model,
                               method=args.method, normalisation=args.normalisation,
-                              seed=args.seed, start=args.start, positions=args.positions,
-                              directions=args.directions, frames=args.frames,
+                              seed=args.seed, start=args.start, cache=cache, frames=args.frames,
                               variant=args.variant, light=light)
     for (name, pixels), res in zip(regions, results):
         res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
@@ -315,7 +314,7 @@ def _relight(args):
 
 
 def _chi2map(args):
-    from .fitting.fit import FitSession
+    from .fitting.fit import FitCache, FitSession
     from .fitting.landscape import (chi2_map, map_axes, map_prefix, profiled_map,
                                     truth_parameters, write_chi2_map)
     from .pipeline.fit_result import check_fit_sequence, read_fit_result
@@ -330,7 +329,8 @@ def _chi2map(args):
                       args.profile)
     name = f"chi2map_{r['region']}_{args.x}_{args.y}"
     prefix = map_prefix(args.output or root, name, args.overwrite)
-    s = FitSession.from_fit(r, args.manifest, seed=args.seed, frames=r.get("frames"))
+    s = FitSession.from_fit(r, args.manifest, cache=FitCache(seed=args.seed),
+                            frames=r.get("frames"))
     theta = np.array([r["parameters"][k] for k in names])
     chi2 = (profiled_map(s, theta, args.x, args.y, xs, ys) if args.profile
             else chi2_map(s, theta, args.x, args.y, xs, ys))

@@ -91,10 +91,10 @@ def fit(day, region="rect:4,4,7,7", positions=2, directions=512):
     from scipy.stats import chi2 as chi2_dist
 
     from skyfit_mi.fitting.chi2 import parse_region
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
 
-    s = FitSession(day, "disc", parse_region(region), model="colour", positions=positions,
-                   directions=directions)
+    s = FitSession(day, "disc", parse_region(region), model="colour",
+                   cache=FitCache(positions=positions, directions=directions))
     r = s.run("global", log=lambda *a: None)
     rise = float(s.problem.chi2(TRUTH) - r["chi2"])
     bound = float(chi2_dist.ppf(0.999, len(TRUTH)) * r["interval_scale_s2"]

@@ -16,12 +16,12 @@ FLOAT32_RTOL = 1e-5
 @pytest.fixture(scope="module")
 def traced(days):
     """A session's raw light cache, the Dr.Jit model on it and its table."""
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.render.basis_table import tabulate
     from skyfit_mi.render.fit_model import WardModel
 
-    s = FitSession(days["clean"], "disc", REGION, model="colour", positions=8, directions=128,
-                   seed=2, trace=False)
+    s = FitSession(days["clean"], "disc", REGION, model="colour",
+                   cache=FitCache(positions=8, directions=128, seed=2), light=None)
     cache = s.light_cache()
     wm = WardModel(cache, "colour")
     return s, cache, wm, tabulate(cache, wm)
@@ -161,7 +161,7 @@ def test_regions_take_views_of_a_table_traced_in_blocks(traced):
 def test_a_fit_beyond_the_machines_memory_is_refused_up_front_with_its_estimate(days,
                                                                                 monkeypatch):
     from skyfit_mi.errors import SkyfitError
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.render import basis_table
 
     monkeypatch.setattr("skyfit_mi.fitting.fit.available_memory", lambda: 100 << 20)
@@ -169,7 +169,7 @@ def test_a_fit_beyond_the_machines_memory_is_refused_up_front_with_its_estimate(
     assert need > 100 << 20
     with pytest.raises(SkyfitError, match=r"needs up to 0\.\d GB, but this machine has 0\.1 GB "
                                           r"available; fit fewer pixels \(--max-pixels\)") as e:
-        FitSession(days["clean"], "disc", REGION, positions=8, directions=128)
+        FitSession(days["clean"], "disc", REGION, cache=FitCache(positions=8, directions=128))
     assert "\n" not in str(e.value)
 
 
@@ -204,7 +204,7 @@ def test_a_mix_of_lights_traced_with_shared_samples_keeps_their_covariances(days
     from skyfit_mi.render.fit_model import WardModel
     from skyfit_mi.render.light_cache import OWN_ARRAYS, build_light_cache
 
-    s = FitSession(days["clean"], "disc", REGION, model="colour", trace=False)
+    s = FitSession(days["clean"], "disc", REGION, model="colour", light=None)
     _, rest, *variants = (light[3:6] for light in s._sky_parts(shape=True))
     caches = build_light_cache(s.scene, s.params, rest, s.obs.pixels[:8], "disc",
                                positions=8, directions=64, seed=5, others=variants)

@@ -50,11 +50,11 @@ def test_bad_maps_get_one_line(fitted, capsys, args, phrase):
 
 @pytest.fixture(scope="module")
 def session(fitted):
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
 
     day, fit = fitted
     r = json.loads(fit.read_text())
-    return FitSession.from_fit(r, day, seed=0), r
+    return FitSession.from_fit(r, day, cache=FitCache(seed=0)), r
 
 
 @pytest.mark.parametrize("x, y", [("rho_s", "sigma_alpha"), ("R", "sigma_alpha"),

@@ -59,10 +59,10 @@ def test_bound_of_a_straight_line_is_least_squares_standard_error():
 def test_fisher_jacobian_is_the_fits_jacobian_where_nothing_is_clipped(days):
     """Away from the clips the bound's J is the fit's own (residual) Jacobian up to sign, so the
     bound and the fit's covariance use one derivative chain; near a clip rows shrink."""
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
 
-    s = FitSession(days["noisy"], "disc", parse_region("rect:4,4,7,7"), positions=2,
-                   directions=256)
+    s = FitSession(days["noisy"], "disc", parse_region("rect:4,4,7,7"),
+                   cache=FitCache(positions=2, directions=256))
     theta = np.array([0.3, 0.1])
     sigma = s.obs.sigma
     J = fisher_jacobian(s, theta, sigma)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from skyfit_mi.fitting.chi2 import parse_region
+from skyfit_mi.fitting.fit import FitCache
 from skyfit_mi.fitting.light import LightOptions
 
 REGION = parse_region("rect:4,4,7,7")          # 16 pixels, all on the disc
@@ -17,12 +18,12 @@ TRUTH = {"rho_s": 0.8, "sigma_alpha": 0.08}
 @pytest.fixture(scope="module")
 def traced(days):
     """A GGX plastic's light cache on the clean day, the Dr.Jit model on it and its table."""
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.render.basis_table import tabulate
     from skyfit_mi.render.fit_model import WardModel
 
     s = FitSession(days["clean"], "disc", REGION, model="two", normalisation="ggx_plastic",
-                   positions=8, directions=128, seed=2, trace=False)
+                   cache=FitCache(positions=8, directions=128, seed=2), light=None)
     cache = s.light_cache()
     wm = WardModel(cache, "two", "ggx_plastic")
     return cache, wm, tabulate(cache, wm)
@@ -101,10 +102,10 @@ def plastic_day(tmp_path_factory, mi):
 def test_a_mitsuba_plastic_is_fitted_best_by_its_own_family(plastic_day):
     """GGX plastic fits the day rendered with Mitsuba's roughplastic at chi2/dof near 1, its
     roughness and reflectance within their intervals; Ward's lobe and Beckmann's cannot."""
-    from skyfit_mi.fitting.fit import fit_region
+    from skyfit_mi.fitting.fit import fit_region, FitCache
 
-    r = {n: fit_region(plastic_day, "disc", REGION, normalisation=n, positions=4,
-                       directions=256, log=lambda *a: None)
+    r = {n: fit_region(plastic_day, "disc", REGION, normalisation=n,
+                       cache=FitCache(positions=4, directions=256), log=lambda *a: None)
          for n in ("ggx_plastic", "beckmann_plastic", "ward")}
     chi2 = {n: v["chi2_per_dof"] for n, v in r.items()}
     g = r["ggx_plastic"]
@@ -173,7 +174,8 @@ def test_model_auto_on_photographs_fits_the_chosen_model_with_the_skys_level(
     pixels = np.stack(np.meshgrid(np.arange(4, 8), np.arange(4, 8)), -1).reshape(-1, 2)
     logs = []
     r = next(fit_auto(day, [("disc", pixels)], families=("ward", "ggx_plastic"),
-                      models=("two",), positions=4, directions=256, log=logs.append))
+                      models=("two",), cache=FitCache(positions=4, directions=256),
+                      log=logs.append))
     assert r["model_selection"]["chosen"]["normalisation"] == "ggx_plastic"
     assert r["normalisation"] == "ggx_plastic" and r["sky"]["regions"] == ["disc"]
     lo, hi = r["sky"]["interval95"]
@@ -202,7 +204,7 @@ def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(photographed_
     from skyfit_mi.render.fit_model import PARAMETERS
 
     monkeypatch.setattr(pixel_map, "fit_auto", functools.partial(
-        fit_auto, families=("ward", "ggx_plastic"), positions=4, directions=256))
+        fit_auto, families=("ward", "ggx_plastic"), cache=FitCache(4, 256)))
     day = photographed_plastic                        # the sky's level is fitted first too
     pixels = np.stack(np.meshgrid(np.arange(3, 9), np.arange(3, 9)), -1).reshape(-1, 2)
     logs = []

@@ -4,11 +4,12 @@ import json
 import numpy as np
 import pytest
 
-from skyfit_mi.fitting.chi2 import parse_region
 from skyfit_mi.cli import main
+from skyfit_mi.fitting.chi2 import parse_region
+from skyfit_mi.fitting.fit import FitCache
 
 REGION = parse_region("rect:4,4,7,7")          # 16 pixels, all on the disc
-FAST = dict(positions=2, directions=512)
+FAST = dict(cache=FitCache(positions=2, directions=512))
 
 
 def fit(path, **kw):
@@ -38,8 +39,8 @@ def test_global_search_reports_a_failed_polish(days, monkeypatch):
                 "trace": []}
 
     monkeypatch.setattr(gs, "polish", failing_lm)
-    from skyfit_mi.fitting.fit import FitSession
-    s = FitSession(days["clean"], "disc", REGION, positions=2, directions=64)
+    from skyfit_mi.fitting.fit import FitCache, FitSession
+    s = FitSession(days["clean"], "disc", REGION, cache=FitCache(positions=2, directions=64))
     res = gs.global_search(s.problem, s.lower, s.lower, s.upper, candidates=1, profile=False)
     assert calls["n"] == 1 and res["status"] == "grid_point"
     assert "singular curvature" in res["message"] and "best grid point" in res["message"]
@@ -50,8 +51,8 @@ def test_a_polish_beside_its_grid_point_is_judged_on_one_evaluation_path(days, m
     polish that stays at its grid point converged; one that ends worse keeps the grid point."""
     import importlib
     gs = importlib.import_module("skyfit_mi.fitting.methods.global_search")
-    from skyfit_mi.fitting.fit import FitSession
-    s = FitSession(days["clean"], "disc", REGION, positions=2, directions=64)
+    from skyfit_mi.fitting.fit import FitCache, FitSession
+    s = FitSession(days["clean"], "disc", REGION, cache=FitCache(positions=2, directions=64))
     for move, status in ((0.0, "converged"), (0.05, "grid_point")):
         def lm(problem, theta, lower, upper, **kw):
             moved = np.clip(theta + move, lower, upper)
@@ -391,9 +392,9 @@ def test_cache_error_compares_the_halves_on_the_same_reading():
 def test_a_start_out_of_bounds_or_of_the_wrong_length_is_refused_by_the_api(days):
     """FitSession.run checks a start as the CLI does: nothing is clipped or broadcast."""
     from skyfit_mi.errors import SkyfitError
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
 
-    s = FitSession(days["clean"], "disc", REGION, positions=2, directions=64)
+    s = FitSession(days["clean"], "disc", REGION, cache=FitCache(positions=2, directions=64))
     with pytest.raises(SkyfitError, match="sigma_alpha = 0.9 is outside its bounds"):
         s.run("lm", start=[0.3, 0.9], log=lambda *a: None)
     with pytest.raises(SkyfitError, match="gives 3 value"):
@@ -475,11 +476,11 @@ def test_an_automatically_sized_cache_grows_until_its_noise_is_a_small_share(day
     of two, within CACHE_GROWTH_MAX) and the fit is repeated; the JSON records both sizes.
     Started small (2 positions) on the noise-free day, whose sigma is the quantisation's."""
     from skyfit_mi.fitting import fit as fit_module
-    from skyfit_mi.fitting.fit import CACHE_SHARE, FitSession
+    from skyfit_mi.fitting.fit import CACHE_SHARE, FitCache, FitSession
 
     monkeypatch.setattr(fit_module, "POSITIONS", 2)
     monkeypatch.setattr(fit_module, "CACHE_GROWTH_MAX", 8)
-    s = FitSession(days["clean"], "disc", REGION, directions=64)
+    s = FitSession(days["clean"], "disc", REGION, cache=FitCache(directions=64))
     first = max(s._model_noise_by_sigma(np.array([0.3, 0.1])).values())
     assert first > CACHE_SHARE * s.problem.dof                   # the small cache is too noisy
     r = s.run("lm", start=[0.3, 0.1], log=lambda *a: None)
@@ -487,6 +488,6 @@ def test_an_automatically_sized_cache_grows_until_its_noise_is_a_small_share(day
     assert c["sized"] == "from the data" and c["grown_from"][0]["positions"] == 2
     assert c["positions"] == 16 and s.cache.mirror.shape[2] == 16        # capped at 8x
     assert max(r["cache_noise_chi2_by_sigma"].values()) < first / 4
-    given = FitSession(days["clean"], "disc", REGION, positions=2, directions=64)
+    given = FitSession(days["clean"], "disc", REGION, cache=FitCache(positions=2, directions=64))
     r = given.run("lm", start=[0.3, 0.1], log=lambda *a: None)
     assert r["light_cache"]["positions"] == 2 and "grown_from" not in r["light_cache"]

@@ -47,8 +47,9 @@ def _raw(session):
 
 @pytest.fixture(scope="module")
 def session(days):
-    from skyfit_mi.fitting.fit import FitSession
-    return _raw(FitSession(days["clean"], "disc", REGION, model="two", seed=5, trace=False))
+    from skyfit_mi.fitting.fit import FitCache, FitSession
+    return _raw(FitSession(days["clean"], "disc", REGION, model="two",
+                           cache=FitCache(seed=5), light=None))
 
 
 def test_cache_matches_the_render_without_bias(session, days):
@@ -145,7 +146,7 @@ def test_the_suns_part_takes_every_node_at_a_few_positions(days):
     from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.render.light_cache import SkyPlan, build_light_cache
 
-    s = FitSession(days["clean"], "disc", REGION, model="two", trace=False)
+    s = FitSession(days["clean"], "disc", REGION, model="two", light=None)
     xml = s.doc["scene"]["xml"].replace(
         '<shape type="disk" id="disc_shape">', '<shape type="disk" id="disc_shape"><transform '
         'name="to_world"><rotate y="1" angle="60"/></transform>')
@@ -290,14 +291,14 @@ def test_the_sky_control_variate_makes_an_overcast_cache_nearly_exact(days):
     variate integrates deterministically: the cache's own Monte Carlo error (its half caches'
     difference) falls from 0.62% rms per value (plain sampling, no sun directions) to 0.03%,
     no direction is spent on a sun that is not there, and the radiance agrees with the render."""
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.pipeline.pixels import frame_values
     from skyfit_mi.render import light_cache
     from skyfit_mi.render.fit_model import WardModel
 
     assert light_cache._components(128, False).min() == 1          # no sun component
-    session = _raw(FitSession(days["overcast"], "disc", REGION, positions=8, directions=256,
-                              seed=3, trace=False))
+    session = _raw(FitSession(days["overcast"], "disc", REGION,
+                              cache=FitCache(positions=8, directions=256, seed=3), light=None))
     for sigma in (0.01, 0.1, 0.3):
         a, b = (WardModel(c, "two").radiance([0.3, sigma]) for c in session.cache.halves())
         assert np.sqrt(np.mean(((a - b) / (a + b)) ** 2)) < 1e-3, sigma
@@ -309,10 +310,11 @@ def test_plastic_metal_rule_agrees_in_single_precision_at_the_threshold(days):
     """A rho_s just below 0.5 is a plastic in NumPy; in the float32 plugin it rounded up to 0.5,
     a metal: a dark glossy colour fit then saw a model 20-260x off at the threshold. The Dr.Jit
     model and the NumPy basis agree on either side of it."""
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.render.fit_model import reflectances
 
-    s = FitSession(days["clean"], "disc", REGION, model="colour", positions=2, directions=128)
+    s = FitSession(days["clean"], "disc", REGION, model="colour",
+                   cache=FitCache(positions=2, directions=128))
     D, G = s.wm.basis(np.array([0.05]))
     for rho_s in (0.4999, 0.49999999, float(np.nextafter(0.5, 0)), 0.5):
         theta = np.array([0.02, 0.03, 0.05, rho_s, 0.05])
@@ -354,7 +356,7 @@ def test_lights_traced_with_shared_samples_each_take_their_own_radiance(days):
     from skyfit_mi.fitting.fit import FitSession
     from skyfit_mi.render.light_cache import OWN_ARRAYS, build_light_cache
 
-    s = FitSession(days["clean"], "disc", REGION, model="two", trace=False)
+    s = FitSession(days["clean"], "disc", REGION, model="two", light=None)
     _, rest, variant, _ = (light[3:6] for light in s._sky_parts(shape=True))
     args = (s.scene, s.params)
     where = (s.obs.pixels[:6], "disc")

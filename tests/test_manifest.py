@@ -369,11 +369,12 @@ def test_incomplete_render_is_warned_and_frames_can_be_chosen(day, tmp_path):
 
 
 def test_the_fit_reports_what_loading_noticed(day, tmp_path):
-    from skyfit_mi.fitting.fit import fit_region
+    from skyfit_mi.fitting.fit import fit_region, FitCache
 
     out = _copy(day, tmp_path)
     doc, _ = load_manifest(out)
     doc["status"] = "incomplete"
     write_manifest(out, doc)
-    res = fit_region(out, "disc", [[5, 5], [6, 6]], positions=4, directions=16, log=lambda *a: None)
+    res = fit_region(out, "disc", [[5, 5], [6, 6]],
+                     cache=FitCache(positions=4, directions=16), log=lambda *a: None)
     assert any("render is incomplete" in w for w in res["warnings"])

@@ -14,13 +14,13 @@ CHILD = r"""
 import json, sys
 import numpy as np
 from skyfit_mi.render import basis_table
-from skyfit_mi.fitting.fit import FitSession
+from skyfit_mi.fitting.fit import FitCache, FitSession
 from skyfit_mi.pipeline.pixels import material_regions
 
 day, count, budget = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 basis_table.CHUNK_SAMPLES = budget
 pixels = dict(material_regions(day))["disc"][:count]
-s = FitSession(day, "disc", pixels, model="colour", positions=16, directions=256)
+s = FitSession(day, "disc", pixels, model="colour", cache=FitCache(16, 256))
 r = s.run(log=lambda *a: None)
 # the process's own high-water mark (ru_maxrss would carry the forking parent's across exec)
 hwm = next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM:"))

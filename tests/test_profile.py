@@ -11,11 +11,11 @@ LEVELS = [1.0, 3.841458820694124]
 @pytest.fixture(scope="module")
 def noisy_fit(days):
     """A global fit of the noisy two-parameter day (rho_s 0.3, sigma_alpha 0.1)."""
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.fitting.methods.global_search import global_search
 
     s = FitSession(days["noisy"], "disc", parse_region("rect:4,4,7,7"), model="two",
-                   positions=2, directions=512)
+                   cache=FitCache(positions=2, directions=512))
     g = global_search(s.problem, None, s.lower, s.upper, profile=False,
                       grid_basis=s.grid_bases()[0])
     r, J = s.problem.jacobian(g["theta"])

@@ -353,7 +353,7 @@ def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
     single region (the same seed and samples), and for three regions on the sample board
     region means within the Monte Carlo error of the two caches (independent: other seeds)."""
     from skyfit_mi.fitting.chi2 import subsample_region
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.fitting.relight import fitted_sessions
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
@@ -370,7 +370,7 @@ def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
     names = ["white_paper", "red_gloss_paint", "polished_mild_steel"]
     pixels = {n: subsample_region(seen[n], 12, 0) for n in names}
     fits = {n: {"region": n, "model": "colour", "normalisation": "ward"} for n in names}
-    options = dict(seed=5, positions=4, directions=64, sky_plan="anchors", min_frames=1)
+    options = dict(cache=FitCache(4, 64, 5, "anchors"), min_frames=1)
     alone = FitSession.from_fit(fits[names[0]], tmp_path / "day", pixels[names[0]], **options)
     one = fitted_sessions({names[0]: fits[names[0]]}, tmp_path / "day", pixels,
                           **options)[names[0]]
@@ -383,8 +383,8 @@ def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
     theta = np.array([0.5, 0.4, 0.3, 0.1, 0.1])
     z = []
     for n in names:
-        own = FitSession.from_fit(fits[n], tmp_path / "day", pixels[n], **{**options,
-                                                                          "seed": 6})
+        own = FitSession.from_fit(fits[n], tmp_path / "day", pixels[n], min_frames=1,
+                                  cache=FitCache(4, 64, 6, "anchors"))
         s = together[n]
         assert len(s.table.hit) == len(pixels[n]) and s.table.hit.all()
         (a, va), (b, vb) = (x.wm.radiance_and_variance(theta) for x in (s, own))

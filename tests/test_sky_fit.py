@@ -36,12 +36,12 @@ def test_the_sun_and_the_rest_of_a_sky_add_up_to_it():
 def test_the_split_lights_mix_is_the_whole_lights_table(days):
     """The sun's table plus k = 1 times the rest's (independent samples) gives the whole
     light's radiance within their Monte Carlo errors; k scales only the sky's share."""
-    from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.fitting.light import LightPlan
     from skyfit_mi.render.basis_table import TableModel, mixed
 
     # 16 positions: the spread of 4 understates the error of the low sun's frames
-    opts = dict(model="colour", positions=16, directions=128, seed=3)
+    opts = dict(model="colour", cache=FitCache(16, 128, seed=3))
     whole = FitSession(days["clean"], "disc", REGION, **opts)
     split = FitSession(days["clean"], "disc", REGION, light=LightPlan("fit"), **opts)
     sun, rest = split.parts

@@ -129,6 +129,27 @@ class FitState:
         return self.interval_scale * self.channel_factors
 
 
+@dataclass(frozen=True)
+class FitCache:
+    """The light cache a fit traces (recorded in the fit JSON's ``light_cache``).
+
+    positions : samples over each pixel's area; None sizes the cache from the data
+        (:meth:`FitSession.run`): POSITIONS (POINT_POSITIONS for a table's points), grown
+        after a fit whose cache noise exceeds CACHE_SHARE of the chi-square the data's scatter
+        gives (:meth:`FitSession.cache_growth`)
+    directions : light directions at each position
+    seed : the seed of the cache's samples
+    plan : where the cache takes the sky's integrals, a name of
+        :data:`~skyfit_mi.render.light_cache.SKY_PLANS`: ``fit`` by default, ``anchors`` for
+        predictions of compact regions
+    """
+
+    positions: int = None
+    directions: int = DIRECTIONS
+    seed: int = 0
+    plan: str = "fit"
+
+
 class FitSession:
     """One region of one sequence, ready to fit: observations, light cache, models, chi-square.
 
@@ -143,28 +164,19 @@ class FitSession:
     pixels : (P, 2) pixel (x, y) coordinates on that material
     model : 'two', 'achromatic', 'colour' (or 2, 3, 5)
     normalisation : Ward normalisation of the model ('ward' = thesis eq. 3.19)
-    seed : seeds the light cache
-    positions, directions : samples per pixel of the light cache; ``positions=None`` sizes
-        it from the data (:meth:`run`): POSITIONS (POINT_POSITIONS for a table's points),
-        grown after a fit whose cache noise exceeds CACHE_SHARE of the chi-square the data's
-        scatter gives (:meth:`cache_growth`)
+    cache : the light cache to trace (:class:`FitCache`)
     min_frames : rendered frames the sequence must hold (1 to predict a single frame)
     frames : manifest frame indices to use (None: every rendered frame), e.g. to hold some
         out for a prediction test
     variant : the Mitsuba variant to fit with (default the sequence's), e.g. 'cuda_ad_rgb'
-    sky_plan : where the light cache takes the sky's integrals, a name of
-        :data:`~skyfit_mi.render.light_cache.SKY_PLANS` (recorded in the fit JSON's
-        ``light_cache``): ``fit`` by default, ``anchors`` for predictions of compact regions
-    trace : False leaves the light cache to the caller (:func:`trace_sessions`)
-    light : the :class:`~.light.LightPlan` traced when ``trace`` (default the spec's light as
-        it is); a fitted sky's splits the sun's light from the rest of the sky's, so that the
+    light : the :class:`~.light.LightPlan` traced now (default the spec's light as it is;
+        None leaves the trace to the caller, :func:`trace_sessions`); a fitted sky's splits the sun's light from the rest of the sky's, so that the
         fit can scale them against each other (:meth:`set_sky`), and with ``shape`` traces the
         sky's shape variants (:func:`~skyfit_mi.physics.sky_shape.shape_variants`) too
     """
 
-    def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward", seed=0,
-                 positions=None, directions=DIRECTIONS, min_frames=2, frames=None, variant=None,
-                 sky_plan="fit", trace=True, light=SPEC_LIGHT):
+    def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward",
+                 cache=FitCache(), frames=None, min_frames=2, variant=None, light=SPEC_LIGHT):
         model = BY_COUNT.get(model, model)
         check_choice("model", model, tuple(PARAMETERS))
         check_fit_normalisation(normalisation)          # before the light is traced
@@ -194,22 +206,23 @@ class FitSession:
         # a material is the truth only where skyfit rendered the frames with it; an ingested
         # sequence's spec materials are placeholders for the unknown photographed surface
         self.truth = mats[name] if doc.get("source", "render") in RENDERED_SOURCES else None
-        self.cache_settings = {"positions": self.first_positions if positions is None
-                               else int(positions),
-                               "directions": int(directions), "seed": seed,
-                               "sized": "from the data" if positions is None else "given",
-                               "sky_plan": check_choice("sky plan", sky_plan, tuple(SKY_PLANS))}
+        given = cache.positions is not None
+        self.cache_settings = {"positions": int(cache.positions) if given
+                               else self.first_positions,
+                               "directions": int(cache.directions), "seed": cache.seed,
+                               "sized": "given" if given else "from the data",
+                               "sky_plan": check_choice("sky plan", cache.plan, tuple(SKY_PLANS))}
         self._mi = setup(variant or doc["render"]["variant"])
         self._loaded = None                         # the scene and its parameters (scene)
         # the light traced (a LightPlan) and its tables: one, or the sun's, the rest's (a
         # fitted sky) and the rest's shape variants, mixed at sky_scale and the shape's mix
         # sky_shape_mix (set_sky)
-        self.light, self.sky_scale, self.parts = light, 1.0, None
+        self.light, self.sky_scale, self.parts = light or SPEC_LIGHT, 1.0, None
         self.parts_cov = None           # the covariances of parts traced with shared samples
         self.sky_shape_mix = None
         self._variants = None                       # the shape variants (_shape_variants)
         self.cache_time = time.perf_counter() - t0
-        if trace:
+        if light is not None:
             self.trace_light(light)
 
     @classmethod
@@ -217,7 +230,9 @@ class FitSession:
         """The session of the region that a fit ``result`` (a fit JSON, checked by
         :func:`~skyfit_mi.pipeline.fit_result.read_fit_result`) measured, in its model and
         normalisation, on the sequence ``manifest_path`` (its own, or a target's); ``pixels``
-        default to the fit's own; ``options`` as the constructor's.  A fit of the sky's level
+        default to the fit's own; ``options`` as the constructor's (``light=None`` leaves the
+        trace to the caller; else the light is the fit's, :meth:`fitted_light`).  A fit of the
+        sky's level
         (``fit --sky fit``) lights its own sequence with that level; another sequence's sky is
         its spec's (the level belongs to the fitted day's sky)."""
         if pixels is None and "points" in result:           # a fit of an observation table
@@ -227,9 +242,9 @@ class FitSession:
                 raise SkyfitError(f"the fit of region {result['region']!r} lists no pixels; "
                                   "give the fit_NAME.json that `skyfit fit` wrote.")
             pixels = result["pixels"]
-        trace = options.pop("trace", True)
+        trace = options.pop("light", True) is not None
         s = cls(manifest_path, result["region"], pixels, model=result["model"],
-                normalisation=result.get("normalisation", "ward"), trace=False, **options)
+                normalisation=result.get("normalisation", "ward"), light=None, **options)
         if trace:
             s.trace_light(s.fitted_light(result))
             s.use_fitted_sky(result)
@@ -703,8 +718,10 @@ def fit_regions(manifest_path, regions, model="two", method="global", seed=0, st
     lets the sky's level change smoothly over the day, 1 holds it (None:
     :func:`~.sky_fit.default_terms` of the frames), and ``shape`` fits the sky's shape too (a
     CIE sky's gradation and indicatrix, a Perez sky's clearness and brightness).  ``options``
-    as :class:`FitSession`'s (normalisation, cache, frames, variant)."""
-    sessions = {name: FitSession(manifest_path, name, px, model=model, seed=seed, trace=False,
+    as :class:`FitSession`'s (normalisation, cache, frames, variant); ``seed`` seeds the
+    method and the light cache."""
+    cache = replace(options.pop("cache", FitCache()), seed=seed)
+    sessions = {name: FitSession(manifest_path, name, px, model=model, cache=cache, light=None,
                                  **options)
                 for name, px in regions}
     yield from fit_sessions(sessions, method, seed, start, method_options, log, light)

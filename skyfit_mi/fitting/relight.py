@@ -32,7 +32,7 @@ from ..conventions import angles_from_direction
 from ..errors import SkyfitError
 from ..files import FolderLock, ensure_dir, figure_png, write_bytes, write_json, write_text
 from .chi2 import subsample_region
-from .fit import FitSession, trace_sessions
+from .fit import FitCache, FitSession, trace_sessions
 from .landscape import truth_parameters
 from .sky_fit import sky_level_at
 from .uncertainty import band_half_width, widen
@@ -899,10 +899,8 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
     else:
         # image regions: the light at all their pixels traced at once
         predict_region = _predict_means
-        shared = fitted_sessions({region: r for region, (_, r) in fits.items()},
-                                 target, pixels, seed=seed, positions=PREDICTION_CACHE[0],
-                                 directions=PREDICTION_CACHE[1], sky_plan="anchors",
-                                 min_frames=1)
+        shared = fitted_sessions({region: r for region, (_, r) in fits.items()}, target, pixels,
+                                 cache=FitCache(*PREDICTION_CACHE, seed, "anchors"), min_frames=1)
         sessions = ((region, shared.pop(region)) for region in sorted(fits))
     rows, means = [], {}
     for region, s in sessions:                          # each let go when done with
@@ -919,8 +917,8 @@ def _table_session(target, region, result, seed):
     """The session of every point of ``region`` in the target's table, lit as the fit
     ``result`` saw its own day (its fitted sky level, :meth:`FitSession.use_fitted_sky`)."""
     s = FitSession(target, region, None, model=result["model"],
-                   normalisation=result.get("normalisation", "ward"), seed=seed,
-                   directions=DIRECTIONS, min_frames=1, trace=False)
+                   normalisation=result.get("normalisation", "ward"),
+                   cache=FitCache(directions=DIRECTIONS, seed=seed), min_frames=1, light=None)
     s.trace_light(s.fitted_light(result))
     s.use_fitted_sky(result)
     return s
@@ -931,7 +929,7 @@ def fitted_sessions(results, manifest_path, pixels, **options):
     sequence, at ``pixels`` {region: (P, 2)}, each lit as its fit saw the day
     (:meth:`FitSession.fitted_light`), their light traced together
     (:func:`~.fit.trace_sessions`); ``options`` as the session's."""
-    sessions = {name: FitSession.from_fit(r, manifest_path, pixels[name], trace=False, **options)
+    sessions = {name: FitSession.from_fit(r, manifest_path, pixels[name], light=None, **options)
                 for name, r in results.items()}
     trace_sessions(list(sessions.values()),
                    {name: s.fitted_light(results[name]) for name, s in sessions.items()})

@@ -12,13 +12,15 @@ other positions), not what follows the noise of the frames fitted; AIC (chi2 + 2
 """
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
 from ..render.basis_table import TableModel
 from ..render.fit_model import PARAMETERS, bounds
 from .chi2 import LuminanceModel, Problem
-from .fit import FitSession, fit_sessions, prepare_sessions, resolve_light, trace_sessions
+from .fit import (FitCache, FitSession, fit_sessions, prepare_sessions, resolve_light,
+                  trace_sessions)
 from .held_out import frame_folds
 from .light import SPEC_LIGHT, LightOptions
 from .methods.global_search import global_search
@@ -102,11 +104,12 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     region (the light traced again, split).  Yields each region's result dict with its
     ``model_selection`` (the ranking, the choice, the folds, the light of the ranking and each
     lobe's tracing time)."""
+    options["cache"] = replace(options.get("cache", FitCache()), seed=seed)
+
     def sessions_of(**kw):
-        return {name: FitSession(manifest_path, name, px, seed=seed, trace=False,
-                                 **{**options, **kw})
+        return {name: FitSession(manifest_path, name, px, light=None, **{**options, **kw})
                 for name, px in regions}
-    first = FitSession(manifest_path, *regions[0], trace=False, **options)
+    first = FitSession(manifest_path, *regions[0], light=None, **options)
     plan = resolve_light({regions[0][0]: first}, light or LightOptions(), log)   # checked once
     level = None
     if plan.split:
@@ -139,7 +142,7 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         # on the light its lobe's candidates were ranked on (the table is the same for any
         # parameterisation), or on the split light traced again below
         s = FitSession(manifest_path, name, pixels, model=pick["model"],
-                       normalisation=pick["normalisation"], seed=seed, trace=False, **options)
+                       normalisation=pick["normalisation"], light=None, **options)
         if not plan.split:
             s.take_light(traced[pick["normalisation"]])
         del traced
