@@ -44,7 +44,8 @@ def test_the_split_lights_mix_is_the_whole_lights_table(days):
     opts = dict(model="colour", cache=FitCache(16, 128, seed=3))
     whole = FitSession(days["clean"], "disc", REGION, **opts)
     split = FitSession(days["clean"], "disc", REGION, light=LightPlan("fit"), **opts)
-    sun, rest = split.parts
+    assert split.parts.names == ("sun", "sky")
+    sun, rest = split.parts.tables
     theta = np.array([0.8, 0.7, 0.6, 0.2, 0.1])
     (a, va), (b, vb) = (TableModel(t, "colour").radiance_and_variance(theta)
                         for t in (whole.table, mixed(sun, [rest], [1.0])))

@@ -21,7 +21,7 @@ from .geometry import highlight_geometry
 from .held_out import held_out_error
 from .intervals import (calibration_sd, fit_intervals, frame_calibration_sd, jpeg_shared_sd,
                         matrix_sd)
-from .light import SPEC_LIGHT, LightOptions, LightPlan
+from .light import SPEC_LIGHT, LightOptions, LightParts, LightPlan
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import levenberg_marquardt
@@ -29,7 +29,7 @@ from ..errors import SkyfitError, check_choice
 from .sky_fit import SkyFit, SkyShare, fit_sky_scale, shape_variants, skies_at_level, sky_level_at
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, block_budget, memory_estimate,
-                                  mixed, shared_budget, trace_basis)
+                                  shared_budget, trace_basis)
 from ..render.fit_model import (BY_COUNT, PARAMETERS, bounds, check_fit_normalisation,
                                 check_start, other_readings)
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
@@ -214,11 +214,10 @@ class FitSession:
                                "sky_plan": check_choice("sky plan", cache.plan, tuple(SKY_PLANS))}
         self._mi = setup(variant or doc["render"]["variant"])
         self._loaded = None                         # the scene and its parameters (scene)
-        # the light traced (a LightPlan) and its tables: one, or the sun's, the rest's (a
-        # fitted sky) and the rest's shape variants, mixed at sky_scale and the shape's mix
-        # sky_shape_mix (set_sky)
+        # the light traced (a LightPlan) and its parts (LightParts): one, or the sun's, the
+        # rest's (a fitted sky) and the rest's shape variants, mixed at sky_scale and the
+        # shape's mix sky_shape_mix (set_sky)
         self.light, self.sky_scale, self.parts = light or SPEC_LIGHT, 1.0, None
-        self.parts_cov = None           # the covariances of parts traced with shared samples
         self.sky_shape_mix = None
         self._variants = None                       # the shape variants (_shape_variants)
         self.cache_time = time.perf_counter() - t0
@@ -280,24 +279,27 @@ class FitSession:
         ``cache_settings`` and make everything from its table."""
         trace_sessions([self], self.light if light is None else light)
 
-    def take_parts(self, parts, cov, light, seconds):
-        """Fit on the light ``light`` traced as ``parts`` (:meth:`_trace`, this session's rows)
-        with their covariances ``cov``, its trace having taken ``seconds``."""
+    def take_parts(self, parts, light, seconds, blocks):
+        """Fit on the light ``light`` traced as ``parts`` (:class:`~.light.LightParts`,
+        :meth:`_trace`, this session's rows) in ``blocks``, its trace having taken
+        ``seconds``."""
         self.light = light
         self.cache_time += seconds
-        self._use_parts(parts, cov)
+        self.cache_settings["blocks"] = blocks
+        self._use_parts(parts)
 
     def _trace(self, at, bsdf_id, light):
         """The :class:`~skyfit_mi.render.basis_table.BasisTable` of the light at
         ``cache_settings`` of the sequence's scene and frames at ``at`` (pixels or rays) on
-        material ``bsdf_id`` (one, or one per pixel), traced in blocks of bounded memory: a
-        list of one table, or under ``light`` (a :class:`~.light.LightPlan`) that splits the sky
-        the sun's and the rest's (their samples independent) and with its ``shape`` the rest's
-        shape variants (traced with the rest's samples); and the :class:`~skyfit_mi.render.basis_table.Covariances` of the parts
-        traced together (None where there are none)."""
+        material ``bsdf_id`` (one, or one per pixel), traced in blocks of bounded memory, as
+        :class:`~.light.LightParts`: the light alone, or under ``light`` (a
+        :class:`~.light.LightPlan`) that splits the sky the sun's and the rest's (their
+        samples independent) and with its ``shape`` the rest's shape variants (traced with the
+        rest's samples, their covariances kept); and the number of blocks."""
         c = self.cache_settings
-        # the split light's tables and their mix
-        lights = self._sky_parts(light.shape) if light.split else None
+        # the split light's parts by name, each a list of the frames' skies
+        named = self._sky_parts(light.shape) if light.split else None
+        lights = None if named is None else list(named.values())
         # a table per part, and the shape group's covariances about one more
         need = (len(lights) + 1 + light.shape if lights else 1) * memory_estimate(
             len(at), len(self.skies), c["positions"], c["directions"])
@@ -309,32 +311,33 @@ class FitSession:
                 "fit fewer pixels (--max-pixels) or frames (--frames), or a region at a time.")
         options = CacheOptions(**self._cache_options())
         if not light.split:
-            tables, _, c["blocks"] = trace_basis(self.scene, self.params, [self.skies], at,
-                                                 bsdf_id, options, model=self.model)
-            return tables, None
+            tables, _, blocks = trace_basis(self.scene, self.params, [self.skies], at, bsdf_id,
+                                            options, model=self.model)
+            return LightParts(("light",), tuple(tables)), blocks
         seeds = np.random.SeedSequence(options.seed).generate_state(2).tolist()
         # the sun's part in the blocks of the rest's group (shared_budget), whose series mix
         budget = block_budget(len(at), len(self.skies), c["positions"])
         parts = []
         for group, seed, b in zip((lights[:1], lights[1:]), seeds,
                                   (shared_budget(budget, len(lights[1:])), budget)):
-            tables, cov, c["blocks"] = trace_basis(self.scene, self.params, group, at, bsdf_id,
-                                                   replace(options, seed=int(seed)), b,
-                                                   self.model)
+            tables, cov, blocks = trace_basis(self.scene, self.params, group, at, bsdf_id,
+                                              replace(options, seed=int(seed)), b, self.model)
             parts += tables
-        # the covariances' pairs as indices into the parts (the sun's first)
-        return parts, None if cov is None else replace(cov, pairs=[(j + 1, k + 1)
-                                                                   for j, k in cov.pairs])
+        # the rest's group's covariances' pairs as indices into all the parts (the sun first)
+        cov = None if cov is None else replace(cov, pairs=[(j + 1, k + 1) for j, k in cov.pairs])
+        return LightParts(tuple(named), tuple(parts), cov), blocks
 
     def _sky_parts(self, shape):
-        """The light's parts, each a list of the frames' skies: the sun's and the rest's
-        (:meth:`~skyfit_mi.physics.sky.Sky.split`), and with ``shape`` the rest's shape
-        variants (:func:`~skyfit_mi.physics.sky_shape.shape_variants`)."""
+        """The light's parts by name (:class:`~.light.LightParts`), each a list of the
+        frames' skies: the sun's and the rest's (:meth:`~skyfit_mi.physics.sky.Sky.split`),
+        and with ``shape`` the rest's shape variants
+        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`)."""
         sun, rest = zip(*(sky.split() for sky in self.skies))
-        lights = [list(sun), list(rest)]
+        lights = {"sun": list(sun), "sky": list(rest)}
         if shape:
             variants = self._shape_variants()
-            lights += [[v[j][1] for v in variants] for j in range(len(variants[0]))]
+            for j, (_, first) in enumerate(variants[0]):
+                lights[f"shape:{first.info['of']}"] = [v[j][1] for v in variants]
         return lights
 
     def _shape_variants(self):
@@ -392,18 +395,12 @@ class FitSession:
                                  self.obs.pixels if self.obs.rays is None else self.obs.rays,
                                  self.name, **self._cache_options())
 
-    def _use_parts(self, parts, cov=None):
-        """Take the light's tables ``parts`` and their covariances ``cov`` (:meth:`_trace`) and
-        fit on their mix."""
-        self.parts, self.parts_cov = list(parts), cov
-        if len(self.parts) == 1:
-            self._use_table(self.parts[0])
-            return
+    def _use_parts(self, parts):
+        """Take the light's ``parts`` (:class:`~.light.LightParts`) and fit on their mix at
+        the sky's level and shape (:meth:`set_sky`)."""
+        self.parts = parts
         sun, sky = self.light_levels(self.sky_shape_mix)
-        k = self.sky_scale * sky
-        mix = np.zeros(len(self.parts) - 2) if self.sky_shape_mix is None else self.sky_shape_mix
-        self._use_table(mixed(self.parts[0], self.parts[1:],
-                              [k * (1.0 - mix.sum())] + [k * m for m in mix], sun, cov))
+        self._use_table(parts.table(self.sky_scale * sky, self.sky_shape_mix, sun))
 
     def set_sky(self, k, mix=None):
         """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
@@ -411,18 +408,20 @@ class FitSession:
         ``mix[j]`` of its shape variant j and (1 - sum(mix)) of its own pattern
         (:func:`~skyfit_mi.physics.sky_shape.shape_variants`), and make the models and
         chi-square on it."""
-        if len(self.parts or ()) < 2 + (0 if mix is None else len(mix)):
+        if self.parts is None or "sky" not in self.parts.names \
+                or len(self.parts.variants) < (0 if mix is None else len(mix)):
             raise ValueError("the sky's level needs a session traced with a fitted sky's light, "
                              "its shape one traced with the sky's shape variants")
         self.sky_scale = float(k) if np.ndim(k) == 0 else np.asarray(k, dtype=float)
         self.sky_shape_mix = None if mix is None else np.asarray(mix, dtype=float)
-        self._use_parts(self.parts, self.parts_cov)
+        self._use_parts(self.parts)
 
     def take_light(self, other):
         """Fit on the light ``other`` (a traced session of the same region, sequence and
         lobe, in any parameterisation: the table does not depend on it) traced."""
         self.cache_settings = dict(other.cache_settings)
-        self.take_parts(other.parts, other.parts_cov, other.light, other.cache_time)
+        self.take_parts(other.parts, other.light, other.cache_time,
+                        other.cache_settings.get("blocks"))
 
     def _use_table(self, table):
         """Take ``table`` (of the region's pixels) and make the models and chi-square on it."""
@@ -683,16 +682,13 @@ def trace_sessions(sessions, light):
         else:
             at = PointRays(*(np.concatenate([getattr(s.obs.rays, k) for s in group])
                              for k in ("origins", "directions")))
-        parts, cov = group[0]._trace(at, np.repeat([s.name for s in group],
-                                                   [len(s.obs.pixels) for s in group]), key[-1])
+        parts, blocks = group[0]._trace(at, np.repeat([s.name for s in group],
+                                                      [len(s.obs.pixels) for s in group]), key[-1])
         share = (time.perf_counter() - t0) / len(group)
         start = 0
         for s in group:
             n = len(s.obs.pixels)
-            s.cache_settings["blocks"] = group[0].cache_settings["blocks"]
-            rows = slice(start, start + n)
-            s.take_parts([t.subset(rows) for t in parts],
-                         None if cov is None else cov.subset(rows), key[-1], share)
+            s.take_parts(parts.subset(slice(start, start + n)), key[-1], share, blocks)
             start += n
 
 

@@ -14,9 +14,11 @@ region's errors (:class:`~.sky_fit.SkyShare`).
 
 from dataclasses import dataclass
 
+import numpy as np
 
 from ..errors import SkyfitError, check_choice, check_range
 from ..physics.sky import SKY_CHOICES, SKY_LEVEL_SD
+from ..render.basis_table import mixed
 from .sky_fit import (check_terms, default_sky, default_sun_sd, shape_variants, sun_source,
                       sun_up)
 
@@ -105,3 +107,48 @@ class LightOptions:
             return LightPlan(sky, float(sun_sd), "given", terms, shape)
         sun_sd = default_sun_sd(doc, skies)
         return LightPlan(sky, sun_sd, sun_source(skies) if sun_sd else "rendered", terms, shape)
+
+
+@dataclass(frozen=True)
+class LightParts:
+    """The light at a region's points as traced (:meth:`~.fit.FitSession.trace_light`), in
+    parts by name.  Radiance is linear in the light, so each part's table (its D and G bases,
+    thesis eq. 6.1's model on that light) adds with a weight, L = sum_j w_j (rho_d D_j + s G_j)
+    (:func:`~skyfit_mi.render.basis_table.mixed`), and no weight needs a trace of its own.
+
+    names : the parts: ``light`` (the spec's light as it is, alone), or a fitted sky's ``sun``
+        (the solar disc), ``sky`` (the rest: sky, map and ground,
+        :meth:`~skyfit_mi.physics.sky.Sky.split`) and its shape variants ``shape:<index>``
+        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`)
+    tables : each part's :class:`~skyfit_mi.render.basis_table.BasisTable`, traced in the
+        same blocks
+    covariances : the :class:`~skyfit_mi.render.basis_table.Covariances` of the parts traced on
+        shared samples (its pairs index ``names``), None where none are
+    """
+
+    names: tuple
+    tables: tuple
+    covariances: object = None
+
+    @property
+    def variants(self):
+        """The names of the sky's shape variants traced."""
+        return [n for n in self.names if n.startswith("shape:")]
+
+    def subset(self, rows):
+        """The parts at the points ``rows`` (a slice)."""
+        return LightParts(self.names, tuple(t.subset(rows) for t in self.tables),
+                          None if self.covariances is None else self.covariances.subset(rows))
+
+    def table(self, k=1.0, mix=None, sun=1.0):
+        """The table of the light whose sky (all but the sun) is ``k`` times the spec's against
+        the sun (one factor, or one per frame), in the spec's shape or (``mix``, one per shape
+        variant) (1 - sum(mix)) times its pattern plus mix_j times variant j, and whose sun is
+        ``sun`` times the spec's (one factor, or one per frame)."""
+        if self.names == ("light",):
+            return self.tables[0]
+        mix = np.zeros(len(self.variants)) if mix is None else np.asarray(mix, dtype=float)
+        weights = {"sun": sun, "sky": k * (1.0 - mix.sum()),
+                   **{v: k * m for v, m in zip(self.variants, mix)}}
+        w = [weights[n] for n in self.names]
+        return mixed(self.tables[0], self.tables[1:], w[1:], w[0], self.covariances)

@@ -620,7 +620,7 @@ def _fit_terms(sessions, level, terms, told, warnings):
     sd, span = _level_shares(sessions, level)
     fitted = _Fitted(float(np.exp(level.u0)), level.interval, level.sd_u, sd, span,
                      level.data(level.u0))
-    J = len(sessions[0].parts) - 2                       # the shape variants traced
+    J = len(sessions[0].parts.variants)                  # the shape variants traced
     if not (terms > 1 or J):
         return fitted
     if not level.determined:
