@@ -39,15 +39,18 @@ def day_means(scans, model, exclude_deg=None):
                  for rot in (False, True))
 
 
-def irradiance_model(name, parts, **perez_kw):
-    """A SkyModel: the Perez sky of each scan from ``parts[capture] = (dhi, dni)``."""
+def irradiance_model(name, parts, options=None):
+    """A SkyModel: the Perez sky of each scan from ``parts[capture] = (dhi, dni)``, with the
+    model choices ``options`` (a PerezOptions; default its defaults)."""
     from skyfit_mi.physics import sky_measurement as sm
-    from skyfit_mi.physics.perez import perez_sky
+    from skyfit_mi.physics.perez import PerezOptions, perez_sky
+
+    options = PerezOptions() if options is None else options
 
     def luminance(d, scan, _):
         dhi, dni = parts[scan.capture]
         return perez_sky(scan.sun_zenith_deg, scan.sun_azimuth_deg, scan.day_of_year,
-                         dhi=dhi, dni=dni, **perez_kw).luminance(d)[None, :]
+                         dhi=dhi, dni=dni, options=options).luminance(d)[None, :]
     return sm.SkyModel(name, luminance, absolute=True)
 
 
@@ -146,9 +149,11 @@ def main():
     scan_parts = parts["DHI integrated from the scan"]
     rows = [{"Delta of the scan's DHI": label,
              "day mean, nominal / rotated": "{:.3f} / {:.3f}".format(*day_means(
-                 scans, irradiance_model(label, scan_parts, **kw)))}
-            for label, kw in (("Kasten-Young air mass, E0 from 1367 W m^-2 (default)", {}),
-                              ("Kasten 1966 air mass", {"airmass_model": "kasten1966"}))]
+                 scans, irradiance_model(label, scan_parts, options)))}
+            for label, options in (("Kasten-Young air mass, E0 from 1367 W m^-2 (default)",
+                                    pz.PerezOptions()),
+                                   ("Kasten 1966 air mass",
+                                    pz.PerezOptions(airmass_model="kasten1966")))]
     print("\n" + markdown(rows))
 
     print("\n### 3. The circumsolar region\n")

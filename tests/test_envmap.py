@@ -7,9 +7,10 @@ import pytest
 
 from skyfit_mi.conventions import direction_from_angles
 from skyfit_mi.errors import SkyfitError
-from skyfit_mi.physics.envmap import envmap_sky, fisheye_lookup, latlong_table
+from skyfit_mi.physics.envmap import MeasuredIrradiance, envmap_sky, fisheye_lookup, latlong_table
 from skyfit_mi.physics.latlong import latlong_centres, latlong_lookup
 from skyfit_mi.physics.sky import Sky, cie_sky, directional_sky
+from skyfit_mi.physics.sun import SunDisc
 
 H, W = 4, 8                                      # rows of 45 degrees, columns of 45 degrees
 
@@ -144,22 +145,24 @@ def test_invalid_pixels_are_masked_and_counted_and_an_empty_map_refused():
 def test_sun_given_apart_from_a_clipped_map():
     """A map with a clipped (too dim) sun: the mask fills the sun's cells from the ring around
     them, and the disc carries the measured direct normal irradiance."""
-    sky0 = cie_sky("clear", 30.0, 200.0, sun=False, ground_albedo=0.0)
+    sky0 = cie_sky("clear", 30.0, 200.0, sun=SunDisc(drawn=False), ground_albedo=0.0)
     theta, phi = latlong_centres(64, 128)
     table = sky0.sky_radiance(direction_from_angles(theta[:, None], phi[None, :])).astype(np.float32)
     near = np.degrees(np.arccos(np.clip(direction_from_angles(theta[:, None], phi[None, :])
                                         @ sky0.sun_direction, -1, 1))) < 3
     table[near] = 50.0                              # the clipped sun and its flare
-    sky = envmap_sky(table, 30.0, 200.0, direct_normal=800.0, sun_mask_deg=3.0)
+    sky = envmap_sky(table, 30.0, 200.0, measured=MeasuredIrradiance(direct_normal=800.0),
+                     sun_mask_deg=3.0)
     assert sky.info["sun_masked_cells"] == near.sum()
     assert sky.envmap[near].max() < 1.5 * sky0.sky_radiance(sky0.sun_direction).max()
     np.testing.assert_allclose(sky.sun_horizontal_irradiance() @ [0.2126, 0.7152, 0.0722],
                                800.0 * np.cos(np.radians(30)), rtol=1e-9)
     # the ground is black by default (the map's own lower half) and Lambertian when asked
     assert not sky.ground.any()
-    lit = envmap_sky(table, 30.0, 200.0, direct_normal=800.0, ground_albedo=0.2)
+    lit = envmap_sky(table, 30.0, 200.0, measured=MeasuredIrradiance(direct_normal=800.0),
+                     ground_albedo=0.2)
     np.testing.assert_allclose(lit.ground, 0.2 * lit.horizontal_irradiance() / np.pi, rtol=1e-3)
-    night = envmap_sky(table, 95.0, 200.0, direct_normal=800.0)
+    night = envmap_sky(table, 95.0, 200.0, measured=MeasuredIrradiance(direct_normal=800.0))
     assert not night.sun_radiance.any() and "below the horizon" in night.info["note"]
 
 

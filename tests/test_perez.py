@@ -140,7 +140,7 @@ def like_gendaylit(month, day, sun, dni, dhi):
     zenith = np.degrees(np.arccos(sun[2]))
     azimuth = np.degrees(np.arctan2(sun[0], sun[1])) % 360.0
     return perez.perez_sky(zenith, azimuth, MONTH_START[month - 1] + day, dhi=dhi, dni=dni,
-                           airmass_model="kasten1966")
+                           options=perez.PerezOptions(airmass_model="kasten1966"))
 
 
 def tregenza_sum(sky):
@@ -220,7 +220,7 @@ def test_matches_gendaylit(radiance, month, day, hour, dni, dhi):
 def test_gendaylit_delta_floor(radiance):
     # Delta = 0.0487 in bin 4: gendaylit, and perez_sky by default, use 0.2 for the
     # coefficients.  The published coefficients at 0.0487 have b = +0.26, a sky growing toward
-    # the horizon, which perez_sky(delta_floor=None) refuses.
+    # the horizon, which perez_sky with PerezOptions(delta_floor=None) refuses.
     _, delta_r, r = gendaylit(radiance, 6, 21, 12.0, 50, 60, output=1)
     sun = r[7:10] / np.linalg.norm(r[7:10])
     raised = like_gendaylit(6, 21, sun, 50, 60)
@@ -231,8 +231,8 @@ def test_gendaylit_delta_floor(radiance):
     published = perez.coefficients(raised.info["epsilon"], raised.info["delta"], zenith)
     assert published[1] == pytest.approx(0.26, abs=0.01)
     with pytest.raises(SkyfitError, match="coefficient b = 0.26.* > 0"):
-        perez.perez_sky(zenith, 180.0, 172, dhi=60, dni=50, airmass_model="kasten1966",
-                        delta_floor=None)
+        perez.perez_sky(zenith, 180.0, 172, dhi=60, dni=50, options=perez.PerezOptions(
+            airmass_model="kasten1966", delta_floor=None))
 
 
 def test_exact_normalisation_differs_from_gendaylits_145_point_sum(radiance):
@@ -267,14 +267,16 @@ def midpoint_irradiance(sky, n=800):
     (45.0, 180.0, 172, 48.0, 8.0, None, 2e-4),
 ])
 def test_sky_irradiance_equals_the_measured_diffuse(zenith, azimuth, day, dhi, dni, floor, rtol):
-    sky = perez.perez_sky(zenith, azimuth, day, dhi=dhi, dni=dni, delta_floor=floor)
+    sky = perez.perez_sky(zenith, azimuth, day, dhi=dhi, dni=dni,
+                          options=perez.PerezOptions(delta_floor=floor))
     assert sky.horizontal_irradiance() == pytest.approx(dhi, rel=1e-12)    # by construction
     assert midpoint_irradiance(sky) == pytest.approx(dhi, rel=rtol)
 
 
 def test_negative_model_values_are_clamped_at_zero():
     # bin 2 at Delta 0.05, published: l_v < 0 near the horizon opposite the sun.
-    sky = perez.perez_sky(45.0, 180.0, 172, dhi=48.0, dni=8.0, delta_floor=None)
+    sky = perez.perez_sky(45.0, 180.0, 172, dhi=48.0, dni=8.0,
+                          options=perez.PerezOptions(delta_floor=None))
     d = sky_grid()
     zeta = np.arccos(np.clip(d @ sky.sun_direction, -1.0, 1.0))
     assert perez_relative_luminance(d[..., 2], zeta, sky.coefficients).min() < -0.5
@@ -339,11 +341,13 @@ def test_global_irradiance_is_split_by_the_chosen_model():
     for name in perez.DECOMPOSITIONS:
         parts = getattr(pvlib.irradiance, name)(600.0, 35.0, 150)
         ref = perez.perez_sky(35.0, 120.0, 150, dhi=float(parts["dhi"]), dni=float(parts["dni"]))
-        sky = perez.perez_sky(35.0, 120.0, 150, ghi=600.0, decomposition=name)
+        sky = perez.perez_sky(35.0, 120.0, 150, ghi=600.0,
+                              options=perez.PerezOptions(decomposition=name))
         np.testing.assert_array_equal(sky.coefficients, ref.coefficients)
         assert sky.scale == ref.scale and sky.info["decomposition"] == name
     with pytest.raises(SkyfitError, match="unknown decomposition 'disc'; valid values are: 'erbs'"):
-        perez.perez_sky(35.0, 120.0, 150, ghi=600.0, decomposition="disc")
+        perez.perez_sky(35.0, 120.0, 150, ghi=600.0,
+                        options=perez.PerezOptions(decomposition="disc"))
 
 
 # --------------------------------------------------------------------------
@@ -359,7 +363,8 @@ def test_global_irradiance_is_split_by_the_chosen_model():
     ({"dhi": 100.0}, "give the measured dhi and dni"),
     ({"ghi": 0.0}, "global horizontal irradiance = 0"),
     ({"dhi": [100.0, 90.0], "dni": 100.0}, "dhi must be a number, not an array"),
-    ({"dhi": 100.0, "dni": 100.0, "airmass_model": "young1994"}, "unknown air mass model"),
+    ({"dhi": 100.0, "dni": 100.0, "options": perez.PerezOptions(airmass_model="young1994")},
+     "unknown air mass model"),
 ])
 def test_bad_irradiance_raises_one_clear_line(kwargs, match):
     with pytest.raises(SkyfitError, match=match) as err:

@@ -3,18 +3,19 @@ import numpy as np
 import pytest
 
 from skyfit_mi.conventions import direction_from_angles
-from skyfit_mi.physics.envmap import envmap_sky
+from skyfit_mi.physics.envmap import MeasuredIrradiance, envmap_sky
 from skyfit_mi.physics.latlong import latlong_centres
 from skyfit_mi.physics.gensky import from_gensky
-from skyfit_mi.physics.perez import perez_sky
+from skyfit_mi.physics.perez import PerezOptions, perez_sky
 from skyfit_mi.physics.sky import cie_sky
+from skyfit_mi.physics.sun import SunDisc
 from test_gensky import CLEAR
 
 
 def clear_map(rows):
     """A CIE clear sky (sun at 30 degrees from the zenith, azimuth 200) tabulated at the cell
     centres of a lat-long map, black below the horizon."""
-    sky = cie_sky("clear", 30, 200, sun=False, ground_albedo=0.0)
+    sky = cie_sky("clear", 30, 200, sun=SunDisc(drawn=False), ground_albedo=0.0)
     theta, phi = latlong_centres(rows, 2 * rows)
     return sky.sky_radiance(direction_from_angles(theta[:, None], phi[None, :])) \
         * (theta < np.pi / 2)[:, None, None]
@@ -35,13 +36,14 @@ SKIES = {
     # Perez all-weather skies from measured irradiance: clear (bin 8), intermediate, overcast
     "perez-clear": lambda: perez_sky(30, 150, 172, dhi=90, dni=850).to_sky(),
     "perez-intermediate": lambda: perez_sky(60, 230, 100, dhi=200, dni=300).to_sky(),
-    "perez-overcast": lambda: perez_sky(45, 100, 300, ghi=150, decomposition="erbs").to_sky(),
+    "perez-overcast": lambda: perez_sky(45, 100, 300, ghi=150, options=PerezOptions(decomposition="erbs")).to_sky(),
     # HDR environment maps (physics/envmap.py), the sun given apart from the map
-    "envmap-clear": lambda: envmap_sky(clear_map(32), 30, 200, direct_normal=700,
+    "envmap-clear": lambda: envmap_sky(clear_map(32), 30, 200, measured=MeasuredIrradiance(direct_normal=700),
                                        ground_albedo=0.2),
-    "envmap-patchy": lambda: envmap_sky(patchy_map(12), 50, 80, direct_normal=300),
+    "envmap-patchy": lambda: envmap_sky(patchy_map(12), 50, 80, measured=MeasuredIrradiance(direct_normal=300)),
     "envmap-patchy-2": lambda: envmap_sky(patchy_map(12, seed=4), 60, 300),
-    "envmap-large": lambda: envmap_sky(patchy_map(20, seed=5), 20, 10, direct_normal=500),
+    "envmap-large": lambda: envmap_sky(patchy_map(20, seed=5), 20, 10,
+                                        measured=MeasuredIrradiance(direct_normal=500)),
 }
 
 

@@ -4,6 +4,7 @@ import pytest
 
 from skyfit_mi.physics import sky as sk
 from skyfit_mi.physics import sky_shape
+from skyfit_mi.physics.sun import SunDisc
 from skyfit_mi.conventions import direction_from_angles
 from skyfit_mi.errors import SkyfitError
 
@@ -22,7 +23,7 @@ def rel(s, theta_p, phi_p):
 @pytest.mark.parametrize("theta_s, theta_p, dphi, expected", [
     (45, 45, 180, 0.63806), (45, 45, 0, 7.24955), (30, 60, 90, 0.69468), (60, 80, 180, 2.49438)])
 def test_clear_sky_relative_luminance(theta_s, theta_p, dphi, expected):
-    s = sk.cie_sky("clear", theta_s, 180.0, sun=False)
+    s = sk.cie_sky("clear", theta_s, 180.0, sun=SunDisc(drawn=False))
     assert rel(s, theta_p, 180.0 + dphi) == pytest.approx(expected, rel=1e-4)
 
 
@@ -36,14 +37,15 @@ def test_zenith_luminance_models():
     assert sk.kittler_zenith_luminance(60) == pytest.approx(300 + 3000 / np.sqrt(3))
     assert sk.krochmann_seidl_zenith_luminance(60) == pytest.approx(123 + 4300)
     assert sk.kittler_zenith_luminance(120) == 0.0
-    s = sk.cie_sky("clear", 60, 180, sun=False, efficacy_clear=150.0)
+    s = sk.cie_sky("clear", 60, 180, sun=SunDisc(drawn=False),
+                   photometry=sk.CIEPhotometry(efficacy_clear=150.0))
     zen = s.sky_radiance(np.array([0.0, 0.0, 1.0]))
     assert zen @ LUM == pytest.approx((300 + 3000 / np.sqrt(3)) / 150.0)   # eq. 4.15 / 150 lm/W
 
 
 def test_overcast_horizontal_irradiance_is_analytic():
     # E = int Lz (1 + 2 cos)/3 cos dw = 7 pi / 9 Lz
-    s = sk.cie_sky("overcast", 40, 0, efficacy_overcast=120.0)
+    s = sk.cie_sky("overcast", 40, 0, photometry=sk.CIEPhotometry(efficacy_overcast=120.0))
     lz = sk.krochmann_seidl_zenith_luminance(40) / 120.0
     assert s.sky_horizontal_irradiance() @ LUM == pytest.approx(7 * np.pi / 9 * lz, rel=1e-6)
     assert np.all(s.sun_horizontal_irradiance() == 0)
@@ -88,6 +90,9 @@ def test_ground_is_lambertian_reflection_of_global_irradiance():
     (dict(kind="intermediate"), "needs a sun probability phi"),
     (dict(kind="clear", phi=0.5), "give phi only for an intermediate sky"),
     (dict(kind="clear", ground_albedo=2.0), r"ground albedo = 2 .*\[0, 1\]"),
+    (dict(kind="clear", sun=False), r"sun must be a SunDisc, got False: .*SunDisc\(drawn=False\)"),
+    (dict(kind="clear", photometry=sk.CIEPhotometry(efficacy_clear=0.5)),
+     r"efficacy_clear = 0.5 lm W\^-1 is outside"),
 ])
 def test_bad_sky_input(kwargs, match):
     kind = kwargs.pop("kind")

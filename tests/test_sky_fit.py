@@ -272,7 +272,7 @@ def test_a_measured_suns_level_is_known_to_the_instruments_accuracy():
     import datetime as dt
 
     from skyfit_mi.fitting.sky_fit import default_sun_sd, sun_source
-    from skyfit_mi.physics.envmap import envmap_sky
+    from skyfit_mi.physics.envmap import MeasuredIrradiance, envmap_sky
     from skyfit_mi.physics.sky import MEASURED_SUN_SD, SUN_LEVEL_SD, cie_sky
     from skyfit_mi.pipeline.illumination import perez_from_irradiance
     from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
@@ -287,8 +287,9 @@ def test_a_measured_suns_level_is_known_to_the_instruments_accuracy():
                                    "direct_normal_W_m2": 700.0}, 30.0, 180.0, t)
     erbs = perez_from_irradiance({"global_horizontal_W_m2": 800.0}, 30.0, 180.0, t)
     table = np.full((16, 32, 3), 20.0, dtype=np.float32)
-    mapped = envmap_sky(table, 30.0, 180.0, direct_normal=700.0)
-    from_ghi = envmap_sky(table, 30.0, 180.0, global_horizontal=800.0)
+    mapped = envmap_sky(table, 30.0, 180.0, measured=MeasuredIrradiance(direct_normal=700.0))
+    from_ghi = envmap_sky(table, 30.0, 180.0,
+                          measured=MeasuredIrradiance(global_horizontal=800.0))
     for skies in (measured, [perez], [mapped]):
         assert sun_source(skies) == "measured"
         assert default_sun_sd({"source": "ingest"}, skies) == MEASURED_SUN_SD

@@ -27,7 +27,7 @@ the frame's time and site, its direct normal irradiance measured) and can blank 
 within ``sun_mask_deg`` of it, filling them with the median of the ring around them.
 """
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -152,9 +152,42 @@ def direct_normal_from_global(ghi, diffuse_horizontal, sun_zenith_deg):
     return float((ghi - diffuse_horizontal) / np.cos(np.radians(sun_zenith_deg)))
 
 
-def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=None,
-               direct_normal=None, global_horizontal=None, sun_mask_deg=None, ground_albedo=0.0,
-               sun_solid_angle=None, info=None, sun_measured=None):
+@dataclass(frozen=True)
+class MeasuredIrradiance:
+    """The irradiance measured beside a captured map, which sets its level and its sun's
+    (:func:`envmap_sky`); None where not measured.
+
+    Attributes
+    ----------
+    diffuse_horizontal : float or None
+        Diffuse horizontal irradiance [W m^-2]: the map (after the sun's mask) is scaled so
+        that its luminance-weighted horizontal irradiance equals it, a photograph's
+        calibration (:meth:`~skyfit_mi.physics.sky.Sky.scaled`).
+    direct_normal : float or None
+        Direct normal irradiance [W m^-2], in [0, 1500]: a solar disc of radiance DNI / Omega
+        in the sun's colour (:meth:`~skyfit_mi.physics.sky.Sky.scaled`); none when the sun is
+        below the horizon.
+    global_horizontal : float or None
+        Global horizontal irradiance [W m^-2], in [0, 2000] (a pyranometer beside the fisheye),
+        instead of ``direct_normal``: the sun takes what the map's own horizontal irradiance
+        (luminance-weighted, after the mask and ``diffuse_horizontal``) leaves of it, (GHI -
+        E_map) / cos theta_s (:func:`direct_normal_from_global`).
+    sun_measured : bool or None
+        Whether ``direct_normal`` was measured (a pyrheliometer's), not a model's: the Sky's
+        ``info["sun_measured"]``, by which a fit knows the sun's level
+        (:func:`~skyfit_mi.fitting.sky_fit.sun_source`); None: whether it is given.
+
+    The values are checked where they are used (:func:`envmap_sky`).
+    """
+
+    diffuse_horizontal: float = None
+    direct_normal: float = None
+    global_horizontal: float = None
+    sun_measured: bool = None
+
+
+def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, measured=MeasuredIrradiance(),
+               sun_mask_deg=None, ground_albedo=0.0, sun_solid_angle=None, info=None):
     """A :class:`~skyfit_mi.physics.sky.Sky` lit by a world-frame lat-long ``table``
     (:func:`latlong_table`) [W m^-2 sr^-1], with the sun given apart from the map.
 
@@ -165,10 +198,11 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=Non
     sun_zenith_deg, sun_azimuth_deg : float
         The sun's position [degrees] (from the frame's time and site); it places the solar
         disc and the mask.
-    direct_normal : float, optional
-        Measured direct normal irradiance [W m^-2]: a solar disc of radiance DNI / Omega in
-        the sun's colour (:meth:`~skyfit_mi.physics.sky.Sky.scaled`); none when the sun is
-        below the horizon (``info`` says so).
+    measured : MeasuredIrradiance
+        The irradiance measured with the map [W m^-2]: its diffuse horizontal sets the map's
+        level, its direct normal (or the global horizontal's rest) the solar disc's (none
+        when the sun is below the horizon: the Sky's ``info`` says so); default: none, the
+        map as it is and no disc.
     sun_mask_deg : float, optional
         Fill the map's cells within this angle of the sun [degrees] from the ring around them
         (:func:`mask_sun`): a clipped captured sun, whose light the disc then carries.
@@ -177,22 +211,10 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=Non
         (L = albedo E_h / pi, as the CIE skies' ground), added to the map's own lower half
         (zero for a fisheye).
     sun_solid_angle : float, optional
-        The disc's solid angle [sr] (default: the sun's, :data:`~skyfit_mi.physics.sun.SUN_SOLID_ANGLE`).
-    diffuse_horizontal : float, optional
-        Measured diffuse horizontal irradiance [W m^-2]: the map (after the mask) is scaled so
-        that its luminance-weighted horizontal irradiance equals it, a photograph's
-        calibration (:meth:`~skyfit_mi.physics.sky.Sky.scaled`).
-    global_horizontal : float, optional
-        Measured global horizontal irradiance [W m^-2] (a pyranometer beside the fisheye),
-        instead of ``direct_normal``: the sun takes what the map's own horizontal irradiance
-        (luminance-weighted, after the mask and ``diffuse_horizontal``) leaves of it, (GHI -
-        E_map) / cos theta_s (:func:`direct_normal_from_global`).
+        The disc's solid angle [sr] (default: the sun's,
+        :data:`~skyfit_mi.physics.sun.SUN_SOLID_ANGLE`).
     info : dict, optional
         Recorded in the Sky's ``info`` (e.g. the map's file and projection).
-    sun_measured : bool, optional
-        Whether ``direct_normal`` was measured (a pyrheliometer's), not a model's: the Sky's
-        ``info["sun_measured"]``, by which a fit knows the sun's level
-        (:func:`~skyfit_mi.fitting.sky_fit.sun_source`); default: whether it is given.
     """
     from .sky import Sky            # not at the top: sky imports this module
 
@@ -207,6 +229,8 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, diffuse_horizontal=Non
         info["sun_mask_deg"] = float(sun_mask_deg)
     sky = Sky(s, envmap=table, sun_solid_angle=SUN_SOLID_ANGLE if sun_solid_angle is None
               else sun_solid_angle, info=info)
+    diffuse_horizontal, direct_normal = measured.diffuse_horizontal, measured.direct_normal
+    global_horizontal, sun_measured = measured.global_horizontal, measured.sun_measured
     if diffuse_horizontal is not None:
         info["diffuse_horizontal_W_m2"] = float(diffuse_horizontal)
         sky = sky.scaled(diffuse_horizontal=diffuse_horizontal)

@@ -70,7 +70,7 @@ from ..conventions import angles_from_direction, direction_from_angles
 from ..errors import SkyfitError, check_range
 from . import cie_general
 from .colour import SRGB_LUMINANCE, XYZ_TO_SRGB
-from .envmap import direct_normal_from_global, envmap_sky
+from .envmap import MeasuredIrradiance, direct_normal_from_global, envmap_sky
 from .latlong import resample
 
 #: RBF kernel of the interpolated fields (scipy.interpolate.RBFInterpolator's name).
@@ -355,7 +355,8 @@ def measured_envmap(sky, efficacy, ghi, sun_zenith_deg, sun_azimuth_deg, *,
             "map_diffuse_horizontal_W_m2": dhi, "global_horizontal_W_m2": float(ghi),
             "efficacy_lm_W": float(efficacy), "cie_groups": sky.groups.tolist(),
             "zenith_luminance_cd_m2": sky.zenith_luminance}
-    return envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, direct_normal=dni,
+    return envmap_sky(table, sun_zenith_deg, sun_azimuth_deg,
+                      measured=MeasuredIrradiance(direct_normal=dni),
                       ground_albedo=ground_albedo, info=info)
 
 

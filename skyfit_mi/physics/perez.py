@@ -21,12 +21,12 @@ Where this module, or common implementations, depart from the paper:
 
 * the horizon: ``cos theta_p`` is held at 0.01 below 0.01, as Radiance's ``perezlum.cal``
   does, so that exp(b / cos theta_p) stays finite;
-* ``delta_floor`` of :func:`perez_sky`: Radiance's ``gendaylit`` and ``gendaymtx`` (and
+* ``delta_floor`` of :class:`PerezOptions`: Radiance's ``gendaylit`` and ``gendaymtx`` (and
   other implementations) raise Delta to 0.2 for the coefficients when 1.065 < epsilon < 2.8:
   at lower Delta the published coefficients of those bins give b > 0 (a sky growing without
   bound toward the horizon, e.g. DHI 60 and DNI 50 W m^-2 under a high sun) or negative
   luminance near the horizon (a low sun in bin 2).  :func:`perez_sky` does the same by
-  default; ``delta_floor=None`` gives the published model unchanged.  :func:`coefficients`
+  default; ``PerezOptions(delta_floor=None)`` gives the published model unchanged.  :func:`coefficients`
   is always the published model.
 * Radiance's ``gendaylit`` also clamps epsilon to [1, 12.01), Delta to [0.01, 0.6] and the
   solar altitude to at most 87 degrees, computes the air mass with Kasten (1966) and
@@ -328,7 +328,7 @@ def coefficients(epsilon, delta, sun_zenith_deg):
               d = -\\exp\\left(\\Delta (d_1 + d_2 Z)\\right) + d_3 + \\Delta d_4.
 
     This is the model as published: no limits on Delta (see ``delta_floor`` of
-    :func:`perez_sky` for Radiance's).
+    :class:`PerezOptions` for Radiance's).
 
     Parameters
     ----------
@@ -502,6 +502,41 @@ def default_cct(epsilon):
     return 1.0 / ((1.0 - w) / CCT_OVERCAST + w / CCT_CLEAR)
 
 
+@dataclass(frozen=True)
+class PerezOptions:
+    """The model choices of a Perez sky (:func:`perez_sky`), apart from the irradiance it is
+    scaled to.
+
+    Attributes
+    ----------
+    decomposition : str
+        A key of :data:`DECOMPOSITIONS` (the pvlib.irradiance function of that name), splitting
+        a global horizontal irradiance into diffuse and direct normal (default 'erbs').
+    airmass_model : str
+        A key of :data:`AIRMASS_MODELS`, for Delta (1990, eq. 2; default 'kastenyoung1989').
+    delta_floor : float or None
+        Delta is raised to at least this value [unitless], in [0, 1], for the coefficients
+        when 1.065 < epsilon < 2.8, as Radiance's gendaylit and gendaymtx do with the default
+        :data:`RADIANCE_DELTA_FLOOR` (0.2); None uses the published model unchanged, which
+        refuses (b > 0) some dark skies with a little sun.  The efficacy always uses the
+        measured Delta.
+    precipitable_water : float
+        W [cm], in [0, 10], for the luminous efficacy (1990, eq. 7; default
+        :data:`PRECIPITABLE_WATER`, 2 cm).
+    nodes : int
+        Quadrature nodes in cos theta_p of the normalisation (1993, eq. 3; see
+        :func:`hemisphere_integral`; default :data:`~skyfit_mi.physics.sky.IRRADIANCE_NODES`).
+
+    The values are checked where they are used (:func:`perez_sky`).
+    """
+
+    decomposition: str = "erbs"
+    airmass_model: str = "kastenyoung1989"
+    delta_floor: float = RADIANCE_DELTA_FLOOR
+    precipitable_water: float = PRECIPITABLE_WATER
+    nodes: int = IRRADIANCE_NODES
+
+
 def _check_scalars(**values):
     for name, value in values.items():
         if value is not None and np.ndim(value) != 0:
@@ -510,9 +545,7 @@ def _check_scalars(**values):
 
 
 def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=None, ghi=None,
-              decomposition="erbs", airmass_model="kastenyoung1989",
-              delta_floor=RADIANCE_DELTA_FLOOR,
-              precipitable_water=PRECIPITABLE_WATER, nodes=IRRADIANCE_NODES):
+              options=PerezOptions()):
     """A Perez all-weather sky (1993) scaled to measured irradiance.
 
     epsilon and Delta come from :func:`clearness` and :func:`brightness`, the pattern from
@@ -533,21 +566,11 @@ def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=Non
         Measured diffuse horizontal and direct normal irradiance [W m^-2]; dhi > 0.
     ghi : float, optional
         Global horizontal irradiance [W m^-2], instead of ``dhi`` and ``dni``: split into
-        them by ``decomposition``.
-    decomposition : str
-        A key of :data:`DECOMPOSITIONS` (pvlib.irradiance function of that name).
-    airmass_model : str
-        A key of :data:`AIRMASS_MODELS`, for Delta.
-    delta_floor : float or None
-        Delta is raised to at least this value for the coefficients when
-        1.065 < epsilon < 2.8, as Radiance's gendaylit and gendaymtx do with the default
-        :data:`RADIANCE_DELTA_FLOOR` (0.2); None uses the published model unchanged, which
-        refuses (b > 0) some dark skies with a little sun.  The efficacy always uses the
-        measured Delta.
-    precipitable_water : float
-        W [cm] for the luminous efficacy.
-    nodes : int
-        Quadrature nodes in cos theta_p of the normalisation (see :func:`hemisphere_integral`).
+        them by ``options.decomposition``.
+    options : PerezOptions
+        The model choices: decomposition, air mass model, Delta floor, precipitable water
+        [cm] and quadrature nodes (default: Radiance's floor and water, Erbs, Kasten and
+        Young 1989, 128 nodes).
 
     Returns
     -------
@@ -559,8 +582,8 @@ def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=Non
         On bad or missing irradiance (negative, NaN, dhi = 0), a sun on or below the horizon,
         an unknown decomposition or air mass model, or coefficients with b > 0 (a sky growing
         without bound toward the horizon, outside the model's range; gendaylit refuses these
-        too: with the default ``delta_floor`` they need epsilon >= 2.8 and a low Delta, e.g.
-        epsilon 2.8-4.5 with Delta < 0.075 and the sun near the zenith).
+        too: with the default ``options.delta_floor`` they need epsilon >= 2.8 and a low
+        Delta, e.g. epsilon 2.8-4.5 with Delta < 0.075 and the sun near the zenith).
     """
     _check_scalars(sun_zenith_deg=sun_zenith_deg, sun_azimuth_deg=sun_azimuth_deg,
                    day_of_year=day_of_year, dhi=dhi, dni=dni, ghi=ghi)
@@ -571,21 +594,21 @@ def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=Non
     if ghi is not None:
         if dhi is not None or dni is not None:
             raise SkyfitError("give either ghi alone or both dhi and dni, not both kinds.")
-        check_choice("decomposition", decomposition, tuple(DECOMPOSITIONS))
+        check_choice("decomposition", options.decomposition, tuple(DECOMPOSITIONS))
         import pvlib.irradiance
 
         _irradiance("global horizontal irradiance", ghi, 2000.0, positive=True)
-        parts = getattr(pvlib.irradiance, decomposition)(float(ghi), z, day_of_year)
+        parts = getattr(pvlib.irradiance, options.decomposition)(float(ghi), z, day_of_year)
         dhi, dni = float(parts["dhi"]), float(parts["dni"])
     elif dhi is None or dni is None:
         raise SkyfitError("give the measured dhi and dni (W m^-2), or ghi alone to split it "
                           f"with a decomposition model ({', '.join(DECOMPOSITIONS)}).")
 
     eps = float(clearness(dhi, dni, z))
-    delta = float(brightness(dhi, z, day_of_year, airmass_model=airmass_model))
-    if delta_floor is not None:
-        check_range("delta_floor", delta_floor, 0.0, 1.0)
-    delta_c = floored_delta(eps, delta, delta_floor)
+    delta = float(brightness(dhi, z, day_of_year, airmass_model=options.airmass_model))
+    if options.delta_floor is not None:
+        check_range("delta_floor", options.delta_floor, 0.0, 1.0)
+    delta_c = floored_delta(eps, delta, options.delta_floor)
     coeffs = coefficients(eps, delta_c, z)
     if coeffs[1] > 0:
         raise SkyfitError(f"the Perez coefficient b = {coeffs[1]:.4g} > 0 for epsilon = {eps:.4g}, "
@@ -595,19 +618,19 @@ def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=Non
                           "delta_floor at its default).")
     sun = direction_from_angles(np.radians(z), np.radians(sun_azimuth_deg))
     unit = PerezSky(sun, coeffs, 1.0, 1.0)
-    total = hemisphere_integral(unit.relative_luminance, nodes)          # 1993 eq. 3
+    total = hemisphere_integral(unit.relative_luminance, options.nodes)    # 1993 eq. 3
     if not total > 0:
         raise SkyfitError(f"the Perez sky for epsilon = {eps:.4g}, Delta = {delta_c:.4g} is "
                           "black above the horizon; check dhi, dni and the sun position.")
     info = {"model": "perez1993", "sun_zenith_deg": z, "sun_azimuth_deg": float(sun_azimuth_deg),
             "day_of_year": int(day_of_year), "dhi_w_m2": float(dhi), "dni_w_m2": float(dni),
             "ghi_w_m2": None if ghi is None else float(ghi),
-            "decomposition": None if ghi is None else decomposition,
+            "decomposition": None if ghi is None else options.decomposition,
             "epsilon": eps, "delta": delta, "delta_coefficients": delta_c,
-            "clearness_bin": int(clearness_bin(eps)), "airmass_model": airmass_model,
-            "precipitable_water_cm": float(precipitable_water)}
+            "clearness_bin": int(clearness_bin(eps)), "airmass_model": options.airmass_model,
+            "precipitable_water_cm": float(options.precipitable_water)}
     return PerezSky(sun, coeffs, float(dhi) / total,
-                    float(diffuse_efficacy(eps, delta, z, precipitable_water)), info)
+                    float(diffuse_efficacy(eps, delta, z, options.precipitable_water)), info)
 
 
 def shape_moves(info):

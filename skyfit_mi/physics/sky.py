@@ -28,7 +28,7 @@ from .colour import SRGB_LUMINANCE, cct_to_rgb
 from ..conventions import angles_from_direction, direction_from_angles
 from ..errors import SkyfitError, check_choice, check_range
 from .latlong import latlong_radiance
-from .sun import SUN_SOLID_ANGLE, direct_normal_irradiance, sun_rgb
+from .sun import SUN_SOLID_ANGLE, SunDisc, direct_normal_irradiance, sun_rgb
 
 #: Luminous efficacy of clear-sky light [lm W^-1] (thesis 4.2.2).
 EFFICACY_CLEAR = 150.0
@@ -465,17 +465,57 @@ def krochmann_seidl_zenith_luminance(sun_zenith_deg):
     return np.maximum(123.0 + 8600.0 * np.cos(np.radians(sun_zenith_deg)), 0.0)
 
 
-def thesis_sun_radiance(sun_zenith_deg, day, extinction, solar_constant, solid_angle, phi):
+def thesis_sun_radiance(sun_zenith_deg, day, disc, phi):
     """The sun disc's linear-sRGB radiance [W m^-2 sr^-1] (3,): ``phi`` times the direct
-    normal irradiance of eq. 4.7 (``extinction``, ``solar_constant`` None for the thesis's)
-    over the disc's ``solid_angle`` [sr], in the colour of
-    :func:`~skyfit_mi.physics.sun.sun_rgb`; zero when ``phi`` is 0 (no sun)."""
-    if phi <= 0:
+    normal irradiance of eq. 4.7 (with the :class:`~skyfit_mi.physics.sun.SunDisc` ``disc``'s
+    extinction and solar constant) over the disc's solid angle [sr], in the colour of
+    :func:`~skyfit_mi.physics.sun.sun_rgb`; zero when ``phi`` is 0 or the disc is not drawn
+    (no sun)."""
+    if not disc.drawn or phi <= 0:
         return np.zeros(3)
-    kw = {k: v for k, v in (("extinction", extinction), ("solar_constant", solar_constant))
-          if v is not None}
-    n = float(direct_normal_irradiance(sun_zenith_deg, day, **kw))
-    return phi * n / solid_angle * sun_rgb(sun_zenith_deg)
+    n = float(direct_normal_irradiance(sun_zenith_deg, day, disc.extinction,
+                                       disc.solar_constant))
+    return phi * n / disc.solid_angle * sun_rgb(sun_zenith_deg)
+
+
+@dataclass(frozen=True)
+class CIEPhotometry:
+    """The photometry of the thesis's CIE clear and overcast skies (:func:`cie_sky`): their
+    levels, luminous efficacies and colours.
+
+    Attributes
+    ----------
+    clear_zenith_luminance : float or None
+        Clear-sky zenith luminance [cd m^-2], in [0, 1e6]; None: Kittler's, eq. 4.15
+        (:func:`kittler_zenith_luminance`).
+    overcast_zenith_luminance : float or None
+        Overcast-sky zenith luminance [cd m^-2], in [0, 1e6]; None: Krochmann and Seidl's,
+        eq. 4.17 (:func:`krochmann_seidl_zenith_luminance`).
+    efficacy_clear, efficacy_overcast : float
+        Luminous efficacies of clear and overcast skylight [lm W^-1], in [1, 683] (thesis
+        4.2.2; defaults :data:`EFFICACY_CLEAR` 150 and :data:`EFFICACY_OVERCAST` 120).
+    cct_clear, cct_overcast : float
+        Sky colour temperatures [K] (thesis 4.2.3; defaults :data:`CCT_CLEAR` 15000 and
+        :data:`CCT_OVERCAST` 6500).
+
+    The values are checked where they are used (:func:`cie_sky`).
+    """
+
+    clear_zenith_luminance: float = None
+    overcast_zenith_luminance: float = None
+    efficacy_clear: float = EFFICACY_CLEAR
+    efficacy_overcast: float = EFFICACY_OVERCAST
+    cct_clear: float = CCT_CLEAR
+    cct_overcast: float = CCT_OVERCAST
+
+
+def _sun_disc(sun):
+    """``sun`` if it is a :class:`~skyfit_mi.physics.sun.SunDisc`, else a SkyfitError (a
+    bool, as ``sun`` was before the disc became a record, says how to write it now)."""
+    if not isinstance(sun, SunDisc):
+        raise SkyfitError(f"sun must be a SunDisc, got {sun!r}: SunDisc() draws the thesis's "
+                          "sun, SunDisc(drawn=False) none (skyfit_mi.physics.sun.SunDisc).")
+    return sun
 
 
 #: The thesis's sky types and their sun probability phi (eq. 4.18).
@@ -483,11 +523,7 @@ SKY_TYPES = {"clear": 1.0, "overcast": 0.0, "intermediate": None}
 
 
 def cie_sky(kind, sun_zenith_deg, sun_azimuth_deg, *, phi=None, day=172,
-            clear_zenith_luminance=None, overcast_zenith_luminance=None,
-            efficacy_clear=EFFICACY_CLEAR, efficacy_overcast=EFFICACY_OVERCAST,
-            cct_clear=CCT_CLEAR, cct_overcast=CCT_OVERCAST,
-            sun=True, extinction=None, solar_constant=None,
-            sun_solid_angle=SUN_SOLID_ANGLE, ground_albedo=GROUND_ALBEDO):
+            photometry=CIEPhotometry(), sun=SunDisc(), ground_albedo=GROUND_ALBEDO):
     """A thesis sky: CIE clear, CIE overcast, or intermediate (eq. 4.18).
 
     L_in = (1 - phi) L_oc + phi L_cl (eq. 4.18); clear is phi = 1 and
@@ -507,20 +543,12 @@ def cie_sky(kind, sun_zenith_deg, sun_azimuth_deg, *, phi=None, day=172,
         Sun probability in [0, 1]; required for 'intermediate'.
     day : int
         Day of the year (for eq. 4.5).
-    clear_zenith_luminance, overcast_zenith_luminance : float, optional
-        Override eqs. 4.15 / 4.17 [cd m^-2].
-    efficacy_clear, efficacy_overcast : float
-        Luminous efficacies [lm W^-1].
-    cct_clear, cct_overcast : float
-        Sky colour temperatures [K].
-    sun : bool
-        Include the solar disc.
-    extinction : float, optional
-        beta of eq. 4.7 (default 0.431).
-    solar_constant : float, optional
-        [W m^-2] (default 1377).
-    sun_solid_angle : float
-        [sr] (default 6e-5).
+    photometry : CIEPhotometry
+        The skies' zenith luminances (None: eqs. 4.15 / 4.17) [cd m^-2], luminous
+        efficacies [lm W^-1] and colour temperatures [K] (default: the thesis's).
+    sun : SunDisc
+        The solar disc: whether it is drawn, beta and the solar constant of eq. 4.7
+        [W m^-2], its solid angle [sr] (default: the thesis's, 0.431, 1377, 6e-5).
     ground_albedo : float
         Ground reflectance in [0, 1].
 
@@ -540,24 +568,27 @@ def cie_sky(kind, sun_zenith_deg, sun_azimuth_deg, *, phi=None, day=172,
     check_range("sun probability phi", phi, 0.0, 1.0)
     check_range("sun zenith", sun_zenith_deg, 0.0, 180.0, "degrees")
     check_range("ground albedo", ground_albedo, 0.0, 1.0)
-    for name, v in (("efficacy_clear", efficacy_clear), ("efficacy_overcast", efficacy_overcast)):
+    ph = photometry
+    sun = _sun_disc(sun)
+    for name, v in (("efficacy_clear", ph.efficacy_clear),
+                    ("efficacy_overcast", ph.efficacy_overcast)):
         check_range(name, v, 1.0, 683.0, "lm W^-1")
 
     theta_s = np.radians(sun_zenith_deg)
     s = direction_from_angles(theta_s, np.radians(sun_azimuth_deg))
-    lz_cl = kittler_zenith_luminance(sun_zenith_deg) if clear_zenith_luminance is None \
-        else check_range("clear zenith luminance", clear_zenith_luminance, 0, 1e6, "cd m^-2")
-    lz_oc = krochmann_seidl_zenith_luminance(sun_zenith_deg) if overcast_zenith_luminance is None \
-        else check_range("overcast zenith luminance", overcast_zenith_luminance, 0, 1e6, "cd m^-2")
+    lz_cl = kittler_zenith_luminance(sun_zenith_deg) if ph.clear_zenith_luminance is None \
+        else check_range("clear zenith luminance", ph.clear_zenith_luminance, 0, 1e6, "cd m^-2")
+    lz_oc = krochmann_seidl_zenith_luminance(sun_zenith_deg) \
+        if ph.overcast_zenith_luminance is None else check_range(
+            "overcast zenith luminance", ph.overcast_zenith_luminance, 0, 1e6, "cd m^-2")
     # eq. 4.10: L_cl = L_zcl * pattern / (gamma(0) f(theta_s))
     norm = float(gamma_factor(1.0) * scattering_indicatrix(theta_s))
-    clear = phi * float(lz_cl) / norm / efficacy_clear * cct_to_rgb(cct_clear)
-    overcast = (1.0 - phi) * float(lz_oc) / efficacy_overcast * cct_to_rgb(cct_overcast)
+    clear = phi * float(lz_cl) / norm / ph.efficacy_clear * cct_to_rgb(ph.cct_clear)
+    overcast = (1.0 - phi) * float(lz_oc) / ph.efficacy_overcast * cct_to_rgb(ph.cct_overcast)
 
-    sun_rad = thesis_sun_radiance(sun_zenith_deg, day, extinction, solar_constant,
-                                  sun_solid_angle, phi if sun else 0.0)
+    sun_rad = thesis_sun_radiance(sun_zenith_deg, day, sun, phi)
     sky = Sky(s, clear=clear, overcast=overcast, sun_radiance=sun_rad,
-              sun_solid_angle=sun_solid_angle,
+              sun_solid_angle=sun.solid_angle,
               info={"kind": kind, "phi": phi, "sun_zenith_deg": float(sun_zenith_deg),
                     "sun_azimuth_deg": float(sun_azimuth_deg),
                     "clear_zenith_luminance_cd_m2": float(lz_cl),
@@ -567,8 +598,7 @@ def cie_sky(kind, sun_zenith_deg, sun_azimuth_deg, *, phi=None, day=172,
 
 
 def cie_general_sky(params, sun_zenith_deg, sun_azimuth_deg, *, day=172, zenith_luminance=None,
-                    efficacy=EFFICACY_CLEAR, cct=CCT_CLEAR, sun=True, extinction=None,
-                    solar_constant=None, sun_solid_angle=SUN_SOLID_ANGLE,
+                    efficacy=EFFICACY_CLEAR, cct=CCT_CLEAR, sun=SunDisc(),
                     ground_albedo=GROUND_ALBEDO):
     """A CIE S 011 general sky (:mod:`skyfit_mi.physics.cie_general`) with the thesis's sun.
 
@@ -595,8 +625,10 @@ def cie_general_sky(params, sun_zenith_deg, sun_azimuth_deg, *, day=172, zenith_
         Luminous efficacy of the skylight [lm W^-1].
     cct : float
         Sky colour temperature [K].
-    sun, extinction, solar_constant, sun_solid_angle, ground_albedo
-        As :func:`cie_sky`.
+    sun : SunDisc
+        The solar disc (eq. 4.7), as :func:`cie_sky`'s.
+    ground_albedo : float
+        Ground reflectance in [0, 1].
 
     Returns
     -------
@@ -605,6 +637,7 @@ def cie_general_sky(params, sun_zenith_deg, sun_azimuth_deg, *, day=172, zenith_
     check_range("sun zenith", sun_zenith_deg, 0.0, 180.0, "degrees")
     check_range("ground albedo", ground_albedo, 0.0, 1.0)
     check_range("efficacy", efficacy, 1.0, 683.0, "lm W^-1")
+    sun = _sun_disc(sun)
     p = np.asarray(params, dtype=float)
     k, coefficients = cie_general.perez_form(p)
     theta_s = np.radians(sun_zenith_deg)
@@ -613,11 +646,10 @@ def cie_general_sky(params, sun_zenith_deg, sun_azimuth_deg, *, day=172, zenith_
     norm = float(cie_general.indicatrix(theta_s, *p[2:])
                  * cie_general.gradation(1.0, *p[:2]))
     weight = float(lz) * k / norm / efficacy * cct_to_rgb(cct)
-    sun_rad = thesis_sun_radiance(sun_zenith_deg, day, extinction, solar_constant,
-                                  sun_solid_angle, 1.0 if sun else 0.0)
+    sun_rad = thesis_sun_radiance(sun_zenith_deg, day, sun, 1.0)
     sky = Sky(direction_from_angles(theta_s, np.radians(sun_azimuth_deg)), perez=weight,
               perez_coefficients=coefficients, sun_radiance=sun_rad,
-              sun_solid_angle=sun_solid_angle,
+              sun_solid_angle=sun.solid_angle,
               info={"kind": "cie_general", "parameters_abcde": p.tolist(),
                     "sun_zenith_deg": float(sun_zenith_deg),
                     "sun_azimuth_deg": float(sun_azimuth_deg),

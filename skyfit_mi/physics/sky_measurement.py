@@ -38,7 +38,7 @@ from ..conventions import direction_from_angles
 from ..errors import SkyfitError, check_choice
 from . import cie_general, turbid_sky
 from .colour import SRGB_LUMINANCE
-from .perez import CLEARNESS_BIN_EDGES, coefficients, perez_sky
+from .perez import CLEARNESS_BIN_EDGES, PerezOptions, coefficients, perez_sky
 from .sky import EFFICACY_CLEAR, cie_sky, perez_pattern
 from .sun import solar_position
 
@@ -343,7 +343,7 @@ def perez_inputs(scan, source):
     """
     check_choice("Perez irradiance source", source, ("erbs", "scan"))
     if source == "erbs":
-        return {"ghi": scan.ghi, "decomposition": "erbs"}
+        return {"ghi": scan.ghi, "options": PerezOptions(decomposition="erbs")}
     cos_z = np.cos(np.radians(scan.sun_zenith_deg))
     return {"dhi": scan.dhi_scan, "dni": (scan.ghi - scan.dhi_scan) / cos_z}
 
@@ -555,7 +555,7 @@ def irradiance_comparison(scan):
     e_sky = float(sky.sky_horizontal_irradiance() @ SRGB_LUMINANCE)
     e_sun = float(sky.sun_horizontal_irradiance() @ SRGB_LUMINANCE)
     perez = perez_sky(z, 0.0, scan.day_of_year, ghi=scan.ghi,
-                      decomposition="erbs")
+                      options=PerezOptions(decomposition="erbs"))
     return {"ghi_measured": scan.ghi, "dhi_scan": scan.dhi_scan,
             "illuminance_scan": scan.diffuse_illuminance_scan,
             "cie_sky_dhi": e_sky, "cie_sun_horizontal": e_sun, "cie_ghi": e_sky + e_sun,

@@ -27,6 +27,33 @@ EXTINCTION_CLEAR = 0.431
 
 
 @dataclass(frozen=True)
+class SunDisc:
+    """The solar disc of the thesis's skies (section 4.1): a disc of finite solid angle whose
+    normal irradiance is eq. 4.7's.
+
+    Attributes
+    ----------
+    drawn : bool
+        Whether the sky has the disc (False: sky light only).
+    extinction : float
+        Broadband extinction coefficient beta of eq. 4.7 [unitless], >= 0 (default
+        :data:`EXTINCTION_CLEAR`, 0.431: a clear atmosphere).
+    solar_constant : float
+        S of eq. 4.5 [W m^-2] (default :data:`SOLAR_CONSTANT`, 1377, Rapp's;
+        :data:`SOLAR_CONSTANT_CLASSIC` 1353).
+    solid_angle : float
+        The disc's solid angle [sr] (default :data:`SUN_SOLID_ANGLE`, 6e-5).
+
+    The values are checked where they are used (:func:`direct_normal_irradiance`).
+    """
+
+    drawn: bool = True
+    extinction: float = EXTINCTION_CLEAR
+    solar_constant: float = SOLAR_CONSTANT
+    solid_angle: float = SUN_SOLID_ANGLE
+
+
+@dataclass(frozen=True)
 class SolarPosition:
     """Solar zenith and compass azimuth [degrees], arrays of equal shape."""
 

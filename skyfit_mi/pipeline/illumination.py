@@ -27,12 +27,13 @@ import numpy as np
 
 from ..conventions import direction_from_angles
 from ..errors import SkyfitError
-from ..physics.envmap import envmap_sky, latlong_table
-from ..physics.perez import perez_sky
+from ..physics.envmap import MeasuredIrradiance, envmap_sky, latlong_table
+from ..physics.perez import PerezOptions, perez_sky
 from ..physics.sky import GROUND_ALBEDO, Sky, directional_sky
 from .photos import read_photo
 
-#: The envmap record's options, as :func:`envmap_sky` and :func:`latlong_table` name them.
+#: The envmap record's options, as :func:`envmap_sky`, :func:`latlong_table` and
+#: :class:`~skyfit_mi.physics.envmap.MeasuredIrradiance` name them.
 ENVMAP_OPTIONS = {"projection": "projection", "north_rotation_deg": "north_rotation_deg",
                   "scale": "scale", "rows": "rows",
                   "diffuse_horizontal_W_m2": "diffuse_horizontal",
@@ -42,6 +43,8 @@ ENVMAP_OPTIONS = {"projection": "projection", "north_rotation_deg": "north_rotat
                   "sun_measured": "sun_measured"}
 #: The options that give the table (the rest light it).
 _TABLE_OPTIONS = ("projection", "north_rotation_deg", "scale", "rows")
+#: The options that are measured irradiance (:class:`~skyfit_mi.physics.envmap.MeasuredIrradiance`).
+_MEASURED_OPTIONS = ("diffuse_horizontal", "direct_normal", "global_horizontal", "sun_measured")
 
 
 def perez_from_irradiance(e, zenith, azimuth, t):
@@ -60,7 +63,7 @@ def perez_from_irradiance(e, zenith, azimuth, t):
     if dhi is not None and dni is not None:
         kw = {"dhi": dhi, "dni": dni}
     elif ghi is not None:
-        kw = {"ghi": ghi, "decomposition": e.get("decomposition", "erbs")}
+        kw = {"ghi": ghi, "options": PerezOptions(decomposition=e.get("decomposition", "erbs"))}
     else:
         raise SkyfitError("a Perez sky needs measured irradiance: "
                           "diffuse_horizontal_W_m2 and direct_normal_W_m2, or "
@@ -96,7 +99,9 @@ def envmap_from_record(rec, folder, sun_zenith_deg, sun_azimuth_deg):
     info = {"file": str(path), "invalid_values": invalid, "rows": int(table.shape[0]),
             **{k: rec[k] for k in _TABLE_OPTIONS if k in rec and k != "rows"}}
     info.setdefault("projection", "latlong")
-    return envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, info=info, **opts)
+    measured = MeasuredIrradiance(**{k: opts.pop(k) for k in _MEASURED_OPTIONS if k in opts})
+    return envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, measured=measured, info=info,
+                      **opts)
 
 
 def envmap_record(sky, folder):

@@ -11,7 +11,7 @@ import datetime as dt
 import hashlib
 import json
 import tomllib
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
@@ -26,9 +26,9 @@ from ..render.fit_model import PARAMETERS, material_dict
 from ..render.scene import camera_matrix
 from ..render.scene_xml import resolve_materials
 from ..render.variant import VARIANTS
-from ..physics.sky import (EFFICACY_CLEAR, EFFICACY_OVERCAST, SKY_TYPES, cie_general_sky,
-                           cie_sky)
-from ..physics.sun import solar_position
+from ..physics.sky import (EFFICACY_CLEAR, EFFICACY_OVERCAST, GROUND_ALBEDO, SKY_TYPES,
+                           CIEPhotometry, cie_general_sky, cie_sky)
+from ..physics.sun import SunDisc, solar_position
 from ..physics.ward import NORMALISATIONS, raw_parameters
 from .fit_result import read_fit_result
 from .illumination import directional_from_record, envmap_from_record, perez_from_irradiance
@@ -660,6 +660,20 @@ def _light(e, zenith, azimuth, t, index, base_dir):
     return envmap_from_record(rec, base_dir, zenith, azimuth)
 
 
+#: The [sky] keys of a CIE sky's photometry, named as the fields of
+#: :class:`~skyfit_mi.physics.sky.CIEPhotometry`.
+_CIE_PHOTOMETRY_KEYS = tuple(f.name for f in fields(CIEPhotometry))
+#: The [sky] keys of the thesis's sun disc, and the :class:`~skyfit_mi.physics.sun.SunDisc`
+#: fields they give.
+_SUN_DISC_KEYS = {"sun": "drawn", "extinction": "extinction", "solar_constant": "solar_constant"}
+
+
+def _sun_disc(e):
+    """The :class:`~skyfit_mi.physics.sun.SunDisc` of a [sky] entry ``e`` (its ``sun``,
+    ``extinction`` and ``solar_constant``; the thesis's where not given)."""
+    return SunDisc(**{f: e[k] for k, f in _SUN_DISC_KEYS.items() if k in e})
+
+
 def _make_sky(e, zenith, azimuth, t, base_dir, index, elevation=0.0):
     measured = {k: e[k] for k in ("diffuse_horizontal_W_m2", "direct_normal_W_m2",
                                   "diffuse_horizontal_lux") if k in e}
@@ -673,10 +687,9 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index, elevation=0.0):
                               elevation_m=elevation, **{k: e[k] for k in (
                                   "cct", "sun", "ground_albedo") if k in e})
         if e["type"] == "cie_general":
-            kw = {k: e[k] for k in ("cct", "sun", "extinction", "solar_constant",
-                                    "ground_albedo", "zenith_luminance") if k in e}
+            kw = {k: e[k] for k in ("cct", "ground_albedo", "zenith_luminance") if k in e}
             sky = cie_general_sky(_cie_general_parameters(e), zenith, azimuth,
-                                  day=t.timetuple().tm_yday, **kw)
+                                  day=t.timetuple().tm_yday, sun=_sun_disc(e), **kw)
         elif e["type"] == "gensky":
             text = e.get("gensky")
             if text is None:
@@ -687,11 +700,11 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index, elevation=0.0):
                 text = p.read_text()
             sky = from_gensky(text)
         else:
-            kw = {k: e[k] for k in ("efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
-                                    "ground_albedo", "extinction", "solar_constant", "sun",
-                                    "clear_zenith_luminance", "overcast_zenith_luminance") if k in e}
+            photometry = CIEPhotometry(**{k: e[k] for k in _CIE_PHOTOMETRY_KEYS if k in e})
             phi = e.get("phi") if e["type"] == "intermediate" else None
-            sky = cie_sky(e["type"], zenith, azimuth, phi=phi, day=t.timetuple().tm_yday, **kw)
+            sky = cie_sky(e["type"], zenith, azimuth, phi=phi, day=t.timetuple().tm_yday,
+                          photometry=photometry, sun=_sun_disc(e),
+                          ground_albedo=e.get("ground_albedo", GROUND_ALBEDO))
         if measured:
             lux = measured.get("diffuse_horizontal_lux")
             if lux is not None:
