@@ -379,28 +379,55 @@ def check_terms(terms, frames):
                           f" frames, and the fit has {frames}; give fewer terms.")
 
 
-def _fit_curve(sessions, thetas, u0, terms, shape, prior_sd, s2):
-    """The sky's coefficients fitted with the regions' parameters, from the day's level ``u0``
-    (log k) and each region's ``thetas`` there: log k over the day as ``terms`` Legendre
-    polynomials in time, and with ``shape`` (J) the mix of the sky's shape variants
-    (:meth:`~.fit.FitSession.set_sky`).  Gauss-Newton on the coefficients with every
-    region's parameters profiled out (each region's Jacobian in the coefficients projected off
-    its parameters' own; the parameters then polished by Levenberg-Marquardt), under the
-    priors N(0, ``prior_sd``^2) on the level (none if None), N(0, :data:`DRIFT_SD`^2) on each
-    further term and N(0, :data:`SHAPE_SD`^2) on each shape's mix.  Leaves each session at the
+@dataclass(frozen=True)
+class SkyCoefficients:
+    """The sky's coefficients fitted with the materials, each under a Gaussian prior N(0, sd^2)
+    about the spec's sky: log k over the day as ``terms`` Legendre polynomials in time (the
+    day's level under ``level_sd``, None for none; each further term under :data:`DRIFT_SD`),
+    and the mix of each of the sky's shape ``variants`` (names, :data:`SHAPE_SD`).  They set
+    the weights of the light's traced parts (:meth:`~.light.LightParts.table`): the sky's
+    k(t) = exp(B(t) u[:terms]) against the sun, its shape's mix u[terms:]."""
+
+    terms: int
+    variants: tuple = ()
+    level_sd: float = None
+
+    @property
+    def names(self):
+        """Each coefficient's name, in order."""
+        return (["log k"] + [f"log k term {j}" for j in range(1, self.terms)]
+                + [f"mix {v.removeprefix('shape:')}" for v in self.variants])
+
+    @property
+    def precision(self):
+        """The priors' precision matrix (1 / sd^2 on the diagonal; 0 for no prior)."""
+        sd = [self.level_sd] + [DRIFT_SD] * (self.terms - 1) + [SHAPE_SD] * len(self.variants)
+        return np.diag([0.0 if v is None else v ** -2 for v in sd])
+
+    def light(self, session, basis, u):
+        """Light ``session`` (its frames' time ``basis``, :func:`time_basis`) at the
+        coefficients ``u``."""
+        session.set_sky(np.exp(basis @ u[:self.terms]),
+                        u[self.terms:] if self.variants else None)
+
+
+def _fit_curve(sessions, thetas, u0, coefficients, s2):
+    """The sky's ``coefficients`` (:class:`SkyCoefficients`) fitted with the regions'
+    parameters, from the day's level ``u0`` (log k) and each region's ``thetas`` there.
+    Gauss-Newton on the coefficients with every region's parameters profiled out (each
+    region's Jacobian in the coefficients projected off its parameters' own; the parameters
+    then polished by Levenberg-Marquardt), under their priors.  Leaves each session at the
     fit; returns (coefficients, their covariance, the span [s], each region's parameters'
-    response to the coefficients (n, terms + J), the regions' summed chi-square there)."""
+    response to the coefficients (n, coefficients), the regions' summed chi-square there)."""
+    terms = coefficients.terms
     times = [t for s in sessions for t in s.obs.times]
     span = (float(_seconds(times).min()), float(_seconds(times).max()))
     bases = [time_basis(s.obs.times, span, terms) for s in sessions]
-    n = terms + shape
-    P = np.diag([0.0 if prior_sd is None else prior_sd ** -2] + [DRIFT_SD ** -2] * (terms - 1)
-                + [SHAPE_SD ** -2] * shape)
+    P = coefficients.precision
+    n = len(P)
     u = np.r_[u0, np.zeros(n - 1)]
     thetas = [np.asarray(t, dtype=float) for t in thetas]
-
-    def put(s, B, u):
-        s.set_sky(np.exp(B @ u[:terms]), u[terms:] if shape else None)
+    put = coefficients.light
 
     def objective(u, thetas):
         for s, B in zip(sessions, bases):
@@ -630,16 +657,15 @@ def _fit_terms(sessions, level, terms, told, warnings):
                             f"{'are' if len(parts) > 1 else 'is'} not fitted: its level is not "
                             "determined.")
         return fitted
+    coefficients = SkyCoefficients(terms, tuple(sessions[0].parts.variants), level.prior_sd)
     u, C, span, responses, fitted.chi2 = _fit_curve(
-        sessions, [th for _, th in level.profile[level.u0]], level.u0, terms, J,
-        level.prior_sd, level.s2)
+        sessions, [th for _, th in level.profile[level.u0]], level.u0, coefficients, level.s2)
     sd = np.sqrt(np.diag(C))
     fitted.sd = [np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", response, C, response), 0))
                  for response in responses]
     fitted.k, fitted.sd_u = float(np.exp(u[0])), float(sd[0])
     fitted.interval = [float(np.exp(u[0] - unc.Z["95"] * sd[0])),
                        float(np.exp(u[0] + unc.Z["95"] * sd[0]))]
-    names = ["log k"] + [f"log k term {j}" for j in range(1, terms)]
     if terms > 1:
         fitted.curve, fitted.log_k = _curve_record(sessions, u[:terms], C[:terms, :terms], span)
         vague = [j for j in range(1, terms) if sd[j] > 0.7 * DRIFT_SD]
@@ -649,9 +675,9 @@ def _fit_terms(sessions, level, terms, told, warnings):
                             "prior holds them, and the intervals include that.")
     if J:
         fitted.shape, fitted.index_names = _shape_record(sessions[0], u[terms:], sd[terms:])
-        names += [f"mix {of}" for of in fitted.shape["index"]]
         warnings += _shape_warnings(fitted.shape, sd[terms:])
-    fitted.correlation = {"names": names, "matrix": (C / np.outer(sd, sd)).tolist()}
+    fitted.correlation = {"names": coefficients.names,
+                          "matrix": (C / np.outer(sd, sd)).tolist()}
     return fitted
 
 
