@@ -1,16 +1,5 @@
 import pytest
 
-#: The test files that take longest (1-5 minutes each on 2 cores), run first: the suite runs on
-#: every core (pytest-xdist, ``-n auto --dist loadfile`` in pyproject.toml), each file on one
-#: worker, and the rest then packs around them instead of one of them running alone at the end.
-LONGEST_FIRST = ("test_sky_fit.py", "test_pixel_map.py", "test_families.py", "test_ingest.py",
-                 "test_sky_control.py", "test_colorchecker.py", "test_chi2map.py")
-
-
-def pytest_collection_modifyitems(items):
-    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(LONGEST_FIRST)))    # stable
-
 
 @pytest.fixture(scope="session")
 def mi():
