@@ -1,15 +1,17 @@
-"""The fit's light: what the user asked of it, checked once against a sequence, and the share of
-each region's errors it carries.
-
-Two records, the first stages of a fit (:mod:`~skyfit_mi.fitting.fit`):
+"""The fit's light: what the user asked of it, checked once against a sequence, and the light
+as traced, in parts.
 
 * :class:`LightOptions`: ``fit --sky``, ``--sun-sd``, ``--sky-terms``, ``--sky-shape`` as
   given (region fits, ``--model auto`` and maps take the same record);
 * :class:`LightPlan`: those options resolved against the sequence's manifest and skies before
   any light is traced (:meth:`LightOptions.resolve`): whether the sky is the spec's or fitted,
   with or without the level's prior, the sun level's uncertainty and where it comes from;
-then the sky fit (:func:`~.sky_fit.fit_sky_scale`) returns what the light adds to each
-region's errors (:class:`~.sky_fit.SkyShare`).
+* :class:`LightParts`: the light a plan traces at a region's points, by part (the spec's
+  light alone; or the sun, the sky and the sky's shape variants), radiance linear in each.
+
+The sky fit (:func:`~.sky_fit.fit_sky_scale`) then sets the parts' weights from its
+coefficients (:class:`~.sky_fit.SkyCoefficients`, each under a Gaussian prior) and returns what
+the light adds to each region's errors (:class:`~.sky_fit.SkyShare`).
 """
 
 from dataclasses import dataclass

@@ -595,12 +595,7 @@ def _read_exr(path):
     except ExrError as exc:
         raise _fail(path, f"cannot be read as an OpenEXR image ({exc.why})",
                     "check that the file is complete, or remove it") from None
-    if values.dtype.kind != "f":
-        raise _fail(path, f"reads as {values.dtype} codes, not floats",
-                    "give it the suffix of its real format")
-    meta = _empty_metadata()
-    meta.update(exr_header_times(path))
-    return _float_photo(path, "exr", _rgb(values, channels, path), meta)
+    return _float_image(path, "exr", values, channels, exr_header_times(path))
 
 
 def _read_rgbe(path):
@@ -617,12 +612,18 @@ def _read_rgbe(path):
     except CallFailed as exc:
         raise _fail(path, f"cannot be read as {name} image ({_first_line(exc)})",
                     "check that the file is complete, or remove it") from None
+    return _float_image(path, "rgbe", values, channels, rgbe_header_times(path))
+
+
+def _float_image(path, kind, values, channels, times):
+    """A float image's photo (``kind`` 'exr' or 'rgbe') from its ``values`` and ``channels``,
+    its header's ``times`` in its metadata."""
     if values.dtype.kind != "f":
         raise _fail(path, f"reads as {values.dtype} codes, not floats",
                     "give it the suffix of its real format")
     meta = _empty_metadata()
-    meta.update(rgbe_header_times(path))
-    return _float_photo(path, "rgbe", _rgb(values, channels, path), meta)
+    meta.update(times)
+    return _float_photo(path, kind, _rgb(values, channels, path), meta)
 
 
 def _wb(values):
