@@ -486,7 +486,7 @@ def test_an_automatically_sized_cache_grows_until_its_noise_is_a_small_share(day
     r = s.run("lm", start=[0.3, 0.1], log=lambda *a: None)
     c = r["light_cache"]
     assert c["sized"] == "from the data" and c["grown_from"][0]["positions"] == 2
-    assert c["positions"] == 16 and s.cache.mirror.shape[2] == 16        # capped at 8x
+    assert c["positions"] == 16 and s.light_cache().mirror.shape[2] == 16     # capped at 8x
     assert max(r["cache_noise_chi2_by_sigma"].values()) < first / 4
     given = FitSession(days["clean"], "disc", REGION, cache=FitCache(positions=2, directions=64))
     r = given.run("lm", start=[0.3, 0.1], log=lambda *a: None)
