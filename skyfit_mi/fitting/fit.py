@@ -245,8 +245,7 @@ class FitSession:
         s = cls(manifest_path, result["region"], pixels, model=result["model"],
                 normalisation=result.get("normalisation", "ward"), light=None, **options)
         if trace:
-            s.trace_light(s.fitted_light(result))
-            s.use_fitted_sky(result)
+            s.trace_as_fitted(result)
         return s
 
     def fitted_light(self, result):
@@ -264,6 +263,12 @@ class FitSession:
         :func:`~.sky_fit.skies_at_level`) as the spec's light, before the light is traced: the
         light a lobe is ranked in (:func:`~.selection.fit_auto`)."""
         self.skies = skies_at_level(self.skies, record, self.obs.times)
+
+    def trace_as_fitted(self, result):
+        """Trace the light as the fit ``result`` saw it (:meth:`fitted_light`) and light it at
+        the fit's sky level and shape (:meth:`use_fitted_sky`)."""
+        self.trace_light(self.fitted_light(result))
+        self.use_fitted_sky(result)
 
     def use_fitted_sky(self, result):
         """Light the sequence, traced with :meth:`fitted_light`, at a sky fit's level and shape
@@ -582,7 +587,7 @@ class FitSession:
         fit = FitState(method, theta, chi2, s2, curv_inv, f2, channels,
                        curv_inv * s2 * np.sqrt(np.outer(f2, f2)), res, g, noise, noise_chi2,
                        problem, merr, rounds, misfit,
-                       sky or SkyShare(sun_sd=self.light.sun_sd, sun_source=self.light.sun_source))
+                       sky or SkyShare())
         fit.jpeg_shared_sd = jpeg_shared_sd(self, J_all, measured, problem.obs.sigma, curv_inv)
         fit.calibration_sd = calibration_sd(self, J_all, problem, measured, theta, curv_inv)
         fit.matrix_sd = matrix_sd(self, J_all, problem, measured, theta, curv_inv)
@@ -726,8 +731,6 @@ def fit_regions(manifest_path, regions, model="two", method="global", seed=0, st
 def resolve_light(sessions, light, log=print):
     """The :class:`~.light.LightPlan` of ``light`` (options, or a plan already resolved) on
     the sequence of ``sessions`` (its first's manifest, skies and frames)."""
-    if isinstance(light, LightPlan):
-        return light
     first = next(iter(sessions.values()))
     return light.resolve(first.doc, first.skies, len(first.obs.frames), log)
 

@@ -49,7 +49,7 @@ def fit_record(s, fit, warnings, start, seed, evaluations, wall, t_method):
             sky.sd if sky.sd is not None else np.zeros(len(names))).tolist())),
             **({} if sky.span is None else {"undetermined_span": {
                 p: [float(lo), float(hi)] for p, lo, hi in zip(names, *sky.span)}}),
-            "sun_level_sd": sky.sun_level_sd, "sun_source": sky.sun_source,
+            "sun_level_sd": sky.sun_level_sd(s.light), "sun_source": s.light.sun_source,
             "sun_level_error_sd": dict(zip(names, fit.sun_level_sd.tolist()))}}
            if sky.record is not None else {}),
         "cache_noise_chi2": fit.cache_noise_chi2,

@@ -119,7 +119,7 @@ def fit_warnings(s, fit):
 def sky_warnings(s, fit):
     """The fitted sky's warnings (its record's) and those of parameters the sky's or the
     sun's level, more than the data, sets (:data:`~.sky_fit.SKY_DOMINATES`)."""
-    sky, names = fit.sky, s.names
+    sky, names, plan = fit.sky, s.names, s.light
     if sky.record is None:
         return []
     k = sky.record
@@ -143,19 +143,19 @@ def sky_warnings(s, fit):
         warnings.append(
             f"{', '.join(level)} scale with the sun's level, which no data tell (the "
             f"light's absolute scale trades exactly with the reflectances) and which "
-            f"is known to +-{100 * sky.sun_level_sd:.0f}% (1 sd, "
+            f"is known to +-{100 * sky.sun_level_sd(plan):.0f}% (1 sd, "
             + {"given": "--sun-sd",
                "measured": "the spec's measured direct normal irradiance",
-               "modelled": f"the modelled sun's {100 * sky.sun_sd:.0f}%"
+               "modelled": f"the modelled sun's {100 * plan.sun_sd:.0f}%"
                + (" widened as the fitted sky departs from the spec's"
-                  if sky.sun_widening else "")}.get(sky.sun_source, "--sun-sd")
+                  if sky.sun_widening else "")}.get(plan.sun_source, "--sun-sd")
             + "): that, more than the data, sets their intervals; their ratios and "
             "sigma_alpha do not depend on it. A reference of known reflectance in the "
             "scene (ingest --calibrate or --colorchecker)"
             + {"measured": "",
                "given": " or a smaller --sun-sd where the sun's level is known better "
                         f"(a measured direct normal irradiance: {MEASURED_SUN_SD:g})"
-               }.get(sky.sun_source, " or a measured direct normal irradiance in the "
+               }.get(plan.sun_source, " or a measured direct normal irradiance in the "
                      "spec (direct_normal_W_m2, or a dni column)")
             + " narrows them.")
     return warnings

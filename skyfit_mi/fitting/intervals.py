@@ -74,7 +74,7 @@ def fit_intervals(s, fit):
     cal_sd = fit.calibration_sd
     sky = fit.sky
     sky_sd = np.zeros(len(names)) if sky.sd is None else sky.sd
-    sun_rel = light_level_sd(s.doc, names, sky.sun_level_sd)
+    sun_rel = light_level_sd(s.doc, names, sky.sun_level_sd(s.light))
     for i, p in enumerate(names):
         for lv in ("68", "95"):
             intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * np.sqrt(

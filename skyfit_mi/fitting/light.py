@@ -55,6 +55,10 @@ class LightPlan:
         """The sd of the prior on log k (None: the level from the data alone)."""
         return SKY_LEVEL_SD if self.sky == "prior" else None
 
+    def resolve(self, doc, skies, n_frames, log=print):
+        """A plan is resolved already (as :meth:`LightOptions.resolve`): itself."""
+        return self
+
 
 #: The spec's light taken as it is.
 SPEC_LIGHT = LightPlan()

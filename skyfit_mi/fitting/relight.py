@@ -919,8 +919,7 @@ def _table_session(target, region, result, seed):
     s = FitSession(target, region, None, model=result["model"],
                    normalisation=result.get("normalisation", "ward"),
                    cache=FitCache(directions=DIRECTIONS, seed=seed), min_frames=1, light=None)
-    s.trace_light(s.fitted_light(result))
-    s.use_fitted_sky(result)
+    s.trace_as_fitted(result)
     return s
 
 

@@ -94,7 +94,7 @@ def choose(rows):
 
 
 def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOLDS, seed=0,
-             log=print, light=None, **options):
+             log=print, light=LightOptions(), **options):
     """``fit --model auto``: every region's candidates ranked (:func:`rank`; the light traced
     once per lobe, every region of a lobe together), then the chosen one fitted in full by
     the global method.  Where the spec's sky is taken as it is (``light``, a
@@ -110,7 +110,7 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         return {name: FitSession(manifest_path, name, px, light=None, **{**options, **kw})
                 for name, px in regions}
     first = FitSession(manifest_path, *regions[0], light=None, **options)
-    plan = resolve_light({regions[0][0]: first}, light or LightOptions(), log)   # checked once
+    plan = resolve_light({regions[0][0]: first}, light, log)        # checked once
     level = None
     if plan.split:
         # the light the candidates are ranked in: the spec's sky at the level a fit of Ward's

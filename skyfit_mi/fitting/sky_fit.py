@@ -111,23 +111,19 @@ class SkyShare:
     sd : the fitted sky's share of each parameter's standard error (None: none)
     span : where the sky's level is not determined, each parameter's (lowest, highest) over the
         levels the data could not tell apart (None where it is)
-    sun_sd, sun_source : as :class:`~.light.LightPlan`'s; ``sun_widening`` what a modelled sun's level
-        gains from the fitted sky's departure from the spec's
-        (:data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`)
+    sun_widening : what a modelled sun's level gains from the fitted sky's departure from the
+        spec's (:data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`)
     """
 
     record: dict = None
     sd: np.ndarray = None
     span: tuple = None
-    sun_sd: float = 0.0
-    sun_source: str = "given"
     sun_widening: float = 0.0
 
-    @property
-    def sun_level_sd(self):
-        """The sun's level's relative uncertainty in the reflectances' intervals: ``sun_sd``
-        widened by ``sun_widening``."""
-        return float(np.hypot(self.sun_sd, self.sun_widening))
+    def sun_level_sd(self, plan):
+        """The sun's level's relative uncertainty in the reflectances' intervals: the
+        :class:`~.light.LightPlan` ``plan``'s ``sun_sd`` widened by ``sun_widening``."""
+        return float(np.hypot(plan.sun_sd, self.sun_widening))
 
 @dataclass(frozen=True)
 class SkyFit:
@@ -783,8 +779,7 @@ def fit_sky_scale(sessions, plan, seed=0, log=print):
               "sun_coupling": coupling,
               "warnings": warnings, "time_s": time.perf_counter() - t0}
     log(_sky_log(record, fitted, len(sessions), plan.prior_sd, terms))
-    return SkyFit(record, {s.name: SkyShare(record, sd, sp, plan.sun_sd, plan.sun_source,
-                                            widening)
+    return SkyFit(record, {s.name: SkyShare(record, sd, sp, widening)
                            for s, sd, sp in zip(sessions, fitted.sd, fitted.span)})
 
 
