@@ -145,7 +145,8 @@ def warm(fits, day, out, n):
     (the first loads Mitsuba and the compiled kernels from disk)."""
     import drjit as dr
 
-    from skyfit_mi.fitting.relight import load_fits, relight
+    from skyfit_mi.fitting.relight import relight
+    from skyfit_mi.pipeline.fit_result import load_fits
     from skyfit_mi.render import basis_table
 
     cache_time = []

@@ -349,7 +349,8 @@ def test_a_table_fit_predicts_every_point_of_the_tables_other_times_within_its_b
     and on the two times the fit did not see (relight.json).  Onto a table that lacks a row,
     that value alone is missing."""
     from skyfit_mi.fitting.fit import fit_region
-    from skyfit_mi.fitting.relight import load_fits, relight
+    from skyfit_mi.fitting.relight import relight
+    from skyfit_mi.pipeline.fit_result import load_fits
     from skyfit_mi.fitting.report import write_fit
     from skyfit_mi.pipeline.observation_table import ingest_table
 

@@ -46,7 +46,8 @@ def test_relit_with_the_true_material_reproduces_the_target(day, tmp_path):
     # which the noise floor from the two days' radiance_sigma images estimates (256 values:
     # within 25%)
     assert errors["shares_target_seeds"] and "noise_floor_rel_rms" not in errors
-    from skyfit_mi.fitting.relight import load_fits, noise_floor, target_pixels
+    from skyfit_mi.fitting.relight import noise_floor, target_pixels
+    from skyfit_mi.pipeline.fit_result import load_fits
     pixels = target_pixels(load_fits([fit]), day / "day")         # as relight chose them
     estimated = noise_floor(day / "day", out / "reference", pixels, errors["frames"])["all"]
     measured = errors["reference_rel_rms"]
@@ -75,7 +76,8 @@ def test_relit_with_the_true_material_reproduces_the_target(day, tmp_path):
 def test_a_folder_target_keeps_the_sun_its_render_computed(day, tmp_path, monkeypatch):
     """The target folder's spec is validated with the sun positions its manifest recorded
     (SPA is not run again): the same frames as computing them."""
-    from skyfit_mi.fitting.relight import load_fits, target_spec
+    from skyfit_mi.fitting.relight import target_spec
+    from skyfit_mi.pipeline.fit_result import load_fits
     from skyfit_mi.pipeline import spec as spec_module
 
     fits = load_fits([_fit_json(tmp_path / "fit_disc.json")])

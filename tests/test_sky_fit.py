@@ -704,7 +704,8 @@ def test_relit_images_take_the_fitted_skys_shape(shape_fit, gradation_4, tmp_pat
     import csv
 
     from skyfit_mi.files import write_json
-    from skyfit_mi.fitting.relight import load_fits, relight
+    from skyfit_mi.fitting.relight import relight
+    from skyfit_mi.pipeline.fit_result import load_fits
     from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
     from skyfit_mi.pipeline.pixels import frame_values
 

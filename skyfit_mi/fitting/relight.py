@@ -38,7 +38,7 @@ from .sky_fit import sky_level_at
 from .uncertainty import band_half_width, widen
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky_shape import shape_variants, shaped
-from ..pipeline.fit_result import check_fit_sequence, read_fit_result
+from ..pipeline.fit_result import check_fit_sequence
 from ..pipeline.illumination import envmap_from_record
 from ..pipeline.manifest import (RENDERED_SOURCES, check_frames, frame_axis, frame_label,
                                  frame_sky, is_table, load_manifest, manifest_file,
@@ -104,32 +104,6 @@ def clear_output(out):
                   out / SKY_MAPS):
             if d.is_dir() and not any(d.iterdir()):
                 d.rmdir()
-
-
-def load_fits(paths):
-    """{region: (path, fit result)} from fit JSONs, a fit folder's ``fits.csv`` (the
-    ``fit_*.json`` beside it), or a folder of fits; a damaged fit JSON in a folder is named,
-    and a region given twice is refused."""
-    out = {}
-    for p in map(Path, paths):
-        if p.is_dir() or p.name == "fits.csv":
-            folder = p if p.is_dir() else p.parent
-            files = sorted(folder.glob("fit_*.json"))
-            if not files:
-                raise SkyfitError(f"no fit_*.json in {folder}; give the folder `skyfit fit` "
-                                  "wrote.")
-        elif p.is_file():
-            files = [p]
-        else:
-            raise SkyfitError(f"fit {str(p)!r} does not exist; give fit_NAME.json files, a "
-                              "fits.csv or the folder `skyfit fit` wrote.")
-        for f in files:
-            r = read_fit_result(f)
-            if r["region"] in out:
-                raise SkyfitError(f"region {r['region']!r} is fitted twice ({out[r['region']][0]} "
-                                  f"and {f}); give one fit per region.")
-            out[r["region"]] = (f, r)
-    return out
 
 
 def target_spec(target, fits, doc=None):

@@ -75,6 +75,32 @@ def read_fit_result(path):
     return r
 
 
+def load_fits(paths):
+    """{region: (path, fit result)} from fit JSONs, a fit folder's ``fits.csv`` (the
+    ``fit_*.json`` beside it), or a folder of fits; a damaged fit JSON in a folder is named,
+    and a region given twice is refused."""
+    out = {}
+    for p in map(Path, paths):
+        if p.is_dir() or p.name == "fits.csv":
+            folder = p if p.is_dir() else p.parent
+            files = sorted(folder.glob("fit_*.json"))
+            if not files:
+                raise SkyfitError(f"no fit_*.json in {folder}; give the folder `skyfit fit` "
+                                  "wrote.")
+        elif p.is_file():
+            files = [p]
+        else:
+            raise SkyfitError(f"fit {str(p)!r} does not exist; give fit_NAME.json files, a "
+                              "fits.csv or the folder `skyfit fit` wrote.")
+        for f in files:
+            r = read_fit_result(f)
+            if r["region"] in out:
+                raise SkyfitError(f"region {r['region']!r} is fitted twice ({out[r['region']][0]} "
+                                  f"and {f}); give one fit per region.")
+            out[r["region"]] = (f, r)
+    return out
+
+
 def _numbers(v, n=None):
     """Whether ``v`` is a list of finite numbers (``n`` of them, if given)."""
     return isinstance(v, list) and (n is None or len(v) == n) and all(

@@ -19,7 +19,7 @@ from ..physics.ward import (METAL_THRESHOLD, PLASTIC_MAX, SIGMA_MIRROR,
 from .light_cache import (CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
                           SIGMA_TABLE, check_fit_normalisation, control_weight)
 from .daylight import jit_array, update_sky
-from .scene_xml import _ward_element
+from .scene_xml import ward_element
 from .sky_control import chebyshev_eval, chebyshev_x
 
 #: Fitted parameters of each model (thesis 7.1), in order; C is three numbers.
@@ -439,7 +439,7 @@ class RegionRenderModel:
         root = ET.fromstring(scene_xml)
         for el in root.iter("bsdf"):
             if el.get("id") == material:
-                _ward_element(el, material, material_dict(model, 0.5 * sum(bounds(model)),
+                ward_element(el, material, material_dict(model, 0.5 * sum(bounds(model)),
                                                           normalisation))
         xml = ET.tostring(root, encoding="unicode")
         self.mi = mi

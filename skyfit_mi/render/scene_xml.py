@@ -65,7 +65,9 @@ def _sub(parent, tag, **attrs):
     return ET.SubElement(parent, tag, {k: str(v) for k, v in attrs.items()})
 
 
-def _ward_element(el, name, m):
+def ward_element(el, name, m):
+    """Make ``el`` the ``ward`` plugin element ``name`` of material ``m`` (model, normalisation
+    and its parameters), its earlier children removed."""
     for child in list(el):
         el.remove(child)
     el.attrib = {"type": "ward", "id": name}
@@ -85,7 +87,7 @@ def build_scene_xml(spec):
     root = tree.getroot()
     for el in root.iter("bsdf"):
         if el.get("type") == "ward" and el.get("id") in mats:
-            _ward_element(el, el.get("id"), mats[el.get("id")])
+            ward_element(el, el.get("id"), mats[el.get("id")])
     ground = spec.raw["scene"].get("ground_albedo")
     if ground is not None:
         g = _sub(root, "shape", type="rectangle", id="ground")
