@@ -201,6 +201,8 @@ def test_bad_inputs_exit_2_and_write_nothing(tmp_path, capsys, world, uv, extra,
     ("name,x_px,y_px,X,Y,Z\na,1,2,0,0,0\na,3,4,1,0,0\n", "'a' is given twice"),
     ("name,x,y,X,Y,Z\na,1,2,0,0,0\n", "lacks column.*x_px, y_px"),
     ("x_px,y_px,X,Y,Z\n1,nan,0,0,0\n", r"line 2 \(row 2\): y_px = 'nan'"),
+    ("name,x_px,y_px,X,Y,Z\na,1,2,0,3,0,0\n", "line 2 has more cells than the header's 6"),
+    ("name,x_px,y_px,X,Y,Z\na,1,2,0\n", "line 2 has fewer cells"),
 ])
 def test_points_file_errors(tmp_path, text, msg):
     (tmp_path / "p.csv").write_text(text)

@@ -94,8 +94,9 @@ def read_points(path, width, height):
     path = Path(path)
     try:
         with open(path, newline="", encoding="utf-8-sig") as f:
-            rows = list(csv.DictReader(f))
-            header = [h.strip() for h in (rows[0].keys() if rows else [])]
+            reader = csv.DictReader(f)
+            rows = list(reader)
+            header = [h.strip() for h in reader.fieldnames or []]
     except OSError as exc:
         raise SkyfitError(f"cannot read points file {str(path)!r}: {exc.strerror or exc}.") \
             from None
@@ -108,7 +109,11 @@ def read_points(path, width, height):
                           "[m]; name optional).")
     names, values = [], []
     for i, row in enumerate(rows, start=2):
-        row = {(k or "").strip(): (v or "").strip() for k, v in row.items()}
+        if None in row or None in row.values():
+            raise SkyfitError(f"{path.name} line {i} has {'more' if None in row else 'fewer'} "
+                              f"cells than the header's {len(header)}; give one cell per column "
+                              "(decimal points, not commas, in numbers).")
+        row = {k.strip(): v.strip() for k, v in row.items()}
         name = row.get("name") or f"row {i}"
         try:
             v = [float(row[c]) for c in COLUMNS]
@@ -490,8 +495,8 @@ def _check_misfit(cv2, points, best, dof, marking_px, width, height, focal, k, f
     rms = np.sqrt(np.mean(err ** 2))
     raise SkyfitError(f"the marks miss the best camera by {rms:.2f} px rms, far beyond the "
                       f"marking accuracy {marking_px:g} px; point {points.names[worst]!r} is the "
-                      f"likeliest mislabelled ({err[worst]:.1f} px off): check its mark and scene coordinates "
-                      "(or give --marking-px as you marked).")
+                      f"likeliest mislabelled ({err[worst]:.1f} px off): check its mark and scene "
+                      "coordinates (or give --marking-px as you marked).")
 
 
 def camera_toml(estimate, source=""):
