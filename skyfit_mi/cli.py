@@ -394,13 +394,14 @@ def _camera(args):
                           args.target)
     toml, report = write_camera(est, args.output, args.overwrite, str(args.points))
     p = est.placement()
-    given = " (given)" if "focal" not in est.free else ""
+    fov = (f"{p['fov_deg'][0]:.2f} deg (given)" if "focal" not in est.free else
+           f"{p['fov_deg'][0]:.2f} +- {p['fov_deg'][1]:.2f} deg")
     err = np.hypot(*est.residuals.T)
     print(f"camera from {len(err)} points: azimuth {p['azimuth_deg'][0]:.2f} +- "
           f"{p['azimuth_deg'][1]:.2f} deg, {p['angle_deg'][0]:.2f} +- {p['angle_deg'][1]:.2f} "
           f"deg from vertical, {p['distance_m'][0]:.3f} +- {p['distance_m'][1]:.3f} m from "
-          f"[{', '.join(f'{v:g}' for v in est.target)}], fov {p['fov_deg'][0]:.2f} +- "
-          f"{p['fov_deg'][1]:.2f} deg{given} (1 sigma, marks {est.sigma_px:.2g} px); "
+          f"[{', '.join(f'{v:g}' for v in est.target)}], fov {fov} (1 sigma, marks "
+          f"{est.sigma_px:.2g} px); "
           f"reprojection rms {np.sqrt(np.mean(err ** 2)):.2f} px, max {err.max():.2f} px "
           f"({est.points.names[int(np.argmax(err))]}); wrote {toml} and {report}")
 

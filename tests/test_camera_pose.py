@@ -158,6 +158,11 @@ def test_cli_writes_the_camera_and_its_report(tmp_path, capsys):
     assert main(args) == 2                                     # no overwrite
     assert "exists" in capsys.readouterr().err
     assert main(args + ["--overwrite"]) == 0
+    from PIL import Image
+    Image.new("RGB", (W, H)).save(tmp_path / "photo.png")
+    size = args.index("--width")
+    assert main(args[:size] + ["--photo", str(tmp_path / "photo.png")] + args[size + 4:]
+                + ["--overwrite"]) == 0
 
 
 def _behind():
