@@ -373,6 +373,39 @@ def _labels(args):
           + ", ".join(f"{k}={v}" for k, v in legend.items()))
 
 
+def _camera(args):
+    from .pipeline.camera_pose import estimate_camera, read_points, write_camera
+    from .pipeline.photos import read_photo
+
+    if args.photo:
+        photo = read_photo(args.photo)
+        width, height = photo.width, photo.height
+    elif args.width and args.height:
+        width, height = args.width, args.height
+    else:
+        raise SkyfitError("give the photograph's size: --photo PHOTO, or --width and --height "
+                          "[px].")
+    if args.distortion is not None and len(args.distortion) not in (1, 2):
+        raise SkyfitError("--distortion takes K1 or K1,K2 (OpenCV's radial terms).")
+    if args.target is not None and len(args.target) != 3:
+        raise SkyfitError("--target takes X,Y,Z [m] (east, north, up).")
+    points = read_points(args.points, width, height)
+    est = estimate_camera(points, width, height, args.fov_deg, args.distortion, args.marking_px,
+                          args.target)
+    toml, report = write_camera(est, args.output, args.overwrite, str(args.points))
+    p = est.placement()
+    fov = (f"{p['fov_deg'][0]:.2f} deg (given)" if "focal" not in est.free else
+           f"{p['fov_deg'][0]:.2f} +- {p['fov_deg'][1]:.2f} deg")
+    err = np.hypot(*est.residuals.T)
+    print(f"camera from {len(err)} points: azimuth {p['azimuth_deg'][0]:.2f} +- "
+          f"{p['azimuth_deg'][1]:.2f} deg, {p['angle_deg'][0]:.2f} +- {p['angle_deg'][1]:.2f} "
+          f"deg from vertical, {p['distance_m'][0]:.3f} +- {p['distance_m'][1]:.3f} m from "
+          f"[{', '.join(f'{v:g}' for v in est.target)}], fov {fov} (1 sigma, marks "
+          f"{est.sigma_px:.2g} px); "
+          f"reprojection rms {np.sqrt(np.mean(err ** 2)):.2f} px, max {err.max():.2f} px "
+          f"({est.points.names[int(np.argmax(err))]}); wrote {toml} and {report}")
+
+
 _MANIFEST_HELP = "folder written by `skyfit render` (or its manifest.json)"
 
 
@@ -452,6 +485,36 @@ def _add_ingest(sub, common):
                      help="replace another run's output in the folder (starts clean)")
     ing.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     ing.set_defaults(func=_ingest)
+
+
+def _add_camera(sub, common):
+    """The ``camera`` sub-command: marked points of a photograph -> the spec's [camera]."""
+    cam = sub.add_parser(
+        "camera", parents=[common], help="the camera's pose and lens from marked points",
+        description="Estimate the camera's pose, field of view and radial distortion from "
+        "points marked in one photograph whose scene positions were measured (e.g. a board's "
+        "corners), with their uncertainty; writes the spec's [camera] table (TOML) and a JSON "
+        "report beside it.")
+    cam.add_argument("points", help="CSV with columns name (optional), x_px, y_px (pixel "
+                     "column and row, 0,0 the centre of the top-left pixel), X, Y, Z (world "
+                     "east, north, up [m])")
+    cam.add_argument("--photo", help="the photograph (gives the image size)")
+    cam.add_argument("--width", type=_int_in(1, 16384), help="image width [px] (without --photo)")
+    cam.add_argument("--height", type=_int_in(1, 16384), help="image height [px]")
+    cam.add_argument("--fov-deg", type=float, help="horizontal field of view [deg] if known "
+                     "(needs 4 points; without it the focal length is fitted, from 6)")
+    cam.add_argument("--distortion", type=_numbers, metavar="K1[,K2]", help="known radial "
+                     "distortion (OpenCV's convention; default 0 with --fov-deg, else fitted "
+                     "when the marks reach far enough from the centre)")
+    cam.add_argument("--marking-px", type=float, default=0.5, help="standard deviation of a "
+                     "mark [px] (default 0.5); the residuals widen it if they show more")
+    cam.add_argument("--target", type=_numbers, metavar="X,Y,Z", help="point the camera's "
+                     "azimuth, angle and distance are given from [m] (default the points' "
+                     "centroid)")
+    cam.add_argument("-o", "--output", required=True, help="camera TOML path (the report is "
+                     "written beside it as .json)")
+    cam.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    cam.set_defaults(func=_camera)
 
 
 def _add_pixels(sub, common):
@@ -654,6 +717,7 @@ def build_parser():
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_render(sub, common)
     _add_ingest(sub, common)
+    _add_camera(sub, common)
     _add_pixels(sub, common)
     _add_labels(sub, common)
     _add_fit(sub, common)

@@ -22,6 +22,7 @@ from ..physics import cie_general
 from ..physics.camera import SensorModel
 from ..errors import SkyfitError
 from ..physics.gensky import from_gensky
+from ..physics.lens import check_distortion
 from ..render.fit_model import PARAMETERS, material_dict
 from ..render.scene import camera_matrix
 from ..render.scene_xml import resolve_materials
@@ -58,7 +59,7 @@ _SCHEMA = {
     "scene": {"file", "ground_albedo"},
     "materials": None,
     "camera": {"azimuth_deg", "angle_deg", "distance", "target", "origin", "up", "matrix",
-               "fov_deg", "width", "height"},
+               "fov_deg", "width", "height", "distortion"},
     "sensor": {"exposure", "response", "gamma", "bits", "noise_percent", "cos4"},
     "render": {"spp", "seed", "variant", "max_depth", "below_horizon", "sampler", "integrator"},
 }
@@ -432,7 +433,17 @@ def _camera(sec):
     _num("camera", "fov_deg", c["fov_deg"], 0.1, 170)
     _num("camera", "width", c["width"], 1, 16384, integer=True)
     _num("camera", "height", c["height"], 1, 16384, integer=True)
+    if "distortion" in c:
+        k = c["distortion"]
+        if not isinstance(k, list) or len(k) not in (1, 2):
+            raise SpecError("[camera] distortion must be [k1] or [k1, k2] (radial, OpenCV's "
+                            f"convention), got {k!r}.")
+        for i, v in enumerate(k):
+            _num("camera", f"distortion[{i}]", v)
     try:
+        if "distortion" in c:
+            c["distortion"] = check_distortion(c["distortion"], c["fov_deg"], c["width"],
+                                               c["height"])
         camera_matrix(c)
     except SkyfitError as exc:
         raise SpecError(f"[camera] {exc}") from None

@@ -1,0 +1,67 @@
+"""The camera's lens geometry: a pinhole with a horizontal field of view, and radial distortion.
+
+The pinhole (Hartley and Zisserman 2004, sec. 6.1) has square pixels and its principal point at
+the image's centre: a point (X, Y, Z) in the camera's OpenCV frame (x right, y down, z along the
+view) [m] falls on pixel
+
+    u = f x_d + (W - 1) / 2,   v = f y_d + (H - 1) / 2,
+
+with pixel (0, 0) the centre of the top-left pixel (OpenCV's convention; Mitsuba's film puts it
+at 0.5, 0.5, the same place), f = (W / 2) / tan(fov / 2) [px], and the radial distortion of
+Brown (1966) as OpenCV and Zhang (2000) write it, on the normalised coordinates x = X / Z,
+y = Y / Z:
+
+    (x_d, y_d) = (x, y) (1 + k1 r^2 + k2 r^4),   r^2 = x^2 + y^2.
+
+Barrel distortion has k1 < 0.  The renderer is a pinhole (k1 = k2 = 0); a photograph's
+distortion is undone before it is compared with a render
+(:func:`skyfit_mi.pipeline.camera_pose.undistort_image`).
+
+References: D. C. Brown, "Decentering distortion of lenses", Photogrammetric Engineering 32(3),
+444-462, 1966; Z. Zhang, "A flexible new technique for camera calibration", IEEE TPAMI 22(11),
+1330-1334, 2000, doi:10.1109/34.888718; R. Hartley and A. Zisserman, "Multiple View Geometry in
+Computer Vision", 2nd ed., Cambridge University Press, 2004.
+"""
+
+import numpy as np
+
+from ..errors import SkyfitError
+
+
+def focal_px(fov_deg, width):
+    """Focal length [px] of a horizontal field of view ``fov_deg`` [degrees] over ``width`` [px]."""
+    return width / 2.0 / np.tan(np.radians(fov_deg) / 2.0)
+
+
+def fov_deg(focal, width):
+    """Horizontal field of view [degrees] of focal length ``focal`` [px] over ``width`` [px]."""
+    return float(np.degrees(2.0 * np.arctan(width / 2.0 / focal)))
+
+
+def intrinsics(focal, width, height):
+    """The 3x3 camera matrix K [px] of focal length ``focal`` [px], principal point at the
+    centre of a ``width`` x ``height`` image."""
+    return np.array([[focal, 0.0, (width - 1) / 2.0], [0.0, focal, (height - 1) / 2.0],
+                     [0.0, 0.0, 1.0]])
+
+
+def check_distortion(k, fov, width, height):
+    """Refuse radial distortion ``k`` = [k1] or [k1, k2] that folds the image over itself.
+
+    The distorted radius r (1 + k1 r^2 + k2 r^4) must grow with r until it reaches the image's
+    corner (at field of view ``fov`` [degrees], ``width`` x ``height`` [px]); otherwise two
+    directions land on one pixel and no undistortion exists.  Returns [k1, k2].
+    """
+    k1, k2 = (list(k) + [0.0])[:2]
+    corner = np.hypot(width, height) / 2.0 / focal_px(fov, width)    # normalised radius
+    r = np.linspace(0.0, 10.0 * corner, 20001)
+    rd = r * (1.0 + k1 * r ** 2 + k2 * r ** 4)
+    slope = 1.0 + 3.0 * k1 * r ** 2 + 5.0 * k2 * r ** 4
+    reach = np.nonzero(rd >= corner)[0]
+    end = reach[0] if len(reach) else len(r)
+    if np.any(slope[:end + 1] <= 0.0) or not len(reach):
+        raise SkyfitError(f"distortion = [{k1:g}, {k2:g}] folds the image before its corner "
+                          f"(fov {fov:g} deg, {width}x{height} px): the distorted radius stops "
+                          "growing; check the values and their signs (OpenCV's convention, "
+                          "barrel k1 < 0).")
+    return [float(k1), float(k2)]

@@ -1,0 +1,576 @@
+"""The camera from the photos: pose, focal length and radial distortion from marked points.
+
+A photographer marks, in one photograph, the pixels of four or more scene points whose world
+positions (+X east, +Y north, +Z up) [m] were measured, e.g. a sample board's corners.  The
+camera is the pinhole with radial distortion of :mod:`skyfit_mi.physics.lens` (square pixels,
+principal point at the centre, no tangential distortion) whose projection of those points is
+nearest the marks in the least-squares sense (the maximum-likelihood estimate for Gaussian
+marking errors, Hartley and Zisserman 2004, sec. 7.2):
+
+* focal length given: OpenCV's ``solvePnP`` from the starts of SQPnP (Terzakis and Lourakis
+  2020) and, for coplanar points, IPPE (Collins and Bartoli 2014), which gives both poses a
+  plane's view allows, each refined by ``SOLVEPNP_ITERATIVE`` (Levenberg-Marquardt);
+* focal length free: the best of those over a scan of fields of view, refined with the focal
+  length and, for marks reaching far enough from the centre to show it, k1 (and k2;
+  :data:`K1_REACH`) by ``calibrateCamera`` on the one view
+  (Zhang 2000's maximum-likelihood step).  One view of a plane fixes the focal length only
+  through its perspective foreshortening; a board seen face-on, or too small, does not.
+
+The uncertainty is the linearised one (Hartley and Zisserman 2004, sec. 5.2.3): with J the
+Jacobian of the reprojection (``projectPoints``) in the free parameters (rotation vector,
+translation, focal length, k1, k2), cov = sigma^2 (J^T J)^-1, sigma [px] the larger of the marking
+accuracy the user states and what the residuals show; it is carried to the camera's azimuth,
+angle from the vertical and distance from a target point, and its field of view, by their
+numerical Jacobian.
+
+References: R. Hartley and A. Zisserman, "Multiple View Geometry in Computer Vision", 2nd ed.,
+2004; Z. Zhang, IEEE TPAMI 22(11), 1330-1334, 2000, doi:10.1109/34.888718; T. Collins and
+A. Bartoli, IJCV 109, 252-286, 2014, doi:10.1007/s11263-014-0725-5; G. Terzakis and
+M. Lourakis, ECCV 2020, doi:10.1007/978-3-030-58452-8_28; OpenCV 4 ``calib3d``.
+"""
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import OutputError, SkyfitError
+from ..files import write_json, write_text
+from ..physics.lens import fov_deg, focal_px, intrinsics
+from ..render.scene import look_at
+
+#: Points needed with the focal length given (six pose parameters) and free (plus f and k1).
+MIN_POINTS = {"given": 4, "free": 6}
+#: With the focal length free, k1 is fitted when the marks reach this fraction of the image's
+#: half-diagonal from its centre, and k2 too when they reach :data:`K2_REACH` and number
+#: :data:`K2_POINTS`: nearer the centre the distortion is below the marking error, and a fitted
+#: value would be extrapolated to the corners.  Otherwise it is the one given (default zero).
+K1_REACH, K2_REACH, K2_POINTS = 0.5, 0.7, 10
+#: Below this chi-square probability the residuals are "far beyond the marking accuracy".
+P_MISFIT = 1e-3
+#: A second pose within this chi-square of the best makes the answer ambiguous (3 sigma).
+AMBIGUOUS_CHI2 = 9.0
+#: A free focal length known no better than this relative standard deviation is not determined.
+FOCAL_REL_SD = 0.2
+#: Relative singular values below which points are collinear (scene or image) or coplanar.
+FLAT = 1e-3
+#: Two-sided 95% factor of a Gaussian.
+Z95 = 1.959963984540054
+COLUMNS = ("x_px", "y_px", "X", "Y", "Z")
+
+
+def _cv2():
+    try:
+        import cv2
+    except ImportError:
+        raise SkyfitError("estimating the camera needs OpenCV: pip install opencv-python-headless "
+                          "(or pip install 'skyfit-mi[photo]').") from None
+    return cv2
+
+
+@dataclass(frozen=True)
+class MarkedPoints:
+    """Image marks of scene points: ``names`` (N,), ``image`` (N, 2) pixel column and row [px]
+    (0, 0 the centre of the top-left pixel), ``world`` (N, 3) east, north, up [m]."""
+
+    names: tuple
+    image: np.ndarray
+    world: np.ndarray
+
+    def __post_init__(self):
+        object.__setattr__(self, "names", tuple(self.names))
+        for key, n in (("image", 2), ("world", 3)):          # OpenCV takes contiguous arrays
+            object.__setattr__(self, key, np.ascontiguousarray(getattr(self, key),
+                                                               dtype=float).reshape(-1, n))
+
+
+def read_points(path, width, height):
+    """Read a CSV of marked points (columns ``name`` (optional), ``x_px``, ``y_px``, ``X``,
+    ``Y``, ``Z``) for a ``width`` x ``height`` [px] photograph; returns :class:`MarkedPoints`.
+
+    Raises SkyfitError naming the row for a missing column, a cell that is not a finite
+    number, a name given twice, or a mark off the image."""
+    path = Path(path)
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            reader = csv.DictReader(f)
+            rows = list(reader)
+            header = [h.strip() for h in reader.fieldnames or []]
+    except OSError as exc:
+        raise SkyfitError(f"cannot read points file {str(path)!r}: {exc.strerror or exc}.") \
+            from None
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise SkyfitError(f"{path.name} is not a CSV text file ({exc}).") from None
+    missing = [c for c in COLUMNS if c not in header]
+    if missing:
+        raise SkyfitError(f"{path.name} lacks column(s) {', '.join(missing)}; give a header row "
+                          "name,x_px,y_px,X,Y,Z (pixel column and row, world east, north, up "
+                          "[m]; name optional).")
+    names, values = [], []
+    for i, row in enumerate(rows, start=2):
+        if None in row or None in row.values():
+            raise SkyfitError(f"{path.name} line {i} has {'more' if None in row else 'fewer'} "
+                              f"cells than the header's {len(header)}; give one cell per column "
+                              "(decimal points, not commas, in numbers).")
+        row = {k.strip(): v.strip() for k, v in row.items()}
+        name = row.get("name") or f"row {i}"
+        try:
+            v = [float(row[c]) for c in COLUMNS]
+            if not np.all(np.isfinite(v)):
+                raise ValueError
+        except ValueError:
+            bad = next(c for c in COLUMNS if not _finite(row[c]))
+            raise SkyfitError(f"{path.name} line {i} ({name}): {bad} = {row[bad]!r} is not a "
+                              "finite number; give pixel coordinates and metres as numbers.") \
+                from None
+        if name in names:
+            raise SkyfitError(f"{path.name} line {i}: the point name {name!r} is given twice; "
+                              "name each marked point once.")
+        if not (-0.5 <= v[0] <= width - 0.5 and -0.5 <= v[1] <= height - 0.5):
+            raise SkyfitError(f"{path.name} line {i} ({name}): the mark ({v[0]:g}, {v[1]:g}) px "
+                              f"is off the {width}x{height} image (x in [0, {width - 1}], y in "
+                              f"[0, {height - 1}]); check the image size or the mark.")
+        names.append(name)
+        values.append(v)
+    values = np.array(values, dtype=float).reshape(-1, 5)
+    return MarkedPoints(tuple(names), values[:, :2], values[:, 2:])
+
+
+def _finite(text):
+    try:
+        return bool(np.isfinite(float(text)))
+    except ValueError:
+        return False
+
+
+def _flatness(x):
+    """Singular values of the centred rows of ``x``, relative to the largest."""
+    s = np.linalg.svd(x - x.mean(axis=0), compute_uv=False)
+    return s / s[0] if s[0] > 0 else s
+
+
+def _check_configuration(points, need, mode):
+    """Refuse too few points and collinear ones; return whether the scene points are coplanar."""
+    n = len(points.names)
+    if n < need:
+        raise SkyfitError(f"{n} marked point(s); the camera needs at least {need} with the focal "
+                          f"length {mode} ({'give --fov-deg or ' if mode == 'free' else ''}mark "
+                          "more points).")
+    for what, x in (("scene", points.world), ("image", points.image)):
+        if _flatness(x)[1] < FLAT:
+            raise SkyfitError(f"the marked points lie on one line in the {what}: they cannot fix "
+                              "the camera; mark points spread over an area (e.g. all four corners "
+                              "of the board)." if what == "scene" else
+                              "the marked points lie on one line in the image (their plane seen "
+                              "edge-on): they cannot fix the camera; mark points off that plane.")
+    return bool(_flatness(points.world)[2] < FLAT)
+
+
+@dataclass
+class _Fit:
+    """One solution: OpenCV's world-to-camera rotation vector and translation [m], the focal
+    length [px] and [k1, k2]; ``ssr`` the sum of squared residuals [px^2]."""
+
+    rvec: np.ndarray
+    tvec: np.ndarray
+    focal: float
+    k: np.ndarray
+    ssr: float
+
+
+def _project(cv2, world, fit, width, height):
+    """Projected points (N, 2) [px] and the Jacobian (2N, 14) of ``projectPoints`` (rotation
+    vector, translation, fx, fy, cx, cy, k1, k2, p1, p2)."""
+    uv, jac = cv2.projectPoints(world, fit.rvec, fit.tvec, intrinsics(fit.focal, width, height),
+                                np.r_[fit.k, 0.0, 0.0])
+    return uv.reshape(-1, 2), jac
+
+
+def _depths(cv2, world, fit):
+    """Depth [m] of each world point along the camera's view."""
+    return world @ cv2.Rodrigues(fit.rvec)[0][2] + fit.tvec[2]
+
+
+def _poses(cv2, points, focal, k, coplanar, width, height):
+    """Pose solutions at a given focal length and distortion, refined, best first."""
+    K, dist = intrinsics(focal, width, height), np.r_[k, 0.0, 0.0]
+    rvecs, tvecs = [], []
+    for flag in ((cv2.SOLVEPNP_IPPE,) if coplanar else ()) + (cv2.SOLVEPNP_SQPNP,):
+        try:
+            _, r, t, _ = cv2.solvePnPGeneric(points.world, points.image, K, dist, flags=flag)
+        except cv2.error:
+            continue
+        rvecs, tvecs = rvecs + list(r), tvecs + list(t)
+    out = []
+    for r0, t0 in zip(rvecs, tvecs):
+        _, r, t = cv2.solvePnP(points.world, points.image, K, dist, r0.copy(), t0.copy(),
+                               useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE)
+        # the refined pose, or the first one if refining turned the camera away (bad marks)
+        fit = next((f for f in (_Fit(rv.ravel(), tv.ravel(), float(focal), np.asarray(k, float),
+                                     0.0) for rv, tv in ((r, t), (r0, t0)))
+                    if np.median(_depths(cv2, points.world, f)) > 0), None)
+        if fit is None:
+            continue
+        fit.ssr = float(np.sum((_project(cv2, points.world, fit, width, height)[0]
+                                - points.image) ** 2))
+        out.append(fit)
+    return sorted(out, key=lambda f: f.ssr)
+
+
+def _calibrate(cv2, points, start, free_k, width, height):
+    """``start`` refined by ``calibrateCamera`` on the one view with the focal length and the
+    first ``free_k`` radial terms free (principal point fixed, square pixels, no tangential)."""
+    flags = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT
+             | cv2.CALIB_FIX_ASPECT_RATIO | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3
+             | (cv2.CALIB_FIX_K1 if free_k < 1 else 0) | (cv2.CALIB_FIX_K2 if free_k < 2 else 0))
+    crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-14)
+    _, K, dist, rvecs, tvecs = cv2.calibrateCamera(
+        [points.world.astype(np.float32)], [points.image.astype(np.float32)], (width, height),
+        intrinsics(start.focal, width, height), np.r_[start.k, 0.0, 0.0, 0.0],
+        flags=flags, criteria=crit)
+    fit = _Fit(rvecs[0].ravel(), tvecs[0].ravel(), float(K[0, 0]), dist.ravel()[:2].copy(), 0.0)
+    fit.ssr = float(np.sum((_project(cv2, points.world, fit, width, height)[0]
+                            - points.image) ** 2))
+    return fit
+
+
+def _angle_between(r1, r2, cv2):
+    """Angle between two rotations given as rotation vectors [degrees]."""
+    d = cv2.Rodrigues(r1)[0] @ cv2.Rodrigues(r2)[0].T
+    return float(np.degrees(np.arccos(np.clip((np.trace(d) - 1.0) / 2.0, -1.0, 1.0))))
+
+
+def _solve(cv2, points, width, height, focal, k, free_k, coplanar):
+    """The best fit, and the best pose at its focal length and distortion that differs from
+    it by more than a degree (the other view of a plane; None if there is none)."""
+    if focal is not None:
+        fits = _poses(cv2, points, focal, k, coplanar, width, height)
+    else:
+        fits = [f for fov in np.geomspace(5.0, 140.0, 36)
+                for f in _poses(cv2, points, focal_px(fov, width), k, coplanar, width, height)]
+    if not fits:
+        raise SkyfitError("OpenCV found no camera for these points; check that each mark and "
+                          "its scene position belong to the same point.")
+    best = min(fits, key=lambda f: f.ssr)
+    if focal is None:
+        try:
+            best = min(best, _calibrate(cv2, points, best, free_k, width, height),
+                       key=lambda f: f.ssr)
+        except cv2.error as exc:
+            raise SkyfitError(f"OpenCV's calibrateCamera failed on these points ({exc.err}); "
+                              "give --fov-deg, or mark more points.") from None
+        fits = _poses(cv2, points, best.focal, best.k, coplanar, width, height)
+    other = next((f for f in fits if _angle_between(f.rvec, best.rvec, cv2) > 1.0), None)
+    return best, other
+
+
+@dataclass
+class CameraEstimate:
+    """A camera estimated from marked points (:func:`estimate_camera`).
+
+    ``rvec``, ``tvec``: OpenCV's world-to-camera rotation vector and translation [m];
+    ``focal`` [px]; ``k`` [k1, k2]; ``free``: names of the free parameters, in the order of
+    ``covariance`` (``r1 r2 r3`` [rad], ``t1 t2 t3`` [m], ``focal`` [px], ``k1``, ``k2``);
+    ``sigma_px``: the marking error the covariance assumes; ``target``: the point azimuth,
+    angle and distance are measured from [m]."""
+
+    points: MarkedPoints
+    width: int
+    height: int
+    rvec: np.ndarray
+    tvec: np.ndarray
+    focal: float
+    k: np.ndarray
+    free: tuple
+    covariance: np.ndarray
+    residuals: np.ndarray
+    marking_px: float
+    sigma_px: float
+    dof: int
+    coplanar: bool
+    target: np.ndarray
+    other_rms_px: float | None
+
+    @property
+    def rotation(self):
+        """World-to-camera rotation (OpenCV's camera frame: x right, y down, z forward)."""
+        return _cv2().Rodrigues(self.rvec)[0]
+
+    @property
+    def origin(self):
+        """The camera's centre in the world [m]."""
+        return -self.rotation.T @ self.tvec
+
+    def to_world(self):
+        """Mitsuba's camera to_world 4x4 (columns: left, up, forward, origin), as
+        :func:`~skyfit_mi.render.scene.look_at` builds it."""
+        m = np.eye(4)
+        m[:3, :3] = self.rotation.T @ np.diag([-1.0, -1.0, 1.0])
+        m[:3, 3] = self.origin
+        return m
+
+    def camera_section(self):
+        """The spec's [camera] table: origin, a target on the view axis at the depth of
+        ``self.target``, the camera's up, fov_deg, width, height and distortion."""
+        m = self.to_world()
+        depth = float(np.dot(self.target - self.origin, m[:3, 2]))
+        return {"origin": self.origin.tolist(),
+                "target": (self.origin + depth * m[:3, 2]).tolist(),
+                "up": m[:3, 1].tolist(), "fov_deg": fov_deg(self.focal, self.width),
+                "width": self.width, "height": self.height,
+                "distortion": [float(v) for v in self.k]}
+
+    def _placement(self, p):
+        """Azimuth [deg], angle from the vertical [deg], distance [m] and fov [deg] of the
+        camera with free parameters ``p``."""
+        q = dict(zip(self.free, p))
+        rvec = np.array([q["r1"], q["r2"], q["r3"]])
+        origin = -_cv2().Rodrigues(rvec)[0].T @ np.array([q["t1"], q["t2"], q["t3"]])
+        v = origin - self.target
+        dist = np.linalg.norm(v)
+        return np.array([np.degrees(np.arctan2(v[0], v[1])) % 360.0,
+                         np.degrees(np.arccos(np.clip(v[2] / dist, -1.0, 1.0))), dist,
+                         fov_deg(q.get("focal", self.focal), self.width)])
+
+    def parameters(self):
+        """The free parameters' values, in the order of ``free``."""
+        allv = dict(zip(("r1", "r2", "r3", "t1", "t2", "t3", "focal", "k1", "k2"),
+                        [*self.rvec, *self.tvec, self.focal, *self.k]))
+        return np.array([allv[n] for n in self.free])
+
+    def placement(self):
+        """{name: (value, standard deviation)} of ``azimuth_deg``, ``angle_deg`` (from the
+        vertical), ``distance_m`` (from ``target``) and ``fov_deg``, plus ``k1``/``k2`` when
+        free; the deviations linearised from the covariance."""
+        p = self.parameters()
+        g0 = self._placement(p)
+        G = np.empty((4, len(p)))
+        for j in range(len(p)):
+            h = 1e-6 * max(1.0, abs(p[j]))
+            dp = np.zeros_like(p)
+            dp[j] = h
+            d = self._placement(p + dp) - self._placement(p - dp)
+            d[0] = (d[0] + 180.0) % 360.0 - 180.0                 # azimuth across north
+            G[:, j] = d / (2 * h)
+        sd = np.sqrt(np.maximum(np.diag(G @ self.covariance @ G.T), 0.0))
+        out = dict(zip(("azimuth_deg", "angle_deg", "distance_m", "fov_deg"), zip(g0, sd)))
+        for i, name in enumerate(self.free):
+            if name in ("k1", "k2"):
+                out[name] = (float(p[i]), float(np.sqrt(self.covariance[i, i])))
+        return {k: (float(v), float(s)) for k, (v, s) in out.items()}
+
+    def report(self):
+        """The JSON report: the camera, its placement with 1-sigma and 95% bounds, the fit's
+        statistics and each point's residual [px]."""
+        err = np.hypot(*self.residuals.T)
+        return {
+            "units": "angles [deg], lengths [m], image coordinates and residuals [px] (0, 0 the "
+                     "centre of the top-left pixel)",
+            "method": ("solvePnP (IPPE and SQPnP starts, refined iteratively)" if self.coplanar
+                       else "solvePnP (SQPnP start, refined iteratively)")
+            if "focal" not in self.free
+            else "calibrateCamera on one view (focal length and radial distortion free)",
+            "free_parameters": list(self.free), "points": len(err), "coplanar": self.coplanar,
+            "camera": self.camera_section(), "to_world": self.to_world().tolist(),
+            "target": self.target.tolist(),
+            "placement": {k: {"value": v, "sd": s, "ci95": [v - Z95 * s, v + Z95 * s]}
+                          for k, (v, s) in self.placement().items()},
+            "covariance": {"parameters": list(self.free), "matrix": self.covariance.tolist()},
+            "marking_px": self.marking_px, "sigma_px": self.sigma_px,
+            "reprojection_rms_px": float(np.sqrt(np.mean(err ** 2))),
+            "reprojection_max_px": float(err.max()), "dof": self.dof,
+            "chi2": float(np.sum(self.residuals ** 2) / self.marking_px ** 2),
+            "other_pose_rms_px": self.other_rms_px,
+            "residuals": [{"name": n, "x_px": float(x), "y_px": float(y), "dx_px": float(dx),
+                           "dy_px": float(dy), "error_px": float(e)}
+                          for n, (x, y), (dx, dy), e in zip(self.points.names, self.points.image,
+                                                             self.residuals, err)],
+            "opencv": _cv2().__version__,
+        }
+
+
+def estimate_camera(points, width, height, fov=None, distortion=None, marking_px=0.5,
+                    target=None):
+    """Estimate the camera that saw ``points`` (:class:`MarkedPoints`) in a ``width`` x
+    ``height`` [px] photograph.
+
+    Parameters
+    ----------
+    fov : float, optional
+        Horizontal field of view [degrees], if known (from the lens and sensor); else fitted.
+    distortion : sequence, optional
+        Known [k1] or [k1, k2]; else zero with ``fov`` given, fitted without it.
+    marking_px : float
+        Standard deviation of a mark in each coordinate [px].
+    target : sequence of 3, optional
+        Point [m] the camera's azimuth, angle and distance are measured from; default the
+        points' centroid.
+
+    Returns
+    -------
+    CameraEstimate
+
+    Raises
+    ------
+    SkyfitError
+        Too few points for the free parameters, collinear points, a point behind the camera,
+        residuals far beyond ``marking_px`` (naming the likeliest mislabelled point), two poses
+        that fit alike, or a free focal length the points do not determine.
+    """
+    cv2 = _cv2()
+    if not (np.isfinite(marking_px) and marking_px > 0):
+        raise SkyfitError(f"the marking accuracy {marking_px!r} px must be a positive number.")
+    mode = "given" if fov is not None else "free"
+    coplanar = _check_configuration(points, MIN_POINTS[mode], mode)
+    k = np.r_[np.asarray(distortion if distortion is not None else [], float), 0.0, 0.0][:2]
+    reach = np.max(np.hypot(*(points.image - [(width - 1) / 2, (height - 1) / 2]).T)) \
+        / np.hypot(width, height) * 2
+    free_k = 0 if (fov is not None or distortion is not None or reach < K1_REACH) else \
+        (2 if len(points.names) >= K2_POINTS and reach >= K2_REACH else 1)
+    focal = None if fov is None else focal_px(fov, width)
+    best, other = _solve(cv2, points, width, height, focal, k, free_k, coplanar)
+
+    behind = [n for n, z in zip(points.names, _depths(cv2, points.world, best)) if z <= 0]
+    if behind:
+        raise SkyfitError(f"the best camera has {', '.join(behind)} behind it; check those "
+                          "points' scene coordinates (signs, east/north order) and marks.")
+
+    uv, jac = _project(cv2, points.world, best, width, height)
+    residuals = points.image - uv
+    cols = [jac[:, :6]] + ([jac[:, 6:7] + jac[:, 7:8]] if focal is None else []) \
+        + [jac[:, 10 + i:11 + i] for i in range(free_k)]
+    J = np.hstack(cols)
+    free = ("r1", "r2", "r3", "t1", "t2", "t3") + (("focal",) if focal is None else ()) \
+        + ("k1", "k2")[:free_k]
+    dof = 2 * len(points.names) - len(free)
+    _check_misfit(cv2, points, best, dof, marking_px, width, height, focal, k, free_k, coplanar)
+    if other is not None and (other.ssr - best.ssr) / marking_px ** 2 < AMBIGUOUS_CHI2:
+        raise SkyfitError("two camera poses fit the marks alike (the two views one plane allows, "
+                          f"rms {np.sqrt(best.ssr / len(uv)):.2f} and "
+                          f"{np.sqrt(other.ssr / len(uv)):.2f} px); mark points off the board's "
+                          "plane, or more points over a larger area.")
+    sigma = max(marking_px, np.sqrt(best.ssr / dof)) if dof > 0 else marking_px
+    JtJ = J.T @ J
+    scale = np.sqrt(np.diag(JtJ))
+    if np.any(scale == 0) or np.linalg.cond(JtJ / np.outer(scale, scale)) > 1e12:
+        raise SkyfitError("these points do not determine the camera (a degenerate arrangement); "
+                          "mark points spread over a larger area.")
+    cov = sigma ** 2 * np.linalg.inv(JtJ)
+    if focal is None and np.sqrt(cov[6, 6]) > FOCAL_REL_SD * best.focal:
+        raise SkyfitError(f"the points do not determine the focal length (fov "
+                          f"{fov_deg(best.focal, width):.1f} deg, +-"
+                          f"{100 * np.sqrt(cov[6, 6]) / best.focal:.0f}%): one view of a plane "
+                          "shows it only through perspective; give --fov-deg (from the lens and "
+                          "sensor), or mark points off the plane or over more of the image.")
+    return CameraEstimate(points, int(width), int(height), best.rvec, best.tvec, best.focal,
+                          best.k, free, cov, residuals, float(marking_px), float(sigma), dof,
+                          coplanar, np.asarray(points.world.mean(axis=0) if target is None
+                                               else target, float),
+                          None if other is None else float(np.sqrt(other.ssr / len(uv))))
+
+
+def _check_misfit(cv2, points, best, dof, marking_px, width, height, focal, k, free_k, coplanar):
+    """Refuse residuals far beyond the marking accuracy, naming the point whose removal
+    improves the fit most (or, with too few points to leave one out, the worst-fitting one)."""
+    from scipy.stats import chi2
+
+    if dof <= 0 or chi2.sf(best.ssr / marking_px ** 2, dof) >= P_MISFIT:
+        return
+    n = len(points.names)
+    err = np.hypot(*(_project(cv2, points.world, best, width, height)[0] - points.image).T)
+    worst = int(np.argmax(err))
+    if n - 1 >= MIN_POINTS["given" if focal is not None else "free"]:
+        gains = []
+        for i in range(n):
+            keep = np.arange(n) != i
+            sub = MarkedPoints(tuple(np.array(points.names)[keep]), points.image[keep],
+                               points.world[keep])
+            try:
+                gains.append(best.ssr - _solve(cv2, sub, width, height, focal, k, free_k,
+                                               coplanar)[0].ssr)
+            except SkyfitError:
+                gains.append(-np.inf)
+        worst = int(np.argmax(gains))
+    rms = np.sqrt(np.mean(err ** 2))
+    raise SkyfitError(f"the marks miss the best camera by {rms:.2f} px rms, far beyond the "
+                      f"marking accuracy {marking_px:g} px; point {points.names[worst]!r} is the "
+                      f"likeliest mislabelled ({err[worst]:.1f} px off): check its mark and scene "
+                      "coordinates (or give --marking-px as you marked).")
+
+
+def camera_toml(estimate, source=""):
+    """The [camera] table of ``estimate`` as TOML text, with its placement in a comment."""
+    p = estimate.placement()
+    sec = estimate.camera_section()
+
+    def val(v):
+        return "[" + ", ".join(repr(float(x)) for x in v) + "]" if isinstance(v, list) \
+            else repr(v)
+
+    t = estimate.target
+    lines = [f"# skyfit camera{': from ' + source if source else ''}, "
+             f"{len(estimate.points.names)} marked points, reprojection rms "
+             f"{np.sqrt(np.mean(np.sum(estimate.residuals ** 2, axis=1))):.2f} px",
+             f"# seen from azimuth {p['azimuth_deg'][0]:.3f} +- {p['azimuth_deg'][1]:.3f} deg, "
+             f"{p['angle_deg'][0]:.3f} +- {p['angle_deg'][1]:.3f} deg from the vertical, "
+             f"{p['distance_m'][0]:.4f} +- {p['distance_m'][1]:.4f} m from "
+             f"[{t[0]:g}, {t[1]:g}, {t[2]:g}]; fov {p['fov_deg'][0]:.3f} +- "
+             f"{p['fov_deg'][1]:.3f} deg (1 sigma)",
+             "# distortion: [k1, k2] of OpenCV's radial model; the renderer is a pinhole, "
+             "ingest undoes it", "[camera]"]
+    lines += [f"{k} = {val(v)}" for k, v in sec.items()]
+    return "\n".join(lines) + "\n"
+
+
+def write_camera(estimate, path, overwrite=False, source=""):
+    """Write ``path`` (the [camera] TOML) and its report beside it (``.json``), atomically;
+    refuses to replace either unless ``overwrite``.  Returns the two paths."""
+    path = Path(path)
+    if path.suffix.lower() != ".toml":
+        raise OutputError(f"-o {path}: the camera is a TOML table; give a path ending in .toml.")
+    report = path.with_suffix(".json")
+    for p in (path, report):
+        if p.exists() and not overwrite:
+            raise OutputError(f"{str(p)!r} exists; give another -o, or --overwrite to replace it.")
+    write_json(report, {**estimate.report(), "points_file": source})
+    write_text(path, camera_toml(estimate, source))
+    return path, report
+
+
+def undistort_image(img, camera):
+    """A photograph with its radial distortion undone: the image the spec's pinhole sees.
+
+    Parameters
+    ----------
+    img : ndarray (H, W) or (H, W, C)
+        The photograph, ``camera['width']`` x ``camera['height']`` pixels, any channels.
+    camera : dict
+        A validated [camera] table: ``fov_deg`` [degrees], ``width``, ``height`` [px] and
+        ``distortion`` [k1] or [k1, k2] (none: the image is returned as it is).
+
+    Returns
+    -------
+    ndarray, float32 (float64 if ``img`` is), the shape of ``img``
+        Each pixel bilinearly interpolated at the place the pinhole's ray lands in the
+        photograph (OpenCV ``initUndistortRectifyMap`` and ``remap``, the camera matrix kept);
+        NaN where that place lies off the photograph.
+    """
+    img = np.asarray(img)
+    h, w = camera["height"], camera["width"]
+    if img.shape[:2] != (h, w):
+        raise SkyfitError(f"the image is {img.shape[1]}x{img.shape[0]} px, the camera "
+                          f"{w}x{h}; undistort photographs of the camera's size.")
+    k = list(camera.get("distortion") or [])
+    out = img.astype(np.float64 if img.dtype == np.float64 else np.float32)
+    if not any(k):
+        return out
+    cv2 = _cv2()
+    K = intrinsics(focal_px(camera["fov_deg"], w), w, h)
+    mx, my = cv2.initUndistortRectifyMap(K, np.r_[k, 0.0, 0.0, 0.0][:4], None, K, (w, h),
+                                         cv2.CV_32FC1)
+    planes = out.reshape(h, w, -1)
+    res = np.stack([cv2.remap(np.ascontiguousarray(planes[..., c]), mx, my, cv2.INTER_LINEAR,
+                              borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
+                    for c in range(planes.shape[2])], axis=-1)
+    return res.reshape(out.shape)
