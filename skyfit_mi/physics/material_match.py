@@ -61,6 +61,9 @@ TAU = 1.0 / np.pi
 GLTF_F0 = 0.04
 #: The sigma_alpha nodes of :func:`nearest_maps`'s table (ratio 1.157) [unitless].
 SIGMA_NODES = np.geomspace(SIGMA_MIRROR, SIGMA_MAX, 64)
+#: View zeniths of the error's highlight pairs [degrees] and their half-vector slopes [sigma_alpha].
+HIGHLIGHT_ZENITHS = (0.0, 20.0, 40.0, 60.0, 70.0, 75.0, 78.0, 80.0)
+HIGHLIGHT_U = np.r_[np.arange(0.25, 3.01, 0.25), 3.5, 4.0, 5.0, 6.0]
 #: View zeniths of the albedo error [degrees].
 ALBEDO_ZENITHS = (0.0, 20.0, 40.0, 60.0, 70.0, 80.0)
 DOMAIN = ("f_r per RGB channel relative to max(f_r, 1e-3 sr^-1), light and view within 80 deg of "
@@ -87,21 +90,22 @@ def _dir(theta, phi):
 def error_pairs(sigma_alpha):
     """(wi, wo), each (G, 3), of the error measure at roughness ``sigma_alpha`` [unitless]:
     zeniths 0-80 by 10 degrees at relative azimuths 0-180 by 45 degrees, and the views at
-    0, 20, 40, 60, 70, 80 degrees with lights reflected about half vectors of slope
-    sigma_alpha u (u = 0 ... 6, eight azimuths) from the normal; pairs beyond 80 degrees dropped."""
+    :data:`HIGHLIGHT_ZENITHS` with lights reflected about half vectors of slope sigma_alpha u
+    (:data:`HIGHLIGHT_U`, 16 azimuths) from the normal, lights beyond 80 degrees moved down to
+    80 at their azimuth (the grazing edge, where the error is largest)."""
     t = np.arange(0.0, THETA_MAX + 1, 10.0)
     ti, to, dp = np.meshgrid(t, t, np.arange(0.0, 181, 45.0), indexing="ij")
     wi, wo = _dir(ti.ravel(), 0.0), _dir(to.ravel(), dp.ravel())
-    u = np.array([0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0])
-    psi = np.arange(8) * np.pi / 4
-    a = np.r_[0.0, (sigma_alpha * u[:, None] * np.cos(psi)).ravel()]
-    b = np.r_[0.0, (sigma_alpha * u[:, None] * np.sin(psi)).ravel()]
+    psi = np.arange(16) * np.pi / 8
+    a = np.r_[0.0, (sigma_alpha * HIGHLIGHT_U[:, None] * np.cos(psi)).ravel()]
+    b = np.r_[0.0, (sigma_alpha * HIGHLIGHT_U[:, None] * np.sin(psi)).ravel()]
     h = np.stack([a, b, np.ones_like(a)], -1) / np.sqrt(1 + a * a + b * b)[:, None]
-    v = _dir(np.array(ALBEDO_ZENITHS), 180.0)[:, None, :]
-    li = 2 * np.sum(v * h, -1)[..., None] * h - v
-    wi, wo = np.r_[wi, li.reshape(-1, 3)], np.r_[wo, np.broadcast_to(v, li.shape).reshape(-1, 3)]
-    keep = wi[:, 2] >= np.cos(np.radians(THETA_MAX)) - 1e-12
-    return wi[keep], wo[keep]
+    v = _dir(np.array(HIGHLIGHT_ZENITHS), 180.0)[:, None, :]
+    li = (2 * np.sum(v * h, -1)[..., None] * h - v).reshape(-1, 3)
+    zmin = np.cos(np.radians(THETA_MAX))
+    low = li[:, 2] < zmin
+    li[low] = _dir(THETA_MAX, np.degrees(np.arctan2(li[low, 1], li[low, 0])))
+    return np.r_[wi, li], np.r_[wo, np.broadcast_to(v, (len(v), len(h), 3)).reshape(-1, 3)]
 
 
 def _schlick_w(wi, wo):
@@ -167,13 +171,21 @@ def _fit_lobe(sigma, normalisation, family):
 
     lo = max(np.log(sigma) - 1.6, np.log(1.01 * SIGMA_MIRROR))
     hi = min(np.log(sigma) + 1.6, 0.0 if family == "gltf" else np.log(2.0))
-    xs = np.linspace(lo, hi, 17)
+    xs = np.linspace(lo, hi, 9)
     j = int(np.argmin([cost(x)[0] for x in xs]))
-    a, b = xs[max(j - 1, 0)], xs[min(j + 1, 16)]
+    a, b = xs[max(j - 1, 0)], xs[min(j + 1, 8)]
     g = (np.sqrt(5) - 1) / 2
-    for _ in range(30):                                  # golden section on [a, b]
-        c, d = b - g * (b - a), a + g * (b - a)
-        a, b = (a, d) if cost(c)[0] < cost(d)[0] else (c, b)
+    c, d = b - g * (b - a), a + g * (b - a)
+    fc, fd = cost(c)[0], cost(d)[0]
+    for _ in range(20):                                  # golden section on [a, b]
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - g * (b - a)
+            fc = cost(c)[0]
+        else:
+            a, c, fc = c, d, fd
+            d = a + g * (b - a)
+            fd = cost(d)[0]
     c, k = cost(0.5 * (a + b))
     return np.exp(0.5 * (a + b)), k, c
 
@@ -368,13 +380,34 @@ def _plain(p):
 
 @lru_cache(maxsize=None)
 def _node_tables(form, family, normalisation, j):
-    """At SIGMA_NODES[j]: the pairs' exact lobe, form lobe and Schlick weight (G,) and the
-    albedos of :func:`_lobe_albedos`, from the table's fit."""
+    """At SIGMA_NODES[j], from the table's fit: the pairs' features (G, 3) (exact lobe, form
+    lobe, form lobe times Schlick's weight), the indices of the pairs on their convex hull
+    (where the largest relative error of any texel lies: it is a ratio of affine functions
+    of the features, with the floor inactive) and of every 24th pair (for the rms), and the
+    albedos of :func:`_lobe_albedos`."""
+    from scipy.spatial import ConvexHull, QhullError
+
     sigma, (alpha, _, _) = SIGMA_NODES[j], _table(normalisation, family)[j]
     wi, wo = error_pairs(sigma)
-    return (specular_lobe(wi, wo, sigma, normalisation), _family_lobe(family, wi, wo, alpha),
-            _schlick_w(wi, wo) if form == "gltf" else np.zeros(len(wi)),
-            _lobe_albedos(form, family, normalisation, sigma, alpha))
+    other = _family_lobe(family, wi, wo, alpha)
+    feat = np.stack([specular_lobe(wi, wo, sigma, normalisation), other,
+                     _schlick_w(wi, wo) * other], -1)
+    cols = feat if form == "gltf" else feat[:, :2]
+    try:
+        hull = ConvexHull(cols / np.maximum(cols.max(0), 1e-300)).vertices
+    except QhullError:                                   # degenerate: every pair
+        hull = np.arange(len(feat))
+    return feat, np.sort(hull), np.arange(0, len(feat), 24), \
+        _lobe_albedos(form, family, normalisation, sigma, alpha)
+
+
+def _map_errors(d, s, eff, feat, pick):
+    """Relative errors (n, P, 3) of texels (rho_d, s, eff = (D, A, B) as from _reflectances)
+    at the pairs ``pick`` of the node's features."""
+    lobe, other, wother = (feat[pick, i][:, None] for i in range(3))
+    f = d[:, None] / np.pi + s[:, None] * lobe
+    g = eff[0][:, None] / np.pi + eff[1][:, None] * other + eff[2][:, None] * wother
+    return np.abs(g - f) / np.maximum(f, F_FLOOR)
 
 
 def nearest_maps(form, rho_d, s, sigma_alpha, normalisation="ward"):
@@ -385,8 +418,9 @@ def nearest_maps(form, rho_d, s, sigma_alpha, normalisation="ward"):
     Mitsuba weight serve the whole map.  Returns (params, error): params as :func:`nearest`'s
     with an array (N,) or (N, 3) (``baseColorFactor`` (N, 4)) per texel-varying entry; error
     {"rms", "max", "albedo_max"} arrays (N,), each texel's error at its nearest table node
-    (its reflectances with the node's sigma, within a factor 1.08, and fit), "domain",
-    "notes", "exact"."""
+    (its reflectances with the node's sigma, within a factor 1.08, and fit; max over the
+    pairs on the convex hull of the node's lobe values, which holds the largest error of the
+    node's grid, rms over every 24th pair), "domain", "notes", "exact"."""
     d, sp, sig = _check(form, rho_d, s, sigma_alpha, normalisation)
     x = np.log(sig)
     fits = {}
@@ -410,17 +444,21 @@ def nearest_maps(form, rho_d, s, sigma_alpha, normalisation="ward"):
         for j in np.unique(node).astype(int):
             idx = np.flatnonzero(node == j)
             t = _table(normalisation, family)[j]
-            _, _, (nd, na, nb) = _reflectances(form, family, d[idx], sp[idx], np.full(len(idx), t[0]),
-                                               np.full(len(idx), t[1]))
-            lobe, other, w, (ex, oth, wal) = _node_tables(form, family, normalisation, j)
-            for c in range(0, len(idx), max(1, 2_000_000 // (3 * len(lobe)))):
-                sl = slice(c, c + max(1, 2_000_000 // (3 * len(lobe))))
-                f = d[idx][sl, None] / np.pi + sp[idx][sl, None] * lobe[:, None]
-                g = nd[sl, None] / np.pi + (na[sl, None] + nb[sl, None] * w[:, None]) * other[:, None]
-                rel = np.abs(g - f) / np.maximum(f, F_FLOOR)
-                alb = nd[sl, None] + na[sl, None] * oth[:, None] + nb[sl, None] * wal[:, None]
-                r = _errors(rel, alb, d[idx][sl, None] + sp[idx][sl, None] * ex[:, None])
-                for k, v in zip(("rms", "max", "albedo_max"), r):
-                    err[k][idx[sl]] = v
+            _, _, eff = _reflectances(form, family, d[idx], sp[idx], np.full(len(idx), t[0]),
+                                      np.full(len(idx), t[1]))
+            feat, hull, every, (ex, oth, wal) = _node_tables(form, family, normalisation, j)
+            floored = np.min(d[idx], -1) < np.pi * F_FLOOR      # the floor may hold the max
+            for c in range(0, len(idx), 20000):
+                sl, ti = slice(c, c + 20000), idx[c:c + 20000]
+                ef = tuple(e[sl] for e in eff)
+                mx = np.max(_map_errors(d[ti], sp[ti], ef, feat, hull), axis=(-2, -1))
+                rms = np.sqrt(np.mean(_map_errors(d[ti], sp[ti], ef, feat, every) ** 2, axis=(-2, -1)))
+                alb = ef[0][:, None] + ef[1][:, None] * oth[:, None] + ef[2][:, None] * wal[:, None]
+                _, _, am = _errors(np.zeros((1, 1)), alb, d[ti][:, None] + sp[ti][:, None] * ex[:, None])
+                err["max"][ti], err["rms"][ti], err["albedo_max"][ti] = mx, rms, am
+            for i in idx[floored]:
+                k = np.flatnonzero(idx == i)
+                err["max"][i] = np.max(_map_errors(d[[i]], sp[[i]], tuple(e[k] for e in eff), feat,
+                                                   slice(None)))
     err.update(domain=DOMAIN, notes=tuple(notes), exact=bool(exact))
     return params, err
