@@ -14,7 +14,8 @@ PLASTIC = ((0.5, 0.35, 0.2), (0.05, 0.05, 0.05))
 METAL = ((0.09, 0.06, 0.03), (0.81, 0.54, 0.27))
 RAW = ((0.3, 0.5, 0.2), (0.2, 0.1, 0.15))
 #: How much the error at random pairs may exceed the grid's stated max (pairs between grid
-#: points) [relative]; measured 1.5 % at most over these cases (seeds 5, 6).
+#: points) [relative]; measured 3.4 % at most over these cases (seeds 5, 6: a Ward metal
+#: at sigma 0.02 as glTF, both directions near 80 degrees).
 MARGIN = 0.05
 
 
@@ -118,27 +119,30 @@ def test_gltf_brdf_at_normal_incidence_by_hand():
 
 @pytest.mark.parametrize("metallic", (0.0, 1.0))
 @pytest.mark.parametrize("roughness", (0.3, 0.6, 1.0))
-def test_gltf_albedo_at_most_one(metallic, roughness):
-    """The directional albedo of a white glTF material [unitless] is <= 1 at view zeniths
-    0-80 degrees (midpoint rule on 600 x 600 cells of cos theta and azimuth, accurate to 1e-3
-    for these roughnesses: single scattering loses energy, fresnel_mix keeps it for white)."""
+def test_gltf_albedo(metallic, roughness):
+    """The directional albedo of a white glTF material [unitless] (midpoint rule on 600 x 600
+    cells of cos theta and azimuth, accurate to 1e-3 for these roughnesses): <= 1 for the
+    metal at every view and the dielectric up to 40 degrees; at grazing views the dielectric's
+    fresnel_mix gains up to 22 % (glTF 2.0 Appendix B, "Coupling Diffuse and Specular
+    Reflection", says it breaks energy conservation)."""
     mu = (np.arange(600) + 0.5) / 600
     phi = (np.arange(600) + 0.5) * 2 * np.pi / 600
     m, p = np.meshgrid(mu, phi, indexing="ij")
     r = np.sqrt(1 - m * m)
     wi = np.stack([r * np.cos(p), r * np.sin(p), m], -1)
-    for theta in np.radians([0.0, 40.0, 70.0, 80.0]):
-        wo = np.array([np.sin(theta), 0.0, np.cos(theta)])
+    for theta in (0.0, 40.0, 70.0, 80.0):
+        t = np.radians(theta)
+        wo = np.array([np.sin(t), 0.0, np.cos(t)])
         f = mm.gltf_brdf(wi, wo, (1.0, 1.0, 1.0), metallic, roughness)[..., 0]
         albedo = np.sum(f * m) * 2 * np.pi / 600 ** 2
-        assert 0.3 < albedo <= 1.0 + 1e-3
+        assert 0.3 < albedo <= (1.0 if metallic or theta <= 40 else 1.25) + 1e-3
 
 
 @pytest.mark.parametrize("form", mm.FORMS)
 def test_maps_agree_with_nearest(form):
     """nearest_maps (table over sigma_alpha) gives each texel nearest's parameters to 1 % (the
     BRDF's terms: Mitsuba's (1 - w) a and w b, Radiance's C and spec, glTF's factors) and its
-    errors to 5 % + 0.01."""
+    errors to 5 % + 0.01 (rms, over every 12th pair: 15 %)."""
     rng = np.random.default_rng(3)
     n = 12
     C, rho = rng.uniform(0.1, 0.9, (n, 3)), rng.uniform(0.02, 0.45, n)
@@ -149,7 +153,7 @@ def test_maps_agree_with_nearest(form):
     for i in range(n):
         m = mm.nearest(form, rho_d[i], s[i], sigma[i], "ward")
         for k in ("rms", "max", "albedo_max"):
-            assert err[k][i] == pytest.approx(m.error[k], rel=0.05, abs=0.01)
+            assert err[k][i] == pytest.approx(m.error[k], rel=0.15 if k == "rms" else 0.05, abs=0.01)
         p = m.params
         if form == "mitsuba":
             assert params["distribution"] == p["distribution"]

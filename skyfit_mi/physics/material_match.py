@@ -383,7 +383,7 @@ def _node_tables(form, family, normalisation, j):
     """At SIGMA_NODES[j], from the table's fit: the pairs' features (G, 3) (exact lobe, form
     lobe, form lobe times Schlick's weight), the indices of the pairs on their convex hull
     (where the largest relative error of any texel lies: it is a ratio of affine functions
-    of the features, with the floor inactive) and of every 24th pair (for the rms), and the
+    of the features, with the floor inactive) and of every 12th pair (for the rms), and the
     albedos of :func:`_lobe_albedos`."""
     from scipy.spatial import ConvexHull, QhullError
 
@@ -397,7 +397,7 @@ def _node_tables(form, family, normalisation, j):
         hull = ConvexHull(cols / np.maximum(cols.max(0), 1e-300)).vertices
     except QhullError:                                   # degenerate: every pair
         hull = np.arange(len(feat))
-    return feat, np.sort(hull), np.arange(0, len(feat), 24), \
+    return feat, np.sort(hull), np.arange(0, len(feat), 12), \
         _lobe_albedos(form, family, normalisation, sigma, alpha)
 
 
@@ -420,7 +420,7 @@ def nearest_maps(form, rho_d, s, sigma_alpha, normalisation="ward"):
     {"rms", "max", "albedo_max"} arrays (N,), each texel's error at its nearest table node
     (its reflectances with the node's sigma, within a factor 1.08, and fit; max over the
     pairs on the convex hull of the node's lobe values, which holds the largest error of the
-    node's grid, rms over every 24th pair), "domain", "notes", "exact"."""
+    node's grid, rms over every 12th pair), "domain", "notes", "exact"."""
     d, sp, sig = _check(form, rho_d, s, sigma_alpha, normalisation)
     x = np.log(sig)
     fits = {}
