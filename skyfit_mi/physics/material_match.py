@@ -1,0 +1,464 @@
+"""The nearest material of another renderer's form to a fitted one, with its error stated.
+
+A fitted material is f_r = rho_d / pi + s lobe(wi, wo; sigma_alpha, normalisation) [sr^-1]
+(thesis eq. 3.19's form; the lobe is :func:`~.ward.specular_lobe`).  The forms:
+
+* ``'mitsuba'``: Mitsuba 3's ``blendbsdf`` of a ``diffuse`` (reflectance a) and a
+  ``roughconductor`` (beckmann or ggx, alpha, specular_reflectance b, ``material="none"``
+  (F = 1) or eta = 1.5, k = 0 (the dielectric Fresnel)), weight w:
+  f = (1 - w) a / pi + w b lobe.  Exact for the microfacet normalisations (:data:`~.microfacet.LOBES`).
+* ``'radiance'``: Radiance's ``plastic`` (rho_d = C (1 - spec), rho_s = spec, white) or
+  ``metal`` (rho_s = C spec), the ``'balanced'`` lobe with roughness = rms slope.  Exact for
+  ``'balanced'`` and ``'radiance'`` when s is grey or proportional to rho_d (the colour,
+  achromatic and two models).  Radiance's Fresnel estimate at roughness 0 does not enter:
+  mirrors (sigma_alpha <= :data:`~.ward.SIGMA_MIRROR`) are refused by every form.
+* ``'gltf'``: glTF 2.0 metallic-roughness (:func:`gltf_brdf`) with KHR_materials_specular.
+  Never exact (its GGX lobe has height-correlated Smith visibility and Schlick's Fresnel).
+  The nearest is a dielectric (metallic 0) whose specularColorFactor 25 s / max(s) makes
+  F0 = 0.04 x 25 x specular = F90 (the extension allows factors > 1 and clamps 0.04 x colour
+  to 1): the Fresnel term is then the constant s k in the channel of max(s) and rises by
+  Schlick's (1 - |v.h|)^5 toward max(s) k in the others; base = rho_d / (1 - specular).
+  A metallic 1 has no diffuse part and would miss rho_d entirely.
+
+Error measure (one for all forms).  For a distant light of direction wi seen from wo, the
+reflected radiance is E cos(theta_i) f_r(wi, wo): its relative error is that of f_r.  It is
+taken per RGB channel against max(f_r, :data:`F_FLOOR`) (a black channel is judged against a
+0.3 % grey diffuse) over :func:`error_pairs`: both directions within :data:`THETA_MAX` of the
+normal, a 10-degree grid of zeniths and 45-degree relative azimuths plus the highlight of six
+views sampled in half-vector slope steps of sigma_alpha.  ``max`` bounds the error of any sky and
+sun within 80 degrees (a positive mix of such pairs) up to the grid's resolution (the tests
+measure how much random pairs exceed it); ``rms`` is its root mean square; ``albedo_max`` the
+largest relative error of the directional albedo at view zeniths 0-80 degrees (quadrature,
+about 1e-3).  The lobe fit minimises the rms relative error of s lobe for rho_d = s, i.e.
+sum ((k lobe' - lobe) / (lobe + 1/pi))^2 over the same pairs, k in closed form, the roughness
+by golden section: it depends only on sigma_alpha and the normalisation (f is linear in s),
+so :func:`nearest_maps` reads it from a table over sigma_alpha.
+"""
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from ..errors import SkyfitError, check_choice, check_range
+from .microfacet import LOBES, albedo_nodes, distribution, fresnel_dielectric, microfacet_lobe, split
+from .ward import (NORMALISATIONS, SIGMA_MAX, SIGMA_MIRROR, lobe_albedo_directions,
+                   lobe_albedo_nodes, specular_lobe, ward_brdf)
+
+FORMS = ("mitsuba", "radiance", "gltf")
+#: The lobes each form can take (a microfacet lobe's name, ``'balanced'``, ``'gltf'``).
+FAMILIES = {"mitsuba": LOBES, "radiance": ("balanced",), "gltf": ("gltf",)}
+#: The normalisations each form reproduces exactly (lobe and roughness unchanged).
+NATIVE = {"mitsuba": {n: n for n in LOBES}, "radiance": {"balanced": "balanced",
+                                                          "radiance": "balanced"}, "gltf": {}}
+#: Largest zenith angle of light and view in the error measure [degrees].
+THETA_MAX = 80.0
+#: Floor of the denominator of the relative error: a 0.3 % grey diffuse's f_r [sr^-1].
+F_FLOOR = 1e-3
+#: The diffuse level of the lobe fit's relative error (rho_d = s = 1) [sr^-1].
+TAU = 1.0 / np.pi
+#: glTF's dielectric F0 at ior 1.5 (glTF 2.0 Appendix B) [unitless].
+GLTF_F0 = 0.04
+#: The sigma_alpha nodes of :func:`nearest_maps`'s table (ratio 1.157) [unitless].
+SIGMA_NODES = np.geomspace(SIGMA_MIRROR, SIGMA_MAX, 64)
+#: View zeniths of the error's highlight pairs [degrees] and their half-vector slopes [sigma_alpha].
+HIGHLIGHT_ZENITHS = (0.0, 20.0, 40.0, 60.0, 70.0, 75.0, 78.0, 80.0)
+HIGHLIGHT_U = np.r_[np.arange(0.25, 3.01, 0.25), 3.5, 4.0, 5.0, 6.0]
+#: View zeniths of the albedo error [degrees].
+ALBEDO_ZENITHS = (0.0, 20.0, 40.0, 60.0, 70.0, 80.0)
+DOMAIN = ("f_r per RGB channel relative to max(f_r, 1e-3 sr^-1), light and view within 80 deg of "
+          "the normal: 10-deg zenith x 45-deg azimuth grid plus the highlight in steps of "
+          "sigma_alpha; albedo at view zeniths 0-80 deg")
+
+
+@dataclass(frozen=True)
+class Match:
+    """The nearest material of a form: ``params`` ready for the form's file, ``exact`` when it
+    reproduces the fitted BRDF, ``error`` (rms, max, albedo_max [unitless], domain, notes)."""
+    form: str
+    params: dict
+    exact: bool
+    error: dict
+
+
+def _dir(theta, phi):
+    """Unit vectors at zenith ``theta`` and azimuth ``phi`` [degrees], (..., 3)."""
+    t, p = np.radians(theta), np.radians(phi)
+    return np.stack(np.broadcast_arrays(np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)), -1)
+
+
+def error_pairs(sigma_alpha):
+    """(wi, wo), each (G, 3), of the error measure at roughness ``sigma_alpha`` [unitless]:
+    zeniths 0-80 by 10 degrees at relative azimuths 0-180 by 45 degrees, and the views at
+    :data:`HIGHLIGHT_ZENITHS` with lights reflected about half vectors of slope sigma_alpha u
+    (:data:`HIGHLIGHT_U`, 16 azimuths) from the normal, lights beyond 80 degrees moved down to
+    80 at their azimuth (the grazing edge, where the error is largest)."""
+    t = np.arange(0.0, THETA_MAX + 1, 10.0)
+    ti, to, dp = np.meshgrid(t, t, np.arange(0.0, 181, 45.0), indexing="ij")
+    wi, wo = _dir(ti.ravel(), 0.0), _dir(to.ravel(), dp.ravel())
+    psi = np.arange(16) * np.pi / 8
+    a = np.r_[0.0, (sigma_alpha * HIGHLIGHT_U[:, None] * np.cos(psi)).ravel()]
+    b = np.r_[0.0, (sigma_alpha * HIGHLIGHT_U[:, None] * np.sin(psi)).ravel()]
+    h = np.stack([a, b, np.ones_like(a)], -1) / np.sqrt(1 + a * a + b * b)[:, None]
+    v = _dir(np.array(HIGHLIGHT_ZENITHS), 180.0)[:, None, :]
+    li = (2 * np.sum(v * h, -1)[..., None] * h - v).reshape(-1, 3)
+    zmin = np.cos(np.radians(THETA_MAX))
+    low = li[:, 2] < zmin
+    li[low] = _dir(THETA_MAX, np.degrees(np.arctan2(li[low, 1], li[low, 0])))
+    return np.r_[wi, li], np.r_[wo, np.broadcast_to(v, (len(v), len(h), 3)).reshape(-1, 3)]
+
+
+def _schlick_w(wi, wo):
+    """Schlick's weight (1 - |v.h|)^5 [unitless] (glTF 2.0 Appendix B, "Fresnel")."""
+    h = wi + wo
+    h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    return (1.0 - np.abs(np.sum(wo * h, -1))) ** 5
+
+
+def gltf_specular(wi, wo, alpha):
+    """glTF's specular_brdf = V D [sr^-1] (glTF 2.0 Appendix B, "Specular BRDF"): GGX D of
+    alpha = roughness^2 and the height-correlated Smith visibility
+    V = 1 / (2 (|n.v| sqrt(a^2 + (1 - a^2)(n.l)^2) + |n.l| sqrt(a^2 + (1 - a^2)(n.v)^2)));
+    0 below the surface (the Heaviside factors)."""
+    wi, wo = np.asarray(wi, dtype=float), np.asarray(wo, dtype=float)
+    ci, co = wi[..., 2], wo[..., 2]
+    h = wi + wo
+    h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    a2 = alpha * alpha
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = 0.5 / (co * np.sqrt(a2 + (1 - a2) * ci * ci) + ci * np.sqrt(a2 + (1 - a2) * co * co))
+    return np.where((ci > 0) & (co > 0), np.nan_to_num(v * distribution(h[..., 2], alpha, "ggx")), 0.0)
+
+
+def gltf_brdf(wi, wo, base_color, metallic, roughness, specular=1.0, specular_colour=(1, 1, 1)):
+    """f_r [sr^-1], RGB (..., 3), of glTF 2.0's metallic-roughness material (Appendix B,
+    "Complete Model": mix(dielectric_brdf, metal_brdf, metallic)) with KHR_materials_specular
+    (dielectric_f0 = min(0.04 specular_colour, 1) specular, dielectric_f90 = specular,
+    dielectric_brdf = F V D + (1 - max_rgb F) base / pi).  ``base_color``, ``specular_colour``
+    RGB, ``metallic``, ``roughness``, ``specular`` in [0, 1] (``specular_colour`` may exceed 1)."""
+    base, sc = np.asarray(base_color, dtype=float), np.asarray(specular_colour, dtype=float)
+    m, lobe = np.asarray(metallic, dtype=float)[..., None], gltf_specular(wi, wo, roughness**2)[..., None]
+    w = _schlick_w(np.asarray(wi, dtype=float), np.asarray(wo, dtype=float))[..., None]
+    f0 = np.minimum(GLTF_F0 * sc, 1.0) * np.asarray(specular)[..., None]
+    fd = f0 + (np.asarray(specular)[..., None] - f0) * w
+    up = ((np.asarray(wi)[..., 2] > 0) & (np.asarray(wo)[..., 2] > 0))[..., None]
+    dielectric = fd * lobe + (1 - np.max(fd, -1, keepdims=True)) * base / np.pi * up
+    metal = (base + (1 - base) * w) * lobe
+    return (1 - m) * dielectric + m * metal
+
+
+def _family_lobe(family, wi, wo, alpha):
+    """A form's lobe without its reflectance [sr^-1]: glTF's V D, Radiance's balanced Ward
+    lobe, or a microfacet lobe (Mitsuba's roughconductor, F = 1 or dielectric)."""
+    if family == "gltf":
+        return gltf_specular(wi, wo, alpha)
+    if family == "balanced":
+        return specular_lobe(wi, wo, alpha, "balanced")
+    return microfacet_lobe(wi, wo, alpha, family)
+
+
+def _fit_lobe(sigma, normalisation, family):
+    """(alpha, k, cost): the roughness alpha and scale k with k lobe'(alpha) nearest to the
+    lobe of ``normalisation`` at ``sigma`` over :func:`error_pairs` (module docstring)."""
+    wi, wo = error_pairs(sigma)
+    lobe = specular_lobe(wi, wo, sigma, normalisation)
+    wt = 1.0 / (lobe + TAU) ** 2
+
+    def cost(x):
+        lp = _family_lobe(family, wi, wo, np.exp(x))
+        k = np.sum(wt * lp * lobe) / max(np.sum(wt * lp * lp), 1e-300)
+        return np.sum(wt * (k * lp - lobe) ** 2), k
+
+    lo = max(np.log(sigma) - 1.6, np.log(1.01 * SIGMA_MIRROR))
+    hi = min(np.log(sigma) + 1.6, 0.0 if family == "gltf" else np.log(2.0))
+    xs = np.linspace(lo, hi, 9)
+    j = int(np.argmin([cost(x)[0] for x in xs]))
+    a, b = xs[max(j - 1, 0)], xs[min(j + 1, 8)]
+    g = (np.sqrt(5) - 1) / 2
+    c, d = b - g * (b - a), a + g * (b - a)
+    fc, fd = cost(c)[0], cost(d)[0]
+    for _ in range(20):                                  # golden section on [a, b]
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - g * (b - a)
+            fc = cost(c)[0]
+        else:
+            a, c, fc = c, d, fd
+            d = a + g * (b - a)
+            fd = cost(d)[0]
+    c, k = cost(0.5 * (a + b))
+    return np.exp(0.5 * (a + b)), k, c
+
+
+@lru_cache(maxsize=None)
+def _table(normalisation, family):
+    """:func:`_fit_lobe` at every :data:`SIGMA_NODES`, (K, 3) read-only."""
+    t = np.array([_fit_lobe(s, normalisation, family) for s in SIGMA_NODES])
+    t.setflags(write=False)
+    return t
+
+
+def _albedo_nodes(family):
+    """Fine nodes of the albedo quadrature of a lobe (GGX's long tails, Ward's and Beckmann's)."""
+    ggx = family == "gltf" or (family in LOBES and split(family)[0] == "ggx")
+    return albedo_nodes(32, 24) if ggx else lobe_albedo_nodes(8, 24)
+
+
+def _albedos(fn, alpha, family):
+    """Directional albedo [unitless] of the lobe fn(wi, wo) of roughness alpha at the views
+    of :data:`ALBEDO_ZENITHS` (:func:`~.ward.lobe_albedo_directions` quadrature), (6,)."""
+    v = _dir(np.array(ALBEDO_ZENITHS), 180.0)
+    wi, wt = lobe_albedo_directions(v, alpha, _albedo_nodes(family))
+    return np.sum(fn(wi, np.broadcast_to(v[:, None], wi.shape)) * np.clip(wi[..., 2], 0, None) * wt, -1)
+
+
+def _reflectances(form, family, rho_d, s, alpha, k):
+    """The form's parameters for texels (rho_d, s (N, 3); alpha, k (N,) of the lobe fit),
+    notes, and the effective BRDF f' = D / pi + (A + B w) lobe' (w Schlick's weight) as
+    (D, A, B), each (N, 3).  One distribution, Fresnel, weight (Mitsuba) or type (Radiance)
+    for all texels."""
+    ks, notes = k[:, None] * s, []
+    zero = np.zeros_like(s)
+    if form == "mitsuba":
+        md, ms = float(np.max(rho_d)), float(np.max(ks))
+        w = ms / (md + ms) if md + ms > 0 else 0.5
+        if md + ms > 1 + 1e-9:
+            notes.append(f"max(rho_d) + max(k s) = {md + ms:.4g} > 1: the diffuse and specular "
+                         "reflectances exceed 1 by that factor (their blend is the fit)")
+        dist, fr = split(family)
+        p = {"distribution": dist, "alpha": alpha,
+             "material": "none" if fr == "metal" else {"eta": 1.5, "k": 0},
+             "diffuse_reflectance": rho_d / (1 - w) if w < 1 else zero,
+             "specular_reflectance": ks / w if w > 0 else zero, "weight": w}
+        return p, notes, (rho_d, ks, zero)
+    if form == "radiance":
+        spec_p = np.mean(ks, -1)
+        c_m = rho_d + ks
+        tot = np.sum(c_m, -1)
+        spec_m = np.divide(np.sum(ks, -1), tot, out=np.zeros_like(tot), where=tot > 0)
+        miss_p = np.sum(np.abs(ks - spec_p[:, None]))
+        miss_m = np.sum(np.abs(c_m * spec_m[:, None] - ks) + np.abs(c_m * (1 - spec_m[:, None]) - rho_d))
+        metal = miss_m < miss_p
+        spec = spec_m if metal else spec_p
+        c = c_m if metal else rho_d / np.maximum(1 - spec_p[:, None], 1e-12)
+        if np.max(c) > 1 + 1e-9 or np.max(spec) > 1:
+            notes.append(f"Radiance colour up to {np.max(c):.4g}, spec up to {np.max(spec):.4g}: "
+                         "above 1 (rho_d + k s > 1)")
+        p = {"type": "metal" if metal else "plastic", "colour": c, "spec": spec, "roughness": alpha}
+        sp = c * spec[:, None] if metal else np.broadcast_to(spec[:, None], c.shape)
+        return p, notes, (c * (1 - spec[:, None]), sp, zero)
+    m = np.max(ks, -1)
+    spec = np.minimum(m, 1.0)
+    sc = np.divide(ks, GLTF_F0 * m[:, None], out=np.ones_like(ks), where=m[:, None] > 0)
+    base = np.divide(rho_d, 1 - spec[:, None], out=np.ones_like(ks), where=spec[:, None] < 1)
+    if np.max(m) > 1 or np.max(base) > 1 + 1e-9:
+        notes.append(f"glTF base colour {np.max(base):.4g} or specular {np.max(m):.4g} above 1, "
+                     "clipped to 1 (rho_d + k max(s) > 1)")
+    base = np.minimum(base, 1.0)
+    f0 = np.minimum(GLTF_F0 * sc, 1.0) * spec[:, None]
+    p = {"baseColorFactor": np.c_[base, np.ones(len(base))], "metallicFactor": np.zeros(len(base)),
+         "roughnessFactor": np.sqrt(alpha),
+         "KHR_materials_specular": {"specularFactor": spec, "specularColorFactor": sc}}
+    return p, notes, ((1 - spec[:, None]) * base, f0, spec[:, None] - f0)
+
+
+def form_brdf(form, params, wi, wo):
+    """f_r [sr^-1], RGB (..., 3), of one material of ``form`` with ``params`` as
+    :func:`nearest` returns them, at light ``wi`` and view ``wo`` (unit vectors, normal +Z):
+    Mitsuba's blend of diffuse and roughconductor (:func:`~.microfacet.microfacet_lobe`),
+    Radiance's plastic or metal (:func:`~.ward.ward_brdf` 'balanced'), :func:`gltf_brdf`."""
+    check_choice("material form", form, FORMS)
+    wi, wo = np.asarray(wi, dtype=float), np.asarray(wo, dtype=float)
+    if form == "mitsuba":
+        name = f"{params['distribution']}_{'metal' if params['material'] == 'none' else 'plastic'}"
+        w, up = params["weight"], ((wi[..., 2] > 0) & (wo[..., 2] > 0))[..., None]
+        return (1 - w) * np.asarray(params["diffuse_reflectance"]) / np.pi * up \
+            + w * np.asarray(params["specular_reflectance"]) \
+            * microfacet_lobe(wi, wo, params["alpha"], name)[..., None]
+    if form == "radiance":
+        c, spec = np.asarray(params["colour"], dtype=float), params["spec"]
+        rho_s = c * spec if params["type"] == "metal" else np.full(3, spec)
+        return ward_brdf(wi, wo, c * (1 - spec), rho_s, params["roughness"], "balanced")
+    ext = params["KHR_materials_specular"]
+    return gltf_brdf(wi, wo, params["baseColorFactor"][:3], params["metallicFactor"],
+                     params["roughnessFactor"], ext["specularFactor"], ext["specularColorFactor"])
+
+
+def _check(form, rho_d, s, sigma_alpha, normalisation):
+    """Validated (rho_d, s (N, 3), sigma (N,)) or SkyfitError."""
+    check_choice("material form", form, FORMS)
+    check_choice("normalisation", normalisation, NORMALISATIONS)
+    d, sp = np.asarray(rho_d, dtype=float), np.asarray(s, dtype=float)
+    sig = np.asarray(sigma_alpha, dtype=float)
+    if d.shape != sp.shape or d.shape[-1:] != (3,) or d.shape[:-1] != sig.shape:
+        raise SkyfitError(f"rho_d {d.shape}, s {sp.shape} and sigma_alpha {sig.shape} do not "
+                          "match: give RGB triples (N, 3), (N, 3) and N roughnesses.")
+    check_range("rho_d", d, 0.0, 1.0)
+    check_range("s", sp, 0.0, 1.0)
+    check_range("sigma_alpha", sig, 0.0, SIGMA_MAX)
+    if np.any(sig <= SIGMA_MIRROR):
+        raise SkyfitError(f"sigma_alpha = {np.min(sig):g} is an ideal mirror (<= {SIGMA_MIRROR:g}), "
+                          "which no form here matches: export it as a smooth conductor or mirror.")
+    return d.reshape(-1, 3), sp.reshape(-1, 3), sig.reshape(-1)
+
+
+def _errors(rel, alb, alb_ref):
+    """rms, max of the relative errors ``rel`` (..., G, 3), albedo_max of albedos (..., 6, 3)."""
+    a = np.abs(alb - alb_ref) / np.maximum(alb_ref, np.pi * F_FLOOR)
+    return (np.sqrt(np.mean(rel ** 2, axis=(-2, -1))), np.max(rel, axis=(-2, -1)),
+            np.max(a, axis=(-2, -1)))
+
+
+def _lobe_albedos(form, family, normalisation, sigma, alpha):
+    """Albedos (6,) of the fitted lobe, the form's lobe, and the form's lobe times Schlick's weight."""
+    exact = _albedos(lambda i, o: specular_lobe(i, o, sigma, normalisation), sigma, normalisation)
+    other = _albedos(lambda i, o: _family_lobe(family, i, o, alpha), alpha, family)
+    w = _albedos(lambda i, o: _schlick_w(i, o) * _family_lobe(family, i, o, alpha), alpha, family) \
+        if form == "gltf" else np.zeros(6)
+    return exact, other, w
+
+
+def _choose(form, normalisation, rho_d, s, fits):
+    """The family of ``form`` for these texels: the native lobe, else the least lobe-fit cost
+    (``fits``: family -> (alpha, k, cost) arrays), in range (max(rho_d) + max(k s) <= 1) if any is."""
+    if normalisation in NATIVE[form]:
+        return NATIVE[form][normalisation]
+    fams = FAMILIES[form]
+    ok = [f for f in fams if np.max(rho_d) + np.max(fits[f][1][:, None] * s) <= 1 + 1e-9]
+    return min(ok or fams, key=lambda f: np.sum(fits[f][2]))
+
+
+def nearest(form, rho_d, s, sigma_alpha, normalisation="ward"):
+    """The nearest material of ``form`` to f_r = rho_d / pi + s lobe(sigma_alpha,
+    normalisation) [sr^-1], and its error (module docstring).
+
+    Parameters
+    ----------
+    form : {'mitsuba', 'radiance', 'gltf'}
+    rho_d, s : RGB triples, diffuse and specular reflectance [unitless, 0-1]
+    sigma_alpha : float, roughness (rms slope) [unitless, SIGMA_MIRROR-1, exclusive of mirrors]
+    normalisation : one of :data:`~.ward.NORMALISATIONS`
+
+    Returns
+    -------
+    Match
+    """
+    d, sp, sig = _check(form, rho_d, s, np.reshape(sigma_alpha, ()), normalisation) \
+        if np.ndim(sigma_alpha) == 0 else _check(form, rho_d, s, sigma_alpha, normalisation)
+    sigma = float(sig[0])
+    if normalisation in NATIVE[form]:
+        fits = {NATIVE[form][normalisation]: (np.array([sigma]), np.ones(1), np.zeros(1))}
+    else:
+        fits = {f: tuple(np.array([v]) for v in _fit_lobe(sigma, normalisation, f))
+                for f in FAMILIES[form]}
+    family = _choose(form, normalisation, d, sp, fits)
+    p, notes, (dd, aa, bb) = _reflectances(form, family, d, sp, *fits[family][:2])
+    params = _plain(p)
+    exact = normalisation in NATIVE[form] and np.allclose(dd, d, atol=1e-12) \
+        and np.allclose(aa, sp, atol=1e-12)
+    if exact:
+        return Match(form, params, True, {"rms": 0.0, "max": 0.0, "albedo_max": 0.0,
+                                          "domain": DOMAIN, "notes": tuple(notes)})
+    wi, wo = error_pairs(sigma)
+    f = ward_brdf(wi, wo, d[0], sp[0], sigma, normalisation)
+    rel = np.abs(form_brdf(form, params, wi, wo) - f) / np.maximum(f, F_FLOOR)
+    ex, other, w = _lobe_albedos(form, family, normalisation, sigma, fits[family][0][0])
+    alb = dd + aa * other[:, None] + bb * w[:, None]
+    rms, mx, am = _errors(rel, alb, d + sp * ex[:, None])
+    return Match(form, params, False, {"rms": float(rms), "max": float(mx), "albedo_max": float(am),
+                                       "domain": DOMAIN, "notes": tuple(notes)})
+
+
+def _plain(p):
+    """One texel's parameters as Python floats and lists (JSON and XML ready)."""
+    if isinstance(p, dict):
+        return {k: _plain(v) for k, v in p.items()}
+    if isinstance(p, np.ndarray):
+        return [float(x) for x in p[0]] if p.ndim == 2 else float(p[0])
+    return p
+
+
+@lru_cache(maxsize=None)
+def _node_tables(form, family, normalisation, j):
+    """At SIGMA_NODES[j], from the table's fit: the pairs' features (G, 3) (exact lobe, form
+    lobe, form lobe times Schlick's weight), the indices of the pairs on their convex hull
+    (where the largest relative error of any texel lies: it is a ratio of affine functions
+    of the features, with the floor inactive) and of every 12th pair (for the rms), and the
+    albedos of :func:`_lobe_albedos`."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    sigma, (alpha, _, _) = SIGMA_NODES[j], _table(normalisation, family)[j]
+    wi, wo = error_pairs(sigma)
+    other = _family_lobe(family, wi, wo, alpha)
+    feat = np.stack([specular_lobe(wi, wo, sigma, normalisation), other,
+                     _schlick_w(wi, wo) * other], -1)
+    cols = feat if form == "gltf" else feat[:, :2]
+    try:
+        hull = ConvexHull(cols / np.maximum(cols.max(0), 1e-300)).vertices
+    except QhullError:                                   # degenerate: every pair
+        hull = np.arange(len(feat))
+    return feat, np.sort(hull), np.arange(0, len(feat), 12), \
+        _lobe_albedos(form, family, normalisation, sigma, alpha)
+
+
+def _map_errors(d, s, eff, feat, pick):
+    """Relative errors (n, P, 3) of texels (rho_d, s, eff = (D, A, B) as from _reflectances)
+    at the pairs ``pick`` of the node's features."""
+    lobe, other, wother = (feat[pick, i][:, None] for i in range(3))
+    f = d[:, None] / np.pi + s[:, None] * lobe
+    g = eff[0][:, None] / np.pi + eff[1][:, None] * other + eff[2][:, None] * wother
+    return np.abs(g - f) / np.maximum(f, F_FLOOR)
+
+
+def nearest_maps(form, rho_d, s, sigma_alpha, normalisation="ward"):
+    """:func:`nearest` for a map's texels: rho_d, s (N, 3), sigma_alpha (N,).
+
+    The lobe fit is read from a table over :data:`SIGMA_NODES` (alpha and k interpolated
+    linearly in log sigma), and one distribution and Fresnel (Mitsuba), type (Radiance) and
+    Mitsuba weight serve the whole map.  Returns (params, error): params as :func:`nearest`'s
+    with an array (N,) or (N, 3) (``baseColorFactor`` (N, 4)) per texel-varying entry; error
+    {"rms", "max", "albedo_max"} arrays (N,), each texel's error at its nearest table node
+    (its reflectances with the node's sigma, within a factor 1.08, and fit; max over the
+    pairs on the convex hull of the node's lobe values, which holds the largest error of the
+    node's grid, rms over every 12th pair), "domain", "notes", "exact"."""
+    d, sp, sig = _check(form, rho_d, s, sigma_alpha, normalisation)
+    x = np.log(sig)
+    fits = {}
+    for fam in ([NATIVE[form][normalisation]] if normalisation in NATIVE[form] else FAMILIES[form]):
+        if normalisation in NATIVE[form]:
+            fits[fam] = (sig, np.ones_like(sig), np.zeros_like(sig))
+            continue
+        t = _table(normalisation, fam)
+        a = np.exp(np.interp(x, np.log(SIGMA_NODES), np.log(t[:, 0])))
+        fits[fam] = (np.maximum(a, 1.01 * SIGMA_MIRROR), np.interp(x, np.log(SIGMA_NODES), t[:, 1]),
+                     np.interp(x, np.log(SIGMA_NODES), t[:, 2]))
+    family = _choose(form, normalisation, d, sp, fits)
+    params, notes, (dd, aa, bb) = _reflectances(form, family, d, sp, *fits[family][:2])
+    n = len(sig)
+    err = {k: np.zeros(n) for k in ("rms", "max", "albedo_max")}
+    exact = normalisation in NATIVE[form] and np.allclose(dd, d, atol=1e-12) \
+        and np.allclose(aa, sp, atol=1e-12)
+    if not exact:
+        node = np.clip(np.rint((x - x[0] * 0 - np.log(SIGMA_NODES[0]))
+                               / np.log(SIGMA_NODES[1] / SIGMA_NODES[0])), 0, len(SIGMA_NODES) - 1)
+        for j in np.unique(node).astype(int):
+            idx = np.flatnonzero(node == j)
+            t = _table(normalisation, family)[j]
+            _, _, eff = _reflectances(form, family, d[idx], sp[idx], np.full(len(idx), t[0]),
+                                      np.full(len(idx), t[1]))
+            feat, hull, every, (ex, oth, wal) = _node_tables(form, family, normalisation, j)
+            floored = np.min(d[idx], -1) < np.pi * F_FLOOR      # the floor may hold the max
+            for c in range(0, len(idx), 20000):
+                sl, ti = slice(c, c + 20000), idx[c:c + 20000]
+                ef = tuple(e[sl] for e in eff)
+                mx = np.max(_map_errors(d[ti], sp[ti], ef, feat, hull), axis=(-2, -1))
+                rms = np.sqrt(np.mean(_map_errors(d[ti], sp[ti], ef, feat, every) ** 2, axis=(-2, -1)))
+                alb = ef[0][:, None] + ef[1][:, None] * oth[:, None] + ef[2][:, None] * wal[:, None]
+                _, _, am = _errors(np.zeros((1, 1)), alb, d[ti][:, None] + sp[ti][:, None] * ex[:, None])
+                err["max"][ti], err["rms"][ti], err["albedo_max"][ti] = mx, rms, am
+            for i in idx[floored]:
+                k = np.flatnonzero(idx == i)
+                err["max"][i] = np.max(_map_errors(d[[i]], sp[[i]], tuple(e[k] for e in eff), feat,
+                                                   slice(None)))
+    err.update(domain=DOMAIN, notes=tuple(notes), exact=bool(exact))
+    return params, err
