@@ -306,11 +306,18 @@ def _fit(args):
 
 
 def _relight(args):
-    from .fitting.relight import load_fits, relight
+    from .fitting.relight import relight
+    from .pipeline.fit_result import load_fits
 
     relight(load_fits(args.fits), args.target, args.output, images=not args.no_images,
             draws=args.draws, seed=args.seed, overwrite=args.overwrite, progress=not args.quiet,
             reference=args.reference)
+
+
+def _export(args):
+    from .pipeline.export import export
+
+    export(args.fits, args.output, args.format, overwrite=args.overwrite)
 
 
 def _chi2map(args):
@@ -706,6 +713,24 @@ def _add_chi2map(sub, common):
     cmap.set_defaults(func=_chi2map)
 
 
+def _add_export(sub, common):
+    """The ``export`` sub-command: fitted materials for other renderers."""
+    ex = sub.add_parser("export", parents=[common],
+                        help="write fitted materials for Mitsuba 3, Radiance and glTF/Blender",
+                        description="Write fitted materials as Mitsuba 3 XML (built-in plugins "
+                        "and skyfit's ward plugin), Radiance plastic/metal and glTF 2.0, each "
+                        "with the error of its form against the fit, and export.json with the "
+                        "fits' intervals and warnings; a map's planes as textures.")
+    ex.add_argument("fits", nargs="+", help="fit_NAME.json files, a fits.csv, the folder "
+                    "`skyfit fit` wrote, or the folder of a per-pixel map")
+    ex.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
+    ex.add_argument("--format", nargs="+", choices=("mitsuba", "radiance", "gltf"),
+                    default=["mitsuba", "radiance", "gltf"], help="formats to write (default all)")
+    ex.add_argument("--overwrite", action="store_true",
+                    help="replace another export in the folder")
+    ex.set_defaults(func=_export)
+
+
 def build_parser():
     """The ``skyfit`` argument parser."""
     parser = _Parser(prog="skyfit", description=DESCRIPTION)
@@ -723,6 +748,7 @@ def build_parser():
     _add_fit(sub, common)
     _add_relight(sub, common)
     _add_chi2map(sub, common)
+    _add_export(sub, common)
     return parser
 
 

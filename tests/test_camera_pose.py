@@ -4,18 +4,17 @@ undistortion, and every bad input refused with nothing written."""
 
 import re
 
+import cv2
 import numpy as np
 import pytest
 
 from skyfit_mi.cli import main
 from skyfit_mi.errors import SkyfitError
 from skyfit_mi.physics.lens import focal_px
+from skyfit_mi.pipeline.camera_pose import (MarkedPoints, estimate_camera, read_points,
+                                            undistort_image, write_camera)
 from skyfit_mi.pipeline.spec import SpecError, read_spec, validate_spec
 from skyfit_mi.render.scene import camera_matrix, camera_origin, look_at
-
-cv2 = pytest.importorskip("cv2")
-from skyfit_mi.pipeline.camera_pose import (MarkedPoints, estimate_camera, read_points,  # noqa: E402
-                                            undistort_image, write_camera)
 
 #: The issue's camera: a 0.6 x 0.4 m board at the origin seen from 3 m, 37 degrees from the
 #: vertical, from the east (azimuth 90), 30 degree field of view, 640 x 480, barrel k1 = -0.1.

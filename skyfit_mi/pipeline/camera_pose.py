@@ -33,12 +33,12 @@ import csv
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from ..errors import OutputError, SkyfitError
 from ..files import write_json, write_text
 from ..physics.lens import fov_deg, focal_px, intrinsics
-from ..render.scene import look_at
 
 #: Points needed with the focal length given (six pose parameters) and free (plus f and k1).
 MIN_POINTS = {"given": 4, "free": 6}
@@ -58,15 +58,6 @@ FLAT = 1e-3
 #: Two-sided 95% factor of a Gaussian.
 Z95 = 1.959963984540054
 COLUMNS = ("x_px", "y_px", "X", "Y", "Z")
-
-
-def _cv2():
-    try:
-        import cv2
-    except ImportError:
-        raise SkyfitError("estimating the camera needs OpenCV: pip install opencv-python-headless "
-                          "(or pip install 'skyfit-mi[photo]').") from None
-    return cv2
 
 
 @dataclass(frozen=True)
@@ -295,7 +286,7 @@ class CameraEstimate:
     @property
     def rotation(self):
         """World-to-camera rotation (OpenCV's camera frame: x right, y down, z forward)."""
-        return _cv2().Rodrigues(self.rvec)[0]
+        return cv2.Rodrigues(self.rvec)[0]
 
     @property
     def origin(self):
@@ -326,7 +317,7 @@ class CameraEstimate:
         camera with free parameters ``p``."""
         q = dict(zip(self.free, p))
         rvec = np.array([q["r1"], q["r2"], q["r3"]])
-        origin = -_cv2().Rodrigues(rvec)[0].T @ np.array([q["t1"], q["t2"], q["t3"]])
+        origin = -cv2.Rodrigues(rvec)[0].T @ np.array([q["t1"], q["t2"], q["t3"]])
         v = origin - self.target
         dist = np.linalg.norm(v)
         return np.array([np.degrees(np.arctan2(v[0], v[1])) % 360.0,
@@ -386,7 +377,7 @@ class CameraEstimate:
                            "dy_px": float(dy), "error_px": float(e)}
                           for n, (x, y), (dx, dy), e in zip(self.points.names, self.points.image,
                                                              self.residuals, err)],
-            "opencv": _cv2().__version__,
+            "opencv": cv2.__version__,
         }
 
 
@@ -418,7 +409,6 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
         residuals far beyond ``marking_px`` (naming the likeliest mislabelled point), two poses
         that fit alike, or a free focal length the points do not determine.
     """
-    cv2 = _cv2()
     if not (np.isfinite(marking_px) and marking_px > 0):
         raise SkyfitError(f"the marking accuracy {marking_px!r} px must be a positive number.")
     mode = "given" if fov is not None else "free"
@@ -565,7 +555,6 @@ def undistort_image(img, camera):
     out = img.astype(np.float64 if img.dtype == np.float64 else np.float32)
     if not any(k):
         return out
-    cv2 = _cv2()
     K = intrinsics(focal_px(camera["fov_deg"], w), w, h)
     mx, my = cv2.initUndistortRectifyMap(K, np.r_[k, 0.0, 0.0, 0.0][:4], None, K, (w, h),
                                          cv2.CV_32FC1)

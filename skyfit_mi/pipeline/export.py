@@ -1,0 +1,520 @@
+"""Fitted materials out: Mitsuba 3 XML, Radiance and glTF 2.0 files, with the fit beside them.
+
+``skyfit export FITS -o OUT`` takes fit results (``fit_NAME.json``, a ``fits.csv`` or the
+folder ``skyfit fit`` wrote) or a per-pixel map's folder (``map_summary.json`` and its EXR
+planes) and writes, in ``OUT``:
+
+* ``materials.xml`` (Mitsuba 3): per material a ``<bsdf id="NAME">`` of built-in plugins, a
+  ``blendbsdf`` of a ``diffuse`` and a ``roughconductor`` (exact for the microfacet lobes, the
+  nearest otherwise); ``materials_ward.xml``: ``<bsdf id="NAME_ward">``, the project's ``ward``
+  plugin with the fitted parameters (exact; from Python, once ``skyfit_mi.render.setup()`` has
+  registered it); ``preview.xml``: the materials on spheres, ``mitsuba preview.xml`` renders it;
+* ``materials.rad`` (Radiance): ``plastic`` or ``metal`` (exact for the ``balanced`` and
+  ``radiance`` lobes, Radiance 6's own; the nearest otherwise); ``preview.rad``: the same
+  scene as ``preview.xml``, its header the ``oconv``/``rpict`` command that renders it;
+* ``materials.gltf`` (glTF 2.0, Blender's importer): metallic-roughness with
+  ``KHR_materials_specular``, the nearest, each material on a unit square;
+* ``export.json``: each material's fit (file, region, model, lobe, parameters, 95% intervals,
+  warnings) and, per format, whether the form is exact, its parameters and the error of the
+  approximation (:mod:`~skyfit_mi.physics.material_match`: the relative error of the radiance
+  reflected from a distant light, both directions within 80 degrees of the normal).
+
+A map's planes become textures (``textures/``: linear EXR, and 8-bit PNG for glTF, sRGB for
+the base colour), indexed like the photographs' pixels (u to the right, v down); Radiance's
+``plastic`` and ``metal`` take one roughness per surface, so ``materials.rad`` holds each
+region's median material.  Nothing is written until every file's content is made; an output
+folder holding another export is refused unless ``overwrite``.
+"""
+
+import base64
+import json
+import shutil
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SkyfitError
+from ..files import ensure_dir, to_json, write_text
+from ..physics.material_match import FORMS, GLTF_F0, nearest, nearest_maps
+from ..physics.ward import raw_parameters
+from ..render.fit_model import PARAMETERS, material_dict
+from ..render.image import to_srgb8, write_exr, write_png
+from ..render.scene_xml import ward_element
+from .fit_result import load_fits
+
+#: The files an export writes (besides ``textures/``), per format, and the sidecar.
+FILES = {"mitsuba": "materials.xml", "radiance": "materials.rad", "gltf": "materials.gltf"}
+#: skyfit's own ``ward`` plugin elements (with the mitsuba format).
+WARD_FILE = "materials_ward.xml"
+#: The preview scenes beside them: the materials on spheres (a map on a square) in a row on a
+#: grey ground, under a uniform sky and a sun, the same in both renderers.
+PREVIEWS = {"mitsuba": "preview.xml", "radiance": "preview.rad"}
+#: The preview's light: the sun's direction (toward it; azimuth 135 degrees, elevation 45), its
+#: irradiance [W m^-2] and the uniform sky's radiance [W m^-2 sr^-1], RGB; the ground's
+#: reflectance; the camera's position and target [m].
+PREVIEW_SUN = np.array([0.5, -0.5, np.sqrt(0.5)])
+PREVIEW_LIGHT = {"sun_irradiance": 600.0, "sky_radiance": 30.0, "ground": 0.2,
+                 "camera": (0.0, -6.0, 3.0), "target": (0.0, 0.0, 0.4)}
+SIDECAR = "export.json"
+#: A map's folder holds this (written by ``skyfit fit --per-pixel``).
+MAP_SUMMARY = "map_summary.json"
+
+
+@dataclass(frozen=True)
+class Material:
+    """One fitted material: its region, model, lobe, parameters and what its fit says of them;
+    ``maps``: a map's texel arrays (rho_d (N, 3), s (N, 3), sigma (N,)) and its (H, W) mask,
+    or None for a region's single fit."""
+    name: str
+    model: str
+    normalisation: str
+    parameters: dict
+    intervals: dict = field(default_factory=dict)
+    warnings: tuple = ()
+    source: str = ""
+    maps: dict = None
+
+    def raw(self):
+        """(rho_d (3,), s (3,), sigma_alpha) of the fitted parameters (thesis 7.1)."""
+        theta = [self.parameters[k] for k in PARAMETERS[self.model]]
+        m = material_dict(self.model, theta)
+        return raw_parameters(**{k: v for k, v in m.items() if k != "normalisation"})
+
+
+def read_materials(paths):
+    """The materials of fit results (:func:`~.fit_result.load_fits`' paths) or of one map
+    folder."""
+    paths = [Path(p) for p in paths]
+    if len(paths) == 1 and (paths[0] / MAP_SUMMARY).is_file():
+        return read_map(paths[0])
+    out = []
+    for region, (path, r) in load_fits(paths).items():
+        out.append(Material(region, r["model"], r.get("normalisation", "ward"),
+                            dict(r["parameters"]),
+                            {k: v["95"] for k, v in r["intervals"].items()},
+                            tuple(r.get("warnings", [])), str(path)))
+    return out
+
+
+def read_map(folder):
+    """The per-pixel map in ``folder`` as materials: one texel array for the whole image,
+    plus each region's median material (for formats without textures)."""
+    from ..render.image import read_exr
+
+    summary = json.loads((folder / MAP_SUMMARY).read_text(encoding="utf-8"))
+    regions = summary.get("regions") or {}
+    lobes = {r.get("normalisation", "ward") for r in regions.values()}
+    if len(lobes) != 1:
+        raise SkyfitError(f"the map in {folder} mixes lobes ({', '.join(sorted(lobes))}); "
+                          "export its regions' fits instead (fit_NAME.json).")
+    lobe = lobes.pop()
+    planes = {n: read_exr(folder / f"{n}.exr") for n in summary["parameters"]}
+    shape = next(iter(planes.values())).shape[:2]
+    rho_d, s = np.zeros(shape + (3,)), np.zeros(shape + (3,))
+    sigma, mask = np.zeros(shape), np.zeros(shape, bool)
+    for model, names in sorted(PARAMETERS.items(), key=lambda kv: -len(kv[1])):   # colour first
+        if not set(names) <= set(planes):
+            continue
+        theta = np.stack([planes[n] for n in names], axis=-1)
+        here = np.all(np.isfinite(theta), axis=-1) & ~mask
+        for y, x in zip(*np.nonzero(here)):
+            m = material_dict(model, theta[y, x])
+            rho_d[y, x], s[y, x], sigma[y, x] = raw_parameters(
+                **{k: v for k, v in m.items() if k != "normalisation"})
+        mask |= here
+    if not mask.any():
+        raise SkyfitError(f"the map in {folder} has no mapped pixel; map the regions again.")
+    out = [Material("map", "raw", lobe, {}, source=str(folder),
+                    maps={"rho_d": rho_d, "s": s, "sigma": sigma, "mask": mask})]
+    for name, r in regions.items():
+        med = r.get("median") or {}
+        if set(PARAMETERS[r["model"]]) <= {k for k, v in med.items() if v is not None}:
+            out.append(Material(name, r["model"], lobe, {k: med[k] for k in PARAMETERS[r["model"]]},
+                                source=f"{folder}: the median of region {name}'s "
+                                       f"{r.get('determined', 0)} determined pixels"))
+    return out
+
+
+def check_output(out, overwrite):
+    """Refuse a folder holding another export (its sidecar or one of its files) unless
+    ``overwrite``."""
+    held = [n for n in (SIDECAR, WARD_FILE, *FILES.values(), *PREVIEWS.values())
+            if (Path(out) / n).exists()]
+    if held and not overwrite:
+        raise SkyfitError(f"{out} holds another export ({held[0]}); give another -o, or pass "
+                          "--overwrite to replace it.")
+
+
+def export(paths, out, formats=FORMS, overwrite=False, log=print):
+    """Write the fitted materials of ``paths`` in ``formats`` (of FORMS) to folder ``out``
+    (module doc); returns the sidecar's document."""
+    bad = [f for f in formats if f not in FORMS]
+    if bad or not formats:
+        raise SkyfitError(f"unknown export format {bad[0] if bad else '(none)'!r}; give some of "
+                          f"{', '.join(FORMS)}.")
+    out = Path(out)
+    check_output(out, overwrite)
+    materials = read_materials(paths)
+    files, record = {}, {"formats": list(formats), "materials": {},
+                         "error": "relative error of the radiance a material reflects from a "
+                                  "distant light, light and view within 80 degrees of the "
+                                  "normal (rms and largest over a grid of such pairs; albedo_max: "
+                                  "the directional albedo's largest), against the fitted BRDF"}
+    matches = {}
+    for m in materials:
+        matches[m.name] = {f: _match(m, f) for f in formats}
+        record["materials"][m.name] = _record(m, matches[m.name])
+    if "mitsuba" in formats:
+        files[FILES["mitsuba"]] = mitsuba_xml(materials, matches)
+        files[WARD_FILE] = mitsuba_ward_xml(materials)
+        files[PREVIEWS["mitsuba"]] = mitsuba_preview(materials)
+    if "radiance" in formats:
+        files[FILES["radiance"]] = radiance_text(materials, matches)
+        files[PREVIEWS["radiance"]] = radiance_preview([m for m in materials if m.maps is None])
+    if "gltf" in formats:
+        files[FILES["gltf"]] = gltf_json(materials, matches)
+    textures = [m for m in materials if m.maps is not None]
+    ensure_dir(out)
+    for stale in {WARD_FILE, *FILES.values(), *PREVIEWS.values()} - set(files):  # another's
+        (out / stale).unlink(missing_ok=True)
+    if not textures and (out / "textures").is_dir():
+        shutil.rmtree(out / "textures")
+    for m in textures:
+        write_textures(out / "textures", m, matches[m.name])
+    for name, text in files.items():
+        write_text(out / name, text)
+    write_text(out / SIDECAR, to_json(record) + "\n")
+    for m in materials:
+        _log_material(m, matches[m.name], log)
+    log(f"wrote {', '.join(files)} and {SIDECAR} in {out}")
+    return record
+
+
+def _match(m, form):
+    """The nearest ``form`` of material ``m`` (per texel for a map: each error a texel array,
+    summarised by its largest and median), or one line naming the material where the form
+    cannot express it; None for a map in Radiance (one roughness per surface)."""
+    try:
+        if m.maps is None:
+            rho_d, s, sigma = m.raw()
+            r = nearest(form, rho_d, s, sigma, m.normalisation)
+            return {"params": r.params, "error": r.error, "exact": r.exact}
+        if form == "radiance":
+            return None
+        k = m.maps["mask"]
+        params, error = nearest_maps(form, m.maps["rho_d"][k], m.maps["s"][k],
+                                     m.maps["sigma"][k], m.normalisation)
+        summary = {"max": float(np.max(error["max"])), "rms": float(np.median(error["rms"])),
+                   "albedo_max": float(np.max(error["albedo_max"])), "domain": error["domain"],
+                   "notes": error["notes"], "over_texels": "largest max and albedo_max, median "
+                   f"rms; each texel's max in textures/{form}_error.exr"}
+        return {"params": params, "error": summary, "exact": bool(error["exact"]),
+                "texel_error": error["max"]}
+    except SkyfitError as exc:
+        raise SkyfitError(f"material {m.name!r}: {str(exc).rstrip('.')} ({form}).") from None
+
+
+def _record(m, matches):
+    """The sidecar's record of material ``m`` and its ``matches`` per format."""
+    rec = {"source": m.source, "model": m.model, "normalisation": m.normalisation,
+           "parameters": m.parameters, "intervals_95": m.intervals, "warnings": list(m.warnings)}
+    if m.maps is not None:
+        rec["texels"] = int(m.maps["mask"].sum())
+    rec["exports"] = {f: {"exact": r["exact"], "error": r["error"],
+                          **({} if m.maps is not None else {"params": r["params"]})}
+                      if r is not None else "the regions' medians (Radiance's plastic and metal "
+                      "take one roughness per surface)" for f, r in matches.items()}
+    if "mitsuba" in matches and m.maps is None:
+        rec["exports"]["mitsuba_ward"] = {"exact": True, "id": f"{m.name}_ward",
+                                          "file": WARD_FILE}
+    return rec
+
+
+def _log_material(m, matches, log):
+    parts = [f"{f} {'exact' if r['exact'] else 'nearest, ' + _error_text(r['error'])}"
+             for f, r in matches.items() if r is not None]
+    log(f"{m.name}: " + "; ".join(parts))
+    if m.warnings:
+        log(f"  warning: {m.name}'s fit has {len(m.warnings)} warning(s), kept in {SIDECAR}: "
+            f"{m.warnings[0]}")
+
+
+def _error_text(error):
+    return (f"reflected radiance off by up to {100 * error['max']:.3g}% (rms "
+            f"{100 * error['rms']:.3g}%)")
+
+
+def _numbers(v):
+    return ", ".join(f"{float(x):.6g}" for x in np.atleast_1d(v))
+
+
+def _sub(parent, tag, **attrs):
+    return ET.SubElement(parent, tag, {k: str(v) for k, v in attrs.items()})
+
+
+def _blend(parent, name, p, textures=None):
+    """A ``blendbsdf`` of ``diffuse`` and ``roughconductor`` from the mitsuba match ``p``; the
+    keys in ``textures`` (a map's) are bitmaps."""
+    textures = textures or {}
+
+    def value(el, tag, key):
+        if key in textures:
+            t = _sub(el, "texture", type="bitmap", name=key if key != "diffuse_reflectance"
+                     else "reflectance")
+            _sub(t, "string", name="filename", value=textures[key])
+            _sub(t, "boolean", name="raw", value="true")
+            _sub(t, "string", name="filter_type", value="nearest")
+        else:
+            _sub(el, tag, name=key if key != "diffuse_reflectance" else "reflectance",
+                 value=_numbers(p[key]))
+
+    b = _sub(parent, "bsdf", type="blendbsdf", id=name)
+    value(b, "float", "weight")
+    d = _sub(b, "bsdf", type="diffuse")
+    value(d, "rgb", "diffuse_reflectance")
+    if p["distribution"] == "mirror":                 # an ideal mirror: the smooth conductor
+        c = _sub(b, "bsdf", type="conductor")
+    else:
+        c = _sub(b, "bsdf", type="roughconductor")
+        _sub(c, "string", name="distribution", value=p["distribution"])
+        value(c, "float", "alpha")
+    value(c, "rgb", "specular_reflectance")
+    if p["material"] == "none":
+        _sub(c, "string", name="material", value="none")
+    else:
+        _sub(c, "float", name="eta", value=f"{p['material']['eta']:.6g}")
+        _sub(c, "float", name="k", value=f"{p['material']['k']:.6g}")
+
+
+def mitsuba_xml(materials, matches):
+    """``materials.xml``: a Mitsuba 3 scene of the materials' built-in BSDFs (module doc)."""
+    root = ET.Element("scene", version="3.0.0")
+    for m in materials:
+        r = matches[m.name]["mitsuba"]
+        what = "exact" if r["exact"] else "the nearest: " + _error_text(r["error"])
+        root.append(ET.Comment(f" {m.name} ({m.source}): built-in plugins, {what} "))
+        _blend(root, m.name, r["params"], TEXTURE_FILES["mitsuba"] if m.maps is not None else None)
+    ET.indent(root)
+    return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def mitsuba_ward_xml(materials):
+    """``materials_ward.xml``: the fitted materials as skyfit's ``ward`` plugin, exact, ids
+    ``NAME_ward`` (a map's regions' medians; Python only: ``skyfit_mi.render.setup()``
+    registers the plugin)."""
+    root = ET.Element("scene", version="3.0.0")
+    root.append(ET.Comment(" skyfit's ward plugin: import skyfit_mi; skyfit_mi.render.setup() "
+                           "registers it before mitsuba.load_file "))
+    for m in materials:
+        if m.maps is None:
+            theta = [m.parameters[k] for k in PARAMETERS[m.model]]
+            ward_element(_sub(root, "bsdf"), f"{m.name}_ward",
+                         material_dict(m.model, theta, m.normalisation))
+    ET.indent(root)
+    return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def _row(materials):
+    """(material, x position [m]) of the preview's row, centred on x = 0, 1 m apart."""
+    return [(m, i - 0.5 * (len(materials) - 1)) for i, m in enumerate(materials)]
+
+
+def _view(materials):
+    """The preview camera's horizontal and vertical fields of view [degrees] and image size
+    [pixels] (240 high), holding the row."""
+    width = max(2.0, len(materials) + 1.0)                 # the row's width in view [m]
+    fov_h = 2 * np.degrees(np.arctan(0.6 * width / 6.7))
+    w, h = int(120 * width), 240
+    return fov_h, 2 * np.degrees(np.arctan(np.tan(np.radians(fov_h / 2)) * h / w)), w, h
+
+
+def mitsuba_preview(materials):
+    """``preview.xml``: the materials' built-in BSDFs (``materials.xml``) in the preview scene
+    (:data:`PREVIEWS`); ``mitsuba preview.xml`` renders it to ``preview.exr``."""
+    L, sun = PREVIEW_LIGHT, PREVIEW_SUN
+    fov_h, _, w, h = _view(materials)
+    shapes = "".join(
+        (f'    <shape type="rectangle"><transform name="to_world"><scale value="0.4"/>'
+         f'<translate x="{x:g}" y="0" z="0.01"/></transform><ref id="{m.name}"/></shape>\n'
+         if m.maps is not None else
+         f'    <shape type="sphere"><point name="center" x="{x:g}" y="0" z="0.4"/>'
+         f'<float name="radius" value="0.4"/><ref id="{m.name}"/></shape>\n')
+        for m, x in _row(materials))
+    return f"""<!-- skyfit export: the materials of materials.xml on spheres (a map on a square) under
+     a uniform sky and a sun; render with `mitsuba preview.xml` (writes preview.exr) -->
+<scene version="3.0.0">
+    <default name="spp" value="256"/>
+    <include filename="materials.xml"/>
+    <integrator type="path"><integer name="max_depth" value="4"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="{fov_h:.4g}"/>
+        <transform name="to_world"><lookat origin="{_numbers(L['camera'])}" target="{_numbers(L['target'])}" up="0, 0, 1"/></transform>
+        <sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>
+        <film type="hdrfilm"><integer name="width" value="{w}"/><integer name="height" value="{h}"/></film>
+    </sensor>
+    <emitter type="constant"><rgb name="radiance" value="{L['sky_radiance']:g}"/></emitter>
+    <emitter type="directional"><vector name="direction" value="{_numbers(-sun)}"/><rgb name="irradiance" value="{L['sun_irradiance']:g}"/></emitter>
+    <shape type="rectangle"><transform name="to_world"><scale value="50"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="{L['ground']:g}"/></bsdf></shape>
+{shapes}</scene>
+"""
+
+
+def radiance_preview(materials):
+    """``preview.rad``: the materials of ``materials.rad`` in the preview scene (:data:`PREVIEWS`),
+    with the command that renders it in its header."""
+    L, sun = PREVIEW_LIGHT, PREVIEW_SUN
+    cam, target = np.array(L["camera"]), np.array(L["target"])
+    fov_h, fov_v, w, h = _view(materials)
+    view = (f"-vp {' '.join(f'{v:g}' for v in cam)} -vd "
+            f"{' '.join(f'{v:.6g}' for v in target - cam)} -vu 0 0 1 -vh {fov_h:.4g} "
+            f"-vv {fov_v:.4g} -x {w} -y {h}")
+    omega = 2 * np.pi * (1 - np.cos(np.radians(0.533 / 2)))          # the sun's disc [sr]
+    lines = ["# skyfit export: the materials of materials.rad on spheres under a uniform sky and "
+             "a sun; render with",
+             f"#   oconv materials.rad preview.rad > preview.oct && rpict {view} -ab 2 -ad 1024 "
+             "preview.oct > preview.hdr",
+             "void light sun_light 0 0 3 " + " ".join([f"{L['sun_irradiance'] / omega:.6g}"] * 3),
+             f"sun_light source sun 0 0 4 {' '.join(f'{v:.6g}' for v in sun)} 0.533",
+             f"void glow sky_glow 0 0 4 {L['sky_radiance']:g} {L['sky_radiance']:g} "
+             f"{L['sky_radiance']:g} 0",
+             "sky_glow source sky 0 0 4 0 0 1 360",
+             f"void plastic ground_mat 0 0 5 {L['ground']:g} {L['ground']:g} {L['ground']:g} 0 0",
+             "ground_mat polygon ground 0 0 12 -50 -50 0 50 -50 0 50 50 0 -50 50 0"]
+    lines += [f"{m.name} sphere {m.name}_sphere 0 0 4 {x:g} 0 0.4 0.4" for m, x in _row(materials)]
+    return "\n".join(lines) + "\n"
+
+
+def radiance_text(materials, matches):
+    """``materials.rad``: a Radiance ``plastic`` or ``metal`` per material (a map's region
+    medians)."""
+    lines = ["# skyfit export: Radiance 6 plastic/metal (balanced Ward lobe), "
+             "colour C, specularity, roughness (rms slope)"]
+    for m in materials:
+        if m.maps is not None:
+            continue
+        r = matches[m.name]["radiance"]
+        p = r["params"]
+        what = "exact" if r["exact"] else "the nearest: " + _error_text(r["error"])
+        lines += [f"# {m.name} ({m.source}): {what}",
+                  f"void {p['type']} {m.name}\n0\n0\n5 {_numbers(p['colour']).replace(',', '')} "
+                  f"{p['spec']:.6g} {p['roughness']:.6g}"]
+    return "\n".join(lines) + "\n"
+
+
+#: A map's texture files, relative to the export folder, per format.
+TEXTURE_FILES = {"mitsuba": {k: f"textures/{k}.exr" for k in
+                             ("diffuse_reflectance", "specular_reflectance", "alpha")},
+                 "gltf": {"baseColorTexture": "textures/base_colour.png",
+                          "metallicRoughnessTexture": "textures/metallic_roughness.png",
+                          "specularTexture": "textures/specular.png",
+                          "specularColorTexture": "textures/specular_colour.png"}}
+
+
+def _image(m, values):
+    """A map's texel values (N, ...) scattered onto its (H, W, ...) image, 0 outside it."""
+    values = np.asarray(values, dtype=float)
+    img = np.zeros(m.maps["mask"].shape + values.shape[1:])
+    img[m.maps["mask"]] = values
+    return img
+
+
+def write_textures(folder, m, matches):
+    """The texture images of map material ``m`` for its formats' ``matches``, and each form's
+    largest error per texel (``FORM_error.exr``)."""
+    ensure_dir(folder)
+    for form, r in matches.items():
+        if r is not None:
+            write_exr(folder / f"{form}_error.exr", _image(m, r["texel_error"]).astype(np.float32))
+    if "mitsuba" in matches:
+        p = matches["mitsuba"]["params"]
+        for key, path in TEXTURE_FILES["mitsuba"].items():
+            write_exr(folder.parent / path, _image(m, p[key]).astype(np.float32))
+    if "gltf" in matches:
+        p, files = matches["gltf"]["params"], TEXTURE_FILES["gltf"]
+        base = _image(m, np.asarray(p["baseColorFactor"])[:, :3])
+        write_png(folder.parent / files["baseColorTexture"], to_srgb8(base, 1.0))
+        mr = np.stack([np.zeros(len(p["roughnessFactor"])), p["roughnessFactor"],
+                       p["metallicFactor"]], axis=-1)
+        write_png(folder.parent / files["metallicRoughnessTexture"], _linear8(_image(m, mr)))
+        spec = p["KHR_materials_specular"]
+        f = np.repeat(np.asarray(spec["specularFactor"], dtype=float)[:, None], 4, axis=1)
+        write_png(folder.parent / files["specularTexture"], _linear8(_image(m, f)))   # its A
+        colour = np.asarray(spec["specularColorFactor"], dtype=float) / GLTF_SPECULAR_COLOUR
+        write_png(folder.parent / files["specularColorTexture"], to_srgb8(_image(m, colour), 1.0))
+
+
+#: The factor of a map's glTF specular colour texture: material_match's dielectric takes
+#: specularColorFactor s / (max(s) GLTF_F0) (F0 = F90), above a texture's range of 0-1.
+GLTF_SPECULAR_COLOUR = 1.0 / GLTF_F0
+
+
+def _linear8(img):
+    return np.round(np.clip(img, 0.0, 1.0) * 255).astype(np.uint8)
+
+
+#: A unit square in glTF's frame (+Y up) facing up, with texture coordinates (u right, v down
+#: as the photographs' pixels): positions, normals, uvs and two triangles.
+_SQUARE = (np.array([[-.5, 0, -.5], [.5, 0, -.5], [.5, 0, .5], [-.5, 0, .5]], np.float32),
+           np.tile(np.array([0, 1, 0], np.float32), (4, 1)),
+           np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32),
+           np.array([0, 2, 1, 0, 3, 2], np.uint16))
+
+
+def gltf_json(materials, matches):
+    """``materials.gltf``: glTF 2.0 with each material on a unit square in a row (module
+    doc); the geometry embedded as a data URI."""
+    pos, nor, uv, idx = _SQUARE
+    blob = b"".join(a.tobytes() for a in (pos, nor, uv, idx))
+    views, offset = [], 0
+    for a, target in ((pos, 34962), (nor, 34962), (uv, 34962), (idx, 34963)):
+        views.append({"buffer": 0, "byteOffset": offset, "byteLength": a.nbytes,
+                      "target": target})
+        offset += a.nbytes
+    accessors = [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                  "min": pos.min(0).tolist(), "max": pos.max(0).tolist()},
+                 {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"},
+                 {"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC2"},
+                 {"bufferView": 3, "componentType": 5123, "count": 6, "type": "SCALAR"}]
+    doc = {"asset": {"version": "2.0", "generator": "skyfit-mi export"},
+           "extensionsUsed": ["KHR_materials_specular"], "scene": 0,
+           "scenes": [{"nodes": list(range(len(materials)))}], "nodes": [], "meshes": [],
+           "materials": [], "accessors": accessors, "bufferViews": views,
+           "buffers": [{"byteLength": len(blob), "uri": "data:application/octet-stream;base64,"
+                        + base64.b64encode(blob).decode()}]}
+    for i, m in enumerate(materials):
+        p = matches[m.name]["gltf"]["params"]
+        doc["materials"].append(_gltf_material(doc, m, p))
+        doc["meshes"].append({"name": m.name, "primitives": [{
+            "attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3,
+            "material": i}]})
+        doc["nodes"].append({"name": m.name, "mesh": i, "translation": [1.2 * i, 0.0, 0.0]})
+    return json.dumps(doc, indent=1) + "\n"
+
+
+def _gltf_material(doc, m, p):
+    """A glTF material of the gltf match ``p``; a map's textures are added to ``doc``."""
+    spec = p["KHR_materials_specular"]
+    if m.maps is None:
+        return {"name": m.name, "pbrMetallicRoughness": {
+                    "baseColorFactor": [float(v) for v in p["baseColorFactor"]],
+                    "metallicFactor": float(p["metallicFactor"]),
+                    "roughnessFactor": float(p["roughnessFactor"])},
+                "extensions": {"KHR_materials_specular": {
+                    "specularFactor": float(spec["specularFactor"]),
+                    "specularColorFactor": [float(v) for v in spec["specularColorFactor"]]}}}
+    doc.setdefault("samplers", [{"magFilter": 9728, "minFilter": 9728}])
+    tex = {}
+    for key, uri in TEXTURE_FILES["gltf"].items():
+        doc.setdefault("images", []).append({"uri": uri})
+        doc.setdefault("textures", []).append({"sampler": 0, "source": len(doc["images"]) - 1})
+        tex[key] = {"index": len(doc["textures"]) - 1}
+    return {"name": m.name, "pbrMetallicRoughness": {
+                "baseColorTexture": tex["baseColorTexture"],
+                "metallicRoughnessTexture": tex["metallicRoughnessTexture"]},
+            "extensions": {"KHR_materials_specular": {
+                "specularTexture": tex["specularTexture"],
+                "specularColorFactor": [GLTF_SPECULAR_COLOUR] * 3,
+                "specularColorTexture": tex["specularColorTexture"]}}}
