@@ -305,6 +305,14 @@ def test_a_table_of_unknown_scale_gives_relative_reflectances_without_a_bound(dn
     assert main(["fit", str(tmp_path / "seq"), "--region", "sample", "--model", "2"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "fit it with --model 3 or 5" in err, err
+    # --model auto leaves the 2-parameter model out, says so, and counts the ranking's time
+    assert main(["fit", str(tmp_path / "seq"), "--region", "sample", "--model", "auto", "-o",
+                 str(tmp_path / "auto")]) == 0
+    r = json.loads((tmp_path / "auto" / "fit_sample.json").read_text())
+    sel = r["model_selection"]
+    assert "two" in sel["left_out"] and "unknown" in sel["left_out"]["two"]
+    assert {row["model"] for row in sel["ranking"]} == {"achromatic", "colour"}
+    assert r["wall_time_s"] == pytest.approx(r["fit_wall_time_s"] + sel["wall_time_s"])
 
 
 @pytest.mark.parametrize("reference, message", [

@@ -16,6 +16,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..pipeline.manifest import is_table, load_manifest
+from ..pipeline.observation_table import relative_scale
 from ..render.basis_table import TableModel
 from ..render.fit_model import PARAMETERS, bounds
 from .chi2 import LuminanceModel, Problem
@@ -23,6 +25,7 @@ from .fit import (FitCache, FitSession, fit_sessions, prepare_sessions, resolve_
                   trace_sessions)
 from .held_out import frame_folds
 from .light import SPEC_LIGHT, LightOptions
+from ..errors import SkyfitError
 from .methods.global_search import global_search
 
 #: The candidates of ``--model auto``: the thesis's Ward lobe, the balanced one, and the four
@@ -93,6 +96,24 @@ def choose(rows):
     return min(near, key=lambda r: (r["parameters"], r["held_out_chi2"]))
 
 
+def candidate_models(manifest_path, models, luminance):
+    """The parameterisations of ``models`` the sequence can take, and why each other is left
+    out: a table of unknown scale cannot take the white 2-parameter surface, nor a region
+    measured as ``luminance`` the colour model."""
+    doc, _ = load_manifest(manifest_path)
+    why = {}
+    if is_table(doc) and relative_scale(doc):
+        why["two"] = ("the table's scale is unknown (ingest --unknown-scale), and the "
+                      "2-parameter model's surface is white (rho_d + rho_s = 1), which needs it")
+    if luminance:
+        why["colour"] = "the regions are measured as luminance, which cannot tell colour"
+    kept = tuple(m for m in models if m not in why)
+    if not kept:
+        raise SkyfitError(f"no model of {', '.join(models)} suits this sequence: "
+                          + "; ".join(why.values()) + ".")
+    return kept, {m: why[m] for m in models if m in why}
+
+
 def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOLDS, seed=0,
              log=print, light=LightOptions(), **options):
     """``fit --model auto``: every region's candidates ranked (:func:`rank`; the light traced
@@ -109,7 +130,12 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     def sessions_of(**kw):
         return {name: FitSession(manifest_path, name, px, light=None, **{**options, **kw})
                 for name, px in regions}
-    first = FitSession(manifest_path, *regions[0], light=None, **options)
+    t_start = time.perf_counter()
+    first = FitSession(manifest_path, *regions[0], light=None,
+                       **{"model": "achromatic", **options})
+    models, skipped = candidate_models(manifest_path, models, first.obs.luminance)
+    for m, why in skipped.items():
+        log(f"model selection leaves out the {m} model: {why}")
     plan = resolve_light({regions[0][0]: first}, light, log)        # checked once
     level = None
     if plan.split:
@@ -126,14 +152,16 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     sessions, trace_s = {}, {}
     for fam in families:
         t0 = time.perf_counter()
-        sessions[fam] = sessions_of(model="two", normalisation=fam)
+        sessions[fam] = sessions_of(model=models[0], normalisation=fam)
         if level is not None:
             for s in sessions[fam].values():
                 s.light_at_level(level)
         trace_sessions(list(sessions[fam].values()), SPEC_LIGHT)
         trace_s[fam] = time.perf_counter() - t0
     chosen, selection = {}, {}
+    shared_s = (time.perf_counter() - t_start) / len(regions)   # the level and the traces
     for name, pixels in regions:
+        t_region = time.perf_counter()
         traced = {fam: sessions[fam].pop(name) for fam in families}
         rows = rank(list(traced.values()), models, folds, log)
         pick = choose(rows)
@@ -155,12 +183,20 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
                 k: level[k] for k in ("k", "interval95", "terms")},
             "folds": int(folds), "chosen": {"normalisation": pick["normalisation"],
                                             "model": pick["model"], "rank": pick["rank"]},
-            "trace_time_s": trace_s, "ranking": rows}
+            "left_out": skipped, "trace_time_s": trace_s, "ranking": rows,
+            "wall_time_s": shared_s + time.perf_counter() - t_region}
         if not plan.split:
             out = chosen.pop(name).run("global", None, seed, None, log)
-            out["model_selection"] = selection.pop(name)
-            yield out
+            yield _with_selection(out, selection.pop(name))
     if chosen:
         for out in fit_sessions(chosen, "global", seed, log=log, light=plan):
-            out["model_selection"] = selection[out["region"]]
-            yield out
+            yield _with_selection(out, selection[out["region"]])
+
+
+def _with_selection(out, selection):
+    """A chosen model's fit with its selection, its ``wall_time_s`` the whole: the selection's
+    (its share of the light's tracing, its ranking) and the fit's own (``fit_wall_time_s``)."""
+    out["model_selection"] = selection
+    out["fit_wall_time_s"] = out["wall_time_s"]
+    out["wall_time_s"] = out["wall_time_s"] + selection["wall_time_s"]
+    return out
