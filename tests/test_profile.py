@@ -63,6 +63,25 @@ def test_levenberg_marquardt_holds_fixed_parameters(noisy_fit):
     assert res["chi2"] == pytest.approx(brute_profile(s, 0, start[0]), rel=1e-4, abs=0.05)
 
 
+def test_a_search_at_its_iteration_limit_has_converged_where_chi2_no_longer_falls():
+    """Stopped at the iteration limit: converged where the last 10 steps lowered chi-square by
+    under 0.01 (a crawl along a flat valley moves no interval), else a warning saying how much
+    it was still falling; and on a curved valley stopped after 3 iterations, that warning."""
+    from skyfit_mi.fitting.methods.levenberg_marquardt import _at_the_limit, levenberg_marquardt
+
+    class Flat:
+        def chi2(self, t):
+            return float(t[0])
+
+    crawl = [[100.0 - 1e-4 * i] for i in range(12)]
+    assert _at_the_limit(Flat(), crawl, crawl[-1][0], 100)[0] == "converged"
+    falling = [[100.0 - 0.5 * i] for i in range(12)]
+    status, message = _at_the_limit(Flat(), falling, falling[-1][0], 100)
+    assert status == "max_iterations" and "still falling (5 over the last 10 steps)" in message
+    res = levenberg_marquardt(_Banana(), [0.9, -0.9], [-2, -2], [2, 2], max_iterations=3)
+    assert res["status"] == "max_iterations" and "iteration limit (3)" in res["message"]
+
+
 class _Banana:
     """chi^2 along a curved ridge a = b^2: residuals (a - b^2) / 0.01 and (b - 0.5) / 0.2.
     The profile of a rises as ((sqrt(a) - 0.5) / 0.2)^2, so its 95% interval is

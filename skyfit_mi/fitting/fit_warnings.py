@@ -17,6 +17,10 @@ from ..physics.ward import METAL_THRESHOLD
 from ..pipeline.manifest import is_table
 from ..pipeline.observation_table import relative_scale
 
+#: The held-out frames' error (relative to each value, beyond the in-sample model error) that
+#: the fit warns of once its 95% interval lies above it: below, predictions (relight) carry it
+#: in their bands (model_error.held_out) and it changes no conclusion.
+HELD_OUT_NOTE = 0.005
 #: Share of the degrees of freedom above which the model's own noise is warned of.
 NOISE_SHARE = 0.25
 #: The widening of a variance by correlated channels (:func:`~.uncertainty.channel_factors`)
@@ -66,13 +70,14 @@ def fit_warnings(s, fit):
     if fit.model_error is not None:
         warnings.append(unc.model_error_warning(fit.misfit, fit.model_error))
     held = held_out_record(fit)
-    if held.get("interval95") is not None:
+    if held.get("interval95") is not None and fit.held_out["interval95"][0] > HELD_OUT_NOTE:
         warnings.append(
             f"frames left out of the fit are predicted worse than noise and the "
             f"parameters' spread explain (held-out chi-square {held['chi2_per_value']:.3g} "
             f"per value, p = {held['p']:.2g}, {held['folds']} folds of frames): the model "
-            f"misses light it was not fitted to by about {held['kappa']:.1%} of each value "
-            f"(95%: {held['interval95'][0]:.1%}-{held['interval95'][1]:.1%}), which "
+            f"misses light it was not fitted to by about {100 * held['kappa']:.2g}% of each "
+            f"value (95%: {100 * held['interval95'][0]:.2g}-"
+            f"{100 * held['interval95'][1]:.2g}%), which "
             "predictions (relight) include; the parameters describe these frames' "
             "light, not necessarily the surface's: they may not carry to other light, "
             "and their intervals may not hold (not reliable as the surface's own). "

@@ -66,11 +66,16 @@ def geometry_warnings(geometry, sigma_alpha, sky_shape_known=True):
     limit = traceless_roughness(delta)
     if sigma_alpha >= limit:
         return []
-    out = [f"sigma_alpha: the sun's highlight never comes closer than {delta:.1f} degrees "
-           f"(half-angle) to the camera's view, and lobes narrower than sigma_alpha = "
-           f"{limit:.3g} show no sun there: sigma_alpha = {sigma_alpha:.3g} rests on the sky's "
-           f"reflection alone; treat it as not determined below {limit:.3g} (a camera nearer "
-           "the sun's mirror direction would measure it)."]
+    seen = (f"sigma_alpha: the sun's highlight never comes closer than {delta:.1f} degrees "
+            f"(half-angle) to the camera's view, and lobes narrower than sigma_alpha = "
+            f"{limit:.3g} show no sun there: sigma_alpha = {sigma_alpha:.3g} rests on the "
+            "sky's reflection alone")
+    out = [seen + ("; its interval holds as far as the sky's shape near the mirror direction "
+                   "is the spec's (a camera nearer the sun's mirror direction would measure it "
+                   "from the sun)." if sky_shape_known else
+                   f"; treat it as not determined below {limit:.3g}, whatever its interval "
+                   "says: that rests on a sky shape the fit did not fit (a camera nearer the "
+                   "sun's mirror direction would measure it).")]
     if not sky_shape_known:
         out.append("rho_s rests on the sky's reflection alone (the sun's highlight is never "
                    "seen at this roughness), so it depends on the sky's pattern near the mirror "

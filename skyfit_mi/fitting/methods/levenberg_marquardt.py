@@ -74,8 +74,32 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
             if lam > 1e10:
                 status, message = "converged", "no step lowers chi-square (lambda > 1e10)"
                 break
+    if status == "max_iterations":
+        status, message = _at_the_limit(problem, trace, chi2, max_iterations)
     return {"theta": theta, "chi2": chi2, "status": status, "message": message, "trace": trace,
             "jacobian": J}
+
+
+#: Accepted steps over which a search stopped at its iteration limit is judged, and the fall of
+#: chi-square over them below which it has converged: far below the 1 that moves a 68%
+#: interval's end, so the rest of a slow crawl along a flat valley changes no conclusion.
+LIMIT_STEPS, LIMIT_CHI2 = 10, 0.01
+
+
+def _at_the_limit(problem, trace, chi2, max_iterations):
+    """(status, message) of a search stopped after ``max_iterations``: converged where its
+    last LIMIT_STEPS steps lowered chi-square by less than LIMIT_CHI2 (a flat valley, which
+    the intervals describe), else how much it was still falling."""
+    if len(trace) > LIMIT_STEPS:
+        fall = problem.chi2(np.asarray(trace[-LIMIT_STEPS - 1])) - chi2
+        if fall < LIMIT_CHI2:
+            return "converged", (f"the iteration limit ({max_iterations}) reached along a flat "
+                                 f"valley: chi-square fell by {fall:.2g} over the last "
+                                 f"{LIMIT_STEPS} steps")
+        return "max_iterations", (f"stopped at the iteration limit ({max_iterations}) with "
+                                  f"chi-square still falling ({fall:.3g} over the last "
+                                  f"{LIMIT_STEPS} steps): the minimum may lie further on")
+    return "max_iterations", f"stopped at the iteration limit ({max_iterations})"
 
 
 def polish(problem, start, lower, upper, fixed=(), **options):
