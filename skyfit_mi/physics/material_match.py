@@ -10,8 +10,7 @@ A fitted material is f_r = rho_d / pi + s lobe(wi, wo; sigma_alpha, normalisatio
 * ``'radiance'``: Radiance's ``plastic`` (rho_d = C (1 - spec), rho_s = spec, white) or
   ``metal`` (rho_s = C spec), the ``'balanced'`` lobe with roughness = rms slope.  Exact for
   ``'balanced'`` and ``'radiance'`` when s is grey or proportional to rho_d (the colour,
-  achromatic and two models).  Radiance's Fresnel estimate at roughness 0 does not enter:
-  mirrors (sigma_alpha <= :data:`~.ward.SIGMA_MIRROR`) are refused by every form.
+  achromatic and two models).
 * ``'gltf'``: glTF 2.0 metallic-roughness (:func:`gltf_brdf`) with KHR_materials_specular.
   Never exact (its GGX lobe has height-correlated Smith visibility and Schlick's Fresnel).
   The nearest is a dielectric (metallic 0) whose specularColorFactor 25 s / max(s) makes
@@ -33,6 +32,21 @@ about 1e-3).  The lobe fit minimises the rms relative error of s lobe for rho_d 
 sum ((k lobe' - lobe) / (lobe + 1/pi))^2 over the same pairs, k in closed form, the roughness
 by golden section: it depends only on sigma_alpha and the normalisation (f is linear in s),
 so :func:`nearest_maps` reads it from a table over sigma_alpha.
+
+Ideal mirrors (sigma_alpha <= :data:`~.ward.SIGMA_MIRROR`) reflect rho_s times
+:func:`~.ward.mirror_albedo`'s fraction in the mirror direction (with ``'radiance'``, Radiance's
+Fresnel estimate, which also dims the diffuse part).  Mitsuba: the same blend with a smooth
+``conductor`` (``"distribution": "mirror"``, alpha 0, F = 1 or the dielectric's), exact for the
+microfacet normalisations; Radiance: ``plastic``/``metal`` of roughness 0, exact for
+``'radiance'`` (and ``'balanced'``, ``'duer'`` below Radiance's Fresnel threshold); glTF:
+roughness 0 (renderers clamp it to a near-mirror), never stated exact.  The specular
+reflectance is k s per channel, k = 2 / (min q + max q) with q = s P / M the ratio of the form's
+mirror (P its Fresnel; 1 for Radiance, whose own estimate is added as Radiance does, and glTF)
+to the fitted one M over view zeniths 0-80 degrees: the least max relative error (Radiance: k
+against mirror_reflectance alone, so 1 where it is 1).  A mirror's error (:data:`MIRROR_DOMAIN`)
+is the relative error per channel of the directional albedo, diffuse plus mirror, at
+:data:`MIRROR_ZENITHS`; ``max`` = ``albedo_max``.  The albedo is smooth in the zenith: between
+the 0.25-degree steps its maxima exceed the grid's by about 1e-6 (relative).
 """
 
 from dataclasses import dataclass
@@ -42,8 +56,9 @@ import numpy as np
 
 from ..errors import SkyfitError, check_choice, check_range
 from .microfacet import LOBES, albedo_nodes, distribution, fresnel_dielectric, microfacet_lobe, split
-from .ward import (NORMALISATIONS, SIGMA_MAX, SIGMA_MIRROR, lobe_albedo_directions,
-                   lobe_albedo_nodes, specular_lobe, ward_brdf)
+from .ward import (NORMALISATIONS, RADIANCE_FRESNEL_K, RADIANCE_FRESNEL_MIN, SIGMA_MAX,
+                   SIGMA_MIRROR, lobe_albedo_directions, lobe_albedo_nodes, mirror_reflectance,
+                   radiance_fresnel, specular_lobe, ward_brdf)
 
 FORMS = ("mitsuba", "radiance", "gltf")
 #: The lobes each form can take (a microfacet lobe's name, ``'balanced'``, ``'gltf'``).
@@ -69,6 +84,15 @@ ALBEDO_ZENITHS = (0.0, 20.0, 40.0, 60.0, 70.0, 80.0)
 DOMAIN = ("f_r per RGB channel relative to max(f_r, 1e-3 sr^-1), light and view within 80 deg of "
           "the normal: 10-deg zenith x 45-deg azimuth grid plus the highlight in steps of "
           "sigma_alpha; albedo at view zeniths 0-80 deg")
+#: View zeniths of an ideal mirror's error [degrees] and of its scale fit.
+MIRROR_ZENITHS, MIRROR_FIT_ZENITHS = np.linspace(0.0, THETA_MAX, 321), np.linspace(0.0, THETA_MAX, 81)
+MIRROR_DOMAIN = ("ideal mirror: directional albedo (diffuse + mirror reflectance) per RGB channel "
+                 "relative to max(albedo, pi 1e-3) at view zeniths 0-80 deg by 0.25 deg")
+MIRROR_NOTE = "an ideal mirror: the error is that of the mirror's reflectance over view zeniths 0-80 deg"
+#: 2 int_0^1 F(mu) mu dmu of Radiance's Fresnel estimate F (:func:`~.ward.radiance_fresnel`):
+#: a Lambertian's albedo lost to it at the light's side [unitless].
+_RAD_LOSS = 2 * ((1 - np.exp(-5.85) * 6.85) / 5.85 ** 2 - RADIANCE_FRESNEL_K / 2)
+_BLOCK = 2000
 
 
 @dataclass(frozen=True)
@@ -217,7 +241,7 @@ def _reflectances(form, family, rho_d, s, alpha, k):
     notes, and the effective BRDF f' = D / pi + (A + B w) lobe' (w Schlick's weight) as
     (D, A, B), each (N, 3).  One distribution, Fresnel, weight (Mitsuba) or type (Radiance)
     for all texels."""
-    ks, notes = k[:, None] * s, []
+    ks, notes = _ks(k, s), []
     zero = np.zeros_like(s)
     if form == "mitsuba":
         md, ms = float(np.max(rho_d)), float(np.max(ks))
@@ -262,23 +286,29 @@ def _reflectances(form, family, rho_d, s, alpha, k):
     return p, notes, ((1 - spec[:, None]) * base, f0, spec[:, None] - f0)
 
 
+def _ks(k, s):
+    """k s (N, 3) for a scale k (N,) or per channel (N, 3)."""
+    return np.reshape(k, (len(s), -1)) * s
+
+
 def form_brdf(form, params, wi, wo):
     """f_r [sr^-1], RGB (..., 3), of one material of ``form`` with ``params`` as
     :func:`nearest` returns them, at light ``wi`` and view ``wo`` (unit vectors, normal +Z):
     Mitsuba's blend of diffuse and roughconductor (:func:`~.microfacet.microfacet_lobe`),
-    Radiance's plastic or metal (:func:`~.ward.ward_brdf` 'balanced'), :func:`gltf_brdf`."""
+    Radiance's plastic or metal (:func:`~.ward.ward_brdf` 'radiance', i.e. 'balanced' with its
+    Fresnel estimate at roughness 0), :func:`gltf_brdf`.  A mirror's delta is left out."""
     check_choice("material form", form, FORMS)
     wi, wo = np.asarray(wi, dtype=float), np.asarray(wo, dtype=float)
     if form == "mitsuba":
         name = f"{params['distribution']}_{'metal' if params['material'] == 'none' else 'plastic'}"
         w, up = params["weight"], ((wi[..., 2] > 0) & (wo[..., 2] > 0))[..., None]
+        lobe = 0.0 if name.startswith("mirror") else microfacet_lobe(wi, wo, params["alpha"], name)
         return (1 - w) * np.asarray(params["diffuse_reflectance"]) / np.pi * up \
-            + w * np.asarray(params["specular_reflectance"]) \
-            * microfacet_lobe(wi, wo, params["alpha"], name)[..., None]
+            + w * np.asarray(params["specular_reflectance"]) * np.asarray(lobe)[..., None]
     if form == "radiance":
         c, spec = np.asarray(params["colour"], dtype=float), params["spec"]
         rho_s = c * spec if params["type"] == "metal" else np.full(3, spec)
-        return ward_brdf(wi, wo, c * (1 - spec), rho_s, params["roughness"], "balanced")
+        return ward_brdf(wi, wo, c * (1 - spec), rho_s, params["roughness"], "radiance", spec)
     ext = params["KHR_materials_specular"]
     return gltf_brdf(wi, wo, params["baseColorFactor"][:3], params["metallicFactor"],
                      params["roughnessFactor"], ext["specularFactor"], ext["specularColorFactor"])
@@ -296,9 +326,6 @@ def _check(form, rho_d, s, sigma_alpha, normalisation):
     check_range("rho_d", d, 0.0, 1.0)
     check_range("s", sp, 0.0, 1.0)
     check_range("sigma_alpha", sig, 0.0, SIGMA_MAX)
-    if np.any(sig <= SIGMA_MIRROR):
-        raise SkyfitError(f"sigma_alpha = {np.min(sig):g} is an ideal mirror (<= {SIGMA_MIRROR:g}), "
-                          "which no form here matches: export it as a smooth conductor or mirror.")
     return d.reshape(-1, 3), sp.reshape(-1, 3), sig.reshape(-1)
 
 
@@ -324,8 +351,56 @@ def _choose(form, normalisation, rho_d, s, fits):
     if normalisation in NATIVE[form]:
         return NATIVE[form][normalisation]
     fams = FAMILIES[form]
-    ok = [f for f in fams if np.max(rho_d) + np.max(fits[f][1][:, None] * s) <= 1 + 1e-9]
+    ok = [f for f in fams if np.max(rho_d) + np.max(_ks(fits[f][1], s)) <= 1 + 1e-9]
     return min(ok or fams, key=lambda f: np.sum(fits[f][2]))
+
+
+def _mirror_albedo(name, fr, d, a, b, c):
+    """Directional albedo (N, Z, 3) at view cosines c (Z,) of a diffuse d (N, 3) and a mirror
+    a P(c) + b (1 - c)^5 (P: :func:`~.ward.mirror_reflectance` of ``name``; glTF's Schlick rise
+    b), with Radiance's Fresnel estimate F where fr (N,) is 1: mirror a + F (1 - a), diffuse
+    d (1 - F(c)) (1 - :data:`_RAD_LOSS`) (:func:`~.ward.ward_brdf`, :func:`~.ward.mirror_albedo`)."""
+    f = fr[:, None, None] * radiance_fresnel(c)[:, None]
+    return d[:, None] * (1 - f) * (1 - _RAD_LOSS * fr[:, None, None]) + f * (1 - a[:, None]) \
+        + a[:, None] * mirror_reflectance(c, name)[:, None] + b[:, None] * ((1 - c) ** 5)[:, None]
+
+
+def _fitted_mirror(normalisation, d, s, c):
+    """The fitted mirror's albedo (N, Z, 3): Radiance's estimate where max(s) reaches its threshold."""
+    fr = (np.max(s, -1) >= RADIANCE_FRESNEL_MIN) * float(normalisation == "radiance")
+    return _mirror_albedo(normalisation, fr, d, s, np.zeros_like(s), c)
+
+
+def _mirror_k(form, family, normalisation, s):
+    """The scale k (N, 3) of a mirror's k s and its max relative error (N,) over
+    :data:`MIRROR_FIT_ZENITHS` (module docstring), in blocks of texels."""
+    c, k, e = np.cos(np.radians(MIRROR_FIT_ZENITHS)), np.ones_like(s), np.zeros(len(s))
+    for b in range(0, len(s), _BLOCK):
+        sb = s[b:b + _BLOCK]
+        m = _fitted_mirror("balanced" if form == "radiance" and normalisation == "radiance"
+                           else normalisation, np.zeros_like(sb), sb, c)
+        q = sb[:, None] * mirror_reflectance(c, family if form == "mitsuba" else "balanced")[:, None] \
+            / np.where(m > 0, m, 1.0)
+        lo, hi = np.min(q, 1), np.max(q, 1)
+        k[b:b + _BLOCK] = np.where(hi > 0, 2 / np.where(hi > 0, lo + hi, 1), 1.0)
+        e[b:b + _BLOCK] = np.max(np.where(hi > 0, (hi - lo) / np.where(hi > 0, lo + hi, 1), 0), -1)
+    return k, e
+
+
+def _mirror_errors(form, family, normalisation, d, s, eff, spec):
+    """rms, max, albedo_max (N,) of mirrors: the relative error of the form's albedo (eff =
+    (D, A, B) of _reflectances; ``spec`` Radiance's) against the fitted one at MIRROR_ZENITHS."""
+    c, out = np.cos(np.radians(MIRROR_ZENITHS)), np.zeros((3, len(d)))
+    fr = np.asarray(spec) >= RADIANCE_FRESNEL_MIN if form == "radiance" else np.zeros(len(d))
+    for b in range(0, len(d), _BLOCK):
+        sl = slice(b, b + _BLOCK)
+        ref = _fitted_mirror(normalisation, d[sl], s[sl], c)
+        alb = _mirror_albedo(family if form == "mitsuba" else "balanced", fr[sl] * 1.0,
+                             *(e[sl] for e in eff), c)
+        rel = np.abs(alb - ref) / np.maximum(ref, np.pi * F_FLOOR)
+        out[0, sl], out[1, sl] = np.sqrt(np.mean(rel ** 2, axis=(-2, -1))), np.max(rel, axis=(-2, -1))
+    out[2] = out[1]
+    return out
 
 
 def nearest(form, rho_d, s, sigma_alpha, normalisation="ward"):
@@ -336,7 +411,7 @@ def nearest(form, rho_d, s, sigma_alpha, normalisation="ward"):
     ----------
     form : {'mitsuba', 'radiance', 'gltf'}
     rho_d, s : RGB triples, diffuse and specular reflectance [unitless, 0-1]
-    sigma_alpha : float, roughness (rms slope) [unitless, SIGMA_MIRROR-1, exclusive of mirrors]
+    sigma_alpha : float, roughness (rms slope) [unitless, 0-1; <= SIGMA_MIRROR an ideal mirror]
     normalisation : one of :data:`~.ward.NORMALISATIONS`
 
     Returns
@@ -346,6 +421,10 @@ def nearest(form, rho_d, s, sigma_alpha, normalisation="ward"):
     d, sp, sig = _check(form, rho_d, s, np.reshape(sigma_alpha, ()), normalisation) \
         if np.ndim(sigma_alpha) == 0 else _check(form, rho_d, s, sigma_alpha, normalisation)
     sigma = float(sig[0])
+    if sigma <= SIGMA_MIRROR:                            # no lobe fit: nearest_maps's path
+        p, e = nearest_maps(form, d, sp, sig, normalisation)
+        return Match(form, _plain(p), e.pop("exact"),
+                     {k: float(v[0]) if isinstance(v, np.ndarray) else v for k, v in e.items()})
     if normalisation in NATIVE[form]:
         fits = {NATIVE[form][normalisation]: (np.array([sigma]), np.ones(1), np.zeros(1))}
     else:
@@ -415,34 +494,40 @@ def nearest_maps(form, rho_d, s, sigma_alpha, normalisation="ward"):
 
     The lobe fit is read from a table over :data:`SIGMA_NODES` (alpha and k interpolated
     linearly in log sigma), and one distribution and Fresnel (Mitsuba), type (Radiance) and
-    Mitsuba weight serve the whole map.  Returns (params, error): params as :func:`nearest`'s
-    with an array (N,) or (N, 3) (``baseColorFactor`` (N, 4)) per texel-varying entry; error
-    {"rms", "max", "albedo_max"} arrays (N,), each texel's error at its nearest table node
-    (its reflectances with the node's sigma, within a factor 1.08, and fit; max over the
-    pairs on the convex hull of the node's lobe values, which holds the largest error of the
-    node's grid, rms over every 12th pair), "domain", "notes", "exact"."""
+    Mitsuba weight serve the whole map (chosen by its rough texels if it has any).  Returns
+    (params, error): params as :func:`nearest`'s with an array (N,) or (N, 3)
+    (``baseColorFactor`` (N, 4)) per texel-varying entry; error {"rms", "max", "albedo_max"}
+    arrays (N,), "domain", "notes", "exact".  A rough texel's error is that at its nearest
+    table node (its reflectances with the node's sigma, within a factor 1.08, and fit; max over
+    the pairs on the convex hull of the node's lobe values, which holds the largest error of the
+    node's grid, rms over every 12th pair); a mirror's is :func:`nearest`'s (alpha 0; Mitsuba's
+    ``"distribution"`` is ``"mirror"`` when every texel is one)."""
     d, sp, sig = _check(form, rho_d, s, sigma_alpha, normalisation)
-    x = np.log(sig)
+    n, mir = len(sig), sig <= SIGMA_MIRROR
+    rough, native = ~mir, normalisation in NATIVE[form]
+    xr, xs = np.log(sig[rough]), np.log(SIGMA_NODES)
     fits = {}
-    for fam in ([NATIVE[form][normalisation]] if normalisation in NATIVE[form] else FAMILIES[form]):
-        if normalisation in NATIVE[form]:
-            fits[fam] = (sig, np.ones_like(sig), np.zeros_like(sig))
-            continue
-        t = _table(normalisation, fam)
-        a = np.exp(np.interp(x, np.log(SIGMA_NODES), np.log(t[:, 0])))
-        fits[fam] = (np.maximum(a, 1.01 * SIGMA_MIRROR), np.interp(x, np.log(SIGMA_NODES), t[:, 1]),
-                     np.interp(x, np.log(SIGMA_NODES), t[:, 2]))
-    family = _choose(form, normalisation, d, sp, fits)
+    for fam in ([NATIVE[form][normalisation]] if native else FAMILIES[form]):
+        alpha, k, cost = np.zeros(n), np.ones((n, 3)), np.zeros(n)
+        if native:
+            alpha[rough] = sig[rough]
+        elif rough.any():
+            t = _table(normalisation, fam)
+            alpha[rough] = np.maximum(np.exp(np.interp(xr, xs, np.log(t[:, 0]))), 1.01 * SIGMA_MIRROR)
+            k[rough], cost[rough] = np.interp(xr, xs, t[:, 1])[:, None], np.interp(xr, xs, t[:, 2])
+        k[mir], cost[mir] = _mirror_k(form, fam, normalisation, sp[mir])
+        fits[fam] = (alpha, k, cost)
+    sel = rough if rough.any() else mir
+    family = _choose(form, normalisation, d[sel], sp[sel], {f: tuple(v[sel] for v in fit)
+                                                            for f, fit in fits.items()})
     params, notes, (dd, aa, bb) = _reflectances(form, family, d, sp, *fits[family][:2])
-    n = len(sig)
     err = {k: np.zeros(n) for k in ("rms", "max", "albedo_max")}
-    exact = normalisation in NATIVE[form] and np.allclose(dd, d, atol=1e-12) \
-        and np.allclose(aa, sp, atol=1e-12)
+    exact = not rough.any() or native and np.allclose(dd[rough], d[rough], atol=1e-12) \
+        and np.allclose(aa[rough], sp[rough], atol=1e-12)
     if not exact:
-        node = np.clip(np.rint((x - x[0] * 0 - np.log(SIGMA_NODES[0]))
-                               / np.log(SIGMA_NODES[1] / SIGMA_NODES[0])), 0, len(SIGMA_NODES) - 1)
+        node = np.clip(np.rint((xr - xs[0]) / (xs[1] - xs[0])), 0, len(SIGMA_NODES) - 1)
         for j in np.unique(node).astype(int):
-            idx = np.flatnonzero(node == j)
+            idx = np.flatnonzero(rough)[node == j]
             t = _table(normalisation, family)[j]
             _, _, eff = _reflectances(form, family, d[idx], sp[idx], np.full(len(idx), t[0]),
                                       np.full(len(idx), t[1]))
@@ -460,5 +545,19 @@ def nearest_maps(form, rho_d, s, sigma_alpha, normalisation="ward"):
                 k = np.flatnonzero(idx == i)
                 err["max"][i] = np.max(_map_errors(d[[i]], sp[[i]], tuple(e[k] for e in eff), feat,
                                                    slice(None)))
-    err.update(domain=DOMAIN, notes=tuple(notes), exact=bool(exact))
+    domain = DOMAIN
+    if mir.any():
+        e = _mirror_errors(form, family, normalisation, d[mir], sp[mir],
+                           (dd[mir], aa[mir], bb[mir]), params.get("spec", np.zeros(n))[mir])
+        exact = exact and form != "gltf" and np.max(e[1]) <= 1e-12
+        err["rms"][mir], err["max"][mir], err["albedo_max"][mir] = (0 * e if exact else e)
+        notes.append(MIRROR_NOTE)
+        domain = MIRROR_DOMAIN if not rough.any() else f"{DOMAIN}; {MIRROR_DOMAIN}"
+        if form == "gltf":
+            notes.append("roughness 0: glTF renderers clamp it to a small value (a near-mirror)")
+        elif form == "mitsuba" and rough.any():
+            notes.append("mirror texels have alpha 0 in the map's roughconductor (a near-mirror)")
+        elif form == "mitsuba":
+            params["distribution"] = "mirror"
+    err.update(domain=domain, notes=tuple(notes), exact=bool(exact))
     return params, err
