@@ -194,7 +194,7 @@ def test_exported_materials_render_the_fitted_day(exported, gensky_day, tmp_path
 
 def _map_folder(folder, lobe="ggx_plastic"):
     """A per-pixel map as `skyfit fit --per-pixel` writes it (5 x 5, the colour model, two
-    metal texels, one texel not mapped): its planes and map_summary.json; returns the planes."""
+    metal texels, a mirror, one texel not mapped): its planes and map_summary.json; returns the planes."""
     from skyfit_mi.render.image import write_exr
 
     rng = np.random.default_rng(0)
@@ -202,6 +202,7 @@ def _map_folder(folder, lobe="ggx_plastic"):
               "C_b": rng.uniform(.2, .9, (5, 5)), "rho_s": rng.uniform(.02, .2, (5, 5)),
               "sigma_alpha": rng.uniform(.05, .3, (5, 5))}
     planes["rho_s"][0, :2] = 0.8
+    planes["sigma_alpha"][2, 3] = 0.0                       # an ideal mirror
     folder.mkdir()
     for k, v in planes.items():
         v[4, 4] = np.nan
