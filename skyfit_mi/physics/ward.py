@@ -130,16 +130,28 @@ def raw_parameters(model="raw", **params):
         return rho_d, rho_s, sigma
     rho_s = float(params["rho_s"])
     check_range("rho_s", rho_s, 0.0, 1.0)
-    if model == "two":
-        return np.full(3, 1.0 - rho_s), np.full(3, rho_s), sigma
     if model == "achromatic":
-        r = float(params["R"])
-        check_range("total reflectance R", r, 0.0, 1.0)
-        return np.full(3, r * (1.0 - rho_s)), np.full(3, r * rho_s), sigma     # eq. 3.20
-    c = _rgb(params["C"], "C")
-    check_range("colour C", c, 0.0, 1.0)
-    spec = c * rho_s if rho_s >= METAL_THRESHOLD else np.full(3, rho_s)
-    return c * (1.0 - rho_s), spec, sigma
+        check_range("total reflectance R", float(params["R"]), 0.0, 1.0)
+    if model == "colour":
+        check_range("colour C", _rgb(params["C"], "C"), 0.0, 1.0)
+    first = {"two": None, "achromatic": params.get("R"), "colour": params.get("C")}[model]
+    rho_d, spec = raw_reflectances(model, rho_s, first)
+    return rho_d[0], spec[0], sigma
+
+
+def raw_reflectances(model, rho_s, first=None):
+    """rho_d and rho_s, each (N, 3), of N materials of ``model`` ('two', 'achromatic' or
+    'colour'; thesis 7.1, eq. 3.20) with specular reflectances ``rho_s`` (N,) and ``first``
+    their R (N,) or C (N, 3) [unitless], unchecked (:func:`raw_parameters` checks one)."""
+    rho_s = np.atleast_1d(np.asarray(rho_s, dtype=float))[:, None]
+    if model == "two":
+        return np.repeat(1.0 - rho_s, 3, axis=1), np.repeat(rho_s, 3, axis=1)
+    if model == "achromatic":
+        r = np.atleast_1d(np.asarray(first, dtype=float))[:, None]
+        return np.repeat(r * (1.0 - rho_s), 3, axis=1), np.repeat(r * rho_s, 3, axis=1)
+    c = np.atleast_2d(np.asarray(first, dtype=float))
+    spec = np.where(rho_s >= METAL_THRESHOLD, c * rho_s, np.repeat(rho_s, 3, axis=1))
+    return c * (1.0 - rho_s), spec
 
 
 def colour_rule_twin(C, rho_s):

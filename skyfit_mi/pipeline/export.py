@@ -38,7 +38,7 @@ import numpy as np
 from ..errors import SkyfitError
 from ..files import ensure_dir, to_json, write_text
 from ..physics.material_match import FORMS, GLTF_F0, nearest, nearest_maps
-from ..physics.ward import raw_parameters
+from ..physics.ward import raw_parameters, raw_reflectances
 from ..render.fit_model import PARAMETERS, material_dict
 from ..render.image import to_srgb8, write_exr, write_png
 from ..render.scene_xml import ward_element
@@ -119,10 +119,10 @@ def read_map(folder):
             continue
         theta = np.stack([planes[n] for n in names], axis=-1)
         here = np.all(np.isfinite(theta), axis=-1) & ~mask
-        for y, x in zip(*np.nonzero(here)):
-            m = material_dict(model, theta[y, x])
-            rho_d[y, x], s[y, x], sigma[y, x] = raw_parameters(
-                **{k: v for k, v in m.items() if k != "normalisation"})
+        th = theta[here].astype(float)
+        first = {"two": None, "achromatic": th[:, 0], "colour": th[:, :3]}[model]
+        rho_d[here], s[here] = raw_reflectances(model, th[:, -2], first)
+        sigma[here] = th[:, -1]
         mask |= here
     if not mask.any():
         raise SkyfitError(f"the map in {folder} has no mapped pixel; map the regions again.")
