@@ -224,10 +224,11 @@ def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
             except cv2.error:
                 M, rho = None, float("nan")
             if M is None or not rho >= MIN_CORRELATION:
-                raise SkyfitError(f"{names[i]}: cannot be registered on {names[ref]} (ECC "
-                                  f"{'did not converge' if M is None else f'correlation {rho:.2f}'}"
-                                  f", at least {MIN_CORRELATION:g} needed); check that it shows "
-                                  "the same view, drop it, or give --no-register.")
+                why = "ECC did not converge" if M is None else \
+                    f"ECC correlation {rho:.2f}, at least {MIN_CORRELATION:g} needed"
+                raise SkyfitError(f"{names[i]}: cannot be registered on {names[ref]}, the "
+                                  f"reference ({why}); check that both show the same view, "
+                                  "drop the odd one, or give --no-register.")
             moved = float(np.max(np.hypot(*(corners @ M.T - corners[:, :2]).T)))
             if moved > limit:
                 raise SkyfitError(f"{names[i]}: it moved {moved:.1f} px from {names[ref]} "
