@@ -151,11 +151,12 @@ def _ingest(args):
         from .pipeline.observation_table import ingest_table
 
         photo_only = [k for k in ("times", "name_pattern", "response", "gamma", "exposure",
-                                  "colorchecker", "noise", "colour_matrix_error")
-                      if getattr(args, k) is not None]
-        if args.photos or photo_only or args.vignetting != "none":
-            what = "photographs" if args.photos else "--" + (photo_only or ["vignetting"])[0] \
-                .replace("_", "-")
+                                  "colorchecker", "noise", "colour_matrix_error",
+                                  "register_limit") if getattr(args, k) is not None]
+        photo_only += ["vignetting"] * (args.vignetting != "none") + \
+            ["no_register"] * args.no_register
+        if args.photos or photo_only:
+            what = "photographs" if args.photos else "--" + photo_only[0].replace("_", "-")
             raise SkyfitError(f"--table takes no {what}: the table gives frames, values and "
                               "sigmas; give either photographs or --table.")
         ingest_table(args.table, args.spec, args.output, tz=args.tz, site=args.site,
@@ -171,8 +172,9 @@ def _ingest(args):
            name_pattern=args.name_pattern, tz=args.tz, site=args.site, response=args.response,
            gamma=args.gamma, exposure=args.exposure, calibrate=dict(args.calibrate or []),
            colorchecker=args.colorchecker, vignetting=args.vignetting, noise=args.noise,
-           colour_matrix_error=args.colour_matrix_error, overwrite=args.overwrite,
-           progress=not args.quiet)
+           colour_matrix_error=args.colour_matrix_error, register=not args.no_register,
+           **({} if args.register_limit is None else {"register_limit_px": args.register_limit}),
+           overwrite=args.overwrite, progress=not args.quiet)
 
 
 def _pixels(args):
@@ -488,6 +490,11 @@ def _add_ingest(sub, common):
                      "linear sRGB), which a grey card cannot calibrate; fits widen their "
                      "intervals by it (default 0.03 for RAWs, developed with the file's own "
                      "matrix; 0 for other files)")
+    ing.add_argument("--no-register", action="store_true", help="take the frames as aligned "
+                     "(default: each frame's shift and rotation against the one nearest the "
+                     "middle of the day measured and undone)")
+    ing.add_argument("--register-limit", type=float, metavar="PX", help="refuse a frame that "
+                     "moved more than this [px] (default 5)")
     ing.add_argument("--overwrite", action="store_true",
                      help="replace another run's output in the folder (starts clean)")
     ing.add_argument("-q", "--quiet", action="store_true", help="no progress bar")

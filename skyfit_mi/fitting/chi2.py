@@ -326,7 +326,9 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
                         f"{len(doc['frames'])} frames are fitted; finish it with `skyfit render`.")
     reach = colour_reach(doc)
     mixing = "a RAW's demosaicing" if any("raw_demosaic" in f for f in rendered) \
-        else "the JPEGs' subsampled chroma"
+        else "the JPEGs' subsampled chroma" if any("jpeg_dc" in f and max(
+            f["jpeg_dc"]["chroma_subsampling"]) > 1 for f in rendered) \
+        else "the frames' registration, resampled"
     mixed = np.zeros(len(pixels), bool)
     if reach and one_fit:
         mixed = _colour_mixed(str(root), doc.get("run_id"), reach)[pixels[:, 1], pixels[:, 0]]

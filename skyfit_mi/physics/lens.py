@@ -65,3 +65,26 @@ def check_distortion(k, fov, width, height):
                           "growing; check the values and their signs (OpenCV's convention, "
                           "barrel k1 < 0).")
     return [float(k1), float(k2)]
+
+
+def distort(x, y, k):
+    """Normalised pinhole coordinates ``x``, ``y`` [1] moved by the radial distortion ``k`` =
+    [k1] or [k1, k2] (Brown 1966, OpenCV's convention): (x, y) (1 + k1 r^2 + k2 r^4)."""
+    k1, k2 = (list(k) + [0.0, 0.0])[:2]
+    r2 = x * x + y * y
+    f = 1.0 + k1 * r2 + k2 * r2 * r2
+    return x * f, y * f
+
+
+def undistort(xd, yd, k, iterations=20):
+    """The inverse of :func:`distort`: normalised pinhole coordinates [1] of distorted ones,
+    by Newton's method on the radius (monotonic for a ``k`` that :func:`check_distortion`
+    accepts; 20 steps reach float64 rounding for |k1| <= 0.3 over a 90-degree field)."""
+    k1, k2 = (list(k) + [0.0, 0.0])[:2]
+    rd = np.hypot(xd, yd)
+    r = rd.copy()
+    for _ in range(iterations):
+        r = r - (r * (1 + k1 * r ** 2 + k2 * r ** 4) - rd) / (1 + 3 * k1 * r ** 2 + 5 * k2 * r ** 4)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = np.where(rd > 0, r / rd, 1.0)
+    return xd * s, yd * s

@@ -54,6 +54,7 @@ from .photo_times import check_times, frame_times
 from .photos import RAW_COLOUR_REACH, SUFFIXES, check_same_size, read_photo
 from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
 from .raw_noise import bootstrap, cfa_planes
+from .registration import LIMIT_PX, register_frames
 from .sequence import (FrameRenderer, finish, frame_record, manifest_header, prepare_folder,
                        write_frame)
 from .spec import SpecError, read_spec, validate_spec
@@ -770,11 +771,13 @@ def _unbiased(values, bias, max_code):
     return np.where(keep, values, np.clip(values - bias, 0.0, max_code)).astype(values.dtype)
 
 
-def _jpeg_errors(values, jpeg, sensor, noise, shown, progress, patches=None):
+def _jpeg_errors(values, jpeg, sensor, noise, shown, progress, patches=None,
+                 registration=None):
     """Per JPEG frame (index -> settings in ``jpeg``): the bootstrap of its compression
     (:func:`.jpeg_noise.bootstrap_variance`, with the sensor's ``noise``): {"variance",
     "rho", "bias_mean" (the frame's mean bias per channel), "bias_patches" (the bias at the
-    (H, W) mask ``patches``, the calibration's pixels; None without), "settings", "shown"};
+    (H, W) mask ``patches``, the calibration's pixels, of the frame registered by
+    ``registration``; None without), "settings", "shown"};
     the frame's ``values`` (a list, changed in place) lose the compression's mean error
     (:func:`_unbiased`).  The variance is kept as float16 (3 significant digits: 0.05% in
     sigma) and the bias not at all: a frame's own values take two bytes more a value, not
@@ -788,7 +791,9 @@ def _jpeg_errors(values, jpeg, sensor, noise, shown, progress, patches=None):
         values[i] = _unbiased(values[i], bias, sensor.max_code)
         out[i] = {"variance": var.astype(np.float16), "rho": rho,
                   "bias_mean": np.nanmean(bias, axis=(0, 1)),
-                  "bias_patches": None if patches is None else bias[patches].astype(np.float32),
+                  "bias_patches": None if patches is None else (
+                      bias if registration is None else registration.warp(i, bias)
+                  )[patches].astype(np.float32),
                   "settings": jpeg[i], "shown": shown}
     return out
 
@@ -809,6 +814,8 @@ class IngestOptions:
     vignetting: str = "none"
     noise: tuple = None
     colour_matrix_error: float = None
+    register: bool = True
+    register_limit_px: float = LIMIT_PX
 
     @property
     def fitted(self):
@@ -892,7 +899,10 @@ def ingest(photo_paths, spec_path, out_dir, *, overwrite=False, progress=True, l
     Its stages, each with a typed result: :func:`check_choices`, :func:`read_frames`
     (photographs, times and the spec's frames), :func:`linearise` (encoding and vignetting),
     :func:`calibration_patches` (references, chart, fitted response), :func:`noise_model`
-    (read + shot noise and JPEG errors), :func:`frame_exposures`, then :func:`_write`.
+    (read + shot noise and JPEG errors), :func:`frame_exposures`, then :func:`_write`; between
+    the first two, :func:`.registration.register_frames` measures each frame's motion (and the
+    lens's distortion), undone where the frames' geometry matters: the calibration patches and
+    the frames written.
 
     Parameters
     ----------
@@ -913,24 +923,29 @@ def ingest(photo_paths, spec_path, out_dir, *, overwrite=False, progress=True, l
             (``calibration.colorchecker``)
         vignetting : 'none', 'cos4', or the path of a flat-field image
         noise : (a [DN^2], b [DN]) of the noise model, or None to estimate it from the frames
+        register, register_limit_px : register the frames on the one nearest the middle of the
+            day (default True), refusing a frame that moved more than the limit [px]
     """
     o = check_choices(IngestOptions(**choices))
     frames = read_frames(photo_paths, spec_path, out_dir, o, log)
     linear = linearise(frames, o)
-    patches = calibration_patches(frames, linear, o, log)
-    noise = noise_model(frames, linear.values, patches, o, progress, log)
+    registration = register_frames(frames, linear, o.register, o.register_limit_px, log)
+    patches = calibration_patches(frames, linear, registration, o, log)
+    noise = noise_model(frames, linear.values, patches, registration, o, progress, log)
     exposures = frame_exposures(frames, patches, noise, o, log)
     options = {"times_csv": str(o.times_csv), "name_pattern": o.name_pattern, "tz": o.tz,
                "response": ("fit: " if o.fitted else "") + exposures.sensor.response,
                "gamma": exposures.sensor.gamma, "exposure": o.exposure,
                "calibrate": o.calibrate, "colorchecker": o.colorchecker,
                "vignetting": str(o.vignetting), "noise": [noise.a, noise.b],
-               "colour_matrix_error": o.colour_matrix_error}
+               "colour_matrix_error": o.colour_matrix_error, "register": o.register,
+               "register_limit_px": o.register_limit_px}
     run_id = _run_id(frames.paths, frames.spec.raw, options)
     out = Path(out_dir)
     with FolderLock(out):
         prepare_folder(out, run_id, frames.size + (3,), overwrite, log)
-        return _write(out, frames, linear, noise, exposures, options, run_id, progress)
+        return _write(out, frames, linear, registration, noise, exposures, options, run_id,
+                      progress)
 
 
 def check_choices(o):
@@ -947,6 +962,9 @@ def check_choices(o):
         raise SkyfitError(f"--colour-matrix-error {o.colour_matrix_error:g}: give the relative "
                           "error of the colour matrix's entries as a number in [0, 1) (e.g. "
                           "0.03), or leave it out.")
+    if not (np.isfinite(o.register_limit_px) and o.register_limit_px > 0):
+        raise SkyfitError(f"--register-limit {o.register_limit_px:g}: give the largest shift a "
+                          "frame may have [px] as a positive number (e.g. 5).")
     if o.exposure is not None and (o.calibrate or o.colorchecker):
         raise SkyfitError("--exposure is not used when --calibrate or --colorchecker set the "
                           "exposure from the scene's reference; give one or the other.")
@@ -1034,11 +1052,13 @@ def linearise(frames, o):
     return Linear(sensor, float_scale, falloff, flat, values)
 
 
-def calibration_patches(frames, linear, o, log):
+def calibration_patches(frames, linear, registration, o, log):
     """The :class:`Patches` of the lit frames: the ``calibrate`` references and a
-    ColorChecker's greys sampled (and the response fitted from them with ``--response fit``),
-    or, without references, the first frame's given exposure (the option's or the spec's)."""
-    lit, values, sensor = frames.lit, linear.values, linear.sensor
+    ColorChecker's greys sampled on the frames registered (:class:`.registration.Registration`),
+    and the response fitted from them with ``--response fit``; or, without references, the first
+    frame's given exposure (the option's or the spec's)."""
+    lit, sensor = frames.lit, linear.sensor
+    values = {i: registration.warp(i, linear.values[i], sensor.max_code) for i in lit}
     rel = _relative_exposures(frames.photos, log)
     out = Patches(sensor, rel)
     if o.colorchecker is not None:
@@ -1068,10 +1088,11 @@ def calibration_patches(frames, linear, o, log):
     return out
 
 
-def noise_model(frames, values, patches, o, progress, log):
+def noise_model(frames, values, patches, registration, o, progress, log):
     """The :class:`Noise` of the lit frames: read + shot noise estimated from them (or the
-    option's), and each JPEG frame's compression errors by bootstrap; for RAWs of a Bayer
-    filter, :func:`_raw_noise`."""
+    option's), and each JPEG frame's compression errors by bootstrap, on the files' own pixels
+    (the compression's bias at the calibration patches ``registration``'s, as they were
+    sampled); for RAWs of a Bayer filter, :func:`_raw_noise`."""
     lit, sensor = frames.lit, patches.sensor
     if all(frames.photos[i].format == "raw" for i in lit):
         planes = [cfa_planes(frames.paths[i]) for i in lit]
@@ -1103,7 +1124,7 @@ def noise_model(frames, values, patches, o, progress, log):
     log(f"noise model: read {np.sqrt(a):.3g} DN rms, shot {b:.3g} DN per linear DN "
         f"({info['source']})")
     return Noise(a, b, info, _jpeg_errors(values, jpeg, sensor, (a, b), shown or (0.0, 0.0),
-                                          progress, patches.mask))
+                                          progress, patches.mask, registration))
 
 
 def _raw_noise(frames, values, planes, o, progress, log):
@@ -1210,8 +1231,9 @@ def colour_matrix(photos, given, measured=None):
     return {"relative_sd": float(given), "source": "given, --colour-matrix-error"}
 
 
-def _write(out, frames, linear, noise, exposures, options, run_id, progress):
-    """Write the sequence folder of the ingest's stages' results."""
+def _write(out, frames, linear, registration, noise, exposures, options, run_id, progress):
+    """Write the sequence folder of the ingest's stages' results, each frame's values and
+    sigma resampled by ``registration`` onto the reference's pinhole pixels."""
     spec, paths, photos, values = frames.spec, frames.paths, frames.photos, linear.values
     sensor, falloff, flat, jpeg_errors = exposures.sensor, linear.falloff, linear.flat, \
         noise.jpeg_errors
@@ -1231,7 +1253,8 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
                           "calibration": exposures.calibration,
                           "colour_matrix": colour_matrix(photos, options["colour_matrix_error"],
                                                          mixing),
-                          "relative_exposure_from_exif": None if rel is None else rel.tolist()}
+                          "relative_exposure_from_exif": None if rel is None else rel.tolist(),
+                          "registration": registration.record}
     bar = None
     if progress:
         from tqdm import tqdm
@@ -1253,6 +1276,16 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
                 sig = np.where(np.isfinite(v), np.sqrt(var), np.inf).astype(np.float32)
             else:
                 sig, edge = _sigma(v, sensor, model, frame_jpeg)
+            offset = block_offset(frame_jpeg["settings"].get("orientation", 1), v.shape) \
+                if frame_jpeg is not None else None
+            v = registration.warp(f.index, v, sensor.max_code)
+            sig = registration.sigma(f.index, sig, v)
+            moved = registration.frames.get(f.index)
+            if moved is not None:
+                rec["registration"] = moved
+                if offset is not None:                  # the blocks move with the frame
+                    offset = [int(o - round(moved.get(d, 0.0))) % 8
+                              for o, d in zip(offset, ("dx_px", "dy_px"))]
             if mixing is not None:
                 v = _unmix(v, mixing["mixing"], sensor)
             s = sensor.linearise(np.nan_to_num(v))
@@ -1270,8 +1303,7 @@ def _write(out, frames, linear, noise, exposures, options, run_id, progress):
                 rec["jpeg_error_DN2"] = np.mean(frame_jpeg["variance"], axis=(0, 1),
                                                  dtype=np.float64).tolist()
                 rec["jpeg_block_correlation"] = frame_jpeg["rho"].tolist()
-                rec["jpeg_block_offset"] = list(block_offset(
-                    frame_jpeg["settings"].get("orientation", 1), v.shape))
+                rec["jpeg_block_offset"] = list(offset)
                 rec["jpeg_edge_block_share"] = float(np.mean(edge))
                 rec["jpeg_bias_removed_DN"] = frame_jpeg["bias_mean"].tolist()
                 rec["jpeg_dc"] = dc_record(frame_jpeg["settings"])

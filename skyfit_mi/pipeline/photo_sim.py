@@ -215,6 +215,13 @@ class PhotoSettings:
         of every other channel's difference from it, a grey untouched), as a maker's matrix
         fitted to another sensor of the model, or under another light, errs; the matrices are
         recorded in photos.json
+    motion : {frame index: (dx [px], dy [px], rotation [degrees])}: the camera nudged, the
+        scene at the render's pixel q seen at R (q - c) + c + (dx, dy) (c the centre, the
+        rotation clockwise as displayed; :mod:`.registration`'s convention), before the
+        vignetting and the noise, which stay with the sensor
+    distortion : (k1[, k2]) the lens's radial distortion
+        (:func:`~skyfit_mi.physics.lens.distort`) about the centre, at the render's field of
+        view; the scene is resampled bicubically for both
     """
 
     exposure: float | None = None
@@ -231,6 +238,8 @@ class PhotoSettings:
     orientation: int = 1
     subsampling: int = 0
     matrix_error: float = 0.0
+    motion: dict | None = None
+    distortion: tuple = ()
 
     def noise(self):
         """(read noise [DN rms], shot gain [DN]) in the format's codes: as given, else 0.8
@@ -240,6 +249,34 @@ class PhotoSettings:
                 else RAW_READ_NOISE_DN if raw else 0.8,
                 self.shot_gain if self.shot_gain is not None
                 else RAW_SHOT_GAIN if raw else 0.02)
+
+
+def _lens(radiance, motion, k, fov):
+    """``radiance`` (H, W, 3) as a camera moved by ``motion`` (dx, dy, rotation_deg; None:
+    not moved) through a lens of distortion ``k`` sees it (:class:`PhotoSettings`): each
+    photograph pixel takes the render's value where its ray, undistorted and moved back,
+    lands (bicubic, edges repeated)."""
+    if motion is None and not any(k):
+        return radiance
+    import cv2
+
+    from ..physics.lens import focal_px, undistort
+
+    h, w = radiance.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    c = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+    if any(k):
+        f = focal_px(fov, w)
+        x, y = undistort((xx - c[0]) / f, (yy - c[1]) / f, k)
+        xx, yy = f * x + c[0], f * y + c[1]
+    if motion is not None:
+        dx, dy, deg = motion
+        t = np.radians(deg)
+        px, py = xx - c[0] - dx, yy - c[1] - dy           # q = R^T (p - c - d) + c
+        xx = np.cos(t) * px + np.sin(t) * py + c[0]
+        yy = -np.sin(t) * px + np.cos(t) * py + c[1]
+    return cv2.remap(radiance, xx.astype(np.float32), yy.astype(np.float32), cv2.INTER_CUBIC,
+                     borderMode=cv2.BORDER_REPLICATE).astype(float)
 
 
 def photograph_day(sequence, out_dir, settings=None, seed=0):
@@ -276,7 +313,8 @@ def photograph_day(sequence, out_dir, settings=None, seed=0):
     paths, record = [], []
     for f in rendered_frames(doc):
         rng = np.random.default_rng([seed, f["index"]])
-        radiance = read_frame_image(root, f, "radiance", (h, w, 3)).astype(float)
+        radiance = _lens(read_frame_image(root, f, "radiance", (h, w, 3)).astype(np.float32),
+                         (photo.motion or {}).get(f["index"]), photo.distortion, cam["fov_deg"])
         signal = radiance * falloff[..., None]
         p99 = float(np.percentile(signal, 99)) * base
         stops = SHUTTER_STOPS[SHUTTER_STOPS * 15.0 * p99 <= photo.target]
@@ -313,6 +351,8 @@ def photograph_day(sequence, out_dir, settings=None, seed=0):
             **({"subsampling": photo.subsampling} if fmt == "jpeg" else {}),
             "orientation": orientation,
             "shutter_error": photo.shutter_error,
+            "motion": {str(i): list(m) for i, m in (photo.motion or {}).items()},
+            "distortion": list(photo.distortion),
             **({"raw": {"bits": RAW_BITS, "black_DN": RAW_BLACK, "white_DN": white,
                         "cfa": "RGGB", "camera_from_linear_srgb": to_camera.tolist(),
                         "matrix_error": float(photo.matrix_error),

@@ -109,13 +109,16 @@ def colour_reach(doc):
     away.  One more covers a camera's encoder that smooths its chroma before subsampling.  At
     a boundary between materials the mix is a bias, not noise (measured on a board of
     saturated paints at quality 95, 4:2:0: the blue of yellow paint +26% on the ring next to
-    the boundary), so a fit leaves such pixels out (:func:`colour_mixed`)."""
+    the boundary), so a fit leaves such pixels out (:func:`colour_mixed`).  Registered or
+    undistorted photographs (:mod:`.registration`) mix each pixel with its neighbours by their
+    resampling, and their motion's uncertainty moves it: ``ingest.registration.erode_px``."""
     frames = doc.get("frames", ())
     factor = max((max(f["jpeg_dc"]["chroma_subsampling"]) for f in frames if "jpeg_dc" in f),
                  default=1)
     jpeg = factor + 1 if factor > 1 else 0
-    return max([jpeg] + [int(f["raw_demosaic"]["colour_reach_px"]) for f in frames
-                         if "raw_demosaic" in f])
+    resampled = int(((doc.get("ingest") or {}).get("registration") or {}).get("erode_px", 0))
+    return max([jpeg, resampled] + [int(f["raw_demosaic"]["colour_reach_px"]) for f in frames
+                                    if "raw_demosaic" in f])
 
 
 def colour_mixed(labels, reach):
@@ -134,8 +137,8 @@ def colour_mixed(labels, reach):
 def material_regions(manifest):
     """(name, pixels) of every Ward material the camera sees, from the scene's label image:
     the pixels inside each material's area (edge pixels, which also see a neighbour, left
-    out, and in JPEGs with subsampled chroma or demosaiced RAWs those whose colour mixes a
-    neighbour's, :func:`colour_reach`); SkyfitError when it sees none.  For an observation table,
+    out, and in JPEGs with subsampled chroma, demosaiced RAWs or registered photographs those
+    whose colour mixes a neighbour's, :func:`colour_reach`); SkyfitError when it sees none.  For an observation table,
     (name, None) of each region it measures."""
     from scipy.ndimage import binary_erosion
 

@@ -1,0 +1,268 @@
+"""Frames registered: a tripod nudged between photographs, measured and undone, and the lens's
+distortion undone with it.
+
+A frame's motion is a Euclidean map of the reference frame's pixels q onto its own,
+
+    p = R(theta) (q - c) + c + (dx, dy),
+
+c the image's centre, theta positive turning the scene clockwise as displayed (image y down).
+It is measured in the pinhole's geometry (each photograph undistorted,
+:func:`.camera_pose.undistort_image`) on the log luminance (linearised, vignetting divided out)
+high-passed over HIGHPASS_SD_PX, which keeps edges and texture and drops the day's slow change
+of shading: phase correlation (Kuglin and Hines 1975) gives the shift, the enhanced correlation
+coefficient (ECC, Evangelidis and Psarakis 2008; invariant to each frame's gain and offset)
+refines it with the rotation.  Its uncertainty is the Gauss-Newton covariance of that fit
+(:func:`motion_covariance`).
+
+Each photograph is then resampled once onto the reference's pinhole pixels, the motion and the
+distortion composed into one map (bilinear, OpenCV ``remap``); pixels that map off the
+photograph are NaN (their sigma infinite), and a pixel that mixes a clipped value (0 or the
+top code) with others is NaN too (it is neither a value nor a bound).  The noise model and a
+JPEG's errors are found on the file's own pixels, before resampling: its grid of blocks and
+its neighbouring pixels' independence hold there.  The variance is resampled with the same
+weights as the values (not their squares): a resampled pixel's own scatter is smaller (by
+the share ``pixel_variance_share``, 1/4 at worst), but it shares its errors with its
+neighbours, and a region's mean over many pixels carries the photograph's error, which a fit
+treating pixels as independent then gets right (squared weights would narrow its intervals by
+up to 2x).  Regions are eroded (``erode_px``, :func:`.pixels.colour_reach`) by the
+resampling's reach, 1 px, plus three standard deviations of the motion.
+
+References: C. D. Kuglin and D. C. Hines, "The phase correlation image alignment method",
+Proc. IEEE Int. Conf. Cybernetics and Society, 163-165, 1975; G. D. Evangelidis and E. Z.
+Psarakis, "Parametric image alignment using enhanced correlation coefficient maximization",
+IEEE TPAMI 30(10), 1858-1865, 2008, doi:10.1109/TPAMI.2008.113.
+"""
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..errors import SkyfitError
+from ..physics.colour import SRGB_LUMINANCE
+from ..physics.lens import distort, focal_px
+from .camera_pose import undistort_image
+
+#: The largest displacement [px] of any pixel of a frame from the reference (--register-limit).
+LIMIT_PX = 5.0
+#: The high-pass: log luminance less its (normalised) Gaussian blur of this sd [px].
+HIGHPASS_SD_PX = 1.5
+#: ECC: OpenCV's Gaussian pre-filter size [px], the most iterations and the step [px] at which
+#: it stops.
+ECC_FILTER, ECC_ITERATIONS, ECC_EPS = 1, 200, 1e-5
+#: The least ECC correlation of a registered frame with the reference: below it the frames do
+#: not show one scene alike enough to align.
+MIN_CORRELATION = 0.5
+#: Shares of a resampled pixel from clipped sources within this of 0 or 1 count as none or all.
+_SHARE_TOL = 1e-4
+
+
+def luminance(values, sensor, falloff):
+    """Linear luminance [1] of codes ``values`` (H, W, 3) [DN] with the vignetting
+    ``falloff`` (H, W) divided out (it stays with the sensor, not the scene); NaN kept."""
+    s = sensor.linearise(np.nan_to_num(values)) @ SRGB_LUMINANCE
+    return np.where(np.all(np.isfinite(values), axis=-1), s / falloff, np.nan)
+
+
+def features(lum):
+    """(high-passed log luminance (H, W) float32, validity mask uint8) of ``lum`` [1]: the log
+    less its Gaussian blur of HIGHPASS_SD_PX, the blur normalised over the valid pixels (NaN
+    and unlit ones are left out, and their border makes no edge)."""
+    ok = np.isfinite(lum) & (lum > 0)
+    if not ok.any():
+        return np.zeros(lum.shape, np.float32), ok.astype(np.uint8)
+    x = np.where(ok, np.log(np.where(ok, lum, 1.0)), 0.0)
+    blur = lambda a: cv2.GaussianBlur(a, (0, 0), HIGHPASS_SD_PX)
+    low = blur(x) / np.maximum(blur(ok.astype(float)), 1e-6)
+    return np.where(ok, x - low, 0.0).astype(np.float32), ok.astype(np.uint8)
+
+
+def measure_motion(ref, img):
+    """The motion of ``img`` against ``ref`` (each a :func:`features` pair): (M (2, 3), the
+    affine map p = M [q, 1] of reference pixels q onto the frame's [px], ECC correlation [1]).
+
+    Phase correlation under a Hann window gives the shift, ECC (MOTION_EUCLIDEAN) refines it
+    with the rotation; cv2.error when ECC does not converge."""
+    (f0, m0), (f1, m1) = ref, img
+    h, w = f0.shape
+    window = cv2.createHanningWindow((w, h), cv2.CV_32F)
+    (dx, dy), _ = cv2.phaseCorrelate(f0.astype(np.float64), f1.astype(np.float64),
+                                     window.astype(np.float64))
+    M = np.float32([[1, 0, dx], [0, 1, dy]])
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, ECC_ITERATIONS, ECC_EPS)
+    rho, M = cv2.findTransformECCWithMask(f0, f1, m0, m1, M, cv2.MOTION_EUCLIDEAN, criteria,
+                                          ECC_FILTER)
+    return M.astype(np.float64), float(rho)
+
+
+def motion_covariance(ref, img, M):
+    """Covariance (3, 3) of the motion (theta [rad], tx, ty [px]; theta about the centre) of
+    ``img`` against ``ref`` (:func:`features` pairs) at ``M``: Gauss-Newton, the residual of
+    ref ~ a img(M q) + b as independent noise, sigma^2 (a^2 J^T J)^-1 with J the frame's
+    gradient along each parameter.  Much of the residual is the day's change of light, an
+    error of the scene that is not noise, so this is a lower bound (measured on the shaken
+    day of tests/test_registration.py: the shifts' errors up to 3x it; the residuals'
+    autocorrelation, summed, did not tell the difference)."""
+    (f0, m0), (f1, m1) = ref, img
+    h, w = f0.shape
+    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+    warped = cv2.warpAffine(f1, M.astype(np.float32), (w, h), flags=flags)
+    valid = (m0 > 0) & (cv2.warpAffine(m1, M.astype(np.float32), (w, h), flags=flags) > 0)
+    gy, gx = np.gradient(warped.astype(np.float64))
+    yy, xx = np.mgrid[0:h, 0:w]
+    xc, yc = xx - (w - 1) / 2.0, yy - (h - 1) / 2.0
+    J = np.stack([-yc * gx + xc * gy, gx, gy], axis=-1)[valid]
+    t = f0[valid] - f0[valid].mean()
+    i = warped[valid] - warped[valid].mean()
+    a = float(t @ i) / max(float(i @ i), 1e-12)
+    r = t - a * i
+    var = float(r @ r) / max(len(r) - 4, 1)
+    return var * np.linalg.pinv(a * a * J.T @ J)
+
+
+def displacement_sd(cov, width, height):
+    """The rms over the image's pixels of one coordinate's standard deviation [px] of the
+    displacement a motion of covariance ``cov`` (:func:`motion_covariance`) gives."""
+    yy, xx = np.mgrid[0:height, 0:width]
+    xc, yc = xx - (width - 1) / 2.0, yy - (height - 1) / 2.0
+    var_x = cov[1, 1] + yc ** 2 * cov[0, 0] - 2 * yc * cov[0, 1]
+    var_y = cov[2, 2] + xc ** 2 * cov[0, 0] + 2 * xc * cov[0, 2]
+    return float(np.sqrt(np.mean(var_x + var_y) / 2.0))
+
+
+def pixel_map(M, camera):
+    """(map_x, map_y) (H, W) float32: where each of the reference pinhole's pixels lies in a
+    photograph of motion ``M`` (:func:`measure_motion`) through the lens of ``camera`` (a
+    validated [camera]: its ``distortion``, :func:`~skyfit_mi.physics.lens.distort`)."""
+    h, w = camera["height"], camera["width"]
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    u = M[0, 0] * xx + M[0, 1] * yy + M[0, 2]
+    v = M[1, 0] * xx + M[1, 1] * yy + M[1, 2]
+    k = camera.get("distortion") or []
+    if any(k):
+        f, cx, cy = focal_px(camera["fov_deg"], w), (w - 1) / 2.0, (h - 1) / 2.0
+        x, y = distort((u - cx) / f, (v - cy) / f, k)
+        u, v = f * x + cx, f * y + cy
+    return u.astype(np.float32), v.astype(np.float32)
+
+
+def remap(img, maps):
+    """``img`` (H, W) or (H, W, C) sampled bilinearly at ``maps`` (:func:`pixel_map`); NaN off
+    the image."""
+    planes = np.asarray(img, np.float32).reshape(img.shape[0], img.shape[1], -1)
+    out = np.stack([cv2.remap(np.ascontiguousarray(planes[..., c]), *maps, cv2.INTER_LINEAR,
+                              borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
+                    for c in range(planes.shape[2])], axis=-1)
+    return out.reshape(img.shape)
+
+
+def variance_share(maps):
+    """The mean over the pixels of the sum of the squared bilinear weights of ``maps``: the
+    share of a source pixel's noise variance a resampled pixel's own scatter keeps [1]."""
+    fx, fy = (m - np.floor(m) for m in maps)
+    return float(np.mean(((1 - fx) ** 2 + fx ** 2) * ((1 - fy) ** 2 + fy ** 2)))
+
+
+@dataclass
+class Registration:
+    """Each resampled frame's map (index -> :func:`pixel_map`), each lit frame's manifest
+    record (index -> ``registration``) and the day's (``ingest.registration``)."""
+
+    maps: dict
+    frames: dict
+    record: dict
+
+    def warp(self, i, values, top=None):
+        """Frame ``i``'s ``values`` (H, W, 3) on the reference's pinhole pixels; for codes
+        [DN] of top code ``top``, a pixel mixing a clipped value (0 or the top) with others is
+        NaN, one of clipped values alone keeps it."""
+        if i not in self.maps:
+            return values
+        out = remap(values, self.maps[i])
+        bounds = () if top is None else ((0.0, values <= 0), (top, values >= top))
+        for bound, clipped in bounds:
+            share = remap(clipped.astype(np.float32), self.maps[i])
+            out = np.where(share > 1 - _SHARE_TOL, bound,
+                           np.where(share > _SHARE_TOL, np.nan, out))
+        return out.astype(np.float32)
+
+    def sigma(self, i, sigma, warped):
+        """Frame ``i``'s sigma (H, W, 3) [DN] on the reference's pixels: its variance
+        resampled with the values' weights (the module docstring), inf where the ``warped``
+        value (:meth:`warp`) is NaN."""
+        if i not in self.maps:
+            return sigma
+        var = remap(np.where(np.isfinite(sigma), np.square(sigma), 0.0), self.maps[i])
+        return np.where(np.isfinite(warped), np.sqrt(var), np.inf).astype(np.float32)
+
+
+def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
+    """The :class:`Registration` of ``frames`` (ingest's ``Frames``; codes and vignetting from
+    ``linear``): with ``register``, each lit frame's motion against the reference (the lit
+    frame nearest the middle of the day) measured, and any lens distortion of the spec's
+    [camera]; SkyfitError naming a frame that moved more than ``limit`` [px] or cannot be
+    registered."""
+    camera, lit, names = frames.spec.camera, frames.lit, [p.name for p in frames.paths]
+    h, w = frames.size
+    k = [float(x) for x in camera.get("distortion") or []]
+    motion = {i: np.float64([[1, 0, 0], [0, 1, 0]]) for i in lit}
+    records, ref = {}, None
+    if register:
+        t = np.array([frames.times[i].timestamp() for i in lit])
+        ref = lit[int(np.argmin(np.abs(t - 0.5 * (t.min() + t.max()))))]
+        feats = {i: features(undistort_image(luminance(linear.values[i], linear.sensor,
+                                                       linear.falloff), camera)) for i in lit}
+        centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+        corners = np.array([[0, 0, 1], [w - 1, 0, 1], [0, h - 1, 1], [w - 1, h - 1, 1.0]])
+        for i in lit:
+            if i == ref:
+                records[i] = {"dx_px": 0.0, "dy_px": 0.0, "rotation_deg": 0.0, "sd_px": 0.0,
+                              "reference": True}
+                continue
+            try:
+                M, rho = measure_motion(feats[ref], feats[i])
+            except cv2.error:
+                M, rho = None, float("nan")
+            if M is None or not rho >= MIN_CORRELATION:
+                why = "ECC did not converge" if M is None else \
+                    f"ECC correlation {rho:.2f}, at least {MIN_CORRELATION:g} needed"
+                raise SkyfitError(f"{names[i]}: cannot be registered on {names[ref]}, the "
+                                  f"reference ({why}); check that both show the same view, "
+                                  "drop the odd one, or give --no-register.")
+            moved = float(np.max(np.hypot(*(corners @ M.T - corners[:, :2]).T)))
+            if moved > limit:
+                raise SkyfitError(f"{names[i]}: it moved {moved:.1f} px from {names[ref]} "
+                                  f"(at most {limit:g} px, --register-limit); check the tripod "
+                                  "and drop the frame, or raise --register-limit.")
+            d = M[:, :2] @ centre + M[:, 2] - centre
+            records[i] = {"dx_px": float(d[0]), "dy_px": float(d[1]),
+                          "rotation_deg": float(np.degrees(np.arctan2(M[1, 0], M[0, 0]))),
+                          "sd_px": displacement_sd(motion_covariance(feats[ref], feats[i], M),
+                                                   w, h),
+                          "correlation": rho}
+            motion[i] = M
+    maps = {i: pixel_map(motion[i], camera) for i in lit if any(k) or (register and i != ref)}
+    for i, m in maps.items():
+        off = (m[0] < 0) | (m[0] > w - 1) | (m[1] < 0) | (m[1] > h - 1)
+        records.setdefault(i, {}).update(pixel_variance_share=variance_share(m),
+                                         off_photo_pixels=int(off.sum()))
+    sd = max((r.get("sd_px", 0.0) for r in records.values()), default=0.0)
+    erode = int(np.ceil(1.0 + 3.0 * sd)) if maps else 0
+    record = {"registered": bool(register), "reference": names[ref] if register else None,
+              "limit_px": float(limit), "distortion_undone": k if any(k) else None,
+              "erode_px": erode, "interpolation": "bilinear, once (motion and distortion "
+              "composed)", "method": "phase correlation (Kuglin and Hines 1975) then ECC, "
+              "Euclidean (Evangelidis and Psarakis 2008), on the high-passed log luminance of "
+              "the undistorted frames; sd_px from the Gauss-Newton covariance",
+              "sigma": "variance resampled with the values' weights: a region's mean keeps the "
+                       "photograph's error; a pixel's own scatter is pixel_variance_share of "
+                       "sigma^2"}
+    if register:
+        moves = [r for i, r in records.items() if i != ref]
+        log(f"registration on {names[ref]}: shifts up to "
+            f"{max((np.hypot(r['dx_px'], r['dy_px']) for r in moves), default=0.0):.2f} px, "
+            f"rotations up to {max((abs(r['rotation_deg']) for r in moves), default=0.0):.3f} "
+            f"deg, sd up to {sd:.3f} px; regions eroded by {erode} px")
+    if any(k):
+        log(f"lens distortion k = {k} undone: the frames resampled onto the spec's pinhole")
+    return Registration(maps, records, record)
