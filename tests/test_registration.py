@@ -65,6 +65,25 @@ def test_the_measured_motion_is_the_cameras(shaken):
     assert all("registration" not in f for f in shaken["docs"][False]["frames"])
 
 
+def test_a_still_day_is_neither_resampled_nor_eroded(shaken):
+    """The same day photographed without motion: each frame's apparent motion (ECC finds a
+    few hundredths of a pixel) is below STILL_PX, so no frame is resampled, the values are the
+    photographs' own and no region is eroded."""
+    from skyfit_mi.pipeline.ingest import ingest
+    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_mi.pipeline.registration import STILL_PX
+
+    tmp = shaken["tmp"]
+    photograph_day(tmp / "truth", tmp / "still", PhotoSettings(fmt="png"), seed=5)
+    doc = ingest([tmp / "still"], shaken["spec"], tmp / "seq_still", progress=False,
+                 calibrate=GREY, vignetting="cos4", log=lambda *a: None)
+    moves = [f["registration"] for f in doc["frames"] if "registration" in f
+             and not f["registration"].get("reference")]
+    assert moves and all(not r["resampled"] for r in moves), moves
+    assert all(np.hypot(r["dx_px"], r["dy_px"]) < STILL_PX for r in moves)
+    assert doc["ingest"]["registration"]["erode_px"] == 0
+
+
 def test_pixels_off_the_photograph_are_masked(shaken):
     """A shifted frame's pixels that fall off the photograph are NaN with infinite sigma,
     counted, and left out of a fit's observations."""

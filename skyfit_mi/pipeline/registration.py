@@ -53,6 +53,10 @@ ECC_FILTER, ECC_ITERATIONS, ECC_EPS = 1, 200, 1e-5
 #: The least ECC correlation of a registered frame with the reference: below it the frames do
 #: not show one scene alike enough to align.
 MIN_CORRELATION = 0.5
+#: A frame that moved less than this [px] (or than 3 sd of its measured motion) is taken as
+#: still and not resampled: ECC finds about 0.05 px of apparent motion on a still day, and a
+#: resampling would smooth its noise and erode the regions for nothing.
+STILL_PX = 0.1
 #: Shares of a resampled pixel from clipped sources within this of 0 or 1 count as none or all.
 _SHARE_TOL = 1e-4
 
@@ -235,19 +239,21 @@ def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
                                   f"(at most {limit:g} px, --register-limit); check the tripod "
                                   "and drop the frame, or raise --register-limit.")
             d = M[:, :2] @ centre + M[:, 2] - centre
+            sd_i = displacement_sd(motion_covariance(feats[ref], feats[i], M), w, h)
             records[i] = {"dx_px": float(d[0]), "dy_px": float(d[1]),
                           "rotation_deg": float(np.degrees(np.arctan2(M[1, 0], M[0, 0]))),
-                          "sd_px": displacement_sd(motion_covariance(feats[ref], feats[i], M),
-                                                   w, h),
-                          "correlation": rho}
-            motion[i] = M
-    maps = {i: pixel_map(motion[i], camera) for i in lit if any(k) or (register and i != ref)}
+                          "sd_px": sd_i, "correlation": rho,
+                          "resampled": bool(moved > max(STILL_PX, 3.0 * sd_i))}
+            if records[i]["resampled"]:
+                motion[i] = M
+    maps = {i: pixel_map(motion[i], camera) for i in lit
+            if any(k) or (register and i != ref and records[i]["resampled"])}
     for i, m in maps.items():
         off = (m[0] < 0) | (m[0] > w - 1) | (m[1] < 0) | (m[1] > h - 1)
         records.setdefault(i, {}).update(pixel_variance_share=variance_share(m),
                                          off_photo_pixels=int(off.sum()))
     sd = max((r.get("sd_px", 0.0) for r in records.values()), default=0.0)
-    erode = int(np.ceil(1.0 + 3.0 * sd)) if maps else 0
+    erode = int(np.ceil(1.0 + 3.0 * sd)) if maps else 0     # a still day: none moved, none
     record = {"registered": bool(register), "reference": names[ref] if register else None,
               "limit_px": float(limit), "distortion_undone": k if any(k) else None,
               "erode_px": erode, "interpolation": "bilinear, once (motion and distortion "
