@@ -35,7 +35,7 @@ from .chi2 import subsample_region
 from .fit import FitCache, FitSession, trace_sessions
 from .landscape import truth_parameters
 from .sky_fit import sky_level_at
-from .uncertainty import band_half_width, widen
+from .uncertainty import Z, band_half_width, widen
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky_shape import shape_variants, shaped
 from ..pipeline.fit_result import check_fit_sequence
@@ -835,7 +835,7 @@ def parameter_draws(result, names, lower, upper, n, rng):
     one's 36 -> 32 of 39; docs/BENCHMARKS.md, "Real surfaces".)"""
     theta = np.array([result["parameters"][k] for k in names], dtype=float)
     iv = np.array([result["intervals"][k]["95"] for k in names], dtype=float)
-    sd = (iv[:, 1] - iv[:, 0]) / (2 * 1.959963984540054)
+    sd = (iv[:, 1] - iv[:, 0]) / (2 * Z["95"])
     corr = np.eye(len(names))
     cov = result.get("covariance", {})
     if cov.get("names") == list(names):

@@ -135,7 +135,7 @@ def band_half_width(variance, value, kappa, interval95=None, level=0.95):
     x, w = np.polynomial.hermite_e.hermegauss(KAPPA_NODES)        # standard normal nodes
     w = w / w.sum()
     spread = np.where(x < 0, np.log(kappa / lo) if lo > 0 else np.log(hi / kappa),
-                      np.log(hi / kappa)) / 1.959963984540054
+                      np.log(hi / kappa)) / Z["95"]
     kappas = kappa * np.exp(spread * x)
     sds = np.sqrt(variance[..., None] + (kappas * value[..., None]) ** 2)   # (..., nodes)
 

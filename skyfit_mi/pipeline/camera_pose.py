@@ -35,6 +35,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy.stats import norm
 
 from ..errors import OutputError, SkyfitError
 from ..files import write_json, write_text
@@ -56,7 +57,7 @@ FOCAL_REL_SD = 0.2
 #: Relative singular values below which points are collinear (scene or image) or coplanar.
 FLAT = 1e-3
 #: Two-sided 95% factor of a Gaussian.
-Z95 = 1.959963984540054
+Z95 = float(norm.ppf(0.975))
 COLUMNS = ("x_px", "y_px", "X", "Y", "Z")
 
 
