@@ -33,7 +33,7 @@ from ..render.basis_table import (TableModel, available_memory, block_budget, me
                                   shared_budget, trace_basis)
 from ..render.fit_model import (BY_COUNT, PARAMETERS, bounds, check_fit_normalisation,
                                 check_start, other_readings)
-from ..render.scene import pose_sd
+from ..render.scene import camera_at, pose_sd
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
                                   SKY_PLANS, CacheOptions, PointRays, anchors_pay,
                                   build_light_cache)
@@ -427,17 +427,8 @@ class FitSession:
         of a pixel lands on the region's material (P, T), with the camera at ``to_world``
         (4x4) instead of the sequence's: the light traced again at ``cache_settings``, with
         the fit's samples and seed, under the light the fit saw (its sky's level and shape)."""
-        import mitsuba as mi
-
-        sensor = mi.traverse(self.scene.sensors()[0])
-        nominal = sensor["to_world"]
-        sensor["to_world"] = mi.ScalarTransform4f(np.asarray(to_world, dtype=float))
-        sensor.update()
-        try:
+        with camera_at(self.scene, to_world):
             parts, _ = self._trace(self.obs.pixels, self.name, self.light)
-        finally:
-            sensor["to_world"] = nominal
-            sensor.update()
         table = self._mixed(parts)
         return self.model_on(table).radiance(theta), table.hit
 

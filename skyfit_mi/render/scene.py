@@ -1,5 +1,7 @@
 """Mitsuba scene dictionaries in the project's world frame (+X east, +Y north, +Z up)."""
 
+from contextlib import contextmanager
+
 import numpy as np
 
 from ..conventions import direction_from_angles
@@ -123,6 +125,23 @@ def turn_camera(to_world, pivot, angle, deg):
     out[:3, :3] = R @ m[:3, :3]
     out[:3, 3] = p + R @ (m[:3, 3] - p)
     return out
+
+
+@contextmanager
+def camera_at(scene, to_world):
+    """Within the block, the scene's first sensor placed at ``to_world`` (4x4); its own
+    placement restored after."""
+    import mitsuba as mi
+
+    sensor = mi.traverse(scene.sensors()[0])
+    nominal = sensor["to_world"]
+    sensor["to_world"] = mi.ScalarTransform4f(np.asarray(to_world, dtype=float))
+    sensor.update()
+    try:
+        yield scene
+    finally:
+        sensor["to_world"] = nominal
+        sensor.update()
 
 
 def view_centre(scene):
