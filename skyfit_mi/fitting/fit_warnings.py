@@ -2,8 +2,8 @@
 :meth:`~.fit.FitSession.run`): the method's status, loading's notes, the fitted sky's, the
 sun's level's and the camera pose's hold on the parameters, bounds, misfit and the model's
 error, held-out frames, identifiability, the day's geometry, the light cache's own noise and
-the colour rule's ambiguity.  Each function takes the region's :class:`~.fit.FitSession` ``s`` and its
-:class:`~.fit.FitState` ``fit``."""
+the colour rule's ambiguity.  Each function takes the region's :class:`~.fit.FitSession` ``s``
+and its :class:`~.fit.FitState` ``fit``."""
 
 import numpy as np
 
