@@ -71,6 +71,17 @@ def _numbers(text):
                                          "(e.g. 0.5,0.1)") from None
 
 
+def _pose_sd(text):
+    """``--pose-sd-deg``: one number of degrees, checked as the spec's pose_sd_deg."""
+    from .render.scene import pose_sd
+
+    try:
+        return pose_sd(float(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc) if isinstance(exc, SkyfitError)
+                                         else f"{text!r} is not a number of degrees") from None
+
+
 def _named(text, what="NAME=VALUE"):
     name, sep, value = text.partition("=")
     if not sep or not REGION_NAME.match(name):
@@ -244,9 +255,9 @@ def _fit(args):
                 if getattr(args, k) not in (None, 1)] + (["--overwrite"] if args.overwrite else [])
     if map_only and not args.per_pixel:
         raise SkyfitError(f"{map_only[0]} belongs to a map: add --per-pixel (or leave it out).")
-    region_only = [f"--{k}" for k, default in (("frames", None), ("positions", None),
-                                               ("directions", DIRECTIONS), ("method", "global"),
-                                               ("start", None))
+    region_only = [f"--{k.replace('_', '-')}" for k, default in (
+                       ("frames", None), ("positions", None), ("directions", DIRECTIONS),
+                       ("method", "global"), ("start", None), ("pose_sd_deg", None))
                    if getattr(args, k) != default]
     if region_only and args.per_pixel:
         raise SkyfitError(f"{region_only[0]} belongs to region fits; a map fits every frame "
@@ -286,7 +297,8 @@ def _fit(args):
         if pixels is not None and len(kept[name]) < len(pixels):
             print(f"{name}: fitting {len(kept[name])} of its {len(pixels)} pixels "
                   f"(--max-pixels, seed {args.seed})")
-    cache = FitCache(args.positions, args.directions)    # seeded by --seed with the method
+    # seeded by --seed with the method
+    cache = FitCache(args.positions, args.directions, pose_sd_deg=args.pose_sd_deg)
     # the light of every region traced together (each frame's kernels once), every region
     # checked before the first is fitted and written
     if auto:
@@ -648,6 +660,11 @@ def _add_fit(sub, common):
                      "the degrees of freedom; the fit JSON's light_cache records it)")
     fit.add_argument("--directions", type=_int_in(1, 1 << 16), default=DIRECTIONS,
                      help=f"light-cache directions per position (default {DIRECTIONS})")
+    fit.add_argument("--pose-sd-deg", type=_pose_sd, default=None, metavar="DEG",
+                     help="the camera pose's uncertainty, 1 sd in azimuth and in the angle "
+                     "from the vertical each [deg], propagated into every interval (a trace "
+                     "of the light per angle; default the manifest's camera.pose_sd_deg, from "
+                     "the spec's [camera], else 0)")
     fit.add_argument("--frames", type=_frame_list, metavar="LIST",
                      help="fit only these frames (manifest indices, e.g. 0-6,9), to hold the "
                      "others out for `skyfit relight` onto the same folder (default: all)")

@@ -3,6 +3,7 @@ Ctrl-C exits 130; fits.csv always agrees with the fit results on disk."""
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -67,6 +68,13 @@ def test_version_help_and_description(capsys):
     (["fit", "{day}", "--region", "disc=pixels:"], ["--region", "at least one pixel"]),
     (["fit", "{day}", "--region", "../x=rect:1,1,2,2"], ["--region", "letters, digits"]),
     (["fit", "{day}", "--all", "--start", "a,b"], ["--start", "not comma-separated numbers"]),
+    (["fit", "{day}", "--all", "--pose-sd-deg", "-1"],
+     ["--pose-sd-deg", "pose_sd_deg azimuth = -1 deg is outside the valid range [0, 10]"]),
+    (["fit", "{day}", "--all", "--pose-sd-deg", "x"], ["--pose-sd-deg", "not a number"]),
+    (["fit", "{day}", "--all", "--per-pixel", "--pose-sd-deg", "1"],
+     ["--pose-sd-deg belongs to region fits"]),
+    (["render", "{tmp}/pose.toml", "-o", "{tmp}/out"],
+     ["[camera] pose_sd_deg has no angle 'tilt'"]),
     (["fit", "{day}", "--all", "--normalisation", "radiance"],
      ["normalisation 'radiance' cannot be fitted", "'balanced'"]),
     (["fit", "{day}", "--all", "--model", "2", "--start", "0.5"],
@@ -94,6 +102,9 @@ def test_bad_input_gets_one_line_and_exit_2(argv, phrases, day, tmp_path, capsys
     monkeypatch.chdir(cli.__file__.rsplit("/skyfit_mi/", 1)[0])        # the repo (scenes/)
     (tmp_path / "afile").write_text("x")
     (tmp_path / "bad.toml").write_text("name = [unclosed")
+    spec = (Path(cli.__file__).parents[1] / "scenes/specs/disc_clear_east.toml").read_text()
+    (tmp_path / "pose.toml").write_text(spec.replace("[camera]",
+                                                     "[camera]\npose_sd_deg = {tilt = 1}"))
     args = [a.format(day=day, tmp=tmp_path) for a in argv]
     code, err = _run(capsys, *args)
     assert code == 2

@@ -83,6 +83,9 @@ def test_phi_only_on_an_intermediate_sky(tmp_path):
     (CAMERA + "\nfov_deg = nan", "fov_deg must be a number"),
     ("matrix = [[1,0,0,0],[0,1,0,0],[0,0,0,0],[0,0,0,1]]", "singular"),
     ("matrix = [[1,0,0],[0,1,0]]", "4 rows of 4 numbers"),
+    (CAMERA + "\npose_sd_deg = -0.5", r"pose_sd_deg azimuth = -0.5 deg is outside .*\[0, 10\]"),
+    (CAMERA + "\npose_sd_deg = {roll = true}", "pose_sd_deg roll must be a number"),
+    (CAMERA + '\npose_sd_deg = "1"', "pose_sd_deg azimuth must be a number"),
 ])
 def test_degenerate_cameras(tmp_path, camera, match):
     with pytest.raises(SpecError, match=match):
@@ -286,3 +289,11 @@ def test_bad_perez_specs_are_refused_by_key(tmp_path, sky, message):
     (tmp_path / "short.csv").write_text("time,ghi\n2026-06-21T09:00,500\n2026-06-21T10:00,600\n")
     with pytest.raises(SpecError, match=message):
         _spec(tmp_path, sky=sky)
+
+
+def test_the_pose_sd_reads_as_azimuth_and_angle_or_a_table(tmp_path):
+    assert _spec(tmp_path, camera=CAMERA + "\npose_sd_deg = 0.5").camera["pose_sd_deg"] == {
+        "azimuth": 0.5, "angle": 0.5, "roll": 0.0}
+    assert _spec(tmp_path, camera=CAMERA + "\npose_sd_deg = {roll = 1}").camera[
+        "pose_sd_deg"] == {"azimuth": 0.0, "angle": 0.0, "roll": 1.0}
+    assert "pose_sd_deg" not in _spec(tmp_path).camera

@@ -25,6 +25,7 @@ from .light import SPEC_LIGHT, LightOptions, LightParts, LightPlan
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import levenberg_marquardt
+from .pose import pose_share
 from ..errors import SkyfitError, check_choice
 from .sky_fit import SkyFit, SkyShare, fit_sky_scale, shape_variants, skies_at_level, sky_level_at
 from ..render import setup
@@ -32,6 +33,7 @@ from ..render.basis_table import (TableModel, available_memory, block_budget, me
                                   shared_budget, trace_basis)
 from ..render.fit_model import (BY_COUNT, PARAMETERS, bounds, check_fit_normalisation,
                                 check_start, other_readings)
+from ..render.scene import camera_at, pose_sd
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
                                   SKY_PLANS, CacheOptions, PointRays, anchors_pay,
                                   build_light_cache)
@@ -90,6 +92,7 @@ class FitState:
     matrix_sd : the standard errors from the camera's colour matrix, an error every value of
         the day shares (:func:`~.intervals.matrix_sd`; zeros without its prior)
     sky : what the light adds to the parameters' errors (:class:`~.sky_fit.SkyShare`)
+    pose : what the camera pose's uncertainty adds (:class:`~.pose.PoseShare`)
     held_out : how well the fit predicts frames it was not fitted to
         (:func:`~.held_out.held_out_error`, on ``problem``: its kappa is the error beyond the
         in-sample model error's), None with too few frames
@@ -120,6 +123,7 @@ class FitState:
     sun_level_sd: np.ndarray = None
     jpeg_shared_sd: np.ndarray = None
     matrix_sd: np.ndarray = None
+    pose: object = None
     held_out: dict = None
 
     @property
@@ -142,12 +146,17 @@ class FitCache:
     plan : where the cache takes the sky's integrals, a name of
         :data:`~skyfit_mi.render.light_cache.SKY_PLANS`: ``fit`` by default, ``anchors`` for
         predictions of compact regions
+    pose_sd_deg : the camera pose's 1-sd [deg] whose effect on the parameters the fit
+        propagates by a trace of the light per angle (:mod:`~.pose`), as
+        :func:`~skyfit_mi.render.scene.pose_sd` reads it (``fit --pose-sd-deg``); None: the
+        manifest's ``camera.pose_sd_deg`` (absent: 0)
     """
 
     positions: int = None
     directions: int = DIRECTIONS
     seed: int = 0
     plan: str = "fit"
+    pose_sd_deg: object = None
 
 
 class FitSession:
@@ -183,6 +192,8 @@ class FitSession:
         t0 = time.perf_counter()
         doc, root = load_manifest(manifest_path)
         self.run_id = doc.get("run_id")
+        self.pose_sd = pose_sd(doc["camera"].get("pose_sd_deg") if cache.pose_sd_deg is None
+                               else cache.pose_sd_deg)
         if is_table(doc):
             self.obs = load_table_observations(manifest_path, name, pixels, frames, min_frames)
             if self.obs.luminance and model == "colour":
@@ -404,8 +415,22 @@ class FitSession:
         """Take the light's ``parts`` (:class:`~.light.LightParts`) and fit on their mix at
         the sky's level and shape (:meth:`set_sky`)."""
         self.parts = parts
+        self._use_table(self._mixed(parts))
+
+    def _mixed(self, parts):
+        """The table of the light's ``parts`` at the sky's level and shape."""
         sun, sky = self.light_levels(self.sky_shape_mix)
-        self._use_table(parts.table(self.sky_scale * sky, self.sky_shape_mix, sun))
+        return parts.table(self.sky_scale * sky, self.sky_shape_mix, sun)
+
+    def radiance_at_pose(self, to_world, theta):
+        """The model's radiance (P, T, 3) [W m^-2 sr^-1] at ``theta`` and where every position
+        of a pixel lands on the region's material (P, T), with the camera at ``to_world``
+        (4x4) instead of the sequence's: the light traced again at ``cache_settings``, with
+        the fit's samples and seed, under the light the fit saw (its sky's level and shape)."""
+        with camera_at(self.scene, to_world):
+            parts, _ = self._trace(self.obs.pixels, self.name, self.light)
+        table = self._mixed(parts)
+        return self.model_on(table).radiance(theta), table.hit
 
     def set_sky(self, k, mix=None):
         """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
@@ -591,6 +616,7 @@ class FitSession:
         fit.jpeg_shared_sd = jpeg_shared_sd(self, J_all, measured, problem.obs.sigma, curv_inv)
         fit.calibration_sd = calibration_sd(self, J_all, problem, measured, theta, curv_inv)
         fit.matrix_sd = matrix_sd(self, J_all, problem, measured, theta, curv_inv)
+        fit.pose = pose_share(self, fit, J_all)
         fit_intervals(self, fit)
         iv95 = np.array([fit.intervals[p]["95"] for p in self.names])
         fit.held_out = held_out_error(

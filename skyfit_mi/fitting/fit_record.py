@@ -8,6 +8,7 @@ from . import uncertainty as unc
 from .chi2 import MEASURED_SE
 from .held_out import HELD_OUT_FRAMES
 from .intervals import matrix_note
+from .pose import pose_record
 from ..pipeline.observation_table import relative_scale
 
 
@@ -52,6 +53,7 @@ def fit_record(s, fit, warnings, start, seed, evaluations, wall, t_method):
             "sun_level_sd": sky.sun_level_sd(s.light), "sun_source": s.light.sun_source,
             "sun_level_error_sd": dict(zip(names, fit.sun_level_sd.tolist()))}}
            if sky.record is not None else {}),
+        **({"pose": pose} if (pose := pose_record(s, fit.pose)) is not None else {}),
         "cache_noise_chi2": fit.cache_noise_chi2,
         "cache_noise_chi2_by_sigma": fit.model_noise_by_sigma,
         "covariance": {"names": list(names), "matrix": fit.covariance.tolist()},

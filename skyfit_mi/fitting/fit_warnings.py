@@ -1,9 +1,9 @@
 """What a fit must tell its user (the stage after the intervals,
-:meth:`~.fit.FitSession.run`): the method's status, loading's notes, the fitted sky's and the
-sun's level's hold on the parameters, bounds, misfit and the model's error, held-out frames,
-identifiability, the day's geometry, the light cache's own noise and the colour rule's
-ambiguity.  Each function takes the region's :class:`~.fit.FitSession` ``s`` and its
-:class:`~.fit.FitState` ``fit``."""
+:meth:`~.fit.FitSession.run`): the method's status, loading's notes, the fitted sky's, the
+sun's level's and the camera pose's hold on the parameters, bounds, misfit and the model's
+error, held-out frames, identifiability, the day's geometry, the light cache's own noise and
+the colour rule's ambiguity.  Each function takes the region's :class:`~.fit.FitSession` ``s``
+and its :class:`~.fit.FitState` ``fit``."""
 
 import numpy as np
 
@@ -11,6 +11,7 @@ from . import uncertainty as unc
 from .fit_record import held_out_record
 from .geometry import geometry_warnings
 from .intervals import matrix_note
+from .pose import pose_warnings
 from .sky_fit import SKY_DOMINATES
 from ..physics.sky import MEASURED_SUN_SD
 from ..physics.ward import METAL_THRESHOLD
@@ -45,6 +46,7 @@ def fit_warnings(s, fit):
     if relative_scale(s.doc):
         warnings.append(s.doc["ingest"]["scale"]["meaning"])
     warnings += sky_warnings(s, fit)
+    warnings += pose_warnings(s, fit)
     own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
     led = [p for i, p in enumerate(names) if fit.matrix_sd[i] > SKY_DOMINATES * own[i]]
     if led:

@@ -2,8 +2,9 @@
 parameter's 68% and 95% intervals from the covariance or the profile of chi-square (thesis
 ch. 6), widened by every error the data share: the light cache's own Monte Carlo error, a
 photographed sequence's calibration, the camera's colour matrix, the rounding a JPEG frame's
-blocks share over the region, the fitted sky and the sun's level.  Each function takes the
-region's :class:`~.fit.FitSession` ``s`` and its :class:`~.fit.FitState` ``fit``."""
+blocks share over the region, the fitted sky, the camera's pose (:mod:`~.pose`) and the sun's
+level.  Each function takes the region's :class:`~.fit.FitSession` ``s`` and its
+:class:`~.fit.FitState` ``fit``."""
 
 import numpy as np
 
@@ -24,8 +25,9 @@ def fit_intervals(s, fit):
     """68% and 95% intervals of every parameter into the :class:`FitState` ``fit`` (its
     intervals, rise, cache_noise_chi2, cache_sd, sun_level_sd): the covariance's, or for
     rho_s and sigma_alpha of a global fit the profile's; each widened by the light cache's
-    own Monte Carlo error, the calibration's (``calibration_sd``), the fitted sky's and, a
-    factor on the reflectances, the sun's level's; by the rounding a JPEG frame's blocks
+    own Monte Carlo error, the calibration's (``calibration_sd``), the fitted sky's, the
+    camera pose's (``pose``, :func:`~.pose.pose_share`) and, a factor on the reflectances,
+    the sun's level's; by the rounding a JPEG frame's blocks
     share over the region (``jpeg_shared_sd``) and the camera's colour matrix's error
     (``matrix_sd``)."""
     problem, theta, names = fit.problem, fit.theta, s.names
@@ -74,11 +76,12 @@ def fit_intervals(s, fit):
     cal_sd = fit.calibration_sd
     sky = fit.sky
     sky_sd = np.zeros(len(names)) if sky.sd is None else sky.sd
+    pose_sd = fit.pose.sd_of(len(names))
     sun_rel = light_level_sd(s.doc, names, sky.sun_level_sd(s.light))
     for i, p in enumerate(names):
         for lv in ("68", "95"):
             intervals[p][lv] = unc.widen(theta[i], intervals[p][lv], unc.Z[lv] * np.sqrt(
-                mc_sd[i] ** 2 + cal_sd[i] ** 2 + sky_sd[i] ** 2
+                mc_sd[i] ** 2 + cal_sd[i] ** 2 + sky_sd[i] ** 2 + pose_sd[i] ** 2
                 + fit.jpeg_shared_sd[i] ** 2 + fit.matrix_sd[i] ** 2), lower[i], upper[i])
             # the sun's level: a factor on every reflectance, lopsided
             intervals[p][lv] = unc.widen_relative(theta[i], intervals[p][lv],

@@ -304,14 +304,18 @@ class CameraEstimate:
 
     def camera_section(self):
         """The spec's [camera] table: origin, a target on the view axis at the depth of
-        ``self.target``, the camera's up, fov_deg, width, height and distortion."""
+        ``self.target``, the camera's up, fov_deg, width, height, distortion and the pose's
+        1-sd in azimuth and angle from the vertical [deg] (:meth:`placement`), which fits
+        propagate into their intervals."""
         m = self.to_world()
         depth = float(np.dot(self.target - self.origin, m[:3, 2]))
+        p = self.placement()
         return {"origin": self.origin.tolist(),
                 "target": (self.origin + depth * m[:3, 2]).tolist(),
                 "up": m[:3, 1].tolist(), "fov_deg": fov_deg(self.focal, self.width),
                 "width": self.width, "height": self.height,
-                "distortion": [float(v) for v in self.k]}
+                "distortion": [float(v) for v in self.k],
+                "pose_sd_deg": {"azimuth": p["azimuth_deg"][1], "angle": p["angle_deg"][1]}}
 
     def _placement(self, p):
         """Azimuth [deg], angle from the vertical [deg], distance [m] and fov [deg] of the
@@ -496,6 +500,8 @@ def camera_toml(estimate, source=""):
     sec = estimate.camera_section()
 
     def val(v):
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{k} = {x!r}" for k, x in v.items()) + " }"
         return "[" + ", ".join(repr(float(x)) for x in v) + "]" if isinstance(v, list) \
             else repr(v)
 
@@ -509,7 +515,8 @@ def camera_toml(estimate, source=""):
              f"[{t[0]:g}, {t[1]:g}, {t[2]:g}]; fov {p['fov_deg'][0]:.3f} +- "
              f"{p['fov_deg'][1]:.3f} deg (1 sigma)",
              "# distortion: [k1, k2] of OpenCV's radial model; the renderer is a pinhole, "
-             "ingest undoes it", "[camera]"]
+             "ingest undoes it; pose_sd_deg: the 1-sigma above, which fits carry into their "
+             "intervals", "[camera]"]
     lines += [f"{k} = {val(v)}" for k, v in sec.items()]
     return "\n".join(lines) + "\n"
 

@@ -182,7 +182,8 @@ def manifest_header(spec, sensor, scene, render, source="render", run_id=None):
         **({"location": spec.raw["location"]} if "location" in spec.raw else {}),
         "scene": {"file": spec.scene_file, "xml": xml, "materials": materials},
         "camera": {"to_world": to_world, "fov_deg": cam["fov_deg"], "fov_axis": "x",
-                   "width": cam["width"], "height": cam["height"]},
+                   "width": cam["width"], "height": cam["height"],
+                   **({"pose_sd_deg": cam["pose_sd_deg"]} if "pose_sd_deg" in cam else {})},
         "sensor": sensor_record(sensor), "render": render, "versions": versions(), "frames": [],
     }
 

@@ -24,7 +24,7 @@ from ..errors import SkyfitError
 from ..physics.gensky import from_gensky
 from ..physics.lens import check_distortion
 from ..render.fit_model import PARAMETERS, material_dict
-from ..render.scene import camera_matrix
+from ..render.scene import camera_matrix, pose_sd
 from ..render.scene_xml import resolve_materials
 from ..render.variant import VARIANTS
 from ..physics.sky import (EFFICACY_CLEAR, EFFICACY_OVERCAST, GROUND_ALBEDO, SKY_TYPES,
@@ -59,7 +59,7 @@ _SCHEMA = {
     "scene": {"file", "ground_albedo"},
     "materials": None,
     "camera": {"azimuth_deg", "angle_deg", "distance", "target", "origin", "up", "matrix",
-               "fov_deg", "width", "height", "distortion"},
+               "fov_deg", "width", "height", "distortion", "pose_sd_deg"},
     "sensor": {"exposure", "response", "gamma", "bits", "noise_percent", "cos4"},
     "render": {"spp", "seed", "variant", "max_depth", "below_horizon", "sampler", "integrator"},
 }
@@ -445,6 +445,8 @@ def _camera(sec):
             c["distortion"] = check_distortion(c["distortion"], c["fov_deg"], c["width"],
                                                c["height"])
         camera_matrix(c)
+        if "pose_sd_deg" in c:
+            c["pose_sd_deg"] = pose_sd(c["pose_sd_deg"])
     except SkyfitError as exc:
         raise SpecError(f"[camera] {exc}") from None
     return c

@@ -1,5 +1,7 @@
 """Mitsuba scene dictionaries in the project's world frame (+X east, +Y north, +Z up)."""
 
+from contextlib import contextmanager
+
 import numpy as np
 
 from ..conventions import direction_from_angles
@@ -68,6 +70,93 @@ def camera_matrix(cam):
     if origin is None:
         origin = camera_origin(cam["azimuth_deg"], cam["angle_deg"], cam["distance"], target)
     return look_at(origin, target, cam.get("up"))
+
+
+#: The pose's angles whose uncertainty a fit propagates (``[camera] pose_sd_deg``): the compass
+#: azimuth (about the vertical through the target), the angle from the vertical (about the
+#: horizontal axis across the view) and the roll (about the view axis).
+POSE_ANGLES = ("azimuth", "angle", "roll")
+#: The largest pose sd taken [deg]: beyond it a linearised shift means little.
+POSE_SD_MAX = 10.0
+
+
+def pose_sd(value):
+    """{azimuth, angle, roll}: the pose's 1-sd [deg] from ``value``, one number (azimuth and
+    angle from the vertical, each; roll 0), a table of some of POSE_ANGLES (the rest 0) or None
+    (0); each in [0, POSE_SD_MAX].  Raises SkyfitError otherwise."""
+    if value is None:
+        value = 0.0
+    if not isinstance(value, dict):
+        value = {"azimuth": value, "angle": value}
+    wrong = sorted(set(value) - set(POSE_ANGLES))
+    if wrong:
+        raise SkyfitError(f"pose_sd_deg has no angle {wrong[0]!r}; give one number (azimuth and "
+                          "angle from the vertical, each 1 sd [deg]) or a table of azimuth, "
+                          "angle, roll.")
+    out = {}
+    for k in POSE_ANGLES:
+        v = value.get(k, 0.0)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+            raise SkyfitError(f"pose_sd_deg {k} must be a number of degrees, got {v!r}.")
+        out[k] = float(check_range(f"pose_sd_deg {k}", v, 0.0, POSE_SD_MAX, "deg"))
+    return out
+
+
+def turn_camera(to_world, pivot, angle, deg):
+    """The camera ``to_world`` (4x4) turned by ``deg`` [deg] about ``pivot`` (3,) [m] in one of
+    POSE_ANGLES: ``azimuth`` clockwise seen from above (the compass azimuth from the pivot
+    grows), ``angle`` about the horizontal axis across the view (the angle from the vertical
+    grows), ``roll`` about the view axis; as a compass placement's azimuth_deg and angle_deg
+    move the camera about its target (:func:`camera_origin`)."""
+    m = np.asarray(to_world, dtype=float)
+    forward = m[:3, 2]
+    axis = {"azimuth": np.array([0.0, 0.0, -1.0]), "roll": forward,
+            "angle": np.cross(forward, [0.0, 0.0, 1.0])}[angle]
+    if np.linalg.norm(axis) < 1e-9:
+        raise SkyfitError("the camera looks straight up or down, so its angle from the "
+                          "vertical has no axis to turn about; give pose_sd_deg as a table "
+                          "without angle.")
+    k = axis / np.linalg.norm(axis)
+    a = np.radians(deg)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    R = np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K        # Rodrigues
+    p = np.asarray(pivot, dtype=float)
+    out = m.copy()
+    out[:3, :3] = R @ m[:3, :3]
+    out[:3, 3] = p + R @ (m[:3, 3] - p)
+    return out
+
+
+@contextmanager
+def camera_at(scene, to_world):
+    """Within the block, the scene's first sensor placed at ``to_world`` (4x4); its own
+    placement restored after."""
+    import mitsuba as mi
+
+    sensor = mi.traverse(scene.sensors()[0])
+    nominal = sensor["to_world"]
+    sensor["to_world"] = mi.ScalarTransform4f(np.asarray(to_world, dtype=float))
+    sensor.update()
+    try:
+        yield scene
+    finally:
+        sensor["to_world"] = nominal
+        sensor.update()
+
+
+def view_centre(scene):
+    """Where the central ray of the scene's first sensor meets the scene [m] (3,): the pivot
+    its pose turns about (:func:`turn_camera`).  Raises SkyfitError where it meets nothing."""
+    import mitsuba as mi
+
+    ray, _ = scene.sensors()[0].sample_ray(mi.Float(0.0), mi.Float(0.5),
+                                           mi.Point2f(0.5, 0.5), mi.Point2f(0.5, 0.5))
+    si = scene.ray_intersect(ray)
+    if not bool(si.is_valid()[0]):
+        raise SkyfitError("the camera's central ray meets nothing in the scene, so there is "
+                          "no target for its pose's uncertainty to turn it about; aim the "
+                          "camera at the scene or give no pose_sd_deg.")
+    return np.array(si.p, dtype=float).ravel()
 
 
 def perspective_sensor(origin, target=(0.0, 0.0, 0.0), fov_deg=30.0, width=256, height=256, spp=64,
