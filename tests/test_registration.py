@@ -8,7 +8,6 @@ measured is each frame's (dx, dy) at the image's centre and its rotation against
 reference, :mod:`skyfit_mi.pipeline.registration`'s convention, the same as the simulator's.
 """
 
-import json
 
 import numpy as np
 import pytest

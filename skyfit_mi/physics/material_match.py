@@ -55,7 +55,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..errors import SkyfitError, check_choice, check_range
-from .microfacet import LOBES, albedo_nodes, distribution, fresnel_dielectric, microfacet_lobe, split
+from .microfacet import LOBES, albedo_nodes, distribution, microfacet_lobe, split
 from .ward import (NORMALISATIONS, RADIANCE_FRESNEL_K, RADIANCE_FRESNEL_MIN, SIGMA_MAX,
                    SIGMA_MIRROR, lobe_albedo_directions, lobe_albedo_nodes, mirror_reflectance,
                    radiance_fresnel, specular_lobe, ward_brdf)
