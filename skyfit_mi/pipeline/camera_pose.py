@@ -171,7 +171,7 @@ class _Fit:
     ssr: float
 
 
-def _project(cv2, world, fit, width, height):
+def _project(world, fit, width, height):
     """Projected points (N, 2) [px] and the Jacobian (2N, 14) of ``projectPoints`` (rotation
     vector, translation, fx, fy, cx, cy, k1, k2, p1, p2)."""
     uv, jac = cv2.projectPoints(world, fit.rvec, fit.tvec, intrinsics(fit.focal, width, height),
@@ -179,12 +179,12 @@ def _project(cv2, world, fit, width, height):
     return uv.reshape(-1, 2), jac
 
 
-def _depths(cv2, world, fit):
+def _depths(world, fit):
     """Depth [m] of each world point along the camera's view."""
     return world @ cv2.Rodrigues(fit.rvec)[0][2] + fit.tvec[2]
 
 
-def _poses(cv2, points, focal, k, coplanar, width, height):
+def _poses(points, focal, k, coplanar, width, height):
     """Pose solutions at a given focal length and distortion, refined, best first."""
     K, dist = intrinsics(focal, width, height), np.r_[k, 0.0, 0.0]
     rvecs, tvecs = [], []
@@ -201,16 +201,16 @@ def _poses(cv2, points, focal, k, coplanar, width, height):
         # the refined pose, or the first one if refining turned the camera away (bad marks)
         fit = next((f for f in (_Fit(rv.ravel(), tv.ravel(), float(focal), np.asarray(k, float),
                                      0.0) for rv, tv in ((r, t), (r0, t0)))
-                    if np.median(_depths(cv2, points.world, f)) > 0), None)
+                    if np.median(_depths(points.world, f)) > 0), None)
         if fit is None:
             continue
-        fit.ssr = float(np.sum((_project(cv2, points.world, fit, width, height)[0]
+        fit.ssr = float(np.sum((_project(points.world, fit, width, height)[0]
                                 - points.image) ** 2))
         out.append(fit)
     return sorted(out, key=lambda f: f.ssr)
 
 
-def _calibrate(cv2, points, start, free_k, width, height):
+def _calibrate(points, start, free_k, width, height):
     """``start`` refined by ``calibrateCamera`` on the one view with the focal length and the
     first ``free_k`` radial terms free (principal point fixed, square pixels, no tangential)."""
     flags = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT
@@ -222,38 +222,38 @@ def _calibrate(cv2, points, start, free_k, width, height):
         intrinsics(start.focal, width, height), np.r_[start.k, 0.0, 0.0, 0.0],
         flags=flags, criteria=crit)
     fit = _Fit(rvecs[0].ravel(), tvecs[0].ravel(), float(K[0, 0]), dist.ravel()[:2].copy(), 0.0)
-    fit.ssr = float(np.sum((_project(cv2, points.world, fit, width, height)[0]
+    fit.ssr = float(np.sum((_project(points.world, fit, width, height)[0]
                             - points.image) ** 2))
     return fit
 
 
-def _angle_between(r1, r2, cv2):
+def _angle_between(r1, r2):
     """Angle between two rotations given as rotation vectors [degrees]."""
     d = cv2.Rodrigues(r1)[0] @ cv2.Rodrigues(r2)[0].T
     return float(np.degrees(np.arccos(np.clip((np.trace(d) - 1.0) / 2.0, -1.0, 1.0))))
 
 
-def _solve(cv2, points, width, height, focal, k, free_k, coplanar):
+def _solve(points, width, height, focal, k, free_k, coplanar):
     """The best fit, and the best pose at its focal length and distortion that differs from
     it by more than a degree (the other view of a plane; None if there is none)."""
     if focal is not None:
-        fits = _poses(cv2, points, focal, k, coplanar, width, height)
+        fits = _poses(points, focal, k, coplanar, width, height)
     else:
         fits = [f for fov in np.geomspace(5.0, 140.0, 36)
-                for f in _poses(cv2, points, focal_px(fov, width), k, coplanar, width, height)]
+                for f in _poses(points, focal_px(fov, width), k, coplanar, width, height)]
     if not fits:
         raise SkyfitError("OpenCV found no camera for these points; check that each mark and "
                           "its scene position belong to the same point.")
     best = min(fits, key=lambda f: f.ssr)
     if focal is None:
         try:
-            best = min(best, _calibrate(cv2, points, best, free_k, width, height),
+            best = min(best, _calibrate(points, best, free_k, width, height),
                        key=lambda f: f.ssr)
         except cv2.error as exc:
             raise SkyfitError(f"OpenCV's calibrateCamera failed on these points ({exc.err}); "
                               "give --fov-deg, or mark more points.") from None
-        fits = _poses(cv2, points, best.focal, best.k, coplanar, width, height)
-    other = next((f for f in fits if _angle_between(f.rvec, best.rvec, cv2) > 1.0), None)
+        fits = _poses(points, best.focal, best.k, coplanar, width, height)
+    other = next((f for f in fits if _angle_between(f.rvec, best.rvec) > 1.0), None)
     return best, other
 
 
@@ -424,14 +424,14 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
     free_k = 0 if (fov is not None or distortion is not None or reach < K1_REACH) else \
         (2 if len(points.names) >= K2_POINTS and reach >= K2_REACH else 1)
     focal = None if fov is None else focal_px(fov, width)
-    best, other = _solve(cv2, points, width, height, focal, k, free_k, coplanar)
+    best, other = _solve(points, width, height, focal, k, free_k, coplanar)
 
-    behind = [n for n, z in zip(points.names, _depths(cv2, points.world, best)) if z <= 0]
+    behind = [n for n, z in zip(points.names, _depths(points.world, best)) if z <= 0]
     if behind:
         raise SkyfitError(f"the best camera has {', '.join(behind)} behind it; check those "
                           "points' scene coordinates (signs, east/north order) and marks.")
 
-    uv, jac = _project(cv2, points.world, best, width, height)
+    uv, jac = _project(points.world, best, width, height)
     residuals = points.image - uv
     cols = [jac[:, :6]] + ([jac[:, 6:7] + jac[:, 7:8]] if focal is None else []) \
         + [jac[:, 10 + i:11 + i] for i in range(free_k)]
@@ -439,7 +439,7 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
     free = ("r1", "r2", "r3", "t1", "t2", "t3") + (("focal",) if focal is None else ()) \
         + ("k1", "k2")[:free_k]
     dof = 2 * len(points.names) - len(free)
-    _check_misfit(cv2, points, best, dof, marking_px, width, height, focal, k, free_k, coplanar)
+    _check_misfit(points, best, dof, marking_px, width, height, focal, k, free_k, coplanar)
     if other is not None and (other.ssr - best.ssr) / marking_px ** 2 < AMBIGUOUS_CHI2:
         raise SkyfitError("two camera poses fit the marks alike (the two views one plane allows, "
                           f"rms {np.sqrt(best.ssr / len(uv)):.2f} and "
@@ -465,7 +465,7 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
                           None if other is None else float(np.sqrt(other.ssr / len(uv))))
 
 
-def _check_misfit(cv2, points, best, dof, marking_px, width, height, focal, k, free_k, coplanar):
+def _check_misfit(points, best, dof, marking_px, width, height, focal, k, free_k, coplanar):
     """Refuse residuals far beyond the marking accuracy, naming the point whose removal
     improves the fit most (or, with too few points to leave one out, the worst-fitting one)."""
     from scipy.stats import chi2
@@ -473,7 +473,7 @@ def _check_misfit(cv2, points, best, dof, marking_px, width, height, focal, k, f
     if dof <= 0 or chi2.sf(best.ssr / marking_px ** 2, dof) >= P_MISFIT:
         return
     n = len(points.names)
-    err = np.hypot(*(_project(cv2, points.world, best, width, height)[0] - points.image).T)
+    err = np.hypot(*(_project(points.world, best, width, height)[0] - points.image).T)
     worst = int(np.argmax(err))
     if n - 1 >= MIN_POINTS["given" if focal is not None else "free"]:
         gains = []
@@ -482,7 +482,7 @@ def _check_misfit(cv2, points, best, dof, marking_px, width, height, focal, k, f
             sub = MarkedPoints(tuple(np.array(points.names)[keep]), points.image[keep],
                                points.world[keep])
             try:
-                gains.append(best.ssr - _solve(cv2, sub, width, height, focal, k, free_k,
+                gains.append(best.ssr - _solve(sub, width, height, focal, k, free_k,
                                                coplanar)[0].ssr)
             except SkyfitError:
                 gains.append(-np.inf)
