@@ -40,6 +40,7 @@ from scipy.stats import norm
 from ..errors import OutputError, SkyfitError
 from ..files import write_json, write_text
 from ..physics.lens import fov_deg, focal_px, intrinsics
+from ..render.scene import POSE_SD_MAX
 
 #: Points needed with the focal length given (six pose parameters) and free (plus f and k1).
 MIN_POINTS = {"given": 4, "free": 6}
@@ -458,11 +459,17 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
                           f"{100 * np.sqrt(cov[6, 6]) / best.focal:.0f}%): one view of a plane "
                           "shows it only through perspective; give --fov-deg (from the lens and "
                           "sensor), or mark points off the plane or over more of the image.")
-    return CameraEstimate(points, int(width), int(height), best.rvec, best.tvec, best.focal,
-                          best.k, free, cov, residuals, float(marking_px), float(sigma), dof,
-                          coplanar, np.asarray(points.world.mean(axis=0) if target is None
-                                               else target, float),
-                          None if other is None else float(np.sqrt(other.ssr / len(uv))))
+    est = CameraEstimate(points, int(width), int(height), best.rvec, best.tvec, best.focal,
+                         best.k, free, cov, residuals, float(marking_px), float(sigma), dof,
+                         coplanar, np.asarray(points.world.mean(axis=0) if target is None
+                                              else target, float),
+                         None if other is None else float(np.sqrt(other.ssr / len(uv))))
+    sd = est.camera_section()["pose_sd_deg"]
+    if max(sd.values()) > POSE_SD_MAX:
+        raise SkyfitError(f"the points fix the camera's direction only to +-{max(sd.values()):.1f} "
+                          f"deg (1 sd; a fit takes at most {POSE_SD_MAX:g}): mark more points, "
+                          "points off the board's plane, or mark them more precisely.")
+    return est
 
 
 def _check_misfit(points, best, dof, marking_px, width, height, focal, k, free_k, coplanar):
