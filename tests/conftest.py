@@ -39,3 +39,51 @@ def radiance():
     pytest.importorskip("pyradiance")
     from independent import radiance_runner
     return radiance_runner()
+
+
+def _trace_key(session, at, bsdf_id, light):
+    """What :meth:`~skyfit_mi.fitting.fit.FitSession._trace` reads, as bytes: the scene, the
+    renderer's settings, the frames' skies, the model and lobe, the cache's options, the points,
+    their materials and how the light is split (the sun's, the rest's, the shape's variants).
+    A sky's ``sun_measured`` (where the spec's sun's level came from, read by the fit's
+    uncertainty, :func:`~skyfit_mi.fitting.sky_fit.sun_source`) is not part of the light."""
+    import json
+    import pickle
+    from dataclasses import replace
+
+    import numpy as np
+
+    skies = [replace(s, info={k: v for k, v in s.info.items() if k != "sun_measured"})
+             for s in session.skies]
+    points = (np.asarray(at).tobytes() if not hasattr(at, "origins")
+              else at.origins.tobytes() + at.directions.tobytes())
+    return pickle.dumps((session.doc["scene"]["xml"], json.dumps(session.doc["render"],
+                                                                 sort_keys=True),
+                         skies, session.model, session.normalisation,
+                         sorted(session._cache_options().items()), points,
+                         np.asarray(bsdf_id).tolist(), light.split, light.shape))
+
+
+@pytest.fixture(scope="module")
+def light_traced_once():
+    """Within a module, each light cache is traced once: a trace of the same scene, skies,
+    points, cache options and split of the light (:func:`_trace_key`) as one already made is
+    a copy of it.  A trace is deterministic (the same options, points and lights give the same
+    samples and the same cache: CacheOptions, tests/test_light_cache.py), so a fit, a session
+    made again from a fit and a relight see exactly the light they would trace; only the
+    time is saved (a fit's trace is 85-90% of its time).  A trace of anything else is made."""
+    import copy
+
+    from skyfit_mi.fitting.fit import FitSession
+
+    traced, original = {}, FitSession._trace
+
+    def _trace(self, at, bsdf_id, light):
+        key = _trace_key(self, at, bsdf_id, light)
+        if key not in traced:
+            traced[key] = copy.deepcopy(original(self, at, bsdf_id, light))
+        return copy.deepcopy(traced[key])
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(FitSession, "_trace", _trace)
+        yield traced
