@@ -1,3 +1,5 @@
+from collections.abc import Mapping
+
 import pytest
 
 
@@ -21,14 +23,32 @@ def disc_day(tmp, name, camera_az=90.0, sky="clear", noise=0.0, rho_s=0.3, sigma
     return out
 
 
+class _Days(Mapping):
+    """The disc days by name, each rendered when first asked for (a worker renders only the
+    days its tests read)."""
+
+    def __init__(self, tmp, options):
+        self._tmp, self._options, self._rendered = tmp, options, {}
+
+    def __getitem__(self, name):
+        if name not in self._rendered:
+            self._rendered[name] = disc_day(self._tmp, name, **self._options[name])
+        return self._rendered[name]
+
+    def __iter__(self):
+        return iter(self._options)
+
+    def __len__(self):
+        return len(self._options)
+
+
 @pytest.fixture(scope="session")
 def days(tmp_path_factory, mi):
     """Rendered disc days (rho_s 0.3, sigma_alpha 0.1, 12x12) shared by the fitting tests."""
-    tmp = tmp_path_factory.mktemp("days")
-    return {"clean": disc_day(tmp, "clean"),
-            "noisy": disc_day(tmp, "noisy", noise=5.0),
-            "south": disc_day(tmp, "south", camera_az=180.0, noise=5.0),
-            "overcast": disc_day(tmp, "overcast", sky="overcast", noise=5.0)}
+    return _Days(tmp_path_factory.mktemp("days"),
+                 {"clean": {}, "noisy": {"noise": 5.0},
+                  "south": {"camera_az": 180.0, "noise": 5.0},
+                  "overcast": {"sky": "overcast", "noise": 5.0}})
 
 
 @pytest.fixture(scope="session")
