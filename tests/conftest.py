@@ -91,7 +91,10 @@ def light_traced_once():
     a copy of it.  A trace is deterministic (the same options, points and lights give the same
     samples and the same cache: CacheOptions, tests/test_light_cache.py), so a fit, a session
     made again from a fit and a relight see exactly the light they would trace; only the
-    time is saved (a fit's trace is 85-90% of its time).  A trace of anything else is made."""
+    time is saved (a fit's trace is 85-90% of its time).  A trace of anything else is made.
+    A copy takes no time: the session's ``cache_time`` (the record's timings, and the time
+    budget of an automatically sized cache's growth) is then its own load's alone.  Not for
+    tests of the trace itself, its timing or its memory."""
     import copy
 
     from skyfit_mi.fitting.fit import FitSession
