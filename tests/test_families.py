@@ -15,11 +15,6 @@ REGION = parse_region("rect:4,4,7,7")          # 16 pixels, all on the disc
 TRUTH = {"rho_s": 0.8, "sigma_alpha": 0.08}
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _light(light_traced_once):
-    """The same day's light in the same lobe is traced once in this module (conftest)."""
-
-
 @pytest.fixture(scope="module")
 def traced(days):
     """A GGX plastic's light cache on the clean day, the Dr.Jit model on it and its table."""

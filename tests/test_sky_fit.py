@@ -16,11 +16,6 @@ TRUTH = {"C_r": 1.0, "C_g": 1.0, "C_b": 1.0, "rho_s": 0.3, "sigma_alpha": 0.1}
 DIMMER = 1.5                                 # the spec's sky is this much too dim
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _light(light_traced_once):
-    """The same day's light, split the same way, is traced once in this module (fits of one
-    day under several sky options, sessions made again from a fit, relights: conftest)."""
-
 
 def test_the_sun_and_the_rest_of_a_sky_add_up_to_it():
     from skyfit_mi.physics.sky import Sky

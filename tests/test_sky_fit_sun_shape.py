@@ -16,11 +16,6 @@ from skyfit_mi.physics import sky_shape
 from test_sky_fit import REGION, TRUTH
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _light(light_traced_once):
-    """The same day's light, split the same way, is traced once in this module (the fits of
-    the sun's day, the shape's relights: conftest)."""
-
 
 def test_the_suns_level_is_a_factor_on_the_reflectances_only_where_nothing_anchors_them():
     from skyfit_mi.fitting.sky_fit import light_level_sd
