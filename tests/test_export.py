@@ -207,8 +207,12 @@ def _map_folder(folder, lobe="ggx_plastic"):
     for k, v in planes.items():
         v[4, 4] = np.nan
         write_exr(folder / f"{k}.exr", v.astype(np.float32))
+    bits = np.zeros((5, 5), np.float32)
+    bits[1, 2] = 2                                          # sigma_alpha undetermined there
+    bits[4, 4] = np.nan
+    write_exr(folder / "warnings.exr", bits)
     (folder / "map_summary.json").write_text(json.dumps({
-        "parameters": list(planes), "regions": {"board": {
+        "parameters": list(planes), "undetermined_bits": 2 | 4 | 8, "regions": {"board": {
             "model": "colour", "normalisation": lobe, "determined": 24,
             "median": {k: float(np.nanmedian(v)) for k, v in planes.items()}}}}))
     return planes
@@ -224,6 +228,10 @@ def test_an_exported_map_renders_as_a_textured_plane(tmp_path, mi):
     assert main(["export", str(tmp_path / "map"), "-o", str(out)]) == 0
     side = json.loads((out / "export.json").read_text())["materials"]
     assert side["map"]["exports"]["mitsuba"]["exact"] and side["map"]["texels"] == 24
+    assert side["map"]["warnings"][0].startswith("1 of 24 texels are not determined")
+    from PIL import Image
+    flagged = np.asarray(Image.open(out / "textures" / "undetermined.png"))[..., 0] > 0
+    assert flagged.sum() == 1 and flagged[1, 2]
     assert "board" in side and "plastic board" in (out / "materials.rad").read_text()
     wi = np.array([0.3, 0.2, 0.9]) / np.linalg.norm([0.3, 0.2, 0.9])
     (out / "scene.xml").write_text(f"""<scene version="3.0.0">

@@ -551,7 +551,7 @@ def write_map_outputs(out, store, names, regions, settings, choices):
                  lacking[n])
     _preview(out / "chi2_per_dof.png", per_dof, mapped, mapped, "chi^2 / dof")
     summary = {"settings": settings, "parameters": names, "store": STORE,
-               "warning_bits": WARNINGS, "units": "reflectances unitless, sigma_alpha rms slope; "
+               "warning_bits": WARNINGS, "undetermined_bits": UNDETERMINED, "units": "reflectances unitless, sigma_alpha rms slope; "
                "widths of 95% intervals; EXR maps NaN outside the regions",
                "regions": {}}
     for name, px in regions:

@@ -40,7 +40,7 @@ from ..files import ensure_dir, to_json, write_text
 from ..physics.material_match import FORMS, GLTF_F0, nearest, nearest_maps
 from ..physics.ward import raw_parameters, raw_reflectances
 from ..render.fit_model import PARAMETERS, material_dict
-from ..render.image import to_srgb8, write_exr, write_png
+from ..render.image import read_exr, to_srgb8, write_exr, write_png
 from ..render.scene_xml import ward_element
 from .fit_result import load_fits
 
@@ -101,8 +101,6 @@ def read_materials(paths):
 def read_map(folder):
     """The per-pixel map in ``folder`` as materials: one texel array for the whole image,
     plus each region's median material (for formats without textures)."""
-    from ..render.image import read_exr
-
     summary = json.loads((folder / MAP_SUMMARY).read_text(encoding="utf-8"))
     regions = summary.get("regions") or {}
     lobes = {r.get("normalisation", "ward") for r in regions.values()}
@@ -126,8 +124,16 @@ def read_map(folder):
         mask |= here
     if not mask.any():
         raise SkyfitError(f"the map in {folder} has no mapped pixel; map the regions again.")
-    out = [Material("map", "raw", lobe, {}, source=str(folder),
-                    maps={"rho_d": rho_d, "s": s, "sigma": sigma, "mask": mask})]
+    unsure = np.zeros(shape, bool)
+    if (folder / "warnings.exr").is_file() and "undetermined_bits" in summary:
+        bits = np.nan_to_num(read_exr(folder / "warnings.exr"), nan=0.0).astype(np.int64)
+        unsure = mask & ((bits & int(summary["undetermined_bits"])) > 0)
+    notes = ((f"{int(unsure.sum())} of {int(mask.sum())} texels are not determined (a parameter "
+              f"the data do not fix): their values are the fits' best, flagged in "
+              f"{UNDETERMINED_FILE}",) if unsure.any() else ())
+    out = [Material("map", "raw", lobe, {}, warnings=notes, source=str(folder),
+                    maps={"rho_d": rho_d, "s": s, "sigma": sigma, "mask": mask,
+                          "undetermined": unsure})]
     for name, r in regions.items():
         med = r.get("median") or {}
         if set(PARAMETERS[r["model"]]) <= {k for k, v in med.items() if v is not None}:
@@ -404,6 +410,9 @@ def radiance_text(materials, matches):
     return "\n".join(lines) + "\n"
 
 
+#: A map's texels whose fits did not determine a parameter (white), relative to the export
+#: folder.
+UNDETERMINED_FILE = "textures/undetermined.png"
 #: A map's texture files, relative to the export folder, per format.
 TEXTURE_FILES = {"mitsuba": {k: f"textures/{k}.exr" for k in
                              ("diffuse_reflectance", "specular_reflectance", "alpha")},
@@ -422,9 +431,12 @@ def _image(m, values):
 
 
 def write_textures(folder, m, matches):
-    """The texture images of map material ``m`` for its formats' ``matches``, and each form's
-    largest error per texel (``FORM_error.exr``)."""
+    """The texture images of map material ``m`` for its formats' ``matches``, each form's
+    largest error per texel (``FORM_error.exr``) and the texels not determined (white in
+    :data:`UNDETERMINED_FILE`)."""
     ensure_dir(folder)
+    write_png(folder.parent / UNDETERMINED_FILE,
+              np.repeat(m.maps["undetermined"][..., None], 3, axis=2).astype(np.uint8) * 255)
     for form, r in matches.items():
         if r is not None:
             write_exr(folder / f"{form}_error.exr", _image(m, r["texel_error"]).astype(np.float32))
