@@ -59,9 +59,14 @@ def fit_warnings(s, fit):
                "ingest the table with --calibrate MATERIAL=REFLECTANCE or --unknown-scale"
                if is_table(s.doc) else "check the exposure (--exposure, --calibrate or "
                "--colorchecker at ingest)")
+        model = ("another lobe or parameter count may (--model auto ranks them)")
+        cause = (f"the model does not describe these data (a misfit beyond their noise): "
+                 f"{model}, or {fix}" if fit.model_error is not None else
+                 f"{fix}, or, if it is right, {model}")
         warnings.append(f"{', '.join(top)} at the upper bound of 1: the data are brighter "
-                        "than any such surface under the frames' light, so the bound, not "
-                        f"the data, decides the fit; {fix}.")
+                        f"than any surface of this model ({s.model}, {s.normalisation} lobe) "
+                        "under the frames' light, so the bound, not the data, decides the "
+                        f"fit; {cause}.")
     if method != "global" and g["chi2"] < chi2 - max(1.0, 1e-3 * chi2):
         # compare with the global minimum: explains local failures (thesis 7.2)
         warnings.insert(0, f"{method} stopped at chi2 = {chi2:.6g}, but the global search finds "
