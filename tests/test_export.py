@@ -227,8 +227,8 @@ def test_an_exported_map_renders_as_a_textured_plane(tmp_path, mi):
     out = tmp_path / "out"
     assert main(["export", str(tmp_path / "map"), "-o", str(out)]) == 0
     side = json.loads((out / "export.json").read_text())["materials"]
-    assert side["map"]["exports"]["mitsuba"]["exact"] and side["map"]["texels"] == 24
-    assert side["map"]["warnings"][0].startswith("1 of 24 texels are not determined")
+    assert side["pixel_map"]["exports"]["mitsuba"]["exact"] and side["pixel_map"]["texels"] == 24
+    assert side["pixel_map"]["warnings"][0].startswith("1 of 24 texels are not determined")
     from PIL import Image
     flagged = np.asarray(Image.open(out / "textures" / "undetermined.png"))[..., 0] > 0
     assert flagged.sum() == 1 and flagged[1, 2]
@@ -244,7 +244,7 @@ def test_an_exported_map_renders_as_a_textured_plane(tmp_path, mi):
                 <rfilter type="box"/></film></sensor>
         <emitter type="directional"><vector name="direction" value="{-wi[0]},{-wi[1]},{-wi[2]}"/>
             <float name="irradiance" value="1"/></emitter>
-        <shape type="rectangle"><ref id="map"/></shape></scene>""")
+        <shape type="rectangle"><ref id="pixel_map"/></shape></scene>""")
     img = np.array(mi.render(mi.load_file(str(out / "scene.xml"))))[::-1]
     expected = np.zeros((5, 5, 3))
     for y, x in zip(*np.nonzero(np.isfinite(planes["C_r"]))):
@@ -256,6 +256,15 @@ def test_an_exported_map_renders_as_a_textured_plane(tmp_path, mi):
     np.testing.assert_allclose(img, expected, rtol=1e-4, atol=1e-7)
     gltf = json.loads((out / "materials.gltf").read_text())
     assert all((out / i["uri"]).is_file() for i in gltf["images"])
+    # the specular texture holds f / max(f) in full 8 bits, the material max(f)
+    spec = gltf["materials"][0]["extensions"]["KHR_materials_specular"]
+    a = np.asarray(Image.open(out / "textures" / "specular.png"))[..., 3]
+    assert a.max() == 255 and 0 < spec["specularFactor"] <= 1
+    # --overwrite in one format: the other format's textures go, the user's scene stays
+    assert main(["export", str(tmp_path / "map"), "-o", str(out), "--overwrite", "--format",
+                 "mitsuba"]) == 0
+    assert not (out / "textures" / "base_colour.png").exists()
+    assert (out / "textures" / "alpha.exr").exists() and (out / "scene.xml").exists()
 
 
 def test_refusals_are_one_line_and_write_nothing(tmp_path, capsys):
@@ -276,6 +285,12 @@ def test_refusals_are_one_line_and_write_nothing(tmp_path, capsys):
     assert main(["export", str(good), "-o", str(tmp_path / "b"), "--overwrite",
                  "--format", "radiance"]) == 0
     assert not (tmp_path / "b" / "materials.xml").exists()        # the earlier export's, gone
+    # a user's own files in the folder are not another export's: kept, and not overwritten
+    own = tmp_path / "mine" / "textures" / "wood.png"
+    own.parent.mkdir(parents=True)
+    own.write_bytes(b"mine")
+    assert main(["export", str(good), "-o", str(tmp_path / "mine"), "--format", "radiance"]) == 0
+    assert own.read_bytes() == b"mine"
     _map_folder(tmp_path / "map")
     summary = json.loads((tmp_path / "map" / "map_summary.json").read_text())
     summary["regions"]["other"] = {**summary["regions"]["board"], "normalisation": "ward"}
@@ -283,3 +298,7 @@ def test_refusals_are_one_line_and_write_nothing(tmp_path, capsys):
     assert main(["export", str(tmp_path / "map"), "-o", str(tmp_path / "c")]) == 2
     assert "mixes lobes (ggx_plastic, ward)" in capsys.readouterr().err
     assert not (tmp_path / "c").exists()
+    summary["regions"] = {"pixel_map": summary["regions"]["board"]}
+    (tmp_path / "map" / "map_summary.json").write_text(json.dumps(summary))
+    assert main(["export", str(tmp_path / "map"), "-o", str(tmp_path / "c")]) == 2
+    assert "a region named 'pixel_map'" in capsys.readouterr().err

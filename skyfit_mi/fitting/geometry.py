@@ -50,6 +50,15 @@ def traceless_roughness(half_angle_deg):
     return float(sig[idx[-1]]) if idx.size else 0.0
 
 
+def sky_only_limit(geometry):
+    """The roughness below which the day's sun shows no lobe to the camera
+    (:func:`traceless_roughness` of the closest highlight), 0 on a day without sun on the
+    surface (its lobe is the sky's alone at any roughness: :func:`geometry_warnings`)."""
+    if geometry["frames_with_sun"] == 0:
+        return 0.0
+    return traceless_roughness(geometry["closest_highlight_half_angle_deg"])
+
+
 def geometry_warnings(geometry, sigma_alpha, sky_shape_known=True):
     """Warnings from the day's geometry for a fit at ``sigma_alpha``: no sun on the surface at
     all, or a closest highlight too far from the camera's view for the sun to show a lobe this
@@ -63,7 +72,7 @@ def geometry_warnings(geometry, sigma_alpha, sky_shape_known=True):
                 "rho_s and sigma_alpha rest on the sky's reflection alone and are weakly "
                 "determined; a sequence with direct sun is needed to measure the lobe."]
     delta = geometry["closest_highlight_half_angle_deg"]
-    limit = traceless_roughness(delta)
+    limit = sky_only_limit(geometry)
     if sigma_alpha >= limit:
         return []
     seen = (f"sigma_alpha: the sun's highlight never comes closer than {delta:.1f} degrees "
@@ -73,9 +82,9 @@ def geometry_warnings(geometry, sigma_alpha, sky_shape_known=True):
     out = [seen + ("; its interval holds as far as the sky's shape near the mirror direction "
                    "is the spec's (a camera nearer the sun's mirror direction would measure it "
                    "from the sun)." if sky_shape_known else
-                   f"; treat it as not determined below {limit:.3g}, whatever its interval "
-                   "says: that rests on a sky shape the fit did not fit (a camera nearer the "
-                   "sun's mirror direction would measure it).")]
+                   f"; treat it as not determined below {limit:.3g}: that reading rests on "
+                   "a sky shape the fit did not fit, so its interval's lower end is left open "
+                   "(a camera nearer the sun's mirror direction would measure it).")]
     if not sky_shape_known:
         out.append("rho_s rests on the sky's reflection alone (the sun's highlight is never "
                    "seen at this roughness), so it depends on the sky's pattern near the mirror "

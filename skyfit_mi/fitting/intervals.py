@@ -9,6 +9,7 @@ level.  Each function takes the region's :class:`~.fit.FitSession` ``s`` and its
 import numpy as np
 
 from . import uncertainty as unc
+from .geometry import sky_only_limit
 from .methods.levenberg_marquardt import SINGULAR_CONDITION
 from .methods.profile import ProfileOptions, profile_edges, ridge_intervals
 from .sky_fit import light_level_sd
@@ -92,6 +93,14 @@ def fit_intervals(s, fit):
                                     max(hi, float(sky.span[1][i])))
                 if lv == "95":
                     intervals[p]["from"] += ", and over the undetermined sky level"
+    if names[-1] == "sigma_alpha" and not sky.shape_known \
+            and theta[-1] < sky_only_limit(s.geometry):
+        # the lobe seen in the sky's reflection alone, in a sky shape only modelled: its
+        # reading there rests on that model, so the roughness's lower end is not determined
+        for lv in ("68", "95"):
+            intervals["sigma_alpha"][lv] = (float(lower[-1]), intervals["sigma_alpha"][lv][1])
+        intervals["sigma_alpha"]["from"] += (", and down to its bound: the sun's highlight "
+                                            "never seen, the sky's shape not fitted")
     fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
     fit.cache_sd = mc_sd
     fit.sun_level_sd = sun_rel * np.abs(theta)

@@ -37,6 +37,7 @@ from ..files import check_dir, ensure_dir, save_figure, write_json
 from ..pipeline.manifest import frame_sky, load_manifest
 from ..render.fit_model import PARAMETER_ORDER, PARAMETERS
 from ..render.image import write_exr
+from ..render.scene import pose_sd
 from ..render.light_cache import SKY_SPACING
 from .chi2 import REGION_PIXELS, check_regions, subsample_region
 from .fit import fit_regions
@@ -605,6 +606,9 @@ def _widths_include(doc, skies, names, light=None):
                    f"{light['sun_source']} sun), on the reflectances")
     if (ingest.get("calibration") or {}).get("scale_relative_sd"):
         out.append("the exposure calibration's error (ingest.calibration)")
+    if any(pose_sd((doc.get("camera") or {}).get("pose_sd_deg")).values()):
+        out.append("not the camera pose's uncertainty (camera.pose_sd_deg), which region fits "
+                   "take in")
     rel = (ingest.get("colour_matrix") or {}).get("relative_sd")
     if rel:
         out.append(f"the camera colour matrix's error, {100 * rel:.3g}% per entry "

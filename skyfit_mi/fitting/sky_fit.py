@@ -125,6 +125,12 @@ class SkyShare:
         :class:`~.light.LightPlan` ``plan``'s ``sun_sd`` widened by ``sun_widening``."""
         return float(np.hypot(plan.sun_sd, self.sun_widening))
 
+    @property
+    def shape_known(self):
+        """Whether the sky's shape is known to the fit: the spec's taken as it is (no sky fit),
+        or fitted with the materials (--sky-shape); not where only its level was fitted."""
+        return self.record is None or self.record.get("shape") is not None
+
 @dataclass(frozen=True)
 class SkyFit:
     """The sky fit's result (:func:`fit_sky_scale`): its ``record`` (the fit JSON's ``sky``) and

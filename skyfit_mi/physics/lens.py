@@ -28,6 +28,10 @@ import numpy as np
 from ..errors import SkyfitError
 
 
+#: The horizontal fields of view a camera may have [degrees] (the spec's [camera] fov_deg).
+FOV_RANGE = (0.1, 170.0)
+
+
 def focal_px(fov_deg, width):
     """Focal length [px] of a horizontal field of view ``fov_deg`` [degrees] over ``width`` [px]."""
     return width / 2.0 / np.tan(np.radians(fov_deg) / 2.0)

@@ -39,7 +39,7 @@ from scipy.stats import norm
 
 from ..errors import OutputError, SkyfitError
 from ..files import write_json, write_text
-from ..physics.lens import fov_deg, focal_px, intrinsics
+from ..physics.lens import FOV_RANGE, check_distortion, fov_deg, focal_px, intrinsics
 from ..render.scene import POSE_SD_MAX
 
 #: Points needed with the focal length given (six pose parameters) and free (plus f and k1).
@@ -417,6 +417,11 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
     """
     if not (np.isfinite(marking_px) and marking_px > 0):
         raise SkyfitError(f"the marking accuracy {marking_px!r} px must be a positive number.")
+    if fov is not None and not (np.isfinite(fov) and FOV_RANGE[0] <= fov <= FOV_RANGE[1]):
+        raise SkyfitError(f"--fov-deg {fov!r}: give the lens's horizontal field of view, "
+                          f"{FOV_RANGE[0]:g}-{FOV_RANGE[1]:g} degrees (as the spec takes it).")
+    if target is not None and not np.all(np.isfinite(np.asarray(target, float))):
+        raise SkyfitError(f"--target {list(target)!r}: give three finite coordinates [m].")
     mode = "given" if fov is not None else "free"
     coplanar = _check_configuration(points, MIN_POINTS[mode], mode)
     k = np.r_[np.asarray(distortion if distortion is not None else [], float), 0.0, 0.0][:2]
@@ -464,7 +469,9 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
                          coplanar, np.asarray(points.world.mean(axis=0) if target is None
                                               else target, float),
                          None if other is None else float(np.sqrt(other.ssr / len(uv))))
-    sd = est.camera_section()["pose_sd_deg"]
+    section = est.camera_section()
+    check_distortion(section["distortion"], section["fov_deg"], int(width), int(height))
+    sd = section["pose_sd_deg"]
     if max(sd.values()) > POSE_SD_MAX:
         raise SkyfitError(f"the points fix the camera's direction only to +-{max(sd.values()):.1f} "
                           f"deg (1 sd; a fit takes at most {POSE_SD_MAX:g}): mark more points, "

@@ -22,13 +22,13 @@ planes) and writes, in ``OUT``:
 A map's planes become textures (``textures/``: linear EXR, and 8-bit PNG for glTF, sRGB for
 the base colour), indexed like the photographs' pixels (u to the right, v down); Radiance's
 ``plastic`` and ``metal`` take one roughness per surface, so ``materials.rad`` holds each
-region's median material.  Nothing is written until every file's content is made; an output
-folder holding another export is refused unless ``overwrite``.
+region's median material.  Every file's content is made before the first is written (each
+atomically); an output folder holding another export is refused unless ``overwrite``, and then
+only the earlier export's own files are replaced or removed.
 """
 
 import base64
 import json
-import shutil
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,11 +55,16 @@ PREVIEWS = {"mitsuba": "preview.xml", "radiance": "preview.rad"}
 #: irradiance [W m^-2] and the uniform sky's radiance [W m^-2 sr^-1], RGB; the ground's
 #: reflectance; the camera's position and target [m].
 PREVIEW_SUN = np.array([0.5, -0.5, np.sqrt(0.5)])
+#: The preview sun's angular diameter [degrees] (Radiance's ``source``; Mitsuba's is a
+#: directional light).
+PREVIEW_SUN_DEG = 0.533
 PREVIEW_LIGHT = {"sun_irradiance": 600.0, "sky_radiance": 30.0, "ground": 0.2,
                  "camera": (0.0, -6.0, 3.0), "target": (0.0, 0.0, 0.4)}
 SIDECAR = "export.json"
 #: A map's folder holds this (written by ``skyfit fit --per-pixel``).
 MAP_SUMMARY = "map_summary.json"
+#: The name of a map's textured material (its regions' medians keep theirs).
+MAP_NAME = "pixel_map"
 
 
 @dataclass(frozen=True)
@@ -131,7 +136,10 @@ def read_map(folder):
     notes = ((f"{int(unsure.sum())} of {int(mask.sum())} texels are not determined (a parameter "
               f"the data do not fix): their values are the fits' best, flagged in "
               f"{UNDETERMINED_FILE}",) if unsure.any() else ())
-    out = [Material("map", "raw", lobe, {}, warnings=notes, source=str(folder),
+    if MAP_NAME in regions:
+        raise SkyfitError(f"the map in {folder} has a region named {MAP_NAME!r}, the name its "
+                          "textured material takes; export that region's fit (fit_NAME.json).")
+    out = [Material(MAP_NAME, "raw", lobe, {}, warnings=notes, source=str(folder),
                     maps={"rho_d": rho_d, "s": s, "sigma": sigma, "mask": mask,
                           "undetermined": unsure})]
     for name, r in regions.items():
@@ -143,11 +151,17 @@ def read_map(folder):
     return out
 
 
+def export_files():
+    """Every file an export may write, relative to its folder."""
+    return {SIDECAR, WARD_FILE, UNDETERMINED_FILE, *FILES.values(), *PREVIEWS.values(),
+            *(f"textures/{form}_error.exr" for form in FORMS),
+            *(n for files in TEXTURE_FILES.values() for n in files.values())}
+
+
 def check_output(out, overwrite):
-    """Refuse a folder holding another export (its sidecar or one of its files) unless
+    """Refuse a folder holding another export (one of :func:`export_files`) unless
     ``overwrite``."""
-    held = [n for n in (SIDECAR, WARD_FILE, *FILES.values(), *PREVIEWS.values())
-            if (Path(out) / n).exists()]
+    held = sorted(n for n in export_files() if (Path(out) / n).exists())
     if held and not overwrite:
         raise SkyfitError(f"{out} holds another export ({held[0]}); give another -o, or pass "
                           "--overwrite to replace it.")
@@ -181,17 +195,18 @@ def export(paths, out, formats=FORMS, overwrite=False, log=print):
         files[PREVIEWS["radiance"]] = radiance_preview([m for m in materials if m.maps is None])
     if "gltf" in formats:
         files[FILES["gltf"]] = gltf_json(materials, matches)
-    textures = [m for m in materials if m.maps is not None]
     ensure_dir(out)
-    for stale in {WARD_FILE, *FILES.values(), *PREVIEWS.values()} - set(files):  # another's
-        (out / stale).unlink(missing_ok=True)
-    if not textures and (out / "textures").is_dir():
-        shutil.rmtree(out / "textures")
-    for m in textures:
-        write_textures(out / "textures", m, matches[m.name])
+    written = [SIDECAR, *files]
+    for m in materials:
+        if m.maps is not None:
+            written += write_textures(out / "textures", m, matches[m.name])
     for name, text in files.items():
         write_text(out / name, text)
     write_text(out / SIDECAR, to_json(record) + "\n")
+    for stale in export_files() - set(written):      # an earlier export's (--overwrite)
+        (out / stale).unlink(missing_ok=True)
+    if (out / "textures").is_dir() and not any((out / "textures").iterdir()):
+        (out / "textures").rmdir()
     for m in materials:
         _log_material(m, matches[m.name], log)
     log(f"wrote {', '.join(files)} and {SIDECAR} in {out}")
@@ -342,7 +357,7 @@ def mitsuba_preview(materials):
     L, sun = PREVIEW_LIGHT, PREVIEW_SUN
     fov_h, _, w, h = _view(materials)
     shapes = "".join(
-        (f'    <shape type="rectangle"><transform name="to_world"><scale value="0.4"/>'
+        (f'    <shape type="rectangle"><transform name="to_world"><scale x="0.4" y="-0.4"/>'
          f'<translate x="{x:g}" y="0" z="0.01"/></transform><ref id="{m.name}"/></shape>\n'
          if m.maps is not None else
          f'    <shape type="sphere"><point name="center" x="{x:g}" y="0" z="0.4"/>'
@@ -377,13 +392,13 @@ def radiance_preview(materials):
     view = (f"-vp {' '.join(f'{v:g}' for v in cam)} -vd "
             f"{' '.join(f'{v:.6g}' for v in target - cam)} -vu 0 0 1 -vh {fov_h:.4g} "
             f"-vv {fov_v:.4g} -x {w} -y {h}")
-    omega = 2 * np.pi * (1 - np.cos(np.radians(0.533 / 2)))          # the sun's disc [sr]
+    omega = 2 * np.pi * (1 - np.cos(np.radians(PREVIEW_SUN_DEG / 2)))   # the sun's disc [sr]
     lines = ["# skyfit export: the materials of materials.rad on spheres under a uniform sky and "
              "a sun; render with",
              f"#   oconv materials.rad preview.rad > preview.oct && rpict {view} -ab 2 -ad 1024 "
              "preview.oct > preview.hdr",
              "void light sun_light 0 0 3 " + " ".join([f"{L['sun_irradiance'] / omega:.6g}"] * 3),
-             f"sun_light source sun 0 0 4 {' '.join(f'{v:.6g}' for v in sun)} 0.533",
+             f"sun_light source sun 0 0 4 {' '.join(f'{v:.6g}' for v in sun)} {PREVIEW_SUN_DEG:g}",
              f"void glow sky_glow 0 0 4 {L['sky_radiance']:g} {L['sky_radiance']:g} "
              f"{L['sky_radiance']:g} 0",
              "sky_glow source sky 0 0 4 0 0 1 360",
@@ -437,14 +452,18 @@ def write_textures(folder, m, matches):
     ensure_dir(folder)
     write_png(folder.parent / UNDETERMINED_FILE,
               np.repeat(m.maps["undetermined"][..., None], 3, axis=2).astype(np.uint8) * 255)
+    written = [UNDETERMINED_FILE]
     for form, r in matches.items():
         if r is not None:
             write_exr(folder / f"{form}_error.exr", _image(m, r["texel_error"]).astype(np.float32))
+            written.append(f"textures/{form}_error.exr")
     if "mitsuba" in matches:
         p = matches["mitsuba"]["params"]
         for key, path in TEXTURE_FILES["mitsuba"].items():
             write_exr(folder.parent / path, _image(m, p[key]).astype(np.float32))
+        written += TEXTURE_FILES["mitsuba"].values()
     if "gltf" in matches:
+        written += TEXTURE_FILES["gltf"].values()
         p, files = matches["gltf"]["params"], TEXTURE_FILES["gltf"]
         base = _image(m, np.asarray(p["baseColorFactor"])[:, :3])
         write_png(folder.parent / files["baseColorTexture"], to_srgb8(base, 1.0))
@@ -452,10 +471,12 @@ def write_textures(folder, m, matches):
                        p["metallicFactor"]], axis=-1)
         write_png(folder.parent / files["metallicRoughnessTexture"], _linear8(_image(m, mr)))
         spec = p["KHR_materials_specular"]
-        f = np.repeat(np.asarray(spec["specularFactor"], dtype=float)[:, None], 4, axis=1)
+        f = np.asarray(spec["specularFactor"], dtype=float)
+        f = np.repeat((f / max(float(f.max()), 1e-12))[:, None], 4, axis=1)   # times the factor
         write_png(folder.parent / files["specularTexture"], _linear8(_image(m, f)))   # its A
         colour = np.asarray(spec["specularColorFactor"], dtype=float) / GLTF_SPECULAR_COLOUR
         write_png(folder.parent / files["specularColorTexture"], to_srgb8(_image(m, colour), 1.0))
+    return written
 
 
 #: The factor of a map's glTF specular colour texture: material_match's dielectric takes
@@ -527,6 +548,7 @@ def _gltf_material(doc, m, p):
                 "baseColorTexture": tex["baseColorTexture"],
                 "metallicRoughnessTexture": tex["metallicRoughnessTexture"]},
             "extensions": {"KHR_materials_specular": {
+                "specularFactor": float(np.max(spec["specularFactor"])),
                 "specularTexture": tex["specularTexture"],
                 "specularColorFactor": [GLTF_SPECULAR_COLOUR] * 3,
                 "specularColorTexture": tex["specularColorTexture"]}}}

@@ -1283,7 +1283,7 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
             moved = registration.frames.get(f.index)
             if moved is not None:
                 rec["registration"] = moved
-                if offset is not None:                  # the blocks move with the frame
+                if offset is not None and moved.get("resampled"):   # the blocks move with it
                     offset = [int(o - round(moved.get(d, 0.0))) % 8
                               for o, d in zip(offset, ("dx_px", "dy_px"))]
             if mixing is not None:

@@ -22,7 +22,7 @@ from ..physics import cie_general
 from ..physics.camera import SensorModel
 from ..errors import SkyfitError
 from ..physics.gensky import from_gensky
-from ..physics.lens import check_distortion
+from ..physics.lens import FOV_RANGE, check_distortion
 from ..render.fit_model import PARAMETERS, material_dict
 from ..render.scene import camera_matrix, pose_sd
 from ..render.scene_xml import resolve_materials
@@ -430,7 +430,7 @@ def _camera(sec):
     for i, row in enumerate(c.get("matrix", ())):
         for j, v in enumerate(row):
             _num("camera", f"matrix[{i}][{j}]", v)
-    _num("camera", "fov_deg", c["fov_deg"], 0.1, 170)
+    _num("camera", "fov_deg", c["fov_deg"], *FOV_RANGE)
     _num("camera", "width", c["width"], 1, 16384, integer=True)
     _num("camera", "height", c["height"], 1, 16384, integer=True)
     if "distortion" in c:
