@@ -289,13 +289,14 @@ def frame_exposure(doc, frame):
     rec = frame.get("exposure")
     if rec is None:
         return np.full(3, float(doc["sensor"]["exposure"]))
-    with np.errstate(over="ignore"):
+    with np.errstate(over="ignore", under="ignore"):
         out = float(rec["exposure"]) * np.asarray(rec.get("white_balance", (1.0, 1.0, 1.0)),
                                                   dtype=float)
-    if not np.all(np.isfinite(out)):
+    if not np.all(np.isfinite(out) & (out > 0)):
         raise ManifestError(f"{frame_label(frame.get('index', '?'))}: its exposure times its "
-                            "white balance is not a finite number; repair the frame's exposure "
-                            "record (or ingest the photographs again).")
+                            "white balance is not a finite positive number (it overflows or "
+                            "underflows); repair the frame's exposure record (or ingest the "
+                            "photographs again).")
     return out
 
 
