@@ -12,7 +12,8 @@ from skyfit_mi.cli import main
 from skyfit_mi.errors import SkyfitError
 from skyfit_mi.physics.lens import focal_px
 from skyfit_mi.pipeline.camera_pose import (MarkedPoints, estimate_camera, read_points,
-                                            undistort_image, write_camera)
+                                            write_camera)
+from skyfit_mi.pipeline.registration import undistort_image
 from skyfit_mi.pipeline.spec import SpecError, read_spec, validate_spec
 from skyfit_mi.render.scene import camera_matrix, camera_origin, look_at
 

@@ -16,7 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..pipeline.manifest import is_table, load_manifest
+from ..pipeline.manifest import is_table
 from ..pipeline.observation_table import relative_scale
 from ..render.basis_table import TableModel
 from ..render.fit_model import PARAMETERS, bounds
@@ -96,11 +96,10 @@ def choose(rows):
     return min(near, key=lambda r: (r["parameters"], r["held_out_chi2"]))
 
 
-def candidate_models(manifest_path, models, luminance):
-    """The parameterisations of ``models`` the sequence can take, and why each other is left
-    out: a table of unknown scale cannot take the white 2-parameter surface, nor a region
-    measured as ``luminance`` the colour model."""
-    doc, _ = load_manifest(manifest_path)
+def candidate_models(doc, models, luminance):
+    """The parameterisations of ``models`` the sequence of manifest ``doc`` can take, and why
+    each other is left out: a table of unknown scale cannot take the white 2-parameter surface,
+    nor a region measured as ``luminance`` the colour model."""
     why = {}
     if is_table(doc) and relative_scale(doc):
         why["two"] = ("the table's scale is unknown (ingest --unknown-scale), and the "
@@ -133,7 +132,7 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     t_start = time.perf_counter()
     first = FitSession(manifest_path, *regions[0], light=None,
                        **{"model": "achromatic", **options})
-    models, skipped = candidate_models(manifest_path, models, first.obs.luminance)
+    models, skipped = candidate_models(first.doc, models, first.obs.luminance)
     for m, why in skipped.items():
         log(f"model selection leaves out the {m} model: {why}")
     plan = resolve_light({regions[0][0]: first}, light, log)        # checked once

@@ -15,7 +15,7 @@ y = Y / Z:
 
 Barrel distortion has k1 < 0.  The renderer is a pinhole (k1 = k2 = 0); a photograph's
 distortion is undone before it is compared with a render
-(:func:`skyfit_mi.pipeline.camera_pose.undistort_image`).
+(:func:`skyfit_mi.pipeline.registration.undistort_image`).
 
 References: D. C. Brown, "Decentering distortion of lenses", Photogrammetric Engineering 32(3),
 444-462, 1966; Z. Zhang, "A flexible new technique for camera calibration", IEEE TPAMI 22(11),

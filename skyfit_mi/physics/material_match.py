@@ -55,7 +55,8 @@ from functools import lru_cache
 import numpy as np
 
 from ..errors import SkyfitError, check_choice, check_range
-from .microfacet import LOBES, albedo_nodes, distribution, microfacet_lobe, split
+from .microfacet import (LOBES, albedo_nodes, distribution, half_vector, microfacet_lobe,
+                         split)
 from .ward import (NORMALISATIONS, RADIANCE_FRESNEL_K, RADIANCE_FRESNEL_MIN, SIGMA_MAX,
                    SIGMA_MIRROR, lobe_albedo_directions, lobe_albedo_nodes, mirror_reflectance,
                    radiance_fresnel, specular_lobe, ward_brdf)
@@ -134,8 +135,7 @@ def error_pairs(sigma_alpha):
 
 def _schlick_w(wi, wo):
     """Schlick's weight (1 - |v.h|)^5 [unitless] (glTF 2.0 Appendix B, "Fresnel")."""
-    h = wi + wo
-    h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    h = half_vector(wi, wo)
     return (1.0 - np.abs(np.sum(wo * h, -1))) ** 5
 
 
@@ -146,8 +146,7 @@ def gltf_specular(wi, wo, alpha):
     0 below the surface (the Heaviside factors)."""
     wi, wo = np.asarray(wi, dtype=float), np.asarray(wo, dtype=float)
     ci, co = wi[..., 2], wo[..., 2]
-    h = wi + wo
-    h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    h = half_vector(wi, wo)
     a2 = alpha * alpha
     with np.errstate(divide="ignore", invalid="ignore"):
         v = 0.5 / (co * np.sqrt(a2 + (1 - a2) * ci * ci) + ci * np.sqrt(a2 + (1 - a2) * co * co))

@@ -93,6 +93,12 @@ def smith_g1(cos_v, alpha, kind):
     return np.where(c >= 1.0, 1.0, np.where(c > 0, np.nan_to_num(g), 0.0))
 
 
+def half_vector(wi, wo):
+    """The unit half vector (wi + wo) / |wi + wo| (..., 3) of unit directions ``wi``, ``wo``."""
+    h = np.asarray(wi, dtype=float) + np.asarray(wo, dtype=float)
+    return h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+
+
 def microfacet_lobe(wi, wo, alpha, name):
     """The lobe ``name`` (LOBES) without s [sr^-1]: F(wi.h) D(h) G1(wi) G1(wo) / (4 cos_i
     cos_o); 0 where either direction is below the surface.  ``wi``, ``wo`` unit vectors in
@@ -101,8 +107,7 @@ def microfacet_lobe(wi, wo, alpha, name):
     wi, wo = np.asarray(wi, dtype=float), np.asarray(wo, dtype=float)
     ci, co = wi[..., 2], wo[..., 2]
     up = (ci > 0) & (co > 0)
-    h = wi + wo
-    h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    h = half_vector(wi, wo)
     ih = np.sum(wi * h, axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
         f = fresnel(ih, kind) * distribution(h[..., 2], alpha, dist) \

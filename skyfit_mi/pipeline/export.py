@@ -38,10 +38,10 @@ import numpy as np
 from ..errors import SkyfitError
 from ..files import ensure_dir, to_json, write_text
 from ..physics.material_match import FORMS, GLTF_F0, nearest, nearest_maps
-from ..physics.ward import raw_parameters, raw_reflectances
-from ..render.fit_model import PARAMETERS, material_dict
+from ..physics.ward import raw_reflectances
+from ..render.fit_model import PARAMETERS, material_dict, reflectances
 from ..render.image import read_exr, to_srgb8, write_exr, write_png
-from ..render.scene_xml import ward_element
+from ..render.scene_xml import sub_element, ward_element
 from .fit_result import load_fits
 
 #: The files an export writes (besides ``textures/``), per format, and the sidecar.
@@ -84,8 +84,8 @@ class Material:
     def raw(self):
         """(rho_d (3,), s (3,), sigma_alpha) of the fitted parameters (thesis 7.1)."""
         theta = [self.parameters[k] for k in PARAMETERS[self.model]]
-        m = material_dict(self.model, theta)
-        return raw_parameters(**{k: v for k, v in m.items() if k != "normalisation"})
+        rho_d, s = reflectances(self.model, theta)[:2]
+        return rho_d, s, float(theta[-1])
 
 
 def read_materials(paths):
@@ -271,42 +271,37 @@ def _numbers(v):
     return ", ".join(f"{float(x):.6g}" for x in np.atleast_1d(v))
 
 
-def _sub(parent, tag, **attrs):
-    return ET.SubElement(parent, tag, {k: str(v) for k, v in attrs.items()})
-
-
 def _blend(parent, name, p, textures=None):
     """A ``blendbsdf`` of ``diffuse`` and ``roughconductor`` from the mitsuba match ``p``; the
     keys in ``textures`` (a map's) are bitmaps."""
     textures = textures or {}
 
     def value(el, tag, key):
+        name = "reflectance" if key == "diffuse_reflectance" else key    # the plugin's name
         if key in textures:
-            t = _sub(el, "texture", type="bitmap", name=key if key != "diffuse_reflectance"
-                     else "reflectance")
-            _sub(t, "string", name="filename", value=textures[key])
-            _sub(t, "boolean", name="raw", value="true")
-            _sub(t, "string", name="filter_type", value="nearest")
+            t = sub_element(el, "texture", type="bitmap", name=name)
+            sub_element(t, "string", name="filename", value=textures[key])
+            sub_element(t, "boolean", name="raw", value="true")
+            sub_element(t, "string", name="filter_type", value="nearest")
         else:
-            _sub(el, tag, name=key if key != "diffuse_reflectance" else "reflectance",
-                 value=_numbers(p[key]))
+            sub_element(el, tag, name=name, value=_numbers(p[key]))
 
-    b = _sub(parent, "bsdf", type="blendbsdf", id=name)
+    b = sub_element(parent, "bsdf", type="blendbsdf", id=name)
     value(b, "float", "weight")
-    d = _sub(b, "bsdf", type="diffuse")
+    d = sub_element(b, "bsdf", type="diffuse")
     value(d, "rgb", "diffuse_reflectance")
     if p["distribution"] == "mirror":                 # an ideal mirror: the smooth conductor
-        c = _sub(b, "bsdf", type="conductor")
+        c = sub_element(b, "bsdf", type="conductor")
     else:
-        c = _sub(b, "bsdf", type="roughconductor")
-        _sub(c, "string", name="distribution", value=p["distribution"])
+        c = sub_element(b, "bsdf", type="roughconductor")
+        sub_element(c, "string", name="distribution", value=p["distribution"])
         value(c, "float", "alpha")
     value(c, "rgb", "specular_reflectance")
     if p["material"] == "none":
-        _sub(c, "string", name="material", value="none")
+        sub_element(c, "string", name="material", value="none")
     else:
-        _sub(c, "float", name="eta", value=f"{p['material']['eta']:.6g}")
-        _sub(c, "float", name="k", value=f"{p['material']['k']:.6g}")
+        sub_element(c, "float", name="eta", value=f"{p['material']['eta']:.6g}")
+        sub_element(c, "float", name="k", value=f"{p['material']['k']:.6g}")
 
 
 def mitsuba_xml(materials, matches):
@@ -331,7 +326,7 @@ def mitsuba_ward_xml(materials):
     for m in materials:
         if m.maps is None:
             theta = [m.parameters[k] for k in PARAMETERS[m.model]]
-            ward_element(_sub(root, "bsdf"), f"{m.name}_ward",
+            ward_element(sub_element(root, "bsdf"), f"{m.name}_ward",
                          material_dict(m.model, theta, m.normalisation))
     ET.indent(root)
     return ET.tostring(root, encoding="unicode") + "\n"

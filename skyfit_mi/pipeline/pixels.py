@@ -138,8 +138,8 @@ def material_regions(manifest):
     """(name, pixels) of every Ward material the camera sees, from the scene's label image:
     the pixels inside each material's area (edge pixels, which also see a neighbour, left
     out, and in JPEGs with subsampled chroma, demosaiced RAWs or registered photographs those
-    whose colour mixes a neighbour's, :func:`colour_reach`); SkyfitError when it sees none.  For an observation table,
-    (name, None) of each region it measures."""
+    whose colour mixes a neighbour's, :func:`colour_reach`); SkyfitError when it sees none.
+    For an observation table, (name, None) of each region it measures."""
     from scipy.ndimage import binary_erosion
 
     doc, root = load_manifest(manifest)

@@ -7,7 +7,7 @@ A frame's motion is a Euclidean map of the reference frame's pixels q onto its o
 
 c the image's centre, theta positive turning the scene clockwise as displayed (image y down).
 It is measured in the pinhole's geometry (each photograph undistorted,
-:func:`.camera_pose.undistort_image`) on the log luminance (linearised, vignetting divided out)
+:func:`undistort_image`) on the log luminance (linearised, vignetting divided out)
 high-passed over HIGHPASS_SD_PX, which keeps edges and texture and drops the day's slow change
 of shading: phase correlation (Kuglin and Hines 1975) gives the shift, the enhanced correlation
 coefficient (ECC, Evangelidis and Psarakis 2008; invariant to each frame's gain and offset)
@@ -41,7 +41,6 @@ import numpy as np
 from ..errors import SkyfitError
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.lens import distort, focal_px
-from .camera_pose import undistort_image
 
 #: The largest displacement [px] of any pixel of a frame from the reference (--register-limit).
 LIMIT_PX = 5.0
@@ -160,6 +159,39 @@ def remap(img, maps):
     return out.reshape(img.shape)
 
 
+#: The motion of a frame that did not move (:func:`pixel_map`).
+NO_MOTION = np.float64([[1, 0, 0], [0, 1, 0]])
+
+
+def undistort_image(img, camera):
+    """A photograph with its radial distortion undone: the image the spec's pinhole sees.
+
+    Parameters
+    ----------
+    img : ndarray (H, W) or (H, W, C)
+        The photograph, ``camera['width']`` x ``camera['height']`` pixels, any channels.
+    camera : dict
+        A validated [camera] table: ``fov_deg`` [degrees], ``width``, ``height`` [px] and
+        ``distortion`` [k1] or [k1, k2] (none: the image is returned as it is).
+
+    Returns
+    -------
+    ndarray, float32 (float64 if ``img`` is), the shape of ``img``
+        Each pixel bilinearly interpolated at the place the pinhole's ray lands in the
+        photograph (:func:`pixel_map` of a still frame, :func:`remap`); NaN where that place
+        lies off the photograph.
+    """
+    img = np.asarray(img)
+    h, w = camera["height"], camera["width"]
+    if img.shape[:2] != (h, w):
+        raise SkyfitError(f"the image is {img.shape[1]}x{img.shape[0]} px, the camera "
+                          f"{w}x{h}; undistort photographs of the camera's size.")
+    dtype = np.float64 if img.dtype == np.float64 else np.float32
+    if not any(camera.get("distortion") or []):
+        return img.astype(dtype)
+    return remap(img, pixel_map(NO_MOTION, camera)).astype(dtype)
+
+
 def variance_share(maps):
     """The mean over the pixels of the sum of the squared bilinear weights of ``maps``: the
     share of a source pixel's noise variance a resampled pixel's own scatter keeps [1]."""
@@ -209,7 +241,7 @@ def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
     camera, lit, names = frames.spec.camera, frames.lit, [p.name for p in frames.paths]
     h, w = frames.size
     k = [float(x) for x in camera.get("distortion") or []]
-    motion = {i: np.float64([[1, 0, 0], [0, 1, 0]]) for i in lit}
+    motion = {i: NO_MOTION for i in lit}
     records, ref = {}, None
     if register:
         t = np.array([frames.times[i].timestamp() for i in lit])

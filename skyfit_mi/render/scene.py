@@ -116,10 +116,9 @@ def turn_camera(to_world, pivot, angle, deg):
         raise SkyfitError("the camera looks straight up or down, so its angle from the "
                           "vertical has no axis to turn about; give pose_sd_deg as a table "
                           "without angle.")
-    k = axis / np.linalg.norm(axis)
-    a = np.radians(deg)
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    R = np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K        # Rodrigues
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.from_rotvec(np.radians(deg) * axis / np.linalg.norm(axis)).as_matrix()
     p = np.asarray(pivot, dtype=float)
     out = m.copy()
     out[:3, :3] = R @ m[:3, :3]

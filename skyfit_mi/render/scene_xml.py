@@ -61,7 +61,8 @@ def resolve_materials(scene_file, overrides):
     return tree, mats
 
 
-def _sub(parent, tag, **attrs):
+def sub_element(parent, tag, **attrs):
+    """A child ``tag`` of ``parent`` with the attributes ``attrs`` (their values as text)."""
     return ET.SubElement(parent, tag, {k: str(v) for k, v in attrs.items()})
 
 
@@ -71,14 +72,14 @@ def ward_element(el, name, m):
     for child in list(el):
         el.remove(child)
     el.attrib = {"type": "ward", "id": name}
-    _sub(el, "string", name="model", value=m["model"])
-    _sub(el, "string", name="normalisation", value=m["normalisation"])
+    sub_element(el, "string", name="model", value=m["model"])
+    sub_element(el, "string", name="normalisation", value=m["normalisation"])
     for k in MODELS[m["model"]]:
         v = m[k]
         if isinstance(v, (list, tuple)):
-            _sub(el, "string", name=k, value=" ".join(repr(float(x)) for x in v))
+            sub_element(el, "string", name=k, value=" ".join(repr(float(x)) for x in v))
         else:
-            _sub(el, "float", name=k, value=repr(float(v)))
+            sub_element(el, "float", name=k, value=repr(float(v)))
 
 
 def build_scene_xml(spec):
@@ -90,30 +91,30 @@ def build_scene_xml(spec):
             ward_element(el, el.get("id"), mats[el.get("id")])
     ground = spec.raw["scene"].get("ground_albedo")
     if ground is not None:
-        g = _sub(root, "shape", type="rectangle", id="ground")
-        tr = _sub(g, "transform", name="to_world")
-        _sub(tr, "scale", value=1000)
-        _sub(tr, "translate", x=0, y=0, z=-0.002)
-        b = _sub(g, "bsdf", type="diffuse")
-        _sub(b, "rgb", name="reflectance", value=float(ground))
-    _sub(root, "emitter", type="cie_sky", id="sky")
-    integ = _sub(root, "integrator", type=spec.render["integrator"], id="integrator")
-    _sub(integ, "integer", name="max_depth", value=spec.render["max_depth"])
+        g = sub_element(root, "shape", type="rectangle", id="ground")
+        tr = sub_element(g, "transform", name="to_world")
+        sub_element(tr, "scale", value=1000)
+        sub_element(tr, "translate", x=0, y=0, z=-0.002)
+        b = sub_element(g, "bsdf", type="diffuse")
+        sub_element(b, "rgb", name="reflectance", value=float(ground))
+    sub_element(root, "emitter", type="cie_sky", id="sky")
+    integ = sub_element(root, "integrator", type=spec.render["integrator"], id="integrator")
+    sub_element(integ, "integer", name="max_depth", value=spec.render["max_depth"])
     cam = spec.camera
     to_world = camera_matrix(cam)
-    sensor = _sub(root, "sensor", type="perspective", id="camera")
-    _sub(sensor, "float", name="fov", value=float(cam["fov_deg"]))
-    _sub(sensor, "string", name="fov_axis", value="x")
-    tr = _sub(sensor, "transform", name="to_world")
-    _sub(tr, "matrix", value=" ".join(repr(float(x)) for x in to_world.ravel()))
-    film = _sub(sensor, "film", type="hdrfilm")
-    _sub(film, "integer", name="width", value=int(cam["width"]))
-    _sub(film, "integer", name="height", value=int(cam["height"]))
-    _sub(film, "string", name="pixel_format", value="rgb")
-    _sub(film, "rfilter", type="box")
-    sampler = _sub(sensor, "sampler", type=spec.render["sampler"])
+    sensor = sub_element(root, "sensor", type="perspective", id="camera")
+    sub_element(sensor, "float", name="fov", value=float(cam["fov_deg"]))
+    sub_element(sensor, "string", name="fov_axis", value="x")
+    tr = sub_element(sensor, "transform", name="to_world")
+    sub_element(tr, "matrix", value=" ".join(repr(float(x)) for x in to_world.ravel()))
+    film = sub_element(sensor, "film", type="hdrfilm")
+    sub_element(film, "integer", name="width", value=int(cam["width"]))
+    sub_element(film, "integer", name="height", value=int(cam["height"]))
+    sub_element(film, "string", name="pixel_format", value="rgb")
+    sub_element(film, "rfilter", type="box")
+    sampler = sub_element(sensor, "sampler", type=spec.render["sampler"])
     # the count of each of the render's two passes, which the sampler accepts as it is
-    _sub(sampler, "integer", name="sample_count",
+    sub_element(sampler, "integer", name="sample_count",
          value=pass_spp(spec.render["spp"], spec.render["sampler"]))
     return ET.tostring(root, encoding="unicode"), mats, to_world
 
