@@ -264,11 +264,13 @@ def _fit(args):
                           "by its own grid and light cache: leave out --per-pixel or "
                           f"{region_only[0]}.")
     regions = _fit_regions(args)
-    light = LightOptions(args.sky, args.sun_sd, args.sky_terms, args.sky_shape)
-    if args.per_pixel and args.sky_shape:
-        raise SkyfitError("--sky-shape belongs to region fits; a map takes the spec's sky's "
+    if args.per_pixel and (args.sky_shape or args.sky_departure):
+        given = "--sky-shape" if args.sky_shape else "--sky-departure"
+        raise SkyfitError(f"{given} belongs to region fits; a map takes the spec's sky's "
                           "shape at the level its regions fit (leave out --per-pixel or "
-                          "--sky-shape).")
+                          f"{given}).")
+    light = LightOptions(args.sky, args.sun_sd, args.sky_terms, args.sky_shape,
+                         False if args.per_pixel else args.sky_departure)
     if args.per_pixel:
         from .fitting.pixel_map import CHUNK, ClusterOptions, MapOptions, run_map
 
@@ -632,6 +634,13 @@ def _add_fit(sub, common):
                      "the next CIE group's gradation and indicatrix, or with the next Perez "
                      "clearness bin's and with Delta one step (x1.42) on, under a prior of one "
                      "group, bin or step (two more traces of the light)")
+    fit.add_argument("--sky-departure", action=argparse.BooleanOptionalAction, default=None,
+                     help="with --sky fit or prior: fit the sky's departure from the spec's "
+                     "model, a smooth field over the sky (zenith angle and angle from the sun, "
+                     "five weights) under a prior measured from real clear skies, marginalised "
+                     "into every interval (five more traces of the light); default on for "
+                     "photographs, off for a sequence skyfit rendered; --no-sky-departure "
+                     "takes the spec's shape as exact")
     fit.add_argument("--sun-sd", type=float, default=None,
                      help="with --sky fit or prior: the relative uncertainty of the spec's sun "
                      f"level, in the reflectances' intervals (default for photographs "

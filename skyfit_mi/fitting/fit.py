@@ -27,7 +27,8 @@ from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import levenberg_marquardt
 from .pose import pose_share
 from ..errors import SkyfitError, check_choice
-from .sky_fit import SkyFit, SkyShare, fit_sky_scale, shape_variants, skies_at_level, sky_level_at
+from .sky_fit import (SkyFit, SkyShare, fit_sky_scale, fitted_mix, shape_variants, skies_at_level,
+                      sky_level_at)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, block_budget, memory_estimate,
                                   shared_budget, trace_basis)
@@ -39,6 +40,7 @@ from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSI
                                   build_light_cache)
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, is_table, load_manifest
 from ..pipeline.observation_table import relative_scale
+from ..physics.sky_departure import departure_parts
 from ..physics.turbid_sky import level_factors
 from ..physics.ward import METAL_THRESHOLD
 
@@ -267,7 +269,8 @@ class FitSession:
         sky = result.get("sky")
         if sky is None or result.get("sequence_run_id") != self.run_id:
             return SPEC_LIGHT
-        return LightPlan("fit", shape=sky.get("shape") is not None)
+        return LightPlan("fit", shape=sky.get("shape") is not None,
+                         departure=sky.get("departure") is not None)
 
     def light_at_level(self, record):
         """Take the frames' skies at a sky fit's level (``record``,
@@ -287,8 +290,7 @@ class FitSession:
         sky = result.get("sky")
         if self.light.split:
             k = sky_level_at(sky, self.obs.times)
-            mix = None if sky.get("shape") is None else sky["shape"]["mix"]
-            self.set_sky(float(k[0]) if np.ptp(k) == 0 else k, mix)
+            self.set_sky(float(k[0]) if np.ptp(k) == 0 else k, fitted_mix(sky))
 
     def trace_light(self, light=None):
         """(Re)trace the light (a :class:`~.light.LightPlan`; None: the one traced last) at
@@ -314,10 +316,10 @@ class FitSession:
         rest's samples, their covariances kept); and the number of blocks."""
         c = self.cache_settings
         # the split light's parts by name, each a list of the frames' skies
-        named = self._sky_parts(light.shape) if light.split else None
+        named = self._sky_parts(light) if light.split else None
         lights = None if named is None else list(named.values())
-        # a table per part, and the shape group's covariances about one more
-        need = (len(lights) + 1 + light.shape if lights else 1) * memory_estimate(
+        # a table per part, and the rest's group's covariances about one more
+        need = (len(lights) + (len(lights) > 2) if lights else 1) * memory_estimate(
             len(at), len(self.skies), c["positions"], c["directions"])
         have = available_memory()
         if have is not None and need > have:
@@ -343,17 +345,23 @@ class FitSession:
         cov = None if cov is None else replace(cov, pairs=[(j + 1, k + 1) for j, k in cov.pairs])
         return LightParts(tuple(named), tuple(parts), cov), blocks
 
-    def _sky_parts(self, shape):
+    def _sky_parts(self, light):
         """The light's parts by name (:class:`~.light.LightParts`), each a list of the
         frames' skies: the sun's and the rest's (:meth:`~skyfit_mi.physics.sky.Sky.split`),
-        and with ``shape`` the rest's shape variants
-        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`)."""
+        with the plan ``light``'s ``shape`` the rest's shape variants
+        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`), with its ``departure`` the
+        parts of the sky's departure field
+        (:func:`~skyfit_mi.physics.sky_departure.departure_parts`)."""
         sun, rest = zip(*(sky.split() for sky in self.skies))
         lights = {"sun": list(sun), "sky": list(rest)}
-        if shape:
+        if light.shape:
             variants = self._shape_variants()
             for j, (_, first) in enumerate(variants[0]):
                 lights[f"shape:{first.info['of']}"] = [v[j][1] for v in variants]
+        if light.departure:
+            parts = [departure_parts(sky) for sky in self.skies]
+            for j, (name, _) in enumerate(parts[0]):
+                lights[f"departure:{name}"] = [p[j][1] for p in parts]
         return lights
 
     def _shape_variants(self):
@@ -367,7 +375,8 @@ class FitSession:
         """(sun, sky): the factors on each frame's sun and sky (T,) that the shape's ``mix``
         brings with it: a turbid sky's turbidity sets both levels
         (:func:`~skyfit_mi.physics.turbid_sky.level_factors`); 1 for other skies, or no mix."""
-        if mix is None or not all(s.info.get("kind") == "turbid" for s in self.skies):
+        if mix is None or not (self.parts and self.parts.shapes) \
+                or not all(s.info.get("kind") == "turbid" for s in self.skies):
             return 1.0, 1.0
         return level_factors([s.info for s in self.skies],
                              [v[0][1].info for v in self._shape_variants()], mix[0])

@@ -21,8 +21,8 @@ import numpy as np
 from ..errors import SkyfitError, check_choice, check_range
 from ..physics.sky import SKY_CHOICES, SKY_LEVEL_SD
 from ..render.basis_table import mixed
-from .sky_fit import (check_terms, default_sky, default_sun_sd, shape_variants, sun_source,
-                      sun_up)
+from .sky_fit import (check_terms, default_departure, default_sky, default_sun_sd,
+                      shape_variants, sun_source, sun_up)
 
 
 @dataclass(frozen=True)
@@ -37,6 +37,8 @@ class LightPlan:
         'modelled' (the spec's sun), 'rendered' (the very sun skyfit rendered the day with)
     terms : the terms of the sky's level over the day (None: :func:`~.sky_fit.default_terms`)
     shape : whether the sky's shape variants are traced and mixed (``--sky-shape``)
+    departure : whether the sky's departure from its model is traced and fitted under its
+        prior (``--sky-departure``, :mod:`~skyfit_mi.physics.sky_departure`)
     """
 
     sky: str = "spec"
@@ -44,6 +46,7 @@ class LightPlan:
     sun_source: str = "given"
     terms: int = None
     shape: bool = False
+    departure: bool = False
 
     @property
     def split(self):
@@ -67,19 +70,22 @@ SPEC_LIGHT = LightPlan()
 @dataclass(frozen=True)
 class LightOptions:
     """The light options of a fit as given (``fit --sky``, ``--sun-sd``, ``--sky-terms``,
-    ``--sky-shape``); None chooses (:meth:`resolve`)."""
+    ``--sky-shape``, ``--sky-departure``); None chooses (:meth:`resolve`)."""
 
     sky: str = None
     sun_sd: float = None
     terms: int = None
     shape: bool = False
+    departure: bool = None
 
     def resolve(self, doc, skies, n_frames, log=print):
         """The :class:`LightPlan` of these options on a sequence (its manifest ``doc``, its
         frames' ``skies``, ``n_frames`` fitted), checked before any light is traced: ``sky``
         None chosen (:func:`~.sky_fit.default_sky`, and said), ``sun_sd`` None its default
-        (:func:`~.sky_fit.default_sun_sd`)."""
+        (:func:`~.sky_fit.default_sun_sd`), ``departure`` None on for photographs whose sky is
+        fitted (:func:`~.sky_fit.default_departure`)."""
         sky, sun_sd, terms, shape = self.sky, self.sun_sd, self.terms, bool(self.shape)
+        departure = self.departure
         if sky is not None:
             check_choice("sky", sky, SKY_CHOICES)
         if sun_sd is not None:
@@ -92,8 +98,9 @@ class LightOptions:
                     f"theirs, so its level is fitted with its prior (--sky {sky}; --sky spec "
                     "takes it as exact)")
         asked = terms not in (None, 1)
-        if sky == "spec" and (asked or shape or sun_sd is not None):
-            given = "--sky-terms" if asked else "--sky-shape" if shape else "--sun-sd"
+        if sky == "spec" and (asked or shape or sun_sd is not None or departure):
+            given = ("--sky-terms" if asked else "--sky-shape" if shape else
+                     "--sky-departure" if departure else "--sun-sd")
             raise SkyfitError(f"{given} belongs to a fitted sky, and the spec's is taken as it "
                               "is " + ("(the default where skyfit rendered the frames or no "
                                        "sun lights them)" if chosen else "(--sky spec)")
@@ -109,10 +116,23 @@ class LightOptions:
             terms = int(terms)
         if shape:
             shape_variants(skies)                       # refuses a sky without variants
+        modelled = any(k.lit_by_sky for k in skies) and all(k.envmap is None for k in skies)
+        if departure and not modelled:
+            raise SkyfitError("--sky-departure moves a model sky's patterns, and the spec's "
+                              "skies are maps (measured) or give no light but the sun's; leave "
+                              "it out.")
+        if departure is None:
+            departure = default_departure(doc) and modelled
+            if departure:
+                log("sky: photographs under a real sky, whose shape no model holds: its "
+                    "departure from the spec's is fitted under its prior "
+                    "(--no-sky-departure takes the spec's shape as exact)")
+        departure = bool(departure)
         if sun_sd is not None:
-            return LightPlan(sky, float(sun_sd), "given", terms, shape)
+            return LightPlan(sky, float(sun_sd), "given", terms, shape, departure)
         sun_sd = default_sun_sd(doc, skies)
-        return LightPlan(sky, sun_sd, sun_source(skies) if sun_sd else "rendered", terms, shape)
+        return LightPlan(sky, sun_sd, sun_source(skies) if sun_sd else "rendered", terms, shape,
+                         departure)
 
 
 @dataclass(frozen=True)
@@ -124,8 +144,9 @@ class LightParts:
 
     names : the parts: ``light`` (the spec's light as it is, alone), or a fitted sky's ``sun``
         (the solar disc), ``sky`` (the rest: sky, map and ground,
-        :meth:`~skyfit_mi.physics.sky.Sky.split`) and its shape variants ``shape:<index>``
-        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`)
+        :meth:`~skyfit_mi.physics.sky.Sky.split`), its shape variants ``shape:<index>``
+        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`) and its departure's parts
+        ``departure:<basis>`` (:func:`~skyfit_mi.physics.sky_departure.departure_parts`)
     tables : each part's :class:`~skyfit_mi.render.basis_table.BasisTable`, traced in the
         same blocks
     covariances : the :class:`~skyfit_mi.render.basis_table.Covariances` of the parts traced on
@@ -138,8 +159,14 @@ class LightParts:
 
     @property
     def variants(self):
-        """The names of the sky's shape variants traced."""
-        return [n for n in self.names if n.startswith("shape:")]
+        """The names of the parts mixed with the rest (the sky's shape variants, then its
+        departure's parts), in order: the mix's."""
+        return [n for n in self.names if n.startswith(("shape:", "departure:"))]
+
+    @property
+    def shapes(self):
+        """How many of :attr:`variants` are shape variants (the first)."""
+        return sum(n.startswith("shape:") for n in self.names)
 
     def subset(self, rows):
         """The parts at the points ``rows`` (a slice)."""
@@ -148,9 +175,10 @@ class LightParts:
 
     def table(self, k=1.0, mix=None, sun=1.0):
         """The table of the light whose sky (all but the sun) is ``k`` times the spec's against
-        the sun (one factor, or one per frame), in the spec's shape or (``mix``, one per shape
-        variant) (1 - sum(mix)) times its pattern plus mix_j times variant j, and whose sun is
-        ``sun`` times the spec's (one factor, or one per frame)."""
+        the sun (one factor, or one per frame), in the spec's shape or (``mix``, one per
+        variant: shape variants, then departure parts) (1 - sum(mix)) times its pattern plus
+        mix_j times variant j, and whose sun is ``sun`` times the spec's (one factor, or one
+        per frame)."""
         if self.names == ("light",):
             return self.tables[0]
         mix = np.zeros(len(self.variants)) if mix is None else np.asarray(mix, dtype=float)

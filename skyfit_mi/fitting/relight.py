@@ -266,6 +266,7 @@ def light_as_fitted(spec, level, target, out, log=print):
     doc, root = load_manifest(target)
     seen = {g["index"]: g for g in doc["frames"] if "illumination" in g}
     shape = level.get("shape")
+    departure = (level.get("departure") or {}).get("weights", [])
     kept = []
     for f in spec.frames:
         if f.index in seen:
@@ -279,11 +280,11 @@ def light_as_fitted(spec, level, target, out, log=print):
                 kept.append(frame_label(f.index, f.time))
             if len(variants) != len(shape["mix"]):
                 variants = []
-        if variants or f.sky.envmap is not None:
+        if variants or departure or f.sky.envmap is not None:
             # a mix that no one Sky holds, or a map the manifest names by its file (which k
             # does not scale): a map of its own
-            f.sky = _sky_map(f, shaped(f.sky, k, shape["mix"] if variants else [], variants),
-                             out)
+            f.sky = _sky_map(f, shaped(f.sky, k, shape["mix"] if variants else [], variants,
+                                       departure if f.sky.lit_by_sky else ()), out)
         else:
             f.sky = f.sky.sky_scaled(k)
     if kept:
@@ -305,7 +306,8 @@ def _sky_map(frame, sky, out):
            "direct_normal_W_m2": float(sky.sun_radiance @ SRGB_LUMINANCE) * sky.sun_solid_angle,
            "sun_measured": bool(sky.info.get("sun_measured"))}
     made = envmap_from_record(rec, out, zenith, azimuth)
-    made.info.update({k: sky.info[k] for k in ("shape_mix", "sky_level")})
+    made.info.update({k: sky.info[k] for k in ("shape_mix", "sky_level", "departure")
+                      if k in sky.info})
     return made
 
 

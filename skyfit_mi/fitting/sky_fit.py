@@ -47,12 +47,14 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.special import chdtrc
 
 from . import uncertainty as unc
 from ..errors import SkyfitError
 from .methods.levenberg_marquardt import levenberg_marquardt
 from ..pipeline.manifest import RENDERED_SOURCES
 from ..physics import sky_shape
+from ..physics.sky_departure import BASIS, PRIOR_SD as DEPARTURE_SD, conflict
 from ..physics.sky import MEASURED_SUN_SD, SUN_LEVEL_SD, SUN_SKY_COUPLING
 from ..physics.turbid_sky import TURBIDITY_RANGE
 from .methods import global_search
@@ -93,6 +95,9 @@ DRIFT_SD = 0.35
 #: thesis's clear sky (5.98 against 5, indicatrix 4: BENCHMARKS, "Sky models against a
 #: measured clear sky").
 SHAPE_SD = 1.0
+#: The p-value of the fitted departure's chi-square under its prior below which the fit warns
+#: that the sky departs from the spec's model more than real clear skies do (:func:`_departure_warnings`).
+DEPARTURE_CONFLICT_P = 0.001
 #: Step in each term's coefficient of the finite differences of the residuals.
 DRIFT_STEP = 1e-3
 #: Gauss-Newton iterations of the terms at most.
@@ -164,6 +169,13 @@ def default_sky(doc, skies):
     or no sun lights them to scale the sky against)."""
     sunny = sun_up(skies) and any(k.lit_by_sky for k in skies)
     return "prior" if sunny and _photographed(doc) else "spec"
+
+
+def default_departure(doc):
+    """Whether a fitted sky's departure from its model is fitted when not told (``fit
+    --sky-departure``): for photographs (their sky is the real one, whose shape no model
+    holds), not for a sequence skyfit rendered under the spec's very sky."""
+    return _photographed(doc)
 
 
 def sun_source(skies):
@@ -386,9 +398,11 @@ class SkyCoefficients:
     """The sky's coefficients fitted with the materials, each under a Gaussian prior N(0, sd^2)
     about the spec's sky: log k over the day as ``terms`` Legendre polynomials in time (the
     day's level under ``level_sd``, None for none; each further term under :data:`DRIFT_SD`),
-    and the mix of each of the sky's shape ``variants`` (names, :data:`SHAPE_SD`).  They set
-    the weights of the light's traced parts (:meth:`~.light.LightParts.table`): the sky's
-    k(t) = exp(B(t) u[:terms]) against the sun, its shape's mix u[terms:]."""
+    and the mix of each of the light's ``variants`` (their parts' names): the sky's shape
+    variants (:data:`SHAPE_SD`) and its departure field's weights
+    (:data:`~skyfit_mi.physics.sky_departure.PRIOR_SD`).  They set the weights of the light's
+    traced parts (:meth:`~.light.LightParts.table`): the sky's k(t) = exp(B(t) u[:terms])
+    against the sun, the variants' mix u[terms:]."""
 
     terms: int
     variants: tuple = ()
@@ -398,12 +412,14 @@ class SkyCoefficients:
     def names(self):
         """Each coefficient's name, in order."""
         return (["log k"] + [f"log k term {j}" for j in range(1, self.terms)]
-                + [f"mix {v.removeprefix('shape:')}" for v in self.variants])
+                + [f"mix {v.removeprefix('shape:')}" if v.startswith("shape:") else
+                   v.replace(":", " ", 1) for v in self.variants])
 
     @property
     def precision(self):
         """The priors' precision matrix (1 / sd^2 on the diagonal; 0 for no prior)."""
-        sd = [self.level_sd] + [DRIFT_SD] * (self.terms - 1) + [SHAPE_SD] * len(self.variants)
+        sd = [self.level_sd] + [DRIFT_SD] * (self.terms - 1) + [
+            SHAPE_SD if v.startswith("shape:") else DEPARTURE_SD for v in self.variants]
         return np.diag([0.0 if v is None else v ** -2 for v in sd])
 
     def light(self, session, basis, u):
@@ -639,6 +655,7 @@ class _Fitted:
     correlation: dict = None
     log_k: np.ndarray = None
     index_names: list = None
+    departure: dict = None
 
 
 def _fit_terms(sessions, level, terms, told, warnings):
@@ -654,7 +671,9 @@ def _fit_terms(sessions, level, terms, told, warnings):
         return fitted
     if not level.determined:
         if told and terms > 1 or J:
-            parts = ["change over the day"] * (told and terms > 1) + ["shape"] * bool(J)
+            parts = (["change over the day"] * (told and terms > 1)
+                     + ["shape"] * bool(sessions[0].parts.shapes)
+                     + ["departure from its model"] * (J > sessions[0].parts.shapes))
             warnings.append(f"the sky's {' and its '.join(parts)} "
                             f"{'are' if len(parts) > 1 else 'is'} not fitted: its level is not "
                             "determined.")
@@ -675,9 +694,15 @@ def _fit_terms(sessions, level, terms, told, warnings):
             warnings.append(f"the data hardly tell how the sky changes over the day (terms "
                             f"{', '.join(map(str, vague))} of --sky-terms {terms}): their "
                             "prior holds them, and the intervals include that.")
-    if J:
-        fitted.shape, fitted.index_names = _shape_record(sessions[0], u[terms:], sd[terms:])
-        warnings += _shape_warnings(fitted.shape, sd[terms:])
+    S = sessions[0].parts.shapes                         # shape variants first, then departure
+    if S:
+        fitted.shape, fitted.index_names = _shape_record(sessions[0], u[terms:terms + S],
+                                                         sd[terms:terms + S])
+        warnings += _shape_warnings(fitted.shape, sd[terms:terms + S])
+    if J > S:
+        a, Ca = u[terms + S:], C[terms + S:, terms + S:]
+        fitted.departure = _departure_record(a, Ca)
+        warnings += _departure_warnings(fitted.departure)
     fitted.correlation = {"names": coefficients.names,
                           "matrix": (C / np.outer(sd, sd)).tolist()}
     return fitted
@@ -716,6 +741,45 @@ def _shape_warnings(shape, mix_sd):
                         "reliable; give the spec a sky nearer the day's (a measured "
                         "one: perez with measured irradiance, or envmap).")
     return warnings
+
+
+def _departure_record(a, covariance):
+    """The JSON record of the sky's fitted departure from its model: the field's weights ``a``
+    with their ``covariance`` (:mod:`~skyfit_mi.physics.sky_departure`)."""
+    sd = np.sqrt(np.diag(covariance))
+    chi2 = conflict(a)
+    return {"meaning": "the sky other than the sun is the spec's (its level and shape as fitted) "
+                       "times 1 + sum_j weights[j] B_j above the horizon, B_j the basis of the "
+                       "zenith angle theta and the angle gamma from the sun (u = 2 cos theta - 1, "
+                       "y = cos gamma; P1, P2 Legendre), each weight under the prior N(0, "
+                       "prior_sd^2) measured from real clear skies; the fit marginalises it "
+                       "into every interval; conflict: sum (weights / prior_sd)^2, chi-square "
+                       "with len(basis) degrees of freedom under the prior, and its p-value",
+            "basis": list(BASIS), "weights": np.asarray(a).tolist(), "sd": sd.tolist(),
+            "covariance": np.asarray(covariance).tolist(), "prior_sd": DEPARTURE_SD,
+            "conflict": chi2, "conflict_p": float(chdtrc(len(a), chi2))}
+
+
+def _departure_warnings(departure):
+    """What the fitted departure says of the spec's sky: a departure beyond what real clear
+    skies show (its conflict with the prior significant at :data:`DEPARTURE_CONFLICT_P`)."""
+    if departure["conflict_p"] >= DEPARTURE_CONFLICT_P:
+        return []
+    return [f"the sky departs from the spec's model more than measured clear skies depart from "
+            f"theirs (its field's weights {', '.join(f'{v:+.2f}' for v in departure['weights'])}"
+            f" against a prior sd of {DEPARTURE_SD:g}; chi-square {departure['conflict']:.1f} "
+            f"for {len(departure['weights'])}): the prior holds the field back, so the "
+            "parameters and their intervals may not be reliable; give the spec a sky nearer the "
+            "day's (a measured one: perez with measured irradiance, or envmap, or a sky "
+            "photographed), or fit its shape too (--sky-shape)."]
+
+
+def fitted_mix(record):
+    """The mix of the light's variants (:class:`~.light.LightParts`) at a sky fit's
+    ``record``: its shape's mix, then its departure's weights; None where neither was fitted."""
+    mix = list((record.get("shape") or {}).get("mix", [])) \
+        + list((record.get("departure") or {}).get("weights", []))
+    return mix or None
 
 
 def _sun_coupling(plan, level, fitted):
@@ -781,7 +845,8 @@ def fit_sky_scale(sessions, plan, seed=0, log=print):
                                      "fitted sky, its curve and shape included)",
                           "k": [float(np.exp(u)) for u in profile],
                           "chi2": [level.data(u) for u in profile]},
-              "terms": fitted.curve, "shape": fitted.shape, "correlation": fitted.correlation,
+              "terms": fitted.curve, "shape": fitted.shape, "departure": fitted.departure,
+              "correlation": fitted.correlation,
               "sun_coupling": coupling,
               "warnings": warnings, "time_s": time.perf_counter() - t0}
     log(_sky_log(record, fitted, len(sessions), plan.prior_sd, terms))
@@ -805,5 +870,10 @@ def _sky_log(record, fitted, regions, prior_sd, terms):
             + ("" if shape is None or "levels_by_frame" not in shape else
                ", which puts the sun's light at {:.2f}-{:.2f} and the sky's at {:.2f}-{:.2f} of "
                "the spec's over the frames".format(*_ranges(shape["levels_by_frame"])))
+            + ("" if fitted.departure is None else
+               "; its departure from the model: " + ", ".join(
+                   f"{b} {a:+.3f} +- {e:.3f}" for b, a, e in zip(
+                       BASIS, fitted.departure["weights"], fitted.departure["sd"]))
+               + f" (prior sd {DEPARTURE_SD:g})")
             + f" ({record['time_s']:.1f} s)"
             + "".join(f"\n  warning: {w}" for w in record["warnings"]))

@@ -28,6 +28,7 @@ from .colour import SRGB_LUMINANCE, cct_to_rgb
 from ..conventions import angles_from_direction, direction_from_angles
 from ..errors import SkyfitError, check_choice, check_range
 from .latlong import latlong_radiance
+from .sky_departure import BASIS, field_factor
 from .sun import SUN_SOLID_ANGLE, SunDisc, direct_normal_irradiance, sun_rgb
 
 #: Luminous efficacy of clear-sky light [lm W^-1] (thesis 4.2.2).
@@ -241,6 +242,10 @@ class Sky:
         Radiance of the solar disc [W m^-2 sr^-1] (uniform over the disc).
     sun_solid_angle : float
         Solid angle of the solar disc [sr].
+    departure : ndarray (5,)
+        Weights a of the field 1 + sum_j a_j B_j (:mod:`~.sky_departure`) that multiplies
+        the patterns above the horizon (not the map, nor the ground) [unitless]: the sky's
+        departure from its model; zeros (the model as it is) unless a fit moved it.
     info : dict
         How the sky was made (kind, phi, sun angles, levels...), for manifests.
     """
@@ -257,6 +262,7 @@ class Sky:
     horizon_blend: bool = False
     sun_radiance: np.ndarray = field(default_factory=lambda: np.zeros(3))
     sun_solid_angle: float = SUN_SOLID_ANGLE
+    departure: np.ndarray = field(default_factory=lambda: np.zeros(len(BASIS)))
     info: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -275,6 +281,11 @@ class Sky:
             raise SkyfitError(f"perez_coefficients must be 5 finite numbers a, b, c, d, e with "
                               f"b <= 0, got {self.perez_coefficients!r}.")
         object.__setattr__(self, "perez_coefficients", c)
+        a = np.asarray(self.departure, dtype=float).ravel()
+        if a.shape != (len(BASIS),) or not np.all(np.isfinite(a)):
+            raise SkyfitError(f"departure must be {len(BASIS)} finite weights, got "
+                              f"{self.departure!r}.")
+        object.__setattr__(self, "departure", a)
         if self.envmap is not None:
             t = np.asarray(self.envmap, dtype=np.float32)
             if t.ndim != 3 or t.shape[2] != 3 or not np.all(np.isfinite(t)) or np.any(t < 0):
@@ -311,6 +322,8 @@ class Sky:
                                 (self.perez, lambda: perez_pattern(d, s, self.perez_coefficients))):
             if np.any(weight):
                 sky = sky + np.asarray(pattern())[..., None] * weight
+        if np.any(self.departure):
+            sky = sky * field_factor(d, s, self.departure)[..., None]
         if self.horizon_blend:
             w = horizon_blend_weight(d[..., 2])[..., None]
             out = w * sky + (1.0 - w) * self.ground

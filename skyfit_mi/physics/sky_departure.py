@@ -10,7 +10,9 @@ materials.  Here it is a multiplicative field over the sky hemisphere,
 on a low-order basis (:data:`BASIS`) of the zenith angle theta and of the angle gamma from the sun
 (thesis eq. 4.14): with u = 2 cos(theta) - 1 and y = cos(gamma), both in [-1, 1] above the
 horizon, B = (P1(u), P2(u), P1(y), P2(y), u y), P_n the Legendre polynomials.  Every |B_j| <= 1,
-so each ``1 + B_j`` is non-negative and the sky lit by it is a light (:func:`departure_parts`);
+so each ``1 + B_j`` is non-negative and the sky lit by it is a light (:func:`departure_parts`;
+the ``departure`` weights of a :class:`~.sky.Sky`, which its patterns and the ``cie_sky``
+emitter's take);
 radiance is linear in the light, so the field's weights a_j are weights of traced parts
 (:class:`~skyfit_mi.fitting.light.LightParts`), as the sky's shape variants' mix is.  The ground
 below the horizon is not moved.
@@ -29,10 +31,6 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..conventions import direction_from_angles
-from .latlong import MAX_ROWS, resample
-from .sky import unit_vector
-
 #: The field's basis functions by name (:func:`basis`).
 BASIS = ("zenith P1", "zenith P2", "sun P1", "sun P2", "zenith x sun")
 #: The prior's standard deviation of every weight a_j: the least (in steps of 0.05) whose 95%
@@ -41,8 +39,6 @@ BASIS = ("zenith P1", "zenith P2", "sun P1", "sun P2", "zenith x sun")
 #: beyond); expectation-maximisation puts it at 0.16 and holds 13 of 15 held out
 #: (``scripts/sky_departure_prior.py``; tests/test_sky_departure.py recomputes both).
 PRIOR_SD = 0.25
-#: Sub-samples per cell side of a departure part's environment map (:func:`departure_parts`).
-SUPERSAMPLE = 2
 
 
 def basis(directions, sun):
@@ -53,42 +49,32 @@ def basis(directions, sun):
     d = np.asarray(directions, dtype=float)
     d = d / np.linalg.norm(d, axis=-1, keepdims=True)
     u = np.clip(2.0 * d[..., 2] - 1.0, -1.0, 1.0)
-    y = np.clip(d @ unit_vector(sun), -1.0, 1.0)
+    y = np.clip(d @ (np.asarray(sun, dtype=float) / np.linalg.norm(sun)), -1.0, 1.0)
     return np.stack([u, 1.5 * u * u - 0.5, y, 1.5 * y * y - 0.5, u * y], axis=-1)
 
 
-def field(directions, sun, weights):
+def field_factor(directions, sun, weights):
     """The multiplicative field 1 + sum_j a_j B_j (...,) at ``weights`` a (J,) [unitless]."""
     return 1.0 + basis(directions, sun) @ np.asarray(weights, dtype=float)
 
 
-def departure_parts(sky, rows=MAX_ROWS, supersample=SUPERSAMPLE):
+def departure_parts(sky):
     """The lights that carry the field's basis for ``sky``'s light other than the sun (the
-    rest, :meth:`~.sky.Sky.split`): for each B_j the rest with its sky (above the horizon)
-    times 1 + B_j, as a lat-long environment map (:mod:`~.latlong`, ``rows`` rows, each cell
-    the mean over ``supersample`` x ``supersample`` directions), the ground below the horizon
-    as the rest's.  A mix (1 - sum a) rest + sum a_j part_j is the rest times the field at
-    a above the horizon (:func:`field`): the form of the sky's shape variants
-    (:func:`~.sky_shape.shape_variants`).
+    rest, :meth:`~.sky.Sky.split`): for each B_j the rest with its patterns (above the
+    horizon) times 1 + B_j (its ``departure`` weights the unit vector e_j), the ground below
+    the horizon and a map as the rest's.  A mix (1 - sum a) rest + sum a_j part_j is the rest
+    with its patterns times the field at a (:func:`field_factor`): the form of the sky's shape
+    variants (:func:`~.sky_shape.shape_variants`).
 
     Returns
     -------
     list of (name, Sky)
         :data:`BASIS`' names and the skies (no sun), their info ``kind`` 'departure'.
     """
-    bare, rest = sky.split()
-    bare = replace(bare, sun_radiance=np.zeros(3), ground=np.zeros(3))   # no light at all
-    sun = sky.sun_direction
-    out = []
-    for j, name in enumerate(BASIS):
-        def lookup(theta, phi, j=j):
-            d = direction_from_angles(theta, phi)
-            up = (d[..., 2] > 0.0)[..., None]
-            return rest.sky_radiance(d) * np.where(up, 1.0 + basis(d, sun)[..., j:j + 1], 1.0)
-        table = np.clip(resample(lookup, int(rows), supersample=supersample), 0.0, None)
-        out.append((name, replace(bare, envmap=table,
-                                  info={"kind": "departure", "basis": name})))
-    return out
+    _, rest = sky.split()
+    return [(name, replace(rest, departure=np.eye(len(BASIS))[j],
+                           info={"kind": "departure", "basis": name}))
+            for j, name in enumerate(BASIS)]
 
 
 def scan_departure(directions, measured, model, sun):

@@ -107,7 +107,7 @@ def _pattern_as_sky_part(sky, coefficients, info=None):
                info=dict(info or {}))
 
 
-def shaped(sky, k, mix, variants, rows=MAX_ROWS, supersample=SHAPED_SUPERSAMPLE):
+def shaped(sky, k, mix, variants, departure=(), rows=MAX_ROWS, supersample=SHAPED_SUPERSAMPLE):
     """A copy of ``sky`` lit as a fit of the sky's level and shape saw it (``fit
     --sky-shape``): the sun's light (:meth:`~.sky.Sky.split`) as ``sky``'s, the rest ``k``
     times (1 - sum(mix)) ``sky``'s own plus ``mix[j]`` times ``variants[j]``
@@ -120,7 +120,11 @@ def shaped(sky, k, mix, variants, rows=MAX_ROWS, supersample=SHAPED_SUPERSAMPLE)
     ``supersample`` directions, the ground below the horizon included
     (its ``ground`` term 0): an ``envmap`` record's sky with the sun's direct normal
     irradiance and no albedo of its own (:func:`~skyfit_mi.physics.envmap.envmap_sky`).
-    Radiances linear sRGB [W m^-2 sr^-1]; ``k`` and ``mix`` unitless."""
+    ``departure``: the weights of the sky's fitted departure from its model (``fit
+    --sky-departure``), ``sky``'s own sky above the horizon times their field added as the
+    fit mixed it (:func:`~.sky_departure.departure_parts`): its patterns' light times
+    sum_j a_j B_j.
+    Radiances linear sRGB [W m^-2 sr^-1]; ``k``, ``mix`` and ``departure`` unitless."""
     mix = np.asarray(mix, dtype=float)
     sun, rest = sky.split()
     b = 1.0
@@ -130,9 +134,17 @@ def shaped(sky, k, mix, variants, rows=MAX_ROWS, supersample=SHAPED_SUPERSAMPLE)
     parts = [(1.0, sun), (k * b * (1.0 - mix.sum()), rest)] + [
         (k * b * m, v) for m, v in zip(mix, variants)]
 
+    a = np.asarray(departure, dtype=float)
+
     def lookup(theta, phi):
         d = direction_from_angles(theta, phi)
-        return sum(w * p.sky_radiance(d) for w, p in parts if w != 0.0)
+        out = sum(w * p.sky_radiance(d) for w, p in parts if w != 0.0)
+        if a.size:
+            up = (d[..., 2] > 0.0)[..., None]
+            out = out + k * b * rest.sky_radiance(d) * np.where(
+                up, (basis(d, sky.sun_direction) @ a)[..., None], 0.0)
+        return out
     table = np.clip(resample(lookup, int(rows), supersample=supersample), 0.0, None)
     return replace(sun, envmap=table, ground=np.zeros(3),
-                   info={**sky.info, "shape_mix": mix.tolist(), "sky_level": float(k)})
+                   info={**sky.info, "shape_mix": mix.tolist(), "sky_level": float(k),
+                         **({"departure": a.tolist()} if a.size else {})})

@@ -10,6 +10,16 @@ import numpy as np
 RGB_KEYS = ("sun_radiance", "clear", "overcast", "uniform", "intermediate", "perez", "ground")
 #: The emitter's float parameters holding the Sky's ``perez_coefficients`` a..e.
 PEREZ_KEYS = ("perez_a", "perez_b", "perez_c", "perez_d", "perez_e")
+#: The emitter's float parameters holding the Sky's ``departure`` weights (its field's basis,
+#: :data:`~skyfit_mi.physics.sky_departure.BASIS`, in order).
+DEPARTURE_KEYS = tuple(f"departure_{j}" for j in range(5))
+
+
+def float_parameters(sky):
+    """The emitter's float parameters of ``sky`` by name: its Perez coefficients and its
+    departure's weights."""
+    return dict(zip(PEREZ_KEYS + DEPARTURE_KEYS,
+                    map(float, np.r_[sky.perez_coefficients, sky.departure])))
 
 
 def sky_dict(sky, scene_radius=1e4):
@@ -21,8 +31,7 @@ def sky_dict(sky, scene_radius=1e4):
          "scene_radius": float(scene_radius)}
     for k in RGB_KEYS:
         d[k] = mi.ScalarVector3f(*map(float, getattr(sky, k)))
-    for k, v in zip(PEREZ_KEYS, sky.perez_coefficients):
-        d[k] = float(v)
+    d.update(float_parameters(sky))
     if sky.envmap is not None:
         d["envmap"] = mi.TensorXf(envmap_table(sky.envmap))
     return d
@@ -89,8 +98,8 @@ def update_sky(params, sky, prefix):
     params[prefix + "horizon_blend"] = opaque_value(mi.Bool, bool(sky.horizon_blend))
     for k in RGB_KEYS:
         params[prefix + k] = opaque_value(mi.Color3f, getattr(sky, k))
-    for k, v in zip(PEREZ_KEYS, sky.perez_coefficients):
-        params[prefix + k] = opaque_value(mi.Float, float(v))
+    for k, v in float_parameters(sky).items():
+        params[prefix + k] = opaque_value(mi.Float, v)
     table = envmap_table(sky.envmap)
     params[prefix + "envmap"] = mi.TensorXf(jit_array(mi.Float, table), table.shape)
     params.update()

@@ -35,7 +35,7 @@ circumsolar peak limits them to a few 1e-4.
 
 import numpy as np
 
-from .daylight import PEREZ_KEYS, RGB_KEYS, jit_array, opaque_value
+from .daylight import RGB_KEYS, float_parameters, jit_array, opaque_value
 
 #: Roughness values at which I_s is integrated: the Chebyshev series' degree + 1.
 CHEBYSHEV_NODES = 16
@@ -227,10 +227,10 @@ class FrameSkies:
         self.values = {k: jit_array(mi.Color3f, *v.T) for k, v in col.items()}
         self.values["sun_direction"] = jit_array(
             mi.Vector3f, *np.array([sky.sun_direction for sky in skies], dtype=float).T)
-        coef = np.array([sky.perez_coefficients for sky in skies], dtype=float).reshape(-1, 5)
-        floats = np.column_stack([coef, [float(sky.horizon_blend) for sky in skies]])
-        self.values.update({k: jit_array(mi.Float, floats[:, i])
-                            for i, k in enumerate(PEREZ_KEYS + ("blend_weight",))})
+        floats = [float_parameters(sky) | {"blend_weight": float(sky.horizon_blend)}
+                  for sky in skies]
+        self.values.update({k: jit_array(mi.Float, np.array([f[k] for f in floats]))
+                            for k in floats[0]})
 
     def at(self, q):
         """The parameters of the frame of each point ``q`` (a lane each), with ``sky_eval``."""

@@ -45,7 +45,10 @@ import numpy as np
 from ...physics.colour import SRGB_LUMINANCE
 from ...physics.latlong import latlong_texel
 from ...physics.sky import PEREZ_HORIZON_COS, Sky
-from ..daylight import PEREZ_KEYS as _PEREZ_KEYS, RGB_KEYS as _RGB_KEYS
+from ..daylight import (DEPARTURE_KEYS as _DEPARTURE_KEYS, PEREZ_KEYS as _PEREZ_KEYS,
+                        RGB_KEYS as _RGB_KEYS, float_parameters)
+
+_FLOAT_KEYS = _PEREZ_KEYS + _DEPARTURE_KEYS
 from ..daylight import envmap_table, jit_array, opaque_value
 from .properties import property_values
 
@@ -95,7 +98,8 @@ def _table_directions_of(variant):
 def sky_function(p, d):
     """The sky's radiance without sun or map toward world directions ``d`` [W m^-2 sr^-1] for
     the parameters of ``p``: an emitter, or any object with its fields (sun_direction, the
-    pattern weights clear ... perez and ground, perez_a .. perez_e, blend_weight), scalars or
+    pattern weights clear ... perez and ground, perez_a .. perez_e, departure_0 .. departure_4,
+    blend_weight), scalars or
     one per lane of ``d`` (the light cache's frames at once).  Sky.sky_radiance in Dr.Jit."""
     s = p.sun_direction
     cos_z = dr.clip(dr.dot(d, s), -1.0, 1.0)
@@ -116,6 +120,11 @@ def sky_function(p, d):
                           + p.perez_e * cos_z * cos_z), 0.0)
     sky = p.clear * clear + p.overcast * overcast + p.uniform \
         + p.intermediate * inter + p.perez * perez
+    # the departure's field (sky_departure.basis: u = 2 cos theta - 1, y = cos gamma)
+    u = dr.clip(2.0 * dz - 1.0, -1.0, 1.0)
+    sky = sky * (1.0 + p.departure_0 * u + p.departure_1 * (1.5 * u * u - 0.5)
+                 + p.departure_2 * cos_z + p.departure_3 * (1.5 * cos_z * cos_z - 0.5)
+                 + p.departure_4 * u * cos_z)
     a = dr.power(dz + 1.01, 10.0)
     w = a / (a + dr.rcp(a))
     blended = w * sky + (1.0 - w) * p.ground
@@ -132,6 +141,7 @@ class CIESkyEmitter(mi.Emitter):
         sky = Sky(_triple(props, "sun_direction", (0, 0, 1)),
                   **{k: _triple(props, k, 0.0) for k in _RGB_KEYS},
                   perez_coefficients=[float(props.get(k, 0.0)) for k in _PEREZ_KEYS],
+                  departure=[float(props.get(k, 0.0)) for k in _DEPARTURE_KEYS],
                   horizon_blend=bool(props.get("horizon_blend", False)),
                   sun_solid_angle=float(props.get("sun_solid_angle", 6e-5)),
                   envmap=_envmap(np.array(props["envmap"], dtype=np.float32))
@@ -141,8 +151,8 @@ class CIESkyEmitter(mi.Emitter):
         self.sun_solid_angle = mi.Float(float(sky.sun_solid_angle))
         for k in _RGB_KEYS:
             setattr(self, k, mi.Color3f(*map(float, getattr(sky, k))))
-        for k, v in zip(_PEREZ_KEYS, sky.perez_coefficients):
-            setattr(self, k, mi.Float(float(v)))
+        for k, v in float_parameters(sky).items():
+            setattr(self, k, mi.Float(v))
         self.horizon_blend = mi.Bool(bool(sky.horizon_blend))
         self.envmap = mi.TensorXf(envmap_table(sky.envmap))
         self._build_sampling(sky)
@@ -169,7 +179,7 @@ class CIESkyEmitter(mi.Emitter):
         self.envmap_rows = opaque_value(mi.Float, float(self.envmap.shape[0]))
         self.envmap_cols = opaque_value(mi.Float, float(self.envmap.shape[1]))
         for k in ("sun_direction", "sun_solid_angle", "blend_weight", "sun_chord2",
-                  "scene_radius") + _RGB_KEYS + _PEREZ_KEYS:
+                  "scene_radius") + _RGB_KEYS + _FLOAT_KEYS:
             dr.make_opaque(getattr(self, k))
         # the luminance of each cell's sub-samples, averaged, by the emitter's own sky_eval (one
         # kernel; the NumPy twin Sky.sky_radiance took ten times as long for each new sky)
@@ -193,7 +203,7 @@ class CIESkyEmitter(mi.Emitter):
         flag = mi.ParamFlags.NonDifferentiable
         cb.put("sun_direction", self.sun_direction, flag)
         cb.put("sun_solid_angle", self.sun_solid_angle, flag)
-        for k in _RGB_KEYS + _PEREZ_KEYS:
+        for k in _RGB_KEYS + _FLOAT_KEYS:
             cb.put(k, getattr(self, k), flag)
         cb.put("horizon_blend", self.horizon_blend, flag)
         cb.put("envmap", self.envmap, flag)
@@ -204,6 +214,7 @@ class CIESkyEmitter(mi.Emitter):
             return np.array(v, dtype=float).ravel()
         sky = Sky(arr(self.sun_direction), **{k: arr(getattr(self, k)) for k in _RGB_KEYS},
                   perez_coefficients=[arr(getattr(self, k))[0] for k in _PEREZ_KEYS],
+                  departure=[arr(getattr(self, k))[0] for k in _DEPARTURE_KEYS],
                   horizon_blend=bool(arr(self.horizon_blend)[0]),
                   sun_solid_angle=float(arr(self.sun_solid_angle)[0]),
                   envmap=_envmap(np.array(self.envmap, dtype=np.float32)))
