@@ -33,7 +33,8 @@ A slow sweep.  ``--quick`` (a few minutes): five skies other than the spec's and
 five frames, both scenes from both cameras, one paint, two replicates.
 
     .venv/bin/python scripts/sky_test_set.py [--quick] [--replicates N] [--sky fit|prior]
-        [--sky-terms N] [--sky-shape] [--spec-turbidity T] [-o DIR]
+        [--sky-terms N] [--sky-shape] [--sky-departure] [--sun-sd SD] [--pixels 16|64]
+        [--noise PERCENT] [--spec-turbidity T] [-o DIR]
 
 writes DIR/sky_test_set.json and prints the tables.
 """
@@ -62,6 +63,14 @@ _GRID = np.stack(np.meshgrid([4, 6, 9, 11], [4, 6, 9, 11]), -1).reshape(-1, 2)
 SCENES = {"disc": ("disc", {}, _GRID // 2 + 4),                       # 16 pixels, central
           "sphere": ("sphere", {"distance": 6.0, "fov_deg": 22.0, "target": [0.0, 0.0, 1.0]},
                      _GRID)}                                          # normals out to ~30 deg
+#: ``--pixels 64``: an 8 x 8 block of each scene (the disc's and the sphere's pixels 4-11: a
+#: board region's count at real signal).
+_BLOCK = np.stack(np.meshgrid(np.arange(4, 12), np.arange(4, 12)), -1).reshape(-1, 2)
+
+
+def scene_pixels(scene, pixels):
+    """The fitted pixels of ``scene``: :data:`SCENES`' 16, or 64 (:data:`_BLOCK`)."""
+    return SCENES[scene][2] if pixels == 16 else _BLOCK
 #: Perez skies: clearness epsilon and the direct normal irradiance's share of eq. 4.7's.
 PEREZ = {10.0: 1.0, 4.0: 0.7, 2.0: 0.45}
 #: Turbid clear skies: Linke turbidities (2.5: about the shared measured clear day's, whose
@@ -162,12 +171,15 @@ def spec_turbid(turbidity):
 
 
 def fit_replicates(day, scene, truth, replicates, positions=None, directions=512, sky="spec",
-                   shape=False, spec_turbidity=None, terms=None):
+                   shape=False, spec_turbidity=None, terms=None, departure=False, sun_sd=None,
+                   pixels=16):
     """Fit ``day`` with the spec's sky (the thesis's CIE clear sky at each frame's sun; with
     ``sky`` 'fit' its level fitted with the material, ``fit --sky fit``, or 'prior' with its
     prior, ``fit --sky prior``; both with the sun's level uncertain as a modelled sun's; with
     ``shape`` the CIE sky's shape fitted too, ``--sky-shape``; ``terms`` those of the sky's
-    level over the day, ``--sky-terms``, None fit's default) on
+    level over the day, ``--sky-terms``, None fit's default; ``departure`` the sky's departure
+    from its model, ``--sky-departure``; ``sun_sd`` the sun's level's, ``--sun-sd``, None a
+    modelled sun's; ``pixels`` 16 or 64, :func:`scene_pixels`) on
     ``replicates`` captures of its radiance; one record per replicate: parameters, 95%
     intervals, warnings, each parameter's 'in'/'warned'/'MISSED', the chi-square rise at the
     truth and its joint 99.9% bound.  The light cache is sized from the data (``positions``
@@ -186,9 +198,11 @@ def fit_replicates(day, scene, truth, replicates, positions=None, directions=512
               if spec_turbidity is None else
               relabelled(day, Path(day).parent / f"fit_turbid_{spec_turbidity:g}",
                          spec_turbid(spec_turbidity)))
-    region, _, pixels = SCENES[scene]
+    region, pixels = SCENES[scene][0], scene_pixels(scene, pixels)
     # a photographed day's default: the sun's level modelled
-    plan = SPEC_LIGHT if sky == "spec" else LightPlan(sky, SUN_LEVEL_SD, "modelled", terms, shape)
+    plan = SPEC_LIGHT if sky == "spec" else LightPlan(
+        sky, SUN_LEVEL_SD if sun_sd is None else sun_sd, "modelled" if sun_sd is None else
+        "given", terms, shape, departure)
     s = FitSession(fitted, region, pixels, model="colour",
                    cache=FitCache(positions=positions, directions=directions), light=plan)
     radiance = frame_values(fitted, s.obs.pixels, s.obs.frames)
@@ -263,14 +277,16 @@ def markdown(cases, totals):
 
 
 def run_case(folder, sky_name, sky, scene, camera, material_name, replicates, hours, scans,
-             fit_sky="spec", shape=False, spec_turbidity=None, terms=None):
+             fit_sky="spec", shape=False, spec_turbidity=None, terms=None, departure=False,
+             sun_sd=None, pixels=16, noise_percent=2.0):
     """Render and fit one (sky, scene, camera, material); returns its record."""
     material = MATERIALS[material_name]
     t0 = time.perf_counter()
-    day = render_day(folder, template(scene, material, camera, hours), sky, scans)
+    day = render_day(folder, template(scene, material, camera, hours, noise_percent), sky, scans)
     t1 = time.perf_counter()
     fits = fit_replicates(day, scene, truth_of(material), replicates, sky=fit_sky, shape=shape,
-                          spec_turbidity=spec_turbidity, terms=terms)
+                          spec_turbidity=spec_turbidity, terms=terms, departure=departure,
+                          sun_sd=sun_sd, pixels=pixels)
     return {"sky": sky_name, "scene": scene, "camera_deg": camera, "material": material_name,
             "truth": dict(zip(NAMES, truth_of(material))), "fits": fits,
             "render_s": t1 - t0, "fit_s": time.perf_counter() - t1}
@@ -297,6 +313,15 @@ def main(argv=None):
     ap.add_argument("--sky-terms", type=int, default=None,
                     help="with --sky fit or prior: the terms of the sky's level over the day "
                     "(fit --sky-terms; default: fit's own, 3 where the frames allow; 1 one level)")
+    ap.add_argument("--sky-departure", action="store_true",
+                    help="with --sky fit or prior: fit the sky's departure from its model too "
+                    "(fit --sky-departure)")
+    ap.add_argument("--sun-sd", type=float, default=None,
+                    help="with --sky fit or prior: the sun's level's sd (fit --sun-sd; default "
+                    "a modelled sun's, as for photographs; 0: the sun as the spec gives it)")
+    ap.add_argument("--pixels", type=int, choices=(16, 64), default=16,
+                    help="pixels fitted per scene (64: an 8 x 8 block, a board region's)")
+    ap.add_argument("--noise", type=float, default=2.0, help="noise [%% of each value]")
     ap.add_argument("--spec-turbidity", type=float, default=None,
                     help="fit with a turbid clear sky of this Linke turbidity as the spec "
                     "(type turbid) instead of the thesis's CIE clear sky")
@@ -325,7 +350,8 @@ def main(argv=None):
                     folder = args.out / f"sky{i}-{scene}-{camera:g}-{materials.index(material)}"
                     c = run_case(folder, sky_name, sky, scene, camera, material, replicates,
                                  hours, scans, args.sky, args.sky_shape, args.spec_turbidity,
-                                 args.sky_terms)
+                                 args.sky_terms, args.sky_departure, args.sun_sd, args.pixels,
+                                 args.noise)
                     cases.append(c)
                     st = [v for f in c["fits"] for v in f["status"].values()]
                     print(f"{sky_name} | {scene} | {camera:g} | {material}: "
@@ -335,6 +361,8 @@ def main(argv=None):
     write_json(args.out / "sky_test_set.json",
                {"quick": args.quick, "replicates": replicates, "fit_sky": args.sky,
                 "sky_shape": args.sky_shape, "spec_turbidity": args.spec_turbidity,
+                "sky_departure": args.sky_departure, "sun_sd": args.sun_sd,
+                "pixels": args.pixels, "noise_percent": args.noise,
                 "sky_terms": args.sky_terms,
                 "hours_utc": list(hours),
                 "scans": [s.label for s in scans], "cases": cases, "summary": totals,

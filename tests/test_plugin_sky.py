@@ -1,4 +1,6 @@
 """The ``cie_sky`` emitter against the NumPy sky, chi-square sampling, irradiance and recompilation."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -26,6 +28,9 @@ def patchy_map(rows, seed=3):
     rng = np.random.default_rng(seed)
     return rng.gamma(0.7, 20.0, size=(rows, 2 * rows, 3))
 
+#: A departure's weights (its field 0.1-1.9 over the sky).
+DEPARTED = np.array([0.2, -0.1, 0.3, -0.2, 0.1])
+
 SKIES = {
     "clear-high": lambda: cie_sky("clear", 20, 170),
     "clear-low": lambda: cie_sky("clear", 80, 250),
@@ -33,6 +38,10 @@ SKIES = {
     "intermediate-high": lambda: cie_sky("intermediate", 25, 200, phi=0.5),
     "intermediate-low": lambda: cie_sky("intermediate", 84, 95, phi=0.5),
     "gensky-clear": lambda: from_gensky(CLEAR),
+    # a fit's departure from the model (physics/sky_departure.py) on a pattern, sharp and
+    # blended at the horizon
+    "clear-departed": lambda: replace(cie_sky("clear", 40, 150), departure=DEPARTED),
+    "gensky-departed": lambda: replace(from_gensky(CLEAR), departure=-DEPARTED),
     # Perez all-weather skies from measured irradiance: clear (bin 8), intermediate, overcast
     "perez-clear": lambda: perez_sky(30, 150, 172, dhi=90, dni=850).to_sky(),
     "perez-intermediate": lambda: perez_sky(60, 230, 100, dhi=200, dni=300).to_sky(),

@@ -128,11 +128,14 @@ def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun):
         log_k ** 2))))
     assert any("the modelled sun's 20% widened" in w for w in r["warnings"]), r["warnings"]
     # a level given to --sun-sd is kept as it is (its source 'given': not widened, as the
-    # measured sun's below is not)
+    # measured sun's below is not); photographs' sky departs from its model by default
+    assert r["sky"]["departure"]["prior_sd"] > 0
     doc, root = load_manifest(bright_sun)
     skies = [frame_sky(f, root) for f in doc["frames"]]
     assert LightOptions(sun_sd=0.1).resolve(doc, skies, len(skies), log=lambda *a: None) == (
-        LightPlan("prior", 0.1, "given"))
+        LightPlan("prior", 0.1, "given", departure=True))
+    assert LightOptions(sun_sd=0.1, departure=False).resolve(
+        doc, skies, len(skies), log=lambda *a: None) == LightPlan("prior", 0.1, "given")
     assert r["sky"]["sun_source"] == "modelled"
     # a sun whose spec gave its measured direct normal irradiance: known to the instrument's
     # accuracy, not widened

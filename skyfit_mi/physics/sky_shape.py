@@ -133,18 +133,14 @@ def shaped(sky, k, mix, variants, departure=(), rows=MAX_ROWS, supersample=SHAPE
         sun = replace(sun, sun_radiance=sun.sun_radiance * a, ground=sun.ground * a)
     parts = [(1.0, sun), (k * b * (1.0 - mix.sum()), rest)] + [
         (k * b * m, v) for m, v in zip(mix, variants)]
-
-    a = np.asarray(departure, dtype=float)
+    weights = np.asarray(departure, dtype=float)
+    if weights.size:                        # the rest's patterns times the field's a_j B_j
+        parts += [(k * b, replace(rest, departure=weights)), (-k * b, rest)]
 
     def lookup(theta, phi):
         d = direction_from_angles(theta, phi)
-        out = sum(w * p.sky_radiance(d) for w, p in parts if w != 0.0)
-        if a.size:
-            up = (d[..., 2] > 0.0)[..., None]
-            out = out + k * b * rest.sky_radiance(d) * np.where(
-                up, (basis(d, sky.sun_direction) @ a)[..., None], 0.0)
-        return out
+        return sum(w * p.sky_radiance(d) for w, p in parts if w != 0.0)
     table = np.clip(resample(lookup, int(rows), supersample=supersample), 0.0, None)
     return replace(sun, envmap=table, ground=np.zeros(3),
                    info={**sky.info, "shape_mix": mix.tolist(), "sky_level": float(k),
-                         **({"departure": a.tolist()} if a.size else {})})
+                         **({"departure": weights.tolist()} if weights.size else {})})
