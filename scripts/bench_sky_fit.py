@@ -10,6 +10,8 @@ its peak memory:
   spec fit chose, under the spec's sky (summed; the peak is the largest)
 * prior: ``--sky prior``, the sky's level (and its curve over the day) fitted with them
 * shape: ``--sky prior --sky-shape``, its shape too
+* departure: ``--sky prior --sky-departure``, its departure from the model's shape (the
+  photographs' default)
 
 Prints a markdown table: median wall time over the rounds, peak memory, and each joint fit's
 ratio to the spec fit and to the separate fits.
@@ -66,12 +68,13 @@ def main():
         day = a.day or str(Path(tmp) / "board")
         if a.day is None:
             run(["render", str(ROOT / "scenes/specs/board_east_37.toml"), "-o", day, "-q"])
-        times = {k: [] for k in ("spec", "separate", "prior", "shape")}
+        times = {k: [] for k in ("spec", "separate", "prior", "shape", "departure")}
         peaks = dict.fromkeys(times, 0.0)
         for r in range(a.rounds):
             for key, extra in (("spec", ["--sky", "spec"]), ("separate", None),
                                ("prior", ["--sky", "prior"]),
-                               ("shape", ["--sky", "prior", "--sky-shape"])):
+                               ("shape", ["--sky", "prior", "--sky-shape"]),
+                               ("departure", ["--sky", "prior", "--sky-departure"])):
                 t, m = separate(day, Path(tmp) / f"spec{r}", Path(tmp) / f"sep{r}") \
                     if extra is None else \
                     run([FIT[0], day, *FIT[1:], *extra, "-o", str(Path(tmp) / f"{key}{r}")])
