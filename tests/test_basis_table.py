@@ -200,12 +200,14 @@ def test_a_mix_of_lights_traced_with_shared_samples_keeps_their_covariances(days
     from dataclasses import replace
 
     from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.light import LightPlan
     from skyfit_mi.render.basis_table import mixed, tabulate, tabulate_group
     from skyfit_mi.render.fit_model import WardModel
     from skyfit_mi.render.light_cache import OWN_ARRAYS, build_light_cache
 
     s = FitSession(days["clean"], "disc", REGION, model="colour", light=None)
-    _, rest, *variants = (light[3:6] for light in s._sky_parts(shape=True).values())
+    _, rest, *variants = (light[3:6] for light in
+                              s._sky_parts(LightPlan("fit", shape=True)).values())
     caches = build_light_cache(s.scene, s.params, rest, s.obs.pixels[:8], "disc",
                                positions=8, directions=64, seed=5, others=variants)
     tables, cov = tabulate_group(caches, "colour")

@@ -354,10 +354,12 @@ def test_lights_traced_with_shared_samples_each_take_their_own_radiance(days):
     and random numbers) are those of its own trace with the seed; only the sampled
     directions' weights differ (its own trace samples its own sky)."""
     from skyfit_mi.fitting.fit import FitSession
+    from skyfit_mi.fitting.light import LightPlan
     from skyfit_mi.render.light_cache import OWN_ARRAYS, build_light_cache
 
     s = FitSession(days["clean"], "disc", REGION, model="two", light=None)
-    _, rest, variant, _ = (light[3:6] for light in s._sky_parts(shape=True).values())
+    _, rest, variant, _ = (light[3:6] for light in
+                              s._sky_parts(LightPlan("fit", shape=True)).values())
     args = (s.scene, s.params)
     where = (s.obs.pixels[:6], "disc")
     options = dict(positions=8, directions=32, seed=3)
