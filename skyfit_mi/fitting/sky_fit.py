@@ -96,7 +96,8 @@ DRIFT_SD = 0.35
 #: measured clear sky").
 SHAPE_SD = 1.0
 #: The p-value of the fitted departure's chi-square under its prior below which the fit warns
-#: that the sky departs from the spec's model more than real clear skies do (:func:`_departure_warnings`).
+#: that the sky departs from the spec's model more than real clear skies do
+#: (:func:`_departure_warnings`).
 DEPARTURE_CONFLICT_P = 0.001
 #: Step in each term's coefficient of the finite differences of the residuals.
 DRIFT_STEP = 1e-3

@@ -17,14 +17,14 @@ radiance is linear in the light, so the field's weights a_j are weights of trace
 (:class:`~skyfit_mi.fitting.light.LightParts`), as the sky's shape variants' mix is.  The ground
 below the horizon is not moved.
 
-The weights' Gaussian prior N(0, :data:`PRIOR_SD` ^2 I) is measured from the shared scans (Kider et
-al. 2014, :mod:`.sky_measurement`): each scan's luminance over the thesis's CIE clear sky (eqs.
-4.10-4.15, the sky a user names; the scanner's fitted rotation; 10 degrees about the sun left
-out) fitted as k (1 + sum_j a_j B_j) by least squares (:func:`scan_departure`), the field
-halving the residual (0.130 to 0.070 rms); ``scripts/sky_departure_prior.py`` finds the prior's
-sd, fitted on some scans and checked on the others.  One clear day holds no haze or cloud, so the prior
-is a clear sky's: a sky further from its model shows as a fitted weight beyond its prior
-(:func:`conflict`).
+The weights' Gaussian prior N(0, :data:`PRIOR_SD` ^2 I) is measured from the shared scans
+(Kider et al. 2014, :mod:`.sky_measurement`): each scan's luminance over the thesis's CIE clear
+sky (eqs. 4.10-4.15, the sky a user names; the scanner's fitted rotation; 10 degrees about the
+sun left out) fitted as k (1 + sum_j a_j B_j) by least squares (:func:`scan_departure`), the
+field halving the residual (0.130 to 0.070 rms); ``scripts/sky_departure_prior.py`` finds the
+prior's sd, fitted on some scans and checked on the others.  One clear day holds no haze or
+cloud, so the prior is a clear sky's: a sky further from its model shows as a fitted weight
+beyond its prior (:func:`conflict`).
 """
 
 from dataclasses import replace

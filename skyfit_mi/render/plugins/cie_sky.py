@@ -24,6 +24,8 @@ name                  type      default                     meaning
 ``intermediate``      rgb       0                           weight of Radiance's intermediate pattern
 ``perez``             rgb       0                           weight of the Perez all-weather pattern
 ``perez_a`` .. ``_e`` float     0                           the Perez pattern's coefficients (b <= 0)
+``departure_0`` ..    float     0                           weights of the departure field on the
+``departure_4``                                             patterns (:mod:`~skyfit_mi.physics.sky_departure`)
 ``ground``            rgb       0                           radiance below the horizon
 ``envmap``            tensor    none                        lat-long radiance table (H, W, 3), world
                                                             frame (:mod:`skyfit_mi.physics.latlong`)
