@@ -46,7 +46,7 @@ def departures(scans, name, rotated):
         keep = sm.angle_to_sun_deg(d, s.sun_direction) > sm.SUN_EXCLUSION_DEG
         M = model.luminance(d[keep], s, model.parameters)
         M = M[int(np.argmin(sm.relative_rms(M, s.luminance[keep])))]
-        a, _, before, after = sd.scan_departure(d[keep], s.luminance[keep], M, s.sun_direction)
+        a, before, after = sd.scan_departure(d[keep], s.luminance[keep], M, s.sun_direction)
         X = np.column_stack([np.ones(keep.sum()), sd.basis(d[keep], s.sun_direction)])
         V = after ** 2 * np.linalg.inv(X.T @ X)[1:, 1:]
         out.append((a, V, before, after))

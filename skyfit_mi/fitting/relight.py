@@ -284,7 +284,7 @@ def light_as_fitted(spec, level, target, out, log=print):
             # a mix that no one Sky holds, or a map the manifest names by its file (which k
             # does not scale): a map of its own
             f.sky = _sky_map(f, shaped(f.sky, k, shape["mix"] if variants else [], variants,
-                                       departure if f.sky.lit_by_sky else ()), out)
+                                       departure), out)
         else:
             f.sky = f.sky.sky_scaled(k)
     if kept:

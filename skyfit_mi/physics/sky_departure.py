@@ -78,17 +78,16 @@ def departure_parts(sky):
 
 
 def scan_departure(directions, measured, model, sun):
-    """The field's weights a (J,) and scale k that best fit ``measured`` luminance (n,) as
-    k ``model`` (n,) (1 + sum_j a_j B_j) toward ``directions`` (n, 3), the sun toward ``sun``:
-    linear least squares in the ratio measured / model; and the rms of the relative residual
-    before (scale only) and after."""
+    """The field's weights a (J,) that best fit ``measured`` luminance (n,) as k ``model``
+    (n,) (1 + sum_j a_j B_j), k a free scale, toward ``directions`` (n, 3), the sun toward
+    ``sun``: linear least squares in the ratio measured / model; and the rms of the relative
+    residual before (scale only) and after."""
     r = np.asarray(measured, dtype=float) / np.asarray(model, dtype=float)
     X = np.column_stack([np.ones(len(r)), basis(directions, sun)])
     b, *_ = np.linalg.lstsq(X, r, rcond=None)
-    k = b[0]
     before = np.sqrt(np.mean((r / np.mean(r) - 1.0) ** 2))
     after = np.sqrt(np.mean(((X @ b) / r - 1.0) ** 2))
-    return b[1:] / k, float(k), float(before), float(after)
+    return b[1:] / b[0], float(before), float(after)
 
 
 def conflict(weights, sd=PRIOR_SD):

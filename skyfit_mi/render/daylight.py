@@ -6,13 +6,15 @@ Importable before a variant is set; the functions need one (see
 
 import numpy as np
 
+from ..physics.sky_departure import BASIS
+
 #: The emitter's RGB parameters, named as the :class:`~skyfit_mi.physics.sky.Sky` fields.
 RGB_KEYS = ("sun_radiance", "clear", "overcast", "uniform", "intermediate", "perez", "ground")
 #: The emitter's float parameters holding the Sky's ``perez_coefficients`` a..e.
 PEREZ_KEYS = ("perez_a", "perez_b", "perez_c", "perez_d", "perez_e")
 #: The emitter's float parameters holding the Sky's ``departure`` weights (its field's basis,
 #: :data:`~skyfit_mi.physics.sky_departure.BASIS`, in order).
-DEPARTURE_KEYS = tuple(f"departure_{j}" for j in range(5))
+DEPARTURE_KEYS = tuple(f"departure_{j}" for j in range(len(BASIS)))
 
 
 def float_parameters(sky):
