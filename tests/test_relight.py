@@ -349,6 +349,43 @@ def test_a_fit_of_ward_data_predicts_another_sky_and_camera_within_its_band(
     assert means["fit"] == pytest.approx(err, rel=1e-3) and means["truth"] < 0.02
 
 
+def test_bands_on_the_fitted_day_are_as_sharp_as_its_data(glossy, tmp_path):
+    """Relit onto its own day, a fit's bands draw from its data's likelihood (the fit JSON's
+    draws): each region mean's band is within twice the 95% noise of the observed mean (2%
+    noise on 16 pixels: 0.98%) and holds the observed, whatever the intervals say: with
+    rho_s's and sigma_alpha's widened to their bounds (as a reading 'not determined' has
+    them) the band is the same, where the intervals' Gaussian, which a fit without its draws
+    falls back on, gives a band several times wider."""
+    fitted = glossy[0]
+    path = fitted / "fits" / "fit_disc.json"
+    original = path.read_text()
+    fit = json.loads(original)
+    draws = fit["draws"]
+    assert len(draws["values"]) == 200 and draws["effective_size"] >= 200
+    widths = {}
+    try:
+        for kind in ("draws", "widened", "intervals"):
+            if kind == "widened":
+                fit["intervals"]["rho_s"]["95"] = [0.0, 1.0]
+                fit["intervals"]["sigma_alpha"]["95"] = [0.0, 0.5]
+            if kind == "intervals":
+                del fit["draws"]
+            path.write_text(json.dumps(fit))
+            out = tmp_path / kind
+            assert main(["relight", str(fitted / "fits"), "--target", str(fitted / "train"),
+                         "-o", str(out), "-q", "--no-images"]) == 0
+            rows = list(csv.reader((out / "prediction.csv").read_text().splitlines()))[1:]
+            widths[kind] = np.median([(float(r[6]) - float(r[5])) / 2 / float(r[4])
+                                      for r in rows])
+            share = json.loads((out / "relight.json").read_text())["band_coverage"]["share"]
+            assert kind == "intervals" or share >= 0.75, (kind, share)
+    finally:
+        path.write_text(original)            # the module's fixture, as it was
+    assert widths["draws"] < 2 * 1.96 * 0.02 / 4, widths
+    assert widths["widened"] == pytest.approx(widths["draws"], rel=0.2), widths
+    assert widths["intervals"] > 3 * widths["draws"], widths
+
+
 def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
     """relight.fitted_sessions (fit.trace_sessions): one light cache over several regions' pixels (each pixel its
     region's material) gives each region what a trace of its own gives: bit for bit for a
@@ -417,9 +454,10 @@ def test_the_prediction_plot_has_no_empty_bands_above_or_below_its_panels(region
         (inked[0], inked[-1], len(image))
 
 
-def test_a_hand_edited_measured_range_is_refused_in_one_line(tmp_path):
-    """relight reads a fit's measured_range (the radiance its data measured, per channel):
-    one not as `fit` writes it is refused naming what it must be; `fit`'s own form passes."""
+def test_a_hand_edited_measured_range_or_draws_is_refused_in_one_line(tmp_path):
+    """relight reads a fit's measured_range (the radiance its data measured, per channel) and
+    draws (sets of its parameters from its likelihood): one not as `fit` writes it is refused
+    naming what it must be; `fit`'s own form passes."""
     from skyfit_mi.errors import SkyfitError
     from skyfit_mi.pipeline.fit_result import read_fit_result
 
@@ -432,6 +470,15 @@ def test_a_hand_edited_measured_range_is_refused_in_one_line(tmp_path):
         with pytest.raises(SkyfitError, match=r"measured_range must be \{\"by_channel\"") as e:
             read_fit_result(path)
         assert "\n" not in str(e.value)
+    for bad in ([[0.1, 0.1]], {"values": []}, {"values": [[0.1]], "added_sd": [0, 0]},
+                {"values": [[0.1, None]], "added_sd": [0, 0]},
+                {"values": [[0.1, 0.1]], "added_sd": [0, -1]}):
+        path.write_text(json.dumps({**fit, "draws": bad}))
+        with pytest.raises(SkyfitError, match=r"draws must be \{\"values\"") as e:
+            read_fit_result(path)
+        assert "\n" not in str(e.value)
+    path.write_text(json.dumps({**fit, "draws": {"values": [[0.1, 0.1]], "added_sd": [0, 0]}}))
+    assert read_fit_result(path)["draws"]["values"] == [[0.1, 0.1]]
     good = {"unit": "W m^-2 sr^-1", "by_channel": {"R": [1.0, 2.0], "G": None, "B": [0, 5]}}
     path.write_text(json.dumps({**fit, "measured_range": good}))
     assert read_fit_result(path)["measured_range"]["by_channel"]["G"] is None

@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import uncertainty as unc
+from .draws import draws_scale, interval_covariance, likelihood_draws
 from .chi2 import LuminanceModel, Problem, load_observations, load_table_observations
 from .fit_record import fit_record
 from .fit_warnings import fit_warnings
@@ -95,6 +96,8 @@ class FitState:
         the day shares (:func:`~.intervals.matrix_sd`; zeros without its prior)
     sky : what the light adds to the parameters' errors (:class:`~.sky_fit.SkyShare`)
     pose : what the camera pose's uncertainty adds (:class:`~.pose.PoseShare`)
+    draws : parameter sets drawn from the likelihood of the region's data
+        (:class:`~.draws.Draws`), for the bands of a relight of this sequence
     held_out : how well the fit predicts frames it was not fitted to
         (:func:`~.held_out.held_out_error`, on ``problem``: its kappa is the error beyond the
         in-sample model error's), None with too few frames
@@ -127,6 +130,7 @@ class FitState:
     matrix_sd: np.ndarray = None
     pose: object = None
     held_out: dict = None
+    draws: object = None
 
     @property
     def delta_scale(self):
@@ -628,6 +632,9 @@ class FitSession:
         fit.pose = pose_share(self, fit, J_all)
         fit_intervals(self, fit)
         iv95 = np.array([fit.intervals[p]["95"] for p in self.names])
+        fit.draws = likelihood_draws(
+            problem, theta, chi2, draws_scale(s2, f2, fit.cache_noise_chi2),
+            interval_covariance(iv95, fit.covariance), self.lower, self.upper, seed)
         fit.held_out = held_out_error(
             problem, theta, self.lower, self.upper,
             within=lambda th: bool(np.all((th >= iv95[:, 0]) & (th <= iv95[:, 1]))),

@@ -57,6 +57,7 @@ def fit_record(s, fit, warnings, start, seed, evaluations, wall, t_method):
         "cache_noise_chi2": fit.cache_noise_chi2,
         "cache_noise_chi2_by_sigma": fit.model_noise_by_sigma,
         "covariance": {"names": list(names), "matrix": fit.covariance.tolist()},
+        **({"draws": draws_record(fit)} if fit.draws is not None else {}),
         "evaluations": evaluations, "status": res.get("status"),
         "message": res.get("message"), "warnings": warnings,
         "wall_time_s": wall, "light_cache_time_s": s.cache_time, "method_time_s": t_method,
@@ -73,6 +74,26 @@ def fit_record(s, fit, warnings, start, seed, evaluations, wall, t_method):
                    "model_DN": s.problem.predict(L).tolist()},
         "measured_range": measured_range(s, L),
     }
+
+
+def draws_record(fit):
+    """The fit's draws from its data's likelihood (:mod:`~.draws`) as relight reads them, with
+    the standard errors the data share that relight adds to them: the light cache's own and
+    the JPEG blocks' rounding (errors a relight of the sequence does not cancel)."""
+    d = fit.draws
+    return {"values": d.values.tolist(), "effective_size": d.effective_size,
+            "proposals": d.proposals, "rounds": d.rounds,
+            "added_sd": np.hypot(fit.cache_sd, fit.jpeg_shared_sd).tolist(),
+            "about": DRAWS_NOTE}
+
+
+#: What a fit JSON's ``draws`` are.
+DRAWS_NOTE = (
+    "parameter sets (columns in the order of parameters) drawn from the likelihood of the "
+    "region's values, exp(-(chi2 - chi2_min) / 2 s), by importance sampling; a relight of "
+    "this very sequence draws its bands from them, each widened by added_sd (the light "
+    "cache's error and the JPEG blocks' rounding); a relight of other light draws from the "
+    "intervals, which also hold the errors the sequence's light, calibration and pose share")
 
 
 def measured_range(s, L):

@@ -32,10 +32,11 @@ from ..conventions import angles_from_direction
 from ..errors import SkyfitError
 from ..files import FolderLock, ensure_dir, figure_png, write_bytes, write_json, write_text
 from .chi2 import subsample_region
+from .draws import interval_covariance, root_of
 from .fit import FitCache, FitSession, trace_sessions
 from .landscape import truth_parameters
 from .sky_fit import sky_level_at
-from .uncertainty import Z, band_half_width, widen
+from .uncertainty import band_half_width, widen
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky_shape import shape_variants, shaped
 from ..pipeline.fit_result import check_fit_sequence
@@ -828,28 +829,31 @@ def plot_prediction(rows, image_kind):
     return figure_png(fig)
 
 
-def parameter_draws(result, names, lower, upper, n, rng):
-    """``n`` parameter sets spread as the fit's uncertainty: Gaussian with each parameter's
-    standard deviation from its 95% interval (half-width / 1.96, so profile and one-sided
-    intervals count at their full width) and the covariance's correlations, clipped to the
-    bounds; the first row is the fit itself.  (A split normal reaching each end of a lopsided
-    interval was tried: a gold disc's held-out means in band 14 -> 15 of 18, but a copper
-    one's 36 -> 32 of 39; docs/BENCHMARKS.md, "Real surfaces".)"""
+def parameter_draws(result, s, n, rng):
+    """``n`` parameter sets of the fit ``result`` for the bands of a prediction by the
+    session ``s`` (the target's); the first row is the fit itself.  On the fitted sequence
+    itself (its run_id), the fit's draws from its data's likelihood (:mod:`~.draws`), each
+    widened by the errors a relight does not cancel: the joint uncertainty the data leave,
+    whose sets predict the fitted frames as the data allow.  Elsewhere (or for a fit
+    without them), Gaussian from the intervals (:func:`~.draws.interval_covariance`),
+    clipped to the bounds: they hold every error, those of the fitted day's light,
+    calibration and pose too.  (A split normal reaching each end of a lopsided interval was
+    tried: a gold disc's held-out means in band 14 -> 15 of 18, but a copper one's 36 -> 32
+    of 39; docs/BENCHMARKS.md, "Real surfaces".)"""
+    names, lower, upper = s.names, s.lower, s.upper
     theta = np.array([result["parameters"][k] for k in names], dtype=float)
-    iv = np.array([result["intervals"][k]["95"] for k in names], dtype=float)
-    sd = (iv[:, 1] - iv[:, 0]) / (2 * Z["95"])
-    corr = np.eye(len(names))
-    cov = result.get("covariance", {})
-    if cov.get("names") == list(names):
-        c = np.asarray(cov["matrix"], dtype=float)
-        d = np.sqrt(np.clip(np.diag(c), 0, None))
-        if np.all(np.isfinite(c)) and np.all(d > 0):
-            corr = np.clip(c / np.outer(d, d), -1, 1)
-    w, v = np.linalg.eigh(corr)
-    root = v * np.sqrt(np.clip(w, 0, None))              # corr = root root^T (PSD)
-    z = rng.standard_normal((n - 1, len(names))) @ root.T
-    draws = np.clip(theta + z * sd, lower, upper)
-    return np.vstack([theta, draws])
+    own = result.get("draws")
+    if own is not None and result.get("sequence_run_id") == s.run_id:
+        sets = np.asarray(own["values"], dtype=float)[rng.integers(len(own["values"]),
+                                                                   size=n - 1)]
+        draws = sets + rng.standard_normal(sets.shape) * np.asarray(own["added_sd"])
+    else:
+        cov = result.get("covariance", {})
+        cov = cov.get("matrix") if cov.get("names") == list(names) else None
+        iv = [result["intervals"][k]["95"] for k in names]
+        draws = theta + rng.standard_normal((n - 1, len(names))) @ root_of(
+            interval_covariance(iv, cov)).T
+    return np.vstack([theta, np.clip(draws, lower, upper)])
 
 
 def predict(fits, target, pixels, draws=200, seed=0, log=print):
@@ -922,7 +926,7 @@ CHUNK_VALUES = 2**23
 def _predict_means(s, result, target, draws, rng):
     """The prediction of one image region (:func:`predict`) from its session ``s`` on the
     target and its fit ``result``: (its rows, its :class:`MeansError`)."""
-    sets = parameter_draws(result, s.names, s.lower, s.upper, draws, rng)
+    sets = parameter_draws(result, s, draws, rng)
     region_mean = _region_mean(s)
     means = s.wm.radiances(sets, region_mean)                               # (draws, T, 3)
     lo, hi = np.percentile(means[1:], [2.5, 97.5], axis=0)
@@ -971,7 +975,7 @@ def _predict_points(s, result, target, draws, rng):
     error and the fit's model error: the band of a measured value, which reaches below zero
     where its noise does, as a table's values may) and the table's value; (its rows, the
     :class:`MeansError` of its region means)."""
-    sets = parameter_draws(result, s.names, s.lower, s.upper, draws, rng)
+    sets = parameter_draws(result, s, draws, rng)
     at_fit, lo, hi = (np.empty(s.obs.y.shape) for _ in range(3))
     P, T = s.obs.y.shape[:2]
     step = max(1, CHUNK_VALUES // (len(sets) * T * 3))

@@ -21,7 +21,8 @@ def read_fit_result(path):
     within their bounds and a 95% interval [lo, hi] of each (lo <= hi), pixels (if any) as
     [x, y] pairs, and, where present, the frames as manifest indices, the model's relative
     error kappa as a finite number >= 0, the radiance range its data measured as [lo, hi]
-    per channel and the covariance as its parameters' names and a square matrix of them.
+    per channel, the draws from its likelihood as sets of its parameters and the covariance
+    as its parameters' names and a square matrix of them.
     SkyfitError saying what is wrong otherwise."""
     path = Path(path)
     try:
@@ -68,6 +69,11 @@ def read_fit_result(path):
         raise SkyfitError(f"{path}: measured_range must be {{\"by_channel\": {{channel: null or "
                           "[lo, hi] radiance, lo <= hi}, ...}; give a fit_NAME.json that "
                           "`skyfit fit` wrote.")
+    draws = r.get("draws")
+    if draws is not None and not _is_draws(draws, len(names)):
+        raise SkyfitError(f"{path}: draws must be {{\"values\": a list of [{', '.join(names)}] "
+                          "sets of finite numbers, \"added_sd\": one number >= 0 each, ...}; "
+                          "give a fit_NAME.json that `skyfit fit` wrote, or leave out draws.")
     cov = r.get("covariance")
     if cov is not None and not _is_covariance(cov):
         raise SkyfitError(f"{path}: covariance must be {{\"names\": [{', '.join(names)}], "
@@ -135,6 +141,15 @@ def _is_kappa(record):
     """Whether ``record`` is a dict whose kappa is a finite number >= 0."""
     k = record.get("kappa") if isinstance(record, dict) else None
     return _numbers([k]) and k >= 0
+
+
+def _is_draws(draws, n):
+    """Whether ``draws`` is a fit's draws from its likelihood as relight reads them: a
+    non-empty list of sets of ``n`` finite numbers, and ``n`` standard errors >= 0."""
+    values = draws.get("values") if isinstance(draws, dict) else None
+    return (isinstance(values, list) and len(values) > 0
+            and all(_numbers(v, n) for v in values)
+            and _numbers(draws.get("added_sd"), n) and min(draws["added_sd"]) >= 0)
 
 
 def _is_covariance(cov):

@@ -1,0 +1,169 @@
+"""Parameter sets drawn from the likelihood of a region's data: the joint uncertainty its
+values leave (thesis ch. 6: chi-square's rise above its minimum is -2 ln L, scaled as the
+intervals scale it), for the bands of a relight of the fitted sequence itself.
+
+The intervals are each parameter's range over every other's; drawn independently from them,
+parameter sets wander along directions the data cannot tell apart (a grey plastic and its
+metal twin, a roughness below what the geometry shows) and beyond, into radiances the data
+exclude.  These draws stay on what the data allow: importance sampling from the intervals'
+Gaussian, then from a mixture around the sets the data favour (population Monte Carlo),
+until the draws' effective number reaches what a band needs.  Errors the fitted sequence's
+light and calibration share with its relight (the sun's and sky's level, the exposure, the
+pose) are not in them: they cancel there; a relight of other light draws from the
+intervals, which hold them (:func:`~.relight.parameter_draws`)."""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import logsumexp
+
+from .uncertainty import LEVELS, Z
+
+#: Parameter sets kept (relight's default draws) and tried in each round of the sampling.
+DRAWS, PROPOSALS = 200, 1000
+#: Rounds of the sampling at most: the first from the intervals, each later one from a
+#: mixture around the sets the rounds before favoured.
+ROUNDS = 6
+MIN_ROUNDS = 3
+#: A mixture component's covariance: that of this many favoured sets nearest it, its width
+#: times SPREAD, plus FLOOR times the first proposal's covariance.
+NEIGHBOURS, SPREAD, FLOOR = 20, 2.0, 1e-4
+#: Parameter sets whose radiance is held at once (sets x pixels x frames x channels).
+CHUNK = 64
+
+
+@dataclass
+class Draws:
+    """``values`` (n, parameters) drawn from the data's likelihood; ``effective_size`` the
+    importance weights' effective number of draws behind them, ``proposals`` the sets tried."""
+
+    values: np.ndarray
+    effective_size: float
+    proposals: int
+    rounds: int
+
+
+def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n=DRAWS):
+    """``n`` parameter sets drawn with probability exp(-(chi2 - chi2_min) / (2 ``scale``))
+    within the bounds (a flat prior), where chi2 is ``problem``'s (:class:`~.chi2.Problem`)
+    and ``theta`` its minimum, by importance sampling: the first proposal is the Gaussian of
+    ``cov`` (the intervals' widths and the covariance's correlations,
+    :func:`interval_covariance`), each later one a mixture around ``n`` sets the rounds so far
+    favour (:func:`_local_kernels`); every set is weighted against the mixture of all the
+    rounds' proposals (deterministic-mixture weights, which a lucky set of a broad round
+    cannot dominate), until the weights make ``n`` effective draws."""
+    rng = np.random.default_rng(seed)
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    w, v = np.linalg.eigh(cov)                   # clipped correlations may not be PSD
+    first = (v * np.clip(w, 0, None)) @ v.T + np.diag((1e-6 * (upper - lower)) ** 2)
+    proposals, logq = [(theta[None], first[None])], []     # logq: each proposal's density
+    x_all, log_likelihood, last = np.empty((0, len(theta))), np.empty(0), 0.0
+    for r in range(ROUNDS):
+        x, accepted = _propose(rng, *proposals[-1], lower, upper)
+        proposals[-1] += (accepted,)
+        logq = [np.concatenate([q, _log_mixture(x, *p[:2]) - np.log(p[2])])
+                for q, p in zip(logq, proposals)]
+        logq.append(_log_mixture(np.concatenate([x_all, x]), *proposals[-1][:2])
+                    - np.log(accepted))
+        x_all = np.concatenate([x_all, x])
+        log_likelihood = np.concatenate([log_likelihood,
+                                         -(_chi2s(problem, x) - chi2_min) / (2 * scale)])
+        logw = log_likelihood - logsumexp(logq, axis=0)
+        w = np.exp(logw - logsumexp(logw))
+        ess = 1.0 / np.sum(w * w)
+        if ess >= n and r + 1 >= MIN_ROUNDS and ess >= last:
+            break
+        last = ess
+        means = x_all[_systematic(w, n, rng)]
+        proposals.append((means, _local_kernels(means, first)))
+    return Draws(x_all[_systematic(w, n, rng)], float(ess), len(x_all), r + 1)
+
+
+def _local_kernels(means, first):
+    """Each mixture component's covariance: that of the NEIGHBOURS ``means`` nearest it (in
+    the first proposal's metric), widened by SPREAD, so that a thin curved ridge of the
+    likelihood is followed along and not across; with FLOOR of the first proposal's
+    covariance ``first``, so that no component collapses onto repeated sets."""
+    z = np.linalg.solve(np.linalg.cholesky(first), means.T).T
+    dist = np.sum((z[:, None] - z[None]) ** 2, axis=-1)
+    near = np.argsort(dist, axis=1)[:, :min(NEIGHBOURS, len(means))]
+    local = means[near] - means[near].mean(axis=1, keepdims=True)          # (K, q, n)
+    return (SPREAD**2 * np.einsum("kqi,kqj->kij", local, local) / near.shape[1]
+            + FLOOR * first)
+
+
+def interval_covariance(intervals95, covariance=None):
+    """The Gaussian of a fit's intervals: each parameter's sd from its 95% interval
+    ``intervals95`` (n, 2), half-width / 1.96 (so profile and one-sided intervals count at
+    their full width), with the correlations of ``covariance`` (n, n) where it is given and
+    finite."""
+    iv = np.asarray(intervals95, dtype=float)
+    sd = (iv[:, 1] - iv[:, 0]) / (2 * Z["95"])
+    corr = np.eye(len(iv))
+    if covariance is not None:
+        c = np.asarray(covariance, dtype=float)
+        d = np.sqrt(np.clip(np.diag(c), 0, None))
+        if np.all(np.isfinite(c)) and np.all(d > 0):
+            corr = np.clip(c / np.outer(d, d), -1, 1)
+    return corr * np.outer(sd, sd)
+
+
+def draws_scale(interval_scale, channel_factors, ripple):
+    """The scale of chi-square's rise in the draws' likelihood: the intervals' s^2 (the
+    largest channel factor's), with the light cache's ripple ``ripple`` spread so that the
+    95% level lies where the intervals put it (LEVELS 95 s^2 + ripple)."""
+    return interval_scale * float(np.max(channel_factors)) + ripple / LEVELS["95"]
+
+
+def _propose(rng, means, kernels, lower, upper):
+    """PROPOSALS sets from the equal mixture of Gaussians at ``means`` (K, n) with
+    covariances ``kernels`` (K, n, n), truncated to the bounds; with the share of the mixture
+    within them.""" 
+    roots = np.array([root_of(k) for k in kernels])
+    kept, tried = [], 0
+    while sum(len(k) for k in kept) < PROPOSALS and tried < 50 * PROPOSALS:
+        c = rng.integers(len(means), size=PROPOSALS)
+        x = means[c] + np.einsum("mij,mj->mi", roots[c],
+                                 rng.standard_normal((PROPOSALS, len(lower))))
+        tried += PROPOSALS
+        kept.append(x[np.all((x >= lower) & (x <= upper), axis=1)])
+    x = np.concatenate(kept)
+    accepted = max(len(x), 1) / tried
+    x = x[:PROPOSALS]
+    return x, accepted
+
+
+def root_of(cov):
+    """A square root R of a symmetric positive semi-definite ``cov`` (cov = R R^T)."""
+    w, v = np.linalg.eigh(cov)
+    return v * np.sqrt(np.clip(w, 0, None))
+
+
+def _log_mixture(x, means, kernels):
+    """Log density at ``x`` (m, n) of the equal mixture of Gaussians at ``means`` (K, n) with
+    covariances ``kernels`` (K, n, n)."""
+    chol = np.linalg.cholesky(kernels)                                      # (K, n, n)
+    whiten = np.linalg.inv(chol)
+    z = whiten @ x.T - whiten @ means[:, :, None]                          # (K, n, m)
+    log_norm = (np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)
+                + 0.5 * x.shape[1] * np.log(2 * np.pi))
+    return (logsumexp(-0.5 * np.sum(z * z, axis=1) - log_norm[:, None], axis=0)
+            - np.log(len(means)))
+
+
+def _chi2s(problem, x):
+    """Chi-square of ``problem`` at each set of ``x``, the radiance of CHUNK sets made at once
+    (a lobe of the light table for each roughness: 64 of a board region's in 20 ms)."""
+    out = np.empty(len(x))
+    for start in range(0, len(x), CHUNK):
+        for i, L in enumerate(problem.model.radiances(x[start:start + CHUNK]), start):
+            r = problem.residuals_from(L)
+            out[i] = r @ r
+    return out
+
+
+def _systematic(w, n, rng):
+    """Indices of ``n`` draws by systematic resampling of the normalised weights ``w``."""
+    edges = np.cumsum(w)
+    edges[-1] = 1.0
+    return np.searchsorted(edges, (rng.random() + np.arange(n)) / n)

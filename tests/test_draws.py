@@ -1,0 +1,92 @@
+"""Draws from a fit's likelihood (skyfit_mi.fitting.draws): against the exact posterior of a
+linear model, and along a curved ridge (a grey plastic's metal twin) that the intervals'
+Gaussian misses."""
+import numpy as np
+
+from skyfit_mi.fitting.draws import (DRAWS, interval_covariance, likelihood_draws)
+from skyfit_mi.fitting.uncertainty import Z
+
+
+class _Model:
+    """Radiance (n, P, T, 3) of parameter sets from a function of the sets (n, k) -> (n, m)."""
+
+    def __init__(self, f):
+        self.f = f
+
+    def radiances(self, thetas):
+        return self.f(np.atleast_2d(thetas)).reshape(len(thetas), -1, 1, 3)
+
+
+class _Problem:
+    """Chi-square of values y with noise sigma (the one method the draws use)."""
+
+    def __init__(self, f, y, sigma):
+        self.model, self.y, self.sigma = _Model(f), y, sigma
+
+    def residuals_from(self, L):
+        return (self.y - L.ravel()) / self.sigma
+
+
+def _intervals(theta, sd, lower, upper):
+    return np.clip(np.stack([theta - Z["95"] * sd, theta + Z["95"] * sd], axis=1),
+                   lower[:, None], upper[:, None])
+
+
+def test_draws_of_a_linear_model_have_its_posterior_mean_and_covariance():
+    """y = A theta + noise: the draws' mean and covariance are the least-squares estimate and
+    (A^T A)^-1 sigma^2 s (s the scale), within their Monte Carlo error, from the intervals'
+    Gaussian and from one three times too wide alike."""
+    rng = np.random.default_rng(1)
+    A = rng.normal(size=(60, 3))
+    A[:, 2] *= 0.2                                   # a poorly determined last parameter
+    truth, sigma, scale = np.array([0.4, 0.3, 0.2]), 0.05, 1.5
+    y = A @ truth + sigma * rng.standard_normal(60)
+    theta = np.linalg.lstsq(A, y, rcond=None)[0]
+    cov = np.linalg.inv(A.T @ A) * sigma**2 * scale
+    problem = _Problem(lambda th: th @ A.T, y, sigma)
+    chi2 = float(np.sum(((y - A @ theta) / sigma) ** 2))
+    lower, upper = np.zeros(3) - 5, np.ones(3) * 5
+    for widen in (1.0, 3.0):
+        start = interval_covariance(_intervals(theta, widen * np.sqrt(np.diag(cov)), lower,
+                                               upper), cov)
+        d = likelihood_draws(problem, theta, chi2, scale, start, lower, upper, seed=2, n=400)
+        assert d.effective_size >= 400 and d.values.shape == (400, 3)
+        se = np.sqrt(np.diag(cov) / 400)
+        assert np.all(np.abs(d.values.mean(axis=0) - theta) < 4 * se), widen
+        ratio = np.sqrt(np.diag(np.cov(d.values.T)) / np.diag(cov))
+        assert np.all((ratio > 0.85) & (ratio < 1.15)), (widen, ratio)
+
+
+def test_draws_follow_a_curved_ridge_and_predict_the_data_as_the_fit_does():
+    """A product model y = a b x (a metal's C times its specular, read the same along
+    a b = const): the intervals' Gaussian, broad along the ridge, gives predictions far
+    wider than the data allow; the draws stay on the ridge (a b within its noise) and
+    spread along it as its likelihood does within the bounds (flat in a and b, so a's
+    density along a b = 0.3 goes as 1/a on [0.3, 1]: quantile q at 0.3 (1/0.3)^q)."""
+    rng = np.random.default_rng(3)
+    x = np.linspace(0.5, 1.5, 90)
+    sigma, ab = 0.01, 0.3
+    y = ab * x + sigma * rng.standard_normal(len(x))
+    problem = _Problem(lambda th: (th[:, 0] * th[:, 1])[:, None] * x, y, sigma)
+    theta = np.array([0.6, 0.5])
+    theta[1] = float(x @ y / (x @ x)) / theta[0]
+    chi2 = float(np.sum(((y - theta[0] * theta[1] * x) / sigma) ** 2))
+    lower, upper = np.array([0.3, 0.3]), np.array([1.0, 1.0])
+    start = interval_covariance([[0.3, 1.0], [0.3, 1.0]])       # "not determined" along it
+    d = likelihood_draws(problem, theta, chi2, 1.0, start, lower, upper, seed=4)
+    assert d.effective_size >= DRAWS
+    products = d.values[:, 0] * d.values[:, 1]
+    se = sigma / np.sqrt(x @ x)
+    assert np.std(products) < 2 * se and abs(np.mean(products) - theta[0] * theta[1]) < 3 * se
+    q = np.percentile(d.values[:, 0], [5, 50, 95])                   # along the ridge
+    assert 0.3 < q[0] < 0.4 and 0.47 < q[1] < 0.65 and q[2] > 0.85, q
+    naive = theta + rng.standard_normal((DRAWS, 2)) @ np.linalg.cholesky(start).T
+    assert np.std(naive[:, 0] * naive[:, 1]) > 20 * se
+
+
+def test_interval_covariance_takes_the_intervals_widths_and_the_covariances_correlations():
+    cov = np.array([[4.0, -1.0], [-1.0, 1.0]])
+    c = interval_covariance([[0.0, 2 * Z["95"]], [1.0, 1.0 + 6 * Z["95"]]], cov)
+    assert np.allclose(np.diag(c), [1.0, 9.0]) and np.isclose(c[0, 1], -0.5 * 3)
+    assert np.allclose(interval_covariance([[0, 1], [0, 1]], np.full((2, 2), np.nan)),
+                       np.eye(2) / (2 * Z["95"]) ** 2)
