@@ -51,6 +51,18 @@ def test_censored_residuals_and_jacobian(mean_dn, side):
     assert np.allclose(J[:, 0], fd, rtol=1e-5, atol=1e-8)
 
 
+@pytest.mark.parametrize("mean_dn", [10.0, 128.0])
+def test_chi2_of_many_radiances_at_once_is_each_ones(mean_dn):
+    """Problem.chi2s (the draws' likelihood) gives chi2 of each radiance, values clipped at
+    the bottom (censored terms) or none (at once)."""
+    problem, sensor = _problem(mean_dn, n=50)
+    assert problem.clipped()[0].any() == (mean_dn == 10.0)
+    thetas = np.linspace(0.5, 1.5, 7)[:, None] * mean_dn / sensor.max_code
+    radiances = np.stack([problem.model.radiance(t) for t in thetas])
+    np.testing.assert_allclose(problem.chi2s(radiances), [problem.chi2(t) for t in thetas],
+                               rtol=1e-12)
+
+
 @pytest.mark.parametrize("mean_dn, side", [(10.0, 0), (245.0, 1)])
 def test_clipped_values_give_an_unbiased_estimate(mean_dn, side):
     # a channel 10 DN from either end under noise of sigma 25.5 DN: a third of its values clip

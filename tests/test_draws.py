@@ -23,8 +23,9 @@ class _Problem:
     def __init__(self, f, y, sigma):
         self.model, self.y, self.sigma = _Model(f), y, sigma
 
-    def residuals_from(self, L):
-        return (self.y - L.ravel()) / self.sigma
+    def chi2s(self, radiances):
+        r = (self.y - radiances.reshape(len(radiances), -1)) / self.sigma
+        return np.sum(r * r, axis=1)
 
 
 def _intervals(theta, sd, lower, upper):

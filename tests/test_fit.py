@@ -338,6 +338,21 @@ def test_colour_rule_twin_keeps_diffuse_and_mean_specular(C, rho_s):
         assert np.allclose(s2, s)
 
 
+@pytest.mark.parametrize("model", ["two", "achromatic", "colour"])
+def test_reflectances_of_many_sets_at_once_are_each_sets(model):
+    """reflectance_sets (radiances of many draws at once) gives reflectances' values exactly,
+    about the colour model's plastic/metal rule too."""
+    import numpy as np
+
+    from skyfit_mi.render.fit_model import bounds, reflectance_sets, reflectances
+
+    lo, hi = bounds(model)
+    th = lo + (hi - lo) * np.random.default_rng(0).random((200, len(lo)))
+    th[:4, -2] = [0.5, 0.49999999, 0.4999999999, 0.0]
+    np.testing.assert_array_equal(reflectance_sets(model, th),
+                                  [reflectances(model, t)[:2] for t in th])
+
+
 class _RawBRDF:
     """A toy chi-square over the colour model whose data determine only the raw BRDF (rho_d,
     the specular reflectance, sigma): for a grey C both readings of the rule fit exactly."""

@@ -556,6 +556,16 @@ class Problem:
                                                         kappa * self.value_scale(theta))),
                        self.model, self.valid)
 
+    def chi2s(self, radiances):
+        """Chi-square (eq. 6.2) of each of several radiances (n, P, T, 3): at once where no
+        usable value is clipped, else one by one (a clipped value's term,
+        :meth:`residual_terms`)."""
+        low, high = self.clipped()
+        if low.any() or high.any():
+            return np.array([r @ r for r in map(self.residuals_from, radiances)])
+        r = (self.obs.y - self.predict(radiances)) / self.obs.sigma
+        return np.sum(np.where(self.mask, r * r, 0.0), axis=(1, 2, 3))
+
     def residuals_from(self, radiance):
         return self.residual_terms(radiance)[0][self.mask]
 

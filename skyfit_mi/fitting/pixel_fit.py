@@ -44,7 +44,7 @@ from ..errors import SkyfitError
 from ..pipeline.manifest import frame_sky, load_manifest
 from ..render import setup
 from ..render.basis_table import TableModel, trace_basis
-from ..render.fit_model import PARAMETERS, bounds, reflectances
+from ..render.fit_model import PARAMETERS, bounds, reflectance_sets
 from ..render.light_cache import CacheOptions
 from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
@@ -226,7 +226,7 @@ def _contradicts(model, y, w, saturated, basis, fit, groups):
     weights, saturated ones included (P, T, 3); ``basis`` (D, G) per pixel on SIGMA_GRID."""
     if not saturated.any():
         return np.zeros(len(groups), bool)
-    rd, sp = (np.array(v) for v in zip(*(reflectances(model, t)[:2] for t in fit["theta"])))
+    rd, sp = reflectance_sets(model, fit["theta"]).transpose(1, 0, 2)
     D, G = basis
     px = np.arange(len(groups))
     g = groups
@@ -242,7 +242,7 @@ def _fit_block(model, names, y, w, bases):
     search, half_a, half_b = (_grid_search(model, names, y, w, D, G) for D, G in bases)
     # the chi^2 the cache's own noise adds at each fit: its halves' model values differ by
     # twice the whole's Monte Carlo error over
-    rd, sp = (np.array(v) for v in zip(*(reflectances(model, t)[:2] for t in search["theta"])))
+    rd, sp = reflectance_sets(model, search["theta"]).transpose(1, 0, 2)
     cols = np.arange(len(rd))
     La, Lb = (rd[:, None] * D + sp[:, None] * G[search["sigma_index"], cols]
               for D, G in bases[1:])

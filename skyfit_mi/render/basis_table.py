@@ -25,7 +25,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .fit_model import PARAMETERS, WardModel, reflectances
+from .fit_model import PARAMETERS, WardModel, reflectance_sets, reflectances
 from .light_cache import (CONTROL_FULL, CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
                           CacheOptions, PointRays, light_caches)
 
@@ -765,6 +765,6 @@ class TableModel:
                       sigma_chunk(self.table.D.shape[1:]))
         G = np.concatenate([np.stack([np.asarray(reduce(g)) for g in chunk])
                             for _, chunk in lobes.chunks()])[inverse.ravel()]
-        refl = np.array([reflectances(self.model, th)[:2] for th in thetas])   # (n, 2, 3)
+        refl = reflectance_sets(self.model, thetas)                            # (n, 2, 3)
         shape = (len(thetas),) + (1,) * (D.ndim - 1) + (3,)
         return refl[:, 0].reshape(shape) * D + refl[:, 1].reshape(shape) * G

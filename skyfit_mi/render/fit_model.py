@@ -15,7 +15,8 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..physics.ward import (METAL_THRESHOLD, PLASTIC_MAX, SIGMA_MIRROR,
-                            albedo_nodes_of, colour_rule_twin, raw_parameters)
+                            albedo_nodes_of, colour_rule_twin, raw_parameters,
+                            raw_reflectances)
 from .light_cache import (CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
                           SIGMA_TABLE, check_fit_normalisation, control_weight)
 from .daylight import jit_array, update_sky
@@ -123,6 +124,19 @@ def reflectances(model, theta):
         else:
             d_spec[:, 3] = 1.0
     return rho_d, spec, d_rho_d, d_spec
+
+
+def reflectance_sets(model, thetas):
+    """rho_d and the specular reflectance s per channel, (n, 2, 3), of many parameter sets
+    ``thetas`` (n, k) within the model's bounds: :func:`reflectances`'s values (the colour
+    model's plastic rho_s held below the rule in single precision too, as
+    :func:`material_dict` holds it), unchecked and at once."""
+    th = np.atleast_2d(np.asarray(thetas, dtype=float))
+    rho = th[:, -2]
+    if model == "colour":
+        rho = np.where(rho < METAL_THRESHOLD, np.minimum(rho, PLASTIC_MAX), rho)
+    first = {"two": None, "achromatic": th[:, 0], "colour": th[:, :3]}[model]
+    return np.stack(raw_reflectances(model, rho, first), axis=1)
 
 
 def material_dict(model, theta, normalisation="ward"):
