@@ -54,7 +54,7 @@ def test_censored_residuals_and_jacobian(mean_dn, side):
 @pytest.mark.parametrize("mean_dn", [10.0, 128.0])
 def test_chi2_of_many_radiances_at_once_is_each_ones(mean_dn):
     """Problem.chi2s (the draws' likelihood) gives chi2 of each radiance, values clipped at
-    the bottom (censored terms) or none (at once)."""
+    the bottom (censored terms) or none."""
     problem, sensor = _problem(mean_dn, n=50)
     assert problem.clipped()[0].any() == (mean_dn == 10.0)
     thetas = np.linspace(0.5, 1.5, 7)[:, None] * mean_dn / sensor.max_code

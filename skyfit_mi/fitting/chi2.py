@@ -484,24 +484,26 @@ class Problem:
                 if told[..., c].any() else None for c in range(radiance.shape[-1])]
 
     def residual_terms(self, radiance):
-        """Residuals of every value (P, T, 3) and their derivative d r / d(model value).
+        """Residuals of every value (P, T, 3) and their derivative d r / d(model value); of
+        several radiances at once (n, P, T, 3) too.
 
         Measured values: (y - m) / sigma.  Clipped ones: sqrt(-2 ln P(clipped)), with
         z = -(m - 0.5) / sigma at the bottom and (m - max + 0.5) / sigma at the top.
         """
         m = self.predict(radiance)
         sig = self.obs.sigma
-        r, dr = (self.obs.y - m) / sig, -1.0 / sig
+        r = (self.obs.y - m) / sig
+        dr = np.broadcast_to(-1.0 / sig, r.shape).copy()
         low, high = self.clipped()
         c = low | high
         if c.any():
             sign = np.where(low, -1.0, 1.0)[c]
-            z = sign * (m[c] - np.where(low, LOW_CODE, self.obs.sensor.max_code - LOW_CODE)[c]) \
-                / sig[c]
-            r[c] = np.sqrt(-2.0 * log_ndtr(z))
+            z = sign * (m[..., c] - np.where(low, LOW_CODE,
+                                             self.obs.sensor.max_code - LOW_CODE)[c]) / sig[c]
+            r[..., c] = np.sqrt(-2.0 * log_ndtr(z))
             # d r / d m = -sign phi(z) / (sigma Phi(z) r)
-            dr[c] = -sign * np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z)) \
-                / (sig[c] * r[c])
+            dr[..., c] = -sign * np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z)) \
+                / (sig[c] * r[..., c])
         return r, dr
 
     def noise_chi2(self, theta):
@@ -557,13 +559,8 @@ class Problem:
                        self.model, self.valid)
 
     def chi2s(self, radiances):
-        """Chi-square (eq. 6.2) of each of several radiances (n, P, T, 3): at once where no
-        usable value is clipped, else one by one (a clipped value's term,
-        :meth:`residual_terms`)."""
-        low, high = self.clipped()
-        if low.any() or high.any():
-            return np.array([r @ r for r in map(self.residuals_from, radiances)])
-        r = (self.obs.y - self.predict(radiances)) / self.obs.sigma
+        """Chi-square (eq. 6.2) of each of several radiances (n, P, T, 3), at once."""
+        r = self.residual_terms(radiances)[0]
         return np.sum(np.where(self.mask, r * r, 0.0), axis=(1, 2, 3))
 
     def residuals_from(self, radiance):
