@@ -1,6 +1,8 @@
 """Draws from a fit's likelihood (skyfit_mi.fitting.draws): against the exact posterior of a
 linear model, and along a curved ridge (a grey plastic's metal twin) that the intervals'
 Gaussian misses."""
+from types import SimpleNamespace
+
 import numpy as np
 
 from skyfit_mi.fitting.draws import (DRAWS, interval_covariance, likelihood_draws)
@@ -22,6 +24,7 @@ class _Problem:
 
     def __init__(self, f, y, sigma):
         self.model, self.y, self.sigma = _Model(f), y, sigma
+        self.obs = SimpleNamespace(y=y)
 
     def chi2s(self, radiances):
         r = (self.y - radiances.reshape(len(radiances), -1)) / self.sigma

@@ -28,8 +28,8 @@ MIN_ROUNDS = 3
 #: A mixture component's covariance: that of this many favoured sets nearest it, its width
 #: times SPREAD, plus FLOOR times the first proposal's covariance.
 NEIGHBOURS, SPREAD, FLOOR = 20, 2.0, 1e-4
-#: Parameter sets whose radiance is held at once (sets x pixels x frames x channels).
-CHUNK = 64
+#: Values (sets x pixels x frames x channels) whose radiance is held at once (32 MB).
+CHUNK_VALUES = 2**22
 
 
 @dataclass
@@ -152,10 +152,12 @@ def _log_mixture(x, means, kernels):
 
 
 def _chi2s(problem, x):
-    """Chi-square of ``problem`` at each set of ``x``, the radiance of CHUNK sets made at once
-    (a lobe of the light table for each roughness: 64 of a board region's in 20 ms)."""
-    return np.concatenate([problem.chi2s(problem.model.radiances(x[start:start + CHUNK]))
-                           for start in range(0, len(x), CHUNK)])
+    """Chi-square of ``problem`` at each set of ``x``, the radiances of as many sets made at
+    once as hold CHUNK_VALUES values (a lobe of the light table for each roughness: 64 of a
+    board region's in 20 ms)."""
+    step = max(1, CHUNK_VALUES // problem.obs.y.size)
+    return np.concatenate([problem.chi2s(problem.model.radiances(x[start:start + step]))
+                           for start in range(0, len(x), step)])
 
 
 def _systematic(w, n, rng):
