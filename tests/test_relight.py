@@ -386,6 +386,28 @@ def test_bands_on_the_fitted_day_are_as_sharp_as_its_data(glossy, tmp_path):
     assert widths["intervals"] > 3 * widths["draws"], widths
 
 
+def test_a_frame_whose_highlight_the_fit_never_saw_is_marked_beyond_its_data(glossy, tmp_path):
+    """The glossy disc fitted on its first three frames (the sun's highlight no nearer than
+    17.7 degrees) and predicted on all four: the last frame's highlight (3.1 degrees) is a
+    lobe peak its data never showed, marked 'highlight' in prediction.csv and counted beyond
+    what the data measured in relight.json; the frames it saw are not."""
+    fitted = glossy[0]
+    fits = tmp_path / "fits"
+    assert main(["fit", str(fitted / "train"), "--region", "disc=rect:6,6,9,9", "--model", "3",
+                 "--frames", "0-2", "-o", str(fits)]) == 0
+    geometry = json.loads((fits / "fit_disc.json").read_text())["geometry"]
+    assert geometry["closest_highlight_half_angle_deg"] > 15
+    out = tmp_path / "pred"
+    assert main(["relight", str(fits), "--target", str(fitted / "train"), "-o", str(out), "-q",
+                 "--no-images", "--draws", "50"]) == 0
+    rows = list(csv.DictReader((out / "prediction.csv").read_text().splitlines()))
+    marks = {(int(r["frame"]), r["beyond_fit_data"]) for r in rows}
+    assert {m for f, m in marks if f == 3} == {"highlight"}, marks
+    assert "highlight" not in {m for f, m in marks if f < 3}, marks
+    coverage = json.loads((out / "relight.json").read_text())["band_coverage"]
+    assert coverage["beyond_measured"] >= 3
+
+
 def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
     """relight.fitted_sessions (fit.trace_sessions): one light cache over several regions' pixels (each pixel its
     region's material) gives each region what a trace of its own gives: bit for bit for a

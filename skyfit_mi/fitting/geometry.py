@@ -12,6 +12,9 @@ import numpy as np
 #: A lobe leaves "no trace" at the closest highlight when its value there is below this share
 #: of a white Lambertian surface's 1 / pi [unitless].
 TRACE = 0.01
+#: A frame's sun highlight lies beyond what a fit measured where the lobe there exceeds its
+#: value at the fit's closest highlight by more than this factor [unitless].
+LOBE_BEYOND = 2.0
 
 
 def highlight_geometry(sun_half_cos):
@@ -32,6 +35,21 @@ def highlight_geometry(sun_half_cos):
     return {"frames": int(c.shape[1]), "frames_with_sun": len(lit),
             "closest_highlight_half_angle_deg": min(lit) if lit else None,
             "closest_half_angle_per_frame_deg": per_frame}
+
+
+def highlight_beyond(fit_half_angle_deg, half_angle_deg, sigma_alpha):
+    """Whether a frame's closest sun highlight (its half-angle delta [degrees], None where its
+    sun gives no light) lies nearer the mirror direction than the fit's data saw (their closest,
+    ``fit_half_angle_deg``, None without sun) by so much that Ward's lobe of roughness
+    ``sigma_alpha``, exp(-tan^2 delta / sigma^2) (eq. 3.19), exceeds its value at the fit's
+    closest by more than LOBE_BEYOND: a lobe peak the data never showed, the model's alone."""
+    if half_angle_deg is None:
+        return False
+    if fit_half_angle_deg is None:
+        return True
+    fit_t, t = np.tan(np.radians([fit_half_angle_deg, half_angle_deg]))
+    s = max(float(sigma_alpha), 1e-4)
+    return bool((fit_t**2 - t**2) / s**2 > np.log(LOBE_BEYOND))
 
 
 def traceless_roughness(half_angle_deg):

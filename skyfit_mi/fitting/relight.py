@@ -34,6 +34,7 @@ from ..files import FolderLock, ensure_dir, figure_png, write_bytes, write_json,
 from .chi2 import subsample_region
 from .draws import interval_covariance, root_of
 from .fit import FitCache, FitSession, trace_sessions
+from .geometry import highlight_beyond
 from .landscape import truth_parameters
 from .sky_fit import sky_level_at
 from .uncertainty import band_half_width, widen
@@ -464,9 +465,11 @@ def band_coverage(rows):
             "within_measured": {"share": float(np.mean(within)) if within else None,
                                 "values": len(within)},
             "beyond_measured": len(rows) - len(within),
-            "band": "95%, from the fits' intervals; beyond_measured: values predicted beyond "
-                    "the radiance the fits' data measured (dimmer than their noise let them "
-                    "tell, or brighter than the top code), where the band is the model's alone"}
+            "band": "95%, from the fits' draws on their own sequence, else from their "
+                    "intervals; beyond_measured: values predicted beyond what the fits' data "
+                    "measured (dimmer than their noise let them tell, brighter than the top "
+                    "code, or in a frame whose sun highlight lies nearer the mirror direction "
+                    "than any they saw), where the band is the model's alone"}
 
 
 def log_errors(errors, plan, log=print):
@@ -494,10 +497,11 @@ def log_errors(errors, plan, log=print):
     log(f"{'table values' if plan.table else 'observed region means'} inside the predicted "
         f"95% band: {coverage['share']:.0%} of {coverage['values']}"
         + (f" ({within['share']:.0%} of the {within['values']} within the radiance the fit's "
-           f"data measured; {beyond} beyond it, dimmer than their noise let them tell or "
-           "brighter than the top code, rest on the model alone)"
+           f"data measured; {beyond} beyond it, dimmer than their noise let them tell, "
+           "brighter than the top code or in a sun highlight nearer the mirror direction than "
+           "the fit saw, rest on the model alone)"
            if beyond and within["values"] else
-           f" (all {beyond} beyond the radiance the fit's data measured: the model's alone)"
+           f" (all {beyond} beyond what the fit's data measured: the model's alone)"
            if beyond else ""))
 
 
@@ -714,8 +718,9 @@ class PredictionRow:
     point: str | None = None
     #: the table's value is saturated: the level its instrument clipped at, a lower bound
     saturated: bool = False
-    #: beyond the radiance the fit's data measured (:func:`beyond_data`): 'below', 'above',
-    #: 'unmeasured', or '' within it
+    #: beyond what the fit's data measured: its radiance (:func:`beyond_data`: 'below',
+    #: 'above', 'unmeasured'), its sun highlights ('highlight', :func:`nearer_highlights`), or
+    #: '' within both
     beyond: str = ""
 
     @property
@@ -943,6 +948,7 @@ def _predict_means(s, result, target, draws, rng):
     observed = region_mean(image)
     names = _channels(s)
     means, observed = means[..., :len(names)], observed[..., :len(names)]
+    nearer = nearer_highlights(result, s)
     rows = []
     for j, (i, t) in enumerate(zip(s.obs.frames, s.obs.times)):
         for c, ch in enumerate(names):
@@ -950,8 +956,24 @@ def _predict_means(s, result, target, draws, rng):
             rows.append(PredictionRow(region=s.name, frame=int(i), time=t, channel=ch,
                                       predicted=float(means[0, j, c]), lo95=float(band[0]),
                                       hi95=float(band[1]), image=float(observed[j, c]),
-                                      beyond=beyond_data(result, ch, means[0, j, c])))
+                                      beyond=beyond_data(result, ch, means[0, j, c])
+                                      or ("highlight" if nearer[j] else "")))
     return rows, _means_error(s, means[0], observed, region_mean)
+
+
+def nearer_highlights(result, s):
+    """Per frame of the target's session ``s``, whether its sun's highlight lies nearer the
+    mirror direction than any the fit ``result``'s data saw, by more than the fitted lobe
+    allows (:func:`~.geometry.highlight_beyond`): there the lobe's peak is the model's alone.
+    All False for a fit that does not record its geometry."""
+    geometry = result.get("geometry")
+    fitted = (geometry.get("closest_highlight_half_angle_deg", False)
+              if isinstance(geometry, dict) else False)
+    per_frame = s.geometry["closest_half_angle_per_frame_deg"]
+    if not (fitted is None or type(fitted) in (int, float)):      # not recorded (or edited)
+        return [False] * len(per_frame)
+    sigma = result["parameters"].get("sigma_alpha", 0.0)
+    return [highlight_beyond(fitted, d, sigma) for d in per_frame]
 
 
 def beyond_data(result, channel, value):
@@ -990,6 +1012,7 @@ def _predict_points(s, result, target, draws, rng):
                             *model_error_kappa(result))
     names = _channels(s)
     saturated = ~_measured(s)
+    nearer = nearer_highlights(result, s)
     rows, points = [], [str(x) for x in s.obs.pixels]      # one string a point, shared
     for p, j, c in zip(*np.nonzero(np.isfinite(s.obs.sigma[..., :len(names)]))):
         band = widen(at_fit[p, j, c], (lo[p, j, c], hi[p, j, c]), extra[p, j, c], -np.inf,
@@ -1000,7 +1023,8 @@ def _predict_points(s, result, target, draws, rng):
                                   hi95=float(band[1]), image=float(image[p, j, c]),
                                   point=points[p],
                                   saturated=bool(saturated[p, j, c]),
-                                  beyond=beyond_data(result, names[c], at_fit[p, j, c])))
+                                  beyond=beyond_data(result, names[c], at_fit[p, j, c])
+                                  or ("highlight" if nearer[j] else "")))
     region_mean = _region_mean(s)
     return rows, _means_error(s, region_mean(at_fit)[..., :len(names)],
                               region_mean(image)[..., :len(names)], region_mean)
