@@ -21,10 +21,11 @@ from .uncertainty import LEVELS, Z
 
 #: Parameter sets kept (relight's default draws) and tried in each round of the sampling.
 DRAWS, PROPOSALS = 200, 1000
-#: Rounds of the sampling at most: the first from the intervals, each later one from a
-#: mixture around the sets the rounds before favoured.
-ROUNDS = 6
-MIN_ROUNDS = 3
+#: Rounds of the sampling, at most and at least: the first from the intervals, each later
+#: one from a mixture around the sets the rounds before favoured; it stops once the draws'
+#: effective number is enough and no smaller than the round before's (a fall means a round
+#: found likelihood that the proposals before had missed: a ridge's far end).
+ROUNDS, MIN_ROUNDS = 6, 3
 #: A mixture component's covariance: that of this many favoured sets nearest it, its width
 #: times SPREAD, plus FLOOR times the first proposal's covariance.
 NEIGHBOURS, SPREAD, FLOOR = 20, 2.0, 1e-4
@@ -35,7 +36,8 @@ CHUNK_VALUES = 2**22
 @dataclass
 class Draws:
     """``values`` (n, parameters) drawn from the data's likelihood; ``effective_size`` the
-    importance weights' effective number of draws behind them, ``proposals`` the sets tried."""
+    importance weights' effective number of draws behind them, ``proposals`` the sets tried
+    in ``rounds`` rounds."""
 
     values: np.ndarray
     effective_size: float
