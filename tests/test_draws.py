@@ -39,7 +39,9 @@ def _intervals(theta, sd, lower, upper):
 def test_draws_of_a_linear_model_have_its_posterior_mean_and_covariance():
     """y = A theta + noise: the draws' mean and covariance are the least-squares estimate and
     (A^T A)^-1 sigma^2 s (s the scale), within their Monte Carlo error, from the intervals'
-    Gaussian and from one three times too wide alike."""
+    Gaussian and from one 3 times too wide alike; from one 30 times too wide (errors the
+    data share can widen the intervals so) too, or, where it finds too few effective draws,
+    none rather than a few sets repeated."""
     rng = np.random.default_rng(1)
     A = rng.normal(size=(60, 3))
     A[:, 2] *= 0.2                                   # a poorly determined last parameter
@@ -50,10 +52,12 @@ def test_draws_of_a_linear_model_have_its_posterior_mean_and_covariance():
     problem = _Problem(lambda th: th @ A.T, y, sigma)
     chi2 = float(np.sum(((y - A @ theta) / sigma) ** 2))
     lower, upper = np.zeros(3) - 5, np.ones(3) * 5
-    for widen in (1.0, 3.0):
+    for widen in (1.0, 3.0, 30.0):
         start = interval_covariance(_intervals(theta, widen * np.sqrt(np.diag(cov)), lower,
                                                upper), cov)
         d = likelihood_draws(problem, theta, chi2, scale, start, lower, upper, seed=2, n=400)
+        if d is None and widen == 30.0:
+            continue                 # too few effective draws found: none kept, not wrong ones
         assert d.effective_size >= 400 and d.values.shape == (400, 3)
         se = np.sqrt(np.diag(cov) / 400)
         assert np.all(np.abs(d.values.mean(axis=0) - theta) < 4 * se), widen
@@ -86,6 +90,18 @@ def test_draws_follow_a_curved_ridge_and_predict_the_data_as_the_fit_does():
     assert 0.3 < q[0] < 0.4 and 0.47 < q[1] < 0.65 and q[2] > 0.85, q
     naive = theta + rng.standard_normal((DRAWS, 2)) @ np.linalg.cholesky(start).T
     assert np.std(naive[:, 0] * naive[:, 1]) > 20 * se
+
+
+def test_no_draws_where_the_likelihood_cannot_be_found():
+    """A chi-square that is nowhere finite, or bounds that no proposal meets: no draws (relight
+    then takes the intervals)."""
+    problem = _Problem(lambda th: np.full((len(th), 3), np.nan), np.zeros(3), 1.0)
+    cov = np.eye(2) * 0.01
+    lower, upper = np.zeros(2), np.ones(2)
+    assert likelihood_draws(problem, np.array([0.5, 0.5]), 0.0, 1.0, cov, lower, upper,
+                            seed=0) is None
+    assert likelihood_draws(problem, np.array([0.5, 0.5]), 0.0, 1.0, cov, lower + 5,
+                            upper + 5, seed=0) is None
 
 
 def test_interval_covariance_takes_the_intervals_widths_and_the_covariances_correlations():

@@ -90,7 +90,7 @@ def test_a_frames_highlight_is_beyond_the_fits_where_the_lobe_there_doubles():
     """Hand values: the fit's closest highlight at 13.5 deg, a frame's at 12 deg: Ward's lobe
     rises by exp((tan^2 13.5 - tan^2 12) / sigma^2), e^1.94 = 7x for sigma 0.08 (beyond),
     e^0.14 for 0.3 (within LOBE_BEYOND = 2); a frame farther off, or without sun, is within;
-    any sunlit frame is beyond a fit that saw no sun."""
+    any sunlit frame is beyond a fit that saw no sun; nearer by under NEARER_DEG is within."""
     from skyfit_mi.fitting.geometry import LOBE_BEYOND, highlight_beyond
 
     rise = (np.tan(np.radians(13.5)) ** 2 - np.tan(np.radians(12.0)) ** 2) / 0.08**2
@@ -99,4 +99,5 @@ def test_a_frames_highlight_is_beyond_the_fits_where_the_lobe_there_doubles():
     assert not highlight_beyond(13.5, 12.0, 0.3)
     assert not highlight_beyond(13.5, 20.0, 0.08) and not highlight_beyond(13.5, None, 0.08)
     assert highlight_beyond(None, 40.0, 0.2) and not highlight_beyond(None, None, 0.2)
-    assert highlight_beyond(13.5, 13.0, 0.0)                 # a mirror: any nearer approach
+    assert highlight_beyond(13.5, 12.0, 0.0)                 # a mirror: any nearer approach,
+    assert not highlight_beyond(13.5, 13.0, 0.0)             # beyond NEARER_DEG

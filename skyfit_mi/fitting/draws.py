@@ -52,25 +52,34 @@ def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n
     ``cov`` (the intervals' widths and the covariance's correlations,
     :func:`interval_covariance`), each later one a mixture around ``n`` sets the rounds so far
     favour (:func:`_local_kernels`); every set is weighted against the mixture of all the
-    rounds' proposals (deterministic-mixture weights, which a lucky set of a broad round
-    cannot dominate), until the weights make ``n`` effective draws."""
+    rounds' proposals, each by its share of the sets (deterministic-mixture weights, which a
+    lucky set of a broad round cannot dominate), until the weights make ``n`` effective
+    draws.  None where they do not after ROUNDS (intervals far wider than the likelihood,
+    which errors the data share widen), or where no set lies within the bounds or has a
+    finite chi-square: relight then takes the intervals."""
     rng = np.random.default_rng(seed)
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
-    w, v = np.linalg.eigh(cov)                   # clipped correlations may not be PSD
-    first = (v * np.clip(w, 0, None)) @ v.T + np.diag((1e-6 * (upper - lower)) ** 2)
-    proposals, logq = [(theta[None], first[None])], []     # logq: each proposal's density
+    first = _psd(cov) + np.diag((1e-6 * (upper - lower)) ** 2)
+    proposals, logq, counts = [(theta[None], first[None])], [], []
     x_all, log_likelihood, last = np.empty((0, len(theta))), np.empty(0), 0.0
     for r in range(ROUNDS):
         x, accepted = _propose(rng, *proposals[-1], lower, upper)
+        if not len(x):
+            return None
         proposals[-1] += (accepted,)
+        counts.append(len(x))
         logq = [np.concatenate([q, _log_mixture(x, *p[:2]) - np.log(p[2])])
                 for q, p in zip(logq, proposals)]
         logq.append(_log_mixture(np.concatenate([x_all, x]), *proposals[-1][:2])
                     - np.log(accepted))
         x_all = np.concatenate([x_all, x])
-        log_likelihood = np.concatenate([log_likelihood,
-                                         -(_chi2s(problem, x) - chi2_min) / (2 * scale)])
-        logw = log_likelihood - logsumexp(logq, axis=0)
+        chi2 = _chi2s(problem, x)
+        log_likelihood = np.concatenate([log_likelihood, np.where(
+            np.isfinite(chi2), -(chi2 - chi2_min) / (2 * scale), -np.inf)])
+        share = np.log(np.array(counts) / len(x_all))[:, None]
+        logw = log_likelihood - logsumexp(np.array(logq) + share, axis=0)
+        if not np.isfinite(logw).any():
+            return None
         w = np.exp(logw - logsumexp(logw))
         ess = 1.0 / np.sum(w * w)
         if ess >= n and r + 1 >= MIN_ROUNDS and ess >= last:
@@ -78,7 +87,15 @@ def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n
         last = ess
         means = x_all[_systematic(w, n, rng)]
         proposals.append((means, _local_kernels(means, first)))
+    if ess < n:
+        return None
     return Draws(x_all[_systematic(w, n, rng)], float(ess), len(x_all), r + 1)
+
+
+def _psd(cov):
+    """``cov`` with its negative eigenvalues (clipped correlations) set to zero."""
+    w, v = np.linalg.eigh(cov)
+    return (v * np.clip(w, 0, None)) @ v.T
 
 
 def _local_kernels(means, first):
@@ -118,9 +135,9 @@ def draws_scale(interval_scale, channel_factors, ripple):
 
 
 def _propose(rng, means, kernels, lower, upper):
-    """PROPOSALS sets from the equal mixture of Gaussians at ``means`` (K, n) with
+    """Up to PROPOSALS sets from the equal mixture of Gaussians at ``means`` (K, n) with
     covariances ``kernels`` (K, n, n), truncated to the bounds; with the share of the mixture
-    within them.""" 
+    within them."""
     roots = np.array([root_of(k) for k in kernels])
     kept, tried = [], 0
     while sum(len(k) for k in kept) < PROPOSALS and tried < 50 * PROPOSALS:

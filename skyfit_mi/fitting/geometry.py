@@ -15,6 +15,9 @@ TRACE = 0.01
 #: A frame's sun highlight lies beyond what a fit measured where the lobe there exceeds its
 #: value at the fit's closest highlight by more than this factor [unitless].
 LOBE_BEYOND = 2.0
+#: ... and only where it lies this much nearer at least [degrees]: the closest half-angle is
+#: read from the light cache's sample positions, which differ between traces.
+NEARER_DEG = 1.0
 
 
 def highlight_geometry(sun_half_cos):
@@ -42,11 +45,14 @@ def highlight_beyond(fit_half_angle_deg, half_angle_deg, sigma_alpha):
     sun gives no light) lies nearer the mirror direction than the fit's data saw (their closest,
     ``fit_half_angle_deg``, None without sun) by so much that Ward's lobe of roughness
     ``sigma_alpha``, exp(-tan^2 delta / sigma^2) (eq. 3.19), exceeds its value at the fit's
-    closest by more than LOBE_BEYOND: a lobe peak the data never showed, the model's alone."""
+    closest by more than LOBE_BEYOND (and nearer by NEARER_DEG at least): a lobe peak the data
+    never showed, the model's alone."""
     if half_angle_deg is None:
         return False
     if fit_half_angle_deg is None:
         return True
+    if half_angle_deg > fit_half_angle_deg - NEARER_DEG:
+        return False
     fit_t, t = np.tan(np.radians([fit_half_angle_deg, half_angle_deg]))
     s = max(float(sigma_alpha), 1e-4)
     return bool((fit_t**2 - t**2) / s**2 > np.log(LOBE_BEYOND))

@@ -965,7 +965,8 @@ def nearer_highlights(result, s):
     """Per frame of the target's session ``s``, whether its sun's highlight lies nearer the
     mirror direction than any the fit ``result``'s data saw, by more than the fitted lobe
     allows (:func:`~.geometry.highlight_beyond`): there the lobe's peak is the model's alone.
-    All False for a fit that does not record its geometry."""
+    All False for a fit that does not record its geometry, and for the frames it was fitted
+    to."""
     geometry = result.get("geometry")
     fitted = (geometry.get("closest_highlight_half_angle_deg", False)
               if isinstance(geometry, dict) else False)
@@ -973,7 +974,10 @@ def nearer_highlights(result, s):
     if not (fitted is None or type(fitted) in (int, float)):      # not recorded (or edited)
         return [False] * len(per_frame)
     sigma = result["parameters"].get("sigma_alpha", 0.0)
-    return [highlight_beyond(fitted, d, sigma) for d in per_frame]
+    trained = (set(result.get("frames", [])) if result.get("sequence_run_id") == s.run_id
+               else set())                                   # the frames it saw: measured
+    return [int(i) not in trained and highlight_beyond(fitted, d, sigma)
+            for i, d in zip(s.obs.frames, per_frame)]
 
 
 def beyond_data(result, channel, value):
