@@ -483,9 +483,9 @@ class Problem:
         return [[float(level[..., c][told[..., c]].min()), float(radiance[..., c][ok[..., c]].max())]
                 if told[..., c].any() else None for c in range(radiance.shape[-1])]
 
-    def residual_terms(self, radiance):
-        """Residuals of every value (P, T, 3) and their derivative d r / d(model value); of
-        several radiances at once (n, P, T, 3) too.
+    def residual_terms(self, radiance, derivative=True):
+        """Residuals of every value (P, T, 3) and their derivative d r / d(model value) (None
+        without ``derivative``); of several radiances at once (n, P, T, 3) too.
 
         Measured values: (y - m) / sigma.  Clipped ones: sqrt(-2 ln P(clipped)), with
         z = -(m - 0.5) / sigma at the bottom and (m - max + 0.5) / sigma at the top.
@@ -493,7 +493,7 @@ class Problem:
         m = self.predict(radiance)
         sig = self.obs.sigma
         r = (self.obs.y - m) / sig
-        dr = np.broadcast_to(-1.0 / sig, r.shape).copy()
+        dr = np.broadcast_to(-1.0 / sig, r.shape).copy() if derivative else None
         low, high = self.clipped()
         c = low | high
         if c.any():
@@ -501,6 +501,7 @@ class Problem:
             z = sign * (m[..., c] - np.where(low, LOW_CODE,
                                              self.obs.sensor.max_code - LOW_CODE)[c]) / sig[c]
             r[..., c] = np.sqrt(-2.0 * log_ndtr(z))
+        if derivative and c.any():
             # d r / d m = -sign phi(z) / (sigma Phi(z) r)
             dr[..., c] = -sign * np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z)) \
                 / (sig[c] * r[..., c])
@@ -560,11 +561,11 @@ class Problem:
 
     def chi2s(self, radiances):
         """Chi-square (eq. 6.2) of each of several radiances (n, P, T, 3), at once."""
-        r = self.residual_terms(radiances)[0]
+        r = self.residual_terms(radiances, derivative=False)[0]
         return np.sum(np.where(self.mask, r * r, 0.0), axis=(1, 2, 3))
 
     def residuals_from(self, radiance):
-        return self.residual_terms(radiance)[0][self.mask]
+        return self.residual_terms(radiance, derivative=False)[0][self.mask]
 
     def residuals(self, theta):
         """(y - y(a)) / sigma over usable values, flat."""

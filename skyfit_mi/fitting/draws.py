@@ -94,8 +94,8 @@ def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n
 
 def _psd(cov):
     """``cov`` with its negative eigenvalues (clipped correlations) set to zero."""
-    w, v = np.linalg.eigh(cov)
-    return (v * np.clip(w, 0, None)) @ v.T
+    root = root_of(cov)
+    return root @ root.T
 
 
 def _local_kernels(means, first):

@@ -78,12 +78,12 @@ def pose_share(s, fit, J):
     to_world = np.asarray(s.doc["camera"]["to_world"], dtype=float)
     pivot = view_centre(s.scene)
     use = problem.mask
-    r0, _ = problem.residual_terms(problem.model.radiance(theta))
+    r0, _ = problem.residual_terms(problem.model.radiance(theta), derivative=False)
     shifts = {}
     for k, deg in turns.items():
         L, hit = s.radiance_at_pose(turn_camera(to_world, pivot, k, deg), theta)
         with np.errstate(all="ignore"):
-            r, _ = problem.residual_terms(L)
+            r, _ = problem.residual_terms(L, derivative=False)
         moved = np.where(use & hit[..., None], r - r0, 0.0)
         shifts[k] = -fit.curvature_inverse @ (J[use].T @ moved[use])
     sd = np.sqrt(sum(d ** 2 for d in shifts.values()))

@@ -956,8 +956,8 @@ def _predict_means(s, result, target, draws, rng):
             rows.append(PredictionRow(region=s.name, frame=int(i), time=t, channel=ch,
                                       predicted=float(means[0, j, c]), lo95=float(band[0]),
                                       hi95=float(band[1]), image=float(observed[j, c]),
-                                      beyond=beyond_data(result, ch, means[0, j, c])
-                                      or ("highlight" if nearer[j] else "")))
+                                      beyond=beyond_data(result, ch, means[0, j, c],
+                                                         nearer[j])))
     return rows, _means_error(s, means[0], observed, region_mean)
 
 
@@ -980,18 +980,18 @@ def nearer_highlights(result, s):
             for i, d in zip(s.obs.frames, per_frame)]
 
 
-def beyond_data(result, channel, value):
-    """Where a predicted ``value`` [W m^-2 sr^-1] of ``channel`` lies against the radiance the
-    fit ``result``'s data measured (its ``measured_range``): '' within it, 'below' or
-    'above' it, 'unmeasured' where they measured that channel nowhere; '' for a fit that
-    does not record it.  Beyond it the prediction and its band rest on the model alone."""
+def beyond_data(result, channel, value, nearer=False):
+    """Where a predicted ``value`` [W m^-2 sr^-1] of ``channel`` lies against what the fit
+    ``result``'s data measured: against its radiance (its ``measured_range``) '' within it,
+    'below' or 'above' it, 'unmeasured' where they measured that channel nowhere ('' for a
+    fit that does not record it); within it, 'highlight' in a frame whose sun highlight lies
+    ``nearer`` the mirror direction than any they saw (:func:`nearer_highlights`).  Beyond
+    either, the prediction and its band rest on the model alone."""
     ranges = (result.get("measured_range") or {}).get("by_channel")
-    if ranges is None or channel not in ranges:
-        return ""
-    lo_hi = ranges[channel]
-    if lo_hi is None:
-        return "unmeasured"
-    return "below" if value < lo_hi[0] else "above" if value > lo_hi[1] else ""
+    lo_hi = ranges.get(channel, ()) if ranges is not None else ()
+    radiance = ("unmeasured" if lo_hi is None else "" if not lo_hi else
+                "below" if value < lo_hi[0] else "above" if value > lo_hi[1] else "")
+    return radiance or ("highlight" if nearer else "")
 
 
 def _predict_points(s, result, target, draws, rng):
@@ -1027,8 +1027,8 @@ def _predict_points(s, result, target, draws, rng):
                                   hi95=float(band[1]), image=float(image[p, j, c]),
                                   point=points[p],
                                   saturated=bool(saturated[p, j, c]),
-                                  beyond=beyond_data(result, names[c], at_fit[p, j, c])
-                                  or ("highlight" if nearer[j] else "")))
+                                  beyond=beyond_data(result, names[c], at_fit[p, j, c],
+                                                     nearer[j])))
     region_mean = _region_mean(s)
     return rows, _means_error(s, region_mean(at_fit)[..., :len(names)],
                               region_mean(image)[..., :len(names)], region_mean)
