@@ -66,10 +66,13 @@ def _copy_frames(out, frames, sensor_seed, trace):
         write_frame(out, f["index"], img, np.zeros_like(img), values, sigma)  # taken as exact
 
 
-def radiance_frames(run, out, gensky_texts, material, geometry="disc", m=4, sensor_seed=99):
+def radiance_frames(run, out, gensky_texts, material, geometry="disc", m=4, sensor_seed=99,
+                    region=None):
     """Trace every frame of the sequence folder ``out`` with Radiance: gensky's sky text per
     frame, ``material`` a Radiance primitive named ``mat`` (e.g. 'void plastic mat 0 0 5 r g b
-    spec rough'), on GEOMETRY[geometry]; the frames' EXRs and captures are replaced."""
+    spec rough'), on GEOMETRY[geometry]; the frames' EXRs and captures are replaced.  With
+    ``region`` (x0, y0, x1, y1), inclusive, only its pixels are traced and the others are 0
+    (a pixel's noise draw does not depend on the others')."""
     import mitsuba as mi
 
     from skyfit_mi.pipeline.manifest import load_manifest
@@ -78,7 +81,9 @@ def radiance_frames(run, out, gensky_texts, material, geometry="disc", m=4, sens
     doc, _ = load_manifest(out)
     scene = mi.load_string(doc["scene"]["xml"])
     w, h = doc["camera"]["width"], doc["camera"]["height"]
-    px = np.stack(np.meshgrid(np.arange(w), np.arange(h), indexing="xy"), -1).reshape(-1, 2)
+    x0, y0, x1, y1 = region or (0, 0, w - 1, h - 1)
+    px = np.stack(np.meshgrid(np.arange(x0, x1 + 1), np.arange(y0, y1 + 1), indexing="xy"),
+                  -1).reshape(-1, 2)
     dirs = -pixel_views(scene, px, m=m).reshape(-1, 3)                 # camera -> scene
     origin = np.asarray(doc["camera"]["to_world"], dtype=float)[:3, 3]
     rays = "".join(f"{origin[0]:.9g} {origin[1]:.9g} {origin[2]:.9g} {d[0]:.9g} {d[1]:.9g} "
@@ -94,8 +99,10 @@ def radiance_frames(run, out, gensky_texts, material, geometry="disc", m=4, sens
         (work / "scene.oct").write_bytes(run("oconv", rad, binary=True))
         txt = run("rtrace", "-h", "-ab", 1, "-ad", 4096, "-as", 0, "-aa", 0, "-ss", 64,
                   "-st", 0, "-lw", 1e-7, work / "scene.oct", input=rays)
-        L = np.array(txt.split(), dtype=float).reshape(h * w, m * m, 3)
-        return L.mean(axis=1).reshape(h, w, 3)
+        L = np.array(txt.split(), dtype=float).reshape(len(px), m * m, 3)
+        img = np.zeros((h, w, 3))
+        img[px[:, 1], px[:, 0]] = L.mean(axis=1)
+        return img
     _copy_frames(out, gensky_texts, sensor_seed, trace)
 
 
