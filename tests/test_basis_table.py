@@ -134,7 +134,7 @@ def test_regions_take_views_of_a_table_traced_in_blocks(traced):
     _, _, _, table = traced
     P, T = table.shape
     # the same table as four blocks: 2 x 2 of pixels and frames
-    blocks = BasisTable.empty(P, T, table.sun_half_cos.shape[-1], table.normalisation)
+    blocks = BasisTable.empty(P, T, table.sun_cos.shape[2], table.normalisation)
     for rows in (slice(0, 5), slice(5, P)):
         for frames in (slice(0, 4), slice(4, T)):
             blocks.place(table.subset(rows, frames), rows, frames)

@@ -9,16 +9,22 @@ from skyfit_mi.fitting.uncertainty import misfit
 
 
 def test_highlight_geometry_takes_the_closest_lit_approach_per_frame():
-    c = np.full((2, 3, 4), np.nan)                     # 2 pixels, 3 frames, 4 positions
-    c[0, 0] = np.cos(np.radians([20, 25, 30, 35]))
-    c[1, 0, 0] = np.cos(np.radians(12.0))
-    c[:, 2, 1] = np.cos(np.radians(40.0))              # frame 1 has no sun
+    c = np.full((2, 3, 4, 2), np.nan)                  # 2 pixels, 3 frames, 4 positions
+    c[0, 0, :, 0] = np.cos(np.radians([20, 25, 30, 35]))
+    c[1, 0, 0, 0] = np.cos(np.radians(12.0))
+    c[0, 0, :, 1] = np.cos(np.radians([40, 41, 42, 43]))
+    c[1, 0, 0, 1] = np.cos(np.radians(50.0))
+    c[:, 2, 1] = np.cos(np.radians([40.0, 10.0]))     # frame 1 has no sun
     g = highlight_geometry(c)
     assert g["frames"] == 3 and g["frames_with_sun"] == 2
     assert g["closest_half_angle_per_frame_deg"][1] is None
     assert g["closest_half_angle_per_frame_deg"][0] == pytest.approx(12.0)
     assert g["closest_highlight_half_angle_deg"] == pytest.approx(12.0)
-    none = highlight_geometry(np.full((2, 3, 4), np.nan))
+    # the median of the five lit positions' (theta_h, theta_d); none without sun
+    np.testing.assert_allclose(g["sun_angles_per_frame_deg"][0], [25.0, 42.0])
+    np.testing.assert_allclose(g["sun_angles_per_frame_deg"][2], [40.0, 10.0])
+    assert g["sun_angles_per_frame_deg"][1] is None
+    none = highlight_geometry(np.full((2, 3, 4, 2), np.nan))
     assert none["frames_with_sun"] == 0 and none["closest_highlight_half_angle_deg"] is None
 
 

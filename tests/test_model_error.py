@@ -236,3 +236,40 @@ def test_a_band_takes_in_the_model_errors_own_uncertainty():
     for vi, mv, hv in zip(v, m, h):
         e = rng.standard_normal(len(k)) * np.sqrt(vi + (k * mv) ** 2)
         assert np.mean(np.abs(e) <= hv) == pytest.approx(0.95, abs=0.003)
+
+
+def test_a_predictions_model_error_follows_the_fits_misses_at_its_angles():
+    """local_error_scale by hand: a frame at the angles of a fitted frame that missed by 26%
+    (kappa 0.05, its sd 1%) takes sqrt((w (0.26^2 - 0.01^2) / kappa^2 + 1) / (w + 1)) of
+    kappa, w = 1 at its own angles; a frame's held-out miss counts where larger than its
+    fitted one, and its fitted one where its fold was left out (None); a prediction far from
+    every frame, or without sun, takes kappa itself; near frames that missed by less than
+    their noise, less than kappa; a fit without residuals (an old fit JSON, kappa 0, or
+    residuals edited) changes nothing."""
+    from skyfit_mi.fitting.held_out import ANGLE_REACH_DEG, KAPPA_FRAMES, local_error_scale
+
+    kappa = 0.05
+    by_frame = {"held_out": [None, [0.0, 0.1, 0.0], None],
+                "held_out_sd": [None, [0.02] * 3, None],
+                "fitted": [[0.26, 0.2, 0.07], [0.0, 0.0, 0.0], None],
+                "fitted_sd": [[0.01] * 3, [0.01] * 3, None]}
+    fit_angles = [[11.3, 54.1], [40.0, 10.0], [20.0, 20.0]]
+    near = [11.3 + 0.6, 54.1 + 0.3]
+    got = local_error_scale(by_frame, fit_angles, [[11.3, 54.1], near, [80.0, 80.0], None,
+                                                   [40.0, 10.0]], kappa)
+    excess = (np.square([0.26, 0.2, 0.07]) - 0.01**2) / kappa**2
+    np.testing.assert_allclose(got[0], np.sqrt((excess + KAPPA_FRAMES) / (1 + KAPPA_FRAMES)),
+                               rtol=1e-6)
+    w = np.exp(-0.5 * (0.6**2 + 0.3**2) / ANGLE_REACH_DEG**2)
+    np.testing.assert_allclose(got[1], np.sqrt((w * excess + KAPPA_FRAMES) / (w + KAPPA_FRAMES)),
+                               rtol=1e-6)
+    assert got[0, 0] > 3 and got[0, 2] > 1                     # 26% and 7% against 5%
+    np.testing.assert_allclose(got[2:4], 1.0, atol=1e-9)       # far from every frame; no sun
+    # within the noise there, but for the green held out at 10% (sd 2%)
+    np.testing.assert_allclose(got[4], np.sqrt([1 / 2, ((0.1**2 - 0.02**2) / kappa**2 + 1) / 2,
+                                                1 / 2]))
+    edited = dict(by_frame, fitted=[["x"] * 3] * 3)
+    for args in ((None, fit_angles), (by_frame, None), (edited, fit_angles)):
+        np.testing.assert_array_equal(local_error_scale(*args, [[11.3, 54.1]], kappa), 1.0)
+    np.testing.assert_array_equal(local_error_scale(by_frame, fit_angles, [[11.3, 54.1]], 0.0),
+                                  1.0)

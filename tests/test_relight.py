@@ -435,7 +435,7 @@ def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
     alone = FitSession.from_fit(fits[names[0]], tmp_path / "day", pixels[names[0]], **options)
     one = fitted_sessions({names[0]: fits[names[0]]}, tmp_path / "day", pixels,
                           **options)[names[0]]
-    for k in ("D", "G0", "G1", "hit", "sun_half_cos"):
+    for k in ("D", "G0", "G1", "hit", "sun_cos"):
         assert np.array_equal(getattr(alone.table, k), getattr(one.table, k), equal_nan=True), k
     for a, b in zip(alone.table.coef, one.table.coef):                # block by block
         assert [(r, f) for r, f, _ in a.blocks] == [(r, f) for r, f, _ in b.blocks]

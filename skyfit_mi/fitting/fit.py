@@ -472,7 +472,7 @@ class FitSession:
             raise SkyfitError(f"none of the region's pixels shows material {self.name!r}; check "
                               "the region.")
         self.table = table
-        self.geometry = highlight_geometry(np.where(table.hit[..., None], table.sun_half_cos,
+        self.geometry = highlight_geometry(np.where(table.hit[..., None, None], table.sun_cos,
                                                     np.nan))
         self.wm = self.model_on(table)
         self.problem = Problem(self.obs, self.wm, valid=table.hit)

@@ -20,24 +20,31 @@ LOBE_BEYOND = 2.0
 NEARER_DEG = 1.0
 
 
-def highlight_geometry(sun_half_cos):
-    """Summary of the sun's highlight over a region and day.
+def highlight_geometry(sun_cos):
+    """Summary of the sun's light over a region and day.
 
-    ``sun_half_cos`` (P, T, S): cos(delta) per pixel, frame and position, NaN where the frame's
-    sun gives no light (:class:`~skyfit_mi.render.light_cache.LightCache`).  Returns a JSON-ready
-    dict: frames, frames_with_sun, closest_highlight_half_angle_deg (None without sun) and its
-    value per frame [degrees].
+    ``sun_cos`` (P, T, S, 2): cos(theta_h) and cos(theta_d) per pixel, frame and position
+    (the half vector's angle from the normal and from the sun), NaN where the frame's sun
+    gives no light (:class:`~skyfit_mi.render.light_cache.LightCache`).  Returns a JSON-ready
+    dict: frames, frames_with_sun, closest_highlight_half_angle_deg (None without sun), its
+    value per frame, and per frame the sun's (theta_h, theta_d), their medians over the
+    region's lit positions [degrees] (None without sun): what light and view the frame's
+    values measured, in the two angles an isotropic reflection depends on most.
     """
-    c = np.asarray(sun_half_cos, dtype=float)
-    per_frame = []
+    c = np.asarray(sun_cos, dtype=float)
+    per_frame, angles = [], []
     for t in range(c.shape[1]):
-        v = c[:, t]
-        per_frame.append(float(np.degrees(np.arccos(np.clip(np.nanmax(v), -1, 1))))
-                         if np.isfinite(v).any() else None)
+        v = c[:, t].reshape(-1, 2)
+        v = v[np.isfinite(v).all(axis=1)]
+        lit = len(v) > 0
+        deg = np.degrees(np.arccos(np.clip(v, -1, 1))) if lit else None
+        per_frame.append(float(deg[:, 0].min()) if lit else None)
+        angles.append([float(x) for x in np.median(deg, axis=0)] if lit else None)
     lit = [d for d in per_frame if d is not None]
     return {"frames": int(c.shape[1]), "frames_with_sun": len(lit),
             "closest_highlight_half_angle_deg": min(lit) if lit else None,
-            "closest_half_angle_per_frame_deg": per_frame}
+            "closest_half_angle_per_frame_deg": per_frame,
+            "sun_angles_per_frame_deg": angles}
 
 
 def highlight_beyond(fit_half_angle_deg, half_angle_deg, sigma_alpha):

@@ -39,6 +39,14 @@ HELD_OUT_FRAMES, END_FRAMES_FROM = 5, 6
 #: test of the light between the fitted frames; four folds of two frames missed a rough gold
 #: disc's misfit: kappa 0.017 against 0.197 frame by frame), interleaved beyond.
 HELD_OUT_FOLDS = 16
+#: The reach in the sun's (theta_h, theta_d) of a held-out frame's residual in a prediction's
+#: model error (:func:`local_error_scale`) [degrees]: a frame's own angles (another camera
+#: seeing them mirrored in time lies within a degree), its neighbours' on the day (6-7
+#: apart) at a tenth of the weight.
+ANGLE_REACH_DEG = 3.0
+#: The weight of the fit's one kappa in a prediction's local model error, in frames: where no
+#: held-out frame saw the prediction's angles, the error is that kappa.
+KAPPA_FRAMES = 1.0
 
 
 def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=None,
@@ -72,14 +80,22 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
     out (``folds_too_small``).
 
     Returns {kappa, interval95 (only where kappa was fitted), chi2_per_value, p, values,
-    folds, folds_outside, folds_too_small, level, wall_time_s}; None with fewer than
-    HELD_OUT_FRAMES frames."""
+    folds, folds_outside, folds_too_small, level, wall_time_s}, and for an image region's
+    means ``by_frame``: each frame's relative residuals e / a per channel held out
+    (``held_out``; None where its fold was left out) and at the fit (``fitted``; the
+    residuals of the frames whose folds were left out, a glossy paint's highlight, are often
+    the largest), with their sd sqrt(v) / a (noise, and held out the prediction's spread;
+    None where nothing was measured): :func:`local_error_scale` reads them.  None with fewer
+    than HELD_OUT_FRAMES frames."""
     if problem.valid.shape[1] < HELD_OUT_FRAMES:
         return None
     splits = list(frame_folds(problem.valid, folds, problem.valid.shape[1] >= END_FRAMES_FROM))
     t0 = time.perf_counter()
     means = problem.obs.rays is None
     es, vs, scales = [], [], []
+    T, C = problem.valid.shape[1], problem.obs.y.shape[-1]
+    rel = {k: np.full((T, C), np.nan) for k in ("held_out", "held_out_sd", "fitted",
+                                                "fitted_sd")}
     outside = small = 0
     for train, test in splits:
         try:
@@ -92,29 +108,20 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
         if within is not None and not within(th):
             outside += 1
             continue
-        cov = unc.covariance(train.jacobian(th)[1])
-        L, model_var = test.model.radiance_and_variance(th)
-        _, J = test.jacobian(th, full=True)               # d r / d theta, r in sigma units
-        use = test.measured()
-        sigma = np.where(use, test.obs.sigma, 0.0)
-        e = np.where(use, test.obs.y - test.predict(L), 0.0)
-        v = np.where(use, sigma ** 2 + test.slope(L) ** 2 * model_var, 0.0)
-        a = np.where(use, test.value_scale(th), 0.0)
-        D = J * sigma[..., None]                          # the prediction's derivatives [DN]
-        if means:                                         # each frame's and channel's mean
-            n = use.sum(axis=0)
-            use = n > 0
-            n = np.maximum(n, 1)
-            e, v, a = e.sum(0) / n, v.sum(0) / n ** 2, a.sum(0) / n
-            D = D.sum(0) / n[..., None]
-        if frame_sd is not None:
-            v = v + (np.asarray(frame_sd, dtype=float) * a) ** 2
+        e, v, a, use = _residuals(test, th, means, frame_sd, unc.covariance(train.jacobian(th)[1]))
         es.append(e[use])
         scales.append(a[use])
-        vs.append(v[use] + np.einsum("ij,jk,ik->i", D[use], cov, D[use]))
+        vs.append(v[use])
+        if means:
+            rel["held_out"][use], rel["held_out_sd"][use] = e[use] / a[use], np.sqrt(v[use]) / a[use]
     out = {"kappa": 0.0, "values": 0, "folds": len(splits),
            "folds_outside": outside, "folds_too_small": small,
            "level": "region mean per frame and channel" if means else "value"}
+    if means:                   # and the fit's own, on every frame (a fold left out too)
+        e, v, a, use = _residuals(problem, np.asarray(theta, dtype=float), means, frame_sd)
+        rel["fitted"][use], rel["fitted_sd"][use] = e[use] / a[use], np.sqrt(v[use]) / a[use]
+        out["by_frame"] = {k: [None if np.isnan(r).all() else [float(x) for x in r] for r in x]
+                           for k, x in rel.items()}
     if es:
         e, v, a = (np.concatenate(x) for x in (es, vs, scales))
         chi2 = float(np.sum(e * e / v))
@@ -124,4 +131,82 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
             me = unc.model_error(e, v, a, len(e))
             out.update(kappa=me.kappa, interval95=list(me.interval95))
     out["wall_time_s"] = time.perf_counter() - t0
+    return out
+
+
+def _residuals(problem, theta, means, frame_sd, cov=None):
+    """``problem``'s residuals at ``theta`` e [DN], their variances v (noise, the model's Monte
+    Carlo error, ``frame_sd``'s shared error and, with the parameters' covariance ``cov``, the
+    prediction's spread D cov D^T) and the values' scale a (each value's, or with ``means``
+    each frame's and channel's mean), and where there are values (``use``)."""
+    L, model_var = problem.model.radiance_and_variance(theta)
+    use = problem.measured()
+    sigma = np.where(use, problem.obs.sigma, 0.0)
+    e = np.where(use, problem.obs.y - problem.predict(L), 0.0)
+    v = np.where(use, sigma ** 2 + problem.slope(L) ** 2 * model_var, 0.0)
+    a = np.where(use, problem.value_scale(theta), 0.0)
+    D = None
+    if cov is not None:
+        _, J = problem.jacobian(theta, full=True)         # d r / d theta, r in sigma units
+        D = J * sigma[..., None]                          # the prediction's derivatives [DN]
+    if means:                                             # each frame's and channel's mean
+        n = use.sum(axis=0)
+        use = n > 0
+        n = np.maximum(n, 1)
+        e, v, a = e.sum(0) / n, v.sum(0) / n ** 2, a.sum(0) / n
+        D = None if D is None else D.sum(0) / n[..., None]
+    if frame_sd is not None:
+        v = v + (np.asarray(frame_sd, dtype=float) * a) ** 2
+    v = np.where(use, v, 0.0)
+    if D is not None:
+        v[use] += np.einsum("ij,jk,ik->i", D[use], cov, D[use])
+    return e, v, a, use
+
+
+def local_error_scale(by_frame, fit_angles, angles, kappa):
+    """The model error of a prediction at the sun's angles ``angles`` [(theta_h, theta_d) per
+    frame, degrees, None without sun] over the fit's one ``kappa``, per frame and channel
+    (T, C): a model misses where its lobe or its diffuse cannot take the surface, at certain
+    pairs of angles (the Fresnel rise and a non-Lambertian diffuse of a low sun in front of
+    the camera), and by little elsewhere, so one relative error for every frame is too wide
+    at most and too narrow at a few (docs/BENCHMARKS.md, "Bands in a new view").
+
+    From the residuals of the fit's frames (``by_frame`` of :func:`held_out_error`, at the
+    frames' ``fit_angles``): each frame's excess over its noise, max(e^2 - sd^2, 0), the larger
+    of its held-out and its fitted one, weighted by exp(-d^2 / 2 ANGLE_REACH_DEG^2) at its
+    distance d in angles from the prediction's, beside kappa^2 with weight KAPPA_FRAMES:
+    kappa_local^2 = (sum w excess + KAPPA_FRAMES kappa^2) / (sum w + KAPPA_FRAMES).  Where no
+    frame of the fit lies near (or the frame has no sun), the scale is 1; so it is
+    everywhere for a fit without kappa or without residuals (edited ones are not read)."""
+    T = len(angles)
+    ones = np.ones((T, 1))
+    if not (kappa > 0 and isinstance(by_frame, dict) and isinstance(fit_angles, list)):
+        return ones
+    try:
+        excess = None
+        for key in ("held_out", "fitted"):
+            e, sd = (by_frame.get(k) for k in (key, f"{key}_sd"))
+            if not (isinstance(e, list) and isinstance(sd, list) and len(e) == len(sd)
+                    == len(fit_angles)):
+                continue
+            C = next((len(r) for r in e if r is not None), 1)
+            x = np.array([np.full(C, np.nan) if r is None or u is None else
+                          np.square(np.asarray(r, float)) - np.square(np.asarray(u, float))
+                          for r, u in zip(e, sd)], dtype=float)
+            excess = x if excess is None else np.fmax(excess, x)
+        if excess is None:
+            return ones
+        at = np.array([[np.nan] * 2 if a is None else a for a in fit_angles], dtype=float)
+    except (TypeError, ValueError):                     # edited or malformed: not used
+        return ones
+    rows = np.isfinite(excess).all(axis=1) & np.isfinite(at).all(axis=1)
+    if not rows.any():
+        return ones
+    at, excess = at[rows], np.maximum(excess[rows], 0.0) / kappa ** 2          # (F, 2), (F, C)
+    out = np.ones((T, excess.shape[1]))
+    for t, a in enumerate(angles):
+        if a is None:
+            continue
+        w = np.exp(-0.5 * np.sum((at - np.asarray(a, float)) ** 2, axis=1) / ANGLE_REACH_DEG**2)
+        out[t] = np.sqrt((w @ excess + KAPPA_FRAMES) / (w.sum() + KAPPA_FRAMES))
     return out

@@ -35,6 +35,7 @@ from .chi2 import subsample_region
 from .draws import interval_covariance, root_of
 from .fit import FitCache, FitSession, trace_sessions
 from .geometry import highlight_beyond
+from .held_out import local_error_scale
 from .landscape import truth_parameters
 from .sky_fit import sky_level_at
 from .uncertainty import band_half_width, widen
@@ -942,9 +943,16 @@ def _predict_means(s, result, target, draws, rng):
     n = len(s.obs.pixels)
     # and by the model's error, kappa times the mean: shared by the region's pixels, which
     # see the light alike (a highlight the model misses, it misses in all of them)
+    # ... the larger or smaller at the sun's angles where the held-out frames missed by more
+    # or less than kappa (:func:`~.held_out.local_error_scale`)
+    kappa, interval = model_error_kappa(result)
+    scale = local_error_scale(((result.get("model_error") or {}).get("held_out") or {})
+                              .get("by_frame"),
+                              (result.get("geometry") or {}).get("sun_angles_per_frame_deg"),
+                              s.geometry["sun_angles_per_frame_deg"], kappa)
     extra = band_half_width((np.sum(image_noise_variance(s, image, at_fit, target), axis=0)
-                             + np.sum(model_var, axis=0)) / n**2, means[0],
-                            *model_error_kappa(result))
+                             + np.sum(model_var, axis=0)) / n**2, means[0] * scale, kappa,
+                            interval)
     observed = region_mean(image)
     names = _channels(s)
     means, observed = means[..., :len(names)], observed[..., :len(names)]

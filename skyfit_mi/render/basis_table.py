@@ -173,7 +173,7 @@ class BasisTable:
     VDG, VGG : (V, P, T, 3)  cov(D, G) and var(G) likewise at the V roughness values
         ``var_sigmas`` (:func:`variance_sigmas`)
     hit : (P, T) bool  every position of the pixel lands on the material
-    sun_half_cos : (P, T, S) float32  the light cache's, per position (NaN without sun)
+    sun_cos : (P, T, S, 2) float32  the light cache's, per position (NaN without sun)
     normalisation : the Ward normalisation of the lobe
     """
 
@@ -185,12 +185,12 @@ class BasisTable:
     VDG: np.ndarray
     VGG: np.ndarray
     hit: np.ndarray
-    sun_half_cos: np.ndarray
+    sun_cos: np.ndarray
     normalisation: str = "ward"
 
     #: The pixel axis of each array field (the frame axis follows it).
     AXES = {"D": 1, "G0": 1, "G1": 1, "VDD": 0, "VDG": 1, "VGG": 1, "hit": 0,
-            "sun_half_cos": 0}
+            "sun_cos": 0}
 
     @property
     def shape(self):
@@ -221,7 +221,7 @@ class BasisTable:
                    np.zeros((2, P, T, 3), f32), [Series([]) for _ in PIECES],
                    np.zeros((P, T, 3), f32), np.zeros((V, P, T, 3), f32),
                    np.zeros((V, P, T, 3), f32), np.zeros((P, T), bool),
-                   np.zeros((P, T, S), f32), normalisation)
+                   np.zeros((P, T, S, 2), f32), normalisation)
 
     def place(self, block, rows, frames):
         """Copy the table ``block`` into pixels ``rows`` and frames ``frames`` (slices); its
@@ -358,7 +358,7 @@ def tabulate(cache, wm, keep=None):
     return BasisTable(D.astype(f32), G0.astype(f32), G1.astype(f32), coef,
                       _spread(d_shares, d_shares, S).astype(f32), VDG, VGG,
                       np.tile(cache.hit, (lights, 1)),
-                      np.tile(cache.sun_half_cos.astype(f32), (lights, 1, 1)), wm.normalisation)
+                      np.tile(cache.sun_cos.astype(f32), (lights, 1, 1, 1)), wm.normalisation)
 
 
 @dataclass
@@ -558,7 +558,7 @@ def mixed(a, others, weights, a_weight=1.0, covariances=None):
     for b in others:
         hit = hit & b.hit
     return BasisTable(add("D"), add("G0"), add("G1"), coef, var["VDD"], var["VDG"], var["VGG"],
-                      hit, a.sun_half_cos, a.normalisation)
+                      hit, a.sun_cos, a.normalisation)
 
 
 def trace_basis(scene, params, lights, at, bsdf_id, options=CacheOptions(), budget=None,
@@ -606,7 +606,7 @@ def trace_basis(scene, params, lights, at, bsdf_id, options=CacheOptions(), budg
         del caches
         if tables is None:
             tables = [(np.zeros((P, T, 3)), np.zeros((P, T, 3))) if diffuse_only else
-                      BasisTable.empty(P, T, b.sun_half_cos.shape[-1], b.normalisation)
+                      BasisTable.empty(P, T, b.sun_cos.shape[2], b.normalisation)
                       for b in parts]
             cov = None if part_cov is None else Covariances.empty(len(lights), P, T)
         for table, part in zip(tables, parts):

@@ -194,9 +194,10 @@ class LightCache:
     inv_pdf : (P, T, N)  1 / (p_mix N) [sr]: weight without L_i
     mirror_sky : (P, T, S, 3)  L_i along the mirror direction without the solar disc
         [W m^-2 sr^-1], per position: the control variate's constant
-    sun_half_cos : (P, T, S)  cos of the angle between the normal and the half vector of the
-        sun and view directions, per position; NaN where the frame's sun gives no light
-        (none, below the horizon, or behind the surface) [unitless]
+    sun_cos : (P, T, S, 2)  cos(theta_h) and cos(theta_d) of the sun and view directions per
+        position (:func:`_sun_cos`: the half vector's angle from the normal and from the
+        sun); NaN where the frame's sun gives no light (none, below the horizon, or behind
+        the surface) [unitless]
     diffuse_sky : (P, T, S, 3)  I_d, the sky function's cosine-weighted integral / pi per
         position [W m^-2 sr^-1] (:mod:`.sky_control`)
     lobe_sky : (P, T, S, M, 3)  Chebyshev coefficients in log sigma of I_s(sigma), the sky
@@ -215,7 +216,7 @@ class LightCache:
     hit: np.ndarray
     inv_pdf: np.ndarray
     mirror_sky: np.ndarray
-    sun_half_cos: np.ndarray
+    sun_cos: np.ndarray
     diffuse_sky: np.ndarray
     lobe_sky: np.ndarray
     normalisation: str = "ward"
@@ -243,7 +244,7 @@ class LightCache:
                 self, wo=self.wo[:, :, n], wi=self.wi[:, :, n], weight=self.weight[:, :, n] * (S / h),
                 mirror=self.mirror[:, :, sl] * (S / h), mirror_cos=self.mirror_cos[:, :, sl],
                 inv_pdf=self.inv_pdf[:, :, n] * (S / h), mirror_sky=self.mirror_sky[:, :, sl],
-                sun_half_cos=self.sun_half_cos[:, :, sl], diffuse_sky=self.diffuse_sky[:, :, sl],
+                sun_cos=self.sun_cos[:, :, sl], diffuse_sky=self.diffuse_sky[:, :, sl],
                 lobe_sky=self.lobe_sky[:, :, sl]))
         return out
 
@@ -330,15 +331,18 @@ def _components(K, has_sun):
                            3 + np.sort(np.arange(n_l) % len(LOBE_SIGMAS))])
 
 
-def _sun_half_cos(sun, view, sky):
-    """cos(delta) per surface interaction: delta the angle between the normal and the half
-    vector of the sun's and the view's directions (Ward's highlight angle, thesis eq. 3.19),
-    from the sun's and the view's local directions ``sun``, ``view`` (Q, 3); NaN where the sun
-    gives no light there (none in ``sky``, below the horizon, or behind the surface)."""
+def _sun_cos(sun, view, sky):
+    """cos(theta_h) and cos(theta_d) per surface interaction (Q, 2): theta_h the angle between
+    the normal and the half vector h of the sun's and the view's directions (Ward's highlight
+    angle, thesis eq. 3.19), theta_d the angle between the sun and h (Rusinkiewicz's difference
+    angle: half the angle between the sun and the view), from their local directions ``sun``,
+    ``view`` (Q, 3); NaN where the sun gives no light there (none in ``sky``, below the
+    horizon, or behind the surface)."""
     h = sun + view
-    cos = h[:, 2] / np.maximum(np.linalg.norm(h, axis=1), 1e-12)
+    h = h / np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-12)
+    cos = np.stack([h[:, 2], np.sum(sun * h, axis=1)], axis=1)
     lit = _has_sun(sky) & (sun[:, 2] > 0) & (view[:, 2] > 0)
-    return np.where(lit, cos, np.nan).astype(np.float32)
+    return np.where(lit[:, None], cos, np.nan).astype(np.float32)
 
 
 def control_weight(sigma_alpha, clip=np.clip):
@@ -593,7 +597,7 @@ def light_caches(scene, params, lights, at, bsdf_id, options=CacheOptions(), sta
         stats["shared"] = 0
     rng = np.random.default_rng(options.seed)
     outs = [{k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky",
-                             "mirror_cos", "hit", "sun_half_cos", "diffuse_sky", "lobe_sky")}]
+                             "mirror_cos", "hit", "sun_cos", "diffuse_sky", "lobe_sky")}]
     # each light's own arrays (the first light's in outs[0], which holds the shared ones)
     outs += [{k: [] for k in OWN_ARRAYS} for _ in others]
     pending = []                      # per frame: (points, the shared sky's plan or None)
@@ -816,8 +820,8 @@ def _keep_frame(tr, outs, samples, traced, sky):
         o["mirror"].append(np3(lm, S) / S)
     out["mirror_cos"].append(view[:, 2].astype(np.float32).reshape(P, S))
     out["hit"].append(on.reshape(P, S).all(axis=1))
-    out["sun_half_cos"].append(_sun_half_cos(np.array(samples.sun, dtype=float).T, view,
-                                             sky).reshape(P, S))
+    out["sun_cos"].append(_sun_cos(np.array(samples.sun, dtype=float).T, view,
+                                   sky).reshape(P, S, 2))
 
 
 @dataclass
