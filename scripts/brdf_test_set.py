@@ -34,7 +34,10 @@ A slow sweep (about 15 minutes on 2 cores).  ``--quick`` (about 4.5 minutes): th
 the day's 6 frames, 32 lights.
 
     .venv/bin/python scripts/brdf_test_set.py [--quick] [--materials 0,2,...] [--data day,table]
-        [-o DIR]
+        [--views south,north] [-o DIR]
+
+``--views`` relights each day's fits onto cameras south and north as well: pairs of half and
+difference angles that neither trained camera saw; those rows give the band's coverage.
 
 writes DIR/brdf_test_set.json and prints the table.
 """
@@ -78,6 +81,9 @@ QUICK_MATERIALS = ("roughplastic nonlinear (GGX 0.1, orange)",
                    "roughconductor gold (Beckmann 0.15)", "principled (blue, roughness 0.4)")
 #: Camera azimuths [degrees] and their names: each trained, the other held out.
 CAMERAS, SIDES = (90.0, 270.0), ("east", "west")
+#: Cameras (azimuths [degrees]) that ``--views`` relights each day's fits onto: the sun's angles
+#: seen from them are pairs the east and west cameras never saw.
+VIEWS = {"south": 180.0, "north": 0.0}
 HOURS, QUICK_HOURS = tuple(range(6, 19)), (7, 9, 11, 13, 15, 17)
 #: The day's fitted pixels (16, the disc's centre, in either camera) and the image size.
 SIZE, REGION = 16, "rect:6,6,9,9"
@@ -215,9 +221,11 @@ def summary(name, kind, fit, errors, held_sessions, held_frames, cover):
             "oracle_by_family": {f"{k[0]} {k[1]}": v for k, v in errors.items()}}
 
 
-def day_case(name, bsdf, root, hours, families):
+def day_case(name, bsdf, root, hours, families, views=()):
     """The image-sequence cases of one material: trained on one camera, predicted at the other
-    (east -> west and west -> east); every family traced once per camera."""
+    (east -> west and west -> east); every family traced once per camera.  Each fit is also
+    relit onto the cameras ``views`` (names of VIEWS): their pairs of half and difference
+    angles are new; those rows give the band's coverage alone (no oracle)."""
     from skyfit_mi.fitting.chi2 import parse_region
 
     days = [render_day(root / f"day-{i}", bsdf, az, hours) for i, az in enumerate(CAMERAS)]
@@ -231,6 +239,14 @@ def day_case(name, bsdf, root, hours, families):
         rows.append(summary(name, f"day, {SIDES[a]} -> {SIDES[b]}", chosen(fit / "fit_disc.json"),
                             oracle(traced[a], traced[b]), traced[b], None,
                             coverage(relit / "prediction.csv")))
+        for view in views:
+            other = render_day(root / f"day-{view}", bsdf, VIEWS[view], hours)
+            relit = root / f"relit-{SIDES[a]}-{view}"
+            _cli("relight", fit, "--target", other, "-o", relit, "--no-images", "--overwrite")
+            cover = coverage(relit / "prediction.csv")
+            rows.append({"material": name, "data": f"day, {SIDES[a]} -> {view}", "view": True,
+                         "chosen": rows[-1]["chosen"], "coverage95": cover[0],
+                         "held_out_values": cover[1]})
     return rows
 
 
@@ -253,18 +269,25 @@ def table_case(name, reflect, root, lights, families, points=POINTS):
 def verdict(rows):
     """The ratios' median and largest, and whether they meet the goal (median <= 1.2, none
     > 3); the coverage of all held-out values together."""
-    ratios = [r["ratio"] for r in rows]
-    n = sum(r["held_out_values"] for r in rows)
+    ratios = [r["ratio"] for r in rows if not r.get("view")]
+    held = [r for r in rows if not r.get("view")]
+    n = sum(r["held_out_values"] for r in held)
+    views = [r for r in rows if r.get("view")]
+    m = sum(r["held_out_values"] for r in views)
     return {"median_ratio": float(np.median(ratios)), "largest_ratio": float(np.max(ratios)),
             "goal_met": bool(np.median(ratios) <= 1.2 and np.max(ratios) <= 3.0),
-            "coverage95": sum(r["coverage95"] * r["held_out_values"] for r in rows) / n,
-            "held_out_values": n}
+            "coverage95": sum(r["coverage95"] * r["held_out_values"] for r in held) / n,
+            "held_out_values": n,
+            "views_coverage95": (sum(r["coverage95"] * r["held_out_values"] for r in views) / m
+                                 if m else None), "views_values": m}
 
 
 def table_markdown(rows):
     lines = [("| material | data | chosen | held-out rel. RMS | oracle (all data) | oracle "
               "rel. RMS | ratio | 95% band coverage (values) |"), "|---|---|---|---|---|---|---|---|"]
-    lines += [f"| {r['material']} | {r['data']} | {r['chosen']} | {r['held_out_rel_rms']:.2%} | "
+    lines += [f"| {r['material']} | {r['data']} | {r['chosen']} | - | - | - | - | "
+              f"{r['coverage95']:.2f} ({r['held_out_values']}) |" if r.get("view") else
+              f"| {r['material']} | {r['data']} | {r['chosen']} | {r['held_out_rel_rms']:.2%} | "
               f"{r['oracle']} | {r['oracle_rel_rms']:.2%} | {r['ratio']:.2f} | "
               f"{r['coverage95']:.2f} ({r['held_out_values']}) |" for r in rows]
     v = verdict(rows)
@@ -272,6 +295,9 @@ def table_markdown(rows):
                  f"(goal: median <= 1.2, none > 3: {'met' if v['goal_met'] else 'NOT met'}); "
                  f"95% band coverage of all {v['held_out_values']} held-out values "
                  f"{v['coverage95']:.3f}")
+    if v["views_values"]:
+        lines.append(f"new views: 95% band coverage of {v['views_values']} values "
+                     f"{v['views_coverage95']:.3f}")
     return "\n".join(lines)
 
 
@@ -285,6 +311,8 @@ def main():
                     help="three materials, 6 frames, 32 lights (about 4.5 minutes)")
     ap.add_argument("--materials", help="comma-separated indices into MATERIALS (0-4)")
     ap.add_argument("--data", default="day,table", help="day, table or both (default)")
+    ap.add_argument("--views", default="", help="cameras the days' fits are also relit onto, "
+                    f"comma-separated: {', '.join(VIEWS)} (new angle pairs; coverage alone)")
     ap.add_argument("-o", "--output", type=Path, default=Path("skyfit-out/brdf-test-set"))
     args = ap.parse_args()
     names = list(MATERIALS)
@@ -299,7 +327,11 @@ def main():
         for kind in args.data.split(","):
             t0 = time.perf_counter()
             root = args.output / f"{kind}-{i}"
-            case = (day_case(name, MATERIALS[name], root, hours, FAMILIES) if kind == "day"
+            views = [v for v in args.views.split(",") if v]
+            if any(v not in VIEWS for v in views):
+                raise SystemExit(f"--views takes {', '.join(VIEWS)}")
+            case = (day_case(name, MATERIALS[name], root, hours, FAMILIES, views)
+                    if kind == "day"
                     else table_case(name, mitsuba_brdf(MATERIALS[name]), root, lights,
                                     FAMILIES))
             for row in case:

@@ -38,6 +38,17 @@ def test_the_verdict_weighs_coverage_by_values_and_checks_both_goals():
     assert not v["goal_met"]                          # one ratio above 3
     assert v["coverage95"] == pytest.approx(0.95) and v["held_out_values"] == 100
     assert bts.verdict(rows[:2])["goal_met"]
+    assert v["views_values"] == 0 and v["views_coverage95"] is None
+    # a new view's rows (--views) give coverage alone, apart from the held-out camera's
+    views = [{"view": True, "coverage95": 0.9, "held_out_values": 20},
+             {"view": True, "coverage95": 1.0, "held_out_values": 20}]
+    w = bts.verdict(rows + views)
+    assert w["coverage95"] == pytest.approx(0.95) and w["held_out_values"] == 100
+    assert w["views_coverage95"] == pytest.approx(0.95) and w["views_values"] == 40
+    assert "new views: 95% band coverage of 40 values 0.950" in bts.table_markdown(
+        [dict(r, material="m", data="d", chosen="c", held_out_rel_rms=0.1, oracle="o",
+              oracle_rel_rms=0.1) for r in rows] + [dict(r, material="m", data="d", chosen="c")
+                                                   for r in views])
 
 
 def test_a_mitsuba_bsdf_is_evaluated_as_a_brdf(mi):
