@@ -269,11 +269,10 @@ def table_case(name, reflect, root, lights, families, points=POINTS):
 def verdict(rows):
     """The ratios' median and largest, and whether they meet the goal (median <= 1.2, none
     > 3); the coverage of all held-out values together."""
-    ratios = [r["ratio"] for r in rows if not r.get("view")]
     held = [r for r in rows if not r.get("view")]
-    n = sum(r["held_out_values"] for r in held)
     views = [r for r in rows if r.get("view")]
-    m = sum(r["held_out_values"] for r in views)
+    ratios = [r["ratio"] for r in held]
+    n, m = (sum(r["held_out_values"] for r in x) for x in (held, views))
     return {"median_ratio": float(np.median(ratios)), "largest_ratio": float(np.max(ratios)),
             "goal_met": bool(np.median(ratios) <= 1.2 and np.max(ratios) <= 3.0),
             "coverage95": sum(r["coverage95"] * r["held_out_values"] for r in held) / n,
@@ -311,8 +310,9 @@ def main():
                     help="three materials, 6 frames, 32 lights (about 4.5 minutes)")
     ap.add_argument("--materials", help="comma-separated indices into MATERIALS (0-4)")
     ap.add_argument("--data", default="day,table", help="day, table or both (default)")
-    ap.add_argument("--views", default="", help="cameras the days' fits are also relit onto, "
-                    f"comma-separated: {', '.join(VIEWS)} (new angle pairs; coverage alone)")
+    ap.add_argument("--views", default="", help="cameras the days' fits are also relit "
+                    f"onto, comma-separated: {', '.join(VIEWS)} (new angle pairs; coverage "
+                    "alone)")
     ap.add_argument("-o", "--output", type=Path, default=Path("skyfit-out/brdf-test-set"))
     args = ap.parse_args()
     names = list(MATERIALS)
@@ -321,15 +321,15 @@ def main():
     hours = QUICK_HOURS if args.quick else HOURS
     lights = QUICK_LIGHTS if args.quick else LIGHTS
     args.output.mkdir(parents=True, exist_ok=True)
+    views = [v for v in args.views.split(",") if v]
+    if any(v not in VIEWS for v in views):
+        raise SystemExit(f"--views takes {', '.join(VIEWS)}")
     rows = []
     for name in chosen_names:
         i = names.index(name)
         for kind in args.data.split(","):
             t0 = time.perf_counter()
             root = args.output / f"{kind}-{i}"
-            views = [v for v in args.views.split(",") if v]
-            if any(v not in VIEWS for v in views):
-                raise SystemExit(f"--views takes {', '.join(VIEWS)}")
             case = (day_case(name, MATERIALS[name], root, hours, FAMILIES, views)
                     if kind == "day"
                     else table_case(name, mitsuba_brdf(MATERIALS[name]), root, lights,

@@ -35,11 +35,10 @@ def highlight_geometry(sun_cos):
     per_frame, angles = [], []
     for t in range(c.shape[1]):
         v = c[:, t].reshape(-1, 2)
-        v = v[np.isfinite(v).all(axis=1)]
-        lit = len(v) > 0
-        deg = np.degrees(np.arccos(np.clip(v, -1, 1))) if lit else None
-        per_frame.append(float(deg[:, 0].min()) if lit else None)
-        angles.append([float(x) for x in np.median(deg, axis=0)] if lit else None)
+        deg = np.degrees(np.arccos(np.clip(v[np.isfinite(v).all(axis=1)], -1, 1)))
+        sunlit = len(deg) > 0
+        per_frame.append(float(deg[:, 0].min()) if sunlit else None)
+        angles.append([float(x) for x in np.median(deg, axis=0)] if sunlit else None)
     lit = [d for d in per_frame if d is not None]
     return {"frames": int(c.shape[1]), "frames_with_sun": len(lit),
             "closest_highlight_half_angle_deg": min(lit) if lit else None,

@@ -108,18 +108,19 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
         if within is not None and not within(th):
             outside += 1
             continue
-        e, v, a, use = _residuals(test, th, means, frame_sd, unc.covariance(train.jacobian(th)[1]))
+        e, v, a, use = _residuals(test, th, means, frame_sd,
+                                  unc.covariance(train.jacobian(th)[1]))
         es.append(e[use])
         scales.append(a[use])
         vs.append(v[use])
         if means:
-            rel["held_out"][use], rel["held_out_sd"][use] = e[use] / a[use], np.sqrt(v[use]) / a[use]
+            _keep_relative(rel, "held_out", e, v, a, use)
     out = {"kappa": 0.0, "values": 0, "folds": len(splits),
            "folds_outside": outside, "folds_too_small": small,
            "level": "region mean per frame and channel" if means else "value"}
     if means:                   # and the fit's own, on every frame (a fold left out too)
-        e, v, a, use = _residuals(problem, np.asarray(theta, dtype=float), means, frame_sd)
-        rel["fitted"][use], rel["fitted_sd"][use] = e[use] / a[use], np.sqrt(v[use]) / a[use]
+        _keep_relative(rel, "fitted",
+                       *_residuals(problem, np.asarray(theta, dtype=float), means, frame_sd))
         out["by_frame"] = {k: [None if np.isnan(r).all() else [float(x) for x in r] for r in x]
                            for k, x in rel.items()}
     if es:
@@ -161,6 +162,12 @@ def _residuals(problem, theta, means, frame_sd, cov=None):
     if D is not None:
         v[use] += np.einsum("ij,jk,ik->i", D[use], cov, D[use])
     return e, v, a, use
+
+
+def _keep_relative(rel, key, e, v, a, use):
+    """Put residuals ``e`` and their sd sqrt(``v``) relative to the values' scale ``a`` into
+    ``rel[key]`` and ``rel[key + '_sd']`` where ``use``."""
+    rel[key][use], rel[f"{key}_sd"][use] = e[use] / a[use], np.sqrt(v[use]) / a[use]
 
 
 def local_error_scale(by_frame, fit_angles, angles, kappa):
