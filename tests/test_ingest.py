@@ -158,6 +158,16 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
     np.testing.assert_allclose([sd["C_r"], sd["C_g"], sd["C_b"]], scale, rtol=0.3)
     lo, hi = fit["intervals"]["sigma_alpha"]["95"]
     assert sd["sigma_alpha"] < 0.1 * (hi - lo)       # a colour's scale barely moves the lobe
+    # the intervals say how much of their width is the card's: (1.96 sd)^2 over the squared
+    # half-width (the wider side), the data the rest
+    shares = fit["interval_shares"]
+    for k in ("C_r", "C_g", "C_b"):
+        lo, hi = fit["intervals"][k]["95"]
+        v = fit["parameters"][k]
+        assert shares[k]["calibration"] == pytest.approx(
+            min(1.0, (1.96 * sd[k]) ** 2 / max(hi - v, v - lo) ** 2), abs=1e-3)
+        assert sum(shares[k].values()) == pytest.approx(1.0, abs=5e-3)
+        assert 0 < shares[k]["calibration"] < 1 and shares[k]["data"] > 0
     assert calibration_sd({"ingest": {"calibration": {"scale_relative_sd": [0.01, 0.02, 0.03]}}},
                           ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha"),
                           [0.5, 0.5, 0.5, 0.1, 0.2]) == pytest.approx(
@@ -536,6 +546,29 @@ def test_pixels_whose_jpeg_colour_mixes_a_neighbours_are_left_out(ingested, tmp_
     assert any(f"{left_out.sum()} of the region's {len(whole)} pixels lie within 3 pixels"
                in w for w in obs.warnings)
     assert not any("pixels lie within" in w for w in load_observations(out, whole).warnings)
+
+
+def test_pixels_in_jpeg_blocks_an_edge_crosses_are_marked():
+    """A lossy JPEG's block that holds an edge rings across its 8 x 8 pixels (16 x 16 with
+    chroma subsampled 2x2), from the frame's block offset; a quality-100 file (DC step 1) and
+    other files mark none."""
+    from skyfit_mi.pipeline.pixels import jpeg_edge_blocks
+
+    labels = np.zeros((24, 32), dtype=np.int32)
+    labels[:, 12:] = 1                                    # an edge between columns 11 and 12
+
+    def doc(step, sub=(1, 1), offset=(0, 0)):
+        return {"frames": [{"jpeg_dc": {"dc_step": [step] * 3, "chroma_subsampling": list(sub)},
+                            "jpeg_block_offset": list(offset)}, {"index": 1}]}
+
+    marked = jpeg_edge_blocks(labels, doc(3))
+    assert marked[:, 8:16].all() and not marked[:, :8].any() and not marked[:, 16:].any()
+    shifted = jpeg_edge_blocks(labels, doc(3, offset=(6, 0)))      # blocks start at x = 6
+    assert shifted[:, 6:14].all() and not shifted[:, 14:].any() and not shifted[:, :6].any()
+    wide = jpeg_edge_blocks(labels, doc(3, sub=(2, 2)))
+    assert wide[:, :16].all() and not wide[:, 16:].any()
+    assert not jpeg_edge_blocks(labels, doc(1)).any()
+    assert not jpeg_edge_blocks(labels, {"frames": [{"index": 0}]}).any()
 
 
 @pytest.mark.parametrize("sd", [-0.01, 1.0, float("nan")])

@@ -151,24 +151,30 @@ def test_the_bootstrap_is_seeded():
         np.testing.assert_array_equal(x, y)
 
 
-@pytest.mark.parametrize("colour", [(101.4, 94.1, 92.7), (60.3, 80.2, 120.6)])
+@pytest.mark.parametrize("colour", [(101.4, 94.1, 92.7), (60.3, 80.2, 120.6),
+                                    (158.0, 56.0, 51.0)])
 def test_the_bootstrap_finds_the_compressions_mean_error(colour):
-    """A uniform patch with noise at quality 95: what the compression shifts the patch's mean
-    by (before decoding: the encoder's colour conversion and rounding; measured -0.15 DN in
-    blue on a grey card) the bootstrap's mean error reproduces (measured to 0.03 DN on the grey
-    card, 0.06 on the bluish colour), one value per coding unit; taken out, the patch's mean
-    error falls within 0.1 DN."""
+    """A uniform patch with noise at quality 95: what the compression shifts the mean of the
+    patch's linear signal by (its colour conversion and rounding, and its smoothing of the
+    noise through the curve; measured up to -0.44% in blue) the bootstrap's mean error takes
+    out, to within 0.1% in each channel, also at the dark channels of a red paint (codes
+    51-56, where taking out the copies' mean error against their draws in codes, which holds
+    the noise's own shift through the curve, biased them high by 0.3-0.7%)."""
     from skyfit_mi.pipeline.ingest import _unbiased
 
-    codes, buf = _patch_jpeg(colour, 96, 11)
-    decoded = jn.decode(buf.getvalue())
-    _, _, bias = jn.bootstrap_variance(decoded, jn.jpeg_settings(buf), SENSOR, NOISE, [3, 0])
-    cells = bias.reshape(12, 8, 12, 8, 3)
-    assert np.all(cells == cells[:, :1, :, :1])                 # one value per 8x8 unit
-    before = (decoded - codes).mean(axis=(0, 1))
-    after = (_unbiased(decoded, bias, 255) - codes).mean(axis=(0, 1))
-    assert np.all(np.abs(bias.mean(axis=(0, 1)) - before) < 0.1), (bias.mean(axis=(0, 1)), before)
-    assert np.all(np.abs(after) < 0.1), after
+    before, after = [], []
+    for seed in (11, 12, 13):
+        codes, buf = _patch_jpeg(colour, 96, seed)
+        decoded = jn.decode(buf.getvalue())
+        _, _, bias = jn.bootstrap_variance(decoded, jn.jpeg_settings(buf), SENSOR, NOISE,
+                                           [3, 0])
+        sent = SENSOR.linearise(codes.astype(float)).mean(axis=(0, 1))  # what the camera coded
+        before.append(SENSOR.linearise(decoded).mean(axis=(0, 1)) / sent - 1.0)
+        after.append(SENSOR.linearise(_unbiased(decoded, bias, 255)).mean(axis=(0, 1)) / sent
+                     - 1.0)
+    before, after = np.mean(before, axis=0), np.mean(after, axis=0)
+    assert np.max(np.abs(before)) > 0.001, before              # there is a bias to take out
+    assert np.all(np.abs(after) < 0.001), (before, after)
 
 
 def test_pixels_sharing_a_block_widen_their_sigma(tmp_path):
@@ -309,7 +315,8 @@ def test_the_bootstrap_of_a_turned_frame_is_the_files_turned():
 @pytest.mark.parametrize("quality, subsampling", [(85, 2), (90, 2), (95, 2)])
 def test_shared_error_sd_is_the_error_of_a_region_mean(quality, subsampling):
     """A patch of one colour, photographed again and again at random levels: the error of its
-    mean over 4096 pixels is the rounding of its blocks' means, shared by all of them, not the
+    mean over 4096 pixels (linearised, as fits take it) is the rounding of its blocks' means,
+    shared by all of them, not the
     pixels' errors over sqrt(pixels); shared_error_sd (with the pixels' own errors over
     sqrt(pixels)) predicts its size: the measured rms is 0.9-1.06 times it at quality 85
     (4:2:0), where the shared error is 4-7x the independent one; at 95, 1.3-1.6 times (0.04-0.07
@@ -332,13 +339,17 @@ def test_shared_error_sd_is_the_error_of_a_region_mean(quality, subsampling):
         _, _, bias = jn.bootstrap_variance(decoded, settings, SENSOR, NOISE, 7)
         values = (decoded - bias).reshape(-1, 3)             # as ingest takes them
         var = pixel_sigma(values, SENSOR, NOISE) ** 2
-        got.append(np.mean(decoded - bias - clean, axis=(0, 1)))
+        # the mean's error in linear signal (where fits take it: the noise's shift through the
+        # curve cancels there), in codes at the patch's level
+        taken = SENSOR.linearise(decoded - bias) * 255.0
+        got.append((np.mean(taken, axis=(0, 1)) - lin[0, 0])
+                   * SENSOR.slope(lin[0, 0] / 255.0))
         want.append(jn.YCC_TO_RGB ** 2 @ jn.shared_error_sd(values, var, jn.dc_record(settings)) ** 2)
         independent.append(np.mean(var, axis=0) / values.shape[0])
     rms = np.sqrt(np.mean(np.square(got), axis=0))
     independent = np.mean(independent, axis=0)
     predicted = np.sqrt(np.mean(want, axis=0) + independent)
-    assert np.all(rms > 1.5 * np.sqrt(independent))                    # not 1 / sqrt(pixels)
+    assert np.all(rms > 1.3 * np.sqrt(independent))                    # not 1 / sqrt(pixels)
     np.testing.assert_allclose(predicted, rms, rtol=0.2 if quality == 85 else 0.45)
 
 

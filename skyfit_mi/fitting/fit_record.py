@@ -38,6 +38,8 @@ def fit_record(s, fit, warnings, start, seed, evaluations, wall, t_method):
         "cache_error_sd": dict(zip(names, fit.cache_sd.tolist())),
         **({"calibration_error_sd": dict(zip(names, fit.calibration_sd.tolist()))}
            if np.any(fit.calibration_sd > 0) else {}),
+        "interval_shares": interval_shares(fit, names),
+        "interval_shares_meaning": SHARES_NOTE,
         **({"jpeg_shared_error_sd": dict(zip(names, fit.jpeg_shared_sd.tolist())),
             "jpeg_shared_error": "the standard error each parameter takes from the JPEG "
             "frames' rounding of their blocks' means (Y, Cb, Cr), which every pixel of "
@@ -74,6 +76,35 @@ def fit_record(s, fit, warnings, start, seed, evaluations, wall, t_method):
                    "model_DN": s.problem.predict(L).tolist()},
         "measured_range": measured_range(s, L),
     }
+
+
+#: What a fit JSON's ``interval_shares`` are.
+SHARES_NOTE = (
+    "each parameter's 95% interval as shares of its squared half-width (the wider side): "
+    "each error the fit adds to what its data tell, (1.96 sd)^2 over it -- calibration (the "
+    "grey card, chart or exposure the frames were calibrated by), sky and sun_level (the "
+    "light's level), pose, jpeg_rounding, colour_matrix, light_cache -- and data the rest "
+    "(the values' noise and the model's error, by chi-square's profile)")
+
+
+def interval_shares(fit, names):
+    """{parameter: {source: share}} of :data:`SHARES_NOTE`, shares rounded to 0.001; a
+    parameter whose interval has no width on either side left out."""
+    n = len(names)
+    added = {"calibration": fit.calibration_sd, "sky": fit.sky.sd, "sun_level": fit.sun_level_sd,
+             "pose": fit.pose.sd_of(n), "jpeg_rounding": fit.jpeg_shared_sd,
+             "colour_matrix": fit.matrix_sd, "light_cache": fit.cache_sd}
+    out = {}
+    for i, p in enumerate(names):
+        lo, hi = fit.intervals[p]["95"]
+        half2 = max(hi - fit.theta[i], fit.theta[i] - lo) ** 2
+        if not half2 > 0:
+            continue
+        shares = {k: min(1.0, float((unc.Z["95"] * sd[i]) ** 2 / half2))
+                  for k, sd in added.items() if sd is not None and sd[i] > 0}
+        shares["data"] = max(0.0, 1.0 - sum(shares.values()))
+        out[p] = {k: round(v, 3) for k, v in shares.items()}
+    return out
 
 
 def draws_record(fit):

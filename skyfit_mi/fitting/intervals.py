@@ -12,7 +12,7 @@ from . import uncertainty as unc
 from .geometry import sky_only_limit
 from .methods.levenberg_marquardt import SINGULAR_CONDITION
 from .methods.profile import ProfileOptions, profile_edges, ridge_intervals
-from .sky_fit import light_level_sd
+from .sky_fit import light_level_sd, photographed
 from ..pipeline.ingest import pixel_sigma
 from ..pipeline.jpeg_noise import YCC_TO_RGB, shared_error_sd
 from ..render.light_cache import SIGMA_RESOLVED
@@ -93,14 +93,21 @@ def fit_intervals(s, fit):
                                     max(hi, float(sky.span[1][i])))
                 if lv == "95":
                     intervals[p]["from"] += ", and over the undetermined sky level"
-    if names[-1] == "sigma_alpha" and not sky.shape_known \
+    shot = photographed(s.doc) and s.obs.rays is None          # photographs, not a table
+    if names[-1] == "sigma_alpha" and (shot or not sky.shape_known) \
             and theta[-1] < sky_only_limit(s.geometry):
-        # the lobe seen in the sky's reflection alone, in a sky shape only modelled: its
-        # reading there rests on that model, so the roughness's lower end is not determined
+        # the lobe seen in the sky's reflection alone: lobes narrower still differ there by a
+        # few tenths of a per cent, which a sky shape only modelled, or photographs' errors
+        # that a frame's pixels share (the JPEG's blocks, the calibration; measured on the
+        # sample board at quality 92: 0.3-0.5%), reach; so the roughness's lower end is not
+        # determined (the board's polished steel, 0.02, read 0.106 with 0.055-0.116, its
+        # rendered frames fitted as they are: below 0.119, lower end not determined)
         for lv in ("68", "95"):
             intervals["sigma_alpha"][lv] = (float(lower[-1]), intervals["sigma_alpha"][lv][1])
-        intervals["sigma_alpha"]["from"] += (", and down to its bound: the sun's highlight "
-                                            "never seen, the sky's shape not fitted")
+        intervals["sigma_alpha"]["from"] += (
+            ", and down to its bound: the sun's highlight never seen, "
+            + ("the photographs' shared errors as large as what tells such lobes apart" if shot
+               else "the sky's shape not fitted"))
     fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
     fit.cache_sd = mc_sd
     fit.sun_level_sd = sun_rel * np.abs(theta)

@@ -157,7 +157,7 @@ def sun_up(skies):
     return bool(_sunlit(skies))
 
 
-def _photographed(doc):
+def photographed(doc):
     """Whether a manifest's frames were not rendered by skyfit (their light is the real one,
     the spec's a model of it)."""
     return doc.get("source", "render") not in RENDERED_SOURCES
@@ -169,14 +169,14 @@ def default_sky(doc, skies):
     the real one), else the spec's ('spec': skyfit rendered the frames under that very light,
     or no sun lights them to scale the sky against)."""
     sunny = sun_up(skies) and any(k.lit_by_sky for k in skies)
-    return "prior" if sunny and _photographed(doc) else "spec"
+    return "prior" if sunny and photographed(doc) else "spec"
 
 
 def default_departure(doc):
     """Whether a fitted sky's departure from its model is fitted when not told (``fit
     --sky-departure``): for photographs (their sky is the real one, whose shape no model
     holds), not for a sequence skyfit rendered under the spec's very sky."""
-    return _photographed(doc)
+    return photographed(doc)
 
 
 def sun_source(skies):
@@ -194,7 +194,7 @@ def default_sun_sd(doc, skies):
     (:data:`~skyfit_mi.physics.sky.MEASURED_SUN_SD`) or a modelled one's
     (:data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD`, :func:`sun_source`); 0 for a sequence
     skyfit rendered under that very sun."""
-    if not _photographed(doc):
+    if not photographed(doc):
         return 0.0
     return MEASURED_SUN_SD if sun_source(skies) == "measured" else SUN_LEVEL_SD
 

@@ -20,8 +20,9 @@ So each frame's error is found by a parametric bootstrap (:func:`bootstrap_varia
    with the file's own tables and chroma subsampling (Pillow, libjpeg) and decoded as ingest
    decodes the frames (:func:`decode`: in floating point, from the DCT coefficients);
 3. the mean square difference between copy and draw over :data:`REPLICATES` draws, averaged
-   over each pixel's 3x3 neighbourhood; their mean difference over each coding unit is the
-   compression's bias, which ingest takes out of the values.
+   over each pixel's 3x3 neighbourhood; the mean of copy less the noisy codes it was
+   compressed from, over each coding unit, is the compression's bias, which ingest takes out
+   of the values.
 
 Measured on smooth synthetic frames (``tests/test_jpeg_noise.py``) with known noise: the rms
 of (decoded - noise-free codes) / sigma is 0.9-1.0 at qualities 100 and 95, 0.8-1.0 at 90
@@ -117,21 +118,24 @@ def tables_bound(settings):
     return luma + (_JFIF_CHROMA ** 2).sum(axis=1) * chroma
 
 
-def recompress(values, settings, sensor, noise, rng):
+def recompress(values, settings, sensor, noise, rng, with_codes=False):
     """One copy of frame ``values`` (H, W, 3) [DN] with fresh sensor noise (a [DN^2], b [DN]
     of the linear codes), encoded by ``sensor``'s response to 8 bits and compressed with
-    ``settings``; the codes (H, W, 3) [DN] that :func:`decode` reads from the copy."""
+    ``settings``; the codes (H, W, 3) [DN] that :func:`decode` reads from the copy, and with
+    ``with_codes`` also the noisy codes before rounding and compression (the errors the
+    compression adds are the difference)."""
     from PIL import Image
 
     a, b = noise
     m = sensor.max_code
     lin = sensor.linearise(np.nan_to_num(values)) * m
     noisy = lin + rng.normal(size=lin.shape) * np.sqrt(np.maximum(a + b * lin, 0.0))
-    encoded = np.clip(np.rint(sensor.respond(noisy / m) * m), 0, m).astype(np.uint8)
+    codes = np.clip(sensor.respond(np.clip(noisy / m, 0.0, 1.0)) * m, 0, m)
     buf = io.BytesIO()
-    Image.fromarray(encoded).save(buf, format="JPEG", qtables=settings["qtables"],
-                                  subsampling=settings["subsampling"])
-    return decode(buf.getvalue())
+    Image.fromarray(np.rint(codes).astype(np.uint8)).save(
+        buf, format="JPEG", qtables=settings["qtables"], subsampling=settings["subsampling"])
+    decoded = decode(buf.getvalue())
+    return (decoded, codes) if with_codes else decoded
 
 
 #: The colour spaces in which :func:`decode` reads a JPEG's planes, and their planes.
@@ -224,13 +228,17 @@ def bootstrap_variance(values, settings, sensor, noise, seed, replicates=REPLICA
     a block (its rounded low orders), so a fit using several pixels of one block learns less
     than as many independent values would tell (:func:`skyfit_mi.fitting.chi2.load_observations`).
 
-    The mean is the errors' mean over the replicates and the pixels of each coding unit
-    (:func:`block_size`): the compression's bias, which a patch of one colour shares in every
-    block (its colour conversion and rounding; measured on smooth patches at quality 95 it
-    reproduces the decoded patch's mean error to about 0.05 DN, e.g. -0.154 DN in blue against
-    -0.153 on a grey card), for the caller to take out.  That estimate's own variance (the
-    spread of a unit's replicate means over the replicates, averaged over the frame) is
-    added to the variance.
+    The mean is the compression's bias, which a patch of one colour shares in every block (its
+    colour conversion and rounding), for the caller to take out: the mean over the replicates
+    and the pixels of each coding unit (:func:`block_size`) of the compression's own error in
+    linear signal (the copy less the noisy codes it was compressed from, both linearised, as
+    fits take the values), in codes at each pixel's level (times the response's slope there).
+    Not the copy less the draw: that mean also holds the noise's shift through the response's
+    curve (E f(x + n) < f(x) for a concave f), which linearising undoes; nor a mean in codes,
+    which the JPEG's smoothing of the noise moves unlike the linear mean.  Either biased dark
+    channels high, by 0.2-0.7% of the signal on a board at quality 100 and by up to 3% on a
+    patch at codes 30-45.  That estimate's own variance (the spread of a unit's replicate
+    means over the replicates, averaged over the frame) is added to the variance.
     """
     rng = np.random.default_rng(seed)
     values = stored(values, settings)
@@ -242,12 +250,13 @@ def bootstrap_variance(values, settings, sensor, noise, seed, replicates=REPLICA
     cell_sum, cell_sq = 0.0, 0.0
     for _ in range(replicates):
         truth = sample(rng)
-        err = recompress(truth, settings, sensor, noise, rng) - truth
+        copy, codes = recompress(truth, settings, sensor, noise, rng, with_codes=True)
+        err = copy - truth
         var = var + err ** 2
         e = err[:bh, :bw]                                  # whole 8x8 blocks
         block = block + np.mean(_cell_means(e, 8) ** 2, axis=(0, 1))
         total = total + np.mean(e ** 2, axis=(0, 1))
-        cells = _cell_means(err, n)
+        cells = _cell_means(sensor.linearise(copy) - sensor.linearise(codes), n)
         cell_sum, cell_sq = cell_sum + cells, cell_sq + cells ** 2
     var = var / replicates
     pad = np.pad(var, ((1, 1), (1, 1), (0, 0)), mode="edge")
@@ -256,8 +265,14 @@ def bootstrap_variance(values, settings, sensor, noise, seed, replicates=REPLICA
         rho = np.clip(np.nan_to_num((64.0 * block / total - 1.0) / 63.0), 0.0, 1.0)
     mean = cell_sum / replicates
     spread = (cell_sq - replicates * mean ** 2) / max(replicates - 1, 1)
-    mean_var = np.mean(np.maximum(spread, 0.0), axis=(0, 1)) / replicates
-    bias = np.repeat(np.repeat(mean, n, axis=0), n, axis=1)[:h, :w]
+
+    def to_pixels(x):
+        return np.repeat(np.repeat(x, n, axis=0), n, axis=1)[:h, :w]
+
+    # in codes at each pixel's own level (d code / d signal; 0 where clipped)
+    slope = sensor.slope(sensor.linearise(np.nan_to_num(values))) * sensor.max_code
+    bias = to_pixels(mean) * slope
+    mean_var = np.mean(to_pixels(np.maximum(spread, 0.0)) * slope ** 2, axis=(0, 1)) / replicates
     return displayed(smooth + mean_var, settings), rho, displayed(bias, settings)
 
 
