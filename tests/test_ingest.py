@@ -571,6 +571,22 @@ def test_pixels_in_jpeg_blocks_an_edge_crosses_are_marked():
     assert not jpeg_edge_blocks(labels, {"frames": [{"index": 0}]}).any()
 
 
+def test_regions_keep_inside_by_what_the_pose_may_move_them():
+    """A pose known to 1 degree (1 sd) moves a 160-pixel view of 40 degrees by f theta = 3.8
+    pixels at its centre: regions keep twice that (8 pixels) inside their material; a roll
+    moves the corners by their radius times it; without a pose sd, nothing."""
+    from skyfit_mi.pipeline.pixels import pose_reach
+
+    doc = {"camera": {"width": 160, "height": 120, "fov_deg": 40.0}}
+    f = 80 / np.tan(np.radians(20.0))
+    assert pose_reach(doc) == 0
+    assert pose_reach(doc, {"azimuth": 1.0, "angle": 0.0, "roll": 0.0}) == \
+        int(np.ceil(2 * f * np.radians(1.0)))
+    assert pose_reach({"camera": {**doc["camera"], "pose_sd_deg": {"azimuth": 1.0, "angle": 1.0,
+                                                                    "roll": 0.0}}}) == 11
+    assert pose_reach(doc, {"roll": 1.0}) == int(np.ceil(2 * 100 * np.radians(1.0)))
+
+
 @pytest.mark.parametrize("sd", [-0.01, 1.0, float("nan")])
 def test_a_colour_matrix_error_is_a_share_below_one(sd):
     """--colour-matrix-error is checked before any photograph is read."""

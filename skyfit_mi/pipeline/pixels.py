@@ -167,13 +167,37 @@ def jpeg_edge_blocks(labels, doc):
     return out
 
 
-def material_regions(manifest):
+def pose_reach(doc, pose_sd_deg=None):
+    """How many pixels the camera's pose uncertainty may move the scene's labels in its frames
+    (``pose_sd_deg``, {angle: 1 sd [deg]} as :func:`~skyfit_mi.render.scene.pose_sd` reads
+    it, or the sequence ``doc``'s ``camera.pose_sd_deg``; absent: 0): twice (95%) the
+    displacement of the frame's farthest pixel, a turn in azimuth or angle moving the view's
+    centre by f theta (f the focal length in pixels) and a roll the corners by their radius
+    times it, the angles independent.  The regions a fit takes from the spec's labels stay
+    that far inside each material: a pose given to +-1 degree moves a 160-pixel-wide view of
+    40 degrees by 4 pixels."""
+    from ..physics.lens import focal_px
+
+    sd = pose_sd_deg if pose_sd_deg is not None else doc.get("camera", {}).get("pose_sd_deg")
+    if not sd:
+        return 0
+    cam = doc["camera"]
+    w, h = cam["width"], cam["height"]
+    f = focal_px(cam["fov_deg"], w)
+    rad = {k: np.radians(float(v)) for k, v in sd.items()}
+    move = np.sqrt((f * rad.get("azimuth", 0.0)) ** 2 + (f * rad.get("angle", 0.0)) ** 2
+                   + (np.hypot(w, h) / 2.0 * rad.get("roll", 0.0)) ** 2)
+    return int(np.ceil(2.0 * move - 1e-9))
+
+
+def material_regions(manifest, pose_sd_deg=None):
     """(name, pixels) of every Ward material the camera sees, from the scene's label image:
     the pixels inside each material's area (edge pixels, which also see a neighbour, left
     out, and in JPEGs with subsampled chroma, demosaiced RAWs or registered photographs those
-    whose colour mixes a neighbour's, :func:`colour_reach`; in lossy JPEGs those in blocks an
-    edge crosses, :func:`jpeg_edge_blocks`, where JPEG_CLEAN_MIN remain without them);
-    SkyfitError when it sees none.
+    whose colour mixes a neighbour's, :func:`colour_reach`, or that the pose's uncertainty,
+    ``pose_sd_deg`` or the sequence's, may move onto a neighbour, :func:`pose_reach`; in lossy
+    JPEGs those in blocks an edge crosses, :func:`jpeg_edge_blocks`, where JPEG_CLEAN_MIN
+    remain without them); SkyfitError when it sees none.
     For an observation table, (name, None) of each region it measures."""
     from scipy.ndimage import binary_erosion
 
@@ -182,7 +206,8 @@ def material_regions(manifest):
         return [(name, None) for name in table_regions(root)]
     doc, _, labels, ids = scene_labels(manifest)
     ward = set(doc["scene"]["materials"])
-    mixed = colour_mixed(labels, colour_reach(doc))
+    reach = pose_reach(doc, pose_sd_deg)
+    mixed = colour_mixed(labels, max(colour_reach(doc), reach))
     ringing = jpeg_edge_blocks(labels, doc)
     regions = []
     for k, name in enumerate(ids):
@@ -194,6 +219,8 @@ def material_regions(manifest):
             regions.append((name, np.stack([xs, ys], axis=1)))
     if not regions:
         raise SkyfitError(f"the camera sees no Ward material of {manifest} away from its edges"
-                          f"{' and the colour its frames mix across them' if mixed.any() else ''};"
-                          " give regions with --region.")
+                          f"{' and the colour its frames mix across them' if mixed.any() else ''}"
+                          + (f" by the {reach} pixels the pose's uncertainty may move them (give "
+                             "the camera better: skyfit camera)" if reach else "")
+                          + "; give regions with --region.")
     return regions
