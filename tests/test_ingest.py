@@ -521,7 +521,8 @@ def test_pixels_whose_jpeg_colour_mixes_a_neighbours_are_left_out(ingested, tmp_
     import shutil
 
     from skyfit_mi.fitting.chi2 import load_observations
-    from skyfit_mi.pipeline.pixels import colour_mixed, material_regions, scene_labels
+    from skyfit_mi.pipeline.pixels import material_regions, scene_labels
+    from skyfit_mi.pipeline.region_edges import colour_mixed
 
     out, _, _ = ingested
     sub = tmp_path / "seq"
@@ -552,7 +553,7 @@ def test_pixels_in_jpeg_blocks_an_edge_crosses_are_marked():
     """A lossy JPEG's block that holds an edge rings across its 8 x 8 pixels (16 x 16 with
     chroma subsampled 2x2), from the frame's block offset; a quality-100 file (DC step 1) and
     other files mark none."""
-    from skyfit_mi.pipeline.pixels import jpeg_edge_blocks
+    from skyfit_mi.pipeline.region_edges import jpeg_edge_blocks
 
     labels = np.zeros((24, 32), dtype=np.int32)
     labels[:, 12:] = 1                                    # an edge between columns 11 and 12
@@ -575,7 +576,7 @@ def test_regions_keep_inside_by_what_the_pose_may_move_them():
     """A pose known to 1 degree (1 sd) moves a 160-pixel view of 40 degrees by f theta = 3.8
     pixels at its centre: regions keep twice that (8 pixels) inside their material; a roll
     moves the corners by their radius times it; without a pose sd, nothing."""
-    from skyfit_mi.pipeline.pixels import pose_reach
+    from skyfit_mi.pipeline.region_edges import pose_reach
 
     doc = {"camera": {"width": 160, "height": 120, "fov_deg": 40.0}}
     f = 80 / np.tan(np.radians(20.0))

@@ -379,7 +379,7 @@ def test_subsampled_colour_reaches_no_further_than_colour_reach(subsampling, off
     it -- but a pixel :func:`colour_mixed` keeps (``colour_reach``: 2 + 1 pixels) decodes
     within 2 codes of its paint, as a pixel of a plain patch does; without subsampling the
     reach is 0."""
-    from skyfit_mi.pipeline.pixels import colour_mixed, colour_reach
+    from skyfit_mi.pipeline.region_edges import colour_mixed, colour_reach
 
     h, w = 48, 64
     labels = np.ones((h, w), np.int32)

@@ -81,7 +81,7 @@ def test_demosaiced_colour_reaches_no_further_than_colour_reach(tmp_path, offset
     each paint's colour across the edge -- by a large share of the weak channels beside it --
     but a pixel :func:`colour_mixed` keeps (``colour_reach`` of a frame's ``raw_demosaic``:
     RAW_COLOUR_REACH pixels) develops within 1% of its paint's brightest channel."""
-    from skyfit_mi.pipeline.pixels import colour_mixed, colour_reach
+    from skyfit_mi.pipeline.region_edges import colour_mixed, colour_reach
 
     h, w = 48, 64
     labels = np.ones((h, w), np.int32)

@@ -174,7 +174,8 @@ def test_a_distorted_photograph_is_undone_onto_the_pinhole(shaken, tmp_path):
     from skyfit_mi.pipeline.ingest import ingest
     from skyfit_mi.pipeline.manifest import load_manifest, read_frame_image
     from skyfit_mi.pipeline.photo_sim import PhotoSettings, _lens, photograph_day
-    from skyfit_mi.pipeline.pixels import colour_mixed, scene_labels
+    from skyfit_mi.pipeline.pixels import scene_labels
+    from skyfit_mi.pipeline.region_edges import colour_mixed
     from skyfit_mi.pipeline.registration import pixel_map, remap
 
     truth_doc, truth_root = load_manifest(shaken["tmp"] / "truth")

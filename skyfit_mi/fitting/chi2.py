@@ -31,7 +31,8 @@ from ..physics.colour import SRGB_LUMINANCE
 from ..pipeline.manifest import (check_frames, frame_exposure, is_table, load_manifest,
                                  read_frame_pixels, rendered_frames, sensor_from_record)
 from ..pipeline.observation_table import table_observations
-from ..pipeline.pixels import colour_mixed, colour_reach, scene_labels
+from ..pipeline.pixels import scene_labels
+from ..pipeline.region_edges import colour_mixed, colour_reach
 from ..render.light_cache import point_rays
 
 #: Values below this [DN] read as code 0.
@@ -293,7 +294,7 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
     (``raw_demosaic.noise_correlation``), by the square root of :func:`neighbour_sharing`;
     neither when the pixels are fitted each on its own (``one_fit`` False: a map).  Pixels
     whose colour a frame mixes with another material's (a JPEG's subsampled chroma, a RAW's
-    demosaicing: :func:`~skyfit_mi.pipeline.pixels.colour_reach`) are left out of a region's
+    demosaicing: :func:`~skyfit_mi.pipeline.region_edges.colour_reach`) are left out of a region's
     fit, with a warning (a map keeps them).
     """
     doc, root = load_manifest(manifest_path)

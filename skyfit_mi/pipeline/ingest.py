@@ -54,6 +54,7 @@ from .photo_times import check_times, frame_times
 from .photos import RAW_COLOUR_REACH, SUFFIXES, check_same_size, read_photo
 from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
 from .raw_noise import bootstrap, cfa_planes
+from .region_edges import colour_mixed, pose_reach
 from .registration import LIMIT_PX, register_frames
 from .sequence import (FrameRenderer, finish, frame_record, manifest_header, prepare_folder,
                        write_frame)
@@ -385,10 +386,14 @@ def _calibration_spec(raw, calibrate, base_dir):
     return validate_spec(raw, base_dir)
 
 
-def patch_samples(spec, values, falloff, calibrate, chart=None):
+def patch_samples(spec, values, falloff, calibrate, chart=None, reach=0):
     """The calibration patches' pixels in every frame of ``values`` (the spec's lit frames).
 
     Patches are the ``calibrate`` materials' pixels away from their edges (labels 1, 2, ...),
+    and ``reach`` pixels inside them where the frames were resampled or the pose is uncertain
+    (as a fit's regions keep, :func:`.pixels.material_regions`: a grey card's pixels that may
+    see the board beside it darken the card, which brightens every material calibrated by it;
+    a pose 0.3 degrees off moved the sample board's C by 2-3%),
     and, with ``chart`` = (material, swatch labels (H, W) of
     :func:`.colorchecker.find_chart`), the ColorChecker's 24 swatches (labels
     :data:`CHART_LABEL` + swatch index), which must lie on that scene material.  Per frame,
@@ -407,10 +412,13 @@ def patch_samples(spec, values, falloff, calibrate, chart=None):
         if name not in ids:
             raise SkyfitError(f"--calibrate {name}: the camera sees no material {name!r}; it sees "
                               f"{', '.join(ids) or 'none'}.")
-        m = binary_erosion(labels == ids.index(name) + 1, border_value=1)
+        m = binary_erosion(labels == ids.index(name) + 1, border_value=1) \
+            & ~colour_mixed(labels, reach)
         if m.sum() < 4:
             raise SkyfitError(f"--calibrate {name}: fewer than 4 pixels of it lie away from its "
-                              "edges; frame the reference patch larger.")
+                              "edges" + (f" by the {reach} pixels registration or the pose's "
+                                         "uncertainty may move them" if reach else "")
+                              + "; frame the reference patch larger.")
         patch[m] = k
     if chart is not None:
         material, swatches = chart
@@ -1067,9 +1075,11 @@ def calibration_patches(frames, linear, registration, o, log):
     if o.calibrate or out.chart:
         materials = {**o.calibrate, **({o.colorchecker: (CHART_GREY,) * 3} if out.chart else {})}
         cal_spec = _calibration_spec(frames.spec.raw, materials, frames.spec.base_dir)
+        reach = max(int(registration.record.get("erode_px", 0)),
+                    pose_reach({"camera": frames.spec.camera}))
         out.samples, out.patch, out.mask = patch_samples(
             cal_spec, [values[i] for i in lit], linear.falloff, o.calibrate,
-            None if out.chart is None else (o.colorchecker, out.chart["labels"]))
+            None if out.chart is None else (o.colorchecker, out.chart["labels"]), reach)
         if o.fitted:
             chosen, g, out.response_info = fit_response(
                 *_neutral(out.samples, out.patch, o.calibrate), sensor.max_code,

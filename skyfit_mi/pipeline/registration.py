@@ -24,7 +24,7 @@ weights as the values (not their squares): a resampled pixel's own scatter is sm
 the share ``pixel_variance_share``, 1/4 at worst), but it shares its errors with its
 neighbours, and a region's mean over many pixels carries the photograph's error, which a fit
 treating pixels as independent then gets right (squared weights would narrow its intervals by
-up to 2x).  Regions are eroded (``erode_px``, :func:`.pixels.colour_reach`) by the
+up to 2x).  Regions are eroded (``erode_px``, :func:`.region_edges.colour_reach`) by the
 resampling's reach, 1 px, plus three standard deviations of the motion.
 
 References: C. D. Kuglin and D. C. Hines, "The phase correlation image alignment method",
