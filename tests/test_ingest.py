@@ -572,6 +572,28 @@ def test_pixels_in_jpeg_blocks_an_edge_crosses_are_marked():
     assert not jpeg_edge_blocks(labels, {"frames": [{"index": 0}]}).any()
 
 
+def test_a_cards_patch_keeps_inside_by_what_registration_or_the_pose_may_move_it(day):
+    """The grey card's calibration pixels keep ``reach`` pixels inside the card (registered
+    frames, an uncertain pose), as a fit's regions do; a reach the card cannot hold is one
+    line saying to frame it larger."""
+    from skyfit_mi.pipeline.ingest import _calibration_spec, patch_samples
+    from skyfit_mi.pipeline.pixels import scene_labels
+    from skyfit_mi.pipeline.region_edges import colour_mixed
+    from skyfit_mi.pipeline.spec import read_spec
+
+    card = {"grey_card": (0.18, 0.18, 0.18)}
+    spec = _calibration_spec(read_spec(day["spec"]), card, day["spec"].parent)
+    h, w = spec.camera["height"], spec.camera["width"]
+    values, falloff = [np.zeros((h, w, 3))], np.ones((h, w))
+    spec.frames[:] = [f for f in spec.frames if not f.skipped][:1]
+    _, _, mask = patch_samples(spec, values, falloff, card)
+    _, _, kept = patch_samples(spec, values, falloff, card, reach=1)
+    labels = scene_labels(day["truth"])[2]
+    assert 4 <= kept.sum() < mask.sum() and not (kept & colour_mixed(labels, 1)).any()
+    with pytest.raises(SkyfitError, match="by the 9 pixels registration or the pose"):
+        patch_samples(spec, values, falloff, card, reach=9)
+
+
 def test_regions_keep_inside_by_what_the_pose_may_move_them():
     """A pose known to 1 degree (1 sd) moves a 160-pixel view of 40 degrees by f theta = 3.8
     pixels at its centre: regions keep twice that (8 pixels) inside their material; a roll
