@@ -214,7 +214,7 @@ def _fit_regions(args):
                     for name, value in args.label]
     if args.all:
         from .pipeline.pixels import material_regions
-        regions += material_regions(args.manifest, getattr(args, "pose_sd_deg", None))
+        regions += material_regions(args.manifest, getattr(args, "pose_sd_deg", None), log=print)
     if is_table(doc):
         if any(px is not None for _, px in regions):
             raise SkyfitError("the sequence is an observation table: name its regions alone "

@@ -100,14 +100,14 @@ def scene_labels(manifest):
     return (doc, root, *label_image(mi.load_string(doc["scene"]["xml"])))
 
 
-def material_regions(manifest, pose_sd_deg=None):
+def material_regions(manifest, pose_sd_deg=None, log=None):
     """(name, pixels) of every Ward material the camera sees, from the scene's label image:
     the pixels inside each material's area (edge pixels, which also see a neighbour, left
     out, and in JPEGs with subsampled chroma, demosaiced RAWs or registered photographs those
     whose colour mixes a neighbour's, or that the pose's uncertainty, ``pose_sd_deg`` or the
     sequence's, may move onto a neighbour; in lossy JPEGs those in blocks an edge crosses,
-    where JPEG_CLEAN_MIN remain without them: :mod:`.region_edges`); SkyfitError when it sees
-    none.
+    where JPEG_CLEAN_MIN remain without them: :mod:`.region_edges`); ``log`` names a Ward
+    material left without pixels; SkyfitError when it sees none.
     For an observation table, (name, None) of each region it measures."""
     from scipy.ndimage import binary_erosion
 
@@ -127,6 +127,10 @@ def material_regions(manifest, pose_sd_deg=None):
         ys, xs = np.nonzero(inside)
         if name in ward and len(xs):
             regions.append((name, np.stack([xs, ys], axis=1)))
+        elif name in ward and log is not None:
+            log(f"{name}: no pixel lies away from its edges"
+                + (f" by the {reach} pixels the pose's uncertainty may move them" if reach
+                   else "") + "; not fitted (give it with --region)")
     if not regions:
         raise SkyfitError(f"the camera sees no Ward material of {manifest} away from its edges"
                           f"{' and the colour its frames mix across them' if mixed.any() else ''}"
