@@ -32,7 +32,6 @@ readings are one BRDF, which the fit says: there the truth's twin reading counts
 
 import argparse
 import json
-import re
 import subprocess
 import sys
 import tempfile
@@ -62,19 +61,16 @@ def scene_xml():
     return text.replace("</scene>", card + "</scene>")
 
 
-def truths():
-    """{material: (C_r, C_g, C_b, rho_s, sigma_alpha)} of the board's colour-model samples."""
-    out = {}
-    for m in re.finditer(r'<bsdf type="ward" id="(\w+)">(.*?)</bsdf>', SCENE.read_text(), re.S):
-        body = m.group(2)
-        C = re.search(r'name="C" value="([^"]+)"', body)
-        if C is None:
-            continue
-        vals = [float(v) for v in C.group(1).split(",")]
-        vals += [float(re.search(rf'name="{k}" value="([^"]+)"', body).group(1))
-                 for k in ("rho_s", "sigma_alpha")]
-        out[m.group(1)] = tuple(vals)
-    return out
+def truths(truth):
+    """{material: (C_r, C_g, C_b, rho_s, sigma_alpha)} of the colour-model materials of the
+    rendered ``truth``'s manifest."""
+    from skyfit_mi.fitting.landscape import truth_parameters
+    from skyfit_mi.pipeline.manifest import load_manifest
+
+    doc, _ = load_manifest(truth)
+    out = {name: truth_parameters(m, "colour", NAMES)
+           for name, m in doc["scene"]["materials"].items()}
+    return {name: tuple(v) for name, v in out.items() if v is not None}
 
 
 #: The scenarios: how the camera photographs (``photo``: PhotoSettings' distortion, and
@@ -95,9 +91,6 @@ SCENARIOS = {
 def write_spec(work, scenario="truth"):
     """The board's spec with the card's scene (path): the truth's, rendered at TRUTH_SPP, or
     the one a user of ``scenario`` gives ingest (its camera off as SCENARIOS says)."""
-    sys.path.insert(0, str(ROOT / "tests"))
-    from test_ingest import _toml
-
     from skyfit_mi.pipeline.spec import read_spec
 
     (work / "board_card.xml").write_text(scene_xml())
@@ -108,8 +101,8 @@ def write_spec(work, scenario="truth"):
     for k, v in SCENARIOS.get(scenario, {}).get("camera", {}).items():
         cam[k] = cam[k] + v if k in ("azimuth_deg", "angle_deg") else v
     raw["camera"] = cam
-    path = work / ("spec.toml" if scenario == "truth" else f"spec_{scenario}.toml")
-    path.write_text(_toml(raw))
+    path = work / ("spec.json" if scenario == "truth" else f"spec_{scenario}.json")
+    path.write_text(json.dumps(raw, indent=1))
     return path
 
 
@@ -219,7 +212,7 @@ def main():
     truth = work / "truth"
     if not (truth / "manifest.json").exists():
         render_sequence(load_spec(spec_path), truth, progress=False, log=lambda *a: None)
-    truth_of = truths()
+    truth_of = truths(truth)
     print(f"JPEG quality {args.quality}, seeds {args.first_seed}.."
           f"{args.first_seed + args.seeds - 1}, work folder {work}\n")
     print("| scenario | pairs held | gross misses | median C 95% half-width [%] | "

@@ -600,14 +600,14 @@ def test_regions_keep_inside_by_what_the_pose_may_move_them():
     moves the corners by their radius times it; without a pose sd, nothing."""
     from skyfit_mi.pipeline.region_edges import pose_reach
 
-    doc = {"camera": {"width": 160, "height": 120, "fov_deg": 40.0}}
+    camera = {"width": 160, "height": 120, "fov_deg": 40.0}
     f = 80 / np.tan(np.radians(20.0))
-    assert pose_reach(doc) == 0
-    assert pose_reach(doc, {"azimuth": 1.0, "angle": 0.0, "roll": 0.0}) == \
+    assert pose_reach(camera) == 0
+    assert pose_reach(camera, {"azimuth": 1.0, "angle": 0.0, "roll": 0.0}) == \
         int(np.ceil(2 * f * np.radians(1.0)))
-    assert pose_reach({"camera": {**doc["camera"], "pose_sd_deg": {"azimuth": 1.0, "angle": 1.0,
-                                                                    "roll": 0.0}}}) == 11
-    assert pose_reach(doc, {"roll": 1.0}) == int(np.ceil(2 * 100 * np.radians(1.0)))
+    assert pose_reach({**camera, "pose_sd_deg": {"azimuth": 1.0, "angle": 1.0,
+                                                 "roll": 0.0}}) == 11
+    assert pose_reach(camera, {"roll": 1.0}) == int(np.ceil(2 * 100 * np.radians(1.0)))
 
 
 @pytest.mark.parametrize("sd", [-0.01, 1.0, float("nan")])

@@ -119,7 +119,7 @@ def test_settings_round_trip_and_non_jpeg_files(tmp_path):
     assert st["subsampling"] == 2 and jn.block_size(st) == 16
     assert set(st["qtables"]) == {0, 1} and all(len(t) == 64 for t in st["qtables"].values())
     # compressing a frame again with its own settings changes it little (same tables)
-    again = jn.recompress(frames[0], st, SENSOR, (0.0, 0.0), np.random.default_rng(1))
+    again, _ = jn.recompress(frames[0], st, SENSOR, (0.0, 0.0), np.random.default_rng(1))
     assert np.sqrt(np.mean((again - frames[0]) ** 2)) < 1.0
     Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(tmp_path / "a.png")
     assert jn.jpeg_settings(tmp_path / "a.png") is None

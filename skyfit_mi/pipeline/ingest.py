@@ -197,7 +197,7 @@ def estimate_noise(values, sensor, jpeg=None, shown=None, log=None):
     a, b = shown
     for it in range(JPEG_NOISE_ITERATIONS):
         rng = np.random.default_rng([SEED, it])
-        errors = [recompress(v, st, sensor, (a, b), rng) - np.nan_to_num(v) for v, st in crops]
+        errors = [recompress(v, st, sensor, (a, b), rng)[0] - np.nan_to_num(v) for v, st in crops]
         sa, sb = _passes(_noise_parts(views, sensor, errors), sensor)
         na, nb = max(a + shown[0] - sa, 0.0), max(b + shown[1] - sb, 0.0)
         done = abs(na - a) <= JPEG_NOISE_TOL * max(a, 1e-2) and \
@@ -1076,7 +1076,7 @@ def calibration_patches(frames, linear, registration, o, log):
         materials = {**o.calibrate, **({o.colorchecker: (CHART_GREY,) * 3} if out.chart else {})}
         cal_spec = _calibration_spec(frames.spec.raw, materials, frames.spec.base_dir)
         reach = max(int(registration.record.get("erode_px", 0)),
-                    pose_reach({"camera": frames.spec.camera}))
+                    pose_reach(frames.spec.camera))
         out.samples, out.patch, out.mask = patch_samples(
             cal_spec, [values[i] for i in lit], linear.falloff, o.calibrate,
             None if out.chart is None else (o.colorchecker, out.chart["labels"]), reach)

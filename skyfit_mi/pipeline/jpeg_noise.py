@@ -118,12 +118,12 @@ def tables_bound(settings):
     return luma + (_JFIF_CHROMA ** 2).sum(axis=1) * chroma
 
 
-def recompress(values, settings, sensor, noise, rng, with_codes=False):
+def recompress(values, settings, sensor, noise, rng):
     """One copy of frame ``values`` (H, W, 3) [DN] with fresh sensor noise (a [DN^2], b [DN]
     of the linear codes), encoded by ``sensor``'s response to 8 bits and compressed with
-    ``settings``; the codes (H, W, 3) [DN] that :func:`decode` reads from the copy, and with
-    ``with_codes`` also the noisy codes before rounding and compression (the errors the
-    compression adds are the difference)."""
+    ``settings``: (the codes (H, W, 3) [DN] that :func:`decode` reads from the copy, the noisy
+    codes before rounding and compression; the errors the compression adds are the
+    difference)."""
     from PIL import Image
 
     a, b = noise
@@ -134,8 +134,7 @@ def recompress(values, settings, sensor, noise, rng, with_codes=False):
     buf = io.BytesIO()
     Image.fromarray(np.rint(codes).astype(np.uint8)).save(
         buf, format="JPEG", qtables=settings["qtables"], subsampling=settings["subsampling"])
-    decoded = decode(buf.getvalue())
-    return (decoded, codes) if with_codes else decoded
+    return decode(buf.getvalue()), codes
 
 
 #: The colour spaces in which :func:`decode` reads a JPEG's planes, and their planes.
@@ -250,7 +249,7 @@ def bootstrap_variance(values, settings, sensor, noise, seed, replicates=REPLICA
     cell_sum, cell_sq = 0.0, 0.0
     for _ in range(replicates):
         truth = sample(rng)
-        copy, codes = recompress(truth, settings, sensor, noise, rng, with_codes=True)
+        copy, codes = recompress(truth, settings, sensor, noise, rng)
         err = copy - truth
         var = var + err ** 2
         e = err[:bh, :bw]                                  # whole 8x8 blocks

@@ -116,7 +116,7 @@ def material_regions(manifest, pose_sd_deg=None, log=None):
         return [(name, None) for name in table_regions(root)]
     doc, _, labels, ids = scene_labels(manifest)
     ward = set(doc["scene"]["materials"])
-    reach = pose_reach(doc, pose_sd_deg)
+    reach = pose_reach(doc["camera"], pose_sd_deg)
     mixed = colour_mixed(labels, max(colour_reach(doc), reach))
     ringing = jpeg_edge_blocks(labels, doc)
     regions = []

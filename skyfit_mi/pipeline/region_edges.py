@@ -75,10 +75,10 @@ def jpeg_edge_blocks(labels, doc):
     return out
 
 
-def pose_reach(doc, pose_sd_deg=None):
+def pose_reach(camera, pose_sd_deg=None):
     """How many pixels the camera's pose uncertainty may move the scene's labels in its frames
     (``pose_sd_deg``, {angle: 1 sd [deg]} as :func:`~skyfit_mi.render.scene.pose_sd` reads
-    it, or the sequence ``doc``'s ``camera.pose_sd_deg``; absent: 0): twice (95%) the
+    it, or the ``camera`` record's ``pose_sd_deg``; absent: 0): twice (95%) the
     displacement of the frame's farthest pixel, a turn in azimuth or angle moving the view's
     centre by f theta (f the focal length in pixels) and a roll the corners by their radius
     times it, the angles independent.  The regions a fit takes from the spec's labels stay
@@ -86,12 +86,11 @@ def pose_reach(doc, pose_sd_deg=None):
     40 degrees by 4 pixels."""
     from ..physics.lens import focal_px
 
-    sd = pose_sd_deg if pose_sd_deg is not None else doc.get("camera", {}).get("pose_sd_deg")
+    sd = pose_sd_deg if pose_sd_deg is not None else camera.get("pose_sd_deg")
     if not sd:
         return 0
-    cam = doc["camera"]
-    w, h = cam["width"], cam["height"]
-    f = focal_px(cam["fov_deg"], w)
+    w, h = camera["width"], camera["height"]
+    f = focal_px(camera["fov_deg"], w)
     rad = {k: np.radians(float(v)) for k, v in sd.items()}
     move = np.sqrt((f * rad.get("azimuth", 0.0)) ** 2 + (f * rad.get("angle", 0.0)) ** 2
                    + (np.hypot(w, h) / 2.0 * rad.get("roll", 0.0)) ** 2)
