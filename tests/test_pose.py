@@ -1,6 +1,7 @@
 """The camera pose's uncertainty in a fit's intervals (fitting/pose.py): a narrow lobe fitted
-with its camera typed 0.7 deg off misses its roughness unless the pose's sd is propagated, and
-the linearised shift is a refit's with the camera turned."""
+with its camera typed 0.7 deg off misses its roughness unless the pose's sd is propagated, the
+linearised shift is a refit's with the camera turned, and where the sky is fitted the pose is
+fitted with it: the turn the data tell holds the one the pose was typed off by."""
 
 import json
 import shutil
@@ -9,7 +10,8 @@ import numpy as np
 import pytest
 
 from skyfit_mi.files import write_json
-from skyfit_mi.fitting.fit import FitCache, FitSession, fit_region
+from skyfit_mi.fitting.fit import FitCache, FitSession, fit_region, fit_regions
+from skyfit_mi.fitting.light import LightOptions
 from skyfit_mi.pipeline.manifest import load_manifest
 from skyfit_mi.pipeline.sequence import render_sequence
 from skyfit_mi.pipeline.spec import thesis_disc_spec, validate_spec
@@ -89,3 +91,22 @@ def test_the_linearised_shift_is_a_refits_with_the_camera_turned(day, tmp_path):
     finite = refit["parameters"]["sigma_alpha"] - lin["parameters"]["sigma_alpha"]
     assert shift == pytest.approx(finite, rel=0.2)          # measured: 0.00025 and 0.00025
     assert lin["pose"]["error_sd"]["sigma_alpha"] == pytest.approx(abs(shift))
+
+
+def test_where_the_sky_is_fitted_the_pose_moves_it_and_the_parameters_with_it(day, tmp_path):
+    """The camera typed 0.7 deg off in azimuth and angle, its sd 0.7, the sky's level fitted:
+    the turn moves the fitted level, and each parameter's shift per angle adds its response to
+    that; the intervals hold the truth."""
+    off = turned(day, tmp_path / "off", [("azimuth", 0.7), ("angle", 0.7)])
+    out = next(fit_regions(off, [("disc", PIXELS)], model="two", cache=FitCache(positions=32),
+                           light=LightOptions(sky="prior", terms=1, sun_sd=0.0), **QUIET))
+    moved = out["sky"]["pose_shift"]
+    assert moved["coefficients"] == ["log k"] and set(moved["by_angle"]) == {"azimuth", "angle"}
+    assert all(abs(v[0]) > 1e-4 for v in moved["by_angle"].values())
+    pose = out["pose"]
+    for p in ("rho_s", "sigma_alpha"):
+        assert set(pose["through_sky"][p]) == {"azimuth", "angle"}
+        assert pose["error_sd"][p] == pytest.approx(np.hypot(
+            *pose["shift_by_parameter"][p].values()))
+        lo, hi = out["intervals"][p]["95"]
+        assert lo <= {"rho_s": RHO_S, "sigma_alpha": SIGMA}[p] <= hi

@@ -26,16 +26,16 @@ from .light import SPEC_LIGHT, LightOptions, LightParts, LightPlan
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import levenberg_marquardt
-from .pose import pose_share
+from .pose import pose_share, pose_through_sky
 from ..errors import SkyfitError, check_choice
-from .sky_fit import (SkyFit, SkyShare, fit_sky_scale, fitted_mix, shape_variants, skies_at_level,
-                      sky_level_at)
+from .sky_fit import (SkyFit, SkyShare, fit_sky_scale, fitted_mix, shape_variants, share_at,
+                      skies_at_level, sky_level_at)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, block_budget, memory_estimate,
                                   shared_budget, trace_basis)
 from ..render.fit_model import (BY_COUNT, PARAMETERS, bounds, check_fit_normalisation,
                                 check_start, other_readings)
-from ..render.scene import camera_at, pose_sd
+from ..render.scene import POSE_ANGLES, camera_at, pose_sd, turn_camera, view_centre
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
                                   SKY_PLANS, CacheOptions, PointRays, anchors_pay,
                                   build_light_cache)
@@ -236,6 +236,7 @@ class FitSession:
         # shape's mix sky_shape_mix (set_sky)
         self.light, self.sky_scale, self.parts = light or SPEC_LIGHT, 1.0, None
         self.sky_shape_mix = None
+        self._turned = {}                           # the light with the camera turned
         self._variants = None                       # the shape variants (_shape_variants)
         self.cache_time = time.perf_counter() - t0
         if light is not None:
@@ -305,7 +306,7 @@ class FitSession:
         """Fit on the light ``light`` traced as ``parts`` (:class:`~.light.LightParts`,
         :meth:`_trace`, this session's rows) in ``blocks``, its trace having taken
         ``seconds``."""
-        self.light = light
+        self.light, self._turned = light, {}
         self.cache_time += seconds
         self.cache_settings["blocks"] = blocks
         self._use_parts(parts)
@@ -435,15 +436,29 @@ class FitSession:
         sun, sky = self.light_levels(self.sky_shape_mix)
         return parts.table(self.sky_scale * sky, self.sky_shape_mix, sun)
 
-    def radiance_at_pose(self, to_world, theta):
-        """The model's radiance (P, T, 3) [W m^-2 sr^-1] at ``theta`` and where every position
-        of a pixel lands on the region's material (P, T), with the camera at ``to_world``
-        (4x4) instead of the sequence's: the light traced again at ``cache_settings``, with
-        the fit's samples and seed, under the light the fit saw (its sky's level and shape)."""
-        with camera_at(self.scene, to_world):
-            parts, _ = self._trace(self.obs.pixels, self.name, self.light)
-        table = self._mixed(parts)
-        return self.model_on(table).radiance(theta), table.hit
+    @property
+    def pose_angles(self):
+        """The pose's angles (of POSE_ANGLES) whose sd is above 0: none for an observation
+        table, whose points are rays in the world, no camera's."""
+        if self.obs.rays is not None:
+            return []
+        return [k for k in POSE_ANGLES if self.pose_sd[k] > 0]
+
+    def table_turned(self, angle):
+        """The light's table (at the sky's level and shape as set now) with the camera turned
+        by the pose's sd in ``angle`` (one of POSE_ANGLES) about where its central ray meets
+        the scene (:func:`~skyfit_mi.render.scene.turn_camera`): the light traced again at
+        ``cache_settings`` with the fit's samples and seed, so that its difference from the
+        fit's table is the turn's, not Monte Carlo noise; traced once per trace of the light
+        (the sky fit and the region's fit share it; :func:`trace_turned`)."""
+        if (angle, self.pose_sd[angle]) not in self._turned:
+            trace_turned([self])
+        return self._mixed(self._turned[angle, self.pose_sd[angle]][0])
+
+    @property
+    def turn_time(self):
+        """The wall time of the traces with the camera turned [s]."""
+        return sum(seconds for _, seconds in self._turned.values())
 
     def set_sky(self, k, mix=None):
         """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
@@ -625,7 +640,7 @@ class FitSession:
         fit = FitState(method, theta, chi2, s2, curv_inv, f2, channels,
                        curv_inv * s2 * np.sqrt(np.outer(f2, f2)), res, g, noise, noise_chi2,
                        problem, merr, rounds, misfit,
-                       sky or SkyShare())
+                       SkyShare() if sky is None else share_at(self, sky, theta))
         fit.jpeg_shared_sd = jpeg_shared_sd(self, J_all, measured, problem.obs.sigma, curv_inv)
         fit.calibration_sd = calibration_sd(self, J_all, problem, measured, theta, curv_inv)
         fit.matrix_sd = matrix_sd(self, J_all, problem, measured, theta, curv_inv)
@@ -712,6 +727,34 @@ def trace_sessions(sessions, light):
     plan's anchors pay (as each region alone would take them) and light, each point under its
     own region's material: each frame's kernels are traced once instead of once a region; each
     session takes its rows and an equal share of the time."""
+    for plan, group in _trace_groups(sessions, light):
+        t0 = time.perf_counter()
+        parts, blocks = _trace_together(group, plan)
+        share = (time.perf_counter() - t0) / len(group)
+        for s, rows in _rows(group):
+            s.take_parts(parts.subset(rows), plan, share, blocks)
+
+
+def trace_turned(sessions):
+    """Trace the light of ``sessions`` (traced, :func:`trace_sessions`) again with the camera
+    turned by the sd of each of the pose's angles (:attr:`FitSession.pose_angles`), together
+    as they were traced, on the same samples: what :meth:`FitSession.table_turned` gives."""
+    for plan, group in _trace_groups(sessions, {s.name: s.light for s in sessions}):
+        first = group[0]
+        to_world = np.asarray(first.doc["camera"]["to_world"], dtype=float)
+        for angle in first.pose_angles:
+            key = (angle, first.pose_sd[angle])
+            t0 = time.perf_counter()
+            with camera_at(first.scene, turn_camera(to_world, view_centre(first.scene), *key)):
+                parts, _ = _trace_together(group, plan)
+            share = (time.perf_counter() - t0) / len(group)
+            for s, rows in _rows(group):
+                s._turned[key] = (parts.subset(rows), share)
+
+
+def _trace_groups(sessions, light):
+    """[(plan, sessions)]: ``sessions`` grouped as :func:`trace_sessions` traces them, each
+    group's light ``light`` (a plan, or {region: plan})."""
     groups = {}
     for s in sessions:
         plan = light[s.name] if isinstance(light, dict) else light
@@ -722,21 +765,28 @@ def trace_sessions(sessions, light):
         key = (s.normalisation, tuple(s.obs.frames), s.obs.rays is None, c["sky_plan"],
                anchored, plan)
         groups.setdefault(key, []).append(s)
-    for key, group in groups.items():
-        t0 = time.perf_counter()
-        if group[0].obs.rays is None:
-            at = np.concatenate([s.obs.pixels for s in group])
-        else:
-            at = PointRays(*(np.concatenate([getattr(s.obs.rays, k) for s in group])
-                             for k in ("origins", "directions")))
-        parts, blocks = group[0]._trace(at, np.repeat([s.name for s in group],
-                                                      [len(s.obs.pixels) for s in group]), key[-1])
-        share = (time.perf_counter() - t0) / len(group)
-        start = 0
-        for s in group:
-            n = len(s.obs.pixels)
-            s.take_parts(parts.subset(slice(start, start + n)), key[-1], share, blocks)
-            start += n
+    return [(key[-1], group) for key, group in groups.items()]
+
+
+def _trace_together(group, plan):
+    """(:class:`~.light.LightParts`, blocks): the light ``plan`` at all the points of the
+    sessions ``group``, each under its own region's material."""
+    if group[0].obs.rays is None:
+        at = np.concatenate([s.obs.pixels for s in group])
+    else:
+        at = PointRays(*(np.concatenate([getattr(s.obs.rays, k) for s in group])
+                         for k in ("origins", "directions")))
+    return group[0]._trace(at, np.repeat([s.name for s in group],
+                                         [len(s.obs.pixels) for s in group]), plan)
+
+
+def _rows(group):
+    """Each session of ``group`` with its rows (a slice) in their points traced together."""
+    start = 0
+    for s in group:
+        n = len(s.obs.pixels)
+        yield s, slice(start, start + n)
+        start += n
 
 
 def fit_region(manifest_path, name, pixels, **options):
@@ -796,6 +846,8 @@ def prepare_sessions(sessions, light=LightOptions(), seed=0, log=print):
     :class:`~.sky_fit.SkyFit` (no record nor shares where the sky is the spec's)."""
     plan = resolve_light(sessions, light, log)
     trace_sessions(list(sessions.values()), plan)
+    trace_turned(list(sessions.values()))
     if not plan.split:
         return SkyFit(None)
-    return fit_sky_scale(list(sessions.values()), plan, seed, log)
+    day = list(sessions.values())
+    return pose_through_sky(day, fit_sky_scale(day, plan, seed, log))

@@ -44,7 +44,7 @@ Two things the data cannot tell well are stated as priors:
 
 import datetime as dt
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.special import chdtrc
@@ -119,12 +119,21 @@ class SkyShare:
         levels the data could not tell apart (None where it is)
     sun_widening : what a modelled sun's level gains from the fitted sky's departure from the
         spec's (:data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`)
+    light : the sky's coefficients as fitted (:class:`FittedLight`), from which the shares are
+        taken again at the region's own fit (:func:`share_at`); None where the sky's level is
+        not determined
+    response : (n, coefficients) the parameters' response to them at that fit (None before)
+    pose_shift : {angle: (coefficients,) their shift were the camera turned by the pose's sd
+        in that angle} (:func:`~.pose.pose_through_sky`; empty: none)
     """
 
     record: dict = None
     sd: np.ndarray = None
     span: tuple = None
     sun_widening: float = 0.0
+    light: "FittedLight" = None
+    response: np.ndarray = None
+    pose_shift: dict = field(default_factory=dict)
 
     def sun_level_sd(self, plan):
         """The sun's level's relative uncertainty in the reflectances' intervals: the
@@ -436,8 +445,9 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2):
     Gauss-Newton on the coefficients with every region's parameters profiled out (each
     region's Jacobian in the coefficients projected off its parameters' own; the parameters
     then polished by Levenberg-Marquardt), under their priors.  Leaves each session at the
-    fit; returns (coefficients, their covariance, the span [s], each region's parameters'
-    response to the coefficients (n, coefficients), the regions' summed chi-square there)."""
+    fit; returns (coefficients, their covariance, the span [s], each region's time basis, its
+    parameters there and their response to the coefficients (n, coefficients), the regions'
+    summed chi-square there)."""
     terms = coefficients.terms
     times = [t for s in sessions for t in s.obs.times]
     span = (float(_seconds(times).min()), float(_seconds(times).max()))
@@ -457,17 +467,7 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2):
         """The profiled normal equations (H, g) at (u, thetas) and each region's response."""
         H, g, responses = P.copy(), P @ u, []
         for s, B, theta in zip(sessions, bases, thetas):
-            Ju = []
-            for j in range(n):
-                r = []
-                for sign in (1, -1):
-                    put(s, B, u + sign * DRIFT_STEP * np.eye(n)[j])
-                    r.append(s.problem.residuals(theta))
-                Ju.append((r[0] - r[1]) / (2 * DRIFT_STEP))
-            Ju = np.column_stack(Ju)
-            put(s, B, u)
-            r, Jt = s.problem.jacobian(theta)
-            response = -np.linalg.lstsq(Jt, Ju, rcond=None)[0]
+            Ju, r, Jt, response = light_response(s, FittedLight(coefficients, B, u), theta)
             Jp = Ju + Jt @ response                     # what the parameters cannot absorb
             rp = r - Jt @ np.linalg.lstsq(Jt, r, rcond=None)[0]
             H += Jp.T @ Jp
@@ -495,7 +495,62 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2):
             break
     chi2 = objective(u, thetas) - u @ P @ u
     H, _, responses = linearised(u, thetas)
-    return u, s2 * np.linalg.inv(H), span, responses, float(chi2)
+    return u, s2 * np.linalg.inv(H), span, bases, thetas, responses, float(chi2)
+
+
+@dataclass(frozen=True)
+class FittedLight:
+    """The sky's coefficients as fitted for one region: their kind (:class:`SkyCoefficients`),
+    the region's frames' time ``basis`` (:func:`time_basis`), their values ``u``, their
+    ``covariance`` over the regions' pooled Birge ratio ``s2`` (its inverse the profiled normal
+    matrix's times s2), and the region's parameters ``theta`` there (None while fitting)."""
+
+    coefficients: SkyCoefficients
+    basis: np.ndarray
+    u: np.ndarray
+    covariance: np.ndarray = None
+    s2: float = 1.0
+    theta: np.ndarray = None
+
+    def put(self, session, u=None):
+        """Light ``session`` at the coefficients ``u`` (default the fitted)."""
+        self.coefficients.light(session, self.basis, self.u if u is None else u)
+
+
+def light_response(s, light, theta):
+    """(d residuals / d coefficients, residuals, d residuals / d theta, the parameters'
+    least-squares response to the coefficients (n, coefficients)) of session ``s`` at its
+    parameters ``theta`` and the :class:`FittedLight` ``light`` (central differences of
+    :data:`DRIFT_STEP`); leaves ``s`` lit at it."""
+    u = light.u
+    eye = np.eye(len(u))
+    Ju = []
+    for j in range(len(u)):
+        r = []
+        for sign in (1, -1):
+            light.put(s, u + sign * DRIFT_STEP * eye[j])
+            r.append(s.problem.residuals(theta))
+        Ju.append((r[0] - r[1]) / (2 * DRIFT_STEP))
+    light.put(s)
+    r, Jt = s.problem.jacobian(theta)
+    return np.column_stack(Ju), r, Jt, -np.linalg.lstsq(Jt, np.column_stack(Ju), rcond=None)[0]
+
+
+def share_at(s, share, theta):
+    """The region's ``share`` of the fitted light (:class:`SkyShare`) taken again at its own
+    fit ``theta`` (session ``s`` lit at the fitted sky): the sky fit found each region's
+    response at the parameters of its search, and a region whose final fit lies elsewhere (a
+    metal's roughness at its bound, where its C and rho_s trade) responds otherwise."""
+    if share.light is None:
+        return share
+    response = light_response(s, share.light, theta)[3]
+    return replace(share, sd=_carried_sd(response, share.light.covariance), response=response)
+
+
+def _carried_sd(response, covariance):
+    """The standard errors (n,) the coefficients' ``covariance`` gives the parameters that
+    respond to them by ``response`` (n, coefficients)."""
+    return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", response, covariance, response), 0.0))
 
 
 @dataclass
@@ -657,6 +712,7 @@ class _Fitted:
     log_k: np.ndarray = None
     index_names: list = None
     departure: dict = None
+    lights: list = None
 
 
 def _fit_terms(sessions, level, terms, told, warnings):
@@ -669,6 +725,12 @@ def _fit_terms(sessions, level, terms, told, warnings):
                      level.data(level.u0))
     J = len(sessions[0].parts.variants)                  # the shape variants traced
     if not (terms > 1 or J):
+        if level.determined:
+            light = SkyCoefficients(1, (), level.prior_sd)
+            fitted.lights = [FittedLight(light, np.ones((len(s.obs.times), 1)),
+                                         np.array([level.u0]), np.array([[level.sd_u ** 2]]),
+                                         level.s2, theta)
+                             for s, (_, theta) in zip(sessions, level.profile[level.u0])]
         return fitted
     if not level.determined:
         if told and terms > 1 or J:
@@ -680,11 +742,12 @@ def _fit_terms(sessions, level, terms, told, warnings):
                             "determined.")
         return fitted
     coefficients = SkyCoefficients(terms, tuple(sessions[0].parts.variants), level.prior_sd)
-    u, C, span, responses, fitted.chi2 = _fit_curve(
+    u, C, span, bases, thetas, responses, fitted.chi2 = _fit_curve(
         sessions, [th for _, th in level.profile[level.u0]], level.u0, coefficients, level.s2)
     sd = np.sqrt(np.diag(C))
-    fitted.sd = [np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", response, C, response), 0))
-                 for response in responses]
+    fitted.lights = [FittedLight(coefficients, B, u, C, level.s2, theta)
+                     for B, theta in zip(bases, thetas)]
+    fitted.sd = [_carried_sd(R, C) for R in responses]
     fitted.k, fitted.sd_u = float(np.exp(u[0])), float(sd[0])
     fitted.interval = [float(np.exp(u[0] - unc.Z["95"] * sd[0])),
                        float(np.exp(u[0] + unc.Z["95"] * sd[0]))]
@@ -851,8 +914,9 @@ def fit_sky_scale(sessions, plan, seed=0, log=print):
               "sun_coupling": coupling,
               "warnings": warnings, "time_s": time.perf_counter() - t0}
     log(_sky_log(record, fitted, len(sessions), plan.prior_sd, terms))
-    return SkyFit(record, {s.name: SkyShare(record, sd, sp, widening)
-                           for s, sd, sp in zip(sessions, fitted.sd, fitted.span)})
+    return SkyFit(record, {s.name: SkyShare(record, sd, sp, widening, light)
+                           for s, sd, sp, light in zip(sessions, fitted.sd, fitted.span,
+                                                       fitted.lights or [None] * len(sessions))})
 
 
 def _sky_log(record, fitted, regions, prior_sd, terms):
