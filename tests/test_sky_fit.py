@@ -196,6 +196,30 @@ def test_a_prior_holding_a_level_the_data_put_beyond_the_search_is_warned(again,
         again.set_sky(kept)                             # the fixture as it was
 
 
+def test_the_skys_share_taken_at_a_regions_own_fit_is_the_sky_fits_there(again):
+    """At the parameters the sky fit ended at, the sky's share taken again at a region's own
+    fit (sky_fit.share_at: its response by central differences) is the sky fit's own (there,
+    from the level's profile), and leaves the region lit as it was; elsewhere it differs."""
+    from skyfit_mi.fitting import sky_fit
+    from skyfit_mi.fitting.light import LightPlan
+
+    kept = again.sky_scale
+    try:
+        share = sky_fit.fit_sky_scale([again], LightPlan("fit", terms=1),
+                                      log=lambda *a: None).shares["disc"]
+        theta = share.light.theta
+        before = again.problem.chi2(theta)
+        at = sky_fit.share_at(again, share, theta)
+        # the level's slope from steps of 0.1 in log k against 0.001: within 13% (rho_s)
+        np.testing.assert_allclose(at.sd, share.sd, rtol=0.2)
+        assert at.response.shape == (len(theta), 1)
+        assert again.problem.chi2(theta) == pytest.approx(before, rel=1e-9)
+        moved = theta * np.r_[np.ones(len(theta) - 1), 1.5]     # another roughness
+        assert not np.allclose(sky_fit.share_at(again, share, moved).sd, at.sd, rtol=0.05)
+    finally:
+        again.set_sky(kept)                             # the fixture as it was
+
+
 def test_a_day_without_sun_cannot_fit_the_sky_against_it(days):
     from skyfit_mi.errors import SkyfitError
     from skyfit_mi.fitting.fit import fit_regions
