@@ -831,9 +831,13 @@ def fit_sessions(sessions, method="global", seed=0, start=None, method_options=N
                  light=LightOptions()):
     """Trace and fit ``sessions`` ({region: FitSession} of one sequence, not yet traced; each
     its own model and lobe) under ``light`` as :func:`fit_regions` describes (the sky's level
-    fitted once for all of them); yields each region's result dict in turn, in the order of
-    ``sessions``."""
+    fitted once for all of them, the light with the camera turned by its pose's sd traced for
+    all of them together and carried through that sky, :mod:`~.pose`); yields each region's
+    result dict in turn, in the order of ``sessions``."""
     sky = prepare_sessions(sessions, light, seed, log)
+    day = list(sessions.values())
+    trace_turned(day)                       # the pose's turns, where it has an sd
+    sky = pose_through_sky(day, sky)
     for name in list(sessions):
         yield sessions.pop(name).run(method, start, seed, method_options, log,
                                      sky.shares.get(name))
@@ -846,8 +850,6 @@ def prepare_sessions(sessions, light=LightOptions(), seed=0, log=print):
     :class:`~.sky_fit.SkyFit` (no record nor shares where the sky is the spec's)."""
     plan = resolve_light(sessions, light, log)
     trace_sessions(list(sessions.values()), plan)
-    trace_turned(list(sessions.values()))
     if not plan.split:
         return SkyFit(None)
-    day = list(sessions.values())
-    return pose_through_sky(day, fit_sky_scale(day, plan, seed, log))
+    return fit_sky_scale(list(sessions.values()), plan, seed, log)
