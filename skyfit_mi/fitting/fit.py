@@ -742,10 +742,11 @@ def trace_turned(sessions):
     for plan, group in _trace_groups(sessions, {s.name: s.light for s in sessions}):
         first = group[0]
         to_world = np.asarray(first.doc["camera"]["to_world"], dtype=float)
+        pivot = view_centre(first.scene) if first.pose_angles else None
         for angle in first.pose_angles:
             key = (angle, first.pose_sd[angle])
             t0 = time.perf_counter()
-            with camera_at(first.scene, turn_camera(to_world, view_centre(first.scene), *key)):
+            with camera_at(first.scene, turn_camera(to_world, pivot, *key)):
                 parts, _ = _trace_together(group, plan)
             share = (time.perf_counter() - t0) / len(group)
             for s, rows in _rows(group):

@@ -106,8 +106,7 @@ def pose_through_sky(sessions, sky):
     pull = {}
     for s in sessions:
         light = lights[s.name]
-        Ju, _, Jt, response = light_response(s, light, light.theta)
-        Jp = Ju + Jt @ response                    # what the parameters cannot absorb
+        Jp = light_response(s, light, light.theta)[0]
         for k, moved in turned_residuals(s, s.problem, light.theta).items():
             pull[k] = pull.get(k, 0.0) + Jp.T @ moved[s.problem.mask]
     light = next(iter(lights.values()))

@@ -467,8 +467,7 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2):
         """The profiled normal equations (H, g) at (u, thetas) and each region's response."""
         H, g, responses = P.copy(), P @ u, []
         for s, B, theta in zip(sessions, bases, thetas):
-            Ju, r, Jt, response = light_response(s, FittedLight(coefficients, B, u), theta)
-            Jp = Ju + Jt @ response                     # what the parameters cannot absorb
+            Jp, r, Jt, response = light_response(s, FittedLight(coefficients, B, u), theta)
             rp = r - Jt @ np.linalg.lstsq(Jt, r, rcond=None)[0]
             H += Jp.T @ Jp
             g += Jp.T @ rp
@@ -518,10 +517,11 @@ class FittedLight:
 
 
 def light_response(s, light, theta):
-    """(d residuals / d coefficients, residuals, d residuals / d theta, the parameters'
-    least-squares response to the coefficients (n, coefficients)) of session ``s`` at its
-    parameters ``theta`` and the :class:`FittedLight` ``light`` (central differences of
-    :data:`DRIFT_STEP`); leaves ``s`` lit at it."""
+    """(the residuals' derivatives in the coefficients that the parameters cannot absorb,
+    residuals, d residuals / d theta, the parameters' least-squares response to the
+    coefficients (n, coefficients)) of session ``s`` at its parameters ``theta`` and the
+    :class:`FittedLight` ``light`` (central differences of :data:`DRIFT_STEP`); leaves ``s``
+    lit at it."""
     u = light.u
     eye = np.eye(len(u))
     Ju = []
@@ -532,8 +532,10 @@ def light_response(s, light, theta):
             r.append(s.problem.residuals(theta))
         Ju.append((r[0] - r[1]) / (2 * DRIFT_STEP))
     light.put(s)
+    Ju = np.column_stack(Ju)
     r, Jt = s.problem.jacobian(theta)
-    return np.column_stack(Ju), r, Jt, -np.linalg.lstsq(Jt, np.column_stack(Ju), rcond=None)[0]
+    response = -np.linalg.lstsq(Jt, Ju, rcond=None)[0]
+    return Ju + Jt @ response, r, Jt, response
 
 
 def share_at(s, share, theta):
@@ -671,25 +673,14 @@ def _level_warnings(level, terms):
     return warnings
 
 
-def _level_shares(sessions, level):
-    """Each region's (sky's share of its parameters' standard errors, their span over the
-    levels the profile could not tell apart where k is not determined, else None) under the
-    day's one level: each parameter's response to log k at its fit (Gauss-Newton: the
-    least-squares change of theta that follows the residuals' change), smooth where a refit
-    may jump.  Leaves each session at the level."""
-    k, sd, span = float(np.exp(level.u0)), [], []
-    for n, (s, (_, theta)) in enumerate(zip(sessions, level.profile[level.u0])):
-        change = []
-        for d in (REFINE_STEP, -REFINE_STEP):
-            s.set_sky(k * np.exp(d))
-            change.append(s.problem.residuals(theta))
-        s.set_sky(k)
-        _, J = s.problem.jacobian(theta)
-        slope = -np.linalg.lstsq(J, (change[0] - change[1]) / (2 * REFINE_STEP), rcond=None)[0]
-        sd.append(np.abs(slope) * (level.sd_u if level.determined else 0.0))
-        thetas = np.array([level.profile[u][n][1] for u in level.within])
-        span.append(None if level.determined else (thetas.min(axis=0), thetas.max(axis=0)))
-    return sd, span
+def _level_spans(sessions, level):
+    """Each region's parameters' (lowest, highest) over the levels the profile could not tell
+    apart where the day's one ``level`` is not determined, else None."""
+    if level.determined:
+        return [None] * len(sessions)
+    return [(np.min(v, axis=0), np.max(v, axis=0))
+            for v in (np.array([level.profile[u][n][1] for u in level.within])
+                      for n in range(len(sessions)))]
 
 
 @dataclass
@@ -697,7 +688,7 @@ class _Fitted:
     """The sky as fitted (:func:`fit_sky_scale`): its level k with its 95% interval and log
     k's sd, each region's share of its errors (``sd``), the curve's and the shape's records
     (None where not fitted), each region's parameters' span over the levels the profile could not
-    tell apart where k is not determined (:func:`_level_shares`), the coefficients' correlation, the regions' chi-square there, log
+    tell apart where k is not determined (:func:`_level_spans`), the coefficients' correlation, the regions' chi-square there, log
     k by frame of a curve (else None), and the log's names of the shape's indices."""
 
     k: float
@@ -720,8 +711,9 @@ def _fit_terms(sessions, level, terms, told, warnings):
     (the shape variants traced) fitted from the day's ``level`` (:func:`_fit_curve`) where
     that is determined; a :class:`_Fitted` (the level's own where they are not fitted).
     Appends what the data hardly tell to ``warnings``."""
-    sd, span = _level_shares(sessions, level)
-    fitted = _Fitted(float(np.exp(level.u0)), level.interval, level.sd_u, sd, span,
+    thetas = [theta for _, theta in level.profile[level.u0]]
+    fitted = _Fitted(float(np.exp(level.u0)), level.interval, level.sd_u,
+                     [np.zeros(len(theta)) for theta in thetas], _level_spans(sessions, level),
                      level.data(level.u0))
     J = len(sessions[0].parts.variants)                  # the shape variants traced
     if not (terms > 1 or J):
@@ -730,7 +722,9 @@ def _fit_terms(sessions, level, terms, told, warnings):
             fitted.lights = [FittedLight(light, np.ones((len(s.obs.times), 1)),
                                          np.array([level.u0]), np.array([[level.sd_u ** 2]]),
                                          level.s2, theta)
-                             for s, (_, theta) in zip(sessions, level.profile[level.u0])]
+                             for s, theta in zip(sessions, thetas)]
+            fitted.sd = [_carried_sd(light_response(s, light, light.theta)[3], light.covariance)
+                         for s, light in zip(sessions, fitted.lights)]
         return fitted
     if not level.determined:
         if told and terms > 1 or J:
@@ -743,7 +737,7 @@ def _fit_terms(sessions, level, terms, told, warnings):
         return fitted
     coefficients = SkyCoefficients(terms, tuple(sessions[0].parts.variants), level.prior_sd)
     u, C, span, bases, thetas, responses, fitted.chi2 = _fit_curve(
-        sessions, [th for _, th in level.profile[level.u0]], level.u0, coefficients, level.s2)
+        sessions, thetas, level.u0, coefficients, level.s2)
     sd = np.sqrt(np.diag(C))
     fitted.lights = [FittedLight(coefficients, B, u, C, level.s2, theta)
                      for B, theta in zip(bases, thetas)]
