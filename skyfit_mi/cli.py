@@ -545,6 +545,66 @@ def _add_camera(sub, common):
     cam.set_defaults(func=_camera)
 
 
+def _sky_series(args):
+    from .pipeline.sky_series import CardOptions, sky_series
+
+    card = None
+    if args.card:
+        if args.card_box is None or len(args.card_box) != 4:
+            raise SkyfitError("--card needs --card-box X0,Y0,X1,Y1: the card's pixels in its "
+                              "shots.")
+        card = CardOptions(tuple(args.card), tuple(int(v) for v in args.card_box),
+                           args.card_reflectance, args.card_max_gap_s, args.card_sd)
+    elif args.card_box is not None:
+        raise SkyfitError("--card-box belongs to --card (the grey card's shots).")
+    doc = sky_series(args.photos, args.output, card=card, tz=args.tz, times_csv=args.times,
+                     gap_s=args.bracket_gap_s,
+                     overwrite=args.overwrite, log=(lambda *a: None) if args.quiet else print)
+    lines = [f"{len(doc['maps'])} sky maps in {args.output}; in the spec:", "[sky]",
+             'type = "envmap"', f'file = "{args.output}/sky_series.json"  # relative to the spec',
+             "north_rotation_deg = 0.0  # the compass azimuth of the maps' top: measure it"]
+    if doc["sun_mask_deg"]:
+        lines.append(f"# sun_mask_deg = {doc['sun_mask_deg']} from the clipped sun (the default)")
+    if card is None:
+        lines.append('# the sun is clipped: give its level, irradiance_file = "irradiance.csv" '
+                     "(dhi and dni, or ghi), or photograph a grey card (--card)")
+    print("\n".join(lines))
+
+
+def _add_sky_series(sub, common):
+    """The ``sky-series`` sub-command: bracketed fisheye shots of the sky -> linear maps."""
+    sky = sub.add_parser(
+        "sky-series", parents=[common], help="merge bracketed fisheye photographs of the sky "
+        "into linear maps a spec's envmap sky names",
+        description="Merge each exposure bracket of an upward equidistant fisheye's shots "
+        "(EXIF times and exposures) into a linear EXR map, count the clipped sun, and, with a "
+        "grey card photographed at each bracket, record the global horizontal irradiance that "
+        "sets the sun's level; writes sky_series.json for the spec's [sky] file.")
+    sky.add_argument("photos", nargs="+", help="the sky's shots: files or folders")
+    sky.add_argument("-o", "--output", required=True, help="output folder (the maps and "
+                     "sky_series.json)")
+    sky.add_argument("--tz", help="time zone of EXIF times without an offset (e.g. "
+                     "Europe/Berlin or +01:00)")
+    sky.add_argument("--times", help="CSV file,time of the shots (and the card's) instead of "
+                     "their EXIF times")
+    sky.add_argument("--bracket-gap-s", type=float, default=30.0, help="a shot more than this "
+                     "many seconds after the previous one starts a new bracket (default 30)")
+    sky.add_argument("--card", nargs="+", help="shots of a horizontal grey card in the sun, "
+                     "with the same camera, one near each bracket (files or folders)")
+    sky.add_argument("--card-box", type=_numbers, metavar="X0,Y0,X1,Y1", help="the card's "
+                     "pixels in its shots (columns X0..X1-1, rows Y0..Y1-1)")
+    sky.add_argument("--card-reflectance", type=float, default=0.18, help="the card's "
+                     "reflectance (default 0.18)")
+    sky.add_argument("--card-max-gap-s", type=float, default=300.0, help="the longest time "
+                     "between a bracket and its card shot [s] (default 300)")
+    sky.add_argument("--card-sd", type=float, default=0.02, help="relative uncertainty (1 sd) "
+                     "of the card's reading of the global irradiance: its reflectance's and "
+                     "its departure from Lambert's law (default 0.02)")
+    sky.add_argument("--overwrite", action="store_true", help="replace an existing series")
+    sky.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    sky.set_defaults(func=_sky_series)
+
+
 def _add_pixels(sub, common):
     """The ``pixels`` sub-command: chosen pixels across a sequence."""
     pixels = sub.add_parser("pixels", parents=[common], help="values of chosen pixels across a rendered sequence",
@@ -776,6 +836,7 @@ def build_parser():
     _add_render(sub, common)
     _add_ingest(sub, common)
     _add_camera(sub, common)
+    _add_sky_series(sub, common)
     _add_pixels(sub, common)
     _add_labels(sub, common)
     _add_fit(sub, common)

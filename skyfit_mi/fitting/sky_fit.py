@@ -199,13 +199,16 @@ def sun_source(skies):
 
 def default_sun_sd(doc, skies):
     """The relative uncertainty of the sun's level a fitted sky counts when not told (``fit
-    --sun-sd``): for photographs a measured sun's
-    (:data:`~skyfit_mi.physics.sky.MEASURED_SUN_SD`) or a modelled one's
+    --sun-sd``): for photographs a measured sun's (the largest its skies state, a grey card's
+    ``info["sun_sd"]``, else :data:`~skyfit_mi.physics.sky.MEASURED_SUN_SD`) or a modelled one's
     (:data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD`, :func:`sun_source`); 0 for a sequence
     skyfit rendered under that very sun."""
     if not photographed(doc):
         return 0.0
-    return MEASURED_SUN_SD if sun_source(skies) == "measured" else SUN_LEVEL_SD
+    if sun_source(skies) != "measured":
+        return SUN_LEVEL_SD
+    stated = [k.info.get("sun_sd") for k in _sunlit(skies)]
+    return max(stated) if None not in stated else MEASURED_SUN_SD
 
 
 def light_level_sd(doc, names, sun_sd):

@@ -173,9 +173,15 @@ class MeasuredIrradiance:
         (luminance-weighted, after the mask and ``diffuse_horizontal``) leaves of it, (GHI -
         E_map) / cos theta_s (:func:`direct_normal_from_global`).
     sun_measured : bool or None
-        Whether ``direct_normal`` was measured (a pyrheliometer's), not a model's: the Sky's
+        Whether ``direct_normal`` (or the ``global_horizontal`` it is found from, when True)
+        was measured (a pyrheliometer's, a grey card's), not a model's: the Sky's
         ``info["sun_measured"]``, by which a fit knows the sun's level
         (:func:`~skyfit_mi.fitting.sky_fit.sun_source`); None: whether it is given.
+    sun_sd : float or None
+        The measured sun's relative uncertainty (one sd of the log of its level), where the
+        measurement says it (a grey card's, :mod:`~skyfit_mi.pipeline.sky_series`): the Sky's
+        ``info["sun_sd"]``, which a fit takes instead of the default
+        (:func:`~skyfit_mi.fitting.sky_fit.default_sun_sd`).
 
     The values are checked where they are used (:func:`envmap_sky`).
     """
@@ -184,6 +190,7 @@ class MeasuredIrradiance:
     direct_normal: float = None
     global_horizontal: float = None
     sun_measured: bool = None
+    sun_sd: float = None
 
 
 def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, measured=MeasuredIrradiance(),
@@ -244,6 +251,10 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, measured=MeasuredIrrad
                 global_horizontal, float(sky.sky_horizontal_irradiance() @ SRGB_LUMINANCE),
                 sun_zenith_deg)
             info["direct_normal_from_global_W_m2"] = dni
+            if sun_measured:
+                info["sun_measured"] = True
+            if measured.sun_sd is not None:
+                info["sun_sd"] = float(check_range("sun_sd", measured.sun_sd, 0.0, 10.0))
             sky = sky.scaled(direct_normal=dni)
         else:
             info["note"] = ("sun within 1 degree of the horizon: its direct light is not found "

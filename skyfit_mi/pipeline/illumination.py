@@ -40,11 +40,12 @@ ENVMAP_OPTIONS = {"projection": "projection", "north_rotation_deg": "north_rotat
                   "direct_normal_W_m2": "direct_normal",
                   "global_horizontal_W_m2": "global_horizontal", "sun_mask_deg": "sun_mask_deg",
                   "ground_albedo": "ground_albedo", "sun_solid_angle_sr": "sun_solid_angle",
-                  "sun_measured": "sun_measured"}
+                  "sun_measured": "sun_measured", "sun_sd": "sun_sd"}
 #: The options that give the table (the rest light it).
 _TABLE_OPTIONS = ("projection", "north_rotation_deg", "scale", "rows")
 #: The options that are measured irradiance (:class:`~skyfit_mi.physics.envmap.MeasuredIrradiance`).
-_MEASURED_OPTIONS = ("diffuse_horizontal", "direct_normal", "global_horizontal", "sun_measured")
+_MEASURED_OPTIONS = ("diffuse_horizontal", "direct_normal", "global_horizontal", "sun_measured",
+                     "sun_sd")
 
 
 def perez_from_irradiance(e, zenith, azimuth, t):

@@ -51,7 +51,7 @@ from .colorchecker import NAMES, NEUTRAL, find_chart, matrix_error, reference_rg
 from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance,
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import check_times, frame_times
-from .photos import RAW_COLOUR_REACH, SUFFIXES, check_same_size, read_photo
+from .photos import RAW_COLOUR_REACH, check_same_size, list_photos, read_photo
 from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
 from .raw_noise import bootstrap, cfa_planes
 from .region_edges import colour_mixed, pose_reach
@@ -991,14 +991,7 @@ def read_frames(photo_paths, spec_path, out_dir, o, log):
     """The :class:`Frames` of the photographs (files, or folders of them in name order): read,
     timed (:func:`.photo_times.frame_times`), sorted by time, and the spec made for their
     times; night frames are kept out of the lit ones."""
-    paths = []
-    for p in map(Path, photo_paths):
-        if p.is_dir():
-            paths += sorted(q for q in p.iterdir() if q.suffix.lower() in SUFFIXES)
-        elif p.is_file():
-            paths.append(p)
-        else:
-            raise SkyfitError(f"{p} does not exist; give photographs or a folder of them.")
+    paths = list_photos(photo_paths)
     if len(paths) < 2:
         raise SkyfitError(f"{len(paths)} photograph(s) given; a sequence needs at least 2.")
     target = Path(out_dir).resolve()

@@ -738,6 +738,21 @@ def read_photo(path):
                     "check that the file is complete, or remove it") from None
 
 
+def list_photos(items):
+    """The photographs named by ``items`` (files, or folders of them in name order, each file
+    one of :data:`SUFFIXES`), as Paths; SkyfitError in one line for a path that does not
+    exist."""
+    paths = []
+    for p in map(Path, items):
+        if p.is_dir():
+            paths += sorted(q for q in p.iterdir() if q.suffix.lower() in SUFFIXES)
+        elif p.is_file():
+            paths.append(p)
+        else:
+            raise SkyfitError(f"{p} does not exist; give photographs or a folder of them.")
+    return paths
+
+
 def check_same_size(photos_by_path):
     """Refuse frames that differ in size or orientation.
 

@@ -34,6 +34,7 @@ from ..physics.ward import NORMALISATIONS, raw_parameters
 from .fit_result import read_fit_result
 from .illumination import directional_from_record, envmap_from_record, perez_from_irradiance
 from .irradiance import irradiance_at, read_irradiance
+from .sky_series import series_entry
 from ..physics.turbid_sky import TURBIDITY_RANGE, turbid_sky
 
 #: Where the shipped scenes live; a spec's ``scene.file`` is looked up beside the spec first.
@@ -670,7 +671,36 @@ def _light(e, zenith, azimuth, t, index, base_dir):
                                               "sun_mask_deg", "diffuse_horizontal_W_m2",
                                               "direct_normal_W_m2", "global_horizontal_W_m2",
                                               "ground_albedo") if k in e}}
+    if name.endswith(".json"):
+        rec = _series_record(rec, base_dir, t)
     return envmap_from_record(rec, base_dir, zenith, azimuth)
+
+
+#: The [sky] keys that give an envmap's measured irradiance.
+_MEASURED_KEYS = {"diffuse_horizontal_W_m2", "direct_normal_W_m2", "global_horizontal_W_m2"}
+
+
+def _series_record(rec, base_dir, t):
+    """An envmap record naming a sky series (``skyfit sky-series``) made the record of the
+    series' map nearest the frame's time ``t``: its file, projection and recommended sun mask,
+    and its card's global horizontal irradiance unless the spec gives measured irradiance."""
+    try:
+        entry, doc = series_entry(base_dir / rec["file"], t)
+    except SkyfitError as exc:
+        raise SpecError(f"[sky] file: {exc}") from None
+    if rec.get("projection", doc["projection"]) != doc["projection"]:
+        raise SpecError(f"[sky] projection = {rec['projection']!r}, but the series "
+                        f"{rec['file']} holds {doc['projection']} maps; drop projection.")
+    out = {**rec, "file": str(Path(rec["file"]).parent / entry["file"]),
+           "projection": doc["projection"]}
+    if doc.get("sun_mask_deg") and "sun_mask_deg" not in rec:
+        out["sun_mask_deg"] = doc["sun_mask_deg"]
+    if "global_horizontal_W_m2" in entry and not _MEASURED_KEYS & set(rec):
+        out["global_horizontal_W_m2"] = entry["global_horizontal_W_m2"]
+        out["sun_measured"] = True          # by the card, to its sun_sd
+        if "sun_sd" in entry:
+            out["sun_sd"] = entry["sun_sd"]
+    return out
 
 
 #: The [sky] keys of a CIE sky's photometry, named as the fields of

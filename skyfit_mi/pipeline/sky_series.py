@@ -1,0 +1,351 @@
+"""An HDR fisheye series of the sky: exposure brackets merged into linear maps (issue 52).
+
+A camera with a fisheye lens, beside the scene and pointing at the zenith, photographs the
+sky in a bracket of exposures at each of the scene's frames.  :func:`sky_series` merges each
+bracket into one linear map (OpenEXR, the equidistant fisheye of
+:mod:`~skyfit_mi.physics.envmap`), and writes a series file (``sky_series.json``) that a
+spec's ``envmap`` sky names as its ``file``: each frame is then lit by the map nearest its
+time (:func:`series_entry`).
+
+Merging (a Debevec-Malik merge with the response known)
+------------------------------------------------------
+* A shot's codes are made linear by the response its file states (sRGB for JPEGs and 8-bit
+  files, linear for RAW and 16-bit linear TIFF; :class:`~skyfit_mi.physics.camera.SensorModel`)
+  and divided by its exposure H = t S / N^2 (EXIF exposure time [s], ISO speed, f-number).
+* A pixel's value is the mean of the shots where none of its channels is within
+  :data:`CLIP_FRACTION` of the saturation code and its largest channel is at least
+  :data:`FLOOR_FRACTION` of it, weighted by H: under shot noise a shot's variance of L is
+  proportional to L / H, so H is the inverse-variance weight.  Where every unclipped shot is
+  below the floor, the longest unclipped shot is taken.
+* A pixel clipped in every shot (the sun and its flare) takes the shortest shot's value, a
+  lower bound, and is counted: ``clipped_radius_deg`` is the largest angle between a clipped
+  pixel and the clipped pixels' brightest-weighted centre, and the series recommends a
+  ``sun_mask_deg`` that covers it (:data:`MASK_MARGIN_DEG` beyond); clipped pixels beyond
+  :data:`SUN_CLIP_MAX_DEG` of that centre (a bright cloud) are reported apart.
+
+Units
+-----
+The maps are in W m^-2 sr^-1 through the exposure equation of a saturation-based ISO speed
+(ISO 12232): a linear value v (1 = saturation) at exposure H is a luminance
+v :data:`SATURATION_LUMINANCE` / H [cd m^-2], divided by the clear sky's luminous efficacy
+(:data:`~skyfit_mi.physics.sky.EFFICACY_CLEAR`).  That is nominal: cameras' stated speeds
+and lenses' transmission make it right to a factor of about 1.5.  The sun's level relative
+to the sky does not depend on it when the card below is photographed with the same camera,
+and a scene calibrated by its own grey card (``ingest --calibrate``) takes its level from
+the light whatever its units; a pyranometer's DHI (the spec's ``irradiance_file``) sets it.
+
+The sun's level: a grey card
+----------------------------
+The sun is clipped in every shot, so its light comes from elsewhere.  A horizontal grey card
+of reflectance rho (about 0.18), in the sun, photographed with the same camera at each
+bracket, gives the global horizontal irradiance in the maps' units: E = pi L_card / rho
+(a Lambertian card; eq. 3.3's diffuse term), L_card the luminance of the card's box.  The
+series records it per map as ``global_horizontal_W_m2``, from which the spec's envmap sky
+takes the sun's disc, (E - E_map) / cos theta_s
+(:func:`~skyfit_mi.physics.envmap.direct_normal_from_global`).  Keep the card out of your
+own shadow and away from the sun's mirror direction, where real cards are not Lambertian.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..conventions import direction_from_angles
+from ..errors import OutputError, SkyfitError
+from ..files import check_dir, ensure_dir, write_json
+from ..physics.camera import SensorModel
+from ..physics.colour import SRGB_LUMINANCE
+from ..physics.sky import EFFICACY_CLEAR
+from ..render.image import write_exr
+from .photo_times import check_times, frame_times
+from .photos import check_same_size, list_photos, read_photo
+
+#: Luminance [cd m^-2] that saturates a sensor at exposure H = t S / N^2 = 1 [s]: ISO 12232's
+#: saturation-based speed, H_sat = 78 / S [lux s] at the sensor, with the standard lens and
+#: angle factor q = 0.65 (sensor illuminance q L / N^2): 78 / 0.65.
+SATURATION_LUMINANCE = 78.0 / 0.65
+#: A code within this fraction of the saturation code (any channel) counts as clipped.
+CLIP_FRACTION = 0.97
+#: A shot whose largest channel is below this fraction of saturation is used only when no
+#: brighter unclipped shot exists (quantisation and read noise dominate down there).
+FLOOR_FRACTION = 0.02
+#: Shots more than this many seconds after the previous one start a new bracket (default).
+BRACKET_GAP_S = 30.0
+#: A card shot is paired with a bracket within this many seconds at most (default).
+CARD_MAX_GAP_S = 300.0
+#: The relative uncertainty (one sd of the log) of the global horizontal irradiance a grey card
+#: gives, by default: a matte card's reflectance is known to 1-2% and it departs from
+#: Lambert's law by a few percent away from its mirror direction.  The sun's share of it, E -
+#: E_map, carries it magnified by E / (E - E_map): the map's ``sun_sd``.
+CARD_SD = 0.02
+#: The sun's share of the card's irradiance below which its uncertainty stops growing (the
+#: sun behind a cloud: the disc is then small next to the sky).
+SUN_SHARE_FLOOR = 0.05
+#: The recommended sun mask reaches this far beyond the clipped pixels [degrees].
+MASK_MARGIN_DEG = 1.0
+#: Clipped pixels farther than this from the clipped centre are not the sun's [degrees].
+SUN_CLIP_MAX_DEG = 15.0
+#: A frame takes the map nearest its time within this many seconds at most.
+MAP_MAX_GAP_S = 300.0
+#: The series file's name.
+SERIES_NAME = "sky_series.json"
+
+
+@dataclass(frozen=True)
+class Shot:
+    """One photograph of a series: its linear values (H, W, 3) as a fraction of saturation,
+    which of its pixels are clipped (H, W), its exposure t S / N^2 [s] and its time."""
+
+    path: Path
+    linear: np.ndarray
+    clipped: np.ndarray
+    floor: np.ndarray
+    exposure: float
+    time: dt.datetime
+
+
+def _exposure(photo):
+    """t S / N^2 [s] of ``photo`` from its EXIF; SkyfitError naming what is missing."""
+    m = photo.metadata
+    t, n, iso = m.get("exposure_time_s"), m.get("f_number"), m.get("iso")
+    missing = [k for k, v in (("exposure time", t), ("f-number", n), ("ISO", iso)) if not v]
+    if missing:
+        raise SkyfitError(f"{Path(photo.path).name}: no EXIF {', '.join(missing)}; a bracket "
+                          "is merged by its shots' exposures, so keep the camera's EXIF.")
+    return float(t) * float(iso) / float(n) ** 2
+
+
+def read_shots(items, tz=None, times_csv=None):
+    """The :class:`Shot` of every photograph named by ``items`` (files or folders), in time
+    order, timed by their EXIF or a ``times_csv`` (file,time; rows naming other files are
+    passed over); one line of SkyfitError for an unreadable file, a missing time or EXIF
+    exposure, or shots of different sizes."""
+    paths = list_photos(items)
+    if not paths:
+        raise SkyfitError(f"no photographs in {', '.join(map(str, items))}.")
+    photos = [read_photo(p) for p in paths]
+    check_same_size(dict(zip(paths, photos)))
+    times = frame_times(paths, [p.metadata for p in photos], times_csv=times_csv, tz=tz,
+                        warn=lambda message: None)
+    check_times(paths, times)
+    shots = []
+    for path, photo, time in zip(paths, photos, times):
+        if photo.kind == "float":
+            linear = np.nan_to_num(photo.values, nan=0.0, posinf=0.0).clip(0.0)
+            clipped = np.zeros(photo.values.shape[:2], bool)
+        else:
+            sensor = SensorModel(1.0, response=photo.encoding_hint, bits=photo.bits)
+            linear = sensor.linearise(photo.values)
+            clipped = photo.values.max(axis=2) >= CLIP_FRACTION * photo.max_code
+        floor = linear.max(axis=2) < FLOOR_FRACTION
+        shots.append(Shot(path, linear.astype(np.float32), clipped, floor, _exposure(photo),
+                          time))
+    return sorted(shots, key=lambda s: s.time)
+
+
+def brackets(shots, gap_s=BRACKET_GAP_S):
+    """``shots`` (in time order) split where one follows the previous by more than ``gap_s``."""
+    out = []
+    for s in shots:
+        if out and (s.time - out[-1][-1].time).total_seconds() <= gap_s:
+            out[-1].append(s)
+        else:
+            out.append([s])
+    return out
+
+
+def merge(bracket):
+    """The merged map of a ``bracket`` of shots (module docstring) in units of luminance at
+    saturation per unit exposure [(H, W, 3), linear / (t S / N^2)], and its clipped pixels
+    (H, W), True where every shot clips."""
+    by_exposure = sorted(bracket, key=lambda s: s.exposure)
+    num = np.zeros(bracket[0].linear.shape, np.float64)
+    den = np.zeros(bracket[0].linear.shape[:2], np.float64)
+    longest = np.full(den.shape, -1)
+    for i, s in enumerate(by_exposure):
+        use = ~s.clipped & ~s.floor
+        num += np.where(use[..., None], s.linear, 0.0)       # (v / H) weighted by H
+        den += np.where(use, s.exposure, 0.0)
+        longest = np.where(~s.clipped, i, longest)
+    merged = num / np.maximum(den, 1e-300)[..., None]
+    dark = (den == 0) & (longest >= 0)
+    for i, s in enumerate(by_exposure):
+        pick = dark & (longest == i)
+        merged[pick] = s.linear[pick] / s.exposure
+    clipped = longest < 0
+    shortest = by_exposure[0]
+    merged[clipped] = shortest.linear[clipped] / shortest.exposure
+    return merged, clipped
+
+
+def fisheye_directions(height, width, north_rotation_deg=0.0):
+    """World directions (H, W, 3) of an equidistant fisheye's pixel centres
+    (:func:`~skyfit_mi.physics.envmap.fisheye_lookup`'s layout, the image's top at compass
+    azimuth ``north_rotation_deg``), and the mask of pixels within the horizon's circle."""
+    R = min(height, width) / 2.0
+    y, x = np.mgrid[0:height, 0:width] + 0.5
+    dx, dy = width / 2.0 - x, height / 2.0 - y
+    r = np.hypot(dx, dy)
+    theta = np.minimum(r / R, 1.0) * np.pi / 2
+    phi = np.arctan2(dx, dy) + np.radians(north_rotation_deg)
+    return direction_from_angles(theta, phi), r <= R
+
+
+def clipped_extent(clipped, merged):
+    """(the angle [deg] from the clipped pixels' centre to the farthest of them within
+    :data:`SUN_CLIP_MAX_DEG`, the count of clipped pixels beyond it) of a fisheye map; (0, 0)
+    when nothing clips."""
+    if not clipped.any():
+        return 0.0, 0
+    d, inside = fisheye_directions(*clipped.shape)
+    c = clipped & inside
+    if not c.any():
+        return 0.0, 0
+    w = merged[c] @ SRGB_LUMINANCE
+    centre = (d[c] * np.maximum(w, 1e-30)[:, None]).sum(0)
+    centre /= np.linalg.norm(centre)
+    angle = np.degrees(np.arccos(np.clip(d[c] @ centre, -1.0, 1.0)))
+    near = angle <= SUN_CLIP_MAX_DEG
+    return float(angle[near].max()) if near.any() else 0.0, int((~near).sum())
+
+
+def map_irradiance(merged, clipped):
+    """The horizontal irradiance of an equidistant fisheye map [its units x sr], luminance,
+    its clipped pixels left out: sum L cos theta d omega, a pixel's solid angle
+    sin theta / r (pi / 2R) (r its distance from the centre, R the horizon's radius [px])."""
+    h, w = clipped.shape
+    d, inside = fisheye_directions(h, w)
+    theta = np.arccos(np.clip(d[..., 2], -1.0, 1.0))
+    r = theta / (np.pi / 2) * (min(h, w) / 2.0)
+    omega = np.sin(theta) / np.maximum(r, 1e-9) * np.pi / min(h, w)
+    use = inside & ~clipped
+    return float(((merged[use] @ SRGB_LUMINANCE) * d[use][:, 2] * omega[use]).sum())
+
+
+def card_irradiance(shots, box, reflectance):
+    """(time, global horizontal irradiance in the maps' units [W m^-2]) of each card shot:
+    pi L / ``reflectance``, L the mean luminance of the card's ``box`` (x0, y0, x1, y1)
+    [pixels, end exclusive]; SkyfitError where the box leaves the image or clips."""
+    x0, y0, x1, y1 = box
+    out = []
+    for s in shots:
+        h, w = s.clipped.shape
+        if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h):
+            raise SkyfitError(f"--card-box {x0},{y0},{x1},{y1} leaves {s.path.name} ({w}x{h}); "
+                              "give the card's pixels as X0,Y0,X1,Y1 within the image.")
+        if s.clipped[y0:y1, x0:x1].any():
+            raise SkyfitError(f"{s.path.name}: the card clips inside --card-box; photograph it "
+                              "at a shorter exposure.")
+        lum = float(s.linear[y0:y1, x0:x1].mean(axis=(0, 1)) @ SRGB_LUMINANCE)
+        radiance = lum * SATURATION_LUMINANCE / s.exposure / EFFICACY_CLEAR
+        out.append((s.time, float(np.pi * radiance / reflectance)))
+    return out
+
+
+def _nearest(card, t, max_gap_s):
+    """The card reading nearest ``t`` within ``max_gap_s``, or SkyfitError."""
+    gaps = [abs((c - t).total_seconds()) for c, _ in card]
+    i = int(np.argmin(gaps))
+    if gaps[i] > max_gap_s:
+        raise SkyfitError(f"the bracket at {t.isoformat()} has no card shot within "
+                          f"{max_gap_s:g} s (nearest {gaps[i]:.0f} s away); photograph the card "
+                          "with every bracket, or raise --card-max-gap-s.")
+    return card[i][1], gaps[i]
+
+
+@dataclass(frozen=True)
+class CardOptions:
+    """A grey card photographed with each bracket: its shots (files or folders), its box
+    (x0, y0, x1, y1) [pixels] in them, its reflectance, the longest gap to a bracket [s], and
+    the relative uncertainty of its reading of the global irradiance (one sd)."""
+
+    photos: tuple
+    box: tuple
+    reflectance: float = 0.18
+    max_gap_s: float = CARD_MAX_GAP_S
+    sd: float = CARD_SD
+
+
+def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, gap_s=BRACKET_GAP_S,
+               overwrite=False, log=print):
+    """Merge the bracketed fisheye shots named by ``items`` into ``out_dir``: one EXR per
+    bracket (``sky_YYYYmmdd_HHMMSS.exr``, its time in the header) and :data:`SERIES_NAME`
+    (module docstring); ``card`` a :class:`CardOptions` gives each map its global horizontal
+    irradiance; ``tz`` and ``times_csv`` time the shots (:func:`read_shots`).  Returns the
+    series document."""
+    if card is not None and not 0.01 <= card.reflectance <= 1.0:
+        raise SkyfitError(f"--card-reflectance {card.reflectance:g} must lie in [0.01, 1].")
+    if card is not None and not 0.0 < card.sd <= 1.0:
+        raise SkyfitError(f"--card-sd {card.sd:g} must lie in (0, 1] (a relative uncertainty).")
+    out = check_dir(out_dir)
+    if (out / SERIES_NAME).exists() and not overwrite:
+        raise OutputError(f"{str(out / SERIES_NAME)!r} exists; give another -o, or --overwrite "
+                          "to replace the series.")
+    shots = read_shots(items, tz, times_csv)
+    groups = brackets(shots, gap_s)
+    readings = card_irradiance(read_shots(card.photos, tz, times_csv), card.box,
+                               card.reflectance) \
+        if card is not None else None
+    ensure_dir(out)
+    entries, radius = [], 0.0
+    for n, group in enumerate(groups):
+        merged, clipped = merge(group)
+        image = merged * (SATURATION_LUMINANCE / EFFICACY_CLEAR)
+        t = group[len(group) // 2].time
+        name = f"sky_{t:%Y%m%d_%H%M%S}.exr"
+        write_exr(out / name, image, {"time": t, "kind": "sky", "units": "W m^-2 sr^-1",
+                                      "shots": len(group)})
+        extent, stray = clipped_extent(clipped, merged)
+        radius = max(radius, extent)
+        e = {"time": t.isoformat(), "file": name, "shots": [s.path.name for s in group],
+             "exposures": [s.exposure for s in group], "clipped_pixels": int(clipped.sum()),
+             "clipped_radius_deg": extent, "clipped_elsewhere": stray}
+        if stray:
+            log(f"{name}: {stray} pixels clip more than {SUN_CLIP_MAX_DEG:g} deg from the sun "
+                "in every shot; add a shorter exposure to the bracket")
+        if readings is not None:
+            ghi, e["card_gap_s"] = _nearest(readings, t, card.max_gap_s)
+            e_map = map_irradiance(image, clipped)
+            e["global_horizontal_W_m2"], e["map_horizontal_W_m2"] = ghi, e_map
+            e["sun_sd"] = card.sd * ghi / max(ghi - e_map, SUN_SHARE_FLOOR * ghi)
+        entries.append(e)
+        log(f"[{n + 1}/{len(groups)}] {name}: {len(group)} shots, "
+            f"{int(clipped.sum())} pixels clipped in all")
+    doc = {"kind": "sky_series", "projection": "fisheye", "units": "W m^-2 sr^-1",
+           "exposure": "H = t S / N^2 [s] (EXIF exposure time, ISO speed, f-number)",
+           "scale_source": "the exposure equation of a saturation-based ISO speed (ISO 12232), "
+                           "nominal: within a factor of about 1.5",
+           "sun_mask_deg": round(radius + MASK_MARGIN_DEG, 1) if radius else None,
+           "bracket_gap_s": gap_s, "maps": entries}
+    if card is not None:
+        doc["card"] = {"reflectance": card.reflectance, "box": list(card.box),
+                       "shots": len(readings), "max_gap_s": card.max_gap_s, "sd": card.sd}
+    write_json(out / SERIES_NAME, doc)
+    return doc
+
+
+def series_entry(path, time):
+    """The entry of the series file ``path`` whose map lies nearest ``time`` (an aware
+    datetime), and the series document; SkyfitError in one line when the file is not a series
+    or no map lies within :data:`MAP_MAX_GAP_S` of ``time``."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise SkyfitError(f"{path}: not a sky series ({type(exc).__name__}); make it with "
+                          "`skyfit sky-series`.") from None
+    if not isinstance(doc, dict) or doc.get("kind") != "sky_series" or not doc.get("maps"):
+        raise SkyfitError(f"{path}: not a sky series with maps; make it with `skyfit sky-series`.")
+    gaps = [abs((dt.datetime.fromisoformat(e["time"]) - time).total_seconds())
+            for e in doc["maps"]]
+    i = int(np.argmin(gaps))
+    if gaps[i] > MAP_MAX_GAP_S:
+        raise SkyfitError(f"{path}: no sky map within {MAP_MAX_GAP_S:g} s of the frame at "
+                          f"{time.isoformat()} (nearest {gaps[i]:.0f} s away); photograph the "
+                          "sky with every frame.")
+    return doc["maps"][i], doc
