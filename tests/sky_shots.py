@@ -5,10 +5,12 @@ A camera whose speed meets its saturation definition (``gain`` 1:
 :class:`~skyfit_mi.physics.sky.Sky` through an upward equidistant fisheye: linear value
 v = gain L H EFFICACY / SATURATION_LUMINANCE, shot noise of ``noise`` (relative, at full
 scale), sRGB, 8-bit JPEG with the EXIF time and exposure (f/8, ISO 100).  The sun and its flare
-(within ``flare_deg``) are far brighter than any exposure holds.  Used by
-tests/test_sky_series.py and scripts/sky_series_example.py.
+(within ``flare_deg``) are far brighter than any exposure holds.  :func:`photographed_day`:
+a day rendered under measured skies and the same day lit by its skies as photographed.  Used by
+tests/test_sky_series.py and scripts/sky_series_fit.py.
 """
 import datetime as dt
+import json
 from pathlib import Path
 
 import numpy as np
@@ -17,12 +19,22 @@ from PIL import Image
 from skyfit_mi.physics.camera import SensorModel
 from skyfit_mi.physics.sky import EFFICACY_CLEAR
 from skyfit_mi.pipeline.photo_sim import SIM_F_NUMBER, SIM_ISO, _exif
-from skyfit_mi.pipeline.sky_series import SATURATION_LUMINANCE, fisheye_directions
+from skyfit_mi.pipeline.sky_series import (
+    SATURATION_LUMINANCE,
+    SERIES_NAME,
+    CardOptions,
+    fisheye_directions,
+    sky_series,
+)
 
 #: Exposure times of a bracket [s]: four stops apart, two each way of 1/500.
 BRACKET_S = (1 / 125, 1 / 500, 1 / 2000, 1 / 8000)
 #: The sun's flare in the fisheye [degrees]: clipped in every shot.
 FLARE_DEG = 2.0
+#: The card's pixels in its shots (x0, y0, x1, y1).
+CARD_BOX = (4, 4, 28, 28)
+#: The fisheye's north rotation in the photographed day [degrees].
+NORTH_DEG = 20.0
 
 
 def fisheye_radiance(sky, size, north_rotation_deg=0.0, flare_deg=FLARE_DEG):
@@ -77,3 +89,60 @@ def photograph_card(sky, time, folder, *, reflectance=0.18, size=32, gain=1.0, n
     _jpeg(path, np.broadcast_to(radiance, (size, size, 3)), exposure_s, time, gain, noise,
           np.random.default_rng(seed))
     return path
+
+
+def series(folder, **kw):
+    """``sky_series`` of ``folder``/shots with the card of ``folder``/card, into ``folder``/sky."""
+    return sky_series([folder / "shots"], folder / "sky",
+                      card=CardOptions((str(folder / "card"),), CARD_BOX), log=lambda *a: None,
+                      **kw)
+
+
+def photographed_day(folder, scans, size=16, noise_percent=1.0, spp=128):
+    """The disc rendered under ``scans`` (:func:`measured_light.measured_disc_day`), each
+    frame's sky photographed (a bracket 2 s before the frame, north turned :data:`NORTH_DEG`)
+    and its card 30 s after, merged by ``skyfit sky-series``, and the day relabelled with the
+    light a spec naming the series gives: (the day, the relabelled day, the relabelled frames'
+    skies by time)."""
+    from measured_light import measured_disc_day, relabelled
+
+    from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
+    from skyfit_mi.pipeline.spec import load_spec
+
+    folder = Path(folder)
+    day = measured_disc_day(folder, scans, size=size, noise_percent=noise_percent, spp=spp)
+    doc, _ = load_manifest(day)
+    for k, f in enumerate(doc["frames"]):
+        t = dt.datetime.fromisoformat(f["time"])
+        sky = frame_sky(f, day)
+        photograph_sky(sky, t - dt.timedelta(seconds=2), folder / "shots", seed=k,
+                       north_rotation_deg=NORTH_DEG)
+        photograph_card(sky, t + dt.timedelta(seconds=30), folder / "card", seed=10 + k)
+    series(folder)
+    spec = json.loads((folder / "measured_sky.json").read_text())
+    spec["sky"] = {"type": "envmap", "file": f"sky/{SERIES_NAME}", "north_rotation_deg": NORTH_DEG,
+                   "ground_albedo": 0.2}
+    (folder / "series.json").write_text(json.dumps(spec))
+    skies = {f.time: f.sky for f in load_spec(folder / "series.json").frames}
+    photographed = relabelled(day, folder / "photographed",
+                              lambda f, _: skies[dt.datetime.fromisoformat(f["time"])])
+    return day, photographed, skies
+
+
+def fit_disc(light, sun_sd):
+    """The colour-model fit of the disc of the day ``light`` with the sky's level under its
+    prior and the sun's level to ``sun_sd``: (each parameter's 95% interval holds its truth,
+    C's median 95% half-width over the truth, the fit's result)."""
+    from measured_light import TRUTH
+
+    from skyfit_mi.fitting.chi2 import parse_region
+    from skyfit_mi.fitting.fit import fit_regions
+    from skyfit_mi.fitting.light import LightOptions
+
+    names = ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha")
+    r = next(fit_regions(light, [("disc", parse_region("rect:3,3,12,12"))], model="colour",
+                         light=LightOptions(sky="prior", sun_sd=sun_sd), log=lambda *a: None))
+    iv = r["intervals"]
+    held = {n: iv[n]["95"][0] <= v <= iv[n]["95"][1] for n, v in zip(names, TRUTH)}
+    half = float(np.median([np.diff(iv[n]["95"])[0] / 2 / v for n, v in zip(names[:3], TRUTH)]))
+    return held, half, r

@@ -10,7 +10,16 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from sky_shots import FLARE_DEG, fisheye_radiance, photograph_card, photograph_sky  # noqa: E402
+from sky_shots import (  # noqa: E402
+    CARD_BOX,
+    FLARE_DEG,
+    fisheye_radiance,
+    photograph_card,
+    photograph_sky,
+    fit_disc,
+    photographed_day,
+    series,
+)
 
 from skyfit_mi.errors import SkyfitError  # noqa: E402
 from skyfit_mi.physics.colour import SRGB_LUMINANCE  # noqa: E402
@@ -25,7 +34,6 @@ from skyfit_mi.pipeline.sky_series import (  # noqa: E402
 
 TZ = dt.timezone(dt.timedelta(hours=-4))
 T0 = dt.datetime(2013, 5, 27, 10, 0, tzinfo=TZ)
-CARD_BOX = (4, 4, 28, 28)
 
 
 def _shoot(folder, skies, gain=1.0, rotation=0.0, card_after_s=20):
@@ -37,12 +45,6 @@ def _shoot(folder, skies, gain=1.0, rotation=0.0, card_after_s=20):
                         seed=10 + k)
 
 
-def _series(folder, **kw):
-    return sky_series([folder / "shots"], folder / "sky",
-                      card=CardOptions((str(folder / "card"),), CARD_BOX), log=lambda *a: None,
-                      **kw)
-
-
 def test_brackets_merge_to_the_skys_radiance_and_the_card_gives_its_global_irradiance(tmp_path):
     """Two brackets of four 8-bit JPEGs (0.5% noise) of CIE clear skies: away from the clipped
     sun and above 10 deg of altitude (where a JPEG's halved chroma mixes in the black beyond the
@@ -52,7 +54,7 @@ def test_brackets_merge_to_the_skys_radiance_and_the_card_gives_its_global_irrad
     the global horizontal irradiance to 1%; the maps carry their times in the header."""
     skies = [cie_sky("clear", z, a) for z, a in ((50.0, 110.0), (40.0, 130.0))]
     _shoot(tmp_path, skies, rotation=25.0)
-    doc = _series(tmp_path)
+    doc = series(tmp_path)
     assert [len(e["shots"]) for e in doc["maps"]] == [4, 4]
     assert FLARE_DEG - 0.7 <= max(e["clipped_radius_deg"] for e in doc["maps"]) <= FLARE_DEG
     assert FLARE_DEG <= doc["sun_mask_deg"] <= FLARE_DEG + 1.5
@@ -78,7 +80,7 @@ def test_a_cameras_gain_scales_map_and_card_alike(tmp_path):
     sky = cie_sky("clear", 45.0, 120.0)
     for gain in (1.0, 1.3):
         _shoot(tmp_path / str(gain), [sky], gain=gain)
-    a, b = (_series(tmp_path / str(g)) for g in (1.0, 1.3))
+    a, b = (series(tmp_path / str(g)) for g in (1.0, 1.3))
     ma, mb = (read_photo(tmp_path / str(g) / "sky" / doc["maps"][0]["file"]).values
               for g, doc in ((1.0, a), (1.3, b)))
     la, lb = ma @ SRGB_LUMINANCE, mb @ SRGB_LUMINANCE
@@ -105,9 +107,9 @@ def test_bad_series_input_gets_one_line_and_nothing_written(tmp_path, capsys):
         sky_series([tmp_path / "shots"], tmp_path / "a",
                    card=CardOptions((str(tmp_path / "card"),), CARD_BOX, max_gap_s=10.0))
     assert not (tmp_path / "a" / SERIES_NAME).exists()
-    _series(tmp_path)
+    series(tmp_path)
     with pytest.raises(SkyfitError, match="--overwrite"):
-        _series(tmp_path)
+        series(tmp_path)
     bare = tmp_path / "bare"
     bare.mkdir()
     exif = Image.Exif()
@@ -132,53 +134,25 @@ def test_a_day_fitted_under_its_photographed_sky_holds_the_truth_near_the_known_
     a photographed day's fit takes by default), the sun's DNI to 1%; fitted with the sky's level
     under its prior and that sun sd, every truth is held, and C's median 95% half-width is at
     most 1.2x that of the fit given the true maps and sun with the same sd (measured 1.00x)."""
-    from measured_light import TRUTH, measured_disc_day, relabelled
-
-    from skyfit_mi.fitting.chi2 import parse_region
-    from skyfit_mi.fitting.fit import fit_regions
-    from skyfit_mi.fitting.light import LightOptions
     from skyfit_mi.fitting.sky_fit import default_sun_sd
     from skyfit_mi.physics.sky_measurement import load_scans
     from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
-    from skyfit_mi.pipeline.spec import load_spec
 
     try:
         scans = load_scans()
     except Exception as e:
         pytest.skip(f"shared scans not found: {e}")
-    day = measured_disc_day(tmp_path, scans[::5], size=16, noise_percent=1.0, spp=128)
-    doc, _ = load_manifest(day)
-    for k, f in enumerate(doc["frames"]):
-        t = dt.datetime.fromisoformat(f["time"])
-        sky = frame_sky(f, day)
-        photograph_sky(sky, t - dt.timedelta(seconds=2), tmp_path / "shots", seed=k,
-                       north_rotation_deg=20.0)
-        photograph_card(sky, t + dt.timedelta(seconds=30), tmp_path / "card", seed=10 + k)
-    _series(tmp_path)
-    spec = json.loads((tmp_path / "measured_sky.json").read_text())
-    spec["sky"] = {"type": "envmap", "file": f"sky/{SERIES_NAME}", "north_rotation_deg": 20.0,
-                   "ground_albedo": 0.2}
-    (tmp_path / "series.json").write_text(json.dumps(spec))
-    skies = {f.time: f.sky for f in load_spec(tmp_path / "series.json").frames}
+    day, photographed, skies = photographed_day(tmp_path, scans[::5])
     assert all(k.info["sun_measured"] and "global_horizontal_W_m2" in k.info
                for k in skies.values())
     sun_sd = default_sun_sd({"source": "photographs"}, list(skies.values()))
     assert sun_sd == max(k.info["sun_sd"] for k in skies.values())
     assert 0.02 < sun_sd < 0.03                  # the card's 2%, through the sun's share
-    photographed = relabelled(day, tmp_path / "photographed",
-                              lambda f, _: skies[dt.datetime.fromisoformat(f["time"])])
-    names = ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha")
-    held, half = {}, {}
+    doc, _ = load_manifest(day)
     for f in doc["frames"]:
         dni = skies[dt.datetime.fromisoformat(f["time"])].info["direct_normal_from_global_W_m2"]
         assert dni == pytest.approx(frame_sky(f, day).info["direct_normal_W_m2"], rel=0.01)
-    for light in (day, photographed):
-        r = next(fit_regions(light, [("disc", parse_region("rect:3,3,12,12"))], model="colour",
-                             light=LightOptions(sky="prior", sun_sd=sun_sd),
-                             log=lambda *a: None))
-        held[light] = {n: r["intervals"][n]["95"][0] <= v <= r["intervals"][n]["95"][1]
-                       for n, v in zip(names, TRUTH)}
-        half[light] = np.median([np.diff(r["intervals"][n]["95"])[0] / 2 / v
-                                 for n, v in zip(names[:3], TRUTH)])
-    assert all(held[day].values()) and all(held[photographed].values()), (held, r["intervals"])
-    assert half[photographed] <= 1.2 * half[day], half
+    (held_true, half_true, _), (held, half, r) = (fit_disc(d, sun_sd)
+                                                 for d in (day, photographed))
+    assert all(held_true.values()) and all(held.values()), (held_true, held, r["intervals"])
+    assert half <= 1.2 * half_true, (half, half_true)
