@@ -558,7 +558,7 @@ def _sky_series(args):
     elif args.card_box is not None:
         raise SkyfitError("--card-box belongs to --card (the grey card's shots).")
     doc = sky_series(args.photos, args.output, card=card, tz=args.tz, times_csv=args.times,
-                     gap_s=args.bracket_gap_s,
+                     flat=args.flat, gap_s=args.bracket_gap_s,
                      overwrite=args.overwrite, log=(lambda *a: None) if args.quiet else print)
     lines = [f"{len(doc['maps'])} sky maps in {args.output}; in the spec:", "[sky]",
              'type = "envmap"', f'file = "{args.output}/sky_series.json"  # relative to the spec',
@@ -587,6 +587,9 @@ def _add_sky_series(sub, common):
                      "Europe/Berlin or +01:00)")
     sky.add_argument("--times", help="CSV file,time of the shots (and the card's) instead of "
                      "their EXIF times")
+    sky.add_argument("--flat", help="a flat field through the fisheye (a photograph of a "
+                     "uniform field, or its linear map), which undoes the lens's vignetting; "
+                     "default none")
     sky.add_argument("--bracket-gap-s", type=float, default=30.0, help="a shot more than this "
                      "many seconds after the previous one starts a new bracket (default 30)")
     sky.add_argument("--card", nargs="+", help="shots of a horizontal grey card in the sun, "

@@ -60,13 +60,14 @@ def _jpeg(path, radiance, exposure_s, time, gain, noise, rng):
 
 
 def photograph_sky(sky, time, folder, *, size=128, gain=1.0, noise=0.005, seed=0,
-                   north_rotation_deg=0.0):
+                   north_rotation_deg=0.0, falloff=1.0):
     """The bracket (:data:`BRACKET_S`) of ``sky`` at ``time`` (aware), a second apart, as JPEGs
-    in ``folder``; returns their paths."""
+    in ``folder``, through a lens whose relative response is ``falloff`` (size, size); returns
+    their paths."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
-    radiance = fisheye_radiance(sky, size, north_rotation_deg)
+    radiance = fisheye_radiance(sky, size, north_rotation_deg) * np.asarray(falloff)[..., None]
     out = []
     for i, t in enumerate(BRACKET_S):
         when = time + dt.timedelta(seconds=i)

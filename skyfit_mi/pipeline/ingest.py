@@ -51,7 +51,7 @@ from .colorchecker import NAMES, NEUTRAL, find_chart, matrix_error, reference_rg
 from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance,
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import check_times, frame_times
-from .photos import RAW_COLOUR_REACH, check_same_size, list_photos, read_photo
+from .photos import RAW_COLOUR_REACH, check_same_size, list_photos, read_flat_field, read_photo
 from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
 from .raw_noise import bootstrap, cfa_planes
 from .region_edges import colour_mixed, pose_reach
@@ -1038,17 +1038,7 @@ def linearise(frames, o):
         else np.ones((h, w))
     flat = None
     if o.vignetting not in ("none", "cos4"):
-        image = read_photo(Path(o.vignetting))
-        if image.values.shape[:2] != (h, w):
-            raise SkyfitError(f"flat field {o.vignetting} is {image.values.shape[1]}x"
-                              f"{image.values.shape[0]}, the frames {w}x{h}; give one of their "
-                              "size.")
-        fl = np.nanmean(image.values if image.kind == "float" else
-                        SensorModel(1.0, response=image.encoding_hint, bits=image.bits)
-                        .linearise(image.values), axis=2)
-        if not np.all(np.isfinite(fl)) or fl.max() <= 0:
-            raise SkyfitError(f"flat field {o.vignetting} has non-finite or no positive values.")
-        falloff = flat = fl / fl.max()
+        falloff = flat = read_flat_field(o.vignetting, (h, w))
     values = [(p.values * float_scale) if float_scale else p.values for p in photos]
     return Linear(sensor, float_scale, falloff, flat, values)
 

@@ -64,6 +64,7 @@ import numpy as np
 
 from ..child import CallFailed, Child, ChildDied, one_line
 from ..errors import SkyfitError
+from ..physics.camera import SensorModel
 from ..render.image import ExrError, read_bitmap, read_exr_channels
 from . import jpeg_noise
 from .orientation import ORIENTATIONS, apply_orientation
@@ -751,6 +752,24 @@ def list_photos(items):
         else:
             raise SkyfitError(f"{p} does not exist; give photographs or a folder of them.")
     return paths
+
+
+def read_flat_field(path, size):
+    """The flat field at ``path`` (a photograph of a uniform field through the same lens), as
+    each pixel's relative response (H, W), 1 at its brightest: the channels' mean of its
+    linear values (the response its file states).  SkyfitError in one line unless it is of
+    ``size`` (height, width) with finite, positive values."""
+    image = read_photo(Path(path))
+    h, w = size
+    if image.values.shape[:2] != (h, w):
+        raise SkyfitError(f"flat field {path} is {image.values.shape[1]}x{image.values.shape[0]}, "
+                          f"the frames {w}x{h}; give one of their size.")
+    fl = np.nanmean(image.values if image.kind == "float" else
+                    SensorModel(1.0, response=image.encoding_hint, bits=image.bits)
+                    .linearise(image.values), axis=2)
+    if not np.all(np.isfinite(fl)) or fl.max() <= 0:
+        raise SkyfitError(f"flat field {path} has non-finite or no positive values.")
+    return fl / fl.max()
 
 
 def check_same_size(photos_by_path):

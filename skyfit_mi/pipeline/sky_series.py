@@ -63,7 +63,7 @@ from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky import EFFICACY_CLEAR
 from ..render.image import write_exr
 from .photo_times import check_times, frame_times
-from .photos import check_same_size, list_photos, read_photo
+from .photos import check_same_size, list_photos, read_flat_field, read_photo
 
 #: Luminance [cd m^-2] that saturates a sensor at exposure H = t S / N^2 = 1 [s]: ISO 12232's
 #: saturation-based speed, H_sat = 78 / S [lux s] at the sensor, with the standard lens and
@@ -120,11 +120,12 @@ def _exposure(photo):
     return float(t) * float(iso) / float(n) ** 2
 
 
-def read_shots(items, tz=None, times_csv=None):
+def read_shots(items, tz=None, times_csv=None, flat=None):
     """The :class:`Shot` of every photograph named by ``items`` (files or folders), in time
     order, timed by their EXIF or a ``times_csv`` (file,time; rows naming other files are
-    passed over); one line of SkyfitError for an unreadable file, a missing time or EXIF
-    exposure, or shots of different sizes."""
+    passed over), divided by the lens's ``flat`` field (a path,
+    :func:`~.photos.read_flat_field`; None: none); one line of SkyfitError for an unreadable
+    file, a missing time or EXIF exposure, or shots of different sizes."""
     paths = list_photos(items)
     if not paths:
         raise SkyfitError(f"no photographs in {', '.join(map(str, items))}.")
@@ -133,6 +134,7 @@ def read_shots(items, tz=None, times_csv=None):
     times = frame_times(paths, [p.metadata for p in photos], times_csv=times_csv, tz=tz,
                         warn=lambda message: None)
     check_times(paths, times)
+    response = 1.0 if flat is None else read_flat_field(flat, photos[0].values.shape[:2])
     shots = []
     for path, photo, time in zip(paths, photos, times):
         if photo.kind == "float":
@@ -143,6 +145,7 @@ def read_shots(items, tz=None, times_csv=None):
             linear = sensor.linearise(photo.values)
             clipped = photo.values.max(axis=2) >= CLIP_FRACTION * photo.max_code
         floor = linear.max(axis=2) < FLOOR_FRACTION
+        linear = linear / np.maximum(response, 1e-6)[..., None] if flat is not None else linear
         shots.append(Shot(path, linear.astype(np.float32), clipped, floor, _exposure(photo),
                           time))
     return sorted(shots, key=lambda s: s.time)
@@ -271,13 +274,14 @@ class CardOptions:
     sd: float = CARD_SD
 
 
-def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, gap_s=BRACKET_GAP_S,
-               overwrite=False, log=print):
+def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
+               gap_s=BRACKET_GAP_S, overwrite=False, log=print):
     """Merge the bracketed fisheye shots named by ``items`` into ``out_dir``: one EXR per
     bracket (``sky_YYYYmmdd_HHMMSS.exr``, its time in the header) and :data:`SERIES_NAME`
     (module docstring); ``card`` a :class:`CardOptions` gives each map its global horizontal
-    irradiance; ``tz`` and ``times_csv`` time the shots (:func:`read_shots`).  Returns the
-    series document."""
+    irradiance; ``tz`` and ``times_csv`` time the shots and ``flat`` undoes the lens's
+    vignetting in the sky's (:func:`read_shots`; not in the card's: take its box near their
+    centre, where the lens does not darken).  Returns the series document."""
     if card is not None and not 0.01 <= card.reflectance <= 1.0:
         raise SkyfitError(f"--card-reflectance {card.reflectance:g} must lie in [0.01, 1].")
     if card is not None and not 0.0 < card.sd <= 1.0:
@@ -286,7 +290,7 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, gap_s=BRAC
     if (out / SERIES_NAME).exists() and not overwrite:
         raise OutputError(f"{str(out / SERIES_NAME)!r} exists; give another -o, or --overwrite "
                           "to replace the series.")
-    shots = read_shots(items, tz, times_csv)
+    shots = read_shots(items, tz, times_csv, flat)
     groups = brackets(shots, gap_s)
     readings = card_irradiance(read_shots(card.photos, tz, times_csv), card.box,
                                card.reflectance) \
@@ -317,6 +321,7 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, gap_s=BRAC
         log(f"[{n + 1}/{len(groups)}] {name}: {len(group)} shots, "
             f"{int(clipped.sum())} pixels clipped in all")
     doc = {"kind": "sky_series", "projection": "fisheye", "units": "W m^-2 sr^-1",
+           "flat_field": None if flat is None else str(flat),
            "exposure": "H = t S / N^2 [s] (EXIF exposure time, ISO speed, f-number)",
            "scale_source": "the exposure equation of a saturation-based ISO speed (ISO 12232), "
                            "nominal: within a factor of about 1.5",
