@@ -188,3 +188,24 @@ def test_a_flat_field_undoes_the_fisheyes_vignetting(tmp_path):
         ghi = float(sky.horizontal_irradiance() @ SRGB_LUMINANCE)
         assert doc["maps"][0]["global_horizontal_W_m2"] == pytest.approx(ghi, rel=0.01)
     assert ratio[True] < 0.75 and ratio[False] == pytest.approx(1.0, abs=0.01), ratio
+
+
+def test_large_shots_are_binned_to_the_maps_size(tmp_path, monkeypatch):
+    """Shots larger than MAP_PIXELS across are binned as they are read by the least whole
+    factor that brings them within it, cropped evenly: 130 pixels against 65 two by two, against
+    64 three by three (43 across, one pixel cropped); the 65-pixel map holds the sky at that
+    size to 1% in the median."""
+    from skyfit_mi.pipeline import sky_series as ss
+
+    sky = cie_sky("clear", 45.0, 120.0)
+    photograph_sky(sky, T0, tmp_path / "shots", size=130)
+    for most, across in ((64, 43), (65, 65)):
+        monkeypatch.setattr(ss, "MAP_PIXELS", most)
+        doc = sky_series([tmp_path / "shots"], tmp_path / str(most), log=lambda *a: None)
+        m = read_photo(tmp_path / str(most) / doc["maps"][0]["file"]).values
+        assert m.shape == (across, across, 3) and doc["sun_mask_deg"] is not None
+    truth = fisheye_radiance(sky, 65)
+    d, _ = fisheye_directions(65, 65)
+    away = (d[..., 2] > np.cos(np.radians(75))) & (d @ sky.sun_direction < np.cos(np.radians(8)))
+    lum = (m[away] @ SRGB_LUMINANCE) / (truth[away] @ SRGB_LUMINANCE)
+    assert np.median(lum) == pytest.approx(1.0, abs=0.01)

@@ -69,6 +69,11 @@ from .photos import check_same_size, list_photos, read_flat_field, read_photo
 #: saturation-based speed, H_sat = 78 / S [lux s] at the sensor, with the standard lens and
 #: angle factor q = 0.65 (sensor illuminance q L / N^2): 78 / 0.65.
 SATURATION_LUMINANCE = 78.0 / 0.65
+#: The merged maps' size across at most [pixels]: a sky's table has at most 256 rows
+#: (:data:`~skyfit_mi.physics.latlong.MAX_ROWS`), which a fisheye 1024 pixels across resolves
+#: with room to spare.  Larger shots are binned (block means) to it as they are read, so a
+#: series of full-size photographs is held at this size.
+MAP_PIXELS = 1024
 #: A code within this fraction of the saturation code (any channel) counts as clipped.
 CLIP_FRACTION = 0.97
 #: A shot whose largest channel is below this fraction of saturation is used only when no
@@ -120,34 +125,73 @@ def _exposure(photo):
     return float(t) * float(iso) / float(n) ** 2
 
 
-def read_shots(items, tz=None, times_csv=None, flat=None):
+def _blocks(a, b, reduce):
+    """``a`` (H, W, ...) reduced over b x b blocks by ``reduce`` (np.mean, np.any), cropped
+    evenly on both sides to whole blocks (the image's centre moves by under half a pixel)."""
+    if b == 1:
+        return a
+    h, w = (n // b * b for n in a.shape[:2])
+    y0, x0 = (a.shape[0] - h) // 2, (a.shape[1] - w) // 2
+    a = a[y0:y0 + h, x0:x0 + w]
+    return reduce(a.reshape(h // b, b, w // b, b, *a.shape[2:]), axis=(1, 3))
+
+
+def _linear(photo):
+    """A photograph's linear values (H, W, 3) as a fraction of saturation (the response its
+    file states; floats as they are), and its clipped pixels (H, W)."""
+    if photo.kind == "float":
+        return (np.nan_to_num(photo.values, nan=0.0, posinf=0.0).clip(0.0),
+                np.zeros(photo.values.shape[:2], bool))
+    sensor = SensorModel(1.0, response=photo.encoding_hint, bits=photo.bits)
+    return (sensor.linearise(photo.values),
+            photo.values.max(axis=2) >= CLIP_FRACTION * photo.max_code)
+
+
+def _check_box(box, photo):
+    """SkyfitError unless the card's ``box`` lies within ``photo``."""
+    x0, y0, x1, y1 = box
+    if not (0 <= x0 < x1 <= photo.width and 0 <= y0 < y1 <= photo.height):
+        raise SkyfitError(f"--card-box {x0},{y0},{x1},{y1} leaves {Path(photo.path).name} "
+                          f"({photo.width}x{photo.height}); give the card's pixels as "
+                          "X0,Y0,X1,Y1 within the image.")
+
+
+def read_shots(items, tz=None, times_csv=None, flat=None, box=None):
     """The :class:`Shot` of every photograph named by ``items`` (files or folders), in time
     order, timed by their EXIF or a ``times_csv`` (file,time; rows naming other files are
-    passed over), divided by the lens's ``flat`` field (a path,
-    :func:`~.photos.read_flat_field`; None: none); one line of SkyfitError for an unreadable
-    file, a missing time or EXIF exposure, or shots of different sizes."""
+    passed over).  A sky's shots are divided by the lens's ``flat`` field (a path,
+    :func:`~.photos.read_flat_field`; None: none) and binned to at most :data:`MAP_PIXELS`
+    across; of a card's, only the ``box`` (x0, y0, x1, y1) is kept, as its mean (1, 1, 3).
+    One photograph is held at a time.  One line of SkyfitError for an unreadable file, a
+    missing time or EXIF exposure, shots of different sizes, or a box beyond them."""
     paths = list_photos(items)
     if not paths:
         raise SkyfitError(f"no photographs in {', '.join(map(str, items))}.")
-    photos = [read_photo(p) for p in paths]
-    check_same_size(dict(zip(paths, photos)))
-    times = frame_times(paths, [p.metadata for p in photos], times_csv=times_csv, tz=tz,
-                        warn=lambda message: None)
-    check_times(paths, times)
-    response = 1.0 if flat is None else read_flat_field(flat, photos[0].values.shape[:2])
-    shots = []
-    for path, photo, time in zip(paths, photos, times):
-        if photo.kind == "float":
-            linear = np.nan_to_num(photo.values, nan=0.0, posinf=0.0).clip(0.0)
-            clipped = np.zeros(photo.values.shape[:2], bool)
+    kept, metas, shapes, response, b = [], [], {}, 1.0, 1
+    for path in paths:
+        photo = read_photo(path)
+        shapes[path] = (photo.height, photo.width, photo.metadata.get("orientation", 1))
+        check_same_size(shapes)
+        linear, clipped = _linear(photo)
+        if box is not None:
+            _check_box(box, photo)
+            x0, y0, x1, y1 = box
+            floor = np.zeros((1, 1), bool)
+            linear = linear[y0:y1, x0:x1].mean(axis=(0, 1), keepdims=True)
+            clipped = clipped[y0:y1, x0:x1].any(keepdims=True)
         else:
-            sensor = SensorModel(1.0, response=photo.encoding_hint, bits=photo.bits)
-            linear = sensor.linearise(photo.values)
-            clipped = photo.values.max(axis=2) >= CLIP_FRACTION * photo.max_code
-        floor = linear.max(axis=2) < FLOOR_FRACTION
-        linear = linear / np.maximum(response, 1e-6)[..., None] if flat is not None else linear
-        shots.append(Shot(path, linear.astype(np.float32), clipped, floor, _exposure(photo),
-                          time))
+            if not kept:
+                response = 1.0 if flat is None else \
+                    read_flat_field(flat, (photo.height, photo.width))[..., None]
+                b = max(1, -(-min(photo.height, photo.width) // MAP_PIXELS))
+            floor = _blocks(linear.max(axis=2), b, np.mean) < FLOOR_FRACTION
+            linear, clipped = _blocks(linear / response, b, np.mean), _blocks(clipped, b, np.any)
+        kept.append((path, linear.astype(np.float32), clipped, floor, _exposure(photo)))
+        metas.append(photo.metadata)
+        del photo
+    times = frame_times(paths, metas, times_csv=times_csv, tz=tz, warn=lambda message: None)
+    check_times(paths, times)
+    shots = [Shot(*k[:4], exposure=k[4], time=t) for k, t in zip(kept, times)]
     return sorted(shots, key=lambda s: s.time)
 
 
@@ -230,21 +274,16 @@ def map_irradiance(merged, clipped):
     return float(((merged[use] @ SRGB_LUMINANCE) * d[use][:, 2] * omega[use]).sum())
 
 
-def card_irradiance(shots, box, reflectance):
-    """(time, global horizontal irradiance in the maps' units [W m^-2]) of each card shot:
-    pi L / ``reflectance``, L the mean luminance of the card's ``box`` (x0, y0, x1, y1)
-    [pixels, end exclusive]; SkyfitError where the box leaves the image or clips."""
-    x0, y0, x1, y1 = box
+def card_irradiance(shots, reflectance):
+    """(time, global horizontal irradiance in the maps' units [W m^-2]) of each card shot
+    (:func:`read_shots` with its box): pi L / ``reflectance``, L the luminance of the box's
+    mean; SkyfitError where the card clips."""
     out = []
     for s in shots:
-        h, w = s.clipped.shape
-        if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h):
-            raise SkyfitError(f"--card-box {x0},{y0},{x1},{y1} leaves {s.path.name} ({w}x{h}); "
-                              "give the card's pixels as X0,Y0,X1,Y1 within the image.")
-        if s.clipped[y0:y1, x0:x1].any():
+        if s.clipped.any():
             raise SkyfitError(f"{s.path.name}: the card clips inside --card-box; photograph it "
                               "at a shorter exposure.")
-        lum = float(s.linear[y0:y1, x0:x1].mean(axis=(0, 1)) @ SRGB_LUMINANCE)
+        lum = float(s.linear[0, 0] @ SRGB_LUMINANCE)
         radiance = lum * SATURATION_LUMINANCE / s.exposure / EFFICACY_CLEAR
         out.append((s.time, float(np.pi * radiance / reflectance)))
     return out
@@ -292,7 +331,7 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
                           "to replace the series.")
     shots = read_shots(items, tz, times_csv, flat)
     groups = brackets(shots, gap_s)
-    readings = card_irradiance(read_shots(card.photos, tz, times_csv), card.box,
+    readings = card_irradiance(read_shots(card.photos, tz, times_csv, box=card.box),
                                card.reflectance) \
         if card is not None else None
     ensure_dir(out)
