@@ -366,8 +366,8 @@ def _float_photo(path, fmt, values, meta, source="float"):
 
 # ----------------------------------------------------------------------------------- readers
 
-def _read_pillow(path, fmt):
-    """8-bit JPEG or PNG through Pillow."""
+def _read_pillow(path, fmt, exact=True):
+    """8-bit JPEG or PNG through Pillow; a JPEG decoded in floating point where ``exact``."""
     from PIL import Image
 
     meta = read_exif(path)
@@ -397,7 +397,9 @@ def _read_pillow(path, fmt):
                     f"{fmt.upper()}, or remove it") from None
     if codes.ndim == 2:
         codes = codes[:, :, None]
-    if fmt == "jpeg":
+    if fmt == "jpeg" and not exact:
+        meta["decoder"] = "libjpeg, whole codes (Pillow)"
+    elif fmt == "jpeg":
         exact = jpeg_noise.decode(path)
         differ = None if exact is None or exact.shape != codes.shape else \
             float(np.sqrt(np.mean((exact - codes) ** 2)))
@@ -695,7 +697,7 @@ def _read_raw(path):
 
 _READERS = {}
 for _s in JPEG_SUFFIXES:
-    _READERS[_s] = lambda p: _read_pillow(p, "jpeg")
+    _READERS[_s] = lambda p, exact=True: _read_pillow(p, "jpeg", exact)
 for _s in PNG_SUFFIXES:
     _READERS[_s] = _read_png
 for _s in TIFF_SUFFIXES:
@@ -708,8 +710,10 @@ for _s in RAW_SUFFIXES:
     _READERS[_s] = _read_raw
 
 
-def read_photo(path):
-    """Read one photograph (any suffix in :data:`SUFFIXES`) as a :class:`Photo`.
+def read_photo(path, exact_jpeg=True):
+    """Read one photograph (any suffix in :data:`SUFFIXES`) as a :class:`Photo`; a JPEG's
+    codes decoded in floating point (module docstring) unless not ``exact_jpeg`` (libjpeg's
+    whole codes: several times faster, for uses that average its pixels).
 
     Raises
     ------
@@ -729,7 +733,7 @@ def read_photo(path):
     if p.stat().st_size == 0:
         raise _fail(p, "is empty (0 bytes)", "copy the photograph again or remove it")
     try:
-        return reader(p)
+        return reader(p) if suffix not in JPEG_SUFFIXES else reader(p, exact_jpeg)
     except SkyfitError:
         raise
     except MemoryError:

@@ -138,13 +138,15 @@ def _blocks(a, b, reduce):
 
 def _linear(photo):
     """A photograph's linear values (H, W, 3) as a fraction of saturation (the response its
-    file states; floats as they are), and its clipped pixels (H, W)."""
+    file states, by a table of its whole codes; floats as they are), and its clipped pixels
+    (H, W)."""
     if photo.kind == "float":
         return (np.nan_to_num(photo.values, nan=0.0, posinf=0.0).clip(0.0),
                 np.zeros(photo.values.shape[:2], bool))
     sensor = SensorModel(1.0, response=photo.encoding_hint, bits=photo.bits)
-    return (sensor.linearise(photo.values),
-            photo.values.max(axis=2) >= CLIP_FRACTION * photo.max_code)
+    table = sensor.linearise(np.arange(photo.max_code + 1)).astype(np.float32)
+    codes = np.rint(photo.values).astype(np.uint16)     # whole codes (exact_jpeg=False)
+    return table[codes], codes.max(axis=2) >= CLIP_FRACTION * photo.max_code
 
 
 def _check_box(box, photo):
@@ -169,7 +171,7 @@ def read_shots(items, tz=None, times_csv=None, flat=None, box=None):
         raise SkyfitError(f"no photographs in {', '.join(map(str, items))}.")
     kept, metas, shapes, response, b = [], [], {}, 1.0, 1
     for path in paths:
-        photo = read_photo(path)
+        photo = read_photo(path, exact_jpeg=False)        # averaged: libjpeg's codes suffice
         shapes[path] = (photo.height, photo.width, photo.metadata.get("orientation", 1))
         check_same_size(shapes)
         linear, clipped = _linear(photo)
