@@ -553,6 +553,8 @@ def _sky_series(args):
         if args.card_box is None or len(args.card_box) != 4:
             raise SkyfitError("--card needs --card-box X0,Y0,X1,Y1: the card's pixels in its "
                               "shots.")
+        if any(v != int(v) for v in args.card_box):
+            raise SkyfitError("--card-box takes whole pixels X0,Y0,X1,Y1.")
         card = CardOptions(tuple(args.card), tuple(int(v) for v in args.card_box),
                            args.card_reflectance, args.card_max_gap_s, args.card_sd)
     elif args.card_box is not None:

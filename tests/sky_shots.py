@@ -60,17 +60,17 @@ def _jpeg(path, radiance, exposure_s, time, gain, noise, rng):
 
 
 def photograph_sky(sky, time, folder, *, size=128, gain=1.0, noise=0.005, seed=0,
-                   north_rotation_deg=0.0, falloff=1.0):
-    """The bracket (:data:`BRACKET_S`) of ``sky`` at ``time`` (aware), a second apart, as JPEGs
-    in ``folder``, through a lens whose relative response is ``falloff`` (size, size); returns
-    their paths."""
+                   north_rotation_deg=0.0, falloff=1.0, spacing_s=1):
+    """The bracket (:data:`BRACKET_S`) of ``sky`` at ``time`` (aware), ``spacing_s`` apart, as
+    JPEGs in ``folder``, through a lens whose relative response is ``falloff`` (size, size);
+    returns their paths."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     radiance = fisheye_radiance(sky, size, north_rotation_deg) * np.asarray(falloff)[..., None]
     out = []
     for i, t in enumerate(BRACKET_S):
-        when = time + dt.timedelta(seconds=i)
+        when = time + dt.timedelta(seconds=i * spacing_s)
         path = folder / f"sky_{when:%H%M%S}_{i}.jpg"
         _jpeg(path, radiance, t, when, gain, noise, rng)
         out.append(path)
@@ -78,12 +78,14 @@ def photograph_sky(sky, time, folder, *, size=128, gain=1.0, noise=0.005, seed=0
 
 
 def photograph_card(sky, time, folder, *, reflectance=0.18, size=32, gain=1.0, noise=0.005,
-                    seed=0):
-    """A horizontal Lambertian grey card lit by ``sky``, filling a ``size``-pixel JPEG exposed
-    to put it near a third of full scale, in ``folder``; returns its path."""
+                    seed=0, shade=False):
+    """A horizontal Lambertian grey card lit by ``sky`` (by its sky alone, half of it, where in
+    ``shade``), filling a ``size``-pixel JPEG exposed to put it near a third of full scale, in
+    ``folder``; returns its path."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    radiance = reflectance / np.pi * sky.horizontal_irradiance()
+    lit = 0.5 * sky.sky_horizontal_irradiance() if shade else sky.horizontal_irradiance()
+    radiance = reflectance / np.pi * lit
     h = 0.35 / (gain * float(radiance.max()) * EFFICACY_CLEAR / SATURATION_LUMINANCE)
     exposure_s = float(h * SIM_F_NUMBER ** 2 / SIM_ISO)
     path = folder / f"card_{time:%H%M%S}.jpg"

@@ -209,3 +209,93 @@ def test_large_shots_are_binned_to_the_maps_size(tmp_path, monkeypatch):
     away = (d[..., 2] > np.cos(np.radians(75))) & (d @ sky.sun_direction < np.cos(np.radians(8)))
     lum = (m[away] @ SRGB_LUMINANCE) / (truth[away] @ SRGB_LUMINANCE)
     assert np.median(lum) == pytest.approx(1.0, abs=0.01)
+
+
+def _shot(v, exposure, clipped=False, t=0):
+    """A one-pixel Shot of linear value ``v`` (all channels) at ``exposure``."""
+    from skyfit_mi.pipeline.sky_series import FLOOR_FRACTION, Shot
+
+    return Shot(Path(f"s{exposure:g}.jpg"), np.full((1, 1, 3), v, np.float32),
+                np.full((1, 1), clipped), np.full((1, 1), v < FLOOR_FRACTION), exposure,
+                T0 + dt.timedelta(seconds=t))
+
+
+def test_the_merge_weighs_by_exposure_leaves_out_the_floor_and_bounds_the_clipped():
+    """Per pixel: the exposure-weighted mean of the shots that neither clip nor sink below the
+    floor (L = sum v / sum H); a shot below the floor is left out where a brighter one exists;
+    a pixel clipped in every shot takes the shortest's value, a lower bound.  Brackets: a
+    repeated exposure starts the next one (a time-lapse), as does a gap."""
+    from skyfit_mi.pipeline.sky_series import brackets, merge
+
+    m, c = merge([_shot(0.40, 1.0), _shot(0.11, 0.25)])
+    assert m[0, 0, 0] == pytest.approx(0.51 / 1.25) and not c.any()
+    m, _ = merge([_shot(0.5, 1.0), _shot(0.001, 1 / 64)])           # the short one too dark
+    assert m[0, 0, 0] == pytest.approx(0.5)
+    m, c = merge([_shot(1.0, 1.0, True), _shot(0.99, 1 / 8, True)])
+    assert c.all() and m[0, 0, 0] == pytest.approx(0.99 * 8)
+    m, _ = merge([_shot(0.01, 1.0), _shot(0.001, 1 / 8)])            # all dark: the longest
+    assert m[0, 0, 0] == pytest.approx(0.01)
+    shots = [_shot(0.5, 1.0, t=0), _shot(0.5, 0.25, t=0), _shot(0.5, 1.0, t=10),
+             _shot(0.5, 0.25, t=11), _shot(0.5, 1.0, t=100)]
+    assert [len(b) for b in brackets(shots, 30.0)] == [2, 2, 1]
+
+
+def test_the_maps_units_follow_iso_12232s_saturation_speed(tmp_path):
+    """A uniform field of luminance 5000 cd m^-2 shot at 1/1000 s, f/8, ISO 100: ISO 12232's
+    saturation-based speed puts saturation at H_sat = 78 / S lux s on the sensor, whose
+    illuminance is 0.65 L / N^2, so the linear value is 0.65 L t / (N^2 H_sat); the map reads L
+    over the clear sky's luminous efficacy."""
+    from PIL import Image
+
+    from skyfit_mi.physics.camera import SensorModel
+    from skyfit_mi.physics.sky import EFFICACY_CLEAR
+    from skyfit_mi.pipeline.photo_sim import _exif
+
+    L, t, N, S = 5000.0, 1 / 1000, 8.0, 100
+    v = 0.65 * L * t / (N ** 2 * (78.0 / S))
+    code = SensorModel(1.0, response="srgb", bits=8).respond(np.full((64, 64, 3), v)) * 255
+    (tmp_path / "shots").mkdir()
+    Image.fromarray(np.round(code).astype(np.uint8)).save(tmp_path / "shots" / "a.jpg",
+                                                          quality=100, exif=_exif(T0, True, t))
+    doc = sky_series([tmp_path / "shots"], tmp_path / "sky", log=lambda *a: None)
+    m = read_photo(tmp_path / "sky" / doc["maps"][0]["file"]).values
+    assert np.median(m) == pytest.approx(L / EFFICACY_CLEAR, rel=0.01)
+
+
+def test_the_fisheyes_directions_and_solid_angles_are_the_lookups():
+    """fisheye_directions is the inverse of envmap.fisheye_lookup (a map of each pixel's own
+    direction looked up at that direction gives it back, north turned 30 deg), and
+    map_irradiance of a sky's fisheye is its horizontal irradiance (the sky's own quadrature)."""
+    from skyfit_mi.conventions import angles_from_direction
+    from skyfit_mi.physics.envmap import fisheye_lookup
+    from skyfit_mi.pipeline.sky_series import map_irradiance
+
+    d, inside = fisheye_directions(96, 96, 30.0)
+    theta, phi = angles_from_direction(d)
+    back = fisheye_lookup(d + 2.0, theta, phi - np.radians(30.0)) - 2.0
+    np.testing.assert_allclose(back[inside], d[inside], atol=1e-9)
+    sky = cie_sky("clear", 40.0, 200.0)
+    image = fisheye_radiance(sky, 400, flare_deg=0.0)
+    e = map_irradiance(image, np.zeros(image.shape[:2], bool))
+    assert e == pytest.approx(float(sky.sky_horizontal_irradiance() @ SRGB_LUMINANCE), rel=0.01)
+
+
+def test_a_bracket_within_one_second_a_shaded_card_and_a_scale(tmp_path):
+    """Shots of one bracket that share their EXIF second are one bracket; a card in shade is
+    refused in one line with nothing written; a spec's scale scales the card's irradiance as it
+    scales the map."""
+    from skyfit_mi.pipeline.spec import _series_record
+
+    sky = cie_sky("clear", 45.0, 120.0)
+    photograph_sky(sky, T0, tmp_path / "shots", spacing_s=0)
+    photograph_card(sky, T0, tmp_path / "shade", shade=True)
+    with pytest.raises(SkyfitError, match="in shade"):
+        sky_series([tmp_path / "shots"], tmp_path / "sky", log=lambda *a: None,
+                   card=CardOptions((str(tmp_path / "shade"),), CARD_BOX))
+    assert not (tmp_path / "sky").exists() or not any((tmp_path / "sky").iterdir())
+    photograph_card(sky, T0, tmp_path / "card")
+    doc = series(tmp_path, overwrite=True)
+    assert len(doc["maps"]) == 1 and len(doc["maps"][0]["shots"]) == 4
+    rec = {"file": f"sky/{SERIES_NAME}"}
+    one, half = (_series_record({**rec, **k}, tmp_path, T0) for k in ({}, {"scale": 0.5}))
+    assert half["global_horizontal_W_m2"] == pytest.approx(0.5 * one["global_horizontal_W_m2"])

@@ -50,6 +50,9 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import os
+import shutil
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,7 +65,7 @@ from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky import EFFICACY_CLEAR
 from ..render.image import write_exr
-from .photo_times import check_times, frame_times
+from .photo_times import frame_times
 from .photos import check_same_size, list_photos, read_flat_field, read_photo
 
 #: Luminance [cd m^-2] that saturates a sensor at exposure H = t S / N^2 = 1 [s]: ISO 12232's
@@ -138,11 +141,12 @@ def _blocks(a, b, reduce):
 
 def _linear(photo):
     """A photograph's linear values (H, W, 3) as a fraction of saturation (the response its
-    file states, by a table of its whole codes; floats as they are), and its clipped pixels
-    (H, W)."""
+    file states, by a table of its whole codes), and its clipped pixels (H, W); SkyfitError
+    for floats (a map merged already: the spec reads it as it is)."""
     if photo.kind == "float":
-        return (np.nan_to_num(photo.values, nan=0.0, posinf=0.0).clip(0.0),
-                np.zeros(photo.values.shape[:2], bool))
+        raise SkyfitError(f"{Path(photo.path).name} holds linear floats, a map merged already; "
+                          "name it in the spec's envmap sky as it is (docs/cli.md), or give "
+                          "the bracket's camera shots.")
     sensor = SensorModel(1.0, response=photo.encoding_hint, bits=photo.bits)
     table = sensor.linearise(np.arange(photo.max_code + 1)).astype(np.float32)
     codes = np.rint(photo.values).astype(np.uint16)     # whole codes (exact_jpeg=False)
@@ -192,16 +196,17 @@ def read_shots(items, tz=None, times_csv=None, flat=None, box=None):
         metas.append(photo.metadata)
         del photo
     times = frame_times(paths, metas, times_csv=times_csv, tz=tz, warn=lambda message: None)
-    check_times(paths, times)
     shots = [Shot(*k[:4], exposure=k[4], time=t) for k, t in zip(kept, times)]
-    return sorted(shots, key=lambda s: s.time)
+    return sorted(shots, key=lambda s: (s.time, s.path.name))   # a bracket shares a second
 
 
 def brackets(shots, gap_s=BRACKET_GAP_S):
-    """``shots`` (in time order) split where one follows the previous by more than ``gap_s``."""
+    """``shots`` (in time order) split where one follows the previous by more than ``gap_s``,
+    or repeats an exposure of the bracket so far (a time-lapse, not a bracket)."""
     out = []
     for s in shots:
-        if out and (s.time - out[-1][-1].time).total_seconds() <= gap_s:
+        if out and (s.time - out[-1][-1].time).total_seconds() <= gap_s \
+                and all(not np.isclose(s.exposure, o.exposure, rtol=0.01) for o in out[-1]):
             out[-1].append(s)
         else:
             out.append([s])
@@ -279,15 +284,19 @@ def map_irradiance(merged, clipped):
 def card_irradiance(shots, reflectance):
     """(time, global horizontal irradiance in the maps' units [W m^-2]) of each card shot
     (:func:`read_shots` with its box): pi L / ``reflectance``, L the luminance of the box's
-    mean; SkyfitError where the card clips."""
+    mean.  Shots where the card clips or lies below :data:`FLOOR_FRACTION` are left out (a
+    bracket of the card keeps its good shots); SkyfitError when none is left."""
     out = []
     for s in shots:
-        if s.clipped.any():
-            raise SkyfitError(f"{s.path.name}: the card clips inside --card-box; photograph it "
-                              "at a shorter exposure.")
+        if s.clipped.any() or s.linear.max() < FLOOR_FRACTION:
+            continue
         lum = float(s.linear[0, 0] @ SRGB_LUMINANCE)
         radiance = lum * SATURATION_LUMINANCE / s.exposure / EFFICACY_CLEAR
         out.append((s.time, float(np.pi * radiance / reflectance)))
+    if not out:
+        raise SkyfitError(f"the card clips or is too dark inside --card-box in all of its "
+                          f"{len(shots)} shots; expose it between about 5% and 95% of full "
+                          "scale.")
     return out
 
 
@@ -315,6 +324,33 @@ class CardOptions:
     sd: float = CARD_SD
 
 
+def _check_options(card, gap_s):
+    """SkyfitError in one line for options out of their range."""
+    if not 0.0 < gap_s <= 3600.0:
+        raise SkyfitError(f"--bracket-gap-s {gap_s:g} must lie in (0, 3600] seconds.")
+    if card is None:
+        return
+    if not 0.01 <= card.reflectance <= 1.0:
+        raise SkyfitError(f"--card-reflectance {card.reflectance:g} must lie in [0.01, 1].")
+    if not 0.0 < card.sd <= 1.0:
+        raise SkyfitError(f"--card-sd {card.sd:g} must lie in (0, 1] (a relative uncertainty).")
+    if not 0.0 < card.max_gap_s <= 86400.0:
+        raise SkyfitError(f"--card-max-gap-s {card.max_gap_s:g} must lie in (0, 86400] seconds.")
+
+
+def _card_entry(readings, t, image, clipped, card, name):
+    """The card's fields of a map's entry: its global horizontal irradiance, the map's own and
+    the sun's sd; SkyfitError where the card saw less than the sky alone gives (in shade)."""
+    ghi, gap = _nearest(readings, t, card.max_gap_s)
+    e_map = map_irradiance(image, clipped)
+    if ghi <= e_map:
+        raise SkyfitError(f"{name}: the card's global irradiance ({ghi:.4g}) is below the sky's "
+                          f"own ({e_map:.4g}): the card was in shade, or the sun behind cloud; "
+                          "photograph it in the sun, or give this frame's irradiance instead.")
+    return {"card_gap_s": gap, "global_horizontal_W_m2": ghi, "map_horizontal_W_m2": e_map,
+            "sun_sd": card.sd * ghi / max(ghi - e_map, SUN_SHARE_FLOOR * ghi)}
+
+
 def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
                gap_s=BRACKET_GAP_S, overwrite=False, log=print):
     """Merge the bracketed fisheye shots named by ``items`` into ``out_dir``: one EXR per
@@ -322,45 +358,47 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
     (module docstring); ``card`` a :class:`CardOptions` gives each map its global horizontal
     irradiance; ``tz`` and ``times_csv`` time the shots and ``flat`` undoes the lens's
     vignetting in the sky's (:func:`read_shots`; not in the card's: take its box near their
-    centre, where the lens does not darken).  Returns the series document."""
-    if card is not None and not 0.01 <= card.reflectance <= 1.0:
-        raise SkyfitError(f"--card-reflectance {card.reflectance:g} must lie in [0.01, 1].")
-    if card is not None and not 0.0 < card.sd <= 1.0:
-        raise SkyfitError(f"--card-sd {card.sd:g} must lie in (0, 1] (a relative uncertainty).")
+    centre, where the lens does not darken).  The maps are written into a folder beside the
+    series and moved into place when every bracket is done, so a refusal leaves nothing, and
+    ``overwrite`` removes the maps of the series it replaces.  Returns the series document."""
+    _check_options(card, gap_s)
     out = check_dir(out_dir)
-    if (out / SERIES_NAME).exists() and not overwrite:
-        raise OutputError(f"{str(out / SERIES_NAME)!r} exists; give another -o, or --overwrite "
-                          "to replace the series.")
-    shots = read_shots(items, tz, times_csv, flat)
-    groups = brackets(shots, gap_s)
-    readings = card_irradiance(read_shots(card.photos, tz, times_csv, box=card.box),
-                               card.reflectance) \
-        if card is not None else None
+    old = out / SERIES_NAME
+    if old.exists() and not overwrite:
+        raise OutputError(f"{str(old)!r} exists; give another -o, or --overwrite to replace the "
+                          "series.")
+    groups = brackets(read_shots(items, tz, times_csv, flat), gap_s)
+    readings = None if card is None else card_irradiance(
+        read_shots(card.photos, tz, times_csv, box=card.box), card.reflectance)
     ensure_dir(out)
-    entries, radius = [], 0.0
-    for n, group in enumerate(groups):
-        merged, clipped = merge(group)
-        image = merged * (SATURATION_LUMINANCE / EFFICACY_CLEAR)
-        t = group[len(group) // 2].time
-        name = f"sky_{t:%Y%m%d_%H%M%S}.exr"
-        write_exr(out / name, image, {"time": t, "kind": "sky", "units": "W m^-2 sr^-1",
-                                      "shots": len(group)})
-        extent, stray = clipped_extent(clipped, merged)
-        radius = max(radius, extent)
-        e = {"time": t.isoformat(), "file": name, "shots": [s.path.name for s in group],
-             "exposures": [s.exposure for s in group], "clipped_pixels": int(clipped.sum()),
-             "clipped_radius_deg": extent, "clipped_elsewhere": stray}
-        if stray:
-            log(f"{name}: {stray} pixels clip more than {SUN_CLIP_MAX_DEG:g} deg from the sun "
-                "in every shot; add a shorter exposure to the bracket")
-        if readings is not None:
-            ghi, e["card_gap_s"] = _nearest(readings, t, card.max_gap_s)
-            e_map = map_irradiance(image, clipped)
-            e["global_horizontal_W_m2"], e["map_horizontal_W_m2"] = ghi, e_map
-            e["sun_sd"] = card.sd * ghi / max(ghi - e_map, SUN_SHARE_FLOOR * ghi)
-        entries.append(e)
-        log(f"[{n + 1}/{len(groups)}] {name}: {len(group)} shots, "
-            f"{int(clipped.sum())} pixels clipped in all")
+    work = Path(tempfile.mkdtemp(prefix=".sky_series.", dir=out))
+    try:
+        entries, radius = [], 0.0
+        for n, group in enumerate(groups):
+            merged, clipped = merge(group)
+            image = merged * (SATURATION_LUMINANCE / EFFICACY_CLEAR)
+            t = group[len(group) // 2].time
+            name = f"sky_{t:%Y%m%d_%H%M%S}.exr"
+            e = {"time": t.isoformat(), "file": name, "shots": [s.path.name for s in group],
+                 "exposures": [s.exposure for s in group], "clipped_pixels": int(clipped.sum())}
+            e["clipped_radius_deg"], e["clipped_elsewhere"] = clipped_extent(clipped, merged)
+            radius = max(radius, e["clipped_radius_deg"])
+            if readings is not None:
+                e.update(_card_entry(readings, t, image, clipped, card, name))
+            write_exr(work / name, image, {"time": t, "kind": "sky", "units": "W m^-2 sr^-1",
+                                           "shots": len(group)})
+            entries.append(e)
+            if e["clipped_elsewhere"]:
+                log(f"{name}: {e['clipped_elsewhere']} pixels clip more than "
+                    f"{SUN_CLIP_MAX_DEG:g} deg from the sun in every shot; add a shorter "
+                    "exposure to the bracket")
+            log(f"[{n + 1}/{len(groups)}] {name}: {len(group)} shots, "
+                f"{e['clipped_pixels']} pixels clipped in all")
+        stale = _series_maps(old) - {e["file"] for e in entries} if old.exists() else set()
+        for e in entries:
+            os.replace(work / e["file"], out / e["file"])
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
     doc = {"kind": "sky_series", "projection": "fisheye", "units": "W m^-2 sr^-1",
            "flat_field": None if flat is None else str(flat),
            "exposure": "H = t S / N^2 [s] (EXIF exposure time, ISO speed, f-number)",
@@ -372,7 +410,17 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
         doc["card"] = {"reflectance": card.reflectance, "box": list(card.box),
                        "shots": len(readings), "max_gap_s": card.max_gap_s, "sd": card.sd}
     write_json(out / SERIES_NAME, doc)
+    for name in stale:
+        (out / name).unlink(missing_ok=True)
     return doc
+
+
+def _series_maps(path):
+    """The map files a series file names (none when it cannot be read)."""
+    try:
+        return {Path(e["file"]).name for e in json.loads(Path(path).read_text())["maps"]}
+    except (OSError, ValueError, KeyError, TypeError):
+        return set()
 
 
 def series_entry(path, time):

@@ -683,7 +683,8 @@ _MEASURED_KEYS = {"diffuse_horizontal_W_m2", "direct_normal_W_m2", "global_horiz
 def _series_record(rec, base_dir, t):
     """An envmap record naming a sky series (``skyfit sky-series``) made the record of the
     series' map nearest the frame's time ``t``: its file, projection and recommended sun mask,
-    and its card's global horizontal irradiance unless the spec gives measured irradiance."""
+    and its card's global horizontal irradiance (times the spec's ``scale``, as the map) unless
+    the spec gives measured irradiance."""
     try:
         entry, doc = series_entry(base_dir / rec["file"], t)
     except SkyfitError as exc:
@@ -696,7 +697,7 @@ def _series_record(rec, base_dir, t):
     if doc.get("sun_mask_deg") and "sun_mask_deg" not in rec:
         out["sun_mask_deg"] = doc["sun_mask_deg"]
     if "global_horizontal_W_m2" in entry and not _MEASURED_KEYS & set(rec):
-        out["global_horizontal_W_m2"] = entry["global_horizontal_W_m2"]
+        out["global_horizontal_W_m2"] = entry["global_horizontal_W_m2"] * rec.get("scale", 1.0)
         out["sun_measured"] = True          # by the card, to its sun_sd
         if "sun_sd" in entry:
             out["sun_sd"] = entry["sun_sd"]
