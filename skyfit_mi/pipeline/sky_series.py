@@ -370,8 +370,10 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
     groups = brackets(read_shots(items, tz, times_csv, flat), gap_s)
     readings = None if card is None else card_irradiance(
         read_shots(card.photos, tz, times_csv, box=card.box), card.reflectance)
+    created = not out.exists()
     ensure_dir(out)
     work = Path(tempfile.mkdtemp(prefix=".sky_series.", dir=out))
+    done = False
     try:
         entries, radius = [], 0.0
         for n, group in enumerate(groups):
@@ -397,8 +399,9 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
         stale = _series_maps(old) - {e["file"] for e in entries} if old.exists() else set()
         for e in entries:
             os.replace(work / e["file"], out / e["file"])
+        done = True
     finally:
-        shutil.rmtree(work, ignore_errors=True)
+        shutil.rmtree(work if done or not created else out, ignore_errors=True)
     doc = {"kind": "sky_series", "projection": "fisheye", "units": "W m^-2 sr^-1",
            "flat_field": None if flat is None else str(flat),
            "exposure": "H = t S / N^2 [s] (EXIF exposure time, ISO speed, f-number)",
