@@ -51,7 +51,7 @@ from .colorchecker import NAMES, NEUTRAL, find_chart, matrix_error, reference_rg
 from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance,
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import check_times, frame_times
-from .photos import RAW_COLOUR_REACH, check_same_size, list_photos, read_flat_field, read_photo
+from .photos import RAW_COLOUR_REACH, check_same_size, exif_exposure, list_photos, read_flat_field, read_photo
 from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
 from .raw_noise import bootstrap, cfa_planes
 from .region_edges import colour_mixed, pose_reach
@@ -132,14 +132,13 @@ def _relative_exposures(photos, log):
     """t ISO / N^2 of each frame over the first's, or None when some frame lacks EXIF."""
     vals = []
     for p in photos:
-        m = p.metadata
-        t, n, iso = m.get("exposure_time_s"), m.get("f_number"), m.get("iso")
-        if not (t and n and iso):
+        h = exif_exposure(p)
+        if h is None:
             if any(x.metadata.get("exposure_time_s") for x in photos):
                 log(f"{Path(p.path).name}: no EXIF exposure (time, f-number, ISO); every frame's "
                     "exposure is taken from the calibration or --exposure instead")
             return None
-        vals.append(float(t) * float(iso) / float(n) ** 2)
+        vals.append(h)
     return np.asarray(vals) / vals[0]
 
 

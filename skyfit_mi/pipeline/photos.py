@@ -743,6 +743,14 @@ def read_photo(path, exact_jpeg=True):
                     "check that the file is complete, or remove it") from None
 
 
+def exif_exposure(photo):
+    """The exposure t S / N^2 [s] of ``photo`` from its EXIF exposure time, ISO speed and
+    f-number, or None where one is missing."""
+    m = photo.metadata
+    t, n, iso = m.get("exposure_time_s"), m.get("f_number"), m.get("iso")
+    return float(t) * float(iso) / float(n) ** 2 if t and n and iso else None
+
+
 def list_photos(items):
     """The photographs named by ``items`` (files, or folders of them in name order, each file
     one of :data:`SUFFIXES`), as Paths; SkyfitError in one line for a path that does not

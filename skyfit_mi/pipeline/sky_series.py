@@ -66,7 +66,7 @@ from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky import EFFICACY_CLEAR
 from ..render.image import write_exr
 from .photo_times import frame_times
-from .photos import check_same_size, list_photos, read_flat_field, read_photo
+from .photos import check_same_size, exif_exposure, list_photos, read_flat_field, read_photo
 
 #: Luminance [cd m^-2] that saturates a sensor at exposure H = t S / N^2 = 1 [s]: ISO 12232's
 #: saturation-based speed, H_sat = 78 / S [lux s] at the sensor, with the standard lens and
@@ -118,14 +118,16 @@ class Shot:
 
 
 def _exposure(photo):
-    """t S / N^2 [s] of ``photo`` from its EXIF; SkyfitError naming what is missing."""
-    m = photo.metadata
-    t, n, iso = m.get("exposure_time_s"), m.get("f_number"), m.get("iso")
-    missing = [k for k, v in (("exposure time", t), ("f-number", n), ("ISO", iso)) if not v]
-    if missing:
+    """t S / N^2 [s] of ``photo`` from its EXIF (:func:`~.photos.exif_exposure`); SkyfitError
+    naming what is missing."""
+    h = exif_exposure(photo)
+    if h is None:
+        m = photo.metadata
+        missing = [k for k, v in (("exposure time", "exposure_time_s"), ("f-number", "f_number"),
+                                  ("ISO", "iso")) if not m.get(v)]
         raise SkyfitError(f"{Path(photo.path).name}: no EXIF {', '.join(missing)}; a bracket "
                           "is merged by its shots' exposures, so keep the camera's EXIF.")
-    return float(t) * float(iso) / float(n) ** 2
+    return h
 
 
 def _blocks(a, b, reduce):
