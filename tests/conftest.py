@@ -1,4 +1,11 @@
+import os
 from collections.abc import Mapping
+
+# NumPy's BLAS on one thread, as the `skyfit` command runs it (skyfit_mi/cli.py), set before any
+# test module loads NumPy: the test modules import NumPy before skyfit_mi.cli, so without this
+# each xdist worker's OpenBLAS spins a thread per core beside Dr.Jit's pool and the other
+# worker's
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import pytest
 from hypothesis import settings
@@ -64,3 +71,4 @@ def radiance():
     pytest.importorskip("pyradiance")
     from independent import radiance_runner
     return radiance_runner()
+
