@@ -71,4 +71,3 @@ def radiance():
     pytest.importorskip("pyradiance")
     from independent import radiance_runner
     return radiance_runner()
-
