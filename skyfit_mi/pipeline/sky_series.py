@@ -9,8 +9,12 @@ time (:func:`series_entry`).
 
 Merging (a Debevec-Malik merge with the response known)
 ------------------------------------------------------
+* Shots are timed by their EXIF (or a CSV) and grouped into brackets: a gap over
+  ``gap_s`` or an exposure the bracket already holds starts the next one; shots of a bracket
+  may share their second.  Float images (maps merged already) are refused.
 * A shot's codes are made linear by the response its file states (sRGB for JPEGs and 8-bit
-  files, linear for RAW and 16-bit linear TIFF; :class:`~skyfit_mi.physics.camera.SensorModel`)
+  files, linear for RAW and 16-bit linear TIFF; :class:`~skyfit_mi.physics.camera.SensorModel`),
+  divided by the lens's flat field where given, binned to at most :data:`MAP_PIXELS` across,
   and divided by its exposure H = t S / N^2 (EXIF exposure time [s], ISO speed, f-number).
 * A pixel's value is the mean of the shots where none of its channels is within
   :data:`CLIP_FRACTION` of the saturation code and its largest channel is at least
@@ -39,7 +43,7 @@ The sun's level: a grey card
 The sun is clipped in every shot, so its light comes from elsewhere.  A horizontal grey card
 of reflectance rho (about 0.18), in the sun, photographed with the same camera at each
 bracket, gives the global horizontal irradiance in the maps' units: E = pi L_card / rho
-(a Lambertian card; eq. 3.3's diffuse term), L_card the luminance of the card's box.  The
+(a Lambertian card: eq. 3.19's diffuse term rho_d / pi), L_card the luminance of the card's box.  The
 series records it per map as ``global_horizontal_W_m2``, from which the spec's envmap sky
 takes the sun's disc, (E - E_map) / cos theta_s
 (:func:`~skyfit_mi.physics.envmap.direct_normal_from_global`).  Keep the card out of your
