@@ -49,21 +49,24 @@ def fisheye_radiance(sky, size, north_rotation_deg=0.0, flare_deg=FLARE_DEG):
     return image
 
 
-def _jpeg(path, radiance, exposure_s, time, gain, noise, rng):
-    """One 8-bit sRGB JPEG of ``radiance`` at ``exposure_s``, with EXIF."""
+def _jpeg(path, radiance, exposure_s, time, gain, noise, rng, gamma=None):
+    """One 8-bit JPEG of ``radiance`` at ``exposure_s`` (sRGB, or a pure ``gamma`` curve: a
+    camera's own tone curve), with EXIF."""
     h = exposure_s * SIM_ISO / SIM_F_NUMBER ** 2
     v = gain * radiance * h * EFFICACY_CLEAR / SATURATION_LUMINANCE
     v = v + rng.normal(size=v.shape) * noise * np.sqrt(np.clip(v, 0.0, 1.0))
-    codes = SensorModel(1.0, response="srgb", bits=8).respond(v) * 255.0
+    sensor = SensorModel(1.0, response="srgb", bits=8) if gamma is None else \
+        SensorModel(1.0, response="gamma", gamma=gamma, bits=8)
+    codes = sensor.respond(v) * 255.0
     Image.fromarray(np.round(codes).astype(np.uint8)).save(
         path, quality=95, exif=_exif(time, True, exposure_s))
 
 
 def photograph_sky(sky, time, folder, *, size=128, gain=1.0, noise=0.005, seed=0,
-                   north_rotation_deg=0.0, falloff=1.0, spacing_s=1):
+                   north_rotation_deg=0.0, falloff=1.0, spacing_s=1, gamma=None):
     """The bracket (:data:`BRACKET_S`) of ``sky`` at ``time`` (aware), ``spacing_s`` apart, as
     JPEGs in ``folder``, through a lens whose relative response is ``falloff`` (size, size);
-    returns their paths."""
+    returns their paths; ``gamma`` encodes them with a pure gamma curve instead of sRGB."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
@@ -72,7 +75,7 @@ def photograph_sky(sky, time, folder, *, size=128, gain=1.0, noise=0.005, seed=0
     for i, t in enumerate(BRACKET_S):
         when = time + dt.timedelta(seconds=i * spacing_s)
         path = folder / f"sky_{when:%H%M%S}_{i}.jpg"
-        _jpeg(path, radiance, t, when, gain, noise, rng)
+        _jpeg(path, radiance, t, when, gain, noise, rng, gamma)
         out.append(path)
     return out
 

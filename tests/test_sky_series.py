@@ -299,3 +299,25 @@ def test_a_bracket_within_one_second_a_shaded_card_and_a_scale(tmp_path):
     rec = {"file": f"sky/{SERIES_NAME}"}
     one, half = (_series_record({**rec, **k}, tmp_path, T0) for k in ({}, {"scale": 0.5}))
     assert half["global_horizontal_W_m2"] == pytest.approx(0.5 * one["global_horizontal_W_m2"])
+
+
+def test_shots_that_disagree_with_their_stated_response_are_warned():
+    """sRGB shots agree with each other where two exposures are both usable (within 1%); shots
+    encoded with a camera's own curve (gamma 1.8) but read as sRGB disagree by more than
+    AGREEMENT_TOL, and the series says so."""
+    import tempfile
+
+    from skyfit_mi.pipeline.sky_series import AGREEMENT_TOL
+
+    sky = cie_sky("clear", 45.0, 120.0)
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for name, gamma in (("srgb", None), ("camera", 1.8)):
+            photograph_sky(sky, T0, tmp / name, gamma=gamma)
+        said = []
+        good, bad = (sky_series([tmp / n], tmp / f"{n}_sky", log=said.append)
+                     for n in ("srgb", "camera"))
+    agree = [a for a in good["maps"][0]["shot_agreement"] if a is not None]
+    assert len(agree) >= 2 and all(abs(a - 1) < 0.01 for a in agree), agree
+    assert max(abs(a - 1) for a in bad["maps"][0]["shot_agreement"] if a) > AGREEMENT_TOL
+    assert sum("disagree" in m for m in said) == 1, said

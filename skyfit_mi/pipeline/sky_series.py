@@ -21,6 +21,9 @@ Merging (a Debevec-Malik merge with the response known)
   :data:`FLOOR_FRACTION` of it, weighted by H: under shot noise a shot's variance of L is
   proportional to L / H, so H is the inverse-variance weight.  Where every unclipped shot is
   below the floor, the longest unclipped shot is taken.
+* Where two shots of adjacent exposure are both usable, their luminance per unit exposure
+  should agree (:func:`agreement`, the series' ``shot_agreement``): the series warns beyond
+  :data:`AGREEMENT_TOL`, a response other than the file's or nominal EXIF exposures.
 * A pixel clipped in every shot (the sun and its flare) takes the shortest shot's value, a
   lower bound, and is counted: ``clipped_radius_deg`` is the largest angle between a clipped
   pixel and the clipped pixels' brightest-weighted centre, and the series recommends a
@@ -98,6 +101,11 @@ CARD_SD = 0.02
 #: The sun's share of the card's irradiance below which its uncertainty stops growing (the
 #: sun behind a cloud: the disc is then small next to the sky).
 SUN_SHARE_FLOOR = 0.05
+#: Pixels usable in two shots at least, for their agreement to be measured.
+AGREEMENT_PIXELS = 20
+#: The largest departure of two shots' agreement from 1 before the series warns: the 8-bit
+#: codes' rounding and the noise move the median of a few hundred pixels well under 1%.
+AGREEMENT_TOL = 0.03
 #: The recommended sun mask reaches this far beyond the clipped pixels [degrees].
 MASK_MARGIN_DEG = 1.0
 #: Clipped pixels farther than this from the clipped centre are not the sun's [degrees].
@@ -241,6 +249,22 @@ def merge(bracket):
     shortest = by_exposure[0]
     merged[clipped] = shortest.linear[clipped] / shortest.exposure
     return merged, clipped
+
+
+def agreement(bracket):
+    """How the shots of a ``bracket`` agree where two of adjacent exposure are both usable
+    (neither clipped nor below the floor): for each such pair, the median over those pixels
+    of the longer shot's luminance per unit exposure over the shorter's (1 where the response
+    the files state and their EXIF exposures are right; None where no pixel is usable in
+    both)."""
+    by_exposure = sorted(bracket, key=lambda s: s.exposure)
+    out = []
+    for a, b in zip(by_exposure, by_exposure[1:]):
+        both = ~a.clipped & ~a.floor & ~b.clipped & ~b.floor
+        la, lb = (s.linear[both] @ SRGB_LUMINANCE / s.exposure for s in (a, b))
+        ok = la > 0
+        out.append(float(np.median(lb[ok] / la[ok])) if ok.sum() >= AGREEMENT_PIXELS else None)
+    return out
 
 
 def fisheye_directions(height, width, north_rotation_deg=0.0):
@@ -390,6 +414,13 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
             e = {"time": t.isoformat(), "file": name, "shots": [s.path.name for s in group],
                  "exposures": [s.exposure for s in group], "clipped_pixels": int(clipped.sum())}
             e["clipped_radius_deg"], e["clipped_elsewhere"] = clipped_extent(clipped, merged)
+            e["shot_agreement"] = agreement(group)
+            off = [a for a in e["shot_agreement"] if a is not None and abs(a - 1) > AGREEMENT_TOL]
+            if off:
+                log(f"{name}: shots of adjacent exposure disagree by up to "
+                    f"{100 * max(abs(a - 1) for a in off):.0f}% where both are exposed: the "
+                    "camera's response is not the one its files state (a JPEG tone curve: "
+                    "shoot RAW), or its EXIF exposures are nominal")
             radius = max(radius, e["clipped_radius_deg"])
             if readings is not None:
                 e.update(_card_entry(readings, t, image, clipped, card, name))
