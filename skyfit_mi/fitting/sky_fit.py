@@ -53,6 +53,7 @@ from . import uncertainty as unc
 from ..errors import SkyfitError
 from .methods.levenberg_marquardt import levenberg_marquardt
 from ..pipeline.manifest import RENDERED_SOURCES
+from ..physics.colour import SRGB_LUMINANCE
 from ..physics import sky_shape
 from ..physics.sky_departure import BASIS, PRIOR_SD as DEPARTURE_SD, conflict
 from ..physics.sky import MEASURED_SUN_SD, SUN_LEVEL_SD, SUN_SKY_COUPLING
@@ -199,16 +200,23 @@ def sun_source(skies):
 
 def default_sun_sd(doc, skies):
     """The relative uncertainty of the sun's level a fitted sky counts when not told (``fit
-    --sun-sd``): for photographs a measured sun's (the largest its skies state, a grey card's
-    ``info["sun_sd"]``, else :data:`~skyfit_mi.physics.sky.MEASURED_SUN_SD`) or a modelled one's
+    --sun-sd``): for photographs a measured sun's (where every sunlit sky states its own, a grey
+    card's ``info["sun_sd"]``: their mean weighted by the sun's horizontal irradiance, the
+    relative error of the day's sunlight when the frames' errors are one (the card's
+    reflectance), so a frame whose sun is faint weighs little; else
+    :data:`~skyfit_mi.physics.sky.MEASURED_SUN_SD`) or a modelled one's
     (:data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD`, :func:`sun_source`); 0 for a sequence
     skyfit rendered under that very sun."""
     if not photographed(doc):
         return 0.0
     if sun_source(skies) != "measured":
         return SUN_LEVEL_SD
-    stated = [k.info.get("sun_sd") for k in _sunlit(skies)]
-    return max(stated) if None not in stated else MEASURED_SUN_SD
+    lit = _sunlit(skies)
+    stated = [k.info.get("sun_sd") for k in lit]
+    if None in stated:
+        return MEASURED_SUN_SD
+    sun = np.array([float(k.sun_horizontal_irradiance() @ SRGB_LUMINANCE) for k in lit])
+    return float(np.dot(stated, sun) / sun.sum())
 
 
 def light_level_sd(doc, names, sun_sd):
