@@ -30,6 +30,8 @@ from .files import check_dir, write_json  # noqa: E402
 from .physics.sky import MEASURED_SUN_SD, SKY_CHOICES, SUN_LEVEL_SD  # noqa: E402
 from .fitting.chi2 import REGION_PIXELS  # noqa: E402
 from .physics.ward import NORMALISATIONS  # noqa: E402
+from .pipeline.sky_series import (BRACKET_GAP_S, CARD_MAX_GAP_S, CARD_REFLECTANCE,  # noqa: E402
+                                  CARD_SD, SERIES_NAME)
 from .render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS  # noqa: E402
 from .render.variant import VARIANTS  # noqa: E402
 # The modules above are light; each command imports those that do its work when it runs, so
@@ -563,7 +565,7 @@ def _sky_series(args):
                      flat=args.flat, gap_s=args.bracket_gap_s,
                      overwrite=args.overwrite, log=(lambda *a: None) if args.quiet else print)
     lines = [f"{len(doc['maps'])} sky maps in {args.output}; in the spec:", "[sky]",
-             'type = "envmap"', f'file = "{args.output}/sky_series.json"  # relative to the spec',
+             'type = "envmap"', f'file = "{args.output}/{SERIES_NAME}"  # relative to the spec',
              "north_rotation_deg = 0.0  # the compass azimuth of the maps' top: measure it"]
     if doc["sun_mask_deg"]:
         lines.append(f"# sun_mask_deg = {doc['sun_mask_deg']} from the clipped sun (the default)")
@@ -581,10 +583,10 @@ def _add_sky_series(sub, common):
         description="Merge each exposure bracket of an upward equidistant fisheye's shots "
         "(EXIF times and exposures) into a linear EXR map, count the clipped sun, and, with a "
         "grey card photographed at each bracket, record the global horizontal irradiance that "
-        "sets the sun's level; writes sky_series.json for the spec's [sky] file.")
+        f"sets the sun's level; writes {SERIES_NAME} for the spec's [sky] file.")
     sky.add_argument("photos", nargs="+", help="the sky's shots: files or folders")
     sky.add_argument("-o", "--output", required=True, help="output folder (the maps and "
-                     "sky_series.json)")
+                     f"{SERIES_NAME})")
     sky.add_argument("--tz", help="time zone of EXIF times without an offset (e.g. "
                      "Europe/Berlin or +01:00)")
     sky.add_argument("--times", help="CSV file,time of the shots (and the card's) instead of "
@@ -592,19 +594,20 @@ def _add_sky_series(sub, common):
     sky.add_argument("--flat", help="a flat field through the fisheye (a photograph of a "
                      "uniform field, or its linear map), which undoes the lens's vignetting; "
                      "default none")
-    sky.add_argument("--bracket-gap-s", type=float, default=30.0, help="a shot more than this "
-                     "many seconds after the previous one starts a new bracket (default 30)")
+    sky.add_argument("--bracket-gap-s", type=float, default=BRACKET_GAP_S, help="a shot more "
+                     "than this many seconds after the previous one starts a new bracket "
+                     f"(default {BRACKET_GAP_S:g})")
     sky.add_argument("--card", nargs="+", help="shots of a horizontal grey card in the sun, "
                      "with the same camera, one near each bracket (files or folders)")
     sky.add_argument("--card-box", type=_numbers, metavar="X0,Y0,X1,Y1", help="the card's "
                      "pixels in its shots (columns X0..X1-1, rows Y0..Y1-1)")
-    sky.add_argument("--card-reflectance", type=float, default=0.18, help="the card's "
-                     "reflectance (default 0.18)")
-    sky.add_argument("--card-max-gap-s", type=float, default=300.0, help="the longest time "
-                     "between a bracket and its card shot [s] (default 300)")
-    sky.add_argument("--card-sd", type=float, default=0.02, help="relative uncertainty (1 sd) "
+    sky.add_argument("--card-reflectance", type=float, default=CARD_REFLECTANCE,
+                     help=f"the card's reflectance (default {CARD_REFLECTANCE:g})")
+    sky.add_argument("--card-max-gap-s", type=float, default=CARD_MAX_GAP_S, help="the longest "
+                     f"time between a bracket and its card shot [s] (default {CARD_MAX_GAP_S:g})")
+    sky.add_argument("--card-sd", type=float, default=CARD_SD, help="relative uncertainty (1 sd) "
                      "of the card's reading of the global irradiance: its reflectance's and "
-                     "its departure from Lambert's law (default 0.02)")
+                     f"its departure from Lambert's law (default {CARD_SD:g})")
     sky.add_argument("--overwrite", action="store_true", help="replace an existing series")
     sky.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     sky.set_defaults(func=_sky_series)

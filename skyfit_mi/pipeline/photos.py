@@ -400,11 +400,11 @@ def _read_pillow(path, fmt, exact=True):
     if fmt == "jpeg" and not exact:
         meta["decoder"] = "libjpeg, whole codes (Pillow)"
     elif fmt == "jpeg":
-        exact = jpeg_noise.decode(path)
-        differ = None if exact is None or exact.shape != codes.shape else \
-            float(np.sqrt(np.mean((exact - codes) ** 2)))
+        decoded = jpeg_noise.decode(path)
+        differ = None if decoded is None or decoded.shape != codes.shape else \
+            float(np.sqrt(np.mean((decoded - codes) ** 2)))
         if differ is not None and differ <= DECODER_AGREEMENT_DN:
-            codes = exact
+            codes = decoded
             meta["decoder"] = "floating point from the DCT coefficients (jpeglib)"
         else:
             meta["decoder"] = "libjpeg, whole codes (Pillow): the floating-point decoder " + (

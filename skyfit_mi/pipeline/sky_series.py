@@ -91,6 +91,8 @@ CLIP_FRACTION = 0.97
 FLOOR_FRACTION = 0.02
 #: Shots more than this many seconds after the previous one start a new bracket (default).
 BRACKET_GAP_S = 30.0
+#: The grey card's reflectance (default): a photographer's 18% card.
+CARD_REFLECTANCE = 0.18
 #: A card shot is paired with a bracket within this many seconds at most (default).
 CARD_MAX_GAP_S = 300.0
 #: The relative uncertainty (one sd of the log) of the global horizontal irradiance a grey card
@@ -325,20 +327,27 @@ def card_irradiance(shots, reflectance):
         out.append((s.time, float(np.pi * radiance / reflectance)))
     if not out:
         raise SkyfitError(f"the card clips or is too dark inside --card-box in all of its "
-                          f"{len(shots)} shots; expose it between about 5% and 95% of full "
-                          "scale.")
+                          f"{len(shots)} shots; expose it between {100 * FLOOR_FRACTION:g}% "
+                          f"and {100 * CLIP_FRACTION:g}% of full scale.")
     return out
 
 
-def _nearest(card, t, max_gap_s):
-    """The card reading nearest ``t`` within ``max_gap_s``, or SkyfitError."""
-    gaps = [abs((c - t).total_seconds()) for c, _ in card]
+def _nearest(times, t):
+    """The index of the aware datetime in ``times`` nearest ``t``, and its distance [s]."""
+    gaps = [abs((c - t).total_seconds()) for c in times]
     i = int(np.argmin(gaps))
-    if gaps[i] > max_gap_s:
+    return i, gaps[i]
+
+
+def _card_at(readings, t, max_gap_s):
+    """The card reading nearest ``t`` within ``max_gap_s`` and its distance [s], or
+    SkyfitError."""
+    i, gap = _nearest([c for c, _ in readings], t)
+    if gap > max_gap_s:
         raise SkyfitError(f"the bracket at {t.isoformat()} has no card shot within "
-                          f"{max_gap_s:g} s (nearest {gaps[i]:.0f} s away); photograph the card "
+                          f"{max_gap_s:g} s (nearest {gap:.0f} s away); photograph the card "
                           "with every bracket, or raise --card-max-gap-s.")
-    return card[i][1], gaps[i]
+    return readings[i][1], gap
 
 
 @dataclass(frozen=True)
@@ -349,7 +358,7 @@ class CardOptions:
 
     photos: tuple
     box: tuple
-    reflectance: float = 0.18
+    reflectance: float = CARD_REFLECTANCE
     max_gap_s: float = CARD_MAX_GAP_S
     sd: float = CARD_SD
 
@@ -371,7 +380,7 @@ def _check_options(card, gap_s):
 def _card_entry(readings, t, image, clipped, card, name):
     """The card's fields of a map's entry: its global horizontal irradiance, the map's own and
     the sun's sd; SkyfitError where the card saw less than the sky alone gives (in shade)."""
-    ghi, gap = _nearest(readings, t, card.max_gap_s)
+    ghi, gap = _card_at(readings, t, card.max_gap_s)
     e_map = map_irradiance(image, clipped)
     if ghi <= e_map:
         raise SkyfitError(f"{name}: the card's global irradiance ({ghi:.4g}) is below the sky's "
@@ -475,11 +484,9 @@ def series_entry(path, time):
                           "`skyfit sky-series`.") from None
     if not isinstance(doc, dict) or doc.get("kind") != "sky_series" or not doc.get("maps"):
         raise SkyfitError(f"{path}: not a sky series with maps; make it with `skyfit sky-series`.")
-    gaps = [abs((dt.datetime.fromisoformat(e["time"]) - time).total_seconds())
-            for e in doc["maps"]]
-    i = int(np.argmin(gaps))
-    if gaps[i] > MAP_MAX_GAP_S:
+    i, gap = _nearest([dt.datetime.fromisoformat(e["time"]) for e in doc["maps"]], time)
+    if gap > MAP_MAX_GAP_S:
         raise SkyfitError(f"{path}: no sky map within {MAP_MAX_GAP_S:g} s of the frame at "
-                          f"{time.isoformat()} (nearest {gaps[i]:.0f} s away); photograph the "
+                          f"{time.isoformat()} (nearest {gap:.0f} s away); photograph the "
                           "sky with every frame.")
     return doc["maps"][i], doc
