@@ -3,6 +3,9 @@ and its curve over the day.  The sun's level and the sky's shape fitted with the
 tests/test_sky_fit_sun_shape.py (a file of its own, so that the two run on two workers)."""
 
 import json
+import pickle
+from contextlib import contextmanager
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,6 +17,48 @@ from skyfit_mi.fitting.light import LightOptions
 REGION = parse_region("rect:2,2,9,9")        # 64 pixels of the disc
 TRUTH = {"C_r": 1.0, "C_g": 1.0, "C_b": 1.0, "rho_s": 0.3, "sigma_alpha": 0.1}
 DIMMER = 1.5                                 # the spec's sky is this much too dim
+
+
+@contextmanager
+def traced_once():
+    """Within it, fit.py's and relight.py's ``trace_sessions`` trace a region's light once and
+    hand a later session asking for the same light the same parts (and the first trace's
+    time, so that the cache's sizing sees what it saw): the same scene, model, normalisation,
+    pixels, frames, cache (positions, directions, seed, plan) and light's parts (split, shape,
+    departure) of skies that differ at most in their ``info`` where no part reads it (no
+    shape, no departure).  A trace is a function of these alone, so a fit on it is the fit
+    that traces again, to the last digit; a session asking for any other light traces it."""
+    from skyfit_mi.fitting import fit, relight
+
+    real, traced = fit.trace_sessions, {}
+
+    def key(s, plan):
+        skies = s.skies if plan.shape or plan.departure else [replace(k, info={})
+                                                                 for k in s.skies]
+        return (s.doc["scene"]["xml"], s.name, s.model, s.normalisation,
+                np.asarray(s.obs.pixels).tobytes(), tuple(s.obs.frames),
+                tuple(sorted(s._cache_options().items())), plan.split, plan.shape,
+                plan.departure, pickle.dumps(skies))
+
+    def trace_sessions(sessions, light):
+        plan = light[sessions[0].name] if isinstance(light, dict) and len(sessions) == 1 \
+            else light
+        if len(sessions) != 1 or isinstance(plan, dict) or sessions[0].obs.rays is not None:
+            return real(sessions, light)
+        s, = sessions
+        k = key(s, plan)
+        if k not in traced:
+            before = s.cache_time
+            real(sessions, light)
+            traced[k] = (s.parts, s.cache_time - before, s.cache_settings["blocks"])
+        else:
+            parts, seconds, blocks = traced[k]
+            s.take_parts(parts, plan, seconds, blocks)
+
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(fit, "trace_sessions", trace_sessions)
+        m.setattr(relight, "trace_sessions", trace_sessions)
+        yield
 
 
 
@@ -78,7 +123,14 @@ def dim_sky(days, tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def dim_fit(dim_sky):
+def once():
+    """The module's fits and sessions under :func:`traced_once`: a light traced once."""
+    with traced_once():
+        yield
+
+
+@pytest.fixture(scope="module")
+def dim_fit(dim_sky, once):
     """The dim-sky day fitted with its level (``fit --sky fit``): (result, log lines)."""
     from skyfit_mi.fitting.fit import fit_regions
 
@@ -118,8 +170,9 @@ def test_sky_shape_is_for_regions_not_maps(days, capsys):
 
 
 @pytest.fixture(scope="module")
-def again(dim_sky, dim_fit):
-    """The dim-sky fit's session made again from its result (``FitSession.from_fit``)."""
+def again(dim_sky, dim_fit, once):
+    """The dim-sky fit's session made again from its result (``FitSession.from_fit``), on the
+    fit's own trace where it asks for the very light the fit traced (:func:`traced_once`)."""
     from skyfit_mi.fitting.fit import FitSession
 
     return FitSession.from_fit(dim_fit[0], dim_sky)
@@ -397,13 +450,14 @@ def height_sky(days, tmp_path_factory):
                         lambda frame: np.cos(np.radians(frame["sun_zenith_deg"])) ** HEIGHT)
 
 
-def test_by_default_the_skys_level_follows_the_suns_height_and_weather(height_sky):
+def test_by_default_the_skys_level_follows_the_suns_height_and_weather(height_sky, once):
     """Not told, a fitted sky's level changes smoothly over the day (DEFAULT_TERMS: level,
     drift, curve), each term beyond the level under its prior: on a day whose sky-to-sun
     ratio follows the sun's height the curve bends up toward both ends, k at the frames holds
     the truth, every parameter's interval holds its truth, and the terms the data hardly tell
     raise no warning (the prior holds them, and the intervals include that); fewer frames take
-    fewer terms.  One level for the day puts the diffuse colour outside its interval."""
+    fewer terms.  One level for the day puts the diffuse colour outside its interval (fitted
+    on the same traced light: the plan differs in its terms alone, :func:`traced_once`)."""
     from skyfit_mi.fitting.fit import fit_regions
     from skyfit_mi.fitting.sky_fit import DEFAULT_TERMS, default_terms
 
