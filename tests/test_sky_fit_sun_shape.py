@@ -13,8 +13,15 @@ from skyfit_mi.cli import main
 from skyfit_mi.fitting.light import LightOptions
 from skyfit_mi.physics import sky_shape
 
-from test_sky_fit import REGION, TRUTH
+from test_sky_fit import REGION, TRUTH, traced_once
 
+
+@pytest.fixture(scope="module")
+def once():
+    """The module's fits, relights and sessions under :func:`~test_sky_fit.traced_once`: a
+    light traced once."""
+    with traced_once():
+        yield
 
 
 def test_the_suns_level_is_a_factor_on_the_reflectances_only_where_nothing_anchors_them():
@@ -103,12 +110,14 @@ def bright_sun(days, tmp_path_factory):
 SUN_BRIGHTER = 1.2
 
 
-def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun):
+def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun, once):
     """The spec's sun 1.2 times too bright scales every reflectance down by about as much,
     and no data tell (the level trades exactly with them): with the sky taken as exact the
     diffuse colour's interval misses the truth; by default a photographed day's fit counts
     the sun's level (SUN_LEVEL_SD) with the sky's prior, holds every truth, warns that the
-    reflectances rest on it, and leaves sigma_alpha's interval as the data make it."""
+    reflectances rest on it, and leaves sigma_alpha's interval as the data make it.  (The
+    measured sun's day differs from the modelled one's in its skies' ``info`` alone: its fit
+    takes the modelled one's trace, :func:`~test_sky_fit.traced_once`.)"""
     from skyfit_mi.fitting.fit import fit_regions
     from skyfit_mi.fitting.light import LightPlan
     from skyfit_mi.physics.sky import MEASURED_SUN_SD
@@ -300,7 +309,7 @@ def test_the_skys_shape_is_fitted_with_the_materials_and_says_what_one_region_ca
     assert any("hardly tell the sky's" in w for w in r["warnings"]), r["warnings"]
 
 
-def test_relit_images_take_the_fitted_skys_shape(shape_fit, gradation_4, tmp_path):
+def test_relit_images_take_the_fitted_skys_shape(shape_fit, gradation_4, tmp_path, once):
     """relight of the fitted day renders each frame under the fitted shape: an environment
     map of the day's pattern mixed with its variants at level k (sky_maps/, named by the relit
     manifest's envmap record, which reads back as the sky rendered), whose horizontal
