@@ -13,7 +13,7 @@ from skyfit_mi.cli import main
 from skyfit_mi.fitting.light import LightOptions
 from skyfit_mi.physics import sky_shape
 
-from test_sky_fit import REGION, TRUTH, traced_once
+from test_sky_fit import HALF, REGION, TRUTH, traced_once
 
 
 @pytest.fixture(scope="module")
@@ -123,7 +123,9 @@ def test_a_modelled_suns_level_is_in_the_reflectances_intervals(bright_sun, once
     from skyfit_mi.physics.sky import MEASURED_SUN_SD
     from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
 
-    exact = next(fit_regions(bright_sun, [("disc", REGION)], model="colour", light=LightOptions(sky="spec"),
+    # half the region: the exact sky's C_g (0.79-0.84 on it, 0.79-0.83 on the whole) misses the
+    # truth by far
+    exact = next(fit_regions(bright_sun, [("disc", HALF)], model="colour", light=LightOptions(sky="spec"),
                              log=lambda *a: None))
     lo, hi = exact["intervals"]["C_g"]["95"]
     assert hi < TRUTH["C_g"], exact["intervals"]["C_g"]
