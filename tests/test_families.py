@@ -16,13 +16,14 @@ TRUTH = {"rho_s": 0.8, "sigma_alpha": 0.08}
 
 
 @pytest.fixture(scope="module")
-def traced(days):
-    """A GGX plastic's light cache on the clean day, the Dr.Jit model on it and its table."""
+def traced(plastic_day):
+    """A GGX plastic's light cache on the plastic's day (the day the fits below read, rendered
+    once for the module), the Dr.Jit model on it and its table."""
     from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.render.basis_table import tabulate
     from skyfit_mi.render.fit_model import WardModel
 
-    s = FitSession(days["clean"], "disc", REGION, model="two", normalisation="ggx_plastic",
+    s = FitSession(plastic_day, "disc", REGION, model="two", normalisation="ggx_plastic",
                    cache=FitCache(positions=8, directions=128, seed=2), light=None)
     cache = s.light_cache()
     wm = WardModel(cache, "two", "ggx_plastic")
