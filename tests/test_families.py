@@ -16,13 +16,14 @@ TRUTH = {"rho_s": 0.8, "sigma_alpha": 0.08}
 
 
 @pytest.fixture(scope="module")
-def traced(days):
-    """A GGX plastic's light cache on the clean day, the Dr.Jit model on it and its table."""
+def traced(plastic_day):
+    """A GGX plastic's light cache on the plastic's day (the day the fits below read, rendered
+    once for the module), the Dr.Jit model on it and its table."""
     from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.render.basis_table import tabulate
     from skyfit_mi.render.fit_model import WardModel
 
-    s = FitSession(days["clean"], "disc", REGION, model="two", normalisation="ggx_plastic",
+    s = FitSession(plastic_day, "disc", REGION, model="two", normalisation="ggx_plastic",
                    cache=FitCache(positions=8, directions=128, seed=2), light=None)
     cache = s.light_cache()
     wm = WardModel(cache, "two", "ggx_plastic")
@@ -160,22 +161,62 @@ def photographed_plastic(plastic_day, tmp_path_factory):
     return day
 
 
-def test_model_auto_on_photographs_fits_the_chosen_model_with_the_skys_level(
-        photographed_plastic):
+@pytest.fixture(scope="module")
+def auto_map(photographed_plastic, tmp_path_factory):
+    """The first run of ``fit --per-pixel --model auto`` on the plastic's day called
+    photographed (two lobes and a small light cache in the ranking, for time), its first fits
+    (:func:`~skyfit_mi.fitting.selection.fit_auto` on up to ``light_pixels`` of the region's
+    pixels, in the light the map resolved: ``--sky prior``, the default for photographs)
+    recorded as they ran: their arguments, results and every line they logged.  The map's test
+    and the test of ``--model auto`` on photographs share this one ranking and fit."""
+    import functools
+
+    from skyfit_mi.fitting import pixel_map
+    from skyfit_mi.fitting.pixel_map import ClusterOptions, MapOptions, run_map
+    from skyfit_mi.fitting.selection import fit_auto
+
+    ranked = functools.partial(fit_auto, families=("ward", "ggx_plastic"), cache=FitCache(4, 256))
+    auto = {"calls": 0, "results": [], "lines": []}
+
+    def recorded(manifest_path, regions, log=print, **kw):
+        auto.update(calls=auto["calls"] + 1, regions=regions, options=kw)
+
+        def both(line):
+            auto["lines"].append(line)
+            log(line)
+        for r in ranked(manifest_path, regions, log=both, **kw):
+            auto["results"].append(r)
+            yield r
+
+    day = photographed_plastic                        # the sky's level is fitted first too
+    pixels = np.stack(np.meshgrid(np.arange(3, 9), np.arange(3, 9)), -1).reshape(-1, 2)
+    out = tmp_path_factory.mktemp("auto_map") / "map"
+    logs = []
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(pixel_map, "fit_auto", recorded)
+        s = run_map(day, [("disc", pixels)], out, MapOptions("auto", chunk=18, light_pixels=16),
+                    ClusterOptions(workers=1), progress=False, log=logs.append)
+    return {"day": day, "pixels": pixels, "out": out, "summary": s, "logs": logs, "auto": auto}
+
+
+def test_model_auto_on_photographs_fits_the_chosen_model_with_the_skys_level(auto_map):
     """The plastic's day called photographed (the spec's sky then a model of the real one):
-    ``--model auto`` ranks on the spec's light as it is, then fits each region's chosen model
-    with the sky's level (``--sky prior``, the default for photographs), whose interval holds
-    the day's own (1); the sigma_alpha interval holds the truth and the result keeps its
-    ranking. A sky option a fit cannot take is refused before any light is traced."""
+    ``--model auto`` (the map's first fits, :func:`auto_map`: every parameter count of two
+    lobes ranked on 16 of the disc's pixels) ranks the candidates, then fits each region's
+    chosen model with the sky's level (``--sky prior``, the default for photographs), whose
+    interval holds the day's own (1); the sigma_alpha interval holds the truth and the result
+    keeps its ranking. A sky option a fit cannot take is refused before any light is
+    traced."""
     from skyfit_mi.errors import SkyfitError
     from skyfit_mi.fitting.selection import fit_auto
 
-    day = photographed_plastic
-    pixels = np.stack(np.meshgrid(np.arange(4, 8), np.arange(4, 8)), -1).reshape(-1, 2)
-    logs = []
-    r = next(fit_auto(day, [("disc", pixels)], families=("ward", "ggx_plastic"),
-                      models=("two",), cache=FitCache(positions=4, directions=256),
-                      log=logs.append))
+    day, auto = auto_map["day"], auto_map["auto"]
+    (name, pixels), = auto["regions"]
+    assert auto["calls"] == 1 and name == "disc" and len(pixels) == 16
+    assert "models" not in auto["options"] and auto["options"]["light"].sky == "prior"
+    logs = auto["lines"]
+    r, = auto["results"]
+    assert len(r["model_selection"]["ranking"]) == 6       # two lobes, three models each
     assert r["model_selection"]["chosen"]["normalisation"] == "ggx_plastic"
     assert r["normalisation"] == "ggx_plastic" and r["sky"]["regions"] == ["disc"]
     lo, hi = r["sky"]["interval95"]
@@ -188,29 +229,20 @@ def test_model_auto_on_photographs_fits_the_chosen_model_with_the_skys_level(
                       log=logs.append))
 
 
-def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(photographed_plastic,
-                                                                   tmp_path, monkeypatch):
+def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(auto_map, monkeypatch):
     """``fit --per-pixel --model auto`` on the plastic's day called photographed: the region's
     model and lobe ranked first (on up to --max-pixels of its pixels) and the sky's level
     fitted with them (its interval holding the day's own), then every pixel mapped in them
     under that light: GGX plastic, the map's planes its model's parameters alone, the pixels'
     roughness about the truth; run again, the map resumes with the choices and light its
-    store holds.  (Two lobes and a small light cache in the ranking, for time.)"""
-    import functools
-
+    store holds.  (The map's first run is :func:`auto_map`'s.)"""
     from skyfit_mi.fitting import pixel_map
     from skyfit_mi.fitting.pixel_map import ClusterOptions, MapOptions, run_map
-    from skyfit_mi.fitting.selection import fit_auto
     from skyfit_mi.render.fit_model import PARAMETERS
 
-    monkeypatch.setattr(pixel_map, "fit_auto", functools.partial(
-        fit_auto, families=("ward", "ggx_plastic"), cache=FitCache(4, 256)))
-    day = photographed_plastic                        # the sky's level is fitted first too
-    pixels = np.stack(np.meshgrid(np.arange(3, 9), np.arange(3, 9)), -1).reshape(-1, 2)
-    logs = []
-    s = run_map(day, [("disc", pixels)], tmp_path / "map",
-                MapOptions("auto", chunk=18, light_pixels=16), ClusterOptions(workers=1),
-                progress=False, log=logs.append)
+    day, pixels, out = auto_map["day"], auto_map["pixels"], auto_map["out"]
+    s, logs = auto_map["summary"], list(auto_map["logs"])
+    assert auto_map["auto"]["calls"] == 1                 # the ranking ran, once
     lo, hi = s["sky"]["interval95"]
     assert lo < 1.0 < hi and any("fitted sky level" in w for w in s["widths_include"]), s["sky"]
     disc = s["regions"]["disc"]
@@ -218,12 +250,12 @@ def test_a_map_with_model_auto_maps_each_region_in_its_chosen_lobe(photographed_
     # the light's level fitted apart, the one with R free (measured)
     assert disc["normalisation"] == "ggx_plastic" and disc["model"] in ("two", "achromatic")
     assert s["parameters"] == list(PARAMETERS[disc["model"]]) and "ranked" in s["models"]
-    assert not (tmp_path / "map" / "C_r.exr").exists()
+    assert not (out / "C_r.exr").exists()
     assert abs(disc["median"]["sigma_alpha"] / TRUTH["sigma_alpha"] - 1) < 0.15, disc
     assert any(f": chose ggx_plastic {disc['model']}" in x for x in logs), logs
     # the same command again resumes the store with the choices it holds, ranking nothing
     monkeypatch.setattr(pixel_map, "fit_auto", None)
-    again = run_map(day, [("disc", pixels)], tmp_path / "map",
+    again = run_map(day, [("disc", pixels)], out,
                     MapOptions("auto", chunk=18, light_pixels=16), ClusterOptions(workers=1),
                     progress=False, log=logs.append)
     assert again["chunks_this_run"] == 0 and again["regions"]["disc"]["normalisation"] == \
