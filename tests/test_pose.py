@@ -83,13 +83,17 @@ def test_a_pose_typed_off_misses_the_roughness_unless_its_sd_is_in_the_intervals
 def test_the_linearised_shift_is_a_refits_with_the_camera_turned(day, tmp_path):
     """At the true pose (no misfit) and a turn small enough for the data to be fitted still,
     the Gauss-Newton shift of the roughness is the refit's at the turned camera's to 20%."""
+    # every other pixel of the 4 x 4: both fits see the same data, so the comparison needs no
+    # more, at half the trace (measured, shift / refit's: 0.95 on these 8, 1.00 and 1.03 on
+    # other 8s, 1.01 on all 16; 1.25 on 4)
+    px = PIXELS[::2]
     cache = FitCache(positions=32, pose_sd_deg={"azimuth": 0.1})
-    lin = fit_region(day, "disc", PIXELS, model="two", cache=cache, **QUIET)
-    refit = fit_region(turned(day, tmp_path / "az", [("azimuth", 0.1)]), "disc", PIXELS,
+    lin = fit_region(day, "disc", px, model="two", cache=cache, **QUIET)
+    refit = fit_region(turned(day, tmp_path / "az", [("azimuth", 0.1)]), "disc", px,
                        model="two", cache=FitCache(positions=32, pose_sd_deg=0.0), **QUIET)
     shift = lin["pose"]["shift_by_parameter"]["sigma_alpha"]["azimuth"]
     finite = refit["parameters"]["sigma_alpha"] - lin["parameters"]["sigma_alpha"]
-    assert shift == pytest.approx(finite, rel=0.2)          # measured: 0.00025 and 0.00025
+    assert shift == pytest.approx(finite, rel=0.2)       # measured: 0.000174 and 0.000184
     assert lin["pose"]["error_sd"]["sigma_alpha"] == pytest.approx(abs(shift))
 
 
