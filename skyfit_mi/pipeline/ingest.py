@@ -198,7 +198,10 @@ def estimate_noise(values, sensor, jpeg=None, shown=None, log=None):
     for it in range(JPEG_NOISE_ITERATIONS):
         rng = np.random.default_rng([SEED, it])
         errors = [recompress(v, st, sensor, (a, b), rng)[0] - np.nan_to_num(v) for v, st in crops]
-        sa, sb = _passes(_noise_parts(views, sensor, errors), sensor)
+        # the copies' errors where the frames are smooth: the edges the frames' own noise
+        # tells (their spread is the frames'; judged by the errors' noise, which the
+        # compression shrinks, a coarse JPEG's smooth pixels all read as edges)
+        sa, sb = _fit_noise(_noise_parts(views, sensor, errors), sensor, shown)
         na, nb = max(a + shown[0] - sa, 0.0), max(b + shown[1] - sb, 0.0)
         done = abs(na - a) <= JPEG_NOISE_TOL * max(a, 1e-2) and \
             abs(nb - b) <= JPEG_NOISE_TOL * max(b, 1e-3)
