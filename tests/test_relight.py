@@ -423,7 +423,7 @@ def test_regions_traced_together_agree_with_each_traced_alone(tmp_path, mi):
     spec = SCENES_DIR / "specs" / "board_east_37.toml"
     raw = read_spec(spec)
     raw["camera"].update(width=48, height=36)
-    raw["time"].update(step_minutes=120)
+    raw["time"].update(step_minutes=180)       # 3 frames (12:00, 15:00, 18:00)
     raw["render"] = {"spp": 16, "seed": 2}
     render_sequence(validate_spec(raw, spec.parent), tmp_path / "day", progress=False,
                     log=lambda *a: None)
