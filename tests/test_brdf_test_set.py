@@ -80,8 +80,10 @@ def test_a_ward_table_is_predicted_as_well_as_its_family_fitted_to_every_light(t
     def ward(wi, wo, rng):
         return ward_brdf(wi, wo, rho_d, spec_r, sigma)
     [row] = bts.table_case("Ward", ward, tmp_path, lights=16, families=("ward", "ggx_metal"),
-                           points=12)
-    assert row["held_out_values"] == 12 * 8 * 3
+                           points=8)
+    print({k: row[k] for k in ("held_out_values", "oracle", "oracle_rel_rms", "held_out_rel_rms",
+                               "ratio", "coverage95")})
+    assert row["held_out_values"] == 8 * 8 * 3
     assert row["oracle"] == "ward colour"
     assert 1.0 <= row["oracle_by_family"]["ward two"] / row["oracle_rel_rms"]  # the minimum
     assert row["held_out_rel_rms"] < 0.02                       # the 1% noise, mostly

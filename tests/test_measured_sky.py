@@ -168,7 +168,9 @@ def test_a_day_under_measured_skies_is_recovered_under_them_and_biased_under_the
     rho_s 0.092 against 0.6, 0.4, 0.08)."""
     from measured_light import fit, measured_disc_day, relabelled, thesis_clear
 
-    day = measured_disc_day(tmp_path, [scans[i] for i in (0, 4, 8, 11, 14)])
+    # 64-row maps (not 128): the day is rendered and fitted under the same maps, and the
+    # asserted quantities are the same to 3 digits (rise 16.3 / bound 46.4; CIE 29.5x bound)
+    day = measured_disc_day(tmp_path, [scans[i] for i in (0, 4, 8, 11, 14)], rows=64)
     r, rise, bound = fit(day)
     print("measured:", r["parameters"], r["chi2_per_dof"], rise, bound)
     assert 0.0 <= rise <= bound, (rise, bound, r["parameters"])
