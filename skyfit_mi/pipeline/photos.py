@@ -743,11 +743,14 @@ def read_photo(path, exact_jpeg=True):
                     "check that the file is complete, or remove it") from None
 
 
+#: The EXIF fields of a photograph's exposure, by name: its :attr:`Photo.metadata` keys.
+EXPOSURE_KEYS = {"exposure time": "exposure_time_s", "f-number": "f_number", "ISO": "iso"}
+
+
 def exif_exposure(photo):
     """The exposure t S / N^2 [s] of ``photo`` from its EXIF exposure time, ISO speed and
-    f-number, or None where one is missing."""
-    m = photo.metadata
-    t, n, iso = m.get("exposure_time_s"), m.get("f_number"), m.get("iso")
+    f-number (:data:`EXPOSURE_KEYS`), or None where one is missing."""
+    t, n, iso = (photo.metadata.get(k) for k in EXPOSURE_KEYS.values())
     return float(t) * float(iso) / float(n) ** 2 if t and n and iso else None
 
 

@@ -73,7 +73,8 @@ from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky import EFFICACY_CLEAR
 from ..render.image import write_exr
 from .photo_times import frame_times
-from .photos import check_same_size, exif_exposure, list_photos, read_flat_field, read_photo
+from .photos import (EXPOSURE_KEYS, check_same_size, exif_exposure, list_photos,
+                     read_flat_field, read_photo)
 
 #: Luminance [cd m^-2] that saturates a sensor at exposure H = t S / N^2 = 1 [s]: ISO 12232's
 #: saturation-based speed, H_sat = 78 / S [lux s] at the sensor, with the standard lens and
@@ -136,9 +137,7 @@ def _exposure(photo):
     naming what is missing."""
     h = exif_exposure(photo)
     if h is None:
-        m = photo.metadata
-        missing = [k for k, v in (("exposure time", "exposure_time_s"), ("f-number", "f_number"),
-                                  ("ISO", "iso")) if not m.get(v)]
+        missing = [name for name, key in EXPOSURE_KEYS.items() if not photo.metadata.get(key)]
         raise SkyfitError(f"{Path(photo.path).name}: no EXIF {', '.join(missing)}; a bracket "
                           "is merged by its shots' exposures, so keep the camera's EXIF.")
     return h
@@ -198,9 +197,9 @@ def read_shots(items, tz=None, times_csv=None, flat=None, box=None):
         if box is not None:
             _check_box(box, photo)
             x0, y0, x1, y1 = box
-            floor = np.zeros((1, 1), bool)
             linear = linear[y0:y1, x0:x1].mean(axis=(0, 1), keepdims=True)
             clipped = clipped[y0:y1, x0:x1].any(keepdims=True)
+            floor = linear.max(axis=2) < FLOOR_FRACTION
         else:
             if not kept:
                 response = 1.0 if flat is None else \
@@ -320,7 +319,7 @@ def card_irradiance(shots, reflectance):
     bracket of the card keeps its good shots); SkyfitError when none is left."""
     out = []
     for s in shots:
-        if s.clipped.any() or s.linear.max() < FLOOR_FRACTION:
+        if s.clipped.any() or s.floor.any():
             continue
         lum = float(s.linear[0, 0] @ SRGB_LUMINANCE)
         radiance = lum * SATURATION_LUMINANCE / s.exposure / EFFICACY_CLEAR
