@@ -334,7 +334,7 @@ def test_new_frames_reuse_the_compiled_kernels(session):
 
     def build(seed, skies):
         build_light_cache(session.scene, session.params, skies, session.obs.pixels[:5], "disc",
-                          positions=2, directions=32, seed=seed, plan="one")
+                          positions=2, directions=32, seed=seed, plan="anchors")
     build(0, session.skies[:2])
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:

@@ -447,10 +447,10 @@ def test_device_grid_equals_the_numpy_grid():
         gs.grid_chi2("colour", y, w, D, G, gs.RHO_GRID[::-1])
 
 
-def _shared_integrals(mi, dr, share, emitter, quad, sun):
-    """One frame's interpolated integrals under the emitter's current sky (as the light cache
-    takes them: the anchors used and the pixels' own, then combined)."""
-    plan = share.plan(sun)
+def _shared_integrals(mi, dr, share, emitter, quad, sky):
+    """One frame's interpolated integrals under ``sky``, the emitter's current one (as the light
+    cache takes them: the anchors used and the pixels' own, then combined)."""
+    plan = share.plan(sky)
     at = dr.gather(mi.SurfaceInteraction3f, share.si, mi.UInt32(plan[3]))
     return share.combine(plan, *_sky_integrals(emitter, at, quad))
 
@@ -511,7 +511,7 @@ def test_sky_integrals_interpolated_between_anchors_match_each_pixels_own(tmp_pa
         pixel_si = dr.gather(mi.SurfaceInteraction3f, share.si,
                              mi.UInt32(share.A + np.arange(len(px))))
         own_d, own_l = _sky_integrals(scene.environment(), pixel_si, quad)
-        d, l, n = _shared_integrals(mi, dr, share, scene.environment(), quad, sky.sun_direction)
+        d, l, n = _shared_integrals(mi, dr, share, scene.environment(), quad, sky)
         interpolated.append((d, l))            # each frame's, for the cache's check below
         shared += n
         for s in (0.002, 0.02, 0.2, 0.5):

@@ -58,9 +58,9 @@ REFERENCE_SEED = 1_000_003
 #: Light-cache samples per pixel of a prediction (positions, directions): it predicts region
 #: means, whose Monte Carlo error (in the band) falls with the region's pixels, so it is a
 #: sixteenth of a fit's cache, whose chi-square needs every pixel accurate; the sky's
-#: integrals by the ``anchors`` plan (light_cache.SKY_PLANS: through the pixels' centres
-#: interpolated between anchors where accurate, else at one random position of each pixel,
-#: unbiased).  Not a fit's: docs/BENCHMARKS.md, "Tried, not adopted".
+#: integrals by the ``anchors`` plan (light_cache.SKY_PLANS: through the pixels' centres,
+#: interpolated between anchors where accurate).  Not a fit's: docs/BENCHMARKS.md, "Tried,
+#: not adopted".
 PREDICTION_CACHE = (4, 64)
 
 

@@ -147,14 +147,14 @@ class SkyPlan:
     """Where a light cache takes the sky's integrals (the control variate's deterministic
     part, :mod:`.sky_control`), which cost most of its time.
 
-    positions : None, at every position of a pixel; k, at the first k of its positions (a
-        random subset of its i.i.d. positions, so their mean is still an unbiased estimate
-        of the pixel's), their mean given to all
-    spacing : None, or n > 1: at anchors every n pixels (pixels only), each pixel taking the
+    spacing : None, or n > 1: at the pixels' centres (pixels only: one integral per pixel,
+        its error second order in the pixel's footprint and its noise none, where one random
+        position of each would add a first-order error that the positions' spread, the
+        stated variance, does not see); at anchors every n pixels, each pixel taking the
         bilinear interpolation of the four around it where that is accurate
-        (SHARE_ANGLE_DEG, SHARE_HORIZON_DEG, SHARE_SUN_DEG; never under an environment map),
-        ``positions``' elsewhere: about n^2 times cheaper on smooth surfaces, with an error
-        second order in the spacing; not where the anchors would outnumber the pixels
+        (SHARE_ANGLE_DEG, SHARE_HORIZON_DEG, SHARE_SUN_DEG; never under an environment map,
+        nor where the anchors would outnumber the pixels), its own elsewhere: about n^2 times
+        cheaper on smooth surfaces, with an error second order in the spacing
     wide_share : None, or a share of the positions: at every position, except the diffuse
         integral and the nodes of roughness at least WIDE_SIGMA (every node where the sky
         function is the ground's alone: the sun's part of a split light), at that share of
@@ -163,18 +163,16 @@ class SkyPlan:
     """
 
     name: str
-    positions: int = None
     spacing: int = None
     wide_share: float = None
 
 
 #: The light caches' sky plans: ``every`` position (the reference); a ``fit``'s (the wide
 #: parts at a share of the positions, the narrow ones, which resolve the pixel, at every
-#: one); ``one`` position per pixel (predictions of means over many pixels, which average
-#: out what one position leaves); ``anchors`` (predictions and maps of compact regions).
+#: one); ``anchors`` (predictions and maps: the pixels' centres, shared between anchors on
+#: compact regions).
 SKY_PLANS = {p.name: p for p in (SkyPlan("every"), SkyPlan("fit", wide_share=WIDE_SHARE),
-                                 SkyPlan("one", positions=1),
-                                 SkyPlan("anchors", positions=1, spacing=SKY_SPACING))}
+                                 SkyPlan("anchors", spacing=SKY_SPACING))}
 
 
 @dataclass
@@ -441,12 +439,17 @@ def _shape_index(mi, si, target):
 
 
 class _SharedSky:
-    """The anchors every ``spacing`` pixels (:class:`SkyPlan`) and which pixels may
-    interpolate between them, from the geometry alone (the camera and scene are the same in
-    every frame): anchors and pixels are traced once, through their centres."""
+    """The pixels' centres and, where anchors every ``spacing`` pixels pay (:func:`anchors_pay`),
+    those anchors and which pixels may interpolate between them, from the geometry alone (the
+    camera and scene are the same in every frame): anchors and pixels are traced once, through
+    their centres."""
 
     def __init__(self, mi, scene, sensor, pixels, spacing, size, target, want=None):
-        anchors, self.corner, self.weight = _anchor_plan(pixels, spacing, *size)
+        if anchors_pay(pixels, spacing, *size):
+            anchors, self.corner, self.weight = _anchor_plan(pixels, spacing, *size)
+        else:                                           # every pixel its own centre's
+            anchors = np.zeros((0, 2), dtype=int)
+            self.corner, self.weight = np.zeros((2, len(pixels), 4), dtype=int)
         # one trace of the anchors (first A points) and the pixels (the rest)
         self.A = A = len(anchors)
         self.si, sid, n, m = self._trace(mi, scene, sensor, np.concatenate([anchors, pixels]),
@@ -456,11 +459,14 @@ class _SharedSky:
         self.arrays = _interaction_arrays(self.si)
         cos_tol = np.cos(np.radians(SHARE_ANGLE_DEG))
         horizon = np.sin(np.radians(SHARE_HORIZON_DEG))
-        ok = (sid_p >= 0) & (np.abs(self.m_p[:, 2]) >= horizon)
-        if want is not None:         # each pixel's centre on its own material (several ones)
+        # each pixel's centre on its own material (its integrals are taken there: a pixel
+        # whose centre is not, on an edge, is no pixel of the material, LightCache.hit)
+        self.centred = sid_p >= 0
+        if want is not None:
             ids = np.array([shape.bsdf().id() for shape in target], dtype=object)
-            ok &= ids[np.maximum(sid_p, 0)] == want
-        for a in self.corner.T:
+            self.centred &= ids[np.maximum(sid_p, 0)] == want
+        ok = self.centred & (np.abs(self.m_p[:, 2]) >= horizon) & (A > 0)
+        for a in self.corner.T if A else ():
             ok &= (sid_a[a] == sid_p) & (np.abs(self.m_a[a, 2]) >= horizon) \
                 & (np.sum(n_a[a] * n_p, axis=1) >= cos_tol) \
                 & (np.sum(self.m_a[a] * self.m_p, axis=1) >= cos_tol)
@@ -479,15 +485,16 @@ class _SharedSky:
         m = np.array(si.to_world(mi.reflect(si.wi)), dtype=float).T
         return si, _shape_index(mi, si, target), n, m
 
-    def plan(self, sun):
-        """Which pixels interpolate under a sky whose sun lies toward ``sun`` (world): where
-        allowed and every mirror direction is SHARE_SUN_DEG from the sun; the others take their
-        own.  Returns (ok (P,), the anchors used, the pixels taking their own, the indices into
-        the traced interactions of both, in that order)."""
+    def plan(self, sky):
+        """Which pixels interpolate under ``sky``: where allowed, the sky has no map, and every
+        mirror direction is SHARE_SUN_DEG from the sun; the others take their own.  Returns
+        (ok (P,), the anchors used, the pixels taking their own, the indices into the traced
+        interactions of both, in that order)."""
         cos_sun = np.cos(np.radians(SHARE_SUN_DEG))
-        sun = np.asarray(sun, dtype=float)
-        ok = self.ok & (self.m_p @ sun < cos_sun) \
-            & np.all(self.m_a[self.corner] @ sun < cos_sun, axis=1)
+        sun = np.asarray(sky.sun_direction, dtype=float)
+        ok = self.ok & (sky.envmap is None) & (self.m_p @ sun < cos_sun)
+        if ok.any():
+            ok &= np.all(self.m_a[self.corner] @ sun < cos_sun, axis=1)
         used = np.unique(self.corner[ok])
         own = np.flatnonzero(~ok)
         return ok, used, own, np.concatenate([used, self.A + own])
@@ -617,6 +624,8 @@ def light_caches(scene, params, lights, at, bsdf_id, options=CacheOptions(), sta
     sky_plan_integrals(tr, params, lights, layout, pending, outs, stats)
     # each list freed once stacked
     common = {k: np.stack(outs[0].pop(k), axis=1) for k in list(outs[0]) if k not in OWN_ARRAYS}
+    if layout.share is not None:
+        common["hit"] &= layout.share.centred[:, None]
     return [LightCache(**common, **{k: np.stack(o.pop(k), axis=1) for k in OWN_ARRAYS},
                        normalisation=options.normalisation) for o in outs]
 
@@ -831,8 +840,9 @@ class _SkyLayout:
 
     quad : the quadrature on SIGMA_TABLE (:func:`~.sky_control.quadrature`)
     is_wide : (M,) bool, the Chebyshev nodes a fit's plan takes at a few positions
-    share : a :class:`_SharedSky` where anchors pay, else None
-    subset : None (every position), or the Dr.Jit indices of the positions taking them
+    share : a :class:`_SharedSky` where the plan takes the pixels' centres, else None
+    subset : None (every position), or the Dr.Jit indices of the positions taking them (a
+        measured point's first)
     wide : whether the wide nodes and the diffuse integral are taken at ``kw`` positions of
         each half (``wide_index``, under ``quads[0]``), the rest at every one (``quads[1]``);
         settled by the first frame's footprints (:func:`_small_footprints`)
@@ -853,18 +863,14 @@ def _sky_layout(tr, skies, options):
     mi, P, S = tr.mi, tr.P, tr.S
     plan = options.sky_plan
     share = None
-    if tr.rays is None and anchors_pay(tr.pixels, plan.spacing, *tr.size):
+    if tr.rays is None and plan.spacing is not None:
         share = _SharedSky(mi, tr.scene, tr.sensor, tr.pixels, int(plan.spacing), tr.size,
                            tr.target, tr.want)
     quad = quadrature(*SIGMA_TABLE, options.normalisation)
-    # the sky's integrals at every position, at the first k of each pixel's (a random subset
-    # of its i.i.d. positions: their mean is still an unbiased estimate of the pixel's), or
-    # shared between anchors (computed apart, with _SharedSky's own trace)
-    k = S if plan.positions is None else min(max(1, int(plan.positions)), S)
-    if tr.rays is not None:
-        k = 1            # a measured point's positions are one ray: its integrals are one
-    subset = None if k >= S else jit_array(
-        mi.UInt32, np.arange(P)[:, None] * S + np.arange(k)[None, :])
+    # the sky's integrals at every position (a measured point's positions are one ray: its
+    # integrals are one), or through the pixels' centres (computed apart, with _SharedSky's
+    # own trace)
+    subset = None if tr.rays is None or S == 1 else jit_array(mi.UInt32, np.arange(P) * S)
     # a fit's: the wide nodes and the diffuse integral at k / 2 positions of each half
     half = S // 2
     kw = 0 if plan.wide_share is None else max(1, int(S * float(plan.wide_share)) // 2)
@@ -876,7 +882,8 @@ def _sky_layout(tr, skies, options):
         # plane's pixel means move 0.3% of the ground's share, tests/test_light_cache.py)
         is_wide[:] = True
     layout = _SkyLayout(quad, is_wide, share, subset, kw=kw,
-                        wide=k >= S and share is None and 1 <= kw < half and 0 < is_wide.sum())
+                        wide=tr.rays is None and share is None and 1 <= kw < half
+                        and 0 < is_wide.sum())
     if layout.wide:
         cols = np.concatenate([np.arange(kw), half + np.arange(kw)])
         layout.wide_index = jit_array(mi.UInt32,
@@ -889,11 +896,11 @@ def _sky_layout(tr, skies, options):
 
 def _frame_points(tr, layout, si, sky, t):
     """The interactions of frame ``t`` (``si``, under ``sky``) whose sky integrals ``layout``
-    takes, Dr.Jit values: (shared, whether the anchors' are; own, those at the plan's
-    positions, or None where shared; few, those at the wide nodes' positions, or None); the
+    takes, Dr.Jit values: (shared, whether the pixels' centres' are; own, those at the
+    plan's positions, or None where shared; few, those at the wide nodes' positions, or None); the
     first frame settles ``layout.wide`` by the pixels' footprints."""
     mi, dr = tr.mi, tr.dr
-    shared = layout.share is not None and sky.envmap is None
+    shared = layout.share is not None
     own = None if shared else \
         si if layout.subset is None else dr.gather(mi.SurfaceInteraction3f, si, layout.subset)
     if layout.wide and t == 0:             # the pixels' footprints, from the first frame's
@@ -909,7 +916,7 @@ def _pending(layout, shared, own, few, sky):
     evaluated): (the points' :func:`_interaction_arrays`, or with ``layout.wide`` the few
     positions' and every one's; the shared sky's plan under ``sky`` or None)."""
     if shared:
-        plan = layout.share.plan(sky.sun_direction)
+        plan = layout.share.plan(sky)
         return layout.share.points(plan[3]), plan
     if layout.wide:
         return (_interaction_arrays(few), _interaction_arrays(own)), None
