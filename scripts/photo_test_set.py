@@ -18,6 +18,10 @@ Scenarios (``--scenario``, default all):
   misposed  card, the spec's camera 0.3 degrees off in azimuth and angle, pose_sd_deg 0.3
             (a camera from some 20 marked points, `skyfit camera`)
   lens      card, a lens of radial distortion k1 = -0.1, given in the spec's camera
+  hazy      card, the day rendered under a turbid clear sky of Linke turbidity 5 (its own
+            truth render), the spec still saying CIE clear (issue 52's case)
+  cloudy    card, the day under CIE S 011 type 10 (partly cloudy, brighter circumsolar
+            region), the spec still saying CIE clear
 
 Prints a markdown table per scenario: over seeds and materials, the share of (material,
 parameter) pairs whose 95% interval holds the truth, the gross misses (the truth beyond the
@@ -75,9 +79,10 @@ def truths(truth):
 
 #: The scenarios: how the camera photographs (``photo``: PhotoSettings' distortion, and
 #: ``shake``: each frame nudged by up to that many pixels and a fifth of a degree, seeded), how
-#: the user's spec departs from the truth's camera (``camera``: added to its [camera]), and
-#: how the frames are calibrated (``card``: the grey card, else the first frame's true
-#: exposure, with ``fit --sky spec``).
+#: the user's spec departs from the truth's camera (``camera``: added to its [camera]), how
+#: the frames are calibrated (``card``: the grey card, else the first frame's true
+#: exposure, with ``fit --sky spec``), and the sky the day is rendered under (``sky``: the
+#: truth's [sky], its own render; the user's spec keeps the board's CIE clear sky).
 SCENARIOS = {
     "card": {"card": True},
     "lab": {"card": False},
@@ -85,25 +90,49 @@ SCENARIOS = {
     "misposed": {"card": True, "camera": {"azimuth_deg": 0.3, "angle_deg": 0.3,
                                           "pose_sd_deg": 0.3}},
     "lens": {"card": True, "photo": {"distortion": (-0.1,)}, "camera": {"distortion": [-0.1]}},
+    "hazy": {"card": True, "sky": {"type": "turbid", "turbidity": 5.0}},
+    "cloudy": {"card": True, "sky": {"type": "cie_general", "cie_type": 10}},
 }
 
 
-def write_spec(work, scenario="truth"):
-    """The board's spec with the card's scene (path): the truth's, rendered at TRUTH_SPP, or
-    the one a user of ``scenario`` gives ingest (its camera off as SCENARIOS says)."""
+def write_spec(work, scenario=None, truth=False):
+    """The board's spec with the card's scene (path): the truth's of ``scenario`` (its sky),
+    rendered at TRUTH_SPP, or the one a user of ``scenario`` gives ingest (its camera off as
+    SCENARIOS says, the board's sky)."""
     from skyfit_mi.pipeline.spec import read_spec
 
+    how = SCENARIOS.get(scenario, {})
     (work / "board_card.xml").write_text(scene_xml())
     raw = read_spec(SPEC)
     raw["scene"] = {**raw["scene"], "file": "board_card.xml"}
     raw["render"] = {**raw["render"], "spp": TRUTH_SPP}
-    cam = dict(raw["camera"])
-    for k, v in SCENARIOS.get(scenario, {}).get("camera", {}).items():
-        cam[k] = cam[k] + v if k in ("azimuth_deg", "angle_deg") else v
-    raw["camera"] = cam
-    path = work / ("spec.json" if scenario == "truth" else f"spec_{scenario}.json")
+    if truth:
+        raw["sky"] = how.get("sky", raw["sky"])
+    else:
+        cam = dict(raw["camera"])
+        for k, v in how.get("camera", {}).items():
+            cam[k] = cam[k] + v if k in ("azimuth_deg", "angle_deg") else v
+        raw["camera"] = cam
+    path = work / (f"spec_truth{truth_tag(scenario)}.json" if truth else f"spec_{scenario}.json")
     path.write_text(json.dumps(raw, indent=1))
     return path
+
+
+def truth_tag(scenario):
+    """The suffix of ``scenario``'s truth render: '' under the board's own sky."""
+    return f"_{scenario}" if "sky" in SCENARIOS.get(scenario, {}) else ""
+
+
+def render_truth(work, scenario):
+    """The folder of ``scenario``'s truth render, rendered on first use."""
+    from skyfit_mi.pipeline.sequence import render_sequence
+    from skyfit_mi.pipeline.spec import load_spec
+
+    truth = work / f"truth{truth_tag(scenario)}"
+    if not (truth / "manifest.json").exists():
+        render_sequence(load_spec(write_spec(work, scenario, truth=True)), truth,
+                        progress=False, log=lambda *a: None)
+    return truth
 
 
 def photo_settings(truth, scenario, quality, seed):
@@ -113,7 +142,7 @@ def photo_settings(truth, scenario, quality, seed):
 
     how = SCENARIOS[scenario]
     kw = dict(how.get("photo", {}))
-    tag = f"q{quality}_s{seed}"
+    tag = f"q{quality}_s{seed}{truth_tag(scenario)}"
     if how.get("shake"):
         rng = np.random.default_rng([seed, 51])
         doc, _ = load_manifest(truth)
@@ -203,16 +232,8 @@ def main():
                     help="fit again the sequences an earlier run ingested into -o DIR")
     ap.add_argument("-o", "--output", help="work folder (default a temporary one)")
     args = ap.parse_args()
-    from skyfit_mi.pipeline.sequence import render_sequence
-    from skyfit_mi.pipeline.spec import load_spec
-
     work = Path(args.output or tempfile.mkdtemp(prefix="photo_test_set_"))
     work.mkdir(parents=True, exist_ok=True)
-    spec_path = write_spec(work)
-    truth = work / "truth"
-    if not (truth / "manifest.json").exists():
-        render_sequence(load_spec(spec_path), truth, progress=False, log=lambda *a: None)
-    truth_of = truths(truth)
     print(f"JPEG quality {args.quality}, seeds {args.first_seed}.."
           f"{args.first_seed + args.seeds - 1}, work folder {work}\n")
     print("| scenario | pairs held | gross misses | median C 95% half-width [%] | "
@@ -220,6 +241,8 @@ def main():
     print("|---|---|---|---|---|")
     for scenario in args.scenario:
         rows = []
+        truth = render_truth(work, scenario)
+        truth_of = truths(truth)
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             fits = run_seed(work, truth, scenario, args.quality, seed, args.refit)
             rows += tally(fits, truth_of)
