@@ -220,6 +220,40 @@ def test_where_the_data_alone_put_the_skys_level_is_read_from_their_profile():
                                grid) == -1
 
 
+def test_regions_that_disagree_on_the_skys_level_widen_its_uncertainty():
+    """_regions_agree: regions whose own levels agree within their curvature leave the sky's
+    information as it is; regions each reading the light at another level (a sky of another
+    shape, seen through each material's own lobe) give Q = the sum of each one's chi-square at
+    the pooled level above its own least (exact here: parabolas in log k), p < MISFIT_P, and the
+    data's information on the sky divided by Q / (R - 1); each region's own level is read from
+    its parabola between the grid's points."""
+    from skyfit_mi.fitting.sky_fit import SCALE_GRID, _Level, _regions_agree
+    from skyfit_mi.fitting.uncertainty import MISFIT_P
+
+    grid = np.log(SCALE_GRID)
+    us = np.sort(np.r_[grid, 0.05, 0.15])
+
+    def level(own, b):
+        profile = {u: [(1000.0 + b_r * (u - m) ** 2, None) for m, b_r in zip(own, b)]
+                   for u in us}
+        lv = _Level(profile, grid, None)
+        lv.u0 = min(profile, key=lv.total)
+        return lv
+
+    same = _regions_agree(level([0.1, 0.1, 0.1], [50.0, 100.0, 200.0]))
+    assert same["scale"] == 1.0 and same["dof"] == 2 and same["chi2"] < 1.0
+    assert np.allclose(same["by_region"], np.exp(0.1), rtol=1e-9)
+    own = [0.0, 0.3, -0.25]
+    lv = level(own, [100.0, 100.0, 100.0])
+    apart = _regions_agree(lv)
+    q = sum(100.0 * (lv.u0 - m) ** 2 for m in own)
+    assert apart["chi2"] == pytest.approx(q, rel=1e-6) and apart["p"] < MISFIT_P
+    assert apart["scale"] == pytest.approx(q / 2, rel=1e-6)
+    assert np.allclose(np.log(apart["by_region"]), own, atol=1e-9)
+    # one region alone has nothing to disagree with
+    assert _regions_agree(level([0.3], [100.0]))["scale"] == 1.0
+
+
 def test_a_prior_holding_a_level_the_data_put_beyond_the_search_is_warned(again, dim_fit,
                                                                            monkeypatch):
     """Under the prior the profile's least point can lie inside the search while the data's

@@ -450,7 +450,7 @@ class SkyCoefficients:
                         u[self.terms:] if self.variants else None)
 
 
-def _fit_curve(sessions, thetas, u0, coefficients, s2):
+def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
     """The sky's ``coefficients`` (:class:`SkyCoefficients`) fitted with the regions'
     parameters, from the day's level ``u0`` (log k) and each region's ``thetas`` there.
     Gauss-Newton on the coefficients with every region's parameters profiled out (each
@@ -458,7 +458,8 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2):
     then polished by Levenberg-Marquardt), under their priors.  Leaves each session at the
     fit; returns (coefficients, their covariance, the span [s], each region's time basis, its
     parameters there and their response to the coefficients (n, coefficients), the regions'
-    summed chi-square there)."""
+    summed chi-square there); the covariance takes the data's information over ``scale`` (the
+    regions' disagreement, :func:`_regions_agree`), the priors' as it is."""
     terms = coefficients.terms
     times = [t for s in sessions for t in s.obs.times]
     span = (float(_seconds(times).min()), float(_seconds(times).max()))
@@ -505,7 +506,8 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2):
             break
     chi2 = objective(u, thetas) - u @ P @ u
     H, _, responses = linearised(u, thetas)
-    return u, s2 * np.linalg.inv(H), span, bases, thetas, responses, float(chi2)
+    return (u, s2 * np.linalg.inv((H - P) / scale + P), span, bases, thetas, responses,
+            float(chi2))
 
 
 @dataclass(frozen=True)
@@ -571,8 +573,9 @@ class _Level:
     """The day's one sky level profiled over log k (:func:`_profile_level`): ``profile``
     {log k: [(least chi-square, parameters) per region]}, the search's ``grid`` (log k), the
     prior's sd on log k (None: none), the least point ``u0``, log k's standard error ``sd_u``
-    (inf where not determined), whether the least point lies at the grid's ``edge``, and
-    s^2 (the regions' pooled Birge ratio there)."""
+    (inf where not determined), whether the least point lies at the grid's ``edge``, s^2
+    (the regions' pooled Birge ratio there), and whether the regions ``agree`` on the level
+    (:func:`_regions_agree`)."""
 
     profile: dict
     grid: np.ndarray
@@ -581,6 +584,7 @@ class _Level:
     sd_u: float = np.inf
     edge: bool = False
     s2: float = 1.0
+    agree: dict = None
 
     def data(self, u):
         """The regions' summed least chi-square at log k = ``u``."""
@@ -645,9 +649,45 @@ def _profile_level(sessions, prior_sd, seed):
                 for s, (_, th) in zip(sessions, level.profile[level.u0]))
     level.s2 = unc.scale(level.data(level.u0), noise)
     level.edge = edge
-    # at the grid's end the minimum may lie beyond it: k is not determined
-    level.sd_u = float(np.sqrt(level.s2 / b)) if b is not None and b > 0 and not edge else np.inf
+    level.agree = _regions_agree(level)
+    # at the grid's end the minimum may lie beyond it: k is not determined; the data's
+    # curvature (the prior's, 1 / sd^2, apart) over the regions' disagreement
+    if b is not None and b > 0 and not edge:
+        prior = 0.0 if prior_sd is None else min(1.0 / prior_sd ** 2, b)
+        level.sd_u = float(np.sqrt(level.s2 / ((b - prior) / level.agree["scale"] + prior)))
+    else:
+        level.sd_u = np.inf
     return level
+
+
+def _regions_agree(level):
+    """Whether the regions agree on the day's one sky level (``level``'s profile): Q, the sum
+    over regions of how far each region's chi-square at the pooled level lies above its own
+    least (a parabola through its three points about the least it saw), over s^2, is
+    chi-square with R - 1 degrees of freedom when one light lights them all as the model
+    says.  Where it is significant (p < MISFIT_P) the sky's model does not hold the light the
+    regions see (a sky of another shape: each material reads it through its own lobe), and
+    the data's information on the sky's coefficients is divided by ``scale`` = Q / (R - 1),
+    the Birge ratio between regions (the Particle Data Group's scale factor, squared); else
+    ``scale`` 1.  Returns {chi2, dof, p, scale, by_region: each region's own least level k}."""
+    us = np.array(sorted(level.profile))
+    chi2 = np.array([[c for c, _ in level.profile[u]] for u in us])          # (U, R)
+    R = chi2.shape[1]
+    at = chi2[int(np.searchsorted(us, level.u0))]
+    least, own = chi2.min(axis=0), us[np.argmin(chi2, axis=0)]
+    for r in range(R):
+        i = int(np.argmin(chi2[:, r]))
+        if 0 < i < len(us) - 1:
+            vertex, b = _parabola(us[i - 1:i + 2], chi2[i - 1:i + 2, r])
+            if vertex is not None and us[i - 1] < vertex < us[i + 1]:
+                own[r] = vertex
+                least[r] = min(least[r], chi2[i, r] - b * (us[i] - vertex) ** 2)
+    q = float(np.sum(at - least) / level.s2)
+    dof = R - 1
+    p = float(chdtrc(dof, q)) if dof else 1.0
+    return {"chi2": q, "dof": dof, "p": p,
+            "scale": q / dof if dof and p < unc.MISFIT_P else 1.0,
+            "by_region": [float(np.exp(u)) for u in own]}
 
 
 def _level_warnings(level, terms):
@@ -664,6 +704,19 @@ def _level_warnings(level, terms):
                "from the light the data show), so the parameters and their intervals are not "
                "reliable" if level.edge else "")
             + "; fit several materials with different normals, or a grey card, together.")
+    agree = level.agree
+    if agree and agree["scale"] > 1:
+        own = agree["by_region"]
+        warnings.append(
+            f"the regions disagree about the sky's level (chi-square {agree['chi2']:.1f} for "
+            f"{agree['dof']}, p = {agree['p']:.2g}; each region alone puts it at "
+            f"{min(own):.3g}-{max(own):.3g} times the spec's): the spec's sky does not hold "
+            "the light they see (a sky of another shape, which each material reads through its "
+            "own lobe), so every interval takes the sky's uncertainty widened by that "
+            f"disagreement (the data's information on it divided by {agree['scale']:.3g}); "
+            "an error in the sky's shape may still move glossy materials beyond their "
+            "intervals: give the spec a measured sky (envmap, or perez with measured "
+            "irradiance) or photograph it (skyfit sky-series).")
     alone = {u: level.data(u) for u in level.profile}   # the profile without the prior
     side = _data_beyond_search(alone, level.grid)
     # the prior-data conflict, over s^2 as the profile's intervals take it
@@ -748,7 +801,7 @@ def _fit_terms(sessions, level, terms, told, warnings):
         return fitted
     coefficients = SkyCoefficients(terms, tuple(sessions[0].parts.variants), level.prior_sd)
     u, C, span, bases, thetas, responses, fitted.chi2 = _fit_curve(
-        sessions, thetas, level.u0, coefficients, level.s2)
+        sessions, thetas, level.u0, coefficients, level.s2, level.agree["scale"])
     sd = np.sqrt(np.diag(C))
     fitted.lights = [FittedLight(coefficients, B, u, C, level.s2, theta)
                      for B, theta in zip(bases, thetas)]
@@ -905,6 +958,12 @@ def fit_sky_scale(sessions, plan, seed=0, log=print):
               "dof": sum(s.problem.dof for s in sessions)
               - (len(fitted.correlation["names"]) if fitted.correlation else 1),
               "interval_scale_s2": level.s2,
+              "regions_agree": None if level.agree is None else {
+                  **level.agree, "meaning": "Q: the sum over regions of each one's chi-square "
+                  "at the pooled level above its own least, over s^2 (chi-square with dof "
+                  "R - 1 where one light lights them all as the model says); where p < "
+                  f"{unc.MISFIT_P:g} the data's information on the sky is divided by scale = "
+                  "Q / dof in every interval; by_region: each region's own least level k"},
               "prior": None if plan.prior_sd is None else {
                   "log_k_sd": plan.prior_sd, "meaning": "log k ~ N(0, sd^2) about the spec's "
                   "sky, from how measured skies scatter about the models; its penalty (log k / "
