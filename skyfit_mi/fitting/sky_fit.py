@@ -684,6 +684,8 @@ def _regions_agree(level):
                 least[r] = min(least[r], chi2[i, r] - b * (us[i] - vertex) ** 2)
     q = float(np.sum(at - least) / level.s2)
     dof = R - 1
+    if not np.isfinite(q):                   # a region's search failed somewhere: no test
+        q, dof = 0.0, 0
     p = float(chdtrc(dof, q)) if dof else 1.0
     return {"chi2": q, "dof": dof, "p": p,
             "scale": q / dof if dof and p < unc.MISFIT_P else 1.0,
