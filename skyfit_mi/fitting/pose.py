@@ -96,7 +96,7 @@ def pose_through_sky(sessions, sky):
     """The sky fit ``sky`` (:class:`~.sky_fit.SkyFit` of ``sessions``, the day's regions, each
     lit at it) with each region's share's ``pose_shift``: the sky's coefficients' shift per
     angle of the pose, -H^-1 sum_r Jp_r^T Delta r_r over the regions at their parameters of
-    the sky fit (:class:`~.sky_fit.FittedLight`, whose covariance is s^2 H^-1), and the
+    the sky fit (:class:`~.sky_fit.FittedLight`'s ``inverse_normal``), and the
     record's ``pose_shift``.  ``sky`` as it is where the pose is exact or the sky's level is
     not determined."""
     angles = sorted({k for s in sessions for k in s.pose_angles})
@@ -110,7 +110,7 @@ def pose_through_sky(sessions, sky):
         for k, moved in turned_residuals(s, s.problem, light.theta).items():
             pull[k] = pull.get(k, 0.0) + Jp.T @ moved[s.problem.mask]
     light = next(iter(lights.values()))
-    shift = {k: -(light.covariance / light.s2) @ v for k, v in pull.items()}
+    shift = {k: -light.inverse_normal @ v for k, v in pull.items()}
     record = {**sky.record, "pose_shift": {
         "meaning": "the sky's coefficients' change were the camera turned by the pose's sd in "
                    "each angle (linearised: every region's residuals moved by the turn), which "

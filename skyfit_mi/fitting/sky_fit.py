@@ -456,7 +456,8 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
     Gauss-Newton on the coefficients with every region's parameters profiled out (each
     region's Jacobian in the coefficients projected off its parameters' own; the parameters
     then polished by Levenberg-Marquardt), under their priors.  Leaves each session at the
-    fit; returns (coefficients, their covariance, the span [s], each region's time basis, its
+    fit; returns (coefficients, their covariance, the profiled normal matrix's inverse, the
+    span [s], each region's time basis, its
     parameters there and their response to the coefficients (n, coefficients), the regions'
     summed chi-square there); the covariance takes the data's information over ``scale`` (the
     regions' disagreement, :func:`_regions_agree`), the priors' as it is."""
@@ -506,16 +507,19 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
             break
     chi2 = objective(u, thetas) - u @ P @ u
     H, _, responses = linearised(u, thetas)
-    return (u, s2 * np.linalg.inv((H - P) / scale + P), span, bases, thetas, responses,
-            float(chi2))
+    return (u, s2 * np.linalg.inv((H - P) / scale + P), np.linalg.inv(H), span, bases, thetas,
+            responses, float(chi2))
 
 
 @dataclass(frozen=True)
 class FittedLight:
     """The sky's coefficients as fitted for one region: their kind (:class:`SkyCoefficients`),
     the region's frames' time ``basis`` (:func:`time_basis`), their values ``u``, their
-    ``covariance`` over the regions' pooled Birge ratio ``s2`` (its inverse the profiled normal
-    matrix's times s2), and the region's parameters ``theta`` there (None while fitting)."""
+    ``covariance`` over the regions' pooled Birge ratio ``s2`` (s2 times the inverse of the
+    profiled normal matrix, the data's part divided by the regions' disagreement), the region's
+    parameters ``theta`` there (None while fitting), and ``inverse_normal`` H^-1, the inverse of
+    the profiled normal matrix as it is: the coefficients' response to the data
+    (:func:`~.pose.pose_through_sky`)."""
 
     coefficients: SkyCoefficients
     basis: np.ndarray
@@ -523,6 +527,7 @@ class FittedLight:
     covariance: np.ndarray = None
     s2: float = 1.0
     theta: np.ndarray = None
+    inverse_normal: np.ndarray = None
 
     def put(self, session, u=None):
         """Light ``session`` at the coefficients ``u`` (default the fitted)."""
@@ -574,8 +579,8 @@ class _Level:
     {log k: [(least chi-square, parameters) per region]}, the search's ``grid`` (log k), the
     prior's sd on log k (None: none), the least point ``u0``, log k's standard error ``sd_u``
     (inf where not determined), whether the least point lies at the grid's ``edge``, s^2
-    (the regions' pooled Birge ratio there), and whether the regions ``agree`` on the level
-    (:func:`_regions_agree`)."""
+    (the regions' pooled Birge ratio there), whether the regions ``agree`` on the level
+    (:func:`_regions_agree`), and the profile's ``curvature`` b there (chi2 = a + b u^2)."""
 
     profile: dict
     grid: np.ndarray
@@ -585,6 +590,7 @@ class _Level:
     edge: bool = False
     s2: float = 1.0
     agree: dict = None
+    curvature: float = None
 
     def data(self, u):
         """The regions' summed least chi-square at log k = ``u``."""
@@ -655,6 +661,7 @@ def _profile_level(sessions, prior_sd, seed):
     if b is not None and b > 0 and not edge:
         prior = 0.0 if prior_sd is None else min(1.0 / prior_sd ** 2, b)
         level.sd_u = float(np.sqrt(level.s2 / ((b - prior) / level.agree["scale"] + prior)))
+        level.curvature = float(b)
     else:
         level.sd_u = np.inf
     return level
@@ -787,7 +794,7 @@ def _fit_terms(sessions, level, terms, told, warnings):
             light = SkyCoefficients(1, (), level.prior_sd)
             fitted.lights = [FittedLight(light, np.ones((len(s.obs.times), 1)),
                                          np.array([level.u0]), np.array([[level.sd_u ** 2]]),
-                                         level.s2, theta)
+                                         level.s2, theta, np.array([[1.0 / level.curvature]]))
                              for s, theta in zip(sessions, thetas)]
             fitted.sd = [_carried_sd(light_response(s, light, light.theta)[3], light.covariance)
                          for s, light in zip(sessions, fitted.lights)]
@@ -802,10 +809,10 @@ def _fit_terms(sessions, level, terms, told, warnings):
                             "determined.")
         return fitted
     coefficients = SkyCoefficients(terms, tuple(sessions[0].parts.variants), level.prior_sd)
-    u, C, span, bases, thetas, responses, fitted.chi2 = _fit_curve(
+    u, C, H_inv, span, bases, thetas, responses, fitted.chi2 = _fit_curve(
         sessions, thetas, level.u0, coefficients, level.s2, level.agree["scale"])
     sd = np.sqrt(np.diag(C))
-    fitted.lights = [FittedLight(coefficients, B, u, C, level.s2, theta)
+    fitted.lights = [FittedLight(coefficients, B, u, C, level.s2, theta, H_inv)
                      for B, theta in zip(bases, thetas)]
     fitted.sd = [_carried_sd(R, C) for R in responses]
     fitted.k, fitted.sd_u = float(np.exp(u[0])), float(sd[0])
