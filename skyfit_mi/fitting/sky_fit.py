@@ -515,8 +515,8 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
 class FittedLight:
     """The sky's coefficients as fitted for one region: their kind (:class:`SkyCoefficients`),
     the region's frames' time ``basis`` (:func:`time_basis`), their values ``u``, their
-    ``covariance`` over the regions' pooled Birge ratio ``s2`` (s2 times the inverse of the
-    profiled normal matrix, the data's part divided by the regions' disagreement), the region's
+    ``covariance`` (the regions' pooled Birge ratio s^2 times the inverse of the profiled
+    normal matrix, the data's part divided by the regions' disagreement), the region's
     parameters ``theta`` there (None while fitting), and ``inverse_normal`` H^-1, the inverse of
     the profiled normal matrix as it is: the coefficients' response to the data
     (:func:`~.pose.pose_through_sky`)."""
@@ -525,7 +525,6 @@ class FittedLight:
     basis: np.ndarray
     u: np.ndarray
     covariance: np.ndarray = None
-    s2: float = 1.0
     theta: np.ndarray = None
     inverse_normal: np.ndarray = None
 
@@ -794,7 +793,7 @@ def _fit_terms(sessions, level, terms, told, warnings):
             light = SkyCoefficients(1, (), level.prior_sd)
             fitted.lights = [FittedLight(light, np.ones((len(s.obs.times), 1)),
                                          np.array([level.u0]), np.array([[level.sd_u ** 2]]),
-                                         level.s2, theta, np.array([[1.0 / level.curvature]]))
+                                         theta, np.array([[1.0 / level.curvature]]))
                              for s, theta in zip(sessions, thetas)]
             fitted.sd = [_carried_sd(light_response(s, light, light.theta)[3], light.covariance)
                          for s, light in zip(sessions, fitted.lights)]
@@ -812,7 +811,7 @@ def _fit_terms(sessions, level, terms, told, warnings):
     u, C, H_inv, span, bases, thetas, responses, fitted.chi2 = _fit_curve(
         sessions, thetas, level.u0, coefficients, level.s2, level.agree["scale"])
     sd = np.sqrt(np.diag(C))
-    fitted.lights = [FittedLight(coefficients, B, u, C, level.s2, theta, H_inv)
+    fitted.lights = [FittedLight(coefficients, B, u, C, theta, H_inv)
                      for B, theta in zip(bases, thetas)]
     fitted.sd = [_carried_sd(R, C) for R in responses]
     fitted.k, fitted.sd_u = float(np.exp(u[0])), float(sd[0])

@@ -871,7 +871,7 @@ def _sky_layout(tr, skies, options):
     # integrals are one), or through the pixels' centres (computed apart, with _SharedSky's
     # own trace)
     subset = None if tr.rays is None or S == 1 else jit_array(mi.UInt32, np.arange(P) * S)
-    # a fit's: the wide nodes and the diffuse integral at k / 2 positions of each half
+    # a fit's: the wide nodes and the diffuse integral at kw positions of each half
     half = S // 2
     kw = 0 if plan.wide_share is None else max(1, int(S * float(plan.wide_share)) // 2)
     is_wide = chebyshev_nodes(*SIGMA_TABLE) >= WIDE_SIGMA
