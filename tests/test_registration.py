@@ -44,20 +44,22 @@ def shaken(tmp_path_factory):
 
 
 def test_the_measured_motion_is_the_cameras(shaken):
-    """Shifts within 0.1 px of the truth (measured: 0.054 px at most), rotations within
-    0.05 degrees (0.3 applied; measured error 0.05 at most, 0.04 px at the image's corner);
-    the reference frame still; the regions eroded by the resampling's reach and 3 sd."""
+    """Shifts within 0.06 px of the truth (measured: 0.044 px at most), rotations within
+    0.1 degrees (0.3 applied; measured error 0.067 at most, 0.05 px at the image's corner); the
+    stated sd honest (each shift's error within 2.5 sd, measured 1.7) and not empty; the
+    reference frame still; the regions eroded by the resampling's reach and 3 sd."""
     doc = shaken["docs"][True]
     reg = doc["ingest"]["registration"]
     assert reg["registered"] and reg["reference"] == "IMG_0003.png" and reg["erode_px"] == 2
     for f in doc["frames"]:
         got = f["registration"]
         want = MOTION.get(f["index"], (0.0, 0.0, 0.0))
-        assert got["dx_px"] == pytest.approx(want[0], abs=0.1), f["index"]
-        assert got["dy_px"] == pytest.approx(want[1], abs=0.1), f["index"]
-        assert got["rotation_deg"] == pytest.approx(want[2], abs=0.05), f["index"]
-        # sd_px is a lower bound (the day's change of light is not noise): errors up to 3x
-        assert 0 <= got["sd_px"] < 0.05
+        assert got["dx_px"] == pytest.approx(want[0], abs=0.06), f["index"]
+        assert got["dy_px"] == pytest.approx(want[1], abs=0.06), f["index"]
+        assert got["rotation_deg"] == pytest.approx(want[2], abs=0.1), f["index"]
+        if not got.get("reference"):
+            err = np.abs([got["dx_px"] - want[0], got["dy_px"] - want[1]])
+            assert np.all(err <= 2.5 * got["sd_px"]) and 0.01 < got["sd_px"] < 0.05, got
     assert any("registration on IMG_0003.png" in m for m in shaken["logs"])
     off = shaken["docs"][False]["ingest"]["registration"]
     assert not off["registered"] and off["erode_px"] == 0
