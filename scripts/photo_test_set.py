@@ -186,6 +186,21 @@ def run_seed(work, truth, scenario, quality, seed, refit):
     return fits
 
 
+def registration_errors(seq, photos):
+    """(each moved frame's shift error at the image's centre (2,) [px], its stated sd_px) of
+    the ingested ``seq`` against the motion ``photos.json`` records (the reference's taken out),
+    or None where ingest registered nothing."""
+    doc = json.loads((seq / "manifest.json").read_text())
+    motion = json.loads((photos / "photos.json").read_text()).get("motion") or {}
+    recs = {f["index"]: f["registration"] for f in doc["frames"] if "registration" in f}
+    ref = [i for i, r in recs.items() if r.get("reference")]
+    if not motion or not ref:
+        return None
+    zero = np.array(motion.get(str(ref[0]), (0.0, 0.0, 0.0))[:2])
+    return [(np.array([r["dx_px"], r["dy_px"]]) - np.array(motion[str(i)][:2]) + zero, r["sd_px"])
+            for i, r in recs.items() if not r.get("reference") and str(i) in motion]
+
+
 def tally(fits, truth_of):
     """Per fitted sample: (held (5,), gross (5,), C half-width [%] (3,), calibration's share
     of C's squared half-width (3,)).  Where the fit warns that C is grey, so that its plastic
@@ -246,6 +261,15 @@ def main():
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             fits = run_seed(work, truth, scenario, args.quality, seed, args.refit)
             rows += tally(fits, truth_of)
+            tag, _ = photo_settings(truth, scenario, args.quality, seed)
+            moved = registration_errors(work / f"seq_{scenario}_q{args.quality}_s{seed}",
+                                        work / f"photos_{tag}")
+            if moved:
+                err = np.array([e for e, _ in moved])
+                z = np.concatenate([e / sd for e, sd in moved])
+                print(f"<!-- seed {seed}: registration errs {np.sqrt(np.mean(err ** 2)):.3f} px "
+                      f"rms per axis; error / stated sd rms {np.sqrt(np.mean(z ** 2)):.2f}, "
+                      f"{np.mean(np.abs(z) < 2):.0%} within 2 sd -->", flush=True)
         held = np.array([r[1] for r in rows])
         gross = np.array([r[2] for r in rows])
         half = np.array([r[3] for r in rows])
