@@ -556,16 +556,18 @@ def test_pixels_whose_jpeg_colour_mixes_a_neighbours_are_left_out(ingested, tmp_
 
 def test_pixels_in_jpeg_blocks_an_edge_crosses_are_marked():
     """A lossy JPEG's block that holds an edge rings across its 8 x 8 pixels (16 x 16 with
-    chroma subsampled 2x2), from the frame's block offset; a quality-100 file (DC step 1) and
-    other files mark none."""
-    from skyfit_mi.pipeline.region_edges import jpeg_edge_blocks
+    chroma subsampled 2x2), from the frame's block offset; a registered frame's resampling
+    carries it RESAMPLED_BLOCK_REACH pixels on; a quality-100 file (DC step 1) and other files
+    mark none."""
+    from skyfit_mi.pipeline.region_edges import RESAMPLED_BLOCK_REACH as R, jpeg_edge_blocks
 
     labels = np.zeros((24, 32), dtype=np.int32)
     labels[:, 12:] = 1                                    # an edge between columns 11 and 12
 
-    def doc(step, sub=(1, 1), offset=(0, 0)):
+    def doc(step, sub=(1, 1), offset=(0, 0), resampled=False):
         return {"frames": [{"jpeg_dc": {"dc_step": [step] * 3, "chroma_subsampling": list(sub)},
-                            "jpeg_block_offset": list(offset)}, {"index": 1}]}
+                            "jpeg_block_offset": list(offset),
+                            "registration": {"resampled": resampled}}, {"index": 1}]}
 
     marked = jpeg_edge_blocks(labels, doc(3))
     assert marked[:, 8:16].all() and not marked[:, :8].any() and not marked[:, 16:].any()
@@ -573,6 +575,9 @@ def test_pixels_in_jpeg_blocks_an_edge_crosses_are_marked():
     assert shifted[:, 6:14].all() and not shifted[:, 14:].any() and not shifted[:, :6].any()
     wide = jpeg_edge_blocks(labels, doc(3, sub=(2, 2)))
     assert wide[:, :16].all() and not wide[:, 16:].any()
+    moved = jpeg_edge_blocks(labels, doc(3, resampled=True))
+    assert moved[:, 8 - R:16 + R].all() and not moved[:, :8 - R].any() \
+        and not moved[:, 16 + R:].any()
     assert not jpeg_edge_blocks(labels, doc(1)).any()
     assert not jpeg_edge_blocks(labels, {"frames": [{"index": 0}]}).any()
 
