@@ -6,8 +6,9 @@ beside it (written into the work folder) is rendered once over the day of
 scenes/specs/board_east_37.toml (160 x 120, half-hourly) at TRUTH_SPP, then for each seed
 photographed as a camera would (skyfit_mi.pipeline.photo_sim: auto-exposure in EXIF, cos^4
 vignetting, read and shot noise, sRGB, JPEG at --quality), ingested, and every sample fitted
-by `skyfit fit --all` with the photographs' defaults (64 pixels per material, the 5-parameter
-model, the sky's level fitted under its prior, its departure marginalised).
+by `skyfit fit --all` with the photographs' defaults (64 pixels per material, or
+--max-pixels, 0 for whole regions; the 5-parameter model, the sky's level fitted under its
+prior, its departure marginalised).
 
 Scenarios (``--scenario``, default all):
   card      ingest --calibrate grey_card=0.18 --vignetting cos4
@@ -31,7 +32,7 @@ median share of C's squared half-width that the calibration gives (the fit JSON'
 readings are one BRDF, which the fit says: there the truth's twin reading counts as the truth.
 
     .venv/bin/python scripts/photo_test_set.py [--scenario card lab] [--seeds 2]
-        [--quality 92] [--first-seed 0] [--refit] [-o DIR]
+        [--quality 92] [--first-seed 0] [--max-pixels 64] [--refit] [-o DIR]
 """
 
 import argparse
@@ -158,7 +159,7 @@ def photo_settings(truth, scenario, quality, seed):
     return tag, PhotoSettings(quality=quality, **kw)
 
 
-def run_seed(work, truth, scenario, quality, seed, refit):
+def run_seed(work, truth, scenario, quality, seed, refit, max_pixels=64):
     """Photograph, ingest and fit one seed; the fits' folder."""
     from skyfit_mi.pipeline.ingest import ingest
     from skyfit_mi.pipeline.photo_sim import photograph_day
@@ -166,6 +167,8 @@ def run_seed(work, truth, scenario, quality, seed, refit):
     tag, settings = photo_settings(truth, scenario, quality, seed)
     photos = work / f"photos_{tag}"
     seq, fits = (work / f"{k}_{scenario}_q{quality}_s{seed}" for k in ("seq", "fits"))
+    if max_pixels != 64:
+        fits = fits.with_name(f"{fits.name}_px{max_pixels}")
     if not (photos / "photos.json").exists():
         photograph_day(truth, photos, settings, seed=seed)
     if not (refit and (seq / "manifest.json").exists()):
@@ -177,7 +180,8 @@ def run_seed(work, truth, scenario, quality, seed, refit):
         ingest([photos], write_spec(work, scenario), seq, vignetting="cos4", overwrite=True,
                progress=False, log=lambda *a: None, **kw)
     if not (refit and any(fits.glob("fit_*.json"))):
-        cmd = [sys.executable, "-m", "skyfit_mi.cli", "fit", str(seq), "--all", "-o", str(fits)]
+        cmd = [sys.executable, "-m", "skyfit_mi.cli", "fit", str(seq), "--all", "-o", str(fits),
+               "--max-pixels", str(max_pixels)]
         if not SCENARIOS[scenario]["card"]:
             cmd += ["--sky", "spec"]
         done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -243,6 +247,8 @@ def main():
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--quality", type=int, default=92, help="JPEG quality (default 92)")
+    ap.add_argument("--max-pixels", type=int, default=64,
+                    help="fit's --max-pixels (default 64, the fit's own; 0: whole regions)")
     ap.add_argument("--refit", action="store_true",
                     help="fit again the sequences an earlier run ingested into -o DIR")
     ap.add_argument("-o", "--output", help="work folder (default a temporary one)")
@@ -259,7 +265,8 @@ def main():
         truth = render_truth(work, scenario)
         truth_of = truths(truth)
         for seed in range(args.first_seed, args.first_seed + args.seeds):
-            fits = run_seed(work, truth, scenario, args.quality, seed, args.refit)
+            fits = run_seed(work, truth, scenario, args.quality, seed, args.refit,
+                            args.max_pixels)
             rows += tally(fits, truth_of)
             tag, _ = photo_settings(truth, scenario, args.quality, seed)
             moved = registration_errors(work / f"seq_{scenario}_q{args.quality}_s{seed}",

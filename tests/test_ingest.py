@@ -556,18 +556,21 @@ def test_pixels_whose_jpeg_colour_mixes_a_neighbours_are_left_out(ingested, tmp_
 
 def test_pixels_in_jpeg_blocks_an_edge_crosses_are_marked():
     """A lossy JPEG's block that holds an edge rings across its 8 x 8 pixels (16 x 16 with
-    chroma subsampled 2x2), from the frame's block offset; a registered frame's resampling
-    carries it RESAMPLED_BLOCK_REACH pixels on; a quality-100 file (DC step 1) and other files
-    mark none."""
+    chroma subsampled 2x2), from the frame's block offset; a frame resampled onto the
+    reference's pixels, where its pixel map puts its blocks and as far as its bilinear values
+    draw on them; a quality-100 file (DC step 1) and other files mark none."""
     from skyfit_mi.pipeline.region_edges import RESAMPLED_BLOCK_REACH as R, jpeg_edge_blocks
 
     labels = np.zeros((24, 32), dtype=np.int32)
     labels[:, 12:] = 1                                    # an edge between columns 11 and 12
 
-    def doc(step, sub=(1, 1), offset=(0, 0), resampled=False):
-        return {"frames": [{"jpeg_dc": {"dc_step": [step] * 3, "chroma_subsampling": list(sub)},
-                            "jpeg_block_offset": list(offset),
-                            "registration": {"resampled": resampled}}, {"index": 1}]}
+    def doc(step, sub=(1, 1), offset=(0, 0), moved=None):
+        reg = {"resampled": False} if moved is None else \
+            {"resampled": True, "dx_px": moved, "dy_px": 0.0, "rotation_deg": 0.0}
+        return {"camera": {"width": 32, "height": 24, "fov_deg": 30.0},
+                "frames": [{"jpeg_dc": {"dc_step": [step] * 3, "chroma_subsampling": list(sub)},
+                            "jpeg_block_offset": list(offset), "registration": reg},
+                           {"index": 1}]}
 
     marked = jpeg_edge_blocks(labels, doc(3))
     assert marked[:, 8:16].all() and not marked[:, :8].any() and not marked[:, 16:].any()
@@ -575,9 +578,16 @@ def test_pixels_in_jpeg_blocks_an_edge_crosses_are_marked():
     assert shifted[:, 6:14].all() and not shifted[:, 14:].any() and not shifted[:, :6].any()
     wide = jpeg_edge_blocks(labels, doc(3, sub=(2, 2)))
     assert wide[:, :16].all() and not wide[:, 16:].any()
-    moved = jpeg_edge_blocks(labels, doc(3, resampled=True))
-    assert moved[:, 8 - R:16 + R].all() and not moved[:, :8 - R].any() \
+    # the photograph 0.6 px right of the reference (ingest records its blocks' offset moved
+    # by the shift rounded, 7): its edge, at 12.6, in its block [8, 16), on which the
+    # reference's pixels 7-15 draw (pixel x takes photograph pixels x and x + 1), and R more
+    moved = jpeg_edge_blocks(labels, doc(3, offset=(7, 0), moved=0.6))
+    assert moved[:, 7 - R:16 + R].all() and not moved[:, :7 - R].any() \
         and not moved[:, 16 + R:].any()
+    # undistorted (barrel, k1 -0.1): the blocks bend with the lens, the edge's block is marked
+    lens = jpeg_edge_blocks(labels, {**doc(3), "ingest": {"registration": {
+        "distortion_undone": [-0.1]}}})
+    assert lens[:, 12 - R - 1:12 + R + 1].all() and lens.sum() > marked.sum()
     assert not jpeg_edge_blocks(labels, doc(1)).any()
     assert not jpeg_edge_blocks(labels, {"frames": [{"index": 0}]}).any()
 

@@ -4,6 +4,7 @@ calibration's patches keep away from (:func:`.pixels.material_regions`,
 an edge, and the labels the pose's uncertainty may move."""
 
 import numpy as np
+from scipy.ndimage import binary_dilation, maximum_filter, minimum_filter
 
 
 def colour_reach(doc):
@@ -33,8 +34,6 @@ def colour_mixed(labels, reach):
     """(H, W) bool: the pixels of the label image ``labels`` (:func:`scene_labels`) within
     ``reach`` pixels (a square's half-width) of a pixel of another label, whose colour a
     frame mixes with another material's (:func:`colour_reach`); none for ``reach`` 0."""
-    from scipy.ndimage import maximum_filter, minimum_filter
-
     if reach <= 0:
         return np.zeros(labels.shape, dtype=bool)
     size = 2 * int(reach) + 1
@@ -45,11 +44,13 @@ def colour_mixed(labels, reach):
 #: The fewest of a material's pixels in JPEG blocks of its own (:func:`jpeg_edge_blocks`) a
 #: region takes alone; with fewer it keeps the pixels of blocks its edges cross.
 JPEG_CLEAN_MIN = 16
-#: How far [px] a resampled frame (:mod:`.registration`) carries an edge block's ringing into
-#: its neighbours on the reference's pixels: its block grid, moved by the frame's shift
-#: rounded to whole pixels (``jpeg_block_offset``), is off by up to half a pixel, and the
-#: bilinear resampling mixes one pixel more.
+#: How far [px] beyond its pixel map's bilinear footprint a resampled frame's edge block
+#: spoils the reference's pixels: the blocks about an edge whose labels are one material but
+#: whose values hold the edge's blur (a lens's, a renderer's pixel filter) ring too, and the
+#: frame's motion moves them over the scene.
 RESAMPLED_BLOCK_REACH = 2
+#: A bilinear weight below this [1] draws on no pixel (a frame not resampled takes its own).
+_NO_WEIGHT = 1e-6
 
 
 def jpeg_edge_blocks(labels, doc):
@@ -62,29 +63,68 @@ def jpeg_edge_blocks(labels, doc):
     and which stops at the block's border.  Measured on the sample board at quality 92
     (4:4:4): 1-3% of the signal at 2-3 pixels from an edge, at most 0.3% in blocks of one
     material.  Blocks are 8 pixels, 8 f with chroma subsampled by f, from each frame's
-    ``jpeg_block_offset``; a registered frame's resampling carries an edge block's ringing
-    RESAMPLED_BLOCK_REACH pixels on (the shaken board, 160 x 120 at quality 92, seed 1: 26 of
-    40 pairs held, 2 gross misses, without the reach; as lossless PNGs 38 of 40)."""
+    ``jpeg_block_offset``.
+
+    A frame resampled onto the reference's pinhole pixels (registered or undistorted,
+    :mod:`.registration`) has its blocks where its pixel map puts them: a pixel is marked where
+    any of the four photograph pixels its bilinear value draws on lies in a block that holds
+    two labels (the labels carried to the photograph by the nearest pixel), and
+    RESAMPLED_BLOCK_REACH pixels about those.  Measured on the shaken board (160 x 120,
+    quality 92, seed 1): 26 of 40 pairs held with 2 gross misses with the blocks alone (moved
+    by the frame's shift rounded, or by its map), 36 with no gross miss with the reach; as
+    lossless PNGs 38 of 40."""
     h, w = labels.shape
     out = np.zeros((h, w), dtype=bool)
-    grids = {(tuple(f.get("jpeg_block_offset", (0, 0))),
-              8 * max(f["jpeg_dc"]["chroma_subsampling"]),
-              RESAMPLED_BLOCK_REACH if (f.get("registration") or {}).get("resampled") else 0)
-             for f in doc.get("frames", ()) if "jpeg_dc" in f and max(f["jpeg_dc"]["dc_step"]) > 1}
-    for (ox, oy), n, reach in grids:
-        yy, xx = np.mgrid[0:h, 0:w]
-        cell = ((yy - oy) // n) * (w // n + 2) + (xx - ox) // n
-        cell = np.unique(cell, return_inverse=True)[1].reshape(h, w)
-        lo = np.full(cell.max() + 1, np.iinfo(np.int64).max)
-        hi = np.full(cell.max() + 1, np.iinfo(np.int64).min)
-        np.minimum.at(lo, cell.ravel(), labels.ravel())
-        np.maximum.at(hi, cell.ravel(), labels.ravel())
-        ringing = (lo != hi)[cell]
-        if reach:
-            from scipy.ndimage import binary_dilation
-            ringing = binary_dilation(ringing, np.ones((2 * reach + 1,) * 2, bool))
+    grids = {}                                   # frames that share a grid are marked once
+    for f in doc.get("frames", ()):
+        if "jpeg_dc" in f and max(f["jpeg_dc"]["dc_step"]) > 1:
+            reg = f.get("registration") or {}
+            moved = tuple(reg.get(k) for k in ("dx_px", "dy_px", "rotation_deg")) \
+                if reg.get("resampled") else None
+            n = 8 * max(f["jpeg_dc"]["chroma_subsampling"])
+            grids.setdefault((tuple(f.get("jpeg_block_offset", (0, 0))), n, moved), f)
+    for (_, n, _), f in grids.items():
+        u, v, (ox, oy), resampled = _photograph_pixels(f, doc, w, h)
+        x0, y0 = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
+        x1, y1 = x0 + (u - x0 > _NO_WEIGHT), y0 + (v - y0 > _NO_WEIGHT)   # bilinear's others
+        xs = np.stack([np.rint(u).astype(np.int64), x0, x0, x1, x1]).reshape(5, -1)
+        ys = np.stack([np.rint(v).astype(np.int64), y0, y1, y0, y1]).reshape(5, -1)
+        bx, by = (xs - ox) // n, (ys - oy) // n
+        ids = (by - by.min()) * int(bx.max() - bx.min() + 1) + bx - bx.min()
+        lo = np.full(ids.max() + 1, np.iinfo(np.int64).max)
+        hi = np.full(ids.max() + 1, np.iinfo(np.int64).min)
+        np.minimum.at(lo, ids[0], labels.ravel())
+        np.maximum.at(hi, ids[0], labels.ravel())
+        ringing = np.any((lo < hi)[ids[1:]], axis=0).reshape(h, w)     # two labels in a block
+        if resampled:
+            ringing = binary_dilation(ringing, np.ones((2 * RESAMPLED_BLOCK_REACH + 1,) * 2, bool))
         out |= ringing
     return out
+
+
+def _photograph_pixels(frame, doc, w, h):
+    """(u, v, (ox, oy), resampled): where each reference pixel's value was taken in
+    ``frame``'s photograph [px] ((H, W) each; the pixel itself unless the frame was resampled,
+    moved or undistorted), the photograph's own block offset, and whether it was resampled."""
+    from .registration import NO_MOTION, pixel_map
+
+    ox, oy = frame.get("jpeg_block_offset", (0, 0))
+    reg = frame.get("registration") or {}
+    k = ((doc.get("ingest") or {}).get("registration") or {}).get("distortion_undone") or []
+    moved = bool(reg.get("resampled"))
+    if not moved and not any(k):
+        yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+        return xx, yy, (ox, oy), False
+    M = NO_MOTION
+    if moved:                 # the record's offset was moved by the shift, rounded: undone
+        d = np.array([reg["dx_px"], reg["dy_px"]])
+        ox, oy = (int(o + round(x)) % 8 for o, x in zip((ox, oy), d))
+        t = np.radians(reg["rotation_deg"])
+        R = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+        c = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+        M = np.c_[R, c + d - R @ c]
+    u, v = pixel_map(M, {**doc["camera"], "width": w, "height": h, "distortion": k})
+    return u.astype(np.float64), v.astype(np.float64), (ox, oy), True
 
 
 def pose_reach(camera, pose_sd_deg=None):
