@@ -208,3 +208,16 @@ def test_a_distorted_photograph_is_undone_onto_the_pinhole(shaken, tmp_path):
         sd = read_frame_image(root, f, "radiance_sigma", (44, 64, 3))[inside]
         z.append((got - read_frame_image(truth_root, g, "radiance", (44, 64, 3))[inside]) / sd)
     assert np.sqrt(np.nanmean(np.square(z))) < 1.5
+
+
+def test_a_frames_record_gives_back_its_measured_motion():
+    """The manifest's record of a motion (its centre's displacement and rotation) gives back the
+    motion measured, the map the frame was resampled by."""
+    from skyfit_mi.pipeline.registration import motion_of_record
+
+    t = np.radians(0.3)
+    M = np.array([[np.cos(t), -np.sin(t), 1.2], [np.sin(t), np.cos(t), -0.7]])
+    c = np.array([(64 - 1) / 2.0, (44 - 1) / 2.0])
+    d = M[:, :2] @ c + M[:, 2] - c                 # as register_frames records it
+    rec = {"dx_px": d[0], "dy_px": d[1], "rotation_deg": 0.3}
+    np.testing.assert_allclose(motion_of_record(rec, 64, 44), M, atol=1e-12)

@@ -97,7 +97,8 @@ def jpeg_edge_blocks(labels, doc):
         np.maximum.at(hi, ids[0], labels.ravel())
         ringing = np.any((lo < hi)[ids[1:]], axis=0).reshape(h, w)     # two labels in a block
         if resampled:
-            ringing = binary_dilation(ringing, np.ones((2 * RESAMPLED_BLOCK_REACH + 1,) * 2, bool))
+            reach = 2 * RESAMPLED_BLOCK_REACH + 1
+            ringing = binary_dilation(ringing, np.ones((reach, reach), bool))
         out |= ringing
     return out
 
@@ -106,7 +107,7 @@ def _photograph_pixels(frame, doc, w, h):
     """(u, v, (ox, oy), resampled): where each reference pixel's value was taken in
     ``frame``'s photograph [px] ((H, W) each; the pixel itself unless the frame was resampled,
     moved or undistorted), the photograph's own block offset, and whether it was resampled."""
-    from .registration import NO_MOTION, pixel_map
+    from .registration import NO_MOTION, motion_of_record, pixel_map
 
     ox, oy = frame.get("jpeg_block_offset", (0, 0))
     reg = frame.get("registration") or {}
@@ -117,12 +118,8 @@ def _photograph_pixels(frame, doc, w, h):
         return xx, yy, (ox, oy), False
     M = NO_MOTION
     if moved:                 # the record's offset was moved by the shift, rounded: undone
-        d = np.array([reg["dx_px"], reg["dy_px"]])
-        ox, oy = (int(o + round(x)) % 8 for o, x in zip((ox, oy), d))
-        t = np.radians(reg["rotation_deg"])
-        R = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
-        c = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
-        M = np.c_[R, c + d - R @ c]
+        ox, oy = (int(o + round(reg[d])) % 8 for o, d in zip((ox, oy), ("dx_px", "dy_px")))
+        M = motion_of_record(reg, w, h)
     u, v = pixel_map(M, {**doc["camera"], "width": w, "height": h, "distortion": k})
     return u.astype(np.float64), v.astype(np.float64), (ox, oy), True
 

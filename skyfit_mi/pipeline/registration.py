@@ -9,9 +9,9 @@ c the image's centre, theta positive turning the scene clockwise as displayed (i
 It is measured in the pinhole's geometry (each photograph undistorted,
 :func:`undistort_image`) on the luminance (linearised, vignetting divided out; linear, as
 :func:`features` says why) high-passed over HIGHPASS_SD_PX, which keeps edges and texture and
-drops the day's slow change of shading: phase correlation (Kuglin and Hines 1975) gives the shift, the enhanced correlation
-coefficient (ECC, Evangelidis and Psarakis 2008; invariant to each frame's gain and offset)
-refines it with the rotation.  Its uncertainty is that fit's covariance, robust to the
+drops the day's slow change of shading: phase correlation (Kuglin and Hines 1975) gives the
+shift, the enhanced correlation coefficient (ECC, Evangelidis and Psarakis 2008; invariant to
+each frame's gain and offset) refines it with the rotation.  Its uncertainty is that fit's covariance, robust to the
 spatially coherent residual the day's change of light leaves (:func:`motion_covariance`).
 
 Each photograph is then resampled once onto the reference's pinhole pixels, the motion and the
@@ -155,6 +155,17 @@ def displacement_sd(cov, width, height):
     var_x = cov[1, 1] + yc ** 2 * cov[0, 0] - 2 * yc * cov[0, 1]
     var_y = cov[2, 2] + xc ** 2 * cov[0, 0] + 2 * xc * cov[0, 2]
     return float(np.sqrt(np.mean(var_x + var_y) / 2.0))
+
+
+def motion_of_record(record, width, height):
+    """The motion M (2, 3) (:func:`measure_motion`'s) of a frame's manifest ``registration``
+    record (its displacement of the image's centre and its rotation, as
+    :func:`register_frames` writes them) in a ``width`` x ``height`` image."""
+    d = np.array([record["dx_px"], record["dy_px"]])
+    t = np.radians(record["rotation_deg"])
+    R = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+    c = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    return np.c_[R, c + d - R @ c]
 
 
 def pixel_map(M, camera):
