@@ -107,3 +107,32 @@ def test_a_frames_highlight_is_beyond_the_fits_where_the_lobe_there_doubles():
     assert highlight_beyond(None, 40.0, 0.2) and not highlight_beyond(None, None, 0.2)
     assert highlight_beyond(13.5, 12.0, 0.0)                 # a mirror: any nearer approach,
     assert not highlight_beyond(13.5, 13.0, 0.0)             # beyond NEARER_DEG
+
+
+def test_a_roughness_interval_reaching_sky_only_lobes_is_open_below():
+    """The roughness's lower end is left open where its 95% interval reaches lobes the sun
+    does not show (below the sky-only limit, 0.076 at a closest highlight of 12.4 degrees) in
+    photographs or under a sky shape only modelled, also where the reading itself lies above
+    that limit (the hazy board's gloss paint: 0.085, 0.067-0.103, for 0.02); not where the
+    whole interval lies above it, nor for rendered frames under their own sky's shape, nor
+    for a table's points."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.fitting.geometry import sky_only_limit
+    from skyfit_mi.fitting.intervals import sky_only_reach
+
+    geometry = {"frames": 13, "frames_with_sun": 13, "closest_highlight_half_angle_deg": 12.4}
+    assert sky_only_limit(geometry) == pytest.approx(0.076, abs=1e-3)
+
+    def session(source="ingest", rays=None):
+        return SimpleNamespace(doc={"source": source}, obs=SimpleNamespace(rays=rays),
+                               names=("C_r", "C_g", "C_b", "rho_s", "sigma_alpha"),
+                               geometry=geometry)
+
+    def iv(lo, hi):
+        return {"sigma_alpha": {"95": (lo, hi)}}
+    assert "photographs' shared errors" in sky_only_reach(session(), True, iv(0.067, 0.103))
+    assert sky_only_reach(session(), True, iv(0.080, 0.103)) == ""
+    assert sky_only_reach(session("render"), True, iv(0.067, 0.103)) == ""
+    assert "sky's shape not fitted" in sky_only_reach(session("render"), False, iv(0.067, 0.1))
+    assert sky_only_reach(session(rays=np.zeros(3)), True, iv(0.067, 0.103)) == ""

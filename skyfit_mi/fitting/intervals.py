@@ -93,24 +93,34 @@ def fit_intervals(s, fit):
                                     max(hi, float(sky.span[1][i])))
                 if lv == "95":
                     intervals[p]["from"] += ", and over the undetermined sky level"
-    shot = photographed(s.doc) and s.obs.rays is None          # photographs, not a table
-    if names[-1] == "sigma_alpha" and (shot or not sky.shape_known) \
-            and theta[-1] < sky_only_limit(s.geometry):
-        # the lobe seen in the sky's reflection alone: lobes narrower still differ there by a
-        # few tenths of a per cent, which a sky shape only modelled, or photographs' errors
-        # that a frame's pixels share (the JPEG's blocks, the calibration; measured on the
-        # sample board at quality 92: 0.3-0.5%), reach; so the roughness's lower end is not
-        # determined (the board's polished steel, 0.02, read 0.106 with 0.055-0.116, its
-        # rendered frames fitted as they are: below 0.119, lower end not determined)
+    why = sky_only_reach(s, sky.shape_known, intervals)
+    if why:
         for lv in ("68", "95"):
             intervals["sigma_alpha"][lv] = (float(lower[-1]), intervals["sigma_alpha"][lv][1])
-        intervals["sigma_alpha"]["from"] += (
-            ", and down to its bound: the sun's highlight never seen, "
-            + ("the photographs' shared errors as large as what tells such lobes apart" if shot
-               else "the sky's shape not fitted"))
+        intervals["sigma_alpha"]["from"] += ", and down to its bound: " + why
     fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
     fit.cache_sd = mc_sd
     fit.sun_level_sd = sun_rel * np.abs(theta)
+
+
+def sky_only_reach(s, shape_known, intervals):
+    """Why the roughness's lower end is not determined ('' where it is): its 95% interval
+    (``intervals``) reaches a lobe seen in the sky's reflection alone (below the session
+    ``s``'s :func:`~.geometry.sky_only_limit`), in photographs (not a table) or where the sky's
+    shape is only modelled (``shape_known`` False).  Lobes narrower still differ there by a
+    few tenths of a per cent, which a sky shape only modelled, or photographs' errors that a
+    frame's pixels share (the JPEG's blocks, the calibration; measured on the sample board at
+    quality 92: 0.3-0.5%), reach.  Measured: the board's polished steel, 0.02, read 0.106 with
+    0.055-0.116 (its rendered frames fitted as they are: below 0.119); a gloss paint, 0.02,
+    photographed under a hazy sky, 0.085 with 0.067-0.103 (the sun's far tail at the closest
+    highlight, 12 degrees off, taken for a lobe; the limit 0.076)."""
+    shot = photographed(s.doc) and s.obs.rays is None          # photographs, not a table
+    if s.names[-1] != "sigma_alpha" or not (shot or not shape_known) \
+            or not intervals["sigma_alpha"]["95"][0] < sky_only_limit(s.geometry):
+        return ""
+    return "the sun's highlight never seen, " + (
+        "the photographs' shared errors as large as what tells such lobes apart" if shot
+        else "the sky's shape not fitted")
 
 
 def calibration_sd(s, J, problem, usable, theta, curvature_inverse):
