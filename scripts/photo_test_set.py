@@ -32,7 +32,7 @@ median share of C's squared half-width that the calibration gives (the fit JSON'
 readings are one BRDF, which the fit says: there the truth's twin reading counts as the truth.
 
     .venv/bin/python scripts/photo_test_set.py [--scenario card lab] [--seeds 2]
-        [--quality 92] [--first-seed 0] [--max-pixels 64] [--refit] [-o DIR]
+        [--quality 92] [--first-seed 0] [--max-pixels N] [--refit] [-o DIR]
 """
 
 import argparse
@@ -159,15 +159,18 @@ def photo_settings(truth, scenario, quality, seed):
     return tag, PhotoSettings(quality=quality, **kw)
 
 
-def run_seed(work, truth, scenario, quality, seed, refit, max_pixels=64):
-    """Photograph, ingest and fit one seed; the fits' folder."""
+def run_seed(work, truth, scenario, quality, seed, refit, max_pixels=None):
+    """Photograph, ingest and fit one seed (``max_pixels`` a region, default the fit's
+    REGION_PIXELS); (its photographs', sequence's and fits' folders)."""
+    from skyfit_mi.fitting.chi2 import REGION_PIXELS
     from skyfit_mi.pipeline.ingest import ingest
     from skyfit_mi.pipeline.photo_sim import photograph_day
 
     tag, settings = photo_settings(truth, scenario, quality, seed)
     photos = work / f"photos_{tag}"
     seq, fits = (work / f"{k}_{scenario}_q{quality}_s{seed}" for k in ("seq", "fits"))
-    if max_pixels != 64:
+    max_pixels = REGION_PIXELS if max_pixels is None else max_pixels
+    if max_pixels != REGION_PIXELS:
         fits = fits.with_name(f"{fits.name}_px{max_pixels}")
     if not (photos / "photos.json").exists():
         photograph_day(truth, photos, settings, seed=seed)
@@ -187,7 +190,7 @@ def run_seed(work, truth, scenario, quality, seed, refit, max_pixels=64):
         done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         if done.returncode:
             print(f"<!-- {fits.name}: fit refused: {done.stderr.strip()} -->")
-    return fits
+    return photos, seq, fits
 
 
 def registration_errors(seq, photos):
@@ -247,8 +250,8 @@ def main():
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--quality", type=int, default=92, help="JPEG quality (default 92)")
-    ap.add_argument("--max-pixels", type=int, default=64,
-                    help="fit's --max-pixels (default 64, the fit's own; 0: whole regions)")
+    ap.add_argument("--max-pixels", type=int, default=None,
+                    help="fit's --max-pixels (default the fit's own; 0: whole regions)")
     ap.add_argument("--refit", action="store_true",
                     help="fit again the sequences an earlier run ingested into -o DIR")
     ap.add_argument("-o", "--output", help="work folder (default a temporary one)")
@@ -265,12 +268,10 @@ def main():
         truth = render_truth(work, scenario)
         truth_of = truths(truth)
         for seed in range(args.first_seed, args.first_seed + args.seeds):
-            fits = run_seed(work, truth, scenario, args.quality, seed, args.refit,
-                            args.max_pixels)
+            photos, seq, fits = run_seed(work, truth, scenario, args.quality, seed,
+                                         args.refit, args.max_pixels)
             rows += tally(fits, truth_of)
-            tag, _ = photo_settings(truth, scenario, args.quality, seed)
-            moved = registration_errors(work / f"seq_{scenario}_q{args.quality}_s{seed}",
-                                        work / f"photos_{tag}")
+            moved = registration_errors(seq, photos)
             if moved:
                 err = np.array([e for e, _ in moved])
                 z = np.concatenate([e / sd for e, sd in moved])

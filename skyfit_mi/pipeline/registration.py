@@ -157,10 +157,20 @@ def displacement_sd(cov, width, height):
     return float(np.sqrt(np.mean(var_x + var_y) / 2.0))
 
 
+def motion_record(M, width, height):
+    """A motion M (2, 3) (:func:`measure_motion`'s) as a frame's manifest ``registration``
+    record holds it in a ``width`` x ``height`` image: the displacement of the image's centre
+    (``dx_px``, ``dy_px``) and the rotation (``rotation_deg``); :func:`motion_of_record`
+    inverts it."""
+    c = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    d = M[:, :2] @ c + M[:, 2] - c
+    return {"dx_px": float(d[0]), "dy_px": float(d[1]),
+            "rotation_deg": float(np.degrees(np.arctan2(M[1, 0], M[0, 0])))}
+
+
 def motion_of_record(record, width, height):
     """The motion M (2, 3) (:func:`measure_motion`'s) of a frame's manifest ``registration``
-    record (its displacement of the image's centre and its rotation, as
-    :func:`register_frames` writes them) in a ``width`` x ``height`` image."""
+    record (:func:`motion_record`) in a ``width`` x ``height`` image."""
     d = np.array([record["dx_px"], record["dy_px"]])
     t = np.radians(record["rotation_deg"])
     R = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
@@ -283,11 +293,10 @@ def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
         ref = lit[int(np.argmin(np.abs(t - 0.5 * (t.min() + t.max()))))]
         feats = {i: features(undistort_image(luminance(linear.values[i], linear.sensor,
                                                        linear.falloff), camera)) for i in lit}
-        centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
         corners = np.array([[0, 0, 1], [w - 1, 0, 1], [0, h - 1, 1], [w - 1, h - 1, 1.0]])
         for i in lit:
             if i == ref:
-                records[i] = {"dx_px": 0.0, "dy_px": 0.0, "rotation_deg": 0.0, "sd_px": 0.0,
+                records[i] = {**motion_record(NO_MOTION, w, h), "sd_px": 0.0,
                               "reference": True}
                 continue
             try:
@@ -305,11 +314,8 @@ def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
                 raise SkyfitError(f"{names[i]}: it moved {moved:.1f} px from {names[ref]} "
                                   f"(at most {limit:g} px, --register-limit); check the tripod "
                                   "and drop the frame, or raise --register-limit.")
-            d = M[:, :2] @ centre + M[:, 2] - centre
             sd_i = displacement_sd(motion_covariance(feats[ref], feats[i], M), w, h)
-            records[i] = {"dx_px": float(d[0]), "dy_px": float(d[1]),
-                          "rotation_deg": float(np.degrees(np.arctan2(M[1, 0], M[0, 0]))),
-                          "sd_px": sd_i, "correlation": rho,
+            records[i] = {**motion_record(M, w, h), "sd_px": sd_i, "correlation": rho,
                           "resampled": bool(moved > max(STILL_PX, 3.0 * sd_i))}
             if records[i]["resampled"]:
                 motion[i] = M
