@@ -87,15 +87,22 @@ def jpeg_edge_blocks(labels, doc):
         u, v, (ox, oy), resampled = _photograph_pixels(f, doc, w, h)
         x0, y0 = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
         x1, y1 = x0 + (u - x0 > _NO_WEIGHT), y0 + (v - y0 > _NO_WEIGHT)   # bilinear's others
-        xs = np.stack([np.rint(u).astype(np.int64), x0, x0, x1, x1]).reshape(5, -1)
-        ys = np.stack([np.rint(v).astype(np.int64), y0, y1, y0, y1]).reshape(5, -1)
-        bx, by = (xs - ox) // n, (ys - oy) // n
-        ids = (by - by.min()) * int(bx.max() - bx.min() + 1) + bx - bx.min()
-        lo = np.full(ids.max() + 1, np.iinfo(np.int64).max)
-        hi = np.full(ids.max() + 1, np.iinfo(np.int64).min)
-        np.minimum.at(lo, ids[0], labels.ravel())
-        np.maximum.at(hi, ids[0], labels.ravel())
-        ringing = np.any((lo < hi)[ids[1:]], axis=0).reshape(h, w)     # two labels in a block
+        # blocks numbered over the map's reach (u, v within one pixel of the nearest)
+        bx0 = int((np.floor(u.min()) - 1 - ox) // n)
+        by0 = int((np.floor(v.min()) - 1 - oy) // n)
+        across = int((np.ceil(u.max()) + 1 - ox) // n) - bx0 + 1
+
+        def block(x, y):
+            return ((y - oy) // n - by0) * across + (x - ox) // n - bx0
+        near = block(np.rint(u).astype(np.int64), np.rint(v).astype(np.int64))
+        lo = np.full(near.max() + 1, np.iinfo(np.int64).max)
+        hi = np.full(near.max() + 1, np.iinfo(np.int64).min)
+        np.minimum.at(lo, near.ravel(), labels.ravel())
+        np.maximum.at(hi, near.ravel(), labels.ravel())
+        edge = np.append(lo < hi, False)               # two labels in a block; beyond: none
+        ringing = np.zeros((h, w), dtype=bool)
+        for x, y in ((x0, y0), (x0, y1), (x1, y0), (x1, y1)):
+            ringing |= edge[np.minimum(block(x, y), len(edge) - 1)]
         if resampled:
             reach = 2 * RESAMPLED_BLOCK_REACH + 1
             ringing = binary_dilation(ringing, np.ones((reach, reach), bool))
