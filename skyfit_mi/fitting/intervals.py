@@ -7,6 +7,7 @@ level.  Each function takes the region's :class:`~.fit.FitSession` ``s`` and its
 :class:`~.fit.FitState` ``fit``."""
 
 import numpy as np
+from scipy.optimize import least_squares
 
 from . import uncertainty as unc
 from .geometry import sky_only_limit
@@ -93,7 +94,7 @@ def fit_intervals(s, fit):
                                     max(hi, float(sky.span[1][i])))
                 if lv == "95":
                     intervals[p]["from"] += ", and over the undetermined sky level"
-    why = sky_only_reach(s, sky.shape_known, intervals)
+    why = sky_only_reach(s, sky.shape_known, intervals, fit)
     if why:
         for lv in ("68", "95"):
             intervals["sigma_alpha"][lv] = (float(lower[-1]), intervals["sigma_alpha"][lv][1])
@@ -103,7 +104,7 @@ def fit_intervals(s, fit):
     fit.sun_level_sd = sun_rel * np.abs(theta)
 
 
-def sky_only_reach(s, shape_known, intervals):
+def sky_only_reach(s, shape_known, intervals, fit=None):
     """Why the roughness's lower end is not determined ('' where it is): its 95% interval
     (``intervals``) reaches a lobe seen in the sky's reflection alone (below the session
     ``s``'s :func:`~.geometry.sky_only_limit`), in photographs (not a table) or where the sky's
@@ -113,14 +114,81 @@ def sky_only_reach(s, shape_known, intervals):
     quality 92: 0.3-0.5%), reach.  Measured: the board's polished steel, 0.02, read 0.106 with
     0.055-0.116 (its rendered frames fitted as they are: below 0.119); a gloss paint, 0.02,
     photographed under a hazy sky, 0.085 with 0.067-0.103 (the sun's far tail at the closest
-    highlight, 12 degrees off, taken for a lobe; the limit 0.076)."""
+    highlight, 12 degrees off, taken for a lobe; the limit 0.076).
+
+    In photographs whose interval lies above the limit, the lower end is open too where the
+    region's means per frame do not exclude a lobe at the limit (:func:`frame_means_admit`,
+    with the fit ``fit``): the sun's tail is then told from the sky's reflection only by
+    its pattern across the region within a frame, a few tenths of a per cent that the
+    photograph's flat field, blocks and the pose's error in each pixel's view hold no better
+    (the board's white gloss paint, 0.02, 0.132 with 0.121-0.142 in photographs with the
+    pose 0.3 degrees off: Delta chi^2 20 from the pixels at the limit, 0.108; from the means
+    per frame at most 2.7 over their misfit of 2.2)."""
     shot = photographed(s.doc) and s.obs.rays is None          # photographs, not a table
-    if s.names[-1] != "sigma_alpha" or not (shot or not shape_known) \
-            or not intervals["sigma_alpha"]["95"][0] < sky_only_limit(s.geometry):
+    if s.names[-1] != "sigma_alpha" or not (shot or not shape_known):
         return ""
-    return "the sun's highlight never seen, " + (
-        "the photographs' shared errors as large as what tells such lobes apart" if shot
-        else "the sky's shape not fitted")
+    limit = sky_only_limit(s.geometry)
+    if intervals["sigma_alpha"]["95"][0] < limit:
+        return "the sun's highlight never seen, " + (
+            "the photographs' shared errors as large as what tells such lobes apart" if shot
+            else "the sky's shape not fitted")
+    if shot and fit is not None and limit > 0 and frame_means_admit(s, fit, limit):
+        return ("the sun's highlight never seen, and the region's mean in each frame as near "
+                f"a lobe of {limit:.3g}, which shows no sun, as its own errors: only the "
+                "pattern across the region within a frame tells them apart, which the "
+                "photograph's flat field, blocks and pose hold no better")
+    return ""
+
+
+def frame_means_admit(s, fit, sigma):
+    """Whether the region's mean per frame and channel leaves a lobe of roughness ``sigma``
+    within 95% of the fit ``fit``: the least chi^2 of the means with the roughness held at
+    ``sigma`` exceeds their least by under 3.84 times their own misfit (least chi^2 over its
+    degrees of freedom, at least 1); each mean's variance its values' noise over their number
+    plus the errors the frame's values share (:func:`frame_shared_sd`)."""
+    problem, theta = fit.problem, np.asarray(fit.theta, dtype=float)
+    use = problem.measured()
+    n = use.sum(axis=0)                                              # (T, 3)
+    told = n > 0
+    k = len(theta)
+    if told.sum() <= k:
+        return False
+    y = np.where(use, problem.obs.y, 0.0)
+    mean = y.sum(axis=0) / np.maximum(n, 1)
+    sd = np.sqrt(np.where(use, problem.obs.sigma ** 2, 0.0).sum(axis=0) / np.maximum(n, 1) ** 2
+                 + frame_shared_sd(s, mean) ** 2)
+    per = np.maximum(n, 1) * np.where(told, sd, 1.0)
+
+    def misses(th):
+        model = np.where(use, problem.predict(problem.model.radiance(th)), 0.0)
+        return ((y - model).sum(axis=0) / per)[told]
+
+    def slopes(th):                            # d misses / d theta, from the model's own
+        L, dL = problem.model.jacobian(th)
+        d = np.where(use[..., None], problem.slope(L)[..., None] * dL, 0.0)
+        return -(d.sum(axis=0) / per[..., None])[told]
+
+    lower, upper = np.asarray(s.lower, dtype=float), np.asarray(s.upper, dtype=float)
+    least = 2.0 * least_squares(misses, np.clip(theta, lower, upper), slopes,
+                                bounds=(lower, upper)).cost
+    held = 2.0 * least_squares(lambda x: misses(np.append(x, sigma)),
+                               np.clip(theta[:-1], lower[:-1], upper[:-1]),
+                               lambda x: slopes(np.append(x, sigma))[:, :-1],
+                               bounds=(lower[:-1], upper[:-1])).cost
+    return bool(held - least < unc.LEVELS["95"] * max(1.0, least / (told.sum() - k)))
+
+
+def frame_shared_sd(s, mean):
+    """The standard error [DN] (T, 3) that every value of a frame and channel of the region
+    shares: the rounding of its JPEG blocks' means (:func:`jpeg_frame_sd`, in R, G, B) and
+    the frame's own calibration (``frame_relative_sd`` times the region's mean ``mean``
+    (T, 3) [DN], where each frame took its own)."""
+    ycc = jpeg_frame_sd(s)
+    var = np.zeros_like(mean) if ycc is None else ycc ** 2 @ (YCC_TO_RGB ** 2).T
+    cal = frame_calibration_sd(s)
+    if cal is not None:
+        var = var + (np.asarray(cal, dtype=float) * mean) ** 2
+    return np.sqrt(var)
 
 
 def calibration_sd(s, J, problem, usable, theta, curvature_inverse):
@@ -202,17 +270,25 @@ def matrix_note(s):
 
 def jpeg_shared_sd(s, J, usable, sigma, curvature_inverse):
     """Each parameter's standard error (n,) from the rounding of the block means that the
-    region's pixels share in each JPEG frame (Y, Cb, Cr; ingest's ``jpeg_dc`` record,
+    region's pixels share in each JPEG frame (:func:`jpeg_frame_sd`), carried to the
+    parameters by :func:`~.uncertainty.shared_error_sd`, ``sigma`` the values' in
+    chi-square); zeros without JPEG frames."""
+    shared = jpeg_frame_sd(s)
+    if shared is None:
+        return np.zeros(len(s.names))
+    return unc.shared_error_sd(J, usable, sigma, shared, YCC_TO_RGB, curvature_inverse)
+
+
+def jpeg_frame_sd(s):
+    """The standard error [DN] (T, 3) in Y, Cb and Cr that the region's pixels share in each
+    JPEG frame, from the rounding of their blocks' means (ingest's ``jpeg_dc`` record,
     :func:`~skyfit_mi.pipeline.jpeg_noise.shared_error_sd`, with the sensor's noise before
-    compression from the manifest's noise model), carried to the parameters by
-    :func:`~.uncertainty.shared_error_sd`, ``sigma`` the values' in chi-square); zeros
-    without JPEG frames."""
-    n = len(s.names)
+    compression from the manifest's noise model); None without JPEG frames."""
     by_index = {f["index"]: f for f in s.doc["frames"]}
     records = [by_index.get(i, {}).get("jpeg_dc") for i in s.obs.frames]
     model = s.doc["sensor"].get("noise_model") or {}
     if s.obs.rays is not None or not any(records) or "read_DN2" not in model:
-        return np.zeros(n)
+        return None
     noise = (model["read_DN2"], model["shot_DN"])
     shared = np.zeros((len(records), 3))
     for t, rec in enumerate(records):
@@ -220,7 +296,7 @@ def jpeg_shared_sd(s, J, usable, sigma, curvature_inverse):
         if rec and ok.any():
             y = s.obs.y[ok, t]
             shared[t] = shared_error_sd(y, pixel_sigma(y, s.obs.sensor, noise) ** 2, rec)
-    return unc.shared_error_sd(J, usable, sigma, shared, YCC_TO_RGB, curvature_inverse)
+    return shared
 
 
 def poorly_determined(s, theta, intervals, profiled, cov):
