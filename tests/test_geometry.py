@@ -154,6 +154,10 @@ class _Lobe:
     def radiance(self, theta):
         return theta[0] * (1 + self.u) + theta[1] * self.w + 0.0 * self.u
 
+    def radiance_and_variance(self, theta):
+        L = self.radiance(theta)
+        return L, np.zeros_like(L)
+
     def jacobian(self, theta):
         L = self.radiance(theta)
         J = np.stack([np.broadcast_to(1 + self.u, L.shape),

@@ -108,7 +108,7 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
         if within is not None and not within(th):
             outside += 1
             continue
-        e, v, a, use = _residuals(test, th, means, frame_sd,
+        e, v, a, use = predicted_residuals(test, th, means, frame_sd,
                                   unc.covariance(train.jacobian(th)[1]))
         es.append(e[use])
         scales.append(a[use])
@@ -119,8 +119,8 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
            "folds_outside": outside, "folds_too_small": small,
            "level": "region mean per frame and channel" if means else "value"}
     if means:                   # and the fit's own, on every frame (a fold left out too)
-        _keep_relative(rel, "fitted",
-                       *_residuals(problem, np.asarray(theta, dtype=float), means, frame_sd))
+        _keep_relative(rel, "fitted", *predicted_residuals(
+            problem, np.asarray(theta, dtype=float), means, frame_sd))
         out["by_frame"] = {k: [None if np.isnan(r).all() else [float(x) for x in r] for r in x]
                            for k, x in rel.items()}
     if es:
@@ -135,7 +135,7 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
     return out
 
 
-def _residuals(problem, theta, means, frame_sd, cov=None):
+def predicted_residuals(problem, theta, means, frame_sd, cov=None):
     """``problem``'s residuals at ``theta`` e [DN], their variances v (noise, the model's Monte
     Carlo error, ``frame_sd``'s shared error and, with the parameters' covariance ``cov``, the
     prediction's spread D cov D^T) and the values' scale a (each value's, or with ``means``

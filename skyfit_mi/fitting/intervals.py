@@ -11,6 +11,7 @@ from scipy.optimize import least_squares
 
 from . import uncertainty as unc
 from .geometry import sky_only_limit
+from .held_out import predicted_residuals
 from .methods.levenberg_marquardt import SINGULAR_CONDITION
 from .methods.profile import ProfileOptions, profile_edges, ridge_intervals
 from .sky_fit import light_level_sd, photographed
@@ -144,29 +145,27 @@ def frame_means_admit(s, fit, sigma):
     """Whether the region's mean per frame and channel leaves a lobe of roughness ``sigma``
     within 95% of the fit ``fit``: the least chi^2 of the means with the roughness held at
     ``sigma`` exceeds their least by under 3.84 times their own misfit (least chi^2 over its
-    degrees of freedom, at least 1); each mean's variance its values' noise over their number
-    plus the errors the frame's values share (:func:`frame_shared_sd`)."""
+    degrees of freedom, at least 1); each mean's variance as the held-out frames' take it
+    (:func:`~.held_out.predicted_residuals`: its values' noise over their number, the frame's
+    own calibration) plus the rounding of the frame's JPEG blocks (:func:`jpeg_frame_sd`)."""
     problem, theta = fit.problem, np.asarray(fit.theta, dtype=float)
-    use = problem.measured()
-    n = use.sum(axis=0)                                              # (T, 3)
-    told = n > 0
+    _, var, _, told = predicted_residuals(problem, theta, True, frame_calibration_sd(s))
     k = len(theta)
     if told.sum() <= k:
         return False
-    y = np.where(use, problem.obs.y, 0.0)
-    mean = y.sum(axis=0) / np.maximum(n, 1)
-    sd = np.sqrt(np.where(use, problem.obs.sigma ** 2, 0.0).sum(axis=0) / np.maximum(n, 1) ** 2
-                 + frame_shared_sd(s, mean) ** 2)
-    per = np.maximum(n, 1) * np.where(told, sd, 1.0)
+    ycc = jpeg_frame_sd(s)
+    if ycc is not None:
+        var = var + ycc ** 2 @ (YCC_TO_RGB ** 2).T
+    sd = np.sqrt(np.where(told, var, 1.0))
+    use = problem.measured()
+    n = np.maximum(use.sum(axis=0), 1)[..., None]
 
     def misses(th):
-        model = np.where(use, problem.predict(problem.model.radiance(th)), 0.0)
-        return ((y - model).sum(axis=0) / per)[told]
+        return (predicted_residuals(problem, th, True, None)[0] / sd)[told]
 
-    def slopes(th):                            # d misses / d theta, from the model's own
-        L, dL = problem.model.jacobian(th)
-        d = np.where(use[..., None], problem.slope(L)[..., None] * dL, 0.0)
-        return -(d.sum(axis=0) / per[..., None])[told]
+    def slopes(th):          # d misses / d theta: the residuals' own, in DN, over the pixels
+        J = problem.jacobian(th, full=True)[1] * problem.obs.sigma[..., None]
+        return (np.where(use[..., None], J, 0.0).sum(axis=0) / n / sd[..., None])[told]
 
     lower, upper = np.asarray(s.lower, dtype=float), np.asarray(s.upper, dtype=float)
     least = 2.0 * least_squares(misses, np.clip(theta, lower, upper), slopes,
@@ -176,19 +175,6 @@ def frame_means_admit(s, fit, sigma):
                                lambda x: slopes(np.append(x, sigma))[:, :-1],
                                bounds=(lower[:-1], upper[:-1])).cost
     return bool(held - least < unc.LEVELS["95"] * max(1.0, least / (told.sum() - k)))
-
-
-def frame_shared_sd(s, mean):
-    """The standard error [DN] (T, 3) that every value of a frame and channel of the region
-    shares: the rounding of its JPEG blocks' means (:func:`jpeg_frame_sd`, in R, G, B) and
-    the frame's own calibration (``frame_relative_sd`` times the region's mean ``mean``
-    (T, 3) [DN], where each frame took its own)."""
-    ycc = jpeg_frame_sd(s)
-    var = np.zeros_like(mean) if ycc is None else ycc ** 2 @ (YCC_TO_RGB ** 2).T
-    cal = frame_calibration_sd(s)
-    if cal is not None:
-        var = var + (np.asarray(cal, dtype=float) * mean) ** 2
-    return np.sqrt(var)
 
 
 def calibration_sd(s, J, problem, usable, theta, curvature_inverse):

@@ -11,8 +11,9 @@ It is measured in the pinhole's geometry (each photograph undistorted,
 :func:`features` says why) high-passed over HIGHPASS_SD_PX, which keeps edges and texture and
 drops the day's slow change of shading: phase correlation (Kuglin and Hines 1975) gives the
 shift, the enhanced correlation coefficient (ECC, Evangelidis and Psarakis 2008; invariant to
-each frame's gain and offset) refines it with the rotation.  Its uncertainty is that fit's covariance, robust to the
-spatially coherent residual the day's change of light leaves (:func:`motion_covariance`).
+each frame's gain and offset) refines it with the rotation.  Its uncertainty is that fit's
+covariance, robust to the spatially coherent residual the day's change of light leaves
+(:func:`motion_covariance`).
 
 Each photograph is then resampled once onto the reference's pinhole pixels, the motion and the
 distortion composed into one map (bilinear, OpenCV ``remap``); pixels that map off the
