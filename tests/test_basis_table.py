@@ -235,3 +235,19 @@ def test_a_mix_of_lights_traced_with_shared_samples_keeps_their_covariances(days
         x, y, z = getattr(got, k), getattr(want, k), getattr(apart, k)
         assert np.allclose(x, y, rtol=0.01, atol=0.01 * np.abs(y).max()), k
         assert np.median(np.abs(z - y) / np.maximum(np.abs(y), 1e-30)) > 0.1, k
+
+
+def test_a_tinted_table_is_the_light_times_its_factor_per_channel(traced):
+    """A table tinted by a factor per channel (the light calibrated again on a reference,
+    fitting.fit.reference_factor) models that light: every radiance, at every roughness, is the
+    factor times the table's, and the Monte Carlo variance its square."""
+    from skyfit_mi.render.basis_table import TableModel
+
+    table, f = traced[3], np.array([1.07, 0.98, 0.91])
+    a, b = TableModel(table, "colour"), TableModel(table.tinted(f), "colour")
+    for sigma in (0.0, 0.003, 0.05, 0.3):
+        theta = np.array([0.7, 0.4, 0.2, 0.3, sigma])
+        np.testing.assert_allclose(b.radiance(theta), a.radiance(theta) * f, rtol=1e-5)
+    rho_d, spec = np.array([0.5, 0.3, 0.2]), np.array([0.04, 0.04, 0.04])
+    np.testing.assert_allclose(table.tinted(f).variance(rho_d, spec, 0.05),
+                               table.variance(rho_d, spec, 0.05) * f ** 2, rtol=1e-5)

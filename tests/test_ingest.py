@@ -110,6 +110,8 @@ def test_fit_after_ingest_recovers_the_material(day, ingested):
     got = np.array([f["exposure"]["exposure"] for f in doc["frames"]])
     true = np.array([f["exposure_sr_m2_W"] for f in sim["frames"]])
     np.testing.assert_allclose(got, true, rtol=0.01)      # measured: 0.1%
+    # the reference named, for fits that calibrate their fitted light on it again
+    assert doc["ingest"]["calibration"]["references"] == {"grey_card": [0.18] * 3}
     assert fit["truth"] is None                            # a photograph's material is unknown
     # the sky's level fitted by default, one for the day: a reference calibrates the frames
     # (sky_fit.default_terms)

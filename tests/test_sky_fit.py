@@ -79,6 +79,69 @@ def test_the_sun_and_the_rest_of_a_sky_add_up_to_it():
     np.testing.assert_allclose(sun.ground / rest.ground, e_sun / e_sky, rtol=1e-12)
 
 
+def test_the_fitted_light_is_calibrated_again_on_the_scenes_reference():
+    """Ingest set each frame's exposure so that the grey card reads its reflectance under the
+    spec's light; a fitted sky moves what the card reads.  The fit calibrates the light again
+    on it (fit.reference_factor): the radiance of the card's fit at the fitted sky over that of
+    a Lambertian card of its known reflectance is a factor per channel on every region's light,
+    recorded in the sky record, which relight and maps take with the level (Sky.tinted: every
+    part of the light times it).  No reference among the fit's regions, a white model without
+    C, or the spec's light: nothing changes."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.fitting.fit import reference_factor
+    from skyfit_mi.fitting.sky_fit import SkyFit, skies_at_level
+    from skyfit_mi.physics.sky import Sky
+
+    doc = {"ingest": {"calibration": {"references": {"card": [0.18, 0.18, 0.18]}}}}
+    colour = ["C_r", "C_g", "C_b", "rho_s", "sigma_alpha"]
+    light = np.array([[[2.0, 3.0, 4.0]], [[1.0, 1.5, 2.5]]])           # (P, T, 3): a day
+
+    class Region:
+        def __init__(self, name, names):
+            self.name, self.doc, self.names, self.parts = name, doc, names, "p"
+            self.light_factor, self.made = None, 0
+            # a lobe that adds rho_s (white) to the diffuse C (1 - rho_s)
+            self.wm = SimpleNamespace(radiance=lambda th: light * (
+                np.asarray(th[:3]) * (1 - th[3]) + th[3] if len(th) == 5 else th[1]))
+
+        def _use_parts(self, parts):
+            self.made += 1
+
+    read = {"card": [0.189, 0.18, 0.171, 0.0, 0.3], "paint": [0.6, 0.2, 0.1, 0.05, 0.1]}
+
+    def fit(s):
+        return {"parameters": dict(zip(s.names, read[s.name]))}
+
+    sessions = {"paint": Region("paint", colour), "card": Region("card", colour)}
+    sky = SkyFit({"k": 1.2})
+    reference_factor(sessions, sky, fit, log=lambda *a: None)
+    factor = np.array([1.05, 1.0, 0.95])
+    np.testing.assert_allclose(sky.record["reference"]["light_factor"], factor)
+    np.testing.assert_allclose(sky.record["reference"]["read"], read["card"][:3])
+    assert sky.record["reference"]["region"] == "card"
+    for s in sessions.values():
+        np.testing.assert_allclose(s.light_factor, factor)
+        assert s.made == 1
+    # relight's and maps' light: the level, then the factor
+    day = Sky(np.array([0.3, -0.2, 0.8]), clear=[30.0, 38.0, 66.0], ground=[40.0, 41.0, 39.0],
+              sun_radiance=[1.5e7, 1.2e7, 1e7])
+    lit, = skies_at_level([day], {**sky.record, "terms": None}, ["2026-08-16T12:00:00+00:00"])
+    d = np.random.default_rng(1).normal(size=(200, 3))
+    d = np.vstack([d / np.linalg.norm(d, axis=1, keepdims=True), day.sun_direction])
+    np.testing.assert_allclose(lit.radiance(d), day.sky_scaled(1.2).radiance(d) * factor,
+                               rtol=1e-12)
+    # nothing to calibrate on
+    for regions in ({"paint": Region("paint", colour)},
+                    {"paint": Region("paint", ["rho_s", "sigma_alpha"]),
+                     "card": Region("card", ["rho_s", "sigma_alpha"])}):
+        other = SkyFit({"k": 1.2})
+        reference_factor(regions, other, fit, log=lambda *a: None)
+        assert "reference" not in other.record
+        assert all(s.light_factor is None and s.made == 0 for s in regions.values())
+    reference_factor(sessions, SkyFit(None), fit, log=lambda *a: None)
+
+
 def test_the_split_lights_mix_is_the_whole_lights_table(days):
     """The sun's table plus k = 1 times the rest's (independent samples) gives the whole
     light's radiance within their Monte Carlo errors; k scales only the sky's share."""

@@ -41,6 +41,7 @@ from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSI
                                   build_light_cache)
 from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, is_table, load_manifest
 from ..pipeline.observation_table import relative_scale
+from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky_departure import departure_parts
 from ..physics.turbid_sky import level_factors
 from ..physics.ward import METAL_THRESHOLD
@@ -236,6 +237,7 @@ class FitSession:
         # shape's mix sky_shape_mix (set_sky)
         self.light, self.sky_scale, self.parts = light or SPEC_LIGHT, 1.0, None
         self.sky_shape_mix = None
+        self.light_factor = None                    # per channel, by a reference (reference_factor)
         self._turned = {}                           # the light with the camera turned
         self._variants = None                       # the shape variants (_shape_variants)
         self.cache_time = time.perf_counter() - t0
@@ -294,6 +296,8 @@ class FitSession:
         (``fit --sky fit``, in ``result``)."""
         sky = result.get("sky")
         if self.light.split:
+            factor = (sky.get("reference") or {}).get("light_factor")
+            self.light_factor = None if factor is None else np.asarray(factor, dtype=float)
             k = sky_level_at(sky, self.obs.times)
             self.set_sky(float(k[0]) if np.ptp(k) == 0 else k, fitted_mix(sky))
 
@@ -434,7 +438,8 @@ class FitSession:
     def _mixed(self, parts):
         """The table of the light's ``parts`` at the sky's level and shape."""
         sun, sky = self.light_levels(self.sky_shape_mix)
-        return parts.table(self.sky_scale * sky, self.sky_shape_mix, sun)
+        table = parts.table(self.sky_scale * sky, self.sky_shape_mix, sun)
+        return table if self.light_factor is None else table.tinted(self.light_factor)
 
     @property
     def pose_angles(self):
@@ -839,9 +844,65 @@ def fit_sessions(sessions, method="global", seed=0, start=None, method_options=N
     day = list(sessions.values())
     trace_turned(day)                       # the pose's turns, where it has an sd
     sky = pose_through_sky(day, sky)
+    reference_factor(sessions, sky, lambda s: s.run(method, start, seed, method_options,
+                                                    lambda *a: None, sky.shares.get(s.name)),
+                     log)
     for name in list(sessions):
         yield sessions.pop(name).run(method, start, seed, method_options, log,
                                      sky.shares.get(name))
+
+
+def reference_factor(sessions, sky, fit, log=print):
+    """Calibrate the fitted light again on the scene's reference (a grey card named by ``ingest
+    --calibrate``), as ingest would have under that light: ingest set each frame's exposure so
+    that the reference reads its known reflectance under the spec's light, and a fitted sky
+    (``sky``, a :class:`~.sky_fit.SkyFit` of ``sessions``) moves what the reference reads, and
+    with it every reflectance measured through it.  Where the reference is one of the fit's
+    regions, it is fitted at the fitted light (``fit``: its session -> its result), and the
+    radiance its fit predicts over that of a Lambertian surface of its known reflectance, per
+    channel over the day, is a factor on the light of every region
+    (:meth:`FitSession.use_fitted_sky` takes it from the sky record's ``reference``, as relight
+    and maps do): the reference then reads its own reflectance and the others theirs against
+    it.  Under the spec's own sky the factor is the reference's noise about 1 (0.1-1% on the
+    sample board); under a sky of another shape it is the light's error that the reference
+    sees (a partly cloudy day's steel read 3-7% high without it, docs/BENCHMARKS.md, "The
+    sample board photographed")."""
+    if sky.record is None:
+        return
+    first = next(iter(sessions.values()))
+    refs = (((first.doc.get("ingest") or {}).get("calibration") or {}).get("references") or {})
+    name = next((n for n in refs if n in sessions), None)
+    if name is None:
+        return
+    s, rho = sessions[name], np.asarray(refs[name], dtype=float)
+    if "C_r" in s.names:
+        known = {"C_r": rho[0], "C_g": rho[1], "C_b": rho[2]}
+    elif "R" in s.names:                    # one grey reflectance: the luminance's
+        known = {"R": float(rho @ SRGB_LUMINANCE)}
+    else:                                   # the white model: no reflectance to read
+        return
+    result = fit(s)
+    theta = np.array([result["parameters"][n] for n in s.names])
+    lambertian = np.array([known.get(n, 0.0 if n == "rho_s" else theta[i])
+                           for i, n in enumerate(s.names)])
+    factor = (np.sum(s.wm.radiance(theta), axis=(0, 1))
+              / np.sum(s.wm.radiance(lambertian), axis=(0, 1)))
+    sky.record["reference"] = {
+        "region": name, "reflectance": rho.tolist(), "read": (rho * factor).tolist(),
+        "light_factor": factor.tolist(),
+        "meaning": "the fitted light calibrated again on the reference, as ingest calibrated "
+                   "the frames on it under the spec's: the radiance of the reference's fit at "
+                   "the fitted light over that of a Lambertian surface of its known "
+                   "reflectance (read: that reflectance times it), per channel over the day, "
+                   "a factor on the light of every region, so that the reference reads its "
+                   "own reflectance"}
+    for each in sessions.values():
+        each.light_factor = factor
+        each._use_parts(each.parts)
+    log(f"sky: the light calibrated again on {name}, which reads "
+        + ", ".join(f"{v:.4g}" for v in rho * factor) + " at the fitted sky for "
+        + ", ".join(f"{v:.4g}" for v in rho) + ": every region's light times "
+        + ", ".join(f"{v:.4f}" for v in factor))
 
 
 def prepare_sessions(sessions, light=LightOptions(), seed=0, log=print):

@@ -265,11 +265,14 @@ def light_as_fitted(spec, level, target, out, log=print):
     ``out``/SKY_MAPS as EXR, which the relit manifest's ``envmap`` record names, with the
     sun's direct normal irradiance; so is a frame lit by a map (a measured sky), whose
     record would otherwise name its own file, unscaled.  A frame whose sky cannot move the
-    fit's way (one the fit did not see) keeps its pattern at level k, and the log says so."""
+    fit's way (one the fit did not see) keeps its pattern at level k, and the log says so.
+    Where the fit calibrated the light again on the scene's reference, the light takes that
+    factor per channel (:func:`~.fit.reference_factor`)."""
     doc, root = load_manifest(target)
     seen = {g["index"]: g for g in doc["frames"] if "illumination" in g}
     shape = level.get("shape")
     departure = (level.get("departure") or {}).get("weights", [])
+    factor = np.asarray((level.get("reference") or {}).get("light_factor", np.ones(3)), float)
     kept = []
     for f in spec.frames:
         if f.index in seen:
@@ -287,9 +290,9 @@ def light_as_fitted(spec, level, target, out, log=print):
             # a mix that no one Sky holds, or a map the manifest names by its file (which k
             # does not scale): a map of its own
             f.sky = _sky_map(f, shaped(f.sky, k, shape["mix"] if variants else [], variants,
-                                       departure), out)
+                                       departure).tinted(factor), out)
         else:
-            f.sky = f.sky.sky_scaled(k)
+            f.sky = f.sky.sky_scaled(k).tinted(factor)
     if kept:
         log(f"{', '.join(kept)}: the spec's sky cannot take the fitted shape's moves there; "
             "the spec's pattern at the fitted level")

@@ -258,8 +258,12 @@ def sky_level_at(record, times):
 
 def skies_at_level(skies, record, times):
     """The frames' ``skies`` (at ISO ``times``) with their sky at a sky fit's level (``record``,
-    :func:`sky_level_at`) against the sun: the spec's light as a fit of the day found it."""
-    return [sky.sky_scaled(k) for sky, k in zip(skies, sky_level_at(record, times))]
+    :func:`sky_level_at`) against the sun: the spec's light as a fit of the day found it,
+    calibrated again on the scene's reference where the fit did so (its ``reference``,
+    :func:`~.fit.reference_factor`)."""
+    factor = (record.get("reference") or {}).get("light_factor")
+    return [sky.sky_scaled(k) if factor is None else sky.sky_scaled(k).tinted(factor)
+            for sky, k in zip(skies, sky_level_at(record, times))]
 
 
 def _least(sessions, k, starts):

@@ -446,6 +446,15 @@ class Sky:
                        envmap=None if self.envmap is None else self.envmap * np.float32(k),
                        ground=sun.ground + sky.ground * k)
 
+    def tinted(self, factor):
+        """A copy whose light, the sun's, the sky's and the ground's, is ``factor`` (3,) times
+        this one's per channel [unitless]: the light as a reference of known reflectance in the
+        scene calibrates it (:func:`~skyfit_mi.fitting.fit.reference_factor`)."""
+        f = np.asarray(factor, dtype=float)
+        return replace(self, **{p: getattr(self, p) * f for p in _PATTERNS + ("ground",
+                                                                                "sun_radiance")},
+                       envmap=None if self.envmap is None else self.envmap * f.astype(np.float32))
+
     def scaled_to_illuminance(self, diffuse_horizontal_lux, efficacy):
         """A copy scaled to a measured horizontal diffuse illuminance [lx].
 

@@ -1178,6 +1178,10 @@ def frame_exposures(frames, patches, noise, o, log):
         per_frame, calibration = calibrate_exposure(
             *_neutral(samples, patches.patch, o.calibrate), sensor,
             [frames.photos[i] for i in lit], None if rel is None else rel[lit], log, cells)
+        # the scene's references by name, so that a fit of the light can calibrate on them
+        # again under the light it fits (fitting.fit.reference_factor)
+        calibration["references"] = {name: [float(v) for v in np.broadcast_to(rho, 3)]
+                                     for name, rho in o.calibrate.items()}
         if patches.response_info is not None:
             calibration["response_fit"] = patches.response_info
         if patches.chart is not None:

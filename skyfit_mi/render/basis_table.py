@@ -211,6 +211,14 @@ class BasisTable:
                           coef=[c.subset(rows, frames) for c in self.coef],
                           normalisation=self.normalisation)
 
+    def tinted(self, factor):
+        """The table of the light ``factor`` (3,) times this one's per channel: every basis
+        times it, their variances times its square."""
+        f = np.asarray(factor, dtype=np.float32)
+        return replace(self, D=self.D * f, G0=self.G0 * f, G1=self.G1 * f,
+                       coef=[c.map(lambda x: x * f) for c in self.coef], VDD=self.VDD * f * f,
+                       VDG=self.VDG * f * f, VGG=self.VGG * f * f)
+
     @classmethod
     def empty(cls, P, T, S, normalisation):
         """A table of P pixels in T frames with S positions, to be filled block by block
