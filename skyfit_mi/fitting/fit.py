@@ -28,8 +28,8 @@ from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import levenberg_marquardt
 from .pose import pose_share, pose_through_sky
 from ..errors import SkyfitError, check_choice
-from .sky_fit import (SkyFit, SkyShare, fit_sky_scale, fitted_mix, shape_variants, share_at,
-                      skies_at_level, sky_level_at)
+from .sky_fit import (SkyFit, SkyShare, fit_sky_scale, fitted_mix, reference_light_factor,
+                      shape_variants, share_at, skies_at_level, sky_level_at)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, block_budget, memory_estimate,
                                   shared_budget, trace_basis)
@@ -296,8 +296,7 @@ class FitSession:
         (``fit --sky fit``, in ``result``)."""
         sky = result.get("sky")
         if self.light.split:
-            factor = (sky.get("reference") or {}).get("light_factor")
-            self.light_factor = None if factor is None else np.asarray(factor, dtype=float)
+            self.light_factor = reference_light_factor(sky)
             k = sky_level_at(sky, self.obs.times)
             self.set_sky(float(k[0]) if np.ptp(k) == 0 else k, fitted_mix(sky))
 
@@ -438,8 +437,8 @@ class FitSession:
     def _mixed(self, parts):
         """The table of the light's ``parts`` at the sky's level and shape."""
         sun, sky = self.light_levels(self.sky_shape_mix)
-        table = parts.table(self.sky_scale * sky, self.sky_shape_mix, sun)
-        return table if self.light_factor is None else table.tinted(self.light_factor)
+        return parts.table(self.sky_scale * sky, self.sky_shape_mix, sun).tinted(
+            self.light_factor)
 
     @property
     def pose_angles(self):

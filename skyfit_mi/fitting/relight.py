@@ -37,7 +37,7 @@ from .fit import FitCache, FitSession, trace_sessions
 from .geometry import highlight_beyond
 from .held_out import local_error_scale
 from .landscape import truth_parameters
-from .sky_fit import sky_level_at
+from .sky_fit import reference_light_factor, sky_level_at
 from .uncertainty import band_half_width, widen
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky_shape import shape_variants, shaped
@@ -272,7 +272,7 @@ def light_as_fitted(spec, level, target, out, log=print):
     seen = {g["index"]: g for g in doc["frames"] if "illumination" in g}
     shape = level.get("shape")
     departure = (level.get("departure") or {}).get("weights", [])
-    factor = np.asarray((level.get("reference") or {}).get("light_factor", np.ones(3)), float)
+    factor = reference_light_factor(level)
     kept = []
     for f in spec.frames:
         if f.index in seen:

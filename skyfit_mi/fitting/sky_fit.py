@@ -261,9 +261,16 @@ def skies_at_level(skies, record, times):
     :func:`sky_level_at`) against the sun: the spec's light as a fit of the day found it,
     calibrated again on the scene's reference where the fit did so (its ``reference``,
     :func:`~.fit.reference_factor`)."""
-    factor = (record.get("reference") or {}).get("light_factor")
-    return [sky.sky_scaled(k) if factor is None else sky.sky_scaled(k).tinted(factor)
-            for sky, k in zip(skies, sky_level_at(record, times))]
+    factor = reference_light_factor(record)
+    return [sky.sky_scaled(k).tinted(factor) for sky, k in zip(skies, sky_level_at(record, times))]
+
+
+def reference_light_factor(record):
+    """The factor per channel (3,) that a sky fit's ``record`` puts on the light where it
+    calibrated the light again on the scene's reference (:func:`~.fit.reference_factor`);
+    None where it did not."""
+    factor = ((record or {}).get("reference") or {}).get("light_factor")
+    return None if factor is None else np.asarray(factor, dtype=float)
 
 
 def _least(sessions, k, starts):

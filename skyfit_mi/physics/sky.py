@@ -449,7 +449,9 @@ class Sky:
     def tinted(self, factor):
         """A copy whose light, the sun's, the sky's and the ground's, is ``factor`` (3,) times
         this one's per channel [unitless]: the light as a reference of known reflectance in the
-        scene calibrates it (:func:`~skyfit_mi.fitting.fit.reference_factor`)."""
+        scene calibrates it (:func:`~skyfit_mi.fitting.fit.reference_factor`); None: itself."""
+        if factor is None:
+            return self
         f = np.asarray(factor, dtype=float)
         return replace(self, **{p: getattr(self, p) * f for p in _PATTERNS + ("ground",
                                                                                 "sun_radiance")},

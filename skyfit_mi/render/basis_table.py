@@ -213,7 +213,9 @@ class BasisTable:
 
     def tinted(self, factor):
         """The table of the light ``factor`` (3,) times this one's per channel: every basis
-        times it, their variances times its square."""
+        times it, their variances times its square; None: itself."""
+        if factor is None:
+            return self
         f = np.asarray(factor, dtype=np.float32)
         return replace(self, D=self.D * f, G0=self.G0 * f, G1=self.G1 * f,
                        coef=[c.map(lambda x: x * f) for c in self.coef], VDD=self.VDD * f * f,
