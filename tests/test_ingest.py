@@ -136,6 +136,39 @@ def test_fit_after_ingest_recovers_the_material(day, ingested):
         assert abs(t - mid) <= 1.5 * half, f"{k}: truth {t} far outside the fit's [{lo}, {hi}]"
 
 
+def test_the_exif_exposures_are_kept_where_the_light_drifts_smoothly_not_where_the_shutter_misses():
+    """The card's exposures over EXIF's, on 13 half-hourly frames at 0.5% noise a frame and
+    channel: a sky the spec does not name moves them smoothly over the day (here 5% over it,
+    redder in the morning), which is the light's -- EXIF's exposures are kept and the drift
+    reported; a shutter missing by 3% a frame (the same in every channel) scatters them about
+    any smooth curve -- each frame takes its own; noise alone keeps EXIF's and reports no drift.
+    Without the frames' times the curve is a constant, so a drift reads as a shutter."""
+    from skyfit_mi.pipeline.ingest import exif_scatter
+
+    rng = np.random.default_rng(3)
+    seconds = 43200.0 + 1800.0 * np.arange(13)
+    x = np.linspace(-1.0, 1.0, 13)
+    var = np.full(3, 0.005 ** 2)
+
+    def ratio(light, shutter):
+        return np.exp(light + shutter[:, None] + rng.normal(0.0, 0.005, (len(shutter), 3)))
+
+    drift = np.outer(0.04 * x - 0.03 * x ** 2, [1.3, 1.0, 0.7])       # smooth, chromatic
+    miss = rng.normal(0.0, 0.03, 13)
+    none = np.zeros(13)
+    sky = exif_scatter(ratio(drift, none), var, seconds)
+    assert not sky["shutter"] and sky["curved"] and sky["curve_terms"] == 3
+    assert sky["relative_spread"] > 0.02 > 0.01 > sky["frame_spread"]
+    camera = exif_scatter(ratio(drift, miss), var, seconds)
+    assert camera["shutter"] and camera["scatter_chi2_per_dof"] > 10
+    quiet = exif_scatter(ratio(0.0, none), var, seconds)
+    assert not quiet["shutter"] and not quiet["curved"] and quiet["scatter_chi2_per_dof"] < 2
+    untimed = exif_scatter(ratio(drift, none), var)
+    assert untimed["shutter"] and untimed["curve_terms"] == 1 and not untimed["curved"]
+    few = exif_scatter(ratio(drift[:3], none[:3]), var, seconds[:3])
+    assert few["curve_terms"] == 2
+
+
 def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, ingested, tmp_path):
     """A real shutter and aperture miss their nominal exposure by a few per cent, which EXIF
     does not record.  Photographed with a 3% miss per frame, the grey card's exposures scatter

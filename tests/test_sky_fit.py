@@ -142,9 +142,78 @@ def test_the_fitted_light_is_calibrated_again_on_the_scenes_reference():
     reference_factor(sessions, SkyFit(None), fit, log=lambda *a: None)
 
 
+def test_the_whole_lights_level_over_the_day_is_fitted_where_the_frames_keep_exif():
+    """Frames that keep their relative exposures from EXIF carry the real light's curve over the
+    day, which the spec's sun follows only as far as its air is the model's: where the
+    reference saw it drift (or none calibrated the frames), the fit of the sky takes the whole
+    light's level, sun and sky, as LEVEL_TERMS Legendre terms about its mean (the exposure's),
+    under the drift prior.  The coefficients light a session with it
+    (set_sky's level, exp(P_1.. u) by frame), relight and maps take it from the record with k
+    and the reference's factor (skies_at_level: every part of the light times it).  Frames
+    calibrated one by one, rendered days and short days fit none."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.fitting.sky_fit import (DRIFT_SD, LEVEL_TERMS, SkyCoefficients,
+                                           _curve_record, default_level_terms, light_level_at,
+                                           skies_at_level, time_basis)
+    from skyfit_mi.physics.sky import Sky
+
+    photos = {"source": "photographs", "ingest": {"calibration": {"light_drift": True}}}
+    assert default_level_terms(photos, 13) == LEVEL_TERMS == 2
+    assert default_level_terms(photos, 4) == 0
+    # the reference saw the spec's curve, or each frame was calibrated on it
+    assert default_level_terms({**photos, "ingest": {"calibration": {"light_drift": False}}},
+                               13) == 0
+    assert default_level_terms({**photos, "ingest": {"calibration": {"per_frame": True}}},
+                               13) == 0
+    assert default_level_terms({"source": "photographs", "ingest": {}}, 13) == LEVEL_TERMS
+    assert default_level_terms({"source": "render"}, 13) == 0
+
+    c = SkyCoefficients(1, ("departure:Y10",), 0.35, LEVEL_TERMS)
+    assert c.names == ["log k", "departure Y10", "log light term 1", "log light term 2"]
+    assert c.columns == 3
+    np.testing.assert_allclose(np.diag(c.precision)[2:], DRIFT_SD ** -2)
+    times = [f"2026-08-16T{h:02d}:00:00+00:00" for h in (9, 12, 15)]
+    span = (1786870800.0, 1786892400.0)
+    basis = time_basis(times, span, c.columns)
+    np.testing.assert_allclose(basis[:, 1], [-1.0, 0.0, 1.0])
+
+    class Session:
+        def set_sky(self, k, mix=None, level=None):
+            self.k, self.mix, self.level = k, mix, level
+
+    s, u = Session(), np.array([np.log(1.3), 0.1, 0.2, -0.05])
+    c.light(s, basis, u)
+    np.testing.assert_allclose(s.k, 1.3)
+    np.testing.assert_allclose(s.mix, [0.1])
+    np.testing.assert_allclose(s.level, np.exp(0.2 * basis[:, 1] - 0.05 * basis[:, 2]))
+    plain = SkyCoefficients(1, ("departure:Y10",), 0.35)
+    plain.light(s, basis[:, :1], u[:2])
+    assert s.level is None
+
+    # the record, read back by relight and maps
+    w, cov = np.array([0.0, 0.2, -0.05]), np.diag([0.0, 0.01, 0.01])
+
+    one = SimpleNamespace(obs=SimpleNamespace(frames=[0, 1, 2], times=times))
+    record, log_level = _curve_record([one], w, cov, span, of="level")
+    assert set(record["level_by_frame"]) == {0, 1, 2}
+    sky = {"k": 1.3, "terms": None, "light_level": record}
+    level = light_level_at(sky, times)
+    np.testing.assert_allclose(level, np.exp(log_level))
+    assert light_level_at({"k": 1.3}, times) is None
+    day = Sky(np.array([0.3, -0.2, 0.8]), clear=[30.0, 38.0, 66.0], ground=[40.0, 41.0, 39.0],
+              sun_radiance=[1.5e7, 1.2e7, 1e7])
+    d = np.random.default_rng(2).normal(size=(100, 3))
+    d = np.vstack([d / np.linalg.norm(d, axis=1, keepdims=True), day.sun_direction])
+    for lit, v in zip(skies_at_level([day] * 3, sky, times), level):
+        np.testing.assert_allclose(lit.radiance(d), day.sky_scaled(1.3).radiance(d) * v,
+                                   rtol=1e-12)
+
+
 def test_the_split_lights_mix_is_the_whole_lights_table(days):
     """The sun's table plus k = 1 times the rest's (independent samples) gives the whole
-    light's radiance within their Monte Carlo errors; k scales only the sky's share."""
+    light's radiance within their Monte Carlo errors; k scales only the sky's share, the
+    light's level by frame both."""
     from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.fitting.light import LightPlan
     from skyfit_mi.render.basis_table import TableModel, mixed
@@ -171,6 +240,10 @@ def test_the_split_lights_mix_is_the_whole_lights_table(days):
     np.testing.assert_allclose(
         TableModel(mixed(sun, [rest], [2.0], w), "colour").radiance(theta),
         w[:, None] * L_sun + 2.0 * L_rest, rtol=1e-5)
+    # the whole light's level by frame (set_sky's level): sun and sky alike
+    split.set_sky(2.0, None, w)
+    np.testing.assert_allclose(split.wm.radiance(theta), w[:, None] * (L_sun + 2.0 * L_rest),
+                               rtol=1e-5)
 
 
 def rescaled_sky(day, out, factor):

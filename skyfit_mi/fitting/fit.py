@@ -28,8 +28,9 @@ from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import levenberg_marquardt
 from .pose import pose_share, pose_through_sky
 from ..errors import SkyfitError, check_choice
-from .sky_fit import (SkyFit, SkyShare, fit_sky_scale, fitted_mix, reference_light_factor,
-                      shape_variants, share_at, skies_at_level, sky_level_at)
+from .sky_fit import (SkyFit, SkyShare, fit_sky_scale, fitted_mix, light_level_at,
+                      reference_light_factor, shape_variants, share_at, skies_at_level,
+                      sky_level_at)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, block_budget, memory_estimate,
                                   shared_budget, trace_basis)
@@ -237,6 +238,7 @@ class FitSession:
         # shape's mix sky_shape_mix (set_sky)
         self.light, self.sky_scale, self.parts = light or SPEC_LIGHT, 1.0, None
         self.sky_shape_mix = None
+        self.light_level = 1.0                      # the whole light's, by frame (set_sky)
         self.light_factor = None                    # per channel, by a reference (reference_factor)
         self._turned = {}                           # the light with the camera turned
         self._variants = None                       # the shape variants (_shape_variants)
@@ -298,7 +300,8 @@ class FitSession:
         if self.light.split:
             self.light_factor = reference_light_factor(sky)
             k = sky_level_at(sky, self.obs.times)
-            self.set_sky(float(k[0]) if np.ptp(k) == 0 else k, fitted_mix(sky))
+            self.set_sky(float(k[0]) if np.ptp(k) == 0 else k, fitted_mix(sky),
+                         light_level_at(sky, self.obs.times))
 
     def trace_light(self, light=None):
         """(Re)trace the light (a :class:`~.light.LightPlan`; None: the one traced last) at
@@ -436,7 +439,7 @@ class FitSession:
 
     def _mixed(self, parts):
         """The table of the light's ``parts`` at the sky's level and shape."""
-        sun, sky = self.light_levels(self.sky_shape_mix)
+        sun, sky = (self.light_level * v for v in self.light_levels(self.sky_shape_mix))
         return parts.table(self.sky_scale * sky, self.sky_shape_mix, sun).tinted(
             self.light_factor)
 
@@ -464,18 +467,20 @@ class FitSession:
         """The wall time of the traces with the camera turned [s]."""
         return sum(seconds for _, seconds in self._turned.values())
 
-    def set_sky(self, k, mix=None):
+    def set_sky(self, k, mix=None, level=None):
         """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
         to the sun (one factor, or one per frame of the session), in the spec's shape or with
         ``mix[j]`` of its shape variant j and (1 - sum(mix)) of its own pattern
-        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`), and make the models and
-        chi-square on it."""
+        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`), the whole light, sun and sky, by
+        ``level`` (one per frame; None: the spec's), and make the models and chi-square on
+        it."""
         if self.parts is None or "sky" not in self.parts.names \
                 or len(self.parts.variants) < (0 if mix is None else len(mix)):
             raise ValueError("the sky's level needs a session traced with a fitted sky's light, "
                              "its shape one traced with the sky's shape variants")
         self.sky_scale = float(k) if np.ndim(k) == 0 else np.asarray(k, dtype=float)
         self.sky_shape_mix = None if mix is None else np.asarray(mix, dtype=float)
+        self.light_level = 1.0 if level is None else np.asarray(level, dtype=float)
         self._use_parts(self.parts)
 
     def take_light(self, other):

@@ -37,7 +37,7 @@ from .fit import FitCache, FitSession, trace_sessions
 from .geometry import highlight_beyond
 from .held_out import local_error_scale
 from .landscape import truth_parameters
-from .sky_fit import reference_light_factor, sky_level_at
+from .sky_fit import light_level_at, reference_light_factor, sky_level_at
 from .uncertainty import band_half_width, widen
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky_shape import shape_variants, shaped
@@ -267,7 +267,8 @@ def light_as_fitted(spec, level, target, out, log=print):
     record would otherwise name its own file, unscaled.  A frame whose sky cannot move the
     fit's way (one the fit did not see) keeps its pattern at level k, and the log says so.
     Where the fit calibrated the light again on the scene's reference, the light takes that
-    factor per channel (:func:`~.fit.reference_factor`)."""
+    factor per channel (:func:`~.fit.reference_factor`), and where it fitted the whole light's
+    level over the day, that level at the frame's time (:func:`~.sky_fit.light_level_at`)."""
     doc, root = load_manifest(target)
     seen = {g["index"]: g for g in doc["frames"] if "illumination" in g}
     shape = level.get("shape")
@@ -278,6 +279,9 @@ def light_as_fitted(spec, level, target, out, log=print):
         if f.index in seen:
             f.sky = frame_sky(seen[f.index], root)
         k = sky_level_at(level, [f.time.isoformat()])[0] if f.time else level["k"]
+        whole = light_level_at(level, [f.time.isoformat()]) if f.time else None
+        tint = None if factor is None and whole is None else (
+            (np.ones(3) if factor is None else factor) * (1.0 if whole is None else whole[0]))
         variants = []
         if shape is not None:
             try:          # none for a sky black above the horizon (the sun down): nothing to mix
@@ -290,9 +294,9 @@ def light_as_fitted(spec, level, target, out, log=print):
             # a mix that no one Sky holds, or a map the manifest names by its file (which k
             # does not scale): a map of its own
             f.sky = _sky_map(f, shaped(f.sky, k, shape["mix"] if variants else [], variants,
-                                       departure).tinted(factor), out)
+                                       departure).tinted(tint), out)
         else:
-            f.sky = f.sky.sky_scaled(k).tinted(factor)
+            f.sky = f.sky.sky_scaled(k).tinted(tint)
     if kept:
         log(f"{', '.join(kept)}: the spec's sky cannot take the fitted shape's moves there; "
             "the spec's pattern at the fitted level")

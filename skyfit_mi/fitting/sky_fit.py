@@ -81,6 +81,15 @@ MAX_TERMS, FRAMES_BEYOND_TERMS = 4, 2
 #: its sky-to-sun ratio 1.2-2.0 times the CIE clear sky's over the day, read sigma_alpha 0.092
 #: (0.086-0.097) for 0.08 with no warning (docs/BENCHMARKS.md, "the sky test set").
 DEFAULT_TERMS = 3
+#: The terms of the whole light's level over the day beyond its mean (Legendre P_1, P_2 in
+#: time, each under the prior :data:`DRIFT_SD`) fitted with the sky where the frames keep their
+#: cameras' relative exposures (:func:`default_level_terms`).  The sun's light crosses more air
+#: as it sinks, and how much of it the air takes is not the model's: under a turbid sky (T 5)
+#: the board's grey card drifted 4.5% over the day against the spec's CIE clear light, and the
+#: sky's level alone, against the sun, could follow that only by bending the sky's share that
+#: each material sees otherwise (docs/BENCHMARKS.md, "The sample board photographed").  Its
+#: mean is the exposure's, which the scene's reference (or the given exposure) sets.
+LEVEL_TERMS = 2
 #: The most frames whose sky level the log lists one by one (more: its ends and range).
 CURVE_LISTED = 8
 #: The prior's standard deviation of each term of log k beyond the day's level (Legendre
@@ -246,14 +255,25 @@ def time_basis(times, span, terms):
     return np.polynomial.legendre.legvander(x, terms - 1)
 
 
+def _curve_at(curve, times):
+    """A curve's record (:func:`_curve_record`) at the frames' ``times`` (ISO; held at the
+    fitted span's ends)."""
+    return np.exp(time_basis(times, curve["span_s"], len(curve["coefficients"]))
+                  @ np.asarray(curve["coefficients"]))
+
+
 def sky_level_at(record, times):
     """The sky's level k at the frames' ``times`` (ISO) by a sky fit's ``record``: the day's
-    one level, or its smooth curve over the day (``terms``; held at the fitted span's ends)."""
+    one level, or its smooth curve over the day (``terms``)."""
     terms = record.get("terms")
-    if terms is None:
-        return np.full(len(times), float(record["k"]))
-    return np.exp(time_basis(times, terms["span_s"], len(terms["coefficients"]))
-                  @ np.asarray(terms["coefficients"]))
+    return np.full(len(times), float(record["k"])) if terms is None else _curve_at(terms, times)
+
+
+def light_level_at(record, times):
+    """The whole light's level at the frames' ``times`` (ISO) by a sky fit's ``record`` (its
+    ``light_level`` curve, :data:`LEVEL_TERMS`), or None where it fitted none."""
+    curve = (record or {}).get("light_level")
+    return None if curve is None else _curve_at(curve, times)
 
 
 def skies_at_level(skies, record, times):
@@ -262,7 +282,11 @@ def skies_at_level(skies, record, times):
     calibrated again on the scene's reference where the fit did so (its ``reference``,
     :func:`~.fit.reference_factor`)."""
     factor = reference_light_factor(record)
-    return [sky.sky_scaled(k).tinted(factor) for sky, k in zip(skies, sky_level_at(record, times))]
+    factor = np.ones(3) if factor is None else factor
+    level = light_level_at(record, times)
+    level = np.ones(len(times)) if level is None else level
+    return [sky.sky_scaled(k).tinted(factor * v)
+            for sky, k, v in zip(skies, sky_level_at(record, times), level)]
 
 
 def reference_light_factor(record):
@@ -383,6 +407,20 @@ def default_terms(frames, referenced=False):
     return int(max(1, min(DEFAULT_TERMS, int(frames) - FRAMES_BEYOND_TERMS)))
 
 
+def default_level_terms(doc, frames):
+    """The terms of the whole light's level over ``frames`` frames beyond its mean
+    (:data:`LEVEL_TERMS`) for photographs whose frames keep their exposures' level from EXIF:
+    where a reference of known reflectance saw the light drift from the spec's over the day
+    (ingest's ``calibration.light_drift``), or where none calibrated them (a given exposure),
+    so that nothing told the day's curve.  None where the reference saw the spec's curve, or
+    calibrated each frame's level on its own (the spec's light's, by construction), for frames
+    skyfit rendered (the spec's light is theirs), and for too few frames."""
+    cal = (doc.get("ingest") or {}).get("calibration")
+    if not photographed(doc) or frames < LEVEL_TERMS + 1 + FRAMES_BEYOND_TERMS:
+        return 0
+    return LEVEL_TERMS if not cal or cal.get("light_drift") else 0
+
+
 def _data_beyond_search(data, grid):
     """Where the data alone put the sky's level: ``data`` {log k: the regions' summed least
     chi-square} (the profile without the prior), ``grid`` the search's log k (:data:`SCALE_GRID`);
@@ -439,26 +477,38 @@ class SkyCoefficients:
     terms: int
     variants: tuple = ()
     level_sd: float = None
+    light_terms: int = 0
 
     @property
     def names(self):
         """Each coefficient's name, in order."""
         return (["log k"] + [f"log k term {j}" for j in range(1, self.terms)]
                 + [f"mix {v.removeprefix('shape:')}" if v.startswith("shape:") else
-                   v.replace(":", " ", 1) for v in self.variants])
+                   v.replace(":", " ", 1) for v in self.variants]
+                + [f"log light term {j}" for j in range(1, self.light_terms + 1)])
+
+    @property
+    def columns(self):
+        """The Legendre polynomials in time (:func:`time_basis`) the coefficients need."""
+        return max(self.terms, self.light_terms + 1)
 
     @property
     def precision(self):
         """The priors' precision matrix (1 / sd^2 on the diagonal; 0 for no prior)."""
         sd = [self.level_sd] + [DRIFT_SD] * (self.terms - 1) + [
-            SHAPE_SD if v.startswith("shape:") else DEPARTURE_SD for v in self.variants]
+            SHAPE_SD if v.startswith("shape:") else DEPARTURE_SD for v in self.variants] + [
+            DRIFT_SD] * self.light_terms
         return np.diag([0.0 if v is None else v ** -2 for v in sd])
 
     def light(self, session, basis, u):
         """Light ``session`` (its frames' time ``basis``, :func:`time_basis`) at the
-        coefficients ``u``."""
-        session.set_sky(np.exp(basis @ u[:self.terms]),
-                        u[self.terms:] if self.variants else None)
+        coefficients ``u``: the sky's level k(t) against the sun, its variants' mix, and the
+        whole light's level exp(P_1..(t) u) about its mean (:data:`LEVEL_TERMS`)."""
+        J = self.terms + len(self.variants)
+        session.set_sky(np.exp(basis[:, :self.terms] @ u[:self.terms]),
+                        u[self.terms:J] if self.variants else None,
+                        np.exp(basis[:, 1:self.light_terms + 1] @ u[J:])
+                        if self.light_terms else None)
 
 
 def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
@@ -475,7 +525,7 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
     terms = coefficients.terms
     times = [t for s in sessions for t in s.obs.times]
     span = (float(_seconds(times).min()), float(_seconds(times).max()))
-    bases = [time_basis(s.obs.times, span, terms) for s in sessions]
+    bases = [time_basis(s.obs.times, span, coefficients.columns) for s in sessions]
     P = coefficients.precision
     n = len(P)
     u = np.r_[u0, np.zeros(n - 1)]
@@ -787,11 +837,13 @@ class _Fitted:
     index_names: list = None
     departure: dict = None
     lights: list = None
+    light_curve: dict = None
 
 
-def _fit_terms(sessions, level, terms, told, warnings):
-    """The sky's level over the day (``terms``, ``told`` by ``--sky-terms``) and its shape
-    (the shape variants traced) fitted from the day's ``level`` (:func:`_fit_curve`) where
+def _fit_terms(sessions, level, terms, told, warnings, light_terms=0):
+    """The sky's level over the day (``terms``, ``told`` by ``--sky-terms``), its shape
+    (the shape variants traced) and the whole light's level over the day (``light_terms``,
+    :func:`default_level_terms`) fitted from the day's ``level`` (:func:`_fit_curve`) where
     that is determined; a :class:`_Fitted` (the level's own where they are not fitted).
     Appends what the data hardly tell to ``warnings``."""
     thetas = [theta for _, theta in level.profile[level.u0]]
@@ -799,7 +851,7 @@ def _fit_terms(sessions, level, terms, told, warnings):
                      [np.zeros(len(theta)) for theta in thetas], _level_spans(sessions, level),
                      level.data(level.u0))
     J = len(sessions[0].parts.variants)                  # the shape variants traced
-    if not (terms > 1 or J):
+    if not (terms > 1 or J or light_terms):
         if level.determined:
             light = SkyCoefficients(1, (), level.prior_sd)
             fitted.lights = [FittedLight(light, np.ones((len(s.obs.times), 1)),
@@ -818,7 +870,8 @@ def _fit_terms(sessions, level, terms, told, warnings):
                             f"{'are' if len(parts) > 1 else 'is'} not fitted: its level is not "
                             "determined.")
         return fitted
-    coefficients = SkyCoefficients(terms, tuple(sessions[0].parts.variants), level.prior_sd)
+    coefficients = SkyCoefficients(terms, tuple(sessions[0].parts.variants), level.prior_sd,
+                                   light_terms)
     u, C, H_inv, span, bases, thetas, responses, fitted.chi2 = _fit_curve(
         sessions, thetas, level.u0, coefficients, level.s2, level.agree["scale"])
     sd = np.sqrt(np.diag(C))
@@ -840,8 +893,12 @@ def _fit_terms(sessions, level, terms, told, warnings):
         fitted.shape, fitted.index_names = _shape_record(sessions[0], u[terms:terms + S],
                                                          sd[terms:terms + S])
         warnings += _shape_warnings(fitted.shape, sd[terms:terms + S])
+    if light_terms:
+        w, Cw = np.zeros(light_terms + 1), np.zeros((light_terms + 1,) * 2)
+        w[1:], Cw[1:, 1:] = u[terms + J:], C[terms + J:, terms + J:]
+        fitted.light_curve = _curve_record(sessions, w, Cw, span, of="level")[0]
     if J > S:
-        a, Ca = u[terms + S:], C[terms + S:, terms + S:]
+        a, Ca = u[terms + S:terms + J], C[terms + S:terms + J, terms + S:terms + J]
         fitted.departure = _departure_record(a, Ca)
         warnings += _departure_warnings(fitted.departure)
     fitted.correlation = {"names": coefficients.names,
@@ -849,20 +906,23 @@ def _fit_terms(sessions, level, terms, told, warnings):
     return fitted
 
 
-def _curve_record(sessions, coefficients, covariance, span):
-    """The JSON record of the sky's level's curve over the day (its Legendre ``coefficients``
-    with their ``covariance`` over ``span`` [s]), and log k at each frame."""
+def _curve_record(sessions, coefficients, covariance, span, of="k"):
+    """The JSON record of a curve over the day of the sky's level k against the sun (or of the
+    whole light's level, ``of`` 'level'): its Legendre ``coefficients`` with their
+    ``covariance`` over ``span`` [s], and its log at each frame."""
     frames = sorted({(i, t) for s in sessions for i, t in zip(s.obs.frames, s.obs.times)})
     B = time_basis([t for _, t in frames], span, len(coefficients))
     log_k = B @ coefficients
     half = unc.Z["95"] * np.sqrt(np.einsum("ij,jk,ik->i", B, covariance, B))
-    return {"meaning": "log k(t) = sum_j coefficients[j] P_j(x), P_j Legendre polynomials, "
-                       "x = -1 at span_s[0] and 1 at span_s[1] (held beyond)",
+    return {"meaning": f"log {of}(t) = sum_j coefficients[j] P_j(x), P_j Legendre polynomials, "
+                       "x = -1 at span_s[0] and 1 at span_s[1] (held beyond)"
+                       + ("; the whole light's, sun and sky, against the spec's, about its "
+                          "mean (P_0's coefficient 0: the exposure's)" if of == "level" else ""),
             "coefficients": coefficients.tolist(), "covariance": covariance.tolist(),
             "span_s": list(span), "drift_prior_sd": DRIFT_SD,
-            "k_by_frame": {int(i): [float(np.exp(v)), float(np.exp(v - h)),
-                                    float(np.exp(v + h))]
-                           for (i, _), v, h in zip(frames, log_k, half)}}, log_k
+            f"{of}_by_frame": {int(i): [float(np.exp(v)), float(np.exp(v - h)),
+                                        float(np.exp(v + h))]
+                               for (i, _), v, h in zip(frames, log_k, half)}}, log_k
 
 
 def _shape_warnings(shape, mix_sd):
@@ -965,7 +1025,9 @@ def fit_sky_scale(sessions, plan, seed=0, log=print):
                               _referenced(sessions[0].doc))
     level = _profile_level(sessions, plan.prior_sd, seed)
     warnings = _level_warnings(level, terms)
-    fitted = _fit_terms(sessions, level, terms, told, warnings)
+    light_terms = default_level_terms(sessions[0].doc,
+                                      len({i for s in sessions for i in s.obs.frames}))
+    fitted = _fit_terms(sessions, level, terms, told, warnings, light_terms)
     widening, coupling = _sun_coupling(plan, level, fitted)
     profile = sorted(level.profile)
     record = {"fitted": "the sky's level (all but the sun's disc) against the spec's, relative "
@@ -992,7 +1054,8 @@ def fit_sky_scale(sessions, plan, seed=0, log=print):
                                      "fitted sky, its curve and shape included)",
                           "k": [float(np.exp(u)) for u in profile],
                           "chi2": [level.data(u) for u in profile]},
-              "terms": fitted.curve, "shape": fitted.shape, "departure": fitted.departure,
+              "terms": fitted.curve, "light_level": fitted.light_curve,
+              "shape": fitted.shape, "departure": fitted.departure,
               "correlation": fitted.correlation,
               "sun_coupling": coupling,
               "warnings": warnings, "time_s": time.perf_counter() - t0}
@@ -1011,6 +1074,10 @@ def _sky_log(record, fitted, regions, prior_sd, terms):
             + f": k = {fitted.k:.3f} (95%: {ends[0]}-{ends[1]}) times the spec's, against the sun"
             + ("" if curve is None else f", changing over the day as {terms} terms: "
                + _curve_text([v[0] for v in curve["k_by_frame"].values()]))
+            + ("" if fitted.light_curve is None else
+               "; the whole light's level over the day {:.3f}-{:.3f} times the spec's".format(
+                   *(f([v[0] for v in fitted.light_curve["level_by_frame"].values()])
+                     for f in (min, max))))
             + ("" if shape is None else "; its shape: " + ", ".join(
                 f"{of} {name} {v[0]:.{2 if abs(v[0]) >= 1 else 3}f} +- "
                 f"{v[1]:.{2 if abs(v[0]) >= 1 else 3}f}"

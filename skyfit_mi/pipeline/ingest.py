@@ -20,7 +20,8 @@ sequences use:
   patches of known reflectance**: scene materials named as grey Lambertian references
   (``--calibrate grey=0.18``) are rendered under each frame's sky and their observed signal
   divided by the rendered radiance; this gives each channel's scale (white balance) too, and
-  each frame's own exposure where EXIF has none;
+  each frame's own exposure where EXIF has none or its shutter misses (the frames scattering
+  about a smooth day curve through EXIF's: a smooth drift is the light's, left to the fit);
 * vignetting: none, the cos^4 law (eq. 5.6) or a flat-field image (``sensor.flat_field``,
   multiplied into each pixel's gain by the fit);
 * noise: per pixel, sigma^2 = Q'(s)^2 (a + b s M) + 1/12 + c [DN^2] (read noise a and shot
@@ -603,9 +604,49 @@ def _patch_exposure(s, r, patch, parts=1, cells=None):
 #: The p-value of the chi^2 of the frames' exposures about the EXIF relative exposures (their
 #: patches' own noise as sigma) below which each frame's exposure is taken from its patches.
 EXIF_SCATTER_P = 1e-3
+#: The terms of the smooth day curve (Legendre polynomials in time: level, drift, curvature)
+#: about which the frames' exposures are tested against EXIF's (:func:`calibrate_exposure`).
+#: A sky the spec does not name moves the references' light smoothly over the day, a shutter
+#: frame by frame: the board's card under a turbid sky (T 5) scattered 4.8% about EXIF's
+#: exposures with a spec of CIE clear, 0.8% about a quadratic in time (its frames' own noise
+#: 0.6-0.8%); under CIE type 10 1.8% and 0.4%.  Taken frame by frame there, the exposures
+#: carried the spec's day curve into the data, which no fit of the sky could then take out
+#: (hazy 29 of 40 pairs held, 3 gross misses; with EXIF kept 36, 2: docs/BENCHMARKS.md).
+EXPOSURE_CURVE_TERMS = 3
 
 
-def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None):
+def exif_scatter(ratio, var, seconds=None):
+    """How the frames' exposures from their patches depart from EXIF's: ``ratio`` (F, 3) the
+    former over the latter (times one scale per channel), ``var`` (3,) a frame's relative
+    variance from its patches' noise, ``seconds`` (F,) the frames' times (None: no curve).
+    Per channel a smooth curve over the day (:data:`EXPOSURE_CURVE_TERMS` Legendre polynomials
+    in time, fewer for few frames; a constant without times) is fitted to log ``ratio``; the
+    frames' scatter about it is the camera's (``shutter``: chi^2 with p below
+    EXIF_SCATTER_P), the curve beyond its level the light's (``curved``, the same test).
+    Returns {relative_spread (all of it), frame_spread, curve_relative_spread (luminance, the
+    standard deviation over the frames), curve_terms, scatter_chi2_per_dof, shutter, curved}."""
+    from scipy.stats import chi2 as chi2_dist
+
+    dev = np.log(np.asarray(ratio, dtype=float))
+    n = len(dev)
+    terms = 1 if seconds is None else max(1, min(EXPOSURE_CURVE_TERMS, n - 1))
+    x = np.zeros(n) if terms == 1 else 2.0 * (seconds - seconds.min()) / max(
+        np.ptp(seconds), 1.0) - 1.0
+    basis = np.polynomial.legendre.legvander(x, terms - 1)
+    curve = basis @ np.linalg.lstsq(basis, dev, rcond=None)[0]
+    w = 1.0 / np.maximum(np.asarray(var, dtype=float), 1e-12)
+    chi2 = float(np.sum((dev - curve) ** 2 * w))                 # about the curve
+    drift = float(np.sum((curve - curve.mean(axis=0)) ** 2 * w))   # the curve beyond its level
+    dof = 3 * (n - terms)
+    return {"relative_spread": float(np.std(dev @ SRGB_LUMINANCE)),
+            "frame_spread": float(np.std((dev - curve) @ SRGB_LUMINANCE)),
+            "curve_relative_spread": float(np.std(curve @ SRGB_LUMINANCE)),
+            "curve_terms": terms, "scatter_chi2_per_dof": chi2 / dof,
+            "shutter": bool(chi2_dist.sf(chi2, dof) < EXIF_SCATTER_P),
+            "curved": bool(terms > 1 and chi2_dist.sf(drift, 3 * (terms - 1)) < EXIF_SCATTER_P)}
+
+
+def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None, seconds=None):
     """Per-frame, per-channel exposure [sr m^2 W^-1] (F, 3) from the calibration patches'
     :func:`patch_samples` (``patch`` each pixel's material label), and the calibration's
     record: per frame :func:`_patch_exposure` (the observed linear signal over the rendered
@@ -616,17 +657,19 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None):
     (measured at quality 95: frames erring 0.37-0.66% against 0.26-0.34% from bands of rows).
 
     With EXIF exposures ``rel`` the day shares one scale per channel (the median over frames of
-    exposure / rel) -- unless the frames scatter about it by more than their patches' noise
-    allows (chi^2 with p below EXIF_SCATTER_P, at least 3 frames: a camera's shutter and
-    aperture miss their nominal values by a few per cent), when each frame takes its own, as
-    without EXIF.  ``scale_relative_sd`` (3,) is the standard error of the exposure the fits
-    use, relative, as it reaches the reflectances: the median's over the frames for one scale,
-    a frame's over the square root of the frames for exposures of their own (each frame's error
-    its own, averaged by a fit over the day); fits widen their intervals by it
+    exposure / rel) -- unless the frames scatter by more than their patches' noise allows
+    (chi^2 with p below EXIF_SCATTER_P, at least 3 frames: a camera's shutter and aperture miss
+    their nominal values by a few per cent) about a smooth curve over the day (per channel,
+    :data:`EXPOSURE_CURVE_TERMS` Legendre polynomials in the frames' ``seconds``; a constant
+    without them), when each frame takes its own, as without EXIF.  A smooth departure is the
+    light's (a sky the spec does not name), not the camera's: it is logged and recorded
+    (``curve_relative_spread``) and left in the data, for a fit of the sky to take
+    (:func:`exif_scatter`).  ``scale_relative_sd`` (3,) is the standard error of the exposure
+    the fits use, relative, as it reaches the reflectances: the median's over the frames for
+    one scale, a frame's over the square root of the frames for exposures of their own (each
+    frame's error its own, averaged by a fit over the day); fits widen their intervals by it
     (:func:`skyfit_mi.fitting.uncertainty.calibration_sd`).
     """
-    from scipy.stats import chi2 as chi2_dist
-
     units = [len(np.unique(cells[patch == m])) if cells is not None else
              int(np.sum(patch == m)) // 8 for m in np.unique(patch)]
     n_parts = int(np.clip(min(units), 2, CALIBRATION_PARTS))
@@ -646,22 +689,23 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None):
         var_f = np.nanmean(np.nanvar(d, axis=1, ddof=1), axis=0) / n_parts
     info = {"frame_relative_sd": np.sqrt(var_f).tolist()}
     missing = [Path(photos[i].path).name for i in np.flatnonzero(~good)]
+    curved = False
     if rel is not None:
         scale = np.nanmedian(k[good] / rel[good, None], axis=0)
     if rel is not None and good.sum() >= 3:
-        dev = k[good] / (rel[good, None] * scale) - 1.0
-        spread = float(np.std(dev @ SRGB_LUMINANCE))
-        dof = 3 * (int(good.sum()) - 1)
-        with np.errstate(all="ignore"):
-            chi2 = float(np.sum(dev ** 2 / np.maximum(var_f, 1e-12)))
-        info.update(relative_spread=spread, scatter_chi2_per_dof=chi2 / dof)
-        if chi2_dist.sf(chi2, dof) < EXIF_SCATTER_P and not missing:
-            log(f"calibration: the frames' exposures scatter by {spread:.1%} about their EXIF "
-                f"relative exposures, {np.sqrt(chi2 / dof):.1f}x what the patches' noise "
-                "allows (a shutter or aperture off its nominal value): each frame's exposure "
-                "is taken from its own patches")
+        test = exif_scatter(k[good] / (rel[good, None] * scale), var_f,
+                            None if seconds is None else np.asarray(seconds, dtype=float)[good])
+        curved, shutter = test.pop("curved"), test.pop("shutter")
+        info.update(test)
+        if shutter and not missing:
+            log(f"calibration: the frames' exposures scatter by {test['frame_spread']:.1%} "
+                "about a smooth curve through their EXIF relative exposures, "
+                f"{np.sqrt(test['scatter_chi2_per_dof']):.1f}x what the patches' noise allows "
+                "(a shutter or aperture off its nominal value): each frame's exposure is taken "
+                "from its own patches")
             rel = None
             info["exif_relative_exposures"] = "not used: they scatter beyond the patches' noise"
+    info["level_from"] = "patches"
     if rel is None:
         if missing:
             raise SkyfitError(f"{missing[0]}: the calibration patches are saturated, black or "
@@ -674,7 +718,20 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None):
                 scale_relative_sd=np.sqrt(np.pi / 2.0 * var_f / good.sum()).tolist())
     log(f"calibration: exposure {scale @ SRGB_LUMINANCE:.4g} sr m^2 W^-1 (EXIF relative "
         f"exposures; frame-to-frame spread {100 * info.get('relative_spread', 0.0):.1f}%)")
-    return rel[:, None] * scale[None, :], info
+    exif = rel[:, None] * scale[None, :]
+    info.update(level_from="exif", light_drift=curved)
+    if not curved:
+        return exif, info
+    log(f"calibration: the references' light drifts from the spec's by "
+        f"{info['curve_relative_spread']:.1%} over the day, smoothly as a sky unlike the "
+        "spec's does: the frames keep their EXIF exposures' level, which a fit of the sky "
+        "with the references among its regions (fit --all) takes, and each its own colour "
+        "balance from the references")
+    # the light's colour, which no fitted part of the light moves, from the references frame by
+    # frame; its level, which the fit's curve of the light takes, from EXIF
+    ratio = (k @ SRGB_LUMINANCE) / (exif @ SRGB_LUMINANCE)
+    info.update(per_frame=True, scale_relative_sd=np.sqrt(var_f / good.sum()).tolist())
+    return np.where(good[:, None], k / ratio[:, None], exif), info
 
 
 # ---- the whole ingest ---------------------------------------------------------------------
@@ -1177,7 +1234,8 @@ def frame_exposures(frames, patches, noise, o, log):
             cells = cells[np.isin(patches.patch, _neutral_labels(o.calibrate))]
         per_frame, calibration = calibrate_exposure(
             *_neutral(samples, patches.patch, o.calibrate), sensor,
-            [frames.photos[i] for i in lit], None if rel is None else rel[lit], log, cells)
+            [frames.photos[i] for i in lit], None if rel is None else rel[lit], log, cells,
+            [frames.times[i].timestamp() for i in lit])
         # the scene's references by name, so that a fit of the light can calibrate on them
         # again under the light it fits (fitting.fit.reference_factor)
         calibration["references"] = {name: [float(v) for v in np.broadcast_to(rho, 3)]
