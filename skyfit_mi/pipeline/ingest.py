@@ -611,7 +611,8 @@ EXIF_SCATTER_P = 1e-3
 #: exposures with a spec of CIE clear, 0.8% about a quadratic in time (its frames' own noise
 #: 0.6-0.8%); under CIE type 10 1.8% and 0.4%.  Taken frame by frame there, the exposures
 #: carried the spec's day curve into the data, which no fit of the sky could then take out
-#: (hazy 29 of 40 pairs held, 3 gross misses; with EXIF kept 36, 2: docs/BENCHMARKS.md).
+#: (hazy 60 of 80 pairs held, 4 gross misses; with EXIF's level kept and the light's level over
+#: the day fitted, 80 of 80: docs/BENCHMARKS.md, "The sample board photographed").
 EXPOSURE_CURVE_TERMS = 3
 
 
