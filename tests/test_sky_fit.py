@@ -145,12 +145,12 @@ def test_the_fitted_light_is_calibrated_again_on_the_scenes_reference():
 def test_the_whole_lights_level_over_the_day_is_fitted_where_the_frames_keep_exif():
     """Frames that keep their relative exposures from EXIF carry the real light's curve over the
     day, which the spec's sun follows only as far as its air is the model's: where the
-    reference saw it drift (or none calibrated the frames), the fit of the sky takes the whole
+    reference saw it drift, the fit of the sky takes the whole
     light's level, sun and sky, as LEVEL_TERMS Legendre terms about its mean (the exposure's),
     under the drift prior.  The coefficients light a session with it
     (set_sky's level, exp(P_1.. u) by frame), relight and maps take it from the record with k
     and the reference's factor (skies_at_level: every part of the light times it).  Frames
-    calibrated one by one, rendered days and short days fit none."""
+    calibrated one by one, days without a reference, rendered days and short days fit none."""
     from types import SimpleNamespace
 
     from skyfit_mi.fitting.sky_fit import (DRIFT_SD, LEVEL_TERMS, SkyCoefficients,
@@ -166,7 +166,7 @@ def test_the_whole_lights_level_over_the_day_is_fitted_where_the_frames_keep_exi
                                13) == 0
     assert default_level_terms({**photos, "ingest": {"calibration": {"per_frame": True}}},
                                13) == 0
-    assert default_level_terms({"source": "photographs", "ingest": {}}, 13) == LEVEL_TERMS
+    assert default_level_terms({"source": "photographs", "ingest": {}}, 13) == 0
     assert default_level_terms({"source": "render"}, 13) == 0
 
     c = SkyCoefficients(1, ("departure:Y10",), 0.35, LEVEL_TERMS)

@@ -409,16 +409,17 @@ def default_terms(frames, referenced=False):
 
 def default_level_terms(doc, frames):
     """The terms of the whole light's level over ``frames`` frames beyond its mean
-    (:data:`LEVEL_TERMS`) for photographs whose frames keep their exposures' level from EXIF:
+    (:data:`LEVEL_TERMS`) for photographs whose frames keep their exposures' level from EXIF
     where a reference of known reflectance saw the light drift from the spec's over the day
-    (ingest's ``calibration.light_drift``), or where none calibrated them (a given exposure),
-    so that nothing told the day's curve.  None where the reference saw the spec's curve, or
-    calibrated each frame's level on its own (the spec's light's, by construction), for frames
-    skyfit rendered (the spec's light is theirs), and for too few frames."""
-    cal = (doc.get("ingest") or {}).get("calibration")
+    (ingest's ``calibration.light_drift``).  None where it saw the spec's curve, or calibrated
+    each frame's level on its own (the spec's light's, by construction), where no reference
+    tells the curve (a given exposure: the level's curve then trades with the materials'
+    lobes, and a one-region ranking of lobes chose Ward's for a GGX plastic), for frames skyfit
+    rendered (the spec's light is theirs), and for too few frames."""
+    cal = (doc.get("ingest") or {}).get("calibration") or {}
     if not photographed(doc) or frames < LEVEL_TERMS + 1 + FRAMES_BEYOND_TERMS:
         return 0
-    return LEVEL_TERMS if not cal or cal.get("light_drift") else 0
+    return LEVEL_TERMS if cal.get("light_drift") else 0
 
 
 def _data_beyond_search(data, grid):
