@@ -83,12 +83,13 @@ MAX_TERMS, FRAMES_BEYOND_TERMS = 4, 2
 DEFAULT_TERMS = 3
 #: The terms of the whole light's level over the day beyond its mean (Legendre P_1, P_2 in
 #: time, each under the prior :data:`DRIFT_SD`) fitted with the sky where the frames keep their
-#: cameras' relative exposures (:func:`default_level_terms`).  The sun's light crosses more air
+#: cameras' relative exposures and the reference saw the light drift (:func:`default_level_terms`).
+#: The sun's light crosses more air
 #: as it sinks, and how much of it the air takes is not the model's: under a turbid sky (T 5)
 #: the board's grey card drifted 4.5% over the day against the spec's CIE clear light, and the
 #: sky's level alone, against the sun, could follow that only by bending the sky's share that
 #: each material sees otherwise (docs/BENCHMARKS.md, "The sample board photographed").  Its
-#: mean is the exposure's, which the scene's reference (or the given exposure) sets.
+#: mean is the exposure's, which the scene's reference sets.
 LEVEL_TERMS = 2
 #: The most frames whose sky level the log lists one by one (more: its ends and range).
 CURVE_LISTED = 8
@@ -280,7 +281,8 @@ def skies_at_level(skies, record, times):
     """The frames' ``skies`` (at ISO ``times``) with their sky at a sky fit's level (``record``,
     :func:`sky_level_at`) against the sun: the spec's light as a fit of the day found it,
     calibrated again on the scene's reference where the fit did so (its ``reference``,
-    :func:`~.fit.reference_factor`)."""
+    :func:`~.fit.reference_factor`), and at the whole light's level over the day where it
+    fitted one (:func:`light_level_at`)."""
     factor = reference_light_factor(record)
     factor = np.ones(3) if factor is None else factor
     level = light_level_at(record, times)
@@ -471,9 +473,11 @@ class SkyCoefficients:
     day's level under ``level_sd``, None for none; each further term under :data:`DRIFT_SD`),
     and the mix of each of the light's ``variants`` (their parts' names): the sky's shape
     variants (:data:`SHAPE_SD`) and its departure field's weights
-    (:data:`~skyfit_mi.physics.sky_departure.PRIOR_SD`).  They set the weights of the light's
-    traced parts (:meth:`~.light.LightParts.table`): the sky's k(t) = exp(B(t) u[:terms])
-    against the sun, the variants' mix u[terms:]."""
+    (:data:`~skyfit_mi.physics.sky_departure.PRIOR_SD`), then the whole light's level over the
+    day as ``light_terms`` Legendre polynomials P_1.. in time (:data:`DRIFT_SD`; its mean is the
+    exposure's).  They set the weights of the light's traced parts
+    (:meth:`~.light.LightParts.table`): the sky's k(t) = exp(B(t) u[:terms]) against the sun,
+    the variants' mix after it, and the level's factor on both, sun and sky, last."""
 
     terms: int
     variants: tuple = ()
