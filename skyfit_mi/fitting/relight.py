@@ -37,7 +37,7 @@ from .fit import FitCache, FitSession, trace_sessions
 from .geometry import highlight_beyond
 from .held_out import local_error_scale
 from .landscape import truth_parameters
-from .sky_fit import light_level_at, reference_light_factor, sky_level_at
+from .sky_fit import light_tints, reference_light_factor, sky_level_at
 from .uncertainty import band_half_width, widen
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky_shape import shape_variants, shaped
@@ -279,9 +279,7 @@ def light_as_fitted(spec, level, target, out, log=print):
         if f.index in seen:
             f.sky = frame_sky(seen[f.index], root)
         k = sky_level_at(level, [f.time.isoformat()])[0] if f.time else level["k"]
-        whole = light_level_at(level, [f.time.isoformat()]) if f.time else None
-        tint = None if factor is None and whole is None else (
-            (np.ones(3) if factor is None else factor) * (1.0 if whole is None else whole[0]))
+        tint = light_tints(level, [f.time.isoformat()])[0] if f.time else factor
         variants = []
         if shape is not None:
             try:          # none for a sky black above the horizon (the sun down): nothing to mix

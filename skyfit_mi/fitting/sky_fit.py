@@ -283,12 +283,20 @@ def skies_at_level(skies, record, times):
     calibrated again on the scene's reference where the fit did so (its ``reference``,
     :func:`~.fit.reference_factor`), and at the whole light's level over the day where it
     fitted one (:func:`light_level_at`)."""
+    return [sky.sky_scaled(k).tinted(tint)
+            for sky, k, tint in zip(skies, sky_level_at(record, times), light_tints(record, times))]
+
+
+def light_tints(record, times):
+    """The factor per channel (3,) on the whole light at each of the frames' ``times`` (ISO) by
+    a sky fit's ``record``: the reference's (:func:`reference_light_factor`) times the light's
+    level over the day (:func:`light_level_at`); None each where the fit set neither."""
     factor = reference_light_factor(record)
-    factor = np.ones(3) if factor is None else factor
     level = light_level_at(record, times)
-    level = np.ones(len(times)) if level is None else level
-    return [sky.sky_scaled(k).tinted(factor * v)
-            for sky, k, v in zip(skies, sky_level_at(record, times), level)]
+    if factor is None and level is None:
+        return [None] * len(times)
+    factor = np.ones(3) if factor is None else factor
+    return [factor * v for v in (np.ones(len(times)) if level is None else level)]
 
 
 def reference_light_factor(record):

@@ -689,6 +689,7 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None, sec
         d = parts[good] / k[good, None, :]
         var_f = np.nanmean(np.nanvar(d, axis=1, ddof=1), axis=0) / n_parts
     info = {"frame_relative_sd": np.sqrt(var_f).tolist()}
+    own_sd = np.sqrt(var_f / good.sum()).tolist()        # exposures of the frames' own
     missing = [Path(photos[i].path).name for i in np.flatnonzero(~good)]
     curved = False
     if rel is not None:
@@ -706,21 +707,19 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None, sec
                 "from its own patches")
             rel = None
             info["exif_relative_exposures"] = "not used: they scatter beyond the patches' noise"
-    info["level_from"] = "patches"
     if rel is None:
         if missing:
             raise SkyfitError(f"{missing[0]}: the calibration patches are saturated, black or "
                               "unlit, and the frame has no EXIF exposure; drop the frame or give "
                               "--exposure.")
-        info.update(per_frame=True,
-                    scale_relative_sd=np.sqrt(var_f / good.sum()).tolist())
+        info.update(per_frame=True, scale_relative_sd=own_sd)
         return k, info
     info.update(per_frame=False,
                 scale_relative_sd=np.sqrt(np.pi / 2.0 * var_f / good.sum()).tolist())
     log(f"calibration: exposure {scale @ SRGB_LUMINANCE:.4g} sr m^2 W^-1 (EXIF relative "
         f"exposures; frame-to-frame spread {100 * info.get('relative_spread', 0.0):.1f}%)")
     exif = rel[:, None] * scale[None, :]
-    info.update(level_from="exif", light_drift=curved)
+    info["light_drift"] = curved
     if not curved:
         return exif, info
     log(f"calibration: the references' light drifts from the spec's by "
@@ -731,7 +730,7 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None, sec
     # the light's colour, which no fitted part of the light moves, from the references frame by
     # frame; its level, which the fit's curve of the light takes, from EXIF
     ratio = (k @ SRGB_LUMINANCE) / (exif @ SRGB_LUMINANCE)
-    info.update(per_frame=True, scale_relative_sd=np.sqrt(var_f / good.sum()).tolist())
+    info.update(per_frame=True, scale_relative_sd=own_sd)
     return np.where(good[:, None], k / ratio[:, None], exif), info
 
 
