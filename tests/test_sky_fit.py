@@ -680,3 +680,51 @@ def test_sky_terms_need_a_fitted_sky_and_frames(days):
                          log=lambda *a: None))
 
 
+
+
+def test_a_references_calibration_carries_the_skys_coefficients_to_every_region(again):
+    """Where a reference calibrates the fitted light again (fit.reference_factor: a factor per
+    channel f on every region's light, its fit's radiance over a Lambertian surface's of its
+    known reflectance), a region's parameters follow the sky's coefficients through f too: the
+    response share_at takes with the factor's slope (sky_fit.reference_slope) is the slope of
+    the whole procedure (the reference fitted at the sky's coefficients, f, the region fitted
+    under the light times f) at steps of the sky's level, and it is not the response without
+    the factor (a brighter sky lowers every reflectance, and the reference's reading with
+    them, which f gives back)."""
+    from skyfit_mi.fitting import sky_fit
+    from skyfit_mi.fitting.light import LightPlan
+    from skyfit_mi.fitting.methods.levenberg_marquardt import levenberg_marquardt
+
+    kept = again.sky_scale
+    try:
+        share = sky_fit.fit_sky_scale([again], LightPlan("fit", terms=1),
+                                      log=lambda *a: None).shares["disc"]
+        light, theta = share.light, share.light.theta
+        known = np.r_[0.9 * theta[:3], 0.0, theta[4]]          # a reference of its own
+        slope = sky_fit.reference_slope(again, light, theta, known)
+
+        def calibrated(u):
+            """The region's fit under the light at ``u`` times the reference's factor there."""
+            again.light_factor = None
+            light.put(again, u)
+            ref = levenberg_marquardt(again.problem, theta, again.lower, again.upper)["theta"]
+            again.light_factor = (np.sum(again.wm.radiance(ref), axis=(0, 1))
+                                  / np.sum(again.wm.radiance(known), axis=(0, 1)))
+            light.put(again, u)
+            return levenberg_marquardt(again.problem, ref, again.lower, again.upper)["theta"]
+
+        h = 0.02
+        slopes = (calibrated(light.u + h) - calibrated(light.u - h)) / (2 * h)
+        at_u = calibrated(light.u)                         # lit at u times its factor
+        with_factor = sky_fit.share_at(again, replace(share, reference_slope=slope), at_u)
+        again.light_factor = None
+        light.put(again)
+        without = sky_fit.share_at(again, share, theta)
+        scaled = slice(0, 4)                                   # C and rho_s
+        np.testing.assert_allclose(with_factor.response[scaled, 0], slopes[scaled],
+                                   rtol=0.2, atol=0.05 * np.abs(without.response[scaled, 0]).max())
+        assert not np.allclose(with_factor.response[scaled, 0], without.response[scaled, 0],
+                               rtol=0.5)
+    finally:
+        again.light_factor = None
+        again.set_sky(kept)                             # the fixture as it was

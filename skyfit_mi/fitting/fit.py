@@ -29,8 +29,8 @@ from .methods.levenberg_marquardt import levenberg_marquardt
 from .pose import pose_share, pose_through_sky
 from ..errors import SkyfitError, check_choice
 from .sky_fit import (SkyFit, SkyShare, fit_sky_scale, fitted_mix, light_level_at,
-                      reference_light_factor, shape_variants, share_at, skies_at_level,
-                      sky_level_at)
+                      reference_light_factor, reference_slope, shape_variants, share_at,
+                      skies_at_level, sky_level_at)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, block_budget, memory_estimate,
                                   shared_budget, trace_basis)
@@ -870,7 +870,10 @@ def reference_factor(sessions, sky, fit, log=print):
     it.  Under the spec's own sky the factor is the reference's noise about 1 (0.1-1% on the
     sample board); under a sky of another shape it is the light's error that the reference
     sees (a partly cloudy day's steel read 3-7% high without it, docs/BENCHMARKS.md, "The
-    sample board photographed")."""
+    sample board photographed").  The factor moves with the sky's coefficients
+    (:func:`~.sky_fit.reference_slope`), and every region's share of the sky's uncertainty
+    is taken through it too (:func:`~.sky_fit.share_at`): what the sky's error leaves a
+    region is the light it sees otherwise than the reference does."""
     if sky.record is None:
         return
     first = next(iter(sessions.values()))
@@ -891,6 +894,11 @@ def reference_factor(sessions, sky, fit, log=print):
                            for i, n in enumerate(s.names)])
     factor = (np.sum(s.wm.radiance(theta), axis=(0, 1))
               / np.sum(s.wm.radiance(lambertian), axis=(0, 1)))
+    light = sky.shares[name].light if name in sky.shares else None
+    slope = None if light is None else reference_slope(s, light, theta, lambertian)
+    if slope is not None:
+        sky.shares.update({n: replace(share, reference_slope=slope)
+                           for n, share in sky.shares.items()})
     sky.record["reference"] = {
         "region": name, "reflectance": rho.tolist(), "read": (rho * factor).tolist(),
         "light_factor": factor.tolist(),
@@ -899,7 +907,11 @@ def reference_factor(sessions, sky, fit, log=print):
                    "the fitted light over that of a Lambertian surface of its known "
                    "reflectance (read: that reflectance times it), per channel over the day, "
                    "a factor on the light of every region, so that the reference reads its "
-                   "own reflectance"}
+                   "own reflectance; slope: d ln light_factor / d the sky's coefficients "
+                   "(correlation.names, or log k alone; per channel), through which every region's share of "
+                   "the sky's uncertainty is taken (a diffuse surface facing as the reference "
+                   "does reads its reflectance against the reference's whatever the sky)",
+        "slope": None if slope is None else slope.tolist()}
     for each in sessions.values():
         each.light_factor = factor
         each._use_parts(each.parts)

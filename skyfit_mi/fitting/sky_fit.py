@@ -134,6 +134,9 @@ class SkyShare:
         taken again at the region's own fit (:func:`share_at`); None where the sky's level is
         not determined
     response : (n, coefficients) the parameters' response to them at that fit (None before)
+    reference_slope : (3, coefficients) d ln f / d coefficients of the light's factor per
+        channel f that a reference in the scene sets (:func:`reference_slope`; None: no
+        reference): the light as calibrated again on it moves with the coefficients
     pose_shift : {angle: (coefficients,) their shift were the camera turned by the pose's sd
         in that angle} (:func:`~.pose.pose_through_sky`; empty: none)
     """
@@ -145,6 +148,7 @@ class SkyShare:
     light: "FittedLight" = None
     response: np.ndarray = None
     pose_shift: dict = field(default_factory=dict)
+    reference_slope: np.ndarray = None
 
     def sun_level_sd(self, plan):
         """The sun's level's relative uncertainty in the reflectances' intervals: the
@@ -629,14 +633,58 @@ def light_response(s, light, theta):
     return Ju + Jt @ response, r, Jt, response
 
 
+def reference_slope(s, light, theta, lambertian):
+    """d ln f / d u (3, coefficients): how the light's factor per channel f that a reference
+    sets (:func:`~.fit.reference_factor`: the radiance of its fit ``theta`` over that of a
+    Lambertian surface of its known reflectance, ``lambertian``, summed over the day) moves with
+    the sky's coefficients u of its :class:`FittedLight` ``light``; session ``s`` (the
+    reference's) is left lit at the fitted u.  The fit's radiance follows the data, its
+    parameters taking up what they can of the light's change: it moves by what they cannot
+    (:func:`light_response`'s residuals' derivatives, linear: a grey card's roughness, which its
+    nil gloss leaves free, responds without bound); the Lambertian's by the light's.  Where
+    the sky is brighter than fitted, the reference reads less, and so every region lit by the
+    light times f: a diffuse surface facing as the reference does reads its reflectance against
+    the reference's whatever the sky's level, and only the light it sees otherwise (its lobe's
+    sky) carries the sky's uncertainty (:func:`share_at`)."""
+    unabsorbed = light_response(s, light, theta)[0]
+    problem = s.problem
+    L = problem.model.radiance(theta)
+    per_radiance = (problem.residual_terms(L)[1] * problem.slope(L))[problem.mask]
+    channel = np.broadcast_to(np.arange(L.shape[-1]), L.shape)[problem.mask]
+    moved = np.divide(unabsorbed, per_radiance[:, None], out=np.zeros_like(unabsorbed),
+                      where=per_radiance[:, None] != 0)
+    fitted = np.array([moved[channel == c].sum(axis=0) / L[problem.mask][channel == c].sum()
+                       for c in range(L.shape[-1])])
+    eye, columns = np.eye(len(light.u)), []
+    for j in range(len(light.u)):
+        ln_lambertian = []
+        for sign in (1, -1):
+            light.put(s, light.u + sign * DRIFT_STEP * eye[j])
+            ln_lambertian.append(np.log(np.sum(s.wm.radiance(lambertian), axis=(0, 1))))
+        columns.append((ln_lambertian[0] - ln_lambertian[1]) / (2 * DRIFT_STEP))
+    light.put(s)
+    return fitted - np.column_stack(columns)
+
+
 def share_at(s, share, theta):
     """The region's ``share`` of the fitted light (:class:`SkyShare`) taken again at its own
     fit ``theta`` (session ``s`` lit at the fitted sky): the sky fit found each region's
     response at the parameters of its search, and a region whose final fit lies elsewhere (a
-    metal's roughness at its bound, where its C and rho_s trade) responds otherwise."""
+    metal's roughness at its bound, where its C and rho_s trade) responds otherwise.  Where a
+    reference calibrated the light again (``share.reference_slope``), the response includes
+    the factor's: the parameters' response to the light's level per channel (d r / d ln f_c,
+    the model's value times the residual's slope in it) through its slope."""
     if share.light is None:
         return share
     response = light_response(s, share.light, theta)[3]
+    if share.reference_slope is not None:
+        problem = s.problem
+        L = problem.model.radiance(theta)
+        dr = problem.residual_terms(L)[1] * problem.slope(L) * L
+        J_f = np.stack([np.where(np.arange(dr.shape[-1]) == c, dr, 0.0)[problem.mask]
+                        for c in range(dr.shape[-1])], axis=1)
+        Jt = problem.jacobian(theta)[1]
+        response = response - np.linalg.lstsq(Jt, J_f, rcond=None)[0] @ share.reference_slope
     return replace(share, sd=_carried_sd(response, share.light.covariance), response=response)
 
 
