@@ -908,9 +908,10 @@ def reference_factor(sessions, sky, fit, log=print):
                    "reflectance (read: that reflectance times it), per channel over the day, "
                    "a factor on the light of every region, so that the reference reads its "
                    "own reflectance; slope: d ln light_factor / d the sky's coefficients "
-                   "(correlation.names, or log k alone; per channel), through which every region's share of "
-                   "the sky's uncertainty is taken (a diffuse surface facing as the reference "
-                   "does reads its reflectance against the reference's whatever the sky)",
+                   "(correlation.names, or log k alone; per channel), through which every "
+                   "region's share of the sky's uncertainty is taken (a diffuse surface facing "
+                   "as the reference does reads its reflectance against the reference's "
+                   "whatever the sky)",
         "slope": None if slope is None else slope.tolist()}
     for each in sessions.values():
         each.light_factor = factor

@@ -633,6 +633,13 @@ def light_response(s, light, theta):
     return Ju + Jt @ response, r, Jt, response
 
 
+def _residual_slope(problem, theta):
+    """(the model's radiance (P, T, 3) at ``theta``, each value's residual's derivative in it)
+    of ``problem`` (a :class:`~.chi2.Problem`)."""
+    L = problem.model.radiance(theta)
+    return L, problem.residual_terms(L)[1] * problem.slope(L)
+
+
 def reference_slope(s, light, theta, lambertian):
     """d ln f / d u (3, coefficients): how the light's factor per channel f that a reference
     sets (:func:`~.fit.reference_factor`: the radiance of its fit ``theta`` over that of a
@@ -648,8 +655,8 @@ def reference_slope(s, light, theta, lambertian):
     sky) carries the sky's uncertainty (:func:`share_at`)."""
     unabsorbed = light_response(s, light, theta)[0]
     problem = s.problem
-    L = problem.model.radiance(theta)
-    per_radiance = (problem.residual_terms(L)[1] * problem.slope(L))[problem.mask]
+    L, per_radiance = _residual_slope(problem, theta)
+    per_radiance = per_radiance[problem.mask]
     channel = np.broadcast_to(np.arange(L.shape[-1]), L.shape)[problem.mask]
     moved = np.divide(unabsorbed, per_radiance[:, None], out=np.zeros_like(unabsorbed),
                       where=per_radiance[:, None] != 0)
@@ -679,8 +686,8 @@ def share_at(s, share, theta):
     response = light_response(s, share.light, theta)[3]
     if share.reference_slope is not None:
         problem = s.problem
-        L = problem.model.radiance(theta)
-        dr = problem.residual_terms(L)[1] * problem.slope(L) * L
+        L, dr = _residual_slope(problem, theta)
+        dr = dr * L
         J_f = np.stack([np.where(np.arange(dr.shape[-1]) == c, dr, 0.0)[problem.mask]
                         for c in range(dr.shape[-1])], axis=1)
         Jt = problem.jacobian(theta)[1]
