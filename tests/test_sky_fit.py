@@ -142,6 +142,32 @@ def test_the_fitted_light_is_calibrated_again_on_the_scenes_reference():
     reference_factor(sessions, SkyFit(None), fit, log=lambda *a: None)
 
 
+def test_a_parameter_the_sky_sets_is_warned_with_what_would_narrow_it():
+    """A parameter whose interval the fitted sky's uncertainty at least doubles is warned,
+    naming the parts of the light fitted; without a reference a grey card would narrow it,
+    with one (the light calibrated again on it) what is left is the sky the region sees
+    otherwise than the reference does, which other normals or the sky photographed tell."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.fitting.fit_warnings import sky_warnings
+    from skyfit_mi.fitting.sky_fit import SkyShare
+
+    record = {"k": 1.2, "interval95": [1.1, 1.3], "terms": None, "shape": None,
+              "departure": {"weights": [0.1]}, "warnings": []}
+    s = SimpleNamespace(names=["C_r", "rho_s"], light=SimpleNamespace(sun_sd=0.0))
+
+    def warned(record):
+        fit = SimpleNamespace(sky=SkyShare(record, sd=np.array([0.01, 1e-5])),
+                              covariance=np.diag([1e-6, 1e-6]), sun_level_sd=np.zeros(2))
+        return sky_warnings(s, fit)
+
+    alone, = warned(record)
+    assert alone.startswith("C_r depends on the sky") and "its departure from its model" in alone
+    assert "or a grey card in the fit would narrow it" in alone
+    calibrated, = warned({**record, "reference": {"region": "grey_card"}})
+    assert "otherwise than grey_card" in calibrated and "grey card in the fit" not in calibrated
+
+
 def test_the_whole_lights_level_over_the_day_is_fitted_where_the_frames_keep_exif():
     """Frames that keep their relative exposures from EXIF carry the real light's curve over the
     day, which the spec's sun follows only as far as its air is the model's: where the
