@@ -162,6 +162,12 @@ def held_or_warned(names, intervals, warnings, truth):
     for p, t in zip(names, truth):
         lo, hi = intervals[p]["95"]
         out[p] = "in" if lo <= t <= hi else (
-            "warned" if any(w.startswith(p) or "not reliable" in w for w in warnings)
+            "warned" if any(p in _named(w) or "not reliable" in w for w in warnings)
             else "MISSED")
     return out
+
+
+def _named(warning):
+    """The parameters a warning opens with ('C_r, rho_s depend on ...': C_r and rho_s)."""
+    m = re.match(r"((?:\w+, )*\w+)[ :]", warning)
+    return m.group(1).split(", ") if m else []

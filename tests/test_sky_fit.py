@@ -162,10 +162,16 @@ def test_a_parameter_the_sky_sets_is_warned_with_what_would_narrow_it():
         return sky_warnings(s, fit)
 
     alone, = warned(record)
-    assert alone.startswith("C_r depends on the sky") and "its departure from its model" in alone
+    assert alone.startswith("C_r depends on the sky: ") and "its departure from its model" in alone
+    assert "+-0.0196 (95%)" in alone
     assert "or a grey card in the fit would narrow it" in alone
     calibrated, = warned({**record, "reference": {"region": "grey_card"}})
     assert "otherwise than grey_card" in calibrated and "grey card in the fit" not in calibrated
+    both = sky_warnings(s, SimpleNamespace(sky=SkyShare(record, sd=np.array([0.01, 0.02])),
+                                           covariance=np.diag([1e-6, 1e-6]),
+                                           sun_level_sd=np.zeros(2)))
+    assert len(both) == 1 and both[0].startswith("C_r, rho_s depend on the sky: "), both
+    assert "+-0.0196, +-0.0392 (95%)" in both[0]
 
 
 def test_the_whole_lights_level_over_the_day_is_fitted_where_the_frames_keep_exif():

@@ -136,24 +136,28 @@ def sky_warnings(s, fit):
     k = sky.record
     warnings = list(k["warnings"])
     own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
-    for i, p in enumerate(names):
-        if sky.sd is not None and sky.sd[i] > SKY_DOMINATES * own[i]:
-            parts = [part for part, told in ((", its change over the day", k["terms"]),
-                                              (", its shape", k["shape"]),
-                                              (", its departure from its model",
-                                               k.get("departure"))) if told]
-            ref = (k.get("reference") or {}).get("region")
-            warnings.append(
-                f"{p} depends on the sky: the uncertainty of the fitted sky (its level "
-                f"k = {k['k']:.3g}, 95%: {k['interval95'][0]:.3g}-"
-                f"{k['interval95'][1]:.3g}{''.join(parts)}) moves it by "
-                f"+-{unc.Z['95'] * sky.sd[i]:.3g} (95%), at least doubling its "
-                "interval, which includes that; "
-                + ("more materials or a grey card in the fit would narrow it." if ref is None
-                   else f"that is the light it sees otherwise than {ref}, which calibrates "
-                        "the light (the sky in its lobe's reflection): more materials with "
-                        "other normals, or the sky photographed (skyfit sky-series), would "
-                        "narrow it."))
+    led = [] if sky.sd is None else [i for i in range(len(names))
+                                     if sky.sd[i] > SKY_DOMINATES * own[i]]
+    if led:
+        parts = [part for part, told in ((", its change over the day", k["terms"]),
+                                          (", its shape", k["shape"]),
+                                          (", its departure from its model",
+                                           k.get("departure"))) if told]
+        ref = (k.get("reference") or {}).get("region")
+        one = len(led) == 1
+        warnings.append(
+            f"{', '.join(names[i] for i in led)} depend{'s' if one else ''} on the sky: the "
+            f"uncertainty of the fitted sky (its level k = {k['k']:.3g}, 95%: "
+            f"{k['interval95'][0]:.3g}-{k['interval95'][1]:.3g}{''.join(parts)}) moves "
+            f"{'it' if one else 'them'} by "
+            + ", ".join(f"+-{unc.Z['95'] * sky.sd[i]:.3g}" for i in led)
+            + f" (95%), at least doubling {'its interval' if one else 'their intervals'}, "
+            f"which include{'s' if one else ''} that; "
+            + ("more materials or a grey card in the fit would narrow it." if ref is None
+               else f"that is the light the region sees otherwise than {ref}, which "
+                    "calibrates the light (the sky in its lobe's reflection): more materials "
+                    "with other normals, or the sky photographed (skyfit sky-series), would "
+                    "narrow it."))
     level = [p for i, p in enumerate(names)
              if fit.sun_level_sd[i] > SKY_DOMINATES * own[i]]
     if level:
