@@ -894,7 +894,7 @@ def reference_factor(sessions, sky, fit, log=print):
                            for i, n in enumerate(s.names)])
     factor = (np.sum(s.wm.radiance(theta), axis=(0, 1))
               / np.sum(s.wm.radiance(lambertian), axis=(0, 1)))
-    light = sky.shares[name].light if name in sky.shares else None
+    light = getattr(sky.shares.get(name), "light", None)
     slope = None if light is None else reference_slope(s, light, theta, lambertian)
     if slope is not None:
         sky.shares.update({n: replace(share, reference_slope=slope)

@@ -655,13 +655,12 @@ def reference_slope(s, light, theta, lambertian):
     sky) carries the sky's uncertainty (:func:`share_at`)."""
     unabsorbed = light_response(s, light, theta)[0]
     problem = s.problem
-    L, per_radiance = _residual_slope(problem, theta)
-    per_radiance = per_radiance[problem.mask]
-    channel = np.broadcast_to(np.arange(L.shape[-1]), L.shape)[problem.mask]
+    L, per_radiance = (a[problem.mask] for a in _residual_slope(problem, theta))
+    channel = np.broadcast_to(np.arange(problem.mask.shape[-1]), problem.mask.shape)[problem.mask]
     moved = np.divide(unabsorbed, per_radiance[:, None], out=np.zeros_like(unabsorbed),
                       where=per_radiance[:, None] != 0)
-    fitted = np.array([moved[channel == c].sum(axis=0) / L[problem.mask][channel == c].sum()
-                       for c in range(L.shape[-1])])
+    fitted = np.array([moved[channel == c].sum(axis=0) / L[channel == c].sum()
+                       for c in range(problem.mask.shape[-1])])
     eye, columns = np.eye(len(light.u)), []
     for j in range(len(light.u)):
         ln_lambertian = []
@@ -683,14 +682,13 @@ def share_at(s, share, theta):
     the model's value times the residual's slope in it) through its slope."""
     if share.light is None:
         return share
-    response = light_response(s, share.light, theta)[3]
+    _, _, Jt, response = light_response(s, share.light, theta)
     if share.reference_slope is not None:
         problem = s.problem
         L, dr = _residual_slope(problem, theta)
         dr = dr * L
         J_f = np.stack([np.where(np.arange(dr.shape[-1]) == c, dr, 0.0)[problem.mask]
                         for c in range(dr.shape[-1])], axis=1)
-        Jt = problem.jacobian(theta)[1]
         response = response - np.linalg.lstsq(Jt, J_f, rcond=None)[0] @ share.reference_slope
     return replace(share, sd=_carried_sd(response, share.light.covariance), response=response)
 
