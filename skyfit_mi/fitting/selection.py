@@ -5,10 +5,11 @@ lobe of :mod:`~skyfit_mi.physics.microfacet`) with a parameterisation (``two``, 
 ``colour``: 2, 3 or 5 parameters).  The light is traced once per lobe (its table holds the
 lobe's series; the parameterisations share it) and each candidate is judged by K-fold
 cross-validation over frames: the frames split into K interleaved folds (frame t in fold
-t mod K), each fold's chi-square (thesis eq. 6.2) at the global minimum of the other folds'
-frames, summed.  The held-out chi-square rewards what predicts unseen light (the sun's
-other positions), not what follows the noise of the frames fitted; AIC (chi2 + 2 k) and BIC
-(chi2 + k ln n) of the full fit are reported beside it.
+t mod K), each fold's chi-square (thesis eq. 6.2) at the minimum of the other folds' frames
+(polished from the global minimum of them all), summed.  The held-out chi-square rewards
+what predicts unseen light (the sun's other positions), not what follows the noise of the
+frames fitted; AIC (chi2 + 2 k) and BIC (chi2 + k ln n) of the full fit are reported beside
+it.
 """
 
 import time
@@ -27,6 +28,7 @@ from .held_out import frame_folds
 from .light import SPEC_LIGHT, LightOptions
 from ..errors import SkyfitError
 from .methods.global_search import global_search
+from .methods.levenberg_marquardt import polish
 
 #: The candidates of ``--model auto``: the thesis's Ward lobe, the balanced one, and the four
 #: microfacet lobes; every parameterisation of each.
@@ -35,6 +37,12 @@ FAMILIES = ("ward", "balanced", "beckmann_plastic", "ggx_plastic", "beckmann_met
 MODELS = tuple(PARAMETERS)
 #: Folds of the cross-validation over frames.
 FOLDS = 4
+#: The ranking's light cache: positions per pixel (at most; fewer where the fit's cache has
+#: fewer) and the sky plan (its integrals at anchors,
+#: :data:`~skyfit_mi.render.light_cache.SKY_PLANS`), a seventh of a fit's trace: the
+#: candidates' held-out chi-square moves by a few units on it, and the chosen one is traced
+#: again at the fit's own (docs/BENCHMARKS.md, "Lobe families").
+RANK_POSITIONS, RANK_PLAN = 8, "anchors"
 
 
 def _fit(problem, grid_basis):
@@ -53,13 +61,17 @@ def cross_validate(session, model, folds=FOLDS):
     wm = LuminanceModel(wm) if obs.luminance else wm
     grid_basis = session.grid_bases()[0]          # the table's lobes: the same for any model
     full = Problem(obs, wm, valid=table.hit)
+    theta, chi2 = _fit(full, grid_basis)
+    lo, hi = bounds(model)
     held_out, n_held = 0.0, 0
     for train, test in frame_folds(full.valid, folds):
         train, test = Problem(obs, wm, valid=train), Problem(obs, wm, valid=test)
-        r = test.residuals(_fit(train, grid_basis)[0])
+        # each fold's minimum from the whole data's: three quarters of the frames move it
+        # little, so a polish finds it (a global search of each fold made the ranking 4x
+        # slower, for the same choices)
+        r = test.residuals(polish(train, theta, lo, hi)["theta"])
         held_out += float(r @ r)
         n_held += r.size
-    theta, chi2 = _fit(full, grid_basis)
     n, p = full.n_data, full.n_params
     return {"normalisation": table.normalisation, "model": model, "parameters": p,
             "held_out_chi2": held_out, "held_out_values": n_held,
@@ -116,14 +128,16 @@ def candidate_models(doc, models, luminance):
 def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOLDS, seed=0,
              log=print, light=LightOptions(), **options):
     """``fit --model auto``: every region's candidates ranked (:func:`rank`; the light traced
-    once per lobe, every region of a lobe together), then the chosen one fitted in full by
-    the global method.  Where the spec's sky is taken as it is (``light``, a
-    :class:`~.light.LightOptions` or plan, resolving to 'spec') the ranking and the fit are in
-    the spec's light; else the candidates are ranked in the spec's sky at the level a fit of
-    Ward's lobe finds first, and the chosen ones fitted with the sky's level, once for every
-    region (the light traced again, split).  Yields each region's result dict with its
-    ``model_selection`` (the ranking, the choice, the folds, the light of the ranking and each
-    lobe's tracing time)."""
+    once per lobe, every region of a lobe together, an image's on the smaller cache of
+    :data:`RANK_POSITIONS` and :data:`RANK_PLAN`), then the chosen one fitted in full by the
+    global method (an image's light traced again at the fit's cache, the regions of each
+    chosen lobe together; a table's ranked on it already).  Where the spec's sky is taken as
+    it is (``light``, a :class:`~.light.LightOptions` or plan, resolving to 'spec') the
+    ranking and the fit are in the spec's light; else the candidates are ranked in the spec's
+    sky at the level a fit of Ward's lobe finds first, and the chosen ones fitted with the
+    sky's level, once for every region (the light traced again, split).  Yields each
+    region's result dict with its ``model_selection`` (the ranking, the choice, the folds, the
+    light of the ranking and each lobe's tracing time)."""
     options["cache"] = replace(options.get("cache", FitCache()), seed=seed)
 
     def sessions_of(**kw):
@@ -136,6 +150,12 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     for m, why in skipped.items():
         log(f"model selection leaves out the {m} model: {why}")
     plan = resolve_light({regions[0][0]: first}, light, log)        # checked once
+    # the ranking's light: image regions on a smaller cache; a table's points as the fit
+    # takes them (one ray each, the fewest positions already)
+    given = options["cache"]
+    reuse = is_table(first.doc) and not plan.split
+    ranking_cache = given if is_table(first.doc) else replace(
+        given, positions=min(RANK_POSITIONS, given.positions or RANK_POSITIONS), plan=RANK_PLAN)
     level = None
     if plan.split:
         # the light the candidates are ranked in: the spec's sky at the level a fit of Ward's
@@ -151,7 +171,7 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     sessions, trace_s = {}, {}
     for fam in families:
         t0 = time.perf_counter()
-        sessions[fam] = sessions_of(model=models[0], normalisation=fam)
+        sessions[fam] = sessions_of(model=models[0], normalisation=fam, cache=ranking_cache)
         if level is not None:
             for s in sessions[fam].values():
                 s.light_at_level(level)
@@ -166,11 +186,10 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         pick = choose(rows)
         log(f"{name}: chose {pick['normalisation']} {pick['model']} (rank {pick['rank']} of "
             f"{len(rows)} by held-out chi2 over {folds} folds of frames)")
-        # on the light its lobe's candidates were ranked on (the table is the same for any
-        # parameterisation), or on the split light traced again below
+        positions = traced[families[0]].cache_settings["positions"]
         s = FitSession(manifest_path, name, pixels, model=pick["model"],
                        normalisation=pick["normalisation"], light=None, **options)
-        if not plan.split:
+        if reuse:                  # the table is the same for any parameterisation
             s.take_light(traced[pick["normalisation"]])
         del traced
         chosen[name] = s
@@ -180,16 +199,21 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
                          f"ranked in {ranked_in}",
             "ranked_at_sky": None if level is None else {
                 k: level[k] for k in ("k", "interval95", "terms")},
+            "ranking_light": {"positions": positions, "directions": ranking_cache.directions,
+                              "sky_plan": ranking_cache.plan},
             "folds": int(folds), "chosen": {"normalisation": pick["normalisation"],
                                             "model": pick["model"], "rank": pick["rank"]},
             "left_out": skipped, "trace_time_s": trace_s, "ranking": rows,
             "wall_time_s": shared_s + time.perf_counter() - t_region}
-        if not plan.split:
-            out = chosen.pop(name).run("global", None, seed, None, log)
-            yield _with_selection(out, selection.pop(name))
-    if chosen:
+    if plan.split:
         for out in fit_sessions(chosen, "global", seed, log=log, light=plan):
             yield _with_selection(out, selection[out["region"]])
+        return
+    if not reuse:              # the chosen lobes at the fit's cache, each lobe's regions together
+        trace_sessions(list(chosen.values()), SPEC_LIGHT)
+    for name in list(chosen):
+        yield _with_selection(chosen.pop(name).run("global", None, seed, None, log),
+                              selection.pop(name))
 
 
 def _with_selection(out, selection):
