@@ -153,11 +153,12 @@ def sky_warnings(s, fit):
             + ", ".join(f"+-{unc.Z['95'] * sky.sd[i]:.3g}" for i in led)
             + f" (95%), at least doubling {'its interval' if one else 'their intervals'}, "
             f"which include{'s' if one else ''} that; "
-            + ("more materials or a grey card in the fit would narrow it." if ref is None
+            + ("more materials or a grey card in the fit would narrow " if ref is None
                else f"that is the light the region sees otherwise than {ref}, which "
                     "calibrates the light (the sky in its lobe's reflection): more materials "
                     "with other normals, or the sky photographed (skyfit sky-series), would "
-                    "narrow it."))
+                    "narrow ")
+            + ("it." if one else "them."))
     level = [p for i, p in enumerate(names)
              if fit.sun_level_sd[i] > SKY_DOMINATES * own[i]]
     if level:

@@ -152,9 +152,9 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     plan = resolve_light({regions[0][0]: first}, light, log)        # checked once
     # the ranking's light: image regions on a smaller cache; a table's points as the fit
     # takes them (one ray each, the fewest positions already)
-    given = options["cache"]
-    reuse = is_table(first.doc) and not plan.split
-    ranking_cache = given if is_table(first.doc) else replace(
+    given, table = options["cache"], is_table(first.doc)
+    reuse = table and not plan.split
+    ranking_cache = given if table else replace(
         given, positions=min(RANK_POSITIONS, given.positions or RANK_POSITIONS), plan=RANK_PLAN)
     level = None
     if plan.split:
@@ -177,6 +177,9 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
                 s.light_at_level(level)
         trace_sessions(list(sessions[fam].values()), SPEC_LIGHT)
         trace_s[fam] = time.perf_counter() - t0
+    ranking_light = {"positions": next(iter(sessions[families[0]].values()))
+                     .cache_settings["positions"],
+                     "directions": ranking_cache.directions, "sky_plan": ranking_cache.plan}
     chosen, selection = {}, {}
     shared_s = (time.perf_counter() - t_start) / len(regions)   # the level and the traces
     for name, pixels in regions:
@@ -186,7 +189,6 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         pick = choose(rows)
         log(f"{name}: chose {pick['normalisation']} {pick['model']} (rank {pick['rank']} of "
             f"{len(rows)} by held-out chi2 over {folds} folds of frames)")
-        positions = traced[families[0]].cache_settings["positions"]
         s = FitSession(manifest_path, name, pixels, model=pick["model"],
                        normalisation=pick["normalisation"], light=None, **options)
         if reuse:                  # the table is the same for any parameterisation
@@ -199,8 +201,7 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
                          f"ranked in {ranked_in}",
             "ranked_at_sky": None if level is None else {
                 k: level[k] for k in ("k", "interval95", "terms")},
-            "ranking_light": {"positions": positions, "directions": ranking_cache.directions,
-                              "sky_plan": ranking_cache.plan},
+            "ranking_light": ranking_light,
             "folds": int(folds), "chosen": {"normalisation": pick["normalisation"],
                                             "model": pick["model"], "rank": pick["rank"]},
             "left_out": skipped, "trace_time_s": trace_s, "ranking": rows,
