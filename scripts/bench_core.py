@@ -6,6 +6,8 @@ Cases (``--cases``):
 * ``board``: the README's sample-board day (``scenes/specs/board_east_37.toml``),
   ``fit --all --model 5``: every region's own wall time (its fit JSON's ``wall_time_s``, its
   share of the light traced for all regions included), median and slowest, and the command's.
+* ``auto``: the same day, ``fit --all --model auto`` (every lobe family and parameter count
+  ranked, the chosen ones fitted): its cost against ``board``'s, issue 53's goal 2x.
 * ``misfit``: a disc of Mitsuba's ``roughconductor`` (gold, Beckmann 0.15; frames by
   tests/independent.py), which Ward's model cannot describe (chi2/dof in the thousands),
   ``fit --region disc=rect:4,4,11,11 --model 5``.
@@ -17,10 +19,11 @@ Each command runs in a new process (``python -m skyfit_mi.cli``, the checkout fi
 ``PYTHONPATH``); its peak resident memory is the process's own ``VmHWM``.  Prints a markdown
 table and writes ``DIR/bench_core.json``.
 
-    .venv/bin/python scripts/bench_core.py -o DIR [--peer PATH] [--cases board,misfit,table400]
+    .venv/bin/python scripts/bench_core.py -o DIR [--peer PATH] [--cases board,auto,misfit,table400]
 """
 
 import argparse
+import functools
 import json
 import os
 import shutil
@@ -72,15 +75,15 @@ def region_times(folder):
     return [json.loads(p.read_text())["wall_time_s"] for p in sorted(folder.glob("fit_*.json"))]
 
 
-def board(out, checkout, tag):
+def board(out, checkout, tag, model=5):
     day = out / "board"
     if not (day / "manifest.json").exists():
         run(ROOT, ["render", ROOT / "scenes/specs/board_east_37.toml", "-o", day, "-q"],
             out / "render-board.log")
-    fits = out / f"board-fits-{tag}"
+    fits = out / f"board-fits-{model}-{tag}"
     shutil.rmtree(fits, ignore_errors=True)
-    wall, rss = run(checkout, ["fit", day, "--all", "--model", 5, "-o", fits],
-                    out / f"fit-board-{tag}.log")
+    wall, rss = run(checkout, ["fit", day, "--all", "--model", model, "-o", fits],
+                    out / f"fit-board-{model}-{tag}.log")
     t = region_times(fits)
     return {"command_s": wall, "peak_MB": rss, "region_median_s": float(np.median(t)),
             "region_max_s": float(np.max(t)), "regions": len(t)}
@@ -181,7 +184,8 @@ def table(n_points):
     return case
 
 
-CASES = {"board": board, "misfit": misfit, "table400": table(400), "table4000": table(4000)}
+CASES = {"board": board, "auto": functools.partial(board, model="auto"), "misfit": misfit,
+         "table400": table(400), "table4000": table(4000)}
 
 
 def main():
