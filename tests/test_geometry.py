@@ -3,18 +3,20 @@ the warnings drawn from them."""
 import numpy as np
 import pytest
 
-from skyfit_mi.fitting.geometry import (TRACE, geometry_warnings, highlight_geometry,
+from skyfit_mi.fitting.geometry import (ANGLES_BEYOND_DEG, TRACE, angles_beyond,
+                                        geometry_warnings, highlight_geometry, sun_view_angles,
                                         traceless_roughness)
 from skyfit_mi.fitting.uncertainty import misfit
 
 
 def test_highlight_geometry_takes_the_closest_lit_approach_per_frame():
-    c = np.full((2, 3, 4, 2), np.nan)                  # 2 pixels, 3 frames, 4 positions
+    c = np.full((2, 3, 4, 3), np.nan)                  # 2 pixels, 3 frames, 4 positions
     c[0, 0, :, 0] = np.cos(np.radians([20, 25, 30, 35]))
     c[1, 0, 0, 0] = np.cos(np.radians(12.0))
     c[0, 0, :, 1] = np.cos(np.radians([40, 41, 42, 43]))
     c[1, 0, 0, 1] = np.cos(np.radians(50.0))
-    c[:, 2, 1] = np.cos(np.radians([40.0, 10.0]))     # frame 1 has no sun
+    c[:, 0, :, 2] = np.cos(np.radians(30.0))
+    c[:, 2, 1] = np.cos(np.radians([40.0, 10.0, 45.0]))     # frame 1 has no sun
     g = highlight_geometry(c)
     assert g["frames"] == 3 and g["frames_with_sun"] == 2
     assert g["closest_half_angle_per_frame_deg"][1] is None
@@ -24,8 +26,43 @@ def test_highlight_geometry_takes_the_closest_lit_approach_per_frame():
     np.testing.assert_allclose(g["sun_angles_per_frame_deg"][0], [25.0, 42.0])
     np.testing.assert_allclose(g["sun_angles_per_frame_deg"][2], [40.0, 10.0])
     assert g["sun_angles_per_frame_deg"][1] is None
-    none = highlight_geometry(np.full((2, 3, 4, 2), np.nan))
+    assert g["sun_view_angles_per_frame_deg"][1] is None
+    assert g["sun_view_angles_per_frame_deg"][2][0] == pytest.approx(45.0)
+    none = highlight_geometry(np.full((2, 3, 4, 3), np.nan))
     assert none["frames_with_sun"] == 0 and none["closest_highlight_half_angle_deg"] is None
+
+
+def test_sun_view_angles_are_those_of_the_directions_they_came_from():
+    """(theta_i, theta_o, phi) recovered from the half vector's cosines and the sun's, as the
+    light cache keeps them, equal those read off random sun and view directions directly, and
+    exchanging sun and view exchanges theta_i and theta_o alone."""
+    rng = np.random.default_rng(3)
+    ti, to = np.radians(rng.uniform(1, 89, (2, 200)))
+    pi_, po = rng.uniform(-np.pi, np.pi, (2, 200))
+    sun = np.stack([np.sin(ti) * np.cos(pi_), np.sin(ti) * np.sin(pi_), np.cos(ti)], axis=1)
+    view = np.stack([np.sin(to) * np.cos(po), np.sin(to) * np.sin(po), np.cos(to)], axis=1)
+
+    def cosines(s, v):
+        h = (s + v) / np.linalg.norm(s + v, axis=1, keepdims=True)
+        return np.stack([h[:, 2], np.sum(s * h, axis=1), s[:, 2]], axis=1)
+    phi = np.abs((pi_ - po + np.pi) % (2 * np.pi) - np.pi)
+    expected = np.degrees(np.stack([ti, to, phi], axis=1))
+    np.testing.assert_allclose(sun_view_angles(cosines(sun, view)), expected, atol=1e-5)
+    np.testing.assert_allclose(sun_view_angles(cosines(view, sun)), expected[:, [1, 0, 2]],
+                               atol=1e-5)
+
+
+def test_angles_beyond_the_fits_are_those_far_from_every_pair_it_saw():
+    """A frame's sun and view are beyond the fit's where every fitted frame's (theta_i,
+    theta_o, phi) lies over ANGLES_BEYOND_DEG away, with sun and view exchanged as well; never
+    without sun in the frame, always where the fit saw no sun."""
+    fitted = [[60.0, 45.0, 20.0], None, [30.0, 45.0, 90.0]]
+    assert not angles_beyond(fitted, [62.0, 45.0, 30.0])
+    assert not angles_beyond(fitted, [45.0, 60.0, 20.0])             # reciprocity
+    assert angles_beyond(fitted, [60.0, 45.0, 20.0 + ANGLES_BEYOND_DEG + 1])
+    assert angles_beyond(fitted, [75.0, 45.0, 150.0])
+    assert not angles_beyond(fitted, None)
+    assert angles_beyond([None, None], [30.0, 45.0, 90.0])
 
 
 @pytest.mark.parametrize("delta", [1.0, 5.0, 16.0, 30.0])

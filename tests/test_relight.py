@@ -325,7 +325,9 @@ def test_a_fit_of_ward_data_predicts_another_sky_and_camera_within_its_band(
         glossy, tmp_path, change):
     """Predict (the fast path) a day the fit never saw: an overcast sky, or the clear day from
     the north.  The observed region means lie in the predicted 95% bands, and the prediction
-    is close."""
+    is close.  From the north, the sun and view of half the frames lie over 30 degrees from
+    any pair the fit saw from the east, and are marked 'angles'; under the overcast sky, with
+    no sun, none is."""
     fitted, target = glossy[0], copy.deepcopy(glossy[1])
     if change == "overcast sky":
         target["sky"] = {"type": "overcast"}
@@ -344,6 +346,9 @@ def test_a_fit_of_ward_data_predicts_another_sky_and_camera_within_its_band(
     pred, seen = (np.array([float(r[k]) for r in rows]) for k in (4, 7))
     err = np.sqrt(np.mean((pred - seen) ** 2) / np.mean(seen**2))
     assert err < 0.02                 # measured 0.56% (overcast) and 0.26% (north); 12 values
+    angles = errors["band_coverage"]["beyond_measured_by"].get("angles", 0)
+    assert angles == sum(r[-1] == "angles" for r in rows)
+    assert (angles == 0) if change == "overcast sky" else (angles >= 3), errors["band_coverage"]
     # the same from the true material: noise alone, which the fit's error is compared with
     means = errors["region_means"]["disc"]
     assert means["fit"] == pytest.approx(err, rel=1e-3) and means["truth"] < 0.02

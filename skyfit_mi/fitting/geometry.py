@@ -18,32 +18,74 @@ LOBE_BEYOND = 2.0
 #: ... and only where it lies this much nearer at least [degrees]: the closest half-angle is
 #: read from the light cache's sample positions, which differ between traces.
 NEARER_DEG = 1.0
+#: A frame's sun and view lie beyond the angles a fit measured where their (theta_i, theta_o,
+#: phi) lies this far from every frame's of the fit [degrees]: on measured materials relit
+#: from one camera into others, values beyond it missed by twice as much (median 1.6% against
+#: 0.8%, 95th percentile 12.7% against 5.3%: docs/BENCHMARKS.md, "Bands in a new view").
+ANGLES_BEYOND_DEG = 30.0
 
 
 def highlight_geometry(sun_cos):
     """Summary of the sun's light over a region and day.
 
-    ``sun_cos`` (P, T, S, 2): cos(theta_h) and cos(theta_d) per pixel, frame and position
-    (the half vector's angle from the normal and from the sun), NaN where the frame's sun
-    gives no light (:class:`~skyfit_mi.render.light_cache.LightCache`).  Returns a JSON-ready
-    dict: frames, frames_with_sun, closest_highlight_half_angle_deg (None without sun), its
-    value per frame, and per frame the sun's (theta_h, theta_d), their medians over the
-    region's lit positions [degrees] (None without sun): what light and view the frame's
-    values measured, in the two angles an isotropic reflection depends on most.
+    ``sun_cos`` (P, T, S, 3): cos(theta_h), cos(theta_d) and cos(theta_i) per pixel, frame
+    and position (the half vector's angle from the normal and from the sun, the sun's from the
+    normal), NaN where the frame's sun gives no light
+    (:class:`~skyfit_mi.render.light_cache.LightCache`).  Returns a JSON-ready dict: frames,
+    frames_with_sun, closest_highlight_half_angle_deg (None without sun), its value per frame,
+    and per frame, as medians over the region's lit positions [degrees] (None without sun), the
+    sun's (theta_h, theta_d), the two angles an isotropic reflection depends on most, and
+    (theta_i, theta_o, phi) (:func:`sun_view_angles`): what light and view the frame's values
+    measured.
     """
     c = np.asarray(sun_cos, dtype=float)
-    per_frame, angles = [], []
+    per_frame, angles, configs = [], [], []
     for t in range(c.shape[1]):
-        v = c[:, t].reshape(-1, 2)
-        deg = np.degrees(np.arccos(np.clip(v[np.isfinite(v).all(axis=1)], -1, 1)))
+        v = c[:, t].reshape(-1, 3)
+        v = v[np.isfinite(v).all(axis=1)]
+        deg = np.degrees(np.arccos(np.clip(v[:, :2], -1, 1)))
         sunlit = len(deg) > 0
         per_frame.append(float(deg[:, 0].min()) if sunlit else None)
         angles.append([float(x) for x in np.median(deg, axis=0)] if sunlit else None)
+        configs.append([float(x) for x in np.median(sun_view_angles(v), axis=0)]
+                       if sunlit else None)
     lit = [d for d in per_frame if d is not None]
     return {"frames": int(c.shape[1]), "frames_with_sun": len(lit),
             "closest_highlight_half_angle_deg": min(lit) if lit else None,
             "closest_half_angle_per_frame_deg": per_frame,
-            "sun_angles_per_frame_deg": angles}
+            "sun_angles_per_frame_deg": angles,
+            "sun_view_angles_per_frame_deg": configs}
+
+
+def sun_view_angles(cos):
+    """The sun's and view's configuration (theta_i, theta_o, phi) [degrees] (Q, 3), from
+    cos(theta_h), cos(theta_d), cos(theta_i) (Q, 3) (:func:`highlight_geometry`): the view is
+    the sun mirrored about the half vector, so cos theta_o = 2 cos theta_d cos theta_h -
+    cos theta_i, and the angle between them is 2 theta_d, whence phi, the angle between their
+    azimuths (0 with the sun behind the camera, 180 in the mirror plane ahead), by the
+    spherical law of cosines."""
+    ch, cd, ci = np.clip(np.asarray(cos, dtype=float), -1, 1).T
+    co = np.clip(2 * cd * ch - ci, -1, 1)
+    sines = np.sqrt((1 - ci**2) * (1 - co**2))
+    cphi = np.where(sines > 1e-9, (2 * cd**2 - 1 - ci * co) / np.maximum(sines, 1e-9), 1.0)
+    return np.degrees(np.arccos(np.stack([ci, co, np.clip(cphi, -1, 1)], axis=1)))
+
+
+def angles_beyond(fit_configs, config):
+    """Whether a frame's sun and view ``config`` [(theta_i, theta_o, phi), degrees; None
+    without sun] lie more than ANGLES_BEYOND_DEG from every frame's of the fit, ``fit_configs``
+    (a list, None per frame without sun), in Euclidean distance over the three angles, each
+    also with the sun and view exchanged (reciprocity): light and view the fit's data never
+    took together, where a model's lobe is its shape's alone.  False without sun in the
+    frame; True where no frame of the fit had sun."""
+    if config is None:
+        return False
+    at = np.array([a for a in fit_configs if a is not None], dtype=float).reshape(-1, 3)
+    if not len(at):
+        return True
+    a = np.asarray(config, dtype=float)
+    d = np.minimum(np.linalg.norm(at - a, axis=1), np.linalg.norm(at[:, [1, 0, 2]] - a, axis=1))
+    return bool(d.min() > ANGLES_BEYOND_DEG)
 
 
 def highlight_beyond(fit_half_angle_deg, half_angle_deg, sigma_alpha):

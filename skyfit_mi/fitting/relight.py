@@ -22,6 +22,7 @@ import csv
 import io
 import json
 import os
+from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -34,7 +35,7 @@ from ..files import FolderLock, ensure_dir, figure_png, write_bytes, write_json,
 from .chi2 import subsample_region
 from .draws import interval_covariance, root_of
 from .fit import FitCache, FitSession, trace_sessions
-from .geometry import highlight_beyond
+from .geometry import ANGLES_BEYOND_DEG, angles_beyond, highlight_beyond
 from .held_out import local_error_scale
 from .landscape import truth_parameters
 from .sky_fit import light_tints, reference_light_factor, sky_level_at
@@ -467,15 +468,28 @@ def band_coverage(rows):
     their bands are the model's alone)."""
     rows = [row for row in rows if not row.saturated]
     within = [row.inside for row in rows if not row.beyond]
+    why = Counter(row.beyond for row in rows if row.beyond)
     return {"share": float(np.mean([row.inside for row in rows])), "values": len(rows),
             "within_measured": {"share": float(np.mean(within)) if within else None,
                                 "values": len(within)},
             "beyond_measured": len(rows) - len(within),
+            "beyond_measured_by": dict(sorted(why.items())),
             "band": "95%, from the fits' draws on their own sequence, else from their "
                     "intervals; beyond_measured: values predicted beyond what the fits' data "
-                    "measured (dimmer than their noise let them tell, brighter than the top "
-                    "code, or in a frame whose sun highlight lies nearer the mirror direction "
-                    "than any they saw), where the band is the model's alone"}
+                    "measured, by why (below: dimmer than their noise let them tell; above: "
+                    "brighter than the top code; unmeasured: a channel they never measured; "
+                    "highlight: a sun highlight nearer the mirror direction than any they "
+                    f"saw; angles: sun and view over {ANGLES_BEYOND_DEG:.0f} degrees from "
+                    "any pair they saw), where the band is the model's alone"}
+
+
+#: Why a prediction lies beyond what a fit measured (:func:`beyond_data`), in a log's words.
+BEYOND_WORDS = {"below": "dimmer than its noise let it tell",
+                "above": "brighter than its top code",
+                "unmeasured": "in a channel it never measured",
+                "highlight": "in a sun highlight nearer the mirror direction than it saw",
+                "angles": f"at sun and view angles over {ANGLES_BEYOND_DEG:.0f} degrees from "
+                          "any it saw"}
 
 
 def log_errors(errors, plan, log=print):
@@ -500,14 +514,13 @@ def log_errors(errors, plan, log=print):
             "the materials' difference)" if errors["shares_target_seeds"] else ""))
     coverage = errors["band_coverage"]
     within, beyond = coverage["within_measured"], coverage["beyond_measured"]
+    why = ", ".join(f"{n} {BEYOND_WORDS[k]}" for k, n in coverage["beyond_measured_by"].items())
     log(f"{'table values' if plan.table else 'observed region means'} inside the predicted "
         f"95% band: {coverage['share']:.0%} of {coverage['values']}"
-        + (f" ({within['share']:.0%} of the {within['values']} within the radiance the fit's "
-           f"data measured; {beyond} beyond it, dimmer than their noise let them tell, "
-           "brighter than the top code or in a sun highlight nearer the mirror direction than "
-           "the fit saw, rest on the model alone)"
+        + (f" ({within['share']:.0%} of the {within['values']} within what the fit's data "
+           f"measured; {beyond} beyond it rest on the model alone: {why})"
            if beyond and within["values"] else
-           f" (all {beyond} beyond what the fit's data measured: the model's alone)"
+           f" (all {beyond} beyond what the fit's data measured, the model's alone: {why})"
            if beyond else ""))
 
 
@@ -725,8 +738,8 @@ class PredictionRow:
     #: the table's value is saturated: the level its instrument clipped at, a lower bound
     saturated: bool = False
     #: beyond what the fit's data measured: its radiance (:func:`beyond_data`: 'below',
-    #: 'above', 'unmeasured'), its sun highlights ('highlight', :func:`nearer_highlights`), or
-    #: '' within both
+    #: 'above', 'unmeasured'), its sun's light ('highlight', 'angles': :func:`unseen_light`),
+    #: or '' within both
     beyond: str = ""
 
     @property
@@ -961,7 +974,7 @@ def _predict_means(s, result, target, draws, rng):
     observed = region_mean(image)
     names = _channels(s)
     means, observed = means[..., :len(names)], observed[..., :len(names)]
-    nearer = nearer_highlights(result, s)
+    unseen = unseen_light(result, s)
     rows = []
     for j, (i, t) in enumerate(zip(s.obs.frames, s.obs.times)):
         for c, ch in enumerate(names):
@@ -970,41 +983,50 @@ def _predict_means(s, result, target, draws, rng):
                                       predicted=float(means[0, j, c]), lo95=float(band[0]),
                                       hi95=float(band[1]), image=float(observed[j, c]),
                                       beyond=beyond_data(result, ch, means[0, j, c],
-                                                         nearer[j])))
+                                                         unseen[j])))
     return rows, _means_error(s, means[0], observed, region_mean)
 
 
-def nearer_highlights(result, s):
-    """Per frame of the target's session ``s``, whether its sun's highlight lies nearer the
-    mirror direction than any the fit ``result``'s data saw, by more than the fitted lobe
-    allows (:func:`~.geometry.highlight_beyond`): there the lobe's peak is the model's alone.
-    All False for a fit that does not record its geometry, and for the frames it was fitted
-    to."""
+def unseen_light(result, s):
+    """Per frame of the target's session ``s``, how its sun's light lies beyond what the fit
+    ``result``'s data saw: 'highlight' where its highlight lies nearer the mirror direction
+    than any they saw, by more than the fitted lobe allows (:func:`~.geometry.highlight_beyond`:
+    the lobe's peak is the model's alone), else 'angles' where its sun and view lie far from
+    every pair they saw (:func:`~.geometry.angles_beyond`: the lobe's shape is), else ''.
+    '' for the frames it was fitted to, and for what a fit does not record (or an edited
+    one)."""
     geometry = result.get("geometry")
-    fitted = (geometry.get("closest_highlight_half_angle_deg", False)
-              if isinstance(geometry, dict) else False)
-    per_frame = s.geometry["closest_half_angle_per_frame_deg"]
-    if not (fitted is None or type(fitted) in (int, float)):      # not recorded (or edited)
-        return [False] * len(per_frame)
+    geometry = geometry if isinstance(geometry, dict) else {}
+    fitted = geometry.get("closest_highlight_half_angle_deg", False)
+    configs = geometry.get("sun_view_angles_per_frame_deg")
+    if not isinstance(configs, list) or any(not (a is None or isinstance(a, list) and len(a) == 3)
+                                            for a in configs):
+        configs = None
     sigma = result["parameters"].get("sigma_alpha", 0.0)
     trained = (set(result.get("frames", [])) if result.get("sequence_run_id") == s.run_id
                else set())                                   # the frames it saw: measured
-    return [int(i) not in trained and highlight_beyond(fitted, d, sigma)
-            for i, d in zip(s.obs.frames, per_frame)]
+    out = []
+    for i, d, a in zip(s.obs.frames, s.geometry["closest_half_angle_per_frame_deg"],
+                       s.geometry["sun_view_angles_per_frame_deg"]):
+        out.append("" if int(i) in trained else
+                   "highlight" if ((fitted is None or type(fitted) in (int, float))
+                                   and highlight_beyond(fitted, d, sigma)) else
+                   "angles" if configs is not None and angles_beyond(configs, a) else "")
+    return out
 
 
-def beyond_data(result, channel, value, nearer=False):
+def beyond_data(result, channel, value, unseen=""):
     """Where a predicted ``value`` [W m^-2 sr^-1] of ``channel`` lies against what the fit
     ``result``'s data measured: against its radiance (its ``measured_range``) '' within it,
     'below' or 'above' it, 'unmeasured' where they measured that channel nowhere ('' for a
-    fit that does not record it); within it, 'highlight' in a frame whose sun highlight lies
-    ``nearer`` the mirror direction than any they saw (:func:`nearer_highlights`).  Beyond
-    either, the prediction and its band rest on the model alone."""
+    fit that does not record it); within it, the frame's ``unseen`` light ('highlight' or
+    'angles', :func:`unseen_light`).  Beyond either, the prediction and its band rest on the
+    model alone."""
     ranges = (result.get("measured_range") or {}).get("by_channel")
     lo_hi = ranges.get(channel, ()) if ranges is not None else ()
     radiance = ("unmeasured" if lo_hi is None else "" if not lo_hi else
                 "below" if value < lo_hi[0] else "above" if value > lo_hi[1] else "")
-    return radiance or ("highlight" if nearer else "")
+    return radiance or unseen
 
 
 def _predict_points(s, result, target, draws, rng):
@@ -1029,7 +1051,7 @@ def _predict_points(s, result, target, draws, rng):
                             *model_error_kappa(result))
     names = _channels(s)
     saturated = ~_measured(s)
-    nearer = nearer_highlights(result, s)
+    unseen = unseen_light(result, s)
     rows, points = [], [str(x) for x in s.obs.pixels]      # one string a point, shared
     for p, j, c in zip(*np.nonzero(np.isfinite(s.obs.sigma[..., :len(names)]))):
         band = widen(at_fit[p, j, c], (lo[p, j, c], hi[p, j, c]), extra[p, j, c], -np.inf,
@@ -1041,7 +1063,7 @@ def _predict_points(s, result, target, draws, rng):
                                   point=points[p],
                                   saturated=bool(saturated[p, j, c]),
                                   beyond=beyond_data(result, names[c], at_fit[p, j, c],
-                                                     nearer[j])))
+                                                     unseen[j])))
     region_mean = _region_mean(s)
     return rows, _means_error(s, region_mean(at_fit)[..., :len(names)],
                               region_mean(image)[..., :len(names)], region_mean)

@@ -173,7 +173,7 @@ class BasisTable:
     VDG, VGG : (V, P, T, 3)  cov(D, G) and var(G) likewise at the V roughness values
         ``var_sigmas`` (:func:`variance_sigmas`)
     hit : (P, T) bool  every position of the pixel lands on the material
-    sun_cos : (P, T, S, 2) float32  the light cache's, per position (NaN without sun)
+    sun_cos : (P, T, S, 3) float32  the light cache's, per position (NaN without sun)
     normalisation : the Ward normalisation of the lobe
     """
 
@@ -231,7 +231,7 @@ class BasisTable:
                    np.zeros((2, P, T, 3), f32), [Series([]) for _ in PIECES],
                    np.zeros((P, T, 3), f32), np.zeros((V, P, T, 3), f32),
                    np.zeros((V, P, T, 3), f32), np.zeros((P, T), bool),
-                   np.zeros((P, T, S, 2), f32), normalisation)
+                   np.zeros((P, T, S, 3), f32), normalisation)
 
     def place(self, block, rows, frames):
         """Copy the table ``block`` into pixels ``rows`` and frames ``frames`` (slices); its

@@ -192,10 +192,10 @@ class LightCache:
     inv_pdf : (P, T, N)  1 / (p_mix N) [sr]: weight without L_i
     mirror_sky : (P, T, S, 3)  L_i along the mirror direction without the solar disc
         [W m^-2 sr^-1], per position: the control variate's constant
-    sun_cos : (P, T, S, 2)  cos(theta_h) and cos(theta_d) of the sun and view directions per
-        position (:func:`_sun_cos`: the half vector's angle from the normal and from the
-        sun); NaN where the frame's sun gives no light (none, below the horizon, or behind
-        the surface) [unitless]
+    sun_cos : (P, T, S, 3)  cos(theta_h), cos(theta_d) and cos(theta_i) of the sun and view
+        directions per position (:func:`_sun_cos`: the half vector's angle from the normal and
+        from the sun, and the sun's from the normal); NaN where the frame's sun gives no light
+        (none, below the horizon, or behind the surface) [unitless]
     diffuse_sky : (P, T, S, 3)  I_d, the sky function's cosine-weighted integral / pi per
         position [W m^-2 sr^-1] (:mod:`.sky_control`)
     lobe_sky : (P, T, S, M, 3)  Chebyshev coefficients in log sigma of I_s(sigma), the sky
@@ -330,15 +330,17 @@ def _components(K, has_sun):
 
 
 def _sun_cos(sun, view, sky):
-    """cos(theta_h) and cos(theta_d) per surface interaction (Q, 2): theta_h the angle between
-    the normal and the half vector h of the sun's and the view's directions (Ward's highlight
-    angle, thesis eq. 3.19), theta_d the angle between the sun and h (Rusinkiewicz's difference
-    angle: half the angle between the sun and the view), from their local directions ``sun``,
-    ``view`` (Q, 3); NaN where the sun gives no light there (none in ``sky``, below the
-    horizon, or behind the surface)."""
+    """cos(theta_h), cos(theta_d) and cos(theta_i) per surface interaction (Q, 3): theta_h the
+    angle between the normal and the half vector h of the sun's and the view's directions
+    (Ward's highlight angle, thesis eq. 3.19), theta_d the angle between the sun and h
+    (Rusinkiewicz's difference angle: half the angle between the sun and the view), theta_i the
+    sun's from the normal (with the other two, the whole configuration of an isotropic
+    reflection: :func:`~skyfit_mi.fitting.geometry.sun_view_angles`), from their local
+    directions ``sun``, ``view`` (Q, 3); NaN where the sun gives no light there (none in
+    ``sky``, below the horizon, or behind the surface)."""
     h = sun + view
     h = h / np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-12)
-    cos = np.stack([h[:, 2], np.sum(sun * h, axis=1)], axis=1)
+    cos = np.stack([h[:, 2], np.sum(sun * h, axis=1), sun[:, 2]], axis=1)
     lit = _has_sun(sky) & (sun[:, 2] > 0) & (view[:, 2] > 0)
     return np.where(lit[:, None], cos, np.nan).astype(np.float32)
 
@@ -830,7 +832,7 @@ def _keep_frame(tr, outs, samples, traced, sky):
     out["mirror_cos"].append(view[:, 2].astype(np.float32).reshape(P, S))
     out["hit"].append(on.reshape(P, S).all(axis=1))
     out["sun_cos"].append(_sun_cos(np.array(samples.sun, dtype=float).T, view,
-                                   sky).reshape(P, S, 2))
+                                   sky).reshape(P, S, 3))
 
 
 @dataclass
