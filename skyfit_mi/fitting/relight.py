@@ -461,6 +461,15 @@ def add_reference_errors(errors, fits, plan, out, pixels, overwrite=False):
                            "independent Monte Carlo noise alone gives")
 
 
+#: Why a prediction lies beyond what a fit's data measured (:func:`beyond_data`), in words.
+BEYOND_WORDS = {"below": "dimmer than their noise let them tell",
+                "above": "brighter than their top code",
+                "unmeasured": "in a channel they never measured",
+                "highlight": "in a sun highlight nearer the mirror direction than they saw",
+                "angles": f"at sun and view angles over {ANGLES_BEYOND_DEG:.0f} degrees from "
+                          "any they saw"}
+
+
 def band_coverage(rows):
     """The share of the image values of prediction ``rows`` inside their predicted band (a
     table's saturated values, lower bounds only, left out), and that share within the
@@ -476,20 +485,8 @@ def band_coverage(rows):
             "beyond_measured_by": dict(sorted(why.items())),
             "band": "95%, from the fits' draws on their own sequence, else from their "
                     "intervals; beyond_measured: values predicted beyond what the fits' data "
-                    "measured, by why (below: dimmer than their noise let them tell; above: "
-                    "brighter than the top code; unmeasured: a channel they never measured; "
-                    "highlight: a sun highlight nearer the mirror direction than any they "
-                    f"saw; angles: sun and view over {ANGLES_BEYOND_DEG:.0f} degrees from "
-                    "any pair they saw), where the band is the model's alone"}
-
-
-#: Why a prediction lies beyond what a fit measured (:func:`beyond_data`), in a log's words.
-BEYOND_WORDS = {"below": "dimmer than its noise let it tell",
-                "above": "brighter than its top code",
-                "unmeasured": "in a channel it never measured",
-                "highlight": "in a sun highlight nearer the mirror direction than it saw",
-                "angles": f"at sun and view angles over {ANGLES_BEYOND_DEG:.0f} degrees from "
-                          "any it saw"}
+                    "measured, where the band is the model's alone, by why ("
+                    + "; ".join(f"{k}: {v}" for k, v in BEYOND_WORDS.items()) + ")"}
 
 
 def log_errors(errors, plan, log=print):
@@ -999,8 +996,8 @@ def unseen_light(result, s):
     geometry = geometry if isinstance(geometry, dict) else {}
     fitted = geometry.get("closest_highlight_half_angle_deg", False)
     configs = geometry.get("sun_view_angles_per_frame_deg")
-    if not isinstance(configs, list) or any(not (a is None or isinstance(a, list) and len(a) == 3)
-                                            for a in configs):
+    if not (isinstance(configs, list)
+            and all(a is None or isinstance(a, list) and len(a) == 3 for a in configs)):
         configs = None
     sigma = result["parameters"].get("sigma_alpha", 0.0)
     trained = (set(result.get("frames", [])) if result.get("sequence_run_id") == s.run_id
