@@ -85,13 +85,12 @@ def test_a_fit_under_measured_skies_holds_the_truth_with_the_departure_and_not_w
     exact every C misses; with the departure fitted every parameter's interval holds its
     truth, the record carries the weights within a few prior sd, and C's median half-width is
     at most 2x that of the fit given the true sky (the maps, the level fitted as for
-    photographs; issue 52's sharpness goal).  The disc is compact: its sky integrals are taken
-    at anchors (``FitCache(plan="anchors")``), for time."""
+    photographs; issue 52's sharpness goal)."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from measured_light import TRUTH, measured_disc_day, relabelled, thesis_clear_scaled
 
     from skyfit_mi.fitting.chi2 import parse_region
-    from skyfit_mi.fitting.fit import FitCache, fit_regions
+    from skyfit_mi.fitting.fit import fit_regions
     from skyfit_mi.fitting.light import LightOptions
     from skyfit_mi.physics.sky_measurement import load_scans
 
@@ -106,7 +105,7 @@ def test_a_fit_under_measured_skies_holds_the_truth_with_the_departure_and_not_w
     for light, departure in ((day, False), (spec, False), (spec, True)):
         r = next(fit_regions(light, [("disc", parse_region("rect:3,3,12,12"))], model="colour",
                              light=LightOptions(sky="prior", sun_sd=0.0, departure=departure),
-                             cache=FitCache(plan="anchors"), log=lambda *a: None))
+                             log=lambda *a: None))
         held[light, departure] = {n: r["intervals"][n]["95"][0] <= v <= r["intervals"][n]["95"][1]
                                   for n, v in zip(names, TRUTH)}
         half[light, departure] = np.median([np.diff(r["intervals"][n]["95"])[0] / 2 / v

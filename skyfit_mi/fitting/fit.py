@@ -152,8 +152,10 @@ class FitCache:
     directions : light directions at each position
     seed : the seed of the cache's samples
     plan : where the cache takes the sky's integrals, a name of
-        :data:`~skyfit_mi.render.light_cache.SKY_PLANS`: ``fit`` by default, ``anchors`` for
-        predictions of compact regions
+        :data:`~skyfit_mi.render.light_cache.SKY_PLANS`: ``anchors`` by default, as maps and
+        predictions take them (the board's fits halve in time, each parameter the same within
+        a tenth of its interval: docs/BENCHMARKS.md, "Sky integrals"); ``fit`` or ``every``
+        resolve each pixel's footprint
     pose_sd_deg : the camera pose's 1-sd [deg] whose effect on the parameters the fit
         propagates by a trace of the light per angle (:mod:`~.pose`), as
         :func:`~skyfit_mi.render.scene.pose_sd` reads it (``fit --pose-sd-deg``); None: the
@@ -163,7 +165,7 @@ class FitCache:
     positions: int = None
     directions: int = DIRECTIONS
     seed: int = 0
-    plan: str = "fit"
+    plan: str = "anchors"
     pose_sd_deg: object = None
 
 
