@@ -98,6 +98,10 @@ def test_geometry_warnings():
     assert "treat it as not determined below" in modelled[0]
     assert modelled[1].startswith("rho_s rests on the sky's reflection")
     assert geometry_warnings(far, 0.3, sky_shape_known=False) == []
+    # a fit above the limit whose interval reaches below it: chi-square is flat there
+    reach = geometry_warnings(far, 0.3, lowest=0.0)
+    assert len(reach) == 1 and "its 95% interval down to 0" in reach[0]
+    assert geometry_warnings(far, 0.3, lowest=0.29) == []
     near = {"frames": 5, "frames_with_sun": 5, "closest_highlight_half_angle_deg": 1.0}
     assert geometry_warnings(near, 0.01) == []
 

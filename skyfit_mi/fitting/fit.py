@@ -153,8 +153,8 @@ class FitCache:
     seed : the seed of the cache's samples
     plan : where the cache takes the sky's integrals, a name of
         :data:`~skyfit_mi.render.light_cache.SKY_PLANS`: ``anchors`` by default, as maps and
-        predictions take them (the board's fits halve in time, each parameter the same within
-        a tenth of its interval: docs/BENCHMARKS.md, "Sky integrals"); ``fit`` or ``every``
+        predictions take them (the board's fits halve in time, each parameter within half its 95%
+        half-width: docs/BENCHMARKS.md, "Sky integrals"); ``fit`` or ``every``
         resolve each pixel's footprint
     pose_sd_deg : the camera pose's 1-sd [deg] whose effect on the parameters the fit
         propagates by a trace of the light per angle (:mod:`~.pose`), as

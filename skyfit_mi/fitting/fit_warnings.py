@@ -105,7 +105,8 @@ def fit_warnings(s, fit):
             "intervals are widened for it, by up to "
             f"{np.sqrt(np.max(fit.channel_factors)):.2f}x.")
     warnings += geometry_warnings(
-        s.geometry, float(theta[-1]), sky_shape_known=fit.sky.shape_known)
+        s.geometry, float(theta[-1]), sky_shape_known=fit.sky.shape_known,
+        lowest=iv95[names[-1]][0])
     worst = max(fit.model_noise_by_sigma, key=fit.model_noise_by_sigma.get)
     if fit.model_noise_by_sigma[worst] > NOISE_SHARE * fit.problem.dof:
         warnings.append(

@@ -131,10 +131,13 @@ def sky_only_limit(geometry):
     return traceless_roughness(geometry["closest_highlight_half_angle_deg"])
 
 
-def geometry_warnings(geometry, sigma_alpha, sky_shape_known=True):
-    """Warnings from the day's geometry for a fit at ``sigma_alpha``: no sun on the surface at
-    all, or a closest highlight too far from the camera's view for the sun to show a lobe this
-    narrow.  Then the lobe is seen in the sky's reflection alone, and where the sky's shape
+def geometry_warnings(geometry, sigma_alpha, sky_shape_known=True, lowest=None):
+    """Warnings from the day's geometry for a fit at ``sigma_alpha`` whose 95% interval
+    reaches down to ``lowest`` (None: the fit alone): no sun on the surface at all, or a
+    closest highlight too far from the camera's view for the sun to show a lobe this narrow
+    (the fit's, or the narrowest its interval allows: where the sun shows no lobe, chi-square
+    is flat, and the fit may lie anywhere along it).  Then the lobe is seen in the sky's
+    reflection alone, and where the sky's shape
     is a model the fit has not fitted (``sky_shape_known`` False: a sky fitted or held by
     its prior in level only), so is rho_s: its reading depends on the sky's pattern near the
     mirror direction (a disc under a measured sky, its highlight never seen: rho_s 0, 95% up
@@ -145,12 +148,16 @@ def geometry_warnings(geometry, sigma_alpha, sky_shape_known=True):
                 "determined; a sequence with direct sun is needed to measure the lobe."]
     delta = geometry["closest_highlight_half_angle_deg"]
     limit = sky_only_limit(geometry)
-    if sigma_alpha >= limit:
+    lowest = sigma_alpha if lowest is None else min(lowest, sigma_alpha)
+    if lowest >= limit:
         return []
     seen = (f"sigma_alpha: the sun's highlight never comes closer than {delta:.1f} degrees "
             f"(half-angle) to the camera's view, and lobes narrower than sigma_alpha = "
-            f"{limit:.3g} show no sun there: sigma_alpha = {sigma_alpha:.3g} rests on the "
-            "sky's reflection alone")
+            f"{limit:.3g} show no sun there: "
+            + (f"sigma_alpha = {sigma_alpha:.3g} rests" if sigma_alpha < limit else
+               f"sigma_alpha = {sigma_alpha:.3g}, its 95% interval down to {lowest:.3g}, rests "
+               "there")
+            + " on the sky's reflection alone")
     out = [seen + ("; its interval holds as far as the sky's shape near the mirror direction "
                    "is the spec's (a camera nearer the sun's mirror direction would measure it "
                    "from the sun)." if sky_shape_known else
