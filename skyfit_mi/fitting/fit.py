@@ -152,11 +152,8 @@ class FitCache:
     directions : light directions at each position
     seed : the seed of the cache's samples
     plan : where the cache takes the sky's integrals, a name of
-        :data:`~skyfit_mi.render.light_cache.SKY_PLANS`: ``anchors`` by default, as maps and
-        predictions take them (the board's fits halve in time, each parameter within half its 95%
-        half-width: docs/BENCHMARKS.md, "Sky integrals"); ``fit`` or ``every`` resolve
-        each pixel's footprint, which a coarse curved surface needs (an 8 x 8 sphere's model
-        0.8% off at anchors)
+        :data:`~skyfit_mi.render.light_cache.SKY_PLANS`: ``fit`` by default, ``anchors`` for
+        predictions of compact regions
     pose_sd_deg : the camera pose's 1-sd [deg] whose effect on the parameters the fit
         propagates by a trace of the light per angle (:mod:`~.pose`), as
         :func:`~skyfit_mi.render.scene.pose_sd` reads it (``fit --pose-sd-deg``); None: the
@@ -166,7 +163,7 @@ class FitCache:
     positions: int = None
     directions: int = DIRECTIONS
     seed: int = 0
-    plan: str = "anchors"
+    plan: str = "fit"
     pose_sd_deg: object = None
 
 
