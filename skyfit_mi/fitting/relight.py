@@ -995,21 +995,18 @@ def unseen_light(result, s):
     geometry = result.get("geometry")
     geometry = geometry if isinstance(geometry, dict) else {}
     fitted = geometry.get("closest_highlight_half_angle_deg", False)
+    closest_known = fitted is None or type(fitted) in (int, float)
     configs = geometry.get("sun_view_angles_per_frame_deg")
-    if not (isinstance(configs, list)
-            and all(a is None or isinstance(a, list) and len(a) == 3 for a in configs)):
-        configs = None
+    configs_known = isinstance(configs, list) and all(
+        a is None or isinstance(a, list) and len(a) == 3 for a in configs)
     sigma = result["parameters"].get("sigma_alpha", 0.0)
     trained = (set(result.get("frames", [])) if result.get("sequence_run_id") == s.run_id
                else set())                                   # the frames it saw: measured
-    out = []
-    for i, d, a in zip(s.obs.frames, s.geometry["closest_half_angle_per_frame_deg"],
-                       s.geometry["sun_view_angles_per_frame_deg"]):
-        out.append("" if int(i) in trained else
-                   "highlight" if ((fitted is None or type(fitted) in (int, float))
-                                   and highlight_beyond(fitted, d, sigma)) else
-                   "angles" if configs is not None and angles_beyond(configs, a) else "")
-    return out
+    return ["" if int(i) in trained else
+            "highlight" if closest_known and highlight_beyond(fitted, d, sigma) else
+            "angles" if configs_known and angles_beyond(configs, a) else ""
+            for i, d, a in zip(s.obs.frames, s.geometry["closest_half_angle_per_frame_deg"],
+                               s.geometry["sun_view_angles_per_frame_deg"])]
 
 
 def beyond_data(result, channel, value, unseen=""):
