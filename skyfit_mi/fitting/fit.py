@@ -57,7 +57,7 @@ GREY_SPREAD = 0.02
 NOISE_SIGMAS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5)
 #: Largest growth of an automatically sized cache's positions, and the time a grown cache's
 #: trace may take [s] (estimated from the first trace's): the data's need, within a budget.
-CACHE_GROWTH_MAX, CACHE_TIME_BUDGET = 16, 20.0
+CACHE_GROWTH_MAX, CACHE_TIME_BUDGET = 32, 20.0
 #: Rounds of the model error's fit (kappa from the residuals, the parameters again at it) at
 #: most, and the relative change of kappa at which they stop (:meth:`FitSession._fit_model_error`).
 MODEL_ERROR_ROUNDS, MODEL_ERROR_RTOL = 8, 0.02
