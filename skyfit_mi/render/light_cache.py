@@ -75,8 +75,8 @@ SIGMA_TABLE = (SIGMA_RESOLVED, SIGMA_LARGEST)
 #: Samples per pixel by default: positions over the pixel's area (a highlight's radiance can
 #: vary by tens of per cent across one pixel) and light directions at each position.  An
 #: automatically sized cache starts at POSITIONS and grows where the data need it: the
-#: README's board spends at most 1.5% of its noise budget at 16 (docs/BENCHMARKS.md, "A fit's first
-#: positions").
+#: README's board spends at most 1.5% of its noise budget at 16 (docs/BENCHMARKS.md, "A
+#: fit's first positions").
 POSITIONS, DIRECTIONS = 16, 128
 #: Positions of a measured point by default: a point has no area, so its positions only
 #: repeat the directions' sampling (two halves for the cache's own error); an automatically
