@@ -39,7 +39,7 @@ MODELS = tuple(PARAMETERS)
 FOLDS = 4
 #: The ranking's light cache: positions per pixel (at most; fewer where the fit's cache has
 #: fewer) and the sky plan (its integrals at anchors,
-#: :data:`~skyfit_mi.render.light_cache.SKY_PLANS`), a seventh of a fit's trace: the
+#: :data:`~skyfit_mi.render.light_cache.SKY_PLANS`), cheaper than a fit's trace: the
 #: candidates' held-out chi-square moves by a few units on it, and the chosen one is traced
 #: again at the fit's own (docs/BENCHMARKS.md, "Lobe families").
 RANK_POSITIONS, RANK_PLAN = 8, "anchors"
