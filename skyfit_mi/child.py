@@ -1,17 +1,10 @@
 """Calls made in a child process, for code that may take its process down with it.
 
-A native library can abort the process instead of raising (Mitsuba's RGBE reader on a damaged
-file corrupts the heap and glibc aborts): no check of the input beforehand rules out every
-such fault, so the call runs in a child, whose death is one error line here.
-
-:class:`Child` is a fresh, isolated interpreter (``sys.executable -I -c``: the current folder
-is not on its path, and the caller's main module is never run again in it, as
-``multiprocessing``'s 'spawn' would).  It takes the parent's ``sys.path``, then serves calls
-pickled on its stdin, each answered pickled on its stdout, until the parent closes its stdin
-(:meth:`Child.close`, or at exit).  It is started at the first call (about 0.3 s) and again
-after a death.  Ctrl-C is the parent's to handle: the child ignores it.  A corrupted heap can
-also leave the child spinning forever rather than aborted (where the overrun lands decides
-which): a call may be given a deadline, past which the child is killed as if it had died.
+A native library can abort instead of raising (Mitsuba's RGBE reader on a damaged file), so
+such calls run in :class:`Child`: a fresh, isolated interpreter (``sys.executable -I -c``, so
+the caller's main module is never re-run) with the parent's ``sys.path``, serving pickled calls
+on its stdin and stdout.  It starts at the first call and after a death, ignores Ctrl-C, and is
+killed past a call's deadline (a corrupted heap can leave it spinning).
 """
 
 import atexit
@@ -25,9 +18,8 @@ import sys
 import tempfile
 import threading
 
-#: The child's program: Ctrl-C ignored, replies on a copy of its stdout while file descriptor 1
-#: (where a native library may print) points at stderr, the parent's ``sys.path`` (so that the
-#: calls' arguments unpickle as they would in the parent), then :func:`_serve`.
+#: The child's program: Ctrl-C ignored, replies on a copy of its stdout while fd 1 (where a
+#: native library may print) points at stderr, the parent's ``sys.path``, then :func:`_serve`.
 _SOURCE = """\
 import os, pickle, signal, sys
 signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -48,8 +40,7 @@ class CallFailed(Exception):
 
 
 def one_line(exc):
-    """An exception's message in one line: its last non-empty line (a native library's
-    messages span many), at most 200 characters; its type's name if it has none."""
+    """An exception's last non-empty message line, at most 200 characters (or its type's name)."""
     lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
     return (lines[-1] if lines else type(exc).__name__)[:200]
 
@@ -72,8 +63,7 @@ def _serve(requests, replies):
 
 
 class Child:
-    """One child process (module doc) serving :meth:`call` for this process, one call at a
-    time."""
+    """One child process (module doc) serving :meth:`call`, one call at a time."""
 
     def __init__(self):
         self._proc = None
@@ -94,17 +84,11 @@ class Child:
         pickle.dump(list(sys.path), self._proc.stdin)
 
     def call(self, function, *args, timeout=None):
-        """``function(*args)`` in the child: ``function`` names a module-level function,
-        'module:function'; its arguments and result must pickle.  ``timeout`` [s]: the
-        deadline for its answer (None: no deadline), for a child that may get stuck.
+        """``function(*args)`` in the child: ``function`` is 'module:function'; arguments and
+        result must pickle.  ``timeout`` [s]: the deadline for its answer (None: none).
 
-        Raises
-        ------
-        CallFailed
-            The call raised; its error in one line.
-        ChildDied
-            The child died during the call (a signal or an exit), or did not answer within
-            ``timeout`` and was killed; how, in one line.
+        Raises CallFailed (the call raised) or ChildDied (the child died, or did not answer
+        within ``timeout`` and was killed), each with a one-line message.
         """
         with self._lock:
             if self._proc is None or self._pid != os.getpid() or self._proc.poll() is not None:
@@ -136,8 +120,7 @@ class Child:
         raise CallFailed(value)
 
     def _death(self, proc, exc):
-        """How the child died, in one line: its signal or exit status and the last line it
-        wrote to stderr (e.g. glibc's 'free(): corrupted unsorted chunks')."""
+        """How the child died, in one line: its signal or exit status and its last stderr line."""
         try:
             code = proc.wait(timeout=10)
         except subprocess.TimeoutExpired:

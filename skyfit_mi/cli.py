@@ -14,12 +14,8 @@ import threading
 from contextlib import contextmanager
 from pathlib import Path
 
-#: NumPy's BLAS (OpenBLAS) on one thread in a `skyfit` process unless the environment says
-#: otherwise; set before NumPy loads.  Dr.Jit's pool does the heavy work on every core, and
-#: OpenBLAS's threads, spinning after each small product NumPy does between its kernels, took
-#: 0.5 CPU-seconds of a 13-frame render from it (docs/BENCHMARKS.md, "One BLAS thread"); fits
-#: and chi2map were no slower.  A map's Dask
-#: workers are set so by ``distributed`` already.
+#: NumPy's BLAS on one thread unless the environment says otherwise, set before NumPy loads:
+#: Dr.Jit's pool uses every core, and OpenBLAS's spinning threads took CPU time from it.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402 -- after the BLAS setting
@@ -34,8 +30,8 @@ from .pipeline.sky_series import (BRACKET_GAP_S, CARD_MAX_GAP_S, CARD_REFLECTANC
                                   CARD_SD, SERIES_NAME)
 from .render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS  # noqa: E402
 from .render.variant import VARIANTS  # noqa: E402
-# The modules above are light; each command imports those that do its work when it runs, so
-# that `skyfit --help` and a usage error start fast and load neither Mitsuba nor matplotlib.
+# The modules above are light; each command imports its heavy ones when it runs, so that
+# `skyfit --help` loads neither Mitsuba nor matplotlib.
 
 DESCRIPTION = ("Render daylight image sequences, fit Ward reflection models to them, and map "
                "the materials a camera sees.")
@@ -301,10 +297,8 @@ def _fit(args):
         if pixels is not None and len(kept[name]) < len(pixels):
             print(f"{name}: fitting {len(kept[name])} of its {len(pixels)} pixels "
                   f"(--max-pixels, seed {args.seed})")
-    # seeded by --seed with the method
     cache = FitCache(args.positions, args.directions, pose_sd_deg=args.pose_sd_deg)
-    # the light of every region traced together (each frame's kernels once), every region
-    # checked before the first is fitted and written
+    # every region's light traced together, and checked before the first is written
     if auto:
         from .fitting.selection import fit_auto
 
@@ -860,9 +854,8 @@ def _oneline(exc):
 
 @contextmanager
 def _ctrl_c_noted():
-    """Ctrl-C raises KeyboardInterrupt as usual, and is noted: an error raised while it unwinds
-    (a C++ extension's, or a file reader's that wrapped it) is the Ctrl-C, not a bug or a bad
-    input.  In the main thread only."""
+    """Ctrl-C raises KeyboardInterrupt as usual, and is noted, so that an error raised while it
+    unwinds (e.g. a C++ extension's) is reported as the Ctrl-C.  In the main thread only."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

@@ -2,41 +2,25 @@
 
 * World frame (Radiance's): +X east, +Y north, +Z up (right-handed).
 * Zenith angle ``theta`` [rad]: angle from +Z.  Altitude = pi/2 - theta.
-* Azimuth ``phi`` [rad]: compass bearing, measured from north (+Y) toward
-  east (+X), so east is pi/2, south pi, west 3 pi/2.  This is the solar
-  azimuth convention of NREL SPA / pvlib and of the thesis (eq. 4.4).
-* Degrees only at the user boundary (function arguments named ``*_deg``,
-  spec files, outputs); radians everywhere inside.
+* Azimuth ``phi`` [rad]: compass bearing from north (+Y) toward east (+X), so east is pi/2,
+  south pi; the solar azimuth convention of NREL SPA / pvlib and of the thesis (eq. 4.4).
+* Degrees only at the user boundary (arguments named ``*_deg``, spec files, outputs).
 """
 
 import numpy as np
 
 
 def direction_from_angles(theta, phi):
-    """Unit world vector(s) for zenith ``theta`` and compass azimuth ``phi``.
-
-    Parameters
-    ----------
-    theta : array_like
-        Zenith angle [rad].
-    phi : array_like
-        Compass azimuth, from north toward east [rad].
-
-    Returns
-    -------
-    ndarray, shape (..., 3)
-        (x east, y north, z up) [unitless].
-    """
+    """Unit world vector(s) (..., 3) for zenith ``theta`` [rad] and compass azimuth ``phi``
+    [rad]."""
     theta, phi = np.broadcast_arrays(np.asarray(theta, dtype=float), np.asarray(phi, dtype=float))
     s = np.sin(theta)
     return np.stack([s * np.sin(phi), s * np.cos(phi), np.cos(theta)], axis=-1)
 
 
 def angles_from_direction(d):
-    """Zenith and compass azimuth [rad] of world vector(s) ``d`` (..., 3).
-
-    The azimuth is in [0, 2 pi); it is 0 for a vertical vector.
-    """
+    """Zenith and compass azimuth [rad] of world vector(s) ``d`` (..., 3); the azimuth is in
+    [0, 2 pi), 0 for a vertical vector."""
     d = np.asarray(d, dtype=float)
     d = d / np.linalg.norm(d, axis=-1, keepdims=True)
     theta = np.arccos(np.clip(d[..., 2], -1.0, 1.0))

@@ -1,8 +1,5 @@
-"""The project's exception types.
-
-Every error raised on bad user input is a :class:`SkyfitError` (a
-``ValueError``), and its message says what was wrong and how to fix it.
-"""
+"""The project's exception types: every error on bad user input is a :class:`SkyfitError` (a
+``ValueError``) whose message says what was wrong and how to fix it."""
 
 import numpy as np
 
@@ -32,10 +29,7 @@ class SetupError(RuntimeError):
 
 
 def check_range(name, value, lo, hi, unit=""):
-    """Raise :class:`InputRangeError` unless ``lo <= value <= hi`` everywhere.
-
-    ``value`` may be a scalar or an array; NaN is rejected.
-    """
+    """Raise :class:`InputRangeError` unless ``lo <= value <= hi`` everywhere (NaN fails)."""
     v = np.asarray(value, dtype=float)
     if v.size and not (np.all(v >= lo) and np.all(v <= hi)):
         bad = v[~((v >= lo) & (v <= hi))].ravel()[0]

@@ -1,9 +1,7 @@
 """Writing output files: atomically (temporary file, then rename), with the user's umask.
 
-The one home of atomic writes.  Every file skyfit-mi writes goes through
-:func:`atomic_write`, so an interrupted run never leaves a half-written file under its
-final name, and a path that cannot be written gives one clear
-:class:`~skyfit_mi.errors.OutputError` instead of a traceback.
+Every file skyfit-mi writes goes through :func:`atomic_write`, so an interrupted run leaves no
+half-written file and an unwritable path gives one :class:`~skyfit_mi.errors.OutputError`.
 """
 
 import datetime as dt
@@ -44,8 +42,7 @@ def ensure_dir(path, what="output folder"):
 
 def check_dir(path, what="output folder"):
     """``path`` as a Path, or :class:`OutputError` unless it is a writable folder or one that
-    :func:`ensure_dir` could create (its nearest existing parent a writable folder); nothing
-    is created, so an input refused later leaves no empty folder behind."""
+    :func:`ensure_dir` could create; nothing is created."""
     path = Path(path)
     if path.exists():
         if not path.is_dir():
@@ -61,11 +58,8 @@ def check_dir(path, what="output folder"):
 
 
 def atomic_write(path, write):
-    """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it to ``path``.
-
-    The file gets the permissions a plain ``open`` would give (0666 less the umask);
-    a failure leaves any earlier ``path`` untouched and no temporary file behind.
-    """
+    """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it to ``path``
+    with mode 0666 less the umask; a failure leaves ``path`` untouched and no temporary file."""
     path = Path(path)
     if path.is_dir():
         raise OutputError(f"output {str(path)!r} is a folder; give a file path.")
@@ -122,8 +116,7 @@ def write_bytes(path, data):
 
 
 def figure_png(fig, dpi=120, close=True):
-    """A matplotlib figure as PNG bytes; the figure is closed unless not ``close`` (a figure
-    redrawn for the next file)."""
+    """A matplotlib figure as PNG bytes, closed if ``close``."""
     import matplotlib.pyplot as plt
 
     buf = io.BytesIO()
@@ -158,12 +151,8 @@ def _alive(pid):
 
 
 class FolderLock:
-    """Exclusive use of an output folder by one process (a context manager).
-
-    The lock is a file holding the owner's host, process id and start time, created with
-    O_EXCL so two writers cannot both take it.  A lock whose process no longer exists on this
-    host is stale (the owner was killed): it is taken over, and ``stale`` says so.
-    """
+    """Exclusive use of an output folder by one process (a context manager): an O_EXCL lock
+    file naming its owner; one whose process is gone from this host is taken over (``stale``)."""
 
     def __init__(self, folder, what="output folder"):
         self.path = Path(folder) / LOCK_NAME

@@ -1,21 +1,13 @@
 """Chi-square between observed pixel values and the model (thesis eq. 6.2), and the data it needs.
 
-chi^2 = sum_i ((y_i - y(x_i; a)) / sigma_i)^2 over every region pixel, frame and
-colour channel, with y the sensor's pixel values [DN] and sigma their standard
-deviations from the manifest's sensor model (a value with sigma = inf carries no
-information and drops out).  The model y(x; a) is the sensor model applied to the radiance the
-:class:`~skyfit_mi.render.fit_model.WardModel` renders for parameters a.
+chi^2 = sum_i ((y_i - y(x_i; a)) / sigma_i)^2 over every region pixel, frame and channel: y the
+sensor's values [DN], sigma their standard deviations (inf: no information), y(x; a) the sensor
+model applied to the model's radiance for parameters a.
 
-Values at code 0 or at the top code with a finite sigma are censored, not
-measured: the sensor clipped a noisy signal that fell below 0.5 DN or above
-max - 0.5 DN.  Taking them as exact biases dark channels upward (and bright ones
-downward) under strong noise, so each contributes -2 ln P(y = 0) =
--2 ln Phi((0.5 - y(x; a)) / sigma), or -2 ln P(y = max) = -2 ln Phi((y(x; a) -
-max + 0.5) / sigma), instead of its squared residual (the Tobit likelihood);
-chi^2 stays -2 ln(likelihood) up to a constant, and is eq. 6.2 when nothing is
-clipped.  An observation table's saturated value (the level its instrument clipped at) enters
-exactly so: :func:`load_table_observations` puts it at the top code, with a gain of its own
-that takes its level to max - 0.5.
+Values at code 0 or the top code are censored (taken as exact they bias dark channels up and
+bright ones down): each contributes -2 ln Phi((0.5 - y(x; a)) / sigma), or
+-2 ln Phi((y(x; a) - max + 0.5) / sigma), instead of its squared residual (the Tobit likelihood),
+so chi^2 stays -2 ln(likelihood) up to a constant, eq. 6.2 when nothing clips.
 """
 
 import functools
@@ -37,8 +29,7 @@ from ..render.light_cache import point_rays
 
 #: Values below this [DN] read as code 0.
 LOW_CODE = 0.5
-#: A region's mean in a frame and channel (a table's value on its own) that the data measured:
-#: none of its values clipped and its standard error at most this share of it
+#: Largest relative standard error of a region mean (or table value) that counts as measured
 #: (:meth:`Problem.measured_range`).
 MEASURED_SE = 0.1
 
@@ -47,15 +38,13 @@ MEASURED_SE = 0.1
 class Observations:
     """Observed values of a region across a sequence.
 
-    y, sigma : (P, T, 3) [DN] (sigma inf: the value carries no information);
-    gain : (P, T, 3) radiance -> signal factor [sr m^2 W^-1] (each frame's exposure and white
-    balance, times the pixel's off-axis falloff);  pixels : (P, 2) (x, y), or for an
-    observation table the points' names (P,);  frames : manifest frame indices (T,);  times :
-    ISO strings (None for a lab light: frames by index);  warnings : what the loading
-    noticed (incomplete render, values left out);
-    rays : for a table, the :class:`~skyfit_mi.render.light_cache.PointRays` that meet its
-    points (None for pixels);  luminance : the values are luminances (first channel; the
-    model's must be mixed by :class:`LuminanceModel`).
+    y, sigma : (P, T, 3) [DN] (sigma inf: no information)
+    gain : (P, T, 3) radiance -> signal factor [sr m^2 W^-1] (exposure, white balance, falloff)
+    pixels : (P, 2) (x, y), or a table's point names (P,)
+    frames, times : manifest frame indices (T,) and ISO times (None for a lab light)
+    warnings : what loading noticed (incomplete render, values left out)
+    rays : a table's :class:`~skyfit_mi.render.light_cache.PointRays` (None for pixels)
+    luminance : the values are luminances (first channel; see :class:`LuminanceModel`)
     """
 
     pixels: np.ndarray
@@ -70,8 +59,7 @@ class Observations:
     luminance: bool = False
 
     def recapture(self, radiance, rng):
-        """Replace y and sigma by a new capture of ``radiance`` (P, T, 3) [W m^-2 sr^-1]
-        through the sensor model with ``rng``: a noise replicate, for coverage studies."""
+        """Replace y and sigma by a noise replicate of ``radiance`` (P, T, 3) [W m^-2 sr^-1]."""
         y, sigma = self.sensor.capture(radiance * self.gain / self.sensor.exposure, rng)
         self.y, self.sigma = y.astype(float), sigma.astype(float)
 
@@ -119,9 +107,8 @@ def region_from_mask(path, label, shape=None):
     return np.stack([xs, ys], axis=1)
 
 
-#: The pixels of a region a fit takes at most when not told (``fit --max-pixels``; a seeded
-#: random subset): 64 tell a material's parameters to well within their intervals at a fraction
-#: of the time every pixel of a large region would take.
+#: Default most pixels of a region a fit takes (``fit --max-pixels``; a seeded random subset):
+#: enough to tell a material well within its intervals, far faster than every pixel.
 REGION_PIXELS = 64
 
 
@@ -137,22 +124,18 @@ def subsample_region(pixels, max_pixels, seed):
 
 
 def _region_values(root, frame, key, pixels, shape):
-    """The region's values in one frame's EXR ``frame[key]``, checked: readable, of the
-    manifest's size; only the region's rows are read."""
+    """The region's values in one frame's EXR ``frame[key]``, checked (readable, right size)."""
     return read_frame_pixels(root, frame, key, shape, pixels)
 
 
 def load_table_observations(manifest_path, region, points=None, frames=None, min_frames=2):
     """A region's values and sigmas from a sequence's observation table
-    (:mod:`~skyfit_mi.pipeline.observation_table`), on the linear scale of its sensor record,
-    with the rays that meet its points; ``points`` (names) default to all of the region's.
+    (:mod:`~skyfit_mi.pipeline.observation_table`), on its sensor's linear scale, with the rays
+    that meet its points; ``points`` (names) default to all of the region's.
 
-    A saturated value v (the level its instrument clipped at) is read as an image's clipped
-    pixel: at the top code, with a gain of its own, (max - 0.5) / (max v), that takes radiance
-    v to the clip point max - 0.5 and its sigma alike, so that its censored term is
-    -2 ln Phi((L - v) / sigma) [radiance units] for a model radiance L up to v, and the model's
-    signal clips at the top as a sensor's does (the censored term then constant): the Tobit
-    term of an image's top code, and left out of the global search's linear grid as it is."""
+    A saturated value v reads as an image's clipped pixel: at the top code, with its own gain
+    (max - 0.5) / (max v) taking v to the clip point, so its Tobit term is
+    -2 ln Phi((L - v) / sigma) for a model radiance L."""
     doc, root = load_manifest(manifest_path)
     rows = table_observations(doc, root, region, points, frames)
     fr = rows.frames
@@ -168,8 +151,7 @@ def load_table_observations(manifest_path, region, points=None, frames=None, min
     sensor = sensor_from_record(doc["sensor"])
     top = float(sensor.max_code)
     sat = rows.saturated
-    # radiance -> normalised signal: the sensor's exposure; a saturated value's own, which
-    # takes its level to the clip point (top - LOW_CODE) / top
+    # radiance -> normalised signal; a saturated value's gain takes it to the clip point
     gain = np.where(sat, (top - LOW_CODE) / (top * np.where(sat, rows.value, 1.0)),
                     sensor.exposure)
     return Observations(np.array(rows.names, dtype=object), fr,
@@ -181,11 +163,10 @@ def load_table_observations(manifest_path, region, points=None, frames=None, min
 
 
 class LuminanceModel:
-    """A radiance model whose outputs' first channel is the luminance-weighted radiance
-    Y = SRGB_LUMINANCE . (R, G, B) [W m^-2 sr^-1] (the others unchanged), for observations of
-    luminance (:func:`load_table_observations`): every output the fit uses (radiance, its
-    variance, Jacobian, the global search's basis, gradients) is mixed alike, so chi-square,
-    the grid and the intervals see Y.  Attributes not mixed pass through to ``model`` (its ``model`` name among them)."""
+    """A radiance model whose first output channel is the luminance Y = SRGB_LUMINANCE . (R, G, B)
+    [W m^-2 sr^-1] (the others unchanged), for luminance observations: every output the fit uses
+    (radiance, variance, Jacobian, basis, gradients) is mixed alike. Other attributes pass
+    through to ``model``."""
 
     def __init__(self, model):
         self.inner = model
@@ -214,8 +195,7 @@ class LuminanceModel:
 
     def radiance_and_variance(self, theta):
         L, var = self.inner.radiance_and_variance(theta)
-        # channels' estimates share their samples: the variance of a sum is at most the square
-        # of the sum of standard deviations (taken, to stay on the safe side)
+        # channels share their samples: bound the sum's variance by (sum of sds)^2
         return self._mix(L), self._mix(np.sqrt(var)) ** 2
 
     def jacobian(self, theta):
@@ -238,8 +218,8 @@ class LuminanceModel:
 
 
 def block_sharing(pixels, block=8, offset=(0, 0)):
-    """How many of ``pixels`` (P, 2) (x, y) lie in each one's 8x8 JPEG block, (P,); the
-    blocks start at ``offset`` (x, y) (a turned frame's, ``jpeg_block_offset``)."""
+    """How many of ``pixels`` (P, 2) (x, y) lie in each one's 8x8 JPEG block (P,); blocks start
+    at ``offset`` (x, y) (``jpeg_block_offset``)."""
     cells = (np.asarray(pixels, dtype=int).reshape(-1, 2) - np.asarray(offset, dtype=int)) \
         // block
     _, inverse, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
@@ -247,11 +227,9 @@ def block_sharing(pixels, block=8, offset=(0, 0)):
 
 
 def neighbour_sharing(pixels, correlation):
-    """Kish's design effect of each of ``pixels`` (P, 2) (x, y) per channel, (P, 3): 1 plus
+    """Kish's design effect of each of ``pixels`` (P, 2) per channel (P, 3), at least 1: 1 plus
     the sum of its error's correlation with the others' within R pixels, ``correlation`` (3,
-    2 R + 1, 2 R + 1) by offset (dy, dx) from the centre (a RAW frame's
-    ``raw_demosaic.noise_correlation``: demosaicing draws a pixel's colours from its
-    neighbours' photosites); at least 1."""
+    2 R + 1, 2 R + 1) by offset (dy, dx) (a RAW frame's ``raw_demosaic.noise_correlation``)."""
     px = np.asarray(pixels, dtype=int).reshape(-1, 2)
     corr = np.asarray(correlation, dtype=float)
     n = corr.shape[-1] // 2
@@ -268,34 +246,19 @@ def neighbour_sharing(pixels, correlation):
 
 @functools.lru_cache(maxsize=4)
 def _colour_mixed(root, run_id, reach):
-    """:func:`~skyfit_mi.pipeline.pixels.colour_mixed` of the sequence in ``root`` (its
-    ``run_id`` keys the cache: the label image is a ray cast of the scene)."""
+    """:func:`~skyfit_mi.pipeline.pixels.colour_mixed` of the sequence in ``root`` (cached)."""
     return colour_mixed(scene_labels(root)[2], reach)
 
 
 def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=True):
     """Read a region's pixel values and sigmas from the rendered frames of a manifest.
 
-    Parameters
-    ----------
-    manifest_path : folder written by ``skyfit render`` (or its manifest.json)
-    pixels : (P, 2) pixel (x, y) coordinates
-    frames : manifest frame indices to use (default: every rendered frame)
-
-    Each frame file is checked (readable, the camera's size).  Non-finite values or
-    sigmas (NaN, a damaged pixel) are left out and counted in ``warnings``; a frame
-    with none of the region's values finite is refused by name.  Each frame's own
-    exposure (``exposure`` record, with white balance) sets its gain.  A JPEG frame's errors
-    are correlated within its 8x8 blocks (``jpeg_block_correlation`` rho, from ingest's
-    bootstrap): the sigma of a pixel whose block holds k of the region's pixels is widened by
-    sqrt(1 + (k - 1) rho), Kish's design effect, so that the k carry what their correlated
-    errors let them tell (the chi-square stays a sum over pixels as if independent); a RAW
-    frame's, whose demosaicing correlates neighbouring pixels' errors
-    (``raw_demosaic.noise_correlation``), by the square root of :func:`neighbour_sharing`;
-    neither when the pixels are fitted each on its own (``one_fit`` False: a map).  Pixels
-    whose colour a frame mixes with another material's (a JPEG's subsampled chroma, a RAW's
-    demosaicing: :func:`~skyfit_mi.pipeline.region_edges.colour_reach`) are left out of a region's
-    fit, with a warning (a map keeps them).
+    ``pixels`` (P, 2) (x, y); ``frames``: manifest frame indices (default every rendered one).
+    Non-finite values are left out (counted in ``warnings``; a frame with none finite raises
+    SkyfitError). Correlated errors widen sigma by Kish's design effect, sqrt(1 + (k - 1) rho)
+    for k region pixels in a JPEG block, sqrt(:func:`neighbour_sharing`) for RAW demosaicing,
+    except for per-pixel fits (``one_fit`` False), which also keep the pixels whose colour a
+    frame mixes with another material's (else left out with a warning).
     """
     doc, root = load_manifest(manifest_path)
     cam = doc["camera"]
@@ -378,10 +341,7 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
 
 
 def check_regions(manifest_path, regions, frames=None):
-    """Load the observations of every region [(material, pixels, or None for a table's
-    points)] and light their frames (``frames``: these indices only), so that a bad region,
-    frame or light is refused before the first region's fit is written; the frames' images
-    stay in the frame cache for the fits."""
+    """Check every region [(material, pixels or None)] and its frames before any fit is written."""
     doc, root = load_manifest(manifest_path)
     materials = doc["scene"]["materials"]
     for name, pixels in regions:
@@ -398,11 +358,10 @@ def check_regions(manifest_path, regions, frames=None):
 def censored_term_moments(a, b):
     """Mean and variance of one value's chi^2 term under pure noise (the Tobit terms above).
 
-    The value is m + sigma e with e standard normal, clipped below at a (standard units: code 0
-    when e < a) and above at b; it contributes e^2 between them and -2 ln P at a clipped end
-    of probability P.  With the truncated normal moments
-    int_a^b e^2 phi = [Phi - e phi]_a^b and int_a^b e^4 phi = [3 Phi - (e^3 + 3 e) phi]_a^b.
-    Returns (mean, variance) arrays; (1, 2) for values far from both ends.
+    The value is m + sigma e, e standard normal, clipped at a and b (standard units); it
+    contributes e^2 between them and -2 ln P at a clipped end of probability P. Truncated
+    moments: int_a^b e^2 phi = [Phi - e phi]_a^b, int_a^b e^4 phi = [3 Phi - (e^3 + 3 e) phi]_a^b.
+    Returns (mean, variance) arrays; (1, 2) far from both ends.
     """
     a = np.clip(np.asarray(a, float), -40.0, 40.0)
     b = np.clip(np.asarray(b, float), -40.0, 40.0)
@@ -418,8 +377,7 @@ def censored_term_moments(a, b):
 
 
 def usable_values(obs, valid=None):
-    """Which of ``obs``'s values (P, T, 3) carry information: a finite, positive sigma, and
-    ``valid`` (P, T) where given (the pixel shows its material)."""
+    """Which of ``obs``'s values (P, T, 3) carry information (finite positive sigma, ``valid``)."""
     ok = np.isfinite(obs.sigma) & (obs.sigma > 0)
     return ok if valid is None else ok & valid[..., None]
 
@@ -457,19 +415,15 @@ class Problem:
         return self.mask & (self.obs.y <= 0), self.mask & (self.obs.y >= self.obs.sensor.max_code)
 
     def measured(self):
-        """Boolean mask of the usable values that are not clipped: those that tell a
-        residual (a clipped one tells only a bound)."""
+        """Boolean mask of the usable values not clipped (a clipped one tells only a bound)."""
         low, high = self.clipped()
         return self.mask & ~low & ~high
 
     def measured_range(self, radiance, means=True):
-        """Per channel, the radiance range [lo, hi] [W m^-2 sr^-1] that the data measured, or
-        None for a channel they measured nowhere: from the least region mean over the frames
-        (``means``; else the least value, a table's points) that holds no value clipped at the
-        top code and whose standard error (the unclipped values' sigma through the response's
-        slope at ``radiance``, the model's) is at most MEASURED_SE of it, to the greatest value
-        not clipped.  A prediction beyond it rests on the model alone: dimmer than the noise
-        let the data tell, or brighter than any value the sensor measured."""
+        """Per channel, the radiance range [lo, hi] [W m^-2 sr^-1] the data measured (None:
+        nowhere): from the least region mean (``means``; else value) with nothing clipped at the
+        top and relative standard error at most MEASURED_SE, to the greatest unclipped value.
+        A prediction beyond it rests on the model alone."""
         _, high = self.clipped()
         slope = self.slope(radiance)
         ok = self.measured() & (slope > 0)
@@ -509,15 +463,8 @@ class Problem:
         return r, dr
 
     def noise_chi2(self, theta):
-        """Mean and variance of the chi^2 that noise alone gives at ``theta``, scaled to the
-        degrees of freedom (dof and 2 dof when nothing can clip).
-
-        A clipped value's term -2 ln P(clipped) is not a squared standard normal: a channel
-        whose model value sits near code 0 (a dark day, strong noise) expects
-        P (-2 ln P) + (the unclipped part), up to 1.39 at P = 1/2, so the misfit test must
-        compare chi^2 with this sum, not with dof (an overcast test day at 5% noise, a
-        sixth of its values at code 0: chi^2/dof 1.21, chi^2/expected 1.0).
-        """
+        """Mean and variance of the chi^2 noise alone gives at ``theta``, scaled to the dof (dof
+        and 2 dof when nothing can clip; a clipped term expects up to 1.39)."""
         m = self.predict(self.model.radiance(theta))[self.mask]
         sig = self.obs.sigma[self.mask]
         mean, var = censored_term_moments((LOW_CODE - m) / sig,
@@ -526,27 +473,17 @@ class Problem:
         return float(mean.sum() * share), float(var.sum() * share)
 
     def value_scale(self, theta):
-        """Each value's own size [DN], by which the model's relative error scales (P, T, 3):
-        the radiance the observed value stands for, through the sensor's slope (the value
-        itself for a linear sensor); for a clipped value, which tells only a bound, the
-        model's at ``theta``.  The observed value, not the model's: under a misfit, weights
-        that follow the model's own misses (a lobe short of the highlight weighting the
-        highlight up) swing the fit between readings, each one's weights favouring the other
-        (a two-lobe material: a broad and a narrow Ward lobe in turn, never settling), while
-        the observed value is the surface's own (the model's error is not in the data).
-        Where the error is random instead (the values themselves scattered by kappa), a value
-        scattered low weighs more, and the reflectances come out low by about 2 kappa^2
-        (2.3% measured at kappa 0.1)."""
+        """Each value's own size [DN] (P, T, 3), by which the model's relative error scales: the
+        observed value (a clipped one: the model's at ``theta``), since weights following the
+        model's misses keep a misfit fit from settling (cost: a bias of about 2 kappa^2)."""
         measured = self.obs.sensor.linearise(self.obs.y) / self.obs.gain
         low, high = self.clipped()
         L = np.where(low | high, self.model.radiance(theta), measured)
         return L * self.slope(L)
 
     def model_error(self, theta):
-        """The model's relative error beyond the noise at ``theta``
-        (:func:`~skyfit_mi.fitting.uncertainty.model_error`, a ModelError), from the measured
-        values (clipped ones tell no residual); each value's noise variance includes the
-        model's own Monte Carlo variance, which is not the model's error."""
+        """The model's relative error beyond the noise (incl. Monte Carlo) at ``theta``, from
+        the unclipped values (:func:`~.uncertainty.model_error`)."""
         L, var = self.model.radiance_and_variance(theta)
         use = self.measured()
         return unc.model_error((self.obs.y - self.predict(L))[use],
@@ -579,19 +516,13 @@ class Problem:
         return float(r @ r)
 
     def model_noise_chi2(self, theta):
-        """Expected share of chi^2 at ``theta`` due to the model's own Monte Carlo variance:
-        sum of var(y(x; a)) / sigma^2 (the model's radiance variance through the sensor's slope).
-
-        It also sets the size of chi^2's ripples between nearby parameters, which the same
-        samples make only partly alike.
-        """
+        """Expected share of chi^2 at ``theta`` from the model's own Monte Carlo variance,
+        sum var(y(x; a)) / sigma^2; also the size of chi^2's ripples between nearby parameters."""
         L, var = self.model.radiance_and_variance(theta)
         return float(np.sum((self.slope(L) ** 2 * var / self.obs.sigma**2)[self.mask]))
 
     def jacobian(self, theta, full=False):
-        """(residuals, d residuals / d theta) with the model's forward-mode derivatives, over
-        the usable values (flat); with ``full`` every value's, shapes (P, T, 3) and
-        (P, T, 3, n_params) (``mask`` says which are usable)."""
+        """(residuals, d residuals / d theta) over the usable values, or with ``full`` all."""
         self.evaluations += 1
         L, dL = self.model.jacobian(theta)
         r, dr = self.residual_terms(L)

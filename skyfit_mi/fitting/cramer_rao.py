@@ -1,10 +1,8 @@
 """The Cramer-Rao bound: the smallest standard deviation any unbiased fit can reach.
 
-The intervals of :mod:`uncertainty` are judged by it (``scripts/coverage.py``): a fit whose
-scatter over noise realisations is near the bound uses the data fully. The data are the
-sensor's: Gaussian read-out of standard deviation ``sigma`` (digital codes) about the mean
-code ``m``, clipped at both ends of the range; a clipped value says only that the mean lies
-beyond the clip (a censored, Tobit, observation; thesis eq. 6.2 is the unclipped case).
+The intervals of :mod:`uncertainty` are judged by it (``scripts/coverage.py``). The data are
+Gaussian read-out (``sigma`` codes) about the mean code ``m``, clipped at both ends of the range:
+a clipped value is a censored (Tobit) observation (thesis eq. 6.2 is the unclipped case).
 """
 
 import numpy as np
@@ -31,11 +29,8 @@ def censored_information(m, sigma, max_code):
 
 
 def fisher_jacobian(session, theta, sigma):
-    """J with J^T J the Fisher information of a region's data at ``theta`` (one row per value).
-
-    ``session`` is a :class:`~skyfit_mi.fitting.fit.FitSession`; ``sigma`` the read-out noise in
-    codes (scalar or per value); the sensor's range comes from the session's observations.
-    """
+    """J with J^T J the Fisher information of a :class:`~.fit.FitSession`'s data at ``theta``
+    (one row per value); ``sigma`` the read-out noise [codes] (scalar or per value)."""
     problem = session.problem
     L, dL = session.wm.jacobian(theta)
     info = censored_information(problem.predict(L), sigma, session.obs.sensor.max_code)

@@ -1,16 +1,7 @@
-"""Parameter sets drawn from the likelihood of a region's data: the joint uncertainty its
-values leave (thesis ch. 6: chi-square's rise above its minimum is -2 ln L, scaled as the
-intervals scale it), for the bands of a relight of the fitted sequence itself.
-
-The intervals are each parameter's range over every other's; drawn independently from them,
-parameter sets wander along directions the data cannot tell apart (a grey plastic and its
-metal twin, a roughness below what the geometry shows) and beyond, into radiances the data
-exclude.  These draws stay on what the data allow: importance sampling from the intervals'
-Gaussian, then from a mixture around the sets the data favour (population Monte Carlo),
-until the draws' effective number reaches what a band needs.  Errors the fitted sequence's
-light and calibration share with its relight (the sun's and sky's level, the exposure, the
-pose) are not in them: they cancel there; a relight of other light draws from the
-intervals, which hold them (:func:`~.relight.parameter_draws`)."""
+"""Parameter sets drawn from the likelihood of a region's data (thesis ch. 6: chi-square's rise is
+-2 ln L), for the bands of a relight of the fitted sequence itself: unlike sets drawn from the
+intervals, they stay where the data allow. Errors the sequence shares with its own relight (light
+level, exposure, pose) cancel there and are left out."""
 
 from dataclasses import dataclass
 
@@ -21,10 +12,8 @@ from .uncertainty import LEVELS, Z
 
 #: Parameter sets kept (relight's default draws) and tried in each round of the sampling.
 DRAWS, PROPOSALS = 200, 1000
-#: Rounds of the sampling, at most and at least: the first from the intervals, each later
-#: one from a mixture around the sets the rounds before favoured; it stops once the draws'
-#: effective number is enough and no smaller than the round before's (a fall means a round
-#: found likelihood that the proposals before had missed: a ridge's far end).
+#: Most and least rounds of the sampling; it stops once the effective number suffices and did
+#: not fall (a fall means a round found likelihood the earlier proposals missed).
 ROUNDS, MIN_ROUNDS = 6, 3
 #: A mixture component's covariance: that of this many favoured sets nearest it, its width
 #: times SPREAD, plus FLOOR times the first proposal's covariance.
@@ -35,9 +24,7 @@ CHUNK_VALUES = 2**22
 
 @dataclass
 class Draws:
-    """``values`` (n, parameters) drawn from the data's likelihood; ``effective_size`` the
-    importance weights' effective number of draws behind them, ``proposals`` the sets tried
-    in ``rounds`` rounds."""
+    """``values`` (n, parameters) drawn from the likelihood, with the sampling's statistics."""
 
     values: np.ndarray
     effective_size: float
@@ -46,17 +33,10 @@ class Draws:
 
 
 def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n=DRAWS):
-    """``n`` parameter sets drawn with probability exp(-(chi2 - chi2_min) / (2 ``scale``))
-    within the bounds (a flat prior), where chi2 is ``problem``'s (:class:`~.chi2.Problem`)
-    and ``theta`` its minimum, by importance sampling: the first proposal is the Gaussian of
-    ``cov`` (the intervals' widths and the covariance's correlations,
-    :func:`interval_covariance`), each later one a mixture around ``n`` sets the rounds so far
-    favour (:func:`_local_kernels`); every set is weighted against the mixture of all the
-    rounds' proposals, each by its share of the sets (deterministic-mixture weights, which a
-    lucky set of a broad round cannot dominate), until the weights make ``n`` effective
-    draws.  None where they do not after ROUNDS (intervals far wider than the likelihood,
-    which errors the data share widen), or where no set lies within the bounds or has a
-    finite chi-square: relight then takes the intervals."""
+    """``n`` parameter sets drawn with probability exp(-(chi2 - chi2_min) / (2 ``scale``)) within
+    the bounds, by importance sampling (population Monte Carlo): first from the Gaussian of
+    ``cov``, then mixtures around the favoured sets, with deterministic-mixture weights, until
+    ``n`` effective draws. None where that fails after ROUNDS or no set is valid."""
     rng = np.random.default_rng(seed)
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     first = _psd(cov) + np.diag((1e-6 * (upper - lower)) ** 2)
@@ -99,10 +79,8 @@ def _psd(cov):
 
 
 def _local_kernels(means, first):
-    """Each mixture component's covariance: that of the NEIGHBOURS ``means`` nearest it (in
-    the first proposal's metric), widened by SPREAD, so that a thin curved ridge of the
-    likelihood is followed along and not across; with FLOOR of the first proposal's
-    covariance ``first``, so that no component collapses onto repeated sets."""
+    """Each mixture component's covariance: its NEIGHBOURS nearest ``means``' times SPREAD (to
+    follow a curved ridge), plus FLOOR times ``first`` (so none collapses)."""
     z = np.linalg.solve(np.linalg.cholesky(first), means.T).T
     dist = np.sum((z[:, None] - z[None]) ** 2, axis=-1)
     near = np.argsort(dist, axis=1)[:, :min(NEIGHBOURS, len(means))]
@@ -112,10 +90,8 @@ def _local_kernels(means, first):
 
 
 def interval_covariance(intervals95, covariance=None):
-    """The Gaussian of a fit's intervals: each parameter's sd from its 95% interval
-    ``intervals95`` (n, 2), half-width / 1.96 (so profile and one-sided intervals count at
-    their full width), with the correlations of ``covariance`` (n, n) where it is given and
-    finite."""
+    """The Gaussian of a fit's intervals: sds from ``intervals95`` (n, 2) half-widths / 1.96,
+    correlations from ``covariance`` (n, n) where given and finite."""
     iv = np.asarray(intervals95, dtype=float)
     sd = (iv[:, 1] - iv[:, 0]) / (2 * Z["95"])
     corr = np.eye(len(iv))
@@ -128,16 +104,13 @@ def interval_covariance(intervals95, covariance=None):
 
 
 def draws_scale(interval_scale, channel_factors, ripple):
-    """The scale of chi-square's rise in the draws' likelihood: the intervals' s^2 (the
-    largest channel factor's), with the light cache's ripple ``ripple`` spread so that the
-    95% level lies where the intervals put it (LEVELS 95 s^2 + ripple)."""
+    """The scale of chi-square's rise in the draws' likelihood: s^2 times the largest channel
+    factor, with ``ripple`` spread so the 95% level lies at LEVELS 95 s^2 + ripple."""
     return interval_scale * float(np.max(channel_factors)) + ripple / LEVELS["95"]
 
 
 def _propose(rng, means, kernels, lower, upper):
-    """Up to PROPOSALS sets from the equal mixture of Gaussians at ``means`` (K, n) with
-    covariances ``kernels`` (K, n, n), truncated to the bounds; with the share of the mixture
-    within them."""
+    """(Up to PROPOSALS sets of the Gaussian mixture within the bounds, its share within them)."""
     roots = np.array([root_of(k) for k in kernels])
     kept, tried = [], 0
     while sum(len(k) for k in kept) < PROPOSALS and tried < 50 * PROPOSALS:
@@ -159,8 +132,7 @@ def root_of(cov):
 
 
 def _log_mixture(x, means, kernels):
-    """Log density at ``x`` (m, n) of the equal mixture of Gaussians at ``means`` (K, n) with
-    covariances ``kernels`` (K, n, n)."""
+    """Log density at ``x`` (m, n) of the equal Gaussian mixture ``means``, ``kernels``."""
     chol = np.linalg.cholesky(kernels)                                      # (K, n, n)
     whiten = np.linalg.inv(chol)
     z = whiten @ x.T - whiten @ means[:, :, None]                          # (K, n, m)
@@ -171,9 +143,7 @@ def _log_mixture(x, means, kernels):
 
 
 def _chi2s(problem, x):
-    """Chi-square of ``problem`` at each set of ``x``, the radiances of as many sets made at
-    once as hold CHUNK_VALUES values (a lobe of the light table for each roughness: 64 of a
-    board region's in 20 ms)."""
+    """Chi-square of ``problem`` at each set of ``x``, CHUNK_VALUES values' radiance at a time."""
     step = max(1, CHUNK_VALUES // problem.obs.y.size)
     return np.concatenate([problem.chi2s(problem.model.radiances(x[start:start + step]))
                            for start in range(0, len(x), step)])

@@ -1,11 +1,8 @@
 """Fit Ward parameters to a region of a rendered or photographed sequence (thesis ch. 6-7).
 
-:func:`fit_region` loads the region's pixel values and sigmas from a manifest, caches
-the light arriving at those pixels (one Mitsuba pass), builds chi-square (eq. 6.2) over
-the Dr.Jit model, runs the chosen method, and reports parameters, chi-square,
-chi-square per degree of freedom, evaluations, wall time, seed, 68%/95% intervals and
-identifiability warnings.  :func:`write_fit` writes the JSON and the observed-vs-model
-plot (thesis fig. 7.14).
+:func:`fit_region` loads the region's values and sigmas, caches the light at its pixels (one
+Mitsuba pass), builds chi-square (eq. 6.2) and runs the chosen method; it returns parameters,
+68%/95% intervals and warnings (:mod:`~.report` writes them).
 """
 
 import time
@@ -48,18 +45,18 @@ from ..physics.turbid_sky import level_factors
 from ..physics.ward import METAL_THRESHOLD
 
 
-#: Largest spread of C's channels for which the cache-error estimate treats the colour rule's
-#: two readings as one BRDF (:meth:`FitSession._same_reading`).
+#: Largest spread of C's channels for which the colour rule's two readings count as one BRDF
+#: (:meth:`FitSession._same_reading`).
 GREY_SPREAD = 0.02
 
 
 #: Roughness values at which the model's own noise is reported [rms slope].
 NOISE_SIGMAS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5)
-#: Largest growth of an automatically sized cache's positions, and the time a grown cache's
-#: trace may take [s] (estimated from the first trace's): the data's need, within a budget.
+#: Largest growth of an automatically sized cache's positions, and the time budget of a grown
+#: cache's trace [s] (estimated from the first trace's).
 CACHE_GROWTH_MAX, CACHE_TIME_BUDGET = 32, 20.0
-#: Rounds of the model error's fit (kappa from the residuals, the parameters again at it) at
-#: most, and the relative change of kappa at which they stop (:meth:`FitSession._fit_model_error`).
+#: Most rounds of the model error's fit, and the relative change of kappa that stops them
+#: (:meth:`FitSession._fit_model_error`).
 MODEL_ERROR_ROUNDS, MODEL_ERROR_RTOL = 8, 0.02
 
 
@@ -67,42 +64,23 @@ MODEL_ERROR_ROUNDS, MODEL_ERROR_RTOL = 8, 0.02
 class FitState:
     """A region's fit while its intervals and warnings are worked out (:meth:`FitSession.run`).
 
-    method, theta, chi2 : the method, its minimum and chi-square there (``problem``'s: with
-        the model's error where fitted)
-    problem : the chi-square the fit minimised (:class:`~.chi2.Problem`): the session's, or
-        with each value's sigma widened by the model's error
-    model_error : the model's error (:class:`~.uncertainty.ModelError`) where chi-square
-        exceeded what noise explains significantly, else None; ``model_error_rounds`` its
-        fit's (:meth:`FitSession._fit_model_error`), and ``misfit`` the
-        :class:`~.uncertainty.MisfitTest` of the chi-square without it
-    interval_scale : s^2, the scale of chi-square's rise for an interval (chi-square over what
-        the noise and the model's error give, where the model still misses the data; else 1)
+    method, theta, chi2 : the method, its minimum and ``problem``'s chi-square there
+    problem : the chi-square minimised, sigmas widened by the model's error where fitted
+    model_error, model_error_rounds, misfit : the fitted :class:`~.uncertainty.ModelError` (None
+        without significant misfit), its rounds, and the :class:`~.uncertainty.MisfitTest`
+    interval_scale : s^2 (1 unless the model still misses the data)
     curvature_inverse : (J^T J)^-1 at the minimum
-    channel_factors : each parameter's widening of its variance by errors shared by a value's
-        channels (:func:`~.uncertainty.channel_factors`), and ``channel_correlation`` theirs
+    channel_factors, channel_correlation : by :func:`~.uncertainty.channel_factors`
     covariance : the parameters' covariance (curvature, scale and channel factors)
-    method_result, global_result : the method's result dict and the global search's (the same
-        for the global method): its grid gives the profiles
-    model_noise_by_sigma : the light cache's own share of chi-square by roughness
-    noise_chi2 : mean and variance of the chi-square noise alone gives at the fit
-    intervals, rise, cache_noise_chi2, cache_sd, sun_level_sd : set by
-        :func:`~.intervals.fit_intervals`: every parameter's 68%/95% intervals, the profiles' rise,
-        the chi-square the cache's noise may add (the intervals allow for it), the standard
-        errors from the cache's samples and from the sun's level
-        (:func:`~.sky_fit.light_level_sd`)
-    jpeg_shared_sd, calibration_sd : the standard errors from the rounding a JPEG frame's
-        blocks share over the region and from a photographed sequence's calibration, errors
-        every value of a frame shares (:func:`~.uncertainty.shared_error_sd`; zeros without
-        JPEG frames, or calibration)
-    matrix_sd : the standard errors from the camera's colour matrix, an error every value of
-        the day shares (:func:`~.intervals.matrix_sd`; zeros without its prior)
-    sky : what the light adds to the parameters' errors (:class:`~.sky_fit.SkyShare`)
-    pose : what the camera pose's uncertainty adds (:class:`~.pose.PoseShare`)
-    draws : parameter sets drawn from the likelihood of the region's data
-        (:class:`~.draws.Draws`), for the bands of a relight of this sequence
-    held_out : how well the fit predicts frames it was not fitted to
-        (:func:`~.held_out.held_out_error`, on ``problem``: its kappa is the error beyond the
-        in-sample model error's), None with too few frames
+    method_result, global_result : the method's and the global search's result dicts
+    model_noise_by_sigma, noise_chi2 : the cache's own chi-square by roughness; the mean and
+        variance of noise's chi-square
+    intervals, rise, cache_noise_chi2, cache_sd, sun_level_sd : by :func:`~.intervals.fit_intervals`
+    jpeg_shared_sd, calibration_sd, matrix_sd : shared errors' standard errors (:mod:`~.intervals`)
+    sky, pose : the light's and the camera pose's shares (:class:`~.sky_fit.SkyShare`,
+        :class:`~.pose.PoseShare`)
+    draws : the likelihood's draws (:class:`~.draws.Draws`)
+    held_out : :func:`~.held_out.held_out_error`'s result, None with too few frames
     """
 
     method: str
@@ -136,8 +114,7 @@ class FitState:
 
     @property
     def delta_scale(self):
-        """Each parameter's scale of Delta chi^2 for its interval: s^2 times its channel
-        factor."""
+        """Each parameter's Delta chi^2 scale: s^2 times its channel factor."""
         return self.interval_scale * self.channel_factors
 
 
@@ -145,19 +122,10 @@ class FitState:
 class FitCache:
     """The light cache a fit traces (recorded in the fit JSON's ``light_cache``).
 
-    positions : samples over each pixel's area; None sizes the cache from the data
-        (:meth:`FitSession.run`): POSITIONS (POINT_POSITIONS for a table's points), grown
-        after a fit whose cache noise exceeds CACHE_SHARE of the chi-square the data's scatter
-        gives (:meth:`FitSession.cache_growth`)
-    directions : light directions at each position
-    seed : the seed of the cache's samples
-    plan : where the cache takes the sky's integrals, a name of
-        :data:`~skyfit_mi.render.light_cache.SKY_PLANS`: ``fit`` by default, ``anchors`` for
-        predictions of compact regions
-    pose_sd_deg : the camera pose's 1-sd [deg] whose effect on the parameters the fit
-        propagates by a trace of the light per angle (:mod:`~.pose`), as
-        :func:`~skyfit_mi.render.scene.pose_sd` reads it (``fit --pose-sd-deg``); None: the
-        manifest's ``camera.pose_sd_deg`` (absent: 0)
+    positions, directions, seed : samples over each pixel's area (None: sized from the data,
+        :meth:`FitSession.cache_growth`), light directions at each, and their seed
+    plan : a name of :data:`~skyfit_mi.render.light_cache.SKY_PLANS`
+    pose_sd_deg : the camera pose's 1-sd [deg] (:mod:`~.pose`; None: the manifest's, or 0)
     """
 
     positions: int = None
@@ -170,9 +138,8 @@ class FitCache:
 class FitSession:
     """One region of one sequence, ready to fit: observations, light cache, models, chi-square.
 
-    Building it traces the light at the region's pixels once (or :func:`trace_sessions`, for
-    several regions at once); :meth:`run` then fits by any method and start without tracing
-    again.
+    Building it traces the light at the region's pixels once (or :func:`trace_sessions` for
+    several regions); :meth:`run` then fits by any method and start without tracing again.
 
     Parameters
     ----------
@@ -183,13 +150,10 @@ class FitSession:
     normalisation : Ward normalisation of the model ('ward' = thesis eq. 3.19)
     cache : the light cache to trace (:class:`FitCache`)
     min_frames : rendered frames the sequence must hold (1 to predict a single frame)
-    frames : manifest frame indices to use (None: every rendered frame), e.g. to hold some
-        out for a prediction test
+    frames : manifest frame indices to use (None: every rendered frame)
     variant : the Mitsuba variant to fit with (default the sequence's), e.g. 'cuda_ad_rgb'
-    light : the :class:`~.light.LightPlan` traced now (default the spec's light as it is;
-        None leaves the trace to the caller, :func:`trace_sessions`); a fitted sky's splits the sun's light from the rest of the sky's, so that the
-        fit can scale them against each other (:meth:`set_sky`), and with ``shape`` traces the
-        sky's shape variants (:func:`~skyfit_mi.physics.sky_shape.shape_variants`) too
+    light : the :class:`~.light.LightPlan` traced now (default the spec's light; None: the
+        caller traces, :func:`trace_sessions`)
     """
 
     def __init__(self, manifest_path, name, pixels, model="two", normalisation="ward",
@@ -222,8 +186,7 @@ class FitSession:
         self.doc, self.name, self.model, self.normalisation = doc, name, model, normalisation
         self.names = PARAMETERS[model]
         self.lower, self.upper = bounds(model)
-        # a material is the truth only where skyfit rendered the frames with it; an ingested
-        # sequence's spec materials are placeholders for the unknown photographed surface
+        # only rendered frames' materials are the truth; an ingested spec's are placeholders
         self.truth = mats[name] if doc.get("source", "render") in RENDERED_SOURCES else None
         given = cache.positions is not None
         self.cache_settings = {"positions": int(cache.positions) if given
@@ -233,9 +196,7 @@ class FitSession:
                                "sky_plan": check_choice("sky plan", cache.plan, tuple(SKY_PLANS))}
         self._mi = setup(variant or doc["render"]["variant"])
         self._loaded = None                         # the scene and its parameters (scene)
-        # the light traced (a LightPlan) and its parts (LightParts): one, or the sun's, the
-        # rest's (a fitted sky) and the rest's shape variants, mixed at sky_scale and the
-        # shape's mix sky_shape_mix (set_sky)
+        # the light traced (LightPlan), its parts (LightParts) and their mix (set_sky)
         self.light, self.sky_scale, self.parts = light or SPEC_LIGHT, 1.0, None
         self.sky_shape_mix = None
         self.light_level = 1.0                      # the whole light's, by frame (set_sky)
@@ -248,14 +209,10 @@ class FitSession:
 
     @classmethod
     def from_fit(cls, result, manifest_path, pixels=None, **options):
-        """The session of the region that a fit ``result`` (a fit JSON, checked by
-        :func:`~skyfit_mi.pipeline.fit_result.read_fit_result`) measured, in its model and
-        normalisation, on the sequence ``manifest_path`` (its own, or a target's); ``pixels``
-        default to the fit's own; ``options`` as the constructor's (``light=None`` leaves the
-        trace to the caller; else the light is the fit's, :meth:`fitted_light`).  A fit of the
-        sky's level
-        (``fit --sky fit``) lights its own sequence with that level; another sequence's sky is
-        its spec's (the level belongs to the fitted day's sky)."""
+        """The session of the region a fit ``result`` (a checked fit JSON) measured, in its model
+        and normalisation, on ``manifest_path`` (its own sequence or a target); ``pixels``
+        default to the fit's; ``options`` as the constructor's (``light=None`` leaves the trace
+        to the caller; else the fit's light, :meth:`fitted_light`)."""
         if pixels is None and "points" in result:           # a fit of an observation table
             pixels = result["points"]
         elif pixels is None:
@@ -271,10 +228,7 @@ class FitSession:
         return s
 
     def fitted_light(self, result):
-        """The :class:`~.light.LightPlan` that lights this sequence as a fit ``result`` saw it:
-        a sky fit's (``fit --sky fit``) split light, with its shape variants where it fitted
-        the shape, where the fit measured this very sequence (its run_id); else the spec's
-        (the fitted level belongs to the fitted day's sky)."""
+        """The :class:`~.light.LightPlan` of a fit ``result`` on this sequence."""
         sky = result.get("sky")
         if sky is None or result.get("sequence_run_id") != self.run_id:
             return SPEC_LIGHT
@@ -282,20 +236,17 @@ class FitSession:
                          departure=sky.get("departure") is not None)
 
     def light_at_level(self, record):
-        """Take the frames' skies at a sky fit's level (``record``,
-        :func:`~.sky_fit.skies_at_level`) as the spec's light, before the light is traced: the
-        light a lobe is ranked in (:func:`~.selection.fit_auto`)."""
+        """Take the skies at a sky fit's ``record`` (:func:`~.sky_fit.skies_at_level`) as the
+        spec's light, before tracing (to rank lobes, :func:`~.selection.fit_auto`)."""
         self.skies = skies_at_level(self.skies, record, self.obs.times)
 
     def trace_as_fitted(self, result):
-        """Trace the light as the fit ``result`` saw it (:meth:`fitted_light`) and light it at
-        the fit's sky level and shape (:meth:`use_fitted_sky`)."""
+        """Trace the light as ``result`` saw it and set its fitted sky (:meth:`use_fitted_sky`)."""
         self.trace_light(self.fitted_light(result))
         self.use_fitted_sky(result)
 
     def use_fitted_sky(self, result):
-        """Light the sequence, traced with :meth:`fitted_light`, at a sky fit's level and shape
-        (``fit --sky fit``, in ``result``)."""
+        """Light the sequence (traced with :meth:`fitted_light`) at ``result``'s fitted sky."""
         sky = result.get("sky")
         if self.light.split:
             self.light_factor = reference_light_factor(sky)
@@ -304,27 +255,21 @@ class FitSession:
                          light_level_at(sky, self.obs.times))
 
     def trace_light(self, light=None):
-        """(Re)trace the light (a :class:`~.light.LightPlan`; None: the one traced last) at
-        ``cache_settings`` and make everything from its table."""
+        """(Re)trace ``light`` (None: the last) and rebuild everything from its table."""
         trace_sessions([self], self.light if light is None else light)
 
     def take_parts(self, parts, light, seconds, blocks):
-        """Fit on the light ``light`` traced as ``parts`` (:class:`~.light.LightParts`,
-        :meth:`_trace`, this session's rows) in ``blocks``, its trace having taken
-        ``seconds``."""
+        """Fit on ``light`` traced as ``parts`` (this session's rows)."""
         self.light, self._turned = light, {}
         self.cache_time += seconds
         self.cache_settings["blocks"] = blocks
         self._use_parts(parts)
 
     def _trace(self, at, bsdf_id, light):
-        """The :class:`~skyfit_mi.render.basis_table.BasisTable` of the light at
-        ``cache_settings`` of the sequence's scene and frames at ``at`` (pixels or rays) on
-        material ``bsdf_id`` (one, or one per pixel), traced in blocks of bounded memory, as
-        :class:`~.light.LightParts`: the light alone, or under ``light`` (a
-        :class:`~.light.LightPlan`) that splits the sky the sun's and the rest's (their
-        samples independent) and with its ``shape`` the rest's shape variants (traced with the
-        rest's samples, their covariances kept); and the number of blocks."""
+        """(:class:`~.light.LightParts`, blocks) of the light at ``at`` (pixels or rays) on
+        material(s) ``bsdf_id``, traced in blocks of bounded memory; a split ``light``'s sun on
+        its own samples, the rest with its variants on shared ones. Raises SkyfitError where the
+        estimate exceeds the available memory."""
         c = self.cache_settings
         # the split light's parts by name, each a list of the frames' skies
         named = self._sky_parts(light) if light.split else None
@@ -357,12 +302,7 @@ class FitSession:
         return LightParts(tuple(named), tuple(parts), cov), blocks
 
     def _sky_parts(self, light):
-        """The light's parts by name (:class:`~.light.LightParts`), each a list of the
-        frames' skies: the sun's and the rest's (:meth:`~skyfit_mi.physics.sky.Sky.split`),
-        with the plan ``light``'s ``shape`` the rest's shape variants
-        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`), with its ``departure`` the
-        parts of the sky's departure field
-        (:func:`~skyfit_mi.physics.sky_departure.departure_parts`)."""
+        """{part name: the frames' skies}: sun, rest, shape variants and departure parts."""
         sun, rest = zip(*(sky.split() for sky in self.skies))
         lights = {"sun": list(sun), "sky": list(rest)}
         if light.shape:
@@ -376,16 +316,14 @@ class FitSession:
         return lights
 
     def _shape_variants(self):
-        """Each frame's shape variants of the spec's sky (:func:`~.sky_fit.shape_variants`),
-        made once."""
+        """Each frame's shape variants (:func:`~.sky_fit.shape_variants`), cached."""
         if self._variants is None:
             self._variants = shape_variants(self.skies)
         return self._variants
 
     def light_levels(self, mix):
-        """(sun, sky): the factors on each frame's sun and sky (T,) that the shape's ``mix``
-        brings with it: a turbid sky's turbidity sets both levels
-        (:func:`~skyfit_mi.physics.turbid_sky.level_factors`); 1 for other skies, or no mix."""
+        """(sun, sky) factors (T,) the shape's ``mix`` brings: a turbid sky's turbidity sets both
+        (:func:`~skyfit_mi.physics.turbid_sky.level_factors`); 1 otherwise."""
         if mix is None or not (self.parts and self.parts.shapes) \
                 or not all(s.info.get("kind") == "turbid" for s in self.skies):
             return 1.0, 1.0
@@ -401,15 +339,13 @@ class FitSession:
 
     @property
     def first_positions(self):
-        """An automatically sized cache's first positions: POSITIONS a pixel, POINT_POSITIONS a
-        measured point."""
+        """An auto-sized cache's first positions: POSITIONS (pixels) or POINT_POSITIONS (points)."""
         return POSITIONS if self.obs.rays is None else POINT_POSITIONS
 
     @property
     def scene(self):
-        """The sequence's Mitsuba scene, loaded when first needed (to trace the light): every
-        live scene's materials are targets of the path tracer's virtual calls, traced in each
-        frame, so sessions that share one trace (:func:`trace_sessions`) load one."""
+        """The sequence's Mitsuba scene, loaded when first needed (every live scene's materials
+        join each trace's virtual calls, so sessions sharing a trace load one)."""
         return self._scene_and_params()[0]
 
     @property
@@ -424,16 +360,13 @@ class FitSession:
         return self._loaded
 
     def light_cache(self):
-        """The region's raw :class:`~skyfit_mi.render.light_cache.LightCache` at
-        ``cache_settings`` in one block, its samples kept (for diagnostics and tests of the
-        Dr.Jit model: a fit keeps only their table)."""
+        """The region's raw :class:`~skyfit_mi.render.light_cache.LightCache` (for diagnostics)."""
         return build_light_cache(self.scene, self.params, self.skies,
                                  self.obs.pixels if self.obs.rays is None else self.obs.rays,
                                  self.name, **self._cache_options())
 
     def _use_parts(self, parts):
-        """Take the light's ``parts`` (:class:`~.light.LightParts`) and fit on their mix at
-        the sky's level and shape (:meth:`set_sky`)."""
+        """Take the light's ``parts`` and fit on their mix at the sky as set (:meth:`set_sky`)."""
         self.parts = parts
         self._use_table(self._mixed(parts))
 
@@ -445,19 +378,14 @@ class FitSession:
 
     @property
     def pose_angles(self):
-        """The pose's angles (of POSE_ANGLES) whose sd is above 0: none for an observation
-        table, whose points are rays in the world, no camera's."""
+        """The pose's angles (of POSE_ANGLES) with sd > 0; none for a table (world rays)."""
         if self.obs.rays is not None:
             return []
         return [k for k in POSE_ANGLES if self.pose_sd[k] > 0]
 
     def table_turned(self, angle):
-        """The light's table (at the sky's level and shape as set now) with the camera turned
-        by the pose's sd in ``angle`` (one of POSE_ANGLES) about where its central ray meets
-        the scene (:func:`~skyfit_mi.render.scene.turn_camera`): the light traced again at
-        ``cache_settings`` with the fit's samples and seed, so that its difference from the
-        fit's table is the turn's, not Monte Carlo noise; traced once per trace of the light
-        (the sky fit and the region's fit share it; :func:`trace_turned`)."""
+        """The light's table with the camera turned by the pose's sd in ``angle``, traced once
+        on the fit's samples so the difference is the turn's (:func:`trace_turned`)."""
         if (angle, self.pose_sd[angle]) not in self._turned:
             trace_turned([self])
         return self._mixed(self._turned[angle, self.pose_sd[angle]][0])
@@ -468,12 +396,10 @@ class FitSession:
         return sum(seconds for _, seconds in self._turned.values())
 
     def set_sky(self, k, mix=None, level=None):
-        """Scale the split light's sky (all but the sun) by ``k`` against the spec's, relative
-        to the sun (one factor, or one per frame of the session), in the spec's shape or with
-        ``mix[j]`` of its shape variant j and (1 - sum(mix)) of its own pattern
-        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`), the whole light, sun and sky, by
-        ``level`` (one per frame; None: the spec's), and make the models and chi-square on
-        it."""
+        """Scale the split light's sky (all but the sun) by ``k`` (scalar or per frame), mix
+        ``mix[j]`` of shape variant j with (1 - sum(mix)) of its own pattern, scale the whole
+        light by ``level`` (per frame; None: 1), and rebuild the models and chi-square. Raises
+        ValueError on a session not traced with the needed parts."""
         if self.parts is None or "sky" not in self.parts.names \
                 or len(self.parts.variants) < (0 if mix is None else len(mix)):
             raise ValueError("the sky's level needs a session traced with a fitted sky's light, "
@@ -484,8 +410,7 @@ class FitSession:
         self._use_parts(self.parts)
 
     def take_light(self, other):
-        """Fit on the light ``other`` (a traced session of the same region, sequence and
-        lobe, in any parameterisation: the table does not depend on it) traced."""
+        """Fit on the light traced by ``other`` (same region, sequence and lobe; any model)."""
         self.cache_settings = dict(other.cache_settings)
         self.take_parts(other.parts, other.light, other.cache_time,
                         other.cache_settings.get("blocks"))
@@ -503,19 +428,14 @@ class FitSession:
         self._halves = self._bases = None
 
     def model_on(self, table, part=0):
-        """The fit's radiance model on ``table`` (its whole cache, or a half: ``part`` 1, 2):
-        Ward's, through the luminance where the observations are luminances."""
+        """The radiance model on ``table`` (whole, or half ``part`` 1, 2), luminance if observed."""
         wm = TableModel(table, self.model, part)
         return LuminanceModel(wm) if self.obs.luminance else wm
 
     def cache_growth(self, noise_by_sigma, s2=1.0):
-        """The factor by which an automatically sized cache's positions must grow so that the
-        largest model noise over the roughness range (``noise_by_sigma``, chi-square) falls
-        under CACHE_SHARE of the chi-square the data's own scatter gives (the degrees of
-        freedom, times the interval scale ``s2`` where the model misses the data: a misfit's
-        residuals dwarf the cache's noise, which then needs no more samples); its variance
-        falls as 1 / positions.  A power of two within CACHE_GROWTH_MAX whose trace, estimated
-        from this one's, takes at most CACHE_TIME_BUDGET; 1 for a cache of given size."""
+        """The power-of-two growth of an auto-sized cache that brings the largest model noise
+        (``noise_by_sigma``; variance ~ 1 / positions) under CACHE_SHARE of dof times ``s2``,
+        within CACHE_GROWTH_MAX and CACHE_TIME_BUDGET; 1 for a cache of given size."""
         if self.cache_settings["sized"] == "given":
             return 1
         need = max(noise_by_sigma.values()) / (CACHE_SHARE * self.problem.dof * max(1.0, s2))
@@ -527,17 +447,10 @@ class FitSession:
         return factor
 
     def cache_error(self, theta, method, problem=None):
-        """Standard error each parameter owes to the light cache's Monte Carlo samples (on the
-        chi-square of ``problem``'s observations, default the session's).
-
-        The fit is repeated on each of two independent half caches (by the global method
-        when that found ``theta``, else by Levenberg-Marquardt from ``theta``, which finds
-        the same local minimum); their estimates differ by the cache error of a half twice
-        over, so the whole cache's error is |theta_A - theta_B| / 2 (each on theta's side of
-        the colour rule, see :meth:`_same_reading`).  One degree of freedom makes it rough,
-        but it keeps intervals honest when the data are precise enough for the cache's noise
-        to ripple chi-square by more than the 95% threshold.
-        """
+        """Standard error each parameter owes to the light cache's Monte Carlo samples: the fit
+        repeated on two independent half caches differs by twice a half's error, so the whole's
+        is |theta_A - theta_B| / 2 (both on theta's side of the colour rule). Rough (one degree
+        of freedom), but it keeps intervals honest for precise data."""
         obs = (problem or self.problem).obs
         if self._halves is None or self._halves[0].obs is not obs:
             self._halves = [Problem(obs, self.model_on(self.table, part=j),
@@ -549,17 +462,15 @@ class FitSession:
         else:
             fits = [levenberg_marquardt(p, theta, self.lower, self.upper)["theta"]
                     for p in self._halves]
-        # a half that lands on the other reading of a grey C (across the colour rule, the
-        # same BRDF to within the data) is read at its minimum on theta's side: the
-        # difference between readings is the ambiguity warned of, not cache error
+        # a half on the other reading of a grey C (same BRDF) is read on theta's side: that
+        # ambiguity is warned of, not cache error
         fits = [self._same_reading(p, np.asarray(f, dtype=float), theta)
                 for p, f in zip(self._halves, fits)]
         return np.abs(fits[0] - fits[1]) / 2
 
     def _same_reading(self, problem, fit, theta):
-        """A half cache's ``fit`` on ``theta``'s side of the colour rule: when C is grey (within
-        GREY_SPREAD) and the fit is across the rule, Levenberg-Marquardt on that half from the
-        fit's twin reading; otherwise the fit itself."""
+        """A half cache's ``fit`` on ``theta``'s side of the colour rule: for a grey C (within
+        GREY_SPREAD) across it, polished from the fit's twin reading; else the fit itself."""
         def side(x):
             return x[3] >= METAL_THRESHOLD
         if np.ptp(fit[:3]) > GREY_SPREAD:
@@ -573,9 +484,7 @@ class FitSession:
         return fit
 
     def grid_bases(self):
-        """The global search's basis on its sigma grid for the whole cache and each half, made
-        once per session (it does not depend on the data); its lobes lazy
-        (:class:`~skyfit_mi.render.basis_table.Lobes`), a few roughness values at a time."""
+        """The global search's lazy basis for the whole cache and each half, made once."""
         if self._bases is None:
             self._bases = self.wm.lobes(SIGMA_GRID, halves=True)
         return self._bases
@@ -585,16 +494,10 @@ class FitSession:
 
     def run(self, method="global", start=None, seed=0, method_options=None, log=print,
             sky=None):
-        """Fit by ``method`` from ``start`` (random within bounds, seeded, if None); a result dict.
-        ``sky``: what the light adds to the parameters' errors (a :class:`~.sky_fit.SkyShare`:
-        the sky fit's, :func:`fit_sessions`; None: the traced light's sun level alone).
-
-        The steps: the method's minimum, the model's error where the model cannot reproduce
-        the data (:meth:`_fit_model_error`), the covariance, the global minimum (whose grid
-        gives the profiles and judges a local method), intervals (:func:`~.intervals.fit_intervals`),
-        warnings (:func:`~.fit_warnings.fit_warnings`), and the JSON-ready record
-        (:func:`~.fit_record.fit_record`): each stage a function of the session and the fit.
-        """
+        """Fit by ``method`` from ``start`` (None: seeded random within bounds); returns the
+        result dict. ``sky``: the light's :class:`~.sky_fit.SkyShare` (None: none). Stages: the
+        minimum (the cache grown if needed), the model's error, the covariance, the global
+        minimum, intervals, warnings and the record."""
         check_choice("fit method", method, tuple(METHODS))
         problem, wm = self.problem, self.wm
         problem.evaluations = wm.evaluations = wm.basis_evaluations = 0
@@ -677,19 +580,11 @@ class FitSession:
         return out
 
     def _fit_model_error(self, method, res, misfit, seed, method_options):
-        """The model's error fitted with the parameters, where chi-square exceeds what noise
-        explains beyond chance (``misfit``, a :class:`~.uncertainty.MisfitTest` at the
-        method's minimum ``res``): kappa from the residuals at the parameters
-        (:meth:`~.chi2.Problem.model_error`), then the parameters again with every sigma
-        widened by it (:meth:`~.chi2.Problem.with_model_error`), in turn, until kappa changes
-        by less than MODEL_ERROR_RTOL (at most MODEL_ERROR_ROUNDS): each step lowers the same
-        restricted likelihood.  The global method searches again each round (the weights can
-        move its minimum), the others polish by Levenberg-Marquardt.
-
-        Returns (the method's result, the chi-square it minimised, the
-        :class:`~.uncertainty.ModelError` or None, {rounds, settled, evaluations}); without
-        significant misfit, or at a kappa of 0, the method's result on the session's
-        chi-square, unchanged."""
+        """Fit the model's error where ``misfit`` is significant: kappa from the residuals, then
+        the parameters with sigmas widened by it, alternately until kappa settles to
+        MODEL_ERROR_RTOL (each step lowers the same restricted likelihood). Returns (result,
+        chi-square minimised, :class:`~.uncertainty.ModelError` or None, {rounds, settled,
+        evaluations}); unchanged without significant misfit or at kappa 0."""
         rounds = {"rounds": 0, "settled": True, "evaluations": 0}
         base, theta = self.problem, np.asarray(res["theta"], dtype=float)
         if not misfit.significant:
@@ -720,22 +615,16 @@ class FitSession:
         return res, base.with_model_error(est.kappa, theta), est, rounds
 
     def _model_noise_by_sigma(self, theta, problem=None):
-        """The model's own Monte Carlo share of chi-square (``problem``'s, default the
-        session's) at the fitted reflectances over the roughness range (NOISE_SIGMAS): where
-        it is a sizeable share of the degrees of freedom it pulls fits toward the roughness
-        where it is small."""
+        """The model's own Monte Carlo share of chi-square at the fitted reflectances, by
+        roughness (NOISE_SIGMAS); where sizeable it pulls fits toward where it is small."""
         problem = problem or self.problem
         return {f"{v:g}": problem.model_noise_chi2(np.r_[theta[:-1], v])
                 for v in NOISE_SIGMAS}
 
 
 def trace_sessions(sessions, light):
-    """Trace the light ``light`` (a :class:`~.light.LightPlan`, or {region: plan}) of
-    ``sessions`` (FitSessions of one sequence): in one pass over all the points of the sessions
-    that share normalisation, frames, kind of point (pixels or rays), sky plan, whether that
-    plan's anchors pay (as each region alone would take them) and light, each point under its
-    own region's material: each frame's kernels are traced once instead of once a region; each
-    session takes its rows and an equal share of the time."""
+    """Trace ``light`` (a plan, or {region: plan}) for ``sessions`` of one sequence, one pass per
+    group that can share it; each session takes its rows and an equal share of the time."""
     for plan, group in _trace_groups(sessions, light):
         t0 = time.perf_counter()
         parts, blocks = _trace_together(group, plan)
@@ -745,9 +634,7 @@ def trace_sessions(sessions, light):
 
 
 def trace_turned(sessions):
-    """Trace the light of ``sessions`` (traced, :func:`trace_sessions`) again with the camera
-    turned by the sd of each of the pose's angles (:attr:`FitSession.pose_angles`), together
-    as they were traced, on the same samples: what :meth:`FitSession.table_turned` gives."""
+    """Trace ``sessions``' light again with the camera turned by each pose angle's sd."""
     for plan, group in _trace_groups(sessions, {s.name: s.light for s in sessions}):
         first = group[0]
         to_world = np.asarray(first.doc["camera"]["to_world"], dtype=float)
@@ -763,8 +650,7 @@ def trace_turned(sessions):
 
 
 def _trace_groups(sessions, light):
-    """[(plan, sessions)]: ``sessions`` grouped as :func:`trace_sessions` traces them, each
-    group's light ``light`` (a plan, or {region: plan})."""
+    """[(plan, sessions)]: ``sessions`` grouped as :func:`trace_sessions` traces them."""
     groups = {}
     for s in sessions:
         plan = light[s.name] if isinstance(light, dict) else light
@@ -779,8 +665,7 @@ def _trace_groups(sessions, light):
 
 
 def _trace_together(group, plan):
-    """(:class:`~.light.LightParts`, blocks): the light ``plan`` at all the points of the
-    sessions ``group``, each under its own region's material."""
+    """(:class:`~.light.LightParts`, blocks) of ``plan`` at all the points of ``group``."""
     if group[0].obs.rays is None:
         at = np.concatenate([s.obs.pixels for s in group])
     else:
@@ -800,29 +685,18 @@ def _rows(group):
 
 
 def fit_region(manifest_path, name, pixels, **options):
-    """Fit one material region (see :class:`FitSession`, ``options`` as
-    :func:`fit_regions`'); returns a JSON-ready result dict."""
+    """Fit one material region (``options`` as :func:`fit_regions`'); returns a result dict."""
     return next(fit_regions(manifest_path, [(name, pixels)], **options))
 
 
 def fit_regions(manifest_path, regions, model="two", method="global", seed=0, start=None,
                 method_options=None, log=print, light=LightOptions(), **options):
     """Fit several regions of one sequence (``regions`` [(name, pixels)]), their light traced
-    together (:func:`trace_sessions`); yields each region's result dict in turn.
-    ``light``: the :class:`~.light.LightOptions` (or a :class:`~.light.LightPlan` already
-    resolved for the sequence): the sky None chooses (:func:`~.sky_fit.default_sky`); 'spec'
-    takes the spec's light as it is; 'fit' fits the sky's level against the sun's with the
-    materials, one for all regions (:func:`~.sky_fit.fit_sky_scale`), and 'prior' the same
-    with the level's prior (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`); both count the sun's
-    own level, known to a relative ``sun_sd`` (None: :func:`~.sky_fit.default_sun_sd`), in
-    the reflectances' intervals (:func:`~.sky_fit.light_level_sd`; not given, a modelled sun's
-    is widened where the fitted sky departs from the spec's,
-    :data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`, a measured one's is not); ``terms`` > 1
-    lets the sky's level change smoothly over the day, 1 holds it (None:
-    :func:`~.sky_fit.default_terms` of the frames), and ``shape`` fits the sky's shape too (a
-    CIE sky's gradation and indicatrix, a Perez sky's clearness and brightness).  ``options``
-    as :class:`FitSession`'s (normalisation, cache, frames, variant); ``seed`` seeds the
-    method and the light cache."""
+    together; yields each region's result dict in turn.
+
+    ``light``: :class:`~.light.LightOptions` or a resolved :class:`~.light.LightPlan` (sky
+    'spec', or 'fit'/'prior': :func:`~.sky_fit.fit_sky_scale`). ``options`` as
+    :class:`FitSession`'s; ``seed`` seeds the method and the light cache."""
     cache = replace(options.pop("cache", FitCache()), seed=seed)
     sessions = {name: FitSession(manifest_path, name, px, model=model, cache=cache, light=None,
                                  **options)
@@ -831,19 +705,15 @@ def fit_regions(manifest_path, regions, model="two", method="global", seed=0, st
 
 
 def resolve_light(sessions, light, log=print):
-    """The :class:`~.light.LightPlan` of ``light`` (options, or a plan already resolved) on
-    the sequence of ``sessions`` (its first's manifest, skies and frames)."""
+    """The :class:`~.light.LightPlan` of ``light`` (options or a plan) on ``sessions``' sequence."""
     first = next(iter(sessions.values()))
     return light.resolve(first.doc, first.skies, len(first.obs.frames), log)
 
 
 def fit_sessions(sessions, method="global", seed=0, start=None, method_options=None, log=print,
                  light=LightOptions()):
-    """Trace and fit ``sessions`` ({region: FitSession} of one sequence, not yet traced; each
-    its own model and lobe) under ``light`` as :func:`fit_regions` describes (the sky's level
-    fitted once for all of them, the light with the camera turned by its pose's sd traced for
-    all of them together and carried through that sky, :mod:`~.pose`); yields each region's
-    result dict in turn, in the order of ``sessions``."""
+    """Trace and fit untraced ``sessions`` ({region: FitSession}) as :func:`fit_regions` does
+    (one sky fit and one pose trace for all); yields each region's result dict in order."""
     sky = prepare_sessions(sessions, light, seed, log)
     day = list(sessions.values())
     trace_turned(day)                       # the pose's turns, where it has an sd
@@ -857,23 +727,12 @@ def fit_sessions(sessions, method="global", seed=0, start=None, method_options=N
 
 
 def reference_factor(sessions, sky, fit, log=print):
-    """Calibrate the fitted light again on the scene's reference (a grey card named by ``ingest
-    --calibrate``), as ingest would have under that light: ingest set each frame's exposure so
-    that the reference reads its known reflectance under the spec's light, and a fitted sky
-    (``sky``, a :class:`~.sky_fit.SkyFit` of ``sessions``) moves what the reference reads, and
-    with it every reflectance measured through it.  Where the reference is one of the fit's
-    regions, it is fitted at the fitted light (``fit``: its session -> its result), and the
-    radiance its fit predicts over that of a Lambertian surface of its known reflectance, per
-    channel over the day, is a factor on the light of every region
-    (:meth:`FitSession.use_fitted_sky` takes it from the sky record's ``reference``, as relight
-    and maps do): the reference then reads its own reflectance and the others theirs against
-    it.  Under the spec's own sky the factor is the reference's noise about 1 (0.1-1% on the
-    sample board); under a sky of another shape it is the light's error that the reference
-    sees (a partly cloudy day's steel read 3-7% high without it, docs/BENCHMARKS.md, "The
-    sample board photographed").  The factor moves with the sky's coefficients
-    (:func:`~.sky_fit.reference_slope`), and every region's share of the sky's uncertainty
-    is taken through it too (:func:`~.sky_fit.share_at`): what the sky's error leaves a
-    region is the light it sees otherwise than the reference does."""
+    """Calibrate the fitted light again on the scene's reference (``ingest --calibrate``), since
+    a fitted ``sky`` moves what it reads: where the reference is a region, it is fitted (``fit``:
+    session -> result) and its radiance over a Lambertian's of its known reflectance, per
+    channel, becomes a factor on every region's light; its slope in the sky's coefficients
+    (:func:`~.sky_fit.reference_slope`) enters every sky share (docs/BENCHMARKS.md, "The sample
+    board photographed")."""
     if sky.record is None:
         return
     first = next(iter(sessions.values()))
@@ -923,10 +782,8 @@ def reference_factor(sessions, sky, fit, log=print):
 
 
 def prepare_sessions(sessions, light=LightOptions(), seed=0, log=print):
-    """Trace the light of ``sessions`` ({region: FitSession}, not yet traced) as ``light``
-    resolves (:meth:`~.light.LightOptions.resolve`) and fit the sky's level with them where it
-    is not the spec's, ready to run (:func:`fit_sessions`); returns the
-    :class:`~.sky_fit.SkyFit` (no record nor shares where the sky is the spec's)."""
+    """Trace ``sessions`` ({region: FitSession}) under the resolved ``light`` and fit the sky
+    where it is not the spec's; returns the :class:`~.sky_fit.SkyFit` (empty for the spec's)."""
     plan = resolve_light(sessions, light, log)
     trace_sessions(list(sessions.values()), plan)
     if not plan.split:

@@ -1,6 +1,5 @@
-"""A fit's record (the last stage of :meth:`~.fit.FitSession.run`): the JSON-ready result,
-the layout of ``fit_NAME.json`` (docs/cli.md), from the region's :class:`~.fit.FitSession`
-``s`` and its :class:`~.fit.FitState` ``fit``."""
+"""A fit's JSON-ready record, the layout of ``fit_NAME.json`` (docs/cli.md), from the region's
+:class:`~.fit.FitSession` ``s`` and its :class:`~.fit.FitState` ``fit``."""
 
 import numpy as np
 
@@ -88,8 +87,7 @@ SHARES_NOTE = (
 
 
 def interval_shares(fit, names):
-    """{parameter: {source: share}} of :data:`SHARES_NOTE`, shares rounded to 0.001; a
-    parameter whose interval has no width on either side left out."""
+    """{parameter: {source: share}} of :data:`SHARES_NOTE`, rounded to 0.001."""
     n = len(names)
     added = {"calibration": fit.calibration_sd, "sky": fit.sky.sd, "sun_level": fit.sun_level_sd,
              "pose": fit.pose.sd_of(n), "jpeg_rounding": fit.jpeg_shared_sd,
@@ -108,9 +106,8 @@ def interval_shares(fit, names):
 
 
 def draws_record(fit):
-    """The fit's draws from its data's likelihood (:mod:`~.draws`) as relight reads them, with
-    the standard errors the data share that relight adds to them: the light cache's own and
-    the JPEG blocks' rounding (errors a relight of the sequence does not cancel)."""
+    """The fit's draws (:mod:`~.draws`) as relight reads them, with the shared standard errors
+    relight adds to them (light cache and JPEG block rounding)."""
     d = fit.draws
     return {"values": d.values.tolist(), "effective_size": d.effective_size,
             "proposals": d.proposals, "rounds": d.rounds,
@@ -128,10 +125,8 @@ DRAWS_NOTE = (
 
 
 def measured_range(s, L):
-    """The fit JSON's ``measured_range``: per channel, the radiance the fit's data measured
-    (:meth:`~.chi2.Problem.measured_range` at the model's ``L``: region means, a table's
-    values on their own), against which relight flags predictions that rest on the model
-    alone."""
+    """The fit JSON's ``measured_range``: per channel, the radiance range the data measured
+    (:meth:`~.chi2.Problem.measured_range`); relight flags predictions beyond it."""
     channels = "Y" if s.obs.luminance else "RGB"
     ranges = s.problem.measured_range(L, means=s.obs.rays is None)
     return {"unit": "W m^-2 sr^-1",
@@ -145,9 +140,8 @@ def measured_range(s, L):
 
 
 def model_error_record(s, fit):
-    """The fit JSON's ``model_error``: kappa (0 where chi-square is within what noise
-    explains), what it means, and with a fitted kappa its 95% interval and the
-    chi-square with it (the fit's, whose intervals include the model's error)."""
+    """The fit JSON's ``model_error``: kappa (0 where noise explains chi-square), its meaning
+    and, when fitted, its 95% interval and the chi-square with it."""
     me, test = fit.model_error, fit.misfit
     form = ("each value's variance is its noise's plus (kappa x the value)^2 (a clipped "
             "value's: the model's); kappa by restricted maximum likelihood with the "
@@ -168,9 +162,8 @@ def model_error_record(s, fit):
 
 
 def held_out_record(fit):
-    """The fit JSON's ``model_error.held_out``: the relative error with which the fit
-    predicts frames it was not fitted to (:func:`~.held_out.held_out_error`), the
-    in-sample model error's and any beyond it together; what predictions add."""
+    """The fit JSON's ``model_error.held_out``: the relative error predicting frames left out
+    of the fit (:func:`~.held_out.held_out_error`), in-sample kappa included."""
     held, kappa = fit.held_out, 0.0 if fit.model_error is None else fit.model_error.kappa
     if held is None:
         return {"kappa": kappa, "meaning": "not tested: fewer than "

@@ -1,9 +1,6 @@
-"""What a fit must tell its user (the stage after the intervals,
-:meth:`~.fit.FitSession.run`): the method's status, loading's notes, the fitted sky's, the
-sun's level's and the camera pose's hold on the parameters, bounds, misfit and the model's
-error, held-out frames, identifiability, the day's geometry, the light cache's own noise and
-the colour rule's ambiguity.  Each function takes the region's :class:`~.fit.FitSession` ``s``
-and its :class:`~.fit.FitState` ``fit``."""
+"""The warnings a fit must give its user (method status, sky, sun level, pose, bounds, misfit,
+held-out frames, identifiability, geometry, cache noise, colour ambiguity). Each function takes
+the region's :class:`~.fit.FitSession` ``s`` and its :class:`~.fit.FitState` ``fit``."""
 
 import numpy as np
 
@@ -18,21 +15,17 @@ from ..physics.ward import METAL_THRESHOLD
 from ..pipeline.manifest import is_table
 from ..pipeline.observation_table import relative_scale
 
-#: The held-out frames' error (relative to each value, beyond the in-sample model error) that
-#: the fit warns of once its 95% interval lies above it: below, predictions (relight) carry it
-#: in their bands (model_error.held_out) and it changes no conclusion.
+#: Held-out relative error warned of once its 95% interval lies above it; below, relight's
+#: bands carry it and it changes no conclusion.
 HELD_OUT_NOTE = 0.005
 #: Share of the degrees of freedom above which the model's own noise is warned of.
 NOISE_SHARE = 0.25
-#: The widening of a variance by correlated channels (:func:`~.uncertainty.channel_factors`)
-#: above which the fit says so.
+#: Variance widening by correlated channels (:func:`~.uncertainty.channel_factors`) warned of.
 CHANNEL_NOTE = 1.1
 
 
 def fit_warnings(s, fit):
-    """What the user must know about ``fit``: loading, the method's status, a local method's
-    distance from the global minimum, misfit, identifiability, the day's geometry, and the
-    colour rule's ambiguity."""
+    """All warnings of ``fit``, in the order the user should read them."""
     names, method, theta, chi2 = s.names, fit.method, fit.theta, fit.chi2
     res, g, intervals = fit.method_result, fit.global_result, fit.intervals
     iv95 = {p: intervals[p]["95"] for p in names}
@@ -129,8 +122,7 @@ def fit_warnings(s, fit):
 
 
 def sky_warnings(s, fit):
-    """The fitted sky's warnings (its record's) and those of parameters the sky's or the
-    sun's level, more than the data, sets (:data:`~.sky_fit.SKY_DOMINATES`)."""
+    """The fitted sky's warnings, and those of parameters the light sets more than the data."""
     sky, names, plan = fit.sky, s.names, s.light
     if sky.record is None:
         return []

@@ -1,10 +1,8 @@
 """What the sequence's geometry lets the data say about the specular lobe.
 
-Ward's lobe falls as exp(-tan^2 delta / sigma_alpha^2) with delta the angle between the surface
-normal and the half vector of the light and view directions (thesis eq. 3.19).  The sun is the
-only light bright enough to show a narrow lobe, so the smallest delta the sun reaches over the
-day (the closest highlight) bounds the roughness the sun can reveal: a lobe narrow enough to be
-dark at that angle leaves no trace of the sun, and its roughness rests on the sky alone.
+Ward's lobe falls as exp(-tan^2 delta / sigma_alpha^2), delta the angle between the normal and
+the half vector (thesis eq. 3.19). Only the sun shows a narrow lobe, so the day's smallest delta
+(the closest highlight) bounds the roughness it can reveal: a narrower lobe rests on the sky alone.
 """
 
 import numpy as np
@@ -12,31 +10,23 @@ import numpy as np
 #: A lobe leaves "no trace" at the closest highlight when its value there is below this share
 #: of a white Lambertian surface's 1 / pi [unitless].
 TRACE = 0.01
-#: A frame's sun highlight lies beyond what a fit measured where the lobe there exceeds its
-#: value at the fit's closest highlight by more than this factor [unitless].
+#: Factor by which a frame's lobe value may exceed the fit's closest highlight's before the
+#: highlight lies beyond what the fit measured [unitless].
 LOBE_BEYOND = 2.0
-#: ... and only where it lies this much nearer at least [degrees]: the closest half-angle is
-#: read from the light cache's sample positions, which differ between traces.
+#: ... and only this much nearer at least [degrees] (sample positions differ between traces).
 NEARER_DEG = 1.0
-#: A frame's sun and view lie beyond the angles a fit measured where their (theta_i, theta_o,
-#: phi) lies this far from every frame's of the fit [degrees]: on measured materials relit
-#: from one camera into others, values beyond it missed by twice as much (median 1.6% against
-#: 0.8%, 95th percentile 12.7% against 5.3%: docs/BENCHMARKS.md, "Bands in a new view").
+#: Distance [degrees] in (theta_i, theta_o, phi) from every fitted frame beyond which a frame's
+#: sun and view lie beyond what the fit measured (docs/BENCHMARKS.md, "Bands in a new view").
 ANGLES_BEYOND_DEG = 30.0
 
 
 def highlight_geometry(sun_cos):
     """Summary of the sun's light over a region and day.
 
-    ``sun_cos`` (P, T, S, 3): cos(theta_h), cos(theta_d) and cos(theta_i) per pixel, frame
-    and position (the half vector's angle from the normal and from the sun, the sun's from the
-    normal), NaN where the frame's sun gives no light
-    (:class:`~skyfit_mi.render.light_cache.LightCache`).  Returns a JSON-ready dict: frames,
-    frames_with_sun, closest_highlight_half_angle_deg (None without sun), its value per frame,
-    and per frame, as medians over the region's lit positions [degrees] (None without sun), the
-    sun's (theta_h, theta_d), the two angles an isotropic reflection depends on most, and
-    (theta_i, theta_o, phi) (:func:`sun_view_angles`): what light and view the frame's values
-    measured.
+    ``sun_cos`` (P, T, S, 3): cos(theta_h), cos(theta_d), cos(theta_i) per pixel, frame and
+    position, NaN without sun. Returns a JSON-ready dict: the closest highlight's half-angle
+    [degrees] overall and per frame, and per frame the medians of (theta_h, theta_d) and of
+    (theta_i, theta_o, phi) (:func:`sun_view_angles`); None without sun.
     """
     c = np.asarray(sun_cos, dtype=float)
     per_frame, angles, configs = [], [], []
@@ -58,12 +48,9 @@ def highlight_geometry(sun_cos):
 
 
 def sun_view_angles(cos):
-    """The sun's and view's configuration (theta_i, theta_o, phi) [degrees] (Q, 3), from
-    cos(theta_h), cos(theta_d), cos(theta_i) (Q, 3) (:func:`highlight_geometry`): the view is
-    the sun mirrored about the half vector, so cos theta_o = 2 cos theta_d cos theta_h -
-    cos theta_i, and the angle between them is 2 theta_d, whence phi, the angle between their
-    azimuths (0 with the sun behind the camera, 180 in the mirror plane ahead), by the
-    spherical law of cosines."""
+    """(theta_i, theta_o, phi) [degrees] (Q, 3) from cos(theta_h), cos(theta_d), cos(theta_i):
+    cos theta_o = 2 cos theta_d cos theta_h - cos theta_i, and sun and view lie 2 theta_d apart,
+    whence phi (0: sun behind the camera) by the spherical law of cosines."""
     ch, cd, ci = np.clip(np.asarray(cos, dtype=float), -1, 1).T
     co = np.clip(2 * cd * ch - ci, -1, 1)
     sines = np.sqrt((1 - ci**2) * (1 - co**2))
@@ -72,12 +59,8 @@ def sun_view_angles(cos):
 
 
 def angles_beyond(fit_configs, config):
-    """Whether a frame's sun and view ``config`` [(theta_i, theta_o, phi), degrees; None
-    without sun] lie more than ANGLES_BEYOND_DEG from every frame's of the fit, ``fit_configs``
-    (a list, None per frame without sun), in Euclidean distance over the three angles, each
-    also with the sun and view exchanged (reciprocity): light and view the fit's data never
-    took together, where a model's lobe is its shape's alone.  False without sun in the
-    frame; True where no frame of the fit had sun."""
+    """Whether a frame's ``config`` [(theta_i, theta_o, phi), degrees] lies more than
+    ANGLES_BEYOND_DEG (also with sun and view exchanged) from every one of ``fit_configs``."""
     if config is None:
         return False
     at = np.array([a for a in fit_configs if a is not None], dtype=float).reshape(-1, 3)
@@ -89,12 +72,9 @@ def angles_beyond(fit_configs, config):
 
 
 def highlight_beyond(fit_half_angle_deg, half_angle_deg, sigma_alpha):
-    """Whether a frame's closest sun highlight (its half-angle delta [degrees], None where its
-    sun gives no light) lies nearer the mirror direction than the fit's data saw (their closest,
-    ``fit_half_angle_deg``, None without sun) by so much that Ward's lobe of roughness
-    ``sigma_alpha``, exp(-tan^2 delta / sigma^2) (eq. 3.19), exceeds its value at the fit's
-    closest by more than LOBE_BEYOND (and nearer by NEARER_DEG at least): a lobe peak the data
-    never showed, the model's alone."""
+    """Whether a frame's closest highlight (half-angle delta [degrees], None without sun) lies so
+    much nearer the mirror than ``fit_half_angle_deg`` that the lobe exp(-tan^2 delta / sigma^2)
+    (eq. 3.19) exceeds its value there by over LOBE_BEYOND (and by NEARER_DEG at least)."""
     if half_angle_deg is None:
         return False
     if fit_half_angle_deg is None:
@@ -123,25 +103,15 @@ def traceless_roughness(half_angle_deg):
 
 
 def sky_only_limit(geometry):
-    """The roughness below which the day's sun shows no lobe to the camera
-    (:func:`traceless_roughness` of the closest highlight), 0 on a day without sun on the
-    surface (its lobe is the sky's alone at any roughness: :func:`geometry_warnings`)."""
+    """The roughness below which the day's sun shows no lobe (0 without sun on the surface)."""
     if geometry["frames_with_sun"] == 0:
         return 0.0
     return traceless_roughness(geometry["closest_highlight_half_angle_deg"])
 
 
 def geometry_warnings(geometry, sigma_alpha, sky_shape_known=True, lowest=None):
-    """Warnings from the day's geometry for a fit at ``sigma_alpha`` whose 95% interval
-    reaches down to ``lowest`` (None: the fit alone): no sun on the surface at all, or a
-    closest highlight too far from the camera's view for the sun to show a lobe this narrow
-    (the fit's, or the narrowest its interval allows: where the sun shows no lobe, chi-square
-    is flat, and the fit may lie anywhere along it).  Then the lobe is seen in the sky's
-    reflection alone, and where the sky's shape
-    is a model the fit has not fitted (``sky_shape_known`` False: a sky fitted or held by
-    its prior in level only), so is rho_s: its reading depends on the sky's pattern near the
-    mirror direction (a disc under a measured sky, its highlight never seen: rho_s 0, 95% up
-    to 0.074, truth 0.08)."""
+    """Warnings for a fit at ``sigma_alpha`` (95% down to ``lowest``) where the sun shows no lobe
+    that narrow, leaving the sky's reflection (and, unfitted, its shape) to decide."""
     if geometry["frames_with_sun"] == 0:
         return ["no frame has the sun on this surface (an overcast sky, or the sun behind it): "
                 "rho_s and sigma_alpha rest on the sky's reflection alone and are weakly "

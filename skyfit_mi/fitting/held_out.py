@@ -1,9 +1,8 @@
 """Frames held out: how well a fit predicts the frames it was not fitted to.
 
-The frames split into K interleaved folds (frame t in fold t mod K, :func:`frame_folds`); each
-fold is predicted from the minimum of the others.  A fit's model error on light it did not
-see (:func:`held_out_error`, :mod:`~skyfit_mi.fitting.fit`) and the ranking of candidate
-models (:mod:`~skyfit_mi.fitting.selection`, which runs fits) both hold frames out this way.
+The frames split into K interleaved folds (:func:`frame_folds`); each fold is predicted from
+the minimum of the others. Used for a fit's model error on unseen light (:func:`held_out_error`)
+and to rank models (:mod:`~skyfit_mi.fitting.selection`).
 """
 
 import time
@@ -17,9 +16,8 @@ from .methods.levenberg_marquardt import levenberg_marquardt
 
 
 def frame_folds(valid, folds, ends=True):
-    """(fit on, held out) masks of values ``valid`` (P, T) in K interleaved folds of frames
-    (frame t in fold t mod K, K = min(``folds``, frames)); without ``ends``, the first and
-    last frames with values are never held out (each fold's frames lie between fitted ones)."""
+    """(fit on, held out) masks of ``valid`` (P, T) in K = min(``folds``, frames) interleaved
+    folds (frame t in fold t mod K); without ``ends`` the first and last are never held out."""
     T = valid.shape[1]
     held = np.arange(T) if ends else np.flatnonzero(valid.any(axis=0))[1:-1]
     k = min(int(folds), len(held))
@@ -28,65 +26,34 @@ def frame_folds(valid, folds, ends=True):
         yield valid & ~test[None, :], valid & test[None, :]
 
 
-#: Frames a fit needs at least for its held-out model error (:func:`held_out_error`), and
-#: frames from which the first and last are held out too.  Below that, only frames between
-#: fitted ones are: a fold without an end frame extrapolates the day from four, and under the
-#: spec's own sky one disc fit of 8 (the quick sky test set, 5 frames) read a misfit of 6.4 per
-#: held-out value (p 6e-14); held out between fitted frames, none of the 8 did, and two of the
-#: Perez 4 sphere's four fits read their wrong sky's misfit (p 3e-5, 2e-6).
+#: Least frames for a held-out model error, and frames from which the first and last are held
+#: out too (holding out an end extrapolates the day and reads false misfits).
 HELD_OUT_FRAMES, END_FRAMES_FROM = 5, 6
-#: Folds of that check at most: each frame held out alone up to 16 frames (the nearest
-#: test of the light between the fitted frames; four folds of two frames missed a rough gold
-#: disc's misfit: kappa 0.017 against 0.197 frame by frame), interleaved beyond.
+#: Most folds: each frame held out alone up to 16 frames (the nearest test of the light
+#: between fitted frames; fewer, larger folds miss misfits), interleaved beyond.
 HELD_OUT_FOLDS = 16
-#: The reach in the sun's (theta_h, theta_d) of a held-out frame's residual in a prediction's
-#: model error (:func:`local_error_scale`) [degrees]: a frame's own angles (another camera
-#: seeing them mirrored in time lies within a degree), its neighbours' on the day (6-7
-#: apart) at a tenth of the weight.
+#: Reach [deg] in the sun's (theta_h, theta_d) of a held-out residual in a prediction's model
+#: error (:func:`local_error_scale`): a frame's own angles, its neighbours' (6-7 apart) at a
+#: tenth of the weight.
 ANGLE_REACH_DEG = 3.0
-#: The weight of the fit's one kappa in a prediction's local model error, in frames: where no
-#: held-out frame saw the prediction's angles, the error is that kappa.
+#: The weight, in frames, of the fit's kappa in a prediction's local model error.
 KAPPA_FRAMES = 1.0
 
 
 def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=None,
                    frame_sd=None):
     """How well a fit at ``theta`` predicts frames it was not fitted to: each of ``folds``
-    interleaved folds of ``problem``'s frames (each frame alone where there are no more; the
-    first and last only from END_FRAMES_FROM frames) predicted from the others' minimum
-    nearest the fit (Levenberg-Marquardt from ``theta`` within ``lower``/``upper``: a fifth of
-    the time of a global search, and the same minimum on the days measured).
+    interleaved folds is predicted from the others' minimum (Levenberg-Marquardt from ``theta``).
 
-    What is predicted is what relight predicts: an image region's mean per frame and channel
-    (its pixels see the light alike, so a highlight the model misses it misses in all of
-    them), a table's every value.  Each held-out residual e [DN] has the variance of its
-    noise (with the model's Monte Carlo error; a mean's from its values' taken as
-    independent, plus an error that every value of a frame and channel shares, ``frame_sd``
-    (3,) relative: a photographed frame's calibration) plus that of the prediction, D C D^T
-    from the parameters' spread C on the other folds (linearised; D the prediction's
-    derivatives).  The excess beyond these is the model's error on light it did not see:
-    kappa by maximum likelihood (:func:`~.uncertainty.model_error`, no parameters fitted to
-    these values), where the held-out chi-square exceeds them beyond chance (p < MISFIT_P).
-    A model error fitted in-sample sees only the fitted frames' residuals, which the
-    parameters bend to: Ward's lobe on a rough gold conductor passed through the highlights
-    it was fitted on at chi2/dof 1.23 and missed the ones between them by 36-64%
-    (BENCHMARKS, "Real surfaces").
+    As relight predicts, an image region's mean per frame and channel (a table's every value) is
+    tested; each residual's variance is its noise's (with ``frame_sd`` (3,), a relative error a
+    frame shares) plus the prediction's, D C D^T. The excess, the model's error on unseen light,
+    gives kappa by maximum likelihood where significant (p < MISFIT_P; docs/BENCHMARKS.md, "Real
+    surfaces"). Folds leaving the 95% intervals (``within`` False) or too small are left out.
 
-    A fold whose parameters leave the fit's 95% intervals (``within`` (theta) False) lost
-    frames the parameters depend on (a glossy paint's one highlight frame: its own lobe,
-    fitted without it, missed it by 2.4x); its misses tell how the day was sampled, which the
-    linearised spread cannot follow, not the model's error, and it is left out
-    (``folds_outside``); so is a fold with fewer values than parameters to fit on or to hold
-    out (``folds_too_small``).
-
-    Returns {kappa, interval95 (only where kappa was fitted), chi2_per_value, p, values,
-    folds, folds_outside, folds_too_small, level, wall_time_s}, and for an image region's
-    means ``by_frame``: each frame's relative residuals e / a per channel held out
-    (``held_out``; None where its fold was left out) and at the fit (``fitted``; the
-    residuals of the frames whose folds were left out, a glossy paint's highlight, are often
-    the largest), with their sd sqrt(v) / a (noise, and held out the prediction's spread;
-    None where nothing was measured): :func:`local_error_scale` reads them.  None with fewer
-    than HELD_OUT_FRAMES frames."""
+    Returns {kappa, interval95, chi2_per_value, p, values, folds, folds_outside, folds_too_small,
+    level, wall_time_s}, for image means with ``by_frame`` relative residuals (held_out, fitted)
+    and their sds (:func:`local_error_scale`); None with fewer than HELD_OUT_FRAMES frames."""
     if problem.valid.shape[1] < HELD_OUT_FRAMES:
         return None
     splits = list(frame_folds(problem.valid, folds, problem.valid.shape[1] >= END_FRAMES_FROM))
@@ -136,10 +103,9 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
 
 
 def predicted_residuals(problem, theta, means, frame_sd, cov=None):
-    """``problem``'s residuals at ``theta`` e [DN], their variances v (noise, the model's Monte
-    Carlo error, ``frame_sd``'s shared error and, with the parameters' covariance ``cov``, the
-    prediction's spread D cov D^T) and the values' scale a (each value's, or with ``means``
-    each frame's and channel's mean), and where there are values (``use``)."""
+    """(e [DN], v, a, use): ``problem``'s residuals at ``theta``, their variances (noise, Monte
+    Carlo, ``frame_sd`` and with ``cov`` the prediction's spread D cov D^T), the values' scale
+    (with ``means``: per frame and channel mean) and where there are values."""
     L, model_var = problem.model.radiance_and_variance(theta)
     use = problem.measured()
     sigma = np.where(use, problem.obs.sigma, 0.0)
@@ -165,26 +131,20 @@ def predicted_residuals(problem, theta, means, frame_sd, cov=None):
 
 
 def _keep_relative(rel, key, e, v, a, use):
-    """Put residuals ``e`` and their sd sqrt(``v``) relative to the values' scale ``a`` into
-    ``rel[key]`` and ``rel[key + '_sd']`` where ``use``."""
+    """Store e / a and sqrt(v) / a in ``rel[key]`` and ``rel[key + '_sd']`` where ``use``."""
     rel[key][use], rel[f"{key}_sd"][use] = e[use] / a[use], np.sqrt(v[use]) / a[use]
 
 
 def local_error_scale(by_frame, fit_angles, angles, kappa):
-    """The model error of a prediction at the sun's angles ``angles`` [(theta_h, theta_d) per
-    frame, degrees, None without sun] over the fit's one ``kappa``, per frame and channel
-    (T, C): a model misses where its lobe or its diffuse cannot take the surface, at certain
-    pairs of angles (the Fresnel rise and a non-Lambertian diffuse of a low sun in front of
-    the camera), and by little elsewhere, so one relative error for every frame is too wide
-    at most and too narrow at a few (docs/BENCHMARKS.md, "Bands in a new view").
+    """A prediction's model error over the fit's one ``kappa`` (T, C) at the sun's ``angles``
+    [(theta_h, theta_d) per frame, deg]: models miss at certain angles and little elsewhere
+    (docs/BENCHMARKS.md, "Bands in a new view").
 
-    From the residuals of the fit's frames (``by_frame`` of :func:`held_out_error`, at the
-    frames' ``fit_angles``): each frame's excess over its noise, max(e^2 - sd^2, 0), the larger
-    of its held-out and its fitted one, weighted by exp(-d^2 / 2 ANGLE_REACH_DEG^2) at its
-    distance d in angles from the prediction's, beside kappa^2 with weight KAPPA_FRAMES:
-    kappa_local^2 = (sum w excess + KAPPA_FRAMES kappa^2) / (sum w + KAPPA_FRAMES).  Where no
-    frame of the fit lies near (or the frame has no sun), the scale is 1; so it is
-    everywhere for a fit without kappa or without residuals (edited ones are not read)."""
+    From ``by_frame`` of :func:`held_out_error` at ``fit_angles``: each frame's excess
+    max(e^2 - sd^2, 0) (the larger of held-out and fitted), weighted w = exp(-d^2 / 2
+    ANGLE_REACH_DEG^2) by angular distance d:
+    kappa_local^2 = (sum w excess + KAPPA_FRAMES kappa^2) / (sum w + KAPPA_FRAMES); returns
+    kappa_local / kappa, 1 where no fitted frame lies near or without kappa or residuals."""
     T = len(angles)
     ones = np.ones((T, 1))
     if not (kappa > 0 and isinstance(by_frame, dict) and isinstance(fit_angles, list)):

@@ -1,10 +1,7 @@
-"""A fit's intervals (the stage after the search, :meth:`~.fit.FitSession.run`): every
-parameter's 68% and 95% intervals from the covariance or the profile of chi-square (thesis
-ch. 6), widened by every error the data share: the light cache's own Monte Carlo error, a
-photographed sequence's calibration, the camera's colour matrix, the rounding a JPEG frame's
-blocks share over the region, the fitted sky, the camera's pose (:mod:`~.pose`) and the sun's
-level.  Each function takes the region's :class:`~.fit.FitSession` ``s`` and its
-:class:`~.fit.FitState` ``fit``."""
+"""A fit's 68% and 95% intervals from the covariance or the profile of chi-square (thesis ch. 6),
+widened by the errors the data share: light cache, calibration, colour matrix, JPEG block
+rounding, fitted sky, camera pose (:mod:`~.pose`) and sun level. Functions take the region's
+:class:`~.fit.FitSession` ``s`` and its :class:`~.fit.FitState` ``fit``."""
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -19,20 +16,15 @@ from ..pipeline.ingest import pixel_sigma
 from ..pipeline.jpeg_noise import YCC_TO_RGB, shared_error_sd
 from ..render.light_cache import SIGMA_RESOLVED
 
-#: Iterations of each constrained fit that profiles a parameter along a ridge (another
-#: parameter poorly determined): the conditional-mean start is poor there.
+#: Iterations of each constrained profile fit along a ridge (a poor conditional-mean start).
 PROFILE_RIDGE_ITERATIONS = 40
 
 
 def fit_intervals(s, fit):
-    """68% and 95% intervals of every parameter into the :class:`FitState` ``fit`` (its
-    intervals, rise, cache_noise_chi2, cache_sd, sun_level_sd): the covariance's, or for
-    rho_s and sigma_alpha of a global fit the profile's; each widened by the light cache's
-    own Monte Carlo error, the calibration's (``calibration_sd``), the fitted sky's, the
-    camera pose's (``pose``, :func:`~.pose.pose_share`) and, a factor on the reflectances,
-    the sun's level's; by the rounding a JPEG frame's blocks
-    share over the region (``jpeg_shared_sd``) and the camera's colour matrix's error
-    (``matrix_sd``)."""
+    """Set ``fit``'s intervals, rise, cache_noise_chi2, cache_sd and sun_level_sd: the
+    covariance's intervals, or the profile's for rho_s and sigma_alpha of a global fit, each
+    widened by the cache's, calibration's, JPEG rounding's, colour matrix's, sky's and pose's
+    errors and (a factor on the reflectances) the sun level's."""
     problem, theta, names = fit.problem, fit.theta, s.names
     lower, upper = s.lower, s.upper
     s2k = fit.delta_scale                             # each parameter's scale of Delta chi^2
@@ -50,10 +42,9 @@ def fit_intervals(s, fit):
         if p in prof:
             rise[p] = float(np.max(prof[p][1]) - np.min(prof[p][1]))
             if glob:
-                # the union of the grid's (linearised) profile interval and the true
-                # chi^2's (see methods/profile.py): the first is offset where the sensor
-                # clips, the second inherits the cache's narrow-lobe error (a mirror fit
-                # of the board's polished steel, truth sigma_alpha 0.02: 95% edge 0.002)
+                # the union of the grid's linearised profile interval and the true chi^2's
+                # (methods/profile.py): the first is offset where the sensor clips, the
+                # second inherits the cache's narrow-lobe error
                 iv = unc.profile_interval(*prof[p], s2k[i], ripple)
                 levels = list(iv)
                 exact, _, points = profile_edges(
@@ -106,25 +97,11 @@ def fit_intervals(s, fit):
 
 
 def sky_only_reach(s, shape_known, intervals, fit=None):
-    """Why the roughness's lower end is not determined ('' where it is): its 95% interval
-    (``intervals``) reaches a lobe seen in the sky's reflection alone (below the session
-    ``s``'s :func:`~.geometry.sky_only_limit`), in photographs (not a table) or where the sky's
-    shape is only modelled (``shape_known`` False).  Lobes narrower still differ there by a
-    few tenths of a per cent, which a sky shape only modelled, or photographs' errors that a
-    frame's pixels share (the JPEG's blocks, the calibration; measured on the sample board at
-    quality 92: 0.3-0.5%), reach.  Measured: the board's polished steel, 0.02, read 0.106 with
-    0.055-0.116 (its rendered frames fitted as they are: below 0.119); a gloss paint, 0.02,
-    photographed under a hazy sky, 0.085 with 0.067-0.103 (the sun's far tail at the closest
-    highlight, 12 degrees off, taken for a lobe; the limit 0.076).
-
-    In photographs whose interval lies above the limit, the lower end is open too where the
-    region's means per frame do not exclude a lobe at the limit (:func:`frame_means_admit`,
-    with the fit ``fit``): the sun's tail is then told from the sky's reflection only by
-    its pattern across the region within a frame, a few tenths of a per cent that the
-    photograph's flat field, blocks and the pose's error in each pixel's view hold no better
-    (the board's white gloss paint, 0.02, 0.132 with 0.121-0.142 in photographs with the
-    pose 0.3 degrees off: Delta chi^2 20 from the pixels at the limit, 0.108; from the means
-    per frame at most 2.7 over their misfit of 2.2)."""
+    """Why the roughness's lower end is not determined ('' where it is): in photographs or under
+    a modelled sky shape, its 95% ``intervals`` reaches a lobe seen only in the sky's reflection
+    (:func:`~.geometry.sky_only_limit`), where narrower lobes differ by less than those errors;
+    in photographs also where the means per frame admit a lobe at the limit
+    (:func:`frame_means_admit`; docs/BENCHMARKS.md, "The sample board photographed")."""
     shot = photographed(s.doc) and s.obs.rays is None          # photographs, not a table
     if s.names[-1] != "sigma_alpha" or not (shot or not shape_known):
         return ""
@@ -142,12 +119,10 @@ def sky_only_reach(s, shape_known, intervals, fit=None):
 
 
 def frame_means_admit(s, fit, sigma):
-    """Whether the region's mean per frame and channel leaves a lobe of roughness ``sigma``
-    within 95% of the fit ``fit``: the least chi^2 of the means with the roughness held at
-    ``sigma`` exceeds their least by under 3.84 times their own misfit (least chi^2 over its
-    degrees of freedom, at least 1); each mean's variance as the held-out frames' take it
-    (:func:`~.held_out.predicted_residuals`: its values' noise over their number, the frame's
-    own calibration) plus the rounding of the frame's JPEG blocks (:func:`jpeg_frame_sd`)."""
+    """Whether the region's means per frame and channel admit roughness ``sigma`` at 95%: their
+    least chi^2 with sigma held rises by under 3.84 times their own misfit (at least 1); each
+    mean's variance as :func:`~.held_out.predicted_residuals` takes it plus the frame's JPEG
+    block rounding (:func:`jpeg_frame_sd`)."""
     problem, theta = fit.problem, np.asarray(fit.theta, dtype=float)
     _, var, _, told = predicted_residuals(problem, theta, True, frame_calibration_sd(s))
     k = len(theta)
@@ -178,18 +153,10 @@ def frame_means_admit(s, fit, sigma):
 
 
 def calibration_sd(s, J, problem, usable, theta, curvature_inverse):
-    """Each parameter's standard error (n,) from a photographed sequence's calibration on
-    patches of known reflectance (ingest's ``calibration`` record): each frame's exposure
-    errs per channel by ``frame_relative_sd`` where the frames take their own
-    (``per_frame``), or the day's by ``scale_relative_sd`` where they share one.  An
-    error e moves every value of its frame and channel by e times the value
-    (:meth:`~.chi2.Problem.value_scale`), carried to the parameters by
-    :func:`~.uncertainty.shared_error_sd`: not a mere scale on the reflectances, since
-    frames erring apart bend the day's curve, which the specular share and the roughness
-    follow (a board's yellow paint, its sun's highlight never seen, frames calibrated
-    each on its own: C_b's standard error from the calibration 0.21%, where a scale gave
-    0.07%).  A table's, without frames photographed, is
-    :func:`~.uncertainty.calibration_sd`."""
+    """Each parameter's standard error (n,) from a photographed sequence's calibration: each
+    frame's (``per_frame``) or the day's exposure error per channel moves its values by e times
+    them, carried by :func:`~.uncertainty.shared_error_sd` (frames erring apart bend the day's
+    curve). A table's is :func:`~.uncertainty.calibration_sd`."""
     cal = (s.doc.get("ingest") or {}).get("calibration") or {}
     if s.obs.rays is not None or not cal.get("scale_relative_sd"):
         return unc.calibration_sd(s.doc, s.names, theta)
@@ -206,22 +173,17 @@ def calibration_sd(s, J, problem, usable, theta, curvature_inverse):
 
 
 def frame_calibration_sd(s):
-    """The relative error (3,) every value of a photographed frame and channel shares from
-    its own calibration (ingest's ``calibration.frame_relative_sd`` where each frame took
-    its own), else None."""
+    """The relative error (3,) a frame's values share from its own calibration, else None."""
     cal = (s.doc.get("ingest") or {}).get("calibration") or {}
     return cal["frame_relative_sd"] if cal.get("per_frame") else None
 
 
 def matrix_sd(s, J, problem, usable, theta, curvature_inverse):
-    """Each parameter's standard error (n,) from the camera's colour matrix (ingest's
-    ``colour_matrix`` record: each entry of its error E, in linear sRGB, relative_sd): a
-    developed value of channel c reads L_c + sum_j E_cj L_j, whose grey-card calibration
-    (which scales each channel to the grey's truth) leaves L_c + sum_(j != c) E_cj (L_j -
-    L_c), nothing on a grey and most on a saturated colour's weak channels.  Each of the
-    six E_cj is one error for the whole day (one camera, one matrix), carried to the
-    parameters by :func:`~.uncertainty.shared_error_sd` with the ratios L_j / L_c of the
-    model at ``theta``; zeros without the record or for a table."""
+    """Each parameter's standard error (n,) from the colour matrix (ingest's ``colour_matrix``
+    record, each entry of its error E relative_sd): after grey-card calibration channel c reads
+    L_c + sum_(j != c) E_cj (L_j - L_c). Each of the six E_cj is one error for the day, carried
+    by :func:`~.uncertainty.shared_error_sd` with the model's L_j / L_c at ``theta``; zeros
+    without the record or for a table."""
     rel = ((s.doc.get("ingest") or {}).get("colour_matrix") or {}).get("relative_sd")
     n = len(s.names)
     if s.obs.rays is not None or not rel:
@@ -255,10 +217,8 @@ def matrix_note(s):
 
 
 def jpeg_shared_sd(s, J, usable, sigma, curvature_inverse):
-    """Each parameter's standard error (n,) from the rounding of the block means that the
-    region's pixels share in each JPEG frame (:func:`jpeg_frame_sd`), carried to the
-    parameters by :func:`~.uncertainty.shared_error_sd`, ``sigma`` the values' in
-    chi-square); zeros without JPEG frames."""
+    """Each parameter's standard error (n,) from the JPEG block-mean rounding the region's
+    pixels share (:func:`jpeg_frame_sd`); zeros without JPEG frames."""
     shared = jpeg_frame_sd(s)
     if shared is None:
         return np.zeros(len(s.names))
@@ -266,10 +226,8 @@ def jpeg_shared_sd(s, J, usable, sigma, curvature_inverse):
 
 
 def jpeg_frame_sd(s):
-    """The standard error [DN] (T, 3) in Y, Cb and Cr that the region's pixels share in each
-    JPEG frame, from the rounding of their blocks' means (ingest's ``jpeg_dc`` record,
-    :func:`~skyfit_mi.pipeline.jpeg_noise.shared_error_sd`, with the sensor's noise before
-    compression from the manifest's noise model); None without JPEG frames."""
+    """The standard error [DN] (T, 3) in Y, Cb, Cr the region's pixels share in each JPEG frame
+    (:func:`~skyfit_mi.pipeline.jpeg_noise.shared_error_sd`); None without JPEG frames."""
     by_index = {f["index"]: f for f in s.doc["frames"]}
     records = [by_index.get(i, {}).get("jpeg_dc") for i in s.obs.frames]
     model = s.doc["sensor"].get("noise_model") or {}
@@ -286,11 +244,8 @@ def jpeg_frame_sd(s):
 
 
 def poorly_determined(s, theta, intervals, profiled, cov):
-    """Whether a profiled parameter's 95% interval runs into a bound of its range, covers
-    over half of it, or is not the covariance's (either side under a third or over three times
-    its covariance half-width: chi-square far from quadratic; on a Radiance-traced day rho_s's
-    profile was a cliff on one side and flat on the other): then the others trade off along
-    a ridge that their covariance intervals (a quadratic at the fit) miss."""
+    """Whether a profiled 95% interval reaches a bound, covers over half the range, or departs
+    from the covariance's (1/3x-3x): the others then trade off along a ridge."""
     for i, p in enumerate(s.names):
         if p in profiled:
             lo, hi = intervals[p]["95"]
@@ -304,13 +259,10 @@ def poorly_determined(s, theta, intervals, profiled, cov):
 
 
 def profile_the_rest(s, fit, intervals, ripple):
-    """Profile intervals, on the true chi-square by constrained fits, for the parameters
-    that have only covariance intervals; each the union with its covariance interval (an
-    edge the fits cannot place keeps the covariance's), unless the fit lies on a bound of
-    its range or the curvature is singular there: the covariance's quadratic then runs
-    into the excluded side (rho_s < 0) and means nothing (an overcast day fitted at
-    rho_s = 0: R's covariance interval 0-1, its profile 0.83-1).  Returns the points the
-    constrained fits walked [(theta, chi2)]."""
+    """Profile intervals by constrained fits on the true chi-square for the parameters with only
+    covariance intervals, each united with its covariance interval, except at a bound or a
+    singular curvature, where the quadratic means nothing. Returns the points walked
+    [(theta, chi2)]."""
     levels, walked = ("68", "95"), []
     theta = fit.theta
     span = s.upper - s.lower
@@ -338,12 +290,9 @@ def profile_the_rest(s, fit, intervals, ripple):
 
 
 def model_noise_allowance(problem, theta, sigmas, profile, s2):
-    """The chi-square the model's own Monte Carlo error may add, as the largest over the
-    sigma_alpha profile's 95% region (not only at the fit: the cache's error grows with
-    sigma_alpha, and the truth may lie where it is larger).  At each roughness the model
-    noise of the larger of two estimators compared (near the mirror, the mirror rays'
-    and the narrowest resolved lobe's); the region widens with the allowance, so it is
-    found again until it stops growing."""
+    """The chi-square the model's Monte Carlo error may add: the largest over the sigma_alpha
+    profile's 95% region (the cache's error grows with sigma_alpha), the larger of two
+    estimators at each roughness; iterated, as the region widens with the allowance."""
     def at(sigma):
         return problem.model_noise_chi2(np.r_[theta[:-1], sigma])
 

@@ -1,11 +1,8 @@
 """Chi-square landscapes: chi^2 over two parameters of a region, the others fixed at a fit
 or, over (rho_s, sigma_alpha), at their best (thesis figs 6.5-6.21 and 7.10).
 
-The map uses the fit's fast model: Ward's radiance is linear in its reflectances once
-sigma_alpha is given (thesis eq. 3.19, L = rho_d D + s G(sigma) per channel), so the light is
-traced once, the basis D, G is evaluated once per roughness on the map, and every grid point
-costs one NumPy evaluation of chi^2 (:meth:`~skyfit_mi.fitting.chi2.Problem.residuals_from`,
-censored values included).
+Ward's radiance is linear in its reflectances given sigma_alpha (thesis eq. 3.19), so the basis
+D, G is evaluated once per roughness and each grid point costs one NumPy chi^2.
 """
 
 import csv
@@ -21,9 +18,8 @@ from ..render.fit_model import PARAMETERS, bounds, reflectances
 
 
 def truth_parameters(truth, model, names, normalisation="ward"):
-    """The true parameters in the fit's parameterisation, from the manifest's material record
-    (``truth`` in a fit JSON), or None when the material was given in another model or Ward
-    normalisation (its parameters would mean another BRDF)."""
+    """The true parameters in the fit's parameterisation from the manifest's material record, or
+    None when it is in another model or normalisation."""
     if not isinstance(truth, dict) or truth.get("model") != model \
             or truth.get("normalisation", "ward") != normalisation:
         return None
@@ -37,10 +33,8 @@ def truth_parameters(truth, model, names, normalisation="ward"):
 
 
 def map_axes(model, x, y, x_range=None, y_range=None, n=60, profile=False):
-    """The grid (xs, ys) of a map of ``model``'s parameters ``x`` and ``y``: ``n`` values over
-    each range (default the parameter's bounds); SkyfitError for an unknown or repeated
-    parameter, a range outside its bounds, or a ``profile`` (:func:`profiled_map`) of the
-    2-parameter model, which has no other parameter."""
+    """The grid (xs, ys) of ``model``'s parameters ``x`` and ``y``, ``n`` values over each range
+    (default the bounds); raises SkyfitError for bad parameters or ranges."""
     names, (lower, upper) = list(PARAMETERS[model]), bounds(model)
     if profile and len(names) == 2:
         raise SkyfitError("the 2-parameter model has no other parameter to profile; leave "
@@ -62,8 +56,7 @@ def map_axes(model, x, y, x_range=None, y_range=None, n=60, profile=False):
 
 
 def chi2_map(session, theta, x, y, xs, ys):
-    """chi^2 on the grid ``xs`` x ``ys`` of parameters ``x`` and ``y`` (names, checked by
-    :func:`map_axes`), every other parameter at ``theta``: array (len(ys), len(xs))."""
+    """chi^2 (len(ys), len(xs)) on the grid of ``x``, ``y``, every other parameter at ``theta``."""
     names = list(session.names)
     ix, iy = names.index(x), names.index(y)
     last = len(names) - 1
@@ -98,10 +91,8 @@ PROFILE_STEPS = 4
 
 
 def _polish(session, theta, free, D, G):
-    """The lowest true chi^2 (censored values included) that Gauss-Newton steps from
-    ``theta`` over its parameters of indices ``free`` (never sigma_alpha, whose basis D, G is
-    given) reach, within the bounds; forward differences on the basis model (Ward's radiance
-    is linear in R, C and, within the plastic or the metal reading, rho_s)."""
+    """The lowest true chi^2 that bounded Gauss-Newton steps from ``theta`` over the parameters
+    ``free`` (never sigma_alpha) reach, by forward differences on the basis model."""
     problem, model = session.problem, session.model
     theta = np.array(theta, dtype=float)
     free = np.asarray(free, dtype=int)
@@ -130,19 +121,10 @@ def _polish(session, theta, free, D, G):
 
 
 def profiled_map(session, theta, x, y, xs, ys):
-    """chi^2 on the grid ``xs`` x ``ys`` of parameters ``x`` and ``y`` with every other
-    parameter at its best for each point (the profile), as the true chi^2 (censored values
-    included), comparable with :func:`chi2_map`.  Each point starts from two places: the best
-    on the linearised data as the global search's grid finds it
-    (:func:`~skyfit_mi.fitting.methods.global_search.linear_quadratics`: R or each free C_c in
-    closed form, rho_s and sigma_alpha, when not an axis, on RHO_GRID and SIGMA_GRID), and
-    the fit ``theta``'s values; where sigma_alpha is not an axis, every value of its grid is
-    tried at its linearised best and the true chi^2 picks one (about 65 evaluations a
-    point).  From each start, R, C and rho_s are polished on the true chi^2 (:func:`_polish`;
-    sigma_alpha stays on its grid), and the lower is kept: so the map is never above the map
-    with the others at the fit, and bounds the profile from above.
-    The 3- and 5-parameter models (:func:`map_axes` refuses the 2-parameter one).  Returns an
-    array (len(ys), len(xs))."""
+    """The profile chi^2 (len(ys), len(xs)) on the grid ``xs`` x ``ys`` of ``x`` and ``y``, every
+    other parameter at its best (3- and 5-parameter models): each point polished
+    (:func:`_polish`) from the linearised grid's best and from ``theta``, the lower kept, so the
+    map never exceeds :func:`chi2_map`'s and bounds the profile from above."""
     names = list(session.names)
     theta = np.asarray(theta, dtype=float)
     axes = {x: np.asarray(xs, dtype=float), y: np.asarray(ys, dtype=float)}
@@ -182,7 +164,6 @@ def profiled_map(session, theta, x, y, xs, ys):
                 k, r = k0, best_rho(0)
             else:
                 # every roughness at its linearised best; the true chi^2 picks among them
-                # (the linearised one leaves out values near saturation, and can mislead)
                 k = min(range(len(sigma)), key=lambda kk: _chi2_from_basis(
                     session, grid_point(kk, best_rho(kk)), D, G[kk]))
                 r = best_rho(k)
@@ -196,9 +177,8 @@ def profiled_map(session, theta, x, y, xs, ys):
 
 
 def map_prefix(prefix, default_name, overwrite=False):
-    """The path prefix of a map's files: ``prefix`` (an existing folder: the map goes into it
-    as ``default_name``), checked not to replace files that are not an earlier map's unless
-    ``overwrite``: a map's CSV has the header X,Y,chi2, and its PNG is the one beside it."""
+    """The path prefix of a map's files (a folder: ``default_name`` in it), refusing to replace
+    files that are not an earlier map's (CSV header X,Y,chi2) unless ``overwrite``."""
     prefix = Path(prefix)
     if prefix.is_dir():
         prefix = prefix / default_name
@@ -218,9 +198,7 @@ def map_prefix(prefix, default_name, overwrite=False):
 
 
 def write_chi2_map(prefix, x, y, xs, ys, chi2, marks, walk=None, others="at the fit"):
-    """``<prefix>.csv`` (x, y, chi2 per grid point) and ``<prefix>.png`` (:func:`draw_chi2_map`
-    with ``marks`` {label: (x, y)} such as the fit, the map's minimum and the truth, and an
-    optional walk (N, 2) such as an annealing trace)."""
+    """Write ``<prefix>.csv`` (x, y, chi2) and ``<prefix>.png`` (:func:`draw_chi2_map`)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -246,9 +224,8 @@ MARK_STYLES = {"fit": ("*", "r"), "map minimum": ("+", "w"), "truth": ("o", "ora
 
 
 def draw_chi2_map(fig, ax, x, y, xs, ys, chi2, marks, walk=None):
-    """Log-scaled filled contours of chi^2 - min + 1 on ``ax`` with a colour bar in decades,
-    ``marks`` {label: (x, y)} (MARK_STYLES) and an optional walk (N, 2), drawn within the
-    map's ranges (a walk beyond them is cut)."""
+    """Log-scaled filled contours of chi^2 - min + 1 on ``ax`` with a colour bar, ``marks``
+    {label: (x, y)} (MARK_STYLES) and an optional walk (N, 2), clipped to the map's ranges."""
     from matplotlib.colors import LogNorm
     from matplotlib.ticker import LogLocator
 

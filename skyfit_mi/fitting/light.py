@@ -1,17 +1,6 @@
-"""The fit's light: what the user asked of it, checked once against a sequence, and the light
-as traced, in parts.
-
-* :class:`LightOptions`: ``fit --sky``, ``--sun-sd``, ``--sky-terms``, ``--sky-shape`` as
-  given (region fits, ``--model auto`` and maps take the same record);
-* :class:`LightPlan`: those options resolved against the sequence's manifest and skies before
-  any light is traced (:meth:`LightOptions.resolve`): whether the sky is the spec's or fitted,
-  with or without the level's prior, the sun level's uncertainty and where it comes from;
-* :class:`LightParts`: the light a plan traces at a region's points, by part (the spec's
-  light alone; or the sun, the sky and the sky's shape variants), radiance linear in each.
-
-The sky fit (:func:`~.sky_fit.fit_sky_scale`) then sets the parts' weights from its
-coefficients (:class:`~.sky_fit.SkyCoefficients`, each under a Gaussian prior) and returns what
-the light adds to each region's errors (:class:`~.sky_fit.SkyShare`).
+"""The fit's light: the options as given (:class:`LightOptions`), resolved against a sequence
+before any tracing (:class:`LightPlan`), and traced by part (:class:`LightParts`), whose weights
+the sky fit sets (:func:`~.sky_fit.fit_sky_scale`).
 """
 
 from dataclasses import dataclass
@@ -29,16 +18,12 @@ from .sky_fit import (check_terms, default_departure, default_sky, default_sun_s
 class LightPlan:
     """A fit's light resolved for a sequence (:meth:`LightOptions.resolve`).
 
-    sky : 'spec' (the spec's light as it is), 'fit' (the sky's level fitted against the sun's
-        with the materials) or 'prior' (the same under the level's prior,
-        :data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`)
-    sun_sd : the sun's level's relative uncertainty (sd of its log) in the reflectances'
-        intervals; ``sun_source`` where it comes from: 'given' (``--sun-sd``), 'measured' or
-        'modelled' (the spec's sun), 'rendered' (the very sun skyfit rendered the day with)
-    terms : the terms of the sky's level over the day (None: :func:`~.sky_fit.default_terms`)
-    shape : whether the sky's shape variants are traced and mixed (``--sky-shape``)
-    departure : whether the sky's departure from its model is traced and fitted under its
-        prior (``--sky-departure``, :mod:`~skyfit_mi.physics.sky_departure`)
+    sky : 'spec' (as is), 'fit' (the sky's level fitted with the materials) or 'prior' (the same
+        under :data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`)
+    sun_sd, sun_source : the sun level's relative sd (of its log) in the reflectances' intervals,
+        and its source: 'given' (``--sun-sd``), 'measured', 'modelled' or 'rendered'
+    terms, shape, departure : ``--sky-terms`` (None: :func:`~.sky_fit.default_terms`),
+        ``--sky-shape``, ``--sky-departure``
     """
 
     sky: str = "spec"
@@ -69,8 +54,7 @@ SPEC_LIGHT = LightPlan()
 
 @dataclass(frozen=True)
 class LightOptions:
-    """The light options of a fit as given (``fit --sky``, ``--sun-sd``, ``--sky-terms``,
-    ``--sky-shape``, ``--sky-departure``); None chooses (:meth:`resolve`)."""
+    """The light options of a fit as given (``fit --sky`` etc.); None chooses (:meth:`resolve`)."""
 
     sky: str = None
     sun_sd: float = None
@@ -79,11 +63,9 @@ class LightOptions:
     departure: bool = None
 
     def resolve(self, doc, skies, n_frames, log=print):
-        """The :class:`LightPlan` of these options on a sequence (its manifest ``doc``, its
-        frames' ``skies``, ``n_frames`` fitted), checked before any light is traced: ``sky``
-        None chosen (:func:`~.sky_fit.default_sky`, and said), ``sun_sd`` None its default
-        (:func:`~.sky_fit.default_sun_sd`), ``departure`` None on for photographs whose sky is
-        fitted (:func:`~.sky_fit.default_departure`)."""
+        """The checked :class:`LightPlan` of these options on a sequence (manifest ``doc``,
+        frames' ``skies``, ``n_frames``); Nones take :func:`~.sky_fit.default_sky` (logged),
+        :func:`~.sky_fit.default_sun_sd` and :func:`~.sky_fit.default_departure`."""
         sky, sun_sd, terms, shape = self.sky, self.sun_sd, self.terms, bool(self.shape)
         departure = self.departure
         if sky is not None:
@@ -137,20 +119,14 @@ class LightOptions:
 
 @dataclass(frozen=True)
 class LightParts:
-    """The light at a region's points as traced (:meth:`~.fit.FitSession.trace_light`), in
-    parts by name.  Radiance is linear in the light, so each part's table (its D and G bases,
-    thesis eq. 6.1's model on that light) adds with a weight, L = sum_j w_j (rho_d D_j + s G_j)
-    (:func:`~skyfit_mi.render.basis_table.mixed`), and no weight needs a trace of its own.
+    """The light at a region's points as traced, by part: radiance is linear in the light, so the
+    parts' tables (thesis eq. 6.1) add with weights, L = sum_j w_j (rho_d D_j + s G_j)
+    (:func:`~skyfit_mi.render.basis_table.mixed`).
 
-    names : the parts: ``light`` (the spec's light as it is, alone), or a fitted sky's ``sun``
-        (the solar disc), ``sky`` (the rest: sky, map and ground,
-        :meth:`~skyfit_mi.physics.sky.Sky.split`), its shape variants ``shape:<index>``
-        (:func:`~skyfit_mi.physics.sky_shape.shape_variants`) and its departure's parts
-        ``departure:<basis>`` (:func:`~skyfit_mi.physics.sky_departure.departure_parts`)
-    tables : each part's :class:`~skyfit_mi.render.basis_table.BasisTable`, traced in the
-        same blocks
-    covariances : the :class:`~skyfit_mi.render.basis_table.Covariances` of the parts traced on
-        shared samples (its pairs index ``names``), None where none are
+    names : ``light`` (the spec's, alone), or ``sun``, ``sky``, ``shape:<index>`` and
+        ``departure:<basis>``
+    tables : each part's :class:`~skyfit_mi.render.basis_table.BasisTable`
+    covariances : the parts' :class:`~skyfit_mi.render.basis_table.Covariances`, or None
     """
 
     names: tuple
@@ -159,8 +135,7 @@ class LightParts:
 
     @property
     def variants(self):
-        """The names of the parts mixed with the rest (the sky's shape variants, then its
-        departure's parts), in order: the mix's."""
+        """The parts mixed with the rest, in the mix's order (shape variants, then departure)."""
         return [n for n in self.names if n.startswith(("shape:", "departure:"))]
 
     @property
@@ -174,11 +149,8 @@ class LightParts:
                           None if self.covariances is None else self.covariances.subset(rows))
 
     def table(self, k=1.0, mix=None, sun=1.0):
-        """The table of the light whose sky (all but the sun) is ``k`` times the spec's against
-        the sun (one factor, or one per frame), in the spec's shape or (``mix``, one per
-        variant: shape variants, then departure parts) (1 - sum(mix)) times its pattern plus
-        mix_j times variant j, and whose sun is ``sun`` times the spec's (one factor, or one
-        per frame)."""
+        """The table with the sky ``k`` and the sun ``sun`` times the spec's (scalars or per frame),
+        the sky's pattern (1 - sum(mix)) its own plus mix_j times variant j."""
         if self.names == ("light",):
             return self.tables[0]
         mix = np.zeros(len(self.variants)) if mix is None else np.asarray(mix, dtype=float)

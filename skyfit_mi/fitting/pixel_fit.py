@@ -1,41 +1,17 @@
 """Every pixel its own Ward fit, many at once: the per-pixel half of a material map.
 
-A region fit (:mod:`.fit`) finds one material for many pixels; a map needs one for each
-pixel (or each N x N patch).  All of a chunk's pixels share one light-cache trace and one
-basis pass (:meth:`~skyfit_mi.render.fit_model.WardModel.basis` on the roughness grid
-SIGMA_GRID: one Dr.Jit launch per roughness for all pixels), and the global method's grid
-scores every (sigma_alpha, rho_s) point of every pixel with its linear parameters (R, or C
-per channel) in closed form, in one double-precision Dr.Jit kernel per block of GRID_BLOCK
-fits (:func:`~.methods.global_search.grid_chi2_device`, equal to the NumPy grid of region
-fits).  There is no per-pixel nonlinear polish: the estimate is the grid's
-best point, the linearised chi-square of the region fit's grid (same models, normalisations,
-the sensor response inverted, values within 3 sigma of saturation left out as the region
-grid does), which limits sigma_alpha to the grid's spacing (8% steps) and rho_s to 0.01.
+A chunk's pixels (or patches) share one light-cache trace (MAP_CACHE) and one basis pass on
+SIGMA_GRID; the global method's grid scores every (sigma_alpha, rho_s) point of every pixel with
+its linear parameters in closed form on the device
+(:func:`~.methods.global_search.grid_chi2_device`). There is no nonlinear polish, so sigma_alpha is
+resolved to the grid's 8% steps and rho_s to 0.01. The cache's error (from its two halves), the
+calibration's, the colour matrix's and, under a fitted sky, the regions' sky shares and the sun's
+level (:func:`~.pixel_map.first_fits`) are added to the intervals in quadrature.
 
-The light is cached with fewer samples than a region fit's (MAP_CACHE; the sky's integrals
-through each pixel's centre, interpolated between anchors where that is accurate: the
-``anchors`` plan of :data:`~skyfit_mi.render.light_cache.SKY_PLANS`) and kept as its table
-(:func:`~skyfit_mi.render.basis_table.trace_basis`, in blocks of bounded memory whatever the
-frames), and the cache's own Monte Carlo error is measured per pixel from its two halves
-(each fitted alike) and added to the intervals in quadrature, as are a photographed
-sequence's calibration error
-(:func:`~skyfit_mi.fitting.uncertainty.calibration_sd`) and its camera's colour-matrix error
-(:func:`~skyfit_mi.fitting.uncertainty.colour_matrix_sd`).  One pixel's values hardly tell
-the sky's level against the sun's, so a map of a photographed day (``--sky prior``, the
-default there, or ``fit``) takes the level its regions' fit finds first
-(:func:`~.pixel_map.first_fits`): each frame's sky at that level, each pixel's intervals with
-its region's share of the sky's error (a reflectance's in proportion to its value) and, on
-a day without a reference in the scene, the sun's level as a factor on the reflectances
-(:func:`~skyfit_mi.fitting.sky_fit.light_level_sd`, as that fit counts it: a modelled sun's
-20% widened by the sky's departure, a measured one's 3%).  The sky's shape is the spec's;
-``--sky spec`` takes the spec's sky and sun as exact, as region fits do.
-
-Intervals are the grid's profile: the 95% set {chi^2 <= chi^2_min + 3.84 s^2}, with
-s^2 = max(1, chi^2_min / dof) (a misfit widens them, as in region fits); sigma_alpha's and
-rho_s's are that set's extent widened by half a grid step, a linear parameter's the union over
-the set of its conditional range L +- sqrt((threshold - chi^2) / hh).  Warnings are a bit
-field (:data:`WARNINGS`); a pixel whose parameters the sequence cannot determine is flagged,
-and one off its material gets NaN.
+Intervals are the grid's profile, the 95% set {chi^2 <= chi^2_min + 3.84 s^2}, s^2 = max(1,
+chi^2_min / dof): sigma_alpha's and rho_s's its extent widened by half a grid step, a linear
+parameter's the union of L +- sqrt((threshold - chi^2) / hh) over the set. Warnings are a bit
+field (:data:`WARNINGS`); a pixel off its material gets NaN.
 """
 
 import numpy as np
@@ -53,27 +29,20 @@ from .sky_fit import LEVEL_SCALED, light_level_sd, skies_at_level
 from .uncertainty import Z, calibration_sd, colour_matrix_sd, widen_relative
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
-#: fit's, so that a chunk of pixels fits in memory (about 0.3 MB per pixel and frame set of 13).
+#: fit's, so that a chunk fits in memory.
 MAP_CACHE = (8, 64)
-#: Fits whose grids are searched at once: bounds the grids' memory (about 1 MB a fit) whatever
-#: the chunk's size, and keeps their arrays small enough to stay in the processor's caches.
+#: Fits whose grids are searched at once: bounds the grids' memory and keeps arrays in cache.
 GRID_BLOCK = 64
 #: Warning bits of a map pixel.
 WARNINGS = {"misfit": 1, "sigma_alpha undetermined": 2, "rho_s undetermined": 4,
             "reflectance undetermined": 8, "few values": 16, "off the material": 32,
             "saturated values left out": 64, "saturated values contradicted": 128}
-#: The bits that mean "a parameter is not determined": such a pixel is not a confident value.
-#: The map's linear grid leaves values near saturation out (a region fit's polish takes them
-#: as censored: they say only that the radiance reached the top code); a fit whose model
-#: falls short of such a value (by more than SATURATION_MARGIN sigma) contradicts it, and a
-#: highlight that saturated then misleads the pixel's fit.  A fit that reaches them agrees
-#: with them (their censored terms are zero there), and its intervals, without them, are
-#: if anything wide: it stays determined, bit 64 saying values were left out.
+#: The bits that mean "not determined": a fit falling short of a left-out saturated value
+#: contradicts it (a saturated highlight misleads it); one reaching it stays determined.
 UNDETERMINED = (WARNINGS["sigma_alpha undetermined"] | WARNINGS["rho_s undetermined"]
                 | WARNINGS["reflectance undetermined"] | WARNINGS["off the material"]
                 | WARNINGS["saturated values contradicted"])
-#: How far [sigma] a fit's model may fall below a saturated value it left out before it
-#: contradicts it (one-sided, about 0.1%).
+#: How far [sigma] a fit may fall below a left-out saturated value (one-sided, about 0.1%).
 SATURATION_MARGIN = 3.0
 #: A parameter is undetermined when its 95% interval spans more than this share of its range
 #: (reflectances) or this factor in roughness.
@@ -94,8 +63,7 @@ def patch_groups(pixels, patch):
 
 
 def _stack_groups(x, groups, n_groups):
-    """(P, T, ...) values regrouped as (G, T * m, ...), each group's pixels laid along the
-    frame axis (m the largest group; missing entries zero)."""
+    """(P, T, ...) values regrouped as (G, T * m, ...), zero-padded (m the largest group)."""
     P, T = x.shape[:2]
     m = int(np.bincount(groups, minlength=n_groups).max())
     out = np.zeros((n_groups, m, T) + x.shape[2:], dtype=x.dtype)
@@ -110,21 +78,14 @@ def _stack_groups(x, groups, n_groups):
 
 def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="ward", seed=0,
                cache=MAP_CACHE, groups=None, variant=None, light=None):
-    """Fit every pixel of ``pixels`` (P, 2), or every group of them, on its own; the light is
-    traced once for all.
+    """Fit every pixel of ``pixels`` (P, 2), or every group, on its own, the light traced once;
+    rebuilt from the manifest, so any worker process can run it.
 
-    ``materials``: the material id the pixels show (one, or one per pixel); ``cache``: the
-    light cache's (positions per pixel, directions per position); ``groups``: each
-    pixel's fit (P,) labels 0..G-1 (a patch's pixels share one; default every pixel its own);
-    ``variant``: the Mitsuba variant (default the sequence's); ``light``: None for the spec's
-    sky as it is, or the sky its regions' fit found (:func:`~.pixel_map.first_fits`): each
-    frame's sky at the fitted level, the sky's share of each region's errors carried to its
-    pixels, and the sun's level as that fit counted it.
-    Returns a dict of arrays over the G fits: ``pixels`` (G, 2) each fit's first pixel,
-    ``theta``, ``lo``, ``hi``, ``cache_error_sd`` (G, n) (95% intervals), ``chi2``, ``dof``,
-    ``model_noise_chi2``, ``warnings``, ``sigma_index`` (into SIGMA_GRID) (G,), and ``names``
-    the parameters.  Everything is
-    rebuilt from the manifest, so a worker in another process can run it.
+    ``materials``: the material id(s); ``cache``: (positions, directions); ``groups``: each
+    pixel's fit (P,) 0..G-1; ``light``: None (the spec's sky) or by :func:`~.pixel_map.first_fits`.
+    Returns a dict over the G fits: ``pixels`` (G, 2), ``theta``, ``lo``, ``hi``,
+    ``cache_error_sd`` (G, n) (95% intervals), ``chi2``, ``dof``, ``model_noise_chi2``,
+    ``warnings``, ``sigma_index`` (G,), and ``names``.
     """
     pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
     groups = np.arange(len(pixels)) if groups is None else np.asarray(groups, dtype=int)
@@ -171,9 +132,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)
-    # under a fitted sky, the sun's level: a factor on every reflectance that no data tell
-    # (as a region fit's, sky_fit.light_level_sd), known as its regions' fit counted it (the
-    # spec's sky as it is takes its sun as exact, as a region fit does)
+    # under a fitted sky, the sun's level as the regions' fit counted it (sky_fit.light_level_sd)
     sun = Z["95"] * light_level_sd(doc, names, 0.0 if light is None else light["sun_level_sd"])
     fit["lo"], fit["hi"] = widen_relative(theta, (fit["lo"], fit["hi"]), sun, lower, upper)
     if sky_span is not None:                  # the regions' sky level was not determined
@@ -193,11 +152,8 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
 
 
 def _sky_errors(light, material, names, theta):
-    """The fitted sky's share of each fit's error (G, n) and, where the regions' fit could not
-    determine the sky's level, the (lo, hi) (G, n) its range of levels reaches (else None):
-    each fit takes its region's (``light``'s ``regions``, by ``material`` (G,)), a
-    reflectance's relative to the region's value (the light's level scales it), the roughness's
-    as it is (zeros and None without ``light``)."""
+    """(The sky's share of each fit's error (G, n), the (lo, hi) its untold levels reach or None)
+    from its region's by ``material`` (G,), a reflectance's relative to the region's value."""
     sd = np.zeros_like(theta)
     if light is None:
         return sd, None
@@ -220,10 +176,9 @@ def _sky_errors(light, material, names, theta):
 
 
 def _contradicts(model, y, w, saturated, basis, fit, groups):
-    """Which pixels (P,) hold a value near saturation (``saturated``, left out of the grid)
-    that their group's fit falls short of by more than SATURATION_MARGIN sigma: the censored
-    term the value would add is then not zero.  ``y``, ``w`` the linearised values and their
-    weights, saturated ones included (P, T, 3); ``basis`` (D, G) per pixel on SIGMA_GRID."""
+    """Which pixels (P,) hold a ``saturated`` value their group's fit falls short of by more than
+    SATURATION_MARGIN sigma. ``y``, ``w`` (P, T, 3) linearised values and weights, saturated
+    included; ``basis`` (D, G) per pixel on SIGMA_GRID."""
     if not saturated.any():
         return np.zeros(len(groups), bool)
     rd, sp = reflectance_sets(model, fit["theta"]).transpose(1, 0, 2)
@@ -236,19 +191,16 @@ def _contradicts(model, y, w, saturated, basis, fit, groups):
 
 
 def _fit_block(model, names, y, w, bases):
-    """The grid fits of a block of groups: ``y``, ``w`` (G, T', 3), ``bases`` [(D, G)] of the
-    whole cache and its halves.  A dict of ``theta``, ``lo``, ``hi`` (before the cache's
-    error), ``cache_error_sd``, ``chi2``, ``chi2_grid``, ``dof``, ``model_noise_chi2``."""
+    """The grid fits (a dict) of a block of groups, on the whole cache and its halves."""
     search, half_a, half_b = (_grid_search(model, names, y, w, D, G) for D, G in bases)
-    # the chi^2 the cache's own noise adds at each fit: its halves' model values differ by
-    # twice the whole's Monte Carlo error over
+    # the chi^2 the cache's noise adds: its halves differ by twice the whole's error
     rd, sp = reflectance_sets(model, search["theta"]).transpose(1, 0, 2)
     cols = np.arange(len(rd))
     La, Lb = (rd[:, None] * D + sp[:, None] * G[search["sigma_index"], cols]
               for D, G in bases[1:])
     noise = np.sum(w * ((La - Lb) / 2.0) ** 2, axis=(1, 2))
     lo, hi = _grid_intervals(model, names, y, w, *bases[0], search, noise)
-    # the cache's own error in each parameter, from its halves' fits (as region fits do)
+    # the cache's own error in each parameter, from its halves' fits
     return {"theta": search["theta"], "lo": lo, "hi": hi, "chi2": search["chi2"],
             "chi2_grid": search["chi2_grid"], "dof": search["dof"], "model_noise_chi2": noise,
             "cache_error_sd": np.abs(half_a["theta"] - half_b["theta"]) / 2.0,
@@ -256,12 +208,8 @@ def _fit_block(model, names, y, w, bases):
 
 
 def _grid_search(model, names, y, w, D, G):
-    """Each group's best point of the grid on linearised data ``y``, weights ``w`` (G, T', 3)
-    and the basis D (G, T', 3), G (K, G, T', 3): a dict of the grid (``chi2`` (K, R, G) and
-    the linear parameters ``L`` (K, R, G, groups): none for the 2-parameter model), the best
-    ``theta`` (G, n), its ``chi2_grid``, the refined minimum ``chi2``, ``dof`` and
-    ``sigma_index``.  The 3- and 5-parameter grids run on the device
-    (:func:`~.methods.global_search.grid_chi2_device`)."""
+    """Each group's best grid point (a dict) on linearised ``y``, weights ``w`` (G, T', 3) and
+    basis D (G, T', 3), G (K, G, T', 3), with the grid's ``chi2`` (K, R, G) and linear ``L``."""
     n_par = len(names)
     if model == "two":
         chi2, thetas = grid_chi2(model, y, w, D, G, per_pixel=True)
@@ -274,17 +222,14 @@ def _grid_search(model, names, y, w, D, G):
     cols = np.arange(n_groups)
     theta = np.concatenate([L.reshape(K * R, n_groups, -1)[best, cols],
                             RHO_GRID[best % R, None], SIGMA_GRID[best // R, None]], axis=1)
-    # the grid's best point lies above the continuous minimum by up to its resolution: on
-    # precise data that excess alone would read as misfit, so s^2 and the misfit test take the
-    # minimum of a parabola through each profile's best point and its neighbours
+    # the grid point lies above the continuous minimum: s^2 and misfit take a parabola's
     vertex = np.minimum(_vertex(chi2.min(axis=1)), _vertex(chi2.min(axis=0)))
     return {"grid": chi2, "L": L, "theta": theta, "chi2_grid": flat[best, cols], "chi2": vertex,
             "dof": np.count_nonzero(w > 0, axis=(1, 2)) - n_par, "sigma_index": best // R}
 
 
 def _grid_intervals(model, names, y, w, D, G, search, model_noise):
-    """The 95% intervals (lo, hi), each (G, n), of a :func:`_grid_search` (module docstring);
-    ``model_noise`` (G,) the chi^2 that the cache's own noise adds (left out of s^2)."""
+    """The 95% intervals (lo, hi), each (G, n), of a :func:`_grid_search` (module docstring)."""
     n_par = len(names)
     chi2, L_grid, dof = search["grid"], search["L"], search["dof"]
     K, R, n_groups = chi2.shape
@@ -307,8 +252,7 @@ def _grid_intervals(model, names, y, w, D, G, search, model_noise):
     lo[:, r] = np.clip(RHO_GRID[np.argmax(j_ok, axis=0)] - half, 0, 1)
     hi[:, r] = np.clip(RHO_GRID[R - 1 - np.argmax(j_ok[::-1], axis=0)] + half, 0, 1)
     if model != "two":
-        # a linear parameter's union of conditional ranges over the 95% set, L +- reach, at
-        # the set's points only (it is a small share of the grid on determined pixels)
+        # a linear parameter's union of L +- reach over the 95% set's points only
         kk, rr, gg = np.nonzero(ok)
         L = L_grid[kk, rr, gg]                                         # (n, groups)
         hh = linear_curvature(model, w, D, G, RHO_GRID[rr], kk, gg)
@@ -318,8 +262,7 @@ def _grid_intervals(model, names, y, w, D, G, search, model_noise):
         high = np.full_like(low, -np.inf)
         np.minimum.at(low, gg, L - reach)
         np.maximum.at(high, gg, L + reach)
-        # the grid's resolution: L halfway to each neighbour of the set (in sigma and rho_s)
-        # lies within it too, as half a grid step does for sigma and rho_s themselves
+        # the grid's resolution: L halfway to each neighbour of the set lies within it too
         for dk, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
             k2, r2 = kk + dk, rr + dj
             on = (k2 >= 0) & (k2 < K) & (r2 >= 0) & (r2 < R)
@@ -331,8 +274,8 @@ def _grid_intervals(model, names, y, w, D, G, search, model_noise):
 
 
 def _vertex(profile):
-    """Each column's minimum of ``profile`` (N, G) refined by the parabola through its lowest
-    point and the two beside it (the lowest point itself at either end), never above it."""
+    """Each column's minimum of ``profile`` (N, G) refined by a parabola through its lowest point
+    and neighbours (never above it; the point itself at either end)."""
     n, g = profile.shape
     i = np.clip(np.argmin(profile, axis=0), 1, n - 2)
     cols = np.arange(g)
@@ -365,8 +308,7 @@ def _flags(model, names, fit, hit):
     return bits | np.where(~hit, WARNINGS["off the material"], 0)
 
 def check_map_region(pixels, shape):
-    """SkyfitError unless ``pixels`` (P, 2) is a non-empty set inside an image of ``shape``
-    (height, width)."""
+    """Raise SkyfitError unless ``pixels`` (P, 2) is non-empty and inside ``shape`` (H, W)."""
     pixels = np.asarray(pixels).reshape(-1, 2)
     if len(pixels) == 0:
         raise SkyfitError("the map's mask selects no pixel; give a mask with the label's value "

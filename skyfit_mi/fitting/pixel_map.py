@@ -1,19 +1,11 @@
 """Material maps over whole images: per-pixel fits in chunks, on Dask, into a Zarr store.
 
-``skyfit fit DIR --per-pixel`` maps every pixel (or every N x N patch, ``--patch``) of the
-chosen regions with :func:`~.pixel_fit.fit_pixels`.  The pixels are cut into chunks (whole
-patches, at most ``chunk`` fits, of one or several regions); each chunk is a Dask task that
-rebuilds what it needs from the manifest, so the same code runs on a ``LocalCluster`` of this machine (the default:
-one single-threaded worker process per core) or on an existing cluster (``--scheduler``).
-Results go into ``pixel_map.zarr`` as each chunk finishes, with the chunk marked done, so an
-interrupted map resumes where it stopped and loses nothing; a chunk's seed is derived from the
-map's seed and the chunk's index alone, so a map is the same from any number of workers.
-
-Outputs in the map folder: one EXR per parameter (full precision, NaN outside the regions),
-its 95% interval width, chi^2 per degree of freedom and the warning bits
-(:data:`~.pixel_fit.WARNINGS`); PNG previews with colour bars in which undetermined pixels
-are grey, not coloured; ``map_summary.json`` with each region's medians over its determined
-pixels, the settings, seeds and timings.
+``skyfit fit DIR --per-pixel`` maps every pixel (or ``--patch``) of the chosen regions with
+:func:`~.pixel_fit.fit_pixels`, in chunks that are self-contained Dask tasks on a local or given
+cluster. Results go into ``pixel_map.zarr`` as each chunk finishes, so an interrupted map resumes;
+a chunk's seed depends only on the map's seed and its index, so any number of workers gives the
+same map. Outputs: EXRs of each parameter, its 95% width, chi^2/dof and warning bits
+(:data:`~.pixel_fit.WARNINGS`), PNG previews and ``map_summary.json``.
 """
 
 import hashlib
@@ -48,20 +40,14 @@ from .sky_fit import default_sky, light_level_sd
 
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
-#: A worker's peak memory [bytes]: a fixed part (the imports and kernels) and a part per fit
-#: of its chunk, on a 13-frame day (docs/BENCHMARKS.md, "Per-pixel maps: speed and memory";
-#: a longer day's light is traced in blocks of bounded size, basis_table.CHUNK_SAMPLES).
+#: A worker's peak memory [bytes]: a fixed part and a part per fit of its chunk
+#: (docs/BENCHMARKS.md, "Per-pixel maps: speed and memory").
 WORKER_BYTES, FIT_BYTES = 0.25e9, 0.8e6
-#: Fits (pixels, or patches) per chunk: 1024 keep a worker near 1.1 GB (WORKER_BYTES +
-#: CHUNK * FIT_BYTES); a chunk's fixed cost (the scene, its skies, the kernels' tracing: about
-#: 1 s) is a tenth of its time.
+#: Fits per chunk: a worker near 1.1 GB, the chunk's fixed cost a tenth of its time.
 CHUNK = 1024
-#: How :func:`plan_chunks` lays fits into chunks (recorded, so that a store laid out otherwise
-#: is not resumed).
+#: How :func:`plan_chunks` lays fits into chunks (a store laid out otherwise is not resumed).
 LAYOUT = "tiles"
-#: Pixels of each region (at most; a seeded subset) whose fits a map takes first (:func:
-#: `first_fits`: a photographed day's sky, the models ranked): a region fit's default (``fit
-#: --max-pixels``).
+#: Most pixels of each region (a seeded subset) in a map's first fits (:func:`first_fits`).
 LIGHT_PIXELS = REGION_PIXELS
 #: The Dask setting that gives workers MALLOC_TRIM_THRESHOLD_ (unset for the local cluster).
 TRIM = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
@@ -70,13 +56,9 @@ SCHEDULER_TIMEOUT_S = 10
 
 
 def plan_chunks(regions, patch, chunk):
-    """The map's chunks: dicts of ``pixels`` (P, 2), ``materials`` (P,) the material each
-    shows, and ``groups`` (P,) each pixel's fit (0..G-1 within the chunk; a ``patch`` x
-    ``patch`` block of one region shares one), at most ``chunk`` fits per chunk, whole
-    groups only; regions follow each other, so one chunk may hold several materials.  Within a
-    region the fits go tile by tile (square tiles of about ``chunk`` fits), so that a chunk is
-    a compact piece of the image whose pixels share the sky integrals' anchors
-    (:data:`~skyfit_mi.render.light_cache.SKY_SPACING`)."""
+    """The map's chunks: dicts of ``pixels`` (P, 2), ``materials`` (P,) and ``groups`` (P,) (each
+    pixel's fit, 0..G-1), at most ``chunk`` whole fits each; within a region fits go by square
+    tiles, so a chunk is compact and shares the sky integrals' anchors."""
     px, mats, keys = [], [], []
     side = int(patch) * max(1, int(np.ceil(np.sqrt(int(chunk)))))
     for r, (name, pixels) in enumerate(regions):
@@ -102,8 +84,7 @@ def chunk_seed(seed, index):
 
 
 def _settings(doc, regions, model, normalisation, seed, patch, chunk, cache, sky):
-    """What a stored map was made with (a resume needs the same); ``sky``: how its light was
-    found (:func:`first_fits`' choices; the same choices find the same light)."""
+    """What a stored map was made with (a resume needs the same)."""
     digest = [(n, np.asarray(p).tolist()) for n, p in regions]
     return {"sequence_run_id": doc.get("run_id"), "model": model, "normalisation": normalisation,
             "seed": int(seed), "patch": int(patch), "chunk": int(chunk), "cache": list(cache),
@@ -114,17 +95,10 @@ def _settings(doc, regions, model, normalisation, seed, patch, chunk, cache, sky
 def first_fits(manifest_path, regions, model="colour", normalisation="ward", seed=0,
                light=SPEC_LIGHT, max_pixels=LIGHT_PIXELS, variant=None,
                log=print):
-    """What a map takes from fits of its ``regions`` ([(material, pixels)]) first, on up to
-    ``max_pixels`` of each (a seeded subset): each region's (model, normalisation), the
-    ones ranked best by held-out frames where ``model`` is 'auto'
-    (:func:`~.selection.fit_auto`), else ``model`` and ``normalisation`` for all; and the light
-    (:func:`~.pixel_fit.fit_pixels`' ``light``: None for the spec's sky as it is, ``sky``
-    'spec') under a fitted sky (``light``, a :class:`~.light.LightPlan` or options, whose sky
-    is 'fit' or 'prior', as ``fit --sky``): the sky's level as those fits find it, its record (``sky``), each
-    region's parameters, the sky's share of their standard errors and, where the level is not
-    determined, their range over the levels it could not tell apart (``regions``), and the
-    sun's level's sd as they count it.  One pixel's values hardly tell the sky or the model.
-    Returns (choices {region: (model, normalisation)}, light)."""
+    """Fit each of ``regions`` ([(material, pixels)]) first on up to ``max_pixels``, since one
+    pixel hardly tells the sky or the model: each region's (model, normalisation) (ranked where
+    ``model`` is 'auto'), and under a fitted sky the light for :func:`~.pixel_fit.fit_pixels`
+    (None for the spec's). Returns (choices {region: (model, normalisation)}, light)."""
     sky = light.sky                                     # named: a plan, or options that say it
     kept = [(name, subsample_region(px, max_pixels or None, seed)) for name, px in regions]
     what = " and ".join((["every lobe and parameter count ranked"] if model == "auto" else [])
@@ -170,9 +144,7 @@ def first_fits(manifest_path, regions, model="colour", normalisation="ward", see
 
 
 def plan_map(regions, choices, patch, chunk):
-    """The map's chunks (:func:`plan_chunks`) over the regions of each (model, normalisation)
-    of ``choices`` in turn, each chunk with its ``model`` and ``normalisation`` (a chunk's
-    light is traced for one lobe)."""
+    """The map's chunks per (model, normalisation) of ``choices``, one lobe per chunk."""
     out = []
     for kind in dict.fromkeys(choices[name] for name, _ in regions):
         for c in plan_chunks([r for r in regions if choices[r[0]] == kind], patch, chunk):
@@ -187,9 +159,7 @@ def map_parameters(choices):
 
 
 def _check_store(path, settings, overwrite):
-    """Refuse a store at ``path`` that holds another map's settings (or is damaged) unless
-    ``overwrite``; returns which of its chunks are done and what its regions' first fits
-    found (``first_fits``: None where it took none), or None for a new map."""
+    """Refuse another map's store unless ``overwrite``; (done, first fits) to resume, or None."""
     import zarr
 
     if not path.exists() or overwrite:
@@ -211,9 +181,8 @@ def _another_map(path):
 
 
 def _open_store(path, settings, shape, n_par, n_chunks, resume, first=None):
-    """The map's Zarr group: the one at ``path`` if ``resume``, else a new one (replacing
-    whatever is there, which :func:`_check_store` allowed), with what its regions' ``first``
-    fits found (a resume takes them again, not fits that might choose otherwise)."""
+    """The map's Zarr group: the one at ``path`` if ``resume``, else a new one (replacing what
+    :func:`_check_store` allowed) holding the ``first`` fits' findings, which a resume reuses."""
     import zarr
 
     if resume:
@@ -235,8 +204,7 @@ def _open_store(path, settings, shape, n_par, n_chunks, resume, first=None):
 
 
 def _write_chunk(store, chunk, res, names):
-    """Scatter one chunk's fits onto its pixels in the store, each parameter of its model on
-    its plane of the map's ``names``."""
+    """Scatter one chunk's fits onto its pixels in the store, each parameter on its plane."""
     pixels, groups = chunk["pixels"], chunk["groups"]
     x, y = pixels[:, 0], pixels[:, 1]
     box = (slice(y.min(), y.max() + 1), slice(x.min(), x.max() + 1))
@@ -253,9 +221,7 @@ def _write_chunk(store, chunk, res, names):
 
 
 def worker_count(workers, chunk, log=print):
-    """The local cluster's worker processes: ``workers`` (default one per core), at most one
-    per core and as many as the free memory holds at a chunk's peak (WORKER_BYTES + ``chunk``
-    FIT_BYTES each); a note says when fewer are started than asked for."""
+    """(Worker processes, note): ``workers`` (default per core), capped by cores and memory."""
     import psutil
 
     cores = os.cpu_count() or 1
@@ -272,9 +238,8 @@ def worker_count(workers, chunk, log=print):
 
 @contextmanager
 def _ctrl_c_deferred():
-    """A Ctrl-C pressed during the block is raised as KeyboardInterrupt when it ends, not
-    within it: a Dask cluster half started or half closed printed tracebacks at exit.
-    Elsewhere than in the main thread, nothing is changed."""
+    """Defer a Ctrl-C during the block to its end (a half-started or half-closed Dask cluster
+    prints tracebacks); no effect outside the main thread."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -294,9 +259,8 @@ def _ctrl_c_deferred():
 
 @contextmanager
 def _stderr_to_null(keep=False):
-    """Processes started during the block write their standard error to /dev/null (unless
-    ``keep``): a Ctrl-C at the terminal reaches every process of its group, and each Dask
-    worker printed its KeyboardInterrupt (their tasks' errors come back through Dask)."""
+    """Send started processes' standard error to /dev/null during the block (unless ``keep``),
+    so workers do not each print a Ctrl-C's traceback."""
     if keep:
         yield
         return
@@ -312,9 +276,8 @@ def _stderr_to_null(keep=False):
 
 
 def _client(workers, scheduler, memory_per_worker, dask_logs=False):
-    """A Dask client: of the cluster at ``scheduler``, or of a new LocalCluster (its logs and
-    its workers' standard error only with ``dask_logs``); start it within
-    :func:`_ctrl_c_deferred`."""
+    """A Dask client of the cluster at ``scheduler`` or of a new LocalCluster (logs only with
+    ``dask_logs``); start it within :func:`_ctrl_c_deferred`."""
     from distributed import Client, LocalCluster
 
     if scheduler:
@@ -327,10 +290,7 @@ def _client(workers, scheduler, memory_per_worker, dask_logs=False):
                               "--scheduler for a cluster on this machine.") from None
     import dask
 
-    # Dask's workers start with MALLOC_TRIM_THRESHOLD_ set, which turns off glibc's dynamic
-    # mmap threshold: every large temporary array is then mapped and faulted in afresh, and a
-    # chunk took 1.4x as long (docs/BENCHMARKS.md, "Per-pixel maps: speed and memory"); the
-    # variable is left unset here
+    # MALLOC_TRIM_THRESHOLD_ (Dask's default) slows chunks: left unset (docs/BENCHMARKS.md)
     with dask.config.set({f"{TRIM}": None}), _stderr_to_null(keep=dask_logs), \
             warnings.catch_warnings():
         if not dask_logs:                     # e.g. its own web server's port taken
@@ -343,10 +303,7 @@ def _client(workers, scheduler, memory_per_worker, dask_logs=False):
 
 @contextmanager
 def _dask_logs_quiet(keep=False):
-    """Dask's log lines in this process (the scheduler's and the client's) shown only at
-    CRITICAL during the block, unless ``keep``.  The cluster's own ``silence_logs`` ends when
-    it closes, and after a Ctrl-C its scheduler could still log the workers' closed
-    connections, with a traceback, before the loop stopped."""
+    """Show Dask's log lines in this process only at CRITICAL during the block, unless ``keep``."""
     if keep:
         yield
         return
@@ -369,18 +326,11 @@ def _close(client, cluster):
 class MapOptions:
     """How a map fits its pixels (:func:`run_map`).
 
-    model, normalisation : every region's model and lobe; ``model`` 'auto': each region in the
-        model and lobe ranked best by held-out frames on up to ``light_pixels`` of its pixels
-        first (:func:`first_fits`), the map's planes every parameter some region's model has
+    model, normalisation : every region's model and lobe (``model`` 'auto': :func:`first_fits`)
     seed : the first fits' subsets and each chunk's seed (:func:`chunk_seed`)
-    patch, chunk : pixels a side of a patch fitted as one, and pixels a chunk (:func:`plan_chunks`)
-    cache : the light cache's (positions, directions) a pixel
-    variant : the Mitsuba variant of the fits (default the sequence's)
-    light : the :class:`~.light.LightOptions`: its sky 'spec' takes the spec's sky as it is,
-        'fit' or 'prior' its level fitted with the regions' materials first (:func:`first_fits`,
-        with its ``sun_sd`` and ``terms``), None chooses as region fits do
-        (:func:`~.sky_fit.default_sky`: 'prior' for photographs under the sun)
-    light_pixels : the pixels of each region the first fits take at most
+    patch, chunk : pixels a side of a patch fitted as one, and fits a chunk
+    cache, variant : the light cache's (positions, directions) a pixel; the Mitsuba variant
+    light, light_pixels : :class:`~.light.LightOptions`; the most pixels a region's first fit takes
     """
 
     model: str = "colour"
@@ -396,9 +346,8 @@ class MapOptions:
 
 @dataclass(frozen=True)
 class ClusterOptions:
-    """Where a map runs (:func:`run_map`): ``workers`` LocalCluster processes (default: the
-    machine's cores, :func:`worker_count`) or a ``scheduler``'s cluster, each worker's memory
-    limit, and whether Dask's own log lines show (``--debug``)."""
+    """Where a map runs (:func:`run_map`): ``workers`` local processes (:func:`worker_count`) or
+    a ``scheduler``'s cluster, the worker memory limit, and Dask's logs (``--debug``)."""
 
     workers: int = None
     scheduler: str = None
@@ -408,11 +357,8 @@ class ClusterOptions:
 
 def run_map(manifest_path, regions, out_dir, options=MapOptions(), cluster=ClusterOptions(),
             overwrite=False, progress=True, log=print):
-    """Map ``regions`` ([(material, pixels (P, 2))]) of a sequence into ``out_dir`` as
-    ``options`` (:class:`MapOptions`) say, on ``cluster`` (:class:`ClusterOptions`); returns
-    the summary dict (module docstring).  Every input, the regions' frames and light and a
-    given scheduler included, is checked before the store is written; a store of another map
-    is refused unless ``overwrite``."""
+    """Map ``regions`` ([(material, pixels (P, 2))]) into ``out_dir`` per ``options`` on
+    ``cluster``, inputs checked first; returns the summary."""
     o, c = options, cluster
     model, normalisation, seed, patch, chunk, cache = (o.model, o.normalisation, o.seed,
                                                        o.patch, o.chunk, o.cache)
@@ -491,8 +437,7 @@ def run_map(manifest_path, regions, out_dir, options=MapOptions(), cluster=Clust
 
 def _map_pending(client, manifest_path, chunks, pending, store, names, options, progress,
                  light):
-    """Submit every pending chunk (each fitted as ``options``, a :class:`MapOptions`, say, in
-    the ``light`` the first fits found) and write each result as it comes."""
+    """Submit every pending chunk and write each result as it comes."""
     from distributed import as_completed
 
     futures = {client.submit(fit_pixels, str(manifest_path), chunks[i]["materials"],
@@ -523,8 +468,7 @@ def _map_pending(client, manifest_path, chunks, pending, store, names, options, 
 
 
 def write_map_outputs(out, store, names, regions, settings, choices):
-    """The map's EXRs, PNG previews and summary (returned) from the store; ``choices``
-    {region: (model, normalisation)} (a region's pixels have its model's planes alone)."""
+    """Write the map's EXRs and PNG previews from the store; returns the summary."""
     theta, lo, hi = (store[k][:] for k in ("theta", "lo", "hi"))
     chi2, dof, bits = store["chi2"][:], store["dof"][:], store["warnings"][:]
     mapped = bits >= 0
@@ -586,11 +530,7 @@ def _sky_summary(light):
 
 
 def _widths_include(doc, skies, names, light=None):
-    """What the maps' 95% widths of parameters ``names`` take in besides the data's noise
-    (their grid's profile, a misfit's scale): the map's light cache's error, a fitted sky's
-    share (``light``, :func:`first_fits`), and a photographed sequence's calibration, camera
-    colour matrix and sun's level where its manifest ``doc`` and its frames' ``skies`` call
-    for them (:func:`~.pixel_fit.fit_pixels`)."""
+    """What the maps' 95% widths include beyond the data's noise."""
     ingest = doc.get("ingest") or {}
     out = ["the light cache's Monte Carlo error (from its two halves)"]
     if light is not None:
@@ -621,9 +561,8 @@ def _stat(f, v):
 
 
 def _preview(path, image, mapped, determined, label, lacking=()):
-    """A PNG of ``image`` with a colour bar; mapped pixels that are not determined grey, the
-    rest of the frame white, the title naming the regions ``lacking`` (white: their model has
-    no such parameter)."""
+    """A PNG of ``image`` with a colour bar; undetermined pixels grey, unmapped white, the title
+    naming the regions ``lacking`` the parameter."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -1,32 +1,16 @@
-"""The camera pose's uncertainty in a fit's intervals (a stage of :meth:`~.fit.FitSession.run`,
-before :func:`~.intervals.fit_intervals`).
+"""The camera pose's uncertainty in a fit's intervals.
 
-A pose typed or estimated a fraction of a degree off moves every pixel's view and where it
-lands, and a narrow lobe's fit with them (a metal of sigma_alpha 0.08 fitted 0.0837 [0.0832,
-0.0841] with its camera 0.7 deg off).  The pose's angles (``[camera] pose_sd_deg``, or
-``fit --pose-sd-deg``: azimuth, angle from the vertical, roll, each 1 sd) are nuisances
-propagated linearised, as the sky's and the calibration's errors are: for each angle j of sd_j
-> 0 the light is traced again with the camera turned by sd_j about where its central ray meets
-the scene (:func:`~skyfit_mi.render.scene.turn_camera`; the same samples and seed as the fit's
-trace, so that their difference is the turn's, not Monte Carlo noise), the residuals at the
-fitted parameters move by Delta r_j, and the parameters by the Gauss-Newton step
+The pose's angles (``[camera] pose_sd_deg`` or ``fit --pose-sd-deg``: azimuth, angle from the
+vertical, roll, each 1 sd) are nuisances propagated linearised: for each angle j of sd_j > 0 the
+light is traced again with the camera turned by sd_j (on the fit's samples), the residuals move by
+Delta r_j, and the parameters by the Gauss-Newton step
 
     Delta theta_j = -(J^T J)^-1 J^T Delta r_j
 
-in the fit's own weighting (J the residuals' Jacobian at the fit).  The pose's covariance
-sum_j Delta theta_j Delta theta_j^T; its diagonal's square roots are added in quadrature to
-every interval (:func:`~.intervals.fit_intervals`).
-
-Where the sky is fitted with the day's regions (:mod:`~.sky_fit`), the turn moves every
-region's residuals, so the shared sky's coefficients (by -H^-1 sum_r Jp_r^T Delta r_r, H their
-profiled normal matrix, Jp_r region r's derivatives in them that its parameters cannot absorb),
-and every region's parameters with them: that part joins each Delta theta_j
-(:func:`pose_through_sky`).  A camera 0.3 deg off moved the sample board's sky level from 1.02
-to 1.09 and every C with it by 2-12%, beyond intervals that held the direct part alone.  The
-pose is not fitted: the turns fitted as coefficients of the light with the sky's took up the
-photographs' own errors (the board photographed with its pose exact read a turn of 0.17 +-
-0.08 deg, and 21 of 40 pairs held against 38 without), so it only widens.  Each function takes
-the region's :class:`~.fit.FitSession` ``s``.
+whose root sum of squares over j widens every interval. Under a fitted sky the turn also moves the
+sky's coefficients, by -H^-1 sum_r Jp_r^T Delta r_r (H their profiled normal matrix, Jp_r region
+r's unabsorbed derivatives), and every region with them (:func:`pose_through_sky`). The pose is
+not fitted (fitted turns took up the photographs' own errors), so it only widens.
 """
 
 from dataclasses import dataclass, field, replace
@@ -47,12 +31,9 @@ class PoseShare:
     """What the camera pose's uncertainty adds to one region's parameters' errors.
 
     sd_deg : the pose's 1-sd {azimuth, angle, roll} [deg]
-        (:func:`~skyfit_mi.render.scene.pose_sd`)
-    shifts : {angle: (n,) the parameters' shift with the camera turned by its sd, directly and
-        through the fitted sky} for each angle of sd > 0 (empty: nothing propagated)
+    shifts : {angle: (n,) the parameters' shift for a turn of its sd} (empty: none propagated)
     through_sky : {angle: (n,) the part of ``shifts`` through the fitted sky}
-    pivot : the point the camera turns about [m] (where its central ray meets the scene)
-    seconds : the traces' wall time [s]
+    pivot, seconds : the point the camera turns about [m]; the traces' wall time [s]
     """
 
     sd_deg: dict
@@ -63,8 +44,7 @@ class PoseShare:
 
     @property
     def sd(self):
-        """(n,) the pose's share of each parameter's standard error, sqrt(sum_j shift_j^2)
-        (None: nothing propagated)."""
+        """(n,) sqrt(sum_j shift_j^2), the pose's standard errors (None: nothing propagated)."""
         return np.sqrt(sum(d ** 2 for d in self.shifts.values())) if self.shifts else None
 
     def sd_of(self, n):
@@ -78,10 +58,8 @@ class PoseShare:
 
 
 def turned_residuals(s, problem, theta):
-    """{angle: the residuals' change (P, T, 3) at ``theta`` under ``problem`` (the region's
-    chi-square) with the camera turned by that angle's sd (:meth:`~.fit.FitSession.table_turned`),
-    0 where a value is not used or its position lands off the material} for each of the
-    session's angles of sd above 0."""
+    """{angle: the residuals' change (P, T, 3) at ``theta`` with the camera turned by its sd}, 0
+    where unused or off the material."""
     r0, _ = problem.residual_terms(problem.model.radiance(theta), derivative=False)
     out = {}
     for k in s.pose_angles:
@@ -93,12 +71,10 @@ def turned_residuals(s, problem, theta):
 
 
 def pose_through_sky(sessions, sky):
-    """The sky fit ``sky`` (:class:`~.sky_fit.SkyFit` of ``sessions``, the day's regions, each
-    lit at it) with each region's share's ``pose_shift``: the sky's coefficients' shift per
-    angle of the pose, -H^-1 sum_r Jp_r^T Delta r_r over the regions at their parameters of
-    the sky fit (:class:`~.sky_fit.FittedLight`'s ``inverse_normal``), and the
-    record's ``pose_shift``.  ``sky`` as it is where the pose is exact or the sky's level is
-    not determined."""
+    """The sky fit ``sky`` of ``sessions`` with each share's and the record's ``pose_shift``:
+    the coefficients' shift per angle, -H^-1 sum_r Jp_r^T Delta r_r
+    (:class:`~.sky_fit.FittedLight`'s ``inverse_normal``). Unchanged where the pose is exact or
+    the sky's level is not determined."""
     angles = sorted({k for s in sessions for k in s.pose_angles})
     lights = {s.name: sky.shares[s.name].light for s in sessions if s.name in sky.shares}
     if not angles or not lights or any(v is None for v in lights.values()):
@@ -123,13 +99,8 @@ def pose_through_sky(sessions, sky):
 
 
 def pose_share(s, fit, J):
-    """The :class:`PoseShare` of the fit ``fit`` (:class:`~.fit.FitState`: its problem, theta,
-    (J^T J)^-1 and sky share) with ``J`` (P, T, 3, n) its residuals' derivatives: the
-    parameters' shift per angle of the session's ``pose_sd`` above 0, from the light traced
-    with the camera turned by that angle's sd (:func:`turned_residuals`), and through the sky
-    fitted with it (its response to the sky's ``pose_shift``, :func:`pose_through_sky`).
-    Nothing where every sd is 0, or for an observation table (its points are rays in the
-    world, no camera's)."""
+    """The :class:`PoseShare` of ``fit`` (``J`` (P, T, 3, n) its residuals' derivatives): direct
+    and through-sky shifts per angle of sd > 0; empty where every sd is 0 or for a table."""
     if not s.pose_angles:
         return PoseShare(s.pose_sd)
     use = fit.problem.mask
@@ -164,8 +135,7 @@ def pose_record(s, share):
 
 
 def pose_warnings(s, fit):
-    """Warnings for the parameters whose pose share at least doubles their interval
-    (:data:`~.sky_fit.SKY_DOMINATES`, the sky's rule)."""
+    """Warnings for parameters whose pose share at least doubles their interval."""
     share = fit.pose
     if not share.shifts:
         return []

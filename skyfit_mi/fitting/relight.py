@@ -1,21 +1,10 @@
 """Re-lit reconstructions (thesis 7.4): a target day rendered with fitted materials.
 
-The target is a spec file (another date, times, site, sky or camera) or a sequence folder (its
-manifest's spec: the same times, skies and camera).  Each fit replaces the scene material its
-region measured; every other material keeps the target's value, and the manifest's
-``scene.materials.ID.source`` says which is which.  The output is a sequence folder like
-``render``'s, so ``pixels``, ``labels`` and ``fit`` work on it.  When the target folder holds
-frames, they are the observations: ``relight.json`` and ``relight.csv`` give the relative RMS
-error of the relit radiance at each region's pixels (the fit's own on its own sequence, else
-the material's interior in the target's label image), per region and frame, per region, and
-overall (thesis fig. 7.14's comparison, as numbers).
-
-:func:`predict` gives the numbers without images: each region's radiance per frame from the
-fitted parameters and the target's light (the fit's own cached model, traced once), with a
-95% band from the fit's intervals, so that a highlight the training sequence never showed
-comes out with the wide band its undetermined roughness implies.  On an observation table it
-predicts every point's value in every frame, and the errors are those of the points' values
-against the table's.
+The target is a spec file or a sequence folder; each fit replaces the material its region
+measured (``scene.materials.ID.source`` says which), and the output is a sequence folder like
+``render``'s. Where the target holds frames, ``relight.json`` and ``relight.csv`` give the relative
+RMS error of the relit radiance (thesis fig. 7.14's comparison, as numbers). :func:`predict`
+gives each region's radiance per frame without images, with a 95% band from the fit's uncertainty.
 """
 
 import csv
@@ -56,29 +45,20 @@ from ..render.light_cache import DIRECTIONS
 
 #: Seed offset of the reference render of a synthetic target (its own materials, other noise).
 REFERENCE_SEED = 1_000_003
-#: Light-cache samples per pixel of a prediction (positions, directions): it predicts region
-#: means, whose Monte Carlo error (in the band) falls with the region's pixels, so it is a
-#: sixteenth of a fit's cache, whose chi-square needs every pixel accurate; the sky's
-#: integrals by the ``anchors`` plan (light_cache.SKY_PLANS: through the pixels' centres,
-#: interpolated between anchors where accurate).  Not a fit's: docs/BENCHMARKS.md, "Tried,
-#: not adopted".
+#: Light-cache samples per pixel of a prediction (positions, directions): region means average
+#: Monte Carlo error over their pixels, so a sixteenth of a fit's cache; sky integrals by the
+#: ``anchors`` plan (light_cache.SKY_PLANS; docs/BENCHMARKS.md, "Tried, not adopted").
 PREDICTION_CACHE = (4, 64)
 
 
-#: The files a relight writes beside its sequence's (a render's): the prediction and the errors
-#: (and compare_NNNN.png, and the reference render in reference/).
+#: The files a relight writes beside its sequence's (and compare_NNNN.png, reference/).
 RELIGHT_FILES = ("prediction.csv", "prediction.png", "relight.json", "relight.csv")
-#: The folder of the relit frames' sky maps where a fit's sky shape lights them
-#: (:func:`light_as_fitted`).
+#: The folder of the relit frames' sky maps (:func:`light_as_fitted`).
 SKY_MAPS = "sky_maps"
 
 
 def check_output(out, images, overwrite):
-    """Refuse an output folder ``out`` that holds another run's output, unless ``overwrite``.
-    A relight without images writes no manifest to tell its run by, so a sequence's or a
-    relight's files there are another run's; with images, a folder holding a sequence is the
-    render's to judge (it resumes its own run and refuses another's), and a relight's files
-    without one are another run's (one without images)."""
+    """Refuse an output folder ``out`` holding another run's output, unless ``overwrite``."""
     out = Path(out)
     if overwrite or not out.is_dir():
         return
@@ -93,8 +73,7 @@ def check_output(out, images, overwrite):
 
 
 def clear_output(out):
-    """Remove an earlier relight from ``out`` (--overwrite): its sequence, prediction, errors,
-    comparison images and reference render, and nothing else."""
+    """Remove an earlier relight's files from ``out`` (--overwrite), and nothing else."""
     out = Path(out)
     if not out.is_dir():
         return
@@ -111,9 +90,7 @@ def clear_output(out):
 
 
 def target_spec(target, fits, doc=None):
-    """The validated spec of ``target`` (a spec file or a sequence folder, whose manifest
-    ``doc`` is read unless given) with each fitted region's material taken from its fit;
-    returns (spec, target manifest or None)."""
+    """(``target``'s validated spec with the fitted materials, its manifest or None)."""
     target = Path(target)
     if target.is_dir() or target.name == "manifest.json":
         if doc is None:
@@ -122,8 +99,7 @@ def target_spec(target, fits, doc=None):
             raise SkyfitError(f"{target} was not rendered from a spec (source "
                               f"{doc.get('source', '?')}); give a spec file as --target.")
         raw, base = doc["spec"], Path(doc.get("spec_dir", "."))
-        # the sun where the folder's render put it (not for lab lights: their frames record
-        # the light's direction)
+        # the sun where the folder's render put it (lab lights' frames record their own)
         sun = {f["time"]: (f["sun_zenith_deg"], f["sun_azimuth_deg"]) for f in doc["frames"]
                if f.get("illumination", {}).get("kind") == "sky" and "sun_zenith_deg" in f}
     else:
@@ -142,7 +118,7 @@ class Plan:
     target: Path
     #: the target folder's manifest; None for a spec file
     doc: dict | None
-    #: the relit images are rendered (else only the prediction, from the target's light)
+    #: the relit images are rendered (else only the prediction)
     render: bool
     #: the target holds observations (frames, or a table's values): errors are reported
     observed: bool
@@ -157,15 +133,12 @@ class Plan:
         return "observed" if self.observed else "relit render"
 
     def predicted_from(self, out):
-        """The sequence whose light and images the prediction takes: the target, or, without
-        observations, the relit render in ``out``."""
+        """The sequence the prediction takes light and images from (the target, or ``out``)."""
         return Path(out) if self.render and not self.observed else self.target
 
 
 def plan_relight(fits, target, out, images=True, reference=False, overwrite=False):
-    """The :class:`Plan` of relighting ``fits`` onto ``target`` into ``out``; inputs that
-    cannot be relit so (a fit of frames the target lacks, an output folder holding another
-    run's output without ``overwrite``...) are refused before anything is made."""
+    """The :class:`Plan` of relighting ``fits`` onto ``target`` into ``out``, inputs checked."""
     target = Path(target)
     is_folder = target.is_dir() or target.name == "manifest.json"
     if not images and not is_folder:
@@ -190,8 +163,7 @@ def plan_relight(fits, target, out, images=True, reference=False, overwrite=Fals
 
 
 def check_sun_up(plan, spec):
-    """Refuse a target whose sun is below the horizon in every frame: the frames of ``spec``
-    (the relit spec), or without it (a prediction alone) the target folder's as recorded."""
+    """Refuse a target whose sun is below the horizon in every frame."""
     if spec is not None:
         frames = [(frame_label(f.index, f.time), f.below_horizon) for f in spec.frames]
     else:
@@ -206,23 +178,19 @@ def check_sun_up(plan, spec):
 def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progress=True,
             overwrite=False, reference=False):
     """Render ``target`` with the fitted materials into ``out`` (``images``) and predict each
-    region's radiance with its 95% band (``prediction.csv``, ``prediction.png``); with
-    observations in the target, write and return the prediction errors
-    (:func:`prediction_errors`) beside the error that the images' noise alone gives
-    (:func:`noise_floor`).  Without ``images`` the target must be a sequence folder: only the
-    prediction is made, from the fits' cached model (no frame is rendered).  ``reference``
-    (a synthetic target) also renders the target's own materials again with other seeds, and
-    reports their error: Monte Carlo noise measured rather than estimated."""
+    region's radiance with its 95% band (``prediction.csv``, ``prediction.png``); with observations
+    in the target, write and return the errors (:func:`prediction_errors`) beside the noise floor
+    (:func:`noise_floor`). Without ``images`` the target must be a sequence folder and only the
+    prediction is made. ``reference`` (a synthetic target) also renders the target's own
+    materials with other seeds, to measure Monte Carlo noise."""
     plan = plan_relight(fits, target, out, images, reference, overwrite)
     if plan.doc is not None:            # the target's frames and light, before any writing
         check_frames(plan.doc, manifest_file(plan.target).parent)
-    # the prediction alone takes the folder's light as recorded: its spec is not validated
-    # again (which would compute every sun position anew)
+    # a prediction alone takes the folder's light as recorded (no re-validation of its spec)
     spec = target_spec(plan.target, fits, plan.doc)[0] if plan.render else None
     check_sun_up(plan, spec)
     level = fitted_sky_level(fits, plan.doc, log)
-    # the predicted sequence's pixels: the target's before the render (a region it does not
-    # show is refused first), or the relit render's own after it (its label image)
+    # the target's pixels before the render (refusing early), the relit render's after
     predicted = plan.predicted_from(out)
     pixels = target_pixels(fits, predicted, seed) if predicted == plan.target else None
     if overwrite:
@@ -257,19 +225,10 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
 
 
 def light_as_fitted(spec, level, target, out, log=print):
-    """Light each frame of ``spec`` (of the fitted sequence ``target``) as the sky fit
-    ``level`` saw it: the frame's sky as the target's manifest records it (the fit's light:
-    the spec's, unless the sequence was lit otherwise), its sky k times against the sun (k
-    at the frame's time, :func:`~.sky_fit.sky_level_at`), and with a fitted shape its
-    pattern mixed with its shape variants, moved the way the fit moved them
-    (:func:`~skyfit_mi.physics.sky_shape.shaped`): an environment map, written to
-    ``out``/SKY_MAPS as EXR, which the relit manifest's ``envmap`` record names, with the
-    sun's direct normal irradiance; so is a frame lit by a map (a measured sky), whose
-    record would otherwise name its own file, unscaled.  A frame whose sky cannot move the
-    fit's way (one the fit did not see) keeps its pattern at level k, and the log says so.
-    Where the fit calibrated the light again on the scene's reference, the light takes that
-    factor per channel (:func:`~.fit.reference_factor`), and where it fitted the whole light's
-    level over the day, that level at the frame's time (:func:`~.sky_fit.light_level_at`)."""
+    """Light each frame of ``spec`` (of the fitted sequence ``target``) as the sky fit ``level``
+    saw it: level k(t), shape (:func:`~skyfit_mi.physics.sky_shape.shaped`), the reference's
+    factor and the light's level. Mixed skies and map-lit frames become EXR maps in
+    ``out``/SKY_MAPS; a sky that cannot move the fit's way keeps its pattern (logged)."""
     doc, root = load_manifest(target)
     seen = {g["index"]: g for g in doc["frames"] if "illumination" in g}
     shape = level.get("shape")
@@ -290,8 +249,7 @@ def light_as_fitted(spec, level, target, out, log=print):
             if len(variants) != len(shape["mix"]):
                 variants = []
         if variants or departure or f.sky.envmap is not None:
-            # a mix that no one Sky holds, or a map the manifest names by its file (which k
-            # does not scale): a map of its own
+            # a mix no one Sky holds, or a map named by its file (unscaled): a map of its own
             f.sky = _sky_map(f, shaped(f.sky, k, shape["mix"] if variants else [], variants,
                                        departure).tinted(tint), out)
         else:
@@ -302,10 +260,8 @@ def light_as_fitted(spec, level, target, out, log=print):
 
 
 def _sky_map(frame, sky, out):
-    """The shaped ``sky`` (:func:`~skyfit_mi.physics.sky_shape.shaped`) of ``frame`` as the
-    relit manifest will read it back: its map written to ``out``/SKY_MAPS, an ``envmap``
-    record of it with the sun's direct normal irradiance (luminance-weighted; the disc in
-    the colour of :func:`~skyfit_mi.physics.sun.sun_rgb`, as the spec's skies have it)."""
+    """The shaped ``sky`` of ``frame`` as an ``envmap`` record, its map written to
+    ``out``/SKY_MAPS, with the sun's direct normal irradiance (luminance-weighted)."""
     path = ensure_dir(Path(out) / SKY_MAPS) / f"frame_{frame.index:03d}.exr"
     write_exr(path, sky.envmap, {"kind": "sky_map", "units": "W m^-2 sr^-1",
                                  "frame": frame.index, "time": frame.time})
@@ -321,11 +277,8 @@ def _sky_map(frame, sky, out):
 
 
 def fitted_sky_level(fits, doc, log=print):
-    """The sky fit's record (``fit --sky fit`` or ``prior``: its level k, maybe changing over
-    the day, :func:`~.sky_fit.sky_level_at`) by which the fits saw the target sequence ``doc``
-    itself (its run_id), for the relit images; None for another day (the level belongs to the
-    fitted day's sky), a fit of the spec's sky, or fits whose levels differ (fitted in
-    separate commands: then the spec's, and the log says so)."""
+    """The sky fit's record of the fits on the target sequence ``doc`` itself; None for another
+    day, the spec's sky, or fits whose levels differ (logged)."""
     if doc is None:
         return None
     levels = {json.dumps([r["sky"]["k"], r["sky"].get("terms")], sort_keys=True): r["sky"]
@@ -355,10 +308,8 @@ REGION_MEANS_NOTE = (
 
 
 def image_errors(fits, plan, out, pixels, spec, log=print):
-    """The relit images in ``out`` against the target's observed frames
-    (:func:`prediction_errors`), with what the two sequences' noise alone gives
-    (:func:`noise_floor`, or common random numbers) and the comparison images
-    (:func:`write_comparisons`)."""
+    """The relit images in ``out`` against the target's frames (:func:`prediction_errors`), with
+    the noise floor (:func:`noise_floor`) and comparison images (:func:`write_comparisons`)."""
     errors = prediction_errors(fits, plan.target, out, pixels)
     errors["shares_target_seeds"] = plan.doc.get("source") in RENDERED_SOURCES and \
         int(plan.doc["render"]["seed"]) == int(spec.render["seed"])
@@ -385,8 +336,7 @@ def image_errors(fits, plan, out, pixels, spec, log=print):
 
 @dataclass(frozen=True)
 class PointError:
-    """The relative RMS error of the prediction at one point of an observation table in one
-    frame (over its measured channels), against the table's value."""
+    """The relative RMS error of the prediction at one table point and frame (measured channels)."""
 
     region: str
     point: str
@@ -398,11 +348,8 @@ class PointError:
 
 
 def table_errors(fits, plan, prediction):
-    """The prediction at every point of an observation table against the table's values
-    (its rows with a point, :func:`predict`): a :class:`PointError` per point and frame, and
-    ``relight.json``'s errors per region (over all its values, per frame, per point, and on
-    the frames the fit did not see where the table is the fit's own) and overall; saturated
-    values, lower bounds only, are left out.  Returns (errors, point errors)."""
+    """(``relight.json``'s errors, a :class:`PointError` per point and frame) of the prediction
+    ``rows`` against a table's values, saturated values left out."""
     def error(rows):
         return float(rel_rms(np.array([r.predicted for r in rows]),
                              np.array([r.image for r in rows])))
@@ -442,9 +389,8 @@ def table_errors(fits, plan, prediction):
 
 
 def add_reference_errors(errors, fits, plan, out, pixels, overwrite=False):
-    """Render the synthetic target's own materials again with its seeds + REFERENCE_SEED into
-    ``out/reference``, and add their error to ``errors`` (per region and overall): what
-    independent Monte Carlo noise alone gives."""
+    """Render the synthetic target's own materials again (seeds + REFERENCE_SEED) into
+    ``out/reference`` and add their error, independent Monte Carlo noise alone, to ``errors``."""
     doc = plan.doc
     raw = {**doc["spec"], "render": {**doc["spec"].get("render", {}),
                                      "seed": int(doc["render"]["seed"]) + REFERENCE_SEED}}
@@ -471,10 +417,8 @@ BEYOND_WORDS = {"below": "dimmer than their noise let them tell",
 
 
 def band_coverage(rows):
-    """The share of the image values of prediction ``rows`` inside their predicted band (a
-    table's saturated values, lower bounds only, left out), and that share within the
-    radiance the fits' data measured, with the number of values beyond it (:func:`beyond_data`:
-    their bands are the model's alone)."""
+    """The share of ``rows``' image values inside their band (saturated left out), that share
+    within the radiance the fits measured, and the number beyond it (:func:`beyond_data`)."""
     rows = [row for row in rows if not row.saturated]
     within = [row.inside for row in rows if not row.beyond]
     why = Counter(row.beyond for row in rows if row.beyond)
@@ -490,8 +434,7 @@ def band_coverage(rows):
 
 
 def log_errors(errors, plan, log=print):
-    """Log the errors of :func:`relight`: per region, of its region means, overall (images)
-    and the band's coverage."""
+    """Log the errors of :func:`relight` and the band's coverage."""
     compared = ("predicted values differ from the table's" if plan.table
                 else "relit radiance differs from the observed")
     for region, e in errors["regions"].items():
@@ -522,10 +465,8 @@ def log_errors(errors, plan, log=print):
 
 
 def target_pixels(fits, target, seed=0, max_pixels=64):
-    """{region: (P, 2) pixels} at which each fit is compared in ``target`` (a sequence
-    folder): the fit's own pixels on its own sequence (the same run), otherwise the material's
-    interior in the target's label image (another camera sees it elsewhere), a seeded subset
-    of at most ``max_pixels``; for an observation table, None (all the region's points)."""
+    """{region: (P, 2) pixels} at which each fit is compared in ``target``: its own on its own
+    sequence, else the material's interior (at most ``max_pixels``); None for a table."""
     doc, root = load_manifest(target)
     out, seen = {}, None
     if is_table(doc):                       # an observation table: every point of the region
@@ -552,16 +493,13 @@ def target_pixels(fits, target, seed=0, max_pixels=64):
 
 
 def rel_rms(pred, obs, axis=None):
-    """Relative RMS error of ``pred`` against ``obs`` (over ``axis``, default all): the RMS of
-    the difference over the RMS of ``obs`` (unitless)."""
+    """rms(``pred`` - ``obs``) / rms(``obs``) over ``axis`` (default all)."""
     return np.sqrt(np.mean((pred - obs) ** 2, axis=axis)) / np.sqrt(np.mean(obs**2, axis=axis))
 
 
 def prediction_errors(fits, observed, relit, pixels):
-    """Relative RMS error of the relit radiance against the observed, at each region's
-    ``pixels`` ({region: (P, 2)}, :func:`target_pixels`), over the frames both sequences hold:
-    {"regions": {region: {rel_rms, per_frame, frames, pixels, fit}}, "rel_rms", "times"}.
-    Unitless; radiance is compared in W m^-2 sr^-1, all channels together."""
+    """Relative RMS error of the relit radiance against the observed at each region's ``pixels``
+    over the frames both hold: {"regions": {region: {...}}, "rel_rms", "times"}."""
     obs_doc, _ = load_manifest(observed)
     new_doc, _ = load_manifest(relit)
     both = sorted({f["index"] for f in rendered_frames(obs_doc)}
@@ -591,11 +529,8 @@ def prediction_errors(fits, observed, relit, pixels):
 
 
 def noise_floor(observed, relit, pixels, frames):
-    """The relative RMS error that noise alone would give between two sequences at ``pixels``
-    ({region: (P, 2)}) over ``frames``: sqrt(mean(sigma_o^2 + sigma_r^2)) / rms(observed), each
-    sigma the frame's ``radiance_sigma`` image (a render's Monte Carlo error); independent
-    noise in the two is assumed, so a relit render that shares the target's seeds (its own day)
-    shows less.  {"regions": {region: value}, "all": value}."""
+    """The relative RMS error independent noise alone gives between two sequences at ``pixels``,
+    sqrt(mean(sigma_o^2 + sigma_r^2)) / rms(observed): {"regions": {...}, "all": value}."""
     sq, ref, out = [], [], {}
     for region, px in sorted(pixels.items()):
         o = frame_values(observed, px, frames)
@@ -609,10 +544,7 @@ def noise_floor(observed, relit, pixels, frames):
 
 
 def write_errors(errors, out, point_errors=None):
-    """``relight.json`` and ``relight.csv`` in ``out``: the relative RMS error per region and
-    frame, or for an observation table per region, point and frame (``point_errors``), with
-    whether the fit did not see the frame (held_out); then per region its 'all' and 'held
-    out' rows, and the overall 'all'."""
+    """Write ``relight.json`` and ``relight.csv`` (relative RMS errors) in ``out``."""
     write_json(Path(out) / "relight.json", errors)
     if not errors["regions"]:
         return
@@ -643,11 +575,8 @@ def write_errors(errors, out, point_errors=None):
 
 
 def write_comparisons(observed, relit):
-    """Per frame both sequences hold, ``compare_NNNN.png`` in ``relit``: observed | relit |
-    signed error (relit - observed, over the observed image's 99th percentile, on a diverging
-    colour map with its scale bar).  Both images at one exposure (the observed day's 99th
-    percentile to 80% white).  Composed as pixels (Pillow), not plotted: a matplotlib figure
-    a frame cost about 0.1 s each.  Returns the file names."""
+    """Write ``compare_NNNN.png`` in ``relit`` per shared frame: observed | relit | signed error
+    (over the observed 99th percentile), composed with Pillow; returns the file names."""
     obs_doc, obs_root = load_manifest(observed)
     new_doc, new_root = load_manifest(relit)
     shape = (obs_doc["camera"]["height"], obs_doc["camera"]["width"], 3)
@@ -669,8 +598,7 @@ def write_comparisons(observed, relit):
         name = f"compare_{frame['index']:04d}.png"
         write_png(Path(relit) / name, _contact_row(panels, lim))
         return name
-    # frames on threads (NumPy and Pillow's encoder let go of the GIL); each call of
-    # _diverging takes its own copy of the colour map
+    # frames on threads (NumPy and Pillow release the GIL); _diverging copies its colour map
     with ThreadPoolExecutor(min(len(pairs), os.cpu_count() or 1)) as pool:
         return list(pool.map(compare, [a for a, _ in pairs], *zip(*images)))
 
@@ -688,9 +616,7 @@ def _diverging(x):
 
 
 def _contact_row(panels, lim):
-    """One 8-bit RGB image: the ``panels`` [(image (H, W, 3) uint8, title)] side by side on
-    white, each titled, and a colour bar of the diverging map from -``lim`` to +``lim`` after
-    the last."""
+    """One 8-bit RGB image of titled ``panels`` side by side and a colour bar to +-``lim``."""
     from PIL import Image, ImageDraw
 
     h, w = panels[0][0].shape[:2]
@@ -713,8 +639,7 @@ def _contact_row(panels, lim):
 
 @dataclass(frozen=True, slots=True)
 class PredictionRow:
-    """One predicted value [W m^-2 sr^-1]: a region's mean radiance in one frame and
-    channel, or for an observation table one point's value."""
+    """One predicted value [W m^-2 sr^-1]: a region's mean (or point's) in a frame and channel."""
 
     region: str
     frame: int
@@ -727,16 +652,14 @@ class PredictionRow:
     #: the 95% band
     lo95: float
     hi95: float
-    #: the image's value: the observed (a target holding frames, a table's value), or the
-    #: relit render's
+    #: the image's value: observed (frames or table), or the relit render's
     image: float
     #: the table's point (None: the region's mean)
     point: str | None = None
-    #: the table's value is saturated: the level its instrument clipped at, a lower bound
+    #: the table's value is saturated (a lower bound)
     saturated: bool = False
-    #: beyond what the fit's data measured: its radiance (:func:`beyond_data`: 'below',
-    #: 'above', 'unmeasured'), its sun's light ('highlight', 'angles': :func:`unseen_light`),
-    #: or '' within both
+    #: beyond what the fit's data measured (:func:`beyond_data`): 'below', 'above',
+    #: 'unmeasured', 'highlight', 'angles', or '' within
     beyond: str = ""
 
     @property
@@ -747,8 +670,7 @@ class PredictionRow:
 
 @dataclass(frozen=True)
 class MeansError:
-    """Relative RMS error of a region's predicted means against the image's: at the fit, and
-    at the true material (None where it is not known in the fit's model)."""
+    """Relative RMS error of a region's predicted means: at the fit, and at the truth (or None)."""
 
     fit: float
     truth: float | None
@@ -763,11 +685,8 @@ class Prediction:
 
 
 def write_prediction(prediction, out, image_kind, plot=True):
-    """``prediction.csv`` in ``out``: one row per region, frame and channel (R, G, B or a
-    luminance table's Y; radiance in W m^-2 sr^-1), for an observation table per region,
-    point, frame and measured channel (and whether the table's value is saturated), with the
-    image's value (``image_kind``: the observed frames or table, or the relit render); with
-    ``plot``, ``prediction.png`` (:func:`plot_prediction`)."""
+    """Write ``prediction.csv`` in ``out``: a row per region (table: point), frame and channel
+    [W m^-2 sr^-1], with the image's value (``image_kind``); with ``plot``, ``prediction.png``."""
     column = image_kind.replace(" ", "_")
     points = any(r.point is not None for r in prediction.rows)
     buf = io.StringIO()
@@ -796,8 +715,7 @@ def _pyplot():
 
 
 def plot_points(rows, image_kind):
-    """PNG bytes of an observation table's prediction ``rows``: per region each point's
-    predicted value in each frame, with its 95% band, against the table's (``image_kind``)."""
+    """PNG bytes of a table's prediction ``rows`` and bands against its values."""
     plt = _pyplot()
     regions = sorted({row.region for row in rows})
     fig, axes = plt.subplots(len(regions), 1, figsize=(5, 4.5 * len(regions)), squeeze=False,
@@ -821,12 +739,10 @@ def plot_points(rows, image_kind):
 
 
 def plot_prediction(rows, image_kind):
-    """PNG bytes of the prediction ``rows``: per region the predicted series with its 95%
-    band and the image's values (``image_kind``) (thesis fig 7.14)."""
+    """PNG bytes of the prediction ``rows``, bands and image values (thesis fig 7.14)."""
     plt = _pyplot()
     regions = sorted({row.region for row in rows})
-    # laid out to the panels (constrained): the default margins, shares of the figure's
-    # height, left empty bands above and below a tall figure of many regions
+    # constrained layout: default margins leave empty bands on a tall figure
     fig, axes = plt.subplots(len(regions), 1, figsize=(7, 0.5 + 2.8 * len(regions)),
                              squeeze=False, layout="constrained")
     for i, (ax, region) in enumerate(zip(axes[:, 0], regions)):
@@ -851,16 +767,10 @@ def plot_prediction(rows, image_kind):
 
 
 def parameter_draws(result, s, n, rng):
-    """``n`` parameter sets of the fit ``result`` for the bands of a prediction by the
-    session ``s`` (the target's); the first row is the fit itself.  On the fitted sequence
-    itself (its run_id), the fit's draws from its data's likelihood (:mod:`~.draws`), each
-    widened by the errors a relight does not cancel: the joint uncertainty the data leave,
-    whose sets predict the fitted frames as the data allow.  Elsewhere (or for a fit
-    without them), Gaussian from the intervals (:func:`~.draws.interval_covariance`),
-    clipped to the bounds: they hold every error, those of the fitted day's light,
-    calibration and pose too.  (A split normal reaching each end of a lopsided interval was
-    tried: a gold disc's held-out means in band 14 -> 15 of 18, but a copper one's 36 -> 32
-    of 39; docs/BENCHMARKS.md, "Real surfaces".)"""
+    """``n`` parameter sets of the fit ``result`` for a prediction's bands on session ``s`` (the
+    first the fit itself): on the fitted sequence the fit's likelihood draws (:mod:`~.draws`);
+    elsewhere Gaussian from the intervals, which hold the light's, calibration's and pose's
+    errors too, clipped to the bounds."""
     names, lower, upper = s.names, s.lower, s.upper
     theta = np.array([result["parameters"][k] for k in names], dtype=float)
     own = result.get("draws")
@@ -878,22 +788,16 @@ def parameter_draws(result, s, n, rng):
 
 
 def predict(fits, target, pixels, draws=200, seed=0, log=print):
-    """Radiance of each fitted region in the target's frames, without rendering images: the
-    region's mean per frame and channel at the fit and its 95% band (2.5-97.5 percentiles
-    over :func:`parameter_draws`, widened in quadrature by the image's noise, the model's
-    Monte Carlo error and the fit's model error, :func:`model_error_kappa`), with the image's
-    mean (the observed, where the target holds frames); on an observation table, each point's value in each frame and channel it measures, with
-    its band and the table's value.  Returns a :class:`Prediction`: its
-    :class:`PredictionRow` s, and per region the relative RMS error of its predicted means
-    against the image's, at the fit and, where the target's material is known in the fit's
-    model (a synthetic target), at the truth: the truth's error is the Monte Carlo noise
-    alone, so the fit's excess over it is the fit's error.
+    """Radiance of each fitted region in the target's frames, without rendering images: its
+    mean (a table: each point's value) per frame and channel at the fit, with a 95% band
+    (percentiles over :func:`parameter_draws`, widened in quadrature by the image's noise, the
+    model's Monte Carlo error and model error) and the image's value. Returns a
+    :class:`Prediction`, with per region the error of its means at the fit and, for a
+    synthetic target, at the truth (Monte Carlo noise alone).
     """
     rng = np.random.default_rng(seed)
     if is_table(load_manifest(target)[0]):
-        # all the region's points in the target's table, whatever the fit's, at a fit's first
-        # cache size for points (positions None: the small cache of an image region averages
-        # out only over its pixels), each region's light traced when its turn comes
+        # every point of the region in the target's table, at a fit's cache size for points
         predict_region = _predict_points
         sessions = ((region, _table_session(target, region, r, seed))
                     for region, (_, r) in sorted(fits.items()))
@@ -915,8 +819,7 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
 
 
 def _table_session(target, region, result, seed):
-    """The session of every point of ``region`` in the target's table, lit as the fit
-    ``result`` saw its own day (its fitted sky level, :meth:`FitSession.use_fitted_sky`)."""
+    """The session of every point of ``region`` in the target's table, lit as ``result`` saw it."""
     s = FitSession(target, region, None, model=result["model"],
                    normalisation=result.get("normalisation", "ward"),
                    cache=FitCache(directions=DIRECTIONS, seed=seed), min_frames=1, light=None)
@@ -925,10 +828,7 @@ def _table_session(target, region, result, seed):
 
 
 def fitted_sessions(results, manifest_path, pixels, **options):
-    """Sessions {region: FitSession} of several fits (``results`` {region: fit result}) on one
-    sequence, at ``pixels`` {region: (P, 2)}, each lit as its fit saw the day
-    (:meth:`FitSession.fitted_light`), their light traced together
-    (:func:`~.fit.trace_sessions`); ``options`` as the session's."""
+    """{region: FitSession} of ``results`` at ``pixels``, lit as fitted and traced together."""
     sessions = {name: FitSession.from_fit(r, manifest_path, pixels[name], light=None, **options)
                 for name, r in results.items()}
     trace_sessions(list(sessions.values()),
@@ -938,28 +838,22 @@ def fitted_sessions(results, manifest_path, pixels, **options):
     return sessions
 
 
-#: Values (draws x points x frames x channels) of a table's prediction held at once: the
-#: draws' radiances are made a chunk of points at a time, from views of the table's rows
-#: (64 MB, a few times over in the percentiles).
+#: Values (draws x points x frames x channels) of a table's prediction held at once (64 MB):
+#: radiances are made a chunk of points at a time.
 CHUNK_VALUES = 2**23
 
 
 def _predict_means(s, result, target, draws, rng):
-    """The prediction of one image region (:func:`predict`) from its session ``s`` on the
-    target and its fit ``result``: (its rows, its :class:`MeansError`)."""
+    """(Rows, :class:`MeansError`) of one image region's prediction from session ``s``."""
     sets = parameter_draws(result, s, draws, rng)
     region_mean = _region_mean(s)
     means = s.wm.radiances(sets, region_mean)                               # (draws, T, 3)
     lo, hi = np.percentile(means[1:], [2.5, 97.5], axis=0)
-    # widened by what the parameters leave out: the image's own noise (the sensor model's
-    # sigma in radiance) and the model's Monte Carlo error, both of the region mean
+    # widened by the image's noise and the model's Monte Carlo error, both of the mean
     at_fit, model_var = s.wm.radiance_and_variance(sets[0])
     image = image_values(s, target)
     n = len(s.obs.pixels)
-    # and by the model's error, kappa times the mean: shared by the region's pixels, which
-    # see the light alike (a highlight the model misses, it misses in all of them)
-    # ... the larger or smaller at the sun's angles where the held-out frames missed by more
-    # or less than kappa (:func:`~.held_out.local_error_scale`)
+    # and by the model's error, kappa times the mean, scaled by local_error_scale
     kappa, interval = model_error_kappa(result)
     scale = local_error_scale(((result.get("model_error") or {}).get("held_out") or {})
                               .get("by_frame"),
@@ -985,13 +879,8 @@ def _predict_means(s, result, target, draws, rng):
 
 
 def unseen_light(result, s):
-    """Per frame of the target's session ``s``, how its sun's light lies beyond what the fit
-    ``result``'s data saw: 'highlight' where its highlight lies nearer the mirror direction
-    than any they saw, by more than the fitted lobe allows (:func:`~.geometry.highlight_beyond`:
-    the lobe's peak is the model's alone), else 'angles' where its sun and view lie far from
-    every pair they saw (:func:`~.geometry.angles_beyond`: the lobe's shape is), else ''.
-    '' for the frames it was fitted to, and for what a fit does not record (or an edited
-    one)."""
+    """Per frame of session ``s``, whether its sun's light lies beyond what ``result``'s data saw:
+    'highlight', 'angles' (:mod:`~.geometry`) or ''."""
     geometry = result.get("geometry")
     geometry = geometry if isinstance(geometry, dict) else {}
     fitted = geometry.get("closest_highlight_half_angle_deg", False)
@@ -1010,12 +899,9 @@ def unseen_light(result, s):
 
 
 def beyond_data(result, channel, value, unseen=""):
-    """Where a predicted ``value`` [W m^-2 sr^-1] of ``channel`` lies against what the fit
-    ``result``'s data measured: against its radiance (its ``measured_range``) '' within it,
-    'below' or 'above' it, 'unmeasured' where they measured that channel nowhere ('' for a
-    fit that does not record it); within it, the frame's ``unseen`` light ('highlight' or
-    'angles', :func:`unseen_light`).  Beyond either, the prediction and its band rest on the
-    model alone."""
+    """Where a predicted ``value`` [W m^-2 sr^-1] of ``channel`` lies against ``result``'s
+    ``measured_range``: 'below', 'above', 'unmeasured', else the frame's ``unseen`` light
+    (:func:`unseen_light`) or ''. Beyond, the prediction rests on the model alone."""
     ranges = (result.get("measured_range") or {}).get("by_channel")
     lo_hi = ranges.get(channel, ()) if ranges is not None else ()
     radiance = ("unmeasured" if lo_hi is None else "" if not lo_hi else
@@ -1024,12 +910,8 @@ def beyond_data(result, channel, value, unseen=""):
 
 
 def _predict_points(s, result, target, draws, rng):
-    """The prediction of one region of an observation table (:func:`predict`): each point's
-    value at the fit in each frame and channel it measures, its 95% band (percentiles over
-    the draws, widened in quadrature by the value's own noise, the model's Monte Carlo
-    error and the fit's model error: the band of a measured value, which reaches below zero
-    where its noise does, as a table's values may) and the table's value; (its rows, the
-    :class:`MeansError` of its region means)."""
+    """(Rows, :class:`MeansError`) of one table region's prediction, per point, frame and
+    measured channel (bands may reach below zero, as a table's values may)."""
     sets = parameter_draws(result, s, draws, rng)
     at_fit, lo, hi = (np.empty(s.obs.y.shape) for _ in range(3))
     P, T = s.obs.y.shape[:2]
@@ -1064,13 +946,9 @@ def _predict_points(s, result, target, draws, rng):
 
 
 def model_error_kappa(result):
-    """The relative model error kappa of a fit ``result`` for a prediction, with its 95%
-    interval (None where not fitted): the error with which it predicted frames it was not
-    fitted to (its ``model_error.held_out``), else its in-sample one (fitted where the model
-    cannot reproduce the data; 0 without).  A new value's own error beyond its noise is kappa
-    times its value, of which the prediction stands for it, and every prediction band adds
-    that to the parameters' spread, averaged over kappa's uncertainty
-    (:func:`~.uncertainty.band_half_width`)."""
+    """(kappa, its 95% interval or None): a fit ``result``'s relative model error for a
+    prediction, held-out (``model_error.held_out``) else in-sample (0 without). Bands add kappa
+    times the value, averaged over kappa's uncertainty (:func:`~.uncertainty.band_half_width`)."""
     me = result.get("model_error") or {}
     held = me.get("held_out") or {}
     if held.get("kappa", 0.0) >= me.get("kappa", 0.0):
@@ -1084,15 +962,12 @@ def _measured(s):
 
 
 def _channels(s):
-    """The channels session ``s`` predicts: a luminance table's one quantity Y (the models'
-    first channel), else R, G and B."""
+    """The channels session ``s`` predicts: Y for a luminance table, else R, G, B."""
     return "Y" if s.obs.luminance else "RGB"
 
 
 def _region_mean(s):
-    """The region's mean of session ``s``'s values (P, T, 3) -> (T, 3): over its pixels, or
-    over a table's points measured in each frame but for saturated values (at the top code),
-    which only bound theirs from below."""
+    """Region mean (T, 3) of values (P, T, 3) over the measured, unsaturated points."""
     have = np.ones(s.obs.y.shape) if s.obs.rays is None else _measured(s) * 1.0
     have = have / np.maximum(have.sum(axis=0), 1.0)
 
@@ -1102,8 +977,7 @@ def _region_mean(s):
 
 
 def _means_error(s, fit_means, observed, region_mean):
-    """The :class:`MeansError` of session ``s``'s region means at the fit, ``fit_means``,
-    against the ``observed`` ones (T, channels), and of those at the truth where known."""
+    """The :class:`MeansError` of ``fit_means`` (and the truth's) against ``observed`` (T, C)."""
     truth = truth_parameters(s.truth, s.model, s.names, s.normalisation)
     at_truth = None if truth is None else float(rel_rms(
         region_mean(s.wm.radiance(truth))[..., :observed.shape[-1]], observed))
@@ -1111,25 +985,17 @@ def _means_error(s, fit_means, observed, region_mean):
 
 
 def image_values(s, target):
-    """The image's values at session ``s``'s pixels in ``target`` (P, T, 3)
-    [W m^-2 sr^-1]: its radiance frames, or a table's values."""
+    """The image's values at session ``s``'s points in ``target`` (P, T, 3) [W m^-2 sr^-1]."""
     if s.obs.rays is None:
         return frame_values(target, s.obs.pixels, s.obs.frames)
     return s.obs.y / (s.obs.gain * s.obs.sensor.max_code)
 
 
 def image_noise_variance(s, image, radiance, target):
-    """The variance of session ``s``'s ``image`` values (P, T, 3) [(W m^-2 sr^-1)^2] in
-    ``target`` where the model predicts ``radiance`` (P, T, 3): the sensor model's sigma in
-    radiance through the response's slope at the prediction (a photograph's radiance frames
-    are its codes, a table's values its measurements), not at the value observed, which noise
-    can put at or below zero, where the slope is 0 (a lab table's 204 values below zero of
-    1,728 had bands without their noise: gold's band coverage 0.84 -> 0.95); at the value
-    where the prediction lies beyond the top code; 0 where a value is saturated or left out.
-    A render's radiance frames are the scene before its sensor: their error is the render's
-    Monte Carlo error (``radiance_sigma``), the sensor's noise only in its sensor frames (with
-    the sensor's noise, a disc's day at 5% noise drew 95% bands of +-8.4% median about region
-    means its fit missed by 1.1%: +-3.6% without)."""
+    """Variance [(W m^-2 sr^-1)^2] of ``image`` values (P, T, 3) where the model predicts
+    ``radiance``: the sensor's sigma through the slope at the prediction (an observed value may
+    sit at zero slope); 0 where saturated or left out. A render's radiance frames carry only its
+    Monte Carlo error (``radiance_sigma``)."""
     if s.obs.rays is None and s.doc.get("source") == "render":
         sd = frame_values(target, s.obs.pixels, s.obs.frames, source="radiance_sigma")
         return np.where(np.isfinite(sd), sd, 0.0) ** 2

@@ -1,4 +1,4 @@
-"""A fit's outputs: ``fit_NAME.json``, the observed-vs-model plot (thesis fig. 7.14) and ``fits.csv``."""
+"""A fit's outputs: ``fit_NAME.json``, the observed/model plot (thesis fig. 7.14), ``fits.csv``."""
 
 import csv
 import io
@@ -14,8 +14,7 @@ from ..pipeline.manifest import frame_axis
 
 
 def write_fit(result, prefix):
-    """Write ``<prefix>.json`` and ``<prefix>.png`` (observed vs model over the day; for
-    annealing also its walk)."""
+    """Write ``<prefix>.json`` and ``<prefix>.png`` (observed vs model; annealing's walk)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -59,8 +58,7 @@ SUMMARY_NAME = "fits.csv"
 
 
 def read_fit(path):
-    """The fit result in ``path`` (a ``fit_NAME.json``, :func:`read_fit_result`), or None if
-    it holds none."""
+    """The fit result in ``path`` (:func:`read_fit_result`), or None if it holds none."""
     try:
         return read_fit_result(path)
     except SkyfitError:
@@ -68,8 +66,7 @@ def read_fit(path):
 
 
 def fit_files(folder):
-    """{region: (path, result)} of the fit results (``fit_*.json``) in ``folder``; files that
-    are not a fit's result are left out."""
+    """{region: (path, result)} of the fit results (``fit_*.json``) in ``folder``."""
     out = {}
     for p in sorted(Path(folder).glob("fit_*.json")):
         r = read_fit(p)
@@ -84,8 +81,7 @@ def read_fits(folder):
 
 
 def _ranking(selection, first=5):
-    """``fit --model auto``'s ranking in one cell: its first candidates by held-out chi2, with
-    AIC and BIC (the fit JSON's ``model_selection`` has them all)."""
+    """``fit --model auto``'s first candidates, with held-out chi2, AIC and BIC, in one cell."""
     if not selection:
         return ""
     return " | ".join(f"{r['rank']} {r['normalisation']}/{r['model']}: held-out chi2 "
@@ -94,12 +90,11 @@ def _ranking(selection, first=5):
 
 
 def write_summary(folder):
-    """Write ``folder/fits.csv`` from every fit result in the folder (one row per region,
-    sorted), so that it always agrees with the ``fit_*.json`` files there; returns its path.
+    """Write ``folder/fits.csv`` from its ``fit_*.json`` files (one row per region, sorted);
+    returns its path.
 
-    Columns: parameters with 95% intervals, how each reads (one-sided limits where an interval
-    runs into a bound), chi2/dof, truth, warnings, and ``fit --model auto``'s ranking.  Units: reflectances
-    unitless, sigma_alpha rms slope, times in seconds.
+    Columns: parameters with 95% intervals and readings, chi2/dof, truth, warnings and
+    ``fit --model auto``'s ranking. Units: reflectances unitless, sigma_alpha rms slope, times [s].
     """
     fits = read_fits(folder)
     results = [fits[k] for k in sorted(fits)]

@@ -1,15 +1,11 @@
 """Model selection: lobe families and parameter counts ranked by held-out frames.
 
 Every candidate is a lobe (a ``normalisation``: Ward's, Duer's, the balanced one or a microfacet
-lobe of :mod:`~skyfit_mi.physics.microfacet`) with a parameterisation (``two``, ``achromatic``,
-``colour``: 2, 3 or 5 parameters).  The light is traced once per lobe (its table holds the
-lobe's series; the parameterisations share it) and each candidate is judged by K-fold
-cross-validation over frames: the frames split into K interleaved folds (frame t in fold
-t mod K), each fold's chi-square (thesis eq. 6.2) at the minimum of the other folds' frames
-(polished from the global minimum of them all), summed.  The held-out chi-square rewards
-what predicts unseen light (the sun's other positions), not what follows the noise of the
-frames fitted; AIC (chi2 + 2 k) and BIC (chi2 + k ln n) of the full fit are reported beside
-it.
+lobe of :mod:`~skyfit_mi.physics.microfacet`) with a parameterisation (2, 3 or 5 parameters). The
+light is traced once per lobe and each candidate judged by K-fold cross-validation over
+interleaved frame folds: each fold's chi-square (thesis eq. 6.2) at the other folds' minimum,
+summed, which rewards predicting unseen light, not following noise. AIC (chi2 + 2 k) and BIC
+(chi2 + k ln n) of the full fit are reported beside it.
 """
 
 import time
@@ -37,11 +33,9 @@ FAMILIES = ("ward", "balanced", "beckmann_plastic", "ggx_plastic", "beckmann_met
 MODELS = tuple(PARAMETERS)
 #: Folds of the cross-validation over frames.
 FOLDS = 4
-#: The ranking's light cache: positions per pixel (at most; fewer where the fit's cache has
-#: fewer) and the sky plan (its integrals at anchors,
-#: :data:`~skyfit_mi.render.light_cache.SKY_PLANS`), cheaper than a fit's trace: the
-#: candidates' held-out chi-square moves by a few units on it, and the chosen one is traced
-#: again at the fit's own (docs/BENCHMARKS.md, "Lobe families").
+#: The ranking's cheaper light cache: most positions per pixel and the sky plan
+#: (:data:`~skyfit_mi.render.light_cache.SKY_PLANS`); the chosen candidate is traced again at
+#: the fit's own (docs/BENCHMARKS.md, "Lobe families").
 RANK_POSITIONS, RANK_PLAN = 8, "anchors"
 
 
@@ -53,9 +47,8 @@ def _fit(problem, grid_basis):
 
 
 def cross_validate(session, model, folds=FOLDS):
-    """One candidate on a traced :class:`~.fit.FitSession` (its table, its lobe): the summed
-    held-out chi-square over ``folds`` interleaved folds of frames, the full fit's chi-square,
-    parameters and degrees of freedom, AIC and BIC."""
+    """One candidate on a traced :class:`~.fit.FitSession`: summed held-out chi-square over
+    ``folds``, the full fit's chi-square, parameters and dof, AIC and BIC."""
     obs, table = session.obs, session.table
     wm = TableModel(table, model)
     wm = LuminanceModel(wm) if obs.luminance else wm
@@ -66,9 +59,8 @@ def cross_validate(session, model, folds=FOLDS):
     held_out, n_held = 0.0, 0
     for train, test in frame_folds(full.valid, folds):
         train, test = Problem(obs, wm, valid=train), Problem(obs, wm, valid=test)
-        # each fold's minimum from the whole data's: three quarters of the frames move it
-        # little, so a polish finds it (a global search of each fold made the ranking 4x
-        # slower, for the same choices)
+        # each fold's minimum polished from the whole data's (a global search per fold is
+        # slower for the same choices)
         r = test.residuals(polish(train, theta, lo, hi)["theta"])
         held_out += float(r @ r)
         n_held += r.size
@@ -81,8 +73,7 @@ def cross_validate(session, model, folds=FOLDS):
 
 
 def rank(sessions, models=MODELS, folds=FOLDS, log=print):
-    """Every candidate of the traced ``sessions`` (one per lobe) and parameterisation in
-    ``models``, best first by held-out chi-square; each with its rank and the time it took."""
+    """Every candidate of ``sessions`` (one per lobe) and ``models``, best held-out first."""
     rows = []
     for s in sessions:
         for m in models:
@@ -99,9 +90,8 @@ def rank(sessions, models=MODELS, folds=FOLDS, log=print):
 
 
 def choose(rows):
-    """The chosen candidate of a ranking (best first): the one-standard-error rule, the fewest
-    parameters among those whose held-out chi-square is within sqrt(2 n) of the best (n the
-    held-out values: chi-square's own spread), the best held-out chi-square among those."""
+    """The one-standard-error rule's choice of a ranking: fewest parameters within sqrt(2 n) (n
+    held-out values) of the best held-out chi-square, then the best among those."""
     best = rows[0]["held_out_chi2"]
     near = [r for r in rows
             if r["held_out_chi2"] <= best + np.sqrt(2.0 * max(r["held_out_values"], 1))]
@@ -109,9 +99,8 @@ def choose(rows):
 
 
 def candidate_models(doc, models, luminance):
-    """The parameterisations of ``models`` the sequence of manifest ``doc`` can take, and why
-    each other is left out: a table of unknown scale cannot take the white 2-parameter surface,
-    nor a region measured as ``luminance`` the colour model."""
+    """(The parameterisations of ``models`` the sequence ``doc`` can take, why others are left
+    out): no white 2-parameter model at unknown scale, no colour model on ``luminance``."""
     why = {}
     if is_table(doc) and relative_scale(doc):
         why["two"] = ("the table's scale is unknown (ingest --unknown-scale), and the "
@@ -127,17 +116,9 @@ def candidate_models(doc, models, luminance):
 
 def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOLDS, seed=0,
              log=print, light=LightOptions(), **options):
-    """``fit --model auto``: every region's candidates ranked (:func:`rank`; the light traced
-    once per lobe, every region of a lobe together, an image's on the smaller cache of
-    :data:`RANK_POSITIONS` and :data:`RANK_PLAN`), then the chosen one fitted in full by the
-    global method (an image's light traced again at the fit's cache, the regions of each
-    chosen lobe together; a table's ranked on it already).  Where the spec's sky is taken as
-    it is (``light``, a :class:`~.light.LightOptions` or plan, resolving to 'spec') the
-    ranking and the fit are in the spec's light; else the candidates are ranked in the spec's
-    sky at the level a fit of Ward's lobe finds first, and the chosen ones fitted with the
-    sky's level, once for every region (the light traced again, split).  Yields each
-    region's result dict with its ``model_selection`` (the ranking, the choice, the folds, the
-    light of the ranking and each lobe's tracing time)."""
+    """``fit --model auto``: rank every region's candidates (:func:`rank`, on a smaller cache for
+    images), then fit the chosen one by the global method; under a fitted sky, ranked at the
+    level a Ward fit finds first. Yields each region's result dict with ``model_selection``."""
     options["cache"] = replace(options.get("cache", FitCache()), seed=seed)
 
     def sessions_of(**kw):
@@ -150,16 +131,14 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     for m, why in skipped.items():
         log(f"model selection leaves out the {m} model: {why}")
     plan = resolve_light({regions[0][0]: first}, light, log)        # checked once
-    # the ranking's light: image regions on a smaller cache; a table's points as the fit
-    # takes them (one ray each, the fewest positions already)
+    # the ranking's light: image regions on a smaller cache; a table's points as the fit's
     given, table = options["cache"], is_table(first.doc)
     reuse = table and not plan.split
     ranking_cache = given if table else replace(
         given, positions=min(RANK_POSITIONS, given.positions or RANK_POSITIONS), plan=RANK_PLAN)
     level = None
     if plan.split:
-        # the light the candidates are ranked in: the spec's sky at the level a fit of Ward's
-        # lobe finds (a lobe ranked on a sky of the wrong level is one that bends to it)
+        # rank in the spec's sky at a Ward fit's level (a wrong level favours lobes that bend)
         ward = sessions_of(model="achromatic" if first.obs.luminance else "colour")
         level = prepare_sessions(ward, plan, seed, lambda *a: None).record
         del ward
@@ -218,8 +197,7 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
 
 
 def _with_selection(out, selection):
-    """A chosen model's fit with its selection, its ``wall_time_s`` the whole: the selection's
-    (its share of the light's tracing, its ranking) and the fit's own (``fit_wall_time_s``)."""
+    """A chosen model's fit with its selection, its wall time including the selection's."""
     out["model_selection"] = selection
     out["fit_wall_time_s"] = out["wall_time_s"]
     out["wall_time_s"] = out["wall_time_s"] + selection["wall_time_s"]

@@ -1,45 +1,19 @@
 """The sky's level fitted with the materials: one sun-to-sky scale shared by every region of a day.
 
-A fit takes the light from the sequence's spec, whose sky is never the real one: the CIE and
-Perez skies put 20-30% too much light in the sky and too little in the sun on a measured clear
-day (docs/BENCHMARKS.md, "Measured light"), and the materials absorb the difference silently
-("Fits under skies other than the spec's").  The thesis names joint estimation of the light as
-future work (ch. 8.2).  Here the light is split into the sun's disc and the rest of the sky
-(patterns, map and ground, :meth:`~skyfit_mi.physics.sky.Sky.split`), traced apart, and the
-rest is scaled by a factor k shared by all regions: radiance is linear in the light, so every
-k's table is the sun's plus k times the sky's (:func:`~skyfit_mi.render.basis_table.mixed`), and
-no k needs a trace of its own.  k is first one level for the day, then (by default,
-:data:`DEFAULT_TERMS`) a smooth curve over it: the sky's share against the sun's follows the
-sun's height and the weather, which no model sky knows.
+The spec's model sky is never the real one (docs/BENCHMARKS.md, "Measured light"); the thesis
+names joint estimation of the light as future work (ch. 8.2). The light is split into the sun's
+disc and the rest (:meth:`~skyfit_mi.physics.sky.Sky.split`), traced apart, and the rest scaled by
+a factor k shared by all regions (radiance is linear in the light,
+:func:`~skyfit_mi.render.basis_table.mixed`): one level for the day, then by default a smooth
+curve over it (:data:`DEFAULT_TERMS`). k is profiled over the regions' summed least chi-square;
+its error, carried by each region's Gauss-Newton response, widens every interval.
 
-k is found by profiling: the sum over regions of each one's least chi-square (the global
-search), first on a geometric grid (:data:`SCALE_GRID`), then by a parabola in log k about its
-least point.  Its 95% interval is where that sum rises by 3.84 s^2 (s^2 the regions' pooled
-Birge ratio).  Each region's parameters move with k; their slope at k (the Gauss-Newton response
-to the residuals' change) times k's standard error is the sky's share of their error, added to the data's and the cache's (every interval
-includes it), and a parameter whose interval the sky at least doubles is warned
-(:data:`SKY_DOMINATES`).  With one
-region the frames alone tell k, through how the sun's share of the light changes over the
-day; more materials and a grey card tell it better.
-
-Two things the data cannot tell well are stated as priors:
-
-* the sky's level against the sun's (``fit --sky prior``, the default for photographs under the
-  sun): log k ~ N(0, sd^2) with sd :data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`, whose penalty
-  (log k / sd)^2 joins the regions' chi-square, so that the profile is the posterior's and k
-  stays near the spec's where the data alone would leave it open;
-* the sun's own level, with ``--sky fit`` or ``prior`` on photographs (``--sun-sd``, default
-  :data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD`): the light's absolute scale trades exactly
-  with the reflectances (every reflectance times a fits the light times 1/a), so no data tell
-  it, and each reflectance's relative error gains it in quadrature (:func:`light_level_sd`),
-  the roughness none.  A reference in the scene (``ingest --calibrate``, ``--colorchecker``)
-  or a relative scale (``--unknown-scale``) ties the reflectances to the data instead, and a
-  measured direct normal irradiance in the spec tells it to a pyrheliometer's accuracy
-  (:data:`~skyfit_mi.physics.sky.MEASURED_SUN_SD`, :func:`sun_source`).  A sequence skyfit
-  rendered was lit by its spec's sun: 0 unless given.  A modelled sun's (not given) widens as
-  the fitted sky departs from the spec's (:data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`):
-  air that is not the model's changes the sun's light too.  A manifest written before skies
-  recorded ``sun_measured`` reads its sun as modelled until ingested again.
+Priors hold what the data cannot tell well: the sky's level against the sun's (``--sky prior``,
+log k ~ N(0, :data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD` ^2)), and the sun's own level
+(``--sun-sd``), which trades exactly with the reflectances and so widens their intervals in
+quadrature (:func:`light_level_sd`) unless a scene reference or ``--unknown-scale`` ties them to
+the data; its sd comes from :func:`default_sun_sd` and widens with the sky's departure from the
+spec's (:data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`).
 """
 
 import datetime as dt
@@ -62,60 +36,41 @@ from .methods import global_search
 
 #: Sky scales k searched first: a geometric grid from a quarter to four times the spec's sky.
 SCALE_GRID = np.geomspace(0.25, 4.0, 9)
-#: The sky's share of a parameter's standard error, against the data's own, from which the
-#: fit warns that the parameter depends on the sky: sqrt(3) doubles its interval.
+#: The sky's share of a parameter's sd, against the data's, above which the fit warns: sqrt(3)
+#: doubles the interval.
 SKY_DOMINATES = 3 ** 0.5
 #: Half the spacing in log k of the points that refine the profile's least point.
 REFINE_STEP = 0.1
-#: The most terms of the sky's level over the day (``fit --sky-terms``), and the frames beyond
-#: the terms a curve needs at least (every term past the level is held by its prior).
+#: Most terms of the sky's level over the day (``--sky-terms``), and frames needed beyond them.
 MAX_TERMS, FRAMES_BEYOND_TERMS = 4, 2
-#: The terms of the sky's level over the day when not told (:func:`default_terms`): the day's
-#: level, its drift (P_1) and its curve (P_2), the last two under the prior :data:`DRIFT_SD`.
-#: The sky's share of the light against the sun's is not the model's, nor constant: it moves
-#: with the sun's height (the air the sun's light crosses: in Ineichen and Perez's clear-sky
-#: model the slope of log(DHI / DNI) in log air mass ranges from -0.4 to +0.17 over Linke
-#: turbidities 2.5-7, tests/test_sky_fit.py) and with the weather, and a clear sky's change
-#: with the sun's height is about even about noon (P_2).  One level for the day let a sky
-#: other than the spec's bend the roughness instead: a disc under a Perez sky of clearness 4,
-#: its sky-to-sun ratio 1.2-2.0 times the CIE clear sky's over the day, read sigma_alpha 0.092
-#: (0.086-0.097) for 0.08 with no warning (docs/BENCHMARKS.md, "the sky test set").
+#: Default terms of the sky's level over the day (:func:`default_terms`): level, drift (P_1) and
+#: curve (P_2), the last two under :data:`DRIFT_SD`. The sky-to-sun ratio moves with the sun's
+#: height (Ineichen and Perez's clear-sky model, tests/test_sky_fit.py) and the weather; one level
+#: lets a sky other than the spec's bend the roughness (docs/BENCHMARKS.md, "the sky test set").
 DEFAULT_TERMS = 3
-#: The terms of the whole light's level over the day beyond its mean (Legendre P_1, P_2 in
-#: time, each under the prior :data:`DRIFT_SD`) fitted with the sky where the frames keep their
-#: cameras' relative exposures and the reference saw the light drift (:func:`default_level_terms`).
-#: The sun's light crosses more air
-#: as it sinks, and how much of it the air takes is not the model's: under a turbid sky (T 5)
-#: the board's grey card drifted 4.5% over the day against the spec's CIE clear light, and the
-#: sky's level alone, against the sun, could follow that only by bending the sky's share that
-#: each material sees otherwise (docs/BENCHMARKS.md, "The sample board photographed").  Its
-#: mean is the exposure's, which the scene's reference sets.
+#: Terms of the whole light's level over the day beyond its mean (Legendre P_1, P_2, under
+#: :data:`DRIFT_SD`), fitted where a reference saw the light drift (:func:`default_level_terms`):
+#: how much sunlight the air takes as the sun sinks is not the model's (docs/BENCHMARKS.md, "The
+#: sample board photographed"). Its mean is the exposure's.
 LEVEL_TERMS = 2
 #: The most frames whose sky level the log lists one by one (more: its ends and range).
 CURVE_LISTED = 8
-#: The prior's standard deviation of each term of log k beyond the day's level (Legendre
-#: polynomials in time over the fitted frames, :func:`time_basis`): its change between the
-#: day's middle and its ends.  Passing haze and cloud change the sky's share of the light by
-#: tens of percent within hours; 0.35 is the level's own prior (:data:`SKY_LEVEL_SD`).
+#: Prior sd of each term of log k beyond the day's level (:func:`time_basis`): haze and cloud move
+#: the sky's share by tens of percent within hours (the level's own prior is the same).
 DRIFT_SD = 0.35
-#: The prior's standard deviation of the mix of each of the sky's shape variants (``fit
-#: --sky-shape``, :func:`~skyfit_mi.physics.sky_shape.shape_variants`): 1 is one CIE group of
-#: gradation or indicatrix, one Perez clearness bin, or one step of the Perez brightness
-#: (:data:`~skyfit_mi.physics.perez.BRIGHTNESS_STEP`, itself one sd of the sky's level).  The
-#: shape fitted to the shared measured clear day's scans lies one gradation group from the
-#: thesis's clear sky (5.98 against 5, indicatrix 4: BENCHMARKS, "Sky models against a
+#: Prior sd of the mix of each sky shape variant (``--sky-shape``): 1 is one CIE gradation or
+#: indicatrix group, one Perez clearness bin or brightness step
+#: (:data:`~skyfit_mi.physics.perez.BRIGHTNESS_STEP`; docs/BENCHMARKS.md, "Sky models against a
 #: measured clear sky").
 SHAPE_SD = 1.0
-#: The p-value of the fitted departure's chi-square under its prior below which the fit warns
-#: that the sky departs from the spec's model more than real clear skies do
-#: (:func:`_departure_warnings`).
+#: p-value of the fitted departure under its prior below which the sky is warned to depart from
+#: its model more than real clear skies do (:func:`_departure_warnings`).
 DEPARTURE_CONFLICT_P = 0.001
 #: Step in each term's coefficient of the finite differences of the residuals.
 DRIFT_STEP = 1e-3
 #: Gauss-Newton iterations of the terms at most.
 DRIFT_ITERATIONS = 8
-#: The parameters that scale with the light's absolute level (the reflectances); the
-#: roughness does not.
+#: The parameters that scale with the light's absolute level (the reflectances).
 LEVEL_SCALED = ("C_r", "C_g", "C_b", "R", "rho_s")
 
 
@@ -123,22 +78,19 @@ LEVEL_SCALED = ("C_r", "C_g", "C_b", "R", "rho_s")
 class SkyShare:
     """What the light adds to one region's parameters' errors.
 
-    record : the sky fit's record (:func:`~.sky_fit.fit_sky_scale`), shared by the day's
-        regions; None where the spec's sky is taken as it is
+    record : the sky fit's record (:func:`fit_sky_scale`); None where the spec's sky is taken
     sd : the fitted sky's share of each parameter's standard error (None: none)
-    span : where the sky's level is not determined, each parameter's (lowest, highest) over the
-        levels the data could not tell apart (None where it is)
-    sun_widening : what a modelled sun's level gains from the fitted sky's departure from the
-        spec's (:data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`)
-    light : the sky's coefficients as fitted (:class:`FittedLight`), from which the shares are
-        taken again at the region's own fit (:func:`share_at`); None where the sky's level is
-        not determined
+    span : each parameter's (lowest, highest) over the levels the data cannot tell apart, where
+        the sky's level is not determined (else None)
+    sun_widening : a modelled sun level's widening from the sky's departure from the spec's
+        (:data:`~skyfit_mi.physics.sky.SUN_SKY_COUPLING`)
+    light : the fitted coefficients (:class:`FittedLight`), to retake the shares at the region's
+        own fit (:func:`share_at`); None where the level is not determined
     response : (n, coefficients) the parameters' response to them at that fit (None before)
-    reference_slope : (3, coefficients) d ln f / d coefficients of the light's factor per
-        channel f that a reference in the scene sets (:func:`reference_slope`; None: no
-        reference): the light as calibrated again on it moves with the coefficients
-    pose_shift : {angle: (coefficients,) their shift were the camera turned by the pose's sd
-        in that angle} (:func:`~.pose.pose_through_sky`; empty: none)
+    reference_slope : (3, coefficients) d ln f / d coefficients of the per-channel light factor
+        f a scene reference sets (:func:`reference_slope`; None: no reference)
+    pose_shift : {angle: (coefficients,) their shift for a camera turn of the pose's sd}
+        (:func:`~.pose.pose_through_sky`)
     """
 
     record: dict = None
@@ -151,20 +103,17 @@ class SkyShare:
     reference_slope: np.ndarray = None
 
     def sun_level_sd(self, plan):
-        """The sun's level's relative uncertainty in the reflectances' intervals: the
-        :class:`~.light.LightPlan` ``plan``'s ``sun_sd`` widened by ``sun_widening``."""
+        """The sun level's relative sd: ``plan.sun_sd`` widened by ``sun_widening``."""
         return float(np.hypot(plan.sun_sd, self.sun_widening))
 
     @property
     def shape_known(self):
-        """Whether the sky's shape is known to the fit: the spec's taken as it is (no sky fit),
-        or fitted with the materials (--sky-shape); not where only its level was fitted."""
+        """Whether the sky's shape is known: the spec's taken as is, or fitted (--sky-shape)."""
         return self.record is None or self.record.get("shape") is not None
 
 @dataclass(frozen=True)
 class SkyFit:
-    """The sky fit's result (:func:`fit_sky_scale`): its ``record`` (the fit JSON's ``sky``) and
-    each region's :class:`SkyShare` (``shares`` {region: share})."""
+    """The sky fit's ``record`` (the fit JSON's ``sky``) and ``shares`` {region: SkyShare}."""
 
     record: dict
     shares: dict = field(default_factory=dict)
@@ -176,51 +125,39 @@ def _sunlit(skies):
 
 
 def sun_up(skies):
-    """Whether the sun's disc lights any of ``skies`` from above the horizon (a fitted sky is
-    scaled against it)."""
+    """Whether the sun's disc lights any of ``skies`` from above the horizon."""
     return bool(_sunlit(skies))
 
 
 def photographed(doc):
-    """Whether a manifest's frames were not rendered by skyfit (their light is the real one,
-    the spec's a model of it)."""
+    """Whether a manifest's frames were not rendered by skyfit (the spec's light a model)."""
     return doc.get("source", "render") not in RENDERED_SOURCES
 
 
 def default_sky(doc, skies):
-    """How a fit takes the sky when not told (``fit --sky``): with its prior ('prior') where
-    the frames were photographed under a sky with the sun (the spec's light is then a model of
-    the real one), else the spec's ('spec': skyfit rendered the frames under that very light,
-    or no sun lights them to scale the sky against)."""
+    """``fit --sky``'s default: 'prior' for photographs under a sky with the sun up, else 'spec'
+    (frames rendered under that very light, or no sun to scale the sky against)."""
     sunny = sun_up(skies) and any(k.lit_by_sky for k in skies)
     return "prior" if sunny and photographed(doc) else "spec"
 
 
 def default_departure(doc):
-    """Whether a fitted sky's departure from its model is fitted when not told (``fit
-    --sky-departure``): for photographs (their sky is the real one, whose shape no model
-    holds), not for a sequence skyfit rendered under the spec's very sky."""
+    """``fit --sky-departure``'s default: on for photographs, off for rendered sequences."""
     return photographed(doc)
 
 
 def sun_source(skies):
-    """Where the level of the sun of ``skies`` comes from, when ``fit --sun-sd`` does not give
-    it: 'measured' where every sky with the sun up carries a measured direct normal irradiance
-    (its ``info["sun_measured"]``), else 'modelled' (the thesis's eq. 4.7, a clear-sky model,
-    or a split of the global irradiance)."""
+    """'measured' where every sunlit sky of ``skies`` has ``info["sun_measured"]``, else
+    'modelled' (thesis eq. 4.7, a clear-sky model, or a split of the global irradiance)."""
     lit = _sunlit(skies)
     return "measured" if lit and all(k.info.get("sun_measured") for k in lit) else "modelled"
 
 
 def default_sun_sd(doc, skies):
-    """The relative uncertainty of the sun's level a fitted sky counts when not told (``fit
-    --sun-sd``): for photographs a measured sun's (where every sunlit sky states its own, a grey
-    card's ``info["sun_sd"]``: their mean weighted by the sun's horizontal irradiance, the
-    relative error of the day's sunlight when the frames' errors are one (the card's
-    reflectance), so a frame whose sun is faint weighs little; else
-    :data:`~skyfit_mi.physics.sky.MEASURED_SUN_SD`) or a modelled one's
-    (:data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD`, :func:`sun_source`); 0 for a sequence
-    skyfit rendered under that very sun."""
+    """``fit --sun-sd``'s default, the sun level's relative sd: for photographs with a measured
+    sun, the sunlit skies' stated ``info["sun_sd"]`` (a grey card's) weighted by the sun's
+    horizontal irradiance, else :data:`~skyfit_mi.physics.sky.MEASURED_SUN_SD`; with a modelled
+    sun :data:`~skyfit_mi.physics.sky.SUN_LEVEL_SD`; 0 for rendered sequences."""
     if not photographed(doc):
         return 0.0
     if sun_source(skies) != "measured":
@@ -234,11 +171,10 @@ def default_sun_sd(doc, skies):
 
 
 def light_level_sd(doc, names, sun_sd):
-    """Each parameter's relative error (``names``) from the sun's level known to a relative
-    ``sun_sd`` (a standard deviation of its log): the reflectances', the roughness none; zeros
-    where a reference in the scene (a calibration) or a relative scale ties the reflectances to
-    the data (the manifest ``doc``), and for the white 2-parameter model (rho_d + rho_s = 1
-    fixes the scale, so a wrong level shows as misfit instead)."""
+    """Each parameter's relative error from the sun's level known to ``sun_sd`` (sd of its log):
+    the reflectances', the roughness none. Zeros where a scene reference or a relative scale in
+    ``doc`` ties the reflectances to the data, and for the white 2-parameter model (rho_d + rho_s
+    = 1 fixes the scale: a wrong level shows as misfit)."""
     scale = (doc.get("ingest") or {}).get("scale") or {}
     anchored = _referenced(doc) or scale.get("known") is False
     if anchored or not sun_sd or "C_r" not in names and "R" not in names:
@@ -252,49 +188,40 @@ def _seconds(times):
 
 
 def time_basis(times, span, terms):
-    """(T, ``terms``) Legendre polynomials P_0 .. P_terms-1 of the frames' ``times`` (ISO)
-    mapped onto [-1, 1] over ``span`` (first, last) [s since the epoch], held at the ends
-    outside it: log k(t) = basis @ coefficients."""
+    """(T, ``terms``) Legendre polynomials of the ISO ``times`` mapped onto [-1, 1] over ``span``
+    [s since the epoch], held beyond it: log k(t) = basis @ coefficients."""
     t0, t1 = span
     x = np.clip(2.0 * (_seconds(times) - t0) / max(t1 - t0, 1.0) - 1.0, -1.0, 1.0)
     return np.polynomial.legendre.legvander(x, terms - 1)
 
 
 def _curve_at(curve, times):
-    """A curve's record (:func:`_curve_record`) at the frames' ``times`` (ISO; held at the
-    fitted span's ends)."""
+    """A curve's record (:func:`_curve_record`) at the frames' ISO ``times``."""
     return np.exp(time_basis(times, curve["span_s"], len(curve["coefficients"]))
                   @ np.asarray(curve["coefficients"]))
 
 
 def sky_level_at(record, times):
-    """The sky's level k at the frames' ``times`` (ISO) by a sky fit's ``record``: the day's
-    one level, or its smooth curve over the day (``terms``)."""
+    """The sky's level k at ISO ``times`` by a sky fit's ``record``: one level, or its curve."""
     terms = record.get("terms")
     return np.full(len(times), float(record["k"])) if terms is None else _curve_at(terms, times)
 
 
 def light_level_at(record, times):
-    """The whole light's level at the frames' ``times`` (ISO) by a sky fit's ``record`` (its
-    ``light_level`` curve, :data:`LEVEL_TERMS`), or None where it fitted none."""
+    """The whole light's level at ISO ``times`` by a sky fit's ``record``, or None."""
     curve = (record or {}).get("light_level")
     return None if curve is None else _curve_at(curve, times)
 
 
 def skies_at_level(skies, record, times):
-    """The frames' ``skies`` (at ISO ``times``) with their sky at a sky fit's level (``record``,
-    :func:`sky_level_at`) against the sun: the spec's light as a fit of the day found it,
-    calibrated again on the scene's reference where the fit did so (its ``reference``,
-    :func:`~.fit.reference_factor`), and at the whole light's level over the day where it
-    fitted one (:func:`light_level_at`)."""
+    """The frames' ``skies`` (at ISO ``times``) at a sky fit's ``record``'s level and tint."""
     return [sky.sky_scaled(k).tinted(tint)
             for sky, k, tint in zip(skies, sky_level_at(record, times), light_tints(record, times))]
 
 
 def light_tints(record, times):
-    """The factor per channel (3,) on the whole light at each of the frames' ``times`` (ISO) by
-    a sky fit's ``record``: the reference's (:func:`reference_light_factor`) times the light's
-    level over the day (:func:`light_level_at`); None each where the fit set neither."""
+    """The per-channel factor (3,) on the light at each ISO ``times`` by a sky fit's ``record``:
+    :func:`reference_light_factor` times :func:`light_level_at`; None each where neither is set."""
     factor = reference_light_factor(record)
     level = light_level_at(record, times)
     if factor is None and level is None:
@@ -304,9 +231,7 @@ def light_tints(record, times):
 
 
 def reference_light_factor(record):
-    """The factor per channel (3,) that a sky fit's ``record`` puts on the light where it
-    calibrated the light again on the scene's reference (:func:`~.fit.reference_factor`);
-    None where it did not."""
+    """The per-channel light factor (3,) from ``record``'s reference, or None."""
     factor = ((record or {}).get("reference") or {}).get("light_factor")
     return None if factor is None else np.asarray(factor, dtype=float)
 
@@ -330,10 +255,9 @@ def _parabola(u, chi2):
 
 def shape_variants(skies):
     """Each frame's shape variants (:func:`~skyfit_mi.physics.sky_shape.shape_variants`) of
-    ``skies``, for a fit of the sky's shape (``--sky-shape``), every frame's index moved the
-    same way (the fit shares each variant's mix over the frames): +1 where every frame can,
-    else -1.  Refused where some frame's spec sky has none (not a CIE, Perez or turbid sky),
-    where the frames' skies move different indices, or where no way suits every frame."""
+    ``skies`` for ``--sky-shape``, every frame's index moved the same way (the mix is shared):
+    +1 where every frame can, else -1. Raises SkyfitError where some frame's sky has none (not
+    CIE, Perez or turbid) or the frames' skies move different indices."""
     variants = [sky_shape.shape_variants(sky) for sky in skies]
     if not all(variants):
         kinds = sorted({str(sky.info.get("kind")) for sky, v in zip(skies, variants) if not v})
@@ -356,11 +280,8 @@ def shape_variants(skies):
 
 
 def _shape_record(session, mix, mix_sd):
-    """The JSON record of the sky's fitted shape, and the indices' names for the log: the
-    ``mix`` of the shape variants of ``session``'s frames (:func:`shape_variants`) with its
-    standard deviations ``mix_sd``, and each variant's index, from + mix (to - from), with its
-    95% half-width: the frames' mean, and each frame's where the spec's index differs between
-    frames (a Perez sky)."""
+    """(JSON record of the fitted shape: ``mix``, ``mix_sd`` and each index from + mix (to -
+    from) with its 95% half-width; the indices' names for the log)."""
     infos = [[v.info for _, v in vs] for vs in shape_variants(session.skies)]
     ends = np.array([[[v["from"], v["to"]] for v in row] for row in infos], dtype=float)
     mean = ends.mean(axis=0)                                          # (J, 2)
@@ -406,16 +327,10 @@ def _ranges(levels_by_frame):
 
 def default_terms(frames, referenced=False):
     """The terms of the sky's level over ``frames`` frames when not told: :data:`DEFAULT_TERMS`,
-    fewer where the frames are fewer than two more than that (one level for up to 3 frames);
-    one level where a reference of known reflectance calibrates the frames (``referenced``,
-    :func:`_referenced`).  There the reflectances' scale is the reference's, seen under the
-    same light, and on a scene of one normal the curve is nearly collinear with a scale on
-    the reflectances (a sky whose share follows the sun's height, as the sun's own light does),
-    so it adds a valley, not information: a calibrated JPEG board at quality 85 (sky level 1)
-    took a curve at k 0.65-0.76 and read every C 3-15% high, its chi-square 7 lower than one
-    level's, while one level held every C within 3%; its half-widths were 2-3 times one
-    level's on PNG (scripts/jpeg_colour_coverage.py, docs/BENCHMARKS.md).  The reference itself
-    in the sky's fit would tell the curve (its reflectance is known); that is not done yet."""
+    fewer for few frames (one level up to 3). One level where a reference calibrates the frames
+    (``referenced``): on a scene of one normal the curve is then nearly collinear with the
+    reflectances' scale and adds a valley, not information (scripts/jpeg_colour_coverage.py,
+    docs/BENCHMARKS.md). Fitting the reference with the sky would tell the curve: not done yet."""
     if referenced:
         return 1
     return int(max(1, min(DEFAULT_TERMS, int(frames) - FRAMES_BEYOND_TERMS)))
@@ -423,13 +338,9 @@ def default_terms(frames, referenced=False):
 
 def default_level_terms(doc, frames):
     """The terms of the whole light's level over ``frames`` frames beyond its mean
-    (:data:`LEVEL_TERMS`) for photographs whose frames keep their exposures' level from EXIF
-    where a reference of known reflectance saw the light drift from the spec's over the day
-    (ingest's ``calibration.light_drift``).  None where it saw the spec's curve, or calibrated
-    each frame's level on its own (the spec's light's, by construction), where no reference
-    tells the curve (a given exposure: the level's curve then trades with the materials'
-    lobes, and a one-region ranking of lobes chose Ward's for a GGX plastic), for frames skyfit
-    rendered (the spec's light is theirs), and for too few frames."""
+    (:data:`LEVEL_TERMS`): for photographs whose reference saw the light drift from the spec's
+    (ingest's ``calibration.light_drift``), with enough frames; else 0 (without a reference the
+    level's curve trades with the materials' lobes)."""
     cal = (doc.get("ingest") or {}).get("calibration") or {}
     if not photographed(doc) or frames < LEVEL_TERMS + 1 + FRAMES_BEYOND_TERMS:
         return 0
@@ -437,31 +348,19 @@ def default_level_terms(doc, frames):
 
 
 def _data_beyond_search(data, grid):
-    """Where the data alone put the sky's level: ``data`` {log k: the regions' summed least
-    chi-square} (the profile without the prior), ``grid`` the search's log k (:data:`SCALE_GRID`);
-    -1 or +1 where the data's least point lies at or beyond the search's lower or upper end, 0
-    within it.  Under ``--sky prior`` the profile's least point may lie well inside while the
-    data's own runs to an end: the prior then holds a level the data do not show, a light
-    further from the spec's than the prior allows (a hazy day's sky fitted with a clear
-    spec: docs/BENCHMARKS.md, "the sky test set").  :func:`fit_sky_scale` warns where the
-    prior's hold is also significant: the data's rise from their least point to the fitted
-    level plus the prior's penalty there, over s^2 as the profile's intervals take it (the
-    prior-data conflict, chi-square with one degree of freedom where the prior holds), above
-    its 95% point (data that hardly tell the level are held by the prior quietly, wherever
-    their least point lies)."""
+    """-1, +1 or 0 as the data alone (``data`` {log k: summed least chi-square, no prior}) put the
+    level at or beyond the lower or upper end of ``grid``, or within it."""
     u = min(data, key=data.get)
     return -1 if u <= grid[0] else 1 if u >= grid[-1] else 0
 
 
 def _referenced(doc):
-    """Whether a reference of known reflectance in the scene calibrates a manifest's frames
-    (``ingest --calibrate``, ``--colorchecker``)."""
+    """Whether a scene reference calibrates the frames (``--calibrate``, ``--colorchecker``)."""
     return bool((doc.get("ingest") or {}).get("calibration"))
 
 
 def _curve_text(k):
-    """The log's words for the sky's level ``k`` at each frame, in order: every value for a
-    few frames, else its ends and range."""
+    """The log's words for the sky's level ``k`` by frame: each value, or for many its range."""
     if len(k) <= CURVE_LISTED:
         return "k = " + ", ".join(f"{v:.2f}" for v in k) + " by frame"
     return (f"k = {k[0]:.2f} at the first frame, {k[-1]:.2f} at the last, {min(k):.2f}-"
@@ -480,16 +379,13 @@ def check_terms(terms, frames):
 
 @dataclass(frozen=True)
 class SkyCoefficients:
-    """The sky's coefficients fitted with the materials, each under a Gaussian prior N(0, sd^2)
-    about the spec's sky: log k over the day as ``terms`` Legendre polynomials in time (the
-    day's level under ``level_sd``, None for none; each further term under :data:`DRIFT_SD`),
-    and the mix of each of the light's ``variants`` (their parts' names): the sky's shape
-    variants (:data:`SHAPE_SD`) and its departure field's weights
-    (:data:`~skyfit_mi.physics.sky_departure.PRIOR_SD`), then the whole light's level over the
-    day as ``light_terms`` Legendre polynomials P_1.. in time (:data:`DRIFT_SD`; its mean is the
-    exposure's).  They set the weights of the light's traced parts
-    (:meth:`~.light.LightParts.table`): the sky's k(t) = exp(B(t) u[:terms]) against the sun,
-    the variants' mix after it, and the level's factor on both, sun and sky, last."""
+    """The sky's coefficients fitted with the materials, each under a prior N(0, sd^2) about the
+    spec's sky: log k over the day as ``terms`` Legendre polynomials in time (the level under
+    ``level_sd``, None for none; further terms under :data:`DRIFT_SD`), the mix of the light's
+    ``variants`` (shape: :data:`SHAPE_SD`; departure:
+    :data:`~skyfit_mi.physics.sky_departure.PRIOR_SD`), then the whole light's level as
+    ``light_terms`` polynomials P_1.. (:data:`DRIFT_SD`). They weight the light's traced parts
+    (:meth:`~.light.LightParts.table`): k(t) = exp(B(t) u[:terms]), the mix, the level last."""
 
     terms: int
     variants: tuple = ()
@@ -518,9 +414,8 @@ class SkyCoefficients:
         return np.diag([0.0 if v is None else v ** -2 for v in sd])
 
     def light(self, session, basis, u):
-        """Light ``session`` (its frames' time ``basis``, :func:`time_basis`) at the
-        coefficients ``u``: the sky's level k(t) against the sun, its variants' mix, and the
-        whole light's level exp(P_1..(t) u) about its mean (:data:`LEVEL_TERMS`)."""
+        """Light ``session`` (its frames' time ``basis``, :func:`time_basis`) at coefficients
+        ``u``: k(t), the variants' mix, and the whole light's level exp(P_1..(t) u)."""
         J = self.terms + len(self.variants)
         session.set_sky(np.exp(basis[:, :self.terms] @ u[:self.terms]),
                         u[self.terms:J] if self.variants else None,
@@ -529,16 +424,13 @@ class SkyCoefficients:
 
 
 def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
-    """The sky's ``coefficients`` (:class:`SkyCoefficients`) fitted with the regions'
-    parameters, from the day's level ``u0`` (log k) and each region's ``thetas`` there.
-    Gauss-Newton on the coefficients with every region's parameters profiled out (each
-    region's Jacobian in the coefficients projected off its parameters' own; the parameters
-    then polished by Levenberg-Marquardt), under their priors.  Leaves each session at the
-    fit; returns (coefficients, their covariance, the profiled normal matrix's inverse, the
-    span [s], each region's time basis, its
-    parameters there and their response to the coefficients (n, coefficients), the regions'
-    summed chi-square there); the covariance takes the data's information over ``scale`` (the
-    regions' disagreement, :func:`_regions_agree`), the priors' as it is."""
+    """Fit the sky's ``coefficients`` (:class:`SkyCoefficients`) with the regions' parameters
+    from log k ``u0`` and ``thetas`` there: Gauss-Newton under the priors, each region's
+    parameters profiled out (its Jacobian projected off theirs, then polished by
+    Levenberg-Marquardt). Leaves each session at the fit. Returns (u, covariance, inverse profiled
+    normal matrix, span [s], each region's time basis, parameters and response (n, coefficients),
+    summed chi-square); the covariance divides the data's information (not the priors') by
+    ``scale`` (:func:`_regions_agree`)."""
     terms = coefficients.terms
     times = [t for s in sessions for t in s.obs.times]
     span = (float(_seconds(times).min()), float(_seconds(times).max()))
@@ -591,13 +483,9 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
 
 @dataclass(frozen=True)
 class FittedLight:
-    """The sky's coefficients as fitted for one region: their kind (:class:`SkyCoefficients`),
-    the region's frames' time ``basis`` (:func:`time_basis`), their values ``u``, their
-    ``covariance`` (the regions' pooled Birge ratio s^2 times the inverse of the profiled
-    normal matrix, the data's part divided by the regions' disagreement), the region's
-    parameters ``theta`` there (None while fitting), and ``inverse_normal`` H^-1, the inverse of
-    the profiled normal matrix as it is: the coefficients' response to the data
-    (:func:`~.pose.pose_through_sky`)."""
+    """The sky's coefficients as fitted for one region: kind, frames' time ``basis``, values
+    ``u``, their ``covariance``, the region's ``theta`` (None while fitting) and the inverse
+    profiled normal matrix ``inverse_normal`` (:func:`~.pose.pose_through_sky`)."""
 
     coefficients: SkyCoefficients
     basis: np.ndarray
@@ -612,10 +500,9 @@ class FittedLight:
 
 
 def light_response(s, light, theta):
-    """(the residuals' derivatives in the coefficients that the parameters cannot absorb,
-    residuals, d residuals / d theta, the parameters' least-squares response to the
-    coefficients (n, coefficients)) of session ``s`` at its parameters ``theta`` and the
-    :class:`FittedLight` ``light`` (central differences of :data:`DRIFT_STEP`); leaves ``s``
+    """(d residuals / d u that the parameters cannot absorb, residuals, d residuals / d theta,
+    the parameters' least-squares response (n, coefficients)) of session ``s`` at ``theta`` and
+    :class:`FittedLight` ``light``, by central differences of :data:`DRIFT_STEP`; leaves ``s``
     lit at it."""
     u = light.u
     eye = np.eye(len(u))
@@ -634,25 +521,19 @@ def light_response(s, light, theta):
 
 
 def _residual_slope(problem, theta):
-    """(the model's radiance (P, T, 3) at ``theta``, each value's residual's derivative in it)
-    of ``problem`` (a :class:`~.chi2.Problem`)."""
+    """(Model radiance (P, T, 3) at ``theta``, each residual's derivative in it) of ``problem``."""
     L = problem.model.radiance(theta)
     return L, problem.residual_terms(L)[1] * problem.slope(L)
 
 
 def reference_slope(s, light, theta, lambertian):
-    """d ln f / d u (3, coefficients): how the light's factor per channel f that a reference
-    sets (:func:`~.fit.reference_factor`: the radiance of its fit ``theta`` over that of a
-    Lambertian surface of its known reflectance, ``lambertian``, summed over the day) moves with
-    the sky's coefficients u of its :class:`FittedLight` ``light``; session ``s`` (the
-    reference's) is left lit at the fitted u.  The fit's radiance follows the data, its
-    parameters taking up what they can of the light's change: it moves by what they cannot
-    (:func:`light_response`'s residuals' derivatives, linear: a grey card's roughness, which its
-    nil gloss leaves free, responds without bound); the Lambertian's by the light's.  Where
-    the sky is brighter than fitted, the reference reads less, and so every region lit by the
-    light times f: a diffuse surface facing as the reference does reads its reflectance against
-    the reference's whatever the sky's level, and only the light it sees otherwise (its lobe's
-    sky) carries the sky's uncertainty (:func:`share_at`)."""
+    """d ln f / d u (3, coefficients): how the per-channel light factor f a reference sets
+    (:func:`~.fit.reference_factor`: its fit ``theta``'s radiance over that of a ``lambertian``
+    surface of its known reflectance, summed over the day) moves with ``light``'s coefficients
+    u; leaves ``s`` (the reference's session) lit at the fitted u. The fit moves by what its
+    parameters cannot absorb (linearised: a grey card's free roughness would respond without
+    bound), the Lambertian by the light's change; so a diffuse surface facing as the reference
+    reads its reflectance whatever the sky's level (:func:`share_at`)."""
     unabsorbed = light_response(s, light, theta)[0]
     problem = s.problem
     L, per_radiance = (a[problem.mask] for a in _residual_slope(problem, theta))
@@ -673,13 +554,10 @@ def reference_slope(s, light, theta, lambertian):
 
 
 def share_at(s, share, theta):
-    """The region's ``share`` of the fitted light (:class:`SkyShare`) taken again at its own
-    fit ``theta`` (session ``s`` lit at the fitted sky): the sky fit found each region's
-    response at the parameters of its search, and a region whose final fit lies elsewhere (a
-    metal's roughness at its bound, where its C and rho_s trade) responds otherwise.  Where a
-    reference calibrated the light again (``share.reference_slope``), the response includes
-    the factor's: the parameters' response to the light's level per channel (d r / d ln f_c,
-    the model's value times the residual's slope in it) through its slope."""
+    """``share`` (:class:`SkyShare`) retaken at the region's own fit ``theta`` (``s`` lit at the
+    fitted sky): a final fit away from the search's (a metal's roughness at its bound) responds
+    otherwise. With a ``reference_slope`` the response includes the reference factor's
+    (d r / d ln f_c through that slope)."""
     if share.light is None:
         return share
     _, _, Jt, response = light_response(s, share.light, theta)
@@ -694,19 +572,15 @@ def share_at(s, share, theta):
 
 
 def _carried_sd(response, covariance):
-    """The standard errors (n,) the coefficients' ``covariance`` gives the parameters that
-    respond to them by ``response`` (n, coefficients)."""
+    """Standard errors (n,) carried by ``response`` (n, coefficients) from ``covariance``."""
     return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", response, covariance, response), 0.0))
 
 
 @dataclass
 class _Level:
-    """The day's one sky level profiled over log k (:func:`_profile_level`): ``profile``
-    {log k: [(least chi-square, parameters) per region]}, the search's ``grid`` (log k), the
-    prior's sd on log k (None: none), the least point ``u0``, log k's standard error ``sd_u``
-    (inf where not determined), whether the least point lies at the grid's ``edge``, s^2
-    (the regions' pooled Birge ratio there), whether the regions ``agree`` on the level
-    (:func:`_regions_agree`), and the profile's ``curvature`` b there (chi2 = a + b u^2)."""
+    """The day's one sky level profiled over log k (:func:`_profile_level`): ``profile`` {log k:
+    [(least chi-square, parameters) per region]}; ``sd_u`` inf where not determined; ``s2`` the
+    pooled Birge ratio; ``curvature`` b of chi2 = a + b u^2 at ``u0``."""
 
     profile: dict
     grid: np.ndarray
@@ -738,8 +612,7 @@ class _Level:
 
     @property
     def interval(self):
-        """k's 95% interval: from the curvature, or what the profile saw where k is not
-        determined (open where it reached the grid's end)."""
+        """k's 95% interval: from the curvature, else the profile's (None: open at the grid)."""
         if self.determined:
             return [float(np.exp(self.u0 - unc.Z["95"] * self.sd_u)),
                     float(np.exp(self.u0 + unc.Z["95"] * self.sd_u))]
@@ -749,9 +622,8 @@ class _Level:
 
 
 def _profile_level(sessions, prior_sd, seed):
-    """The day's one sky level (:class:`_Level`): the regions' summed least chi-square (the
-    global search from seeded starts) on :data:`SCALE_GRID`, then a parabola in log k about
-    its least point; log k's standard error from the curvature (Delta chi^2 = s^2 at 1 sd)."""
+    """The day's one sky level (:class:`_Level`): the regions' summed least chi-square on
+    :data:`SCALE_GRID`, then a parabola in log k; log k's sd from its curvature (Dchi2 = s^2)."""
     rng = np.random.default_rng(seed)
     starts = [s.random_start(rng) for s in sessions]
     level = _Level({}, np.log(SCALE_GRID), prior_sd)
@@ -773,8 +645,7 @@ def _profile_level(sessions, prior_sd, seed):
     vertex, b = _parabola(near, [total(u) for u in near])
     if vertex is not None and abs(vertex - u0) < 2 * REFINE_STEP and not edge:
         total(float(vertex))
-    # the least point evaluated; the curvature near it, or the grid's where the near points'
-    # search jitter leaves none
+    # the curvature near the least point, or the grid's where search jitter leaves none
     level.u0 = min(level.profile, key=level.total)
     b = b if b is not None and b > 0 else b_grid
     noise = sum(s.problem.noise_chi2(th)[0]
@@ -782,8 +653,8 @@ def _profile_level(sessions, prior_sd, seed):
     level.s2 = unc.scale(level.data(level.u0), noise)
     level.edge = edge
     level.agree = _regions_agree(level)
-    # at the grid's end the minimum may lie beyond it: k is not determined; the data's
-    # curvature (the prior's, 1 / sd^2, apart) over the regions' disagreement
+    # at the grid's end k is not determined; else the data's curvature (the prior's 1 / sd^2
+    # apart) over the regions' disagreement
     if b is not None and b > 0 and not edge:
         prior = 0.0 if prior_sd is None else min(1.0 / prior_sd ** 2, b)
         level.sd_u = float(np.sqrt(level.s2 / ((b - prior) / level.agree["scale"] + prior)))
@@ -794,15 +665,12 @@ def _profile_level(sessions, prior_sd, seed):
 
 
 def _regions_agree(level):
-    """Whether the regions agree on the day's one sky level (``level``'s profile): Q, the sum
-    over regions of how far each region's chi-square at the pooled level lies above its own
-    least (a parabola through its three points about the least it saw), over s^2, is
-    chi-square with R - 1 degrees of freedom when one light lights them all as the model
-    says.  Where it is significant (p < MISFIT_P) the sky's model does not hold the light the
-    regions see (a sky of another shape: each material reads it through its own lobe), and
-    the data's information on the sky's coefficients is divided by ``scale`` = Q / (R - 1),
-    the Birge ratio between regions (the Particle Data Group's scale factor, squared); else
-    ``scale`` 1.  Returns {chi2, dof, p, scale, by_region: each region's own least level k}."""
+    """Whether the regions agree on the day's one level: Q, the sum over regions of their
+    chi-square at the pooled level above their own least (a parabola about it), over s^2, is
+    chi-square with R - 1 dof if one light lights them all. Where p < MISFIT_P the data's
+    information on the sky is divided by ``scale`` = Q / (R - 1), the Birge ratio between regions
+    (the Particle Data Group's scale factor, squared); else 1. Returns {chi2, dof, p, scale,
+    by_region: each region's own least k}."""
     us = np.array(sorted(level.profile))
     chi2 = np.array([[c for c, _ in level.profile[u]] for u in us])          # (U, R)
     R = chi2.shape[1]
@@ -826,8 +694,8 @@ def _regions_agree(level):
 
 
 def _level_warnings(level, terms):
-    """What the day's one level says of itself: not determined, or held by its prior where the
-    data alone put it beyond the search (:func:`_data_beyond_search`)."""
+    """Warnings on the day's one level: not determined, regions disagreeing, or held by its prior
+    where the data alone put it beyond the search (a significant prior-data conflict)."""
     warnings, k, within = [], float(np.exp(level.u0)), level.within
     if not level.determined:
         warnings.append(
@@ -873,8 +741,7 @@ def _level_warnings(level, terms):
 
 
 def _level_spans(sessions, level):
-    """Each region's parameters' (lowest, highest) over the levels the profile could not tell
-    apart where the day's one ``level`` is not determined, else None."""
+    """Each region's parameters' (lowest, highest) over an undetermined level's range, or None."""
     if level.determined:
         return [None] * len(sessions)
     return [(np.min(v, axis=0), np.max(v, axis=0))
@@ -884,11 +751,7 @@ def _level_spans(sessions, level):
 
 @dataclass
 class _Fitted:
-    """The sky as fitted (:func:`fit_sky_scale`): its level k with its 95% interval and log
-    k's sd, each region's share of its errors (``sd``), the curve's and the shape's records
-    (None where not fitted), each region's parameters' span over the levels the profile could not
-    tell apart where k is not determined (:func:`_level_spans`), the coefficients' correlation, the regions' chi-square there, log
-    k by frame of a curve (else None), and the log's names of the shape's indices."""
+    """The sky as fitted (:func:`fit_sky_scale`); records are None where not fitted."""
 
     k: float
     interval: list
@@ -907,11 +770,10 @@ class _Fitted:
 
 
 def _fit_terms(sessions, level, terms, told, warnings, light_terms=0):
-    """The sky's level over the day (``terms``, ``told`` by ``--sky-terms``), its shape
-    (the shape variants traced) and the whole light's level over the day (``light_terms``,
-    :func:`default_level_terms`) fitted from the day's ``level`` (:func:`_fit_curve`) where
-    that is determined; a :class:`_Fitted` (the level's own where they are not fitted).
-    Appends what the data hardly tell to ``warnings``."""
+    """Fit the sky's level over the day (``terms``, ``told`` by ``--sky-terms``), its shape and
+    departure (the variants traced) and the light's level curve (``light_terms``) from the day's
+    ``level`` (:func:`_fit_curve`) where that is determined; returns a :class:`_Fitted` and
+    appends what the data hardly tell to ``warnings``."""
     thetas = [theta for _, theta in level.profile[level.u0]]
     fitted = _Fitted(float(np.exp(level.u0)), level.interval, level.sd_u,
                      [np.zeros(len(theta)) for theta in thetas], _level_spans(sessions, level),
@@ -973,9 +835,8 @@ def _fit_terms(sessions, level, terms, told, warnings, light_terms=0):
 
 
 def _curve_record(sessions, coefficients, covariance, span, of="k"):
-    """The JSON record of a curve over the day of the sky's level k against the sun (or of the
-    whole light's level, ``of`` 'level'): its Legendre ``coefficients`` with their
-    ``covariance`` over ``span`` [s], and its log at each frame."""
+    """(JSON record, log by frame) of a curve over the day of the sky's level k (``of`` 'level':
+    the whole light's): Legendre ``coefficients``, ``covariance``, ``span`` [s]."""
     frames = sorted({(i, t) for s in sessions for i, t in zip(s.obs.frames, s.obs.times)})
     B = time_basis([t for _, t in frames], span, len(coefficients))
     log_k = B @ coefficients
@@ -1011,8 +872,7 @@ def _shape_warnings(shape, mix_sd):
 
 
 def _departure_record(a, covariance):
-    """The JSON record of the sky's fitted departure from its model: the field's weights ``a``
-    with their ``covariance`` (:mod:`~skyfit_mi.physics.sky_departure`)."""
+    """The JSON record of the sky's departure weights ``a``."""
     sd = np.sqrt(np.diag(covariance))
     chi2 = conflict(a)
     return {"meaning": "the sky other than the sun is the spec's (its level and shape as fitted) "
@@ -1028,8 +888,7 @@ def _departure_record(a, covariance):
 
 
 def _departure_warnings(departure):
-    """What the fitted departure says of the spec's sky: a departure beyond what real clear
-    skies show (its conflict with the prior significant at :data:`DEPARTURE_CONFLICT_P`)."""
+    """A warning where the departure conflicts with its prior (:data:`DEPARTURE_CONFLICT_P`)."""
     if departure["conflict_p"] >= DEPARTURE_CONFLICT_P:
         return []
     return [f"the sky departs from the spec's model more than measured clear skies depart from "
@@ -1042,17 +901,14 @@ def _departure_warnings(departure):
 
 
 def fitted_mix(record):
-    """The mix of the light's variants (:class:`~.light.LightParts`) at a sky fit's
-    ``record``: its shape's mix, then its departure's weights; None where neither was fitted."""
+    """The light variants' mix at a sky fit's ``record`` (shape, then departure), or None."""
     mix = list((record.get("shape") or {}).get("mix", [])) \
         + list((record.get("departure") or {}).get("weights", []))
     return mix or None
 
 
 def _sun_coupling(plan, level, fitted):
-    """(What a modelled sun's level's sd gains from the fitted sky's departure from the
-    spec's, its record or None): log k's rms over the frames of a curve, its level's, or the
-    largest over the levels the profile could not tell apart where k is not determined."""
+    """(A modelled sun level's sd widening by log k's rms over the frames, its record or None)."""
     if fitted.sd_u is not None and np.isfinite(fitted.sd_u):
         log_k = fitted.log_k if fitted.curve is not None else np.log(fitted.k)
         departure = float(np.sqrt(np.mean(log_k ** 2)))
@@ -1072,18 +928,12 @@ def _sun_coupling(plan, level, fitted):
 
 
 def fit_sky_scale(sessions, plan, seed=0, log=print):
-    """Fit the sky scale k of ``sessions`` (FitSessions of one day, traced with the split
-    light of ``plan``, a :class:`~.light.LightPlan`) and leave each lit at the fitted k;
-    returns the :class:`SkyFit`: its record and each region's :class:`SkyShare` (the sky's
-    share of each parameter's standard error, the sun level's sd).
-    ``plan.prior_sd``: the standard deviation of a normal prior on log k about the spec's level
-    (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`), None for none (k from the data alone).
-    ``plan.terms`` > 1: log k changes smoothly over the day (the sun's height, changing
-    weather), as that many Legendre polynomials in time; None: :func:`default_terms` of the
-    frames, and no warning where the data hardly tell the terms beyond the level (their prior
-    holds them, as it does the intervals); sessions traced with ``plan.shape`` also fit the
-    mix of the sky's shape variants (:func:`_fit_curve`), both from the day's level found
-    first (:func:`_profile_level`)."""
+    """Fit the sky of ``sessions`` (one day's FitSessions, traced with the split light of
+    ``plan``, a :class:`~.light.LightPlan`) and leave each lit at the fit; returns the
+    :class:`SkyFit`. ``plan.prior_sd``: sd of log k's prior (None: data alone). ``plan.terms``:
+    Legendre terms of log k over the day (None: :func:`default_terms`, with no warning where the
+    data hardly tell them); a ``plan.shape`` also fits the sky's shape variants
+    (:func:`_fit_curve`), from the day's level found first (:func:`_profile_level`)."""
     t0 = time.perf_counter()
     terms, told = plan.terms, plan.terms is not None
     if not told:

@@ -1,25 +1,12 @@
 """Uncertainty of fitted parameters and whether the data determine them (thesis 6.3).
 
-Two estimates, both reported:
+Two estimates: the profile chi-square (sigma_alpha and rho_s, :mod:`.methods.profile`), where the
+minimum of chi^2 over the other parameters stays within Delta = 1 (68%) or 3.84 (95%) of its
+minimum; and the covariance C = (J^T J)^-1 at the optimum, intervals +- 1 and 1.96 sd.
 
-* profile chi-square (for sigma_alpha and rho_s; the union of the global grid's linearised
-  profile interval and the true chi^2's, :mod:`.methods.profile`): the set where the minimum
-  of chi^2 over the other parameters stays within Delta of its minimum, Delta = 1 (68%) and
-  3.84 (95%) for one parameter;
-* covariance: C = (J^T J)^-1 at the optimum, intervals +- 1 and 1.96 standard deviations.
-
-Where chi^2 exceeds what noise explains beyond chance (p < MISFIT_P: the model cannot
-reproduce the data), the model's error is fitted with the parameters (:func:`model_error`):
-each value's variance becomes sigma^2 + (kappa y)^2, a relative error kappa of the value
-beyond its noise, kappa by restricted maximum likelihood, so that the fit weights each value
-by what the model can reproduce and its intervals and predictions include that error.  What
-chi^2 still exceeds then (or any excess of a fit without significant misfit) widens both by
-s^2 = chi^2 / (what noise gives) (Birge ratio), and the output says so; once kappa is fitted
-s^2 is about 1, so the misfit is not counted twice.  The model's own Monte Carlo error (the
-light cache's samples, estimated by fitting on two independent halves of it) is then added
-in quadrature to each interval's half-widths, and the profile threshold is raised by the
-chi^2 that noise contributes, since chi^2 ripples by about that much from one parameter
-value to the next.
+Where chi^2 exceeds noise beyond chance (p < MISFIT_P) the model's error is fitted
+(:func:`model_error`); any remaining excess widens both by the Birge ratio s^2. The light cache's
+Monte Carlo error is added in quadrature, and the profile threshold raised by its chi^2 ripple.
 """
 
 from dataclasses import dataclass
@@ -40,9 +27,7 @@ MISFIT_P = 1e-3
 
 
 def scale(chi2, expected):
-    """The Birge ratio s^2 = max(1, chi^2 / expected) that widens intervals of a poor fit;
-    ``expected`` is the chi^2 noise alone gives (dof when nothing clips,
-    :meth:`~skyfit_mi.fitting.chi2.Problem.noise_chi2`)."""
+    """The Birge ratio s^2 = max(1, chi^2 / expected), ``expected`` noise's chi^2."""
     return max(1.0, chi2 / expected) if expected > 0 else 1.0
 
 
@@ -62,22 +47,11 @@ def channel_factors(r, J, usable, in_chi2=None):
     """Per parameter, the factor f^2 >= 1 by which correlated errors of a value's R, G and B
     widen its variance, and the channels' correlation R (C, C) it comes from.
 
-    ``r`` (P, T, C) residuals at the fit, ``J`` (P, T, C, n) their derivatives, ``usable``
-    (P, T, C) the values that are measured (not clipped, not left out), ``in_chi2`` those in
-    chi-square (default ``usable``; clipped values enter as censored terms, uncorrelated).
-    A JPEG codes a pixel's brightness once for its three channels, a raw converter demosaics
-    each from its neighbours', a renderer's Monte Carlo paths carry all three, and a model
-    that misses the brightness misses it in all three: their errors are then correlated,
-    while chi-square sums them as independent.  R is the residuals' correlation between
-    channels over the pixels and frames where both are measured (a pair's taken as zero
-    unless it exceeds twice its standard error under independence, 2 / sqrt(n)); the
-    parameters' covariance is then the sandwich (J^T J)^-1 J^T R J (J^T J)^-1, and f^2 its
-    diagonal over that of (J^T J)^-1 (the thesis's covariance, the inverse of eq. 6.11's
-    curvature matrix, when R = I).
-    Measured on quality-95 JPEG days (``scripts/ingest_coverage.py --scale 3``, 18 noise
-    seeds, docs/BENCHMARKS.md, "Errors shared by a pixel's channels"): R's off-diagonal
-    0.3-0.56, f 1.1-1.34, and the 95% intervals' coverage 0.88 -> 0.94; at quality 100 (12
-    seeds) f 1.00-1.06, coverage 1.00 as before.
+    ``r`` (P, T, C) residuals, ``J`` (P, T, C, n) their derivatives, ``usable`` (P, T, C) the
+    measured values, ``in_chi2`` those in chi-square (default ``usable``). R is the residuals'
+    correlation between measured channels (zero unless above 2 / sqrt(n)); the covariance is the
+    sandwich (J^T J)^-1 J^T R J (J^T J)^-1 and f^2 its diagonal over (J^T J)^-1's (eq. 6.11's
+    when R = I; docs/BENCHMARKS.md, "Errors shared by a pixel's channels").
     """
     n_par = J.shape[-1]
     C = r.shape[-1]
@@ -95,8 +69,7 @@ def channel_factors(r, J, usable, in_chi2=None):
                 R[i, j] = R[j, i] = rho
     w, v = np.linalg.eigh(R)
     R = (v * np.clip(w, 0.0, None)) @ v.T                      # positive semi-definite
-    # every value of chi-square in the curvature; the correlation between measured ones only
-    # (a clipped value's censored term shares nothing with the others)
+    # every chi-square value in the curvature; correlation between measured ones only
     Jall = np.where(in_chi2[..., None], J, 0.0).reshape(-1, C, n_par)
     Jz = np.where(usable[..., None], J, 0.0).reshape(-1, C, n_par)
     Hi = covariance(Jall.reshape(-1, n_par))
@@ -119,14 +92,9 @@ KAPPA_NODES = 24
 
 
 def band_half_width(variance, value, kappa, interval95=None, level=0.95):
-    """The half-width of the central ``level`` band of a new value's error beyond the
-    prediction: Gaussian of variance ``variance`` (its noise, the model's Monte Carlo error)
-    plus (kappa x ``value``)^2 (the model's error), arrays alike.  A model error estimated
-    from few values is itself uncertain: with its 95% ``interval95`` (lo, hi) the error is
-    averaged over kappa (the band of the predictive distribution, not of kappa's point), kappa
-    log-normal about its estimate with each side's spread from its side of the interval
-    (ln(kappa / lo) / 1.96 below, ln(hi / kappa) / 1.96 above; Gauss-Hermite nodes).  Without
-    an interval, or kappa 0, z (variance + (kappa value)^2)^0.5."""
+    """The half-width of the central ``level`` band of a new value's error, Gaussian of variance
+    ``variance`` + (kappa ``value``)^2; with ``interval95`` averaged over a log-normal kappa
+    (Gauss-Hermite nodes)."""
     variance, value = np.broadcast_arrays(np.asarray(variance, float), np.asarray(value, float))
     z = float(ndtri(0.5 + level / 2))
     if not kappa or interval95 is None:
@@ -150,20 +118,15 @@ def band_half_width(variance, value, kappa, interval95=None, level=0.95):
 
 
 def widen(value, interval, extra, lower, upper):
-    """(lo, hi) with ``extra`` added in quadrature to each half-width (an independent error,
-    such as the model's own Monte Carlo error), clipped to the bounds."""
+    """(lo, hi) with ``extra`` added in quadrature to each half-width, clipped to the bounds."""
     lo, hi = interval
     return (float(max(lower, value - np.hypot(max(value - lo, 0.0), extra))),
             float(min(upper, value + np.hypot(max(hi - value, 0.0), extra))))
 
 
 def widen_relative(value, interval, extra, lower, upper):
-    """(lo, hi) with a relative error ``extra`` (a standard deviation of log value times z,
-    such as a scale common to every reflectance) added in quadrature to each side's log
-    half-width, clipped to the bounds: a scale's error is a factor, so its interval is
-    lopsided (e^-x, e^x), not additive; left as it is where the value is not above zero or
-    ``extra`` is 0.  Scalars give floats; arrays (broadcasting) give arrays (a map's
-    pixels)."""
+    """(lo, hi) with a relative error ``extra`` (z times an sd of log value) added in quadrature
+    to each side's log half-width (a factor's interval is lopsided), clipped to the bounds."""
     value, lo, hi, extra = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (
         value, *interval, extra)))
     moved = (value > 0) & (extra > 0)
@@ -178,12 +141,8 @@ def widen_relative(value, interval, extra, lower, upper):
 
 
 def calibration_sd(doc, names, theta):
-    """The standard error, per parameter of ``names`` at ``theta`` (n,) or (G, n), that a
-    photographed sequence's calibration gives a fit: the exposure found from patches of known
-    reflectance has a relative error per channel (``ingest.calibration.scale_relative_sd`` of
-    the manifest ``doc``, :func:`skyfit_mi.pipeline.ingest.calibrate_exposure`), which scales
-    every reflectance measured through it -- C_r, C_g, C_b by their channel's, R and rho_s by
-    the channels' rms -- and leaves the roughness alone; zeros without a calibration."""
+    """The standard error per parameter (n,) or (G, n) from the calibration's per-channel
+    relative error: C_c by its channel's, R and rho_s by the rms, roughness none."""
     theta = np.asarray(theta, dtype=float)
     u = ((doc.get("ingest") or {}).get("calibration") or {}).get("scale_relative_sd")
     if not u:
@@ -195,15 +154,11 @@ def calibration_sd(doc, names, theta):
 
 
 def colour_matrix_sd(doc, names, theta):
-    """The standard error, per parameter of ``names`` at ``theta`` (n,) or (G, n), that the
-    camera's colour matrix gives a fit of a pixel on its own (a map's; a region's carries it
-    through its Jacobian, :func:`~.intervals.matrix_sd`): each entry E_cj of the
-    matrix's error errs by ``ingest.colour_matrix.relative_sd`` of the manifest ``doc``, and
-    channel c, calibrated on a grey, reads L_c + sum_(j != c) E_cj (L_j - L_c).  With the
-    diffuse colour's ratios for L_j / L_c, C_c errs by relative_sd sqrt(sum_(j != c) (C_j -
-    C_c)^2): nothing on a grey, most on a saturated colour's weak channels (a white lobe
-    brings the channels together, so this bounds a glossy pixel's).  The other parameters
-    and the achromatic models: zeros, as without the record."""
+    """The standard error per parameter of ``names`` at ``theta`` (n,) or (G, n) that the colour
+    matrix gives a single pixel's fit (a region's: :func:`~.intervals.matrix_sd`). Each entry
+    E_cj errs by ``ingest.colour_matrix.relative_sd``, and channel c, calibrated on a grey,
+    reads L_c + sum_(j != c) E_cj (L_j - L_c); so C_c errs by relative_sd sqrt(sum_(j != c)
+    (C_j - C_c)^2) (a bound for glossy pixels). Zeros for other parameters and models."""
     theta = np.asarray(theta, dtype=float)
     rel = ((doc.get("ingest") or {}).get("colour_matrix") or {}).get("relative_sd")
     out = np.zeros(theta.shape)
@@ -217,19 +172,13 @@ def colour_matrix_sd(doc, names, theta):
 
 
 def shared_error_sd(J, usable, sigma, shared_sd, mixing, curvature_inverse):
-    """The standard error per parameter (n,) from errors that every value of a region shares
-    within one frame: a frame's JPEG rounds its blocks' means of Y, Cb and Cr alike over a
-    surface of one colour (:func:`skyfit_mi.pipeline.jpeg_noise.shared_error_sd`), an error
-    that chi-square, summing the pixels as independent, lets shrink as 1 / sqrt(pixels).
+    """The standard error per parameter (n,) from errors every value of a region shares within a
+    frame (e.g. a JPEG's block rounding), which chi-square would let shrink as 1 / sqrt(pixels).
 
-    ``J`` (P, T, C, n) the residuals' derivatives, ``usable`` (P, T, C) the measured values
-    (the error moves them by its size over their ``sigma`` (P, T, C)), ``shared_sd`` (T, K)
-    each frame's shared errors' standard deviations (independent of each other and between
-    frames), ``mixing`` (C, K) how each reaches the channels.  A shared error e moves the fit
-    by (J^T J)^-1 g e, g = sum over the frame's values of J mixing / sigma: the covariance
-    (``curvature_inverse`` (J^T J)^-1) sum_(T,K) sd^2 (J^T J)^-1 g g^T (J^T J)^-1, the
-    sandwich's share of the correlated errors (generalised least squares' covariance for the
-    weights chi-square uses)."""
+    ``J`` (P, T, C, n), ``usable`` and ``sigma`` (P, T, C), ``shared_sd`` (T, K) each frame's
+    independent shared errors' sds, ``mixing`` (C, K) how each reaches the channels. With
+    g = sum over the frame's values of J mixing / sigma, the covariance is
+    sum_(T,K) sd^2 (J^T J)^-1 g g^T (J^T J)^-1 (``curvature_inverse`` = (J^T J)^-1)."""
     w = np.where(usable[..., None], J / np.where(usable, sigma, np.inf)[..., None], 0.0)
     g = np.einsum("ptcn,ck->tkn", w, np.asarray(mixing, dtype=float))      # (T, K, n)
     g = g * np.asarray(shared_sd, dtype=float)[..., None]
@@ -241,8 +190,7 @@ def profile_interval(grid, profile, s2=1.0, ripple=0.0):
     """{level: (lo, hi)} where profile <= min + Delta s^2 + ripple, edges interpolated linearly.
 
     ``ripple`` is the chi^2 the model's own Monte Carlo noise can add or take away
-    (:meth:`~skyfit_mi.fitting.chi2.Problem.model_noise_chi2`): profile values closer than that to
-    the minimum are not told apart from it.
+    (:meth:`~skyfit_mi.fitting.chi2.Problem.model_noise_chi2`).
     """
     grid, profile = np.asarray(grid, float), np.asarray(profile, float)
     pmin = profile.min()
@@ -262,8 +210,7 @@ def profile_interval(grid, profile, s2=1.0, ripple=0.0):
 
 
 def identifiability(names, intervals95, lower, upper, profile_rise, s2, ripple=0.0):
-    """Warnings for parameters the data do not determine (``s2`` the scale of Delta chi^2, one
-    for all or one per parameter)."""
+    """Warnings for parameters the data do not determine (``s2``: Delta chi^2's scale(s))."""
     warnings = []
     span = np.asarray(upper) - np.asarray(lower)
     s2 = np.broadcast_to(np.asarray(s2, dtype=float), (len(names),))
@@ -283,9 +230,8 @@ def identifiability(names, intervals95, lower, upper, profile_rise, s2, ripple=0
 
 
 def reading(name, value, interval95, lower, upper):
-    """How a parameter's result reads: a value with its 95% interval, or, where the interval
-    runs into a bound of the parameter's range, a one-sided limit ("sigma_alpha < 0.0965
-    (95%); lower end not determined"), or "not determined" when it spans the range."""
+    """How a parameter's result reads: a value with its 95% interval, a one-sided limit where
+    the interval reaches a bound, or "not determined" where it spans the range."""
     lo, hi = interval95
     eps = 1e-6 * (upper - lower)
     at_lo, at_hi = lo <= lower + eps, hi >= upper - eps
@@ -301,17 +247,10 @@ def reading(name, value, interval95, lower, upper):
 def misfit(chi2, dof, s2, model_noise=0.0, noise=None, model_error=False):
     """Warnings when chi-square is larger than the data's noise explains (thesis 6.2).
 
-    ``noise`` = (mean, variance) of the chi-square noise alone gives
-    (:meth:`~skyfit_mi.fitting.chi2.Problem.noise_chi2`; default (dof, 2 dof), nothing
-    clipped).  Noise and the model's own Monte Carlo error (``model_noise``, its expected share
-    of chi-square) together expect mean + model_noise; the p-value is that of a chi-square
-    distribution matched to this mean and the noise's variance (k = 2 mean^2 / variance degrees
-    of freedom; k = dof when nothing clips), its size says what to do.  Above MISFIT_UNRELIABLE
-    times the expectation the model does not describe the data and no parameter can be trusted
-    (widening intervals by s^2 does not repair a wrong model); a significant smaller excess
-    (p < MISFIT_P) widens the intervals by s^2.  With ``model_error`` the chi-square is the
-    fit's with the model's error (:func:`model_error_warning` tells of that): these are what it
-    leaves unexplained.
+    ``noise`` = (mean, variance) of noise's chi-square (default (dof, 2 dof)), ``model_noise``
+    the model's own share (:func:`misfit_test`). Above MISFIT_UNRELIABLE times the expectation
+    no parameter can be trusted; a smaller significant excess widens the intervals by s^2.
+    ``model_error``: ``chi2`` already includes a fitted model error.
     """
     test = misfit_test(chi2, dof, model_noise, noise)
     by = (f"noise and the model's Monte Carlo error ({model_noise:.3g}) explain"
@@ -333,9 +272,7 @@ def misfit(chi2, dof, s2, model_noise=0.0, noise=None, model_error=False):
 
 
 def model_error_warning(test, model_error):
-    """The warning of a fit whose model's error was fitted (a :class:`ModelError`) because
-    chi-square without it exceeded what noise explains (``test``, its :class:`MisfitTest`):
-    how far, what kappa means, and what the intervals now include."""
+    """The warning of a fit whose model error was fitted after the misfit ``test``."""
     me = model_error
     of = (f"chi-square is {test.ratio:.3g} times what noise explains (p = {test.p:.2g}); "
           f"{me.meaning} (kappa = {me.kappa:.3g}, 95%: {me.interval95[0]:.3g}-"
@@ -351,9 +288,8 @@ def model_error_warning(test, model_error):
 
 @dataclass(frozen=True)
 class MisfitTest:
-    """chi-square against what noise and the model's Monte Carlo error explain
-    (:func:`misfit_test`): their ``ratio``, its p-value ``p`` on ``k`` degrees of freedom, and
-    the mean chi-square noise alone gives, ``noise_mean``."""
+    """chi-square against noise and model noise (:func:`misfit_test`): ``ratio``, p-value ``p``
+    on ``k`` dof, and noise's mean chi-square ``noise_mean``."""
 
     ratio: float
     p: float
@@ -367,9 +303,8 @@ class MisfitTest:
 
 
 def misfit_test(chi2, dof, model_noise=0.0, noise=None):
-    """The :class:`MisfitTest` of ``chi2`` (arguments as :func:`misfit`'s): a chi-square
-    distribution matched to the mean noise and the model's noise give and to the noise's
-    variance (k = 2 mean^2 / variance degrees of freedom; k = dof when nothing clips)."""
+    """The :class:`MisfitTest` of ``chi2`` against a chi-square of k = 2 mean^2 / variance dof
+    matched to the expected mean and noise's variance (k = dof when nothing clips)."""
     mean, var = noise if noise is not None else (float(dof), 2.0 * dof)
     expected = mean + max(model_noise, 0.0)
     k = 2.0 * mean * mean / var if var > 0 else float(dof)
@@ -377,16 +312,14 @@ def misfit_test(chi2, dof, model_noise=0.0, noise=None):
                       noise_mean=mean)
 
 
-#: The model errors searched, relative to the prediction: 0 and a geometric grid up to ten
-#: times the value (refined between its points).
+#: The relative model errors searched: 0 and a geometric grid up to 10 (refined between points).
 KAPPA_GRID = np.r_[0.0, np.geomspace(1e-4, 10.0, 81)]
 
 
 @dataclass(frozen=True)
 class ModelError:
-    """A model's relative error beyond the data's noise (:func:`model_error`): ``kappa``, its
-    95% interval ``interval95`` (lo, hi) at the parameters it was estimated at, and the
-    values it was estimated from."""
+    """A model's relative error beyond noise (:func:`model_error`): ``kappa``, its 95%
+    ``interval95`` (lo, hi) at fixed parameters, and the number of ``values``."""
 
     kappa: float
     interval95: tuple
@@ -401,21 +334,15 @@ class ModelError:
 
 
 def model_error(e, v, a, dof):
-    """The relative model error kappa of residuals ``e`` [DN] (observed - model, measured
-    values only) with noise variances ``v`` [DN^2] and values ``a`` [DN] (each value's
-    radiance through the sensor's slope, :meth:`~skyfit_mi.fitting.chi2.Problem.value_scale`),
-    by restricted maximum likelihood: each residual is Gaussian of variance
-    V = v + kappa^2 a^2, and kappa minimises
+    """The relative model error kappa of residuals ``e`` [DN] (measured values only) with noise
+    variances ``v`` [DN^2] and values ``a`` [DN] (:meth:`~.chi2.Problem.value_scale`), by
+    restricted maximum likelihood: each residual is Gaussian of variance V = v + kappa^2 a^2,
+    and kappa minimises
 
     .. math:: -2 \\ln L_R = \\sum e^2 / V + (\\nu / n) \\sum \\ln V
 
-    (n values, nu = ``dof`` of them left by the fitted parameters, which take up the rest of
-    the residuals' variance: the log-determinant's weight nu / n is REML's correction in its
-    simplest form, and keeps kappa from coming out low).  Its stationary point weights each
-    value by a^2 / V: kappa is told by the values whose model error exceeds their noise.
-    The 95% interval is where -2 ln L_R rises by 3.84 (at fixed parameters).  kappa is 0 where
-    the likelihood is largest without it; searched over KAPPA_GRID.  Returns a
-    :class:`ModelError`."""
+    (nu = ``dof`` of the n values: REML's simplest correction, keeping kappa from coming out
+    low). 95% interval: where -2 ln L_R rises by 3.84. Returns a :class:`ModelError`."""
     from scipy.optimize import brentq, minimize_scalar    # lazy: only a misfit needs it
 
     e2, v, a2 = np.asarray(e, float) ** 2, np.asarray(v, float), np.asarray(a, float) ** 2
@@ -450,10 +377,8 @@ def model_error(e, v, a, dof):
 def colour_rule_ambiguity(theta, intervals95):
     """For the colour model: the other reading of the same BRDF when C is grey, or None.
 
-    With C_r = C_g = C_b = c the plastic rule (rho_s < 0.5, white highlight) and the metal
-    rule (rho_s >= 0.5, highlight c rho_s) describe the same raw Ward model when
-    rho_d = c (1 - rho_s) and the specular reflectance agree, so the data cannot tell them
-    apart (thesis 3.4.5).  Returns (C', rho_s') of the other reading if it is valid.
+    With C_r = C_g = C_b the plastic (rho_s < 0.5) and metal rules can give the same Ward model
+    (thesis 3.4.5). Returns (C', rho_s') of the other reading if valid.
     """
     lo = max(intervals95[k][0] for k in ("C_r", "C_g", "C_b"))
     hi = min(intervals95[k][1] for k in ("C_r", "C_g", "C_b"))

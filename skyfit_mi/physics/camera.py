@@ -2,27 +2,19 @@
 
 Scene radiance L [W m^-2 sr^-1] becomes a pixel value V [DN] in these steps:
 
-1. optics: image-plane irradiance E_p = l(alpha) L, with the off-axis
-   falloff cos^4(alpha) of eq. 5.6 (optional; the constant (pi/4)(D/f)^2 is
-   folded into the exposure);
-2. exposure: the normalised signal s = exposure * E_p / L-units, with the
-   shutter time, gain and aperture of eq. 5.11 in the one number ``exposure``
-   [sr m^2 W^-1]; s = 1 is full scale;
-3. saturation: s is clipped to [0, 1];
-4. response (the transfer function Q of eq. 5.11): linear, a power law
-   s^(1/gamma), or the sRGB curve;
-5. noise: additive Gaussian with standard deviation ``noise_percent`` per cent
-   of the dynamic range (thesis 6.3.3), seeded;
-6. quantisation to ``bits`` bits, clipped to [0, 2^bits - 1] so that no value
-   is negative or over range.
+1. optics: image-plane irradiance E_p = l(alpha) L, with the optional off-axis falloff
+   cos^4(alpha) of eq. 5.6 (the constant (pi/4)(D/f)^2 folded into the exposure);
+2. exposure: normalised signal s = exposure * E_p, shutter, gain and aperture of eq. 5.11 in
+   ``exposure`` [sr m^2 W^-1]; s = 1 is full scale;
+3. saturation: s clipped to [0, 1];
+4. response (eq. 5.11's transfer function Q): linear, s^(1/gamma), or the sRGB curve;
+5. noise: additive Gaussian, ``noise_percent`` per cent of the dynamic range (thesis 6.3.3);
+6. quantisation to ``bits`` bits, clipped to [0, 2^bits - 1].
 
-The per-pixel standard deviation that chi-square needs (eq. 6.2) is
-sqrt(sigma_noise^2 + 1/12) DN (noise plus uniform quantisation error), plus,
-for a rendered frame, the render's own Monte Carlo error carried through the
-response.  A pixel is saturated (or black) when its captured value is at the top
-(or bottom) code: chi-square then takes it as censored (P(value >= top)), which
-the finite sigma also describes; a value's sigma is infinite only where it
-carries no information at all (a pixel left out).
+Chi-square's per-pixel sigma (eq. 6.2) is sqrt(sigma_noise^2 + 1/12) DN (noise plus uniform
+quantisation), plus a rendered frame's Monte Carlo error through the response.  Pixels at the
+top (or bottom) code are censored (P(value >= top)) in chi-square; sigma is infinite only for
+a pixel carrying no information.
 """
 
 from dataclasses import asdict, dataclass
@@ -37,7 +29,7 @@ BIT_DEPTHS = (8, 10, 12, 16)
 
 @dataclass(frozen=True)
 class SensorModel:
-    """A radiometric camera model; see the module docstring for the steps.
+    """A radiometric camera model (module docstring).
 
     Attributes
     ----------
@@ -81,7 +73,7 @@ class SensorModel:
 
     @property
     def sigma(self):
-        """Per-pixel standard deviation of an unsaturated pixel [DN] (noise + quantisation)."""
+        """Standard deviation of an unsaturated pixel [DN] (noise + quantisation)."""
         return float(np.sqrt(self.noise_sigma ** 2 + 1.0 / 12.0))
 
     def to_dict(self):
@@ -117,8 +109,8 @@ class SensorModel:
         return np.where(s <= 0.0031308, 12.92 * s, 1.055 * s ** (1 / 2.4) - 0.055)
 
     def linearise(self, values):
-        """The signal s in [0, 1] that pixel ``values`` [DN] encode: the inverse of
-        :meth:`respond` (eq. 5.11's Q^-1) on values / max_code, clipped to [0, 1]."""
+        """The signal s in [0, 1] that pixel ``values`` [DN] encode: eq. 5.11's Q^-1 on
+        values / max_code, clipped."""
         v = np.clip(np.asarray(values, dtype=float) / self.max_code, 0.0, 1.0)
         if self.response == "linear":
             return v
@@ -152,20 +144,17 @@ class SensorModel:
         radiance : ndarray (H, W, 3)
             Scene radiance [W m^-2 sr^-1].
         rng : numpy.random.Generator
-            Source of the noise (seed it and record the seed).
+            Source of the noise (record its seed).
         fov_deg : float, optional
             Horizontal field of view, needed with ``cos4``.
         radiance_sd : ndarray (H, W, 3), optional
-            Standard error of ``radiance`` itself (a render's Monte Carlo error)
-            [W m^-2 sr^-1]; carried through the response into sigma.
+            Monte Carlo standard error of ``radiance`` [W m^-2 sr^-1], carried into sigma.
 
         Returns
         -------
-        values : ndarray (H, W, 3) of uint16
-            Pixel values [DN], in [0, 2^bits - 1].
-        sigma : ndarray (H, W, 3) of float32
-            Standard deviation for chi-square [DN], finite; values at the top code are
-            saturated and enter chi-square as censored.
+        values, sigma : ndarray (H, W, 3), uint16 and float32
+            Pixel values [DN] in [0, 2^bits - 1] (top code: saturated, censored) and their
+            finite chi-square standard deviation [DN].
         """
         s = self.signal(radiance, fov_deg)
         v = self.respond(s) * self.max_code

@@ -1,36 +1,22 @@
 """The CIE standard general sky: 15 relative sky luminance distributions (CIE S 011/E:2003).
 
-ISO 15469:2004 / CIE S 011/E:2003 ("Spatial distribution of daylight - CIE standard general
-sky") gives the luminance L of a sky element relative to the zenith luminance L_z as
+ISO 15469:2004 / CIE S 011/E:2003 gives the luminance of a sky element relative to the zenith's
 
     L / L_z = f(zeta) phi(theta_p) / (f(theta_s) phi(0)),
 
-the product of a gradation function of the element's zenith angle theta_p,
+with the gradation phi(theta_p) = 1 + a exp(b / cos theta_p) (phi(pi/2) = 1) of the element's
+zenith angle, and the indicatrix f(zeta) = 1 + c (exp(d zeta) - exp(d pi/2)) + e cos^2 zeta of
+its angle to the sun.  Six gradations (a, b) and six indicatrices (c, d, e) make the 15 standard
+types (Table 1, :data:`STANDARD_PARAMETERS`), from 1 (overcast, steep gradation) to 15
+(white-blue turbid, broad corona).  Types 11-15 are cloudless, clearest first (Darula and Kittler
+2002); type 12 is the thesis's clear sky (eqs. 4.12-4.14; its 0.91 = 1 - 10 exp(-3 pi/2) to 2e-4).
 
-    phi(theta_p) = 1 + a exp(b / cos theta_p),      phi(pi/2) = 1,
+Continuous indices for fitting a cloudless sky (this project's, not the standard's):
+:func:`clear_parameters` (t in [11, 15], linear between clear types) and
+:func:`group_parameters` (gradation and indicatrix indices, linear between groups).
 
-and a scattering indicatrix of its angle zeta to the sun,
-
-    f(zeta) = 1 + c (exp(d zeta) - exp(d pi/2)) + e cos^2 zeta,
-
-with f(theta_s) the indicatrix at the zenith (whose angle to the sun is the solar zenith
-theta_s).  Six gradations (a, b) and six indicatrices (c, d, e) combine into 15 standard sky
-types (the standard's Table 1, :data:`STANDARD_PARAMETERS`), from type 1 (overcast, steep
-gradation) to type 15 (white-blue turbid sky with a broad solar corona).  Types 11-15 are the
-cloudless ones, ordered from the clearest to the most turbid atmosphere (Darula and Kittler
-2002); type 12 is the CIE standard clear sky, the thesis's clear sky (eqs. 4.12-4.14):
-gamma(theta_p) = phi(theta_p) and the thesis's 0.91 = 1 - 10 exp(-3 pi/2) to 2e-4.
-
-The standard has discrete types only.  Two continuations make turbidity-like parameters for
-fitting a measured cloudless sky (choices of this project, not part of the standard):
-:func:`clear_parameters`, one index t in [11, 15] that interpolates a, b, c, d, e linearly
-between consecutive clear types, and :func:`group_parameters`, a gradation index and an
-indicatrix index interpolating within the standard's groups (Table 1 builds each type from
-one gradation group I-VI and one indicatrix group 1-6; the clear types use IV-VI and 4-6).
-
-The names follow ``docs/CONVENTIONS.md``: ``theta_p`` is the element's zenith angle (the
-standard's Z), ``zeta`` its angle to the sun (the standard's chi), ``theta_s`` the solar
-zenith (Z_s); angles in radians.  World frame +X east, +Y north, +Z up.
+Names follow ``docs/CONVENTIONS.md``: ``theta_p`` is the standard's Z, ``zeta`` its chi,
+``theta_s`` its Z_s; angles in radians.
 
 References
 ----------
@@ -48,8 +34,7 @@ import numpy as np
 
 from ..errors import SkyfitError, check_range
 
-#: The six gradation groups I-VI (row i is group i + 1): a, b of phi [unitless]
-#: (CIE S 011/E:2003, Table 1).
+#: Gradation groups I-VI (row i is group i + 1): a, b of phi [unitless] (Table 1).
 GRADATION_GROUPS = np.array([
     [4.0, -0.70],      # I    overcast, steep gradation
     [1.1, -0.80],      # II   overcast, moderate gradation
@@ -58,8 +43,7 @@ GRADATION_GROUPS = np.array([
     [-1.0, -0.32],     # V    CIE clear sky (the thesis's gamma, eq. 4.12)
     [-1.0, -0.15],     # VI   turbid, strongest brightening toward the horizon
 ])
-#: The six indicatrix groups 1-6 (row i is group i + 1): c [unitless], d [rad^-1],
-#: e [unitless] of f (CIE S 011/E:2003, Table 1).
+#: Indicatrix groups 1-6 (row i is group i + 1): c, d [rad^-1], e of f (Table 1).
 INDICATRIX_GROUPS = np.array([
     [0.0, -1.0, 0.00],     # 1  no brightening toward the sun
     [2.0, -1.5, 0.15],     # 2  slight brightening
@@ -68,14 +52,10 @@ INDICATRIX_GROUPS = np.array([
     [16.0, -3.0, 0.30],    # 5  polluted atmosphere
     [24.0, -2.8, 0.15],    # 6  turbid, broad solar corona
 ])
-#: Gradation group (I-VI as 1-6) and indicatrix group (1-6) of the standard sky types 1-15
-#: (CIE S 011/E:2003, Table 1; entry i is type i + 1).
+#: (gradation group, indicatrix group) of standard types 1-15 (Table 1; entry i is type i + 1).
 STANDARD_TYPES = ((1, 1), (1, 2), (2, 1), (2, 2), (3, 1), (3, 2), (3, 3), (3, 4),
                   (4, 2), (4, 3), (4, 4), (5, 4), (5, 5), (6, 5), (6, 6))
-#: a, b, c, d, e of the standard sky types 1-15 (row i is type i + 1): type 1 overcast with
-#: a steep gradation ... type 5 uniform ... 11 white-blue sky with a distinct solar corona,
-#: 12 the CIE standard clear sky, 13 clear polluted, 14 cloudless turbid with a broad solar
-#: corona, 15 white-blue turbid with a broad solar corona.
+#: a, b, c, d, e of the standard sky types 1-15 (row i is type i + 1).
 STANDARD_PARAMETERS = np.array([np.concatenate([GRADATION_GROUPS[g - 1],
                                                 INDICATRIX_GROUPS[i - 1]])
                                 for g, i in STANDARD_TYPES])
@@ -96,23 +76,8 @@ def _between(table, x, name, lo, hi):
 
 
 def standard_parameters(sky_type):
-    """a, b, c, d, e of a standard sky type 1-15 (CIE S 011/E:2003, Table 1).
-
-    Parameters
-    ----------
-    sky_type : int
-        Standard sky type, 1-15.
-
-    Returns
-    -------
-    ndarray, shape (5,)
-        a, b, c [unitless], d [rad^-1], e [unitless].
-
-    Raises
-    ------
-    SkyfitError
-        Unless ``sky_type`` is an integer in 1-15.
-    """
+    """a, b, c [unitless], d [rad^-1], e [unitless] (5,) of standard sky type 1-15 (Table 1);
+    SkyfitError unless ``sky_type`` is an integer in 1-15."""
     if isinstance(sky_type, bool) or not float(sky_type).is_integer() or not 1 <= sky_type <= 15:
         raise SkyfitError(f"CIE standard sky type {sky_type!r} does not exist; give an integer "
                           "from 1 (overcast) to 15 (turbid cloudless).")
@@ -120,47 +85,16 @@ def standard_parameters(sky_type):
 
 
 def clear_parameters(t):
-    """a, b, c, d, e along the clear types, linear between consecutive types 11-15.
-
-    At an integer t the parameters of standard type t (Table 1); between two types each
-    parameter is interpolated linearly in t.  The index is this project's turbidity-like
-    continuation of the standard's discrete clear types (11 clearest, 15 most turbid), not
-    part of CIE S 011.
-
-    Parameters
-    ----------
-    t : array_like
-        Clear-sky type index in [11, 15] [unitless].
-
-    Returns
-    -------
-    ndarray, shape (..., 5)
-        a, b, c [unitless], d [rad^-1], e [unitless] along the last axis.
-    """
+    """a, b, c, d, e (..., 5) along the clear types: type t's at integer t in [11, 15], linear
+    between (this project's continuation, not the standard's)."""
     return _between(STANDARD_PARAMETERS, t, "clear-sky type index t", CLEAR_TYPES[0],
                     CLEAR_TYPES[-1])
 
 
 def group_parameters(gradation_group, indicatrix_group):
-    """a, b, c, d, e of a gradation group and an indicatrix group, each continuous.
-
-    At integer values the standard's groups (Table 1: gradations I-VI as 1-6, indicatrices
-    1-6), any pair of them, not only the 15 standard types; between two groups each
-    parameter is interpolated linearly (this project's continuation, not part of CIE
-    S 011).  Over the clear groups (IV-VI, 4-6) both indices grow with turbidity: a flatter
-    gradation with more horizon brightening, a broader, weaker solar corona.
-
-    Parameters
-    ----------
-    gradation_group : array_like
-        Gradation index in [1, 6] (I-VI) [unitless].
-    indicatrix_group : array_like
-        Indicatrix index in [1, 6] [unitless], broadcast against ``gradation_group``.
-
-    Returns
-    -------
-    ndarray, shape (..., 5)
-        a, b, c [unitless], d [rad^-1], e [unitless] along the last axis.
+    """a, b, c, d, e (..., 5) of continuous gradation (1-6 for I-VI) and indicatrix (1-6)
+    indices, broadcast together: any pair of the standard's groups, linear between (this
+    project's continuation).  Over the clear groups (IV-VI, 4-6) both grow with turbidity.
     """
     g, i = np.broadcast_arrays(np.asarray(gradation_group, dtype=float),
                                np.asarray(indicatrix_group, dtype=float))
@@ -172,20 +106,8 @@ def group_parameters(gradation_group, indicatrix_group):
 def gradation(cos_theta_p, a, b):
     """Gradation phi(theta_p) = 1 + a exp(b / cos theta_p), CIE S 011/E:2003 [unitless].
 
-    The limit at the horizon, phi = 1 for b < 0 (every standard type), is also used below it
-    (cos theta_p <= 0), where the standard does not define the sky; NaN stays NaN.
-
-    Parameters
-    ----------
-    cos_theta_p : array_like
-        Cosine of the sky element's zenith angle [unitless].
-    a, b : array_like
-        Gradation parameters [unitless], b < 0.
-
-    Returns
-    -------
-    ndarray
-        phi [unitless]; phi(0) = 1 + a exp(b) at the zenith.
+    ``a``, ``b`` (b < 0) broadcast against ``cos_theta_p``.  The horizon limit phi = 1 is also
+    used below it, where the standard does not define the sky; NaN stays NaN.
     """
     c = np.asarray(cos_theta_p, dtype=float)
     up = c > 0.0
@@ -195,48 +117,25 @@ def gradation(cos_theta_p, a, b):
 
 def indicatrix(zeta, c, d, e):
     """Scattering indicatrix f(zeta) = 1 + c (exp(d zeta) - exp(d pi/2)) + e cos^2 zeta,
-    CIE S 011/E:2003 [unitless].
-
-    Parameters
-    ----------
-    zeta : array_like
-        Angle between the sky element and the sun [rad], in [0, pi].
-    c, e : array_like
-        Indicatrix parameters [unitless].
-    d : array_like
-        Indicatrix parameter [rad^-1].
-
-    Returns
-    -------
-    ndarray
-        f [unitless]; f(pi/2) = 1.
-    """
+    CIE S 011/E:2003 [unitless]; ``zeta`` [rad] in [0, pi], ``d`` [rad^-1], f(pi/2) = 1."""
     zeta = np.asarray(zeta, dtype=float)
     return 1.0 + c * (np.exp(d * zeta) - np.exp(d * np.pi / 2)) + e * np.cos(zeta) ** 2
 
 
 def relative_luminance(cos_theta_p, zeta, sun_zenith, params):
-    """Sky luminance relative to the zenith's, L / L_z, CIE S 011/E:2003.
+    """Sky luminance relative to the zenith's, L / L_z [unitless], CIE S 011/E:2003.
 
     .. math:: \\frac{L}{L_z} = \\frac{f(\\zeta)\\, \\varphi(\\theta_p)}
                                     {f(\\theta_s)\\, \\varphi(0)}
 
     Parameters
     ----------
-    cos_theta_p : array_like
-        Cosine of the sky element's zenith angle [unitless].
-    zeta : array_like
-        Angle between the sky element and the sun [rad], in [0, pi].
+    cos_theta_p, zeta : array_like
+        Cosine of the element's zenith angle, and its angle to the sun [rad] in [0, pi].
     sun_zenith : array_like
         Solar zenith theta_s [rad], in [0, pi/2].
     params : array_like, shape (..., 5)
-        a, b, c, d, e (:func:`standard_parameters`, :func:`clear_parameters`), broadcast
-        against the angles.
-
-    Returns
-    -------
-    ndarray
-        L / L_z [unitless]; 1 at the zenith.
+        a, b, c, d, e, broadcast against the angles.
     """
     a, b, c, d, e = np.moveaxis(np.asarray(params, dtype=float), -1, 0)
     return (indicatrix(zeta, c, d, e) * gradation(cos_theta_p, a, b)
@@ -244,9 +143,8 @@ def relative_luminance(cos_theta_p, zeta, sun_zenith, params):
 
 
 def pattern(directions, sun, params):
-    """L / L_z toward world ``directions`` (n, 3) for the sun toward the unit vector ``sun``
-    (3,), by :func:`relative_luminance`; ``params`` of shape (5,) give shape (n,), of shape
-    (k, 5) give (k, n) (one row per parameter set) [unitless]."""
+    """L / L_z [unitless] toward world ``directions`` (n, 3) for the unit vector ``sun`` (3,);
+    ``params`` (5,) give (n,), (k, 5) give (k, n)."""
     d = np.asarray(directions, dtype=float)
     d = d / np.linalg.norm(d, axis=-1, keepdims=True)
     zeta = np.arccos(np.clip(d @ sun, -1.0, 1.0))
@@ -256,25 +154,13 @@ def pattern(directions, sun, params):
 
 
 def perez_form(params):
-    """The general sky's pattern in the Perez (1993, eq. 1) form that the ``cie_sky`` emitter
+    """The general sky's pattern in the Perez (1993, eq. 1) form the ``cie_sky`` emitter
     renders: f(zeta) phi(theta_p) = k (1 + a e^{b / cos theta_p})(1 + c' e^{d zeta} +
     e' cos^2 zeta).
 
-    Since f(zeta) = k + c e^{d zeta} + e cos^2 zeta with k = 1 - c e^{d pi / 2} (CIE S 011's
-    indicatrix, :func:`indicatrix`), c' = c / k and e' = e / k.  k > 0 for every standard
-    group and every blend of them (0.705 for group 6, the least).
-
-    Parameters
-    ----------
-    params : array_like, shape (5,)
-        a, b, c [unitless], d [rad^-1], e [unitless] of the general sky.
-
-    Returns
-    -------
-    k : float
-        The factor [unitless].
-    coefficients : ndarray, shape (5,)
-        a, b, c', d, e' of :func:`skyfit_mi.physics.sky.perez_relative_luminance`.
+    As f(zeta) = k + c e^{d zeta} + e cos^2 zeta with k = 1 - c e^{d pi / 2}, c' = c / k and
+    e' = e / k; k > 0 for every standard group and blend.  Returns (k, array of a, b, c', d, e')
+    for :func:`skyfit_mi.physics.sky.perez_relative_luminance`; SkyfitError unless k > 0, b < 0.
     """
     a, b, c, d, e = np.asarray(params, dtype=float)
     k = 1.0 - c * np.exp(d * np.pi / 2)
@@ -286,8 +172,8 @@ def perez_form(params):
 
 
 def shape_moves(params):
-    """The moves of a general sky's shape that a fit mixes with it (``fit --sky-shape``,
-    :func:`~skyfit_mi.physics.sky_shape.shape_variants`): its gradation (a, b), then its
+    """The moves of a general sky's shape that a sky-shape fit mixes with it
+    (:func:`~skyfit_mi.physics.sky_shape.shape_variants`): its gradation (a, b), then its
     indicatrix (c, d, e), from the nearest group to the next toward the more turbid (+1) or
     the clearer (-1), the rest of ``params`` (5,) kept.
 
@@ -295,8 +181,8 @@ def shape_moves(params):
     -------
     list of dict
         One per index: ``of`` ('gradation', 'indicatrix'), ``index`` ('group'), ``from``
-        (the nearest group, 1-6) and ``moves`` {+1, -1: None beyond groups 1-6, else ``to``
-        (the group), ``parameters_abcde`` and ``coefficients`` (:func:`perez_form`)}.
+        (the nearest group, 1-6) and ``moves`` {+1, -1: None beyond groups 1-6, else ``to``,
+        ``parameters_abcde`` and ``coefficients`` (:func:`perez_form`)}.
     """
     p0 = np.asarray(params, dtype=float)
     out = []

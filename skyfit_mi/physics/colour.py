@@ -1,10 +1,8 @@
 """Colour of daylight from a correlated colour temperature (CCT).
 
-Rendering is in linear sRGB (Rec. 709 primaries, D65 white), the space of
-Mitsuba's ``*_rgb`` variants.  A colour returned here has luminance
-Y = 0.2126 R + 0.7152 G + 0.0722 B = 1, so multiplying it by a broadband
-radiometric quantity (e.g. radiance [W m^-2 sr^-1]) keeps that quantity as
-the luminance-weighted value of the RGB triple.
+Rendering is in linear sRGB (Rec. 709 primaries, D65 white), as Mitsuba's ``*_rgb`` variants.
+Colours here have luminance 0.2126 R + 0.7152 G + 0.0722 B = 1, so times a broadband radiometric
+quantity they keep it as the triple's luminance-weighted value.
 """
 
 import numpy as np
@@ -27,12 +25,9 @@ def _lobe(lam, mu, s1, s2):
 
 
 def cie1931_cmf(lam):
-    """CIE 1931 2-degree colour matching functions, analytic fit.
-
-    Multi-lobe piecewise-Gaussian fit of C. Wyman, P.-P. Sloan, P. Shirley,
-    "Simple analytic approximations to the CIE XYZ color matching functions",
-    JCGT 2(2), 1-11, 2013.  ``lam`` in [nm]; returns (..., 3).
-    """
+    """CIE 1931 2-degree colour matching functions (..., 3) at ``lam`` [nm], by the
+    piecewise-Gaussian fit of C. Wyman, P.-P. Sloan, P. Shirley, "Simple analytic
+    approximations to the CIE XYZ color matching functions", JCGT 2(2), 1-11, 2013."""
     lam = np.asarray(lam, dtype=float)
     x = (1.056 * _lobe(lam, 599.8, 37.9, 31.0) + 0.362 * _lobe(lam, 442.0, 16.0, 26.7)
          - 0.065 * _lobe(lam, 501.1, 20.4, 26.2))
@@ -58,18 +53,7 @@ def cct_to_xyz(temperature):
 
 
 def cct_to_rgb(temperature):
-    """Linear-sRGB colour of a black body at ``temperature`` [K], luminance 1.
-
-    Parameters
-    ----------
-    temperature : array_like
-        Correlated colour temperature [K], in [1000, 1e6].
-
-    Returns
-    -------
-    ndarray, shape (..., 3)
-        Linear sRGB with 0.2126 R + 0.7152 G + 0.0722 B = 1; components that
-        fall outside the sRGB gamut are clipped at 0 before normalising.
-    """
+    """Linear-sRGB colour (..., 3) of a black body at ``temperature`` [K], in [1000, 1e6], with
+    luminance 1; out-of-gamut components are clipped at 0 before normalising."""
     rgb = np.maximum(cct_to_xyz(temperature) @ XYZ_TO_SRGB.T, 0.0)
     return rgb / (rgb @ SRGB_LUMINANCE)[..., None]

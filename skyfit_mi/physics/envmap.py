@@ -1,30 +1,25 @@
 """HDR environment maps as sky light: a tabulated radiance on a latitude-longitude grid.
 
-A measured sky (an HDR photograph of the whole sky) enters a :class:`~skyfit_mi.physics.sky.Sky`
-as one more term of its pattern sum, ``Sky.envmap``: a table of linear-sRGB radiance
-[W m^-2 sr^-1] over the whole sphere, in the world frame (its layout and lookup:
-:mod:`~skyfit_mi.physics.latlong`).  This module is the one home of the conversions of captured
-maps into it, and of the map as a Sky's light (:func:`envmap_sky`).
+A measured sky enters a :class:`~skyfit_mi.physics.sky.Sky` as the term ``Sky.envmap``: a
+world-frame table of linear-sRGB radiance [W m^-2 sr^-1] over the sphere (layout and lookup:
+:mod:`~skyfit_mi.physics.latlong`).  This module converts captured maps into it and makes the
+map a Sky's light (:func:`envmap_sky`).
 
-The captured maps
------------------
+Captured maps:
+
 * ``latlong``: an equirectangular image in the table's layout (top row at the zenith, left
   edge at the map's azimuth origin, azimuth increasing to the right).
 * ``fisheye``: an equidistant ("angular") fisheye of the upper hemisphere, as Radiance's
-  ``rpict -vta -vd 0 0 1 -vu 0 1 0`` renders it and as all-sky cameras record it: the circle
-  of radius R = min(rows, columns)/2 centred in the image holds the hemisphere, the zenith at
-  its centre and the horizon on its rim, a point at zenith angle theta at r = R theta/(pi/2)
-  from the centre.  The image's top is the map's azimuth origin and azimuth increases
-  counter-clockwise in the image (east to the left of north: the sky seen from below).  It
-  becomes a lat-long table whose lower half is zero (the ``ground`` term lights it).
-* ``north_rotation_deg`` is the compass azimuth of the map's azimuth origin [degrees]: world
-  azimuth = map azimuth + north_rotation_deg (0: the map's origin already points north).
-* ``scale`` multiplies the map's values into W m^-2 sr^-1 (a photograph's calibration).
+  ``rpict -vta -vd 0 0 1 -vu 0 1 0`` and all-sky cameras: the centred circle of radius
+  R = min(rows, columns)/2 holds the hemisphere, zenith angle theta at r = R theta/(pi/2); the
+  image's top is the azimuth origin, azimuth counter-clockwise (the sky seen from below).  Its
+  table's lower half is zero (the ``ground`` term lights it).
+* ``north_rotation_deg``: compass azimuth of the map's azimuth origin [degrees].
+* ``scale``: multiplies the map's values into W m^-2 sr^-1 (a photograph's calibration).
 
-The sun in a photograph is almost always clipped, so the measured map under-states the direct
-light by orders of magnitude.  :func:`envmap_sky` takes the sun separately (its position from
-the frame's time and site, its direct normal irradiance measured) and can blank the map's cells
-within ``sun_mask_deg`` of it, filling them with the median of the ring around them.
+A photographed sun is almost always clipped, so :func:`envmap_sky` takes the sun separately
+(position from time and site, measured DNI) and can fill the map's cells near it from the
+ring around them.
 """
 
 from dataclasses import dataclass, replace
@@ -41,16 +36,15 @@ from .sun import SUN_SOLID_ANGLE
 PROJECTIONS = ("latlong", "fisheye")
 #: Sub-samples per cell side at most when a map is averaged onto the table.
 MAX_SUPERSAMPLE = 8
-#: The sun's zenith [degrees] at most where its direct normal irradiance is found from the
-#: global horizontal (:func:`direct_normal_from_global`): nearer the horizon 1 / cos theta_s
-#: magnifies the pyranometer's error beyond use.
+#: Largest sun zenith [degrees] at which :func:`direct_normal_from_global` is used: nearer the
+#: horizon 1 / cos theta_s magnifies the pyranometer's error beyond use.
 MAX_ZENITH_FROM_GLOBAL_DEG = 89.0
 
 
 def fisheye_lookup(image, theta, phi):
-    """Radiance of an equidistant fisheye ``image`` (N, M, 3) of the upper hemisphere (module
-    docstring) at zenith ``theta`` and map azimuth ``phi`` [rad], bilinear between pixel centres
-    (clamped at the image's edges); 0 below the horizon.  Shape (..., 3)."""
+    """Radiance (..., 3) of an equidistant fisheye ``image`` (N, M, 3) at zenith ``theta`` and
+    map azimuth ``phi`` [rad], bilinear between pixel centres (clamped at the edges); 0 below
+    the horizon."""
     img = np.asarray(image)
     N, M = img.shape[:2]
     R = min(N, M) / 2.0
@@ -69,19 +63,18 @@ def fisheye_lookup(image, theta, phi):
 
 
 def valid_pixels(image):
-    """``image`` with its NaN, infinite and negative values set to 0, and their count (values
-    counted per channel)."""
+    """``image`` with NaN, infinite and negative values set to 0, and their count (per
+    channel)."""
     img = np.asarray(image, dtype=np.float32)
     bad = ~np.isfinite(img) | (img < 0)
     return np.where(bad, np.float32(0.0), img), int(bad.sum())
 
 
 def mask_sun(table, sun_direction, radius_deg):
-    """``table`` with the cells whose centre lies within ``radius_deg`` [degrees] of the
-    ``sun_direction`` (world, unit) filled with the per-channel median of the cells in the ring
-    from ``radius_deg`` to twice it (0 if that ring holds no cell centre); and the count of
-    cells filled.  A photograph's clipped sun and its flare are replaced by the brightness of
-    the sky around it; the sun's own light then comes from the Sky's solar disc."""
+    """``table`` with the cells within ``radius_deg`` [degrees] of the world unit
+    ``sun_direction`` filled with the per-channel median of the ring out to twice that (0 if
+    empty), and the count filled: a clipped sun and its flare become the sky around it, the
+    sun's light then coming from the solar disc."""
     t = np.array(table, dtype=np.float32)
     theta, phi = latlong_centres(*t.shape[:2])
     d = direction_from_angles(theta[:, None], phi[None, :])
@@ -96,13 +89,11 @@ def mask_sun(table, sun_direction, radius_deg):
 def latlong_table(image, projection, north_rotation_deg=0.0, scale=1.0, rows=None):
     """A captured map (``image`` (N, M, 3), linear, in its ``projection``) as the world-frame
     lat-long table [W m^-2 sr^-1] of a Sky, float32 (rows, columns, 3), and the count of
-    invalid values set to 0 (:func:`valid_pixels`).
+    invalid values set to 0.
 
-    A lat-long map keeps its own cells when it is not rotated and has at most ``rows`` rows
-    (default :data:`~skyfit_mi.physics.latlong.MAX_ROWS`); otherwise, and always for a
-    fisheye, it is averaged onto a table of ``rows`` x 2 ``rows`` cells (default: the map's
-    own resolution, the fisheye's diameter, at most that), through
-    :func:`~skyfit_mi.physics.latlong.resample`.
+    An unrotated lat-long map of at most ``rows`` rows keeps its cells; otherwise (always for a
+    fisheye) it is averaged onto ``rows`` x 2 ``rows`` cells (default: its own resolution, at
+    most :data:`~skyfit_mi.physics.latlong.MAX_ROWS`).
     """
     check_choice("envmap projection", projection, PROJECTIONS)
     check_range("envmap scale", scale, 1e-30, 1e30)
@@ -131,17 +122,9 @@ def latlong_table(image, projection, north_rotation_deg=0.0, scale=1.0, rows=Non
 
 
 def direct_normal_from_global(ghi, diffuse_horizontal, sun_zenith_deg):
-    """Direct normal irradiance (GHI - DHI) / cos theta_s [W m^-2] (module docstring).
-
-    Parameters
-    ----------
-    ghi : float
-        Measured global horizontal irradiance [W m^-2].
-    diffuse_horizontal : float
-        The sky's own diffuse horizontal irradiance (the map's) [W m^-2].
-    sun_zenith_deg : float
-        Solar zenith at the GHI's time [degrees], below 90.
-    """
+    """Direct normal irradiance (GHI - DHI) / cos theta_s [W m^-2] from the measured ``ghi``
+    and the map's own ``diffuse_horizontal`` [W m^-2], at the GHI's ``sun_zenith_deg`` (< 90);
+    SkyfitError if GHI < DHI."""
     check_range("global horizontal irradiance", ghi, 0.0, 2000.0, "W m^-2")
     check_range("sun zenith", sun_zenith_deg, 0.0, MAX_ZENITH_FROM_GLOBAL_DEG, "degrees")
     if ghi < diffuse_horizontal:
@@ -154,36 +137,24 @@ def direct_normal_from_global(ghi, diffuse_horizontal, sun_zenith_deg):
 
 @dataclass(frozen=True)
 class MeasuredIrradiance:
-    """The irradiance measured beside a captured map, which sets its level and its sun's
-    (:func:`envmap_sky`); None where not measured.
+    """The irradiance measured beside a captured map [W m^-2], setting its level and its sun's
+    (checked by :func:`envmap_sky`); None where not measured.
 
     Attributes
     ----------
     diffuse_horizontal : float or None
-        Diffuse horizontal irradiance [W m^-2]: the map (after the sun's mask) is scaled so
-        that its luminance-weighted horizontal irradiance equals it, a photograph's
-        calibration (:meth:`~skyfit_mi.physics.sky.Sky.scaled`).
+        DHI: the map (after the sun's mask) is scaled to it, luminance-weighted.
     direct_normal : float or None
-        Direct normal irradiance [W m^-2], in [0, 1500]: a solar disc of radiance DNI / Omega
-        in the sun's colour (:meth:`~skyfit_mi.physics.sky.Sky.scaled`); none when the sun is
-        below the horizon.
+        DNI, in [0, 1500]: a solar disc of radiance DNI / Omega in the sun's colour (none with
+        the sun below the horizon).
     global_horizontal : float or None
-        Global horizontal irradiance [W m^-2], in [0, 2000] (a pyranometer beside the fisheye),
-        instead of ``direct_normal``: the sun takes what the map's own horizontal irradiance
-        (luminance-weighted, after the mask and ``diffuse_horizontal``) leaves of it, (GHI -
-        E_map) / cos theta_s (:func:`direct_normal_from_global`).
+        GHI, in [0, 2000], instead of ``direct_normal``: the sun takes (GHI - E_map) / cos
+        theta_s (:func:`direct_normal_from_global`).
     sun_measured : bool or None
-        Whether ``direct_normal`` (or the ``global_horizontal`` it is found from, when True)
-        was measured (a pyrheliometer's, a grey card's), not a model's: the Sky's
-        ``info["sun_measured"]``, by which a fit knows the sun's level
-        (:func:`~skyfit_mi.fitting.sky_fit.sun_source`); None: whether it is given.
+        Whether the sun's level was measured, not modelled (the Sky's ``info["sun_measured"]``,
+        setting a fit's prior); None: whether it is given.
     sun_sd : float or None
-        The measured sun's relative uncertainty (one sd of the log of its level), where the
-        measurement says it (a grey card's, :mod:`~skyfit_mi.pipeline.sky_series`): the Sky's
-        ``info["sun_sd"]``, which a fit takes instead of the default
-        (:func:`~skyfit_mi.fitting.sky_fit.default_sun_sd`).
-
-    The values are checked where they are used (:func:`envmap_sky`).
+        The measured sun's sd of log level, if known (``info["sun_sd"]``, for the fit).
     """
 
     diffuse_horizontal: float = None
@@ -201,27 +172,18 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, measured=MeasuredIrrad
     Parameters
     ----------
     table : ndarray (H, W, 3)
-        The map's radiance [W m^-2 sr^-1], world frame, this module's layout.
+        The map's radiance [W m^-2 sr^-1], world frame.
     sun_zenith_deg, sun_azimuth_deg : float
-        The sun's position [degrees] (from the frame's time and site); it places the solar
-        disc and the mask.
+        The sun's position [degrees], placing the solar disc and the mask.
     measured : MeasuredIrradiance
-        The irradiance measured with the map [W m^-2]: its diffuse horizontal sets the map's
-        level, its direct normal (or the global horizontal's rest) the solar disc's (none
-        when the sun is below the horizon: the Sky's ``info`` says so); default: none, the
-        map as it is and no disc.
+        Sets the map's level and the disc's (default: the map as it is, no disc).
     sun_mask_deg : float, optional
-        Fill the map's cells within this angle of the sun [degrees] from the ring around them
-        (:func:`mask_sun`): a clipped captured sun, whose light the disc then carries.
+        Fill the map's cells within this angle of the sun [degrees] (:func:`mask_sun`).
     ground_albedo : float
-        Reflectance of a Lambertian ground below the horizon, lit by the map and the sun
-        (L = albedo E_h / pi, as the CIE skies' ground), added to the map's own lower half
-        (zero for a fisheye).
-    sun_solid_angle : float, optional
-        The disc's solid angle [sr] (default: the sun's,
-        :data:`~skyfit_mi.physics.sun.SUN_SOLID_ANGLE`).
-    info : dict, optional
-        Recorded in the Sky's ``info`` (e.g. the map's file and projection).
+        Reflectance of a Lambertian ground below the horizon lit by map and sun, added to the
+        map's own lower half.
+    sun_solid_angle, info : optional
+        The disc's solid angle [sr] (default the sun's); a dict recorded in the Sky's ``info``.
     """
     from .sky import Sky            # not at the top: sky imports this module
 

@@ -1,18 +1,13 @@
 """Import of Radiance ``gensky`` sky descriptions into :class:`~skyfit_mi.physics.sky.Sky`.
 
-``gensky`` prints a small Radiance scene: the sun as a ``light`` material on
-a ``source`` of given angular diameter, and the sky as a ``brightfunc``
-``skyfunc`` that calls ``skybr`` in ``skybright.cal`` with arguments
-A1 (1 clear, 2 overcast, 3 uniform, 4 intermediate), A2 (zenith brightness),
-A3 (ground brightness), A4 (normalisation) and A5-A7 (sun direction).  The
-import reproduces Radiance's sky exactly: the same patterns, the same
-sky-to-ground blend across the horizon, the same sun disc.  Radiance's
-frame is the project's (+X east, +Y north, +Z up) and its radiance unit
-W m^-2 sr^-1.
+``gensky`` prints a small Radiance scene: the sun as a ``light`` on a ``source`` of given angular
+diameter, and the sky as a ``brightfunc`` ``skyfunc`` calling ``skybr`` (``skybright.cal``) with
+A1 (1 clear, 2 overcast, 3 uniform, 4 intermediate), A2 (zenith brightness), A3 (ground
+brightness), A4 (normalisation) and A5-A7 (sun direction).  The import reproduces Radiance's sky
+exactly (patterns, horizon blend, sun disc); Radiance's frame and units are the project's.
 
-If the text also holds a ``glow`` whose modifier is ``skyfunc`` (the line a
-user adds to make the sky visible), its RGB multiplies the sky; otherwise
-the sky is grey (1, 1, 1), as in the usual ``skyfunc glow sky_mat 0 0 4 1 1 1 0``.
+A ``glow`` modified by ``skyfunc`` (the line a user adds to see the sky) gives the sky its RGB;
+otherwise it is grey (1, 1, 1), as the usual ``skyfunc glow sky_mat 0 0 4 1 1 1 0``.
 """
 
 import numpy as np
@@ -70,25 +65,9 @@ def _primitives(text):
 
 
 def from_gensky(text):
-    """Build a :class:`Sky` from the text ``gensky`` prints.
-
-    Parameters
-    ----------
-    text : str
-        gensky's output (comments allowed), optionally with the user's
-        ``skyfunc glow`` line.
-
-    Returns
-    -------
-    Sky
-        With ``horizon_blend=True``; radiance in W m^-2 sr^-1.
-
-    Raises
-    ------
-    ParseError
-        When no ``skyfunc`` brightfunc calling ``skybr`` is found, or the
-        numbers are malformed; the message says what is missing.
-    """
+    """Build a :class:`Sky` (``horizon_blend=True``, W m^-2 sr^-1) from the text ``gensky``
+    prints (comments and a ``skyfunc glow`` line allowed).  ParseError, saying what is missing,
+    without a ``skyfunc`` brightfunc calling ``skybr`` or on malformed numbers."""
     prims = _primitives(text)
     by_name = {p[2]: p for p in prims}
     funcs = [p for p in prims if p[1] == "brightfunc" and "skybr" in p[3]]

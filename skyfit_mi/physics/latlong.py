@@ -1,42 +1,35 @@
 """The lat-long table: a radiance over the whole sphere on a latitude-longitude grid.
 
 A measured or fitted sky's light enters a :class:`~skyfit_mi.physics.sky.Sky` as such a table,
-``Sky.envmap`` (:mod:`~skyfit_mi.physics.envmap`).  This module is the one home of the table's
-convention and of its lookup (shared, line for line, with the ``cie_sky`` emitter through
-:func:`latlong_texel`), and of the resampling of any lookup onto it.
+``Sky.envmap``.  This module holds the table's convention, its lookup (shared with the
+``cie_sky`` emitter through :func:`latlong_texel`) and the resampling of any lookup onto it.
 
 A table ``T`` of shape (H, W, 3):
 
-* row ``i`` covers the zenith angles theta in [i pi/H, (i + 1) pi/H]; its centre is
-  (i + 1/2) pi/H.  Row 0 touches the zenith, row H - 1 the nadir.
-* column ``j`` covers the compass azimuths phi (from north toward east, ``docs/CONVENTIONS.md``)
-  in [j 2 pi/W, (j + 1) 2 pi/W]; its centre is (j + 1/2) 2 pi/W.  Column 0 begins at north,
-  and the columns run north, east, south, west: a panorama's left-to-right for a
-  photographer turning clockwise seen from above.
-* between cell centres the radiance is bilinear in (phi, theta), periodic in azimuth (the last
-  column blends into the first), and held at the first (last) row's values between that row's
-  centre and the zenith (nadir).
+* row ``i`` covers zenith angles [i pi/H, (i + 1) pi/H]: row 0 touches the zenith, row H - 1
+  the nadir.
+* column ``j`` covers compass azimuths (``docs/CONVENTIONS.md``) [j 2 pi/W, (j + 1) 2 pi/W]:
+  column 0 begins at north, running north, east, south, west (a panorama turning clockwise).
+* between cell centres the radiance is bilinear in (phi, theta), periodic in azimuth, and held
+  at the first (last) row's values toward the zenith (nadir).
 """
 
 import numpy as np
 
 from ..conventions import angles_from_direction
 
-#: Rows of the lat-long table a map is resampled to at most (columns: twice as many); larger
-#: maps are averaged down to it [cells].  256 rows: 0.7 degree cells, 1.5 MB per frame in float32.
+#: Most rows a map is resampled to (columns twice as many); larger maps are averaged down.
+#: 256 rows: 0.7 degree cells, 1.5 MB per frame in float32.
 MAX_ROWS = 256
 #: Table rows resampled at once (bounds the memory :func:`resample` takes).
 RESAMPLE_BLOCK = 16
 
 
 def latlong_texel(theta, phi, rows, cols, floor, clip):
-    """The bilinear lookup of the lat-long table (module docstring) at zenith ``theta`` and
-    compass azimuth ``phi`` [rad]: rows i0, i1 with the weight ``fy`` of i1, and columns j0,
-    j1 (wrapped) with the weight ``fx`` of j1, all as floats.
-
-    ``floor`` and ``clip`` come from NumPy or Dr.Jit, so that the NumPy sky and the emitter
-    share this one definition; ``rows`` and ``cols`` may be Dr.Jit values.  ``phi`` may lie
-    outside [0, 2 pi) (it wraps).
+    """The bilinear lookup of the lat-long table at zenith ``theta`` and compass azimuth ``phi``
+    [rad] (wrapping): rows i0, i1, the weight ``fy`` of i1, columns j0, j1 (wrapped), the
+    weight ``fx`` of j1, all floats.  ``floor`` and ``clip`` come from NumPy or Dr.Jit so the
+    NumPy sky and the emitter share this definition; ``rows``, ``cols`` may be Dr.Jit values.
     """
     y = clip(theta * (rows / np.pi) - 0.5, 0.0, rows - 1.0)
     i0 = floor(y)
@@ -50,9 +43,8 @@ def latlong_texel(theta, phi, rows, cols, floor, clip):
 
 
 def latlong_lookup(table, theta, phi):
-    """Radiance of the lat-long ``table`` (H, W, 3) at zenith ``theta`` and compass azimuth
-    ``phi`` [rad] (broadcast), by bilinear interpolation (module docstring); shape (..., 3) in
-    the table's units."""
+    """Radiance (..., 3) of the lat-long ``table`` (H, W, 3) at zenith ``theta`` and compass
+    azimuth ``phi`` [rad] (broadcast), bilinear."""
     t = np.asarray(table)
     H, W = t.shape[:2]
     i0, i1, fy, j0, j1, fx = (np.asarray(a) for a in latlong_texel(
@@ -77,12 +69,8 @@ def latlong_centres(rows, cols):
 
 def resample(lookup, rows, north_rotation_deg=0.0, supersample=1):
     """A world-frame lat-long table (rows, 2 rows, 3): each cell the mean of ``lookup(theta,
-    phi_map)`` over ``supersample`` x ``supersample`` points evenly spaced in (theta, phi) in
-    the cell, with phi_map = phi - north_rotation the map's own azimuth [rad].
-
-    ``lookup`` is :func:`latlong_lookup` or :func:`~skyfit_mi.physics.envmap.fisheye_lookup`
-    bound to a map.  Rows are done in blocks of :data:`RESAMPLE_BLOCK` to bound the memory
-    taken.
+    phi_map)`` over ``supersample``^2 evenly spaced points, phi_map = phi - north_rotation the
+    map's own azimuth [rad].  ``lookup`` is a lookup function bound to a map.
     """
     k = int(supersample)
     cols = 2 * int(rows)

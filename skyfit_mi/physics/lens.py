@@ -1,21 +1,19 @@
 """The camera's lens geometry: a pinhole with a horizontal field of view, and radial distortion.
 
 The pinhole (Hartley and Zisserman 2004, sec. 6.1) has square pixels and its principal point at
-the image's centre: a point (X, Y, Z) in the camera's OpenCV frame (x right, y down, z along the
-view) [m] falls on pixel
+the image's centre: a point (X, Y, Z) [m] in the camera's OpenCV frame (x right, y down, z along
+the view) falls on pixel
 
     u = f x_d + (W - 1) / 2,   v = f y_d + (H - 1) / 2,
 
-with pixel (0, 0) the centre of the top-left pixel (OpenCV's convention; Mitsuba's film puts it
-at 0.5, 0.5, the same place), f = (W / 2) / tan(fov / 2) [px], and the radial distortion of
-Brown (1966) as OpenCV and Zhang (2000) write it, on the normalised coordinates x = X / Z,
-y = Y / Z:
+pixel (0, 0) being the top-left pixel's centre (as OpenCV and Mitsuba), f = (W / 2) /
+tan(fov / 2) [px], with Brown's (1966) radial distortion as OpenCV and Zhang (2000) write it on
+x = X / Z, y = Y / Z:
 
     (x_d, y_d) = (x, y) (1 + k1 r^2 + k2 r^4),   r^2 = x^2 + y^2.
 
-Barrel distortion has k1 < 0.  The renderer is a pinhole (k1 = k2 = 0); a photograph's
-distortion is undone before it is compared with a render
-(:func:`skyfit_mi.pipeline.registration.undistort_image`).
+Barrel distortion has k1 < 0.  The renderer is a pinhole; a photograph is undistorted
+(:func:`skyfit_mi.pipeline.registration.undistort_image`) before comparison.
 
 References: D. C. Brown, "Decentering distortion of lenses", Photogrammetric Engineering 32(3),
 444-462, 1966; Z. Zhang, "A flexible new technique for camera calibration", IEEE TPAMI 22(11),
@@ -50,11 +48,9 @@ def intrinsics(focal, width, height):
 
 
 def check_distortion(k, fov, width, height):
-    """Refuse radial distortion ``k`` = [k1] or [k1, k2] that folds the image over itself.
-
-    The distorted radius r (1 + k1 r^2 + k2 r^4) must grow with r until it reaches the image's
-    corner (at field of view ``fov`` [degrees], ``width`` x ``height`` [px]); otherwise two
-    directions land on one pixel and no undistortion exists.  Returns [k1, k2].
+    """Refuse radial distortion ``k`` = [k1] or [k1, k2] that folds the image over itself (the
+    distorted radius must grow up to the image's corner at ``fov`` [degrees], ``width`` x
+    ``height`` [px], or no undistortion exists).  Returns [k1, k2].
     """
     k1, k2 = (list(k) + [0.0])[:2]
     corner = np.hypot(width, height) / 2.0 / focal_px(fov, width)    # normalised radius
@@ -72,8 +68,8 @@ def check_distortion(k, fov, width, height):
 
 
 def distort(x, y, k):
-    """Normalised pinhole coordinates ``x``, ``y`` [1] moved by the radial distortion ``k`` =
-    [k1] or [k1, k2] (Brown 1966, OpenCV's convention): (x, y) (1 + k1 r^2 + k2 r^4)."""
+    """Normalised pinhole ``x``, ``y`` moved by the radial distortion ``k`` = [k1] or [k1, k2]
+    (Brown 1966, OpenCV's convention): (x, y) (1 + k1 r^2 + k2 r^4)."""
     k1, k2 = (list(k) + [0.0, 0.0])[:2]
     r2 = x * x + y * y
     f = 1.0 + k1 * r2 + k2 * r2 * r2
@@ -81,9 +77,8 @@ def distort(x, y, k):
 
 
 def undistort(xd, yd, k, iterations=20):
-    """The inverse of :func:`distort`: normalised pinhole coordinates [1] of distorted ones,
-    by Newton's method on the radius (monotonic for a ``k`` that :func:`check_distortion`
-    accepts; 20 steps reach float64 rounding for |k1| <= 0.3 over a 90-degree field)."""
+    """The inverse of :func:`distort`, by Newton's method on the radius (monotonic for a ``k``
+    :func:`check_distortion` accepts; 20 steps reach float64 rounding for usual lenses)."""
     k1, k2 = (list(k) + [0.0, 0.0])[:2]
     rd = np.hypot(xd, yd)
     r = rd.copy()

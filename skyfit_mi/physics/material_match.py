@@ -5,48 +5,29 @@ A fitted material is f_r = rho_d / pi + s lobe(wi, wo; sigma_alpha, normalisatio
 
 * ``'mitsuba'``: Mitsuba 3's ``blendbsdf`` of a ``diffuse`` (reflectance a) and a
   ``roughconductor`` (beckmann or ggx, alpha, specular_reflectance b, ``material="none"``
-  (F = 1) or eta = 1.5, k = 0 (the dielectric Fresnel)), weight w:
-  f = (1 - w) a / pi + w b lobe.  Exact for the microfacet normalisations (:data:`~.microfacet.LOBES`).
+  (F = 1) or eta = 1.5, k = 0 (dielectric Fresnel)), weight w: f = (1 - w) a / pi + w b lobe.
+  Exact for the microfacet normalisations (:data:`~.microfacet.LOBES`).
 * ``'radiance'``: Radiance's ``plastic`` (rho_d = C (1 - spec), rho_s = spec, white) or
   ``metal`` (rho_s = C spec), the ``'balanced'`` lobe with roughness = rms slope.  Exact for
-  ``'balanced'`` and ``'radiance'`` when s is grey or proportional to rho_d (the colour,
-  achromatic and two models).
-* ``'gltf'``: glTF 2.0 metallic-roughness (:func:`gltf_brdf`) with KHR_materials_specular.
-  Never exact (its GGX lobe has height-correlated Smith visibility and Schlick's Fresnel).
-  The nearest is a dielectric (metallic 0) whose specularColorFactor 25 s / max(s) makes
-  F0 = 0.04 x 25 x specular = F90 (the extension allows factors > 1 and clamps 0.04 x colour
-  to 1): the Fresnel term is then the constant s k in the channel of max(s) and rises by
-  Schlick's (1 - |v.h|)^5 toward max(s) k in the others; base = rho_d / (1 - specular).
-  A metallic 1 has no diffuse part and would miss rho_d entirely.
+  ``'balanced'`` and ``'radiance'`` when s is grey or proportional to rho_d.
+* ``'gltf'``: glTF 2.0 metallic-roughness (:func:`gltf_brdf`) with KHR_materials_specular,
+  never exact (height-correlated Smith GGX, Schlick's Fresnel).  The nearest is a dielectric
+  whose specularColorFactor 25 s / max(s) makes F0 = F90, so the Fresnel term is constant in
+  the channel of max(s); base = rho_d / (1 - specular).  Metallic 1 would lose rho_d.
 
-Error measure (one for all forms).  For a distant light of direction wi seen from wo, the
-reflected radiance is E cos(theta_i) f_r(wi, wo): its relative error is that of f_r.  It is
-taken per RGB channel against max(f_r, :data:`F_FLOOR`) (a black channel is judged against a
-0.3 % grey diffuse) over :func:`error_pairs`: both directions within :data:`THETA_MAX` of the
-normal, a 10-degree grid of zeniths and 45-degree relative azimuths plus the highlight of six
-views sampled in half-vector slope steps of sigma_alpha.  ``max`` bounds the error of any sky and
-sun within 80 degrees (a positive mix of such pairs) up to the grid's resolution (the tests
-measure how much random pairs exceed it); ``rms`` is its root mean square; ``albedo_max`` the
-largest relative error of the directional albedo at view zeniths 0-80 degrees (quadrature,
-about 1e-3).  The lobe fit minimises the rms relative error of s lobe for rho_d = s, i.e.
-sum ((k lobe' - lobe) / (lobe + 1/pi))^2 over the same pairs, k in closed form, the roughness
-by golden section: it depends only on sigma_alpha and the normalisation (f is linear in s),
-so :func:`nearest_maps` reads it from a table over sigma_alpha.
+Error: per RGB channel, |f' - f_r| / max(f_r, :data:`F_FLOOR`) (the reflected radiance's
+relative error under a distant light) over :func:`error_pairs` (both directions within
+:data:`THETA_MAX`: a 10-degree zenith by 45-degree azimuth grid plus each view's highlight).
+``max`` bounds the error of any sky and sun within 80 degrees up to the grid's resolution;
+``rms`` is its root mean square; ``albedo_max`` the largest relative error of the directional
+albedo at view zeniths 0-80 degrees.  The lobe fit minimises sum ((k lobe' - lobe) / (lobe +
+1/pi))^2 over the pairs (k in closed form, roughness by golden section); it depends only on
+sigma_alpha and the normalisation, so :func:`nearest_maps` reads it from a table.
 
-Ideal mirrors (sigma_alpha <= :data:`~.ward.SIGMA_MIRROR`) reflect rho_s times
-:func:`~.ward.mirror_albedo`'s fraction in the mirror direction (with ``'radiance'``, Radiance's
-Fresnel estimate, which also dims the diffuse part).  Mitsuba: the same blend with a smooth
-``conductor`` (``"distribution": "mirror"``, alpha 0, F = 1 or the dielectric's), exact for the
-microfacet normalisations; Radiance: ``plastic``/``metal`` of roughness 0, exact for
-``'radiance'`` (and ``'balanced'``, ``'duer'`` below Radiance's Fresnel threshold); glTF:
-roughness 0 (renderers clamp it to a near-mirror), never stated exact.  The specular
-reflectance is k s per channel, k = 2 / (min q + max q) with q = s P / M the ratio of the form's
-mirror (P its Fresnel; 1 for Radiance, whose own estimate is added as Radiance does, and glTF)
-to the fitted one M over view zeniths 0-80 degrees: the least max relative error (Radiance: k
-against mirror_reflectance alone, so 1 where it is 1).  A mirror's error (:data:`MIRROR_DOMAIN`)
-is the relative error per channel of the directional albedo, diffuse plus mirror, at
-:data:`MIRROR_ZENITHS`; ``max`` = ``albedo_max``.  The albedo is smooth in the zenith: between
-the 0.25-degree steps its maxima exceed the grid's by about 1e-6 (relative).
+Ideal mirrors (sigma_alpha <= :data:`~.ward.SIGMA_MIRROR`) take the forms' mirrors (exact for
+Mitsuba's microfacet lobes and ``'radiance'``, never for glTF) with specular reflectance k s,
+k = 2 / (min q + max q), q the form's mirror over the fitted one at view zeniths 0-80 degrees.
+Their error (:data:`MIRROR_DOMAIN`) is that of the directional albedo at :data:`MIRROR_ZENITHS`.
 """
 
 from dataclasses import dataclass
@@ -62,7 +43,7 @@ from .ward import (NORMALISATIONS, RADIANCE_FRESNEL_K, RADIANCE_FRESNEL_MIN, SIG
                    radiance_fresnel, specular_lobe, ward_brdf)
 
 FORMS = ("mitsuba", "radiance", "gltf")
-#: The lobes each form can take (a microfacet lobe's name, ``'balanced'``, ``'gltf'``).
+#: The lobes each form can take (a microfacet lobe, ``'balanced'``, ``'gltf'``).
 FAMILIES = {"mitsuba": LOBES, "radiance": ("balanced",), "gltf": ("gltf",)}
 #: The normalisations each form reproduces exactly (lobe and roughness unchanged).
 NATIVE = {"mitsuba": {n: n for n in LOBES}, "radiance": {"balanced": "balanced",
@@ -77,7 +58,7 @@ TAU = 1.0 / np.pi
 GLTF_F0 = 0.04
 #: The sigma_alpha nodes of :func:`nearest_maps`'s table (ratio 1.157) [unitless].
 SIGMA_NODES = np.geomspace(SIGMA_MIRROR, SIGMA_MAX, 64)
-#: View zeniths of the error's highlight pairs [degrees] and their half-vector slopes [sigma_alpha].
+#: View zeniths [degrees] and half-vector slopes [sigma_alpha] of the error's highlight pairs.
 HIGHLIGHT_ZENITHS = (0.0, 20.0, 40.0, 60.0, 70.0, 75.0, 78.0, 80.0)
 HIGHLIGHT_U = np.r_[np.arange(0.25, 3.01, 0.25), 3.5, 4.0, 5.0, 6.0]
 #: View zeniths of the albedo error [degrees].
@@ -113,11 +94,10 @@ def _dir(theta, phi):
 
 
 def error_pairs(sigma_alpha):
-    """(wi, wo), each (G, 3), of the error measure at roughness ``sigma_alpha`` [unitless]:
-    zeniths 0-80 by 10 degrees at relative azimuths 0-180 by 45 degrees, and the views at
-    :data:`HIGHLIGHT_ZENITHS` with lights reflected about half vectors of slope sigma_alpha u
-    (:data:`HIGHLIGHT_U`, 16 azimuths) from the normal, lights beyond 80 degrees moved down to
-    80 at their azimuth (the grazing edge, where the error is largest)."""
+    """(wi, wo), each (G, 3), of the error measure at roughness ``sigma_alpha``: zeniths 0-80
+    by 10 degrees at relative azimuths 0-180 by 45, and the views at :data:`HIGHLIGHT_ZENITHS`
+    with lights reflected about half vectors of slope sigma_alpha :data:`HIGHLIGHT_U` (16
+    azimuths), lights beyond 80 degrees moved to 80 (the grazing edge, where errors peak)."""
     t = np.arange(0.0, THETA_MAX + 1, 10.0)
     ti, to, dp = np.meshgrid(t, t, np.arange(0.0, 181, 45.0), indexing="ij")
     wi, wo = _dir(ti.ravel(), 0.0), _dir(to.ravel(), dp.ravel())
@@ -140,10 +120,9 @@ def _schlick_w(wi, wo):
 
 
 def gltf_specular(wi, wo, alpha):
-    """glTF's specular_brdf = V D [sr^-1] (glTF 2.0 Appendix B, "Specular BRDF"): GGX D of
-    alpha = roughness^2 and the height-correlated Smith visibility
-    V = 1 / (2 (|n.v| sqrt(a^2 + (1 - a^2)(n.l)^2) + |n.l| sqrt(a^2 + (1 - a^2)(n.v)^2)));
-    0 below the surface (the Heaviside factors)."""
+    """glTF's specular_brdf = V D [sr^-1] (glTF 2.0 Appendix B): GGX D of alpha = roughness^2,
+    height-correlated Smith V = 1 / (2 (|n.v| sqrt(a^2 + (1 - a^2)(n.l)^2) + |n.l| sqrt(a^2 +
+    (1 - a^2)(n.v)^2))); 0 below the surface."""
     wi, wo = np.asarray(wi, dtype=float), np.asarray(wo, dtype=float)
     ci, co = wi[..., 2], wo[..., 2]
     h = half_vector(wi, wo)
@@ -154,11 +133,10 @@ def gltf_specular(wi, wo, alpha):
 
 
 def gltf_brdf(wi, wo, base_color, metallic, roughness, specular=1.0, specular_colour=(1, 1, 1)):
-    """f_r [sr^-1], RGB (..., 3), of glTF 2.0's metallic-roughness material (Appendix B,
-    "Complete Model": mix(dielectric_brdf, metal_brdf, metallic)) with KHR_materials_specular
-    (dielectric_f0 = min(0.04 specular_colour, 1) specular, dielectric_f90 = specular,
-    dielectric_brdf = F V D + (1 - max_rgb F) base / pi).  ``base_color``, ``specular_colour``
-    RGB, ``metallic``, ``roughness``, ``specular`` in [0, 1] (``specular_colour`` may exceed 1)."""
+    """f_r [sr^-1], RGB (..., 3), of glTF 2.0's metallic-roughness material (Appendix B:
+    mix(dielectric_brdf, metal_brdf, metallic)) with KHR_materials_specular (dielectric_f0 =
+    min(0.04 specular_colour, 1) specular, f90 = specular, dielectric_brdf = F V D + (1 -
+    max_rgb F) base / pi).  Inputs in [0, 1], except ``specular_colour`` may exceed 1."""
     base, sc = np.asarray(base_color, dtype=float), np.asarray(specular_colour, dtype=float)
     m, lobe = np.asarray(metallic, dtype=float)[..., None], gltf_specular(wi, wo, roughness**2)[..., None]
     w = _schlick_w(np.asarray(wi, dtype=float), np.asarray(wo, dtype=float))[..., None]
@@ -172,7 +150,7 @@ def gltf_brdf(wi, wo, base_color, metallic, roughness, specular=1.0, specular_co
 
 def _family_lobe(family, wi, wo, alpha):
     """A form's lobe without its reflectance [sr^-1]: glTF's V D, Radiance's balanced Ward
-    lobe, or a microfacet lobe (Mitsuba's roughconductor, F = 1 or dielectric)."""
+    lobe, or a microfacet lobe."""
     if family == "gltf":
         return gltf_specular(wi, wo, alpha)
     if family == "balanced":
@@ -238,8 +216,7 @@ def _albedos(fn, alpha, family):
 def _reflectances(form, family, rho_d, s, alpha, k):
     """The form's parameters for texels (rho_d, s (N, 3); alpha, k (N,) of the lobe fit),
     notes, and the effective BRDF f' = D / pi + (A + B w) lobe' (w Schlick's weight) as
-    (D, A, B), each (N, 3).  One distribution, Fresnel, weight (Mitsuba) or type (Radiance)
-    for all texels."""
+    (D, A, B), each (N, 3).  One distribution, Fresnel, weight or type for all texels."""
     ks, notes = _ks(k, s), []
     zero = np.zeros_like(s)
     if form == "mitsuba":
@@ -291,11 +268,9 @@ def _ks(k, s):
 
 
 def form_brdf(form, params, wi, wo):
-    """f_r [sr^-1], RGB (..., 3), of one material of ``form`` with ``params`` as
-    :func:`nearest` returns them, at light ``wi`` and view ``wo`` (unit vectors, normal +Z):
-    Mitsuba's blend of diffuse and roughconductor (:func:`~.microfacet.microfacet_lobe`),
-    Radiance's plastic or metal (:func:`~.ward.ward_brdf` 'radiance', i.e. 'balanced' with its
-    Fresnel estimate at roughness 0), :func:`gltf_brdf`.  A mirror's delta is left out."""
+    """f_r [sr^-1], RGB (..., 3), of one material of ``form`` with ``params`` as :func:`nearest`
+    returns them, at light ``wi`` and view ``wo`` (unit vectors, normal +Z).  A mirror's delta
+    is left out."""
     check_choice("material form", form, FORMS)
     wi, wo = np.asarray(wi, dtype=float), np.asarray(wo, dtype=float)
     if form == "mitsuba":
@@ -336,7 +311,8 @@ def _errors(rel, alb, alb_ref):
 
 
 def _lobe_albedos(form, family, normalisation, sigma, alpha):
-    """Albedos (6,) of the fitted lobe, the form's lobe, and the form's lobe times Schlick's weight."""
+    """Albedos (6,) of the fitted lobe, the form's lobe, and the form's lobe times Schlick's
+    weight."""
     exact = _albedos(lambda i, o: specular_lobe(i, o, sigma, normalisation), sigma, normalisation)
     other = _albedos(lambda i, o: _family_lobe(family, i, o, alpha), alpha, family)
     w = _albedos(lambda i, o: _schlick_w(i, o) * _family_lobe(family, i, o, alpha), alpha, family) \
@@ -346,7 +322,7 @@ def _lobe_albedos(form, family, normalisation, sigma, alpha):
 
 def _choose(form, normalisation, rho_d, s, fits):
     """The family of ``form`` for these texels: the native lobe, else the least lobe-fit cost
-    (``fits``: family -> (alpha, k, cost) arrays), in range (max(rho_d) + max(k s) <= 1) if any is."""
+    (``fits``: family -> (alpha, k, cost)), preferring those with max(rho_d) + max(k s) <= 1."""
     if normalisation in NATIVE[form]:
         return NATIVE[form][normalisation]
     fams = FAMILIES[form]
@@ -356,16 +332,17 @@ def _choose(form, normalisation, rho_d, s, fits):
 
 def _mirror_albedo(name, fr, d, a, b, c):
     """Directional albedo (N, Z, 3) at view cosines c (Z,) of a diffuse d (N, 3) and a mirror
-    a P(c) + b (1 - c)^5 (P: :func:`~.ward.mirror_reflectance` of ``name``; glTF's Schlick rise
-    b), with Radiance's Fresnel estimate F where fr (N,) is 1: mirror a + F (1 - a), diffuse
-    d (1 - F(c)) (1 - :data:`_RAD_LOSS`) (:func:`~.ward.ward_brdf`, :func:`~.ward.mirror_albedo`)."""
+    a P(c) + b (1 - c)^5 (P: :func:`~.ward.mirror_reflectance`; b glTF's Schlick rise), with
+    Radiance's Fresnel estimate F where fr (N,) is 1 (mirror a + F (1 - a), diffuse
+    d (1 - F(c)) (1 - :data:`_RAD_LOSS`))."""
     f = fr[:, None, None] * radiance_fresnel(c)[:, None]
     return d[:, None] * (1 - f) * (1 - _RAD_LOSS * fr[:, None, None]) + f * (1 - a[:, None]) \
         + a[:, None] * mirror_reflectance(c, name)[:, None] + b[:, None] * ((1 - c) ** 5)[:, None]
 
 
 def _fitted_mirror(normalisation, d, s, c):
-    """The fitted mirror's albedo (N, Z, 3): Radiance's estimate where max(s) reaches its threshold."""
+    """The fitted mirror's albedo (N, Z, 3), with Radiance's estimate where max(s) reaches its
+    threshold."""
     fr = (np.max(s, -1) >= RADIANCE_FRESNEL_MIN) * float(normalisation == "radiance")
     return _mirror_albedo(normalisation, fr, d, s, np.zeros_like(s), c)
 
@@ -403,8 +380,8 @@ def _mirror_errors(form, family, normalisation, d, s, eff, spec):
 
 
 def nearest(form, rho_d, s, sigma_alpha, normalisation="ward"):
-    """The nearest material of ``form`` to f_r = rho_d / pi + s lobe(sigma_alpha,
-    normalisation) [sr^-1], and its error (module docstring).
+    """The nearest material (:class:`Match`) of ``form`` to f_r = rho_d / pi + s
+    lobe(sigma_alpha, normalisation) [sr^-1], and its error (module docstring).
 
     Parameters
     ----------
@@ -412,10 +389,6 @@ def nearest(form, rho_d, s, sigma_alpha, normalisation="ward"):
     rho_d, s : RGB triples, diffuse and specular reflectance [unitless, 0-1]
     sigma_alpha : float, roughness (rms slope) [unitless, 0-1; <= SIGMA_MIRROR an ideal mirror]
     normalisation : one of :data:`~.ward.NORMALISATIONS`
-
-    Returns
-    -------
-    Match
     """
     d, sp, sig = _check(form, rho_d, s, np.reshape(sigma_alpha, ()), normalisation) \
         if np.ndim(sigma_alpha) == 0 else _check(form, rho_d, s, sigma_alpha, normalisation)
@@ -460,9 +433,8 @@ def _plain(p):
 def _node_tables(form, family, normalisation, j):
     """At SIGMA_NODES[j], from the table's fit: the pairs' features (G, 3) (exact lobe, form
     lobe, form lobe times Schlick's weight), the indices of the pairs on their convex hull
-    (where the largest relative error of any texel lies: it is a ratio of affine functions
-    of the features, with the floor inactive) and of every 12th pair (for the rms), and the
-    albedos of :func:`_lobe_albedos`."""
+    (where any texel's largest relative error lies, a ratio of affine functions of the
+    features) and of every 12th pair (for the rms), and :func:`_lobe_albedos`."""
     from scipy.spatial import ConvexHull, QhullError
 
     sigma, (alpha, _, _) = SIGMA_NODES[j], _table(normalisation, family)[j]
@@ -491,16 +463,13 @@ def _map_errors(d, s, eff, feat, pick):
 def nearest_maps(form, rho_d, s, sigma_alpha, normalisation="ward"):
     """:func:`nearest` for a map's texels: rho_d, s (N, 3), sigma_alpha (N,).
 
-    The lobe fit is read from a table over :data:`SIGMA_NODES` (alpha and k interpolated
-    linearly in log sigma), and one distribution and Fresnel (Mitsuba), type (Radiance) and
-    Mitsuba weight serve the whole map (chosen by its rough texels if it has any).  Returns
-    (params, error): params as :func:`nearest`'s with an array (N,) or (N, 3)
-    (``baseColorFactor`` (N, 4)) per texel-varying entry; error {"rms", "max", "albedo_max"}
-    arrays (N,), "domain", "notes", "exact".  A rough texel's error is that at its nearest
-    table node (its reflectances with the node's sigma, within a factor 1.08, and fit; max over
-    the pairs on the convex hull of the node's lobe values, which holds the largest error of the
-    node's grid, rms over every 12th pair); a mirror's is :func:`nearest`'s (alpha 0; Mitsuba's
-    ``"distribution"`` is ``"mirror"`` when every texel is one)."""
+    The lobe fit is interpolated in log sigma from the :data:`SIGMA_NODES` table; one
+    distribution, Fresnel, type and weight serve the whole map (chosen by its rough texels).
+    Returns (params, error): params as :func:`nearest`'s, texel-varying entries (N,) or (N, 3)
+    (``baseColorFactor`` (N, 4)); error {"rms", "max", "albedo_max"} (N,), "domain", "notes",
+    "exact".  A rough texel's error is that at its nearest node (max over the convex-hull
+    pairs, rms over every 12th); a mirror's as :func:`nearest`'s.
+    """
     d, sp, sig = _check(form, rho_d, s, sigma_alpha, normalisation)
     n, mir = len(sig), sig <= SIGMA_MIRROR
     rough, native = ~mir, normalisation in NATIVE[form]

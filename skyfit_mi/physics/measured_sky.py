@@ -1,57 +1,33 @@
 """A sky measured in a few directions as an HDR environment map: interpolated, with the sun.
 
-A sky scanner (or a spectroradiometer on a mount) reads the sky's luminance and colour in a
-few dozen directions; a pyranometer reads the global horizontal irradiance (GHI).  This module
-makes from them a lat-long table of linear-sRGB radiance over the sky hemisphere
-(:mod:`skyfit_mi.physics.envmap`) and the direct normal irradiance (DNI) of the solar disc,
-so that the measured sky lights frames and fits as any ``envmap`` sky does.
+From a sky scanner's luminance and colour in a few dozen directions and a pyranometer's GHI, make
+a lat-long table of linear-sRGB radiance over the sky (:mod:`skyfit_mi.physics.envmap`) and the
+DNI of the solar disc, so the measured sky lights frames and fits as any ``envmap`` sky.
 
-Interpolation
--------------
-Measured luminance varies by a factor of 10-50 over a clear sky, most steeply toward the sun
-and the horizon, where the points are sparsest.  It is not interpolated directly:
+Interpolation (luminance varies 10-50x over a clear sky, most steeply where points are sparse):
 
-1. A CIE S 011 general sky (:mod:`skyfit_mi.physics.cie_general`, continuous gradation and
-   indicatrix indices on a grid of :data:`GROUP_STEP`) is fitted to the points, with the
-   zenith luminance L_z free, by least squares in log luminance over the points at least
-   ``exclude_deg`` from the sun (:func:`fit_general_shape`).  It carries the shape the points
-   cannot resolve: the circumsolar peak and the brightening toward the horizon.
-2. The log of the measured luminance over that model, ln(L / L_model), and the log
-   chromaticity ratios ln(X / Y), ln(Z / Y), are interpolated over the sphere by a radial
-   basis function in the 3D unit vectors (``scipy.interpolate.RBFInterpolator``, kernel
-   :data:`KERNEL` plus a linear polynomial).  These fields are smooth (a few per cent across
-   the sky), so the interpolant passes through every point without the overshoot that the
-   raw luminance's steep gradients would cause, and the result is positive everywhere.
-3. Below the lowest measured elevation the fields are held at their values at that
-   elevation, at the same azimuth: toward the horizon the luminance follows the fitted model's
-   gradation instead of an extrapolated polynomial.
+1. A CIE S 011 general sky (continuous gradation and indicatrix indices on a grid of
+   :data:`GROUP_STEP`, L_z free) is fitted in log luminance to the points at least
+   ``exclude_deg`` from the sun (:func:`fit_general_shape`): it carries the circumsolar peak and
+   horizon brightening the points cannot resolve.
+2. ln(L / L_model), ln(X / Y) and ln(Z / Y), smooth fields, are interpolated over the sphere by
+   an RBF in the unit vectors (:data:`KERNEL` plus a linear polynomial): exact at the points,
+   no overshoot, positive everywhere.  The linear polyharmonic spline (phi(r) = -r) does not
+   ring between the scanner's rings and beat the thin-plate spline in :func:`leave_one_out`.
+3. Below the lowest measured elevation the fields are held at that elevation's values, so the
+   luminance follows the model's gradation toward the horizon.
 
-The kernel: the polyharmonic spline phi(r) = -r ("linear", the minimum-energy interpolant in
-3D) holds each point's value without ringing between the scanner's rings.  On the shared
-measured clear day (Kider et al. 2014, :mod:`skyfit_mi.physics.sky_measurement`) its
-leave-one-out error (:func:`leave_one_out`) is lower than the thin-plate spline's, which
-overshoots around an outlying point.
-
-Units
------
-The package's skies are linear sRGB radiances whose luminance-weighted value
-(:data:`~skyfit_mi.physics.colour.SRGB_LUMINANCE`) is the broadband radiance
-[W m^-2 sr^-1] (the CIE skies: luminance over a luminous efficacy, thesis 4.2.2; the sun:
-DNI over its solid angle).  A measured CIE XYZ [cd m^-2] becomes linear sRGB by
-:data:`~skyfit_mi.physics.colour.XYZ_TO_SRGB` (IEC 61966-2-1; components outside the gamut
-clipped at 0), divided by the skylight's luminous efficacy K [lm W^-1]:
+Units: measured XYZ [cd m^-2] becomes linear sRGB (IEC 61966-2-1, out-of-gamut clipped at 0)
+over the skylight's luminous efficacy K [lm W^-1], in the pyranometer's units:
 
 .. math:: (R, G, B) = M_{XYZ \\to sRGB} (X, Y, Z) / K
 
-so that the map's horizontal irradiance is in the pyranometer's units.  The sun's disc then
-takes what the pyranometer saw that the map does not hold (:func:`direct_normal_from_global`):
+The sun's disc takes what the pyranometer saw that the map does not hold
+(:func:`direct_normal_from_global`), so the circumsolar light counts once:
 
 .. math:: E_{bn} = \\frac{E_{gh} - E_{dh,\\,map}}{\\cos\\theta_s}
 
-with E_dh,map the map's own diffuse horizontal irradiance (eq. 4.19 by quadrature,
-:meth:`~skyfit_mi.physics.sky.Sky.sky_horizontal_irradiance`): sky and sun together give the
-measured GHI exactly, and the circumsolar light counts once (in the map, not also in the disc,
-as a pyrheliometer's 2.5 degree field would).
+with E_dh,map the map's diffuse horizontal irradiance (eq. 4.19 by quadrature).
 
 References
 ----------
@@ -78,10 +54,10 @@ KERNEL = "linear"
 #: Step of the gradation and indicatrix indices searched by :func:`fit_general_shape` [unitless].
 GROUP_STEP = 0.05
 #: Points closer than this to the sun are left out of the model's fit [degrees] (the
-#: circumsolar peak is undersampled; :data:`skyfit_mi.physics.sky_measurement.SUN_EXCLUSION_DEG`).
+#: circumsolar peak is undersampled).
 EXCLUDE_DEG = 10.0
-#: Rows of the lat-long table by default (1.4 degree cells; columns twice as many): the
-#: table reproduces the measured points to 0.6% rms (64 rows: 1.3%).
+#: Rows of the lat-long table by default (1.4 degree cells; columns twice as many): reproduces
+#: the measured points to 0.6% rms.
 ROWS = 128
 #: Sub-samples per cell side when the table's cells are averaged (:func:`~.latlong.resample`).
 SUPERSAMPLE = 2
@@ -106,37 +82,17 @@ def _log_residuals(directions, luminance, sun, step):
 
 
 def fit_general_shape(directions, luminance, sun, exclude_deg=EXCLUDE_DEG, step=GROUP_STEP):
-    """The CIE general sky that best fits measured luminance, in log luminance.
+    """The CIE general sky that best fits measured luminance, in log luminance: (indices (2,),
+    a..e (5,), L_z [cd m^-2]).
 
-    Minimises over the gradation and indicatrix indices g, i in [1, 6] (a grid of ``step``,
+    Minimises over the indices g, i in [1, 6] (a grid of ``step``,
     :func:`~skyfit_mi.physics.cie_general.group_parameters`) and the zenith luminance L_z
 
     .. math:: \\sum_k \\big(\\ln L_k - \\ln L_z - \\ln P(d_k; g, i)\\big)^2
 
-    over the points at least ``exclude_deg`` from the sun; for each (g, i), ln L_z is the
-    mean log ratio (closed form).
-
-    Parameters
-    ----------
-    directions : array_like (n, 3)
-        World unit vectors of the points (+X east, +Y north, +Z up), above the horizon.
-    luminance : array_like (n,)
-        Measured luminance [cd m^-2], > 0.
-    sun : array_like (3,)
-        Unit vector toward the sun.
-    exclude_deg : float
-        Points closer to the sun are left out of the fit [degrees].
-    step : float
-        Grid step of the indices [unitless].
-
-    Returns
-    -------
-    groups : ndarray (2,)
-        Gradation and indicatrix index.
-    params : ndarray (5,)
-        a, b, c, d, e of the fitted sky.
-    zenith_luminance : float
-        L_z [cd m^-2].
+    over the points at least ``exclude_deg`` [degrees] from the sun; ln L_z is in closed form.
+    ``directions`` (n, 3) are world unit vectors above the horizon, ``luminance`` (n,) > 0
+    [cd m^-2], ``sun`` (3,) a unit vector.
     """
     d, y, sun = _check_points(directions, luminance, sun)
     keep = _far_from_sun(d, sun, exclude_deg)
@@ -179,16 +135,12 @@ class MeasuredSky:
     ----------
     sun : ndarray (3,)
         Unit vector toward the sun, world frame.
-    groups : ndarray (2,)
-        Gradation and indicatrix index of the fitted CIE general sky.
-    params : ndarray (5,)
-        Its a, b, c, d, e.
-    zenith_luminance : float
-        Its L_z [cd m^-2].
+    groups, params, zenith_luminance
+        The fitted CIE general sky's indices (2,), a..e (5,) and L_z [cd m^-2].
     fields : scipy.interpolate.RBFInterpolator
         Unit vectors (..., 3) -> ln(L / L_model), ln(X / Y), ln(Z / Y) [unitless].
     min_elevation : float
-        Lowest measured elevation [rad]; below it the fields are held (module docstring).
+        Lowest measured elevation [rad]; below it the fields are held.
     """
 
     sun: np.ndarray
@@ -245,19 +197,9 @@ def _check_xyz(directions, xyz, sun):
 
 
 def interpolate_sky(directions, xyz, sun, exclude_deg=EXCLUDE_DEG, step=GROUP_STEP):
-    """A :class:`MeasuredSky` through measured CIE XYZ (module docstring).
-
-    Parameters
-    ----------
-    directions : array_like (n, 3)
-        World unit vectors of the points, above the horizon.
-    xyz : array_like (n, 3)
-        Measured CIE 1931 X, Y, Z [cd m^-2] (Y the luminance), > 0.
-    sun : array_like (3,)
-        Unit vector toward the sun.
-    exclude_deg, step
-        As :func:`fit_general_shape`.
-    """
+    """A :class:`MeasuredSky` through measured CIE XYZ (n, 3) [cd m^-2], > 0, at world unit
+    ``directions`` (n, 3) above the horizon; ``exclude_deg`` and ``step`` as
+    :func:`fit_general_shape`."""
     from scipy.interpolate import RBFInterpolator
 
     d, v, s = _check_xyz(directions, xyz, sun)
@@ -268,14 +210,8 @@ def interpolate_sky(directions, xyz, sun, exclude_deg=EXCLUDE_DEG, step=GROUP_ST
 
 
 def leave_one_out(directions, xyz, sun, exclude_deg=EXCLUDE_DEG, step=GROUP_STEP):
-    """Each point's luminance predicted from the others: the interpolated sky's and the fitted
-    CIE general sky's alone (both refitted without the point).
-
-    Returns
-    -------
-    interpolated, model : ndarray (n,)
-        Predicted luminance [cd m^-2] at each point held out.
-    """
+    """Each point's luminance [cd m^-2] predicted from the others, (n,) each: the interpolated
+    sky's and the fitted CIE general sky's alone (both refitted without the point)."""
     from scipy.interpolate import RBFInterpolator
 
     d, v, s = _check_xyz(directions, xyz, sun)
@@ -303,14 +239,10 @@ def leave_one_out(directions, xyz, sun, exclude_deg=EXCLUDE_DEG, step=GROUP_STEP
 
 
 def sky_table(sky, efficacy, rows=ROWS, supersample=SUPERSAMPLE):
-    """The lat-long table (rows, 2 rows, 3) of a :class:`MeasuredSky` [W m^-2 sr^-1], float32,
-    linear sRGB (:meth:`MeasuredSky.radiance`), each cell the mean of ``supersample`` squared
-    points (:func:`~skyfit_mi.physics.latlong.resample`); its lower half is 0 (a ground term
-    lights it).
-
-    ``efficacy`` [lm W^-1] is the skylight's luminous efficacy in the band of the irradiance
-    the sun is set from (module docstring).
-    """
+    """The lat-long table (rows, 2 rows, 3) of a :class:`MeasuredSky` [W m^-2 sr^-1], float32
+    linear sRGB, each cell the mean of ``supersample`` squared points; the lower half is 0 (a
+    ground term lights it).  ``efficacy`` [lm W^-1]: the skylight's, in the band of the
+    irradiance the sun is set from."""
     check_range("luminous efficacy", efficacy, 1.0, 683.0, "lm W^-1")
     check_range("envmap rows", rows, 2, 4096)
     return resample(lambda theta, phi: sky.radiance(direction_from_angles(theta, phi), efficacy),
@@ -326,25 +258,15 @@ def measured_envmap(sky, efficacy, ghi, sun_zenith_deg, sun_azimuth_deg, *,
     ----------
     sky : MeasuredSky
     efficacy : float
-        Luminous efficacy of the skylight [lm W^-1] (:func:`sky_table`).
+        Luminous efficacy of the skylight [lm W^-1].
     ghi : float
         Measured global horizontal irradiance [W m^-2].
-    sun_zenith_deg, sun_azimuth_deg : float
-        The sun at the measurement [degrees].
-    ghi_sun_zenith_deg : float, optional
-        The sun's zenith when the GHI was read, if at another time [degrees].
-    rows : int
-        Rows of the table.
-    ground_albedo : float
-        A Lambertian ground below the horizon (:func:`~skyfit_mi.physics.envmap.envmap_sky`).
-    info : dict, optional
-        Recorded in the Sky's ``info``.
-
-    Returns
-    -------
-    Sky
-        ``info`` holds ``direct_normal_W_m2``, ``map_diffuse_horizontal_W_m2`` (the map's),
-        ``efficacy_lm_W``, ``cie_groups`` and ``zenith_luminance_cd_m2`` of the fitted model.
+    sun_zenith_deg, sun_azimuth_deg, ghi_sun_zenith_deg : float
+        The sun at the measurement, and its zenith when the GHI was read if later [degrees].
+    ground_albedo, info
+        As :func:`~skyfit_mi.physics.envmap.envmap_sky`'s; ``info`` also gets
+        ``direct_normal_W_m2``, ``map_diffuse_horizontal_W_m2``, ``efficacy_lm_W``,
+        ``cie_groups`` and ``zenith_luminance_cd_m2``.
     """
     table = sky_table(sky, efficacy, rows)
     dhi = float(envmap_sky(table, sun_zenith_deg, sun_azimuth_deg).sky_horizontal_irradiance()
@@ -364,13 +286,10 @@ def scan_envmap(scan, rows=ROWS, rotated=True, ground_albedo=0.0):
     """The envmap :class:`~skyfit_mi.physics.sky.Sky` of one scan of the measured clear day
     (:class:`~skyfit_mi.physics.sky_measurement.Scan`, Kider et al. 2014).
 
-    The scan's 81 points (turned by the scanner rotation the data's README fits if
-    ``rotated``, so that the measured circumsolar light surrounds the computed sun) are
-    interpolated (:func:`interpolate_sky`); the efficacy is the scan's own, its diffuse
-    horizontal illuminance over its irradiance 350-2500 nm (both integrated from the scan by
-    the data's authors, 134-137 lm W^-1 on that day); the disc carries the pyranometer's GHI
-    less the map's diffuse irradiance (:func:`measured_envmap`), with the sun at the GHI's
-    minute (13:00 for the 13:30 scan, whose log starts at 13:00).
+    The 81 points (turned by the README's scanner rotation if ``rotated``, so the measured
+    circumsolar light surrounds the computed sun) are interpolated; the efficacy is the scan's
+    own diffuse illuminance over its 350-2500 nm irradiance; the disc carries the pyranometer's
+    GHI less the map's diffuse irradiance, with the sun at the GHI's minute.
     """
     from .sky_measurement import CITATION
 

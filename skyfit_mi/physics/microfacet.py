@@ -1,10 +1,9 @@
 """Microfacet specular lobes (Beckmann and GGX with Smith shadowing and Fresnel), NumPy reference.
 
-The fitting model is f_r = rho_d / pi + s lobe(wi, wo; alpha): linear in the reflectances
-(rho_d, s), non-linear in one roughness only (thesis eq. 3.19's form).  Besides Ward's lobes
-(:mod:`.ward`), the lobe can be a Cook-Torrance microfacet lobe (B. Walter, S. Marschner, H. Li,
-K. Torrance, "Microfacet models for refraction through rough surfaces", EGSR 2007, eqs. 20, 33,
-27 and 34):
+The fitting model f_r = rho_d / pi + s lobe(wi, wo; alpha) is linear in the reflectances and
+non-linear in one roughness (thesis eq. 3.19's form).  Besides Ward's lobes (:mod:`.ward`), the
+lobe can be a Cook-Torrance microfacet lobe (B. Walter, S. Marschner, H. Li, K. Torrance,
+"Microfacet models for refraction through rough surfaces", EGSR 2007, eqs. 20, 33, 27, 34):
 
     lobe = F(wi.h) D(h) G1(wi) G1(wo) / (4 cos_i cos_o)            [sr^-1]
 
@@ -13,29 +12,23 @@ exp(-tan^2 theta_h / alpha^2) / (pi alpha^2 cos^4 theta_h), alpha the rms slope,
 sigma_alpha; GGX: alpha^2 / (pi cos^4 theta_h (alpha^2 + tan^2 theta_h)^2)), G1 Smith's
 separable shadowing (Walter's rational approximation for Beckmann, exact for GGX), and F:
 
-* ``plastic``: a dielectric coating's Fresnel reflectance at index ETA_PLASTIC (unpolarised),
-  the lobe of Mitsuba 3's ``roughplastic`` without its diffuse part; s scales it
-  (``specular_reflectance``), and rho_d / pi is a Lambertian base (not ``roughplastic``'s
-  Fresnel-weighted one, which is not linear in a single diffuse basis);
-* ``metal``: F = 1 (Mitsuba 3's ``roughconductor`` with ``material="none"``); s is the
-  specular colour, so that a conductor's Fresnel colour is the fitted RGB reflectance.
+* ``plastic``: dielectric Fresnel at index ETA_PLASTIC, the lobe of Mitsuba 3's
+  ``roughplastic`` without its diffuse part, which here is Lambertian rho_d / pi (roughplastic's
+  Fresnel-weighted base is not linear in one diffuse basis);
+* ``metal``: F = 1 (``roughconductor`` with ``material="none"``); s is the specular colour.
 
-These are the same functions as Mitsuba 3.9's ``MicrofacetDistribution`` (``eval``, ``G``)
-and ``fresnel`` (tests/test_plugin_ward.py compares them with ``roughplastic`` and
-``roughconductor``).  Each lobe is a ``normalisation`` of the fitting model
-(:data:`LOBES`): ``<distribution>_<fresnel>``.  Below :data:`~.ward.SIGMA_MIRROR` the lobe
-is an ideal mirror reflecting s F(cos_o) (:func:`mirror_fraction`).
+These match Mitsuba 3.9's ``MicrofacetDistribution`` and ``fresnel``.  Each lobe is a
+``normalisation`` (:data:`LOBES`: ``<distribution>_<fresnel>``).  Below
+:data:`~.ward.SIGMA_MIRROR` the lobe is an ideal mirror reflecting s F(cos_o).
 """
 
 import numpy as np
 
-#: The microfacet distributions and Fresnel terms, and the lobes made of them (names of the
-#: fitting model's ``normalisation``).
+#: The microfacet distributions, Fresnel terms and their lobes (``normalisation`` names).
 DISTRIBUTIONS = ("beckmann", "ggx")
 FRESNELS = ("plastic", "metal")
 LOBES = tuple(f"{d}_{f}" for d in DISTRIBUTIONS for f in FRESNELS)
-#: The plastic coating's refractive index (relative to air) [unitless]: Mitsuba's
-#: ``roughplastic`` default (polypropylene), with ext_ior = 1.
+#: The plastic coating's refractive index (to air) [unitless]: Mitsuba's ``roughplastic`` default.
 ETA_PLASTIC = 1.5
 
 
@@ -46,9 +39,9 @@ def split(name):
 
 
 def fresnel_dielectric(cos_theta, eta=ETA_PLASTIC):
-    """Unpolarised Fresnel reflectance of a dielectric interface [unitless] at the incident
-    cosine ``cos_theta`` (from the outside, >= 0), relative index ``eta`` (Born and Wolf,
-    Principles of Optics, eq. 1.5.21): the mean of the s and p reflectances."""
+    """Unpolarised Fresnel reflectance [unitless] of a dielectric interface of relative index
+    ``eta`` at incident cosine ``cos_theta`` (outside, >= 0): the mean of s and p (Born and
+    Wolf, Principles of Optics, eq. 1.5.21)."""
     c = np.clip(np.abs(np.asarray(cos_theta, dtype=float)), 0.0, 1.0)
     s2 = (1.0 - c * c) / (eta * eta)                   # sin^2 of the transmitted angle
     ct = np.sqrt(np.maximum(1.0 - s2, 0.0))
@@ -100,9 +93,8 @@ def half_vector(wi, wo):
 
 
 def microfacet_lobe(wi, wo, alpha, name):
-    """The lobe ``name`` (LOBES) without s [sr^-1]: F(wi.h) D(h) G1(wi) G1(wo) / (4 cos_i
-    cos_o); 0 where either direction is below the surface.  ``wi``, ``wo`` unit vectors in
-    the local frame (normal +Z), both away from the surface."""
+    """The lobe ``name`` without s [sr^-1]: F(wi.h) D(h) G1(wi) G1(wo) / (4 cos_i cos_o); 0
+    where either local unit direction (both away from the surface) is below it."""
     dist, kind = split(name)
     wi, wo = np.asarray(wi, dtype=float), np.asarray(wo, dtype=float)
     ci, co = wi[..., 2], wo[..., 2]
@@ -123,18 +115,14 @@ def mirror_fraction(cos_theta, name):
 
 
 def albedo_nodes(n_u=16, n_phi=6):
-    """Nodes (a, b, c) of a microfacet lobe's directional albedo quadrature per unit alpha, as
-    :func:`~.ward.lobe_albedo_nodes` gives Ward's: the half vector of node j at roughness alpha
-    is normalise(alpha a_j, alpha b_j, 1) and its weight c_j times 2 alpha^2 (wo.h)
-    cos^3 theta_h.
+    """Nodes (a, b, c) of a microfacet lobe's albedo quadrature per unit alpha, as
+    :func:`~.ward.lobe_albedo_nodes`: node j's half vector is normalise(alpha a_j, alpha b_j, 1),
+    its weight c_j 2 alpha^2 (wo.h) cos^3 theta_h.
 
-    The radial variable is t = alpha^2 / (alpha^2 + tan^2 theta_h) in (0, 1], in which GGX's
-    D cos^4 theta_h times the slope area is constant (its tails are too long for Gauss-Laguerre
-    in tan^2 theta_h / alpha^2); Gauss-Legendre in t, the trapezoid rule in azimuth.  The
-    tails reach the surface's horizon, where the integrand ends abruptly: against a fine
-    quadrature the albedo is exact to 3e-5 (metal) and 3e-4 (plastic) at alpha = 0.005, 2e-3 at
-    0.02 and 4e-3 at 0.05 up to 70 degrees from the normal (tests/test_microfacet.py).  (A
-    Beckmann lobe takes Ward's nodes: its D is exponential in tan^2 theta_h / alpha^2.)
+    Gauss-Legendre in t = alpha^2 / (alpha^2 + tan^2 theta_h), in which GGX's D cos^4 theta_h
+    times the slope area is constant (its tails are too long for Gauss-Laguerre), by the
+    trapezoid rule in azimuth.  The horizon cuts the tails: accurate to about 3e-5-4e-3 up to
+    70 degrees (Beckmann takes Ward's nodes).
     """
     x, w = np.polynomial.legendre.leggauss(int(n_u))
     t, wt = 0.5 * (x + 1.0), 0.5 * w

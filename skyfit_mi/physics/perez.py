@@ -1,36 +1,21 @@
 """The Perez all-weather sky, driven by measured irradiance (Perez, Seals and Michalsky 1993).
 
-The sky's relative luminance toward a sky element at zenith angle theta_p and angle zeta
-from the sun is (1993, eq. 1)
+Relative luminance toward an element at zenith angle theta_p and angle zeta from the sun
+(1993, eq. 1):
 
     l_v = (1 + a exp(b / cos theta_p)) (1 + c exp(d zeta) + e cos^2 zeta),
 
-with five coefficients a..e that depend on the sun's zenith Z and on two indices computed
-from measured irradiance (Perez et al. 1990, eqs. 1-2): the sky clearness epsilon, which
-picks one of eight bins of a table of 8 x 5 x 4 numbers (1993, Table 1), and the sky
-brightness Delta.  The absolute sky follows by scaling l_v so that the sky's horizontal
-irradiance equals the measured diffuse horizontal irradiance, and luminance by the Perez
-1990 diffuse luminous efficacy (1990, eq. 7 and Table 4).
+with a..e depending on the sun's zenith Z, the sky clearness epsilon (picking one of eight bins
+of 1993 Table 1) and the sky brightness Delta (Perez et al. 1990, eqs. 1-2).  The absolute sky
+scales l_v so its horizontal irradiance equals the measured diffuse horizontal irradiance;
+luminance uses the 1990 diffuse luminous efficacy (eq. 7, Table 4).  Names follow
+``docs/CONVENTIONS.md`` (the paper's zeta and gamma are ``theta_p`` and ``zeta`` here).
 
-The paper names the element's zenith angle zeta and its angle to the sun gamma; this module
-follows ``docs/CONVENTIONS.md`` instead: ``theta_p`` is the element's zenith angle and
-``zeta`` its angle to the sun.  World frame +X east, +Y north, +Z up; azimuths from north
-toward east; degrees only in arguments named ``*_deg``.
-
-Where this module, or common implementations, depart from the paper:
-
-* the horizon: ``cos theta_p`` is held at 0.01 below 0.01, as Radiance's ``perezlum.cal``
-  does, so that exp(b / cos theta_p) stays finite;
-* ``delta_floor`` of :class:`PerezOptions`: Radiance's ``gendaylit`` and ``gendaymtx`` (and
-  other implementations) raise Delta to 0.2 for the coefficients when 1.065 < epsilon < 2.8:
-  at lower Delta the published coefficients of those bins give b > 0 (a sky growing without
-  bound toward the horizon, e.g. DHI 60 and DNI 50 W m^-2 under a high sun) or negative
-  luminance near the horizon (a low sun in bin 2).  :func:`perez_sky` does the same by
-  default; ``PerezOptions(delta_floor=None)`` gives the published model unchanged.  :func:`coefficients`
-  is always the published model.
-* Radiance's ``gendaylit`` also clamps epsilon to [1, 12.01), Delta to [0.01, 0.6] and the
-  solar altitude to at most 87 degrees, computes the air mass with Kasten (1966) and
-  normalises with a 145-point sum over the sky; none of this is done here.
+Departures from the paper, as Radiance: ``cos theta_p`` is held at >= 0.01 (``perezlum.cal``)
+to keep exp(b / cos theta_p) finite; ``PerezOptions.delta_floor`` raises Delta to 0.2 for
+1.065 < epsilon < 2.8 (``gendaylit``), where lower Delta gives b > 0 (unbounded toward the
+horizon) or negative luminance.  Radiance's other clamps, air mass and normalisation are not
+copied.
 
 References
 ----------
@@ -56,16 +41,12 @@ from .sky import (CCT_CLEAR, CCT_OVERCAST, GROUND_ALBEDO, IRRADIANCE_NODES, SKY_
                   hemisphere_integral as sky_hemisphere_integral, perez_pattern)
 from .sun import SUN_SOLID_ANGLE, sun_rgb
 
-#: Lower edges of the eight sky-clearness bins, then +inf (Perez et al. 1990, Table 1;
-#: the same bins in 1993) [unitless].  Bin i holds edges[i] <= epsilon < edges[i + 1].
+#: Lower edges of the eight clearness bins, then +inf (1990 Table 1; 1993 the same).  Bin i
+#: holds edges[i] <= epsilon < edges[i + 1].
 CLEARNESS_BIN_EDGES = np.array([1.0, 1.065, 1.23, 1.5, 1.95, 2.8, 4.5, 6.2, np.inf])
 
-#: Perez et al. 1993, Table 1: for each clearness bin (axis 0) and each coefficient a, b, c,
-#: d, e (axis 1), the terms x1..x4 of x = x1 + x2 Z + Delta (x3 + x4 Z) (axis 2), Z in
-#: radians.  In bin 1, c and d take other forms (see :func:`coefficients`).  Transcribed
-#: from, and identical digit for digit in, three implementations: Radiance's gendaylit.c
-#: (J.-J. Delaunay 1994) and gendaymtx.c (I. Ashdown, who cites the 1993 erratum), and
-#: cPerezSkyModel.cpp.
+#: 1993 Table 1 (as gendaylit.c, gendaymtx.c, with the erratum): per bin (axis 0) and
+#: coefficient a..e (axis 1), x1..x4 of x = x1 + x2 Z + Delta (x3 + x4 Z), Z in rad (axis 2).
 LUMINANCE_COEFFICIENTS = np.array([
     # epsilon 1.000 - 1.065 (overcast)
     [[1.3525, -0.2576, -0.2690, -1.4366], [-0.7670, 0.0007, 1.2734, -0.1233],
@@ -101,9 +82,8 @@ LUMINANCE_COEFFICIENTS = np.array([
      [1.5000, -0.6426, 1.8564, 0.5636]],
 ])
 
-#: Perez et al. 1990, Table 4, diffuse luminous efficacy: a_i [lm W^-1], b_i [lm W^-1 cm^-1],
-#: c_i, d_i [lm W^-1] per clearness bin, for K = a + b W + c cos Z + d ln Delta (eq. 7).
-#: Identical in Radiance's gendaylit.c and gendaymtx.c and in cPerezSkyModel.cpp.
+#: 1990 Table 4, diffuse luminous efficacy per clearness bin: a_i [lm W^-1], b_i
+#: [lm W^-1 cm^-1], c_i, d_i [lm W^-1] of K = a + b W + c cos Z + d ln Delta (eq. 7).
 DIFFUSE_EFFICACY_COEFFICIENTS = np.array([
     [97.24, -0.46, 12.00, -8.91],
     [107.22, 1.15, 0.59, -3.95],
@@ -117,36 +97,21 @@ DIFFUSE_EFFICACY_COEFFICIENTS = np.array([
 
 #: kappa of the clearness, 1.041 for Z in radians (Perez et al. 1990, eq. 1) [rad^-3].
 KAPPA = 1.041
-#: Solar constant for the extraterrestrial irradiance of Delta [W m^-2]: the WMO (1981)
-#: value of the Perez model's time, used by Radiance's gendaylit and gendaymtx.
+#: Solar constant for Delta's extraterrestrial irradiance [W m^-2]: WMO (1981), as gendaylit.
 PEREZ_SOLAR_CONSTANT = 1367.0
-#: Radiance's lower limit on Delta for 1.065 < epsilon < 2.8 (gendaylit.c, gendaymtx.c),
-#: the default of :func:`perez_sky`.
+#: Radiance's lower limit on Delta for 1.065 < epsilon < 2.8, the default of :func:`perez_sky`.
 RADIANCE_DELTA_FLOOR = 0.2
-#: Radiance's gendaylit clamps epsilon below this value [unitless]: the top this module gives
-#: the open clear bin where it needs one (:data:`CLEARNESS_BIN_CENTRES`).
+#: gendaylit's upper clamp on epsilon; closes the open clear bin in :data:`CLEARNESS_BIN_CENTRES`.
 GENDAYLIT_MAX_CLEARNESS = 12.01
-#: The clearness that stands for each bin in a fit of the sky's shape (``fit --sky-shape``,
-#: :func:`shape_moves`): the bin's centre, the open clear bin's taken to
-#: :data:`GENDAYLIT_MAX_CLEARNESS` (9.1; the clear skies of pvlib's two TMY3 files have
-#: epsilon 6.7-8.5 between quartiles, 10.1-10.6 at the 99th percentile) [unitless].  Within a
-#: bin the pattern depends on epsilon only through the bin (1993, Table 1): the value names the
-#: bin on the clearness scale of a fitted index.
+#: The epsilon standing for each bin in a sky-shape fit (:func:`shape_moves`): its centre (the
+#: open bin closed at :data:`GENDAYLIT_MAX_CLEARNESS`); the pattern depends only on the bin.
 CLEARNESS_BIN_CENTRES = 0.5 * (CLEARNESS_BIN_EDGES[:-1]
                                + np.r_[CLEARNESS_BIN_EDGES[1:-1], GENDAYLIT_MAX_CLEARNESS])
-#: The factor by which a fit of the sky's shape (``fit --sky-shape``, :func:`shape_moves`)
-#: moves the sky brightness Delta: e^0.35 = 1.42, one standard deviation of the sky's level
-#: in a fit (:data:`~skyfit_mi.physics.sky.SKY_LEVEL_SD`), since Delta = E_dh m / E_0 is
-#: proportional to the diffuse irradiance whose level that prior doubts.  In log, that is 1-3
-#: times Delta's spread within one clearness bin (relative standard deviation 0.11-0.14 in the
-#: bins of epsilon >= 2.8 and 0.22-0.31 in those below 1.23, in pvlib's TMY3 files 723170TYA,
-#: Greensboro NC, and 703165TY, Sand Point AK, over their hours with the sun above 5 degrees):
-#: one step, the shape prior's standard deviation, is a change of sky that the spec's
-#: irradiance could plausibly miss.
+#: Factor by which a sky-shape fit moves Delta: one sd of the sky's level prior, since Delta is
+#: proportional to the diffuse irradiance (1-3 times Delta's spread in a bin in TMY3 data).
 BRIGHTNESS_STEP = float(np.exp(SKY_LEVEL_SD))
 #: Atmospheric precipitable water assumed by Radiance's gendaylit (dew point 11 C) [cm].
 PRECIPITABLE_WATER = 2.0
-
 #: Relative air mass models for Delta, by pvlib name.
 AIRMASS_MODELS = {
     "kastenyoung1989": "F. Kasten, A. T. Young, Applied Optics 28, 4735-4738, 1989 "
@@ -167,9 +132,7 @@ DECOMPOSITIONS = {
 }
 
 
-# --------------------------------------------------------------------------
-# Input checks
-# --------------------------------------------------------------------------
+# ---- Input checks ----
 
 def _sun_zenith(sun_zenith_deg):
     """Sun zenith [rad] from degrees, or InputRangeError unless in [0, 90) everywhere."""
@@ -183,8 +146,8 @@ def _sun_zenith(sun_zenith_deg):
 
 
 def _irradiance(name, value, hi, positive=False):
-    """``value`` as an array [W m^-2], or InputRangeError if negative, NaN, above ``hi``,
-    or zero where ``positive``."""
+    """``value`` as an array [W m^-2]; InputRangeError if negative, NaN, above ``hi``, or zero
+    where ``positive``."""
     check_range(name, value, 0.0, hi, "W m^-2")
     v = np.asarray(value, dtype=float)
     if positive and np.any(v == 0.0):
@@ -213,29 +176,21 @@ def _brightness_value(delta, positive=False):
     return d
 
 
-# --------------------------------------------------------------------------
-# Sky indices (Perez et al. 1990)
-# --------------------------------------------------------------------------
+# ---- Sky indices (Perez et al. 1990) ----
 
 def clearness(dhi, dni, sun_zenith_deg):
-    """Perez sky clearness epsilon, Perez et al. 1990 eq. 1.
+    """Perez sky clearness epsilon [unitless], >= 1 (1: no direct sun; > 6.2: clear), 1990 eq. 1.
 
     .. math:: \\varepsilon = \\frac{(E_{dh} + E_{dn}) / E_{dh} + \\kappa Z^3}{1 + \\kappa Z^3},
               \\quad \\kappa = 1.041\\ \\mathrm{rad}^{-3}
 
     Parameters
     ----------
-    dhi : array_like
-        Diffuse horizontal irradiance E_dh [W m^-2], in (0, 2000].
-    dni : array_like
-        Direct normal irradiance E_dn [W m^-2], in [0, 1500].
+    dhi, dni : array_like
+        Diffuse horizontal E_dh, in (0, 2000], and direct normal E_dn, in [0, 1500],
+        irradiance [W m^-2].
     sun_zenith_deg : array_like
         Solar zenith Z [degrees], in [0, 90).
-
-    Returns
-    -------
-    ndarray
-        epsilon [unitless], >= 1 (1: no direct sun; above 6.2: clear).
 
     Raises
     ------
@@ -251,15 +206,13 @@ def clearness(dhi, dni, sun_zenith_deg):
 
 def brightness(dhi, sun_zenith_deg, day_of_year=None, *, extraterrestrial=None,
                airmass_model="kastenyoung1989"):
-    """Perez sky brightness Delta, Perez et al. 1990 eq. 2.
+    """Perez sky brightness Delta [unitless], typically 0.01-0.6, Perez et al. 1990 eq. 2.
 
     .. math:: \\Delta = E_{dh}\\, m / E_0
 
-    with m the relative optical air mass (pvlib's ``get_relative_airmass``, model
-    ``airmass_model``; Kasten and Young 1989 by default, which pvlib uses for its Perez
-    models) and E_0 the extraterrestrial normal irradiance: ``extraterrestrial`` if given,
-    else pvlib's ``get_extra_radiation`` for ``day_of_year`` (Spencer 1971) with the solar
-    constant :data:`PEREZ_SOLAR_CONSTANT`, as Radiance's gendaylit computes it.
+    with m the relative air mass (pvlib's ``get_relative_airmass``; Kasten and Young 1989 by
+    default, as pvlib's Perez models) and E_0 the extraterrestrial normal irradiance, given or
+    from ``day_of_year`` (pvlib, Spencer 1971, :data:`PEREZ_SOLAR_CONSTANT`, as gendaylit).
 
     Parameters
     ----------
@@ -267,23 +220,10 @@ def brightness(dhi, sun_zenith_deg, day_of_year=None, *, extraterrestrial=None,
         Diffuse horizontal irradiance E_dh [W m^-2], in [0, 2000].
     sun_zenith_deg : array_like
         Solar zenith [degrees], in [0, 90).
-    day_of_year : array_like, optional
-        Day of the year, 1-366.  Give this or ``extraterrestrial``.
-    extraterrestrial : array_like, optional
-        E_0 [W m^-2], in (0, 1500].
+    day_of_year, extraterrestrial : array_like, optional
+        Exactly one (else SkyfitError): day 1-366, or E_0 [W m^-2] in (0, 1500].
     airmass_model : str
         A key of :data:`AIRMASS_MODELS`.
-
-    Returns
-    -------
-    ndarray
-        Delta [unitless], typically 0.01-0.6.
-
-    Raises
-    ------
-    SkyfitError
-        On bad irradiance or sun zenith, an unknown air mass model, or unless exactly one of
-        ``day_of_year`` and ``extraterrestrial`` is given.
     """
     from pvlib.atmosphere import get_relative_airmass
     from pvlib.irradiance import get_extra_radiation
@@ -305,18 +245,13 @@ def brightness(dhi, sun_zenith_deg, day_of_year=None, *, extraterrestrial=None,
 
 
 def clearness_bin(epsilon):
-    """Index 0-7 of the Perez clearness bin holding ``epsilon`` (1990 and 1993, Table 1).
-
-    Bins are closed below and open above: 1.065 is in bin 1 (0-based), as in Radiance and
-    pvlib.  ``epsilon`` must be finite and >= 1 [unitless].
-    """
+    """Index 0-7 of the clearness bin holding ``epsilon`` (finite, >= 1; 1990/1993 Table 1).
+    Bins are closed below, open above (1.065 is in bin 1), as in Radiance and pvlib."""
     eps = _clearness_value(epsilon)
     return np.minimum(np.searchsorted(CLEARNESS_BIN_EDGES, eps, side="right") - 1, 7)[()]
 
 
-# --------------------------------------------------------------------------
-# The luminance distribution (Perez et al. 1993)
-# --------------------------------------------------------------------------
+# ---- The luminance distribution (Perez et al. 1993) ----
 
 def coefficients(epsilon, delta, sun_zenith_deg):
     """The coefficients a, b, c, d, e of the Perez sky, 1993 eqs. 6-8 and Table 1.
@@ -327,22 +262,19 @@ def coefficients(epsilon, delta, sun_zenith_deg):
     .. math:: c = \\exp\\left([\\Delta (c_1 + c_2 Z)]^{c_3}\\right) - c_4, \\qquad
               d = -\\exp\\left(\\Delta (d_1 + d_2 Z)\\right) + d_3 + \\Delta d_4.
 
-    This is the model as published: no limits on Delta (see ``delta_floor`` of
-    :class:`PerezOptions` for Radiance's).
+    As published: no limits on Delta (see :class:`PerezOptions` ``delta_floor``).
 
     Parameters
     ----------
-    epsilon : array_like
-        Sky clearness [unitless], >= 1.
-    delta : array_like
-        Sky brightness [unitless], >= 0.
+    epsilon, delta : array_like
+        Sky clearness (>= 1) and brightness (>= 0) [unitless].
     sun_zenith_deg : array_like
         Solar zenith Z [degrees], in [0, 90).
 
     Returns
     -------
     ndarray, shape (..., 5)
-        a [unitless], b [unitless], c [unitless], d [rad^-1], e [unitless] along the last axis.
+        a, b, c [unitless], d [rad^-1], e [unitless] along the last axis.
     """
     eps, dlt, z = np.broadcast_arrays(_clearness_value(epsilon), _brightness_value(delta),
                                       _sun_zenith(sun_zenith_deg))
@@ -359,38 +291,31 @@ def coefficients(epsilon, delta, sun_zenith_deg):
 
 
 def floored_delta(epsilon, delta, delta_floor=RADIANCE_DELTA_FLOOR):
-    """The Delta [unitless] that :func:`perez_sky` gives :func:`coefficients` for a sky of
-    clearness ``epsilon`` and brightness ``delta``: raised to ``delta_floor`` where
-    1.065 < epsilon < 2.8, as Radiance's gendaylit and gendaymtx do; ``delta`` itself
-    elsewhere or when ``delta_floor`` is None (numbers, not arrays)."""
+    """The Delta [unitless] :func:`perez_sky` gives :func:`coefficients`: raised to
+    ``delta_floor`` where 1.065 < epsilon < 2.8, as gendaylit/gendaymtx; else, or when
+    ``delta_floor`` is None, ``delta`` itself (scalars)."""
     if delta_floor is None or not 1.065 < epsilon < 2.8:
         return float(delta)
     return max(float(delta), float(delta_floor))
 
 
 def diffuse_efficacy(epsilon, delta, sun_zenith_deg, precipitable_water=PRECIPITABLE_WATER):
-    """Luminous efficacy of diffuse skylight, Perez et al. 1990 eq. 7 and Table 4.
+    """Luminous efficacy K [lm W^-1] of diffuse skylight (diffuse horizontal illuminance per
+    unit irradiance), Perez et al. 1990 eq. 7 and Table 4.
 
     .. math:: K = a_i + b_i W + c_i \\cos Z + d_i \\ln\\Delta
 
-    with the coefficients of ``epsilon``'s clearness bin i.  W can be had from the surface
-    dew point T_d [C] as exp(0.07 T_d - 0.075) (1990, eq. 3).
+    with the coefficients of ``epsilon``'s bin i.  W from the dew point T_d [C]:
+    exp(0.07 T_d - 0.075) (1990, eq. 3).
 
     Parameters
     ----------
-    epsilon : array_like
-        Sky clearness [unitless], >= 1.
-    delta : array_like
-        Sky brightness [unitless], > 0.
+    epsilon, delta : array_like
+        Sky clearness (>= 1) and brightness (> 0) [unitless].
     sun_zenith_deg : array_like
         Solar zenith Z [degrees], in [0, 90).
     precipitable_water : array_like
-        Atmospheric precipitable water W [cm], in [0, 10]; 2 cm (Radiance's default).
-
-    Returns
-    -------
-    ndarray
-        K [lm W^-1]: diffuse horizontal illuminance per unit diffuse horizontal irradiance.
+        Precipitable water W [cm], in [0, 10]; 2 cm (Radiance's default).
     """
     check_range("precipitable water", precipitable_water, 0.0, 10.0, "cm")
     k = clearness_bin(epsilon)
@@ -401,41 +326,32 @@ def diffuse_efficacy(epsilon, delta, sun_zenith_deg, precipitable_water=PRECIPIT
 
 
 def hemisphere_integral(f, n=IRRADIANCE_NODES):
-    """Integral of f(d) cos theta_p over the upper hemisphere, dOmega in sr: the rule of
-    :func:`skyfit_mi.physics.sky.hemisphere_integral` (thesis eq. 4.19), as a number.  With
-    the default 128 nodes, Perez skies of every clearness bin with the sun 0-87 degrees from
-    the zenith agree with a 512-node rule to 3e-6 relative; where :class:`PerezSky` clamps
-    negative model values at zero (``delta_floor=None`` and a low Delta) the kink limits
-    the agreement to about 1.5e-4.
+    """Integral of f(d) cos theta_p dOmega over the upper hemisphere, as a number, by
+    :func:`skyfit_mi.physics.sky.hemisphere_integral` (thesis eq. 4.19).  128 nodes agree with
+    512 to 3e-6 relative (1.5e-4 where the clamp at zero puts a kink in l_v).
     """
     return float(sky_hemisphere_integral(f, n))
 
 
-# --------------------------------------------------------------------------
-# An absolute sky
-# --------------------------------------------------------------------------
+# ---- An absolute sky ----
 
 @dataclass(frozen=True)
 class PerezSky:
-    """A Perez sky scaled to measured irradiance; build it with :func:`perez_sky`.
-
-    Radiance is broadband (solar), as the measured irradiance; a colour, e.g. from
-    :func:`skyfit_mi.physics.colour.cct_to_rgb`, is the caller's choice.
+    """A Perez sky scaled to measured irradiance; build it with :func:`perez_sky`.  Radiance is
+    broadband (solar), as the measured irradiance; colour is the caller's choice.
 
     Attributes
     ----------
     sun_direction : ndarray (3,)
-        Unit vector toward the sun, world frame (+X east, +Y north, +Z up).
+        Unit vector toward the sun, world frame.
     coefficients : ndarray (5,)
-        a, b, c, d, e of :func:`~skyfit_mi.physics.sky.perez_relative_luminance`.
+        a..e of :func:`~skyfit_mi.physics.sky.perez_relative_luminance`.
     scale : float
-        Radiance per unit relative luminance [W m^-2 sr^-1]: the sky's horizontal
-        irradiance equals the diffuse horizontal irradiance.
+        Radiance per unit relative luminance [W m^-2 sr^-1], giving the measured DHI.
     efficacy : float
         Luminous efficacy of the skylight [lm W^-1].
     info : dict
-        Inputs and indices: sun angles [degrees], dhi, dni [W m^-2], epsilon, delta (and
-        the delta used for the coefficients), the clearness bin, the models used.
+        Inputs, indices (epsilon, delta, delta of the coefficients, bin) and models used.
     """
 
     sun_direction: np.ndarray
@@ -445,8 +361,8 @@ class PerezSky:
     info: dict = field(default_factory=dict)
 
     def relative_luminance(self, directions):
-        """l_v toward world ``directions`` (..., 3), clamped at 0, and 0 at and below the
-        horizon (the Perez model has no ground) [unitless]."""
+        """l_v toward world ``directions`` (..., 3) [unitless], clamped at 0, and 0 at and
+        below the horizon (no ground)."""
         d = np.asarray(directions, dtype=float)
         d = d / np.linalg.norm(d, axis=-1, keepdims=True)
         return np.where(d[..., 2] > 0.0, perez_pattern(d, self.sun_direction, self.coefficients),
@@ -467,15 +383,11 @@ class PerezSky:
 
     def to_sky(self, cct=None, ground_albedo=GROUND_ALBEDO, sun=True,
                sun_solid_angle=SUN_SOLID_ANGLE):
-        """This sky with its sun as a :class:`~skyfit_mi.physics.sky.Sky` (the ``perez``
-        pattern of the family the ``cie_sky`` emitter renders), linear sRGB.
-
-        The sky gets the colour of ``cct`` [K] (default :func:`default_cct`), whose luminance
-        is 1, so the sky's luminance-weighted horizontal irradiance stays the measured DHI; the
-        sun disc carries the measured DNI [W m^-2] over ``sun_solid_angle`` [sr] in the colour
-        of :func:`~skyfit_mi.physics.sun.sun_rgb`; the ground is a Lambertian plane of
-        reflectance ``ground_albedo`` lit by sky and sun (as the CIE skies' ground).
-        """
+        """This sky and its sun as a linear-sRGB :class:`~skyfit_mi.physics.sky.Sky` (``perez``
+        pattern): the sky in the unit-luminance colour of ``cct`` [K] (default
+        :func:`default_cct`), keeping the measured DHI; the disc carrying the measured DNI over
+        ``sun_solid_angle`` [sr] in :func:`~skyfit_mi.physics.sun.sun_rgb`'s colour; a Lambertian
+        ground of ``ground_albedo`` lit by both."""
         check_range("ground albedo", ground_albedo, 0.0, 1.0)
         eps = self.info.get("epsilon", 1.0)
         colour = cct_to_rgb(default_cct(eps) if cct is None else cct)
@@ -493,41 +405,30 @@ class PerezSky:
 
 
 def default_cct(epsilon):
-    """The sky colour temperature [K] skyfit gives a Perez sky of clearness ``epsilon``: the
-    thesis's overcast 6500 K at epsilon = 1 to its clear 15000 K at epsilon >= 6.2 (the last
-    bin's edge), linear in reciprocal temperature (mired) between.  A choice, not a published
-    model: the thesis gives 4500-7000 K overcast and 1e4-1e5 K clear (4.2.3); give ``cct`` to
-    override."""
+    """Sky colour temperature [K] for clearness ``epsilon``: 6500 K (overcast, epsilon = 1) to
+    15000 K (clear, epsilon >= 6.2), linear in mired between.  A choice, not a published model
+    (thesis 4.2.3: 4500-7000 K overcast, 1e4-1e5 K clear)."""
     w = float(np.clip((float(epsilon) - 1.0) / (CLEARNESS_BIN_EDGES[-2] - 1.0), 0.0, 1.0))
     return 1.0 / ((1.0 - w) / CCT_OVERCAST + w / CCT_CLEAR)
 
 
 @dataclass(frozen=True)
 class PerezOptions:
-    """The model choices of a Perez sky (:func:`perez_sky`), apart from the irradiance it is
-    scaled to.
+    """The model choices of a Perez sky (:func:`perez_sky`), checked where used.
 
     Attributes
     ----------
-    decomposition : str
-        A key of :data:`DECOMPOSITIONS` (the pvlib.irradiance function of that name), splitting
-        a global horizontal irradiance into diffuse and direct normal (default 'erbs').
-    airmass_model : str
-        A key of :data:`AIRMASS_MODELS`, for Delta (1990, eq. 2; default 'kastenyoung1989').
+    decomposition, airmass_model : str
+        Keys of :data:`DECOMPOSITIONS` (splitting GHI into DHI and DNI) and
+        :data:`AIRMASS_MODELS` (for Delta, 1990 eq. 2).
     delta_floor : float or None
-        Delta is raised to at least this value [unitless], in [0, 1], for the coefficients
-        when 1.065 < epsilon < 2.8, as Radiance's gendaylit and gendaymtx do with the default
-        :data:`RADIANCE_DELTA_FLOOR` (0.2); None uses the published model unchanged, which
-        refuses (b > 0) some dark skies with a little sun.  The efficacy always uses the
-        measured Delta.
+        Floor on Delta, in [0, 1], for the coefficients when 1.065 < epsilon < 2.8; None is the
+        published model, which refuses (b > 0) some dark skies with a little sun.  The efficacy
+        always uses the measured Delta.
     precipitable_water : float
-        W [cm], in [0, 10], for the luminous efficacy (1990, eq. 7; default
-        :data:`PRECIPITABLE_WATER`, 2 cm).
+        W [cm], in [0, 10], for the luminous efficacy (1990, eq. 7).
     nodes : int
-        Quadrature nodes in cos theta_p of the normalisation (1993, eq. 3; see
-        :func:`hemisphere_integral`; default :data:`~skyfit_mi.physics.sky.IRRADIANCE_NODES`).
-
-    The values are checked where they are used (:func:`perez_sky`).
+        Quadrature nodes in cos theta_p of the normalisation (1993, eq. 3).
     """
 
     decomposition: str = "erbs"
@@ -546,44 +447,33 @@ def _check_scalars(**values):
 
 def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=None, ghi=None,
               options=PerezOptions()):
-    """A Perez all-weather sky (1993) scaled to measured irradiance.
+    """A Perez all-weather sky (1993, :class:`PerezSky`) scaled to measured irradiance.
 
-    epsilon and Delta come from :func:`clearness` and :func:`brightness`, the pattern from
-    :func:`coefficients` and :func:`~skyfit_mi.physics.sky.perez_relative_luminance` (negative values clamped at 0, as
-    Radiance's gendaymtx does), and its level from the diffuse horizontal irradiance:
-    scale = E_dh / integral of l_v cos theta_p dOmega (1993, eq. 3), by
-    :func:`hemisphere_integral`.  Luminance uses :func:`diffuse_efficacy`.
+    epsilon and Delta from :func:`clearness` and :func:`brightness`; the pattern from
+    :func:`coefficients` (negative values clamped at 0, as gendaymtx); the level
+    scale = E_dh / integral of l_v cos theta_p dOmega (1993, eq. 3); luminance from
+    :func:`diffuse_efficacy`.
 
     Parameters
     ----------
-    sun_zenith_deg : float
-        Solar zenith [degrees], in [0, 90).
-    sun_azimuth_deg : float
-        Solar compass azimuth, from north toward east [degrees].
+    sun_zenith_deg, sun_azimuth_deg : float
+        Solar zenith, in [0, 90), and compass azimuth [degrees].
     day_of_year : int
         1-366, for the extraterrestrial irradiance (and the decomposition).
     dhi, dni : float, optional
-        Measured diffuse horizontal and direct normal irradiance [W m^-2]; dhi > 0.
+        Measured diffuse horizontal (> 0) and direct normal irradiance [W m^-2].
     ghi : float, optional
-        Global horizontal irradiance [W m^-2], instead of ``dhi`` and ``dni``: split into
-        them by ``options.decomposition``.
+        Global horizontal irradiance [W m^-2], instead of ``dhi`` and ``dni``: split by
+        ``options.decomposition``.
     options : PerezOptions
-        The model choices: decomposition, air mass model, Delta floor, precipitable water
-        [cm] and quadrature nodes (default: Radiance's floor and water, Erbs, Kasten and
-        Young 1989, 128 nodes).
-
-    Returns
-    -------
-    PerezSky
+        The model choices (default: Radiance's floor and water, Erbs, Kasten and Young 1989).
 
     Raises
     ------
     SkyfitError
-        On bad or missing irradiance (negative, NaN, dhi = 0), a sun on or below the horizon,
-        an unknown decomposition or air mass model, or coefficients with b > 0 (a sky growing
-        without bound toward the horizon, outside the model's range; gendaylit refuses these
-        too: with the default ``options.delta_floor`` they need epsilon >= 2.8 and a low
-        Delta, e.g. epsilon 2.8-4.5 with Delta < 0.075 and the sun near the zenith).
+        On bad or missing irradiance, a sun on or below the horizon, an unknown model, or
+        coefficients with b > 0 (as gendaylit; with the default floor only for epsilon >= 2.8
+        and a low Delta).
     """
     _check_scalars(sun_zenith_deg=sun_zenith_deg, sun_azimuth_deg=sun_azimuth_deg,
                    day_of_year=day_of_year, dhi=dhi, dni=dni, ghi=ghi)
@@ -634,28 +524,24 @@ def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=Non
 
 
 def shape_moves(info):
-    """The moves of a Perez sky's shape that a fit mixes with it (``fit --sky-shape``,
-    :func:`~skyfit_mi.physics.sky_shape.shape_variants`), for the sky of :func:`perez_sky`'s
-    ``info`` (epsilon, delta, delta_coefficients, sun_zenith_deg):
+    """The moves of a Perez sky's shape that a sky-shape fit mixes with it
+    (:func:`~skyfit_mi.physics.sky_shape.shape_variants`), for :func:`perez_sky`'s ``info``:
 
-    * ``clearness``: the pattern of the next clearness bin toward the clearer (+1) or the more
-      overcast (-1), at the spec's Delta (raised by :func:`floored_delta` where that bin
-      takes it), its epsilon the bin's :data:`CLEARNESS_BIN_CENTRES` value;
+    * ``clearness``: the next bin toward clearer (+1) or more overcast (-1), at the spec's Delta
+      (floored by :func:`floored_delta`), its epsilon from :data:`CLEARNESS_BIN_CENTRES`;
     * ``brightness``: the spec's clearness at the coefficients' Delta times (+1) or over (-1)
       :data:`BRIGHTNESS_STEP`.
 
-    A move is None beyond the first or last bin, below the Delta floor of the spec's bin
-    (which the spec's coefficients already use), or where its coefficients leave the model
-    (b > 0, or a black sky: :func:`perez_sky` refuses these too).
+    A move is None beyond the first or last bin, below the spec bin's Delta floor, or where
+    its coefficients leave the model (b > 0, or a black sky).
 
     Returns
     -------
     list of dict
         One per index: ``of`` ('clearness', 'brightness'), ``index`` ('epsilon', 'Delta'),
-        ``from`` (the spec's epsilon, or the Delta of its coefficients) and ``moves``
-        {+1, -1: None or ``to`` (the index), ``epsilon``, ``delta_coefficients``,
-        ``clearness_bin`` and ``coefficients`` (a..e)}.  Empty for a sky without epsilon
-        (the sun below the horizon).
+        ``from`` (the spec's epsilon, or its coefficients' Delta) and ``moves`` {+1, -1: None or
+        ``to`` (the index), ``epsilon``, ``delta_coefficients``, ``clearness_bin``,
+        ``coefficients``}.  Empty without epsilon (sun below the horizon).
     """
     if "epsilon" not in info:
         return []

@@ -1,17 +1,14 @@
 """Radiance reflected by a horizontal Ward surface under an open daylight sky, by quadrature.
 
-A deterministic NumPy reference for the renderers: the surface (normal +Z, world frame)
-sees the whole upper hemisphere of a :class:`~skyfit_mi.physics.sky.Sky`, nothing occludes it, and
-light reflects once, so the radiance toward ``wo`` is the rendering equation's single
-integral (thesis eq. 3.1 with the Ward BRDF, eq. 3.19):
+A deterministic NumPy reference for the renderers: the surface (normal +Z) sees the whole upper
+hemisphere of a :class:`~skyfit_mi.physics.sky.Sky` unoccluded and light reflects once, so the
+radiance toward ``wo`` is the single integral (thesis eq. 3.1 with the Ward BRDF, eq. 3.19)
 
     L(wo) = integral over the hemisphere of f_r(wi, wo) cos(theta_i) L_sky+sun(wi) dwi
 
-split into the solar disc (the whole BRDF, Gauss-Legendre in the angle from the sun's
-centre), the diffuse part over the sky (the sky's horizontal irradiance, ``Sky``'s own
-quadrature) and the lobe over the sky (a cap around the mirror direction holding all but
-e^-100 of it).  Used to arbitrate
-between the light cache and the path-traced frames (``scripts/diagnose_narrow_lobe.py``).
+split into the solar disc (the whole BRDF, Gauss-Legendre about the sun's centre), the diffuse
+part over the sky (its horizontal irradiance) and the lobe over the sky (a cap around the mirror
+direction holding all but e^-100 of it).
 """
 
 import numpy as np

@@ -1,27 +1,16 @@
 """Sky models against a measured sky: the Kider et al. (2014) scans of a clear day.
 
-The data (``../shared/data/sky-measurements-2014-05-27/`` beside the repository, or the
-folder named by the environment variable :data:`DATA_ENV`) are 15 scans of the sky's
-spectral radiance in 81 directions over Ithaca NY on 2013-05-27, 09:30-13:30 EDT, with a
-pyranometer's global horizontal irradiance.  Their README fixes the conventions used here:
-times are EDT (UTC-4); ``azimuth_deg`` is the compass azimuth from north toward east and
-``elevation_deg`` the elevation above the horizon [degrees] of each point;
-``luminance_cd_m2`` is 683 lm/W times the spectral radiance weighted by ybar [cd m^-2].
+The data (``../shared/data/sky-measurements-2014-05-27/`` beside the repository, or
+``$SKYFIT_SKY_DATA``) are 15 scans of spectral sky radiance in 81 directions over Ithaca NY on
+2013-05-27, 09:30-13:30 EDT (UTC-4), with a pyranometer's GHI.  Per the README, azimuths are
+compass (from north toward east), elevations above the horizon [degrees], and luminance is
+683 lm/W times the ybar-weighted spectral radiance [cd m^-2].
 
-How well a sky model matches a scan (the comparison of issue 15):
-
-* the model's luminance pattern M toward the scan's directions, with one free scale k per
-  scan, the closed-form least-squares fit in log luminance (:func:`scale_factor`);
-* points within :data:`SUN_EXCLUSION_DEG` of the sun left out (the README's advice: the
-  81-point grid undersamples the circumsolar peak, whose readings depart most from smooth
-  sky functions);
-* the figure of merit, the rms of the relative residuals (:func:`relative_rms`);
-* optionally the scanner's frame turned by the README's fitted rotation
-  (:data:`SCANNER_ROTATION_DEG`, :func:`Scan.directions`): with the nominal directions
-  the measured pattern is turned 6-17 degrees in azimuth against the computed sun.
-
-The sun position is NREL SPA (:func:`skyfit_mi.physics.sun.solar_position`) at the scan's
-label time (its start; a scan lasts about 5.7 min, in which the sun moves 1-3 degrees).
+A model matches a scan by the rms relative residual (:func:`relative_rms`) of its pattern
+with one free scale per scan, fitted in log luminance (:func:`scale_factor`); points within
+:data:`SUN_EXCLUSION_DEG` of the sun are left out (the grid undersamples the circumsolar
+peak); optionally the scanner frame is turned by the README's fitted rotation
+(:data:`SCANNER_ROTATION_DEG`).  The sun is NREL SPA at the scan's label (start) time.
 
 Data: J. T. Kider Jr., D. Knowlton, J. Newlin, Y. K. Li, D. P. Greenberg, "A Framework for
 the Experimental Comparison of Solar and Skydome Illumination", ACM Transactions on Graphics
@@ -54,9 +43,8 @@ CITATION = ("Kider et al. 2014, 'A Framework for the Experimental Comparison of 
 #: Roof of Rhodes Hall, Cornell University, Ithaca NY (the data's README) [degrees].
 SITE_LATITUDE_DEG = 42.443449
 SITE_LONGITUDE_DEG = -76.481962
-#: Rotation vector about (east, north, up) [degrees] that the data's README fits to all 15
-#: scans at once: true direction = R(rotation) nominal direction, i.e. true azimuth about
-#: nominal + 11.5 degrees, with a ~1.5 degree tilt.
+#: Rotation vector about (east, north, up) [degrees] the README fits to all scans: true
+#: direction = R(rotation) nominal (azimuth about +11.5 degrees, ~1.5 degree tilt).
 SCANNER_ROTATION_DEG = (1.473, -0.45, -11.521)
 #: Points closer than this to the sun are left out of every comparison [degrees].
 SUN_EXCLUSION_DEG = 10.0
@@ -67,13 +55,8 @@ _ILLUMINANCE_COLUMN = "diffuse_horizontal_illuminance_lx_est"
 
 
 def data_dir(folder=None):
-    """The data folder: ``folder``, else ``$SKYFIT_SKY_DATA``, else :data:`DEFAULT_DATA_DIR`.
-
-    Raises
-    ------
-    SkyfitError
-        If the folder has no ``sky_radiance.csv``.
-    """
+    """The data folder: ``folder``, else ``$SKYFIT_SKY_DATA``, else :data:`DEFAULT_DATA_DIR`;
+    SkyfitError if it has no ``sky_radiance.csv``."""
     path = Path(folder or os.environ.get(DATA_ENV) or DEFAULT_DATA_DIR)
     if not (path / "sky_radiance.csv").is_file():
         raise SkyfitError(f"no sky_radiance.csv in {path}: put the Kider et al. 2014 data "
@@ -83,13 +66,12 @@ def data_dir(folder=None):
 
 
 def rotation_matrix(rotvec_deg):
-    """Rotation matrix of a rotation vector (axis times angle) [degrees], Rodrigues' formula.
+    """Rotation matrix (3, 3), acting on column vectors, of a rotation vector [degrees]
+    (right-handed, as scipy's ``Rotation.from_rotvec``), by Rodrigues' formula:
 
     .. math:: R = I + \\sin\\theta\\, K + (1 - \\cos\\theta) K^2
 
-    with theta = |rotvec| [rad] and K the cross-product matrix of the unit axis; the
-    rotation is right-handed about the axis (as ``scipy.spatial.transform.Rotation.
-    from_rotvec``).  Returns a (3, 3) array acting on column vectors.
+    with theta = |rotvec| [rad] and K the cross-product matrix of the unit axis.
     """
     v = np.radians(np.asarray(rotvec_deg, dtype=float))
     theta = np.linalg.norm(v)
@@ -102,37 +84,28 @@ def rotation_matrix(rotvec_deg):
 
 @dataclass(frozen=True)
 class Scan:
-    """One scan of the sky with the sun and the pyranometer reading that go with it.
+    """One scan of the sky (81 points) with its sun and pyranometer reading.
 
     Attributes
     ----------
     capture : str
         The archive's name, e.g. ``2013-05-27___09.30.00``.
     time : pandas.Timestamp
-        Scan start (its label), time-zone aware (EDT).
+        Scan start (its label), EDT.
     azimuth_deg, elevation_deg : ndarray (81,)
-        Nominal directions of the points: compass azimuth from north toward east, elevation
-        above the horizon [degrees].
-    luminance : ndarray (81,)
-        Measured luminance [cd m^-2].
+        Nominal directions of the points [degrees].
+    luminance, xyz : ndarray (81,); ndarray (81, 3) or None
+        Measured luminance and CIE 1931 X, Y, Z [cd m^-2].
     sun_zenith_deg, sun_azimuth_deg : float
         Apparent sun position at ``time`` (NREL SPA) [degrees].
     ghi : float
-        Pyranometer global horizontal irradiance, mean over the first minute of the scan's
-        log [W m^-2].
-    ghi_time : pandas.Timestamp
-        Middle of that minute (13:00:30 for the 13:30 scan, whose log starts at 13:00).
-    ghi_sun_zenith_deg : float
-        Sun zenith at ``ghi_time`` [degrees].
-    dhi_scan : float
-        Diffuse horizontal irradiance integrated from the scan's spectra, 350-2500 nm, sky
-        only (the data's estimate) [W m^-2].
-    diffuse_illuminance_scan : float
-        Diffuse horizontal illuminance integrated from the scan [lx].
+        Pyranometer GHI, mean over the first minute of the scan's log [W m^-2].
+    ghi_time, ghi_sun_zenith_deg
+        Middle of that minute (13:00:30 for the 13:30 scan), and the sun zenith then [degrees].
+    dhi_scan, diffuse_illuminance_scan : float
+        The data's sky-only DHI (350-2500 nm) [W m^-2] and illuminance [lx] from the scan.
     note : str
-        The data's note on the scan (empty when none).
-    xyz : ndarray (81, 3) or None
-        Measured CIE 1931 X, Y, Z [cd m^-2] (Y = ``luminance``).
+        The data's note on the scan ("" if none).
     """
 
     capture: str
@@ -162,25 +135,21 @@ class Scan:
 
     @property
     def sun_direction(self):
-        """Unit vector toward the sun, world frame (+X east, +Y north, +Z up)."""
+        """Unit vector toward the sun, world frame."""
         return direction_from_angles(np.radians(self.sun_zenith_deg),
                                      np.radians(self.sun_azimuth_deg))
 
     def directions(self, rotated=False):
-        """World unit vectors (81, 3) of the points: nominal, or turned by the README's
-        scanner rotation, v = R(:data:`SCANNER_ROTATION_DEG`) v_nominal, if ``rotated``."""
+        """World unit vectors (81, 3) of the points, turned by :data:`SCANNER_ROTATION_DEG`
+        if ``rotated``."""
         d = direction_from_angles(np.radians(90.0 - self.elevation_deg),
                                   np.radians(self.azimuth_deg))
         return d @ rotation_matrix(SCANNER_ROTATION_DEG).T if rotated else d
 
 
 def load_scans(folder=None):
-    """The 15 scans of the data (:func:`data_dir`), in time order, as :class:`Scan` s.
-
-    Reads ``sky_radiance.csv`` (directions and luminance), ``captures.csv`` (the scan's
-    diffuse estimates and notes) and ``irradiance.csv`` (the pyranometer GHI of the log the
-    data pairs with each scan, first minute).
-    """
+    """The 15 scans of the data (:func:`data_dir`), in time order, as :class:`Scan` s, from
+    ``sky_radiance.csv``, ``captures.csv`` and ``irradiance.csv``."""
     import pandas as pd
 
     path = data_dir(folder)
@@ -213,9 +182,7 @@ def load_scans(folder=None):
             for i, ((name, g), t) in enumerate(zip(groups, times))]
 
 
-# --------------------------------------------------------------------------
-# The figure of merit
-# --------------------------------------------------------------------------
+# ---- The figure of merit ----
 
 def angle_to_sun_deg(directions, sun):
     """Angle zeta between world ``directions`` (..., 3) and the unit vector ``sun`` (3,)
@@ -235,60 +202,33 @@ def _positive(model, measured):
 
 
 def scale_factor(model, measured):
-    """The scale k that best fits ``model`` to ``measured`` in log luminance, closed form.
+    """The scale k [cd m^-2 per model unit], shape (...), that best fits ``model`` M (..., n)
+    (one fit per row, M_i > 0) to ``measured`` L (n,) [cd m^-2] in log luminance:
 
     .. math:: k = \\exp\\Big(\\frac{1}{n}\\sum_i \\ln\\frac{L_i}{M_i}\\Big)
 
     the least-squares solution of ln L_i = ln k + ln M_i (the geometric mean of the ratios).
-
-    Parameters
-    ----------
-    model : array_like, shape (..., n)
-        Model values M_i > 0, any unit (one fit per row).
-    measured : array_like, shape (n,)
-        Measured luminance L_i > 0 [cd m^-2].
-
-    Returns
-    -------
-    ndarray, shape (...)
-        k [cd m^-2 per model unit]: 1 when the model is in cd m^-2 and its level is right.
     """
     m, y = _positive(model, measured)
     return np.exp(np.mean(np.log(y) - np.log(m), axis=-1))
 
 
 def relative_rms(model, measured):
-    """Relative rms error of a model pattern with its scale free: the figure of issue 15.
+    """Relative rms error [unitless], shape (...), of a model pattern ``model`` (..., n) against
+    ``measured`` (n,) with its scale free (inputs as :func:`scale_factor`):
 
     .. math:: \\epsilon = \\sqrt{\\frac{1}{n}\\sum_i \\Big(\\frac{k M_i - L_i}{L_i}\\Big)^2}
 
-    with k from :func:`scale_factor` (least squares in log luminance).  This definition (not
-    the rms residual over the rms luminance, nor k by least squares in luminance) reproduces
-    the issue's figures for the thesis's CIE clear sky: 13-20% per scan, day mean 0.1641
-    (0.1305 with the scanner rotation; the issue's 0.164 and 0.131), and 43-68% for a
-    uniform sky.  The rms residual over the rms luminance gives 0.191, and k by least
-    squares in luminance 0.167.
-
-    Parameters
-    ----------
-    model : array_like, shape (..., n)
-        Model values M_i > 0, any unit (one figure per row).
-    measured : array_like, shape (n,)
-        Measured luminance L_i > 0 [cd m^-2].
-
-    Returns
-    -------
-    ndarray, shape (...)
-        epsilon [unitless].
+    with k from :func:`scale_factor`.  This definition, rather than rms residual over rms
+    luminance or k fitted in linear luminance, reproduces the published figures
+    (``docs/BENCHMARKS.md``, "Sky models against a measured clear sky").
     """
     m, y = _positive(model, measured)
     k = scale_factor(m, y)[..., None]
     return np.sqrt(np.mean(((k * m - y) / y) ** 2, axis=-1))
 
 
-# --------------------------------------------------------------------------
-# The skies compared
-# --------------------------------------------------------------------------
+# ---- The skies compared ----
 
 @dataclass(frozen=True)
 class SkyModel:
@@ -296,25 +236,19 @@ class SkyModel:
 
     Attributes
     ----------
-    name : str
-        Short name (a table column).
+    name, description : str
+        Short name (a table column) and one line for tables.
     luminance : callable
-        ``luminance(directions (n, 3), scan, parameters (k,))`` -> (k, n): the model's
-        luminance toward the directions for each parameter value (``parameters`` is
-        ``[None]`` for a model without one) [cd m^-2 if ``absolute``, else any unit].
+        ``luminance(directions (n, 3), scan, parameters (k,))`` -> (k, n) [cd m^-2 if
+        ``absolute``, else any unit].
     parameters : tuple
-        Values tried, one per row; the best (lowest :func:`relative_rms`) is kept.
-        ``(None,)`` for a model without a fitted parameter.
+        Values tried; the best (lowest :func:`relative_rms`) is kept.  ``(None,)`` if none.
     parameter_name : str
         Name of the fitted parameter ("" if none).
     absolute : bool
-        The luminance is in cd m^-2, so the fitted scale k is the measured level over the
-        model's (1 = the model's level is right).
-    description : str
-        One line for tables.
+        The luminance is in cd m^-2, so the scale k is the measured level over the model's.
     held_out : bool
-        Also score the model as a prediction, its parameter fitted to the other scans
-        (:func:`compare_held_out`); for models with a fitted parameter.
+        Also score the model as a prediction (:func:`compare_held_out`).
     """
 
     name: str
@@ -327,8 +261,7 @@ class SkyModel:
 
 
 def thesis_clear_luminance(directions, scan, parameters):
-    """The thesis's CIE clear sky (eqs. 4.10-4.15, :func:`skyfit_mi.physics.sky.cie_sky`):
-    its luminance-weighted radiance times the efficacy 150 lm/W [cd m^-2], shape (1, n)."""
+    """The thesis's CIE clear sky (eqs. 4.10-4.15) at 150 lm/W [cd m^-2], shape (1, n)."""
     sky = cie_sky("clear", scan.sun_zenith_deg, scan.sun_azimuth_deg, day=scan.day_of_year)
     return (sky.sky_radiance(directions) @ SRGB_LUMINANCE * EFFICACY_CLEAR)[None, :]
 
@@ -337,9 +270,8 @@ def perez_inputs(scan, source):
     """Irradiance for the Perez sky of ``scan`` as keywords of :func:`perez_sky`.
 
     ``source`` is ``'erbs'`` (the pyranometer GHI split by Erbs et al. 1982) or ``'scan'``
-    (DHI integrated from the scan, DNI = (GHI - DHI) / cos Z) [W m^-2].  Z is the sun at the
-    scan; the GHI is that of the scan's paired log, which for the 13:30 scan was taken at
-    13:00 (no pyranometer samples exist near 13:30).
+    (DHI from the scan, DNI = (GHI - DHI) / cos Z, Z the sun at the scan).  The 13:30 scan's
+    GHI is from 13:00, the nearest pyranometer samples.
     """
     check_choice("Perez irradiance source", source, ("erbs", "scan"))
     if source == "erbs":
@@ -359,12 +291,9 @@ def perez_luminance(source):
 
 
 def perez_shape_luminance(directions, scan, parameters):
-    """The Perez (1993) pattern l_v for (epsilon, Delta) pairs (k, 2) at the scan's sun, (k, n):
-    the shape alone, its indices given instead of computed from irradiance
-    (:func:`~skyfit_mi.physics.perez.coefficients`, as published: no Delta floor).  Pairs whose
-    b > 0 (a sky growing without bound toward the horizon, which
-    :func:`~skyfit_mi.physics.perez.perez_sky` refuses) give NaN rows, so :func:`compare`
-    passes them over."""
+    """The Perez (1993) pattern l_v for (epsilon, Delta) pairs (k, 2) at the scan's sun, (k, n),
+    from :func:`~skyfit_mi.physics.perez.coefficients` (no Delta floor).  Pairs with b > 0
+    give NaN rows, which :func:`compare` passes over."""
     eps, delta = np.asarray(parameters, dtype=float).T
     c = coefficients(eps, delta, scan.sun_zenith_deg)                      # (k, 5)
     values = perez_pattern(np.asarray(directions, dtype=float), scan.sun_direction,
@@ -406,8 +335,8 @@ INDEX_STEP = 0.01
 _LO, _HI = cie_general.CLEAR_GROUPS
 _GROUP_STEPS = np.round(np.arange(_LO, _HI + 1e-9, 2 * INDEX_STEP), 2)
 
-#: Step and range of the Perez sky brightness Delta fitted per scan [unitless]: Radiance's
-#: gendaylit holds Delta to [0.01, 0.6], the range of the data the model was fitted to.
+#: Step and range of the Perez brightness Delta fitted per scan [unitless]: gendaylit's
+#: [0.01, 0.6], the range of the model's data.
 PEREZ_DELTA_STEP = 0.005
 _PEREZ_DELTAS = np.round(np.arange(0.01, 0.6 + 1e-9, PEREZ_DELTA_STEP), 3)
 #: (epsilon, Delta) pairs tried by ``perez_fit``: each clearness bin by its lower edge (the
@@ -457,10 +386,9 @@ MODELS = (
 
 
 def _errors(scan, model, rotated, exclude_deg):
-    """:func:`relative_rms` and :func:`scale_factor` of every parameter value of ``model``
-    on ``scan`` (points at least ``exclude_deg`` from the sun), shape (k,) each, and the
-    number of points compared.  A value whose model is not positive and finite at every
-    compared point is no candidate: error inf, scale NaN."""
+    """:func:`relative_rms` and :func:`scale_factor`, each (k,), of every parameter value of
+    ``model`` on ``scan`` (points >= ``exclude_deg`` from the sun), and the number of points.
+    A value whose model is not positive and finite everywhere gets error inf, scale NaN."""
     d = scan.directions(rotated)
     keep = angle_to_sun_deg(d, scan.sun_direction) >= exclude_deg
     values = np.asarray(model.luminance(d[keep], scan, model.parameters), dtype=float)
@@ -478,19 +406,10 @@ def _errors(scan, model, rotated, exclude_deg):
 
 
 def compare(scan, model, rotated=False, exclude_deg=SUN_EXCLUSION_DEG):
-    """How well ``model`` matches ``scan``: the best parameter, its error and scale.
-
-    The model is evaluated toward the scan's directions (turned by the scanner rotation if
-    ``rotated``) that lie at least ``exclude_deg`` [degrees] from the sun, and each
-    parameter value's :func:`relative_rms` computed with its own :func:`scale_factor`; values
-    whose model is not positive at every compared point are passed over.
-
-    Returns
-    -------
-    dict
-        ``relative_rms`` [unitless] and ``scale`` (k) of the best parameter value,
-        ``parameter`` (None for a model without one), ``n_points`` compared.
-    """
+    """How well ``model`` matches ``scan`` (points >= ``exclude_deg`` [degrees] from the sun,
+    directions turned if ``rotated``): a dict of ``relative_rms`` and ``scale`` (k) of the
+    parameter value of least :func:`relative_rms`, that ``parameter`` (None if the model has
+    none) and ``n_points`` compared."""
     err, scale, n = _errors(scan, model, rotated, exclude_deg)
     i = int(np.argmin(err))
     return {"relative_rms": float(err[i]), "scale": float(scale[i]),
@@ -498,25 +417,14 @@ def compare(scan, model, rotated=False, exclude_deg=SUN_EXCLUSION_DEG):
 
 
 def held_out_name(model):
-    """Table name of ``model`` with its parameter chosen on the other scans:
-    ``cie_groups_fit`` -> ``cie_groups_fit_heldout``."""
+    """Table name of ``model`` scored with its parameter chosen on the other scans."""
     return model.name + "_heldout"
 
 
 def compare_held_out(scans, model, rotated=False, exclude_deg=SUN_EXCLUSION_DEG):
-    """``model`` as a prediction: each scan scored at the parameter fitted to the others.
-
-    For scan j the parameter value with the lowest mean :func:`relative_rms` over the other
-    scans (leave-one-out cross-validation) is chosen, and scan j's error at that value
-    reported (its scale k still free, as in :func:`compare`).  Unlike :func:`compare`, which
-    fits the pattern to the scan it scores, this tells how well the model, once set from
-    other measurements, predicts a sky it has not seen.
-
-    Returns
-    -------
-    list of dict
-        One per scan, the keys of :func:`compare`.
-    """
+    """``model`` as a prediction: each scan scored at the parameter value of lowest mean
+    :func:`relative_rms` over the other scans (leave-one-out), its scale k still free; a list
+    of :func:`compare` dicts, one per scan."""
     if len(scans) < 2:
         raise SkyfitError("a held-out comparison needs at least two scans; give more.")
     runs = [_errors(s, model, rotated, exclude_deg) for s in scans]
@@ -533,13 +441,9 @@ def compare_held_out(scans, model, rotated=False, exclude_deg=SUN_EXCLUSION_DEG)
 def irradiance_comparison(scan):
     """Measured against modelled horizontal irradiance at the pyranometer's minute.
 
-    Models with absolute levels, at the sun of ``scan.ghi_time``:
-
-    * the thesis's CIE clear sky (:func:`~skyfit_mi.physics.sky.cie_sky`): the sky's
-      horizontal irradiance (eq. 4.19 of the Kittler zenith luminance over 150 lm/W) and
-      the sun's (eq. 4.7 times cos Z); their sum against the pyranometer GHI;
-    * the Perez sky from the GHI split by Erbs: its DHI and diffuse illuminance (its GHI
-      equals the measured by construction).
+    Models with absolute levels, at the sun of ``scan.ghi_time``: the thesis's CIE clear sky
+    (sky by eq. 4.19 at 150 lm/W, sun by eq. 4.7 times cos Z; their sum against the measured
+    GHI) and the Perez sky from the GHI split by Erbs (its GHI is the measured by construction).
 
     Returns
     -------
@@ -550,7 +454,7 @@ def irradiance_comparison(scan):
         ``perez_dni``, ``perez_illuminance``.
     """
     z = scan.ghi_sun_zenith_deg
-    # Horizontal irradiance does not depend on the sun's azimuth: 0 (north) stands for it.
+    # Horizontal irradiance does not depend on the sun's azimuth: 0 stands for it.
     sky = cie_sky("clear", z, 0.0, day=scan.day_of_year)
     e_sky = float(sky.sky_horizontal_irradiance() @ SRGB_LUMINANCE)
     e_sun = float(sky.sun_horizontal_irradiance() @ SRGB_LUMINANCE)
@@ -567,16 +471,13 @@ def irradiance_comparison(scan):
 
 def run_comparison(scans, models=MODELS, rotations=(False, True), exclude_deg=SUN_EXCLUSION_DEG):
     """:func:`compare` for every scan, model and rotation choice, as one long table; models
-    marked ``held_out`` also as predictions (:func:`compare_held_out`, named by
-    :func:`held_out_name`), right after their fit.
+    marked ``held_out`` also as predictions (:func:`compare_held_out`), right after their fit.
 
     Returns
     -------
     pandas.DataFrame
-        One row per (rotated, model, scan): ``rotated`` (bool), ``model``, ``capture``,
-        ``time`` (HH:MM local), ``relative_rms`` [unitless], ``scale`` (k; the measured level
-        over the model's for ``absolute`` models), ``absolute``, ``held_out`` (the parameter
-        was fitted to the other scans), ``parameter`` (the fitted value as text, "" if none),
+        One row per (rotated, model, scan): ``rotated``, ``model``, ``capture``, ``time``,
+        ``relative_rms``, ``scale`` (k), ``absolute``, ``held_out``, ``parameter`` (as text),
         ``n_points``.
     """
     import pandas as pd
@@ -607,8 +508,7 @@ def best_models(results, reference="cie_clear_thesis"):
 
     ``results`` is a :func:`run_comparison` table.  Returns a pandas.DataFrame with
     ``rotated``, ``time``, ``best`` (model name), ``best_rms``, ``reference_rms`` and
-    ``margin`` = reference_rms - best_rms (> 0: the best model beats the reference)
-    [unitless].
+    ``margin`` = reference_rms - best_rms (> 0: the best beats the reference).
     """
     if reference not in set(results["model"]):
         raise SkyfitError(f"reference model {reference!r} is not in the results; give one of "

@@ -1,11 +1,8 @@
-"""A sky's shape moved: the skies a fit of the shape mixes (``fit --sky-shape``), and the sky
-that fit saw.
+"""A sky's shape moved: the skies a sky-shape fit (``fit --sky-shape``) mixes, and the sky it saw.
 
-A CIE sky moves its gradation and indicatrix (:mod:`~skyfit_mi.physics.cie_general`), a Perez
-sky its clearness and brightness (:mod:`~skyfit_mi.physics.perez`), a turbid sky its turbidity
-(:mod:`~skyfit_mi.physics.turbid_sky`); each model gives its moves (``shape_moves``) and makes
-its own :class:`~skyfit_mi.physics.sky.Sky`, so the choice among them sits here, above all of
-them.
+Each sky model gives its moves (``shape_moves``: CIE gradation and indicatrix, Perez clearness
+and brightness, turbidity) and its own :class:`~skyfit_mi.physics.sky.Sky`; the choice among
+them sits here, above them all.
 """
 
 from dataclasses import replace
@@ -24,36 +21,18 @@ SHAPED_SUPERSAMPLE = 2
 
 
 def shape_variants(sky, toward=None):
-    """The skies a fit of the sky's shape mixes with ``sky`` (``fit --sky-shape``): one
-    index of its pattern moved at a time, lit as that sky's light other than the sun
-    (:func:`_pattern_as_sky_part`).  For a CIE sky (the thesis's clear sky, standard type
-    12, or a CIE S 011 general sky, :mod:`~skyfit_mi.physics.cie_general`) its gradation,
-    then its indicatrix, moved one CIE group on
-    (:func:`~skyfit_mi.physics.cie_general.shape_moves`); for a Perez sky
-    (:mod:`~skyfit_mi.physics.perez`) its clearness moved one bin and its brightness Delta
-    one step (:func:`~skyfit_mi.physics.perez.shape_moves`); for a turbid sky
-    (:mod:`~skyfit_mi.physics.turbid_sky`) its turbidity moved one step.  A mix
-    (1 - sum(a)) sky + sum a_j V_j moves the shape continuously between them: a_j = 1 is
-    variant j's index exactly.
+    """The skies (label, Sky) a sky-shape fit mixes with ``sky``: one index of its pattern moved
+    at a time (the model's ``shape_moves``), lit as ``sky``'s light other than the sun.  A mix
+    (1 - sum(a)) sky + sum a_j V_j moves the shape continuously; a_j = 1 is variant j's index.
+    Labels read 'gradation group 5 -> 6'; info ``kind`` 'shape variant', ``of``, ``index``,
+    ``from``, ``to`` and the move's coefficients.  Empty for other skies or a black sky.
 
     Parameters
     ----------
     toward : dict, optional
-        {index name (``of``): +1 or -1}: the way to move that index, +1 toward the more
-        turbid CIE group, the clearer Perez bin, the brighter Delta, the higher turbidity;
-        an index not named moves +1 where it can, else -1.
-
-    Returns
-    -------
-    list of (label, Sky)
-        The labels as 'gradation group 5 -> 6'; the skies' info ``kind`` 'shape variant',
-        ``of``, ``index``, ``from``, ``to`` and the move's coefficients.  Empty for other
-        skies, or a sky black above the horizon.
-
-    Raises
-    ------
-    SkyfitError
-        Where ``toward`` names a way this sky's index cannot move.
+        {index name (``of``): +1 or -1}: +1 toward the more turbid CIE group, the clearer Perez
+        bin, the brighter Delta, the higher turbidity; an unnamed index moves +1 where it can.
+        SkyfitError where the named way is impossible.
     """
     kind = sky.info.get("kind")
     if kind == "clear":
@@ -91,11 +70,9 @@ def shape_variants(sky, toward=None):
 
 
 def _pattern_as_sky_part(sky, coefficients, info=None):
-    """The Perez-form pattern of ``coefficients`` (a..e, :func:`~.sky.perez_pattern`) lit as
-    ``sky``'s light other than the sun: the same horizontal irradiance channel by channel
-    (:meth:`~.sky.Sky.sky_horizontal_irradiance`, so the same luminance-weighted irradiance
-    and colour), the sky-lit ground (:meth:`~.sky.Sky.split`), the same horizon; no sun, and
-    ``info``."""
+    """The Perez-form pattern of ``coefficients`` (a..e) lit as ``sky``'s light other than the
+    sun: the same horizontal irradiance per channel, the sky-lit ground, the same horizon; no
+    sun; ``info``."""
     c = np.asarray(coefficients, dtype=float)
     total = float(hemisphere_integral(lambda d: perez_pattern(d, sky.sun_direction, c)))
     if not total > 0:
@@ -108,23 +85,16 @@ def _pattern_as_sky_part(sky, coefficients, info=None):
 
 
 def shaped(sky, k, mix, variants, departure=(), rows=MAX_ROWS, supersample=SHAPED_SUPERSAMPLE):
-    """A copy of ``sky`` lit as a fit of the sky's level and shape saw it (``fit
-    --sky-shape``): the sun's light (:meth:`~.sky.Sky.split`) as ``sky``'s, the rest ``k``
-    times (1 - sum(mix)) ``sky``'s own plus ``mix[j]`` times ``variants[j]``
-    (:func:`shape_variants`' skies); for a
-    turbid sky both levels moved too, as its fitted turbidity sets them
-    (:func:`~skyfit_mi.physics.turbid_sky.level_factors`).  The variants' patterns have
-    Perez coefficients of their own, which one Sky cannot hold beside this one's, so the
-    rest becomes an environment map: a lat-long table of ``rows`` rows
-    (:mod:`~skyfit_mi.physics.latlong`), each cell the mean over ``supersample`` x
-    ``supersample`` directions, the ground below the horizon included
-    (its ``ground`` term 0): an ``envmap`` record's sky with the sun's direct normal
-    irradiance and no albedo of its own (:func:`~skyfit_mi.physics.envmap.envmap_sky`).
-    ``departure``: the weights of the sky's fitted departure from its model (``fit
-    --sky-departure``), ``sky``'s own sky above the horizon times their field added as the
-    fit mixed it (:func:`~.sky_departure.departure_parts`): its patterns' light times
-    sum_j a_j B_j.
-    Radiances linear sRGB [W m^-2 sr^-1]; ``k``, ``mix`` and ``departure`` unitless."""
+    """A copy of ``sky`` lit as a fit of the sky's level and shape saw it: the sun's light as
+    ``sky``'s, the rest ``k`` times (1 - sum(mix)) ``sky``'s own plus ``mix[j]`` times
+    ``variants[j]``, plus, with ``departure`` weights a_j, the rest's patterns times
+    sum_j a_j B_j (:func:`~.sky_departure.departure_parts`).  A turbid sky's levels move with
+    its fitted turbidity (:func:`~skyfit_mi.physics.turbid_sky.level_factors`).
+
+    The variants have Perez coefficients of their own, which one Sky cannot hold, so the rest
+    becomes a lat-long envmap of ``rows`` rows (``supersample``^2 directions a cell), ground
+    included (``ground`` term 0).  Radiances linear sRGB [W m^-2 sr^-1]; ``k``, ``mix`` and
+    ``departure`` unitless."""
     mix = np.asarray(mix, dtype=float)
     sun, rest = sky.split()
     b = 1.0

@@ -1,8 +1,7 @@
 """The sun: position, irradiance and colour (thesis section 4.1).
 
-Angles are in degrees at this module's boundary (arguments and results named
-``*_deg``) and follow ``docs/CONVENTIONS.md``: zenith from the vertical,
-compass azimuth from north toward east.  Times must carry a time zone.
+Angles are in degrees at this module's boundary (``*_deg``), per ``docs/CONVENTIONS.md``:
+zenith from the vertical, compass azimuth from north toward east.  Times must carry a zone.
 """
 
 from dataclasses import dataclass
@@ -28,23 +27,18 @@ EXTINCTION_CLEAR = 0.431
 
 @dataclass(frozen=True)
 class SunDisc:
-    """The solar disc of the thesis's skies (section 4.1): a disc of finite solid angle whose
-    normal irradiance is eq. 4.7's.
+    """The solar disc of the thesis's skies (section 4.1), of finite solid angle and eq. 4.7's
+    normal irradiance; values are checked where used.
 
     Attributes
     ----------
     drawn : bool
         Whether the sky has the disc (False: sky light only).
-    extinction : float
-        Broadband extinction coefficient beta of eq. 4.7 [unitless], >= 0 (default
-        :data:`EXTINCTION_CLEAR`, 0.431: a clear atmosphere).
-    solar_constant : float
-        S of eq. 4.5 [W m^-2] (default :data:`SOLAR_CONSTANT`, 1377, Rapp's;
-        :data:`SOLAR_CONSTANT_CLASSIC` 1353).
+    extinction, solar_constant : float
+        Extinction coefficient beta of eq. 4.7 [unitless], >= 0, and S of eq. 4.5 [W m^-2]
+        (Rapp's 1377; :data:`SOLAR_CONSTANT_CLASSIC` 1353).
     solid_angle : float
-        The disc's solid angle [sr] (default :data:`SUN_SOLID_ANGLE`, 6e-5).
-
-    The values are checked where they are used (:func:`direct_normal_irradiance`).
+        The disc's solid angle [sr].
     """
 
     drawn: bool = True
@@ -86,9 +80,8 @@ def _times(time):
 
 
 def _mixed_offsets(time):
-    """Aware times of several UTC offsets (a day across a change of summer time, photographs
-    from two cameras) as one UTC DatetimeIndex of the same instants; None unless every time
-    reads as an aware instant."""
+    """Aware times of several UTC offsets (e.g. across a summer-time change) as one UTC
+    DatetimeIndex; None unless every time reads as an aware instant."""
     import pandas as pd
 
     try:
@@ -116,41 +109,27 @@ def _shape_like(time, values):
     return np.asarray(values, dtype=float)
 
 
-# --------------------------------------------------------------------------
-# Solar position
-# --------------------------------------------------------------------------
+# ---- Solar position ----
 
 def spa_solar_position(time, latitude_deg, longitude_deg, elevation=0.0, pressure=101325.0,
                        temperature=12.0, delta_t=67.0, refraction=True):
-    """Solar position by the NREL SPA algorithm (Reda and Andreas 2004) via pvlib.
+    """Solar position (:class:`SolarPosition`) by the NREL SPA algorithm via pvlib (I. Reda,
+    A. Andreas, "Solar position algorithm for solar radiation applications", Solar Energy 76(5),
+    577-589, 2004, doi:10.1016/j.solener.2003.12.003).
 
     Parameters
     ----------
     time : datetime or sequence of datetimes, time-zone aware
-    latitude_deg : float
-        Latitude, north positive [degrees], in [-90, 90].
-    longitude_deg : float
-        Longitude, east positive [degrees], in [-180, 180].
+    latitude_deg, longitude_deg : float
+        North and east positive [degrees], in [-90, 90] and [-180, 180].
     elevation : float
         Height above sea level [m].
-    pressure : float
-        Mean air pressure [Pa] (used for refraction).
-    temperature : float
-        Mean air temperature [degrees C] (used for refraction).
+    pressure, temperature : float
+        Mean air pressure [Pa] and temperature [degrees C], for refraction.
     delta_t : float
         TT - UT1 [s].
     refraction : bool
-        Return the apparent (refracted) zenith (True) or the geometric one.
-
-    Returns
-    -------
-    SolarPosition
-        Zenith and compass azimuth [degrees].
-
-    References
-    ----------
-    I. Reda, A. Andreas, "Solar position algorithm for solar radiation
-    applications", Solar Energy 76(5), 577-589, 2004. doi:10.1016/j.solener.2003.12.003
+        Apparent (refracted) zenith if True, else geometric.
     """
     from pvlib.solarposition import spa_python
 
@@ -164,40 +143,28 @@ def spa_solar_position(time, latitude_deg, longitude_deg, elevation=0.0, pressur
 
 
 def equation_of_time(day):
-    """Equation of time [minutes] for day of year ``day`` (1-366).
-
-    Spencer's Fourier series (J. W. Spencer, "Fourier series representation
-    of the position of the sun", Search 2(5), 172, 1971), as used for the
-    local solar time of thesis eq. 4.1.  Accurate to about 0.5 minute.
-    """
+    """Equation of time [minutes] for day of year ``day`` (1-366), to about 0.5 minute, for the
+    local solar time of thesis eq. 4.1: Spencer's Fourier series (J. W. Spencer, "Fourier
+    series representation of the position of the sun", Search 2(5), 172, 1971)."""
     b = 2 * np.pi * (np.asarray(day, dtype=float) - 1) / 365.0
     return 229.18 * (0.000075 + 0.001868 * np.cos(b) - 0.032077 * np.sin(b)
                      - 0.014615 * np.cos(2 * b) - 0.040849 * np.sin(2 * b))
 
 
 def thesis_declination_sine(day):
-    """sin of the solar declination, thesis eq. 4.3 [unitless].
-
-    ``day`` is the day of the year (1 = 1 January); the thesis's day count
-    D_s starts at 1 on 21 December.
-    """
+    """sin of the solar declination, thesis eq. 4.3 [unitless], for day of year ``day``
+    (1 = 1 January; the thesis's D_s starts at 1 on 21 December)."""
     d_s = np.mod(np.asarray(day, dtype=float) - 355.0, 365.0) + 1.0
     return -np.cos(np.radians((d_s - 1.0) * 180.0 / 182.6)) * np.sin(np.radians(23.45))
 
 
 def thesis_solar_position(time, latitude_deg, longitude_deg):
-    """Solar position by the thesis's eqs. 4.1-4.4 (after Rapp).
+    """Solar position (:class:`SolarPosition`) by the thesis's eqs. 4.1-4.4 (after Rapp).
 
-    Local solar time = UTC + longitude/15 h + equation of time (Spencer);
-    hour angle h = (LST - 12) * 15 degrees (eq. 4.1); zenith from eq. 4.2 with
-    the declination of eq. 4.3; azimuth from eq. 4.4, placed west of the
-    meridian in the afternoon.  No refraction.  Errors against SPA are up to
-    about a degree (the declination formula is approximate).
-
-    Returns
-    -------
-    SolarPosition
-        Zenith and compass azimuth [degrees].
+    Local solar time = UTC + longitude/15 h + equation of time (Spencer); hour angle
+    h = (LST - 12) * 15 degrees (eq. 4.1); zenith by eq. 4.2 with eq. 4.3's declination;
+    azimuth by eq. 4.4, west of the meridian in the afternoon.  No refraction; up to about a
+    degree off SPA (the declination formula is approximate).
     """
     check_range("latitude", latitude_deg, -90, 90, "degrees")
     check_range("longitude", longitude_deg, -180, 180, "degrees")
@@ -225,34 +192,17 @@ SOLAR_POSITION_METHODS = {"spa": spa_solar_position, "thesis": thesis_solar_posi
 
 
 def solar_position(time, latitude_deg, longitude_deg, method="spa", **kwargs):
-    """Solar zenith and azimuth [degrees] at a place and time-zone-aware time.
-
-    ``method`` is ``'spa'`` (NREL SPA through pvlib, the default) or
-    ``'thesis'`` (thesis eqs. 4.1-4.4); ``kwargs`` go to the method.
-    """
+    """Solar zenith and azimuth [degrees] at a place and time-zone-aware time, by ``method``
+    ``'spa'`` (default) or ``'thesis'`` (eqs. 4.1-4.4); ``kwargs`` go to the method."""
     check_choice("solar position method", method, tuple(SOLAR_POSITION_METHODS))
     return SOLAR_POSITION_METHODS[method](time, latitude_deg, longitude_deg, **kwargs)
 
 
-# --------------------------------------------------------------------------
-# Irradiance
-# --------------------------------------------------------------------------
+# ---- Irradiance ----
 
 def extraterrestrial_irradiance(day, solar_constant=SOLAR_CONSTANT):
-    """Extraterrestrial solar irradiance normal to the sun's rays, thesis eq. 4.5-4.6.
-
-    Parameters
-    ----------
-    day : array_like
-        Day of the (Julian) year D_j, 1-366.
-    solar_constant : float
-        S [W m^-2]; 1377 (Rapp, default) or 1353 (:data:`SOLAR_CONSTANT_CLASSIC`).
-
-    Returns
-    -------
-    ndarray
-        N_ext [W m^-2].
-    """
+    """Extraterrestrial solar irradiance N_ext [W m^-2] normal to the sun's rays, thesis eqs.
+    4.5-4.6, for (Julian) day of year D_j ``day`` (1-366) and solar constant S [W m^-2]."""
     check_range("day of year", day, 1, 366)
     check_range("solar constant", solar_constant, 0, np.inf, "W m^-2")
     phi = np.radians((np.asarray(day, dtype=float) - 2.0) * 360.0 / 365.2)       # eq. 4.6
@@ -262,26 +212,11 @@ def extraterrestrial_irradiance(day, solar_constant=SOLAR_CONSTANT):
 
 def direct_normal_irradiance(zenith_deg, day, extinction=EXTINCTION_CLEAR,
                              solar_constant=SOLAR_CONSTANT):
-    """Direct solar irradiance on a plane normal to the sun, thesis eq. 4.7.
+    """Direct solar irradiance N [W m^-2] normal to the sun, thesis eq. 4.7:
+    N = N_ext exp(-beta sec(theta_h)); zero for the sun on or below the horizon.
 
-    N = N_ext exp(-beta sec(theta_h)); zero when the sun is on or below the
-    horizon (zenith >= 90 degrees).
-
-    Parameters
-    ----------
-    zenith_deg : array_like
-        Solar zenith [degrees].
-    day : array_like
-        Day of the year, 1-366.
-    extinction : float
-        Broadband extinction coefficient beta [unitless], >= 0 (0.431: clear).
-    solar_constant : float
-        [W m^-2].
-
-    Returns
-    -------
-    ndarray
-        N [W m^-2].
+    ``zenith_deg`` [degrees], ``day`` of year (1-366), ``extinction`` beta >= 0 [unitless]
+    (0.431: clear), ``solar_constant`` [W m^-2].
     """
     check_range("extinction coefficient", extinction, 0, np.inf)
     z = np.radians(np.asarray(zenith_deg, dtype=float))
@@ -292,11 +227,8 @@ def direct_normal_irradiance(zenith_deg, day, extinction=EXTINCTION_CLEAR,
 
 
 def cos_incidence(sun_zenith_deg, sun_azimuth_deg, tilt_deg, plane_azimuth_deg):
-    """Cosine of the sun's angle to a tilted plane's normal, thesis eq. 4.8.
-
-    ``tilt_deg`` is the plane normal's zenith (0: horizontal) and
-    ``plane_azimuth_deg`` its compass azimuth [degrees].  Not clamped.
-    """
+    """Cosine of the sun's angle to a tilted plane's normal, thesis eq. 4.8, not clamped;
+    ``tilt_deg`` is the normal's zenith (0: horizontal), ``plane_azimuth_deg`` its azimuth."""
     zs, as_, zn, an = (np.radians(np.asarray(a, dtype=float))
                        for a in (sun_zenith_deg, sun_azimuth_deg, tilt_deg, plane_azimuth_deg))
     return np.cos(zn) * np.cos(zs) + np.sin(zn) * np.sin(zs) * np.cos(as_ - an)
@@ -304,24 +236,17 @@ def cos_incidence(sun_zenith_deg, sun_azimuth_deg, tilt_deg, plane_azimuth_deg):
 
 def tilted_direct_irradiance(normal_irradiance, sun_zenith_deg, sun_azimuth_deg, tilt_deg,
                              plane_azimuth_deg):
-    """Direct solar irradiance on a tilted plane, thesis eq. 4.9 [W m^-2].
-
-    D_T = N cos(theta_T), zero when the sun is behind the plane.
-    """
+    """Direct solar irradiance on a tilted plane, thesis eq. 4.9 [W m^-2]: D_T = N cos(theta_T),
+    zero when the sun is behind the plane."""
     c = cos_incidence(sun_zenith_deg, sun_azimuth_deg, tilt_deg, plane_azimuth_deg)
     return np.asarray(normal_irradiance, dtype=float) * np.maximum(c, 0.0)
 
 
-# --------------------------------------------------------------------------
-# Colour
-# --------------------------------------------------------------------------
+# ---- Colour ----
 
 def sun_cct(zenith_deg):
-    """Correlated colour temperature of terrestrial sunlight [K] (thesis 4.1.3).
-
-    The thesis gives about 4000 K for a low sun and 5500 K for a high sun;
-    between them this project uses 4000 + 1500 sin(altitude), clamped.
-    """
+    """Correlated colour temperature of terrestrial sunlight [K] (thesis 4.1.3: about 4000 K
+    low, 5500 K high): this project's 4000 + 1500 sin(altitude), clamped."""
     alt = np.radians(90.0 - np.asarray(zenith_deg, dtype=float))
     return 4000.0 + 1500.0 * np.clip(np.sin(alt), 0.0, 1.0)
 

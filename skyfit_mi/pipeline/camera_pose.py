@@ -1,27 +1,20 @@
 """The camera from the photos: pose, focal length and radial distortion from marked points.
 
-A photographer marks, in one photograph, the pixels of four or more scene points whose world
-positions (+X east, +Y north, +Z up) [m] were measured, e.g. a sample board's corners.  The
-camera is the pinhole with radial distortion of :mod:`skyfit_mi.physics.lens` (square pixels,
-principal point at the centre, no tangential distortion) whose projection of those points is
-nearest the marks in the least-squares sense (the maximum-likelihood estimate for Gaussian
-marking errors, Hartley and Zisserman 2004, sec. 7.2):
+In one photograph the user marks four or more scene points of measured world position (+X east,
++Y north, +Z up) [m], e.g. a board's corners.  The camera is the pinhole with radial distortion
+of :mod:`skyfit_mi.physics.lens` (square pixels, centred principal point) whose projection is
+nearest the marks in least squares (maximum likelihood for Gaussian marking errors, Hartley and
+Zisserman 2004, sec. 7.2):
 
-* focal length given: OpenCV's ``solvePnP`` from the starts of SQPnP (Terzakis and Lourakis
-  2020) and, for coplanar points, IPPE (Collins and Bartoli 2014), which gives both poses a
-  plane's view allows, each refined by ``SOLVEPNP_ITERATIVE`` (Levenberg-Marquardt);
+* focal length given: OpenCV's ``solvePnP`` from SQPnP (Terzakis and Lourakis 2020) and, for
+  coplanar points, IPPE's two poses (Collins and Bartoli 2014), refined by Levenberg-Marquardt;
 * focal length free: the best of those over a scan of fields of view, refined with the focal
-  length and, for marks reaching far enough from the centre to show it, k1 (and k2;
-  :data:`K1_REACH`) by ``calibrateCamera`` on the one view
-  (Zhang 2000's maximum-likelihood step).  One view of a plane fixes the focal length only
-  through its perspective foreshortening; a board seen face-on, or too small, does not.
+  length (and k1, k2: :data:`K1_REACH`) by ``calibrateCamera`` (Zhang 2000).  A plane fixes the
+  focal length only through its foreshortening: not face-on, nor too small.
 
-The uncertainty is the linearised one (Hartley and Zisserman 2004, sec. 5.2.3): with J the
-Jacobian of the reprojection (``projectPoints``) in the free parameters (rotation vector,
-translation, focal length, k1, k2), cov = sigma^2 (J^T J)^-1, sigma [px] the larger of the marking
-accuracy the user states and what the residuals show; it is carried to the camera's azimuth,
-angle from the vertical and distance from a target point, and its field of view, by their
-numerical Jacobian.
+The uncertainty is linearised (Hartley and Zisserman 2004, sec. 5.2.3): cov = sigma^2 (J^T J)^-1,
+sigma [px] the larger of the stated marking accuracy and the residuals', carried numerically to
+the camera's azimuth, angle from the vertical, distance from a target and field of view.
 
 References: R. Hartley and A. Zisserman, "Multiple View Geometry in Computer Vision", 2nd ed.,
 2004; Z. Zhang, IEEE TPAMI 22(11), 1330-1334, 2000, doi:10.1109/34.888718; T. Collins and
@@ -45,9 +38,8 @@ from ..render.scene import POSE_SD_MAX
 #: Points needed with the focal length given (six pose parameters) and free (plus f and k1).
 MIN_POINTS = {"given": 4, "free": 6}
 #: With the focal length free, k1 is fitted when the marks reach this fraction of the image's
-#: half-diagonal from its centre, and k2 too when they reach :data:`K2_REACH` and number
-#: :data:`K2_POINTS`: nearer the centre the distortion is below the marking error, and a fitted
-#: value would be extrapolated to the corners.  Otherwise it is the one given (default zero).
+#: half-diagonal, k2 when they reach :data:`K2_REACH` with :data:`K2_POINTS` points: nearer the
+#: centre the distortion is below the marking error.  Otherwise the given one (default zero).
 K1_REACH, K2_REACH, K2_POINTS = 0.5, 0.7, 10
 #: Below this chi-square probability the residuals are "far beyond the marking accuracy".
 P_MISFIT = 1e-3
@@ -80,10 +72,8 @@ class MarkedPoints:
 
 def read_points(path, width, height):
     """Read a CSV of marked points (columns ``name`` (optional), ``x_px``, ``y_px``, ``X``,
-    ``Y``, ``Z``) for a ``width`` x ``height`` [px] photograph; returns :class:`MarkedPoints`.
-
-    Raises SkyfitError naming the row for a missing column, a cell that is not a finite
-    number, a name given twice, or a mark off the image."""
+    ``Y``, ``Z``) for a ``width`` x ``height`` [px] photograph as :class:`MarkedPoints`;
+    SkyfitError naming the row of a missing column, bad number, repeated name or mark off it."""
     path = Path(path)
     try:
         with open(path, newline="", encoding="utf-8-sig") as f:
@@ -162,8 +152,7 @@ def _check_configuration(points, need, mode):
 
 @dataclass
 class _Fit:
-    """One solution: OpenCV's world-to-camera rotation vector and translation [m], the focal
-    length [px] and [k1, k2]; ``ssr`` the sum of squared residuals [px^2]."""
+    """One solution (rvec, tvec [m], focal [px], [k1, k2]); ``ssr``: squared residuals [px^2]."""
 
     rvec: np.ndarray
     tvec: np.ndarray
@@ -173,8 +162,7 @@ class _Fit:
 
 
 def _project(world, fit, width, height):
-    """Projected points (N, 2) [px] and the Jacobian (2N, 14) of ``projectPoints`` (rotation
-    vector, translation, fx, fy, cx, cy, k1, k2, p1, p2)."""
+    """Projected points (N, 2) [px] and ``projectPoints``' Jacobian (2N, 14)."""
     uv, jac = cv2.projectPoints(world, fit.rvec, fit.tvec, intrinsics(fit.focal, width, height),
                                 np.r_[fit.k, 0.0, 0.0])
     return uv.reshape(-1, 2), jac
@@ -212,8 +200,7 @@ def _poses(points, focal, k, coplanar, width, height):
 
 
 def _calibrate(points, start, free_k, width, height):
-    """``start`` refined by ``calibrateCamera`` on the one view with the focal length and the
-    first ``free_k`` radial terms free (principal point fixed, square pixels, no tangential)."""
+    """``start`` refined by ``calibrateCamera`` (focal length and first ``free_k`` k free)."""
     flags = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT
              | cv2.CALIB_FIX_ASPECT_RATIO | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3
              | (cv2.CALIB_FIX_K1 if free_k < 1 else 0) | (cv2.CALIB_FIX_K2 if free_k < 2 else 0))
@@ -235,8 +222,7 @@ def _angle_between(r1, r2):
 
 
 def _solve(points, width, height, focal, k, free_k, coplanar):
-    """The best fit, and the best pose at its focal length and distortion that differs from
-    it by more than a degree (the other view of a plane; None if there is none)."""
+    """The best fit, and the best pose over a degree from it (a plane's other view, or None)."""
     if focal is not None:
         fits = _poses(points, focal, k, coplanar, width, height)
     else:
@@ -260,13 +246,11 @@ def _solve(points, width, height, focal, k, free_k, coplanar):
 
 @dataclass
 class CameraEstimate:
-    """A camera estimated from marked points (:func:`estimate_camera`).
-
-    ``rvec``, ``tvec``: OpenCV's world-to-camera rotation vector and translation [m];
-    ``focal`` [px]; ``k`` [k1, k2]; ``free``: names of the free parameters, in the order of
-    ``covariance`` (``r1 r2 r3`` [rad], ``t1 t2 t3`` [m], ``focal`` [px], ``k1``, ``k2``);
-    ``sigma_px``: the marking error the covariance assumes; ``target``: the point azimuth,
-    angle and distance are measured from [m]."""
+    """A camera estimated from marked points (:func:`estimate_camera`): ``rvec``, ``tvec``
+    OpenCV's world-to-camera rotation vector and translation [m]; ``focal`` [px]; ``k`` [k1,
+    k2]; ``free`` the parameters in ``covariance``'s order (``r1 r2 r3`` [rad], ``t1 t2 t3``
+    [m], ``focal`` [px], ``k1``, ``k2``); ``sigma_px`` the marking error assumed; ``target``
+    [m] the point azimuth, angle and distance are measured from."""
 
     points: MarkedPoints
     width: int
@@ -296,18 +280,16 @@ class CameraEstimate:
         return -self.rotation.T @ self.tvec
 
     def to_world(self):
-        """Mitsuba's camera to_world 4x4 (columns: left, up, forward, origin), as
-        :func:`~skyfit_mi.render.scene.look_at` builds it."""
+        """Mitsuba's camera to_world 4x4 (columns: left, up, forward, origin)."""
         m = np.eye(4)
         m[:3, :3] = self.rotation.T @ np.diag([-1.0, -1.0, 1.0])
         m[:3, 3] = self.origin
         return m
 
     def camera_section(self):
-        """The spec's [camera] table: origin, a target on the view axis at the depth of
-        ``self.target``, the camera's up, fov_deg, width, height, distortion and the pose's
-        1-sd in azimuth and angle from the vertical [deg] (:meth:`placement`), which fits
-        propagate into their intervals."""
+        """The spec's [camera] table: origin, a target on the view axis at ``self.target``'s
+        depth, up, fov_deg, width, height, distortion, and the pose's 1-sd in azimuth and angle
+        [deg] (:meth:`placement`), which fits propagate into their intervals."""
         m = self.to_world()
         depth = float(np.dot(self.target - self.origin, m[:3, 2]))
         p = self.placement()
@@ -319,8 +301,7 @@ class CameraEstimate:
                 "pose_sd_deg": {"azimuth": p["azimuth_deg"][1], "angle": p["angle_deg"][1]}}
 
     def _placement(self, p):
-        """Azimuth [deg], angle from the vertical [deg], distance [m] and fov [deg] of the
-        camera with free parameters ``p``."""
+        """Azimuth, angle from the vertical, fov [deg] and distance [m] at free parameters ``p``."""
         q = dict(zip(self.free, p))
         rvec = np.array([q["r1"], q["r2"], q["r3"]])
         origin = -cv2.Rodrigues(rvec)[0].T @ np.array([q["t1"], q["t2"], q["t3"]])
@@ -337,9 +318,8 @@ class CameraEstimate:
         return np.array([allv[n] for n in self.free])
 
     def placement(self):
-        """{name: (value, standard deviation)} of ``azimuth_deg``, ``angle_deg`` (from the
-        vertical), ``distance_m`` (from ``target``) and ``fov_deg``, plus ``k1``/``k2`` when
-        free; the deviations linearised from the covariance."""
+        """{name: (value, linearised sd)} of ``azimuth_deg``, ``angle_deg`` (from the vertical),
+        ``distance_m`` (from ``target``), ``fov_deg``, and ``k1``/``k2`` when free."""
         p = self.parameters()
         g0 = self._placement(p)
         G = np.empty((4, len(p)))
@@ -389,31 +369,14 @@ class CameraEstimate:
 
 def estimate_camera(points, width, height, fov=None, distortion=None, marking_px=0.5,
                     target=None):
-    """Estimate the camera that saw ``points`` (:class:`MarkedPoints`) in a ``width`` x
-    ``height`` [px] photograph.
+    """The :class:`CameraEstimate` that saw ``points`` in a ``width`` x ``height`` [px] photo.
 
-    Parameters
-    ----------
-    fov : float, optional
-        Horizontal field of view [degrees], if known (from the lens and sensor); else fitted.
-    distortion : sequence, optional
-        Known [k1] or [k1, k2]; else zero with ``fov`` given, fitted without it.
-    marking_px : float
-        Standard deviation of a mark in each coordinate [px].
-    target : sequence of 3, optional
-        Point [m] the camera's azimuth, angle and distance are measured from; default the
-        points' centroid.
-
-    Returns
-    -------
-    CameraEstimate
-
-    Raises
-    ------
-    SkyfitError
-        Too few points for the free parameters, collinear points, a point behind the camera,
-        residuals far beyond ``marking_px`` (naming the likeliest mislabelled point), two poses
-        that fit alike, or a free focal length the points do not determine.
+    ``fov``: horizontal field of view [degrees] if known, else fitted; ``distortion``: known
+    [k1] or [k1, k2], else zero with ``fov``, fitted without; ``marking_px``: a mark's sd per
+    coordinate [px]; ``target``: point [m] azimuth, angle and distance are measured from
+    (default the centroid).  SkyfitError for too few or collinear points, a point behind the
+    camera, residuals far beyond ``marking_px`` (naming the likeliest mislabelled point), two
+    poses that fit alike, or an undetermined free focal length.
     """
     if not (np.isfinite(marking_px) and marking_px > 0):
         raise SkyfitError(f"the marking accuracy {marking_px!r} px must be a positive number.")
@@ -480,8 +443,7 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
 
 
 def _check_misfit(points, best, dof, marking_px, width, height, focal, k, free_k, coplanar):
-    """Refuse residuals far beyond the marking accuracy, naming the point whose removal
-    improves the fit most (or, with too few points to leave one out, the worst-fitting one)."""
+    """Refuse residuals far beyond the marking accuracy, naming the likeliest culprit point."""
     from scipy.stats import chi2
 
     if dof <= 0 or chi2.sf(best.ssr / marking_px ** 2, dof) >= P_MISFIT:
@@ -536,8 +498,8 @@ def camera_toml(estimate, source=""):
 
 
 def write_camera(estimate, path, overwrite=False, source=""):
-    """Write ``path`` (the [camera] TOML) and its report beside it (``.json``), atomically;
-    refuses to replace either unless ``overwrite``.  Returns the two paths."""
+    """Write ``path`` (the [camera] TOML) and its ``.json`` report atomically (replacing them
+    only with ``overwrite``); returns the two paths."""
     path = Path(path)
     if path.suffix.lower() != ".toml":
         raise OutputError(f"-o {path}: the camera is a TOML table; give a path ending in .toml.")

@@ -1,27 +1,16 @@
 """A ColorChecker in the photographs: found, oriented, and its swatches as calibration patches.
 
 ``skyfit ingest --colorchecker MATERIAL`` calibrates a day of photographs from an X-Rite
-ColorChecker Classic (24 swatches, 4 rows of 6) lying on the scene surface ``MATERIAL`` (its
-geometry gives the swatches' normal, so each frame's sky lights them as it lights the chart).
-The chart is found once for the static camera:
+ColorChecker Classic (24 swatches, 4 rows of 6) lying on the scene surface ``MATERIAL``.  The
+chart is found once, in the median of the normalised frames: ``colour-checker-detection``
+(Mansencal et al., colour-science) finds chart-shaped clusters of swatches, a homography maps
+the 6 x 4 grid onto each, and the orientation and cluster best matching the reference colours
+win.  A swatch's pixels are the middle :data:`INNER` of its cell.
 
-1. the frames are linearised and normalised by their medians, and their per-pixel median
-   taken (one image, whatever the day's light did);
-2. ``colour-checker-detection``'s segmentation (Mansencal et al., colour-science) finds the
-   square swatch contours and the clusters of them shaped like a chart;
-3. the chart's 6 x 4 grid is mapped to the image by a homography: a first guess from each
-   cluster's corners (all eight corner orders), then a least-squares fit to the detected swatch
-   centres nearest the guessed cells, refined twice;
-4. the orientation and the cluster whose sampled swatches match the chart's reference colours
-   best (per-channel scale free, rms log ratio) win;
-5. each swatch's pixels are those whose centres map inside the middle :data:`INNER` of its
-   cell, so edges and the black surround stay out.
-
-The six neutral swatches (white to black, spectrally flat, so their reflectance does not depend
-on the camera's spectral sensitivities) are the grey steps of the calibration
-(:func:`skyfit_mi.pipeline.ingest.fit_response`, :func:`~skyfit_mi.pipeline.ingest.calibrate_exposure`),
-as the thesis's IT8 target's greys.  The chromatic swatches orient the chart and, after the
-calibration, are a check of it (:func:`swatch_check`).
+The six neutral swatches (spectrally flat, so independent of the camera's sensitivities) are the
+calibration's grey steps (:func:`skyfit_mi.pipeline.ingest.fit_response`,
+:func:`~skyfit_mi.pipeline.ingest.calibrate_exposure`), as the thesis's IT8 target's greys; the
+chromatic ones orient the chart and check the calibration (:func:`swatch_check`).
 
 Reference reflectances: the linear-sRGB values of ``colour-checker-detection`` (colour-science's
 "ColorChecker24 - After November 2014", X-Rite's post-2014 formulation, D50, Bradford-adapted to
@@ -46,14 +35,14 @@ NAMES = ("dark skin", "light skin", "blue sky", "foliage", "blue flower", "bluis
 INNER = 0.5
 #: Least pixels a sampled swatch needs.
 MIN_SWATCH_PIXELS = 4
-#: Aspect ratios of a chart's outline that the segmentation accepts: wider than the library's
-#: default (1.35-1.65 around 1.5) because a chart seen obliquely is foreshortened.
+#: Aspect ratios of a chart's outline the segmentation accepts: wider than the library's
+#: default, since a chart seen obliquely is foreshortened.
 ASPECT_RANGE = (1.0, 3.0)
 #: Rms log ratio of the sampled swatches to the reference (scale per channel free) above which
 #: a detection is not accepted as the chart [unitless, ~ relative].
 MATCH_MAX = 0.35
-#: Swatches measured in every channel that the match's mixing (:func:`_match`) needs at least:
-#: four times its nine coefficients' worth of values.
+#: Least swatches measured in every channel for the match's mixing (:func:`_match`): four
+#: times its nine coefficients' worth of values.
 MIN_MIXING_SWATCHES = 12
 #: Reference reflectances below this are left out of the match (the cyan swatch lies outside
 #: sRGB: its red is negative).
@@ -97,8 +86,7 @@ def _apply(h, pts):
 
 
 def _to_image(points, shape, working_width):
-    """Working-image coordinates of the segmentation (the frame resized to ``working_width``,
-    turned 90 degrees clockwise first when it is portrait) -> the frame's pixel coordinates."""
+    """Segmentation working-image coordinates (resized, portrait turned) -> frame pixels."""
     h, w = shape
     pts = np.asarray(points, float).reshape(-1, 2)
     if w < h:                                          # rotated: (x, y) -> (h - 1 - y, x)
@@ -121,10 +109,8 @@ def _sample(image, h):
 
 def _match(sampled, reference, mixing=False):
     """Rms log ratio of sampled to reference swatches, one scale per channel free; with
-    ``mixing`` the reference first mixed by the 3x3 matrix that best turns it into the sampled
-    colours (least squares over the swatches measured in every channel): a camera whose
-    colour matrix errs mixes its channels (:func:`matrix_error`), which a scale per channel
-    cannot follow on the saturated swatches."""
+    ``mixing``, the reference first mixed by the least-squares 3x3 matrix, for cameras whose
+    colour matrix errs (:func:`matrix_error`)."""
     if mixing:
         rows = np.all((reference > _MATCH_FLOOR) & np.isfinite(sampled), axis=1)
         if rows.sum() >= MIN_MIXING_SWATCHES:
@@ -140,8 +126,8 @@ def _match(sampled, reference, mixing=False):
 
 
 def swatch_labels(h, shape):
-    """(H, W) int: 1 + the swatch index of each pixel whose centre maps (by the inverse of the
-    grid-to-image homography ``h``) into the middle :data:`INNER` of a swatch's cell, else 0."""
+    """(H, W) int: 1 + swatch index of pixels mapping (by ``h``'s inverse) into the middle
+    :data:`INNER` of a swatch's cell, else 0."""
     rows, cols = shape
     out = np.zeros(shape, np.int32)
     # only the chart's bounding box can hold swatch pixels
@@ -191,27 +177,10 @@ def _fit_grid(quad, centres, image, reference):
 
 
 def find_chart(images, log=print):
-    """Find the ColorChecker in a static camera's frames.
-
-    Parameters
-    ----------
-    images : list of ndarray (H, W, 3)
-        The frames' linear signal (any scale per frame; NaN allowed).
-    log : callable
-        Progress and warnings.
-
-    Returns
-    -------
-    dict
-        ``homography`` (3x3, grid (column, row) -> pixel (x, y)), ``labels`` (H, W) int
-        (:func:`swatch_labels`), ``pixels`` (24,) sampled pixels per swatch, ``match`` (rms log
-        ratio to the reference) and ``corners`` (4, 2) the chart's outline [pixels].
-
-    Raises
-    ------
-    SkyfitError
-        If no chart is found, or its match or swatches are too poor to calibrate from.
-    """
+    """Find the ColorChecker in a static camera's ``images`` (H, W, 3) (linear, any scale, NaN
+    allowed): {``homography`` (grid (column, row) -> pixel (x, y)), ``labels`` (H, W)
+    (:func:`swatch_labels`), ``pixels`` (24,) per swatch, ``match`` (rms log ratio to the
+    reference), ``corners`` (4, 2) [pixels]}; SkyfitError if none is found fit to calibrate."""
     seg = _library()
     stack = []
     for im in images:
@@ -238,8 +207,7 @@ def find_chart(images, log=print):
                           "scene material with --calibrate.")
     match, h = best
     if match > MATCH_MAX:
-        # a camera's colours mixed (its colour matrix off, a JPEG's rendering): judged once
-        # the reference is mixed as they are; ingest's --colorchecker measures the mixing
+        # a camera's colours mixed (colour matrix off): judged with the reference mixed alike
         mixed = _match(_sample(image, h)[0], reference, mixing=True)
         if mixed > MATCH_MAX:
             raise SkyfitError(f"the chart-like object found matches a ColorChecker's colours "
@@ -264,13 +232,9 @@ def find_chart(images, log=print):
 
 
 def swatch_check(ratio):
-    """How far the calibrated chromatic swatches lie from their rendered references.
-
-    ``ratio`` : (24, 3) each swatch's observed signal over its calibrated prediction (NaN where
-    not sampled).  Returns ``{"rms", "worst": [name, error], "per_swatch": {name: [r, g, b]}}``
-    with errors ratio - 1 [unitless] over the chromatic swatches whose reference reflectance
-    is above the match floor (``rms`` None if there are none).
-    """
+    """How far the calibrated chromatic swatches lie from their references: ``ratio`` (24, 3)
+    observed over predicted -> ``{"rms", "worst": [name, error], "per_swatch"}`` of ratio - 1
+    over chromatic swatches above the match floor (``rms`` None if none)."""
     ref = reference_rgb()
     e = np.asarray(ratio, dtype=float) - 1.0
     ok = (ref > _MATCH_FLOOR) & np.isfinite(e)
@@ -285,19 +249,11 @@ def swatch_check(ratio):
 
 
 def matrix_error(ratio, predicted):
-    """The error of the camera's colour matrix that the chromatic swatches show, as a
-    white-preserving mixing of the channels: a camera whose matrix errs reads a colour L as
-    (I + G) L, G's rows summing to 0 (a grey stays grey, as the neutral swatches calibrate
-    it), so that swatch k's channel c reads L_kc + sum_(j != c) G_cj (L_kj - L_kc): its ratio
-    to the prediction is 1 + sum_(j != c) G_cj (L_kj / L_kc - 1).
-
-    ``ratio`` (24, 3) each swatch's observed signal over its calibrated prediction (NaN where
-    not sampled), ``predicted`` (24, 3) its predicted signal (any common scale).  Least
-    squares per channel over the chromatic swatches whose reference reflectance in every
-    channel is above the match floor.  Returns ``{"mixing": G (3, 3), "standard_error": (3,
-    3) of G's entries, "residual_rms": the ratios' rms after it}`` or None with fewer than 4
-    such swatches (then the matrix's error stays a prior).
-    """
+    """The colour matrix's error the chromatic swatches show, as a white-preserving mixing: the
+    camera reads L as (I + G) L, G's rows summing to 0, so swatch k's channel c has ratio
+    1 + sum_(j != c) G_cj (L_kj / L_kc - 1) to its prediction.  From ``ratio`` (24, 3) and
+    ``predicted`` (24, 3) signals, by least squares per channel: ``{"mixing": G (3, 3),
+    "standard_error": (3, 3), "residual_rms"}``, or None with fewer than 4 usable swatches."""
     ratio = np.asarray(ratio, dtype=float)
     L = np.asarray(predicted, dtype=float)
     ok = np.all(reference_rgb() > _MATCH_FLOOR, axis=1) & np.all(np.isfinite(ratio), axis=1) \

@@ -1,30 +1,20 @@
 """Fitted materials out: Mitsuba 3 XML, Radiance and glTF 2.0 files, with the fit beside them.
 
-``skyfit export FITS -o OUT`` takes fit results (``fit_NAME.json``, a ``fits.csv`` or the
-folder ``skyfit fit`` wrote) or a per-pixel map's folder (``map_summary.json`` and its EXR
-planes) and writes, in ``OUT``:
+``skyfit export FITS -o OUT`` takes fit results (``fit_NAME.json``, a ``fits.csv`` or a ``skyfit
+fit`` folder) or a per-pixel map's folder and writes, in ``OUT``:
 
-* ``materials.xml`` (Mitsuba 3): per material a ``<bsdf id="NAME">`` of built-in plugins, a
-  ``blendbsdf`` of a ``diffuse`` and a ``roughconductor`` (exact for the microfacet lobes, the
-  nearest otherwise); ``materials_ward.xml``: ``<bsdf id="NAME_ward">``, the project's ``ward``
-  plugin with the fitted parameters (exact; from Python, once ``skyfit_mi.render.setup()`` has
-  registered it); ``preview.xml``: the materials on spheres, ``mitsuba preview.xml`` renders it;
+* ``materials.xml`` (Mitsuba 3): a ``blendbsdf`` of ``diffuse`` and ``roughconductor`` (exact
+  for the microfacet lobes); ``materials_ward.xml``: the exact ``ward`` plugin (Python only,
+  after ``skyfit_mi.render.setup()``); ``preview.xml``: the materials on spheres;
 * ``materials.rad`` (Radiance): ``plastic`` or ``metal`` (exact for the ``balanced`` and
-  ``radiance`` lobes, Radiance 6's own; the nearest otherwise); ``preview.rad``: the same
-  scene as ``preview.xml``, its header the ``oconv``/``rpict`` command that renders it;
-* ``materials.gltf`` (glTF 2.0, Blender's importer): metallic-roughness with
-  ``KHR_materials_specular``, the nearest, each material on a unit square;
-* ``export.json``: each material's fit (file, region, model, lobe, parameters, 95% intervals,
-  warnings) and, per format, whether the form is exact, its parameters and the error of the
-  approximation (:mod:`~skyfit_mi.physics.material_match`: the relative error of the radiance
-  reflected from a distant light, both directions within 80 degrees of the normal).
+  ``radiance`` lobes); ``preview.rad``;
+* ``materials.gltf`` (glTF 2.0): metallic-roughness with ``KHR_materials_specular``;
+* ``export.json``: each fit and, per format, whether exact, the parameters and the nearest
+  form's error (:mod:`~skyfit_mi.physics.material_match`).
 
-A map's planes become textures (``textures/``: linear EXR, and 8-bit PNG for glTF, sRGB for
-the base colour), indexed like the photographs' pixels (u to the right, v down); Radiance's
-``plastic`` and ``metal`` take one roughness per surface, so ``materials.rad`` holds each
-region's median material.  Every file's content is made before the first is written (each
-atomically); an output folder holding another export is refused unless ``overwrite``, and then
-only the earlier export's own files are replaced or removed.
+A map's planes become textures (``textures/``, u right, v down), Radiance taking each region's
+median.  Nothing is written until all is made; another export's folder is refused unless
+``overwrite``, which replaces only that export's files.
 """
 
 import base64
@@ -51,12 +41,10 @@ WARD_FILE = "materials_ward.xml"
 #: The preview scenes beside them: the materials on spheres (a map on a square) in a row on a
 #: grey ground, under a uniform sky and a sun, the same in both renderers.
 PREVIEWS = {"mitsuba": "preview.xml", "radiance": "preview.rad"}
-#: The preview's light: the sun's direction (toward it; azimuth 135 degrees, elevation 45), its
-#: irradiance [W m^-2] and the uniform sky's radiance [W m^-2 sr^-1], RGB; the ground's
-#: reflectance; the camera's position and target [m].
+#: The preview's sun direction (toward it; azimuth 135, elevation 45 degrees), irradiance
+#: [W m^-2] and sky radiance [W m^-2 sr^-1], RGB; ground reflectance; camera position, target [m].
 PREVIEW_SUN = np.array([0.5, -0.5, np.sqrt(0.5)])
-#: The preview sun's angular diameter [degrees] (Radiance's ``source``; Mitsuba's is a
-#: directional light).
+#: The preview sun's angular diameter [degrees] (Radiance's ``source``; Mitsuba's: directional).
 PREVIEW_SUN_DEG = 0.533
 PREVIEW_LIGHT = {"sun_irradiance": 600.0, "sky_radiance": 30.0, "ground": 0.2,
                  "camera": (0.0, -6.0, 3.0), "target": (0.0, 0.0, 0.4)}
@@ -69,9 +57,8 @@ MAP_NAME = "pixel_map"
 
 @dataclass(frozen=True)
 class Material:
-    """One fitted material: its region, model, lobe, parameters and what its fit says of them;
-    ``maps``: a map's texel arrays (rho_d (N, 3), s (N, 3), sigma (N,)) and its (H, W) mask,
-    or None for a region's single fit."""
+    """One fitted material: region, model, lobe, parameters and fit record; ``maps``: a map's
+    texel arrays (rho_d (N, 3), s (N, 3), sigma (N,)) and (H, W) mask, or None."""
     name: str
     model: str
     normalisation: str
@@ -89,8 +76,7 @@ class Material:
 
 
 def read_materials(paths):
-    """The materials of fit results (:func:`~.fit_result.load_fits`' paths) or of one map
-    folder."""
+    """The materials of fit results (:func:`~.fit_result.load_fits`' paths) or a map folder."""
     paths = [Path(p) for p in paths]
     if len(paths) == 1 and (paths[0] / MAP_SUMMARY).is_file():
         return read_map(paths[0])
@@ -104,8 +90,7 @@ def read_materials(paths):
 
 
 def read_map(folder):
-    """The per-pixel map in ``folder`` as materials: one texel array for the whole image,
-    plus each region's median material (for formats without textures)."""
+    """The per-pixel map in ``folder`` as materials: its texels, and each region's median."""
     summary = json.loads((folder / MAP_SUMMARY).read_text(encoding="utf-8"))
     regions = summary.get("regions") or {}
     lobes = {r.get("normalisation", "ward") for r in regions.values()}
@@ -159,8 +144,7 @@ def export_files():
 
 
 def check_output(out, overwrite):
-    """Refuse a folder holding another export (one of :func:`export_files`) unless
-    ``overwrite``."""
+    """Refuse a folder holding another export (:func:`export_files`) unless ``overwrite``."""
     held = sorted(n for n in export_files() if (Path(out) / n).exists())
     if held and not overwrite:
         raise SkyfitError(f"{out} holds another export ({held[0]}); give another -o, or pass "
@@ -168,8 +152,7 @@ def check_output(out, overwrite):
 
 
 def export(paths, out, formats=FORMS, overwrite=False, log=print):
-    """Write the fitted materials of ``paths`` in ``formats`` (of FORMS) to folder ``out``
-    (module doc); returns the sidecar's document."""
+    """Write the materials of ``paths`` in ``formats`` into ``out``; returns the sidecar."""
     bad = [f for f in formats if f not in FORMS]
     if bad or not formats:
         raise SkyfitError(f"unknown export format {bad[0] if bad else '(none)'!r}; give some of "
@@ -214,9 +197,8 @@ def export(paths, out, formats=FORMS, overwrite=False, log=print):
 
 
 def _match(m, form):
-    """The nearest ``form`` of material ``m`` (per texel for a map: each error a texel array,
-    summarised by its largest and median), or one line naming the material where the form
-    cannot express it; None for a map in Radiance (one roughness per surface)."""
+    """The nearest ``form`` of material ``m`` (per texel for a map, errors summarised by largest
+    and median), or a line naming what the form cannot express; None for a map in Radiance."""
     try:
         if m.maps is None:
             rho_d, s, sigma = m.raw()
@@ -272,8 +254,7 @@ def _numbers(v):
 
 
 def _blend(parent, name, p, textures=None):
-    """A ``blendbsdf`` of ``diffuse`` and ``roughconductor`` from the mitsuba match ``p``; the
-    keys in ``textures`` (a map's) are bitmaps."""
+    """A ``blendbsdf`` of ``diffuse`` and ``roughconductor`` for ``p`` (``textures``: bitmaps)."""
     textures = textures or {}
 
     def value(el, tag, key):
@@ -317,9 +298,7 @@ def mitsuba_xml(materials, matches):
 
 
 def mitsuba_ward_xml(materials):
-    """``materials_ward.xml``: the fitted materials as skyfit's ``ward`` plugin, exact, ids
-    ``NAME_ward`` (a map's regions' medians; Python only: ``skyfit_mi.render.setup()``
-    registers the plugin)."""
+    """``materials_ward.xml``: the materials as the exact ``ward`` plugin, ids ``NAME_ward``."""
     root = ET.Element("scene", version="3.0.0")
     root.append(ET.Comment(" skyfit's ward plugin: import skyfit_mi; skyfit_mi.render.setup() "
                            "registers it before mitsuba.load_file "))
@@ -338,8 +317,7 @@ def _row(materials):
 
 
 def _view(materials):
-    """The preview camera's horizontal and vertical fields of view [degrees] and image size
-    [pixels] (240 high), holding the row."""
+    """The preview camera's fields of view [degrees] and image size [pixels] holding the row."""
     width = max(2.0, len(materials) + 1.0)                 # the row's width in view [m]
     fov_h = 2 * np.degrees(np.arctan(0.6 * width / 6.7))
     w, h = int(120 * width), 240
@@ -347,8 +325,7 @@ def _view(materials):
 
 
 def mitsuba_preview(materials):
-    """``preview.xml``: the materials' built-in BSDFs (``materials.xml``) in the preview scene
-    (:data:`PREVIEWS`); ``mitsuba preview.xml`` renders it to ``preview.exr``."""
+    """``preview.xml``: ``materials.xml`` in the preview scene (``mitsuba preview.xml``)."""
     L, sun = PREVIEW_LIGHT, PREVIEW_SUN
     fov_h, _, w, h = _view(materials)
     shapes = "".join(
@@ -379,8 +356,7 @@ def mitsuba_preview(materials):
 
 
 def radiance_preview(materials):
-    """``preview.rad``: the materials of ``materials.rad`` in the preview scene (:data:`PREVIEWS`),
-    with the command that renders it in its header."""
+    """``preview.rad``: ``materials.rad`` in the preview scene, its render command in the header."""
     L, sun = PREVIEW_LIGHT, PREVIEW_SUN
     cam, target = np.array(L["camera"]), np.array(L["target"])
     fov_h, fov_v, w, h = _view(materials)
@@ -404,8 +380,7 @@ def radiance_preview(materials):
 
 
 def radiance_text(materials, matches):
-    """``materials.rad``: a Radiance ``plastic`` or ``metal`` per material (a map's region
-    medians)."""
+    """``materials.rad``: a Radiance ``plastic`` or ``metal`` per material (map: region medians)."""
     lines = ["# skyfit export: Radiance 6 plastic/metal (balanced Ward lobe), "
              "colour C, specularity, roughness (rms slope)"]
     for m in materials:
@@ -420,8 +395,7 @@ def radiance_text(materials, matches):
     return "\n".join(lines) + "\n"
 
 
-#: A map's texels whose fits did not determine a parameter (white), relative to the export
-#: folder.
+#: A map's texels whose fits did not determine a parameter (white), relative to the folder.
 UNDETERMINED_FILE = "textures/undetermined.png"
 #: A map's texture files, relative to the export folder, per format.
 TEXTURE_FILES = {"mitsuba": {k: f"textures/{k}.exr" for k in
@@ -441,9 +415,8 @@ def _image(m, values):
 
 
 def write_textures(folder, m, matches):
-    """The texture images of map material ``m`` for its formats' ``matches``, each form's
-    largest error per texel (``FORM_error.exr``) and the texels not determined (white in
-    :data:`UNDETERMINED_FILE`)."""
+    """The texture images of map material ``m`` for ``matches``, each form's largest error per
+    texel (``FORM_error.exr``) and the undetermined texels (:data:`UNDETERMINED_FILE`)."""
     ensure_dir(folder)
     write_png(folder.parent / UNDETERMINED_FILE,
               np.repeat(m.maps["undetermined"][..., None], 3, axis=2).astype(np.uint8) * 255)
@@ -492,8 +465,7 @@ _SQUARE = (np.array([[-.5, 0, -.5], [.5, 0, -.5], [.5, 0, .5], [-.5, 0, .5]], np
 
 
 def gltf_json(materials, matches):
-    """``materials.gltf``: glTF 2.0 with each material on a unit square in a row (module
-    doc); the geometry embedded as a data URI."""
+    """``materials.gltf``: glTF 2.0, each material on a unit square in a row (data-URI geometry)."""
     pos, nor, uv, idx = _SQUARE
     blob = b"".join(a.tobytes() for a in (pos, nor, uv, idx))
     views, offset = [], 0

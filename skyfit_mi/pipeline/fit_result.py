@@ -1,8 +1,7 @@
 """The fit result file (``fit_NAME.json``, written by ``skyfit fit``): its one reader.
 
 It is the inverse half's output and, as a spec material (``{ fit = "fit_NAME.json" }``), an
-input of the forward half, so it is read here, below both: the spec takes a fitted material
-from it, and ``relight``, ``chi2map`` and the fit folder's summary take whole results.
+input of the forward half, so it is read here, below both.
 """
 
 import json
@@ -16,14 +15,10 @@ from .manifest import is_table, rendered_frames
 
 
 def read_fit_result(path):
-    """The fit result in ``path``, checked: a region name, a model of
-    :data:`~skyfit_mi.render.fit_model.PARAMETERS`, that model's parameters as finite numbers
-    within their bounds and a 95% interval [lo, hi] of each (lo <= hi), pixels (if any) as
-    [x, y] pairs, and, where present, the frames as manifest indices, the model's relative
-    error kappa as a finite number >= 0, the radiance range its data measured as [lo, hi]
-    per channel, the draws from its likelihood as sets of its parameters and the covariance
-    as its parameters' names and a square matrix of them.
-    SkyfitError saying what is wrong otherwise."""
+    """The fit result in ``path``, checked: region, a model of
+    :data:`~skyfit_mi.render.fit_model.PARAMETERS`, its parameters finite, within bounds and with
+    95% intervals [lo, hi], pixels as [x, y] pairs, and any frames, kappa, measured range, draws
+    and covariance well formed (the ``_is_*`` checks); SkyfitError saying what is wrong."""
     path = Path(path)
     try:
         r = json.loads(path.read_text(encoding="utf-8"))
@@ -82,9 +77,8 @@ def read_fit_result(path):
 
 
 def load_fits(paths):
-    """{region: (path, fit result)} from fit JSONs, a fit folder's ``fits.csv`` (the
-    ``fit_*.json`` beside it), or a folder of fits; a damaged fit JSON in a folder is named,
-    and a region given twice is refused."""
+    """{region: (path, fit result)} from fit JSONs, a ``fits.csv`` (its ``fit_*.json``) or a
+    folder of fits; a damaged fit JSON is named, a region given twice refused."""
     out = {}
     for p in map(Path, paths):
         if p.is_dir() or p.name == "fits.csv":
@@ -114,9 +108,8 @@ def _numbers(v, n=None):
 
 
 def _is_sky(sky):
-    """Whether ``sky`` is a sky fit's record as relight and chi2map read it: its level k, its
-    curve over the day (``terms``) and its shape (``shape``: the variants' mix and the way
-    each index moved)."""
+    """Whether ``sky`` is a sky fit's record as relight and chi2map read it: level k, day curve
+    (``terms``) and ``shape`` (the variants' mix and each index's move)."""
     if not (isinstance(sky, dict) and _numbers([sky.get("k")]) and sky["k"] > 0):
         return False
     terms, shape = sky.get("terms"), sky.get("shape")
@@ -153,9 +146,8 @@ def _is_draws(draws, n):
 
 
 def _is_covariance(cov):
-    """Whether ``cov`` is {"names": a list of parameter names, "matrix": one row of numbers
-    (or null) per name}; names of another model are allowed (relight then takes the
-    intervals alone)."""
+    """Whether ``cov`` is {"names": [parameter names], "matrix": a row of numbers (or null) per
+    name}; another model's names are allowed (relight then takes the intervals alone)."""
     if not isinstance(cov, dict) or not isinstance(cov.get("names"), list) \
             or not isinstance(cov.get("matrix"), list):
         return False
@@ -188,12 +180,9 @@ def _pair(value, kind=(int, float)):
 
 
 def check_fit_sequence(result, path, doc, where, own=True):
-    """SkyfitError unless the fit ``result`` (read from ``path``) can be used on the sequence
-    whose manifest ``doc`` is at ``where``.  ``own`` (a use of the fit's own chi-square, such
-    as chi2map): the sequence must be the one it was fitted to (its run, where the fit names
-    one), of its kind (image pixels or a table's points), with every frame the fit lists
-    rendered; otherwise (a relight's target) only the frames are checked, and only on the
-    fit's own sequence when it holds observations."""
+    """SkyfitError unless fit ``result`` (from ``path``) suits the sequence ``doc`` at ``where``:
+    with ``own`` (e.g. chi2map) the fitted sequence itself (run, kind, frames rendered); else (a
+    relight's target) its frames, checked only on the fit's own sequence."""
     same_run = result.get("sequence_run_id") == doc.get("run_id")
     if own:
         table, of_points = is_table(doc), "points" in result

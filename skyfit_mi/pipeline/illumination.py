@@ -1,23 +1,15 @@
 """The light of a frame from an ``envmap`` or ``directional`` illumination record.
 
-The manifest's records (``docs/MANIFEST.md``) and the spec's sky tables of the same types
-(``docs/SPEC.md``) share these fields, so both become a :class:`~skyfit_mi.physics.sky.Sky`
-here, and a rendered frame's record is written back from the Sky (:func:`envmap_record`,
-:func:`directional_record`): the map's file and options, never its numbers.
+Manifest records (``docs/MANIFEST.md``) and spec sky tables (``docs/SPEC.md``) of these types
+share their fields: both become a :class:`~skyfit_mi.physics.sky.Sky` here, and a frame's record
+is written back from the Sky (the map's file and options, never its numbers).
 
-``envmap``: ``file`` (an HDR image: OpenEXR, Radiance HDR or float TIFF, read by
-:func:`~skyfit_mi.pipeline.photos.read_photo`), ``projection`` (``latlong`` or ``fisheye``),
-``north_rotation_deg`` (0), ``scale`` (1), ``rows`` (the table's rows; default the map's own,
-at most :data:`~skyfit_mi.physics.latlong.MAX_ROWS`), ``diffuse_horizontal_W_m2`` (rescale the
-map to this measured diffuse irradiance), ``direct_normal_W_m2`` (a solar disc at the frame's
-sun position), ``sun_mask_deg`` (fill the map's clipped sun from the ring around it),
-``ground_albedo`` (0), ``sun_solid_angle_sr``.  See :mod:`skyfit_mi.physics.envmap`.
-
-``directional``: ``direction`` (toward the source, world frame), ``irradiance_W_m2`` (RGB or one
-number, normal to the beam), ``solid_angle_sr`` (default the sun's).
-
-Measured irradiance (a spec's ``perez`` sky, a manifest's ``irradiance`` record) drives the
-Perez all-weather sky: :func:`perez_from_irradiance`.
+``envmap`` (:mod:`skyfit_mi.physics.envmap`): ``file`` (OpenEXR, Radiance HDR or float TIFF),
+``projection`` (``latlong`` or ``fisheye``), ``north_rotation_deg`` (0), ``scale`` (1), ``rows``
+(default the map's), ``diffuse_horizontal_W_m2`` (rescale to it), ``direct_normal_W_m2`` (a
+solar disc), ``sun_mask_deg`` (fill the clipped sun), ``ground_albedo`` (0),
+``sun_solid_angle_sr``.  ``directional``: ``direction`` (toward the source), ``irradiance_W_m2``
+(RGB or one number, normal to the beam), ``solid_angle_sr`` (default the sun's).
 """
 
 import os
@@ -50,11 +42,10 @@ _MEASURED_OPTIONS = ("diffuse_horizontal", "direct_normal", "global_horizontal",
 
 def perez_from_irradiance(e, zenith, azimuth, t):
     """The Perez all-weather sky (:func:`~skyfit_mi.physics.perez.perez_sky`) of measured
-    irradiance at one time ``t`` (aware datetime), sun at ``zenith``, ``azimuth`` [deg]: ``e``
-    a spec [sky] entry or a manifest ``irradiance`` record, with ``diffuse_horizontal_W_m2``
-    and ``direct_normal_W_m2``, or ``global_horizontal_W_m2`` split by ``decomposition``
-    (default 'erbs'), and optional ``cct`` [K], ``ground_albedo``, ``sun`` (False: no disc).
-    The sun below the horizon gives a black sky.  SkyfitError when no irradiance is given."""
+    irradiance at time ``t`` (aware), sun at ``zenith``, ``azimuth`` [deg].  ``e`` (spec entry or
+    manifest record) gives ``diffuse_horizontal_W_m2`` and ``direct_normal_W_m2``, or
+    ``global_horizontal_W_m2`` split by ``decomposition`` (default 'erbs'), and optional ``cct``
+    [K], ``ground_albedo``, ``sun``.  Black below the horizon; SkyfitError without irradiance."""
     if zenith >= 90.0:              # no daylight model below the horizon: a black sky
         return Sky(direction_from_angles(np.radians(zenith), np.radians(azimuth)),
                    info={"kind": "perez", "sun_zenith_deg": zenith, "sun_azimuth_deg": azimuth,
@@ -78,11 +69,8 @@ def perez_from_irradiance(e, zenith, azimuth, t):
 
 
 def read_envmap(path):
-    """The pixels (N, M, 3) of the HDR map at ``path`` [the file's linear values].
-
-    Raises :class:`~skyfit_mi.errors.SkyfitError` in one line naming the file: missing, not an
-    image, or integer codes (8/16-bit photographs are not radiance maps).
-    """
+    """The pixels (N, M, 3) of the HDR map at ``path`` [the file's linear values]; SkyfitError
+    naming the file if missing, not an image, or integer codes (not a radiance map)."""
     photo = read_photo(path)
     if photo.kind != "float":
         raise SkyfitError(f"{path}: holds {photo.bits}-bit codes, not the linear floats of an HDR "
@@ -106,8 +94,7 @@ def envmap_from_record(rec, folder, sun_zenith_deg, sun_azimuth_deg):
 
 
 def envmap_record(sky, folder):
-    """The ``envmap`` record of a Sky made by :func:`envmap_from_record`, its file relative to
-    ``folder`` (the manifest's)."""
+    """The ``envmap`` record of a Sky made by :func:`envmap_from_record`, relative to ``folder``."""
     info = sky.info
     if "file" not in info:
         raise SkyfitError("this sky's environment map was not read from a file, so a manifest "
@@ -125,7 +112,7 @@ def directional_from_record(rec):
 
 
 def directional_record(sky):
-    """The ``directional`` record of a Sky made by :func:`~skyfit_mi.physics.sky.directional_sky`."""
+    """The ``directional`` record of a :func:`~skyfit_mi.physics.sky.directional_sky` Sky."""
     return {"kind": "directional", "direction": sky.sun_direction,
             "irradiance_W_m2": sky.sun_radiance * sky.sun_solid_angle,
             "solid_angle_sr": sky.sun_solid_angle}

@@ -1,37 +1,14 @@
 """Photographs in: a day of real frames becomes the sequence folder ``render`` writes.
 
-``skyfit ingest SPEC PHOTOS... -o DIR`` reads the photographs (:mod:`.photos`), gives each its
-time (:mod:`.photo_times`: EXIF, a CSV or a file-name pattern), resolves the sun and sky of
-each time from the spec (site, camera pose, scene geometry, sky type or measured irradiance:
-the spec's ``[time]`` is replaced by the photographs' times), and writes the manifest
-contract with ``source = "ingest"``, so ``fit``, ``pixels``, ``labels``, ``relight`` and
-``chi2map`` read it unchanged.  The sensor model (thesis ch. 5) is the one synthetic
-sequences use:
-
-* values stay in the camera's codes [DN]: an 8-bit JPEG's 0-255, a 16-bit TIFF's or a RAW
-  file's 0-65535; floating-point frames (EXR, HDR) are put on a linear 16-bit scale (one
-  factor for the day, recorded).  Codes at 0 or the top are censored in the fit, as for
-  synthetic frames; NaN values are masked (sigma infinite) and counted;
-* linearisation: the response (``srgb``, ``gamma``, ``linear``) inverts the encoding, or is
-  **fitted from the calibration patches** (``--response fit``: the family and gamma whose
-  codes match the patches' rendered radiance, grey steps as the thesis's IT8 target);
-* exposure: relative from EXIF (t ISO / N^2, per frame) when every frame has it, and an
-  absolute scale [sr m^2 W^-1] given (``--exposure``, for the first frame) or **fitted from
-  patches of known reflectance**: scene materials named as grey Lambertian references
-  (``--calibrate grey=0.18``) are rendered under each frame's sky and their observed signal
-  divided by the rendered radiance; this gives each channel's scale (white balance) too, and
-  each frame's own exposure where EXIF has none or its shutter misses (the frames scattering
-  about a smooth day curve through EXIF's: a smooth drift is the light's, left to the fit);
-* vignetting: none, the cos^4 law (eq. 5.6) or a flat-field image (``sensor.flat_field``,
-  multiplied into each pixel's gain by the fit);
-* noise: per pixel, sigma^2 = Q'(s)^2 (a + b s M) + 1/12 + c [DN^2] (read noise a and shot
-  noise b in linear codes, through the response's slope Q', plus quantisation, plus a JPEG's
-  quantisation error c from its tables), a and b estimated from the frames (local
-  differences, robust by level) or given.
-
-Nothing is written until every input is checked; the folder is then written as ``render``
-writes it (frames atomically, manifest last) and a second run into it is refused unless
-``--overwrite``.
+``skyfit ingest SPEC PHOTOS... -o DIR`` reads and times the photographs (:mod:`.photos`,
+:mod:`.photo_times`), takes each time's sun and sky from the spec and writes a manifest with
+``source = "ingest"`` that the other commands read unchanged.  The sensor model is the synthetic
+sequences' (thesis ch. 5): values stay in camera codes [DN] (float frames on a linear 16-bit
+scale; codes at 0 or the top censored), linearised by a given or fitted response
+(:func:`fit_response`), with vignetting none, cos^4 (eq. 5.6) or a flat field, exposure from
+EXIF, ``--exposure`` or grey references (:func:`calibrate_exposure`), and noise
+sigma^2 = Q'(s)^2 (a + b s M) + 1/12 [DN^2] plus a JPEG's error (:func:`pixel_sigma`).  Nothing
+is written until every input is checked.
 """
 
 import hashlib
@@ -62,35 +39,27 @@ from .sequence import (FrameRenderer, finish, frame_record, manifest_header, pre
                        write_frame)
 from .spec import SpecError, read_spec, validate_spec
 
-#: Floating-point frames are scaled so that the day's brightest finite value is this share of
-#: a 16-bit full scale.
+#: Float frames are scaled so that the day's brightest value is this share of 16-bit full scale.
 FLOAT_HEADROOM = 0.9
 #: Level bins and the least pixels per bin of the noise estimate.
 NOISE_BINS, NOISE_MIN_PIXELS = 16, 200
-#: Robust standard deviations beyond which a neighbour difference is an outlier, not noise;
-#: the spread of four diagonal neighbours, in noise standard deviations, beyond which a pixel
-#: lies on a scene edge (four normal values spread more than 4.5 sigma in about 1.4% of
-#: cases, which only thins the data: the test does not touch the pixel's own noise); passes.
+#: Robust sds beyond which a neighbour difference is an outlier; spread of the four diagonal
+#: neighbours [noise sd] marking a scene edge (noise alone exceeds it ~1.4% of the time); passes.
 NOISE_CLIP, NOISE_FLAT, NOISE_PASSES = 3.5, 4.5, 3
-#: JPEG noise (:mod:`.jpeg_noise`): the iterations and relative tolerance of the sensor noise
-#: found from what the frames show, the frames and crop [pixels] it re-compresses.
+#: JPEG noise (:mod:`.jpeg_noise`): iterations and relative tolerance of the sensor-noise search.
 JPEG_NOISE_ITERATIONS, JPEG_NOISE_TOL = 12, 0.01
 #: Below this share of the estimated noise shown by neighbouring pixels a JPEG hides the noise.
 JPEG_NOISE_PASSED_MIN = 0.15
-#: A JPEG block whose values spread about a plane by more than this many sigmas holds an edge
-#: (64 normal values spread more than 8 sigma about once in 10^5).
+#: Spread about a plane [sigma] marking a JPEG block with an edge (noise alone: ~1e-5 of blocks).
 JPEG_EDGE_RANGE = 8.0
+#: Frames and crop [pixels] re-compressed to find the sensor noise of JPEGs.
 JPEG_CALIBRATION_FRAMES, JPEG_CALIBRATION_SIZE = 3, 512
-#: Responses ``--response fit`` chooses among (:func:`fit_response`), the gamma it accepts,
-#: the least span of the patches' signals at one exposure it needs, and the rms relative
-#: error of the patches' codes beyond which it warns that no family describes them.
+#: ``--response fit`` (:func:`fit_response`): families, accepted gamma, least span of the
+#: patches' signals at one exposure, and rms relative code error above which it warns.
 RESPONSE_FAMILIES = ("linear", "srgb", "gamma")
 GAMMA_RANGE = (1.0, 4.0)
-#: The prior relative error of each entry of a RAW's colour matrix (its maker's or Adobe's
-#: for the camera model, in linear sRGB) when none is given: such a matrix is a least-squares
-#: fit of a chart under one light for one sensor of the model, and mixes a few per cent of
-#: each channel into the others on another sensor or light.  A prior, not a measurement; it
-#: is the error photo_sim's ``matrix_error`` gives its RAWs in scripts/jpeg_colour_coverage.py.
+#: Prior relative error of each entry of a RAW's colour matrix when none is given: fitted to one
+#: chart, light and sensor, a maker's matrix mixes a few per cent of each channel elsewhere.
 RAW_MATRIX_ERROR = 0.03
 RESPONSE_SPAN_MIN = 2.0
 RESPONSE_RMS_WARN = 0.05
@@ -119,8 +88,7 @@ def _sensor(photos, response, gamma, spec_sensor, cos4):
     else:
         depth = int(first.bits)
     if response is None and (first.kind == "float" or all(p.format == "raw" for p in photos)):
-        response = "linear"           # EXR/HDR and RAWs as read hold linear values, whatever
-                                      # the spec
+        response = "linear"           # EXR/HDR and RAWs as read are linear, whatever the spec
     if response is None:
         response = spec_sensor.get("response") if "response" in spec_sensor else None
     if response is None:
@@ -147,39 +115,23 @@ def _relative_exposures(photos, log):
 # ---- noise --------------------------------------------------------------------------------
 
 def estimate_noise(values, sensor, jpeg=None, shown=None, log=None):
-    """Read and shot noise (a [DN^2], b [DN]) of the linear codes from frames (H, W, 3) [DN];
-    ``jpeg`` each frame's :func:`.jpeg_noise.jpeg_settings` (None for other files);
-    ``shown`` the frames' :func:`shown_noise` if already taken; ``log`` gets a warning when a
-    JPEG hides the noise.
+    """Read and shot noise (a [DN^2], b [DN]) of the linear codes of frames (H, W, 3) [DN];
+    ``jpeg`` each frame's :func:`.jpeg_noise.jpeg_settings` (or None).
 
-    The difference r between a pixel and the mean of its four neighbours has variance 5/4 of
-    the pixel's where the scene is smooth.  Its level, and whether the scene is smooth there,
-    come from the four diagonal neighbours, whose noise is independent of r's (binned by the
-    pixel's own value, a flat region's bins would cut its noise short; tested on r itself, a
-    smooth pixel's large noise would be taken for an edge): a pixel whose diagonal neighbours
-    spread more than NOISE_FLAT times the noise at their level is a scene edge and left out,
-    with the noise of the previous pass (the first pass takes every pixel and a median
-    absolute deviation, which edges barely move).  Per level bin the variance within
-    NOISE_CLIP robust standard deviations (:func:`_clipped_variance`) is fitted by
-    Q'(s)^2 (a + b s M) + 1/12 with a, b >= 0 (non-negative least squares).
+    A pixel's difference r from the mean of its four neighbours has 5/4 of its variance where
+    the scene is smooth.  Level and smoothness come from the four diagonal neighbours, whose
+    noise is independent of r's; pixels whose diagonals spread beyond NOISE_FLAT sigma (of the
+    previous pass; the first uses a MAD) are edges, left out.  Per level bin the clipped
+    variance (:func:`_clipped_variance`) is fitted by Q'(s)^2 (a + b s M) + 1/12, a, b >= 0.
 
-    A JPEG removes part of the noise and adds its own error (:mod:`.jpeg_noise`), so for JPEG
-    frames that fit gives the noise the frames show, not the sensor's.  The sensor's is then
-    the (a, b) whose copies (each frame compressed again after fresh noise,
-    :func:`.jpeg_noise.recompress`; up to JPEG_CALIBRATION_FRAMES frames, each cropped to
-    JPEG_CALIBRATION_SIZE pixels about its centre on the JPEG's block grid) show in their
-    differences from the frames what the frames show, found by iterating (a, b) += shown -
-    the copies' (JPEG_NOISE_ITERATIONS, to JPEG_NOISE_TOL).  Measured on smooth synthetic
-    frames: exact without compression, read noise and total sigma within about 15% at quality
-    95 (its shot noise lost), but below it the frames show a few per cent of the noise between
-    neighbouring pixels and the estimate falls short: when what they show is below
-    JPEG_NOISE_PASSED_MIN of the estimate, ``log`` says so and asks for --noise.
+    A JPEG hides part of the noise, so for JPEGs the sensor's (a, b) is iterated until
+    re-compressed copies of centred crops (:func:`.jpeg_noise.recompress`) show what the frames
+    show; below JPEG_NOISE_PASSED_MIN shown, ``log`` asks for --noise.
     """
     shown = shown_noise(values, sensor) if shown is None else shown
     jpeg = list(jpeg or [None] * len(values))
 
-    # in each file's own layout (its blocks from the top left); the estimate does not depend on
-    # the turn (a pixel's four neighbours)
+    # in each file's own layout (blocks from the top left); the estimate ignores the turn
     pairs = [(stored(v, st), st) for v, st in zip(values, jpeg) if st is not None]
     if not pairs:
         return shown
@@ -199,9 +151,7 @@ def estimate_noise(values, sensor, jpeg=None, shown=None, log=None):
     for it in range(JPEG_NOISE_ITERATIONS):
         rng = np.random.default_rng([SEED, it])
         errors = [recompress(v, st, sensor, (a, b), rng)[0] - np.nan_to_num(v) for v, st in crops]
-        # the copies' errors where the frames are smooth: the edges the frames' own noise
-        # tells (their spread is the frames'; judged by the errors' noise, which the
-        # compression shrinks, a coarse JPEG's smooth pixels all read as edges)
+        # edges judged by the frames' noise (the errors' is shrunk by compression)
         sa, sb = _fit_noise(_noise_parts(views, sensor, errors), sensor, shown)
         na, nb = max(a + shown[0] - sa, 0.0), max(b + shown[1] - sb, 0.0)
         done = abs(na - a) <= JPEG_NOISE_TOL * max(a, 1e-2) and \
@@ -221,14 +171,12 @@ def estimate_noise(values, sensor, jpeg=None, shown=None, log=None):
 
 
 def shown_noise(values, sensor):
-    """The fit of :func:`estimate_noise` to the frames as they are (no JPEG correction): the
-    noise their neighbouring pixels show, (a [DN^2], b [DN])."""
+    """(a [DN^2], b [DN]) the frames' neighbouring pixels show: no JPEG correction."""
     return _passes(_noise_parts(values, sensor), sensor)
 
 
 def _passes(parts, sensor):
-    """(a, b) fitted to :func:`_noise_parts` in NOISE_PASSES passes (each leaving out the
-    edges the previous one tells)."""
+    """(a, b) fitted to :func:`_noise_parts` in NOISE_PASSES passes, each dropping found edges."""
     noise = None
     for _ in range(NOISE_PASSES):
         noise = _fit_noise(parts, sensor, noise)
@@ -236,9 +184,7 @@ def _passes(parts, sensor):
 
 
 def _noise_parts(values, sensor, errors=None):
-    """Per frame (r, level, spread) of :func:`estimate_noise`'s pixels; with ``errors`` (error
-    fields of the frames' size) r of their differences instead, the levels and edges still
-    the frames'."""
+    """Per frame (r, level, spread) of :func:`estimate_noise`'s pixels (r of ``errors`` if any)."""
     parts = []
     for i, v in enumerate(values):
         e = v if errors is None else errors[i]
@@ -254,9 +200,8 @@ def _noise_parts(values, sensor, errors=None):
 
 
 def _noise_bins(parts, sensor, noise):
-    """Per level bin: the row [Q'^2, Q'^2 s M] of the noise model, the variance of r / 1.25
-    [DN^2] and the weight (sqrt of the pixels), edges left out by ``noise`` (None: every
-    pixel, the variance from a median absolute deviation)."""
+    """Per level bin: the noise model's row [Q'^2, Q'^2 s M], var(r) / 1.25 [DN^2] and weight
+    sqrt(pixels); edges left out by ``noise`` (None: every pixel, variance from a MAD)."""
     rows, var, weights = [], [], []
     for r, lvl, spread in parts:
         if noise is not None:
@@ -292,17 +237,15 @@ def _nnls(rows, rhs, weights):
 
 
 def _fit_noise(parts, sensor, noise):
-    """One pass of :func:`estimate_noise`: (a, b) from the frames' (r, level, spread), the
-    edges left out by the previous pass's ``noise`` (None: the first pass)."""
+    """One pass of :func:`estimate_noise`, edges left out by the previous ``noise`` (or None)."""
     rows, var, weights = _noise_bins(parts, sensor, noise)
     return _nnls(rows, var - 1.0 / 12.0, weights)
 
 
 def _clipped_variance(r):
-    """The variance of ``r`` without its outliers (scene edges): the mean square about the
-    median within NOISE_CLIP robust standard deviations, iterated, corrected for the normal
-    distribution's share beyond the clip.  Unlike a squared MAD it is not biased by codes that
-    are whole numbers (a MAD of residuals of 1-DN noise falls on a few discrete values)."""
+    """Variance of ``r`` without outliers (edges): mean square about the median within
+    NOISE_CLIP robust sds, iterated, corrected for the normal tail beyond the clip.  Unlike a
+    squared MAD it is not biased by whole-number codes."""
     from scipy.stats import norm
 
     r = r - np.median(r)
@@ -318,24 +261,15 @@ def _clipped_variance(r):
 
 
 def pixel_sigma(values, sensor, noise, jpeg=None):
-    """sigma [DN] of each value (H, W, 3) (or of levels (n,)), inf where NaN.
-
-    Without compression sqrt(Q'(s)^2 (a + b s M) + 1/12): read and shot noise through the
-    response's slope, plus the rounding to whole codes.  For a JPEG, ``jpeg`` =
-    {"variance": the frame's :func:`.jpeg_noise.bootstrap_variance`, "shown": the frames'
-    :func:`shown_noise`, "settings": its :func:`.jpeg_noise.jpeg_settings`}: the bootstrap's
-    variance, at least that formula of the shown noise (what neighbouring pixels differ by is
-    error too: a floor where heavy compression leaves the bootstrap little noise to find); in
-    blocks holding an edge (values spreading about a plane more than JPEG_EDGE_RANGE of those
-    sigmas), where the JPEG loses the scene's own detail (ringing), which the bootstrap cannot
-    draw, plus the tables' bound (:func:`.jpeg_noise.tables_bound`).
-    """
+    """sigma [DN] of each value (H, W, 3) (or level (n,)), inf where NaN: sqrt(Q'(s)^2 (a + b s M)
+    + 1/12).  For a JPEG (``jpeg`` = {"variance", "shown", "settings"}), the bootstrap variance
+    floored by that formula of the shown noise, plus :func:`.jpeg_noise.tables_bound` in blocks
+    holding an edge (:func:`edge_blocks`), whose ringing the bootstrap cannot draw."""
     return _sigma(values, sensor, noise, jpeg)[0]
 
 
 def _sigma(values, sensor, noise, jpeg=None):
-    """:func:`pixel_sigma`, and for a JPEG which pixels lie in blocks holding an edge
-    (:func:`edge_blocks`; None without a JPEG)."""
+    """:func:`pixel_sigma`, and for a JPEG its edge-block mask (:func:`edge_blocks`; else None)."""
     a, b = noise if jpeg is None else jpeg["shown"]
     s = sensor.linearise(np.nan_to_num(values))
     q = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6))
@@ -350,11 +284,9 @@ def _sigma(values, sensor, noise, jpeg=None):
 
 
 def edge_blocks(values, variance, block=8):
-    """(H, W, 1) bool: the pixel's 8x8 JPEG block (from the top left) spreads, about the plane
-    fitted to it, more than JPEG_EDGE_RANGE times its median sigma (of ``variance``) in some
-    channel: an edge (a plane, since shading and vignetting tilt a block without one).  Luma's
-    blocks: the 16-pixel cells of subsampled chroma, whose upsampling leaves steps inside
-    them, would take a quarter of a smooth surface for edges."""
+    """(H, W, 1) bool: the pixel's 8x8 JPEG block (from the top left) spreads about its fitted
+    plane by more than JPEG_EDGE_RANGE times its median sigma in some channel.  A plane, since
+    shading tilts smooth blocks; luma blocks, since chroma upsampling steps would read as edges."""
     h, w = values.shape[:2]
     ph, pw = -h % block, -w % block
     nby, nbx = (h + ph) // block, (w + pw) // block
@@ -393,18 +325,11 @@ def _calibration_spec(raw, calibrate, base_dir):
 def patch_samples(spec, values, falloff, calibrate, chart=None, reach=0):
     """The calibration patches' pixels in every frame of ``values`` (the spec's lit frames).
 
-    Patches are the ``calibrate`` materials' pixels away from their edges (labels 1, 2, ...),
-    and ``reach`` pixels inside them where the frames were resampled or the pose is uncertain
-    (as a fit's regions keep, :func:`.pixels.material_regions`: a grey card's pixels that may
-    see the board beside it darken the card, which brightens every material calibrated by it;
-    a pose 0.3 degrees off moved the sample board's C by 2-3%),
-    and, with ``chart`` = (material, swatch labels (H, W) of
-    :func:`.colorchecker.find_chart`), the ColorChecker's 24 swatches (labels
-    :data:`CHART_LABEL` + swatch index), which must lie on that scene material.  Per frame,
-    (codes (n, 3) [DN], L (n, 3) [W m^-2 sr^-1]), L the pixel's radiance rendered under the
-    frame's sky with the material a Lambertian of its known reflectance (a swatch: of
-    :data:`CHART_GREY`, scaled to the swatch's reference), times the vignetting ``falloff``;
-    each pixel's patch label (n,); and where the n pixels lie, an (H, W) mask.
+    Patches: the ``calibrate`` materials' pixels (labels 1, 2, ...) eroded from their edges by
+    ``reach`` more (mixed pixels bias every material calibrated on them), and with ``chart`` =
+    (material, swatch labels (H, W)) the 24 swatches (labels CHART_LABEL + index).  Returns per
+    frame (codes (n, 3) [DN], L (n, 3) [W m^-2 sr^-1] rendered for the known reflectance times
+    ``falloff``), each pixel's label (n,), and the (H, W) mask.
     """
     from scipy.ndimage import binary_erosion
 
@@ -456,9 +381,7 @@ def _select(samples, patch, keep):
 
 
 def _swatch_ratios(samples, patch, sensor, exposures):
-    """(24, 3) :func:`central_mean` over frames and pixels of each ColorChecker swatch's
-    observed signal over its calibrated prediction (exposure x rendered radiance), values at 0
-    or the top left out; NaN where a swatch has none."""
+    """(24, 3) :func:`central_mean` of each swatch's observed over predicted signal, or NaN."""
     r = np.concatenate([_signal_ratio(y, L, sensor)[1] / e for (y, L), e in zip(samples,
                                                                                exposures)])
     labels = np.tile(patch, len(samples))
@@ -473,11 +396,8 @@ def _swatch_ratios(samples, patch, sensor, exposures):
 
 
 def central_mean(x, axis=0):
-    """The mean of the middle half (by rank) of ``x``'s finite values along ``axis`` (the
-    interquartile mean), NaN where none: the calibration's robust level.  A median of whole
-    codes snaps to the code nearest the level (on 8-bit frames a bias of up to half a code, 1%
-    of a dark patch's signal); the middle half's mean does not, and leaves outliers out as a
-    median does."""
+    """Interquartile mean of ``x``'s finite values along ``axis``, NaN where none: the
+    calibration's robust level (unlike a median, it does not snap to whole codes)."""
     x = np.moveaxis(np.asarray(x, dtype=float), axis, 0)
     s = np.sort(np.where(np.isfinite(x), x, np.inf), axis=0)       # non-finite last
     n = np.sum(np.isfinite(x), axis=0)
@@ -489,9 +409,8 @@ def central_mean(x, axis=0):
 
 
 def _signal_ratio(y, L, sensor):
-    """The linear signal of codes ``y`` (n, 3) [DN] and its ratio to the rendered radiance
-    ``L`` (n, 3) [W m^-2 sr^-1], NaN where a value is clipped (0 or the top), not finite, or
-    unlit: the calibration's one rule for usable patch values."""
+    """Linear signal of codes ``y`` (n, 3) [DN] and its ratio to the rendered radiance ``L``
+    (n, 3) [W m^-2 sr^-1]; NaN where clipped, not finite or unlit (the one usability rule)."""
     ok = np.isfinite(y) & (y > 0) & (y < sensor.max_code) & (L > 0)
     s = np.where(ok, sensor.linearise(np.where(ok, y, 0.0)), np.nan)
     return s, s / np.where(ok, L, 1.0)
@@ -500,14 +419,10 @@ def _signal_ratio(y, L, sensor):
 def fit_response(samples, patch, max_code, rel, log):
     """The sensor response that the calibration patches' codes follow: (response, gamma, info).
 
-    Per frame, patch and channel the central code v (:func:`central_mean`, away from 0 and the
-    top) is set against the central rendered radiance L; each family of
-    :data:`RESPONSE_FAMILIES` is fitted with an exposure per channel (times the frames' EXIF
-    exposures ``rel``), or per frame and channel where ``rel`` is None: 'linear' and 'srgb'
-    have no shape parameter, 'gamma' (v = (k L) ^ (1 / gamma), thesis eq. 5.11) fits gamma by
-    least squares in log v.  The family whose codes
-    come closest (rms relative error) is chosen; every family's error is in ``info``.
-    SkyfitError unless the patches' signals span RESPONSE_SPAN_MIN at a fixed exposure.
+    Each of :data:`RESPONSE_FAMILIES` is fitted to the patches' central codes v against their
+    rendered radiance L, with an exposure per channel (times EXIF's ``rel``, else per frame too);
+    'gamma' (v = (k L) ^ (1 / gamma), thesis eq. 5.11) by least squares in log v.  The lowest
+    rms relative error wins.  SkyfitError unless the signals span RESPONSE_SPAN_MIN.
     """
     v, group, u = [], [], []
     for f, (codes, radiance) in enumerate(samples):
@@ -567,21 +482,16 @@ def fit_response(samples, patch, max_code, rel, log):
     return best, gamma, info
 
 
-#: The most parts a calibration patch's pixels are split into (:func:`calibrate_exposure`),
-#: whose spread measures a frame's exposure's own error: 8 give each frame 7 degrees of
-#: freedom per channel.  Two halves gave 1, and the estimate pooled over a day of 7 frames then
-#: scattered 3x between a grey card's three channels (0.06-0.47%, where the exposures' errors
-#: were 0.14-0.43%), so that exact EXIF exposures were refused as scattering beyond it.
+#: Most parts a patch's pixels are split into, whose spread measures a frame's exposure error
+#: (:func:`calibrate_exposure`): 8 give 7 degrees of freedom per frame and channel.
 CALIBRATION_PARTS = 8
 
 
 def _patch_exposure(s, r, patch, parts=1, cells=None):
-    """One frame's exposure (3,) from its patches' signals ``s`` and ratios ``r`` (n, 3) (of
-    :func:`_signal_ratio`): per patch the central mean of its ratios, weighted by its pixels
-    times its median signal squared; with ``parts`` > 1, (parts, 3): the same from each of
-    ``parts`` runs of each patch's pixels (raster order: bands of its rows), or with ``cells``
-    (n,) (each pixel's JPEG coding unit) of its units, whose spread measures the estimate's
-    own error."""
+    """One frame's exposure (3,) from its patches' signals ``s`` and ratios ``r`` (n, 3)
+    (:func:`_signal_ratio`): per patch the central mean of its ratios, weighted by pixels x
+    median signal^2.  With ``parts`` > 1, (parts, 3) from runs of each patch's pixels (bands of
+    rows), or of its JPEG coding units with ``cells`` (n,)."""
     out = np.zeros((parts, 3))
     for part in range(parts):
         num = den = 0.0
@@ -601,31 +511,20 @@ def _patch_exposure(s, r, patch, parts=1, cells=None):
     return out if parts > 1 else out[0]
 
 
-#: The p-value of the chi^2 of the frames' exposures about the EXIF relative exposures (their
-#: patches' own noise as sigma) below which each frame's exposure is taken from its patches.
+#: p-value of the exposures' chi^2 about EXIF's below which each frame takes its patches' own.
 EXIF_SCATTER_P = 1e-3
-#: The terms of the smooth day curve (Legendre polynomials in time: level, drift, curvature)
-#: about which the frames' exposures are tested against EXIF's (:func:`calibrate_exposure`).
-#: A sky the spec does not name moves the references' light smoothly over the day, a shutter
-#: frame by frame: the board's card under a turbid sky (T 5) scattered 4.8% about EXIF's
-#: exposures with a spec of CIE clear, 0.8% about a quadratic in time (its frames' own noise
-#: 0.6-0.8%); under CIE type 10 1.8% and 0.4%.  Taken frame by frame there, the exposures
-#: carried the spec's day curve into the data, which no fit of the sky could then take out
-#: (hazy 60 of 80 pairs held, 4 gross misses; with EXIF's level kept and the light's level over
-#: the day fitted, 80 of 80: docs/BENCHMARKS.md, "The sample board photographed").
+#: Legendre terms in time (level, drift, curvature) of the smooth day curve about which exposures
+#: are tested against EXIF's: a sky unlike the spec's moves the light smoothly, a shutter frame by
+#: frame (docs/BENCHMARKS.md, "The sample board photographed").
 EXPOSURE_CURVE_TERMS = 3
 
 
 def exif_scatter(ratio, var, seconds=None):
-    """How the frames' exposures from their patches depart from EXIF's: ``ratio`` (F, 3) the
-    former over the latter (times one scale per channel), ``var`` (3,) a frame's relative
-    variance from its patches' noise, ``seconds`` (F,) the frames' times (None: no curve).
-    Per channel a smooth curve over the day (:data:`EXPOSURE_CURVE_TERMS` Legendre polynomials
-    in time, fewer for few frames; a constant without times) is fitted to log ``ratio``; the
-    frames' scatter about it is the camera's (``shutter``: chi^2 with p below
-    EXIF_SCATTER_P), the curve beyond its level the light's (``curved``, the same test).
-    Returns {relative_spread (all of it), frame_spread, curve_relative_spread (luminance, the
-    standard deviation over the frames), curve_terms, scatter_chi2_per_dof, shutter, curved}."""
+    """How the frames' patch exposures depart from EXIF's: ``ratio`` (F, 3) patch over EXIF
+    exposure, ``var`` (3,) a frame's relative variance, ``seconds`` (F,) frame times (or None).
+    Scatter about a smooth curve in log ``ratio`` (:data:`EXPOSURE_CURVE_TERMS`) is the
+    camera's (``shutter``), the curve beyond its level the light's (``curved``), each a chi^2
+    test at EXIF_SCATTER_P; the dict also holds the spreads and ``scatter_chi2_per_dof``."""
     from scipy.stats import chi2 as chi2_dist
 
     dev = np.log(np.asarray(ratio, dtype=float))
@@ -648,28 +547,16 @@ def exif_scatter(ratio, var, seconds=None):
 
 
 def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None, seconds=None):
-    """Per-frame, per-channel exposure [sr m^2 W^-1] (F, 3) from the calibration patches'
-    :func:`patch_samples` (``patch`` each pixel's material label), and the calibration's
-    record: per frame :func:`_patch_exposure` (the observed linear signal over the rendered
-    radiance x falloff), its standard error from the spread of the exposures that up to
-    CALIBRATION_PARTS parts of the patches give (pooled over the frames).  In JPEGs, whose
-    errors the pixels of a coding unit share (``cells`` (n,): each pixel's unit), a part holds
-    whole units: parts that split the units share their errors and understate the spread
-    (measured at quality 95: frames erring 0.37-0.66% against 0.26-0.34% from bands of rows).
+    """Per-frame, per-channel exposure [sr m^2 W^-1] (F, 3) from the patches'
+    :func:`patch_samples` (``patch``: each pixel's label), and the calibration's record.
 
-    With EXIF exposures ``rel`` the day shares one scale per channel (the median over frames of
-    exposure / rel) -- unless the frames scatter by more than their patches' noise allows
-    (chi^2 with p below EXIF_SCATTER_P, at least 3 frames: a camera's shutter and aperture miss
-    their nominal values by a few per cent) about a smooth curve over the day (per channel,
-    :data:`EXPOSURE_CURVE_TERMS` Legendre polynomials in the frames' ``seconds``; a constant
-    without them), when each frame takes its own, as without EXIF.  A smooth departure is the
-    light's (a sky the spec does not name), not the camera's: it is logged and recorded
-    (``curve_relative_spread``) and left in the data, for a fit of the sky to take
-    (:func:`exif_scatter`).  ``scale_relative_sd`` (3,) is the standard error of the exposure
-    the fits use, relative, as it reaches the reflectances: the median's over the frames for
-    one scale, a frame's over the square root of the frames for exposures of their own (each
-    frame's error its own, averaged by a fit over the day); fits widen their intervals by it
-    (:func:`skyfit_mi.fitting.uncertainty.calibration_sd`).
+    Each frame's exposure is :func:`_patch_exposure`, its standard error the spread over up to
+    CALIBRATION_PARTS parts of the patches (in JPEGs whole coding units ``cells``, which share
+    errors), pooled over frames.  With EXIF exposures ``rel`` the day shares one scale per
+    channel, unless (3+ frames) they scatter beyond the patches' noise about a smooth day curve
+    in ``seconds`` (:func:`exif_scatter`): then each frame takes its own.  A smooth departure is
+    the light's, left for a fit of the sky.  ``scale_relative_sd`` (3,) widens the fits'
+    intervals (:func:`skyfit_mi.fitting.uncertainty.calibration_sd`).
     """
     units = [len(np.unique(cells[patch == m])) if cells is not None else
              int(np.sum(patch == m)) // 8 for m in np.unique(patch)]
@@ -684,7 +571,7 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None, sec
     if not good.any():
         raise SkyfitError("the calibration patches are saturated, black or unlit in every frame; "
                           "they cannot set the exposure. Give --exposure instead.")
-    # a frame's relative variance, pooled over the frames: the parts' variance over their number
+    # a frame's relative variance, pooled over frames: the parts' variance over their number
     with np.errstate(all="ignore"):
         d = parts[good] / k[good, None, :]
         var_f = np.nanmean(np.nanvar(d, axis=1, ddof=1), axis=0) / n_parts
@@ -727,8 +614,7 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None, sec
         "spec's does: the frames keep their EXIF exposures' level, which a fit of the sky "
         "with the references among its regions (fit --all) takes, and each its own colour "
         "balance from the references")
-    # the light's colour, which no fitted part of the light moves, from the references frame by
-    # frame; its level, which the fit's curve of the light takes, from EXIF
+    # colour from the references frame by frame (no fitted light moves it); level from EXIF
     ratio = (k @ SRGB_LUMINANCE) / (exif @ SRGB_LUMINANCE)
     info.update(per_frame=True, scale_relative_sd=own_sd)
     return np.where(good[:, None], k / ratio[:, None], exif), info
@@ -738,8 +624,7 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None, sec
 
 def _chart_record(material, chart, samples, patch, sensor, exposures, log):
     """The manifest's record of a ColorChecker calibration, with its chromatic check and the
-    colour matrix's error the chromatic swatches measure (:func:`.colorchecker.matrix_error`;
-    ``colour_matrix``, None where too few swatches tell it)."""
+    colour matrix's error (:func:`.colorchecker.matrix_error`; None if too few swatches)."""
     ratio = _swatch_ratios(samples, patch, sensor, exposures)
     check = swatch_check(ratio)
     if check["rms"] is not None:
@@ -768,11 +653,9 @@ def _chart_record(material, chart, samples, patch, sensor, exposures, log):
 
 
 def spec_for_times(spec_path, times, tz=None, site=None, size=None):
-    """(raw, validated spec) of ``spec_path`` for measured frames at ``times`` (aware
-    datetimes, in order): its [time] replaced by them, frames with the sun below the horizon
-    skipped, ``site`` (latitude_deg, longitude_deg[, elevation_m]) over its [location] and
-    ``size`` (width, height) of the measured frames as its camera's (a spec naming another
-    size is refused)."""
+    """(raw, validated spec) of ``spec_path`` for frames at ``times`` (aware datetimes, in
+    order), night frames skipped; ``site`` (lat_deg, lon_deg[, elevation_m]) overrides its
+    [location], ``size`` (width, height) is its camera's (a spec naming another is refused)."""
     spec_path = Path(spec_path)
     raw = read_spec(spec_path)
     if "time" not in raw:
@@ -800,9 +683,8 @@ def spec_for_times(spec_path, times, tz=None, site=None, size=None):
 
 
 def measured_header(spec, sensor, run_id, what, seed_rule, scene=None):
-    """The manifest header of measured frames (source ``ingest``): the spec's materials kept
-    as placeholders of the ``what`` (e.g. 'photographed') material, unknown until fitted.
-    ``scene``: the spec's (xml, materials, to_world) if already built."""
+    """The manifest header of measured frames, materials marked placeholders; ``scene``: the
+    spec's (xml, materials, to_world) if already built."""
     xml, materials, to_world = scene or build_scene_xml(spec)
     for m in materials.values():
         m["source"] = f"{m.get('source', 'spec')}: a placeholder; the {what} material is " \
@@ -822,8 +704,7 @@ def _run_id(paths, spec_raw, options):
 
 
 def _neutral_labels(calibrate):
-    """The labels of the patches that set the exposure: the ``calibrate`` materials' and the
-    ColorChecker's neutral swatches."""
+    """Labels of the patches that set the exposure: ``calibrate``'s and the neutral swatches."""
     return list(range(1, len(calibrate) + 1)) + [CHART_LABEL + k for k in NEUTRAL]
 
 
@@ -833,23 +714,17 @@ def _neutral(samples, patch, calibrate):
 
 
 def _unbiased(values, bias, max_code):
-    """``values`` [DN] less the compression's mean error ``bias``, where they are neither
-    clipped (0 or ``max_code``: censored, they stay so) nor missing."""
+    """``values`` [DN] less the compression's mean error ``bias``, clipped or missing ones kept."""
     keep = ~np.isfinite(values) | (values <= 0) | (values >= max_code)
     return np.where(keep, values, np.clip(values - bias, 0.0, max_code)).astype(values.dtype)
 
 
 def _jpeg_errors(values, jpeg, sensor, noise, shown, progress, patches=None,
                  registration=None):
-    """Per JPEG frame (index -> settings in ``jpeg``): the bootstrap of its compression
-    (:func:`.jpeg_noise.bootstrap_variance`, with the sensor's ``noise``): {"variance",
-    "rho", "bias_mean" (the frame's mean bias per channel), "bias_patches" (the bias at the
-    (H, W) mask ``patches``, the calibration's pixels, of the frame registered by
-    ``registration``; None without), "settings", "shown"};
-    the frame's ``values`` (a list, changed in place) lose the compression's mean error
-    (:func:`_unbiased`).  The variance is kept as float16 (3 significant digits: 0.05% in
-    sigma) and the bias not at all: a frame's own values take two bytes more a value, not
-    eight."""
+    """Per JPEG frame (index -> settings in ``jpeg``) its compression's bootstrap
+    (:func:`.jpeg_noise.bootstrap_variance`): {"variance" (float16, to save memory), "rho",
+    "bias_mean", "bias_patches" (at the registered mask ``patches``, or None), "settings",
+    "shown"}.  ``values`` (a list) lose the mean error in place (:func:`_unbiased`)."""
     from tqdm import tqdm
 
     out = {}
@@ -910,8 +785,7 @@ class Frames:
 
 @dataclass
 class Linear:
-    """The frames' encoding: the sensor model to invert, the float frames' scale [DN per
-    unit], the vignetting (h, w) and a measured flat field (or None), and the values [DN]."""
+    """The frames' encoding: sensor, float scale [DN per unit], vignetting (h, w), flat field."""
 
     sensor: SensorModel
     float_scale: float
@@ -922,9 +796,8 @@ class Linear:
 
 @dataclass
 class Patches:
-    """The calibration's references seen in the lit frames (or, without any, the given first
-    exposure), the chart found, the response fitted from them, and the EXIF's relative
-    exposures."""
+    """The references seen in the lit frames (or, without any, the given first exposure), the
+    chart found, the response fitted from them, and EXIF's relative exposures."""
 
     sensor: SensorModel
     rel: np.ndarray
@@ -938,9 +811,8 @@ class Patches:
 
 @dataclass
 class Noise:
-    """The read + shot noise model (a [DN^2], b [DN]; a RAW's of its photosites [raw DN]), its
-    record, each JPEG frame's errors (:func:`_jpeg_errors`) by frame index, and for RAWs each
-    frame's developed noise (:func:`_raw_noise`: its sd and correlations) by index."""
+    """Read + shot noise (a [DN^2], b [DN]; for RAWs of the photosites), its record, and by
+    frame index the JPEG errors (:func:`_jpeg_errors`) or RAW noise (:func:`_raw_noise`)."""
 
     a: float
     b: float
@@ -951,8 +823,7 @@ class Noise:
 
 @dataclass
 class Exposures:
-    """Each lit frame's RGB exposure [sr m^2 W^-1] by index, the sensor at the first frame's,
-    the calibration's record (or None) and the EXIF's relative exposures (or None)."""
+    """Each lit frame's RGB exposure [sr m^2 W^-1] by index, with the first frame's sensor."""
 
     sensor: SensorModel
     by_frame: dict
@@ -964,13 +835,9 @@ def ingest(photo_paths, spec_path, out_dir, *, overwrite=False, progress=True, l
            **choices):
     """Turn photographs into a sequence folder; returns the manifest dict.
 
-    Its stages, each with a typed result: :func:`check_choices`, :func:`read_frames`
-    (photographs, times and the spec's frames), :func:`linearise` (encoding and vignetting),
-    :func:`calibration_patches` (references, chart, fitted response), :func:`noise_model`
-    (read + shot noise and JPEG errors), :func:`frame_exposures`, then :func:`_write`; between
-    the first two, :func:`.registration.register_frames` measures each frame's motion (and the
-    lens's distortion), undone where the frames' geometry matters: the calibration patches and
-    the frames written.
+    Stages, each with a typed result: :func:`check_choices`, :func:`read_frames`,
+    :func:`linearise`, :func:`.registration.register_frames`, :func:`calibration_patches`,
+    :func:`noise_model`, :func:`frame_exposures`, then :func:`_write`.
 
     Parameters
     ----------
@@ -978,21 +845,18 @@ def ingest(photo_paths, spec_path, out_dir, *, overwrite=False, progress=True, l
     spec_path : the spec (TOML/JSON) giving site, camera, scene and sky; its [time] is unused
     out_dir : the sequence folder to write
     choices : :class:`IngestOptions`' fields:
-        times_csv, name_pattern, tz : the frames' times (see :func:`.photo_times.frame_times`)
+        times_csv, name_pattern, tz : the frames' times (:func:`.photo_times.frame_times`)
         site : (latitude_deg, longitude_deg[, elevation_m]) overriding the spec's [location]
         response, gamma : the encoding to invert (default: the spec's [sensor], else the
-            files'), or response 'fit': chosen and fitted from the ``calibrate`` patches
-            (:func:`fit_response`)
+            files'), or response 'fit' (:func:`fit_response`)
         exposure : absolute exposure of the first frame [sr m^2 W^-1]
-        calibrate : {material: (r, g, b) reflectance} of grey Lambertian references in the scene
-        colorchecker : the scene material a ColorChecker Classic in the photographs lies on:
-            the chart is found (:func:`.colorchecker.find_chart`) and its six neutral swatches
-            join the calibration patches; its chromatic ones check the result
-            (``calibration.colorchecker``)
+        calibrate : {material: (r, g, b) reflectance} of grey Lambertian references
+        colorchecker : scene material a ColorChecker Classic lies on; its neutral swatches
+            calibrate, its chromatic ones check (``calibration.colorchecker``)
         vignetting : 'none', 'cos4', or the path of a flat-field image
-        noise : (a [DN^2], b [DN]) of the noise model, or None to estimate it from the frames
-        register, register_limit_px : register the frames on the one nearest the middle of the
-            day (default True), refusing a frame that moved more than the limit [px]
+        noise : (a [DN^2], b [DN]), or None to estimate it from the frames
+        register, register_limit_px : register the frames on the one nearest midday
+            (default True), refusing a frame that moved more than the limit [px]
     """
     o = check_choices(IngestOptions(**choices))
     frames = read_frames(photo_paths, spec_path, out_dir, o, log)
@@ -1017,8 +881,7 @@ def ingest(photo_paths, spec_path, out_dir, *, overwrite=False, progress=True, l
 
 
 def check_choices(o):
-    """``o`` (:class:`IngestOptions`, its calibrate made a dict), or SkyfitError for choices
-    that contradict each other or cannot be used, before any photograph is read."""
+    """``o`` with calibrate made a dict; SkyfitError for unusable or contradictory choices."""
     o.calibrate = dict(o.calibrate or {})
     if o.noise is not None and not (len(o.noise) == 2 and np.all(np.isfinite(o.noise))
                                     and min(o.noise) >= 0):
@@ -1048,9 +911,7 @@ def check_choices(o):
 
 
 def read_frames(photo_paths, spec_path, out_dir, o, log):
-    """The :class:`Frames` of the photographs (files, or folders of them in name order): read,
-    timed (:func:`.photo_times.frame_times`), sorted by time, and the spec made for their
-    times; night frames are kept out of the lit ones."""
+    """The :class:`Frames` of the photographs: read, timed, sorted, with the spec at their times."""
     paths = list_photos(photo_paths)
     if len(paths) < 2:
         raise SkyfitError(f"{len(paths)} photograph(s) given; a sequence needs at least 2.")
@@ -1081,9 +942,7 @@ def read_frames(photo_paths, spec_path, out_dir, o, log):
 
 
 def linearise(frames, o):
-    """The :class:`Linear` encoding of ``frames``: the response to invert (the files', the
-    spec's or the option's; a fitted one is set by :func:`calibration_patches`) and the
-    vignetting (cos^4 or a flat field)."""
+    """The :class:`Linear` encoding of ``frames`` (a fitted response comes later)."""
     photos, (h, w) = frames.photos, frames.size
     sensor, float_scale = _sensor(photos, None if o.fitted else o.response, o.gamma,
                                   frames.raw.get("sensor", {}), o.vignetting == "cos4")
@@ -1104,10 +963,8 @@ def linearise(frames, o):
 
 
 def calibration_patches(frames, linear, registration, o, log):
-    """The :class:`Patches` of the lit frames: the ``calibrate`` references and a
-    ColorChecker's greys sampled on the frames registered (:class:`.registration.Registration`),
-    and the response fitted from them with ``--response fit``; or, without references, the first
-    frame's given exposure (the option's or the spec's)."""
+    """The :class:`Patches` of the lit frames: references sampled on the registered frames (and
+    the fitted response), or without references the first frame's given exposure."""
     lit, sensor = frames.lit, linear.sensor
     values = {i: registration.warp(i, linear.values[i], sensor.max_code) for i in lit}
     rel = _relative_exposures(frames.photos, log)
@@ -1142,10 +999,8 @@ def calibration_patches(frames, linear, registration, o, log):
 
 
 def noise_model(frames, values, patches, registration, o, progress, log):
-    """The :class:`Noise` of the lit frames: read + shot noise estimated from them (or the
-    option's), and each JPEG frame's compression errors by bootstrap, on the files' own pixels
-    (the compression's bias at the calibration patches ``registration``'s, as they were
-    sampled); for RAWs of a Bayer filter, :func:`_raw_noise`."""
+    """The :class:`Noise` of the lit frames: read + shot noise estimated (or the option's), and
+    each JPEG frame's compression errors by bootstrap; for Bayer RAWs, :func:`_raw_noise`."""
     lit, sensor = frames.lit, patches.sensor
     if all(frames.photos[i].format == "raw" for i in lit):
         planes = [cfa_planes(frames.paths[i]) for i in lit]
@@ -1181,11 +1036,8 @@ def noise_model(frames, values, patches, registration, o, progress, log):
 
 
 def _raw_noise(frames, values, planes, o, progress, log):
-    """The :class:`Noise` of RAW frames (:mod:`.raw_noise`): the photosites' read and shot
-    noise [raw DN above black] estimated on the frames' CFA planes ``planes`` (or the
-    option's), then each lit frame developed again with fresh noise of it: each frame's
-    developed noise's standard deviation (float16: 3 significant digits, as a JPEG's variance)
-    and correlations."""
+    """The :class:`Noise` of RAW frames: photosite noise [raw DN] from the CFA ``planes`` (or
+    given), and each frame's developed noise sd and correlations (:mod:`.raw_noise`)."""
     lit = frames.lit
     if o.noise is None:
         a, b = shown_noise([p for ps in planes for p in ps], SensorModel(1.0, "linear", bits=16))
@@ -1214,9 +1066,8 @@ def _raw_noise(frames, values, planes, o, progress, log):
 
 
 def frame_exposures(frames, patches, noise, o, log):
-    """The :class:`Exposures` of the lit frames: calibrated on the references (their codes
-    with the compression's mean error taken out, as the frames' values are), or the given
-    first exposure scaled by the EXIF's relative exposures."""
+    """The :class:`Exposures` of the lit frames: calibrated on the references (JPEG bias taken
+    out as from the frames), or the given first exposure scaled by EXIF's relative exposures."""
     lit, sensor, rel = frames.lit, patches.sensor, patches.rel
     calibration = None
     if patches.samples is not None:
@@ -1236,8 +1087,7 @@ def frame_exposures(frames, patches, noise, o, log):
             *_neutral(samples, patches.patch, o.calibrate), sensor,
             [frames.photos[i] for i in lit], None if rel is None else rel[lit], log, cells,
             [frames.times[i].timestamp() for i in lit])
-        # the scene's references by name, so that a fit of the light can calibrate on them
-        # again under the light it fits (fitting.fit.reference_factor)
+        # by name, for a fit of the light to recalibrate on (fitting.fit.reference_factor)
         calibration["references"] = {name: [float(v) for v in np.broadcast_to(rho, 3)]
                                      for name, rho in o.calibrate.items()}
         if patches.response_info is not None:
@@ -1256,10 +1106,8 @@ def frame_exposures(frames, patches, noise, o, log):
 
 
 def _unmix(values, mixing, sensor):
-    """Codes ``values`` (H, W, 3) [DN] with the colour matrix's error ``mixing`` G (3, 3)
-    (:func:`.colorchecker.matrix_error`: the camera read (I + G) L) taken out of their linear
-    signal, (I + G)^-1 s; a pixel with a channel clipped (0 or the top) or missing keeps its
-    codes, whose clipped channel tells a bound only."""
+    """Codes ``values`` (H, W, 3) [DN] with the colour matrix's error G = ``mixing``
+    (:func:`.colorchecker.matrix_error`) taken out, (I + G)^-1 s; clipped pixels kept."""
     top = sensor.max_code
     ok = np.all(np.isfinite(values) & (values > 0) & (values < top), axis=-1)
     s = sensor.linearise(np.where(ok[..., None], values, 0.0))
@@ -1268,12 +1116,9 @@ def _unmix(values, mixing, sensor):
 
 
 def colour_matrix(photos, given, measured=None):
-    """The manifest's ``colour_matrix`` record: the relative error of each entry of the
-    camera's colour matrix ``given`` (the option's); else as a ColorChecker ``measured`` it
-    (the chart record's ``colour_matrix``: the frames are corrected by the mixing it found,
-    and what is left is the mixing's standard error); else for RAWs the prior
-    :data:`RAW_MATRIX_ERROR`; None for other files without one (their camera's matrix is
-    unknown: a JPEG's is inside the camera), or 0."""
+    """The manifest's ``colour_matrix`` record, the relative error of the colour matrix's
+    entries: ``given``; else the standard error of a ColorChecker's ``measured`` mixing (the
+    frames corrected by it); else :data:`RAW_MATRIX_ERROR` for RAWs; else (or given 0) None."""
     if given is None and measured is not None:
         return {"relative_sd": float(np.sqrt(np.mean(np.square(measured["standard_error"])))),
                 "source": "measured on the ColorChecker's chromatic swatches (the frames "
@@ -1290,8 +1135,7 @@ def colour_matrix(photos, given, measured=None):
 
 
 def _write(out, frames, linear, registration, noise, exposures, options, run_id, progress):
-    """Write the sequence folder of the ingest's stages' results, each frame's values and
-    sigma resampled by ``registration`` onto the reference's pinhole pixels."""
+    """Write the sequence folder, each frame resampled onto the reference's pinhole pixels."""
     spec, paths, photos, values = frames.spec, frames.paths, frames.photos, linear.values
     sensor, falloff, flat, jpeg_errors = exposures.sensor, linear.falloff, linear.flat, \
         noise.jpeg_errors

@@ -1,12 +1,10 @@
 """Measured irradiance series: a CSV, or an EPW / TMY3 weather file (pvlib's readers), read
 once and interpolated to each frame's time, to drive the Perez all-weather sky.
 
-A CSV holds a header row with ``time`` (ISO 8601; without an offset it is read in the
-spec's time zone) and ``ghi`` [W m^-2], optionally ``dhi`` and ``dni`` [W m^-2] (the long
-names ``global_horizontal_W_m2``, ``diffuse_horizontal_W_m2``, ``direct_normal_W_m2`` are
-accepted too).  EPW and TMY3 values are hourly sums ending at their time stamp, so they are
-placed at the middle of their hour.  Values are interpolated linearly in time; a frame
-outside the series by more than half its largest step is refused, never extrapolated.
+A CSV has columns ``time`` (ISO 8601; naive times in the spec's zone) and ``ghi``, optionally
+``dhi`` and ``dni`` [W m^-2] (or the long names, :data:`COLUMNS`).  EPW and TMY3 hourly sums
+end at their time stamp, so they are placed mid-hour.  Values are interpolated linearly in
+time; a frame beyond the series by more than half its largest step is refused.
 """
 
 import datetime as dt

@@ -1,39 +1,15 @@
 """What a JPEG does to a photograph's noise, found by compressing the scene again.
 
-A JPEG rounds each 8x8 block's DCT coefficients (of Y, Cb, Cr) to multiples of its quantisation
-tables.  On a smooth surface (the materials skyfit fits) the high frequencies hold only noise,
-and where the table's step exceeds the noise those coefficients round to zero: the JPEG
-*removes* noise there, while it adds rounding error to the coefficients it keeps and mixes the
-channels' errors through YCbCr.  Neither the tables' bound (the mean of q^2 / 12 over the
-coefficients, as if every coefficient were rounded with a uniform error: 4-5 DN rms at quality
-95, against 1.3-1.9 DN measured on smooth materials) nor the frames' pixel-to-pixel differences
-(which miss the errors a block's pixels share) give the error of a decoded value about the
-scene, which chi-square needs.
-
-So each frame's error is found by a parametric bootstrap (:func:`bootstrap_variance`):
-
-1. draws of the scene given the file (:func:`truth_sampler`): every coefficient the file kept,
-   and the low orders (:data:`LOW_ORDER`), anywhere in its rounding interval, the other
-   zeroed ones zero;
-2. each draw photographed again (:func:`recompress`): linearised, the sensor's read and shot
-   noise added (thesis ch. 5's model), encoded by the response, rounded to 8 bits, compressed
-   with the file's own tables and chroma subsampling (Pillow, libjpeg) and decoded as ingest
-   decodes the frames (:func:`decode`: in floating point, from the DCT coefficients);
-3. the mean square difference between copy and draw over :data:`REPLICATES` draws, averaged
-   over each pixel's 3x3 neighbourhood; the mean of copy less the noisy codes it was
-   compressed from, over each coding unit, is the compression's bias, which ingest takes out
-   of the values.
-
-Measured on smooth synthetic frames (``tests/test_jpeg_noise.py``) with known noise: the rms
-of (decoded - noise-free codes) / sigma is 0.9-1.0 at qualities 100 and 95, 0.8-1.0 at 90
-(4:2:2), 0.7-0.85 at 85 (4:2:0) and 0.4-0.7 at 75, where the low orders' content is overstated.
-The bootstrap cannot draw the content a JPEG zeroed above the low orders, which is what rings
-at an edge: :func:`skyfit_mi.pipeline.ingest.pixel_sigma` adds the tables' bound
-(:func:`tables_bound`) in blocks holding an edge (there sigma errs wide: z 0.45-1.0).  The
-sensor's noise itself is estimated from the frames
-(:func:`skyfit_mi.pipeline.ingest.estimate_noise`, with copies of the frames compressed again)
-well at quality 100 and to about 15% in sigma at 95; below that the frames hide it, and it
-should be given.  Noise realisations are seeded (:data:`SEED` and the frame's index).
+A JPEG rounds each 8x8 block's DCT coefficients (Y, Cb, Cr) to multiples of its quantisation
+tables: on a smooth surface it *removes* noise (high frequencies round to zero), adds rounding
+error to the kept coefficients and mixes the channels through YCbCr.  Neither the tables' bound
+(:func:`tables_bound`) nor pixel-to-pixel differences give the error about the scene that
+chi-square needs, so :func:`bootstrap_variance` finds it by a parametric bootstrap: draws of the
+scene given the file (:func:`truth_sampler`), each photographed again with fresh sensor noise
+(thesis ch. 5) and the file's own tables (:func:`recompress`), and decoded as ingest decodes
+(:func:`decode`).  The bootstrap cannot draw the content that rings at an edge, so
+:func:`skyfit_mi.pipeline.ingest.pixel_sigma` adds :func:`tables_bound` in blocks holding one.
+Accuracy by quality: docs/BENCHMARKS.md, "A JPEG's sigma".  Noise is seeded (:data:`SEED`).
 """
 
 import io
@@ -48,9 +24,8 @@ from .orientation import apply_orientation, undo_orientation
 REPLICATES = 8
 #: Seed of the bootstrap's noise (with the frame's index; recorded in the manifest).
 SEED = 20261125
-#: The DCT coefficients (u + v <= 2: the mean, gradients and curvature) whose rounding
-#: interval always holds the scene's content, zeroed or not: smooth shading and vignetting
-#: live there.
+#: DCT coefficients (u + v <= 2: mean, gradients, curvature) whose rounding interval always
+#: holds the scene's content, zeroed or not: smooth shading and vignetting live there.
 LOW_ORDER = np.add.outer(np.arange(8), np.arange(8)) <= 2
 
 
@@ -68,8 +43,7 @@ def jpeg_settings(path):
 
 
 def stored(values, settings):
-    """``values`` (H, W, ...) of a JPEG frame as the file lays them out, its EXIF orientation
-    (``settings["orientation"]``, from the caller) undone: its blocks start at the top left."""
+    """``values`` (H, W, ...) in the file's layout (``settings["orientation"]`` undone)."""
     return undo_orientation(values, settings.get("orientation", 1))
 
 
@@ -79,12 +53,8 @@ def displayed(values, settings):
 
 
 def block_offset(orientation, shape, block=8):
-    """(x, y) of the JPEG's block grid in a frame displayed with ``shape`` (H, W, ...) after
-    EXIF ``orientation``, each in [0, block): a displayed pixel (x, y) lies in block
-    ((x - ox) // block, (y - oy) // block).  The file's blocks start at its top left; a turn
-    that reverses an axis of the file moves them by its length modulo ``block``.  Found by
-    turning (:func:`~.orientation.apply_orientation`) the block indices of a small file with the
-    same lengths modulo ``block``."""
+    """(ox, oy) in [0, block) of the block grid of a frame displayed with ``shape`` after EXIF
+    ``orientation``: pixel (x, y) lies in block ((x - ox) // block, (y - oy) // block)."""
     settings = {"orientation": orientation}
     fh, fw = stored(np.broadcast_to(False, tuple(shape[:2])), settings).shape
     yy, xx = np.mgrid[0:fh % block + block, 0:fw % block + block] // block
@@ -108,10 +78,8 @@ def block_size(settings):
 
 
 def tables_bound(settings):
-    """The error variance [DN^2] per R, G, B if every coefficient were rounded with an error
-    uniform over its table entry q (q^2 / 12, averaged over the 64; luma and chroma combined
-    by JFIF's inverse): an upper bound, reached where the scene has content at every
-    frequency, as at an edge (the JPEG's ringing), shape (3,)."""
+    """Error variance [DN^2] (3,) if every coefficient were rounded uniformly over its table
+    entry q (mean q^2 / 12, through JFIF's inverse): an upper bound, reached at an edge."""
     var = {k: float(np.mean(np.asarray(v, dtype=float) ** 2)) / 12.0
            for k, v in settings["qtables"].items()}
     luma, chroma = var.get(0, 0.0), var.get(1, var.get(0, 0.0))
@@ -119,11 +87,8 @@ def tables_bound(settings):
 
 
 def recompress(values, settings, sensor, noise, rng):
-    """One copy of frame ``values`` (H, W, 3) [DN] with fresh sensor noise (a [DN^2], b [DN]
-    of the linear codes), encoded by ``sensor``'s response to 8 bits and compressed with
-    ``settings``: (the codes (H, W, 3) [DN] that :func:`decode` reads from the copy, the noisy
-    codes before rounding and compression; the errors the compression adds are the
-    difference)."""
+    """A copy of frame ``values`` [DN] with fresh ``noise`` (a [DN^2], b [DN]), compressed with
+    ``settings``: (its decoded codes, the noisy codes before compression), (H, W, 3) [DN]."""
     from PIL import Image
 
     a, b = noise
@@ -142,21 +107,14 @@ _DECODED_SPACES = {"JCS_YCbCr": 3, "JCS_RGB": 3, "JCS_GRAYSCALE": 1}
 
 
 def decode(source):
-    """The RGB codes [DN] (H, W, 3) float, or (H, W, 1) for a grey JPEG, that JPEG ``source``
-    (a path, or the file's bytes) holds, decoded in floating point from its DCT coefficients
-    (read by jpeglib, lossless): dequantised, inverse DCT (JPEG's is the orthonormal DCT-II),
-    chroma upsampled by linear interpolation between sample centres (libjpeg's "fancy"
-    upsampling), and JFIF's YCbCr -> RGB (ITU-T T.871, eq. 7; a file coded in RGB or grey is
-    taken as it is), with nothing rounded.
+    """RGB codes [DN] (H, W, 3) float, or (H, W, 1) for grey, of JPEG ``source`` (path or
+    bytes), decoded in floating point from its DCT coefficients (jpeglib): dequantised,
+    orthonormal inverse DCT-II, chroma upsampled as libjpeg's "fancy" upsampling, and JFIF's
+    YCbCr -> RGB (ITU-T T.871, eq. 7; RGB or grey files as they are), nothing rounded.
 
-    libjpeg's own decoder (Pillow's) rounds the Y, Cb and Cr planes to whole codes before the
-    colour conversion.  Where the compression has removed the noise (a smooth surface at
-    quality 95 or below) nothing dithers that rounding, so every pixel of a patch of one colour
-    carries the same error: measured on a grey card photographed at quality 95, blue -0.41 DN
-    (1% of its linear signal, which biased the calibration's blue exposure) against -0.13 DN
-    decoded here.  Values are clamped to [0, 255], and those within half a code of either end
-    set to it: what libjpeg's rounding reads as clipped stays clipped.  None where jpeglib
-    cannot read the file, or it is coded in another colour space (CMYK, YCCK)."""
+    (libjpeg's whole-code planes would put one undithered error on a smooth patch.)  Values
+    are clamped to [0, 255], those within half a code of either end set to it.  None where
+    jpeglib cannot read the file or it is CMYK or YCCK."""
     import jpeglib
     from scipy.fft import idctn
 
@@ -199,9 +157,8 @@ def decode(source):
 
 
 def _upsample(plane, fy, fx, h, w):
-    """The (h, w) image that ``plane``'s samples, each covering fy x fx pixels, make by linear
-    interpolation between sample centres, edges held (libjpeg's "fancy" upsampling: weights 3/4
-    and 1/4 for a factor of 2); the coding unit's padding samples beyond the image unused."""
+    """The (h, w) image of ``plane``'s samples, each covering fy x fx pixels, by linear
+    interpolation between sample centres, edges held (libjpeg's "fancy" upsampling)."""
     for axis, f, size in ((0, fy, h), (1, fx, w)):
         n = -(-size // f)                               # samples that cover the image
         x = np.clip((np.arange(size) + 0.5) / f - 0.5, 0, n - 1)
@@ -215,29 +172,15 @@ def _upsample(plane, fy, fx, h, w):
 
 
 def bootstrap_variance(values, settings, sensor, noise, seed, replicates=REPLICATES):
-    """Each value's error variance [DN^2] (H, W, 3), the errors' correlation within the JPEG's
-    8x8 blocks (3,), and their mean [DN] (H, W, 3); ``values`` as displayed, the work done in
-    the file's layout (:func:`stored`).
+    """Each value's error variance [DN^2] (H, W, 3), the errors' correlation within 8x8 blocks
+    (3,), and their mean [DN] (H, W, 3); ``values`` as displayed (worked in :func:`stored`).
 
-    The variance is the mean over ``replicates`` draws of the scene (:func:`truth_sampler`) of
-    the square difference between the draw photographed again (:func:`recompress`) and the
-    draw, averaged over the pixel's 3x3 neighbourhood (edges padded).  The correlation rho is
-    that of two pixels' errors in one block (whole blocks only): from the variance of the
-    errors' block means, var(mean) = var (1 + 63 rho) / 64.  A JPEG's errors are shared within
-    a block (its rounded low orders), so a fit using several pixels of one block learns less
-    than as many independent values would tell (:func:`skyfit_mi.fitting.chi2.load_observations`).
-
-    The mean is the compression's bias, which a patch of one colour shares in every block (its
-    colour conversion and rounding), for the caller to take out: the mean over the replicates
-    and the pixels of each coding unit (:func:`block_size`) of the compression's own error in
-    linear signal (the copy less the noisy codes it was compressed from, both linearised, as
-    fits take the values), in codes at each pixel's level (times the response's slope there).
-    Not the copy less the draw: that mean also holds the noise's shift through the response's
-    curve (E f(x + n) < f(x) for a concave f), which linearising undoes; nor a mean in codes,
-    which the JPEG's smoothing of the noise moves unlike the linear mean.  Either biased dark
-    channels high, by 0.2-0.7% of the signal on a board at quality 100 and by up to 3% on a
-    patch at codes 30-45.  That estimate's own variance (the spread of a unit's replicate
-    means over the replicates, averaged over the frame) is added to the variance.
+    The variance: mean over ``replicates`` draws (:func:`truth_sampler`) of (copy - draw)^2
+    (:func:`recompress`), 3x3 averaged.  rho from the block means: var(mean) =
+    var (1 + 63 rho) / 64 (:func:`skyfit_mi.fitting.chi2.load_observations`).  The mean is the
+    compression's bias per coding unit: copy less its noisy codes, both linearised (copy - draw
+    or a mean in codes would bias dark channels high), in codes at each pixel's level; its
+    estimate's variance is added to the variance.
     """
     rng = np.random.default_rng(seed)
     values = stored(values, settings)
@@ -276,8 +219,7 @@ def bootstrap_variance(values, settings, sensor, noise, seed, replicates=REPLICA
 
 
 def _cell_means(x, n):
-    """Means of (H, W, 3) ``x`` over its n x n cells from the top left (partial cells at the
-    edges over the pixels they hold)."""
+    """Means of (H, W, 3) ``x`` over its n x n cells from the top left (edges: partial cells)."""
     h, w = x.shape[:2]
     ph, pw = -h % n, -w % n
     ones = np.pad(np.ones((h, w, 1)), ((0, ph), (0, pw), (0, 0)))
@@ -300,17 +242,10 @@ def _factors(settings):
 
 
 def truth_sampler(values, settings):
-    """Draws of the scene's codes [DN] (H, W, 3) given the decoded frame ``values``:
-    a function of a numpy Generator.
-
-    The frame is turned into JFIF's Y, Cb, Cr (the chroma averaged over the subsampling's
-    cells), each plane's 8x8 blocks into their orthonormal DCT (JPEG's), and every
-    coefficient the file kept (a non-zero multiple of its table entry q: magnitude above
-    q / 2), and every one of :data:`LOW_ORDER`, is moved uniformly within its rounding interval
-    by each draw: the coefficient the scene had is anywhere in it.  A higher one the file
-    zeroed is taken as zero (a smooth surface has no content there).  The moves are turned
-    back into R, G, B by JFIF's inverse.
-    """
+    """A function of a numpy Generator drawing the scene's codes [DN] (H, W, 3) given the decoded
+    ``values``: in each block's DCT of Y, Cb, Cr, every kept coefficient (above q / 2) or of
+    :data:`LOW_ORDER` moves uniformly within its rounding interval; higher zeroed ones stay zero
+    (a smooth surface has no content there)."""
     from scipy.fft import dctn, idctn
 
     v = np.nan_to_num(np.asarray(values, dtype=float))
@@ -350,9 +285,8 @@ _HARMONICS = np.arange(1, 33)
 
 
 def dc_record(settings):
-    """What a fit needs of JPEG ``settings`` to find the error a region shares
-    (:func:`shared_error_sd`): the quantisation step of the blocks' means (the DC entry of
-    the tables) of Y, Cb and Cr, and the chroma's subsampling (rows, columns)."""
+    """What :func:`shared_error_sd` needs of JPEG ``settings``: the DC quantisation steps of Y,
+    Cb and Cr and the chroma's subsampling (rows, columns)."""
     tables = settings["qtables"]
     luma, chroma = tables[0][0], tables.get(1, tables[0])[0]
     return {"dc_step": [float(luma), float(chroma), float(chroma)],
@@ -360,26 +294,16 @@ def dc_record(settings):
 
 
 def shared_error_sd(values, noise_var, record):
-    """The standard deviation [DN] (3,) of the error that the pixels of one region of one
-    JPEG frame share in Y, Cb and Cr (:data:`YCC_TO_RGB` takes it to R, G, B): the rounding of
-    their blocks' means.
+    """Standard deviation [DN] (3,) of the error the pixels of one region of one JPEG frame
+    share in Y, Cb, Cr (:data:`YCC_TO_RGB` takes it to R, G, B): the rounding of block means.
 
-    A block's mean is coded as its DC coefficient (8 x the mean), rounded to a multiple of the
-    table's step q (``record``, :func:`dc_record`).  On a surface of one colour every block of
-    the region has nearly the same mean, so every block rounds it the same way: one error for
-    the whole region, which no number of pixels averages away, and which the bootstrap (each
-    block's coefficients moved on their own, :func:`truth_sampler`) counts as independent from
-    block to block.  Two things decorrelate the blocks' errors: the sensor's noise in the
-    block means (sd s, in units of q; ``noise_var`` (P, 3) each value's variance [DN^2] before
-    compression, in R, G, B, mixed into Y, Cb, Cr and averaged over the block's 64 samples,
-    each a mean of the subsampling's pixels) dithers the rounding, and a spread of the means
-    over the region (a range R in units of q, from the variance of ``values`` (P, 3) [DN] in
-    each plane beyond the noise's, as if uniform) spreads them over the rounding's period.
-    The rounding error of the means x is the sawtooth sum_k (-1)^(k+1) q sin(2 pi k x / q) /
-    (pi k); noise damps each harmonic by exp(-2 pi^2 k^2 s^2), averaging over the range by
-    sinc(k R), and the variance over the means' unknown place within the step is
-    q^2 sum_k exp(-4 pi^2 k^2 s^2) sinc^2(k R) / (2 pi^2 k^2) (q^2 / 12 without noise or
-    spread); a pixel carries 1/8 of its block's DC error."""
+    A block's DC (8 x its mean) is rounded to a multiple of q (``record``, :func:`dc_record`);
+    on one colour every block rounds alike, an error no number of pixels averages away.  Noise
+    in the block means (sd s in units of q, from ``noise_var`` (P, 3) [DN^2]) dithers it, and a
+    spread of the means (range R in q, from ``values`` (P, 3) [DN]) spreads it.  The sawtooth
+    sum_k (-1)^(k+1) q sin(2 pi k x / q) / (pi k), damped by exp(-2 pi^2 k^2 s^2) and sinc(k R),
+    gives the variance q^2 sum_k exp(-4 pi^2 k^2 s^2) sinc^2(k R) / (2 pi^2 k^2) (q^2 / 12
+    without noise or spread); a pixel carries 1/8 of its block's DC error."""
     values = np.asarray(values, dtype=float).reshape(-1, 3)
     noise_var = np.asarray(noise_var, dtype=float).reshape(-1, 3)
     ok = np.all(np.isfinite(values) & np.isfinite(noise_var), axis=1)

@@ -1,20 +1,15 @@
 """The sequence manifest: the one contract between the forward and the inverse half.
 
-``render`` (and later ``ingest`` and ``relight``) write a folder with ``manifest.json``;
-``fit``, ``pixels``, ``labels`` (and later ``relight`` and ``chi2map``) read it.  This
-module is the only code that reads, validates, upgrades or writes that file.  The
-format is the versioned JSON Schema shipped beside this module
-(``manifest.schema.json``, schema id ``skyfit-manifest/2``) and is documented for
-people in ``docs/MANIFEST.md``.
+``render``, ``ingest`` and ``relight`` write a folder with ``manifest.json``; ``fit``,
+``pixels``, ``labels``, ``relight`` and ``chi2map`` read it.  Only this module reads, validates,
+upgrades or writes that file; its format is the JSON Schema ``manifest.schema.json``
+(``skyfit-manifest/2``) beside it, documented in ``docs/MANIFEST.md``.
 
-Per frame it holds the time (local with its offset, and UTC), the illumination as one
-of several kinds (``sky``: the CIE/gensky sun and sky as pattern weights; ``gensky``:
-Radiance text; ``irradiance``: measured levels driving a sky model; ``envmap``: an HDR
-environment map; ``directional``: a lab light), the frame's own exposure when it differs
-from the sequence's sensor (exposure, shutter time, gain, white balance), and the
-observations (image files, or a table of measured values).
-
-Version 1 manifests (skyfit-mi before the layered package) are upgraded on reading.
+Per frame it holds the time (local with offset, and UTC), the illumination (``sky``: CIE/gensky
+pattern weights; ``gensky``: Radiance text; ``irradiance``: measured levels driving a sky model;
+``envmap``: an HDR map; ``directional``: a lab light), the frame's own exposure where it differs
+from the sensor's, and the observations (image files or a table).  Version 1 manifests are
+upgraded on reading.
 """
 
 import collections
@@ -115,12 +110,8 @@ def manifest_file(path):
 
 
 def load_manifest(path):
-    """Read, upgrade and validate the manifest at ``path`` (a folder holding manifest.json,
-    or the file itself); returns (doc, folder).
-
-    Raises :class:`ManifestError` for a missing, damaged (e.g. truncated), foreign,
-    newer or invalid file.
-    """
+    """Read, upgrade and validate the manifest at ``path`` (folder or file); returns (doc,
+    folder).  :class:`ManifestError` for a missing, damaged, foreign, newer or invalid file."""
     p = manifest_file(path)
     if not p.is_file():
         raise ManifestError(f"no manifest at {str(p)!r}; give a folder written by `skyfit render` "
@@ -141,8 +132,7 @@ def load_manifest(path):
         raise ManifestError(f"{p} has schema {doc['schema']!r}, which this skyfit-mi "
                             f"({__version__}) cannot read (it reads {', '.join(READABLE)}); "
                             "upgrade skyfit-mi.")
-    # a text this process has validated (the manifest read again by the steps of one command)
-    # is not validated again
+    # a text this process has validated (read again by one command's steps) is not re-validated
     key = hashlib.sha256(text.encode("utf-8")).digest()
     doc = upgrade(doc)
     if key not in _VALIDATED:
@@ -176,9 +166,7 @@ def versions():
 # ---- illumination -----------------------------------------------------------
 
 def illumination_record(sky, folder):
-    """The ``illumination`` record of a :class:`~skyfit_mi.physics.sky.Sky` in a manifest in
-    ``folder``: kind ``envmap`` for a sky lit by a map file (the file relative to ``folder``
-    and its options, not its numbers), ``directional`` for a lab light, else ``sky``."""
+    """The ``illumination`` record of a Sky for a manifest in ``folder`` (files relative to it)."""
     common = {"info": {k: v for k, v in sky.info.items() if k != "file"},
               "horizontal_irradiance_W_m2": sky.horizontal_irradiance()}
     if sky.envmap is not None:
@@ -210,16 +198,8 @@ def _irradiance_sky(frame, rec):
 
 
 def frame_sky(frame, folder):
-    """The :class:`~skyfit_mi.physics.sky.Sky` of a manifest frame's illumination; ``folder``
-    is the manifest's (an ``envmap`` record's file is relative to it).
-
-    Kinds ``sky``, ``gensky``, ``envmap`` (with the frame's ``sun_zenith_deg`` and
-    ``sun_azimuth_deg`` placing the sun), ``irradiance`` (the Perez all-weather sky of the
-    measured irradiance at the frame's sun position and ``time``,
-    :func:`~.illumination.perez_from_irradiance`) and ``directional`` become a sky; a
-    :class:`ManifestError` naming the manifest and the frame says what is wrong with a record
-    (a negative radiance, a missing map...).
-    """
+    """The :class:`~skyfit_mi.physics.sky.Sky` of a manifest frame's illumination (``folder``
+    the manifest's); :class:`ManifestError` names the manifest and frame of a bad record."""
     rec = frame.get("illumination")
     where = f"{Path(folder) / FILENAME} frame {frame.get('index')}"
     if rec is None:
@@ -259,7 +239,7 @@ def _record_sky(frame, rec, kind, folder):
                                   frame["sun_azimuth_deg"])
     keys = ("clear", "overcast", "uniform", "intermediate", "ground", "sun_radiance")
     optional = {k: np.asarray(rec[k], dtype=float) for k in ("perez", "perez_coefficients")
-                if k in rec}                       # absent from manifests before the Perez sky
+                if k in rec}                       # absent from older manifests
     return Sky(np.asarray(rec["sun_direction"], dtype=float),
                **{k: np.asarray(rec[k], dtype=float) for k in keys}, **optional,
                horizon_blend=bool(rec["horizon_blend"]),
@@ -275,7 +255,7 @@ def sensor_record(sensor):
 
 
 def sensor_from_record(rec):
-    """The :class:`~skyfit_mi.physics.camera.SensorModel` a manifest's ``sensor`` record describes."""
+    """The :class:`~skyfit_mi.physics.camera.SensorModel` of a manifest's ``sensor`` record."""
     defaults = {"gamma": 2.2, "noise_percent": 0.0, "cos4": False}
     try:
         return SensorModel(**{k: rec.get(k, defaults.get(k)) for k in SENSOR_FIELDS})
@@ -284,8 +264,8 @@ def sensor_from_record(rec):
 
 
 def frame_exposure(doc, frame):
-    """Per-channel exposure [sr m^2 W^-1] of a frame, shape (3,): the frame's own
-    ``exposure`` record (times its white balance) when present, else the sensor's."""
+    """Per-channel exposure [sr m^2 W^-1] (3,) of a frame: its own (times white balance), else
+    the sensor's."""
     rec = frame.get("exposure")
     if rec is None:
         return np.full(3, float(doc["sensor"]["exposure"]))
@@ -301,17 +281,15 @@ def frame_exposure(doc, frame):
 
 
 def frame_label(index, time=None):
-    """How a frame is named to people: 'frame 3 at 12:00' ([time] local time, a datetime or ISO
-    string), or 'frame 3' for a lab light, which has no time (frames by index)."""
+    """How a frame is named to people: 'frame 3 at 12:00' (``time`` a datetime or ISO string),
+    or 'frame 3' for a lab light."""
     if time is None:
         return f"frame {index}"
     return f"frame {index} at {(time if isinstance(time, str) else time.isoformat())[11:16]}"
 
 
 def frame_axis(frames, times):
-    """(x values, axis label) to plot a series over manifest frames ``frames`` (indices) at
-    ``times`` (ISO strings; None for lab lights): local time when every frame has one, else
-    the frame index."""
+    """(x values, axis label) to plot over ``frames`` at ``times``: local time, else index."""
     if all(t is not None for t in times):
         return [dt.datetime.fromisoformat(t) for t in times], "local time"
     return [int(i) for i in frames], "frame (lab light, by index)"
@@ -332,14 +310,9 @@ def is_table(doc):
 
 
 def check_frames(doc, root, kinds=("radiance", "sensor", "sigma"), frames=None):
-    """Light every rendered frame (``frames``: of these indices only) of the sequence ``doc``
-    in folder ``root`` (:func:`frame_sky`) and check its images of ``kinds`` (and its
-    ``radiance_sigma``, where it has one, when ``kinds`` holds 'radiance'), so that a bad
-    record or a missing, truncated, foreign or foreign-size file is refused before a command
-    writes anything.  Only each file's header and chunk table are read
-    (:func:`check_frame_image`): the command then reads the rows it needs
-    (:func:`read_frame_pixels`), and a chunk damaged inside a complete file is refused there,
-    naming its frame.  A table's frames have no images."""
+    """Light every rendered frame (of ``frames`` only) of sequence ``doc`` in ``root`` and check
+    the headers of its images of ``kinds``, so a bad record or file is refused before a command
+    writes anything."""
     shape = (doc["camera"]["height"], doc["camera"]["width"], 3)
     for f in rendered_frames(doc):
         if frames is not None and f["index"] not in frames:
@@ -352,9 +325,8 @@ def check_frames(doc, root, kinds=("radiance", "sensor", "sigma"), frames=None):
             check_frame_image(root, f, key, shape)
 
 
-#: Bytes of decoded frame images kept to be read again (each of a prediction's or a relight's
-#: regions reads the same frames), least recently read first out; an image over an eighth of
-#: it is not kept.  A file written again (another inode, time or size) is read anew.
+#: Bytes of decoded frame images kept for re-reading (each region reads the same frames), least
+#: recently read first out; an image over an eighth of it is not kept.
 FRAME_CACHE_BYTES = 256 << 20
 _FRAMES = collections.OrderedDict()      # file identity and shape -> read-only image
 _FRAMES_LOCK = threading.Lock()
@@ -372,11 +344,9 @@ def _file_identity(path):
 
 
 def read_frame_image(root, frame, key, shape):
-    """Frame record ``frame``'s image ``key`` ('radiance', 'radiance_sigma', 'sensor',
-    'sigma') of the sequence in folder ``root``, checked to read as an image of ``shape``
-    (H, W, 3); a missing, damaged or foreign file raises SkyfitError naming the frame and the
-    fix.  The array is read-only and may be shared: images read lately are kept
-    (FRAME_CACHE_BYTES) for the next reader of the same unchanged file."""
+    """Frame record ``frame``'s image ``key`` ('radiance', 'radiance_sigma', 'sensor', 'sigma')
+    in folder ``root``, checked to be of ``shape`` (H, W, 3); SkyfitError naming the frame and
+    fix otherwise.  The array is read-only and may be shared (cached, FRAME_CACHE_BYTES)."""
     path = _frame_path(root, frame, key)
     ident = _file_identity(path)
     if ident is not None:
@@ -409,8 +379,7 @@ def _frame_failed(frame, exc):
 
 
 def check_frame_image(root, frame, key, shape):
-    """:func:`read_frame_image`'s checks from the file's header and chunk table alone (no
-    pixels decoded): present, OpenEXR, complete, of ``shape`` (H, W, 3)."""
+    """:func:`read_frame_image`'s checks from the file's header and chunk table alone."""
     path = _frame_path(root, frame, key)
     try:
         check_exr(path, shape)
@@ -419,10 +388,8 @@ def check_frame_image(root, frame, key, shape):
 
 
 def read_frame_pixels(root, frame, key, shape, pixels):
-    """Frame record ``frame``'s image ``key`` at ``pixels`` ((P, 2) x, y): (P, 3) float32, as
-    :func:`read_frame_image` would give them (the same checks and errors), reading only the
-    pixels' rows of the file (a fit's or a relight's few pixels of each frame); from the frame
-    cache where the whole image is there."""
+    """Frame record ``frame``'s image ``key`` at ``pixels`` ((P, 2) x, y) as (P, 3) float32,
+    with :func:`read_frame_image`'s checks, reading only those rows (or from the cache)."""
     px = np.asarray(pixels, dtype=int).reshape(-1, 2)
     path = _frame_path(root, frame, key)
     ident = _file_identity(path)
@@ -438,9 +405,7 @@ def read_frame_pixels(root, frame, key, shape, pixels):
 
 
 def keep_frame_image(path, image):
-    """Keep a copy of ``image`` (H, W, 3), just written to ``path`` as float32 EXR (which reads
-    back bit for bit), for :func:`read_frame_image`'s next reader of that file: a relight
-    compares the frames it has just rendered."""
+    """Cache ``image``, just written to ``path`` as float32 EXR, for :func:`read_frame_image`."""
     ident = _file_identity(Path(path))
     if ident is not None:
         img = np.array(image, dtype=np.float32)

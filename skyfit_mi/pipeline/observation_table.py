@@ -1,17 +1,10 @@
 """Observations without images: a table of measured radiances becomes a sequence folder.
 
-A spectroradiometer or luminance meter aimed at a sample through a day, or another program's
-radiances at chosen points, give values, not photographs.  ``skyfit ingest SPEC --table
-OBS.csv -o DIR`` takes such a table with the spec's site, scene, camera and sky (its
-``[time]`` replaced by the table's times, as for photographs) and writes the manifest contract
-with each frame's ``observations = {"kind": "table", "file": "observations.csv"}``: ``fit``
-then fits the table's regions with the same light cache, chi-square and intervals as image
-regions, without any image or throw-away render.
-
-Lab lights (a photometric-stereo rig: one directional ``[[sky]]`` per light, a spec without
-``[time]`` or ``[location]``) have no time: the table's ``frame`` column names each row's
-light by its index in the spec's ``[[sky]]`` list, and the sequence keeps every light as a
-frame of that index.
+A spectroradiometer or luminance meter aimed at a sample, or another program's radiances, give
+values, not photographs.  ``skyfit ingest SPEC --table OBS.csv -o DIR`` takes such a table with
+the spec (its ``[time]`` replaced by the table's times) and writes a sequence whose frames'
+observations are the table: ``fit`` fits its regions as image regions, unrendered.  Lab lights
+(one directional ``[[sky]]`` each, no ``[time]``) are named by the ``frame`` column.
 
 The table (CSV, header names in any order, case ignored):
 
@@ -19,45 +12,30 @@ The table (CSV, header names in any order, case ignored):
 column                       meaning
 ===========================  ==================================================================
 ``time``                     ISO 8601 date-time; with an offset, or naive with ``--tz``
-``frame``                    instead of ``time``, for lab lights: the 0-based index of the
-                             row's light among the spec's ``[[sky]]`` (frames by index)
+``frame``                    instead of ``time``, for lab lights: 0-based index in ``[[sky]]``
 ``region``                   the scene material the point lies on (a ``ward`` material id)
 ``point``                    optional: the point's name within its region (default the region's)
 ``x``, ``y``, ``z``          optional: the point, world frame [scene units]; default: where the
                              camera's central ray meets the region's surface
-``view_x``.. ``view_z``      optional: unit vector from the point toward the instrument, world
-                             frame (+X east, +Y north, +Z up); or ``view_zenith_deg`` and
-                             ``view_azimuth_deg`` (east of north); default: toward the camera
-``normal_x``.. ``normal_z``  optional: the surface normal the user expects; checked against the
-                             scene's (a wrong position or scene is refused)
+``view_x``.. ``view_z``      optional: unit vector toward the instrument (+X east, +Y north, +Z
+                             up), or ``view_zenith_deg``, ``view_azimuth_deg``; default: camera
+``normal_x``.. ``normal_z``  optional: the expected surface normal; one unlike the scene's: refused
 ``r``, ``g``, ``b``          the measured radiance, linear sRGB [W m^-2 sr^-1]
 ``sigma_r``.. ``sigma_b``    its standard deviation [W m^-2 sr^-1]; or one ``sigma`` for all
-``luminance``                instead of r, g, b: a luminance meter's value as the project's
-                             luminance-weighted radiance Y = 0.2126 R + 0.7152 G + 0.0722 B
-                             [W m^-2 sr^-1] (cd m^-2 divided by the sky's luminous efficacy,
-                             e.g. the spec's ``efficacy_clear``), with ``sigma``
-``saturated``                optional, 0 or 1: the instrument clipped the value (all channels);
-                             or ``saturated_r``.. ``saturated_b`` per channel.  A saturated
-                             value is the level it clipped at: the true value lies at or above
-                             it (censored at the top, as an image's top code)
+``luminance``                instead of r, g, b: Y = 0.2126 R + 0.7152 G + 0.0722 B
+                             [W m^-2 sr^-1] (cd m^-2 over the sky's luminous efficacy, e.g. the
+                             spec's ``efficacy_clear``), with ``sigma``
+``saturated``                optional, 0 or 1 (or ``saturated_r``.. ``saturated_b``): the value
+                             is the level the instrument clipped at; the true one is at or above
 ===========================  ==================================================================
 
-A point keeps its position through the day; its view may change from row to row (a
-goniometer), and each row is checked from its own view.  A point without a row at some time
-carries no information there.  The values are put on a linear 16-bit scale for the fit (the
-brightest value plus 5 sigma at half scale, one factor recorded as the sensor's exposure), so
-chi-square is eq. 6.2 in the table's own units; a value at or below zero, which a radiance
-cannot be, is taken as censored at zero (the fit's rule for code 0), and a saturated value
-as censored at its level, as an image's top code
-(:func:`skyfit_mi.fitting.chi2.load_table_observations`); but a region needs a positive value,
-and a radiance or sigma beyond any radiance (:data:`MAX_RADIANCE`) is refused.  A luminance
-table is fitted through the model's luminance (the first channel;
-:class:`~skyfit_mi.fitting.chi2.LuminanceModel`): it cannot tell colour, so only the 2- and
-3-parameter models take it.
-
-Values in an instrument's own units (DN: an unknown radiometric scale) are scaled to radiance
-by rows on reference materials of known Lambertian reflectance (``ingest --table --calibrate
-MATERIAL=REFLECTANCE``, :func:`reference_scale`); without one, the values are radiances.
+A point keeps its position; its view may change from row to row (a goniometer).  Values go on a
+linear 16-bit scale (the brightest plus 5 sigma at half scale), so chi-square is eq. 6.2 in the
+table's units; values at or below zero are censored at zero, saturated ones at their level
+(:func:`skyfit_mi.fitting.chi2.load_table_observations`), values beyond :data:`MAX_RADIANCE`
+refused.  A luminance table (:class:`~skyfit_mi.fitting.chi2.LuminanceModel`) cannot tell
+colour: only the 2- and 3-parameter models take it.  Instrument units are scaled by references
+(:func:`reference_scale`) or put on a relative scale (:func:`unknown_scale`).
 """
 
 import csv
@@ -107,15 +85,9 @@ _FLAGS = {"0": False, "1": True}
 
 @dataclass
 class ObservationTable:
-    """The rows of an observation table (N rows), checked.
-
-    times : aware datetimes (N,), or None for a table of lab lights (frames by index);
-    regions, points : str (N,);  position, view, normal : (N, 3) float, NaN where not given;
-    value, sigma : (N, 3) [W m^-2 sr^-1] (a luminance table: Y in the first column, NaN in the
-    others);  saturated : (N, 3) bool, the value is the level the instrument clipped at;
-    lines : the file's line of each row;  path : the file;  luminance : whether the values
-    are luminances;  frames : each row's frame index (a lab table's, or the sequence folder's
-    normalised table), else None.
+    """The N checked rows of an observation table: times (N,) aware (None for lab lights);
+    regions, points (N,); position, view, normal (N, 3), NaN where not given; value, sigma
+    (N, 3) [W m^-2 sr^-1] (luminance: Y first); saturated (N, 3) bool; lines; frames (or None).
     """
 
     path: Path
@@ -146,8 +118,7 @@ class ObservationTable:
         return list(dict.fromkeys(zip(self.regions, self.points)))
 
     def point_rows(self):
-        """{(region, point): its rows' indices}, in order of first appearance (one pass:
-        a table of thousands of points x frames is grouped in linear time)."""
+        """{(region, point): its rows' indices}, in order of first appearance (linear time)."""
         out = {}
         for i, k in enumerate(zip(self.regions, self.points)):
             out.setdefault(k, []).append(i)
@@ -196,9 +167,7 @@ def _time(text, tz, path, line):
 
 def read_observation_table(path, tz=None):
     """The checked :class:`ObservationTable` of a CSV file (module docstring); SkyfitError
-    naming the file, line and column of anything wrong.  The steps: the file's rows
-    (:func:`_csv_rows`), its columns checked (:func:`_check_columns`), each row's cells
-    parsed (:func:`_parse_rows`), and the rows checked together (:func:`_check_rows`)."""
+    naming the file, line and column of anything wrong."""
     path = Path(path)
     rows = _csv_rows(path)
     header = [c.strip().lower() for c in rows[0][1]]
@@ -270,9 +239,8 @@ def _check_columns(path, header):
 
 
 def _parse_rows(path, header, rows, tz, luminance):
-    """Each row's cells parsed and checked: (times, regions, points, lines, frames, {x,
-    view, normal, value, sigma: (N, 3) float, NaN where not given; saturated: (N, 3) 0/1}),
-    view and normal vectors made unit length."""
+    """Each row's cells parsed and checked: (times, regions, points, lines, frames, {x, view,
+    normal, value, sigma: (N, 3), NaN where not given; saturated: (N, 3) 0/1}), vectors unit."""
     col = {c: i for i, c in enumerate(header)}
     n = len(rows)
     out = {k: np.full((n, 3), np.nan) for k in ("x", "view", "normal", "value", "sigma")}
@@ -366,11 +334,10 @@ def _camera(to_world):
 
 
 def locate_points(spec, scene_xml, table, row_frames):
-    """Each point's position (P, 3), each row's view (N, 3) and the scene's offset for rays,
-    checked in the spec's scene: a point must lie on its region's surface, and each row's
-    view (the table's, else toward the camera) must see it from the front, with the normal
-    the table gives (if any).  ``scene_xml``: the spec's (xml, materials, camera to_world);
-    ``row_frames``: each row's frame index in the sequence (for messages)."""
+    """Each point's position (P, 3), each row's view (N, 3) and the rays' offset, checked in the
+    spec's scene: a point must lie on its region's surface, seen from the front by each row's
+    view (the table's, else toward the camera), with the table's normal if given.
+    ``scene_xml``: the spec's (xml, materials, camera to_world); ``row_frames``: for messages."""
     groups = table.point_rows()
     keys = list(groups)
     xml, _, to_world = scene_xml
@@ -427,8 +394,7 @@ def locate_points(spec, scene_xml, table, row_frames):
 # ---- the sequence folder ---------------------------------------------------------------
 
 def _lab_spec(spec_path, table, tz, site):
-    """The validated spec of a table of lab lights (frames by index): its lights are the
-    frames; every row's frame one of them."""
+    """The validated spec of a table of lab lights, its lights the frames."""
     for name, given in (("--tz", tz), ("--site", site)):
         if given is not None:
             raise SkyfitError(f"{name}: {table.path} names its frames by index (lab lights), "
@@ -449,8 +415,7 @@ def _lab_spec(spec_path, table, tz, site):
 
 def _table_spec(spec_path, table, tz, site, log):
     """(validated spec, each row's frame index) of an observation table: the spec's lights by
-    index, or for a table of times the spec at those times (:func:`.ingest.spec_for_times`:
-    a time with the sun below the horizon is kept out, as a skipped frame)."""
+    index, or the spec at the table's times (:func:`.ingest.spec_for_times`)."""
     if table.by_index:
         spec = _lab_spec(spec_path, table, tz, site)
         if len(set(table.frames)) < 2:
@@ -476,13 +441,9 @@ def _table_spec(spec_path, table, tz, site, log):
 
 
 def white_at_rows(spec, xml, table, rows, row_frames, pos, view, offset, **trace):
-    """The radiance a white Lambertian reflects at the points of the table's ``rows`` under
-    their frames' light, traced as a fit traces its points
-    (:func:`~skyfit_mi.render.points.lambertian_radiance`, ``trace`` its options), each from
-    its row's own view (a frame without the point's row: any of its views); ``pos``,
-    ``view``, ``offset``: :func:`locate_points`'.  Returns L and its Monte Carlo variance
-    (P, T, 3) over the rows' points and frames, each row's (p, t) cell, and the points
-    [(region, point)]."""
+    """A white Lambertian's radiance L at the points of ``rows`` from each row's view, traced as a
+    fit traces (:func:`~skyfit_mi.render.points.lambertian_radiance`): (L, its Monte Carlo
+    variance (P, T, 3), each row's (p, t) cell, the points [(region, point)])."""
     index = {k: j for j, k in enumerate(table.point_keys())}
     points = list(dict.fromkeys((table.regions[i], table.points[i]) for i in rows))
     frames = sorted({row_frames[i] for i in rows})
@@ -504,19 +465,11 @@ def white_at_rows(spec, xml, table, rows, row_frames, pos, view, offset, **trace
 
 
 def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calibrate):
-    """The radiance of one unit of a table in its own scale (an instrument's DN), per channel,
-    from its rows on reference materials of known Lambertian reflectance, and the record of
-    that calibration: ((3,) [W m^-2 sr^-1 per unit], record).
-
-    ``calibrate`` {material: (r, g, b) reflectance}; ``rows``: the rows of the sequence (lit
-    frames); ``pos``, ``view``, ``offset``: :func:`locate_points`'.  Each reference point's
-    radiance as a white Lambertian, L, is traced as a fit traces its points
-    (:func:`~skyfit_mi.render.points.lambertian_radiance`); the table's values y ~ a rho L, a
-    [units per W m^-2 sr^-1] by weighted least squares over the unsaturated reference rows
-    (weights 1 / (sigma^2 + a^2 rho^2 var L), var L the trace's Monte Carlo variance), its
-    standard error widened by the scatter about the fit where that exceeds the sigmas
-    (chi^2/dof > 1).  The record's ``scale_relative_sd`` widens every fit's intervals of
-    reflectances (:func:`skyfit_mi.fitting.uncertainty.calibration_sd`)."""
+    """Radiance of one unit of a table's own scale per channel, from rows on references of
+    ``calibrate`` {material: (r, g, b)} reflectance: ((3,) [W m^-2 sr^-1 per unit], record).
+    With L a white Lambertian's traced radiance (:func:`white_at_rows`), y ~ a rho L by weighted
+    least squares (weights 1 / (sigma^2 + a^2 rho^2 var L)), the error widened where chi^2/dof >
+    1; ``scale_relative_sd`` widens fits' intervals (:mod:`skyfit_mi.fitting.uncertainty`)."""
     ref = [i for i in rows if table.regions[i] in calibrate and not table.saturated[i].all()]
     missing = [m for m in calibrate if m not in {table.regions[i] for i in ref}]
     if missing:
@@ -559,25 +512,17 @@ def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calib
     return 1.0 / a, record
 
 
-#: Where an unknown scale puts the table's brightest apparent albedo (pi L / E, the
-#: radiance over a white Lambertian's at that point and light): at 0.5 no Ward material's
-#: reflectance that reproduces the data needs a bound (a lobe's peak apparent albedo is at
-#: least its rho_s, so a plastic's rho_s stays under 0.5 and a metal's C under 1).
+#: Where an unknown scale puts the table's brightest apparent albedo (radiance over a white
+#: Lambertian's): at 0.5 no Ward material fitting the data needs a bound (a lobe's peak apparent
+#: albedo is at least its rho_s).
 UNKNOWN_SCALE_ALBEDO = 0.5
 
 
 def unknown_scale(spec, xml, table, rows, row_frames, pos, view, offset):
-    """The factor that puts a table of unknown radiometric scale (DN, no reference) on the
-    scale of :data:`UNKNOWN_SCALE_ALBEDO`, and its record: (factor, record).
-
-    Every row's apparent albedo y / L (L a white Lambertian's radiance at its point under its
-    frame's light, traced as :func:`reference_scale` traces references; a saturated value's a
-    lower bound of its own) is taken; the largest, over rows and channels, becomes
-    UNKNOWN_SCALE_ALBEDO.  Fitted reflectances are then relative: the true ones times one
-    unknown factor, the same for every material and channel of the table.  Roughness and the
-    ratio of specular to diffuse reflectance do not depend on it.  (Under the spec's light;
-    a fitted sky level, or data whose shape the model misses, can still take a parameter to
-    a bound, which the fit then says.)"""
+    """(factor, record) putting a table of unknown scale (DN, no reference) on the scale where
+    its largest apparent albedo y / L (L a white Lambertian's traced radiance) is
+    :data:`UNKNOWN_SCALE_ALBEDO`.  Fitted reflectances are then relative (one unknown factor
+    for every material and channel); roughness and rho_s / rho_d do not depend on it."""
     # a saturated value is a lower bound of the true one: its albedo counts as at least that
     lit = [i for i in rows if np.nanmax(table.value[i]) > 0]
     if not lit:
@@ -630,12 +575,9 @@ def check_radiances(table, scaled=None):
 
 def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrate=None,
                  scale_unknown=False, overwrite=False, log=print):
-    """Turn an observation table into a sequence folder (module docstring); returns the
-    manifest dict.  ``tz``: zone of naive times; ``site``: (lat, lon[, alt]) over the spec's
-    (neither for lab lights); ``calibrate``: {material: (r, g, b) reflectance} of Lambertian
-    references measured in the table, whose values are then in its own units, scaled to
-    radiance by them (:func:`reference_scale`); ``scale_unknown``: values in the table's own
-    units without a reference, put on a relative scale (:func:`unknown_scale`)."""
+    """Turn an observation table into a sequence folder; returns the manifest dict.  ``tz``:
+    zone of naive times; ``site``: (lat, lon[, alt]) over the spec's; ``calibrate``
+    (:func:`reference_scale`) or ``scale_unknown`` (:func:`unknown_scale`) for own units."""
     out = Path(out_dir)
     mine = out / TABLE_FILE
     if mine.exists() and mine.resolve() == Path(table_path).resolve():
@@ -733,8 +675,7 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
 
 
 def relative_scale(doc):
-    """Whether a manifest's values are on a relative scale (an observation table of unknown
-    radiometric scale, :func:`unknown_scale`)."""
+    """Whether a manifest's values are on a relative scale (:func:`unknown_scale`)."""
     return ((doc.get("ingest") or {}).get("scale") or {}).get("known") is False
 
 
@@ -745,12 +686,10 @@ def table_regions(root):
 
 @dataclass
 class RegionRows:
-    """A region's rows of a table sequence, by point and frame: names (P,) of the points;
-    frames (T,) their manifest indices;  position (P, 3);  view (P, T, 3) unit, surface toward
-    instrument;  value, sigma (P, T, 3) [W m^-2 sr^-1] (no row: value 0, sigma inf, no
-    information);  saturated (P, T, 3) bool (the value is the level the instrument clipped
-    at);  luminance: the values are luminances (in the first channel, the others' sigma
-    inf)."""
+    """A region's rows of a table sequence by point and frame: names (P,); frames (T,) manifest
+    indices; position (P, 3); view (P, T, 3) unit, surface toward instrument; value, sigma
+    (P, T, 3) [W m^-2 sr^-1] (no row: sigma inf); saturated (P, T, 3) bool; luminance: Y in
+    the first channel, the others' sigma inf."""
 
     names: list
     frames: list
@@ -763,9 +702,8 @@ class RegionRows:
 
 
 def table_observations(doc, root, region, points=None, frames=None):
-    """The :class:`RegionRows` of ``region`` in a table sequence (folder ``root``);
-    ``points``: the points to take (default all of the region's); ``frames``: the frames
-    (default all with a row)."""
+    """The :class:`RegionRows` of ``region`` in a table sequence (folder ``root``), of
+    ``points`` and ``frames`` (default all)."""
     table = read_observation_table(root / TABLE_FILE)
     frame_col = table.frames
     keys = [p for r, p in table.point_keys() if r == region]

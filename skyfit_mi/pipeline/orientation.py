@@ -1,9 +1,8 @@
 """EXIF orientation: a photograph's pixels turned as its orientation code asks, and back.
 
-A camera stores its frames in the sensor's layout and records in EXIF tag 0x0112 how they are
-to be turned for display; :mod:`~skyfit_mi.pipeline.photos` reads frames as displayed, and
-:mod:`~skyfit_mi.pipeline.jpeg_noise` turns them back to the file's own layout, where a JPEG's
-blocks start at the top left.
+Frames are stored in the sensor's layout, EXIF tag 0x0112 saying how to turn them for display;
+:mod:`.photos` reads them as displayed, and :mod:`.jpeg_noise` turns them back to the file's
+layout, where a JPEG's blocks start at the top left.
 """
 
 import numpy as np
@@ -15,9 +14,8 @@ ORIENTATIONS = {1: "as stored", 2: "mirrored left-right", 3: "rotated 180",
 
 
 def apply_orientation(values, orientation):
-    """Turn an (H, W, ...) array as the EXIF ``orientation`` code asks, the way Pillow's
-    ``ImageOps.exif_transpose`` turns an image (1 = unchanged, 6 = rotate 90 CW for display...).
-    Returns a view where possible."""
+    """Turn an (H, W, ...) array as EXIF ``orientation`` asks (as Pillow's
+    ``ImageOps.exif_transpose``; 1 = unchanged); a view where possible."""
     if orientation in (None, 1):
         return values
     turn = {
@@ -33,6 +31,5 @@ def apply_orientation(values, orientation):
 
 
 def undo_orientation(values, orientation):
-    """The inverse of :func:`apply_orientation`: an (H, W, ...) array as displayed back in the
-    file's own layout (where a JPEG's blocks start at the top left)."""
+    """The inverse of :func:`apply_orientation`: a displayed array back in the file's layout."""
     return apply_orientation(values, {6: 8, 8: 6}.get(orientation, orientation))

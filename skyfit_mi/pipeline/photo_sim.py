@@ -1,19 +1,14 @@
 """A rendered day as a camera would have photographed it: JPEG/PNG/TIFF/DNG frames with EXIF.
 
-For tests of ``skyfit ingest`` and for the shipped example, a sequence folder written by
-``render`` becomes image files degraded the way photographs are: an auto-exposure that
-changes from frame to frame (shutter time steps recorded in EXIF, as t ISO / N^2), the cos^4
-vignetting of a lens (thesis eq. 5.6), Gaussian read noise and shot noise in linear codes, the
-sRGB (or a gamma) encoding, clipping at the top code, quantisation, and JPEG compression.  Or
-a camera RAW (``fmt="dng"``): the scene in the camera's own RGB (:data:`RAW_XYZ_TO_CAMERA`)
-sampled through an RGGB Bayer filter, read and shot noise in raw codes above a black level,
-clipped and quantised to RAW_BITS, in a DNG whose ColorMatrix1 lets the reader (LibRaw)
-demosaic and convert it back to linear sRGB, exactly or, with ``matrix_error``, with the error
-of a maker's matrix that does not match the sensor.  EXIF carries DateTimeOriginal with or
-without OffsetTimeOriginal.  Every random choice is drawn from
-``numpy.random.default_rng([seed, frame index])`` (the matrix's error from
-``default_rng(seed)``, :func:`matrix_error_mix`) and the seed is written into
-``photos.json`` beside the images, with each frame's true exposure [sr m^2 W^-1].
+For tests of ``skyfit ingest`` and the shipped example, a ``render`` sequence folder becomes
+image files degraded as photographs are: auto-exposure (shutter steps in EXIF), cos^4 vignetting
+(thesis eq. 5.6), read and shot noise in linear codes, sRGB or gamma encoding, clipping,
+quantisation and JPEG compression.  Or a camera RAW (``fmt="dng"``): the scene in the camera's
+RGB (:data:`RAW_XYZ_TO_CAMERA`) through an RGGB Bayer filter, noisy raw codes above a black
+level, in a DNG whose ColorMatrix1 lets LibRaw develop it back to linear sRGB (with
+``matrix_error``, through a matrix that errs).  Random draws use
+``numpy.random.default_rng([seed, frame index])``; the seed and each frame's true exposure
+[sr m^2 W^-1] are written to ``photos.json``.
 """
 
 import datetime as dt
@@ -40,15 +35,12 @@ SIM_F_NUMBER, SIM_ISO = 8.0, 100
 #: Shutter times of the auto-exposure [s]: third stops from 1/4000 to 1/15 s.
 SHUTTER_STOPS = 2.0 ** (-np.arange(36) / 3.0) / 15.0
 FORMATS = {"jpeg": ".jpg", "png": ".png", "tiff": ".tif", "dng": ".dng"}
-#: The RAW camera of ``fmt="dng"``: XYZ (D65) -> camera RGB of the Canon EOS 5D Mark II, the
-#: ColorMatrix Adobe's DNG Converter gives it (dcraw's and LibRaw's ``adobe_coeff`` table, its
-#: entries x 10^-4): its rows are far from diagonal (the red channel sees as much green as
-#: red), as a real sensor's are.
+#: The RAW camera of ``fmt="dng"``: XYZ (D65) -> camera RGB of the Canon EOS 5D Mark II (Adobe's
+#: ColorMatrix, LibRaw's ``adobe_coeff`` x 10^-4), far from diagonal as a real sensor's is.
 RAW_XYZ_TO_CAMERA = np.array([[4716, 603, -830], [-7798, 15474, 2480],
                               [-1496, 1937, 6651]]) / 1e4
-#: The RAW sensor: bits, black level [DN] (the 5D Mark II's at 14 bits), read noise [DN rms]
-#: and shot noise [DN^2 per DN of signal] (about 3.9 electrons per DN: a full well of 60000
-#: electrons over the 15360 DN above black).
+#: The RAW sensor: bits, black level [DN] (the 5D Mark II's), read noise [DN rms] and shot noise
+#: [DN^2 per DN] (a 60000-electron full well over the 15360 DN above black).
 RAW_BITS, RAW_BLACK, RAW_READ_NOISE_DN, RAW_SHOT_GAIN = 14, 1024, 6.0, 0.26
 #: DNG tags written (TIFF/EP and DNG 1.4 specifications).
 _DNG_CFA_REPEAT, _DNG_CFA_PATTERN, _DNG_VERSION, _DNG_BACKWARD = 33421, 33422, 50706, 50707
@@ -60,18 +52,16 @@ _D65 = 21
 
 
 def raw_camera_matrix(xyz_to_camera=RAW_XYZ_TO_CAMERA):
-    """A (3, 3): the camera's raw RGB = A @ linear sRGB for an XYZ (D65) -> camera matrix,
-    scaled so that green's row sums to 1 (white of signal 1 fills the green channel)."""
+    """A (3, 3) with raw RGB = A @ linear sRGB for an XYZ (D65) -> camera matrix, green's row
+    summing to 1."""
     a = np.asarray(xyz_to_camera, dtype=float) @ np.linalg.inv(XYZ_TO_SRGB)
     return a / a[1].sum()
 
 
 def matrix_error_mix(matrix_error, seed):
-    """(3, 3): what a DNG colour matrix off by ``matrix_error`` makes of the truth, developed
-    linear sRGB = mix @ true linear sRGB: I + matrix_error G, G's off-diagonal entries standard
-    normal from default_rng(seed), each row summing to 0 (a grey stays grey, as LibRaw's
-    development, which maps the camera's white to sRGB's, keeps it): each channel takes
-    matrix_error x N(0, 1) of every other channel's difference from it."""
+    """(3, 3) mix with developed linear sRGB = mix @ true linear sRGB for a DNG colour matrix off
+    by ``matrix_error``: I + matrix_error G, G's off-diagonal entries N(0, 1) from
+    default_rng(seed), its rows summing to 0 (LibRaw keeps a grey grey)."""
     g = np.random.default_rng(seed).normal(size=(3, 3))
     np.fill_diagonal(g, 0.0)
     g -= np.diag(g.sum(axis=1))
@@ -79,9 +69,8 @@ def matrix_error_mix(matrix_error, seed):
 
 
 def colour_matrix_1(mix, to_camera=None):
-    """The DNG ColorMatrix1 (XYZ -> camera, any row scale) through which LibRaw develops the
-    camera ``to_camera`` (:func:`raw_camera_matrix`) into ``mix`` @ linear sRGB (for a white
-    balance from the camera's own response to white, AsShotNeutral)."""
+    """The DNG ColorMatrix1 (XYZ -> camera) through which LibRaw develops camera ``to_camera``
+    (:func:`raw_camera_matrix`) into ``mix`` @ linear sRGB, white-balanced by AsShotNeutral."""
     a = raw_camera_matrix() if to_camera is None else to_camera
     return a @ np.linalg.inv(mix) @ XYZ_TO_SRGB
 
@@ -98,8 +87,7 @@ def _rationals(values, den=1_000_000):
 
 
 def _ifd(entries, start):
-    """A little-endian TIFF IFD at file offset ``start``: ``entries`` [(tag, type, count,
-    bytes)] sorted by tag, values over 4 bytes placed after it."""
+    """A little-endian TIFF IFD at offset ``start`` of ``entries`` [(tag, type, count, bytes)]."""
     head = struct.pack("<H", len(entries))
     data, table = b"", b""
     tail = start + 2 + 12 * len(entries) + 4
@@ -147,12 +135,10 @@ def _exif_entries(time, offset, exposure_time):
 
 def write_dng(path, mosaic, xyz_to_camera, neutral, *, black=RAW_BLACK, white=2 ** RAW_BITS - 1,
               exif=(), orientation=1):
-    """A DNG of one RGGB CFA image ``mosaic`` (H, W) [raw DN] with the tags LibRaw needs:
-    ``xyz_to_camera`` as ColorMatrix1 (D65), AsShotNeutral ``neutral`` (the camera's raw
-    response to white, green 1), black and white levels, the EXIF sub-IFD's ``exif`` entries
-    (:func:`_exif_entries`) and ``orientation``; returns ``path``.  tifffile writes the image
-    and its tags; the EXIF sub-IFD, whose pointer (tag 0x8769) it does not write, is appended
-    with a copy of IFD0 that points to it, and the header to that copy."""
+    """A DNG of one RGGB CFA image ``mosaic`` (H, W) [raw DN] with the tags LibRaw needs
+    (ColorMatrix1 ``xyz_to_camera``, AsShotNeutral ``neutral``, levels, ``exif`` entries,
+    ``orientation``); returns ``path``.  tifffile cannot write the EXIF pointer (0x8769), so
+    the sub-IFD is appended with a copy of IFD0 pointing to it, and the header to that copy."""
     import tifffile
 
     tags = [(_TIFF_MAKE, "s", 0, "Skyfit", True), (_TIFF_MODEL, "s", 0, "Simulated RAW", True),
@@ -190,38 +176,19 @@ def write_dng(path, mosaic, xyz_to_camera, neutral, *, black=RAW_BLACK, white=2 
 class PhotoSettings:
     """The camera of :func:`photograph_day` and how it writes its photographs.
 
-    exposure : exposure [sr m^2 W^-1] at 1/15 s, f/8, ISO 100; default: the sequence's sensor
-        exposure times 2, so that the auto-exposure has room to shorten
-    target : the auto-exposure puts the frame's 99th-percentile linear signal at or below this
-        share of full scale, stepping the shutter in thirds of a stop
+    exposure : [sr m^2 W^-1] at 1/15 s, f/8, ISO 100; default twice the sequence's
+    target : largest share of full scale for the 99th-percentile linear signal
     response, gamma : the encoding (``srgb``, ``gamma``, ``linear``; not a RAW's)
-    read_noise_DN, shot_gain : noise in linear codes, sigma^2 = read^2 + shot_gain x code:
-        default 0.8 and 0.02 of 8-bit codes, for a RAW RAW_READ_NOISE_DN and RAW_SHOT_GAIN of
-        its raw codes above black (:meth:`noise`)
-    cos4 : apply the cos^4 vignetting of the camera's field of view
-    fmt : 'jpeg', 'png' or 'tiff' (8-bit), or 'dng' (a RAW of RAW_BITS: the module docstring)
-    quality : a JPEG's quality (Pillow's 1-100)
-    offset : write EXIF OffsetTimeOriginal (without it a reader needs the time zone)
-    shutter_error : relative standard deviation of each frame's true exposure about the
-        nominal one its EXIF records (a real shutter and aperture miss by a few per cent),
-        drawn from numpy.random.default_rng([seed, index, 1]); recorded in photos.json
-    orientation : EXIF orientation code: the file holds the frame turned back, as a camera
-        held on its side stores it, and the tag says how to show it (the frame as rendered)
-    subsampling : a JPEG's chroma: 0 at full resolution (4:4:4, a camera's finest setting), 1
-        halved across (4:2:2), 2 halved both ways (4:2:0, most cameras' and Pillow's default),
-        which blurs colour across 2x2 pixels and into a region's edge pixels
-    matrix_error : a RAW's: the DNG's ColorMatrix1 is off so that the developed linear sRGB
-        is the truth times :func:`matrix_error_mix` (each channel takes matrix_error x N(0, 1)
-        of every other channel's difference from it, a grey untouched), as a maker's matrix
-        fitted to another sensor of the model, or under another light, errs; the matrices are
-        recorded in photos.json
-    motion : {frame index: (dx [px], dy [px], rotation [degrees])}: the camera nudged, the
-        scene at the render's pixel q seen at R (q - c) + c + (dx, dy) (c the centre, the
-        rotation clockwise as displayed; :mod:`.registration`'s convention), before the
-        vignetting and the noise, which stay with the sensor
-    distortion : (k1[, k2]) the lens's radial distortion
-        (:func:`~skyfit_mi.physics.lens.distort`) about the centre, at the render's field of
-        view; the scene is resampled bicubically for both
+    read_noise_DN, shot_gain : sigma^2 = read^2 + shot_gain x code (:meth:`noise`)
+    cos4, offset : apply cos^4 vignetting; write EXIF OffsetTimeOriginal
+    fmt, quality : 'jpeg', 'png' or 'tiff' (8-bit), or 'dng' (RAW_BITS); JPEG quality (1-100)
+    shutter_error : relative sd of each frame's true exposure about its EXIF one
+    orientation : EXIF orientation code; the file holds the frame turned back
+    subsampling : JPEG chroma: 0 (4:4:4), 1 (4:2:2) or 2 (4:2:0, Pillow's default)
+    matrix_error : a RAW's ColorMatrix1 error (:func:`matrix_error_mix`)
+    motion : {frame index: (dx [px], dy [px], rotation [degrees])}: the camera nudged
+        (:mod:`.registration`'s convention), before vignetting and noise
+    distortion : (k1[, k2]) radial lens distortion (:func:`~skyfit_mi.physics.lens.distort`)
     """
 
     exposure: float | None = None
@@ -252,10 +219,8 @@ class PhotoSettings:
 
 
 def _lens(radiance, motion, k, fov):
-    """``radiance`` (H, W, 3) as a camera moved by ``motion`` (dx, dy, rotation_deg; None:
-    not moved) through a lens of distortion ``k`` sees it (:class:`PhotoSettings`): each
-    photograph pixel takes the render's value where its ray, undistorted and moved back,
-    lands (bicubic, edges repeated)."""
+    """``radiance`` (H, W, 3) as seen by a camera moved by ``motion`` (dx, dy, rotation_deg, or
+    None) through a lens of distortion ``k`` (bicubic, edges repeated)."""
     if motion is None and not any(k):
         return radiance
     import cv2
@@ -280,13 +245,8 @@ def _lens(radiance, motion, k, fov):
 
 
 def photograph_day(sequence, out_dir, settings=None, seed=0):
-    """Write the rendered frames of ``sequence`` (a folder written by ``skyfit render``: its
-    radiance EXRs are the scene) as photographs into ``out_dir``, taken and written as
-    ``settings`` (a :class:`PhotoSettings`, default its defaults) says; ``seed`` seeds every
-    random choice (the module docstring).
-
-    Returns the list of written paths, in time order.
-    """
+    """Photograph ``sequence``'s rendered frames into ``out_dir`` as ``settings`` says; returns
+    the paths in time order."""
     from PIL import Image
 
     photo = settings or PhotoSettings()

@@ -1,29 +1,19 @@
-"""The capture time of each photograph of a sequence (issue 15).
+"""The capture time of each photograph of a sequence.
 
 :func:`frame_times` gives every frame one time-zone-aware instant, from exactly one source:
 
-1. **EXIF** (the default): ``DateTimeOriginal`` plus ``SubSecTimeOriginal`` when present, in the
-   zone of ``OffsetTimeOriginal``; a frame without that offset takes ``tz``.
-2. **A CSV** ``times_csv`` with the header ``file,time``: one row per frame, files matched by
-   base name, times in ISO 8601 (``2026-06-21T12:00:05``, ``2026-06-21 12:00:05.25+01:00``);
-   a time without an offset takes ``tz``.
-3. **A file-name pattern** ``name_pattern``, matched against each base name: either a
-   ``strptime`` pattern (``IMG_%Y%m%d_%H%M%S.jpg``; ``%z`` reads an offset such as ``+0100``,
-   ``%f`` a fraction of a second; if the pattern has no suffix it is matched against the name
-   without its suffix), or a regular expression with named groups ``year month day hour minute``
-   and optional ``second``, ``fraction`` (digits after the decimal point) and ``offset``
-   (``+01:00``, ``+0100``, ``Z``): e.g. ``r"(?P<year>\\d{4})(?P<month>\\d\\d)..."``.  A pattern
-   containing ``(?P<`` is taken as a regular expression; the whole base name must match.
+1. **EXIF** (the default): ``DateTimeOriginal`` (+ ``SubSecTimeOriginal``) in the zone of
+   ``OffsetTimeOriginal``, else ``tz``.
+2. **A CSV** ``times_csv`` with header ``file,time``: files matched by base name, ISO 8601
+   times (``2026-06-21 12:00:05.25+01:00``); a time without an offset takes ``tz``.
+3. **A file-name pattern** ``name_pattern`` matching the whole base name: a ``strptime`` pattern
+   (``IMG_%Y%m%d_%H%M%S.jpg``; ``%z`` an offset, ``%f`` a fraction; without a suffix it matches
+   the name without its suffix), or, if it contains ``(?P<``, a regular expression with named
+   groups ``year month day hour minute`` and optional ``second``, ``fraction`` and ``offset``.
 
-Time zones (``tz``) are IANA names (``'Europe/London'``, ``'UTC'``) or fixed offsets
-(``'+02:00'``, ``'-0530'``, ``'Z'``).  A wall-clock time read in an IANA zone that is ambiguous
-(the repeated hour when clocks go back) or does not exist (the skipped hour when they go
-forward) is refused by name, never guessed.  When a frame carries its own offset and ``tz`` is
-also given, the two must agree at that instant, or the frame is refused: a camera set to the
-wrong zone is more likely than a deliberate mix, and the fix (a CSV of times) is explicit.
-
-:func:`duplicate_times` finds frames that share an instant and :func:`time_order` sorts
-them; :func:`check_times` refuses duplicates and returns the order.
+``tz`` is an IANA name or a fixed offset (``'+02:00'``, ``'Z'``); wall-clock times it makes
+ambiguous or skips are refused, and a frame's own offset must agree with it (a camera in the
+wrong zone is likelier than a deliberate mix; a CSV is the explicit fix).
 """
 
 from __future__ import annotations
@@ -64,9 +54,7 @@ def parse_offset(text):
 
 
 def parse_tz(tz):
-    """A ``tzinfo`` from an IANA name, a fixed offset text, or a ``tzinfo`` (returned as is).
-
-    Raises SkyfitError naming the bad value."""
+    """A ``tzinfo`` from an IANA name, an offset text or a ``tzinfo``; SkyfitError if bad."""
     if tz is None or isinstance(tz, dt.tzinfo):
         return tz
     off = parse_offset(tz)
@@ -137,8 +125,7 @@ _EXIF_RE = re.compile(r"^\s*(\d{4})[:\-](\d{2})[:\-](\d{2})[ T](\d{2}):(\d{2}):(
 
 
 def exif_time(meta, tz, who):
-    """The instant of one frame from its EXIF ``metadata`` dict (see
-    :class:`~skyfit_mi.pipeline.photos.Photo`)."""
+    """The instant of one frame from its EXIF ``metadata`` (:attr:`.photos.Photo.metadata`)."""
     text = (meta or {}).get("datetime_original")
     m = _EXIF_RE.match(str(text)) if text else None
     if not m:
@@ -299,34 +286,12 @@ def _pattern_time(name, pattern, tz):
 
 def frame_times(paths, metadata=None, *, times_csv=None, name_pattern=None, tz=None,
                 warn=None):
-    """One time-zone-aware capture time per frame, from exactly one source.
+    """One aware capture time per frame of ``paths``, in its source's offset (module docstring).
 
-    Parameters
-    ----------
-    paths : sequence of str or Path
-        The frames, in the caller's order.
-    metadata : sequence of dict, or mapping path -> dict, optional
-        Each frame's EXIF metadata (``Photo.metadata``); used when neither ``times_csv`` nor
-        ``name_pattern`` is given.
-    times_csv : str or Path, optional
-        A ``file,time`` CSV (see the module docstring).
-    name_pattern : str, optional
-        A ``strptime`` pattern or a named-group regular expression for the base names.
-    tz : str or tzinfo, optional
-        Zone of times that carry no offset; checked against those that do.
-    warn : callable(str), optional
-        Receives the message about CSV rows that name no frame; without it those rows are
-        an error.
-
-    Returns
-    -------
-    list of datetime
-        Aware, in the offset of their source (convert with ``astimezone`` as needed).
-
-    Raises
-    ------
-    SkyfitError
-        One line naming the first frame (or CSV line) without a usable time.
+    ``metadata``: each frame's EXIF (``Photo.metadata``, list or mapping), used without
+    ``times_csv`` and ``name_pattern``; ``tz``: zone of times without an offset, checked
+    against those with one; ``warn``: told of CSV rows naming no frame (without it, an error).
+    SkyfitError names the first frame (or CSV line) without a usable time.
     """
     paths = list(paths)
     if times_csv is not None and name_pattern is not None:
@@ -362,13 +327,7 @@ def _check_aware(paths, times):
 
 
 def duplicate_times(paths, times):
-    """Groups of frames that share one instant (compared in UTC).
-
-    Returns
-    -------
-    list of (datetime, list of path)
-        One entry per instant held by two or more frames, in time order; empty if none.
-    """
+    """[(instant, [path, ...])] of instants (UTC) shared by two or more frames, in time order."""
     paths, times = list(paths), list(times)
     _check_aware(paths, times)
     groups = {}
@@ -385,13 +344,7 @@ def time_order(times):
 
 
 def check_times(paths, times):
-    """Refuse frames that share an instant (naming them); return :func:`time_order`.
-
-    Returns
-    -------
-    list of int
-        Indices of ``paths`` in time order.
-    """
+    """Refuse frames that share an instant (naming them); return :func:`time_order`."""
     paths, times = list(paths), list(times)
     dups = duplicate_times(paths, times)
     if dups:

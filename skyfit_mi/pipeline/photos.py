@@ -1,51 +1,26 @@
-"""Reading one photograph, with the metadata that ingest needs (issue 15).
+"""Reading one photograph, with the metadata ingest needs.
 
-:func:`read_photo` turns one file -- a camera RAW, an 8- or 16-bit JPEG/PNG/TIFF, or a float
-OpenEXR / Radiance RGBE image -- into a :class:`Photo`: its pixel values as stored (RGB,
-float32), what kind of numbers they are (integer codes of ``bits`` bits, or floats), a hint of
-their encoding (sRGB-encoded or linear), and its EXIF metadata (capture time, exposure, camera).
-:func:`check_same_size` refuses a set of frames that do not share one size and orientation.
-
-Every failure is one :class:`~skyfit_mi.errors.SkyfitError` line that names the file and says
-what to do; the CLI prints it.
+:func:`read_photo` turns one file (camera RAW, 8- or 16-bit JPEG/PNG/TIFF, float OpenEXR or
+Radiance RGBE) into a :class:`Photo`: values as stored (RGB float32), their kind (integer codes or
+floats), an encoding hint (sRGB or linear) and EXIF metadata.  :func:`check_same_size` refuses
+frames of differing size or orientation.  Every failure is one
+:class:`~skyfit_mi.errors.SkyfitError` line naming the file and what to do.
 
 Formats and decisions
 ---------------------
-* ``.jpg .jpeg`` (Pillow), ``.png`` of 8 bits or fewer (Pillow), ``.tif .tiff`` of 8 bits
-  (tifffile): kind 'integer', bits 8, max_code 255, encoding_hint 'srgb' (a PNG gAMA 1.0 chunk
-  or an ICC profile named linear makes it 'linear').  A JPEG's codes are decoded in floating
-  point from its DCT coefficients (:func:`.jpeg_noise.decode`; ``metadata['decoder']``):
-  libjpeg's whole-code planes put one shared error on every pixel of a smooth patch.
-* ``.png`` of 16 bits (Mitsuba's Bitmap: Pillow truncates 16-bit RGB PNG to 8 bits) and
-  ``.tif .tiff`` of 16 bits (tifffile): kind 'integer', bits 16, max_code 65535,
-  encoding_hint 'linear' (a PNG sRGB chunk, gAMA 1/2.2, or an ICC profile named sRGB makes it
-  'srgb').
-* ``.tif .tiff`` of floats (tifffile), ``.exr`` (OpenEXR's Python bindings,
-  :func:`.render.image.read_exr_channels`), ``.hdr .pic .rgbe`` Radiance RGBE (Mitsuba): kind
-  'float', bits and max_code None, encoding_hint 'linear'; an EXR's capture time from its
-  header's ``capDate``/``utcOffset``, an RGBE's from ``CAPDATE=``/``GMT=``, in the metadata's
-  EXIF fields.  OpenEXR raises on a damaged file, so EXR is read in this process; Mitsuba
-  reads RGBE pixels in a child process (:data:`_BITMAPS`, started at the first such file and
-  kept for the rest): a damaged file can abort that native reader, which then ends the
-  child, not the caller, and the file gets one error line.
-* camera RAW, any suffix in :data:`RAW_SUFFIXES` (rawpy / LibRaw): kind 'integer', bits 16,
-  max_code 65535, encoding_hint 'linear'.
-
-* ``encoding_hint`` is a hint, and :attr:`Photo.encoding_source` says where it came from
-  (``'assumed'`` when the file says nothing).  A 16-bit TIFF/PNG without colour information is
-  taken as linear (the usual output of ``dcraw -4 -T`` and of linear raw exports); a 16-bit
-  file exported with an sRGB curve must be declared sRGB by the user.
-* EXIF orientation is applied (the pixels are turned the way Pillow's
-  ``ImageOps.exif_transpose`` turns them) and recorded in ``metadata['orientation']`` (the EXIF
-  code, 1 = as stored); RAW files are turned by LibRaw's own flip, recorded the same way.
-  :func:`check_same_size` refuses frames whose orientations differ (a camera on a tripod
-  whose orientation sensor flipped between frames).
-* Alpha is dropped; grey images are repeated into R, G and B.
-* RAW: LibRaw (through rawpy) demosaics to linear 16-bit sRGB primaries: black level
-  subtracted, white level scaled to 65535, the camera's as-shot white balance (daylight
-  balance where the file has none), no gamma, no automatic brightening, and no per-frame
-  white-level adjustment (``adjust_maximum_thr=0``), so codes are proportional to exposure
-  across frames.  What was applied is recorded in ``metadata['raw']``.
+* ``.jpg .jpeg``, ``.png`` of up to 8 bits (Pillow), ``.tif .tiff`` of 8 bits (tifffile): bits
+  8, hint 'srgb' ('linear' for PNG gAMA 1.0 or an ICC profile named linear).  JPEG codes are
+  decoded in floating point from the DCT coefficients (:func:`.jpeg_noise.decode`): libjpeg's
+  whole codes put one shared error on every pixel of a smooth patch.
+* ``.png`` of 16 bits (Mitsuba's Bitmap: Pillow truncates to 8) and 16-bit ``.tif``: bits 16,
+  hint 'linear' (as ``dcraw -4 -T`` writes; 'srgb' for an sRGB chunk, gAMA 1/2.2 or an ICC
+  profile named sRGB).
+* float ``.tif``, ``.exr``, ``.hdr .pic .rgbe``: kind 'float', hint 'linear', capture time from
+  the header; RGBE is read in a child process (:data:`_BITMAPS`) that a damaged file may abort.
+* camera RAW (:data:`RAW_SUFFIXES`, rawpy / LibRaw): bits 16, developed to linear sRGB with fixed
+  levels (:data:`RAW_DEVELOP`), so codes are proportional to exposure across frames.
+* EXIF orientation is applied (as Pillow's ``ImageOps.exif_transpose``; RAWs by LibRaw's flip)
+  and recorded in ``metadata['orientation']``.  Alpha is dropped; grey is repeated into RGB.
 """
 
 from __future__ import annotations
@@ -77,10 +52,8 @@ RAW_SUFFIXES = frozenset({
     ".kdc", ".dcr", ".rwl", ".raw",
 })
 JPEG_SUFFIXES = frozenset({".jpg", ".jpeg", ".jpe"})
-#: The largest rms difference [DN] between the floating-point JPEG decoder and libjpeg's codes
-#: at which the former is used: they differ by libjpeg's rounding, 0.3-0.65 DN rms (measured
-#: on Pillow's files at qualities 75-100, any subsampling, progressive or not, and on a
-#: third-party photograph); more means the file is coded in a way the decoder does not follow.
+#: Largest rms difference [DN] from libjpeg's codes at which the floating-point JPEG decoder is
+#: used: libjpeg's rounding stays well below it; more means a coding the decoder does not follow.
 DECODER_AGREEMENT_DN = 1.5
 PNG_SUFFIXES = frozenset({".png"})
 TIFF_SUFFIXES = frozenset({".tif", ".tiff"})
@@ -96,10 +69,8 @@ _LIBRAW_FLIP_TO_EXIF = {0: 1, 3: 3, 5: 8, 6: 6}
 #: 16-bit, the camera's as-shot white balance, no brightening or per-frame white level.
 RAW_DEVELOP = {"gamma": (1, 1), "no_auto_bright": True, "output_bps": 16, "use_camera_wb": True,
                "adjust_maximum_thr": 0.0}
-#: How far [pixels] AHD demosaicing mixes a pixel's colour with its neighbours': measured on a
-#: board of saturated paints (scripts/jpeg_colour_coverage.py --format dng --diagnose), the
-#: pixels next to another paint read its colour (yellow's blue +100%), those two pixels from it
-#: still 8% (yellow's blue) and 3% (blue's red), those three from it within the noise (0.5%).
+#: How far [pixels] AHD demosaicing mixes a pixel's colour with its neighbours' (measured on
+#: saturated paints: three pixels from an edge the mixing is within the noise).
 RAW_COLOUR_REACH = 2
 
 
@@ -109,34 +80,24 @@ class Photo:
 
     Attributes
     ----------
-    path : str
-        The file read.
-    format : str
-        'jpeg', 'png', 'tiff', 'exr', 'rgbe' or 'raw'.
+    path, format : str
+        The file; 'jpeg', 'png', 'tiff', 'exr', 'rgbe' or 'raw'.
     values : ndarray, float32, shape (H, W, 3)
-        RGB values as stored, after the EXIF orientation is applied: codes (0 ..
-        ``max_code``) held as floats for integer formats (whole codes but for a JPEG's, decoded
-        in floating point), the float values for EXR/RGBE/float TIFF.  Writable; the Photo does not copy it.
+        RGB values as stored, EXIF orientation applied: codes (0 .. ``max_code``) for integer
+        formats (fractional for a JPEG), the floats otherwise.  Writable, not copied.
     kind : str
         'integer' or 'float'.
-    bits : int or None
-        8 or 16 for integer formats (the container's depth); None for floats.
-    max_code : int or None
-        2**bits - 1 (the saturation code); None for floats.
-    encoding_hint : str
-        'srgb' or 'linear' (see the module table); the pipeline lets the user override it.
-    encoding_source : str
-        Why: 'assumed' (the file says nothing), 'PNG sRGB chunk', 'PNG gAMA 1.0', 'PNG gAMA
-        1/2.2', 'ICC profile "<description>"', 'RAW' or 'float'.
+    bits, max_code : int or None
+        8 or 16 and 2**bits - 1 (saturation) for integer formats; None for floats.
+    encoding_hint, encoding_source : str
+        'srgb' or 'linear' (the user may override it), and why: 'assumed', 'PNG sRGB chunk',
+        'PNG gAMA 1.0', 'PNG gAMA 1/2.2', 'ICC profile "<description>"', 'RAW' or 'float'.
     nan_count, inf_count : int
-        Pixel values (counted per channel) that are NaN / infinite (always 0 for integer formats).
     metadata : dict
-        ``datetime_original`` (EXIF text 'YYYY:MM:DD HH:MM:SS' or None),
-        ``offset_time_original`` ('+01:00' or None), ``subsec_time_original`` (digits or None),
-        ``exposure_time_s``, ``f_number``, ``iso`` (floats/int or None), ``make``, ``model``
-        (str or None), ``orientation`` (EXIF code applied, 1 = none), ``icc_profile``
-        (description or None), and for RAW ``raw`` (black/white levels, white balances, and
-        what was applied).
+        ``datetime_original`` ('YYYY:MM:DD HH:MM:SS' or None), ``offset_time_original``
+        ('+01:00' or None), ``subsec_time_original``, ``exposure_time_s``, ``f_number``,
+        ``iso``, ``make``, ``model``, ``orientation`` (EXIF code applied, 1 = none),
+        ``icc_profile``, and for RAW ``raw`` (levels, white balances, what was applied).
     """
 
     path: str
@@ -185,8 +146,7 @@ def _first_line(exc):
 
 
 def _rgb(values, channels, path):
-    """(H, W, C) -> (H, W, 3): alpha dropped, grey repeated.  ``channels`` is a list of names
-    (Mitsuba) or None (count only)."""
+    """(H, W, C) -> (H, W, 3): alpha dropped, grey repeated; ``channels``: names or None."""
     c = values.shape[2]
     if channels is not None:
         names = [n.upper() for n in channels]
@@ -245,8 +205,7 @@ def _empty_metadata():
 
 @contextlib.contextmanager
 def _quiet(*names):
-    """Silence the named loggers and Python warnings (exifread, tifffile and Pillow report
-    every oddity of a damaged file; the reader's one error line says what matters)."""
+    """Silence the named loggers and Python warnings (the reader's one error line suffices)."""
     loggers = [logging.getLogger(n) for n in names]
     levels = [lg.level for lg in loggers]
     for lg in loggers:
@@ -261,10 +220,9 @@ def _quiet(*names):
 
 
 def read_exif(path):
-    """EXIF metadata of ``path`` (JPEG, TIFF, PNG eXIf, most TIFF-based RAWs) through
-    ``exifread``, as the ``metadata`` dict of :class:`Photo` (``orientation`` is the code the
-    file asks for, 1 without one).  Unreadable EXIF gives the empty values, never an error:
-    the pixel reader judges whether the file is readable."""
+    """EXIF metadata of ``path`` (JPEG, TIFF, PNG eXIf, most TIFF-based RAWs) by ``exifread``,
+    as :attr:`Photo.metadata` (``orientation``: the code the file asks for, 1 without one).
+    Unreadable EXIF gives empty values, never an error: the pixel reader judges the file."""
     import exifread
 
     meta = _empty_metadata()
@@ -511,11 +469,8 @@ def _read_tiff(path):
 
 
 def exr_header_times(path):
-    """``datetime_original`` and ``offset_time_original`` (EXIF's forms) from an OpenEXR
-    header's standard attributes ``capDate`` ('YYYY:MM:DD hh:mm:ss', local time) and
-    ``utcOffset`` (seconds, UTC = local + utcOffset: west of Greenwich positive); None where
-    absent or unreadable.  The header is a run of (name, type, size, value) up to an empty
-    name (OpenEXR file layout)."""
+    """``datetime_original``, ``offset_time_original`` from an OpenEXR header's ``capDate``
+    (local) and ``utcOffset`` ([s], UTC = local + utcOffset); None where absent or unreadable."""
     out = {"datetime_original": None, "offset_time_original": None}
     try:
         with open(path, "rb") as fh:
@@ -545,8 +500,7 @@ def exr_header_times(path):
 
 def rgbe_header_times(path):
     """``datetime_original`` and ``offset_time_original`` from a Radiance RGBE header's
-    ``CAPDATE=`` (local) and ``GMT=`` (UTC) lines, both 'YYYY:MM:DD hh:mm:ss': the offset is
-    their difference; GMT alone gives the UTC time at +00:00.  None where absent."""
+    ``CAPDATE=`` (local) and ``GMT=`` (UTC) lines; GMT alone gives +00:00.  None where absent."""
     lines = {}
     try:
         with open(path, "rb") as fh:
@@ -578,21 +532,16 @@ def rgbe_header_times(path):
 
 #: The function that reads an RGBE file in the child process (tests name one that crashes).
 READ_BITMAP = "skyfit_mi.render.image:read_bitmap"
-#: Deadline of one such read [s]: READ_DEADLINE[0] plus READ_DEADLINE[1] per MB of the file
-#: (a read takes well under a second per 100 MB; a child that overran its heap can spin).
+#: Deadline of one such read [s]: [0] + [1] per MB of the file (an overrun child can spin).
 READ_DEADLINE = (60.0, 0.1)
-#: The child process that reads RGBE files for this process: Mitsuba 3.9.1's RGBE
-#: reader, meeting a scanline after the first that is not run-length encoded, reads the whole
-#: image's worth of flat pixels from there into the image buffer, past its end, and glibc
-#: aborts (SIGABRT) on the corrupted heap, or the child spins (READ_DEADLINE); the child dies
-#: instead of the caller.  Each read
-#: adds the copy of its pixels through a pipe (~0.1-0.2 s per 100 MB).
+#: The child process that reads RGBE files: Mitsuba 3.9.1's RGBE reader overruns its buffer on
+#: a non-run-length-encoded scanline after the first and aborts (or spins), killing the child
+#: instead of the caller.  Each read adds a copy of its pixels through a pipe.
 _BITMAPS = Child()
 
 
 def _read_exr(path):
-    """An OpenEXR file through OpenEXR's Python bindings, in this process (a damaged file
-    raises: :func:`.render.image.read_exr_channels`)."""
+    """An OpenEXR file, read in this process (a damaged file raises, it does not abort)."""
     try:
         values, channels = read_exr_channels(path)
     except ExrError as exc:
@@ -602,8 +551,7 @@ def _read_exr(path):
 
 
 def _read_rgbe(path):
-    """A Radiance RGBE file through Mitsuba's Bitmap, read in the child process
-    :data:`_BITMAPS` (its values exactly as :func:`.render.image.read_bitmap` gives them)."""
+    """A Radiance RGBE file through Mitsuba's Bitmap, read in the child process :data:`_BITMAPS`."""
     name = "a Radiance RGBE"
     try:
         values, channels = _BITMAPS.call(
@@ -619,8 +567,7 @@ def _read_rgbe(path):
 
 
 def _float_image(path, kind, values, channels, times):
-    """A float image's photo (``kind`` 'exr' or 'rgbe') from its ``values`` and ``channels``,
-    its header's ``times`` in its metadata."""
+    """A float image's photo (``kind`` 'exr' or 'rgbe'), its header's ``times`` in metadata."""
     if values.dtype.kind != "f":
         raise _fail(path, f"reads as {values.dtype} codes, not floats",
                     "give it the suffix of its real format")
@@ -634,8 +581,7 @@ def _wb(values):
 
 
 def develop(raw):
-    """An open rawpy image developed as :data:`RAW_DEVELOP` says, into sRGB primaries: (H, W,
-    3) uint16, turned by the file's orientation."""
+    """An open rawpy image developed by :data:`RAW_DEVELOP`: (H, W, 3) uint16 sRGB, turned."""
     import rawpy
 
     return raw.postprocess(**RAW_DEVELOP, output_color=rawpy.ColorSpace.sRGB)
@@ -711,16 +657,9 @@ for _s in RAW_SUFFIXES:
 
 
 def read_photo(path, exact_jpeg=True):
-    """Read one photograph (any suffix in :data:`SUFFIXES`) as a :class:`Photo`; a JPEG's
-    codes decoded in floating point (module docstring) unless not ``exact_jpeg`` (libjpeg's
-    whole codes: several times faster, for uses that average its pixels).
-
-    Raises
-    ------
-    SkyfitError
-        One line naming the file: unknown suffix, missing, empty, truncated or corrupt file,
-        an unsupported RAW, or pixels that are not RGB/grey 8-bit, 16-bit or float.
-    """
+    """Read one photograph (any suffix in :data:`SUFFIXES`) as a :class:`Photo`; without
+    ``exact_jpeg``, a JPEG gets libjpeg's whole codes (faster, for uses that average pixels).
+    SkyfitError naming the file if it cannot be read as RGB/grey 8-bit, 16-bit or float."""
     p = Path(path)
     suffix = p.suffix.lower()
     reader = _READERS.get(suffix)
@@ -748,16 +687,14 @@ EXPOSURE_KEYS = {"exposure time": "exposure_time_s", "f-number": "f_number", "IS
 
 
 def exif_exposure(photo):
-    """The exposure t S / N^2 [s] of ``photo`` from its EXIF exposure time, ISO speed and
-    f-number (:data:`EXPOSURE_KEYS`), or None where one is missing."""
+    """The exposure t S / N^2 [s] of ``photo`` from EXIF (:data:`EXPOSURE_KEYS`), or None."""
     t, n, iso = (photo.metadata.get(k) for k in EXPOSURE_KEYS.values())
     return float(t) * float(iso) / float(n) ** 2 if t and n and iso else None
 
 
 def list_photos(items):
-    """The photographs named by ``items`` (files, or folders of them in name order, each file
-    one of :data:`SUFFIXES`), as Paths; SkyfitError in one line for a path that does not
-    exist."""
+    """Paths of the photographs in ``items`` (files, or folders in name order); SkyfitError if
+    one does not exist."""
     paths = []
     for p in map(Path, items):
         if p.is_dir():
@@ -770,10 +707,8 @@ def list_photos(items):
 
 
 def read_flat_field(path, size):
-    """The flat field at ``path`` (a photograph of a uniform field through the same lens), as
-    each pixel's relative response (H, W), 1 at its brightest: the channels' mean of its
-    linear values (the response its file states).  SkyfitError in one line unless it is of
-    ``size`` (height, width) with finite, positive values."""
+    """The flat field at ``path`` as relative response (H, W), 1 at its brightest; SkyfitError
+    unless of ``size`` (height, width) with finite, positive values."""
     image = read_photo(Path(path))
     h, w = size
     if image.values.shape[:2] != (h, w):
@@ -788,25 +723,9 @@ def read_flat_field(path, size):
 
 
 def check_same_size(photos_by_path):
-    """Refuse frames that differ in size or orientation.
-
-    Parameters
-    ----------
-    photos_by_path : mapping or sequence of pairs
-        path -> :class:`Photo`, or path -> ``(height, width)`` / ``(height, width,
-        orientation)`` (keep only the shapes, not the pixels, to save memory).  The first
-        entry is the reference.
-
-    Returns
-    -------
-    (width, height) [pixels] of every frame.
-
-    Raises
-    ------
-    SkyfitError
-        Naming the first frame that differs from the first one, e.g. ``"b.jpg is 640x480,
-        a.jpg is 480x640: ..."``.
-    """
+    """Refuse frames that differ in size or orientation (SkyfitError naming the first); returns
+    their (width, height) [pixels].  ``photos_by_path``: path -> :class:`Photo` or
+    ``(height, width[, orientation])`` (mapping or pairs), the first entry the reference."""
     items = list(photos_by_path.items() if hasattr(photos_by_path, "items") else photos_by_path)
     if not items:
         raise SkyfitError("no photographs given; give a folder with at least one image.")

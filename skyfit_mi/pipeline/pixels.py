@@ -49,9 +49,8 @@ def pixel_series(manifest_path, pixels, source="radiance"):
 
 
 def frame_values(manifest_path, pixels, frames, source="radiance"):
-    """Values of ``pixels`` ((P, 2) x, y) in the frames whose index is in ``frames``, in time
-    order: (P, T, 3) [``SOURCES[source]``]; each frame checked as ``fit`` checks it, and only
-    the pixels' rows read."""
+    """Values (P, T, 3) [``SOURCES[source]``] of ``pixels`` ((P, 2) x, y) in ``frames``, in time
+    order, checked as ``fit`` checks them; only the pixels' rows are read."""
     doc, root = load_manifest(manifest_path)
     shape = (doc["camera"]["height"], doc["camera"]["width"], 3)
     px = np.asarray(pixels, dtype=int)
@@ -101,14 +100,10 @@ def scene_labels(manifest):
 
 
 def material_regions(manifest, pose_sd_deg=None, log=None):
-    """(name, pixels) of every Ward material the camera sees, from the scene's label image:
-    the pixels inside each material's area (edge pixels, which also see a neighbour, left
-    out, and in JPEGs with subsampled chroma, demosaiced RAWs or registered photographs those
-    whose colour mixes a neighbour's, or that the pose's uncertainty, ``pose_sd_deg`` or the
-    sequence's, may move onto a neighbour; in lossy JPEGs those in blocks an edge crosses,
-    where JPEG_CLEAN_MIN remain without them: :mod:`.region_edges`); ``log`` names a Ward
-    material left without pixels; SkyfitError when it sees none.
-    For an observation table, (name, None) of each region it measures."""
+    """(name, pixels) of every Ward material the camera sees: each material's inner pixels, away
+    from edges, colour mixing, pose uncertainty (``pose_sd_deg`` or the sequence's) and JPEG
+    edge blocks (:mod:`.region_edges`); ``log`` names a material left without pixels;
+    SkyfitError if none is seen.  For an observation table, (name, None) per region."""
     from scipy.ndimage import binary_erosion
 
     doc, root = load_manifest(manifest)

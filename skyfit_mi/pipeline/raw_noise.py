@@ -1,31 +1,16 @@
 """What developing a camera RAW does to its noise, found by developing the frame again.
 
-A RAW's photosites carry independent read and shot noise, one colour each through the Bayer
-filter.  Developing it (:func:`.photos.develop`: LibRaw's AHD demosaicing, the white
-balance, the colour matrix from the camera's RGB to sRGB's) gives each pixel the two colours
-it lacks from its neighbours, and mixes the channels through the matrix, whose rows are far
-from diagonal: a developed pixel's noise is then (measured on photo_sim's camera, the Canon
-EOS 5D Mark II's matrix) 1.4-3.3x what its neighbouring pixels differ by, correlated with its
-neighbours' (0.4-0.6 between adjacent pixels), larger in red and blue than in green at one
-level, and set by all three channels' signals, not by the channel's own.  The frames' pixel
-differences (:func:`skyfit_mi.pipeline.ingest.estimate_noise`) cannot tell it.  So:
-
-1. the sensor's noise is estimated on the mosaic itself (:func:`cfa_planes`): each CFA
-   colour a plane of photosites two pixels apart, whose neighbours' noise is independent,
-   read a [raw DN^2] and shot b [raw DN per DN], as ingest estimates any frame's;
-2. a parametric bootstrap (:func:`bootstrap`): the frame's photosites smoothed (each CFA
-   plane over :data:`SMOOTH` of its sites: the scene, as far as a flat surface goes), given
-   fresh noise of that model and developed by LibRaw as ingest develops them,
-   :data:`REPLICATES` times; the differences from the smoothed sites developed are draws of
-   the developed noise: their mean square, averaged over each pixel's SMOOTH x SMOOTH
-   neighbourhood, is its variance (within 5% of the spread of 16 frames of one scene, each
-   its own noise, on a grey and a saturated blue: ``tests/test_raw_noise.py``), and each
-   channel's correlation between pixels up to :data:`.photos.RAW_COLOUR_REACH` apart gives a
-   fit its design effect (:func:`skyfit_mi.fitting.chi2.neighbour_sharing`).
-
-Noise draws are seeded (:data:`SEED` and the frame's index).  A RAW whose filter is not a 2x2
-Bayer pattern (X-Trans, Foveon) has no planes here: :func:`cfa_planes` returns None, and
-ingest estimates its noise from the developed frames.
+A RAW's photosites carry independent read and shot noise, one colour each.  Developing it
+(:func:`.photos.develop`: AHD demosaicing, white balance, a far-from-diagonal colour matrix)
+mixes neighbours and channels, so a developed pixel's noise is larger than its neighbours'
+differences show, correlated with theirs, and set by all three channels.  So the sensor's read
+a [raw DN^2] and shot b [raw DN per DN] noise is estimated on the CFA planes
+(:func:`cfa_planes`), whose neighbouring sites' noise is independent, and a parametric bootstrap
+(:func:`bootstrap`) develops the smoothed photosites with fresh noise :data:`REPLICATES` times,
+giving each pixel's variance and the correlations between pixels up to
+:data:`.photos.RAW_COLOUR_REACH` apart (:func:`skyfit_mi.fitting.chi2.neighbour_sharing`).
+Draws are seeded (:data:`SEED`, frame index).  A RAW without a 2x2 Bayer filter (X-Trans,
+Foveon) has no planes: ingest then estimates its noise from the developed frames.
 """
 
 import numpy as np
@@ -36,13 +21,9 @@ from .photos import RAW_COLOUR_REACH, develop
 REPLICATES = 8
 #: Seed of the bootstrap's noise (with the frame's index; recorded in the manifest).
 SEED = 20261127
-#: The bootstrap develops a smoothed copy of the frame's photosites (each CFA colour's plane
-#: averaged over SMOOTH x SMOOTH of its sites) with and without fresh noise: AHD chooses its
-#: interpolation's directions from the data, and on the frame itself, which holds noise
-#: already, the fresh noise moved those choices as the scene's noise alone does not, and the
-#: developed variance came out 15-30% high (against the spread of 16 frames of one scene, each
-#: its own noise; noise scaled down to a quarter, to probe the development's linear response,
-#: came out 2-3x high: every choice it moved added its own error).
+#: Sites per side over which each CFA plane is averaged before the bootstrap adds noise: AHD
+#: picks its interpolation directions from the data, and on the noisy frame itself the fresh
+#: noise would move those choices and overstate the developed variance.
 SMOOTH = 5
 
 
@@ -56,10 +37,8 @@ def _mosaic(raw):
 
 
 def cfa_planes(path):
-    """The photosites of RAW ``path`` above black as an (H/2, W/2, 3) image per colour plane
-    of its 2x2 filter (R, the first G, B; then the second G with R and B again), NaN where
-    clipped, for the noise estimate: [(H/2, W/2, 3), (H/2, W/2, 3)]; None for a filter that is
-    not a 2x2 Bayer pattern."""
+    """RAW ``path``'s photosites above black as two (H/2, W/2, 3) images of its 2x2 filter's
+    planes ((R, G1, B), (R, G2, B)), NaN where clipped; None without a 2x2 Bayer filter."""
     import rawpy
 
     with rawpy.imread(str(path)) as raw:
@@ -94,15 +73,13 @@ def _smoothed(values, pattern):
 
 
 def bootstrap(path, noise, seed, frame, replicates=REPLICATES):
-    """Draws of the developed noise of RAW ``path``: its photosites smoothed (SMOOTH), given
-    fresh read and shot noise ``noise`` = (a [raw DN^2], b [raw DN per DN]) and developed as
-    :func:`.photos.read_photo` develops them, against the smoothed sites developed; ``frame``
-    (H, W, 3) the file as read (its clipped pixels are left out), not developed again.
+    """Draws of RAW ``path``'s developed noise: smoothed photosites with fresh ``noise`` = (a
+    [raw DN^2], b [raw DN per DN]) developed as :func:`.photos.read_photo` does, less the
+    smoothed sites developed; ``frame`` (H, W, 3) the file as read (clipped pixels left out).
 
-    Returns (the draws' mean square per pixel averaged over the unclipped pixels of its SMOOTH x
-    SMOOTH neighbourhood (none: the frame's most) (H, W, 3) [DN^2], float32; each channel's
-    correlation between pixels (3, 2 R + 1, 2 R + 1), R = RAW_COLOUR_REACH, offsets (dy, dx)
-    from the centre; the correlation between a pixel's channels, R-G, G-B, B-R)."""
+    Returns (variance (H, W, 3) [DN^2] float32, averaged over unclipped SMOOTH x SMOOTH
+    neighbours; each channel's correlation between pixels (3, 2 R + 1, 2 R + 1), R =
+    RAW_COLOUR_REACH, offsets (dy, dx); the channels' correlations R-G, G-B, B-R)."""
     import rawpy
     from scipy.ndimage import uniform_filter
 
@@ -150,8 +127,7 @@ def bootstrap(path, noise, seed, frame, replicates=REPLICATES):
     channels = [float(cross[c, (c + 1) % 3] / np.sqrt(cross[c, c] * cross[(c + 1) % 3,
                                                                            (c + 1) % 3]))
                 for c in range(3)]
-    # the neighbourhood's mean over its unclipped pixels; where all are clipped, the most of the
-    # frame's (a clipped channel is censored, but its pixel's others are values)
+    # mean over unclipped neighbours; where all clip, the frame's most (other channels count)
     keep = (~clipped).astype(float)[..., None]
     size = (SMOOTH, SMOOTH, 1)
     with np.errstate(all="ignore"):

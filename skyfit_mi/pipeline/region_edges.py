@@ -8,19 +8,11 @@ from scipy.ndimage import binary_dilation, maximum_filter, minimum_filter
 
 
 def colour_reach(doc):
-    """How many pixels from itself a frame of the sequence ``doc`` mixes a pixel's colour
-    with others', at most over its frames: 0 but for JPEGs with subsampled chroma and RAWs.
-    A RAW's demosaicing draws a pixel's missing colours from photosites around it (AHD's
-    reach, :data:`~.photos.RAW_COLOUR_REACH`, recorded in each frame's ``raw_demosaic``).  A
-    JPEG of chroma subsampled by f (2 for 4:2:0 and 4:2:2) averages each f x f cell's colour
-    into one sample, and the decoder interpolates between neighbouring samples (libjpeg's "fancy"
-    upsampling, :func:`~.jpeg_noise.decode`): a pixel's colour then draws on pixels up to f
-    away.  One more covers a camera's encoder that smooths its chroma before subsampling.  At
-    a boundary between materials the mix is a bias, not noise (measured on a board of
-    saturated paints at quality 95, 4:2:0: the blue of yellow paint +26% on the ring next to
-    the boundary), so a fit leaves such pixels out (:func:`colour_mixed`).  Registered or
-    undistorted photographs (:mod:`.registration`) mix each pixel with its neighbours by their
-    resampling, and their motion's uncertainty moves it: ``ingest.registration.erode_px``."""
+    """How many pixels away a frame of sequence ``doc`` mixes a pixel's colour with others', at
+    most over its frames: 0 but for RAWs (AHD's :data:`~.photos.RAW_COLOUR_REACH`) and JPEGs
+    with chroma subsampled by f (f, plus one for cameras that smooth chroma first).  At a
+    material boundary the mix is a bias, not noise, so fits leave such pixels out
+    (:func:`colour_mixed`).  Registration's resampling is ``ingest.registration.erode_px``."""
     frames = doc.get("frames", ())
     factor = max((max(f["jpeg_dc"]["chroma_subsampling"]) for f in frames if "jpeg_dc" in f),
                  default=1)
@@ -31,9 +23,8 @@ def colour_reach(doc):
 
 
 def colour_mixed(labels, reach):
-    """(H, W) bool: the pixels of the label image ``labels`` (:func:`scene_labels`) within
-    ``reach`` pixels (a square's half-width) of a pixel of another label, whose colour a
-    frame mixes with another material's (:func:`colour_reach`); none for ``reach`` 0."""
+    """(H, W) bool: pixels of ``labels`` within ``reach`` pixels (a square's half-width) of
+    another label, whose colour a frame mixes (:func:`colour_reach`); none for ``reach`` 0."""
     if reach <= 0:
         return np.zeros(labels.shape, dtype=bool)
     size = 2 * int(reach) + 1
@@ -44,35 +35,23 @@ def colour_mixed(labels, reach):
 #: The fewest of a material's pixels in JPEG blocks of its own (:func:`jpeg_edge_blocks`) a
 #: region takes alone; with fewer it keeps the pixels of blocks its edges cross.
 JPEG_CLEAN_MIN = 16
-#: How far [px] beyond its pixel map's bilinear footprint a resampled frame's edge block
-#: spoils the reference's pixels: the blocks about an edge whose labels are one material but
-#: whose values hold the edge's blur (a lens's, a renderer's pixel filter) ring too, and the
-#: frame's motion moves them over the scene.
+#: How far [px] beyond its bilinear footprint a resampled frame's edge block spoils reference
+#: pixels: blocks holding an edge's blur ring too, and the frame's motion moves them.
 RESAMPLED_BLOCK_REACH = 2
 #: A bilinear weight below this [1] draws on no pixel (a frame not resampled takes its own).
 _NO_WEIGHT = 1e-6
 
 
 def jpeg_edge_blocks(labels, doc):
-    """(H, W) bool: the pixels of the label image ``labels`` that lie in a JPEG coding block
-    holding another label too, in any frame of the sequence ``doc`` whose tables round (a
-    luminance DC step above 1: below quality 100).  A JPEG rounds each block's coefficients
-    together, so an edge's high orders, rounded, ring across its block: an error of the
-    scene's edge, the same in every frame, that neither noise nor the bootstrap's draws
-    (:func:`~.jpeg_noise.truth_sampler`, which cannot restore what the file zeroed) describe,
-    and which stops at the block's border.  Measured on the sample board at quality 92
-    (4:4:4): 1-3% of the signal at 2-3 pixels from an edge, at most 0.3% in blocks of one
-    material.  Blocks are 8 pixels, 8 f with chroma subsampled by f, from each frame's
-    ``jpeg_block_offset``.
+    """(H, W) bool: pixels of ``labels`` in a JPEG coding block (8 f pixels for chroma
+    subsampled by f, at each frame's ``jpeg_block_offset``) holding another label too, in any
+    frame of ``doc`` below quality 100.  An edge's rounded high orders ring across its block:
+    an error of the scene, the same in every frame, that neither noise nor the bootstrap
+    describes, and which stops at the block's border.
 
-    A frame resampled onto the reference's pinhole pixels (registered or undistorted,
-    :mod:`.registration`) has its blocks where its pixel map puts them: a pixel is marked where
-    any of the four photograph pixels its bilinear value draws on lies in a block that holds
-    two labels (the labels carried to the photograph by the nearest pixel), and
-    RESAMPLED_BLOCK_REACH pixels about those.  Measured on the shaken board (160 x 120,
-    quality 92, seed 1): 26 of 40 pairs held with 2 gross misses with the blocks alone (moved
-    by the frame's shift rounded, or by its map), 36 with no gross miss with the reach; as
-    lossless PNGs 38 of 40."""
+    For a resampled frame (:mod:`.registration`) a pixel is marked where any of the four
+    photograph pixels its bilinear value draws on lies in such a block, and
+    RESAMPLED_BLOCK_REACH pixels about those."""
     h, w = labels.shape
     out = np.zeros((h, w), dtype=bool)
     grids = {}                                   # frames that share a grid are marked once
@@ -111,9 +90,8 @@ def jpeg_edge_blocks(labels, doc):
 
 
 def _photograph_pixels(frame, doc, w, h):
-    """(u, v, (ox, oy), resampled): where each reference pixel's value was taken in
-    ``frame``'s photograph [px] ((H, W) each; the pixel itself unless the frame was resampled,
-    moved or undistorted), the photograph's own block offset, and whether it was resampled."""
+    """(u, v, (ox, oy), resampled): where each reference pixel's value was taken in ``frame``'s
+    photograph [px] ((H, W) each), its block offset, and whether it was resampled."""
     from .registration import NO_MOTION, motion_of_record, pixel_map
 
     ox, oy = frame.get("jpeg_block_offset", (0, 0))
@@ -132,14 +110,10 @@ def _photograph_pixels(frame, doc, w, h):
 
 
 def pose_reach(camera, pose_sd_deg=None):
-    """How many pixels the camera's pose uncertainty may move the scene's labels in its frames
-    (``pose_sd_deg``, {angle: 1 sd [deg]} as :func:`~skyfit_mi.render.scene.pose_sd` reads
-    it, or the ``camera`` record's ``pose_sd_deg``; absent: 0): twice (95%) the
-    displacement of the frame's farthest pixel, a turn in azimuth or angle moving the view's
-    centre by f theta (f the focal length in pixels) and a roll the corners by their radius
-    times it, the angles independent.  The regions a fit takes from the spec's labels stay
-    that far inside each material: a pose given to +-1 degree moves a 160-pixel-wide view of
-    40 degrees by 4 pixels."""
+    """How many pixels the pose uncertainty may move the scene's labels (``pose_sd_deg``, {angle:
+    1 sd [deg]} as :func:`~skyfit_mi.render.scene.pose_sd` reads it; absent: 0): twice (95%) the
+    farthest pixel's displacement, f theta for azimuth or angle (f [px]) and radius x theta for
+    roll, the angles independent.  Fit regions stay that far inside each material."""
     from ..physics.lens import focal_px
 
     sd = pose_sd_deg if pose_sd_deg is not None else camera.get("pose_sd_deg")

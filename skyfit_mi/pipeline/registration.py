@@ -6,27 +6,13 @@ A frame's motion is a Euclidean map of the reference frame's pixels q onto its o
     p = R(theta) (q - c) + c + (dx, dy),
 
 c the image's centre, theta positive turning the scene clockwise as displayed (image y down).
-It is measured in the pinhole's geometry (each photograph undistorted,
-:func:`undistort_image`) on the luminance (linearised, vignetting divided out; linear, as
-:func:`features` says why) high-passed over HIGHPASS_SD_PX, which keeps edges and texture and
-drops the day's slow change of shading: phase correlation (Kuglin and Hines 1975) gives the
-shift, the enhanced correlation coefficient (ECC, Evangelidis and Psarakis 2008; invariant to
-each frame's gain and offset) refines it with the rotation.  Its uncertainty is that fit's
-covariance, robust to the spatially coherent residual the day's change of light leaves
-(:func:`motion_covariance`).
-
-Each photograph is then resampled once onto the reference's pinhole pixels, the motion and the
-distortion composed into one map (bilinear, OpenCV ``remap``); pixels that map off the
-photograph are NaN (their sigma infinite), and a pixel that mixes a clipped value (0 or the
-top code) with others is NaN too (it is neither a value nor a bound).  The noise model and a
-JPEG's errors are found on the file's own pixels, before resampling: its grid of blocks and
-its neighbouring pixels' independence hold there.  The variance is resampled with the same
-weights as the values (not their squares): a resampled pixel's own scatter is smaller (by
-the share ``pixel_variance_share``, 1/4 at worst), but it shares its errors with its
-neighbours, and a region's mean over many pixels carries the photograph's error, which a fit
-treating pixels as independent then gets right (squared weights would narrow its intervals by
-up to 2x).  Regions are eroded (``erode_px``, :func:`.region_edges.colour_reach`) by the
-resampling's reach, 1 px, plus three standard deviations of the motion.
+It is measured on the high-passed luminance (:func:`features`) of undistorted frames: phase
+correlation (Kuglin and Hines 1975) gives the shift, ECC (Evangelidis and Psarakis 2008) the
+rotation, :func:`motion_covariance` the uncertainty.  Each photograph is resampled once onto the
+reference's pinhole pixels (motion and distortion in one bilinear map), after its noise is found
+on its own pixels.  The variance is resampled with the values' weights, not their squares: a
+resampled pixel shares its errors with its neighbours, so a fit treating pixels as independent
+gets a region's error right.  Regions are eroded by 1 px plus three sd of the motion.
 
 References: C. D. Kuglin and D. C. Hines, "The phase correlation image alignment method",
 Proc. IEEE Int. Conf. Cybernetics and Society, 163-165, 1975; G. D. Evangelidis and E. Z.
@@ -50,15 +36,13 @@ from ..physics.lens import distort, focal_px
 LIMIT_PX = 5.0
 #: The high-pass: luminance less its (normalised) Gaussian blur of this sd [px].
 HIGHPASS_SD_PX = 1.5
-#: ECC: OpenCV's Gaussian pre-filter size [px], the most iterations and the step [px] at which
-#: it stops.
+#: ECC: OpenCV's Gaussian pre-filter size [px], most iterations, and stopping step [px].
 ECC_FILTER, ECC_ITERATIONS, ECC_EPS = 1, 200, 1e-5
 #: The least ECC correlation of a registered frame with the reference: below it the frames do
 #: not show one scene alike enough to align.
 MIN_CORRELATION = 0.5
-#: A frame that moved less than this [px] (or than 3 sd of its measured motion) is taken as
-#: still and not resampled: ECC finds about 0.05 px of apparent motion on a still day, and a
-#: resampling would smooth its noise and erode the regions for nothing.
+#: A frame that moved less than this [px] (or than 3 sd of its motion) is taken as still and
+#: not resampled: ECC finds small apparent motion on a still day, and resampling costs.
 STILL_PX = 0.1
 #: The tiles [px] of the motion's sandwich covariance: the high-passed residual (the day's
 #: change of light) is correlated within a few pixels, not across this.
@@ -68,21 +52,16 @@ _SHARE_TOL = 1e-4
 
 
 def luminance(values, sensor, falloff):
-    """Linear luminance [1] of codes ``values`` (H, W, 3) [DN] with the vignetting
-    ``falloff`` (H, W) divided out (it stays with the sensor, not the scene); NaN kept."""
+    """Linear luminance [1] of codes ``values`` (H, W, 3) [DN] over the vignetting ``falloff``."""
     s = sensor.linearise(np.nan_to_num(values)) @ SRGB_LUMINANCE
     return np.where(np.all(np.isfinite(values), axis=-1), s / falloff, np.nan)
 
 
 def features(lum):
-    """(high-passed luminance (H, W) float32, validity mask uint8) of ``lum`` [1]: the luminance
-    over its median, less its Gaussian blur of HIGHPASS_SD_PX, the blur normalised over the
-    valid pixels (NaN and unlit ones are left out, and their border makes no edge).
-
-    Linear, not the log: a photograph's pixel integrates the scene over its area, so an edge's
-    centroid moves with the camera whatever the pixel grid's phase; a log (or any curve) of
-    those pixels bends an edge's profile by its phase, which pulled the shaken board's measured
-    shifts towards half a pixel by 0.1-0.15 px (the log) where the linear one errs by 0.03."""
+    """(high-passed luminance (H, W) float32, validity mask uint8) of ``lum`` [1]: luminance over
+    its median less its Gaussian blur of HIGHPASS_SD_PX, normalised over the valid pixels.
+    Linear, not log: a pixel integrates the scene, so an edge's centroid moves with the camera
+    whatever the grid's phase; a curve of the pixels biases sub-pixel shifts."""
     ok = np.isfinite(lum) & (lum > 0)
     if not ok.any():
         return np.zeros(lum.shape, np.float32), ok.astype(np.uint8)
@@ -93,11 +72,8 @@ def features(lum):
 
 
 def measure_motion(ref, img):
-    """The motion of ``img`` against ``ref`` (each a :func:`features` pair): (M (2, 3), the
-    affine map p = M [q, 1] of reference pixels q onto the frame's [px], ECC correlation [1]).
-
-    Phase correlation under a Hann window gives the shift, ECC (MOTION_EUCLIDEAN) refines it
-    with the rotation; cv2.error when ECC does not converge."""
+    """The motion of ``img`` against ``ref`` (:func:`features` pairs): (M (2, 3), p = M [q, 1]
+    of reference pixels q onto the frame's [px], ECC correlation); cv2.error if ECC diverges."""
     (f0, m0), (f1, m1) = ref, img
     h, w = f0.shape
     window = cv2.createHanningWindow((w, h), cv2.CV_32F)
@@ -111,19 +87,15 @@ def measure_motion(ref, img):
 
 
 def motion_covariance(ref, img, M):
-    """Covariance (3, 3) of the motion (theta [rad], tx, ty [px]; theta about the centre) of
-    ``img`` against ``ref`` (:func:`features` pairs) at ``M``.
+    """Covariance (3, 3) of the motion (theta [rad] about the centre, tx, ty [px]) at ``M``.
 
-    The fit is least squares of ref ~ a img(M q) + b, J the frame's gradient along each
-    parameter, H = a^2 J^T J.  Much of its residual r is the day's change of light, an error of
-    the scene that is spatially coherent, not independent noise: the Gauss-Newton sigma^2 H^-1
-    understates it.  So the covariance is the sandwich
-    H^-1 (sum_b g_b g_b^T) H^-1 over tiles b of BLOCK_PX (g_b = a J_b^T r_b, errors correlated
-    within a tile, independent between), scaled by G/(G-3) for G tiles (White 1980; Liang and
-    Zeger 1986), or the Gauss-Newton one where that gives the larger displacement (few tiles).
-    Measured on the shaken board of scripts/photo_test_set.py (two seeds, 24 shifts): the
-    errors over this sd have rms 1.3, and 92% lie within 2 sd; over the Gauss-Newton sd alone,
-    rms 3.6 and 27%."""
+    The fit is least squares of ref ~ a img(M q) + b, J the gradient along each parameter,
+    H = a^2 J^T J.  Its residual r is mostly the day's change of light, spatially coherent, so
+    the Gauss-Newton sigma^2 H^-1 understates it: the covariance is the sandwich
+    H^-1 (sum_b g_b g_b^T) H^-1 over tiles b of BLOCK_PX (g_b = a J_b^T r_b), scaled by
+    G/(G-3) for G tiles (White 1980; Liang and Zeger 1986), or the Gauss-Newton one where that
+    is larger (few tiles).  Coverage: docs/BENCHMARKS.md, "The camera from marked points, and
+    frames registered"."""
     (f0, m0), (f1, m1) = ref, img
     h, w = f0.shape
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
@@ -149,8 +121,7 @@ def motion_covariance(ref, img, M):
 
 
 def displacement_sd(cov, width, height):
-    """The rms over the image's pixels of one coordinate's standard deviation [px] of the
-    displacement a motion of covariance ``cov`` (:func:`motion_covariance`) gives."""
+    """Rms over the pixels of one coordinate's displacement sd [px] under covariance ``cov``."""
     yy, xx = np.mgrid[0:height, 0:width]
     xc, yc = xx - (width - 1) / 2.0, yy - (height - 1) / 2.0
     var_x = cov[1, 1] + yc ** 2 * cov[0, 0] - 2 * yc * cov[0, 1]
@@ -159,10 +130,8 @@ def displacement_sd(cov, width, height):
 
 
 def motion_record(M, width, height):
-    """A motion M (2, 3) (:func:`measure_motion`'s) as a frame's manifest ``registration``
-    record holds it in a ``width`` x ``height`` image: the displacement of the image's centre
-    (``dx_px``, ``dy_px``) and the rotation (``rotation_deg``); :func:`motion_of_record`
-    inverts it."""
+    """A motion M (2, 3) as a frame's manifest ``registration`` record in a ``width`` x
+    ``height`` image: the centre's displacement (``dx_px``, ``dy_px``) and ``rotation_deg``."""
     c = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
     d = M[:, :2] @ c + M[:, 2] - c
     return {"dx_px": float(d[0]), "dy_px": float(d[1]),
@@ -170,8 +139,7 @@ def motion_record(M, width, height):
 
 
 def motion_of_record(record, width, height):
-    """The motion M (2, 3) (:func:`measure_motion`'s) of a frame's manifest ``registration``
-    record (:func:`motion_record`) in a ``width`` x ``height`` image."""
+    """The motion M (2, 3) of a :func:`motion_record` in a ``width`` x ``height`` image."""
     d = np.array([record["dx_px"], record["dy_px"]])
     t = np.radians(record["rotation_deg"])
     R = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
@@ -180,9 +148,8 @@ def motion_of_record(record, width, height):
 
 
 def pixel_map(M, camera):
-    """(map_x, map_y) (H, W) float32: where each of the reference pinhole's pixels lies in a
-    photograph of motion ``M`` (:func:`measure_motion`) through the lens of ``camera`` (a
-    validated [camera]: its ``distortion``, :func:`~skyfit_mi.physics.lens.distort`)."""
+    """(map_x, map_y) (H, W) float32: where each reference pinhole pixel lies in a photograph of
+    motion ``M`` through the lens of ``camera`` (:func:`~skyfit_mi.physics.lens.distort`)."""
     h, w = camera["height"], camera["width"]
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
     u = M[0, 0] * xx + M[0, 1] * yy + M[0, 2]
@@ -196,8 +163,7 @@ def pixel_map(M, camera):
 
 
 def remap(img, maps):
-    """``img`` (H, W) or (H, W, C) sampled bilinearly at ``maps`` (:func:`pixel_map`); NaN off
-    the image."""
+    """``img`` (H, W[, C]) sampled bilinearly at ``maps`` (:func:`pixel_map`); NaN off it."""
     planes = np.asarray(img, np.float32).reshape(img.shape[0], img.shape[1], -1)
     out = np.stack([cv2.remap(np.ascontiguousarray(planes[..., c]), *maps, cv2.INTER_LINEAR,
                               borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
@@ -210,23 +176,9 @@ NO_MOTION = np.float64([[1, 0, 0], [0, 1, 0]])
 
 
 def undistort_image(img, camera):
-    """A photograph with its radial distortion undone: the image the spec's pinhole sees.
-
-    Parameters
-    ----------
-    img : ndarray (H, W) or (H, W, C)
-        The photograph, ``camera['width']`` x ``camera['height']`` pixels, any channels.
-    camera : dict
-        A validated [camera] table: ``fov_deg`` [degrees], ``width``, ``height`` [px] and
-        ``distortion`` [k1] or [k1, k2] (none: the image is returned as it is).
-
-    Returns
-    -------
-    ndarray, float32 (float64 if ``img`` is), the shape of ``img``
-        Each pixel bilinearly interpolated at the place the pinhole's ray lands in the
-        photograph (:func:`pixel_map` of a still frame, :func:`remap`); NaN where that place
-        lies off the photograph.
-    """
+    """A photograph ``img`` (H, W[, C]) with the radial ``distortion`` of the validated
+    ``camera`` undone: the image the spec's pinhole sees (float32, or float64 if ``img`` is;
+    NaN where a ray lands off it; ``img`` itself without distortion)."""
     img = np.asarray(img)
     h, w = camera["height"], camera["width"]
     if img.shape[:2] != (h, w):
@@ -239,8 +191,8 @@ def undistort_image(img, camera):
 
 
 def variance_share(maps):
-    """The mean over the pixels of the sum of the squared bilinear weights of ``maps``: the
-    share of a source pixel's noise variance a resampled pixel's own scatter keeps [1]."""
+    """Mean over pixels of the summed squared bilinear weights of ``maps``: the share of a source
+    pixel's noise variance a resampled pixel keeps."""
     fx, fy = (m - np.floor(m) for m in maps)
     return float(np.mean(((1 - fx) ** 2 + fx ** 2) * ((1 - fy) ** 2 + fy ** 2)))
 
@@ -255,9 +207,8 @@ class Registration:
     record: dict
 
     def warp(self, i, values, top=None):
-        """Frame ``i``'s ``values`` (H, W, 3) on the reference's pinhole pixels; for codes
-        [DN] of top code ``top``, a pixel mixing a clipped value (0 or the top) with others is
-        NaN, one of clipped values alone keeps it."""
+        """Frame ``i``'s ``values`` (H, W, 3) on the reference's pinhole pixels; with ``top``,
+        a pixel mixing a clipped code (0 or ``top``) with others is NaN."""
         if i not in self.maps:
             return values
         out = remap(values, self.maps[i])
@@ -269,9 +220,8 @@ class Registration:
         return out.astype(np.float32)
 
     def sigma(self, i, sigma, warped):
-        """Frame ``i``'s sigma (H, W, 3) [DN] on the reference's pixels: its variance
-        resampled with the values' weights (the module docstring), inf where the ``warped``
-        value (:meth:`warp`) is NaN."""
+        """Frame ``i``'s sigma (H, W, 3) [DN] on the reference's pixels (variance resampled with
+        the values' weights), inf where the ``warped`` value is NaN."""
         if i not in self.maps:
             return sigma
         var = remap(np.where(np.isfinite(sigma), np.square(sigma), 0.0), self.maps[i])
@@ -279,11 +229,9 @@ class Registration:
 
 
 def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
-    """The :class:`Registration` of ``frames`` (ingest's ``Frames``; codes and vignetting from
-    ``linear``): with ``register``, each lit frame's motion against the reference (the lit
-    frame nearest the middle of the day) measured, and any lens distortion of the spec's
-    [camera]; SkyfitError naming a frame that moved more than ``limit`` [px] or cannot be
-    registered."""
+    """The :class:`Registration` of ingest's ``frames``: with ``register``, each lit frame's
+    motion against the one nearest midday, plus the lens distortion; SkyfitError for a frame
+    that moved over ``limit`` [px] or cannot be registered."""
     camera, lit, names = frames.spec.camera, frames.lit, [p.name for p in frames.paths]
     h, w = frames.size
     k = [float(x) for x in camera.get("distortion") or []]

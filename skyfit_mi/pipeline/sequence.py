@@ -10,16 +10,11 @@ The output folder holds::
     contact_sheet.png        the day at the sensor's exposure (sRGB preview)
 
 Each frame is rendered as two half-spp passes with seeds ``seed + index`` and
-``seed + index + 2^31`` (their difference estimates the Monte Carlo error) and its noise drawn from
-``numpy.random.default_rng([seed, index])``, so a frame does not depend on
-which frames were rendered before it: an interrupted run resumes where it
-stopped and gives the same files as an uninterrupted one.
-
-The steps are separate so that relighting and photograph ingest reuse them:
-:func:`prepare_folder` (lock held: refuse another run's folder, verify the frames kept
-for a resume), :class:`FrameRenderer` (the Mitsuba scene; radiance and its Monte Carlo
-error per frame), :func:`capture_frame` (the sensor model), :func:`write_frame`,
-:func:`manifest_header` and :func:`finish` (contact sheet, complete manifest).
+``seed + index + 2^31`` (their difference estimates the Monte Carlo error), its noise drawn
+from ``numpy.random.default_rng([seed, index])``: a frame does not depend on the frames before
+it, so an interrupted run resumes to the same files.  The steps (:func:`prepare_folder`,
+:class:`FrameRenderer`, :func:`capture_frame`, :func:`write_frame`, :func:`manifest_header`,
+:func:`finish`) are separate for relight and ingest to reuse.
 """
 
 import datetime as dt
@@ -55,12 +50,9 @@ def frame_names(index):
 
 
 def resolve_exposure(spec):
-    """The sensor exposure [sr m^2 W^-1]: the spec's, or 'auto'.
-
-    'auto' puts a white Lambertian horizontal surface under the day's highest
-    global horizontal irradiance at 80% of full scale (E/pi * exposure = 0.8),
-    known before rendering so that every frame, and a resumed run, shares it.
-    """
+    """The sensor exposure [sr m^2 W^-1]: the spec's, or for 'auto' the one putting a white
+    horizontal Lambertian under the day's highest global irradiance at 80% of full scale
+    (E/pi * exposure = 0.8), known before rendering so every frame and a resume share it."""
     e = spec.sensor["exposure"]
     if e != "auto":
         return float(e)
@@ -89,14 +81,10 @@ def clear_run(out):
 
 
 def prepare_folder(out, run_id, shape, overwrite=False, log=print):
-    """Make ``out`` ready for run ``run_id`` (call with the folder's lock held); returns the
-    frame records that a resume keeps, by index.
-
-    A folder holding another run's manifest, or a damaged one, is refused unless
-    ``overwrite``, which always starts clean (the earlier run's files removed).  For a
-    resume, each kept frame's files are read back and checked (readable, of the camera's
-    ``shape``); a damaged frame is rendered again.
-    """
+    """Make ``out`` ready for run ``run_id`` (lock held); returns the frame records a resume
+    keeps, by index.  Another run's or a damaged manifest is refused unless ``overwrite``
+    (which starts clean); a resume's kept frames are checked against ``shape``, a damaged one
+    rendered again."""
     ensure_dir(out / "frames")
     if overwrite:
         clear_run(out)
@@ -140,25 +128,21 @@ class FrameRenderer:
 
 
 def capture_frame(sensor, radiance, radiance_sd, seed, index, fov_deg):
-    """The sensor's pixel values and sigmas [DN] for frame ``index``, its noise seeded by
-    ``numpy.random.default_rng([seed, index])``; and whether the frame is dark (all zero)."""
+    """The sensor's values and sigmas [DN] for frame ``index`` (seeded), and whether it is dark."""
     values, sigma = sensor.capture(radiance, np.random.default_rng([seed, index]),
                                    fov_deg=fov_deg, radiance_sd=radiance_sd)
     return values, sigma, not np.any(values > 0)
 
 
 def frame_meta(index, key, time=None):
-    """The EXR header metadata of frame ``index``'s file ``key`` (:func:`.render.image.write_exr`):
-    its kind, units, frame index and, where the frame has one, its time (aware datetime)."""
+    """The EXR header metadata of frame ``index``'s file ``key``: kind, units, index, time."""
     return {"kind": key, "units": FRAME_UNITS[key], "frame": int(index), "time": time}
 
 
 def write_frame(out, index, radiance, radiance_sd, values, sigma, time=None):
-    """Write one frame's EXRs (:data:`FRAME_FILES`) atomically, each with its kind, units,
-    frame index and ``time`` (the frame's, an aware datetime; None for a lab light) in its
-    header (:func:`frame_meta`), the radiance and its error kept for the frame reader
-    (:func:`~skyfit_mi.pipeline.manifest.keep_frame_image`: the contact sheet and a relight's
-    comparisons read them next); returns their relative paths by kind."""
+    """Write one frame's EXRs (:data:`FRAME_FILES`) atomically with :func:`frame_meta` headers
+    (``time`` None for a lab light), caching the radiance and its error
+    (:func:`~skyfit_mi.pipeline.manifest.keep_frame_image`); returns relative paths by kind."""
     names = frame_names(index)
     for key, image in (("radiance", radiance), ("radiance_sigma", radiance_sd)):
         keep_frame_image(write_exr(out / names[key], image, frame_meta(index, key, time)), image)
@@ -168,10 +152,9 @@ def write_frame(out, index, radiance, radiance_sd, values, sigma, time=None):
 
 
 def manifest_header(spec, sensor, scene, render, source="render", run_id=None):
-    """The manifest of a sequence of ``spec`` written by command ``source`` ('render',
-    'relight' for fitted materials, 'ingest' for photographs), before any frame (status
-    incomplete).  ``scene`` is (xml, materials, camera to_world); ``render`` the record of how
-    the frames were made; ``run_id`` defaults to the spec's."""
+    """The incomplete manifest, before any frame, of ``spec``'s sequence by command ``source``
+    ('render', 'relight', 'ingest'); ``scene`` is (xml, materials, camera to_world), ``render``
+    the record of how frames were made, ``run_id`` by default the spec's."""
     xml, materials, to_world = scene
     cam = spec.camera
     return {
@@ -196,8 +179,7 @@ def render_record(spec, renderer):
 
 
 def frame_record(frame, seed, out):
-    """A spec frame's manifest record without its files (time, sun, illumination, seed), for
-    the manifest in folder ``out`` (an environment map's file is written relative to it)."""
+    """A spec frame's manifest record (no files) for a manifest in folder ``out``."""
     when = {} if frame.time is None else {     # a lab light: by index alone
         "time": frame.time.isoformat(),
         "time_utc": frame.time.astimezone(dt.timezone.utc).isoformat()}
@@ -208,8 +190,7 @@ def frame_record(frame, seed, out):
 
 
 def finish(out, manifest, exposure):
-    """Write the contact sheet (of the frames with images) and the complete manifest; returns
-    the rendered frames' count."""
+    """Write the contact sheet and the complete manifest; returns the rendered frames' count."""
     manifest["status"] = "complete"
     rendered = [r for r in manifest["frames"] if r["status"] == "rendered" and "radiance" in r]
     if rendered:
@@ -221,13 +202,9 @@ def finish(out, manifest, exposure):
 
 
 def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print, source="render"):
-    """Render every frame of a validated spec into ``out_dir``; returns the manifest dict
-    (its ``source`` the command that renders, :func:`manifest_header`).
-
-    The folder is locked while the run lasts (a second run into it is refused).  A folder
-    holding another run is refused unless ``overwrite`` (which starts clean); a folder holding
-    this run is resumed (its verified frames are kept).
-    """
+    """Render every frame of a validated spec into ``out_dir``; returns the manifest dict.
+    The folder is locked for the run; another run's folder is refused unless ``overwrite``, and
+    this run's is resumed."""
     out = Path(out_dir)
     sensor = spec_sensor(spec)                # its exposure checked before the folder is made
     with FolderLock(out) as lock:

@@ -1,11 +1,10 @@
 """Measured sky scans as a day of ``envmap`` frames: HDR maps and the spec that uses them.
 
 Each scan of the measured clear day (:mod:`skyfit_mi.physics.sky_measurement`) becomes a
-lat-long EXR of the sky alone (:func:`skyfit_mi.physics.measured_sky.scan_envmap`: interpolated
-radiance, linear sRGB [W m^-2 sr^-1], world frame) and a ``[[sky]]`` table of ``type =
-"envmap"`` that names the map and the solar disc's direct normal irradiance.  With a template
-spec's scene, materials, camera, sensor and render settings, the result is a spec that
-``skyfit render`` renders and whose frames ``skyfit fit`` fits under the measured light.
+lat-long EXR of the sky alone (:func:`skyfit_mi.physics.measured_sky.scan_envmap`, linear sRGB
+[W m^-2 sr^-1]) and an ``envmap`` ``[[sky]]`` table naming the map and the disc's direct normal
+irradiance; with a template's scene, camera, sensor and render settings, a spec to render and
+fit under the measured light.
 """
 
 from pathlib import Path
@@ -21,9 +20,8 @@ from .spec import SCENES_DIR, SpecError
 MAP_FILE = "maps/sky_{time:%H%M}.exr"
 #: The written spec's and summary's names in the output folder.
 SPEC_FILE, SUMMARY_FILE = "measured_sky.json", "measured_sky.csv"
-#: The summary's columns: the scan, whether the scanner rotation was applied, the fitted CIE
-#: general sky (indices, zenith luminance [cd m^-2]), the efficacy [lm W^-1], the map's and the
-#: data's diffuse horizontal irradiance, the pyranometer's GHI and the disc's DNI [W m^-2].
+#: The summary's columns: scan, rotation applied, fitted CIE general sky (indices, zenith
+#: luminance [cd m^-2]), efficacy [lm W^-1], map's and data's DHI, GHI and DNI [W m^-2].
 SUMMARY_COLUMNS = ("time", "capture", "rotated", "gradation", "indicatrix",
                    "zenith_luminance_cd_m2", "efficacy_lm_W", "map_dhi_W_m2", "scan_dhi_W_m2",
                    "ghi_W_m2", "dni_W_m2")
@@ -32,8 +30,7 @@ _REPLACED = ("location", "time", "sky")
 
 
 def _scene(template, template_dir):
-    """The template's [scene] with its file as an absolute path (the spec is written
-    elsewhere): beside the template first, then the shipped scenes, as a spec looks it up."""
+    """The template's [scene] with its file made absolute, looked up as a spec does."""
     scene = dict(template.get("scene") or {})
     if "file" not in scene:
         raise SpecError("the template spec has no [scene] file; give one (e.g. file = 'disc.xml').")
@@ -51,30 +48,17 @@ def measured_day(scans, folder, template, template_dir=".", *, rows=ROWS, rotate
     Parameters
     ----------
     scans : list of :class:`~skyfit_mi.physics.sky_measurement.Scan`
-        The frames, one per scan, in time order.
+        One frame per scan, in time order.
     folder : path
-        Output folder: ``maps/sky_HHMM.exr``, ``measured_sky.json`` (the spec) and
-        ``measured_sky.csv`` (one row per scan: the fitted CIE general sky, the efficacy and
-        the irradiance split).
-    template : dict
-        A spec's tables (:func:`~skyfit_mi.pipeline.spec.read_spec`); its scene, materials,
-        camera, sensor and render are kept, its location, time and sky replaced.
-    template_dir : path
-        The template's folder (its scene file is looked up there first).
+        Output: ``maps/sky_HHMM.exr``, :data:`SPEC_FILE` and :data:`SUMMARY_FILE`.
+    template, template_dir : dict, path
+        A spec's tables, whose location, time and sky are replaced, and its folder.
     rows : int
         Rows of each lat-long map (columns twice as many).
-    rotated : bool
-        Turn the scanner's directions by the data's fitted rotation
-        (:func:`~skyfit_mi.physics.measured_sky.scan_envmap`).
-    ground_albedo : float
-        The Lambertian ground below the horizon, lit by each map and its sun.
-    name : str
-        The spec's name.
+    rotated, ground_albedo, name : bool, float, str
+        Apply the scans' fitted rotation; albedo of the ground below the horizon; spec name.
 
-    Returns
-    -------
-    Path
-        The written spec.
+    Returns the written spec's Path.
     """
     if not scans:
         raise SkyfitError("no scans to write; give at least one.")

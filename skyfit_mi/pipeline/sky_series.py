@@ -1,56 +1,24 @@
-"""An HDR fisheye series of the sky: exposure brackets merged into linear maps (issue 52).
+"""An HDR fisheye series of the sky: exposure brackets merged into linear maps.
 
-A camera with a fisheye lens, beside the scene and pointing at the zenith, photographs the
-sky in a bracket of exposures at each of the scene's frames.  :func:`sky_series` merges each
-bracket into one linear map (OpenEXR, the equidistant fisheye of
-:mod:`~skyfit_mi.physics.envmap`), and writes a series file (``sky_series.json``) that a
-spec's ``envmap`` sky names as its ``file``: each frame is then lit by the map nearest its
-time (:func:`series_entry`).
+A zenith-pointing fisheye beside the scene photographs the sky in a bracket of exposures at each
+frame.  :func:`sky_series` merges each bracket into a linear map (OpenEXR, the equidistant
+fisheye of :mod:`~skyfit_mi.physics.envmap`) and writes ``sky_series.json``, which a spec's
+``envmap`` sky names as its ``file``: each frame is lit by the map nearest its time.
 
-Merging (a Debevec-Malik merge with the response known)
-------------------------------------------------------
-* Shots are timed by their EXIF (or a CSV) and grouped into brackets: a gap over
-  ``gap_s`` or an exposure the bracket already holds starts the next one; shots of a bracket
-  may share their second.  Float images (maps merged already) are refused.
-* A shot's codes are made linear by the response its file states (sRGB for JPEGs and 8-bit
-  files, linear for RAW and 16-bit linear TIFF; :class:`~skyfit_mi.physics.camera.SensorModel`),
-  divided by the lens's flat field where given, binned to at most :data:`MAP_PIXELS` across,
-  and divided by its exposure H = t S / N^2 (EXIF exposure time [s], ISO speed, f-number).
-* A pixel's value is the mean of the shots where none of its channels is within
-  :data:`CLIP_FRACTION` of the saturation code and its largest channel is at least
-  :data:`FLOOR_FRACTION` of it, weighted by H: under shot noise a shot's variance of L is
-  proportional to L / H, so H is the inverse-variance weight.  Where every unclipped shot is
-  below the floor, the longest unclipped shot is taken.
-* Where two shots of adjacent exposure are both usable, their luminance per unit exposure
-  should agree (:func:`agreement`, the series' ``shot_agreement``): the series warns beyond
-  :data:`AGREEMENT_TOL`, a response other than the file's or nominal EXIF exposures.
-* A pixel clipped in every shot (the sun and its flare) takes the shortest shot's value, a
-  lower bound, and is counted: ``clipped_radius_deg`` is the largest angle between a clipped
-  pixel and the clipped pixels' brightest-weighted centre, and the series recommends a
-  ``sun_mask_deg`` that covers it (:data:`MASK_MARGIN_DEG` beyond); clipped pixels beyond
-  :data:`SUN_CLIP_MAX_DEG` of that centre (a bright cloud) are reported apart.
+Merging is Debevec-Malik's with the response known: linearised, flat-fielded shots divided by
+their exposure H = t S / N^2 are averaged with weight H (inverse variance under shot noise)
+where neither clipped (:data:`CLIP_FRACTION`) nor below :data:`FLOOR_FRACTION`.  Pixels clipped
+in every shot (the sun) keep the shortest shot's lower bound; the series recommends a
+``sun_mask_deg`` (:func:`clipped_extent`).
 
-Units
------
-The maps are in W m^-2 sr^-1 through the exposure equation of a saturation-based ISO speed
-(ISO 12232): a linear value v (1 = saturation) at exposure H is a luminance
-v :data:`SATURATION_LUMINANCE` / H [cd m^-2], divided by the clear sky's luminous efficacy
-(:data:`~skyfit_mi.physics.sky.EFFICACY_CLEAR`).  That is nominal: cameras' stated speeds
-and lenses' transmission make it right to a factor of about 1.5.  The sun's level relative
-to the sky does not depend on it when the card below is photographed with the same camera,
-and a scene calibrated by its own grey card (``ingest --calibrate``) takes its level from
-the light whatever its units; a pyranometer's DHI (the spec's ``irradiance_file``) sets it.
-
-The sun's level: a grey card
-----------------------------
-The sun is clipped in every shot, so its light comes from elsewhere.  A horizontal grey card
-of reflectance rho (about 0.18), in the sun, photographed with the same camera at each
-bracket, gives the global horizontal irradiance in the maps' units: E = pi L_card / rho
-(a Lambertian card: eq. 3.19's diffuse term rho_d / pi), L_card the luminance of the card's box.  The
-series records it per map as ``global_horizontal_W_m2``, from which the spec's envmap sky
-takes the sun's disc, (E - E_map) / cos theta_s
-(:func:`~skyfit_mi.physics.envmap.direct_normal_from_global`).  Keep the card out of your
-own shadow and away from the sun's mirror direction, where real cards are not Lambertian.
+Units: W m^-2 sr^-1 through ISO 12232's saturation-based exposure (v at H is
+v :data:`SATURATION_LUMINANCE` / H [cd m^-2]) over the clear sky's efficacy
+(:data:`~skyfit_mi.physics.sky.EFFICACY_CLEAR`): nominal, right to a factor of about 1.5.  The
+sun's level comes from a horizontal grey card of reflectance rho photographed with each bracket:
+E = pi L_card / rho (eq. 3.19's diffuse term rho_d / pi), recorded as
+``global_horizontal_W_m2``; the envmap sky takes the disc from (E - E_map) / cos theta_s
+(:func:`~skyfit_mi.physics.envmap.direct_normal_from_global`).  Keep the card out of your shadow
+and away from the sun's mirror direction (not Lambertian there).
 """
 
 from __future__ import annotations
@@ -76,14 +44,11 @@ from .photo_times import frame_times
 from .photos import (EXPOSURE_KEYS, check_same_size, exif_exposure, list_photos,
                      read_flat_field, read_photo)
 
-#: Luminance [cd m^-2] that saturates a sensor at exposure H = t S / N^2 = 1 [s]: ISO 12232's
-#: saturation-based speed, H_sat = 78 / S [lux s] at the sensor, with the standard lens and
-#: angle factor q = 0.65 (sensor illuminance q L / N^2): 78 / 0.65.
+#: Luminance [cd m^-2] saturating a sensor at H = t S / N^2 = 1 [s]: ISO 12232's H_sat = 78 / S
+#: [lux s] with the lens and angle factor q = 0.65 (sensor illuminance q L / N^2): 78 / 0.65.
 SATURATION_LUMINANCE = 78.0 / 0.65
-#: The merged maps' size across at most [pixels]: a sky's table has at most 256 rows
-#: (:data:`~skyfit_mi.physics.latlong.MAX_ROWS`), which a fisheye 1024 pixels across resolves
-#: with room to spare.  Larger shots are binned (block means) to it as they are read, so a
-#: series of full-size photographs is held at this size.
+#: Most pixels across a merged map: ample for a sky table of at most 256 rows
+#: (:data:`~skyfit_mi.physics.latlong.MAX_ROWS`); larger shots are binned to it as read.
 MAP_PIXELS = 1024
 #: A code within this fraction of the saturation code (any channel) counts as clipped.
 CLIP_FRACTION = 0.97
@@ -96,18 +61,15 @@ BRACKET_GAP_S = 30.0
 CARD_REFLECTANCE = 0.18
 #: A card shot is paired with a bracket within this many seconds at most (default).
 CARD_MAX_GAP_S = 300.0
-#: The relative uncertainty (one sd of the log) of the global horizontal irradiance a grey card
-#: gives, by default: a matte card's reflectance is known to 1-2% and it departs from
-#: Lambert's law by a few percent away from its mirror direction.  The sun's share of it, E -
-#: E_map, carries it magnified by E / (E - E_map): the map's ``sun_sd``.
+#: Default relative sd (of the log) of a grey card's global horizontal irradiance: reflectance
+#: known to 1-2%, a few per cent off Lambert's law.  The sun's share E - E_map carries it
+#: magnified by E / (E - E_map): the map's ``sun_sd``.
 CARD_SD = 0.02
-#: The sun's share of the card's irradiance below which its uncertainty stops growing (the
-#: sun behind a cloud: the disc is then small next to the sky).
+#: The sun's share of the card's irradiance below which its uncertainty stops growing.
 SUN_SHARE_FLOOR = 0.05
 #: Pixels usable in two shots at least, for their agreement to be measured.
 AGREEMENT_PIXELS = 20
-#: The largest departure of two shots' agreement from 1 before the series warns: the 8-bit
-#: codes' rounding and the noise move the median of a few hundred pixels well under 1%.
+#: Largest departure of two shots' agreement from 1 before the series warns.
 AGREEMENT_TOL = 0.03
 #: The recommended sun mask reaches this far beyond the clipped pixels [degrees].
 MASK_MARGIN_DEG = 1.0
@@ -115,7 +77,6 @@ MASK_MARGIN_DEG = 1.0
 SUN_CLIP_MAX_DEG = 15.0
 #: A frame takes the map nearest its time within this many seconds at most.
 MAP_MAX_GAP_S = 300.0
-#: The series file's name.
 SERIES_NAME = "sky_series.json"
 
 
@@ -133,8 +94,7 @@ class Shot:
 
 
 def _exposure(photo):
-    """t S / N^2 [s] of ``photo`` from its EXIF (:func:`~.photos.exif_exposure`); SkyfitError
-    naming what is missing."""
+    """t S / N^2 [s] of ``photo`` from its EXIF; SkyfitError naming what is missing."""
     h = exif_exposure(photo)
     if h is None:
         missing = [name for name, key in EXPOSURE_KEYS.items() if not photo.metadata.get(key)]
@@ -144,8 +104,7 @@ def _exposure(photo):
 
 
 def _blocks(a, b, reduce):
-    """``a`` (H, W, ...) reduced over b x b blocks by ``reduce`` (np.mean, np.any), cropped
-    evenly on both sides to whole blocks (the image's centre moves by under half a pixel)."""
+    """``a`` (H, W, ...) reduced over b x b blocks by ``reduce``, cropped evenly to whole blocks."""
     if b == 1:
         return a
     h, w = (n // b * b for n in a.shape[:2])
@@ -155,9 +114,8 @@ def _blocks(a, b, reduce):
 
 
 def _linear(photo):
-    """A photograph's linear values (H, W, 3) as a fraction of saturation (the response its
-    file states, by a table of its whole codes), and its clipped pixels (H, W); SkyfitError
-    for floats (a map merged already: the spec reads it as it is)."""
+    """A photograph's linear values (H, W, 3) as a fraction of saturation and its clipped pixels
+    (H, W); SkyfitError for floats (a merged map: the spec reads it as it is)."""
     if photo.kind == "float":
         raise SkyfitError(f"{Path(photo.path).name} holds linear floats, a map merged already; "
                           "name it in the spec's envmap sky as it is (docs/cli.md), or give "
@@ -178,13 +136,9 @@ def _check_box(box, photo):
 
 
 def read_shots(items, tz=None, times_csv=None, flat=None, box=None):
-    """The :class:`Shot` of every photograph named by ``items`` (files or folders), in time
-    order, timed by their EXIF or a ``times_csv`` (file,time; rows naming other files are
-    passed over).  A sky's shots are divided by the lens's ``flat`` field (a path,
-    :func:`~.photos.read_flat_field`; None: none) and binned to at most :data:`MAP_PIXELS`
-    across; of a card's, only the ``box`` (x0, y0, x1, y1) is kept, as its mean (1, 1, 3).
-    One photograph is held at a time.  One line of SkyfitError for an unreadable file, a
-    missing time or EXIF exposure, shots of different sizes, or a box beyond them."""
+    """The :class:`Shot` of every photograph in ``items`` in time order (EXIF or ``times_csv``
+    times).  Sky shots are flat-fielded by ``flat`` and binned to :data:`MAP_PIXELS`; card shots
+    keep only ``box``'s mean (1, 1, 3).  SkyfitError for an unusable file or box."""
     paths = list_photos(items)
     if not paths:
         raise SkyfitError(f"no photographs in {', '.join(map(str, items))}.")
@@ -229,9 +183,7 @@ def brackets(shots, gap_s=BRACKET_GAP_S):
 
 
 def merge(bracket):
-    """The merged map of a ``bracket`` of shots (module docstring) in units of luminance at
-    saturation per unit exposure [(H, W, 3), linear / (t S / N^2)], and its clipped pixels
-    (H, W), True where every shot clips."""
+    """The merged map (H, W, 3) of a ``bracket`` [linear / (t S / N^2)], and where all clip."""
     by_exposure = sorted(bracket, key=lambda s: s.exposure)
     num = np.zeros(bracket[0].linear.shape, np.float64)
     den = np.zeros(bracket[0].linear.shape[:2], np.float64)
@@ -253,11 +205,8 @@ def merge(bracket):
 
 
 def agreement(bracket):
-    """How the shots of a ``bracket`` agree where two of adjacent exposure are both usable
-    (neither clipped nor below the floor): for each such pair, the median over those pixels
-    of the longer shot's luminance per unit exposure over the shorter's (1 where the response
-    the files state and their EXIF exposures are right; None where no pixel is usable in
-    both)."""
+    """Per adjacent-exposure pair of ``bracket``, the median ratio of their luminance per unit
+    exposure over pixels usable in both (1 if response and EXIF are right; None if none)."""
     by_exposure = sorted(bracket, key=lambda s: s.exposure)
     out = []
     for a, b in zip(by_exposure, by_exposure[1:]):
@@ -269,8 +218,7 @@ def agreement(bracket):
 
 
 def fisheye_directions(height, width, north_rotation_deg=0.0):
-    """World directions (H, W, 3) of an equidistant fisheye's pixel centres
-    (:func:`~skyfit_mi.physics.envmap.fisheye_lookup`'s layout, the image's top at compass
+    """World directions (H, W, 3) of an equidistant fisheye's pixel centres (the image's top at
     azimuth ``north_rotation_deg``), and the mask of pixels within the horizon's circle."""
     R = min(height, width) / 2.0
     y, x = np.mgrid[0:height, 0:width] + 0.5
@@ -282,9 +230,8 @@ def fisheye_directions(height, width, north_rotation_deg=0.0):
 
 
 def clipped_extent(clipped, merged):
-    """(the angle [deg] from the clipped pixels' centre to the farthest of them within
-    :data:`SUN_CLIP_MAX_DEG`, the count of clipped pixels beyond it) of a fisheye map; (0, 0)
-    when nothing clips."""
+    """(angle [deg] from the clipped pixels' centre to the farthest within
+    :data:`SUN_CLIP_MAX_DEG`, count of clipped pixels beyond) of a fisheye map; (0, 0) if none."""
     if not clipped.any():
         return 0.0, 0
     d, inside = fisheye_directions(*clipped.shape)
@@ -300,9 +247,8 @@ def clipped_extent(clipped, merged):
 
 
 def map_irradiance(merged, clipped):
-    """The horizontal irradiance of an equidistant fisheye map [its units x sr], luminance,
-    its clipped pixels left out: sum L cos theta d omega, a pixel's solid angle
-    sin theta / r (pi / 2R) (r its distance from the centre, R the horizon's radius [px])."""
+    """Horizontal irradiance (luminance) of an equidistant fisheye map, clipped pixels left out:
+    sum L cos theta d omega, d omega = sin theta / r (pi / 2R) (r, R [px] from the centre)."""
     h, w = clipped.shape
     d, inside = fisheye_directions(h, w)
     theta = np.arccos(np.clip(d[..., 2], -1.0, 1.0))
@@ -313,10 +259,8 @@ def map_irradiance(merged, clipped):
 
 
 def card_irradiance(shots, reflectance):
-    """(time, global horizontal irradiance in the maps' units [W m^-2]) of each card shot
-    (:func:`read_shots` with its box): pi L / ``reflectance``, L the luminance of the box's
-    mean.  Shots where the card clips or lies below :data:`FLOOR_FRACTION` are left out (a
-    bracket of the card keeps its good shots); SkyfitError when none is left."""
+    """(time, global horizontal irradiance pi L / ``reflectance`` [W m^-2]) of each usable card
+    shot; SkyfitError when none is usable."""
     out = []
     for s in shots:
         if s.clipped.any() or s.floor.any():
@@ -339,8 +283,7 @@ def _nearest(times, t):
 
 
 def _card_at(readings, t, max_gap_s):
-    """The card reading nearest ``t`` within ``max_gap_s`` and its distance [s], or
-    SkyfitError."""
+    """The card reading nearest ``t`` within ``max_gap_s`` and its distance [s], or SkyfitError."""
     i, gap = _nearest([c for c, _ in readings], t)
     if gap > max_gap_s:
         raise SkyfitError(f"the bracket at {t.isoformat()} has no card shot within "
@@ -351,9 +294,8 @@ def _card_at(readings, t, max_gap_s):
 
 @dataclass(frozen=True)
 class CardOptions:
-    """A grey card photographed with each bracket: its shots (files or folders), its box
-    (x0, y0, x1, y1) [pixels] in them, its reflectance, the longest gap to a bracket [s], and
-    the relative uncertainty of its reading of the global irradiance (one sd)."""
+    """A grey card photographed with each bracket: shots, box (x0, y0, x1, y1) [pixels],
+    reflectance, longest gap to a bracket [s], relative sd of its global irradiance."""
 
     photos: tuple
     box: tuple
@@ -391,14 +333,10 @@ def _card_entry(readings, t, image, clipped, card, name):
 
 def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
                gap_s=BRACKET_GAP_S, overwrite=False, log=print):
-    """Merge the bracketed fisheye shots named by ``items`` into ``out_dir``: one EXR per
-    bracket (``sky_YYYYmmdd_HHMMSS.exr``, its time in the header) and :data:`SERIES_NAME`
-    (module docstring); ``card`` a :class:`CardOptions` gives each map its global horizontal
-    irradiance; ``tz`` and ``times_csv`` time the shots and ``flat`` undoes the lens's
-    vignetting in the sky's (:func:`read_shots`; not in the card's: take its box near their
-    centre, where the lens does not darken).  The maps are written into a folder beside the
-    series and moved into place when every bracket is done, so a refusal leaves nothing, and
-    ``overwrite`` removes the maps of the series it replaces.  Returns the series document."""
+    """Merge the bracketed fisheye shots ``items`` into ``out_dir``: one EXR per bracket and
+    :data:`SERIES_NAME`; returns the series document.  ``card`` (:class:`CardOptions`) gives
+    each map its global irradiance; ``flat`` undoes the sky's vignetting (not the card's: keep
+    its box central).  A refusal leaves nothing; ``overwrite`` removes the replaced maps."""
     _check_options(card, gap_s)
     out = check_dir(out_dir)
     old = out / SERIES_NAME
@@ -472,9 +410,8 @@ def _series_maps(path):
 
 
 def series_entry(path, time):
-    """The entry of the series file ``path`` whose map lies nearest ``time`` (an aware
-    datetime), and the series document; SkyfitError in one line when the file is not a series
-    or no map lies within :data:`MAP_MAX_GAP_S` of ``time``."""
+    """The entry of series file ``path`` nearest ``time`` (aware), and the series document;
+    SkyfitError if it is not a series or no map lies within :data:`MAP_MAX_GAP_S`."""
     path = Path(path)
     try:
         doc = json.loads(path.read_text())

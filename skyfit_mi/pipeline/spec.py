@@ -1,9 +1,8 @@
 """Sequence specifications (TOML or JSON): reading, validation, resolution into frames.
 
-A spec describes a day to render: where and when, the sky of each frame, the
-scene and its materials, the camera, the sensor and the render settings.
-See ``scenes/specs/*.toml`` and ``docs/SPEC.md``.  Every problem raises a
-:class:`~skyfit_mi.errors.SpecError` naming the key and the fix.
+A spec describes a day to render: where and when, each frame's sky, the scene and its materials,
+the camera, the sensor and the render settings (``scenes/specs/*.toml``, ``docs/SPEC.md``).
+Every problem raises a :class:`~skyfit_mi.errors.SpecError` naming the key and the fix.
 """
 
 import copy
@@ -94,14 +93,11 @@ _ALLOWED_WITH = {"turbid": _TURBID_KEYS | {"type", "time", "cct", "sun", "ground
 _SERIES_KEYS = {"ghi": "global_horizontal_W_m2", "dhi": "diffuse_horizontal_W_m2",
                 "dni": "direct_normal_W_m2"}
 BELOW_HORIZON = ("sky", "skip")
-#: Mitsuba samplers a spec may choose; multijitter stratifies the sun/sky choice of the
-#: emitter sample and gives about 6x lower noise than independent at equal samples
-#: (docs/BENCHMARKS.md, "sun_sky_path against path and Radiance rpict").
+#: Mitsuba samplers a spec may choose; multijitter stratifies the sun/sky choice, for much lower
+#: noise (docs/BENCHMARKS.md, "sun_sky_path against path and Radiance rpict").
 SAMPLERS = ("multijitter", "stratified", "ldsampler", "independent")
-#: Integrators a spec may choose: ``sun_sky_path`` (separate sun and sky light samples, the
-#: default; about a fifth of ``path``'s error at equal time on the thesis disc, docs/BENCHMARKS.md,
-#: "sun_sky_path against path and Radiance rpict") or Mitsuba's ``path`` (one light sample
-#: that picks sun or sky).
+#: Integrators a spec may choose: ``sun_sky_path`` (default: separate sun and sky samples, far
+#: lower error at equal time, same BENCHMARKS section) or Mitsuba's ``path``.
 INTEGRATORS = ("sun_sky_path", "path")
 
 
@@ -241,11 +237,9 @@ def load_spec(path):
 
 
 def validate_spec(raw, base_dir=".", sun=None):
-    """Validate a spec dictionary and resolve its frames; returns :class:`Spec`.
-
-    ``sun``: {ISO time: the sun's (zenith, azimuth) [degrees]} as a sequence rendered from this
-    spec recorded them (its manifest): used, when it holds every time of the spec, instead of
-    computing them again (NREL SPA through pvlib, whose import alone takes about a second)."""
+    """Validate a spec dictionary and resolve its frames; returns :class:`Spec`.  ``sun``:
+    {ISO time: (zenith, azimuth) [degrees]} from a manifest of this spec, used when it holds
+    every time, to skip pvlib's slow import."""
     raw = _plain(copy.deepcopy(raw))
     base_dir = Path(base_dir)
     if not isinstance(raw, dict):
@@ -681,10 +675,9 @@ _MEASURED_KEYS = {"diffuse_horizontal_W_m2", "direct_normal_W_m2", "global_horiz
 
 
 def _series_record(rec, base_dir, t):
-    """An envmap record naming a sky series (``skyfit sky-series``) made the record of the
-    series' map nearest the frame's time ``t``: its file, projection and recommended sun mask,
-    and its card's global horizontal irradiance (times the spec's ``scale``, as the map) unless
-    the spec gives measured irradiance."""
+    """An envmap record naming a sky series made the record of the map nearest time ``t``:
+    file, projection, sun mask and (unless measured irradiance is given) the card's global
+    horizontal irradiance times ``scale``."""
     try:
         entry, doc = series_entry(base_dir / rec["file"], t)
     except SkyfitError as exc:
@@ -769,16 +762,10 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index, elevation=0.0):
 
 def thesis_disc_spec(name, material, camera_azimuth_deg=90.0, size=16, noise_percent=0.0,
                      spp=1024, seed=0, sky="clear", exposure="auto"):
-    """The thesis's synthetic experiment (ch. 7) as a raw spec for :func:`validate_spec`.
-
-    The disc (``scenes/disc.xml``) made of ``material`` (a spec material table, e.g.
-    ``{"model": "two", "rho_s": 1.0, "sigma_alpha": 0.2}``), seen at 45 degrees from the
-    ``camera_azimuth_deg`` side (0 north, 90 east) from 5 m, at 40 N 0 E on 21 June, hourly
-    06:00-18:00 UTC, under a CIE ``sky``; ``size`` x ``size`` pixels over 6 degrees, a 12-bit
-    sensor of ``exposure`` [sr m^2 W^-1] (or "auto") and ``noise_percent``; ``spp`` samples
-    per pixel from ``seed``.  Anything else (``camera.fov_deg``, ``sensor.bits``, the scene) is
-    the returned dict's to change.
-    """
+    """The thesis's synthetic experiment (ch. 7) as a raw spec for :func:`validate_spec`: the
+    disc (``scenes/disc.xml``) of ``material`` seen at 45 degrees from ``camera_azimuth_deg``
+    (0 north, 90 east) from 5 m, at 40 N 0 E on 21 June, hourly 06:00-18:00 UTC, under a CIE
+    ``sky``; ``size``^2 pixels over 6 degrees, a 12-bit sensor of ``exposure`` [sr m^2 W^-1]."""
     return {"name": name,
             "location": {"latitude_deg": 40.0, "longitude_deg": 0.0, "timezone": "UTC"},
             "time": {"date": "2026-06-21", "start": "06:00", "end": "18:00", "step_minutes": 60},

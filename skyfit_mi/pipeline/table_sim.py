@@ -1,14 +1,10 @@
 """A rendered sequence measured at points: an observation table, for tests and the lab example.
 
-:func:`measure_table` reads a sequence folder written by ``render`` at the centres of chosen
-pixels, as an instrument would measure the surface there: each pixel's central ray gives the
-point (x, y, z) and its region (the material it meets); each rendered frame's radiance there,
-with Gaussian noise, gives the row's value and sigma.  The view is left to the table's
-default, toward the camera, which is the pixel's.  A sequence of lab lights (frames without
-a time) names its rows' frames by index, a day by time.  With ``saturate`` the instrument
-clips: a value above that level is written as the level and flagged ``saturated``.  Every
-random choice is drawn from ``numpy.random.default_rng([seed, frame index])``; the seed and
-the settings are written beside the table (``<table>.json``).
+:func:`measure_table` reads a ``render`` sequence folder at the centres of chosen pixels, as an
+instrument would: each pixel's central ray gives the point and its region, each rendered frame's
+radiance there, with Gaussian noise, the row's value and sigma; the view is the table's default
+(toward the camera).  Lab lights name frames by index, a day by time.  Noise is drawn from
+``numpy.random.default_rng([seed, frame index])``; the settings go to ``<table>.json``.
 """
 
 import csv
@@ -24,15 +20,10 @@ from .manifest import load_manifest, read_frame_pixels, rendered_frames
 
 
 def measure_table(sequence, pixels, out, *, noise=0.01, seed=0, saturate=None):
-    """Write the observation table of ``sequence`` (a folder ``render`` wrote) measured at the
-    centres of ``pixels`` ((P, 2) x, y) to ``out`` (CSV, :mod:`.observation_table`'s columns),
-    and its settings to ``out`` with suffix ``.json``; returns the table's path.
-
-    noise : relative standard deviation of the measurement [unitless], of each point's mean
-        over channels; in quadrature with the render's own Monte Carlo error (its
-        ``radiance_sigma``), the row's sigma_r, sigma_g, sigma_b [W m^-2 sr^-1]
-    saturate : level [W m^-2 sr^-1] at which the instrument clips (per channel), or None
-    """
+    """Write ``sequence``'s observation table at the centres of ``pixels`` ((P, 2) x, y) to CSV
+    ``out`` (settings beside it, ``.json``); returns its path.  ``noise``: relative sd of each
+    point's channel mean, in quadrature with ``radiance_sigma``; ``saturate``: clipping level
+    [W m^-2 sr^-1] (values above it flagged ``saturated``), or None."""
     doc, root = load_manifest(sequence)
     frames = rendered_frames(doc)
     if not frames:

@@ -1,24 +1,16 @@
 """A region's fitting model as a table: L = rho_d D + s G(sigma) with G tabulated in sigma.
 
-Ward's model is linear in its reflectances (thesis eq. 3.19): per pixel, frame and channel
-the cached light gives L = rho_d D + s G(sigma), with D the diffuse basis and G the lobe of
-rho_s = 1 (:class:`~.fit_model.WardModel`).  Only sigma_alpha enters non-linearly, so a fit
-needs the light's samples only through D and the one-dimensional function G(sigma).
-:func:`tabulate` evaluates them once with the ``ward`` plugin on the cached samples and keeps
-G as Chebyshev series in log sigma on each smooth piece of the model's sigma range (the
-pieces end where the model's form changes: the linear interpolation to the mirror below
-SIGMA_RESOLVED, and the lobe control variate's weight, a smoothstep between CONTROL_FULL and
-CONTROL_SIGMA).  Every later evaluation (search, polish, intervals, profiles, predictions)
-is then NumPy arithmetic on arrays of one value per pixel, frame and channel: the samples,
-which are 4096 times larger, can be dropped as soon as the table is made, so a sequence is
-traced in chunks of bounded size (:func:`~skyfit_mi.fitting.fit.FitSession`).
+Ward's model is linear in its reflectances (thesis eq. 3.19), with D the diffuse basis and G
+the lobe of rho_s = 1 (:class:`~.fit_model.WardModel`); only sigma_alpha enters non-linearly.
+:func:`tabulate` evaluates D and G once on the cached samples and keeps G as Chebyshev series
+in log sigma on each smooth piece of the sigma range (PIECES end where the model's form
+changes: below SIGMA_RESOLVED, and at the lobe control variate's CONTROL_FULL, CONTROL_SIGMA).
+The samples can then be dropped, so a sequence is traced in blocks of bounded memory.
 
-The table keeps each half of every pixel's light-cache positions apart (as their mean M and
-half difference Delta, so that the whole cache is M and the halves are M +- Delta): the two
-halves are independent estimates, whose fits give the cache's own error on the parameters.
-The model's own Monte Carlo variance comes from the spread of the positions' estimates, as
-their covariances of D and G at a few roughness values (``VARIANCE_DEGREES``): the
-variance of rho_d D + s G is bilinear in the reflectances.
+The table keeps the two halves of every pixel's positions apart (as mean M and half difference
+Delta; halves M +- Delta): independent estimates whose fits give the cache's own error.  The
+model's Monte Carlo variance is the positions' spread, kept as covariances of D and G at a few
+roughness values (the variance of rho_d D + s G is bilinear in the reflectances).
 """
 
 from dataclasses import dataclass, replace
@@ -29,34 +21,26 @@ from .fit_model import PARAMETERS, WardModel, reflectance_sets, reflectances
 from .light_cache import (CONTROL_FULL, CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
                           CacheOptions, PointRays, light_caches)
 
-#: The smooth pieces of G(sigma) above SIGMA_RESOLVED (log sigma ends) and the first degree
-#: of each piece's Chebyshev series: doubled (the Lobatto nodes are nested, so every value is
-#: kept) until the series agrees with the model within TABLE_RTOL of the piece's largest value
-#: at CHECKS points between its nodes, or stops improving, up to MAX_DEGREE.  A board region of 64 pixels with 32
-#: positions needs 16, 6 and 32; the disc's with 8 positions 32 in the narrow piece (fewer
-#: samples, sharper sums of lobes).  TABLE_RTOL is far under any light cache's Monte Carlo
-#: error (~1e-3 per value).
+#: The smooth pieces of G(sigma) above SIGMA_RESOLVED and the first degree of each piece's
+#: Chebyshev series: doubled (nested Lobatto nodes keep every value) until it agrees with the
+#: model within TABLE_RTOL of the piece's largest value at CHECKS points between nodes, or stops
+#: improving, up to MAX_DEGREE.  TABLE_RTOL is far under a cache's Monte Carlo error.
 PIECES = ((SIGMA_RESOLVED, CONTROL_FULL), (CONTROL_FULL, CONTROL_SIGMA),
           (CONTROL_SIGMA, SIGMA_LARGEST))
 DEGREES, MAX_DEGREE, TABLE_RTOL, CHECKS = (16, 6, 32), 64, 1e-5, 3
 #: Degrees of the Lobatto nodes (among each piece's first DEGREES') at which the table keeps
-#: the positions' spread, the model's Monte Carlo variance: it changes slowly with sigma,
-#: except where a lobe starts to take in the sun (the narrow piece, kept denser; within
-#: 0.7-1.4x of the positions' own there, tests/test_basis_table.py).
+#: the positions' spread: it changes slowly with sigma, except where a lobe starts to take in
+#: the sun (the narrow piece, kept denser).
 VARIANCE_DEGREES = (16, 3, 8)
-#: Light-cache samples traced and tabulated at once (:func:`trace_basis`): 140 bytes each at
-#: the peak (the cache's arrays, the model's Dr.Jit copies and the tracer's; 3.4 million
-#: samples in one block peaked 475 MB above a one-pixel fit, tests/test_memory.py), so a
-#: block takes about 0.6 GB.
+#: Light-cache samples traced and tabulated at once (:func:`trace_basis`), and their peak bytes
+#: each (the cache's arrays, the model's Dr.Jit copies and the tracer's; tests/test_memory.py).
 CHUNK_SAMPLES, BYTES_PER_SAMPLE = 1 << 22, 140
-#: The peak a fit aims at [bytes]: a large table's blocks shrink (block_budget) down to
-#: MIN_CHUNK_SAMPLES so that the table and a block fit in it.
+#: The peak a fit aims at [bytes]: a large table's blocks shrink down to MIN_CHUNK_SAMPLES.
 MEMORY_TARGET, MIN_CHUNK_SAMPLES = 2 << 30, 1 << 19
 
 
 def _lobatto(n):
-    """The n + 1 Chebyshev-Lobatto points cos(pi k / n) in [-1, 1], ends included (so that
-    adjacent pieces share their end values)."""
+    """The n + 1 Chebyshev-Lobatto points cos(pi k / n), ends included (pieces share them)."""
     return np.cos(np.pi * np.arange(n + 1) / n)
 
 
@@ -74,9 +58,8 @@ def _sigma(x, lo, hi):
 
 
 def _chebyshev_rows(x, n, derivative=False):
-    """T_k(x) for k = 0..n at the points ``x`` (K,), a (K, n + 1) array, and with
-    ``derivative`` dT_k/dx = k U_{k-1}(x) too (U the Chebyshev polynomials of the second
-    kind, by their recurrence)."""
+    """T_k(x) for k = 0..n at ``x`` (K,), (K, n + 1), and with ``derivative`` dT_k/dx =
+    k U_{k-1}(x) too (U of the second kind, by recurrence)."""
     x = np.atleast_1d(np.asarray(x, dtype=float))
     T = np.polynomial.chebyshev.chebvander(x, n)
     if not derivative:
@@ -93,16 +76,15 @@ def _chebyshev_rows(x, n, derivative=False):
 
 
 def _cut(x, axis, rows, frames):
-    """``x`` at pixels ``rows`` and frames ``frames`` (slices: a view) on its pixel ``axis``
-    (the frame axis follows it)."""
+    """A view of ``x`` at slices ``rows``, ``frames`` of its pixel ``axis`` and the next one."""
     where = [slice(None)] * x.ndim
     where[axis], where[axis + 1] = rows, frames
     return x[tuple(where)]
 
 
 def _within(part, whole):
-    """The slice ``part`` of range(whole's stop) as (its slice of the block ``whole``, where
-    that lands in ``part``), or None where they do not meet (both slices of step 1)."""
+    """Where slices ``part`` and ``whole`` (step 1) meet, as (slice within ``whole``, slice
+    within ``part``), or None."""
     lo, hi = max(part.start, whole.start), min(part.stop, whole.stop)
     if lo >= hi:
         return None
@@ -111,10 +93,8 @@ def _within(part, whole):
 
 @dataclass
 class Series:
-    """One piece's Chebyshev coefficients of G in log sigma, kept in the blocks they were
-    traced in (:func:`trace_basis`): each block of pixels x frames keeps the degree its own
-    light needed, so no block is padded to another's degree and the table is never copied
-    into one array.
+    """One piece's Chebyshev coefficients of G in log sigma, in the blocks they were traced in,
+    each at its own degree (never padded nor copied into one array).
 
     ``blocks``: [(rows, frames, coef)] with ``rows``, ``frames`` slices of the table and
     ``coef`` (2, n + 1, p, t, 3) the stored mean and half difference (:attr:`BasisTable.PARTS`).
@@ -123,8 +103,7 @@ class Series:
     blocks: list
 
     def subset(self, rows, frames):
-        """The series of the table's pixels ``rows`` and frames ``frames`` (slices of step
-        1): views of the blocks that meet them."""
+        """The series of pixels ``rows`` and frames ``frames`` (slices of step 1), as views."""
         out = []
         for r, f, c in self.blocks:
             rr, ff = _within(rows, r), _within(frames, f)
@@ -158,9 +137,8 @@ class Series:
 
 @dataclass
 class BasisTable:
-    """D and G(sigma) of P pixels in T frames, three channels, for each half of the light
-    cache's positions (as mean and half difference, an axis of length 2), and the spread of
-    the whole cache's positions (its Monte Carlo variance).
+    """D and G(sigma) of P pixels in T frames, for each half of the cache's positions (as mean
+    and half difference, an axis of length 2), and the positions' spread.
 
     Attributes
     ----------
@@ -202,8 +180,7 @@ class BasisTable:
         return variance_sigmas()
 
     def subset(self, rows=slice(None), frames=slice(None)):
-        """The table of pixels ``rows`` and frames ``frames`` (slices of step 1): views of this
-        table's arrays, nothing copied (regions traced together share one table)."""
+        """The table of pixels ``rows`` and frames ``frames`` (slices of step 1), as views."""
         rows = slice(*rows.indices(self.shape[0]))
         frames = slice(*frames.indices(self.shape[1]))
         return BasisTable(**{k: _cut(getattr(self, k), a, rows, frames)
@@ -212,8 +189,7 @@ class BasisTable:
                           normalisation=self.normalisation)
 
     def tinted(self, factor):
-        """The table of the light ``factor`` (3,) times this one's per channel: every basis
-        times it, their variances times its square; None: itself."""
+        """The table of this light times ``factor`` (3,) per channel (None: itself)."""
         if factor is None:
             return self
         f = np.asarray(factor, dtype=np.float32)
@@ -223,8 +199,7 @@ class BasisTable:
 
     @classmethod
     def empty(cls, P, T, S, normalisation):
-        """A table of P pixels in T frames with S positions, to be filled block by block
-        (:meth:`place`)."""
+        """A zero table of P pixels, T frames, S positions, to fill with :meth:`place`."""
         f32 = np.float32
         V = len(variance_sigmas())
         return cls(np.zeros((2, P, T, 3), f32), np.zeros((2, P, T, 3), f32),
@@ -234,8 +209,7 @@ class BasisTable:
                    np.zeros((P, T, S, 3), f32), normalisation)
 
     def place(self, block, rows, frames):
-        """Copy the table ``block`` into pixels ``rows`` and frames ``frames`` (slices); its
-        series are kept as they are, as blocks of this table's."""
+        """Copy the table ``block`` into pixels ``rows`` and frames ``frames`` (slices)."""
         for k, a in self.AXES.items():
             _cut(getattr(self, k), a, rows, frames)[...] = getattr(block, k)
         for mine, theirs in zip(self.coef, block.coef):
@@ -250,10 +224,8 @@ class BasisTable:
         return sum(w * self.D[h].astype(float) for h, w in enumerate(self.PARTS[part]) if w)
 
     def variance(self, rho_d, spec, sigma):
-        """The whole cache's Monte Carlo variance of L = rho_d D + s G(sigma), (P, T, 3):
-        the positions' covariances, interpolated between ``var_sigmas`` (in sigma below
-        SIGMA_RESOLVED, in log sigma above; var(G) geometrically, the correlation of D and G
-        linearly)."""
+        """The whole cache's Monte Carlo variance of L = rho_d D + s G(sigma), (P, T, 3),
+        interpolated between ``var_sigmas`` (in sigma below SIGMA_RESOLVED, log sigma above)."""
         v = self.var_sigmas
         k = int(np.clip(np.searchsorted(v, sigma, side="right") - 1, 0, len(v) - 2))
         lo, hi = v[k], v[k + 1]
@@ -273,9 +245,8 @@ class BasisTable:
         return np.maximum(rho_d**2 * self.VDD + 2 * rho_d * spec * VDG + spec**2 * VGG, 0.0)
 
     def lobe(self, sigma, derivative=False, part=0):
-        """G of ``part`` (PARTS: the whole cache, a half, or the halves' half difference) at
-        the roughness values ``sigma`` (K,): (K, P, T, 3) float64, and with ``derivative``
-        dG/dsigma too; a half is made from the stored arrays as it is asked for, never kept."""
+        """G of ``part`` (PARTS) at the roughness values ``sigma`` (K,): (K, P, T, 3) float64,
+        and with ``derivative`` dG/dsigma too."""
         terms = [self._series(sigma, derivative, h) for h, w in enumerate(self.PARTS[part]) if w]
         weights = [w for w in self.PARTS[part] if w]
         if derivative:
@@ -312,8 +283,8 @@ class BasisTable:
 
 
 def _spread(x, y, S):
-    """The covariance of the positions' estimates (S times each share, shares (P, T, S, ...))
-    / S: the variance of their mean (WardModel.radiance_and_variance's)."""
+    """The covariance of the positions' estimates (S times each share (P, T, S, ...)) / S:
+    that of their mean."""
     if S < 2:
         return np.zeros(x.shape[:2] + x.shape[3:])
     xs, ys = x * S, y * S
@@ -322,12 +293,9 @@ def _spread(x, y, S):
 
 
 def tabulate(cache, wm, keep=None):
-    """The :class:`BasisTable` of a :class:`~.light_cache.LightCache` ``cache`` through its
-    :class:`~.fit_model.WardModel` ``wm``: D and G at every Chebyshev node of PIECES (one pass
-    of the basis plugin each, per position, the two halves summed apart).  ``keep``, a dict,
-    receives the positions' shares of D ('D') and of G at every :func:`variance_sigmas` value
-    (for :func:`tabulate_group`).  A model of several lights (its ``others``) gives one table
-    of them all, stacked by pixel."""
+    """The :class:`BasisTable` of ``cache`` through its :class:`~.fit_model.WardModel` ``wm``
+    (of several lights: one table, stacked by pixel).  ``keep``, a dict, receives the positions'
+    shares of D ('D') and of G at each :func:`variance_sigmas` value."""
     S = wm.S
     lights = len(wm.lights)
     h = S // 2
@@ -335,8 +303,7 @@ def tabulate(cache, wm, keep=None):
         raise ValueError("a light cache with one position per pixel cannot be tabulated")
 
     def halves(shares):
-        # each half as an estimate of the whole (weights S / h), then their mean and half
-        # difference; a last odd position belongs to neither half (as LightCache.halves)
+        # each half as an estimate of the whole; a last odd position is in neither
         a = shares[:, :, :h].sum(axis=2) * (S / h)
         b = shares[:, :, h:2 * h].sum(axis=2) * (S / h)
         return np.stack([(a + b) / 2, (a - b) / 2])
@@ -373,10 +340,8 @@ def tabulate(cache, wm, keep=None):
 
 @dataclass
 class Covariances:
-    """The covariances between the tables of lights traced with one trace's samples
-    (:func:`trace_basis`), which :func:`mixed` adds to their variances: for each pair j < k
-    of ``pairs`` (indices into the lights), as a :class:`BasisTable`'s VDD, VDG and VGG (over
-    the positions' estimates / S):
+    """Covariances between the tables of lights traced on shared samples, for :func:`mixed`;
+    for each pair j < k of ``pairs`` (indices into the lights), as a table's VDD, VDG, VGG:
 
     DD : (n, P, T, 3)  cov(D_j, D_k)
     DG : (n, V, P, T, 3)  cov(D_j, G_k) + cov(D_k, G_j) at the V ``variance_sigmas``
@@ -393,8 +358,7 @@ class Covariances:
 
     @classmethod
     def empty(cls, n_lights, P, T):
-        """The covariances of ``n_lights`` lights' tables of P pixels in T frames, to be filled
-        block by block (:meth:`place`)."""
+        """Zero covariances of ``n_lights`` lights, P pixels, T frames, to fill by :meth:`place`."""
         pairs = [(j, k) for j in range(n_lights) for k in range(j + 1, n_lights)]
         V, n = len(variance_sigmas()), len(pairs)
         return cls(pairs, np.zeros((n, P, T, 3), np.float32),
@@ -412,10 +376,8 @@ class Covariances:
 
 
 def tabulate_group(caches, model, normalisation="ward"):
-    """The :class:`BasisTable` of each of ``caches`` (light caches of one trace's samples,
-    :func:`~.light_cache.build_light_cache`'s ``others``), tabulated together through one
-    :class:`~.fit_model.WardModel` of ``model`` and ``normalisation`` (the lobe evaluated once
-    for all), and the :class:`Covariances` between them, from their positions' shares."""
+    """The :class:`BasisTable` of each of ``caches`` (of one trace's samples), tabulated through
+    one :class:`~.fit_model.WardModel`, and the :class:`Covariances` between them."""
     keep = {}
     whole = tabulate(caches[0], WardModel(caches[0], model, normalisation, caches[1:]), keep)
     P, T = caches[0].hit.shape
@@ -431,9 +393,8 @@ def tabulate_group(caches, model, normalisation="ward"):
 
 
 def variance_sigmas():
-    """The roughness values at which a table keeps its positions' spread: the mirror, then
-    the Lobatto nodes of degree VARIANCE_DEGREES of every piece (among the nodes of its first
-    series, so always evaluated), ascending."""
+    """The roughness values at which a table keeps its positions' spread, ascending: the
+    mirror, then each piece's Lobatto nodes of degree VARIANCE_DEGREES."""
     out = {0.0}
     for (lo, hi), n, m in zip(PIECES, DEGREES, VARIANCE_DEGREES):
         out |= set(_sigma(_lobatto(n)[::n // m], lo, hi).tolist())
@@ -441,11 +402,9 @@ def variance_sigmas():
 
 
 def _piece(lobe, lo, hi, n):
-    """Chebyshev coefficients (2, n + 1, P, T, 3) of ``lobe(sigma)`` (the halves' mean and half
-    difference of G) on the piece [lo, hi] in log sigma, the degree n doubled until the series
-    holds at CHECKS points between its nodes (TABLE_RTOL), or stops improving (the model's
-    own float32 rounding: a tiny light such as a lab's directional one makes the lobe's
-    exponent large), or reaches MAX_DEGREE."""
+    """Chebyshev coefficients (2, n + 1, P, T, 3) of ``lobe(sigma)`` on [lo, hi] in log sigma,
+    n doubled until TABLE_RTOL holds, the error stops improving (float32 rounding of a tiny
+    light), or MAX_DEGREE."""
     C = np.polynomial.chebyshev
     last = np.inf
     while True:
@@ -469,46 +428,40 @@ def _lobe_at(lobe, x, lo, hi):
     return lobe(float(_sigma(x, lo, hi))).reshape(1, -1)
 
 
-#: Bytes a fit takes per value (pixel or point, frame and channel) beside its table: the
-#: observations, the model's arrays and the search's (a 400-point x 96-light table's run
-#: peaked 74 MB above its trace, 0.64 kB a value), and the process's base [bytes].
+#: Bytes a fit takes per value (pixel or point, frame and channel) beside its table (the
+#: observations, the model's and search's arrays), and the process's base [bytes].
 FIT_BYTES_PER_VALUE, BASE_BYTES = 1024, 300 << 20
 
 
 def _bytes_per_value(degrees, positions):
-    """A fit's bytes per value (pixel or point, frame and channel) with series of
-    ``degrees``: its table's arrays and the fit's own."""
+    """A fit's bytes per value with series of ``degrees``: its table's arrays and its own."""
     arrays = 2 * sum(n + 1 for n in degrees) + 2 * len(variance_sigmas()) + 7
     return 4 * arrays + 4 * positions / 3 + FIT_BYTES_PER_VALUE
 
 
 def block_budget(P, T, positions):
     """Samples per block of a fit of P points in T frames: CHUNK_SAMPLES, or fewer (down to
-    MIN_CHUNK_SAMPLES) where the fit's table, at its first degrees, leaves less of
-    MEMORY_TARGET for the block."""
+    MIN_CHUNK_SAMPLES) where the table leaves less of MEMORY_TARGET."""
     room = MEMORY_TARGET - BASE_BYTES - P * T * 3 * _bytes_per_value(DEGREES, positions)
     return int(np.clip(room / BYTES_PER_SAMPLE, MIN_CHUNK_SAMPLES, CHUNK_SAMPLES))
 
 
 def shared_budget(budget, lights):
-    """A block's samples where ``lights`` lights share one trace's samples
-    (:func:`trace_basis`) for a ``budget`` of one light's: each light's own arrays and its
-    tabulation's shares take about a light's memory again.  (Half the budget for the board's
-    three: its shape fit no faster, 150 s, and its peak 1.00 GB, not 0.80.)"""
+    """A block's samples where ``lights`` lights share one trace's samples, for a ``budget``
+    of one light's: each light's own arrays take about a light's memory again."""
     return int(budget // lights)
 
 
 def memory_estimate(P, T, positions, directions):
-    """The most a fit of P points (or pixels) in T frames takes [bytes]: its table at
-    MAX_DEGREE in every piece, the fit's own arrays, one block of the light and the base."""
+    """The most a fit of P points in T frames takes [bytes]: its table at MAX_DEGREE, its own
+    arrays, one block of the light and the base."""
     per_value = _bytes_per_value([MAX_DEGREE] * len(PIECES), positions)
     block = min(block_budget(P, T, positions), P * T * positions * directions)
     return int(P * T * 3 * per_value + block * BYTES_PER_SAMPLE + BASE_BYTES)
 
 
 def available_memory():
-    """The memory this machine can give a new allocation [bytes] (Linux's MemAvailable;
-    elsewhere None)."""
+    """Linux's MemAvailable [bytes], or None elsewhere."""
     try:
         with open("/proc/meminfo") as f:
             for line in f:
@@ -520,10 +473,8 @@ def available_memory():
 
 
 def chunks(P, T, per_value, budget):
-    """(rows, frames) slices that split P points x T frames, each with ``per_value`` samples,
-    into blocks of at most ``budget`` samples (at least one point of one frame): as many
-    points per block as fit (the light cache's kernels run over a block's points), then as
-    many frames."""
+    """(rows, frames) slices splitting P points x T frames of ``per_value`` samples into blocks
+    of at most ``budget`` samples (at least one): as many points as fit, then frames."""
     rows = int(min(P, max(1, budget // per_value)))
     frames = int(min(T, max(1, budget // (per_value * rows))))
     return [(slice(r, min(r + rows, P)), slice(f, min(f + frames, T)))
@@ -531,14 +482,12 @@ def chunks(P, T, per_value, budget):
 
 
 def mixed(a, others, weights, a_weight=1.0, covariances=None):
-    """The table of the light w_a a + sum_j w_j b_j, from the tables ``a`` and ``others`` [b_j]
-    of parts of one light (:meth:`~skyfit_mi.physics.sky.Sky.split`,
-    :func:`~skyfit_mi.physics.sky_shape.shape_variants`) traced at the same points in the same
-    blocks: every basis is linear in the light, and the positions' spreads of independent
-    traces add (w^2 for each); parts traced with shared samples add their ``covariances``
-    too (:class:`Covariances`, its pairs' indices into ``[a, *others]``: 2 w_j w_k cov).  Each
-    weight (``a_weight`` w_a, and ``weights``) is one factor or one per frame of the tables
-    (T,); weights may be negative (a shape's mix extrapolated)."""
+    """The table of the light w_a a + sum_j w_j b_j from tables ``a`` and ``others`` [b_j] of
+    parts of one light (:meth:`~skyfit_mi.physics.sky.Sky.split`,
+    :func:`~skyfit_mi.physics.sky_shape.shape_variants`) traced in the same blocks: bases add
+    linearly, variances with w^2, plus 2 w_j w_k ``covariances`` (:class:`Covariances`, indices
+    into ``[a, *others]``) for shared samples.  Each weight (``a_weight``, ``weights``) is a
+    factor or one per frame (T,), and may be negative."""
     parts = [a, *others]
     ws = [np.asarray(w, dtype=np.float32) for w in [a_weight, *weights]]
     wt = [w[:, None] if w.ndim == 1 else w for w in ws]        # against (..., T, 3)
@@ -574,29 +523,20 @@ def mixed(a, others, weights, a_weight=1.0, covariances=None):
 def trace_basis(scene, params, lights, at, bsdf_id, options=CacheOptions(), budget=None,
                 model="two", diffuse_only=False):
     """The tables of points ``at`` (pixels (P, 2) or :class:`~.light_cache.PointRays`) on
-    material ``bsdf_id`` (one, or one per point) under ``lights`` (each a list of skies, one
-    per frame; the lights after the first traced on its samples,
-    :func:`~.light_cache.light_caches`): the light cache traced with ``options``
-    (:class:`~.light_cache.CacheOptions`) and tabulated block by block (:func:`chunks`,
-    ``budget`` samples each for one light, :func:`block_budget` by default; several lights'
-    blocks take :func:`shared_budget` of it), so that memory stays bounded whatever the
-    points and frames.  Each block's caches are tabulated through the
-    :class:`~.fit_model.WardModel` of ``model`` and ``options.normalisation``
-    (:func:`tabulate`, :func:`tabulate_group`).  One block takes ``options.seed`` itself (the
-    same samples as an untabulated cache); several take seeds drawn from it.
+    material(s) ``bsdf_id`` under ``lights`` (each a list of skies, one per frame; later lights
+    on the first's samples): light caches traced with ``options`` and tabulated block by block
+    (:func:`chunks` of ``budget`` samples, :func:`block_budget` by default), so memory stays
+    bounded.  One block takes ``options.seed`` itself; several take seeds drawn from it.
 
     Returns (tables, covariances, blocks): each light's :class:`BasisTable`, the
     :class:`Covariances` between them (None for one light) and the number of blocks.  With
-    ``diffuse_only`` each light's diffuse basis alone instead of its table (a white
-    Lambertian's radiance, thesis eq. 3.19's rho_d term at rho_d = 1), without the lobe's
-    table: (D, its Monte Carlo variance), (P, T, 3) each [W m^-2 sr^-1] and
-    [(W m^-2 sr^-1)^2]; covariances None.
+    ``diffuse_only``, each light's (D, its Monte Carlo variance) instead, (P, T, 3)
+    [W m^-2 sr^-1] and [(W m^-2 sr^-1)^2] (thesis eq. 3.19's rho_d term at rho_d = 1).
     """
     import drjit as dr
 
     P, T = len(at), len(lights[0])
     ids = np.broadcast_to(np.asarray(bsdf_id, dtype=object), (P,))
-    # each light's caches and the tables' shares take a block's memory again: smaller blocks
     budget = shared_budget(budget or block_budget(P, T, options.positions), len(lights))
     blocks = chunks(P, T, int(options.positions) * int(options.directions), budget)
     seeds = [options.seed] if len(blocks) == 1 else \
@@ -627,15 +567,13 @@ def trace_basis(scene, params, lights, at, bsdf_id, options=CacheOptions(), budg
                 table.place(part, rows, frames)
         if cov is not None:
             cov.place(part_cov, rows, frames)
-    # Dr.Jit keeps freed buffers for reuse: the last block's, not needed once the light is
-    # tabulated (a 1,000-point table's trace: 206 MB of a 1.1 GB process)
+    # Dr.Jit keeps freed buffers for reuse; the last block's are no longer needed
     dr.flush_malloc_cache()
     return tables, cov, len(blocks)
 
 
 def _block_points(at, rows, frames):
-    """The points ``at`` (pixels or :class:`~.light_cache.PointRays`) of a block's ``rows``
-    and ``frames`` (a point's rays are per frame)."""
+    """The points ``at`` of a block's ``rows`` and ``frames`` (rays are per frame)."""
     if isinstance(at, PointRays):
         return PointRays(at.origins[rows, frames], at.directions[rows, frames])
     return np.asarray(at)[rows]
@@ -643,8 +581,7 @@ def _block_points(at, rows, frames):
 
 def _diffuse_parts(caches, model, normalisation):
     """Each light's diffuse basis D and its Monte Carlo variance, (P, T, 3) each, from
-    ``caches`` (light caches of one trace's samples) through one WardModel: the positions'
-    shares summed, and their spread / S."""
+    ``caches`` of one trace's samples."""
     wm = WardModel(caches[0], model, normalisation, caches[1:])
     shares = wm._diffuse_shares()
     P, S = len(caches[0].hit), shares.shape[2]
@@ -654,8 +591,7 @@ def _diffuse_parts(caches, model, normalisation):
 
 
 #: The most roughness values whose lobe arrays (P, T, 3) a search takes at once, and the most
-#: bytes of such a chunk in float64: a large table's chunks take fewer values
-#: (:func:`sigma_chunk`).
+#: bytes of such a chunk (float64).
 SIGMA_CHUNK, CHUNK_BYTES = 8, 64 << 20
 
 
@@ -665,11 +601,9 @@ def sigma_chunk(shape):
 
 
 class Lobes:
-    """The lobe basis G at roughness values ``sigmas``, made a few at a time when used:
-    ``lobe(sigmas)`` gives (k, P, T, 3); ``chunks()`` yields (slice, values) of ``chunk``
-    roughness values (the global search's sums, :func:`~skyfit_mi.fitting.methods.
-    global_search.sigma_chunks`), so that the grid's (K, P, T, 3) never exists at once;
-    ``map(f)`` applies f to every chunk's values."""
+    """The lobe basis G at ``sigmas``, made ``chunk`` values at a time so the grid's
+    (K, P, T, 3) never exists at once: ``lobe(sigmas)`` gives (k, P, T, 3); ``chunks()`` yields
+    (slice, values); ``map(f)`` applies f to every chunk's values."""
 
     def __init__(self, lobe, sigmas, chunk=SIGMA_CHUNK):
         self.lobe, self.sigmas, self.chunk = lobe, np.asarray(sigmas, dtype=float), int(chunk)
@@ -686,15 +620,9 @@ class Lobes:
 
 
 class TableModel:
-    """The fitting model of a region on its :class:`BasisTable`: the interface of
-    :class:`~.fit_model.WardModel` (radiance, Jacobian, variance, the global search's basis,
-    gradients) in NumPy, exact to the table's interpolation.
-
-    Parameters
-    ----------
-    table : BasisTable
-    model : {'two', 'achromatic', 'colour'}
-    """
+    """The fitting model of a region on its :class:`BasisTable`: :class:`~.fit_model.WardModel`'s
+    interface in NumPy, exact to the table's interpolation (``model``: 'two', 'achromatic' or
+    'colour')."""
 
     def __init__(self, table, model, part=0):
         self.table, self.model, self.part = table, model, part
@@ -704,8 +632,7 @@ class TableModel:
         self.evaluations = self.basis_evaluations = 0
 
     def half(self, j):
-        """The model of the first (j = 1) or second (j = 2) half of the cache's positions (on
-        the same table: nothing is copied)."""
+        """The model of the first (j = 1) or second (j = 2) half of the cache's positions."""
         return TableModel(self.table, self.model, j)
 
     def _parts(self, theta, derivative=False):
@@ -720,8 +647,7 @@ class TableModel:
         return rho_d * self.table.diffuse(self.part) + spec * G[0]
 
     def radiance_and_variance(self, theta):
-        """``radiance(theta)`` and its Monte Carlo variance [(W m^-2 sr^-1)^2], (P, T, 3): the
-        spread of the positions' estimates (:meth:`BasisTable.variance`)."""
+        """``radiance(theta)`` and its Monte Carlo variance [(W m^-2 sr^-1)^2], (P, T, 3)."""
         self.evaluations += 1
         rho_d, spec, _, _, G = self._parts(theta)
         L = rho_d * self.table.diffuse(self.part) + spec * G[0]
@@ -752,8 +678,7 @@ class TableModel:
         return out if halves else out[0]
 
     def lobes(self, sigmas, halves=False):
-        """As :meth:`basis`, with each G a lazy :class:`Lobes` (memory of a few roughness
-        values' arrays, whatever the points and frames)."""
+        """As :meth:`basis`, with each G a lazy :class:`Lobes`."""
         sigmas = np.asarray(sigmas, dtype=float)
         t = self.table
         self.basis_evaluations += len(sigmas)
@@ -764,9 +689,8 @@ class TableModel:
         return out if halves else out[0]
 
     def radiances(self, thetas, reduce=None):
-        """L at many parameter sets ``thetas`` (n, n_params): (n, P, T, 3), or ``reduce`` of
-        each (a linear map of a (P, T, 3) radiance, applied to the basis, a few roughness
-        values' lobes at a time)."""
+        """L at parameter sets ``thetas`` (n, n_params): (n, P, T, 3), or ``reduce`` of each (a
+        linear map of a (P, T, 3) radiance, applied to the basis)."""
         thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
         reduce = reduce or (lambda x: x)
         uniq, inverse = np.unique(thetas[:, -1], return_inverse=True)

@@ -1,7 +1,6 @@
 """Daylight in Mitsuba scenes: the ``cie_sky`` emitter's dictionary and per-frame updates.
 
-Importable before a variant is set; the functions need one (see
-:func:`skyfit_mi.render.setup`).
+Importable before a variant is set; the functions need one (:func:`skyfit_mi.render.setup`).
 """
 
 import numpy as np
@@ -12,14 +11,13 @@ from ..physics.sky_departure import BASIS
 RGB_KEYS = ("sun_radiance", "clear", "overcast", "uniform", "intermediate", "perez", "ground")
 #: The emitter's float parameters holding the Sky's ``perez_coefficients`` a..e.
 PEREZ_KEYS = ("perez_a", "perez_b", "perez_c", "perez_d", "perez_e")
-#: The emitter's float parameters holding the Sky's ``departure`` weights (its field's basis,
-#: :data:`~skyfit_mi.physics.sky_departure.BASIS`, in order).
+#: The emitter's float parameters holding the Sky's ``departure`` weights (in
+#: :data:`~skyfit_mi.physics.sky_departure.BASIS` order).
 DEPARTURE_KEYS = tuple(f"departure_{j}" for j in range(len(BASIS)))
 
 
 def float_parameters(sky):
-    """The emitter's float parameters of ``sky`` by name: its Perez coefficients and its
-    departure's weights."""
+    """The emitter's float parameters of ``sky`` by name (Perez coefficients, departure weights)."""
     return dict(zip(PEREZ_KEYS + DEPARTURE_KEYS,
                     map(float, np.r_[sky.perez_coefficients, sky.departure])))
 
@@ -40,22 +38,15 @@ def sky_dict(sky, scene_radius=1e4):
 
 
 def envmap_table(envmap):
-    """The emitter's ``envmap`` table of a Sky's ``envmap`` (H, W, 3) [W m^-2 sr^-1]: the map
-    as float32, or for None a single black cell (its lookup adds zero)."""
+    """The emitter's ``envmap`` table of a Sky's ``envmap`` (H, W, 3) [W m^-2 sr^-1]: float32,
+    or for None a single black cell."""
     return np.zeros((1, 1, 3), np.float32) if envmap is None else np.asarray(envmap, np.float32)
 
 
 def jit_array(cls, *columns):
-    """A Dr.Jit array of type ``cls`` from NumPy ``columns`` (one per component of a vector
-    type such as ``mi.Point2f``), each copied first into a 64-byte aligned buffer of the
-    type's dtype.
-
-    On the CPU Dr.Jit uses a NumPy buffer as it is and flags it unaligned unless its address
-    is a multiple of the SIMD width (up to 64 bytes); a kernel reading it is compiled for that
-    alignment, so per-frame inputs in buffers at arbitrary addresses compiled the light
-    cache's main kernel again now and then (0.33 s each; measured: 4 compilations in one of
-    six warm builds, none aligned).  A GPU copies the data anyway.
-    """
+    """A Dr.Jit array of type ``cls`` from NumPy ``columns`` (one per vector component), each
+    copied into a 64-byte aligned buffer: on the CPU Dr.Jit uses a NumPy buffer in place and
+    compiles kernels for its alignment, so unaligned inputs would recompile them."""
     import drjit as dr
 
     dtype = np.dtype(dr.type_v(cls).name.lower())
@@ -70,15 +61,9 @@ def jit_array(cls, *columns):
 
 
 def opaque_value(cls, values):
-    """An opaque Dr.Jit value of type ``cls`` holding ``values`` (a scalar or a triple).
-
-    Opaque: a kernel reads it from memory, never as a literal compiled in, so every frame's
-    sky (or sampler seed) reuses the same kernels.  Made from Python numbers and then made
-    opaque, never from a NumPy buffer: Dr.Jit reads a size-1 array made from NumPy with an
-    alignment that varies with the buffer's address (``align 1`` or ``align 4`` in the
-    kernel), and every variant is a kernel of its own (measured: one compilation per frame in
-    the light cache; :func:`jit_array` for longer arrays).
-    """
+    """An opaque Dr.Jit value of type ``cls`` holding ``values`` (a scalar or a triple), so every
+    frame's sky reuses the same kernels; made from Python numbers, as a NumPy buffer's varying
+    alignment would compile a kernel per frame."""
     import drjit as dr
 
     v = cls(*(x.item() for x in np.atleast_1d(np.asarray(values)).ravel()))
@@ -87,12 +72,8 @@ def opaque_value(cls, values):
 
 
 def update_sky(params, sky, prefix):
-    """Write ``sky`` into a ``cie_sky`` emitter through ``mi.traverse`` parameters.
-
-    ``prefix`` is the emitter's key prefix in ``params`` (e.g. ``'sky.'`` for an
-    emitter with id ``sky``).  Calls ``params.update()``; no recompilation: every value
-    is copied from memory, never a kernel literal (see :func:`opaque_value`).
-    """
+    """Write ``sky`` into a ``cie_sky`` emitter's ``params`` under key ``prefix`` (e.g. ``'sky.'``)
+    and update them; all values opaque, so nothing recompiles."""
     import mitsuba as mi
 
     params[prefix + "sun_direction"] = opaque_value(mi.Vector3f, sky.sun_direction)

@@ -1,11 +1,8 @@
 """The fitting model in Dr.Jit: a region's pixel radiances from a :class:`LightCache` and the ``ward`` plugin.
 
-:class:`WardModel` evaluates L(theta) for every region pixel and frame with the
-plugin's own ``eval`` (and its mirror ``sample`` for sigma_alpha = 0) on the
-cached light, and differentiates it with Dr.Jit: the Jacobian through the basis
-L = rho_d D + s G(sigma) (linear in the reflectances, thesis eq. 3.19) with dG/dsigma
-by forward mode, and reverse mode for the gradient of a scalar loss.  The same basis
-on a grid of sigma is the global search's.
+:class:`WardModel` evaluates L(theta) with the plugin's ``eval`` (and its mirror ``sample`` for
+sigma_alpha = 0) on the cached light; its Jacobian goes through the basis L = rho_d D + s G(sigma)
+(thesis eq. 3.19) with dG/dsigma by forward mode, the gradient of a loss by reverse mode.
 """
 
 import itertools
@@ -27,7 +24,7 @@ from .sky_control import chebyshev_eval, chebyshev_x
 PARAMETERS = {"two": ("rho_s", "sigma_alpha"),
               "achromatic": ("R", "rho_s", "sigma_alpha"),
               "colour": ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha")}
-#: Every model's parameters in one order (a map's planes, each region's model's in it).
+#: Every model's parameters in one order (a map's planes).
 PARAMETER_ORDER = ("C_r", "C_g", "C_b", "R", "rho_s", "sigma_alpha")
 #: Models by their number of free parameters (the CLI's --model 2/3/5).
 BY_COUNT = {2: "two", 3: "achromatic", 5: "colour"}
@@ -43,8 +40,7 @@ def bounds(model):
 
 
 def check_start(model, start):
-    """``start`` as an array, or SkyfitError unless it has one value per parameter of
-    ``model``, each within its bounds (nothing is clipped or broadcast silently)."""
+    """``start`` as an array; SkyfitError unless it has one in-bounds value per parameter."""
     names, (lo, hi) = PARAMETERS[model], bounds(model)
     v = np.asarray(start, dtype=float).ravel()
     if v.size != len(names):
@@ -72,11 +68,8 @@ def material_values(model, theta):
 
 
 def write_material(params, prefix, model, theta):
-    """Set a ``ward`` plugin's parameters (keys ``prefix + name``) to ``theta`` and update.
-
-    The values are opaque, so that a frozen render replays for every theta: literal values
-    (0 on a bound, above all) changed the recorded kernels and forced a new recording.
-    """
+    """Set a ``ward`` plugin's parameters (keys ``prefix + name``) to ``theta`` and update;
+    opaque values, so that a frozen render replays for every theta without re-recording."""
     import drjit as dr
 
     v = material_values(model, theta)
@@ -87,9 +80,9 @@ def write_material(params, prefix, model, theta):
 
 
 def other_readings(model, theta):
-    """Parameter points that chi^2 should also be tried at because the model jumps between
-    them and ``theta``: for the colour model the reading across the plastic/metal rule
-    (:func:`~skyfit_mi.physics.ward.colour_rule_twin`), clipped to the bounds and its side of the rule."""
+    """Parameter points chi^2 should also try because the model jumps between them and
+    ``theta``: for the colour model the reading across the plastic/metal rule
+    (:func:`~skyfit_mi.physics.ward.colour_rule_twin`), clipped to its side and the bounds."""
     if model != "colour":
         return []
     c2, rho2 = colour_rule_twin(theta[:3], theta[3])
@@ -99,13 +92,9 @@ def other_readings(model, theta):
 
 
 def reflectances(model, theta):
-    """rho_d and the specular reflectance s per channel for ``theta``
-    (:func:`~skyfit_mi.physics.ward.raw_parameters`, thesis 7.1), and their derivatives.
-
-    Returns rho_d (3,), s (3,), d rho_d / d theta (3, n), d s / d theta (3, n); the
-    sigma_alpha column is zero.  For the colour model the derivative is that of the rule on
-    theta's side of rho_s = 0.5.
-    """
+    """rho_d (3,), s (3,) for ``theta`` (:func:`~skyfit_mi.physics.ward.raw_parameters`, thesis
+    7.1) and their derivatives d/dtheta (3, n), the sigma_alpha column zero; for the colour
+    model that of the rule on theta's side of rho_s = 0.5."""
     th = np.asarray(theta, dtype=float)
     rho_d, spec, _ = raw_parameters(**{k: v for k, v in material_dict(model, th).items()
                                        if k != "normalisation"})
@@ -127,10 +116,8 @@ def reflectances(model, theta):
 
 
 def reflectance_sets(model, thetas):
-    """rho_d and the specular reflectance s per channel, (n, 2, 3), of many parameter sets
-    ``thetas`` (n, k) within the model's bounds: :func:`reflectances`'s values (the colour
-    model's plastic rho_s held below the rule in single precision too, as
-    :func:`material_dict` holds it), unchecked and at once."""
+    """:func:`reflectances`' rho_d and s, (n, 2, 3), of in-bounds ``thetas`` (n, k), at once
+    and unchecked."""
     th = np.atleast_2d(np.asarray(thetas, dtype=float))
     rho = th[:, -2]
     if model == "colour":
@@ -154,8 +141,7 @@ def material_dict(model, theta, normalisation="ward"):
 
 
 def _dr_array(cls, a, k=1):
-    """NumPy ``a`` (..., k) as a Dr.Jit array of ``cls`` of its k columns, in aligned buffers
-    (:func:`~.daylight.jit_array`: a NumPy buffer's alignment compiles kernels anew)."""
+    """NumPy ``a`` (..., k) as a Dr.Jit ``cls`` of its k columns (:func:`~.daylight.jit_array`)."""
     a = np.asarray(a).reshape(-1, k)
     return jit_array(cls, *(a[:, i] for i in range(k)))
 
@@ -165,15 +151,10 @@ class WardModel:
 
     Parameters
     ----------
-    cache : LightCache
-    model : {'two', 'achromatic', 'colour'}
-    normalisation : {'ward', 'duer', 'balanced'} or a microfacet lobe
-        (:data:`~skyfit_mi.physics.microfacet.LOBES`; 'radiance' is refused:
-        :func:`~.light_cache.check_fit_normalisation`)
-    others : light caches of other lights traced with ``cache``'s samples
-        (:func:`~.light_cache.build_light_cache`'s ``others``): the basis's shares
-        (:meth:`_shares`) are then every light's, stacked after this one's pixels, from one
-        evaluation of the lobe (:func:`~.basis_table.tabulate_group`)
+    cache, model : a LightCache; 'two', 'achromatic' or 'colour'
+    normalisation : 'ward', 'duer', 'balanced' or a microfacet lobe (not 'radiance')
+    others : caches of other lights traced on ``cache``'s samples: the basis's shares
+        (:meth:`_shares`) are then every light's, stacked by pixel, from one lobe evaluation
     """
 
     def __init__(self, cache, model, normalisation="ward", others=()):
@@ -199,9 +180,8 @@ class WardModel:
         wo_m[..., 2] = c
         self.si_m.wi = _dr_array(mi.Vector3f, wo_m, 3)
         self.S = S
-        # the lobe's control variate (see .light_cache): the inverse densities, the estimate of
-        # the diffuse albedo per position (rho_d times it is the diffuse part of the estimated
-        # albedo), the constant c, and the albedo quadrature's nodes around each view direction
+        # the lobe's control variate (.light_cache): inverse densities, the diffuse albedo's
+        # estimate per position, and (below) the albedo quadrature's nodes per view direction
         self.inv_pdf = _dr_array(mi.Float, cache.inv_pdf)
         up = (cache.wi[..., 2] > 0) & (cache.wo[..., 2] > 0)
         d_hat = (np.clip(cache.wi[..., 2], 0, None) / np.pi * up * cache.inv_pdf)
@@ -213,9 +193,8 @@ class WardModel:
         self.si_q = dr.zeros(mi.SurfaceInteraction3f, P * T * S * self.J)
         self.si_q.wi = _dr_array(mi.Vector3f, np.repeat(wo_m, self.J, axis=2), 3)
         self.nodes = [_dr_array(mi.Float, np.tile(x, P * T * S)) for x in (a, b, c)]
-        # the model's plugin, and a two-parameter one for the basis L = rho_d D + rho_s G(sigma)
-        # of the Jacobian (rho_s = 0: D; rho_s = 1: G), each with the literal values it keeps
-        # between evaluations
+        # the model's plugin and a two-parameter one for the basis (rho_s = 0: D; 1: G), each
+        # with the literal values it keeps between evaluations
         self.plugins = {}
         for key, m in (("model", model), ("basis", "two")):
             mid = 0.5 * np.add(*bounds(m))
@@ -226,9 +205,8 @@ class WardModel:
         self.evaluations = self.basis_evaluations = 0
 
     def _light_arrays(self, cache, normalisation):
-        """A light's own arrays (light_cache.OWN_ARRAYS) in Dr.Jit: its samples' weights,
-        its mirror rays, the lobe's control variate's constant c and the sky function's
-        integrals (.sky_control) per position's share."""
+        """A light's own arrays (light_cache.OWN_ARRAYS) in Dr.Jit, the sky integrals per
+        position's share."""
         mi, S = self.mi, self.S
         cache.check_normalisation(normalisation)
         return {"weight": _dr_array(mi.Color3f, cache.weight, 3),
@@ -245,14 +223,9 @@ class WardModel:
         return d
 
     def _variables(self, theta, grad=(), model=None):
-        """The parameters as Dr.Jit values keyed like the plugin's (those in ``grad`` track
-        derivatives), and sigma_alpha as a float; ``model='two'`` for the basis plugin
-        (rho_s = 0: the diffuse basis; 1: the lobe).
-
-        The values are opaque (kernel inputs, not literals baked into the code), so that the
-        kernels compiled for one theta serve every theta; with literals each new theta
-        compiled anew, ten times the cost of the evaluation itself.
-        """
+        """The parameters as opaque Dr.Jit values keyed like the plugin's (those in ``grad``
+        track derivatives), and sigma_alpha as a float; ``model='two'`` for the basis plugin.
+        Opaque, so the kernels compiled for one theta serve every theta."""
         v = material_values(model or self.model, theta)
         self.dr.make_opaque(*v.values())
         for k in grad:
@@ -260,16 +233,13 @@ class WardModel:
         return v, float(theta[-1])
 
     def _eval(self, bsdf, sigma, per_position=False, every=False):
-        """L for the plugin's current parameters (``sigma`` its sigma_alpha as a float): the
-        BRDF on the cached light with the lobe's control variate, plus the mirror; with
-        ``per_position`` each position's share (size P*T*S) instead of their sum (P*T): a
-        list of the first light's alone, or with ``every`` of each light's (``others``), the
-        BRDF evaluated once for all."""
+        """L for the plugin's current parameters (``sigma`` its sigma_alpha): the BRDF on the
+        cached light with the lobe's control variate, plus the mirror; a list of the first
+        light's, or with ``every`` each light's; ``per_position``: shares (P*T*S), not sums."""
         dr, mi = self.dr, self.mi
         ctx = mi.BSDFContext()
         f = bsdf.eval(ctx, self.si, self.wi)                            # f_r cos(theta_i)
-        # evaluated once: each block sum below launches a kernel per channel, which would
-        # evaluate the BRDF anew every time
+        # evaluated once, or each block sum's per-channel kernel would evaluate it anew
         dr.eval(f)
         K = self.n // self.S
         control = SIGMA_MIRROR < sigma < CONTROL_SIGMA
@@ -302,25 +272,17 @@ class WardModel:
         return out
 
     def radiance_and_variance(self, theta):
-        """``radiance(theta)`` and its Monte Carlo variance [(W m^-2 sr^-1)^2], both (P, T, 3).
-
-        Each of the S positions of a pixel gives an independent estimate (S times its share):
-        their mean is the radiance, their sample variance / S the variance of that mean.
-        """
+        """``radiance(theta)`` and its Monte Carlo variance [(W m^-2 sr^-1)^2], both (P, T, 3):
+        the S positions' independent estimates' sample variance / S."""
         self.evaluations += 1
         shares = self._radiance_dr(*self._variables(theta), per_position=True)
         est = self._np(shares, per_position=True) * self.S
         return est.mean(axis=2), np.var(est, axis=2, ddof=1) / self.S
 
     def _radiance_dr(self, v, sigma, per_position=False, plugin="model", every=False):
-        """L as a Dr.Jit Color3f of size P*T from parameter values ``v`` (attached to their
-        gradients) of the model's plugin, or of the basis plugin (``plugin='basis'``); with
-        ``every`` a list of them, one per light (:meth:`_eval`).
-
-        Below the cache's resolution (sigma < SIGMA_RESOLVED) L is interpolated linearly in
-        sigma between the ideal mirror and the lobe at SIGMA_RESOLVED, so that L stays a
-        continuous function of sigma down to the mirror (see :mod:`.light_cache`).
-        """
+        """L as a Dr.Jit Color3f of size P*T from values ``v`` of the model's or the basis
+        ``plugin``; with ``every`` one per light.  Below SIGMA_RESOLVED, linear in sigma to the
+        mirror (:mod:`.light_cache`)."""
         if not every and len(self.lights) > 1:
             raise ValueError("a model of several lights gives their basis's shares alone "
                              "(basis_table.tabulate_group)")
@@ -338,9 +300,8 @@ class WardModel:
             p.update()
             mirror = self._eval(bsdf, 0.0, per_position, every)
             L = [m + (v["sigma_alpha"] / SIGMA_RESOLVED) * (r - m) for r, m in zip(rough, mirror)]
-        # L holds the opaque values; the plugin gets literals back, because a frozen function
-        # elsewhere in the process (RegionRenderModel) dispatches over every registered BSDF
-        # and cannot record foreign opaque state
+        # literals back into the plugin: a frozen function (RegionRenderModel) dispatches over
+        # every registered BSDF and cannot record foreign opaque state
         for k, x in rest.items():
             p[k] = x
         p.update()
@@ -358,13 +319,8 @@ class WardModel:
         return self._np(self._radiance_dr(*self._variables(theta)))
 
     def jacobian(self, theta):
-        """(L, dL/dtheta) with shapes (P, T, 3) and (P, T, 3, n_params).
-
-        Through the basis: L = rho_d D + s G(sigma) per channel (thesis eq. 3.19, the lobe
-        linear in its reflectances), with D and G from the plugin and dG/dsigma by Dr.Jit's
-        forward mode, so that one pass gives every column; rho_d, s and their derivatives
-        come from :func:`reflectances`.
-        """
+        """(L, dL/dtheta) with shapes (P, T, 3) and (P, T, 3, n_params), through the basis
+        L = rho_d D + s G(sigma) (thesis eq. 3.19) with dG/dsigma by forward mode."""
         dr = self.dr
         v, sigma = self._variables([1.0, theta[-1]], grad=("sigma_alpha",), model="two")
         G_dr = self._radiance_dr(v, sigma, plugin="basis")
@@ -379,13 +335,9 @@ class WardModel:
         return rho_d * D + spec * G, J
 
     def basis(self, sigmas, halves=False):
-        """The basis of L = rho_d D + s G(sigma) per channel (thesis eq. 3.19): D (P, T, 3)
-        and G (K, P, T, 3) for the K ``sigmas``, from the basis plugin.
-
-        With ``halves`` a list [(D, G) of the whole cache, of its first half, of its second
-        half] (halves of every pixel's positions, as :meth:`LightCache.halves`), from one
-        per-position pass per sigma.
-        """
+        """The basis of L = rho_d D + s G(sigma) (thesis eq. 3.19): D (P, T, 3) and G
+        (K, P, T, 3) at the K ``sigmas``; with ``halves`` a list [(D, G) of the whole cache,
+        of its first half, of its second] (as :meth:`LightCache.halves`)."""
         S, h = self.S, self.S // 2
         parts = [(slice(0, S), 1.0)] + ([(slice(0, h), S / h), (slice(h, 2 * h), S / h)]
                                         if halves else [])
@@ -403,8 +355,8 @@ class WardModel:
         return self.basis(sigmas, halves)
 
     def _shares(self, rho_s, sigma):
-        """Each position's share (P, T, S, 3) of the basis plugin's L (rho_s = 0: the diffuse
-        basis; 1: the lobe at sigma); with ``others``, every light's, stacked (n P, T, S, 3)."""
+        """Each position's share (P, T, S, 3) of the basis plugin's L (rho_s = 0: D; 1: G at
+        sigma); with ``others``, every light's, stacked (n P, T, S, 3)."""
         L = self._radiance_dr(*self._variables([rho_s, sigma], model="two"), per_position=True,
                               plugin="basis", every=True)
         self.dr.eval(*L)                                 # every light's shares together
@@ -435,14 +387,9 @@ class WardModel:
 class RegionRenderModel:
     """The region's radiance by a full Mitsuba render of its pixels for every frame.
 
-    The thesis's way of evaluating the model (a render per chi-square evaluation), kept as
-    the baseline the cached :class:`WardModel` is measured against.  One scene per frame
-    holds that frame's sky; every call sets the material's parameters in each and
-    path-traces ``spp`` jittered rays through each region pixel with a fixed seed (common
-    random numbers, so chi-square is a deterministic function of the parameters).  The
-    per-frame render is a ``dr.freeze`` function: traced once per frame's scene, then
-    replayed with the new parameters (about 12x faster than re-tracing every call), so
-    the baseline is as fast as Dr.Jit makes it.
+    The thesis's way (a render per chi-square evaluation), the baseline for :class:`WardModel`:
+    one scene per frame, ``spp`` jittered rays per pixel with a fixed seed (common random
+    numbers), each frame's render a ``dr.freeze`` function replayed with new parameters.
     """
 
     def __init__(self, scene_xml, material, skies, pixels, model, spp=256, seed=0, max_depth=4,
@@ -486,8 +433,7 @@ class RegionRenderModel:
             sampler.seed(seed, n)
             li, _, _ = integrator.sample(scene, sampler, rays)
             return dr.block_sum(li, spp) / spp
-        # a few recordings per frame's scene are expected (Dr.Jit re-records once it has seen
-        # which inputs change from call to call)
+        # a few recordings per scene are expected (Dr.Jit re-records once inputs change)
         self._frame = dr.freeze(frame, warn_after=5 * len(skies))
 
     def radiance(self, theta):

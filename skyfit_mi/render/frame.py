@@ -4,12 +4,8 @@ import numpy as np
 
 
 def render_with_error(mi, scene, params, seed, half):
-    """A frame and the standard error of each pixel's Monte Carlo estimate.
-
-    Two independent renders of ``half`` spp (seeds ``seed`` and ``seed + 2^31``): their
-    mean is the frame, and (a - b)^2 / 4, averaged over each pixel's 3x3 neighbourhood,
-    estimates the variance of that mean.
-    """
+    """A frame and each pixel's Monte Carlo standard error, from two independent renders a, b
+    of ``half`` spp: their mean, and (a - b)^2 / 4 averaged over 3x3 pixels as its variance."""
     a = np.array(mi.render(scene, params, seed=seed, spp=half), dtype=np.float64)
     b = np.array(mi.render(scene, params, seed=seed + 2**31, spp=half), dtype=np.float64)
     var = (a - b) ** 2 / 4.0

@@ -1,25 +1,14 @@
 """Image files: linear float32 OpenEXR frames (read and written through OpenEXR's Python
 bindings) and PNG previews, written atomically.
 
-EXR layout
-----------
-:func:`write_exr` writes a single-part scanline image of float32 channels R, G, B (an (H, W, 3)
-image) or Y (an (H, W) map), as Mitsuba's ``Bitmap`` wrote them before, so the files of
-earlier runs (PIZ-compressed) and of this one read alike, and Mitsuba reads these as
-environment maps.  Compression is ZIPS: lossless, one scanline per chunk, so a reader of a
-few pixels (:func:`read_exr_pixels`, a fit's or a relight's 64 per region) decodes only their
-rows.  A frame's metadata (:data:`META_PREFIX` attributes, and the standard ``capDate`` /
-``utcOffset`` of its time) goes in the header; the manifest keeps its own record too.
+:func:`write_exr` writes single-part scanline float32 R, G, B (H, W, 3) or Y (H, W), ZIPS
+compressed (one scanline per chunk, so reading a few pixels decodes only their rows), with the
+frame's metadata in the header.
 
-Reading
--------
-:func:`read_exr` reads the whole image, or only some rows; a missing, foreign or damaged file
-raises :class:`~skyfit_mi.errors.SkyfitError` of one line naming it.  OpenEXR's C library
-reports a damaged chunk on the process's stderr (and the bindings on stdout) before it
-raises: those lines are taken into the error's message instead (:func:`_native_quiet`).
-OpenEXR's reader is fuzzed upstream (OSS-Fuzz) and raises on damaged input rather than
-aborting, so EXR files are read in this process (no child, unlike Radiance RGBE:
-:mod:`skyfit_mi.pipeline.photos`).
+A missing, foreign or damaged file raises a one-line :class:`~skyfit_mi.errors.SkyfitError`
+naming it, with what OpenEXR printed (:func:`_native_quiet`).  OpenEXR's reader is fuzzed
+upstream (OSS-Fuzz) and raises rather than aborts, so EXR files are read in this process
+(unlike Radiance RGBE: :mod:`skyfit_mi.pipeline.photos`).
 """
 
 import contextlib
@@ -39,8 +28,8 @@ from ..files import atomic_write
 EXR_MAGIC = b"\x76\x2f\x31\x01"
 #: Prefix of skyfit's own header attributes ('skyfit/kind', 'skyfit/frame'...).
 META_PREFIX = "skyfit/"
-#: Scanlines per chunk of each compression (OpenEXR's file layout): a row read decodes its
-#: whole chunk, so rows are read in whole chunks.  Unknown ones: 32 (any count is correct).
+#: Scanlines per chunk of each compression (OpenEXR's file layout): rows are read in whole
+#: chunks.  Unknown ones: 32 (any count is correct).
 CHUNK_LINES = {"NO_COMPRESSION": 1, "RLE_COMPRESSION": 1, "ZIPS_COMPRESSION": 1,
                "ZIP_COMPRESSION": 16, "PXR24_COMPRESSION": 16, "PIZ_COMPRESSION": 32,
                "B44_COMPRESSION": 32, "B44A_COMPRESSION": 32, "DWAA_COMPRESSION": 32,
@@ -53,10 +42,9 @@ _NATIVE_LOCK = threading.Lock()
 
 @contextlib.contextmanager
 def _native_quiet():
-    """Take what OpenEXR prints while the block runs (the C library on file descriptor 2, the
-    bindings on ``sys.stdout``): yields a list that holds those lines, last one last, after
-    the block.  On success they are passed on unchanged (another thread's output, not
-    OpenEXR's: a good file prints nothing); on an exception they are kept for its message."""
+    """Capture what OpenEXR prints in the block (the C library on fd 2, the bindings on
+    ``sys.stdout``): yields a list that receives those lines on an exception; on success the
+    output is passed on unchanged (a good file prints nothing)."""
     with _NATIVE_LOCK:
         sys.stderr.flush()
         saved = os.dup(2)
@@ -85,8 +73,7 @@ def _native_quiet():
 
 
 def _why(path, exc, lines):
-    """One line saying why ``path`` did not read as OpenEXR (``lines``: what the library
-    printed)."""
+    """One line saying why ``path`` did not read as OpenEXR (``lines``: what OpenEXR printed)."""
     try:
         with open(path, "rb") as fh:
             head = fh.read(4)
@@ -118,10 +105,9 @@ def _fail(path, exc, lines):
 
 
 def _header_meta(meta):
-    """Header attributes of a frame's ``meta`` (dict): each under :data:`META_PREFIX` (ints,
-    floats and text as they are, dates as ISO text); a ``time`` (an aware datetime or its ISO
-    text) also as the standard ``capDate`` (local, 'YYYY:MM:DD hh:mm:ss') and ``utcOffset``
-    (seconds, UTC = local + utcOffset)."""
+    """Header attributes of a frame's ``meta`` (dict), each under :data:`META_PREFIX` (dates as
+    ISO text); a ``time`` (aware datetime or ISO text) also as the standard ``capDate`` (local,
+    'YYYY:MM:DD hh:mm:ss') and ``utcOffset`` (seconds, UTC = local + utcOffset)."""
     out = {}
     for key, value in (meta or {}).items():
         if value is None:
@@ -152,10 +138,9 @@ def _header_meta(meta):
 
 
 def write_exr(path, image, meta=None):
-    """Write a linear float32 RGB image (H, W, 3) [W m^-2 sr^-1], or a one-channel map (H, W)
-    (channel Y), as OpenEXR (module doc: layout), atomically.  ``meta``: the frame's metadata
-    for the header (e.g. ``{"kind": "radiance", "frame": 3, "units": "W m^-2 sr^-1",
-    "time": datetime}``; :func:`read_exr_meta` gives it back).  Returns ``path``."""
+    """Write a linear float32 RGB image (H, W, 3) [W m^-2 sr^-1], or a one-channel map (H, W),
+    as OpenEXR, atomically; ``meta`` goes in the header (e.g. ``{"kind": "radiance", "frame":
+    3, "time": datetime}``; :func:`read_exr_meta`).  Returns ``path``."""
     import OpenEXR
 
     image = np.ascontiguousarray(image, dtype=np.float32)
@@ -178,7 +163,7 @@ def write_exr(path, image, meta=None):
 
 def _layout(header):
     """(channel names in the order read, (H, W), first row's y, scanlines per chunk) of an
-    EXR ``header`` (OpenEXR.File's dict)."""
+    EXR ``header``."""
     names = [c.name for c in header["channels"]]
     order = next((list(o) for o in _ORDERS if set(o) == set(names)), sorted(names))
     (x0, y0), (x1, y1) = (np.asarray(v) for v in header["dataWindow"])
@@ -194,9 +179,8 @@ def _stack(planes):
 
 
 def read_exr_channels(path):
-    """The whole of OpenEXR ``path`` as stored: (values (H, W, C) in the file's own pixel type
-    -- float32, float16 or uint32 --, channel names in the order of the last axis: R, G, B(, A),
-    or Y(, A), else by name).  A missing, foreign or damaged file raises :class:`ExrError`."""
+    """OpenEXR ``path`` as stored: (values (H, W, C) in the file's pixel type, channel names of
+    the last axis: R, G, B(, A), or Y(, A), else by name); raises :class:`ExrError`."""
     import OpenEXR
 
     path = str(path)
@@ -214,8 +198,7 @@ def read_exr_channels(path):
 
 
 def read_exr_header(path):
-    """The header of OpenEXR ``path`` (OpenEXR.File's dict; no pixels read); a missing or
-    damaged file raises SkyfitError of one line."""
+    """The header of OpenEXR ``path`` (OpenEXR.File's dict; no pixels read)."""
     import OpenEXR
 
     lines = []
@@ -228,27 +211,21 @@ def read_exr_header(path):
 
 
 def read_exr_meta(path):
-    """The frame metadata :func:`write_exr` put in ``path``'s header: {key: value} of its
-    :data:`META_PREFIX` attributes ({} for a file without them)."""
+    """The frame metadata :func:`write_exr` put in ``path``'s header ({} if none)."""
     return {k[len(META_PREFIX):]: v for k, v in read_exr_header(path).items()
             if k.startswith(META_PREFIX)}
 
 
 def read_exr_shape(path):
-    """(H, W, channels) of OpenEXR ``path`` from its header (channels: how many)."""
+    """(H, W, channel count), or (H, W) for one channel, of OpenEXR ``path`` from its header."""
     order, (h, w), _, _ = _layout(read_exr_header(path))
     return (h, w, len(order)) if len(order) > 1 else (h, w)
 
 
 def read_exr(path, rows=None):
-    """Read an OpenEXR file as float32: (H, W, 3) for RGB (R, G, B; RGBA: 4), (H, W) for one
-    channel Y, else its channels in name order on the last axis.
-
-    ``rows`` (ints, from the top of its data window): only those scanlines, in that order,
-    shape (len(rows), W[, C]); only their chunks are read and decoded
-    (:data:`CHUNK_LINES`).  A missing, foreign or damaged file raises SkyfitError of one line
-    naming it ('cannot read <path>: ...').
-    """
+    """Read an OpenEXR file as float32: (H, W, 3) for RGB (RGBA: 4), (H, W) for one channel,
+    else its channels in name order; with ``rows`` (from the top of the data window) only those
+    scanlines, in that order, decoding only their chunks.  Raises SkyfitError."""
     path = str(path)
     if rows is None:
         values = read_exr_channels(path)[0].astype(np.float32, copy=False)
@@ -266,9 +243,8 @@ def read_exr(path, rows=None):
 
 
 def _read_rows(path, rows):
-    """:func:`read_exr`'s rows (module doc): each needed chunk once, neighbouring chunks in one
-    call of OpenEXR's scanline reader (its ``InputFile``; where the bindings no longer have
-    it, the whole image)."""
+    """:func:`read_exr`'s rows: each needed chunk once, runs of chunks in one call of OpenEXR's
+    ``InputFile`` (the whole image where the bindings lack it)."""
     import OpenEXR
 
     with OpenEXR.File(path, header_only=True) as f:
@@ -321,9 +297,8 @@ def check_exr_shape(path, shape, found):
 
 
 def check_exr(path, shape):
-    """SkyfitError of one line unless ``path`` is an OpenEXR of ``shape`` (H, W, 3) whose
-    chunks are all present (its chunk table whole: not cut short), from its header and chunk
-    table alone; damage inside a chunk shows only when its pixels are read."""
+    """SkyfitError unless ``path`` is an OpenEXR of ``shape`` (H, W, 3) with all its chunks
+    (header and chunk table only: damage inside a chunk shows when its pixels are read)."""
     import OpenEXR
 
     check_exr_shape(path, shape, read_exr_shape(path))
@@ -345,9 +320,8 @@ def check_exr(path, shape):
 
 
 def read_exr_checked(path, shape, pixels=None):
-    """:func:`read_exr` (``pixels``: only those, (P, 2) x, y -> (P, 3), :func:`read_exr_pixels`),
-    raising SkyfitError (naming the file and what is wrong) unless the file reads as an image
-    of ``shape`` (H, W, 3)."""
+    """:func:`read_exr` (or :func:`read_exr_pixels` of ``pixels``), raising SkyfitError unless
+    the file is an image of ``shape`` (H, W, 3)."""
     if pixels is None:
         img = read_exr(path)
         check_exr_shape(path, shape, img.shape)
@@ -363,8 +337,8 @@ def to_srgb8(image, exposure):
     return np.round(srgb * 255).astype(np.uint8)
 
 
-#: zlib level of the PNG previews written with Pillow: level 1 encodes a contact sheet or a
-#: comparison 2.5-3x faster than the default 6, in files 15-25% larger.
+#: zlib level of PNG previews: level 1 is several times faster than the default 6, files a
+#: little larger.
 PNG_COMPRESS_LEVEL = 1
 
 
@@ -392,16 +366,8 @@ def read_bitmap(path):
     """Read any image Mitsuba's ``Bitmap`` reads (OpenEXR, Radiance RGBE ``.hdr``/``.pic``,
     PNG of 8 or 16 bits, PFM...) as it is stored, with no conversion.
 
-    Returns
-    -------
-    values : ndarray, shape (H, W, C)
-        The file's pixels in its own component type (float32/float16 for EXR and RGBE,
-        uint8/uint16 codes for PNG).
-    channels : list of str
-        Channel names, e.g. ``['R', 'G', 'B']``, ``['R', 'G', 'B', 'A']`` or ``['Y']``.
-
-    Raises whatever Mitsuba raises on an unreadable file (``RuntimeError``); callers in the
-    pipeline turn it into a :class:`~skyfit_mi.errors.SkyfitError` naming the file.
+    Returns (values (H, W, C) in the file's component type, channel names such as
+    ``['R', 'G', 'B']`` or ``['Y']``); raises Mitsuba's ``RuntimeError`` on an unreadable file.
     """
     import mitsuba as mi
 

@@ -5,8 +5,7 @@ import numpy as np
 
 def label_image(scene):
     """(H, W) int array: 1 + the index of the material seen at each pixel centre, 0 for none,
-    and the list of material ids (label k is ids[k - 1]), sorted, so that a scene's labels
-    do not depend on the order Mitsuba lists its shapes in."""
+    and the sorted material ids (label k is ids[k - 1]), independent of the shapes' order."""
     import mitsuba as mi
 
     sensor = scene.sensors()[0]

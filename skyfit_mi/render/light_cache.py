@@ -1,56 +1,30 @@
 """The fitting model's renderer: light arriving at exactly the region's pixels, cached once.
 
-Fitting needs the radiance of a few pixels in every frame for thousands of
-parameter values.  Everything in that radiance except the fitted material's
-BRDF is independent of the parameters: the surface points seen through each
-pixel, the light arriving there from sky, sun and the rest of the scene, and
-its visibility.  :func:`build_light_cache` traces it once per region pixel
-and frame with Mitsuba (primary rays jittered over the pixel, incident light
-by the scene's own path integrator) along fixed directions drawn from a
-parameter-independent mixture (the ``cie_sky`` samplers of the sun disc and
-the sky, cosine, and Ward lobes at several roughnesses around the mirror direction);
-the mixture density weights each sample (multi-sample MIS, balance
-heuristic).  Then for any parameters
+Everything in a pixel's radiance but the fitted BRDF is independent of the parameters.
+:func:`build_light_cache` traces it once per region pixel and frame with Mitsuba (primary rays
+jittered over the pixel, incident light by the scene's path integrator) along fixed directions
+drawn from a parameter-independent mixture (sun disc, sky, cosine, and Ward lobes at several
+roughnesses), weighted by the mixture density (multi-sample MIS, balance heuristic).  Then
 
     L = sum_k f_r(w_o, w_k) cos(theta_k) L_i(w_k) / (p_mix(w_k) N)  +  rho_s m(cos) L_i(mirror)
 
-(the last term only for an ideal mirror, sigma_alpha <= 1e-4) is an unbiased
-estimate of the pixel's radiance with fixed samples: a deterministic, smooth
-function of the parameters (common random numbers), evaluated with the
-``ward`` plugin's own ``eval`` in Dr.Jit (so gradients come from Dr.Jit), or
-split into the basis L = rho_d * D + rho_s * G(sigma) for the global search.
+(the last term only for an ideal mirror, sigma_alpha <= 1e-4) is an unbiased estimate and, with
+fixed samples, a smooth deterministic function of the parameters (common random numbers),
+evaluated by the ``ward`` plugin in Dr.Jit or split into the basis L = rho_d D + rho_s G(sigma).
 
-Most of that light is the sky itself, a known function h (the ``cie_sky`` emitter's pattern
-sum).  It is the estimate's control variate (:mod:`.sky_control`): the samples carry only
-L_i - h (the sun, the scene's geometry and its shadows, which h does not know), and the
-integrals of h through the diffuse term and through the lobe at every sigma are computed
-deterministically, per position, once.  Without it the sampled sky's own error was 0.28-0.30%
-rms per value under a clear sky and 0.47-0.55% under an overcast one at every roughness; with
-it 0.005-0.09% (docs/BENCHMARKS.md, "The light cache's accuracy at every roughness").
-
-A narrow lobe sees what h does not know (a reflected object, say) through a few of the fixed
-directions, so that part's estimate
-is noisy (before the sky's control variate: 1.7% rms per value at sigma_alpha = 0.01 with
-the default samples, fifty times the difference the data see between 0.01 and 0.003).  Near the
-mirror direction that light is smooth, so the lobe's part takes a second control variate:
-with c the radiance along the mirror direction without the solar disc, less h (one more
-ray per position) and A the lobe's directional albedo from a deterministic
-quadrature (:func:`~skyfit_mi.physics.ward.lobe_albedo`),
+Two control variates cut its noise: the sky function h, integrated deterministically
+(:mod:`.sky_control`), and for narrow lobes the radiance c along the mirror direction (without
+the solar disc, less h), with A the lobe's directional albedo
+(:func:`~skyfit_mi.physics.ward.lobe_albedo`):
 
     L_lobe = sum_k f_s(w_k) cos(theta_k) (L_i(w_k) - beta c) / (p_mix(w_k) N)  +  beta c A
 
-is still unbiased (c is independent of the directions' samples) and for
-sigma_alpha = 0.01 has 24 times less error (0.07% rms per value).  Its weight
-beta is 1 up to CONTROL_FULL and falls smoothly to 0 at CONTROL_SIGMA, where the
-quadrature's accuracy ends at grazing views (:func:`control_weight`).
+unbiased since c is independent of the directions; beta (:func:`control_weight`) fades to 0 by
+CONTROL_SIGMA, where A's quadrature loses accuracy at grazing views (docs/BENCHMARKS.md, "The
+light cache's accuracy at every roughness").
 
-Fixed samples resolve a lobe no narrower than the narrowest sampling lobe,
-SIGMA_RESOLVED: below it the estimate's variance grows as (SIGMA_RESOLVED /
-sigma)^2 and chi-square would turn into noise between the resolved lobes and
-the mirror.  There the model interpolates linearly in sigma between the mirror
-(sigma = 0) and the lobe at SIGMA_RESOLVED.  SIGMA_RESOLVED = 0.002 is below the
-sun's angular radius (0.0047 rad), so such lobes reflect sun and sky almost as a
-mirror does, and the interpolation changes little but keeps L continuous.
+Below SIGMA_RESOLVED (the narrowest sampling lobe, under the sun's angular radius) the variance
+grows as (SIGMA_RESOLVED / sigma)^2, so the model interpolates linearly in sigma to the mirror.
 """
 
 from dataclasses import dataclass, replace
@@ -72,64 +46,44 @@ SIGMA_RESOLVED = LOBE_SIGMAS[0]
 SIGMA_LARGEST = 0.5
 #: The roughness range of the sky's integral through the lobe (:mod:`.sky_control`).
 SIGMA_TABLE = (SIGMA_RESOLVED, SIGMA_LARGEST)
-#: Samples per pixel by default: positions over the pixel's area (a highlight's radiance can
-#: vary by tens of per cent across one pixel) and light directions at each position.  An
-#: automatically sized cache starts at POSITIONS and grows where the data need it: the
-#: README's board spends at most 1.5% of its noise budget at 16 (docs/BENCHMARKS.md, "A
-#: fit's first positions").
+#: Samples per pixel by default: positions over its area (a highlight varies across a pixel)
+#: and light directions at each; an automatically sized cache starts at POSITIONS and grows
+#: (docs/BENCHMARKS.md, "A fit's first positions").
 POSITIONS, DIRECTIONS = 16, 128
-#: Positions of a measured point by default: a point has no area, so its positions only
-#: repeat the directions' sampling (two halves for the cache's own error); an automatically
-#: sized cache grows them where the data need it.
+#: Positions of a measured point by default: a point has no area, so they only repeat the
+#: directions' sampling (two halves for the cache's own error).
 POINT_POSITIONS = 4
 #: Share of a fit's degrees of freedom that an automatically sized cache's largest noise over
-#: the roughness range is grown to stay under (:meth:`~skyfit_mi.fitting.fit.FitSession.run`).
+#: the roughness range must stay under (:meth:`~skyfit_mi.fitting.fit.FitSession.run`).
 CACHE_SHARE = 0.1
-#: Pixels between the anchors at which the light caches of predictions and maps integrate the
-#: sky (the ``anchors`` :class:`SkyPlan`; a fit's takes its positions' own,
-#: WIDE_SHARE): the pixels between them interpolate where that is accurate, with an error
-#: second order in the spacing, a few 1e-4 of the radiance at 4 pixels (docs/BENCHMARKS.md,
-#: "Sky integrals interpolated between anchors").
+#: Pixels between the anchors at which predictions' and maps' caches integrate the sky (the
+#: ``anchors`` :class:`SkyPlan`); the error is second order in the spacing.
 SKY_SPACING = 4
-#: Sky integrals shared by interpolation (a :class:`SkyPlan`'s ``spacing``): a
-#: pixel takes the bilinear interpolation of the four anchors around it only when they lie on
-#: its shape, their normals and mirror directions within SHARE_ANGLE_DEG of its own, and every
-#: mirror direction at least SHARE_HORIZON_DEG from the world's horizon (where the sky
-#: function steps to the ground) and SHARE_SUN_DEG from the sun (the cusp of the circumsolar
-#: peak, which a narrow lobe resolves); otherwise its own integrals are computed.  Skies with
-#: an environment map (arbitrary structure) are never interpolated.
+#: A pixel interpolates the four anchors around it only when they lie on its shape, their
+#: normals and mirror directions within SHARE_ANGLE_DEG of its own, and every mirror direction
+#: at least SHARE_HORIZON_DEG from the horizon (where the sky steps to the ground) and
+#: SHARE_SUN_DEG from the sun (the circumsolar cusp); never under an environment map.
 SHARE_ANGLE_DEG, SHARE_HORIZON_DEG, SHARE_SUN_DEG = 2.0, 5.0, 5.0
-#: A fit's sky integrals: the diffuse one and the lobe's Chebyshev nodes of roughness at least
-#: WIDE_SIGMA [rad] change little across a pixel and carry most of the quadratures'
-#: directions, so they are taken at WIDE_SHARE of each pixel's random positions (at least one
-#: in each half of them: LightCache.halves stay independent and see the subset's noise), each
-#: half's mean given to its positions: unbiased, the cache about 2.6x faster (docs/
-#: BENCHMARKS.md, "A fit's wide sky integrals at a few positions"); the narrower
-#: nodes, which resolve the pixel, at every position (the ``fit`` :class:`SkyPlan`).
-#: Only where every pixel's footprint is small against those lobes: its positions' normals and
-#: mirror directions within WIDE_SPREAD_DEG of their mean (planes seen in pixels of a fraction
-#: of a degree); a curved surface or a coarse pixel takes them at every position, so that the
-#: positions' spread (the model's own noise estimate) keeps seeing how they change.  Not the
-#: pixel centres: docs/BENCHMARKS.md, "A fit's sky integrals through pixel centres: tried, not
-#: adopted".
+#: The ``fit`` :class:`SkyPlan`: I_d and the nodes of roughness >= WIDE_SIGMA [rad] change little
+#: across a pixel and cost most, so they are taken at WIDE_SHARE of each pixel's positions (at
+#: least one per half, so LightCache.halves stay independent), each half's mean given to all;
+#: only where every pixel's normals and mirror directions lie within WIDE_SPREAD_DEG of their
+#: mean (docs/BENCHMARKS.md, "Sky integrals: wide nodes at a few positions ...").
 WIDE_SIGMA, WIDE_SHARE, WIDE_SPREAD_DEG = 0.15, 1 / 8, 1.0
-#: Points whose sky integrals one pass takes (frames' positions together, each under its
-#: frame's sky): a prediction's few points of every frame at once, larger caches frame by frame
-#: (their quadratures' arrays grow with the points).
+#: Points whose sky integrals one pass takes (several frames' together, each under its own sky);
+#: bounds the quadratures' memory.
 SKY_PASS_POINTS = 2048
 #: Share of directions from the solar disc, the sky table, cosine, and all lobes together; fixed
 #: counts, so the sun's share does not fluctuate from pixel to pixel.
 MIX = {"sun": 0.25, "sky": 0.20, "cosine": 0.15, "lobes": 0.40}
-#: Roughness from which the lobe's control variate is off (see the module docstring), and up to
-#: which it has its full weight; its quadrature of the lobe's albedo is exact to 1e-6 below
-#: CONTROL_SIGMA up to 70 degrees from the normal.
+#: Roughness up to which the lobe's control variate has full weight, and from which it is off:
+#: the albedo quadrature is exact to 1e-6 below CONTROL_SIGMA up to 70 degrees from the normal.
 CONTROL_FULL, CONTROL_SIGMA = 0.035, 0.05
 
 
 def check_fit_normalisation(normalisation):
-    """``normalisation``, or SkyfitError unless the fitting model can represent it: every one
-    of :data:`~skyfit_mi.physics.ward.NORMALISATIONS` but ``'radiance'``, whose Fresnel term
-    for an ideal mirror is outside the basis L = rho_d D + s G(sigma) (the render side takes it)."""
+    """``normalisation``, or SkyfitError unless the fitting model can represent it: any but
+    ``'radiance'``, whose mirror Fresnel term is outside the basis L = rho_d D + rho_s G(sigma)."""
     check_choice("Ward normalisation", normalisation, NORMALISATIONS)
     if normalisation == "radiance":
         raise SkyfitError("normalisation 'radiance' cannot be fitted: its Fresnel term at "
@@ -141,28 +95,18 @@ def check_fit_normalisation(normalisation):
 
 
 #: A light cache's arrays that are each light's own where several lights share one trace's
-#: samples (:func:`build_light_cache`'s ``others``); the rest are the samples' own.
+#: samples (:func:`build_light_cache`'s ``others``).
 OWN_ARRAYS = ("weight", "mirror", "mirror_sky", "diffuse_sky", "lobe_sky")
 
 
 @dataclass(frozen=True)
 class SkyPlan:
-    """Where a light cache takes the sky's integrals (the control variate's deterministic
-    part, :mod:`.sky_control`), which cost most of its time.
+    """Where a light cache takes the sky's integrals (:mod:`.sky_control`), most of its cost.
 
-    spacing : None, or n > 1: at the pixels' centres (pixels only: one integral per pixel,
-        its error second order in the pixel's footprint and its noise none, where one random
-        position of each would add a first-order error that the positions' spread, the
-        stated variance, does not see); at anchors every n pixels, each pixel taking the
-        bilinear interpolation of the four around it where that is accurate
-        (SHARE_ANGLE_DEG, SHARE_HORIZON_DEG, SHARE_SUN_DEG; never under an environment map,
-        nor where the anchors would outnumber the pixels), its own elsewhere: about n^2 times
-        cheaper on smooth surfaces, with an error second order in the spacing
-    wide_share : None, or a share of the positions: at every position, except the diffuse
-        integral and the nodes of roughness at least WIDE_SIGMA (every node where the sky
-        function is the ground's alone: the sun's part of a split light), at that share of
-        each pixel's positions where every pixel's footprint is small (WIDE_SPREAD_DEG), at
-        least one in each half of them, each half's mean given to its positions
+    spacing : None (at every position), or n > 1: at the pixels' centres (pixels only), at
+        anchors every n pixels where interpolating is accurate (SHARE_*)
+    wide_share : None, or the share of positions taking the diffuse integral and the nodes of
+        roughness >= WIDE_SIGMA (all nodes for a ground-only sky) where footprints are small
     """
 
     name: str
@@ -170,19 +114,15 @@ class SkyPlan:
     wide_share: float = None
 
 
-#: The light caches' sky plans: ``every`` position (the reference); a ``fit``'s (the wide
-#: parts at a share of the positions, the narrow ones, which resolve the pixel, at every
-#: one); ``anchors`` (predictions and maps: the pixels' centres, shared between anchors on
-#: compact regions).
+#: The sky plans: ``every`` position (the reference); ``fit`` (wide parts at a share of the
+#: positions); ``anchors`` (predictions and maps: pixel centres, interpolated between anchors).
 SKY_PLANS = {p.name: p for p in (SkyPlan("every"), SkyPlan("fit", wide_share=WIDE_SHARE),
                                  SkyPlan("anchors", spacing=SKY_SPACING))}
 
 
 @dataclass
 class LightCache:
-    """Cached light at region pixels.
-
-    Shapes: P pixels, T frames, N = positions x directions samples.
+    """Cached light at region pixels: P pixels, T frames, S positions, N = S x directions.
 
     Attributes
     ----------
@@ -194,19 +134,16 @@ class LightCache:
     hit : (P, T) bool  every position of the pixel lands on the material
     inv_pdf : (P, T, N)  1 / (p_mix N) [sr]: weight without L_i
     mirror_sky : (P, T, S, 3)  L_i along the mirror direction without the solar disc
-        [W m^-2 sr^-1], per position: the control variate's constant
-    sun_cos : (P, T, S, 3)  cos(theta_h), cos(theta_d) and cos(theta_i) of the sun and view
-        directions per position (:func:`_sun_cos`: the half vector's angle from the normal and
-        from the sun, and the sun's from the normal); NaN where the frame's sun gives no light
-        (none, below the horizon, or behind the surface) [unitless]
-    diffuse_sky : (P, T, S, 3)  I_d, the sky function's cosine-weighted integral / pi per
-        position [W m^-2 sr^-1] (:mod:`.sky_control`)
+        [W m^-2 sr^-1]: the control variate's constant
+    sun_cos : (P, T, S, 3)  cos(theta_h), cos(theta_d), cos(theta_i) of the sun and view
+        (:func:`_sun_cos`); NaN where the frame's sun gives no light
+    diffuse_sky : (P, T, S, 3)  I_d, the sky function's cosine-weighted integral / pi
+        [W m^-2 sr^-1] (:mod:`.sky_control`)
     lobe_sky : (P, T, S, M, 3)  Chebyshev coefficients in log sigma of I_s(sigma), the sky
-        function through the lobe of rho_s = 1, per position [W m^-2 sr^-1]
+        function through the lobe of rho_s = 1 [W m^-2 sr^-1]
     normalisation : the Ward normalisation of that lobe
 
-    ``weight`` and ``mirror_sky`` hold the light less the sky function h (the control
-    variate of :mod:`.sky_control`): L_i - h.
+    ``weight`` and ``mirror_sky`` hold L_i - h, the light less the sky function h.
     """
 
     wo: np.ndarray
@@ -223,16 +160,13 @@ class LightCache:
     normalisation: str = "ward"
 
     def subset(self, rows):
-        """The cache of the pixels ``rows`` (an index or slice of the first axis): a region's
-        share of a cache traced for several regions at once."""
+        """The cache of the pixels ``rows`` (index or slice): one region's share of a cache."""
         return replace(self, **{k: v[rows] for k, v in vars(self).items()
                                 if isinstance(v, np.ndarray)})
 
     def halves(self):
-        """Two independent caches, each from half of every pixel's positions (weights doubled).
-
-        Fits on each estimate the Monte Carlo error the cache adds to a fit on the whole.
-        """
+        """Two independent caches, each from half of every pixel's positions (weights doubled):
+        fits on each estimate the Monte Carlo error the cache adds."""
         S = self.mirror.shape[2]
         if S < 2:
             raise ValueError("a cache with one position per pixel cannot be halved")
@@ -267,12 +201,8 @@ class LightCache:
         return chebyshev_eval(np.moveaxis(self.lobe_sky, 3, 0), x)
 
     def specular_basis(self, sigma_alpha, normalisation="ward"):
-        """G(sigma) with L = ... + rho_s * G: shape (P, T, 3).
-
-        The mirror term for sigma <= 1e-4, linear interpolation from it to G(SIGMA_RESOLVED)
-        below SIGMA_RESOLVED (as the Dr.Jit model does).  ``'radiance'`` is refused
-        (:func:`check_fit_normalisation`).
-        """
+        """G(sigma) with L = ... + rho_s * G: shape (P, T, 3); the mirror term for sigma <= 1e-4,
+        interpolated linearly up to SIGMA_RESOLVED (as the Dr.Jit model does)."""
         check_fit_normalisation(normalisation)
         self.check_normalisation(normalisation)
         if sigma_alpha <= SIGMA_MIRROR:
@@ -298,9 +228,8 @@ class LightCache:
 
 @dataclass
 class PointRays:
-    """Rays that meet measured points (an observation table's), one per point and frame:
-    ``origins`` and unit ``directions`` (P, T, 3) in the world frame [scene units]; each ray
-    starts just off the surface on the instrument's side and points at the surface."""
+    """Rays to measured points, one per point and frame: ``origins`` and unit ``directions``
+    (P, T, 3), world frame [scene units], starting just off the surface on the instrument's side."""
 
     origins: np.ndarray
     directions: np.ndarray
@@ -333,14 +262,10 @@ def _components(K, has_sun):
 
 
 def _sun_cos(sun, view, sky):
-    """cos(theta_h), cos(theta_d) and cos(theta_i) per surface interaction (Q, 3): theta_h the
-    angle between the normal and the half vector h of the sun's and the view's directions
-    (Ward's highlight angle, thesis eq. 3.19), theta_d the angle between the sun and h
-    (Rusinkiewicz's difference angle: half the angle between the sun and the view), theta_i the
-    sun's from the normal (with the other two, the whole configuration of an isotropic
-    reflection: :func:`~skyfit_mi.fitting.geometry.sun_view_angles`), from their local
-    directions ``sun``, ``view`` (Q, 3); NaN where the sun gives no light there (none in
-    ``sky``, below the horizon, or behind the surface)."""
+    """cos(theta_h), cos(theta_d), cos(theta_i) (Q, 3) from local directions ``sun``, ``view``
+    (Q, 3): theta_h from the normal to the half vector h (thesis eq. 3.19), theta_d from the sun
+    to h (Rusinkiewicz's difference angle), theta_i the sun's from the normal
+    (:func:`~skyfit_mi.fitting.geometry.sun_view_angles`); NaN where the sun gives no light."""
     h = sun + view
     h = h / np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-12)
     cos = np.stack([h[:, 2], np.sum(sun * h, axis=1), sun[:, 2]], axis=1)
@@ -357,13 +282,10 @@ def control_weight(sigma_alpha, clip=np.clip):
 
 
 def _stratified(rng, n, count=None):
-    """n stratified 2D samples in [0, 1)^2, in random order: shape (n, 2), or (count, n, 2)
-    for ``count`` independent sets.
+    """n stratified 2D samples in [0, 1)^2, in random order: (n, 2), or (count, n, 2).
 
-    One jittered sample in each of n cells of an a x b grid (a b >= n).  When n is not
-    a b, the n cells are a random subset, so that every sample stays uniform on the
-    square and the estimate unbiased (a fixed subset would leave the same corner
-    unsampled every time).
+    One jittered sample in each of n cells of an a x b grid (a b >= n); when n < a b the cells
+    are a random subset, so every sample stays uniform and the estimate unbiased.
     """
     m = 1 if count is None else int(count)
     if n == 0:
@@ -378,11 +300,8 @@ def _stratified(rng, n, count=None):
 
 def _sky_values(emitter, si, quad):
     """I_d (Q, 3) or None (``quad['diffuse']`` None) and I_s at the nodes of ``quad`` (Q, n, 3)
-    of every surface interaction in ``si`` under the emitter's current sky, or each under its
-    frame's (``emitter`` a :class:`~.sky_control.FrameSkies`); ``quad`` a
-    :func:`~.sky_control.quadrature` on SIGMA_TABLE, or its nodes' subset.  Given a list of
-    emitters, a list of those pairs, one per emitter: each node's integrals under all of them
-    are evaluated together, its directions and lobe once (:func:`~.sky_control._sky_sum`)."""
+    at interactions ``si`` under ``emitter`` (or a :class:`~.sky_control.FrameSkies`); given a
+    list of emitters, a list of pairs, each node's directions and lobe evaluated once for all."""
     emitters = emitter if isinstance(emitter, list) else [emitter]
     diffuse, values = sky_integrals(emitters, si, quad)
     d = [None] * len(emitters) if diffuse is None else [to_numpy(x) for x in diffuse]
@@ -392,15 +311,13 @@ def _sky_values(emitter, si, quad):
 
 
 def _interaction_arrays(si):
-    """What the sky's integrals need of interactions ``si`` as NumPy arrays, each (Q, 3): the
-    view direction and the shading frame's s, t, n (rebuilt by :func:`_interactions`)."""
+    """The view direction and shading frame s, t, n of interactions ``si``, NumPy (Q, 3) each."""
     return [np.array(v, dtype=np.float32).T
             for v in (si.wi, si.sh_frame.s, si.sh_frame.t, si.sh_frame.n)]
 
 
 def _interactions(mi, dr, wi, s, t, n):
-    """Surface interactions with view directions ``wi`` and shading frames (s, t, n), each
-    (Q, 3) NumPy (:func:`_interaction_arrays`)."""
+    """Surface interactions from :func:`_interaction_arrays`' view directions and frames."""
     si = dr.zeros(mi.SurfaceInteraction3f, len(wi))
     si.wi = jit_array(mi.Vector3f, *wi.T)
     si.sh_frame = mi.Frame3f(*(jit_array(mi.Vector3f, *a.T) for a in (s, t, n)))
@@ -408,9 +325,8 @@ def _interactions(mi, dr, wi, s, t, n):
 
 
 def _anchor_plan(pixels, spacing, width, height):
-    """Anchors every ``spacing`` pixels (their centres, clamped to the image) and each pixel's
-    bilinear interpolation between the four around it: the anchors (A, 2), each pixel's
-    corner indices (P, 4) into them and weights (P, 4)."""
+    """Anchors every ``spacing`` pixels (clamped to the image) and each pixel's bilinear
+    interpolation: the anchors (A, 2), each pixel's corner indices (P, 4) and weights (P, 4)."""
     xy = np.asarray(pixels, dtype=int)
     lo = (xy // spacing) * spacing
     hi = np.minimum(lo + spacing, [width - 1, height - 1])
@@ -425,9 +341,8 @@ def _anchor_plan(pixels, spacing, width, height):
 
 
 def anchors_pay(pixels, spacing, width, height):
-    """Whether the sky's anchors every ``spacing`` pixels (a :class:`SkyPlan`'s) are fewer
-    than the ``pixels`` (P, 2) of a ``width`` x ``height`` image: a compact region's are, a
-    scattered subset's are not (its pixels then take their own)."""
+    """Whether anchors every ``spacing`` pixels are fewer than the ``pixels`` (P, 2) of a
+    ``width`` x ``height`` image (a compact region's are, a scattered subset's not)."""
     return spacing is not None and int(spacing) > 1 \
         and len(_anchor_plan(pixels, int(spacing), width, height)[0]) < len(pixels)
 
@@ -444,10 +359,8 @@ def _shape_index(mi, si, target):
 
 
 class _SharedSky:
-    """The pixels' centres and, where anchors every ``spacing`` pixels pay (:func:`anchors_pay`),
-    those anchors and which pixels may interpolate between them, from the geometry alone (the
-    camera and scene are the same in every frame): anchors and pixels are traced once, through
-    their centres."""
+    """The pixels' centres and, where anchors pay (:func:`anchors_pay`), the anchors and which
+    pixels may interpolate between them: traced once from the geometry, the same in every frame."""
 
     def __init__(self, mi, scene, sensor, pixels, spacing, size, target, want=None):
         if anchors_pay(pixels, spacing, *size):
@@ -455,7 +368,7 @@ class _SharedSky:
         else:                                           # every pixel its own centre's
             anchors = np.zeros((0, 2), dtype=int)
             self.corner, self.weight = np.zeros((2, len(pixels), 4), dtype=int)
-        # one trace of the anchors (first A points) and the pixels (the rest)
+        # one trace: the anchors (first A points), then the pixels
         self.A = A = len(anchors)
         self.si, sid, n, m = self._trace(mi, scene, sensor, np.concatenate([anchors, pixels]),
                                          size, target)
@@ -464,8 +377,7 @@ class _SharedSky:
         self.arrays = _interaction_arrays(self.si)
         cos_tol = np.cos(np.radians(SHARE_ANGLE_DEG))
         horizon = np.sin(np.radians(SHARE_HORIZON_DEG))
-        # each pixel's centre on its own material (its integrals are taken there: a pixel
-        # whose centre is not, on an edge, is no pixel of the material, LightCache.hit)
+        # a pixel whose centre misses its material (an edge) is no pixel of it (LightCache.hit)
         self.centred = sid_p >= 0
         if want is not None:
             ids = np.array([shape.bsdf().id() for shape in target], dtype=object)
@@ -491,10 +403,8 @@ class _SharedSky:
         return si, _shape_index(mi, si, target), n, m
 
     def plan(self, sky):
-        """Which pixels interpolate under ``sky``: where allowed, the sky has no map, and every
-        mirror direction is SHARE_SUN_DEG from the sun; the others take their own.  Returns
-        (ok (P,), the anchors used, the pixels taking their own, the indices into the traced
-        interactions of both, in that order)."""
+        """Which pixels interpolate under ``sky`` (no map, mirror directions SHARE_SUN_DEG from
+        the sun): (ok (P,), anchors used, pixels taking their own, both's traced indices)."""
         cos_sun = np.cos(np.radians(SHARE_SUN_DEG))
         sun = np.asarray(sky.sun_direction, dtype=float)
         ok = self.ok & (sky.envmap is None) & (self.m_p @ sun < cos_sun)
@@ -505,8 +415,8 @@ class _SharedSky:
         return ok, used, own, np.concatenate([used, self.A + own])
 
     def combine(self, plan, d, c):
-        """I_d (P, 3) and I_s's coefficients (P, M, 3) of each pixel from the integrals ``d``,
-        ``c`` at the points of ``plan`` (:meth:`plan`); and the number interpolated."""
+        """Each pixel's I_d (P, 3) and I_s coefficients (P, M, 3) from ``d``, ``c`` at the
+        points of ``plan`` (:meth:`plan`), and the number interpolated."""
         ok, used, own, _ = plan
         diffuse, lobe_c = np.zeros((len(ok), 3)), np.zeros((len(ok),) + c.shape[1:])
         at = np.full(self.A, -1)
@@ -524,18 +434,14 @@ class _SharedSky:
 
 @dataclass(frozen=True)
 class CacheOptions:
-    """How a light cache is traced (:func:`light_caches`): the same options, points and
-    lights give the same samples and the same cache.
+    """How a light cache is traced (:func:`light_caches`); the same options, points and lights
+    give the same cache.
 
-    positions, directions : samples per pixel: positions over the pixel's area, and light
-        directions at each
-    seed : int, the seed of every random choice (recorded by the caller)
-    max_depth : path depth for light arriving from the rest of the scene
-    normalisation : the Ward normalisation the cache's sky integrals are for (and the lobe
-        its table is made of, :func:`~.basis_table.trace_basis`)
-    plan : a :class:`SkyPlan` or its name in SKY_PLANS: where the sky's integrals (the
-        control variate's deterministic part) are taken; measured points take theirs once
-        (their positions are one ray)
+    positions, directions : positions over each pixel's area, and light directions at each
+    seed : int, the seed of every random choice
+    max_depth : path depth for light from the rest of the scene
+    normalisation : the Ward normalisation the sky integrals (and basis table) are for
+    plan : a :class:`SkyPlan` or its name in SKY_PLANS (measured points take theirs once)
     """
 
     positions: int = POSITIONS
@@ -553,29 +459,19 @@ class CacheOptions:
 
 def build_light_cache(scene, params, skies, pixels, bsdf_id, *settings, stats=None, others=(),
                       **options):
-    """Trace the light arriving at ``pixels`` for every sky in ``skies``
-    (:func:`light_caches` of one light, or of it and ``others`` on its samples).
+    """Trace the light arriving at ``pixels`` for every sky in ``skies`` (:func:`light_caches`).
 
     Parameters
     ----------
     scene, params : a loaded spec scene and its ``mi.traverse`` parameters
     skies : list of :class:`~skyfit_mi.physics.sky.Sky`, one per frame
-    pixels : (P, 2) int array of (x, y) pixel coordinates, or :class:`PointRays` (measured
-        points: one ray per point and frame)
-    bsdf_id : str, the material whose surface the pixels must show, or one per pixel (P,)
-    settings, options : the fields of :class:`CacheOptions` in its order or by name
-        (positions, directions, seed, max_depth, normalisation, plan)
-    stats : None, or a dict that receives ``shared``, the number of (pixel, frame) pairs whose
-        sky integrals were interpolated
-    others : lights traced with this light's samples, each a list of skies without maps, one
-        per frame of ``skies`` (no map there either) with its frame's sun direction, disc and
-        ground (a sky's shape variants,
-        :func:`~skyfit_mi.physics.sky_shape.shape_variants`): they share every position,
-        sampled direction and random number (each light's paths beyond the first bounce and
-        its radiance its own) and the sky integrals' nodes, so their estimates are correlated
-        (:func:`~.basis_table.trace_basis` keeps the covariances); each costs a small
-        share of a trace of its own (the board's sky and two shape variants, tabulated:
-        65 s, the sky alone 57 s)
+    pixels : (P, 2) int array of (x, y) pixel coordinates, or :class:`PointRays`
+    bsdf_id : str, the material the pixels must show, or one per pixel (P,)
+    settings, options : the fields of :class:`CacheOptions`, in order or by name
+    stats : None, or a dict receiving ``shared``, the (pixel, frame) pairs interpolated
+    others : lights traced on this light's samples (each a list of map-free skies with each
+        frame's sun and ground, :func:`~skyfit_mi.physics.sky_shape.shape_variants`): cheap,
+        but correlated (:func:`~.basis_table.trace_basis` keeps the covariances)
 
     Returns
     -------
@@ -587,17 +483,13 @@ def build_light_cache(scene, params, skies, pixels, bsdf_id, *settings, stats=No
 
 
 def light_caches(scene, params, lights, at, bsdf_id, options=CacheOptions(), stats=None):
-    """The :class:`LightCache` of every light of ``lights`` (each a list of skies, one per
-    frame) at points ``at`` (pixels (P, 2) or :class:`PointRays`) on material ``bsdf_id``
-    (one, or one per point), traced with ``options`` (:class:`CacheOptions`); the lights
-    after the first on the first's samples (:func:`build_light_cache`'s ``others``).
+    """A :class:`LightCache` per light of ``lights`` (each a list of skies, one per frame) at
+    points ``at`` (pixels (P, 2) or :class:`PointRays`) on material ``bsdf_id``, traced with
+    ``options``; later lights on the first's samples (:func:`build_light_cache`).
 
-    Three steps: in each frame (a) :func:`sample_frame`, the positions and directions (rays
-    or pixels), and (c) :func:`trace_samples`, the light along them, the first light's and
-    then each other light's re-run on the same samples; after the frames (b)
-    :func:`sky_plan_integrals`, the sky function's integrals where the named plan
-    (``options.plan``, SKY_PLANS) takes them.  ``stats`` as :func:`build_light_cache`'s.
-    Returns a list of caches, one per light.
+    Per frame (a) :func:`sample_frame` draws positions and directions and (c)
+    :func:`trace_samples` traces each light along them; after the frames (b)
+    :func:`sky_plan_integrals` takes the sky function's integrals where the plan says.
     """
     import drjit as dr
 
@@ -610,7 +502,7 @@ def light_caches(scene, params, lights, at, bsdf_id, options=CacheOptions(), sta
     rng = np.random.default_rng(options.seed)
     outs = [{k: [] for k in ("wo", "wi", "weight", "inv_pdf", "mirror", "mirror_sky",
                              "mirror_cos", "hit", "sun_cos", "diffuse_sky", "lobe_sky")}]
-    # each light's own arrays (the first light's in outs[0], which holds the shared ones)
+    # each other light's own arrays (outs[0] holds the shared ones)
     outs += [{k: [] for k in OWN_ARRAYS} for _ in others]
     pending = []                      # per frame: (points, the shared sky's plan or None)
     for t, sky in enumerate(skies):
@@ -636,8 +528,7 @@ def light_caches(scene, params, lights, at, bsdf_id, options=CacheOptions(), sta
 
 
 def _check_shared(skies, others):
-    """ValueError unless every light of ``others`` can be traced on the samples of ``skies``
-    (:func:`build_light_cache`'s ``others``)."""
+    """ValueError unless every light of ``others`` can be traced on the samples of ``skies``."""
     if others and any(len(light) != len(skies) or any(
             sky.envmap is not None or k.envmap is not None or _has_sun(sky) != _has_sun(k)
             or sky.ground_only != k.ground_only
@@ -649,12 +540,9 @@ def _check_shared(skies, others):
 
 @dataclass
 class _Tracer:
-    """What every frame of one light cache's trace shares: Mitsuba and Dr.Jit, the scene, its
-    environment emitter (the sky, set frame by frame), the path integrator and the sampler;
-    the points (``pixels`` (P, 2) of the first sensor, of film ``size``, or ``rays``), S
-    positions and K directions each, and the material ``want`` (P,) each must show (the
-    ``target`` shapes carry it, ``ids`` their materials); ``repeat`` each position's index K
-    times."""
+    """What every frame of one cache's trace shares: the points (``pixels`` (P, 2) of a film of
+    ``size``, or ``rays``), S positions and K directions each, the material ``want`` (P,) each
+    must show (on ``target`` shapes with materials ``ids``); ``repeat`` each position K times."""
 
     mi: object
     dr: object
@@ -679,8 +567,7 @@ class _Tracer:
 
 
 def _tracer(scene, at, bsdf_id, options):
-    """The :class:`_Tracer` of points ``at`` (pixels (P, 2) or :class:`PointRays`) on material
-    ``bsdf_id`` (one, or one per point) with ``options``' samples and depth."""
+    """The :class:`_Tracer` of points ``at`` on material(s) ``bsdf_id`` with ``options``."""
     import drjit as dr
     import mitsuba as mi
 
@@ -710,12 +597,10 @@ def _tracer(scene, at, bsdf_id, options):
 
 @dataclass
 class _Samples:
-    """One frame's samples (:func:`sample_frame`), Dr.Jit values: the first interactions
-    ``si`` (P S) and each repeated K times ``sik``, the sampled directions ``d`` (world) and
-    ``wl`` (local), ``inv_pdf`` 1 / (p_mix N) [sr], the mirror rays ``ray_m`` (P S), whether
-    the solar disc lies along them (``sun_seen``), the sun's direction in each position's
-    local frame (``sun``), and the sampler's ``seeds`` of the directions' and the mirror
-    rays' paths."""
+    """One frame's samples (:func:`sample_frame`), Dr.Jit values: interactions ``si`` (P S),
+    each repeated K times ``sik``, directions ``d`` (world) and ``wl`` (local), ``inv_pdf``
+    1 / (p_mix N) [sr], mirror rays ``ray_m`` and whether they see the solar disc
+    (``sun_seen``), the local sun direction ``sun``, and the paths' sampler ``seeds``."""
 
     si: object
     sik: object
@@ -730,14 +615,10 @@ class _Samples:
 
 def sample_frame(tr, sky, t, rng):
     """Step (a) of :func:`light_caches`: frame ``t``'s positions and light directions under
-    ``sky`` (the emitter's current sky, whose sun disc and sky table the directions sample),
-    from ``rng``, as :class:`_Samples`.
+    ``sky`` (the emitter's current sky), from ``rng``, as :class:`_Samples`.
 
-    Pixels take S stratified positions each (primary rays jittered over the pixel); a
-    measured point's S positions are its frame's one ray.  At each position K directions
-    in fixed counts per component of the mixture (:func:`_components`: sun, sky, cosine and
-    the Ward lobes of LOBE_SIGMAS), stratified within each component's block, weighted by
-    the mixture's density (multi-sample MIS, balance heuristic).
+    S stratified positions per pixel (a measured point's are its one ray); at each, K directions
+    in fixed counts per mixture component (:func:`_components`), stratified within each.
     """
     from .plugins.ward import glossy_pdf, sample_glossy     # a plugin: needs the variant set
 
@@ -745,29 +626,25 @@ def sample_frame(tr, sky, t, rng):
     P, S, K = tr.P, tr.S, tr.K
     n_comp = 3 + len(LOBE_SIGMAS)
     comp = _components(K, _has_sun(sky))
-    # each component's share of the directions, opaque: one kernel with and without a sun
+    # opaque: one kernel with and without a sun
     frac = [opaque_value(mi.Float, np.sum(comp == c) / K) for c in range(n_comp)]
     seeds = [opaque_value(mi.UInt32, int(rng.integers(2**31))) for _ in range(2)]
     if tr.rays is None:
-        # primary rays: S stratified positions in each pixel
         pos = (tr.pixels[:, None, :] + _stratified(rng, S)[None]).reshape(P * S, 2) \
             / list(tr.size)
         ray, _ = tr.sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
                                       jit_array(mi.Point2f, pos[:, 0], pos[:, 1]),
                                       mi.Point2f(0.5, 0.5))
     else:
-        # a point's S positions are the same ray (a measured point has no pixel area)
         o, d = (np.repeat(a[:, t], S, axis=0) for a in (tr.rays.origins, tr.rays.directions))
         ray = mi.Ray3f(jit_array(mi.Point3f, *o.T), jit_array(mi.Vector3f, *d.T))
     si = tr.scene.ray_intersect(ray)
     sik = dr.gather(mi.SurfaceInteraction3f, si, tr.repeat)
-    # stratified within each component's block of directions
     u = np.concatenate([_stratified(rng, int(np.sum(comp == c)), P * S)
                         for c in range(n_comp)], axis=1).reshape(P * S * K, 2)
     u2 = jit_array(mi.Point2f, u[:, 0], u[:, 1])
-    # candidate directions from every component, then pick each sample's own (the lobes
-    # as functions, not plugins: every registered BSDF is one more target of the path
-    # integrator's virtual calls, traced in every frame)
+    # candidates from every component, then each sample's own (lobes as functions, not
+    # plugins: each registered BSDF adds a virtual-call target to the path integrator)
     cands = [emitter.sample_sun(u2), emitter.sample_sky(u2),
              sik.to_world(mi.warp.square_to_cosine_hemisphere(u2))]
     cands += [sik.to_world(sample_glossy(sik.wi, u2, s)) for s in LOBE_SIGMAS]
@@ -792,13 +669,10 @@ def sample_frame(tr, sky, t, rng):
 
 
 def trace_samples(tr, samples, sky=None, params=None):
-    """The light along one frame's ``samples`` (:func:`sample_frame`), Dr.Jit values: the
-    directions' weights (L_i - h) / (p_mix N) [W m^-2 sr^-1 sr] (the control variate's rest),
-    the mirror rays' L_i and their L_i without the solar disc, less h (the control variate's
-    constant) [W m^-2 sr^-1]; under the emitter's current sky, or (step (c) of
-    :func:`light_caches`) under ``sky``, set in the scene's ``params``: another light re-run
-    on the same positions, directions and random numbers (its paths beyond the first bounce
-    and its radiance its own)."""
+    """Step (c) of :func:`light_caches`: the light along ``samples``, Dr.Jit values: weights
+    (L_i - h) / (p_mix N) [W m^-2 sr^-1 sr], the mirror rays' L_i, and their L_i less the solar
+    disc and h [W m^-2 sr^-1]; under the emitter's current sky, or ``sky`` set in ``params``
+    (another light on the same samples and random numbers)."""
     mi, dr, emitter = tr.mi, tr.dr, tr.emitter
     if sky is not None:
         update_sky(params, sky, "sky.")
@@ -814,9 +688,8 @@ def trace_samples(tr, samples, sky=None, params=None):
 
 
 def _keep_frame(tr, outs, samples, traced, sky):
-    """Append one frame's arrays, evaluated, to the caches' lists ``outs`` (every light's own,
-    the first light's with the samples' shared ones): the frame's ``samples`` and each light's
-    ``traced`` light (:func:`trace_samples`) under frame sky ``sky``."""
+    """Append one frame's ``samples`` and each light's ``traced`` light, evaluated, to the
+    caches' lists ``outs`` (the shared arrays in the first's)."""
     P, S, K = tr.P, tr.S, tr.K
 
     def np3(v, n):
@@ -840,17 +713,14 @@ def _keep_frame(tr, outs, samples, traced, sky):
 
 @dataclass
 class _SkyLayout:
-    """Where one light cache takes the sky's integrals: its :class:`SkyPlan` made concrete for
-    its points (:func:`_sky_layout`).
+    """A :class:`SkyPlan` made concrete for one cache's points (:func:`_sky_layout`).
 
     quad : the quadrature on SIGMA_TABLE (:func:`~.sky_control.quadrature`)
     is_wide : (M,) bool, the Chebyshev nodes a fit's plan takes at a few positions
     share : a :class:`_SharedSky` where the plan takes the pixels' centres, else None
-    subset : None (every position), or the Dr.Jit indices of the positions taking them (a
-        measured point's first)
-    wide : whether the wide nodes and the diffuse integral are taken at ``kw`` positions of
-        each half (``wide_index``, under ``quads[0]``), the rest at every one (``quads[1]``);
-        settled by the first frame's footprints (:func:`_small_footprints`)
+    subset : None (every position), or Dr.Jit indices of the positions taking them
+    wide : whether the wide nodes and I_d are taken at ``kw`` positions per half (``wide_index``,
+        ``quads[0]``), the rest at every one (``quads[1]``); settled by the first frame
     """
 
     quad: dict
@@ -872,19 +742,15 @@ def _sky_layout(tr, skies, options):
         share = _SharedSky(mi, tr.scene, tr.sensor, tr.pixels, int(plan.spacing), tr.size,
                            tr.target, tr.want)
     quad = quadrature(*SIGMA_TABLE, options.normalisation)
-    # the sky's integrals at every position (a measured point's positions are one ray: its
-    # integrals are one), or through the pixels' centres (computed apart, with _SharedSky's
-    # own trace)
+    # a measured point's positions are one ray: one integral
     subset = None if tr.rays is None or S == 1 else jit_array(mi.UInt32, np.arange(P) * S)
     # a fit's: the wide nodes and the diffuse integral at kw positions of each half
     half = S // 2
     kw = 0 if plan.wide_share is None else max(1, int(S * float(plan.wide_share)) // 2)
     is_wide = chebyshev_nodes(*SIGMA_TABLE) >= WIDE_SIGMA
     if all(sky.ground_only for sky in skies):
-        # the sun's part of a split light (Sky.split): its sky function is the sun-lit ground
-        # alone, uniform below the horizon, which changes across a small footprint only for
-        # lobes that straddle the horizon: every node is taken as a wide one (a tilted
-        # plane's pixel means move 0.3% of the ground's share, tests/test_light_cache.py)
+        # the sun's part of a split light (Sky.split): the ground alone, uniform, changes
+        # across a small footprint only for lobes straddling the horizon: all nodes are wide
         is_wide[:] = True
     layout = _SkyLayout(quad, is_wide, share, subset, kw=kw,
                         wide=tr.rays is None and share is None and 1 <= kw < half
@@ -900,16 +766,15 @@ def _sky_layout(tr, skies, options):
 
 
 def _frame_points(tr, layout, si, sky, t):
-    """The interactions of frame ``t`` (``si``, under ``sky``) whose sky integrals ``layout``
-    takes, Dr.Jit values: (shared, whether the pixels' centres' are; own, those at the
-    plan's positions, or None where shared; few, those at the wide nodes' positions, or None); the
-    first frame settles ``layout.wide`` by the pixels' footprints."""
+    """Frame ``t``'s interactions whose sky integrals ``layout`` takes: (shared, whether the
+    pixels' centres' are; own, at the plan's positions, or None; few, at the wide nodes'
+    positions, or None); the first frame settles ``layout.wide``."""
     mi, dr = tr.mi, tr.dr
     shared = layout.share is not None
     own = None if shared else \
         si if layout.subset is None else dr.gather(mi.SurfaceInteraction3f, si, layout.subset)
-    if layout.wide and t == 0:             # the pixels' footprints, from the first frame's
-        layout.wide = _small_footprints(                                 # positions
+    if layout.wide and t == 0:
+        layout.wide = _small_footprints(
             np.array(si.sh_frame.n, dtype=float).T,
             np.array(si.to_world(mi.reflect(si.wi)), dtype=float).T, tr.P, tr.S)
     few = dr.gather(mi.SurfaceInteraction3f, si, layout.wide_index) if layout.wide else None
@@ -917,9 +782,8 @@ def _frame_points(tr, layout, si, sky, t):
 
 
 def _pending(layout, shared, own, few, sky):
-    """A frame's points for :func:`sky_plan_integrals` (from :func:`_frame_points`,
-    evaluated): (the points' :func:`_interaction_arrays`, or with ``layout.wide`` the few
-    positions' and every one's; the shared sky's plan under ``sky`` or None)."""
+    """A frame's points for :func:`sky_plan_integrals`: (their :func:`_interaction_arrays`, or
+    with ``layout.wide`` the few positions' and all; the shared sky's plan or None)."""
     if shared:
         plan = layout.share.plan(sky)
         return layout.share.points(plan[3]), plan
@@ -929,12 +793,10 @@ def _pending(layout, shared, own, few, sky):
 
 
 def sky_plan_integrals(tr, params, lights, layout, pending, outs, stats=None):
-    """Step (b) of :func:`light_caches`: the sky function's integrals (I_d and I_s's
-    coefficients, :mod:`.sky_control`) of every light at every frame's ``pending`` points
-    (:func:`_pending`) where ``layout`` takes them, appended to each light's lists ``outs``;
-    ``stats['shared']`` counts the first light's interpolated (pixel, frame) pairs."""
+    """Step (b) of :func:`light_caches`: every light's I_d and I_s coefficients at each frame's
+    ``pending`` points, appended to ``outs``; ``stats['shared']`` counts interpolated pairs."""
     P, S = tr.P, tr.S
-    # the sun alone (Sky.split's first part) has a sky function of zero, so are its integrals
+    # the sun alone (Sky.split's first part) has a zero sky function
     lit = [i for i, light in enumerate(lights) if any(sky.lit_by_sky for sky in light)]
     for i in set(range(len(lights))) - set(lit):
         for _ in pending:
@@ -954,9 +816,7 @@ def sky_plan_integrals(tr, params, lights, layout, pending, outs, stats=None):
 
 
 def _wide_integrals(tr, params, lights, layout, pending, outs, lit):
-    """:func:`sky_plan_integrals` of a fit's plan (``layout.wide``): the diffuse integral and
-    the wide nodes at ``layout.kw`` positions of each half, each half's mean given to its
-    positions, the narrow nodes at every position; for the lights ``lit``."""
+    """:func:`sky_plan_integrals` under a fit's plan (``layout.wide``) for the lights ``lit``."""
     P, S, is_wide, kw = tr.P, tr.S, layout.is_wide, layout.kw
     half = S // 2
     narrow = _integrate(tr, params, lights, [p[1] for p, _ in pending], layout.quads[1], lit) \
@@ -964,7 +824,6 @@ def _wide_integrals(tr, params, lights, layout, pending, outs, lit):
     wide = _integrate(tr, params, lights, [p[0] for p, _ in pending], layout.quads[0], lit)
     for i, wides, narrows in zip(lit, wide, narrow):
         for (d, v_wide), (_, v_narrow) in zip(wides, narrows):
-            # each half's mean over its k / 2 positions, given to the half's positions
             d, v_wide = (np.repeat(a.reshape(P, 2, kw, *a.shape[1:]).mean(axis=2),
                                    [half, S - half], axis=1) for a in (d, v_wide))
             values = np.empty((P, S, len(is_wide), 3))
@@ -977,12 +836,10 @@ def _wide_integrals(tr, params, lights, layout, pending, outs, lit):
 
 
 def _integrate(tr, params, lights, points, q, which):
-    """Per frame, :func:`_sky_values` under ``quad`` ``q`` at its ``points`` (each frame's
-    :func:`_interaction_arrays`), for each light of ``which`` (indices into ``lights``): a
-    list per light.  Every frame's, in passes of up to SKY_PASS_POINTS points (at least a
-    frame), each point under its own frame's sky (FrameSkies); a frame whose sky has a map
-    alone, under the emitter set to that sky.  A pass's nodes hold every light's values at
-    once, so it goes in as many pieces as lights: its memory is one light's."""
+    """Per frame, :func:`_sky_values` under quadrature ``q`` at its ``points``, for each light
+    of ``which``: a list per light.  Passes of up to SKY_PASS_POINTS points (at least a frame),
+    each under its frame's sky; a sky with a map alone.  A pass goes in as many pieces as lights,
+    so its memory is one light's."""
     skies = lights[0]
     res, first = [[] for _ in which], 0
     while first < len(points):
@@ -1015,8 +872,8 @@ def _integrate(tr, params, lights, points, q, which):
 
 
 def _small_footprints(normals, mirrors, P, S):
-    """Whether every pixel's positions' world ``normals`` and mirror directions (P S, 3) lie
-    within WIDE_SPREAD_DEG of their pixel's mean (a position off every surface fails)."""
+    """Whether every pixel's ``normals`` and ``mirrors`` (P S, 3) lie within WIDE_SPREAD_DEG of
+    their pixel's mean (NaN fails)."""
     cos_max = np.cos(np.radians(WIDE_SPREAD_DEG))
     for d in (normals, mirrors):
         d = d.reshape(P, S, 3)
@@ -1024,16 +881,16 @@ def _small_footprints(normals, mirrors, P, S):
         mean = mean / np.maximum(np.linalg.norm(mean, axis=2, keepdims=True), 1e-30)
         with np.errstate(invalid="ignore"):
             cos = np.sum(d * mean, axis=2) / np.linalg.norm(d, axis=2)
-        if not np.all(cos >= cos_max):                                # NaN fails too
+        if not np.all(cos >= cos_max):
             return False
     return True
 
 
 def _add_sky(out, diffuse, lobe, P, S):
     """Append one frame's I_d (P k, 3) and I_s coefficients (P k, M, 3) at k of each pixel's S
-    positions (their mean given to all S when k < S) to the cache's lists ``out``."""
+    positions (their mean to all S when k < S) to ``out``."""
     diffuse, lobe = (a.reshape(P, -1, *a.shape[1:]) for a in (diffuse, lobe))
-    if diffuse.shape[1] < S:                           # the subset's mean for every position
+    if diffuse.shape[1] < S:
         diffuse, lobe = (a.mean(axis=1, keepdims=True) for a in (diffuse, lobe))
     out["diffuse_sky"].append(np.broadcast_to(diffuse, (P, S, 3)))
     out["lobe_sky"].append(np.broadcast_to(lobe, (P, S) + lobe.shape[2:]))

@@ -1,13 +1,10 @@
 """The global method's closed-form grid, on the device: Ward's model linear in its reflectances.
 
-Given sigma_alpha, Ward's model is linear in rho_d and rho_s (thesis eq. 3.19), so on the
-basis L = rho_d D + rho_s G(sigma) a model's remaining linear parameter (R, or C per channel)
-has a closed-form bounded least-squares value at every (sigma_alpha, rho_s) grid point.
-:func:`linear_form` is that algebra (arithmetic only, so NumPy arrays, for the region grid of
-:mod:`~skyfit_mi.fitting.methods.global_search`, and Dr.Jit arrays both serve);
-:func:`grid_on_device` scores every pixel's grid in one double-precision Dr.Jit kernel on the
-current variant's device (LLVM or CUDA), so that only the weighted sums go in and the grid
-comes back once.
+Given sigma_alpha, Ward's model is linear in rho_d and rho_s (thesis eq. 3.19), so on the basis
+L = rho_d D + rho_s G(sigma) a model's remaining linear parameter (R, or C per channel) has a
+closed-form bounded least-squares value at every (sigma_alpha, rho_s) grid point.
+:func:`linear_form` is that algebra (for NumPy or Dr.Jit arrays); :func:`grid_on_device` scores
+every pixel's grid in one double-precision Dr.Jit kernel on the current variant's device.
 """
 
 import numpy as np
@@ -30,12 +27,11 @@ def linear_form(metal, r2, a, b, c, yd, yg, yy):
 
 def grid_on_device(sums, rho, achromatic):
     """Every pixel's chi^2 and bounded linear parameters L in [0, 1] at every (sigma, rho_s)
-    grid point, in one Dr.Jit kernel in double precision.
+    grid point, in one double-precision Dr.Jit kernel.
 
-    ``sums`` = (a, b, c, yd, yg, yy) of :func:`linear_form` per pixel: a, yd, yy (P, groups),
-    b, c, yg (K, P, groups) over the K roughnesses (groups: 1 for R, 3 for C per channel);
-    ``rho`` (R,) the rho_s grid; ``achromatic``: every point has the metal form (R scales the
-    lobe).  Returns chi2 (K, R, P) and L (K, R, P, groups), NumPy float64.
+    ``sums`` = (a, b, c, yd, yg, yy) of :func:`linear_form`: a, yd, yy (P, groups), b, c, yg
+    (K, P, groups) (groups: 1 for R, 3 for C); ``rho`` (R,) the rho_s grid; ``achromatic``: the
+    metal form everywhere.  Returns chi2 (K, R, P) and L (K, R, P, groups), NumPy float64.
     """
     import drjit as dr
     import mitsuba as mi

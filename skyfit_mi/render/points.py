@@ -15,12 +15,9 @@ def load_points_scene(xml, variant):
 
 
 def surface_hits(scene, origins, directions):
-    """Trace rays (origins, unit directions (N, 3), world frame) through a loaded ``scene``.
-
-    Returns a dict: ``p`` hit points (N, 3) (NaN on a miss), ``n`` shading normals (N, 3),
-    ``t`` distances (N,) (inf on a miss), ``material`` the hit shape's BSDF id (None on a
-    miss), and ``scale`` the scene's bounding-box diagonal [scene units].
-    """
+    """Trace rays (origins, unit directions (N, 3), world frame) through a loaded ``scene``:
+    a dict of hit points ``p`` (N, 3) (NaN on a miss), shading normals ``n``, distances ``t``
+    (N,) (inf), the hit ``material`` id (None) and ``scale``, the bounding-box diagonal."""
     import mitsuba as mi
 
     o = np.asarray(origins, dtype=float)
@@ -54,11 +51,10 @@ def pixel_points(scene, pixels):
 
 def lambertian_radiance(xml, variant, skies, rays, material, max_depth, seed=0,
                         positions=POSITIONS, directions=DIRECTIONS):
-    """The radiance a white Lambertian surface (reflectance 1) on ``material`` reflects along
-    ``rays`` (:class:`~.light_cache.PointRays`, P points x T frames) under ``skies`` (T) in
-    scene ``xml`` loaded in ``variant``, traced by the light cache as a fit traces its points
-    (``max_depth`` for the light arriving from the rest of the scene), and its Monte Carlo
-    variance: (P, T, 3) [W m^-2 sr^-1] and [(W m^-2 sr^-1)^2]."""
+    """The radiance a white Lambertian surface on ``material`` reflects along ``rays``
+    (:class:`~.light_cache.PointRays`, P points x T frames) under ``skies`` (T), traced by the
+    light cache as a fit traces its points, and its Monte Carlo variance: (P, T, 3)
+    [W m^-2 sr^-1] and [(W m^-2 sr^-1)^2]."""
     scene = load_points_scene(xml, variant)
     options = CacheOptions(positions, directions, seed, max_depth)
     (diffuse,), _, _ = trace_basis(scene, setup(variant).traverse(scene), [list(skies)], rays,

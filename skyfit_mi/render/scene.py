@@ -10,10 +10,8 @@ from .daylight import jit_array
 
 
 def camera_origin(azimuth_deg, angle_deg, distance, target=(0.0, 0.0, 0.0)):
-    """Camera position at compass ``azimuth_deg`` from the target, ``angle_deg`` from the vertical.
-
-    E.g. the thesis's east camera at 45 degrees: ``camera_origin(90, 45, d)``.
-    """
+    """Camera position at compass ``azimuth_deg`` from the target, ``angle_deg`` from the vertical
+    (the thesis's east camera at 45 degrees: ``camera_origin(90, 45, d)``)."""
     check_range("camera angle from the normal", angle_deg, 0.0, 89.0, "degrees")
     check_range("camera distance", distance, 1e-6, np.inf)
     d = direction_from_angles(np.radians(angle_deg), np.radians(azimuth_deg))
@@ -27,9 +25,8 @@ UP = (0.0, 0.0, 1.0)
 def look_at(origin, target, up=None):
     """Camera to_world 4x4 as Mitsuba's look_at builds it (columns: left, up, forward, origin).
 
-    With the default ``up`` (+Z), a camera looking (nearly) straight up or down takes north
-    (+Y) as up, so north is up in the image; an ``up`` given explicitly must not lie along the
-    view.  Raises SkyfitError for a camera at its target or an ``up`` along the view.
+    With the default ``up`` a camera looking (nearly) straight up or down takes north (+Y) as
+    up.  Raises SkyfitError for a camera at its target or an explicit ``up`` along the view.
     """
     o, t = np.asarray(origin, dtype=float), np.asarray(target, dtype=float)
     u = np.asarray(UP if up is None else up, dtype=float)
@@ -72,18 +69,17 @@ def camera_matrix(cam):
     return look_at(origin, target, cam.get("up"))
 
 
-#: The pose's angles whose uncertainty a fit propagates (``[camera] pose_sd_deg``): the compass
-#: azimuth (about the vertical through the target), the angle from the vertical (about the
-#: horizontal axis across the view) and the roll (about the view axis).
+#: The pose's angles whose uncertainty a fit propagates (``[camera] pose_sd_deg``): compass
+#: azimuth, angle from the vertical and roll (:func:`turn_camera`).
 POSE_ANGLES = ("azimuth", "angle", "roll")
 #: The largest pose sd taken [deg]: beyond it a linearised shift means little.
 POSE_SD_MAX = 10.0
 
 
 def pose_sd(value):
-    """{azimuth, angle, roll}: the pose's 1-sd [deg] from ``value``, one number (azimuth and
-    angle from the vertical, each; roll 0), a table of some of POSE_ANGLES (the rest 0) or None
-    (0); each in [0, POSE_SD_MAX].  Raises SkyfitError otherwise."""
+    """{azimuth, angle, roll}: the pose's 1-sd [deg] from ``value``: one number (azimuth and
+    angle; roll 0), a table of some of POSE_ANGLES (the rest 0) or None; each in
+    [0, POSE_SD_MAX], else SkyfitError."""
     if value is None:
         value = 0.0
     if not isinstance(value, dict):
@@ -104,10 +100,8 @@ def pose_sd(value):
 
 def turn_camera(to_world, pivot, angle, deg):
     """The camera ``to_world`` (4x4) turned by ``deg`` [deg] about ``pivot`` (3,) [m] in one of
-    POSE_ANGLES: ``azimuth`` clockwise seen from above (the compass azimuth from the pivot
-    grows), ``angle`` about the horizontal axis across the view (the angle from the vertical
-    grows), ``roll`` about the view axis; as a compass placement's azimuth_deg and angle_deg
-    move the camera about its target (:func:`camera_origin`)."""
+    POSE_ANGLES: ``azimuth`` clockwise seen from above, ``angle`` about the horizontal axis
+    across the view (away from the vertical), ``roll`` about the view axis."""
     m = np.asarray(to_world, dtype=float)
     forward = m[:3, 2]
     axis = {"azimuth": np.array([0.0, 0.0, -1.0]), "roll": forward,
@@ -128,8 +122,7 @@ def turn_camera(to_world, pivot, angle, deg):
 
 @contextmanager
 def camera_at(scene, to_world):
-    """Within the block, the scene's first sensor placed at ``to_world`` (4x4); its own
-    placement restored after."""
+    """Within the block, the scene's first sensor placed at ``to_world`` (4x4), then restored."""
     import mitsuba as mi
 
     sensor = mi.traverse(scene.sensors()[0])

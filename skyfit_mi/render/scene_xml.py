@@ -1,9 +1,8 @@
 """Scenes from the Mitsuba XML files in ``scenes/`` plus a spec's materials, sky and camera.
 
-A scene file holds geometry and ``ward`` materials with ids; the spec may
-override any of those materials (any parameterisation).  The loader adds the
-``cie_sky`` emitter (id ``sky``), an optional ground plane, the integrator and
-the camera, and returns the scene with its ``mi.traverse`` parameters.
+A scene file holds geometry and ``ward`` materials with ids, which the spec may override.  The
+loader adds the ``cie_sky`` emitter (id ``sky``), an optional ground plane, the integrator and
+the camera.
 """
 
 import xml.etree.ElementTree as ET
@@ -121,7 +120,7 @@ def build_scene_xml(spec):
 
 def pass_spp(spp, sampler):
     """Samples per pixel of each of the two passes: half of ``spp``, rounded to a square for
-    the stratified samplers (which need one and would otherwise round it themselves)."""
+    the stratified samplers."""
     half = max(1, int(spp) // 2)
     if sampler in ("multijitter", "stratified"):
         half = max(1, int(round(np.sqrt(half)))) ** 2

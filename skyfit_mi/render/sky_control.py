@@ -1,36 +1,25 @@
 """The sky's own share of a surface point's radiance, integrated deterministically.
 
-The light cache (:mod:`.light_cache`) estimates the light a material reflects from fixed
-sampled directions.  Most of that light comes straight from the sky, whose radiance h(w)
-is a known function: the ``cie_sky`` emitter's pattern sum without the solar disc
-(:meth:`~skyfit_mi.render.plugins.cie_sky.CIESkyEmitter.sky_eval`, thesis eqs. 4.12-4.18).
-Taking h as a control variate,
+The sky's radiance h(w) is a known function: the ``cie_sky`` emitter's pattern sum without the
+solar disc (:meth:`~skyfit_mi.render.plugins.cie_sky.CIESkyEmitter.sky_eval`, thesis eqs.
+4.12-4.18).  Taking it as the light cache's control variate,
 
     L = sum_k f_r cos(theta_k) (L_i(w_k) - h(w_k)) / (p(w_k) N)  +  integral f_r cos(theta) h dw
 
-is still an unbiased estimate of L for any f_r, and its samples only carry what differs from
-the unoccluded sky: the sun, the scene's own geometry and its shadows.  With f_r = rho_d /
-pi + s lobe(sigma) (thesis eq. 3.19) the integral is rho_d I_d + s I_s(sigma), so two
-deterministic integrals per surface point serve every parameter value:
+is still unbiased for any f_r, its samples carrying only the sun, the scene's geometry and its
+shadows.  With f_r = rho_d / pi + s lobe(sigma) (thesis eq. 3.19) the integral is
+rho_d I_d + s I_s(sigma), two deterministic integrals per surface point:
 
-* I_d = integral cos(theta)/pi h dw over the surface's hemisphere [W m^-2 sr^-1]
-  (:func:`diffuse_directions`), and
+* I_d = integral cos(theta)/pi h dw over the hemisphere [W m^-2 sr^-1] (:func:`diffuse_directions`)
 * I_s(sigma) = integral lobe(wi, wo; sigma) cos(theta_i) h(wi) dwi [W m^-2 sr^-1]
-  (:func:`lobe_directions`), computed at CHEBYSHEV_NODES roughness values and kept as a
-  Chebyshev series in log sigma (:func:`chebyshev_nodes`, :func:`chebyshev_coefficients`,
-  :func:`chebyshev_eval`), smooth in sigma, so that Dr.Jit differentiates it.
+  (:func:`lobe_directions`), kept as a Chebyshev series in log sigma (:func:`chebyshev_eval`)
+  that Dr.Jit differentiates.
 
-Both quadratures split their domain where the integrand is not smooth.  The lobe's nodes lie
-along rays of the half vector's slope (tan delta cos phi, tan delta sin phi), each ending at
-the surface's horizon or at TRUNCATION sigma (where the lobe is e^-16 of its peak) and cut
-where it first crosses the world's horizon (where a sky without Radiance's blend jumps to the
-ground); the radial variable is tau = exp(-tan^2 delta / sigma^2), in which the lobe is
-constant, and each piece takes Gauss-Legendre nodes through a smoothstep map, whose vanishing
-slope at both ends absorbs the integrand's square-root behaviour at the surface's horizon
-(Ward's 1/sqrt(cos_i cos_o)) and at the lobe's centre.  The diffuse term's nodes lie along
-rays of azimuth, Gauss-Legendre in the polar angle, cut at the world's horizon.  Both are
-tested against brute force (tests/test_sky_control.py); the cusp of the clear sky's
-circumsolar peak limits them to a few 1e-4.
+Both quadratures split their rays where the integrand is not smooth (the world's horizon,
+where the sky may jump to the ground).  The lobe's rays of the half vector's slope use the
+radial variable tau = exp(-tan^2 delta / sigma^2), in which the lobe is constant, with
+Gauss-Legendre nodes through a smoothstep map whose zero end slopes absorb Ward's
+1/sqrt(cos_i cos_o) at the horizon.  Accuracy against brute force: tests/test_sky_control.py.
 """
 
 import numpy as np
@@ -40,14 +29,11 @@ from .daylight import RGB_KEYS, float_parameters, jit_array, opaque_value
 #: Roughness values at which I_s is integrated: the Chebyshev series' degree + 1.
 CHEBYSHEV_NODES = 16
 #: The lobe quadrature's resolution by roughness: (largest sigma, rays of the half vector's
-#: slope, Gauss-Legendre nodes per piece of a ray).  A wide lobe sees the sky's structure (the
-#: circumsolar peak, the horizon); against brute force (tests/test_sky_control.py) the
-#: integral is exact to 1e-4 up to sigma 0.1, 3e-4 at 0.2 and 1e-3 at 0.5.
+#: slope, Gauss-Legendre nodes per piece of a ray); a wide lobe sees more of the sky's structure.
 LOBE_RESOLUTION = ((0.12, 16, 6), (0.25, 32, 8), (float("inf"), 64, 12))
-#: The same for GGX lobes, whose long tails see the whole sky (the circumsolar peak from any
-#: view): exact to 1.5e-4 up to sigma 0.12 and 1e-4 at 0.3 (16 rays of 6 nodes: 7e-3).
+#: The same for GGX lobes, whose long tails see the whole sky (the circumsolar peak from any view).
 GGX_RESOLUTION = ((0.12, 32, 24), (float("inf"), 64, 24))
-#: The diffuse quadrature's rays of azimuth and Gauss-Legendre nodes per piece: exact to 2e-4.
+#: The diffuse quadrature's rays of azimuth and Gauss-Legendre nodes per piece.
 DIFFUSE_AZIMUTHS, DIFFUSE_POLAR = 64, 24
 #: Where the lobe's rays end: tan delta = TRUNCATION sigma, exp(-TRUNCATION^2) of the peak.
 TRUNCATION = 4.0
@@ -61,8 +47,8 @@ def _smoothstep_legendre(n):
 
 
 def _tables(n_rays, n, smoothstep):
-    """Per node j of one surface point: its ray's azimuth, its piece (two per ray), y and weight
-    (Gauss-Legendre on (0, 1), through the smoothstep map or not)."""
+    """Per node of one surface point: its ray's azimuth, its piece (two per ray), y and weight
+    (Gauss-Legendre on (0, 1), optionally through the smoothstep map)."""
     if smoothstep:
         y, wy = _smoothstep_legendre(n)
     else:
@@ -79,8 +65,7 @@ def _table_arrays(mi, n_rays, n, smoothstep):
 
 
 def _per_node(mi, dr, Q, tables):
-    """Index of each node's surface point, and its table values (``tables``:
-    :func:`_table_arrays`) gathered for every node."""
+    """Each node's surface point index, and its :func:`_table_arrays` values."""
     J = dr.width(tables[0])
     i = dr.arange(mi.UInt32, Q * J)
     q, j = i // J, i % J
@@ -89,16 +74,15 @@ def _per_node(mi, dr, Q, tables):
 
 
 def _pieces(dr, piece, y, wy, mid, end, start=0.0):
-    """The node's position along its ray, in two pieces from the ray's breakpoints start, mid,
-    end (in order, increasing or decreasing), and its weight (d position, signed)."""
+    """The node's position along its ray, in two pieces between breakpoints start, mid, end
+    (monotone), and its signed weight."""
     first = piece < 0.5
     lo, hi = dr.select(first, start, mid), dr.select(first, mid, end)
     return lo + (hi - lo) * y, (hi - lo) * wy
 
 
 def lobe_resolution(sigma, distribution="beckmann"):
-    """(rays, nodes per piece) of the lobe quadrature at roughness ``sigma`` (LOBE_RESOLUTION,
-    or GGX_RESOLUTION for the ``distribution`` 'ggx')."""
+    """(rays, nodes per piece) of the lobe quadrature at roughness ``sigma``."""
     table = GGX_RESOLUTION if distribution == "ggx" else LOBE_RESOLUTION
     return next((n, k) for top, n, k in table if sigma <= top)
 
@@ -116,13 +100,10 @@ def lobe_directions(wo, up, sigma, n_rays, n_radial, tables=None, distribution="
     distribution : 'beckmann' (Ward's lobes and Beckmann's) or 'ggx': the radial variable
 
     Returns wi (Q J) local light directions, weights (Q J) [sr], each node's point index q and
-    J, nodes per point:
-    integral g(wi) dwi ~ sum over each point's J nodes of g(wi) weight, for g with the
-    lobe's e^(-tan^2 delta / sigma^2) (Walter's change of variables to the half vector h,
-    dwi = 4 (wo.h) cos^3 delta d(slope area)); for GGX's lobe the radial variable is
-    tau = sigma^2 / (sigma^2 + tan^2 delta), in which GGX's D cos^4 delta times the slope area is
-    constant, and the rays end at the surface's horizon only (its tails hold 1/17 of the lobe
-    beyond 4 sigma).
+    J, nodes per point: integral g(wi) dwi ~ sum over each point's J nodes of g(wi) weight
+    (Walter's change of variables to the half vector h, dwi = 4 (wo.h) cos^3 delta d(slope
+    area)).  For GGX tau = sigma^2 / (sigma^2 + tan^2 delta), in which D cos^4 delta is
+    constant, and the rays end at the surface's horizon only (its tails are long).
     """
     import drjit as dr
     import mitsuba as mi
@@ -173,10 +154,9 @@ def lobe_directions(wo, up, sigma, n_rays, n_radial, tables=None, distribution="
 def diffuse_directions(up, n_rays=DIFFUSE_AZIMUTHS, n_polar=DIFFUSE_POLAR, tables=None):
     """Light directions and cosine-weighted solid-angle weights of the diffuse quadrature.
 
-    ``up`` (Q) the world's zenith in each local frame; ``tables`` the resolution's
-    :func:`_table_arrays` (made here if None).  Returns wi (Q J), weights (Q J), each
-    node's point index q and J: integral g(wi) cos(theta_i) / pi dwi ~ sum of g(wi) weight [unitless], the polar
-    angle of each azimuth's ray split at the world's horizon.
+    ``up`` (Q) the world's zenith in each local frame; ``tables`` as :func:`lobe_directions`.
+    Returns wi (Q J), weights (Q J), q and J: integral g(wi) cos(theta_i) / pi dwi ~ sum of
+    g(wi) weight [unitless].
     """
     import drjit as dr
     import mitsuba as mi
@@ -197,25 +177,23 @@ def diffuse_directions(up, n_rays=DIFFUSE_AZIMUTHS, n_polar=DIFFUSE_POLAR, table
 
 
 def _sky_sum(mi, dr, emitter, si, wi, w, q, J, f=1.0):
-    """Sum over each point's J nodes of f h(wi) w, h the emitter's sky function toward the
-    nodes' directions (local to each point's frame) [W m^-2 sr^-1], (Q) Dr.Jit colours;
-    ``emitter`` a ``cie_sky`` emitter or :class:`FrameSkies` (each point its own frame's sky),
-    or a list of them: then a list of sums, one per sky, over the same nodes (one kernel
-    evaluates them together)."""
+    """Sum over each point's J nodes of f h(wi) w [W m^-2 sr^-1], (Q) Dr.Jit colours, h the sky
+    function of ``emitter`` (a ``cie_sky`` emitter or :class:`FrameSkies`); for a list of
+    emitters a list of sums over the same nodes."""
     frame = dr.gather(mi.Frame3f, si.sh_frame, q)
     d, fw = frame.to_world(wi), f * w
     skies = emitter if isinstance(emitter, list) else [emitter]
     terms = [fw * (e.at(q) if isinstance(e, FrameSkies) else e).sky_eval(d) for e in skies]
     if len(terms) > 1:
-        dr.eval(*terms)        # one kernel: the nodes' directions and lobe once for every sky
+        dr.eval(*terms)        # one kernel: the nodes and lobe once for every sky
     sums = [dr.block_sum(t, J) for t in terms]
     return sums if isinstance(emitter, list) else sums[0]
 
 
 class FrameSkies:
-    """The sky functions of several frames at once, for :func:`sky_integrals` over the points
-    of all of them in one pass (the light cache's frames): ``skies`` the frames'
-    :class:`~skyfit_mi.physics.sky.Sky` (without maps), ``frame`` (Q,) each point's frame."""
+    """The sky functions of several frames, for one pass of :func:`sky_integrals` over all their
+    points: ``skies`` the frames' map-free :class:`~skyfit_mi.physics.sky.Sky`, ``frame`` (Q,)
+    each point's frame."""
 
     def __init__(self, skies, frame):
         import mitsuba as mi
@@ -254,9 +232,8 @@ class _SkyLanes:
 
 
 def _lobe_sum(mi, dr, emitter, si, up, sigma, resolution, normalisation, tables=None):
-    """I_s of every interaction of ``si`` through the rho_s = 1 lobe of ``normalisation`` at
-    roughness ``sigma`` (a Dr.Jit value) and quadrature ``resolution``: (Q) Dr.Jit colours
-    (a list of them for a list of emitters, :func:`_sky_sum`)."""
+    """I_s of every interaction of ``si`` through the rho_s = 1 lobe at Dr.Jit ``sigma``: (Q)
+    Dr.Jit colours (a list for a list of emitters)."""
     from .plugins.ward import lobe, lobe_distribution      # a plugin: needs the variant set
 
     wi, w, q, J = lobe_directions(si.wi, up, sigma, *resolution, tables=tables,
@@ -281,8 +258,7 @@ def diffuse_integral(emitter, si, up):
 
 def lobe_integral(emitter, si, up, sigma, normalisation="ward"):
     """I_s(sigma) of every surface interaction in ``si`` (Q): the sky function through the
-    rho_s = 1 lobe of ``normalisation`` at roughness ``sigma``, times cos(theta_i); (Q, 3)
-    [W m^-2 sr^-1]."""
+    rho_s = 1 lobe times cos(theta_i); (Q, 3) [W m^-2 sr^-1]."""
     import drjit as dr
     import mitsuba as mi
 
@@ -294,9 +270,8 @@ def lobe_integral(emitter, si, up, sigma, normalisation="ward"):
 
 
 def quadrature(lo, hi, normalisation):
-    """The fixed inputs of :func:`sky_integrals` for the Chebyshev series on [lo, hi] of the
-    lobe of ``normalisation``: the quadratures' tables as Dr.Jit arrays and, per node, its
-    roughness (opaque: one kernel for all) and resolution; made once for every frame."""
+    """The fixed inputs of :func:`sky_integrals` for the Chebyshev series on [lo, hi]: the
+    quadratures' tables and, per node, its roughness (opaque: one kernel for all) and resolution."""
     import mitsuba as mi
 
     from .plugins.ward import lobe_distribution      # a plugin: needs the variant set
@@ -318,11 +293,9 @@ def quadrature(lo, hi, normalisation):
 
 
 def sky_integrals(emitter, si, quad):
-    """I_d and I_s at each Chebyshev node of ``quad`` (:func:`quadrature`) for every surface
-    interaction of ``si`` (Q) under the emitter's current sky (or each under its frame's,
-    ``emitter`` a :class:`FrameSkies`): Dr.Jit colours (Q) and a list of them
-    [W m^-2 sr^-1], not yet evaluated (I_d None where ``quad['diffuse']`` is None).  Given a
-    list of emitters, each value is a list of theirs, from the same nodes (:func:`_sky_sum`)."""
+    """I_d and I_s at each Chebyshev node of ``quad`` for every interaction of ``si`` (Q) under
+    ``emitter`` (or a :class:`FrameSkies`): unevaluated Dr.Jit colours (Q) and a list of them
+    [W m^-2 sr^-1] (I_d None where ``quad['diffuse']`` is); for a list of emitters, lists."""
     import drjit as dr
     import mitsuba as mi
 
@@ -353,15 +326,15 @@ def chebyshev_coefficients(values, axis=0):
 
 
 def chebyshev_x(sigma, lo, hi, log, clip):
-    """sigma's coordinate in [-1, 1] on [lo, hi] in log sigma (``log``/``clip`` from NumPy or
-    Dr.Jit, so that the same line serves both)."""
+    """sigma's coordinate in [-1, 1] on [lo, hi] in log sigma (``log``, ``clip``: NumPy's or
+    Dr.Jit's)."""
     a, b = np.log(lo), np.log(hi)
     return clip((2.0 * log(sigma) - (a + b)) / (b - a), -1.0, 1.0)
 
 
 def chebyshev_eval(coefficients, x):
-    """sum_k c_k T_k(x) by Clenshaw's recurrence; ``coefficients`` a sequence of arrays (NumPy
-    or Dr.Jit, any shape broadcasting with x): arithmetic only, so Dr.Jit differentiates it."""
+    """sum_k c_k T_k(x) by Clenshaw's recurrence (NumPy or Dr.Jit arrays broadcasting with x;
+    arithmetic only, so Dr.Jit differentiates it)."""
     b1 = b2 = 0.0
     for c in reversed(coefficients[1:]):
         b1, b2 = c + 2.0 * x * b1 - b2, b1

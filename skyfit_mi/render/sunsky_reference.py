@@ -1,10 +1,8 @@
 """Mitsuba's built-in ``sunsky`` emitter (Hosek-Wilkie) as a reference sky for comparisons.
 
-The emitter's local frame is Mitsuba's default for it, +Z up: with no ``to_world`` its sky
-has cos(theta) = d.z, so world vectors in the project's frame (+X east, +Y north, +Z up) go
-in unchanged, and ``sun_direction`` orients the sky.  Only the sky is evaluated
-(``sun_scale`` 0: the solar disc is left out); its RGB radiance, on the emitter's own
-radiometric scale, is weighted to luminance by :data:`~skyfit_mi.physics.colour.SRGB_LUMINANCE`.
+The emitter's default frame is +Z up, so world vectors in the project's frame go in unchanged.
+Only the sky is evaluated (``sun_scale`` 0); its RGB radiance, on the emitter's own scale, is
+weighted to luminance by :data:`~skyfit_mi.physics.colour.SRGB_LUMINANCE`.
 
 References
 ----------
@@ -26,22 +24,9 @@ TURBIDITIES = tuple(float(t) for t in np.round(np.arange(1.0, 10.0 + 1e-9, 0.25)
 def sunsky_luminance(directions, sun_direction, turbidities, albedo=GROUND_ALBEDO):
     """Luminance of Mitsuba's ``sunsky`` sky (no sun disc) toward world ``directions``.
 
-    Parameters
-    ----------
-    directions : array_like, shape (n, 3)
-        World directions toward the sky (+X east, +Y north, +Z up).
-    sun_direction : array_like, shape (3,)
-        Unit vector toward the sun, same frame.
-    turbidities : sequence of float
-        Hosek-Wilkie turbidities, each in [1, 10].
-    albedo : float
-        Ground albedo of the model, in [0, 1] (default: the project's ground, 0.2).
-
-    Returns
-    -------
-    ndarray, shape (len(turbidities), n)
-        0.2126 R + 0.7152 G + 0.0722 B of the emitter's RGB radiance, on its own scale;
-        0 at and below the horizon.
+    ``directions`` (n, 3), ``sun_direction`` (3,) unit, world frame; ``turbidities`` each in
+    [1, 10]; ``albedo`` in [0, 1].  Returns (len(turbidities), n): the luminance on the
+    emitter's own scale, 0 at and below the horizon.
     """
     mi = setup()
     import drjit as dr

@@ -1,11 +1,8 @@
 """Start Mitsuba: find libLLVM for the CPU back-end and choose the variant.
 
-Dr.Jit's CPU back-end loads a shared libLLVM at import.  drjit 1.5 needs
-LLVM 17 or newer (14 lacks opaque pointers; 15/16 abort on llvm.minimum).
-:func:`find_libllvm` looks for one and :func:`setup` sets
-``DRJIT_LIBLLVM_PATH`` before the first ``import drjit`` unless the user has
-set it.  Importing :mod:`skyfit_mi` never sets a variant: call
-:func:`setup` (or :func:`skyfit_mi.render.setup`) first.
+drjit 1.5 needs LLVM 17 or newer (14 lacks opaque pointers; 15/16 abort on llvm.minimum):
+:func:`setup` sets ``DRJIT_LIBLLVM_PATH`` to :func:`find_libllvm`'s before the first ``import
+drjit`` unless the user has.  Importing :mod:`skyfit_mi` never sets a variant: call :func:`setup`.
 """
 
 import glob
@@ -59,16 +56,8 @@ def _prepare_llvm():
 def setup(variant=DEFAULT_VARIANT):
     """Choose the Mitsuba variant and register the project's plugins.
 
-    Parameters
-    ----------
-    variant : {'llvm_ad_rgb', 'cuda_ad_rgb'}
-        ``llvm_ad_rgb`` (CPU, the default) or ``cuda_ad_rgb`` (needs an
-        NVIDIA GPU and driver).
-
-    Returns
-    -------
-    module
-        The ``mitsuba`` module, with the variant set.
+    ``variant``: ``llvm_ad_rgb`` (CPU, the default) or ``cuda_ad_rgb`` (an NVIDIA GPU and
+    driver).  Returns the ``mitsuba`` module, with the variant set.
     """
     check_choice("Mitsuba variant", variant, VARIANTS)
     if variant.startswith("llvm"):

@@ -1,9 +1,7 @@
 """Gradient descent through the differentiable model with Adam (Kingma and Ba, ICLR 2015).
 
-Mitsuba's inverse-rendering practice: the gradient of chi-square comes from Dr.Jit's
-reverse mode through the ``ward`` plugin (``WardModel.gradient``); parameters are
-clipped to their bounds after each step.  Learning rate in units of each parameter's
-range.
+The gradient of chi-square comes from Dr.Jit's reverse mode (``WardModel.gradient``);
+parameters are clipped to their bounds after each step; learning rate in units of each range.
 """
 
 import numpy as np

@@ -1,37 +1,19 @@
 """Simulated annealing: the downhill simplex with thermal fluctuations (thesis 6.4.4, 7.3).
 
-After Press et al., Numerical Recipes 2nd ed. section 10.9: the Nelder-Mead simplex moves
-(reflect, expand, contract, shrink), with a positive thermal fluctuation -T ln(u) added
-to the values kept at the vertices and subtracted from every new trial, so that uphill
-moves are accepted with a probability that falls with the temperature T.  Trial points
-that leave the parameter box are mirrored back into it.  The cooling schedule of the thesis
-(7.3.1): start at T0, run m simplex iterations at each temperature, then multiply T by alpha
-(temperatures scale with the number of region pixels, since the thesis's chi^2 was one
-pixel's, and start no lower than 10x the initial chi^2); below t_min (0.1 per pixel:
-fluctuations far below a chi^2 change of 1, which moves a parameter by its standard error)
-the simplex runs cold (T = 0) until its chi^2 values agree to ftol.  Seeded; the walk (the
-simplex's lowest vertex after each iteration) is recorded (thesis fig. 7.10).
+After Press et al., Numerical Recipes 2nd ed. 10.9: Nelder-Mead moves with a thermal fluctuation
+-T ln(u) added to the vertices' values and subtracted from every trial (trials leaving the box
+are mirrored back). The thesis's schedule (7.3.1): m iterations per temperature from T0, then T *=
+alpha (scaled by the region's pixels); below t_min the simplex runs cold until its values agree to
+ftol. Seeded; the walk is recorded (thesis fig. 7.10).
 
-Additions to the thesis's method, for the end game, all measured on its tables 7.4-7.12
-(docs/THESIS_TABLES.md):
+End-game additions to the thesis's method (tested on its tables 7.4-7.12, docs/THESIS_TABLES.md):
 
-* When the cold simplex first converges, it tries the best point on every face, edge and
-  corner of the parameter box.  Mirrored trial points almost never land on a bound, yet
-  truths often lie there (an ideal mirror: sigma_alpha = 0, rho_s = R = 1) at the bottom
-  of a well too narrow for the hot random walk to find (table 7.9 failed from half the
-  starts without this).
-* At every freeze a cold simplex descends from each point the caller names for the best
-  point (``alternatives``), unless it lies near one already descended from: for the colour
-  model the reading across the plastic/metal rule, where chi^2 jumps and no simplex move
-  crosses (a metal reading of a plastic surface is a local minimum at rho_s = 0.5).  Cold,
-  because the twin lies in the other rule's basin and a hot walk from it may leave that
-  basin again; and at every freeze, because the first freeze's best point may be in neither
-  basin of the truth's pair (table 7.10 failed from one start of 30 so).
-* After the first freeze it also anneals again from the best point (a further cooling
-  cycle, Press et al. 10.9), starting at T = the chi^2 there, which frees simplices stuck
-  on a ridge.
-* Later convergences restart around the best point, first with a full-size simplex and
-  then small ones (Press et al. 10.4), each after trying every parameter on each bound.
+* at the first cold convergence, the best point tried on every face, edge and corner of the box
+  (mirrored trials rarely reach a bound, where truths often lie in narrow wells);
+* at every freeze, a cold descent from each untried ``alternatives`` reading (the colour model's
+  plastic/metal twin, which no simplex move crosses);
+* after the first freeze, a further cooling cycle from the best point at T = its chi^2;
+* later convergences restart around the best point (Press et al. 10.4), after trying each bound.
 """
 
 import itertools
@@ -66,14 +48,9 @@ def on_bounds(x, lower, upper, every_face=False):
 class AnnealingOptions:
     """The settings of :func:`simulated_annealing`; ``method_options`` of a fit name them.
 
-    ``schedule`` (T0, alpha, m): the starting temperature (a chi^2 of one pixel's sequence),
-    the cooling factor per step and the simplex iterations at each temperature (default the
-    thesis's, :data:`SCHEDULES`, by number of parameters).  ``t_min``: the temperature (per
-    pixel) below which the simplex runs cold.  ``step``: the starting simplex's size, a
-    fraction of each parameter's range.  ``ftol``: the relative spread of the simplex's
-    chi^2 values at which it has converged.  ``max_restarts``: restarts of a converged
-    simplex.  ``reanneal``: the end game of the module's docstring (a further cooling cycle,
-    cold descents from the alternative readings).
+    ``schedule`` (T0, alpha, m) per pixel (default :data:`SCHEDULES`); ``t_min``: cold below
+    it, per pixel; ``step``: starting simplex size per range; ``ftol``: relative spread at
+    convergence; ``reanneal``: the module docstring's end game.
     """
 
     schedule: tuple | None = None
@@ -86,8 +63,7 @@ class AnnealingOptions:
 
     @classmethod
     def of(cls, options=None, settings=()):
-        """``options`` (default the defaults) with those of ``settings`` (a dict of keyword
-        options) it names replaced; other keys (another method's options) are ignored."""
+        """``options`` (default the defaults) with the keys of ``settings`` it names replaced."""
         known = {f.name for f in fields(cls)}
         return replace(options or cls(), **{k: v for k, v in dict(settings).items() if k in known})
 
@@ -96,12 +72,9 @@ def simulated_annealing(problem, start, lower, upper, seed=0, alternatives=None,
                         **settings):
     """Minimise chi^2 by annealing from ``start``; returns a result dict with the walk.
 
-    ``options`` an :class:`AnnealingOptions`; its settings may also be given as keywords
-    (``schedule=``, ``max_evaluations=``, ...: a fit's ``method_options``), which replace
-    those of ``options``; keywords of other methods (``grid_basis``) are ignored.  With
-    ``reanneal`` the end game of the module's docstring follows the first cooling cycle: a
-    further cycle from its best point, and cold descents from ``alternatives(x)`` of every
-    new best point x (each distinct point once).
+    ``options`` an :class:`AnnealingOptions`, whose settings keywords may replace (other
+    methods' keywords are ignored). ``alternatives(x)``: other readings of a best point x for
+    the end game's cold descents.
     """
     run = _Annealing(problem, start, lower, upper, seed, AnnealingOptions.of(options, settings),
                      alternatives)
@@ -109,8 +82,7 @@ def simulated_annealing(problem, start, lower, upper, seed=0, alternatives=None,
 
 
 class _Annealing:
-    """One annealing run's state: the simplex and its chi^2 values, the temperature, the best
-    point, the walk and the counts of the end game."""
+    """One annealing run's state."""
 
     def __init__(self, problem, start, lower, upper, seed, opts, alternatives):
         self.problem, self.lower, self.upper, self.opts = problem, lower, upper, opts
@@ -118,8 +90,7 @@ class _Annealing:
         self.seed, self.rng = seed, np.random.default_rng(seed)
         self.n = n = len(start)
         self.t0, self.alpha, self.m = opts.schedule or SCHEDULES.get(n, (1e6, 0.8, 10))
-        # The thesis's temperatures are chi^2 values of one pixel's sequence; a region of P
-        # pixels sums P such chi^2, so its temperatures are P times higher.
+        # the thesis's temperatures are one pixel's chi^2; a region of P pixels sums P of them
         self.pixels = max(1, int(problem.obs.y.shape[0]))
         self.t0, self.t_min = self.t0 * self.pixels, opts.t_min * self.pixels
         self.span = np.asarray(upper) - np.asarray(lower)
@@ -129,9 +100,8 @@ class _Annealing:
         self.restarts = self.reanneals = self.descents = 0
         self.cycles = None  # queued (start or None for the best point, hot?), from 1st freeze
         self.tried = []      # alternative readings already descended from
-        # The thesis's T0 (1e6, 1e7) exceeded its sequences' chi^2 many times over, so annealing
-        # began as a random walk.  Sequences with more pixels or less noise have larger chi^2:
-        # then start at 10x the initial simplex's largest chi^2 to keep that first phase.
+        # the thesis's T0 began as a random walk; keep that for larger chi^2 (more pixels, less
+        # noise) by starting at least at 10x the initial simplex's largest chi^2
         self.t0_used = max(self.t0, 10.0 * float(np.max(self.f)))
         best_i = int(np.argmin(self.f))
         self.best_x, self.best_f = self.simplex[best_i].copy(), float(self.f[best_i])
@@ -140,8 +110,8 @@ class _Annealing:
         self.frozen = False
 
     def _simplex(self, x0, size):
-        """A simplex of n + 1 points (x0, and x0 moved by ``size`` of the range along each
-        axis, inwards at the upper bound) and their chi^2 (not counted in ``evals``)."""
+        """A simplex of x0 and x0 moved by ``size`` of the range along each axis (inwards at the
+        upper bound), and their chi^2 (not counted in ``evals``)."""
         pts = [x0]
         for i in range(self.n):
             v, d = x0.copy(), size * self.span[i]
@@ -173,8 +143,7 @@ class _Annealing:
         return yflu
 
     def _move(self):
-        """One simplex iteration at the temperature: reflect, then expand, or contract and
-        if that fails shrink toward the best vertex."""
+        """One simplex iteration at the temperature."""
         n, simplex, f = self.n, self.simplex, self.f
         self.fluct = f - self.temp * np.log(self.rng.random(n + 1))   # vertices get +T|ln u|
         order = np.argsort(self.fluct)
@@ -201,8 +170,7 @@ class _Annealing:
         return 2 * abs(f.max() - f.min()) <= self.opts.ftol * (abs(f.max()) + abs(f.min())) + 1e-10
 
     def _untried_alternatives(self):
-        """Cold descents from the alternatives to the best point, except near (within 1% of
-        the box) one already descended from."""
+        """Queue cold descents from the best point's alternatives not within 1% of one tried."""
         out = []
         for x in (self.alternatives(self.best_x) if self.alternatives else []):
             x = np.clip(np.asarray(x, dtype=float), self.lower, self.upper)
@@ -212,10 +180,8 @@ class _Annealing:
         return out
 
     def _next_cycle(self):
-        """At a freeze: on the first, try the best point on every face, edge and corner of the
-        box (points the simplex's mirrored moves rarely reach) and queue a further cooling
-        cycle from the best point; on every one, queue cold descents from the untried
-        alternatives.  Starts the next queued cycle; False if none is left."""
+        """At a freeze run the end game (first freeze: box faces and a further cooling cycle;
+        every freeze: alternatives) and start the next queued cycle; False if none is left."""
         if self.cycles is None:
             self._try(on_bounds(self.best_x, self.lower, self.upper, every_face=True))
             self.cycles = [(None, True)] if self.opts.reanneal else []
@@ -229,8 +195,7 @@ class _Annealing:
         best_i = int(np.argmin(self.f))
         if self.f[best_i] < self.best_f:
             self.best_x, self.best_f = self.simplex[best_i].copy(), float(self.f[best_i])
-        # a further cooling cycle starts hot enough to leave a basin as deep as its start's
-        # chi^2 (Press et al. 10.9); a descent from an alternative, cold
+        # a further cycle starts at its start's chi^2 (Press et al. 10.9); an alternative, cold
         self.temp = max(float(self.f[0]), self.t_min / self.alpha) if hot else 0.0
         self.frozen = False
         self.reanneals += hot
@@ -238,8 +203,7 @@ class _Annealing:
         return True
 
     def cool(self):
-        """Anneal, with the end game at each freeze, until the simplex has converged for good
-        (True) or the evaluations run out (False)."""
+        """Anneal until converged for good (True) or out of evaluations (False)."""
         opts = self.opts
         while self.evals < opts.max_evaluations:
             if self.temp <= self.t_min:     # frozen: plain downhill simplex until it converges
@@ -260,8 +224,7 @@ class _Annealing:
             if self.restarts >= opts.max_restarts:
                 return True
             self._try(on_bounds(self.best_x, self.lower, self.upper))
-            # Nelder-Mead can stall on a degenerate simplex: restart around the best point
-            # until a restart no longer improves (Press et al. 10.4); the first is full-size
+            # restart a possibly degenerate simplex until that no longer improves (Press 10.4)
             self.simplex, self.f = self._simplex(self.best_x.copy(),
                                                  opts.step if self.restarts == 0 else 0.05)
             self.evals += self.n + 1

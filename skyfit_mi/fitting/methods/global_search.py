@@ -1,19 +1,18 @@
 """The global method: sigma_alpha searched on a grid, the linear parameters solved in closed form.
 
-Given sigma_alpha, Ward's model is linear in rho_d and rho_s (thesis eq. 3.19), so with
-the basis L = rho_d * D + rho_s * G(sigma) (light cached once, :class:`LightCache`;
-:meth:`WardModel.basis`)
-every model's remaining parameters have closed-form bounded least-squares solutions on
-linearised data (y mapped back through the sensor response, sigma through its slope):
+Given sigma_alpha, Ward's model is linear in rho_d and rho_s (thesis eq. 3.19): with the basis
+L = rho_d * D + rho_s * G(sigma) (:meth:`WardModel.basis`) every model's other parameters have
+closed-form bounded least-squares solutions on linearised data (y and sigma mapped back through
+the sensor response):
 
 * 2 parameters: L = D + rho_s (G - D), scored on a grid of rho_s;
 * 3 parameters: L = R ((1 - rho_s) D + rho_s G): for each rho_s on a grid, R in closed form;
 * 5 parameters: per channel, plastic (rho_s < 0.5) L_c = C_c (1 - rho_s) D_c + rho_s G_c,
   metal L_c = C_c ((1 - rho_s) D_c + rho_s G_c): for each rho_s on a grid, C_c in closed form.
 
-Every (sigma, rho_s) grid point is scored at once; the best few distinct candidates are
-polished by Levenberg-Marquardt on the full model, so the result is the global minimum
-from any start.  The grid also gives the profile chi-square of sigma_alpha and rho_s.
+Every (sigma, rho_s) grid point is scored at once; the best few distinct candidates are polished
+by Levenberg-Marquardt on the full model, giving the global minimum from any start. The grid also
+gives the profile chi-square of sigma_alpha and rho_s.
 """
 
 import numpy as np
@@ -31,16 +30,13 @@ RHO_FINE = np.linspace(0.0, 1.0, 2001)
 SIGMA_FINE_POINTS = 21
 #: Values within this many sigma of the top code are left out of the linear grid [sigma].
 SATURATION_BAND = 3.0
-#: A polish counts as not lowering chi-square only beyond this relative amount: the fit
-#: model's float32 evaluations with and without derivatives differ by ~1e-7 relative (an
-#: overcast Radiance day: 201.778467 vs 201.778452 at the same point), which once made a
-#: polish that had converged beside its grid point read as a failure.
+#: Relative rise of chi-square beyond which a polish counts as failed: float32 evaluations with
+#: and without derivatives differ by ~1e-7 relative.
 POLISH_TOLERANCE = 1e-6
 
 
 def _linearise(obs, mask, leave_out_saturated=True):
-    """Observed radiance-space values and weights of observations ``obs`` where ``mask``
-    (P, T, 3; a problem's usable values): y_lin (P,T,3), w = 1/sigma_lin^2 (0 = unused);
+    """(y_lin, w = 1/sigma_lin^2) (P, T, 3) of ``obs`` in radiance where ``mask`` (else w 0);
     values near saturation get weight 0 unless ``leave_out_saturated`` is False."""
     sensor = obs.sensor
     v = np.clip(obs.y / sensor.max_code, 0.0, 1.0)
@@ -53,13 +49,9 @@ def _linearise(obs, mask, leave_out_saturated=True):
     g = obs.gain
     y = s / g
     slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code * g
-    # the grid's model is linear and cannot saturate: a value at the top code (censored in
-    # chi2.py) or within SATURATION_BAND sigma of it (a saturated pixel read down by noise)
-    # would pull its highlight down, so the grid leaves them out; the polish on the true
-    # chi-square uses them (on coverage.py's 7.2 case at 5%, leaving out only the top code
-    # or a 1-sigma band still ranks a narrower lobe first in a third to a half of the
-    # replicates; 3 sigma in none of 20). A value at code 0 stays: reading it as zero errs by
-    # less than its sigma.
+    # the linear grid cannot saturate: values at or within SATURATION_BAND sigma of the top code
+    # would pull a highlight down, so the grid leaves them out (the polish uses them; a narrower
+    # band still misranks lobes). A value at code 0 stays: as zero it errs by under its sigma.
     if leave_out_saturated:
         mask = mask & ~near_saturation(obs)
     w = np.where(mask, (slope / obs.sigma) ** 2, 0.0)
@@ -67,15 +59,13 @@ def _linearise(obs, mask, leave_out_saturated=True):
 
 
 def near_saturation(obs):
-    """Which values (P, T, 3) of ``obs`` lie within SATURATION_BAND sigma of the top code:
-    the ones the linear grid leaves out (see :func:`_linearise`)."""
+    """Which values (P, T, 3) of ``obs`` lie within SATURATION_BAND sigma of the top code."""
     return obs.y >= obs.sensor.max_code - SATURATION_BAND * obs.sigma
 
 
 def sigma_chunks(G):
-    """(slice, values) over the roughness axis of the lobe basis ``G``: an array (K, P, T, 3)
-    in slices of :func:`~skyfit_mi.render.basis_table.sigma_chunk`, or a lazy :class:`~skyfit_mi.render.basis_table.Lobes` in its
-    own chunks, so that only a few roughness values' arrays exist at once."""
+    """(slice, values) over the roughness axis of the lobe basis ``G`` (an array (K, P, T, 3) or
+    a lazy :class:`~skyfit_mi.render.basis_table.Lobes`), a few roughness values at a time."""
     if hasattr(G, "chunks"):
         yield from G.chunks()
         return
@@ -85,8 +75,7 @@ def sigma_chunks(G):
 
 
 def _per_sigma(G, *terms):
-    """Each of ``terms`` (functions of a chunk of G) over all of G's roughness values,
-    concatenated along the first axis."""
+    """Each of ``terms`` (functions of a chunk of G) over all of G, concatenated."""
     parts = [[] for _ in terms]
     for _, g in sigma_chunks(G):
         for out, f in zip(parts, terms):
@@ -95,9 +84,8 @@ def _per_sigma(G, *terms):
 
 
 def _basis_sums(w, D, G, keep):
-    """The weighted inner products of the basis, <D,D>, <D,G_k>, <G_k,G_k>, summed over frames
-    and over the axes of 'ptc' (pixels, channels) not in ``keep`` ('', 'c', 'p' or 'pc': kept
-    axes stay, in that order, after the K of the G terms)."""
+    """The basis's weighted inner products <D,D>, <D,G_k>, <G_k,G_k>, summed over frames and the
+    axes of 'pc' not in ``keep`` (kept axes follow the K of the G terms)."""
     Dw = D * w
     return (np.einsum(f"ptc,ptc->{keep}", Dw, D),
             *_per_sigma(G, lambda g: np.einsum(f"ptc,kptc->k{keep}", Dw, g),
@@ -115,11 +103,8 @@ def _weighted_sums(y, w, D, G, keep):
 
 
 def grid_chi2(model, y, w, D, G, rho=RHO_GRID, per_pixel=False):
-    """Linearised chi^2 and the closed-form linear parameters at every (sigma[, rho_s]) point.
-
-    Returns (chi2, thetas) with chi2 of shape (K, R) and thetas (K, R, n_params); with
-    ``per_pixel`` every pixel its own fit: (K, R, P) and (K, R, P, n_params).
-    """
+    """(chi2 (K, R), thetas (K, R, n_params)): linearised chi^2 and closed-form linear
+    parameters at every (sigma, rho_s) point; with ``per_pixel`` (K, R, P) and (K, R, P, n)."""
     p = "p" if per_pixel else ""
     if model == "two":
         # with H = G - D (K, P, T, 3), a few roughness values at a time
@@ -152,17 +137,14 @@ def solve_quadratics(zz, yh, hh):
 
 
 def _along_rho(rho, extra):
-    """``rho`` shaped (1, R, 1, ...) with ``extra`` trailing axes, to broadcast against
-    per-sigma arrays (K, R, ...)."""
+    """``rho`` shaped (1, R, 1, ...) with ``extra`` trailing axes, against (K, R, ...)."""
     return np.reshape(rho, (1, -1) + (1,) * extra)
 
 
 def linear_quadratics(model, y, w, D, G, rho, per_pixel=False):
-    """The 3- and 5-parameter models' linearised chi^2 at each (sigma_k, rho_s) grid point as
-    a quadratic in the linear parameter of each channel group (R over all channels, or C_c
-    per channel): chi^2 = sum over groups of zz - 2 L yh + L^2 hh.  Returns (zz, yh, hh),
-    each (K, R, groups) with 1 group (R) or 3 (C_r, C_g, C_b); (K, R, P, groups) with
-    ``per_pixel``."""
+    """The 3- and 5-parameter models' linearised chi^2 at each (sigma_k, rho_s) as a quadratic in
+    each group's linear parameter L (R, or C_c): chi^2 = sum over groups of zz - 2 L yh + L^2 hh.
+    Returns (zz, yh, hh), each (K, R, groups), or (K, R, P, groups) with ``per_pixel``."""
     out = None
     for idx, *parts in _quadratic_parts(model, y, w, D, G, rho, per_pixel):
         if out is None:
@@ -174,10 +156,8 @@ def linear_quadratics(model, y, w, D, G, rho, per_pixel=False):
 
 
 def linear_curvature(model, w, D, G, rho, k, p):
-    """hh of :func:`linear_quadratics` (per pixel) at listed grid points only: rho_s values
-    ``rho`` (n,), roughness indices ``k`` into G's first axis and pixels ``p``; (n, groups).
-    A linear parameter's chi^2 rises as hh (L - L_best)^2 from its best, so this gives its
-    conditional range at a few points without the whole grid."""
+    """hh of :func:`linear_quadratics` (per pixel) at listed points only (``rho`` (n,), roughness
+    indices ``k``, pixels ``p``): (n, groups), for conditional ranges without the whole grid."""
     a, b, c = _basis_sums(w, D, G, "p" if model == "achromatic" else "pc")
     a, b, c = a[p], b[k, p], c[k, p]
     r2 = np.asarray(rho, dtype=float).reshape((-1,) + (1,) * (np.ndim(a) - 1))
@@ -187,10 +167,8 @@ def linear_curvature(model, w, D, G, rho, k, p):
 
 
 def _quadratic_parts(model, y, w, D, G, rho, per_pixel):
-    """:func:`linear_quadratics` in parts: (a slice of ``rho``, zz, yh, hh) for the rho_s
-    values of each form (a colour model's plastics, then its metals; the achromatic model has
-    one form), each part computed only for its own rho_s (the grid's costliest step);
-    ``rho`` ascending."""
+    """:func:`linear_quadratics` in parts (slice of ascending ``rho``, zz, yh, hh), one per form
+    (a colour model's plastics, then metals), each computed only for its own rho_s."""
     p = "p" if per_pixel else ""
     # h = (1 - rho) D + rho G: (K, R, P, T, 3) built lazily by channel sums
     a, b, c, yd, yg, yy = _weighted_sums(y, w, D, G, p if model == "achromatic" else p + "c")
@@ -217,11 +195,8 @@ def _ascending(rho):
 
 
 def grid_chi2_device(model, y, w, D, G, rho=RHO_GRID):
-    """Every pixel's linearised chi^2 and linear parameters on the (sigma, rho_s) grid, as
-    :func:`grid_chi2` with ``per_pixel`` (3- and 5-parameter models), on the current Mitsuba
-    variant's device (:func:`~skyfit_mi.render.linear_grid.grid_on_device`): only the
-    weighted sums go in, and the grid comes back once.  Returns chi2 (K, R, P) and the linear
-    parameters L (K, R, P, groups)."""
+    """:func:`grid_chi2` with ``per_pixel`` (3- and 5-parameter models) on the Mitsuba device:
+    chi2 (K, R, P) and the linear parameters L (K, R, P, groups)."""
     achromatic = model == "achromatic"
     sums = _weighted_sums(y, w, D, G, "p" if achromatic else "pc")
     if achromatic:
@@ -232,10 +207,8 @@ def grid_chi2_device(model, y, w, D, G, rho=RHO_GRID):
 def global_search(problem, start, lower, upper, candidates=3, profile=True, grid_basis=None, **_):
     """Grid over sigma_alpha (and rho_s) with closed-form linear parameters, then LM polish.
 
-    ``start`` is not needed (the search is global); it is accepted for a uniform interface.
-    ``profile`` = False skips the refined profiles (when only the minimum is wanted).
-    ``grid_basis`` = (D, G) on SIGMA_GRID from ``problem.model.lobes``, if already made
-    (it depends on the light cache only, not on the data).
+    ``start`` is unused (uniform interface). ``profile`` = False skips the refined profiles.
+    ``grid_basis`` = (D, G) on SIGMA_GRID from ``problem.model.lobes``, if already made.
     """
     wm = problem.model
     model = wm.model
@@ -243,10 +216,8 @@ def global_search(problem, start, lower, upper, candidates=3, profile=True, grid
     D, G = grid_basis if grid_basis is not None else wm.lobes(SIGMA_GRID)
     chi2, thetas = grid_chi2(model, y, w, D, G)
     thetas[..., -1] = SIGMA_GRID[:, None]
-    # candidates: best grid point, then the best ones at other roughness (distinct minima),
-    # ranked by the true chi-square at each roughness's grid minimum: the linear grid leaves
-    # out values near saturation, and on the rest a saturated highlight's roughness can look
-    # worse than a narrower lobe's
+    # candidates: the best grid point, then the best at other roughness, ranked by the true
+    # chi-square (the grid, without saturated values, can favour too narrow a lobe)
     rows = np.arange(len(SIGMA_GRID))
     best_j = np.argmin(chi2, axis=1)
     order = np.argsort([problem.chi2(thetas[k, j]) for k, j in zip(rows, best_j)])

@@ -1,13 +1,10 @@
 """Levenberg-Marquardt (thesis 6.4.3, eq. 6.12; Press et al., Numerical Recipes ch. 15.5).
 
-The thesis's baseline: from a starting point, solve (alpha + lambda diag alpha) delta = beta
-with alpha = J^T J (the curvature matrix) and beta = -J^T r, accept the step if chi^2
-falls (lambda /= 10) or raise lambda (x 10).  Steps are clipped to the bounds.  When
-alpha is singular at the start (a parameter the data do not constrain, e.g. sigma_alpha at
-rho_s = 0) the method fails, as the thesis's tables report; the failure and its reason are
-returned.  When steps lead to such a point, the determined parameters have converged.
-Parameters listed in ``fixed`` keep their start values (the constrained fits of a profile
-chi-square, :mod:`.profile`).
+The thesis's baseline: solve (alpha + lambda diag alpha) delta = beta with alpha = J^T J (the
+curvature matrix) and beta = -J^T r; accept the step if chi^2 falls (lambda /= 10), else raise
+lambda (x 10). Steps are clipped to the bounds. A singular alpha at the start (e.g. sigma_alpha at
+rho_s = 0) fails, as in the thesis's tables, with its reason; reached by steps, the determined
+parameters have converged. Parameters in ``fixed`` keep their start values (:mod:`.profile`).
 """
 
 import numpy as np
@@ -20,8 +17,7 @@ NO_EFFECT = 1e-9
 
 def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1e-3,
                         tol_chi2=1e-6, fixed=(), **_):
-    """Minimise chi^2 from ``start`` over the parameters not in ``fixed`` (indices); returns a
-    result dict (theta, chi2, status, message, trace, jacobian)."""
+    """Minimise chi^2 from ``start`` over the parameters not in ``fixed``; returns a result dict."""
     theta = np.clip(np.asarray(start, dtype=float), lower, upper)
     free = np.ones(len(theta), dtype=bool)
     free[list(fixed)] = False
@@ -41,8 +37,7 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
         a = alpha + lam * np.diag(np.diag(alpha))
         if not np.all(np.isfinite(a)) or np.linalg.cond(a) > SINGULAR_CONDITION:
             if len(trace) > 1:
-                # steps led here (e.g. onto rho_s = 0, where sigma_alpha has no effect): the
-                # determined parameters have converged
+                # steps led here (e.g. rho_s = 0): the determined parameters have converged
                 status = "converged"
                 message = ("stopped where the curvature matrix became singular (a parameter no "
                            "longer changes chi-square, e.g. sigma_alpha at rho_s = 0)")
@@ -80,16 +75,14 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
             "jacobian": J}
 
 
-#: Accepted steps over which a search stopped at its iteration limit is judged, and the fall of
-#: chi-square over them below which it has converged: far below the 1 that moves a 68%
-#: interval's end, so the rest of a slow crawl along a flat valley changes no conclusion.
+#: Accepted steps over which a search stopped at its limit is judged, and the chi-square fall
+#: below which it has converged (far below the 1 that moves a 68% interval's end).
 LIMIT_STEPS, LIMIT_CHI2 = 10, 0.01
 
 
 def _at_the_limit(problem, trace, chi2, max_iterations):
-    """(status, message) of a search stopped after ``max_iterations``: converged where its
-    last LIMIT_STEPS steps lowered chi-square by less than LIMIT_CHI2 (a flat valley, which
-    the intervals describe), else how much it was still falling."""
+    """(status, message) of a search stopped after ``max_iterations``: converged where its last
+    LIMIT_STEPS steps lowered chi-square by under LIMIT_CHI2, else how fast it still fell."""
     if len(trace) > LIMIT_STEPS:
         fall = problem.chi2(np.asarray(trace[-LIMIT_STEPS - 1])) - chi2
         if fall < LIMIT_CHI2:
@@ -103,13 +96,10 @@ def _at_the_limit(problem, trace, chi2, max_iterations):
 
 
 def polish(problem, start, lower, upper, fixed=(), **options):
-    """Levenberg-Marquardt for polishing and constrained fits (the global search's candidates,
-    profile chi-square): where the curvature is singular at the start because sigma_alpha (the
-    last parameter) changes nothing there (its Jacobian column vanishes: rho_s = 0), sigma_alpha
-    is held at its start and the rest are fitted, instead of the thesis's 'Fail' (an overcast
-    day at rho_s = 0: every constrained fit of R failed, and R's profile interval ran to 0).
-    Any other singular start still fails: holding a parameter that does change chi-square would
-    overstate the profile and narrow its interval."""
+    """Levenberg-Marquardt for polishing and constrained fits: where the curvature is singular at
+    the start because sigma_alpha changes nothing (rho_s = 0), sigma_alpha is held and the rest
+    fitted, instead of the thesis's 'Fail'. Any other singular start fails: holding a parameter
+    that changes chi-square would narrow its profile interval."""
     res = levenberg_marquardt(problem, start, lower, upper, fixed=fixed, **options)
     last = len(lower) - 1
     if res["status"] == "failed" and last not in fixed:

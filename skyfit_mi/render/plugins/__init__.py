@@ -2,8 +2,7 @@
 
 
 def register_plugins():
-    """Register ``cie_sky`` (emitter), ``ward`` (BSDF) and ``sun_sky_path`` (integrator) with
-    the current variant."""
+    """Register ``cie_sky``, ``ward`` and ``sun_sky_path`` with the current variant."""
     import mitsuba as mi
 
     # each plugin module subclasses the variant's Mitsuba classes: imported once it is set

@@ -1,13 +1,10 @@
 """The ``cie_sky`` environment emitter: the daylight sky and the sun disc.
 
-It evaluates exactly :meth:`skyfit_mi.physics.sky.Sky.radiance` (the same pattern
-sum, term by term) and importance-samples it: the sun disc by a uniform cone,
-the sky by a piecewise-constant table over an equal-area (azimuth,
-cos theta) grid built from the NumPy sky whenever its parameters change.
-Every number lives in an opaque Dr.Jit variable, so changing the sky from
-frame to frame (``mi.traverse`` + ``params.update()``) recompiles nothing; an environment
-map is a flat array read by ``dr.gather`` with its rows and columns opaque, so a new map
-(of any size) recompiles nothing either.
+It evaluates exactly :meth:`skyfit_mi.physics.sky.Sky.radiance` (the same pattern sum, term by
+term) and importance-samples it: the sun disc by a uniform cone, the sky by a piecewise-constant
+table over an equal-area (azimuth, cos theta) grid rebuilt whenever its parameters change.  Every
+number, an environment map's size included, is an opaque Dr.Jit variable, so changing the sky
+from frame to frame (``mi.traverse`` + ``params.update()``) recompiles nothing.
 
 Parameters (all linear sRGB radiance in W m^-2 sr^-1 unless stated; none
 differentiable; all exposed by ``traverse`` and updatable):
@@ -86,8 +83,7 @@ def _table_directions():
 
 
 def _table_directions_jit():
-    """:func:`_table_directions` flat (cell by cell) as a Dr.Jit Vector3f of the current
-    variant (made once per variant)."""
+    """:func:`_table_directions` flat as a Dr.Jit Vector3f of the current variant (cached)."""
     return _table_directions_of(mi.variant())
 
 
@@ -98,11 +94,9 @@ def _table_directions_of(variant):
 
 
 def sky_function(p, d):
-    """The sky's radiance without sun or map toward world directions ``d`` [W m^-2 sr^-1] for
-    the parameters of ``p``: an emitter, or any object with its fields (sun_direction, the
-    pattern weights clear ... perez and ground, perez_a .. perez_e, departure_0 .. departure_4,
-    blend_weight), scalars or
-    one per lane of ``d`` (the light cache's frames at once).  Sky.sky_radiance in Dr.Jit."""
+    """Sky.sky_radiance in Dr.Jit: the radiance without sun or map toward world directions
+    ``d`` [W m^-2 sr^-1] for the parameters of ``p`` (an emitter, or any object with its fields,
+    scalars or one per lane of ``d``)."""
     s = p.sun_direction
     cos_z = dr.clip(dr.dot(d, s), -1.0, 1.0)
     zeta = dr.acos(cos_z)
@@ -163,17 +157,12 @@ class CIESkyEmitter(mi.Emitter):
     def _build_sampling(self, sky):
         """Rebuild the sampling table from the NumPy twin of the current parameters.
 
-        The traversed parameters stay the same Dr.Jit variables (``params.update()``
-        writes into them); only derived data are replaced.  All are made opaque so
-        that new values never change a kernel, and the emitter keeps no other Python
-        state that changes with the sky (``dr.freeze`` compares such state by value, so a
-        frozen function would record again for every sky).
+        Only derived data are replaced, all opaque, and no other Python state changes with the
+        sky (``dr.freeze`` compares such state by value and would record again for every sky).
         """
-        # the sky's own fields first, opaque: the table evaluates the sky through them
         self.sun_chord2 = opaque_value(mi.Float, sky.sun_chord2)
-        # the kernel reads the blend switch as a float: a 1-byte Bool among the emitter's
-        # data would shift the other fields' alignment from frame to frame, and with it
-        # the kernel's hash (a recompilation per frame)
+        # a float, not a Bool: a 1-byte field would shift the others' alignment and the
+        # kernel's hash from frame to frame
         self.blend_weight = opaque_value(mi.Float, float(sky.horizon_blend))
         # the map as a flat array of RGB triples with its size opaque: any map, one kernel
         self.envmap_data = self.envmap.array
@@ -183,8 +172,8 @@ class CIESkyEmitter(mi.Emitter):
         for k in ("sun_direction", "sun_solid_angle", "blend_weight", "sun_chord2",
                   "scene_radius") + _RGB_KEYS + _FLOAT_KEYS:
             dr.make_opaque(getattr(self, k))
-        # the luminance of each cell's sub-samples, averaged, by the emitter's own sky_eval (one
-        # kernel; the NumPy twin Sky.sky_radiance took ten times as long for each new sky)
+        # each cell's mean luminance, by the emitter's own sky_eval (one kernel, much faster
+        # than the NumPy twin)
         rgb = self.sky_eval(_table_directions_jit())
         lum = sum(w * rgb[c] for c, w in enumerate(SRGB_LUMINANCE.tolist()))
         cell = np.maximum(np.array(dr.block_sum(lum, TABLE_SUPERSAMPLE ** 2), dtype=float)
@@ -224,11 +213,10 @@ class CIESkyEmitter(mi.Emitter):
 
     # ---- evaluation -------------------------------------------------------
     def sky_eval(self, d):
-        """Sky radiance (no sun) toward world directions d [W m^-2 sr^-1]: Sky.sky_radiance in
-        Dr.Jit (the light cache's control variate integrates it, :mod:`..sky_control`)."""
+        """Sky radiance (no sun) toward world directions d [W m^-2 sr^-1]: the light cache's
+        control variate (:mod:`..sky_control`)."""
         sky = sky_function(self, d)
-        # a sky without a map skips the lookup (it doubled the cost of the light cache's sky
-        # integrals); a day mixing skies with and without maps compiles one kernel for each
+        # a sky without a map skips the lookup (costly in the sky integrals): one kernel each
         return sky + self.envmap_eval(d) if self.has_map else sky
 
     def envmap_eval(self, d):

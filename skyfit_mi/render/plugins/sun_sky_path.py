@@ -1,22 +1,18 @@
 """The ``sun_sky_path`` integrator: a path tracer that samples the sun and the sky separately.
 
-Mitsuba's ``path`` integrator draws one light sample per path vertex from the ``cie_sky``
-emitter, which picks the solar disc with probability p_sun and the sky otherwise.  On a sunlit
-surface the sun carries most of the light, so that coin flip is most of a frame's noise: an
-estimate's relative standard deviation per sample is about sqrt((1 - p_sun) / p_sun) from the
-choice alone.  Radiance computes its sources deterministically; here, at every vertex, the sun
-and the sky each get their own light sample, combined with the BSDF's sample by multiple
-importance sampling (E. Veach, PhD thesis, Stanford 1997, ch. 9, the balance heuristic),
-treating the emitter's radiance as the sum of its two parts,
+Mitsuba's ``path`` draws one light sample per vertex from the ``cie_sky`` emitter, which picks
+the sun or the sky at random: on a sunlit surface that coin flip is most of a frame's noise
+(relative deviation about sqrt((1 - p_sun) / p_sun) per sample).  Here the sun and the sky each
+get their own light sample at every vertex, combined with the BSDF's by multiple importance
+sampling (E. Veach, PhD thesis, Stanford 1997, ch. 9, the balance heuristic), treating the
+emitter's radiance as the sum of its two parts,
 
     L_e(w) = h(w) + L_sun 1[w in the solar disc]          [W m^-2 sr^-1]
 
 with h the sky function (:meth:`~skyfit_mi.render.plugins.cie_sky.CIESkyEmitter.sky_eval`,
-thesis eqs. 4.12-4.18).  Each part is one integrand with two sampling techniques (its own and
-the BSDF's), so the balance weights p_light / (p_light + p_bsdf) and p_bsdf / (p_light +
-p_bsdf) sum to one for each part and the estimate is unbiased.  An ideal mirror (a Dirac
-BSDF) sees both parts through its sampled direction only, with weight one.  Area emitters,
-if a scene has any, are found by BSDF sampling alone (weight one: still unbiased).
+thesis eqs. 4.12-4.18).  Each part has two techniques (its own and the BSDF's) whose balance
+weights sum to one, so the estimate is unbiased.  An ideal mirror sees both parts through its
+sampled direction only, and area emitters are found by BSDF sampling alone (weight one).
 
 The scene's environment must be a ``cie_sky`` emitter.  Only surface scattering: no media.
 
@@ -67,8 +63,8 @@ class SunSkyPathIntegrator(mi.SamplingIntegrator):
         active = mi.Bool(active)
         valid = mi.Bool(active)                   # an environment is always there to be seen
 
-        # the emitter is read, never changed, in the loop: out of its state (traversed, its
-        # environment map's table, of another size than the loop, would be refused as state)
+        # the emitter is read-only in the loop: excluded from its state (its map's table,
+        # another size than the loop, would be refused)
         while dr.hint(active, max_iterations=self.max_depth, label="sun_sky_path",
                       exclude=[sky]):
             si = scene.ray_intersect(ray, active)

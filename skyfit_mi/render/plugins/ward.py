@@ -1,15 +1,13 @@
 """The ``ward`` BSDF: Ward's isotropic model (thesis eq. 3.19) with the thesis's parameterisations.
 
-Implements exactly :func:`skyfit_mi.physics.ward.ward_brdf` (tested against it) with
-importance sampling after B. Walter, "Notes on the Ward BRDF", Cornell
-PCG-05-06, 2005 (half vector with tan^2 delta = -sigma^2 ln u), mixed with
-cosine-weighted diffuse sampling in proportion to the two reflectances.
-sigma_alpha <= 1e-4 is an ideal mirror lobe (a Dirac delta) reflecting
-rho_s times the sigma -> 0 limit of the chosen normalisation; with ``radiance`` (Radiance 6's
-``plastic``/``metal``: the balanced lobe plus Radiance's Fresnel estimate for smooth surfaces,
-src/rt/normal.c, see :mod:`skyfit_mi.physics.ward`) that mirror reflects
-rho_s + F(cos) (1 - rho_s) and the diffuse part is scaled by (1 - F(cos_i)) (1 - F(cos_o))
-when the specularity (the model's ``rho_s``; max(rho_s) in ``raw``) is at least 0.018.
+Implements exactly :func:`skyfit_mi.physics.ward.ward_brdf` with importance sampling after
+B. Walter, "Notes on the Ward BRDF", Cornell PCG-05-06, 2005 (half vector with tan^2 delta =
+-sigma^2 ln u), mixed with cosine-weighted diffuse sampling in proportion to the reflectances.
+sigma_alpha <= 1e-4 is an ideal mirror (a Dirac delta) reflecting rho_s times the sigma -> 0
+limit of the normalisation; with ``radiance`` (Radiance 6's ``plastic``/``metal``: the balanced
+lobe plus Radiance's smooth-surface Fresnel estimate, src/rt/normal.c) the mirror reflects
+rho_s + F(cos) (1 - rho_s) and the diffuse part is scaled by (1 - F(cos_i)) (1 - F(cos_o)) when
+the specularity (``rho_s``; max(rho_s) in ``raw``) is at least 0.018.
 
 Parameters (reflectances unitless, sigma_alpha the rms slope):
 
@@ -33,9 +31,8 @@ mirror reflects rho_s F(cos_o).
 
 Models: ``raw`` (rho_d, rho_s, sigma_alpha), ``two`` (rho_s, sigma_alpha; rho_d = 1 - rho_s),
 ``achromatic`` (R, rho_s, sigma_alpha), ``colour`` (C, rho_s, sigma_alpha).  ``traverse``
-exposes exactly the model's parameters, all differentiable.  Values set through
-``params.update()`` are clamped to their ranges inside the kernel (validation
-happens when the plugin is built from properties).
+exposes exactly the model's parameters, all differentiable; values set through
+``params.update()`` are clamped in the kernel (validated only when built from properties).
 """
 
 import drjit as dr
@@ -221,9 +218,8 @@ class WardBSDF(mi.BSDF):
         return f"WardBSDF[model={self.model}, normalisation={self.normalisation}, {vals}]"
 
 
-# ---- the glossy lobe as functions of the roughness (the light cache's sampling lobes and the
-# sky's lobe integrals use them without plugins: every registered BSDF is one more target of
-# the path integrator's virtual calls, traced in each frame) ----------------------------------
+# ---- the glossy lobe as functions (used without plugins: each registered BSDF adds a
+# virtual-call target to the path integrator) -------------------------------------------------
 def lobe(wi, wo, sigma, normalisation):
     """Specular lobe value (no rho_s) [sr^-1] at roughness ``sigma`` (any Dr.Jit value), as
     skyfit_mi.physics.ward.specular_lobe; 0 below either horizon and for a mirror."""
@@ -237,7 +233,6 @@ def lobe(wi, wo, sigma, normalisation):
     s2 = dr.square(dr.maximum(sigma, SIGMA_MIRROR))
     hz2 = dr.maximum(dr.square(hz), 1e-20)
     # tan^2 delta from the tangential components: (hh - hz^2) cancels in single precision
-    # (an error of 0.15% in the exponent at sigma = 0.01)
     e = dr.exp(-(dr.square(hu.x) + dr.square(hu.y)) / (hz2 * s2))
     if normalisation == "ward":
         f = e / (4.0 * dr.pi * s2 * dr.safe_sqrt(ci * co))                       # eq. 3.19
@@ -250,8 +245,7 @@ def lobe(wi, wo, sigma, normalisation):
 
 # ---- microfacet lobes (skyfit_mi.physics.microfacet, Mitsuba's MicrofacetDistribution) ----
 def lobe_distribution(normalisation):
-    """The half vectors' distribution of the lobe ``normalisation`` (its sampling and its sky
-    quadrature's): 'ggx' for GGX lobes, else 'beckmann' (Ward's lobes: Walter's sampling)."""
+    """The half vectors' distribution of lobe ``normalisation``: 'ggx' or 'beckmann' (Ward's)."""
     return split(normalisation)[0] if normalisation in LOBES else "beckmann"
 
 
