@@ -42,7 +42,7 @@ def main():
     args = ap.parse_args()
     from reproduce_thesis import truth_vector
 
-    from skyfit_mi.fitting import cramer_rao
+    from skyfit_testkit import cramer_rao
     from skyfit_mi.fitting.chi2 import parse_region
     from skyfit_mi.fitting.fit import FitCache, FitSession
     from skyfit_mi.pipeline.manifest import load_manifest, sensor_from_record

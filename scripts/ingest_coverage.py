@@ -1,7 +1,7 @@
 """Coverage of fits after `skyfit ingest` of JPEG photographs (issue 15).
 
 The example board's day of tests/test_ingest.py (64x44, hourly) is rendered once, then
-photographed with SEEDS noise seeds at each JPEG quality (skyfit_mi.pipeline.photo_sim:
+photographed with SEEDS noise seeds at each JPEG quality (skyfit_testkit.photo_sim:
 auto-exposure, cos^4 vignetting, read and shot noise, sRGB), ingested with the grey card's
 calibration and the noise estimated from the frames, and the sample fitted (64 pixels, colour
 model).  Prints a markdown table: per quality, the share of (seed, parameter) pairs whose 95%
@@ -69,7 +69,7 @@ def main():
     from skyfit_mi.fitting.chi2 import subsample_region
     from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import validate_spec

@@ -2,7 +2,7 @@
 
 A board of five samples (saturated red, green, blue and yellow paint, a pale blue paper; all
 rho_s 0.05, sigma_alpha 0.08) beside a grey card (written into the work folder) is rendered
-once, hourly over a clear day, then photographed (skyfit_mi.pipeline.photo_sim) with SEEDS
+once, hourly over a clear day, then photographed (skyfit_testkit.photo_sim) with SEEDS
 noise seeds at each JPEG quality with the chroma subsampling asked (default 4:2:0), or as PNG
 (``--quality 0``: lossless), or with ``--format dng`` as camera RAWs (a Bayer mosaic in the
 camera's RGB, demosaiced by LibRaw on ingest) at each ``--matrix-error`` (the DNG colour
@@ -86,7 +86,7 @@ def main():
     from skyfit_mi.fitting.chi2 import subsample_region
     from skyfit_mi.fitting.fit import fit_regions
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import validate_spec

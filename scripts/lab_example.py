@@ -14,7 +14,7 @@ from pathlib import Path
 
 from skyfit_mi.pipeline.sequence import render_sequence
 from skyfit_mi.pipeline.spec import load_spec
-from skyfit_mi.pipeline.table_sim import measure_table
+from skyfit_testkit.table_sim import measure_table
 
 LAB = Path(__file__).resolve().parents[1] / "scenes" / "lab"
 #: The measured pixels (x, y), the noise [relative], its seed, the instrument's clip level

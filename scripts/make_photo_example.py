@@ -1,13 +1,13 @@
 """The example photographs of scenes/specs/photo_board.toml: render the day (the truth), then
 photograph it as a camera would (8-bit sRGB JPEG, auto-exposure in EXIF, cos^4 vignetting,
-read and shot noise; skyfit_mi.pipeline.photo_sim), for `skyfit ingest` to turn into a fit.
+read and shot noise; skyfit_testkit.photo_sim), for `skyfit ingest` to turn into a fit.
 
     .venv/bin/python scripts/make_photo_example.py -o out/photo_example
 """
 import argparse
 from pathlib import Path
 
-from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
 from skyfit_mi.pipeline.sequence import render_sequence
 from skyfit_mi.pipeline.spec import SCENES_DIR, load_spec
 

@@ -3,7 +3,7 @@ fitted under them and under the thesis's CIE clear sky (issue 36, item 3).
 
 The thesis disc in a known colour-model paint (C 0.6, 0.4, 0.2; rho_s 0.08; sigma_alpha 0.08),
 seen from the west-north-west at 45 degrees, is rendered at the scans' times under the
-envmaps made from them (``skyfit_mi/physics/measured_sky.py``: each scan's 81 points
+envmaps made from them (``skyfit_testkit/measured_sky.py``: each scan's 81 points
 interpolated over a fitted CIE general sky, the sun's DNI from the pyranometer's GHI less the
 map's diffuse irradiance).  Its frames are fitted with
 
@@ -41,8 +41,8 @@ def loo_table(scans):
     """Per scan: median and rms relative error of the held-out luminance, interpolated sky and
     CIE general sky alone, over all 81 points and over those 10 degrees or more from the sun
     other than point 0 (which reads 25-42% below its neighbours from 10:00 on)."""
-    from skyfit_mi.physics.measured_sky import EXCLUDE_DEG, leave_one_out
-    from skyfit_mi.physics.sky_measurement import angle_to_sun_deg
+    from skyfit_testkit.measured_sky import EXCLUDE_DEG, leave_one_out
+    from skyfit_testkit.sky_measurement import angle_to_sun_deg
 
     rows = []
     for s in scans:
@@ -63,7 +63,7 @@ def main(argv=None):
     from measured_light import LIGHTS, TRUTH, fit, measured_disc_day, relabelled
 
     from skyfit_mi.files import ensure_dir, write_json
-    from skyfit_mi.physics.sky_measurement import CITATION, load_scans
+    from skyfit_testkit.sky_measurement import CITATION, load_scans
     from skyfit_mi.render import setup
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -2,7 +2,7 @@
 
 Each scan of 2013-05-27 (Ithaca NY; Kider et al. 2014) becomes ``maps/sky_HHMM.exr``, a
 lat-long map of the sky's radiance (linear sRGB [W m^-2 sr^-1], world frame, interpolated from
-its 81 points over a fitted CIE general sky, ``skyfit_mi/physics/measured_sky.py``), and a
+its 81 points over a fitted CIE general sky, ``skyfit_testkit/measured_sky.py``), and a
 ``[[sky]]`` table of ``type = "envmap"`` whose ``direct_normal_W_m2`` is the pyranometer's GHI
 less the map's own diffuse irradiance.  The template spec's scene, materials, camera, sensor
 and render settings are kept; its place, times and sky become the measured day's.  Then:
@@ -26,9 +26,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def main(argv=None):
     from skyfit_mi.errors import SkyfitError
-    from skyfit_mi.physics.measured_sky import ROWS
-    from skyfit_mi.physics.sky_measurement import CITATION, load_scans
-    from skyfit_mi.pipeline.sky_scans import SUMMARY_FILE, measured_day
+    from skyfit_testkit.measured_sky import ROWS
+    from skyfit_testkit.sky_measurement import CITATION, load_scans
+    from skyfit_testkit.sky_scans import SUMMARY_FILE, measured_day
     from skyfit_mi.pipeline.spec import read_spec
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

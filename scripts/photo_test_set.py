@@ -4,7 +4,7 @@ the board's signal (issue 51's test set).
 The thesis's sample board (scenes/sample_board.xml, eight materials) with an 18% grey card
 beside it (written into the work folder) is rendered once over the day of
 scenes/specs/board_east_37.toml (160 x 120, half-hourly) at TRUTH_SPP, then for each seed
-photographed as a camera would (skyfit_mi.pipeline.photo_sim: auto-exposure in EXIF, cos^4
+photographed as a camera would (skyfit_testkit.photo_sim: auto-exposure in EXIF, cos^4
 vignetting, read and shot noise, sRGB, JPEG at --quality), ingested, and every sample fitted
 by `skyfit fit --all` with the photographs' defaults (64 pixels per material, or
 --max-pixels, 0 for whole regions; the 5-parameter model, the sky's level fitted under its
@@ -139,7 +139,7 @@ def render_truth(work, scenario):
 def photo_settings(truth, scenario, quality, seed):
     """(tag, PhotoSettings) of ``scenario``'s photographs of seed ``seed``."""
     from skyfit_mi.pipeline.manifest import load_manifest, rendered_frames
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings
+    from skyfit_testkit.photo_sim import PhotoSettings
 
     how = SCENARIOS[scenario]
     kw = dict(how.get("photo", {}))
@@ -164,7 +164,7 @@ def run_seed(work, truth, scenario, quality, seed, refit, max_pixels=None):
     REGION_PIXELS); (its photographs', sequence's and fits' folders)."""
     from skyfit_mi.fitting.chi2 import REGION_PIXELS
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import photograph_day
+    from skyfit_testkit.photo_sim import photograph_day
 
     tag, settings = photo_settings(truth, scenario, quality, seed)
     photos = work / f"photos_{tag}"

@@ -72,12 +72,12 @@ def main():
 
     import pandas as pd
 
-    from skyfit_mi.physics import sky_measurement as sm
+    from skyfit_testkit import sky_measurement as sm
 
     scans = sm.load_scans(args.data)
     models = sm.MODELS
     if not args.no_sunsky:
-        from skyfit_mi.render.sunsky_reference import sunsky_model
+        from skyfit_testkit.sunsky_reference import sunsky_model
 
         models = models[:-1] + (sunsky_model(),) + models[-1:]
     results = sm.run_comparison(scans, models)

@@ -32,7 +32,7 @@ PROFILE_BANDS_DEG = (0, 5, 10, 15, 20, 25, 30, 40, 60, 90, 180)
 
 def day_means(scans, model, exclude_deg=None):
     """Day mean of the relative rms error (nominal, rotated) of ``model``."""
-    from skyfit_mi.physics import sky_measurement as sm
+    from skyfit_testkit import sky_measurement as sm
 
     ex = sm.SUN_EXCLUSION_DEG if exclude_deg is None else exclude_deg
     return tuple(float(np.mean([sm.compare(s, model, rot, ex)["relative_rms"] for s in scans]))
@@ -42,7 +42,7 @@ def day_means(scans, model, exclude_deg=None):
 def irradiance_model(name, parts, options=None):
     """A SkyModel: the Perez sky of each scan from ``parts[capture] = (dhi, dni)``, with the
     model choices ``options`` (a PerezOptions; default its defaults)."""
-    from skyfit_mi.physics import sky_measurement as sm
+    from skyfit_testkit import sky_measurement as sm
     from skyfit_mi.physics.perez import PerezOptions, perez_sky
 
     options = PerezOptions() if options is None else options
@@ -61,7 +61,7 @@ def decompositions(scans):
     import pandas as pd
     import pvlib
 
-    from skyfit_mi.physics import sky_measurement as sm
+    from skyfit_testkit import sky_measurement as sm
 
     times = pd.DatetimeIndex([s.time for s in scans])
     ghi = pd.Series([s.ghi for s in scans], index=times)
@@ -107,7 +107,7 @@ def main():
     import pandas as pd
 
     from skyfit_mi.physics import perez as pz
-    from skyfit_mi.physics import sky_measurement as sm
+    from skyfit_testkit import sky_measurement as sm
 
     scans = sm.load_scans(args.data)
     models = {m.name: m for m in sm.MODELS}

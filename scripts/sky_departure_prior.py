@@ -1,6 +1,6 @@
 """The prior of the sky's departure field, measured from the shared scans of a clear day.
 
-Each of the 15 scans (Kider et al. 2014, ``skyfit_mi/physics/sky_measurement.py``) is fitted
+Each of the 15 scans (Kider et al. 2014, ``skyfit_testkit/sky_measurement.py``) is fitted
 as k M (1 + sum_j a_j B_j) (``skyfit_mi/physics/sky_departure.py``), M a model sky's luminance
 toward the scan's points (10 degrees about the sun left out), the scanner's fitted rotation
 applied (``--nominal``: its nominal directions).  Shown: one prior sd for every weight by
@@ -23,7 +23,7 @@ from scipy.stats import chi2
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from skyfit_mi.physics import sky_departure as sd  # noqa: E402
-from skyfit_mi.physics import sky_measurement as sm  # noqa: E402
+from skyfit_testkit import sky_measurement as sm  # noqa: E402
 
 #: Reference skies: the scan's model M (sky_measurement.MODELS' names).
 REFERENCES = ("cie_clear_thesis", "cie_groups_fit")

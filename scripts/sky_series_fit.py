@@ -33,7 +33,7 @@ def main(argv=None):
 
     from skyfit_mi.files import ensure_dir, write_json
     from skyfit_mi.fitting.sky_fit import default_sun_sd
-    from skyfit_mi.physics.sky_measurement import load_scans
+    from skyfit_testkit.sky_measurement import load_scans
 
     out = ensure_dir(args.output)
     t0 = time.perf_counter()

@@ -12,7 +12,7 @@ rendered under another sky:
 * turbid clear skies (``skyfit_mi/physics/turbid_sky.py``): Preetham's pattern with Ineichen and
   Perez's levels at a Linke turbidity, so the sun's light falls off with the air mass as haze
   takes it (the spec's eq. 4.7 has one fixed extinction): the shape and the levels differ;
-* the measured clear day's scans as envmaps (``pipeline/sky_scans.py``, Kider et al. 2014,
+* the measured clear day's scans as envmaps (``skyfit_testkit/sky_scans.py``, Kider et al. 2014,
   Apache-2.0) at their own site and times (scripts/measured_sky_maps.py);
 * the spec's own sky, the control;
 
@@ -144,7 +144,7 @@ def render_day(folder, spec, sky, scans=None):
     """Render ``spec`` (raw) under ``sky`` (a :func:`sky_entries` value; None: the envmaps of
     ``scans`` at their own site and times) into ``folder``/day; returns that folder."""
     from skyfit_mi.pipeline.sequence import render_sequence
-    from skyfit_mi.pipeline.sky_scans import measured_day
+    from skyfit_testkit.sky_scans import measured_day
     from skyfit_mi.pipeline.spec import load_spec, validate_spec
 
     folder = Path(folder)
@@ -297,7 +297,7 @@ def main(argv=None):
     from skyfit_mi.files import ensure_dir, write_json
     from skyfit_mi.fitting.sky_fit import check_terms
     from skyfit_mi.physics.sky import SKY_CHOICES
-    from skyfit_mi.physics.sky_measurement import CITATION, load_scans
+    from skyfit_testkit.sky_measurement import CITATION, load_scans
     from skyfit_mi.render import setup
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

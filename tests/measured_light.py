@@ -3,7 +3,7 @@
 The thesis disc (``scenes/disc.xml``) in a known Ward colour-model material, seen from the
 west-north-west (the camera on the sun's side: the highlight crosses the disc over the
 morning), at the site and times of the shared measured clear day (Kider et al. 2014), lit
-by each scan's envmap (:func:`skyfit_mi.pipeline.sky_scans.measured_day`).  Its frames are
+by each scan's envmap (:func:`skyfit_testkit.sky_scans.measured_day`).  Its frames are
 then fitted with the light the manifest names, or with another light put in its place
 (:func:`relabelled`): what a user who photographed the day and assumed a model sky would fit.
 
@@ -25,9 +25,9 @@ CAMERA_AZIMUTH_DEG = 300.0
 def measured_disc_day(folder, scans, size=12, noise_percent=2.0, spp=256, rows=None, seed=3):
     """Render the disc under the envmaps of ``scans`` into ``folder``/day (its maps and spec
     beside it); returns the day's folder."""
-    from skyfit_mi.physics.measured_sky import ROWS
+    from skyfit_testkit.measured_sky import ROWS
     from skyfit_mi.pipeline.sequence import render_sequence
-    from skyfit_mi.pipeline.sky_scans import measured_day
+    from skyfit_testkit.sky_scans import measured_day
     from skyfit_mi.pipeline.spec import load_spec, thesis_disc_spec
 
     template = thesis_disc_spec("measured-sky-disc", MATERIAL,

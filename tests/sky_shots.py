@@ -18,7 +18,6 @@ from PIL import Image
 
 from skyfit_mi.physics.camera import SensorModel
 from skyfit_mi.physics.sky import EFFICACY_CLEAR
-from skyfit_mi.pipeline.photo_sim import SIM_F_NUMBER, SIM_ISO, _exif
 from skyfit_mi.pipeline.sky_series import (
     SATURATION_LUMINANCE,
     SERIES_NAME,
@@ -26,6 +25,7 @@ from skyfit_mi.pipeline.sky_series import (
     fisheye_directions,
     sky_series,
 )
+from skyfit_testkit.photo_sim import SIM_F_NUMBER, SIM_ISO, _exif
 
 #: Exposure times of a bracket [s]: four stops apart, two each way of 1/500.
 BRACKET_S = (1 / 125, 1 / 500, 1 / 2000, 1 / 8000)

@@ -118,7 +118,7 @@ def test_ingest_calibrates_from_the_chart(chart_day, response, gamma):
     fitted gamma within 0.05, its exposures within 3%: the gamma's error moves them); the
     calibrated chromatic swatches agree with their rendered reference within 3% rms."""
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
 
     tmp = chart_day["tmp"]
     photos = tmp / f"photos_{response}"
@@ -143,7 +143,7 @@ def test_ingest_calibrates_from_the_chart(chart_day, response, gamma):
 
 def test_bad_chart_options_are_refused_before_any_output(chart_day):
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
 
     tmp = chart_day["tmp"]
     photos = tmp / "photos_bad"
@@ -179,7 +179,7 @@ def test_a_raws_colour_matrix_error_is_measured_on_the_chart_and_corrected(chart
     entry), the frames are corrected by it, and the fits' matrix error is its standard error,
     not the 3% prior."""
     from skyfit_mi.pipeline.ingest import RAW_MATRIX_ERROR, ingest
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, matrix_error_mix, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, matrix_error_mix, photograph_day
 
     pytest.importorskip("rawpy")
     tmp = chart_day["tmp"]

@@ -5,7 +5,7 @@ from scipy import integrate
 from scipy.stats import norm
 
 from skyfit_mi.fitting.chi2 import LOW_CODE, parse_region
-from skyfit_mi.fitting.cramer_rao import bound, censored_information, fisher_jacobian
+from skyfit_testkit.cramer_rao import bound, censored_information, fisher_jacobian
 
 
 def _information_by_integration(m, sigma, top):

@@ -97,7 +97,7 @@ def _coverage(day, n, noise_percent):
     """Over ``n`` noise replicates of ``day`` (truth rho_s 0.3, sigma_alpha 0.1): per parameter
     the count of 95% and 68% intervals containing the truth, RMSE / Cramer-Rao bound, median
     95% width / the bound's (2 x 1.96 x CRB), and the mean chi2/dof."""
-    from skyfit_mi.fitting import cramer_rao
+    from skyfit_testkit import cramer_rao
 
     truth = np.array([0.3, 0.1])
     s, draws = _replicates(day, n, seed=21, noise_percent=noise_percent)

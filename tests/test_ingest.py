@@ -1,6 +1,6 @@
 """`skyfit ingest`: photographs in, the manifest contract out (issue 15).
 
-A rendered day (the truth) is photographed by :mod:`skyfit_mi.pipeline.photo_sim`: 8-bit sRGB
+A rendered day (the truth) is photographed by :mod:`skyfit_testkit.photo_sim`: 8-bit sRGB
 JPEGs (quality 100; a coarser JPEG in a slow test) with an auto-exposure that changes between
 frames (EXIF shutter times), cos^4 vignetting, read and shot noise, clipping and JPEG
 compression.  After ingest, with the absolute scale taken from the grey card in the scene, a
@@ -64,7 +64,7 @@ def _toml(raw):
 def day(tmp_path_factory):
     """The truth rendered and its photographs (JPEG with offsets in EXIF)."""
     from skyfit_mi.fitting.chi2 import subsample_region
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
 
@@ -180,7 +180,7 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
     reflectances; with an exposure per frame, each frame's error moves the fit on its own."""
     from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.fitting.uncertainty import calibration_sd
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
 
     _, doc, fit = ingested
     cal = doc["ingest"]["calibration"]
@@ -251,7 +251,7 @@ def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, tmp_path):
     from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.fitting.light import LightOptions
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.sequence import render_sequence
 
     keys = ("C_r", "C_g", "C_b", "rho_s")
@@ -280,7 +280,7 @@ def test_simulated_png_and_tiff_photographs_carry_their_exif(day, tmp_path, fmt)
     """The simulator's PNG, TIFF and DNG files hold their EXIF (time, offset, exposure) as its
     JPEGs do (Pillow writes an Exif object's sub-IFD into PNG and TIFF only as bytes; a DNG's is
     appended to tifffile's file)."""
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.photos import read_photo
 
     paths = photograph_day(day["truth"], tmp_path, PhotoSettings(fmt=fmt), seed=5)
@@ -345,7 +345,7 @@ def test_response_fitted_from_grey_patches(tmp_path):
     recorded; without patches, or with too little span, it is refused."""
     from PIL import Image
 
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.sequence import render_sequence
 
     xml = (SCENES_DIR / "photo_board.xml").read_text()
@@ -411,7 +411,7 @@ def test_a_coarse_jpeg_widens_the_intervals_but_keeps_the_truth(day, tmp_path):
     and hold the truth."""
     from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
 
     photos = tmp_path / "q90"
     photograph_day(day["truth"], photos, PhotoSettings(quality=90), seed=5)
@@ -424,7 +424,7 @@ def test_a_coarse_jpeg_widens_the_intervals_but_keeps_the_truth(day, tmp_path):
 
 
 def test_offsets_missing_need_tz_and_then_agree(day, tmp_path):
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
 
     naive = tmp_path / "naive"
     photograph_day(day["truth"], naive, PhotoSettings(offset=False), seed=5)
@@ -689,8 +689,8 @@ def raw_ingested(day):
     small to estimate it, tests/test_raw_noise.py does), and the sample fitted."""
     pytest.importorskip("rawpy")
     from skyfit_mi.fitting.fit import fit_region
-    from skyfit_mi.pipeline.photo_sim import (RAW_READ_NOISE_DN, RAW_SHOT_GAIN, PhotoSettings,
-                                               photograph_day)
+    from skyfit_testkit.photo_sim import (RAW_READ_NOISE_DN, RAW_SHOT_GAIN, PhotoSettings,
+                                          photograph_day)
 
     photos, out = day["tmp"] / "raw_photos", day["tmp"] / "raw_seq"
     photograph_day(day["truth"], photos, PhotoSettings(fmt="dng", matrix_error=0.03), seed=5)

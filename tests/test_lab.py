@@ -206,7 +206,7 @@ def dn_rig(tmp_path_factory, mi):
     under six lab lights in the instrument's DN) made from a render."""
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
-    from skyfit_mi.pipeline.table_sim import measure_table
+    from skyfit_testkit.table_sim import measure_table
 
     tmp = tmp_path_factory.mktemp("dn")
     (tmp / "rig.xml").write_text(RIG)

@@ -1,5 +1,5 @@
-"""The package's folders are its layers: every import points down, and only render/ touches
-Mitsuba or Dr.Jit (docs/architecture.md)."""
+"""The package's folders are its layers: every import points down, only render/ touches
+Mitsuba or Dr.Jit, and nothing imports skyfit_testkit (docs/architecture.md)."""
 import ast
 from pathlib import Path
 
@@ -53,6 +53,8 @@ def test_imports_point_down_and_only_render_touches_mitsuba(path):
         top = mod.split(".")[0]
         if top in ("mitsuba", "drjit"):
             assert own == "render", f"{path.name}:{line} imports {mod} outside render/"
+        assert top != "skyfit_testkit", f"{path.name}:{line} imports {mod}: the test kit " \
+                                        "builds on the package, not the other way round"
         if top == "skyfit_mi":
             other = _layer(mod) if mod != "skyfit_mi" else "ground"
             assert LAYERS.index(other) <= LAYERS.index(own), \

@@ -1,4 +1,4 @@
-"""A measured sky as an envmap (physics/measured_sky.py, pipeline/sky_scans.py): exact on a model
+"""A measured sky as an envmap (skyfit_testkit: measured_sky.py, sky_scans.py): exact on a model
 sky, through the measured points, held-out points predicted; the sun from the GHI; and a day
 rendered under the measured skies of Kider et al. (2014; Apache-2.0, ../shared/data/ beside
 the repository) fitted under them (the truth held) and under the thesis's CIE clear sky
@@ -9,9 +9,9 @@ import pytest
 from skyfit_mi.conventions import direction_from_angles
 from skyfit_mi.errors import SkyfitError
 from skyfit_mi.physics import cie_general
-from skyfit_mi.physics import measured_sky as ms
-from skyfit_mi.physics import sky_measurement as sm
 from skyfit_mi.physics.colour import SRGB_LUMINANCE, XYZ_TO_SRGB
+from skyfit_testkit import measured_sky as ms
+from skyfit_testkit import sky_measurement as sm
 
 
 def _rings():
@@ -143,7 +143,7 @@ def test_the_envmaps_reproduce_the_scans_and_predict_held_out_points(scans):
 
 
 def test_measured_day_writes_maps_and_a_spec_that_renders_them(scans, tmp_path, mi):
-    from skyfit_mi.pipeline.sky_scans import SPEC_FILE, SUMMARY_FILE, measured_day
+    from skyfit_testkit.sky_scans import SPEC_FILE, SUMMARY_FILE, measured_day
     from skyfit_mi.pipeline.spec import load_spec, thesis_disc_spec
 
     template = thesis_disc_spec("t", {"model": "two", "rho_s": 0.1, "sigma_alpha": 0.1})

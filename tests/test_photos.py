@@ -265,7 +265,7 @@ def make_dng(path, raw, black=64, white=4095, neutral=(0.5, 1.0, 0.8), orientati
     """A minimal valid DNG: one 16-bit RGGB CFA image, the camera's RGB taken as sRGB's (LibRaw
     refuses images under 22 pixels a side)."""
     from skyfit_mi.physics.colour import XYZ_TO_SRGB
-    from skyfit_mi.pipeline.photo_sim import write_dng
+    from skyfit_testkit.photo_sim import write_dng
 
     write_dng(path, raw, XYZ_TO_SRGB, neutral, black=black, white=white, orientation=orientation)
     return path
@@ -279,9 +279,9 @@ def test_a_simulated_raw_reads_back_as_its_linear_srgb(tmp_path, matrix_error):
     with a matrix off by 5%, the grey still, the blue as photo_sim's mix makes it (its red
     -16%)."""
     pytest.importorskip("rawpy")
-    from skyfit_mi.pipeline.photo_sim import (RAW_BITS, RAW_BLACK, RAW_READ_NOISE_DN,
-                                              RAW_SHOT_GAIN, _mosaic, colour_matrix_1,
-                                              matrix_error_mix, raw_camera_matrix, write_dng)
+    from skyfit_testkit.photo_sim import (RAW_BITS, RAW_BLACK, RAW_READ_NOISE_DN,
+                                          RAW_SHOT_GAIN, _mosaic, colour_matrix_1,
+                                          matrix_error_mix, raw_camera_matrix, write_dng)
 
     a = raw_camera_matrix()
     assert a[0, 1] > 0.8 * a[0, 0] and np.all(a.sum(axis=1) <= 1.0 + 1e-12)

@@ -7,9 +7,9 @@ import pytest
 
 from skyfit_mi.physics.camera import SensorModel
 from skyfit_mi.pipeline.ingest import shown_noise
-from skyfit_mi.pipeline.photo_sim import (RAW_BITS, RAW_BLACK, _mosaic, colour_matrix_1,
-                                          raw_camera_matrix, write_dng)
 from skyfit_mi.pipeline.photos import read_photo
+from skyfit_testkit.photo_sim import (RAW_BITS, RAW_BLACK, _mosaic, colour_matrix_1,
+                                      raw_camera_matrix, write_dng)
 
 rawpy = pytest.importorskip("rawpy")
 from skyfit_mi.pipeline import raw_noise  # noqa: E402

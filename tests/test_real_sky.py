@@ -7,8 +7,8 @@ import pytest
 from skyfit_mi.conventions import angles_from_direction, direction_from_angles
 from skyfit_mi.errors import SkyfitError
 from skyfit_mi.physics import cie_general as cg
-from skyfit_mi.physics import sky_measurement as sm
 from skyfit_mi.physics.sky import clear_pattern, overcast_pattern
+from skyfit_testkit import sky_measurement as sm
 
 # --------------------------------------------------------------------------
 # The CIE general sky (CIE S 011/E:2003)
@@ -389,7 +389,7 @@ def test_irradiance_comparison(scans):
 @needs_data
 def test_sunsky_frame_puts_the_sky_around_the_sun(scans):
     pytest.importorskip("mitsuba")
-    from skyfit_mi.render.sunsky_reference import sunsky_luminance
+    from skyfit_testkit.sunsky_reference import sunsky_luminance
 
     s = scans[0]
     zen, az = np.radians(s.sun_zenith_deg), np.radians(s.sun_azimuth_deg)

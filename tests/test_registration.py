@@ -1,7 +1,7 @@
 """Frames registered and the lens undone in `skyfit ingest` (issue 51: parts 4 and the lens).
 
 A small rendered day (tests/test_ingest.py's: 64 x 44 px, hourly, 7 frames) is photographed by
-:mod:`skyfit_mi.pipeline.photo_sim` (8-bit sRGB PNG, auto-exposure, cos^4, read and shot
+:mod:`skyfit_testkit.photo_sim` (8-bit sRGB PNG, auto-exposure, cos^4, read and shot
 noise) with the camera nudged between frames: known shifts of the image's centre from 0.5 to
 2 px, one frame also turned by 0.3 degrees, the middle frame (the reference) still.  What is
 measured is each frame's (dx, dy) at the image's centre and its rotation against the
@@ -28,7 +28,7 @@ def shaken(tmp_path_factory):
     """The truth rendered, its photographs shaken (MOTION), ingested with and without
     registration."""
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.sequence import render_sequence
 
     tmp = tmp_path_factory.mktemp("register")
@@ -71,7 +71,7 @@ def test_a_still_day_is_neither_resampled_nor_eroded(shaken):
     few hundredths of a pixel) is below STILL_PX, so no frame is resampled, the values are the
     photographs' own and no region is eroded."""
     from skyfit_mi.pipeline.ingest import ingest
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
     from skyfit_mi.pipeline.registration import STILL_PX
 
     tmp = shaken["tmp"]
@@ -175,7 +175,7 @@ def test_a_distorted_photograph_is_undone_onto_the_pinhole(shaken, tmp_path):
     their noise and record what was undone; pixels off the photograph are NaN."""
     from skyfit_mi.pipeline.ingest import ingest
     from skyfit_mi.pipeline.manifest import load_manifest, read_frame_image
-    from skyfit_mi.pipeline.photo_sim import PhotoSettings, _lens, photograph_day
+    from skyfit_testkit.photo_sim import PhotoSettings, _lens, photograph_day
     from skyfit_mi.pipeline.pixels import scene_labels
     from skyfit_mi.pipeline.region_edges import colour_mixed
     from skyfit_mi.pipeline.registration import pixel_map, remap

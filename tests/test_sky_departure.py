@@ -62,7 +62,7 @@ def test_the_prior_is_the_least_that_holds_nine_in_ten_of_the_measured_skies():
     puts the sd at 0.16, and held out it holds at least 80% of the scans."""
     from sky_departure_prior import SD_GRID, departures, fit_prior, held_out, within
 
-    from skyfit_mi.physics.sky_measurement import load_scans
+    from skyfit_testkit.sky_measurement import load_scans
 
     try:
         scans = load_scans()
@@ -92,7 +92,7 @@ def test_a_fit_under_measured_skies_holds_the_truth_with_the_departure_and_not_w
     from skyfit_mi.fitting.chi2 import parse_region
     from skyfit_mi.fitting.fit import fit_regions
     from skyfit_mi.fitting.light import LightOptions
-    from skyfit_mi.physics.sky_measurement import load_scans
+    from skyfit_testkit.sky_measurement import load_scans
 
     try:
         scans = load_scans()

@@ -136,7 +136,7 @@ def test_a_day_fitted_under_its_photographed_sky_holds_the_truth_near_the_known_
     under its prior and that sun sd, every truth is held, and C's median 95% half-width is at
     most 1.2x that of the fit given the true maps and sun with the same sd (measured 1.00x)."""
     from skyfit_mi.fitting.sky_fit import default_sun_sd
-    from skyfit_mi.physics.sky_measurement import load_scans
+    from skyfit_testkit.sky_measurement import load_scans
     from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
 
     try:
@@ -249,7 +249,7 @@ def test_the_maps_units_follow_iso_12232s_saturation_speed(tmp_path):
 
     from skyfit_mi.physics.camera import SensorModel
     from skyfit_mi.physics.sky import EFFICACY_CLEAR
-    from skyfit_mi.pipeline.photo_sim import _exif
+    from skyfit_testkit.photo_sim import _exif
 
     L, t, N, S = 5000.0, 1 / 1000, 8.0, 100
     v = 0.65 * L * t / (N ** 2 * (78.0 / S))

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SkyfitError
-from ..files import write_json, write_text
-from ..render.points import load_points_scene, pixel_points
-from .manifest import load_manifest, read_frame_pixels, rendered_frames
+from skyfit_mi.errors import SkyfitError
+from skyfit_mi.files import write_json, write_text
+from skyfit_mi.pipeline.manifest import load_manifest, read_frame_pixels, rendered_frames
+from skyfit_mi.render.points import load_points_scene, pixel_points
 
 
 def measure_table(sequence, pixels, out, *, noise=0.01, seed=0, saturate=None):

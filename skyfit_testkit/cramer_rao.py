@@ -8,7 +8,7 @@ a clipped value is a censored (Tobit) observation (thesis eq. 6.2 is the unclipp
 import numpy as np
 from scipy.stats import norm
 
-from .chi2 import LOW_CODE
+from skyfit_mi.fitting.chi2 import LOW_CODE
 
 
 def censored_information(m, sigma, max_code):

@@ -1,7 +1,7 @@
 """Measured sky scans as a day of ``envmap`` frames: HDR maps and the spec that uses them.
 
-Each scan of the measured clear day (:mod:`skyfit_mi.physics.sky_measurement`) becomes a
-lat-long EXR of the sky alone (:func:`skyfit_mi.physics.measured_sky.scan_envmap`, linear sRGB
+Each scan of the measured clear day (:mod:`skyfit_testkit.sky_measurement`) becomes a
+lat-long EXR of the sky alone (:func:`skyfit_testkit.measured_sky.scan_envmap`, linear sRGB
 [W m^-2 sr^-1]) and an ``envmap`` ``[[sky]]`` table naming the map and the disc's direct normal
 irradiance; with a template's scene, camera, sensor and render settings, a spec to render and
 fit under the measured light.
@@ -9,12 +9,13 @@ fit under the measured light.
 
 from pathlib import Path
 
-from ..errors import SkyfitError
-from ..files import ensure_dir, write_json, write_text
-from ..physics.measured_sky import ROWS, scan_envmap
-from ..physics.sky_measurement import SITE_LATITUDE_DEG, SITE_LONGITUDE_DEG
-from ..render.image import write_exr
-from .spec import SCENES_DIR, SpecError
+from skyfit_mi.errors import SkyfitError
+from skyfit_mi.files import ensure_dir, write_json, write_text
+from skyfit_mi.pipeline.spec import SCENES_DIR, SpecError
+from skyfit_mi.render.image import write_exr
+
+from .measured_sky import ROWS, scan_envmap
+from .sky_measurement import SITE_LATITUDE_DEG, SITE_LONGITUDE_DEG
 
 #: The maps' names, relative to the spec (a ``file`` pattern of the spec's envmap sky).
 MAP_FILE = "maps/sky_{time:%H%M}.exr"
@@ -47,7 +48,7 @@ def measured_day(scans, folder, template, template_dir=".", *, rows=ROWS, rotate
 
     Parameters
     ----------
-    scans : list of :class:`~skyfit_mi.physics.sky_measurement.Scan`
+    scans : list of :class:`~skyfit_testkit.sky_measurement.Scan`
         One frame per scan, in time order.
     folder : path
         Output: ``maps/sky_HHMM.exr``, :data:`SPEC_FILE` and :data:`SUMMARY_FILE`.

@@ -23,18 +23,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..conventions import direction_from_angles
-from ..errors import SkyfitError, check_choice
-from . import cie_general, turbid_sky
-from .colour import SRGB_LUMINANCE
-from .perez import CLEARNESS_BIN_EDGES, PerezOptions, coefficients, perez_sky
-from .sky import EFFICACY_CLEAR, cie_sky, perez_pattern
-from .sun import solar_position
+from skyfit_mi.conventions import direction_from_angles
+from skyfit_mi.errors import SkyfitError, check_choice
+from skyfit_mi.physics import cie_general, turbid_sky
+from skyfit_mi.physics.colour import SRGB_LUMINANCE
+from skyfit_mi.physics.perez import CLEARNESS_BIN_EDGES, PerezOptions, coefficients, perez_sky
+from skyfit_mi.physics.sky import EFFICACY_CLEAR, cie_sky, perez_pattern
+from skyfit_mi.physics.sun import solar_position
 
 #: Environment variable naming the data folder, overriding :data:`DEFAULT_DATA_DIR`.
 DATA_ENV = "SKYFIT_SKY_DATA"
 #: The data's place relative to the repository: ``../shared/data/...`` beside its root.
-DEFAULT_DATA_DIR = (Path(__file__).resolve().parents[2].parent / "shared" / "data"
+DEFAULT_DATA_DIR = (Path(__file__).resolve().parents[1].parent / "shared" / "data"
                     / "sky-measurements-2014-05-27")
 #: Citation and license of the data, for every output that shows results from it.
 CITATION = ("Kider et al. 2014, 'A Framework for the Experimental Comparison of Solar and "
@@ -345,7 +345,7 @@ PEREZ_SHAPE_GRID = tuple((float(e), float(d)) for e in CLEARNESS_BIN_EDGES[:-1]
                          for d in _PEREZ_DELTAS)
 
 #: The NumPy skies the project offers, in table order (Mitsuba's sunsky is in
-#: :mod:`skyfit_mi.render.sunsky_reference`).
+#: :mod:`skyfit_testkit.sunsky_reference`).
 MODELS = (
     SkyModel("cie_clear_thesis", thesis_clear_luminance, absolute=True,
              description="thesis CIE clear sky (eqs. 4.10-4.15), Kittler zenith luminance, "

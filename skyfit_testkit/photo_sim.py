@@ -19,12 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SkyfitError
-from ..files import atomic_write, ensure_dir, write_json
-from ..physics.camera import SensorModel
-from ..physics.colour import XYZ_TO_SRGB
-from .manifest import load_manifest, read_frame_image, rendered_frames
-from .orientation import undo_orientation
+from skyfit_mi.errors import SkyfitError
+from skyfit_mi.files import atomic_write, ensure_dir, write_json
+from skyfit_mi.physics.camera import SensorModel
+from skyfit_mi.physics.colour import XYZ_TO_SRGB
+from skyfit_mi.pipeline.manifest import load_manifest, read_frame_image, rendered_frames
+from skyfit_mi.pipeline.orientation import undo_orientation
 
 #: EXIF tags (the Exif sub-IFD 0x8769) written for each frame.
 EXIF_IFD, DATETIME_ORIGINAL, OFFSET_TIME_ORIGINAL = 0x8769, 0x9003, 0x9011
@@ -225,7 +225,7 @@ def _lens(radiance, motion, k, fov):
         return radiance
     import cv2
 
-    from ..physics.lens import focal_px, undistort
+    from skyfit_mi.physics.lens import focal_px, undistort
 
     h, w = radiance.shape[:2]
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)

@@ -42,12 +42,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..conventions import angles_from_direction, direction_from_angles
-from ..errors import SkyfitError, check_range
-from . import cie_general
-from .colour import SRGB_LUMINANCE, XYZ_TO_SRGB
-from .envmap import MeasuredIrradiance, direct_normal_from_global, envmap_sky
-from .latlong import resample
+from skyfit_mi.conventions import angles_from_direction, direction_from_angles
+from skyfit_mi.errors import SkyfitError, check_range
+from skyfit_mi.physics import cie_general
+from skyfit_mi.physics.colour import SRGB_LUMINANCE, XYZ_TO_SRGB
+from skyfit_mi.physics.envmap import MeasuredIrradiance, direct_normal_from_global, envmap_sky
+from skyfit_mi.physics.latlong import resample
 
 #: RBF kernel of the interpolated fields (scipy.interpolate.RBFInterpolator's name).
 KERNEL = "linear"
@@ -284,7 +284,7 @@ def measured_envmap(sky, efficacy, ghi, sun_zenith_deg, sun_azimuth_deg, *,
 
 def scan_envmap(scan, rows=ROWS, rotated=True, ground_albedo=0.0):
     """The envmap :class:`~skyfit_mi.physics.sky.Sky` of one scan of the measured clear day
-    (:class:`~skyfit_mi.physics.sky_measurement.Scan`, Kider et al. 2014).
+    (:class:`~skyfit_testkit.sky_measurement.Scan`, Kider et al. 2014).
 
     The 81 points (turned by the README's scanner rotation if ``rotated``, so the measured
     circumsolar light surrounds the computed sun) are interpolated; the efficacy is the scan's

@@ -12,10 +12,11 @@ Transactions on Graphics 31(4), 95, 2012, doi:10.1145/2185520.2185591.
 
 import numpy as np
 
-from ..physics.colour import SRGB_LUMINANCE
-from ..physics.sky import GROUND_ALBEDO
-from ..physics.sky_measurement import SkyModel
-from .variant import setup
+from skyfit_mi.physics.colour import SRGB_LUMINANCE
+from skyfit_mi.physics.sky import GROUND_ALBEDO
+from skyfit_mi.render.variant import setup
+
+from .sky_measurement import SkyModel
 
 #: Turbidities tried per scan by :func:`sunsky_model`: the emitter's range [1, 10], step 0.25.
 TURBIDITIES = tuple(float(t) for t in np.round(np.arange(1.0, 10.0 + 1e-9, 0.25), 2))
@@ -48,7 +49,7 @@ def sunsky_luminance(directions, sun_direction, turbidities, albedo=GROUND_ALBED
 
 
 def sunsky_model(turbidities=TURBIDITIES):
-    """The ``sunsky`` sky as a :class:`~skyfit_mi.physics.sky_measurement.SkyModel`, its
+    """The ``sunsky`` sky as a :class:`~skyfit_testkit.sky_measurement.SkyModel`, its
     turbidity fitted per scan over ``turbidities``."""
     return SkyModel("sunsky_fit",
                     lambda d, scan, values: sunsky_luminance(d, scan.sun_direction, values),
