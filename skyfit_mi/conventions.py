@@ -18,11 +18,16 @@ def direction_from_angles(theta, phi):
     return np.stack([s * np.sin(phi), s * np.cos(phi), np.cos(theta)], axis=-1)
 
 
+def unit_directions(d):
+    """World vector(s) ``d`` (..., 3) divided by their lengths, as a float array."""
+    d = np.asarray(d, dtype=float)
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
 def angles_from_direction(d):
     """Zenith and compass azimuth [rad] of world vector(s) ``d`` (..., 3); the azimuth is in
     [0, 2 pi), 0 for a vertical vector."""
-    d = np.asarray(d, dtype=float)
-    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    d = unit_directions(d)
     theta = np.arccos(np.clip(d[..., 2], -1.0, 1.0))
     phi = np.mod(np.arctan2(d[..., 0], d[..., 1]), 2 * np.pi)
     return theta, phi

@@ -66,7 +66,7 @@ def _z(frames, clean, sigmas):
 def _sigmas(frames, settings, noise):
     shown = shown_noise(frames, SENSOR)
     return [pixel_sigma(f, SENSOR, noise, {"variance": jn.bootstrap_variance(
-        f, s, SENSOR, noise, [jn.SEED, i])[0], "shown": shown, "settings": s})
+        f, s, SENSOR, noise, [jn.SEED, i])[0], "shown": shown, "settings": s})[0]
         for i, (f, s) in enumerate(zip(frames, settings))]
 
 
@@ -338,7 +338,7 @@ def test_shared_error_sd_is_the_error_of_a_region_mean(quality, subsampling):
                         "subsampling": subsampling}
         _, _, bias = jn.bootstrap_variance(decoded, settings, SENSOR, NOISE, 7)
         values = (decoded - bias).reshape(-1, 3)             # as ingest takes them
-        var = pixel_sigma(values, SENSOR, NOISE) ** 2
+        var = pixel_sigma(values, SENSOR, NOISE)[0] ** 2
         # the mean's error in linear signal (where fits take it: the noise's shift through the
         # curve cancels there), in codes at the patch's level
         taken = SENSOR.linearise(decoded - bias) * 255.0

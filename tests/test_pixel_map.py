@@ -544,7 +544,8 @@ def test_saturated_values_left_out_flag_only_fits_that_contradict_them(tmp_path)
     board's determined pixels; the same fits without their lobe (a wrong estimate) contradict
     the values and are flagged; patches of such pixels are fitted and flagged alike."""
     from skyfit_mi.fitting.chi2 import load_observations, usable_values
-    from skyfit_mi.fitting.methods.global_search import SIGMA_GRID, _linearise, near_saturation
+    from skyfit_mi.fitting.methods.global_search import (SIGMA_GRID, linear_observations,
+                                                          near_saturation)
     from skyfit_mi.fitting.pixel_fit import (UNDETERMINED, WARNINGS, _contradicts, fit_pixels,
                                              patch_groups)
     from skyfit_mi.pipeline.pixels import material_regions
@@ -592,7 +593,7 @@ def test_saturated_values_left_out_flag_only_fits_that_contradict_them(tmp_path)
     saturated = usable & near_saturation(obs)
     basis = WardModel(cache, "colour").basis(SIGMA_GRID)
     groups = np.arange(len(px))
-    y, w = _linearise(obs, usable, leave_out_saturated=False)
+    y, w = linear_observations(obs, usable, leave_out_saturated=False)
     right = _contradicts("colour", y, w, saturated, basis, res, groups)
     matte = dict(res, theta=res["theta"] * [1, 1, 1, 0, 1])
     wrong = _contradicts("colour", y, w, saturated, basis, matte, groups)

@@ -123,11 +123,6 @@ def subsample_region(pixels, max_pixels, seed):
     return pixels[keep]
 
 
-def _region_values(root, frame, key, pixels, shape):
-    """The region's values in one frame's EXR ``frame[key]``, checked (readable, right size)."""
-    return read_frame_pixels(root, frame, key, shape, pixels)
-
-
 def load_table_observations(manifest_path, region, points=None, frames=None, min_frames=2):
     """A region's values and sigmas from a sequence's observation table
     (:mod:`~skyfit_mi.pipeline.observation_table`), on its sensor's linear scale, with the rays
@@ -312,8 +307,8 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
         falloff = falloff * flat[:, 0]
     ys, sig, gain = [], [], []
     for f in rendered:
-        y = _region_values(root, f, "sensor", pixels, (h, w, 3))
-        s = _region_values(root, f, "sigma", pixels, (h, w, 3))
+        y = read_frame_pixels(root, f, "sensor", (h, w, 3), pixels)
+        s = read_frame_pixels(root, f, "sigma", (h, w, 3), pixels)
         if "jpeg_block_correlation" in f:          # a JPEG's errors shared within its blocks
             shared = block_sharing(pixels, offset=f.get("jpeg_block_offset", (0, 0))) \
                 if one_fit else np.ones(len(pixels))
@@ -502,13 +497,10 @@ class Problem:
         r = self.residual_terms(radiances, derivative=False)[0]
         return np.sum(np.where(self.mask, r * r, 0.0), axis=(1, 2, 3))
 
-    def residuals_from(self, radiance):
-        return self.residual_terms(radiance, derivative=False)[0][self.mask]
-
     def residuals(self, theta):
         """(y - y(a)) / sigma over usable values, flat."""
         self.evaluations += 1
-        return self.residuals_from(self.model.radiance(theta))
+        return self.residual_terms(self.model.radiance(theta), derivative=False)[0][self.mask]
 
     def chi2(self, theta):
         """Thesis eq. 6.2."""

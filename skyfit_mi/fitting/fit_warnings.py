@@ -9,7 +9,7 @@ from .fit_record import held_out_record
 from .geometry import geometry_warnings
 from .intervals import matrix_note
 from .pose import pose_warnings
-from .sky_fit import SKY_DOMINATES
+from .sky_fit import doubles_interval
 from ..physics.sky import MEASURED_SUN_SD
 from ..physics.ward import METAL_THRESHOLD
 from ..pipeline.manifest import is_table
@@ -40,8 +40,7 @@ def fit_warnings(s, fit):
         warnings.append(s.doc["ingest"]["scale"]["meaning"])
     warnings += sky_warnings(s, fit)
     warnings += pose_warnings(s, fit)
-    own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
-    led = [p for i, p in enumerate(names) if fit.matrix_sd[i] > SKY_DOMINATES * own[i]]
+    led = [p for p, big in zip(names, doubles_interval(fit, fit.matrix_sd)) if big]
     if led:
         warnings.append(f"{', '.join(led)}: {matrix_note(s)}; it, more than the "
                         "data, sets their intervals.")
@@ -128,9 +127,7 @@ def sky_warnings(s, fit):
         return []
     k = sky.record
     warnings = list(k["warnings"])
-    own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
-    led = [] if sky.sd is None else [i for i in range(len(names))
-                                     if sky.sd[i] > SKY_DOMINATES * own[i]]
+    led = [] if sky.sd is None else np.flatnonzero(doubles_interval(fit, sky.sd)).tolist()
     if led:
         parts = [part for part, told in ((", its change over the day", k["terms"]),
                                           (", its shape", k["shape"]),
@@ -152,8 +149,7 @@ def sky_warnings(s, fit):
                     "with other normals, or the sky photographed (skyfit sky-series), would "
                     "narrow ")
             + ("it." if one else "them."))
-    level = [p for i, p in enumerate(names)
-             if fit.sun_level_sd[i] > SKY_DOMINATES * own[i]]
+    level = [p for p, big in zip(names, doubles_interval(fit, fit.sun_level_sd)) if big]
     if level:
         warnings.append(
             f"{', '.join(level)} scale with the sun's level, which no data tell (the "

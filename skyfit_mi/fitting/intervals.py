@@ -239,7 +239,7 @@ def jpeg_frame_sd(s):
         ok = np.all(np.isfinite(s.obs.sigma[:, t]), axis=1)
         if rec and ok.any():
             y = s.obs.y[ok, t]
-            shared[t] = shared_error_sd(y, pixel_sigma(y, s.obs.sensor, noise) ** 2, rec)
+            shared[t] = shared_error_sd(y, pixel_sigma(y, s.obs.sensor, noise)[0] ** 2, rec)
     return shared
 
 

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .methods.global_search import RHO_GRID, SIGMA_GRID, _linearise, linear_quadratics
+from .methods.global_search import (RHO_GRID, SIGMA_GRID, linear_observations,
+                                    linear_quadratics)
 from ..errors import SkyfitError
 from ..files import save_figure, write_text
 from ..render.fit_model import PARAMETERS, bounds, reflectances
@@ -82,7 +83,9 @@ def _radiance_from_basis(model, theta, D, G):
 
 def _chi2_from_basis(session, theta, D, G):
     """The true chi^2 (censored values included) at ``theta`` from the basis at its sigma."""
-    r = session.problem.residuals_from(_radiance_from_basis(session.model, theta, D, G))
+    problem = session.problem
+    r = problem.residual_terms(_radiance_from_basis(session.model, theta, D, G),
+                               derivative=False)[0][problem.mask]
     return float(r @ r)
 
 
@@ -131,7 +134,7 @@ def profiled_map(session, theta, x, y, xs, ys):
     # the grids hold the fit's values, so that its start is a grid point
     sigma = axes.get("sigma_alpha", np.union1d(SIGMA_GRID, [theta[-1]]))
     rho = axes.get("rho_s", np.union1d(RHO_GRID, [theta[-2]]))
-    obs, w = _linearise(session.problem.obs, session.problem.mask)
+    obs, w = linear_observations(session.problem.obs, session.problem.mask)
     D, G = session.wm.basis(sigma)
     zz, yh, hh = linear_quadratics(session.model, obs, w, D, G, rho)       # (K, R, groups)
     at_best = np.clip(yh / np.maximum(hh, 1e-300), 0.0, 1.0)

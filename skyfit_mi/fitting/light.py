@@ -10,8 +10,8 @@ import numpy as np
 from ..errors import SkyfitError, check_choice, check_range
 from ..physics.sky import SKY_CHOICES, SKY_LEVEL_SD
 from ..render.basis_table import mixed
-from .sky_fit import (check_terms, default_departure, default_sky, default_sun_sd,
-                      shape_variants, sun_source, sun_up)
+from .sky_fit import (check_terms, default_sky, default_sun_sd, photographed, shape_variants,
+                      sun_source, sunlit)
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ class LightOptions:
     def resolve(self, doc, skies, n_frames, log=print):
         """The checked :class:`LightPlan` of these options on a sequence (manifest ``doc``,
         frames' ``skies``, ``n_frames``); Nones take :func:`~.sky_fit.default_sky` (logged),
-        :func:`~.sky_fit.default_sun_sd` and :func:`~.sky_fit.default_departure`."""
+        :func:`~.sky_fit.default_sun_sd`, and the departure on for photographs under a model sky."""
         sky, sun_sd, terms, shape = self.sky, self.sun_sd, self.terms, bool(self.shape)
         departure = self.departure
         if sky is not None:
@@ -89,7 +89,7 @@ class LightOptions:
                               + ": give --sky fit or prior.")
         if sky == "spec":
             return SPEC_LIGHT
-        if not sun_up(skies):                           # refused before the light is traced
+        if not sunlit(skies):                           # refused before the light is traced
             raise SkyfitError(f"--sky {sky} scales the sky against the sun, and no frame of the "
                               "sequence has the sun's disc above the horizon; fit with the "
                               "spec's sky (--sky spec).")
@@ -104,7 +104,7 @@ class LightOptions:
                               "skies are maps (measured) or give no light but the sun's; leave "
                               "it out.")
         if departure is None:
-            departure = default_departure(doc) and modelled
+            departure = photographed(doc) and modelled
             if departure:
                 log("sky: photographs under a real sky, whose shape no model holds: its "
                     "departure from the spec's is fitted under its prior "

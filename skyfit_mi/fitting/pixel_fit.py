@@ -23,8 +23,8 @@ from ..render.basis_table import TableModel, trace_basis
 from ..render.fit_model import PARAMETERS, bounds, reflectance_sets
 from ..render.light_cache import CacheOptions
 from .chi2 import load_observations, usable_values
-from .methods.global_search import (RHO_GRID, SIGMA_GRID, _linearise, grid_chi2,
-                                    grid_chi2_device, linear_curvature, near_saturation)
+from .methods.global_search import (RHO_GRID, SIGMA_GRID, grid_chi2, grid_chi2_device,
+                                    linear_curvature, linear_observations, near_saturation)
 from .sky_fit import LEVEL_SCALED, light_level_sd, skies_at_level
 from .uncertainty import Z, calibration_sd, colour_matrix_sd, widen_relative
 
@@ -105,7 +105,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     wm = TableModel(table, model)
     usable = usable_values(obs, table.hit)
     # every usable value's weight, and the grid's: values near saturation left out of it
-    y, w_all = _linearise(obs, usable, leave_out_saturated=False)
+    y, w_all = linear_observations(obs, usable, leave_out_saturated=False)
     saturated = usable & near_saturation(obs)
     w = np.where(saturated, 0.0, w_all)
     bases = wm.basis(SIGMA_GRID, halves=True)            # the whole cache, and its two halves

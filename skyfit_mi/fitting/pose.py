@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import uncertainty as unc
-from .sky_fit import SKY_DOMINATES, light_response
+from .sky_fit import doubles_interval, light_response
 from ..render.scene import view_centre
 
 #: How each angle of the pose is named in records and warnings.
@@ -139,10 +139,10 @@ def pose_warnings(s, fit):
     share = fit.pose
     if not share.shifts:
         return []
-    own = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
+    big = doubles_interval(fit, share.sd)
     told = ", ".join(f"+-{share.sd_deg[k]:g} deg {ANGLE_NAMES[k]}" for k in s.pose_angles)
     return [f"{p} depends on the pose: its uncertainty ({told}, 1 sd) moves it by "
             f"+-{unc.Z['95'] * share.sd[i]:.3g} (95%), at least doubling its interval, which "
             "includes that; a pose measured better (`skyfit camera` from more marked points, "
             "spread over the image) would narrow it."
-            for i, p in enumerate(s.names) if share.sd[i] > SKY_DOMINATES * own[i]]
+            for i, p in enumerate(s.names) if big[i]]

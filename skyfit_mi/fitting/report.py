@@ -57,27 +57,17 @@ def write_fit(result, prefix):
 SUMMARY_NAME = "fits.csv"
 
 
-def read_fit(path):
-    """The fit result in ``path`` (:func:`read_fit_result`), or None if it holds none."""
-    try:
-        return read_fit_result(path)
-    except SkyfitError:
-        return None
-
-
-def fit_files(folder):
-    """{region: (path, result)} of the fit results (``fit_*.json``) in ``folder``."""
+def read_fits(folder):
+    """The fit results (``fit_*.json``) in ``folder`` by region name; files holding none
+    (:func:`read_fit_result` refuses them) are skipped."""
     out = {}
     for p in sorted(Path(folder).glob("fit_*.json")):
-        r = read_fit(p)
-        if r is not None:
-            out[r["region"]] = (p, r)
+        try:
+            r = read_fit_result(p)
+        except SkyfitError:
+            continue
+        out[r["region"]] = r
     return out
-
-
-def read_fits(folder):
-    """The fit results (``fit_*.json``) in ``folder``, by region name."""
-    return {k: r for k, (_, r) in fit_files(folder).items()}
 
 
 def _ranking(selection, first=5):

@@ -119,14 +119,14 @@ class SkyFit:
     shares: dict = field(default_factory=dict)
 
 
-def _sunlit(skies):
+def doubles_interval(fit, sd):
+    """Whether another error's share ``sd`` (n,) at least doubles each of ``fit``'s intervals."""
+    return np.asarray(sd) > SKY_DOMINATES * np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
+
+
+def sunlit(skies):
     """Those of ``skies`` whose sun's disc lights the scene from above the horizon."""
     return [k for k in skies if np.any(k.sun_radiance > 0) and k.sun_direction[2] > 0]
-
-
-def sun_up(skies):
-    """Whether the sun's disc lights any of ``skies`` from above the horizon."""
-    return bool(_sunlit(skies))
 
 
 def photographed(doc):
@@ -137,19 +137,14 @@ def photographed(doc):
 def default_sky(doc, skies):
     """``fit --sky``'s default: 'prior' for photographs under a sky with the sun up, else 'spec'
     (frames rendered under that very light, or no sun to scale the sky against)."""
-    sunny = sun_up(skies) and any(k.lit_by_sky for k in skies)
+    sunny = sunlit(skies) and any(k.lit_by_sky for k in skies)
     return "prior" if sunny and photographed(doc) else "spec"
-
-
-def default_departure(doc):
-    """``fit --sky-departure``'s default: on for photographs, off for rendered sequences."""
-    return photographed(doc)
 
 
 def sun_source(skies):
     """'measured' where every sunlit sky of ``skies`` has ``info["sun_measured"]``, else
     'modelled' (thesis eq. 4.7, a clear-sky model, or a split of the global irradiance)."""
-    lit = _sunlit(skies)
+    lit = sunlit(skies)
     return "measured" if lit and all(k.info.get("sun_measured") for k in lit) else "modelled"
 
 
@@ -162,7 +157,7 @@ def default_sun_sd(doc, skies):
         return 0.0
     if sun_source(skies) != "measured":
         return SUN_LEVEL_SD
-    lit = _sunlit(skies)
+    lit = sunlit(skies)
     stated = [k.info.get("sun_sd") for k in lit]
     if None in stated:
         return MEASURED_SUN_SD
@@ -498,23 +493,26 @@ class FittedLight:
         """Light ``session`` at the coefficients ``u`` (default the fitted)."""
         self.coefficients.light(session, self.basis, self.u if u is None else u)
 
+    def derivative(self, session, value):
+        """d value(session) / d u (..., coefficients) by central differences of
+        :data:`DRIFT_STEP`; leaves ``session`` lit at the fitted u."""
+        columns = []
+        for step in DRIFT_STEP * np.eye(len(self.u)):
+            ends = []
+            for sign in (1, -1):
+                self.put(session, self.u + sign * step)
+                ends.append(value(session))
+            columns.append((ends[0] - ends[1]) / (2 * DRIFT_STEP))
+        self.put(session)
+        return np.stack(columns, axis=-1)
+
 
 def light_response(s, light, theta):
     """(d residuals / d u that the parameters cannot absorb, residuals, d residuals / d theta,
     the parameters' least-squares response (n, coefficients)) of session ``s`` at ``theta`` and
     :class:`FittedLight` ``light``, by central differences of :data:`DRIFT_STEP`; leaves ``s``
     lit at it."""
-    u = light.u
-    eye = np.eye(len(u))
-    Ju = []
-    for j in range(len(u)):
-        r = []
-        for sign in (1, -1):
-            light.put(s, u + sign * DRIFT_STEP * eye[j])
-            r.append(s.problem.residuals(theta))
-        Ju.append((r[0] - r[1]) / (2 * DRIFT_STEP))
-    light.put(s)
-    Ju = np.column_stack(Ju)
+    Ju = light.derivative(s, lambda s: s.problem.residuals(theta))
     r, Jt = s.problem.jacobian(theta)
     response = -np.linalg.lstsq(Jt, Ju, rcond=None)[0]
     return Ju + Jt @ response, r, Jt, response
@@ -542,15 +540,8 @@ def reference_slope(s, light, theta, lambertian):
                       where=per_radiance[:, None] != 0)
     fitted = np.array([moved[channel == c].sum(axis=0) / L[channel == c].sum()
                        for c in range(problem.mask.shape[-1])])
-    eye, columns = np.eye(len(light.u)), []
-    for j in range(len(light.u)):
-        ln_lambertian = []
-        for sign in (1, -1):
-            light.put(s, light.u + sign * DRIFT_STEP * eye[j])
-            ln_lambertian.append(np.log(np.sum(s.wm.radiance(lambertian), axis=(0, 1))))
-        columns.append((ln_lambertian[0] - ln_lambertian[1]) / (2 * DRIFT_STEP))
-    light.put(s)
-    return fitted - np.column_stack(columns)
+    return fitted - light.derivative(
+        s, lambda s: np.log(np.sum(s.wm.radiance(lambertian), axis=(0, 1))))
 
 
 def share_at(s, share, theta):

@@ -23,7 +23,15 @@ import numpy as np
 
 from ..errors import SkyfitError, check_choice, check_range
 
-RESPONSES = ("linear", "gamma", "srgb")
+#: Each response's transfer function Q(s) (eq. 5.11), its inverse and dQ/ds, as functions of
+#: (x, gamma); sRGB's curve of IEC 61966-2-1.
+CURVES = {
+    "linear": (lambda s, g: s, lambda v, g: v, lambda s, g: np.ones_like(s)),
+    "gamma": (lambda s, g: s ** (1.0 / g), lambda v, g: v ** g,
+              lambda s, g: s ** (1.0 / g - 1.0) / g),
+    "srgb": (lambda s, g: np.where(s <= 0.0031308, 12.92 * s, 1.055 * s ** (1 / 2.4) - 0.055),
+             lambda v, g: np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4),
+             lambda s, g: np.where(s <= 0.0031308, 12.92, 1.055 / 2.4 * s ** (1 / 2.4 - 1.0)))}
 BIT_DEPTHS = (8, 10, 12, 16)
 
 
@@ -56,7 +64,7 @@ class SensorModel:
         if not (np.isfinite(self.exposure) and self.exposure > 0):
             raise SkyfitError(f"sensor exposure = {self.exposure!r} must be a positive number "
                               "[sr m^2 W^-1] (1 / the radiance that saturates the sensor).")
-        check_choice("sensor response", self.response, RESPONSES)
+        check_choice("sensor response", self.response, tuple(CURVES))
         check_range("sensor gamma", self.gamma, 0.1, 10.0)
         check_choice("sensor bit depth", self.bits, BIT_DEPTHS)
         check_range("sensor noise_percent", self.noise_percent, 0.0, 50.0, "%")
@@ -101,22 +109,13 @@ class SensorModel:
 
     def respond(self, s):
         """Transfer function on the clipped signal, in [0, 1]."""
-        s = np.clip(s, 0.0, 1.0)
-        if self.response == "linear":
-            return s
-        if self.response == "gamma":
-            return s ** (1.0 / self.gamma)
-        return np.where(s <= 0.0031308, 12.92 * s, 1.055 * s ** (1 / 2.4) - 0.055)
+        return CURVES[self.response][0](np.clip(s, 0.0, 1.0), self.gamma)
 
     def linearise(self, values):
         """The signal s in [0, 1] that pixel ``values`` [DN] encode: eq. 5.11's Q^-1 on
         values / max_code, clipped."""
         v = np.clip(np.asarray(values, dtype=float) / self.max_code, 0.0, 1.0)
-        if self.response == "linear":
-            return v
-        if self.response == "gamma":
-            return v ** self.gamma
-        return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+        return CURVES[self.response][1](v, self.gamma)
 
     def gain(self, width, height, fov_deg):
         """Per-pixel factor from radiance to signal, exposure x optional cos^4, shape (H, W)."""
@@ -127,13 +126,7 @@ class SensorModel:
         """d(response)/d(signal) at signal ``s``; 0 where the sensor is saturated or black."""
         s = np.asarray(s, dtype=float)
         inside = (s > 0.0) & (s < 1.0)
-        sc = np.clip(s, 1e-12, 1.0)
-        if self.response == "linear":
-            d = np.ones_like(sc)
-        elif self.response == "gamma":
-            d = sc ** (1.0 / self.gamma - 1.0) / self.gamma
-        else:
-            d = np.where(sc <= 0.0031308, 12.92, 1.055 / 2.4 * sc ** (1 / 2.4 - 1.0))
+        d = CURVES[self.response][2](np.clip(s, 1e-12, 1.0), self.gamma)
         return np.where(inside, d, 0.0)
 
     def capture(self, radiance, rng, fov_deg=None, radiance_sd=None):

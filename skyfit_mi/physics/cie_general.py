@@ -32,6 +32,7 @@ for computer and energy conscious design", final report, US SK 92 052, Bratislav
 
 import numpy as np
 
+from ..conventions import unit_directions
 from ..errors import SkyfitError, check_range
 
 #: Gradation groups I-VI (row i is group i + 1): a, b of phi [unitless] (Table 1).
@@ -145,8 +146,7 @@ def relative_luminance(cos_theta_p, zeta, sun_zenith, params):
 def pattern(directions, sun, params):
     """L / L_z [unitless] toward world ``directions`` (n, 3) for the unit vector ``sun`` (3,);
     ``params`` (5,) give (n,), (k, 5) give (k, n)."""
-    d = np.asarray(directions, dtype=float)
-    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    d = unit_directions(directions)
     zeta = np.arccos(np.clip(d @ sun, -1.0, 1.0))
     theta_s = np.arccos(np.clip(sun[2], -1.0, 1.0))
     p = np.asarray(params, dtype=float)

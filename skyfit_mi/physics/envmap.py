@@ -22,7 +22,7 @@ A photographed sun is almost always clipped, so :func:`envmap_sky` takes the sun
 ring around them.
 """
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -228,4 +228,4 @@ def envmap_sky(table, sun_zenith_deg, sun_azimuth_deg, *, measured=MeasuredIrrad
             sky = sky.scaled(direct_normal=direct_normal)
         else:
             info["note"] = "sun below the horizon: no solar disc"
-    return replace(sky, ground=ground_albedo * sky.horizontal_irradiance() / np.pi)
+    return sky.with_ground(ground_albedo)

@@ -34,8 +34,7 @@ ETA_PLASTIC = 1.5
 
 def split(name):
     """(distribution, fresnel) of the lobe ``name`` (one of LOBES)."""
-    d, f = name.split("_")
-    return d, f
+    return tuple(name.split("_"))
 
 
 def fresnel_dielectric(cos_theta, eta=ETA_PLASTIC):

@@ -30,15 +30,15 @@ and irradiance components from direct and global irradiance", Solar Energy 44(5)
 Equation numbers of the 1993 paper are those cited by Radiance's ``gendaymtx.c`` (I. Ashdown).
 """
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..conventions import direction_from_angles
+from ..conventions import direction_from_angles, unit_directions
 from ..errors import InputRangeError, SkyfitError, check_choice, check_range
 from .colour import cct_to_rgb
 from .sky import (CCT_CLEAR, CCT_OVERCAST, GROUND_ALBEDO, IRRADIANCE_NODES, SKY_LEVEL_SD, Sky,
-                  hemisphere_integral as sky_hemisphere_integral, perez_pattern)
+                  hemisphere_integral, perez_pattern)
 from .sun import SUN_SOLID_ANGLE, sun_rgb
 
 #: Lower edges of the eight clearness bins, then +inf (1990 Table 1; 1993 the same).  Bin i
@@ -134,15 +134,21 @@ DECOMPOSITIONS = {
 
 # ---- Input checks ----
 
+def _checked(value, ok, message):
+    """``value`` as a float array, or InputRangeError ``message`` with its first value where
+    ``ok(value)`` fails in place of ``{}``."""
+    v = np.asarray(value, dtype=float)
+    good = ok(v)
+    if not np.all(good):
+        raise InputRangeError(message.format(f"{v[~good].ravel()[0]:g}"))
+    return v
+
+
 def _sun_zenith(sun_zenith_deg):
     """Sun zenith [rad] from degrees, or InputRangeError unless in [0, 90) everywhere."""
-    z = np.asarray(sun_zenith_deg, dtype=float)
-    ok = (z >= 0.0) & (z < 90.0)
-    if not np.all(ok):
-        bad = z[~ok].ravel()[0]
-        raise InputRangeError(f"sun zenith = {bad:g} degrees: the Perez sky needs the sun above "
-                              "the horizon (zenith in [0, 90) degrees); skip night-time steps.")
-    return np.radians(z)
+    return np.radians(_checked(sun_zenith_deg, lambda z: (z >= 0.0) & (z < 90.0),
+                               "sun zenith = {} degrees: the Perez sky needs the sun above the "
+                               "horizon (zenith in [0, 90) degrees); skip night-time steps."))
 
 
 def _irradiance(name, value, hi, positive=False):
@@ -157,23 +163,16 @@ def _irradiance(name, value, hi, positive=False):
 
 
 def _clearness_value(epsilon):
-    eps = np.asarray(epsilon, dtype=float)
-    if not np.all(np.isfinite(eps) & (eps >= 1.0)):
-        bad = eps[~(np.isfinite(eps) & (eps >= 1.0))].ravel()[0]
-        raise InputRangeError(f"sky clearness epsilon = {bad:g} is outside [1, inf); compute it "
-                              "with clearness() from a positive diffuse irradiance.")
-    return eps
+    return _checked(epsilon, lambda e: np.isfinite(e) & (e >= 1.0),
+                    "sky clearness epsilon = {} is outside [1, inf); compute it with clearness() "
+                    "from a positive diffuse irradiance.")
 
 
 def _brightness_value(delta, positive=False):
-    d = np.asarray(delta, dtype=float)
-    ok = np.isfinite(d) & ((d > 0.0) if positive else (d >= 0.0))
-    if not np.all(ok):
-        bad = d[~ok].ravel()[0]
-        rng = "(0, inf)" if positive else "[0, inf)"
-        raise InputRangeError(f"sky brightness Delta = {bad:g} is outside {rng}; compute it with "
-                              "brightness() from a positive diffuse irradiance.")
-    return d
+    rng = "(0, inf)" if positive else "[0, inf)"
+    return _checked(delta, lambda d: np.isfinite(d) & ((d > 0.0) if positive else (d >= 0.0)),
+                    f"sky brightness Delta = {{}} is outside {rng}; compute it with brightness() "
+                    "from a positive diffuse irradiance.")
 
 
 # ---- Sky indices (Perez et al. 1990) ----
@@ -325,14 +324,6 @@ def diffuse_efficacy(epsilon, delta, sun_zenith_deg, precipitable_water=PRECIPIT
             + d * np.log(_brightness_value(delta, positive=True)))[()]
 
 
-def hemisphere_integral(f, n=IRRADIANCE_NODES):
-    """Integral of f(d) cos theta_p dOmega over the upper hemisphere, as a number, by
-    :func:`skyfit_mi.physics.sky.hemisphere_integral` (thesis eq. 4.19).  128 nodes agree with
-    512 to 3e-6 relative (1.5e-4 where the clamp at zero puts a kink in l_v).
-    """
-    return float(sky_hemisphere_integral(f, n))
-
-
 # ---- An absolute sky ----
 
 @dataclass(frozen=True)
@@ -363,8 +354,7 @@ class PerezSky:
     def relative_luminance(self, directions):
         """l_v toward world ``directions`` (..., 3) [unitless], clamped at 0, and 0 at and
         below the horizon (no ground)."""
-        d = np.asarray(directions, dtype=float)
-        d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        d = unit_directions(directions)
         return np.where(d[..., 2] > 0.0, perez_pattern(d, self.sun_direction, self.coefficients),
                         0.0)
 
@@ -377,8 +367,10 @@ class PerezSky:
         return self.efficacy * self.radiance(directions)
 
     def horizontal_irradiance(self, n=IRRADIANCE_NODES):
-        """The sky's horizontal irradiance by :func:`hemisphere_integral` [W m^-2]."""
-        return hemisphere_integral(self.radiance, n)
+        """The sky's horizontal irradiance [W m^-2] by
+        :func:`~skyfit_mi.physics.sky.hemisphere_integral` (thesis eq. 4.19): 128 nodes agree
+        with 512 to 3e-6 relative (1.5e-4 where the clamp at zero puts a kink in l_v)."""
+        return float(hemisphere_integral(self.radiance, n))
 
 
     def to_sky(self, cct=None, ground_albedo=GROUND_ALBEDO, sun=True,
@@ -401,7 +393,7 @@ class PerezSky:
                         "efficacy_lm_W": self.efficacy,
                         "sun_measured": bool(sun) and "decomposition" in self.info
                         and self.info["decomposition"] is None})
-        return replace(sky, ground=ground_albedo * sky.horizontal_irradiance() / np.pi)
+        return sky.with_ground(ground_albedo)
 
 
 def default_cct(epsilon):
@@ -508,7 +500,7 @@ def perez_sky(sun_zenith_deg, sun_azimuth_deg, day_of_year, *, dhi=None, dni=Non
                           "delta_floor at its default).")
     sun = direction_from_angles(np.radians(z), np.radians(sun_azimuth_deg))
     unit = PerezSky(sun, coeffs, 1.0, 1.0)
-    total = hemisphere_integral(unit.relative_luminance, options.nodes)    # 1993 eq. 3
+    total = float(hemisphere_integral(unit.relative_luminance, options.nodes))  # 1993 eq. 3
     if not total > 0:
         raise SkyfitError(f"the Perez sky for epsilon = {eps:.4g}, Delta = {delta_c:.4g} is "
                           "black above the horizon; check dhi, dni and the sun position.")
@@ -552,8 +544,8 @@ def shape_moves(info):
 
     def move(to, epsilon, delta_to, k_to):
         c = coefficients(epsilon, delta_to, z)
-        if not (np.all(np.isfinite(c)) and c[1] <= 0 and hemisphere_integral(
-                PerezSky(sun, c, 1.0, 1.0).relative_luminance) > 0):
+        if not (np.all(np.isfinite(c)) and c[1] <= 0 and float(hemisphere_integral(
+                PerezSky(sun, c, 1.0, 1.0).relative_luminance)) > 0):
             return None
         return {"to": float(to), "epsilon": float(epsilon), "delta_coefficients": delta_to,
                 "clearness_bin": k_to, "coefficients": c.tolist()}

@@ -22,7 +22,7 @@ import numpy as np
 
 from . import cie_general
 from .colour import SRGB_LUMINANCE, cct_to_rgb
-from ..conventions import angles_from_direction, direction_from_angles
+from ..conventions import angles_from_direction, direction_from_angles, unit_directions
 from ..errors import SkyfitError, check_choice, check_range
 from .latlong import latlong_radiance
 from .sky_departure import BASIS, field_factor
@@ -261,8 +261,7 @@ class Sky:
     def sky_radiance(self, directions):
         """Radiance of the sky alone (no sun) toward world ``directions`` (..., 3): linear
         sRGB [W m^-2 sr^-1], (..., 3)."""
-        d = np.asarray(directions, dtype=float)
-        d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        d = unit_directions(directions)
         s = self.sun_direction
         # the patterns with a weight, in this order (a term without one is left out)
         sky = np.zeros(d.shape[:-1] + (3,))
@@ -286,8 +285,7 @@ class Sky:
 
     def sun_mask(self, directions):
         """True where ``directions`` fall inside the solar disc."""
-        d = np.asarray(directions, dtype=float)
-        d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        d = unit_directions(directions)
         return np.sum((d - self.sun_direction) ** 2, axis=-1) <= self.sun_chord2
 
     def radiance(self, directions):
@@ -312,6 +310,11 @@ class Sky:
     def horizontal_irradiance(self, n=IRRADIANCE_NODES):
         """Global horizontal irradiance, sky plus sun [W m^-2], RGB (3,)."""
         return self.sky_horizontal_irradiance(n) + self.sun_horizontal_irradiance()
+
+    def with_ground(self, albedo):
+        """A copy whose ground is a Lambertian reflector of ``albedo`` lit by this sky and
+        sun: L = albedo E / pi [W m^-2 sr^-1]."""
+        return replace(self, ground=albedo * self.horizontal_irradiance() / np.pi)
 
     # ---- levels -----------------------------------------------------------
     def scaled(self, diffuse_horizontal=None, direct_normal=None):
@@ -521,7 +524,7 @@ def cie_sky(kind, sun_zenith_deg, sun_azimuth_deg, *, phi=None, day=172,
                     "clear_zenith_luminance_cd_m2": float(lz_cl),
                     "overcast_zenith_luminance_cd_m2": float(lz_oc),
                     "ground_albedo": ground_albedo})
-    return replace(sky, ground=ground_albedo * sky.horizontal_irradiance() / np.pi)
+    return sky.with_ground(ground_albedo)
 
 
 def cie_general_sky(params, sun_zenith_deg, sun_azimuth_deg, *, day=172, zenith_luminance=None,
@@ -567,7 +570,7 @@ def cie_general_sky(params, sun_zenith_deg, sun_azimuth_deg, *, day=172, zenith_
                     "sun_azimuth_deg": float(sun_azimuth_deg),
                     "zenith_luminance_cd_m2": float(lz), "efficacy_lm_W": float(efficacy),
                     "ground_albedo": ground_albedo})
-    return replace(sky, ground=ground_albedo * sky.horizontal_irradiance() / np.pi)
+    return sky.with_ground(ground_albedo)
 
 
 def directional_sky(direction, irradiance, solid_angle=SUN_SOLID_ANGLE):

@@ -13,7 +13,7 @@ by 1 + B_j is a light (:func:`departure_parts`), and the a_j are weights of trac
 shape variants' mix.  The ground is not moved.
 
 The weights' prior N(0, :data:`PRIOR_SD` ^2 I) is measured on the Kider et al. 2014 scans
-(:mod:`.sky_measurement`) against the thesis's CIE clear sky (:func:`scan_departure`;
+(``skyfit_testkit.sky_measurement``) against the thesis's CIE clear sky (:func:`scan_departure`;
 ``scripts/sky_departure_prior.py``).  One clear day holds no haze or cloud, so it is a clear
 sky's prior: a sky further from its model shows as a weight beyond it (:func:`conflict`).
 """
@@ -21,6 +21,8 @@ sky's prior: a sky further from its model shows as a weight beyond it (:func:`co
 from dataclasses import replace
 
 import numpy as np
+
+from ..conventions import unit_directions
 
 #: The field's basis functions by name (:func:`basis`).
 BASIS = ("zenith P1", "zenith P2", "sun P1", "sun P2", "zenith x sun")
@@ -33,8 +35,7 @@ def basis(directions, sun):
     """The basis B (..., J) [unitless, |B| <= 1 above the horizon] toward world ``directions``
     (..., 3) for the unit ``sun`` (3,): :data:`BASIS` of u = 2 cos(theta) - 1 and
     y = cos(gamma)."""
-    d = np.asarray(directions, dtype=float)
-    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    d = unit_directions(directions)
     u = np.clip(2.0 * d[..., 2] - 1.0, -1.0, 1.0)
     y = np.clip(d @ (np.asarray(sun, dtype=float) / np.linalg.norm(sun)), -1.0, 1.0)
     return np.stack([u, 1.5 * u * u - 0.5, y, 1.5 * y * y - 0.5, u * y], axis=-1)

@@ -29,8 +29,6 @@ P. Ineichen, R. Perez, "A new airmass independent formulation for the Linke turb
 coefficient", Solar Energy 73(3), 151-157, 2002.
 """
 
-from dataclasses import replace
-
 import numpy as np
 
 from ..conventions import direction_from_angles
@@ -106,7 +104,7 @@ def turbid_sky(turbidity, sun_zenith_deg, sun_azimuth_deg, *, day=172, elevation
                     "day_of_year": int(day), "elevation_m": float(elevation_m),
                     "direct_normal_W_m2": dni, "diffuse_horizontal_W_m2": dhi,
                     "ground_albedo": ground_albedo})
-    return replace(sky, ground=ground_albedo * sky.horizontal_irradiance() / np.pi)
+    return sky.with_ground(ground_albedo)
 
 
 def shape_moves(info):

@@ -101,10 +101,10 @@ def load_fits(paths):
     return out
 
 
-def _numbers(v, n=None):
-    """Whether ``v`` is a list of finite numbers (``n`` of them, if given)."""
+def _numbers(v, n=None, kind=(int, float)):
+    """Whether ``v`` is a list of finite numbers (``n`` of them, if given; of ``kind``)."""
     return isinstance(v, list) and (n is None or len(v) == n) and all(
-        isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in v)
+        isinstance(x, kind) and not isinstance(x, bool) and np.isfinite(x) for x in v)
 
 
 def _is_sky(sky):
@@ -167,16 +167,9 @@ def _is_fit_result(r, parameters):
     params, intervals, pixels = r.get("parameters"), r.get("intervals"), r.get("pixels", [])
     return (isinstance(params, dict) and set(params) == set(parameters[r["model"]])
             and isinstance(intervals, dict)
-            and all(isinstance(intervals.get(k), dict) and _pair(intervals[k].get("95"))
+            and all(isinstance(intervals.get(k), dict) and _numbers(intervals[k].get("95"), 2)
                     for k in params)
-            and isinstance(pixels, list) and all(_pair(p, int) for p in pixels))
-
-
-def _pair(value, kind=(int, float)):
-    """Whether ``value`` is a list of two finite numbers (of ``kind``)."""
-    return (isinstance(value, list) and len(value) == 2
-            and all(isinstance(v, kind) and not isinstance(v, bool) and np.isfinite(v)
-                    for v in value))
+            and isinstance(pixels, list) and all(_numbers(p, 2, int) for p in pixels))
 
 
 def check_fit_sequence(result, path, doc, where, own=True):

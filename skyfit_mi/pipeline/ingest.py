@@ -205,7 +205,7 @@ def _noise_bins(parts, sensor, noise):
     rows, var, weights = [], [], []
     for r, lvl, spread in parts:
         if noise is not None:
-            keep = spread <= NOISE_FLAT * pixel_sigma(lvl, sensor, noise)
+            keep = spread <= NOISE_FLAT * pixel_sigma(lvl, sensor, noise)[0]
             r, lvl = r[keep], lvl[keep]
             if len(r) < NOISE_MIN_PIXELS:
                 continue
@@ -261,15 +261,11 @@ def _clipped_variance(r):
 
 
 def pixel_sigma(values, sensor, noise, jpeg=None):
-    """sigma [DN] of each value (H, W, 3) (or level (n,)), inf where NaN: sqrt(Q'(s)^2 (a + b s M)
-    + 1/12).  For a JPEG (``jpeg`` = {"variance", "shown", "settings"}), the bootstrap variance
-    floored by that formula of the shown noise, plus :func:`.jpeg_noise.tables_bound` in blocks
-    holding an edge (:func:`edge_blocks`), whose ringing the bootstrap cannot draw."""
-    return _sigma(values, sensor, noise, jpeg)[0]
-
-
-def _sigma(values, sensor, noise, jpeg=None):
-    """:func:`pixel_sigma`, and for a JPEG its edge-block mask (:func:`edge_blocks`; else None)."""
+    """(sigma [DN] of each value (H, W, 3) (or level (n,)), inf where NaN; a JPEG's edge-block
+    mask, else None): sqrt(Q'(s)^2 (a + b s M) + 1/12).  For a JPEG (``jpeg`` = {"variance",
+    "shown", "settings"}), the bootstrap variance floored by that formula of the shown noise,
+    plus :func:`.jpeg_noise.tables_bound` in blocks holding an edge (:func:`edge_blocks`), whose
+    ringing the bootstrap cannot draw."""
     a, b = noise if jpeg is None else jpeg["shown"]
     s = sensor.linearise(np.nan_to_num(values))
     q = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6))
@@ -708,11 +704,6 @@ def _neutral_labels(calibrate):
     return list(range(1, len(calibrate) + 1)) + [CHART_LABEL + k for k in NEUTRAL]
 
 
-def _neutral(samples, patch, calibrate):
-    """The samples and labels of the patches that set the exposure (:func:`_neutral_labels`)."""
-    return _select(samples, patch, _neutral_labels(calibrate))
-
-
 def _unbiased(values, bias, max_code):
     """``values`` [DN] less the compression's mean error ``bias``, clipped or missing ones kept."""
     keep = ~np.isfinite(values) | (values <= 0) | (values >= max_code)
@@ -982,7 +973,7 @@ def calibration_patches(frames, linear, registration, o, log):
             None if out.chart is None else (o.colorchecker, out.chart["labels"]), reach)
         if o.fitted:
             chosen, g, out.response_info = fit_response(
-                *_neutral(out.samples, out.patch, o.calibrate), sensor.max_code,
+                *_select(out.samples, out.patch, _neutral_labels(o.calibrate)), sensor.max_code,
                 None if rel is None else rel[lit], log)
             out.sensor = SensorModel(exposure=1.0, response=chosen, gamma=g, bits=sensor.bits,
                                      cos4=sensor.cos4)
@@ -1084,7 +1075,7 @@ def frame_exposures(frames, patches, noise, o, log):
             cells = (ys // unit) * (patches.mask.shape[1] // unit + 1) + xs // unit
             cells = cells[np.isin(patches.patch, _neutral_labels(o.calibrate))]
         per_frame, calibration = calibrate_exposure(
-            *_neutral(samples, patches.patch, o.calibrate), sensor,
+            *_select(samples, patches.patch, _neutral_labels(o.calibrate)), sensor,
             [frames.photos[i] for i in lit], None if rel is None else rel[lit], log, cells,
             [frames.times[i].timestamp() for i in lit])
         # by name, for a fit of the light to recalibrate on (fitting.fit.reference_factor)
@@ -1157,11 +1148,10 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
                                                          mixing),
                           "relative_exposure_from_exif": None if rel is None else rel.tolist(),
                           "registration": registration.record}
-    bar = None
-    if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=len(paths), desc="ingest", unit="frame")
-    for f, p, photo, v in zip(spec.frames, paths, photos, values):
+    from tqdm import tqdm
+
+    for f, p, photo, v in tqdm(zip(spec.frames, paths, photos, values), total=len(paths),
+                               desc="ingest", unit="frame", disable=not progress):
         rec = frame_record(f, 0, out)
         rec.pop("seed")
         rec["photo"] = {"file": p.name, **{k: x for k, x in photo.metadata.items()
@@ -1177,7 +1167,7 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
                 var = noise.raw[f.index]["sd"].astype(np.float32) ** 2 + np.float32(1.0 / 12)
                 sig = np.where(np.isfinite(v), np.sqrt(var), np.inf).astype(np.float32)
             else:
-                sig, edge = _sigma(v, sensor, model, frame_jpeg)
+                sig, edge = pixel_sigma(v, sensor, model, frame_jpeg)
             offset = block_offset(frame_jpeg["settings"].get("orientation", 1), v.shape) \
                 if frame_jpeg is not None else None
             v = registration.warp(f.index, v, sensor.max_code)
@@ -1219,10 +1209,6 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
             if bad:
                 rec["non_finite_values"] = bad
         manifest["frames"].append(rec)
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
     if noise.raw is not None:
         manifest["sensor"]["noise_model"]["sigma2_DN2"] = (
             "RAWs: the variance of the developed noise by bootstrap (noise_model.raw), + 1/12; "

@@ -20,6 +20,7 @@ import numpy as np
 from .fit_model import PARAMETERS, WardModel, reflectance_sets, reflectances
 from .light_cache import (CONTROL_FULL, CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
                           CacheOptions, PointRays, light_caches)
+from .sky_control import chebyshev_x
 
 #: The smooth pieces of G(sigma) above SIGMA_RESOLVED and the first degree of each piece's
 #: Chebyshev series: doubled (nested Lobatto nodes keep every value) until it agrees with the
@@ -42,12 +43,6 @@ MEMORY_TARGET, MIN_CHUNK_SAMPLES = 2 << 30, 1 << 19
 def _lobatto(n):
     """The n + 1 Chebyshev-Lobatto points cos(pi k / n), ends included (pieces share them)."""
     return np.cos(np.pi * np.arange(n + 1) / n)
-
-
-def _x(sigma, lo, hi):
-    """sigma's coordinate in [-1, 1] on the piece [lo, hi], in log sigma."""
-    a, b = np.log(lo), np.log(hi)
-    return np.clip((2.0 * np.log(sigma) - (a + b)) / (b - a), -1.0, 1.0)
 
 
 def _sigma(x, lo, hi):
@@ -271,7 +266,7 @@ class BasisTable:
             at = np.flatnonzero(~low & (piece == i))
             if not len(at):
                 continue
-            x = _x(sigma[at], lo, hi)
+            x = chebyshev_x(sigma[at], lo, hi, np.log, np.clip)
             got = self.coef[i].evaluate(x, h, out.shape[1:], derivative)
             if derivative:
                 # dx/dsigma = 2 / (sigma (log hi - log lo))
@@ -648,10 +643,8 @@ class TableModel:
 
     def radiance_and_variance(self, theta):
         """``radiance(theta)`` and its Monte Carlo variance [(W m^-2 sr^-1)^2], (P, T, 3)."""
-        self.evaluations += 1
-        rho_d, spec, _, _, G = self._parts(theta)
-        L = rho_d * self.table.diffuse(self.part) + spec * G[0]
-        return L, self.table.variance(rho_d, spec, float(theta[-1]))
+        rho_d, spec, _, _ = reflectances(self.model, theta)
+        return self.radiance(theta), self.table.variance(rho_d, spec, float(theta[-1]))
 
     def jacobian(self, theta):
         """(L, dL/dtheta) with shapes (P, T, 3) and (P, T, 3, n_params)."""
@@ -670,22 +663,20 @@ class TableModel:
     def basis(self, sigmas, halves=False):
         """D (P, T, 3) and G (K, P, T, 3) at the K ``sigmas``; with ``halves`` a list of them
         for the whole cache and each half (as :meth:`~.fit_model.WardModel.basis`)."""
-        sigmas = np.asarray(sigmas, dtype=float)
-        t = self.table
-        self.basis_evaluations += len(sigmas)
-        parts = (0, 1, 2) if halves else (self.part,)
-        out = [(t.diffuse(j), t.lobe(sigmas, part=j)) for j in parts]
-        return out if halves else out[0]
+        return self._bases(sigmas, halves, lambda s, j: self.table.lobe(s, part=j))
 
     def lobes(self, sigmas, halves=False):
         """As :meth:`basis`, with each G a lazy :class:`Lobes`."""
+        chunk = sigma_chunk(self.table.D.shape[1:])
+        return self._bases(sigmas, halves, lambda s, j: Lobes(
+            lambda x: self.table.lobe(x, part=j), s, chunk))
+
+    def _bases(self, sigmas, halves, lobe):
+        """(D, ``lobe(sigmas, part)``) of this part, or a list of them for parts 0, 1, 2."""
         sigmas = np.asarray(sigmas, dtype=float)
-        t = self.table
         self.basis_evaluations += len(sigmas)
-        parts = (0, 1, 2) if halves else (self.part,)
-        chunk = sigma_chunk(t.D.shape[1:])
-        out = [(t.diffuse(j), Lobes(lambda s, j=j: t.lobe(s, part=j), sigmas, chunk))
-               for j in parts]
+        out = [(self.table.diffuse(j), lobe(sigmas, j))
+               for j in ((0, 1, 2) if halves else (self.part,))]
         return out if halves else out[0]
 
     def radiances(self, thetas, reduce=None):

@@ -17,6 +17,7 @@ from ..physics.ward import (METAL_THRESHOLD, PLASTIC_MAX, SIGMA_MIRROR,
 from .light_cache import (CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
                           SIGMA_TABLE, check_fit_normalisation, control_weight)
 from .daylight import jit_array, update_sky
+from .scene import pixel_rays
 from .scene_xml import ward_element
 from .sky_control import chebyshev_eval, chebyshev_x
 
@@ -54,8 +55,10 @@ def check_start(model, start):
     return v
 
 
-def material_values(model, theta):
-    """The ``ward`` plugin's parameters for ``theta`` as Dr.Jit values, keyed like ``traverse``."""
+def material_values(model, theta, opaque=False):
+    """The ``ward`` plugin's parameters for ``theta`` as Dr.Jit values, keyed like ``traverse``;
+    ``opaque``: so that kernels compiled (or renders frozen) for one theta serve every theta."""
+    import drjit as dr
     import mitsuba as mi
 
     d = material_dict(model, theta)
@@ -64,17 +67,15 @@ def material_values(model, theta):
         v["R"] = mi.Float(d["R"])
     if "C" in d:
         v["C"] = mi.Color3f(*d["C"])
+    if opaque:
+        dr.make_opaque(*v.values())
     return v
 
 
 def write_material(params, prefix, model, theta):
-    """Set a ``ward`` plugin's parameters (keys ``prefix + name``) to ``theta`` and update;
-    opaque values, so that a frozen render replays for every theta without re-recording."""
-    import drjit as dr
-
-    v = material_values(model, theta)
-    dr.make_opaque(*v.values())
-    for k, x in v.items():
+    """Set a ``ward`` plugin's parameters (keys ``prefix + name``) to ``theta``, opaque, and
+    update."""
+    for k, x in material_values(model, theta, opaque=True).items():
         params[prefix + k] = x
     params.update()
 
@@ -224,10 +225,8 @@ class WardModel:
 
     def _variables(self, theta, grad=(), model=None):
         """The parameters as opaque Dr.Jit values keyed like the plugin's (those in ``grad``
-        track derivatives), and sigma_alpha as a float; ``model='two'`` for the basis plugin.
-        Opaque, so the kernels compiled for one theta serve every theta."""
-        v = material_values(model or self.model, theta)
-        self.dr.make_opaque(*v.values())
+        track derivatives), and sigma_alpha as a float; ``model='two'`` for the basis plugin."""
+        v = material_values(model or self.model, theta, opaque=True)
         for k in grad:
             self.dr.enable_grad(v[k])
         return v, float(theta[-1])
@@ -350,9 +349,7 @@ class WardModel:
         out = [(a[0], np.stack(a[1:])) for a in acc]
         return out if halves else out[0]
 
-    def lobes(self, sigmas, halves=False):
-        """:meth:`basis` (its arrays serve wherever lazy lobes do)."""
-        return self.basis(sigmas, halves)
+    lobes = basis       # its arrays serve wherever lazy lobes do
 
     def _shares(self, rho_s, sigma):
         """Each position's share (P, T, S, 3) of the basis plugin's L (rho_s = 0: D; 1: G at
@@ -417,14 +414,9 @@ class RegionRenderModel:
         self.pixels = np.asarray(pixels, dtype=int)
         self.shape = (len(self.pixels), len(skies))
         self.integrator = mi.load_dict({"type": "path", "max_depth": int(max_depth)})
-        sensor = self.scenes[0].sensors()[0]
-        w, h = sensor.film().crop_size()
         rng = np.random.default_rng(seed)
         pos = (np.repeat(self.pixels, self.spp, axis=0) + rng.random((len(self.pixels) * self.spp, 2)))
-        pos = pos / [w, h]
-        self.rays = mi.RayDifferential3f(sensor.sample_ray(
-            mi.Float(0.0), mi.Float(0.5), jit_array(mi.Point2f, pos[:, 0], pos[:, 1]),
-            mi.Point2f(0.5, 0.5))[0])
+        self.rays = mi.RayDifferential3f(pixel_rays(self.scenes[0].sensors()[0], pos))
         self.evaluations = 0
         spp, n, integrator = self.spp, len(self.pixels) * self.spp, self.integrator
 

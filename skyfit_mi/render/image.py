@@ -100,8 +100,18 @@ class ExrError(SkyfitError):
         self.path, self.why = str(path), why
 
 
-def _fail(path, exc, lines):
-    return ExrError(path, _why(path, exc, lines))
+@contextlib.contextmanager
+def _reading(path):
+    """The block quiet (:func:`_native_quiet`), its exceptions raised as one :class:`ExrError`
+    on ``path`` (a SkyfitError or MemoryError as it is)."""
+    lines = []
+    try:
+        with _native_quiet() as lines:
+            yield
+    except (SkyfitError, MemoryError):
+        raise
+    except Exception as exc:             # noqa: BLE001 -- RuntimeError, OSError, ValueError..
+        raise ExrError(path, _why(path, exc, lines)) from None
 
 
 def _header_meta(meta):
@@ -184,30 +194,18 @@ def read_exr_channels(path):
     import OpenEXR
 
     path = str(path)
-    lines = []
-    try:
-        with _native_quiet() as lines:
-            with OpenEXR.File(path, separate_channels=True) as f:
-                chans = f.channels()
-                order, _, _, _ = _layout(f.header())
-                return np.stack([chans[n].pixels for n in order], axis=-1), order
-    except MemoryError:
-        raise
-    except Exception as exc:             # noqa: BLE001 -- RuntimeError, OSError, ValueError..
-        raise _fail(path, exc, lines) from None
+    with _reading(path), OpenEXR.File(path, separate_channels=True) as f:
+        chans = f.channels()
+        order, _, _, _ = _layout(f.header())
+        return np.stack([chans[n].pixels for n in order], axis=-1), order
 
 
 def read_exr_header(path):
     """The header of OpenEXR ``path`` (OpenEXR.File's dict; no pixels read)."""
     import OpenEXR
 
-    lines = []
-    try:
-        with _native_quiet() as lines:
-            with OpenEXR.File(str(path), header_only=True) as f:
-                return dict(f.header())         # a copy: closing the file empties its own
-    except Exception as exc:             # noqa: BLE001 -- RuntimeError, OSError, ValueError..
-        raise _fail(path, exc, lines) from None
+    with _reading(path), OpenEXR.File(str(path), header_only=True) as f:
+        return dict(f.header())         # a copy: closing the file empties its own
 
 
 def read_exr_meta(path):
@@ -230,16 +228,8 @@ def read_exr(path, rows=None):
     if rows is None:
         values = read_exr_channels(path)[0].astype(np.float32, copy=False)
         return values[..., 0] if values.shape[-1] == 1 else values
-    lines = []
-    try:
-        with _native_quiet() as lines:
-            return _read_rows(path, np.asarray(rows, dtype=int).reshape(-1))
-    except SkyfitError:
-        raise
-    except MemoryError:
-        raise
-    except Exception as exc:             # noqa: BLE001 -- RuntimeError, OSError, ValueError..
-        raise _fail(path, exc, lines) from None
+    with _reading(path):
+        return _read_rows(path, np.asarray(rows, dtype=int).reshape(-1))
 
 
 def _read_rows(path, rows):
@@ -304,16 +294,12 @@ def check_exr(path, shape):
     check_exr_shape(path, shape, read_exr_shape(path))
     if not hasattr(OpenEXR, "InputFile"):
         return
-    lines, complete = [], False
-    try:
-        with _native_quiet() as lines:
-            src = OpenEXR.InputFile(str(path))
-            try:
-                complete = src.isComplete()
-            finally:
-                src.close()
-    except Exception as exc:             # noqa: BLE001 -- RuntimeError, OSError, ValueError..
-        raise _fail(path, exc, lines) from None
+    with _reading(path):
+        src = OpenEXR.InputFile(str(path))
+        try:
+            complete = src.isComplete()
+        finally:
+            src.close()
     if not complete:
         raise SkyfitError(f"cannot read {path}: a truncated OpenEXR file (some of its chunks "
                           "are missing)")

@@ -35,6 +35,7 @@ from ..errors import SkyfitError, check_choice
 from ..physics.ward import (NORMALISATIONS, SIGMA_MIRROR, lobe_albedo, mirror_reflectance,
                             specular_lobe)
 from .daylight import jit_array, opaque_value, update_sky
+from .scene import pixel_rays, shape_index
 from .sky_control import (FrameSkies, chebyshev_coefficients, chebyshev_eval, chebyshev_nodes,
                           chebyshev_x, quadrature, sky_integrals, to_numpy)
 
@@ -347,17 +348,6 @@ def anchors_pay(pixels, spacing, width, height):
         and len(_anchor_plan(pixels, int(spacing), width, height)[0]) < len(pixels)
 
 
-def _shape_index(mi, si, target):
-    """Index into ``target`` of the shape each interaction of ``si`` lies on, -1 elsewhere."""
-    import drjit as dr
-
-    out = np.full(dr.width(si), -1)
-    valid = np.array(si.is_valid())
-    for j, shape in enumerate(target):
-        out[np.array(si.shape == mi.ShapePtr(shape)) & valid] = j
-    return out
-
-
 class _SharedSky:
     """The pixels' centres and, where anchors pay (:func:`anchors_pay`), the anchors and which
     pixels may interpolate between them: traced once from the geometry, the same in every frame."""
@@ -371,7 +361,7 @@ class _SharedSky:
         # one trace: the anchors (first A points), then the pixels
         self.A = A = len(anchors)
         self.si, sid, n, m = self._trace(mi, scene, sensor, np.concatenate([anchors, pixels]),
-                                         size, target)
+                                         target)
         sid_a, n_a, self.m_a = sid[:A], n[:A], m[:A]
         sid_p, n_p, self.m_p = sid[A:], n[A:], m[A:]
         self.arrays = _interaction_arrays(self.si)
@@ -390,17 +380,13 @@ class _SharedSky:
         self.ok = ok
 
     @staticmethod
-    def _trace(mi, scene, sensor, xy, size, target):
+    def _trace(mi, scene, sensor, xy, target):
         """Interactions through the centres of pixels ``xy`` (Q, 2), their shapes' indices
         into ``target`` (-1 elsewhere), world normals and mirror directions (Q, 3)."""
-        pos = (np.asarray(xy) + 0.5) / np.asarray(size, dtype=float)
-        ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
-                                   jit_array(mi.Point2f, pos[:, 0], pos[:, 1]),
-                                   mi.Point2f(0.5, 0.5))
-        si = scene.ray_intersect(ray)
+        si = scene.ray_intersect(pixel_rays(sensor, np.asarray(xy) + 0.5))
         n = np.array(si.sh_frame.n, dtype=float).T
         m = np.array(si.to_world(mi.reflect(si.wi)), dtype=float).T
-        return si, _shape_index(mi, si, target), n, m
+        return si, shape_index(si, target), n, m
 
     def plan(self, sky):
         """Which pixels interpolate under ``sky`` (no map, mirror directions SHARE_SUN_DEG from
@@ -630,11 +616,7 @@ def sample_frame(tr, sky, t, rng):
     frac = [opaque_value(mi.Float, np.sum(comp == c) / K) for c in range(n_comp)]
     seeds = [opaque_value(mi.UInt32, int(rng.integers(2**31))) for _ in range(2)]
     if tr.rays is None:
-        pos = (tr.pixels[:, None, :] + _stratified(rng, S)[None]).reshape(P * S, 2) \
-            / list(tr.size)
-        ray, _ = tr.sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
-                                      jit_array(mi.Point2f, pos[:, 0], pos[:, 1]),
-                                      mi.Point2f(0.5, 0.5))
+        ray = pixel_rays(tr.sensor, tr.pixels[:, None, :] + _stratified(rng, S)[None])
     else:
         o, d = (np.repeat(a[:, t], S, axis=0) for a in (tr.rays.origins, tr.rays.directions))
         ray = mi.Ray3f(jit_array(mi.Point3f, *o.T), jit_array(mi.Vector3f, *d.T))
@@ -694,7 +676,7 @@ def _keep_frame(tr, outs, samples, traced, sky):
 
     def np3(v, n):
         return np.array(v, dtype=np.float32).T.reshape(P, n, 3)
-    sid = _shape_index(tr.mi, samples.si, tr.target)
+    sid = shape_index(samples.si, tr.target)
     on = (sid >= 0) & (np.repeat(tr.want, S) == tr.ids[np.maximum(sid, 0)])
     view = np.array(samples.si.wi, dtype=float).T
     out = outs[0]

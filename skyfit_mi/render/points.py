@@ -5,8 +5,8 @@ import numpy as np
 
 from . import setup
 from .basis_table import trace_basis
-from .daylight import jit_array
 from .light_cache import DIRECTIONS, POSITIONS, CacheOptions
+from .scene import pixel_rays, shape_index
 
 
 def load_points_scene(xml, variant):
@@ -24,28 +24,20 @@ def surface_hits(scene, origins, directions):
     d = np.asarray(directions, dtype=float)
     si = scene.ray_intersect(mi.Ray3f(mi.Point3f(*o.T), mi.Vector3f(*d.T)))
     valid = np.array(si.is_valid(), dtype=bool)
-    ids = np.full(len(o), None, dtype=object)
-    for shape in scene.shapes():
-        on = np.array(si.shape == mi.ShapePtr(shape), dtype=bool) & valid
-        ids[on] = shape.bsdf().id()
+    shapes = scene.shapes()
+    ids = np.array([None] + [s.bsdf().id() for s in shapes], dtype=object)
     box = scene.bbox()
     scale = float(np.linalg.norm(np.array(box.max, dtype=float) - np.array(box.min, dtype=float)))
     return {"p": np.where(valid[:, None], np.array(si.p, dtype=float).T, np.nan),
             "n": np.array(si.sh_frame.n, dtype=float).T,
-            "t": np.where(valid, np.array(si.t, dtype=float), np.inf), "material": ids,
-            "scale": scale}
+            "t": np.where(valid, np.array(si.t, dtype=float), np.inf),
+            "material": ids[shape_index(si, shapes) + 1], "scale": scale}
 
 
 def pixel_points(scene, pixels):
     """Where the central rays of ``pixels`` ((P, 2) x, y) of the scene's first sensor meet the
     scene: :func:`surface_hits`' dict (``p`` NaN where a ray misses)."""
-    import mitsuba as mi
-
-    sensor = scene.sensors()[0]
-    w, h = sensor.film().crop_size()
-    uv = (np.asarray(pixels, dtype=float).reshape(-1, 2) + 0.5) / [w, h]
-    ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
-                               jit_array(mi.Point2f, uv[:, 0], uv[:, 1]), mi.Point2f(0.5, 0.5))
+    ray = pixel_rays(scene.sensors()[0], np.asarray(pixels, dtype=float).reshape(-1, 2) + 0.5)
     return surface_hits(scene, np.array(ray.o, dtype=float).T, np.array(ray.d, dtype=float).T)
 
 

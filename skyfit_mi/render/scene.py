@@ -139,11 +139,9 @@ def camera_at(scene, to_world):
 def view_centre(scene):
     """Where the central ray of the scene's first sensor meets the scene [m] (3,): the pivot
     its pose turns about (:func:`turn_camera`).  Raises SkyfitError where it meets nothing."""
-    import mitsuba as mi
-
-    ray, _ = scene.sensors()[0].sample_ray(mi.Float(0.0), mi.Float(0.5),
-                                           mi.Point2f(0.5, 0.5), mi.Point2f(0.5, 0.5))
-    si = scene.ray_intersect(ray)
+    sensor = scene.sensors()[0]
+    w, h = sensor.film().crop_size()
+    si = scene.ray_intersect(pixel_rays(sensor, [w / 2, h / 2]))
     if not bool(si.is_valid()[0]):
         raise SkyfitError("the camera's central ray meets nothing in the scene, so there is "
                           "no target for its pose's uncertainty to turn it about; aim the "
@@ -178,13 +176,31 @@ def disc_scene(emitter, bsdf, sensor, radius=1.0, integrator=None):
 def pixel_views(scene, pixels, m=8):
     """World unit directions toward the camera from an m x m grid of positions in each of
     ``pixels`` ((P, 2) x, y) of the scene's first sensor: (P, m*m, 3)."""
-    import mitsuba as mi
-
-    sensor = scene.sensors()[0]
-    w, h = sensor.film().crop_size()
     g = (np.arange(m) + 0.5) / m
     u = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
-    pos = (np.asarray(pixels)[:, None, :] + u[None]).reshape(-1, 2) / [w, h]
+    ray = pixel_rays(scene.sensors()[0], np.asarray(pixels)[:, None, :] + u[None])
+    return -np.array(ray.d, dtype=float).T.reshape(len(pixels), m * m, 3)
+
+
+def pixel_rays(sensor, xy):
+    """The rays of ``sensor`` through film positions ``xy`` (..., 2) [pixels] (x, y; pixel
+    (i, j)'s centre at (i + 0.5, j + 0.5)), one Dr.Jit Ray3f."""
+    import mitsuba as mi
+
+    w, h = sensor.film().crop_size()
+    pos = np.asarray(xy, dtype=float).reshape(-1, 2) / [w, h]
     ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5),
                                jit_array(mi.Point2f, pos[:, 0], pos[:, 1]), mi.Point2f(0.5, 0.5))
-    return -np.array(ray.d, dtype=float).T.reshape(len(pixels), m * m, 3)
+    return ray
+
+
+def shape_index(si, shapes):
+    """Index into ``shapes`` of the shape each interaction of ``si`` lies on, -1 elsewhere."""
+    import drjit as dr
+    import mitsuba as mi
+
+    out = np.full(dr.width(si), -1)
+    valid = np.array(si.is_valid())
+    for j, shape in enumerate(shapes):
+        out[np.array(si.shape == mi.ShapePtr(shape)) & valid] = j
+    return out

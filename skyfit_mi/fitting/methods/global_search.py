@@ -35,7 +35,7 @@ SATURATION_BAND = 3.0
 POLISH_TOLERANCE = 1e-6
 
 
-def _linearise(obs, mask, leave_out_saturated=True):
+def linear_observations(obs, mask, leave_out_saturated=True):
     """(y_lin, w = 1/sigma_lin^2) (P, T, 3) of ``obs`` in radiance where ``mask`` (else w 0);
     values near saturation get weight 0 unless ``leave_out_saturated`` is False."""
     sensor = obs.sensor
@@ -212,7 +212,7 @@ def global_search(problem, start, lower, upper, candidates=3, profile=True, grid
     """
     wm = problem.model
     model = wm.model
-    y, w = _linearise(problem.obs, problem.mask)
+    y, w = linear_observations(problem.obs, problem.mask)
     D, G = grid_basis if grid_basis is not None else wm.lobes(SIGMA_GRID)
     chi2, thetas = grid_chi2(model, y, w, D, G)
     thetas[..., -1] = SIGMA_GRID[:, None]

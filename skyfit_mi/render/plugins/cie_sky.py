@@ -45,11 +45,11 @@ from ...physics.colour import SRGB_LUMINANCE
 from ...physics.latlong import latlong_texel
 from ...physics.sky import PEREZ_HORIZON_COS, Sky
 from ..daylight import (DEPARTURE_KEYS as _DEPARTURE_KEYS, PEREZ_KEYS as _PEREZ_KEYS,
-                        RGB_KEYS as _RGB_KEYS, float_parameters)
+                        RGB_KEYS as _RGB_KEYS, envmap_table, float_parameters, jit_array,
+                        opaque_value)
+from .properties import property_values
 
 _FLOAT_KEYS = _PEREZ_KEYS + _DEPARTURE_KEYS
-from ..daylight import envmap_table, jit_array, opaque_value
-from .properties import property_values
 
 #: Sampling table resolution: azimuth cells x cos(theta) cells.
 TABLE_NU, TABLE_NV = 128, 64
@@ -59,14 +59,21 @@ TABLE_SUPERSAMPLE = 3
 UNIFORM_FLOOR = 0.02
 
 
-def _envmap(table):
-    """The Sky's ``envmap`` of an emitter's table: None when it is all zero."""
-    return table if np.any(table) else None
-
-
 def _triple(props, name, default):
     a = property_values(props, name, default)
     return np.full(3, a[0]) if a.size == 1 else a
+
+
+def _sky(value, envmap):
+    """The :class:`~skyfit_mi.physics.sky.Sky` of an emitter's parameters, each
+    ``value(name, default)`` as a float array, and ``envmap`` table (None or all zero: none)."""
+    table = None if envmap is None else np.array(envmap, dtype=np.float32)
+    return Sky(value("sun_direction", (0, 0, 1)), **{k: value(k, 0.0) for k in _RGB_KEYS},
+               perez_coefficients=[float(value(k, 0.0)[0]) for k in _PEREZ_KEYS],
+               departure=[float(value(k, 0.0)[0]) for k in _DEPARTURE_KEYS],
+               horizon_blend=bool(value("horizon_blend", False)[0]),
+               sun_solid_angle=float(value("sun_solid_angle", 6e-5)[0]),
+               envmap=table if np.any(table) else None)
 
 
 def _table_directions():
@@ -134,14 +141,8 @@ class CIESkyEmitter(mi.Emitter):
     def __init__(self, props):
         mi.Emitter.__init__(self, props)
         self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
-        sky = Sky(_triple(props, "sun_direction", (0, 0, 1)),
-                  **{k: _triple(props, k, 0.0) for k in _RGB_KEYS},
-                  perez_coefficients=[float(props.get(k, 0.0)) for k in _PEREZ_KEYS],
-                  departure=[float(props.get(k, 0.0)) for k in _DEPARTURE_KEYS],
-                  horizon_blend=bool(props.get("horizon_blend", False)),
-                  sun_solid_angle=float(props.get("sun_solid_angle", 6e-5)),
-                  envmap=_envmap(np.array(props["envmap"], dtype=np.float32))
-                  if "envmap" in props else None)
+        sky = _sky(lambda k, default: _triple(props, k, default),
+                   props["envmap"] if "envmap" in props else None)
         self.scene_radius = mi.Float(float(props.get("scene_radius", 1e4)))
         self.sun_direction = mi.Vector3f(*map(float, sky.sun_direction))
         self.sun_solid_angle = mi.Float(float(sky.sun_solid_angle))
@@ -201,15 +202,8 @@ class CIESkyEmitter(mi.Emitter):
         cb.put("scene_radius", self.scene_radius, flag)
 
     def parameters_changed(self, keys=[]):
-        def arr(v):
-            return np.array(v, dtype=float).ravel()
-        sky = Sky(arr(self.sun_direction), **{k: arr(getattr(self, k)) for k in _RGB_KEYS},
-                  perez_coefficients=[arr(getattr(self, k))[0] for k in _PEREZ_KEYS],
-                  departure=[arr(getattr(self, k))[0] for k in _DEPARTURE_KEYS],
-                  horizon_blend=bool(arr(self.horizon_blend)[0]),
-                  sun_solid_angle=float(arr(self.sun_solid_angle)[0]),
-                  envmap=_envmap(np.array(self.envmap, dtype=np.float32)))
-        self._build_sampling(sky)
+        self._build_sampling(_sky(lambda k, _: np.array(getattr(self, k), dtype=float).ravel(),
+                                  self.envmap))
 
     # ---- evaluation -------------------------------------------------------
     def sky_eval(self, d):

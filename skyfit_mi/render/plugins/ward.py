@@ -129,8 +129,12 @@ class WardBSDF(mi.BSDF):
         f = self._fresnel(ci, rho_s, sigma)
         return rho_d * (1.0 - f), rho_s + f * (1.0 - rho_s)
 
-    def _p_spec(self, rho_d, rho_s):
-        ld, ls = _lum(rho_d), _lum(rho_s)
+    def _p_spec(self, ctx, ci, rho_d, rho_s, sigma):
+        """The chance of a specular sample (1 or 0 where ``ctx`` disables a side)."""
+        en_d, en_g, en_delta = self._enabled(ctx)
+        if not (en_d and (en_g or en_delta)):
+            return mi.Float(1.0 if en_g or en_delta else 0.0)
+        ld, ls = (_lum(x) for x in self._mix(ci, rho_d, rho_s, sigma))
         return dr.select(ld + ls > 0, ls / dr.maximum(ld + ls, 1e-12), 0.0)
 
     def _enabled(self, ctx):
@@ -158,10 +162,9 @@ class WardBSDF(mi.BSDF):
         wi = si.wi
         ci, co = mi.Frame3f.cos_theta(wi), mi.Frame3f.cos_theta(wo)
         rho_d, rho_s, sigma = self.raw()
-        en_d, en_g, en_delta = self._enabled(ctx)
+        en_d, en_g, _ = self._enabled(ctx)
         mirror = sigma <= SIGMA_MIRROR
-        p_spec = self._p_spec(*self._mix(ci, rho_d, rho_s, sigma)) if (en_g or en_delta) and en_d \
-            else (mi.Float(1.0) if (en_g or en_delta) else mi.Float(0.0))
+        p_spec = self._p_spec(ctx, ci, rho_d, rho_s, sigma)
         pdf = mi.Float(0.0)
         if en_d:
             pdf += (1.0 - p_spec) * co * dr.inv_pi
@@ -180,8 +183,7 @@ class WardBSDF(mi.BSDF):
         rho_d, rho_s, sigma = self.raw()
         en_d, en_g, en_delta = self._enabled(ctx)
         mirror = sigma <= SIGMA_MIRROR
-        p_spec = self._p_spec(*self._mix(ci, rho_d, rho_s, sigma)) if (en_g or en_delta) and en_d \
-            else (mi.Float(1.0) if (en_g or en_delta) else mi.Float(0.0))
+        p_spec = self._p_spec(ctx, ci, rho_d, rho_s, sigma)
         pick_spec = sample1 < p_spec
         if not en_g:
             pick_spec &= mirror
