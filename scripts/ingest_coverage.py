@@ -77,12 +77,12 @@ def main():
     quiet = {"log": lambda *a: None}
     if args.sigma_floor_sensor:
         import skyfit_mi.pipeline.ingest as ingest_module
-        shown_floor = ingest_module._sigma
+        shown_floor = ingest_module.pixel_sigma
 
         def sensor_floor(values, sensor, noise, jpeg=None):
             return shown_floor(values, sensor, noise,
                                None if jpeg is None else dict(jpeg, shown=noise))
-        ingest_module._sigma = sensor_floor
+        ingest_module.pixel_sigma = sensor_floor
     work = Path(args.output or tempfile.mkdtemp(prefix="ingest_coverage_"))
     work.mkdir(parents=True, exist_ok=True)
     spec_path, raw = _small_spec(work, width=64 * args.scale, height=44 * args.scale)

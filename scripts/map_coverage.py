@@ -29,6 +29,7 @@ def main():
     from test_pixel_map import MATERIALS, SPEC
 
     import skyfit_mi.fitting.pixel_fit as pf
+    import skyfit_mi.render.light_cache as lc
     from skyfit_mi.pipeline.pixels import material_regions
     from skyfit_mi.pipeline.sequence import render_sequence
     from skyfit_mi.pipeline.spec import read_spec, validate_spec
@@ -52,7 +53,7 @@ def main():
         mats = np.concatenate([[n] * len(p) for n, p in regions])
         truth = np.array([[*MATERIALS[m][0], *MATERIALS[m][1:]] for m in mats])
         for spacing, what in ((4, "interpolated"), (1, "each pixel's own")):
-            pf.SKY_SPACING = spacing
+            lc.SKY_PLANS["anchors"] = lc.SkyPlan("anchors", spacing=spacing)
             for seed in range(args.seeds):
                 res = pf.fit_pixels(day, list(mats), px, seed=seed)
                 ok = (res["warnings"] & pf.UNDETERMINED) == 0
