@@ -197,16 +197,17 @@ class LuminanceModel:
         L, J = self.inner.jacobian(theta)
         return self._mix(L), self._mix(J, axis=-2)
 
-    def basis(self, sigmas, halves=False):
-        out = self.inner.basis(sigmas, halves)
-        mixed = [(self._mix(D), self._mix(G)) for D, G in (out if halves else [out])]
-        return mixed if halves else mixed[0]
-
-    def lobes(self, sigmas, halves=False):
-        out = self.inner.lobes(sigmas, halves)
+    def _pairs(self, out, halves):
+        """The (D, G) of ``out`` (a list of them with ``halves``) mixed, a lazy G by its ``map``."""
         mixed = [(self._mix(D), G.map(self._mix) if hasattr(G, "map") else self._mix(G))
                  for D, G in (out if halves else [out])]
         return mixed if halves else mixed[0]
+
+    def basis(self, sigmas, halves=False):
+        return self._pairs(self.inner.basis(sigmas, halves), halves)
+
+    def lobes(self, sigmas, halves=False):
+        return self._pairs(self.inner.lobes(sigmas, halves), halves)
 
     def gradient(self, theta, dloss_dL):
         return self.inner.gradient(theta, np.tensordot(dloss_dL, self.mix, axes=1))
@@ -451,10 +452,10 @@ class Problem:
             z = sign * (m[..., c] - np.where(low, LOW_CODE,
                                              self.obs.sensor.max_code - LOW_CODE)[c]) / sig[c]
             r[..., c] = np.sqrt(-2.0 * log_ndtr(z))
-        if derivative and c.any():
-            # d r / d m = -sign phi(z) / (sigma Phi(z) r)
-            dr[..., c] = -sign * np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z)) \
-                / (sig[c] * r[..., c])
+            if derivative:
+                # d r / d m = -sign phi(z) / (sigma Phi(z) r)
+                dr[..., c] = -sign * np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi)
+                                            - log_ndtr(z)) / (sig[c] * r[..., c])
         return r, dr
 
     def noise_chi2(self, theta):

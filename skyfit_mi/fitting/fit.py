@@ -5,6 +5,7 @@ Mitsuba pass), builds chi-square (eq. 6.2) and runs the chosen method; it return
 68%/95% intervals and warnings (:mod:`~.report` writes them).
 """
 
+import functools
 import time
 from dataclasses import dataclass, replace
 
@@ -25,9 +26,9 @@ from .methods.global_search import SIGMA_GRID
 from .methods.levenberg_marquardt import levenberg_marquardt
 from .pose import pose_share, pose_through_sky
 from ..errors import SkyfitError, check_choice
-from .sky_fit import (SkyFit, SkyShare, fit_sky_scale, fitted_mix, light_level_at,
+from .sky_fit import (SkyFit, SkyShare, fit_sky_scale, fitted_mix, light_level_at, photographed,
                       reference_light_factor, reference_slope, shape_variants, share_at,
-                      skies_at_level, sky_level_at)
+                      sky_level_at)
 from ..render import setup
 from ..render.basis_table import (TableModel, available_memory, block_budget, memory_estimate,
                                   shared_budget, trace_basis)
@@ -37,7 +38,7 @@ from ..render.scene import POSE_ANGLES, camera_at, pose_sd, turn_camera, view_ce
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
                                   SKY_PLANS, CacheOptions, PointRays, anchors_pay,
                                   build_light_cache)
-from ..pipeline.manifest import RENDERED_SOURCES, frame_sky, is_table, load_manifest
+from ..pipeline.manifest import frame_sky, is_table, load_manifest
 from ..pipeline.observation_table import relative_scale
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky_departure import departure_parts
@@ -187,7 +188,7 @@ class FitSession:
         self.names = PARAMETERS[model]
         self.lower, self.upper = bounds(model)
         # only rendered frames' materials are the truth; an ingested spec's are placeholders
-        self.truth = mats[name] if doc.get("source", "render") in RENDERED_SOURCES else None
+        self.truth = None if photographed(doc) else mats[name]
         given = cache.positions is not None
         self.cache_settings = {"positions": int(cache.positions) if given
                                else self.first_positions,
@@ -195,14 +196,12 @@ class FitSession:
                                "sized": "given" if given else "from the data",
                                "sky_plan": check_choice("sky plan", cache.plan, tuple(SKY_PLANS))}
         self._mi = setup(variant or doc["render"]["variant"])
-        self._loaded = None                         # the scene and its parameters (scene)
         # the light traced (LightPlan), its parts (LightParts) and their mix (set_sky)
         self.light, self.sky_scale, self.parts = light or SPEC_LIGHT, 1.0, None
         self.sky_shape_mix = None
         self.light_level = 1.0                      # the whole light's, by frame (set_sky)
         self.light_factor = None                    # per channel, by a reference (reference_factor)
         self._turned = {}                           # the light with the camera turned
-        self._variants = None                       # the shape variants (_shape_variants)
         self.cache_time = time.perf_counter() - t0
         if light is not None:
             self.trace_light(light)
@@ -213,13 +212,11 @@ class FitSession:
         and normalisation, on ``manifest_path`` (its own sequence or a target); ``pixels``
         default to the fit's; ``options`` as the constructor's (``light=None`` leaves the trace
         to the caller; else the fit's light, :meth:`fitted_light`)."""
-        if pixels is None and "points" in result:           # a fit of an observation table
-            pixels = result["points"]
-        elif pixels is None:
-            if not isinstance(result.get("pixels"), list) or not result["pixels"]:
+        if pixels is None:                 # a fit of an observation table lists its points
+            pixels = result["points"] if "points" in result else result.get("pixels")
+            if "points" not in result and not (isinstance(pixels, list) and pixels):
                 raise SkyfitError(f"the fit of region {result['region']!r} lists no pixels; "
                                   "give the fit_NAME.json that `skyfit fit` wrote.")
-            pixels = result["pixels"]
         trace = options.pop("light", True) is not None
         s = cls(manifest_path, result["region"], pixels, model=result["model"],
                 normalisation=result.get("normalisation", "ward"), light=None, **options)
@@ -234,11 +231,6 @@ class FitSession:
             return SPEC_LIGHT
         return LightPlan("fit", shape=sky.get("shape") is not None,
                          departure=sky.get("departure") is not None)
-
-    def light_at_level(self, record):
-        """Take the skies at a sky fit's ``record`` (:func:`~.sky_fit.skies_at_level`) as the
-        spec's light, before tracing (to rank lobes, :func:`~.selection.fit_auto`)."""
-        self.skies = skies_at_level(self.skies, record, self.obs.times)
 
     def trace_as_fitted(self, result):
         """Trace the light as ``result`` saw it and set its fitted sky (:meth:`use_fitted_sky`)."""
@@ -271,11 +263,11 @@ class FitSession:
         its own samples, the rest with its variants on shared ones. Raises SkyfitError where the
         estimate exceeds the available memory."""
         c = self.cache_settings
-        # the split light's parts by name, each a list of the frames' skies
-        named = self._sky_parts(light) if light.split else None
-        lights = None if named is None else list(named.values())
+        # the light's parts by name, each a list of the frames' skies
+        named = self._sky_parts(light) if light.split else {"light": self.skies}
+        lights = list(named.values())
         # a table per part, and the rest's group's covariances about one more
-        need = (len(lights) + (len(lights) > 2) if lights else 1) * memory_estimate(
+        need = (len(lights) + (len(lights) > 2)) * memory_estimate(
             len(at), len(self.skies), c["positions"], c["directions"])
         have = available_memory()
         if have is not None and need > have:
@@ -285,9 +277,9 @@ class FitSession:
                 "fit fewer pixels (--max-pixels) or frames (--frames), or a region at a time.")
         options = CacheOptions(**self._cache_options())
         if not light.split:
-            tables, _, blocks = trace_basis(self.scene, self.params, [self.skies], at, bsdf_id,
-                                            options, model=self.model)
-            return LightParts(("light",), tuple(tables)), blocks
+            tables, _, blocks = trace_basis(self.scene, self.params, lights, at, bsdf_id, options,
+                                            model=self.model)
+            return LightParts(tuple(named), tuple(tables)), blocks
         seeds = np.random.SeedSequence(options.seed).generate_state(2).tolist()
         # the sun's part in the blocks of the rest's group (shared_budget), whose series mix
         budget = block_budget(len(at), len(self.skies), c["positions"])
@@ -306,20 +298,18 @@ class FitSession:
         sun, rest = zip(*(sky.split() for sky in self.skies))
         lights = {"sun": list(sun), "sky": list(rest)}
         if light.shape:
-            variants = self._shape_variants()
-            for j, (_, first) in enumerate(variants[0]):
-                lights[f"shape:{first.info['of']}"] = [v[j][1] for v in variants]
+            for j, (_, first) in enumerate(self._variants[0]):
+                lights[f"shape:{first.info['of']}"] = [v[j][1] for v in self._variants]
         if light.departure:
             parts = [departure_parts(sky) for sky in self.skies]
             for j, (name, _) in enumerate(parts[0]):
                 lights[f"departure:{name}"] = [p[j][1] for p in parts]
         return lights
 
-    def _shape_variants(self):
-        """Each frame's shape variants (:func:`~.sky_fit.shape_variants`), cached."""
-        if self._variants is None:
-            self._variants = shape_variants(self.skies)
-        return self._variants
+    @functools.cached_property
+    def _variants(self):
+        """Each frame's shape variants (:func:`~.sky_fit.shape_variants`), made once."""
+        return shape_variants(self.skies)
 
     def light_levels(self, mix):
         """(sun, sky) factors (T,) the shape's ``mix`` brings: a turbid sky's turbidity sets both
@@ -328,7 +318,7 @@ class FitSession:
                 or not all(s.info.get("kind") == "turbid" for s in self.skies):
             return 1.0, 1.0
         return level_factors([s.info for s in self.skies],
-                             [v[0][1].info for v in self._shape_variants()], mix[0])
+                             [v[0][1].info for v in self._variants], mix[0])
 
     def _cache_options(self):
         """build_light_cache's options at ``cache_settings``."""
@@ -346,18 +336,17 @@ class FitSession:
     def scene(self):
         """The sequence's Mitsuba scene, loaded when first needed (every live scene's materials
         join each trace's virtual calls, so sessions sharing a trace load one)."""
-        return self._scene_and_params()[0]
+        return self._loaded[0]
 
     @property
     def params(self):
         """The scene's parameters (``mi.traverse``)."""
-        return self._scene_and_params()[1]
+        return self._loaded[1]
 
-    def _scene_and_params(self):
-        if self._loaded is None:
-            scene = self._mi.load_string(self.doc["scene"]["xml"])
-            self._loaded = scene, self._mi.traverse(scene)
-        return self._loaded
+    @functools.cached_property
+    def _loaded(self):
+        scene = self._mi.load_string(self.doc["scene"]["xml"])
+        return scene, self._mi.traverse(scene)
 
     def light_cache(self):
         """The region's raw :class:`~skyfit_mi.render.light_cache.LightCache` (for diagnostics)."""
@@ -366,9 +355,19 @@ class FitSession:
                                  self.name, **self._cache_options())
 
     def _use_parts(self, parts):
-        """Take the light's ``parts`` and fit on their mix at the sky as set (:meth:`set_sky`)."""
+        """Take the light's ``parts`` and make the models and chi-square on their mix at the sky
+        as set (:meth:`set_sky`)."""
         self.parts = parts
-        self._use_table(self._mixed(parts))
+        table = self._mixed(parts)
+        if not table.hit.any():
+            raise SkyfitError(f"none of the region's pixels shows material {self.name!r}; check "
+                              "the region.")
+        self.table = table
+        self.geometry = highlight_geometry(np.where(table.hit[..., None, None], table.sun_cos,
+                                                    np.nan))
+        self.wm = self.model_on(table)
+        self.problem = Problem(self.obs, self.wm, valid=table.hit)
+        self._halves = self._bases = None
 
     def _mixed(self, parts):
         """The table of the light's ``parts`` at the sky's level and shape."""
@@ -414,18 +413,6 @@ class FitSession:
         self.cache_settings = dict(other.cache_settings)
         self.take_parts(other.parts, other.light, other.cache_time,
                         other.cache_settings.get("blocks"))
-
-    def _use_table(self, table):
-        """Take ``table`` (of the region's pixels) and make the models and chi-square on it."""
-        if not table.hit.any():
-            raise SkyfitError(f"none of the region's pixels shows material {self.name!r}; check "
-                              "the region.")
-        self.table = table
-        self.geometry = highlight_geometry(np.where(table.hit[..., None, None], table.sun_cos,
-                                                    np.nan))
-        self.wm = self.model_on(table)
-        self.problem = Problem(self.obs, self.wm, valid=table.hit)
-        self._halves = self._bases = None
 
     def model_on(self, table, part=0):
         """The radiance model on ``table`` (whole, or half ``part`` 1, 2), luminance if observed."""
@@ -629,8 +616,8 @@ def trace_sessions(sessions, light):
         t0 = time.perf_counter()
         parts, blocks = _trace_together(group, plan)
         share = (time.perf_counter() - t0) / len(group)
-        for s, rows in _rows(group):
-            s.take_parts(parts.subset(rows), plan, share, blocks)
+        for s, own in zip(group, parts):
+            s.take_parts(own, plan, share, blocks)
 
 
 def trace_turned(sessions):
@@ -645,8 +632,8 @@ def trace_turned(sessions):
             with camera_at(first.scene, turn_camera(to_world, pivot, *key)):
                 parts, _ = _trace_together(group, plan)
             share = (time.perf_counter() - t0) / len(group)
-            for s, rows in _rows(group):
-                s._turned[key] = (parts.subset(rows), share)
+            for s, own in zip(group, parts):
+                s._turned[key] = (own, share)
 
 
 def _trace_groups(sessions, light):
@@ -665,23 +652,17 @@ def _trace_groups(sessions, light):
 
 
 def _trace_together(group, plan):
-    """(:class:`~.light.LightParts`, blocks) of ``plan`` at all the points of ``group``."""
+    """(Each session's :class:`~.light.LightParts`, blocks) of ``plan`` traced at all the points
+    of ``group`` at once."""
     if group[0].obs.rays is None:
         at = np.concatenate([s.obs.pixels for s in group])
     else:
         at = PointRays(*(np.concatenate([getattr(s.obs.rays, k) for s in group])
                          for k in ("origins", "directions")))
-    return group[0]._trace(at, np.repeat([s.name for s in group],
-                                         [len(s.obs.pixels) for s in group]), plan)
-
-
-def _rows(group):
-    """Each session of ``group`` with its rows (a slice) in their points traced together."""
-    start = 0
-    for s in group:
-        n = len(s.obs.pixels)
-        yield s, slice(start, start + n)
-        start += n
+    sizes = [len(s.obs.pixels) for s in group]
+    parts, blocks = group[0]._trace(at, np.repeat([s.name for s in group], sizes), plan)
+    ends = np.cumsum(sizes).tolist()
+    return [parts.subset(slice(e - n, e)) for e, n in zip(ends, sizes)], blocks
 
 
 def fit_region(manifest_path, name, pixels, **options):
@@ -786,6 +767,4 @@ def prepare_sessions(sessions, light=LightOptions(), seed=0, log=print):
     where it is not the spec's; returns the :class:`~.sky_fit.SkyFit` (empty for the spec's)."""
     plan = resolve_light(sessions, light, log)
     trace_sessions(list(sessions.values()), plan)
-    if not plan.split:
-        return SkyFit(None)
-    return fit_sky_scale(list(sessions.values()), plan, seed, log)
+    return fit_sky_scale(list(sessions.values()), plan, seed, log) if plan.split else SkyFit(None)

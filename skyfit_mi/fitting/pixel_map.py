@@ -18,7 +18,7 @@ import sys
 import threading
 import time
 import warnings
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,6 +53,8 @@ LIGHT_PIXELS = REGION_PIXELS
 TRIM = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
 #: Seconds to wait for a given scheduler to answer.
 SCHEDULER_TIMEOUT_S = 10
+#: The store's arrays of a value per parameter and pixel (parameters, H, W), and per pixel (H, W).
+PLANES, IMAGES = ("theta", "lo", "hi", "cache_error_sd"), ("chi2", "dof", "warnings")
 
 
 def plan_chunks(regions, patch, chunk):
@@ -83,13 +85,20 @@ def chunk_seed(seed, index):
     return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0])
 
 
-def _settings(doc, regions, model, normalisation, seed, patch, chunk, cache, sky):
-    """What a stored map was made with (a resume needs the same)."""
+def _settings(doc, regions, o, sky, first):
+    """What a stored map was made with (a resume needs the same): :class:`MapOptions` ``o``, the
+    light's ``sky`` plan, and whether the regions' fits come ``first``."""
     digest = [(n, np.asarray(p).tolist()) for n, p in regions]
-    return {"sequence_run_id": doc.get("run_id"), "model": model, "normalisation": normalisation,
-            "seed": int(seed), "patch": int(patch), "chunk": int(chunk), "cache": list(cache),
-            "sky_spacing": SKY_SPACING, "layout": LAYOUT, "undetermined_bits": UNDETERMINED,
-            "regions": hashlib.sha256(json.dumps(digest).encode()).hexdigest()[:16], "sky": sky}
+    settings = {
+        "sequence_run_id": doc.get("run_id"), "model": o.model, "normalisation": o.normalisation,
+        "seed": int(o.seed), "patch": int(o.patch), "chunk": int(o.chunk), "cache": list(o.cache),
+        "sky_spacing": SKY_SPACING, "layout": LAYOUT, "undetermined_bits": UNDETERMINED,
+        "regions": hashlib.sha256(json.dumps(digest).encode()).hexdigest()[:16],
+        "sky": {"sky": sky, "sun_sd": o.light.sun_sd, "sky_terms": o.light.terms}
+        if sky != "spec" else "spec"}
+    if first:
+        settings["first_fits_pixels"] = o.light_pixels
+    return settings
 
 
 def first_fits(manifest_path, regions, model="colour", normalisation="ward", seed=0,
@@ -117,7 +126,6 @@ def first_fits(manifest_path, regions, model="colour", normalisation="ward", see
     else:
         results = fit_regions(manifest_path, kept, model=model, normalisation=normalisation,
                               seed=seed, variant=variant, light=light, log=shown)
-    choices, light = {}, None if sky == "spec" else {"fitted": sky, "regions": {}}
     try:
         fits = list(zip(kept, results))
     except SkyfitError as exc:
@@ -126,21 +134,21 @@ def first_fits(manifest_path, regions, model="colour", normalisation="ward", see
                           + (", or map with --sky spec" if sky != "spec" else "")
                           + (" and a model (--model 2, 3 or 5)" if model == "auto" else "")
                           + ".") from None
+    choices = {name: (r["model"], r["normalisation"]) for (name, _), r in fits}
+    if sky == "spec":
+        return choices, None
+    regions = {}
     for (name, _), r in fits:
-        choices[name] = (r["model"], r["normalisation"])
-        if light is None:
-            continue
-        rec = r["sky"]
-        span = rec.get("undetermined_span")
-        light["regions"][name] = {
-            "value": r["parameters"], "sd": rec["error_sd"],
+        span = r["sky"].get("undetermined_span")
+        regions[name] = {
+            "value": r["parameters"], "sd": r["sky"]["error_sd"],
             "span": None if span is None else [{p: v[i] for p, v in span.items()}
                                                for i in (0, 1)]}
-    if light is not None:                         # one sky record, shared by every region
-        light["sky"] = {k: rec[k] for k in ("k", "interval95", "determined", "terms",
-                                            "regions", "prior", "warnings")}
-        light.update(sun_level_sd=rec["sun_level_sd"], sun_source=rec["sun_source"])
-    return choices, light
+    rec = fits[-1][1]["sky"]                      # one sky record, shared by every region
+    return choices, {"fitted": sky, "regions": regions,
+                     "sky": {k: rec[k] for k in ("k", "interval95", "determined", "terms",
+                                                 "regions", "prior", "warnings")},
+                     "sun_level_sd": rec["sun_level_sd"], "sun_source": rec["sun_source"]}
 
 
 def plan_map(regions, choices, patch, chunk):
@@ -190,13 +198,12 @@ def _open_store(path, settings, shape, n_par, n_chunks, resume, first=None):
     if path.exists():
         shutil.rmtree(path)
     g = zarr.open_group(str(path), mode="w")
-    h, w = shape
-    for name, dims in (("theta", (n_par, h, w)), ("lo", (n_par, h, w)), ("hi", (n_par, h, w)),
-                       ("cache_error_sd", (n_par, h, w)), ("chi2", (h, w)), ("dof", (h, w)),
-                       ("warnings", (h, w))):
-        g.create_array(name, shape=dims, dtype="f4" if name not in ("dof", "warnings") else "i4",
-                       fill_value=np.nan if name not in ("dof", "warnings") else -1,
-                       chunks=dims[:-2] + (min(h, 256), min(w, 256)))
+    for name in PLANES + IMAGES:
+        whole = name in ("dof", "warnings")
+        dims = ((n_par,) if name in PLANES else ()) + shape
+        g.create_array(name, shape=dims, dtype="i4" if whole else "f4",
+                       fill_value=-1 if whole else np.nan,
+                       chunks=dims[:-2] + tuple(min(n, 256) for n in shape))
     g.create_array("done", shape=(n_chunks,), dtype="bool", fill_value=False)
     g.attrs["settings"] = settings
     g.attrs["first_fits"] = first
@@ -207,16 +214,14 @@ def _write_chunk(store, chunk, res, names):
     """Scatter one chunk's fits onto its pixels in the store, each parameter on its plane."""
     pixels, groups = chunk["pixels"], chunk["groups"]
     x, y = pixels[:, 0], pixels[:, 1]
-    box = (slice(y.min(), y.max() + 1), slice(x.min(), x.max() + 1))
-    planes = [names.index(p) for p in res["names"]]
-    for key in ("theta", "lo", "hi", "cache_error_sd"):
-        arr = store[key][(slice(None),) + box]
-        for j, plane in enumerate(planes):
-            arr[plane, y - y.min(), x - x.min()] = res[key][groups, j]
-        store[key][(slice(None),) + box] = arr
-    for key in ("chi2", "dof", "warnings"):
+    box = (Ellipsis, slice(y.min(), y.max() + 1), slice(x.min(), x.max() + 1))
+    planes = np.array([names.index(p) for p in res["names"]])[:, None]
+    for key in PLANES + IMAGES:
         arr = store[key][box]
-        arr[y - y.min(), x - x.min()] = res[key][groups]
+        if key in PLANES:                         # res[key] (fits, parameters)
+            arr[planes, y - y.min(), x - x.min()] = res[key][groups].T
+        else:
+            arr[y - y.min(), x - x.min()] = res[key][groups]
         store[key][box] = arr
 
 
@@ -258,12 +263,9 @@ def _ctrl_c_deferred():
 
 
 @contextmanager
-def _stderr_to_null(keep=False):
-    """Send started processes' standard error to /dev/null during the block (unless ``keep``),
-    so workers do not each print a Ctrl-C's traceback."""
-    if keep:
-        yield
-        return
+def _stderr_to_null():
+    """Send started processes' standard error to /dev/null during the block, so workers do not
+    each print a Ctrl-C's traceback."""
     sys.stderr.flush()
     saved, null = os.dup(2), os.open(os.devnull, os.O_WRONLY)
     os.dup2(null, 2)
@@ -291,7 +293,7 @@ def _client(workers, scheduler, memory_per_worker, dask_logs=False):
     import dask
 
     # MALLOC_TRIM_THRESHOLD_ (Dask's default) slows chunks: left unset (docs/BENCHMARKS.md)
-    with dask.config.set({f"{TRIM}": None}), _stderr_to_null(keep=dask_logs), \
+    with dask.config.set({TRIM: None}), nullcontext() if dask_logs else _stderr_to_null(), \
             warnings.catch_warnings():
         if not dask_logs:                     # e.g. its own web server's port taken
             warnings.simplefilter("ignore")
@@ -301,25 +303,21 @@ def _client(workers, scheduler, memory_per_worker, dask_logs=False):
     return Client(cluster), cluster
 
 
-@contextmanager
 def _dask_logs_quiet(keep=False):
     """Show Dask's log lines in this process only at CRITICAL during the block, unless ``keep``."""
     if keep:
-        yield
-        return
+        return nullcontext()
     from distributed.utils import silence_logging_cmgr
 
-    with silence_logging_cmgr(logging.CRITICAL):
-        yield
+    return silence_logging_cmgr(logging.CRITICAL)
 
 
 def _close(client, cluster):
     """Close a Dask client and its local cluster (a Ctrl-C meanwhile deferred until they are)."""
     with _ctrl_c_deferred():
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        for x in (client, cluster):
+            if x is not None:
+                x.close()
 
 
 @dataclass(frozen=True)
@@ -360,31 +358,22 @@ def run_map(manifest_path, regions, out_dir, options=MapOptions(), cluster=Clust
     """Map ``regions`` ([(material, pixels (P, 2))]) into ``out_dir`` per ``options`` on
     ``cluster``, inputs checked first; returns the summary."""
     o, c = options, cluster
-    model, normalisation, seed, patch, chunk, cache = (o.model, o.normalisation, o.seed,
-                                                       o.patch, o.chunk, o.cache)
-    light, light_pixels, variant = o.light, o.light_pixels, o.variant
-    workers, scheduler = c.workers, c.scheduler
     doc, root = load_manifest(manifest_path)
     skies = [frame_sky(f, root) for f in doc["frames"] if "illumination" in f]
-    plan = light.resolve(doc, skies, len(skies), log=log)
-    sky = plan.sky
+    plan = o.light.resolve(doc, skies, len(skies), log=log)
     shape = (doc["camera"]["height"], doc["camera"]["width"])
     for _, px in regions:
         check_map_region(px, shape)
-    if int(patch) < 1 or int(chunk) < 1:
+    if int(o.patch) < 1 or int(o.chunk) < 1:
         raise SkyfitError("--patch and --chunk take whole numbers of at least 1.")
-    if scheduler and workers is not None:
+    if c.scheduler and c.workers is not None:
         raise SkyfitError("--workers sizes the cluster on this machine; with --scheduler the "
                           "cluster's own workers run the map: leave out --workers.")
-    first = model == "auto" or sky != "spec"            # fits of the regions come first
-    settings = _settings(doc, regions, model, normalisation, seed, patch, chunk, cache,
-                         {"sky": sky, "sun_sd": light.sun_sd, "sky_terms": light.terms}
-                         if sky != "spec" else "spec")
-    if first:
-        settings["first_fits_pixels"] = light_pixels
+    first = o.model == "auto" or plan.sky != "spec"     # fits of the regions come first
+    settings = _settings(doc, regions, o, plan.sky, first)
     out = check_dir(Path(out_dir))
     stored = _check_store(out / STORE, settings, overwrite)
-    n_workers = None if scheduler else worker_count(workers, chunk, log)
+    n_workers = None if c.scheduler else worker_count(c.workers, o.chunk, log)
     t0 = time.perf_counter()
     client = local = None
     with _dask_logs_quiet(keep=c.dask_logs):
@@ -393,18 +382,18 @@ def run_map(manifest_path, regions, out_dir, options=MapOptions(), cluster=Clust
             resume = stored is not None
             if not (resume and np.all(stored[0])):  # a given scheduler answers before any fit
                 with _ctrl_c_deferred():
-                    client, local = _client(n_workers, scheduler, c.memory_per_worker,
+                    client, local = _client(n_workers, c.scheduler, c.memory_per_worker,
                                             c.dask_logs)
             if resume and first and stored[1] is not None:     # what the store's map took
                 choices = {n: tuple(c) for n, c in stored[1]["choices"].items()}
                 light = stored[1]["light"]
             elif first:
-                choices, light = first_fits(manifest_path, regions, model, normalisation, seed,
-                                            plan, light_pixels, variant, log)
+                choices, light = first_fits(manifest_path, regions, o.model, o.normalisation,
+                                            o.seed, plan, o.light_pixels, o.variant, log)
             else:
-                choices, light = {name: (model, normalisation) for name, _ in regions}, None
+                choices, light = {name: (o.model, o.normalisation) for name, _ in regions}, None
             names = map_parameters(choices)
-            chunks = plan_map(regions, choices, patch, chunk)
+            chunks = plan_map(regions, choices, o.patch, o.chunk)
             if resume and len(stored[0]) != len(chunks):
                 _another_map(out / STORE)
             pending = [i for i in range(len(chunks)) if not resume or not stored[0][i]]
@@ -425,11 +414,11 @@ def run_map(manifest_path, regions, out_dir, options=MapOptions(), cluster=Clust
     summary.update(widths_include=_widths_include(doc, skies, names, light),
                    sky=_sky_summary(light),
                    models=("each region's ranked best by held-out frames (fit --model auto) on "
-                           + (f"up to {light_pixels} of its pixels" if light_pixels else
-                              "every pixel") if model == "auto" else "as given"),
+                           + (f"up to {o.light_pixels} of its pixels" if o.light_pixels else
+                              "every pixel") if o.model == "auto" else "as given"),
                    wall_time_s=time.perf_counter() - t0, chunks=len(chunks),
                    chunks_this_run=len(pending), workers=n_workers,
-                   scheduler=scheduler or "LocalCluster", memory_per_worker=c.memory_per_worker,
+                   scheduler=c.scheduler or "LocalCluster", memory_per_worker=c.memory_per_worker,
                    chunk_seeds="numpy SeedSequence([seed, chunk index])")
     write_json(out / "map_summary.json", summary)
     return summary
@@ -439,6 +428,7 @@ def _map_pending(client, manifest_path, chunks, pending, store, names, options, 
                  light):
     """Submit every pending chunk and write each result as it comes."""
     from distributed import as_completed
+    from tqdm import tqdm
 
     futures = {client.submit(fit_pixels, str(manifest_path), chunks[i]["materials"],
                              chunks[i]["pixels"], model=chunks[i]["model"],
@@ -447,10 +437,8 @@ def _map_pending(client, manifest_path, chunks, pending, store, names, options, 
                              groups=chunks[i]["groups"], variant=options.variant, light=light,
                              pure=False): i
                for i in pending}
-    bar = None
-    if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=sum(len(chunks[i]["pixels"]) for i in pending), desc="map", unit="px")
+    bar = tqdm(total=sum(len(chunks[i]["pixels"]) for i in pending), desc="map", unit="px",
+               disable=not progress)
     for fut in as_completed(futures):
         i = futures[fut]
         try:
@@ -461,10 +449,8 @@ def _map_pending(client, manifest_path, chunks, pending, store, names, options, 
             raise
         _write_chunk(store, chunks[i], res, names)
         store["done"][i] = True                 # after the chunk's values: a resume redoes it
-        if bar is not None:
-            bar.update(len(chunks[i]["pixels"]))
-    if bar is not None:
-        bar.close()
+        bar.update(len(chunks[i]["pixels"]))
+    bar.close()
 
 
 def write_map_outputs(out, store, names, regions, settings, choices):
@@ -481,28 +467,24 @@ def write_map_outputs(out, store, names, regions, settings, choices):
         images[f"{n}_width95"] = hi[i] - lo[i]
     for key, img in images.items():
         write_exr(out / f"{key}.exr", img.astype(np.float32))
-    # the planes of each region's model: its pixels on them, the regions without them
-    own = {name: [(i, n) for i, n in enumerate(names) if n in PARAMETERS[choices[name][0]]]
-           for name, _ in regions}
-    has = np.zeros((len(names),) + mapped.shape, bool)
-    lacking = {n: [name for name, _ in regions] for n in names}
+    # each region's pixels and the planes of its model: a plane's preview shows the pixels of
+    # the regions whose model has it, and names the others
+    within = {name: np.zeros(mapped.shape, bool) for name, _ in regions}
     for name, px in regions:
         px = np.asarray(px).reshape(-1, 2)
-        for i, n in own[name]:
-            has[i, px[:, 1], px[:, 0]] = True
-            lacking[n].remove(name)
+        within[name][px[:, 1], px[:, 0]] = True
+    own = {name: [(i, n) for i, n in enumerate(names) if n in PARAMETERS[choices[name][0]]]
+           for name in within}
     for i, n in enumerate(names):
-        _preview(out / f"{n}.png", theta[i], mapped & has[i], determined & has[i], n,
-                 lacking[n])
+        has = np.any([within[name] for name in within if (i, n) in own[name]], axis=0)
+        _preview(out / f"{n}.png", theta[i], mapped & has, determined & has, n,
+                 [name for name in within if (i, n) not in own[name]])
     _preview(out / "chi2_per_dof.png", per_dof, mapped, mapped, "chi^2 / dof")
     summary = {"settings": settings, "parameters": names, "store": STORE,
                "warning_bits": WARNINGS, "undetermined_bits": UNDETERMINED, "units": "reflectances unitless, sigma_alpha rms slope; "
                "widths of 95% intervals; EXR maps NaN outside the regions",
                "regions": {}}
-    for name, px in regions:
-        px = np.asarray(px).reshape(-1, 2)
-        sel = np.zeros(mapped.shape, bool)
-        sel[px[:, 1], px[:, 0]] = True
+    for name, sel in within.items():
         ok = sel & determined
         summary["regions"][name] = {
             "pixels": int(sel.sum()), "mapped": int((sel & mapped).sum()),
@@ -538,12 +520,12 @@ def _widths_include(doc, skies, names, light=None):
                    "reflectance's in proportion to its value; over the levels the fit could "
                    "not tell apart where it did not determine the level); the sky's shape is "
                    "the spec's")
-    if light is None and default_sky(doc, skies) != "spec":
+        if light_level_sd(doc, names, light["sun_level_sd"]).any():
+            out.append(f"the sun's level, known to +-{100 * light['sun_level_sd']:.0f}% (1 sd, "
+                       f"a {light['sun_source']} sun), on the reflectances")
+    elif default_sky(doc, skies) != "spec":
         out.append("no error of the light's: the spec's sky and sun are taken as exact "
                    "(--sky spec)")
-    elif light is not None and light_level_sd(doc, names, light["sun_level_sd"]).any():
-        out.append(f"the sun's level, known to +-{100 * light['sun_level_sd']:.0f}% (1 sd, a "
-                   f"{light['sun_source']} sun), on the reflectances")
     if (ingest.get("calibration") or {}).get("scale_relative_sd"):
         out.append("the exposure calibration's error (ingest.calibration)")
     if any(pose_sd((doc.get("camera") or {}).get("pose_sd_deg")).values()):
@@ -568,15 +550,13 @@ def _preview(path, image, mapped, determined, label, lacking=()):
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(5.2, 4.2))
-    shown = np.where(determined, image, np.nan)
-    im = ax.imshow(shown, cmap="viridis", interpolation="nearest")
-    grey = np.where(mapped & ~determined, 0.6, np.nan)
-    ax.imshow(grey, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+    unsure = mapped & ~determined
+    im = ax.imshow(np.where(determined, image, np.nan), cmap="viridis", interpolation="nearest")
+    ax.imshow(np.where(unsure, 0.6, np.nan), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
     fig.colorbar(im, ax=ax, fraction=0.046, label=label)
-    n_u = int((mapped & ~determined).sum())
+    n_u = int(unsure.sum())
     notes = ([f"{n_u} undetermined pixels grey"] if n_u else []) + (
         [f"not in the model of {', '.join(lacking)}"] if lacking else [])
     ax.set_title(label + (f" ({'; '.join(notes)})" if notes else ""), fontsize=9)
-    ax.set_xticks([])
-    ax.set_yticks([])
+    ax.set(xticks=[], yticks=[])
     save_figure(fig, path)

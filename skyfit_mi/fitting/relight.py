@@ -59,15 +59,8 @@ SKY_MAPS = "sky_maps"
 
 def check_output(out, images, overwrite):
     """Refuse an output folder ``out`` holding another run's output, unless ``overwrite``."""
-    out = Path(out)
-    if overwrite or not out.is_dir():
-        return
-    sequence = (out / "manifest.json").exists()
-    if images and sequence:
-        return
-    held = (["manifest.json"] if sequence else []) + [n for n in RELIGHT_FILES
-                                                      if (out / n).exists()]
-    if held:
+    held = [n for n in ("manifest.json", *RELIGHT_FILES) if (Path(out) / n).exists()]
+    if held and not overwrite and not (images and held[0] == "manifest.json"):
         raise SkyfitError(f"{out} holds another run's output ({held[0]}); relight into another "
                           "folder, or pass --overwrite to replace it.")
 
@@ -127,15 +120,6 @@ class Plan:
     #: the target's own materials are rendered again with other seeds
     reference: bool
 
-    @property
-    def image_kind(self):
-        """What the prediction is compared with: the observed frames, or the relit render."""
-        return "observed" if self.observed else "relit render"
-
-    def predicted_from(self, out):
-        """The sequence the prediction takes light and images from (the target, or ``out``)."""
-        return Path(out) if self.render and not self.observed else self.target
-
 
 def plan_relight(fits, target, out, images=True, reference=False, overwrite=False):
     """The :class:`Plan` of relighting ``fits`` onto ``target`` into ``out``, inputs checked."""
@@ -190,8 +174,9 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     spec = target_spec(plan.target, fits, plan.doc)[0] if plan.render else None
     check_sun_up(plan, spec)
     level = fitted_sky_level(fits, plan.doc, log)
+    # the sequence the prediction takes light and images from: the target, or the relit render;
     # the target's pixels before the render (refusing early), the relit render's after
-    predicted = plan.predicted_from(out)
+    predicted = Path(out) if plan.render and not plan.observed else plan.target
     pixels = target_pixels(fits, predicted, seed) if predicted == plan.target else None
     if overwrite:
         clear_output(out)
@@ -204,7 +189,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if pixels is None:
         pixels = target_pixels(fits, predicted, seed)
     prediction = predict(fits, predicted, pixels, draws, seed, log)
-    write_prediction(prediction, out, plan.image_kind, plot=plan.render)
+    write_prediction(prediction, out, "observed" if plan.observed else "relit render",
+                     plot=plan.render)
     if not plan.observed:
         return None
     point_errors = None
@@ -705,22 +691,24 @@ def write_prediction(prediction, out, image_kind, plot=True):
             prediction.rows, image_kind))
 
 
-def _pyplot():
-    """matplotlib's pyplot on the Agg back-end (files only)."""
+def _region_figure(rows, width, height, margin=0.0):
+    """(Figure, [(axes, region)]) of a panel per region of ``rows``, one above another
+    (``height`` each, ``margin`` beside), by matplotlib on the Agg back-end (files only)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    return plt
+    regions = sorted({row.region for row in rows})
+    # constrained layout: default margins leave empty bands on a tall figure
+    fig, axes = plt.subplots(len(regions), 1, figsize=(width, margin + height * len(regions)),
+                             squeeze=False, layout="constrained")
+    return fig, list(zip(axes[:, 0], regions))
 
 
 def plot_points(rows, image_kind):
     """PNG bytes of a table's prediction ``rows`` and bands against its values."""
-    plt = _pyplot()
-    regions = sorted({row.region for row in rows})
-    fig, axes = plt.subplots(len(regions), 1, figsize=(5, 4.5 * len(regions)), squeeze=False,
-                             layout="constrained")
-    for ax, region in zip(axes[:, 0], regions):
+    fig, panels = _region_figure(rows, 5, 4.5)
+    for ax, region in panels:
         mine = [row for row in rows if row.region == region]
         for ch, col in zip("RGBY", ("r", "g", "b", "k")):
             sel = [row for row in mine if row.channel == ch]
@@ -740,12 +728,8 @@ def plot_points(rows, image_kind):
 
 def plot_prediction(rows, image_kind):
     """PNG bytes of the prediction ``rows``, bands and image values (thesis fig 7.14)."""
-    plt = _pyplot()
-    regions = sorted({row.region for row in rows})
-    # constrained layout: default margins leave empty bands on a tall figure
-    fig, axes = plt.subplots(len(regions), 1, figsize=(7, 0.5 + 2.8 * len(regions)),
-                             squeeze=False, layout="constrained")
-    for i, (ax, region) in enumerate(zip(axes[:, 0], regions)):
+    fig, panels = _region_figure(rows, 7, 2.8, 0.5)
+    for i, (ax, region) in enumerate(panels):
         for ch, col in zip("RGBY", ("r", "g", "b", "k")):
             sel = [row for row in rows if row.region == region and row.channel == ch]
             if not sel:
@@ -865,17 +849,27 @@ def _predict_means(s, result, target, draws, rng):
     observed = region_mean(image)
     names = _channels(s)
     means, observed = means[..., :len(names)], observed[..., :len(names)]
-    unseen = unseen_light(result, s)
-    rows = []
-    for j, (i, t) in enumerate(zip(s.obs.frames, s.obs.times)):
-        for c, ch in enumerate(names):
-            band = widen(means[0, j, c], (lo[j, c], hi[j, c]), extra[j, c], 0.0, np.inf)
-            rows.append(PredictionRow(region=s.name, frame=int(i), time=t, channel=ch,
-                                      predicted=float(means[0, j, c]), lo95=float(band[0]),
-                                      hi95=float(band[1]), image=float(observed[j, c]),
-                                      beyond=beyond_data(result, ch, means[0, j, c],
-                                                         unseen[j])))
+    rows = _prediction_rows(s, result, [a[None] for a in (means[0], lo, hi, extra, observed)],
+                 np.ndindex(1, *means[0].shape), 0.0)
     return rows, _means_error(s, means[0], observed, region_mean)
+
+
+def _prediction_rows(s, result, values, where, lower, points=None, saturated=None):
+    """The :class:`PredictionRow` of session ``s`` at each (point, frame, channel) of ``where``
+    from ``values`` (at the fit, the band's lo and hi, its widening, the image's; each (P, T, C)),
+    bands widened from ``lower`` up; ``points`` and ``saturated`` (P, T, C) a table's."""
+    at_fit, lo, hi, extra, image = values
+    names, unseen = _channels(s), unseen_light(result, s)
+    rows = []
+    for p, j, c in where:
+        band = widen(at_fit[p, j, c], (lo[p, j, c], hi[p, j, c]), extra[p, j, c], lower, np.inf)
+        rows.append(PredictionRow(
+            region=s.name, frame=int(s.obs.frames[j]), time=s.obs.times[j], channel=names[c],
+            predicted=float(at_fit[p, j, c]), lo95=float(band[0]), hi95=float(band[1]),
+            image=float(image[p, j, c]), point=None if points is None else points[p],
+            saturated=saturated is not None and bool(saturated[p, j, c]),
+            beyond=beyond_data(result, names[c], at_fit[p, j, c], unseen[j])))
+    return rows
 
 
 def unseen_light(result, s):
@@ -926,20 +920,9 @@ def _predict_points(s, result, target, draws, rng):
     extra = band_half_width(image_noise_variance(s, image, at_fit, target) + model_var, at_fit,
                             *model_error_kappa(result))
     names = _channels(s)
-    saturated = ~_measured(s)
-    unseen = unseen_light(result, s)
-    rows, points = [], [str(x) for x in s.obs.pixels]      # one string a point, shared
-    for p, j, c in zip(*np.nonzero(np.isfinite(s.obs.sigma[..., :len(names)]))):
-        band = widen(at_fit[p, j, c], (lo[p, j, c], hi[p, j, c]), extra[p, j, c], -np.inf,
-                     np.inf)
-        rows.append(PredictionRow(region=s.name, frame=int(s.obs.frames[j]),
-                                  time=s.obs.times[j], channel=names[c],
-                                  predicted=float(at_fit[p, j, c]), lo95=float(band[0]),
-                                  hi95=float(band[1]), image=float(image[p, j, c]),
-                                  point=points[p],
-                                  saturated=bool(saturated[p, j, c]),
-                                  beyond=beyond_data(result, names[c], at_fit[p, j, c],
-                                                     unseen[j])))
+    where = zip(*np.nonzero(np.isfinite(s.obs.sigma[..., :len(names)])))
+    rows = _prediction_rows(s, result, (at_fit, lo, hi, extra, image), where, -np.inf,
+                 [str(x) for x in s.obs.pixels], ~_measured(s))     # one string a point, shared
     region_mean = _region_mean(s)
     return rows, _means_error(s, region_mean(at_fit)[..., :len(names)],
                               region_mean(image)[..., :len(names)], region_mean)
@@ -970,10 +953,7 @@ def _region_mean(s):
     """Region mean (T, 3) of values (P, T, 3) over the measured, unsaturated points."""
     have = np.ones(s.obs.y.shape) if s.obs.rays is None else _measured(s) * 1.0
     have = have / np.maximum(have.sum(axis=0), 1.0)
-
-    def region_mean(x):
-        return np.sum(x * have, axis=0)
-    return region_mean
+    return lambda x: np.sum(x * have, axis=0)
 
 
 def _means_error(s, fit_means, observed, region_mean):

@@ -22,6 +22,7 @@ from .fit import (FitCache, FitSession, fit_sessions, prepare_sessions, resolve_
                   trace_sessions)
 from .held_out import frame_folds
 from .light import SPEC_LIGHT, LightOptions
+from .sky_fit import skies_at_level
 from ..errors import SkyfitError
 from .methods.global_search import global_search
 from .methods.levenberg_marquardt import polish
@@ -39,23 +40,18 @@ FOLDS = 4
 RANK_POSITIONS, RANK_PLAN = 8, "anchors"
 
 
-def _fit(problem, grid_basis):
-    """The global minimum of ``problem`` (theta, chi2), its grid on ``grid_basis``."""
-    lo, hi = bounds(problem.model.model)
-    res = global_search(problem, 0.5 * (lo + hi), lo, hi, profile=False, grid_basis=grid_basis)
-    return np.asarray(res["theta"], dtype=float), float(res["chi2"])
-
-
 def cross_validate(session, model, folds=FOLDS):
     """One candidate on a traced :class:`~.fit.FitSession`: summed held-out chi-square over
     ``folds``, the full fit's chi-square, parameters and dof, AIC and BIC."""
     obs, table = session.obs, session.table
     wm = TableModel(table, model)
     wm = LuminanceModel(wm) if obs.luminance else wm
-    grid_basis = session.grid_bases()[0]          # the table's lobes: the same for any model
     full = Problem(obs, wm, valid=table.hit)
-    theta, chi2 = _fit(full, grid_basis)
     lo, hi = bounds(model)
+    # the global minimum, its grid on the table's lobes (the same for any model)
+    res = global_search(full, 0.5 * (lo + hi), lo, hi, profile=False,
+                        grid_basis=session.grid_bases()[0])
+    theta, chi2 = np.asarray(res["theta"], dtype=float), float(res["chi2"])
     held_out, n_held = 0.0, 0
     for train, test in frame_folds(full.valid, folds):
         train, test = Problem(obs, wm, valid=train), Problem(obs, wm, valid=test)
@@ -151,9 +147,9 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     for fam in families:
         t0 = time.perf_counter()
         sessions[fam] = sessions_of(model=models[0], normalisation=fam, cache=ranking_cache)
-        if level is not None:
+        if level is not None:                     # the spec's light at the level, before tracing
             for s in sessions[fam].values():
-                s.light_at_level(level)
+                s.skies = skies_at_level(s.skies, level, s.obs.times)
         trace_sessions(list(sessions[fam].values()), SPEC_LIGHT)
         trace_s[fam] = time.perf_counter() - t0
     ranking_light = {"positions": next(iter(sessions[families[0]].values()))

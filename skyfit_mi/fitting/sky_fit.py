@@ -426,13 +426,11 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
     normal matrix, span [s], each region's time basis, parameters and response (n, coefficients),
     summed chi-square); the covariance divides the data's information (not the priors') by
     ``scale`` (:func:`_regions_agree`)."""
-    terms = coefficients.terms
     times = [t for s in sessions for t in s.obs.times]
     span = (float(_seconds(times).min()), float(_seconds(times).max()))
     bases = [time_basis(s.obs.times, span, coefficients.columns) for s in sessions]
     P = coefficients.precision
-    n = len(P)
-    u = np.r_[u0, np.zeros(n - 1)]
+    u = np.r_[u0, np.zeros(len(P) - 1)]
     thetas = [np.asarray(t, dtype=float) for t in thetas]
     put = coefficients.light
 
@@ -926,14 +924,13 @@ def fit_sky_scale(sessions, plan, seed=0, log=print):
     data hardly tell them); a ``plan.shape`` also fits the sky's shape variants
     (:func:`_fit_curve`), from the day's level found first (:func:`_profile_level`)."""
     t0 = time.perf_counter()
+    frames = len({i for s in sessions for i in s.obs.frames})
     terms, told = plan.terms, plan.terms is not None
     if not told:
-        terms = default_terms(len({i for s in sessions for i in s.obs.frames}),
-                              _referenced(sessions[0].doc))
+        terms = default_terms(frames, _referenced(sessions[0].doc))
     level = _profile_level(sessions, plan.prior_sd, seed)
     warnings = _level_warnings(level, terms)
-    light_terms = default_level_terms(sessions[0].doc,
-                                      len({i for s in sessions for i in s.obs.frames}))
+    light_terms = default_level_terms(sessions[0].doc, frames)
     fitted = _fit_terms(sessions, level, terms, told, warnings, light_terms)
     widening, coupling = _sun_coupling(plan, level, fitted)
     profile = sorted(level.profile)

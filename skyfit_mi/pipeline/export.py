@@ -80,13 +80,10 @@ def read_materials(paths):
     paths = [Path(p) for p in paths]
     if len(paths) == 1 and (paths[0] / MAP_SUMMARY).is_file():
         return read_map(paths[0])
-    out = []
-    for region, (path, r) in load_fits(paths).items():
-        out.append(Material(region, r["model"], r.get("normalisation", "ward"),
-                            dict(r["parameters"]),
-                            {k: v["95"] for k, v in r["intervals"].items()},
-                            tuple(r.get("warnings", [])), str(path)))
-    return out
+    return [Material(region, r["model"], r.get("normalisation", "ward"), dict(r["parameters"]),
+                     {k: v["95"] for k, v in r["intervals"].items()},
+                     tuple(r.get("warnings", [])), str(path))
+            for region, (path, r) in load_fits(paths).items()]
 
 
 def read_map(folder):
@@ -160,15 +157,14 @@ def export(paths, out, formats=FORMS, overwrite=False, log=print):
     out = Path(out)
     check_output(out, overwrite)
     materials = read_materials(paths)
-    files, record = {}, {"formats": list(formats), "materials": {},
-                         "error": "relative error of the radiance a material reflects from a "
-                                  "distant light, light and view within 80 degrees of the "
-                                  "normal (rms and largest over a grid of such pairs; albedo_max: "
-                                  "the directional albedo's largest), against the fitted BRDF"}
-    matches = {}
-    for m in materials:
-        matches[m.name] = {f: _match(m, f) for f in formats}
-        record["materials"][m.name] = _record(m, matches[m.name])
+    matches = {m.name: {f: _match(m, f) for f in formats} for m in materials}
+    record = {"formats": list(formats),
+              "materials": {m.name: _record(m, matches[m.name]) for m in materials},
+              "error": "relative error of the radiance a material reflects from a distant light, "
+                       "light and view within 80 degrees of the normal (rms and largest over a "
+                       "grid of such pairs; albedo_max: the directional albedo's largest), "
+                       "against the fitted BRDF"}
+    files = {}
     if "mitsuba" in formats:
         files[FILES["mitsuba"]] = mitsuba_xml(materials, matches)
         files[WARD_FILE] = mitsuba_ward_xml(materials)
@@ -182,7 +178,7 @@ def export(paths, out, formats=FORMS, overwrite=False, log=print):
     written = [SIDECAR, *files]
     for m in materials:
         if m.maps is not None:
-            written += write_textures(out / "textures", m, matches[m.name])
+            written += write_textures(out, m, matches[m.name])
     for name, text in files.items():
         write_text(out / name, text)
     write_text(out / SIDECAR, to_json(record) + "\n")
@@ -236,17 +232,18 @@ def _record(m, matches):
 
 
 def _log_material(m, matches, log):
-    parts = [f"{f} {'exact' if r['exact'] else 'nearest, ' + _error_text(r['error'])}"
-             for f, r in matches.items() if r is not None]
+    parts = [f"{f} {_how(r, 'nearest, ')}" for f, r in matches.items() if r is not None]
     log(f"{m.name}: " + "; ".join(parts))
     if m.warnings:
         log(f"  warning: {m.name}'s fit has {len(m.warnings)} warning(s), kept in {SIDECAR}: "
             f"{m.warnings[0]}")
 
 
-def _error_text(error):
-    return (f"reflected radiance off by up to {100 * error['max']:.3g}% (rms "
-            f"{100 * error['rms']:.3g}%)")
+def _how(r, nearest="the nearest: "):
+    """'exact', or how far off the nearest form of match ``r`` is, after ``nearest``."""
+    return "exact" if r["exact"] else (f"{nearest}reflected radiance off by up to "
+                                       f"{100 * r['error']['max']:.3g}% (rms "
+                                       f"{100 * r['error']['rms']:.3g}%)")
 
 
 def _numbers(v):
@@ -290,8 +287,7 @@ def mitsuba_xml(materials, matches):
     root = ET.Element("scene", version="3.0.0")
     for m in materials:
         r = matches[m.name]["mitsuba"]
-        what = "exact" if r["exact"] else "the nearest: " + _error_text(r["error"])
-        root.append(ET.Comment(f" {m.name} ({m.source}): built-in plugins, {what} "))
+        root.append(ET.Comment(f" {m.name} ({m.source}): built-in plugins, {_how(r)} "))
         _blend(root, m.name, r["params"], TEXTURE_FILES["mitsuba"] if m.maps is not None else None)
     ET.indent(root)
     return ET.tostring(root, encoding="unicode") + "\n"
@@ -388,8 +384,7 @@ def radiance_text(materials, matches):
             continue
         r = matches[m.name]["radiance"]
         p = r["params"]
-        what = "exact" if r["exact"] else "the nearest: " + _error_text(r["error"])
-        lines += [f"# {m.name} ({m.source}): {what}",
+        lines += [f"# {m.name} ({m.source}): {_how(r)}",
                   f"void {p['type']} {m.name}\n0\n0\n5 {_numbers(p['colour']).replace(',', '')} "
                   f"{p['spec']:.6g} {p['roughness']:.6g}"]
     return "\n".join(lines) + "\n"
@@ -414,37 +409,36 @@ def _image(m, values):
     return img
 
 
-def write_textures(folder, m, matches):
-    """The texture images of map material ``m`` for ``matches``, each form's largest error per
-    texel (``FORM_error.exr``) and the undetermined texels (:data:`UNDETERMINED_FILE`)."""
-    ensure_dir(folder)
-    write_png(folder.parent / UNDETERMINED_FILE,
-              np.repeat(m.maps["undetermined"][..., None], 3, axis=2).astype(np.uint8) * 255)
-    written = [UNDETERMINED_FILE]
+def write_textures(out, m, matches):
+    """Write in ``out`` the texture images of map material ``m`` for ``matches``, each form's
+    largest error per texel (``textures/FORM_error.exr``) and the undetermined texels
+    (:data:`UNDETERMINED_FILE`); returns their names (EXR or PNG by suffix)."""
+    unsure = np.repeat(m.maps["undetermined"][..., None], 3, axis=2).astype(np.uint8) * 255
+    images = {UNDETERMINED_FILE: unsure}
     for form, r in matches.items():
         if r is not None:
-            write_exr(folder / f"{form}_error.exr", _image(m, r["texel_error"]).astype(np.float32))
-            written.append(f"textures/{form}_error.exr")
+            images[f"textures/{form}_error.exr"] = _image(m, r["texel_error"]).astype(np.float32)
     if "mitsuba" in matches:
         p = matches["mitsuba"]["params"]
-        for key, path in TEXTURE_FILES["mitsuba"].items():
-            write_exr(folder.parent / path, _image(m, p[key]).astype(np.float32))
-        written += TEXTURE_FILES["mitsuba"].values()
+        images.update({path: _image(m, p[key]).astype(np.float32)
+                       for key, path in TEXTURE_FILES["mitsuba"].items()})
     if "gltf" in matches:
-        written += TEXTURE_FILES["gltf"].values()
         p, files = matches["gltf"]["params"], TEXTURE_FILES["gltf"]
-        base = _image(m, np.asarray(p["baseColorFactor"])[:, :3])
-        write_png(folder.parent / files["baseColorTexture"], to_srgb8(base, 1.0))
         mr = np.stack([np.zeros(len(p["roughnessFactor"])), p["roughnessFactor"],
                        p["metallicFactor"]], axis=-1)
-        write_png(folder.parent / files["metallicRoughnessTexture"], _linear8(_image(m, mr)))
         spec = p["KHR_materials_specular"]
         f = np.asarray(spec["specularFactor"], dtype=float)
         f = np.repeat((f / max(float(f.max()), 1e-12))[:, None], 4, axis=1)   # times the factor
-        write_png(folder.parent / files["specularTexture"], _linear8(_image(m, f)))   # its A
         colour = np.asarray(spec["specularColorFactor"], dtype=float) / GLTF_SPECULAR_COLOUR
-        write_png(folder.parent / files["specularColorTexture"], to_srgb8(_image(m, colour), 1.0))
-    return written
+        images[files["baseColorTexture"]] = to_srgb8(
+            _image(m, np.asarray(p["baseColorFactor"])[:, :3]), 1.0)
+        images[files["metallicRoughnessTexture"]] = _linear8(_image(m, mr))
+        images[files["specularTexture"]] = _linear8(_image(m, f))                  # its A
+        images[files["specularColorTexture"]] = to_srgb8(_image(m, colour), 1.0)
+    ensure_dir(out / "textures")
+    for name, image in images.items():
+        (write_exr if name.endswith(".exr") else write_png)(out / name, image)
+    return list(images)
 
 
 #: The factor of a map's glTF specular colour texture: material_match's dielectric takes

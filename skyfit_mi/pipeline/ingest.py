@@ -13,7 +13,7 @@ is written until every input is checked.
 
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +29,8 @@ from .colorchecker import NAMES, NEUTRAL, find_chart, matrix_error, reference_rg
 from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance,
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import check_times, frame_times
-from .photos import (RAW_COLOUR_REACH, check_same_size, exif_exposure, list_photos,
-                     read_flat_field, read_photo)
+from .photos import (EXPOSURE_KEYS, RAW_COLOUR_REACH, check_same_size, exif_exposure,
+                     list_photos, read_flat_field, read_photo)
 from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
 from .raw_noise import bootstrap, cfa_planes
 from .region_edges import colour_mixed, pose_reach
@@ -90,7 +90,7 @@ def _sensor(photos, response, gamma, spec_sensor, cos4):
     if response is None and (first.kind == "float" or all(p.format == "raw" for p in photos)):
         response = "linear"           # EXR/HDR and RAWs as read are linear, whatever the spec
     if response is None:
-        response = spec_sensor.get("response") if "response" in spec_sensor else None
+        response = spec_sensor.get("response")
     if response is None:
         hints = {p.encoding_hint for p in photos}
         response = hints.pop() if len(hints) == 1 else "srgb"
@@ -100,15 +100,12 @@ def _sensor(photos, response, gamma, spec_sensor, cos4):
 
 def _relative_exposures(photos, log):
     """t ISO / N^2 of each frame over the first's, or None when some frame lacks EXIF."""
-    vals = []
-    for p in photos:
-        h = exif_exposure(p)
-        if h is None:
-            if any(x.metadata.get("exposure_time_s") for x in photos):
-                log(f"{Path(p.path).name}: no EXIF exposure (time, f-number, ISO); every frame's "
-                    "exposure is taken from the calibration or --exposure instead")
-            return None
-        vals.append(h)
+    vals = [exif_exposure(p) for p in photos]
+    if None in vals:
+        if any(x.metadata.get("exposure_time_s") for x in photos):
+            log(f"{Path(photos[vals.index(None)].path).name}: no EXIF exposure (time, f-number, "
+                "ISO); every frame's exposure is taken from the calibration or --exposure instead")
+        return None
     return np.asarray(vals) / vals[0]
 
 
@@ -142,9 +139,7 @@ def estimate_noise(values, sensor, jpeg=None, shown=None, log=None):
     for i in picks:
         v, st = pairs[i]
         n = block_size(st)
-        h, w = v.shape[:2]
-        y0 = max((h - JPEG_CALIBRATION_SIZE) // 2 // n * n, 0)
-        x0 = max((w - JPEG_CALIBRATION_SIZE) // 2 // n * n, 0)
+        y0, x0 = (max((d - JPEG_CALIBRATION_SIZE) // 2 // n * n, 0) for d in v.shape[:2])
         crops.append((v[y0:y0 + JPEG_CALIBRATION_SIZE, x0:x0 + JPEG_CALIBRATION_SIZE], st))
     views = [v for v, _ in crops]
     a, b = shown
@@ -171,13 +166,9 @@ def estimate_noise(values, sensor, jpeg=None, shown=None, log=None):
 
 
 def shown_noise(values, sensor):
-    """(a [DN^2], b [DN]) the frames' neighbouring pixels show: no JPEG correction."""
-    return _passes(_noise_parts(values, sensor), sensor)
-
-
-def _passes(parts, sensor):
-    """(a, b) fitted to :func:`_noise_parts` in NOISE_PASSES passes, each dropping found edges."""
-    noise = None
+    """(a [DN^2], b [DN]) the frames' neighbouring pixels show: no JPEG correction; fitted in
+    NOISE_PASSES passes, each dropping the edges the previous found."""
+    parts, noise = _noise_parts(values, sensor), None
     for _ in range(NOISE_PASSES):
         noise = _fit_noise(parts, sensor, noise)
     return noise
@@ -227,19 +218,15 @@ def _noise_bins(parts, sensor, noise):
     return np.asarray(rows), np.asarray(var), np.asarray(weights)
 
 
-def _nnls(rows, rhs, weights):
-    """(a, b) >= 0 minimising the weighted squares of rows @ (a, b) - rhs."""
+def _fit_noise(parts, sensor, noise):
+    """One pass of :func:`estimate_noise`, edges left out by the previous ``noise`` (or None):
+    (a, b) >= 0 fitting the bins' variance less 1/12 by weighted least squares."""
     from scipy.optimize import nnls
 
-    w = weights / np.mean(weights)
-    (a, b), _ = nnls(rows * w[:, None], np.maximum(rhs, 0.0) * w)
-    return float(a), float(b)
-
-
-def _fit_noise(parts, sensor, noise):
-    """One pass of :func:`estimate_noise`, edges left out by the previous ``noise`` (or None)."""
     rows, var, weights = _noise_bins(parts, sensor, noise)
-    return _nnls(rows, var - 1.0 / 12.0, weights)
+    w = weights / np.mean(weights)
+    (a, b), _ = nnls(rows * w[:, None], np.maximum(var - 1.0 / 12.0, 0.0) * w)
+    return float(a), float(b)
 
 
 def _clipped_variance(r):
@@ -275,7 +262,7 @@ def pixel_sigma(values, sensor, noise, jpeg=None):
         var = np.maximum(jpeg["variance"].astype(np.float32), var)
         st = jpeg["settings"]
         edge = displayed(edge_blocks(stored(np.nan_to_num(values), st), stored(var, st)), st)
-        var = np.where(edge, var + tables_bound(jpeg["settings"]), var)
+        var = np.where(edge, var + tables_bound(st), var)
     return np.where(np.isfinite(values), np.sqrt(var), np.inf).astype(np.float32), edge
 
 
@@ -391,10 +378,10 @@ def _swatch_ratios(samples, patch, sensor, exposures):
     return ratio
 
 
-def central_mean(x, axis=0):
-    """Interquartile mean of ``x``'s finite values along ``axis``, NaN where none: the
+def central_mean(x):
+    """Interquartile mean of ``x``'s finite values along its first axis, NaN where none: the
     calibration's robust level (unlike a median, it does not snap to whole codes)."""
-    x = np.moveaxis(np.asarray(x, dtype=float), axis, 0)
+    x = np.asarray(x, dtype=float)
     s = np.sort(np.where(np.isfinite(x), x, np.inf), axis=0)       # non-finite last
     n = np.sum(np.isfinite(x), axis=0)
     rank = np.arange(len(s)).reshape((-1,) + (1,) * (s.ndim - 1))
@@ -445,22 +432,19 @@ def fit_response(samples, patch, max_code, rel, log):
                           "the EXIF exposures, or give --response.")
     n_groups = int(group.max()) + 1
     onehot = np.eye(n_groups)[group]
+
+    def rms(pred):
+        return float(np.sqrt(np.mean((pred / v - 1.0) ** 2)))
+
     fits = {}
-    for family in RESPONSE_FAMILIES:
-        if family == "gamma":
-            coef, *_ = np.linalg.lstsq(np.column_stack([u, onehot]), np.log(v), rcond=None)
-            gamma = 1.0 / coef[0] if coef[0] > 0 else None       # None: codes fall with signal
-            pred = np.exp(coef[0] * u + onehot @ coef[1:])
-        else:
-            gamma = None
-            sensor = SensorModel(1.0, response=family, bits=16)
-            log_k = np.log(sensor.linearise(v * sensor.max_code)) - u
-            b = np.array([np.median(log_k[group == g]) for g in range(n_groups)])
-            pred = sensor.respond(np.exp(u + b[group]))
-        rms = float(np.sqrt(np.mean((pred / v - 1.0) ** 2)))
-        fits[family] = {"rms_rel": rms}
-        if family == "gamma":
-            fits[family]["gamma"] = None if gamma is None else float(gamma)
+    for family in RESPONSE_FAMILIES[:-1]:               # the fixed curves; 'gamma' (last) below
+        sensor = SensorModel(1.0, response=family, bits=16)
+        log_k = np.log(sensor.linearise(v * sensor.max_code)) - u
+        b = np.array([np.median(log_k[group == g]) for g in range(n_groups)])
+        fits[family] = {"rms_rel": rms(sensor.respond(np.exp(u + b[group])))}
+    coef, *_ = np.linalg.lstsq(np.column_stack([u, onehot]), np.log(v), rcond=None)
+    gamma = float(1.0 / coef[0]) if coef[0] > 0 else None       # None: codes fall with signal
+    fits["gamma"] = {"rms_rel": rms(np.exp(coef[0] * u + onehot @ coef[1:])), "gamma": gamma}
     usable = {k: f for k, f in fits.items() if k != "gamma" or (
         f["gamma"] is not None and GAMMA_RANGE[0] <= f["gamma"] <= GAMMA_RANGE[1])}
     best = min(usable, key=lambda k: usable[k]["rms_rel"])
@@ -542,7 +526,7 @@ def exif_scatter(ratio, var, seconds=None):
             "curved": bool(terms > 1 and chi2_dist.sf(drift, 3 * (terms - 1)) < EXIF_SCATTER_P)}
 
 
-def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None, seconds=None):
+def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells, seconds):
     """Per-frame, per-channel exposure [sr m^2 W^-1] (F, 3) from the patches'
     :func:`patch_samples` (``patch``: each pixel's label), and the calibration's record.
 
@@ -579,7 +563,7 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells=None, sec
         scale = np.nanmedian(k[good] / rel[good, None], axis=0)
     if rel is not None and good.sum() >= 3:
         test = exif_scatter(k[good] / (rel[good, None] * scale), var_f,
-                            None if seconds is None else np.asarray(seconds, dtype=float)[good])
+                            np.asarray(seconds, dtype=float)[good])
         curved, shutter = test.pop("curved"), test.pop("shutter")
         info.update(test)
         if shutter and not missing:
@@ -669,8 +653,7 @@ def spec_for_times(spec_path, times, tz=None, site=None, size=None):
     raw["camera"] = cam
     loc = dict(raw.get("location", {}))
     if site is not None:
-        loc.update(latitude_deg=site[0], longitude_deg=site[1],
-                   **({"elevation_m": site[2]} if len(site) > 2 else {}))
+        loc.update(zip(("latitude_deg", "longitude_deg", "elevation_m"), site))
     loc.setdefault("timezone", tz or times[0].isoformat()[-6:])
     raw["location"] = loc
     raw["time"] = {"times": [t.isoformat() for t in times]}
@@ -710,8 +693,7 @@ def _unbiased(values, bias, max_code):
     return np.where(keep, values, np.clip(values - bias, 0.0, max_code)).astype(values.dtype)
 
 
-def _jpeg_errors(values, jpeg, sensor, noise, shown, progress, patches=None,
-                 registration=None):
+def _jpeg_errors(values, jpeg, sensor, noise, shown, progress, patches, registration):
     """Per JPEG frame (index -> settings in ``jpeg``) its compression's bootstrap
     (:func:`.jpeg_noise.bootstrap_variance`): {"variance" (float16, to save memory), "rho",
     "bias_mean", "bias_patches" (at the registered mask ``patches``, or None), "settings",
@@ -725,9 +707,8 @@ def _jpeg_errors(values, jpeg, sensor, noise, shown, progress, patches=None,
         values[i] = _unbiased(values[i], bias, sensor.max_code)
         out[i] = {"variance": var.astype(np.float16), "rho": rho,
                   "bias_mean": np.nanmean(bias, axis=(0, 1)),
-                  "bias_patches": None if patches is None else (
-                      bias if registration is None else registration.warp(i, bias)
-                  )[patches].astype(np.float32),
+                  "bias_patches": None if patches is None
+                  else registration.warp(i, bias)[patches].astype(np.float32),
                   "settings": jpeg[i], "shown": shown}
     return out
 
@@ -856,13 +837,11 @@ def ingest(photo_paths, spec_path, out_dir, *, overwrite=False, progress=True, l
     patches = calibration_patches(frames, linear, registration, o, log)
     noise = noise_model(frames, linear.values, patches, registration, o, progress, log)
     exposures = frame_exposures(frames, patches, noise, o, log)
-    options = {"times_csv": str(o.times_csv), "name_pattern": o.name_pattern, "tz": o.tz,
-               "response": ("fit: " if o.fitted else "") + exposures.sensor.response,
-               "gamma": exposures.sensor.gamma, "exposure": o.exposure,
-               "calibrate": o.calibrate, "colorchecker": o.colorchecker,
-               "vignetting": str(o.vignetting), "noise": [noise.a, noise.b],
-               "colour_matrix_error": o.colour_matrix_error, "register": o.register,
-               "register_limit_px": o.register_limit_px}
+    # the choices as recorded (the site is in the spec's [location]), with the encoding used
+    options = {k: x for k, x in vars(o).items() if k != "site"}
+    options.update(times_csv=str(o.times_csv), vignetting=str(o.vignetting),
+                   response=("fit: " if o.fitted else "") + exposures.sensor.response,
+                   gamma=exposures.sensor.gamma, noise=[noise.a, noise.b])
     run_id = _run_id(frames.paths, frames.spec.raw, options)
     out = Path(out_dir)
     with FolderLock(out):
@@ -913,12 +892,11 @@ def read_frames(photo_paths, spec_path, out_dir, o, log):
                           "give another with -o (--overwrite would clear it, and its contact "
                           "sheet would be read as a photograph next time).")
     photos = [read_photo(p) for p in paths]
-    check_same_size(list(zip(paths, photos)))
+    w, h = check_same_size(list(zip(paths, photos)))
     times = frame_times(paths, [p.metadata for p in photos], times_csv=o.times_csv,
                         name_pattern=o.name_pattern, tz=o.tz, warn=log)
     order = check_times(paths, times)                  # refuses frames sharing an instant
     paths, photos, times = ([x[i] for i in order] for x in (paths, photos, times))
-    h, w = photos[0].values.shape[:2]
     raw, spec = spec_for_times(spec_path, times, o.tz, o.site, (w, h))
     night = [paths[f.index].name for f in spec.frames if f.skipped]
     if len(night) == len(paths):
@@ -975,13 +953,11 @@ def calibration_patches(frames, linear, registration, o, log):
             chosen, g, out.response_info = fit_response(
                 *_select(out.samples, out.patch, _neutral_labels(o.calibrate)), sensor.max_code,
                 None if rel is None else rel[lit], log)
-            out.sensor = SensorModel(exposure=1.0, response=chosen, gamma=g, bits=sensor.bits,
-                                     cos4=sensor.cos4)
+            out.sensor = replace(sensor, response=chosen, gamma=g)
         return out
-    raw = frames.raw
     out.given = o.exposure if o.exposure is not None else (
         frames.spec.sensor.get("exposure")
-        if raw.get("sensor", {}).get("exposure", "auto") != "auto" else None)
+        if frames.raw.get("sensor", {}).get("exposure", "auto") != "auto" else None)
     if out.given is None:
         raise SkyfitError("the photographs' absolute scale is unknown: give --exposure E "
                           "[sr m^2 W^-1] for the first frame, or --calibrate MATERIAL="
@@ -1062,12 +1038,8 @@ def frame_exposures(frames, patches, noise, o, log):
     lit, sensor, rel = frames.lit, patches.sensor, patches.rel
     calibration = None
     if patches.samples is not None:
-        samples = list(patches.samples)
-        for j, i in enumerate(lit):
-            if i in noise.jpeg_errors:
-                y, L = samples[j]
-                samples[j] = (_unbiased(y, noise.jpeg_errors[i]["bias_patches"],
-                                        sensor.max_code), L)
+        samples = [(_unbiased(y, noise.jpeg_errors[i]["bias_patches"], sensor.max_code)
+                    if i in noise.jpeg_errors else y, L) for i, (y, L) in zip(lit, patches.samples)]
         cells = None
         if noise.jpeg_errors:                       # each pixel's JPEG coding unit
             unit = block_size(next(iter(noise.jpeg_errors.values()))["settings"])
@@ -1092,8 +1064,7 @@ def frame_exposures(frames, patches, noise, o, log):
         e0 = float(patches.given)
         r = np.ones(len(frames.paths)) if rel is None else rel
         by_frame = {i: np.full(3, e0 * r[i]) for i in lit}
-    return Exposures(SensorModel(exposure=e0, response=sensor.response, gamma=sensor.gamma,
-                                 bits=sensor.bits, cos4=sensor.cos4), by_frame, calibration, rel)
+    return Exposures(replace(sensor, exposure=e0), by_frame, calibration, rel)
 
 
 def _unmix(values, mixing, sensor):
@@ -1115,8 +1086,7 @@ def colour_matrix(photos, given, measured=None):
                 "source": "measured on the ColorChecker's chromatic swatches (the frames "
                           "corrected by the mixing found: ingest.calibration.colorchecker."
                           "colour_matrix); its standard error"}
-    raw = all(p.format == "raw" for p in photos)
-    if given is None and raw:
+    if given is None and all(p.format == "raw" for p in photos):
         return {"relative_sd": RAW_MATRIX_ERROR,
                 "source": "a prior for RAWs developed with their file's colour matrix, "
                           "--colour-matrix-error"}
@@ -1127,18 +1097,14 @@ def colour_matrix(photos, given, measured=None):
 
 def _write(out, frames, linear, registration, noise, exposures, options, run_id, progress):
     """Write the sequence folder, each frame resampled onto the reference's pinhole pixels."""
-    spec, paths, photos, values = frames.spec, frames.paths, frames.photos, linear.values
-    sensor, falloff, flat, jpeg_errors = exposures.sensor, linear.falloff, linear.flat, \
-        noise.jpeg_errors
-    rel, model = exposures.rel, (noise.a, noise.b)
+    paths, photos, sensor, rel = frames.paths, frames.photos, exposures.sensor, exposures.rel
     mixing = ((exposures.calibration or {}).get("colorchecker") or {}).get("colour_matrix")
-    manifest = measured_header(spec, sensor, run_id, "photographed",
+    manifest = measured_header(frames.spec, sensor, run_id, "photographed",
                                "none: frames are photographs")
     manifest["sensor"]["noise_model"] = {**noise.info,
                                          "sigma2_DN2": "Q'(s)^2 (read + shot s M) + 1/12"}
-    jpeg_frames = 0
-    if flat is not None:
-        write_exr(out / "frames" / "flat_field.exr", np.repeat(flat[..., None], 3, axis=2),
+    if linear.flat is not None:
+        write_exr(out / "frames" / "flat_field.exr", np.repeat(linear.flat[..., None], 3, axis=2),
                   {"kind": "flat_field", "units": "1"})
         manifest["sensor"]["flat_field"] = "frames/flat_field.exr"
     manifest["ingest"] = {"photos": [p.name for p in paths], "options": options,
@@ -1150,8 +1116,8 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
                           "registration": registration.record}
     from tqdm import tqdm
 
-    for f, p, photo, v in tqdm(zip(spec.frames, paths, photos, values), total=len(paths),
-                               desc="ingest", unit="frame", disable=not progress):
+    for f, p, photo, v in tqdm(zip(frames.spec.frames, paths, photos, linear.values),
+                               total=len(paths), desc="ingest", unit="frame", disable=not progress):
         rec = frame_record(f, 0, out)
         rec.pop("seed")
         rec["photo"] = {"file": p.name, **{k: x for k, x in photo.metadata.items()
@@ -1160,14 +1126,13 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
             rec["status"] = "skipped"
         else:
             e = exposures.by_frame[f.index]
-            gain = e[None, None, :] * falloff[..., None]
-            frame_jpeg = jpeg_errors.get(f.index)
-            jpeg_frames += frame_jpeg is not None
+            gain = e[None, None, :] * linear.falloff[..., None]
+            frame_jpeg = noise.jpeg_errors.get(f.index)
             if noise.raw is not None:
                 var = noise.raw[f.index]["sd"].astype(np.float32) ** 2 + np.float32(1.0 / 12)
                 sig = np.where(np.isfinite(v), np.sqrt(var), np.inf).astype(np.float32)
             else:
-                sig, edge = pixel_sigma(v, sensor, model, frame_jpeg)
+                sig, edge = pixel_sigma(v, sensor, (noise.a, noise.b), frame_jpeg)
             offset = block_offset(frame_jpeg["settings"].get("orientation", 1), v.shape) \
                 if frame_jpeg is not None else None
             v = registration.warp(f.index, v, sensor.max_code)
@@ -1188,8 +1153,7 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
             rec.update(status="rendered", **names,
                        exposure={"exposure": float(e @ SRGB_LUMINANCE),
                                  "white_balance": (e / float(e @ SRGB_LUMINANCE)).tolist(),
-                                 **{k: photo.metadata[k] for k in ("exposure_time_s", "f_number",
-                                                                   "iso")
+                                 **{k: photo.metadata[k] for k in EXPOSURE_KEYS.values()
                                     if photo.metadata.get(k)}})
             if frame_jpeg is not None:
                 rec["jpeg_error_DN2"] = np.mean(frame_jpeg["variance"], axis=(0, 1),
@@ -1214,7 +1178,7 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
             "RAWs: the variance of the developed noise by bootstrap (noise_model.raw), + 1/12; "
             "each frame's raw_demosaic.noise_correlation, between pixels up to "
             "colour_reach_px apart, by which a fit widens the sigma of a region's pixels")
-    if jpeg_frames:
+    if noise.jpeg_errors:
         manifest["sensor"]["noise_model"]["jpeg"] = {
             "method": "parametric bootstrap: draws of the scene given each frame's DCT "
                       "coefficients, photographed again with fresh sensor noise and the "

@@ -321,8 +321,8 @@ def check_frames(doc, root, kinds=("radiance", "sensor", "sigma"), frames=None):
         if f.get("observations", {}).get("kind") == "table":
             continue
         extra = ("radiance_sigma",) if "radiance" in kinds and "radiance_sigma" in f else ()
-        for key in (*kinds, *extra):
-            check_frame_image(root, f, key, shape)
+        for key in (*kinds, *extra):         # read_frame_image's checks, from the header alone
+            _checked(f, check_exr, _frame_path(root, f, key), shape)
 
 
 #: Bytes of decoded frame images kept for re-reading (each region reads the same frames), least
@@ -333,14 +333,15 @@ _FRAMES_LOCK = threading.Lock()
 _FRAMES_BYTES = [0]
 
 
-def _file_identity(path):
-    """What changes when the file at ``path`` is written again, or None (no such file)."""
+def _file_identity(path, shape):
+    """What changes when the file at ``path`` is written again, and the image's ``shape``: the
+    frame cache's key; None if there is no such file."""
     try:
         st = path.stat()
     except OSError:
         return None
     return (str(path.resolve()), st.st_dev, st.st_ino, st.st_mtime_ns, st.st_ctime_ns,
-            st.st_size)
+            st.st_size, tuple(shape))
 
 
 def read_frame_image(root, frame, key, shape):
@@ -348,20 +349,16 @@ def read_frame_image(root, frame, key, shape):
     in folder ``root``, checked to be of ``shape`` (H, W, 3); SkyfitError naming the frame and
     fix otherwise.  The array is read-only and may be shared (cached, FRAME_CACHE_BYTES)."""
     path = _frame_path(root, frame, key)
-    ident = _file_identity(path)
+    ident = _file_identity(path, shape)
     if ident is not None:
-        ident += (tuple(shape),)
         with _FRAMES_LOCK:
             if ident in _FRAMES:
                 _FRAMES.move_to_end(ident)
                 return _FRAMES[ident]
-    try:
-        img = read_exr_checked(path, shape)
-    except SkyfitError as exc:
-        raise _frame_failed(frame, exc) from None
+    img = _checked(frame, read_exr_checked, path, shape)
     img.flags.writeable = False
     # kept only if the file did not change while it was read
-    if ident is not None and (_file_identity(path) or ()) + (tuple(shape),) == ident:
+    if ident is not None and _file_identity(path, shape) == ident:
         _keep(ident, img)
     return img
 
@@ -373,18 +370,13 @@ def _frame_path(root, frame, key):
     return Path(root) / frame[key]
 
 
-def _frame_failed(frame, exc):
-    return SkyfitError(f"frame {frame['index']}: {exc}; render the sequence again (it resumes "
-                       "and replaces damaged frames).")
-
-
-def check_frame_image(root, frame, key, shape):
-    """:func:`read_frame_image`'s checks from the file's header and chunk table alone."""
-    path = _frame_path(root, frame, key)
+def _checked(frame, read, *args):
+    """``read(*args)`` of a frame's image file, its SkyfitError naming the frame and the fix."""
     try:
-        check_exr(path, shape)
+        return read(*args)
     except SkyfitError as exc:
-        raise _frame_failed(frame, exc) from None
+        raise SkyfitError(f"frame {frame['index']}: {exc}; render the sequence again (it resumes "
+                          "and replaces damaged frames).") from None
 
 
 def read_frame_pixels(root, frame, key, shape, pixels):
@@ -392,25 +384,22 @@ def read_frame_pixels(root, frame, key, shape, pixels):
     with :func:`read_frame_image`'s checks, reading only those rows (or from the cache)."""
     px = np.asarray(pixels, dtype=int).reshape(-1, 2)
     path = _frame_path(root, frame, key)
-    ident = _file_identity(path)
+    ident = _file_identity(path, shape)
     if ident is not None:
         with _FRAMES_LOCK:
-            img = _FRAMES.get(ident + (tuple(shape),))
+            img = _FRAMES.get(ident)
         if img is not None:
             return img[px[:, 1], px[:, 0]]
-    try:
-        return read_exr_checked(path, shape, px)
-    except SkyfitError as exc:
-        raise _frame_failed(frame, exc) from None
+    return _checked(frame, read_exr_checked, path, shape, px)
 
 
 def keep_frame_image(path, image):
     """Cache ``image``, just written to ``path`` as float32 EXR, for :func:`read_frame_image`."""
-    ident = _file_identity(Path(path))
+    img = np.array(image, dtype=np.float32)
+    ident = _file_identity(Path(path), img.shape)
     if ident is not None:
-        img = np.array(image, dtype=np.float32)
         img.flags.writeable = False
-        _keep(ident + (img.shape,), img)
+        _keep(ident, img)
 
 
 def _keep(ident, img):

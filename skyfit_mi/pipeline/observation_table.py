@@ -79,8 +79,6 @@ _VECTORS = {"x": ("x", "y", "z"), "view": ("view_x", "view_y", "view_z"),
             "saturated": ("saturated_r", "saturated_g", "saturated_b")}
 _KNOWN = {"time", "region", "point", "view_zenith_deg", "view_azimuth_deg", "sigma",
           "luminance", "frame", "saturated", *(c for v in _VECTORS.values() for c in v)}
-#: The spellings of a ``saturated`` cell.
-_FLAGS = {"0": False, "1": True}
 
 
 @dataclass
@@ -108,14 +106,6 @@ class ObservationTable:
     def by_index(self):
         """Whether the rows name their frames by index alone (lab lights, no time)."""
         return self.times is None
-
-    def frame_keys(self):
-        """Each row's frame as the table names it: its time, or its index (lab lights)."""
-        return self.frames if self.by_index else self.times
-
-    def point_keys(self):
-        """The distinct (region, point) pairs in order of first appearance."""
-        return list(dict.fromkeys(zip(self.regions, self.points)))
 
     def point_rows(self):
         """{(region, point): its rows' indices}, in order of first appearance (linear time)."""
@@ -147,10 +137,10 @@ def _frame(text, path, line):
 
 def _flag(text, path, line, column):
     """A ``saturated`` cell: 0 or 1."""
-    if text not in _FLAGS:
+    if text not in ("0", "1"):
         raise SkyfitError(f"{path} line {line}: {column} = {text!r}; write 1 (the instrument "
                           "clipped the value) or 0.")
-    return float(_FLAGS[text])
+    return float(text)
 
 
 def _time(text, tz, path, line):
@@ -223,8 +213,7 @@ def _check_columns(path, header):
         raise SkyfitError(f"{path}: no column {what}; a table needs time (or frame), region, "
                           "r, g, b (or luminance) and sigma (standard deviations, the values' "
                           "units).")
-    if "saturated" in header and any(c in header for c in _VECTORS["saturated"]) or (
-            luminance and any(c in header for c in _VECTORS["saturated"])):
+    if any(c in header for c in _VECTORS["saturated"]) and ("saturated" in header or luminance):
         raise SkyfitError(f"{path}: give saturated (every channel; a luminance table's one) or "
                           "saturated_r, saturated_g, saturated_b, not both.")
     for name, cols in _VECTORS.items():
@@ -272,6 +261,7 @@ def _parse_rows(path, header, rows, tz, luminance):
         if luminance:
             out["value"][k, 0] = _number(cell["luminance"], path, line, "luminance")
             out["sigma"][k, 1:] = np.inf             # no colour: G and B carry nothing
+            out["saturated"][k, 1:] = 0.0
         if "view_zenith_deg" in cell:
             zen, azi = (_number(cell[c], path, line, c)
                         for c in ("view_zenith_deg", "view_azimuth_deg"))
@@ -282,10 +272,7 @@ def _parse_rows(path, header, rows, tz, luminance):
         if not np.all(out["sigma"][k] > 0):
             raise SkyfitError(f"{path} line {line}: sigma must be positive (the value's standard "
                               "deviation, in its units).")
-        if luminance:
-            out["saturated"][k, 1:] = 0.0
-        clipped = out["saturated"][k] > 0
-        if np.any(clipped & ~(out["value"][k] > 0)):
+        if np.any((out["saturated"][k] > 0) & ~(out["value"][k] > 0)):
             raise SkyfitError(f"{path} line {line}: a saturated value must be the positive level "
                               "the instrument clipped at; give that level, or saturated = 0.")
         for name in ("view", "normal"):
@@ -303,13 +290,13 @@ def _check_rows(table):
     """Refuse a region without a positive value, a point measured twice in a frame, and a
     point whose position changes from row to row."""
     path, regions, points, lines = table.path, table.regions, table.points, table.lines
-    n = len(regions)
     for r in dict.fromkeys(regions):
-        if not np.nanmax(table.value[[i for i in range(n) if regions[i] == r]]) > 0:
+        if not np.nanmax(table.value[np.array(regions) == r]) > 0:
             raise SkyfitError(f"{path}: every value of region {r!r} is zero or negative; give "
                               "measured values (a radiance is positive).")
     seen = {}
-    for f, r, p, line in zip(table.frame_keys(), regions, points, lines):
+    frame_keys = table.frames if table.by_index else table.times    # as the table names them
+    for f, r, p, line in zip(frame_keys, regions, points, lines):
         key = (f, r, p)
         if key in seen:
             when = f"in frame {f}" if table.by_index else f"at {f.isoformat()}"
@@ -327,25 +314,19 @@ def _check_rows(table):
 
 # ---- the points in the scene -------------------------------------------------------------
 
-def _camera(to_world):
-    """A camera's origin and unit central direction (world frame) from its to_world 4x4."""
-    m = np.asarray(to_world, dtype=float)
-    return m[:3, 3], m[:3, 2] / np.linalg.norm(m[:3, 2])
-
-
 def locate_points(spec, scene_xml, table, row_frames):
     """Each point's position (P, 3), each row's view (N, 3) and the rays' offset, checked in the
     spec's scene: a point must lie on its region's surface, seen from the front by each row's
     view (the table's, else toward the camera), with the table's normal if given.
     ``scene_xml``: the spec's (xml, materials, camera to_world); ``row_frames``: for messages."""
     groups = table.point_rows()
-    keys = list(groups)
     xml, _, to_world = scene_xml
     scene = load_points_scene(xml, spec.render["variant"])
-    cam_o, cam_d = _camera(to_world)
-    P = len(keys)
-    first = {k: rows[0] for k, rows in groups.items()}
-    pos = table.position[[first[k] for k in keys]]
+    m = np.asarray(to_world, dtype=float)          # the camera's origin and central direction
+    cam_o, cam_d = m[:3, 3], m[:3, 2] / np.linalg.norm(m[:3, 2])
+    first = [rows[0] for rows in groups.values()]          # each point's first row
+    P = len(first)
+    pos = table.position[first]
     unplaced = ~np.isfinite(pos).all(axis=1)
     hits = surface_hits(scene, np.repeat(cam_o[None], P, 0), np.repeat(cam_d[None], P, 0))
     pos[unplaced] = hits["p"][unplaced]
@@ -371,7 +352,7 @@ def locate_points(spec, scene_xml, table, row_frames):
             raise SkyfitError(f"{where} lies on material {check['material'][i]!r}, not {r!r}; "
                               "check its position or its region.")
         n_scene = check["n"][i]
-        normal = table.normal[first[(r, p)]]
+        normal = table.normal[first[j]]
         if np.isfinite(normal).all() and np.degrees(np.arccos(np.clip(
                 normal @ n_scene, -1, 1))) > NORMAL_TOLERANCE_DEG:
             raise SkyfitError(f"{where}: the scene's normal there is {np.round(n_scene, 3).tolist()}"
@@ -440,23 +421,34 @@ def _table_spec(spec_path, table, tz, site, log):
     return spec, [frame_of[t] for t in table.times]
 
 
+def _grid(table, cell, view, shape):
+    """The rows at ``cell`` {row: (p, t)} on a (P, T) grid ``shape``: (view (P, T, 3), a frame
+    without a row taking another's (none: +Z); value, sigma (no row: inf); saturated)."""
+    v = np.zeros((*shape, 3))
+    v[..., 2] = 1.0
+    y, sig = np.zeros((*shape, 3)), np.full((*shape, 3), np.inf)
+    sat = np.zeros((*shape, 3), bool)
+    for i, (p, t) in cell.items():
+        v[p, t], y[p, t] = view[i], np.nan_to_num(table.value[i])
+        sig[p, t], sat[p, t] = table.sigma[i], table.saturated[i]
+    for p in range(shape[0]):            # a frame without a row: the view of another frame
+        have = np.isfinite(sig[p, :, 0])
+        v[p, ~have] = v[p, np.argmax(have)]
+    return v, y, sig, sat
+
+
 def white_at_rows(spec, xml, table, rows, row_frames, pos, view, offset, **trace):
     """A white Lambertian's radiance L at the points of ``rows`` from each row's view, traced as a
     fit traces (:func:`~skyfit_mi.render.points.lambertian_radiance`): (L, its Monte Carlo
     variance (P, T, 3), each row's (p, t) cell, the points [(region, point)])."""
-    index = {k: j for j, k in enumerate(table.point_keys())}
+    index = {k: j for j, k in enumerate(table.point_rows())}
     points = list(dict.fromkeys((table.regions[i], table.points[i]) for i in rows))
     frames = sorted({row_frames[i] for i in rows})
     at_point = {k: j for j, k in enumerate(points)}
     at_frame = {f: j for j, f in enumerate(frames)}
     cell = {i: (at_point[(table.regions[i], table.points[i])], at_frame[row_frames[i]])
             for i in rows}
-    v = np.zeros((len(points), len(frames), 3))
-    have = np.zeros(v.shape[:2], bool)
-    for i, (p, t) in cell.items():
-        v[p, t], have[p, t] = view[i], True
-    for p in range(len(points)):
-        v[p, ~have[p]] = v[p, np.argmax(have[p])]
+    v = _grid(table, cell, view, (len(points), len(frames)))[0]
     material = np.array([m for m, _ in points], dtype=object)
     L, var = lambertian_radiance(xml, spec.render["variant"], [spec.frames[j].sky for j in frames],
                                  point_rays(pos[[index[k] for k in points]], v, offset),
@@ -477,10 +469,8 @@ def reference_scale(spec, xml, table, rows, row_frames, pos, view, offset, calib
                           f"region {missing[0]!r} in a lit frame; measure the reference in the "
                           "table (rows with that region).")
     L, var, cell, points = white_at_rows(spec, xml, table, ref, row_frames, pos, view, offset)
-    y, sig = np.zeros(L.shape), np.full(L.shape, np.inf)
-    for i, (p, t) in cell.items():
-        y[p, t] = np.nan_to_num(table.value[i])
-        sig[p, t] = np.where(table.saturated[i], np.inf, table.sigma[i])
+    _, y, sig, sat = _grid(table, cell, view, L.shape[:2])
+    sig = np.where(sat, np.inf, sig)
     material = np.array([m for m, _ in points], dtype=object)
     rho = np.array([calibrate[m] for m in material], dtype=float)[:, None, :]
     m, m_var = rho * L, rho ** 2 * var
@@ -610,25 +600,25 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
     if calibrate:
         scale, calibration = reference_scale(spec, scene[0], table, keep, row_frames, pos, view,
                                              offset, calibrate)
-        table = replace(table, value=table.value * scale, sigma=table.sigma * scale)
         log(f"calibration: one unit of {table.path.name} is "
             f"{', '.join(f'{v:.4g}' for v in scale)} W m^-2 sr^-1 (R, G, B), to "
             f"{', '.join(f'{v:.1%}' for v in calibration['scale_relative_sd'])} (standard "
             f"error), from {calibration['reference_rows']} reference rows")
     elif scale_unknown:
-        factor, calibration = unknown_scale(spec, scene[0], table, keep, row_frames, pos, view,
-                                            offset)
-        table = replace(table, value=table.value * factor, sigma=table.sigma * factor)
-        log(f"scale: unknown (no reference); the values are multiplied by {factor:.4g} so that "
+        scale, calibration = unknown_scale(spec, scene[0], table, keep, row_frames, pos, view,
+                                           offset)
+        log(f"scale: unknown (no reference); the values are multiplied by {scale:.4g} so that "
             f"the brightest apparent albedo reads {UNKNOWN_SCALE_ALBEDO}: fitted reflectances "
             "will be relative, roughness and ratios absolute")
+    if calibration is not None:
+        table = replace(table, value=table.value * scale, sigma=table.sigma * scale)
     check_radiances(table, "its reference's scale" if calibrate else
                     "the relative scale" if scale_unknown else None)
     top = float(np.nanmax(np.where(np.isfinite(table.sigma),
                                    table.value + HEADROOM_SIGMAS * table.sigma, np.nan)))
     sensor = SensorModel(exposure=SCALE_SHARE / top, response="linear", bits=16)
 
-    index = {k: j for j, k in enumerate(table.point_keys())}
+    index = {k: j for j, k in enumerate(table.point_rows())}
     saturated = bool(table.saturated.any())
     columns = ["frame", *([] if table.by_index else ["time"]), "region", "point", "x", "y", "z",
                "view_x", "view_y", "view_z",
@@ -706,7 +696,7 @@ def table_observations(doc, root, region, points=None, frames=None):
     ``points`` and ``frames`` (default all)."""
     table = read_observation_table(root / TABLE_FILE)
     frame_col = table.frames
-    keys = [p for r, p in table.point_keys() if r == region]
+    keys = [p for r, p in table.point_rows() if r == region]
     if not keys:
         regions = ", ".join(dict.fromkeys(table.regions))
         raise SkyfitError(f"the observation table has no point on region {region!r}; its regions "
@@ -721,21 +711,12 @@ def table_observations(doc, root, region, points=None, frames=None):
     rows = [i for i in range(len(frame_col)) if table.regions[i] == region
             and table.points[i] in wanted]
     fr = sorted({frame_col[i] for i in rows} if frames is None else set(frames))
-    P, T = len(keys), len(fr)
     at_point, at_frame = {p: j for j, p in enumerate(keys)}, {f: j for j, f in enumerate(fr)}
-    pos = np.zeros((P, 3))
-    view = np.zeros((P, T, 3))
-    view[..., 2] = 1.0
-    y, sig = np.zeros((P, T, 3)), np.full((P, T, 3), np.inf)
-    sat = np.zeros((P, T, 3), bool)
-    for i in rows:
-        if frame_col[i] not in fr:
-            continue
-        p, t = at_point[table.points[i]], at_frame[frame_col[i]]
-        pos[p], view[p, t] = table.position[i], table.view[i]
-        y[p, t], sig[p, t] = np.nan_to_num(table.value[i]), table.sigma[i]
-        sat[p, t] = table.saturated[i]
-    for p in range(P):                   # a frame without a row: the view of another frame
-        have = np.isfinite(sig[p, :, 0])
-        view[p, ~have] = view[p, np.argmax(have)]
+    cell = {i: (at_point[table.points[i]], at_frame[frame_col[i]]) for i in rows
+            if frame_col[i] in at_frame}
+    pos = np.zeros((len(keys), 3))
+    for i, (p, _) in cell.items():
+        pos[p] = table.position[i]
+    view, y, sig, sat = _grid(table, cell, table.view, (len(keys), len(fr)))
     return RegionRows(keys, fr, pos, view, y, sig, sat, table.luminance)
+

@@ -134,14 +134,12 @@ def exif_time(meta, tz, who):
                           "file-name pattern.")
     y, mo, d, h, mi, s = (int(x) for x in m.groups()[:6])
     sub = m.group(7) or (meta.get("subsec_time_original") or "").strip()
-    micro = 0
-    if sub:
-        if not sub.isdigit():
-            raise SkyfitError(f"{who} has SubSecTimeOriginal {sub!r}, not digits; fix it or "
-                              "give the times in a CSV.")
-        micro = round(int(sub) * 10 ** (6 - len(sub))) if len(sub) <= 6 else int(sub[:6])
+    if sub and not sub.isdigit():
+        raise SkyfitError(f"{who} has SubSecTimeOriginal {sub!r}, not digits; fix it or "
+                          "give the times in a CSV.")
+    micro = int((sub + "000000")[:6])                       # the fraction's first 6 digits
     try:
-        naive = dt.datetime(y, mo, d, h, mi, s) + dt.timedelta(microseconds=micro)
+        naive = dt.datetime(y, mo, d, h, mi, s, micro)
     except ValueError:
         raise SkyfitError(f"{who} has DateTimeOriginal {text!r}, not a valid date and time; "
                           "give the times with a CSV (file,time) or a file-name pattern.") \
@@ -236,7 +234,6 @@ _REGEX_GROUPS = ("year", "month", "day", "hour", "minute")
 
 
 def _pattern_time(name, pattern, tz):
-    who = name
     if "(?P<" in pattern:
         try:
             rx = re.compile(pattern)
@@ -249,36 +246,35 @@ def _pattern_time(name, pattern, tz):
                               f"{', '.join(lacking)}; name them (?P<year>...) etc.")
         m = rx.fullmatch(name) or rx.fullmatch(Path(name).stem)
         if not m:
-            raise SkyfitError(f"{who} does not match the name pattern {pattern!r}; rename the "
+            raise SkyfitError(f"{name} does not match the name pattern {pattern!r}; rename the "
                               "file, fix the pattern, or give the times in a CSV.")
         g = m.groupdict()
         try:
-            frac = g.get("fraction") or ""
-            micro = int((frac + "000000")[:6]) if frac else 0
+            micro = int(((g.get("fraction") or "") + "000000")[:6])
             naive = dt.datetime(int(g["year"]), int(g["month"]), int(g["day"]), int(g["hour"]),
                                 int(g["minute"]), int(g.get("second") or 0), micro)
         except (TypeError, ValueError):
-            raise SkyfitError(f"{who}: the name pattern reads no valid date and time from it "
+            raise SkyfitError(f"{name}: the name pattern reads no valid date and time from it "
                               f"({g}); fix the pattern or give the times in a CSV.") from None
         off_text = g.get("offset")
         if off_text:
             off = parse_offset(off_text)
             if off is None:
-                raise SkyfitError(f"{who}: {off_text!r} is not an offset such as '+01:00'; "
+                raise SkyfitError(f"{name}: {off_text!r} is not an offset such as '+01:00'; "
                                   "fix the pattern or the file name.")
-            return _with_offset(naive.replace(tzinfo=off), tz, who, "the file name's")
+            return _with_offset(naive.replace(tzinfo=off), tz, name, "the file name's")
     else:
         target = name if Path(pattern).suffix else Path(name).stem
         try:
             t = dt.datetime.strptime(target, pattern)
         except ValueError:
-            raise SkyfitError(f"{who} does not match the name pattern {pattern!r}; rename the "
+            raise SkyfitError(f"{name} does not match the name pattern {pattern!r}; rename the "
                               "file, fix the pattern (strptime codes: %Y %m %d %H %M %S %f %z), "
                               "or give the times in a CSV.") from None
         if t.tzinfo is not None:
-            return _with_offset(t, tz, who, "the file name's")
+            return _with_offset(t, tz, name, "the file name's")
         naive = t
-    return localize(naive, tz, who, "has a time in its name but no offset; give --tz, or read "
+    return localize(naive, tz, name, "has a time in its name but no offset; give --tz, or read "
                     "an offset with the pattern (%z).")
 
 

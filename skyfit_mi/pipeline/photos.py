@@ -55,12 +55,6 @@ JPEG_SUFFIXES = frozenset({".jpg", ".jpeg", ".jpe"})
 #: Largest rms difference [DN] from libjpeg's codes at which the floating-point JPEG decoder is
 #: used: libjpeg's rounding stays well below it; more means a coding the decoder does not follow.
 DECODER_AGREEMENT_DN = 1.5
-PNG_SUFFIXES = frozenset({".png"})
-TIFF_SUFFIXES = frozenset({".tif", ".tiff"})
-EXR_SUFFIXES = frozenset({".exr"})
-RGBE_SUFFIXES = frozenset({".hdr", ".pic", ".rgbe"})
-#: Every suffix :func:`read_photo` reads.
-SUFFIXES = JPEG_SUFFIXES | PNG_SUFFIXES | TIFF_SUFFIXES | EXR_SUFFIXES | RGBE_SUFFIXES | RAW_SUFFIXES
 
 #: LibRaw's ``sizes.flip`` -> the EXIF orientation code of the same turn.
 _LIBRAW_FLIP_TO_EXIF = {0: 1, 3: 3, 5: 8, 6: 6}
@@ -163,13 +157,9 @@ def _rgb(values, channels, path):
     raise _fail(path, f"has {c} channels per pixel, not RGB or grey", "save the image as RGB")
 
 
-def _tag(tags, key):
-    v = tags.get(key)
-    return None if v is None else getattr(v, "values", v)
-
-
-def _text(tags, key):
-    v = _tag(tags, key)
+def _text(v):
+    """An EXIF value (exifread's tag or Pillow's value) as stripped text, or None."""
+    v = getattr(v, "values", v)
     if v is None:
         return None
     if isinstance(v, bytes):
@@ -180,8 +170,9 @@ def _text(tags, key):
     return v or None
 
 
-def _number(tags, key):
-    v = _tag(tags, key)
+def _number(v):
+    """An EXIF value (exifread's tag or Pillow's; a list's first) as a finite float, or None."""
+    v = getattr(v, "values", v)
     if isinstance(v, (list, tuple)):
         v = v[0] if v else None
     if v is None:
@@ -197,10 +188,20 @@ def _number(tags, key):
     return x if math.isfinite(x) else None
 
 
+#: :attr:`Photo.metadata` keys read from EXIF: exifread's tag name, Pillow's IFD (0x8769 the
+#: Exif IFD, 0 the image's) and tag number, and whether the value is a number (else text).
+_EXIF_TAGS = {"datetime_original": ("EXIF DateTimeOriginal", 0x8769, 0x9003, False),
+              "offset_time_original": ("EXIF OffsetTimeOriginal", 0x8769, 0x9011, False),
+              "subsec_time_original": ("EXIF SubSecTimeOriginal", 0x8769, 0x9291, False),
+              "exposure_time_s": ("EXIF ExposureTime", 0x8769, 0x829A, True),
+              "f_number": ("EXIF FNumber", 0x8769, 0x829D, True),
+              "iso": ("EXIF ISOSpeedRatings", 0x8769, 0x8827, True),
+              "make": ("Image Make", 0, 0x010F, False),
+              "model": ("Image Model", 0, 0x0110, False)}
+
+
 def _empty_metadata():
-    return {"datetime_original": None, "offset_time_original": None,
-            "subsec_time_original": None, "exposure_time_s": None, "f_number": None,
-            "iso": None, "make": None, "model": None, "orientation": 1, "icc_profile": None}
+    return {**dict.fromkeys(_EXIF_TAGS), "orientation": 1, "icc_profile": None}
 
 
 @contextlib.contextmanager
@@ -231,18 +232,12 @@ def read_exif(path):
             tags = exifread.process_file(fh, details=False, extract_thumbnail=False)
     except Exception:                           # noqa: BLE001 -- corrupt EXIF is not fatal
         tags = {}
-    meta["datetime_original"] = _text(tags, "EXIF DateTimeOriginal")
-    meta["offset_time_original"] = _text(tags, "EXIF OffsetTimeOriginal")
-    meta["subsec_time_original"] = _text(tags, "EXIF SubSecTimeOriginal")
-    meta["exposure_time_s"] = _number(tags, "EXIF ExposureTime")
-    meta["f_number"] = _number(tags, "EXIF FNumber")
-    iso = _number(tags, "EXIF ISOSpeedRatings")
-    if iso is None:
-        iso = _number(tags, "EXIF PhotographicSensitivity")
-    meta["iso"] = None if iso is None else int(iso)
-    meta["make"] = _text(tags, "Image Make")
-    meta["model"] = _text(tags, "Image Model")
-    o = _number(tags, "Image Orientation")
+    for key, (name, _, _, number) in _EXIF_TAGS.items():
+        meta[key] = (_number if number else _text)(tags.get(name))
+    if meta["iso"] is None:
+        meta["iso"] = _number(tags.get("EXIF PhotographicSensitivity"))
+    meta["iso"] = None if meta["iso"] is None else int(meta["iso"])
+    o = _number(tags.get("Image Orientation"))
     meta["orientation"] = int(o) if o is not None and int(o) in ORIENTATIONS else 1
     return meta
 
@@ -251,34 +246,13 @@ def _pil_exif_metadata(im, meta):
     """Fill what exifread missed from Pillow's ``getexif()`` (PNG eXIf chunks)."""
     try:
         exif = im.getexif()
-        sub = exif.get_ifd(0x8769)
+        ifds = {0: exif, 0x8769: exif.get_ifd(0x8769)}
     except Exception:                           # noqa: BLE001
         return meta
-
-    def text(v):
-        if v is None:
-            return None
-        v = v.decode("ascii", "replace") if isinstance(v, bytes) else str(v)
-        return v.strip().strip("\x00").strip() or None
-
-    def num(v):
-        try:
-            x = float(v)
-        except (TypeError, ValueError, ZeroDivisionError):
-            return None
-        return x if math.isfinite(x) else None
-
-    fill = {"datetime_original": text(sub.get(0x9003)),
-            "offset_time_original": text(sub.get(0x9011)),
-            "subsec_time_original": text(sub.get(0x9291)),
-            "exposure_time_s": num(sub.get(0x829A)), "f_number": num(sub.get(0x829D)),
-            "iso": sub.get(0x8827), "make": text(exif.get(0x010F)),
-            "model": text(exif.get(0x0110))}
-    if isinstance(fill["iso"], tuple):
-        fill["iso"] = fill["iso"][0] if fill["iso"] else None
-    for k, v in fill.items():
-        if meta.get(k) is None and v is not None:
-            meta[k] = int(v) if k == "iso" else v
+    for key, (_, ifd, tag, number) in _EXIF_TAGS.items():
+        v = (_number if number else _text)(ifds[ifd].get(tag))
+        if meta.get(key) is None and v is not None:
+            meta[key] = int(v) if key == "iso" else v
     if meta.get("orientation", 1) == 1 and exif.get(0x0112) in ORIENTATIONS:
         meta["orientation"] = int(exif.get(0x0112))
     return meta
@@ -295,17 +269,36 @@ def _icc_description(icc):
         return "unreadable"
 
 
-def _hint_from_icc(desc, default, default_source="assumed"):
+def _hint_from_icc(desc, default):
     if desc and desc not in ("unreadable", "unnamed"):
         d = desc.lower()
         if "linear" in d or "gamma 1.0" in d or "g10" in d:
             return "linear", f'ICC profile "{desc}"'
         if "srgb" in d or "iec61966" in d:
             return "srgb", f'ICC profile "{desc}"'
-    return default, default_source
+    return default, "assumed"
 
 
-def _integer_photo(path, fmt, codes, bits, hint, source, meta):
+def _png_hint(info, hint, source):
+    """The encoding a PNG's sRGB or gAMA chunk states (Pillow's ``info``), else (hint, source)."""
+    if "srgb" in info:
+        return "srgb", "PNG sRGB chunk"
+    g = float(info.get("gamma", 0.0))
+    if abs(g - 1.0) < 1e-3:
+        return "linear", "PNG gAMA 1.0"
+    if abs(g - 1 / 2.2) < 2e-3:
+        return "srgb", "PNG gAMA 1/2.2"
+    return hint, source
+
+
+def _integer_photo(path, fmt, codes, bits, info, meta):
+    """An integer format's photo, EXIF orientation applied; its encoding hint a PNG's sRGB or
+    gAMA chunk's, else its ICC profile's (both in Pillow's ``info``), else 'srgb' at 8 bits and
+    'linear' at 16."""
+    meta["icc_profile"] = _icc_description(info.get("icc_profile"))
+    hint, source = _hint_from_icc(meta["icc_profile"], "srgb" if bits == 8 else "linear")
+    if fmt == "png":
+        hint, source = _png_hint(info, hint, source)
     values = apply_orientation(_rgb(codes, None, path), meta["orientation"])
     return Photo(path=str(path), format=fmt,
                  values=np.ascontiguousarray(values, dtype=np.float32), kind="integer",
@@ -313,11 +306,11 @@ def _integer_photo(path, fmt, codes, bits, hint, source, meta):
                  nan_count=0, inf_count=0, metadata=meta)
 
 
-def _float_photo(path, fmt, values, meta, source="float"):
+def _float_photo(path, fmt, values, meta):
     values = np.ascontiguousarray(apply_orientation(values, meta["orientation"]),
                                   dtype=np.float32)
     return Photo(path=str(path), format=fmt, values=values, kind="float", bits=None,
-                 max_code=None, encoding_hint="linear", encoding_source=source,
+                 max_code=None, encoding_hint="linear", encoding_source="float",
                  nan_count=int(np.isnan(values).sum()), inf_count=int(np.isinf(values).sum()),
                  metadata=meta)
 
@@ -368,23 +361,7 @@ def _read_pillow(path, fmt, exact=True):
             meta["decoder"] = "libjpeg, whole codes (Pillow): the floating-point decoder " + (
                 "could not read the file" if differ is None else
                 f"disagrees with libjpeg by {differ:.3g} DN rms")
-    meta["icc_profile"] = _icc_description(info.get("icc_profile"))
-    hint, source = _hint_from_icc(meta["icc_profile"], "srgb")
-    if fmt == "png":
-        hint, source = _png_hint(info, hint, source)
-    return _integer_photo(path, fmt, codes, 8, hint, source, meta)
-
-
-def _png_hint(info, hint, source):
-    """The encoding a PNG's sRGB or gAMA chunk states (Pillow's ``info``), else (hint, source)."""
-    if "srgb" in info:
-        return "srgb", "PNG sRGB chunk"
-    g = float(info.get("gamma", 0.0))
-    if abs(g - 1.0) < 1e-3:
-        return "linear", "PNG gAMA 1.0"
-    if abs(g - 1 / 2.2) < 2e-3:
-        return "srgb", "PNG gAMA 1/2.2"
-    return hint, source
+    return _integer_photo(path, fmt, codes, 8, info, meta)
 
 
 def _png_header(path):
@@ -418,11 +395,7 @@ def _read_png(path):
                     "check that the file is complete, or remove it") from None
     if codes.dtype != np.uint16:
         raise _fail(path, f"reads as {codes.dtype}, not 16-bit codes", "export it again")
-    codes = _rgb(codes, channels, path)
-    meta["icc_profile"] = _icc_description(info.get("icc_profile"))
-    hint, source = _hint_from_icc(meta["icc_profile"], "linear")
-    hint, source = _png_hint(info, hint, source)
-    return _integer_photo(path, "png", codes, 16, hint, source, meta)
+    return _integer_photo(path, "png", _rgb(codes, channels, path), 16, info, meta)
 
 
 def _read_tiff(path):
@@ -455,14 +428,11 @@ def _read_tiff(path):
     elif axes != "YXS":
         raise _fail(path, f"holds an image of axes {axes!r} (several pages or planes?)",
                     "export a single RGB image")
-    meta["icc_profile"] = _icc_description(icc)
-    if arr.dtype == np.uint8:
-        hint, source = _hint_from_icc(meta["icc_profile"], "srgb")
-        return _integer_photo(path, "tiff", arr, 8, hint, source, meta)
-    if arr.dtype == np.uint16:
-        hint, source = _hint_from_icc(meta["icc_profile"], "linear")
-        return _integer_photo(path, "tiff", arr, 16, hint, source, meta)
+    if arr.dtype in (np.uint8, np.uint16):
+        return _integer_photo(path, "tiff", arr, 8 * arr.dtype.itemsize, {"icc_profile": icc},
+                              meta)
     if arr.dtype.kind == "f":
+        meta["icc_profile"] = _icc_description(icc)
         return _float_photo(path, "tiff", _rgb(arr, None, path), meta)
     raise _fail(path, f"holds {arr.dtype} samples, not 8- or 16-bit codes or floats",
                 "export it as 8-bit, 16-bit or float TIFF")
@@ -513,11 +483,10 @@ def rgbe_header_times(path):
     except OSError:
         pass
     out = {"datetime_original": None, "offset_time_original": None}
-    fmt = "%Y:%m:%d %H:%M:%S"
 
     def parse(text):
         try:
-            return dt.datetime.strptime(text, fmt)
+            return dt.datetime.strptime(text, "%Y:%m:%d %H:%M:%S")
         except (TypeError, ValueError):
             return None
     local, utc = parse(lines.get("CAPDATE")), parse(lines.get("GMT"))
@@ -552,16 +521,15 @@ def _read_exr(path):
 
 def _read_rgbe(path):
     """A Radiance RGBE file through Mitsuba's Bitmap, read in the child process :data:`_BITMAPS`."""
-    name = "a Radiance RGBE"
     try:
         values, channels = _BITMAPS.call(
             READ_BITMAP, str(path),
             timeout=READ_DEADLINE[0] + READ_DEADLINE[1] * path.stat().st_size / 1e6)
     except ChildDied as exc:
-        raise _fail(path, f"cannot be read as {name} image (the image reader crashed on it: "
-                    f"{exc})", "check that the file is complete, or remove it") from None
+        raise _fail(path, "cannot be read as a Radiance RGBE image (the image reader crashed "
+                    f"on it: {exc})", "check that the file is complete, or remove it") from None
     except CallFailed as exc:
-        raise _fail(path, f"cannot be read as {name} image ({_first_line(exc)})",
+        raise _fail(path, f"cannot be read as a Radiance RGBE image ({_first_line(exc)})",
                     "check that the file is complete, or remove it") from None
     return _float_image(path, "rgbe", values, channels, rgbe_header_times(path))
 
@@ -571,9 +539,7 @@ def _float_image(path, kind, values, channels, times):
     if values.dtype.kind != "f":
         raise _fail(path, f"reads as {values.dtype} codes, not floats",
                     "give it the suffix of its real format")
-    meta = _empty_metadata()
-    meta.update(times)
-    return _float_photo(path, kind, _rgb(values, channels, path), meta)
+    return _float_photo(path, kind, _rgb(values, channels, path), {**_empty_metadata(), **times})
 
 
 def _wb(values):
@@ -594,14 +560,13 @@ def _read_raw(path):
     try:
         with rawpy.imread(str(path)) as raw:
             cam_wb = _wb(raw.camera_whitebalance)
-            day_wb = _wb(raw.daylight_whitebalance)
             use_camera = bool(cam_wb) and cam_wb[0] > 0 and cam_wb[1] > 0
             flip = int(raw.sizes.flip)
             info = {
                 "black_level_per_channel": [int(x) for x in raw.black_level_per_channel],
                 "white_level": int(raw.white_level),
                 "camera_whitebalance": cam_wb,
-                "daylight_whitebalance": day_wb,
+                "daylight_whitebalance": _wb(raw.daylight_whitebalance),
                 "color_desc": raw.color_desc.decode("ascii", "replace"),
                 "applied_white_balance": "camera (as shot)" if use_camera
                 else "daylight (the file has no as-shot balance)",
@@ -641,19 +606,13 @@ def _read_raw(path):
                  inf_count=0, metadata=meta)
 
 
-_READERS = {}
-for _s in JPEG_SUFFIXES:
-    _READERS[_s] = lambda p, exact=True: _read_pillow(p, "jpeg", exact)
-for _s in PNG_SUFFIXES:
-    _READERS[_s] = _read_png
-for _s in TIFF_SUFFIXES:
-    _READERS[_s] = _read_tiff
-for _s in EXR_SUFFIXES:
-    _READERS[_s] = _read_exr
-for _s in RGBE_SUFFIXES:
-    _READERS[_s] = _read_rgbe
-for _s in RAW_SUFFIXES:
-    _READERS[_s] = _read_raw
+#: The reader of each suffix, lower case.
+_READERS = {s: reader for suffixes, reader in (
+    (JPEG_SUFFIXES, lambda p, exact: _read_pillow(p, "jpeg", exact)), ((".png",), _read_png),
+    ((".tif", ".tiff"), _read_tiff), ((".exr",), _read_exr),
+    ((".hdr", ".pic", ".rgbe"), _read_rgbe), (RAW_SUFFIXES, _read_raw)) for s in suffixes}
+#: Every suffix :func:`read_photo` reads.
+SUFFIXES = frozenset(_READERS)
 
 
 def read_photo(path, exact_jpeg=True):
@@ -664,9 +623,8 @@ def read_photo(path, exact_jpeg=True):
     suffix = p.suffix.lower()
     reader = _READERS.get(suffix)
     if reader is None:
-        valid = " ".join(sorted(SUFFIXES))
         raise _fail(p, f"has the suffix {suffix or '(none)'!r}, not an image format skyfit "
-                    "reads", f"give one of: {valid}")
+                    "reads", f"give one of: {' '.join(sorted(SUFFIXES))}")
     if not p.is_file():
         raise _fail(p, "does not exist or is not a file", "check the path")
     if p.stat().st_size == 0:

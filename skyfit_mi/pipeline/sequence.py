@@ -44,30 +44,21 @@ FRAME_UNITS = {"radiance": "W m^-2 sr^-1", "radiance_sigma": "W m^-2 sr^-1", "se
                "sigma": "DN"}
 
 
-def frame_names(index):
-    """Paths of frame ``index``'s files relative to the output folder, by kind."""
-    return {k: f"frames/{k}_{index:03d}.exr" for k in FRAME_FILES}
-
-
-def resolve_exposure(spec):
-    """The sensor exposure [sr m^2 W^-1]: the spec's, or for 'auto' the one putting a white
-    horizontal Lambertian under the day's highest global irradiance at 80% of full scale
-    (E/pi * exposure = 0.8), known before rendering so every frame and a resume share it."""
-    e = spec.sensor["exposure"]
-    if e != "auto":
-        return float(e)
-    lum = [float(f.sky.horizontal_irradiance() @ SRGB_LUMINANCE) for f in spec.frames
-           if not f.skipped]
-    peak = max(lum, default=0.0)
-    if peak <= 0:
-        raise SkyfitError("every frame is dark, so sensor.exposure = 'auto' has nothing to go by; "
-                          "give sensor.exposure [sr m^2 W^-1] explicitly.")
-    return 0.8 * np.pi / peak
-
-
 def spec_sensor(spec):
-    """The spec's :class:`SensorModel` (exposure resolved)."""
-    return SensorModel(exposure=resolve_exposure(spec),
+    """The spec's :class:`SensorModel`, its exposure [sr m^2 W^-1] the spec's, or for 'auto' the
+    one putting a white horizontal Lambertian under the day's highest global irradiance at 80%
+    of full scale (E/pi * exposure = 0.8), known before rendering so every frame and a resume
+    share it."""
+    e = spec.sensor["exposure"]
+    if e == "auto":
+        lum = [float(f.sky.horizontal_irradiance() @ SRGB_LUMINANCE) for f in spec.frames
+               if not f.skipped]
+        peak = max(lum, default=0.0)
+        if peak <= 0:
+            raise SkyfitError("every frame is dark, so sensor.exposure = 'auto' has nothing to go "
+                              "by; give sensor.exposure [sr m^2 W^-1] explicitly.")
+        e = 0.8 * np.pi / peak
+    return SensorModel(exposure=float(e),
                        **{k: spec.sensor[k] for k in ("response", "gamma", "bits", "noise_percent",
                                                       "cos4")})
 
@@ -134,20 +125,17 @@ def capture_frame(sensor, radiance, radiance_sd, seed, index, fov_deg):
     return values, sigma, not np.any(values > 0)
 
 
-def frame_meta(index, key, time=None):
-    """The EXR header metadata of frame ``index``'s file ``key``: kind, units, index, time."""
-    return {"kind": key, "units": FRAME_UNITS[key], "frame": int(index), "time": time}
-
-
 def write_frame(out, index, radiance, radiance_sd, values, sigma, time=None):
-    """Write one frame's EXRs (:data:`FRAME_FILES`) atomically with :func:`frame_meta` headers
-    (``time`` None for a lab light), caching the radiance and its error
+    """Write one frame's EXRs (:data:`FRAME_FILES`) atomically, their headers giving kind, units,
+    index and time (None for a lab light), caching the radiance and its error
     (:func:`~skyfit_mi.pipeline.manifest.keep_frame_image`); returns relative paths by kind."""
-    names = frame_names(index)
-    for key, image in (("radiance", radiance), ("radiance_sigma", radiance_sd)):
-        keep_frame_image(write_exr(out / names[key], image, frame_meta(index, key, time)), image)
-    write_exr(out / names["sensor"], values.astype(np.float32), frame_meta(index, "sensor", time))
-    write_exr(out / names["sigma"], sigma, frame_meta(index, "sigma", time))
+    names = {k: f"frames/{k}_{index:03d}.exr" for k in FRAME_FILES}
+    images = (radiance, radiance_sd, values.astype(np.float32), sigma)
+    for key, image in zip(FRAME_FILES, images):
+        meta = {"kind": key, "units": FRAME_UNITS[key], "frame": int(index), "time": time}
+        path = write_exr(out / names[key], image, meta)
+        if key.startswith("radiance"):
+            keep_frame_image(path, image)
     return names
 
 
@@ -169,13 +157,6 @@ def manifest_header(spec, sensor, scene, render, source="render", run_id=None):
                    **({"pose_sd_deg": cam["pose_sd_deg"]} if "pose_sd_deg" in cam else {})},
         "sensor": sensor_record(sensor), "render": render, "versions": versions(), "frames": [],
     }
-
-
-def render_record(spec, renderer):
-    """The manifest's ``render`` record of frames rendered by ``renderer`` (settings, seeds)."""
-    return {**spec.render, "spp_rendered": 2 * renderer.half,
-            "seed_rule": "two half-spp passes with mitsuba seeds seed + index and seed + index "
-            "+ 2^31; noise rng = numpy.random.default_rng([seed, index])"}
 
 
 def frame_record(frame, seed, out):
@@ -218,13 +199,15 @@ def _render(spec, sensor, out, overwrite, progress, log, source):
     cam = spec.camera
     done = prepare_folder(out, spec.run_id(), (cam["height"], cam["width"], 3), overwrite, log)
     renderer = FrameRenderer(spec)
+    render = {**spec.render, "spp_rendered": 2 * renderer.half,      # settings and seeds
+              "seed_rule": "two half-spp passes with mitsuba seeds seed + index and seed + "
+              "index + 2^31; noise rng = numpy.random.default_rng([seed, index])"}
     manifest = manifest_header(spec, sensor, (renderer.xml, renderer.materials,
-                                              renderer.to_world),
-                               render_record(spec, renderer), source)
-    bar = None
-    if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=len(spec.frames), desc="render", unit="frame", initial=len(done))
+                                              renderer.to_world), render, source)
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(spec.frames), desc="render", unit="frame", initial=len(done),
+               disable=not progress)
     for f in spec.frames:
         rec = frame_record(f, renderer.seed, out)
         if f.skipped:
@@ -246,14 +229,12 @@ def _render(spec, sensor, out, overwrite, progress, log, source):
                 rec["dark"] = True
                 log(f"{frame_label(f.index, f.time)}: black at this exposure (no light reached "
                     "the camera); kept and marked dark in the manifest")
-            if bar is not None:
-                bar.update(1)
+            bar.update(1)
         manifest["frames"].append(rec)
         if "render_seconds" in rec:               # checkpoint: the frames so far, the rest pending
             pending = [{"index": g.index, "status": "pending"} for g in spec.frames[f.index + 1:]]
             write_manifest(out, {**manifest, "frames": manifest["frames"] + pending})
-    if bar is not None:
-        bar.close()
+    bar.close()
     n = finish(out, manifest, sensor.exposure)
     skipped = sum(r["status"] == "skipped" for r in manifest["frames"])
     dark = sum(bool(r.get("dark")) for r in manifest["frames"])

@@ -44,18 +44,20 @@ class SpecError(SkyfitError):
     """A sequence spec is invalid; the message names the key and the fix."""
 
 
+#: [sky] keys whose values are numbers (their ranges are checked where they are used), or text.
+_SKY_NUMBERS = {"phi", "efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
+                "ground_albedo", "extinction", "solar_constant", "clear_zenith_luminance",
+                "overcast_zenith_luminance", "diffuse_horizontal_W_m2", "direct_normal_W_m2",
+                "diffuse_horizontal_lux", "global_horizontal_W_m2", "cct", "north_rotation_deg",
+                "scale", "rows", "sun_mask_deg", "zenith_deg", "azimuth_deg", "solid_angle_sr",
+                "cie_type", "gradation", "indicatrix", "zenith_luminance", "turbidity"}
+_SKY_TEXTS = {"type", "gensky", "gensky_file", "decomposition", "irradiance_file", "file",
+              "projection"}
 _SCHEMA = {
     "name": None,
     "location": {"latitude_deg", "longitude_deg", "timezone", "elevation_m"},
     "time": {"date", "times", "start", "end", "step_minutes"},
-    "sky": {"type", "phi", "time", "frames", "efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
-            "ground_albedo", "extinction", "solar_constant", "sun", "gensky", "gensky_file",
-            "clear_zenith_luminance", "overcast_zenith_luminance",
-            "diffuse_horizontal_W_m2", "direct_normal_W_m2", "diffuse_horizontal_lux",
-            "global_horizontal_W_m2", "decomposition", "cct", "irradiance_file",
-            "file", "projection", "north_rotation_deg", "scale", "rows", "sun_mask_deg",
-            "direction", "zenith_deg", "azimuth_deg", "irradiance_W_m2", "solid_angle_sr",
-            "cie_type", "gradation", "indicatrix", "zenith_luminance", "turbidity"},
+    "sky": _SKY_NUMBERS | _SKY_TEXTS | {"time", "frames", "sun", "direction", "irradiance_W_m2"},
     "scene": {"file", "ground_albedo"},
     "materials": None,
     "camera": {"azimuth_deg", "angle_deg", "distance", "target", "origin", "up", "matrix",
@@ -65,13 +67,6 @@ _SCHEMA = {
 }
 SKY_KINDS = tuple(SKY_TYPES) + ("cie_general", "turbid", "gensky", "perez", "envmap",
                                  "directional")
-#: [sky] keys whose values are numbers (their ranges are checked where they are used).
-_SKY_NUMBERS = {"phi", "efficacy_clear", "efficacy_overcast", "cct_clear", "cct_overcast",
-                "ground_albedo", "extinction", "solar_constant", "clear_zenith_luminance",
-                "overcast_zenith_luminance", "diffuse_horizontal_W_m2", "direct_normal_W_m2",
-                "diffuse_horizontal_lux", "global_horizontal_W_m2", "cct", "north_rotation_deg",
-                "scale", "rows", "sun_mask_deg", "zenith_deg", "azimuth_deg", "solid_angle_sr",
-                "cie_type", "gradation", "indicatrix", "zenith_luminance", "turbidity"}
 #: The keys of an HDR environment map sky and of a directional lab light
 #: (:mod:`skyfit_mi.pipeline.illumination`), and the other keys each takes.
 _ENVMAP_KEYS = {"file", "projection", "north_rotation_deg", "scale", "rows", "sun_mask_deg"}
@@ -274,14 +269,11 @@ def validate_spec(raw, base_dir=".", sun=None):
 
     render = {"spp": 64, "seed": 0, "variant": "llvm_ad_rgb", "max_depth": 4, "below_horizon": "sky",
               "sampler": "multijitter", "integrator": INTEGRATORS[0], **raw.get("render", {})}
-    if render["sampler"] not in SAMPLERS:
-        raise SpecError(f"[render] sampler {render['sampler']!r}; valid: {', '.join(SAMPLERS)}.")
-    if render["integrator"] not in INTEGRATORS:
-        raise SpecError(f"[render] integrator {render['integrator']!r}; valid: "
-                        f"{', '.join(INTEGRATORS)}.")
-    _num("render", "spp", render["spp"], 1, 1 << 20, integer=True)
-    _num("render", "seed", render["seed"], 0, 2**31 - 1, integer=True)
-    _num("render", "max_depth", render["max_depth"], 1, 64, integer=True)
+    for key, valid in (("sampler", SAMPLERS), ("integrator", INTEGRATORS)):
+        if render[key] not in valid:
+            raise SpecError(f"[render] {key} {render[key]!r}; valid: {', '.join(valid)}.")
+    for key, lo, hi in (("spp", 1, 1 << 20), ("seed", 0, 2**31 - 1), ("max_depth", 1, 64)):
+        _num("render", key, render[key], lo, hi, integer=True)
     if render["variant"] not in VARIANTS:
         raise SpecError(f"[render] variant {render['variant']!r}; valid: 'llvm_ad_rgb' (CPU), "
                         "'cuda_ad_rgb' (NVIDIA GPU).")
@@ -504,33 +496,27 @@ def _sky_entries(sec, times, tz):
                         "listed; drop time (or give [time] and [location] for a day).")
     if entries is None:
         out = [dict(base) for _ in (times or [None])]
-    elif times is None:
+    elif times is not None and all("time" in e for e in entries):
+        by_time = {}
+        for e in entries:
+            _unknown("sky", e, _SCHEMA["sky"])
+            by_time[_clock(e["time"], times[0].date(), tz, "sky time")] = e
+        missing = [t for t in times if t not in by_time]
+        if missing:
+            raise SpecError(f"[[sky]] has no entry for {missing[0]:%H:%M}; give one per frame "
+                            "time (or drop 'time' and list one per frame in order).")
+        out = [{**base, **by_time[t]} for t in times]
+    elif times is not None and len(entries) != len(times):
+        raise SpecError(f"[[sky]] lists {len(entries)} skies for {len(times)} frames; give one "
+                        "per frame, or a 'time' in each.")
+    else:                                   # one entry per frame, in order
         for e in entries:
             _unknown("sky", e, _SCHEMA["sky"])
         out = [{**base, **e} for e in entries]
-    else:
-        if all("time" in e for e in entries):
-            by_time = {}
-            for e in entries:
-                _unknown("sky", e, _SCHEMA["sky"])
-                by_time[_clock(e["time"], times[0].date(), tz, "sky time")] = e
-            missing = [t for t in times if t not in by_time]
-            if missing:
-                raise SpecError(f"[[sky]] has no entry for {missing[0]:%H:%M}; give one per frame "
-                                "time (or drop 'time' and list one per frame in order).")
-            out = [{**base, **by_time[t]} for t in times]
-        elif len(entries) == len(times):
-            for e in entries:
-                _unknown("sky", e, _SCHEMA["sky"])
-            out = [{**base, **e} for e in entries]
-        else:
-            raise SpecError(f"[[sky]] lists {len(entries)} skies for {len(times)} frames; give one "
-                            "per frame, or a 'time' in each.")
     for e in out:
         for k in _SKY_NUMBERS & set(e):
             _num("sky", k, e[k])
-        for k in {"type", "gensky", "gensky_file", "decomposition", "irradiance_file", "file",
-                  "projection"} & set(e):
+        for k in _SKY_TEXTS & set(e):
             _text("sky", k, e[k])
         if "sun" in e and not isinstance(e["sun"], bool):
             raise SpecError(f"[sky] sun must be true or false (draw the sun's disc), got {e['sun']!r}.")
@@ -647,13 +633,11 @@ def _with_series(entries, times, tz, base_dir):
 def _light(e, zenith, azimuth, t, index, base_dir):
     """The Sky of an envmap or directional [sky] entry (:mod:`.illumination`)."""
     if e["type"] == "directional":
-        rec = {k: e[k] for k in ("direction", "irradiance_W_m2") if k in e}
+        rec = {k: e[k] for k in ("direction", "irradiance_W_m2", "solid_angle_sr") if k in e}
         if "direction" not in rec:
             _num("sky", "zenith_deg", e["zenith_deg"], 0, 180)
             rec["direction"] = direction_from_angles(np.radians(e["zenith_deg"]),
                                                      np.radians(e["azimuth_deg"]))
-        if "solid_angle_sr" in e:
-            rec["solid_angle_sr"] = e["solid_angle_sr"]
         return directional_from_record(rec)
     try:
         name = e["file"].format(index=index, time=t)
@@ -712,8 +696,6 @@ def _sun_disc(e):
 
 
 def _make_sky(e, zenith, azimuth, t, base_dir, index, elevation=0.0):
-    measured = {k: e[k] for k in ("diffuse_horizontal_W_m2", "direct_normal_W_m2",
-                                  "diffuse_horizontal_lux") if k in e}
     try:
         if e["type"] in ("envmap", "directional"):
             return _light(e, zenith, azimuth, t, index, base_dir)
@@ -742,16 +724,15 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index, elevation=0.0):
             sky = cie_sky(e["type"], zenith, azimuth, phi=phi, day=t.timetuple().tm_yday,
                           photometry=photometry, sun=_sun_disc(e),
                           ground_albedo=e.get("ground_albedo", GROUND_ALBEDO))
-        if measured:
-            lux = measured.get("diffuse_horizontal_lux")
-            if lux is not None:
+        if {"diffuse_horizontal_W_m2", "direct_normal_W_m2", "diffuse_horizontal_lux"} & set(e):
+            if "diffuse_horizontal_lux" in e:
                 overcast = e["type"] == "overcast"
-                sky = sky.scaled_to_illuminance(lux, e.get(
+                sky = sky.scaled_to_illuminance(e["diffuse_horizontal_lux"], e.get(
                     "efficacy_overcast" if overcast else "efficacy_clear",
                     EFFICACY_OVERCAST if overcast else EFFICACY_CLEAR))
-            sky = sky.scaled(diffuse_horizontal=measured.get("diffuse_horizontal_W_m2"),
-                             direct_normal=measured.get("direct_normal_W_m2"))
-            if "direct_normal_W_m2" in measured:
+            sky = sky.scaled(diffuse_horizontal=e.get("diffuse_horizontal_W_m2"),
+                             direct_normal=e.get("direct_normal_W_m2"))
+            if "direct_normal_W_m2" in e:
                 sky = replace(sky, info={**sky.info, "sun_measured": True})
     except SpecError:
         raise
