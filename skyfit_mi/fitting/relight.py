@@ -59,7 +59,8 @@ SKY_MAPS = "sky_maps"
 
 def check_output(out, images, overwrite):
     """Refuse an output folder ``out`` holding another run's output, unless ``overwrite``."""
-    held = [n for n in ("manifest.json", *RELIGHT_FILES) if (Path(out) / n).exists()]
+    out = Path(out)
+    held = [n for n in ("manifest.json", *RELIGHT_FILES) if (out / n).exists()]
     if held and not overwrite and not (images and held[0] == "manifest.json"):
         raise SkyfitError(f"{out} holds another run's output ({held[0]}); relight into another "
                           "folder, or pass --overwrite to replace it.")
