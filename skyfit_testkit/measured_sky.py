@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skyfit_mi.conventions import angles_from_direction, direction_from_angles
+from skyfit_mi.conventions import angles_from_direction, direction_from_angles, unit_directions
 from skyfit_mi.errors import SkyfitError, check_range
 from skyfit_mi.physics import cie_general
 from skyfit_mi.physics.colour import SRGB_LUMINANCE, XYZ_TO_SRGB
@@ -61,11 +61,6 @@ EXCLUDE_DEG = 10.0
 ROWS = 128
 #: Sub-samples per cell side when the table's cells are averaged (:func:`~.latlong.resample`).
 SUPERSAMPLE = 2
-
-
-def _unit(directions):
-    d = np.asarray(directions, dtype=float)
-    return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
 def _grid(step):
@@ -103,7 +98,7 @@ def fit_general_shape(directions, luminance, sun, exclude_deg=EXCLUDE_DEG, step=
 
 
 def _check_points(directions, luminance, sun):
-    d = _unit(directions)
+    d = unit_directions(directions)
     y = np.asarray(luminance, dtype=float)
     if d.ndim != 2 or d.shape[1] != 3 or y.shape != (len(d),) or len(d) < 5:
         raise SkyfitError(f"a measured sky needs at least 5 directions (n, 3) with one luminance "
@@ -115,7 +110,7 @@ def _check_points(directions, luminance, sun):
                           "are not.")
     if np.any(d[:, 2] <= 0):
         raise SkyfitError("a measured sky's directions must lie above the horizon (z > 0).")
-    s = _unit(sun)
+    s = unit_directions(sun)
     return d, y, s
 
 
@@ -152,14 +147,14 @@ class MeasuredSky:
 
     def model_luminance(self, directions):
         """The fitted CIE general sky's luminance toward ``directions`` (..., 3) [cd m^-2]."""
-        d = _unit(directions)
+        d = unit_directions(directions)
         flat = d.reshape(-1, 3)
         return (self.zenith_luminance
                 * cie_general.pattern(flat, self.sun, self.params)).reshape(d.shape[:-1])
 
     def xyz(self, directions):
         """CIE XYZ toward world ``directions`` (..., 3) [cd m^-2]; 0 at and below the horizon."""
-        d = _unit(directions)
+        d = unit_directions(directions)
         theta, phi = angles_from_direction(d)
         held = direction_from_angles(np.minimum(theta, np.pi / 2 - self.min_elevation), phi)
         f = self.fields(held.reshape(-1, 3)).reshape(d.shape[:-1] + (3,))

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skyfit_mi.conventions import direction_from_angles
+from skyfit_mi.conventions import direction_from_angles, unit_directions
 from skyfit_mi.errors import SkyfitError, check_choice
 from skyfit_mi.physics import cie_general, turbid_sky
 from skyfit_mi.physics.colour import SRGB_LUMINANCE
@@ -187,9 +187,7 @@ def load_scans(folder=None):
 def angle_to_sun_deg(directions, sun):
     """Angle zeta between world ``directions`` (..., 3) and the unit vector ``sun`` (3,)
     (thesis eq. 4.14) [degrees]."""
-    d = np.asarray(directions, dtype=float)
-    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-    return np.degrees(np.arccos(np.clip(d @ sun, -1.0, 1.0)))
+    return np.degrees(np.arccos(np.clip(unit_directions(directions) @ sun, -1.0, 1.0)))
 
 
 def _positive(model, measured):

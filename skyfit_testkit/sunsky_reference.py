@@ -12,6 +12,7 @@ Transactions on Graphics 31(4), 95, 2012, doi:10.1145/2185520.2185591.
 
 import numpy as np
 
+from skyfit_mi.conventions import unit_directions
 from skyfit_mi.physics.colour import SRGB_LUMINANCE
 from skyfit_mi.physics.sky import GROUND_ALBEDO
 from skyfit_mi.render.variant import setup
@@ -32,8 +33,7 @@ def sunsky_luminance(directions, sun_direction, turbidities, albedo=GROUND_ALBED
     mi = setup()
     import drjit as dr
 
-    d = np.asarray(directions, dtype=float)
-    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    d = unit_directions(directions)
     emitter = mi.load_dict({"type": "sunsky", "turbidity": float(turbidities[0]),
                             "albedo": float(albedo), "sun_scale": 0.0,
                             "sun_direction": mi.ScalarVector3f(*map(float, sun_direction))})
