@@ -17,7 +17,7 @@ from ..pipeline.manifest import is_table
 from ..pipeline.observation_table import relative_scale
 from ..render.basis_table import TableModel
 from ..render.fit_model import PARAMETERS, bounds
-from .chi2 import LuminanceModel, Problem
+from .chi2 import LuminanceModel, Problem, subsample_region
 from .fit import (FitCache, FitSession, fit_sessions, prepare_sessions, resolve_light,
                   trace_sessions)
 from .held_out import frame_folds
@@ -38,19 +38,23 @@ FOLDS = 4
 #: (:data:`~skyfit_mi.render.light_cache.SKY_PLANS`); the chosen candidate is traced again at
 #: the fit's own (docs/BENCHMARKS.md, "Lobe families").
 RANK_POSITIONS, RANK_PLAN = 8, "anchors"
+#: Most pixels of an image region the ranking takes (a seeded subset of the fit's pixels), and
+#: the grid minima it polishes (docs/BENCHMARKS.md, "Lobe families").
+RANK_PIXELS, RANK_CANDIDATES = 16, 1
 
 
-def cross_validate(session, model, folds=FOLDS):
+def cross_validate(session, model, folds=FOLDS, scale=1.0):
     """One candidate on a traced :class:`~.fit.FitSession`: summed held-out chi-square over
-    ``folds``, the full fit's chi-square, parameters and dof, AIC and BIC."""
+    ``folds``, the full fit's chi-square, parameters and dof, AIC and BIC; chi-squares and
+    counts times ``scale``, the fit's pixels over the session's (a ranking on a subset)."""
     obs, table = session.obs, session.table
     wm = TableModel(table, model)
     wm = LuminanceModel(wm) if obs.luminance else wm
     full = Problem(obs, wm, valid=table.hit)
     lo, hi = bounds(model)
     # the global minimum, its grid on the table's lobes (the same for any model)
-    res = global_search(full, 0.5 * (lo + hi), lo, hi, profile=False,
-                        grid_basis=session.grid_bases()[0])
+    res = global_search(full, 0.5 * (lo + hi), lo, hi, candidates=RANK_CANDIDATES,
+                        profile=False, grid_basis=session.grid_bases()[0])
     theta, chi2 = np.asarray(res["theta"], dtype=float), float(res["chi2"])
     held_out, n_held = 0.0, 0
     for train, test in frame_folds(full.valid, folds):
@@ -60,7 +64,8 @@ def cross_validate(session, model, folds=FOLDS):
         r = test.residuals(polish(train, theta, lo, hi)["theta"])
         held_out += float(r @ r)
         n_held += r.size
-    n, p = full.n_data, full.n_params
+    n, p = full.n_data * scale, full.n_params
+    held_out, n_held, chi2 = held_out * scale, n_held * scale, chi2 * scale
     return {"normalisation": table.normalisation, "model": model, "parameters": p,
             "held_out_chi2": held_out, "held_out_values": n_held,
             "held_out_chi2_per_value": held_out / max(n_held, 1),
@@ -68,13 +73,14 @@ def cross_validate(session, model, folds=FOLDS):
             "theta": dict(zip(PARAMETERS[model], theta.tolist()))}
 
 
-def rank(sessions, models=MODELS, folds=FOLDS, log=print):
-    """Every candidate of ``sessions`` (one per lobe) and ``models``, best held-out first."""
+def rank(sessions, models=MODELS, folds=FOLDS, log=print, scale=1.0):
+    """Every candidate of ``sessions`` (one per lobe) and ``models``, best held-out first
+    (``scale``: :func:`cross_validate`'s)."""
     rows = []
     for s in sessions:
         for m in models:
             t0 = time.perf_counter()
-            row = cross_validate(s, m, folds)
+            row = cross_validate(s, m, folds, scale)
             row["wall_time_s"] = time.perf_counter() - t0
             rows.append(row)
             log(f"{s.name}: {row['normalisation']} {m}: held-out chi2 "
@@ -117,9 +123,9 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     level a Ward fit finds first. Yields each region's result dict with ``model_selection``."""
     options["cache"] = replace(options.get("cache", FitCache()), seed=seed)
 
-    def sessions_of(**kw):
-        return {name: FitSession(manifest_path, name, px, light=None, **{**options, **kw})
-                for name, px in regions}
+    def sessions_of(subset=None, **kw):
+        return {name: FitSession(manifest_path, name, subsample_region(px, subset, seed),
+                                 light=None, **{**options, **kw}) for name, px in regions}
     t_start = time.perf_counter()
     first = FitSession(manifest_path, *regions[0], light=None,
                        **{"model": "achromatic", **options})
@@ -146,7 +152,8 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     sessions, trace_s = {}, {}
     for fam in families:
         t0 = time.perf_counter()
-        sessions[fam] = sessions_of(model=models[0], normalisation=fam, cache=ranking_cache)
+        sessions[fam] = sessions_of(None if table else RANK_PIXELS, model=models[0],
+                                    normalisation=fam, cache=ranking_cache)
         if level is not None:                     # the spec's light at the level, before tracing
             for s in sessions[fam].values():
                 s.skies = skies_at_level(s.skies, level, s.obs.times)
@@ -154,13 +161,16 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         trace_s[fam] = time.perf_counter() - t0
     ranking_light = {"positions": next(iter(sessions[families[0]].values()))
                      .cache_settings["positions"],
-                     "directions": ranking_cache.directions, "sky_plan": ranking_cache.plan}
+                     "directions": ranking_cache.directions, "sky_plan": ranking_cache.plan,
+                     "most_pixels": None if table else RANK_PIXELS}
     chosen, selection = {}, {}
     shared_s = (time.perf_counter() - t_start) / len(regions)   # the level and the traces
     for name, pixels in regions:
         t_region = time.perf_counter()
         traced = {fam: sessions[fam].pop(name) for fam in families}
-        rows = rank(list(traced.values()), models, folds, log)
+        ranked_pixels = len(traced[families[0]].obs.pixels)
+        rows = rank(list(traced.values()), models, folds, log,
+                    scale=1.0 if table else len(pixels) / ranked_pixels)
         pick = choose(rows)
         log(f"{name}: chose {pick['normalisation']} {pick['model']} (rank {pick['rank']} of "
             f"{len(rows)} by held-out chi2 over {folds} folds of frames)")
@@ -172,8 +182,9 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         chosen[name] = s
         selection[name] = {
             "criterion": f"held-out chi2, {folds}-fold over frames (frame t in fold t mod "
-                         f"{folds}); the fewest parameters within sqrt(2 n) of the best, "
-                         f"ranked in {ranked_in}",
+                         f"{folds}), on the ranking light's pixels and scaled to the fit's; "
+                         f"the fewest parameters within sqrt(2 n) of the best, ranked in "
+                         f"{ranked_in}",
             "ranked_at_sky": None if level is None else {
                 k: level[k] for k in ("k", "interval95", "terms")},
             "ranking_light": ranking_light,
