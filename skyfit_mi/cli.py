@@ -28,7 +28,7 @@ from .fitting.chi2 import REGION_PIXELS  # noqa: E402
 from .physics.ward import NORMALISATIONS  # noqa: E402
 from .pipeline.sky_series import (BRACKET_GAP_S, CARD_MAX_GAP_S, CARD_REFLECTANCE,  # noqa: E402
                                   CARD_SD, SERIES_NAME)
-from .render.light_cache import CACHE_SHARE, DIRECTIONS, POSITIONS  # noqa: E402
+from .render.light_cache import DIRECTIONS, POSITIONS  # noqa: E402
 from .render.variant import VARIANTS  # noqa: E402
 # The modules above are light; each command imports its heavy ones when it runs, so that
 # `skyfit --help` loads neither Mitsuba nor matplotlib.
@@ -430,10 +430,12 @@ _MANIFEST_HELP = "folder written by `skyfit render` (or its manifest.json)"
 
 def _add_render(sub, common):
     """The ``render`` sub-command: a spec -> a sequence folder."""
-    render = sub.add_parser("render", parents=[common], help="render the day a sequence spec describes",
-                            description="Render the day a sequence spec describes into a folder "
-                            "(frames, manifest, contact sheet); an interrupted run resumes.")
-    render.add_argument("spec", help="sequence spec (.toml or .json), e.g. scenes/specs/disc_clear_east.toml")
+    render = sub.add_parser(
+        "render", parents=[common], help="render the day a sequence spec describes",
+        description="Render the day a sequence spec describes into a folder (frames, manifest, "
+        "contact sheet); an interrupted run resumes. Reference: docs/cli.md.")
+    render.add_argument("spec", help="sequence spec (.toml or .json), e.g. "
+                        "scenes/specs/disc_clear_east.toml")
     render.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
     render.add_argument("--overwrite", action="store_true",
                         help="replace another run's output in the folder (starts clean)")
@@ -447,64 +449,46 @@ def _add_ingest(sub, common):
     """The ``ingest`` sub-command: photographs (or a table) -> a sequence folder."""
     ing = sub.add_parser(
         "ingest", parents=[common], help="photographs of a day -> a sequence folder",
-        description="Turn photographs of a day into the sequence folder `render` writes (frames, "
-        "manifest, contact sheet), so fit, relight and chi2map read them. The spec gives site, "
-        "camera pose, scene geometry and sky (or measured irradiance); the photographs give the "
-        "times and the observations.")
+        description="Turn photographs of a day, or a table of measured radiances, into the "
+        "sequence folder `render` writes, for fit, relight and chi2map. Reference: docs/cli.md.")
     ing.add_argument("spec", help="spec (.toml/.json) with [location], [camera], [scene], [sky]; "
-                     "its [time] is replaced by the photographs' times")
-    ing.add_argument("photos", nargs="*", help="image files, or folders of them (EXR, HDR, TIFF, "
-                     "PNG, JPEG, camera RAW)")
-    ing.add_argument("--table", metavar="CSV", help="instead of photographs: a table of measured "
-                     "radiances (time, region, r, g, b, sigma, optional point, x,y,z, view, "
-                     "normal, saturated; for lab lights, a spec of directional [[sky]] without "
-                     "[time], frame instead of time; see docs/MANIFEST.md)")
+                     "the photographs give the times")
+    ing.add_argument("photos", nargs="*",
+                     help="image files or folders (EXR, HDR, TIFF, PNG, JPEG, camera RAW)")
+    ing.add_argument("--table", metavar="CSV",
+                     help="measured radiances instead of photographs (format: docs/MANIFEST.md)")
     ing.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
-    ing.add_argument("--times", metavar="CSV", help="CSV file,time giving each frame's time "
-                     "(instead of EXIF DateTimeOriginal)")
-    ing.add_argument("--name-pattern", metavar="PATTERN", help="times from the file names, e.g. "
-                     "'IMG_%%Y%%m%%d_%%H%%M%%S.jpg'")
+    ing.add_argument("--times", metavar="CSV",
+                     help="CSV file,time of each frame's time (instead of EXIF DateTimeOriginal)")
+    ing.add_argument("--name-pattern", metavar="PATTERN",
+                     help="times from the file names, e.g. 'IMG_%%Y%%m%%d_%%H%%M%%S.jpg'")
     ing.add_argument("--tz", help="time zone of times without an offset (IANA name such as "
                      "'Europe/London', or '+01:00')")
     ing.add_argument("--site", type=_numbers, metavar="LAT,LON[,ALT]",
                      help="site in degrees (north, east) and metres, overriding the spec's")
     ing.add_argument("--response", choices=("srgb", "gamma", "linear", "fit"),
-                     help="the encoding to invert (default: the spec's [sensor], else the "
-                     "files'); fit: chosen and fitted from the --calibrate or --colorchecker "
-                     "patches")
+                     help="the encoding to invert (default the spec's [sensor], else the files'; "
+                     "fit: from the greys)")
     ing.add_argument("--gamma", type=float, help="exponent of a gamma response")
-    ing.add_argument("--exposure", type=float, help="absolute exposure of the first frame "
-                     "[sr m^2 W^-1] (1 / the radiance at full scale)")
+    ing.add_argument("--exposure", type=float,
+                     help="absolute exposure of the first frame [sr m^2 W^-1]")
     ing.add_argument("--calibrate", action="append", type=_reflectance,
-                     metavar="MATERIAL=REFLECTANCE", help="a scene material that is a grey "
-                     "Lambertian reference of this reflectance (or R,G,B); sets the exposure and "
-                     "white balance (repeatable); with --table, the table's values are in its "
-                     "own units (e.g. DN), scaled to radiance by its rows on this material")
-    ing.add_argument("--unknown-scale", action="store_true", help="with --table: the values "
-                     "are in the instrument's own units (e.g. DN) and no reference is measured; "
-                     "they are put on a relative scale (the brightest apparent albedo reads "
-                     "0.5), so fitted reflectances are relative and roughness and ratios "
-                     "absolute")
-    ing.add_argument("--colorchecker", metavar="MATERIAL", help="a ColorChecker Classic in the "
-                     "photographs, lying on this scene material: found automatically; its six "
-                     "neutral swatches calibrate like --calibrate greys, its colours check the "
-                     "result (needs colour-checker-detection: pip install 'skyfit-mi[photo]')")
+                     metavar="MATERIAL=REFLECTANCE", help="a grey Lambertian scene material of "
+                     "this reflectance (or R,G,B) to calibrate by; repeatable")
+    ing.add_argument("--unknown-scale", action="store_true",
+                     help="with --table: values in the instrument's units, put on a relative scale")
+    ing.add_argument("--colorchecker", metavar="MATERIAL",
+                     help="calibrate by a ColorChecker Classic lying on this scene material")
     ing.add_argument("--vignetting", default="none", metavar="none|cos4|FLAT",
                      help="none, the cos^4 law, or a flat-field image (default none)")
     ing.add_argument("--noise", type=_numbers, metavar="READ,SHOT",
-                     help="noise model: read variance [DN^2] and shot gain [DN] of the linear "
-                     "codes, a RAW's of its photosites above black (default: estimated from "
-                     "the frames)")
+                     help="read variance [DN^2] and shot gain [DN] (default estimated from frames)")
     ing.add_argument("--colour-matrix-error", type=float, metavar="SD",
-                     help="relative error of each entry of the camera's colour matrix (to "
-                     "linear sRGB), which a grey card cannot calibrate; fits widen their "
-                     "intervals by it (default 0.03 for RAWs, developed with the file's own "
-                     "matrix; 0 for other files)")
-    ing.add_argument("--no-register", action="store_true", help="take the frames as aligned "
-                     "(default: each frame's shift and rotation against the one nearest the "
-                     "middle of the day measured and undone)")
-    ing.add_argument("--register-limit", type=float, metavar="PX", help="refuse a frame that "
-                     "moved more than this [px] (default 5)")
+                     help="relative error of each colour matrix entry (default 0.03 RAW, else 0)")
+    ing.add_argument("--no-register", action="store_true",
+                     help="take the frames as aligned (default: their shifts and turns are undone)")
+    ing.add_argument("--register-limit", type=float, metavar="PX",
+                     help="refuse a frame that moved more than this [px] (default 5)")
     ing.add_argument("--overwrite", action="store_true",
                      help="replace another run's output in the folder (starts clean)")
     ing.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -515,28 +499,24 @@ def _add_camera(sub, common):
     """The ``camera`` sub-command: marked points of a photograph -> the spec's [camera]."""
     cam = sub.add_parser(
         "camera", parents=[common], help="the camera's pose and lens from marked points",
-        description="Estimate the camera's pose, field of view and radial distortion from "
-        "points marked in one photograph whose scene positions were measured (e.g. a board's "
-        "corners), with their uncertainty; writes the spec's [camera] table (TOML) and a JSON "
-        "report beside it.")
-    cam.add_argument("points", help="CSV with columns name (optional), x_px, y_px (pixel "
-                     "column and row, 0,0 the centre of the top-left pixel), X, Y, Z (world "
-                     "east, north, up [m])")
+        description="Estimate the camera's pose, field of view and radial distortion, with their "
+        "uncertainty, from points marked in one photograph whose scene positions were measured; "
+        "writes the spec's [camera] table (TOML) and a JSON report. Reference: docs/cli.md.")
+    cam.add_argument("points", help="CSV: name (optional), x_px, y_px (column, row), X, Y, Z "
+                     "(east, north, up [m])")
     cam.add_argument("--photo", help="the photograph (gives the image size)")
     cam.add_argument("--width", type=_int_in(1, 16384), help="image width [px] (without --photo)")
     cam.add_argument("--height", type=_int_in(1, 16384), help="image height [px]")
-    cam.add_argument("--fov-deg", type=float, help="horizontal field of view [deg] if known "
-                     "(needs 4 points; without it the focal length is fitted, from 6)")
-    cam.add_argument("--distortion", type=_numbers, metavar="K1[,K2]", help="known radial "
-                     "distortion (OpenCV's convention; default 0 with --fov-deg, else fitted "
-                     "when the marks reach far enough from the centre)")
-    cam.add_argument("--marking-px", type=float, default=0.5, help="standard deviation of a "
-                     "mark [px] (default 0.5); the residuals widen it if they show more")
-    cam.add_argument("--target", type=_numbers, metavar="X,Y,Z", help="point the camera's "
-                     "azimuth, angle and distance are given from [m] (default the points' "
-                     "centroid)")
-    cam.add_argument("-o", "--output", required=True, help="camera TOML path (the report is "
-                     "written beside it as .json)")
+    cam.add_argument("--fov-deg", type=float,
+                     help="horizontal field of view [deg] if known (4 points; else fitted, from 6)")
+    cam.add_argument("--distortion", type=_numbers, metavar="K1[,K2]",
+                     help="known radial distortion (default 0 with --fov-deg, else fitted)")
+    cam.add_argument("--marking-px", type=float, default=0.5,
+                     help="standard deviation of a mark [px] (default 0.5)")
+    cam.add_argument("--target", type=_numbers, metavar="X,Y,Z",
+                     help="point the pose is given from [m] (default the points' centroid)")
+    cam.add_argument("-o", "--output", required=True,
+                     help="camera TOML path (the JSON report is written beside it)")
     cam.add_argument("--overwrite", action="store_true", help="replace existing output files")
     cam.set_defaults(func=_camera)
 
@@ -572,36 +552,30 @@ def _sky_series(args):
 def _add_sky_series(sub, common):
     """The ``sky-series`` sub-command: bracketed fisheye shots of the sky -> linear maps."""
     sky = sub.add_parser(
-        "sky-series", parents=[common], help="merge bracketed fisheye photographs of the sky "
-        "into linear maps a spec's envmap sky names",
-        description="Merge each exposure bracket of an upward equidistant fisheye's shots "
-        "(EXIF times and exposures) into a linear EXR map, count the clipped sun, and, with a "
-        "grey card photographed at each bracket, record the global horizontal irradiance that "
-        f"sets the sun's level; writes {SERIES_NAME} for the spec's [sky] file.")
+        "sky-series", parents=[common], help="merge bracketed fisheye shots of the sky into maps",
+        description="Merge each exposure bracket of an upward equidistant fisheye into a linear "
+        f"EXR map, the sun's level from a grey card; writes {SERIES_NAME} for the spec's [sky] "
+        "file. Reference: docs/cli.md.")
     sky.add_argument("photos", nargs="+", help="the sky's shots: files or folders")
-    sky.add_argument("-o", "--output", required=True, help="output folder (the maps and "
-                     f"{SERIES_NAME})")
-    sky.add_argument("--tz", help="time zone of EXIF times without an offset (e.g. "
-                     "Europe/Berlin or +01:00)")
-    sky.add_argument("--times", help="CSV file,time of the shots (and the card's) instead of "
-                     "their EXIF times")
-    sky.add_argument("--flat", help="a flat field through the fisheye (a photograph of a "
-                     "uniform field, or its linear map), which undoes the lens's vignetting; "
-                     "default none")
-    sky.add_argument("--bracket-gap-s", type=float, default=BRACKET_GAP_S, help="a shot more "
-                     "than this many seconds after the previous one starts a new bracket "
-                     f"(default {BRACKET_GAP_S:g})")
-    sky.add_argument("--card", nargs="+", help="shots of a horizontal grey card in the sun, "
-                     "with the same camera, one near each bracket (files or folders)")
-    sky.add_argument("--card-box", type=_numbers, metavar="X0,Y0,X1,Y1", help="the card's "
-                     "pixels in its shots (columns X0..X1-1, rows Y0..Y1-1)")
+    sky.add_argument("-o", "--output", required=True,
+                     help=f"output folder (the maps and {SERIES_NAME})")
+    sky.add_argument("--tz", help="time zone of EXIF times without an offset (e.g. Europe/Berlin "
+                     "or +01:00)")
+    sky.add_argument("--times", help="CSV file,time of the shots (and the card's), instead of EXIF")
+    sky.add_argument("--flat", help="flat field through the fisheye: a photograph of a uniform "
+                     "field, or its linear map (default none)")
+    sky.add_argument("--bracket-gap-s", type=float, default=BRACKET_GAP_S,
+                     help=f"a gap over this [s] starts a new bracket (default {BRACKET_GAP_S:g})")
+    sky.add_argument("--card", nargs="+", help="shots of a horizontal grey card in the sun, one "
+                     "near each bracket (files or folders)")
+    sky.add_argument("--card-box", type=_numbers, metavar="X0,Y0,X1,Y1",
+                     help="the card's pixels in its shots (columns X0..X1-1, rows Y0..Y1-1)")
     sky.add_argument("--card-reflectance", type=float, default=CARD_REFLECTANCE,
                      help=f"the card's reflectance (default {CARD_REFLECTANCE:g})")
     sky.add_argument("--card-max-gap-s", type=float, default=CARD_MAX_GAP_S, help="the longest "
                      f"time between a bracket and its card shot [s] (default {CARD_MAX_GAP_S:g})")
-    sky.add_argument("--card-sd", type=float, default=CARD_SD, help="relative uncertainty (1 sd) "
-                     "of the card's reading of the global irradiance: its reflectance's and "
-                     f"its departure from Lambert's law (default {CARD_SD:g})")
+    sky.add_argument("--card-sd", type=float, default=CARD_SD, help="relative sd of the card's "
+                     f"reading of the global irradiance (default {CARD_SD:g})")
     sky.add_argument("--overwrite", action="store_true", help="replace an existing series")
     sky.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     sky.set_defaults(func=_sky_series)
@@ -609,23 +583,26 @@ def _add_sky_series(sub, common):
 
 def _add_pixels(sub, common):
     """The ``pixels`` sub-command: chosen pixels across a sequence."""
-    pixels = sub.add_parser("pixels", parents=[common], help="values of chosen pixels across a rendered sequence",
-                            description="Write chosen pixels' values across a sequence as CSV "
-                            "and a plot.")
+    pixels = sub.add_parser(
+        "pixels", parents=[common], help="values of chosen pixels across a rendered sequence",
+        description="Write chosen pixels' values across a sequence as CSV and a plot. "
+        "Reference: docs/cli.md.")
     pixels.add_argument("manifest", help=_MANIFEST_HELP)
     pixels.add_argument("--pixel", action="append", required=True, metavar="X,Y",
                         help="pixel column,row from the top left; repeat for more pixels")
     pixels.add_argument("--source", choices=("radiance", "sensor"), default="radiance",
                         help="linear radiance frames or the sensor model's pixel values")
-    pixels.add_argument("-o", "--output", help="output path prefix (default: MANIFEST/pixels_SOURCE)")
+    pixels.add_argument("-o", "--output",
+                        help="output path prefix (default: MANIFEST/pixels_SOURCE)")
     pixels.set_defaults(func=_pixels)
 
 
 def _add_labels(sub, common):
     """The ``labels`` sub-command: a label-mask PNG of the materials."""
-    labels = sub.add_parser("labels", parents=[common], help="label-mask PNG of the materials each pixel sees",
-                            description="Write a label-mask PNG (pixel value = material) and "
-                            "its legend JSON, for `skyfit fit --mask`.")
+    labels = sub.add_parser(
+        "labels", parents=[common], help="label-mask PNG of the materials each pixel sees",
+        description="Write a label-mask PNG (pixel value = material) and its legend JSON, for "
+        "`skyfit fit --mask`. Reference: docs/cli.md.")
     labels.add_argument("manifest", help=_MANIFEST_HELP)
     labels.add_argument("-o", "--output", help="PNG path (default: MANIFEST/labels.png)")
     labels.set_defaults(func=_labels)
@@ -633,9 +610,10 @@ def _add_labels(sub, common):
 
 def _add_fit(sub, common):
     """The ``fit`` sub-command: Ward parameters of material regions."""
-    fit = sub.add_parser("fit", parents=[common], help="fit Ward parameters to material regions of a sequence",
-                         description="Fit Ward reflection parameters, with 95% intervals and "
-                         "warnings, to material regions of a rendered sequence.")
+    fit = sub.add_parser(
+        "fit", parents=[common], help="fit Ward parameters to material regions of a sequence",
+        description="Fit Ward reflection parameters, with 95% intervals and warnings, to "
+        "material regions of a rendered sequence. Reference: docs/cli.md.")
     fit.add_argument("manifest", help=_MANIFEST_HELP)
     fit.add_argument("--region", action="append", type=_region, metavar="NAME=rect:x0,y0,x1,y1",
                      help="a material region (NAME = the material id); also NAME=pixels:x,y;x,y")
@@ -647,110 +625,71 @@ def _add_fit(sub, common):
     fit.add_argument("--variant", choices=VARIANTS,
                      help="Mitsuba variant of the fit (default the sequence's; cuda_ad_rgb: GPU)")
     fit.add_argument("--per-pixel", action="store_true",
-                     help="a material map: every pixel of the regions (or every --patch) its own "
-                     "fit, with intervals and warnings, as EXR/PNG maps (on Dask)")
+                     help="material maps: every pixel of the regions (or --patch) its own fit")
     fit.add_argument("--patch", type=_int_in(1, 4096), default=1, metavar="N",
                      help="with --per-pixel: fit N x N blocks of pixels (default 1)")
     fit.add_argument("--workers", type=_int_in(1, 1024), default=None,
-                     help="with --per-pixel: worker processes of the local Dask cluster "
-                     "(default and most: one per core, and as many as the free memory holds)")
+                     help="with --per-pixel: local Dask workers (default one per core, as memory "
+                     "allows)")
     fit.add_argument("--scheduler", metavar="ADDRESS",
-                     help="with --per-pixel: an existing Dask scheduler (e.g. tcp://host:8786) "
-                     "instead of a cluster on this machine")
+                     help="with --per-pixel: an existing Dask scheduler, e.g. tcp://host:8786")
     fit.add_argument("--chunk", type=_int_in(1, 1 << 20), default=None, metavar="N",
-                     help="with --per-pixel: fits per Dask task (default 1024, about 1.1 GB a worker)")
+                     help="with --per-pixel: fits per Dask task (default 1024, about 1.1 GB a "
+                     "worker)")
     fit.add_argument("--overwrite", action="store_true",
                      help="with --per-pixel: replace another map in the output folder")
     fit.add_argument("-q", "--quiet", action="store_true", help="with --per-pixel: no progress bar")
     fit.add_argument("--max-pixels", type=_int_in(0), default=REGION_PIXELS,
                      help="fit at most this many pixels of a region, a seeded random subset "
-                     f"(default {REGION_PIXELS}; 0 = every pixel); with --per-pixel, those of "
-                     "the fits a map takes first (the sky's level, --model auto's ranking)")
+                     f"(default {REGION_PIXELS}; 0 = every pixel)")
     fit.add_argument("--model", choices=("2", "3", "5", "auto"), default="5",
-                     help="5 (default): C (RGB diffuse colour), rho_s, sigma_alpha; "
-                     "3: R, rho_s, sigma_alpha; 2: rho_s, sigma_alpha (thesis 7.1); auto: "
-                     "every lobe (Ward, balanced, Beckmann and GGX plastic and metal) and "
-                     "parameter count ranked by held-out frames (4-fold), AIC and BIC beside, "
-                     "the chosen one fitted (the light traced once per lobe); with --per-pixel "
-                     "each region ranked first and mapped in its choice")
+                     help="5 (default): C, rho_s, sigma_alpha; 3: R, rho_s, sigma_alpha; "
+                     "2: rho_s, sigma_alpha; auto: ranked")
     fit.add_argument("--sky", choices=SKY_CHOICES, default=None,
-                     help="spec: the spec's light as it is (the default for sequences skyfit "
-                     "rendered); fit: the sky's level against the sun's fitted with the "
-                     "materials, one for every region of the command, its error in every "
-                     "interval (the sun and sky traced apart: about twice the fit's time); "
-                     "prior (the default for photographs under the sun): the same with a prior "
-                     "on that level from how measured skies scatter about the models. fit and "
-                     "prior also count the sun's own level (--sun-sd) in the reflectances' "
-                     "intervals. With --per-pixel the level is fitted first with the regions' "
-                     "materials (up to --max-pixels of each), and the map takes that light")
+                     help="spec: as given; fit: the sky's level fitted; prior: that with a prior "
+                     "(default prior for photos, else spec)")
     fit.add_argument("--sky-terms", type=int, default=None,
-                     help="with --sky fit or prior: how the sky's level may change over the day, "
-                     "as log k in that many Legendre polynomials in time, each beyond the "
-                     "level under a prior: 1 one level for the day; 2-4 a smooth change (the "
-                     "sun's height, changing weather); default 3 (the level, its drift and "
-                     "its curve), fewer for under 5 frames, 1 where a reference calibrates the "
-                     "frames")
+                     help="with --sky fit or prior: Legendre terms of the level over the day "
+                     "(default 3; 1 = one level)")
     fit.add_argument("--sky-shape", action="store_true",
-                     help="with --sky fit or prior and a CIE sky (clear, cie_general) or a "
-                     "Perez sky (perez): fit its shape too, as mixes of the spec's pattern with "
-                     "the next CIE group's gradation and indicatrix, or with the next Perez "
-                     "clearness bin's and with Delta one step (x1.42) on, under a prior of one "
-                     "group, bin or step (two more traces of the light)")
+                     help="with --sky fit or prior and a CIE, turbid or Perez sky: fit its shape "
+                     "too")
     fit.add_argument("--sky-departure", action=argparse.BooleanOptionalAction, default=None,
-                     help="with --sky fit or prior: fit the sky's departure from the spec's "
-                     "model, a smooth field over the sky (zenith angle and angle from the sun, "
-                     "five weights) under a prior measured from real clear skies, marginalised "
-                     "into every interval (five more traces of the light); default on for "
-                     "photographs, off for a sequence skyfit rendered; --no-sky-departure "
-                     "takes the spec's shape as exact")
+                     help="with --sky fit or prior: fit the sky's departure from its model "
+                     "(default on for photos, off for renders)")
     fit.add_argument("--sun-sd", type=float, default=None,
-                     help="with --sky fit or prior: the relative uncertainty of the spec's sun "
-                     f"level, in the reflectances' intervals (default for photographs "
-                     f"{SUN_LEVEL_SD} for a modelled sun, widened as the fitted sky departs "
-                     f"from the spec's, {MEASURED_SUN_SD} where the spec gives the measured "
-                     "direct normal irradiance; 0 for a sequence skyfit rendered; given, it is "
-                     "kept as it is; unused where a reference calibrates the frames)")
+                     help="with --sky fit or prior: sun level's relative sd (default "
+                     f"{SUN_LEVEL_SD}, {MEASURED_SUN_SD} with measured DNI, 0 for renders)")
     fit.add_argument("--method", choices=("global", "lm", "anneal", "adam"), default="global",
-                     help="global (default: grid over sigma_alpha then Levenberg-Marquardt; "
-                     "right from any start), lm (the thesis's baseline), anneal (simulated "
-                     "annealing over full renders), adam (gradient descent)")
+                     help="global (default: grid over sigma_alpha, then Levenberg-Marquardt), "
+                     "lm, anneal or adam")
     fit.add_argument("--normalisation", choices=NORMALISATIONS, default="ward",
-                     help="the specular lobe (default ward, the thesis's; "
-                     "balanced is Radiance 6's lobe; radiance, that lobe plus Radiance's "
-                     "Fresnel estimate for smooth surfaces, renders but cannot be fitted; "
-                     "beckmann_/ggx_ plastic/metal: microfacet lobes with Smith shadowing and "
-                     "a dielectric (eta 1.5) or a metal's Fresnel, alpha = sigma_alpha)")
+                     help="the specular lobe (default ward; radiance renders but cannot be fitted)")
     fit.add_argument("--start", type=_numbers, metavar="A,B,...",
-                     help="starting parameters in the model's order, comma-separated (lm, anneal,"
-                     " adam; default a seeded random start)")
+                     help="starting parameters in the model's order (lm, anneal, adam; default a "
+                     "seeded random start)")
     fit.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,
                      help="seed of the light cache, random starts and subsets (default 0)")
     fit.add_argument("--positions", type=_int_in(1, 4096), default=None,
-                     help=f"light-cache positions per pixel (default: chosen from the data, "
-                     f"{POSITIONS}, grown until the cache's own noise is {CACHE_SHARE * 100:g}%% of "
-                     "the degrees of freedom; the fit JSON's light_cache records it)")
+                     help=f"light-cache positions per pixel (default {POSITIONS}, grown as the "
+                     "data need)")
     fit.add_argument("--directions", type=_int_in(1, 1 << 16), default=DIRECTIONS,
                      help=f"light-cache directions per position (default {DIRECTIONS})")
     fit.add_argument("--pose-sd-deg", type=_pose_sd, default=None, metavar="DEG",
-                     help="the camera pose's uncertainty, 1 sd in azimuth and in the angle "
-                     "from the vertical each [deg], propagated into every interval (a trace "
-                     "of the light per angle; default the manifest's camera.pose_sd_deg, from "
-                     "the spec's [camera], else 0)")
+                     help="camera pose's sd in azimuth and in angle from vertical [deg] (default "
+                     "the manifest's, else 0)")
     fit.add_argument("--frames", type=_frame_list, metavar="LIST",
-                     help="fit only these frames (manifest indices, e.g. 0-6,9), to hold the "
-                     "others out for `skyfit relight` onto the same folder (default: all)")
+                     help="fit only these frames (manifest indices, e.g. 0-6,9; default all)")
     fit.add_argument("-o", "--output", help="output folder (default: the manifest's folder)")
     fit.set_defaults(func=_fit)
 
 
 def _add_relight(sub, common):
     """The ``relight`` sub-command: render a target with fitted materials."""
-    relit = sub.add_parser("relight", parents=[common],
-                           help="render a day, sky or camera with fitted materials",
-                           description="Render a target (a spec, or a sequence folder: its "
-                           "times, skies and camera) with the materials of fits; with the "
-                           "target's frames as observations, report the prediction error "
-                           "(relight.json, relight.csv).")
+    relit = sub.add_parser(
+        "relight", parents=[common], help="render a day, sky or camera with fitted materials",
+        description="Render a target (a spec, or a sequence folder) with the materials of fits "
+        "and, against the target's frames, report the prediction error. Reference: docs/cli.md.")
     relit.add_argument("fits", nargs="+",
                        help="fit_NAME.json files, a fits.csv, or the folder `skyfit fit` wrote")
     relit.add_argument("--target", required=True,
@@ -759,16 +698,11 @@ def _add_relight(sub, common):
     relit.add_argument("--overwrite", action="store_true",
                        help="replace another run's output in the folder (starts clean)")
     relit.add_argument("--no-images", action="store_true",
-                       help="predict the regions' values only (prediction.csv, relight.json), from "
-                       "the fits' cached model of the target folder's light; no frame is "
-                       "rendered and no image or plot written")
+                       help="predict the regions' values only (prediction.csv, relight.json)")
     relit.add_argument("--reference", action="store_true",
-                       help="a synthetic target: also render its own materials again with "
-                       "other seeds (reference/), to measure the Monte Carlo floor that "
-                       "relight.json otherwise estimates from the sigma images")
+                       help="a synthetic target: also render its materials with other seeds")
     relit.add_argument("--draws", type=_int_in(2, 100000), default=200,
-                       help="parameter draws from the fits' intervals for the 95%% band "
-                       "(default 200)")
+                       help="parameter draws for the 95%% band (default 200)")
     relit.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,
                        help="seed of the parameter draws and the light cache (default 0)")
     relit.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -777,10 +711,10 @@ def _add_relight(sub, common):
 
 def _add_chi2map(sub, common):
     """The ``chi2map`` sub-command: chi-square over two parameters."""
-    cmap = sub.add_parser("chi2map", parents=[common],
-                          help="chi-square over two parameters of a fitted region",
-                          description="Map chi-square over two parameters of a fitted region, "
-                          "the others at the fit (thesis figs 6.5-6.21, 7.10): CSV and PNG.")
+    cmap = sub.add_parser(
+        "chi2map", parents=[common], help="chi-square over two parameters of a fitted region",
+        description="Map chi-square over two parameters of a fitted region, the others at the "
+        "fit (thesis figs 6.5-6.21, 7.10): CSV and PNG. Reference: docs/cli.md.")
     cmap.add_argument("manifest", help=_MANIFEST_HELP)
     cmap.add_argument("fit", help="the region's fit_NAME.json (its pixels, model and frames)")
     cmap.add_argument("--x", default="rho_s", help="parameter on the x axis (default rho_s)")
@@ -793,16 +727,13 @@ def _add_chi2map(sub, common):
     cmap.add_argument("--n", type=_int_in(2, 1000), default=60,
                       help="grid points per axis (default 60)")
     cmap.add_argument("--profile", action="store_true",
-                      help="every other parameter at its best for each point (the profile: "
-                      "started from the linearised grid and the fit, polished on the true "
-                      "chi-square), not fixed at the fit")
+                      help="every other parameter at its best for each point, not at the fit")
     cmap.add_argument("--walk", action="store_true",
                       help="overlay the fit's walk (its trace, e.g. annealing's)")
     cmap.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,
                       help="seed of the light cache (default 0)")
-    cmap.add_argument("-o", "--output",
-                      help="output path prefix, or a folder to write into (default "
-                      "MANIFEST/chi2map_REGION_X_Y)")
+    cmap.add_argument("-o", "--output", help="output path prefix, or a folder to write into "
+                      "(default MANIFEST/chi2map_REGION_X_Y)")
     cmap.add_argument("--overwrite", action="store_true",
                       help="replace files of the prefix's names that are not an earlier map's")
     cmap.set_defaults(func=_chi2map)
@@ -810,14 +741,13 @@ def _add_chi2map(sub, common):
 
 def _add_export(sub, common):
     """The ``export`` sub-command: fitted materials for other renderers."""
-    ex = sub.add_parser("export", parents=[common],
-                        help="write fitted materials for Mitsuba 3, Radiance and glTF/Blender",
-                        description="Write fitted materials as Mitsuba 3 XML (built-in plugins "
-                        "and skyfit's ward plugin), Radiance plastic/metal and glTF 2.0, each "
-                        "with the error of its form against the fit, and export.json with the "
-                        "fits' intervals and warnings; a map's planes as textures.")
+    ex = sub.add_parser(
+        "export", parents=[common],
+        help="write fitted materials for Mitsuba 3, Radiance and glTF/Blender",
+        description="Write fitted materials as Mitsuba 3 XML, Radiance and glTF 2.0, each with "
+        "its error against the fit, and export.json. Reference: docs/cli.md.")
     ex.add_argument("fits", nargs="+", help="fit_NAME.json files, a fits.csv, the folder "
-                    "`skyfit fit` wrote, or the folder of a per-pixel map")
+                    "`skyfit fit` wrote, or a per-pixel map's folder")
     ex.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
     ex.add_argument("--format", nargs="+", choices=("mitsuba", "radiance", "gltf"),
                     default=["mitsuba", "radiance", "gltf"], help="formats to write (default all)")
