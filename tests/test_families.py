@@ -147,6 +147,25 @@ def test_model_auto_ranks_the_true_family_first_and_writes_the_ranking(plastic_d
     assert rows[0]["model_ranking"].startswith("1 ggx_plastic/")
 
 
+@pytest.mark.parametrize("per_value, chosen", [(1.0, 5), (0.5, 5), (4.0, 2)])
+def test_selection_window_widens_with_what_the_noise_model_leaves_out(per_value, chosen):
+    """The one-standard-error window is sqrt(2 n) held-out chi-square where the best candidate
+    fits to its noise (a 2-parameter model 2 sqrt(2 n) worse is left out) and c sqrt(2 n) where
+    its held-out chi-square per value is c > 1 (model error, quantisation): the same gap is
+    then inside it."""
+    from skyfit_mi.fitting.selection import choose
+
+    n = 800
+    best = per_value * n
+    rows = [{"parameters": 5, "held_out_chi2": best, "held_out_values": n,
+             "held_out_chi2_per_value": best / n},
+            {"parameters": 2, "held_out_chi2": best + 2 * np.sqrt(2 * n), "held_out_values": n,
+             "held_out_chi2_per_value": (best + 2 * np.sqrt(2 * n)) / n}]
+    pick, c = choose(rows)
+    assert pick["parameters"] == chosen
+    assert c == max(1.0, per_value)
+
+
 @pytest.fixture(scope="module")
 def photographed_plastic(plastic_day, tmp_path_factory):
     """The plastic's day called photographed (``source`` 'ingest'): its spec's sky is then a

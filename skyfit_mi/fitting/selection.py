@@ -92,12 +92,16 @@ def rank(sessions, models=MODELS, folds=FOLDS, log=print, scale=1.0):
 
 
 def choose(rows):
-    """The one-standard-error rule's choice of a ranking: fewest parameters within sqrt(2 n) (n
-    held-out values) of the best held-out chi-square, then the best among those."""
-    best = rows[0]["held_out_chi2"]
-    near = [r for r in rows
-            if r["held_out_chi2"] <= best + np.sqrt(2.0 * max(r["held_out_values"], 1))]
-    return min(near, key=lambda r: (r["parameters"], r["held_out_chi2"]))
+    """The one-standard-error rule's choice of a ranking (best first): the fewest parameters
+    within c sqrt(2 n) (n held-out values) of the best held-out chi-square, then the best among
+    those; c = max(1, the best's held-out chi-square per value) counts what the noise model
+    leaves out (model error, quantisation) as the quasi-likelihood's overdispersion does
+    (Burnham & Anderson 2002, sec. 2.5). Returns (the choice, c)."""
+    best = rows[0]
+    c = max(1.0, best["held_out_chi2_per_value"])
+    near = [r for r in rows if r["held_out_chi2"] <= best["held_out_chi2"]
+            + c * np.sqrt(2.0 * max(r["held_out_values"], 1))]
+    return min(near, key=lambda r: (r["parameters"], r["held_out_chi2"])), c
 
 
 def candidate_models(doc, models, luminance):
@@ -124,7 +128,8 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     options["cache"] = replace(options.get("cache", FitCache()), seed=seed)
 
     def sessions_of(subset=None, **kw):
-        return {name: FitSession(manifest_path, name, subsample_region(px, subset, seed),
+        return {name: FitSession(manifest_path, name,
+                                 px if subset is None else subsample_region(px, subset, seed),
                                  light=None, **{**options, **kw}) for name, px in regions}
     t_start = time.perf_counter()
     first = FitSession(manifest_path, *regions[0], light=None,
@@ -171,9 +176,10 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         ranked_pixels = len(traced[families[0]].obs.pixels)
         rows = rank(list(traced.values()), models, folds, log,
                     scale=1.0 if table else len(pixels) / ranked_pixels)
-        pick = choose(rows)
+        pick, overdispersion = choose(rows)
         log(f"{name}: chose {pick['normalisation']} {pick['model']} (rank {pick['rank']} of "
-            f"{len(rows)} by held-out chi2 over {folds} folds of frames)")
+            f"{len(rows)} by held-out chi2 over {folds} folds of frames, overdispersion "
+            f"{overdispersion:.3g})")
         s = FitSession(manifest_path, name, pixels, model=pick["model"],
                        normalisation=pick["normalisation"], light=None, **options)
         if reuse:                  # the table is the same for any parameterisation
@@ -183,8 +189,9 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         selection[name] = {
             "criterion": f"held-out chi2, {folds}-fold over frames (frame t in fold t mod "
                          f"{folds}), on the ranking light's pixels and scaled to the fit's; "
-                         f"the fewest parameters within sqrt(2 n) of the best, ranked in "
-                         f"{ranked_in}",
+                         f"the fewest parameters within c sqrt(2 n) of the best (c the best's "
+                         f"held-out chi2 per value, at least 1), ranked in {ranked_in}",
+            "overdispersion": overdispersion,
             "ranked_at_sky": None if level is None else {
                 k: level[k] for k in ("k", "interval95", "terms")},
             "ranking_light": ranking_light,
