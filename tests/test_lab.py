@@ -315,6 +315,43 @@ def test_a_table_of_unknown_scale_gives_relative_reflectances_without_a_bound(dn
     assert r["wall_time_s"] == pytest.approx(r["fit_wall_time_s"] + sel["wall_time_s"])
 
 
+def test_a_held_out_table_of_unknown_scale_is_put_on_the_fits_scale(dn_rig, tmp_path):
+    """A fit on one relative-scale ingest relit onto another (the sample alone without its
+    highlight, another gain: its relative scale differs 2-3x) is compared after one factor that
+    puts the
+    target's values on the fit's scale: the factor is the ratio of the two ingests' scales
+    within 2%, recorded, and the held-out values' error is that of the fit's own table."""
+    def table_at(gain, path, keep=lambda r: True):
+        rows = [r for r in csv.DictReader((tmp / "radiance.csv").open()) if keep(r)]
+        for r in rows:
+            for c in "rgb":
+                r[c], r[f"sigma_{c}"] = (f"{float(r[k]) * gain:.6g}" for k in (c, f"sigma_{c}"))
+        with path.open("w") as f:
+            w = csv.DictWriter(f, list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+        return path
+
+    tmp, spec, _ = dn_rig
+    seqs = {}
+    for name, gain, keep in (("fitted", 1000.0, lambda r: True),
+                             ("target", 700.0, lambda r: r["region"] == "sample" and r["frame"] != "0")):
+        seqs[name] = tmp_path / name
+        assert main(["ingest", str(spec), "--table", str(table_at(gain, tmp_path / f"{name}.csv",
+                                                                  keep)),
+                     "--unknown-scale", "-o", str(seqs[name]), "-q"]) == 0
+    assert main(["fit", str(seqs["fitted"]), "--region", "sample", "-o",
+                 str(tmp_path / "fit"), "-q"]) == 0
+    assert main(["relight", str(tmp_path / "fit"), "--target", str(seqs["target"]),
+                 "--no-images", "-o", str(tmp_path / "relit")]) == 0
+    errors = json.loads((tmp_path / "relit" / "relight.json").read_text())
+    scales = {k: load_manifest(v)[0]["ingest"]["scale"]["scale_per_unit"] for k, v in seqs.items()}
+    expected = scales["fitted"] * 1000.0 / (scales["target"] * 700.0)
+    assert abs(expected - 1.0) > 0.3                      # the two relative scales differ
+    assert errors["target_scale"]["factor"] == pytest.approx(expected, rel=0.02)
+    assert errors["rel_rms"] < 0.05 and errors["band_coverage"]["share"] >= 0.8, errors
+
+
 @pytest.mark.parametrize("reference, message", [
     ("wall=0.9", "--calibrate wall: no material 'wall' in the spec's scene"),
     ("white=0.9", "--calibrate white: .* has no unsaturated row on region 'white'"),

@@ -13,7 +13,7 @@ import json
 import os
 from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +37,7 @@ from ..pipeline.manifest import (RENDERED_SOURCES, check_frames, frame_axis, fra
                                  frame_sky, is_table, load_manifest, manifest_file,
                                  read_frame_image, rendered_frames)
 from ..pipeline.pixels import frame_values, material_regions
-from ..pipeline.observation_table import table_regions
+from ..pipeline.observation_table import relative_scale, table_regions
 from ..pipeline.sequence import clear_run, render_sequence
 from ..pipeline.spec import read_spec, validate_spec
 from ..render.image import to_srgb8, write_exr, write_png
@@ -190,6 +190,9 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if pixels is None:
         pixels = target_pixels(fits, predicted, seed)
     prediction = predict(fits, predicted, pixels, draws, seed, log)
+    scale = on_fit_scale(prediction, fits, plan.doc) if plan.table else None
+    if scale is not None:
+        log(f"the target table's values put on the fits' scale: times {scale['factor']:.4g}")
     write_prediction(prediction, out, "observed" if plan.observed else "relit render",
                      plot=plan.render)
     if not plan.observed:
@@ -206,6 +209,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if plan.reference:
         add_reference_errors(errors, fits, plan, out, pixels, overwrite)
     errors["band_coverage"] = band_coverage(prediction.rows)
+    if scale is not None:
+        errors["target_scale"] = scale
     write_errors(errors, out, point_errors)
     log_errors(errors, plan, log)
     return errors
@@ -401,6 +406,25 @@ BEYOND_WORDS = {"below": "dimmer than their noise let them tell",
                 "highlight": "in a sun highlight nearer the mirror direction than they saw",
                 "angles": f"at sun and view angles over {ANGLES_BEYOND_DEG:.0f} degrees from "
                           "any they saw"}
+
+
+def on_fit_scale(prediction, fits, doc):
+    """Put a table's values on the fits' radiometric scale where one of them is relative
+    (``ingest --unknown-scale``) and they come from different ingests: one factor for every
+    unsaturated value, least squares in relative error, f = sum(o/p) / sum((o/p)^2). Replaces
+    ``prediction.rows``' image values; returns the factor's record, or None."""
+    relative = [relative_scale(doc)] + [bool(r.get("radiometric_scale")) for _, r in fits.values()]
+    own = all(r.get("sequence_run_id") == doc.get("run_id") for _, r in fits.values())
+    ratios = np.array([row.image / row.predicted for row in prediction.rows
+                       if not row.saturated and row.predicted > 0 and row.image > 0])
+    if own or not any(relative) or not len(ratios):
+        return None
+    factor = float(ratios.sum() / (ratios ** 2).sum())
+    prediction.rows = [replace(row, image=row.image * factor) for row in prediction.rows]
+    return {"factor": factor, "values": int(len(ratios)),
+            "meaning": "the target table's values times this factor, fitted to the "
+                       "predictions: the table's or the fits' scale is relative (ingest "
+                       "--unknown-scale), so errors and coverage hold up to one factor"}
 
 
 def band_coverage(rows):
