@@ -510,3 +510,26 @@ def test_an_automatically_sized_cache_grows_until_its_noise_is_a_small_share(day
     given = FitSession(days["clean"], "disc", REGION, cache=FitCache(positions=2, directions=64))
     r = given.run("lm", start=[0.3, 0.1], log=lambda *a: None)
     assert r["light_cache"]["positions"] == 2 and "grown_from" not in r["light_cache"]
+
+
+def test_a_reflectance_on_its_bound_is_named_only_where_the_data_pull_past_it():
+    """beyond_upper_bound names a reflectance at its bound of 1 only where chi-square still
+    falls beyond it (the data brighter than the model allows), not a white or mirror surface
+    whose minimum lies on the bound; sigma_alpha's bound is another warning's."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.fitting.fit_warnings import beyond_upper_bound
+
+    target = np.array([1.2, 0.9, 0.5, 1.1, 0.6])          # the data's unconstrained optimum
+
+    class Quadratic:
+        def jacobian(self, theta):                         # r = target - theta
+            return target - theta, -np.eye(len(theta))
+
+    s = SimpleNamespace(names=("C_r", "C_g", "C_b", "rho_s", "sigma_alpha"),
+                        upper=np.array([1.0, 1.0, 1.0, 1.0, 0.5]))
+    theta = np.array([1.0, 1.0, 0.5, 1.0, 0.5])
+    assert beyond_upper_bound(s, SimpleNamespace(theta=theta, problem=Quadratic())) \
+        == ["C_r", "rho_s"]
+    assert beyond_upper_bound(s, SimpleNamespace(theta=theta, problem=None)) \
+        == ["C_r", "C_g", "rho_s"]

@@ -9,7 +9,7 @@ from .fit_record import held_out_record
 from .geometry import geometry_warnings
 from .intervals import matrix_note
 from .pose import pose_warnings
-from .sky_fit import doubles_interval
+from .sky_fit import doubles_interval, photographed
 from ..physics.sky import MEASURED_SUN_SD
 from ..physics.ward import METAL_THRESHOLD
 from ..pipeline.manifest import is_table
@@ -22,6 +22,19 @@ HELD_OUT_NOTE = 0.005
 NOISE_SHARE = 0.25
 #: Variance widening by correlated channels (:func:`~.uncertainty.channel_factors`) warned of.
 CHANNEL_NOTE = 1.1
+
+
+def beyond_upper_bound(s, fit):
+    """The reflectances of ``fit`` at their upper bound of 1 whose chi-square still falls
+    beyond it (the data brighter than the model allows); one at the bound where chi-square
+    rises past it (a white or mirror surface, the truth on the bound) is not named."""
+    at = [i for i, p in enumerate(s.names)
+          if p != "sigma_alpha" and fit.theta[i] >= s.upper[i] - 1e-3]
+    if not at or fit.problem is None:
+        return [s.names[i] for i in at]
+    r, J = fit.problem.jacobian(np.asarray(fit.theta, dtype=float))
+    slope = 2.0 * (r @ J)                                   # d chi^2 / d theta
+    return [s.names[i] for i in at if slope[i] < 0]
 
 
 def fit_warnings(s, fit):
@@ -44,15 +57,16 @@ def fit_warnings(s, fit):
     if led:
         warnings.append(f"{', '.join(led)}: {matrix_note(s)}; it, more than the "
                         "data, sets their intervals.")
-    top = [p for i, p in enumerate(names)
-           if p != "sigma_alpha" and theta[i] >= s.upper[i] - 1e-3]
+    top = beyond_upper_bound(s, fit)
     if top:
         fix = ("if its values are not radiances in W m^-2 sr^-1 (an instrument's DN), "
                "ingest the table with --calibrate MATERIAL=REFLECTANCE or --unknown-scale"
                if is_table(s.doc) else "check the exposure (--exposure, --calibrate or "
-               "--colorchecker at ingest)")
+               "--colorchecker at ingest)" if photographed(s.doc) else None)
         model = ("another lobe or parameter count may (--model auto ranks them)")
-        cause = (f"the model does not describe these data (a misfit beyond their noise): "
+        cause = (f"the exposure of these rendered frames is exact, so the model cannot "
+                 f"describe them: {model}" if fix is None else
+                 f"the model does not describe these data (a misfit beyond their noise): "
                  f"{model}, or {fix}" if fit.model_error is not None else
                  f"{fix}, or, if it is right, {model}")
         warnings.append(f"{', '.join(top)} at the upper bound of 1: the data are brighter "
