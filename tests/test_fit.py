@@ -523,8 +523,9 @@ def test_a_reflectance_on_its_bound_is_named_only_where_the_data_pull_past_it():
     target = np.array([1.2, 0.9, 0.5, 1.1, 0.6])          # the data's unconstrained optimum
 
     class Quadratic:
-        def jacobian(self, theta):                         # r = target - theta
-            return target - theta, -np.eye(len(theta))
+        def jacobian(self, theta):         # r = target - theta, and a censored value far past
+            r = np.append(target - theta, 0.0)          # its clip: r = 0, dr / dtheta 0/0
+            return r, np.vstack([-np.eye(len(theta)), np.full(len(theta), np.nan)])
 
     s = SimpleNamespace(names=("C_r", "C_g", "C_b", "rho_s", "sigma_alpha"),
                         upper=np.array([1.0, 1.0, 1.0, 1.0, 0.5]))

@@ -18,6 +18,9 @@ from ..pipeline.observation_table import relative_scale
 #: Held-out relative error warned of once its 95% interval lies above it; below, relight's
 #: bands carry it and it changes no conclusion.
 HELD_OUT_NOTE = 0.005
+#: The fall of chi-square per unit of a reflectance past its bound of 1 below which the data
+#: do not pull past it (a minimum on the bound).
+BOUND_PULL = 1e-3
 #: Share of the degrees of freedom above which the model's own noise is warned of.
 NOISE_SHARE = 0.25
 #: Variance widening by correlated channels (:func:`~.uncertainty.channel_factors`) warned of.
@@ -33,8 +36,9 @@ def beyond_upper_bound(s, fit):
     if not at or fit.problem is None:
         return [s.names[i] for i in at]
     r, J = fit.problem.jacobian(np.asarray(fit.theta, dtype=float))
-    slope = 2.0 * (r @ J)                                   # d chi^2 / d theta
-    return [s.names[i] for i in at if slope[i] < 0]
+    # d chi^2 / d theta; a censored value far past its clip has r = 0, dr 0/0: its limit, 0
+    slope = 2.0 * np.nansum(r[:, None] * J, axis=0)
+    return [s.names[i] for i in at if slope[i] < -BOUND_PULL]
 
 
 def fit_warnings(s, fit):

@@ -13,7 +13,7 @@ import json
 import os
 from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -190,9 +190,6 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if pixels is None:
         pixels = target_pixels(fits, predicted, seed)
     prediction = predict(fits, predicted, pixels, draws, seed, log)
-    scale = on_fit_scale(prediction, fits, plan.doc) if plan.table else None
-    if scale is not None:
-        log(f"the target table's values put on the fits' scale: times {scale['factor']:.4g}")
     write_prediction(prediction, out, "observed" if plan.observed else "relit render",
                      plot=plan.render)
     if not plan.observed:
@@ -209,8 +206,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if plan.reference:
         add_reference_errors(errors, fits, plan, out, pixels, overwrite)
     errors["band_coverage"] = band_coverage(prediction.rows)
-    if scale is not None:
-        errors["target_scale"] = scale
+    if prediction.scales:
+        errors["target_scale"] = prediction.scales
     write_errors(errors, out, point_errors)
     log_errors(errors, plan, log)
     return errors
@@ -406,25 +403,6 @@ BEYOND_WORDS = {"below": "dimmer than their noise let them tell",
                 "highlight": "in a sun highlight nearer the mirror direction than they saw",
                 "angles": f"at sun and view angles over {ANGLES_BEYOND_DEG:.0f} degrees from "
                           "any they saw"}
-
-
-def on_fit_scale(prediction, fits, doc):
-    """Put a table's values on the fits' radiometric scale where one of them is relative
-    (``ingest --unknown-scale``) and they come from different ingests: one factor for every
-    unsaturated value, least squares in relative error, f = sum(o/p) / sum((o/p)^2). Replaces
-    ``prediction.rows``' image values; returns the factor's record, or None."""
-    relative = [relative_scale(doc)] + [bool(r.get("radiometric_scale")) for _, r in fits.values()]
-    own = all(r.get("sequence_run_id") == doc.get("run_id") for _, r in fits.values())
-    ratios = np.array([row.image / row.predicted for row in prediction.rows
-                       if not row.saturated and row.predicted > 0 and row.image > 0])
-    if own or not any(relative) or not len(ratios):
-        return None
-    factor = float(ratios.sum() / (ratios ** 2).sum())
-    prediction.rows = [replace(row, image=row.image * factor) for row in prediction.rows]
-    return {"factor": factor, "values": int(len(ratios)),
-            "meaning": "the target table's values times this factor, fitted to the "
-                       "predictions: the table's or the fits' scale is relative (ingest "
-                       "--unknown-scale), so errors and coverage hold up to one factor"}
 
 
 def band_coverage(rows):
@@ -693,6 +671,8 @@ class Prediction:
 
     rows: list
     region_means: dict
+    #: per region, the factor that put a table's values on the fit's scale (:func:`_on_fit_scale`)
+    scales: dict = field(default_factory=dict)
 
 
 def write_prediction(prediction, out, image_kind, plot=True):
@@ -816,15 +796,20 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
         shared = fitted_sessions({region: r for region, (_, r) in fits.items()}, target, pixels,
                                  cache=FitCache(*PREDICTION_CACHE, seed, "anchors"), min_frames=1)
         sessions = ((region, shared.pop(region)) for region in sorted(fits))
-    rows, means = [], {}
+    rows, means, scales = [], {}, {}
     for region, s in sessions:                          # each let go when done with
-        region_rows, means[region] = predict_region(s, fits[region][1], target, draws, rng)
+        region_rows, means[region], scale = predict_region(s, fits[region][1], target, draws,
+                                                           rng)
         rows += region_rows
+        if scale is not None:
+            scales[region] = scale
+            log(f"{region}: the table's values put on the fit's scale, times "
+                f"{scale['factor']:.4g} (each frame's factor from the other frames')")
         log(f"{region}: predicted {len(s.obs.frames)} frames from {draws} parameter draws"
             + (f" (under the target's spec sky: the fit's sky level k = "
                f"{fits[region][1]['sky']['k']:.3g} belongs to its own day)"
                if fits[region][1].get("sky") is not None and not s.light.split else ""))
-    return Prediction(rows, means)
+    return Prediction(rows, means, scales)
 
 
 def _table_session(target, region, result, seed):
@@ -876,7 +861,7 @@ def _predict_means(s, result, target, draws, rng):
     means, observed = means[..., :len(names)], observed[..., :len(names)]
     rows = _prediction_rows(s, result, [a[None] for a in (means[0], lo, hi, extra, observed)],
                  np.ndindex(1, *means[0].shape), 0.0)
-    return rows, _means_error(s, means[0], observed, region_mean)
+    return rows, _means_error(s, means[0], observed, region_mean), None
 
 
 def _prediction_rows(s, result, values, where, lower, points=None, saturated=None):
@@ -941,6 +926,7 @@ def _predict_points(s, result, target, draws, rng):
         at_fit[part] = values[0]
         lo[part], hi[part] = np.percentile(values[1:], [2.5, 97.5], axis=0)
     _, model_var = s.wm.radiance_and_variance(sets[0])
+    scale = _on_fit_scale(s, result, at_fit, target)
     image = image_values(s, target)
     extra = band_half_width(image_noise_variance(s, image, at_fit, target) + model_var, at_fit,
                             *model_error_kappa(result))
@@ -950,7 +936,38 @@ def _predict_points(s, result, target, draws, rng):
                  [str(x) for x in s.obs.pixels], ~_measured(s))     # one string a point, shared
     region_mean = _region_mean(s)
     return rows, _means_error(s, region_mean(at_fit)[..., :len(names)],
-                              region_mean(image)[..., :len(names)], region_mean)
+                              region_mean(image)[..., :len(names)], region_mean), scale
+
+
+def _on_fit_scale(s, result, at_fit, target):
+    """Put table session ``s``'s values on the fit's radiometric scale where one of the two is
+    relative (ingest --unknown-scale) and they come from different ingests: each frame's values
+    times the factor the other frames' give (least squares in relative error, f = sum(o/p) /
+    sum((o/p)^2), over measured, unsaturated values within the fit's measured range), so no
+    frame is scored with its own. Scales the session's gain (values, noise and means alike);
+    returns the factor's record, or None."""
+    if result.get("sequence_run_id") == s.doc.get("run_id") or not (
+            relative_scale(s.doc) or result.get("radiometric_scale")):
+        return None
+    image = image_values(s, target)
+    use = _measured(s) & (at_fit > 0) & (image > 0)
+    ranges = (result.get("measured_range") or {}).get("by_channel") or {}
+    for c, name in enumerate(_channels(s)):
+        lo_hi = ranges.get(name)
+        if lo_hi:
+            use[..., c] &= (at_fit[..., c] >= lo_hi[0]) & (at_fit[..., c] <= lo_hi[1])
+    use = use if use.any() else _measured(s) & (at_fit > 0) & (image > 0)
+    ratio = np.where(use, image / np.where(use, at_fit, 1.0), 0.0)
+    a, b = ratio.sum(axis=(0, 2)), (ratio ** 2).sum(axis=(0, 2))          # per frame
+    factor = float(a.sum() / b.sum())
+    others = b.sum() - b
+    by_frame = np.where(others > 0, (a.sum() - a) / np.where(others > 0, others, 1.0), factor)
+    s.obs.gain = s.obs.gain / by_frame[None, :, None]
+    return {"factor": factor, "by_frame": by_frame.tolist(), "values": int(use.sum()),
+            "meaning": "the table's or the fit's scale is relative (ingest --unknown-scale): "
+                       "each frame's values are put on the fit's by the factor the other "
+                       "frames' values give against the predictions (factor: all frames'); "
+                       "errors and coverage hold up to it"}
 
 
 def model_error_kappa(result):

@@ -46,7 +46,7 @@ RANK_PIXELS, RANK_CANDIDATES = 16, 1
 def cross_validate(session, model, folds=FOLDS, scale=1.0):
     """One candidate on a traced :class:`~.fit.FitSession`: summed held-out chi-square over
     ``folds``, the full fit's chi-square, parameters and dof, AIC and BIC; chi-squares and
-    counts times ``scale``, the fit's pixels over the session's (a ranking on a subset)."""
+    counts times ``scale``, the fit's data over the session's (:func:`information`)."""
     obs, table = session.obs, session.table
     wm = TableModel(table, model)
     wm = LuminanceModel(wm) if obs.luminance else wm
@@ -64,13 +64,20 @@ def cross_validate(session, model, folds=FOLDS, scale=1.0):
         r = test.residuals(polish(train, theta, lo, hi)["theta"])
         held_out += float(r @ r)
         n_held += r.size
-    n, p = full.n_data * scale, full.n_params
-    held_out, n_held, chi2 = held_out * scale, n_held * scale, chi2 * scale
+    n, p = round(full.n_data * scale), full.n_params
+    held_out, n_held, chi2 = held_out * scale, round(n_held * scale), chi2 * scale
     return {"normalisation": table.normalisation, "model": model, "parameters": p,
             "held_out_chi2": held_out, "held_out_values": n_held,
             "held_out_chi2_per_value": held_out / max(n_held, 1),
-            "chi2": chi2, "dof": full.dof, "aic": chi2 + 2 * p, "bic": chi2 + p * np.log(n),
+            "chi2": chi2, "dof": n - p, "aic": chi2 + 2 * p, "bic": chi2 + p * np.log(n),
             "theta": dict(zip(PARAMETERS[model], theta.tolist()))}
+
+
+def information(obs):
+    """Sum of (y / sigma)^2 over a region's usable values: what chi-square differences of
+    relative misfits grow with (errors that JPEG blocks share counted through sigma)."""
+    ok = np.isfinite(obs.sigma) & (obs.sigma > 0)
+    return float(np.sum((obs.y[ok] / obs.sigma[ok]) ** 2))
 
 
 def rank(sessions, models=MODELS, folds=FOLDS, log=print, scale=1.0):
@@ -127,9 +134,8 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     level a Ward fit finds first. Yields each region's result dict with ``model_selection``."""
     options["cache"] = replace(options.get("cache", FitCache()), seed=seed)
 
-    def sessions_of(subset=None, **kw):
-        return {name: FitSession(manifest_path, name,
-                                 px if subset is None else subsample_region(px, subset, seed),
+    def sessions_of(pixels=None, **kw):
+        return {name: FitSession(manifest_path, name, px if pixels is None else pixels[name],
                                  light=None, **{**options, **kw}) for name, px in regions}
     t_start = time.perf_counter()
     first = FitSession(manifest_path, *regions[0], light=None,
@@ -143,6 +149,15 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     reuse = table and not plan.split
     ranking_cache = given if table else replace(
         given, positions=min(RANK_POSITIONS, given.positions or RANK_POSITIONS), plan=RANK_PLAN)
+    # an image region's ranking pixels: a seeded subset of those the fit can use, and the
+    # fit's data over theirs (information), by which its chi-squares are scaled
+    ranked, fit_information = None, {}
+    if not table:
+        ranked = {}
+        for name, s in sessions_of(model=models[0]).items():
+            usable = s.obs.pixels[np.isfinite(s.obs.sigma).any(axis=(1, 2))]
+            ranked[name] = subsample_region(usable, RANK_PIXELS, seed)
+            fit_information[name] = information(s.obs)
     level = None
     if plan.split:
         # rank in the spec's sky at a Ward fit's level (a wrong level favours lobes that bend)
@@ -157,8 +172,8 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     sessions, trace_s = {}, {}
     for fam in families:
         t0 = time.perf_counter()
-        sessions[fam] = sessions_of(None if table else RANK_PIXELS, model=models[0],
-                                    normalisation=fam, cache=ranking_cache)
+        sessions[fam] = sessions_of(ranked, model=models[0], normalisation=fam,
+                                    cache=ranking_cache)
         if level is not None:                     # the spec's light at the level, before tracing
             for s in sessions[fam].values():
                 s.skies = skies_at_level(s.skies, level, s.obs.times)
@@ -173,9 +188,8 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     for name, pixels in regions:
         t_region = time.perf_counter()
         traced = {fam: sessions[fam].pop(name) for fam in families}
-        ranked_pixels = len(traced[families[0]].obs.pixels)
-        rows = rank(list(traced.values()), models, folds, log,
-                    scale=1.0 if table else len(pixels) / ranked_pixels)
+        scale = fit_information[name] / information(traced[families[0]].obs) if ranked else 1.0
+        rows = rank(list(traced.values()), models, folds, log, scale)
         pick, overdispersion = choose(rows)
         log(f"{name}: chose {pick['normalisation']} {pick['model']} (rank {pick['rank']} of "
             f"{len(rows)} by held-out chi2 over {folds} folds of frames, overdispersion "
@@ -188,10 +202,11 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         chosen[name] = s
         selection[name] = {
             "criterion": f"held-out chi2, {folds}-fold over frames (frame t in fold t mod "
-                         f"{folds}), on the ranking light's pixels and scaled to the fit's; "
+                         f"{folds}), on the ranking light's pixels and scaled to the fit's "
+                         f"data (ranking_scale: the sum of (y / sigma)^2 over theirs); "
                          f"the fewest parameters within c sqrt(2 n) of the best (c the best's "
                          f"held-out chi2 per value, at least 1), ranked in {ranked_in}",
-            "overdispersion": overdispersion,
+            "overdispersion": overdispersion, "ranking_scale": scale,
             "ranked_at_sky": None if level is None else {
                 k: level[k] for k in ("k", "interval95", "terms")},
             "ranking_light": ranking_light,
