@@ -354,6 +354,11 @@ def test_a_held_out_table_of_unknown_scale_is_put_on_the_fits_scale(dn_rig, tmp_
     assert len(scale["by_frame"]) == 5 and np.allclose(scale["by_frame"], expected, rtol=0.03)
     assert errors["rel_rms"] < 0.05 and errors["region_means"]["sample"]["fit"] < 0.05
     assert errors["band_coverage"]["share"] >= 0.8, errors
+    # relit onto the rig's rendered frames, the relative fit is named, not scaled
+    assert main(["relight", str(tmp_path / "fit"), "--target", str(tmp / "render"),
+                 "--no-images", "-o", str(tmp_path / "relit_render")]) == 0
+    errors = json.loads((tmp_path / "relit_render" / "relight.json").read_text())
+    assert errors["relative_scale_fits"] == ["sample"] and "target_scale" not in errors
 
 
 @pytest.mark.parametrize("reference, message", [

@@ -190,6 +190,11 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if pixels is None:
         pixels = target_pixels(fits, predicted, seed)
     prediction = predict(fits, predicted, pixels, draws, seed, log)
+    relative = [] if plan.table else sorted(
+        region for region, (_, r) in fits.items() if r.get("radiometric_scale"))
+    if relative:
+        log(f"{', '.join(relative)}: fitted on a relative scale (ingest --unknown-scale), so "
+            "their predicted radiances are the true ones times that table's unknown factor")
     write_prediction(prediction, out, "observed" if plan.observed else "relit render",
                      plot=plan.render)
     if not plan.observed:
@@ -208,6 +213,8 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     errors["band_coverage"] = band_coverage(prediction.rows)
     if prediction.scales:
         errors["target_scale"] = prediction.scales
+    if relative:
+        errors["relative_scale_fits"] = relative
     write_errors(errors, out, point_errors)
     log_errors(errors, plan, log)
     return errors
