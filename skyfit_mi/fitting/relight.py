@@ -964,6 +964,8 @@ def _on_fit_scale(s, result, at_fit, target):
         if lo_hi:
             use[..., c] &= (at_fit[..., c] >= lo_hi[0]) & (at_fit[..., c] <= lo_hi[1])
     use = use if use.any() else _measured(s) & (at_fit > 0) & (image > 0)
+    if not use.any():
+        return None
     ratio = np.where(use, image / np.where(use, at_fit, 1.0), 0.0)
     a, b = ratio.sum(axis=(0, 2)), (ratio ** 2).sum(axis=(0, 2))          # per frame
     factor = float(a.sum() / b.sum())

@@ -102,8 +102,9 @@ def choose(rows):
     """The one-standard-error rule's choice of a ranking (best first): the fewest parameters
     within c sqrt(2 n) (n held-out values) of the best held-out chi-square, then the best among
     those; c = max(1, the best's held-out chi-square per value) counts what the noise model
-    leaves out (model error, quantisation) as the quasi-likelihood's overdispersion does
-    (Burnham & Anderson 2002, sec. 2.5). Returns (the choice, c)."""
+    leaves out (model error, quantisation) as the variance inflation factor c-hat does
+    in QAIC (Burnham & Anderson 2002, *Model Selection and Multimodel Inference*, 2nd ed.).
+    Returns (the choice, c)."""
     best = rows[0]
     c = max(1.0, best["held_out_chi2_per_value"])
     near = [r for r in rows if r["held_out_chi2"] <= best["held_out_chi2"]
