@@ -763,8 +763,10 @@ def reference_factor(sessions, sky, fit, log=print):
 
 
 def prepare_sessions(sessions, light=LightOptions(), seed=0, log=print):
-    """Trace ``sessions`` ({region: FitSession}) under the resolved ``light`` and fit the sky
-    where it is not the spec's; returns the :class:`~.sky_fit.SkyFit` (empty for the spec's)."""
+    """Trace ``sessions`` ({region: FitSession}) under the resolved ``light`` (those that took it
+    traced already, :meth:`FitSession.take_light`, as they are) and fit the sky where it is not
+    the spec's; returns the :class:`~.sky_fit.SkyFit` (empty for the spec's)."""
     plan = resolve_light(sessions, light, log)
-    trace_sessions(list(sessions.values()), plan)
+    trace_sessions([s for s in sessions.values() if s.parts is None or s.light is not plan],
+                   plan)
     return fit_sky_scale(list(sessions.values()), plan, seed, log) if plan.split else SkyFit(None)

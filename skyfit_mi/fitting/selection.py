@@ -159,12 +159,12 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
             usable = s.obs.pixels[np.isfinite(s.obs.sigma).any(axis=(1, 2))]
             ranked[name] = subsample_region(usable, RANK_PIXELS, seed)
             fit_information[name] = information(s.obs)
-    level = None
+    level, ward = None, {}
     if plan.split:
-        # rank in the spec's sky at a Ward fit's level (a wrong level favours lobes that bend)
+        # rank in the spec's sky at a Ward fit's level (a wrong level favours lobes that bend);
+        # a region that chooses Ward's lobe fits on these sessions' light
         ward = sessions_of(model="achromatic" if first.obs.luminance else "colour")
         level = prepare_sessions(ward, plan, seed, lambda *a: None).record
-        del ward
     ranked_in = ("the spec's light as it is" if level is None else "the spec's sky at the level "
                  f"a fit of Ward's lobe found first (k = {level['k']:.3g})")
     log(f"model selection ranks in {ranked_in}; the chosen models are fitted "
@@ -199,6 +199,9 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
                        normalisation=pick["normalisation"], light=None, **options)
         if reuse:                  # the table is the same for any parameterisation
             s.take_light(traced[pick["normalisation"]])
+        level_light = ward.pop(name, None)
+        if level_light is not None and pick["normalisation"] == level_light.normalisation:
+            s.take_light(level_light)                 # the level's light, traced for the fit
         del traced
         chosen[name] = s
         selection[name] = {
