@@ -957,13 +957,14 @@ def _on_fit_scale(s, result, at_fit, target):
             relative_scale(s.doc) or result.get("radiometric_scale")):
         return None
     image = image_values(s, target)
-    use = _measured(s) & (at_fit > 0) & (image > 0)
+    measured = _measured(s) & (at_fit > 0) & (image > 0)
+    use = measured.copy()
     ranges = (result.get("measured_range") or {}).get("by_channel") or {}
     for c, name in enumerate(_channels(s)):
         lo_hi = ranges.get(name)
         if lo_hi:
             use[..., c] &= (at_fit[..., c] >= lo_hi[0]) & (at_fit[..., c] <= lo_hi[1])
-    use = use if use.any() else _measured(s) & (at_fit > 0) & (image > 0)
+    use = use if use.any() else measured
     if not use.any():
         return None
     ratio = np.where(use, image / np.where(use, at_fit, 1.0), 0.0)

@@ -150,21 +150,22 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     reuse = table and not plan.split
     ranking_cache = given if table else replace(
         given, positions=min(RANK_POSITIONS, given.positions or RANK_POSITIONS), plan=RANK_PLAN)
-    # an image region's ranking pixels: a seeded subset of those the fit can use, and the
-    # fit's data over theirs (information), by which its chi-squares are scaled
-    ranked, fit_information = None, {}
-    if not table:
-        ranked = {}
-        for name, s in sessions_of(model=models[0]).items():
-            usable = s.obs.pixels[np.isfinite(s.obs.sigma).any(axis=(1, 2))]
-            ranked[name] = subsample_region(usable, RANK_PIXELS, seed)
-            fit_information[name] = information(s.obs)
-    level, ward = None, {}
+    # the regions at the fit's pixels, with Ward's lobe: an image region's ranking takes a
+    # seeded subset of the pixels they can use, its chi-squares scaled by their data over the
+    # subset's (information); under a fitted sky they find the level first
+    ward = sessions_of(model="achromatic" if first.obs.luminance else "colour") \
+        if plan.split or not table else {}
+    ranked = None if table else {
+        name: subsample_region(s.obs.pixels[np.isfinite(s.obs.sigma).any(axis=(1, 2))],
+                               RANK_PIXELS, seed) for name, s in ward.items()}
+    fit_information = {name: information(s.obs) for name, s in ward.items()}
+    level = None
     if plan.split:
         # rank in the spec's sky at a Ward fit's level (a wrong level favours lobes that bend);
         # a region that chooses Ward's lobe fits on these sessions' light
-        ward = sessions_of(model="achromatic" if first.obs.luminance else "colour")
         level = prepare_sessions(ward, plan, seed, lambda *a: None).record
+    else:
+        ward = {}
     ranked_in = ("the spec's light as it is" if level is None else "the spec's sky at the level "
                  f"a fit of Ward's lobe found first (k = {level['k']:.3g})")
     log(f"model selection ranks in {ranked_in}; the chosen models are fitted "
