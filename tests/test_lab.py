@@ -5,6 +5,7 @@ relight, chi2map) runs on the example of scenes/lab in tests/test_lab_example.py
 import csv
 import json
 import re
+import time
 
 import numpy as np
 import pytest
@@ -306,13 +307,19 @@ def test_a_table_of_unknown_scale_gives_relative_reflectances_without_a_bound(dn
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "fit it with --model 3 or 5" in err, err
     # --model auto leaves the 2-parameter model out, says so, and counts the ranking's time
+    # once: the table the ranking traced and the fit reused is in the fit's time alone
+    t0 = time.perf_counter()
     assert main(["fit", str(tmp_path / "seq"), "--region", "sample", "--model", "auto", "-o",
                  str(tmp_path / "auto")]) == 0
+    elapsed = time.perf_counter() - t0
     r = json.loads((tmp_path / "auto" / "fit_sample.json").read_text())
     sel = r["model_selection"]
     assert "two" in sel["left_out"] and "unknown" in sel["left_out"]["two"]
     assert {row["model"] for row in sel["ranking"]} == {"achromatic", "colour"}
     assert r["wall_time_s"] == pytest.approx(r["fit_wall_time_s"] + sel["wall_time_s"])
+    assert sel["reused_trace_time_s"] == pytest.approx(r["light_cache_time_s"], abs=0.05)
+    assert sel["reused_trace_time_s"] > 0
+    assert 0.5 * elapsed < r["wall_time_s"] <= elapsed
 
 
 def test_a_held_out_table_of_unknown_scale_is_put_on_the_fits_scale(dn_rig, tmp_path):

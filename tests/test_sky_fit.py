@@ -189,6 +189,7 @@ def test_the_whole_lights_level_over_the_day_is_fitted_where_the_frames_keep_exi
                                            _curve_record, default_level_terms, light_level_at,
                                            skies_at_level, time_basis)
     from skyfit_mi.physics.sky import Sky
+    from skyfit_mi.physics.sky_departure import PRIOR_SD
 
     photos = {"source": "photographs", "ingest": {"calibration": {"light_drift": True}}}
     assert default_level_terms(photos, 13) == LEVEL_TERMS == 2
@@ -201,10 +202,10 @@ def test_the_whole_lights_level_over_the_day_is_fitted_where_the_frames_keep_exi
     assert default_level_terms({"source": "photographs", "ingest": {}}, 13) == 0
     assert default_level_terms({"source": "render"}, 13) == 0
 
-    c = SkyCoefficients(1, ("departure:Y10",), 0.35, LEVEL_TERMS)
-    assert c.names == ["log k", "departure Y10", "log light term 1", "log light term 2"]
+    c = SkyCoefficients(1, ("departure:sun P2",), 0.35, LEVEL_TERMS)
+    assert c.names == ["log k", "departure sun P2", "log light term 1", "log light term 2"]
     assert c.columns == 3
-    np.testing.assert_allclose(np.diag(c.precision)[2:], DRIFT_SD ** -2)
+    np.testing.assert_allclose(np.diag(c.precision)[1:], [PRIOR_SD[3] ** -2] + [DRIFT_SD ** -2] * 2)
     times = [f"2026-08-16T{h:02d}:00:00+00:00" for h in (9, 12, 15)]
     span = (1786870800.0, 1786892400.0)
     basis = time_basis(times, span, c.columns)
@@ -219,7 +220,7 @@ def test_the_whole_lights_level_over_the_day_is_fitted_where_the_frames_keep_exi
     np.testing.assert_allclose(s.k, 1.3)
     np.testing.assert_allclose(s.mix, [0.1])
     np.testing.assert_allclose(s.level, np.exp(0.2 * basis[:, 1] - 0.05 * basis[:, 2]))
-    plain = SkyCoefficients(1, ("departure:Y10",), 0.35)
+    plain = SkyCoefficients(1, ("departure:sun P2",), 0.35)
     plain.light(s, basis[:, :1], u[:2])
     assert s.level is None
 

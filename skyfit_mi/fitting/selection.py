@@ -198,11 +198,13 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
             f"{overdispersion:.3g})")
         s = FitSession(manifest_path, name, pixels, model=pick["model"],
                        normalisation=pick["normalisation"], light=None, **options)
+        own = s.cache_time
         if reuse:                  # the table is the same for any parameterisation
             s.take_light(traced[pick["normalisation"]])
         level_light = ward.pop(name, None)
         if level_light is not None and pick["normalisation"] == level_light.normalisation:
             s.take_light(level_light)                 # the level's light, traced for the fit
+        reused = s.cache_time - own                   # counted in the fit's time, not here
         del traced
         chosen[name] = s
         selection[name] = {
@@ -218,7 +220,8 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
             "folds": int(folds), "chosen": {"normalisation": pick["normalisation"],
                                             "model": pick["model"], "rank": pick["rank"]},
             "left_out": skipped, "trace_time_s": trace_s, "ranking": rows,
-            "wall_time_s": shared_s + time.perf_counter() - t_region}
+            "reused_trace_time_s": reused,
+            "wall_time_s": shared_s + time.perf_counter() - t_region - reused}
     if plan.split:
         for out in fit_sessions(chosen, "global", seed, log=log, light=plan):
             yield _with_selection(out, selection[out["region"]])

@@ -64,7 +64,7 @@ DRIFT_SD = 0.35
 #: measured clear sky").
 SHAPE_SD = 1.0
 #: p-value of the fitted departure under its prior below which the sky is warned to depart from
-#: its model more than real clear skies do (:func:`_departure_warnings`).
+#: its model more than real skies and published sky models do (:func:`_departure_warnings`).
 DEPARTURE_CONFLICT_P = 0.001
 #: Step in each term's coefficient of the finite differences of the residuals.
 DRIFT_STEP = 1e-3
@@ -404,7 +404,8 @@ class SkyCoefficients:
     def precision(self):
         """The priors' precision matrix (1 / sd^2 on the diagonal; 0 for no prior)."""
         sd = [self.level_sd] + [DRIFT_SD] * (self.terms - 1) + [
-            SHAPE_SD if v.startswith("shape:") else DEPARTURE_SD for v in self.variants] + [
+            SHAPE_SD if v.startswith("shape:")
+            else DEPARTURE_SD[BASIS.index(v.removeprefix("departure:"))] for v in self.variants] + [
             DRIFT_SD] * self.light_terms
         return np.diag([0.0 if v is None else v ** -2 for v in sd])
 
@@ -868,11 +869,12 @@ def _departure_record(a, covariance):
                        "times 1 + sum_j weights[j] B_j above the horizon, B_j the basis of the "
                        "zenith angle theta and the angle gamma from the sun (u = 2 cos theta - 1, "
                        "y = cos gamma; P1, P2 Legendre), each weight under the prior N(0, "
-                       "prior_sd^2) measured from real clear skies; the fit marginalises it "
+                       "prior_sd^2) measured from a clear day's scans and published sky models; "
+                       "the fit marginalises it "
                        "into every interval; conflict: sum (weights / prior_sd)^2, chi-square "
                        "with len(basis) degrees of freedom under the prior, and its p-value",
             "basis": list(BASIS), "weights": np.asarray(a).tolist(), "sd": sd.tolist(),
-            "covariance": np.asarray(covariance).tolist(), "prior_sd": DEPARTURE_SD,
+            "covariance": np.asarray(covariance).tolist(), "prior_sd": DEPARTURE_SD.tolist(),
             "conflict": chi2, "conflict_p": float(chdtrc(len(a), chi2))}
 
 
@@ -880,10 +882,11 @@ def _departure_warnings(departure):
     """A warning where the departure conflicts with its prior (:data:`DEPARTURE_CONFLICT_P`)."""
     if departure["conflict_p"] >= DEPARTURE_CONFLICT_P:
         return []
-    return [f"the sky departs from the spec's model more than measured clear skies depart from "
-            f"theirs (its field's weights {', '.join(f'{v:+.2f}' for v in departure['weights'])}"
-            f" against a prior sd of {DEPARTURE_SD:g}; chi-square {departure['conflict']:.1f} "
-            f"for {len(departure['weights'])}): the prior holds the field back, so the "
+    return [f"the sky departs from the spec's model more than measured skies and published "
+            f"models depart from it (its field's weights "
+            f"{', '.join(f'{v:+.2f}' for v in departure['weights'])} against prior sds of "
+            f"{', '.join(f'{v:g}' for v in DEPARTURE_SD)}; chi-square "
+            f"{departure['conflict']:.1f} for {len(departure['weights'])}): the prior holds the field back, so the "
             "parameters and their intervals may not be reliable; give the spec a sky nearer the "
             "day's (a measured one: perez with measured irradiance, or envmap, or a sky "
             "photographed), or fit its shape too (--sky-shape)."]
@@ -993,6 +996,6 @@ def _sky_log(record, fitted, regions, prior_sd, terms):
                "; its departure from the model: " + ", ".join(
                    f"{b} {a:+.3f} +- {e:.3f}" for b, a, e in zip(
                        BASIS, fitted.departure["weights"], fitted.departure["sd"]))
-               + f" (prior sd {DEPARTURE_SD:g})")
+               + f" (prior sds {', '.join(f'{v:g}' for v in DEPARTURE_SD)})")
             + f" ({record['time_s']:.1f} s)"
             + "".join(f"\n  warning: {w}" for w in record["warnings"]))

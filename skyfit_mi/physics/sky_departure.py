@@ -12,10 +12,12 @@ P2(y), u y), P_n the Legendre polynomials.  Every |B_j| <= 1 above the horizon, 
 by 1 + B_j is a light (:func:`departure_parts`), and the a_j are weights of traced parts, as the
 shape variants' mix.  The ground is not moved.
 
-The weights' prior N(0, :data:`PRIOR_SD` ^2 I) is measured on the Kider et al. 2014 scans
-(``skyfit_testkit.sky_measurement``) against the thesis's CIE clear sky (:func:`scan_departure`;
-``scripts/sky_departure_prior.py``).  One clear day holds no haze or cloud, so it is a clear
-sky's prior: a sky further from its model shows as a weight beyond it (:func:`conflict`).
+The weights' prior N(0, diag :data:`PRIOR_SD` ^2) is measured against the thesis's CIE clear
+sky (:func:`scan_departure`; ``scripts/sky_departure_prior.py``) on the Kider et al. 2014 scans
+of a clear day (``skyfit_testkit.sky_measurement``) and on published models fitted to many
+measured skies: Preetham et al.'s clear skies of turbidity 2-7 and the CIE general skies from
+partly cloudy to turbid cloudless (types 7-15).  A sky further from its model than those shows
+as a weight beyond it (:func:`conflict`).
 """
 
 from dataclasses import replace
@@ -26,9 +28,10 @@ from ..conventions import unit_directions
 
 #: The field's basis functions by name (:func:`basis`).
 BASIS = ("zenith P1", "zenith P2", "sun P1", "sun P2", "zenith x sun")
-#: Prior sd of every weight a_j: the least (in steps of 0.05) whose 95% region holds the
-#: weights of at least 90% of the 15 scans (``scripts/sky_departure_prior.py``).
-PRIOR_SD = 0.25
+#: Prior sd of each weight a_j [unitless]: the sds expectation-maximisation finds over the
+#: scans and the published models together, times the least factor (steps of 0.1; 1.4) whose
+#: 95% region holds at least 90% of each of the three (``scripts/sky_departure_prior.py``).
+PRIOR_SD = np.array([0.62, 0.14, 0.21, 0.35, 0.20])
 
 
 def basis(directions, sun):
@@ -72,6 +75,6 @@ def scan_departure(directions, measured, model, sun):
 
 
 def conflict(weights, sd=PRIOR_SD):
-    """The fitted field's distance from its prior: sum_j (a_j / sd)^2, chi-square with J
+    """The fitted field's distance from its prior: sum_j (a_j / sd_j)^2, chi-square with J
     degrees of freedom under the prior [unitless]."""
     return float(np.sum((np.asarray(weights, dtype=float) / sd) ** 2))
