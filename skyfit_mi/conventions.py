@@ -5,6 +5,8 @@
 * Azimuth ``phi`` [rad]: compass bearing from north (+Y) toward east (+X), so east is pi/2,
   south pi; the solar azimuth convention of NREL SPA / pvlib and of the thesis (eq. 4.4).
 * Degrees only at the user boundary (arguments named ``*_deg``, spec files, outputs).
+* Smooth curves over a day: Legendre polynomials of the time mapped onto [-1, 1] over the
+  frames' span (:func:`time_legendre`).
 """
 
 import numpy as np
@@ -31,3 +33,12 @@ def angles_from_direction(d):
     theta = np.arccos(np.clip(d[..., 2], -1.0, 1.0))
     phi = np.mod(np.arctan2(d[..., 0], d[..., 1]), 2 * np.pi)
     return theta, phi
+
+
+def time_legendre(seconds, span, terms):
+    """(n, ``terms``) Legendre polynomials P_0.. of ``seconds`` (n,) [s] mapped onto [-1, 1]
+    over ``span`` (first, last) [s], held beyond it."""
+    t0, t1 = span
+    x = np.clip(2.0 * (np.asarray(seconds, dtype=float) - t0) / max(t1 - t0, 1.0) - 1.0,
+                -1.0, 1.0)
+    return np.polynomial.legendre.legvander(x, terms - 1)

@@ -24,6 +24,7 @@ import numpy as np
 from scipy.special import chdtrc
 
 from . import uncertainty as unc
+from ..conventions import time_legendre
 from ..errors import SkyfitError
 from .methods.levenberg_marquardt import levenberg_marquardt
 from ..pipeline.manifest import RENDERED_SOURCES
@@ -185,9 +186,7 @@ def _seconds(times):
 def time_basis(times, span, terms):
     """(T, ``terms``) Legendre polynomials of the ISO ``times`` mapped onto [-1, 1] over ``span``
     [s since the epoch], held beyond it: log k(t) = basis @ coefficients."""
-    t0, t1 = span
-    x = np.clip(2.0 * (_seconds(times) - t0) / max(t1 - t0, 1.0) - 1.0, -1.0, 1.0)
-    return np.polynomial.legendre.legvander(x, terms - 1)
+    return time_legendre(_seconds(times), span, terms)
 
 
 def _curve_at(curve, times):

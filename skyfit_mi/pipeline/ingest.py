@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..conventions import time_legendre
 from ..errors import SkyfitError
 from ..files import FolderLock
 from ..physics.camera import SensorModel
@@ -510,9 +511,8 @@ def exif_scatter(ratio, var, seconds=None):
     dev = np.log(np.asarray(ratio, dtype=float))
     n = len(dev)
     terms = 1 if seconds is None else max(1, min(EXPOSURE_CURVE_TERMS, n - 1))
-    x = np.zeros(n) if terms == 1 else 2.0 * (seconds - seconds.min()) / max(
-        np.ptp(seconds), 1.0) - 1.0
-    basis = np.polynomial.legendre.legvander(x, terms - 1)
+    basis = np.ones((n, 1)) if terms == 1 else time_legendre(
+        seconds, (seconds.min(), seconds.max()), terms)
     curve = basis @ np.linalg.lstsq(basis, dev, rcond=None)[0]
     w = 1.0 / np.maximum(np.asarray(var, dtype=float), 1e-12)
     chi2 = float(np.sum((dev - curve) ** 2 * w))                 # about the curve
