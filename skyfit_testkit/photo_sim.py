@@ -34,6 +34,10 @@ ORIENTATION = 0x0112
 SIM_F_NUMBER, SIM_ISO = 8.0, 100
 #: Shutter times of the auto-exposure [s]: third stops from 1/4000 to 1/15 s.
 SHUTTER_STOPS = 2.0 ** (-np.arange(36) / 3.0) / 15.0
+#: A camera's shutter labels [s] (``nominal_exif``): the rounded nominal third-stop series,
+#: 1/4000 to 1/15 s (1/125 for 1/128 s, 1/60 for 1/64).
+NOMINAL_SHUTTER = 1.0 / np.array([4000, 3200, 2500, 2000, 1600, 1250, 1000, 800, 640, 500, 400,
+                                  320, 250, 200, 160, 125, 100, 80, 60, 50, 40, 30, 25, 20, 15])
 FORMATS = {"jpeg": ".jpg", "png": ".png", "tiff": ".tif", "dng": ".dng"}
 #: The RAW camera of ``fmt="dng"``: XYZ (D65) -> camera RGB of the Canon EOS 5D Mark II (Adobe's
 #: ColorMatrix, LibRaw's ``adobe_coeff`` x 10^-4), far from diagonal as a real sensor's is.
@@ -183,6 +187,8 @@ class PhotoSettings:
     cos4, offset : apply cos^4 vignetting; write EXIF OffsetTimeOriginal
     fmt, quality : 'jpeg', 'png' or 'tiff' (8-bit), or 'dng' (RAW_BITS); JPEG quality (1-100)
     shutter_error : relative sd of each frame's true exposure about its EXIF one
+    nominal_exif : label each shutter time in EXIF as a camera does, with the nearest of the
+        nominal series (:data:`NOMINAL_SHUTTER`: 0-6% off the time the shutter gave)
     orientation : EXIF orientation code; the file holds the frame turned back
     subsampling : JPEG chroma: 0 (4:4:4), 1 (4:2:2) or 2 (4:2:0, Pillow's default)
     matrix_error : a RAW's ColorMatrix1 error (:func:`matrix_error_mix`)
@@ -202,6 +208,7 @@ class PhotoSettings:
     quality: int = 95
     offset: bool = True
     shutter_error: float = 0.0
+    nominal_exif: bool = False
     orientation: int = 1
     subsampling: int = 0
     matrix_error: float = 0.0
@@ -283,13 +290,15 @@ def photograph_day(sequence, out_dir, settings=None, seed=0):
         miss = float(np.random.default_rng([seed, f["index"], 1]).normal()) * photo.shutter_error
         e_true = e * (1.0 + miss)                             # what the shutter really gave
         time = dt.datetime.fromisoformat(f["time"])
+        label = float(NOMINAL_SHUTTER[np.argmin(np.abs(np.log(NOMINAL_SHUTTER / t)))]) \
+            if photo.nominal_exif else t                     # the EXIF shutter time
         path = out / f"IMG_{f['index']:04d}{FORMATS[fmt]}"
         if raw:
             camera = np.clip(signal * e_true @ to_camera.T, 0.0, None) * (white - RAW_BLACK)
             dn = _mosaic(undo_orientation(camera, orientation))
             dn = dn + rng.normal(size=dn.shape) * np.sqrt(read_noise_DN ** 2 + shot_gain * dn)
             mosaic = np.clip(np.rint(dn + RAW_BLACK), 0, white)
-            atomic_write(path, lambda p, m=mosaic, ex=_exif_entries(time, offset, t):
+            atomic_write(path, lambda p, m=mosaic, ex=_exif_entries(time, offset, label):
                          write_dng(p, m, written, neutral, exif=ex, orientation=orientation))
         else:
             lin = np.clip(signal * e_true, 0.0, None) * sensor.max_code
@@ -300,17 +309,18 @@ def photograph_day(sequence, out_dir, settings=None, seed=0):
                 np.clip(codes, 0, 255).astype(np.uint8), orientation)))
             kw = ({"quality": photo.quality, "subsampling": photo.subsampling} if fmt == "jpeg"
                   else {})
-            atomic_write(path, lambda p, img=img, ex=_exif(time, offset, t, orientation), kw=kw:
+            atomic_write(path, lambda p, img=img, ex=_exif(time, offset, label, orientation), kw=kw:
                          img.save(p, format=fmt.upper(), exif=ex.tobytes(), **kw))
         paths.append(path)
         record.append({"file": path.name, "time": f["time"], "exposure_time_s": t,
+                       "exif_exposure_time_s": label,
                        "exposure_sr_m2_W": e_true, "nominal_exposure_sr_m2_W": e})
     meta = {"sequence": str(Path(sequence).resolve()), "seed": seed, "response": photo.response,
             "gamma": photo.gamma, "read_noise_DN": read_noise_DN, "shot_gain": shot_gain,
             "cos4": photo.cos4, "format": fmt, "quality": photo.quality, "offset_in_exif": offset,
             **({"subsampling": photo.subsampling} if fmt == "jpeg" else {}),
             "orientation": orientation,
-            "shutter_error": photo.shutter_error,
+            "shutter_error": photo.shutter_error, "nominal_exif": photo.nominal_exif,
             "motion": {str(i): list(m) for i, m in (photo.motion or {}).items()},
             "distortion": list(photo.distortion),
             **({"raw": {"bits": RAW_BITS, "black_DN": RAW_BLACK, "white_DN": white,

@@ -171,17 +171,21 @@ def colour_matrix_sd(doc, names, theta):
     return out
 
 
-def shared_error_sd(J, usable, sigma, shared_sd, mixing, curvature_inverse):
+def shared_error_sd(J, usable, sigma, shared_sd, mixing, curvature_inverse, loading=None):
     """The standard error per parameter (n,) from errors every value of a region shares within a
     frame (e.g. a JPEG's block rounding), which chi-square would let shrink as 1 / sqrt(pixels).
 
     ``J`` (P, T, C, n), ``usable`` and ``sigma`` (P, T, C), ``shared_sd`` (T, K) each frame's
     independent shared errors' sds, ``mixing`` (C, K) how each reaches the channels. With
     g = sum over the frame's values of J mixing / sigma, the covariance is
-    sum_(T,K) sd^2 (J^T J)^-1 g g^T (J^T J)^-1 (``curvature_inverse`` = (J^T J)^-1)."""
+    sum_(T,K) sd^2 (J^T J)^-1 g g^T (J^T J)^-1 (``curvature_inverse`` = (J^T J)^-1). Errors
+    that several frames share: ``loading`` (E, T), how each of E independent errors reaches
+    the frames (g summed over them)."""
     w = np.where(usable[..., None], J / np.where(usable, sigma, np.inf)[..., None], 0.0)
     g = np.einsum("ptcn,ck->tkn", w, np.asarray(mixing, dtype=float))      # (T, K, n)
     g = g * np.asarray(shared_sd, dtype=float)[..., None]
+    if loading is not None:
+        g = np.einsum("et,tkn->ekn", np.asarray(loading, dtype=float), g)
     d = g.reshape(-1, g.shape[-1]) @ curvature_inverse
     return np.sqrt(np.sum(d * d, axis=0))
 

@@ -30,8 +30,8 @@ from .colorchecker import NAMES, NEUTRAL, find_chart, matrix_error, reference_rg
 from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance,
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import check_times, frame_times
-from .photos import (EXPOSURE_KEYS, RAW_COLOUR_REACH, check_same_size, exif_exposure,
-                     list_photos, read_flat_field, read_photo)
+from .photos import (EXIF_LABEL_SD, EXPOSURE_KEYS, RAW_COLOUR_REACH, check_same_size,
+                     exif_exposure, list_photos, read_flat_field, read_photo)
 from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
 from .raw_noise import bootstrap, cfa_planes
 from .region_edges import colour_mixed, pose_reach
@@ -1064,6 +1064,11 @@ def frame_exposures(frames, patches, noise, o, log):
         e0 = float(patches.given)
         r = np.ones(len(frames.paths)) if rel is None else rel
         by_frame = {i: np.full(3, e0 * r[i]) for i in lit}
+        if rel is not None and np.ptp(rel[lit]) > 0:
+            log(f"exposure: the given {e0:.4g} sr m^2 W^-1 scaled by the frames' EXIF settings "
+                f"({len(set(rel[lit].tolist()))} of them), each label taken to be within "
+                f"{EXIF_LABEL_SD:.0%} of what it gave (the intervals count it); a grey card "
+                "(--calibrate) measures them, and one manual setting for every frame has none")
     return Exposures(replace(sensor, exposure=e0), by_frame, calibration, rel)
 
 
