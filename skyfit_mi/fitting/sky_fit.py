@@ -885,10 +885,10 @@ def _departure_warnings(departure):
             f"models depart from it (its field's weights "
             f"{', '.join(f'{v:+.2f}' for v in departure['weights'])} against prior sds of "
             f"{', '.join(f'{v:g}' for v in DEPARTURE_SD)}; chi-square "
-            f"{departure['conflict']:.1f} for {len(departure['weights'])}): the prior holds the field back, so the "
-            "parameters and their intervals may not be reliable; give the spec a sky nearer the "
-            "day's (a measured one: perez with measured irradiance, or envmap, or a sky "
-            "photographed), or fit its shape too (--sky-shape)."]
+            f"{departure['conflict']:.1f} for {len(departure['weights'])}): the prior holds the "
+            "field back, so the parameters and their intervals may not be reliable; give the "
+            "spec a sky nearer the day's (a measured one: perez with measured irradiance, or "
+            "envmap, or a sky photographed), or fit its shape too (--sky-shape)."]
 
 
 def fitted_mix(record):

@@ -647,7 +647,7 @@ EXPOSURE_KEYS = {"exposure time": "exposure_time_s", "f-number": "f_number", "IS
 #: Relative sd of the exposure a setting (shutter time, f-number, ISO) gives about the one its
 #: EXIF label states: cameras set exact third stops (2^(-k/3) s, f/2^(k/6)) and label them with
 #: the rounded nominal series (1/125 s for 1/128, 1/60 for 1/64, f/11 for f/11.31), 0-6.7% off,
-#: rms 2.9% over the shutter times 1/4000-1/8 s; a shutter's own accuracy adds to it.
+#: rms 2.8% over the shutter times 1/4000-1/8 s; a shutter's own accuracy adds to it.
 EXIF_LABEL_SD = 0.03
 
 
