@@ -235,8 +235,8 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
         assert apart[k] > 0.9 * u / np.sqrt(frames) * TRUTH[k], (k, apart[k])
 
 
-def test_exif_labels_scaling_a_given_exposure_are_counted_in_the_intervals(day, tmp_path,
-                                                                           monkeypatch):
+def test_exif_labels_scaling_a_given_exposure_are_counted_in_the_intervals(day, ingested,
+                                                                           tmp_path, monkeypatch):
     """A camera labels its shutter times with the nominal series (1/60 s for 1/64): the
     photographs' EXIF times are 0-6% off what the shutter gave. Without a reference, the given
     exposure of the first frame is scaled by them; each setting's label error (EXIF_LABEL_SD)
@@ -248,7 +248,7 @@ def test_exif_labels_scaling_a_given_exposure_are_counted_in_the_intervals(day, 
     from skyfit_mi.fitting import intervals
     from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.fitting.light import LightOptions
-    from skyfit_mi.pipeline.photos import EXIF_LABEL_SD, exif_label_loading
+    from skyfit_mi.pipeline.photos import EXIF_LABEL_SD, exif_label_loading, exif_scaled
     from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
 
     photos = tmp_path / "photos"
@@ -262,6 +262,7 @@ def test_exif_labels_scaling_a_given_exposure_are_counted_in_the_intervals(day, 
                   exposure=sim["frames"][0]["exposure_sr_m2_W"], vignetting="cos4",
                   log=logs.append)
     assert any("each label taken to be within 3%" in m for m in logs), logs
+    assert exif_scaled(doc) and not exif_scaled(ingested[1])        # a card calibrated those
     lit = [f["index"] for f in doc["frames"] if f["status"] == "rendered"]
     loading = exif_label_loading(doc["frames"], lit)
     first = np.isclose(label[lit], label[0])

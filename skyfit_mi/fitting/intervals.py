@@ -14,7 +14,7 @@ from .methods.profile import ProfileOptions, profile_edges, ridge_intervals
 from .sky_fit import light_level_sd, photographed
 from ..pipeline.ingest import pixel_sigma
 from ..pipeline.jpeg_noise import YCC_TO_RGB, shared_error_sd
-from ..pipeline.photos import EXIF_LABEL_SD, exif_label_loading
+from ..pipeline.photos import EXIF_LABEL_SD, exif_label_loading, exif_scaled
 from ..render.light_cache import SIGMA_RESOLVED
 
 #: Iterations of each constrained profile fit along a ridge (a poor conditional-mean start).
@@ -160,11 +160,10 @@ def calibration_sd(s, J, problem, usable, theta, curvature_inverse):
     curve); without a reference, the errors of the EXIF labels that scale the given exposure
     (:func:`~skyfit_mi.pipeline.photos.exif_label_loading`), each on every channel of the
     frames of its setting. A table's is :func:`~.uncertainty.calibration_sd`."""
-    ingest = s.doc.get("ingest") or {}
-    cal = ingest.get("calibration") or {}
+    cal = (s.doc.get("ingest") or {}).get("calibration") or {}
     Js = J * problem.value_scale(theta)[..., None]          # per relative error of a value
     sigma = problem.obs.sigma
-    if s.obs.rays is None and not cal and ingest.get("relative_exposure_from_exif"):
+    if s.obs.rays is None and exif_scaled(s.doc):
         loading = exif_label_loading(s.doc["frames"], s.obs.frames)
         return unc.shared_error_sd(Js, usable, sigma, np.full((J.shape[1], 1), EXIF_LABEL_SD),
                                    np.ones((3, 1)), curvature_inverse, loading)

@@ -27,6 +27,7 @@ import numpy as np
 from ..errors import SkyfitError
 from ..files import check_dir, ensure_dir, save_figure, write_json
 from ..pipeline.manifest import frame_sky, load_manifest
+from ..pipeline.photos import exif_scaled
 from ..render.fit_model import PARAMETER_ORDER, PARAMETERS
 from ..render.image import write_exr
 from ..render.scene import pose_sd
@@ -369,6 +370,9 @@ def run_map(manifest_path, regions, out_dir, options=MapOptions(), cluster=Clust
     if c.scheduler and c.workers is not None:
         raise SkyfitError("--workers sizes the cluster on this machine; with --scheduler the "
                           "cluster's own workers run the map: leave out --workers.")
+    if exif_scaled(doc):
+        log("map: the frames' EXIF labels scale the given exposure; their error (ingest's log) is "
+            "in the regions' fits (fit --all), not in the map's intervals")
     first = o.model == "auto" or plan.sky != "spec"     # fits of the regions come first
     settings = _settings(doc, regions, o, plan.sky, first)
     out = check_dir(Path(out_dir))

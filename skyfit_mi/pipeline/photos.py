@@ -657,6 +657,14 @@ def exif_exposure(photo):
     return float(t) * float(iso) / float(n) ** 2 if t and n and iso else None
 
 
+def exif_scaled(doc):
+    """Whether EXIF's relative exposures of several settings scale a given exposure in the
+    manifest ``doc`` (no reference calibrating the frames): their labels' error then counts."""
+    ingest = doc.get("ingest") or {}
+    rel = ingest.get("relative_exposure_from_exif") or []
+    return not ingest.get("calibration") and len(set(rel)) > 1
+
+
 def exif_label_loading(records, frames):
     """How the errors of the EXIF labels (:data:`EXIF_LABEL_SD` each) reach ``frames``' exposures
     (manifest indices, T) where EXIF's relative exposures scale the first frame's given one
