@@ -14,8 +14,8 @@ Scenarios (``--scenario``, default all):
   card      ingest --calibrate grey_card=0.18 --vignetting cos4
   lab       no card: ingest --exposure (the first frame's true exposure, as a lab meter gives
             it) --vignetting cos4, and `fit --sky spec`, the sun's level given exactly
-  labels    lab, the shutter times labelled in EXIF as a camera labels them (the nominal
-            series: 1/60 s for 1/64), 0-6% off what the shutter gave
+  labels    lab, the shutter times labelled in EXIF as a camera labels them, with the nominal
+            series (1/20 s for 1/18.9), 0-6% off what the shutter gave
   shaky     card, the tripod nudged by up to 1 pixel and 0.2 degrees between frames (the
             middle one, ingest's reference, where the spec's pose was marked, unshaken)
   misposed  card, the spec's camera 0.3 degrees off in azimuth and angle, pose_sd_deg 0.3

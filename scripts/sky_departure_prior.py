@@ -11,8 +11,9 @@ thesis's CIE clear sky toward the sky's points, 10 degrees about the sun left ou
 Shown per group: each weight's prior sd by expectation-maximisation (the weights' own
 least-squares covariance taken out) and the share of the group within the 95% region of the
 prior the other groups give (one kind of sky does not tell another's departure); then the
-prior every group's skies give, times the least factor (steps of 0.1) whose 95% region holds at
-least 90% of each group, which :data:`~skyfit_mi.physics.sky_departure.PRIOR_SD` takes.
+prior the three groups give, each weighing alike, times the least factor (steps of 0.1) whose
+95% region holds at least 90% of each group, which
+:data:`~skyfit_mi.physics.sky_departure.PRIOR_SD` takes.
 
     .venv/bin/python scripts/sky_departure_prior.py [--nominal]
 """
@@ -91,18 +92,22 @@ def groups(rotated=True):
                 CIE_TYPES)}
 
 
-def fit_prior(fits):
-    """Each weight's prior sd (J,) by expectation-maximisation: each sky's weights
-    a ~ N(0, diag v) seen through least squares with covariance V (the basis nearly collinear
-    when the sun is high), v the mean of the weights' posterior second moments."""
-    v = np.full(len(fits[0][0]), 0.04)
+def fit_prior(*groups):
+    """Each weight's prior sd (J,) by expectation-maximisation over ``groups`` of fits, each
+    group weighing alike: each sky's weights a ~ N(0, diag v) seen through least squares with
+    covariance V (the basis nearly collinear when the sun is high), v the mean over the groups
+    of their skies' mean posterior second moments."""
+    v = np.full(len(groups[0][0][0]), 0.04)
     for _ in range(ITERATIONS):
-        moments = []
-        for a, V, *_ in fits:
-            post = np.linalg.inv(np.linalg.inv(V) + np.diag(1.0 / v))
-            mean = post @ np.linalg.solve(V, a)
-            moments.append(mean ** 2 + np.diag(post))
-        v = np.mean(moments, axis=0)
+        by_group = []
+        for fits in groups:
+            moments = []
+            for a, V, *_ in fits:
+                post = np.linalg.inv(np.linalg.inv(V) + np.diag(1.0 / v))
+                mean = post @ np.linalg.solve(V, a)
+                moments.append(mean ** 2 + np.diag(post))
+            by_group.append(np.mean(moments, axis=0))
+        v = np.mean(by_group, axis=0)
     return np.sqrt(v)
 
 
@@ -115,12 +120,13 @@ def within(fits, prior_sd):
 
 
 def prior(by_group):
-    """(the prior's sds (J,), their factor on every group's EM prior): the least factor of
-    :data:`FACTORS` whose 95% region holds at least 90% of each group."""
-    base = fit_prior([f for fits in by_group.values() for f in fits])
+    """(the prior's sds (J,), their factor on the groups' EM prior, :func:`fit_prior`): the
+    least factor of :data:`FACTORS` whose 95% region holds at least 90% of each group."""
+    base = fit_prior(*by_group.values())
     factor = next((m for m in FACTORS
-                   if all(within(fits, m * base) >= 0.9 for fits in by_group.values())),
-                  FACTORS[-1])
+                   if all(within(fits, m * base) >= 0.9 for fits in by_group.values())), None)
+    if factor is None:
+        raise SystemExit(f"no factor up to {FACTORS[-1]:g} holds 90% of every kind of sky")
     return np.round(factor * base, 2), factor
 
 
@@ -138,11 +144,11 @@ def main(argv=None):
     sds, factor = prior(by_group)
     for name, fits in by_group.items():
         before, after = (np.mean([f[k] for f in fits]) for k in (2, 3))
-        others = fit_prior([f for g, x in by_group.items() if g != name for f in x])
+        others = fit_prior(*(x for g, x in by_group.items() if g != name))
         print(f"| {name} | {len(fits)} | {before:.3f} / {after:.3f} | "
               f"{', '.join(f'{v:.2f}' for v in fit_prior(fits))} | {within(fits, others):.0%} | "
               f"{within(fits, sds):.0%} |")
-    print(f"\nthe prior: {factor:g} x every group's EM sd = {', '.join(f'{v:.2f}' for v in sds)}"
+    print(f"\nthe prior: {factor:g} x the groups' EM sd = {', '.join(f'{v:.2f}' for v in sds)}"
           f" (in use: {', '.join(f'{v:g}' for v in sd.PRIOR_SD)})")
 
 

@@ -32,12 +32,15 @@ EXPOSURE_TIME, F_NUMBER, ISO = 0x829A, 0x829D, 0x8827
 ORIENTATION = 0x0112
 #: The simulated camera's aperture and ISO (only their ratio to the exposure time matters).
 SIM_F_NUMBER, SIM_ISO = 8.0, 100
-#: Shutter times of the auto-exposure [s]: third stops from 1/4000 to 1/15 s.
+#: Shutter times of the auto-exposure [s]: 36 third stops down from 1/15 s.
 SHUTTER_STOPS = 2.0 ** (-np.arange(36) / 3.0) / 15.0
 #: A camera's shutter labels [s] (``nominal_exif``): the rounded nominal third-stop series,
-#: 1/4000 to 1/15 s (1/125 for 1/128 s, 1/60 for 1/64).
-NOMINAL_SHUTTER = 1.0 / np.array([4000, 3200, 2500, 2000, 1600, 1250, 1000, 800, 640, 500, 400,
-                                  320, 250, 200, 160, 125, 100, 80, 60, 50, 40, 30, 25, 20, 15])
+#: 1/8000 to 1/15 s; the simulated shutter's times (:data:`SHUTTER_STOPS`) lie 0-6% off them.
+NOMINAL_SHUTTER = 1.0 / np.array([8000, 6400, 5000, 4000, 3200, 2500, 2000, 1600, 1250, 1000,
+                                  800, 640, 500, 400, 320, 250, 200, 160, 125, 100, 80, 60, 50,
+                                  40, 30, 25, 20, 15])
+#: The largest relative offset of a nominal label from the time it stands for.
+NOMINAL_REACH = 0.07
 FORMATS = {"jpeg": ".jpg", "png": ".png", "tiff": ".tif", "dng": ".dng"}
 #: The RAW camera of ``fmt="dng"``: XYZ (D65) -> camera RGB of the Canon EOS 5D Mark II (Adobe's
 #: ColorMatrix, LibRaw's ``adobe_coeff`` x 10^-4), far from diagonal as a real sensor's is.
@@ -188,7 +191,8 @@ class PhotoSettings:
     fmt, quality : 'jpeg', 'png' or 'tiff' (8-bit), or 'dng' (RAW_BITS); JPEG quality (1-100)
     shutter_error : relative sd of each frame's true exposure about its EXIF one
     nominal_exif : label each shutter time in EXIF as a camera does, with the nearest of the
-        nominal series (:data:`NOMINAL_SHUTTER`: 0-6% off the time the shutter gave)
+        nominal series (:data:`NOMINAL_SHUTTER`: 0-6% off the time the shutter gave; a time
+        beyond the series raises ValueError)
     orientation : EXIF orientation code; the file holds the frame turned back
     subsampling : JPEG chroma: 0 (4:4:4), 1 (4:2:2) or 2 (4:2:0, Pillow's default)
     matrix_error : a RAW's ColorMatrix1 error (:func:`matrix_error_mix`)
@@ -292,6 +296,8 @@ def photograph_day(sequence, out_dir, settings=None, seed=0):
         time = dt.datetime.fromisoformat(f["time"])
         label = float(NOMINAL_SHUTTER[np.argmin(np.abs(np.log(NOMINAL_SHUTTER / t)))]) \
             if photo.nominal_exif else t                     # the EXIF shutter time
+        if abs(np.log(label / t)) > NOMINAL_REACH:
+            raise ValueError(f"no nominal shutter label within {NOMINAL_REACH:.0%} of {t:.3g} s")
         path = out / f"IMG_{f['index']:04d}{FORMATS[fmt]}"
         if raw:
             camera = np.clip(signal * e_true @ to_camera.T, 0.0, None) * (white - RAW_BLACK)

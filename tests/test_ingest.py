@@ -237,36 +237,39 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
 
 def test_exif_labels_scaling_a_given_exposure_are_counted_in_the_intervals(day, ingested,
                                                                            tmp_path, monkeypatch):
-    """A camera labels its shutter times with the nominal series (1/60 s for 1/64): the
-    photographs' EXIF times are 0-6% off what the shutter gave. Without a reference, the given
-    exposure of the first frame is scaled by them; each setting's label error (EXIF_LABEL_SD)
-    reaches the intervals through the frames of that setting (calibration_error_sd), and every
-    C interval holds the truth (the spec's sky taken as exact, as in a lab); frames of the first
-    frame's setting carry none. Without that error the C intervals miss (measured: C_g 0.1257,
+    """A camera labels its shutter times with the nominal series: the photographs' EXIF times
+    are 0-6% off what the shutter gave (here 1/20 s for 1/18.9). Without a reference, the given
+    exposure of the first frame is scaled by them; each label's error (EXIF_LABEL_SD) reaches
+    the intervals through the frames with that label, and the first frame's through the frames
+    without it (calibration_error_sd); every C interval holds the truth (the spec's sky taken as
+    exact, as in a lab). Without that error the C intervals miss (measured: C_g 0.1257,
     0.1235-0.1280, and C_b 0.1037, 0.1027-0.1047, for 0.12 and 0.10), though the fit's model
     error is fitted."""
     from skyfit_mi.fitting import intervals
     from skyfit_mi.fitting.fit import fit_region
     from skyfit_mi.fitting.light import LightOptions
-    from skyfit_mi.pipeline.photos import EXIF_LABEL_SD, exif_label_loading, exif_scaled
+    from skyfit_mi.pipeline.photos import EXIF_LABEL_SD, exif_scaled
     from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
 
     photos = tmp_path / "photos"
     photograph_day(day["truth"], photos, PhotoSettings(quality=100, nominal_exif=True), seed=5)
     sim = json.loads((photos / "photos.json").read_text())
-    true, label = (np.array([f[k] for f in sim["frames"]])
+    true, label = (np.array([f[k] for f in sim["frames"]])          # the photographed frames
                    for k in ("exposure_time_s", "exif_exposure_time_s"))
     assert np.ptp(label / true / (label[0] / true[0])) > 0.03          # measured: 0-5.5% off
     logs = []
     doc = _ingest({**day, "photos": photos}, tmp_path / "seq",
                   exposure=sim["frames"][0]["exposure_sr_m2_W"], vignetting="cos4",
                   log=logs.append)
-    assert any("each label taken to be within 3%" in m for m in logs), logs
-    assert exif_scaled(doc) and not exif_scaled(ingested[1])        # a card calibrated those
+    assert any("by an sd of 2%" in m for m in logs), logs
+    assert exif_scaled(ingested[1]) is None                         # a card calibrated those
     lit = [f["index"] for f in doc["frames"] if f["status"] == "rendered"]
-    loading = exif_label_loading(doc["frames"], lit)
-    first = np.isclose(label[lit], label[0])
+    assert lit[0] == 0 and len(lit) == len(label)
+    loading = exif_scaled(doc)                  # a row per label other than the first's, and its
+    first = label == label[0]
+    assert loading.shape == (len(set(label)), len(lit))
     assert np.all(loading[:, first] == 0) and np.all(np.abs(loading[:, ~first]).sum(0) == 2)
+    assert exif_scaled(doc, [i for i, f in zip(lit, first) if f]) is None
 
     def fit():
         return fit_region(tmp_path / "seq", "sample", day["regions"]["sample"], model="colour",

@@ -14,7 +14,7 @@ from .methods.profile import ProfileOptions, profile_edges, ridge_intervals
 from .sky_fit import light_level_sd, photographed
 from ..pipeline.ingest import pixel_sigma
 from ..pipeline.jpeg_noise import YCC_TO_RGB, shared_error_sd
-from ..pipeline.photos import EXIF_LABEL_SD, exif_label_loading, exif_scaled
+from ..pipeline.photos import EXIF_LABEL_SD, exif_scaled
 from ..render.light_cache import SIGMA_RESOLVED
 
 #: Iterations of each constrained profile fit along a ridge (a poor conditional-mean start).
@@ -158,17 +158,17 @@ def calibration_sd(s, J, problem, usable, theta, curvature_inverse):
     frame's (``per_frame``) or the day's exposure error per channel moves its values by e times
     them, carried by :func:`~.uncertainty.shared_error_sd` (frames erring apart bend the day's
     curve); without a reference, the errors of the EXIF labels that scale the given exposure
-    (:func:`~skyfit_mi.pipeline.photos.exif_label_loading`), each on every channel of the
-    frames of its setting. A table's is :func:`~.uncertainty.calibration_sd`."""
+    (:func:`~skyfit_mi.pipeline.photos.exif_scaled`), each on every channel of the frames with
+    that label. A table's is :func:`~.uncertainty.calibration_sd`."""
     cal = (s.doc.get("ingest") or {}).get("calibration") or {}
+    loading = None if s.obs.rays is not None else exif_scaled(s.doc, s.obs.frames)
+    if loading is None and (s.obs.rays is not None or not cal.get("scale_relative_sd")):
+        return unc.calibration_sd(s.doc, s.names, theta)
     Js = J * problem.value_scale(theta)[..., None]          # per relative error of a value
     sigma = problem.obs.sigma
-    if s.obs.rays is None and exif_scaled(s.doc):
-        loading = exif_label_loading(s.doc["frames"], s.obs.frames)
+    if loading is not None:                       # every channel of a label's frames alike
         return unc.shared_error_sd(Js, usable, sigma, np.full((J.shape[1], 1), EXIF_LABEL_SD),
                                    np.ones((3, 1)), curvature_inverse, loading)
-    if s.obs.rays is not None or not cal.get("scale_relative_sd"):
-        return unc.calibration_sd(s.doc, s.names, theta)
     if cal.get("per_frame"):
         shared = np.tile(np.asarray(frame_calibration_sd(s), dtype=float),
                          (J.shape[1], 1))

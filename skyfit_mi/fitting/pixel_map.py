@@ -370,7 +370,7 @@ def run_map(manifest_path, regions, out_dir, options=MapOptions(), cluster=Clust
     if c.scheduler and c.workers is not None:
         raise SkyfitError("--workers sizes the cluster on this machine; with --scheduler the "
                           "cluster's own workers run the map: leave out --workers.")
-    if exif_scaled(doc):
+    if exif_scaled(doc) is not None:
         log("map: the frames' EXIF labels scale the given exposure; their error (ingest's log) is "
             "in the regions' fits (fit --all), not in the map's intervals")
     first = o.model == "auto" or plan.sky != "spec"     # fits of the regions come first

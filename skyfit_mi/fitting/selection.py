@@ -204,7 +204,7 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         level_light = ward.pop(name, None)
         if level_light is not None and pick["normalisation"] == level_light.normalisation:
             s.take_light(level_light)                 # the level's light, traced for the fit
-        reused = s.cache_time - own                   # counted in the fit's time, not here
+        reused = s.cache_time - own                   # the traces the fit takes over
         del traced
         chosen[name] = s
         selection[name] = {
@@ -221,7 +221,8 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
                                             "model": pick["model"], "rank": pick["rank"]},
             "left_out": skipped, "trace_time_s": trace_s, "ranking": rows,
             "reused_trace_time_s": reused,
-            "wall_time_s": shared_s + time.perf_counter() - t_region - reused}
+            # the session's setup and the traces it took are in the fit's time
+            "wall_time_s": shared_s + time.perf_counter() - t_region - s.cache_time}
     if plan.split:
         for out in fit_sessions(chosen, "global", seed, log=log, light=plan):
             yield _with_selection(out, selection[out["region"]])

@@ -180,7 +180,7 @@ def shared_error_sd(J, usable, sigma, shared_sd, mixing, curvature_inverse, load
     g = sum over the frame's values of J mixing / sigma, the covariance is
     sum_(T,K) sd^2 (J^T J)^-1 g g^T (J^T J)^-1 (``curvature_inverse`` = (J^T J)^-1). Errors
     that several frames share: ``loading`` (E, T), how each of E independent errors reaches
-    the frames (g summed over them)."""
+    the frames (g summed over them), ``shared_sd`` then the same for every frame."""
     w = np.where(usable[..., None], J / np.where(usable, sigma, np.inf)[..., None], 0.0)
     g = np.einsum("ptcn,ck->tkn", w, np.asarray(mixing, dtype=float))      # (T, K, n)
     g = g * np.asarray(shared_sd, dtype=float)[..., None]

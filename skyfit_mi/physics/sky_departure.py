@@ -29,9 +29,10 @@ from ..conventions import unit_directions
 #: The field's basis functions by name (:func:`basis`).
 BASIS = ("zenith P1", "zenith P2", "sun P1", "sun P2", "zenith x sun")
 #: Prior sd of each weight a_j [unitless]: the sds expectation-maximisation finds over the
-#: scans and the published models together, times the least factor (steps of 0.1; 1.4) whose
-#: 95% region holds at least 90% of each of the three (``scripts/sky_departure_prior.py``).
-PRIOR_SD = np.array([0.62, 0.14, 0.21, 0.35, 0.20])
+#: scans and the two kinds of published model, each kind weighing alike, times the least factor
+#: (steps of 0.1; 1.4) whose 95% region holds at least 90% of each kind
+#: (``scripts/sky_departure_prior.py``).
+PRIOR_SD = np.array([0.60, 0.15, 0.20, 0.33, 0.20])
 
 
 def basis(directions, sun):

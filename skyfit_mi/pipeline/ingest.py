@@ -31,7 +31,8 @@ from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_v
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import check_times, frame_times
 from .photos import (EXIF_LABEL_SD, EXPOSURE_KEYS, RAW_COLOUR_REACH, check_same_size,
-                     exif_exposure, list_photos, read_flat_field, read_photo)
+                     exif_exposure, exif_label_loading, exif_setting, list_photos,
+                     read_flat_field, read_photo)
 from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
 from .raw_noise import bootstrap, cfa_planes
 from .region_edges import colour_mixed, pose_reach
@@ -1064,11 +1065,14 @@ def frame_exposures(frames, patches, noise, o, log):
         e0 = float(patches.given)
         r = np.ones(len(frames.paths)) if rel is None else rel
         by_frame = {i: np.full(3, e0 * r[i]) for i in lit}
-        if rel is not None and np.ptp(rel[lit]) > 0:
-            log(f"exposure: the given {e0:.4g} sr m^2 W^-1 scaled by the frames' EXIF settings "
-                f"({len(set(rel[lit].tolist()))} of them), each label taken to be within "
-                f"{EXIF_LABEL_SD:.0%} of what it gave (the intervals count it); a grey card "
-                "(--calibrate) measures them, and one manual setting for every frame has none")
+        settings = [exif_setting(frames.photos[i].metadata) for i in lit]
+        if rel is not None and len(exif_label_loading(exif_setting(frames.photos[0].metadata),
+                                                      settings)):
+            log(f"exposure: the given {e0:.4g} sr m^2 W^-1 scaled by the frames' EXIF labels "
+                f"({len(set(settings))} settings), each label's exposure taken to be off what "
+                f"it says by an sd of {EXIF_LABEL_SD:.0%} (the intervals count it); a grey card "
+                "(--calibrate) measures them, and the first frame's labels on every frame have "
+                "none")
     return Exposures(replace(sensor, exposure=e0), by_frame, calibration, rel)
 
 

@@ -644,11 +644,12 @@ def read_photo(path, exact_jpeg=True):
 EXPOSURE_KEYS = {"exposure time": "exposure_time_s", "f-number": "f_number", "ISO": "iso"}
 
 
-#: Relative sd of the exposure a setting (shutter time, f-number, ISO) gives about the one its
-#: EXIF label states: cameras set exact third stops (2^(-k/3) s, f/2^(k/6)) and label them with
-#: the rounded nominal series (1/125 s for 1/128, 1/60 for 1/64, f/11 for f/11.31), 0-6.7% off,
-#: rms 2.8% over the shutter times 1/4000-1/8 s; a shutter's own accuracy adds to it.
-EXIF_LABEL_SD = 0.03
+#: Relative sd of the exposure each EXIF label (a shutter time, f-number or ISO) stands for
+#: about the label's own: cameras set exact third stops (2^(-k/3) s, f/2^(k/6)) and label them
+#: with the rounded nominal series (1/125 s for 1/128, 1/60 for 1/64, f/11 for f/11.31), whose
+#: offsets spread 1.9% about their mean over the shutter times 1/4000-1/8 s and 2.4% in N^2 over
+#: f/1.4-22 (the mean cancels in a ratio to the first frame's exposure).
+EXIF_LABEL_SD = 0.02
 
 
 def exif_exposure(photo):
@@ -657,26 +658,41 @@ def exif_exposure(photo):
     return float(t) * float(iso) / float(n) ** 2 if t and n and iso else None
 
 
-def exif_scaled(doc):
-    """Whether EXIF's relative exposures of several settings scale a given exposure in the
-    manifest ``doc`` (no reference calibrating the frames): their labels' error then counts."""
+def exif_setting(metadata):
+    """A photograph's EXIF exposure labels (:data:`EXPOSURE_KEYS`) from its ``metadata``."""
+    return tuple(metadata.get(k) for k in EXPOSURE_KEYS.values())
+
+
+def exif_label_loading(first, settings):
+    """How the errors of the EXIF labels (:data:`EXIF_LABEL_SD` each) reach the exposures of
+    frames labelled ``settings`` (T, :func:`exif_setting`) where their ratios to the first
+    frame's (labelled ``first``) scale its given exposure: (K, T) loadings of K independent
+    relative errors, one per label value of each key (shutter time, f-number, ISO) other than
+    the first frame's (+1 on the frames with it), and the first frame's value of each key that
+    some frame changes (-1 on those frames). K is 0 where every frame has the first's labels."""
+    rows = []
+    for key, base in enumerate(first):
+        values = [v[key] for v in settings]
+        other = np.array([v != base for v in values], dtype=float)
+        rows += [[float(v == u) for v in values] for u in sorted(set(values) - {base}, key=str)]
+        rows += [-other] if other.any() else []
+    return np.array(rows, dtype=float).reshape(-1, len(settings))
+
+
+def exif_scaled(doc, frames=None):
+    """The label loading (:func:`exif_label_loading`) of the manifest ``doc``'s ``frames``
+    (indices; default every lit frame) where EXIF's relative exposures scale a given exposure
+    (no reference calibrates the frames) and some frame's labels differ from the first's; else
+    None."""
     ingest = doc.get("ingest") or {}
-    rel = ingest.get("relative_exposure_from_exif") or []
-    return not ingest.get("calibration") and len(set(rel)) > 1
-
-
-def exif_label_loading(records, frames):
-    """How the errors of the EXIF labels (:data:`EXIF_LABEL_SD` each) reach ``frames``' exposures
-    (manifest indices, T) where EXIF's relative exposures scale the first frame's given one
-    (``records``: the manifest's frame records, with their ``photo`` EXIF): (K, T) loadings of K
-    independent relative errors, each other setting's own (+1 on its frames) and the first
-    frame's (-1 on every frame of another setting). K is 0 where the frames share its setting."""
-    setting = {r["index"]: tuple((r.get("photo") or {}).get(k) for k in EXPOSURE_KEYS.values())
-               for r in records}
-    first = setting[records[0]["index"]]
-    others = sorted({setting[i] for i in frames} - {first}, key=str)
-    own = np.array([[setting[i] == g for i in frames] for g in others], dtype=float)
-    return np.vstack([own, -own.sum(axis=0)]) if others else np.zeros((0, len(frames)))
+    if ingest.get("calibration") or not ingest.get("relative_exposure_from_exif"):
+        return None
+    records = {r["index"]: r for r in doc["frames"]}
+    frames = [r["index"] for r in doc["frames"] if r.get("status") == "rendered"] \
+        if frames is None else frames
+    loading = exif_label_loading(exif_setting(doc["frames"][0].get("photo") or {}),
+                                 [exif_setting(records[i].get("photo") or {}) for i in frames])
+    return loading if len(loading) and loading.any() else None
 
 
 def list_photos(items):
