@@ -709,9 +709,8 @@ def fit_sessions(sessions, method="global", seed=0, start=None, method_options=N
 
 def reference_factor(sessions, sky, fit, log=print):
     """Calibrate the fitted light again on the scene's reference (``ingest --calibrate``), since
-    a fitted ``sky`` moves what it reads: where the reference is a region, its parameters at the
-    fitted sky (the sky's fit's, else ``fit``: session -> result) give its radiance, which over a
-    Lambertian's of its known reflectance, per
+    a fitted ``sky`` moves what it reads: where the reference is a region, it is fitted (``fit``:
+    session -> result) and its radiance over a Lambertian's of its known reflectance, per
     channel, becomes a factor on every region's light; its slope in the sky's coefficients
     (:func:`~.sky_fit.reference_slope`) enters every sky share (docs/BENCHMARKS.md, "The sample
     board photographed")."""
@@ -729,14 +728,13 @@ def reference_factor(sessions, sky, fit, log=print):
         known = {"R": float(rho @ SRGB_LUMINANCE)}
     else:                                   # the white model: no reflectance to read
         return
-    light = getattr(sky.shares.get(name), "light", None)
-    # the reference's parameters at the fitted sky, as the sky's fit left them where it has them
-    theta = light.theta if light is not None and light.theta is not None else np.array(
-        [fit(s)["parameters"][n] for n in s.names])
+    result = fit(s)
+    theta = np.array([result["parameters"][n] for n in s.names])
     lambertian = np.array([known.get(n, 0.0 if n == "rho_s" else theta[i])
                            for i, n in enumerate(s.names)])
     factor = (np.sum(s.wm.radiance(theta), axis=(0, 1))
               / np.sum(s.wm.radiance(lambertian), axis=(0, 1)))
+    light = getattr(sky.shares.get(name), "light", None)
     slope = None if light is None else reference_slope(s, light, theta, lambertian)
     if slope is not None:
         sky.shares.update({n: replace(share, reference_slope=slope)
