@@ -428,6 +428,14 @@ def _camera(args):
 _MANIFEST_HELP = "folder written by `skyfit render` (or its manifest.json)"
 
 
+def _add_run_folder(parser):
+    """The output folder of a run that writes a sequence folder: -o, --overwrite, -q."""
+    parser.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace another run's output in the folder (starts clean)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+
+
 def _add_render(sub, common):
     """The ``render`` sub-command: a spec -> a sequence folder."""
     render = sub.add_parser(
@@ -436,10 +444,7 @@ def _add_render(sub, common):
         "contact sheet); an interrupted run resumes. Reference: docs/cli.md.")
     render.add_argument("spec", help="sequence spec (.toml or .json), e.g. "
                         "scenes/specs/disc_clear_east.toml")
-    render.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
-    render.add_argument("--overwrite", action="store_true",
-                        help="replace another run's output in the folder (starts clean)")
-    render.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_run_folder(render)
     render.add_argument("--variant", choices=VARIANTS,
                         help="Mitsuba variant, over the spec's [render] variant (cuda_ad_rgb: GPU)")
     render.set_defaults(func=_render)
@@ -457,7 +462,7 @@ def _add_ingest(sub, common):
                      help="image files or folders (EXR, HDR, TIFF, PNG, JPEG, camera RAW)")
     ing.add_argument("--table", metavar="CSV",
                      help="measured radiances instead of photographs (format: docs/MANIFEST.md)")
-    ing.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
+    _add_run_folder(ing)
     ing.add_argument("--times", metavar="CSV",
                      help="CSV file,time of each frame's time (instead of EXIF DateTimeOriginal)")
     ing.add_argument("--name-pattern", metavar="PATTERN",
@@ -489,9 +494,6 @@ def _add_ingest(sub, common):
                      help="take the frames as aligned (default: their shifts and turns are undone)")
     ing.add_argument("--register-limit", type=float, metavar="PX",
                      help="refuse a frame that moved more than this [px] (default 5)")
-    ing.add_argument("--overwrite", action="store_true",
-                     help="replace another run's output in the folder (starts clean)")
-    ing.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     ing.set_defaults(func=_ingest)
 
 
@@ -694,9 +696,7 @@ def _add_relight(sub, common):
                        help="fit_NAME.json files, a fits.csv, or the folder `skyfit fit` wrote")
     relit.add_argument("--target", required=True,
                        help="spec file (.toml/.json) or sequence folder to relight")
-    relit.add_argument("-o", "--output", required=True, help="output folder (created if needed)")
-    relit.add_argument("--overwrite", action="store_true",
-                       help="replace another run's output in the folder (starts clean)")
+    _add_run_folder(relit)
     relit.add_argument("--no-images", action="store_true",
                        help="predict the regions' values only (prediction.csv, relight.json)")
     relit.add_argument("--reference", action="store_true",
@@ -705,7 +705,6 @@ def _add_relight(sub, common):
                        help="parameter draws for the 95%% band (default 200)")
     relit.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0,
                        help="seed of the parameter draws and the light cache (default 0)")
-    relit.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     relit.set_defaults(func=_relight)
 
 
