@@ -357,14 +357,14 @@ class FitSession:
     def _use_parts(self, parts):
         """Take the light's ``parts`` and make the models and chi-square on their mix at the sky
         as set (:meth:`set_sky`)."""
-        self.parts = parts
         table = self._mixed(parts)
         if not table.hit.any():
             raise SkyfitError(f"none of the region's pixels shows material {self.name!r}; check "
                               "the region.")
-        self.table = table
-        self.geometry = highlight_geometry(np.where(table.hit[..., None, None], table.sun_cos,
-                                                    np.nan))
+        if parts is not self.parts:         # the sun's geometry: the same at any weights
+            self.geometry = highlight_geometry(np.where(table.hit[..., None, None],
+                                                        table.sun_cos, np.nan))
+        self.parts, self.table = parts, table
         self.wm = self.model_on(table)
         self.problem = Problem(self.obs, self.wm, valid=table.hit)
         self._halves = self._bases = None
@@ -372,8 +372,7 @@ class FitSession:
     def _mixed(self, parts):
         """The table of the light's ``parts`` at the sky's level and shape."""
         sun, sky = (self.light_level * v for v in self.light_levels(self.sky_shape_mix))
-        return parts.table(self.sky_scale * sky, self.sky_shape_mix, sun).tinted(
-            self.light_factor)
+        return parts.table(self.sky_scale * sky, self.sky_shape_mix, sun, self.light_factor)
 
     @property
     def pose_angles(self):

@@ -148,13 +148,14 @@ class LightParts:
         return LightParts(self.names, tuple(t.subset(rows) for t in self.tables),
                           None if self.covariances is None else self.covariances.subset(rows))
 
-    def table(self, k=1.0, mix=None, sun=1.0):
+    def table(self, k=1.0, mix=None, sun=1.0, tint=None):
         """The table with the sky ``k`` and the sun ``sun`` times the spec's (scalars or per frame),
-        the sky's pattern (1 - sum(mix)) its own plus mix_j times variant j."""
+        the sky's pattern (1 - sum(mix)) its own plus mix_j times variant j, the whole light
+        times ``tint`` (3,) per channel (None: 1)."""
         if self.names == ("light",):
-            return self.tables[0]
+            return self.tables[0].tinted(tint)
         mix = np.zeros(len(self.variants)) if mix is None else np.asarray(mix, dtype=float)
         weights = {"sun": sun, "sky": k * (1.0 - mix.sum()),
                    **{v: k * m for v, m in zip(self.variants, mix)}}
         w = [weights[n] for n in self.names]
-        return mixed(self.tables[0], self.tables[1:], w[1:], w[0], self.covariances)
+        return mixed(self.tables[0], self.tables[1:], w[1:], w[0], self.covariances, tint)

@@ -13,6 +13,7 @@ model's Monte Carlo variance is the positions' spread, kept as covariances of D 
 roughness values (the variance of rho_d D + s G is bilinear in the reflectances).
 """
 
+import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -476,43 +477,84 @@ def chunks(P, T, per_value, budget):
             for f in range(0, T, frames) for r in range(0, P, rows)]
 
 
-def mixed(a, others, weights, a_weight=1.0, covariances=None):
+def mixed(a, others, weights, a_weight=1.0, covariances=None, tint=None):
     """The table of the light w_a a + sum_j w_j b_j from tables ``a`` and ``others`` [b_j] of
     parts of one light (:meth:`~skyfit_mi.physics.sky.Sky.split`,
     :func:`~skyfit_mi.physics.sky_shape.shape_variants`) traced in the same blocks: bases add
     linearly, variances with w^2, plus 2 w_j w_k ``covariances`` (:class:`Covariances`, indices
     into ``[a, *others]``) for shared samples.  Each weight (``a_weight``, ``weights``) is a
-    factor or one per frame (T,), and may be negative."""
+    factor or one per frame (T,), and may be negative; ``tint`` (3,) multiplies them all per
+    channel (:meth:`BasisTable.tinted`).  The lobe's series and the variances at ``var_sigmas``
+    are mixed where first used (a fit at one roughness needs one piece and two of them)."""
     parts = [a, *others]
-    ws = [np.asarray(w, dtype=np.float32) for w in [a_weight, *weights]]
-    wt = [w[:, None] if w.ndim == 1 else w for w in ws]        # against (..., T, 3)
-    coef = []
-    for n, sa in enumerate(a.coef):
-        blocks = []
-        for i, (r, f, ca) in enumerate(sa.blocks):
-            cs = [b.coef[n].blocks[i] for b in parts]
-            if any((rb, fb) != (r, f) for rb, fb, _ in cs):
-                raise ValueError("the parts' tables were traced in different blocks")
-            c = np.zeros((2, max(cb.shape[1] for _, _, cb in cs)) + ca.shape[2:], np.float32)
-            for (_, _, cb), w, wf in zip(cs, ws, wt):
-                c[:, :cb.shape[1]] += (wf[f] if w.ndim == 1 else wf) * cb
-            blocks.append((r, f, c))
-        coef.append(Series(blocks))
+    T = a.shape[1]
+    tint = np.ones(3, np.float32) if tint is None else np.asarray(tint, np.float32)
+    # every weight as (T, 3): per frame and channel, against (..., T, 3)
+    wt = [np.broadcast_to(np.reshape(np.asarray(w, np.float32), (-1, 1)), (T, 1)) * tint
+          for w in [a_weight, *weights]]
+    # the variances' terms: (array, weight) of each part (w^2), then each pair (w_j w_k)
+    pairs = [] if covariances is None else [(i, wt[j] * wt[k])
+                                             for i, (j, k) in enumerate(covariances.pairs)]
 
-    def add(name, square=False):
-        return sum((w * w if square else w) * getattr(b, name) for b, w in zip(parts, wt))
-    var = {k: add(k, True) for k in ("VDD", "VDG", "VGG")}
-    if covariances is not None:
-        for i, (j, k) in enumerate(covariances.pairs):
-            w = wt[j] * wt[k]
-            var["VDD"] = var["VDD"] + 2 * w * covariances.DD[i]
-            var["VDG"] = var["VDG"] + w * covariances.DG[i]
-            var["VGG"] = var["VGG"] + 2 * w * covariances.GG[i]
+    def add(name):
+        return sum(w * getattr(b, name) for b, w in zip(parts, wt))
+
+    def variance(name, pair_name, factor):
+        return [(getattr(b, name), w * w) for b, w in zip(parts, wt)] + [
+            (getattr(covariances, pair_name)[i], factor * w) for i, w in pairs]
+    VDD = sum(w * x for x, w in variance("VDD", "DD", 2.0))
     hit = a.hit
     for b in others:
         hit = hit & b.hit
-    return BasisTable(add("D"), add("G0"), add("G1"), coef, var["VDD"], var["VDG"], var["VGG"],
+    coef = [_MixedSeries([b.coef[n] for b in parts], wt) for n in range(len(a.coef))]
+    return BasisTable(add("D"), add("G0"), add("G1"), coef, VDD,
+                      _Mixed(variance("VDG", "DG", 1.0)), _Mixed(variance("VGG", "GG", 2.0)),
                       hit, a.sun_cos, a.normalisation)
+
+
+class _Mixed:
+    """sum_j w_j X_j of arrays X_j (V, P, T, 3) with weights w_j (T, 3), each X[i] (one
+    roughness's) mixed when first asked for; other indices take the whole mix."""
+
+    def __init__(self, terms):
+        self.terms, self.done, self.whole = terms, {}, None
+        self.shape = terms[0][0].shape
+
+    def __getitem__(self, key):
+        if isinstance(key, (int, np.integer)):
+            if key not in self.done:
+                self.done[key] = sum(w * x[key] for x, w in self.terms)
+            return self.done[key]
+        return self.__array__()[key]
+
+    def __len__(self):
+        return self.shape[0]
+
+    def __array__(self, dtype=None, copy=None):
+        if self.whole is None:
+            self.whole = sum(w * x for x, w in self.terms)
+        return self.whole if dtype is None else self.whole.astype(dtype)
+
+
+class _MixedSeries(Series):
+    """The series sum_j w_j s_j of the parts' series ``series`` (traced in the same blocks) with
+    weights ``wt`` [(T, 3)], mixed when first used."""
+
+    def __init__(self, series, wt):
+        self._series, self._wt = series, wt
+
+    @functools.cached_property
+    def blocks(self):
+        out = []
+        for i, (r, f, first) in enumerate(self._series[0].blocks):
+            cs = [s.blocks[i] for s in self._series]
+            if any((rb, fb) != (r, f) for rb, fb, _ in cs):
+                raise ValueError("the parts' tables were traced in different blocks")
+            c = np.zeros((2, max(cb.shape[1] for _, _, cb in cs)) + first.shape[2:], np.float32)
+            for (_, _, cb), w in zip(cs, self._wt):
+                c[:, :cb.shape[1]] += w[f] * cb
+            out.append((r, f, c))
+        return out
 
 
 def trace_basis(scene, params, lights, at, bsdf_id, options=CacheOptions(), budget=None,
