@@ -235,6 +235,12 @@ def test_a_mix_of_lights_traced_with_shared_samples_keeps_their_covariances(days
         x, y, z = getattr(got, k), getattr(want, k), getattr(apart, k)
         assert np.allclose(x, y, rtol=0.01, atol=0.01 * np.abs(y).max()), k
         assert np.median(np.abs(z - y) / np.maximum(np.abs(y), 1e-30)) > 0.1, k
+    # mixed where first used: one roughness's variances, and a subset, as the whole mix's
+    part, whole = mixed(tables[0], tables[1:], w[1:], w[0], cov), np.asarray(got.VGG)
+    np.testing.assert_allclose(part.VGG[3], whole[3])
+    np.testing.assert_allclose(np.asarray(part.subset(slice(2, 5), slice(1, 3)).VDG),
+                               np.asarray(got.VDG)[:, 2:5, 1:3])
+    np.testing.assert_allclose(part.subset(slice(2, 5)).lobe(0.04), got.lobe(0.04)[:, 2:5])
 
 
 def test_a_tinted_table_is_the_light_times_its_factor_per_channel(traced):

@@ -357,14 +357,15 @@ class FitSession:
     def _use_parts(self, parts):
         """Take the light's ``parts`` and make the models and chi-square on their mix at the sky
         as set (:meth:`set_sky`)."""
+        changed, self.parts = parts is not self.parts, parts
         table = self._mixed(parts)
         if not table.hit.any():
             raise SkyfitError(f"none of the region's pixels shows material {self.name!r}; check "
                               "the region.")
-        if parts is not self.parts:         # the sun's geometry: the same at any weights
+        if changed:                         # the sun's geometry: the same at any weights
             self.geometry = highlight_geometry(np.where(table.hit[..., None, None],
                                                         table.sun_cos, np.nan))
-        self.parts, self.table = parts, table
+        self.table = table
         self.wm = self.model_on(table)
         self.problem = Problem(self.obs, self.wm, valid=table.hit)
         self._halves = self._bases = None

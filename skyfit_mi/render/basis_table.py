@@ -73,6 +73,8 @@ def _chebyshev_rows(x, n, derivative=False):
 
 def _cut(x, axis, rows, frames):
     """A view of ``x`` at slices ``rows``, ``frames`` of its pixel ``axis`` and the next one."""
+    if isinstance(x, _Mixed):
+        return x.cut(axis, rows, frames)
     where = [slice(None)] * x.ndim
     where[axis], where[axis + 1] = rows, frames
     return x[tuple(where)]
@@ -530,10 +532,14 @@ class _Mixed:
     def __len__(self):
         return self.shape[0]
 
+    def cut(self, axis, rows, frames):
+        """The mix at pixels ``rows`` and frames ``frames`` (:func:`_cut`), still unmixed."""
+        return _Mixed([(_cut(x, axis, rows, frames), w[frames]) for x, w in self.terms])
+
     def __array__(self, dtype=None, copy=None):
         if self.whole is None:
             self.whole = sum(w * x for x, w in self.terms)
-        return self.whole if dtype is None else self.whole.astype(dtype)
+        return self.whole.astype(dtype or self.whole.dtype, copy=bool(copy))
 
 
 class _MixedSeries(Series):
