@@ -380,3 +380,50 @@ def test_lights_traced_with_shared_samples_each_take_their_own_radiance(days):
     assert set(OWN_ARRAYS) < set(fields)
     with pytest.raises(ValueError, match="one sky without a map per frame"):
         build_light_cache(*args, rest, *where, others=[variant[:2]], **options)
+
+
+def test_a_scene_hiding_part_of_the_sky_matches_the_render(tmp_path, days):
+    """Paths are traced only along directions the scene hides (a wall north of the disc: its
+    shadow and its light), the rest take the emitter's own light: the cache still agrees with a
+    full render, and a scene hiding nothing traces no path."""
+    from pathlib import Path
+
+    from skyfit_mi.fitting.fit import FitCache, FitSession
+    from skyfit_mi.pipeline.pixels import frame_values
+    from skyfit_mi.pipeline.sequence import render_sequence
+    from skyfit_mi.pipeline.spec import SCENES_DIR, thesis_disc_spec, validate_spec
+    from skyfit_mi.render import light_cache
+
+    wall = ('    <shape type="rectangle" id="wall">\n'
+            '        <bsdf type="diffuse"><rgb name="reflectance" value="0.8"/></bsdf>\n'
+            '        <transform name="to_world"><scale x="4" y="2"/><rotate x="1" angle="90"/>'
+            '<translate y="1.5" z="2"/></transform>\n    </shape>\n</scene>')
+    xml = (Path(SCENES_DIR) / "disc.xml").read_text().replace("</scene>", wall)
+    (tmp_path / "walled.xml").write_text(xml)
+    raw = thesis_disc_spec("walled", {"model": "two", "rho_s": 0.3, "sigma_alpha": 0.1},
+                           size=12, seed=11, exposure=0.0015)
+    raw["scene"]["file"] = "walled.xml"
+    raw["time"].update(start="07:00", end="17:00", step_minutes=150)
+    render_sequence(validate_spec(raw, tmp_path), tmp_path / "day", progress=False,
+                    log=lambda *a: None)
+    traced = []
+    paths = light_cache._paths
+
+    def counting(*args):
+        traced.append(1)
+        return paths(*args)
+    light_cache._paths = counting
+    try:
+        FitSession(days["clean"], "disc", REGION, model="two", cache=FitCache(seed=5),
+                   light=None).light_cache()
+        assert not traced, "the disc alone hides nothing, yet paths were traced"
+        s = _raw(FitSession(tmp_path / "day", "disc", REGION, model="two",
+                            cache=FitCache(seed=5), light=None))
+    finally:
+        light_cache._paths = paths
+    assert traced, "the wall hides part of the sky, yet no path was traced"
+    rendered = frame_values(tmp_path / "day", s.obs.pixels, s.obs.frames)
+    rel = s.wm.radiance([0.3, 0.1]) / rendered - 1
+    assert np.sqrt(np.mean(rel**2)) < 0.01
+    assert np.all(np.abs(rel.mean(axis=(0, 2))) < 0.006), rel.mean(axis=(0, 2))   # per frame
+    assert abs(rel.mean()) < 0.002

@@ -207,10 +207,11 @@ class WardModel:
 
     def _light_arrays(self, cache, normalisation):
         """A light's own arrays (light_cache.OWN_ARRAYS) in Dr.Jit, the sky integrals per
-        position's share."""
+        position's share; the weights None where all are zero (every sampled direction sees
+        the sky function alone: a scene that hides none of them from a sunless light)."""
         mi, S = self.mi, self.S
         cache.check_normalisation(normalisation)
-        return {"weight": _dr_array(mi.Color3f, cache.weight, 3),
+        return {"weight": _dr_array(mi.Color3f, cache.weight, 3) if cache.weight.any() else None,
                 "mirror": _dr_array(mi.Color3f, cache.mirror, 3),
                 "c": _dr_array(mi.Color3f, cache.mirror_sky, 3),
                 "diffuse_sky": _dr_array(mi.Color3f, cache.diffuse_sky / S, 3),
@@ -260,8 +261,9 @@ class WardModel:
             albedo = dr.block_sum(g * (2.0 * dr.square(s) * oh * h.z * dr.square(h.z) * c), self.J)
         out = []
         for light in self.lights if every else self.lights[:1]:
-            L = dr.block_sum(f * light["weight"], K)
-            L += dr.select(delta, w * bs.pdf, 0.0) * light["mirror"]
+            L = dr.select(delta, w * bs.pdf, 0.0) * light["mirror"]
+            if light["weight"] is not None:
+                L += dr.block_sum(f * light["weight"], K)
             L += rho_d * light["diffuse_sky"]
             if sigma > SIGMA_MIRROR:
                 L += spec * chebyshev_eval(light["lobe_sky"], x)

@@ -585,18 +585,23 @@ def _tracer(scene, at, bsdf_id, options):
 class _Samples:
     """One frame's samples (:func:`sample_frame`), Dr.Jit values: interactions ``si`` (P S),
     each repeated K times ``sik``, directions ``d`` (world) and ``wl`` (local), ``inv_pdf``
-    1 / (p_mix N) [sr], mirror rays ``ray_m`` and whether they see the solar disc
-    (``sun_seen``), the local sun direction ``sun``, and the paths' sampler ``seeds``."""
+    1 / (p_mix N) [sr], their rays ``ray`` and whether the scene hides the emitter along them
+    (``hidden``: toward the surface's back, none), mirror rays ``ray_m`` and ``hidden_m``, the
+    local sun direction ``sun``, the paths' sampler ``seeds``, and whether any ray is hidden
+    (``any_hidden``; else no path is traced)."""
 
     si: object
     sik: object
     d: object
     wl: object
     inv_pdf: object
+    ray: object
+    hidden: object
     ray_m: object
-    sun_seen: object
+    hidden_m: object
     sun: object
     seeds: list
+    any_hidden: bool
 
 
 def sample_frame(tr, sky, t, rng):
@@ -643,11 +648,23 @@ def sample_frame(tr, sky, t, rng):
         p_mix += frac[3 + j] * dr.select(facing, glossy_pdf(sik.wi, wl, s), 0.0)
     ok = (p_mix > 0) & (mi.Frame3f.cos_theta(wl) > 0)
     inv_pdf = dr.select(ok, dr.rcp(dr.maximum(p_mix, 1e-30)) / (K * S), 0.0)
-    # mirror direction at each position, and whether the solar disc lies along it
+    ray = mi.RayDifferential3f(sik.spawn_ray(d))
+    # mirror direction at each position
     ray_m = mi.RayDifferential3f(si.spawn_ray(si.to_world(mi.reflect(si.wi))))
-    sun_seen = ~tr.scene.ray_test(ray_m) & (emitter.pdf_sun(ray_m.d) > 0)
+    # a direction into the surface (weight 0) needs no path either
+    hidden, hidden_m = ok & tr.scene.ray_test(ray), tr.scene.ray_test(ray_m)
     sun = si.to_local(opaque_value(mi.Vector3f, sky.sun_direction))
-    return _Samples(si, sik, d, wl, inv_pdf, ray_m, sun_seen, sun, seeds)
+    dr.eval(d, wl, inv_pdf, hidden, hidden_m)
+    return _Samples(si, sik, d, wl, inv_pdf, ray, hidden, ray_m, hidden_m, sun, seeds,
+                    bool(dr.any(hidden)) or bool(dr.any(hidden_m)))
+
+
+def _paths(tr, ray, hidden, seed):
+    """The path integrator's L_i [W m^-2 sr^-1] along ``ray`` where ``hidden`` (its sampler
+    seeded with ``seed``; the other lanes idle)."""
+    tr.sampler.seed(seed, tr.dr.width(ray))
+    li, _, _ = tr.integrator.sample(tr.scene, tr.sampler, ray, active=hidden)
+    return li
 
 
 def trace_samples(tr, samples, sky=None, params=None):
@@ -658,14 +675,20 @@ def trace_samples(tr, samples, sky=None, params=None):
     mi, dr, emitter = tr.mi, tr.dr, tr.emitter
     if sky is not None:
         update_sky(params, sky, "sky.")
-    tr.sampler.seed(samples.seeds[0], tr.P * tr.S * tr.K)
-    li, _, _ = tr.integrator.sample(tr.scene, tr.sampler,
-                                    mi.RayDifferential3f(samples.sik.spawn_ray(samples.d)))
-    weight = (li - emitter.sky_eval(samples.d)) * samples.inv_pdf
-    tr.sampler.seed(samples.seeds[1], tr.P * tr.S)
-    lm, _, _ = tr.integrator.sample(tr.scene, tr.sampler, samples.ray_m)
-    lm_sky = lm - dr.select(samples.sun_seen, emitter.sun_radiance, 0.0) \
-        - emitter.sky_eval(samples.ray_m.d)
+    # a path only where the scene hides the emitter: along an escaping direction L_i is the
+    # emitter's own, h and the solar disc
+    def disc(d):
+        return dr.select(emitter.pdf_sun(d) > 0, emitter.sun_radiance, 0.0)
+    h_m = emitter.sky_eval(samples.ray_m.d)
+    weight, lm = disc(samples.d), h_m + disc(samples.ray_m.d)
+    lm_sky = dr.zeros(mi.Color3f, dr.width(lm))
+    if samples.any_hidden:
+        li = _paths(tr, samples.ray, samples.hidden, samples.seeds[0])
+        weight = dr.select(samples.hidden, li - emitter.sky_eval(samples.d), weight)
+        li_m = _paths(tr, samples.ray_m, samples.hidden_m, samples.seeds[1])
+        lm = dr.select(samples.hidden_m, li_m, lm)
+        lm_sky = dr.select(samples.hidden_m, li_m - h_m, lm_sky)     # no sun seen there
+    weight = weight * samples.inv_pdf
     return weight, lm, lm_sky
 
 
