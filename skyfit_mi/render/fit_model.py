@@ -207,13 +207,17 @@ class WardModel:
 
     def _light_arrays(self, cache, normalisation):
         """A light's own arrays (light_cache.OWN_ARRAYS) in Dr.Jit, the sky integrals per
-        position's share; the weights None where all are zero (every sampled direction sees
-        the sky function alone: a scene that hides none of them from a sunless light)."""
+        position's share; the weights and c None where all are zero (a scene hiding none of the
+        sampled directions from a sunless light, none of the mirror rays: the sky function
+        alone, whose integrals carry it all)."""
         mi, S = self.mi, self.S
         cache.check_normalisation(normalisation)
-        return {"weight": _dr_array(mi.Color3f, cache.weight, 3) if cache.weight.any() else None,
+
+        def unless_zero(a):
+            return _dr_array(mi.Color3f, a, 3) if a.any() else None
+        return {"weight": unless_zero(cache.weight),
                 "mirror": _dr_array(mi.Color3f, cache.mirror, 3),
-                "c": _dr_array(mi.Color3f, cache.mirror_sky, 3),
+                "c": unless_zero(cache.mirror_sky),
                 "diffuse_sky": _dr_array(mi.Color3f, cache.diffuse_sky / S, 3),
                 "lobe_sky": [_dr_array(mi.Color3f, cache.lobe_sky[:, :, :, m] / S, 3)
                              for m in range(cache.lobe_sky.shape[3])]}
@@ -238,11 +242,15 @@ class WardModel:
         light's, or with ``every`` each light's; ``per_position``: shares (P*T*S), not sums."""
         dr, mi = self.dr, self.mi
         ctx = mi.BSDFContext()
-        f = bsdf.eval(ctx, self.si, self.wi)                            # f_r cos(theta_i)
-        # evaluated once, or each block sum's per-channel kernel would evaluate it anew
-        dr.eval(f)
+        lights = self.lights if every else self.lights[:1]
         K = self.n // self.S
-        control = SIGMA_MIRROR < sigma < CONTROL_SIGMA
+        # the lobe's control variate, where some light's mirror rays see more than h
+        control = SIGMA_MIRROR < sigma < CONTROL_SIGMA and any(x["c"] is not None
+                                                                for x in lights)
+        if control or any(x["weight"] is not None for x in lights):
+            f = bsdf.eval(ctx, self.si, self.wi)                        # f_r cos(theta_i)
+            # evaluated once, or each block sum's per-channel kernel would evaluate it anew
+            dr.eval(f)
         bs, w = bsdf.sample(ctx, self.si_m, mi.Float(0.0), mi.Point2f(0.5, 0.5))
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection)
         rho_d, spec, s = bsdf.raw()
@@ -260,14 +268,14 @@ class WardModel:
             dr.eval(g)
             albedo = dr.block_sum(g * (2.0 * dr.square(s) * oh * h.z * dr.square(h.z) * c), self.J)
         out = []
-        for light in self.lights if every else self.lights[:1]:
+        for light in lights:
             L = dr.select(delta, w * bs.pdf, 0.0) * light["mirror"]
             if light["weight"] is not None:
                 L += dr.block_sum(f * light["weight"], K)
             L += rho_d * light["diffuse_sky"]
             if sigma > SIGMA_MIRROR:
                 L += spec * chebyshev_eval(light["lobe_sky"], x)
-            if control:
+            if control and light["c"] is not None:
                 L += control_weight(s, dr.clip) * light["c"] * (albedo / self.S - estimate)
             out.append(L if per_position else dr.block_sum(L, self.S))
         return out
