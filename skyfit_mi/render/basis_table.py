@@ -379,15 +379,23 @@ def tabulate_group(caches, model, normalisation="ward"):
     keep = {}
     whole = tabulate(caches[0], WardModel(caches[0], model, normalisation, caches[1:]), keep)
     P, T = caches[0].hit.shape
-    S, sigmas = keep["D"].shape[2], [float(v) for v in variance_sigmas()]
-    cov = Covariances.empty(len(caches), P, T)
-    for i, (j, k) in enumerate(cov.pairs):
-        a, b = ({s: x[m * P:(m + 1) * P] for s, x in keep.items()} for m in (j, k))
-        cov.DD[i] = _spread(a["D"], b["D"], S)
-        for v, sigma in enumerate(sigmas):
-            cov.DG[i, v] = _spread(a["D"], b[sigma], S) + _spread(b["D"], a[sigma], S)
-            cov.GG[i, v] = _spread(a[sigma], b[sigma], S)
-    return [whole.subset(slice(m * P, (m + 1) * P)) for m in range(len(caches))], cov
+    M, S = len(caches), keep["D"].shape[2]
+    cov = Covariances.empty(M, P, T)
+    if S > 1:
+        # each light's positions' estimates about their mean, (P, T, 3, M, S)
+        c = {key: np.moveaxis(x.reshape(M, P, T, S, 3) * S, (0, 3), (3, 4))
+             for key, x in keep.items()}
+        c = {key: x - x.mean(axis=4, keepdims=True) for key, x in c.items()}
+
+        def spreads(x, y):          # _spread of every pair of lights, [j, k] (P, T, 3)
+            return np.moveaxis(x @ np.swapaxes(y, 3, 4) / ((S - 1) * S), (3, 4), (0, 1))
+        j, k = np.array(cov.pairs).T
+        cov.DD[:] = spreads(c["D"], c["D"])[j, k]
+        for v, sigma in enumerate(float(v) for v in variance_sigmas()):
+            DG = spreads(c["D"], c[sigma])
+            cov.DG[:, v] = DG[j, k] + DG[k, j]
+            cov.GG[:, v] = spreads(c[sigma], c[sigma])[j, k]
+    return [whole.subset(slice(m * P, (m + 1) * P)) for m in range(M)], cov
 
 
 def variance_sigmas():
