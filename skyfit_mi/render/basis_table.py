@@ -381,20 +381,21 @@ def tabulate_group(caches, model, normalisation="ward"):
     P, T = caches[0].hit.shape
     M, S = len(caches), keep["D"].shape[2]
     cov = Covariances.empty(M, P, T)
-    if S > 1:
-        # each light's positions' estimates about their mean, (P, T, 3, M, S)
-        c = {key: np.moveaxis(x.reshape(M, P, T, S, 3) * S, (0, 3), (3, 4))
-             for key, x in keep.items()}
-        c = {key: x - x.mean(axis=4, keepdims=True) for key, x in c.items()}
+    if S > 1 and cov.pairs:
+        def centred(key):           # each light's positions' estimates less their mean
+            x = np.moveaxis(keep[key].reshape(M, P, T, S, 3) * S, (0, 3), (3, 4))
+            return x - x.mean(axis=4, keepdims=True)                    # (P, T, 3, M, S)
 
         def spreads(x, y):          # _spread of every pair of lights, [j, k] (P, T, 3)
             return np.moveaxis(x @ np.swapaxes(y, 3, 4) / ((S - 1) * S), (3, 4), (0, 1))
         j, k = np.array(cov.pairs).T
-        cov.DD[:] = spreads(c["D"], c["D"])[j, k]
+        d = centred("D")
+        cov.DD[:] = spreads(d, d)[j, k]
         for v, sigma in enumerate(float(v) for v in variance_sigmas()):
-            DG = spreads(c["D"], c[sigma])
+            g = centred(sigma)
+            DG = spreads(d, g)
             cov.DG[:, v] = DG[j, k] + DG[k, j]
-            cov.GG[:, v] = spreads(c[sigma], c[sigma])[j, k]
+            cov.GG[:, v] = spreads(g, g)[j, k]
     return [whole.subset(slice(m * P, (m + 1) * P)) for m in range(M)], cov
 
 
