@@ -2,7 +2,8 @@
 
 Everything in a pixel's radiance but the fitted BRDF is independent of the parameters.
 :func:`build_light_cache` traces it once per region pixel and frame with Mitsuba (primary rays
-jittered over the pixel, incident light by the scene's path integrator) along fixed directions
+jittered over the pixel, incident light by the scene's path integrator where the scene hides the
+emitter, the emitter's own elsewhere) along fixed directions
 drawn from a parameter-independent mixture (sun disc, sky, cosine, and Ward lobes at several
 roughnesses), weighted by the mixture density (multi-sample MIS, balance heuristic).  Then
 
