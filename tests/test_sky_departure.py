@@ -122,3 +122,25 @@ def test_a_fit_under_measured_skies_holds_the_truth_with_the_departure_and_not_w
     assert r["sky"]["correlation"]["names"][-5:] == [f"departure {b}" for b in sd.BASIS]
     assert all(held["truth"].values()), held
     assert half[True] <= 2.0 * half["truth"], half
+
+
+def test_the_least_field_over_the_day_and_its_warning():
+    """The field's least value above the horizon, hand-derived: 1 + 0.5 u is least at the
+    horizon (u = -1), 1 - 1.2 u at the zenith; 1 + 0.5 cos(gamma) is 1 with the sun at the
+    zenith and 0.5 with it on the horizon (the opposite horizon); below zero the fit warns that
+    no sky is like that, above it not."""
+    from skyfit_mi.fitting.sky_fit import _departure_record, _departure_warnings
+
+    zenith, horizon = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
+    e = np.eye(len(sd.BASIS))
+    np.testing.assert_allclose(sd.least_field(0.5 * e[0], [zenith]), [0.5], atol=1e-12)
+    np.testing.assert_allclose(sd.least_field(-1.2 * e[0], [zenith]), [-0.2], atol=1e-12)
+    np.testing.assert_allclose(sd.least_field(0.5 * e[2], [zenith, horizon]), [1.0, 0.5],
+                               atol=1e-12)
+    small = np.diag(np.full(len(sd.BASIS), 0.01))
+    for weights, negative in ((-1.2 * e[0], True), (0.5 * e[0], False)):
+        rec = _departure_record(weights, small, np.array([zenith, horizon]))
+        said = " ".join(_departure_warnings(rec))
+        assert (rec["least_field"] < 0) == negative
+        assert ("negative" in said) == negative, said
+    assert rec["least_field_sun_zenith_deg"] in (0.0, 90.0)

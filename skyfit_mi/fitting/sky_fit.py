@@ -30,7 +30,7 @@ from .methods.levenberg_marquardt import levenberg_marquardt
 from ..pipeline.manifest import RENDERED_SOURCES
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics import sky_shape
-from ..physics.sky_departure import BASIS, PRIOR_SD as DEPARTURE_SD, conflict
+from ..physics.sky_departure import BASIS, PRIOR_SD as DEPARTURE_SD, conflict, least_field
 from ..physics.sky import MEASURED_SUN_SD, SUN_LEVEL_SD, SUN_SKY_COUPLING
 from ..physics.turbid_sky import TURBIDITY_RANGE
 from .methods import global_search
@@ -816,7 +816,8 @@ def _fit_terms(sessions, level, terms, told, warnings, light_terms=0):
         fitted.light_curve = _curve_record(sessions, w, Cw, span, of="level")[0]
     if J > S:
         a, Ca = u[terms + S:terms + J], C[terms + S:terms + J, terms + S:terms + J]
-        fitted.departure = _departure_record(a, Ca)
+        suns = np.unique([sky.sun_direction for s in sessions for sky in s.skies], axis=0)
+        fitted.departure = _departure_record(a, Ca, suns)
         warnings += _departure_warnings(fitted.departure)
     fitted.correlation = {"names": coefficients.names,
                           "matrix": (C / np.outer(sd, sd)).tolist()}
@@ -860,10 +861,12 @@ def _shape_warnings(shape, mix_sd):
     return warnings
 
 
-def _departure_record(a, covariance):
-    """The JSON record of the sky's departure weights ``a``."""
+def _departure_record(a, covariance, suns):
+    """The JSON record of the sky's departure weights ``a``, the frames' unit ``suns`` (n, 3)."""
     sd = np.sqrt(np.diag(covariance))
     chi2 = conflict(a)
+    least = least_field(a, suns)
+    worst = int(np.argmin(least))
     return {"meaning": "the sky other than the sun is the spec's (its level and shape as fitted) "
                        "times 1 + sum_j weights[j] B_j above the horizon, B_j the basis of the "
                        "zenith angle theta and the angle gamma from the sun (u = 2 cos theta - 1, "
@@ -871,24 +874,44 @@ def _departure_record(a, covariance):
                        "prior_sd^2) measured from a clear day's scans and published sky models; "
                        "the fit marginalises it "
                        "into every interval; conflict: sum (weights / prior_sd)^2, chi-square "
-                       "with len(basis) degrees of freedom under the prior, and its p-value",
+                       "with len(basis) degrees of freedom under the prior, and its p-value; "
+                       "least_field: the field's least value above the horizon over the day's "
+                       "suns (below 0 the sky's radiance is negative there), and that sun's "
+                       "zenith angle [degrees]",
             "basis": list(BASIS), "weights": np.asarray(a).tolist(), "sd": sd.tolist(),
             "covariance": np.asarray(covariance).tolist(), "prior_sd": DEPARTURE_SD.tolist(),
-            "conflict": chi2, "conflict_p": float(chdtrc(len(a), chi2))}
+            "conflict": chi2, "conflict_p": float(chdtrc(len(a), chi2)),
+            "least_field": float(least[worst]),
+            "least_field_sun_zenith_deg": float(np.degrees(np.arccos(np.clip(
+                suns[worst][2] / np.linalg.norm(suns[worst]), -1.0, 1.0))))}
 
 
 def _departure_warnings(departure):
-    """A warning where the departure conflicts with its prior (:data:`DEPARTURE_CONFLICT_P`)."""
+    """Warnings where the departure conflicts with its prior (:data:`DEPARTURE_CONFLICT_P`) and
+    where it makes the sky's radiance negative somewhere above the horizon."""
+    warnings = []
+    least = departure.get("least_field")
+    if least is not None and least < 0:
+        warnings.append(
+            f"the fitted departure makes the sky's radiance negative above the horizon (the "
+            f"field, the factor on the model's radiance, reaches {least:+.2f} with the sun "
+            f"{departure['least_field_sun_zenith_deg']:.0f} degrees from the zenith): no sky is "
+            "like that, so the field stands in for what the spec's sky misses in these "
+            "materials' lobes rather than for the sky; parameters resting on that part of the "
+            "sky, and relighting under other views or light, may not be reliable; give the spec "
+            "a sky nearer the day's (a measured one: perez with measured irradiance, or envmap, "
+            "or a sky photographed).")
     if departure["conflict_p"] >= DEPARTURE_CONFLICT_P:
-        return []
-    return [f"the sky departs from the spec's model more than measured skies and published "
-            f"models depart from it (its field's weights "
-            f"{', '.join(f'{v:+.2f}' for v in departure['weights'])} against prior sds of "
-            f"{', '.join(f'{v:g}' for v in DEPARTURE_SD)}; chi-square "
-            f"{departure['conflict']:.1f} for {len(departure['weights'])}): the prior holds the "
-            "field back, so the parameters and their intervals may not be reliable; give the "
-            "spec a sky nearer the day's (a measured one: perez with measured irradiance, or "
-            "envmap, or a sky photographed), or fit its shape too (--sky-shape)."]
+        return warnings
+    return warnings + [
+        f"the sky departs from the spec's model more than measured skies and published "
+        f"models depart from it (its field's weights "
+        f"{', '.join(f'{v:+.2f}' for v in departure['weights'])} against prior sds of "
+        f"{', '.join(f'{v:g}' for v in DEPARTURE_SD)}; chi-square "
+        f"{departure['conflict']:.1f} for {len(departure['weights'])}): the prior holds the "
+        "field back, so the parameters and their intervals may not be reliable; give the "
+        "spec a sky nearer the day's (a measured one: perez with measured irradiance, or "
+        "envmap, or a sky photographed), or fit its shape too (--sky-shape)."]
 
 
 def fitted_mix(record):

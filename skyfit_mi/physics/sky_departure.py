@@ -50,6 +50,18 @@ def field_factor(directions, sun, weights):
     return 1.0 + basis(directions, sun) @ np.asarray(weights, dtype=float)
 
 
+def least_field(weights, suns, steps=(46, 72)):
+    """The least field 1 + sum_j a_j B_j [unitless] over directions above the horizon for each
+    unit sun of ``suns`` (n, 3) at ``weights`` a (J,), on a grid of ``steps`` (zenith angles
+    0-90 degrees, azimuths): (n,).  Below zero the field makes the sky's radiance negative
+    there, which no sky is."""
+    theta = np.radians(np.linspace(0.0, 90.0, steps[0]))
+    phi = np.radians(np.linspace(0.0, 360.0, steps[1], endpoint=False))
+    t, f = np.meshgrid(theta, phi, indexing="ij")
+    d = np.stack([np.sin(t) * np.cos(f), np.sin(t) * np.sin(f), np.cos(t)], axis=-1)
+    return np.array([field_factor(d, sun, weights).min() for sun in np.atleast_2d(suns)])
+
+
 def departure_parts(sky):
     """The lights carrying the field's basis for ``sky``'s light other than the sun
     (:meth:`~.sky.Sky.split`): for each B_j that rest with its patterns times 1 + B_j
