@@ -118,3 +118,28 @@ def test_edges_follow_a_curved_ridge_and_its_points_widen_the_others():
     b_lo, b_hi = (v[1] for v in ridge_intervals(walked, 0.0, LEVELS[1]))
     assert b_lo < 0.15 and b_hi > 0.85                   # b's own 95%: 0.108-0.892
     assert ridge_intervals(walked, 0.0, -1.0) is None
+
+
+def test_a_fit_failing_from_its_extrapolated_start_is_retried_from_the_nearest_fit(
+        noisy_fit, monkeypatch):
+    """A constrained fit whose start, stepped along the profile's path, lands where the
+    curvature is singular (the grey card's C_r under a hazy sky: rho_s clipped to 0 beside
+    sigma_alpha 0) is fitted again from the nearest fit, x in its place; before, every such x
+    counted as outside while searching and the edge then fell to the bound."""
+    from skyfit_mi.fitting.methods import profile
+
+    s, theta, chi2, cinv = noisy_fit
+    want, _, _ = profile.profile_edges(s.problem, theta, chi2, 0, LEVELS, s.lower, s.upper, cinv)
+    real, calls = profile.polish, []
+
+    def singular_when_stepped(problem, start, *args, **kwargs):
+        # every x's first start fails, as a singular corner would
+        calls.append(float(start[0]))
+        if calls.count(float(start[0])) == 1:
+            return {"theta": np.asarray(start), "chi2": problem.chi2(start), "status": "failed",
+                    "message": "curvature matrix singular"}
+        return real(problem, start, *args, **kwargs)
+    monkeypatch.setattr(profile, "polish", singular_when_stepped)
+    got, _, _ = profile.profile_edges(s.problem, theta, chi2, 0, LEVELS, s.lower, s.upper, cinv)
+    np.testing.assert_allclose(np.array(got, dtype=float), np.array(want, dtype=float),
+                               rtol=0.02)

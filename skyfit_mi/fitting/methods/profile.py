@@ -59,6 +59,13 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, op
         fits += 1
         res = polish(problem, start_at(x), lower, upper, max_iterations=opts.iterations,
                      fixed=(k,))
+        if res["status"] == "failed":
+            # the start stepped into a singular corner (rho_s clipped to 0 beside sigma_alpha
+            # 0): from the nearest fit itself, x in its place
+            start = path[min(path, key=lambda v: abs(v - x))].copy()
+            start[k] = x
+            res = polish(problem, start, lower, upper, max_iterations=opts.iterations,
+                         fixed=(k,))
         exact = res["status"] != "failed"
         chi2 = res["chi2"] if exact else problem.chi2(start_at(x))
         if exact:
