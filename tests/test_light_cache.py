@@ -382,7 +382,7 @@ def test_lights_traced_with_shared_samples_each_take_their_own_radiance(days):
         build_light_cache(*args, rest, *where, others=[variant[:2]], **options)
 
 
-def test_a_scene_hiding_part_of_the_sky_matches_the_render(tmp_path, days):
+def test_a_scene_hiding_part_of_the_sky_matches_the_render(tmp_path, days, monkeypatch):
     """Paths are traced only along directions the scene hides (a wall north of the disc: its
     shadow and its light), the rest take the emitter's own light: the cache still agrees with a
     full render, and a scene hiding nothing traces no path."""
@@ -406,21 +406,17 @@ def test_a_scene_hiding_part_of_the_sky_matches_the_render(tmp_path, days):
     raw["time"].update(start="07:00", end="17:00", step_minutes=150)
     render_sequence(validate_spec(raw, tmp_path), tmp_path / "day", progress=False,
                     log=lambda *a: None)
-    traced = []
-    paths = light_cache._paths
+    traced, paths = [], light_cache._paths
 
     def counting(*args):
         traced.append(1)
         return paths(*args)
-    light_cache._paths = counting
-    try:
-        FitSession(days["clean"], "disc", REGION, model="two", cache=FitCache(seed=5),
-                   light=None).light_cache()
-        assert not traced, "the disc alone hides nothing, yet paths were traced"
-        s = _raw(FitSession(tmp_path / "day", "disc", REGION, model="two",
-                            cache=FitCache(seed=5), light=None))
-    finally:
-        light_cache._paths = paths
+    monkeypatch.setattr(light_cache, "_paths", counting)
+    FitSession(days["clean"], "disc", REGION, model="two", cache=FitCache(seed=5),
+               light=None).light_cache()
+    assert not traced, "the disc alone hides nothing, yet paths were traced"
+    s = _raw(FitSession(tmp_path / "day", "disc", REGION, model="two",
+                        cache=FitCache(seed=5), light=None))
     assert traced, "the wall hides part of the sky, yet no path was traced"
     rendered = frame_values(tmp_path / "day", s.obs.pixels, s.obs.frames)
     rel = s.wm.radiance([0.3, 0.1]) / rendered - 1

@@ -24,7 +24,7 @@ import numpy as np
 from scipy.special import chdtrc
 
 from . import uncertainty as unc
-from ..conventions import time_legendre
+from ..conventions import angles_from_direction, time_legendre
 from ..errors import SkyfitError
 from .methods.levenberg_marquardt import levenberg_marquardt
 from ..pipeline.manifest import RENDERED_SOURCES
@@ -882,8 +882,7 @@ def _departure_record(a, covariance, suns):
             "covariance": np.asarray(covariance).tolist(), "prior_sd": DEPARTURE_SD.tolist(),
             "conflict": chi2, "conflict_p": float(chdtrc(len(a), chi2)),
             "least_field": float(least[worst]),
-            "least_field_sun_zenith_deg": float(np.degrees(np.arccos(np.clip(
-                suns[worst][2] / np.linalg.norm(suns[worst]), -1.0, 1.0))))}
+            "least_field_sun_zenith_deg": float(np.degrees(angles_from_direction(suns[worst])[0]))}
 
 
 def _departure_warnings(departure):

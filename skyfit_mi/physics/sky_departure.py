@@ -24,7 +24,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..conventions import unit_directions
+from ..conventions import direction_from_angles, unit_directions
 
 #: The field's basis functions by name (:func:`basis`).
 BASIS = ("zenith P1", "zenith P2", "sun P1", "sun P2", "zenith x sun")
@@ -57,8 +57,7 @@ def least_field(weights, suns, steps=(46, 72)):
     there, which no sky is."""
     theta = np.radians(np.linspace(0.0, 90.0, steps[0]))
     phi = np.radians(np.linspace(0.0, 360.0, steps[1], endpoint=False))
-    t, f = np.meshgrid(theta, phi, indexing="ij")
-    d = np.stack([np.sin(t) * np.cos(f), np.sin(t) * np.sin(f), np.cos(t)], axis=-1)
+    d = direction_from_angles(*np.meshgrid(theta, phi, indexing="ij"))
     return np.array([field_factor(d, sun, weights).min() for sun in np.atleast_2d(suns)])
 
 

@@ -57,15 +57,15 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, op
         """sqrt(P_k(x) - chi2_min), and whether it is exact (not just an upper bound)."""
         nonlocal fits
         fits += 1
-        res = polish(problem, start_at(x), lower, upper, max_iterations=opts.iterations,
-                     fixed=(k,))
-        if res["status"] == "failed":
-            # the start stepped into a singular corner (rho_s clipped to 0 beside sigma_alpha
-            # 0): from the nearest fit itself, x in its place
-            start = path[min(path, key=lambda v: abs(v - x))].copy()
-            start[k] = x
+        # a start stepped into a singular corner (rho_s clipped to 0 beside sigma_alpha 0)
+        # fails: then from the nearest fit itself, x in its place
+        nearest = path[min(path, key=lambda v: abs(v - x))].copy()
+        nearest[k] = x
+        for start in (start_at(x), nearest):
             res = polish(problem, start, lower, upper, max_iterations=opts.iterations,
                          fixed=(k,))
+            if res["status"] != "failed":
+                break
         exact = res["status"] != "failed"
         chi2 = res["chi2"] if exact else problem.chi2(start_at(x))
         if exact:
