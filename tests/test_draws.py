@@ -1,7 +1,6 @@
 """Draws from a fit's likelihood (skyfit_mi.fitting.draws): against the exact posterior of a
 linear model, and along a curved ridge (a grey plastic's metal twin) that the intervals'
 Gaussian misses."""
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -24,10 +23,9 @@ class _Problem:
 
     def __init__(self, f, y, sigma):
         self.model, self.y, self.sigma = _Model(f), y, sigma
-        self.obs = SimpleNamespace(y=y)
 
-    def chi2s(self, radiances):
-        r = (self.y - radiances.reshape(len(radiances), -1)) / self.sigma
+    def chi2_at(self, thetas):
+        r = (self.y - self.model.radiances(thetas).reshape(len(thetas), -1)) / self.sigma
         return np.sum(r * r, axis=1)
 
 

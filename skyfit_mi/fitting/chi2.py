@@ -29,6 +29,9 @@ from ..render.light_cache import point_rays
 
 #: Values below this [DN] read as code 0.
 LOW_CODE = 0.5
+#: Values (sets x pixels x frames x channels) whose radiance :meth:`Problem.chi2_at` holds at
+#: once (32 MB).
+CHUNK_VALUES = 2**22
 #: Largest relative standard error of a region mean (or table value) that counts as measured
 #: (:meth:`Problem.measured_range`).
 MEASURED_SE = 0.1
@@ -497,6 +500,15 @@ class Problem:
         """Chi-square (eq. 6.2) of each of several radiances (n, P, T, 3), at once."""
         r = self.residual_terms(radiances, derivative=False)[0]
         return np.sum(np.where(self.mask, r * r, 0.0), axis=(1, 2, 3))
+
+    def chi2_at(self, thetas):
+        """Chi-square (eq. 6.2) at each parameter set of ``thetas`` (n, params), from the model's
+        radiances CHUNK_VALUES values at a time."""
+        thetas = np.atleast_2d(thetas)
+        self.evaluations += len(thetas)
+        step = max(1, CHUNK_VALUES // self.obs.y.size)
+        return np.concatenate([self.chi2s(self.model.radiances(thetas[start:start + step]))
+                               for start in range(0, len(thetas), step)])
 
     def residuals(self, theta):
         """(y - y(a)) / sigma over usable values, flat."""

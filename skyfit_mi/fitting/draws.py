@@ -18,8 +18,6 @@ ROUNDS, MIN_ROUNDS = 6, 3
 #: A mixture component's covariance: that of this many favoured sets nearest it, its width
 #: times SPREAD, plus FLOOR times the first proposal's covariance.
 NEIGHBOURS, SPREAD, FLOOR = 20, 2.0, 1e-4
-#: Values (sets x pixels x frames x channels) whose radiance is held at once (32 MB).
-CHUNK_VALUES = 2**22
 
 
 @dataclass
@@ -53,7 +51,7 @@ def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n
         logq.append(_log_mixture(np.concatenate([x_all, x]), *proposals[-1][:2])
                     - np.log(accepted))
         x_all = np.concatenate([x_all, x])
-        chi2 = _chi2s(problem, x)
+        chi2 = problem.chi2_at(x)
         log_likelihood = np.concatenate([log_likelihood, np.where(
             np.isfinite(chi2), -(chi2 - chi2_min) / (2 * scale), -np.inf)])
         share = np.log(np.array(counts) / len(x_all))[:, None]
@@ -140,13 +138,6 @@ def _log_mixture(x, means, kernels):
                 + 0.5 * x.shape[1] * np.log(2 * np.pi))
     return (logsumexp(-0.5 * np.sum(z * z, axis=1) - log_norm[:, None], axis=0)
             - np.log(len(means)))
-
-
-def _chi2s(problem, x):
-    """Chi-square of ``problem`` at each set of ``x``, CHUNK_VALUES values' radiance at a time."""
-    step = max(1, CHUNK_VALUES // problem.obs.y.size)
-    return np.concatenate([problem.chi2s(problem.model.radiances(x[start:start + step]))
-                           for start in range(0, len(x), step)])
 
 
 def _systematic(w, n, rng):

@@ -113,20 +113,30 @@ class Series:
         """The series with ``f`` applied to every block's coefficients."""
         return Series([(r, fr, f(c)) for r, fr, c in self.blocks])
 
+    def places(self):
+        """Each block's (rows, frames)."""
+        return [(r, f) for r, f, _ in self.blocks]
+
+    def coefficients(self, i, h):
+        """Block ``i``'s coefficients (n + 1, p, t, 3) of the stored mean (``h`` = 0) or half
+        difference (1)."""
+        return self.blocks[i][2][h]
+
     def evaluate(self, x, h, shape, derivative=False):
         """The stored mean (``h`` = 0) or half difference (1) at the coordinates ``x`` (K,)
         of the piece: (K,) + ``shape`` float64, and its derivative in x."""
         out = np.empty((len(x),) + tuple(shape))
         dout = np.empty_like(out) if derivative else None
         rows_of = {}
-        for r, f, c in self.blocks:
-            n = c.shape[1] - 1
+        for i, (r, f) in enumerate(self.places()):
+            c = self.coefficients(i, h)
+            n = c.shape[0] - 1
             if n not in rows_of:
                 rows_of[n] = _chebyshev_rows(x, n, True) if derivative else \
                     (_chebyshev_rows(x, n), None)
             T, dT = rows_of[n]
-            flat = c[h].reshape(n + 1, -1)
-            size = (len(x),) + c.shape[2:]
+            flat = c.reshape(n + 1, -1)
+            size = (len(x),) + c.shape[1:]
             out[:, r, f] = (T.astype(flat.dtype) @ flat).reshape(size)
             if derivative:
                 dout[:, r, f] = (dT.astype(flat.dtype) @ flat).reshape(size)
@@ -553,23 +563,32 @@ class _Mixed:
 
 class _MixedSeries(Series):
     """The series sum_j w_j s_j of the parts' series ``series`` (traced in the same blocks) with
-    weights ``wt`` [(T, 3)], mixed when first used."""
+    weights ``wt`` [(T, 3)], each block's mean or half difference mixed when first used (a fit
+    asks for the mean only)."""
 
     def __init__(self, series, wt):
-        self._series, self._wt = series, wt
+        self._series, self._wt, self._mixed = series, wt, {}
+        places = series[0].places()
+        if any(s.places() != places for s in series[1:]):
+            raise ValueError("the parts' tables were traced in different blocks")
 
-    @functools.cached_property
+    @property
     def blocks(self):
-        out = []
-        for i, (r, f, first) in enumerate(self._series[0].blocks):
-            cs = [s.blocks[i] for s in self._series]
-            if any((rb, fb) != (r, f) for rb, fb, _ in cs):
-                raise ValueError("the parts' tables were traced in different blocks")
-            c = np.zeros((2, max(cb.shape[1] for _, _, cb in cs)) + first.shape[2:], np.float32)
-            for (_, _, cb), w in zip(cs, self._wt):
-                c[:, :cb.shape[1]] += w[f] * cb
-            out.append((r, f, c))
-        return out
+        return [(r, f, np.stack([self.coefficients(i, h) for h in (0, 1)]))
+                for i, (r, f) in enumerate(self.places())]
+
+    def places(self):
+        return self._series[0].places()
+
+    def coefficients(self, i, h):
+        if (i, h) not in self._mixed:
+            f = self.places()[i][1]
+            cs = [s.coefficients(i, h) for s in self._series]
+            c = np.zeros((max(len(cb) for cb in cs),) + cs[0].shape[1:], np.float32)
+            for cb, w in zip(cs, self._wt):
+                c[:len(cb)] += w[f] * cb
+            self._mixed[i, h] = c
+        return self._mixed[i, h]
 
 
 def trace_basis(scene, params, lights, at, bsdf_id, options=CacheOptions(), budget=None,

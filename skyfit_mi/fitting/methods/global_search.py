@@ -220,7 +220,7 @@ def global_search(problem, start, lower, upper, candidates=3, profile=True, grid
     # chi-square (the grid, without saturated values, can favour too narrow a lobe)
     rows = np.arange(len(SIGMA_GRID))
     best_j = np.argmin(chi2, axis=1)
-    order = np.argsort([problem.chi2(thetas[k, j]) for k, j in zip(rows, best_j)])
+    order = np.argsort(problem.chi2_at(thetas[rows, best_j]))
     picks = []
     for k in order:
         if all(abs(np.log((SIGMA_GRID[k] + 0.01) / (SIGMA_GRID[j] + 0.01))) > 0.5 for j in picks):

@@ -2,7 +2,8 @@
 
 The thesis's baseline: solve (alpha + lambda diag alpha) delta = beta with alpha = J^T J (the
 curvature matrix) and beta = -J^T r; accept the step if chi^2 falls (lambda /= 10), else raise
-lambda (x 10). Steps are clipped to the bounds. A singular alpha at the start (e.g. sigma_alpha at
+lambda (x 10). Steps are clipped to the bounds, and a parameter at a bound that chi-square
+presses on is held for the step. A singular alpha at the start (e.g. sigma_alpha at
 rho_s = 0) fails, as in the thesis's tables, with its reason; reached by steps, the determined
 parameters have converged. Parameters in ``fixed`` keep their start values (:mod:`.profile`).
 """
@@ -31,7 +32,11 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
     status, message = "max_iterations", "stopped after the iteration limit"
     small = 0
     for _ in range(max_iterations):
-        Jf = J[:, free]
+        step = free & ~_held_at_bound(theta, -J.T @ r, lower, upper)
+        if not step.any():
+            status, message = "converged", "every free parameter at a bound chi-square presses on"
+            break
+        Jf = J[:, step]
         alpha = Jf.T @ Jf
         beta = -Jf.T @ r
         a = alpha + lam * np.diag(np.diag(alpha))
@@ -47,7 +52,7 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
                        "e.g. sigma_alpha when rho_s = 0): the thesis's 'Fail'")
             break
         trial = theta.copy()
-        trial[free] += np.linalg.solve(a, beta)
+        trial[step] += np.linalg.solve(a, beta)
         trial = np.clip(trial, lower, upper)
         r_t = problem.residuals(trial)
         chi2_t = float(r_t @ r_t)
@@ -73,6 +78,13 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
         status, message = _at_the_limit(problem, trace, chi2, max_iterations)
     return {"theta": theta, "chi2": chi2, "status": status, "message": message, "trace": trace,
             "jacobian": J}
+
+
+def _held_at_bound(theta, beta, lower, upper):
+    """Parameters at a bound that the descent direction ``beta`` (-J^T r) presses on: held for
+    the step, so that clipping them does not shorten every other parameter's step (a projected
+    Gauss-Newton step; without it the search crawls along a bound, lambda rising and falling)."""
+    return ((theta <= lower) & (beta <= 0)) | ((theta >= upper) & (beta >= 0))
 
 
 #: Accepted steps over which a search stopped at its limit is judged, and the chi-square fall
