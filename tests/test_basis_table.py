@@ -241,6 +241,11 @@ def test_a_mix_of_lights_traced_with_shared_samples_keeps_their_covariances(days
     np.testing.assert_allclose(np.asarray(part.subset(slice(2, 5), slice(1, 3)).VDG),
                                np.asarray(got.VDG)[:, 2:5, 1:3])
     np.testing.assert_allclose(part.subset(slice(2, 5)).lobe(0.04), got.lobe(0.04)[:, 2:5])
+    # a subset of pixels and frames mixes its own blocks' halves, with its frames' weights
+    np.testing.assert_allclose(part.subset(slice(2, 5), slice(1, 3)).lobe(0.04, part=1),
+                               got.lobe(0.04, part=1)[:, 2:5, 1:3])
+    tint = np.array([1.0, 2.0, 3.0])
+    np.testing.assert_allclose(part.tinted(tint).lobe(0.3), got.lobe(0.3) * tint, rtol=1e-6)
 
 
 def test_a_tinted_table_is_the_light_times_its_factor_per_channel(traced):

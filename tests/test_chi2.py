@@ -24,6 +24,9 @@ class _Flat:
     def jacobian(self, theta):
         return self.radiance(theta), np.ones(self.shape + (1,))
 
+    def radiances(self, thetas):
+        return np.stack([self.radiance(t) for t in thetas])
+
 
 def _problem(mean_dn, noise_percent=10.0, n=4000, seed=0):
     sensor = SensorModel(exposure=1.0, bits=8, noise_percent=noise_percent)
@@ -60,6 +63,18 @@ def test_chi2_of_many_radiances_at_once_is_each_ones(mean_dn):
     thetas = np.linspace(0.5, 1.5, 7)[:, None] * mean_dn / sensor.max_code
     radiances = np.stack([problem.model.radiance(t) for t in thetas])
     np.testing.assert_allclose(problem.chi2s(radiances), [problem.chi2(t) for t in thetas],
+                               rtol=1e-12)
+
+
+def test_chi2_at_many_parameter_sets_in_chunks_is_each_ones(monkeypatch):
+    """Problem.chi2_at (the global search's ranking, the draws' likelihood): chi2 of each set,
+    the sets' radiances taken a few at a time where they would not fit at once."""
+    from skyfit_mi.fitting import chi2
+
+    problem, sensor = _problem(10.0, n=50)
+    monkeypatch.setattr(chi2, "CHUNK_VALUES", 2 * problem.obs.y.size)
+    thetas = np.linspace(0.5, 1.5, 7)[:, None] * 10.0 / sensor.max_code
+    np.testing.assert_allclose(problem.chi2_at(thetas), [problem.chi2(t) for t in thetas],
                                rtol=1e-12)
 
 

@@ -82,6 +82,40 @@ def test_a_search_at_its_iteration_limit_has_converged_where_chi2_no_longer_fall
     assert res["status"] == "max_iterations" and "iteration limit (3)" in res["message"]
 
 
+def test_levenberg_marquardt_holds_a_parameter_at_the_bound_it_is_pressed_against():
+    """A valley whose minimum lies beyond a's lower bound, a and b nearly interchangeable: held
+    at a = 0 for its steps, the search reaches the constrained minimum (b by least squares at
+    a = 0) exactly, not crawling along the bound as clipped steps do; a parameter that changes
+    nothing at its bound (sigma_alpha at rho_s = 0) is not held, so that start still fails."""
+    from skyfit_mi.fitting.methods.levenberg_marquardt import levenberg_marquardt
+
+    class Valley(_Banana):
+        A = np.array([[1.0, 1.0], [1.0, 1.05], [0.0, 0.01]]) / 0.01
+        y = A @ np.array([-1.0, 3.0])
+
+        def residuals(self, t):
+            return self.A @ t - self.y
+
+        def jacobian(self, t):
+            return self.residuals(t), self.A.copy()
+
+    p = Valley()
+    res = levenberg_marquardt(p, [0.5, 0.5], [0.0, -10.0], [10.0, 10.0])
+    b = np.linalg.lstsq(p.A[:, 1:], p.y, rcond=None)[0][0]
+    assert res["status"] == "converged" and res["theta"][0] == 0.0
+    assert res["theta"][1] == pytest.approx(b, abs=1e-6) and len(res["trace"]) <= 15
+
+    class Corner(_Banana):                   # rho_s exp(-sigma): sigma idle at rho_s = 0
+        def residuals(self, t):
+            return np.array([t[0] * np.exp(-t[1]) - 0.5, t[0] - 0.4, 0.0])
+
+        def jacobian(self, t):
+            e = np.exp(-t[1])
+            return self.residuals(t), np.array([[e, -t[0] * e], [1.0, 0.0], [0.0, 0.0]])
+
+    assert levenberg_marquardt(Corner(), [0.0, 0.0], [0, 0], [1, 1])["status"] == "failed"
+
+
 class _Banana:
     """chi^2 along a curved ridge a = b^2: residuals (a - b^2) / 0.01 and (b - 0.5) / 0.2.
     The profile of a rises as ((sqrt(a) - 0.5) / 0.2)^2, so its 95% interval is

@@ -382,7 +382,8 @@ def usable_values(obs, valid=None):
 
 
 class Problem:
-    """chi^2(a) for one region: observations, and a radiance model with ``radiance``/``jacobian``."""
+    """chi^2(a) for one region: observations, and a radiance model with ``radiance``,
+    ``jacobian`` and, for :meth:`chi2_at`, ``radiances``."""
 
     def __init__(self, obs, model, valid=None):
         self.obs, self.model, self.valid = obs, model, valid

@@ -563,8 +563,8 @@ class _Mixed:
 
 class _MixedSeries(Series):
     """The series sum_j w_j s_j of the parts' series ``series`` (traced in the same blocks) with
-    weights ``wt`` [(T, 3)], each block's mean or half difference mixed when first used (a fit
-    asks for the mean only)."""
+    weights ``wt`` [(T, 3)], each block's mean or half difference mixed when first used (a light
+    remixed at each step of the sky's fit is evaluated at its mean alone)."""
 
     def __init__(self, series, wt):
         self._series, self._wt, self._mixed = series, wt, {}
@@ -579,6 +579,13 @@ class _MixedSeries(Series):
 
     def places(self):
         return self._series[0].places()
+
+    def subset(self, rows, frames):
+        return _MixedSeries([s.subset(rows, frames) for s in self._series],
+                            [w[frames] for w in self._wt])
+
+    def map(self, f):
+        return Series(self.blocks).map(f)
 
     def coefficients(self, i, h):
         if (i, h) not in self._mixed:

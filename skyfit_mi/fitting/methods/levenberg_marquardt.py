@@ -83,8 +83,10 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
 def _held_at_bound(theta, beta, lower, upper):
     """Parameters at a bound that the descent direction ``beta`` (-J^T r) presses on: held for
     the step, so that clipping them does not shorten every other parameter's step (a projected
-    Gauss-Newton step; without it the search crawls along a bound, lambda rising and falling)."""
-    return ((theta <= lower) & (beta <= 0)) | ((theta >= upper) & (beta >= 0))
+    Gauss-Newton step; without it the search crawls along a bound, lambda rising and falling).
+    One that changes nothing (beta 0) is not held: its singular curvature stays the thesis's
+    'Fail' (:func:`polish` holds sigma_alpha at rho_s = 0)."""
+    return ((theta <= lower) & (beta < 0)) | ((theta >= upper) & (beta > 0))
 
 
 #: Accepted steps over which a search stopped at its limit is judged, and the chi-square fall
