@@ -37,9 +37,10 @@ def _intervals(theta, sd, lower, upper):
 def test_draws_of_a_linear_model_have_its_posterior_mean_and_covariance():
     """y = A theta + noise: the draws' mean and covariance are the least-squares estimate and
     (A^T A)^-1 sigma^2 s (s the scale), within their Monte Carlo error, from the intervals'
-    Gaussian and from one 3 times too wide alike; from one 30 times too wide (errors the
-    data share can widen the intervals so) too, or, where it finds too few effective draws,
-    none rather than a few sets repeated."""
+    Gaussian and from one 3 times too wide alike; from one 30 or 100 times too wide (errors
+    the data share can widen the intervals so) too, beside the curvature's Gaussian
+    (``local``); without it, from 100 times too wide, too few effective draws are found, and
+    none are given rather than a few sets repeated."""
     rng = np.random.default_rng(1)
     A = rng.normal(size=(60, 3))
     A[:, 2] *= 0.2                                   # a poorly determined last parameter
@@ -50,12 +51,15 @@ def test_draws_of_a_linear_model_have_its_posterior_mean_and_covariance():
     problem = _Problem(lambda th: th @ A.T, y, sigma)
     chi2 = float(np.sum(((y - A @ theta) / sigma) ** 2))
     lower, upper = np.zeros(3) - 5, np.ones(3) * 5
-    for widen in (1.0, 3.0, 30.0):
+    for widen in (1.0, 3.0, 30.0, 100.0):
         start = interval_covariance(_intervals(theta, widen * np.sqrt(np.diag(cov)), lower,
                                                upper), cov)
-        d = likelihood_draws(problem, theta, chi2, scale, start, lower, upper, seed=2, n=400)
-        if d is None and widen == 30.0:
-            continue                 # too few effective draws found: none kept, not wrong ones
+        local = cov if widen > 3 else None
+        d = likelihood_draws(problem, theta, chi2, scale, start, lower, upper, seed=2, n=400,
+                             local=local)
+        if widen == 100.0:
+            assert likelihood_draws(problem, theta, chi2, scale, start, lower, upper, seed=2,
+                                    n=400) is None
         assert d.effective_size >= 400 and d.values.shape == (400, 3)
         se = np.sqrt(np.diag(cov) / 400)
         assert np.all(np.abs(d.values.mean(axis=0) - theta) < 4 * se), widen

@@ -30,15 +30,23 @@ class Draws:
     rounds: int
 
 
-def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n=DRAWS):
+def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n=DRAWS,
+                     local=None):
     """``n`` parameter sets drawn with probability exp(-(chi2 - chi2_min) / (2 ``scale``)) within
     the bounds, by importance sampling (population Monte Carlo): first from the Gaussian of
-    ``cov``, then mixtures around the favoured sets, with deterministic-mixture weights, until
-    ``n`` effective draws. None where that fails after ROUNDS or no set is valid."""
+    ``cov`` about ``theta`` (with ``local``, the curvature's covariance there, an equal mixture
+    with its Gaussian: the intervals' is broad along a thin ridge, or wider than the
+    likelihood where errors the data share widen them), then mixtures around the favoured
+    sets, with deterministic-mixture weights, until ``n`` effective draws. None where that
+    fails after ROUNDS or no set is valid."""
     rng = np.random.default_rng(seed)
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
-    first = _psd(cov) + np.diag((1e-6 * (upper - lower)) ** 2)
-    proposals, logq, counts = [(theta[None], first[None])], [], []
+    tiny = np.diag((1e-6 * (upper - lower)) ** 2)
+    first = _psd(cov) + tiny
+    kernels = [first] if local is None or not np.all(np.isfinite(local)) else \
+        [first, _psd(local) + tiny]
+    proposals, logq, counts = [(np.repeat(theta[None], len(kernels), axis=0),
+                                np.array(kernels))], [], []
     x_all, log_likelihood, last = np.empty((0, len(theta))), np.empty(0), 0.0
     for r in range(ROUNDS):
         x, accepted = _propose(rng, *proposals[-1], lower, upper)

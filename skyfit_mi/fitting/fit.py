@@ -77,6 +77,8 @@ class FitState:
     model_noise_by_sigma, noise_chi2 : the cache's own chi-square by roughness; the mean and
         variance of noise's chi-square
     intervals, rise, cache_noise_chi2, cache_sd, sun_level_sd : by :func:`~.intervals.fit_intervals`
+    data_intervals : (n, 2) the 95% intervals of the data's chi-square alone, before the errors
+        the sequence shares (light, calibration, pose, ...) widen them: the draws' first proposal
     jpeg_shared_sd, calibration_sd, matrix_sd : shared errors' standard errors (:mod:`~.intervals`)
     sky, pose : the light's and the camera pose's shares (:class:`~.sky_fit.SkyShare`,
         :class:`~.pose.PoseShare`)
@@ -112,6 +114,7 @@ class FitState:
     pose: object = None
     held_out: dict = None
     draws: object = None
+    data_intervals: np.ndarray = None
 
     @property
     def delta_scale(self):
@@ -548,7 +551,8 @@ class FitSession:
         iv95 = np.array([fit.intervals[p]["95"] for p in self.names])
         fit.draws = likelihood_draws(
             problem, theta, chi2, draws_scale(s2, f2, fit.cache_noise_chi2),
-            interval_covariance(iv95, fit.covariance), self.lower, self.upper, seed)
+            interval_covariance(fit.data_intervals, fit.covariance), self.lower, self.upper,
+            seed, local=fit.covariance)
         fit.held_out = held_out_error(
             problem, theta, self.lower, self.upper,
             within=lambda th: bool(np.all((th >= iv95[:, 0]) & (th <= iv95[:, 1]))),

@@ -22,10 +22,11 @@ PROFILE_RIDGE_ITERATIONS = 40
 
 
 def fit_intervals(s, fit):
-    """Set ``fit``'s intervals, rise, cache_noise_chi2, cache_sd and sun_level_sd: the
-    covariance's intervals, or the profile's for rho_s and sigma_alpha of a global fit, each
-    widened by the cache's, calibration's, JPEG rounding's, colour matrix's, sky's and pose's
-    errors and (a factor on the reflectances) the sun level's."""
+    """Set ``fit``'s intervals, data_intervals, rise, cache_noise_chi2, cache_sd and
+    sun_level_sd: the covariance's intervals, or the profile's for rho_s and sigma_alpha of a
+    global fit (the data's, ``data_intervals`` at 95%), each widened by the cache's,
+    calibration's, JPEG rounding's, colour matrix's, sky's and pose's errors and (a factor on
+    the reflectances) the sun level's."""
     problem, theta, names = fit.problem, fit.theta, s.names
     lower, upper = s.lower, s.upper
     s2k = fit.delta_scale                             # each parameter's scale of Delta chi^2
@@ -67,6 +68,7 @@ def fit_intervals(s, fit):
             if ridge is not None:
                 lo, hi = intervals[p][lv]
                 intervals[p][lv] = (min(lo, float(ridge[0][i])), max(hi, float(ridge[1][i])))
+    fit.data_intervals = np.array([intervals[p]["95"] for p in names])
     mc_sd = s.cache_error(theta, fit.method, problem)
     cal_sd = fit.calibration_sd
     sky = fit.sky

@@ -26,6 +26,7 @@ from .draws import interval_covariance, root_of
 from .fit import FitCache, FitSession, trace_sessions
 from .geometry import ANGLES_BEYOND_DEG, angles_beyond, highlight_beyond
 from .held_out import local_error_scale
+from .intervals import frame_calibration_sd
 from .landscape import truth_parameters
 from .sky_fit import light_tints, reference_light_factor, sky_level_at
 from .uncertainty import band_half_width, widen
@@ -861,7 +862,8 @@ def _predict_means(s, result, target, draws, rng):
                               (result.get("geometry") or {}).get("sun_angles_per_frame_deg"),
                               s.geometry["sun_angles_per_frame_deg"], kappa)
     extra = band_half_width((np.sum(image_noise_variance(s, image, at_fit, target), axis=0)
-                             + np.sum(model_var, axis=0)) / n**2, means[0] * scale, kappa,
+                             + np.sum(model_var, axis=0)) / n**2
+                            + frame_calibration_variance(s, means[0]), means[0] * scale, kappa,
                             interval)
     observed = region_mean(image)
     names = _channels(s)
@@ -935,7 +937,8 @@ def _predict_points(s, result, target, draws, rng):
     _, model_var = s.wm.radiance_and_variance(sets[0])
     scale = _on_fit_scale(s, result, at_fit, target)
     image = image_values(s, target)
-    extra = band_half_width(image_noise_variance(s, image, at_fit, target) + model_var, at_fit,
+    extra = band_half_width(image_noise_variance(s, image, at_fit, target) + model_var
+                            + frame_calibration_variance(s, at_fit), at_fit,
                             *model_error_kappa(result))
     names = _channels(s)
     where = zip(*np.nonzero(np.isfinite(s.obs.sigma[..., :len(names)])))
@@ -1021,6 +1024,14 @@ def image_values(s, target):
     if s.obs.rays is None:
         return frame_values(target, s.obs.pixels, s.obs.frames)
     return s.obs.y / (s.obs.gain * s.obs.sensor.max_code)
+
+
+def frame_calibration_variance(s, radiance):
+    """Variance [(W m^-2 sr^-1)^2] that the target's frames' own calibration (a grey card in
+    each frame, ingest's ``per_frame``) gives ``radiance`` (..., 3): a relative error each frame
+    shares over all its pixels, so a region mean keeps it whole; 0 without."""
+    sd = frame_calibration_sd(s)
+    return 0.0 if sd is None else (np.asarray(sd, dtype=float) * radiance) ** 2
 
 
 def image_noise_variance(s, image, radiance, target):
