@@ -44,7 +44,7 @@ def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n
     tiny = np.diag((1e-6 * (upper - lower)) ** 2)
     first = _psd(cov) + tiny
     kernels = [first] if local is None or not np.all(np.isfinite(local)) else \
-        [first, _psd(local) + tiny]
+        [first, _psd(_within_range(local, upper - lower)) + tiny]
     proposals, logq, counts = [(np.repeat(theta[None], len(kernels), axis=0),
                                 np.array(kernels))], [], []
     x_all, log_likelihood, last = np.empty((0, len(theta))), np.empty(0), 0.0
@@ -76,6 +76,15 @@ def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n
     if ess < n:
         return None
     return Draws(x_all[_systematic(w, n, rng)], float(ess), len(x_all), r + 1)
+
+
+def _within_range(cov, span):
+    """``cov`` with each sd at most ``span`` (the bounds' range), its correlations kept: a
+    nearly singular curvature's covariance can be vast, beyond what its rounding leaves
+    positive definite."""
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    shrink = np.divide(np.minimum(sd, span), sd, out=np.ones_like(sd), where=sd > 0)
+    return cov * np.outer(shrink, shrink)
 
 
 def _psd(cov):
