@@ -13,7 +13,6 @@ model's Monte Carlo variance is the positions' spread, kept as covariances of D 
 roughness values (the variance of rho_d D + s G is bilinear in the reflectances).
 """
 
-import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
