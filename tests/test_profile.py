@@ -42,7 +42,8 @@ def test_edges_sit_where_the_profile_crosses_the_threshold(noisy_fit, k):
     from skyfit_mi.fitting.methods.profile import profile_edges
 
     s, theta, chi2, cinv = noisy_fit
-    edges, fits, _ = profile_edges(s.problem, theta, chi2, k, LEVELS, s.lower, s.upper, cinv)
+    edges, fits, _, _ = profile_edges(s.problem, theta, chi2, k, LEVELS, s.lower, s.upper,
+                                      cinv)
     assert fits <= 4 * 6
     for (lo, hi), thr in zip(edges, LEVELS):
         assert lo < theta[k] < hi
@@ -145,7 +146,7 @@ def test_edges_follow_a_curved_ridge_and_its_points_widen_the_others():
     r, J = p.jacobian(theta)
     cov = np.linalg.inv(J.T @ J)
     assert 0.25 + 1.96 * np.sqrt(cov[0, 0]) == pytest.approx(0.642, abs=0.002)
-    edges, _, walked = profile_edges(p, theta, 0.0, 0, LEVELS, lower, upper, cov,
+    edges, _, walked, _ = profile_edges(p, theta, 0.0, 0, LEVELS, lower, upper, cov,
                                      ProfileOptions(rtol=0.01, iterations=40))
     lo, hi = edges[1]
     assert lo == pytest.approx(0.0117, abs=0.002) and hi == pytest.approx(0.796, rel=0.02)
@@ -163,7 +164,8 @@ def test_a_fit_failing_from_its_extrapolated_start_is_retried_from_the_nearest_f
     from skyfit_mi.fitting.methods import profile
 
     s, theta, chi2, cinv = noisy_fit
-    want, _, _ = profile.profile_edges(s.problem, theta, chi2, 0, LEVELS, s.lower, s.upper, cinv)
+    want, _, _, _ = profile.profile_edges(s.problem, theta, chi2, 0, LEVELS, s.lower, s.upper,
+                                          cinv)
     real, calls = profile.polish, []
 
     def singular_when_stepped(problem, start, *args, **kwargs):
@@ -174,6 +176,44 @@ def test_a_fit_failing_from_its_extrapolated_start_is_retried_from_the_nearest_f
                     "message": "curvature matrix singular"}
         return real(problem, start, *args, **kwargs)
     monkeypatch.setattr(profile, "polish", singular_when_stepped)
-    got, _, _ = profile.profile_edges(s.problem, theta, chi2, 0, LEVELS, s.lower, s.upper, cinv)
+    got, _, _, _ = profile.profile_edges(s.problem, theta, chi2, 0, LEVELS, s.lower, s.upper,
+                                         cinv)
     np.testing.assert_allclose(np.array(got, dtype=float), np.array(want, dtype=float),
                                rtol=0.02)
+
+
+def test_an_edge_the_fits_cannot_reach_is_taken_to_the_bound_and_said_to_be_the_searchs(
+        noisy_fit, monkeypatch):
+    """Every constrained fit below a point between the fit and its lower 95% edge fails (as at
+    a singular corner), however started: that edge is the bound, the other as before, and
+    profile_edges says where it gave up, which the fit's warnings then name as the search's
+    limit rather than the data's."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.fitting.fit_warnings import search_warnings
+    from skyfit_mi.fitting.intervals import _search_open
+    from skyfit_mi.fitting.methods import profile
+
+    s, theta, chi2, cinv = noisy_fit
+    want, _, _, none = profile.profile_edges(s.problem, theta, chi2, 0, LEVELS, s.lower,
+                                             s.upper, cinv)
+    assert none == {}
+    wall = theta[0] - 0.3 * (theta[0] - want[1][0])
+    real = profile.polish
+
+    def failing_below(problem, start, *args, **kwargs):
+        if start[0] < wall:
+            return {"theta": np.asarray(start), "chi2": problem.chi2(start), "status": "failed",
+                    "message": "curvature matrix singular"}
+        return real(problem, start, *args, **kwargs)
+    monkeypatch.setattr(profile, "polish", failing_below)
+    got, _, _, gave_up = profile.profile_edges(s.problem, theta, chi2, 0, LEVELS, s.lower,
+                                               s.upper, cinv)
+    assert got[1][0] == s.lower[0] and got[1][1] == pytest.approx(want[1][1], rel=0.02)
+    assert set(gave_up) >= {(1, 0)} and s.lower[0] < gave_up[1, 0] < theta[0]
+    fit = SimpleNamespace(search_open={})
+    _search_open(fit, s.names[0], ["68", "95"], gave_up)
+    assert fit.search_open == {s.names[0]: [("lower", gave_up[1, 0])]}
+    said, = search_warnings(fit.search_open)
+    assert f"failed beyond {s.names[0]} = {gave_up[1, 0]:.4g}" in said
+    assert "the lower end of its 95% interval is taken to the bound" in said

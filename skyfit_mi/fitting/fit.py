@@ -79,6 +79,8 @@ class FitState:
     intervals, rise, cache_noise_chi2, cache_sd, sun_level_sd : by :func:`~.intervals.fit_intervals`
     data_intervals : (n, 2) the 95% intervals of the data's chi-square alone, before the errors
         the sequence shares (light, calibration, pose, ...) widen them: the draws' first proposal
+    search_open : {parameter: [(end, x)]} ends of 95% intervals taken to the bound where the
+        profile's fits beyond x failed (:func:`~.intervals.fit_intervals`)
     jpeg_shared_sd, calibration_sd, matrix_sd : shared errors' standard errors (:mod:`~.intervals`)
     sky, pose : the light's and the camera pose's shares (:class:`~.sky_fit.SkyShare`,
         :class:`~.pose.PoseShare`)
@@ -115,6 +117,7 @@ class FitState:
     held_out: dict = None
     draws: object = None
     data_intervals: np.ndarray = None
+    search_open: dict = None
 
     @property
     def delta_scale(self):

@@ -41,6 +41,15 @@ def beyond_upper_bound(s, fit):
     return [s.names[i] for i in at if slope[i] < -BOUND_PULL]
 
 
+def search_warnings(search_open):
+    """A warning for each end of a 95% interval that its profile took to the bound because the
+    constrained fits failed beyond some x (``search_open`` {parameter: [(end, x)]})."""
+    return [f"{p}: the profile's constrained fits failed beyond {p} = {x:.4g} (a singular "
+            f"curvature there), so the {end} end of its 95% interval is taken to the bound: "
+            "the search, not the data, leaves that end open, and the data may determine it."
+            for p, ends in search_open.items() for end, x in ends]
+
+
 def fit_warnings(s, fit):
     """All warnings of ``fit``, in the order the user should read them."""
     names, method, theta, chi2 = s.names, fit.method, fit.theta, fit.chi2
@@ -100,6 +109,7 @@ def fit_warnings(s, fit):
             "and their intervals may not hold (not reliable as the surface's own). "
             "Another model (--model auto ranks them by held-out frames) or, under a sky, "
             "its shape fitted with the materials (--sky-shape) may predict better.")
+    warnings += search_warnings(fit.search_open or {})
     warnings += unc.misfit(chi2, fit.problem.dof, fit.interval_scale, fit.cache_noise_chi2,
                            fit.noise_chi2, model_error=fit.model_error is not None)
     warnings += unc.identifiability(names, iv95, s.lower, s.upper, fit.rise,

@@ -29,6 +29,7 @@ def fit_intervals(s, fit):
     the reflectances) the sun level's."""
     problem, theta, names = fit.problem, fit.theta, s.names
     lower, upper = s.lower, s.upper
+    fit.search_open = {}
     s2k = fit.delta_scale                             # each parameter's scale of Delta chi^2
     cov_iv = unc.covariance_intervals(theta, fit.covariance, lower, upper)
     grid = fit.global_result["profile_linearised"]
@@ -49,11 +50,12 @@ def fit_intervals(s, fit):
                 # second inherits the cache's narrow-lobe error
                 iv = unc.profile_interval(*prof[p], s2k[i], ripple)
                 levels = list(iv)
-                exact, _, points = profile_edges(
+                exact, _, points, gave_up = profile_edges(
                     problem, theta, fit.chi2, i,
                     [unc.LEVELS[lv] * s2k[i] + ripple for lv in levels], lower, upper,
                     fit.curvature_inverse)
                 walked += points
+                _search_open(fit, p, levels, gave_up)
                 iv = {lv: (min(iv[lv][0], e[0] if e[0] is not None else np.inf),
                            max(iv[lv][1], e[1] if e[1] is not None else -np.inf))
                       for lv, e in zip(levels, exact)}
@@ -282,13 +284,14 @@ def profile_the_rest(s, fit, intervals, ripple):
     for i, p in enumerate(s.names):
         if intervals[p]["from"] != "covariance":
             continue
-        exact, _, points = profile_edges(
+        exact, _, points, gave_up = profile_edges(
             fit.problem, fit.theta, fit.chi2, i,
             [unc.LEVELS[lv] * fit.delta_scale[i] + ripple for lv in levels],
             s.lower, s.upper,
             fit.curvature_inverse,
             ProfileOptions(rtol=0.01, iterations=PROFILE_RIDGE_ITERATIONS))
         walked += points
+        _search_open(fit, p, levels, gave_up)
         for lv, e in zip(levels, exact):
             lo, hi = intervals[p][lv]
             keep_lo, keep_hi = (lo, hi) if quadratic else (np.inf, -np.inf)
@@ -296,6 +299,15 @@ def profile_the_rest(s, fit, intervals, ripple):
                                 max(keep_hi, e[1]) if e[1] is not None else hi)
         intervals[p]["from"] = "profile (another parameter is poorly determined)"
     return walked
+
+
+def _search_open(fit, name, levels, gave_up):
+    """Record in ``fit.search_open`` {name: [(end, x reached)]} each end of ``name``'s 95%
+    interval that its profile took to the bound because the fits beyond x failed
+    (:func:`~.methods.profile.profile_edges`' ``gave_up``)."""
+    for (level, side), x in gave_up.items():
+        if levels[level] == "95":
+            fit.search_open.setdefault(name, []).append((("lower", "upper")[side], float(x)))
 
 
 def model_noise_allowance(problem, theta, sigmas, profile, s2):

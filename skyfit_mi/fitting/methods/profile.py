@@ -38,8 +38,10 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, op
 
     ``cov`` is (J^T J)^-1 at ``theta`` (unscaled), for first guesses and starts; ``options`` a
     :class:`ProfileOptions`. Returns ([(lo, hi)] per threshold, None for an edge no fit could
-    approach, e.g. singular curvature), the number of fits, and every fit's (parameters, chi^2)
-    (for :func:`ridge_intervals`).
+    approach, e.g. singular curvature), the number of fits, every fit's (parameters, chi^2)
+    (for :func:`ridge_intervals`), and where the search gave up: {(threshold index, side 0 or
+    1): the farthest x a fit reached inside} for each edge taken to the bound because the fits
+    beyond that x failed (the search's limit, not the data's).
     """
     opts = options or ProfileOptions()
     theta = np.asarray(theta, dtype=float)
@@ -106,14 +108,14 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, op
             x = min(x, far) if side > 0 else max(x, far)
         return float(np.clip(x, min(x0, bound), max(x0, bound)))
 
-    edges = [[None, None] for _ in thresholds]
+    edges, gave_up = [[None, None] for _ in thresholds], {}
     for j, (side, bound) in enumerate(((-1, lower[k]), (1, upper[k]))):
         if x0 == bound:
             for e in edges:
                 e[j] = float(bound)
             continue
         pts = [(x0, 0.0)]
-        for e, thr in zip(edges, thresholds):
+        for i, (e, thr) in enumerate(zip(edges, thresholds)):
             t = np.sqrt(thr)
             for _ in range(opts.max_fits):
                 x = guess(pts, t, side, bound)
@@ -134,7 +136,10 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, op
                 # the fits ran out: the nearest point known outside, else the bound
                 outside = [p[0] for p in pts if t <= p[1] < np.inf]
                 e[j] = float(outside[0]) if outside else float(bound)
-    return [tuple(e) for e in edges], fits, visited
+                if not outside and any(p[1] == np.inf for p in pts):
+                    gave_up[i, j] = max((p[0] for p in pts if p[1] < t),
+                                                     key=lambda x: abs(x - x0))
+    return [tuple(e) for e in edges], fits, visited, gave_up
 
 
 def ridge_intervals(points, chi2_min, threshold):
