@@ -212,8 +212,43 @@ def test_an_edge_the_fits_cannot_reach_is_taken_to_the_bound_and_said_to_be_the_
     assert got[1][0] == s.lower[0] and got[1][1] == pytest.approx(want[1][1], rel=0.02)
     assert set(gave_up) >= {(1, 0)} and s.lower[0] < gave_up[1, 0] < theta[0]
     fit = SimpleNamespace(search_open={})
-    _search_open(fit, s.names[0], ["68", "95"], gave_up)
+    _search_open(fit, s.names[0], ["68", "95"], gave_up, want[1], s.lower[0], s.upper[0])
     assert fit.search_open == {s.names[0]: [("lower", gave_up[1, 0])]}
     said, = search_warnings(fit.search_open)
-    assert f"failed beyond {s.names[0]} = {gave_up[1, 0]:.4g}" in said
+    assert f"farthest point found inside, {s.names[0]} = {gave_up[1, 0]:.4g}" in said
     assert "the lower end of its 95% interval is taken to the bound" in said
+    # where the interval's other source reaches the bound too, the data leave it open: no word
+    fit.search_open = {}
+    _search_open(fit, s.names[0], ["68", "95"], gave_up, (s.lower[0], want[1][1]), s.lower[0],
+                 s.upper[0])
+    assert fit.search_open == {}
+
+
+def test_a_fit_failing_inside_the_68_edge_does_not_stop_the_95_search(monkeypatch):
+    """chi^2 = a^2 + (b - 0.5)^2 / 0.01, constrained fits failing for a in (-1.2, -0.9) only:
+    such a failure lies outside the 68% edge (a = -1) but inside the 95% one (-1.96), where its
+    start's chi-square (an upper bound) says so; the 95% search steps past it to -1.96 and
+    does not give up (before, the 68% search's failure blocked it, and the edge fell to the
+    bound of -10)."""
+    from skyfit_mi.fitting.methods import profile
+
+    class Bowl(_Banana):
+        def residuals(self, t):
+            return np.array([t[0], (t[1] - 0.5) / 0.1])
+
+        def jacobian(self, t):
+            return self.residuals(t), np.array([[1.0, 0.0], [0.0, 10.0]])
+
+    real = profile.polish
+
+    def failing_in_a_window(problem, start, *args, **kwargs):
+        if -1.2 < start[0] < -0.9:
+            return {"theta": np.asarray(start), "chi2": problem.chi2(start), "status": "failed",
+                    "message": "curvature matrix singular"}
+        return real(problem, start, *args, **kwargs)
+    monkeypatch.setattr(profile, "polish", failing_in_a_window)
+    lower, upper = np.array([-10.0, -10.0]), np.array([10.0, 10.0])
+    edges, _, _, gave_up = profile.profile_edges(Bowl(), np.array([0.0, 0.5]), 0.0, 0,
+                                                 [1.0, 3.84], lower, upper, np.diag([1, 0.01]))
+    assert edges[1][0] == pytest.approx(-1.96, abs=0.03), edges
+    assert (1, 0) not in gave_up, gave_up          # the 68% edge's own search may give up

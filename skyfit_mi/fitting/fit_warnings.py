@@ -44,9 +44,10 @@ def beyond_upper_bound(s, fit):
 def search_warnings(search_open):
     """A warning for each end of a 95% interval that its profile took to the bound because the
     constrained fits failed beyond some x (``search_open`` {parameter: [(end, x)]})."""
-    return [f"{p}: the profile's constrained fits failed beyond {p} = {x:.4g} (a singular "
-            f"curvature there), so the {end} end of its 95% interval is taken to the bound: "
-            "the search, not the data, leaves that end open, and the data may determine it."
+    return [f"{p}: the profile's constrained fits failed on its {end} side beyond the "
+            f"farthest point found inside, {p} = {x:.4g} (a singular curvature there), so the "
+            f"{end} end of its 95% interval is taken to the bound: the search, not the data, "
+            "leaves that end open, and the data may determine it."
             for p, ends in search_open.items() for end, x in ends]
 
 

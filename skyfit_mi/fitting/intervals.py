@@ -55,7 +55,7 @@ def fit_intervals(s, fit):
                     [unc.LEVELS[lv] * s2k[i] + ripple for lv in levels], lower, upper,
                     fit.curvature_inverse)
                 walked += points
-                _search_open(fit, p, levels, gave_up)
+                _search_open(fit, p, levels, gave_up, iv["95"], lower[i], upper[i])
                 iv = {lv: (min(iv[lv][0], e[0] if e[0] is not None else np.inf),
                            max(iv[lv][1], e[1] if e[1] is not None else -np.inf))
                       for lv, e in zip(levels, exact)}
@@ -96,6 +96,7 @@ def fit_intervals(s, fit):
         for lv in ("68", "95"):
             intervals["sigma_alpha"][lv] = (float(lower[-1]), intervals["sigma_alpha"][lv][1])
         intervals["sigma_alpha"]["from"] += ", and down to its bound: " + why
+        fit.search_open.pop("sigma_alpha", None)      # the lower end open for the data's reason
     fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
     fit.cache_sd = mc_sd
     fit.sun_level_sd = sun_rel * np.abs(theta)
@@ -291,7 +292,9 @@ def profile_the_rest(s, fit, intervals, ripple):
             fit.curvature_inverse,
             ProfileOptions(rtol=0.01, iterations=PROFILE_RIDGE_ITERATIONS))
         walked += points
-        _search_open(fit, p, levels, gave_up)
+        _search_open(fit, p, levels, gave_up,
+                     intervals[p]["95"] if quadratic else (np.inf, -np.inf), s.lower[i],
+                     s.upper[i])
         for lv, e in zip(levels, exact):
             lo, hi = intervals[p][lv]
             keep_lo, keep_hi = (lo, hi) if quadratic else (np.inf, -np.inf)
@@ -301,12 +304,14 @@ def profile_the_rest(s, fit, intervals, ripple):
     return walked
 
 
-def _search_open(fit, name, levels, gave_up):
-    """Record in ``fit.search_open`` {name: [(end, x reached)]} each end of ``name``'s 95%
-    interval that its profile took to the bound because the fits beyond x failed
-    (:func:`~.methods.profile.profile_edges`' ``gave_up``)."""
+def _search_open(fit, name, levels, gave_up, other, lower, upper):
+    """Record in ``fit.search_open`` {name: [(end, farthest x found inside)]} each end of
+    ``name``'s 95% interval that its profile took to the bound because the fits beyond failed
+    (:func:`~.methods.profile.profile_edges`' ``gave_up``), where the interval's ``other``
+    source (lo, hi) puts that end inside the bound: else the data leave it open anyway."""
     for (level, side), x in gave_up.items():
-        if levels[level] == "95":
+        inside = other[0] > lower if side == 0 else other[1] < upper
+        if levels[level] == "95" and inside:
             fit.search_open.setdefault(name, []).append((("lower", "upper")[side], float(x)))
 
 

@@ -114,19 +114,26 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, op
             for e in edges:
                 e[j] = float(bound)
             continue
-        pts = [(x0, 0.0)]
+        found = {x0: (0.0, True)}              # x -> (h, exact): a failed fit's h a bound
         for i, (e, thr) in enumerate(zip(edges, thresholds)):
             t = np.sqrt(thr)
+
+            def points():
+                # no fit at x (singular curvature): outside unless its bound says inside t,
+                # so that the next guess halves the step
+                return sorted(((x, hx if exact or hx < t else np.inf)
+                               for x, (hx, exact) in found.items()),
+                              key=lambda p: abs(p[0] - x0))
+            pts = points()
             for _ in range(opts.max_fits):
                 x = guess(pts, t, side, bound)
-                if any(x == p[0] for p in pts):         # no new point to try
+                if x in found:                          # no new point to try
                     break
-                hx, exact = h(x)
-                if not exact:
-                    # no fit there (singular curvature): the next guess halves the step
-                    hx = np.inf if hx >= t else hx
-                pts = sorted(pts + [(x, hx)], key=lambda p: abs(p[0] - x0))
-                if abs(hx - t) <= opts.rtol * t:
+                found[x] = h(x)
+                pts = points()
+                hx = dict(pts)[x]
+                # an edge where a fit lands on t; a failed fit's bound there says only inside
+                if found[x][1] and abs(hx - t) <= opts.rtol * t:
                     e[j] = x
                     break
                 if hx < t and x == bound:
@@ -138,7 +145,7 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, op
                 e[j] = float(outside[0]) if outside else float(bound)
                 if not outside and any(p[1] == np.inf for p in pts):
                     gave_up[i, j] = max((p[0] for p in pts if p[1] < t),
-                                                     key=lambda x: abs(x - x0))
+                                        key=lambda x: abs(x - x0))
     return [tuple(e) for e in edges], fits, visited, gave_up
 
 
