@@ -63,13 +63,14 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, op
         # fails: then from the nearest fit itself, x in its place
         nearest = path[min(path, key=lambda v: abs(v - x))].copy()
         nearest[k] = x
-        for start in (start_at(x), nearest):
+        starts = (start_at(x), nearest)
+        for start in starts:
             res = polish(problem, start, lower, upper, max_iterations=opts.iterations,
                          fixed=(k,))
             if res["status"] != "failed":
                 break
         exact = res["status"] != "failed"
-        chi2 = res["chi2"] if exact else problem.chi2(start_at(x))
+        chi2 = res["chi2"] if exact else problem.chi2(starts[0])
         if exact:
             path[x] = np.asarray(res["theta"], dtype=float)
             visited.append((path[x], float(chi2)))
@@ -118,20 +119,21 @@ def profile_edges(problem, theta, chi2_min, k, thresholds, lower, upper, cov, op
         for i, (e, thr) in enumerate(zip(edges, thresholds)):
             t = np.sqrt(thr)
 
-            def points():
+            def at(x):
                 # no fit at x (singular curvature): outside unless its bound says inside t,
                 # so that the next guess halves the step
-                return sorted(((x, hx if exact or hx < t else np.inf)
-                               for x, (hx, exact) in found.items()),
-                              key=lambda p: abs(p[0] - x0))
+                hx, exact = found[x]
+                return hx if exact or hx < t else np.inf
+
+            def points():
+                return sorted(((x, at(x)) for x in found), key=lambda p: abs(p[0] - x0))
             pts = points()
             for _ in range(opts.max_fits):
                 x = guess(pts, t, side, bound)
                 if x in found:                          # no new point to try
                     break
                 found[x] = h(x)
-                pts = points()
-                hx = dict(pts)[x]
+                pts, hx = points(), at(x)
                 # an edge where a fit lands on t; a failed fit's bound there says only inside
                 if found[x][1] and abs(hx - t) <= opts.rtol * t:
                     e[j] = x
