@@ -32,14 +32,13 @@ def levenberg_marquardt(problem, start, lower, upper, max_iterations=100, lam0=1
     status, message = "max_iterations", "stopped after the iteration limit"
     small = 0
     for _ in range(max_iterations):
-        descent = -J.T @ r
-        step = free & ~_held_at_bound(theta, descent, lower, upper)
+        step = free & ~_held_at_bound(theta, -J.T @ r, lower, upper)
         if not step.any():
             status, message = "converged", "every free parameter at a bound chi-square presses on"
             break
         Jf = J[:, step]
         alpha = Jf.T @ Jf
-        beta = descent[step]
+        beta = -Jf.T @ r
         a = alpha + lam * np.diag(np.diag(alpha))
         if not np.all(np.isfinite(a)) or np.linalg.cond(a) > SINGULAR_CONDITION:
             if len(trace) > 1:
