@@ -27,14 +27,17 @@ item 5): >= 90% in, none missed.  ``--spec-turbidity T`` fits with a turbid clea
 turbidity T as the spec instead (``type = "turbid"``; the CIE clear day is then one more sky
 other than the spec's), with ``--sky-shape`` its turbidity fitted with both levels.
 ``--sky-terms N`` sets the terms of the fitted sky's level over the day (``fit --sky-terms``; 1
-is one level, as before the default became a curve).
+is one level, as before the default became a curve).  ``--true-sky`` fits each day with its own
+sky as the spec instead (the same light plan, but no departure from a measured map): the widths
+a fit given the true sky reaches, the comparator of issue 52's sharpness goal.  ``--skies NAME
+...`` runs only the skies whose names contain one of these.
 
 A slow sweep.  ``--quick`` (a few minutes): five skies other than the spec's and the control,
 five frames, both scenes from both cameras, one paint, two replicates.
 
     .venv/bin/python scripts/sky_test_set.py [--quick] [--replicates N] [--sky fit|prior]
         [--sky-terms N] [--sky-shape] [--sky-departure] [--sun-sd SD] [--pixels 16|64]
-        [--noise PERCENT] [--spec-turbidity T] [-o DIR]
+        [--noise PERCENT] [--spec-turbidity T] [--true-sky] [--skies NAME ...] [-o DIR]
 
 writes DIR/sky_test_set.json and prints the tables.
 """
@@ -172,18 +175,19 @@ def spec_turbid(turbidity):
 
 def fit_replicates(day, scene, truth, replicates, positions=None, directions=512, sky="spec",
                    shape=False, spec_turbidity=None, terms=None, departure=False, sun_sd=None,
-                   pixels=16):
-    """Fit ``day`` with the spec's sky (the thesis's CIE clear sky at each frame's sun; with
-    ``sky`` 'fit' its level fitted with the material, ``fit --sky fit``, or 'prior' with its
-    prior, ``fit --sky prior``; both with the sun's level uncertain as a modelled sun's; with
-    ``shape`` the CIE sky's shape fitted too, ``--sky-shape``; ``terms`` those of the sky's
-    level over the day, ``--sky-terms``, None fit's default; ``departure`` the sky's departure
-    from its model, ``--sky-departure``; ``sun_sd`` the sun's level's, ``--sun-sd``, None a
-    modelled sun's; ``pixels`` 16 or 64, :func:`scene_pixels`) on
-    ``replicates`` captures of its radiance; one record per replicate: parameters, 95%
-    intervals, warnings, each parameter's 'in'/'warned'/'MISSED', the chi-square rise at the
-    truth and its joint 99.9% bound.  The light cache is sized from the data (``positions``
-    None): a small fixed one leaves the sphere's intervals to its Monte Carlo error."""
+                   pixels=16, true_sky=False):
+    """Fit ``day`` with the spec's sky (the thesis's CIE clear sky at each frame's sun;
+    ``true_sky`` the day's own; with ``sky`` 'fit' its level fitted with the material, ``fit
+    --sky fit``, or 'prior' with its prior, ``fit --sky prior``; both with the sun's level
+    uncertain as a modelled sun's; with ``shape`` the CIE sky's shape fitted too,
+    ``--sky-shape``; ``terms`` those of the sky's level over the day, ``--sky-terms``, None
+    fit's default; ``departure`` the sky's departure from its model, ``--sky-departure``;
+    ``sun_sd`` the sun's level's, ``--sun-sd``, None a modelled sun's; ``pixels`` 16 or 64,
+    :func:`scene_pixels`) on ``replicates`` captures of its radiance; one record per
+    replicate: parameters, 95% intervals, warnings, each parameter's 'in'/'warned'/'MISSED',
+    the chi-square rise at the truth and its joint 99.9% bound.  The light cache is sized
+    from the data (``positions`` None): a small fixed one leaves the sphere's intervals to its
+    Monte Carlo error."""
     from independent import held_or_warned
     from measured_light import relabelled, thesis_clear
     from scipy.stats import chi2 as chi2_dist
@@ -194,7 +198,8 @@ def fit_replicates(day, scene, truth, replicates, positions=None, directions=512
     from skyfit_mi.physics.sky import SUN_LEVEL_SD
     from skyfit_mi.pipeline.pixels import frame_values
 
-    fitted = (relabelled(day, Path(day).parent / "fit_cie_clear", thesis_clear)
+    fitted = (day if true_sky else
+              relabelled(day, Path(day).parent / "fit_cie_clear", thesis_clear)
               if spec_turbidity is None else
               relabelled(day, Path(day).parent / f"fit_turbid_{spec_turbidity:g}",
                          spec_turbid(spec_turbidity)))
@@ -232,12 +237,20 @@ def truth_of(material):
 def summary(cases):
     """Counts over every (case, parameter, replicate) of ``cases`` (dicts with 'sky' and
     'fits'): n, in, warned, missed, and the fractions held (in), held or warned, confidently
-    wrong (missed); the same per sky under 'by_sky'."""
+    wrong (missed); the gross misses (the truth beyond the 95% interval by more than half its
+    width, warned or not) and the median 95% half-width of C over the truth [%]; the same per
+    sky under 'by_sky'."""
     def count(group):
         statuses = [v for c in group for f in c["fits"] for v in f["status"].values()]
         n = len(statuses)
         k = {s: statuses.count(s) for s in ("in", "warned", "MISSED")}
+        spans = [(f["intervals_95"][p], c["truth"][p], p) for c in group for f in c["fits"]
+                 for p in NAMES]
+        gross = sum(t < lo - (hi - lo) / 2 or t > hi + (hi - lo) / 2 for (lo, hi), t, _ in spans)
+        half = [50 * (hi - lo) / t for (lo, hi), t, p in spans if p.startswith("C_")]
         return {"n": n, "in": k["in"], "warned": k["warned"], "missed": k["MISSED"],
+                "gross": int(gross),
+                "median_C_half_width_percent": float(np.median(half)) if half else float("nan"),
                 "held": k["in"] / n if n else float("nan"),
                 "held_or_warned": (k["in"] + k["warned"]) / n if n else float("nan"),
                 "confidently_wrong": k["MISSED"] / n if n else float("nan")}
@@ -269,24 +282,27 @@ def markdown(cases, totals):
         lines.append(f"| {c['sky']} | {c['scene']} | {c['camera_deg']:g} | {c['material']} | "
                      f"{chi:.2f} | " + " | ".join(_cell(c, p) for p in NAMES) + " |")
     lines += ["", ("| sky | (parameter, replicate) pairs | held | held or warned | "
-                   "confidently wrong |"), "|---|---|---|---|---|"]
+                   "confidently wrong | gross | median C 95% half-width |"),
+              "|---|---|---|---|---|---|---|"]
     for name, t in [*totals["by_sky"].items(), ("**all**", totals)]:
         lines.append(f"| {name} | {t['n']} | {t['held']:.0%} | {t['held_or_warned']:.0%} | "
-                     f"{t['confidently_wrong']:.0%} ({t['missed']}) |")
+                     f"{t['confidently_wrong']:.0%} ({t['missed']}) | {t['gross']} | "
+                     f"{t['median_C_half_width_percent']:.1f}% |")
     return "\n".join(lines)
 
 
 def run_case(folder, sky_name, sky, scene, camera, material_name, replicates, hours, scans,
              fit_sky="spec", shape=False, spec_turbidity=None, terms=None, departure=False,
-             sun_sd=None, pixels=16, noise_percent=2.0):
+             sun_sd=None, pixels=16, noise_percent=2.0, true_sky=False):
     """Render and fit one (sky, scene, camera, material); returns its record."""
     material = MATERIALS[material_name]
     t0 = time.perf_counter()
     day = render_day(folder, template(scene, material, camera, hours, noise_percent), sky, scans)
     t1 = time.perf_counter()
     fits = fit_replicates(day, scene, truth_of(material), replicates, sky=fit_sky, shape=shape,
-                          spec_turbidity=spec_turbidity, terms=terms, departure=departure,
-                          sun_sd=sun_sd, pixels=pixels)
+                          spec_turbidity=spec_turbidity, terms=terms,
+                          departure=departure and not (true_sky and sky is None),  # a map
+                          sun_sd=sun_sd, pixels=pixels, true_sky=true_sky)
     return {"sky": sky_name, "scene": scene, "camera_deg": camera, "material": material_name,
             "truth": dict(zip(NAMES, truth_of(material))), "fits": fits,
             "render_s": t1 - t0, "fit_s": time.perf_counter() - t1}
@@ -325,7 +341,13 @@ def main(argv=None):
     ap.add_argument("--spec-turbidity", type=float, default=None,
                     help="fit with a turbid clear sky of this Linke turbidity as the spec "
                     "(type turbid) instead of the thesis's CIE clear sky")
+    ap.add_argument("--true-sky", action="store_true",
+                    help="fit each day with its own sky as the spec (the same light plan)")
+    ap.add_argument("--skies", nargs="+", default=None, metavar="NAME",
+                    help="only the skies whose names contain one of these (e.g. 'Perez')")
     args = ap.parse_args(argv)
+    if args.true_sky and args.spec_turbidity is not None:
+        ap.error("--true-sky fits with each day's own sky: leave out --spec-turbidity")
     replicates = args.replicates or (2 if args.quick else 3)
     hours = QUICK_HOURS if args.quick else HOURS
     if args.sky_terms is not None:
@@ -344,6 +366,8 @@ def main(argv=None):
     cases = []
     t_start = time.perf_counter()
     for i, (sky_name, sky) in enumerate(sky_entries(args.quick).items()):
+        if args.skies and not any(k in sky_name for k in args.skies):
+            continue
         for scene in SCENES:
             for camera in CAMERAS:
                 for material in materials:
@@ -351,7 +375,7 @@ def main(argv=None):
                     c = run_case(folder, sky_name, sky, scene, camera, material, replicates,
                                  hours, scans, args.sky, args.sky_shape, args.spec_turbidity,
                                  args.sky_terms, args.sky_departure, args.sun_sd, args.pixels,
-                                 args.noise)
+                                 args.noise, args.true_sky)
                     cases.append(c)
                     st = [v for f in c["fits"] for v in f["status"].values()]
                     print(f"{sky_name} | {scene} | {camera:g} | {material}: "
@@ -363,7 +387,7 @@ def main(argv=None):
                 "sky_shape": args.sky_shape, "spec_turbidity": args.spec_turbidity,
                 "sky_departure": args.sky_departure, "sun_sd": args.sun_sd,
                 "pixels": args.pixels, "noise_percent": args.noise,
-                "sky_terms": args.sky_terms,
+                "sky_terms": args.sky_terms, "true_sky": args.true_sky,
                 "hours_utc": list(hours),
                 "scans": [s.label for s in scans], "cases": cases, "summary": totals,
                 "wall_s": time.perf_counter() - t_start, "data": CITATION})

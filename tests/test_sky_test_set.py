@@ -11,10 +11,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
 import sky_test_set as sts
 
 
+#: A parameter's 95% interval by its status, the truth 0.5: in; outside but not by half its
+#: width (warned); beyond by more than half (missed: gross).
+_SPANS = {"in": (0.45, 0.55), "warned": (0.51, 0.59), "MISSED": (0.6, 0.64)}
+
+
 def _case(sky, statuses):
     return {"sky": sky, "scene": "disc", "camera_deg": 90.0, "material": "orange paint",
+            "truth": dict.fromkeys(sts.NAMES, 0.5),
             "fits": [{"status": dict(zip(sts.NAMES, s)), "chi2_per_dof": 1.0,
-                      "parameters": dict.fromkeys(sts.NAMES, 0.5)} for s in statuses]}
+                      "parameters": dict.fromkeys(sts.NAMES, 0.5),
+                      "intervals_95": {p: _SPANS[v] for p, v in zip(sts.NAMES, s)}}
+                     for s in statuses]}
 
 
 def test_the_summary_counts_every_parameter_and_replicate_by_sky():
@@ -26,9 +34,14 @@ def test_the_summary_counts_every_parameter_and_replicate_by_sky():
     assert t["held_or_warned"] == pytest.approx(12 / 15)
     assert t["confidently_wrong"] == pytest.approx(3 / 15)
     assert t["by_sky"]["a"]["missed"] == 1 and t["by_sky"]["b"]["held"] == pytest.approx(0.6)
+    # gross: beyond by more than half the width (the warned one is not); C's half-widths
+    # [%] are 10 (in) and 4 (missed): six tens, then b's 4, 4, 10
+    assert (t["gross"], t["by_sky"]["a"]["gross"], t["by_sky"]["b"]["gross"]) == (3, 1, 2)
+    assert t["median_C_half_width_percent"] == pytest.approx(10.0)
+    assert t["by_sky"]["b"]["median_C_half_width_percent"] == pytest.approx(4.0)
     table = sts.markdown(cases, t)
     assert "0.500 (1/2, 1 warned)" in table and "0.500 (0/1, **1 x**)" in table
-    assert "| **all** | 15 | 73% | 80% | 20% (3) |" in table
+    assert "| **all** | 15 | 73% | 80% | 20% (3) | 3 | 10.0% |" in table
 
 
 def _one_day(tmp_path, sky_name):
