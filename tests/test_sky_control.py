@@ -141,6 +141,34 @@ def test_every_frames_integrals_in_one_pass_equal_each_frames_own(mi, points):
         assert np.allclose(part, values, rtol=1e-5, atol=1e-6 * np.abs(values).max()), t
 
 
+def test_skies_differing_in_their_departure_alone_share_their_patterns(mi, points):
+    # a list of FrameSkies (the departure's parts beside the rest, and a sky of other levels)
+    # integrated together, where _sky_sum evaluates one pattern for the skies that differ in
+    # their departure weights alone, gives each sky's own integrals; the other levels' sky
+    # keeps its own pattern (twice the rest's here)
+    from skyfit_mi.physics.sky_departure import departure_parts
+    from skyfit_mi.render.sky_control import FrameSkies, quadrature, sky_integrals, to_numpy
+
+    si, _, _ = points
+    frames = np.zeros(len(SURFACES))
+    _, rest = _sky("intermediate").split()
+    skies = [rest, *(sky for _, sky in departure_parts(_sky("intermediate"))),
+             rest.sky_scaled(2.0)]
+    lights = [FrameSkies([sky], frames) for sky in skies]
+    assert len({light.patterns_key for light in lights}) == 2
+    quad = quadrature(0.002, 0.5, "ward")
+
+    def values(result):
+        d, lobes = result
+        return np.stack([to_numpy(v) for v in [d, *lobes]])
+
+    d, lobes = sky_integrals(lights, si, quad)
+    for i, light in enumerate(lights):
+        alone = values(sky_integrals(light, si, quad))
+        assert np.array_equal(values((d[i], [node[i] for node in lobes])), alone), i
+    assert np.allclose(alone, 2 * values(sky_integrals(lights[0], si, quad)), rtol=1e-6)
+
+
 def _brute_ggx(sky, wo, frame, sigma, name, n=3000, m=720):
     """The GGX lobe's integral by the midpoint rule in log tan delta (from 1e-3 sigma to 60,
     where its D cos^4 delta times the slope area is smooth) and the half vector's azimuth."""

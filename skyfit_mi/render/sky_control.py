@@ -24,7 +24,7 @@ Gauss-Legendre nodes through a smoothstep map whose zero end slopes absorb Ward'
 
 import numpy as np
 
-from .daylight import RGB_KEYS, float_parameters, jit_array, opaque_value
+from .daylight import DEPARTURE_KEYS, RGB_KEYS, float_parameters, jit_array, opaque_value
 
 #: Roughness values at which I_s is integrated: the Chebyshev series' degree + 1.
 CHEBYSHEV_NODES = 16
@@ -183,7 +183,17 @@ def _sky_sum(mi, dr, emitter, si, wi, w, q, J, f=1.0):
     frame = dr.gather(mi.Frame3f, si.sh_frame, q)
     d, fw = frame.to_world(wi), f * w
     skies = emitter if isinstance(emitter, list) else [emitter]
-    terms = [fw * (e.at(q) if isinstance(e, FrameSkies) else e).sky_eval(d) for e in skies]
+    patterns, terms = {}, []
+    for e in skies:
+        if not isinstance(e, FrameSkies):
+            terms.append(fw * e.sky_eval(d))
+            continue
+        lanes = e.at(q)
+        # skies that differ in their departure weights alone (the departure's parts) share
+        # the patterns, each then times its own field
+        if e.patterns_key not in patterns:
+            patterns[e.patterns_key] = lanes.sky_pattern(d)
+        terms.append(fw * lanes.sky_eval(d, patterns[e.patterns_key]))
     if len(terms) > 1:
         dr.eval(*terms)        # one kernel: the nodes and lobe once for every sky
     sums = [dr.block_sum(t, J) for t in terms]
@@ -209,6 +219,12 @@ class FrameSkies:
                   for sky in skies]
         self.values.update({k: jit_array(mi.Float, np.array([f[k] for f in floats]))
                             for k in floats[0]})
+        # equal for FrameSkies that differ in their departure weights alone (:func:`_sky_sum`)
+        kept = [k for k in floats[0] if k not in DEPARTURE_KEYS]
+        self.patterns_key = b"".join(
+            [np.asarray(frame, dtype=np.uint32).tobytes(), *(v.tobytes() for v in col.values()),
+             np.array([sky.sun_direction for sky in skies], dtype=float).tobytes(),
+             np.array([[f[k] for k in kept] for f in floats], dtype=float).tobytes()])
 
     def at(self, q):
         """The parameters of the frame of each point ``q`` (a lane each), with ``sky_eval``."""
@@ -225,10 +241,15 @@ class _SkyLanes:
     def __init__(self, values):
         self.__dict__.update(values)
 
-    def sky_eval(self, d):
+    def sky_eval(self, d, pattern=None):
         from .plugins.cie_sky import sky_function      # a plugin: needs the variant set
 
-        return sky_function(self, d)
+        return sky_function(self, d, pattern)
+
+    def sky_pattern(self, d):
+        from .plugins.cie_sky import sky_pattern       # a plugin: needs the variant set
+
+        return sky_pattern(self, d)
 
 
 def _lobe_sum(mi, dr, emitter, si, up, sigma, resolution, normalisation, tables=None):

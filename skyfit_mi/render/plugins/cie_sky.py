@@ -100,10 +100,31 @@ def _table_directions_of(variant):
     return jit_array(mi.Vector3f, d[:, 0], d[:, 1], d[:, 2])
 
 
-def sky_function(p, d):
+def sky_function(p, d, pattern=None):
     """Sky.sky_radiance in Dr.Jit: the radiance without sun or map toward world directions
     ``d`` [W m^-2 sr^-1] for the parameters of ``p`` (an emitter, or any object with its fields,
-    scalars or one per lane of ``d``)."""
+    scalars or one per lane of ``d``): :func:`sky_pattern` (or the ``pattern`` it gave for a sky
+    that differs from ``p`` in its departure weights alone) times the departure's field, blended
+    into the ground at the horizon."""
+    s = p.sun_direction
+    cos_z = dr.clip(dr.dot(d, s), -1.0, 1.0)
+    dz = d.z
+    sky = sky_pattern(p, d) if pattern is None else pattern
+    # the departure's field (sky_departure.basis: u = 2 cos theta - 1, y = cos gamma)
+    u = dr.clip(2.0 * dz - 1.0, -1.0, 1.0)
+    sky = sky * (1.0 + p.departure_0 * u + p.departure_1 * (1.5 * u * u - 0.5)
+                 + p.departure_2 * cos_z + p.departure_3 * (1.5 * cos_z * cos_z - 0.5)
+                 + p.departure_4 * u * cos_z)
+    a = dr.power(dz + 1.01, 10.0)
+    w = a / (a + dr.rcp(a))
+    blended = w * sky + (1.0 - w) * p.ground
+    sharp = dr.select(dz > 0.0, sky, p.ground)
+    return dr.select(p.blend_weight > 0.5, blended, sharp)
+
+
+def sky_pattern(p, d):
+    """The sky's patterns toward ``d`` [W m^-2 sr^-1] (eqs. 4.12-4.16, Perez et al. 1993) at
+    ``p``'s levels, before the departure's field and the ground (:func:`sky_function`)."""
     s = p.sun_direction
     cos_z = dr.clip(dr.dot(d, s), -1.0, 1.0)
     zeta = dr.acos(cos_z)
@@ -121,18 +142,8 @@ def sky_function(p, d):
     perez = dr.maximum((1.0 + p.perez_a * dr.exp(p.perez_b / mu))
                        * (1.0 + p.perez_c * dr.exp(p.perez_d * zeta)
                           + p.perez_e * cos_z * cos_z), 0.0)
-    sky = p.clear * clear + p.overcast * overcast + p.uniform \
+    return p.clear * clear + p.overcast * overcast + p.uniform \
         + p.intermediate * inter + p.perez * perez
-    # the departure's field (sky_departure.basis: u = 2 cos theta - 1, y = cos gamma)
-    u = dr.clip(2.0 * dz - 1.0, -1.0, 1.0)
-    sky = sky * (1.0 + p.departure_0 * u + p.departure_1 * (1.5 * u * u - 0.5)
-                 + p.departure_2 * cos_z + p.departure_3 * (1.5 * cos_z * cos_z - 0.5)
-                 + p.departure_4 * u * cos_z)
-    a = dr.power(dz + 1.01, 10.0)
-    w = a / (a + dr.rcp(a))
-    blended = w * sky + (1.0 - w) * p.ground
-    sharp = dr.select(dz > 0.0, sky, p.ground)
-    return dr.select(p.blend_weight > 0.5, blended, sharp)
 
 
 class CIESkyEmitter(mi.Emitter):
