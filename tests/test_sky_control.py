@@ -142,20 +142,31 @@ def test_every_frames_integrals_in_one_pass_equal_each_frames_own(mi, points):
 
 
 def test_skies_differing_in_their_departure_alone_share_their_patterns(mi, points):
-    # a list of FrameSkies (the departure's parts beside the rest, and a sky of other levels)
-    # integrated together, where _sky_sum evaluates one pattern for the skies that differ in
-    # their departure weights alone, gives each sky's own integrals; the other levels' sky
-    # keeps its own pattern (twice the rest's here)
+    # a list of FrameSkies integrated together, where _sky_sum evaluates one pattern for the
+    # skies that differ in their departure weights alone (the departure's parts beside the
+    # rest), gives each sky's own integrals; skies of other levels, another sun, other Perez
+    # coefficients or frames swapped keep their own patterns
+    import dataclasses
+
+    from skyfit_mi.physics.perez import perez_sky
+    from skyfit_mi.physics.sky import cie_sky
     from skyfit_mi.physics.sky_departure import departure_parts
     from skyfit_mi.render.sky_control import FrameSkies, quadrature, sky_integrals, to_numpy
 
     si, _, _ = points
-    frames = np.zeros(len(SURFACES))
+    Q = len(SURFACES)
+    first = np.zeros(Q)
     _, rest = _sky("intermediate").split()
-    skies = [rest, *(sky for _, sky in departure_parts(_sky("intermediate"))),
-             rest.sky_scaled(2.0)]
-    lights = [FrameSkies([sky], frames) for sky in skies]
-    assert len({light.patterns_key for light in lights}) == 2
+    perez = perez_sky(50.0, 150.0, 172, dhi=120.0, dni=500.0).to_sky()
+    bent = dataclasses.replace(perez, perez_coefficients=perez.perez_coefficients * [1, 1.2, 1,
+                                                                                      1, 1])
+    other_sun = cie_sky(sun_zenith_deg=50.0, sun_azimuth_deg=200.0, **SKIES["intermediate"])
+    lights = [FrameSkies([sky], first) for sky in
+              [rest, *(sky for _, sky in departure_parts(_sky("intermediate"))),
+               rest.sky_scaled(2.0), other_sun.split()[1], perez, bent]]
+    half = np.arange(Q) % 2
+    lights += [FrameSkies([rest, perez], half), FrameSkies([rest, perez], 1 - half)]
+    assert len({light.patterns_key for light in lights}) == len(lights) - 5
     quad = quadrature(0.002, 0.5, "ward")
 
     def values(result):
@@ -163,10 +174,12 @@ def test_skies_differing_in_their_departure_alone_share_their_patterns(mi, point
         return np.stack([to_numpy(v) for v in [d, *lobes]])
 
     d, lobes = sky_integrals(lights, si, quad)
-    for i, light in enumerate(lights):
-        alone = values(sky_integrals(light, si, quad))
-        assert np.array_equal(values((d[i], [node[i] for node in lobes])), alone), i
-    assert np.allclose(alone, 2 * values(sky_integrals(lights[0], si, quad)), rtol=1e-6)
+    alone = [values(sky_integrals(light, si, quad)) for light in lights]
+    for i, own in enumerate(alone):
+        assert np.array_equal(values((d[i], [node[i] for node in lobes])), own), i
+    assert np.allclose(alone[6], 2 * alone[0], rtol=1e-6)       # the levels are the rest's x 2
+    for i, j in ((7, 0), (9, 8), (11, 10)):        # another sun, Perez's b, the frames swapped
+        assert not np.allclose(alone[i], alone[j], rtol=1e-3), i
 
 
 def _brute_ggx(sky, wo, frame, sigma, name, n=3000, m=720):

@@ -179,7 +179,8 @@ def diffuse_directions(up, n_rays=DIFFUSE_AZIMUTHS, n_polar=DIFFUSE_POLAR, table
 def _sky_sum(mi, dr, emitter, si, wi, w, q, J, f=1.0):
     """Sum over each point's J nodes of f h(wi) w [W m^-2 sr^-1], (Q) Dr.Jit colours, h the sky
     function of ``emitter`` (a ``cie_sky`` emitter or :class:`FrameSkies`); for a list of
-    emitters a list of sums over the same nodes."""
+    emitters a list of sums over the same nodes, the FrameSkies that differ in their departure
+    weights alone sharing one evaluation of the patterns."""
     frame = dr.gather(mi.Frame3f, si.sh_frame, q)
     d, fw = frame.to_world(wi), f * w
     skies = emitter if isinstance(emitter, list) else [emitter]
@@ -222,12 +223,14 @@ class FrameSkies:
         # equal for FrameSkies that differ in their departure weights alone (:func:`_sky_sum`)
         kept = [k for k in floats[0] if k not in DEPARTURE_KEYS]
         self.patterns_key = b"".join(
-            [np.asarray(frame, dtype=np.uint32).tobytes(), *(v.tobytes() for v in col.values()),
+            [np.array([len(frame), len(skies)], dtype=np.int64).tobytes(),
+             np.asarray(frame, dtype=np.uint32).tobytes(), *(v.tobytes() for v in col.values()),
              np.array([sky.sun_direction for sky in skies], dtype=float).tobytes(),
              np.array([[f[k] for k in kept] for f in floats], dtype=float).tobytes()])
 
     def at(self, q):
-        """The parameters of the frame of each point ``q`` (a lane each), with ``sky_eval``."""
+        """The parameters of the frame of each point ``q`` (a lane each), with ``sky_eval`` and
+        ``sky_pattern``."""
         import drjit as dr
         import mitsuba as mi
 

@@ -123,8 +123,9 @@ def sky_function(p, d, pattern=None):
 
 
 def sky_pattern(p, d):
-    """The sky's patterns toward ``d`` [W m^-2 sr^-1] (eqs. 4.12-4.16, Perez et al. 1993) at
-    ``p``'s levels, before the departure's field and the ground (:func:`sky_function`)."""
+    """The sky's patterns toward ``d`` [W m^-2 sr^-1] at ``p``'s levels (CIE clear eqs. 4.12-4.13,
+    overcast eq. 4.16, Radiance's intermediate, Perez et al. 1993 eq. 1), before the departure's
+    field and the ground (:func:`sky_function`)."""
     s = p.sun_direction
     cos_z = dr.clip(dr.dot(d, s), -1.0, 1.0)
     zeta = dr.acos(cos_z)
