@@ -378,6 +378,25 @@ def test_a_sky_level_beyond_the_search_is_undetermined_and_widens_every_interval
     assert all("undetermined sky level" in r["intervals"][p]["from"] for p in TRUTH)
 
 
+def test_a_sky_level_beyond_the_first_grid_is_searched_for_and_determined(days, tmp_path):
+    """A spec's sky 6 times too dim (k = 6, beyond the first grid's 4, within SCALE_LIMITS):
+    the search steps on past the grid's end, finds the least inside and determines k there,
+    its interval holding 6, and every parameter's interval the truth."""
+    from skyfit_mi.fitting.fit import FitCache, fit_regions
+    from skyfit_mi.fitting.sky_fit import SCALE_GRID, SCALE_LIMITS
+
+    assert SCALE_GRID[-1] < 6.0 < SCALE_LIMITS[1]
+    out = rescaled_sky(days["noisy"], tmp_path / "day", lambda frame: 1.0 / 6.0)
+    r = next(fit_regions(out, [("disc", HALF)], model="colour", light=LightOptions(sky="fit"),
+                         log=lambda *a: None, cache=FitCache(16)))
+    sky = r["sky"]
+    assert sky["determined"] and sky["interval95"][0] < 6.0 < sky["interval95"][1], sky
+    assert not any("do not determine the sky's level" in w for w in r["warnings"])
+    for p, v in TRUTH.items():
+        lo, hi = r["intervals"][p]["95"]
+        assert lo - 1e-9 <= v <= hi + 1e-9, (p, r["intervals"][p], r["parameters"])
+
+
 def test_where_the_data_alone_put_the_skys_level_is_read_from_their_profile():
     from skyfit_mi.fitting.sky_fit import SCALE_GRID, _data_beyond_search
 

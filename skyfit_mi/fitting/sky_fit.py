@@ -37,6 +37,10 @@ from .methods import global_search
 
 #: Sky scales k searched first: a geometric grid from a quarter to four times the spec's sky.
 SCALE_GRID = np.geomspace(0.25, 4.0, 9)
+#: Where the least chi-square lies at the grid's end, the search goes on in the grid's steps up
+#: to these scales: a very clear sky (Perez clearness 10) gives 0.1-0.7 times the diffuse light
+#: of the thesis's CIE clear sky (eqs. 4.13, 4.15) over a day, an overcast one several times it.
+SCALE_LIMITS = (1.0 / 16.0, 16.0)
 #: The sky's share of a parameter's sd, against the data's, above which the fit warns: sqrt(3)
 #: doubles the interval.
 SKY_DOMINATES = 3 ** 0.5
@@ -612,7 +616,8 @@ class _Level:
 
 def _profile_level(sessions, prior_sd, seed):
     """The day's one sky level (:class:`_Level`): the regions' summed least chi-square on
-    :data:`SCALE_GRID`, then a parabola in log k; log k's sd from its curvature (Dchi2 = s^2)."""
+    :data:`SCALE_GRID`, stepped on beyond its end towards :data:`SCALE_LIMITS` while the least
+    lies there, then a parabola in log k; log k's sd from its curvature (Dchi2 = s^2)."""
     rng = np.random.default_rng(seed)
     starts = [s.random_start(rng) for s in sessions]
     level = _Level({}, np.log(SCALE_GRID), prior_sd)
@@ -624,8 +629,19 @@ def _profile_level(sessions, prior_sd, seed):
         return level.total(u)
 
     grid = level.grid
-    chi2 = np.array([total(u) for u in grid])
-    i = int(np.argmin(chi2))
+    chi2 = [total(u) for u in grid]
+    step, (lo, hi) = grid[1] - grid[0], np.log(SCALE_LIMITS)
+    while True:
+        i = int(np.argmin(chi2))
+        if i == 0 and grid[0] - step >= lo - 1e-9:
+            grid = np.r_[grid[0] - step, grid]
+            chi2.insert(0, total(grid[0]))
+        elif i == len(grid) - 1 and grid[-1] + step <= hi + 1e-9:
+            grid = np.r_[grid, grid[-1] + step]
+            chi2.append(total(grid[-1]))
+        else:
+            break
+    level.grid, chi2 = grid, np.array(chi2)
     edge = i in (0, len(grid) - 1)
     j = min(max(i, 1), len(grid) - 2)
     u0, b_grid = _parabola(grid[j - 1:j + 2], chi2[j - 1:j + 2])
