@@ -37,9 +37,10 @@ from .methods import global_search
 
 #: Sky scales k searched first: a geometric grid from a quarter to four times the spec's sky.
 SCALE_GRID = np.geomspace(0.25, 4.0, 9)
-#: Where the least chi-square lies at the grid's end, the search goes on in the grid's steps up
-#: to these scales: a very clear sky (Perez clearness 10) gives 0.1-0.7 times the diffuse light
-#: of the thesis's CIE clear sky (eqs. 4.13, 4.15) over a day, an overcast one several times it.
+#: Where the least of chi-square and the prior's penalty lies at the grid's end, the search goes
+#: on in the grid's steps up to these scales: a very clear sky (Perez clearness 10) gives 0.1-0.7
+#: times the diffuse light of the thesis's CIE clear sky (eqs. 4.13, 4.15) over a day, a hazy or
+#: broken-cloud sky with the sun out several times it.
 SCALE_LIMITS = (1.0 / 16.0, 16.0)
 #: The sky's share of a parameter's sd, against the data's, above which the fit warns: sqrt(3)
 #: doubles the interval.
@@ -646,10 +647,12 @@ def _profile_level(sessions, prior_sd, seed):
     j = min(max(i, 1), len(grid) - 2)
     u0, b_grid = _parabola(grid[j - 1:j + 2], chi2[j - 1:j + 2])
     u0 = float(grid[i] if u0 is None or edge else np.clip(u0, grid[j - 1], grid[j + 1]))
-    near = np.array([u0 - REFINE_STEP, u0, u0 + REFINE_STEP])
-    vertex, b = _parabola(near, [total(u) for u in near])
-    if vertex is not None and abs(vertex - u0) < 2 * REFINE_STEP and not edge:
-        total(float(vertex))
+    b = None
+    if not edge:                                 # at SCALE_LIMITS no level beyond is fitted
+        near = np.array([u0 - REFINE_STEP, u0, u0 + REFINE_STEP])
+        vertex, b = _parabola(near, [total(u) for u in near])
+        if vertex is not None and abs(vertex - u0) < 2 * REFINE_STEP:
+            total(float(vertex))
     # the curvature near the least point, or the grid's where search jitter leaves none
     level.u0 = min(level.profile, key=level.total)
     b = b if b is not None and b > 0 else b_grid
@@ -658,7 +661,7 @@ def _profile_level(sessions, prior_sd, seed):
     level.s2 = unc.scale(level.data(level.u0), noise)
     level.edge = edge
     level.agree = _regions_agree(level)
-    # at the grid's end k is not determined; else the data's curvature (the prior's 1 / sd^2
+    # at SCALE_LIMITS k is not determined; else the data's curvature (the prior's 1 / sd^2
     # apart) over the regions' disagreement
     if b is not None and b > 0 and not edge:
         prior = 0.0 if prior_sd is None else min(1.0 / prior_sd ** 2, b)
@@ -732,8 +735,9 @@ def _level_warnings(level, terms):
     if level.prior_sd is not None and side and not level.edge and conflict > unc.LEVELS["95"]:
         end = level.grid[-1 if side > 0 else 0]
         warnings.append(
-            f"the data alone put the sky's level at the search's {'upper' if side > 0 else 'lower'}"
-            f" end (k near {np.exp(end):.3g} times the spec's or beyond, "
+            "the data alone put the sky's level at or beyond the "
+            f"{'highest' if side > 0 else 'lowest'} searched (k = {np.exp(end):.3g} times the "
+            "spec's, "
             f"{abs(end) / level.prior_sd:.1f} sd of its prior) as one level for the day, and the "
             f"prior holds that level at k = {k:.3g}: the light the data show departs from the "
             "spec's more than the prior allows, so the parameters and their intervals are not "
