@@ -171,14 +171,16 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     log(f"model selection ranks in {ranked_in}; the chosen models are fitted "
         + ("in it too (fit the chosen model again with --sky to add the sky's level)"
            if not plan.split else f"with the sky's level (--sky {plan.sky})"))
-    sessions, trace_s = {}, {}
+    sessions, trace_s, at_level = {}, {}, {}
     for fam in families:
         t0 = time.perf_counter()
         sessions[fam] = sessions_of(ranked, model=models[0], normalisation=fam,
                                     cache=ranking_cache)
         if level is not None:                     # the spec's light at the level, before tracing
-            for s in sessions[fam].values():
-                s.skies = skies_at_level(s.skies, level, s.obs.times)
+            for name, s in sessions[fam].items():  # (a region's frames alike for every family)
+                if name not in at_level:
+                    at_level[name] = skies_at_level(s.skies, level, s.obs.times)
+                s.skies = list(at_level[name])
         trace_sessions(list(sessions[fam].values()), SPEC_LIGHT)
         trace_s[fam] = time.perf_counter() - t0
     ranking_light = {"positions": next(iter(sessions[families[0]].values()))
