@@ -218,6 +218,9 @@ def tally(fits, truth_of):
     of C's squared half-width (3,)).  Where the fit warns that C is grey, so that its plastic
     and metal readings are one BRDF, the truth's own twin (ward.colour_rule_twin) counts as the
     truth for C and rho_s."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from independent import gross_miss
+
     from skyfit_mi.physics.ward import colour_rule_twin
 
     out = []
@@ -237,8 +240,7 @@ def tally(fits, truth_of):
             width = hi - lo
             values = [truth[i]] + ([twin[i]] if twin is not None else [])
             held.append(any(lo <= t <= hi for t in values))
-            gross.append(not held[-1] and all(t < lo - width / 2 or t > hi + width / 2
-                                              for t in values))
+            gross.append(not held[-1] and all(gross_miss((lo, hi), t) for t in values))
             if k.startswith("C_"):
                 half.append(100 * width / 2 / truth[i])
                 share.append(fit.get("interval_shares", {}).get(k, {}).get("calibration", 0.0))

@@ -240,13 +240,15 @@ def summary(cases):
     wrong (missed); the gross misses (the truth beyond the 95% interval by more than half its
     width, warned or not) and the median 95% half-width of C over the truth [%]; the same per
     sky under 'by_sky'."""
+    from independent import gross_miss
+
     def count(group):
         statuses = [v for c in group for f in c["fits"] for v in f["status"].values()]
         n = len(statuses)
         k = {s: statuses.count(s) for s in ("in", "warned", "MISSED")}
         spans = [(f["intervals_95"][p], c["truth"][p], p) for c in group for f in c["fits"]
                  for p in NAMES]
-        gross = sum(t < lo - (hi - lo) / 2 or t > hi + (hi - lo) / 2 for (lo, hi), t, _ in spans)
+        gross = sum(gross_miss(iv, t) for iv, t, _ in spans)
         half = [50 * (hi - lo) / t for (lo, hi), t, p in spans if p.startswith("C_")]
         return {"n": n, "in": k["in"], "warned": k["warned"], "missed": k["MISSED"],
                 "gross": int(gross),

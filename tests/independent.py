@@ -167,6 +167,12 @@ def held_or_warned(names, intervals, warnings, truth):
     return out
 
 
+def gross_miss(interval, truth):
+    """Whether ``truth`` lies beyond the ``interval`` (lo, hi) by more than half its width."""
+    lo, hi = interval
+    return truth < lo - (hi - lo) / 2 or truth > hi + (hi - lo) / 2
+
+
 def _named(warning):
     """The parameters a warning opens with ('C_r, rho_s depend on ...': C_r and rho_s)."""
     m = re.match(r"((?:\w+, )*\w+)[ :]", warning)
