@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
 SPEC = ROOT / "scenes" / "specs" / "board_east_37.toml"
 SCENE = ROOT / "scenes" / "sample_board.xml"
 #: The grey card: 0.24 m square, its reflectance, beside the board's south edge (about 13
@@ -218,7 +219,6 @@ def tally(fits, truth_of):
     of C's squared half-width (3,)).  Where the fit warns that C is grey, so that its plastic
     and metal readings are one BRDF, the truth's own twin (ward.colour_rule_twin) counts as the
     truth for C and rho_s."""
-    sys.path.insert(0, str(ROOT / "tests"))
     from independent import gross_miss
 
     from skyfit_mi.physics.ward import colour_rule_twin
