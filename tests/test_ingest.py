@@ -275,6 +275,7 @@ def test_exif_labels_scaling_a_given_exposure_are_counted_in_the_intervals(day, 
         return fit_region(tmp_path / "seq", "sample", day["regions"]["sample"], model="colour",
                           light=LightOptions(sky="spec"), **QUIET)
     counted = fit()
+    _a_map_counts_the_labels_error(tmp_path / "seq", day["regions"]["sample"], counted)
     monkeypatch.setattr(intervals, "EXIF_LABEL_SD", 0.0)
     left_out = fit()
     held = {name: {k: r["intervals"][k]["95"][0] <= TRUTH[k] <= r["intervals"][k]["95"][1]
@@ -284,6 +285,43 @@ def test_exif_labels_scaling_a_given_exposure_are_counted_in_the_intervals(day, 
     for k in ("C_r", "C_g", "C_b"):
         assert counted["calibration_error_sd"][k] > EXIF_LABEL_SD * TRUTH[k] / len(lit)
         assert left_out.get("calibration_error_sd", {}).get(k, 0.0) == 0.0
+
+
+def _a_map_counts_the_labels_error(seq, region, counted):
+    """A per-pixel map of the labelled day (the spec's sky): its regions are fitted first and
+    each pixel takes its region's share of the labels' error (a reflectance's in proportion to
+    its value), so its C intervals hold the truth; without that share (the map before) they
+    miss, and the summary says what the widths hold."""
+    from skyfit_mi.fitting.light import LightOptions
+    from skyfit_mi.fitting.pixel_fit import fit_pixels
+    from skyfit_mi.fitting.pixel_map import _widths_include, first_fits
+    from skyfit_mi.pipeline.manifest import load_manifest
+
+    names = ("C_r", "C_g", "C_b")
+    logs = []
+    _, light = first_fits(seq, [("sample", region)], light=LightOptions(sky="spec"),
+                          log=logs.append)
+    assert "EXIF labels' error measured" in logs[0], logs
+    share = light["regions"]["sample"]["labels_sd"]
+    np.testing.assert_allclose([share[k] for k in names],
+                               [counted["calibration_error_sd"][k] for k in names], rtol=0.3)
+    groups = np.arange(len(region)) % 4           # four patches of 16 pixels (map --patch)
+    bare, labelled = (fit_pixels(seq, "sample", region, model="colour", light=lt, groups=groups)
+                      for lt in (None, light))
+    ok = np.isfinite(labelled["theta"][:, 0])
+    np.testing.assert_array_equal(labelled["theta"][ok], bare["theta"][ok])   # the same light
+    truth = np.array([TRUTH[k] for k in names])
+    inside = {k: (m["lo"][ok, :3] <= truth) & (truth <= m["hi"][ok, :3])
+              for k, m in (("bare", bare), ("labelled", labelled))}
+    print("map C inside", {k: v.mean(axis=0).round(2) for k, v in inside.items()}, "of", ok.sum())
+    # measured: every patch's C held; without the share 6 of 12 missed (C_r in all 4)
+    assert ok.sum() == 4 and inside["labelled"].all() and (~inside["bare"]).sum() >= 4
+    value = np.array([counted["parameters"][k] for k in names])
+    half = (labelled["hi"][ok, :3] - labelled["lo"][ok, :3]) / 2
+    assert np.all(half > 1.96 * 0.9 * np.array([share[k] for k in names])
+                  * labelled["theta"][ok, :3] / value)
+    doc, _ = load_manifest(seq)
+    assert any("EXIF labels" in w for w in _widths_include(doc, [], list(names), light))
 
 
 @pytest.mark.slow

@@ -273,7 +273,8 @@ def test_a_photographed_days_map_counts_the_suns_level_in_its_reflectances(board
         (photo / "manifest.json").write_text(json.dumps(m))
     name, px = regions[0]
     px = px[:12]
-    light = {"sky": {"k": 1.0}, "regions": {}, "sun_level_sd": 0.2, "sun_source": "modelled"}
+    light = {"fitted": "prior", "sky": {"k": 1.0}, "regions": {}, "sun_level_sd": 0.2,
+             "sun_source": "modelled"}
     rendered, exact, photographed = (fit_pixels(d, name, px, model="colour", light=lt)
                                      for d, lt in ((tmp / "day", None), (photo, None),
                                                    (photo, light)))
@@ -361,12 +362,12 @@ def test_chunks_are_compact_tiles_of_whole_patches():
             assert np.bincount(c["groups"]).tolist() == [patch**2] * (64 // patch**2)
 
 
-def test_a_pixels_sky_errors_follow_its_regions_share_and_undetermined_span():
+def test_a_pixels_shared_errors_follow_its_regions_shares_and_undetermined_span():
     """A pixel takes its region's sky share (a reflectance's in proportion to its value, the
-    roughness's as it is) and, where the regions' fit did not determine the sky's level, the
-    region's range over it moved to the pixel's value; pixels of other regions take nothing
-    of it; no light, no share."""
-    from skyfit_mi.fitting.pixel_fit import _sky_errors
+    roughness's as it is), and its share of the EXIF labels' error in quadrature with it, and,
+    where the regions' fit did not determine the sky's level, the region's range over it moved
+    to the pixel's value; pixels of other regions take nothing of it; no light, no share."""
+    from skyfit_mi.fitting.pixel_fit import _region_errors
 
     names = ["C_r", "C_g", "C_b", "rho_s", "sigma_alpha"]
     value = dict(zip(names, [0.5, 0.4, 0.2, 0.1, 0.1]))
@@ -376,13 +377,21 @@ def test_a_pixels_sky_errors_follow_its_regions_share_and_undetermined_span():
                            dict(zip(names, [0.6, 0.5, 0.3, 0.2, 0.2]))]},
         "other": {"value": value, "sd": dict(zip(names, [0.5] * 5)), "span": None}}}
     theta = np.array([[1.0, 0.8, 0.4, 0.2, 0.15], [0.5, 0.4, 0.2, 0.1, 0.1]])
-    sd, span = _sky_errors(light, np.array(["paint", "nowhere"], dtype=object), names, theta)
+    sd, span = _region_errors(light, np.array(["paint", "nowhere"], dtype=object), names, theta)
     np.testing.assert_allclose(sd[0], [0.1, 0.08, 0.04, 0.02, 0.02])   # x2, the roughness as is
     np.testing.assert_array_equal(sd[1], 0.0)
     np.testing.assert_allclose(span[0][0], [0.8, 0.6, 0.2, 0.1, 0.1])
     np.testing.assert_allclose(span[1][0], [1.2, 1.0, 0.6, 0.4, 0.25])
     np.testing.assert_array_equal(span[0][1], theta[1])
-    assert _sky_errors(None, np.array(["paint"], dtype=object), names, theta[:1])[1] is None
+    assert _region_errors(None, np.array(["paint"], dtype=object), names, theta[:1])[1] is None
+    labels = {"regions": {"paint": {"value": value, "sd": None, "span": None,
+                                    "labels_sd": {"C_r": 0.03, "C_g": 0.03}}}}
+    sd, span = _region_errors(labels, np.array(["paint"], dtype=object), names, theta[:1])
+    np.testing.assert_allclose(sd[0], [0.06, 0.06, 0.0, 0.0, 0.0])
+    assert span is None
+    light["regions"]["paint"]["labels_sd"] = {"C_r": 0.03}
+    sd, _ = _region_errors(light, np.array(["paint"], dtype=object), names, theta[:1])
+    np.testing.assert_allclose(sd[0], [2 * np.hypot(0.05, 0.03), 0.08, 0.04, 0.02, 0.02])
 
 
 def test_regions_of_other_models_map_onto_their_own_planes():

@@ -5,8 +5,9 @@ SIGMA_GRID; the global method's grid scores every (sigma_alpha, rho_s) point of 
 its linear parameters in closed form on the device
 (:func:`~.methods.global_search.grid_chi2_device`). There is no nonlinear polish, so sigma_alpha is
 resolved to the grid's 8% steps and rho_s to 0.01. The cache's error (from its two halves), the
-calibration's, the colour matrix's and, under a fitted sky, the regions' sky shares and the sun's
-level (:func:`~.pixel_map.first_fits`) are added to the intervals in quadrature.
+calibration's, the colour matrix's, the regions' shares of the EXIF labels' error where labels
+scale a given exposure and, under a fitted sky, the regions' sky shares and the sun's level
+(:func:`~.pixel_map.first_fits`) are added to the intervals in quadrature.
 
 Intervals are the grid's profile, the 95% set {chi^2 <= chi^2_min + 3.84 s^2}, s^2 = max(1,
 chi^2_min / dof): sigma_alpha's and rho_s's its extent widened by half a grid step, a linear
@@ -82,7 +83,8 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     rebuilt from the manifest, so any worker process can run it.
 
     ``materials``: the material id(s); ``cache``: (positions, directions); ``groups``: each
-    pixel's fit (P,) 0..G-1; ``light``: None (the spec's sky) or by :func:`~.pixel_map.first_fits`.
+    pixel's fit (P,) 0..G-1; ``light``: None (the spec's sky, no region's share) or by
+    :func:`~.pixel_map.first_fits` (its ``fitted`` 'spec': the spec's sky, the regions' shares).
     Returns a dict over the G fits: ``pixels`` (G, 2), ``theta``, ``lo``, ``hi``,
     ``cache_error_sd`` (G, n) (95% intervals), ``chi2``, ``dof``, ``model_noise_chi2``,
     ``warnings``, ``sigma_index`` (G,), and ``names``.
@@ -96,7 +98,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     mi = setup(variant or doc["render"]["variant"])
     scene = mi.load_string(doc["scene"]["xml"])
     skies = [frame_sky(frames[i], root) for i in obs.frames]
-    if light is not None:
+    if light is not None and light["fitted"] != "spec":
         skies = skies_at_level(skies, light["sky"], obs.times)
     options = CacheOptions(cache[0], cache[1], seed,
                            max(1, int(doc["render"]["max_depth"]) - 1), normalisation, "anchors")
@@ -126,14 +128,14 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     theta = fit["theta"]
     material = np.broadcast_to(np.asarray(materials, dtype=object), (len(pixels),))[
         np.unique(groups, return_index=True)[1]]
-    sky_sd, sky_span = _sky_errors(light, material, names, theta)
+    region_sd, sky_span = _region_errors(light, material, names, theta)
     spread = Z["95"] * np.sqrt(sd ** 2 + calibration_sd(doc, names, theta) ** 2
-                               + colour_matrix_sd(doc, names, theta) ** 2 + sky_sd ** 2)
+                               + colour_matrix_sd(doc, names, theta) ** 2 + region_sd ** 2)
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)
     fit["hi"] = np.minimum(theta + np.hypot(fit["hi"] - theta, spread), upper)
     # under a fitted sky, the sun's level as the regions' fit counted it (sky_fit.light_level_sd)
-    sun = Z["95"] * light_level_sd(doc, names, 0.0 if light is None else light["sun_level_sd"])
+    sun = Z["95"] * light_level_sd(doc, names, (light or {}).get("sun_level_sd", 0.0))
     fit["lo"], fit["hi"] = widen_relative(theta, (fit["lo"], fit["hi"]), sun, lower, upper)
     if sky_span is not None:                  # the regions' sky level was not determined
         fit["lo"] = np.maximum(np.minimum(fit["lo"], sky_span[0]), lower)
@@ -151,9 +153,10 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     return fit
 
 
-def _sky_errors(light, material, names, theta):
-    """(The sky's share of each fit's error (G, n), the (lo, hi) its untold levels reach or None)
-    from its region's by ``material`` (G,), a reflectance's relative to the region's value."""
+def _region_errors(light, material, names, theta):
+    """(The regions' shares of each fit's error (G, n): the sky's and the EXIF labels', in
+    quadrature; the (lo, hi) the sky's untold levels reach or None) from its region's by
+    ``material`` (G,), a reflectance's relative to the region's value."""
     sd = np.zeros_like(theta)
     if light is None:
         return sd, None
@@ -165,7 +168,9 @@ def _sky_errors(light, material, names, theta):
             continue
         value = np.array([region["value"][p] for p in names])
         scale = np.where(scaled & (value > 0), theta[at] / np.where(value > 0, value, 1.0), 1.0)
-        sd[at] = scale * [region["sd"][p] for p in names]
+        shares = [np.array([share.get(p, 0.0) for p in names])
+                  for share in (region.get("sd") or {}, region.get("labels_sd") or {})]
+        sd[at] = scale * np.hypot(*shares)
         if region.get("span") is not None:
             if span is None:
                 span = [theta.copy(), theta.copy()]

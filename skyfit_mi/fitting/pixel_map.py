@@ -106,16 +106,25 @@ def first_fits(manifest_path, regions, model="colour", normalisation="ward", see
                light=SPEC_LIGHT, max_pixels=LIGHT_PIXELS, variant=None,
                log=print):
     """Fit each of ``regions`` ([(material, pixels)]) first on up to ``max_pixels``, since one
-    pixel hardly tells the sky or the model: each region's (model, normalisation) (ranked where
-    ``model`` is 'auto'), and under a fitted sky the light for :func:`~.pixel_fit.fit_pixels`
-    (None for the spec's). Returns (choices {region: (model, normalisation)}, light)."""
+    pixel hardly tells the sky, the model or what shared errors do: each region's (model,
+    normalisation) (ranked where ``model`` is 'auto'), and the light for
+    :func:`~.pixel_fit.fit_pixels`: under a fitted sky its level and each region's share of
+    its error; where EXIF labels scale a given exposure
+    (:func:`~skyfit_mi.pipeline.photos.exif_scaled`), each region's share of their error
+    (``labels_sd``, its ``calibration_error_sd``); else None. Returns (choices {region: (model,
+    normalisation)}, light)."""
     sky = light.sky                                     # named: a plan, or options that say it
+    labelled = exif_scaled(load_manifest(manifest_path)[0]) is not None
     kept = [(name, subsample_region(px, max_pixels or None, seed)) for name, px in regions]
     what = " and ".join((["every lobe and parameter count ranked"] if model == "auto" else [])
-                        + ([] if sky == "spec" else ["the sky's level fitted"]))
+                        + ([] if sky == "spec" else ["the sky's level fitted"])
+                        + (["the EXIF labels' error measured"] if labelled else []))
     log(f"map: {what} first with {len(kept)} region(s) ("
         + (f"up to {max_pixels} pixels each, seed {seed}" if max_pixels else "every pixel")
-        + "); the map takes " + ("each region's choice" if model == "auto" else "that light"))
+        + "); the map takes " + " and ".join(
+            (["each region's choice"] if model == "auto" else [])
+            + ([] if sky == "spec" else ["that light"])
+            + (["each region's share of the labels' error"] if labelled else [])))
 
     def shown(line):
         """The first fits' own lines on the sky and the choices, not the regions' results."""
@@ -136,15 +145,19 @@ def first_fits(manifest_path, regions, model="colour", normalisation="ward", see
                           + (" and a model (--model 2, 3 or 5)" if model == "auto" else "")
                           + ".") from None
     choices = {name: (r["model"], r["normalisation"]) for (name, _), r in fits}
-    if sky == "spec":
+    if sky == "spec" and not labelled:
         return choices, None
     regions = {}
     for (name, _), r in fits:
-        span = r["sky"].get("undetermined_span")
-        regions[name] = {
-            "value": r["parameters"], "sd": r["sky"]["error_sd"],
-            "span": None if span is None else [{p: v[i] for p, v in span.items()}
-                                               for i in (0, 1)]}
+        regions[name] = {"value": r["parameters"], "sd": None, "span": None}
+        if labelled:
+            regions[name]["labels_sd"] = r.get("calibration_error_sd", {})
+        if sky != "spec":
+            span = r["sky"].get("undetermined_span")
+            regions[name].update(sd=r["sky"]["error_sd"], span=None if span is None else [
+                {p: v[i] for p, v in span.items()} for i in (0, 1)])
+    if sky == "spec":
+        return choices, {"fitted": sky, "regions": regions}
     rec = fits[-1][1]["sky"]                      # one sky record, shared by every region
     return choices, {"fitted": sky, "regions": regions,
                      "sky": {k: rec[k] for k in ("k", "interval95", "determined", "terms",
@@ -370,10 +383,8 @@ def run_map(manifest_path, regions, out_dir, options=MapOptions(), cluster=Clust
     if c.scheduler and c.workers is not None:
         raise SkyfitError("--workers sizes the cluster on this machine; with --scheduler the "
                           "cluster's own workers run the map: leave out --workers.")
-    if exif_scaled(doc) is not None:
-        log("map: the frames' EXIF labels scale the given exposure; their error (ingest's log) is "
-            "in the regions' fits (fit --all), not in the map's intervals")
-    first = o.model == "auto" or plan.sky != "spec"     # fits of the regions come first
+    # fits of the regions come first: the model, the sky's level, the EXIF labels' error
+    first = o.model == "auto" or plan.sky != "spec" or exif_scaled(doc) is not None
     settings = _settings(doc, regions, o, plan.sky, first)
     out = check_dir(Path(out_dir))
     stored = _check_store(out / STORE, settings, overwrite)
@@ -503,7 +514,7 @@ def write_map_outputs(out, store, names, regions, settings, choices):
 
 def _sky_summary(light):
     """The map summary's record of the sky the map took (``light``: :func:`first_fits`')."""
-    if light is None:
+    if light is None or light["fitted"] == "spec":
         return {"source": "the spec's, taken as exact (--sky spec)"}
     return {"source": f"the spec's, its level fitted first with the regions' materials (--sky "
                       f"{light['fitted']}; its shape is the spec's)", **light["sky"],
@@ -519,7 +530,7 @@ def _widths_include(doc, skies, names, light=None):
     """What the maps' 95% widths include beyond the data's noise."""
     ingest = doc.get("ingest") or {}
     out = ["the light cache's Monte Carlo error (from its two halves)"]
-    if light is not None:
+    if light is not None and light["fitted"] != "spec":
         out.append("the fitted sky level's error, each pixel its region's share (a "
                    "reflectance's in proportion to its value; over the levels the fit could "
                    "not tell apart where it did not determine the level); the sky's shape is "
@@ -532,6 +543,10 @@ def _widths_include(doc, skies, names, light=None):
                    "(--sky spec)")
     if (ingest.get("calibration") or {}).get("scale_relative_sd"):
         out.append("the exposure calibration's error (ingest.calibration)")
+    if light is not None and any("labels_sd" in r for r in light["regions"].values()):
+        out.append("the error of the EXIF labels that scale the given exposure, each pixel its "
+                   "region's share (calibration_error_sd of its fit; a reflectance's in "
+                   "proportion to its value)")
     if any(pose_sd((doc.get("camera") or {}).get("pose_sd_deg")).values()):
         out.append("not the camera pose's uncertainty (camera.pose_sd_deg), which region fits "
                    "take in")
