@@ -91,6 +91,7 @@ SCENARIOS = {
     "card": {"card": True},
     "lab": {"card": False},
     "labels": {"card": False, "photo": {"nominal_exif": True}},
+    "card_labels": {"card": True, "photo": {"nominal_exif": True}},
     "shaky": {"card": True, "shake": 1.0},
     "misposed": {"card": True, "camera": {"azimuth_deg": 0.3, "angle_deg": 0.3,
                                           "pose_sd_deg": 0.3}},
