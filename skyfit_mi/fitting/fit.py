@@ -201,7 +201,8 @@ class FitSession:
                                "directions": int(cache.directions), "seed": cache.seed,
                                "sized": "given" if given else "from the data",
                                "sky_plan": check_choice("sky plan", cache.plan, tuple(SKY_PLANS))}
-        self._mi = setup(variant or doc["render"]["variant"])
+        self._variant = variant or doc["render"]["variant"]
+        setup(self._variant)
         # the light traced (LightPlan), its parts (LightParts) and their mix (set_sky)
         self.light, self.sky_scale, self.parts = light or SPEC_LIGHT, 1.0, None
         self.sky_shape_mix = None
@@ -340,8 +341,8 @@ class FitSession:
 
     @property
     def scene(self):
-        """The sequence's Mitsuba scene, loaded when first needed (every live scene's materials
-        join each trace's virtual calls, so sessions sharing a trace load one)."""
+        """The sequence's Mitsuba scene, loaded when first needed and shared by the sessions of
+        one sequence (:func:`_loaded_scene`)."""
         return self._loaded[0]
 
     @property
@@ -351,8 +352,7 @@ class FitSession:
 
     @functools.cached_property
     def _loaded(self):
-        scene = self._mi.load_string(self.doc["scene"]["xml"])
-        return scene, self._mi.traverse(scene)
+        return _loaded_scene(self._variant, self.doc["scene"]["xml"])
 
     def light_cache(self):
         """The region's raw :class:`~skyfit_mi.render.light_cache.LightCache` (for diagnostics)."""
@@ -614,6 +614,18 @@ class FitSession:
         problem = problem or self.problem
         return {f"{v:g}": problem.model_noise_chi2(np.r_[theta[:-1], v])
                 for v in NOISE_SIGMAS}
+
+
+@functools.lru_cache(maxsize=1)
+def _loaded_scene(variant, xml):
+    """(scene, its parameters) of a sequence's scene ``xml`` in ``variant``, the last one
+    loaded kept for the next session: every live scene's materials join each trace's virtual
+    calls, so each scene more slows every trace's kernels (`fit --model auto` with a scene for
+    each of its six lobes: its ranking traces 30 -> 20 s). A trace sets the sky of each frame
+    it traces, so sessions can share one."""
+    mi = setup(variant)
+    scene = mi.load_string(xml)
+    return scene, mi.traverse(scene)
 
 
 def trace_sessions(sessions, light):
