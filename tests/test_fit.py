@@ -229,6 +229,26 @@ def test_a_model_that_cannot_describe_the_data_is_called_unreliable(days):
                "the model misses the data by about" in w for w in bad["warnings"])
 
 
+def test_the_sessions_of_one_scene_share_it_while_one_lives(days):
+    """Sessions of one scene share its Mitsuba scene (each live scene's materials join every
+    trace's virtual calls), and a trace of one after another's sees the same fit as alone; the
+    scene goes with its last session."""
+    import gc
+
+    from skyfit_mi.fitting.fit import _SCENES, FitSession
+
+    def session(**kw):
+        return FitSession(days["clean"], "disc", REGION, model="two", light=None, **FAST, **kw)
+    alone = fit(days["clean"])
+    a, b = session(), session(normalisation="balanced")
+    assert a.scene is b.scene and a.params is b.params
+    b.light_cache()                                     # another lobe traced on the scene first
+    assert fit(days["clean"])["parameters"] == alone["parameters"]
+    del a, b
+    gc.collect()
+    assert not _SCENES
+
+
 def test_region_errors(days):
     from skyfit_mi.errors import SkyfitError
     from skyfit_mi.fitting.fit import fit_region

@@ -294,7 +294,7 @@ def _a_map_counts_the_labels_error(seq, region, counted):
     miss, and the summary says what the widths hold."""
     from skyfit_mi.fitting.light import LightOptions
     from skyfit_mi.fitting.pixel_fit import fit_pixels
-    from skyfit_mi.fitting.pixel_map import _widths_include, first_fits
+    from skyfit_mi.fitting.pixel_map import _sky_summary, _widths_include, first_fits
     from skyfit_mi.pipeline.manifest import load_manifest
 
     names = ("C_r", "C_g", "C_b")
@@ -302,6 +302,8 @@ def _a_map_counts_the_labels_error(seq, region, counted):
     _, light = first_fits(seq, [("sample", region)], light=LightOptions(sky="spec"),
                           log=logs.append)
     assert "EXIF labels' error measured" in logs[0], logs
+    assert light["fitted"] == "spec" and "taken as exact" in _sky_summary(light)["source"]
+    json.dumps(light)                                      # the map's store keeps it as JSON
     share = light["regions"]["sample"]["labels_sd"]
     np.testing.assert_allclose([share[k] for k in names],
                                [counted["calibration_error_sd"][k] for k in names], rtol=0.3)

@@ -7,6 +7,7 @@ Mitsuba pass), builds chi-square (eq. 6.2) and runs the chosen method; it return
 
 import functools
 import time
+import weakref
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -343,12 +344,12 @@ class FitSession:
     def scene(self):
         """The sequence's Mitsuba scene, loaded when first needed and shared by the sessions of
         one sequence (:func:`_loaded_scene`)."""
-        return self._loaded[0]
+        return self._loaded.scene
 
     @property
     def params(self):
         """The scene's parameters (``mi.traverse``)."""
-        return self._loaded[1]
+        return self._loaded.params
 
     @functools.cached_property
     def _loaded(self):
@@ -616,16 +617,31 @@ class FitSession:
                 for v in NOISE_SIGMAS}
 
 
-@functools.lru_cache(maxsize=1)
+@dataclass
+class _Scene:
+    """A loaded Mitsuba scene and its parameters (``mi.traverse``)."""
+
+    scene: object
+    params: object
+
+
+#: The scenes live sessions hold, by (variant, scene XML): each freed with its last session.
+_SCENES = weakref.WeakValueDictionary()
+
+
 def _loaded_scene(variant, xml):
-    """(scene, its parameters) of a sequence's scene ``xml`` in ``variant``, the last one
-    loaded kept for the next session: every live scene's materials join each trace's virtual
-    calls, so each scene more slows every trace's kernels (`fit --model auto` with a scene for
-    each of its six lobes: its ranking traces 30 -> 20 s). A trace sets the sky of each frame
-    it traces, so sessions can share one."""
-    mi = setup(variant)
-    scene = mi.load_string(xml)
-    return scene, mi.traverse(scene)
+    """The :class:`_Scene` of a scene ``xml`` in ``variant``, shared by every live session of
+    that XML: each live scene's materials join every trace's virtual calls, so each scene more
+    slows every trace's kernels (`fit --model auto` with a scene for each of its six lobes: its
+    ranking traces 30 -> 20 s). A trace sets the sky of each frame it traces, and the pose's
+    traces put the camera back, so sessions traced one after another can share one; sessions
+    traced in threads at once could not."""
+    loaded = _SCENES.get((variant, xml))
+    if loaded is None:
+        mi = setup(variant)
+        scene = mi.load_string(xml)
+        loaded = _SCENES[variant, xml] = _Scene(scene, mi.traverse(scene))
+    return loaded
 
 
 def trace_sessions(sessions, light):

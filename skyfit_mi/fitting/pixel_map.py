@@ -88,7 +88,8 @@ def chunk_seed(seed, index):
 
 def _settings(doc, regions, o, sky, first):
     """What a stored map was made with (a resume needs the same): :class:`MapOptions` ``o``, the
-    light's ``sky`` plan, and whether the regions' fits come ``first``."""
+    light's ``sky`` plan, whether the regions' fits come ``first``, and whether the pixels take
+    the regions' shares of the EXIF labels' error."""
     digest = [(n, np.asarray(p).tolist()) for n, p in regions]
     settings = {
         "sequence_run_id": doc.get("run_id"), "model": o.model, "normalisation": o.normalisation,
@@ -99,6 +100,8 @@ def _settings(doc, regions, o, sky, first):
         if sky != "spec" else "spec"}
     if first:
         settings["first_fits_pixels"] = o.light_pixels
+    if exif_scaled(doc) is not None:              # the regions' shares of the labels' error
+        settings["exif_labels_error"] = True
     return settings
 
 
@@ -543,7 +546,7 @@ def _widths_include(doc, skies, names, light=None):
                    "(--sky spec)")
     if (ingest.get("calibration") or {}).get("scale_relative_sd"):
         out.append("the exposure calibration's error (ingest.calibration)")
-    if light is not None and any("labels_sd" in r for r in light["regions"].values()):
+    if light is not None and any(r.get("labels_sd") for r in light["regions"].values()):
         out.append("the error of the EXIF labels that scale the given exposure, each pixel its "
                    "region's share (calibration_error_sd of its fit; a reflectance's in "
                    "proportion to its value)")
