@@ -6,7 +6,7 @@ import numpy as np
 from . import setup
 from .basis_table import trace_basis
 from .light_cache import DIRECTIONS, POSITIONS, CacheOptions
-from .scene import shape_index
+from .scene import pixel_rays, shape_index
 
 
 def load_points_scene(xml, variant):
@@ -32,6 +32,13 @@ def surface_hits(scene, origins, directions):
             "n": np.array(si.sh_frame.n, dtype=float).T,
             "t": np.where(valid, np.array(si.t, dtype=float), np.inf),
             "material": ids[shape_index(si, shapes) + 1], "scale": scale}
+
+
+def pixel_points(scene, pixels):
+    """Where the central rays of ``pixels`` ((P, 2) x, y) of the scene's first sensor meet the
+    scene: :func:`surface_hits`' dict (``p`` NaN where a ray misses)."""
+    ray = pixel_rays(scene.sensors()[0], np.asarray(pixels, dtype=float).reshape(-1, 2) + 0.5)
+    return surface_hits(scene, np.array(ray.o, dtype=float).T, np.array(ray.d, dtype=float).T)
 
 
 def lambertian_radiance(xml, variant, skies, rays, material, max_depth, seed=0,
