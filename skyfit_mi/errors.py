@@ -28,6 +28,13 @@ class SetupError(RuntimeError):
     """The rendering back-end cannot start (missing libLLVM, no GPU...)."""
 
 
+def listed(names, most=3):
+    """``names`` joined for a message: the first ``most``, then how many more."""
+    names = list(names)
+    return ", ".join(names[:most]) + (f" and {len(names) - most} more" if len(names) > most
+                                      else "")
+
+
 def check_range(name, value, lo, hi, unit=""):
     """Raise :class:`InputRangeError` unless ``lo <= value <= hi`` everywhere (NaN fails)."""
     v = np.asarray(value, dtype=float)

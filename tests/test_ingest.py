@@ -235,6 +235,63 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
         assert apart[k] > 0.9 * u / np.sqrt(frames) * TRUTH[k], (k, apart[k])
 
 
+def test_clipped_or_black_pixels_are_ranked_not_averaged_nor_dropped():
+    """A patch's level is the mean of its middle half.  Clipped pixels lie above every other,
+    black ones below: dropping them would shift that half toward the rest (a partly clipped
+    card reads dark), so they keep their ranks, and where one falls inside the middle half the
+    level is unknown (NaN)."""
+    from skyfit_mi.physics.camera import CLIP_FRACTION
+    from skyfit_mi.pipeline.ingest import _signal_ratio, central_mean
+    from skyfit_mi.pipeline.photos import SensorModel
+
+    x = np.arange(1.0, 101.0)
+    want = central_mean(x)
+    assert want == pytest.approx(50.5)
+    for share in (0.1, 0.24):                          # the top ones clipped: the same level
+        top = np.where(x > 100 * (1 - share), np.inf, x)
+        assert central_mean(top) == pytest.approx(want)
+        assert central_mean(np.where(x <= 100 * share, -np.inf, x)) == pytest.approx(want)
+        assert central_mean(x[x <= 100 * (1 - share)]) < want - 4     # dropped: biased dark
+    assert np.isnan(central_mean(np.where(x > 70, np.inf, x)))       # 30%: unknown
+    assert central_mean(np.r_[x, np.nan, np.nan]) == pytest.approx(want)      # NaN left out
+    sensor = SensorModel(1.0, response="linear", bits=8)
+    y = np.array([[100.0, 255 * CLIP_FRACTION + 0.1, 0.0, np.nan, 100.0]]).T
+    s, r = _signal_ratio(y, np.array([[2.0, 2.0, 2.0, 2.0, 0.0]]).T, sensor)
+    np.testing.assert_array_equal(np.isnan(r.ravel()), [False, False, False, True, True])
+    assert r[0, 0] == pytest.approx(s[0, 0] / 2) and r[1, 0] == np.inf and r[2, 0] == -np.inf
+
+
+def test_a_frame_whose_card_is_partly_clipped_takes_its_exif_exposure(day, tmp_path):
+    """In one frame a third of the grey card's pixels clip (its brightest, as where a card
+    lies nearest the light): the frame's exposure is its EXIF one on the others' scale, said
+    in a line, and matches the truth; it is not the dark level of the card's unclipped rest."""
+    from PIL import Image
+
+    from skyfit_mi.pipeline.pixels import material_regions
+
+    src = tmp_path / "in"
+    files = _copy_photos(day, src)
+    card = dict(material_regions(day["truth"]))["grey_card"]
+    k = 6
+    with Image.open(files[k]) as im:
+        exif, v = im.getexif(), np.array(im)
+    rows, cols = card[:, 1], card[:, 0]
+    bright = v[rows, cols].sum(axis=1) >= np.quantile(v[rows, cols].sum(axis=1), 2 / 3)
+    v[rows[bright], cols[bright]] = 255
+    Image.fromarray(v).save(files[k], quality=100, exif=exif)
+    logs = []
+    doc = _ingest({**day, "photos": src}, tmp_path / "seq",
+                  calibrate={"grey_card": (0.18, 0.18, 0.18)}, vignetting="cos4",
+                  log=logs.append)
+    cal = doc["ingest"]["calibration"]
+    assert cal["frames_without_reference"] == [files[k].name]
+    assert any("clipped, black or unlit in " + files[k].name in m for m in logs)
+    sim = json.loads((day["photos"] / "photos.json").read_text())
+    got = np.array([f["exposure"]["exposure"] for f in doc["frames"]])
+    true = np.array([f["exposure_sr_m2_W"] for f in sim["frames"]])
+    np.testing.assert_allclose(got, true, rtol=0.01)
+
+
 def test_exif_labels_scaling_a_given_exposure_are_counted_in_the_intervals(day, ingested,
                                                                            tmp_path, monkeypatch):
     """A camera labels its shutter times with the nominal series: the photographs' EXIF times

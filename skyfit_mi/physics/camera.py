@@ -33,6 +33,9 @@ CURVES = {
              lambda v, g: np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4),
              lambda s, g: np.where(s <= 0.0031308, 12.92, 1.055 / 2.4 * s ** (1 / 2.4 - 1.0)))}
 BIT_DEPTHS = (8, 10, 12, 16)
+#: A code within this fraction of the largest (any channel) counts as clipped: a JPEG's ringing
+#: leaves a clipped area's codes a few below the top (249-254.9 of 255).
+CLIP_FRACTION = 0.97
 
 
 @dataclass(frozen=True)

@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from ..conventions import time_legendre
-from ..errors import SkyfitError
+from ..errors import SkyfitError, listed
 from ..files import FolderLock
-from ..physics.camera import SensorModel
+from ..physics.camera import CLIP_FRACTION, SensorModel
 from ..physics.colour import SRGB_LUMINANCE
 from ..render.image import write_exr
 from ..render.labels import label_image
@@ -374,31 +374,46 @@ def _swatch_ratios(samples, patch, sensor, exposures):
     for k in range(24):
         for c in range(3):
             v = r[labels == CHART_LABEL + k, c]
-            v = v[np.isfinite(v)]
+            v = v[~np.isnan(v)]
             if len(v):
                 ratio[k, c] = central_mean(v)
     return ratio
 
 
 def central_mean(x):
-    """Interquartile mean of ``x``'s finite values along its first axis, NaN where none: the
-    calibration's robust level (unlike a median, it does not snap to whole codes)."""
+    """Interquartile mean of ``x`` along its first axis, NaN where it has no value: the
+    calibration's robust level (unlike a median, it does not snap to whole codes).  NaN values
+    are left out; -inf and +inf stand for values known to lie below or above every other (black
+    or clipped pixels, :func:`_signal_ratio`), ranked but never averaged: where one falls among
+    the middle half, the level is not known and the mean is NaN."""
     x = np.asarray(x, dtype=float)
-    s = np.sort(np.where(np.isfinite(x), x, np.inf), axis=0)       # non-finite last
-    n = np.sum(np.isfinite(x), axis=0)
+    s = np.sort(np.where(np.isnan(x), np.inf, x), axis=0)           # NaN last, with +inf
+    n = np.sum(~np.isnan(x), axis=0)
     rank = np.arange(len(s)).reshape((-1,) + (1,) * (s.ndim - 1))
     keep = (rank >= n // 4) & (rank < n - n // 4)
     with np.errstate(all="ignore"):
-        return np.where(n > 0, np.sum(np.where(keep, s, 0.0), axis=0)
-                        / np.maximum(np.sum(keep, axis=0), 1), np.nan)
+        mean = np.sum(np.where(keep, s, 0.0), axis=0) / np.maximum(np.sum(keep, axis=0), 1)
+    return np.where((n > 0) & np.isfinite(mean), mean, np.nan)
+
+
+def _ranked_codes(y, max_code):
+    """Codes ``y`` [DN] with the clipped ones (:data:`~skyfit_mi.physics.camera.CLIP_FRACTION`
+    of ``max_code``) set to +inf and the black ones (<= 0) to -inf: for :func:`central_mean`,
+    which ranks them, since within a patch's middle half they would bias its level."""
+    with np.errstate(invalid="ignore"):
+        return np.where(y >= CLIP_FRACTION * max_code, np.inf, np.where(y <= 0, -np.inf, y))
 
 
 def _signal_ratio(y, L, sensor):
     """Linear signal of codes ``y`` (n, 3) [DN] and its ratio to the rendered radiance ``L``
-    (n, 3) [W m^-2 sr^-1]; NaN where clipped, not finite or unlit (the one usability rule)."""
-    ok = np.isfinite(y) & (y > 0) & (y < sensor.max_code) & (L > 0)
-    s = np.where(ok, sensor.linearise(np.where(ok, y, 0.0)), np.nan)
-    return s, s / np.where(ok, L, 1.0)
+    (n, 3) [W m^-2 sr^-1]: NaN where not finite or unlit, -inf where black and +inf where
+    clipped (:func:`_ranked_codes`), which :func:`central_mean` ranks (the one usability
+    rule)."""
+    ranked = np.where(np.isfinite(y) & (L > 0), _ranked_codes(y, sensor.max_code), np.nan)
+    ok = np.isfinite(ranked)
+    s = np.where(ok, sensor.linearise(np.where(ok, y, 0.0)), ranked)
+    with np.errstate(all="ignore"):
+        return s, np.where(ok, s / np.where(ok, L, 1.0), ranked)
 
 
 def fit_response(samples, patch, max_code, rel, log):
@@ -415,12 +430,13 @@ def fit_response(samples, patch, max_code, rel, log):
             sel = patch == m
             for c in range(3):
                 y, x = codes[sel, c], radiance[sel, c]
-                ok = np.isfinite(y) & (y > 0) & (y < max_code) & (x > 0)
-                if ok.sum() < 4:
+                lit = np.isfinite(y) & (x > 0)
+                code = central_mean(_ranked_codes(y[lit], max_code))
+                if lit.sum() < 4 or not np.isfinite(code):
                     continue
-                v.append(central_mean(y[ok]) / max_code)
+                v.append(code / max_code)
                 group.append(c if rel is not None else 3 * f + c)
-                u.append(np.log(central_mean(x[ok])) + (0.0 if rel is None else np.log(rel[f])))
+                u.append(np.log(central_mean(x[lit])) + (0.0 if rel is None else np.log(rel[f])))
     v, u = np.array(v), np.array(u)
     group = np.unique(group, return_inverse=True)[1].ravel() if len(v) else np.array([], int)
     # what sets the shape: the spread of the signals that share an exposure
@@ -472,8 +488,9 @@ CALIBRATION_PARTS = 8
 def _patch_exposure(s, r, patch, parts=1, cells=None):
     """One frame's exposure (3,) from its patches' signals ``s`` and ratios ``r`` (n, 3)
     (:func:`_signal_ratio`): per patch the central mean of its ratios, weighted by pixels x
-    median signal^2.  With ``parts`` > 1, (parts, 3) from runs of each patch's pixels (bands of
-    rows), or of its JPEG coding units with ``cells`` (n,)."""
+    central signal^2; NaN where no patch's middle half is free of clipped or black pixels.
+    With ``parts`` > 1, (parts, 3) from runs of each patch's pixels (bands of rows), or of its
+    JPEG coding units with ``cells`` (n,)."""
     out = np.zeros((parts, 3))
     for part in range(parts):
         num = den = 0.0
@@ -485,9 +502,10 @@ def _patch_exposure(s, r, patch, parts=1, cells=None):
                 else:
                     idx = idx[np.isin(cells[idx], np.array_split(np.unique(cells[idx]),
                                                                  parts)[part])]
-                n = np.sum(np.isfinite(r[idx]), axis=0)
-                weight = np.where(n > 0, n * np.nan_to_num(np.nanmedian(s[idx], axis=0)) ** 2, 0)
-                num = num + weight * np.nan_to_num(central_mean(r[idx]))
+                level = central_mean(r[idx])
+                weight = np.where(np.isfinite(level), np.sum(~np.isnan(r[idx]), axis=0)
+                                  * np.nan_to_num(central_mean(s[idx])) ** 2, 0.0)
+                num = num + weight * np.nan_to_num(level)
                 den = den + weight
             out[part] = np.where(den > 0, num / den, np.nan)
     return out if parts > 1 else out[0]
@@ -559,6 +577,10 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells, seconds)
     info = {"frame_relative_sd": np.sqrt(var_f).tolist()}
     own_sd = np.sqrt(var_f / good.sum()).tolist()        # exposures of the frames' own
     missing = [Path(photos[i].path).name for i in np.flatnonzero(~good)]
+    if missing and rel is not None:
+        log(f"calibration: the references are clipped, black or unlit in {listed(missing)}: "
+            "those frames take their EXIF exposures, on the others' scale")
+        info["frames_without_reference"] = missing
     curved = False
     if rel is not None:
         scale = np.nanmedian(k[good] / rel[good, None], axis=0)
@@ -577,9 +599,10 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells, seconds)
             info["exif_relative_exposures"] = "not used: they scatter beyond the patches' noise"
     if rel is None:
         if missing:
-            raise SkyfitError(f"{missing[0]}: the calibration patches are saturated, black or "
-                              "unlit, and the frame has no EXIF exposure; drop the frame or give "
-                              "--exposure.")
+            raise SkyfitError(f"{listed(missing)}: the calibration patches are clipped, black "
+                              "or unlit, and the frames' EXIF exposures cannot stand in for them "
+                              "(missing, or scattered beyond the patches' noise); drop those "
+                              "frames, or give --exposure.")
         info.update(per_frame=True, scale_relative_sd=own_sd)
         return k, info
     info.update(per_frame=False,

@@ -24,7 +24,7 @@ import re
 from pathlib import Path
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
-from ..errors import SkyfitError
+from ..errors import SkyfitError, listed
 
 #: Civil UTC offsets in use [hours].
 UTC_OFFSETS = (-12.0, 14.0)
@@ -200,13 +200,11 @@ def _csv_times(paths, csv_path, tz, warn):
     names = [_name(p) for p in paths]
     missing = [n for n in names if n not in table]
     if missing:
-        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
-        raise SkyfitError(f"{csv_path} has no row for {', '.join(missing[:3])}{more}; list "
+        raise SkyfitError(f"{csv_path} has no row for {listed(missing)}; list "
                           "every frame (file,time).")
     extra = sorted(set(table) - set(names), key=lambda n: table[n][1])
     if extra:
-        more = f" and {len(extra) - 3} more" if len(extra) > 3 else ""
-        msg = (f"{csv_path} lists {', '.join(extra[:3])}{more} (line "
+        msg = (f"{csv_path} lists {listed(extra)} (line "
                f"{table[extra[0]][1]}), which are not frames of this sequence")
         if warn is None:
             raise SkyfitError(msg + "; remove those rows.")

@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 
 from ..errors import SkyfitError
+from ..physics.camera import CLIP_FRACTION
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.lens import distort, focal_px
 
@@ -52,9 +53,13 @@ _SHARE_TOL = 1e-4
 
 
 def luminance(values, sensor, falloff):
-    """Linear luminance [1] of codes ``values`` (H, W, 3) [DN] over the vignetting ``falloff``."""
+    """Linear luminance [1] of codes ``values`` (H, W, 3) [DN] over the vignetting ``falloff``;
+    NaN where a channel is not finite or clipped (:data:`CLIP_FRACTION`): a clipped pixel's
+    luminance is not known, and it would tie the match to where the light clips."""
     s = sensor.linearise(np.nan_to_num(values)) @ SRGB_LUMINANCE
-    return np.where(np.all(np.isfinite(values), axis=-1), s / falloff, np.nan)
+    with np.errstate(invalid="ignore"):
+        known = np.all(np.isfinite(values) & (values < CLIP_FRACTION * sensor.max_code), axis=-1)
+    return np.where(known, s / falloff, np.nan)
 
 
 def features(lum):

@@ -7,9 +7,9 @@ fisheye of :mod:`~skyfit_mi.physics.envmap`) and writes ``sky_series.json``, whi
 
 Merging is Debevec-Malik's with the response known: linearised, flat-fielded shots divided by
 their exposure H = t S / N^2 are averaged with weight H (inverse variance under shot noise)
-where neither clipped (:data:`CLIP_FRACTION`) nor below :data:`FLOOR_FRACTION`.  Pixels clipped
-in every shot (the sun) keep the shortest shot's lower bound; the series recommends a
-``sun_mask_deg`` (:func:`clipped_extent`).
+where neither clipped (:data:`~skyfit_mi.physics.camera.CLIP_FRACTION`) nor below
+:data:`FLOOR_FRACTION`.  Pixels clipped in every shot (the sun) keep the shortest shot's lower
+bound; the series recommends a ``sun_mask_deg`` (:func:`clipped_extent`).
 
 Units: W m^-2 sr^-1 through ISO 12232's saturation-based exposure (v at H is
 v :data:`SATURATION_LUMINANCE` / H [cd m^-2]) over the clear sky's efficacy
@@ -36,7 +36,7 @@ import numpy as np
 from ..conventions import direction_from_angles
 from ..errors import OutputError, SkyfitError
 from ..files import check_dir, ensure_dir, write_json
-from ..physics.camera import SensorModel
+from ..physics.camera import CLIP_FRACTION, SensorModel
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky import EFFICACY_CLEAR
 from ..render.image import write_exr
@@ -50,8 +50,6 @@ SATURATION_LUMINANCE = 78.0 / 0.65
 #: Most pixels across a merged map: ample for a sky table of at most 256 rows
 #: (:data:`~skyfit_mi.physics.latlong.MAX_ROWS`); larger shots are binned to it as read.
 MAP_PIXELS = 1024
-#: A code within this fraction of the saturation code (any channel) counts as clipped.
-CLIP_FRACTION = 0.97
 #: A shot whose largest channel is below this fraction of saturation is used only when no
 #: brighter unclipped shot exists (quantisation and read noise dominate down there).
 FLOOR_FRACTION = 0.02
