@@ -169,7 +169,7 @@ def _ingest(args):
             raise SkyfitError(f"--table takes no {what}: the table gives frames, values and "
                               "sigmas; give either photographs or --table.")
         ingest_table(args.table, args.spec, args.output, tz=args.tz, site=args.site,
-                     calibrate=dict(args.calibrate or []), scale_unknown=args.unknown_scale,
+                     calibrate=_references(args.calibrate), scale_unknown=args.unknown_scale,
                      overwrite=args.overwrite)
         return
     if args.unknown_scale:
@@ -179,11 +179,21 @@ def _ingest(args):
         raise SkyfitError("give photographs (files or folders), or --table OBS.csv.")
     ingest(args.photos, args.spec, args.output, times_csv=args.times,
            name_pattern=args.name_pattern, tz=args.tz, site=args.site, response=args.response,
-           gamma=args.gamma, exposure=args.exposure, calibrate=dict(args.calibrate or []),
+           gamma=args.gamma, exposure=args.exposure, calibrate=_references(args.calibrate),
            colorchecker=args.colorchecker, vignetting=args.vignetting, noise=args.noise,
            colour_matrix_error=args.colour_matrix_error, register=not args.no_register,
            **({} if args.register_limit is None else {"register_limit_px": args.register_limit}),
            overwrite=args.overwrite, progress=not args.quiet)
+
+
+def _references(pairs):
+    """``--calibrate`` NAME=RHO pairs as a dict; SkyfitError if a name comes twice."""
+    names = [name for name, _ in pairs or []]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise SkyfitError(f"--calibrate names {', '.join(twice)} more than once; give each "
+                          "reference's reflectance once.")
+    return dict(pairs or [])
 
 
 def _pixels(args):

@@ -235,6 +235,30 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
         assert apart[k] > 0.9 * u / np.sqrt(frames) * TRUTH[k], (k, apart[k])
 
 
+def test_an_encoding_no_profile_states_is_said_and_another_profiles_refused():
+    """16-bit frames without a colour profile are read as linear (a raw converter's linear
+    export), said in a line; a profile neither sRGB nor linear (Adobe RGB) is refused unless
+    --response says the encoding; a profile that names its encoding is taken silently."""
+    from skyfit_mi.pipeline.ingest import _sensor
+    from skyfit_mi.pipeline.photos import Photo, _hint_from_icc
+
+    def photo(desc, bits=16):
+        hint, source = _hint_from_icc(desc, "srgb" if bits == 8 else "linear")
+        return Photo("a.tif", "tiff", np.zeros((2, 2, 3)), "integer", bits, 2 ** bits - 1,
+                     hint, source, 0, 0)
+
+    sensor, _, said = _sensor([photo(None)] * 2, None, None, {}, False)
+    assert sensor.response == "linear" and "no colour profile" in said and "--response" in said
+    assert _sensor([photo(None, 8)] * 2, None, None, {}, False)[2] is None
+    sensor, _, said = _sensor([photo("sRGB IEC61966-2.1")] * 2, None, None, {}, False)
+    assert sensor.response == "srgb" and said is None
+    with pytest.raises(SkyfitError, match='a.tif: the ICC profile "Adobe RGB \\(1998\\)" is '
+                                          "neither sRGB nor linear.*--response"):
+        _sensor([photo("Adobe RGB (1998)")] * 2, None, None, {}, False)
+    sensor, _, said = _sensor([photo("Adobe RGB (1998)")] * 2, "gamma", 2.2, {}, False)
+    assert sensor.response == "gamma" and said is None
+
+
 def test_clipped_or_black_pixels_are_ranked_not_averaged_nor_dropped():
     """A patch's level is the mean of its middle half.  Clipped pixels lie above every other,
     black ones below: dropping them would shift that half toward the rest (a partly clipped
@@ -605,6 +629,7 @@ def _copy_photos(day, dst):
     ("corrupt", "IMG_0003"),
     ("unknown raw", "IMG_0099"),
     ("duplicate time", "all have the time"),
+    ("grey", "IMG_0002.jpg: grey"),
 ])
 def test_bad_photographs_get_one_line_and_no_output(day, tmp_path, damage, message):
     from PIL import Image
@@ -623,6 +648,10 @@ def test_bad_photographs_get_one_line_and_no_output(day, tmp_path, damage, messa
         (src / "IMG_0099.nef").write_bytes(b"not a raw file" * 100)
     elif damage == "duplicate time":
         shutil.copy(files[4], src / "IMG_0004b.jpg")
+    elif damage == "grey":
+        with Image.open(files[2]) as im:
+            exif = im.getexif()
+            im.convert("L").save(files[2], exif=exif, quality=95)
     out = tmp_path / "out"
     with pytest.raises(SkyfitError, match=message):
         ingest([src], day["spec"], out, exposure=1e-3, progress=False, **QUIET)
@@ -706,6 +735,11 @@ def test_cli_ingest_error_is_one_line_exit_2(day, tmp_path, capsys):
     code = main(["ingest", str(day["spec"]), str(day["photos"]), "-o", str(tmp_path / "o"), "-q"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "absolute scale" in err
+    code = main(["ingest", str(day["spec"]), str(day["photos"]), "-o", str(tmp_path / "o"), "-q",
+                 "--calibrate", "grey_card=0.18", "--calibrate", "grey_card=0.2"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "--calibrate names grey_card more than once" in err
+    assert not (tmp_path / "o").exists()
 
 
 def test_pixels_whose_jpeg_colour_mixes_a_neighbours_are_left_out(ingested, tmp_path):

@@ -30,9 +30,9 @@ from .colorchecker import NAMES, NEUTRAL, find_chart, matrix_error, reference_rg
 from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance,
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import check_times, frame_times
-from .photos import (EXIF_LABEL_SD, EXPOSURE_KEYS, RAW_COLOUR_REACH, check_same_size,
-                     exif_exposure, exif_label_loading, exif_setting, list_photos,
-                     read_flat_field, read_photo)
+from .photos import (EXIF_LABEL_SD, EXPOSURE_KEYS, OTHER_PROFILE, RAW_COLOUR_REACH,
+                     check_same_size, exif_exposure, exif_label_loading, exif_setting,
+                     list_photos, read_flat_field, read_photo)
 from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
 from .raw_noise import bootstrap, cfa_planes
 from .region_edges import colour_mixed, pose_reach
@@ -70,7 +70,8 @@ RESPONSE_RMS_WARN = 0.05
 # ---- the sensor ------------------------------------------------------------------------
 
 def _sensor(photos, response, gamma, spec_sensor, cos4):
-    """The day's SensorModel (exposure 1 for now) and the float scale (None for codes)."""
+    """The day's SensorModel (exposure 1 for now), the float scale (None for codes) and a line
+    saying what was assumed of the encoding (or None)."""
     kinds = {p.kind for p in photos}
     if len(kinds) > 1:
         raise SkyfitError("the frames mix floating-point (EXR/HDR) and integer images; give one "
@@ -93,11 +94,24 @@ def _sensor(photos, response, gamma, spec_sensor, cos4):
         response = "linear"           # EXR/HDR and RAWs as read are linear, whatever the spec
     if response is None:
         response = spec_sensor.get("response")
+    said = None
     if response is None:
+        other = next((p for p in photos if p.encoding_source.startswith(OTHER_PROFILE)), None)
+        if other is not None:
+            raise SkyfitError(f"{Path(other.path).name}: {other.encoding_source} is neither sRGB "
+                              "nor linear, which skyfit reads; export the photographs as sRGB "
+                              "or linear, or say how their codes encode the light with "
+                              "--response (srgb, linear, or gamma with --gamma).")
         hints = {p.encoding_hint for p in photos}
         response = hints.pop() if len(hints) == 1 else "srgb"
+        if depth == 16 and first.kind != "float" and all(
+                p.encoding_source == "assumed" for p in photos):
+            said = (f"encoding: the {depth}-bit photographs carry no colour profile, so their "
+                    f"codes are read as {response}; if they are not, give --response (srgb, "
+                    "linear, or gamma with --gamma)")
     g = gamma if gamma is not None else spec_sensor.get("gamma", 2.2)
-    return SensorModel(exposure=1.0, response=response, gamma=g, bits=depth, cos4=cos4), scale
+    return SensorModel(exposure=1.0, response=response, gamma=g, bits=depth, cos4=cos4), scale, \
+        said
 
 
 def _relative_exposures(photos, log):
@@ -856,7 +870,7 @@ def ingest(photo_paths, spec_path, out_dir, *, overwrite=False, progress=True, l
     """
     o = check_choices(IngestOptions(**choices))
     frames = read_frames(photo_paths, spec_path, out_dir, o, log)
-    linear = linearise(frames, o)
+    linear = linearise(frames, o, log)
     registration = register_frames(frames, linear, o.register, o.register_limit_px, log)
     patches = calibration_patches(frames, linear, registration, o, log)
     noise = noise_model(frames, linear.values, patches, registration, o, progress, log)
@@ -904,6 +918,13 @@ def check_choices(o):
     return o
 
 
+def _grey(values):
+    """Whether photograph ``values`` (H, W, 3) hold one channel repeated (every finite pixel
+    R = G = B): a grey image, as a colour camera's frame never is."""
+    v = np.nan_to_num(values)
+    return bool(np.array_equal(v[..., 0], v[..., 1]) and np.array_equal(v[..., 1], v[..., 2]))
+
+
 def read_frames(photo_paths, spec_path, out_dir, o, log):
     """The :class:`Frames` of the photographs: read, timed, sorted, with the spec at their times."""
     paths = list_photos(photo_paths)
@@ -916,6 +937,11 @@ def read_frames(photo_paths, spec_path, out_dir, o, log):
                           "give another with -o (--overwrite would clear it, and its contact "
                           "sheet would be read as a photograph next time).")
     photos = [read_photo(p) for p in paths]
+    grey = [p.name for p, ph in zip(paths, photos) if _grey(ph.values)]
+    if grey:
+        raise SkyfitError(f"{listed(grey)}: grey (one channel, or R = G = B in every pixel); "
+                          "a fit measures each colour channel's reflectance, which a grey "
+                          "photograph cannot tell: give the camera's colour photographs.")
     w, h = check_same_size(list(zip(paths, photos)))
     times = frame_times(paths, [p.metadata for p in photos], times_csv=o.times_csv,
                         name_pattern=o.name_pattern, tz=o.tz, warn=log)
@@ -934,11 +960,13 @@ def read_frames(photo_paths, spec_path, out_dir, o, log):
                   [i for i, f in enumerate(spec.frames) if not f.skipped])
 
 
-def linearise(frames, o):
+def linearise(frames, o, log):
     """The :class:`Linear` encoding of ``frames`` (a fitted response comes later)."""
     photos, (h, w) = frames.photos, frames.size
-    sensor, float_scale = _sensor(photos, None if o.fitted else o.response, o.gamma,
-                                  frames.raw.get("sensor", {}), o.vignetting == "cos4")
+    sensor, float_scale, said = _sensor(photos, None if o.fitted else o.response, o.gamma,
+                                        frames.raw.get("sensor", {}), o.vignetting == "cos4")
+    if said:
+        log(said)
     if o.fitted and float_scale is not None:
         raise SkyfitError("--response fit: the frames are floating-point (EXR/HDR), which hold "
                           "linear values; leave out --response.")

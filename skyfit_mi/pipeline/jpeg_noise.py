@@ -31,7 +31,8 @@ LOW_ORDER = np.add.outer(np.arange(8), np.arange(8)) <= 2
 
 def jpeg_settings(path):
     """The compression of JPEG ``path`` as Pillow re-applies it: ``{"qtables": ...,
-    "subsampling": 0 (4:4:4) | 1 (4:2:2) | 2 (4:2:0)}``; None for other files."""
+    "subsampling": 0 (4:4:4, or one grey component) | 1 (4:2:2) | 2 (4:2:0)}``; None for
+    other files."""
     from PIL import Image, JpegImagePlugin
 
     with Image.open(path) as im:
@@ -39,7 +40,7 @@ def jpeg_settings(path):
             return None
         sampling = JpegImagePlugin.get_sampling(im)
         return {"qtables": {k: list(v) for k, v in im.quantization.items()},
-                "subsampling": 2 if sampling < 0 else int(sampling)}
+                "subsampling": 0 if im.mode == "L" else 2 if sampling < 0 else int(sampling)}
 
 
 def stored(values, settings):

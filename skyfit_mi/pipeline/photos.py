@@ -85,7 +85,8 @@ class Photo:
         8 or 16 and 2**bits - 1 (saturation) for integer formats; None for floats.
     encoding_hint, encoding_source : str
         'srgb' or 'linear' (the user may override it), and why: 'assumed', 'PNG sRGB chunk',
-        'PNG gAMA 1.0', 'PNG gAMA 1/2.2', 'ICC profile "<description>"', 'RAW' or 'float'.
+        'PNG gAMA 1.0', 'PNG gAMA 1/2.2', 'ICC profile "<description>"' (sRGB or linear by
+        name), 'the ICC profile "<description>"' (another: the hint a guess), 'RAW' or 'float'.
     nan_count, inf_count : int
     metadata : dict
         ``datetime_original`` ('YYYY:MM:DD HH:MM:SS' or None), ``offset_time_original``
@@ -269,13 +270,21 @@ def _icc_description(icc):
         return "unreadable"
 
 
+#: The start of an encoding source naming an ICC profile that is neither sRGB nor linear.
+OTHER_PROFILE = "the ICC profile"
+
+
 def _hint_from_icc(desc, default):
+    """(hint, source) of an ICC profile's description ``desc``: 'linear' or 'srgb' by name; a
+    profile of another name (Adobe RGB, ProPhoto) keeps ``default`` with a source that starts
+    :data:`OTHER_PROFILE`, for ingest to refuse unless told the encoding."""
     if desc and desc not in ("unreadable", "unnamed"):
         d = desc.lower()
         if "linear" in d or "gamma 1.0" in d or "g10" in d:
             return "linear", f'ICC profile "{desc}"'
         if "srgb" in d or "iec61966" in d:
             return "srgb", f'ICC profile "{desc}"'
+        return default, f'{OTHER_PROFILE} "{desc}"'
     return default, "assumed"
 
 
