@@ -295,8 +295,9 @@ def _fit(args):
         for name, r in s["regions"].items():
             med = ", ".join(f"{k} = {v:.4g}" for k, v in r["median"].items() if v is not None)
             kind = f" ({r['normalisation']} {r['model']})" if auto else ""
-            print(f"{name}{kind}: {r['determined']} of {r['mapped']} pixels determined"
-                  + (f"; medians {med}" if med else ""))
+            each = ", ".join(f"{k} {v}" for k, v in r["determined_by_parameter"].items())
+            print(f"{name}{kind}: {r['determined']} of {r['mapped']} pixels determined in "
+                  f"every parameter ({each})" + (f"; medians {med}" if med else ""))
         print(f"wrote the maps and map_summary.json in {out} ({s['wall_time_s']:.1f} s)")
         return
     out = check_dir(Path(args.output) if args.output else root)     # made by the first write

@@ -62,12 +62,12 @@ def test_determined_pixels_hold_their_samples_truth(board):
     paints' roughness is not determined pixel by pixel)."""
     import zarr
 
-    from skyfit_mi.fitting.pixel_fit import UNDETERMINED
+    from skyfit_mi.fitting.pixel_fit import UNDETERMINED, undetermined_bits
     from skyfit_mi.fitting.pixel_map import STORE
 
     tmp, regions, summary = board
     g = zarr.open_group(str(tmp / "map" / STORE), mode="r")
-    lo, hi, bits = g["lo"][:], g["hi"][:], g["warnings"][:]
+    theta, lo, hi, bits = g["theta"][:], g["lo"][:], g["hi"][:], g["warnings"][:]
     inside, medians = [], 0
     for name, px in regions:
         c, rho, sigma = MATERIALS[name]
@@ -75,6 +75,13 @@ def test_determined_pixels_hold_their_samples_truth(board):
         ok = (bits[px[:, 1], px[:, 0]] & UNDETERMINED) == 0
         r = summary["regions"][name]
         assert r["determined"] == ok.sum() and r["mapped"] == len(px)
+        # each parameter's statistics over the pixels where it is determined: a flat lobe
+        # width does not take a pixel's reflectances out of them
+        for i, n in enumerate(summary["parameters"]):
+            own = (bits[px[:, 1], px[:, 0]] & undetermined_bits(n)) == 0
+            assert r["determined_by_parameter"][n] == own.sum() >= ok.sum()
+            if own.any():
+                assert r["median"][n] == pytest.approx(np.median(theta[i, px[own, 1], px[own, 0]]))
         if not ok.any():
             continue
         L, H = lo[:, px[ok, 1], px[ok, 0]], hi[:, px[ok, 1], px[ok, 0]]

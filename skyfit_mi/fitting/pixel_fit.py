@@ -43,6 +43,15 @@ WARNINGS = {"misfit": 1, "sigma_alpha undetermined": 2, "rho_s undetermined": 4,
 UNDETERMINED = (WARNINGS["sigma_alpha undetermined"] | WARNINGS["rho_s undetermined"]
                 | WARNINGS["reflectance undetermined"] | WARNINGS["off the material"]
                 | WARNINGS["saturated values contradicted"])
+
+
+def undetermined_bits(name):
+    """The bits that leave parameter ``name`` of a pixel not determined: the pixel's as a whole
+    (off the material, saturated values contradicted) and the parameter's own (a flat lobe
+    width leaves a pixel's reflectance determined)."""
+    own = {"rho_s": "rho_s undetermined", "sigma_alpha": "sigma_alpha undetermined"}
+    return (WARNINGS["off the material"] | WARNINGS["saturated values contradicted"]
+            | WARNINGS[own.get(name, "reflectance undetermined")])
 #: How far [sigma] a fit may fall below a left-out saturated value (one-sided, about 0.1%).
 SATURATION_MARGIN = 3.0
 #: A parameter is undetermined when its 95% interval spans more than this share of its range

@@ -36,7 +36,8 @@ from .chi2 import REGION_PIXELS, check_regions, subsample_region
 from .fit import fit_regions
 from .light import SPEC_LIGHT, LightOptions
 from .selection import fit_auto
-from .pixel_fit import MAP_CACHE, UNDETERMINED, WARNINGS, check_map_region, fit_pixels, patch_groups
+from .pixel_fit import (MAP_CACHE, UNDETERMINED, WARNINGS, check_map_region, fit_pixels,
+                        patch_groups, undetermined_bits)
 from .sky_fit import default_sky, light_level_sd
 
 #: The Zarr store of a map, in the map folder.
@@ -493,25 +494,31 @@ def write_map_outputs(out, store, names, regions, settings, choices):
         within[name][px[:, 1], px[:, 0]] = True
     own = {name: [(i, n) for i, n in enumerate(names) if n in PARAMETERS[choices[name][0]]]
            for name in within}
+    # a parameter is determined where neither the pixel nor that parameter is flagged
+    known = {n: mapped & ((bits & undetermined_bits(n)) == 0) for n in names}
     for i, n in enumerate(names):
         has = np.any([within[name] for name in within if (i, n) in own[name]], axis=0)
-        _preview(out / f"{n}.png", theta[i], mapped & has, determined & has, n,
+        _preview(out / f"{n}.png", theta[i], mapped & has, known[n] & has, n,
                  [name for name in within if (i, n) not in own[name]])
     _preview(out / "chi2_per_dof.png", per_dof, mapped, mapped, "chi^2 / dof")
     summary = {"settings": settings, "parameters": names, "store": STORE,
-               "warning_bits": WARNINGS, "undetermined_bits": UNDETERMINED, "units": "reflectances unitless, sigma_alpha rms slope; "
-               "widths of 95% intervals; EXR maps NaN outside the regions",
+               "warning_bits": WARNINGS, "undetermined_bits": UNDETERMINED,
+               "units": "reflectances unitless, sigma_alpha rms slope; widths of 95% intervals; "
+               "EXR maps NaN outside the regions; each parameter's statistics over the pixels "
+               "where it is determined (determined_by_parameter)",
                "regions": {}}
     for name, sel in within.items():
-        ok = sel & determined
+        ok = {n: sel & known[n] for _, n in own[name]}
         summary["regions"][name] = {
             "pixels": int(sel.sum()), "mapped": int((sel & mapped).sum()),
-            "determined": int(ok.sum()),
+            "determined": int((sel & determined).sum()),
+            "determined_by_parameter": {n: int(ok[n].sum()) for _, n in own[name]},
             "warnings": {w: int(((bits & b) > 0)[sel & mapped].sum()) for w, b in WARNINGS.items()},
-            "median": {n: _stat(np.median, theta[i][ok]) for i, n in own[name]},
+            "median": {n: _stat(np.median, theta[i][ok[n]]) for i, n in own[name]},
             "iqr": {n: _stat(lambda v: float(np.subtract(*np.percentile(v, [75, 25]))),
-                             theta[i][ok]) for i, n in own[name]},
-            "median_width95": {n: _stat(np.median, (hi[i] - lo[i])[ok]) for i, n in own[name]}}
+                             theta[i][ok[n]]) for i, n in own[name]},
+            "median_width95": {n: _stat(np.median, (hi[i] - lo[i])[ok[n]])
+                               for i, n in own[name]}}
     return summary
 
 
