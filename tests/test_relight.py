@@ -235,6 +235,14 @@ def test_predictions_without_images_have_bands_as_wide_as_the_fits_intervals(day
     coverage = errors["band_coverage"]
     assert coverage["beyond_measured"] == 2 * len(rows) // 3
     assert coverage["within_measured"] == {"share": 1.0, "values": len(rows) // 3}
+    # the errors of the region means against the observed frames', per frame and overall
+    pred, obs = (np.array([float(r[k]) for r in rows]) for k in (4, 7))
+    e = errors["regions"]["disc"]
+    assert e["rel_rms"] == pytest.approx(np.sqrt(np.mean((pred - obs) ** 2) / np.mean(obs ** 2)),
+                                         rel=1e-3)
+    assert len(e["per_frame"]) == len({r[1] for r in rows}) and "held_out_rel_rms" not in e
+    lines = (out / "relight.csv").read_text().splitlines()
+    assert lines[0].startswith("region,frame") and lines[-1].startswith("all,all")
     _fit_json(fit, model="achromatic", R=0.8, rho_s=0.0, sigma_alpha=0.0)
     # another prediction into the folder replaces it only with --overwrite
     before = {p.name: p.read_bytes() for p in out.iterdir()}
@@ -277,7 +285,13 @@ def test_fit_on_some_frames_and_relight_onto_the_same_folder_reports_the_held_ou
     assert sorted(p.name for p in out.iterdir()) == before
     assert main(["relight", str(fits), "--target", str(day / "day"), "-o", str(out), "-q",
                  "--no-images", "--draws", "20", "--overwrite"]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["prediction.csv", "relight.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["prediction.csv", "relight.csv",
+                                                     "relight.json"]
+    # without images the region means give the held-out error alike
+    e = json.loads((out / "relight.json").read_text())["regions"]["disc"]
+    assert e["trained_frames"] == [0, 1] and e["held_out_rel_rms"] < 0.05
+    rows = list(csv.reader((out / "relight.csv").read_text().splitlines()))
+    assert [row[4] for row in rows[1:5]] == ["no", "no", "yes", "yes"]
 
 
 @pytest.mark.parametrize("text", ["6-2", "a", "1,,2", "-1"])

@@ -201,12 +201,10 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if not plan.observed:
         return None
     point_errors = None
-    if plan.table:
-        errors, point_errors = table_errors(fits, plan, prediction)
-    elif plan.render:
+    if plan.render and not plan.table:
         errors = image_errors(fits, plan, out, pixels, spec, log)
-    else:                   # a prediction alone of observed frames: no relit image to compare
-        errors = {"regions": {}}
+    else:                   # the predicted values against the table's or the frames' means
+        errors, point_errors = observed_errors(fits, plan, prediction)
     errors["region_means"] = {region: asdict(m) for region, m in prediction.region_means.items()}
     errors["region_means_note"] = REGION_MEANS_NOTE
     if plan.reference:
@@ -344,9 +342,10 @@ class PointError:
     held_out: bool | None
 
 
-def table_errors(fits, plan, prediction):
-    """(``relight.json``'s errors, a :class:`PointError` per point and frame) of the prediction
-    ``rows`` against a table's values, saturated values left out."""
+def observed_errors(fits, plan, prediction):
+    """(``relight.json``'s errors, a :class:`PointError` per point and frame or None) of the
+    prediction's rows against the values they were predicted for: a table's points, or without
+    images the observed frames' region means; saturated values left out."""
     def error(rows):
         return float(rel_rms(np.array([r.predicted for r in rows]),
                              np.array([r.image for r in rows])))
@@ -368,10 +367,12 @@ def table_errors(fits, plan, prediction):
                                     None if trained is None else frame not in trained)
                          for (point, frame), values in by_value.items()]
         e = regions[region] = {
-            "fit": str(path), "points": len(by_point), "frames": len(by_frame),
-            "values": len(rows), "rel_rms": error(rows),
-            "per_frame": [error(by_frame[f]) if f in by_frame else None for f in frames],
-            "per_point": {point: error(values) for point, values in by_point.items()}}
+            "fit": str(path), "frames": len(by_frame), "values": len(rows),
+            "rel_rms": error(rows),
+            "per_frame": [error(by_frame[f]) if f in by_frame else None for f in frames]}
+        if plan.table:
+            e.update(points=len(by_point),
+                     per_point={point: error(values) for point, values in by_point.items()})
         if trained is not None:
             held = [row for row in rows if row.frame not in trained]
             e["trained_frames"] = [int(i) for i in r["frames"]]
@@ -381,8 +382,11 @@ def table_errors(fits, plan, prediction):
               "unit": "relative RMS of radiance (unitless)",
               "observations": ("an observation table: each point's value predicted at the fit "
                                "(prediction.csv) against the table's; relight.csv per point "
-                               "and frame")}
-    return errors, point_errors
+                               "and frame" if plan.table else
+                               "each region's mean radiance per frame and channel predicted at "
+                               "the fit (prediction.csv) against the observed frames' mean over "
+                               "the same pixels (no images rendered); relight.csv per frame")}
+    return errors, point_errors if plan.table else None
 
 
 def add_reference_errors(errors, fits, plan, out, pixels, overwrite=False):
@@ -433,18 +437,23 @@ def band_coverage(rows):
 def log_errors(errors, plan, log=print):
     """Log the errors of :func:`relight` and the band's coverage."""
     compared = ("predicted values differ from the table's" if plan.table
-                else "relit radiance differs from the observed")
+                else "relit radiance differs from the observed" if plan.render
+                else "predicted region means differ from the observed")
     for region, e in errors["regions"].items():
         held, floor = e.get("held_out_rel_rms"), e.get("noise_floor_rel_rms")
-        where = f"{e['points']} points" if plan.table else f"{e['pixels']} pixels"
+        where = (f"{e['points']} points" if plan.table else f"{e['pixels']} pixels" if plan.render
+                 else f"{e['values']} values")
         log(f"{region}: {compared} by {e['rel_rms']:.2%} rms ({e['frames']} frames, {where})"
             + (f"; {held:.2%} on the frames the fit did not see" if held is not None else "")
             + (f"; noise alone gives {floor:.2%}" if floor is not None else "")
             + (f", a re-render of the truth {e['reference_rel_rms']:.2%}"
                if "reference_rel_rms" in e else ""))
     for region, m in errors["region_means"].items():
-        log(f"{region}: predicted region means differ from the observed by {m['fit']:.2%} rms"
-            + ("" if m["truth"] is None else f" (the true material's: {m['truth']:.2%})"))
+        if plan.render or plan.table:
+            log(f"{region}: predicted region means differ from the observed by {m['fit']:.2%} "
+                "rms" + ("" if m["truth"] is None else f" (the true material's: {m['truth']:.2%})"))
+        elif m["truth"] is not None:                # the fit's own are the line above
+            log(f"{region}: the true material's region means differ by {m['truth']:.2%} rms")
     if plan.render and not plan.table:
         log(f"overall: {errors['rel_rms']:.2%} rms" + (
             " (relit with the target's seeds: Monte Carlo noise largely cancels, so this is "

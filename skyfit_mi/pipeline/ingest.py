@@ -937,11 +937,6 @@ def read_frames(photo_paths, spec_path, out_dir, o, log):
                           "give another with -o (--overwrite would clear it, and its contact "
                           "sheet would be read as a photograph next time).")
     photos = [read_photo(p) for p in paths]
-    grey = [p.name for p, ph in zip(paths, photos) if _grey(ph.values)]
-    if grey:
-        raise SkyfitError(f"{listed(grey)}: grey (one channel, or R = G = B in every pixel); "
-                          "a fit measures each colour channel's reflectance, which a grey "
-                          "photograph cannot tell: give the camera's colour photographs.")
     w, h = check_same_size(list(zip(paths, photos)))
     times = frame_times(paths, [p.metadata for p in photos], times_csv=o.times_csv,
                         name_pattern=o.name_pattern, tz=o.tz, warn=log)
@@ -956,6 +951,11 @@ def read_frames(photo_paths, spec_path, out_dir, o, log):
     if night:
         log(f"{len(night)} night frame(s) (sun below the horizon) are kept out of the sequence: "
             f"{', '.join(night)}")
+    grey = [p.name for p, ph in zip(paths, photos) if _grey(ph.values)]
+    if grey:
+        raise SkyfitError(f"{listed(grey)}: grey (one channel, or R = G = B in every pixel); "
+                          "a fit measures each colour channel's reflectance, which a grey "
+                          "photograph cannot tell: give the camera's colour photographs.")
     return Frames(paths, photos, times, raw, spec,
                   [i for i, f in enumerate(spec.frames) if not f.skipped])
 
