@@ -726,6 +726,13 @@ def test_options_that_would_be_ignored_are_refused(day, tmp_path):
     with pytest.raises(SkyfitError, match="the response is fitted"):
         _ingest(day, tmp_path / "o", response="fit", gamma=2.0,
                 calibrate={"grey_card": (0.18,) * 3})
+    with pytest.raises(SkyfitError, match="--vignetting cos5: give none, cos4, or the path"):
+        _ingest(day, tmp_path / "o", exposure=1e-3, vignetting="cos5")
+    for bad in (0.0, -1.0, float("nan")):            # refused before any work is logged
+        logs = []
+        with pytest.raises(SkyfitError, match="--exposure .*: give the first frame's exposure"):
+            _ingest(day, tmp_path / "o", exposure=bad, log=logs.append)
+        assert not logs
     assert not (tmp_path / "o").exists()
 
 

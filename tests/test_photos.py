@@ -637,6 +637,18 @@ def test_ambiguous_and_nonexistent_local_times_refused():
     frame_times(["a.jpg"], [meta("2026:10:25 01:30:00")], tz="+01:00")
 
 
+def test_an_unknown_or_malformed_offset_gives_way_to_tz():
+    """EXIF's placeholder for an unknown offset (blanks and a colon) is no offset; a malformed
+    one is refused unless --tz stands for it."""
+    with pytest.raises(SkyfitError, match=r"no OffsetTimeOriginal; give --tz"):
+        frame_times(["a.jpg"], [meta(offset="   :  ")])
+    with pytest.raises(SkyfitError, match=r"OffsetTimeOriginal '\+1:00', not an offset.*--tz"):
+        frame_times(["a.jpg"], [meta(offset="+1:00")])
+    for offset in ("   :  ", "+1:00"):
+        (t,) = frame_times(["a.jpg"], [meta(offset=offset)], tz="Europe/London")
+        assert t == dt.datetime(2026, 6, 21, 11, tzinfo=dt.timezone.utc)
+
+
 def test_exif_offset_disagreeing_with_tz_refused():
     with pytest.raises(SkyfitError, match=r"a\.jpg: OffsetTimeOriginal offset \+02:00 "
                                           r"disagrees with the time zone Europe/London"):
@@ -778,3 +790,23 @@ def test_iana_local_times_are_exact_or_refused(naive, zone):
         assert "happens twice" in str(exc) or "does not exist" in str(exc)
     else:
         assert t.astimezone(ZoneInfo(zone)).replace(tzinfo=None) == naive
+
+
+def test_a_flat_field_is_relative_to_its_brightest_and_every_pixel_must_have_signal(tmp_path):
+    """A flat field divides every frame: read as linear response, 1 at its brightest, and
+    refused (naming how many pixels) where a pixel is black, since it would divide by 0."""
+    g = np.full((4, 6, 3), 200, np.uint8)
+    g[0, 0] = 100
+    Image.fromarray(g).save(tmp_path / "flat.png")
+    from skyfit_mi.physics.camera import SensorModel
+
+    fl = photos.read_flat_field(tmp_path / "flat.png", (4, 6))
+    srgb = SensorModel(1.0, response="srgb", bits=8)
+    assert fl.max() == 1.0 and fl[0, 0] == pytest.approx(srgb.linearise(100.0)
+                                                         / srgb.linearise(200.0))
+    g[1, 2] = 0
+    Image.fromarray(g).save(tmp_path / "black.png")
+    with pytest.raises(SkyfitError, match=r"black\.png has 1 pixel\(s\) not finite and positive"):
+        photos.read_flat_field(tmp_path / "black.png", (4, 6))
+    with pytest.raises(SkyfitError, match="the frames 5x4; give one of their size"):
+        photos.read_flat_field(tmp_path / "flat.png", (4, 5))

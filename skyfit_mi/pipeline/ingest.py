@@ -904,6 +904,13 @@ def check_choices(o):
     if not (np.isfinite(o.register_limit_px) and o.register_limit_px > 0):
         raise SkyfitError(f"--register-limit {o.register_limit_px:g}: give the largest shift a "
                           "frame may have [px] as a positive number (e.g. 5).")
+    if str(o.vignetting) not in ("none", "cos4") and not Path(o.vignetting).is_file():
+        raise SkyfitError(f"--vignetting {o.vignetting}: give none, cos4, or the path of a "
+                          "flat-field image (no such file).")
+    if o.exposure is not None and not (np.isfinite(o.exposure) and o.exposure > 0):
+        raise SkyfitError(f"--exposure {o.exposure:g}: give the first frame's exposure as a "
+                          "positive number [sr m^2 W^-1] (1 / the radiance that saturates the "
+                          "sensor), or calibrate it on a reference with --calibrate.")
     if o.exposure is not None and (o.calibrate or o.colorchecker):
         raise SkyfitError("--exposure is not used when --calibrate or --colorchecker set the "
                           "exposure from the scene's reference; give one or the other.")

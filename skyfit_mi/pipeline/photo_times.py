@@ -144,13 +144,15 @@ def exif_time(meta, tz, who):
         raise SkyfitError(f"{who} has DateTimeOriginal {text!r}, not a valid date and time; "
                           "give the times with a CSV (file,time) or a file-name pattern.") \
             from None
-    off_text = meta.get("offset_time_original")
-    if off_text:
+    off_text = str(meta.get("offset_time_original") or "")
+    if off_text.strip(" :\x00"):                   # EXIF's unknown is blanks and a colon
         off = parse_offset(off_text)
-        if off is None:
+        if off is not None:
+            return _with_offset(naive.replace(tzinfo=off), tz, who, "OffsetTimeOriginal")
+        if tz is None:
             raise SkyfitError(f"{who} has OffsetTimeOriginal {off_text!r}, not an offset such "
-                              "as '+01:00'; give --tz or a CSV of times.")
-        return _with_offset(naive.replace(tzinfo=off), tz, who, "OffsetTimeOriginal")
+                              "as '+01:00'; give --tz (which then stands for it) or a CSV of "
+                              "times.")
     return localize(naive, tz, who, "has DateTimeOriginal but no OffsetTimeOriginal; give --tz "
                     "(an IANA zone such as 'Europe/London' or an offset such as '+01:00').")
 

@@ -729,8 +729,11 @@ def read_flat_field(path, size):
     fl = np.nanmean(image.values if image.kind == "float" else
                     SensorModel(1.0, response=image.encoding_hint, bits=image.bits)
                     .linearise(image.values), axis=2)
-    if not np.all(np.isfinite(fl)) or fl.max() <= 0:
-        raise SkyfitError(f"flat field {path} has non-finite or no positive values.")
+    if not np.all(np.isfinite(fl)) or fl.min() <= 0:
+        bad = int(np.sum(~(np.isfinite(fl) & (fl > 0))))
+        raise SkyfitError(f"flat field {path} has {bad} pixel(s) not finite and positive (a "
+                          "flat field divides every frame); give one exposed so that every "
+                          "pixel has signal.")
     return fl / fl.max()
 
 
