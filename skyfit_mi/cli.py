@@ -1,8 +1,9 @@
 """The ``skyfit`` command: thin argument parsing over the package.
 
 Every user error ends in one line on stderr naming the input and what is allowed, exit
-code 2; Ctrl-C exits 130 and leaves what was finished (a render resumes, fits already
-written stay); ``--debug`` shows the traceback of any error.
+code 2; Ctrl-C exits 130, keeps what was finished and says what running the command again
+does (:data:`_AGAIN`: a render resumes, fits already written stay); ``--debug`` shows the
+traceback of any error.
 """
 
 import argparse
@@ -816,6 +817,14 @@ def _ctrl_c_noted():
         signal.signal(signal.SIGINT, previous)
 
 
+#: What an interrupted command keeps and what running it again does, by command.
+_AGAIN = {_render: "the finished frames are kept: run the same command again to resume",
+          _fit: "the finished regions' fits (and a per-pixel map's chunks) are kept: run the same "
+                "command again (a map resumes; regions are fitted again)",
+          _relight: "run the same command again (a relit render resumes)",
+          None: "nothing unfinished was kept as done: run the same command again to start over"}
+
+
 def main(argv=None):
     """Run ``skyfit`` with ``argv``; returns the exit code."""
     try:
@@ -828,8 +837,7 @@ def main(argv=None):
     except KeyboardInterrupt:
         if args.debug:
             raise
-        print("skyfit: interrupted; finished work is kept (run the same command again: a render "
-              "resumes, written fits stay).", file=sys.stderr)
+        print(f"skyfit: interrupted; {_AGAIN.get(args.func, _AGAIN[None])}.", file=sys.stderr)
         return 130
     except (SkyfitError, SetupError) as exc:
         if args.debug:

@@ -240,9 +240,10 @@ def test_ctrl_c_during_a_map_exits_130_in_one_line_and_the_map_resumes(board, tm
     os.killpg(proc.pid, signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
-    assert err.strip().splitlines() == ["skyfit: interrupted; finished work is kept (run the "
-                                        "same command again: a render resumes, written fits "
-                                        "stay)."]
+    assert err.strip().splitlines() == ["skyfit: interrupted; the finished regions' fits (and "
+                                        "a per-pixel map's chunks) are kept: run the same "
+                                        "command again (a map resumes; regions are fitted "
+                                        "again)."]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0 and "wrote the maps" in done.stdout, done.stderr
 

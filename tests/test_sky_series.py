@@ -92,8 +92,9 @@ def test_a_cameras_gain_scales_map_and_card_alike(tmp_path):
 
 
 def test_bad_series_input_gets_one_line_and_nothing_written(tmp_path, capsys):
-    """A shot without its EXIF exposure, a card box beyond the card's shots, a bracket without a
-    card shot near it, an existing series without --overwrite: one line each, and a spec whose
+    """A shot without its EXIF exposure, a card box beyond the card's shots or upside down, a
+    bracket without a card shot near it, a shot copied, an existing series without
+    --overwrite: one line each, and a spec whose
     series has no map near a frame is refused; the CLI exits 2."""
     from PIL import Image
 
@@ -107,6 +108,19 @@ def test_bad_series_input_gets_one_line_and_nothing_written(tmp_path, capsys):
     with pytest.raises(SkyfitError, match="no card shot within 10 s"):
         sky_series([tmp_path / "shots"], tmp_path / "a",
                    card=CardOptions((str(tmp_path / "card"),), CARD_BOX, max_gap_s=10.0))
+    with pytest.raises(SkyfitError, match="X0 < X1 and Y0 < Y1"):
+        sky_series([tmp_path / "shots"], tmp_path / "a",
+                   card=CardOptions((str(tmp_path / "card"),), (9, 9, 2, 2)))
+    import shutil
+
+    twice = tmp_path / "twice"
+    shutil.copytree(tmp_path / "shots", twice)
+    first = sorted(twice.iterdir())[0]
+    shutil.copy(first, twice / f"{first.stem} copy{first.suffix}")
+    with pytest.raises(SkyfitError, match=f"{first.stem} copy.jpg and {first.name} are one "
+                                          "shot twice"):
+        sky_series([twice], tmp_path / "a",
+                   card=CardOptions((str(tmp_path / "card"),), CARD_BOX))
     assert not (tmp_path / "a" / SERIES_NAME).exists()
     series(tmp_path)
     with pytest.raises(SkyfitError, match="--overwrite"):

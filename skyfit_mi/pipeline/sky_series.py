@@ -127,6 +127,9 @@ def _linear(photo):
 def _check_box(box, photo):
     """SkyfitError unless the card's ``box`` lies within ``photo``."""
     x0, y0, x1, y1 = box
+    if not (x0 < x1 and y0 < y1):
+        raise SkyfitError(f"--card-box {x0},{y0},{x1},{y1}: give the card's corners as "
+                          "X0,Y0,X1,Y1 with X0 < X1 and Y0 < Y1 (top left, then bottom right).")
     if not (0 <= x0 < x1 <= photo.width and 0 <= y0 < y1 <= photo.height):
         raise SkyfitError(f"--card-box {x0},{y0},{x1},{y1} leaves {Path(photo.path).name} "
                           f"({photo.width}x{photo.height}); give the card's pixels as "
@@ -163,8 +166,13 @@ def read_shots(items, tz=None, times_csv=None, flat=None, box=None):
         metas.append(photo.metadata)
         del photo
     times = frame_times(paths, metas, times_csv=times_csv, tz=tz, warn=lambda message: None)
-    shots = [Shot(*k[:4], exposure=k[4], time=t) for k, t in zip(kept, times)]
-    return sorted(shots, key=lambda s: (s.time, s.path.name))   # a bracket shares a second
+    shots = sorted((Shot(*k[:4], exposure=k[4], time=t) for k, t in zip(kept, times)),
+                   key=lambda s: (s.time, s.path.name))         # a bracket shares a second
+    for a, b in zip(shots, shots[1:]):
+        if a.time == b.time and np.isclose(a.exposure, b.exposure, rtol=0.01):
+            raise SkyfitError(f"{a.path.name} and {b.path.name} are one shot twice (the same "
+                              f"time, {a.time.isoformat()}, and exposure): remove the copy.")
+    return shots
 
 
 def brackets(shots, gap_s=BRACKET_GAP_S):
