@@ -243,11 +243,11 @@ def _fit_regions(args):
 
 
 def _fit(args):
-    from .fitting.chi2 import subsample_region
+    from .fitting.chi2 import chosen_frames, subsample_region
     from .fitting.fit import FitCache, fit_regions
     from .fitting.light import LightOptions
     from .fitting.report import write_fit, write_summary
-    from .pipeline.manifest import load_manifest
+    from .pipeline.manifest import is_table, load_manifest
     from .render.fit_model import BY_COUNT, check_fit_normalisation, check_start
 
     auto = args.model == "auto"
@@ -257,9 +257,11 @@ def _fit(args):
         raise SkyfitError("--model auto ranks every lobe and parameter count by the global "
                           "method, on the spec's sky's shape: leave out --sky-shape, --method "
                           "and --start (or give a model: 2, 3 or 5).")
-    _, root = load_manifest(args.manifest)
+    doc, root = load_manifest(args.manifest)
     if args.start is not None:
         check_start(model, args.start)
+    if args.frames is not None and not is_table(doc):
+        chosen_frames(doc, root, args.frames)            # before any region's line
     map_only = [f"--{k.replace('_', '-')}" for k in ("patch", "workers", "scheduler", "chunk")
                 if getattr(args, k) not in (None, 1)] + (["--overwrite"] if args.overwrite else [])
     if map_only and not args.per_pixel:

@@ -249,6 +249,25 @@ def _colour_mixed(root, run_id, reach):
     return colour_mixed(scene_labels(root)[2], reach)
 
 
+def chosen_frames(doc, root, frames=None, min_frames=2):
+    """The rendered frames (manifest records) of the sequence ``doc`` in ``root`` among
+    ``frames`` (indices; None: all); SkyfitError naming one that is not rendered, or if fewer
+    than ``min_frames`` remain."""
+    rendered = rendered_frames(doc)
+    if frames is not None:
+        known = {f["index"] for f in rendered}
+        missing = sorted(set(frames) - known)
+        if missing:
+            raise SkyfitError(f"frame {missing[0]} is not a rendered frame of the sequence; the "
+                              f"rendered frames are {sorted(known)}.")
+        rendered = [f for f in rendered if f["index"] in set(frames)]
+    if len(rendered) < min_frames:
+        raise SkyfitError(f"{root} has {len(rendered)} rendered frame(s)"
+                          f"{' of those chosen' if frames is not None else ''}; at least "
+                          f"{min_frames} are needed: render the sequence (or choose more frames).")
+    return rendered
+
+
 def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=True):
     """Read a region's pixel values and sigmas from the rendered frames of a manifest.
 
@@ -270,18 +289,7 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
         x, y = pixels[bad][0]
         raise SkyfitError(f"region pixel {x},{y} is outside the {w}x{h} frames; x in [0, {w - 1}],"
                           f" y in [0, {h - 1}].")
-    rendered = rendered_frames(doc)
-    if frames is not None:
-        known = {f["index"] for f in rendered}
-        missing = sorted(set(frames) - known)
-        if missing:
-            raise SkyfitError(f"frame {missing[0]} is not a rendered frame of the sequence; the "
-                              f"rendered frames are {sorted(known)}.")
-        rendered = [f for f in rendered if f["index"] in set(frames)]
-    if len(rendered) < min_frames:
-        raise SkyfitError(f"{root} has {len(rendered)} rendered frame(s)"
-                          f"{' of those chosen' if frames is not None else ''}; at least "
-                          f"{min_frames} are needed: render the sequence (or choose more frames).")
+    rendered = chosen_frames(doc, root, frames, min_frames)
     warnings = []
     if doc.get("status") != "complete":
         warnings.append("the sequence's render is incomplete (manifest status "

@@ -229,8 +229,10 @@ def _noise_bins(parts, sensor, noise):
             rows.append([q, q * s * sensor.max_code])
             weights.append(np.sqrt(sel.sum()))
     if len(rows) < 2:
-        raise SkyfitError("too few unsaturated pixels to estimate the noise; give --noise "
-                          "READ,SHOT [DN^2, DN] explicitly.")
+        raise SkyfitError("too few usable pixels to estimate the noise (it needs "
+                          f"{NOISE_MIN_PIXELS} unsaturated, lit pixels away from edges in each "
+                          "of two signal levels at least; small frames and busy scenes have "
+                          "fewer); give --noise READ,SHOT [DN^2, DN] explicitly.")
     return np.asarray(rows), np.asarray(var), np.asarray(weights)
 
 
