@@ -13,7 +13,7 @@ from skyfit_mi.pipeline.spec import SCENES_DIR, load_spec
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("-o", "--output", required=True, help="folder: truth/ and photos/ inside")
     ap.add_argument("--quality", type=int, default=95, help="JPEG quality (default 95)")
     ap.add_argument("--seed", type=int, default=0, help="noise seed (recorded in photos.json)")

@@ -1,4 +1,4 @@
-"""A sky photographed (issue 52 point 4): a day fitted under its sky as ``skyfit sky-series``
+"""A sky photographed: a day fitted under its sky as ``skyfit sky-series``
 merges it, against the day's own light.
 
 The thesis disc in a known colour-model paint is rendered under measured scans as maps

@@ -526,7 +526,8 @@ def _add_camera(sub, common):
     cam.add_argument("--fov-deg", type=float,
                      help="horizontal field of view [deg] if known (4 points; else fitted, from 6)")
     cam.add_argument("--distortion", type=_numbers, metavar="K1[,K2]",
-                     help="known radial distortion (default 0 with --fov-deg, else fitted)")
+                     help="known radial distortion (without it: fitted where --fov-deg is "
+                     "not given and the marks reach half-way to the corners, else 0)")
     cam.add_argument("--marking-px", type=float, default=0.5,
                      help="standard deviation of a mark [px] (default 0.5)")
     cam.add_argument("--target", type=_numbers, metavar="X,Y,Z",
@@ -555,7 +556,9 @@ def _sky_series(args):
                      flat=args.flat, gap_s=args.bracket_gap_s,
                      overwrite=args.overwrite, log=(lambda *a: None) if args.quiet else print)
     lines = [f"{len(doc['maps'])} sky maps in {args.output}; in the spec:", "[sky]",
-             'type = "envmap"', f'file = "{args.output}/{SERIES_NAME}"  # relative to the spec',
+             'type = "envmap"',
+             f'file = "{(Path(args.output) / SERIES_NAME).resolve().as_posix()}"  # or relative '
+             "to the spec's folder",
              "north_rotation_deg = 0.0  # the compass azimuth of the maps' top: measure it"]
     if doc["sun_mask_deg"]:
         lines.append(f"# sun_mask_deg = {doc['sun_mask_deg']} from the clipped sun (the default)")

@@ -113,7 +113,8 @@ def test_a_two_parameter_fit_has_nothing_to_profile(fitted, tmp_path, capsys):
 
 def test_a_map_does_not_replace_a_fit_folders_files(fitted, few_pixels, tmp_path, capsys):
     """-o onto a fit folder's files (fits.csv, a fit's PNG) is refused unless --overwrite; a
-    folder as -o takes the map under its default name, and an earlier map is replaced."""
+    folder as -o (existing, or new with a trailing slash) takes the map under its default name,
+    and an earlier map is replaced."""
     import shutil
 
     day, fit = few_pixels
@@ -128,6 +129,9 @@ def test_a_map_does_not_replace_a_fit_folders_files(fitted, few_pixels, tmp_path
     for _ in range(2):
         assert main(["chi2map", str(day), str(fit), "--n", "3", "-o", str(folder)]) == 0
     assert (folder / "chi2map_disc_rho_s_sigma_alpha.csv").exists()
+    # a new folder, written with its trailing slash
+    assert main(["chi2map", str(day), str(fit), "--n", "3", "-o", f"{tmp_path / 'new'}/"]) == 0
+    assert (tmp_path / "new" / "chi2map_disc_rho_s_sigma_alpha.csv").exists()
     assert main(["chi2map", str(day), str(fit), "--n", "3", "-o", str(folder / "fit_disc"),
                  "--overwrite"]) == 0
     assert (folder / "fit_disc.png").read_bytes() != before["fit_disc.png"]

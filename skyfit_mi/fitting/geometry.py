@@ -132,13 +132,15 @@ def geometry_warnings(geometry, sigma_alpha, sky_shape_known=True, lowest=None):
                    "is the spec's (a camera nearer the sun's mirror direction would measure it "
                    "from the sun)." if sky_shape_known else
                    f"; treat it as not determined below {limit:.3g}: that reading rests on "
-                   "a sky shape the fit did not fit, so its interval's lower end is left open "
-                   "(a camera nearer the sun's mirror direction would measure it).")]
+                   "the sky's shape near the mirror direction, which the fit did not measure, "
+                   "so its interval's lower end is left open (a camera nearer the sun's mirror "
+                   "direction would measure it).")]
     if not sky_shape_known:
         out.append("rho_s rests on the sky's reflection alone (the sun's highlight is never "
                    "seen at this roughness), so it depends on the sky's pattern near the mirror "
-                   "direction, which the spec's sky only models and the fit did not fit (its "
-                   "level only): treat rho_s as that sky model's reading (--sky-shape fits a "
-                   "CIE or Perez sky's shape; a camera nearer the sun's mirror direction "
-                   "measures rho_s from the sun).")
+                   "direction, which the spec's sky only models and the fit did not measure "
+                   "(its level, and a smooth departure where fitted, do not follow it there): "
+                   "treat rho_s as that sky model's reading (--sky-shape fits a CIE, turbid or "
+                   "Perez sky's shape; a camera nearer the sun's mirror direction measures rho_s "
+                   "from the sun).")
     return out

@@ -7,6 +7,7 @@ D, G is evaluated once per roughness and each grid point costs one NumPy chi^2.
 
 import csv
 import io
+import os
 from pathlib import Path
 
 import numpy as np
@@ -180,10 +181,12 @@ def profiled_map(session, theta, x, y, xs, ys):
 
 
 def map_prefix(prefix, default_name, overwrite=False):
-    """The path prefix of a map's files (a folder: ``default_name`` in it), refusing to replace
-    files that are not an earlier map's (CSV header X,Y,chi2) unless ``overwrite``."""
+    """The path prefix of a map's files (a folder, existing or written with a trailing slash:
+    ``default_name`` in it), refusing to replace files that are not an earlier map's (CSV header
+    X,Y,chi2) unless ``overwrite``."""
+    folder = str(prefix).endswith(("/", os.sep))
     prefix = Path(prefix)
-    if prefix.is_dir():
+    if folder or prefix.is_dir():
         prefix = prefix / default_name
     table, image = prefix.with_suffix(".csv"), prefix.with_suffix(".png")
     if overwrite or not (table.exists() or image.exists()):

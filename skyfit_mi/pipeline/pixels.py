@@ -33,6 +33,10 @@ def pixel_series(manifest_path, pixels, source="radiance"):
     if source not in SOURCES:
         raise SkyfitError(f"unknown source {source!r}; valid: {', '.join(SOURCES)}.")
     doc, root = load_manifest(manifest_path)
+    if is_table(doc):
+        raise SkyfitError(f"{root} is an observation table (values per point, no images): its "
+                          "values are in its table; pixels reads the frames of a rendered or "
+                          "photographed sequence.")
     w, h = doc["camera"]["width"], doc["camera"]["height"]
     for x, y in pixels:
         if not (0 <= x < w and 0 <= y < h):

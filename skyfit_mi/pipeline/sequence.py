@@ -85,7 +85,7 @@ def prepare_folder(out, run_id, shape, overwrite=False, log=print):
     old, _ = load_manifest(out)          # a damaged one: ManifestError says --overwrite
     if old.get("run_id") != run_id:
         raise SkyfitError(f"{out} holds another run ({old.get('name')!r}, run {old.get('run_id')});"
-                          " render into an empty folder, or pass --overwrite to replace it.")
+                          " write into an empty folder, or pass --overwrite to replace it.")
     kept = {}
     for f in old["frames"]:
         if f["status"] != "rendered":
