@@ -316,6 +316,25 @@ def test_a_frame_whose_card_is_partly_clipped_takes_its_exif_exposure(day, tmp_p
     np.testing.assert_allclose(got, true, rtol=0.01)
 
 
+def test_a_frame_whose_clock_was_reset_is_named(day, tmp_path):
+    """A frame dated years from the others (a camera clock reset) is named in a line, beside
+    its leaving the sequence as a night frame."""
+    from PIL import Image
+
+    src = tmp_path / "in"
+    files = _copy_photos(day, src)
+    with Image.open(files[0]) as im:
+        exif, v = im.getexif(), np.array(im)
+    exif.get_ifd(0x8769)[0x9003] = "2000:01:01 00:00:00"
+    Image.fromarray(v).save(files[0], quality=100, exif=exif)
+    logs = []
+    _ingest({**day, "photos": src}, tmp_path / "seq", calibrate={"grey_card": (0.18,) * 3},
+            log=logs.append)
+    assert any(m.startswith(f"{files[0].name}: taken over 30 days from the other frames' "
+                            "median date") for m in logs), logs
+    assert any("night frame(s)" in m and files[0].name in m for m in logs)
+
+
 def test_exif_labels_scaling_a_given_exposure_are_counted_in_the_intervals(day, ingested,
                                                                            tmp_path, monkeypatch):
     """A camera labels its shutter times with the nominal series: the photographs' EXIF times

@@ -695,6 +695,10 @@ def test_csv_missing_extra_malformed_and_header(tmp_path):
     c.write_text("file,time\na.jpg,2026-06-21T12:00:00Z\n")
     with pytest.raises(SkyfitError, match=r"t\.csv has no row for b\.jpg; list every frame"):
         frame_times(["a.jpg", "b.jpg"], None, times_csv=c)
+    c.write_text("file,time\na.jpg,2026-06-21T12:00:00Z\nB.JPG,2026-06-21T12:01:00Z\n")
+    with pytest.raises(SkyfitError, match=r"no row for b\.jpg; list every frame \(file,time\) "
+                                          r"by its exact name \(it lists 'B\.JPG'"):
+        frame_times(["a.jpg", "b.jpg"], None, times_csv=c)
     c.write_text("file,time\na.jpg,2026-06-21T12:00:00Z\nz.jpg,2026-06-21T12:01:00Z\n")
     with pytest.raises(SkyfitError, match=r"t\.csv lists z\.jpg \(line 3\), which are not "
                                           r"frames"):

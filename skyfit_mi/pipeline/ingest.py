@@ -623,9 +623,10 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells, seconds)
         return k, info
     info.update(per_frame=False,
                 scale_relative_sd=np.sqrt(np.pi / 2.0 * var_f / good.sum()).tolist())
-    log(f"calibration: exposure {scale @ SRGB_LUMINANCE:.4g} sr m^2 W^-1 (EXIF relative "
-        f"exposures; frame-to-frame spread {100 * info.get('relative_spread', 0.0):.1f}%)")
     exif = rel[:, None] * scale[None, :]
+    log(f"calibration: the first frame's exposure {exif[0] @ SRGB_LUMINANCE:.4g} sr m^2 W^-1, "
+        "the others' by their EXIF relative exposures (frame-to-frame spread "
+        f"{100 * info.get('relative_spread', 0.0):.1f}%)")
     info["light_drift"] = curved
     if not curved:
         return exif, info
@@ -684,11 +685,15 @@ def spec_for_times(spec_path, times, tz=None, site=None, size=None):
                         "([location], [time], its sky), or the lab values as a table (ingest "
                         "--table with a frame column).")
     cam = dict(raw.get("camera", {}))
+    turned = size is not None and [cam.get("width"), cam.get("height")] == [size[1], size[0]]
     for key, n in zip(("width", "height"), size or ()):
         if key in cam and int(cam[key]) != n:
             raise SpecError(f"[camera] {key} = {cam[key]} but the photographs are "
-                            f"{size[0]}x{size[1]}; drop {key} from the spec or give the camera "
-                            "of these photographs.")
+                            f"{size[0]}x{size[1]}"
+                            + (" (the spec's size turned a quarter: their EXIF Orientation, "
+                               "which skyfit applies, turns them as displayed)" if turned else "")
+                            + f"; drop {key} from the spec or give the camera of these "
+                            "photographs as they are displayed.")
         cam[key] = n
     raw["camera"] = cam
     loc = dict(raw.get("location", {}))
@@ -934,6 +939,10 @@ def _grey(values):
     return bool(np.array_equal(v[..., 0], v[..., 1]) and np.array_equal(v[..., 1], v[..., 2]))
 
 
+#: A frame further than this from the others' median date [days] is named (a reset clock).
+CLOCK_OFF_DAYS = 30.0
+
+
 def read_frames(photo_paths, spec_path, out_dir, o, log):
     """The :class:`Frames` of the photographs: read, timed, sorted, with the spec at their times."""
     paths = list_photos(photo_paths)
@@ -951,6 +960,12 @@ def read_frames(photo_paths, spec_path, out_dir, o, log):
                         name_pattern=o.name_pattern, tz=o.tz, warn=log)
     order = check_times(paths, times)                  # refuses frames sharing an instant
     paths, photos, times = ([x[i] for i in order] for x in (paths, photos, times))
+    days = np.array([t.timestamp() for t in times]) / 86400.0
+    far = [p.name for p, d in zip(paths, days) if abs(d - np.median(days)) > CLOCK_OFF_DAYS]
+    if far:
+        log(f"{listed(far)}: taken over {CLOCK_OFF_DAYS:g} days from the other frames' median "
+            f"date ({times[len(times) // 2].date().isoformat()}): a camera clock reset or "
+            "wrong? Check the EXIF times, or give them in a CSV (--times)")
     raw, spec = spec_for_times(spec_path, times, o.tz, o.site, (w, h))
     night = [paths[f.index].name for f in spec.frames if f.skipped]
     if len(night) == len(paths):

@@ -202,8 +202,12 @@ def _csv_times(paths, csv_path, tz, warn):
     names = [_name(p) for p in paths]
     missing = [n for n in names if n not in table]
     if missing:
+        folded = {n.casefold(): n for n in table}
+        near = next((folded[n.casefold()] for n in missing if n.casefold() in folded), None)
         raise SkyfitError(f"{csv_path} has no row for {listed(missing)}; list "
-                          "every frame (file,time).")
+                          "every frame (file,time)"
+                          + (f" by its exact name (it lists {near!r}: names are matched with "
+                             "their case)" if near else "") + ".")
     extra = sorted(set(table) - set(names), key=lambda n: table[n][1])
     if extra:
         msg = (f"{csv_path} lists {listed(extra)} (line "
@@ -344,7 +348,8 @@ def check_times(paths, times):
     paths, times = list(paths), list(times)
     dups = duplicate_times(paths, times)
     if dups:
-        t, ps = dups[0]
+        _, ps = dups[0]
+        t = times[paths.index(ps[0])]                  # as the first frame states it
         more = f" ({len(dups) - 1} more instants are shared too)" if len(dups) > 1 else ""
         raise SkyfitError(
             f"{', '.join(_name(p) for p in ps)} all have the time {t.isoformat()}{more}; "
