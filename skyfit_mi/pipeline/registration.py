@@ -233,20 +233,30 @@ class Registration:
         return np.where(np.isfinite(warped), np.sqrt(var), np.inf).astype(np.float32)
 
 
+#: The least share of a frame's pixels known (neither clipped nor black), relative to the best
+#: frame's, for it to be the registration's reference.
+REFERENCE_KNOWN = 0.5
+
+
 def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
     """The :class:`Registration` of ingest's ``frames``: with ``register``, each lit frame's
-    motion against the one nearest midday, plus the lens distortion; SkyfitError for a frame
-    that moved over ``limit`` [px] or cannot be registered."""
+    motion against the one nearest midday (of those mostly unclipped: :data:`REFERENCE_KNOWN`),
+    plus the lens distortion; SkyfitError for a frame that moved over ``limit`` [px] or cannot
+    be registered."""
     camera, lit, names = frames.spec.camera, frames.lit, [p.name for p in frames.paths]
     h, w = frames.size
     k = [float(x) for x in camera.get("distortion") or []]
     motion = {i: NO_MOTION for i in lit}
     records, ref = {}, None
     if register:
-        t = np.array([frames.times[i].timestamp() for i in lit])
-        ref = lit[int(np.argmin(np.abs(t - 0.5 * (t.min() + t.max()))))]
         feats = {i: features(undistort_image(luminance(linear.values[i], linear.sensor,
                                                        linear.falloff), camera)) for i in lit}
+        # the reference: nearest midday among the frames with most of the scene unclipped
+        known = {i: float(feats[i][1].mean()) for i in lit}
+        usable = [i for i in lit if known[i] >= REFERENCE_KNOWN * max(known.values())]
+        t = np.array([frames.times[i].timestamp() for i in lit])
+        mid = 0.5 * (t.min() + t.max())
+        ref = min(usable, key=lambda i: abs(frames.times[i].timestamp() - mid))
         corners = np.array([[0, 0, 1], [w - 1, 0, 1], [0, h - 1, 1], [w - 1, h - 1, 1.0]])
         for i in lit:
             if i == ref:
@@ -260,9 +270,13 @@ def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
             if M is None or not rho >= MIN_CORRELATION:
                 why = "ECC did not converge" if M is None else \
                     f"ECC correlation {rho:.2f}, at least {MIN_CORRELATION:g} needed"
+                lost = [f"{names[j]} {1 - known[j]:.0%}" for j in (i, ref)
+                        if known[j] < REFERENCE_KNOWN]
                 raise SkyfitError(f"{names[i]}: cannot be registered on {names[ref]}, the "
-                                  f"reference ({why}); check that both show the same view, "
-                                  "drop the odd one, or give --no-register.")
+                                  f"reference ({why}); check that both show the same view"
+                                  + (f" and exposure (clipped or black: {', '.join(lost)} of "
+                                     "the pixels)" if lost else "")
+                                  + ", drop the odd one, or give --no-register.")
             moved = float(np.max(np.hypot(*(corners @ M.T - corners[:, :2]).T)))
             if moved > limit:
                 raise SkyfitError(f"{names[i]}: it moved {moved:.1f} px from {names[ref]} "
