@@ -814,3 +814,16 @@ def test_a_flat_field_is_relative_to_its_brightest_and_every_pixel_must_have_sig
         photos.read_flat_field(tmp_path / "black.png", (4, 6))
     with pytest.raises(SkyfitError, match="the frames 5x4; give one of their size"):
         photos.read_flat_field(tmp_path / "flat.png", (4, 5))
+
+
+def test_a_folder_of_an_unread_format_is_named_not_taken_as_empty(tmp_path):
+    """iPhones write HEIF: a folder of them is refused naming the format and what to export,
+    not as a folder without photographs; beside two readable frames they are left alone."""
+    for i in range(3):
+        (tmp_path / f"IMG_{i}.HEIC").write_bytes(b"\0" * 16)
+    with pytest.raises(SkyfitError, match=r"holds 3 HEIF image\(s\) \(IMG_0\.HEIC, \.\.\.\), "
+                                          "which skyfit does not read; export them as JPEG"):
+        photos.list_photos([tmp_path])
+    for i in range(2):
+        Image.fromarray(codes8()).save(tmp_path / f"f{i}.png")
+    assert [p.name for p in photos.list_photos([tmp_path])] == ["f0.png", "f1.png"]

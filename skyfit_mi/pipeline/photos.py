@@ -704,17 +704,30 @@ def exif_scaled(doc, frames=None):
     return loading if len(loading) and loading.any() else None
 
 
+#: Image formats a folder may hold that skyfit does not read, and what to make of them.
+UNREAD_SUFFIXES = {".heic": "HEIF", ".heif": "HEIF", ".avif": "AVIF", ".webp": "WebP",
+                   ".jxl": "JPEG XL"}
+
+
 def list_photos(items):
     """Paths of the photographs in ``items`` (files, or folders in name order); SkyfitError if
-    one does not exist."""
-    paths = []
+    one does not exist, or if a folder holds images of a format skyfit does not read and too
+    few others for a sequence."""
+    paths, unread = [], []
     for p in map(Path, items):
         if p.is_dir():
             paths += sorted(q for q in p.iterdir() if q.suffix.lower() in SUFFIXES)
+            unread += sorted(q for q in p.iterdir() if q.suffix.lower() in UNREAD_SUFFIXES)
         elif p.is_file():
             paths.append(p)
         else:
             raise SkyfitError(f"{p} does not exist; give photographs or a folder of them.")
+    if unread and len(paths) < 2:
+        kind = UNREAD_SUFFIXES[unread[0].suffix.lower()]
+        raise SkyfitError(f"{unread[0].parent} holds {len(unread)} {kind} image(s) "
+                          f"({unread[0].name}, ...), which skyfit does not read; export them as "
+                          "JPEG, 16-bit TIFF or PNG with their EXIF (or give the camera's RAW "
+                          "files).")
     return paths
 
 
