@@ -48,6 +48,20 @@ def test_saturation_follows_the_captured_value():
         np.testing.assert_allclose(sigma, s.sigma, rtol=1e-6)
 
 
+def test_a_clipped_values_sigma_keeps_its_monte_carlo_error():
+    """A value censored at the clip still has its radiance's Monte Carlo error about the clip
+    (the slope just inside the range), not the quantisation alone: else one saturated pixel of
+    a noisy render outweighs hundreds of measured ones."""
+    s = SensorModel(exposure=1.0, bits=12)
+    img = np.array([[[0.9, 0.9, 0.9], [1.5, 1.5, 1.5]]])
+    sd = np.full(img.shape, 0.05)
+    v, sigma = s.capture(img, np.random.default_rng(0), radiance_sd=sd)
+    assert v[0, 1, 0] == 4095
+    expected = np.hypot(s.sigma, 0.05 * 4095)
+    np.testing.assert_allclose(sigma[0, 0], expected, rtol=1e-6)
+    np.testing.assert_allclose(sigma[0, 1], expected, rtol=1e-6)
+
+
 def test_responses_and_cos4():
     lin = SensorModel(exposure=1.0, bits=16)
     assert lin.respond(np.array(0.5)) == 0.5

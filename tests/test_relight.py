@@ -294,6 +294,21 @@ def test_fit_on_some_frames_and_relight_onto_the_same_folder_reports_the_held_ou
     assert [row[4] for row in rows[1:5]] == ["no", "no", "yes", "yes"]
 
 
+def test_a_day_of_black_frames_is_refused_in_one_line(day, tmp_path, capsys):
+    """A sequence whose every frame came out black (marked dark) has nothing to fit."""
+    import shutil
+
+    dark = tmp_path / "dark"
+    shutil.copytree(day / "day", dark)
+    doc = json.loads((dark / "manifest.json").read_text())
+    for f in doc["frames"]:
+        f["dark"] = True
+    (dark / "manifest.json").write_text(json.dumps(doc))
+    assert main(["fit", str(dark), "--region", "disc=rect:6,6,9,9", "--model", "2"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "is black (marked dark" in err and len(err.splitlines()) == 1
+
+
 @pytest.mark.parametrize("text", ["6-2", "a", "1,,2", "-1"])
 def test_bad_frame_lists_get_one_line(day, capsys, text):
     assert main(["fit", str(day / "day"), "--all", "--frames", text]) == 2

@@ -67,6 +67,29 @@ def test_bad_times(tmp_path, time, match):
         _spec(tmp_path, time=time)
 
 
+def test_a_day_across_a_clock_change_steps_in_real_time_and_names_lost_or_twice_hours(tmp_path):
+    """Across a daylight-saving change start/end/step_minutes steps in real time (the clocks
+    read 01:30 BST, 01:00 GMT, 01:30 GMT: every 30 minutes); a wall time the clocks skip or
+    pass twice is refused, naming it, until given with its offset."""
+    day = _spec(tmp_path, tz="Europe/London", time='date = "2026-10-25"\nstart = "00:30"\n'
+                'end = "02:30"\nstep_minutes = 30')
+    t = [f.time for f in day.frames]
+    assert [b.timestamp() - a.timestamp() for a, b in zip(t, t[1:])] == [1800.0] * (len(t) - 1)
+    assert [f"{x:%H:%M%z}" for x in t] == ["00:30+0100", "01:00+0100", "01:30+0100",
+                                           "01:00+0000", "01:30+0000", "02:00+0000",
+                                           "02:30+0000"]
+    for time, match in (('date = "2026-10-25"\ntimes = ["01:30"]', "'01:30' happens twice in "
+                         "Europe/London"),
+                        ('date = "2026-03-29"\ntimes = ["01:30"]', "'01:30' does not exist in "
+                         "Europe/London"),
+                        ('date = "2026-03-29"\nstart = "01:30"\nend = "03:00"\n'
+                         'step_minutes = 30', "start '01:30' does not exist")):
+        with pytest.raises(SpecError, match=match):
+            _spec(tmp_path, tz="Europe/London", time=time)
+    given = _spec(tmp_path, tz="Europe/London", time='times = ["2026-10-25T01:30+00:00"]')
+    assert given.frames[0].time.utcoffset() == dt.timedelta(0)
+
+
 def test_phi_only_on_an_intermediate_sky(tmp_path):
     for kind in ("clear", "overcast"):
         with pytest.raises(SpecError, match="phi .* belongs to an intermediate sky"):

@@ -252,7 +252,7 @@ def _colour_mixed(root, run_id, reach):
 def chosen_frames(doc, root, frames=None, min_frames=2):
     """The rendered frames (manifest records) of the sequence ``doc`` in ``root`` among
     ``frames`` (indices; None: all); SkyfitError naming one that is not rendered, or if fewer
-    than ``min_frames`` remain."""
+    than ``min_frames`` remain or all are black."""
     rendered = rendered_frames(doc)
     if frames is not None:
         known = {f["index"] for f in rendered}
@@ -265,6 +265,10 @@ def chosen_frames(doc, root, frames=None, min_frames=2):
         raise SkyfitError(f"{root} has {len(rendered)} rendered frame(s)"
                           f"{' of those chosen' if frames is not None else ''}; at least "
                           f"{min_frames} are needed: render the sequence (or choose more frames).")
+    if all(f.get("dark") for f in rendered):
+        raise SkyfitError(f"every {'chosen ' if frames is not None else ''}frame of {root} is "
+                          "black (marked dark: no light reached the camera at its exposure); "
+                          "render it with a larger exposure, or choose lit frames.")
     return rendered
 
 

@@ -160,6 +160,9 @@ class SensorModel:
         var = np.full(s.shape, self.sigma ** 2)
         if radiance_sd is not None:
             ds_dl = s / np.where(radiance > 0, radiance, 1.0)           # the pixel's gain
-            var = var + (self.slope(s) * self.max_code * ds_dl * radiance_sd) ** 2
+            # a clipped value is censored at the clip, where its Monte Carlo error still
+            # spreads the signal: the slope just inside the range, not the flat beyond it
+            inside = np.clip(s, 1e-9, 1.0 - 1e-9)
+            var = var + (self.slope(inside) * self.max_code * ds_dl * radiance_sd) ** 2
         sigma = np.sqrt(var).astype(np.float32)
         return values, sigma

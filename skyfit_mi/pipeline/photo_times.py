@@ -79,27 +79,34 @@ def format_offset(td):
     return f"{sign}{abs(minutes) // 60:02d}:{abs(minutes) % 60:02d}"
 
 
+def wall_time_problem(naive, tz):
+    """What is wrong with the wall-clock time ``naive`` in zone ``tz``: None, or a phrase
+    saying that the clocks skip it or pass it twice (a daylight-saving change)."""
+    t0 = naive.replace(tzinfo=tz, fold=0)
+    t1 = naive.replace(tzinfo=tz, fold=1)
+    if t0.utcoffset() == t1.utcoffset():
+        return None
+    if t0.astimezone(dt.timezone.utc).astimezone(tz).replace(tzinfo=None) != naive:
+        return f"does not exist in {tz} (the clocks skip that hour)"
+    return (f"happens twice in {tz} (at {format_offset(t0.utcoffset())} and "
+            f"{format_offset(t1.utcoffset())}, when the clocks go back)")
+
+
 def localize(naive, tz, who, no_tz):
     """Attach ``tz`` to the wall-clock time ``naive``; refuse (naming ``who``) a time that an
     IANA zone makes ambiguous or skips.  Without ``tz``, raise ``f"{who} {no_tz}"``."""
     if tz is None:
         raise SkyfitError(f"{who} {no_tz}")
-    t0 = naive.replace(tzinfo=tz, fold=0)
-    t1 = naive.replace(tzinfo=tz, fold=1)
-    if t0.utcoffset() != t1.utcoffset():
-        back = t0.astimezone(dt.timezone.utc).astimezone(tz).replace(tzinfo=None)
-        if back != naive:
-            raise SkyfitError(
-                f"{who}: {naive.isoformat(sep=' ')} does not exist in {tz} (the clocks skip "
-                "that hour); the camera clock was probably not on local time: give the "
-                "frame's offset, e.g. --tz with a fixed offset such as "
-                f"'{format_offset(t0.utcoffset())}', or a CSV of times.")
+    problem = wall_time_problem(naive, tz)
+    if problem is None:
+        return naive.replace(tzinfo=tz, fold=0)
+    if problem.startswith("does not exist"):
         raise SkyfitError(
-            f"{who}: {naive.isoformat(sep=' ')} happens twice in {tz} (at "
-            f"{format_offset(t0.utcoffset())} and {format_offset(t1.utcoffset())}, when the clocks "
-            "go back); give the offset: --tz with a fixed offset, or a CSV of times with "
-            "offsets.")
-    return t0
+            f"{who}: {naive.isoformat(sep=' ')} {problem}; the camera clock was probably not on "
+            "local time: give the frame's offset, e.g. --tz with a fixed offset such as "
+            f"'{format_offset(naive.replace(tzinfo=tz).utcoffset())}', or a CSV of times.")
+    raise SkyfitError(f"{who}: {naive.isoformat(sep=' ')} {problem}; give the offset: --tz with "
+                      "a fixed offset, or a CSV of times with offsets.")
 
 
 def _with_offset(aware, tz, who, source):

@@ -33,6 +33,7 @@ from ..physics.ward import NORMALISATIONS, raw_parameters
 from .fit_result import read_fit_result
 from .illumination import directional_from_record, envmap_from_record, perez_from_irradiance
 from .irradiance import irradiance_at, read_irradiance
+from .photo_times import wall_time_problem
 from .sky_series import series_entry
 from ..physics.turbid_sky import TURBIDITY_RANGE, turbid_sky
 
@@ -161,14 +162,21 @@ def _clock(s, date, tz, key):
                 off = t.utcoffset() / dt.timedelta(hours=1)
                 if not UTC_OFFSETS[0] <= off <= UTC_OFFSETS[1]:
                     raise ValueError(off)
-            return t if t.tzinfo else t.replace(tzinfo=tz)
-        if date is None:
+            if t.tzinfo is not None:
+                return t
+        elif date is None:
             raise ValueError(s)
-        hh, mm = (int(x) for x in str(s).split(":")[:2])
-        return dt.datetime.combine(date, dt.time(hh, mm), tzinfo=tz)
+        else:
+            hh, mm = (int(x) for x in str(s).split(":")[:2])
+            t = dt.datetime.combine(date, dt.time(hh, mm))
     except (ValueError, TypeError, OverflowError):
         raise SpecError(f"[time] {key} {s!r} is not a time; write 'HH:MM' (on [time] date) or an "
                         "ISO date-time such as '2026-06-21T06:00'.") from None
+    problem = wall_time_problem(t, tz)
+    if problem is not None:
+        raise SpecError(f"[time] {key} {s!r} {problem}; give it as an ISO date-time with its "
+                        "offset, such as '2026-10-25T01:30+01:00'.")
+    return t.replace(tzinfo=tz)
 
 
 @dataclass
@@ -350,16 +358,21 @@ def _times(sec, tz):
                             f"{', '.join(missing)}.")
         start, end = _clock(sec["start"], date, tz, "start"), _clock(sec["end"], date, tz, "end")
         step = _num("time", "step_minutes", sec["step_minutes"], 1, 24 * 60)
-        if end < start:
-            raise SpecError(f"[time] end {sec['end']} is before start {sec['start']}.")
-        n = int(np.floor((end - start) / dt.timedelta(minutes=step) + 1e-9)) + 1
-        out = [start + k * dt.timedelta(minutes=step) for k in range(n)]
+        # steps of real time: through UTC, so that a daylight-saving change keeps them even
+        start_utc, end_utc = (t.astimezone(dt.timezone.utc) for t in (start, end))
+        if end_utc < start_utc:
+            raise SpecError(f"[time] end {sec['end']} is before start {sec['start']} (for a "
+                            "range past midnight, give ISO date-times).")
+        n = int(np.floor((end_utc - start_utc) / dt.timedelta(minutes=step) + 1e-9)) + 1
+        out = [(start_utc + k * dt.timedelta(minutes=step)).astimezone(start.tzinfo)
+               for k in range(n)]
     if len(out) > 10000:
         raise SpecError(f"[time] gives {len(out)} frames; at most 10000.")
     for a, b in zip(out, out[1:]):
-        if b <= a:
+        if b.timestamp() <= a.timestamp():        # instants: the same zone compares wall time
+            same = a.timestamp() == b.timestamp()
             raise SpecError(f"[time] times must increase: {b.isoformat()} "
-                            f"{'repeats' if a == b else 'comes after'} {a.isoformat()}; list each "
+                            f"{'repeats' if same else 'comes after'} {a.isoformat()}; list each "
                             "time once, in order.")
     return out
 
