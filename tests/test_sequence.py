@@ -273,3 +273,26 @@ def test_monte_carlo_error_estimate_matches_the_scatter_of_independent_renders(
     ratio = scatter_var[inner].sum() / estimate_var[inner].sum()
     assert 0.75 < ratio < 1.33, ratio
     assert np.all(estimate_var[inner] > 0)
+
+
+def test_materials_of_equal_parameters_keep_their_own_labels(mi):
+    """Mitsuba merges identical objects by default: two materials of equal parameters (a
+    photographed scene's placeholders) would share one BSDF id, and one of them would vanish
+    from the label image; skyfit loads its scenes with them kept apart."""
+    from skyfit_mi.render.labels import label_image
+    from skyfit_mi.render.scene import load_xml
+
+    xml = """<scene version="3.0.0">
+      <sensor type="perspective"><float name="fov" value="60"/>
+        <transform name="to_world"><lookat origin="0,0,5" target="0,0,0" up="0,1,0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="8"/>
+        </film></sensor>
+      <bsdf type="diffuse" id="left"><rgb name="reflectance" value="0.5"/></bsdf>
+      <bsdf type="diffuse" id="right"><rgb name="reflectance" value="0.5"/></bsdf>
+      <shape type="rectangle"><ref id="left"/>
+        <transform name="to_world"><translate x="-1.2"/></transform></shape>
+      <shape type="rectangle"><ref id="right"/>
+        <transform name="to_world"><translate x="1.2"/></transform></shape>
+    </scene>"""
+    labels, ids = label_image(load_xml(xml))
+    assert ids == ["left", "right"] and set(np.unique(labels)) == {0, 1, 2}

@@ -35,7 +35,7 @@ from ..render.basis_table import (TableModel, available_memory, block_budget, me
                                   shared_budget, trace_basis)
 from ..render.fit_model import (BY_COUNT, PARAMETERS, bounds, check_fit_normalisation,
                                 check_start, other_readings)
-from ..render.scene import POSE_ANGLES, camera_at, pose_sd, turn_camera, view_centre
+from ..render.scene import POSE_ANGLES, camera_at, load_xml, pose_sd, turn_camera, view_centre
 from ..render.light_cache import (CACHE_SHARE, DIRECTIONS, POINT_POSITIONS, POSITIONS,
                                   SKY_PLANS, CacheOptions, PointRays, anchors_pay,
                                   build_light_cache)
@@ -639,7 +639,7 @@ def _loaded_scene(variant, xml):
     loaded = _SCENES.get((variant, xml))
     if loaded is None:
         mi = setup(variant)
-        scene = mi.load_string(xml)
+        scene = load_xml(xml)
         loaded = _SCENES[variant, xml] = _Scene(scene, mi.traverse(scene))
     return loaded
 

@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import SkyfitError
 from ..pipeline.manifest import frame_sky, load_manifest
 from ..render import setup
+from ..render.scene import load_xml
 from ..render.basis_table import TableModel, trace_basis
 from ..render.fit_model import PARAMETERS, bounds, reflectance_sets
 from ..render.light_cache import CacheOptions
@@ -105,7 +106,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     obs = load_observations(manifest_path, pixels, one_fit=False)
     frames = {f["index"]: f for f in doc["frames"]}
     mi = setup(variant or doc["render"]["variant"])
-    scene = mi.load_string(doc["scene"]["xml"])
+    scene = load_xml(doc["scene"]["xml"])
     skies = [frame_sky(frames[i], root) for i in obs.frames]
     if light is not None and light["fitted"] != "spec":
         skies = skies_at_level(skies, light["sky"], obs.times)

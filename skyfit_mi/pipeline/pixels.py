@@ -9,6 +9,7 @@ import numpy as np
 from ..errors import SkyfitError
 from ..files import save_figure, write_text
 from ..render import setup
+from ..render.scene import load_xml
 from ..render.labels import label_image
 from .manifest import frame_axis, is_table, load_manifest, read_frame_pixels
 from .observation_table import table_regions
@@ -99,8 +100,8 @@ def write_pixels(manifest_path, pixels, out_prefix=None, source="radiance"):
 def scene_labels(manifest):
     """(manifest document, its folder, label image, material ids) of a rendered sequence."""
     doc, root = load_manifest(manifest)
-    mi = setup(doc["render"]["variant"])
-    return (doc, root, *label_image(mi.load_string(doc["scene"]["xml"])))
+    setup(doc["render"]["variant"])
+    return (doc, root, *label_image(load_xml(doc["scene"]["xml"])))
 
 
 def material_regions(manifest, pose_sd_deg=None, log=None):

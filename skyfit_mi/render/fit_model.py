@@ -17,7 +17,7 @@ from ..physics.ward import (METAL_THRESHOLD, PLASTIC_MAX, SIGMA_MIRROR,
 from .light_cache import (CONTROL_SIGMA, SIGMA_LARGEST, SIGMA_RESOLVED,
                           SIGMA_TABLE, check_fit_normalisation, control_weight)
 from .daylight import jit_array, update_sky
-from .scene import pixel_rays
+from .scene import load_xml, pixel_rays
 from .scene_xml import ward_element
 from .sky_control import chebyshev_eval, chebyshev_x
 
@@ -413,7 +413,7 @@ class RegionRenderModel:
         self.mi = mi
         self.scenes, self.params = [], []
         for sky in skies:
-            scene = mi.load_string(xml)
+            scene = load_xml(xml)
             params = mi.traverse(scene)
             update_sky(params, sky, "sky.")
             self.scenes.append(scene)

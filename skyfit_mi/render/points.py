@@ -6,12 +6,13 @@ import numpy as np
 from . import setup
 from .basis_table import trace_basis
 from .light_cache import DIRECTIONS, POSITIONS, CacheOptions
-from .scene import pixel_rays, shape_index
+from .scene import load_xml, pixel_rays, shape_index
 
 
 def load_points_scene(xml, variant):
     """The scene ``xml`` loaded in Mitsuba ``variant``, for :func:`surface_hits`."""
-    return setup(variant).load_string(xml)
+    setup(variant)
+    return load_xml(xml)
 
 
 def surface_hits(scene, origins, directions):

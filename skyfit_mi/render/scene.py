@@ -9,6 +9,16 @@ from ..errors import SkyfitError, check_range
 from .daylight import jit_array
 
 
+def load_xml(xml):
+    """The Mitsuba scene (or object) of XML ``xml`` in the variant set up, every plugin kept
+    apart: Mitsuba's default optimisation merges identical objects, so two materials of equal
+    parameters (a photographed scene's placeholders, say) would share one BSDF and one id, and
+    the label image would lose one of them."""
+    import mitsuba as mi
+
+    return mi.load_string(xml, optimize=False)
+
+
 def camera_origin(azimuth_deg, angle_deg, distance, target=(0.0, 0.0, 0.0)):
     """Camera position at compass ``azimuth_deg`` from the target, ``angle_deg`` from the vertical
     (the thesis's east camera at 45 degrees: ``camera_origin(90, 45, d)``)."""

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..physics.ward import MODELS, raw_parameters
-from .scene import camera_matrix
+from .scene import camera_matrix, load_xml
 
 _SCALAR_TAGS = {"float": float, "integer": int, "string": str,
                 "boolean": lambda v: v.lower() == "true"}
@@ -133,7 +133,7 @@ def load_scene(spec):
 
     xml, mats, to_world = build_scene_xml(spec)
     try:
-        scene = mi.load_string(xml)
+        scene = load_xml(xml)
     except RuntimeError as exc:
         raise SkyfitError(f"Mitsuba could not load {spec.scene_file.name} with the spec's "
                           f"materials: {str(exc).splitlines()[-1]}") from None
