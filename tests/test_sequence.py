@@ -296,3 +296,21 @@ def test_materials_of_equal_parameters_keep_their_own_labels(mi):
     </scene>"""
     labels, ids = label_image(load_xml(xml))
     assert ids == ["left", "right"] and set(np.unique(labels)) == {0, 1, 2}
+
+
+def test_a_render_says_when_its_frames_clip_or_its_samples_are_few(tmp_path, mi):
+    """An exposure that clips a share of a frame's lit values, and fewer samples per pixel
+    than fitting wants, are each said in a line; the render goes on."""
+    from skyfit_mi.pipeline.sequence import FEW_SPP, render_sequence
+
+    logs = []
+    raw = spec(sensor__exposure=1.0)                  # far above auto: most values clip
+    render_sequence(validate_spec(raw, tmp_path), tmp_path / "a", progress=False,
+                    log=logs.append)
+    assert any("of the lit pixel values at the top code" in m for m in logs), logs
+    assert any(m.startswith(f"spp {raw['render']['spp']}: ") for m in logs) \
+        == (raw["render"]["spp"] < FEW_SPP)
+    logs.clear()
+    render_sequence(validate_spec(spec(), tmp_path), tmp_path / "b", progress=False,
+                    log=logs.append)
+    assert not any("at the top code" in m for m in logs), logs

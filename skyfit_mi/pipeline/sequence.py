@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SkyfitError
+from ..errors import SkyfitError, listed
 from ..files import FolderLock, ensure_dir
 from ..physics.camera import SensorModel
 from ..physics.colour import SRGB_LUMINANCE
@@ -195,6 +195,8 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print, so
         return _render(spec, sensor, out, overwrite, progress, log, source)
 
 
+#: Share of a frame's lit pixel values at the top code above which the render says so.
+SATURATED_SHARE = 0.01
 #: Fewer samples per pixel than this leave each pixel's Monte Carlo error heavy-tailed and its
 #: estimate rough: fits of 16-spp days under a low sun missed their truth with narrow intervals
 #: where 128 spp held it.
@@ -218,6 +220,7 @@ def _render(spec, sensor, out, overwrite, progress, log, source):
 
     bar = tqdm(total=len(spec.frames), desc="render", unit="frame", initial=len(done),
                disable=not progress)
+    saturated = []                                   # (frame, share of its lit values clipped)
     for f in spec.frames:
         rec = frame_record(f, renderer.seed, out)
         if f.skipped:
@@ -239,12 +242,22 @@ def _render(spec, sensor, out, overwrite, progress, log, source):
                 rec["dark"] = True
                 log(f"{frame_label(f.index, f.time)}: black at this exposure (no light reached "
                     "the camera); kept and marked dark in the manifest")
+            lit = img > 0
+            if lit.any() and np.mean(values[lit] == sensor.max_code) > SATURATED_SHARE:
+                saturated.append((frame_label(f.index, f.time),
+                                  float(np.mean(values[lit] == sensor.max_code))))
             bar.update(1)
         manifest["frames"].append(rec)
         if "render_seconds" in rec:               # checkpoint: the frames so far, the rest pending
             pending = [{"index": g.index, "status": "pending"} for g in spec.frames[f.index + 1:]]
             write_manifest(out, {**manifest, "frames": manifest["frames"] + pending})
     bar.close()
+    if saturated:
+        log(f"{listed([name for name, _ in saturated])}: up to "
+            f"{max(share for _, share in saturated):.0%} of the lit pixel values at the top code, "
+            "which a fit takes only as 'at least this' (it tells less): a lower "
+            "sensor.exposure keeps them (auto sets a white horizontal surface at 80% in "
+            "luminance, which a surface facing a low sun, or a blue sky's blue, exceeds)")
     n = finish(out, manifest, sensor.exposure)
     skipped = sum(r["status"] == "skipped" for r in manifest["frames"])
     dark = sum(bool(r.get("dark")) for r in manifest["frames"])
