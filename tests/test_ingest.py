@@ -238,7 +238,8 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
 def test_an_encoding_no_profile_states_is_said_and_another_profiles_refused():
     """16-bit frames without a colour profile are read as linear (a raw converter's linear
     export), said in a line; a profile neither sRGB nor linear (Adobe RGB) is refused unless
-    --response says the encoding; a profile that names its encoding is taken silently."""
+    --response says (or fits) the encoding; Display P3 (sRGB's curve, wider primaries) is read
+    as sRGB, said in a line; a profile that names its encoding is taken silently."""
     from skyfit_mi.pipeline.ingest import _sensor
     from skyfit_mi.pipeline.photos import Photo, _hint_from_icc
 
@@ -248,15 +249,19 @@ def test_an_encoding_no_profile_states_is_said_and_another_profiles_refused():
                      hint, source, 0, 0)
 
     sensor, _, said = _sensor([photo(None)] * 2, None, None, {}, False)
-    assert sensor.response == "linear" and "no colour profile" in said and "--response" in said
-    assert _sensor([photo(None, 8)] * 2, None, None, {}, False)[2] is None
+    assert sensor.response == "linear" and "no colour profile" in said[0] and "--response" in said[0]
+    assert _sensor([photo(None, 8)] * 2, None, None, {}, False)[2] == []
     sensor, _, said = _sensor([photo("sRGB IEC61966-2.1")] * 2, None, None, {}, False)
-    assert sensor.response == "srgb" and said is None
+    assert sensor.response == "srgb" and said == []
+    sensor, _, said = _sensor([photo("Display P3", 8)] * 2, None, None, {}, False)
+    assert sensor.response == "srgb" and said[0].startswith(
+        "encoding: a.tif's ICC profile \"Display P3\" has sRGB's curve but wider primaries")
     with pytest.raises(SkyfitError, match='a.tif: the ICC profile "Adobe RGB \\(1998\\)" is '
                                           "neither sRGB nor linear.*--response"):
         _sensor([photo("Adobe RGB (1998)")] * 2, None, None, {}, False)
     sensor, _, said = _sensor([photo("Adobe RGB (1998)")] * 2, "gamma", 2.2, {}, False)
-    assert sensor.response == "gamma" and said is None
+    assert sensor.response == "gamma" and said == []
+    assert _sensor([photo("Adobe RGB (1998)")] * 2, None, None, {}, False, fitted=True)[2] == []
 
 
 def test_clipped_or_black_pixels_are_ranked_not_averaged_nor_dropped():

@@ -796,9 +796,11 @@ def test_iana_local_times_are_exact_or_refused(naive, zone):
         assert t.astimezone(ZoneInfo(zone)).replace(tzinfo=None) == naive
 
 
-def test_a_flat_field_is_relative_to_its_brightest_and_every_pixel_must_have_signal(tmp_path):
-    """A flat field divides every frame: read as linear response, 1 at its brightest, and
-    refused (naming how many pixels) where a pixel is black, since it would divide by 0."""
+def test_a_flat_field_is_relative_to_its_brightest_and_leaves_out_where_it_has_no_signal(
+        tmp_path):
+    """A flat field divides every frame: read as linear response, 1 at its brightest, NaN
+    where it is black (a fisheye's corners, whose frames' pixels are then left out), and
+    refused if black everywhere."""
     g = np.full((4, 6, 3), 200, np.uint8)
     g[0, 0] = 100
     Image.fromarray(g).save(tmp_path / "flat.png")
@@ -808,10 +810,13 @@ def test_a_flat_field_is_relative_to_its_brightest_and_every_pixel_must_have_sig
     srgb = SensorModel(1.0, response="srgb", bits=8)
     assert fl.max() == 1.0 and fl[0, 0] == pytest.approx(srgb.linearise(100.0)
                                                          / srgb.linearise(200.0))
-    g[1, 2] = 0
+    g[1, 2] = 0                                # beyond a fisheye's circle: no signal
     Image.fromarray(g).save(tmp_path / "black.png")
-    with pytest.raises(SkyfitError, match=r"black\.png has 1 pixel\(s\) not finite and positive"):
-        photos.read_flat_field(tmp_path / "black.png", (4, 6))
+    fl = photos.read_flat_field(tmp_path / "black.png", (4, 6))
+    assert np.isnan(fl[1, 2]) and np.isfinite(np.delete(fl.ravel(), 8)).all()
+    Image.fromarray(np.zeros_like(g)).save(tmp_path / "none.png")
+    with pytest.raises(SkyfitError, match=r"none\.png has no positive value"):
+        photos.read_flat_field(tmp_path / "none.png", (4, 6))
     with pytest.raises(SkyfitError, match="the frames 5x4; give one of their size"):
         photos.read_flat_field(tmp_path / "flat.png", (4, 5))
 

@@ -1004,7 +1004,7 @@ def model_error_kappa(result):
 
 
 def _measured(s):
-    """Where session ``s``'s table holds a value that is not saturated (P, T, 3)."""
+    """Where session ``s``'s table or frames hold a value that is not saturated (P, T, 3)."""
     return np.isfinite(s.obs.sigma) & (s.obs.y < s.obs.sensor.max_code)
 
 
@@ -1014,10 +1014,12 @@ def _channels(s):
 
 
 def _region_mean(s):
-    """Region mean (T, 3) of values (P, T, 3) over the measured, unsaturated points."""
-    have = np.ones(s.obs.y.shape) if s.obs.rays is None else _measured(s) * 1.0
-    have = have / np.maximum(have.sum(axis=0), 1.0)
-    return lambda x: np.sum(x * have, axis=0)
+    """Region mean (T, 3) of values (P, T, 3) over the measured, unsaturated points or pixels
+    (a registered frame's pixels beyond its edge and clipped ones left out of both the
+    prediction's mean and the observed)."""
+    have = _measured(s)
+    weight = have / np.maximum(have.sum(axis=0), 1.0)
+    return lambda x: np.sum(np.where(have, x, 0.0) * weight, axis=0)
 
 
 def _means_error(s, fit_means, observed, region_mean):

@@ -13,6 +13,7 @@ is written until every input is checked.
 
 import hashlib
 import json
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -31,8 +32,8 @@ from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_v
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import check_times, frame_times
 from .photos import (EXIF_LABEL_SD, EXPOSURE_KEYS, OTHER_PROFILE, RAW_COLOUR_REACH,
-                     check_same_size, exif_exposure, exif_label_loading, exif_setting,
-                     list_photos, read_flat_field, read_photo)
+                     WIDE_PRIMARIES, check_same_size, exif_exposure, exif_label_loading,
+                     exif_setting, list_photos, read_flat_field, read_photo)
 from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
 from .raw_noise import bootstrap, cfa_planes
 from .region_edges import colour_mixed, pose_reach
@@ -69,9 +70,9 @@ RESPONSE_RMS_WARN = 0.05
 
 # ---- the sensor ------------------------------------------------------------------------
 
-def _sensor(photos, response, gamma, spec_sensor, cos4):
-    """The day's SensorModel (exposure 1 for now), the float scale (None for codes) and a line
-    saying what was assumed of the encoding (or None)."""
+def _sensor(photos, response, gamma, spec_sensor, cos4, fitted=False):
+    """The day's SensorModel (exposure 1 for now), the float scale (None for codes) and the
+    lines saying what was assumed of the encoding; ``fitted``: the response is fitted later."""
     kinds = {p.kind for p in photos}
     if len(kinds) > 1:
         raise SkyfitError("the frames mix floating-point (EXR/HDR) and integer images; give one "
@@ -94,10 +95,17 @@ def _sensor(photos, response, gamma, spec_sensor, cos4):
         response = "linear"           # EXR/HDR and RAWs as read are linear, whatever the spec
     if response is None:
         response = spec_sensor.get("response")
-    said = None
+    said = []
+    wide = next((p for p in photos if p.encoding_source.startswith(WIDE_PRIMARIES)), None)
+    if wide is not None:
+        profile = wide.encoding_source[len(WIDE_PRIMARIES):].strip()
+        said.append(f"encoding: {Path(wide.path).name}'s ICC profile {profile} has sRGB's curve "
+                    "but wider primaries: colours are read in its red, green and blue, not "
+                    "sRGB's (a grey reference calibrates alike; C of a saturated colour differs "
+                    "from sRGB's by up to a few tens of per cent)")
     if response is None:
         other = next((p for p in photos if p.encoding_source.startswith(OTHER_PROFILE)), None)
-        if other is not None:
+        if other is not None and not fitted:
             raise SkyfitError(f"{Path(other.path).name}: {other.encoding_source} is neither sRGB "
                               "nor linear, which skyfit reads; export the photographs as sRGB "
                               "or linear, or say how their codes encode the light with "
@@ -106,9 +114,9 @@ def _sensor(photos, response, gamma, spec_sensor, cos4):
         response = hints.pop() if len(hints) == 1 else "srgb"
         if depth == 16 and first.kind != "float" and all(
                 p.encoding_source == "assumed" for p in photos):
-            said = (f"encoding: the {depth}-bit photographs carry no colour profile, so their "
-                    f"codes are read as {response}; if they are not, give --response (srgb, "
-                    "linear, or gamma with --gamma)")
+            said.append(f"encoding: the {depth}-bit photographs carry no colour profile, so "
+                        f"their codes are read as {response}; if they are not, give --response "
+                        "(srgb, linear, or gamma with --gamma)")
     g = gamma if gamma is not None else spec_sensor.get("gamma", 2.2)
     return SensorModel(exposure=1.0, response=response, gamma=g, bits=depth, cos4=cos4), scale, \
         said
@@ -382,18 +390,18 @@ def _select(samples, patch, keep):
 
 
 def _swatch_ratios(samples, patch, sensor, exposures):
-    """(24, 3) :func:`central_mean` of each swatch's observed over predicted signal, or NaN."""
-    r = np.concatenate([_signal_ratio(y, L, sensor)[1] / e for (y, L), e in zip(samples,
-                                                                               exposures)])
-    labels = np.tile(patch, len(samples))
-    ratio = np.full((24, 3), np.nan)
-    for k in range(24):
-        for c in range(3):
-            v = r[labels == CHART_LABEL + k, c]
-            v = v[~np.isnan(v)]
-            if len(v):
-                ratio[k, c] = central_mean(v)
-    return ratio
+    """(24, 3) each swatch's observed over predicted signal: its :func:`central_mean` in each
+    frame (NaN where clipped or black pixels reach the middle half), the median over the frames
+    that tell it; NaN where none does."""
+    ratio = np.full((len(samples), 24, 3), np.nan)
+    for f, ((y, L), e) in enumerate(zip(samples, exposures)):
+        r = _signal_ratio(y, L, sensor)[1] / e
+        for k in range(24):
+            if np.any(patch == CHART_LABEL + k):
+                ratio[f, k] = central_mean(r[patch == CHART_LABEL + k])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)          # a swatch no frame tells
+        return np.nanmedian(ratio, axis=0)
 
 
 def central_mean(x):
@@ -581,7 +589,10 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells, seconds)
     for i, (y, L) in enumerate(samples):
         s, r = _signal_ratio(y, L, sensor)
         k[i] = _patch_exposure(s, r, patch)
-        parts[i] = _patch_exposure(s, r, patch, parts=n_parts, cells=cells)
+        # the parts measure the spread only: each from its unclipped values, since a highlight
+        # within a quarter of the patch may fill more than a quarter of one part
+        unclipped = [np.where(np.isinf(x), np.nan, x) for x in (s, r)]
+        parts[i] = _patch_exposure(*unclipped, patch, parts=n_parts, cells=cells)
     good = np.isfinite(k).all(axis=1)
     if not good.any():
         raise SkyfitError("the calibration patches are saturated, black or unlit in every frame; "
@@ -593,10 +604,6 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells, seconds)
     info = {"frame_relative_sd": np.sqrt(var_f).tolist()}
     own_sd = np.sqrt(var_f / good.sum()).tolist()        # exposures of the frames' own
     missing = [Path(photos[i].path).name for i in np.flatnonzero(~good)]
-    if missing and rel is not None:
-        log(f"calibration: the references are clipped, black or unlit in {listed(missing)}: "
-            "those frames take their EXIF exposures, on the others' scale")
-        info["frames_without_reference"] = missing
     curved = False
     if rel is not None:
         scale = np.nanmedian(k[good] / rel[good, None], axis=0)
@@ -611,6 +618,7 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells, seconds)
                 f"{np.sqrt(test['scatter_chi2_per_dof']):.1f}x what the patches' noise allows "
                 "(a shutter or aperture off its nominal value): each frame's exposure is taken "
                 "from its own patches")
+        if shutter:                 # EXIF cannot stand in for a frame without its reference
             rel = None
             info["exif_relative_exposures"] = "not used: they scatter beyond the patches' noise"
     if rel is None:
@@ -621,6 +629,10 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells, seconds)
                               "frames, or give --exposure.")
         info.update(per_frame=True, scale_relative_sd=own_sd)
         return k, info
+    if missing:
+        log(f"calibration: the references are clipped, black or unlit in {listed(missing)}: "
+            "those frames take their EXIF exposures, on the others' scale")
+        info["frames_without_reference"] = missing
     info.update(per_frame=False,
                 scale_relative_sd=np.sqrt(np.pi / 2.0 * var_f / good.sum()).tolist())
     exif = rel[:, None] * scale[None, :]
@@ -932,11 +944,17 @@ def check_choices(o):
     return o
 
 
-def _grey(values):
-    """Whether photograph ``values`` (H, W, 3) hold one channel repeated (every finite pixel
-    R = G = B): a grey image, as a colour camera's frame never is."""
-    v = np.nan_to_num(values)
-    return bool(np.array_equal(v[..., 0], v[..., 1]) and np.array_equal(v[..., 1], v[..., 2]))
+def _grey(values, max_code=None):
+    """Whether photograph ``values`` (H, W, 3) hold one channel repeated: R = G = B in every
+    pixel that tells (finite, neither black nor clipped at ``max_code``), and some do; a grey
+    image, as a colour camera's frame never is."""
+    v = np.asarray(values, dtype=float)
+    with np.errstate(invalid="ignore"):
+        tells = np.all(np.isfinite(v) & (v > 0), axis=-1)
+        if max_code is not None:
+            tells &= np.all(v < CLIP_FRACTION * max_code, axis=-1)
+    v = v[tells]
+    return bool(len(v) and np.array_equal(v[:, 0], v[:, 1]) and np.array_equal(v[:, 1], v[:, 2]))
 
 
 #: A frame further than this from the others' median date [days] is named (a reset clock).
@@ -975,7 +993,8 @@ def read_frames(photo_paths, spec_path, out_dir, o, log):
     if night:
         log(f"{len(night)} night frame(s) (sun below the horizon) are kept out of the sequence: "
             f"{', '.join(night)}")
-    grey = [p.name for p, ph in zip(paths, photos) if _grey(ph.values)]
+    lit = [i for i, f in enumerate(spec.frames) if not f.skipped]
+    grey = [paths[i].name for i in lit if _grey(photos[i].values, photos[i].max_code)]
     if grey:
         raise SkyfitError(f"{listed(grey)}: grey (one channel, or R = G = B in every pixel); "
                           "a fit measures each colour channel's reflectance, which a grey "
@@ -988,9 +1007,10 @@ def linearise(frames, o, log):
     """The :class:`Linear` encoding of ``frames`` (a fitted response comes later)."""
     photos, (h, w) = frames.photos, frames.size
     sensor, float_scale, said = _sensor(photos, None if o.fitted else o.response, o.gamma,
-                                        frames.raw.get("sensor", {}), o.vignetting == "cos4")
-    if said:
-        log(said)
+                                        frames.raw.get("sensor", {}), o.vignetting == "cos4",
+                                        o.fitted)
+    for line in said:
+        log(line)
     if o.fitted and float_scale is not None:
         raise SkyfitError("--response fit: the frames are floating-point (EXR/HDR), which hold "
                           "linear values; leave out --response.")

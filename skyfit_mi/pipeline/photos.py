@@ -272,10 +272,13 @@ def _icc_description(icc):
 
 #: The start of an encoding source naming an ICC profile that is neither sRGB nor linear.
 OTHER_PROFILE = "the ICC profile"
+#: The start of one naming a profile of sRGB's curve and wider primaries (Display P3, phones').
+WIDE_PRIMARIES = "the wide-primaries ICC profile"
 
 
 def _hint_from_icc(desc, default):
-    """(hint, source) of an ICC profile's description ``desc``: 'linear' or 'srgb' by name; a
+    """(hint, source) of an ICC profile's description ``desc``: 'linear' or 'srgb' by name
+    (Display P3 'srgb', its source starting :data:`WIDE_PRIMARIES`, for ingest to say so); a
     profile of another name (Adobe RGB, ProPhoto) keeps ``default`` with a source that starts
     :data:`OTHER_PROFILE`, for ingest to refuse unless told the encoding."""
     if desc and desc not in ("unreadable", "unnamed"):
@@ -284,6 +287,8 @@ def _hint_from_icc(desc, default):
             return "linear", f'ICC profile "{desc}"'
         if "srgb" in d or "iec61966" in d:
             return "srgb", f'ICC profile "{desc}"'
+        if "p3" in d:                                    # Display P3: sRGB's curve
+            return "srgb", f'{WIDE_PRIMARIES} "{desc}"'
         return default, f'{OTHER_PROFILE} "{desc}"'
     return default, "assumed"
 
@@ -732,8 +737,9 @@ def list_photos(items):
 
 
 def read_flat_field(path, size):
-    """The flat field at ``path`` as relative response (H, W), 1 at its brightest; SkyfitError
-    unless of ``size`` (height, width) with finite, positive values."""
+    """The flat field at ``path`` as relative response (H, W), 1 at its brightest, NaN where it
+    has no signal (a fisheye's corners beyond its image circle: the frames' pixels there are
+    left out); SkyfitError unless of ``size`` (height, width) with some positive value."""
     image = read_photo(Path(path))
     h, w = size
     if image.values.shape[:2] != (h, w):
@@ -742,12 +748,12 @@ def read_flat_field(path, size):
     fl = np.nanmean(image.values if image.kind == "float" else
                     SensorModel(1.0, response=image.encoding_hint, bits=image.bits)
                     .linearise(image.values), axis=2)
-    if not np.all(np.isfinite(fl)) or fl.min() <= 0:
-        bad = int(np.sum(~(np.isfinite(fl) & (fl > 0))))
-        raise SkyfitError(f"flat field {path} has {bad} pixel(s) not finite and positive (a "
-                          "flat field divides every frame); give one exposed so that every "
-                          "pixel has signal.")
-    return fl / fl.max()
+    with np.errstate(invalid="ignore"):
+        fl = np.where(np.isfinite(fl) & (fl > 0), fl, np.nan)
+    if np.all(np.isnan(fl)):
+        raise SkyfitError(f"flat field {path} has no positive value; give one exposed so that "
+                          "the frames' pixels have signal.")
+    return fl / np.nanmax(fl)
 
 
 def check_same_size(photos_by_path):

@@ -513,12 +513,13 @@ def _sky_entries(sec, times, tz):
         by_time = {}
         for e in entries:
             _unknown("sky", e, _SCHEMA["sky"])
-            by_time[_clock(e["time"], times[0].date(), tz, "sky time")] = e
-        missing = [t for t in times if t not in by_time]
+            # by instant: in a repeated hour equal wall times are different instants
+            by_time[_clock(e["time"], times[0].date(), tz, "sky time").timestamp()] = e
+        missing = [t for t in times if t.timestamp() not in by_time]
         if missing:
-            raise SpecError(f"[[sky]] has no entry for {missing[0]:%H:%M}; give one per frame "
+            raise SpecError(f"[[sky]] has no entry for {missing[0]:%H:%M%z}; give one per frame "
                             "time (or drop 'time' and list one per frame in order).")
-        out = [{**base, **by_time[t]} for t in times]
+        out = [{**base, **by_time[t.timestamp()]} for t in times]
     elif times is not None and len(entries) != len(times):
         raise SpecError(f"[[sky]] lists {len(entries)} skies for {len(times)} frames; give one "
                         "per frame, or a 'time' in each.")
