@@ -141,6 +141,8 @@ def test_a_map_does_not_replace_a_fit_folders_files(fitted, few_pixels, tmp_path
     ({"parameters": {"rho_s": 1.5}}, "rho_s = 1.5 is outside its bounds [0, 1]"),
     ({"intervals": {"rho_s": {"95": [0.5, 0.1]}}}, "runs backwards (lo > hi)"),
     ({"covariance": [[1.0, 0.0], [0.0, 1.0]]}, "covariance must be"),
+    ({"covariance": {"names": ["rho_s", "sigma_alpha"], "matrix": [[-1.0, 0.0], [0.0, 1.0]]}},
+     "no variance below 0"),
     ({"frames": "all"}, "frames must be a list of manifest frame indices"),
 ])
 def test_a_hand_edited_fit_is_refused_by_name(fitted, tmp_path, capsys, change, phrase):

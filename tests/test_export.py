@@ -303,3 +303,28 @@ def test_refusals_are_one_line_and_write_nothing(tmp_path, capsys):
     (tmp_path / "map" / "map_summary.json").write_text(json.dumps(summary))
     assert main(["export", str(tmp_path / "map"), "-o", str(tmp_path / "c")]) == 2
     assert "a region named 'pixel_map'" in capsys.readouterr().err
+
+
+def test_an_exported_ideal_mirror_keeps_its_light_in_mitsubas_blend(mi):
+    """A Ward lobe of sigma_alpha 0 exports as a blend's mirror: under a uniform sky of radiance
+    1 a flat patch seen from above reflects weight x F (a smooth conductor in Mitsuba's
+    blendbsdf gave 0.26 for 0.34)."""
+    import xml.etree.ElementTree as ET
+
+    from skyfit_mi.pipeline.export import _blend
+    from skyfit_mi.render.scene import load_xml
+
+    root = ET.Element("scene", version="3.0.0")
+    _blend(root, "m", {"weight": 0.5, "diffuse_reflectance": [0.0] * 3, "distribution": "mirror",
+                       "specular_reflectance": [0.675] * 3, "material": "none"})
+    bsdf = ET.tostring(root[0], encoding="unicode")
+    scene = load_xml(f"""<scene version="3.0.0">
+      <integrator type="path"><integer name="max_depth" value="3"/></integrator>
+      <emitter type="constant"><rgb name="radiance" value="1"/></emitter>
+      <shape type="rectangle">{bsdf}</shape>
+      <sensor type="perspective"><float name="fov" value="10"/>
+        <transform name="to_world"><lookat origin="0,0,5" target="0,0,0" up="0,1,0"/></transform>
+        <sampler type="independent"><integer name="sample_count" value="256"/></sampler>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/>
+        </film></sensor></scene>""")
+    assert float(np.mean(np.array(mi.render(scene)))) == pytest.approx(0.5 * 0.675, rel=0.02)

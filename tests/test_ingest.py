@@ -249,7 +249,8 @@ def test_an_encoding_no_profile_states_is_said_and_another_profiles_refused():
                      hint, source, 0, 0)
 
     sensor, _, said = _sensor([photo(None)] * 2, None, None, {}, False)
-    assert sensor.response == "linear" and "no colour profile" in said[0] and "--response" in said[0]
+    assert sensor.response == "linear" and "no colour profile" in said[0]
+    assert "--response" in said[0]
     assert _sensor([photo(None, 8)] * 2, None, None, {}, False)[2] == []
     sensor, _, said = _sensor([photo("sRGB IEC61966-2.1")] * 2, None, None, {}, False)
     assert sensor.response == "srgb" and said == []

@@ -294,6 +294,23 @@ def test_fit_on_some_frames_and_relight_onto_the_same_folder_reports_the_held_ou
     assert [row[4] for row in rows[1:5]] == ["no", "no", "yes", "yes"]
 
 
+def test_fits_another_run_left_in_a_sequence_folder_are_refused(day, tmp_path, capsys):
+    """`render --overwrite` leaves the old run's fits in the folder: given the folder, relight
+    and export refuse them by name rather than use numbers of other frames."""
+    import shutil
+
+    folder = tmp_path / "again"
+    shutil.copytree(day / "day", folder)
+    fit = _fit_json(folder / "fit_disc.json")
+    fit.write_text(json.dumps({**json.loads(fit.read_text()), "sequence_run_id": "0ld"}))
+    for argv in (["relight", str(folder), "--target", str(folder), "-o", str(tmp_path / "r"),
+                  "--no-images", "-q"], ["export", str(folder), "-o", str(tmp_path / "e")]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert "was fitted to another run of the sequence in its folder (run 0ld" in err, err
+        assert len(err.splitlines()) == 1
+
+
 def test_a_day_of_black_frames_is_refused_in_one_line(day, tmp_path, capsys):
     """A sequence whose every frame came out black (marked dark) has nothing to fit."""
     import shutil

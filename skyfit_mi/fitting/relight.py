@@ -410,7 +410,7 @@ def add_reference_errors(errors, fits, plan, out, pixels, overwrite=False):
 
 #: Why a prediction lies beyond what a fit's data measured (:func:`beyond_data`), in words.
 BEYOND_WORDS = {"below": "dimmer than their noise let them tell",
-                "above": "brighter than their top code",
+                "above": "brighter than the brightest value they measured below the top code",
                 "unmeasured": "in a channel they never measured",
                 "highlight": "in a sun highlight nearer the mirror direction than they saw",
                 "angles": f"at sun and view angles over {ANGLES_BEYOND_DEG:.0f} degrees from "

@@ -72,13 +72,15 @@ def read_fit_result(path):
     cov = r.get("covariance")
     if cov is not None and not _is_covariance(cov):
         raise SkyfitError(f"{path}: covariance must be {{\"names\": [{', '.join(names)}], "
-                          "\"matrix\": a square list of lists of numbers, one row each}.")
+                          "\"matrix\": a square list of lists of numbers, one row each, no "
+                          "variance below 0}.")
     return r
 
 
 def load_fits(paths):
     """{region: (path, fit result)} from fit JSONs, a ``fits.csv`` (its ``fit_*.json``) or a
-    folder of fits; a damaged fit JSON is named, a region given twice refused."""
+    folder of fits; a damaged fit JSON is named, a region given twice refused, and so is a fit
+    in a sequence's folder that another run of it made (``render --overwrite`` since)."""
     out = {}
     for p in map(Path, paths):
         if p.is_dir() or p.name == "fits.csv":
@@ -92,13 +94,29 @@ def load_fits(paths):
         else:
             raise SkyfitError(f"fit {str(p)!r} does not exist; give fit_NAME.json files, a "
                               "fits.csv or the folder `skyfit fit` wrote.")
+        run = _folder_run(p) if p.is_dir() or p.name == "fits.csv" else None
         for f in files:
             r = read_fit_result(f)
+            if run is not None and r.get("sequence_run_id") not in (None, run):
+                raise SkyfitError(f"{f} was fitted to another run of the sequence in its folder "
+                                  f"(run {r['sequence_run_id']}; the folder's frames are run "
+                                  f"{run}, rendered or ingested again since): fit again, or name "
+                                  "that run's fit files.")
             if r["region"] in out:
                 raise SkyfitError(f"region {r['region']!r} is fitted twice ({out[r['region']][0]} "
                                   f"and {f}); give one fit per region.")
             out[r["region"]] = (f, r)
     return out
+
+
+def _folder_run(path):
+    """The run id of the sequence whose folder holds the fits at ``path`` (a folder or its
+    ``fits.csv``); None where it holds no sequence."""
+    folder = path if path.is_dir() else path.parent
+    try:
+        return json.loads((folder / "manifest.json").read_text()).get("run_id")
+    except (OSError, ValueError, AttributeError):
+        return None
 
 
 def _numbers(v, n=None, kind=(int, float)):
@@ -147,7 +165,8 @@ def _is_draws(draws, n):
 
 def _is_covariance(cov):
     """Whether ``cov`` is {"names": [parameter names], "matrix": a row of numbers (or null) per
-    name}; another model's names are allowed (relight then takes the intervals alone)."""
+    name, no variance negative}; another model's names are allowed (relight then takes the
+    intervals alone)."""
     if not isinstance(cov, dict) or not isinstance(cov.get("names"), list) \
             or not isinstance(cov.get("matrix"), list):
         return False
@@ -155,7 +174,8 @@ def _is_covariance(cov):
     return (all(isinstance(k, str) for k in cov["names"]) and len(cov["matrix"]) == n
             and all(isinstance(row, list) and len(row) == n
                     and all(v is None or (isinstance(v, (int, float)) and not isinstance(v, bool))
-                            for v in row) for row in cov["matrix"]))
+                            for v in row) for row in cov["matrix"])
+            and all(row[i] is None or row[i] >= 0 for i, row in enumerate(cov["matrix"])))
 
 
 def _is_fit_result(r, parameters):

@@ -79,6 +79,10 @@ def prepare_folder(out, run_id, shape, overwrite=False, log=print):
     ensure_dir(out / "frames")
     if overwrite:
         clear_run(out)
+        fits = sorted(p.name for p in out.glob("fit_*.json"))
+        if fits:
+            log(f"{out}: {listed(fits)} fitted the run this replaces; they stay, but relight and "
+                "export refuse them: fit again")
         return {}
     if not manifest_file(out).exists():
         return {}
