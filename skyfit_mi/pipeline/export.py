@@ -240,9 +240,12 @@ def _log_material(m, matches, log):
 
 def _how(r, nearest="the nearest: "):
     """'exact', or how far off the nearest form of match ``r`` is, after ``nearest``."""
-    return "exact" if r["exact"] else (f"{nearest}reflected radiance off by up to "
-                                       f"{100 * r['error']['max']:.3g}% (rms "
-                                       f"{100 * r['error']['rms']:.3g}%)")
+    e = r["error"]
+    return "exact" if r["exact"] else (
+        f"{nearest}reflected radiance off by up to {100 * e['max']:.3g}% (rms "
+        f"{100 * e['rms']:.3g}%)" + (f", its albedo (the light it returns under a uniform sky) by "
+                                     f"up to {100 * e['albedo_max']:.3g}%"
+                                     if e.get("albedo_max") is not None else ""))
 
 
 def _numbers(v):
