@@ -38,6 +38,12 @@ BIT_DEPTHS = (8, 10, 12, 16)
 CLIP_FRACTION = 0.97
 
 
+def clipped(codes, max_code):
+    """Where ``codes`` [DN] lie within :data:`CLIP_FRACTION` of ``max_code`` (NaN: False)."""
+    with np.errstate(invalid="ignore"):
+        return np.asarray(codes) >= CLIP_FRACTION * max_code
+
+
 @dataclass(frozen=True)
 class SensorModel:
     """A radiometric camera model (module docstring).

@@ -22,7 +22,7 @@ import numpy as np
 from ..conventions import time_legendre
 from ..errors import SkyfitError, listed
 from ..files import FolderLock
-from ..physics.camera import CLIP_FRACTION, SensorModel
+from ..physics.camera import SensorModel, clipped
 from ..physics.colour import SRGB_LUMINANCE
 from ..render.image import write_exr
 from ..render.labels import label_image
@@ -425,7 +425,7 @@ def _ranked_codes(y, max_code):
     of ``max_code``) set to +inf and the black ones (<= 0) to -inf: for :func:`central_mean`,
     which ranks them, since within a patch's middle half they would bias its level."""
     with np.errstate(invalid="ignore"):
-        return np.where(y >= CLIP_FRACTION * max_code, np.inf, np.where(y <= 0, -np.inf, y))
+        return np.where(clipped(y, max_code), np.inf, np.where(y <= 0, -np.inf, y))
 
 
 def _signal_ratio(y, L, sensor):
@@ -952,7 +952,7 @@ def _grey(values, max_code=None):
     with np.errstate(invalid="ignore"):
         tells = np.all(np.isfinite(v) & (v > 0), axis=-1)
         if max_code is not None:
-            tells &= np.all(v < CLIP_FRACTION * max_code, axis=-1)
+            tells &= ~np.any(clipped(v, max_code), axis=-1)
     v = v[tells]
     return bool(len(v) and np.array_equal(v[:, 0], v[:, 1]) and np.array_equal(v[:, 1], v[:, 2]))
 
@@ -999,8 +999,7 @@ def read_frames(photo_paths, spec_path, out_dir, o, log):
         raise SkyfitError(f"{listed(grey)}: grey (one channel, or R = G = B in every pixel); "
                           "a fit measures each colour channel's reflectance, which a grey "
                           "photograph cannot tell: give the camera's colour photographs.")
-    return Frames(paths, photos, times, raw, spec,
-                  [i for i, f in enumerate(spec.frames) if not f.skipped])
+    return Frames(paths, photos, times, raw, spec, lit)
 
 
 def linearise(frames, o, log):

@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from ..errors import SkyfitError
-from ..physics.camera import CLIP_FRACTION
+from ..physics.camera import clipped
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.lens import distort, focal_px
 
@@ -54,11 +54,12 @@ _SHARE_TOL = 1e-4
 
 def luminance(values, sensor, falloff):
     """Linear luminance [1] of codes ``values`` (H, W, 3) [DN] over the vignetting ``falloff``;
-    NaN where a channel is not finite or clipped (:data:`CLIP_FRACTION`): a clipped pixel's
-    luminance is not known, and it would tie the match to where the light clips."""
+    NaN where a channel is not finite or clipped (:func:`~skyfit_mi.physics.camera.clipped`): a
+    clipped pixel's luminance is not known, and it would tie the match to where the light
+    clips."""
     s = sensor.linearise(np.nan_to_num(values)) @ SRGB_LUMINANCE
-    with np.errstate(invalid="ignore"):
-        known = np.all(np.isfinite(values) & (values < CLIP_FRACTION * sensor.max_code), axis=-1)
+    known = np.all(np.isfinite(values), axis=-1) & ~np.any(clipped(values, sensor.max_code),
+                                                           axis=-1)
     return np.where(known, s / falloff, np.nan)
 
 
@@ -218,8 +219,8 @@ class Registration:
             return values
         out = remap(values, self.maps[i])
         bounds = () if top is None else ((0.0, values <= 0), (top, values >= top))
-        for bound, clipped in bounds:
-            share = remap(clipped.astype(np.float32), self.maps[i])
+        for bound, at in bounds:
+            share = remap(at.astype(np.float32), self.maps[i])
             out = np.where(share > 1 - _SHARE_TOL, bound,
                            np.where(share > _SHARE_TOL, np.nan, out))
         return out.astype(np.float32)
@@ -254,9 +255,9 @@ def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
         # the reference: nearest midday among the frames with most of the scene unclipped
         known = {i: float(feats[i][1].mean()) for i in lit}
         usable = [i for i in lit if known[i] >= REFERENCE_KNOWN * max(known.values())]
-        t = np.array([frames.times[i].timestamp() for i in lit])
-        mid = 0.5 * (t.min() + t.max())
-        ref = min(usable, key=lambda i: abs(frames.times[i].timestamp() - mid))
+        t = {i: frames.times[i].timestamp() for i in lit}
+        mid = 0.5 * (min(t.values()) + max(t.values()))
+        ref = min(usable, key=lambda i: abs(t[i] - mid))
         corners = np.array([[0, 0, 1], [w - 1, 0, 1], [0, h - 1, 1], [w - 1, h - 1, 1.0]])
         for i in lit:
             if i == ref:

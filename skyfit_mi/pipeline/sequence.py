@@ -247,9 +247,9 @@ def _render(spec, sensor, out, overwrite, progress, log, source):
                 log(f"{frame_label(f.index, f.time)}: black at this exposure (no light reached "
                     "the camera); kept and marked dark in the manifest")
             lit = img > 0
-            if lit.any() and np.mean(values[lit] == sensor.max_code) > SATURATED_SHARE:
-                saturated.append((frame_label(f.index, f.time),
-                                  float(np.mean(values[lit] == sensor.max_code))))
+            share = float(np.mean(values[lit] == sensor.max_code)) if lit.any() else 0.0
+            if share > SATURATED_SHARE:
+                saturated.append((frame_label(f.index, f.time), share))
             bar.update(1)
         manifest["frames"].append(rec)
         if "render_seconds" in rec:               # checkpoint: the frames so far, the rest pending

@@ -36,7 +36,7 @@ import numpy as np
 from ..conventions import direction_from_angles
 from ..errors import OutputError, SkyfitError
 from ..files import check_dir, ensure_dir, write_json
-from ..physics.camera import CLIP_FRACTION, SensorModel
+from ..physics.camera import CLIP_FRACTION, SensorModel, clipped
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky import EFFICACY_CLEAR
 from ..render.image import write_exr
@@ -121,7 +121,7 @@ def _linear(photo):
     sensor = SensorModel(1.0, response=photo.encoding_hint, bits=photo.bits)
     table = sensor.linearise(np.arange(photo.max_code + 1)).astype(np.float32)
     codes = np.rint(photo.values).astype(np.uint16)     # whole codes (exact_jpeg=False)
-    return table[codes], codes.max(axis=2) >= CLIP_FRACTION * photo.max_code
+    return table[codes], clipped(codes, photo.max_code).any(axis=2)
 
 
 def _check_box(box, photo):
