@@ -142,6 +142,12 @@ def test_missing_manifest(tmp_path):
         load_manifest(tmp_path / "nowhere")
 
 
+def test_a_folder_of_frames_without_its_manifest_is_named_as_unfinished(tmp_path):
+    (tmp_path / "frames").mkdir()
+    with pytest.raises(ManifestError, match="stopped before its end; run it again"):
+        load_manifest(tmp_path)
+
+
 def test_invalid_frame_is_named(day):
     doc, _ = load_manifest(day)
     doc = json.loads(json.dumps(doc))

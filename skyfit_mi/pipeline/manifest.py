@@ -114,8 +114,11 @@ def load_manifest(path):
     folder).  :class:`ManifestError` for a missing, damaged, foreign, newer or invalid file."""
     p = manifest_file(path)
     if not p.is_file():
+        if (p.parent / "frames").is_dir():
+            raise ManifestError(f"{str(p.parent)!r} holds frames but no manifest.json: a render "
+                                "or ingest stopped before its end; run it again into that folder.")
         raise ManifestError(f"no manifest at {str(p)!r}; give a folder written by `skyfit render` "
-                            "(or its manifest.json).")
+                            "or `skyfit ingest` (or its manifest.json).")
     try:
         text = p.read_text(encoding="utf-8")
         doc = json.loads(text)
