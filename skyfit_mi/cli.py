@@ -138,7 +138,10 @@ def _render(args):
 
 
 def _reflectance(text):
-    name, value = _named(text, "MATERIAL=REFLECTANCE")
+    """MATERIAL=RHO[+-SD]: (name, rho (3,), sd (3,) or None); RHO one number or R,G,B, SD an
+    absolute reflectance or N% of RHO."""
+    name, value = _named(text, "MATERIAL=REFLECTANCE[+-SD]")
+    value, pm, err = value.partition("+-")
     try:
         rho = [float(v) for v in value.split(",")]
         if len(rho) not in (1, 3) or not all(0.0 < v <= 1.0 for v in rho):
@@ -146,7 +149,19 @@ def _reflectance(text):
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r}: give the reference's reflectance as one "
                                          "number or R,G,B, each in (0, 1]") from None
-    return name, rho * 3 if len(rho) == 1 else rho
+    rho = rho * 3 if len(rho) == 1 else rho
+    if not pm:
+        return name, rho, None
+    try:
+        sd = [float(err[:-1]) / 100.0 * r for r in rho] if err.endswith("%") \
+            else [float(err)] * 3
+        if not all(0.0 <= e < r for e, r in zip(sd, rho)):          # NaN fails too
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give the reflectance's standard error after "
+                                         "+- as a number below it or a percentage (e.g. "
+                                         f"{name}=0.18+-0.005 or {name}=0.18+-3%)") from None
+    return name, rho, sd
 
 
 def _ingest(args):
@@ -169,8 +184,9 @@ def _ingest(args):
             what = "photographs" if args.photos else "--" + photo_only[0].replace("_", "-")
             raise SkyfitError(f"--table takes no {what}: the table gives frames, values and "
                               "sigmas; give either photographs or --table.")
+        rho, sd = _references(args.calibrate)
         ingest_table(args.table, args.spec, args.output, tz=args.tz, site=args.site,
-                     calibrate=_references(args.calibrate), scale_unknown=args.unknown_scale,
+                     calibrate=rho, reference_sd=sd, scale_unknown=args.unknown_scale,
                      overwrite=args.overwrite)
         return
     if args.unknown_scale:
@@ -178,23 +194,26 @@ def _ingest(args):
                           "from --exposure, --calibrate or --colorchecker).")
     if not args.photos:
         raise SkyfitError("give photographs (files or folders), or --table OBS.csv.")
+    rho, sd = _references(args.calibrate)
     ingest(args.photos, args.spec, args.output, times_csv=args.times,
            name_pattern=args.name_pattern, tz=args.tz, site=args.site, response=args.response,
-           gamma=args.gamma, exposure=args.exposure, calibrate=_references(args.calibrate),
+           gamma=args.gamma, exposure=args.exposure, calibrate=rho, reference_sd=sd,
            colorchecker=args.colorchecker, vignetting=args.vignetting, noise=args.noise,
            colour_matrix_error=args.colour_matrix_error, register=not args.no_register,
            **({} if args.register_limit is None else {"register_limit_px": args.register_limit}),
            overwrite=args.overwrite, progress=not args.quiet)
 
 
-def _references(pairs):
-    """``--calibrate`` NAME=RHO pairs as a dict; SkyfitError if a name comes twice."""
-    names = [name for name, _ in pairs or []]
+def _references(triples):
+    """``--calibrate`` as ({name: rho}, {name: sd} of those given one); SkyfitError if a name
+    comes twice."""
+    names = [t[0] for t in triples or []]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise SkyfitError(f"--calibrate names {', '.join(twice)} more than once; give each "
                           "reference's reflectance once.")
-    return dict(pairs or [])
+    return ({n: rho for n, rho, _ in triples or []},
+            {n: sd for n, _, sd in triples or [] if sd is not None})
 
 
 def _pixels(args):
@@ -492,8 +511,9 @@ def _add_ingest(sub, common):
     ing.add_argument("--exposure", type=float,
                      help="absolute exposure of the first frame [sr m^2 W^-1]")
     ing.add_argument("--calibrate", action="append", type=_reflectance,
-                     metavar="MATERIAL=REFLECTANCE", help="a grey Lambertian scene material of "
-                     "this reflectance (or R,G,B) to calibrate by; repeatable")
+                     metavar="MATERIAL=REFLECTANCE[+-SD]", help="a grey Lambertian scene "
+                     "material of this reflectance (or R,G,B) to calibrate by, and its standard "
+                     "error (absolute, or N%%), which the intervals count; repeatable")
     ing.add_argument("--unknown-scale", action="store_true",
                      help="with --table: values in the instrument's units, put on a relative scale")
     ing.add_argument("--colorchecker", metavar="MATERIAL",

@@ -9,6 +9,7 @@ medians over noise seeds) the intervals at most 1.5x as wide as those of a fit t
 rendered frames.  Bad inputs get one line and leave no output.
 """
 
+import argparse
 import json
 import shutil
 
@@ -1006,3 +1007,60 @@ def test_a_raw_days_map_carries_the_colour_matrix_in_its_intervals(day, raw_inge
     assert any("colour matrix's error, 3% per entry" in w
                for w in _widths_include(doc, [], names))
     assert np.all(np.median(half[:, 1:], axis=0) > 1.96 * 0.8 * closed[1:3])
+
+
+def test_a_references_reflectance_error_is_parsed_or_refused_in_one_line():
+    from skyfit_mi.cli import _reflectance
+
+    assert _reflectance("card=0.18") == ("card", [0.18] * 3, None)
+    assert _reflectance("card=0.18+-0.005") == ("card", [0.18] * 3, [0.005] * 3)
+    name, rho, sd = _reflectance("card=0.2,0.18,0.16+-5%")
+    np.testing.assert_allclose(sd, [0.01, 0.009, 0.008])
+    for bad in ("card=0.18+-", "card=0.18+-0.2", "card=0.18+-x", "card=0.18+-nan",
+                "card=0.18+--0.01"):
+        with pytest.raises(argparse.ArgumentTypeError, match="standard error after"):
+            _reflectance(bad)
+
+
+def test_a_references_reflectance_error_reaches_every_reflectance_interval(day, tmp_path,
+                                                                            monkeypatch):
+    """A grey card's maker states its reflectance to a few percent. Here the user gives the card
+    as 0.19 +- 0.01 (5.3%) while it is 0.18: every fitted reflectance reads about 5.6% high. The
+    error, recorded by ingest, widens the reflectances' intervals (C, rho_s; not the roughness)
+    in quadrature so that they hold the truth; left out, C_g's and C_b's (2.5% and 1.4%
+    half-widths) miss (measured: C_r's 4.6% held 0.62 at 0.619). A reference given without
+    one is said to be taken as exact."""
+    from skyfit_mi.fitting import uncertainty
+    from skyfit_mi.fitting.fit import fit_region
+    from skyfit_mi.fitting.light import LightOptions
+
+    logs = []
+    doc = _ingest(day, tmp_path / "seq", calibrate={"grey_card": (0.19,) * 3},
+                  reference_sd={"grey_card": (0.01,) * 3}, vignetting="cos4", log=logs.append)
+    np.testing.assert_allclose(doc["ingest"]["calibration"]["reference_relative_sd"],
+                               [0.01 / 0.19] * 3)
+    assert not any("taken as exact" in m for m in logs), logs
+
+    def fit():
+        return fit_region(tmp_path / "seq", "sample", day["regions"]["sample"], model="colour",
+                          light=LightOptions(sky="spec"), **QUIET)
+    counted = fit()
+    monkeypatch.setattr(uncertainty, "reference_sd",
+                        lambda doc, names, theta: np.zeros(np.shape(theta)))
+    left_out = fit()
+    names = ("C_r", "C_g", "C_b", "rho_s")
+    held = {name: {k: r["intervals"][k]["95"][0] <= TRUTH[k] <= r["intervals"][k]["95"][1]
+                   for k in names} for name, r in (("counted", counted), ("left out", left_out))}
+    assert all(held["counted"].values()), held
+    assert not held["left out"]["C_g"] and not held["left out"]["C_b"], held
+    for k in names:                  # the card's share in quadrature with the rest, as the sun's
+        value, u = counted["parameters"][k], 0.01 / 0.19
+        assert counted["calibration_error_sd"][k] >= u * value
+        half = [max(value - lo, hi - value) for lo, hi in (r["intervals"][k]["95"]
+                                                          for r in (counted, left_out))]
+        np.testing.assert_allclose(half[0], np.hypot(half[1], 1.96 * u * value), rtol=0.05)
+    assert counted["intervals"]["sigma_alpha"] == left_out["intervals"]["sigma_alpha"]
+    logs = []
+    _ingest(day, tmp_path / "plain", calibrate={"grey_card": (0.18,) * 3}, vignetting="cos4",
+            log=logs.append)
+    assert any("grey_card=0.18 taken as exact" in m and "+-SD" in m for m in logs), logs

@@ -252,6 +252,17 @@ def test_a_table_in_its_own_units_is_scaled_by_its_reference(dn_rig):
     rise = s.problem.chi2(truth) - r["chi2"]
     assert 0.0 <= rise <= chi2_dist.ppf(0.999, 5) * r["interval_scale_s2"] \
         + r["cache_noise_chi2"], (rise, r["parameters"])
+    # the reference's own error (2%) in quadrature on every reflectance, not on the roughness
+    assert main(["ingest", str(spec), "--table", str(table), "--calibrate", "white=0.9+-2%",
+                 "-o", str(tmp / "stated")]) == 0
+    assert load_manifest(tmp / "stated")[0]["ingest"]["calibration"][
+        "reference_relative_sd"] == pytest.approx([0.02] * 3)
+    stated = FitSession(tmp / "stated", "sample", None, model="colour").run(
+        "global", log=lambda *a: None)
+    for k in ("C_r", "C_g", "C_b", "rho_s"):
+        assert stated["calibration_error_sd"][k] == pytest.approx(np.hypot(
+            r["calibration_error_sd"][k], 0.02 * stated["parameters"][k]), rel=0.02)
+    assert stated["calibration_error_sd"]["sigma_alpha"] == 0.0
     assert main(["ingest", str(spec), "--table", str(table), "-o", str(tmp / "raw")]) == 0
     raw = FitSession(tmp / "raw", "sample", None, model="colour").run("global",
                                                                      log=lambda *a: None)

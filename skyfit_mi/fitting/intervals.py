@@ -164,7 +164,8 @@ def calibration_sd(s, J, problem, usable, theta, curvature_inverse):
     them, carried by :func:`~.uncertainty.shared_error_sd` (frames erring apart bend the day's
     curve); without a reference, the errors of the EXIF labels that scale the given exposure
     (:func:`~skyfit_mi.pipeline.photos.exif_scaled`), each on every channel of the frames with
-    that label. A table's is :func:`~.uncertainty.calibration_sd`."""
+    that label. A table's is :func:`~.uncertainty.calibration_sd`. Each adds the references'
+    reflectances' error (:func:`~.uncertainty.reference_sd`)."""
     cal = (s.doc.get("ingest") or {}).get("calibration") or {}
     loading = None if s.obs.rays is not None else exif_scaled(s.doc, s.obs.frames)
     if loading is None and (s.obs.rays is not None or not cal.get("scale_relative_sd")):
@@ -172,16 +173,18 @@ def calibration_sd(s, J, problem, usable, theta, curvature_inverse):
     Js = J * problem.value_scale(theta)[..., None]          # per relative error of a value
     sigma = problem.obs.sigma
     if loading is not None:                       # every channel of a label's frames alike
-        return unc.shared_error_sd(Js, usable, sigma, np.full((J.shape[1], 1), EXIF_LABEL_SD),
-                                   np.ones((3, 1)), curvature_inverse, loading)
-    if cal.get("per_frame"):
+        sd = unc.shared_error_sd(Js, usable, sigma, np.full((J.shape[1], 1), EXIF_LABEL_SD),
+                                 np.ones((3, 1)), curvature_inverse, loading)
+    elif cal.get("per_frame"):
         shared = np.tile(np.asarray(frame_calibration_sd(s), dtype=float),
                          (J.shape[1], 1))
+        sd = unc.shared_error_sd(Js, usable, sigma, shared, np.eye(3), curvature_inverse)
     else:                                         # one error per channel for every frame
         P, T, C, n = J.shape
         Js, usable, sigma = (a.reshape((P * T, 1) + a.shape[2:]) for a in (Js, usable, sigma))
         shared = np.asarray(cal["scale_relative_sd"], dtype=float)[None, :]
-    return unc.shared_error_sd(Js, usable, sigma, shared, np.eye(3), curvature_inverse)
+        sd = unc.shared_error_sd(Js, usable, sigma, shared, np.eye(3), curvature_inverse)
+    return np.hypot(sd, unc.reference_sd(s.doc, s.names, theta))
 
 
 def frame_calibration_sd(s):

@@ -551,8 +551,15 @@ def _widths_include(doc, skies, names, light=None):
     elif default_sky(doc, skies) != "spec":
         out.append("no error of the light's: the spec's sky and sun are taken as exact "
                    "(--sky spec)")
-    if (ingest.get("calibration") or {}).get("scale_relative_sd"):
+    cal = ingest.get("calibration") or {}
+    if cal.get("scale_relative_sd"):
         out.append("the exposure calibration's error (ingest.calibration)")
+    if cal.get("references"):
+        out.append("the references' reflectances' error, "
+                   f"{100 * max(cal.get('reference_relative_sd') or [0]):.3g}% "
+                   "(ingest.calibration.reference_relative_sd), on the reflectances"
+                   + ("" if any(cal.get("reference_relative_sd") or []) else
+                      ": none, they were given as exact"))
     if light is not None and any(r.get("labels_sd") for r in light["regions"].values()):
         out.append("the error of the EXIF labels that scale the given exposure, each pixel its "
                    "region's share (calibration_error_sd of its fit; a reflectance's in "

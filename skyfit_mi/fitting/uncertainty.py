@@ -140,17 +140,31 @@ def widen_relative(value, interval, extra, lower, upper):
     return new_lo, new_hi
 
 
-def calibration_sd(doc, names, theta):
-    """The standard error per parameter (n,) or (G, n) from the calibration's per-channel
-    relative error: C_c by its channel's, R and rho_s by the rms, roughness none."""
-    theta = np.asarray(theta, dtype=float)
-    u = ((doc.get("ingest") or {}).get("calibration") or {}).get("scale_relative_sd")
-    if not u:
-        return np.zeros(theta.shape)
+def _level_sd(u, names, theta):
+    """The standard error per parameter (n,) or (G, n) from a relative error ``u`` (3,) of the
+    values per channel: C_c by its channel's, R and rho_s by the rms, roughness none."""
     u = np.asarray(u, dtype=float)
     grey = float(np.sqrt(np.mean(u ** 2)))
     rel = {"C_r": u[0], "C_g": u[1], "C_b": u[2], "R": grey, "rho_s": grey}
     return np.array([rel.get(p, 0.0) for p in names]) * np.abs(theta)
+
+
+def reference_sd(doc, names, theta):
+    """The standard error per parameter (n,) or (G, n) from the error of the references'
+    reflectances (``ingest --calibrate NAME=RHO+-SD``), which sets the level of every fitted
+    reflectance; zeros without one."""
+    theta = np.asarray(theta, dtype=float)
+    u = ((doc.get("ingest") or {}).get("calibration") or {}).get("reference_relative_sd")
+    return _level_sd(u, names, theta) if u else np.zeros(theta.shape)
+
+
+def calibration_sd(doc, names, theta):
+    """The standard error per parameter (n,) or (G, n) from the calibration's per-channel
+    relative error (:func:`_level_sd`) and the references' reflectances' (:func:`reference_sd`)."""
+    theta = np.asarray(theta, dtype=float)
+    u = ((doc.get("ingest") or {}).get("calibration") or {}).get("scale_relative_sd")
+    scale = _level_sd(u, names, theta) if u else np.zeros(theta.shape)
+    return np.hypot(scale, reference_sd(doc, names, theta))
 
 
 def colour_matrix_sd(doc, names, theta):

@@ -322,6 +322,22 @@ def edge_blocks(values, variance, block=8):
 CHART_LABEL, CHART_GREY = 1000, 0.5
 
 
+def reference_error(calibrate, reference_sd, log):
+    """The relative error (3,) of the level the references ``calibrate`` {name: rho (3,)} set
+    from their reflectances' standard errors ``reference_sd`` {name: sd (3,)}: each its sd over
+    its reflectance, independent, the level taken from them alike (root sum of squares over
+    their number).  Those without one are taken as exact, which a line says."""
+    exact = [n for n in calibrate if n not in reference_sd]
+    if exact:
+        log(f"calibration: {listed([f'{n}={calibrate[n][0]:g}' for n in exact])} taken as "
+            "exact: the intervals leave out the error of its reflectance, which sets every "
+            "fitted reflectance's level (a grey card's maker states it, often 1-3%); give it as "
+            f"--calibrate {exact[0]}={calibrate[exact[0]][0]:g}+-SD (or +-N%) to count it")
+    u = [np.asarray(reference_sd[n], dtype=float) / np.asarray(calibrate[n], dtype=float)
+         for n in calibrate if n in reference_sd]
+    return np.sqrt(np.sum(np.square(u), axis=0)) / len(calibrate) if u else np.zeros(3)
+
+
 def _calibration_spec(raw, calibrate, base_dir):
     """The spec with each calibration material a grey (or RGB) Lambertian of its reflectance."""
     raw = json.loads(json.dumps(raw))
@@ -782,6 +798,7 @@ class IngestOptions:
     gamma: float = None
     exposure: float = None
     calibrate: dict = None
+    reference_sd: dict = None
     colorchecker: str = None
     vignetting: str = "none"
     noise: tuple = None
@@ -910,6 +927,11 @@ def ingest(photo_paths, spec_path, out_dir, *, overwrite=False, progress=True, l
 def check_choices(o):
     """``o`` with calibrate made a dict; SkyfitError for unusable or contradictory choices."""
     o.calibrate = dict(o.calibrate or {})
+    o.reference_sd = dict(o.reference_sd or {})
+    unknown = sorted(set(o.reference_sd) - set(o.calibrate))
+    if unknown:
+        raise SkyfitError(f"a reflectance error is given for {', '.join(unknown)}, which "
+                          "--calibrate does not name; give it as --calibrate NAME=RHO+-SD.")
     if o.noise is not None and not (len(o.noise) == 2 and np.all(np.isfinite(o.noise))
                                     and min(o.noise) >= 0):
         raise SkyfitError(f"--noise {','.join(f'{v:g}' for v in o.noise)}: give the read "
@@ -1148,6 +1170,9 @@ def frame_exposures(frames, patches, noise, o, log):
         # by name, for a fit of the light to recalibrate on (fitting.fit.reference_factor)
         calibration["references"] = {name: [float(v) for v in np.broadcast_to(rho, 3)]
                                      for name, rho in o.calibrate.items()}
+        if o.calibrate:
+            calibration["reference_relative_sd"] = reference_error(
+                o.calibrate, o.reference_sd, log).tolist()
         if patches.response_info is not None:
             calibration["response_fit"] = patches.response_info
         if patches.chart is not None:

@@ -55,7 +55,7 @@ from ..conventions import direction_from_angles
 from ..render.light_cache import POINT_POSITIONS, point_rays
 from ..render.points import lambertian_radiance, load_points_scene, surface_hits
 from ..render.scene_xml import build_scene_xml
-from .ingest import measured_header, spec_for_times
+from .ingest import measured_header, reference_error, spec_for_times
 from .manifest import frame_label
 from .photo_times import _iso, localize, parse_tz
 from .sequence import finish, frame_record, prepare_folder
@@ -564,10 +564,12 @@ def check_radiances(table, scaled=None):
 
 
 def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrate=None,
-                 scale_unknown=False, overwrite=False, log=print):
+                 reference_sd=None, scale_unknown=False, overwrite=False, log=print):
     """Turn an observation table into a sequence folder; returns the manifest dict.  ``tz``:
     zone of naive times; ``site``: (lat, lon[, alt]) over the spec's; ``calibrate``
-    (:func:`reference_scale`) or ``scale_unknown`` (:func:`unknown_scale`) for own units."""
+    (:func:`reference_scale`, with the reflectances' errors ``reference_sd``, as
+    :func:`.ingest.reference_error`) or ``scale_unknown`` (:func:`unknown_scale`) for own
+    units."""
     out = Path(out_dir)
     mine = out / TABLE_FILE
     if mine.exists() and mine.resolve() == Path(table_path).resolve():
@@ -600,6 +602,8 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
     if calibrate:
         scale, calibration = reference_scale(spec, scene[0], table, keep, row_frames, pos, view,
                                              offset, calibrate)
+        calibration["reference_relative_sd"] = reference_error(
+            calibrate, reference_sd or {}, log).tolist()
         log(f"calibration: one unit of {table.path.name} is "
             f"{', '.join(f'{v:.4g}' for v in scale)} W m^-2 sr^-1 (R, G, B), to "
             f"{', '.join(f'{v:.1%}' for v in calibration['scale_relative_sd'])} (standard "
