@@ -1064,3 +1064,46 @@ def test_a_references_reflectance_error_reaches_every_reflectance_interval(day, 
     _ingest(day, tmp_path / "plain", calibrate={"grey_card": (0.18,) * 3}, vignetting="cos4",
             log=logs.append)
     assert any("grey_card=0.18 taken as exact" in m and "+-SD" in m for m in logs), logs
+
+
+def test_an_uncorrected_lens_falloff_is_counted_between_the_card_and_each_region(day, tmp_path,
+                                                                                monkeypatch):
+    """Photographs with a cos^4 falloff ingested with --vignetting none (the default): the card
+    and the sample lie at different distances from the image's centre, so the sample reads off
+    by the falloff between them (here 0.4%: both near the centre of a 30-degree view). The fit
+    counts half of it as an error of every reflectance, in quadrature (the 95% interval reaches
+    a lens with none and one with cos^4's), and says so where it passes VIGNETTING_NOTE; the
+    roughness keeps its interval. By hand: a corner pixel of a 64 x 44 frame of 30 degrees, the
+    card at the centre, reads 1 - 1 / (1 + tan(15)^2 (63^2 + 43^2) / 64^2)^2 = 0.187 low."""
+    from skyfit_mi.fitting import fit_warnings, uncertainty
+    from skyfit_mi.fitting.fit import fit_region
+    from skyfit_mi.fitting.light import LightOptions
+    from skyfit_mi.physics.camera import SensorModel
+
+    doc = _ingest(day, tmp_path / "seq", calibrate={"grey_card": (0.18,) * 3})
+    cam, cal = doc["camera"], doc["ingest"]["calibration"]
+    assert (cam["width"], cam["height"], cam["fov_deg"]) == (64, 44, 30.0)
+    corner = uncertainty.vignetting_error({**doc, "ingest": {**doc["ingest"], "calibration": {}}},
+                                          np.array([[0, 0]]))
+    t2 = np.tan(np.radians(15)) ** 2 * (63 ** 2 + 43 ** 2) / 64 ** 2
+    np.testing.assert_allclose(corner, 0.5 * (1 - 1 / (1 + t2) ** 2), rtol=1e-12)
+    f = SensorModel.falloff(cam["width"], cam["height"], cam["fov_deg"])
+    px = day["regions"]["sample"]
+    shift = 1 - f[px[:, 1], px[:, 0]].mean() / cal["reference_falloff"]
+    assert abs(np.mean(uncertainty.vignetting_error(doc, px))) == pytest.approx(abs(shift) / 2)
+    monkeypatch.setattr(fit_warnings, "VIGNETTING_NOTE", abs(shift) / 2)
+
+    def fit():
+        return fit_region(tmp_path / "seq", "sample", px, model="colour",
+                          light=LightOptions(sky="spec"), **QUIET)
+    counted = fit()
+    assert any("--vignetting none" in w and f"{abs(shift):.1%}" in w
+               for w in counted["warnings"]), counted["warnings"]
+    monkeypatch.setattr(uncertainty, "vignetting_error", lambda doc, p: np.zeros(len(p)))
+    left_out = fit()
+    assert not any("--vignetting none" in w for w in left_out["warnings"])
+    for k in ("C_r", "C_g", "C_b", "rho_s"):
+        value = counted["parameters"][k]
+        np.testing.assert_allclose(counted["calibration_error_sd"][k], np.hypot(
+            left_out["calibration_error_sd"][k], abs(shift) / 2 * value), rtol=1e-6)
+    assert counted["intervals"]["sigma_alpha"] == left_out["intervals"]["sigma_alpha"]

@@ -25,6 +25,8 @@ BOUND_PULL = 1e-3
 NOISE_SHARE = 0.25
 #: Variance widening by correlated channels (:func:`~.uncertainty.channel_factors`) warned of.
 CHANNEL_NOTE = 1.1
+#: An uncorrected cos^4 falloff between the reference and a region warned of above this.
+VIGNETTING_NOTE = 0.01
 
 
 def beyond_upper_bound(s, fit):
@@ -67,6 +69,15 @@ def fit_warnings(s, fit):
         warnings.append(s.doc["ingest"]["scale"]["meaning"])
     warnings += sky_warnings(s, fit)
     warnings += pose_warnings(s, fit)
+    falloff = 2 * abs(float(np.mean(unc.vignetting_error(s.doc, s.obs.pixels)))) \
+        if s.obs.rays is None else 0.0
+    if falloff > VIGNETTING_NOTE:
+        warnings.append(
+            "the photographs' lens falloff was not corrected (ingest --vignetting none): this "
+            f"region lies where a cos^4 falloff differs by {falloff:.1%} from the reference's "
+            "place (or the image's centre), which every reflectance's interval counts as an "
+            f"error of {falloff / 2:.1%} (1 sd); ingest with --vignetting cos4, or a flat field "
+            "of this lens (--vignetting FLAT), to correct it.")
     led = [p for p, big in zip(names, doubles_interval(fit, fit.matrix_sd)) if big]
     if led:
         warnings.append(f"{', '.join(led)}: {matrix_note(s)}; it, more than the "

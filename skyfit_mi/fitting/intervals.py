@@ -164,12 +164,15 @@ def calibration_sd(s, J, problem, usable, theta, curvature_inverse):
     them, carried by :func:`~.uncertainty.shared_error_sd` (frames erring apart bend the day's
     curve); without a reference, the errors of the EXIF labels that scale the given exposure
     (:func:`~skyfit_mi.pipeline.photos.exif_scaled`), each on every channel of the frames with
-    that label. A table's is :func:`~.uncertainty.calibration_sd`. Each adds the references'
-    reflectances' error (:func:`~.uncertainty.reference_sd`)."""
+    that label. A table's is :func:`~.uncertainty.calibration_sd`. Each adds the errors of the
+    level every frame shares (:func:`~.uncertainty.shared_level_sd`: the references'
+    reflectances', and an uncorrected falloff's between the references and the region)."""
     cal = (s.doc.get("ingest") or {}).get("calibration") or {}
     loading = None if s.obs.rays is not None else exif_scaled(s.doc, s.obs.frames)
+    vignetting = abs(float(np.mean(unc.vignetting_error(s.doc, s.obs.pixels)))) \
+        if s.obs.rays is None else 0.0
     if loading is None and (s.obs.rays is not None or not cal.get("scale_relative_sd")):
-        return unc.calibration_sd(s.doc, s.names, theta)
+        return unc.calibration_sd(s.doc, s.names, theta, vignetting)
     Js = J * problem.value_scale(theta)[..., None]          # per relative error of a value
     sigma = problem.obs.sigma
     if loading is not None:                       # every channel of a label's frames alike
@@ -184,7 +187,7 @@ def calibration_sd(s, J, problem, usable, theta, curvature_inverse):
         Js, usable, sigma = (a.reshape((P * T, 1) + a.shape[2:]) for a in (Js, usable, sigma))
         shared = np.asarray(cal["scale_relative_sd"], dtype=float)[None, :]
         sd = unc.shared_error_sd(Js, usable, sigma, shared, np.eye(3), curvature_inverse)
-    return np.hypot(sd, unc.reference_sd(s.doc, s.names, theta))
+    return np.hypot(sd, unc.shared_level_sd(s.doc, s.names, theta, vignetting))
 
 
 def frame_calibration_sd(s):

@@ -28,7 +28,8 @@ from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, grid_chi2, grid_chi2_device,
                                     linear_curvature, linear_observations, near_saturation)
 from .sky_fit import LEVEL_SCALED, light_level_sd, skies_at_level
-from .uncertainty import Z, calibration_sd, colour_matrix_sd, widen_relative
+from .uncertainty import (Z, calibration_sd, colour_matrix_sd, vignetting_error,
+                          widen_relative)
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
 #: fit's, so that a chunk fits in memory.
@@ -139,7 +140,10 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     material = np.broadcast_to(np.asarray(materials, dtype=object), (len(pixels),))[
         np.unique(groups, return_index=True)[1]]
     region_sd, sky_span = _region_errors(light, material, names, theta)
-    spread = Z["95"] * np.sqrt(sd ** 2 + calibration_sd(doc, names, theta) ** 2
+    count = np.bincount(groups, minlength=n)
+    vignetting = np.abs(np.bincount(groups, weights=vignetting_error(doc, pixels), minlength=n)
+                        / np.maximum(count, 1))
+    spread = Z["95"] * np.sqrt(sd ** 2 + calibration_sd(doc, names, theta, vignetting) ** 2
                                + colour_matrix_sd(doc, names, theta) ** 2 + region_sd ** 2)
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)

@@ -564,6 +564,9 @@ def _widths_include(doc, skies, names, light=None):
         out.append("the error of the EXIF labels that scale the given exposure, each pixel its "
                    "region's share (calibration_error_sd of its fit; a reflectance's in "
                    "proportion to its value)")
+    if (ingest.get("options") or {}).get("vignetting") == "none" and "photos" in ingest:
+        out.append("the uncorrected lens falloff's error (ingest --vignetting none): half the "
+                   "cos^4 falloff between the reference's place and each pixel's")
     if any(pose_sd((doc.get("camera") or {}).get("pose_sd_deg")).values()):
         out.append("not the camera pose's uncertainty (camera.pose_sd_deg), which region fits "
                    "take in")

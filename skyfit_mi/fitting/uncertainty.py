@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import chdtrc, ndtr, ndtri
 
+from ..physics.camera import SensorModel
 from ..physics.ward import METAL_THRESHOLD, colour_rule_twin
 
 LEVELS = {"68": 1.0, "95": 3.841458820694124}
@@ -141,12 +142,13 @@ def widen_relative(value, interval, extra, lower, upper):
 
 
 def _level_sd(u, names, theta):
-    """The standard error per parameter (n,) or (G, n) from a relative error ``u`` (3,) of the
-    values per channel: C_c by its channel's, R and rho_s by the rms, roughness none."""
+    """The standard error per parameter (n,) or (G, n) from a relative error ``u`` (3,) or
+    (G, 3) of the values per channel: C_c by its channel's, R and rho_s by the rms, roughness
+    none."""
     u = np.asarray(u, dtype=float)
-    grey = float(np.sqrt(np.mean(u ** 2)))
-    rel = {"C_r": u[0], "C_g": u[1], "C_b": u[2], "R": grey, "rho_s": grey}
-    return np.array([rel.get(p, 0.0) for p in names]) * np.abs(theta)
+    grey = np.sqrt(np.mean(u ** 2, axis=-1))
+    rel = {"C_r": u[..., 0], "C_g": u[..., 1], "C_b": u[..., 2], "R": grey, "rho_s": grey}
+    return np.stack([rel.get(p, np.zeros_like(grey)) for p in names], -1) * np.abs(theta)
 
 
 def reference_sd(doc, names, theta):
@@ -158,13 +160,41 @@ def reference_sd(doc, names, theta):
     return _level_sd(u, names, theta) if u else np.zeros(theta.shape)
 
 
-def calibration_sd(doc, names, theta):
+def vignetting_error(doc, pixels):
+    """The signed relative error (P,) of the exposure carried from the references' place (else
+    the image's centre, where a given exposure holds) to each of ``pixels`` (P, 2) (x, y) of
+    photographs whose lens falloff was not corrected (``ingest --vignetting none``): half the
+    cos^4 falloff (thesis eq. 5.6) between the two places, so that the 95% interval of a group
+    of pixels (its mean's size) takes in a lens with none (or a camera that corrected it) and
+    one with cos^4's; zeros otherwise."""
+    ingest = doc.get("ingest") or {}
+    pixels = np.asarray(pixels)
+    if (ingest.get("options") or {}).get("vignetting") != "none" or "photos" not in ingest \
+            or pixels.ndim != 2 or pixels.dtype.kind not in "iu":
+        return np.zeros(len(pixels))
+    cam = doc["camera"]
+    f = SensorModel.falloff(cam["width"], cam["height"], cam["fov_deg"])
+    ref = float((ingest.get("calibration") or {}).get("reference_falloff", 1.0))
+    return 0.5 * (1.0 - f[pixels[:, 1], pixels[:, 0]] / ref)
+
+
+def shared_level_sd(doc, names, theta, vignetting=0.0):
+    """The standard error per parameter (n,) or (G, n) from errors of the level every frame
+    shares: the references' reflectances' (:func:`reference_sd`) and the uncorrected falloff's
+    relative error ``vignetting`` (a number, or (G,); :func:`vignetting_error`)."""
+    theta = np.asarray(theta, dtype=float)
+    v = np.asarray(vignetting, dtype=float)[..., None] * np.ones(3)
+    return np.hypot(reference_sd(doc, names, theta), _level_sd(v, names, theta))
+
+
+def calibration_sd(doc, names, theta, vignetting=0.0):
     """The standard error per parameter (n,) or (G, n) from the calibration's per-channel
-    relative error (:func:`_level_sd`) and the references' reflectances' (:func:`reference_sd`)."""
+    relative error (:func:`_level_sd`) and the errors of the level every frame shares
+    (:func:`shared_level_sd`)."""
     theta = np.asarray(theta, dtype=float)
     u = ((doc.get("ingest") or {}).get("calibration") or {}).get("scale_relative_sd")
     scale = _level_sd(u, names, theta) if u else np.zeros(theta.shape)
-    return np.hypot(scale, reference_sd(doc, names, theta))
+    return np.hypot(scale, shared_level_sd(doc, names, theta, vignetting))
 
 
 def colour_matrix_sd(doc, names, theta):

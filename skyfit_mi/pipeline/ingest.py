@@ -1173,6 +1173,12 @@ def frame_exposures(frames, patches, noise, o, log):
         if o.calibrate:
             calibration["reference_relative_sd"] = reference_error(
                 o.calibrate, o.reference_sd, log).tolist()
+        # the cos^4 falloff where the references lie, from which an uncorrected one's error
+        # (--vignetting none) to each region is carried (fitting.uncertainty.vignetting_error)
+        h, w = frames.size
+        at = np.argwhere(patches.mask)[np.isin(patches.patch, _neutral_labels(o.calibrate))]
+        calibration["reference_falloff"] = float(np.mean(SensorModel.falloff(
+            w, h, frames.spec.camera["fov_deg"])[at[:, 0], at[:, 1]]))
         if patches.response_info is not None:
             calibration["response_fit"] = patches.response_info
         if patches.chart is not None:
