@@ -452,7 +452,7 @@ def _camera(args):
     print(f"camera from {len(err)} points: azimuth {p['azimuth_deg'][0]:.2f} +- "
           f"{p['azimuth_deg'][1]:.2f} deg, {p['angle_deg'][0]:.2f} +- {p['angle_deg'][1]:.2f} "
           f"deg from vertical, {p['distance_m'][0]:.3f} +- {p['distance_m'][1]:.3f} m from "
-          f"[{', '.join(f'{v:g}' for v in est.target)}], fov {fov} (1 sigma, marks "
+          f"[{', '.join(f'{v + 0.0:.4g}' for v in np.round(est.target, 6))}], fov {fov} (1 sigma, marks "
           f"{est.sigma_px:.2g} px); "
           f"reprojection rms {np.sqrt(np.mean(err ** 2)):.2f} px, max {err.max():.2f} px "
           f"({est.points.names[int(np.argmax(err))]}); wrote {toml} and {report}")
@@ -850,10 +850,31 @@ _AGAIN = {_render: "the finished frames are kept: run the same command again to 
           None: "nothing unfinished was kept as done: run the same command again to start over"}
 
 
+#: A comma list of numbers starting with a minus ('-0.1,0.02', a southern latitude), which
+#: argparse would take for an option's name.
+_NEGATIVE_LIST = re.compile(r"^-[\d.][\deE.+-]*(,[\deE.+-]+)+$")
+
+
+def _join_negative_lists(parser, argv):
+    """``argv`` with each option of comma-separated numbers (type :func:`_numbers`) joined to
+    a value starting with a minus (``--site -33.9,151.2`` as ``--site=-33.9,151.2``)."""
+    takes = {o for sub in parser._subparsers._group_actions for p in sub.choices.values()
+             for a in p._actions if a.type is _numbers for o in a.option_strings}
+    out = []
+    for a in argv:
+        if out and out[-1] in takes and _NEGATIVE_LIST.match(a):
+            out[-1] = f"{out[-1]}={a}"
+        else:
+            out.append(a)
+    return out
+
+
 def main(argv=None):
     """Run ``skyfit`` with ``argv``; returns the exit code."""
+    parser = build_parser()
     try:
-        args = build_parser().parse_args(argv)
+        args = parser.parse_args(_join_negative_lists(
+            parser, sys.argv[1:] if argv is None else list(argv)))
     except SystemExit as exc:              # --help, --version, or a usage error (already printed)
         return exc.code
     try:

@@ -44,7 +44,8 @@ def marks(world, seed, sd=0.5, **kw):
 
 def placement_errors(est):
     p = est.placement()
-    truth = {"azimuth_deg": AZ, "angle_deg": ANGLE, "distance_m": DIST, "fov_deg": FOV}
+    truth = {"azimuth_deg": AZ, "angle_deg": ANGLE, "distance_m": DIST, "fov_deg": FOV,
+             "roll_deg": 0.0}                     # look_at's camera: its up in the vertical
     return {k: (p[k][0] - v, p[k][1]) for k, v in truth.items()}
 
 
@@ -80,13 +81,14 @@ def test_points_off_the_board_plane_reach_a_tenth_of_a_degree_at_one_sigma():
                          ids=["board, fov given", "posts, fov given", "posts, fov fitted"])
 def test_uncertainty_covers_the_truth_at_its_stated_level(world, fov):
     """Over 50 seeds, the truth lies within 1.96 stated sigma about 95% of the time: 44 or more
-    (a binomial(50, 0.95) falls below 44 with probability 1.2%)."""
-    hits = np.zeros(4, int)
+    (a binomial(50, 0.95) falls below 44 with probability 1.2%); the roll's too, which the
+    written pose_sd_deg carries."""
+    hits = np.zeros(5, int)
     for seed in range(50):
         err = placement_errors(estimate_camera(marks(world, seed), W, H, fov,
                                                [K1] if fov else None, target=[0, 0, 0]))
         hits += [abs(e) <= 1.96 * s for e, s in err.values()] if fov is None else \
-            [abs(e) <= 1.96 * s for k, (e, s) in err.items() if k != "fov_deg"] + [1]
+            [abs(e) <= 1.96 * s if k != "fov_deg" else 1 for k, (e, s) in err.items()]
     assert np.all(hits >= 44), hits
 
 
@@ -102,6 +104,8 @@ def test_written_camera_reads_back_through_the_spec(tmp_path):
     assert np.allclose(camera_matrix(cam), est.to_world(), atol=1e-12)
     assert cam["distortion"] == [K1, 0.0] and cam["fov_deg"] == pytest.approx(FOV)
     assert report.exists() and "azimuth" in toml.read_text()
+    roll = est.placement()["roll_deg"][1]
+    assert roll > 0 and cam["pose_sd_deg"]["roll"] == pytest.approx(roll)
 
 
 def test_spec_refuses_a_distortion_that_folds_the_image():
@@ -186,8 +190,11 @@ MISLABELLED[1] = MISLABELLED[3]               # p1 marked on p3's corner
      [], "lie on one line in the scene"),
     (*_behind(), [], "p6 behind it"),
     (BOARD6, MISLABELLED, [], "point 'p1' is the likeliest mislabelled"),
+    # a plane's mirror image fits a camera below it as well as the truth from above
+    (BOARD6, project(BOARD6) * [1, -1] + [0, H - 1], [], "below the marked points' plane"),
+    (BOARD6[:, [1, 0, 2]], project(BOARD6), [], "below the marked points' plane"),
 ], ids=["off the image", "three points", "five, fov free", "collinear", "behind",
-        "mislabelled"])
+        "mislabelled", "rows counted up", "east and north swapped"])
 def test_bad_inputs_exit_2_and_write_nothing(tmp_path, capsys, world, uv, extra, msg):
     pts = _csv(tmp_path / "pts.csv", world, uv)
     args = ["camera", str(pts), "--width", "640", "--height", "480", "-o",

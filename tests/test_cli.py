@@ -256,3 +256,21 @@ def test_a_damaged_spec_is_refused_with_a_spec_error(changes):
         validate_spec(raw)
     except SpecError as exc:
         assert str(exc) and "\n" not in str(exc)
+
+
+def test_a_comma_list_of_numbers_may_start_with_a_minus():
+    """argparse takes '-0.1,0.02' for an option's name; the options of comma-separated numbers
+    take it as their value (a barrel lens's k1, a southern latitude), and nothing else is
+    joined."""
+    from skyfit_mi.cli import _join_negative_lists, build_parser
+
+    parser = build_parser()
+    argv = ["camera", "pts.csv", "--distortion", "-0.1,0.02", "--target", "-0.3,0,0", "-o",
+            "cam.toml"]
+    args = parser.parse_args(_join_negative_lists(parser, argv))
+    assert args.distortion == [-0.1, 0.02] and args.target == [-0.3, 0.0, 0.0]
+    args = parser.parse_args(_join_negative_lists(
+        parser, ["ingest", "spec.toml", "photos", "--site", "-33.9,151.2", "-o", "seq"]))
+    assert args.site == [-33.9, 151.2] and args.output == "seq"
+    assert _join_negative_lists(parser, ["fit", "seq", "-q", "-o", "-1,2"]) == \
+        ["fit", "seq", "-q", "-o", "-1,2"]

@@ -288,8 +288,8 @@ class CameraEstimate:
 
     def camera_section(self):
         """The spec's [camera] table: origin, a target on the view axis at ``self.target``'s
-        depth, up, fov_deg, width, height, distortion, and the pose's 1-sd in azimuth and angle
-        [deg] (:meth:`placement`), which fits propagate into their intervals."""
+        depth, up, fov_deg, width, height, distortion, and the pose's 1-sd in azimuth, angle and
+        roll [deg] (:meth:`placement`), which fits propagate into their intervals."""
         m = self.to_world()
         depth = float(np.dot(self.target - self.origin, m[:3, 2]))
         p = self.placement()
@@ -298,18 +298,25 @@ class CameraEstimate:
                 "up": m[:3, 1].tolist(), "fov_deg": fov_deg(self.focal, self.width),
                 "width": self.width, "height": self.height,
                 "distortion": [float(v) for v in self.k],
-                "pose_sd_deg": {"azimuth": p["azimuth_deg"][1], "angle": p["angle_deg"][1]}}
+                "pose_sd_deg": {"azimuth": p["azimuth_deg"][1], "angle": p["angle_deg"][1],
+                                "roll": p["roll_deg"][1]}}
 
     def _placement(self, p):
-        """Azimuth, angle from the vertical, fov [deg] and distance [m] at free parameters ``p``."""
+        """Azimuth, angle from the vertical [deg], distance [m], fov and roll [deg] (the image's
+        up turned about the view axis from the world's vertical, counter-clockwise as seen by
+        the camera) at free parameters ``p``."""
         q = dict(zip(self.free, p))
         rvec = np.array([q["r1"], q["r2"], q["r3"]])
-        origin = -cv2.Rodrigues(rvec)[0].T @ np.array([q["t1"], q["t2"], q["t3"]])
+        R = cv2.Rodrigues(rvec)[0]
+        origin = -R.T @ np.array([q["t1"], q["t2"], q["t3"]])
         v = origin - self.target
         dist = np.linalg.norm(v)
+        forward, up = R[2], -R[1]                 # the camera's z and -y in the world
+        level = np.array([0.0, 0.0, 1.0]) - forward[2] * forward
+        roll = np.degrees(np.arctan2(np.dot(np.cross(level, up), forward), np.dot(level, up)))
         return np.array([np.degrees(np.arctan2(v[0], v[1])) % 360.0,
                          np.degrees(np.arccos(np.clip(v[2] / dist, -1.0, 1.0))), dist,
-                         fov_deg(q.get("focal", self.focal), self.width)])
+                         fov_deg(q.get("focal", self.focal), self.width), roll])
 
     def parameters(self):
         """The free parameters' values, in the order of ``free``."""
@@ -319,19 +326,21 @@ class CameraEstimate:
 
     def placement(self):
         """{name: (value, linearised sd)} of ``azimuth_deg``, ``angle_deg`` (from the vertical),
-        ``distance_m`` (from ``target``), ``fov_deg``, and ``k1``/``k2`` when free."""
+        ``distance_m`` (from ``target``), ``fov_deg``, ``roll_deg``, and ``k1``/``k2`` when
+        free."""
         p = self.parameters()
         g0 = self._placement(p)
-        G = np.empty((4, len(p)))
+        G = np.empty((5, len(p)))
         for j in range(len(p)):
             h = 1e-6 * max(1.0, abs(p[j]))
             dp = np.zeros_like(p)
             dp[j] = h
             d = self._placement(p + dp) - self._placement(p - dp)
-            d[0] = (d[0] + 180.0) % 360.0 - 180.0                 # azimuth across north
+            d[[0, 4]] = (d[[0, 4]] + 180.0) % 360.0 - 180.0    # azimuth across north, roll
             G[:, j] = d / (2 * h)
         sd = np.sqrt(np.maximum(np.diag(G @ self.covariance @ G.T), 0.0))
-        out = dict(zip(("azimuth_deg", "angle_deg", "distance_m", "fov_deg"), zip(g0, sd)))
+        out = dict(zip(("azimuth_deg", "angle_deg", "distance_m", "fov_deg", "roll_deg"),
+                       zip(g0, sd)))
         for i, name in enumerate(self.free):
             if name in ("k1", "k2"):
                 out[name] = (float(p[i]), float(np.sqrt(self.covariance[i, i])))
@@ -399,6 +408,8 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
     if behind:
         raise SkyfitError(f"the best camera has {', '.join(behind)} behind it; check those "
                           "points' scene coordinates (signs, east/north order) and marks.")
+    if coplanar:
+        _check_side(points, best)
 
     uv, jac = _project(points.world, best, width, height)
     residuals = points.image - uv
@@ -440,6 +451,27 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
                           f"deg (1 sd; a fit takes at most {POSE_SD_MAX:g}): mark more points, "
                           "points off the board's plane, or mark them more precisely.")
     return est
+
+
+#: A plane of marks whose normal lies within this angle of the vertical [degrees] is seen from
+#: above: a camera below it sees the plane's mirror image.
+FACING_DEG = 60.0
+
+
+def _check_side(points, best):
+    """Refuse a camera below a plane of marks that faces up (the ground, a board on it): the
+    mirror image of the marks (image rows counted up, x and y or east and north swapped) fits a
+    camera seen from the plane's other side as well as the true one fits from above."""
+    centre = points.world.mean(axis=0)
+    normal = np.linalg.svd(points.world - centre)[2][-1]
+    normal = normal if normal[2] >= 0 else -normal
+    origin = -cv2.Rodrigues(best.rvec)[0].T @ best.tvec
+    if normal[2] > np.cos(np.radians(FACING_DEG)) and np.dot(origin - centre, normal) < 0:
+        raise SkyfitError(
+            f"the camera comes out below the marked points' plane (at height {origin[2]:.2f} m, "
+            f"the points at {centre[2]:.2f} m), seeing it from behind: the marks are a mirror "
+            "image of the scene's. Check that y_px counts rows down from the image's top, that "
+            "x_px is the column, and that X, Y, Z are east, north, up.")
 
 
 def _check_misfit(points, best, dof, marking_px, width, height, focal, k, free_k, coplanar):
@@ -488,7 +520,7 @@ def camera_toml(estimate, source=""):
              f"# seen from azimuth {p['azimuth_deg'][0]:.3f} +- {p['azimuth_deg'][1]:.3f} deg, "
              f"{p['angle_deg'][0]:.3f} +- {p['angle_deg'][1]:.3f} deg from the vertical, "
              f"{p['distance_m'][0]:.4f} +- {p['distance_m'][1]:.4f} m from "
-             f"[{t[0]:g}, {t[1]:g}, {t[2]:g}]; fov {p['fov_deg'][0]:.3f} +- "
+             f"[{', '.join(f'{v + 0.0:.4g}' for v in np.round(t, 6))}]; fov {p['fov_deg'][0]:.3f} +- "
              f"{p['fov_deg'][1]:.3f} deg (1 sigma)",
              "# distortion: [k1, k2] of OpenCV's radial model; the renderer is a pinhole, "
              "ingest undoes it; pose_sd_deg: the 1-sigma above, which fits carry into their "
