@@ -199,11 +199,13 @@ def _poses(points, focal, k, coplanar, width, height):
     return sorted(out, key=lambda f: f.ssr)
 
 
-def _calibrate(points, start, free_k, width, height):
-    """``start`` refined by ``calibrateCamera`` (focal length and first ``free_k`` k free)."""
+def _calibrate(points, start, free_k, width, height, fix_focal=False):
+    """``start`` refined by ``calibrateCamera`` (the focal length unless ``fix_focal``, and the
+    first ``free_k`` k, free)."""
     flags = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT
              | cv2.CALIB_FIX_ASPECT_RATIO | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3
-             | (cv2.CALIB_FIX_K1 if free_k < 1 else 0) | (cv2.CALIB_FIX_K2 if free_k < 2 else 0))
+             | (cv2.CALIB_FIX_K1 if free_k < 1 else 0) | (cv2.CALIB_FIX_K2 if free_k < 2 else 0)
+             | (cv2.CALIB_FIX_FOCAL_LENGTH if fix_focal else 0))
     crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-14)
     _, K, dist, rvecs, tvecs = cv2.calibrateCamera(
         [points.world.astype(np.float32)], [points.image.astype(np.float32)], (width, height),
@@ -232,9 +234,9 @@ def _solve(points, width, height, focal, k, free_k, coplanar):
         raise SkyfitError("OpenCV found no camera for these points; check that each mark and "
                           "its scene position belong to the same point.")
     best = min(fits, key=lambda f: f.ssr)
-    if focal is None:
+    if focal is None or free_k:
         try:
-            best = min(best, _calibrate(points, best, free_k, width, height),
+            best = min(best, _calibrate(points, best, free_k, width, height, focal is not None),
                        key=lambda f: f.ssr)
         except cv2.error as exc:
             raise SkyfitError(f"OpenCV's calibrateCamera failed on these points ({exc.err}); "
@@ -399,10 +401,13 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
     k = np.r_[np.asarray(distortion if distortion is not None else [], float), 0.0, 0.0][:2]
     reach = np.max(np.hypot(*(points.image - [(width - 1) / 2, (height - 1) / 2]).T)) \
         / np.hypot(width, height) * 2
-    free_k = 0 if (fov is not None or distortion is not None or reach < K1_REACH) else \
+    reach_k = 0 if reach < K1_REACH else \
         (2 if len(points.names) >= K2_POINTS and reach >= K2_REACH else 1)
+    free_k = 0 if distortion is not None else reach_k
     focal = None if fov is None else focal_px(fov, width)
     best, other = _solve(points, width, height, focal, k, free_k, coplanar)
+    if distortion is not None and reach_k:
+        _check_given_distortion(points, width, height, focal, best, marking_px, coplanar)
 
     behind = [n for n, z in zip(points.names, _depths(points.world, best)) if z <= 0]
     if behind:
@@ -451,6 +456,21 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
                           f"deg (1 sd; a fit takes at most {POSE_SD_MAX:g}): mark more points, "
                           "points off the board's plane, or mark them more precisely.")
     return est
+
+
+def _check_given_distortion(points, width, height, focal, given, marking_px, coplanar):
+    """Refuse a given distortion the marks reject: with k1 fitted too, chi-square falls by more
+    than :data:`AMBIGUOUS_CHI2` (a likelihood-ratio test of one parameter, at the larger of the
+    marking accuracy and the free fit's residuals)."""
+    free, _ = _solve(points, width, height, focal, given.k, 1, coplanar)
+    dof = 2 * len(points.names) - 7 - (focal is None)
+    sigma2 = max(marking_px ** 2, free.ssr / dof if dof > 0 else 0.0)
+    if (given.ssr - free.ssr) / sigma2 > AMBIGUOUS_CHI2:
+        raise SkyfitError(
+            f"--distortion k1 = {given.k[0]:g} disagrees with the marks, which put k1 at "
+            f"{free.k[0]:.3g} (reprojection rms {np.sqrt(given.ssr / len(points.names)):.2f} "
+            f"px against {np.sqrt(free.ssr / len(points.names)):.2f}): check its value and sign "
+            "(barrel distortion is negative), or leave --distortion out to fit it.")
 
 
 #: A plane of marks whose normal lies within this angle of the vertical [degrees] is seen from
