@@ -449,7 +449,15 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
                                               else target, float),
                          None if other is None else float(np.sqrt(other.ssr / len(uv))))
     section = est.camera_section()
-    check_distortion(section["distortion"], section["fov_deg"], int(width), int(height))
+    try:
+        check_distortion(section["distortion"], section["fov_deg"], int(width), int(height))
+    except SkyfitError as exc:
+        if "k1" not in free:
+            raise
+        raise SkyfitError(f"the fitted {exc} The lens is beyond the two-term radial model the "
+                          "marks fit (a wide-angle lens's corners, or a fisheye, which skyfit "
+                          "does not take): give --fov-deg and --distortion from the lens's "
+                          "profile, or mark points nearer the image's centre.") from None
     sd = section["pose_sd_deg"]
     if max(sd.values()) > POSE_SD_MAX:
         raise SkyfitError(f"the points fix the camera's direction only to +-{max(sd.values()):.1f} "
@@ -516,10 +524,13 @@ def _check_misfit(points, best, dof, marking_px, width, height, focal, k, free_k
                 gains.append(-np.inf)
         worst = int(np.argmax(gains))
     rms = np.sqrt(np.mean(err ** 2))
+    lens = ("the --fov-deg given (the horizontal field of view, the long side's only for a "
+            "landscape photo) or the lens's distortion may be wrong, " if focal is not None
+            else "the lens may be beyond the two-term radial model (a fisheye), ")
     raise SkyfitError(f"the marks miss the best camera by {rms:.2f} px rms, far beyond the "
                       f"marking accuracy {marking_px:g} px; point {points.names[worst]!r} is the "
                       f"likeliest mislabelled ({err[worst]:.1f} px off): check its mark and scene "
-                      "coordinates (or give --marking-px as you marked).")
+                      f"coordinates; else {lens}or give --marking-px as you marked.")
 
 
 def camera_toml(estimate, source=""):
