@@ -64,9 +64,12 @@ def _int_in(lo, hi=None):
 
 def _numbers(text):
     try:
-        return [float(v) for v in text.split(",")]
+        values = [float(v) for v in text.split(",")]
+        if not all(abs(v) < float("inf") for v in values):          # NaN fails too
+            raise ValueError
+        return values
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not comma-separated numbers "
+        raise argparse.ArgumentTypeError(f"{text!r} is not comma-separated finite numbers "
                                          "(e.g. 0.5,0.1)") from None
 
 
