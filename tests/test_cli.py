@@ -67,7 +67,7 @@ def test_version_help_and_description(capsys):
     (["fit", "{day}", "--region", "disc=rect:1,1", "--model", "2"], ["--region", "rect:x0,y0,x1,y1"]),
     (["fit", "{day}", "--region", "disc=pixels:"], ["--region", "at least one pixel"]),
     (["fit", "{day}", "--region", "../x=rect:1,1,2,2"], ["--region", "letters, digits"]),
-    (["fit", "{day}", "--all", "--start", "a,b"], ["--start", "not comma-separated numbers"]),
+    (["fit", "{day}", "--all", "--start", "a,b"], ["--start", "not comma-separated finite numbers"]),
     (["fit", "{day}", "--all", "--pose-sd-deg", "-1"],
      ["--pose-sd-deg", "pose_sd_deg azimuth = -1 deg is outside the valid range [0, 10]"]),
     (["fit", "{day}", "--all", "--pose-sd-deg", "x"], ["--pose-sd-deg", "not a number"]),
