@@ -81,19 +81,20 @@ def photograph_sky(sky, time, folder, *, size=128, gain=1.0, noise=0.005, seed=0
 
 
 def photograph_card(sky, time, folder, *, reflectance=0.18, size=32, gain=1.0, noise=0.005,
-                    seed=0, shade=False):
-    """A horizontal Lambertian grey card lit by ``sky`` (by its sky alone, half of it, where in
-    ``shade``), filling a ``size``-pixel JPEG exposed to put it near a third of full scale, in
-    ``folder``; returns its path."""
+                    seed=0, shade=False, shaded_columns=0, shade_share=0.5):
+    """A horizontal Lambertian grey card lit by ``sky`` (by ``shade_share`` of its sky alone
+    where in ``shade``, or in its first ``shaded_columns``), filling a ``size``-pixel JPEG exposed to put
+    it near a third of full scale, in ``folder``; returns its path."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    lit = 0.5 * sky.sky_horizontal_irradiance() if shade else sky.horizontal_irradiance()
-    radiance = reflectance / np.pi * lit
+    shaded = reflectance / np.pi * shade_share * sky.sky_horizontal_irradiance()
+    lit = shaded if shade else reflectance / np.pi * sky.horizontal_irradiance()
+    radiance = np.array(np.broadcast_to(lit, (size, size, 3)))
+    radiance[:, :shaded_columns] = shaded
     h = 0.35 / (gain * float(radiance.max()) * EFFICACY_CLEAR / SATURATION_LUMINANCE)
     exposure_s = float(h * SIM_F_NUMBER ** 2 / SIM_ISO)
     path = folder / f"card_{time:%H%M%S}.jpg"
-    _jpeg(path, np.broadcast_to(radiance, (size, size, 3)), exposure_s, time, gain, noise,
-          np.random.default_rng(seed))
+    _jpeg(path, radiance, exposure_s, time, gain, noise, np.random.default_rng(seed))
     return path
 
 

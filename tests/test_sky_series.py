@@ -137,7 +137,8 @@ def test_bad_series_input_gets_one_line_and_nothing_written(tmp_path, capsys):
     from skyfit_mi.pipeline.spec import SpecError, _series_record
 
     with pytest.raises(SpecError, match="no sky map within"):
-        _series_record({"file": f"sky/{SERIES_NAME}"}, tmp_path, T0 + dt.timedelta(hours=2))
+        _series_record({"file": f"sky/{SERIES_NAME}"}, tmp_path, T0 + dt.timedelta(hours=2),
+                       45.0, 120.0)
 
 
 def test_a_day_fitted_under_its_photographed_sky_holds_the_truth_near_the_known_lights_width(
@@ -298,7 +299,8 @@ def test_a_bracket_within_one_second_a_shaded_card_and_a_scale(tmp_path):
     """Shots of one bracket that share their EXIF second are one bracket; a card in shade is
     refused in one line with nothing written; a spec's scale scales the card's irradiance as it
     scales the map."""
-    from skyfit_mi.pipeline.spec import _series_record
+    from skyfit_mi.conventions import direction_from_angles
+    from skyfit_mi.pipeline.spec import SpecError, _series_record
 
     sky = cie_sky("clear", 45.0, 120.0)
     photograph_sky(sky, T0, tmp_path / "shots", spacing_s=0)
@@ -307,12 +309,38 @@ def test_a_bracket_within_one_second_a_shaded_card_and_a_scale(tmp_path):
         sky_series([tmp_path / "shots"], tmp_path / "sky", log=lambda *a: None,
                    card=CardOptions((str(tmp_path / "shade"),), CARD_BOX))
     assert not (tmp_path / "sky").exists()
+    photograph_card(sky, T0, tmp_path / "part", shaded_columns=12)     # half the box shaded
+    with pytest.raises(SkyfitError, match="inside --card-box vary by"):
+        sky_series([tmp_path / "shots"], tmp_path / "sky", log=lambda *a: None,
+                   card=CardOptions((str(tmp_path / "part"),), CARD_BOX))
+    with pytest.raises(SkyfitError, match="both as a sky shot and as a card shot"):
+        sky_series([tmp_path / "shots"], tmp_path / "sky", log=lambda *a: None,
+                   card=CardOptions((str(tmp_path / "shots"),), CARD_BOX))
+    assert not (tmp_path / "sky").exists()
+    # the sun behind a cloud: the card reads the sky's own irradiance, within its noise
+    photograph_card(sky, T0, tmp_path / "cloud", shade=True, shade_share=0.96)
+    logs = []
+    hidden = sky_series([tmp_path / "shots"], tmp_path / "hidden", log=logs.append,
+                        card=CardOptions((str(tmp_path / "cloud"),), CARD_BOX))["maps"][0]
+    assert hidden["global_horizontal_W_m2"] == hidden["map_horizontal_W_m2"]
+    assert any("behind cloud" in m for m in logs), logs
     photograph_card(sky, T0, tmp_path / "card")
     doc = series(tmp_path, overwrite=True)
     assert len(doc["maps"]) == 1 and len(doc["maps"][0]["shots"]) == 4
     rec = {"file": f"sky/{SERIES_NAME}"}
-    one, half = (_series_record({**rec, **k}, tmp_path, T0) for k in ({}, {"scale": 0.5}))
+    one, half = (_series_record({**rec, **k}, tmp_path, T0, 45.0, 120.0)
+                 for k in ({}, {"scale": 0.5}))
     assert half["global_horizontal_W_m2"] == pytest.approx(0.5 * one["global_horizontal_W_m2"])
+    # the clipped sun where the sun is: a fisheye's north given wrong (or a mirrored image, a
+    # clock off) is refused, with the rotation that would put the sun in place
+    centre = doc["maps"][0]["clipped_centre_deg"]
+    assert np.degrees(np.arccos(np.clip(
+        direction_from_angles(*np.radians(centre)) @ direction_from_angles(
+            *np.radians([45.0, 120.0])), -1, 1))) < 1.0, centre
+    with pytest.raises(SpecError, match=r"from the sun's position.*north_rotation_deg = -?0\.\d would put"):
+        _series_record({**rec, "north_rotation_deg": 30.0}, tmp_path, T0, 45.0, 120.0)
+    with pytest.raises(SpecError, match=r"not mirrored"):              # east and west swapped
+        _series_record(rec, tmp_path, T0, 45.0, 240.0)
 
 
 def test_shots_that_disagree_with_their_stated_response_are_warned():

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..conventions import direction_from_angles
+from ..conventions import angles_from_direction, direction_from_angles
 from ..errors import OutputError, SkyfitError
 from ..files import check_dir, ensure_dir, write_json
 from ..physics.camera import CLIP_FRACTION, SensorModel, clipped
@@ -65,6 +65,9 @@ CARD_MAX_GAP_S = 300.0
 CARD_SD = 0.02
 #: The sun's share of the card's irradiance below which its uncertainty stops growing.
 SUN_SHARE_FLOOR = 0.05
+#: Largest 10-90% range of a card box's luminance over its median: an evenly lit card's varies
+#: by its noise and texture (a few per cent), a box reaching shade or off the card by far more.
+CARD_UNIFORMITY = 0.1
 #: Pixels usable in two shots at least, for their agreement to be measured.
 AGREEMENT_PIXELS = 20
 #: Largest departure of two shots' agreement from 1 before the series warns.
@@ -136,6 +139,21 @@ def _check_box(box, photo):
                           "X0,Y0,X1,Y1 within the image.")
 
 
+def _check_uniform(path, linear, clipped):
+    """SkyfitError where a card box's unclipped pixels vary in luminance by over
+    :data:`CARD_UNIFORMITY` (their 10-90% range over their median): part of it in shade or off
+    the card."""
+    lum = (linear @ SRGB_LUMINANCE)[~clipped.any(axis=-1)]
+    if lum.size < 4:
+        return
+    lo, mid, hi = np.percentile(lum, [10, 50, 90])
+    if mid > 0 and (hi - lo) / mid > CARD_UNIFORMITY:
+        raise SkyfitError(f"{path.name}: the pixels inside --card-box vary by "
+                          f"{100 * (hi - lo) / mid:.0f}% (their 10-90% range over the median): "
+                          "part of the box is in shade, off the card or on a highlight; draw "
+                          "it inside the card's evenly lit part.")
+
+
 def read_shots(items, tz=None, times_csv=None, flat=None, box=None):
     """The :class:`Shot` of every photograph in ``items`` in time order (EXIF or ``times_csv``
     times).  Sky shots are flat-fielded by ``flat`` and binned to :data:`MAP_PIXELS`; card shots
@@ -152,6 +170,7 @@ def read_shots(items, tz=None, times_csv=None, flat=None, box=None):
         if box is not None:
             _check_box(box, photo)
             x0, y0, x1, y1 = box
+            _check_uniform(path, linear[y0:y1, x0:x1], clipped[y0:y1, x0:x1])
             linear = linear[y0:y1, x0:x1].mean(axis=(0, 1), keepdims=True)
             clipped = clipped[y0:y1, x0:x1].any(keepdims=True)
             floor = linear.max(axis=2) < FLOOR_FRACTION
@@ -237,19 +256,22 @@ def fisheye_directions(height, width, north_rotation_deg=0.0):
 
 def clipped_extent(clipped, merged):
     """(angle [deg] from the clipped pixels' centre to the farthest within
-    :data:`SUN_CLIP_MAX_DEG`, count of clipped pixels beyond) of a fisheye map; (0, 0) if none."""
+    :data:`SUN_CLIP_MAX_DEG`, count of clipped pixels beyond, the centre's [zenith, azimuth]
+    [deg] in the image's frame (its top at azimuth 0)) of a fisheye map; (0, 0, None) if none."""
     if not clipped.any():
-        return 0.0, 0
+        return 0.0, 0, None
     d, inside = fisheye_directions(*clipped.shape)
     c = clipped & inside
     if not c.any():
-        return 0.0, 0
+        return 0.0, 0, None
     w = merged[c] @ SRGB_LUMINANCE
     centre = (d[c] * np.maximum(w, 1e-30)[:, None]).sum(0)
     centre /= np.linalg.norm(centre)
     angle = np.degrees(np.arccos(np.clip(d[c] @ centre, -1.0, 1.0)))
     near = angle <= SUN_CLIP_MAX_DEG
-    return float(angle[near].max()) if near.any() else 0.0, int((~near).sum())
+    zenith, azimuth = np.degrees(angles_from_direction(centre))
+    return (float(angle[near].max()) if near.any() else 0.0, int((~near).sum()),
+            [round(float(zenith), 3), round(float(azimuth), 3)])
 
 
 def map_irradiance(merged, clipped):
@@ -324,15 +346,20 @@ def _check_options(card, gap_s):
         raise SkyfitError(f"--card-max-gap-s {card.max_gap_s:g} must lie in (0, 86400] seconds.")
 
 
-def _card_entry(readings, t, image, clipped, card, name):
+def _card_entry(readings, t, image, clipped, card, name, log):
     """The card's fields of a map's entry: its global horizontal irradiance, the map's own and
-    the sun's sd; SkyfitError where the card saw less than the sky alone gives (in shade)."""
+    the sun's sd.  A card reading the sky's own irradiance within 3 of its sds saw no sun (behind
+    cloud: no disc, said); SkyfitError where it saw clearly less (in shade)."""
     ghi, gap = _card_at(readings, t, card.max_gap_s)
     e_map = map_irradiance(image, clipped)
-    if ghi <= e_map:
+    if ghi <= e_map * (1.0 - 3.0 * card.sd):
         raise SkyfitError(f"{name}: the card's global irradiance ({ghi:.4g}) is below the sky's "
-                          f"own ({e_map:.4g}): the card was in shade, or the sun behind cloud; "
-                          "photograph it in the sun, or give this frame's irradiance instead.")
+                          f"own ({e_map:.4g}) by over 3 of its sds ({card.sd:.0%}): the card "
+                          "was in shade; photograph it in the sun.")
+    if ghi <= e_map:
+        log(f"{name}: the card reads the sky's own irradiance ({ghi:.4g} against {e_map:.4g}, "
+            "within its uncertainty): the sun was behind cloud, so the map has no sun's disc")
+        ghi = e_map
     return {"card_gap_s": gap, "global_horizontal_W_m2": ghi, "map_horizontal_W_m2": e_map,
             "sun_sd": card.sd * ghi / max(ghi - e_map, SUN_SHARE_FLOOR * ghi)}
 
@@ -349,6 +376,12 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
     if old.exists() and not overwrite:
         raise OutputError(f"{str(old)!r} exists; give another -o, or --overwrite to replace the "
                           "series.")
+    if card is not None:
+        both = sorted({p.resolve() for p in list_photos(items)}
+                      & {p.resolve() for p in list_photos(card.photos)})
+        if both:
+            raise SkyfitError(f"{both[0].name}: given both as a sky shot and as a card shot; "
+                              "put the card's shots in a folder of their own (--card).")
     groups = brackets(read_shots(items, tz, times_csv, flat), gap_s)
     readings = None if card is None else card_irradiance(
         read_shots(card.photos, tz, times_csv, box=card.box), card.reflectance)
@@ -365,7 +398,8 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
             name = f"sky_{t:%Y%m%d_%H%M%S}.exr"
             e = {"time": t.isoformat(), "file": name, "shots": [s.path.name for s in group],
                  "exposures": [s.exposure for s in group], "clipped_pixels": int(clipped.sum())}
-            e["clipped_radius_deg"], e["clipped_elsewhere"] = clipped_extent(clipped, merged)
+            e["clipped_radius_deg"], e["clipped_elsewhere"], e["clipped_centre_deg"] = \
+                clipped_extent(clipped, merged)
             e["shot_agreement"] = agreement(group)
             off = [a for a in e["shot_agreement"] if a is not None and abs(a - 1) > AGREEMENT_TOL]
             if off:
@@ -375,7 +409,7 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
                     "shoot RAW), or its EXIF exposures are nominal")
             radius = max(radius, e["clipped_radius_deg"])
             if readings is not None:
-                e.update(_card_entry(readings, t, image, clipped, card, name))
+                e.update(_card_entry(readings, t, image, clipped, card, name, log))
             write_exr(work / name, image, {"time": t, "kind": "sky", "units": "W m^-2 sr^-1",
                                            "shots": len(group)})
             entries.append(e)

@@ -664,7 +664,7 @@ def _light(e, zenith, azimuth, t, index, base_dir):
                                               "direct_normal_W_m2", "global_horizontal_W_m2",
                                               "ground_albedo") if k in e}}
     if name.endswith(".json"):
-        rec = _series_record(rec, base_dir, t)
+        rec = _series_record(rec, base_dir, t, zenith, azimuth)
     return envmap_from_record(rec, base_dir, zenith, azimuth)
 
 
@@ -672,14 +672,38 @@ def _light(e, zenith, azimuth, t, index, base_dir):
 _MEASURED_KEYS = {"diffuse_horizontal_W_m2", "direct_normal_W_m2", "global_horizontal_W_m2"}
 
 
-def _series_record(rec, base_dir, t):
+#: Largest angle [deg] between a sky map's clipped sun and the sun's computed position: beyond,
+#: the fisheye's orientation, projection or clock is wrong (a level fisheye with the right north
+#: and clock puts it within the sun's motion between map and frame, 1.25 deg in 5 minutes).
+SUN_OFF_DEG = 5.0
+
+
+def _series_record(rec, base_dir, t, zenith, azimuth):
     """An envmap record naming a sky series made the record of the map nearest time ``t``:
     file, projection, sun mask and (unless measured irradiance is given) the card's global
-    horizontal irradiance times ``scale``."""
+    horizontal irradiance times ``scale``.  SpecError where the map's clipped sun lies over
+    :data:`SUN_OFF_DEG` from the sun at ``zenith``, ``azimuth`` [deg]."""
     try:
         entry, doc = series_entry(base_dir / rec["file"], t)
     except SkyfitError as exc:
         raise SpecError(f"[sky] file: {exc}") from None
+    centre = entry.get("clipped_centre_deg")
+    if centre is not None and zenith < 90.0:
+        north = rec.get("north_rotation_deg", 0.0)
+        seen = direction_from_angles(*np.radians([centre[0], centre[1] + north]))
+        off = np.degrees(np.arccos(np.clip(seen @ direction_from_angles(
+            *np.radians([zenith, azimuth])), -1.0, 1.0)))
+        if off > SUN_OFF_DEG:
+            turn = (azimuth - centre[1] + 180.0) % 360.0 - 180.0
+            hint = (f"; north_rotation_deg = {turn:.1f} would put it on the sun"
+                    if abs(centre[0] - zenith) < SUN_OFF_DEG else "")
+            raise SpecError(
+                f"[sky] file {rec['file']}: the map at {entry['time']} has its clipped sun at "
+                f"zenith {centre[0]:.1f}, azimuth {(centre[1] + north) % 360.0:.1f} deg, "
+                f"{off:.1f} deg from the sun's position at {t.isoformat()} ({zenith:.1f}, "
+                f"{azimuth:.1f} deg): check the fisheye's north_rotation_deg (the compass "
+                "azimuth of the image's top), that the image is not mirrored, that the lens is "
+                "equidistant and level, and the clocks" + hint + ".")
     if rec.get("projection", doc["projection"]) != doc["projection"]:
         raise SpecError(f"[sky] projection = {rec['projection']!r}, but the series "
                         f"{rec['file']} holds {doc['projection']} maps; drop projection.")
@@ -687,11 +711,22 @@ def _series_record(rec, base_dir, t):
            "projection": doc["projection"]}
     if doc.get("sun_mask_deg") and "sun_mask_deg" not in rec:
         out["sun_mask_deg"] = doc["sun_mask_deg"]
-    if "global_horizontal_W_m2" in entry and not _MEASURED_KEYS & set(rec):
-        out["global_horizontal_W_m2"] = entry["global_horizontal_W_m2"] * rec.get("scale", 1.0)
+    given = _MEASURED_KEYS & set(rec)
+    if "global_horizontal_W_m2" in entry and given <= {"diffuse_horizontal_W_m2"}:
+        # the card's global irradiance on the map's scale, or in the ratio the card saw to the
+        # map where a measured diffuse irradiance rescales the map
+        out["global_horizontal_W_m2"] = entry["global_horizontal_W_m2"] * (
+            rec["diffuse_horizontal_W_m2"] / entry["map_horizontal_W_m2"] if given
+            else rec.get("scale", 1.0))
         out["sun_measured"] = True          # by the card, to its sun_sd
         if "sun_sd" in entry:
             out["sun_sd"] = entry["sun_sd"]
+    elif not given and entry.get("clipped_pixels") and zenith < 90.0:
+        raise SpecError(f"[sky] file {rec['file']}: the map at {entry['time']} clips the sun "
+                        f"({entry['clipped_pixels']} pixels in every shot) and the series has no "
+                        "card, so the sun's light is unknown: make the series with --card, or "
+                        "give the measured direct_normal_W_m2 (or global_horizontal_W_m2) in "
+                        "[sky].")
     return out
 
 
