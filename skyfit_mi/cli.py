@@ -566,9 +566,12 @@ def _sky_series(args):
 
     card = None
     if args.card:
-        if args.card_box is None or len(args.card_box) != 4:
+        if args.card_box is None:
             raise SkyfitError("--card needs --card-box X0,Y0,X1,Y1: the card's pixels in its "
                               "shots.")
+        if len(args.card_box) != 4:
+            raise SkyfitError(f"--card-box takes four numbers X0,Y0,X1,Y1, got "
+                              f"{len(args.card_box)}.")
         if any(v != int(v) for v in args.card_box):
             raise SkyfitError("--card-box takes whole pixels X0,Y0,X1,Y1.")
         card = CardOptions(tuple(args.card), tuple(int(v) for v in args.card_box),

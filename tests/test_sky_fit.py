@@ -442,6 +442,24 @@ def test_regions_that_disagree_on_the_skys_level_widen_its_uncertainty():
     assert _regions_agree(level([0.3], [100.0]))["scale"] == 1.0
 
 
+def test_a_level_far_from_its_prior_is_warned():
+    """A determined level within the search but over PRIOR_FAR prior sds from the spec's (a sky
+    map turned the wrong way read k 0.25, 4 sd) is warned of; one within it is not."""
+    from skyfit_mi.fitting.sky_fit import PRIOR_FAR, SCALE_GRID, _Level, _level_warnings
+
+    grid = np.log(SCALE_GRID)
+
+    def warned(own, prior_sd=0.35):
+        profile = {u: [(1000.0 + 400.0 * (u - own) ** 2, None)] for u in grid}
+        lv = _Level(profile, grid, prior_sd, u0=own, sd_u=0.05)
+        lv.agree = {"scale": 1.0}
+        return [w for w in _level_warnings(lv, 1) if "sd of its prior from the spec" in w]
+
+    far = warned(np.log(0.3))               # inside the search (its lowest end warns alone)
+    assert abs(np.log(0.3)) > PRIOR_FAR * 0.35 and len(far) == 1 and "k = 0.3" in far[0]
+    assert warned(np.log(0.8)) == [] and warned(np.log(0.3), prior_sd=None) == []
+
+
 def test_a_prior_holding_a_level_the_data_put_beyond_the_search_is_warned(again, dim_fit,
                                                                            monkeypatch):
     """Under the prior the profile's least point can lie inside the search while the data's

@@ -380,3 +380,23 @@ def test_a_faint_suns_card_weighs_little_in_the_days_sun_sd():
              for k, sd in ((bright, 0.02), (faint, 0.4))]
     assert default_sun_sd({"source": "ingest"}, skies) == pytest.approx((0.02 + 0.04) / 1.1,
                                                                          rel=1e-3)
+
+
+def test_a_card_shot_by_another_camera_is_said(tmp_path):
+    """The card's irradiance is read through its camera's ISO speed and the map through the sky
+    camera's: cameras whose EXIF make and model differ are named in a line."""
+    from PIL import Image
+
+    sky = cie_sky("clear", 45.0, 120.0)
+    photograph_sky(sky, T0, tmp_path / "shots", spacing_s=0)
+    photograph_card(sky, T0, tmp_path / "card")
+    for folder, model in (("shots", "Fisheye One"), ("card", "Scene Two")):
+        for path in (tmp_path / folder).glob("*.jpg"):
+            with Image.open(path) as im:
+                exif = im.getexif()
+                exif[0x010F], exif[0x0110] = "Maker", model
+                im.save(path, quality=95, exif=exif)
+    logs = []
+    sky_series([tmp_path / "shots"], tmp_path / "sky", log=logs.append,
+               card=CardOptions((str(tmp_path / "card"),), CARD_BOX))
+    assert any("Maker Scene Two" in m and "Maker Fisheye One" in m for m in logs), logs

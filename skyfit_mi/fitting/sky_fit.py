@@ -76,6 +76,8 @@ DEPARTURE_CONFLICT_P = 0.001
 DRIFT_STEP = 1e-3
 #: Gauss-Newton iterations of the terms at most.
 DRIFT_ITERATIONS = 8
+#: A fitted level more than this many prior sds from the spec's (log k = 0) is warned of.
+PRIOR_FAR = 3.0
 #: The parameters that scale with the light's absolute level (the reflectances).
 LEVEL_SCALED = ("C_r", "C_g", "C_b", "R", "rho_s")
 
@@ -746,6 +748,14 @@ def _level_warnings(level, terms):
             + "; give the spec a sky nearer the day's (a measured one: perez with measured "
             "irradiance, or envmap), or fit several materials with different normals, or a grey "
             "card, together.")
+    elif level.prior_sd is not None and level.determined and \
+            abs(level.u0) > PRIOR_FAR * level.prior_sd:
+        warnings.append(
+            f"the sky's fitted level k = {k:.3g} lies {abs(level.u0) / level.prior_sd:.1f} sd of "
+            "its prior from the spec's light: the light the data show is far from the spec's "
+            "(for a measured sky: its map's orientation, card or scale; for a model sky: its "
+            "type or irradiance; else the exposure), and the materials' values rest on the fitted "
+            "level.")
     return warnings
 
 

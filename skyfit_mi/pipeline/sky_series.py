@@ -84,7 +84,8 @@ SERIES_NAME = "sky_series.json"
 @dataclass(frozen=True)
 class Shot:
     """One photograph of a series: its linear values (H, W, 3) as a fraction of saturation,
-    which of its pixels are clipped (H, W), its exposure t S / N^2 [s] and its time."""
+    which of its pixels are clipped (H, W), its exposure t S / N^2 [s], its time and its
+    camera's EXIF make and model ('' if not given)."""
 
     path: Path
     linear: np.ndarray
@@ -92,6 +93,7 @@ class Shot:
     floor: np.ndarray
     exposure: float
     time: dt.datetime
+    camera: str = ""
 
 
 def _exposure(photo):
@@ -185,7 +187,10 @@ def read_shots(items, tz=None, times_csv=None, flat=None, box=None):
         metas.append(photo.metadata)
         del photo
     times = frame_times(paths, metas, times_csv=times_csv, tz=tz, warn=lambda message: None)
-    shots = sorted((Shot(*k[:4], exposure=k[4], time=t) for k, t in zip(kept, times)),
+    cameras = [" ".join(str(m.get(k) or "").strip() for k in ("make", "model")).strip()
+               for m in metas]
+    shots = sorted((Shot(*k[:4], exposure=k[4], time=t, camera=c)
+                    for k, t, c in zip(kept, times, cameras)),
                    key=lambda s: (s.time, s.path.name))         # a bracket shares a second
     for a, b in zip(shots, shots[1:]):
         if a.time == b.time and np.isclose(a.exposure, b.exposure, rtol=0.01):
@@ -382,9 +387,18 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
         if both:
             raise SkyfitError(f"{both[0].name}: given both as a sky shot and as a card shot; "
                               "put the card's shots in a folder of their own (--card).")
-    groups = brackets(read_shots(items, tz, times_csv, flat), gap_s)
-    readings = None if card is None else card_irradiance(
-        read_shots(card.photos, tz, times_csv, box=card.box), card.reflectance)
+    shots = read_shots(items, tz, times_csv, flat)
+    groups = brackets(shots, gap_s)
+    readings = None
+    if card is not None:
+        card_shots = read_shots(card.photos, tz, times_csv, box=card.box)
+        readings = card_irradiance(card_shots, card.reflectance)
+        sky_cams, card_cams = ({s.camera for s in x if s.camera} for x in (shots, card_shots))
+        if sky_cams and card_cams and sky_cams != card_cams:
+            log(f"the card's shots are from {', '.join(sorted(card_cams))}, the sky's from "
+                f"{', '.join(sorted(sky_cams))}: the sun's level rests on their ISO speeds "
+                "agreeing, which cameras' often do not (by up to a third); shoot the card with "
+                "the sky's camera")
     created = not out.exists()
     ensure_dir(out)
     work = Path(tempfile.mkdtemp(prefix=".sky_series.", dir=out))
@@ -460,7 +474,18 @@ def series_entry(path, time):
                           "`skyfit sky-series`.") from None
     if not isinstance(doc, dict) or doc.get("kind") != "sky_series" or not doc.get("maps"):
         raise SkyfitError(f"{path}: not a sky series with maps; make it with `skyfit sky-series`.")
-    i, gap = _nearest([dt.datetime.fromisoformat(e["time"]) for e in doc["maps"]], time)
+    times = []
+    for k, e in enumerate(doc["maps"]):
+        try:
+            t = dt.datetime.fromisoformat(e["time"])
+            if t.utcoffset() is None or not isinstance(e["file"], str):
+                raise ValueError
+        except (TypeError, KeyError, ValueError):
+            raise SkyfitError(f"{path}: map {k} needs a 'file' and a 'time' in ISO 8601 with its "
+                              "offset (e.g. 2013-05-27T10:00:00-04:00); repair it, or make the "
+                              "series again.") from None
+        times.append(t)
+    i, gap = _nearest(times, time)
     if gap > MAP_MAX_GAP_S:
         raise SkyfitError(f"{path}: no sky map within {MAP_MAX_GAP_S:g} s of the frame at "
                           f"{time.isoformat()} (nearest {gap:.0f} s away); photograph the "

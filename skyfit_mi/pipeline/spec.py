@@ -34,7 +34,7 @@ from .fit_result import read_fit_result
 from .illumination import directional_from_record, envmap_from_record, perez_from_irradiance
 from .irradiance import irradiance_at, read_irradiance
 from .photo_times import wall_time_problem
-from .sky_series import series_entry
+from .sky_series import MASK_MARGIN_DEG, series_entry
 from ..physics.turbid_sky import TURBIDITY_RANGE, turbid_sky
 
 #: Where the shipped scenes live; a spec's ``scene.file`` is looked up beside the spec first.
@@ -709,8 +709,13 @@ def _series_record(rec, base_dir, t, zenith, azimuth):
                         f"{rec['file']} holds {doc['projection']} maps; drop projection.")
     out = {**rec, "file": str(Path(rec["file"]).parent / entry["file"]),
            "projection": doc["projection"]}
-    if doc.get("sun_mask_deg") and "sun_mask_deg" not in rec:
-        out["sun_mask_deg"] = doc["sun_mask_deg"]
+    # the mask of the map's own clipped sun (a hazy map's would take a clear map's sky), else
+    # the series' (older series record only that)
+    mask = (round(entry["clipped_radius_deg"] + MASK_MARGIN_DEG, 1)
+            if entry.get("clipped_pixels") else None) if "clipped_radius_deg" in entry \
+        else doc.get("sun_mask_deg")
+    if mask and "sun_mask_deg" not in rec:
+        out["sun_mask_deg"] = mask
     given = _MEASURED_KEYS & set(rec)
     if "global_horizontal_W_m2" in entry and given <= {"diffuse_horizontal_W_m2"}:
         # the card's global irradiance on the map's scale, or in the ratio the card saw to the
