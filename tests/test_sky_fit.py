@@ -450,7 +450,7 @@ def test_a_level_far_from_its_prior_is_warned():
     grid = np.log(SCALE_GRID)
 
     def warned(own, prior_sd=0.35):
-        profile = {u: [(1000.0 + 400.0 * (u - own) ** 2, None)] for u in grid}
+        profile = {u: [(1000.0 + 400.0 * (u - own) ** 2, None)] for u in np.r_[grid, own]}
         lv = _Level(profile, grid, prior_sd, u0=own, sd_u=0.05)
         lv.agree = {"scale": 1.0}
         return [w for w in _level_warnings(lv, 1) if "sd of its prior from the spec" in w]
