@@ -447,6 +447,10 @@ def _camera(args):
     points = read_points(args.points, width, height)
     est = estimate_camera(points, width, height, args.fov_deg, args.distortion, args.marking_px,
                           args.target)
+    if args.photo:
+        from dataclasses import replace
+
+        est = replace(est, photo=Path(args.photo).name)
     toml, report = write_camera(est, args.output, args.overwrite, str(args.points))
     p = est.placement()
     fov = (f"{p['fov_deg'][0]:.2f} deg (given)" if "focal" not in est.free else

@@ -93,7 +93,9 @@ def test_uncertainty_covers_the_truth_at_its_stated_level(world, fov):
 
 
 def test_written_camera_reads_back_through_the_spec(tmp_path):
-    est = estimate_camera(marks(BOARD6, 3), W, H, FOV, [K1])
+    from dataclasses import replace
+
+    est = replace(estimate_camera(marks(BOARD6, 3), W, H, FOV, [K1]), photo="IMG_0002.jpg")
     toml, report = write_camera(est, tmp_path / "camera.toml")
     raw = read_spec(toml)
     spec = {"name": "t", "location": {"latitude_deg": 40.0, "longitude_deg": 0.0,
@@ -104,6 +106,7 @@ def test_written_camera_reads_back_through_the_spec(tmp_path):
     assert np.allclose(camera_matrix(cam), est.to_world(), atol=1e-12)
     assert cam["distortion"] == [K1, 0.0] and cam["fov_deg"] == pytest.approx(FOV)
     assert report.exists() and "azimuth" in toml.read_text()
+    assert cam["photo"] == "IMG_0002.jpg"              # the frame ingest registers on
     roll = est.placement()["roll_deg"][1]
     assert roll > 0 and cam["pose_sd_deg"]["roll"] == pytest.approx(roll)
 

@@ -221,3 +221,30 @@ def test_a_frames_record_gives_back_its_measured_motion():
     d = M[:, :2] @ c + M[:, 2] - c                 # as register_frames records it
     rec = {"dx_px": d[0], "dy_px": d[1], "rotation_deg": 0.3}
     np.testing.assert_allclose(motion_of_record(rec, 64, 44), M, atol=1e-12)
+
+
+def test_the_frames_are_registered_on_the_photograph_the_pose_was_marked_on(shaken, tmp_path):
+    """The spec's [camera] photo (skyfit camera --photo writes it) is the reference: every frame
+    is brought onto the view the pose describes, its motion measured against that frame's;
+    a photo not among the frames is said, and the middle frame taken."""
+    from skyfit_mi.pipeline.ingest import ingest
+
+    raw = read_spec(shaken["spec"])
+    for name, tag in (("IMG_0001.png", "on"), ("IMG_9999.png", "off")):
+        raw["camera"]["photo"] = name
+        spec = tmp_path / f"spec_{tag}.toml"
+        spec.write_text(_toml(raw))
+        logs = []
+        doc = ingest([shaken["photos"]], spec, tmp_path / tag, progress=False, calibrate=GREY,
+                     vignetting="cos4", log=logs.append)
+        reg = doc["ingest"]["registration"]
+        if tag == "off":
+            assert reg["reference"] == "IMG_0003.png"
+            assert any("marked on IMG_9999.png, which is not among" in m for m in logs), logs
+            continue
+        assert reg["reference"] == "IMG_0001.png"
+        base = np.array(MOTION[1][:2])
+        for f in doc["frames"]:                   # small motions: shifts nearly add
+            want = np.array(MOTION.get(f["index"], (0.0, 0.0, 0.0))[:2]) - base
+            got = np.array([f["registration"]["dx_px"], f["registration"]["dy_px"]])
+            assert np.all(np.abs(got - want) < 0.15), (f["index"], got, want)

@@ -270,6 +270,7 @@ class CameraEstimate:
     coplanar: bool
     target: np.ndarray
     other_rms_px: float | None
+    photo: str | None = None
 
     @property
     def rotation(self):
@@ -290,8 +291,9 @@ class CameraEstimate:
 
     def camera_section(self):
         """The spec's [camera] table: origin, a target on the view axis at ``self.target``'s
-        depth, up, fov_deg, width, height, distortion, and the pose's 1-sd in azimuth, angle and
-        roll [deg] (:meth:`placement`), which fits propagate into their intervals."""
+        depth, up, fov_deg, width, height, distortion, the pose's 1-sd in azimuth, angle and
+        roll [deg] (:meth:`placement`), which fits propagate into their intervals, and the
+        photograph it was marked on (which ingest registers the frames on)."""
         m = self.to_world()
         depth = float(np.dot(self.target - self.origin, m[:3, 2]))
         p = self.placement()
@@ -301,7 +303,8 @@ class CameraEstimate:
                 "width": self.width, "height": self.height,
                 "distortion": [float(v) for v in self.k],
                 "pose_sd_deg": {"azimuth": p["azimuth_deg"][1], "angle": p["angle_deg"][1],
-                                "roll": p["roll_deg"][1]}}
+                                "roll": p["roll_deg"][1]},
+                **({"photo": self.photo} if self.photo else {})}
 
     def _placement(self, p):
         """Azimuth, angle from the vertical [deg], distance [m], fov and roll [deg] (the image's

@@ -241,8 +241,9 @@ REFERENCE_KNOWN = 0.5
 
 def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
     """The :class:`Registration` of ingest's ``frames``: with ``register``, each lit frame's
-    motion against the one nearest midday (of those mostly unclipped: :data:`REFERENCE_KNOWN`),
-    plus the lens distortion; SkyfitError for a frame that moved over ``limit`` [px] or cannot
+    motion against the one the pose was marked on (the spec's [camera] ``photo``), else the one
+    nearest midday (of those mostly unclipped: :data:`REFERENCE_KNOWN`), plus the lens
+    distortion; SkyfitError for a frame that moved over ``limit`` [px] or cannot
     be registered."""
     camera, lit, names = frames.spec.camera, frames.lit, [p.name for p in frames.paths]
     h, w = frames.size
@@ -258,6 +259,15 @@ def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
         t = {i: frames.times[i].timestamp() for i in lit}
         mid = 0.5 * (min(t.values()) + max(t.values()))
         ref = min(usable, key=lambda i: abs(t[i] - mid))
+        marked = camera.get("photo")             # the photograph the pose was marked on
+        if marked is not None:
+            on = [i for i in usable if names[i] == marked]
+            if on:
+                ref = on[0]
+            else:
+                log(f"registration: the pose was marked on {marked}, which is not among the "
+                    f"lit, mostly unclipped frames; registering on {names[ref]}, so the pose "
+                    "holds as far as the camera did not move between the two")
         corners = np.array([[0, 0, 1], [w - 1, 0, 1], [0, h - 1, 1], [w - 1, h - 1, 1.0]])
         for i in lit:
             if i == ref:

@@ -62,7 +62,7 @@ _SCHEMA = {
     "scene": {"file", "ground_albedo"},
     "materials": None,
     "camera": {"azimuth_deg", "angle_deg", "distance", "target", "origin", "up", "matrix",
-               "fov_deg", "width", "height", "distortion", "pose_sd_deg"},
+               "fov_deg", "width", "height", "distortion", "pose_sd_deg", "photo"},
     "sensor": {"exposure", "response", "gamma", "bits", "noise_percent", "cos4"},
     "render": {"spp", "seed", "variant", "max_depth", "below_horizon", "sampler", "integrator"},
 }
@@ -449,6 +449,9 @@ def _camera(sec):
             c["pose_sd_deg"] = pose_sd(c["pose_sd_deg"])
     except SkyfitError as exc:
         raise SpecError(f"[camera] {exc}") from None
+    if "photo" in c and not (isinstance(c["photo"], str) and c["photo"]):
+        raise SpecError(f"[camera] photo = {c['photo']!r}: give the file name of the photograph "
+                        "the pose was marked on (skyfit camera --photo writes it).")
     return c
 
 
