@@ -691,7 +691,8 @@ def _series_record(rec, base_dir, t, zenith, azimuth):
     except SkyfitError as exc:
         raise SpecError(f"[sky] file: {exc}") from None
     centre = entry.get("clipped_centre_deg")
-    if centre is not None and zenith < 90.0:
+    # the clipped pixels' centre is the sun's where none clip far from it (bright clouds)
+    if centre is not None and not entry.get("clipped_elsewhere") and zenith < 90.0:
         north = rec.get("north_rotation_deg", 0.0)
         seen = direction_from_angles(*np.radians([centre[0], centre[1] + north]))
         off = np.degrees(np.arccos(np.clip(seen @ direction_from_angles(
