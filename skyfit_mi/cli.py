@@ -525,8 +525,9 @@ def _add_ingest(sub, common):
                      help="with --table: values in the instrument's units, put on a relative scale")
     ing.add_argument("--colorchecker", metavar="MATERIAL",
                      help="calibrate by a ColorChecker Classic lying on this scene material")
-    ing.add_argument("--vignetting", default="none", metavar="none|cos4|FLAT",
-                     help="none, the cos^4 law, or a flat-field image (default none)")
+    ing.add_argument("--vignetting", default="none", metavar="none|corrected|cos4|FLAT",
+                     help="none (not corrected: its error counted), corrected (by the camera), "
+                     "the cos^4 law, or a flat-field image (default none)")
     ing.add_argument("--noise", type=_numbers, metavar="READ,SHOT",
                      help="read variance [DN^2] and shot gain [DN] (default estimated from frames)")
     ing.add_argument("--colour-matrix-error", type=float, metavar="SD",

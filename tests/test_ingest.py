@@ -752,7 +752,7 @@ def test_options_that_would_be_ignored_are_refused(day, tmp_path):
     with pytest.raises(SkyfitError, match="the response is fitted"):
         _ingest(day, tmp_path / "o", response="fit", gamma=2.0,
                 calibrate={"grey_card": (0.18,) * 3})
-    with pytest.raises(SkyfitError, match="--vignetting cos5: give none, cos4, or the path"):
+    with pytest.raises(SkyfitError, match="--vignetting cos5: give none, corrected, cos4, or the path"):
         _ingest(day, tmp_path / "o", exposure=1e-3, vignetting="cos5")
     for bad in (0.0, -1.0, float("nan")):            # refused before any work is logged
         logs = []
@@ -1107,3 +1107,16 @@ def test_an_uncorrected_lens_falloff_is_counted_between_the_card_and_each_region
         np.testing.assert_allclose(counted["calibration_error_sd"][k], np.hypot(
             left_out["calibration_error_sd"][k], abs(shift) / 2 * value), rtol=1e-6)
     assert counted["intervals"]["sigma_alpha"] == left_out["intervals"]["sigma_alpha"]
+
+
+def test_frames_the_camera_corrected_for_its_lens_carry_no_falloff_error(day, tmp_path):
+    """--vignetting corrected: the frames are taken as they are (as with none) and no falloff's
+    error is counted; an unknown choice is refused in one line."""
+    from skyfit_mi.fitting.uncertainty import vignetting_error
+
+    doc = _ingest(day, tmp_path / "seq", calibrate={"grey_card": (0.18,) * 3},
+                  vignetting="corrected")
+    assert doc["ingest"]["options"]["vignetting"] == "corrected"
+    assert not np.any(vignetting_error(doc, np.array([[0, 0], [63, 43]])))
+    with pytest.raises(SkyfitError, match="give none, corrected, cos4"):
+        _ingest(day, tmp_path / "o", calibrate={"grey_card": (0.18,) * 3}, vignetting="cos5")

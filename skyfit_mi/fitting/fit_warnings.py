@@ -77,7 +77,8 @@ def fit_warnings(s, fit):
             f"region lies where a cos^4 falloff differs by {falloff:.1%} from the reference's "
             "place (or the image's centre), which every reflectance's interval counts as an "
             f"error of {falloff / 2:.1%} (1 sd); ingest with --vignetting cos4, or a flat field "
-            "of this lens (--vignetting FLAT), to correct it.")
+            "of this lens (--vignetting FLAT), to correct it, or --vignetting corrected if the "
+            "camera did.")
     led = [p for p, big in zip(names, doubles_interval(fit, fit.matrix_sd)) if big]
     if led:
         warnings.append(f"{', '.join(led)}: {matrix_note(s)}; it, more than the "

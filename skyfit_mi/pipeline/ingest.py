@@ -899,7 +899,9 @@ def ingest(photo_paths, spec_path, out_dir, *, overwrite=False, progress=True, l
         calibrate : {material: (r, g, b) reflectance} of grey Lambertian references
         colorchecker : scene material a ColorChecker Classic lies on; its neutral swatches
             calibrate, its chromatic ones check (``calibration.colorchecker``)
-        vignetting : 'none', 'cos4', or the path of a flat-field image
+        vignetting : 'none' (not corrected: its error counted, fitting.uncertainty.
+            vignetting_error), 'corrected' (by the camera: none left), 'cos4', or the path of a
+            flat-field image
         noise : (a [DN^2], b [DN]), or None to estimate it from the frames
         register, register_limit_px : register the frames on the one nearest midday
             (default True), refusing a frame that moved more than the limit [px]
@@ -945,9 +947,9 @@ def check_choices(o):
     if not (np.isfinite(o.register_limit_px) and o.register_limit_px > 0):
         raise SkyfitError(f"--register-limit {o.register_limit_px:g}: give the largest shift a "
                           "frame may have [px] as a positive number (e.g. 5).")
-    if str(o.vignetting) not in ("none", "cos4") and not Path(o.vignetting).is_file():
-        raise SkyfitError(f"--vignetting {o.vignetting}: give none, cos4, or the path of a "
-                          "flat-field image (no such file).")
+    if str(o.vignetting) not in VIGNETTING and not Path(o.vignetting).is_file():
+        raise SkyfitError(f"--vignetting {o.vignetting}: give none, corrected, cos4, or the path "
+                          "of a flat-field image (no such file).")
     if o.exposure is not None and not (np.isfinite(o.exposure) and o.exposure > 0):
         raise SkyfitError(f"--exposure {o.exposure:g}: give the first frame's exposure as a "
                           "positive number [sr m^2 W^-1] (1 / the radiance that saturates the "
@@ -979,6 +981,9 @@ def _grey(values, max_code=None):
     return bool(len(v) and np.array_equal(v[:, 0], v[:, 1]) and np.array_equal(v[:, 1], v[:, 2]))
 
 
+#: ``--vignetting``'s named choices (else a flat field's path): the falloff not corrected (its
+#: error counted), corrected by the camera already, or the cos^4 law.
+VIGNETTING = ("none", "corrected", "cos4")
 #: A frame further than this from the others' median date [days] is named (a reset clock).
 CLOCK_OFF_DAYS = 30.0
 
@@ -1042,7 +1047,7 @@ def linearise(frames, o, log):
     falloff = sensor.falloff(w, h, frames.spec.camera["fov_deg"]) if sensor.cos4 \
         else np.ones((h, w))
     flat = None
-    if o.vignetting not in ("none", "cos4"):
+    if o.vignetting not in VIGNETTING:
         falloff = flat = read_flat_field(o.vignetting, (h, w))
     values = [(p.values * float_scale) if float_scale else p.values for p in photos]
     return Linear(sensor, float_scale, falloff, flat, values)
