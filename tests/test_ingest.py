@@ -752,7 +752,8 @@ def test_options_that_would_be_ignored_are_refused(day, tmp_path):
     with pytest.raises(SkyfitError, match="the response is fitted"):
         _ingest(day, tmp_path / "o", response="fit", gamma=2.0,
                 calibrate={"grey_card": (0.18,) * 3})
-    with pytest.raises(SkyfitError, match="--vignetting cos5: give none, corrected, cos4, or the path"):
+    with pytest.raises(SkyfitError,
+                       match="--vignetting cos5: give none, corrected, cos4, or the path"):
         _ingest(day, tmp_path / "o", exposure=1e-3, vignetting="cos5")
     for bad in (0.0, -1.0, float("nan")):            # refused before any work is logged
         logs = []
