@@ -83,8 +83,8 @@ def photograph_sky(sky, time, folder, *, size=128, gain=1.0, noise=0.005, seed=0
 def photograph_card(sky, time, folder, *, reflectance=0.18, size=32, gain=1.0, noise=0.005,
                     seed=0, shade=False, shaded_columns=0, shade_share=0.5):
     """A horizontal Lambertian grey card lit by ``sky`` (by ``shade_share`` of its sky alone
-    where in ``shade``, or in its first ``shaded_columns``), filling a ``size``-pixel JPEG exposed to put
-    it near a third of full scale, in ``folder``; returns its path."""
+    where in ``shade``, or in its first ``shaded_columns``), filling a ``size``-pixel JPEG
+    exposed to put it near a third of full scale, in ``folder``; returns its path."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     shaded = reflectance / np.pi * shade_share * sky.sky_horizontal_irradiance()

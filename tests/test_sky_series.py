@@ -337,7 +337,8 @@ def test_a_bracket_within_one_second_a_shaded_card_and_a_scale(tmp_path):
     assert np.degrees(np.arccos(np.clip(
         direction_from_angles(*np.radians(centre)) @ direction_from_angles(
             *np.radians([45.0, 120.0])), -1, 1))) < 1.0, centre
-    with pytest.raises(SpecError, match=r"from the sun's position.*north_rotation_deg = -?0\.\d would put"):
+    with pytest.raises(SpecError,
+                       match=r"from the sun's position.*north_rotation_deg = -?0\.\d would put"):
         _series_record({**rec, "north_rotation_deg": 30.0}, tmp_path, T0, 45.0, 120.0)
     with pytest.raises(SpecError, match=r"not mirrored"):              # east and west swapped
         _series_record(rec, tmp_path, T0, 45.0, 240.0)

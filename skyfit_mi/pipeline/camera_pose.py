@@ -554,7 +554,8 @@ def camera_toml(estimate, source=""):
              f"# seen from azimuth {p['azimuth_deg'][0]:.3f} +- {p['azimuth_deg'][1]:.3f} deg, "
              f"{p['angle_deg'][0]:.3f} +- {p['angle_deg'][1]:.3f} deg from the vertical, "
              f"{p['distance_m'][0]:.4f} +- {p['distance_m'][1]:.4f} m from "
-             f"[{', '.join(f'{v + 0.0:.4g}' for v in np.round(t, 6))}]; fov {p['fov_deg'][0]:.3f} +- "
+             f"[{', '.join(f'{v + 0.0:.4g}' for v in np.round(t, 6))}]; "
+             f"fov {p['fov_deg'][0]:.3f} +- "
              f"{p['fov_deg'][1]:.3f} deg (1 sigma)",
              "# distortion: [k1, k2] of OpenCV's radial model; the renderer is a pinhole, "
              "ingest undoes it; pose_sd_deg: the 1-sigma above, which fits carry into their "
