@@ -28,7 +28,7 @@ from .physics.sky import MEASURED_SUN_SD, SKY_CHOICES, SUN_LEVEL_SD  # noqa: E40
 from .fitting.chi2 import REGION_PIXELS  # noqa: E402
 from .physics.ward import NORMALISATIONS  # noqa: E402
 from .pipeline.sky_series import (BRACKET_GAP_S, CARD_MAX_GAP_S, CARD_REFLECTANCE,  # noqa: E402
-                                  CARD_SD, SERIES_NAME)
+                                  CARD_SD, LENSES, SERIES_NAME)
 from .render.light_cache import DIRECTIONS, POSITIONS  # noqa: E402
 from .render.variant import VARIANTS  # noqa: E402
 # The modules above are light; each command imports its heavy ones when it runs, so that
@@ -585,7 +585,7 @@ def _sky_series(args):
     elif args.card_box is not None:
         raise SkyfitError("--card-box belongs to --card (the grey card's shots).")
     doc = sky_series(args.photos, args.output, card=card, tz=args.tz, times_csv=args.times,
-                     flat=args.flat, gap_s=args.bracket_gap_s,
+                     flat=args.flat, gap_s=args.bracket_gap_s, lens=args.lens,
                      overwrite=args.overwrite, log=(lambda *a: None) if args.quiet else print)
     lines = [f"{len(doc['maps'])} sky maps in {args.output}; in the spec:", "[sky]",
              'type = "envmap"',
@@ -627,6 +627,8 @@ def _add_sky_series(sub, common):
                      f"time between a bracket and its card shot [s] (default {CARD_MAX_GAP_S:g})")
     sky.add_argument("--card-sd", type=float, default=CARD_SD, help="relative sd of the card's "
                      f"reading of the global irradiance (default {CARD_SD:g})")
+    sky.add_argument("--lens", choices=LENSES, default="equidistant",
+                     help="the fisheye's projection (the maps are written equidistant)")
     sky.add_argument("--overwrite", action="store_true", help="replace an existing series")
     sky.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     sky.set_defaults(func=_sky_series)

@@ -259,6 +259,33 @@ def fisheye_directions(height, width, north_rotation_deg=0.0):
     return direction_from_angles(theta, phi), r <= R
 
 
+#: The fisheye projections a series takes: r / R = theta / 90 deg (equidistant, the maps'), or
+#: sqrt(2) sin(theta / 2) (equisolid: equal areas, many circular fisheyes), R the horizon's.
+LENSES = ("equidistant", "equisolid")
+
+
+def to_equidistant(merged, clipped, lens):
+    """A merged map (H, W, 3) and its clipped pixels (H, W) taken through ``lens`` (one of
+    :data:`LENSES`) resampled onto the equidistant fisheye of :func:`fisheye_directions`
+    (bilinear; the clipped mask by nearest pixel); unchanged for an equidistant lens."""
+    if lens == "equidistant":
+        return merged, clipped
+    from scipy.ndimage import map_coordinates
+
+    h, w = clipped.shape
+    R = min(h, w) / 2.0
+    y, x = np.mgrid[0:h, 0:w] + 0.5
+    dx, dy = x - w / 2.0, y - h / 2.0
+    r = np.hypot(dx, dy)
+    theta = np.minimum(r / R, 1.0) * np.pi / 2
+    scale = np.where(r > 0, R * np.sqrt(2.0) * np.sin(theta / 2) / np.maximum(r, 1e-12), 1.0)
+    scale = np.where(r <= R, scale, 1.0)                     # beyond the horizon: as it is
+    at = [h / 2.0 + dy * scale - 0.5, w / 2.0 + dx * scale - 0.5]
+    out = np.stack([map_coordinates(merged[..., c], at, order=1, mode="nearest")
+                    for c in range(merged.shape[-1])], axis=-1)
+    return out, map_coordinates(clipped.astype(np.uint8), at, order=0, mode="nearest") > 0
+
+
 def clipped_extent(clipped, merged):
     """(angle [deg] from the clipped pixels' centre to the farthest within
     :data:`SUN_CLIP_MAX_DEG`, count of clipped pixels beyond, the centre's [zenith, azimuth]
@@ -370,12 +397,16 @@ def _card_entry(readings, t, image, clipped, card, name, log):
 
 
 def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
-               gap_s=BRACKET_GAP_S, overwrite=False, log=print):
+               gap_s=BRACKET_GAP_S, lens="equidistant", overwrite=False, log=print):
     """Merge the bracketed fisheye shots ``items`` into ``out_dir``: one EXR per bracket and
     :data:`SERIES_NAME`; returns the series document.  ``card`` (:class:`CardOptions`) gives
     each map its global irradiance; ``flat`` undoes the sky's vignetting (not the card's: keep
-    its box central).  A refusal leaves nothing; ``overwrite`` removes the replaced maps."""
+    its box central); ``lens`` the shots' projection (:data:`LENSES`), the maps equidistant.
+    A refusal leaves nothing; ``overwrite`` removes the replaced maps."""
     _check_options(card, gap_s)
+    if lens not in LENSES:
+        raise SkyfitError(f"--lens {lens}: give one of {', '.join(LENSES)} (the fisheye's "
+                          "projection; remap others to equidistant first).")
     out = check_dir(out_dir)
     old = out / SERIES_NAME
     if old.exists() and not overwrite:
@@ -406,7 +437,7 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
     try:
         entries, radius = [], 0.0
         for n, group in enumerate(groups):
-            merged, clipped = merge(group)
+            merged, clipped = to_equidistant(*merge(group), lens)
             image = merged * (SATURATION_LUMINANCE / EFFICACY_CLEAR)
             t = group[len(group) // 2].time
             name = f"sky_{t:%Y%m%d_%H%M%S}.exr"
@@ -439,7 +470,8 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
         done = True
     finally:
         shutil.rmtree(work if done or not created else out, ignore_errors=True)
-    doc = {"kind": "sky_series", "projection": "fisheye", "units": "W m^-2 sr^-1",
+    doc = {"kind": "sky_series", "projection": "fisheye", "lens": lens,
+           "units": "W m^-2 sr^-1",
            "flat_field": None if flat is None else str(flat),
            "exposure": "H = t S / N^2 [s] (EXIF exposure time, ISO speed, f-number)",
            "scale_source": "the exposure equation of a saturation-based ISO speed (ISO 12232), "
