@@ -406,11 +406,25 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
         / np.hypot(width, height) * 2
     reach_k = 0 if reach < K1_REACH else \
         (2 if len(points.names) >= K2_POINTS and reach >= K2_REACH else 1)
-    free_k = 0 if distortion is not None else reach_k
     focal = None if fov is None else focal_px(fov, width)
+    free_k = reach_k if distortion is None and focal is None else 0
     best, other = _solve(points, width, height, focal, k, free_k, coplanar)
-    if distortion is not None and reach_k:
-        _check_given_distortion(points, width, height, focal, best, marking_px, coplanar)
+    if reach_k and focal is not None or distortion is not None and reach_k:
+        # the marks' say on the distortion: fitted where they ask for it (a lens left without
+        # --distortion), a given one refused where they reject it
+        n_k = 1 if distortion is not None else reach_k
+        free, free_other = _solve(points, width, height, focal, k, n_k, coplanar)
+        dof = 2 * len(points.names) - 6 - n_k - (focal is None)
+        sigma2 = max(marking_px ** 2, free.ssr / dof if dof > 0 else 0.0)
+        rejected = (best.ssr - free.ssr) / sigma2 > AMBIGUOUS_CHI2
+        if distortion is not None and rejected:
+            raise SkyfitError(
+                f"--distortion k1 = {best.k[0]:g} disagrees with the marks, which put k1 at "
+                f"{free.k[0]:.3g} (reprojection rms {np.sqrt(best.ssr / len(points.names)):.2f}"
+                f" px against {np.sqrt(free.ssr / len(points.names)):.2f}): check its value and "
+                "sign (barrel distortion is negative), or leave --distortion out to fit it.")
+        if distortion is None and rejected:
+            best, other, free_k = free, free_other, n_k
 
     behind = [n for n, z in zip(points.names, _depths(points.world, best)) if z <= 0]
     if behind:
@@ -467,21 +481,6 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
                           f"deg (1 sd; a fit takes at most {POSE_SD_MAX:g}): mark more points, "
                           "points off the board's plane, or mark them more precisely.")
     return est
-
-
-def _check_given_distortion(points, width, height, focal, given, marking_px, coplanar):
-    """Refuse a given distortion the marks reject: with k1 fitted too, chi-square falls by more
-    than :data:`AMBIGUOUS_CHI2` (a likelihood-ratio test of one parameter, at the larger of the
-    marking accuracy and the free fit's residuals)."""
-    free, _ = _solve(points, width, height, focal, given.k, 1, coplanar)
-    dof = 2 * len(points.names) - 7 - (focal is None)
-    sigma2 = max(marking_px ** 2, free.ssr / dof if dof > 0 else 0.0)
-    if (given.ssr - free.ssr) / sigma2 > AMBIGUOUS_CHI2:
-        raise SkyfitError(
-            f"--distortion k1 = {given.k[0]:g} disagrees with the marks, which put k1 at "
-            f"{free.k[0]:.3g} (reprojection rms {np.sqrt(given.ssr / len(points.names)):.2f} "
-            f"px against {np.sqrt(free.ssr / len(points.names)):.2f}): check its value and sign "
-            "(barrel distortion is negative), or leave --distortion out to fit it.")
 
 
 #: A plane of marks whose normal lies within this angle of the vertical [degrees] is seen from
