@@ -63,14 +63,17 @@ def _jpeg(path, radiance, exposure_s, time, gain, noise, rng, gamma=None):
 
 
 def photograph_sky(sky, time, folder, *, size=128, gain=1.0, noise=0.005, seed=0,
-                   north_rotation_deg=0.0, falloff=1.0, spacing_s=1, gamma=None):
+                   north_rotation_deg=0.0, falloff=1.0, spacing_s=1, gamma=None,
+                   flare_deg=FLARE_DEG):
     """The bracket (:data:`BRACKET_S`) of ``sky`` at ``time`` (aware), ``spacing_s`` apart, as
     JPEGs in ``folder``, through a lens whose relative response is ``falloff`` (size, size);
-    returns their paths; ``gamma`` encodes them with a pure gamma curve instead of sRGB."""
+    returns their paths; ``gamma`` encodes them with a pure gamma curve instead of sRGB;
+    ``flare_deg`` 0: the sun behind cloud (no flare)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
-    radiance = fisheye_radiance(sky, size, north_rotation_deg) * np.asarray(falloff)[..., None]
+    radiance = fisheye_radiance(sky, size, north_rotation_deg, flare_deg) \
+        * np.asarray(falloff)[..., None]
     out = []
     for i, t in enumerate(BRACKET_S):
         when = time + dt.timedelta(seconds=i * spacing_s)

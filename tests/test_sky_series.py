@@ -317,13 +317,25 @@ def test_a_bracket_within_one_second_a_shaded_card_and_a_scale(tmp_path):
         sky_series([tmp_path / "shots"], tmp_path / "sky", log=lambda *a: None,
                    card=CardOptions((str(tmp_path / "shots"),), CARD_BOX))
     assert not (tmp_path / "sky").exists()
-    # the sun behind a cloud: the card reads the sky's own irradiance, within its noise
-    photograph_card(sky, T0, tmp_path / "cloud", shade=True, shade_share=0.96)
+    # a card shaded from the sun alone (a post's shadow) reads the sky's own light while the
+    # map shows the sun: refused
+    photograph_card(sky, T0, tmp_path / "post", shade=True, shade_share=0.96)
+    with pytest.raises(SkyfitError, match="in shade while the map shows the sun"):
+        sky_series([tmp_path / "shots"], tmp_path / "sky", log=lambda *a: None,
+                   card=CardOptions((str(tmp_path / "post"),), CARD_BOX))
+    # the sun behind a cloud: no flare in the map, the card reads the sky's own irradiance
+    # within its noise; the spec's record then has no disc
+    photograph_sky(sky, T0, tmp_path / "cloudy", spacing_s=0, flare_deg=0.0)
     logs = []
-    hidden = sky_series([tmp_path / "shots"], tmp_path / "hidden", log=logs.append,
-                        card=CardOptions((str(tmp_path / "cloud"),), CARD_BOX))["maps"][0]
-    assert hidden["global_horizontal_W_m2"] == hidden["map_horizontal_W_m2"]
+    hidden = sky_series([tmp_path / "cloudy"], tmp_path / "hidden", log=logs.append,
+                        card=CardOptions((str(tmp_path / "post"),), CARD_BOX))["maps"][0]
+    assert hidden["sun_hidden"] and hidden["clipped_pixels"] == 0
     assert any("behind cloud" in m for m in logs), logs
+    record = _series_record({"file": f"hidden/{SERIES_NAME}"}, tmp_path, T0, 45.0, 120.0)
+    assert record["direct_normal_W_m2"] == 0.0 and "global_horizontal_W_m2" not in record
+    from skyfit_mi.pipeline.illumination import envmap_from_record
+    lit = envmap_from_record(record, tmp_path, 45.0, 120.0)
+    assert lit.info["direct_normal_W_m2"] == 0.0
     photograph_card(sky, T0, tmp_path / "card")
     doc = series(tmp_path, overwrite=True)
     assert len(doc["maps"]) == 1 and len(doc["maps"][0]["shots"]) == 4

@@ -380,18 +380,24 @@ def _check_options(card, gap_s):
 
 def _card_entry(readings, t, image, clipped, card, name, log):
     """The card's fields of a map's entry: its global horizontal irradiance, the map's own and
-    the sun's sd.  A card reading the sky's own irradiance within 3 of its sds saw no sun (behind
-    cloud: no disc, said); SkyfitError where it saw clearly less (in shade)."""
+    the sun's sd.  Where the map clips no sun and the card reads the sky's own irradiance within
+    3 of its sds, the sun was behind cloud (``sun_hidden``: no disc, said); SkyfitError where
+    it read less than the sky alone gives (in shade)."""
     ghi, gap = _card_at(readings, t, card.max_gap_s)
     e_map = map_irradiance(image, clipped)
-    if ghi <= e_map * (1.0 - 3.0 * card.sd):
+    hidden = not clipped.any() and ghi > e_map * (1.0 - 3.0 * card.sd)
+    if ghi <= e_map and not hidden:
         raise SkyfitError(f"{name}: the card's global irradiance ({ghi:.4g}) is below the sky's "
-                          f"own ({e_map:.4g}) by over 3 of its sds ({card.sd:.0%}): the card "
-                          "was in shade; photograph it in the sun.")
+                          f"own ({e_map:.4g}): the card was in shade"
+                          + (" while the map shows the sun (clipped)" if clipped.any() else
+                             f" (by over 3 of its sds, {card.sd:.0%})")
+                          + "; photograph it in the sun.")
     if ghi <= e_map:
         log(f"{name}: the card reads the sky's own irradiance ({ghi:.4g} against {e_map:.4g}, "
-            "within its uncertainty): the sun was behind cloud, so the map has no sun's disc")
-        ghi = e_map
+            "within its uncertainty) and the map clips no sun: the sun was behind cloud, so the "
+            "map has no sun's disc")
+        return {"card_gap_s": gap, "global_horizontal_W_m2": ghi, "map_horizontal_W_m2": e_map,
+                "sun_hidden": True}
     return {"card_gap_s": gap, "global_horizontal_W_m2": ghi, "map_horizontal_W_m2": e_map,
             "sun_sd": card.sd * ghi / max(ghi - e_map, SUN_SHARE_FLOOR * ghi)}
 

@@ -721,7 +721,10 @@ def _series_record(rec, base_dir, t, zenith, azimuth):
     if mask and "sun_mask_deg" not in rec:
         out["sun_mask_deg"] = mask
     given = _MEASURED_KEYS & set(rec)
-    if "global_horizontal_W_m2" in entry and given <= {"diffuse_horizontal_W_m2"}:
+    if entry.get("sun_hidden") and given <= {"diffuse_horizontal_W_m2"}:
+        out["direct_normal_W_m2"] = 0.0     # the card saw the sky's own light: no disc
+        out["sun_measured"] = True
+    elif "global_horizontal_W_m2" in entry and given <= {"diffuse_horizontal_W_m2"}:
         # the card's global irradiance on the map's scale, or in the ratio the card saw to the
         # map where a measured diffuse irradiance rescales the map
         out["global_horizontal_W_m2"] = entry["global_horizontal_W_m2"] * (
@@ -730,7 +733,8 @@ def _series_record(rec, base_dir, t, zenith, azimuth):
         out["sun_measured"] = True          # by the card, to its sun_sd
         if "sun_sd" in entry:
             out["sun_sd"] = entry["sun_sd"]
-    elif not given and entry.get("clipped_pixels") and zenith < 90.0:
+    elif given <= {"diffuse_horizontal_W_m2"} and entry.get("clipped_pixels") \
+            and zenith < 90.0:
         raise SpecError(f"[sky] file {rec['file']}: the map at {entry['time']} clips the sun "
                         f"({entry['clipped_pixels']} pixels in every shot) and the series has no "
                         "card, so the sun's light is unknown: make the series with --card, or "
