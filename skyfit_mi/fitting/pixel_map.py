@@ -39,6 +39,7 @@ from .selection import fit_auto
 from .pixel_fit import (MAP_CACHE, UNDETERMINED, WARNINGS, check_map_region, fit_pixels,
                         patch_groups, undetermined_bits)
 from .sky_fit import default_sky, light_level_sd
+from . import uncertainty as unc
 
 #: The Zarr store of a map, in the map folder.
 STORE = "pixel_map.zarr"
@@ -106,6 +107,19 @@ def _settings(doc, regions, o, sky, first):
     return settings
 
 
+def _labels_share(doc, result, pixels):
+    """A region fit's ``result`` share of the EXIF labels' error per parameter: its
+    ``calibration_error_sd`` without the errors of the level every frame shares
+    (:func:`~.uncertainty.shared_level_sd`, taken out in quadrature), which each pixel of a map
+    takes at its own place."""
+    cal = result.get("calibration_error_sd") or {}
+    names = [p for p in result["parameters"] if p in cal]
+    theta = np.array([result["parameters"][p] for p in names])
+    shared = unc.shared_level_sd(doc, names, theta,
+                                 abs(float(np.mean(unc.vignetting_error(doc, pixels)))))
+    return {p: float(np.sqrt(max(cal[p] ** 2 - v ** 2, 0.0))) for p, v in zip(names, shared)}
+
+
 def first_fits(manifest_path, regions, model="colour", normalisation="ward", seed=0,
                light=SPEC_LIGHT, max_pixels=LIGHT_PIXELS, variant=None,
                log=print):
@@ -118,7 +132,8 @@ def first_fits(manifest_path, regions, model="colour", normalisation="ward", see
     (``labels_sd``, its ``calibration_error_sd``); else None. Returns (choices {region: (model,
     normalisation)}, light)."""
     sky = light.sky                                     # named: a plan, or options that say it
-    labelled = exif_scaled(load_manifest(manifest_path)[0]) is not None
+    doc = load_manifest(manifest_path)[0]
+    labelled = exif_scaled(doc) is not None
     kept = [(name, subsample_region(px, max_pixels or None, seed)) for name, px in regions]
     what = " and ".join((["every lobe and parameter count ranked"] if model == "auto" else [])
                         + ([] if sky == "spec" else ["the sky's level fitted"])
@@ -152,10 +167,10 @@ def first_fits(manifest_path, regions, model="colour", normalisation="ward", see
     if sky == "spec" and not labelled:
         return choices, None
     regions = {}
-    for (name, _), r in fits:
+    for (name, px), r in fits:
         regions[name] = {"value": r["parameters"], "sd": None, "span": None}
         if labelled:
-            regions[name]["labels_sd"] = r.get("calibration_error_sd", {})
+            regions[name]["labels_sd"] = _labels_share(doc, r, px)
         if sky != "spec":
             span = r["sky"].get("undetermined_span")
             regions[name].update(sd=r["sky"]["error_sd"], span=None if span is None else [
