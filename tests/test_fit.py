@@ -535,7 +535,8 @@ def test_an_automatically_sized_cache_grows_until_its_noise_is_a_small_share(day
 def test_a_reflectance_on_its_bound_is_named_only_where_the_data_pull_past_it():
     """beyond_upper_bound names a reflectance at its bound of 1 only where chi-square still
     falls beyond it (the data brighter than the model allows), not a white or mirror surface
-    whose minimum lies on the bound; sigma_alpha's bound is another warning's."""
+    whose minimum lies on the bound, nor rho_s (a share: 1 is a metal); sigma_alpha's bound is
+    another warning's."""
     from types import SimpleNamespace
 
     from skyfit_mi.fitting.fit_warnings import beyond_upper_bound
@@ -550,7 +551,8 @@ def test_a_reflectance_on_its_bound_is_named_only_where_the_data_pull_past_it():
     s = SimpleNamespace(names=("C_r", "C_g", "C_b", "rho_s", "sigma_alpha"),
                         upper=np.array([1.0, 1.0, 1.0, 1.0, 0.5]))
     theta = np.array([1.0, 1.0, 0.5, 1.0, 0.5])
+    # rho_s, the specular share, at 1 is a metal without a diffuse part, not too bright
     assert beyond_upper_bound(s, SimpleNamespace(theta=theta, problem=Quadratic())) \
-        == ["C_r", "rho_s"]
+        == ["C_r"]
     assert beyond_upper_bound(s, SimpleNamespace(theta=theta, problem=None)) \
-        == ["C_r", "C_g", "rho_s"]
+        == ["C_r", "C_g"]

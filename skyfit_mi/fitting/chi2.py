@@ -397,12 +397,13 @@ class Problem:
     """chi^2(a) for one region: observations, and a radiance model with ``radiance``,
     ``jacobian`` and, for :meth:`chi2_at`, ``radiances``."""
 
-    def __init__(self, obs, model, valid=None):
+    def __init__(self, obs, model, valid=None, held_out=False):
+        """``held_out``: values only predicted (a fold held out), however few."""
         self.obs, self.model, self.valid = obs, model, valid
         ok = self.mask = usable_values(obs, valid)
         self.n_data = int(ok.sum())
         self.n_params = len(model.names)
-        if self.n_data <= self.n_params:
+        if self.n_data <= self.n_params and not held_out:
             raise SkyfitError(f"only {self.n_data} usable pixel values (the rest saturated or off "
                               f"the material) for {self.n_params} parameters; choose a larger "
                               "region or a lower exposure.")

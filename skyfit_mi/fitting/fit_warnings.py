@@ -30,11 +30,12 @@ VIGNETTING_NOTE = 0.01
 
 
 def beyond_upper_bound(s, fit):
-    """The reflectances of ``fit`` at their upper bound of 1 whose chi-square still falls
+    """The reflectances of ``fit`` (C, R) at their upper bound of 1 whose chi-square still falls
     beyond it (the data brighter than the model allows); one at the bound where chi-square
-    rises past it (a white or mirror surface, the truth on the bound) is not named."""
+    rises past it (a white or mirror surface, the truth on the bound) is not named, nor rho_s,
+    the specular share of the reflectance (1: all specular, a metal without a diffuse part)."""
     at = [i for i, p in enumerate(s.names)
-          if p != "sigma_alpha" and fit.theta[i] >= s.upper[i] - 1e-3]
+          if p not in ("sigma_alpha", "rho_s") and fit.theta[i] >= s.upper[i] - 1e-3]
     if not at or fit.problem is None:
         return [s.names[i] for i in at]
     r, J = fit.problem.jacobian(np.asarray(fit.theta, dtype=float))

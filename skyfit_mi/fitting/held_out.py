@@ -90,7 +90,7 @@ def held_out_error(problem, theta, lower, upper, folds=HELD_OUT_FOLDS, within=No
             problem, np.asarray(theta, dtype=float), means, frame_sd))
         out["by_frame"] = {k: [None if np.isnan(r).all() else [float(x) for x in r] for r in x]
                            for k, x in rel.items()}
-    if es:
+    if sum(x.size for x in es):
         e, v, a = (np.concatenate(x) for x in (es, vs, scales))
         chi2 = float(np.sum(e * e / v))
         test = unc.misfit_test(chi2, len(e))

@@ -17,7 +17,7 @@ from ..pipeline.manifest import is_table
 from ..pipeline.observation_table import relative_scale
 from ..render.basis_table import TableModel
 from ..render.fit_model import PARAMETERS, bounds
-from .chi2 import LuminanceModel, Problem, subsample_region
+from .chi2 import LuminanceModel, Problem, subsample_region, usable_values
 from .fit import (FitCache, FitSession, fit_sessions, prepare_sessions, resolve_light,
                   trace_sessions)
 from .held_out import frame_folds
@@ -34,6 +34,9 @@ FAMILIES = ("ward", "balanced", "beckmann_plastic", "ggx_plastic", "beckmann_met
 MODELS = tuple(PARAMETERS)
 #: Folds of the cross-validation over frames.
 FOLDS = 4
+#: Fewest frames with values a ranking by held-out frames takes: with two, each fold fits on one
+#: frame's light and the ranking says little (a 3-parameter model 350x worse in chi-square won).
+RANK_FRAMES = 3
 #: The ranking's cheaper light cache: most positions per pixel and the sky plan
 #: (:data:`~skyfit_mi.render.light_cache.SKY_PLANS`); the chosen candidate is traced again at
 #: the fit's own (docs/BENCHMARKS.md, "Lobe families").
@@ -58,12 +61,19 @@ def cross_validate(session, model, folds=FOLDS, scale=1.0):
     theta, chi2 = np.asarray(res["theta"], dtype=float), float(res["chi2"])
     held_out, n_held = 0.0, 0
     for train, test in frame_folds(full.valid, folds):
-        train, test = Problem(obs, wm, valid=train), Problem(obs, wm, valid=test)
+        try:                                  # a fold too small to fit on is left out
+            train = Problem(obs, wm, valid=train)
+        except SkyfitError:
+            continue
         # each fold's minimum polished from the whole data's (a global search per fold is
-        # slower for the same choices)
-        r = test.residuals(polish(train, theta, lo, hi)["theta"])
+        # slower for the same choices); its held-out values however few
+        r = Problem(obs, wm, valid=test, held_out=True).residuals(
+            polish(train, theta, lo, hi)["theta"])
         held_out += float(r @ r)
         n_held += r.size
+    if not n_held:
+        raise SkyfitError(f"--model auto: no fold of frames leaves enough values to fit the "
+                          f"{model} model on ({full.n_data} values in all); give --model.")
     n, p = round(full.n_data * scale), full.n_params
     held_out, n_held, chi2 = held_out * scale, round(n_held * scale), chi2 * scale
     return {"normalisation": table.normalisation, "model": model, "parameters": p,
@@ -141,6 +151,12 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     t_start = time.perf_counter()
     first = FitSession(manifest_path, *regions[0], light=None,
                        **{"model": "achromatic", **options})
+    frames = int(np.sum(usable_values(first.obs).any(axis=(0, 2))))
+    if frames < RANK_FRAMES:
+        raise SkyfitError(f"--model auto ranks the models by frames held out, and "
+                          f"{regions[0][0]} has values in {frames} frame(s) (at least "
+                          f"{RANK_FRAMES}): give --model 2, 3 or 5, or more frames.")
+    folds = min(folds, frames)
     models, skipped = candidate_models(first.doc, models, first.obs.luminance)
     for m, why in skipped.items():
         log(f"model selection leaves out the {m} model: {why}")

@@ -540,10 +540,12 @@ def unknown_scale(spec, xml, table, rows, row_frames, pos, view, offset):
               "rows": len(lit),
               "meaning": "the table's radiometric scale is unknown: its values were multiplied "
                          f"by {factor:.6g} so that its brightest apparent albedo (pi L / E) "
-                         f"reads {UNKNOWN_SCALE_ALBEDO}; fitted reflectances (C, R, rho_s) are "
+                         f"reads {UNKNOWN_SCALE_ALBEDO}; the raw diffuse and specular "
+                         "reflectances (rho_d = C (1 - rho_s), and rho_s or C rho_s) are "
                          "the true ones times one unknown factor, the same for every material "
-                         "and channel; sigma_alpha, the colour's ratios and the ratio of "
-                         "specular to diffuse reflectance are absolute"}
+                         "and channel, and the roughness is absolute; the model's C, R and "
+                         "rho_s mix them, so a C or rho_s is not the true one times that "
+                         "factor: compare materials by their raw reflectances"}
     return factor, record
 
 
@@ -579,6 +581,10 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
         raise SkyfitError(f"{out} holds a file {TABLE_FILE} of no skyfit sequence; give another "
                           "folder with -o, or pass --overwrite to replace it.")
     table = read_observation_table(table_path, tz)
+    if table.saturated.all():
+        raise SkyfitError(f"{table.path}: every value is flagged saturated, which tells only a "
+                          "lower bound; measure the surface at an exposure (or gain) where some "
+                          "values are not.")
     spec, row_frames = _table_spec(spec_path, table, tz, site, log)
     scene = build_scene_xml(spec)
     mats = scene[1]
