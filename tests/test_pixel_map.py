@@ -259,6 +259,16 @@ def test_patches_share_one_fit_per_block(board):
     assert np.all(res["pixels"] // 2 == corners // 2)            # each fit's first pixel
     assert np.all(res["dof"] > 0)
     json.dumps({k: np.asarray(v).tolist() for k, v in res.items()})     # picklable, plain data
+    # a patch of 1 numbers the pixels in the image's order, not the list's: each fit is still
+    # its own pixel's (the map once wrote every pixel's fit onto another of its region's)
+    some = px[::-1][:24]
+    groups, corners = patch_groups(some, 1)
+    assert not np.array_equal(groups, np.arange(len(some)))
+    own, patched = (fit_pixels(tmp / "day", name, some, model="achromatic", groups=g)
+                    for g in (None, groups))
+    assert np.array_equal(patched["pixels"], corners)
+    np.testing.assert_allclose(patched["theta"][groups], own["theta"], rtol=1e-9)
+    np.testing.assert_array_equal(patched["dof"][groups], own["dof"])
 
 
 def test_a_photographed_days_map_counts_the_suns_level_in_its_reflectances(board):

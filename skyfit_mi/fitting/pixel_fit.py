@@ -126,7 +126,9 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     hit = np.bincount(groups, weights=table.hit.all(axis=1), minlength=n) > 0
     first = pixels[np.unique(groups, return_index=True)[1]]
     y_pixels = y                                         # per pixel, for _contradicts
-    if n < len(pixels):
+    if n < len(pixels) or not np.array_equal(groups, np.arange(len(pixels))):
+        # in group order, as every per-group array below (a patch of 1 numbers its pixels in
+        # the image's order, not the list's)
         y, w = (_stack_groups(a, groups, n) for a in (y, w))
         bases = [(_stack_groups(D, groups, n), np.stack([_stack_groups(g, groups, n) for g in G]))
                  for D, G in bases]
