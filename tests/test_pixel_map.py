@@ -625,3 +625,17 @@ def test_saturated_values_left_out_flag_only_fits_that_contradict_them(tmp_path)
     matte = dict(res, theta=res["theta"] * [1, 1, 1, 0, 1])
     wrong = _contradicts("colour", y, w, saturated, basis, matte, groups)
     assert wrong[left_out].mean() > 0.9 and right[kept].mean() < 0.1
+
+
+def test_a_roughness_open_at_its_upper_bound_is_not_determined():
+    """A pixel's sigma_alpha interval reaching its upper bound (0.328-0.5: a lower limit only)
+    is flagged undetermined, as one spread over a factor of 4; a closed one is not."""
+    from skyfit_mi.fitting.pixel_fit import WARNINGS, _flags
+
+    names = ["R", "rho_s", "sigma_alpha"]
+    fit = {"lo": np.array([[0.5, 0.05, 0.328], [0.5, 0.05, 0.02], [0.5, 0.05, 0.02]]),
+           "hi": np.array([[0.51, 0.06, 0.5], [0.51, 0.06, 0.03], [0.51, 0.06, 0.2]]),
+           "dof": np.full(3, 40), "chi2": np.full(3, 40.0), "model_noise_chi2": np.zeros(3)}
+    bits = _flags("achromatic", names, fit, np.ones(3, bool))
+    flagged = (bits & WARNINGS["sigma_alpha undetermined"]) > 0
+    assert flagged.tolist() == [True, False, True]

@@ -319,8 +319,10 @@ def _flags(model, names, fit, hit):
         misfit = (dof > 0) & (fit["chi2"] - fit["model_noise_chi2"]
                               > chi2_dist.ppf(MISFIT_QUANTILE, np.maximum(dof, 1)))
     bits |= np.where(misfit, WARNINGS["misfit"], 0)
-    bits |= np.where(hi[:, -1] > SIGMA_FACTOR_UNDETERMINED * np.maximum(lo[:, -1], SIGMA_GRID[1]),
-                     WARNINGS["sigma_alpha undetermined"], 0)
+    # the roughness spread over a factor, or open at its upper bound (a lower limit only)
+    top = bounds(model)[1][-1]
+    spread = hi[:, -1] > SIGMA_FACTOR_UNDETERMINED * np.maximum(lo[:, -1], SIGMA_GRID[1])
+    bits |= np.where(spread | (hi[:, -1] >= top - 1e-9), WARNINGS["sigma_alpha undetermined"], 0)
     bits |= np.where(hi[:, r] - lo[:, r] > SPAN_UNDETERMINED, WARNINGS["rho_s undetermined"], 0)
     if model != "two":
         bits |= np.where((hi[:, :-2] - lo[:, :-2] > SPAN_UNDETERMINED).any(axis=1),
