@@ -328,3 +328,30 @@ def test_an_exported_ideal_mirror_keeps_its_light_in_mitsubas_blend(mi):
         <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/>
         </film></sensor></scene>""")
     assert float(np.mean(np.array(mi.render(scene)))) == pytest.approx(0.5 * 0.675, rel=0.02)
+
+
+def test_a_maps_median_materials_say_how_many_pixels_hold_them(tmp_path):
+    """A map's region medians go out as materials only where every parameter has a median; one
+    over fewer than MEDIAN_PIXELS determined pixels says so, and a region left out is named."""
+    from skyfit_mi.pipeline.export import MAP_SUMMARY, MEDIAN_PIXELS, read_map
+    from skyfit_mi.render.image import write_exr
+
+    names = ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha")
+    for k, v in zip(names, (0.5, 0.4, 0.3, 0.05, 0.1)):
+        write_exr(tmp_path / f"{k}.exr", np.full((2, 2), v, np.float32))
+    med = dict(zip(names, (0.5, 0.4, 0.3, 0.05, 0.1)))
+    regions = {"few": {"model": "colour", "median": med,
+                       "determined_by_parameter": {**dict.fromkeys(names, 40), "sigma_alpha": 1}},
+               "many": {"model": "colour", "median": med,
+                        "determined_by_parameter": dict.fromkeys(names, 40)},
+               "none": {"model": "colour", "median": {**med, "sigma_alpha": None},
+                        "determined_by_parameter": {**dict.fromkeys(names, 40),
+                                                    "sigma_alpha": 0}}}
+    (tmp_path / MAP_SUMMARY).write_text(json.dumps({"parameters": list(names),
+                                                    "regions": regions}))
+    mats = {m.name: m for m in read_map(tmp_path)}
+    assert set(mats) == {"pixel_map", "few", "many"}
+    assert "none" not in mats and mats["many"].warnings == ()
+    assert any(f"fewer than {MEDIAN_PIXELS}" in w and "sigma_alpha (1)" in w
+               for w in mats["few"].warnings)
+    assert any("none: no median material" in w for m in mats.values() for w in m.warnings)

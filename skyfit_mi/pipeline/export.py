@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SkyfitError
+from ..errors import SkyfitError, listed
 from ..files import ensure_dir, to_json, write_text
 from ..physics.material_match import FORMS, GLTF_F0, nearest, nearest_maps
 from ..physics.ward import raw_reflectances
@@ -86,6 +86,10 @@ def read_materials(paths):
             for region, (path, r) in load_fits(paths).items()]
 
 
+#: A region's median material from fewer determined pixels than this is warned of.
+MEDIAN_PIXELS = 10
+
+
 def read_map(folder):
     """The per-pixel map in ``folder`` as materials: its texels, and each region's median."""
     summary = json.loads((folder / MAP_SUMMARY).read_text(encoding="utf-8"))
@@ -121,16 +125,27 @@ def read_map(folder):
     if MAP_NAME in regions:
         raise SkyfitError(f"the map in {folder} has a region named {MAP_NAME!r}, the name its "
                           "textured material takes; export that region's fit (fit_NAME.json).")
-    out = [Material(MAP_NAME, "raw", lobe, {}, warnings=notes, source=str(folder),
-                    maps={"rho_d": rho_d, "s": s, "sigma": sigma, "mask": mask,
-                          "undetermined": unsure})]
+    out, lacking = [], []
     for name, r in regions.items():
-        med = r.get("median") or {}
-        if set(PARAMETERS[r["model"]]) <= {k for k, v in med.items() if v is not None}:
-            out.append(Material(name, r["model"], lobe, {k: med[k] for k in PARAMETERS[r["model"]]},
-                                source=f"{folder}: the median of region {name}'s "
-                                       f"{r.get('determined', 0)} determined pixels"))
-    return out
+        med, names = r.get("median") or {}, PARAMETERS[r["model"]]
+        counts = r.get("determined_by_parameter") or {}
+        if not set(names) <= {k for k, v in med.items() if v is not None}:
+            lacking.append(name)
+            continue
+        few = [f"{k} ({counts[k]})" for k in names if counts.get(k, MEDIAN_PIXELS) < MEDIAN_PIXELS]
+        out.append(Material(
+            name, r["model"], lobe, {k: med[k] for k in names},
+            warnings=(f"medians of fewer than {MEDIAN_PIXELS} determined pixels: "
+                      f"{', '.join(few)}; export the region's fit (fit_NAME.json) for a value "
+                      "with its interval",) if few else (),
+            source=f"{folder}: each parameter the median of region {name}'s pixels that "
+                   "determine it (map_summary.json's determined_by_parameter)"))
+    if lacking:
+        notes += (f"{listed(lacking)}: no median material (a parameter no pixel determines); "
+                  "export the region's fit (fit_NAME.json)",)
+    return [Material(MAP_NAME, "raw", lobe, {}, warnings=notes, source=str(folder),
+                     maps={"rho_d": rho_d, "s": s, "sigma": sigma, "mask": mask,
+                           "undetermined": unsure})] + out
 
 
 def export_files():
