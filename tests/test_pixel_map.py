@@ -144,6 +144,13 @@ def test_another_maps_folder_is_refused_without_overwrite(board):
     with pytest.raises(SkyfitError, match="holds another map"):
         run_map(tmp / "day", regions, tmp / "map", MapOptions("achromatic", chunk=32),
                 ClusterOptions(workers=1), progress=False, **QUIET)
+    # replaced with --overwrite: the other model's planes go with it
+    shutil.copytree(tmp / "map", tmp / "replaced")
+    assert (tmp / "replaced" / "C_r.exr").is_file()
+    run_map(tmp / "day", regions[:1], tmp / "replaced", MapOptions("achromatic", chunk=32),
+            ClusterOptions(workers=1), overwrite=True, progress=False, **QUIET)
+    left = {p.name for p in (tmp / "replaced").iterdir()}
+    assert "R.exr" in left and not left & {"C_r.exr", "C_r_width95.exr", "C_r.png"}, left
 
 
 def test_bad_map_inputs_get_one_line(board, monkeypatch, capsys):

@@ -501,6 +501,9 @@ def write_map_outputs(out, store, names, regions, settings, choices):
         images[f"{n}_width95"] = hi[i] - lo[i]
     for key, img in images.items():
         write_exr(out / f"{key}.exr", img.astype(np.float32))
+    for n in set(PARAMETER_ORDER) - set(names):      # another map's planes (--overwrite)
+        for f in (f"{n}.exr", f"{n}_width95.exr", f"{n}.png"):
+            (out / f).unlink(missing_ok=True)
     # each region's pixels and the planes of its model: a plane's preview shows the pixels of
     # the regions whose model has it, and names the others
     within = {name: np.zeros(mapped.shape, bool) for name, _ in regions}
