@@ -471,20 +471,19 @@ def _map_pending(client, manifest_path, chunks, pending, store, names, options, 
                              groups=chunks[i]["groups"], variant=options.variant, light=light,
                              pure=False): i
                for i in pending}
-    bar = tqdm(total=sum(len(chunks[i]["pixels"]) for i in pending), desc="map", unit="px",
-               disable=not progress)
-    for fut in as_completed(futures):
-        i = futures[fut]
-        try:
-            res = fut.result()
-        except SkyfitError:
-            for f in futures:
-                f.cancel()
-            raise
-        _write_chunk(store, chunks[i], res, names)
-        store["done"][i] = True                 # after the chunk's values: a resume redoes it
-        bar.update(len(chunks[i]["pixels"]))
-    bar.close()
+    with tqdm(total=sum(len(chunks[i]["pixels"]) for i in pending), desc="map", unit="px",
+              disable=not progress) as bar:     # closed on Ctrl-C too: the message's own line
+        for fut in as_completed(futures):
+            i = futures[fut]
+            try:
+                res = fut.result()
+            except SkyfitError:
+                for f in futures:
+                    f.cancel()
+                raise
+            _write_chunk(store, chunks[i], res, names)
+            store["done"][i] = True             # after the chunk's values: a resume redoes it
+            bar.update(len(chunks[i]["pixels"]))
 
 
 def write_map_outputs(out, store, names, regions, settings, choices):
