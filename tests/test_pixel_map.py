@@ -141,7 +141,7 @@ def test_another_maps_folder_is_refused_without_overwrite(board):
     from skyfit_mi.fitting.pixel_map import ClusterOptions, MapOptions, run_map
 
     tmp, regions, _ = board
-    with pytest.raises(SkyfitError, match="holds another map"):
+    with pytest.raises(SkyfitError, match=r"holds another map \(its .*model.* differ"):
         run_map(tmp / "day", regions, tmp / "map", MapOptions("achromatic", chunk=32),
                 ClusterOptions(workers=1), progress=False, **QUIET)
     # replaced with --overwrite: the other model's planes go with it

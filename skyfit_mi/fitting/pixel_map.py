@@ -212,13 +212,19 @@ def _check_store(path, settings, overwrite):
     except Exception:                                          # damaged or not a store
         old = done = first = None
     if old != settings:
-        _another_map(path)
+        _another_map(path, old, settings)
     return done, first
 
 
-def _another_map(path):
-    raise SkyfitError(f"{path} holds another map (or a damaged one); give another -o, or "
-                      "pass --overwrite to replace it.")
+def _another_map(path, old=None, settings=None):
+    """SkyfitError for another map's (or a damaged) store at ``path``, naming the settings in
+    which ``old`` (that map's) differs from ``settings`` (this run's)."""
+    differ = sorted(k for k in set(old or {}) | set(settings or {})
+                    if (old or {}).get(k) != (settings or {}).get(k)) if old else []
+    raise SkyfitError(f"{path} holds another map"
+                      + (f" (its {', '.join(differ[:4])} differ from this run's)" if differ
+                         else " (or a damaged one)")
+                      + "; give another -o, or pass --overwrite to replace it.")
 
 
 def _open_store(path, settings, shape, n_par, n_chunks, resume, first=None):
