@@ -646,3 +646,25 @@ def test_a_roughness_open_at_its_upper_bound_is_not_determined():
     bits = _flags("achromatic", names, fit, np.ones(3, bool))
     flagged = (bits & WARNINGS["sigma_alpha undetermined"]) > 0
     assert flagged.tolist() == [True, False, True]
+
+
+def test_a_grey_metal_pixel_is_flagged_as_reading_either_way():
+    """A colour-model pixel whose C is grey and whose other reading (metal <-> plastic) is
+    valid gives the same BRDF either way: flagged, and its C and rho_s not determined (its
+    roughness is); a coloured one, or a grey plastic with no valid metal twin, is not."""
+    from skyfit_mi.fitting.pixel_fit import WARNINGS, _flags, undetermined_bits
+    from skyfit_mi.physics.ward import colour_rule_twin
+
+    theta = np.array([[0.5, 0.5, 0.5, 0.75, 0.1],        # a grey steel: plastic twin valid
+                      [0.7, 0.08, 0.05, 0.06, 0.1],      # red paint: not grey
+                      [0.85, 0.85, 0.85, 0.03, 0.2]])    # white paper: no valid metal twin
+    lo, hi = theta - 0.005, theta + 0.005
+    fit = {"theta": theta, "lo": lo, "hi": hi, "dof": np.full(3, 40), "chi2": np.full(3, 40.0),
+           "model_noise_chi2": np.zeros(3)}
+    bits = _flags("colour", ["C_r", "C_g", "C_b", "rho_s", "sigma_alpha"], fit, np.ones(3, bool))
+    twin = (bits & WARNINGS["grey: plastic and metal readings alike"]) > 0
+    assert twin.tolist() == [True, False, False]
+    c2, rho2 = colour_rule_twin(theta[0, :3], theta[0, 3])          # the scalar rule agrees
+    assert rho2 < 0.5 and c2[0] <= 1
+    assert bits[0] & undetermined_bits("rho_s") and bits[0] & undetermined_bits("C_g")
+    assert not bits[0] & undetermined_bits("sigma_alpha")

@@ -18,6 +18,7 @@ field (:data:`WARNINGS`); a pixel off its material gets NaN.
 import numpy as np
 
 from ..errors import SkyfitError
+from ..physics.ward import METAL_THRESHOLD
 from ..pipeline.manifest import frame_sky, load_manifest
 from ..render import setup
 from ..render.scene import load_xml
@@ -39,12 +40,14 @@ GRID_BLOCK = 64
 #: Warning bits of a map pixel.
 WARNINGS = {"misfit": 1, "sigma_alpha undetermined": 2, "rho_s undetermined": 4,
             "reflectance undetermined": 8, "few values": 16, "off the material": 32,
-            "saturated values left out": 64, "saturated values contradicted": 128}
+            "saturated values left out": 64, "saturated values contradicted": 128,
+            "grey: plastic and metal readings alike": 256}
 #: The bits that mean "not determined": a fit falling short of a left-out saturated value
 #: contradicts it (a saturated highlight misleads it); one reaching it stays determined.
 UNDETERMINED = (WARNINGS["sigma_alpha undetermined"] | WARNINGS["rho_s undetermined"]
                 | WARNINGS["reflectance undetermined"] | WARNINGS["off the material"]
-                | WARNINGS["saturated values contradicted"])
+                | WARNINGS["saturated values contradicted"]
+                | WARNINGS["grey: plastic and metal readings alike"])
 
 
 def undetermined_bits(name):
@@ -52,8 +55,9 @@ def undetermined_bits(name):
     (off the material, saturated values contradicted) and the parameter's own (a flat lobe
     width leaves a pixel's reflectance determined)."""
     own = {"rho_s": "rho_s undetermined", "sigma_alpha": "sigma_alpha undetermined"}
+    twin = 0 if name == "sigma_alpha" else WARNINGS["grey: plastic and metal readings alike"]
     return (WARNINGS["off the material"] | WARNINGS["saturated values contradicted"]
-            | WARNINGS[own.get(name, "reflectance undetermined")])
+            | WARNINGS[own.get(name, "reflectance undetermined")] | twin)
 #: How far [sigma] a fit may fall below a left-out saturated value (one-sided, about 0.1%).
 SATURATION_MARGIN = 3.0
 #: A parameter is undetermined when its 95% interval spans more than this share of its range
@@ -328,7 +332,25 @@ def _flags(model, names, fit, hit):
         bits |= np.where((hi[:, :-2] - lo[:, :-2] > SPAN_UNDETERMINED).any(axis=1),
                          WARNINGS["reflectance undetermined"], 0)
     bits |= np.where(dof < 2 * n_par, WARNINGS["few values"], 0)
+    if model == "colour":
+        bits |= np.where(_grey_twin(fit["theta"], lo, hi),
+                         WARNINGS["grey: plastic and metal readings alike"], 0)
     return bits | np.where(~hit, WARNINGS["off the material"], 0)
+
+
+def _grey_twin(theta, lo, hi):
+    """Per colour-model fit (G, 5), whether C is grey within its intervals and the colour
+    rule's other reading (plastic <-> metal, thesis 3.4.5) gives the same BRDF within bounds
+    (:func:`~skyfit_mi.physics.ward.colour_rule_twin`, vectorised): C and rho_s then read either
+    way, and only the raw reflectances are determined."""
+    grey = lo[:, :3].max(axis=1) <= hi[:, :3].min(axis=1) + 1e-9
+    g, rho = theta[:, :3].mean(axis=1), theta[:, 3]
+    d = g * (1.0 - rho)
+    metal = rho >= METAL_THRESHOLD
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho2 = np.where(metal, g * rho, np.where(rho > 0, rho / (d + rho), 0.0))
+        c2 = np.where(rho2 < 1, d / (1.0 - rho2), np.inf)
+    return grey & ((rho2 >= METAL_THRESHOLD) != metal) & (c2 <= 1.0)
 
 def check_map_region(pixels, shape):
     """Raise SkyfitError unless ``pixels`` (P, 2) is non-empty and inside ``shape`` (H, W)."""
