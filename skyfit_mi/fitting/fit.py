@@ -182,7 +182,8 @@ class FitSession:
             if relative_scale(doc) and model == "two":
                 raise SkyfitError("the table's scale is unknown (ingest --unknown-scale), and the "
                                   "2-parameter model's surface is white (rho_d + rho_s = 1), "
-                                  "which needs the scale; fit it with --model 3 or 5.")
+                                  "which needs the scale; fit it with --model 3"
+                                  + ("." if self.obs.luminance else " or 5."))
         else:
             self.obs = load_observations(manifest_path, pixels, frames, min_frames)
         mats = doc["scene"]["materials"]

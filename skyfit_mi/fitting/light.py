@@ -9,6 +9,7 @@ import numpy as np
 
 from ..errors import SkyfitError, check_choice, check_range
 from ..physics.sky import SKY_CHOICES, SKY_LEVEL_SD
+from ..pipeline.manifest import is_table
 from ..render.basis_table import mixed
 from .sky_fit import (check_terms, default_sky, default_sun_sd, photographed, shape_variants,
                       sun_source, sunlit)
@@ -76,9 +77,9 @@ class LightOptions:
         if chosen:
             sky = default_sky(doc, skies)
             if sky != "spec":
-                log(f"sky: photographs under the sun and a sky: the spec's light is a model of "
-                    f"theirs, so its level is fitted with its prior (--sky {sky}; --sky spec "
-                    "takes it as exact)")
+                log(f"sky: {'values measured' if is_table(doc) else 'photographs'} under the "
+                    "sun and a sky: the spec's light is a model of theirs, so its level is "
+                    f"fitted with its prior (--sky {sky}; --sky spec takes it as exact)")
         asked = terms not in (None, 1)
         if sky == "spec" and (asked or shape or sun_sd is not None or departure):
             given = ("--sky-terms" if asked else "--sky-shape" if shape else
