@@ -172,10 +172,12 @@ def vignetting_error(doc, pixels):
     if (ingest.get("options") or {}).get("vignetting") != "none" or "photos" not in ingest \
             or pixels.ndim != 2 or pixels.dtype.kind not in "iu":
         return np.zeros(len(pixels))
+    cal = ingest.get("calibration") or {}
+    if cal.get("references") and "reference_falloff" not in cal:
+        return np.zeros(len(pixels))        # an older ingest: the references' place unknown
     cam = doc["camera"]
-    f = SensorModel.falloff(cam["width"], cam["height"], cam["fov_deg"])
-    ref = float((ingest.get("calibration") or {}).get("reference_falloff", 1.0))
-    return 0.5 * (1.0 - f[pixels[:, 1], pixels[:, 0]] / ref)
+    f = SensorModel.falloff(cam["width"], cam["height"], cam["fov_deg"], pixels)
+    return 0.5 * (1.0 - f / float(cal.get("reference_falloff", 1.0)))
 
 
 def shared_level_sd(doc, names, theta, vignetting=0.0):

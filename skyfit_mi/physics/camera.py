@@ -98,13 +98,17 @@ class SensorModel:
 
     # ---- the forward model ----------------------------------------------
     @staticmethod
-    def falloff(width, height, fov_deg):
-        """cos^4 of each pixel's off-axis angle (eq. 5.6) for a horizontal field of view."""
+    def falloff(width, height, fov_deg, pixels=None):
+        """cos^4 of each pixel's off-axis angle (eq. 5.6) for a horizontal field of view: (H, W),
+        or at ``pixels`` (P, 2) (x, y) alone, (P,)."""
         t = np.tan(np.radians(fov_deg) / 2.0)
-        x = ((np.arange(width) + 0.5) / width * 2.0 - 1.0) * t
-        y = ((np.arange(height) + 0.5) / height * 2.0 - 1.0) * t * height / width
-        r2 = x[None, :] ** 2 + y[:, None] ** 2
-        return (1.0 / (1.0 + r2)) ** 2                      # cos^4 = 1/(1 + tan^2)^2
+        if pixels is None:
+            x, y = np.arange(width)[None, :], np.arange(height)[:, None]
+        else:
+            x, y = np.asarray(pixels, dtype=float).T
+        tx = ((x + 0.5) / width * 2.0 - 1.0) * t
+        ty = ((y + 0.5) / height * 2.0 - 1.0) * t * height / width
+        return (1.0 / (1.0 + tx ** 2 + ty ** 2)) ** 2      # cos^4 = 1/(1 + tan^2)^2
 
     def signal(self, radiance, fov_deg=None):
         """Normalised, unclipped sensor signal s for radiance (H, W, 3) [W m^-2 sr^-1]."""

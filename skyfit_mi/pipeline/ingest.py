@@ -1183,7 +1183,7 @@ def frame_exposures(frames, patches, noise, o, log):
         h, w = frames.size
         at = np.argwhere(patches.mask)[np.isin(patches.patch, _neutral_labels(o.calibrate))]
         calibration["reference_falloff"] = float(np.mean(SensorModel.falloff(
-            w, h, frames.spec.camera["fov_deg"])[at[:, 0], at[:, 1]]))
+            w, h, frames.spec.camera["fov_deg"], at[:, ::-1])))
         if patches.response_info is not None:
             calibration["response_fit"] = patches.response_info
         if patches.chart is not None:
