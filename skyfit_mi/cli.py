@@ -549,7 +549,8 @@ def _add_camera(sub, common):
         "writes the spec's [camera] table (TOML) and a JSON report. Reference: docs/cli.md.")
     cam.add_argument("points", help="CSV: name (optional), x_px, y_px (column, row), X, Y, Z "
                      "(east, north, up [m])")
-    cam.add_argument("--photo", help="the photograph (gives the image size)")
+    cam.add_argument("--photo", help="the photograph marked (gives the image size; ingest "
+                     "registers the frames on it)")
     cam.add_argument("--width", type=_int_in(1, 16384), help="image width [px] (without --photo)")
     cam.add_argument("--height", type=_int_in(1, 16384), help="image height [px]")
     cam.add_argument("--fov-deg", type=float,

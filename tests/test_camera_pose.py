@@ -194,8 +194,8 @@ MISLABELLED[1] = MISLABELLED[3]               # p1 marked on p3's corner
     (*_behind(), [], "p6 behind it"),
     (BOARD6, MISLABELLED, [], "point 'p1' is the likeliest mislabelled"),
     # a plane's mirror image fits a camera below it as well as the truth from above
-    (BOARD6, project(BOARD6) * [1, -1] + [0, H - 1], [], "below the marked points' plane"),
-    (BOARD6[:, [1, 0, 2]], project(BOARD6), [], "below the marked points' plane"),
+    (BOARD6, project(BOARD6) * [1, -1] + [0, H - 1], [], "below the ground and the marked"),
+    (BOARD6[:, [1, 0, 2]], project(BOARD6), [], "below the ground and the marked"),
 ], ids=["off the image", "three points", "five, fov free", "collinear", "behind",
         "mislabelled", "rows counted up", "east and north swapped"])
 def test_bad_inputs_exit_2_and_write_nothing(tmp_path, capsys, world, uv, extra, msg):

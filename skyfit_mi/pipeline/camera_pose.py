@@ -489,17 +489,20 @@ FACING_DEG = 60.0
 
 
 def _check_side(points, best):
-    """Refuse a camera below a plane of marks that faces up (the ground, a board on it): the
-    mirror image of the marks (image rows counted up, x and y or east and north swapped) fits a
-    camera seen from the plane's other side as well as the true one fits from above."""
+    """Refuse a camera below the ground (z < 0) and below a plane of marks that faces up (a
+    board on the ground): the mirror image of the marks (image rows counted up, x and y or east
+    and north swapped) fits a camera on the plane's other side as well as the true one fits
+    from above.  A camera above the ground under a ceiling's marks is a view from below."""
     centre = points.world.mean(axis=0)
     normal = np.linalg.svd(points.world - centre)[2][-1]
     normal = normal if normal[2] >= 0 else -normal
     origin = -cv2.Rodrigues(best.rvec)[0].T @ best.tvec
-    if normal[2] > np.cos(np.radians(FACING_DEG)) and np.dot(origin - centre, normal) < 0:
+    if normal[2] > np.cos(np.radians(FACING_DEG)) and np.dot(origin - centre, normal) < 0 \
+            and origin[2] < 0:
         raise SkyfitError(
-            f"the camera comes out below the marked points' plane (at height {origin[2]:.2f} m, "
-            f"the points at {centre[2]:.2f} m), seeing it from behind: the marks are a mirror "
+            f"the camera comes out below the ground and the marked points' plane (at height "
+            f"{origin[2]:.2f} m, the points at {centre[2]:.2f} m), seeing it from behind: the "
+            "marks are a mirror "
             "image of the scene's. Check that y_px counts rows down from the image's top, that "
             "x_px is the column, and that X, Y, Z are east, north, up.")
 

@@ -324,9 +324,9 @@ CHART_LABEL, CHART_GREY = 1000, 0.5
 
 def reference_error(calibrate, reference_sd, log):
     """The relative error (3,) of the level the references ``calibrate`` {name: rho (3,)} set
-    from their reflectances' standard errors ``reference_sd`` {name: sd (3,)}: each its sd over
-    its reflectance, independent, the level taken from them alike (root sum of squares over
-    their number).  Those without one are taken as exact, which a line says."""
+    from their reflectances' standard errors ``reference_sd`` {name: sd (3,)}: the largest of
+    their sds over their reflectances (the level pools their pixels, so one large reference
+    may hold it alone).  Those without one are taken as exact, which a line says."""
     exact = [n for n in calibrate if n not in reference_sd]
     if exact:
         log(f"calibration: {listed([f'{n}={calibrate[n][0]:g}' for n in exact])} taken as "
@@ -335,7 +335,7 @@ def reference_error(calibrate, reference_sd, log):
             f"--calibrate {exact[0]}={calibrate[exact[0]][0]:g}+-SD (or +-N%) to count it")
     u = [np.asarray(reference_sd[n], dtype=float) / np.asarray(calibrate[n], dtype=float)
          for n in calibrate if n in reference_sd]
-    return np.sqrt(np.sum(np.square(u), axis=0)) / len(calibrate) if u else np.zeros(3)
+    return np.max(u, axis=0) if u else np.zeros(3)
 
 
 def _calibration_spec(raw, calibrate, base_dir):

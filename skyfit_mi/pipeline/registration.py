@@ -24,6 +24,7 @@ heteroskedasticity", Econometrica 48(4), 817-838, 1980; K.-Y. Liang and S. L. Ze
 """
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -261,7 +262,8 @@ def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
         ref = min(usable, key=lambda i: abs(t[i] - mid))
         marked = camera.get("photo")             # the photograph the pose was marked on
         if marked is not None:
-            on = [i for i in usable if names[i] == marked]
+            on = [i for i in usable if names[i] == marked] or [     # or its RAW's, JPEG's
+                i for i in usable if Path(names[i]).stem.lower() == Path(marked).stem.lower()]
             if on:
                 ref = on[0]
             else:

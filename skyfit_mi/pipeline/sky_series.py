@@ -68,6 +68,8 @@ SUN_SHARE_FLOOR = 0.05
 #: Largest 10-90% range of a card box's luminance over its median: an evenly lit card's varies
 #: by its noise and texture (a few per cent), a box reaching shade or off the card by far more.
 CARD_UNIFORMITY = 0.1
+#: Pixels a side of the bins whose spread it measures (a 4% noise per pixel is 1% per bin).
+UNIFORM_BIN = 4
 #: Pixels usable in two shots at least, for their agreement to be measured.
 AGREEMENT_PIXELS = 20
 #: Largest departure of two shots' agreement from 1 before the series warns.
@@ -142,10 +144,15 @@ def _check_box(box, photo):
 
 
 def _check_uniform(path, linear, clipped):
-    """SkyfitError where a card box's unclipped pixels vary in luminance by over
-    :data:`CARD_UNIFORMITY` (their 10-90% range over their median): part of it in shade or off
-    the card."""
-    lum = (linear @ SRGB_LUMINANCE)[~clipped.any(axis=-1)]
+    """SkyfitError where a card box's unclipped pixels, in :data:`UNIFORM_BIN` square bins,
+    vary in luminance by over :data:`CARD_UNIFORMITY` (their 10-90% range over their median):
+    part of it in shade or off the card."""
+    lum = np.where(clipped.any(axis=-1), np.nan, linear @ SRGB_LUMINANCE)
+    if min(lum.shape) >= 2 * UNIFORM_BIN:          # binned: a noisy card's pixels average out
+        h, w = (n // UNIFORM_BIN * UNIFORM_BIN for n in lum.shape)
+        lum = lum[:h, :w].reshape(h // UNIFORM_BIN, UNIFORM_BIN, w // UNIFORM_BIN,
+                                  UNIFORM_BIN).mean(axis=(1, 3))
+    lum = lum[np.isfinite(lum)]
     if lum.size < 4:
         return
     lo, mid, hi = np.percentile(lum, [10, 50, 90])
