@@ -121,7 +121,7 @@ def figure_png(fig, dpi=120, close=True):
 
     buf = io.BytesIO()
     try:
-        fig.savefig(buf, dpi=dpi, format="png", bbox_inches="tight")   # labels kept whole
+        fig.savefig(buf, dpi=dpi, format="png")
     finally:
         if close:
             plt.close(fig)

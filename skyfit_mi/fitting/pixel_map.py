@@ -621,4 +621,5 @@ def _preview(path, image, mapped, determined, label, lacking=()):
         [f"not in the model of {', '.join(lacking)}"] if lacking else [])
     ax.set_title(label + (f" ({'; '.join(notes)})" if notes else ""), fontsize=9)
     ax.set(xticks=[], yticks=[])
+    fig.tight_layout()                              # the colour bar's label kept whole
     save_figure(fig, path)
