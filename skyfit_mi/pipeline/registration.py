@@ -43,6 +43,9 @@ ECC_FILTER, ECC_ITERATIONS, ECC_EPS = 1, 200, 1e-5
 #: The least ECC correlation of a registered frame with the reference: below it the frames do
 #: not show one scene alike enough to align.
 MIN_CORRELATION = 0.5
+#: Below this ECC correlation a registered frame is named: a helper's flare in the reference
+#: read 0.55 (from 0.92) and biased turns by 0.25 degrees, shifts still right.
+WEAK_CORRELATION = 0.75
 #: A frame that moved less than this [px] (or than 3 sd of its motion) is taken as still and
 #: not resampled: ECC finds small apparent motion on a still day, and resampling costs.
 STILL_PX = 0.1
@@ -298,6 +301,10 @@ def register_frames(frames, linear, register=True, limit=LIMIT_PX, log=print):
             sd_i = displacement_sd(motion_covariance(feats[ref], feats[i], M), w, h)
             records[i] = {**motion_record(M, w, h), "sd_px": sd_i, "correlation": rho,
                           "resampled": bool(moved > max(STILL_PX, 3.0 * sd_i))}
+            if rho < WEAK_CORRELATION:
+                log(f"registration: {names[i]} matches {names[ref]} weakly (ECC correlation "
+                    f"{rho:.2f}; a still scene's reads over {WEAK_CORRELATION:g}): flare, "
+                    "moving shadows or clouds in either may bias its measured turn; look at it")
             if records[i]["resampled"]:
                 motion[i] = M
     maps = {i: pixel_map(motion[i], camera) for i in lit
