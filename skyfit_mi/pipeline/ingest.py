@@ -1189,6 +1189,9 @@ def frame_exposures(frames, patches, noise, o, log):
         if patches.chart is not None:
             calibration["colorchecker"] = _chart_record(o.colorchecker, patches.chart, samples,
                                                         patches.patch, sensor, per_frame, log)
+            log("calibration: the ColorChecker's greys taken at their published reflectances: a "
+                "chart departs from them by its batch and age (1-2%), which the intervals leave "
+                "out; a grey card of stated error beside it (--calibrate NAME=RHO+-SD) counts it")
         e0 = float(per_frame[0] @ SRGB_LUMINANCE)
         by_frame = {i: per_frame[j] for j, i in enumerate(lit)}
     else:
