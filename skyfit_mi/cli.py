@@ -429,7 +429,7 @@ def _labels(args):
 
 
 def _camera(args):
-    from .pipeline.camera_pose import estimate_camera, read_points, write_camera
+    from .pipeline.camera_pose import estimate_camera, point_text, read_points, write_camera
     from .pipeline.photos import read_photo
 
     if args.photo:
@@ -459,7 +459,7 @@ def _camera(args):
     print(f"camera from {len(err)} points: azimuth {p['azimuth_deg'][0]:.2f} +- "
           f"{p['azimuth_deg'][1]:.2f} deg, {p['angle_deg'][0]:.2f} +- {p['angle_deg'][1]:.2f} "
           f"deg from vertical, {p['distance_m'][0]:.3f} +- {p['distance_m'][1]:.3f} m from "
-          f"[{', '.join(f'{v + 0.0:.4g}' for v in np.round(est.target, 6))}], fov {fov} "
+          f"{point_text(est.target)}, fov {fov} "
           "(1 sigma, marks "
           f"{est.sigma_px:.2g} px); "
           f"reprojection rms {np.sqrt(np.mean(err ** 2)):.2f} px, max {err.max():.2f} px "

@@ -70,8 +70,7 @@ def fit_warnings(s, fit):
         warnings.append(s.doc["ingest"]["scale"]["meaning"])
     warnings += sky_warnings(s, fit)
     warnings += pose_warnings(s, fit)
-    falloff = 2 * abs(float(np.mean(unc.vignetting_error(s.doc, s.obs.pixels)))) \
-        if s.obs.rays is None else 0.0
+    falloff = 2 * unc.region_vignetting(s.doc, s.obs.pixels)
     if falloff > VIGNETTING_NOTE:
         warnings.append(
             "the photographs' lens falloff was not corrected (ingest --vignetting none): this "

@@ -169,8 +169,7 @@ def calibration_sd(s, J, problem, usable, theta, curvature_inverse):
     reflectances', and an uncorrected falloff's between the references and the region)."""
     cal = (s.doc.get("ingest") or {}).get("calibration") or {}
     loading = None if s.obs.rays is not None else exif_scaled(s.doc, s.obs.frames)
-    vignetting = abs(float(np.mean(unc.vignetting_error(s.doc, s.obs.pixels)))) \
-        if s.obs.rays is None else 0.0
+    vignetting = unc.region_vignetting(s.doc, s.obs.pixels)
     if loading is None and (s.obs.rays is not None or not cal.get("scale_relative_sd")):
         return unc.calibration_sd(s.doc, s.names, theta, vignetting)
     Js = J * problem.value_scale(theta)[..., None]          # per relative error of a value

@@ -18,7 +18,6 @@ field (:data:`WARNINGS`); a pixel off its material gets NaN.
 import numpy as np
 
 from ..errors import SkyfitError
-from ..physics.ward import METAL_THRESHOLD
 from ..pipeline.manifest import frame_sky, load_manifest
 from ..render import setup
 from ..render.scene import load_xml
@@ -29,8 +28,8 @@ from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, grid_chi2, grid_chi2_device,
                                     linear_curvature, linear_observations, near_saturation)
 from .sky_fit import LEVEL_SCALED, light_level_sd, skies_at_level
-from .uncertainty import (Z, calibration_sd, colour_matrix_sd, vignetting_error,
-                          widen_relative)
+from .uncertainty import (Z, calibration_sd, colour_matrix_sd, colour_twins,
+                          vignetting_error, widen_relative)
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
 #: fit's, so that a chunk fits in memory.
@@ -333,24 +332,10 @@ def _flags(model, names, fit, hit):
                          WARNINGS["reflectance undetermined"], 0)
     bits |= np.where(dof < 2 * n_par, WARNINGS["few values"], 0)
     if model == "colour":
-        bits |= np.where(_grey_twin(fit["theta"], lo, hi),
+        bits |= np.where(colour_twins(fit["theta"], lo[:, :3], hi[:, :3])[0],
                          WARNINGS["grey: plastic and metal readings alike"], 0)
     return bits | np.where(~hit, WARNINGS["off the material"], 0)
 
-
-def _grey_twin(theta, lo, hi):
-    """Per colour-model fit (G, 5), whether C is grey within its intervals and the colour
-    rule's other reading (plastic <-> metal, thesis 3.4.5) gives the same BRDF within bounds
-    (:func:`~skyfit_mi.physics.ward.colour_rule_twin`, vectorised): C and rho_s then read either
-    way, and only the raw reflectances are determined."""
-    grey = lo[:, :3].max(axis=1) <= hi[:, :3].min(axis=1) + 1e-9
-    g, rho = theta[:, :3].mean(axis=1), theta[:, 3]
-    d = g * (1.0 - rho)
-    metal = rho >= METAL_THRESHOLD
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rho2 = np.where(metal, g * rho, np.where(rho > 0, rho / (d + rho), 0.0))
-        c2 = np.where(rho2 < 1, d / (1.0 - rho2), np.inf)
-    return grey & ((rho2 >= METAL_THRESHOLD) != metal) & (c2 <= 1.0)
 
 def check_map_region(pixels, shape):
     """Raise SkyfitError unless ``pixels`` (P, 2) is non-empty and inside ``shape`` (H, W)."""

@@ -115,8 +115,7 @@ def _labels_share(doc, result, pixels):
     cal = result.get("calibration_error_sd") or {}
     names = [p for p in result["parameters"] if p in cal]
     theta = np.array([result["parameters"][p] for p in names])
-    shared = unc.shared_level_sd(doc, names, theta,
-                                 abs(float(np.mean(unc.vignetting_error(doc, pixels)))))
+    shared = unc.shared_level_sd(doc, names, theta, unc.region_vignetting(doc, pixels))
     return {p: float(np.sqrt(max(cal[p] ** 2 - v ** 2, 0.0))) for p, v in zip(names, shared)}
 
 

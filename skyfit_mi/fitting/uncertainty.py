@@ -180,6 +180,13 @@ def vignetting_error(doc, pixels):
     return 0.5 * (1.0 - f / float(cal.get("reference_falloff", 1.0)))
 
 
+def region_vignetting(doc, pixels):
+    """The relative error of a group of ``pixels``' exposure from an uncorrected falloff: the
+    size of their :func:`vignetting_error`'s mean (0 for a table's points)."""
+    return abs(float(np.mean(vignetting_error(doc, pixels)))) \
+        if pixels is not None and len(pixels) else 0.0
+
+
 def shared_level_sd(doc, names, theta, vignetting=0.0):
     """The standard error per parameter (n,) or (G, n) from errors of the level every frame
     shares: the references' reflectances' (:func:`reference_sd`) and the uncorrected falloff's
@@ -430,11 +437,19 @@ def colour_rule_ambiguity(theta, intervals95):
     With C_r = C_g = C_b the plastic (rho_s < 0.5) and metal rules can give the same Ward model
     (thesis 3.4.5). Returns (C', rho_s') of the other reading if valid.
     """
-    lo = max(intervals95[k][0] for k in ("C_r", "C_g", "C_b"))
-    hi = min(intervals95[k][1] for k in ("C_r", "C_g", "C_b"))
-    if lo > hi + 1e-9:                      # the channels differ: C is not grey
-        return None
-    g = float(np.mean(theta[:3]))
-    c2, rho2 = colour_rule_twin(np.full(3, g), theta[3])
-    ok = (rho2 < METAL_THRESHOLD) != (theta[3] < METAL_THRESHOLD) and c2[0] <= 1.0
-    return (float(c2[0]), rho2) if ok else None
+    iv = np.array([intervals95[k] for k in ("C_r", "C_g", "C_b")], dtype=float)
+    ok, c2, rho2 = colour_twins(np.asarray(theta, dtype=float)[None], iv[None, :, 0],
+                                iv[None, :, 1])
+    return (float(c2[0]), float(rho2[0])) if ok[0] else None
+
+
+def colour_twins(theta, c_lo, c_hi):
+    """For colour-model fits ``theta`` (G, 5) with C's intervals ``c_lo``, ``c_hi`` (G, 3):
+    whether C is grey within them (one value in every channel's) and the colour rule's other
+    reading of the same BRDF is valid (:func:`~skyfit_mi.physics.ward.colour_rule_twin`,
+    across the plastic/metal rule, C' <= 1), and that reading's C' (grey) and rho_s', (G,) each."""
+    grey = np.max(c_lo, axis=1) <= np.min(c_hi, axis=1) + 1e-9
+    g, rho = np.mean(theta[:, :3], axis=1), theta[:, 3]
+    c2, rho2 = colour_rule_twin(np.repeat(g[:, None], 3, axis=1), rho)
+    ok = grey & ((rho2 < METAL_THRESHOLD) != (rho < METAL_THRESHOLD)) & (c2[:, 0] <= 1.0)
+    return ok, c2[:, 0], rho2

@@ -131,15 +131,16 @@ def colour_rule_twin(C, rho_s):
 
     Metal -> plastic: rho_s' = mean(C) rho_s; plastic -> metal: rho_s' = rho_s / (mean(d) +
     rho_s); C' = d / (1 - rho_s').  Same raw BRDF when C is grey.  Unclipped: valid only if
-    rho_s' is across METAL_THRESHOLD and C' <= 1.
+    rho_s' is across METAL_THRESHOLD and C' <= 1.  ``C`` (..., 3) and ``rho_s`` (...) may hold
+    many readings at once.
     """
-    c, rho = np.asarray(C, dtype=float), float(rho_s)
-    d = c * (1 - rho)
-    if rho >= METAL_THRESHOLD:
-        rho2 = float(np.mean(c)) * rho
-    else:
-        rho2 = rho / (float(np.mean(d)) + rho) if rho > 0 else 0.0
-    return (d / (1 - rho2) if rho2 < 1 else np.zeros(3)), rho2
+    c, rho = np.asarray(C, dtype=float), np.asarray(rho_s, dtype=float)
+    d = c * (1 - rho)[..., None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho2 = np.where(rho >= METAL_THRESHOLD, np.mean(c, axis=-1) * rho,
+                        np.where(rho > 0, rho / (np.mean(d, axis=-1) + rho), 0.0))
+        c2 = np.where((rho2 < 1)[..., None], d / (1 - rho2)[..., None], 0.0)
+    return c2, (float(rho2) if rho2.ndim == 0 else rho2)
 
 
 def _cos(w):

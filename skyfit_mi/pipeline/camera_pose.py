@@ -409,7 +409,7 @@ def estimate_camera(points, width, height, fov=None, distortion=None, marking_px
     focal = None if fov is None else focal_px(fov, width)
     free_k = reach_k if distortion is None and focal is None else 0
     best, other = _solve(points, width, height, focal, k, free_k, coplanar)
-    if reach_k and focal is not None or distortion is not None and reach_k:
+    if reach_k and (focal is not None or distortion is not None):
         # the marks' say on the distortion: fitted where they ask for it (a lens left without
         # --distortion), a given one refused where they reject it
         n_k = 1 if distortion is not None else reach_k
@@ -538,6 +538,11 @@ def _check_misfit(points, best, dof, marking_px, width, height, focal, k, free_k
                       f"coordinates; else {lens}or give --marking-px as you marked.")
 
 
+def point_text(p):
+    """A point [m] as '[x, y, z]', without round-off noise (9e-18 shown as 0)."""
+    return f"[{', '.join(f'{v + 0.0:.4g}' for v in np.round(p, 6))}]"
+
+
 def camera_toml(estimate, source=""):
     """The [camera] table of ``estimate`` as TOML text, with its placement in a comment."""
     p = estimate.placement()
@@ -556,7 +561,7 @@ def camera_toml(estimate, source=""):
              f"# seen from azimuth {p['azimuth_deg'][0]:.3f} +- {p['azimuth_deg'][1]:.3f} deg, "
              f"{p['angle_deg'][0]:.3f} +- {p['angle_deg'][1]:.3f} deg from the vertical, "
              f"{p['distance_m'][0]:.4f} +- {p['distance_m'][1]:.4f} m from "
-             f"[{', '.join(f'{v + 0.0:.4g}' for v in np.round(t, 6))}]; "
+             f"{point_text(t)}; "
              f"fov {p['fov_deg'][0]:.3f} +- "
              f"{p['fov_deg'][1]:.3f} deg (1 sigma)",
              "# distortion: [k1, k2] of OpenCV's radial model; the renderer is a pinhole, "

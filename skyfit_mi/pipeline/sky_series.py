@@ -254,14 +254,21 @@ def agreement(bracket):
     return out
 
 
-def fisheye_directions(height, width, north_rotation_deg=0.0):
-    """World directions (H, W, 3) of an equidistant fisheye's pixel centres (the image's top at
-    azimuth ``north_rotation_deg``), and the mask of pixels within the horizon's circle."""
+def _fisheye_grid(height, width):
+    """A fisheye frame's pixel centres from its centre, left and up [px] (H, W) each, their
+    radius r and the horizon's R = half the shorter side, and each one's equidistant zenith
+    theta = r / R 90 deg [rad]."""
     R = min(height, width) / 2.0
     y, x = np.mgrid[0:height, 0:width] + 0.5
     dx, dy = width / 2.0 - x, height / 2.0 - y
     r = np.hypot(dx, dy)
-    theta = np.minimum(r / R, 1.0) * np.pi / 2
+    return dx, dy, r, R, np.minimum(r / R, 1.0) * np.pi / 2
+
+
+def fisheye_directions(height, width, north_rotation_deg=0.0):
+    """World directions (H, W, 3) of an equidistant fisheye's pixel centres (the image's top at
+    azimuth ``north_rotation_deg``), and the mask of pixels within the horizon's circle."""
+    dx, dy, r, R, theta = _fisheye_grid(height, width)
     phi = np.arctan2(dx, dy) + np.radians(north_rotation_deg)
     return direction_from_angles(theta, phi), r <= R
 
@@ -280,14 +287,10 @@ def to_equidistant(merged, clipped, lens):
     from scipy.ndimage import map_coordinates
 
     h, w = clipped.shape
-    R = min(h, w) / 2.0
-    y, x = np.mgrid[0:h, 0:w] + 0.5
-    dx, dy = x - w / 2.0, y - h / 2.0
-    r = np.hypot(dx, dy)
-    theta = np.minimum(r / R, 1.0) * np.pi / 2
+    dx, dy, r, R, theta = _fisheye_grid(h, w)
     scale = np.where(r > 0, R * np.sqrt(2.0) * np.sin(theta / 2) / np.maximum(r, 1e-12), 1.0)
     scale = np.where(r <= R, scale, 1.0)                     # beyond the horizon: as it is
-    at = [h / 2.0 + dy * scale - 0.5, w / 2.0 + dx * scale - 0.5]
+    at = [h / 2.0 - dy * scale - 0.5, w / 2.0 - dx * scale - 0.5]
     out = np.stack([map_coordinates(merged[..., c], at, order=1, mode="nearest")
                     for c in range(merged.shape[-1])], axis=-1)
     return out, map_coordinates(clipped.astype(np.uint8), at, order=0, mode="nearest") > 0
