@@ -237,8 +237,8 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
 
 
 def test_an_encoding_no_profile_states_is_said_and_another_profiles_refused():
-    """16-bit frames without a colour profile are read as linear (a raw converter's linear
-    export), said in a line; a profile neither sRGB nor linear (Adobe RGB) is refused unless
+    """16-bit frames without a colour profile are refused unless --response says their
+    encoding (read as linear, a dcraw -6 export's gamma codes gave C 0.32 for 0.62); a profile neither sRGB nor linear (Adobe RGB) is refused unless
     --response says (or fits) the encoding; Display P3 (sRGB's curve, wider primaries) is read
     as sRGB, said in a line; a profile that names its encoding is taken silently."""
     from skyfit_mi.pipeline.ingest import _sensor
@@ -249,9 +249,13 @@ def test_an_encoding_no_profile_states_is_said_and_another_profiles_refused():
         return Photo("a.tif", "tiff", np.zeros((2, 2, 3)), "integer", bits, 2 ** bits - 1,
                      hint, source, 0, 0)
 
-    sensor, _, said = _sensor([photo(None)] * 2, None, None, {}, False)
-    assert sensor.response == "linear" and "no colour profile" in said[0]
-    assert "--response" in said[0]
+    with pytest.raises(SkyfitError, match=r"a.tif: 16-bit codes without a colour profile may "
+                                          r"be linear .*--response linear"):
+        _sensor([photo(None)] * 2, None, None, {}, False)
+    for response in ("linear", "srgb"):
+        sensor, _, said = _sensor([photo(None)] * 2, response, None, {}, False)
+        assert sensor.response == response and said == []
+    assert _sensor([photo(None)] * 2, None, None, {"response": "linear"}, False)[2] == []
     assert _sensor([photo(None, 8)] * 2, None, None, {}, False)[2] == []
     sensor, _, said = _sensor([photo("sRGB IEC61966-2.1")] * 2, None, None, {}, False)
     assert sensor.response == "srgb" and said == []
@@ -261,9 +265,12 @@ def test_an_encoding_no_profile_states_is_said_and_another_profiles_refused():
     with pytest.raises(SkyfitError, match='a.tif: the ICC profile "Adobe RGB \\(1998\\)" is '
                                           "neither sRGB nor linear.*--response"):
         _sensor([photo("Adobe RGB (1998)")] * 2, None, None, {}, False)
+    # --response sets the curve, not the primaries: said in a line (C_r 0.50 for 0.62 else)
     sensor, _, said = _sensor([photo("Adobe RGB (1998)")] * 2, "gamma", 2.2, {}, False)
-    assert sensor.response == "gamma" and said == []
-    assert _sensor([photo("Adobe RGB (1998)")] * 2, None, None, {}, False, fitted=True)[2] == []
+    assert sensor.response == "gamma" and len(said) == 1
+    assert "--response sets the curve, not the primaries" in said[0]
+    assert len(_sensor([photo("Adobe RGB (1998)")] * 2, None, None, {}, False,
+                       fitted=True)[2]) == 1
 
 
 def test_clipped_or_black_pixels_are_ranked_not_averaged_nor_dropped():
@@ -340,6 +347,28 @@ def test_a_frame_whose_clock_was_reset_is_named(day, tmp_path):
     assert any(m.startswith(f"{files[0].name}: taken over 30 days from the other frames' "
                             "median date") for m in logs), logs
     assert any("night frame(s)" in m and files[0].name in m for m in logs)
+
+
+def test_a_given_exposure_needs_every_frame_s_exif_labels(day, tmp_path):
+    """--exposure gives the first frame's exposure and EXIF's labels scale it to the others: a
+    frame without them is refused, naming it (every frame took the given exposure, 21% low to
+    59% high on the day a helper tried), where a grey card calibrates each frame instead."""
+    from PIL import Image
+
+    src = tmp_path / "in"
+    files = _copy_photos(day, src)
+    with Image.open(files[6]) as im:
+        exif, v = im.getexif(), np.array(im)
+    del exif.get_ifd(0x8769)[0x829A]                              # ExposureTime
+    Image.fromarray(v).save(files[6], quality=100, exif=exif)
+    with pytest.raises(SkyfitError, match=rf"1 of {len(files)} photographs have no EXIF "
+                                          rf"exposure .*{files[6].name}\), .*--calibrate"):
+        _ingest({**day, "photos": src}, tmp_path / "seq", exposure=0.003)
+    doc = _ingest({**day, "photos": src}, tmp_path / "cal",
+                  calibrate={"grey_card": (0.18,) * 3}, vignetting="cos4")
+    sim = json.loads((day["photos"] / "photos.json").read_text())
+    np.testing.assert_allclose([f["exposure"]["exposure"] for f in doc["frames"]],
+                               [f["exposure_sr_m2_W"] for f in sim["frames"]], rtol=0.01)
 
 
 def test_exif_labels_scaling_a_given_exposure_are_counted_in_the_intervals(day, ingested,

@@ -823,12 +823,25 @@ def test_a_flat_field_is_relative_to_its_brightest_and_leaves_out_where_it_has_n
 
 def test_a_folder_of_an_unread_format_is_named_not_taken_as_empty(tmp_path):
     """iPhones write HEIF: a folder of them is refused naming the format and what to export,
-    not as a folder without photographs; beside two readable frames they are left alone."""
+    not as a folder without photographs; beside readable frames too (eleven of a day's thirteen
+    frames were left out silently); hidden files (macOS's ._NAME copies) are not frames; a
+    folder of folders says where the photographs are."""
     for i in range(3):
         (tmp_path / f"IMG_{i}.HEIC").write_bytes(b"\0" * 16)
     with pytest.raises(SkyfitError, match=r"holds 3 HEIF image\(s\) \(IMG_0\.HEIC, \.\.\.\), "
-                                          "which skyfit does not read; export them as JPEG"):
+                                          "which skyfit does not read, beside 0 it reads; "
+                                          "export them as JPEG"):
         photos.list_photos([tmp_path])
     for i in range(2):
         Image.fromarray(codes8()).save(tmp_path / f"f{i}.png")
+    with pytest.raises(SkyfitError, match=r"beside 2 it reads.*give only the files"):
+        photos.list_photos([tmp_path])
+    for i in range(3):
+        (tmp_path / f"IMG_{i}.HEIC").unlink()
+    (tmp_path / "._f0.png").write_bytes(b"\0" * 16)
+    (tmp_path / ".hidden.png").write_bytes(b"\0" * 16)
     assert [p.name for p in photos.list_photos([tmp_path])] == ["f0.png", "f1.png"]
+    (tmp_path / "outer" / "day1").mkdir(parents=True)
+    Image.fromarray(codes8()).save(tmp_path / "outer" / "day1" / "f0.png")
+    with pytest.raises(SkyfitError, match=r"outer holds no photographs, only folders \(day1, "):
+        photos.list_photos([tmp_path / "outer"])

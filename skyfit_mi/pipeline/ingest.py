@@ -31,7 +31,7 @@ from .colorchecker import NAMES, NEUTRAL, find_chart, matrix_error, reference_rg
 from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance,
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import check_times, frame_times
-from .photos import (EXIF_LABEL_SD, EXPOSURE_KEYS, OTHER_PROFILE, RAW_COLOUR_REACH,
+from .photos import (EXIF_LABEL_SD, EXPOSURE_KEYS, NOT_SRGB, RAW_COLOUR_REACH,
                      WIDE_PRIMARIES, check_same_size, exif_exposure, exif_label_loading,
                      exif_setting, list_photos, read_flat_field, read_photo)
 from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
@@ -103,20 +103,30 @@ def _sensor(photos, response, gamma, spec_sensor, cos4, fitted=False):
                     "but wider primaries: colours are read in its red, green and blue, not "
                     "sRGB's (a grey reference calibrates alike; C of a saturated colour differs "
                     "from sRGB's by up to a few tens of per cent)")
+    other = next((p for p in photos if p.encoding_source.startswith(NOT_SRGB)), None)
+    if response is None and other is not None and not fitted:
+        raise SkyfitError(f"{Path(other.path).name}: {other.encoding_source} is neither sRGB "
+                          "nor linear, which skyfit reads; convert the photographs to sRGB, "
+                          "primaries as well as curve (the camera maker's software, or "
+                          "ImageMagick: magick IN -profile sRGB.icc OUT), or, for codes of "
+                          "sRGB's primaries under another curve, give --response (srgb, "
+                          "linear, or gamma with --gamma).")
+    if other is not None:
+        said.append(f"encoding: {Path(other.path).name}: {other.encoding_source}; --response "
+                    "sets the curve, not the primaries: if they are not sRGB's (Adobe RGB's, "
+                    "ProPhoto's), colours are read in its red, green and blue (a grey reference "
+                    "calibrates alike; C of a saturated colour differs by up to a few tens of "
+                    "per cent): convert the photographs to sRGB for sRGB's")
     if response is None:
-        other = next((p for p in photos if p.encoding_source.startswith(OTHER_PROFILE)), None)
-        if other is not None and not fitted:
-            raise SkyfitError(f"{Path(other.path).name}: {other.encoding_source} is neither sRGB "
-                              "nor linear, which skyfit reads; export the photographs as sRGB "
-                              "or linear, or say how their codes encode the light with "
-                              "--response (srgb, linear, or gamma with --gamma).")
         hints = {p.encoding_hint for p in photos}
         response = hints.pop() if len(hints) == 1 else "srgb"
-        if depth == 16 and first.kind != "float" and all(
+        if depth == 16 and first.kind != "float" and not fitted and all(
                 p.encoding_source == "assumed" for p in photos):
-            said.append(f"encoding: the {depth}-bit photographs carry no colour profile, so "
-                        f"their codes are read as {response}; if they are not, give --response "
-                        "(srgb, linear, or gamma with --gamma)")
+            raise SkyfitError(
+                f"{Path(first.path).name}: 16-bit codes without a colour profile may be linear "
+                "(dcraw -4, a raw converter's linear export) or not (dcraw -6 writes a gamma "
+                "curve, read as linear C comes out about half); say which with --response "
+                "linear (or srgb, or gamma with --gamma), or the spec's [sensor] response.")
     g = gamma if gamma is not None else spec_sensor.get("gamma", 2.2)
     return SensorModel(exposure=1.0, response=response, gamma=g, bits=depth, cos4=cos4), scale, \
         said
@@ -126,9 +136,9 @@ def _relative_exposures(photos, log):
     """t ISO / N^2 of each frame over the first's, or None when some frame lacks EXIF."""
     vals = [exif_exposure(p) for p in photos]
     if None in vals:
-        if any(x.metadata.get("exposure_time_s") for x in photos):
+        if any(v is not None for v in vals):
             log(f"{Path(photos[vals.index(None)].path).name}: no EXIF exposure (time, f-number, "
-                "ISO); every frame's exposure is taken from the calibration or --exposure instead")
+                "ISO); every frame's exposure is taken from the calibration instead of EXIF")
         return None
     return np.asarray(vals) / vals[0]
 
@@ -1084,6 +1094,16 @@ def calibration_patches(frames, linear, registration, o, log):
         raise SkyfitError("the photographs' absolute scale is unknown: give --exposure E "
                           "[sr m^2 W^-1] for the first frame, or --calibrate MATERIAL="
                           "REFLECTANCE naming a grey reference in the scene.")
+    # an HDR merge's float frames share one scale; a camera's codes scale by their labels
+    bare = [Path(p.path).name for p in frames.photos
+            if p.kind != "float" and exif_exposure(p) is None]
+    if rel is None and len(frames.photos) > 1 and bare:
+        raise SkyfitError(
+            f"{len(bare)} of {len(frames.photos)} photographs have no EXIF exposure (time, "
+            f"f-number, ISO: {', '.join(bare[:3])}{', ...' if len(bare) > 3 else ''}), which "
+            "scales the given exposure from the first frame to each: calibrate every frame on "
+            "a grey reference (--calibrate MATERIAL=REFLECTANCE), or give the files their "
+            "exposure labels (exiftool -ExposureTime= -FNumber= -ISO=).")
     return out
 
 
@@ -1196,7 +1216,7 @@ def frame_exposures(frames, patches, noise, o, log):
         by_frame = {i: per_frame[j] for j, i in enumerate(lit)}
     else:
         e0 = float(patches.given)
-        r = np.ones(len(frames.paths)) if rel is None else rel
+        r = np.ones(len(frames.paths)) if rel is None else rel      # one frame: no labels
         by_frame = {i: np.full(3, e0 * r[i]) for i in lit}
         settings = [exif_setting(frames.photos[i].metadata) for i in lit]
         if rel is not None and len(exif_label_loading(exif_setting(frames.photos[0].metadata),

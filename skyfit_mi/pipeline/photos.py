@@ -198,7 +198,9 @@ _EXIF_TAGS = {"datetime_original": ("EXIF DateTimeOriginal", 0x8769, 0x9003, Fal
               "f_number": ("EXIF FNumber", 0x8769, 0x829D, True),
               "iso": ("EXIF ISOSpeedRatings", 0x8769, 0x8827, True),
               "make": ("Image Make", 0, 0x010F, False),
-              "model": ("Image Model", 0, 0x0110, False)}
+              "model": ("Image Model", 0, 0x0110, False),
+              "colour_space": ("EXIF ColorSpace", 0x8769, 0xA001, True),
+              "interop_index": ("Interoperability InteroperabilityIndex", 0xA005, 0x0001, False)}
 
 
 def _empty_metadata():
@@ -247,7 +249,7 @@ def _pil_exif_metadata(im, meta):
     """Fill what exifread missed from Pillow's ``getexif()`` (PNG eXIf chunks)."""
     try:
         exif = im.getexif()
-        ifds = {0: exif, 0x8769: exif.get_ifd(0x8769)}
+        ifds = {0: exif, 0x8769: exif.get_ifd(0x8769), 0xA005: exif.get_ifd(0xA005)}
     except Exception:                           # noqa: BLE001
         return meta
     for key, (_, ifd, tag, number) in _EXIF_TAGS.items():
@@ -272,6 +274,11 @@ def _icc_description(icc):
 
 #: The start of an encoding source naming an ICC profile that is neither sRGB nor linear.
 OTHER_PROFILE = "the ICC profile"
+#: The start of one naming EXIF's colour space 'Uncalibrated' in a file without a profile (DCF's
+#: mark of Adobe RGB, as cameras set to it write their JPEGs).
+EXIF_SPACE = "the EXIF colour space"
+#: The starts of the sources ingest refuses unless told the encoding.
+NOT_SRGB = (OTHER_PROFILE, EXIF_SPACE)
 #: The start of one naming a profile of sRGB's curve and wider primaries (Display P3, phones').
 WIDE_PRIMARIES = "the wide-primaries ICC profile"
 
@@ -311,6 +318,11 @@ def _integer_photo(path, fmt, codes, bits, info, meta):
     'linear' at 16."""
     meta["icc_profile"] = _icc_description(info.get("icc_profile"))
     hint, source = _hint_from_icc(meta["icc_profile"], "srgb" if bits == 8 else "linear")
+    if meta["icc_profile"] is None and (meta.get("colour_space") == 0xFFFF
+                                        or meta.get("interop_index") == "R03"):
+        source = f"{EXIF_SPACE} 'Uncalibrated' " + (
+            "(Adobe RGB by its interoperability index R03)"
+            if meta.get("interop_index") == "R03" else "(not sRGB)")
     if fmt == "png":
         hint, source = _png_hint(info, hint, source)
     values = apply_orientation(_rgb(codes, None, path), meta["orientation"])
@@ -715,24 +727,30 @@ UNREAD_SUFFIXES = {".heic": "HEIF", ".heif": "HEIF", ".avif": "AVIF", ".webp": "
 
 
 def list_photos(items):
-    """Paths of the photographs in ``items`` (files, or folders in name order); SkyfitError if
-    one does not exist, or if a folder holds images of a format skyfit does not read and too
-    few others for a sequence."""
-    paths, unread = [], []
+    """Paths of the photographs in ``items`` (files, or folders in name order, hidden files such
+    as macOS's ``._NAME`` copies left out); SkyfitError if one does not exist, or if a folder
+    holds images of a format skyfit does not read (a sequence would silently lose them)."""
+    paths, unread, below = [], [], []
     for p in map(Path, items):
         if p.is_dir():
-            paths += sorted(q for q in p.iterdir() if q.suffix.lower() in SUFFIXES)
-            unread += sorted(q for q in p.iterdir() if q.suffix.lower() in UNREAD_SUFFIXES)
+            inside = sorted(q for q in p.iterdir() if not q.name.startswith("."))
+            paths += [q for q in inside if q.suffix.lower() in SUFFIXES]
+            unread += [q for q in inside if q.suffix.lower() in UNREAD_SUFFIXES]
+            below += [q for q in inside if q.is_dir()]
         elif p.is_file():
             paths.append(p)
         else:
             raise SkyfitError(f"{p} does not exist; give photographs or a folder of them.")
-    if unread and len(paths) < 2:
+    if unread:
         kind = UNREAD_SUFFIXES[unread[0].suffix.lower()]
         raise SkyfitError(f"{unread[0].parent} holds {len(unread)} {kind} image(s) "
-                          f"({unread[0].name}, ...), which skyfit does not read; export them as "
-                          "JPEG, 16-bit TIFF or PNG with their EXIF (or give the camera's RAW "
-                          "files).")
+                          f"({unread[0].name}, ...), which skyfit does not read, beside "
+                          f"{len(paths)} it reads; export them as JPEG, 16-bit TIFF or PNG with "
+                          "their EXIF (or give the camera's RAW files), or give only the files "
+                          "of the sequence.")
+    if not paths and below:
+        raise SkyfitError(f"{below[0].parent} holds no photographs, only folders "
+                          f"({below[0].name}, ...); give the folder that holds them.")
     return paths
 
 
