@@ -148,6 +148,26 @@ def test_a_folder_of_frames_without_its_manifest_is_named_as_unfinished(tmp_path
         load_manifest(tmp_path)
 
 
+def test_frames_sharing_an_index_or_a_file_or_a_false_time_are_refused(day, tmp_path):
+    """A hand-edited manifest whose frames share an index or an image file was fitted (chi2/dof
+    1757, C 0.41 for 0.5) and one whose time is no date crashed after the fit wrote its JSON:
+    refused on load, naming the frames; a spec or frame given as the sequence is named."""
+    doc, _ = load_manifest(day)
+    for frame, change, match in (
+            (1, {"index": 0}, r"frames\[0\] and frames\[1\] share their index 0"),
+            (1, {"sensor": doc["frames"][0]["sensor"]}, r"frames\[0\] and frames\[1\] share their sensor"),
+            (1, {"time": "2026-02-30T12:00:00+00:00"}, r"frame 1's time '2026-02-30T12:00:00"
+                                                       r"\+00:00' is not an ISO date")):
+        bad = json.loads(json.dumps(doc))
+        bad["frames"][frame].update(change)
+        (tmp_path / "manifest.json").write_text(json.dumps(bad))
+        with pytest.raises(ManifestError, match=match):
+            load_manifest(tmp_path)
+    (tmp_path / "day.toml").write_text("")
+    with pytest.raises(ManifestError, match=r"day\.toml is not a sequence: give the folder"):
+        load_manifest(tmp_path / "day.toml")
+
+
 def test_invalid_frame_is_named(day):
     doc, _ = load_manifest(day)
     doc = json.loads(json.dumps(doc))

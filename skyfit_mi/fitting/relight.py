@@ -59,10 +59,11 @@ SKY_MAPS = "sky_maps"
 
 
 def check_output(out, images, overwrite):
-    """Refuse an output folder ``out`` holding another run's output, unless ``overwrite``."""
+    """Refuse an output folder ``out`` holding another run's output, unless ``overwrite``; a
+    relit render left unfinished (its manifest, no prediction yet) resumes."""
     out = Path(out)
     held = [n for n in ("manifest.json", *RELIGHT_FILES) if (out / n).exists()]
-    if held and not overwrite and not (images and held[0] == "manifest.json"):
+    if held and not overwrite and not (images and held == ["manifest.json"]):
         raise SkyfitError(f"{out} holds another run's output ({held[0]}); relight into another "
                           "folder, or pass --overwrite to replace it.")
 
@@ -210,6 +211,7 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
     if plan.reference:
         add_reference_errors(errors, fits, plan, out, pixels, overwrite)
     errors["band_coverage"] = band_coverage(prediction.rows)
+    errors["bands_drawn"] = {"draws": int(draws), "seed": int(seed)}
     if prediction.scales:
         errors["target_scale"] = prediction.scales
     if relative:

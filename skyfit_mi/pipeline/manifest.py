@@ -40,6 +40,8 @@ SCHEMA_FILE = Path(__file__).with_name("manifest.schema.json")
 FILENAME = "manifest.json"
 #: The illumination kinds the schema defines (each one :func:`frame_sky` lights).
 ILLUMINATION_KINDS = ("sky", "gensky", "irradiance", "envmap", "directional")
+#: A frame record's images, each a file of its own.
+FRAME_KINDS = ("radiance", "radiance_sigma", "sensor", "sigma")
 #: The sky models an ``irradiance`` record may name (its ``model``; default the first).
 IRRADIANCE_MODELS = ("perez",)
 #: The SensorModel fields a manifest's ``sensor`` record carries.
@@ -113,6 +115,10 @@ def load_manifest(path):
     """Read, upgrade and validate the manifest at ``path`` (folder or file); returns (doc,
     folder).  :class:`ManifestError` for a missing, damaged, foreign, newer or invalid file."""
     p = manifest_file(path)
+    if p.is_file() and p.suffix.lower() != ".json":
+        raise ManifestError(f"{p} is not a sequence: give the folder `skyfit render` or `skyfit "
+                            "ingest` wrote (or its manifest.json); a spec is rendered first "
+                            "(skyfit render SPEC -o DIR).")
     if not p.is_file():
         if (p.parent / "frames").is_dir():
             raise ManifestError(f"{str(p.parent)!r} holds frames but no manifest.json: a render "
@@ -140,8 +146,29 @@ def load_manifest(path):
     doc = upgrade(doc)
     if key not in _VALIDATED:
         validate_manifest(doc, str(p))
+        _check_frame_records(doc, p)
         _VALIDATED.add(key)
     return doc, p.parent
+
+
+def _check_frame_records(doc, p):
+    """What the schema cannot say of a (hand-edited) manifest's frames: each index, and each
+    frame's file of a kind, its own; each time a real instant."""
+    seen = {}
+    for i, f in enumerate(doc["frames"]):
+        for key in ("index", *FRAME_KINDS):
+            if key in f and (key, f[key]) in seen:
+                raise ManifestError(f"{p}: frames[{seen[key, f[key]]}] and frames[{i}] share "
+                                    f"their {key} {f[key]!r}; restore the manifest the run "
+                                    "wrote, or run it again into a new folder.")
+            if key in f:
+                seen[key, f[key]] = i
+        if "time" in f:
+            try:
+                dt.datetime.fromisoformat(str(f["time"]))
+            except ValueError:
+                raise ManifestError(f"{p}: frame {f['index']}'s time {f['time']!r} is not an ISO "
+                                    "date and time; restore the manifest the run wrote.") from None
 
 
 #: Digests of the manifest texts :func:`load_manifest` has validated in this process.
