@@ -330,6 +330,25 @@ def test_a_frame_whose_card_is_partly_clipped_takes_its_exif_exposure(day, tmp_p
     np.testing.assert_allclose(got, true, rtol=0.01)
 
 
+def test_frames_turned_so_the_card_region_reads_a_colour_are_refused(day, tmp_path):
+    """Frames turned upside down without a tag put the card's region on the red sample: its
+    "grey" read R:G:B about 1 : 0.2 : 0.17, the fit then gave the sample C (0.055, 0.28, 0.33)
+    for (0.62, 0.12, 0.10) with chi2/dof 0.47; refused, naming a frame and what to check."""
+    from PIL import Image
+
+    src = tmp_path / "in"
+    files = _copy_photos(day, src)
+    for f in files:
+        with Image.open(f) as im:
+            exif, v = im.getexif(), np.array(im)
+        Image.fromarray(np.ascontiguousarray(v[::-1, ::-1])).save(f, quality=100, exif=exif)
+    with pytest.raises(SkyfitError, match=r"frame\(s\) \(.*\.jpg, \.\.\.\) read the grey "
+                                          r"reference as R:G:B .*not grey: its region does not "
+                                          r"lie on the card"):
+        _ingest({**day, "photos": src}, tmp_path / "seq", calibrate={"grey_card": (0.18,) * 3},
+                vignetting="cos4")
+
+
 def test_a_frame_whose_clock_was_reset_is_named(day, tmp_path):
     """A frame dated years from the others (a camera clock reset) is named in a line, beside
     its leaving the sequence as a night frame."""

@@ -196,6 +196,26 @@ def test_png16_colour_chunks_set_the_hint_not_the_codes(tmp_path, kind, data, hi
     np.testing.assert_array_equal(ph.values, a.astype(np.float32))
 
 
+def test_a_jpeg_marked_adobe_rgb_by_exif_alone_is_not_taken_as_srgb(tmp_path):
+    """Cameras set to Adobe RGB write JPEGs without a profile, marked by EXIF's ColorSpace
+    'Uncalibrated' (DCF): read as sRGB the red sample's C_r was 0.48 for 0.62, silently. The
+    source says so, and ingest refuses it unless told the encoding (tests/test_ingest.py)."""
+    from PIL import Image
+    from skyfit_mi.pipeline.photos import EXIF_SPACE, NOT_SRGB
+
+    im = Image.fromarray(codes8())
+    exif = im.getexif()
+    exif.get_ifd(0x8769)[0xA001] = 0xFFFF
+    im.save(tmp_path / "a.jpg", quality=95, exif=exif)
+    ph = read_photo(tmp_path / "a.jpg")
+    assert ph.metadata["colour_space"] == 0xFFFF
+    assert ph.encoding_source == f"{EXIF_SPACE} 'Uncalibrated' (not sRGB)"
+    assert ph.encoding_source.startswith(NOT_SRGB)
+    exif.get_ifd(0x8769)[0xA001] = 1                                  # sRGB
+    im.save(tmp_path / "b.jpg", quality=95, exif=exif)
+    assert read_photo(tmp_path / "b.jpg").encoding_source == "assumed"
+
+
 # -------------------------------------------------------------------------- float formats
 
 def test_exr_round_trip_nan_count_and_alpha(tmp_path):

@@ -533,6 +533,11 @@ def fit_response(samples, patch, max_code, rel, log):
 #: Most parts a patch's pixels are split into, whose spread measures a frame's exposure error
 #: (:func:`calibrate_exposure`): 8 give 7 degrees of freedom per frame and channel.
 CALIBRATION_PARTS = 8
+#: The most a grey reference's channels may read apart (largest over smallest exposure): a
+#: white-balanced camera's grey reads within a few tens of per cent, a raw one's without its
+#: balance about 2x; beyond, the reference's box lies on something else (a frame turned or
+#: cropped: an upside-down day's "card" read the red sample, 2.73 : 0.54 : 0.46).
+GREY_BALANCE_MAX = 3.0
 
 
 def _patch_exposure(s, r, patch, parts=1, cells=None):
@@ -623,6 +628,18 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells, seconds)
     if not good.any():
         raise SkyfitError("the calibration patches are saturated, black or unlit in every frame; "
                           "they cannot set the exposure. Give --exposure instead.")
+    with np.errstate(all="ignore"):
+        balance = np.max(k, axis=1) / np.min(k, axis=1)
+    off = np.flatnonzero(good & (balance > GREY_BALANCE_MAX))
+    if off.size:
+        i = int(off[np.argmax(balance[off])])
+        grey = k[i] / k[i].max()                     # its codes per unit of light
+        raise SkyfitError(
+            f"{len(off)} frame(s) ({Path(photos[i].path).name}, ...) read the grey reference as "
+            f"R:G:B {grey[0]:.2f} : {grey[1]:.2f} : {grey[2]:.2f}, not grey: its region does not "
+            "lie on the card there (a frame turned or cropped, a wrong EXIF orientation, the "
+            "spec's region) or the frames are not white-balanced; check the region on the "
+            "contact sheet.")
     # a frame's relative variance, pooled over frames: the parts' variance over their number
     with np.errstate(all="ignore"):
         d = parts[good] / k[good, None, :]
