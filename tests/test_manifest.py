@@ -362,8 +362,15 @@ def test_frames_are_checked_on_load(day, tmp_path):
     obs = load_observations(out, px)
     assert any("frame 3: 3 of the region's values are not finite" in w for w in obs.warnings)
     assert np.isinf(obs.sigma[0, obs.frames.index(3)]).all()
+    sigma7 = read_exr(out / f7["sigma"])         # a frame of zero sigmas was dropped silently
+    write_exr(out / f7["sigma"], np.zeros_like(sigma7))
+    with pytest.raises(SkyfitError, match=r"frame 7 \(.*sensor_007\.exr, frames/sigma_007\.exr"
+                                          r"\) has no value in the region that is finite with a "
+                                          "positive sigma"):
+        load_observations(out, px)
+    write_exr(out / f7["sigma"], sigma7)
     write_exr(out / f5["sensor"], np.full((12, 12, 3), np.nan, np.float32))
-    with pytest.raises(SkyfitError, match="frame 5 .* no finite value"):
+    with pytest.raises(SkyfitError, match="frame 5 .* no value in the region that is finite"):
         load_observations(out, px)
     write_exr(out / f5["sensor"], np.zeros((10, 12, 3), np.float32))        # another size
     with pytest.raises(SkyfitError, match="frame 5: .* is 12x10 .* not the camera.s 12x12"):

@@ -148,6 +148,7 @@ ROW = "2026-06-21T12:00:00+00:00,disc,1,1,1,0.1\n"
     ("time,region,r,g,b,sigma,x\n" + ROW[:-1] + ",1\n", "give all of x, y, z"),
     (HEAD + ROW.replace(",1,1,1,", ",1,one,1,"), "g = 'one' is not a number"),
     (HEAD + ROW.replace(",0.1", ",0"), "sigma must be positive"),
+    (HEAD + ROW.replace(",0.1", ",1e-6"), r"sigma is under 1e-05 of the value"),  # 0/0 in a fit
     (HEAD + ROW.replace(",1,1,1,", ",-1,-2,0,"), "every value of region 'disc' is zero or"),
     (HEAD + ROW.replace(",1,1,1,", ",1,nan,1,"), "is not finite"),
     (HEAD + ROW + ROW, "measured again"),

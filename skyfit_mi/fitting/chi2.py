@@ -335,13 +335,15 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
             deff[~mixed] = neighbour_sharing(pixels[~mixed],
                                              f["raw_demosaic"]["noise_correlation"])
             s = s * np.sqrt(deff)
-        ok = np.isfinite(y) & ~np.isnan(s) & (s >= 0)
+        ok = np.isfinite(y) & ~np.isnan(s) & (s > 0)          # sigma inf: a clipped value's
         if not ok[~mixed].any():
-            raise SkyfitError(f"frame {f['index']} ({root / f['sensor']}) has no finite value in "
-                              "the region; repair or re-render that frame.")
+            raise SkyfitError(f"frame {f['index']} ({root / f['sensor']}, {f['sigma']}) has no "
+                              "value in the region that is finite with a positive sigma; repair "
+                              "or re-render that frame.")
         if not ok[~mixed].all():
             warnings.append(f"frame {f['index']}: {int((~ok[~mixed]).sum())} of the region's "
-                            "values are not finite (NaN) and are left out.")
+                            "values are not finite (NaN) or have no positive sigma, and are "
+                            "left out.")
         ok[mixed] = False
         ys.append(np.where(ok, y, 0.0))
         sig.append(np.where(ok, s, np.inf))

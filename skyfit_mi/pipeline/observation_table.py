@@ -67,6 +67,9 @@ TABLE_FILE = "observations.csv"
 NORMAL_TOLERANCE_DEG = 5.0
 #: Ray start off the surface, as a share of the scene's bounding-box diagonal.
 RAY_OFFSET = 1e-4
+#: The least sigma a value may carry, relative to it: a table's 1e-6 on values of 30 crashed the
+#: fit's censored terms (0/0); instruments measure to 1e-3 at best.
+SIGMA_FLOOR = 1e-5
 #: Largest radiance, value or sigma, a table may give [W m^-2 sr^-1]: ten times the solar
 #: disc's above the atmosphere (no surface reflects more than its brightest source).
 MAX_RADIANCE = 10.0 * SOLAR_CONSTANT / SUN_SOLID_ANGLE
@@ -272,6 +275,10 @@ def _parse_rows(path, header, rows, tz, luminance):
         if not np.all(out["sigma"][k] > 0):
             raise SkyfitError(f"{path} line {line}: sigma must be positive (the value's standard "
                               "deviation, in its units).")
+        if np.any(out["sigma"][k] < SIGMA_FLOOR * np.abs(out["value"][k])):
+            raise SkyfitError(f"{path} line {line}: sigma is under {SIGMA_FLOOR:g} of the value, "
+                              "below what any instrument measures (and what the fit's arithmetic "
+                              "resolves); give the value's real standard deviation.")
         if np.any((out["saturated"][k] > 0) & ~(out["value"][k] > 0)):
             raise SkyfitError(f"{path} line {line}: a saturated value must be the positive level "
                               "the instrument clipped at; give that level, or saturated = 0.")
