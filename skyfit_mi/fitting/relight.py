@@ -34,7 +34,7 @@ from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky_shape import shape_variants, shaped
 from ..pipeline.fit_result import check_fit_sequence
 from ..pipeline.illumination import envmap_from_record
-from ..pipeline.manifest import (RENDERED_SOURCES, check_frames, frame_axis, frame_label,
+from ..pipeline.manifest import (FILENAME, RENDERED_SOURCES, check_frames, frame_axis, frame_label,
                                  frame_sky, is_table, load_manifest, manifest_file,
                                  read_frame_image, rendered_frames)
 from ..pipeline.pixels import frame_values, material_regions
@@ -62,8 +62,8 @@ def check_output(out, images, overwrite):
     """Refuse an output folder ``out`` holding another run's output, unless ``overwrite``; a
     relit render left unfinished (its manifest, no prediction yet) resumes."""
     out = Path(out)
-    held = [n for n in ("manifest.json", *RELIGHT_FILES) if (out / n).exists()]
-    if held and not overwrite and not (images and held == ["manifest.json"]):
+    held = [n for n in (FILENAME, *RELIGHT_FILES) if (out / n).exists()]
+    if held and not overwrite and not (images and held == [FILENAME]):
         raise SkyfitError(f"{out} holds another run's output ({held[0]}); relight into another "
                           "folder, or pass --overwrite to replace it.")
 
@@ -88,7 +88,7 @@ def clear_output(out):
 def target_spec(target, fits, doc=None):
     """(``target``'s validated spec with the fitted materials, its manifest or None)."""
     target = Path(target)
-    if target.is_dir() or target.name == "manifest.json":
+    if target.is_dir() or target.name == FILENAME:
         if doc is None:
             doc, _ = load_manifest(target)
         if not isinstance(doc.get("spec"), dict):
@@ -127,7 +127,7 @@ class Plan:
 def plan_relight(fits, target, out, images=True, reference=False, overwrite=False):
     """The :class:`Plan` of relighting ``fits`` onto ``target`` into ``out``, inputs checked."""
     target = Path(target)
-    is_folder = target.is_dir() or target.name == "manifest.json"
+    is_folder = target.is_dir() or target.name == FILENAME
     if not images and not is_folder:
         raise SkyfitError("a prediction without images needs a sequence folder as --target "
                           "(its light is traced there); give one, or leave out --no-images.")

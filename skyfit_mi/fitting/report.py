@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..files import save_figure, write_json, write_text
-from ..pipeline.fit_result import read_fit_result
+from ..pipeline.fit_result import SUMMARY_NAME, read_fit_result
 from ..pipeline.manifest import frame_axis
 
 
@@ -42,7 +42,8 @@ def write_fit(result, prefix):
         ax.plot(t, y[..., c].mean(axis=0), "o", color=col, ms=4, label=f"observed {'RGB'[c]}")
         ax.plot(t, m[..., c].mean(axis=0), "-", color=col, label=f"model {'RGB'[c]}")
     p = result["parameters"]
-    ax.set_title(f"{result['region']}: " + ", ".join(f"{k}={v:.3f}" for k, v in p.items()), fontsize=9)
+    ax.set_title(f"{result['region']}: " + ", ".join(f"{k}={v:.3f}" for k, v in p.items()),
+                 fontsize=9)
     ax.set_xlabel(t_label)
     ax.set_ylabel("region mean pixel value [DN]")
     ax.legend(fontsize=7, ncol=2)
@@ -51,10 +52,6 @@ def write_fit(result, prefix):
         label.set_ha("right")
     fig.tight_layout()
     return js, save_figure(fig, prefix.with_suffix(".png"))
-
-
-#: Name of the summary CSV in a fit output folder.
-SUMMARY_NAME = "fits.csv"
 
 
 def read_fits(folder):

@@ -11,7 +11,10 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..render.fit_model import PARAMETERS, bounds
-from .manifest import is_table, rendered_frames
+from .manifest import FILENAME, is_table, rendered_frames
+
+#: Name of the summary CSV in a fit output folder.
+SUMMARY_NAME = "fits.csv"
 
 
 def read_fit_result(path):
@@ -83,7 +86,7 @@ def load_fits(paths):
     in a sequence's folder that another run of it made (``render --overwrite`` since)."""
     out = {}
     for p in map(Path, paths):
-        if p.is_dir() or p.name == "fits.csv":
+        if p.is_dir() or p.name == SUMMARY_NAME:
             folder = p if p.is_dir() else p.parent
             files = sorted(folder.glob("fit_*.json"))
             if not files:
@@ -94,7 +97,7 @@ def load_fits(paths):
         else:
             raise SkyfitError(f"fit {str(p)!r} does not exist; give fit_NAME.json files, a "
                               "fits.csv or the folder `skyfit fit` wrote.")
-        run = _folder_run(p) if p.is_dir() or p.name == "fits.csv" else None
+        run = _folder_run(p) if p.is_dir() or p.name == SUMMARY_NAME else None
         for f in files:
             r = read_fit_result(f)
             if run is not None and r.get("sequence_run_id") not in (None, run):
@@ -114,7 +117,7 @@ def _folder_run(path):
     ``fits.csv``); None where it holds no sequence."""
     folder = path if path.is_dir() else path.parent
     try:
-        return json.loads((folder / "manifest.json").read_text()).get("run_id")
+        return json.loads((folder / FILENAME).read_text()).get("run_id")
     except (OSError, ValueError, AttributeError):
         return None
 

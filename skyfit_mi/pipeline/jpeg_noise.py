@@ -67,12 +67,6 @@ def block_offset(orientation, shape, block=8):
     return first_edge(shown[0]), first_edge(shown[:, 0])
 
 
-def key(settings):
-    """A hashable key of :func:`jpeg_settings` (frames of one camera setting share it)."""
-    return (settings["subsampling"],
-            tuple((k, tuple(v)) for k, v in sorted(settings["qtables"].items())))
-
-
 def block_size(settings):
     """Side of the JPEG's coding unit [pixels]: 16 with subsampled chroma, else 8."""
     return 16 if settings["subsampling"] else 8

@@ -376,20 +376,6 @@ class WardModel:
             self.basis_evaluations += 1
         return self._D_shares
 
-    def gradient(self, theta, dloss_dL):
-        """d(loss)/d(theta) by reverse-mode AD, given dloss/dL (P, T, 3) as a constant."""
-        dr, mi = self.dr, self.mi
-        keys = list(dict.fromkeys("C" if n.startswith("C_") else n for n in self.names))
-        v, sigma = self._variables(theta, grad=keys)
-        L = self._radiance_dr(v, sigma)
-        g = dloss_dL.reshape(-1, 3)
-        dr.backward_from(dr.sum(L * mi.Color3f(*[np.ascontiguousarray(g[:, i]) for i in range(3)]),
-                                axis=None), flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
-        grads = {k: np.array(dr.grad(v[k]), dtype=float).ravel() for k in keys}
-        self.evaluations += 1
-        return np.array([grads["C"]["rgb".index(n[-1])] if n.startswith("C_") else grads[n][0]
-                         for n in self.names])
-
 
 class RegionRenderModel:
     """The region's radiance by a full Mitsuba render of its pixels for every frame.

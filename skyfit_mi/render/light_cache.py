@@ -161,11 +161,6 @@ class LightCache:
     lobe_sky: np.ndarray
     normalisation: str = "ward"
 
-    def subset(self, rows):
-        """The cache of the pixels ``rows`` (index or slice): one region's share of a cache."""
-        return replace(self, **{k: v[rows] for k, v in vars(self).items()
-                                if isinstance(v, np.ndarray)})
-
     def halves(self):
         """Two independent caches, each from half of every pixel's positions (weights doubled):
         fits on each estimate the Monte Carlo error the cache adds."""
