@@ -351,7 +351,8 @@ def test_frames_turned_so_the_card_region_reads_a_colour_are_refused(day, tmp_pa
 
 def test_a_frame_whose_clock_was_reset_is_named(day, tmp_path):
     """A frame dated years from the others (a camera clock reset) is named in a line, beside
-    its leaving the sequence as a night frame."""
+    its leaving the sequence as a night frame; a frame of another camera (EXIF's make and
+    model) is named too."""
     from PIL import Image
 
     src = tmp_path / "in"
@@ -360,11 +361,18 @@ def test_a_frame_whose_clock_was_reset_is_named(day, tmp_path):
         exif, v = im.getexif(), np.array(im)
     exif.get_ifd(0x8769)[0x9003] = "2000:01:01 00:00:00"
     Image.fromarray(v).save(files[0], quality=100, exif=exif)
+    for k, f in enumerate(files[1:], 1):                # another camera's frame: said too
+        with Image.open(f) as im:
+            exif, v = im.getexif(), np.array(im)
+        exif[0x0110] = "Other Model 2" if k == 3 else "Model 1"
+        Image.fromarray(v).save(f, quality=100, exif=exif)
     logs = []
     _ingest({**day, "photos": src}, tmp_path / "seq", calibrate={"grey_card": (0.18,) * 3},
             log=logs.append)
     assert any(m.startswith(f"{files[0].name}: taken over 30 days from the other frames' "
                             "median date") for m in logs), logs
+    assert any(m.startswith(f"{files[3].name}: taken by another camera than the rest (Model 1)")
+               for m in logs), logs
     assert any("night frame(s)" in m and files[0].name in m for m in logs)
 
 

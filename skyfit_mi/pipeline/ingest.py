@@ -596,6 +596,7 @@ def exif_scatter(ratio, var, seconds=None):
             "frame_spread": float(np.std((dev - curve) @ SRGB_LUMINANCE)),
             "curve_relative_spread": float(np.std(curve @ SRGB_LUMINANCE)),
             "curve_terms": terms, "scatter_chi2_per_dof": chi2 / dof,
+            "furthest": int(np.argmax(np.abs((dev - curve) @ SRGB_LUMINANCE))),
             "shutter": bool(chi2_dist.sf(chi2, dof) < EXIF_SCATTER_P),
             "curved": bool(terms > 1 and chi2_dist.sf(drift, 3 * (terms - 1)) < EXIF_SCATTER_P)}
 
@@ -654,13 +655,15 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells, seconds)
         test = exif_scatter(k[good] / (rel[good, None] * scale), var_f,
                             np.asarray(seconds, dtype=float)[good])
         curved, shutter = test.pop("curved"), test.pop("shutter")
+        furthest = Path(photos[np.flatnonzero(good)[test.pop("furthest")]].path).name
         info.update(test)
         if shutter and not missing:
             log(f"calibration: the frames' exposures scatter by {test['frame_spread']:.1%} "
                 "about a smooth curve through their EXIF relative exposures, "
-                f"{np.sqrt(test['scatter_chi2_per_dof']):.1f}x what the patches' noise allows "
-                "(a shutter or aperture off its nominal value): each frame's exposure is taken "
-                "from its own patches")
+                f"{np.sqrt(test['scatter_chi2_per_dof']):.1f}x what the patches' noise allows, "
+                f"most at {furthest} (a shutter or aperture off its nominal value, a label "
+                "wrong, the camera's white balance or processing changed, or a frame's time "
+                "off): each frame's exposure is taken from its own patches")
         if shutter:                 # EXIF cannot stand in for a frame without its reference
             rel = None
             info["exif_relative_exposures"] = "not used: they scatter beyond the patches' noise"
@@ -746,9 +749,11 @@ def spec_for_times(spec_path, times, tz=None, site=None, size=None):
             raise SpecError(f"[camera] {key} = {cam[key]} but the photographs are "
                             f"{size[0]}x{size[1]}"
                             + (" (the spec's size turned a quarter: their EXIF Orientation, "
-                               "which skyfit applies, turns them as displayed)" if turned else "")
-                            + f"; drop {key} from the spec or give the camera of these "
-                            "photographs as they are displayed.")
+                               "which skyfit applies, turns them as displayed; a wrong tag "
+                               "turns them wrongly)" if turned else "")
+                            + f"; give the camera of these photographs as they are displayed "
+                            f"(drop {key} from the spec only if its field of view is theirs: a "
+                            "cropped photograph sees a narrower one).")
         cam[key] = n
     raw["camera"] = cam
     loc = dict(raw.get("location", {}))
@@ -1038,6 +1043,15 @@ def read_frames(photo_paths, spec_path, out_dir, o, log):
         log(f"{listed(far)}: taken over {CLOCK_OFF_DAYS:g} days from the other frames' median "
             f"date ({times[len(times) // 2].date().isoformat()}): a camera clock reset or "
             "wrong? Check the EXIF times, or give them in a CSV (--times)")
+    cameras = [" ".join(str(p.metadata.get(k) or "").strip() for k in ("make", "model")).strip()
+               for p in photos]
+    named = [c for c in cameras if c]
+    if len(set(named)) > 1:
+        usual = max(set(named), key=named.count)
+        odd = [p.name for p, c in zip(paths, cameras) if c and c != usual]
+        log(f"{listed(odd)}: taken by another camera than the rest ({usual}), by EXIF: its "
+            "sensor, lens and processing differ (each frame is calibrated alike only with a grey "
+            "reference in it); leave such frames out unless they belong to the sequence")
     raw, spec = spec_for_times(spec_path, times, o.tz, o.site, (w, h))
     night = [paths[f.index].name for f in spec.frames if f.skipped]
     if len(night) == len(paths):
