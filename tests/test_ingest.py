@@ -710,7 +710,7 @@ def _copy_photos(day, dst):
     ("mixed sizes", "same size"),
     ("corrupt", "IMG_0003"),
     ("unknown raw", "IMG_0099"),
-    ("duplicate time", "all have the time"),
+    ("duplicate time", "have the time"),
     ("grey", "IMG_0002.jpg: grey"),
 ])
 def test_bad_photographs_get_one_line_and_no_output(day, tmp_path, damage, message):

@@ -682,6 +682,7 @@ def test_exif_offset_disagreeing_with_tz_refused():
     (meta("0000:00:00 00:00:00"), r"b\.jpg has DateTimeOriginal '0000:00:00 00:00:00', not a "
                                   r"valid date"),
     (meta("    :  :     :  :  "), r"b\.jpg has DateTimeOriginal .*not a time"),
+    (meta(photos._text(b"    :  :     :  :  \x00")), r"b\.jpg has no DateTimeOriginal"),
     (meta(offset="+1h"), r"b\.jpg has OffsetTimeOriginal '\+1h'"),
 ])
 def test_frame_without_usable_time_refused_by_name(m, match):
@@ -775,9 +776,13 @@ def test_duplicates_found_and_order():
     dups = duplicate_times(paths, times)
     assert dups == [(dt.datetime(2026, 6, 21, 12, tzinfo=utc), ["d/c.jpg", "d/b.jpg"])]
     assert time_order(times) == [3, 1, 0, 2]
-    with pytest.raises(SkyfitError, match=r"^c\.jpg, b\.jpg all have the time "
-                                          r"2026-06-21T12:00:00\+00:00; every frame needs"):
+    with pytest.raises(SkyfitError, match=r"^c\.jpg, b\.jpg both have the time "
+                                          r"2026-06-21T12:00:00\+00:00; every frame needs.*"
+                                          r"remove the extra frames"):
         check_times(paths, times)
+    with pytest.raises(SkyfitError, match=r"^c\.jpg, c\.CR2 both have .*one shot in two "
+                                          r"formats \(a RAW and its JPEG\): give one format"):
+        check_times(["d/c.jpg", "d/c.CR2"], times[:1] * 2)
     assert check_times(paths[:2], times[:2]) == [1, 0]
     assert duplicate_times(paths[:2], times[:2]) == []
 

@@ -358,8 +358,12 @@ def check_times(paths, times):
         _, ps = dups[0]
         t = times[paths.index(ps[0])]                  # as the first frame states it
         more = f" ({len(dups) - 1} more instants are shared too)" if len(dups) > 1 else ""
+        stems = {Path(p).stem for p in ps}
+        pair = len(stems) == 1 and len({Path(p).suffix.lower() for p in ps}) > 1
         raise SkyfitError(
-            f"{', '.join(_name(p) for p in ps)} all have the time {t.isoformat()}{more}; "
-            "every frame needs its own time: remove the extra frames, or give distinct times "
-            "(SubSecTimeOriginal, or a CSV of times).")
+            f"{', '.join(_name(p) for p in ps)} {'both have' if len(ps) == 2 else 'all have'} "
+            f"the time {t.isoformat()}{more}; every frame needs its own time: "
+            + ("one shot in two formats (a RAW and its JPEG): give one format's files."
+               if pair else "remove the extra frames, or give distinct times "
+               "(SubSecTimeOriginal, or a CSV of times)."))
     return time_order(times)

@@ -168,7 +168,7 @@ def _text(v):
     if isinstance(v, (list, tuple)):
         v = " ".join(str(x) for x in v)
     v = str(v).strip().strip("\x00").strip()
-    return v or None
+    return v if v.replace(":", "").strip() else None     # EXIF's blank "    :  :  " too
 
 
 def _number(v):
