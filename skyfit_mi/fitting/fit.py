@@ -803,6 +803,11 @@ def prepare_sessions(sessions, light=LightOptions(), seed=0, log=print):
     traced already, :meth:`FitSession.take_light`, as they are) and fit the sky where it is not
     the spec's; returns the :class:`~.sky_fit.SkyFit` (empty for the spec's)."""
     plan = resolve_light(sessions, light, log)
-    trace_sessions([s for s in sessions.values() if s.parts is None or s.light is not plan],
-                   plan)
+    todo = [s for s in sessions.values() if s.parts is None or s.light is not plan]
+    if todo:                                    # the fit's longest silence (a minute or more)
+        log(f"tracing the light of {len(todo)} region(s), "
+            f"{sum(len(s.obs.pixels) for s in todo)} "
+            f"{'pixels' if todo[0].obs.rays is None else 'points'} over "
+            f"{len(todo[0].obs.frames)} frames ...")
+    trace_sessions(todo, plan)
     return fit_sky_scale(list(sessions.values()), plan, seed, log) if plan.split else SkyFit(None)
