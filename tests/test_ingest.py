@@ -711,6 +711,7 @@ def _copy_photos(day, dst):
     ("corrupt", "IMG_0003"),
     ("unknown raw", "IMG_0099"),
     ("duplicate time", "have the time"),
+    ("a sequence", "is a sequence folder"),
     ("grey", "IMG_0002.jpg: grey"),
 ])
 def test_bad_photographs_get_one_line_and_no_output(day, tmp_path, damage, message):
@@ -724,6 +725,8 @@ def test_bad_photographs_get_one_line_and_no_output(day, tmp_path, damage, messa
         with Image.open(files[2]) as im:
             exif = im.getexif()
             im.resize((32, 22)).save(files[2], exif=exif)
+    elif damage == "a sequence":               # its contact sheet was read as a photograph
+        (src / "manifest.json").write_text("{}")
     elif damage == "corrupt":
         files[3].write_bytes(files[3].read_bytes()[:200])
     elif damage == "unknown raw":

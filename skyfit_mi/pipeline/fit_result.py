@@ -23,6 +23,8 @@ def read_fit_result(path):
     95% intervals [lo, hi], pixels as [x, y] pairs, and any frames, kappa, measured range, draws
     and covariance well formed (the ``_is_*`` checks); SkyfitError saying what is wrong."""
     path = Path(path)
+    if path.is_dir():
+        raise SkyfitError(f"{path} is a folder; give a fit_NAME.json that `skyfit fit` wrote.")
     try:
         r = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:

@@ -28,6 +28,7 @@ from ..render.image import write_exr
 from ..render.labels import label_image
 from ..render.scene_xml import build_scene_xml
 from .colorchecker import NAMES, NEUTRAL, find_chart, matrix_error, reference_rgb, swatch_check
+from .manifest import FILENAME
 from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance,
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
 from .photo_times import check_times, frame_times
@@ -1022,6 +1023,10 @@ CLOCK_OFF_DAYS = 30.0
 
 def read_frames(photo_paths, spec_path, out_dir, o, log):
     """The :class:`Frames` of the photographs: read, timed, sorted, with the spec at their times."""
+    made = next((p for p in map(Path, photo_paths) if (p / FILENAME).is_file()), None)
+    if made is not None:
+        raise SkyfitError(f"{made} is a sequence folder (skyfit render or ingest wrote it), not "
+                          "photographs; give the folder of the camera's files.")
     paths = list_photos(photo_paths)
     if len(paths) < 2:
         raise SkyfitError(f"{len(paths)} photograph(s) given; a sequence needs at least 2.")

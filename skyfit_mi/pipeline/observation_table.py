@@ -193,6 +193,13 @@ def _csv_rows(path):
 def _check_columns(path, header):
     """Refuse unknown, repeated, missing or mixed columns; whether the values are luminances."""
     unknown = [c for c in header if c not in _KNOWN]
+    if unknown and any(";" in c or "\t" in c for c in unknown):
+        raise SkyfitError(f"{path}: its columns are separated by semicolons or tabs "
+                          f"({unknown[0]!r}); save it with commas (a comma-separated CSV, the "
+                          "decimal point a full stop).")
+    if unknown == [""]:
+        raise SkyfitError(f"{path}: a column without a name (a comma at the header's end?); "
+                          "remove it.")
     if unknown:
         raise SkyfitError(f"{path}: unknown column {unknown[0]!r}; the columns are time (or "
                           "frame), region, point, x,y,z, view_x,view_y,view_z (or "
