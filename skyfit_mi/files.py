@@ -10,6 +10,7 @@ import json
 import os
 import socket
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -150,9 +151,18 @@ def _alive(pid):
     return True
 
 
+#: A lock file younger than this [s] that names no owner yet is a live run's, between creating
+#: it and writing its owner into it; an older one is a run's killed in between (stale).
+FRESH_LOCK_S = 5.0
+#: How long [s] a run waits for such a young lock file to name its owner, and how often it looks.
+LOCK_WAIT_S, LOCK_POLL_S = 1.0, 0.05
+
+
 class FolderLock:
     """Exclusive use of an output folder by one process (a context manager): an O_EXCL lock
-    file naming its owner; one whose process is gone from this host is taken over (``stale``)."""
+    file naming its owner; one whose process is gone from this host, or one left unreadable
+    for :data:`FRESH_LOCK_S`, is taken over (``stale``: its owner record, pid 'unknown' if
+    unreadable)."""
 
     def __init__(self, folder, what="output folder"):
         self.path = Path(folder) / LOCK_NAME
@@ -161,36 +171,55 @@ class FolderLock:
 
     def _owner(self):
         try:
-            return json.loads(self.path.read_text())
+            owner = json.loads(self.path.read_text())
         except (OSError, ValueError):
             return None
+        return owner if isinstance(owner, dict) else None
+
+    def _age(self):
+        """The lock file's age [s] by its mtime; 0 if it is gone (a new try then takes it)."""
+        try:
+            return time.time() - self.path.stat().st_mtime
+        except OSError:
+            return 0.0
+
+    def _in_use(self, by):
+        return OutputError(
+            f"{self.what} {str(self.path.parent)!r} is in use by {by}; wait for it to finish, "
+            f"or, if that run no longer exists, delete {self.path}.")
 
     def __enter__(self):
         ensure_dir(self.path.parent, self.what)
         me = {"host": socket.gethostname(), "pid": os.getpid(),
               "since": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")}
-        for _ in range(2):
+        wait_until = time.monotonic() + LOCK_WAIT_S
+        while True:
             try:
                 fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666 & ~_umask())
             except FileExistsError:
                 owner = self._owner()
-                if owner is None or (owner.get("host") == me["host"]
-                                     and not _alive(owner.get("pid"))):
-                    self.stale = owner or {}
-                    self.path.unlink(missing_ok=True)
-                    continue
-                raise OutputError(
-                    f"{self.what} {str(self.path.parent)!r} is in use by process {owner.get('pid')}"
-                    f" on {owner.get('host')} since {owner.get('since')}; wait for it to finish, "
-                    f"or, if that run no longer exists, delete {self.path}.") from None
+                if owner is None and self._age() < FRESH_LOCK_S:     # its owner is writing it
+                    if time.monotonic() < wait_until:
+                        time.sleep(LOCK_POLL_S)
+                        continue
+                    raise self._in_use(f"another process (its lock file {self.path.name} "
+                                       "names no owner yet)") from None
+                if owner is not None and (owner.get("host") != me["host"]
+                                          or _alive(owner.get("pid"))):
+                    raise self._in_use(f"process {owner.get('pid')} on {owner.get('host')} "
+                                       f"since {owner.get('since')}") from None
+                if self.stale is not None:
+                    raise OutputError(f"cannot lock {self.what} {str(self.path.parent)!r}: "
+                                      "another process keeps taking it.") from None
+                self.stale = owner or {"pid": "unknown"}
+                self.path.unlink(missing_ok=True)
+                continue
             except OSError as exc:
                 raise OutputError(f"cannot lock {self.what} {str(self.path.parent)!r}: "
                                   f"{exc.strerror or exc}.") from None
             with os.fdopen(fd, "w") as f:
                 json.dump(me, f)
             return self
-        raise OutputError(f"cannot lock {self.what} {str(self.path.parent)!r}: another process "
-                          "keeps taking it.")
 
     def __exit__(self, *exc):
         self.path.unlink(missing_ok=True)

@@ -42,6 +42,32 @@ def test_a_locked_folder_is_refused_and_a_stale_lock_taken_over(tmp_path, mi):
     assert not (out / LOCK_NAME).exists()
 
 
+def test_a_lock_file_not_yet_naming_its_owner_is_live_until_old(tmp_path, monkeypatch):
+    """A live run's lock is empty between its O_EXCL creation and its owner's record: young,
+    it is waited for and refused as in use; only one left empty for FRESH_LOCK_S is stale."""
+    import threading
+
+    from skyfit_mi import files
+
+    monkeypatch.setattr(files, "LOCK_WAIT_S", 0.2)
+    lock = tmp_path / LOCK_NAME
+    lock.write_text("")
+    with pytest.raises(OutputError, match="in use by another process .*names no owner yet"):
+        FolderLock(tmp_path).__enter__()
+    me = {"host": os.uname().nodename, "pid": os.getpid(), "since": "2026-01-01T00:00:00+00:00"}
+    lock.write_text("")                          # its owner's record comes within the wait
+    threading.Timer(0.05, lambda: lock.write_text(json.dumps(me))).start()
+    monkeypatch.setattr(files, "LOCK_WAIT_S", 5.0)
+    with pytest.raises(OutputError, match=f"in use by process {os.getpid()} on "):
+        FolderLock(tmp_path).__enter__()
+    lock.write_text('{"host": ')                 # left half-written by a killed run
+    old = lock.stat().st_mtime - files.FRESH_LOCK_S - 1
+    os.utime(lock, (old, old))
+    with FolderLock(tmp_path) as taken:
+        assert taken.stale == {"pid": "unknown"}
+        assert json.loads(lock.read_text())["pid"] == os.getpid()
+
+
 def test_resume_rerenders_damaged_frames_and_overwrite_starts_clean(tmp_path, mi):
     from skyfit_mi.render.image import read_exr, write_exr
 
