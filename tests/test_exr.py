@@ -120,6 +120,37 @@ def test_a_bad_file_is_one_skyfit_line(tmp_path, capfd):
     assert read_exr(tmp_path / "truncated.exr", [0]).shape == (1, 16, 3)   # its whole rows read
 
 
+def test_a_full_disk_while_writing_is_one_output_line(tmp_path, monkeypatch):
+    """OpenEXR's bindings raise RuntimeError on a failed write (a full disk): one
+    OutputError naming the file and the reason, the earlier file kept, no temporary file."""
+    import OpenEXR
+
+    from skyfit_mi.errors import OutputError
+
+    class Full:
+        def __init__(self, *a):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def write(self, name):
+            raise RuntimeError(f'Cannot write image file "{name}". No space left on device.')
+
+    out = tmp_path / "map.exr"
+    write_exr(out, np.ones((4, 4), np.float32))
+    monkeypatch.setattr(OpenEXR, "File", Full)
+    with pytest.raises(OutputError, match=r"^cannot write '.*map\.exr': No space left on "
+                       r"device\.$"):
+        write_exr(out, np.zeros((4, 4), np.float32))
+    assert [p.name for p in tmp_path.iterdir()] == ["map.exr"]
+    monkeypatch.undo()
+    assert np.all(read_exr(out) == 1.0)
+
+
 @pytest.fixture(scope="module")
 def day(tmp_path_factory, mi):
     """A tiny rendered day (8x8, 3 frames)."""

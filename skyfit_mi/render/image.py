@@ -166,8 +166,13 @@ def write_exr(path, image, meta=None):
               "generatedBy": "skyfit-mi", **_header_meta(meta)}
 
     def write(tmp):
-        with OpenEXR.File(header, channels) as f:
-            f.write(str(tmp))
+        try:
+            with OpenEXR.File(header, channels) as f:
+                f.write(str(tmp))
+        except RuntimeError as exc:      # OpenEXR's I/O errors (a full disk): atomic_write's
+            # OSError, with the reason after the temporary file's name ('Cannot write ... "tmp".
+            # No space left on device.')
+            raise OSError(str(exc).rsplit('". ', 1)[-1].rstrip(".")) from None
     return atomic_write(path, write)
 
 
