@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402 -- after the BLAS setting
 
 from . import __version__  # noqa: E402
 from .errors import SetupError, SkyfitError  # noqa: E402
-from .files import check_dir, write_json  # noqa: E402
+from .files import FolderLock, check_dir, write_json  # noqa: E402
 from .physics.sky import MEASURED_SUN_SD, SKY_CHOICES, SUN_LEVEL_SD  # noqa: E402
 from .fitting.chi2 import REGION_PIXELS  # noqa: E402
 from .physics.ward import NORMALISATIONS  # noqa: E402
@@ -325,32 +325,33 @@ def _fit(args):
                   f"every parameter ({each})" + (f"; medians {med}" if med else ""))
         print(f"wrote the maps and map_summary.json in {out} ({s['wall_time_s']:.1f} s)")
         return
-    out = check_dir(Path(args.output) if args.output else root)     # made by the first write
-    kept = {}
-    for name, pixels in regions:
-        kept[name] = pixels if pixels is None else subsample_region(
-            pixels, args.max_pixels or None, args.seed)
-        if pixels is not None and len(kept[name]) < len(pixels):
-            print(f"{name}: fitting {len(kept[name])} of its {len(pixels)} pixels "
-                  f"(--max-pixels, seed {args.seed})")
-    cache = FitCache(args.positions, args.directions, pose_sd_deg=args.pose_sd_deg)
-    # every region's light traced together, and checked before the first is written
-    if auto:
-        from .fitting.selection import fit_auto
+    out = check_dir(Path(args.output) if args.output else root)
+    with FolderLock(out):                # one fit at a time into a folder
+        kept = {}
+        for name, pixels in regions:
+            kept[name] = pixels if pixels is None else subsample_region(
+                pixels, args.max_pixels or None, args.seed)
+            if pixels is not None and len(kept[name]) < len(pixels):
+                print(f"{name}: fitting {len(kept[name])} of its {len(pixels)} pixels "
+                      f"(--max-pixels, seed {args.seed})")
+        cache = FitCache(args.positions, args.directions, pose_sd_deg=args.pose_sd_deg)
+        # every region's light traced together, and checked before the first is written
+        if auto:
+            from .fitting.selection import fit_auto
 
-        results = fit_auto(args.manifest, list(kept.items()), seed=args.seed, cache=cache,
-                           frames=args.frames, variant=args.variant, light=light)
-    else:
-        results = fit_regions(args.manifest, list(kept.items()), model=model,
-                              method=args.method, normalisation=args.normalisation,
-                              seed=args.seed, start=args.start, cache=cache, frames=args.frames,
-                              variant=args.variant, light=light)
-    for (name, pixels), res in zip(regions, results):
-        res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
-                                         if pixels is None else len(pixels))
-        paths = write_fit(res, out / f"fit_{name}")
-        summary = write_summary(out)              # after each region: agrees with the JSONs
-        print("wrote " + " and ".join(str(p) for p in paths) + f"; updated {summary}")
+            results = fit_auto(args.manifest, list(kept.items()), seed=args.seed, cache=cache,
+                               frames=args.frames, variant=args.variant, light=light)
+        else:
+            results = fit_regions(args.manifest, list(kept.items()), model=model,
+                                  method=args.method, normalisation=args.normalisation,
+                                  seed=args.seed, start=args.start, cache=cache, frames=args.frames,
+                                  variant=args.variant, light=light)
+        for (name, pixels), res in zip(regions, results):
+            res["region_pixels_total"] = int(len(res.get("pixels") or res["points"])
+                                             if pixels is None else len(pixels))
+            paths = write_fit(res, out / f"fit_{name}")
+            summary = write_summary(out)              # after each region: agrees with the JSONs
+            print("wrote " + " and ".join(str(p) for p in paths) + f"; updated {summary}")
 
 
 def _relight(args):
@@ -384,24 +385,25 @@ def _chi2map(args):
                       args.profile)
     name = f"chi2map_{r['region']}_{args.x}_{args.y}"
     prefix = map_prefix(args.output or root, name, args.overwrite)
-    s = FitSession.from_fit(r, args.manifest, cache=FitCache(seed=args.seed),
-                            frames=r.get("frames"))
-    theta = np.array([r["parameters"][k] for k in names])
-    chi2 = (profiled_map(s, theta, args.x, args.y, xs, ys) if args.profile
-            else chi2_map(s, theta, args.x, args.y, xs, ys))
-    ix, iy = names.index(args.x), names.index(args.y)
-    j, i = np.unravel_index(np.argmin(chi2), chi2.shape)
-    marks = {"fit": (theta[ix], theta[iy]), "map minimum": (xs[i], ys[j])}
-    truth = truth_parameters(r.get("truth"), r["model"], names, r.get("normalisation", "ward"))
-    if truth is not None:
-        marks["truth"] = (truth[ix], truth[iy])
-    walk = np.asarray(r.get("trace") or [], dtype=float)
-    walk = walk[:, [ix, iy]] if args.walk and walk.ndim == 2 and len(walk) > 1 else None
-    others = "at their best" if args.profile else "at the fit"
-    paths = write_chi2_map(prefix, args.x, args.y, xs, ys, chi2, marks, walk, others)
-    print(f"{r['region']}: chi2 minimum {chi2.min():.6g} at {args.x} = {xs[i]:.4g}, "
-          f"{args.y} = {ys[j]:.4g} (the fit: {theta[ix]:.4g}, {theta[iy]:.4g}); wrote "
-          + " and ".join(str(p) for p in paths))
+    with FolderLock(prefix.parent):      # one map at a time into a folder
+        s = FitSession.from_fit(r, args.manifest, cache=FitCache(seed=args.seed),
+                                frames=r.get("frames"))
+        theta = np.array([r["parameters"][k] for k in names])
+        chi2 = (profiled_map(s, theta, args.x, args.y, xs, ys) if args.profile
+                else chi2_map(s, theta, args.x, args.y, xs, ys))
+        ix, iy = names.index(args.x), names.index(args.y)
+        j, i = np.unravel_index(np.argmin(chi2), chi2.shape)
+        marks = {"fit": (theta[ix], theta[iy]), "map minimum": (xs[i], ys[j])}
+        truth = truth_parameters(r.get("truth"), r["model"], names, r.get("normalisation", "ward"))
+        if truth is not None:
+            marks["truth"] = (truth[ix], truth[iy])
+        walk = np.asarray(r.get("trace") or [], dtype=float)
+        walk = walk[:, [ix, iy]] if args.walk and walk.ndim == 2 and len(walk) > 1 else None
+        others = "at their best" if args.profile else "at the fit"
+        paths = write_chi2_map(prefix, args.x, args.y, xs, ys, chi2, marks, walk, others)
+        print(f"{r['region']}: chi2 minimum {chi2.min():.6g} at {args.x} = {xs[i]:.4g}, "
+              f"{args.y} = {ys[j]:.4g} (the fit: {theta[ix]:.4g}, {theta[iy]:.4g}); wrote "
+              + " and ".join(str(p) for p in paths))
 
 
 def _range(text):

@@ -162,12 +162,14 @@ class FolderLock:
     """Exclusive use of an output folder by one process (a context manager): an O_EXCL lock
     file naming its owner; one whose process is gone from this host, or one left unreadable
     for :data:`FRESH_LOCK_S`, is taken over (``stale``: its owner record, pid 'unknown' if
-    unreadable)."""
+    unreadable).  A folder the lock made is removed again if the run fails leaving it empty,
+    so that a refused input leaves none."""
 
     def __init__(self, folder, what="output folder"):
         self.path = Path(folder) / LOCK_NAME
         self.what = what
         self.stale = None
+        self.made = False
 
     def _owner(self):
         try:
@@ -189,6 +191,7 @@ class FolderLock:
             f"or, if that run no longer exists, delete {self.path}.")
 
     def __enter__(self):
+        self.made = not self.path.parent.exists()
         ensure_dir(self.path.parent, self.what)
         me = {"host": socket.gethostname(), "pid": os.getpid(),
               "since": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")}
@@ -221,6 +224,11 @@ class FolderLock:
                 json.dump(me, f)
             return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, exc_type, *exc):
         self.path.unlink(missing_ok=True)
+        if self.made and exc_type is not None:        # a failed run leaves no folder it made
+            try:
+                self.path.parent.rmdir()
+            except OSError:                           # not empty: what it wrote stays
+                pass
         return False

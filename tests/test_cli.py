@@ -212,6 +212,34 @@ def test_fits_csv_merges_by_region_and_survives_ctrl_c(day, tmp_path, capsys, mo
     assert on_disk == set(rows()) == {"a", "b", "c"}
 
 
+def test_every_writer_refuses_a_folder_in_use(day, tmp_path, capsys, monkeypatch):
+    """Region fits, a map, chi2map and export each take their output folder's lock, as render
+    does: a second run into a folder in use gets the same one line, exit 2, and writes nothing
+    (a map's --overwrite no longer removes a live map's store)."""
+    import os
+
+    import skyfit_mi.fitting.fit as fit
+    import skyfit_mi.fitting.report as report
+    from skyfit_mi.files import LOCK_NAME, FolderLock
+
+    monkeypatch.setattr(fit, "fit_regions", _fake_fits)
+    monkeypatch.setattr(report, "write_fit", lambda res, prefix: (
+        report.write_json(prefix.with_suffix(".json"), res),))
+    fits, busy = tmp_path / "fits", tmp_path / "busy"
+    assert main(["fit", str(day), "--region", "a=rect:1,1,2,2", "-o", str(fits)]) == 0
+    capsys.readouterr()
+    with FolderLock(busy):
+        for argv in (["fit", day, "--region", "a=rect:1,1,2,2", "-o", busy],
+                     ["fit", day, "--per-pixel", "--region", "a=rect:1,1,2,2", "--overwrite",
+                      "-o", busy],
+                     ["chi2map", day, fits / "fit_a.json", "-o", f"{busy}/"],
+                     ["export", fits, "-o", busy]):
+            code, err = _run(capsys, *argv)
+            assert code == 2, (argv, err)
+            _one_line_error(err, f"output folder '{busy}' is in use by process {os.getpid()}")
+            assert [p.name for p in busy.iterdir()] == [LOCK_NAME], argv
+
+
 # ---- property tests: no input makes the parsers or the spec validator crash ------------------
 @settings(max_examples=300, deadline=None)
 @given(st.text(max_size=40))

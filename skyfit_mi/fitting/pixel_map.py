@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SkyfitError
-from ..files import check_dir, ensure_dir, save_figure, write_json
+from ..files import FolderLock, check_dir, ensure_dir, save_figure, write_json
 from ..pipeline.manifest import frame_sky, load_manifest
 from ..pipeline.photos import exif_scaled
 from ..render.fit_model import PARAMETER_ORDER, PARAMETERS
@@ -411,56 +411,58 @@ def run_map(manifest_path, regions, out_dir, options=MapOptions(), cluster=Clust
     first = o.model == "auto" or plan.sky != "spec" or exif_scaled(doc) is not None
     settings = _settings(doc, regions, o, plan.sky, first)
     out = check_dir(Path(out_dir))
-    stored = _check_store(out / STORE, settings, overwrite)
-    n_workers = None if c.scheduler else worker_count(c.workers, o.chunk, log)
-    t0 = time.perf_counter()
-    client = local = None
-    with _dask_logs_quiet(keep=c.dask_logs):
-        try:
-            check_regions(manifest_path, regions)          # the frames and their light
-            resume = stored is not None
-            if not (resume and np.all(stored[0])):  # a given scheduler answers before any fit
-                with _ctrl_c_deferred():
-                    client, local = _client(n_workers, c.scheduler, c.memory_per_worker,
-                                            c.dask_logs)
-            if resume and first and stored[1] is not None:     # what the store's map took
-                choices = {n: tuple(c) for n, c in stored[1]["choices"].items()}
-                light = stored[1]["light"]
-            elif first:
-                choices, light = first_fits(manifest_path, regions, o.model, o.normalisation,
-                                            o.seed, plan, o.light_pixels, o.variant, log)
-            else:
-                choices, light = {name: (o.model, o.normalisation) for name, _ in regions}, None
-            names = map_parameters(choices)
-            chunks = plan_map(regions, choices, o.patch, o.chunk)
-            if resume and len(stored[0]) != len(chunks):
-                _another_map(out / STORE)
-            pending = [i for i in range(len(chunks)) if not resume or not stored[0][i]]
-            store = _open_store(ensure_dir(out) / STORE, settings, shape, len(names),
-                                len(chunks), resume, {"choices": choices, "light": light}
-                                if first else None)
-            if len(pending) < len(chunks):
-                log(f"resuming: {len(chunks) - len(pending)} of {len(chunks)} chunks already "
-                    "mapped")
-            if pending:
-                _map_pending(client, manifest_path, chunks, pending, store, names, o,
-                             progress, light)
-        finally:
-            _close(client, local)
-    summary = write_map_outputs(out, store, names, regions, settings, choices)
-    for name, _ in regions:
-        summary["regions"][name].update(model=choices[name][0], normalisation=choices[name][1])
-    summary.update(widths_include=_widths_include(doc, skies, names, light),
-                   sky=_sky_summary(light),
-                   models=("each region's ranked best by held-out frames (fit --model auto) on "
-                           + (f"up to {o.light_pixels} of its pixels" if o.light_pixels else
-                              "every pixel") if o.model == "auto" else "as given"),
-                   wall_time_s=time.perf_counter() - t0, chunks=len(chunks),
-                   chunks_this_run=len(pending), workers=n_workers,
-                   scheduler=c.scheduler or "LocalCluster", memory_per_worker=c.memory_per_worker,
-                   chunk_seeds="numpy SeedSequence([seed, chunk index])")
-    write_json(out / "map_summary.json", summary)
-    return summary
+    with FolderLock(out):                  # one run at a time: check, store and maps
+        stored = _check_store(out / STORE, settings, overwrite)
+        n_workers = None if c.scheduler else worker_count(c.workers, o.chunk, log)
+        t0 = time.perf_counter()
+        client = local = None
+        with _dask_logs_quiet(keep=c.dask_logs):
+            try:
+                check_regions(manifest_path, regions)          # the frames and their light
+                resume = stored is not None
+                if not (resume and np.all(stored[0])):  # a given scheduler answers before any fit
+                    with _ctrl_c_deferred():
+                        client, local = _client(n_workers, c.scheduler, c.memory_per_worker,
+                                                c.dask_logs)
+                if resume and first and stored[1] is not None:     # what the store's map took
+                    choices = {n: tuple(c) for n, c in stored[1]["choices"].items()}
+                    light = stored[1]["light"]
+                elif first:
+                    choices, light = first_fits(manifest_path, regions, o.model, o.normalisation,
+                                                o.seed, plan, o.light_pixels, o.variant, log)
+                else:
+                    choices, light = {name: (o.model, o.normalisation) for name, _ in regions}, None
+                names = map_parameters(choices)
+                chunks = plan_map(regions, choices, o.patch, o.chunk)
+                if resume and len(stored[0]) != len(chunks):
+                    _another_map(out / STORE)
+                pending = [i for i in range(len(chunks)) if not resume or not stored[0][i]]
+                store = _open_store(ensure_dir(out) / STORE, settings, shape, len(names),
+                                    len(chunks), resume, {"choices": choices, "light": light}
+                                    if first else None)
+                if len(pending) < len(chunks):
+                    log(f"resuming: {len(chunks) - len(pending)} of {len(chunks)} chunks already "
+                        "mapped")
+                if pending:
+                    _map_pending(client, manifest_path, chunks, pending, store, names, o,
+                                 progress, light)
+            finally:
+                _close(client, local)
+        summary = write_map_outputs(out, store, names, regions, settings, choices)
+        for name, _ in regions:
+            summary["regions"][name].update(model=choices[name][0], normalisation=choices[name][1])
+        summary.update(widths_include=_widths_include(doc, skies, names, light),
+                       sky=_sky_summary(light),
+                       models=("each region's ranked best by held-out frames (fit --model auto) on "
+                               + (f"up to {o.light_pixels} of its pixels" if o.light_pixels else
+                                  "every pixel") if o.model == "auto" else "as given"),
+                       wall_time_s=time.perf_counter() - t0, chunks=len(chunks),
+                       chunks_this_run=len(pending), workers=n_workers,
+                       scheduler=c.scheduler or "LocalCluster",
+                       memory_per_worker=c.memory_per_worker,
+                       chunk_seeds="numpy SeedSequence([seed, chunk index])")
+        write_json(out / "map_summary.json", summary)
+        return summary
 
 
 def _map_pending(client, manifest_path, chunks, pending, store, names, options, progress,

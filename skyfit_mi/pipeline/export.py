@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SkyfitError, listed
-from ..files import ensure_dir, to_json, write_text
+from ..files import FolderLock, ensure_dir, to_json, write_text
 from ..physics.material_match import FORMS, GLTF_F0, nearest, nearest_maps
 from ..physics.ward import raw_reflectances
 from ..render.fit_model import PARAMETERS, material_dict, reflectances
@@ -170,41 +170,42 @@ def export(paths, out, formats=FORMS, overwrite=False, log=print):
         raise SkyfitError(f"unknown export format {bad[0] if bad else '(none)'!r}; give some of "
                           f"{', '.join(FORMS)}.")
     out = Path(out)
-    check_output(out, overwrite)
-    materials = read_materials(paths)
-    matches = {m.name: {f: _match(m, f) for f in formats} for m in materials}
-    record = {"formats": list(formats),
-              "materials": {m.name: _record(m, matches[m.name]) for m in materials},
-              "error": "relative error of the radiance a material reflects from a distant light, "
-                       "light and view within 80 degrees of the normal (rms and largest over a "
-                       "grid of such pairs; albedo_max: the directional albedo's largest), "
-                       "against the fitted BRDF"}
-    files = {}
-    if "mitsuba" in formats:
-        files[FILES["mitsuba"]] = mitsuba_xml(materials, matches)
-        files[WARD_FILE] = mitsuba_ward_xml(materials)
-        files[PREVIEWS["mitsuba"]] = mitsuba_preview(materials)
-    if "radiance" in formats:
-        files[FILES["radiance"]] = radiance_text(materials, matches)
-        files[PREVIEWS["radiance"]] = radiance_preview([m for m in materials if m.maps is None])
-    if "gltf" in formats:
-        files[FILES["gltf"]] = gltf_json(materials, matches)
-    ensure_dir(out)
-    written = [SIDECAR, *files]
-    for m in materials:
-        if m.maps is not None:
-            written += write_textures(out, m, matches[m.name])
-    for name, text in files.items():
-        write_text(out / name, text)
-    write_text(out / SIDECAR, to_json(record) + "\n")
-    for stale in export_files() - set(written):      # an earlier export's (--overwrite)
-        (out / stale).unlink(missing_ok=True)
-    if (out / "textures").is_dir() and not any((out / "textures").iterdir()):
-        (out / "textures").rmdir()
-    for m in materials:
-        _log_material(m, matches[m.name], log)
-    log(f"wrote {', '.join(files)} and {SIDECAR} in {out}")
-    return record
+    with FolderLock(out):                # one export at a time into a folder
+        check_output(out, overwrite)
+        materials = read_materials(paths)
+        matches = {m.name: {f: _match(m, f) for f in formats} for m in materials}
+        record = {"formats": list(formats),
+                  "materials": {m.name: _record(m, matches[m.name]) for m in materials},
+                  "error": "relative error of the radiance a material reflects from a distant "
+                           "light, light and view within 80 degrees of the normal (rms and "
+                           "largest over a grid of such pairs; albedo_max: the directional "
+                           "albedo's largest), against the fitted BRDF"}
+        files = {}
+        if "mitsuba" in formats:
+            files[FILES["mitsuba"]] = mitsuba_xml(materials, matches)
+            files[WARD_FILE] = mitsuba_ward_xml(materials)
+            files[PREVIEWS["mitsuba"]] = mitsuba_preview(materials)
+        if "radiance" in formats:
+            files[FILES["radiance"]] = radiance_text(materials, matches)
+            files[PREVIEWS["radiance"]] = radiance_preview([m for m in materials
+                                                            if m.maps is None])
+        if "gltf" in formats:
+            files[FILES["gltf"]] = gltf_json(materials, matches)
+        written = [SIDECAR, *files]
+        for m in materials:
+            if m.maps is not None:
+                written += write_textures(out, m, matches[m.name])
+        for name, text in files.items():
+            write_text(out / name, text)
+        write_text(out / SIDECAR, to_json(record) + "\n")
+        for stale in export_files() - set(written):      # an earlier export's (--overwrite)
+            (out / stale).unlink(missing_ok=True)
+        if (out / "textures").is_dir() and not any((out / "textures").iterdir()):
+            (out / "textures").rmdir()
+        for m in materials:
+            _log_material(m, matches[m.name], log)
+        log(f"wrote {', '.join(files)} and {SIDECAR} in {out}")
+        return record
 
 
 def _match(m, form):
