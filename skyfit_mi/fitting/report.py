@@ -14,13 +14,14 @@ from ..pipeline.manifest import frame_axis
 
 
 def write_fit(result, prefix):
-    """Write ``<prefix>.json`` and ``<prefix>.png`` (observed vs model; annealing's walk)."""
+    """Write ``<prefix>.png`` (observed vs model; annealing's walk), then ``<prefix>.json``,
+    which marks the fit done (an interrupted write leaves none); returns their paths (JSON
+    first)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     prefix = Path(prefix)
-    js = write_json(prefix.with_suffix(".json"), result)
     t, t_label = frame_axis(result["frames"], result["series"]["times"])
     y = np.asarray(result["series"]["observed_DN"])
     m = np.asarray(result["series"]["model_DN"])
@@ -51,7 +52,8 @@ def write_fit(result, prefix):
         label.set_rotation(30)
         label.set_ha("right")
     fig.tight_layout()
-    return js, save_figure(fig, prefix.with_suffix(".png"))
+    png = save_figure(fig, prefix.with_suffix(".png"))
+    return write_json(prefix.with_suffix(".json"), result), png
 
 
 def read_fits(folder):
