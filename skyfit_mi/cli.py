@@ -1,8 +1,8 @@
 """The ``skyfit`` command: thin argument parsing over the package.
 
 Every user error ends in one line on stderr naming the input and what is allowed, exit
-code 2; Ctrl-C exits 130, keeps what was finished and says what running the command again
-does (:data:`_AGAIN`: a render resumes, fits already written stay); ``--debug`` shows the
+code 2; Ctrl-C exits 130 (SIGTERM: 143), keeps what was finished and says what running the
+command again does (:data:`_AGAIN`: a render resumes, fits already written stay); ``--debug`` shows the
 traceback of any error.
 """
 
@@ -835,28 +835,36 @@ def _oneline(exc):
     return " ".join(str(exc).split())
 
 
+#: The signals that stop a command as Ctrl-C does (SIGTERM: timeout, docker stop, batch
+#: systems), with the word its line says; it exits 128 + the signal's number (130, 143).
+STOP_SIGNALS = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated (SIGTERM)"}
+
+
 @contextmanager
 def _ctrl_c_noted():
-    """Ctrl-C raises KeyboardInterrupt as usual, and is noted, so that an error raised while it
-    unwinds (e.g. a C++ extension's) is reported as the Ctrl-C.  In the main thread only."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
+    """Ctrl-C (or SIGTERM) raises KeyboardInterrupt, so that the run unwinds as on Ctrl-C
+    (temporary files removed, locks released), and is noted in the list yielded, so that an
+    error raised while it unwinds (e.g. a C++ extension's) is reported as the stop.  In the main
+    thread only."""
     pressed = []
+    if threading.current_thread() is not threading.main_thread():
+        yield pressed
+        return
 
-    def on_ctrl_c(signum, frame):
-        pressed.append(True)
+    def on_stop(signum, frame):
+        pressed.append(signum)
         raise KeyboardInterrupt
 
-    previous = signal.signal(signal.SIGINT, on_ctrl_c)
+    previous = {s: signal.signal(s, on_stop) for s in STOP_SIGNALS}
     try:
-        yield
+        yield pressed
     except Exception as exc:
         if pressed:
             raise KeyboardInterrupt from exc
         raise
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 #: What an interrupted command keeps and what running it again does, by command.
@@ -895,13 +903,15 @@ def main(argv=None):
     except SystemExit as exc:              # --help, --version, or a usage error (already printed)
         return exc.code
     try:
-        with _ctrl_c_noted():
+        with _ctrl_c_noted() as stopped:
             args.func(args)
     except KeyboardInterrupt:
         if args.debug:
             raise
-        print(f"skyfit: interrupted; {_AGAIN.get(args.func, _AGAIN[None])}.", file=sys.stderr)
-        return 130
+        signum = stopped[0] if stopped else signal.SIGINT
+        print(f"skyfit: {STOP_SIGNALS[signum]}; {_AGAIN.get(args.func, _AGAIN[None])}.",
+              file=sys.stderr)
+        return 128 + signum
     except (SkyfitError, SetupError) as exc:
         if args.debug:
             raise

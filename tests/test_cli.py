@@ -240,6 +240,32 @@ def test_every_writer_refuses_a_folder_in_use(day, tmp_path, capsys, monkeypatch
             assert [p.name for p in busy.iterdir()] == [LOCK_NAME], argv
 
 
+def test_sigterm_stops_a_command_as_ctrl_c_does(tmp_path, capsys, monkeypatch):
+    """SIGTERM (timeout, docker stop, a batch system) unwinds a command as Ctrl-C does: one
+    line, exit 143, the half-written file's temporary removed and the folder's lock released
+    (the folder it made, left empty, removed)."""
+    import os
+    import signal
+
+    from skyfit_mi.files import FolderLock, atomic_write
+
+    out = tmp_path / "out"
+
+    def terminated_while_writing(args):
+        def write(tmp):
+            Path(tmp).write_text("half")
+            os.kill(os.getpid(), signal.SIGTERM)
+        with FolderLock(out):
+            atomic_write(out / "export.json", write)
+
+    monkeypatch.setattr(cli, "_export", terminated_while_writing)
+    code, err = _run(capsys, "export", tmp_path / "fits", "-o", out)
+    assert code == 143
+    _one_line_error(err, "skyfit: terminated (SIGTERM); nothing unfinished was kept as done")
+    assert not out.exists()
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL          # restored after the run
+
+
 # ---- property tests: no input makes the parsers or the spec validator crash ------------------
 @settings(max_examples=300, deadline=None)
 @given(st.text(max_size=40))

@@ -281,23 +281,22 @@ def worker_count(workers, chunk, log=print):
 
 @contextmanager
 def _ctrl_c_deferred():
-    """Defer a Ctrl-C during the block to its end (a half-started or half-closed Dask cluster
-    prints tracebacks); no effect outside the main thread."""
+    """Defer a Ctrl-C or SIGTERM during the block to its end (a half-started or half-closed Dask
+    cluster prints tracebacks), then deliver it to the handler it was kept from; no effect
+    outside the main thread."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     pressed = []
-    handler = signal.signal(signal.SIGINT, lambda *a: pressed.append(True))
+    handlers = {s: signal.signal(s, lambda signum, frame: pressed.append(signum))
+                for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
-    except Exception:
-        if pressed:          # e.g. a worker that the Ctrl-C ended while it started
-            raise KeyboardInterrupt from None
-        raise
-    finally:
-        signal.signal(signal.SIGINT, handler)
-    if pressed:
-        raise KeyboardInterrupt
+    finally:          # also after an error, e.g. of a worker that the Ctrl-C ended as it started
+        for s, handler in handlers.items():
+            signal.signal(s, handler)
+        if pressed:
+            signal.raise_signal(pressed[0])
 
 
 @contextmanager
