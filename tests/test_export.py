@@ -355,3 +355,30 @@ def test_a_maps_median_materials_say_how_many_pixels_hold_them(tmp_path):
     assert any(f"fewer than {MEDIAN_PIXELS}" in w and "sigma_alpha (1)" in w
                for w in mats["few"].warnings)
     assert any("none: no median material" in w for m in mats.values() for w in m.warnings)
+
+
+def test_an_export_that_failed_part_way_is_replaced_by_the_next(tmp_path, capsys, monkeypatch):
+    """A map's export that stopped after its textures (a full disk) leaves them marked
+    unfinished: the same command then replaces them without --overwrite, and a finished
+    export is refused as before."""
+    from skyfit_mi.errors import OutputError
+    from skyfit_mi.pipeline import export as ex
+
+    _map_folder(tmp_path / "map")
+    out = tmp_path / "out"
+    real = ex.write_text
+
+    def full(path, text):
+        if path.name == "materials.xml":
+            raise OutputError(f"cannot write {str(path)!r}: No space left on device.")
+        return real(path, text)
+
+    monkeypatch.setattr(ex, "write_text", full)
+    assert main(["export", str(tmp_path / "map"), "-o", str(out)]) == 2
+    assert "No space left on device" in capsys.readouterr().err
+    assert (out / "textures").is_dir() and not (out / ex.SIDECAR).exists()
+    monkeypatch.undo()
+    assert main(["export", str(tmp_path / "map"), "-o", str(out)]) == 0
+    assert (out / ex.SIDECAR).is_file() and not (out / ex.UNFINISHED).exists()
+    assert main(["export", str(tmp_path / "map"), "-o", str(out)]) == 2
+    assert "holds another export" in capsys.readouterr().err

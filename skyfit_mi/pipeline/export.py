@@ -13,8 +13,9 @@ fit`` folder) or a per-pixel map's folder and writes, in ``OUT``:
   form's error (:mod:`~skyfit_mi.physics.material_match`).
 
 A map's planes become textures (``textures/``, u right, v down), Radiance taking each region's
-median.  Nothing is written until all is made; another export's folder is refused unless
-``overwrite``, which replaces only that export's files.
+median.  Nothing is written until all is made, and ``export.json`` last; another export's
+folder is refused unless ``overwrite``, which replaces only that export's files (an export that
+did not finish is replaced as well).
 """
 
 import base64
@@ -26,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SkyfitError, listed
-from ..files import FolderLock, ensure_dir, to_json, write_text
+from ..files import FolderLock, to_json, write_text
 from ..physics.material_match import FORMS, GLTF_F0, nearest, nearest_maps
 from ..physics.ward import raw_reflectances
 from ..render.fit_model import PARAMETERS, material_dict, reflectances
@@ -49,6 +50,9 @@ PREVIEW_SUN_DEG = 0.533
 PREVIEW_LIGHT = {"sun_irradiance": 600.0, "sky_radiance": 30.0, "ground": 0.2,
                  "camera": (0.0, -6.0, 3.0), "target": (0.0, 0.0, 0.4)}
 SIDECAR = "export.json"
+#: An export holds this in its folder from its first file until the sidecar, its last, is
+#: written: the files of an export that failed or was stopped, which the next one replaces.
+UNFINISHED = ".export_unfinished"
 #: A map's folder holds this (written by ``skyfit fit --per-pixel``).
 MAP_SUMMARY = "map_summary.json"
 #: The name of a map's textured material (its regions' medians keep theirs).
@@ -156,9 +160,10 @@ def export_files():
 
 
 def check_output(out, overwrite):
-    """Refuse a folder holding another export (:func:`export_files`) unless ``overwrite``."""
+    """Refuse a folder holding another export (:func:`export_files`) unless ``overwrite``; an
+    export's that did not finish (:data:`UNFINISHED`) is replaced."""
     held = sorted(n for n in export_files() if (Path(out) / n).exists())
-    if held and not overwrite:
+    if held and not overwrite and not (Path(out) / UNFINISHED).exists():
         raise SkyfitError(f"{out} holds another export ({held[0]}); give another -o, or pass "
                           "--overwrite to replace it.")
 
@@ -191,17 +196,19 @@ def export(paths, out, formats=FORMS, overwrite=False, log=print):
                                                             if m.maps is None])
         if "gltf" in formats:
             files[FILES["gltf"]] = gltf_json(materials, matches)
-        written = [SIDECAR, *files]
-        for m in materials:
-            if m.maps is not None:
-                written += write_textures(out, m, matches[m.name])
+        images = {name: image for m in materials if m.maps is not None
+                  for name, image in texture_images(m, matches[m.name]).items()}
+        write_text(out / UNFINISHED, "")           # until the sidecar, written last, is
+        for name, image in images.items():
+            (write_exr if name.endswith(".exr") else write_png)(out / name, image)
         for name, text in files.items():
             write_text(out / name, text)
         write_text(out / SIDECAR, to_json(record) + "\n")
-        for stale in export_files() - set(written):      # an earlier export's (--overwrite)
+        for stale in export_files() - {SIDECAR, *files, *images}:   # an earlier export's
             (out / stale).unlink(missing_ok=True)
         if (out / "textures").is_dir() and not any((out / "textures").iterdir()):
             (out / "textures").rmdir()
+        (out / UNFINISHED).unlink()
         for m in materials:
             _log_material(m, matches[m.name], log)
         log(f"wrote {', '.join(files)} and {SIDECAR} in {out}")
@@ -435,10 +442,10 @@ def _image(m, values):
     return img
 
 
-def write_textures(out, m, matches):
-    """Write in ``out`` the texture images of map material ``m`` for ``matches``, each form's
-    largest error per texel (``textures/FORM_error.exr``) and the undetermined texels
-    (:data:`UNDETERMINED_FILE`); returns their names (EXR or PNG by suffix)."""
+def texture_images(m, matches):
+    """The texture images of map material ``m`` for ``matches``, each form's largest error per
+    texel (``textures/FORM_error.exr``) and the undetermined texels (:data:`UNDETERMINED_FILE`),
+    by file name (EXR or PNG by suffix)."""
     unsure = np.repeat(m.maps["undetermined"][..., None], 3, axis=2).astype(np.uint8) * 255
     images = {UNDETERMINED_FILE: unsure}
     for form, r in matches.items():
@@ -461,10 +468,7 @@ def write_textures(out, m, matches):
         images[files["metallicRoughnessTexture"]] = _linear8(_image(m, mr))
         images[files["specularTexture"]] = _linear8(_image(m, f))                  # its A
         images[files["specularColorTexture"]] = to_srgb8(_image(m, colour), 1.0)
-    ensure_dir(out / "textures")
-    for name, image in images.items():
-        (write_exr if name.endswith(".exr") else write_png)(out / name, image)
-    return list(images)
+    return images
 
 
 #: The factor of a map's glTF specular colour texture: material_match's dielectric takes
