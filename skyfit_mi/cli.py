@@ -2,8 +2,8 @@
 
 Every user error ends in one line on stderr naming the input and what is allowed, exit
 code 2; Ctrl-C exits 130 (SIGTERM: 143), keeps what was finished and says what running the
-command again does (:data:`_AGAIN`: a render resumes, fits already written stay); ``--debug`` shows the
-traceback of any error.
+command again does (:data:`_AGAIN`: a render resumes, fits already written stay);
+``--debug`` shows the traceback of any error.
 """
 
 import argparse
