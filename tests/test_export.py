@@ -101,6 +101,26 @@ def test_export_writes_every_format_with_the_fit_beside_it(exported):
     assert gltf["asset"]["version"] == "2.0"
 
 
+def test_radiance_identifiers_are_one_word():
+    """A material named "dïsc é" was written `void plastic dïsc é`, which oconv refuses ("bad
+    arguments for plastic"): Radiance takes one word; two names that become one are refused."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.pipeline.export import radiance_name, radiance_text
+
+    assert radiance_name("dïsc é") == "d_sc__" and radiance_name("steel_40.grit-a") == \
+        "steel_40.grit-a"
+    match = {"radiance": {"params": {"type": "plastic", "colour": [0.5, 0.4, 0.3], "spec": 0.05,
+                                     "roughness": 0.1}, "exact": True, "error": {}}}
+    one = SimpleNamespace(name="dïsc é", maps=None, source="fit_a.json")
+    assert "void plastic d_sc__\n0\n0\n5 0.5 0.4 0.3 0.05 0.1" in \
+        radiance_text([one], {"dïsc é": match})
+    two = SimpleNamespace(name="dèsc ê", maps=None, source="fit_b.json")
+    with pytest.raises(SkyfitError, match="are both 'd_sc__' as Radiance identifiers"):
+        radiance_text([one, two], {"dïsc é": match, "dèsc ê": match})
+
+
 @pytest.mark.parametrize("name", list(FITS))
 def test_mitsuba_reads_the_exported_bsdfs_as_the_fit(exported, name, mi):
     """Mitsuba's own ``eval`` of the exported files: the ``ward`` plugin element is the fitted

@@ -20,6 +20,7 @@ did not finish is replaced as well).
 
 import base64
 import json
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -384,6 +385,12 @@ def mitsuba_preview(materials):
 """
 
 
+def radiance_name(name):
+    """``name`` as a Radiance identifier: one word of ASCII letters, digits and ``_.-`` (a
+    material "dïsc é" was written as two words, which oconv refuses)."""
+    return re.sub(r"[^A-Za-z0-9_.\-]", "_", name)
+
+
 def radiance_preview(materials):
     """``preview.rad``: ``materials.rad`` in the preview scene, its render command in the header."""
     L, sun = PREVIEW_LIGHT, PREVIEW_SUN
@@ -404,7 +411,8 @@ def radiance_preview(materials):
              "sky_glow source sky 0 0 4 0 0 1 360",
              f"void plastic ground_mat 0 0 5 {L['ground']:g} {L['ground']:g} {L['ground']:g} 0 0",
              "ground_mat polygon ground 0 0 12 -50 -50 0 50 -50 0 50 50 0 -50 50 0"]
-    lines += [f"{m.name} sphere {m.name}_sphere 0 0 4 {x:g} 0 0.4 0.4" for m, x in _row(materials)]
+    lines += [f"{radiance_name(m.name)} sphere {radiance_name(m.name)}_sphere 0 0 4 {x:g} 0 0.4 "
+              "0.4" for m, x in _row(materials)]
     return "\n".join(lines) + "\n"
 
 
@@ -412,13 +420,21 @@ def radiance_text(materials, matches):
     """``materials.rad``: a Radiance ``plastic`` or ``metal`` per material (map: region medians)."""
     lines = ["# skyfit export: Radiance 6 plastic/metal (balanced Ward lobe), "
              "colour C, specularity, roughness (rms slope)"]
+    names = {}
+    for m in materials:
+        other = names.setdefault(radiance_name(m.name), m.name)
+        if other != m.name:
+            raise SkyfitError(f"materials {other!r} and {m.name!r} are both "
+                              f"{radiance_name(m.name)!r} as Radiance identifiers (one word of "
+                              "ASCII letters, digits and _.-); rename one.")
     for m in materials:
         if m.maps is not None:
             continue
         r = matches[m.name]["radiance"]
         p = r["params"]
         lines += [f"# {m.name} ({m.source}): {_how(r)}",
-                  f"void {p['type']} {m.name}\n0\n0\n5 {_numbers(p['colour']).replace(',', '')} "
+                  f"void {p['type']} {radiance_name(m.name)}\n0\n0\n5 "
+                  f"{_numbers(p['colour']).replace(',', '')} "
                   f"{p['spec']:.6g} {p['roughness']:.6g}"]
     return "\n".join(lines) + "\n"
 
