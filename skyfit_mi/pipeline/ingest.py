@@ -28,13 +28,13 @@ from ..render.image import write_exr
 from ..render.labels import label_image
 from ..render.scene_xml import build_scene_xml
 from .colorchecker import NAMES, NEUTRAL, find_chart, matrix_error, reference_rgb, swatch_check
-from .manifest import FILENAME
 from .jpeg_noise import (REPLICATES, SEED, block_offset, block_size, bootstrap_variance,
                          dc_record, displayed, jpeg_settings, recompress, stored, tables_bound)
+from .manifest import FILENAME
 from .photo_times import check_times, frame_times
 from .photos import (EXIF_LABEL_SD, EXPOSURE_KEYS, NOT_SRGB, RAW_COLOUR_REACH,
-                     WIDE_PRIMARIES, check_same_size, exif_exposure, exif_label_loading,
-                     exif_setting, list_photos, read_flat_field, read_photo)
+                     WIDE_PRIMARIES, camera_name, check_same_size, exif_exposure,
+                     exif_label_loading, exif_setting, list_photos, read_flat_field, read_photo)
 from .raw_noise import REPLICATES as RAW_REPLICATES, SEED as RAW_SEED, SMOOTH as RAW_SMOOTH
 from .raw_noise import bootstrap, cfa_planes
 from .region_edges import colour_mixed, pose_reach
@@ -1048,8 +1048,7 @@ def read_frames(photo_paths, spec_path, out_dir, o, log):
         log(f"{listed(far)}: taken over {CLOCK_OFF_DAYS:g} days from the other frames' median "
             f"date ({times[len(times) // 2].date().isoformat()}): a camera clock reset or "
             "wrong? Check the EXIF times, or give them in a CSV (--times)")
-    cameras = [" ".join(str(p.metadata.get(k) or "").strip() for k in ("make", "model")).strip()
-               for p in photos]
+    cameras = [camera_name(p.metadata) for p in photos]
     named = [c for c in cameras if c]
     if len(set(named)) > 1:
         usual = max(set(named), key=named.count)

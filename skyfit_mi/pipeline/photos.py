@@ -203,6 +203,11 @@ _EXIF_TAGS = {"datetime_original": ("EXIF DateTimeOriginal", 0x8769, 0x9003, Fal
               "interop_index": ("Interoperability InteroperabilityIndex", 0xA005, 0x0001, False)}
 
 
+def camera_name(metadata):
+    """EXIF's make and model of a photograph's :attr:`Photo.metadata`, '' without them."""
+    return " ".join(str(metadata.get(k) or "").strip() for k in ("make", "model")).strip()
+
+
 def _empty_metadata():
     return {**dict.fromkeys(_EXIF_TAGS), "orientation": 1, "icc_profile": None}
 

@@ -41,7 +41,7 @@ from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky import EFFICACY_CLEAR
 from ..render.image import write_exr
 from .photo_times import frame_times
-from .photos import (EXPOSURE_KEYS, check_same_size, exif_exposure, list_photos,
+from .photos import (EXPOSURE_KEYS, camera_name, check_same_size, exif_exposure, list_photos,
                      read_flat_field, read_photo)
 
 #: Luminance [cd m^-2] saturating a sensor at H = t S / N^2 = 1 [s]: ISO 12232's H_sat = 78 / S
@@ -194,8 +194,7 @@ def read_shots(items, tz=None, times_csv=None, flat=None, box=None):
         metas.append(photo.metadata)
         del photo
     times = frame_times(paths, metas, times_csv=times_csv, tz=tz, warn=lambda message: None)
-    cameras = [" ".join(str(m.get(k) or "").strip() for k in ("make", "model")).strip()
-               for m in metas]
+    cameras = [camera_name(m) for m in metas]
     shots = sorted((Shot(*k[:4], exposure=k[4], time=t, camera=c)
                     for k, t, c in zip(kept, times, cameras)),
                    key=lambda s: (s.time, s.path.name))         # a bracket shares a second
