@@ -175,6 +175,9 @@ def _ingest(args):
         if v is not None and len(v) not in n:
             raise SkyfitError(f"{name} takes {' or '.join(map(str, n))} comma-separated numbers, "
                               f"got {len(v)}.")
+    if args.site is not None and not (abs(args.site[0]) <= 90 and abs(args.site[1]) <= 180):
+        raise SkyfitError(f"--site {args.site[0]:g},{args.site[1]:g}: give the latitude in "
+                          "[-90, 90] (north) and the longitude in [-180, 180] (east), degrees.")
     if args.table is not None:
         from .pipeline.observation_table import ingest_table
 

@@ -329,3 +329,12 @@ def test_a_comma_list_of_numbers_may_start_with_a_minus():
     assert args.site == [-33.9, 151.2] and args.output == "seq"
     assert _join_negative_lists(parser, ["fit", "seq", "-q", "-o", "-1,2"]) == \
         ["fit", "seq", "-q", "-o", "-1,2"]
+
+
+def test_a_site_beyond_the_globe_is_named_as_the_option(tmp_path, capsys):
+    """--site 95,0 was refused naming the spec's [location] latitude_deg."""
+    assert main(["ingest", "spec.toml", str(tmp_path), "-o", str(tmp_path / "o"),
+                 "--site", "95,0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("--site 95,0: give the latitude in [-90, 90] (north) and the longitude "
+                        "in [-180, 180] (east), degrees."), err
