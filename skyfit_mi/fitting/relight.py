@@ -189,6 +189,13 @@ def relight(fits, target, out, images=True, draws=200, seed=0, log=print, progre
         render_sequence(spec, out, overwrite=overwrite, progress=progress, log=log,
                         source="relight")
     ensure_dir(Path(out))
+    with FolderLock(out):                      # the render's lock ended with it
+        return _predict_and_report(fits, plan, out, spec, predicted, pixels, draws, seed,
+                                   overwrite, log)
+
+
+def _predict_and_report(fits, plan, out, spec, predicted, pixels, draws, seed, overwrite, log):
+    """:func:`relight`'s prediction, written with the errors where the target has observations."""
     if pixels is None:
         pixels = target_pixels(fits, predicted, seed)
     prediction = predict(fits, predicted, pixels, draws, seed, log)
