@@ -13,7 +13,8 @@ Cases (``--cases``):
   ``fit --region disc=rect:4,4,11,11 --model 5``.
 * ``tableN``: a photometric-stereo table of N points under 96 directional lights
   (:func:`make_table`), ``ingest --table``, ``fit --all --model 5`` and
-  ``relight --no-images`` of the fit onto the table.
+  ``relight --no-images`` of the fit onto the table; ``tableNauto`` the same with ``fit
+  --model auto``, against ``tableN``'s fit issue 53's 2x.
 
 Each command runs in a new process (``python -m skyfit_mi.cli``, the checkout first on
 ``PYTHONPATH``); its peak resident memory is the process's own ``VmHWM``.  Prints a markdown
@@ -159,22 +160,24 @@ def make_table(folder, n_points, seed=0, lights=LIGHTS, reflect=None, noise_floo
     return folder / "spec.json", folder / "table.csv"
 
 
-def table(n_points):
-    """The ``tableN`` case: ingest, fit and relight (--no-images) of :func:`make_table`."""
+def table(n_points, model=5):
+    """The ``tableN`` case (``tableNauto``: ``--model auto``): ingest, fit and relight
+    (--no-images) of :func:`make_table`."""
     def case(out, checkout, tag):
         src = out / f"table{n_points}-input"
         if not (src / "table.csv").exists():
             make_table(src, n_points)
-        day, fits, relit = (out / f"table{n_points}-{k}-{tag}" for k in ("day", "fits", "relit"))
+        name = f"table{n_points}{'' if model == 5 else model}"
+        day, fits, relit = (out / f"{name}-{k}-{tag}" for k in ("day", "fits", "relit"))
         for f in (day, fits, relit):
             shutil.rmtree(f, ignore_errors=True)
         res = {}
         for step, args in (("ingest", ["ingest", src / "spec.json", "--table",
                                        src / "table.csv", "-o", day]),
-                           ("fit", ["fit", day, "--all", "--model", 5, "-o", fits]),
+                           ("fit", ["fit", day, "--all", "--model", model, "-o", fits]),
                            ("relight", ["relight", fits, "--target", day, "-o", relit,
                                         "--no-images"])):
-            wall, rss = run(checkout, args, out / f"{step}-table{n_points}-{tag}.log")
+            wall, rss = run(checkout, args, out / f"{step}-{name}-{tag}.log")
             res[f"{step}_s"], res[f"{step}_peak_MB"] = wall, rss
         r = json.loads((fits / "fit_disc.json").read_text())
         res.update(command_s=res["fit_s"], peak_MB=res["fit_peak_MB"],
@@ -185,7 +188,8 @@ def table(n_points):
 
 
 CASES = {"board": board, "auto": functools.partial(board, model="auto"), "misfit": misfit,
-         "table400": table(400), "table4000": table(4000)}
+         "table400": table(400), "table4000": table(4000),
+         "table400auto": table(400, "auto"), "table4000auto": table(4000, "auto")}
 
 
 def main():
