@@ -320,3 +320,53 @@ def test_the_pose_sd_reads_as_azimuth_and_angle_or_a_table(tmp_path):
     assert _spec(tmp_path, camera=CAMERA + "\npose_sd_deg = {roll = 1}").camera[
         "pose_sd_deg"] == {"azimuth": 0.0, "angle": 0.0, "roll": 1.0}
     assert "pose_sd_deg" not in _spec(tmp_path).camera
+
+
+# ---- reading the file: its encoding, and a folder for a file ---------------------------------
+
+def _spec_text():
+    return BASE.format(tz="UTC", time=TIME, sky='type = "clear"', scene="disc.xml", camera=CAMERA)
+
+
+def _write(path, data):
+    path.write_bytes(data)
+    return path
+
+
+def test_a_spec_saved_with_a_byte_order_mark_reads_as_without(tmp_path):
+    """Windows Notepad starts a UTF-8 file with a byte-order mark; TOML and JSON alike."""
+    plain = load_spec(_write(tmp_path / "plain.toml", _spec_text().encode()))
+    bom = load_spec(_write(tmp_path / "bom.toml", b"\xef\xbb\xbf" + _spec_text().encode()))
+    assert bom.raw == plain.raw and bom.run_id() == plain.run_id()
+    import json
+    doc = json.dumps(plain.raw).encode()
+    assert load_spec(_write(tmp_path / "bom.json", b"\xef\xbb\xbf" + doc)).raw == plain.raw
+
+
+def test_a_spec_or_gensky_file_not_utf8_is_refused_naming_it(tmp_path):
+    latin1 = ("# 40\xb0 N\n" + _spec_text()).encode("latin-1")
+    with pytest.raises(SpecError, match=r"spec file '.*s.toml' is not UTF-8 text \(byte 0xb0 "
+                                        r"at offset 4\); save it as UTF-8\.$"):
+        load_spec(_write(tmp_path / "s.toml", latin1))
+    _write(tmp_path / "sky.rad", b"# gensky 6 21 12 +s -a 40\xb0\n")
+    with pytest.raises(SpecError, match=r"\[sky\] gensky_file '.*sky.rad' is not UTF-8 text .*"
+                                        "save it as UTF-8"):
+        _spec(tmp_path, sky='gensky_file = "sky.rad"')
+
+
+def test_a_folder_given_as_the_spec_is_named_a_folder(tmp_path):
+    with pytest.raises(SpecError, match=r"spec '.*' is a folder; give a spec file \(.toml or "
+                                        r"\.json\)\.$"):
+        load_spec(tmp_path)
+    (tmp_path / "day.toml").write_text(_spec_text())
+    with pytest.raises(SpecError, match="is a folder; .*, such as .*day.toml.$"):
+        load_spec(tmp_path)
+    with pytest.raises(SpecError, match="does not exist"):
+        load_spec(tmp_path / "nosuch.toml")
+
+
+def test_an_integer_beyond_python_s_digit_limit_is_a_spec_error(tmp_path):
+    for name in ("big.json", "big.toml"):
+        text = '{"name": %s}' % ("9" * 5000) if name.endswith("json") else "name = " + "9" * 5000
+        with pytest.raises(SpecError, match=f"{name} holds a number of over 4300 digits"):
+            load_spec(_write(tmp_path / name, text.encode()))

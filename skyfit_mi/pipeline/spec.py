@@ -221,17 +221,34 @@ class Spec:
         return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def _utf8(path, what):
+    """The text of ``path`` as UTF-8, a leading byte-order mark (Windows Notepad's) dropped."""
+    try:
+        return path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise SpecError(f"{what} {str(path)!r} is not UTF-8 text (byte "
+                        f"0x{exc.object[exc.start]:02x} at offset {exc.start}); save it as "
+                        "UTF-8.") from None
+
+
 def read_spec(path):
     """The unvalidated tables of a spec file (``.toml`` or ``.json``)."""
     path = Path(path)
+    if path.is_dir():
+        inside = sorted(p.name for p in path.iterdir() if p.suffix.lower() in (".toml", ".json"))
+        raise SpecError(f"spec {str(path)!r} is a folder; give a spec file (.toml or .json)"
+                        + (f", such as {path / inside[0]}" if inside else "") + ".")
     if not path.is_file():
         raise SpecError(f"spec file {str(path)!r} does not exist.")
-    text = path.read_text()
+    text = _utf8(path, "spec file")
     try:
         return json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
     except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
         raise SpecError(f"{path.name} is not valid {'JSON' if path.suffix == '.json' else 'TOML'}: "
                         f"{exc}") from None
+    except ValueError:              # Python reads no integer of over 4300 digits
+        raise SpecError(f"{path.name} holds a number of over 4300 digits; give every number in "
+                        "ordinary notation (1e30, not its digits).") from None
 
 
 def load_spec(path):
@@ -778,7 +795,7 @@ def _make_sky(e, zenith, azimuth, t, base_dir, index, elevation=0.0):
                 if not p.is_file():
                     raise SpecError(f"[sky] gensky_file {str(p)!r} not found; give gensky = '''...''' "
                                     "or a file beside the spec.")
-                text = p.read_text()
+                text = _utf8(p, "[sky] gensky_file")
             sky = from_gensky(text)
         else:
             photometry = CIEPhotometry(**{k: e[k] for k in _CIE_PHOTOMETRY_KEYS if k in e})
