@@ -60,11 +60,22 @@ def test_bad_time_zones(tmp_path, tz, match):
     ('date = "2026-06-21"\ntimes = ["12:00", "12:00"]', "must increase: .* repeats"),
     ('times = ["2026-06-21T12:00+25:00"]', "is not a time"),
     ('date = "2026-06-21"\ntimes = ["25:00"]', "is not a time"),
+    ('date = "2026-06-21"\ntimes = ["12:00:99"]', "'12:00:99' is not a time; write 'HH:MM'"),
+    ('date = "2026-06-21"\ntimes = ["12:5"]', "'12:5' is not a time"),
+    ('date = "2026-06-21"\ntimes = ["12:60"]', "'12:60' is not a time"),
+    ('date = "2026-06-21"\ntimes = ["12:00:00:00"]', "is not a time"),
+    ('date = "2026-06-21"\ntimes = ["１２:００"]', "is not a time"),
+    ('date = "2026-06-21"\nstart = "6:00"\nend = "10:00"\nstep_minutes = 60', "start '6:00'"),
     ('date = "2026-06-21"\nstart = "12:00"\nend = "10:00"\nstep_minutes = 5', "before start"),
 ])
 def test_bad_times(tmp_path, time, match):
     with pytest.raises(SpecError, match=match):
         _spec(tmp_path, time=time)
+
+
+def test_a_time_s_seconds_are_kept(tmp_path):
+    spec = _spec(tmp_path, time='date = "2026-06-21"\ntimes = ["10:00:30", "12:00"]')
+    assert [f"{f.time:%H:%M:%S}" for f in spec.frames] == ["10:00:30", "12:00:00"]
 
 
 def test_a_day_across_a_clock_change_steps_in_real_time_and_names_lost_or_twice_hours(tmp_path):

@@ -9,6 +9,7 @@ import copy
 import datetime as dt
 import hashlib
 import json
+import re
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -154,6 +155,10 @@ def _tz(name):
                         "as 'Europe/London' or 'UTC', or an offset such as '+01:00'.") from None
 
 
+#: A wall time on [time] date: HH:MM or HH:MM:SS (their ranges checked by datetime.time).
+_CLOCK = re.compile(r"[0-9]{2}:[0-9]{2}(:[0-9]{2})?")
+
+
 def _clock(s, date, tz, key):
     try:
         if "T" in str(s) or len(str(s)) > 8:
@@ -167,11 +172,12 @@ def _clock(s, date, tz, key):
         elif date is None:
             raise ValueError(s)
         else:
-            hh, mm = (int(x) for x in str(s).split(":")[:2])
-            t = dt.datetime.combine(date, dt.time(hh, mm))
+            if not _CLOCK.fullmatch(str(s)):
+                raise ValueError(s)
+            t = dt.datetime.combine(date, dt.time(*(int(x) for x in str(s).split(":"))))
     except (ValueError, TypeError, OverflowError):
-        raise SpecError(f"[time] {key} {s!r} is not a time; write 'HH:MM' (on [time] date) or an "
-                        "ISO date-time such as '2026-06-21T06:00'.") from None
+        raise SpecError(f"[time] {key} {s!r} is not a time; write 'HH:MM' or 'HH:MM:SS' (on "
+                        "[time] date) or an ISO date-time such as '2026-06-21T06:00'.") from None
     problem = wall_time_problem(t, tz)
     if problem is not None:
         raise SpecError(f"[time] {key} {s!r} {problem}; give it as an ISO date-time with its "
