@@ -381,3 +381,56 @@ def test_an_integer_beyond_python_s_digit_limit_is_a_spec_error(tmp_path):
         text = '{"name": %s}' % ("9" * 5000) if name.endswith("json") else "name = " + "9" * 5000
         with pytest.raises(SpecError, match=f"{name} holds a number of over 4300 digits"):
             load_spec(_write(tmp_path / name, text.encode()))
+
+
+# ---- [[sky]]: one table per frame, in order or each at its frame's time ----------------------
+
+def _day_of_skies(tmp_path, times, *entries):
+    """A spec of frames at ``times`` on 21 June and a [[sky]] table of each of ``entries``."""
+    p = tmp_path / "s.toml"
+    p.write_text(BASE.replace("[sky]\n{sky}", "{sky}").format(
+        tz="UTC", time=f'date = "2026-06-21"\ntimes = {times!r}'.replace("'", '"'),
+        sky="\n".join(f"[[sky]]\n{e}" for e in entries), scene="disc.xml", camera=CAMERA))
+    return load_spec(p)
+
+
+def test_timed_sky_entries_go_to_their_frames_whatever_their_order(tmp_path):
+    spec = _day_of_skies(tmp_path, ["09:00", "12:00", "15:00"],
+                         'type = "overcast"\ntime = "15:00"', 'type = "clear"\ntime = "09:00"',
+                         'type = "intermediate"\nphi = 0.5\ntime = "12:00"')
+    assert [f.sky.info["kind"] for f in spec.frames] == ["clear", "intermediate", "overcast"]
+
+
+@pytest.mark.parametrize("entries, match", [
+    (['type = "clear"', 'type = "clear"', 'type = "overcast"\ntime = "15:00"'],
+     r"\[\[sky\]\] gives a time in entry 2 but not in entries 0 and 1; give every entry its "
+     r"frame's time, or none"),
+    (['type = "clear"\ntime = "09:00"', 'type = "clear"\ntime = "12:00"',
+      'type = "clear"\ntime = "15:00"', 'type = "overcast"\ntime = "18:00"'],
+     r"entry 3 has time '18:00', which is no frame's \(\[time\] gives 09:00, 12:00, 15:00\); "
+     "drop the entry"),
+    (['type = "clear"\ntime = "09:00"', 'type = "clear"\ntime = "12:00"',
+      'type = "clear"\ntime = "15:00"', 'type = "overcast"\ntime = "12:00:00"'],
+     "entries 1 and 3 both have time '12:00:00'; give each frame's sky once"),
+    (['type = "clear"\ntime = "09:00"\nframes = []', 'type = "clear"', 'type = "clear"'],
+     "unknown key.* frames in \\[sky\\]"),
+])
+def test_sky_entries_whose_times_do_not_match_the_frames_are_refused(tmp_path, entries, match):
+    with pytest.raises(SpecError, match=match):
+        _day_of_skies(tmp_path, ["09:00", "12:00", "15:00"], *entries)
+
+
+@pytest.mark.parametrize("sky, match", [
+    ([1, 2, 3], r"\[\[sky\]\] entry 0 is 1, not a table"),
+    ([], r"\[\[sky\]\] must be a list of tables, one per frame; got \[\]"),
+    ({"type": "clear", "frames": 5}, r"\[sky\] frames must be a list of tables, one per frame; "
+                                     "got 5"),
+    ({"frames": [{"type": "clear"}, "overcast"]}, r"\[sky\] frames entry 1 is 'overcast'"),
+    ({"type": "clear", "time": "12:00"}, r"\[sky\] time: one \[sky\] table is every frame's"),
+])
+def test_a_sky_list_of_other_than_tables_is_refused(sky, match):
+    raw = thesis_disc_spec("t", {"model": "two", "rho_s": 0.5, "sigma_alpha": 0.1})
+    raw["time"] = {"date": "2026-06-21", "times": ["12:00"]}
+    raw["sky"] = sky
+    with pytest.raises(SpecError, match=match):
+        validate_spec(raw)

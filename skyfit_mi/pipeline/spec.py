@@ -521,37 +521,76 @@ def _materials(sec, base_dir):
     return out
 
 
+def _indices(ix):
+    """Entry indices as text: 'entry 3', 'entries 0, 2 and 5', the first five of more then
+    '...'."""
+    shown = [str(i) for i in ix[:5]] + (["..."] if len(ix) > 5 else [])
+    if len(shown) == 1:
+        return f"entry {shown[0]}"
+    return f"entries {', '.join(shown[:-1])} and {shown[-1]}"
+
+
+def _frame_times(times):
+    """The frames' times as text: '09:00, 12:00, 15:00', or the first and last of many."""
+    text = [f"{t:%H:%M:%S}".removesuffix(":00") for t in times]
+    return ", ".join(text) if len(text) <= 6 else f"{len(text)} times, {text[0]} to {text[-1]}"
+
+
 def _sky_entries(sec, times, tz):
     if isinstance(sec, dict):
         base = {k: v for k, v in sec.items() if k != "frames"}
-        entries = sec.get("frames")
+        entries, where = sec.get("frames"), "[sky] frames"
     elif isinstance(sec, list):
-        base, entries = {}, sec
+        base, entries, where = {}, sec, "[[sky]]"
     else:
         raise SpecError("[sky] must be a table, or [[sky]] a list of tables (one per frame).")
     _unknown("sky", base, _SCHEMA["sky"] - {"frames"})
+    if entries is not None:
+        if not isinstance(entries, list) or not entries:
+            raise SpecError(f"{where} must be a list of tables, one per frame; got {entries!r}.")
+        for i, e in enumerate(entries):
+            if not isinstance(e, dict):
+                raise SpecError(f"{where} entry {i} is {e!r}, not a table; give one table of sky "
+                                "keys per frame.")
+            _unknown("sky", e, _SCHEMA["sky"] - {"frames"})
     if times is None and any("time" in e for e in [base, *(entries or [])]):
         raise SpecError("[sky] time: lab lights without [time] are frames by index, in the order "
                         "listed; drop time (or give [time] and [location] for a day).")
+    if "time" in base:
+        raise SpecError("[sky] time: one [sky] table is every frame's sky; give each frame's sky "
+                        "its time in a [[sky]] table, or drop time.")
+    timed = [i for i, e in enumerate(entries or []) if "time" in e]
     if entries is None:
         out = [dict(base) for _ in (times or [None])]
-    elif times is not None and all("time" in e for e in entries):
+    elif timed and len(timed) < len(entries):
+        untimed = sorted(set(range(len(entries))) - set(timed))
+        raise SpecError(f"{where} gives a time in {_indices(timed)} but not in "
+                        f"{_indices(untimed)}; give every entry its frame's time, or none (one "
+                        "entry per frame, in order).")
+    elif timed:
         by_time = {}
-        for e in entries:
-            _unknown("sky", e, _SCHEMA["sky"])
+        for i, e in enumerate(entries):
             # by instant: in a repeated hour equal wall times are different instants
-            by_time[_clock(e["time"], times[0].date(), tz, "sky time").timestamp()] = e
+            at = _clock(e["time"], times[0].date(), tz, "sky time").timestamp()
+            if at in by_time:
+                raise SpecError(f"{where} entries {by_time[at][0]} and {i} both have time "
+                                f"{e['time']!r}; give each frame's sky once.")
+            by_time[at] = i, e
         missing = [t for t in times if t.timestamp() not in by_time]
         if missing:
             raise SpecError(f"[[sky]] has no entry for {missing[0]:%H:%M%z}; give one per frame "
                             "time (or drop 'time' and list one per frame in order).")
-        out = [{**base, **by_time[t.timestamp()]} for t in times]
+        frames = {t.timestamp() for t in times}
+        extra = [i for at, (i, _) in by_time.items() if at not in frames]
+        if extra:
+            raise SpecError(f"{where} entry {extra[0]} has time {entries[extra[0]]['time']!r}, "
+                            f"which is no frame's ([time] gives {_frame_times(times)}); drop the "
+                            "entry or add its time to [time].")
+        out = [{**base, **by_time[t.timestamp()][1]} for t in times]
     elif times is not None and len(entries) != len(times):
         raise SpecError(f"[[sky]] lists {len(entries)} skies for {len(times)} frames; give one "
                         "per frame, or a 'time' in each.")
     else:                                   # one entry per frame, in order
-        for e in entries:
-            _unknown("sky", e, _SCHEMA["sky"])
         out = [{**base, **e} for e in entries]
     for e in out:
         for k in _SKY_NUMBERS & set(e):
