@@ -1,5 +1,6 @@
 """Spec validation: every bad spec is refused before frame 0 with a message naming the key."""
 
+import copy
 import datetime as dt
 
 import numpy as np
@@ -434,3 +435,127 @@ def test_a_sky_list_of_other_than_tables_is_refused(sky, match):
     raw["sky"] = sky
     with pytest.raises(SpecError, match=match):
         validate_spec(raw)
+
+
+# ---- wrong types at every key: refused in one line, never a crash later ----------------------
+
+@pytest.mark.parametrize("section, key, value, match", [
+    ("materials", None, [1], r"\[materials\] must be a table of tables"),
+    ("materials", None, None, r"\[materials\] must be a table of tables"),
+    ("materials", "disc", {"model": "colour", "C": ["a", 0.4, 0.3], "rho_s": 0.1,
+                           "sigma_alpha": 0.1}, r"\[materials.disc\] C\[0\] must be a number, "
+                                                "got 'a'; write it without quotes"),
+    ("materials", "disc", {"model": "two", "rho_s": "0.1", "sigma_alpha": 0.1},
+     r"\[materials.disc\] rho_s must be a number, got '0.1'"),
+    ("materials", "disc", {"model": "two", "rho_s": [0.1], "sigma_alpha": 0.1},
+     r"\[materials.disc\] rho_s must be a number, got \[0.1\]"),
+    ("materials", "disc", {"model": "two", "rho_s": 0.1, "sigma_alpha": None},
+     r"\[materials.disc\] sigma_alpha must be a number, got None"),
+    ("materials", "disc", {"model": ["two"], "rho_s": 0.1, "sigma_alpha": 0.1},
+     r"\[materials.disc\] unknown Ward model \['two'\]"),
+    ("sensor", "gamma", "2.2", r"\[sensor\] gamma must be a number, got '2.2'"),
+    ("sensor", "noise_percent", "1", r"\[sensor\] noise_percent must be a number, got '1'"),
+    ("sensor", "bits", 8.5, r"\[sensor\] bits must be a whole number"),
+    ("sensor", "cos4", "false", r"\[sensor\] cos4 must be true or false"),
+    ("location", "latitude_deg", "40", r"\[location\] latitude_deg must be a number, got '40'"),
+    ("location", "timezone", None, r"\[location\] timezone must be text, got None"),
+    ("camera", "width", -25000000000000000000, r"\[camera\] width = -25000000000000000000 is "
+                                               r"outside \[1, 16384\]"),
+    ("camera", "fov_deg", 10**400, r"\[camera\] fov_deg is a whole number of 401 digits, "
+                                   r"beyond any float; give a value in \[0.1, 170\]"),
+    ("camera", "pose_sd_deg", -(2**63) - 1, r"\[camera\] pose_sd_deg azimuth = -9.22337e\+18 deg "
+                                            "is outside"),
+    ("camera", "pose_sd_deg", {"roll": 2**64}, r"pose_sd_deg roll = 1.84467e\+19 deg is outside"),
+    ("scene", "ground_albedo", None, r"\[scene\] ground_albedo must be a number, got None"),
+    ("time", "date", 20260621, r"\[time\] date 20260621 is not a date; write 'YYYY-MM-DD'"),
+    ("time", "times", 5, r"\[time\] times must be a non-empty list"),
+    ("time", "times", [1200], r"\[time\] time 1200 is not a time"),
+])
+def test_wrong_types_are_refused_naming_the_key(section, key, value, match):
+    raw = thesis_disc_spec("t", {"model": "two", "rho_s": 0.5, "sigma_alpha": 0.1})
+    raw["time"] = {"date": "2026-06-21", "times": ["12:00"]}
+    if key is None:
+        raw[section] = value
+    else:
+        raw[section][key] = value
+    with pytest.raises(SpecError, match=match):
+        validate_spec(raw)
+
+
+def test_a_time_list_of_numbers_without_a_date_is_a_spec_error():
+    raw = thesis_disc_spec("t", {"model": "two", "rho_s": 0.5, "sigma_alpha": 0.1})
+    raw["time"] = {"times": 5}
+    with pytest.raises(SpecError, match=r"\[time\] times must be a non-empty list"):
+        validate_spec(raw)
+
+
+def _example_spec():
+    import tomllib
+    from pathlib import Path
+    from skyfit_mi.pipeline.spec import SCENES_DIR
+    return tomllib.loads((SCENES_DIR / "specs" / "disc_clear_east.toml").read_text()), \
+        SCENES_DIR / "specs"
+
+
+def _key_paths():
+    """Every key of the example spec, at every depth, and every key the schema allows."""
+    from skyfit_mi.pipeline.spec import _SCHEMA
+
+    def walk(d, at):
+        for k, v in d.items():
+            yield at + (k,)
+            if isinstance(v, dict):
+                yield from walk(v, at + (k,))
+    raw, _ = _example_spec()
+    paths = set(walk(raw, ()))
+    paths |= {(sec, k) for sec, keys in _SCHEMA.items() for k in (keys or ())}
+    paths |= {("materials", "disc", k) for k in ("R", "C", "rho_d", "normalisation", "fit")}
+    return sorted(paths)
+
+
+def _wrong_values():
+    from hypothesis import strategies as st
+    scalars = st.one_of(
+        st.none(), st.booleans(), st.integers(), st.sampled_from([-2.5e19, 10**400, -(10**30)]),
+        st.floats(), st.text(max_size=8),
+        st.sampled_from(["0.1", "2.2", "1", "40", "12:00", "12:00:99", "auto", "clear", "disc"]))
+    return st.one_of(scalars, st.lists(scalars, max_size=4),
+                     st.dictionaries(st.text(max_size=4), scalars, max_size=2))
+
+
+def test_a_spec_with_wrong_types_anywhere_is_refused_in_one_line_or_works():
+    """Hypothesis: copies of disc_clear_east.toml with one to three keys (at any depth, or any
+    the schema allows) given a value of another type; validate_spec raises only SpecError, in
+    one line, or gives a spec whose sensor and materials hold numbers where numbers belong."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+    from skyfit_mi.errors import SkyfitError
+
+    example, base_dir = _example_spec()
+    sun = {f.time.isoformat(): (f.sun_zenith_deg, f.sun_azimuth_deg)
+           for f in validate_spec(example, base_dir).frames}         # pvlib once
+
+    @settings(max_examples=200, deadline=None, derandomize=True, database=None,
+              suppress_health_check=[HealthCheck.too_slow])
+    @given(st.lists(st.tuples(st.sampled_from(_key_paths()), _wrong_values()), min_size=1,
+                    max_size=3))
+    def check(changes):
+        raw = copy.deepcopy(example)
+        for path, value in changes:
+            at = raw
+            for k in path[:-1]:
+                at = at.setdefault(k, {}) if isinstance(at.get(k, {}), dict) else {}
+            at[path[-1]] = value
+        try:
+            spec = validate_spec(raw, base_dir, sun=sun)
+        except SkyfitError as exc:
+            assert isinstance(exc, SpecError) and str(exc) and "\n" not in str(exc)
+            return
+        for k in ("gamma", "noise_percent", "bits"):
+            assert isinstance(spec.sensor[k], (int, float)), spec.sensor
+        for m in spec.materials.values():
+            for k, v in m.items():
+                if k not in ("model", "normalisation", "source"):
+                    assert all(isinstance(x, (int, float)) for x in np.ravel(v)), m
+
+    check()

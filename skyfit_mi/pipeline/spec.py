@@ -9,7 +9,9 @@ import copy
 import datetime as dt
 import hashlib
 import json
+import math
 import re
+import sys
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -24,13 +26,13 @@ from ..errors import SkyfitError
 from ..physics.gensky import from_gensky
 from ..physics.lens import FOV_RANGE, check_distortion
 from ..render.fit_model import PARAMETERS, material_dict
-from ..render.scene import camera_matrix, pose_sd
+from ..render.scene import POSE_ANGLES, camera_matrix, pose_sd
 from ..render.scene_xml import resolve_materials
 from ..render.variant import VARIANTS
 from ..physics.sky import (EFFICACY_CLEAR, EFFICACY_OVERCAST, GROUND_ALBEDO, SKY_TYPES,
                            CIEPhotometry, cie_general_sky, cie_sky)
 from ..physics.sun import SunDisc, solar_position
-from ..physics.ward import NORMALISATIONS, raw_parameters
+from ..physics.ward import MODELS, NORMALISATIONS, raw_parameters
 from .fit_result import read_fit_result
 from .illumination import directional_from_record, envmap_from_record, perez_from_irradiance
 from .irradiance import irradiance_at, read_irradiance
@@ -106,7 +108,13 @@ def _unknown(section, got, allowed):
 
 
 def _num(section, key, v, lo=-np.inf, hi=np.inf, integer=False):
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        quotes = "; write it without quotes" if isinstance(v, str) else ""
+        raise SpecError(f"[{section}] {key} must be a number, got {v!r}{quotes}.")
+    if isinstance(v, int) and abs(v) > sys.float_info.max:
+        raise SpecError(f"[{section}] {key} is a whole number of {len(str(abs(v)))} digits, beyond "
+                        f"any float; give a value in [{lo:g}, {hi:g}].")
+    if not math.isfinite(v):
         raise SpecError(f"[{section}] {key} must be a number, got {v!r}.")
     if integer and int(v) != v:
         raise SpecError(f"[{section}] {key} must be a whole number, got {v!r}.")
@@ -139,7 +147,7 @@ def _text(section, key, v):
 
 
 def _tz(name):
-    if isinstance(name, str) and name[:1] in "+-" and ":" in name:
+    if name[:1] in "+-" and ":" in name:
         hh, _, mm = name[1:].partition(":")
         if not (hh.isdigit() and mm.isdigit() and len(mm) == 2):
             raise SpecError(f"[location] timezone {name!r} is not an offset; write it as '+01:00'.")
@@ -149,7 +157,7 @@ def _tz(name):
                             "from '-12:00' to '+14:00' (minutes below 60).")
         return dt.timezone(dt.timedelta(hours=hours))
     try:
-        return ZoneInfo(str(name))
+        return ZoneInfo(name)
     except (ZoneInfoNotFoundError, ValueError):
         raise SpecError(f"[location] timezone {name!r} is not a time zone; give an IANA name such "
                         "as 'Europe/London' or 'UTC', or an offset such as '+01:00'.") from None
@@ -161,20 +169,20 @@ _CLOCK = re.compile(r"[0-9]{2}:[0-9]{2}(:[0-9]{2})?")
 
 def _clock(s, date, tz, key):
     try:
-        if "T" in str(s) or len(str(s)) > 8:
-            t = dt.datetime.fromisoformat(str(s))
+        if not isinstance(s, str):
+            raise TypeError(s)
+        if "T" in s or len(s) > 8:
+            t = dt.datetime.fromisoformat(s)
             if t.tzinfo is not None:
                 off = t.utcoffset() / dt.timedelta(hours=1)
                 if not UTC_OFFSETS[0] <= off <= UTC_OFFSETS[1]:
                     raise ValueError(off)
             if t.tzinfo is not None:
                 return t
-        elif date is None:
+        elif date is None or not _CLOCK.fullmatch(s):
             raise ValueError(s)
         else:
-            if not _CLOCK.fullmatch(str(s)):
-                raise ValueError(s)
-            t = dt.datetime.combine(date, dt.time(*(int(x) for x in str(s).split(":"))))
+            t = dt.datetime.combine(date, dt.time(*(int(x) for x in s.split(":"))))
     except (ValueError, TypeError, OverflowError):
         raise SpecError(f"[time] {key} {s!r} is not a time; write 'HH:MM' or 'HH:MM:SS' (on "
                         "[time] date) or an ISO date-time such as '2026-06-21T06:00'.") from None
@@ -295,7 +303,7 @@ def validate_spec(raw, base_dir=".", sun=None):
         lat = _num("location", "latitude_deg", loc["latitude_deg"], -90, 90)
         lon = _num("location", "longitude_deg", loc["longitude_deg"], -180, 180)
         elevation = _num("location", "elevation_m", loc.get("elevation_m", 0.0), -500, 9000)
-        tz = _tz(loc["timezone"])
+        tz = _tz(_text("location", "timezone", loc["timezone"]))
         times = _times(raw["time"], tz)
 
     render = {"spp": 64, "seed": 0, "variant": "llvm_ad_rgb", "max_depth": 4, "below_horizon": "sky",
@@ -362,17 +370,17 @@ def _lab_entries(sec):
 
 
 def _times(sec, tz):
+    if "times" in sec and (not isinstance(sec["times"], list) or not sec["times"]):
+        raise SpecError("[time] times must be a non-empty list such as ['12:00', '12:30'].")
     if "date" not in sec and not all("T" in str(t) for t in sec.get("times", ["x"])):
         raise SpecError("[time] needs date = 'YYYY-MM-DD' (or ISO date-times in times).")
     try:
-        date = dt.date.fromisoformat(str(sec["date"])) if "date" in sec else None
-    except ValueError:
+        date = dt.date.fromisoformat(sec["date"]) if "date" in sec else None
+    except (ValueError, TypeError):             # TypeError: not text (20260621)
         raise SpecError(f"[time] date {sec['date']!r} is not a date; write 'YYYY-MM-DD'.") from None
     if "times" in sec:
         if any(k in sec for k in ("start", "end", "step_minutes")):
             raise SpecError("[time] give either times = [...] or start/end/step_minutes, not both.")
-        if not isinstance(sec["times"], list) or not sec["times"]:
-            raise SpecError("[time] times must be a non-empty list such as ['12:00', '12:30'].")
         out = [_clock(s, date, tz, "time") for s in sec["times"]]
     else:
         missing = [k for k in ("start", "end", "step_minutes") if k not in sec]
@@ -421,6 +429,12 @@ def _sensor(sec):
          "cos4": False, **sec}
     if s["exposure"] != "auto":
         _num("sensor", "exposure", s["exposure"], 1e-12, 1e12)
+    for k in ("gamma", "noise_percent", "bits"):    # their ranges and depths: SensorModel's
+        _num("sensor", k, s[k], integer=k == "bits")
+    _text("sensor", "response", s["response"])
+    if not isinstance(s["cos4"], bool):
+        raise SpecError(f"[sensor] cos4 must be true or false (the cos^4 falloff), got "
+                        f"{s['cos4']!r}.")
     try:
         SensorModel(exposure=1.0 if s["exposure"] == "auto" else s["exposure"],
                     **{k: s[k] for k in ("response", "gamma", "bits", "noise_percent", "cos4")})
@@ -463,6 +477,11 @@ def _camera(sec):
                             f"convention), got {k!r}.")
         for i, v in enumerate(k):
             _num("camera", f"distortion[{i}]", v)
+    if isinstance(c.get("pose_sd_deg"), dict):     # numbers as every spec number; ranges below
+        c["pose_sd_deg"] = {k: _num("camera", f"pose_sd_deg {k}", v) if k in POSE_ANGLES else v
+                            for k, v in c["pose_sd_deg"].items()}
+    elif "pose_sd_deg" in c:
+        c["pose_sd_deg"] = _num("camera", "pose_sd_deg azimuth", c["pose_sd_deg"])
     try:
         if "distortion" in c:
             c["distortion"] = check_distortion(c["distortion"], c["fov_deg"], c["width"],
@@ -495,7 +514,14 @@ def _fitted_material(name, m, base_dir):
     return {**out, "source": f"fit {path.name} (region {result.get('region', '?')})"}
 
 
+#: The material parameters that may be an RGB triple [r, g, b], by Ward model.
+_RGB_PARAMETERS = {"raw": ("rho_d", "rho_s"), "colour": ("C",)}
+
+
 def _materials(sec, base_dir):
+    if not isinstance(sec, dict):
+        raise SpecError(f"[materials] must be a table of tables ([materials.disc] model = ..., "
+                        f"rho_s = ...), got {sec!r}.")
     out = {}
     for name, m in sec.items():
         if not isinstance(m, dict):
@@ -510,7 +536,14 @@ def _materials(sec, base_dir):
         if norm not in NORMALISATIONS:
             raise SpecError(f"[materials.{name}] normalisation {norm!r}; valid: "
                             f"{', '.join(NORMALISATIONS)}.")
+        if not isinstance(model, str) or model not in MODELS:
+            raise SpecError(f"[materials.{name}] unknown Ward model {model!r}; valid: "
+                            f"{', '.join(MODELS)}.")
         params = {k: v for k, v in m.items() if k != "model"}
+        for k in set(params) & set(MODELS[model]):
+            rgb = isinstance(params[k], list) and k in _RGB_PARAMETERS.get(model, ())
+            for i, v in enumerate(params[k] if rgb else [params[k]]):
+                _num(f"materials.{name}", f"{k}[{i}]" if rgb else k, v)
         try:
             raw_parameters(model, **params)
         except SkyfitError as exc:
