@@ -366,6 +366,20 @@ def test_a_spec_or_gensky_file_not_utf8_is_refused_naming_it(tmp_path):
         _spec(tmp_path, sky='gensky_file = "sky.rad"')
 
 
+def test_a_scene_xml_in_latin1_gets_a_run_id(tmp_path):
+    """An XML may declare its own encoding; the run's hash takes its bytes as they are, and a
+    UTF-8 scene's hash is its text's."""
+    from skyfit_mi.pipeline.spec import SCENES_DIR
+    xml = (SCENES_DIR / "disc.xml").read_text()
+    utf8 = _spec(tmp_path).run_id()
+    (tmp_path / "disc.xml").write_bytes(b'<?xml version="1.0" encoding="ISO-8859-1"?>\n'
+                                        b"<!-- 40\xb0 N -->\n" + xml.encode())
+    latin1 = _spec(tmp_path).run_id()
+    assert len(latin1) == 16 and latin1 != utf8
+    (tmp_path / "disc.xml").write_text(xml)
+    assert _spec(tmp_path).run_id() == utf8
+
+
 def test_a_folder_given_as_the_spec_is_named_a_folder(tmp_path):
     with pytest.raises(SpecError, match=r"spec '.*' is a folder; give a spec file \(.toml or "
                                         r"\.json\)\.$"):

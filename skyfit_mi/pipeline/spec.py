@@ -228,7 +228,9 @@ class Spec:
     def run_id(self):
         """Hash of everything that determines the output (the resolved spec, and the contents
         of its environment maps)."""
-        doc = {"spec": self.raw, "scene": self.scene_file.read_text(), "materials": self.materials}
+        # the scene's text as UTF-8, other bytes kept as they are (an XML may declare Latin-1)
+        scene = self.scene_file.read_text(encoding="utf-8", errors="surrogateescape")
+        doc = {"spec": self.raw, "scene": scene, "materials": self.materials}
         maps = sorted({f.sky.info["file"] for f in self.frames if f.sky.envmap is not None})
         if maps:
             doc["envmaps"] = {p: hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in maps}
