@@ -391,6 +391,12 @@ def test_a_folder_given_as_the_spec_is_named_a_folder(tmp_path):
         load_spec(tmp_path / "nosuch.toml")
 
 
+def test_a_spec_error_names_the_language_it_was_read_in(tmp_path):
+    for name, language in (("s.toml", "TOML"), ("s.json", "JSON"), ("S.JSON", "JSON")):
+        with pytest.raises(SpecError, match=f"{name} is not valid {language}: "):
+            load_spec(_write(tmp_path / name, b"{oops"))
+
+
 def test_an_integer_beyond_python_s_digit_limit_is_a_spec_error(tmp_path):
     for name in ("big.json", "big.toml"):
         text = '{"name": %s}' % ("9" * 5000) if name.endswith("json") else "name = " + "9" * 5000

@@ -257,11 +257,11 @@ def read_spec(path):
     if not path.is_file():
         raise SpecError(f"spec file {str(path)!r} does not exist.")
     text = _utf8(path, "spec file")
+    is_json = path.suffix.lower() == ".json"
     try:
-        return json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
+        return json.loads(text) if is_json else tomllib.loads(text)
     except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
-        raise SpecError(f"{path.name} is not valid {'JSON' if path.suffix == '.json' else 'TOML'}: "
-                        f"{exc}") from None
+        raise SpecError(f"{path.name} is not valid {'JSON' if is_json else 'TOML'}: {exc}") from None
     except ValueError:              # Python reads no integer of over 4300 digits
         raise SpecError(f"{path.name} holds a number of over 4300 digits; give every number in "
                         "ordinary notation (1e30, not its digits).") from None
