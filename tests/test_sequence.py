@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from skyfit_mi.cli import main
+from skyfit_mi.errors import SkyfitError
 from skyfit_mi.pipeline.spec import SpecError, load_spec, validate_spec
 
 TINY = {
@@ -138,7 +139,6 @@ def test_interrupted_render_resumes_to_identical_frames(tmp_path, mi, monkeypatc
 
 
 def test_refuses_to_mix_runs(tmp_path, mi):
-    from skyfit_mi.errors import SkyfitError
     _render(spec(), tmp_path / "a", tmp_path)
     other = spec(render__seed=4)
     with pytest.raises(SkyfitError, match="holds another run.*--overwrite"):
@@ -171,6 +171,10 @@ def test_sun_below_horizon_is_skipped_or_sky_only(tmp_path, mi):
     from skyfit_mi.render.image import read_exr
     night = read_exr(tmp_path / "k" / m["frames"][0]["radiance"])
     assert np.all(np.isfinite(night)) and night.max() < 1e-3
+    # a day of night alone: said as such (it was "every frame is dark ... give exposure")
+    with pytest.raises(SkyfitError, match="the sun is below the horizon at every time"):
+        _render(spec(time={"date": "2026-06-21", "times": ["00:00", "01:00"]}),
+                tmp_path / "n", tmp_path)
 
 
 def test_a_fitted_material_renders_and_the_manifest_says_where_it_came_from(tmp_path, mi):

@@ -54,6 +54,10 @@ def spec_sensor(spec):
         lum = [float(f.sky.horizontal_irradiance() @ SRGB_LUMINANCE) for f in spec.frames
                if not f.skipped]
         peak = max(lum, default=0.0)
+        if spec.frames and all(f.below_horizon for f in spec.frames):
+            raise SkyfitError("the sun is below the horizon at every time of the spec (first "
+                              f"{spec.frames[0].time}); check [time] (local times, its "
+                              "timezone) and [location].")
         if peak <= 0:
             raise SkyfitError("every frame is dark, so sensor.exposure = 'auto' has nothing to go "
                               "by; give sensor.exposure [sr m^2 W^-1] explicitly.")
