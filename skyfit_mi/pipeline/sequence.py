@@ -198,8 +198,9 @@ def render_sequence(spec, out_dir, overwrite=False, progress=True, log=print, so
     sensor = spec_sensor(spec)                # its exposure checked before the folder is made
     with FolderLock(out) as lock:
         if lock.stale is not None:
-            log(f"{out}: took over the lock of a run that no longer exists "
-                f"(process {lock.stale.get('pid')}); resuming")
+            pid = lock.stale.get("pid")
+            log(f"{out}: took over the lock of a run that no longer exists"
+                + ("" if pid == "unknown" else f" (process {pid})") + "; resuming")
         return _render(spec, sensor, out, overwrite, progress, log, source)
 
 
