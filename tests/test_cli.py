@@ -136,7 +136,8 @@ def test_damaged_inputs_get_one_line(day, tmp_path, capsys):
 @pytest.mark.parametrize("args, phrase", [
     (["--region", "disc=rect:1,1,2,2", "--region", "plate=rect:6,6,7,7"], "'plate' names no"),
     (["--region", "disc=rect:1,1,2,2", "--frames", "1-5"], "frame 3 is not a rendered frame"),
-    (["--region", "disc=rect:3,3,4,4"], "frame 1 (nan/frames/sensor_001.exr) has no finite"),
+    (["--region", "disc=rect:3,3,4,4"],
+     "frame 1 (nan/frames/sensor_001.exr, frames/sigma_001.exr) has no value"),
 ])
 def test_a_refused_fit_writes_nothing(day, tmp_path, capsys, monkeypatch, args, phrase):
     """Every region, its frames and their light are checked before the first fit is written:

@@ -282,7 +282,8 @@ def _parse_rows(path, header, rows, tz, luminance):
         if not np.all(out["sigma"][k] > 0):
             raise SkyfitError(f"{path} line {line}: sigma must be positive (the value's standard "
                               "deviation, in its units).")
-        if np.any(out["sigma"][k] < SIGMA_FLOOR * np.abs(out["value"][k])):
+        if np.any((out["sigma"][k] < SIGMA_FLOOR * np.abs(out["value"][k]))
+                  & (np.abs(out["value"][k]) <= MAX_RADIANCE)):        # beyond: refused below
             raise SkyfitError(f"{path} line {line}: sigma is under {SIGMA_FLOOR:g} of the value, "
                               "below what any instrument measures (and what the fit's arithmetic "
                               "resolves); give the value's real standard deviation.")
