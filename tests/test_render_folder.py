@@ -116,7 +116,7 @@ def test_an_auto_exposure_of_a_dark_day_is_refused_before_the_folder_is_made(tmp
     raw["location"]["latitude_deg"] = 80.0
     raw["time"] = {"date": "2026-12-21", "times": ["06:00", "12:00"]}
     raw["sensor"]["exposure"] = "auto"
-    with pytest.raises(SkyfitError, match="every frame is dark"):
+    with pytest.raises(SkyfitError, match="the sun is below the horizon at every time"):
         _render(validate_spec(raw, tmp_path), tmp_path / "polar")
     assert not (tmp_path / "polar").exists()
 
