@@ -4,7 +4,7 @@ Gaussian misses."""
 
 import numpy as np
 
-from skyfit_mi.fitting.draws import (DRAWS, interval_covariance, likelihood_draws)
+from skyfit_mi.fitting.draws import DRAWS, interval_covariance, interval_draws, likelihood_draws
 from skyfit_mi.fitting.uncertainty import Z
 
 
@@ -140,3 +140,22 @@ def test_interval_covariance_takes_the_intervals_widths_and_the_covariances_corr
     assert np.allclose(np.diag(c), [1.0, 9.0]) and np.isclose(c[0, 1], -0.5 * 3)
     assert np.allclose(interval_covariance([[0, 1], [0, 1]], np.full((2, 2), np.nan)),
                        np.eye(2) / (2 * Z["95"]) ** 2)
+
+
+def test_interval_draws_spread_each_side_as_its_interval_says():
+    # a gloss at 0.089 in [0, 0.103], a roughness at its bound 0.5 in [0, 0.5], a C in [0.4, 0.6]
+    theta = np.array([0.089, 0.5, 0.5])
+    iv = [[0.0, 0.103], [0.0, 0.5], [0.4, 0.6]]
+    cov = np.array([[1.0, -0.8, 0.0], [-0.8, 1.0, 0.0], [0.0, 0.0, 4.0]])
+    x = interval_draws(theta, iv, cov, 40000, np.random.default_rng(0))
+    lo, hi = np.array(iv).T
+    for i in range(3):
+        assert abs(np.mean(x[:, i] < lo[i]) - 0.025) < 0.004
+        assert abs(np.mean(x[:, i] > hi[i]) - 0.025) < 0.004 or hi[i] == theta[i]
+        assert abs(np.median(x[:, i]) - theta[i]) < 0.01 * (hi[i] - lo[i])
+    assert np.all(x[:, 1] <= 0.5)                          # nothing above a bound the fit sits at
+    # half the gloss's draws lie below the fit, spread to the interval's lower end; the
+    # correlation's sign kept: a sharper gloss comes with a rougher second parameter
+    assert np.mean(x[:, 0] < 0.045) > 0.15
+    assert np.corrcoef(x[:, 0], x[:, 1])[0, 1] < -0.5
+    assert abs(np.corrcoef(x[:, 0], x[:, 2])[0, 1]) < 0.03

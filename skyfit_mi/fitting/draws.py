@@ -109,13 +109,32 @@ def interval_covariance(intervals95, covariance=None):
     correlations from ``covariance`` (n, n) where given and finite."""
     iv = np.asarray(intervals95, dtype=float)
     sd = (iv[:, 1] - iv[:, 0]) / (2 * Z["95"])
-    corr = np.eye(len(iv))
+    return correlation(covariance, len(iv)) * np.outer(sd, sd)
+
+
+def interval_draws(theta, intervals95, covariance, n, rng):
+    """``n`` parameter sets (n, parameters) spread as a fit's 95% intervals say about its
+    best ``theta``, for a prediction where the data were not taken: each parameter a split
+    normal, sd (theta - lo) / 1.96 below and (hi - theta) / 1.96 above, so 95% of its draws lie
+    in [lo, hi] however lopsided (a roughness at its bound 0.5 in [0, 0.5] spreads below only),
+    the parameters' standard normals correlated as ``covariance`` (n, n) says."""
+    theta = np.asarray(theta, dtype=float)
+    iv = np.asarray(intervals95, dtype=float)
+    below = np.clip(theta - iv[:, 0], 0, None) / Z["95"]
+    above = np.clip(iv[:, 1] - theta, 0, None) / Z["95"]
+    z = rng.standard_normal((n, len(theta))) @ root_of(correlation(covariance, len(theta))).T
+    return theta + np.where(z < 0, below, above) * z
+
+
+def correlation(covariance, n):
+    """The correlations of ``covariance`` (n, n); the identity where it is None, not finite or
+    has a variance of 0."""
     if covariance is not None:
         c = np.asarray(covariance, dtype=float)
         d = np.sqrt(np.clip(np.diag(c), 0, None))
         if np.all(np.isfinite(c)) and np.all(d > 0):
-            corr = np.clip(c / np.outer(d, d), -1, 1)
-    return corr * np.outer(sd, sd)
+            return np.clip(c / np.outer(d, d), -1, 1)
+    return np.eye(n)
 
 
 def draws_scale(interval_scale, channel_factors, ripple):

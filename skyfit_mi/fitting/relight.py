@@ -22,7 +22,7 @@ from ..conventions import angles_from_direction
 from ..errors import SkyfitError
 from ..files import FolderLock, ensure_dir, figure_png, write_bytes, write_json, write_text
 from .chi2 import subsample_region
-from .draws import interval_covariance, root_of
+from .draws import interval_draws
 from .fit import FitCache, FitSession, trace_sessions
 from .geometry import ANGLES_BEYOND_DEG, angles_beyond, highlight_beyond
 from .held_out import local_error_scale
@@ -784,8 +784,9 @@ def plot_prediction(rows, image_kind):
 def parameter_draws(result, s, n, rng):
     """``n`` parameter sets of the fit ``result`` for a prediction's bands on session ``s`` (the
     first the fit itself): on the fitted sequence the fit's likelihood draws (:mod:`~.draws`);
-    elsewhere Gaussian from the intervals, which hold the light's, calibration's and pose's
-    errors too, clipped to the bounds."""
+    elsewhere from the intervals (:func:`~.draws.interval_draws`: each parameter's spread on
+    either side of the fit as its interval's), which hold the light's, calibration's and
+    pose's errors too; clipped to the bounds."""
     names, lower, upper = s.names, s.lower, s.upper
     theta = np.array([result["parameters"][k] for k in names], dtype=float)
     own = result.get("draws")
@@ -797,8 +798,7 @@ def parameter_draws(result, s, n, rng):
         cov = result.get("covariance", {})
         cov = cov.get("matrix") if cov.get("names") == list(names) else None
         iv = [result["intervals"][k]["95"] for k in names]
-        draws = theta + rng.standard_normal((n - 1, len(names))) @ root_of(
-            interval_covariance(iv, cov)).T
+        draws = interval_draws(theta, iv, cov, n - 1, rng)
     return np.vstack([theta, np.clip(draws, lower, upper)])
 
 
