@@ -193,3 +193,22 @@ def test_the_measured_range_runs_from_the_dimmest_mean_told_to_the_brightest_val
     result = {"measured_range": {"by_channel": {"R": [1.0, 2.0], "G": None}}}
     assert [beyond_data(result, "R", v) for v in (0.5, 1.5, 3.0)] == ["below", "", "above"]
     assert beyond_data(result, "G", 1.5) == "unmeasured" and beyond_data({}, "R", 9.0) == ""
+    # a sun highlight the data never saw outranks the radiance's mark: what it misses is the peak
+    assert beyond_data(result, "R", 0.5, "highlight") == "highlight"
+    assert beyond_data(result, "R", 0.5, "angles") == "below"
+    assert beyond_data(result, "R", 1.5, "angles") == "angles"
+
+
+def test_a_highlight_is_beyond_the_data_if_any_lobe_the_interval_allows_peaks_there():
+    """A roughness fitted at its bound 0.5 with the interval [0, 0.5] (the lobe unseen): a frame
+    whose highlight lies 5 degrees nearer the mirror than any fitted frame's is beyond the data,
+    since a sharp lobe the data allow peaks there; at the fit's own sigma it would not be."""
+    from skyfit_mi.fitting.geometry import highlight_beyond
+    from skyfit_mi.fitting.relight import sharpest_roughness
+
+    result = {"parameters": {"sigma_alpha": 0.5}, "intervals": {"sigma_alpha": {"95": [0.0, 0.5]}}}
+    assert sharpest_roughness(result) == 0.0
+    assert highlight_beyond(12.0, 7.0, sharpest_roughness(result))
+    assert not highlight_beyond(12.0, 7.0, 0.5)
+    assert sharpest_roughness({"parameters": {"sigma_alpha": 0.2}}) == 0.2
+    assert sharpest_roughness({"parameters": {"C_r": 0.5}}) == 0.0

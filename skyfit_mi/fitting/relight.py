@@ -919,7 +919,7 @@ def unseen_light(result, s):
     configs = geometry.get("sun_view_angles_per_frame_deg")
     configs_known = isinstance(configs, list) and all(
         a is None or isinstance(a, list) and len(a) == 3 for a in configs)
-    sigma = result["parameters"].get("sigma_alpha", 0.0)
+    sigma = sharpest_roughness(result)
     trained = (set(result.get("frames", [])) if result.get("sequence_run_id") == s.run_id
                else set())                                   # the frames it saw: measured
     return ["" if int(i) in trained else
@@ -930,14 +930,27 @@ def unseen_light(result, s):
 
 
 def beyond_data(result, channel, value, unseen=""):
-    """Where a predicted ``value`` [W m^-2 sr^-1] of ``channel`` lies against ``result``'s
-    ``measured_range``: 'below', 'above', 'unmeasured', else the frame's ``unseen`` light
-    (:func:`unseen_light`) or ''. Beyond, the prediction rests on the model alone."""
+    """Where a predicted ``value`` [W m^-2 sr^-1] of ``channel`` lies beyond what ``result``'s
+    data measured: the frame's sun 'highlight' nearer the mirror than they saw (its lobe's peak
+    is what such a prediction most misses, so this mark comes first), else against the fit's
+    ``measured_range`` 'below', 'above', 'unmeasured', else the frame's new 'angles'
+    (:func:`unseen_light`), or ''. Beyond, the prediction rests on the model alone."""
+    if unseen == "highlight":
+        return unseen
     ranges = (result.get("measured_range") or {}).get("by_channel")
     lo_hi = ranges.get(channel, ()) if ranges is not None else ()
     radiance = ("unmeasured" if lo_hi is None else "" if not lo_hi else
                 "below" if value < lo_hi[0] else "above" if value > lo_hi[1] else "")
     return radiance or unseen
+
+
+def sharpest_roughness(result):
+    """The smallest sigma_alpha ``result``'s 95% interval allows (its best value where it has
+    no interval; 0 for a model without a lobe): a highlight nearer the mirror than the data saw
+    is beyond them if any lobe the data allow peaks there."""
+    interval = ((result.get("intervals") or {}).get("sigma_alpha") or {}).get("95")
+    best = result["parameters"].get("sigma_alpha", 0.0)
+    return float(min(interval[0], best)) if isinstance(interval, list) and interval else best
 
 
 def _predict_points(s, result, target, draws, rng):
