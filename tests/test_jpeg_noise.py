@@ -326,7 +326,6 @@ def test_shared_error_sd_is_the_error_of_a_region_mean(quality, subsampling):
     for _ in range(40):
         colour = rng.choice([[0.62, 0.12, 0.10], [0.10, 0.45, 0.12], [0.55, 0.68, 0.85]])
         lin = np.broadcast_to(rng.uniform(0.3, 0.9) * 255.0 * np.asarray(colour), (64, 64, 3))
-        clean = SENSOR.respond(lin / 255.0) * 255.0
         noisy = lin + rng.normal(size=lin.shape) * np.sqrt(NOISE[0] + NOISE[1] * lin)
         codes = np.clip(np.rint(SENSOR.respond(noisy / 255.0) * 255.0), 0, 255).astype(np.uint8)
         buf = io.BytesIO()

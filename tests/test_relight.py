@@ -94,6 +94,22 @@ def test_a_folder_target_keeps_the_sun_its_render_computed(day, tmp_path, monkey
         assert np.array_equal(a.sky.sun_direction, b.sky.sun_direction)
 
 
+def test_a_per_pixel_map_given_as_fits_is_named_as_such(tmp_path):
+    """A folder of `skyfit maps` (its summary, no fit_NAME.json) given to relight: the message
+    says it is a map and what to give instead, not that the folder has no fits."""
+    import pytest
+
+    from skyfit_mi.errors import SkyfitError
+    from skyfit_mi.pipeline.fit_result import MAP_SUMMARY, load_fits
+
+    (tmp_path / MAP_SUMMARY).write_text("{}")
+    with pytest.raises(SkyfitError, match="per-pixel map .*skyfit fit SEQUENCE --all"):
+        load_fits([tmp_path])
+    (tmp_path / MAP_SUMMARY).unlink()
+    with pytest.raises(SkyfitError, match="no fit_"):
+        load_fits([tmp_path])
+
+
 def test_a_wrong_material_shows_as_prediction_error(day, tmp_path):
     """Half the target's reflectance (R = 0.5 Lambertian where the target is white): the relit
     radiance is half the observed in every frame (the same seeds trace the same paths), so

@@ -511,7 +511,6 @@ def test_a_time_list_of_numbers_without_a_date_is_a_spec_error():
 
 def _example_spec():
     import tomllib
-    from pathlib import Path
     from skyfit_mi.pipeline.spec import SCENES_DIR
     return tomllib.loads((SCENES_DIR / "specs" / "disc_clear_east.toml").read_text()), \
         SCENES_DIR / "specs"

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import SkyfitError
 from ..files import FolderLock, check_dir, ensure_dir, save_figure, write_json
+from ..pipeline.fit_result import MAP_SUMMARY
 from ..pipeline.manifest import frame_sky, load_manifest
 from ..pipeline.photos import exif_scaled
 from ..render.fit_model import PARAMETER_ORDER, PARAMETERS
@@ -460,7 +461,7 @@ def run_map(manifest_path, regions, out_dir, options=MapOptions(), cluster=Clust
                        scheduler=c.scheduler or "LocalCluster",
                        memory_per_worker=c.memory_per_worker,
                        chunk_seeds="numpy SeedSequence([seed, chunk index])")
-        write_json(out / "map_summary.json", summary)
+        write_json(out / MAP_SUMMARY, summary)
         return summary
 
 

@@ -34,7 +34,7 @@ from ..physics.ward import raw_reflectances
 from ..render.fit_model import PARAMETERS, material_dict, reflectances
 from ..render.image import read_exr, to_srgb8, write_exr, write_png
 from ..render.scene_xml import sub_element, ward_element
-from .fit_result import load_fits
+from .fit_result import MAP_SUMMARY, load_fits
 
 #: The files an export writes (besides ``textures/``), per format, and the sidecar.
 FILES = {"mitsuba": "materials.xml", "radiance": "materials.rad", "gltf": "materials.gltf"}
@@ -55,7 +55,6 @@ SIDECAR = "export.json"
 #: written: the files of an export that failed or was stopped, which the next one replaces.
 UNFINISHED = ".export_unfinished"
 #: A map's folder holds this (written by ``skyfit fit --per-pixel``).
-MAP_SUMMARY = "map_summary.json"
 #: The name of a map's textured material (its regions' medians keep theirs).
 MAP_NAME = "pixel_map"
 

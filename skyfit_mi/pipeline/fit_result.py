@@ -15,6 +15,8 @@ from .manifest import FILENAME, is_table, rendered_frames
 
 #: Name of the summary CSV in a fit output folder.
 SUMMARY_NAME = "fits.csv"
+#: The summary of a per-pixel map (`skyfit maps`), beside its parameters' EXR planes.
+MAP_SUMMARY = "map_summary.json"
 
 
 def read_fit_result(path):
@@ -91,6 +93,11 @@ def load_fits(paths):
         if p.is_dir() or p.name == SUMMARY_NAME:
             folder = p if p.is_dir() else p.parent
             files = sorted(folder.glob("fit_*.json"))
+            if not files and (folder / MAP_SUMMARY).is_file():
+                raise SkyfitError(f"{folder} holds a per-pixel map ({MAP_SUMMARY}), which takes "
+                                  "no part in a prediction: give the region fits of its "
+                                  "sequence (`skyfit fit SEQUENCE --all`) instead; `skyfit "
+                                  "export` takes a map.")
             if not files:
                 raise SkyfitError(f"no fit_*.json in {folder}; give the folder `skyfit fit` "
                                   "wrote.")
