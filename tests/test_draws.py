@@ -3,8 +3,9 @@ linear model, and along a curved ridge (a grey plastic's metal twin) that the in
 Gaussian misses."""
 
 import numpy as np
+import pytest
 
-from skyfit_mi.fitting.draws import DRAWS, interval_covariance, interval_draws, likelihood_draws
+from skyfit_mi.fitting.draws import DRAWS, interval_covariance, likelihood_draws
 from skyfit_mi.fitting.uncertainty import Z
 
 
@@ -142,20 +143,62 @@ def test_interval_covariance_takes_the_intervals_widths_and_the_covariances_corr
                        np.eye(2) / (2 * Z["95"]) ** 2)
 
 
-def test_interval_draws_spread_each_side_as_its_interval_says():
-    # a gloss at 0.089 in [0, 0.103], a roughness at its bound 0.5 in [0, 0.5], a C in [0.4, 0.6]
-    theta = np.array([0.089, 0.5, 0.5])
-    iv = [[0.0, 0.103], [0.0, 0.5], [0.4, 0.6]]
-    cov = np.array([[1.0, -0.8, 0.0], [-0.8, 1.0, 0.0], [0.0, 0.0, 4.0]])
-    x = interval_draws(theta, iv, cov, 40000, np.random.default_rng(0))
-    lo, hi = np.array(iv).T
-    for i in range(3):
-        assert abs(np.mean(x[:, i] < lo[i]) - 0.025) < 0.004
-        assert abs(np.mean(x[:, i] > hi[i]) - 0.025) < 0.004 or hi[i] == theta[i]
-        assert abs(np.median(x[:, i]) - theta[i]) < 0.01 * (hi[i] - lo[i])
-    assert np.all(x[:, 1] <= 0.5)                          # nothing above a bound the fit sits at
-    # half the gloss's draws lie below the fit, spread to the interval's lower end; the
-    # correlation's sign kept: a sharper gloss comes with a rougher second parameter
-    assert np.mean(x[:, 0] < 0.045) > 0.15
-    assert np.corrcoef(x[:, 0], x[:, 1])[0, 1] < -0.5
-    assert abs(np.corrcoef(x[:, 0], x[:, 2])[0, 1]) < 0.03
+def test_relight_draws_keep_to_the_likelihood_and_widen_by_the_shared_errors_elsewhere():
+    """A fit whose likelihood draws lie on a curved ridge (two parameters trading as
+    x1 = 1 - x0^2, as a grey plastic and its metal twin do): on its own sequence relight's
+    draws are those sets widened by added_sd; on another target also by shared_sd (the light's,
+    calibration's and pose's errors), and they stay on the ridge as far as those allow, where
+    the intervals' Gaussian fills the box around it; a fit without shared_sd, or over an
+    undetermined sky level, draws from its intervals."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.fitting.relight import parameter_draws
+
+    rng = np.random.default_rng(1)
+    x0 = rng.uniform(0.2, 0.9, 400)
+    values = np.stack([x0, 1 - x0**2], axis=1)
+    result = {"parameters": {"a": 0.5, "b": 0.75}, "sequence_run_id": "day",
+              "intervals": {"a": {"95": [0.2, 0.9], "from": "profile"},
+                            "b": {"95": [0.19, 0.96], "from": "profile"}},
+              "covariance": {"names": ["a", "b"], "matrix": [[1.0, -0.9], [-0.9, 1.0]]},
+              "draws": {"values": values.tolist(), "added_sd": [0.001, 0.001],
+                        "shared_sd": [0.01, 0.02]}}
+    s = SimpleNamespace(names=("a", "b"), lower=np.zeros(2), upper=np.ones(2), run_id="day")
+
+    def off_ridge(d):
+        return np.abs(d[1:, 1] - (1 - d[1:, 0] ** 2))
+
+    own = parameter_draws(result, s, 4000, np.random.default_rng(2))
+    assert np.allclose(own[0], [0.5, 0.75]) and np.percentile(off_ridge(own), 99) < 0.005
+    s.run_id = "another day"
+    other = parameter_draws(result, s, 4000, np.random.default_rng(2))
+    assert np.median(off_ridge(own)) < np.median(off_ridge(other)) < 0.02  # shared_sd's only
+    assert np.std(other[1:, 1] - own[1:, 1]) == pytest.approx(0.02, rel=0.15)
+    for old in ({k: v for k, v in result["draws"].items() if k != "shared_sd"}, None):
+        box = parameter_draws({**result, "draws": old}, s, 4000, np.random.default_rng(2))
+        assert np.median(off_ridge(box)) > 0.05                   # the intervals' Gaussian
+    result["intervals"]["a"]["from"] += ", and over the undetermined sky level"
+    assert np.median(off_ridge(parameter_draws(result, s, 4000, np.random.default_rng(2)))) \
+        > 0.05
+
+
+def test_draws_find_a_sharp_lobe_the_data_allow_at_the_far_end_of_the_interval():
+    """A roughness fitted at its bound 0.5 whose data allow any value over 0.28 and, apart from
+    those, a sharp lobe at 0.05 (sd 0.01; a tenth of the likelihood's mass, by integration):
+    the draws find that mode in every seed, in about its share (from the fit's end alone they
+    found it in two of four seeds)."""
+    class Problem:
+        def chi2_at(self, x):
+            broad = np.where(x[:, 0] > 0.28, 0.0, ((x[:, 0] - 0.28) / 0.02) ** 2)
+            sharp = ((x[:, 0] - 0.05) / 0.01) ** 2
+            return np.minimum(broad, sharp) + ((x[:, 1] - 0.5) / 0.01) ** 2
+
+    a = np.linspace(0, 0.5, 200001)
+    like = np.exp(-0.5 * Problem().chi2_at(np.stack([a, np.full_like(a, 0.5)], axis=1)))
+    share = like[a < 0.15].sum() / like.sum()
+    assert 0.08 < share < 0.11
+    iv = np.array([[0.0, 0.5], [0.48, 0.52]])
+    for seed in range(4):
+        d = likelihood_draws(Problem(), np.array([0.5, 0.5]), 0.0, 1.0, interval_covariance(iv),
+                             np.zeros(2), np.array([0.5, 1.0]), seed, centre=iv.mean(axis=1))
+        assert abs(np.mean(d.values[:, 0] < 0.15) - share) < 0.05

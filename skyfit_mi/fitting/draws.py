@@ -31,12 +31,15 @@ class Draws:
 
 
 def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n=DRAWS,
-                     local=None):
+                     local=None, centre=None):
     """``n`` parameter sets drawn with probability exp(-(chi2 - chi2_min) / (2 ``scale``)) within
     the bounds, by importance sampling (population Monte Carlo): first from the Gaussian of
     ``cov`` about ``theta`` (with ``local``, the curvature's covariance there, an equal mixture
     with its Gaussian: the intervals' is broad along a thin ridge, or wider than the
-    likelihood where errors the data share widen them), then mixtures around the favoured
+    likelihood where errors the data share widen them; with ``centre``, the intervals'
+    middle, also ``cov``'s Gaussian there: a fit at one end of an interval, a roughness at
+    its bound whose data allow a sharp lobe too, reaches the other end), then mixtures around
+    the favoured
     sets, with deterministic-mixture weights, until ``n`` effective draws. None where that
     fails after ROUNDS or no set is valid."""
     rng = np.random.default_rng(seed)
@@ -45,8 +48,10 @@ def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n
     first = _psd(cov) + tiny
     kernels = [first] if local is None or not np.all(np.isfinite(local)) else \
         [first, _psd(_within_range(local, upper - lower)) + tiny]
-    proposals, logq, counts = [(np.repeat(theta[None], len(kernels), axis=0),
-                                np.array(kernels))], [], []
+    means = [theta] * len(kernels)
+    if centre is not None and not np.allclose(centre, theta):
+        means, kernels = means + [np.asarray(centre, dtype=float)], kernels + [first]
+    proposals, logq, counts = [(np.array(means), np.array(kernels))], [], []
     x_all, log_likelihood, last = np.empty((0, len(theta))), np.empty(0), 0.0
     for r in range(ROUNDS):
         x, accepted = _propose(rng, *proposals[-1], lower, upper)
@@ -113,17 +118,10 @@ def interval_covariance(intervals95, covariance=None):
 
 
 def interval_draws(theta, intervals95, covariance, n, rng):
-    """``n`` parameter sets (n, parameters) spread as a fit's 95% intervals say about its
-    best ``theta``, for a prediction where the data were not taken: each parameter a split
-    normal, sd (theta - lo) / 1.96 below and (hi - theta) / 1.96 above, so 95% of its draws lie
-    in [lo, hi] however lopsided (a roughness at its bound 0.5 in [0, 0.5] spreads below only),
-    the parameters' standard normals correlated as ``covariance`` (n, n) says."""
-    theta = np.asarray(theta, dtype=float)
-    iv = np.asarray(intervals95, dtype=float)
-    below = np.clip(theta - iv[:, 0], 0, None) / Z["95"]
-    above = np.clip(iv[:, 1] - theta, 0, None) / Z["95"]
-    z = rng.standard_normal((n, len(theta))) @ root_of(correlation(covariance, len(theta))).T
-    return theta + np.where(z < 0, below, above) * z
+    """``n`` parameter sets (n, parameters) Gaussian about ``theta`` as the intervals' Gaussian
+    (:func:`interval_covariance`) spreads them: where a fit keeps no likelihood draws."""
+    root = root_of(interval_covariance(intervals95, covariance))
+    return np.asarray(theta, dtype=float) + rng.standard_normal((n, len(root))) @ root.T
 
 
 def correlation(covariance, n):

@@ -557,7 +557,7 @@ class FitSession:
         fit.draws = likelihood_draws(
             problem, theta, chi2, draws_scale(s2, f2, fit.cache_noise_chi2),
             interval_covariance(fit.data_intervals, fit.covariance), self.lower, self.upper,
-            seed, local=fit.covariance)
+            seed, local=fit.covariance, centre=fit.data_intervals.mean(axis=1))
         fit.held_out = held_out_error(
             problem, theta, self.lower, self.upper,
             within=lambda th: bool(np.all((th >= iv95[:, 0]) & (th <= iv95[:, 1]))),

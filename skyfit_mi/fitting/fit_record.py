@@ -107,11 +107,16 @@ def interval_shares(fit, names):
 
 def draws_record(fit):
     """The fit's draws (:mod:`~.draws`) as relight reads them, with the shared standard errors
-    relight adds to them (light cache and JPEG block rounding)."""
-    d = fit.draws
+    relight adds to them: always the light cache's and JPEG block rounding's; under other
+    light, those the sequence's light, calibration and pose share too."""
+    d, n = fit.draws, len(fit.theta)
+    shared = [fit.calibration_sd, fit.sky.sd, fit.sun_level_sd, fit.pose.sd_of(n),
+              fit.matrix_sd]
     return {"values": d.values.tolist(), "effective_size": d.effective_size,
             "proposals": d.proposals, "rounds": d.rounds,
             "added_sd": np.hypot(fit.cache_sd, fit.jpeg_shared_sd).tolist(),
+            "shared_sd": np.sqrt(sum(np.square(sd) for sd in shared if sd is not None)
+                                 + np.zeros(n)).tolist(),
             "about": DRAWS_NOTE}
 
 
@@ -120,8 +125,9 @@ DRAWS_NOTE = (
     "parameter sets (columns in the order of parameters) drawn from the likelihood of the "
     "region's values, exp(-(chi2 - chi2_min) / 2 s), by importance sampling; a relight of "
     "this very sequence draws its bands from them, each widened by added_sd (the light "
-    "cache's error and the JPEG blocks' rounding); a relight of other light draws from the "
-    "intervals, which also hold the errors the sequence's light, calibration and pose share")
+    "cache's error and the JPEG blocks' rounding); a relight of other light or another view "
+    "widens them by shared_sd too (the errors the sequence's light, calibration and pose share, "
+    "correlated as the covariance)")
 
 
 def measured_range(s, L):

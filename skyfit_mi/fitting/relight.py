@@ -22,7 +22,7 @@ from ..conventions import angles_from_direction
 from ..errors import SkyfitError
 from ..files import FolderLock, ensure_dir, figure_png, write_bytes, write_json, write_text
 from .chi2 import subsample_region
-from .draws import interval_draws
+from .draws import correlation, interval_draws, root_of
 from .fit import FitCache, FitSession, trace_sessions
 from .geometry import ANGLES_BEYOND_DEG, angles_beyond, highlight_beyond
 from .held_out import local_error_scale
@@ -783,23 +783,38 @@ def plot_prediction(rows, image_kind):
 
 def parameter_draws(result, s, n, rng):
     """``n`` parameter sets of the fit ``result`` for a prediction's bands on session ``s`` (the
-    first the fit itself): on the fitted sequence the fit's likelihood draws (:mod:`~.draws`);
-    elsewhere from the intervals (:func:`~.draws.interval_draws`: each parameter's spread on
-    either side of the fit as its interval's), which hold the light's, calibration's and
-    pose's errors too; clipped to the bounds."""
+    first the fit itself): the fit's likelihood draws (:mod:`~.draws`), which keep to the
+    combinations its data allow (a grey plastic's metal twin, a lobe the sun never showed),
+    each widened by the errors that do not cancel: on the fitted sequence the light cache's
+    and JPEG rounding's (``added_sd``); elsewhere those the sequence's light, calibration and
+    pose share as well (``shared_sd``, correlated as the covariance). A fit without such
+    draws, or whose intervals reach over an undetermined sky level, draws from its
+    intervals (:func:`~.draws.interval_draws`). Clipped to the bounds."""
     names, lower, upper = s.names, s.lower, s.upper
     theta = np.array([result["parameters"][k] for k in names], dtype=float)
     own = result.get("draws")
-    if own is not None and result.get("sequence_run_id") == s.run_id:
+    cov = result.get("covariance", {})
+    cov = cov.get("matrix") if cov.get("names") == list(names) else None
+    same = result.get("sequence_run_id") == s.run_id
+    if own is not None and (same or own.get("shared_sd") is not None
+                            and not _over_sky_level(result)):
         sets = np.asarray(own["values"], dtype=float)[rng.integers(len(own["values"]),
                                                                    size=n - 1)]
         draws = sets + rng.standard_normal(sets.shape) * np.asarray(own["added_sd"])
+        if not same:
+            draws += rng.standard_normal(sets.shape) @ root_of(
+                correlation(cov, len(names)) * np.outer(own["shared_sd"], own["shared_sd"])).T
     else:
-        cov = result.get("covariance", {})
-        cov = cov.get("matrix") if cov.get("names") == list(names) else None
-        iv = [result["intervals"][k]["95"] for k in names]
-        draws = interval_draws(theta, iv, cov, n - 1, rng)
+        draws = interval_draws(theta, [result["intervals"][k]["95"] for k in names], cov,
+                               n - 1, rng)
     return np.vstack([theta, np.clip(draws, lower, upper)])
+
+
+def _over_sky_level(result):
+    """Whether ``result``'s intervals were widened over a sky level its data left undetermined
+    (beyond its likelihood draws)."""
+    return any("undetermined sky level" in str(iv.get("from", ""))
+               for iv in result["intervals"].values())
 
 
 def predict(fits, target, pixels, draws=200, seed=0, log=print):
