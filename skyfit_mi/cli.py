@@ -678,7 +678,8 @@ def _add_fit(sub, common):
         "material regions of a rendered sequence. Reference: docs/cli.md.")
     fit.add_argument("manifest", help=_MANIFEST_HELP)
     fit.add_argument("--region", action="append", type=_region, metavar="NAME=rect:x0,y0,x1,y1",
-                     help="a material region (NAME = the material id); also NAME=pixels:x,y;x,y")
+                     help="a material region (NAME = the material id; the rect's columns x0 to x1 and "
+                     "rows y0 to y1, both ends included); also NAME=pixels:x,y;x,y")
     fit.add_argument("--mask", help="label-mask PNG (values per material), with --label")
     fit.add_argument("--label", action="append", type=_label, metavar="NAME=VALUE",
                      help="the mask value of material NAME")
