@@ -653,7 +653,8 @@ def _add_pixels(sub, common):
     pixels.add_argument("--pixel", action="append", required=True, metavar="X,Y",
                         help="pixel column,row from the top left; repeat for more pixels")
     pixels.add_argument("--source", choices=("radiance", "sensor"), default="radiance",
-                        help="linear radiance frames or the sensor model's pixel values")
+                        help="radiance (default): the linear radiance frames [W m^-2 sr^-1]; "
+                        "sensor: the sensor model's pixel values [DN]")
     pixels.add_argument("-o", "--output",
                         help="output path prefix (default: MANIFEST/pixels_SOURCE)")
     pixels.set_defaults(func=_pixels)
@@ -712,8 +713,9 @@ def _add_fit(sub, common):
                      help="spec: as given; fit: the sky's level fitted; prior: that with a prior "
                      "(default prior for photos, else spec)")
     fit.add_argument("--sky-terms", type=int, default=None,
-                     help="with --sky fit or prior: Legendre terms of the level over the day "
-                     "(default 3; 1 = one level)")
+                     help="with --sky fit or prior: Legendre terms of the level over the day, "
+                     "1 (one level) to 4 (default 3, the frames less 2 below 5 frames, 1 where "
+                     "ingest's --calibrate or --colorchecker set the frames' scale)")
     fit.add_argument("--sky-shape", action="store_true",
                      help="with --sky fit or prior and a CIE, turbid or Perez sky: fit its shape "
                      "too")
@@ -759,7 +761,8 @@ def _add_relight(sub, common):
                        help="spec file (.toml/.json) or sequence folder to relight")
     _add_run_folder(relit)
     relit.add_argument("--no-images", action="store_true",
-                       help="predict the regions' values only (prediction.csv, relight.json)")
+                       help="predict the regions' values only (prediction.csv, relight.json, "
+                       "relight.csv)")
     relit.add_argument("--reference", action="store_true",
                        help="a synthetic target: also render its materials with other seeds")
     relit.add_argument("--draws", type=_int_in(2, 100000), default=200,
