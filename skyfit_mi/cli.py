@@ -403,7 +403,11 @@ def _chi2map(args):
         walk = np.asarray(r.get("trace") or [], dtype=float)
         walk = walk[:, [ix, iy]] if args.walk and walk.ndim == 2 and len(walk) > 1 else None
         others = "at their best" if args.profile else "at the fit"
-        paths = write_chi2_map(prefix, args.x, args.y, xs, ys, chi2, marks, walk, others)
+        paths = write_chi2_map(prefix, args.x, args.y, xs, ys, chi2, marks, walk, others,
+                               record={"region": r["region"], "fit": str(args.fit),
+                                       "sequence": str(root), "seed": args.seed,
+                                       "profile": bool(args.profile),
+                                       "frames": r.get("frames")})
         print(f"{r['region']}: chi2 minimum {chi2.min():.6g} at {args.x} = {xs[i]:.4g}, "
               f"{args.y} = {ys[j]:.4g} (the fit: {theta[ix]:.4g}, {theta[iy]:.4g}); wrote "
               + " and ".join(str(p) for p in paths))

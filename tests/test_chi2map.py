@@ -129,12 +129,15 @@ def test_a_map_does_not_replace_a_fit_folders_files(fitted, few_pixels, tmp_path
     for _ in range(2):
         assert main(["chi2map", str(day), str(fit), "--n", "3", "-o", str(folder)]) == 0
     assert (folder / "chi2map_disc_rho_s_sigma_alpha.csv").exists()
+    made = json.loads((folder / "chi2map_disc_rho_s_sigma_alpha.chi2map.json").read_text())
+    assert made["seed"] == 0 and made["fit"] == str(fit) and made["minimum"]["chi2"] > 0
     # a new folder, written with its trailing slash
     assert main(["chi2map", str(day), str(fit), "--n", "3", "-o", f"{tmp_path / 'new'}/"]) == 0
     assert (tmp_path / "new" / "chi2map_disc_rho_s_sigma_alpha.csv").exists()
     assert main(["chi2map", str(day), str(fit), "--n", "3", "-o", str(folder / "fit_disc"),
                  "--overwrite"]) == 0
     assert (folder / "fit_disc.png").read_bytes() != before["fit_disc.png"]
+    assert (folder / "fit_disc.json").read_bytes() == before["fit_disc.json"]
 
 
 @pytest.mark.parametrize("change, phrase", [

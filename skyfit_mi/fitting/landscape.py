@@ -15,7 +15,7 @@ import numpy as np
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, linear_observations,
                                     linear_quadratics)
 from ..errors import SkyfitError
-from ..files import save_figure, write_text
+from ..files import save_figure, write_json, write_text
 from ..render.fit_model import PARAMETERS, bounds, reflectances
 
 
@@ -203,8 +203,11 @@ def map_prefix(prefix, default_name, overwrite=False):
     return prefix
 
 
-def write_chi2_map(prefix, x, y, xs, ys, chi2, marks, walk=None, others="at the fit"):
-    """Write ``<prefix>.csv`` (x, y, chi2) and ``<prefix>.png`` (:func:`draw_chi2_map`)."""
+def write_chi2_map(prefix, x, y, xs, ys, chi2, marks, walk=None, others="at the fit",
+                   record=None):
+    """Write ``<prefix>.csv`` (x, y, chi2), ``<prefix>.png`` (:func:`draw_chi2_map`) and, with
+    ``record`` (what the map was made from: fit, seed, ...), ``<prefix>.chi2map.json`` (not
+    ``<prefix>.json``: a map may be written beside the fit JSON it was made from)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -222,7 +225,15 @@ def write_chi2_map(prefix, x, y, xs, ys, chi2, marks, walk=None, others="at the 
     ax.set_title(f"chi-square over {x} and {y} (others {others})", fontsize=9)
     ax.legend(fontsize=7, loc="upper right")
     png_path = save_figure(fig, prefix.with_suffix(".png"))
-    return csv_path, png_path
+    if record is None:
+        return csv_path, png_path
+    minimum = np.unravel_index(np.argmin(chi2), chi2.shape)
+    json_path = write_json(prefix.with_suffix(".chi2map.json"), {
+        **record, "x": x, "y": y, "others": others,
+        "minimum": {"chi2": float(chi2[minimum]), x: float(xs[minimum[1]]),
+                    y: float(ys[minimum[0]])},
+        "marks": {k: [float(v) for v in xy] for k, xy in marks.items()}})
+    return csv_path, png_path, json_path
 
 
 #: How each mark of a chi-square map is drawn: (marker, colour).

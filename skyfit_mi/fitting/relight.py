@@ -437,8 +437,10 @@ def band_coverage(rows):
                                 "values": len(within)},
             "beyond_measured": len(rows) - len(within),
             "beyond_measured_by": dict(sorted(why.items())),
-            "band": "95%, from the fits' draws on their own sequence, else from their "
-                    "intervals; beyond_measured: values predicted beyond what the fits' data "
+            "band": "95%, from the fits' likelihood draws (under other light or from "
+                    "another camera widened by the errors the fitted day's light, calibration "
+                    "and pose share; from the intervals where a fit has no such draws); "
+                    "beyond_measured: values predicted beyond what the fits' data "
                     "measured, where the band is the model's alone, by why ("
                     + "; ".join(f"{k}: {v}" for k, v in BEYOND_WORDS.items()) + ")"}
 
