@@ -39,9 +39,8 @@ def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n
     likelihood where errors the data share widen them; with ``centre``, the intervals'
     middle, also ``cov``'s Gaussian there: a fit at one end of an interval, a roughness at
     its bound whose data allow a sharp lobe too, reaches the other end), then mixtures around
-    the favoured
-    sets, with deterministic-mixture weights, until ``n`` effective draws. None where that
-    fails after ROUNDS or no set is valid."""
+    the favoured sets, with deterministic-mixture weights, until ``n`` effective draws. None
+    where that fails after ROUNDS or no set is valid."""
     rng = np.random.default_rng(seed)
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     tiny = np.diag((1e-6 * (upper - lower)) ** 2)
