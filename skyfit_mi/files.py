@@ -58,6 +58,14 @@ def check_dir(path, what="output folder"):
     return path
 
 
+def output_prefix(prefix, default_name):
+    """The path prefix of a command's files from ``-o``: ``default_name`` inside it where it is
+    a folder (existing, or new written with a trailing slash), else ``prefix`` itself."""
+    if str(prefix).endswith(("/", os.sep)) or Path(prefix).is_dir():
+        return Path(prefix) / default_name
+    return Path(prefix)
+
+
 def atomic_write(path, write):
     """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it to ``path``
     with mode 0666 less the umask; a failure leaves ``path`` untouched and no temporary file."""

@@ -2,6 +2,7 @@
 import copy
 import csv
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -212,6 +213,12 @@ def test_cli_render_and_pixels_end_to_end(tmp_path, mi):
     rows = list(csv.reader(open(out / "pixels_sensor.csv")))
     assert rows[0][4] == "R [DN]" and len(rows) == 1 + 4 * 2
     assert (out / "pixels_sensor.png").stat().st_size > 5000
+    # -o a folder (existing, or new with its trailing slash): the default names in it
+    (tmp_path / "px").mkdir()
+    for folder in (tmp_path / "px", f"{tmp_path / 'new'}/"):
+        assert main(["pixels", str(out), "--pixel", "8,8", "-o", str(folder)]) == 0
+        assert (Path(folder) / "pixels_radiance.csv").is_file()
+    assert not (tmp_path / "px.csv").exists()
     assert main(["pixels", str(out), "--pixel", "99,1"]) == 2
     assert main(["render", str(tmp_path / "missing.toml"), "-o", str(out)]) == 2
 

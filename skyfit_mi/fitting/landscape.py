@@ -7,7 +7,6 @@ D, G is evaluated once per roughness and each grid point costs one NumPy chi^2.
 
 import csv
 import io
-import os
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +14,7 @@ import numpy as np
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, linear_observations,
                                     linear_quadratics)
 from ..errors import SkyfitError
-from ..files import save_figure, write_json, write_text
+from ..files import output_prefix, save_figure, write_json, write_text
 from ..render.fit_model import PARAMETERS, bounds, reflectances
 
 
@@ -184,10 +183,7 @@ def map_prefix(prefix, default_name, overwrite=False):
     """The path prefix of a map's files (a folder, existing or written with a trailing slash:
     ``default_name`` in it), refusing to replace files that are not an earlier map's (CSV header
     X,Y,chi2) unless ``overwrite``."""
-    folder = str(prefix).endswith(("/", os.sep))
-    prefix = Path(prefix)
-    if folder or prefix.is_dir():
-        prefix = prefix / default_name
+    prefix = output_prefix(prefix, default_name)
     table, image = prefix.with_suffix(".csv"), prefix.with_suffix(".png")
     if overwrite or not (table.exists() or image.exists()):
         return prefix

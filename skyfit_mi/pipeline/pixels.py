@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SkyfitError
-from ..files import save_figure, write_text
+from ..files import output_prefix, save_figure, write_text
 from ..render import setup
 from ..render.scene import load_xml
 from ..render.labels import label_image
@@ -65,10 +65,11 @@ def frame_values(manifest_path, pixels, frames, source="radiance"):
 
 
 def write_pixels(manifest_path, pixels, out_prefix=None, source="radiance"):
-    """Write ``<prefix>.csv`` and ``<prefix>.png``; returns their paths."""
+    """Write ``<prefix>.csv`` and ``<prefix>.png`` (``out_prefix`` a folder: pixels_SOURCE in
+    it; default the sequence's folder); returns their paths."""
     rows, unit = pixel_series(manifest_path, pixels, source)
     root = Path(manifest_path) if Path(manifest_path).is_dir() else Path(manifest_path).parent
-    prefix = Path(out_prefix) if out_prefix else root / f"pixels_{source}"
+    prefix = output_prefix(out_prefix or root, f"pixels_{source}")
     buf = io.StringIO()
     wr = csv.writer(buf)
     wr.writerow(["frame", "time", "x", "y", f"R [{unit}]", f"G [{unit}]", f"B [{unit}]"])
