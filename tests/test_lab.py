@@ -272,7 +272,8 @@ def test_a_table_in_its_own_units_is_scaled_by_its_reference(dn_rig):
 
 
 def test_a_table_of_unknown_scale_gives_relative_reflectances_without_a_bound(dn_rig,
-                                                                              tmp_path, capsys):
+                                                                              tmp_path, capsys,
+                                                                              monkeypatch):
     """--unknown-scale (no reference, the channels sharing one unknown gain) puts the values
     on a relative scale, recorded: the fit holds the truth times that scale in its joint
     99.9% region, says its reflectances are relative, and no bound decides it; the
@@ -331,6 +332,18 @@ def test_a_table_of_unknown_scale_gives_relative_reflectances_without_a_bound(dn
     assert sel["reused_trace_time_s"] == pytest.approx(r["light_cache_time_s"], abs=0.05)
     assert sel["reused_trace_time_s"] > 0
     assert 0.5 * elapsed < r["wall_time_s"] <= elapsed
+    # a region of more points than RANK_POINTS is ranked on a seeded subset of them, its
+    # chi-squares scaled to the whole table's; the chosen model is fitted on every point
+    from skyfit_mi.fitting import selection
+    monkeypatch.setattr(selection, "RANK_POINTS", 3)
+    assert main(["fit", str(tmp_path / "seq"), "--region", "sample", "--model", "auto", "-o",
+                 str(tmp_path / "auto3")]) == 0
+    sub_r = json.loads((tmp_path / "auto3" / "fit_sample.json").read_text())
+    sub_sel = sub_r["model_selection"]
+    assert sub_sel["ranking_light"]["most_points"] == 3 and sub_sel["ranking_scale"] > 1.1
+    assert sub_r["points"] == r["points"] and len(r["points"]) > 3
+    assert sub_sel["reused_trace_time_s"] == 0 and sub_r["light_cache_time_s"] > 0
+    assert sub_sel["chosen"]["model"] == sel["chosen"]["model"]
 
 
 def test_a_held_out_table_of_unknown_scale_is_put_on_the_fits_scale(dn_rig, tmp_path):

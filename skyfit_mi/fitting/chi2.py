@@ -116,8 +116,10 @@ REGION_PIXELS = 64
 
 
 def subsample_region(pixels, max_pixels, seed):
-    """At most ``max_pixels`` of a region's (P, 2) pixels, a seeded random subset in image order."""
-    pixels = np.asarray(pixels, dtype=int).reshape(-1, 2)
+    """At most ``max_pixels`` of a region's (P, 2) pixels (or a table's (P,) point names), a
+    seeded random subset in their order."""
+    pixels = np.asarray(pixels)
+    pixels = pixels if pixels.dtype == object else pixels.astype(int).reshape(-1, 2)
     if max_pixels is None or len(pixels) <= max_pixels:
         return pixels
     if max_pixels < 1:

@@ -41,9 +41,10 @@ RANK_FRAMES = 3
 #: (:data:`~skyfit_mi.render.light_cache.SKY_PLANS`); the chosen candidate is traced again at
 #: the fit's own (docs/BENCHMARKS.md, "Lobe families").
 RANK_POSITIONS, RANK_PLAN = 8, "anchors"
-#: Most pixels of an image region the ranking takes (a seeded subset of the fit's pixels), and
-#: the grid minima it polishes (docs/BENCHMARKS.md, "Lobe families").
-RANK_PIXELS, RANK_CANDIDATES = 16, 1
+#: Most pixels of an image region the ranking takes (a seeded subset of the fit's pixels), most
+#: points of a table's region (each lit by every light), and the grid minima it polishes
+#: (docs/BENCHMARKS.md, "Lobe families").
+RANK_PIXELS, RANK_POINTS, RANK_CANDIDATES = 16, 32, 1
 
 
 def cross_validate(session, model, folds=FOLDS, scale=1.0):
@@ -163,17 +164,19 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     plan = resolve_light({regions[0][0]: first}, light, log)        # checked once
     # the ranking's light: image regions on a smaller cache; a table's points as the fit's
     given, table = options["cache"], is_table(first.doc)
-    reuse = table and not plan.split
     ranking_cache = given if table else replace(
         given, positions=min(RANK_POSITIONS, given.positions or RANK_POSITIONS), plan=RANK_PLAN)
-    # the regions at the fit's pixels, with Ward's lobe: an image region's ranking takes a
-    # seeded subset of the pixels they can use, its chi-squares scaled by their data over the
+    # the regions at the fit's pixels, with Ward's lobe: the ranking takes a seeded subset of
+    # the pixels (a table's points) they can use, its chi-squares scaled by their data over the
     # subset's (information); under a fitted sky they find the level first
-    ward = sessions_of(model="achromatic" if first.obs.luminance else "colour") \
-        if plan.split or not table else {}
-    ranked = None if table else {
-        name: subsample_region(s.obs.pixels[np.isfinite(s.obs.sigma).any(axis=(1, 2))],
-                               RANK_PIXELS, seed) for name, s in ward.items()}
+    ward = sessions_of(model="achromatic" if first.obs.luminance else "colour")
+    ranked = {name: subsample_region(s.obs.pixels[np.isfinite(s.obs.sigma).any(axis=(1, 2))],
+                                     RANK_POINTS if table else RANK_PIXELS, seed)
+              for name, s in ward.items()}
+    ranked = {name: list(px) if table else px for name, px in ranked.items()}
+    # a table's region ranked on all its points at the fit's cache: the fit takes its trace
+    reuse = {name for name, s in ward.items()
+             if table and not plan.split and len(ranked[name]) == len(s.obs.pixels)}
     fit_information = {name: information(s.obs) for name, s in ward.items()}
     level = None
     if plan.split:
@@ -202,13 +205,14 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     ranking_light = {"positions": next(iter(sessions[families[0]].values()))
                      .cache_settings["positions"],
                      "directions": ranking_cache.directions, "sky_plan": ranking_cache.plan,
-                     "most_pixels": None if table else RANK_PIXELS}
+                     "most_pixels": None if table else RANK_PIXELS,
+                     "most_points": RANK_POINTS if table else None}
     chosen, selection = {}, {}
     shared_s = (time.perf_counter() - t_start) / len(regions)   # the level and the traces
     for name, pixels in regions:
         t_region = time.perf_counter()
         traced = {fam: sessions[fam].pop(name) for fam in families}
-        scale = fit_information[name] / information(traced[families[0]].obs) if ranked else 1.0
+        scale = fit_information[name] / information(traced[families[0]].obs)
         rows = rank(list(traced.values()), models, folds, log, scale)
         pick, overdispersion = choose(rows)
         log(f"{name}: chose {pick['normalisation']} {pick['model']} (rank {pick['rank']} of "
@@ -217,7 +221,7 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         s = FitSession(manifest_path, name, pixels, model=pick["model"],
                        normalisation=pick["normalisation"], light=None, **options)
         own = s.cache_time
-        if reuse:                  # the table is the same for any parameterisation
+        if name in reuse:          # the table is the same for any parameterisation
             s.take_light(traced[pick["normalisation"]])
         level_light = ward.pop(name, None)
         if level_light is not None and pick["normalisation"] == level_light.normalisation:
@@ -245,8 +249,9 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
         for out in fit_sessions(chosen, "global", seed, log=log, light=plan):
             yield _with_selection(out, selection[out["region"]])
         return
-    if not reuse:              # the chosen lobes at the fit's cache, each lobe's regions together
-        trace_sessions(list(chosen.values()), SPEC_LIGHT)
+    untraced = [s for name, s in chosen.items() if name not in reuse]
+    if untraced:               # the chosen lobes at the fit's cache, each lobe's regions together
+        trace_sessions(untraced, SPEC_LIGHT)
     for name in list(chosen):
         yield _with_selection(chosen.pop(name).run("global", None, seed, None, log),
                               selection.pop(name))
