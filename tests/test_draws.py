@@ -202,3 +202,22 @@ def test_draws_find_a_sharp_lobe_the_data_allow_at_the_far_end_of_the_interval()
         d = likelihood_draws(Problem(), np.array([0.5, 0.5]), 0.0, 1.0, interval_covariance(iv),
                              np.zeros(2), np.array([0.5, 1.0]), seed, centre=iv.mean(axis=1))
         assert abs(np.mean(d.values[:, 0] < 0.15) - share) < 0.05
+
+
+def test_the_shared_errors_a_fit_records_for_its_draws_stay_within_its_intervals():
+    """A fit JSON's draws.shared_sd: the light's, calibration's and pose's sds in quadrature,
+    each at most its 95% interval's Gaussian sd (a sky level's linear share at a roughness on
+    its bound 0.5 came out 0.72, beyond the parameter's whole range)."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.fitting.draws import Draws
+    from skyfit_mi.fitting.fit_record import draws_record
+
+    fit = SimpleNamespace(
+        draws=Draws(np.zeros((4, 2)), 300.0, 1000, 3), theta=np.array([0.5, 0.5]),
+        calibration_sd=np.array([0.03, 0.0]), sky=SimpleNamespace(sd=np.array([0.04, 0.72])),
+        sun_level_sd=np.zeros(2), pose=SimpleNamespace(sd_of=lambda n: np.zeros(n)),
+        matrix_sd=None, cache_sd=np.zeros(2), jpeg_shared_sd=np.zeros(2),
+        intervals={"C": {"95": [0.3, 0.7]}, "sigma_alpha": {"95": [0.0, 0.5]}})
+    shared = draws_record(fit)["shared_sd"]
+    assert shared == pytest.approx([0.05, 0.5 / (2 * Z["95"])])

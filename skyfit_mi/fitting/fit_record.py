@@ -108,15 +108,19 @@ def interval_shares(fit, names):
 def draws_record(fit):
     """The fit's draws (:mod:`~.draws`) as relight reads them, with the shared standard errors
     relight adds to them: always the light cache's and JPEG block rounding's; under other
-    light, those the sequence's light, calibration and pose share too."""
+    light, those the sequence's light, calibration and pose share too, each parameter's at most
+    its 95% interval's Gaussian sd (a linear share at a bound, a roughness at 0.5, can exceed
+    the parameter's whole range)."""
     d, n = fit.draws, len(fit.theta)
     shared = [fit.calibration_sd, fit.sky.sd, fit.sun_level_sd, fit.pose.sd_of(n),
               fit.matrix_sd]
+    iv = np.array([v["95"] for v in fit.intervals.values()], dtype=float)
     return {"values": d.values.tolist(), "effective_size": d.effective_size,
             "proposals": d.proposals, "rounds": d.rounds,
             "added_sd": np.hypot(fit.cache_sd, fit.jpeg_shared_sd).tolist(),
-            "shared_sd": np.sqrt(sum(np.square(sd) for sd in shared if sd is not None)
-                                 + np.zeros(n)).tolist(),
+            "shared_sd": np.minimum(
+                np.sqrt(sum(np.square(sd) for sd in shared if sd is not None) + np.zeros(n)),
+                (iv[:, 1] - iv[:, 0]) / (2 * unc.Z["95"])).tolist(),
             "about": DRAWS_NOTE}
 
 
