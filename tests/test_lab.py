@@ -231,7 +231,7 @@ def dn_rig(tmp_path_factory, mi):
     return tmp, spec, tmp / "dn.csv"
 
 
-def test_a_table_in_its_own_units_is_scaled_by_its_reference(dn_rig):
+def test_a_table_in_its_own_units_is_scaled_by_its_reference(dn_rig, capsys):
     """--calibrate white=0.9 finds the instrument's scale within its standard error (a joint
     99.9% test over the channels), the sample's fit holds the truth in its joint 99.9% region
     and carries the scale's error in its intervals; without the reference the reflectances
@@ -241,6 +241,8 @@ def test_a_table_in_its_own_units_is_scaled_by_its_reference(dn_rig):
     tmp, spec, table = dn_rig
     assert main(["ingest", str(spec), "--table", str(table), "--calibrate", "white=0.9", "-o",
                  str(tmp / "seq")]) == 0
+    said = capsys.readouterr().out                      # what was written, in one line
+    assert f"wrote 48 rows of 8 point(s) in 2 region(s) over 6 frame(s): {tmp / 'seq'}" in said, said
     cal = load_manifest(tmp / "seq")[0]["ingest"]["calibration"]
     dev = np.array(cal["scale_W_m2_sr_per_unit"]) * DN_PER_RADIANCE - 1.0
     assert np.sum((dev / cal["scale_relative_sd"]) ** 2) < chi2_dist.ppf(0.999, 3), cal

@@ -686,6 +686,9 @@ def ingest_table(table_path, spec_path, out_dir, *, tz=None, site=None, calibrat
             manifest["frames"].append(rec)
         write_text(out / TABLE_FILE, text)
         finish(out, manifest, sensor.exposure)
+    log(f"wrote {len(keep)} rows of {len(index)} point(s) in "
+        f"{len(set(table.regions[i] for i in keep))} region(s) over "
+        f"{len(set(row_frames[i] for i in keep))} frame(s): {out / TABLE_FILE} and its manifest")
     return manifest
 
 
