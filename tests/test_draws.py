@@ -56,10 +56,10 @@ def test_draws_of_a_linear_model_have_its_posterior_mean_and_covariance():
         start = interval_covariance(_intervals(theta, widen * np.sqrt(np.diag(cov)), lower,
                                                upper), cov)
         local = cov if widen > 3 else None
-        d = likelihood_draws(problem, theta, chi2, scale, start, lower, upper, seed=2, n=400,
+        d = likelihood_draws(problem, theta, chi2, scale, start, (lower, upper), seed=2, n=400,
                              local=local)
         if widen == 100.0:
-            assert likelihood_draws(problem, theta, chi2, scale, start, lower, upper, seed=2,
+            assert likelihood_draws(problem, theta, chi2, scale, start, (lower, upper), seed=2,
                                     n=400) is None
         assert d.effective_size >= 400 and d.values.shape == (400, 3)
         se = np.sqrt(np.diag(cov) / 400)
@@ -88,7 +88,7 @@ def test_a_nearly_singular_curvature_beside_the_intervals_still_draws():
         problem = _Problem(lambda th: th @ A.T, y, 0.05)
         chi2 = float(np.sum(((y - A @ theta) / 0.05) ** 2))
         start = interval_covariance([[0.3, 0.5], [0.2, 0.4], [-5, 5], [-5, 5]], local)
-        d = likelihood_draws(problem, theta, chi2, 1.0, start, -5 * np.ones(4), 5 * np.ones(4),
+        d = likelihood_draws(problem, theta, chi2, 1.0, start, (-5 * np.ones(4), 5 * np.ones(4)),
                              seed, local=local)
         done += 1
         if d is not None:                    # each set fits y to about its noise
@@ -112,7 +112,7 @@ def test_draws_follow_a_curved_ridge_and_predict_the_data_as_the_fit_does():
     chi2 = float(np.sum(((y - theta[0] * theta[1] * x) / sigma) ** 2))
     lower, upper = np.array([0.3, 0.3]), np.array([1.0, 1.0])
     start = interval_covariance([[0.3, 1.0], [0.3, 1.0]])       # "not determined" along it
-    d = likelihood_draws(problem, theta, chi2, 1.0, start, lower, upper, seed=4)
+    d = likelihood_draws(problem, theta, chi2, 1.0, start, (lower, upper), seed=4)
     assert d.effective_size >= DRAWS
     products = d.values[:, 0] * d.values[:, 1]
     se = sigma / np.sqrt(x @ x)
@@ -129,10 +129,10 @@ def test_no_draws_where_the_likelihood_cannot_be_found():
     problem = _Problem(lambda th: np.full((len(th), 3), np.nan), np.zeros(3), 1.0)
     cov = np.eye(2) * 0.01
     lower, upper = np.zeros(2), np.ones(2)
-    assert likelihood_draws(problem, np.array([0.5, 0.5]), 0.0, 1.0, cov, lower, upper,
+    assert likelihood_draws(problem, np.array([0.5, 0.5]), 0.0, 1.0, cov, (lower, upper),
                             seed=0) is None
-    assert likelihood_draws(problem, np.array([0.5, 0.5]), 0.0, 1.0, cov, lower + 5,
-                            upper + 5, seed=0) is None
+    assert likelihood_draws(problem, np.array([0.5, 0.5]), 0.0, 1.0, cov, (lower + 5,
+                            upper + 5), seed=0) is None
 
 
 def test_interval_covariance_takes_the_intervals_widths_and_the_covariances_correlations():
@@ -200,7 +200,7 @@ def test_draws_find_a_sharp_lobe_the_data_allow_at_the_far_end_of_the_interval()
     iv = np.array([[0.0, 0.5], [0.48, 0.52]])
     for seed in range(4):
         d = likelihood_draws(Problem(), np.array([0.5, 0.5]), 0.0, 1.0, interval_covariance(iv),
-                             np.zeros(2), np.array([0.5, 1.0]), seed, centre=iv.mean(axis=1))
+                             (np.zeros(2), np.array([0.5, 1.0])), seed, centre=iv.mean(axis=1))
         assert abs(np.mean(d.values[:, 0] < 0.15) - share) < 0.05
 
 

@@ -30,10 +30,10 @@ class Draws:
     rounds: int
 
 
-def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n=DRAWS,
+def likelihood_draws(problem, theta, chi2_min, scale, cov, bounds, seed, n=DRAWS,
                      local=None, centre=None):
     """``n`` parameter sets drawn with probability exp(-(chi2 - chi2_min) / (2 ``scale``)) within
-    the bounds, by importance sampling (population Monte Carlo): first from the Gaussian of
+    the ``bounds`` (lower, upper), by importance sampling (population Monte Carlo): first from the Gaussian of
     ``cov`` about ``theta`` (with ``local``, the curvature's covariance there, an equal mixture
     with its Gaussian: the intervals' is broad along a thin ridge, or wider than the
     likelihood where errors the data share widen them; with ``centre``, the intervals'
@@ -42,7 +42,7 @@ def likelihood_draws(problem, theta, chi2_min, scale, cov, lower, upper, seed, n
     the favoured sets, with deterministic-mixture weights, until ``n`` effective draws. None
     where that fails after ROUNDS or no set is valid."""
     rng = np.random.default_rng(seed)
-    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    lower, upper = (np.asarray(b, float) for b in bounds)
     tiny = np.diag((1e-6 * (upper - lower)) ** 2)
     first = _psd(cov) + tiny
     kernels = [first] if local is None or not np.all(np.isfinite(local)) else \

@@ -556,7 +556,7 @@ class FitSession:
         iv95 = np.array([fit.intervals[p]["95"] for p in self.names])
         fit.draws = likelihood_draws(
             problem, theta, chi2, draws_scale(s2, f2, fit.cache_noise_chi2),
-            interval_covariance(fit.data_intervals, fit.covariance), self.lower, self.upper,
+            interval_covariance(fit.data_intervals, fit.covariance), (self.lower, self.upper),
             seed, local=fit.covariance, centre=fit.data_intervals.mean(axis=1))
         fit.held_out = held_out_error(
             problem, theta, self.lower, self.upper,
