@@ -162,7 +162,7 @@ def test_relight_draws_keep_to_the_likelihood_and_widen_by_the_shared_errors_els
                             "b": {"95": [0.19, 0.96], "from": "profile"}},
               "covariance": {"names": ["a", "b"], "matrix": [[1.0, -0.9], [-0.9, 1.0]]},
               "draws": {"values": values.tolist(), "added_sd": [0.001, 0.001],
-                        "shared_sd": [0.01, 0.02]}}
+                        "level_sd": [0.0, 0.0], "shared_sd": [0.01, 0.02]}}
     s = SimpleNamespace(names=("a", "b"), lower=np.zeros(2), upper=np.ones(2), run_id="day")
 
     def off_ridge(d):
@@ -174,10 +174,12 @@ def test_relight_draws_keep_to_the_likelihood_and_widen_by_the_shared_errors_els
     other = parameter_draws(result, s, 4000, np.random.default_rng(2))
     assert np.median(off_ridge(own)) < np.median(off_ridge(other)) < 0.02  # shared_sd's only
     assert np.std(other[1:, 1] - own[1:, 1]) == pytest.approx(0.02, rel=0.15)
-    for old in ({k: v for k, v in result["draws"].items() if k != "shared_sd"}, None):
+    for old in ({k: v for k, v in result["draws"].items() if not k.endswith(("level_sd",
+                                                                            "shared_sd"))},
+                None):
         box = parameter_draws({**result, "draws": old}, s, 4000, np.random.default_rng(2))
         assert np.median(off_ridge(box)) > 0.05                   # the intervals' Gaussian
-    result["intervals"]["a"]["from"] += ", and over the undetermined sky level"
+    result["sky"] = {"undetermined_span": {"a": [0.2, 0.9]}}
     assert np.median(off_ridge(parameter_draws(result, s, 4000, np.random.default_rng(2)))) \
         > 0.05
 
@@ -205,9 +207,11 @@ def test_draws_find_a_sharp_lobe_the_data_allow_at_the_far_end_of_the_interval()
 
 
 def test_the_shared_errors_a_fit_records_for_its_draws_stay_within_its_intervals():
-    """A fit JSON's draws.shared_sd: the light's, calibration's and pose's sds in quadrature,
-    each at most its 95% interval's Gaussian sd (a sky level's linear share at a roughness on
-    its bound 0.5 came out 0.72, beyond the parameter's whole range)."""
+    """A fit JSON's draws: level_sd, the calibration's, sky level's and sun level's sds in
+    quadrature on the reflectances (one factor moves them alike), shared_sd the rest (pose,
+    colour matrix, the level's share on the roughness), each at most its 95% interval's
+    Gaussian sd (a sky level's linear share at a roughness on its bound 0.5 came out 0.72,
+    beyond the parameter's whole range)."""
     from types import SimpleNamespace
 
     from skyfit_mi.fitting.draws import Draws
@@ -216,8 +220,62 @@ def test_the_shared_errors_a_fit_records_for_its_draws_stay_within_its_intervals
     fit = SimpleNamespace(
         draws=Draws(np.zeros((4, 2)), 300.0, 1000, 3), theta=np.array([0.5, 0.5]),
         calibration_sd=np.array([0.03, 0.0]), sky=SimpleNamespace(sd=np.array([0.04, 0.72])),
-        sun_level_sd=np.zeros(2), pose=SimpleNamespace(sd_of=lambda n: np.zeros(n)),
+        sun_level_sd=np.zeros(2), pose=SimpleNamespace(sd_of=lambda n: np.full(n, 0.01)),
         matrix_sd=None, cache_sd=np.zeros(2), jpeg_shared_sd=np.zeros(2),
-        intervals={"C": {"95": [0.3, 0.7]}, "sigma_alpha": {"95": [0.0, 0.5]}})
-    shared = draws_record(fit)["shared_sd"]
-    assert shared == pytest.approx([0.05, 0.5 / (2 * Z["95"])])
+        intervals={"R": {"95": [0.3, 0.7]}, "sigma_alpha": {"95": [0.0, 0.5]}})
+    d = draws_record(fit, ["R", "sigma_alpha"])
+    assert d["level_sd"] == pytest.approx([0.05, 0.0])
+    assert d["shared_sd"] == pytest.approx([0.01, 0.5 / (2 * Z["95"])])
+
+
+def test_a_level_error_moves_every_reflectance_alike_whatever_their_correlation():
+    """Under other light a 5% level error (the grey card's, the sun's) moves R and rho_s by one
+    factor: a value proportional to R + rho_s keeps a 5% spread though the data anticorrelate
+    them (-0.8; drawn as the covariance says, the level's spread fell to 1.6%), and the
+    roughness does not move."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.fitting.relight import parameter_draws
+
+    theta = np.array([0.5, 0.5, 0.1])
+    result = {"parameters": dict(zip(("R", "rho_s", "sigma_alpha"), theta)),
+              "sequence_run_id": "day",
+              "intervals": {k: {"95": [0.0, 1.0]} for k in ("R", "rho_s", "sigma_alpha")},
+              "covariance": {"names": ["R", "rho_s", "sigma_alpha"],
+                             "matrix": [[1.0, -0.8, 0.5], [-0.8, 1.0, -0.5], [0.5, -0.5, 1.0]]},
+              "draws": {"values": [theta.tolist()], "added_sd": [0, 0, 0],
+                        "level_sd": [0.025, 0.025, 0.0], "shared_sd": [0, 0, 0]}}
+    s = SimpleNamespace(names=("R", "rho_s", "sigma_alpha"), lower=np.zeros(3),
+                        upper=np.ones(3), run_id="another day")
+    d = parameter_draws(result, s, 20000, np.random.default_rng(3))[1:]
+    assert np.std(d[:, 0] + d[:, 1]) == pytest.approx(0.05, rel=0.05)
+    assert np.all(d[:, 2] == 0.1)
+
+
+def test_a_roughness_open_below_spreads_over_its_reach_in_other_light():
+    """A roughness whose interval was opened down to its bound (the sun's highlight unseen: the
+    data told 0.26-0.34, the interval reads 0-0.34): under other light a share of the draws as
+    large as that reach's share of the interval spreads evenly over it, so a sharp lobe's
+    highlight can show in the band; on the fitted sequence the draws stay as the data put
+    them."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.fitting.relight import parameter_draws
+
+    rng = np.random.default_rng(0)
+    values = np.stack([np.full(400, 0.5), rng.uniform(0.264, 0.338, 400)], axis=1)
+    result = {"parameters": {"rho_s": 0.5, "sigma_alpha": 0.3}, "sequence_run_id": "day",
+              "intervals": {"rho_s": {"95": [0.45, 0.55]},
+                            "sigma_alpha": {"95": [0.0, 0.34], "open_below": 0.26}},
+              "draws": {"values": values.tolist(), "added_sd": [0, 0], "level_sd": [0, 0],
+                        "shared_sd": [0, 0]}}
+    s = SimpleNamespace(names=("rho_s", "sigma_alpha"), lower=np.zeros(2),
+                        upper=np.array([1.0, 0.5]), run_id="day")
+    own = parameter_draws(result, s, 4000, np.random.default_rng(1))[1:, 1]
+    assert own.min() >= 0.264
+    s.run_id = "another day"
+    other = parameter_draws(result, s, 4000, np.random.default_rng(1))[1:, 1]
+    assert np.mean(other < 0.264) == pytest.approx(0.264 / 0.34, abs=0.03)
+    assert np.mean(other < 0.1) == pytest.approx(0.1 / 0.34, abs=0.03)
+    del result["intervals"]["sigma_alpha"]["open_below"]
+    assert parameter_draws(result, s, 4000, np.random.default_rng(1))[1:, 1].min() >= 0.264

@@ -95,9 +95,9 @@ def test_a_folder_target_keeps_the_sun_its_render_computed(day, tmp_path, monkey
 
 
 def test_a_per_pixel_map_given_as_fits_is_named_as_such(tmp_path):
-    """A folder of `skyfit maps` (its summary, no fit_NAME.json) given to relight: the message
-    says it is a map and what to give instead, not that the folder has no fits."""
-    import pytest
+    """A per-pixel map's folder (`fit --per-pixel`: its summary, no fit_NAME.json) given to
+    relight: the message says it is a map and what to give instead, not that the folder has no
+    fits."""
 
     from skyfit_mi.errors import SkyfitError
     from skyfit_mi.pipeline.fit_result import MAP_SUMMARY, load_fits
@@ -573,13 +573,20 @@ def test_a_hand_edited_measured_range_or_draws_is_refused_in_one_line(tmp_path):
         assert "\n" not in str(e.value)
     for bad in ([[0.1, 0.1]], {"values": []}, {"values": [[0.1]], "added_sd": [0, 0]},
                 {"values": [[0.1, None]], "added_sd": [0, 0]},
-                {"values": [[0.1, 0.1]], "added_sd": [0, -1]}):
+                {"values": [[0.1, 0.1]], "added_sd": [0, -1]},
+                {"values": [[0.1, 0.1]], "added_sd": [0, 0], "level_sd": [0, 0]},
+                {"values": [[0.1, 0.1]], "added_sd": [0, 0], "level_sd": [0.1],
+                 "shared_sd": [0, 0]},
+                {"values": [[0.1, 0.1]], "added_sd": [0, 0], "level_sd": [0, 0],
+                 "shared_sd": [None, -1]}):
         path.write_text(json.dumps({**fit, "draws": bad}))
         with pytest.raises(SkyfitError, match=r"draws must be \{\"values\"") as e:
             read_fit_result(path)
         assert "\n" not in str(e.value)
-    path.write_text(json.dumps({**fit, "draws": {"values": [[0.1, 0.1]], "added_sd": [0, 0]}}))
-    assert read_fit_result(path)["draws"]["values"] == [[0.1, 0.1]]
+    for good in ({}, {"level_sd": [0.01, 0], "shared_sd": [0, 0.02]}):
+        path.write_text(json.dumps({**fit, "draws": {"values": [[0.1, 0.1]],
+                                                     "added_sd": [0, 0], **good}}))
+        assert read_fit_result(path)["draws"]["values"] == [[0.1, 0.1]]
     good = {"unit": "W m^-2 sr^-1", "by_channel": {"R": [1.0, 2.0], "G": None, "B": [0, 5]}}
     path.write_text(json.dumps({**fit, "measured_range": good}))
     assert read_fit_result(path)["measured_range"]["by_channel"]["G"] is None

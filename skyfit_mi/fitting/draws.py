@@ -1,7 +1,8 @@
 """Parameter sets drawn from the likelihood of a region's data (thesis ch. 6: chi-square's rise is
--2 ln L), for the bands of a relight of the fitted sequence itself: unlike sets drawn from the
-intervals, they stay where the data allow. Errors the sequence shares with its own relight (light
-level, exposure, pose) cancel there and are left out."""
+-2 ln L), for the bands of a relight: unlike sets drawn from the intervals, they stay where the
+data allow. The errors the sequence's light, calibration and pose share are left out of them:
+they cancel in a relight of the fitted sequence itself, and relight adds them under other light
+(:func:`skyfit_mi.fitting.relight.parameter_draws`)."""
 
 from dataclasses import dataclass
 

@@ -8,6 +8,7 @@ from .chi2 import MEASURED_SE
 from .held_out import HELD_OUT_FRAMES
 from .intervals import matrix_note
 from .pose import pose_record
+from .sky_fit import LEVEL_SCALED
 from ..pipeline.observation_table import relative_scale
 
 
@@ -58,7 +59,7 @@ def fit_record(s, fit, warnings, start, seed, evaluations, wall, t_method):
         "cache_noise_chi2": fit.cache_noise_chi2,
         "cache_noise_chi2_by_sigma": fit.model_noise_by_sigma,
         "covariance": {"names": list(names), "matrix": fit.covariance.tolist()},
-        **({"draws": draws_record(fit)} if fit.draws is not None else {}),
+        **({"draws": draws_record(fit, names)} if fit.draws is not None else {}),
         "evaluations": evaluations, "status": res.get("status"),
         "message": res.get("message"), "warnings": warnings,
         "wall_time_s": wall, "light_cache_time_s": s.cache_time, "method_time_s": t_method,
@@ -105,22 +106,28 @@ def interval_shares(fit, names):
     return out
 
 
-def draws_record(fit):
+def draws_record(fit, names):
     """The fit's draws (:mod:`~.draws`) as relight reads them, with the shared standard errors
-    relight adds to them: always the light cache's and JPEG block rounding's; under other
-    light, those the sequence's light, calibration and pose share too, each parameter's at most
-    its 95% interval's Gaussian sd (a linear share at a bound, a roughness at 0.5, can exceed
-    the parameter's whole range)."""
-    d, n = fit.draws, len(fit.theta)
-    shared = [fit.calibration_sd, fit.sky.sd, fit.sun_level_sd, fit.pose.sd_of(n),
-              fit.matrix_sd]
-    iv = np.array([v["95"] for v in fit.intervals.values()], dtype=float)
+    relight adds to them: always the light cache's and JPEG block rounding's (added_sd); under
+    other light, those the sequence's light, calibration and pose share too: level_sd, the
+    calibration's, sky level's and sun level's on the reflectances (one factor moves them all
+    alike), and shared_sd, the rest (pose, colour matrix; the level's on the roughness). Each
+    parameter's at most its 95% interval's Gaussian sd (a linear share at a bound, a roughness
+    at 0.5, can exceed the parameter's whole range)."""
+    d, n = fit.draws, len(names)
+    level = np.sqrt(sum(np.square(sd) for sd in (fit.calibration_sd, fit.sky.sd,
+                                                 fit.sun_level_sd) if sd is not None)
+                    + np.zeros(n))
+    scaled = np.array([p in LEVEL_SCALED for p in names])
+    rest = np.sqrt(np.square(fit.pose.sd_of(n)) + np.square(np.where(scaled, 0.0, level))
+                   + (0.0 if fit.matrix_sd is None else np.square(fit.matrix_sd)))
+    iv = np.array([fit.intervals[p]["95"] for p in names], dtype=float)
+    cap = (iv[:, 1] - iv[:, 0]) / (2 * unc.Z["95"])
     return {"values": d.values.tolist(), "effective_size": d.effective_size,
             "proposals": d.proposals, "rounds": d.rounds,
             "added_sd": np.hypot(fit.cache_sd, fit.jpeg_shared_sd).tolist(),
-            "shared_sd": np.minimum(
-                np.sqrt(sum(np.square(sd) for sd in shared if sd is not None) + np.zeros(n)),
-                (iv[:, 1] - iv[:, 0]) / (2 * unc.Z["95"])).tolist(),
+            "level_sd": np.minimum(np.where(scaled, level, 0.0), cap).tolist(),
+            "shared_sd": np.minimum(rest, cap).tolist(),
             "about": DRAWS_NOTE}
 
 
@@ -130,8 +137,9 @@ DRAWS_NOTE = (
     "region's values, exp(-(chi2 - chi2_min) / 2 s), by importance sampling; a relight of "
     "this very sequence draws its bands from them, each widened by added_sd (the light "
     "cache's error and the JPEG blocks' rounding); a relight of other light or another view "
-    "widens them by shared_sd too (the errors the sequence's light, calibration and pose share, "
-    "correlated as the covariance)")
+    "widens them by the errors the sequence's light, calibration and pose share too: level_sd "
+    "(one factor on every reflectance: the calibration's, sky's and sun's level) and shared_sd "
+    "(the rest, correlated as the covariance)")
 
 
 def measured_range(s, L):

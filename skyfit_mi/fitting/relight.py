@@ -789,34 +789,51 @@ def parameter_draws(result, s, n, rng):
     combinations its data allow (a grey plastic's metal twin, a lobe the sun never showed),
     each widened by the errors that do not cancel: on the fitted sequence the light cache's
     and JPEG rounding's (``added_sd``); elsewhere those the sequence's light, calibration and
-    pose share as well (``shared_sd``, correlated as the covariance). A fit without such
-    draws, or whose intervals reach over an undetermined sky level, draws from its
-    intervals (:func:`~.draws.interval_draws`). Clipped to the bounds."""
+    pose share as well: ``level_sd`` one factor on every reflectance, ``shared_sd`` correlated
+    as the covariance; and a roughness whose interval reaches its bound beyond what the data
+    told (``open_below``: the sky's shape near the mirror unknown) spread over that reach too
+    (:func:`_open_below`). A fit without such draws (its sampling failed, or written before
+    them), or whose intervals reach over an undetermined sky level, draws from its intervals
+    (:func:`~.draws.interval_draws`). Clipped to the bounds."""
     names, lower, upper = s.names, s.lower, s.upper
     theta = np.array([result["parameters"][k] for k in names], dtype=float)
     own = result.get("draws")
     cov = result.get("covariance", {})
     cov = cov.get("matrix") if cov.get("names") == list(names) else None
     same = result.get("sequence_run_id") == s.run_id
-    if own is not None and (same or own.get("shared_sd") is not None
-                            and not _over_sky_level(result)):
+    undetermined_sky = (result.get("sky") or {}).get("undetermined_span") is not None
+    if own is not None and (same or "level_sd" in own and not undetermined_sky):
         sets = np.asarray(own["values"], dtype=float)[rng.integers(len(own["values"]),
                                                                    size=n - 1)]
         draws = sets + rng.standard_normal(sets.shape) * np.asarray(own["added_sd"])
         if not same:
-            draws += rng.standard_normal(sets.shape) @ root_of(
-                correlation(cov, len(names)) * np.outer(own["shared_sd"], own["shared_sd"])).T
+            draws += (rng.standard_normal((n - 1, 1)) * np.asarray(own["level_sd"])
+                      + rng.standard_normal(sets.shape) @ root_of(
+                          correlation(cov, len(names))
+                          * np.outer(own["shared_sd"], own["shared_sd"])).T)
+            draws = _open_below(result, names, draws, rng)
     else:
         draws = interval_draws(theta, [result["intervals"][k]["95"] for k in names], cov,
                                n - 1, rng)
     return np.vstack([theta, np.clip(draws, lower, upper)])
 
 
-def _over_sky_level(result):
-    """Whether ``result``'s intervals were widened over a sky level its data left undetermined
-    (beyond its likelihood draws)."""
-    return any("undetermined sky level" in str(iv.get("from", ""))
-               for iv in result["intervals"].values())
+def _open_below(result, names, draws, rng):
+    """``draws`` with the roughness of a share of them spread evenly over the reach of its
+    interval below the sharpest the draws hold, where the interval is open below
+    (``open_below``: the sun's highlight unseen, the sky's shape near the mirror not known to
+    the data); the share that reach's of the interval, as if uniform over it."""
+    iv = (result["intervals"].get("sigma_alpha") or {})
+    if "sigma_alpha" not in names or iv.get("open_below") is None:
+        return draws
+    k = list(names).index("sigma_alpha")
+    lo, hi = iv["95"]
+    floor = float(np.min(draws[:, k]))
+    if not hi > lo or floor <= lo:
+        return draws
+    spread = rng.random(len(draws)) < (floor - lo) / (hi - lo)
+    draws[spread, k] = rng.uniform(lo, floor, int(spread.sum()))
+    return draws
 
 
 def predict(fits, target, pixels, draws=200, seed=0, log=print):

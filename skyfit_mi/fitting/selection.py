@@ -170,13 +170,15 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     # the pixels (a table's points) they can use, its chi-squares scaled by their data over the
     # subset's (information); under a fitted sky they find the level first
     ward = sessions_of(model="achromatic" if first.obs.luminance else "colour")
-    ranked = {name: subsample_region(s.obs.pixels[np.isfinite(s.obs.sigma).any(axis=(1, 2))],
-                                     RANK_POINTS if table else RANK_PIXELS, seed)
+    usable = {name: s.obs.pixels[np.isfinite(s.obs.sigma).any(axis=(1, 2))]
               for name, s in ward.items()}
-    ranked = {name: list(px) if table else px for name, px in ranked.items()}
-    # a table's region ranked on all its points at the fit's cache: the fit takes its trace
-    reuse = {name for name, s in ward.items()
-             if table and not plan.split and len(ranked[name]) == len(s.obs.pixels)}
+    # a table's region of no more usable points than RANK_POINTS is ranked on all its points
+    # (None), at the fit's cache: the fit takes its trace
+    ranked = {name: None if table and len(px) <= RANK_POINTS else
+              subsample_region(px, RANK_POINTS if table else RANK_PIXELS, seed)
+              for name, px in usable.items()}
+    ranked = {name: list(px) if table and px is not None else px for name, px in ranked.items()}
+    reuse = {name for name, px in ranked.items() if table and not plan.split and px is None}
     fit_information = {name: information(s.obs) for name, s in ward.items()}
     level = None
     if plan.split:

@@ -54,7 +54,6 @@ SIDECAR = "export.json"
 #: An export holds this in its folder from its first file until the sidecar, its last, is
 #: written: the files of an export that failed or was stopped, which the next one replaces.
 UNFINISHED = ".export_unfinished"
-#: A map's folder holds this (written by ``skyfit fit --per-pixel``).
 #: The name of a map's textured material (its regions' medians keep theirs).
 MAP_NAME = "pixel_map"
 

@@ -15,7 +15,7 @@ from .manifest import FILENAME, is_table, rendered_frames
 
 #: Name of the summary CSV in a fit output folder.
 SUMMARY_NAME = "fits.csv"
-#: The summary of a per-pixel map (`skyfit maps`), beside its parameters' EXR planes.
+#: The summary of a per-pixel map (`skyfit fit --per-pixel`), beside its parameters' EXR planes.
 MAP_SUMMARY = "map_summary.json"
 
 
@@ -74,8 +74,9 @@ def read_fit_result(path):
     draws = r.get("draws")
     if draws is not None and not _is_draws(draws, len(names)):
         raise SkyfitError(f"{path}: draws must be {{\"values\": a list of [{', '.join(names)}] "
-                          "sets of finite numbers, \"added_sd\" (and \"shared_sd\"): one "
-                          "number >= 0 each, ...}; give a fit_NAME.json that `skyfit fit` wrote, or leave out draws.")
+                          "sets of finite numbers, \"added_sd\" (and \"level_sd\" with "
+                          "\"shared_sd\"): one number >= 0 each, ...}; give a fit_NAME.json "
+                          "that `skyfit fit` wrote, or leave out draws.")
     cov = r.get("covariance")
     if cov is not None and not _is_covariance(cov):
         raise SkyfitError(f"{path}: covariance must be {{\"names\": [{', '.join(names)}], "
@@ -168,13 +169,16 @@ def _is_kappa(record):
 
 def _is_draws(draws, n):
     """Whether ``draws`` is a fit's draws from its likelihood as relight reads them: a
-    non-empty list of sets of ``n`` finite numbers, and ``n`` standard errors >= 0 (added_sd,
-    and shared_sd where given)."""
-    values = draws.get("values") if isinstance(draws, dict) else None
+    non-empty list of sets of ``n`` finite numbers, and ``n`` standard errors >= 0: added_sd,
+    and level_sd with shared_sd where either is given."""
+    if not isinstance(draws, dict):
+        return False
+    values = draws.get("values")
+    sds = ["added_sd"] + (["level_sd", "shared_sd"] if {"level_sd", "shared_sd"} & set(draws)
+                          else [])
     return (isinstance(values, list) and len(values) > 0
             and all(_numbers(v, n) for v in values)
-            and all(_numbers(draws[k], n) and min(draws[k]) >= 0
-                    for k in ("added_sd", "shared_sd") if k in draws or k == "added_sd"))
+            and all(_numbers(draws.get(k), n) and min(draws[k]) >= 0 for k in sds))
 
 
 def _is_covariance(cov):
