@@ -229,27 +229,27 @@ def test_the_shared_errors_a_fit_records_for_its_draws_stay_within_its_intervals
 
 
 def test_a_level_error_moves_every_reflectance_alike_whatever_their_correlation():
-    """Under other light a 5% level error (the grey card's, the sun's) moves R and rho_s by one
-    factor: a value proportional to R + rho_s keeps a 5% spread though the data anticorrelate
-    them (-0.8; drawn as the covariance says, the level's spread fell to 1.6%), and the
-    roughness does not move."""
+    """Under other light a 5% level error (the grey card's, the sun's) moves C_r and C_g by one
+    factor: a value proportional to C_r + C_g keeps a 5% spread though the data anticorrelate
+    them (-0.8; drawn as the covariance says, a level's spread fell to 1.6%), and rho_s (a
+    fraction of the reflectance here) and the roughness do not move."""
     from types import SimpleNamespace
 
     from skyfit_mi.fitting.relight import parameter_draws
 
-    theta = np.array([0.5, 0.5, 0.1])
-    result = {"parameters": dict(zip(("R", "rho_s", "sigma_alpha"), theta)),
-              "sequence_run_id": "day",
-              "intervals": {k: {"95": [0.0, 1.0]} for k in ("R", "rho_s", "sigma_alpha")},
-              "covariance": {"names": ["R", "rho_s", "sigma_alpha"],
-                             "matrix": [[1.0, -0.8, 0.5], [-0.8, 1.0, -0.5], [0.5, -0.5, 1.0]]},
-              "draws": {"values": [theta.tolist()], "added_sd": [0, 0, 0],
-                        "level_sd": [0.025, 0.025, 0.0], "shared_sd": [0, 0, 0]}}
-    s = SimpleNamespace(names=("R", "rho_s", "sigma_alpha"), lower=np.zeros(3),
-                        upper=np.ones(3), run_id="another day")
+    names = ("C_r", "C_g", "rho_s", "sigma_alpha")
+    theta = np.array([0.5, 0.5, 0.6, 0.1])
+    result = {"parameters": dict(zip(names, theta)), "sequence_run_id": "day",
+              "intervals": {k: {"95": [0.0, 1.0]} for k in names},
+              "covariance": {"names": list(names), "matrix": [
+                  [1.0, -0.8, 0.5, 0.2], [-0.8, 1.0, -0.5, 0.0], [0.5, -0.5, 1.0, 0.0],
+                  [0.2, 0.0, 0.0, 1.0]]},
+              "draws": {"values": [theta.tolist()], "added_sd": [0] * 4,
+                        "level_sd": [0.025, 0.025, 0.0, 0.0], "shared_sd": [0] * 4}}
+    s = SimpleNamespace(names=names, lower=np.zeros(4), upper=np.ones(4), run_id="another day")
     d = parameter_draws(result, s, 20000, np.random.default_rng(3))[1:]
     assert np.std(d[:, 0] + d[:, 1]) == pytest.approx(0.05, rel=0.05)
-    assert np.all(d[:, 2] == 0.1)
+    assert np.all(d[:, 2:] == theta[2:])
 
 
 def test_a_roughness_open_below_spreads_over_its_reach_in_other_light():

@@ -8,7 +8,6 @@ from .chi2 import MEASURED_SE
 from .held_out import HELD_OUT_FRAMES
 from .intervals import matrix_note
 from .pose import pose_record
-from .sky_fit import LEVEL_SCALED
 from ..pipeline.observation_table import relative_scale
 
 
@@ -106,19 +105,26 @@ def interval_shares(fit, names):
     return out
 
 
+#: The parameters a light level's error scales by one factor, the radiance with them: the
+#: reflectances C and R (rho_d = C (1 - rho_s) and a metal's C rho_s, thesis 7.1); rho_s is a
+#: fraction in every reading but the colour model's plastic, so it takes its share apart.
+LEVEL_FACTORS = ("C_r", "C_g", "C_b", "R")
+
+
 def draws_record(fit, names):
     """The fit's draws (:mod:`~.draws`) as relight reads them, with the shared standard errors
     relight adds to them: always the light cache's and JPEG block rounding's (added_sd); under
     other light, those the sequence's light, calibration and pose share too: level_sd, the
-    calibration's, sky level's and sun level's on the reflectances (one factor moves them all
-    alike), and shared_sd, the rest (pose, colour matrix; the level's on the roughness). Each
+    calibration's, sky level's and sun level's on C and R (LEVEL_FACTORS: one factor moves
+    them all alike), and shared_sd, the rest (pose, colour matrix; the level's on rho_s and the
+    roughness). Each
     parameter's at most its 95% interval's Gaussian sd (a linear share at a bound, a roughness
     at 0.5, can exceed the parameter's whole range)."""
     d, n = fit.draws, len(names)
     level = np.sqrt(sum(np.square(sd) for sd in (fit.calibration_sd, fit.sky.sd,
                                                  fit.sun_level_sd) if sd is not None)
                     + np.zeros(n))
-    scaled = np.array([p in LEVEL_SCALED for p in names])
+    scaled = np.array([p in LEVEL_FACTORS for p in names])
     rest = np.sqrt(np.square(fit.pose.sd_of(n)) + np.square(np.where(scaled, 0.0, level))
                    + (0.0 if fit.matrix_sd is None else np.square(fit.matrix_sd)))
     iv = np.array([fit.intervals[p]["95"] for p in names], dtype=float)
@@ -138,7 +144,7 @@ DRAWS_NOTE = (
     "this very sequence draws its bands from them, each widened by added_sd (the light "
     "cache's error and the JPEG blocks' rounding); a relight of other light or another view "
     "widens them by the errors the sequence's light, calibration and pose share too: level_sd "
-    "(one factor on every reflectance: the calibration's, sky's and sun's level) and shared_sd "
+    "(one factor on C and R: the calibration's, sky's and sun's level) and shared_sd "
     "(the rest, correlated as the covariance)")
 
 

@@ -789,7 +789,7 @@ def parameter_draws(result, s, n, rng):
     combinations its data allow (a grey plastic's metal twin, a lobe the sun never showed),
     each widened by the errors that do not cancel: on the fitted sequence the light cache's
     and JPEG rounding's (``added_sd``); elsewhere those the sequence's light, calibration and
-    pose share as well: ``level_sd`` one factor on every reflectance, ``shared_sd`` correlated
+    pose share as well: ``level_sd`` one factor on C and R, ``shared_sd`` correlated
     as the covariance; and a roughness whose interval reaches its bound beyond what the data
     told (``open_below``: the sky's shape near the mirror unknown) spread over that reach too
     (:func:`_open_below`). A fit without such draws (its sampling failed, or written before
@@ -802,7 +802,8 @@ def parameter_draws(result, s, n, rng):
     cov = cov.get("matrix") if cov.get("names") == list(names) else None
     same = result.get("sequence_run_id") == s.run_id
     undetermined_sky = (result.get("sky") or {}).get("undetermined_span") is not None
-    if own is not None and (same or "level_sd" in own and not undetermined_sky):
+    if own is not None and (same or {"level_sd", "shared_sd"} <= set(own)
+                            and not undetermined_sky):
         sets = np.asarray(own["values"], dtype=float)[rng.integers(len(own["values"]),
                                                                    size=n - 1)]
         draws = sets + rng.standard_normal(sets.shape) * np.asarray(own["added_sd"])
@@ -811,7 +812,8 @@ def parameter_draws(result, s, n, rng):
                       + rng.standard_normal(sets.shape) @ root_of(
                           correlation(cov, len(names))
                           * np.outer(own["shared_sd"], own["shared_sd"])).T)
-            draws = _open_below(result, names, draws, rng)
+            return np.vstack([theta, _open_below(result, names, np.clip(draws, lower, upper),
+                                                 rng)])
     else:
         draws = interval_draws(theta, [result["intervals"][k]["95"] for k in names], cov,
                                n - 1, rng)
@@ -819,16 +821,16 @@ def parameter_draws(result, s, n, rng):
 
 
 def _open_below(result, names, draws, rng):
-    """``draws`` with the roughness of a share of them spread evenly over the reach of its
-    interval below the sharpest the draws hold, where the interval is open below
-    (``open_below``: the sun's highlight unseen, the sky's shape near the mirror not known to
-    the data); the share that reach's of the interval, as if uniform over it."""
+    """``draws`` (within the bounds) with the roughness of a share of them spread evenly over
+    the reach of its interval below where the data's reach ended, where the interval is open
+    below (``open_below``: the sun's highlight unseen, the sky's shape near the mirror not known
+    to the data); the share that reach's of the interval, as if uniform over it."""
     iv = (result["intervals"].get("sigma_alpha") or {})
     if "sigma_alpha" not in names or iv.get("open_below") is None:
         return draws
     k = list(names).index("sigma_alpha")
     lo, hi = iv["95"]
-    floor = float(np.min(draws[:, k]))
+    floor = min(float(iv["open_below"]), hi)
     if not hi > lo or floor <= lo:
         return draws
     spread = rng.random(len(draws)) < (floor - lo) / (hi - lo)

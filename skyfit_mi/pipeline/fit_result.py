@@ -74,7 +74,7 @@ def read_fit_result(path):
     draws = r.get("draws")
     if draws is not None and not _is_draws(draws, len(names)):
         raise SkyfitError(f"{path}: draws must be {{\"values\": a list of [{', '.join(names)}] "
-                          "sets of finite numbers, \"added_sd\" (and \"level_sd\" with "
+                          "sets of finite numbers, \"added_sd\" (and \"level_sd\", "
                           "\"shared_sd\"): one number >= 0 each, ...}; give a fit_NAME.json "
                           "that `skyfit fit` wrote, or leave out draws.")
     cov = r.get("covariance")
@@ -170,12 +170,11 @@ def _is_kappa(record):
 def _is_draws(draws, n):
     """Whether ``draws`` is a fit's draws from its likelihood as relight reads them: a
     non-empty list of sets of ``n`` finite numbers, and ``n`` standard errors >= 0: added_sd,
-    and level_sd with shared_sd where either is given."""
+    and level_sd and shared_sd where given (relight draws from the intervals without them)."""
     if not isinstance(draws, dict):
         return False
     values = draws.get("values")
-    sds = ["added_sd"] + (["level_sd", "shared_sd"] if {"level_sd", "shared_sd"} & set(draws)
-                          else [])
+    sds = ["added_sd"] + [k for k in ("level_sd", "shared_sd") if k in draws]
     return (isinstance(values, list) and len(values) > 0
             and all(_numbers(v, n) for v in values)
             and all(_numbers(draws.get(k), n) and min(draws[k]) >= 0 for k in sds))
