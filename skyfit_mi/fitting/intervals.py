@@ -93,8 +93,10 @@ def fit_intervals(s, fit):
                     intervals[p]["from"] += ", and over the undetermined sky level"
     why = sky_only_reach(s, sky.shape_known, intervals, fit)
     if why:
-        # where the data's reach ended: below it, any lobe the sky's shape there allows
-        intervals["sigma_alpha"]["open_below"] = float(intervals["sigma_alpha"]["95"][0])
+        # where the data's reach ended (before the other errors widened it): below it, any
+        # lobe the sky's shape there allows
+        intervals["sigma_alpha"]["open_below"] = float(
+            fit.data_intervals[names.index("sigma_alpha")][0])
         for lv in ("68", "95"):
             intervals["sigma_alpha"][lv] = (float(lower[-1]), intervals["sigma_alpha"][lv][1])
         intervals["sigma_alpha"]["from"] += ", and down to its bound: " + why
