@@ -152,7 +152,7 @@ def test_relight_draws_keep_to_the_likelihood_and_widen_by_the_shared_errors_els
     undetermined sky level, draws from its intervals."""
     from types import SimpleNamespace
 
-    from skyfit_mi.fitting.relight import parameter_draws
+    from skyfit_mi.fitting.relight import draws_source, parameter_draws
 
     rng = np.random.default_rng(1)
     x0 = rng.uniform(0.2, 0.9, 400)
@@ -170,7 +170,9 @@ def test_relight_draws_keep_to_the_likelihood_and_widen_by_the_shared_errors_els
 
     own = parameter_draws(result, s, 4000, np.random.default_rng(2))
     assert np.allclose(own[0], [0.5, 0.75]) and np.percentile(off_ridge(own), 99) < 0.005
+    assert draws_source(result, s) == "its likelihood draws"
     s.run_id = "another day"
+    assert "widened by its day's light" in draws_source(result, s)
     other = parameter_draws(result, s, 4000, np.random.default_rng(2))
     assert np.median(off_ridge(own)) < np.median(off_ridge(other)) < 0.02  # shared_sd's only
     assert np.std(other[1:, 1] - own[1:, 1]) == pytest.approx(0.02, rel=0.15)
@@ -179,7 +181,9 @@ def test_relight_draws_keep_to_the_likelihood_and_widen_by_the_shared_errors_els
                 None):
         box = parameter_draws({**result, "draws": old}, s, 4000, np.random.default_rng(2))
         assert np.median(off_ridge(box)) > 0.05                   # the intervals' Gaussian
+        assert draws_source({**result, "draws": old}, s).startswith("its intervals (")
     result["sky"] = {"undetermined_span": {"a": [0.2, 0.9]}}
+    assert "sky level its data left undetermined" in draws_source(result, s)
     assert np.median(off_ridge(parameter_draws(result, s, 4000, np.random.default_rng(2)))) \
         > 0.05
 

@@ -801,9 +801,7 @@ def parameter_draws(result, s, n, rng):
     cov = result.get("covariance", {})
     cov = cov.get("matrix") if cov.get("names") == list(names) else None
     same = result.get("sequence_run_id") == s.run_id
-    undetermined_sky = (result.get("sky") or {}).get("undetermined_span") is not None
-    if own is not None and (same or {"level_sd", "shared_sd"} <= set(own)
-                            and not undetermined_sky):
+    if draws_source(result, s).startswith("its likelihood"):
         sets = np.asarray(own["values"], dtype=float)[rng.integers(len(own["values"]),
                                                                    size=n - 1)]
         draws = sets + rng.standard_normal(sets.shape) * np.asarray(own["added_sd"])
@@ -818,6 +816,20 @@ def parameter_draws(result, s, n, rng):
         draws = interval_draws(theta, [result["intervals"][k]["95"] for k in names], cov,
                                n - 1, rng)
     return np.vstack([theta, np.clip(draws, lower, upper)])
+
+
+def draws_source(result, s):
+    """Where :func:`parameter_draws` takes ``result``'s sets for session ``s``, in words."""
+    own = result.get("draws")
+    if own is None:
+        return "its intervals (its likelihood's sampling found too few draws)"
+    if result.get("sequence_run_id") == s.run_id:
+        return "its likelihood draws"
+    if (result.get("sky") or {}).get("undetermined_span") is not None:
+        return "its intervals (they reach over a sky level its data left undetermined)"
+    if not {"level_sd", "shared_sd"} <= set(own):
+        return "its intervals (a fit JSON from before its draws held the day's shared errors)"
+    return "its likelihood draws, widened by its day's light, calibration and pose errors"
 
 
 def _open_below(result, names, draws, rng):
@@ -867,7 +879,8 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
             scales[region] = scale
             log(f"{region}: the table's values put on the fit's scale, times "
                 f"{scale['factor']:.4g} (each frame's factor from the other frames')")
-        log(f"{region}: predicted {len(s.obs.frames)} frames from {draws} parameter draws"
+        log(f"{region}: predicted {len(s.obs.frames)} frames from {draws} parameter draws of "
+            + draws_source(fits[region][1], s)
             + (f" (under the target's spec sky: the fit's sky level k = "
                f"{fits[region][1]['sky']['k']:.3g} belongs to its own day)"
                if fits[region][1].get("sky") is not None and not s.light.split else ""))
