@@ -431,3 +431,32 @@ def test_photographs_of_lab_lights_are_refused_by_name(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "has lab lights (frames by index, no [time])" in err \
         and "ingest --table with a frame column" in err, err
+
+
+def test_model_auto_on_a_table_ranks_large_regions_on_a_subset_and_small_ones_whole(
+        dn_rig, tmp_path, monkeypatch):
+    """``fit --all --model auto`` on a table whose sample has 4 points and whose reference 2,
+    ranking at most 3 points a region (RANK_POINTS): the sample ranked on a seeded 3 (its
+    chi-squares scaled up to its 4), its chosen lobe traced and fitted on all 4; the reference
+    ranked whole at the fit's cache, its fit taking that trace."""
+    from skyfit_mi.fitting import selection
+
+    tmp, spec, table = dn_rig
+    rows = list(csv.DictReader(table.open()))
+    white = sorted({r["point"] for r in rows if r["region"] == "white"})
+    kept = [r for r in rows if r["region"] != "white" or r["point"] in white[:2]]
+    with (tmp_path / "t.csv").open("w") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows(kept)
+    assert main(["ingest", str(spec), "--table", str(tmp_path / "t.csv"), "--calibrate",
+                 "white=0.9", "-o", str(tmp_path / "seq")]) == 0
+    monkeypatch.setattr(selection, "RANK_POINTS", 3)
+    assert main(["fit", str(tmp_path / "seq"), "--all", "--model", "auto", "-o",
+                 str(tmp_path / "fits")]) == 0
+    fits = {name: json.loads((tmp_path / "fits" / f"fit_{name}.json").read_text())
+            for name in ("sample", "white")}
+    assert len(fits["sample"]["points"]) == 4 and len(fits["white"]["points"]) == 2
+    sample, ref = (fits[k]["model_selection"] for k in ("sample", "white"))
+    assert sample["ranking_scale"] > 1.1 and sample["reused_trace_time_s"] == 0
+    assert ref["ranking_scale"] == 1.0 and ref["reused_trace_time_s"] > 0
