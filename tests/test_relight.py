@@ -293,7 +293,8 @@ def test_fit_on_some_frames_and_relight_onto_the_same_folder_reports_the_held_ou
     assert errors["band_coverage"]["share"] >= 0.75          # measured 1.0 (12 values)
     rows = list(csv.reader((out / "relight.csv").read_text().splitlines()))
     assert [row[4] for row in rows[1:5]] == ["no", "no", "yes", "yes"]
-    assert errors["bands_drawn"] == {"draws": 20, "seed": 0}
+    assert errors["bands_drawn"] == {"draws": 20, "seed": 0,
+                                     "from": {"disc": "its likelihood draws"}}
     # a prediction without images does not mix into the relit sequence, nor another relight
     # (other draws or seed: its bands were replaced silently); with --overwrite it replaces it
     before = sorted(p.name for p in out.iterdir())

@@ -218,7 +218,8 @@ def _predict_and_report(fits, plan, out, spec, predicted, pixels, draws, seed, o
     if plan.reference:
         add_reference_errors(errors, fits, plan, out, pixels, overwrite)
     errors["band_coverage"] = band_coverage(prediction.rows)
-    errors["bands_drawn"] = {"draws": int(draws), "seed": int(seed)}
+    errors["bands_drawn"] = {"draws": int(draws), "seed": int(seed),
+                             "from": prediction.draws_from}
     if prediction.scales:
         errors["target_scale"] = prediction.scales
     if relative:
@@ -701,6 +702,8 @@ class Prediction:
     region_means: dict
     #: per region, the factor that put a table's values on the fit's scale (:func:`_on_fit_scale`)
     scales: dict = field(default_factory=dict)
+    #: per region, where its bands' parameter draws came from (:func:`draws_source`)
+    draws_from: dict = field(default_factory=dict)
 
 
 def write_prediction(prediction, out, image_kind, plot=True):
@@ -870,7 +873,7 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
         shared = fitted_sessions({region: r for region, (_, r) in fits.items()}, target, pixels,
                                  cache=FitCache(*PREDICTION_CACHE, seed, "anchors"), min_frames=1)
         sessions = ((region, shared.pop(region)) for region in sorted(fits))
-    rows, means, scales = [], {}, {}
+    rows, means, scales, sources = [], {}, {}, {}
     for region, s in sessions:                          # each let go when done with
         region_rows, means[region], scale = predict_region(s, fits[region][1], target, draws,
                                                            rng)
@@ -879,12 +882,13 @@ def predict(fits, target, pixels, draws=200, seed=0, log=print):
             scales[region] = scale
             log(f"{region}: the table's values put on the fit's scale, times "
                 f"{scale['factor']:.4g} (each frame's factor from the other frames')")
+        sources[region] = draws_source(fits[region][1], s)
         log(f"{region}: predicted {len(s.obs.frames)} frames from {draws} parameter draws of "
-            + draws_source(fits[region][1], s)
+            + sources[region]
             + (f" (under the target's spec sky: the fit's sky level k = "
                f"{fits[region][1]['sky']['k']:.3g} belongs to its own day)"
                if fits[region][1].get("sky") is not None and not s.light.split else ""))
-    return Prediction(rows, means, scales)
+    return Prediction(rows, means, scales, sources)
 
 
 def _table_session(target, region, result, seed):
