@@ -146,9 +146,9 @@ def test_interval_covariance_takes_the_intervals_widths_and_the_covariances_corr
 def test_relight_draws_keep_to_the_likelihood_and_widen_by_the_shared_errors_elsewhere():
     """A fit whose likelihood draws lie on a curved ridge (two parameters trading as
     x1 = 1 - x0^2, as a grey plastic and its metal twin do): on its own sequence relight's
-    draws are those sets widened by added_sd; on another target also by shared_sd (the light's,
-    calibration's and pose's errors), and they stay on the ridge as far as those allow, where
-    the intervals' Gaussian fills the box around it; a fit without shared_sd, or over an
+    draws are those sets widened by added_sd; on another target also by shared_rows (the
+    light's, calibration's and pose's errors), and they stay on the ridge as far as those allow,
+    where the intervals' Gaussian fills the box around it; a fit without shared_rows, or over an
     undetermined sky level, draws from its intervals."""
     from types import SimpleNamespace
 
@@ -162,7 +162,7 @@ def test_relight_draws_keep_to_the_likelihood_and_widen_by_the_shared_errors_els
                             "b": {"95": [0.19, 0.96], "from": "profile"}},
               "covariance": {"names": ["a", "b"], "matrix": [[1.0, -0.9], [-0.9, 1.0]]},
               "draws": {"values": values.tolist(), "added_sd": [0.001, 0.001],
-                        "level_sd": [0.0, 0.0], "shared_sd": [0.01, 0.02]}}
+                        "shared_rows": [[0.01, 0.0], [0.0, 0.02]]}}
     s = SimpleNamespace(names=("a", "b"), lower=np.zeros(2), upper=np.ones(2), run_id="day")
 
     def off_ridge(d):
@@ -174,11 +174,9 @@ def test_relight_draws_keep_to_the_likelihood_and_widen_by_the_shared_errors_els
     s.run_id = "another day"
     assert "widened by its day's light" in draws_source(result, s)
     other = parameter_draws(result, s, 4000, np.random.default_rng(2))
-    assert np.median(off_ridge(own)) < np.median(off_ridge(other)) < 0.02  # shared_sd's only
+    assert np.median(off_ridge(own)) < np.median(off_ridge(other)) < 0.02  # the rows' only
     assert np.std(other[1:, 1] - own[1:, 1]) == pytest.approx(0.02, rel=0.15)
-    for old in ({k: v for k, v in result["draws"].items() if not k.endswith(("level_sd",
-                                                                            "shared_sd"))},
-                None):
+    for old in ({k: v for k, v in result["draws"].items() if k != "shared_rows"}, None):
         box = parameter_draws({**result, "draws": old}, s, 4000, np.random.default_rng(2))
         assert np.median(off_ridge(box)) > 0.05                   # the intervals' Gaussian
         assert draws_source({**result, "draws": old}, s).startswith("its intervals (")
@@ -210,31 +208,50 @@ def test_draws_find_a_sharp_lobe_the_data_allow_at_the_far_end_of_the_interval()
         assert abs(np.mean(d.values[:, 0] < 0.15) - share) < 0.05
 
 
-def test_the_shared_errors_a_fit_records_for_its_draws_stay_within_its_intervals():
-    """A fit JSON's draws: level_sd, the calibration's, sky level's and sun level's sds in
-    quadrature on the reflectances (one factor moves them alike), shared_sd the rest (pose,
-    colour matrix, the level's share on the roughness), each at most its 95% interval's
-    Gaussian sd (a sky level's linear share at a roughness on its bound 0.5 came out 0.72,
-    beyond the parameter's whole range)."""
+def test_the_shared_errors_a_fit_records_for_its_draws_are_its_intervals_signed_rows():
+    """A fit JSON's draws carry the errors its sequence shares as signed rows, one per
+    independent error: each source's rows give its standard errors in the intervals (root sum
+    of squares), keep the signs with which one error moves several parameters (the sky's level
+    against the sun's: up in one, down in the other), and each parameter's column is at most
+    its 95% interval's Gaussian sd (a sky level's linear share at a roughness on its bound 0.5
+    came out 0.72, beyond the parameter's whole range), its signs kept."""
     from types import SimpleNamespace
 
     from skyfit_mi.fitting.draws import Draws
     from skyfit_mi.fitting.fit_record import draws_record
+    from skyfit_mi.fitting.sky_fit import _carried_sd
+    from skyfit_mi.fitting.uncertainty import rows_sd
 
+    response = np.array([[0.04, 0.01], [-0.5, -0.5]])           # (n, coefficients)
+    light_cov = np.array([[1.0, 0.5], [0.5, 2.0]])
+    calibration = np.array([[0.03, 0.0], [0.01, 0.0]])
     fit = SimpleNamespace(
         draws=Draws(np.zeros((4, 2)), 300.0, 1000, 3), theta=np.array([0.5, 0.5]),
-        calibration_sd=np.array([0.03, 0.0]), sky=SimpleNamespace(sd=np.array([0.04, 0.72])),
-        sun_level_sd=np.zeros(2), pose=SimpleNamespace(sd_of=lambda n: np.full(n, 0.01)),
-        matrix_sd=None, cache_sd=np.zeros(2), jpeg_shared_sd=np.zeros(2),
+        calibration_rows=calibration, matrix_rows=np.zeros((0, 2)),
+        sky=SimpleNamespace(response=response, light=SimpleNamespace(covariance=light_cov)),
+        sun_level_sd=np.array([0.02, 0.0]), pose=SimpleNamespace(shifts={"yaw": np.array(
+            [0.01, -0.01])}), cache_sd=np.zeros(2), jpeg_shared_sd=np.zeros(2),
         intervals={"R": {"95": [0.3, 0.7]}, "sigma_alpha": {"95": [0.0, 0.5]}})
     d = draws_record(fit, ["R", "sigma_alpha"])
-    assert d["level_sd"] == pytest.approx([0.05, 0.0])
-    assert d["shared_sd"] == pytest.approx([0.01, 0.5 / (2 * Z["95"])])
+    rows, sources = np.array(d["shared_rows"]), np.array(d["shared_sources"])
+    assert sorted(set(sources)) == ["calibration", "pose", "sky", "sun_level"]
+    cap = np.array([0.4, 0.5]) / (2 * Z["95"])
+    sky_sd = _carried_sd(response, light_cov)
+    assert rows_sd(rows[sources == "calibration"])[0] == pytest.approx(np.hypot(0.03, 0.01))
+    assert rows_sd(rows[sources == "sky"])[0] == pytest.approx(sky_sd[0])
+    assert rows_sd(rows[sources == "sun_level"]) == pytest.approx([0.02, 0.0])
+    assert rows_sd(rows)[0] == pytest.approx(np.sqrt(0.03**2 + 0.01**2 + sky_sd[0]**2 + 0.02**2
+                                                     + 0.01**2))
+    assert rows_sd(rows)[1] == pytest.approx(cap[1])           # the roughness at its interval's
+    sky_rows = rows[sources == "sky"]
+    assert np.all(sky_rows[:, 0] * sky_rows[:, 1] < 0)           # the sky's signs kept
+    pose = rows[sources == "pose"][0]
+    assert pose[0] == pytest.approx(0.01) and pose[1] < 0      # scaled, not flipped
 
 
 def test_a_level_error_moves_every_reflectance_alike_whatever_their_correlation():
-    """Under other light a 5% level error (the grey card's, the sun's) moves C_r and C_g by one
-    factor: a value proportional to C_r + C_g keeps a 5% spread though the data anticorrelate
+    """Under other light a 5% level error (the grey card's, the sun's: one shared row) moves C_r
+    and C_g by one factor: a value proportional to C_r + C_g keeps a 5% spread though the data anticorrelate
     them (-0.8; drawn as the covariance says, a level's spread fell to 1.6%), and rho_s (a
     fraction of the reflectance here) and the roughness do not move."""
     from types import SimpleNamespace
@@ -249,7 +266,7 @@ def test_a_level_error_moves_every_reflectance_alike_whatever_their_correlation(
                   [1.0, -0.8, 0.5, 0.2], [-0.8, 1.0, -0.5, 0.0], [0.5, -0.5, 1.0, 0.0],
                   [0.2, 0.0, 0.0, 1.0]]},
               "draws": {"values": [theta.tolist()], "added_sd": [0] * 4,
-                        "level_sd": [0.025, 0.025, 0.0, 0.0], "shared_sd": [0] * 4}}
+                        "shared_rows": [[0.025, 0.025, 0.0, 0.0]]}}
     s = SimpleNamespace(names=names, lower=np.zeros(4), upper=np.ones(4), run_id="another day")
     d = parameter_draws(result, s, 20000, np.random.default_rng(3))[1:]
     assert np.std(d[:, 0] + d[:, 1]) == pytest.approx(0.05, rel=0.05)
@@ -271,8 +288,7 @@ def test_a_roughness_open_below_spreads_over_its_reach_in_other_light():
     result = {"parameters": {"rho_s": 0.5, "sigma_alpha": 0.3}, "sequence_run_id": "day",
               "intervals": {"rho_s": {"95": [0.45, 0.55]},
                             "sigma_alpha": {"95": [0.0, 0.34], "open_below": 0.26}},
-              "draws": {"values": values.tolist(), "added_sd": [0, 0], "level_sd": [0, 0],
-                        "shared_sd": [0, 0]}}
+              "draws": {"values": values.tolist(), "added_sd": [0, 0], "shared_rows": []}}
     s = SimpleNamespace(names=("rho_s", "sigma_alpha"), lower=np.zeros(2),
                         upper=np.array([1.0, 0.5]), run_id="day")
     own = parameter_draws(result, s, 4000, np.random.default_rng(1))[1:, 1]

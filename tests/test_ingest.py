@@ -180,7 +180,7 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
     intervals (calibration_error_sd): with one scale for the day, a scale on each channel's
     reflectances; with an exposure per frame, each frame's error moves the fit on its own."""
     from skyfit_mi.fitting.fit import fit_region
-    from skyfit_mi.fitting.uncertainty import calibration_sd
+    from skyfit_mi.fitting.uncertainty import calibration_rows, rows_sd
     from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
 
     _, doc, fit = ingested
@@ -194,6 +194,12 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
     np.testing.assert_allclose([sd["C_r"], sd["C_g"], sd["C_b"]], scale, rtol=0.3)
     lo, hi = fit["intervals"]["sigma_alpha"]["95"]
     assert sd["sigma_alpha"] < 0.1 * (hi - lo)       # a colour's scale barely moves the lobe
+    # relight's draws carry the same errors as signed rows, one per channel's scale
+    draws = fit["draws"]
+    rows = np.array([r for r, k in zip(draws["shared_rows"], draws["shared_sources"])
+                     if k == "calibration"])
+    np.testing.assert_allclose(rows_sd(rows)[:3], [sd[k] for k in ("C_r", "C_g", "C_b")],
+                               rtol=1e-6)
     # the intervals say how much of their width is the card's: (1.96 sd)^2 over the squared
     # half-width (the wider side), the data the rest
     shares = fit["interval_shares"]
@@ -204,9 +210,13 @@ def test_a_shutter_off_its_nominal_exposure_is_calibrated_frame_by_frame(day, in
             min(1.0, (1.96 * sd[k]) ** 2 / max(hi - v, v - lo) ** 2), abs=1e-3)
         assert sum(shares[k].values()) == pytest.approx(1.0, abs=5e-3)
         assert 0 < shares[k]["calibration"] < 1 and shares[k]["data"] > 0
-    assert calibration_sd({"ingest": {"calibration": {"scale_relative_sd": [0.01, 0.02, 0.03]}}},
-                          ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha"),
-                          [0.5, 0.5, 0.5, 0.1, 0.2]) == pytest.approx(
+    # a table's: each channel's scale its own error (a row each), R and rho_s by their rms
+    rows = calibration_rows({"ingest": {"calibration": {"scale_relative_sd": [0.01, 0.02, 0.03]}}},
+                            ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha"),
+                            [0.5, 0.5, 0.5, 0.1, 0.2])
+    assert rows.shape == (4, 5) and not rows[3].any()          # no falloff: its row nil
+    np.testing.assert_allclose(rows[:3, :3], np.diag([0.005, 0.01, 0.015]))
+    assert rows_sd(rows) == pytest.approx(
         [0.005, 0.01, 0.015, 0.1 * np.sqrt((1 + 4 + 9) / 3) / 100, 0.0])
     photos = tmp_path / "photos"
     photograph_day(day["truth"], photos, PhotoSettings(quality=100, shutter_error=0.03), seed=5)
@@ -1105,8 +1115,8 @@ def test_a_references_reflectance_error_reaches_every_reflectance_interval(day, 
         return fit_region(tmp_path / "seq", "sample", day["regions"]["sample"], model="colour",
                           light=LightOptions(sky="spec"), **QUIET)
     counted = fit()
-    monkeypatch.setattr(uncertainty, "reference_sd",
-                        lambda doc, names, theta: np.zeros(np.shape(theta)))
+    monkeypatch.setattr(uncertainty, "reference_rows",
+                        lambda doc, names, theta: np.zeros((0,) + np.shape(theta)))
     left_out = fit()
     names = ("C_r", "C_g", "C_b", "rho_s")
     held = {name: {k: r["intervals"][k]["95"][0] <= TRUTH[k] <= r["intervals"][k]["95"][1]

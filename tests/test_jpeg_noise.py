@@ -355,8 +355,9 @@ def test_shared_error_sd_is_the_error_of_a_region_mean(quality, subsampling):
 def test_a_shared_error_reaches_a_mean_whole():
     """A mean fitted to P pixels of T frames, each frame's pixels sharing an error of sd s in
     one channel: the mean's standard error from it is s / sqrt(T) however many pixels, and
-    the YCbCr mixing takes a Cb error to B by 1.772 and to G by -0.344."""
-    from skyfit_mi.fitting.uncertainty import covariance, shared_error_sd
+    the YCbCr mixing takes a Cb error to B by 1.772 and to G by -0.344, each frame's error
+    moving them opposite ways (its signed row)."""
+    from skyfit_mi.fitting.uncertainty import covariance, rows_sd, shared_error_rows
 
     P, T, sigma, s = 400, 4, 2.0, 0.3
     J = np.zeros((P, T, 3, 3))
@@ -364,8 +365,11 @@ def test_a_shared_error_reaches_a_mean_whole():
         J[:, :, c, c] = -1.0 / sigma                       # r = (y - theta_c) / sigma
     usable = np.ones((P, T, 3), bool)
     shared = np.tile([0.0, s, 0.0], (T, 1))                # Cb only
-    sd = shared_error_sd(J, usable, np.full((P, T, 3), sigma), shared, jn.YCC_TO_RGB,
-                         covariance(J.reshape(-1, 3)))
+    rows = shared_error_rows(J, usable, np.full((P, T, 3), sigma), shared, jn.YCC_TO_RGB,
+                             covariance(J.reshape(-1, 3)))
+    sd = rows_sd(rows)
+    cb = rows[np.abs(rows).sum(axis=1) > 0]
+    assert len(cb) == T and np.all(cb[:, 1] * cb[:, 2] < 0)
     np.testing.assert_allclose(sd, np.abs(jn.YCC_TO_RGB[:, 1]) * s / np.sqrt(T), atol=1e-12)
     assert sd[2] > 5 * sigma / np.sqrt(P * T)             # far above the pixels' own error
 

@@ -575,15 +575,14 @@ def test_a_hand_edited_measured_range_or_draws_is_refused_in_one_line(tmp_path):
     for bad in ([[0.1, 0.1]], {"values": []}, {"values": [[0.1]], "added_sd": [0, 0]},
                 {"values": [[0.1, None]], "added_sd": [0, 0]},
                 {"values": [[0.1, 0.1]], "added_sd": [0, -1]},
-                {"values": [[0.1, 0.1]], "added_sd": [0, 0], "level_sd": [0.1],
-                 "shared_sd": [0, 0]},
-                {"values": [[0.1, 0.1]], "added_sd": [0, 0], "level_sd": [0, 0],
-                 "shared_sd": [None, -1]}):
+                {"values": [[0.1, 0.1]], "added_sd": [0, 0], "shared_rows": [[0.1]]},
+                {"values": [[0.1, 0.1]], "added_sd": [0, 0], "shared_rows": [0.1, 0.1]},
+                {"values": [[0.1, 0.1]], "added_sd": [0, 0], "shared_rows": [[None, -1]]}):
         path.write_text(json.dumps({**fit, "draws": bad}))
         with pytest.raises(SkyfitError, match=r"draws must be \{\"values\"") as e:
             read_fit_result(path)
         assert "\n" not in str(e.value)
-    for good in ({}, {"level_sd": [0.01, 0], "shared_sd": [0, 0.02]}, {"shared_sd": [0, 0]}):
+    for good in ({}, {"shared_rows": [[0.01, -0.02], [0, 0.02]]}, {"shared_rows": []}):
         path.write_text(json.dumps({**fit, "draws": {"values": [[0.1, 0.1]],
                                                      "added_sd": [0, 0], **good}}))
         assert read_fit_result(path)["draws"]["values"] == [[0.1, 0.1]]

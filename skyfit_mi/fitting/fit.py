@@ -19,8 +19,8 @@ from .fit_record import fit_record
 from .fit_warnings import fit_warnings
 from .geometry import highlight_geometry
 from .held_out import held_out_error
-from .intervals import (calibration_sd, fit_intervals, frame_calibration_sd, jpeg_shared_sd,
-                        matrix_sd)
+from .intervals import (calibration_rows, fit_intervals, frame_calibration_sd, jpeg_shared_sd,
+                        matrix_rows)
 from .light import SPEC_LIGHT, LightOptions, LightParts, LightPlan
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
@@ -82,7 +82,10 @@ class FitState:
         the sequence shares (light, calibration, pose, ...) widen them: the draws' first proposal
     search_open : {parameter: [(end, x)]} ends of 95% intervals taken to the bound where the
         profile's fits beyond x failed (:func:`~.intervals.fit_intervals`)
-    jpeg_shared_sd, calibration_sd, matrix_sd : shared errors' standard errors (:mod:`~.intervals`)
+    jpeg_shared_sd : the JPEG blocks' rounding's standard errors (:mod:`~.intervals`)
+    calibration_rows, matrix_rows : signed rows (E, n), one per independent error of the
+        calibration and the colour matrix (:mod:`~.intervals`); their standard errors
+        calibration_sd, matrix_sd
     sky, pose : the light's and the camera pose's shares (:class:`~.sky_fit.SkyShare`,
         :class:`~.pose.PoseShare`)
     draws : the likelihood's draws (:class:`~.draws.Draws`)
@@ -110,15 +113,25 @@ class FitState:
     rise: dict = None
     cache_noise_chi2: float = None
     cache_sd: np.ndarray = None
-    calibration_sd: np.ndarray = None
+    calibration_rows: np.ndarray = None
     sun_level_sd: np.ndarray = None
     jpeg_shared_sd: np.ndarray = None
-    matrix_sd: np.ndarray = None
+    matrix_rows: np.ndarray = None
     pose: object = None
     held_out: dict = None
     draws: object = None
     data_intervals: np.ndarray = None
     search_open: dict = None
+
+    @property
+    def calibration_sd(self):
+        """The calibration's standard errors (n,)."""
+        return unc.rows_sd(self.calibration_rows)
+
+    @property
+    def matrix_sd(self):
+        """The colour matrix's standard errors (n,)."""
+        return unc.rows_sd(self.matrix_rows)
 
     @property
     def delta_scale(self):
@@ -549,8 +562,8 @@ class FitSession:
                        problem, merr, rounds, misfit,
                        SkyShare() if sky is None else share_at(self, sky, theta))
         fit.jpeg_shared_sd = jpeg_shared_sd(self, J_all, measured, problem.obs.sigma, curv_inv)
-        fit.calibration_sd = calibration_sd(self, J_all, problem, measured, theta, curv_inv)
-        fit.matrix_sd = matrix_sd(self, J_all, problem, measured, theta, curv_inv)
+        fit.calibration_rows = calibration_rows(self, J_all, problem, measured, theta, curv_inv)
+        fit.matrix_rows = matrix_rows(self, J_all, problem, measured, theta, curv_inv)
         fit.pose = pose_share(self, fit, J_all)
         fit_intervals(self, fit)
         iv95 = np.array([fit.intervals[p]["95"] for p in self.names])

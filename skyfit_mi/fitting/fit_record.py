@@ -5,6 +5,7 @@ import numpy as np
 
 from . import uncertainty as unc
 from .chi2 import MEASURED_SE
+from .draws import root_of
 from .held_out import HELD_OUT_FRAMES
 from .intervals import matrix_note
 from .pose import pose_record
@@ -105,35 +106,46 @@ def interval_shares(fit, names):
     return out
 
 
-#: The parameters a light level's error scales by one factor, the radiance with them: the
-#: reflectances C and R (rho_d = C (1 - rho_s) and a metal's C rho_s, thesis 7.1); rho_s is a
-#: fraction in every reading but the colour model's plastic, so it takes its share apart.
-LEVEL_FACTORS = ("C_r", "C_g", "C_b", "R")
+def shared_rows(fit, n):
+    """(sources, rows (E, n)): the errors the sequence's light, calibration and pose share, one
+    signed row per independent error, its effect on the parameters at one sd of it
+    (:func:`~.uncertainty.rows_sd` gives each source's standard errors in the intervals):
+    the calibration's and colour matrix's (:mod:`~.intervals`), the fitted light's coefficients
+    (each an eigen-direction of their covariance, through the parameters' response to them:
+    the sky's level against the sun's moves a lobe's C and rho_s as the fit found), the sun's
+    level (a factor on the reflectances) and the camera pose's angles."""
+    sky = fit.sky
+    parts = {"calibration": fit.calibration_rows, "colour_matrix": fit.matrix_rows,
+             "sun_level": fit.sun_level_sd[None],
+             "pose": np.array(list(fit.pose.shifts.values())).reshape(-1, n)}
+    if sky.response is not None:
+        parts["sky"] = (sky.response @ root_of(sky.light.covariance)).T
+    sources, rows = [], []
+    for k, r in parts.items():
+        r = np.asarray(r, dtype=float).reshape(-1, n)
+        r = r[np.any(r != 0, axis=1)]
+        sources += [k] * len(r)
+        rows.append(r)
+    return sources, np.concatenate(rows)
 
 
 def draws_record(fit, names):
-    """The fit's draws (:mod:`~.draws`) as relight reads them, with the shared standard errors
-    relight adds to them: always the light cache's and JPEG block rounding's (added_sd); under
-    other light, those the sequence's light, calibration and pose share too: level_sd, the
-    calibration's, sky level's and sun level's on C and R (LEVEL_FACTORS: one factor moves
-    them all alike), and shared_sd, the rest (pose, colour matrix; the level's on rho_s and the
-    roughness). Each
-    parameter's at most its 95% interval's Gaussian sd (a linear share at a bound, a roughness
-    at 0.5, can exceed the parameter's whole range)."""
+    """The fit's draws (:mod:`~.draws`) as relight reads them, with the shared errors relight
+    adds to them: always the light cache's and JPEG block rounding's standard errors
+    (added_sd); under other light, those the sequence's light, calibration and pose share
+    too, as signed rows (:func:`shared_rows`: one normal each moves every parameter along its
+    row). Each parameter's column scaled to at most its 95% interval's Gaussian sd (a linear
+    share at a bound, a roughness at 0.5, can exceed the parameter's whole range)."""
     d, n = fit.draws, len(names)
-    level = np.sqrt(sum(np.square(sd) for sd in (fit.calibration_sd, fit.sky.sd,
-                                                 fit.sun_level_sd) if sd is not None)
-                    + np.zeros(n))
-    scaled = np.array([p in LEVEL_FACTORS for p in names])
-    rest = np.sqrt(np.square(fit.pose.sd_of(n)) + np.square(np.where(scaled, 0.0, level))
-                   + (0.0 if fit.matrix_sd is None else np.square(fit.matrix_sd)))
+    sources, rows = shared_rows(fit, n)
     iv = np.array([fit.intervals[p]["95"] for p in names], dtype=float)
     cap = (iv[:, 1] - iv[:, 0]) / (2 * unc.Z["95"])
+    sd = unc.rows_sd(rows)
+    rows = rows * np.divide(np.minimum(sd, cap), sd, out=np.ones(n), where=sd > 0)
     return {"values": d.values.tolist(), "effective_size": d.effective_size,
             "proposals": d.proposals, "rounds": d.rounds,
             "added_sd": np.hypot(fit.cache_sd, fit.jpeg_shared_sd).tolist(),
-            "level_sd": np.minimum(np.where(scaled, level, 0.0), cap).tolist(),
-            "shared_sd": np.minimum(rest, cap).tolist(),
+            "shared_rows": rows.tolist(), "shared_sources": sources,
             "about": DRAWS_NOTE}
 
 
@@ -143,9 +155,9 @@ DRAWS_NOTE = (
     "region's values, exp(-(chi2 - chi2_min) / 2 s), by importance sampling; a relight of "
     "this very sequence draws its bands from them, each widened by added_sd (the light "
     "cache's error and the JPEG blocks' rounding); a relight of other light or another view "
-    "widens them by the errors the sequence's light, calibration and pose share too: level_sd "
-    "(one factor on C and R: the calibration's, sky's and sun's level) and shared_sd "
-    "(the rest, correlated as the covariance)")
+    "widens them by the errors the sequence's light, calibration and pose share too: "
+    "shared_rows, one per independent error (its source in shared_sources), each the "
+    "parameters' change at one sd of it, each drawn as one normal")
 
 
 def measured_range(s, L):

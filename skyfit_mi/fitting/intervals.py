@@ -162,35 +162,37 @@ def frame_means_admit(s, fit, sigma):
     return bool(held - least < unc.LEVELS["95"] * max(1.0, least / (told.sum() - k)))
 
 
-def calibration_sd(s, J, problem, usable, theta, curvature_inverse):
-    """Each parameter's standard error (n,) from a photographed sequence's calibration: each
-    frame's (``per_frame``) or the day's exposure error per channel moves its values by e times
-    them, carried by :func:`~.uncertainty.shared_error_sd` (frames erring apart bend the day's
-    curve); without a reference, the errors of the EXIF labels that scale the given exposure
+def calibration_rows(s, J, problem, usable, theta, curvature_inverse):
+    """Signed rows (E, n) (:func:`~.uncertainty.rows_sd`), one per independent error of a
+    photographed sequence's calibration: each frame's (``per_frame``) or the day's exposure
+    error per channel moves its values by e times them, carried by
+    :func:`~.uncertainty.shared_error_rows` (frames erring apart bend the day's curve); without
+    a reference, the errors of the EXIF labels that scale the given exposure
     (:func:`~skyfit_mi.pipeline.photos.exif_scaled`), each on every channel of the frames with
-    that label. A table's is :func:`~.uncertainty.calibration_sd`. Each adds the errors of the
-    level every frame shares (:func:`~.uncertainty.shared_level_sd`: the references'
+    that label. A table's are :func:`~.uncertainty.calibration_rows`. Each adds the errors of
+    the level every frame shares (:func:`~.uncertainty.shared_level_rows`: the references'
     reflectances', and an uncorrected falloff's between the references and the region)."""
     cal = (s.doc.get("ingest") or {}).get("calibration") or {}
     loading = None if s.obs.rays is not None else exif_scaled(s.doc, s.obs.frames)
     vignetting = unc.region_vignetting(s.doc, s.obs.pixels)
     if loading is None and (s.obs.rays is not None or not cal.get("scale_relative_sd")):
-        return unc.calibration_sd(s.doc, s.names, theta, vignetting)
+        return unc.calibration_rows(s.doc, s.names, theta, vignetting)
     Js = J * problem.value_scale(theta)[..., None]          # per relative error of a value
     sigma = problem.obs.sigma
     if loading is not None:                       # every channel of a label's frames alike
-        sd = unc.shared_error_sd(Js, usable, sigma, np.full((J.shape[1], 1), EXIF_LABEL_SD),
-                                 np.ones((3, 1)), curvature_inverse, loading)
+        rows = unc.shared_error_rows(Js, usable, sigma,
+                                     np.full((J.shape[1], 1), EXIF_LABEL_SD), np.ones((3, 1)),
+                                     curvature_inverse, loading)
     elif cal.get("per_frame"):
         shared = np.tile(np.asarray(frame_calibration_sd(s), dtype=float),
                          (J.shape[1], 1))
-        sd = unc.shared_error_sd(Js, usable, sigma, shared, np.eye(3), curvature_inverse)
+        rows = unc.shared_error_rows(Js, usable, sigma, shared, np.eye(3), curvature_inverse)
     else:                                         # one error per channel for every frame
         P, T, C, n = J.shape
         Js, usable, sigma = (a.reshape((P * T, 1) + a.shape[2:]) for a in (Js, usable, sigma))
         shared = np.asarray(cal["scale_relative_sd"], dtype=float)[None, :]
-        sd = unc.shared_error_sd(Js, usable, sigma, shared, np.eye(3), curvature_inverse)
-    return np.hypot(sd, unc.shared_level_sd(s.doc, s.names, theta, vignetting))
+        rows = unc.shared_error_rows(Js, usable, sigma, shared, np.eye(3), curvature_inverse)
+    return np.concatenate([rows, unc.shared_level_rows(s.doc, s.names, theta, vignetting)])
 
 
 def frame_calibration_sd(s):
@@ -199,21 +201,21 @@ def frame_calibration_sd(s):
     return cal["frame_relative_sd"] if cal.get("per_frame") else None
 
 
-def matrix_sd(s, J, problem, usable, theta, curvature_inverse):
-    """Each parameter's standard error (n,) from the colour matrix (ingest's ``colour_matrix``
-    record, each entry of its error E relative_sd): after grey-card calibration channel c reads
-    L_c + sum_(j != c) E_cj (L_j - L_c). Each of the six E_cj is one error for the day, carried
-    by :func:`~.uncertainty.shared_error_sd` with the model's L_j / L_c at ``theta``; zeros
-    without the record or for a table."""
+def matrix_rows(s, J, problem, usable, theta, curvature_inverse):
+    """Signed rows (E, n) (:func:`~.uncertainty.rows_sd`) from the colour matrix (ingest's
+    ``colour_matrix`` record, each entry of its error E relative_sd): after grey-card
+    calibration channel c reads L_c + sum_(j != c) E_cj (L_j - L_c). Each of the six E_cj is one
+    error for the day, carried by :func:`~.uncertainty.shared_error_rows` with the model's
+    L_j / L_c at ``theta``; none without the record or for a table."""
     rel = ((s.doc.get("ingest") or {}).get("colour_matrix") or {}).get("relative_sd")
     n = len(s.names)
     if s.obs.rays is not None or not rel:
-        return np.zeros(n)
+        return np.zeros((0, n))
     L = problem.model.radiance(theta)
     value = problem.value_scale(theta)
     P, T, C, _ = J.shape
     flat = (P * T, 1, C, n)
-    var = np.zeros(n)
+    rows = []
     for c in range(C):
         for j in range(C):
             if j == c:
@@ -222,10 +224,10 @@ def matrix_sd(s, J, problem, usable, theta, curvature_inverse):
                 move = np.nan_to_num(value[..., c] * (L[..., j] / L[..., c] - 1.0))
             Jk = np.zeros_like(J)
             Jk[..., c, :] = J[..., c, :] * move[..., None]
-            var += unc.shared_error_sd(Jk.reshape(flat), usable.reshape(flat[:3]),
-                                       problem.obs.sigma.reshape(flat[:3]), [[rel]],
-                                       np.ones((C, 1)), curvature_inverse) ** 2
-    return np.sqrt(var)
+            rows.append(unc.shared_error_rows(Jk.reshape(flat), usable.reshape(flat[:3]),
+                                              problem.obs.sigma.reshape(flat[:3]), [[rel]],
+                                              np.ones((C, 1)), curvature_inverse))
+    return np.concatenate(rows)
 
 
 def matrix_note(s):
@@ -243,7 +245,8 @@ def jpeg_shared_sd(s, J, usable, sigma, curvature_inverse):
     shared = jpeg_frame_sd(s)
     if shared is None:
         return np.zeros(len(s.names))
-    return unc.shared_error_sd(J, usable, sigma, shared, YCC_TO_RGB, curvature_inverse)
+    return unc.rows_sd(unc.shared_error_rows(J, usable, sigma, shared, YCC_TO_RGB,
+                                             curvature_inverse))
 
 
 def jpeg_frame_sd(s):

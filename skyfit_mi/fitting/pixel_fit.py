@@ -28,7 +28,7 @@ from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, grid_chi2, grid_chi2_device,
                                     linear_curvature, linear_observations, near_saturation)
 from .sky_fit import LEVEL_SCALED, light_level_sd, skies_at_level
-from .uncertainty import (Z, calibration_sd, colour_matrix_sd, colour_twins,
+from .uncertainty import (Z, calibration_rows, colour_matrix_sd, colour_twins, rows_sd,
                           vignetting_error, widen_relative)
 
 #: Light-cache samples per pixel of a map (positions, directions): a sixteenth of a region
@@ -148,7 +148,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     count = np.bincount(groups, minlength=n)
     vignetting = np.abs(np.bincount(groups, weights=vignetting_error(doc, pixels), minlength=n)
                         / np.maximum(count, 1))
-    spread = Z["95"] * np.sqrt(sd ** 2 + calibration_sd(doc, names, theta, vignetting) ** 2
+    spread = Z["95"] * np.sqrt(sd ** 2 + rows_sd(calibration_rows(doc, names, theta, vignetting)) ** 2
                                + colour_matrix_sd(doc, names, theta) ** 2 + region_sd ** 2)
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)

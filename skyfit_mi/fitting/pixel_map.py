@@ -111,12 +111,13 @@ def _settings(doc, regions, o, sky, first):
 def _labels_share(doc, result, pixels):
     """A region fit's ``result`` share of the EXIF labels' error per parameter: its
     ``calibration_error_sd`` without the errors of the level every frame shares
-    (:func:`~.uncertainty.shared_level_sd`, taken out in quadrature), which each pixel of a map
+    (:func:`~.uncertainty.shared_level_rows`, taken out in quadrature), which each pixel of a map
     takes at its own place."""
     cal = result.get("calibration_error_sd") or {}
     names = [p for p in result["parameters"] if p in cal]
     theta = np.array([result["parameters"][p] for p in names])
-    shared = unc.shared_level_sd(doc, names, theta, unc.region_vignetting(doc, pixels))
+    shared = unc.rows_sd(unc.shared_level_rows(doc, names, theta,
+                                               unc.region_vignetting(doc, pixels)))
     return {p: float(np.sqrt(max(cal[p] ** 2 - v ** 2, 0.0))) for p, v in zip(names, shared)}
 
 

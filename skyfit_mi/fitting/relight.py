@@ -22,7 +22,7 @@ from ..conventions import angles_from_direction
 from ..errors import SkyfitError
 from ..files import FolderLock, ensure_dir, figure_png, write_bytes, write_json, write_text
 from .chi2 import subsample_region
-from .draws import correlation, interval_draws, root_of
+from .draws import interval_draws
 from .fit import FitCache, FitSession, trace_sessions
 from .geometry import ANGLES_BEYOND_DEG, angles_beyond, highlight_beyond
 from .held_out import local_error_scale
@@ -792,8 +792,8 @@ def parameter_draws(result, s, n, rng):
     combinations its data allow (a grey plastic's metal twin, a lobe the sun never showed),
     each widened by the errors that do not cancel: on the fitted sequence the light cache's
     and JPEG rounding's (``added_sd``); elsewhere those the sequence's light, calibration and
-    pose share as well: ``level_sd`` one factor on C and R, ``shared_sd`` correlated
-    as the covariance; and a roughness whose interval reaches its bound beyond what the data
+    pose share as well, one normal for each of their signed ``shared_rows``
+    (:func:`~.fit_record.shared_rows`); and a roughness whose interval reaches its bound beyond what the data
     told (``open_below``: the sky's shape near the mirror unknown) spread over that reach too
     (:func:`_open_below`). A fit without such draws (its sampling failed, or written before
     them), or whose intervals reach over an undetermined sky level, draws from its intervals
@@ -809,10 +809,8 @@ def parameter_draws(result, s, n, rng):
                                                                    size=n - 1)]
         draws = sets + rng.standard_normal(sets.shape) * np.asarray(own["added_sd"])
         if not same:
-            draws += (rng.standard_normal((n - 1, 1)) * np.asarray(own["level_sd"])
-                      + rng.standard_normal(sets.shape) @ root_of(
-                          correlation(cov, len(names))
-                          * np.outer(own["shared_sd"], own["shared_sd"])).T)
+            rows = np.asarray(own["shared_rows"], dtype=float).reshape(-1, len(names))
+            draws += rng.standard_normal((n - 1, len(rows))) @ rows
             return np.vstack([theta, _open_below(result, names, np.clip(draws, lower, upper),
                                                  rng)])
     else:
@@ -830,7 +828,7 @@ def draws_source(result, s):
         return "its likelihood draws"
     if (result.get("sky") or {}).get("undetermined_span") is not None:
         return "its intervals (they reach over a sky level its data left undetermined)"
-    if not {"level_sd", "shared_sd"} <= set(own):
+    if "shared_rows" not in own:
         return "its intervals (a fit JSON from before its draws held the day's shared errors)"
     return "its likelihood draws, widened by its day's light, calibration and pose errors"
 

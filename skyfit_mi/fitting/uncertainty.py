@@ -141,23 +141,40 @@ def widen_relative(value, interval, extra, lower, upper):
     return new_lo, new_hi
 
 
-def _level_sd(u, names, theta):
-    """The standard error per parameter (n,) or (G, n) from a relative error ``u`` (3,) or
-    (G, 3) of the values per channel: C_c by its channel's, R and rho_s by the rms, roughness
-    none."""
+def rows_sd(rows):
+    """The standard errors (..., n) of independent errors given as signed ``rows`` (..., E, n):
+    each row one error's effect on the parameters at one sd of it."""
+    return np.sqrt(np.sum(np.square(rows), axis=-2))
+
+
+def _level_rows(u, names, theta, independent=True):
+    """Signed rows (..., E, n) (:func:`rows_sd`) from a relative error ``u`` (3,) or (G, 3) of
+    the values per channel: C_c by its channel's, R and rho_s by the rms, roughness none. Each
+    channel's error its own row where they are ``independent`` (a reference's measured level
+    per channel); else one row, every channel's moving together (a reflectance's level)."""
     u = np.asarray(u, dtype=float)
-    grey = np.sqrt(np.mean(u ** 2, axis=-1))
-    rel = {"C_r": u[..., 0], "C_g": u[..., 1], "C_b": u[..., 2], "R": grey, "rho_s": grey}
-    return np.stack([rel.get(p, np.zeros_like(grey)) for p in names], -1) * np.abs(theta)
+    if independent:
+        channel = u[..., :, None] * np.eye(3)                            # (..., 3 rows, 3)
+        grey = u / np.sqrt(3.0)
+    else:
+        channel = u[..., None, :]
+        grey = np.sqrt(np.mean(u ** 2, axis=-1))[..., None]
+    rel = {"C_r": channel[..., 0], "C_g": channel[..., 1], "C_b": channel[..., 2], "R": grey,
+           "rho_s": grey}
+    return np.stack([rel.get(p, np.zeros_like(grey)) for p in names], -1) \
+        * np.abs(np.asarray(theta, dtype=float))[..., None, :]
 
 
-def reference_sd(doc, names, theta):
-    """The standard error per parameter (n,) or (G, n) from the error of the references'
-    reflectances (``ingest --calibrate NAME=RHO+-SD``), which sets the level of every fitted
-    reflectance; zeros without one."""
-    theta = np.asarray(theta, dtype=float)
+def _no_rows(theta):
+    return np.zeros(np.shape(theta)[:-1] + (0, np.shape(theta)[-1]))
+
+
+def reference_rows(doc, names, theta):
+    """Signed rows (..., 1, n) from the error of the references' reflectances (``ingest
+    --calibrate NAME=RHO+-SD``), which sets the level of every fitted reflectance at once;
+    none without one."""
     u = ((doc.get("ingest") or {}).get("calibration") or {}).get("reference_relative_sd")
-    return _level_sd(u, names, theta) if u else np.zeros(theta.shape)
+    return _level_rows(u, names, theta, independent=False) if u else _no_rows(theta)
 
 
 def vignetting_error(doc, pixels):
@@ -187,23 +204,24 @@ def region_vignetting(doc, pixels):
         if pixels is not None and len(pixels) else 0.0
 
 
-def shared_level_sd(doc, names, theta, vignetting=0.0):
-    """The standard error per parameter (n,) or (G, n) from errors of the level every frame
-    shares: the references' reflectances' (:func:`reference_sd`) and the uncorrected falloff's
-    relative error ``vignetting`` (a number, or (G,); :func:`vignetting_error`)."""
+def shared_level_rows(doc, names, theta, vignetting=0.0):
+    """Signed rows (..., E, n) from errors of the level every frame shares: the references'
+    reflectances' (:func:`reference_rows`) and the uncorrected falloff's relative error
+    ``vignetting`` (a number, or (G,); :func:`vignetting_error`), each on every channel."""
     theta = np.asarray(theta, dtype=float)
     v = np.asarray(vignetting, dtype=float)[..., None] * np.ones(3)
-    return np.hypot(reference_sd(doc, names, theta), _level_sd(v, names, theta))
+    return np.concatenate([reference_rows(doc, names, theta),
+                           _level_rows(v, names, theta, independent=False)], axis=-2)
 
 
-def calibration_sd(doc, names, theta, vignetting=0.0):
-    """The standard error per parameter (n,) or (G, n) from the calibration's per-channel
-    relative error (:func:`_level_sd`) and the errors of the level every frame shares
-    (:func:`shared_level_sd`)."""
+def calibration_rows(doc, names, theta, vignetting=0.0):
+    """Signed rows (..., E, n) from the calibration's relative error per channel, each
+    channel's its own (:func:`_level_rows`), and the errors of the level every frame shares
+    (:func:`shared_level_rows`)."""
     theta = np.asarray(theta, dtype=float)
     u = ((doc.get("ingest") or {}).get("calibration") or {}).get("scale_relative_sd")
-    scale = _level_sd(u, names, theta) if u else np.zeros(theta.shape)
-    return np.hypot(scale, shared_level_sd(doc, names, theta, vignetting))
+    scale = _level_rows(u, names, theta) if u else _no_rows(theta)
+    return np.concatenate([scale, shared_level_rows(doc, names, theta, vignetting)], axis=-2)
 
 
 def colour_matrix_sd(doc, names, theta):
@@ -224,23 +242,23 @@ def colour_matrix_sd(doc, names, theta):
     return out
 
 
-def shared_error_sd(J, usable, sigma, shared_sd, mixing, curvature_inverse, loading=None):
-    """The standard error per parameter (n,) from errors every value of a region shares within a
+def shared_error_rows(J, usable, sigma, shared_sd, mixing, curvature_inverse, loading=None):
+    """Signed rows (E, n) (:func:`rows_sd`) from errors every value of a region shares within a
     frame (e.g. a JPEG's block rounding), which chi-square would let shrink as 1 / sqrt(pixels).
 
     ``J`` (P, T, C, n), ``usable`` and ``sigma`` (P, T, C), ``shared_sd`` (T, K) each frame's
     independent shared errors' sds, ``mixing`` (C, K) how each reaches the channels. With
-    g = sum over the frame's values of J mixing / sigma, the covariance is
-    sum_(T,K) sd^2 (J^T J)^-1 g g^T (J^T J)^-1 (``curvature_inverse`` = (J^T J)^-1). Errors
-    that several frames share: ``loading`` (E, T), how each of E independent errors reaches
-    the frames (g summed over them), ``shared_sd`` then the same for every frame."""
+    g = sum over the frame's values of J mixing / sigma times the error's sd, each error's row
+    is g^T (J^T J)^-1 (``curvature_inverse`` = (J^T J)^-1), the parameters' least-squares
+    response to it. Errors that several frames share: ``loading`` (E, T), how each of E
+    independent errors reaches the frames (g summed over them), ``shared_sd`` then the same for
+    every frame."""
     w = np.where(usable[..., None], J / np.where(usable, sigma, np.inf)[..., None], 0.0)
     g = np.einsum("ptcn,ck->tkn", w, np.asarray(mixing, dtype=float))      # (T, K, n)
     g = g * np.asarray(shared_sd, dtype=float)[..., None]
     if loading is not None:
         g = np.einsum("et,tkn->ekn", np.asarray(loading, dtype=float), g)
-    d = g.reshape(-1, g.shape[-1]) @ curvature_inverse
-    return np.sqrt(np.sum(d * d, axis=0))
+    return g.reshape(-1, g.shape[-1]) @ curvature_inverse
 
 
 def profile_interval(grid, profile, s2=1.0, ripple=0.0):

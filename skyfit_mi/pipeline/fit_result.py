@@ -74,9 +74,9 @@ def read_fit_result(path):
     draws = r.get("draws")
     if draws is not None and not _is_draws(draws, len(names)):
         raise SkyfitError(f"{path}: draws must be {{\"values\": a list of [{', '.join(names)}] "
-                          "sets of finite numbers, \"added_sd\" (and \"level_sd\", "
-                          "\"shared_sd\"): one number >= 0 each, ...}; give a fit_NAME.json "
-                          "that `skyfit fit` wrote, or leave out draws.")
+                          "sets of finite numbers, \"added_sd\": one number >= 0 each, "
+                          "\"shared_rows\" (where given): a list of such sets, ...}; give a "
+                          "fit_NAME.json that `skyfit fit` wrote, or leave out draws.")
     cov = r.get("covariance")
     if cov is not None and not _is_covariance(cov):
         raise SkyfitError(f"{path}: covariance must be {{\"names\": [{', '.join(names)}], "
@@ -169,15 +169,16 @@ def _is_kappa(record):
 
 def _is_draws(draws, n):
     """Whether ``draws`` is a fit's draws from its likelihood as relight reads them: a
-    non-empty list of sets of ``n`` finite numbers, and ``n`` standard errors >= 0: added_sd,
-    and level_sd and shared_sd where given (relight draws from the intervals without them)."""
+    non-empty list of sets of ``n`` finite numbers, ``n`` standard errors >= 0 (added_sd), and
+    where given a list of ``n`` finite numbers per shared error (shared_rows; relight draws from
+    the intervals without them)."""
     if not isinstance(draws, dict):
         return False
-    values = draws.get("values")
-    sds = ["added_sd"] + [k for k in ("level_sd", "shared_sd") if k in draws]
+    values, rows = draws.get("values"), draws.get("shared_rows", [])
     return (isinstance(values, list) and len(values) > 0
             and all(_numbers(v, n) for v in values)
-            and all(_numbers(draws.get(k), n) and min(draws[k]) >= 0 for k in sds))
+            and _numbers(draws.get("added_sd"), n) and min(draws["added_sd"]) >= 0
+            and isinstance(rows, list) and all(_numbers(r, n) for r in rows))
 
 
 def _is_covariance(cov):
