@@ -793,9 +793,9 @@ def parameter_draws(result, s, n, rng):
     each widened by the errors that do not cancel: on the fitted sequence the light cache's
     and JPEG rounding's (``added_sd``); elsewhere those the sequence's light, calibration and
     pose share as well, one normal for each of their signed ``shared_rows``
-    (:func:`~.fit_record.shared_rows`); and a roughness whose interval reaches its bound beyond what the data
-    told (``open_below``: the sky's shape near the mirror unknown) spread over that reach too
-    (:func:`_open_below`). A fit without such draws (its sampling failed, or written before
+    (:func:`~.fit_record.shared_rows`); and a roughness whose interval reaches its bound beyond
+    what the data told (``open_below``: the sky's shape near the mirror unknown) spread over
+    that reach too (:func:`_open_below`). A fit without such draws (its sampling failed, or written before
     them), or whose intervals reach over an undetermined sky level, draws from its intervals
     (:func:`~.draws.interval_draws`). Clipped to the bounds."""
     names, lower, upper = s.names, s.lower, s.upper
