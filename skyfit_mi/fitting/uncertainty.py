@@ -150,8 +150,9 @@ def rows_sd(rows):
 def _level_rows(u, names, theta, independent=True):
     """Signed rows (..., E, n) (:func:`rows_sd`) from a relative error ``u`` (3,) or (G, 3) of
     the values per channel: C_c by its channel's, R and rho_s by the rms, roughness none. Each
-    channel's error its own row where they are ``independent`` (a reference's measured level
-    per channel); else one row, every channel's moving together (a reflectance's level)."""
+    channel's error its own row where they are ``independent`` (the level a grey card's pixels
+    measure in each channel); else one row, every channel's moving together (the card's stated
+    reflectance, a lens falloff)."""
     u = np.asarray(u, dtype=float)
     if independent:
         channel = u[..., :, None] * np.eye(3)                            # (..., 3 rows, 3)
@@ -166,6 +167,7 @@ def _level_rows(u, names, theta, independent=True):
 
 
 def _no_rows(theta):
+    """No rows (..., 0, n) for parameters ``theta`` (..., n)."""
     return np.zeros(np.shape(theta)[:-1] + (0, np.shape(theta)[-1]))
 
 
