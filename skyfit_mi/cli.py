@@ -272,6 +272,7 @@ def _fit(args):
     from .fitting.fit import FitCache, fit_regions
     from .fitting.light import LightOptions
     from .fitting.report import write_fit, write_summary
+    from .pipeline.fit_result import check_fit_folder
     from .pipeline.manifest import is_table, load_manifest
     from .render.fit_model import BY_COUNT, check_fit_normalisation, check_start
 
@@ -329,6 +330,7 @@ def _fit(args):
         print(f"wrote the maps and map_summary.json in {out} ({s['wall_time_s']:.1f} s)")
         return
     out = check_dir(Path(args.output) if args.output else root)
+    check_fit_folder(out, doc.get("run_id"), [name for name, _ in regions])
     with FolderLock(out):                # one fit at a time into a folder
         kept = {}
         for name, pixels in regions:

@@ -258,7 +258,9 @@ def test_a_region_that_is_no_material_is_refused(tmp_path, mi):
         ingest_table(table, spec, tmp_path / "out", log=lambda *a: None)
 
 
-def test_the_cli_takes_a_table_and_refuses_photo_options_with_it(tmp_path, mi):
+def test_the_cli_takes_a_table_and_refuses_photo_options_with_it(tmp_path, mi, capsys):
+    """... and a fit into a folder that holds another sequence's fit of another region (its
+    fits.csv would mix the two) is refused before any fitting."""
     from skyfit_mi.cli import main
 
     spec = _spec({"type": "clear"}, tmp_path)
@@ -270,6 +272,15 @@ def test_the_cli_takes_a_table_and_refuses_photo_options_with_it(tmp_path, mi):
     assert main(["fit", str(tmp_path / "o"), "--region", "disc=rect:0,0,1,1"]) == 2
     doc = json.loads((tmp_path / "o" / "manifest.json").read_text())
     assert doc["source"] == "ingest" and len(doc["frames"]) == 3
+    fits = tmp_path / "fits"
+    fits.mkdir()
+    (fits / "fit_wall.json").write_text(json.dumps({"region": "wall",
+                                                    "sequence_run_id": "another"}))
+    capsys.readouterr()
+    assert main(["fit", str(tmp_path / "o"), "--all", "-o", str(fits)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "holds fit_wall.json, a fit of another sequence or run" in err and "\n" not in err
+    assert sorted(p.name for p in fits.iterdir()) == ["fit_wall.json"]
 
 
 @pytest.mark.parametrize("values, message", [

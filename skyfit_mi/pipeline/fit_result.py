@@ -122,6 +122,23 @@ def load_fits(paths):
     return out
 
 
+def check_fit_folder(folder, run_id, regions):
+    """Refuse to fit ``regions`` of the sequence run ``run_id`` into ``folder`` where it holds a
+    fit of another region of another run (another sequence, or this one rendered or ingested
+    again since): its ``fits.csv`` and any relight of the folder would mix the two."""
+    for f in sorted(Path(folder).glob("fit_*.json")):
+        try:
+            r = json.loads(f.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            continue
+        other = r.get("sequence_run_id") if isinstance(r, dict) else None
+        if other not in (None, run_id) and r.get("region") not in regions:
+            raise SkyfitError(f"{folder} holds {f.name}, a fit of another sequence or run "
+                              f"(run {other}; this one is run {run_id}), which its {SUMMARY_NAME} "
+                              "and a relight of the folder would mix with these: give another "
+                              "-o folder, or move that fit away.")
+
+
 def _folder_run(path):
     """The run id of the sequence whose folder holds the fits at ``path`` (a folder or its
     ``fits.csv``); None where it holds no sequence."""
