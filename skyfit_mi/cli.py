@@ -330,8 +330,8 @@ def _fit(args):
         print(f"wrote the maps and map_summary.json in {out} ({s['wall_time_s']:.1f} s)")
         return
     out = check_dir(Path(args.output) if args.output else root)
-    check_fit_folder(out, doc.get("run_id"), [name for name, _ in regions])
     with FolderLock(out):                # one fit at a time into a folder
+        check_fit_folder(out, doc.get("run_id"), [name for name, _ in regions])
         kept = {}
         for name, pixels in regions:
             kept[name] = pixels if pixels is None else subsample_region(

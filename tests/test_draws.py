@@ -229,7 +229,7 @@ def test_the_shared_errors_a_fit_records_for_its_draws_are_its_intervals_signed_
         draws=Draws(np.zeros((4, 2)), 300.0, 1000, 3), theta=np.array([0.5, 0.5]),
         calibration_rows=calibration, matrix_rows=np.zeros((0, 2)),
         sky=SimpleNamespace(response=response, light=SimpleNamespace(covariance=light_cov)),
-        sun_level_sd=np.array([0.02, 0.0]), pose=SimpleNamespace(shifts={"yaw": np.array(
+        sun_level_rows=np.array([[0.02, 0.0]]), pose=SimpleNamespace(shifts={"yaw": np.array(
             [0.01, -0.01])}), cache_sd=np.zeros(2), jpeg_shared_sd=np.zeros(2),
         intervals={"R": {"95": [0.3, 0.7]}, "sigma_alpha": {"95": [0.0, 0.5]}})
     d = draws_record(fit, ["R", "sigma_alpha"])
@@ -250,27 +250,34 @@ def test_the_shared_errors_a_fit_records_for_its_draws_are_its_intervals_signed_
 
 
 def test_a_level_error_moves_every_reflectance_alike_whatever_their_correlation():
-    """Under other light a 5% level error (the grey card's, the sun's: one shared row) moves C_r
-    and C_g by one factor: a value proportional to C_r + C_g keeps a 5% spread though the data anticorrelate
-    them (-0.8; drawn as the covariance says, a level's spread fell to 1.6%), and rho_s (a
-    fraction of the reflectance here) and the roughness do not move."""
+    """Under other light a 5% level error (the grey card's: one shared row, level_rows) moves
+    C_r and C_g by one factor: a value proportional to C_r + C_g keeps a 5% spread though the
+    data anticorrelate them (-0.8; drawn as the covariance says, a level's spread fell to
+    1.6%). A metal's rho_s (a fraction of C, thesis 7.1) takes its share apart, a plastic's
+    (its highlight's reflectance) moves with C; the roughness does not move."""
     from types import SimpleNamespace
 
     from skyfit_mi.fitting.relight import parameter_draws
+    from skyfit_mi.fitting.uncertainty import level_rows
 
     names = ("C_r", "C_g", "rho_s", "sigma_alpha")
-    theta = np.array([0.5, 0.5, 0.6, 0.1])
-    result = {"parameters": dict(zip(names, theta)), "sequence_run_id": "day",
-              "intervals": {k: {"95": [0.0, 1.0]} for k in names},
-              "covariance": {"names": list(names), "matrix": [
-                  [1.0, -0.8, 0.5, 0.2], [-0.8, 1.0, -0.5, 0.0], [0.5, -0.5, 1.0, 0.0],
-                  [0.2, 0.0, 0.0, 1.0]]},
-              "draws": {"values": [theta.tolist()], "added_sd": [0] * 4,
-                        "shared_rows": [[0.025, 0.025, 0.0, 0.0]]}}
     s = SimpleNamespace(names=names, lower=np.zeros(4), upper=np.ones(4), run_id="another day")
-    d = parameter_draws(result, s, 20000, np.random.default_rng(3))[1:]
-    assert np.std(d[:, 0] + d[:, 1]) == pytest.approx(0.05, rel=0.05)
-    assert np.all(d[:, 2:] == theta[2:])
+    for rho_s, together in ((0.6, False), (0.1, True)):
+        theta = np.array([0.5, 0.5, rho_s, 0.1])
+        rows = level_rows([0.05] * 3, names, theta, independent=False)
+        result = {"parameters": dict(zip(names, theta)), "sequence_run_id": "day",
+                  "intervals": {k: {"95": [0.0, 1.0]} for k in names},
+                  "covariance": {"names": list(names), "matrix": [
+                      [1.0, -0.8, 0.5, 0.2], [-0.8, 1.0, -0.5, 0.0], [0.5, -0.5, 1.0, 0.0],
+                      [0.2, 0.0, 0.0, 1.0]]},
+                  "draws": {"values": [theta.tolist()], "added_sd": [0] * 4,
+                            "shared_rows": rows.tolist()}}
+        d = parameter_draws(result, s, 20000, np.random.default_rng(3))[1:]
+        assert np.std(d[:, 0] + d[:, 1]) == pytest.approx(0.05, rel=0.05)
+        assert np.std(d[:, 2]) == pytest.approx(0.05 * rho_s, rel=0.05)
+        r = np.corrcoef(d[:, 0], d[:, 2])[0, 1]
+        assert r > 0.99 if together else abs(r) < 0.05
+        assert np.all(d[:, 3] == theta[3])
 
 
 def test_a_roughness_open_below_spreads_over_its_reach_in_other_light():

@@ -77,7 +77,8 @@ class FitState:
     method_result, global_result : the method's and the global search's result dicts
     model_noise_by_sigma, noise_chi2 : the cache's own chi-square by roughness; the mean and
         variance of noise's chi-square
-    intervals, rise, cache_noise_chi2, cache_sd, sun_level_sd : by :func:`~.intervals.fit_intervals`
+    intervals, rise, cache_noise_chi2, cache_sd, sun_level_rows : by
+        :func:`~.intervals.fit_intervals` (sun_level_rows: signed rows, as calibration_rows)
     data_intervals : (n, 2) the 95% intervals of the data's chi-square alone, before the errors
         the sequence shares (light, calibration, pose, ...) widen them: the draws' first proposal
     search_open : {parameter: [(end, x)]} ends of 95% intervals taken to the bound where the
@@ -114,7 +115,7 @@ class FitState:
     cache_noise_chi2: float = None
     cache_sd: np.ndarray = None
     calibration_rows: np.ndarray = None
-    sun_level_sd: np.ndarray = None
+    sun_level_rows: np.ndarray = None
     jpeg_shared_sd: np.ndarray = None
     matrix_rows: np.ndarray = None
     pose: object = None
@@ -127,6 +128,11 @@ class FitState:
     def calibration_sd(self):
         """The calibration's standard errors (n,)."""
         return unc.rows_sd(self.calibration_rows)
+
+    @property
+    def sun_level_sd(self):
+        """The sun level's standard errors (n,)."""
+        return unc.rows_sd(self.sun_level_rows)
 
     @property
     def matrix_sd(self):

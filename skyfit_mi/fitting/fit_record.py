@@ -116,7 +116,7 @@ def shared_rows(fit, n):
     level (a factor on the reflectances) and the camera pose's angles."""
     sky = fit.sky
     parts = {"calibration": fit.calibration_rows, "colour_matrix": fit.matrix_rows,
-             "sun_level": fit.sun_level_sd[None],
+             "sun_level": fit.sun_level_rows,
              "pose": np.array(list(fit.pose.shifts.values())).reshape(-1, n)}
     if sky.response is not None:
         parts["sky"] = (sky.response @ root_of(sky.light.covariance)).T
@@ -157,7 +157,8 @@ DRAWS_NOTE = (
     "cache's error and the JPEG blocks' rounding); a relight of other light or another view "
     "widens them by the errors the sequence's light, calibration and pose share too: "
     "shared_rows, one per independent error (its source in shared_sources), each the "
-    "parameters' change at one sd of it, each drawn as one normal")
+    "parameters' change at one sd of it, each drawn as one normal; each parameter's column "
+    "scaled to at most its 95% interval's Gaussian sd")
 
 
 def measured_range(s, L):

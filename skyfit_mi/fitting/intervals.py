@@ -23,7 +23,7 @@ PROFILE_RIDGE_ITERATIONS = 40
 
 def fit_intervals(s, fit):
     """Set ``fit``'s intervals, data_intervals, rise, cache_noise_chi2, cache_sd and
-    sun_level_sd: the covariance's intervals, or the profile's for rho_s and sigma_alpha of a
+    sun_level_rows: the covariance's intervals, or the profile's for rho_s and sigma_alpha of a
     global fit (the data's, ``data_intervals`` at 95%), each widened by the cache's,
     calibration's, JPEG rounding's, colour matrix's, sky's and pose's errors and (a factor on
     the reflectances) the sun level's."""
@@ -103,7 +103,9 @@ def fit_intervals(s, fit):
         fit.search_open.pop("sigma_alpha", None)      # the lower end open for the data's reason
     fit.intervals, fit.rise, fit.cache_noise_chi2 = intervals, rise, ripple
     fit.cache_sd = mc_sd
-    fit.sun_level_sd = sun_rel * np.abs(theta)
+    # the sun's level: one error on every reflectance (rho_s's share its own where a fraction)
+    fit.sun_level_rows = unc.level_rows(np.full(3, np.max(sun_rel, initial=0.0)), names, theta,
+                                        independent=False)
 
 
 def sky_only_reach(s, shape_known, intervals, fit=None):

@@ -148,7 +148,8 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     count = np.bincount(groups, minlength=n)
     vignetting = np.abs(np.bincount(groups, weights=vignetting_error(doc, pixels), minlength=n)
                         / np.maximum(count, 1))
-    spread = Z["95"] * np.sqrt(sd ** 2 + rows_sd(calibration_rows(doc, names, theta, vignetting)) ** 2
+    calibration = rows_sd(calibration_rows(doc, names, theta, vignetting))
+    spread = Z["95"] * np.sqrt(sd ** 2 + calibration ** 2
                                + colour_matrix_sd(doc, names, theta) ** 2 + region_sd ** 2)
     lower, upper = bounds(model)
     fit["lo"] = np.maximum(theta - np.hypot(theta - fit["lo"], spread), lower)

@@ -795,9 +795,9 @@ def parameter_draws(result, s, n, rng):
     pose share as well, one normal for each of their signed ``shared_rows``
     (:func:`~.fit_record.shared_rows`); and a roughness whose interval reaches its bound beyond
     what the data told (``open_below``: the sky's shape near the mirror unknown) spread over
-    that reach too (:func:`_open_below`). A fit without such draws (its sampling failed, or written before
-    them), or whose intervals reach over an undetermined sky level, draws from its intervals
-    (:func:`~.draws.interval_draws`). Clipped to the bounds."""
+    that reach too (:func:`_open_below`). A fit without such draws (its sampling failed, or
+    written before them), or whose intervals reach over an undetermined sky level, draws from
+    its intervals (:func:`~.draws.interval_draws`). Clipped to the bounds."""
     names, lower, upper = s.names, s.lower, s.upper
     theta = np.array([result["parameters"][k] for k in names], dtype=float)
     own = result.get("draws")
@@ -829,7 +829,8 @@ def draws_source(result, s):
     if (result.get("sky") or {}).get("undetermined_span") is not None:
         return "its intervals (they reach over a sky level its data left undetermined)"
     if "shared_rows" not in own:
-        return "its intervals (a fit JSON from before its draws held the day's shared errors)"
+        return ("its intervals (a fit JSON written before its draws kept the day's shared "
+                "errors as signed rows: fit again to draw from its likelihood)")
     return "its likelihood draws, widened by its day's light, calibration and pose errors"
 
 

@@ -147,23 +147,38 @@ def rows_sd(rows):
     return np.sqrt(np.sum(np.square(rows), axis=-2))
 
 
-def _level_rows(u, names, theta, independent=True):
+def level_rows(u, names, theta, independent=True):
     """Signed rows (..., E, n) (:func:`rows_sd`) from a relative error ``u`` (3,) or (G, 3) of
     the values per channel: C_c by its channel's, R and rho_s by the rms, roughness none. Each
     channel's error its own row where they are ``independent`` (the level a grey card's pixels
     measure in each channel); else one row, every channel's moving together (the card's stated
-    reflectance, a lens falloff)."""
+    reflectance, a lens falloff). rho_s moves with the level where it is a reflectance (the
+    colour model's plastic, thesis 7.1: its highlight rho_s itself); elsewhere a fraction of R
+    or C that a level leaves (diffuse R (1 - rho_s), highlight R rho_s), its share an
+    independent row of its own, as wide."""
     u = np.asarray(u, dtype=float)
+    theta = np.asarray(theta, dtype=float)
+    rms = np.sqrt(np.mean(u ** 2, axis=-1))[..., None]
     if independent:
         channel = u[..., :, None] * np.eye(3)                            # (..., 3 rows, 3)
         grey = u / np.sqrt(3.0)
     else:
-        channel = u[..., None, :]
-        grey = np.sqrt(np.mean(u ** 2, axis=-1))[..., None]
+        channel, grey = u[..., None, :], rms
+    if "rho_s" in names:
+        absolute = ("C_r" in names) & (theta[..., list(names).index("rho_s")] < METAL_THRESHOLD)
+        absolute = np.asarray(absolute)[..., None]
+    else:
+        absolute = np.ones(rms.shape, dtype=bool)
+    zero = np.zeros_like(grey)
     rel = {"C_r": channel[..., 0], "C_g": channel[..., 1], "C_b": channel[..., 2], "R": grey,
-           "rho_s": grey}
-    return np.stack([rel.get(p, np.zeros_like(grey)) for p in names], -1) \
-        * np.abs(np.asarray(theta, dtype=float))[..., None, :]
+           "rho_s": np.where(absolute, grey, 0.0)}
+    own = {"rho_s": np.where(absolute, 0.0, rms)}                        # (..., 1)
+    together = np.stack(np.broadcast_arrays(*(rel.get(p, zero) for p in names)), -1)
+    apart = np.stack(np.broadcast_arrays(*(own.get(p, np.zeros_like(rms)) for p in names)), -1)
+    lead = np.broadcast_shapes(together.shape[:-2], apart.shape[:-2], theta.shape[:-1])
+    rows = np.concatenate([np.broadcast_to(a, lead + a.shape[-2:]) for a in (together, apart)],
+                          axis=-2)
+    return rows * np.abs(theta)[..., None, :]
 
 
 def _no_rows(theta):
@@ -176,7 +191,7 @@ def reference_rows(doc, names, theta):
     --calibrate NAME=RHO+-SD``), which sets the level of every fitted reflectance at once;
     none without one."""
     u = ((doc.get("ingest") or {}).get("calibration") or {}).get("reference_relative_sd")
-    return _level_rows(u, names, theta, independent=False) if u else _no_rows(theta)
+    return level_rows(u, names, theta, independent=False) if u else _no_rows(theta)
 
 
 def vignetting_error(doc, pixels):
@@ -213,22 +228,22 @@ def shared_level_rows(doc, names, theta, vignetting=0.0):
     theta = np.asarray(theta, dtype=float)
     v = np.asarray(vignetting, dtype=float)[..., None] * np.ones(3)
     return np.concatenate([reference_rows(doc, names, theta),
-                           _level_rows(v, names, theta, independent=False)], axis=-2)
+                           level_rows(v, names, theta, independent=False)], axis=-2)
 
 
 def calibration_rows(doc, names, theta, vignetting=0.0):
     """Signed rows (..., E, n) from the calibration's relative error per channel, each
-    channel's its own (:func:`_level_rows`), and the errors of the level every frame shares
+    channel's its own (:func:`level_rows`), and the errors of the level every frame shares
     (:func:`shared_level_rows`)."""
     theta = np.asarray(theta, dtype=float)
     u = ((doc.get("ingest") or {}).get("calibration") or {}).get("scale_relative_sd")
-    scale = _level_rows(u, names, theta) if u else _no_rows(theta)
+    scale = level_rows(u, names, theta) if u else _no_rows(theta)
     return np.concatenate([scale, shared_level_rows(doc, names, theta, vignetting)], axis=-2)
 
 
 def colour_matrix_sd(doc, names, theta):
     """The standard error per parameter of ``names`` at ``theta`` (n,) or (G, n) that the colour
-    matrix gives a single pixel's fit (a region's: :func:`~.intervals.matrix_sd`). Each entry
+    matrix gives a single pixel's fit (a region's: :func:`~.intervals.matrix_rows`). Each entry
     E_cj errs by ``ingest.colour_matrix.relative_sd``, and channel c, calibrated on a grey,
     reads L_c + sum_(j != c) E_cj (L_j - L_c); so C_c errs by relative_sd sqrt(sum_(j != c)
     (C_j - C_c)^2) (a bound for glossy pixels). Zeros for other parameters and models."""
@@ -252,9 +267,9 @@ def shared_error_rows(J, usable, sigma, shared_sd, mixing, curvature_inverse, lo
     independent shared errors' sds, ``mixing`` (C, K) how each reaches the channels. With
     g = sum over the frame's values of J mixing / sigma times the error's sd, each error's row
     is g^T (J^T J)^-1 (``curvature_inverse`` = (J^T J)^-1), the parameters' least-squares
-    response to it. Errors that several frames share: ``loading`` (E, T), how each of E
-    independent errors reaches the frames (g summed over them), ``shared_sd`` then the same for
-    every frame."""
+    response to it (up to its sign, which no single row's draws need). Errors that several
+    frames share: ``loading`` (E, T), how each of E independent errors reaches the frames (g
+    summed over them), ``shared_sd`` then the same for every frame."""
     w = np.where(usable[..., None], J / np.where(usable, sigma, np.inf)[..., None], 0.0)
     g = np.einsum("ptcn,ck->tkn", w, np.asarray(mixing, dtype=float))      # (T, K, n)
     g = g * np.asarray(shared_sd, dtype=float)[..., None]

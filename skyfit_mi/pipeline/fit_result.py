@@ -126,6 +126,8 @@ def check_fit_folder(folder, run_id, regions):
     """Refuse to fit ``regions`` of the sequence run ``run_id`` into ``folder`` where it holds a
     fit of another region of another run (another sequence, or this one rendered or ingested
     again since): its ``fits.csv`` and any relight of the folder would mix the two."""
+    if run_id is None:                  # a manifest from before run ids: nothing to tell apart
+        return
     for f in sorted(Path(folder).glob("fit_*.json")):
         try:
             r = json.loads(f.read_text(encoding="utf-8"))
@@ -135,8 +137,9 @@ def check_fit_folder(folder, run_id, regions):
         if other not in (None, run_id) and r.get("region") not in regions:
             raise SkyfitError(f"{folder} holds {f.name}, a fit of another sequence or run "
                               f"(run {other}; this one is run {run_id}), which its {SUMMARY_NAME} "
-                              "and a relight of the folder would mix with these: give another "
-                              "-o folder, or move that fit away.")
+                              "and a relight of the folder would mix with these: fit every "
+                              "region it holds again, fit into another folder (-o), or move "
+                              "that fit away.")
 
 
 def _folder_run(path):

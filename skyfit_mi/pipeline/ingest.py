@@ -612,7 +612,7 @@ def calibrate_exposure(samples, patch, sensor, photos, rel, log, cells, seconds)
     channel, unless (3+ frames) they scatter beyond the patches' noise about a smooth day curve
     in ``seconds`` (:func:`exif_scatter`): then each frame takes its own.  A smooth departure is
     the light's, left for a fit of the sky.  ``scale_relative_sd`` (3,) widens the fits'
-    intervals (:func:`skyfit_mi.fitting.uncertainty.calibration_sd`).
+    intervals (:func:`skyfit_mi.fitting.intervals.calibration_rows`).
     """
     units = [len(np.unique(cells[patch == m])) if cells is not None else
              int(np.sum(patch == m)) // 8 for m in np.unique(patch)]

@@ -86,7 +86,8 @@ def prepare_folder(out, run_id, shape, overwrite=False, log=print):
         fits = sorted(p.name for p in out.glob("fit_*.json"))
         if fits:
             log(f"{out}: {listed(fits)} fitted the run this replaces; they stay, but relight and "
-                "export refuse them: fit again")
+                "export refuse them, and a fit into this folder of some regions only: fit them "
+                "all again")
         return {}
     if not manifest_file(out).exists():
         return {}
