@@ -306,3 +306,36 @@ def test_a_roughness_open_below_spreads_over_its_reach_in_other_light():
     assert np.mean(other < 0.1) == pytest.approx(0.1 / 0.34, abs=0.03)
     del result["intervals"]["sigma_alpha"]["open_below"]
     assert parameter_draws(result, s, 4000, np.random.default_rng(1))[1:, 1].min() >= 0.264
+
+
+def test_a_shared_error_that_carries_a_lobe_past_its_bound_holds_it_there_and_moves_the_rest():
+    """A roughness fitted on its bound 0.5, a shared error's row moving it and rho_s up
+    together: a draw the row carries past the bound keeps the roughness at 0.5 and moves rho_s
+    as the data answer the roughness held (minus the excess times cov[rho, sigma] /
+    cov[sigma, sigma]), not up alone as a clip would leave it; draws within the bounds are
+    as the rows put them."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.fitting.relight import parameter_draws
+
+    names = ("rho_s", "sigma_alpha")
+    theta = np.array([0.1, 0.5])
+    cov = [[4e-4, 8e-4], [8e-4, 4e-3]]                 # rho_s rises with a broader lobe
+    result = {"parameters": dict(zip(names, theta)), "sequence_run_id": "day",
+              "intervals": {"rho_s": {"95": [0.06, 0.14]}, "sigma_alpha": {"95": [0.38, 0.5]}},
+              "covariance": {"names": list(names), "matrix": cov},
+              "draws": {"values": [theta.tolist()], "added_sd": [0, 0],
+                        "shared_rows": [[0.01, 0.05]]}}
+    s = SimpleNamespace(names=names, lower=np.zeros(2), upper=np.array([1.0, 0.5]),
+                        run_id="another day")
+    d = parameter_draws(result, s, 4000, np.random.default_rng(0))[1:]
+    z = (d[:, 0] - 0.1) / 0.01
+    up, down = d[:, 1] >= 0.5 - 1e-12, d[:, 1] < 0.5 - 1e-12
+    assert 0.4 < up.mean() < 0.6
+    np.testing.assert_allclose(d[down, 1], 0.5 + 0.05 * z[down])       # as the row says
+    # past the bound: excess 0.05 z held back, rho_s by 0.01 z - 0.05 z * 0.2 = 0
+    np.testing.assert_allclose(d[up, 0], 0.1, atol=1e-12)
+    np.testing.assert_allclose(d[up, 1], 0.5)
+    del result["covariance"]                            # without one: clipped as before
+    d = parameter_draws(result, s, 4000, np.random.default_rng(0))[1:]
+    assert np.all(d[:, 1] <= 0.5) and d[d[:, 1] >= 0.5, 0].max() > 0.11

@@ -793,7 +793,8 @@ def parameter_draws(result, s, n, rng):
     each widened by the errors that do not cancel: on the fitted sequence the light cache's
     and JPEG rounding's (``added_sd``); elsewhere those the sequence's light, calibration and
     pose share as well, one normal for each of their signed ``shared_rows``
-    (:func:`~.fit_record.shared_rows`); and a roughness whose interval reaches its bound beyond
+    (:func:`~.fit_record.shared_rows`), a parameter they carry past a bound held there
+    (:func:`_held_at_bounds`); and a roughness whose interval reaches its bound beyond
     what the data told (``open_below``: the sky's shape near the mirror unknown) spread over
     that reach too (:func:`_open_below`). A fit without such draws (its sampling failed, or
     written before them), or whose intervals reach over an undetermined sky level, draws from
@@ -811,12 +812,32 @@ def parameter_draws(result, s, n, rng):
         if not same:
             rows = np.asarray(own["shared_rows"], dtype=float).reshape(-1, len(names))
             draws += rng.standard_normal((n - 1, len(rows))) @ rows
+            draws = _held_at_bounds(draws, cov, lower, upper)
             return np.vstack([theta, _open_below(result, names, np.clip(draws, lower, upper),
                                                  rng)])
     else:
         draws = interval_draws(theta, [result["intervals"][k]["95"] for k in names], cov,
                                n - 1, rng)
     return np.vstack([theta, np.clip(draws, lower, upper)])
+
+
+def _held_at_bounds(draws, cov, lower, upper):
+    """``draws`` (m, n) whose shared errors carried a parameter beyond a bound, that parameter
+    held at it and the others moved as the data's covariance ``cov`` says they answer it held
+    (the least-squares response with it fixed: minus its excess times cov[:, i] / cov[i, i]);
+    so a lobe fitted on its bound keeps the trade its rows describe instead of a clip that
+    moves the rest alone. Unchanged without a covariance."""
+    if cov is None:
+        return draws
+    c = np.asarray([[np.nan if v is None else v for v in row] for row in cov], dtype=float)
+    if not np.all(np.isfinite(c)):
+        return draws
+    draws = draws.copy()
+    for i in range(draws.shape[1]):
+        excess = draws[:, i] - np.clip(draws[:, i], lower[i], upper[i])
+        if c[i, i] > 0 and excess.any():
+            draws -= excess[:, None] * c[:, i] / c[i, i]
+    return draws
 
 
 def draws_source(result, s):
