@@ -89,10 +89,12 @@ SHARES_NOTE = (
 
 def interval_shares(fit, names):
     """{parameter: {source: share}} of :data:`SHARES_NOTE`, rounded to 0.001."""
-    n = len(names)
-    added = {"calibration": fit.calibration_sd, "sky": fit.sky.sd, "sun_level": fit.sun_level_sd,
-             "pose": fit.pose.sd_of(n), "jpeg_rounding": fit.jpeg_shared_sd,
-             "colour_matrix": fit.matrix_sd, "light_cache": fit.cache_sd}
+    sources, rows = shared_rows(fit, len(names))
+    sources = np.array(sources)
+    shared = {k: unc.rows_sd(rows[sources == k]) for k in dict.fromkeys(sources)}
+    added = {**{k: shared.get(k) for k in ("calibration", "sky", "sun_level", "pose")},
+             "jpeg_rounding": fit.jpeg_shared_sd, "colour_matrix": shared.get("colour_matrix"),
+             "light_cache": fit.cache_sd}
     out = {}
     for i, p in enumerate(names):
         lo, hi = fit.intervals[p]["95"]

@@ -829,7 +829,7 @@ def _held_at_bounds(draws, cov, lower, upper):
     moves the rest alone. Unchanged without a covariance."""
     if cov is None:
         return draws
-    c = np.asarray([[np.nan if v is None else v for v in row] for row in cov], dtype=float)
+    c = np.asarray(cov, dtype=float)                  # a None in the JSON reads as nan
     if not np.all(np.isfinite(c)):
         return draws
     draws = draws.copy()

@@ -175,9 +175,8 @@ def fit_auto(manifest_path, regions, families=FAMILIES, models=MODELS, folds=FOL
     # a table's region of no more usable points than RANK_POINTS is ranked on all its points
     # (None), at the fit's cache: the fit takes its trace
     ranked = {name: None if table and len(px) <= RANK_POINTS else
-              subsample_region(px, RANK_POINTS if table else RANK_PIXELS, seed)
-              for name, px in usable.items()}
-    ranked = {name: list(px) if table and px is not None else px for name, px in ranked.items()}
+              list(subsample_region(px, RANK_POINTS, seed)) if table else
+              subsample_region(px, RANK_PIXELS, seed) for name, px in usable.items()}
     reuse = {name for name, px in ranked.items() if table and not plan.split and px is None}
     fit_information = {name: information(s.obs) for name, s in ward.items()}
     level = None
