@@ -141,7 +141,8 @@ def main():
                 photograph_day(truth, photos, camera, seed=seed)
                 ingest([photos], spec_path, seq, calibrate={"grey_card": (0.18,) * 3},
                        vignetting="cos4", overwrite=True, progress=False,
-                       noise=true_noise(camera) if args.true_noise else None, **quiet)
+                       noise=true_noise(camera) if args.true_noise else None,
+                       exact_curve=True, **quiet)       # the simulated camera's sRGB is exact
             sequences.append(seq)
         medians[q] = row(q, sequences)
     if args.clean:

@@ -206,6 +206,7 @@ def _ingest(args):
            gamma=args.gamma, exposure=args.exposure, calibrate=rho, reference_sd=sd,
            colorchecker=args.colorchecker, vignetting=args.vignetting, noise=args.noise,
            colour_matrix_error=args.colour_matrix_error, register=not args.no_register,
+           exact_curve=args.exact_curve,
            **({} if args.register_limit is None else {"register_limit_px": args.register_limit}),
            overwrite=args.overwrite, progress=not args.quiet)
 
@@ -527,6 +528,10 @@ def _add_ingest(sub, common):
                      help="the encoding to invert (default the spec's [sensor], else the files'; "
                      "fit: from the greys)")
     ing.add_argument("--gamma", type=float, help="exponent of a gamma response")
+    ing.add_argument("--exact-curve", action="store_true",
+                     help="the codes follow the response's curve exactly (written from linear "
+                     "values by software); default for 8-bit codes: a camera's JPEG engine's "
+                     "own tone curve, whose error the intervals count")
     ing.add_argument("--exposure", type=float,
                      help="absolute exposure of the first frame [sr m^2 W^-1]")
     ing.add_argument("--calibrate", action="append", type=_reflectance,

@@ -199,6 +199,9 @@ class PhotoSettings:
     motion : {frame index: (dx [px], dy [px], rotation [degrees])}: the camera nudged
         (:mod:`.registration`'s convention), before vignetting and noise
     distortion : (k1[, k2]) radial lens distortion (:func:`~skyfit_mi.physics.lens.distort`)
+    tone_curve : a camera's own tone curve's strength A: the linear signal x becomes
+        x exp(D(ln x)) before the response encodes it, D(t) = A (g(t) - g(0)) with g a Gaussian
+        of width TONE_WIDTH about ln TONE_MIDDLE (:func:`camera_tone`); 0: none
     """
 
     exposure: float | None = None
@@ -218,6 +221,7 @@ class PhotoSettings:
     matrix_error: float = 0.0
     motion: dict | None = None
     distortion: tuple = ()
+    tone_curve: float = 0.0
 
     def noise(self):
         """(read noise [DN rms], shot gain [DN]) in the format's codes: as given, else 0.8
@@ -253,6 +257,25 @@ def _lens(radiance, motion, k, fov):
         yy = -np.sin(t) * px + np.cos(t) * py + c[1]
     return cv2.remap(radiance, xx.astype(np.float32), yy.astype(np.float32), cv2.INTER_CUBIC,
                      borderMode=cv2.BORDER_REPLICATE).astype(float)
+
+
+#: The simulated camera's tone curve (:func:`camera_tone`): its middle [fraction of full scale]
+#: and width [in ln signal], a bump in ln signal like cameras' measured curves' (a brighter
+#: middle, a toe and a shoulder) but none of them.
+TONE_MIDDLE, TONE_WIDTH = 0.15, 1.2
+
+
+def camera_tone(x, strength):
+    """Linear signal ``x`` [fraction of full scale] through a camera's own tone curve of
+    ``strength`` A (:class:`PhotoSettings`): x exp(A (g(ln x) - g(0))), monotone for A < 1.6,
+    1 at full scale."""
+    if not strength:
+        return x
+    def g(t):
+        return np.exp(-0.5 * ((t - np.log(TONE_MIDDLE)) / TONE_WIDTH) ** 2)
+    with np.errstate(divide="ignore"):
+        t = np.log(np.clip(x, 1e-12, None))
+    return x * np.exp(strength * (g(t) - g(0.0)))
 
 
 def photograph_day(sequence, out_dir, settings=None, seed=0):
@@ -310,7 +333,8 @@ def photograph_day(sequence, out_dir, settings=None, seed=0):
             lin = np.clip(signal * e_true, 0.0, None) * sensor.max_code
             lin = lin + rng.normal(size=lin.shape) * np.sqrt(read_noise_DN ** 2
                                                              + shot_gain * lin)
-            codes = np.rint(sensor.respond(lin / sensor.max_code) * sensor.max_code)
+            codes = np.rint(sensor.respond(np.clip(camera_tone(
+                lin / sensor.max_code, photo.tone_curve), 0.0, 1.0)) * sensor.max_code)
             img = Image.fromarray(np.ascontiguousarray(undo_orientation(
                 np.clip(codes, 0, 255).astype(np.uint8), orientation)))
             kw = ({"quality": photo.quality, "subsampling": photo.subsampling} if fmt == "jpeg"
@@ -327,6 +351,7 @@ def photograph_day(sequence, out_dir, settings=None, seed=0):
             **({"subsampling": photo.subsampling} if fmt == "jpeg" else {}),
             "orientation": orientation,
             "shutter_error": photo.shutter_error, "nominal_exif": photo.nominal_exif,
+            "tone_curve": photo.tone_curve,
             "motion": {str(i): list(m) for i, m in (photo.motion or {}).items()},
             "distortion": list(photo.distortion),
             **({"raw": {"bits": RAW_BITS, "black_DN": RAW_BLACK, "white_DN": white,

@@ -81,8 +81,11 @@ def day(tmp_path_factory):
 
 
 def _ingest(day, out, **kw):
+    """Ingest ``day``'s photographs; the simulated camera encodes through sRGB's curve exactly,
+    and is said to (``exact_curve``) unless a test says otherwise."""
     from skyfit_mi.pipeline.ingest import ingest
-    return ingest([day["photos"]], day["spec"], out, progress=False, **{**QUIET, **kw})
+    exact = {"exact_curve": kw.get("response") != "fit"}
+    return ingest([day["photos"]], day["spec"], out, progress=False, **{**QUIET, **exact, **kw})
 
 
 @pytest.fixture(scope="module")
@@ -92,7 +95,8 @@ def ingested(day):
     from skyfit_mi.fitting.fit import fit_region
 
     out = day["tmp"] / "seq"
-    doc = _ingest(day, out, calibrate={"grey_card": (0.18, 0.18, 0.18)}, vignetting="cos4")
+    doc = _ingest(day, out, calibrate={"grey_card": (0.18, 0.18, 0.18)}, vignetting="cos4",
+                  exact_curve=False)               # as a user's: a camera's own curve counted
     fit = fit_region(out, "sample", day["regions"]["sample"], model="colour", **QUIET)
     return out, doc, fit
 
@@ -135,6 +139,69 @@ def test_fit_after_ingest_recovers_the_material(day, ingested):
         # measured on the full region: C_r 0.0002 outside its 95% interval, the others inside)
         mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
         assert abs(t - mid) <= 1.5 * half, f"{k}: truth {t} far outside the fit's [{lo}, {hi}]"
+
+
+def test_a_camera_s_own_tone_curve_is_counted_unless_the_curve_is_said_exact(day, ingested,
+                                                                            tmp_path):
+    """8-bit codes read through sRGB's curve carry a camera's own tone curve's error
+    (skyfit_mi.physics.tone_curve), anchored at the grey card's codes in each frame. Under the
+    spec's light it is counted as its prior says at the sample's codes, most for its red,
+    furthest from the card's; with the light fitted (the default) its weights join the light's
+    coefficients, held at 0. A camera that curves its codes (photo_sim.camera_tone) is then
+    held, where taking the codes as exact sRGB misses it (measured, under the spec's light:
+    C_r 0.508, 0.493-0.522, for 0.62)."""
+    from skyfit_mi.fitting.chi2 import load_observations
+    from skyfit_mi.fitting.fit import fit_region, fit_regions
+    from skyfit_mi.fitting.light import LightOptions
+    from skyfit_mi.physics import tone_curve as tc
+    from skyfit_testkit.photo_sim import PhotoSettings, photograph_day
+
+    out, doc, fit = ingested
+    rec = doc["ingest"]["tone_curve"]
+    assert rec["anchored_at"] == "references" and rec["response"] == "srgb"
+    obs = load_observations(out, day["regions"]["sample"])
+    anchors = np.array([rec["anchor_ln_signal"][str(i)] for i in obs.frames])
+    assert np.all((anchors > np.log(0.02)) & (anchors < np.log(0.5)))     # the card's codes
+    t = np.log(obs.sensor.linearise(obs.y))
+    # under the spec's light, the prior's rows: the sample's C_c moves as its values' level
+    # does, by the prior's sd between its codes and the card's over the frames (its red 3.4x
+    # the card's reflectance, its green 0.7x)
+    expect = tc.relative_sd(np.median(t, axis=(0, 1)), np.median(anchors, axis=0))
+    spec = LightOptions(sky="spec")
+    rows = fit_region(out, "sample", day["regions"]["sample"], model="colour", light=spec,
+                      **QUIET)
+    got = np.array([rows["tone_curve_error_sd"][k] / rows["parameters"][k]
+                    for k in ("C_r", "C_g")])
+    assert np.all((got > 0.5 * expect[:2]) & (got < 1.5 * expect[:2])), (got, expect)
+    assert got[0] > got[1] and "tone curve" in rows["tone_curve_error"]
+    # the photographs' default: the curve's weights among the light's coefficients, at 0
+    tone = fit["sky"]["tone_curve"]
+    assert tone["weights"] == [0.0] * tc.PRIOR_ROOT.shape[1] and min(tone["sd"]) > 0
+    assert fit["tone_curve_error_sd"]["C_r"] > 0
+    exact = _ingest(day, tmp_path / "exact", calibrate={"grey_card": (0.18,) * 3},
+                    vignetting="cos4")
+    assert exact["ingest"]["tone_curve"] is None
+    # a camera that curves its codes: held under the spec's light and fitted with the card
+    # (fit --all), missed where the codes are said to be exact sRGB
+    photos = tmp_path / "curved"
+    photograph_day(day["truth"], photos, PhotoSettings(quality=100, tone_curve=0.6), seed=5)
+    held = {}
+    for told in (False, True):
+        seq = tmp_path / f"curved_{told}"
+        _ingest({**day, "photos": photos}, seq, calibrate={"grey_card": (0.18,) * 3},
+                vignetting="cos4", exact_curve=told)
+        r = fit_region(seq, "sample", day["regions"]["sample"], model="colour", light=spec,
+                       **QUIET)
+        held[told] = [r["intervals"][k]["95"][0] <= TRUTH[k] <= r["intervals"][k]["95"][1]
+                      for k in ("C_r", "C_g", "C_b")]
+    assert all(held[False]) and not any(held[True]), held
+    both = {r["region"]: r for r in fit_regions(tmp_path / "curved_False",
+                                                 list(day["regions"].items()),
+                                                 model="colour", **QUIET)}
+    r = both["sample"]
+    assert r["sky"]["tone_curve"] is not None
+    assert all(r["intervals"][k]["95"][0] <= TRUTH[k] <= r["intervals"][k]["95"][1]
+               for k in ("C_r", "C_g", "C_b")), {k: r["intervals"][k]["95"] for k in TRUTH}
 
 
 def test_the_exif_exposures_are_kept_where_the_light_drifts_smoothly_not_where_the_shutter_misses():
@@ -529,7 +596,8 @@ def test_ingested_intervals_are_at_most_1_5x_the_clean_fits(day, tmp_path):
         photos = tmp_path / f"photos{seed}"
         photograph_day(day["truth"], photos, PhotoSettings(quality=100), seed=seed)
         ingest([photos], day["spec"], tmp_path / f"seq{seed}", progress=False,
-               calibrate={"grey_card": (0.18,) * 3}, vignetting="cos4", **QUIET)
+               calibrate={"grey_card": (0.18,) * 3}, vignetting="cos4", exact_curve=True,
+               **QUIET)
         for out, src in ((clean, seq), (photo, tmp_path / f"seq{seed}")):
             r = fit_region(src, "sample", day["regions"]["sample"], model="colour",
                            light=LightOptions(sky="spec"), **QUIET)
@@ -825,6 +893,9 @@ def test_options_that_would_be_ignored_are_refused(day, tmp_path):
     with pytest.raises(SkyfitError,
                        match="--vignetting cos5: give none, corrected, cos4, or the path"):
         _ingest(day, tmp_path / "o", exposure=1e-3, vignetting="cos5")
+    with pytest.raises(SkyfitError, match="--exact-curve says .* the response is fitted"):
+        _ingest(day, tmp_path / "o", calibrate={"grey_card": (0.18,) * 3}, response="fit",
+                exact_curve=True)
     for bad in (0.0, -1.0, float("nan")):            # refused before any work is logged
         logs = []
         with pytest.raises(SkyfitError, match="--exposure .*: give the first frame's exposure"):

@@ -212,17 +212,25 @@ def test_the_whole_lights_level_over_the_day_is_fitted_where_the_frames_keep_exi
     np.testing.assert_allclose(basis[:, 1], [-1.0, 0.0, 1.0])
 
     class Session:
-        def set_sky(self, k, mix=None, level=None):
-            self.k, self.mix, self.level = k, mix, level
+        def set_sky(self, k, mix=None, level=None, tone=None):
+            self.k, self.mix, self.level, self.tone = k, mix, level, tone
 
     s, u = Session(), np.array([np.log(1.3), 0.1, 0.2, -0.05])
     c.light(s, basis, u)
     np.testing.assert_allclose(s.k, 1.3)
     np.testing.assert_allclose(s.mix, [0.1])
     np.testing.assert_allclose(s.level, np.exp(0.2 * basis[:, 1] - 0.05 * basis[:, 2]))
+    assert s.tone is None
     plain = SkyCoefficients(1, ("departure:sun P2",), 0.35)
     plain.light(s, basis[:, :1], u[:2])
     assert s.level is None
+    # a camera's tone curve's weights last, each under N(0, 1) (tone.tone_count)
+    toned = SkyCoefficients(1, ("departure:sun P2",), 0.35, LEVEL_TERMS, 2)
+    assert toned.names[-2:] == ["tone curve 1", "tone curve 2"]
+    np.testing.assert_allclose(np.diag(toned.precision)[-2:], 1.0)
+    toned.light(s, basis, np.r_[u, 0.3, -0.4])
+    np.testing.assert_allclose(s.tone, [0.3, -0.4])
+    np.testing.assert_allclose(s.level, np.exp(0.2 * basis[:, 1] - 0.05 * basis[:, 2]))
 
     # the record, read back by relight and maps
     w, cov = np.array([0.0, 0.2, -0.05]), np.diag([0.0, 0.01, 0.01])
@@ -799,3 +807,28 @@ def test_a_references_calibration_carries_the_skys_coefficients_to_every_region(
     finally:
         again.light_factor = None
         again.set_sky(kept)                             # the fixture as it was
+
+
+def test_held_coefficients_carry_their_error_about_zero_directly_and_through_the_light():
+    """A tone curve's weights held at 0 (sky_fit._held_covariance): with no step asked the
+    covariance is the posterior's; with a step s, the held ones' error about 0 is C_hh + s s^T,
+    and a region's response R = (R_f, R_h) carries R_f C_f|h R_f^T + (R_f G + R_h) (C_hh + s s^T)
+    (R_f G + R_h)^T, G the free ones' regression on the held."""
+    from skyfit_mi.fitting.sky_fit import _held_covariance
+
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=(5, 5))
+    C = A @ A.T + np.eye(5)
+    free = np.array([True, True, True, False, False])
+    np.testing.assert_allclose(_held_covariance(C, free, np.zeros(2)), C, atol=1e-12)
+    np.testing.assert_array_equal(_held_covariance(C, np.ones(5, bool), np.ones(0)), C)
+    s = np.array([0.7, -1.2])
+    out = _held_covariance(C, free, s)
+    assert np.all(np.linalg.eigvalsh(out) > -1e-12)
+    f, h = np.ix_(free, free), np.ix_(~free, ~free)
+    G = C[np.ix_(free, ~free)] @ np.linalg.inv(C[h])
+    R = rng.normal(size=(3, 5))
+    Rf, Rh = R[:, free], R[:, ~free]
+    Ch = C[h] + np.outer(s, s)
+    want = Rf @ (C[f] - G @ C[np.ix_(~free, free)]) @ Rf.T + (Rf @ G + Rh) @ Ch @ (Rf @ G + Rh).T
+    np.testing.assert_allclose(R @ out @ R.T, want, rtol=1e-10)

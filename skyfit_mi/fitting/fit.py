@@ -21,6 +21,7 @@ from .geometry import highlight_geometry
 from .held_out import held_out_error
 from .intervals import (calibration_rows, fit_intervals, frame_calibration_sd, jpeg_shared_sd,
                         matrix_rows)
+from .tone import tone_moves, tone_rows
 from .light import SPEC_LIGHT, LightOptions, LightParts, LightPlan
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
@@ -85,8 +86,10 @@ class FitState:
         profile's fits beyond x failed (:func:`~.intervals.fit_intervals`)
     jpeg_shared_sd : the JPEG blocks' rounding's standard errors (:mod:`~.intervals`)
     calibration_rows, matrix_rows : signed rows (E, n), one per independent error of the
-        calibration and the colour matrix (:mod:`~.intervals`); their standard errors
-        calibration_sd, matrix_sd
+        calibration (a camera's own tone curve's among them) and the colour matrix
+        (:mod:`~.intervals`); their standard errors calibration_sd, matrix_sd
+    tone_sd : the standard errors (n,) of a camera's tone curve's share: of calibration_rows, or
+        of the fitted light's where its fit took the curve (:attr:`~.sky_fit.SkyShare.tone_sd`)
     sky, pose : the light's and the camera pose's shares (:class:`~.sky_fit.SkyShare`,
         :class:`~.pose.PoseShare`)
     draws : the likelihood's draws (:class:`~.draws.Draws`)
@@ -118,6 +121,7 @@ class FitState:
     sun_level_rows: np.ndarray = None
     jpeg_shared_sd: np.ndarray = None
     matrix_rows: np.ndarray = None
+    tone_sd: np.ndarray = None
     pose: object = None
     held_out: dict = None
     draws: object = None
@@ -228,6 +232,7 @@ class FitSession:
         self.light, self.sky_scale, self.parts = light or SPEC_LIGHT, 1.0, None
         self.sky_shape_mix = None
         self.light_level = 1.0                      # the whole light's, by frame (set_sky)
+        self.tone_weights = None                    # a camera's tone curve's, fitted (set_sky)
         self.light_factor = None                    # per channel, by a reference (reference_factor)
         self._turned = {}                           # the light with the camera turned
         self.cache_time = time.perf_counter() - t0
@@ -394,7 +399,10 @@ class FitSession:
                                                         table.sun_cos, np.nan))
         self.table = table
         self.wm = self.model_on(table)
-        self.problem = Problem(self.obs, self.wm, valid=table.hit)
+        obs = self.obs
+        if self.tone_weights is not None:       # each value's gain as the curve reads it
+            obs = replace(obs, gain=obs.gain * np.exp(tone_moves(self) @ self.tone_weights))
+        self.problem = Problem(obs, self.wm, valid=table.hit)
         self._halves = self._bases = None
 
     def _mixed(self, parts):
@@ -421,11 +429,13 @@ class FitSession:
         """The wall time of the traces with the camera turned [s]."""
         return sum(seconds for _, seconds in self._turned.values())
 
-    def set_sky(self, k, mix=None, level=None):
+    def set_sky(self, k, mix=None, level=None, tone=None):
         """Scale the split light's sky (all but the sun) by ``k`` (scalar or per frame), mix
         ``mix[j]`` of shape variant j with (1 - sum(mix)) of its own pattern, scale the whole
-        light by ``level`` (per frame; None: 1), and rebuild the models and chi-square. Raises
-        ValueError on a session not traced with the needed parts."""
+        light by ``level`` (per frame; None: 1), read the values through a camera's tone curve
+        at the weights ``tone`` of its prior's errors (:func:`~.tone.tone_moves`; None:
+        as ingested), and rebuild the models and chi-square. Raises ValueError on a session not
+        traced with the needed parts."""
         if self.parts is None or "sky" not in self.parts.names \
                 or len(self.parts.variants) < (0 if mix is None else len(mix)):
             raise ValueError("the sky's level needs a session traced with a fitted sky's light, "
@@ -433,6 +443,7 @@ class FitSession:
         self.sky_scale = float(k) if np.ndim(k) == 0 else np.asarray(k, dtype=float)
         self.sky_shape_mix = None if mix is None else np.asarray(mix, dtype=float)
         self.light_level = 1.0 if level is None else np.asarray(level, dtype=float)
+        self.tone_weights = None if tone is None else np.asarray(tone, dtype=float)
         self._use_parts(self.parts)
 
     def take_light(self, other):
@@ -568,7 +579,11 @@ class FitSession:
                        problem, merr, rounds, misfit,
                        SkyShare() if sky is None else share_at(self, sky, theta))
         fit.jpeg_shared_sd = jpeg_shared_sd(self, J_all, measured, problem.obs.sigma, curv_inv)
-        fit.calibration_rows = calibration_rows(self, J_all, problem, measured, theta, curv_inv)
+        # a camera's own tone curve (tone_rows) is the calibration's too: its rows among them
+        tone = tone_rows(self, J_all, problem, measured, theta, curv_inv)
+        fit.tone_sd = unc.rows_sd(tone) if len(tone) else fit.sky.tone_sd
+        fit.calibration_rows = np.concatenate(
+            [calibration_rows(self, J_all, problem, measured, theta, curv_inv), tone])
         fit.matrix_rows = matrix_rows(self, J_all, problem, measured, theta, curv_inv)
         fit.pose = pose_share(self, fit, J_all)
         fit_intervals(self, fit)

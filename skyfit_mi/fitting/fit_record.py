@@ -9,6 +9,7 @@ from .draws import root_of
 from .held_out import HELD_OUT_FRAMES
 from .intervals import matrix_note
 from .pose import pose_record
+from .tone import TONE_NOTE
 from ..pipeline.observation_table import relative_scale
 
 
@@ -45,6 +46,9 @@ def fit_record(s, fit, warnings, start, seed, evaluations, wall, t_method):
             "frames' rounding of their blocks' means (Y, Cb, Cr), which every pixel of "
             "the region shares in a frame; added in quadrature to the intervals"}
            if np.any(fit.jpeg_shared_sd > 0) else {}),
+        **({"tone_curve_error_sd": dict(zip(names, fit.tone_sd.tolist())),
+            "tone_curve_error": TONE_NOTE}
+           if fit.tone_sd is not None and np.any(fit.tone_sd > 0) else {}),
         **({"colour_matrix_error_sd": dict(zip(names, fit.matrix_sd.tolist())),
             "colour_matrix_error": matrix_note(s)}
            if np.any(fit.matrix_sd > 0) else {}),

@@ -79,6 +79,15 @@ def fit_warnings(s, fit):
             f"error of {falloff / 2:.1%} (1 sd); ingest with --vignetting cos4, or a flat field "
             "of this lens (--vignetting FLAT), to correct it, or --vignetting corrected if the "
             "camera did.")
+    if fit.tone_sd is not None:
+        led = [p for p, big in zip(names, doubles_interval(fit, fit.tone_sd)) if big]
+        if led:
+            warnings.append(
+                f"{', '.join(led)}: the camera's own JPEG tone curve, unknown (read as "
+                f"{s.doc['sensor'].get('response', 'srgb')}'s), more than the data sets their "
+                "intervals: this surface's codes lie far from the grey reference's, where "
+                "cameras' curves depart most; RAW files, several greys (ingest --response fit) "
+                "or ingest --exact-curve (codes written from linear values) take it out.")
     led = [p for p, big in zip(names, doubles_interval(fit, fit.matrix_sd)) if big]
     if led:
         warnings.append(f"{', '.join(led)}: {matrix_note(s)}; it, more than the "

@@ -28,6 +28,7 @@ from .chi2 import load_observations, usable_values
 from .methods.global_search import (RHO_GRID, SIGMA_GRID, grid_chi2, grid_chi2_device,
                                     linear_curvature, linear_observations, near_saturation)
 from .sky_fit import LEVEL_SCALED, light_level_sd, skies_at_level
+from .tone import tone_level_rows
 from .uncertainty import (Z, calibration_rows, colour_matrix_sd, colour_twins, rows_sd,
                           vignetting_error, widen_relative)
 
@@ -149,6 +150,10 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     vignetting = np.abs(np.bincount(groups, weights=vignetting_error(doc, pixels), minlength=n)
                         / np.maximum(count, 1))
     calibration = rows_sd(calibration_rows(doc, names, theta, vignetting))
+    if light is None or light["fitted"] == "spec" or not (light.get("sky") or {}).get(
+            "tone_curve"):          # else the regions' fitted light took the curve: region_sd
+        calibration = np.hypot(calibration, rows_sd(tone_level_rows(doc, obs, groups, n, names,
+                                                                    theta)))
     spread = Z["95"] * np.sqrt(sd ** 2 + calibration ** 2
                                + colour_matrix_sd(doc, names, theta) ** 2 + region_sd ** 2)
     lower, upper = bounds(model)

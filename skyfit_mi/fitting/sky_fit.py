@@ -34,6 +34,7 @@ from ..physics.sky_departure import BASIS, PRIOR_SD as DEPARTURE_SD, conflict, l
 from ..physics.sky import MEASURED_SUN_SD, SUN_LEVEL_SD, SUN_SKY_COUPLING
 from ..physics.turbid_sky import TURBIDITY_RANGE
 from .methods import global_search
+from .tone import tone_count
 
 #: Sky scales k searched first: a geometric grid from a quarter to four times the spec's sky.
 SCALE_GRID = np.geomspace(0.25, 4.0, 9)
@@ -113,6 +114,15 @@ class SkyShare:
     def sun_level_sd(self, plan):
         """The sun level's relative sd: ``plan.sun_sd`` widened by ``sun_widening``."""
         return float(np.hypot(plan.sun_sd, self.sun_widening))
+
+    @property
+    def tone_sd(self):
+        """The fitted tone curve's share (n,) of each parameter's standard error (its block of
+        the light's covariance alone), None where the light's fit took none."""
+        tone = 0 if self.light is None else self.light.coefficients.tone
+        if not tone or self.response is None:
+            return None
+        return _carried_sd(self.response[:, -tone:], self.light.covariance[-tone:, -tone:])
 
     @property
     def shape_known(self):
@@ -386,12 +396,16 @@ class SkyCoefficients:
     ``variants`` (shape: :data:`SHAPE_SD`; departure:
     :data:`~skyfit_mi.physics.sky_departure.PRIOR_SD`), then the whole light's level as
     ``light_terms`` polynomials P_1.. (:data:`DRIFT_SD`). They weight the light's traced parts
-    (:meth:`~.light.LightParts.table`): k(t) = exp(B(t) u[:terms]), the mix, the level last."""
+    (:meth:`~.light.LightParts.table`): k(t) = exp(B(t) u[:terms]), the mix, the level. Last,
+    ``tone`` weights of a camera's own tone curve's independent errors (each N(0, 1);
+    :func:`~.tone.tone_moves`), which scale each value's gain: the camera's, not the light's,
+    but told by the same regions and frames (:func:`_fit_curve` holds them at 0)."""
 
     terms: int
     variants: tuple = ()
     level_sd: float = None
     light_terms: int = 0
+    tone: int = 0
 
     @property
     def names(self):
@@ -399,7 +413,8 @@ class SkyCoefficients:
         return (["log k"] + [f"log k term {j}" for j in range(1, self.terms)]
                 + [f"mix {v.removeprefix('shape:')}" if v.startswith("shape:") else
                    v.replace(":", " ", 1) for v in self.variants]
-                + [f"log light term {j}" for j in range(1, self.light_terms + 1)])
+                + [f"log light term {j}" for j in range(1, self.light_terms + 1)]
+                + [f"tone curve {e}" for e in range(1, self.tone + 1)])
 
     @property
     def columns(self):
@@ -412,27 +427,33 @@ class SkyCoefficients:
         sd = [self.level_sd] + [DRIFT_SD] * (self.terms - 1) + [
             SHAPE_SD if v.startswith("shape:")
             else DEPARTURE_SD[BASIS.index(v.removeprefix("departure:"))] for v in self.variants] + [
-            DRIFT_SD] * self.light_terms
+            DRIFT_SD] * self.light_terms + [1.0] * self.tone
         return np.diag([0.0 if v is None else v ** -2 for v in sd])
 
     def light(self, session, basis, u):
         """Light ``session`` (its frames' time ``basis``, :func:`time_basis`) at coefficients
         ``u``: k(t), the variants' mix, and the whole light's level exp(P_1..(t) u)."""
         J = self.terms + len(self.variants)
+        K = J + self.light_terms
         session.set_sky(np.exp(basis[:, :self.terms] @ u[:self.terms]),
                         u[self.terms:J] if self.variants else None,
-                        np.exp(basis[:, 1:self.light_terms + 1] @ u[J:])
-                        if self.light_terms else None)
+                        np.exp(basis[:, 1:self.light_terms + 1] @ u[J:K])
+                        if self.light_terms else None,
+                        u[K:] if self.tone else None)
 
 
 def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
     """Fit the sky's ``coefficients`` (:class:`SkyCoefficients`) with the regions' parameters
     from log k ``u0`` and ``thetas`` there: Gauss-Newton under the priors, each region's
     parameters profiled out (its Jacobian projected off theirs, then polished by
-    Levenberg-Marquardt). Leaves each session at the fit. Returns (u, covariance, inverse profiled
+    Levenberg-Marquardt). A camera's tone curve's weights are held at 0, not fitted, their
+    error about 0 in the covariance (:func:`_held_covariance`): the day's values hardly tell
+    the curve (auto-exposure keeps each surface's codes alike), and fitted they took up what
+    the light's model misses (the board photographed through a curved camera: whites 41% low,
+    7 gross misses). Leaves each session at the fit. Returns (u, covariance, inverse profiled
     normal matrix, span [s], each region's time basis, parameters and response (n, coefficients),
-    summed chi-square); the covariance divides the data's information (not the priors') by
-    ``scale`` (:func:`_regions_agree`)."""
+    summed chi-square, the held coefficients' step from 0 the data ask for); the covariance
+    divides the data's information (not the priors') by ``scale`` (:func:`_regions_agree`)."""
     times = [t for s in sessions for t in s.obs.times]
     span = (float(_seconds(times).min()), float(_seconds(times).max()))
     bases = [time_basis(s.obs.times, span, coefficients.columns) for s in sessions]
@@ -458,9 +479,11 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
         return H, g, responses
 
     current = objective(u, thetas)
+    free = np.arange(len(u)) < len(u) - coefficients.tone    # the tone curve's held at 0
     for _ in range(DRIFT_ITERATIONS):
         H, g, _ = linearised(u, thetas)
-        step = -np.linalg.solve(H, g)
+        step = np.zeros_like(u)
+        step[free] = -np.linalg.solve(H[np.ix_(free, free)], g[free])
         for _ in range(6):                              # halved until chi-square falls
             for s, B in zip(sessions, bases):
                 put(s, B, u + step)
@@ -476,9 +499,31 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
         if gain < 1e-3 * max(1.0, s2) or np.max(np.abs(step)) < 1e-4:
             break
     chi2 = objective(u, thetas) - u @ P @ u
-    H, _, responses = linearised(u, thetas)
-    return (u, s2 * np.linalg.inv((H - P) / scale + P), np.linalg.inv(H), span, bases, thetas,
-            responses, float(chi2))
+    H, g, responses = linearised(u, thetas)
+    C = s2 * np.linalg.inv((H - P) / scale + P)
+    shift = -np.linalg.solve(H, g)[~free]                # where the data would put the held
+    return (u, _held_covariance(C, free, shift), np.linalg.inv(H), span, bases, thetas,
+            responses, float(chi2), shift)
+
+
+def _held_covariance(C, free, shift):
+    """The coefficients' covariance with those not ``free`` (a tone curve's weights, held at 0:
+    :func:`_fit_curve`) taken at their posterior widened by the ``shift`` (the held ones' least-
+    squares step from 0 that the data ask for): their error about 0, not about where the data
+    would put them, is C_hh + shift shift^T. The free ones: their covariance with the held
+    fixed, C_ff - G C_hf (G = C_fh C_hh^-1, their response to the held ones' errors), plus
+    G (C_hh + shift shift^T) G^T; so a region's response R = (R_f, R_h) carries the held ones'
+    error directly and through the light's fit."""
+    held = ~free
+    if not held.any():
+        return C
+    f, h = np.ix_(free, free), np.ix_(held, held)
+    G = C[np.ix_(free, held)] @ np.linalg.inv(C[h])
+    Ch = C[h] + np.outer(shift, shift)
+    out = np.empty_like(C)
+    out[f] = C[f] - G @ C[np.ix_(held, free)] + G @ Ch @ G.T
+    out[np.ix_(free, held)], out[np.ix_(held, free)], out[h] = G @ Ch, (G @ Ch).T, Ch
+    return out
 
 
 @dataclass(frozen=True)
@@ -784,6 +829,7 @@ class _Fitted:
     log_k: np.ndarray = None
     index_names: list = None
     departure: dict = None
+    tone_curve: dict = None
     lights: list = None
     light_curve: dict = None
 
@@ -798,7 +844,8 @@ def _fit_terms(sessions, level, terms, told, warnings, light_terms=0):
                      [np.zeros(len(theta)) for theta in thetas], _level_spans(sessions, level),
                      level.data(level.u0))
     J = len(sessions[0].parts.variants)                  # the shape variants traced
-    if not (terms > 1 or J or light_terms):
+    tone = tone_count(sessions)
+    if not (terms > 1 or J or light_terms or tone):
         if level.determined:
             light = SkyCoefficients(1, (), level.prior_sd)
             fitted.lights = [FittedLight(light, np.ones((len(s.obs.times), 1)),
@@ -818,8 +865,8 @@ def _fit_terms(sessions, level, terms, told, warnings, light_terms=0):
                             "determined.")
         return fitted
     coefficients = SkyCoefficients(terms, tuple(sessions[0].parts.variants), level.prior_sd,
-                                   light_terms)
-    u, C, H_inv, span, bases, thetas, responses, fitted.chi2 = _fit_curve(
+                                   light_terms, tone)
+    u, C, H_inv, span, bases, thetas, responses, fitted.chi2, asked = _fit_curve(
         sessions, thetas, level.u0, coefficients, level.s2, level.agree["scale"])
     sd = np.sqrt(np.diag(C))
     fitted.lights = [FittedLight(coefficients, B, u, C, theta, H_inv)
@@ -840,15 +887,26 @@ def _fit_terms(sessions, level, terms, told, warnings, light_terms=0):
         fitted.shape, fitted.index_names = _shape_record(sessions[0], u[terms:terms + S],
                                                          sd[terms:terms + S])
         warnings += _shape_warnings(fitted.shape, sd[terms:terms + S])
+    K = terms + J + light_terms
     if light_terms:
         w, Cw = np.zeros(light_terms + 1), np.zeros((light_terms + 1,) * 2)
-        w[1:], Cw[1:, 1:] = u[terms + J:], C[terms + J:, terms + J:]
+        w[1:], Cw[1:, 1:] = u[terms + J:K], C[terms + J:K, terms + J:K]
         fitted.light_curve = _curve_record(sessions, w, Cw, span, of="level")[0]
     if J > S:
         a, Ca = u[terms + S:terms + J], C[terms + S:terms + J, terms + S:terms + J]
         suns = np.unique([sky.sun_direction for s in sessions for sky in s.skies], axis=0)
         fitted.departure = _departure_record(a, Ca, suns)
         warnings += _departure_warnings(fitted.departure)
+    if tone:
+        fitted.tone_curve = {
+            "weights": u[K:].tolist(), "sd": sd[K:].tolist(), "asked": asked.tolist(),
+            "meaning": "the weights of a camera's own JPEG tone curve's independent errors "
+                       "(skyfit_mi.physics.tone_curve.PRIOR_ROOT's columns, each N(0, 1)), "
+                       "held at 0 (the codes read through the response's curve); asked: the "
+                       "step from 0 the regions' values ask for (linearised); sd: their error "
+                       "about 0 (what the values leave of the prior, widened by that step), "
+                       "through the light's fit and directly in the light's share of every "
+                       "interval"}
     fitted.correlation = {"names": coefficients.names,
                           "matrix": (C / np.outer(sd, sd)).tolist()}
     return fitted
@@ -1014,7 +1072,7 @@ def fit_sky_scale(sessions, plan, seed=0, log=print):
                           "chi2": [level.data(u) for u in profile]},
               "terms": fitted.curve, "light_level": fitted.light_curve,
               "shape": fitted.shape, "departure": fitted.departure,
-              "correlation": fitted.correlation,
+              "tone_curve": fitted.tone_curve, "correlation": fitted.correlation,
               "sun_coupling": coupling,
               "warnings": warnings, "time_s": time.perf_counter() - t0}
     log(_sky_log(record, fitted, len(sessions), plan.prior_sd, terms))

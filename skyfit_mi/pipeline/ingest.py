@@ -838,6 +838,7 @@ class IngestOptions:
     colour_matrix_error: float = None
     register: bool = True
     register_limit_px: float = LIMIT_PX
+    exact_curve: bool = False
 
     @property
     def fitted(self):
@@ -908,6 +909,7 @@ class Exposures:
     by_frame: dict
     calibration: dict
     rel: np.ndarray
+    tone_curve: dict = None
 
 
 def ingest(photo_paths, spec_path, out_dir, *, overwrite=False, progress=True, log=print,
@@ -1089,6 +1091,11 @@ def linearise(frames, o, log):
         raise SkyfitError(f"--gamma is the exponent of a gamma response, but the response is "
                           f"{'fitted' if o.fitted else repr(sensor.response)}; add --response "
                           "gamma, or leave out --gamma.")
+    if o.exact_curve and (o.fitted or sensor.response == "linear"):
+        raise SkyfitError("--exact-curve says codes follow their response's curve exactly, but "
+                          + ("the response is fitted from the patches" if o.fitted else
+                             "these frames are linear (RAW, EXR/HDR, or --response linear)")
+                          + ", which no camera's tone curve bends; leave out --exact-curve.")
     falloff = sensor.falloff(w, h, frames.spec.camera["fov_deg"]) if sensor.cos4 \
         else np.ones((h, w))
     flat = None
@@ -1213,7 +1220,7 @@ def frame_exposures(frames, patches, noise, o, log):
     """The :class:`Exposures` of the lit frames: calibrated on the references (JPEG bias taken
     out as from the frames), or the given first exposure scaled by EXIF's relative exposures."""
     lit, sensor, rel = frames.lit, patches.sensor, patches.rel
-    calibration = None
+    calibration = references = None
     if patches.samples is not None:
         samples = [(_unbiased(y, noise.jpeg_errors[i]["bias_patches"], sensor.max_code)
                     if i in noise.jpeg_errors else y, L) for i, (y, L) in zip(lit, patches.samples)]
@@ -1223,8 +1230,10 @@ def frame_exposures(frames, patches, noise, o, log):
             ys, xs = np.nonzero(patches.mask)
             cells = (ys // unit) * (patches.mask.shape[1] // unit + 1) + xs // unit
             cells = cells[np.isin(patches.patch, _neutral_labels(o.calibrate))]
+        neutral = _select(samples, patches.patch, _neutral_labels(o.calibrate))
+        references = [y for y, _ in neutral[0]]
         per_frame, calibration = calibrate_exposure(
-            *_select(samples, patches.patch, _neutral_labels(o.calibrate)), sensor,
+            *neutral, sensor,
             [frames.photos[i] for i in lit], None if rel is None else rel[lit], log, cells,
             [frames.times[i].timestamp() for i in lit])
         # by name, for a fit of the light to recalibrate on (fitting.fit.reference_factor)
@@ -1261,7 +1270,38 @@ def frame_exposures(frames, patches, noise, o, log):
                 f"it says by an sd of {EXIF_LABEL_SD:.0%} (the intervals count it); a grey card "
                 "(--calibrate) measures them, and the first frame's labels on every frame have "
                 "none")
-    return Exposures(replace(sensor, exposure=e0), by_frame, calibration, rel)
+    return Exposures(replace(sensor, exposure=e0), by_frame, calibration, rel,
+                     tone_curve_record(frames, sensor, references, o, log))
+
+
+def tone_curve_record(frames, sensor, references, o, log):
+    """The record of the error a camera's own JPEG tone curve leaves
+    (:mod:`skyfit_mi.physics.tone_curve`), or None where the codes' curve is known: linear
+    (RAW, EXR, linear 16-bit), fitted (``--response fit``) or said exact (``--exact-curve``).
+    ``references``: each lit frame's grey references' codes (n, 3) [DN], whose ln signal
+    anchors the curve's error there (None: a given exposure, anchored at full scale)."""
+    if sensor.response == "linear" or o.fitted or o.exact_curve \
+            or any(p.kind != "integer" for p in frames.photos):
+        return None
+    anchors = None
+    if references is not None:
+        anchors = {}
+        for i, y in zip(frames.lit, references):
+            s = _signal_ratio(y, np.ones_like(y, dtype=float), sensor)[0]
+            level = central_mean(s)                          # a fraction of full scale
+            anchors[str(i)] = [float(np.log(v)) if v > 0 else None for v in level]
+    where = ("each frame's grey references" if anchors is not None
+             else "full scale (the given exposure)")
+    log(f"encoding: the codes are read through {sensor.response}'s curve, but a camera's JPEG "
+        "engine applies its own tone curve (cameras' measured curves depart from sRGB's by "
+        "tens of per cent between a grey card's codes and a white's); its error, calibrated at "
+        f"{where}, is counted in the intervals, most for surfaces far darker or brighter than "
+        "the references. RAW files (linear), several greys with --response fit, or "
+        "--exact-curve (codes written from linear values by software) take it out")
+    return {"response": sensor.response, "anchor_ln_signal": anchors,
+            "anchored_at": "references" if anchors is not None else "full scale",
+            "prior": "skyfit_mi.physics.tone_curve.PRIOR_ROOT (darktable's measured camera "
+                     "base curves)"}
 
 
 def _unmix(values, mixing, sensor):
@@ -1310,6 +1350,7 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
                           "colour_matrix": colour_matrix(photos, options["colour_matrix_error"],
                                                          mixing),
                           "relative_exposure_from_exif": None if rel is None else rel.tolist(),
+                          "tone_curve": exposures.tone_curve,
                           "registration": registration.record}
     from tqdm import tqdm
 

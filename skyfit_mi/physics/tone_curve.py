@@ -1,0 +1,60 @@
+"""A camera's own tone curve: how an in-camera JPEG departs from the curve it is read with.
+
+Ingest reads 8-bit codes with a response (thesis ch. 5, eq. 5.11; sRGB's by default).  A
+camera's JPEG engine applies its own tone curve instead (a brighter middle, compressed
+highlights, a toe), so a value read as the linear signal s [fraction of full scale] stands
+for a true signal s exp(-d(ln s)).  Calibrated on a grey reference at signal s_a, a value's
+relative error is d(ln s) - d(ln s_a); with no reference (a given exposure) the curves meet at
+full scale, d(0) = 0.  Here d is a random smooth function,
+
+    d(t) = sum_j b_j phi_j(t),   phi_j(t) = P_j(x) - 1,   x = 1 + 2 t / T_MIN,
+
+P_j the Legendre polynomials on t = ln s in [T_MIN, 0] (t below clipped), so phi_j(0) = 0, and b
+~ N(0, M) with M = :data:`PRIOR_ROOT` :data:`PRIOR_ROOT`^T: the second moment (mean included) of
+the weights fitted to cameras' measured JPEG curves (darktable's base-curve presets, each
+measured from a camera's RAW and JPEG pairs; ``scripts/tone_curve_prior.py``), with a floor.  The columns of
+PRIOR_ROOT are independent errors (one normal each, :func:`moves`).
+"""
+
+import numpy as np
+from numpy.polynomial import legendre
+
+#: Least ln signal [ln of a fraction of full scale] of the basis, the least the prior was fitted
+#: at (a camera's curve at lower codes is its toe, unmeasured); darker values take its value.
+T_MIN = float(np.log(5e-3))
+#: Degree of the basis (its functions P_1 ... P_DEGREE less 1).
+DEGREE = 4
+#: Root (DEGREE, E) [unitless] of the weights' prior second moment: the eigenvectors times the
+#: root of the eigenvalues of the mean b b^T over the measured cameras' curves, each fitted by
+#: least squares in ln signal over the codes' 0.5-90%, and a floor, an independent slope of
+#: 0.18 in d per unit ln signal (on phi_1, linear in t), the least that holds 95% of each
+#: camera's curve left out and of the makers' generic curves within 1.96 sd
+#: (``scripts/tone_curve_prior.py``: 11 cameras; without the floor a left-out camera's held
+#: 91-100%, 97.7% on average).  Calibrated at 18% of full scale, a value read at 10% errs by
+#: an sd of 0.25 in ln, at 30% by 0.14, at 3% by 0.73: a camera's JPEG says little of a surface
+#: much darker or brighter than its grey reference.
+PRIOR_ROOT = np.array([[-0.0126, 0.0578, 0.0245, -0.6203, 0.4768],
+                       [-0.0346, 0.0485, -0.0827, 0.3932, 0.0],
+                       [-0.0215, 0.0098, 0.1583, 0.2725, 0.0],
+                       [0.0465, 0.0564, 0.0184, 0.2500, 0.0]])
+
+
+def basis(t):
+    """phi (..., DEGREE) [unitless] at ln signal ``t`` (...,): zero at full scale (t = 0)."""
+    x = 1.0 + 2.0 * np.clip(np.asarray(t, dtype=float), T_MIN, 0.0) / -T_MIN
+    return np.stack([legendre.legval(x, np.eye(DEGREE + 1)[j]) - 1.0
+                     for j in range(1, DEGREE + 1)], axis=-1)
+
+
+def moves(t, anchor=0.0, root=None):
+    """Each independent error's relative change (..., E) [unitless, at one sd] of a value at
+    ln signal ``t`` (...,) calibrated at ln signal ``anchor`` (broadcast with ``t``; 0: full
+    scale, for a given exposure): (phi(t) - phi(anchor)) @ ``root`` (default PRIOR_ROOT)."""
+    root = PRIOR_ROOT if root is None else np.asarray(root, dtype=float)
+    return (basis(t) - basis(anchor)) @ root
+
+
+def relative_sd(t, anchor=0.0, root=None):
+    """The sd (...,) [unitless] of the relative error of a value at ln signal ``t`` calibrated
+    at ``anchor`` (:func:`moves`)."""
+    return np.sqrt(np.sum(np.square(moves(t, anchor, root)), axis=-1))
