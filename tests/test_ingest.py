@@ -12,6 +12,7 @@ rendered frames.  Bad inputs get one line and leave no output.
 import argparse
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -84,7 +85,9 @@ def _ingest(day, out, **kw):
     """Ingest ``day``'s photographs; the simulated camera encodes through sRGB's curve exactly,
     and is said to (``exact_curve``) unless a test says otherwise."""
     from skyfit_mi.pipeline.ingest import ingest
-    exact = {"exact_curve": kw.get("response") != "fit"}
+    sim = Path(day["photos"]) / "photos.json"
+    coded = sim.exists() and json.loads(sim.read_text())["format"] != "dng"
+    exact = {"exact_curve": coded and kw.get("response") != "fit"}
     return ingest([day["photos"]], day["spec"], out, progress=False, **{**QUIET, **exact, **kw})
 
 
