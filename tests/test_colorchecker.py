@@ -210,3 +210,32 @@ def test_a_chart_whose_channels_are_mixed_still_matches_and_a_shuffled_one_does_
     assert _match(sampled, ref, mixing=True) < 1e-6
     shuffled = sampled[np.random.default_rng(0).permutation(len(sampled))]
     assert min(_match(shuffled, ref), _match(shuffled, ref, mixing=True)) > MATCH_MAX
+
+
+def test_the_charts_greys_measure_a_cameras_own_tone_curve(chart_day):
+    """A camera with its own tone curve (photo_sim.camera_tone), the chart's six greys at 3-90%:
+    ingest reads the curve from their exposures' disagreement (physics.tone_curve.
+    fit_references) and records it with its posterior; between the greys' levels the curve it
+    gives lies within 2 sd of the truth and nearer it than sRGB's."""
+    from skyfit_mi.physics import tone_curve as tc
+    from skyfit_mi.pipeline.ingest import ingest
+    from skyfit_testkit.photo_sim import PhotoSettings, camera_tone, photograph_day
+
+    tmp = chart_day["tmp"]
+    photos = tmp / "photos_curved"
+    photograph_day(chart_day["truth"], photos, PhotoSettings(quality=100, tone_curve=0.6), seed=6)
+    doc = ingest([photos], chart_day["spec"], tmp / "seq_curved", colorchecker="chart",
+                 vignetting="cos4", progress=False, **QUIET)
+    rec = doc["ingest"]["tone_curve"]
+    assert rec["anchored_at"] == "references" and rec["weights"] is not None
+    w, root = np.array(rec["weights"]), np.array(rec["root"])
+    phi = np.array(next(iter(rec["anchor_basis"].values())))[1]           # green's anchor
+    x = np.geomspace(1e-3, 1.0, 400)
+    t = np.log(np.geomspace(0.03, 0.8, 20))                                # read signals
+    d = t - np.interp(t, np.log(camera_tone(x, 0.6)), np.log(x))           # the true departure
+    est = tc.moves_from(t, phi) @ w
+    sd = np.sqrt(np.sum(np.square(tc.moves_from(t, phi, tc.PRIOR_ROOT @ root)), axis=-1))
+    # the anchor's own departure is free (it sets the exposure): compare about their means
+    err, ref = (est - est.mean()) - (d - d.mean()), d - d.mean()
+    assert np.all(np.abs(err) <= 2.0 * sd + 0.02), np.c_[d, est, sd]
+    assert np.sqrt(np.mean(err ** 2)) < 0.5 * np.sqrt(np.mean(ref ** 2))

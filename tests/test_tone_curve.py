@@ -96,7 +96,7 @@ def test_a_map_s_fits_take_the_curve_s_error_by_their_own_codes():
     by nothing, one 4x brighter by the prior's sd there, on every channel's C at once."""
     from types import SimpleNamespace
 
-    from skyfit_mi.fitting.tone import tone_level_rows, tone_moves
+    from skyfit_mi.fitting.tone import region_tone, tone_level_rows
     from skyfit_mi.fitting.uncertainty import rows_sd
     from skyfit_mi.physics.camera import SensorModel
 
@@ -106,8 +106,8 @@ def test_a_map_s_fits_take_the_curve_s_error_by_their_own_codes():
     y = np.empty((4, 3, 3))
     y[:2], y[2:] = code[0], code[1]                  # two pixels at the anchor, two 4x brighter
     obs = SimpleNamespace(rays=None, y=y, sensor=sensor, frames=[0, 1, 2])
-    doc = {"ingest": {"tone_curve": {"anchor_ln_signal": {
-        str(i): [float(np.log(anchor))] * 3 for i in range(3)}}}}
+    phi = tc.basis(np.full(3, np.log(anchor))).tolist()
+    doc = {"ingest": {"tone_curve": {"anchor_basis": {str(i): phi for i in range(3)}}}}
     names = ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha")
     theta = np.tile([0.5, 0.4, 0.3, 0.02, 0.1], (2, 1))
     rows = tone_level_rows(doc, obs, np.array([0, 0, 1, 1]), 2, names, theta)
@@ -117,8 +117,39 @@ def test_a_map_s_fits_take_the_curve_s_error_by_their_own_codes():
     np.testing.assert_allclose(sd[0], 0.0, atol=1e-9)
     np.testing.assert_allclose(sd[1, :3] / theta[1, :3], want, rtol=1e-6)
     assert sd[1, 4] == 0.0                            # a roughness does not move with a level
-    # a region's values move by its median code in each frame (fitting.tone.tone_moves)
-    s = SimpleNamespace(doc=doc, obs=obs)
-    move = tone_moves(s)
-    assert move.shape == (4, 3, 3, tc.PRIOR_ROOT.shape[1])
-    assert tone_moves(SimpleNamespace(doc={"ingest": {}}, obs=obs)) is None
+    # a region's values move by its median code in each frame (fitting.tone.region_tone); one
+    # grey measures no curve (base 0)
+    base, move = region_tone(SimpleNamespace(doc=doc, obs=obs))
+    assert move.shape == (4, 3, 3, tc.PRIOR_ROOT.shape[1]) and not base.any()
+    assert region_tone(SimpleNamespace(doc={"ingest": {}}, obs=obs)) is None
+
+
+def test_greys_at_several_levels_measure_the_curve_and_one_grey_measures_none():
+    """physics.tone_curve.fit_references: six greys (a ColorChecker's 3-90%) photographed
+    through the simulated camera's curve over 13 frames of changing exposure, read at 1%:
+    the curve they give between 3% and 90% lies within 2 sd of its posterior and nearer the
+    truth than the prior's 0; one grey leaves the prior (weights 0, root I)."""
+    rng = np.random.default_rng(7)
+    rho = np.array([0.031, 0.09, 0.19, 0.36, 0.59, 0.9])
+    exposure = np.exp(rng.uniform(np.log(0.4), np.log(0.9), size=(13, 1)))
+    x = exposure * rho                                    # the true linear signal
+    y = camera_tone(x, 0.6)                               # read through sRGB's curve
+    ratio = np.log(y / rho) + rng.normal(0.0, 0.01, y.shape)
+    weights, root, anchors, chi2 = tc.fit_references(np.log(y), ratio, np.full(y.shape, 0.01))
+    assert 0.3 < chi2 < 3.0 and anchors.shape == (13, tc.DEGREE)
+    cov = root @ root.T
+    assert np.all(np.linalg.eigvalsh(cov) <= 1.0 + 1e-9)   # the data only narrow the prior
+    grid = np.log(np.geomspace(0.03, 0.9, 25))
+    a = np.log(0.2)
+    truth = np.log(camera_tone(np.exp(grid), 0.6) / np.exp(grid))
+    x_grid = np.interp(grid, np.log(camera_tone(np.geomspace(1e-3, 1, 400), 0.6)),
+                       np.log(np.geomspace(1e-3, 1, 400)))
+    truth = (grid - x_grid) - np.interp(a, grid, grid - x_grid)   # d(ln y) - d(a)
+    est = tc.moves(grid, a) @ weights
+    sd = tc.relative_sd(grid, a, tc.PRIOR_ROOT @ root)
+    assert np.all(np.abs(est - truth) <= 2.0 * sd + 1e-3), np.c_[truth, est, sd]
+    assert np.sqrt(np.mean((est - truth) ** 2)) < 0.5 * np.sqrt(np.mean(truth ** 2))
+    w1, r1, a1, _ = tc.fit_references(np.log(y[:, 2:3]), ratio[:, 2:3], np.full((13, 1), 0.01))
+    np.testing.assert_allclose(w1, 0.0)
+    np.testing.assert_allclose(r1 @ r1.T, np.eye(len(w1)), atol=1e-12)
+    np.testing.assert_allclose(a1, tc.basis(np.log(y[:, 2])))

@@ -21,7 +21,7 @@ from .geometry import highlight_geometry
 from .held_out import held_out_error
 from .intervals import (calibration_rows, fit_intervals, frame_calibration_sd, jpeg_shared_sd,
                         matrix_rows)
-from .tone import tone_moves, tone_rows
+from .tone import region_tone, tone_rows
 from .light import SPEC_LIGHT, LightOptions, LightParts, LightPlan
 from .methods import METHODS, global_search
 from .methods.global_search import SIGMA_GRID
@@ -399,9 +399,11 @@ class FitSession:
                                                         table.sun_cos, np.nan))
         self.table = table
         self.wm = self.model_on(table)
-        obs = self.obs
-        if self.tone_weights is not None:       # each value's gain as the curve reads it
-            obs = replace(obs, gain=obs.gain * np.exp(tone_moves(self) @ self.tone_weights))
+        obs, tone = self.obs, region_tone(self)
+        if tone is not None:                    # each value's gain as the curve reads it
+            base, move = tone
+            w = self.tone_weights
+            obs = replace(obs, gain=obs.gain * np.exp(base if w is None else base + move @ w))
         self.problem = Problem(obs, self.wm, valid=table.hit)
         self._halves = self._bases = None
 
@@ -433,7 +435,7 @@ class FitSession:
         """Scale the split light's sky (all but the sun) by ``k`` (scalar or per frame), mix
         ``mix[j]`` of shape variant j with (1 - sum(mix)) of its own pattern, scale the whole
         light by ``level`` (per frame; None: 1), read the values through a camera's tone curve
-        at the weights ``tone`` of its prior's errors (:func:`~.tone.tone_moves`; None:
+        at the weights ``tone`` of its prior's errors (:func:`~.tone.region_tone`; None:
         as ingested), and rebuild the models and chi-square. Raises ValueError on a session not
         traced with the needed parts."""
         if self.parts is None or "sky" not in self.parts.names \

@@ -83,11 +83,13 @@ def fit_warnings(s, fit):
         led = [p for p, big in zip(names, doubles_interval(fit, fit.tone_sd)) if big]
         if led:
             warnings.append(
-                f"{', '.join(led)}: the camera's own JPEG tone curve, unknown (read as "
+                f"{', '.join(led)}: the camera's own JPEG tone curve, not known (read as "
                 f"{s.doc['sensor'].get('response', 'srgb')}'s), more than the data sets their "
-                "intervals: this surface's codes lie far from the grey reference's, where "
-                "cameras' curves depart most; RAW files, several greys (ingest --response fit) "
-                "or ingest --exact-curve (codes written from linear values) take it out.")
+                "intervals: this surface's codes lie far from the grey references', where "
+                "cameras' curves depart most; RAW files, greys of several reflectances in the "
+                "frames (a ColorChecker's, or several --calibrate greys at ingest), which "
+                "measure the curve, or ingest --exact-curve (codes written from linear values "
+                "by software) narrow it.")
     led = [p for p, big in zip(names, doubles_interval(fit, fit.matrix_sd)) if big]
     if led:
         warnings.append(f"{', '.join(led)}: {matrix_note(s)}; it, more than the "

@@ -398,7 +398,7 @@ class SkyCoefficients:
     ``light_terms`` polynomials P_1.. (:data:`DRIFT_SD`). They weight the light's traced parts
     (:meth:`~.light.LightParts.table`): k(t) = exp(B(t) u[:terms]), the mix, the level. Last,
     ``tone`` weights of a camera's own tone curve's independent errors (each N(0, 1);
-    :func:`~.tone.tone_moves`), which scale each value's gain: the camera's, not the light's,
+    :func:`~.tone.region_tone`), which scale each value's gain: the camera's, not the light's,
     but told by the same regions and frames (:func:`_fit_curve` holds them at 0)."""
 
     terms: int

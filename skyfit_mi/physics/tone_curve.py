@@ -12,8 +12,10 @@ full scale, d(0) = 0.  Here d is a random smooth function,
 P_j the Legendre polynomials on t = ln s in [T_MIN, 0] (t below clipped), so phi_j(0) = 0, and b
 ~ N(0, M) with M = :data:`PRIOR_ROOT` :data:`PRIOR_ROOT`^T: the second moment (mean included) of
 the weights fitted to cameras' measured JPEG curves (darktable's base-curve presets, each
-measured from a camera's RAW and JPEG pairs; ``scripts/tone_curve_prior.py``), with a floor.  The columns of
-PRIOR_ROOT are independent errors (one normal each, :func:`moves`).
+measured from a camera's RAW and JPEG pairs; ``scripts/tone_curve_prior.py``), with a
+floor.  The columns of PRIOR_ROOT are independent errors (one normal each, :func:`moves`).
+Grey references at several levels (a ColorChecker's six) measure the weights
+(:func:`fit_references`): their posterior replaces the prior.
 """
 
 import numpy as np
@@ -50,11 +52,65 @@ def moves(t, anchor=0.0, root=None):
     """Each independent error's relative change (..., E) [unitless, at one sd] of a value at
     ln signal ``t`` (...,) calibrated at ln signal ``anchor`` (broadcast with ``t``; 0: full
     scale, for a given exposure): (phi(t) - phi(anchor)) @ ``root`` (default PRIOR_ROOT)."""
+    return moves_from(t, basis(anchor), root)
+
+
+def moves_from(t, anchor_basis, root=None):
+    """:func:`moves` from the anchor's phi (..., DEGREE) itself (several references' mean,
+    :func:`fit_references`)."""
     root = PRIOR_ROOT if root is None else np.asarray(root, dtype=float)
-    return (basis(t) - basis(anchor)) @ root
+    return (basis(t) - np.asarray(anchor_basis, dtype=float)) @ root
 
 
 def relative_sd(t, anchor=0.0, root=None):
     """The sd (...,) [unitless] of the relative error of a value at ln signal ``t`` calibrated
     at ``anchor`` (:func:`moves`)."""
     return np.sqrt(np.sum(np.square(moves(t, anchor, root)), axis=-1))
+
+
+#: The least relative error [unitless] of a reference's ln exposure in the curve's fit from
+#: several greys (:func:`fit_references`): a chart's greys depart from their published
+#: reflectances by 1-2% with its batch and age.
+REFERENCE_FLOOR = 0.015
+#: The least share of the prior's sd the curve's error keeps however many references measure
+#: it [unitless]: the basis's own residual on the measured cameras' curves (median rms 0.067 in
+#: ln, ``scripts/tone_curve_prior.py``) over the prior's sd a factor of two from a reference
+#: (0.25): between and beyond the references' levels the four terms cannot follow a curve.
+POSTERIOR_FLOOR = 0.27
+
+
+def fit_references(t, ratio, sd, root=None):
+    """The curve's weights from grey references at several levels: (weights w (E,), their
+    posterior root L (E, E): w = weights + L z, z ~ N(0, 1); anchors (G, DEGREE): each
+    group's weighted mean phi, where its calibration holds, NaN where it read none;
+    chi-square per dof).
+
+    ``t`` (G, K) each group's (a frame and channel) K references' ln signal [ln of a fraction
+    of full scale], ``ratio`` (G, K) their ln exposure read (ln of signal over reflectance
+    times light; NaN where unread), ``sd`` (G, K) its error, floored at REFERENCE_FLOOR. Each
+    group's exposure is free (profiled); ln ratio = c_g + phi(t) root w under w ~ N(0, 1)
+    (the prior's). Where the references disagree beyond their errors the posterior widens by
+    the chi-square per dof (at least 1), and it keeps POSTERIOR_FLOOR^2 of the prior."""
+    root = PRIOR_ROOT if root is None else np.asarray(root, dtype=float)
+    t, ratio = np.asarray(t, dtype=float), np.asarray(ratio, dtype=float)
+    ok = np.isfinite(t) & np.isfinite(ratio)
+    w = np.where(ok, 1.0 / np.maximum(np.nan_to_num(np.asarray(sd, dtype=float), nan=1.0),
+                                      REFERENCE_FLOOR) ** 2, 0.0)
+    A = basis(np.where(ok, t, 0.0)) @ root                                  # (G, K, E)
+    wsum = np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
+    anchors = np.einsum("gk,gkd->gd", w, basis(np.where(ok, t, 0.0))) / wsum
+    anchors[~ok.any(axis=1)] = np.nan                     # a group with no reference read
+    Ac = A - np.einsum("gk,gke->ge", w, A)[:, None, :] / wsum[..., None]      # offsets profiled
+    rc = np.where(ok, ratio, 0.0) - np.sum(w * np.where(ok, ratio, 0.0), axis=1,
+                                           keepdims=True) / wsum
+    H = np.einsum("gk,gke,gkf->ef", w, Ac, Ac)
+    g = np.einsum("gk,gke,gk->e", w, Ac, rc)
+    E = root.shape[1]
+    weights = np.linalg.solve(H + np.eye(E), g)
+    res = rc - Ac @ weights
+    dof = max(int(ok.sum()) - int(np.sum(ok.any(axis=1))), 1)
+    chi2 = float(np.sum(w * res ** 2)) / dof
+    cov = np.linalg.inv(H / max(chi2, 1.0) + np.eye(E))
+    cov = (1.0 - POSTERIOR_FLOOR ** 2) * cov + POSTERIOR_FLOOR ** 2 * np.eye(E)
+    val, vec = np.linalg.eigh((cov + cov.T) / 2)
+    return weights, vec * np.sqrt(np.clip(val, 0.0, None)), anchors, chi2

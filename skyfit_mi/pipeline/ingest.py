@@ -23,6 +23,7 @@ from ..conventions import time_legendre
 from ..errors import SkyfitError, listed
 from ..files import FolderLock
 from ..physics.camera import SensorModel, clipped
+from ..physics import tone_curve
 from ..physics.colour import SRGB_LUMINANCE
 from ..render.image import write_exr
 from ..render.labels import label_image
@@ -67,6 +68,9 @@ GAMMA_RANGE = (1.0, 4.0)
 RAW_MATRIX_ERROR = 0.03
 RESPONSE_SPAN_MIN = 2.0
 RESPONSE_RMS_WARN = 0.05
+#: The least span of the grey references' signals in a frame [ratio] over which they measure a
+#: camera's own tone curve (:func:`tone_curve_record`).
+TONE_LEVELS_MIN = 2.0
 
 
 # ---- the sensor ------------------------------------------------------------------------
@@ -1230,8 +1234,7 @@ def frame_exposures(frames, patches, noise, o, log):
             ys, xs = np.nonzero(patches.mask)
             cells = (ys // unit) * (patches.mask.shape[1] // unit + 1) + xs // unit
             cells = cells[np.isin(patches.patch, _neutral_labels(o.calibrate))]
-        neutral = _select(samples, patches.patch, _neutral_labels(o.calibrate))
-        references = [y for y, _ in neutral[0]]
+        references = neutral = _select(samples, patches.patch, _neutral_labels(o.calibrate))
         per_frame, calibration = calibrate_exposure(
             *neutral, sensor,
             [frames.photos[i] for i in lit], None if rel is None else rel[lit], log, cells,
@@ -1278,30 +1281,60 @@ def tone_curve_record(frames, sensor, references, o, log):
     """The record of the error a camera's own JPEG tone curve leaves
     (:mod:`skyfit_mi.physics.tone_curve`), or None where the codes' curve is known: linear
     (RAW, EXR, linear 16-bit), fitted (``--response fit``) or said exact (``--exact-curve``).
-    ``references``: each lit frame's grey references' codes (n, 3) [DN], whose ln signal
-    anchors the curve's error there (None: a given exposure, anchored at full scale)."""
+    ``references``: the grey references' (samples [(codes (n, 3) [DN], rendered radiance
+    (n, 3))] per lit frame, labels (n,)), whose signals anchor the curve's error in each
+    frame, and, at several levels, measure the curve (:func:`~skyfit_mi.physics.tone_curve.
+    fit_references`); None: a given exposure, anchored at full scale."""
     if sensor.response == "linear" or o.fitted or o.exact_curve \
             or any(p.kind != "integer" for p in frames.photos):
         return None
-    anchors = None
+    record = {"response": sensor.response, "anchored_at": "full scale",
+              "anchor_ln_signal": None, "anchor_basis": None,
+              "prior": "skyfit_mi.physics.tone_curve.PRIOR_ROOT (darktable's measured camera "
+                       "base curves)"}
     if references is not None:
-        anchors = {}
-        for i, y in zip(frames.lit, references):
-            s = _signal_ratio(y, np.ones_like(y, dtype=float), sensor)[0]
-            level = central_mean(s)                          # a fraction of full scale
-            anchors[str(i)] = [float(np.log(v)) if v > 0 else None for v in level]
-    where = ("each frame's grey references" if anchors is not None
+        samples, patch = references
+        labels = np.unique(patch)
+        t = np.full((len(samples), 3, len(labels)), np.nan)
+        ratio, sd = t.copy(), t.copy()
+        for f, (y, L) in enumerate(samples):
+            for k, m in enumerate(labels):
+                s, r = _signal_ratio(y[patch == m], L[patch == m], sensor)
+                with np.errstate(all="ignore"), warnings.catch_warnings():
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                    t[f, :, k] = np.log(central_mean(s))
+                    ratio[f, :, k] = np.log(central_mean(r))
+                    lr = np.log(np.where(np.isfinite(r) & (r > 0), r, np.nan))
+                    sd[f, :, k] = np.nanstd(lr, axis=0) / np.sqrt(np.sum(np.isfinite(lr), 0))
+        weights, root, phi, chi2 = tone_curve.fit_references(
+            t.reshape(-1, len(labels)), ratio.reshape(-1, len(labels)), sd.reshape(-1, len(labels)))
+        phi = phi.reshape(len(samples), 3, -1)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            level = np.nanmean(t, axis=2)
+        record.update(
+            anchored_at="references",
+            anchor_ln_signal={str(i): [float(v) if np.isfinite(v) else None for v in a]
+                              for i, a in zip(frames.lit, level)},
+            anchor_basis={str(i): np.where(np.isfinite(a), a, None).tolist()
+                          for i, a in zip(frames.lit, phi)})
+        spread = np.nanmax(t, axis=2) - np.nanmin(t, axis=2) if len(labels) > 1 else None
+        if spread is not None and np.nanmedian(spread) > np.log(TONE_LEVELS_MIN):
+            record.update(weights=weights.tolist(), root=root.tolist(),
+                          references_chi2_per_dof=chi2)
+            log(f"encoding: the camera's own tone curve measured on the references' "
+                f"{len(labels)} levels (their exposures agree to chi-square {chi2:.2g} per dof "
+                "about it): the codes are read through it, and its error left is counted")
+            return record
+    where = ("each frame's grey references" if references is not None
              else "full scale (the given exposure)")
     log(f"encoding: the codes are read through {sensor.response}'s curve, but a camera's JPEG "
         "engine applies its own tone curve (cameras' measured curves depart from sRGB's by "
         "tens of per cent between a grey card's codes and a white's); its error, calibrated at "
         f"{where}, is counted in the intervals, most for surfaces far darker or brighter than "
-        "the references. RAW files (linear), several greys with --response fit, or "
-        "--exact-curve (codes written from linear values by software) take it out")
-    return {"response": sensor.response, "anchor_ln_signal": anchors,
-            "anchored_at": "references" if anchors is not None else "full scale",
-            "prior": "skyfit_mi.physics.tone_curve.PRIOR_ROOT (darktable's measured camera "
-                     "base curves)"}
+        "the references. RAW files (linear), greys of several reflectances (a ColorChecker's), "
+        "or --exact-curve (codes written from linear values by software) take it out")
+    return record
 
 
 def _unmix(values, mixing, sensor):
