@@ -134,7 +134,7 @@ def main():
                         seed=seed)
                 ingest([photos], spec_path, seq, calibrate={"grey_card": (0.18,) * 3},
                        vignetting="cos4", colour_matrix_error=args.colour_matrix_error,
-                       exact_curve=True,                # the simulated camera's sRGB is exact
+                       exact_curve=args.format != "dng",   # the simulated JPEGs' sRGB is exact
                        overwrite=True, progress=False, **quiet)
             for fit in fit_regions(seq, regions, model="colour", **quiet):
                 name = fit["region"]

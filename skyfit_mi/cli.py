@@ -530,7 +530,7 @@ def _add_ingest(sub, common):
     ing.add_argument("--gamma", type=float, help="exponent of a gamma response")
     ing.add_argument("--exact-curve", action="store_true",
                      help="the codes follow the response's curve exactly (written from linear "
-                     "values by software); default for 8-bit codes: a camera's JPEG engine's "
+                     "values by software); default for codes read through a curve: a camera's "
                      "own tone curve, whose error the intervals count")
     ing.add_argument("--exposure", type=float,
                      help="absolute exposure of the first frame [sr m^2 W^-1]")

@@ -87,7 +87,7 @@ def _ingest(day, out, **kw):
     from skyfit_mi.pipeline.ingest import ingest
     sim = Path(day["photos"]) / "photos.json"
     coded = sim.exists() and json.loads(sim.read_text())["format"] != "dng"
-    exact = {"exact_curve": coded and kw.get("response") != "fit"}
+    exact = {"exact_curve": coded}
     return ingest([day["photos"]], day["spec"], out, progress=False, **{**QUIET, **exact, **kw})
 
 
@@ -859,6 +859,10 @@ def test_float_frames_with_nan_are_masked_and_counted(day, tmp_path):
     man = ingest([src], day["spec"], out, times_csv=tmp_path / "t.csv", noise=(0.0, 0.0),
                  calibrate={"grey_card": (0.18, 0.18, 0.18)}, progress=False, **QUIET)
     assert man["sensor"]["response"] == "linear" and man["sensor"]["bits"] == 16
+    assert man["ingest"]["tone_curve"] is None                # linear: no camera's curve
+    with pytest.raises(SkyfitError, match="--exact-curve says .* these frames are linear"):
+        ingest([src], day["spec"], tmp_path / "no", times_csv=tmp_path / "t.csv",
+               calibrate={"grey_card": (0.18,) * 3}, exact_curve=True, progress=False, **QUIET)
     assert man["frames"][2]["non_finite_values"] == 27
     obs = load_observations(out, np.array([[5, 5], [6, 6], [20, 20]]))
     assert np.isinf(obs.sigma[:2, 2]).all() and np.isfinite(obs.sigma[2]).all()
@@ -896,9 +900,6 @@ def test_options_that_would_be_ignored_are_refused(day, tmp_path):
     with pytest.raises(SkyfitError,
                        match="--vignetting cos5: give none, corrected, cos4, or the path"):
         _ingest(day, tmp_path / "o", exposure=1e-3, vignetting="cos5")
-    with pytest.raises(SkyfitError, match="--exact-curve says .* the response is fitted"):
-        _ingest(day, tmp_path / "o", calibrate={"grey_card": (0.18,) * 3}, response="fit",
-                exact_curve=True)
     for bad in (0.0, -1.0, float("nan")):            # refused before any work is logged
         logs = []
         with pytest.raises(SkyfitError, match="--exposure .*: give the first frame's exposure"):

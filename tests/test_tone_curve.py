@@ -105,7 +105,7 @@ def test_a_map_s_fits_take_the_curve_s_error_by_their_own_codes():
     code = sensor.respond(np.array([anchor, 4 * anchor])) * sensor.max_code
     y = np.empty((4, 3, 3))
     y[:2], y[2:] = code[0], code[1]                  # two pixels at the anchor, two 4x brighter
-    obs = SimpleNamespace(rays=None, y=y, sensor=sensor, frames=[0, 1, 2])
+    obs = SimpleNamespace(rays=None, y=y, sigma=np.ones_like(y), sensor=sensor, frames=[0, 1, 2])
     phi = tc.basis(np.full(3, np.log(anchor))).tolist()
     doc = {"ingest": {"tone_curve": {"anchor_basis": {str(i): phi for i in range(3)}}}}
     names = ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha")

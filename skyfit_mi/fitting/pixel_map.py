@@ -111,13 +111,17 @@ def _settings(doc, regions, o, sky, first):
 def _labels_share(doc, result, pixels):
     """A region fit's ``result`` share of the EXIF labels' error per parameter: its
     ``calibration_error_sd`` without the errors of the level every frame shares
-    (:func:`~.uncertainty.shared_level_rows`, taken out in quadrature), which each pixel of a map
-    takes at its own place."""
+    (:func:`~.uncertainty.shared_level_rows`) and a camera's tone curve's where they are among
+    them (its light not fitted; each pixel takes its own, :func:`~.tone.tone_level_rows`), taken
+    out in quadrature, which each pixel of a map takes at its own place."""
     cal = result.get("calibration_error_sd") or {}
     names = [p for p in result["parameters"] if p in cal]
     theta = np.array([result["parameters"][p] for p in names])
     shared = unc.rows_sd(unc.shared_level_rows(doc, names, theta,
                                                unc.region_vignetting(doc, pixels)))
+    if not (result.get("sky") or {}).get("tone_curve"):
+        tone = result.get("tone_curve_error_sd") or {}
+        shared = np.hypot(shared, [tone.get(p, 0.0) for p in names])
     return {p: float(np.sqrt(max(cal[p] ** 2 - v ** 2, 0.0))) for p, v in zip(names, shared)}
 
 
@@ -180,8 +184,9 @@ def first_fits(manifest_path, regions, model="colour", normalisation="ward", see
         return choices, {"fitted": sky, "regions": regions}
     rec = fits[-1][1]["sky"]                      # one sky record, shared by every region
     return choices, {"fitted": sky, "regions": regions,
-                     "sky": {k: rec[k] for k in ("k", "interval95", "determined", "terms",
-                                                 "regions", "prior", "warnings")},
+                     "sky": {k: rec.get(k) for k in ("k", "interval95", "determined", "terms",
+                                                     "regions", "prior", "warnings",
+                                                     "tone_curve")},
                      "sun_level_sd": rec["sun_level_sd"], "sun_source": rec["sun_source"]}
 
 

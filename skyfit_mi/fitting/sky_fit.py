@@ -117,12 +117,16 @@ class SkyShare:
 
     @property
     def tone_sd(self):
-        """The fitted tone curve's share (n,) of each parameter's standard error (its block of
-        the light's covariance alone), None where the light's fit took none."""
+        """The tone curve's share (n,) of each parameter's standard error, directly and through
+        the light's fit (the free coefficients' regression G on the held weights,
+        :func:`_held_covariance`), None where the light's fit took none."""
         tone = 0 if self.light is None else self.light.coefficients.tone
         if not tone or self.response is None:
             return None
-        return _carried_sd(self.response[:, -tone:], self.light.covariance[-tone:, -tone:])
+        C = self.light.covariance                        # _held_covariance's
+        G = C[:-tone, -tone:] @ np.linalg.inv(C[-tone:, -tone:])
+        R = self.response[:, -tone:] + self.response[:, :-tone] @ G
+        return _carried_sd(R, C[-tone:, -tone:])
 
     @property
     def shape_known(self):
@@ -451,9 +455,10 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
     the curve (auto-exposure keeps each surface's codes alike), and fitted they took up what
     the light's model misses (the board photographed through a curved camera: whites 41% low,
     7 gross misses). Leaves each session at the fit. Returns (u, covariance, inverse profiled
-    normal matrix, span [s], each region's time basis, parameters and response (n, coefficients),
-    summed chi-square, the held coefficients' step from 0 the data ask for); the covariance
-    divides the data's information (not the priors') by ``scale`` (:func:`_regions_agree`)."""
+    normal matrix (nil on the held weights), span [s], each region's time basis, parameters
+    and response (n, coefficients), summed chi-square, the held coefficients' step from 0 the
+    data ask for); the covariance divides the data's information (not the priors') by
+    ``scale`` (:func:`_regions_agree`)."""
     times = [t for s in sessions for t in s.obs.times]
     span = (float(_seconds(times).min()), float(_seconds(times).max()))
     bases = [time_basis(s.obs.times, span, coefficients.columns) for s in sessions]
@@ -502,8 +507,10 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
     H, g, responses = linearised(u, thetas)
     C = s2 * np.linalg.inv((H - P) / scale + P)
     shift = -np.linalg.solve(H, g)[~free]                # where the data would put the held
-    return (u, _held_covariance(C, free, shift), np.linalg.inv(H), span, bases, thetas,
-            responses, float(chi2), shift)
+    inverse = np.zeros_like(H)                            # the held weights do not move
+    inverse[np.ix_(free, free)] = np.linalg.inv(H[np.ix_(free, free)])
+    return (u, _held_covariance(C, free, shift), inverse, span, bases, thetas, responses,
+            float(chi2), shift)
 
 
 def _held_covariance(C, free, shift):
@@ -1053,7 +1060,8 @@ def fit_sky_scale(sessions, plan, seed=0, log=print):
               "k": fitted.k, "interval95": fitted.interval, "determined": level.determined,
               "regions": [s.name for s in sessions], "chi2": fitted.chi2,
               "dof": sum(s.problem.dof for s in sessions)
-              - (len(fitted.correlation["names"]) if fitted.correlation else 1),
+              - (len(fitted.correlation["names"]) - len((fitted.tone_curve or {}).get(
+                  "weights", [])) if fitted.correlation else 1),
               "interval_scale_s2": level.s2,
               "regions_agree": None if level.agree is None else {
                   **level.agree, "meaning": "Q: the sum over regions of each one's chi-square "

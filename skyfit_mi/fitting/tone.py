@@ -45,10 +45,12 @@ def level_tone(doc, obs, codes):
     return dphi @ root @ weights, dphi @ root @ posterior
 
 
-def median_codes(y):
-    """The median code (1, T, C) [DN] of values ``y`` (P, T, C) in each frame and channel: a
-    region's level, by which its values move (a move read from each value's own noise would
-    let a fitted curve follow it)."""
+def median_codes(obs, rows=slice(None)):
+    """The median code (1, T, C) [DN] of ``obs``'s values (of pixels ``rows``) in each frame and
+    channel, of those usable (a finite sigma: not clipped, mixed or missing): a region's level,
+    by which its values move (a move read from each value's own noise would let a fitted
+    curve follow it)."""
+    y = np.where(np.isfinite(obs.sigma), obs.y, np.nan)[rows]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)          # a frame with no value
         return np.nanmedian(y, axis=0, keepdims=True)
@@ -57,7 +59,7 @@ def median_codes(y):
 def region_tone(s):
     """:func:`level_tone` (base (P, T, C), moves (P, T, C, E)) of session ``s``'s values at the
     region's :func:`median_codes`, None where its ingest counted no curve."""
-    tone = level_tone(s.doc, s.obs, median_codes(s.obs.y))
+    tone = level_tone(s.doc, s.obs, median_codes(s.obs))
     if tone is None:
         return None
     base, move = tone
@@ -71,7 +73,7 @@ def tone_level_rows(doc, obs, groups, n, names, theta):
     frames of its values' move (:func:`level_tone` at the group's median codes), through
     :func:`~.uncertainty.level_rows` (every channel at once); none (n, 0, names) where the
     ingest counted no curve."""
-    codes = np.stack([median_codes(obs.y[groups == g])[0] for g in range(n)])   # (n, T, C)
+    codes = np.stack([median_codes(obs, groups == g)[0] for g in range(n)])       # (n, T, C)
     tone = level_tone(doc, obs, codes)
     if tone is None:
         return np.zeros((n, 0, len(names)))
@@ -98,8 +100,9 @@ TONE_NOTE = ("the standard error each parameter takes from the camera's own JPEG
              "sRGB's by tens of per cent between a grey reference's codes and a much brighter "
              "or darker surface's (skyfit_mi.physics.tone_curve), less where greys of several "
              "reflectances measured it. Where the light is fitted (the photographs' default) "
-             "the curve's weights are among its coefficients and this is their block of the "
-             "light's share; under the spec's light, its rows among the calibration's errors. "
+             "the curve's weights, held at 0, are among its coefficients, and this is their "
+             "share through it and directly; under the spec's light, its rows among the "
+             "calibration's errors. "
              "RAW files, greys of several reflectances, or ingest --exact-curve for codes "
              "written from linear values narrow it")
 

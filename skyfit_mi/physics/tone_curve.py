@@ -1,13 +1,14 @@
 """A camera's own tone curve: how an in-camera JPEG departs from the curve it is read with.
 
-Ingest reads 8-bit codes with a response (thesis ch. 5, eq. 5.11; sRGB's by default).  A
+Ingest reads integer codes with a response (thesis ch. 5, eq. 5.11; sRGB's by default for
+8-bit files).  A
 camera's JPEG engine applies its own tone curve instead (a brighter middle, compressed
 highlights, a toe), so a value read as the linear signal s [fraction of full scale] stands
 for a true signal s exp(-d(ln s)).  Calibrated on a grey reference at signal s_a, a value's
 relative error is d(ln s) - d(ln s_a); with no reference (a given exposure) the curves meet at
 full scale, d(0) = 0.  Here d is a random smooth function,
 
-    d(t) = sum_j b_j phi_j(t),   phi_j(t) = P_j(x) - 1,   x = 1 + 2 t / T_MIN,
+    d(t) = sum_j b_j phi_j(t),   phi_j(t) = P_j(x) - 1,   x = 1 - 2 t / T_MIN,
 
 P_j the Legendre polynomials on t = ln s in [T_MIN, 0] (t below clipped), so phi_j(0) = 0, and b
 ~ N(0, M) with M = :data:`PRIOR_ROOT` :data:`PRIOR_ROOT`^T: the second moment (mean included) of
@@ -79,10 +80,11 @@ REFERENCE_FLOOR = 0.015
 POSTERIOR_FLOOR = 0.27
 
 
-def fit_references(t, ratio, sd, root=None):
+def fit_references(t, ratio, sd, root=None, anchor_weight=None):
     """The curve's weights from grey references at several levels: (weights w (E,), their
     posterior root L (E, E): w = weights + L z, z ~ N(0, 1); anchors (G, DEGREE): each
-    group's weighted mean phi, where its calibration holds, NaN where it read none;
+    group's mean phi weighted by ``anchor_weight`` (G, K) (as its exposure weighed its
+    references; default 1 / sd^2), where its calibration holds, NaN where it read none;
     chi-square per dof).
 
     ``t`` (G, K) each group's (a frame and channel) K references' ln signal [ln of a fraction
@@ -98,8 +100,10 @@ def fit_references(t, ratio, sd, root=None):
                                       REFERENCE_FLOOR) ** 2, 0.0)
     A = basis(np.where(ok, t, 0.0)) @ root                                  # (G, K, E)
     wsum = np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
-    anchors = np.einsum("gk,gkd->gd", w, basis(np.where(ok, t, 0.0))) / wsum
-    anchors[~ok.any(axis=1)] = np.nan                     # a group with no reference read
+    aw = w if anchor_weight is None else np.where(ok, np.nan_to_num(anchor_weight), 0.0)
+    anchors = np.einsum("gk,gkd->gd", aw, basis(np.where(ok, t, 0.0))) \
+        / np.maximum(aw.sum(axis=1, keepdims=True), 1e-300)
+    anchors[~(aw > 0).any(axis=1)] = np.nan               # a group with no reference read
     Ac = A - np.einsum("gk,gke->ge", w, A)[:, None, :] / wsum[..., None]      # offsets profiled
     rc = np.where(ok, ratio, 0.0) - np.sum(w * np.where(ok, ratio, 0.0), axis=1,
                                            keepdims=True) / wsum

@@ -1095,11 +1095,10 @@ def linearise(frames, o, log):
         raise SkyfitError(f"--gamma is the exponent of a gamma response, but the response is "
                           f"{'fitted' if o.fitted else repr(sensor.response)}; add --response "
                           "gamma, or leave out --gamma.")
-    if o.exact_curve and (o.fitted or sensor.response == "linear"):
+    if o.exact_curve and not o.fitted and sensor.response == "linear":
         raise SkyfitError("--exact-curve says codes follow their response's curve exactly, but "
-                          + ("the response is fitted from the patches" if o.fitted else
-                             "these frames are linear (RAW, EXR/HDR, or --response linear)")
-                          + ", which no camera's tone curve bends; leave out --exact-curve.")
+                          "these frames are linear (RAW, EXR/HDR, or --response linear), which "
+                          "no camera's tone curve bends; leave out --exact-curve.")
     falloff = sensor.falloff(w, h, frames.spec.camera["fov_deg"]) if sensor.cos4 \
         else np.ones((h, w))
     flat = None
@@ -1274,18 +1273,21 @@ def frame_exposures(frames, patches, noise, o, log):
                 "(--calibrate) measures them, and the first frame's labels on every frame have "
                 "none")
     return Exposures(replace(sensor, exposure=e0), by_frame, calibration, rel,
-                     tone_curve_record(frames, sensor, references, o, log))
+                     tone_curve_record(frames, sensor, references,
+                                       bool((calibration or {}).get("per_frame")), o, log))
 
 
-def tone_curve_record(frames, sensor, references, o, log):
+def tone_curve_record(frames, sensor, references, per_frame, o, log):
     """The record of the error a camera's own JPEG tone curve leaves
     (:mod:`skyfit_mi.physics.tone_curve`), or None where the codes' curve is known: linear
-    (RAW, EXR, linear 16-bit), fitted (``--response fit``) or said exact (``--exact-curve``).
-    ``references``: the grey references' (samples [(codes (n, 3) [DN], rendered radiance
-    (n, 3))] per lit frame, labels (n,)), whose signals anchor the curve's error in each
-    frame, and, at several levels, measure the curve (:func:`~skyfit_mi.physics.tone_curve.
-    fit_references`); None: a given exposure, anchored at full scale."""
-    if sensor.response == "linear" or o.fitted or o.exact_curve \
+    (RAW, EXR, linear 16-bit) or said exact (``--exact-curve``); a fitted response's families
+    hold no camera's curve. ``references``: the grey references' (samples [(codes (n, 3)
+    [DN], rendered radiance (n, 3))] per lit frame, labels (n,)), whose signals anchor the
+    curve's error in each frame (``per_frame``: each frame calibrated on its own, else one
+    scale for the day, anchored where the frames' mean holds), and, at several levels, measure
+    the curve (:func:`~skyfit_mi.physics.tone_curve.fit_references`); None: a given exposure,
+    anchored at full scale."""
+    if sensor.response == "linear" or o.exact_curve \
             or any(p.kind != "integer" for p in frames.photos):
         return None
     record = {"response": sensor.response, "anchored_at": "full scale",
@@ -1296,7 +1298,7 @@ def tone_curve_record(frames, sensor, references, o, log):
         samples, patch = references
         labels = np.unique(patch)
         t = np.full((len(samples), 3, len(labels)), np.nan)
-        ratio, sd = t.copy(), t.copy()
+        ratio, sd, weight = t.copy(), t.copy(), t.copy()
         for f, (y, L) in enumerate(samples):
             for k, m in enumerate(labels):
                 s, r = _signal_ratio(y[patch == m], L[patch == m], sensor)
@@ -1304,11 +1306,18 @@ def tone_curve_record(frames, sensor, references, o, log):
                     warnings.simplefilter("ignore", RuntimeWarning)
                     t[f, :, k] = np.log(central_mean(s))
                     ratio[f, :, k] = np.log(central_mean(r))
+                    # as the exposure weighs it (_patch_exposure): pixels x signal^2
+                    weight[f, :, k] = np.sum(~np.isnan(r), axis=0) * np.exp(2 * t[f, :, k])
                     lr = np.log(np.where(np.isfinite(r) & (r > 0), r, np.nan))
                     sd[f, :, k] = np.nanstd(lr, axis=0) / np.sqrt(np.sum(np.isfinite(lr), 0))
         weights, root, phi, chi2 = tone_curve.fit_references(
-            t.reshape(-1, len(labels)), ratio.reshape(-1, len(labels)), sd.reshape(-1, len(labels)))
+            *(a.reshape(-1, len(labels)) for a in (t, ratio, sd)),
+            anchor_weight=weight.reshape(-1, len(labels)))
         phi = phi.reshape(len(samples), 3, -1)
+        if not per_frame:                   # one scale for the day: where the frames' mean holds
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                phi = np.broadcast_to(np.nanmean(phi, axis=0), phi.shape)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             level = np.nanmean(t, axis=2)
