@@ -472,11 +472,13 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
             put(s, B, u)
         return sum(s.problem.chi2(t) for s, t in zip(sessions, thetas)) + u @ P @ u
 
-    def linearised(u, thetas):
-        """The profiled normal equations (H, g) at (u, thetas) and each region's response."""
+    def linearised(u, thetas, which=None):
+        """The profiled normal equations (H, g) at (u, thetas) and each region's response, of
+        the coefficients ``which`` (default all; the others' columns 0)."""
         H, g, responses = P.copy(), P @ u, []
         for s, B, theta in zip(sessions, bases, thetas):
-            Jp, r, Jt, response = light_response(s, FittedLight(coefficients, B, u), theta)
+            Jp, r, Jt, response = light_response(s, FittedLight(coefficients, B, u), theta,
+                                                 which)
             rp = r - Jt @ np.linalg.lstsq(Jt, r, rcond=None)[0]
             H += Jp.T @ Jp
             g += Jp.T @ rp
@@ -486,7 +488,7 @@ def _fit_curve(sessions, thetas, u0, coefficients, s2, scale=1.0):
     current = objective(u, thetas)
     free = np.arange(len(u)) < len(u) - coefficients.tone    # the tone curve's held at 0
     for _ in range(DRIFT_ITERATIONS):
-        H, g, _ = linearised(u, thetas)
+        H, g, _ = linearised(u, thetas, free)           # the held: only at the end
         step = np.zeros_like(u)
         step[free] = -np.linalg.solve(H[np.ix_(free, free)], g[free])
         for _ in range(6):                              # halved until chi-square falls
@@ -550,26 +552,31 @@ class FittedLight:
         """Light ``session`` at the coefficients ``u`` (default the fitted)."""
         self.coefficients.light(session, self.basis, self.u if u is None else u)
 
-    def derivative(self, session, value):
+    def derivative(self, session, value, which=None):
         """d value(session) / d u (..., coefficients) by central differences of
-        :data:`DRIFT_STEP`; leaves ``session`` lit at the fitted u."""
+        :data:`DRIFT_STEP`, of the coefficients ``which`` (a mask; default all, the others'
+        columns 0); leaves ``session`` lit at the fitted u."""
         columns = []
-        for step in DRIFT_STEP * np.eye(len(self.u)):
+        for j, step in enumerate(DRIFT_STEP * np.eye(len(self.u))):
+            if which is not None and not which[j]:
+                columns.append(None)
+                continue
             ends = []
             for sign in (1, -1):
                 self.put(session, self.u + sign * step)
                 ends.append(value(session))
             columns.append((ends[0] - ends[1]) / (2 * DRIFT_STEP))
         self.put(session)
-        return np.stack(columns, axis=-1)
+        zero = np.zeros_like(next(c for c in columns if c is not None))
+        return np.stack([zero if c is None else c for c in columns], axis=-1)
 
 
-def light_response(s, light, theta):
+def light_response(s, light, theta, which=None):
     """(d residuals / d u that the parameters cannot absorb, residuals, d residuals / d theta,
     the parameters' least-squares response (n, coefficients)) of session ``s`` at ``theta`` and
-    :class:`FittedLight` ``light``, by central differences of :data:`DRIFT_STEP`; leaves ``s``
-    lit at it."""
-    Ju = light.derivative(s, lambda s: s.problem.residuals(theta))
+    :class:`FittedLight` ``light``, by central differences of :data:`DRIFT_STEP` (of the
+    coefficients ``which``, default all); leaves ``s`` lit at it."""
+    Ju = light.derivative(s, lambda s: s.problem.residuals(theta), which)
     r, Jt = s.problem.jacobian(theta)
     response = -np.linalg.lstsq(Jt, Ju, rcond=None)[0]
     return Ju + Jt @ response, r, Jt, response
