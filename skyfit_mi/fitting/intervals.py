@@ -215,21 +215,17 @@ def matrix_rows(s, J, problem, usable, theta, curvature_inverse):
         return np.zeros((0, n))
     L = problem.model.radiance(theta)
     value = problem.value_scale(theta)
-    P, T, C, _ = J.shape
-    flat = (P * T, 1, C, n)
-    rows = []
+    C = J.shape[2]
+    moves = []
     for c in range(C):
         for j in range(C):
             if j == c:
                 continue
             with np.errstate(all="ignore"):
                 move = np.nan_to_num(value[..., c] * (L[..., j] / L[..., c] - 1.0))
-            Jk = np.zeros_like(J)
-            Jk[..., c, :] = J[..., c, :] * move[..., None]
-            rows.append(unc.shared_error_rows(Jk.reshape(flat), usable.reshape(flat[:3]),
-                                              problem.obs.sigma.reshape(flat[:3]), [[rel]],
-                                              np.ones((C, 1)), curvature_inverse))
-    return np.concatenate(rows)
+            moves.append(np.where(np.arange(C) == c, float(rel) * move[..., None], 0.0))
+    return unc.moved_rows(J, usable, problem.obs.sigma, np.stack(moves, axis=-1),
+                          curvature_inverse)
 
 
 def matrix_note(s):

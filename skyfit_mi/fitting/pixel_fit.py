@@ -150,8 +150,7 @@ def fit_pixels(manifest_path, materials, pixels, model="colour", normalisation="
     vignetting = np.abs(np.bincount(groups, weights=vignetting_error(doc, pixels), minlength=n)
                         / np.maximum(count, 1))
     calibration = rows_sd(calibration_rows(doc, names, theta, vignetting))
-    if light is None or light["fitted"] == "spec" or not (light.get("sky") or {}).get(
-            "tone_curve"):          # else the regions' fitted light took the curve: region_sd
+    if not ((light or {}).get("sky") or {}).get("tone_curve"):  # else region_sd carries it
         calibration = np.hypot(calibration, rows_sd(tone_level_rows(doc, obs, groups, n, names,
                                                                     theta)))
     spread = Z["95"] * np.sqrt(sd ** 2 + calibration ** 2

@@ -124,9 +124,9 @@ class SkyShare:
         if not tone or self.response is None:
             return None
         C = self.light.covariance                        # _held_covariance's
-        G = C[:-tone, -tone:] @ np.linalg.inv(C[-tone:, -tone:])
-        R = self.response[:, -tone:] + self.response[:, :-tone] @ G
-        return _carried_sd(R, C[-tone:, -tone:])
+        held = np.arange(len(C)) >= len(C) - tone
+        R = self.response[:, held] + self.response[:, ~held] @ _regression(C, held)
+        return _carried_sd(R, C[np.ix_(held, held)])
 
     @property
     def shape_known(self):
@@ -527,12 +527,18 @@ def _held_covariance(C, free, shift):
     if not held.any():
         return C
     f, h = np.ix_(free, free), np.ix_(held, held)
-    G = C[np.ix_(free, held)] @ np.linalg.inv(C[h])
+    G = _regression(C, held)
     Ch = C[h] + np.outer(shift, shift)
     out = np.empty_like(C)
     out[f] = C[f] - G @ C[np.ix_(held, free)] + G @ Ch @ G.T
     out[np.ix_(free, held)], out[np.ix_(held, free)], out[h] = G @ Ch, (G @ Ch).T, Ch
     return out
+
+
+def _regression(C, held):
+    """G (free, held): the free coefficients' regression on the ``held`` ones under covariance
+    ``C``, C_fh C_hh^-1."""
+    return C[np.ix_(~held, held)] @ np.linalg.inv(C[np.ix_(held, held)])
 
 
 @dataclass(frozen=True)

@@ -90,7 +90,7 @@ def tone_count(sessions):
     """The independent errors of a camera's own tone curve a joint fit of the light takes
     among its coefficients: every one (:data:`~skyfit_mi.physics.tone_curve.PRIOR_ROOT`'s
     columns) where every region's ingest counted the curve, else none."""
-    counted = all(region_tone(s) is not None for s in sessions)
+    counted = all(s.tone is not None for s in sessions)
     return tone_curve.PRIOR_ROOT.shape[1] if sessions and counted else 0
 
 
@@ -108,21 +108,12 @@ TONE_NOTE = ("the standard error each parameter takes from the camera's own JPEG
 
 
 def tone_rows(s, J, problem, usable, theta, curvature_inverse):
-    """Signed rows (E, n) from a camera's own tone curve (:func:`region_tone`): each
-    independent error of its prior moves each value by its move, one error for every frame and
-    channel (:func:`~.uncertainty.shared_error_rows`); none where the ingest counted none, or
-    where a joint fit of the light took the curve among its coefficients (``s.tone_weights``:
-    the fitted light's share carries it)."""
-    n = len(s.names)
-    tone = region_tone(s)
-    if tone is None or s.tone_weights is not None:
-        return np.zeros((0, n))
-    move = tone[1]
-    Js = J * problem.value_scale(theta)[..., None]
-    P, T, C, _ = J.shape
-    flat = (P * T, 1, C, n)
-    return np.concatenate([unc.shared_error_rows((Js * move[..., e, None]).reshape(flat),
-                                                 usable.reshape(flat[:3]),
-                                                 problem.obs.sigma.reshape(flat[:3]), [[1.0]],
-                                                 np.ones((C, 1)), curvature_inverse)
-                           for e in range(move.shape[-1])])
+    """Signed rows (E, n) from a camera's own tone curve (``s.tone``, :func:`region_tone`): each
+    independent error of its prior moves each value by its move
+    (:func:`~.uncertainty.moved_rows`); none where the ingest counted none, or where a joint
+    fit of the light took the curve among its coefficients (``s.tone_weights``: the fitted
+    light's share carries it)."""
+    if s.tone is None or s.tone_weights is not None:
+        return np.zeros((0, len(s.names)))
+    return unc.moved_rows(J * problem.value_scale(theta)[..., None], usable, problem.obs.sigma,
+                          s.tone[1], curvature_inverse)

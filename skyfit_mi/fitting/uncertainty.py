@@ -278,6 +278,18 @@ def shared_error_rows(J, usable, sigma, shared_sd, mixing, curvature_inverse, lo
     return g.reshape(-1, g.shape[-1]) @ curvature_inverse
 
 
+def moved_rows(J, usable, sigma, moves, curvature_inverse):
+    """Signed rows (E, n) of E independent errors each moving every value of a region by its
+    own amount, ``moves`` (P, T, C, E) at one sd (in the units ``J`` (P, T, C, n) takes), one
+    error for every frame and channel (:func:`shared_error_rows`)."""
+    P, T, C, n = J.shape
+    flat = (P * T, 1, C, n)
+    return np.concatenate([shared_error_rows((J * moves[..., e, None]).reshape(flat),
+                                             usable.reshape(flat[:3]), sigma.reshape(flat[:3]),
+                                             [[1.0]], np.ones((C, 1)), curvature_inverse)
+                           for e in range(moves.shape[-1])])
+
+
 def profile_interval(grid, profile, s2=1.0, ripple=0.0):
     """{level: (lo, hi)} where profile <= min + Delta s^2 + ripple, edges interpolated linearly.
 

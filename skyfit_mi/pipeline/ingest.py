@@ -1327,8 +1327,10 @@ def tone_curve_record(frames, sensor, references, per_frame, o, log):
                               for i, a in zip(frames.lit, level)},
             anchor_basis={str(i): np.where(np.isfinite(a), a, None).tolist()
                           for i, a in zip(frames.lit, phi)})
-        spread = np.nanmax(t, axis=2) - np.nanmin(t, axis=2) if len(labels) > 1 else None
-        if spread is not None and np.nanmedian(spread) > np.log(TONE_LEVELS_MIN):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            spread = np.nanmedian(np.nanmax(t, axis=2) - np.nanmin(t, axis=2))
+        if spread > np.log(TONE_LEVELS_MIN):
             record.update(weights=weights.tolist(), root=root.tolist(),
                           references_chi2_per_dof=chi2)
             log(f"encoding: the camera's own tone curve measured on the references' "
