@@ -30,6 +30,9 @@ Scenarios (``--scenario``, default all):
             through sRGB's curve exactly, and ingest is told so (--exact-curve). With
             --exact-curve every scenario's ingest is told the curve is exact (the error left
             out); --counted-curve: none is
+  card_set_curve  card_curve with a three-card set (white 90%, grey 18%, black 4%: CARD_SET)
+            in a row beside the board, each given to --calibrate: their levels measure the
+            camera's curve (its own truth render)
 
 Prints a markdown table per scenario: over seeds and materials, the share of (material,
 parameter) pairs whose 95% interval holds the truth, the gross misses (the truth beyond the
@@ -58,20 +61,31 @@ SCENE = ROOT / "scenes" / "sample_board.xml"
 #: The grey card: 0.24 m square, its reflectance, beside the board's south edge (about 13
 #: pixels across in the board's 160 x 120 frames).
 CARD = {"rho": 0.18, "size_m": 0.24, "at": (0.0, -0.85)}
+#: A photographer's three-card set (a white card of 90%, the 18% grey, a black of 4%; 0.24 m
+#: squares in a row along the board's south edge): {material: (reflectance, centre x [m])}.
+CARD_SET = {"white_card": (0.90, -0.35), "grey_card": (0.18, 0.0), "black_card": (0.04, 0.35)}
 TRUTH_SPP = 1024
 NAMES = ("C_r", "C_g", "C_b", "rho_s", "sigma_alpha")
 
 
-def scene_xml():
-    """The sample board's XML with the grey card (a raw grey Lambertian) added."""
-    card = (f'<bsdf type="ward" id="grey_card"><string name="model" value="raw"/>'
-            f'<rgb name="rho_d" value="{CARD["rho"]}, {CARD["rho"]}, {CARD["rho"]}"/>'
-            '<rgb name="rho_s" value="0, 0, 0"/><float name="sigma_alpha" value="0.1"/></bsdf>'
-            '<shape type="rectangle" id="card"><transform name="to_world">'
-            f'<scale value="{CARD["size_m"] / 2}"/><translate x="{CARD["at"][0]}" '
-            f'y="{CARD["at"][1]}" z="0.001"/></transform><ref id="grey_card"/></shape>\n')
-    text = SCENE.read_text()
-    return text.replace("</scene>", card + "</scene>")
+def cards_of(scenario):
+    """{material: (reflectance, centre x [m])} of the cards beside the board in ``scenario``."""
+    if SCENARIOS.get(scenario, {}).get("card_set"):
+        return CARD_SET
+    return {"grey_card": (CARD["rho"], CARD["at"][0])}
+
+
+def scene_xml(cards):
+    """The sample board's XML with ``cards`` (cards_of's; each a raw grey Lambertian) added."""
+    xml = "".join(
+        f'<bsdf type="ward" id="{name}"><string name="model" value="raw"/>'
+        f'<rgb name="rho_d" value="{rho}, {rho}, {rho}"/>'
+        '<rgb name="rho_s" value="0, 0, 0"/><float name="sigma_alpha" value="0.1"/></bsdf>'
+        f'<shape type="rectangle" id="{name}_shape"><transform name="to_world">'
+        f'<scale value="{CARD["size_m"] / 2}"/><translate x="{x}" y="{CARD["at"][1]}" '
+        f'z="0.001"/></transform><ref id="{name}"/></shape>\n'
+        for name, (rho, x) in cards.items())
+    return SCENE.read_text().replace("</scene>", xml + "</scene>")
 
 
 def truths(truth):
@@ -102,6 +116,8 @@ SCENARIOS = {
                                           "pose_sd_deg": 0.3}},
     "lens": {"card": True, "photo": {"distortion": (-0.1,)}, "camera": {"distortion": [-0.1]}},
     "card_curve": {"card": True, "photo": {"tone_curve": 0.6}, "camera_curve": True},
+    "card_set_curve": {"card": True, "card_set": True, "photo": {"tone_curve": 0.6},
+                       "camera_curve": True},
     "hazy": {"card": True, "sky": {"type": "turbid", "turbidity": 5.0}},
     "cloudy": {"card": True, "sky": {"type": "cie_general", "cie_type": 10}},
 }
@@ -114,9 +130,10 @@ def write_spec(work, scenario=None, truth=False):
     from skyfit_mi.pipeline.spec import read_spec
 
     how = SCENARIOS.get(scenario, {})
-    (work / "board_card.xml").write_text(scene_xml())
+    scene = "board_card_set.xml" if how.get("card_set") else "board_card.xml"
+    (work / scene).write_text(scene_xml(cards_of(scenario)))
     raw = read_spec(SPEC)
-    raw["scene"] = {**raw["scene"], "file": "board_card.xml"}
+    raw["scene"] = {**raw["scene"], "file": scene}
     raw["render"] = {**raw["render"], "spp": TRUTH_SPP}
     if truth:
         raw["sky"] = how.get("sky", raw["sky"])
@@ -131,8 +148,10 @@ def write_spec(work, scenario=None, truth=False):
 
 
 def truth_tag(scenario):
-    """The suffix of ``scenario``'s truth render: '' under the board's own sky."""
-    return f"_{scenario}" if "sky" in SCENARIOS.get(scenario, {}) else ""
+    """The suffix of ``scenario``'s truth render: '' under the board's own sky with the one
+    card."""
+    how = SCENARIOS.get(scenario, {})
+    return f"_{scenario}" if "sky" in how or how.get("card_set") else ""
 
 
 def render_truth(work, scenario):
@@ -195,7 +214,7 @@ def run_seed(work, truth, scenario, quality, seed, refit, max_pixels=None, exact
         photograph_day(truth, photos, settings, seed=seed)
     if not (refit and (seq / "manifest.json").exists()):
         if SCENARIOS[scenario]["card"]:
-            kw = {"calibrate": {"grey_card": (CARD["rho"],) * 3}}
+            kw = {"calibrate": {name: (rho,) * 3 for name, (rho, _) in cards_of(scenario).items()}}
         else:
             first = json.loads((photos / "photos.json").read_text())["frames"][0]
             kw = {"exposure": first["exposure_sr_m2_W"]}

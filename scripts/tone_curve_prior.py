@@ -10,7 +10,10 @@ models as a function of the value read, d(ln y) = ln y - ln x(y), fitted on its 
 squares over y in [Y_RANGE] (ln-uniform).  The prior's second moment is the mean b b^T over the
 measured curves; the makers' generic curves and each measured curve left out check it: the
 share of the values (y on a grid, calibrated at each of ANCHORS) whose departure lies within
-1.96 sd.  Prints PRIOR_ROOT for ``tone_curve.py``.
+1.96 sd.  Then the curve as grey references measure it (REFERENCE_SETS, photographed over
+FRAMES frames): the least posterior floor (``tone_curve.POSTERIOR_FLOOR``) under which each
+measured curve left out and the makers' hold 95% of their values within 1.96 sd, read as the
+fit reads them (``tone_curve.covered``).  Prints PRIOR_ROOT for ``tone_curve.py``.
 
     .venv/bin/python scripts/tone_curve_prior.py PATH/basecurve.c
 """
@@ -118,6 +121,61 @@ def held(curves, r):
     return float(np.mean(z <= 1.96)), float(z.max())
 
 
+#: Grey references a user photographs (reflectances): a three-card set (black, the 18% grey,
+#: white) and a ColorChecker's six greys; each over FRAMES frames of exposures ln-uniform in
+#: EXPOSURES (the white at 40-90% of full scale), read at NOISE (ln).
+REFERENCE_SETS = {"three cards": (0.04, 0.18, 0.9),
+                  "ColorChecker": (0.031, 0.09, 0.19, 0.36, 0.59, 0.9)}
+FRAMES, EXPOSURES, NOISE = 13, (0.45, 1.0), 0.01
+#: The posterior floors tried (shares of the prior's sd).
+FLOORS = np.round(np.arange(0.0, 0.61, 0.01), 2)
+
+
+def measured_errors(nodes, r, rho, floor, rng):
+    """|error| / sd (frames x grid) of the curve of ``nodes`` as references of reflectances
+    ``rho`` measure it (tone_curve.fit_references under prior ``r`` with posterior ``floor``):
+    each read value's departure relative to its frame's anchor, over Y_RANGE, as the fit reads
+    it: within the references' levels through the measured curve with its posterior's error,
+    beyond them at the curve's value at the nearest level with the prior's
+    (tone_curve.covered)."""
+    x = np.exp(rng.uniform(*np.log(EXPOSURES), size=(FRAMES, 1))) * np.asarray(rho)
+    xs, ys = nodes[:, 0], nodes[:, 1]
+    ok = (xs > 0) & (ys > 0)
+    t = np.interp(np.log(x), np.log(xs[ok]), np.log(ys[ok]))      # ln of the value read
+    ratio = t - np.log(rho) + rng.normal(0.0, NOISE, t.shape)
+    w, post, phi, _ = tc.fit_references(t, ratio, np.full(t.shape, NOISE), r,
+                                        anchor_weight=np.exp(2 * t), floor=floor)
+    grid = np.log(np.geomspace(*Y_RANGE, 40))
+    aw = np.exp(2 * t) / np.exp(2 * t).sum(axis=1, keepdims=True)
+    truth = departure(nodes, grid)[None, :] - np.sum(aw * departure(nodes, t.ravel())
+                                                     .reshape(t.shape), axis=1, keepdims=True)
+    span = (t.min(), t.max())
+    inside = tc.covered(grid, span)
+    move = tc.moves_from(grid[None, :], phi[:, None, :], r)                 # (F, grid, E)
+    est = tc.moves_from(np.clip(grid, *span)[None, :], phi[:, None, :], r) @ w
+    sd = np.sqrt(np.sum(np.square(np.where(inside[:, None], move @ post, move)), axis=-1))
+    return np.abs(est - truth) / np.maximum(sd, 1e-12)
+
+
+def least_posterior_floor(b, measured, makers, slope, seed=0):
+    """The least posterior floor (of FLOORS) under which each measured curve left out (the
+    prior from the others) and the makers' curves, measured by each of REFERENCE_SETS, hold at
+    least HOLD of their values within 1.96 sd; with {set: each left-out curve's share}."""
+    for floor in FLOORS:
+        shares = {}
+        for name, rho in REFERENCE_SETS.items():
+            rng = np.random.default_rng(seed)
+            shares[name] = [float(np.mean(measured_errors(
+                nodes, root(np.delete(b, i, axis=0), slope), rho, floor, rng) <= 1.96))
+                for i, nodes in enumerate(measured.values())]
+            if makers:
+                z = [measured_errors(n, root(b, slope), rho, floor, rng) for n in makers.values()]
+                shares[name].append(float(np.mean(np.concatenate(z) <= 1.96)))
+        if min(min(v) for v in shares.values()) >= HOLD:
+            return float(floor), shares
+    return float(FLOORS[-1]), shares
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("basecurve", help="darktable's src/iop/basecurve.c")
@@ -148,6 +206,13 @@ def main(argv=None):
         sds = tc.relative_sd(np.log(ys), np.log(a), r)
         print(f"calibrated at {a:g}: sd of ln value at " + ", ".join(
             f"{y:g}: {s:.3f}" for y, s in zip(ys, sds)))
+    floor, shares = least_posterior_floor(b, measured, makers, slope)
+    print(f"measured by grey references, the posterior's floor holding {HOLD:.0%} of each "
+          f"curve left out and of the makers': {floor:g} of the prior's sd (POSTERIOR_FLOOR)")
+    for name, share in shares.items():
+        print(f"  {name} {REFERENCE_SETS[name]}: each left out {np.mean(share[:len(measured)]):.3f}"
+              f" (worst {min(share[:len(measured)]):.3f})"
+              + (f", the makers' {share[-1]:.3f}" if makers else ""))
     print("\nPRIOR_ROOT = np.array(" + np.array2string(
         r, precision=4, separator=", ", floatmode="fixed").replace("\n", "\n    ") + ")")
 

@@ -239,3 +239,22 @@ def test_the_charts_greys_measure_a_cameras_own_tone_curve(chart_day):
     err, ref = (est - est.mean()) - (d - d.mean()), d - d.mean()
     assert np.all(np.abs(err) <= 2.0 * sd + 0.02), np.c_[d, est, sd]
     assert np.sqrt(np.mean(err ** 2)) < 0.5 * np.sqrt(np.mean(ref ** 2))
+    # the values are read through it (ingest's radiance frames; the fit's gains,
+    # fitting.tone.curve_reading): the greys' radiance over the truth's is one exposure's, where
+    # sRGB's curve read them tens of per cent apart
+    from scipy.ndimage import binary_erosion
+
+    from skyfit_mi.pipeline.pixels import scene_labels
+
+    _, _, labels, ids = scene_labels(chart_day["truth"])
+    read, true = _frames(tmp / "seq_curved"), _frames(chart_day["truth"])
+    ratio = []
+    for k in range(18, 24):                                        # the six greys
+        sel = binary_erosion(labels == ids.index(f"swatch_{k + 1:02d}") + 1)
+        ratio.append([np.median(np.log(r[sel, 1] / t[sel, 1])) for r, t in zip(read, true)])
+    ratio = np.array(ratio)                                        # (6 greys, frames)
+    # the five greys of 9-90% within 3% in every frame; the black's (3%, noisier) on average
+    assert np.all(np.ptp(ratio[:5], axis=0) < 0.03), ratio
+    assert abs(np.median(ratio[5] - ratio[:5].mean(axis=0))) < 0.03, ratio
+    levels = np.geomspace(0.03, 0.9, 6)                            # the greys' signals, about
+    assert np.ptp(np.log(camera_tone(levels, 0.6) / levels)) > 0.3  # as sRGB's curve reads them

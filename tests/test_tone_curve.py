@@ -96,7 +96,7 @@ def test_a_map_s_fits_take_the_curve_s_error_by_their_own_codes():
     by nothing, one 4x brighter by the prior's sd there, on every channel's C at once."""
     from types import SimpleNamespace
 
-    from skyfit_mi.fitting.tone import region_tone, tone_level_rows
+    from skyfit_mi.fitting.tone import curve_reading, level_tone, region_tone, tone_level_rows
     from skyfit_mi.fitting.uncertainty import rows_sd
     from skyfit_mi.physics.camera import SensorModel
 
@@ -118,10 +118,28 @@ def test_a_map_s_fits_take_the_curve_s_error_by_their_own_codes():
     np.testing.assert_allclose(sd[1, :3] / theta[1, :3], want, rtol=1e-6)
     assert sd[1, 4] == 0.0                            # a roughness does not move with a level
     # a region's values move by its median code in each frame (fitting.tone.region_tone); one
-    # grey measures no curve (base 0)
-    base, move = region_tone(SimpleNamespace(doc=doc, obs=obs))
-    assert move.shape == (4, 3, 3, tc.PRIOR_ROOT.shape[1]) and not base.any()
+    # grey measures no curve, by which to read the values (curve_reading)
+    move = region_tone(SimpleNamespace(doc=doc, obs=obs))
+    assert move.shape == (4, 3, 3, tc.PRIOR_ROOT.shape[1])
     assert region_tone(SimpleNamespace(doc={"ingest": {}}, obs=obs)) is None
+    assert curve_reading(doc, obs) is None
+    # greys of several levels measured one: each value is read at its own code, relative to
+    # its frame's anchor (a frame whose references read none takes the others' mean)
+    w = np.array([1.5, -0.5, 0.3, 0.2, -0.4])
+    doc["ingest"]["tone_curve"]["weights"] = w.tolist()
+    doc["ingest"]["tone_curve"]["anchor_basis"]["2"] = [[None] * tc.DEGREE] * 3
+    read = curve_reading(doc, obs)
+    np.testing.assert_allclose(read[:2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(read[2:], tc.moves(t[1], t[0]) @ w, rtol=1e-9)
+    # measured only about the anchor's level: the brighter values take the curve's value at
+    # the highest measured level, and the prior's error, not the posterior's
+    rec = doc["ingest"]["tone_curve"]
+    rec.update(measured_ln_signal=[t[0] - 0.1, t[0] + 0.1], root=(0.5 * np.eye(5)).tolist())
+    np.testing.assert_allclose(curve_reading(doc, obs)[2:], tc.moves(t[0] + 0.1, t[0]) @ w,
+                               rtol=1e-9)
+    move = level_tone(doc, obs, y)
+    np.testing.assert_allclose(move[2:], np.broadcast_to(tc.moves(t[1], t[0]), move[2:].shape),
+                               rtol=1e-9)
 
 
 def test_greys_at_several_levels_measure_the_curve_and_one_grey_measures_none():

@@ -17,6 +17,7 @@ import numpy as np
 from scipy.special import log_ndtr, ndtr
 
 from . import uncertainty as unc
+from .tone import curve_reading
 from ..physics.camera import SensorModel
 from ..errors import SkyfitError
 from ..physics.colour import SRGB_LUMINANCE
@@ -282,7 +283,9 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
     SkyfitError). Correlated errors widen sigma by Kish's design effect, sqrt(1 + (k - 1) rho)
     for k region pixels in a JPEG block, sqrt(:func:`neighbour_sharing`) for RAW demosaicing,
     except for per-pixel fits (``one_fit`` False), which also keep the pixels whose colour a
-    frame mixes with another material's (else left out with a warning).
+    frame mixes with another material's (else left out with a warning). Where greys of several
+    levels measured a camera's own tone curve at ingest, each value's gain is read through it
+    (:func:`~.tone.curve_reading`).
     """
     doc, root = load_manifest(manifest_path)
     cam = doc["camera"]
@@ -350,9 +353,13 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
         ys.append(np.where(ok, y, 0.0))
         sig.append(np.where(ok, s, np.inf))
         gain.append(falloff[:, None] * frame_exposure(doc, f)[None, :])
-    return Observations(pixels, [f["index"] for f in rendered], [f.get("time") for f in rendered],
-                        np.stack(ys, 1).astype(float), np.stack(sig, 1).astype(float),
-                        np.stack(gain, 1), sensor, warnings)
+    obs = Observations(pixels, [f["index"] for f in rendered], [f.get("time") for f in rendered],
+                       np.stack(ys, 1).astype(float), np.stack(sig, 1).astype(float),
+                       np.stack(gain, 1), sensor, warnings)
+    reading = curve_reading(doc, obs)      # a camera's own tone curve, measured at ingest
+    if reading is not None:
+        obs.gain = obs.gain * np.exp(reading)
+    return obs
 
 
 def check_regions(manifest_path, regions, frames=None):

@@ -232,7 +232,7 @@ class FitSession:
         self.light, self.sky_scale, self.parts = light or SPEC_LIGHT, 1.0, None
         self.sky_shape_mix = None
         self.light_level = 1.0                      # the whole light's, by frame (set_sky)
-        self.tone = region_tone(self)               # a camera's tone curve's (base, moves)
+        self.tone = region_tone(self)               # a camera's tone curve's moves
         self.tone_weights = None                    # its weights, in a fit of the light (set_sky)
         self.light_factor = None                    # per channel, by a reference (reference_factor)
         self._turned = {}                           # the light with the camera turned
@@ -401,10 +401,8 @@ class FitSession:
         self.table = table
         self.wm = self.model_on(table)
         obs = self.obs
-        if self.tone is not None:               # each value's gain as the curve reads it
-            base, move = self.tone
-            w = self.tone_weights
-            obs = replace(obs, gain=obs.gain * np.exp(base if w is None else base + move @ w))
+        if self.tone is not None and self.tone_weights is not None:   # the curve moved
+            obs = replace(obs, gain=obs.gain * np.exp(self.tone @ self.tone_weights))
         self.problem = Problem(obs, self.wm, valid=table.hit)
         self._halves = self._bases = None
 

@@ -81,7 +81,16 @@ def fit_warnings(s, fit):
             "camera did.")
     if fit.tone_sd is not None:
         led = [p for p, big in zip(names, doubles_interval(fit, fit.tone_sd)) if big]
-        if led:
+        measured = bool(((s.doc.get("ingest") or {}).get("tone_curve") or {}).get("weights"))
+        if led and measured:
+            warnings.append(
+                f"{', '.join(led)}: the camera's own JPEG tone curve, measured by the grey "
+                "references' levels and read through, but not exactly (its four terms cannot "
+                "follow a camera's curve everywhere, least beyond the greys' levels), more than "
+                "the data sets their intervals: this surface's codes lie far from the greys' "
+                "weighted mean; RAW files, or a grey nearer this surface's brightness, narrow "
+                "it.")
+        elif led:
             warnings.append(
                 f"{', '.join(led)}: the camera's own JPEG tone curve, not known (read as "
                 f"{s.doc['sensor'].get('response', 'srgb')}'s), more than the data sets their "

@@ -768,9 +768,11 @@ def _regions_agree(level):
             "by_region": [float(np.exp(u)) for u in own]}
 
 
-def _level_warnings(level, terms):
-    """Warnings on the day's one level: not determined, regions disagreeing, or held by its prior
-    where the data alone put it beyond the search (a significant prior-data conflict)."""
+def _level_warnings(level, terms, tone=False):
+    """Warnings on the day's one level: not determined, regions disagreeing (``tone``: the
+    regions' values read through a camera's own tone curve not exactly known, another cause),
+    or held by its prior where the data alone put it beyond the search (a significant
+    prior-data conflict)."""
     warnings, k, within = [], float(np.exp(level.u0)), level.within
     if not level.determined:
         warnings.append(
@@ -790,7 +792,11 @@ def _level_warnings(level, terms):
             f"{agree['dof']}, p = {agree['p']:.2g}; each region alone puts it at "
             f"{min(own):.3g}-{max(own):.3g} times the spec's): the spec's sky does not hold "
             "the light they see (a sky of another shape, which each material reads through its "
-            "own lobe), so every interval takes the sky's uncertainty widened by that "
+            "own lobe)"
+            + (", or the camera's own tone curve, not exactly known, reads the brighter and "
+               "darker surfaces' codes otherwise than the grey references' (its error is counted in every "
+               "interval)" if tone else "")
+            + ", so every interval takes the sky's uncertainty widened by that "
             f"disagreement (the data's information on it divided by {agree['scale']:.3g}); "
             "an error in the sky's shape may still move glossy materials beyond their "
             "intervals: give the spec a measured sky (envmap, or perez with measured "
@@ -1061,7 +1067,7 @@ def fit_sky_scale(sessions, plan, seed=0, log=print):
     if not told:
         terms = default_terms(frames, _referenced(sessions[0].doc))
     level = _profile_level(sessions, plan.prior_sd, seed)
-    warnings = _level_warnings(level, terms)
+    warnings = _level_warnings(level, terms, tone=bool(tone_count(sessions)))
     light_terms = default_level_terms(sessions[0].doc, frames)
     fitted = _fit_terms(sessions, level, terms, told, warnings, light_terms)
     widening, coupling = _sun_coupling(plan, level, fitted)

@@ -2,7 +2,8 @@
 the curve's prior (:mod:`skyfit_mi.physics.tone_curve`), taken as rows of the calibration's
 errors (:func:`tone_rows`), or, where the light is fitted, among the light's coefficients
 (:func:`tone_count`; :meth:`~.fit.FitSession.set_sky` reads each value's gain through the
-fitted curve)."""
+curve at those weights). A curve that greys of several levels measured reads every value
+(:func:`curve_reading`, in :func:`~.chi2.load_observations`)."""
 
 import warnings
 
@@ -12,37 +13,56 @@ from . import uncertainty as unc
 from ..physics import tone_curve
 
 
-def level_tone(doc, obs, codes):
-    """(base (..., T, C), moves (..., T, C, E)) of values at ``codes`` (..., T, C) [DN] of
-    ``obs``'s frames read through a camera's own tone curve (:mod:`~skyfit_mi.physics.
-    tone_curve`; ``doc``'s ``ingest.tone_curve``), each relative to its frame's anchor (where
-    its references calibrate it; a frame whose references were clipped took the others'
-    scale, so their mean anchor; full scale for a given exposure): base, the ln change the
-    curve its references measured gives it (0 from one grey); moves, its relative change at
-    one sd of each independent error left. None where the ingest counted no curve; a value
-    without a signal 0."""
+def _from_anchor(doc, obs, codes, clip=False):
+    """(the ``ingest.tone_curve`` record, phi(t) - phi(anchor) (..., T, C, DEGREE), whether t
+    lies within the levels references measured the curve at (..., T, C)) of values at ``codes``
+    (..., T, C) [DN] of ``obs``'s frames, t their ln signal as the response reads it (``clip``:
+    taken to the nearest measured level) and the anchor their frame's (where its references
+    calibrate it; a frame whose references were clipped took the others' scale, so their mean
+    anchor; full scale for a given exposure); 0 for a value without a signal. None where the
+    ingest counted no curve."""
     rec = (doc.get("ingest") or {}).get("tone_curve")
     if obs.rays is not None or not rec:
         return None
     with np.errstate(all="ignore"):
         t = np.log(obs.sensor.linearise(np.asarray(codes, dtype=float)))
-    anchors = rec.get("anchor_basis")
-    if anchors is None:                                  # a given exposure: at full scale
-        phi = np.zeros((len(obs.frames), 3, tone_curve.DEGREE))
-    else:
-        known = np.array(list(anchors.values()), dtype=float)              # (F, 3, DEGREE)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            mean = np.nan_to_num(np.nanmean(known, axis=0))
-        phi = np.array([anchors.get(str(i), np.full((3, tone_curve.DEGREE), np.nan))
-                        for i in obs.frames], dtype=float)
-        phi = np.where(np.isfinite(phi), phi, mean)
-    root = tone_curve.PRIOR_ROOT
-    weights = np.asarray(rec.get("weights") or np.zeros(root.shape[1]), dtype=float)
-    posterior = np.asarray(rec["root"], dtype=float) if rec.get("root") else np.eye(len(weights))
+    span = rec.get("measured_ln_signal") or (-np.inf, np.inf)
+    inside = tone_curve.covered(t, span)
+    if clip:
+        t = np.clip(t, *span)
+    phi = tone_curve.frame_anchors(rec.get("anchor_basis"), obs.frames)
     ok = np.isfinite(t)
-    dphi = np.where(ok[..., None], tone_curve.basis(np.where(ok, t, 0.0)) - phi, 0.0)
-    return dphi @ root @ weights, dphi @ root @ posterior
+    return rec, np.where(ok[..., None], tone_curve.basis(np.where(ok, t, 0.0)) - phi, 0.0), inside
+
+
+def curve_reading(doc, obs):
+    """The ln factor (P, T, C) [unitless] by which each of ``obs``'s values, read through the
+    response at its own code, stands above the true signal under the camera's own tone curve
+    that grey references of several levels measured (``ingest.tone_curve.weights``; beyond
+    their levels, its value at the nearest, :func:`~skyfit_mi.physics.tone_curve.covered`):
+    true = read exp(-factor), relative to its frame's anchor. None where none was measured."""
+    found = _from_anchor(doc, obs, obs.y, clip=True)
+    if found is None or not found[0].get("weights"):
+        return None
+    rec, dphi, _ = found
+    return dphi @ tone_curve.PRIOR_ROOT @ np.asarray(rec["weights"], dtype=float)
+
+
+def level_tone(doc, obs, codes):
+    """The moves (..., T, C, E) [unitless] of values at ``codes`` (..., T, C) [DN] of ``obs``'s
+    frames under a camera's own tone curve (:mod:`~skyfit_mi.physics.tone_curve`; ``doc``'s
+    ``ingest.tone_curve``), each relative to its frame's anchor: its relative change at one sd
+    of each independent error the curve's prior leaves, or, within the levels references
+    measured it at, its posterior (:func:`curve_reading` reads the values through that curve).
+    None where the ingest counted no curve."""
+    found = _from_anchor(doc, obs, codes)
+    if found is None:
+        return None
+    rec, dphi, inside = found
+    move = dphi @ tone_curve.PRIOR_ROOT
+    if not rec.get("root"):
+        return move
+    return np.where(inside[..., None], move @ np.asarray(rec["root"], dtype=float), move)
 
 
 def median_codes(obs, rows=slice(None)):
@@ -57,14 +77,10 @@ def median_codes(obs, rows=slice(None)):
 
 
 def region_tone(s):
-    """:func:`level_tone` (base (P, T, C), moves (P, T, C, E)) of session ``s``'s values at the
-    region's :func:`median_codes`, None where its ingest counted no curve."""
-    tone = level_tone(s.doc, s.obs, median_codes(s.obs))
-    if tone is None:
-        return None
-    base, move = tone
-    return (np.broadcast_to(base, s.obs.y.shape),
-            np.broadcast_to(move, s.obs.y.shape + move.shape[-1:]))
+    """:func:`level_tone`'s moves (P, T, C, E) of session ``s``'s values at the region's
+    :func:`median_codes`, None where its ingest counted no curve."""
+    move = level_tone(s.doc, s.obs, median_codes(s.obs))
+    return None if move is None else np.broadcast_to(move, s.obs.y.shape + move.shape[-1:])
 
 
 def tone_level_rows(doc, obs, groups, n, names, theta):
@@ -74,10 +90,9 @@ def tone_level_rows(doc, obs, groups, n, names, theta):
     :func:`~.uncertainty.level_rows` (every channel at once); none (n, 0, names) where the
     ingest counted no curve."""
     codes = np.stack([median_codes(obs, groups == g)[0] for g in range(n)])       # (n, T, C)
-    tone = level_tone(doc, obs, codes)
-    if tone is None:
+    move = level_tone(doc, obs, codes)
+    if move is None:
         return np.zeros((n, 0, len(names)))
-    move = tone[1]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         u = np.nan_to_num(np.nanmean(np.where(np.isfinite(codes)[..., None], move, np.nan),
@@ -116,4 +131,4 @@ def tone_rows(s, J, problem, usable, theta, curvature_inverse):
     if s.tone is None or s.tone_weights is not None:
         return np.zeros((0, len(s.names)))
     return unc.moved_rows(J * problem.value_scale(theta)[..., None], usable, problem.obs.sigma,
-                          s.tone[1], curvature_inverse)
+                          s.tone, curvature_inverse)

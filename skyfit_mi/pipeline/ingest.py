@@ -1332,6 +1332,7 @@ def tone_curve_record(frames, sensor, references, per_frame, o, log):
             spread = np.nanmedian(np.nanmax(t, axis=2) - np.nanmin(t, axis=2))
         if spread > np.log(TONE_LEVELS_MIN):
             record.update(weights=weights.tolist(), root=root.tolist(),
+                          measured_ln_signal=[float(np.nanmin(t)), float(np.nanmax(t))],
                           references_chi2_per_dof=chi2)
             log(f"encoding: the camera's own tone curve measured on the references' "
                 f"{len(labels)} levels (their exposures agree to chi-square {chi2:.2g} per dof "
@@ -1398,6 +1399,8 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
                           "registration": registration.record}
     from tqdm import tqdm
 
+    curve = exposures.tone_curve if (exposures.tone_curve or {}).get("weights") else None
+    curve_w = None if curve is None else np.asarray(curve["weights"], dtype=float)
     for f, p, photo, v in tqdm(zip(frames.spec.frames, paths, photos, linear.values),
                                total=len(paths), desc="ingest", unit="frame", disable=not progress):
         rec = frame_record(f, 0, out)
@@ -1429,6 +1432,11 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
                 v = _unmix(v, mixing["mixing"], sensor)
             s = sensor.linearise(np.nan_to_num(v))
             slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code
+            if curve is not None:      # read through the curve the references measured
+                with np.errstate(divide="ignore"):
+                    phi = tone_curve.frame_anchors(curve["anchor_basis"], [f.index])[0]
+                    t = np.clip(np.log(s), *curve["measured_ln_signal"])
+                    gain = gain * np.exp(tone_curve.moves_from(t, phi) @ curve_w)
             radiance = np.where(np.isfinite(v), s / gain, np.nan).astype(np.float32)
             rad_sd = np.where(np.isfinite(v), sig / (slope * gain), np.inf).astype(np.float32)
             names = write_frame(out, f.index, radiance, rad_sd, v, sig, f.time)
