@@ -606,7 +606,8 @@ def _sky_series(args):
         raise SkyfitError("--card-box belongs to --card (the grey card's shots).")
     doc = sky_series(args.photos, args.output, card=card, tz=args.tz, times_csv=args.times,
                      flat=args.flat, gap_s=args.bracket_gap_s, lens=args.lens,
-                     overwrite=args.overwrite, log=(lambda *a: None) if args.quiet else print)
+                     exact_curve=args.exact_curve, overwrite=args.overwrite,
+                     log=(lambda *a: None) if args.quiet else print)
     lines = [f"{len(doc['maps'])} sky maps in {args.output}; in the spec:", "[sky]",
              'type = "envmap"',
              f'file = "{(Path(args.output) / SERIES_NAME).resolve().as_posix()}"  # or relative '
@@ -649,6 +650,10 @@ def _add_sky_series(sub, common):
                      f"reading of the global irradiance (default {CARD_SD:g})")
     sky.add_argument("--lens", choices=LENSES, default="equidistant",
                      help="the fisheye's projection (the maps are written equidistant)")
+    sky.add_argument("--exact-curve", action="store_true",
+                     help="the JPEGs' codes follow their stated curve (sRGB's) exactly, as "
+                     "software writes them from linear values; by default a camera's own tone "
+                     "curve is measured on the brackets' overlaps and the shots read through it")
     sky.add_argument("--overwrite", action="store_true", help="replace an existing series")
     sky.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     sky.set_defaults(func=_sky_series)

@@ -102,10 +102,11 @@ def photograph_card(sky, time, folder, *, reflectance=0.18, size=32, gain=1.0, n
 
 
 def series(folder, **kw):
-    """``sky_series`` of ``folder``/shots with the card of ``folder``/card, into ``folder``/sky."""
+    """``sky_series`` of ``folder``/shots with the card of ``folder``/card, into ``folder``/sky;
+    told the shots' codes are sRGB's exactly, as this camera writes them (``exact_curve``)."""
     return sky_series([folder / "shots"], folder / "sky",
                       card=CardOptions((str(folder / "card"),), CARD_BOX), log=lambda *a: None,
-                      **kw)
+                      **{"exact_curve": True, **kw})
 
 
 def photographed_day(folder, scans, size=16, noise_percent=1.0, spp=128):

@@ -28,15 +28,17 @@ import json
 import os
 import shutil
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import binary_erosion
 
 from ..conventions import angles_from_direction, direction_from_angles
 from ..errors import OutputError, SkyfitError
 from ..files import check_dir, ensure_dir, write_json
 from ..physics.camera import CLIP_FRACTION, SensorModel, clipped
+from ..physics import tone_curve
 from ..physics.colour import SRGB_LUMINANCE
 from ..physics.sky import EFFICACY_CLEAR
 from ..render.image import write_exr
@@ -74,6 +76,20 @@ UNIFORM_BIN = 4
 AGREEMENT_PIXELS = 20
 #: Largest departure of two shots' agreement from 1 before the series warns.
 AGREEMENT_TOL = 0.03
+#: Pixels of a bracket the camera's tone curve is measured on at most (:func:`bracket_curve`).
+CURVE_SAMPLES = 4000
+#: The highest signal [fraction of full scale] a value the curve is measured on may have: a
+#: JPEG's codes just below clipping are pulled down by the clipped noise and the ringing of
+#: blocks that hold clipped pixels (the sun's aureole).
+CURVE_TOP = 0.8
+#: Pixels [binned] a value the curve is measured on keeps from any clipped or dark one (the
+#: sun, the black beyond the horizon): a JPEG mixes codes over its 8-16 pixel blocks, and a mix
+#: of codes read through a curve bends as a tone curve would.
+CURVE_MARGIN = 8
+#: The relative error [unitless] of one value's ln in that measurement: a JPEG's rounding and
+#: noise near FLOOR_FRACTION, 1% (fit_references floors it at the references' 1.5% and widens
+#: it by the fit's chi-square).
+CURVE_SD = 0.01
 #: The recommended sun mask reaches this far beyond the clipped pixels [degrees].
 MASK_MARGIN_DEG = 1.0
 #: Clipped pixels farther than this from the clipped centre are not the sun's [degrees].
@@ -86,8 +102,9 @@ SERIES_NAME = "sky_series.json"
 @dataclass(frozen=True)
 class Shot:
     """One photograph of a series: its linear values (H, W, 3) as a fraction of saturation,
-    which of its pixels are clipped (H, W), its exposure t S / N^2 [s], its time and its
-    camera's EXIF make and model ('' if not given)."""
+    which of its pixels are clipped (H, W), its exposure t S / N^2 [s], its time, its
+    camera's EXIF make and model ('' if not given), the flat field its values were divided by,
+    and whether its codes were read through a curve (8-bit JPEGs: a camera's own tone curve)."""
 
     path: Path
     linear: np.ndarray
@@ -96,6 +113,8 @@ class Shot:
     exposure: float
     time: dt.datetime
     camera: str = ""
+    flat: object = 1.0          # the flat field (binned) its linear values were divided by
+    curved: bool = False        # integer codes read through a curve (a camera's own may bend)
 
 
 def _exposure(photo):
@@ -170,7 +189,7 @@ def read_shots(items, tz=None, times_csv=None, flat=None, box=None):
     paths = list_photos(items)
     if not paths:
         raise SkyfitError(f"no photographs in {', '.join(map(str, items))}.")
-    kept, metas, shapes, response, b = [], [], {}, 1.0, 1
+    kept, metas, shapes, response, binned, b = [], [], {}, 1.0, 1.0, 1
     for path in paths:
         photo = read_photo(path, exact_jpeg=False)        # averaged: libjpeg's codes suffice
         shapes[path] = (photo.height, photo.width, photo.metadata.get("orientation", 1))
@@ -188,14 +207,17 @@ def read_shots(items, tz=None, times_csv=None, flat=None, box=None):
                 response = 1.0 if flat is None else \
                     read_flat_field(flat, (photo.height, photo.width))[..., None]
                 b = max(1, -(-min(photo.height, photo.width) // MAP_PIXELS))
+                binned = response if np.ndim(response) == 0 else _blocks(response, b, np.mean)
             floor = _blocks(linear.max(axis=2), b, np.mean) < FLOOR_FRACTION
             linear, clipped = _blocks(linear / response, b, np.mean), _blocks(clipped, b, np.any)
-        kept.append((path, linear.astype(np.float32), clipped, floor, _exposure(photo)))
+        curved = photo.kind == "integer" and photo.encoding_hint != "linear"
+        kept.append((path, linear.astype(np.float32), clipped, floor, _exposure(photo),
+                     1.0 if box is not None else binned, curved))
         metas.append(photo.metadata)
         del photo
     times = frame_times(paths, metas, times_csv=times_csv, tz=tz, warn=lambda message: None)
     cameras = [camera_name(m) for m in metas]
-    shots = sorted((Shot(*k[:4], exposure=k[4], time=t, camera=c)
+    shots = sorted((Shot(*k[:4], exposure=k[4], time=t, camera=c, flat=k[5], curved=k[6])
                     for k, t, c in zip(kept, times, cameras)),
                    key=lambda s: (s.time, s.path.name))         # a bracket shares a second
     for a, b in zip(shots, shots[1:]):
@@ -215,6 +237,59 @@ def brackets(shots, gap_s=BRACKET_GAP_S):
             out[-1].append(s)
         else:
             out.append([s])
+    return out
+
+
+def bracket_curve(groups, seed=0):
+    """A camera's own tone curve (:mod:`~skyfit_mi.physics.tone_curve`) measured on the
+    brackets ``groups``' overlaps: a pixel unclipped and above the floor in two shots or more
+    reads ln(v / H) = ln L + d(ln s) in each (s its signal before the flat field, d the curve's
+    departure, 0 at full scale), L profiled per pixel and channel
+    (:func:`~skyfit_mi.physics.tone_curve.fit_references`, a seeded sample of at most
+    :data:`CURVE_SAMPLES` pixels a bracket). Returns {weights, root, chi2_per_dof,
+    measured_ln_signal, values} or None where no bracket of curved shots overlaps."""
+    rng = np.random.default_rng(seed)
+    width = max(len(g) for g in groups)
+    ts, rs = [], []
+    for group in groups:
+        if len(group) < 2 or not all(s.curved for s in group):
+            continue
+        use = np.stack([binary_erosion(~s.clipped & ~s.floor, iterations=CURVE_MARGIN).ravel()
+                        for s in group], axis=1)                                  # (N, k)
+        idx = np.flatnonzero(use.sum(axis=1) >= 2)
+        idx = np.sort(rng.choice(idx, min(len(idx), CURVE_SAMPLES), replace=False))
+        sig = np.stack([(s.linear * s.flat).reshape(-1, 3)[idx] for s in group], axis=1)
+        lin = np.stack([s.linear.reshape(-1, 3)[idx] / s.exposure for s in group], axis=1)
+        ok = use[idx][..., None] & (sig >= FLOOR_FRACTION) & (sig < CURVE_TOP)      # (n, k, 3)
+        with np.errstate(all="ignore"):
+            t = np.where(ok, np.log(sig), np.nan)
+            r = np.where(ok, np.log(lin), np.nan)
+        pad = ((0, 0), (0, width - len(group)))
+        ts.append(np.pad(np.moveaxis(t, 2, 1).reshape(-1, len(group)), pad,
+                         constant_values=np.nan))
+        rs.append(np.pad(np.moveaxis(r, 2, 1).reshape(-1, len(group)), pad,
+                         constant_values=np.nan))
+    if not ts or not np.isfinite(np.concatenate(ts)).any():
+        return None
+    t, r = np.concatenate(ts), np.concatenate(rs)
+    weights, root, _, chi2 = tone_curve.fit_references(t, r, np.full(t.shape, CURVE_SD))
+    return {"weights": weights.tolist(), "root": root.tolist(), "chi2_per_dof": chi2,
+            "measured_ln_signal": [float(np.nanmin(t)), float(np.nanmax(t))],
+            "values": int(np.isfinite(t).sum())}
+
+
+def read_through(shots, curve):
+    """``shots`` with their curved ones' values read through the measured ``curve``
+    (:func:`bracket_curve`): v exp(-d(ln s)), s the signal before the flat field, taken to the
+    nearest measured level beyond them (:func:`~skyfit_mi.physics.tone_curve.covered`)."""
+    w = np.asarray(curve["weights"], dtype=float)
+    out = []
+    for s in shots:
+        if s.curved:
+            with np.errstate(divide="ignore"):
+                t = np.clip(np.log(s.linear * s.flat), *curve["measured_ln_signal"])
+            s = replace(s, linear=(s.linear * np.exp(-tone_curve.moves(t) @ w)).astype(np.float32))
+        out.append(s)
     return out
 
 
@@ -412,12 +487,16 @@ def _card_entry(readings, t, image, clipped, card, name, log):
 
 
 def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
-               gap_s=BRACKET_GAP_S, lens="equidistant", overwrite=False, log=print):
+               gap_s=BRACKET_GAP_S, lens="equidistant", exact_curve=False, overwrite=False,
+               log=print):
     """Merge the bracketed fisheye shots ``items`` into ``out_dir``: one EXR per bracket and
     :data:`SERIES_NAME`; returns the series document.  ``card`` (:class:`CardOptions`) gives
     each map its global irradiance; ``flat`` undoes the sky's vignetting (not the card's: keep
     its box central); ``lens`` the shots' projection (:data:`LENSES`), the maps equidistant.
-    A refusal leaves nothing; ``overwrite`` removes the replaced maps."""
+    Integer codes read through a curve are read through the camera's own tone curve measured
+    on the brackets' overlaps (:func:`bracket_curve`) unless ``exact_curve`` (codes written
+    from linear values by software). A refusal leaves nothing; ``overwrite`` removes the
+    replaced maps."""
     _check_options(card, gap_s)
     if lens not in LENSES:
         raise SkyfitError(f"--lens {lens}: give one of {', '.join(LENSES)} (the fisheye's "
@@ -434,17 +513,25 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
             raise SkyfitError(f"{both[0].name}: given both as a sky shot and as a card shot; "
                               "put the card's shots in a folder of their own (--card).")
     shots = read_shots(items, tz, times_csv, flat)
+    curve = None if exact_curve else bracket_curve(brackets(shots, gap_s))
+    if curve is not None:
+        shots = read_through(shots, curve)
+        log(f"the camera's own tone curve measured on the brackets' overlaps "
+            f"({curve['values']} values, chi-square {curve['chi2_per_dof']:.2g} per dof): the "
+            "shots are read through it, not through their files' stated curve alone")
     groups = brackets(shots, gap_s)
     readings = None
     if card is not None:
         card_shots = read_shots(card.photos, tz, times_csv, box=card.box)
-        readings = card_irradiance(card_shots, card.reflectance)
         sky_cams, card_cams = ({s.camera for s in x if s.camera} for x in (shots, card_shots))
         if sky_cams and card_cams and sky_cams != card_cams:
             log(f"the card's shots are from {', '.join(sorted(card_cams))}, the sky's from "
                 f"{', '.join(sorted(sky_cams))}: the sun's level rests on their ISO speeds "
                 "agreeing, which cameras' often do not (by up to a third); shoot the card with "
                 "the sky's camera")
+        elif curve is not None:                 # the sky's camera: its curve
+            card_shots = read_through(card_shots, curve)
+        readings = card_irradiance(card_shots, card.reflectance)
     created = not out.exists()
     ensure_dir(out)
     work = Path(tempfile.mkdtemp(prefix=".sky_series.", dir=out))
@@ -492,7 +579,13 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
            "scale_source": "the exposure equation of a saturation-based ISO speed (ISO 12232), "
                            "nominal: within a factor of about 1.5",
            "sun_mask_deg": round(radius + MASK_MARGIN_DEG, 1) if radius else None,
-           "bracket_gap_s": gap_s, "maps": entries}
+           "bracket_gap_s": gap_s,
+           "tone_curve": None if curve is None else {
+               **curve, "meaning": "a camera's own tone curve (skyfit_mi.physics.tone_curve: "
+                                   "weights of PRIOR_ROOT's columns, root their posterior's) "
+                                   "measured on the brackets' overlaps, the shots read through "
+                                   "it; beyond measured_ln_signal at its nearest level"},
+           "maps": entries}
     if card is not None:
         doc["card"] = {"reflectance": card.reflectance, "box": list(card.box),
                        "shots": len(readings), "max_gap_s": card.max_gap_s, "sd": card.sd}
