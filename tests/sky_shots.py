@@ -84,10 +84,11 @@ def photograph_sky(sky, time, folder, *, size=128, gain=1.0, noise=0.005, seed=0
 
 
 def photograph_card(sky, time, folder, *, reflectance=0.18, size=32, gain=1.0, noise=0.005,
-                    seed=0, shade=False, shaded_columns=0, shade_share=0.5):
+                    seed=0, shade=False, shaded_columns=0, shade_share=0.5, gamma=None):
     """A horizontal Lambertian grey card lit by ``sky`` (by ``shade_share`` of its sky alone
     where in ``shade``, or in its first ``shaded_columns``), filling a ``size``-pixel JPEG
-    exposed to put it near a third of full scale, in ``folder``; returns its path."""
+    exposed to put it near a third of full scale (``gamma``: :func:`photograph_sky`'s), in
+    ``folder``; returns its path."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     shaded = reflectance / np.pi * shade_share * sky.sky_horizontal_irradiance()
@@ -97,7 +98,7 @@ def photograph_card(sky, time, folder, *, reflectance=0.18, size=32, gain=1.0, n
     h = 0.35 / (gain * float(radiance.max()) * EFFICACY_CLEAR / SATURATION_LUMINANCE)
     exposure_s = float(h * SIM_F_NUMBER ** 2 / SIM_ISO)
     path = folder / f"card_{time:%H%M%S}.jpg"
-    _jpeg(path, radiance, exposure_s, time, gain, noise, np.random.default_rng(seed))
+    _jpeg(path, radiance, exposure_s, time, gain, noise, np.random.default_rng(seed), gamma)
     return path
 
 
@@ -109,33 +110,43 @@ def series(folder, **kw):
                       **{"exact_curve": True, **kw})
 
 
-def photographed_day(folder, scans, size=16, noise_percent=1.0, spp=128):
+def photographed_day(folder, scans, size=16, noise_percent=1.0, spp=128, gamma=None,
+                     exact_curve=None):
     """The disc rendered under ``scans`` (:func:`measured_light.measured_disc_day`), each
-    frame's sky photographed (a bracket 2 s before the frame, north turned :data:`NORTH_DEG`)
-    and its card 30 s after, merged by ``skyfit sky-series``, and the day relabelled with the
-    light a spec naming the series gives: (the day, the relabelled day, the relabelled frames'
-    skies by time)."""
+    frame's sky photographed (a bracket 2 s before the frame, north turned :data:`NORTH_DEG`;
+    ``gamma``: the camera's own curve, :func:`photograph_sky`) and its card 30 s after, merged by
+    ``skyfit sky-series`` (``exact_curve``: told the codes are sRGB's; default so for an sRGB
+    camera, else the curve measured), and the day relabelled with the light a spec naming the
+    series gives: (the day, the relabelled day, the relabelled frames' skies by time); rendered
+    and photographed once into ``folder``."""
     from measured_light import measured_disc_day, relabelled
 
     from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
     from skyfit_mi.pipeline.spec import load_spec
 
     folder = Path(folder)
-    day = measured_disc_day(folder, scans, size=size, noise_percent=noise_percent, spp=spp)
+    exact = gamma is None if exact_curve is None else exact_curve
+    tag = "" if gamma is None and exact else f"_g{gamma}_{'exact' if exact else 'measured'}"
+    day = folder / "day"
+    if not (day / "manifest.json").exists():
+        day = measured_disc_day(folder, scans, size=size, noise_percent=noise_percent, spp=spp)
     doc, _ = load_manifest(day)
-    for k, f in enumerate(doc["frames"]):
-        t = dt.datetime.fromisoformat(f["time"])
-        sky = frame_sky(f, day)
-        photograph_sky(sky, t - dt.timedelta(seconds=2), folder / "shots", seed=k,
-                       north_rotation_deg=NORTH_DEG)
-        photograph_card(sky, t + dt.timedelta(seconds=30), folder / "card", seed=10 + k)
-    series(folder)
+    shots, card = (folder / (k if gamma is None else f"{k}_g{gamma}") for k in ("shots", "card"))
+    if not shots.exists():
+        for k, f in enumerate(doc["frames"]):
+            t = dt.datetime.fromisoformat(f["time"])
+            sky = frame_sky(f, day)
+            photograph_sky(sky, t - dt.timedelta(seconds=2), shots, seed=k,
+                           north_rotation_deg=NORTH_DEG, gamma=gamma)
+            photograph_card(sky, t + dt.timedelta(seconds=30), card, seed=10 + k, gamma=gamma)
+    sky_series([shots], folder / f"sky{tag}", card=CardOptions((str(card),), CARD_BOX),
+               exact_curve=exact, overwrite=True, log=lambda *a: None)
     spec = json.loads((folder / "measured_sky.json").read_text())
-    spec["sky"] = {"type": "envmap", "file": f"sky/{SERIES_NAME}", "north_rotation_deg": NORTH_DEG,
-                   "ground_albedo": 0.2}
-    (folder / "series.json").write_text(json.dumps(spec))
-    skies = {f.time: f.sky for f in load_spec(folder / "series.json").frames}
-    photographed = relabelled(day, folder / "photographed",
+    spec["sky"] = {"type": "envmap", "file": f"sky{tag}/{SERIES_NAME}",
+                   "north_rotation_deg": NORTH_DEG, "ground_albedo": 0.2}
+    (folder / f"series{tag}.json").write_text(json.dumps(spec))
+    skies = {f.time: f.sky for f in load_spec(folder / f"series{tag}.json").frames}
+    photographed = relabelled(day, folder / f"photographed{tag}",
                               lambda f, _: skies[dt.datetime.fromisoformat(f["time"])])
     return day, photographed, skies
 
