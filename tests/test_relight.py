@@ -634,3 +634,24 @@ def test_a_frame_calibrated_on_its_own_keeps_its_calibrations_error_in_the_band(
                                (np.array(sd) * radiance) ** 2)
     assert frame_calibration_variance(session(False), radiance) == 0.0
     assert frame_calibration_variance(SimpleNamespace(doc={"source": "render"}), radiance) == 0.0
+
+
+def test_another_photographed_target_keeps_its_own_tone_curves_error_in_the_band():
+    """relight's target_tone_variance: a target ingested with a camera's own tone curve counted
+    (its region's moves at one sd of each independent error) keeps each mean's (move x value)^2
+    summed over the errors, where it is another sequence than the fit's; on the fit's own
+    sequence the parameters carry that error already, and a target without the curve adds
+    nothing."""
+    from types import SimpleNamespace
+
+    from skyfit_mi.fitting.relight import target_tone_variance
+
+    radiance = np.array([[10.0, 20.0, 30.0], [1.0, 2.0, 3.0]])                    # (T, 3)
+    move = np.zeros((4, 2, 3, 2))                              # (P, T, C, E): a region's moves
+    move[:, :, :, 0], move[:, 1, :, 1] = 0.1, -0.2
+    target = SimpleNamespace(tone=move, run_id="b")
+    want = (0.1 * radiance) ** 2 + np.array([[0.0], [0.04]]) * radiance ** 2
+    np.testing.assert_allclose(target_tone_variance(target, {"sequence_run_id": "a"}, radiance),
+                               want)
+    assert target_tone_variance(target, {"sequence_run_id": "b"}, radiance) == 0.0
+    assert target_tone_variance(SimpleNamespace(tone=None, run_id="b"), {}, radiance) == 0.0

@@ -954,7 +954,8 @@ def _predict_means(s, result, target, draws, rng):
                               s.geometry["sun_angles_per_frame_deg"], kappa)
     extra = band_half_width((np.sum(image_noise_variance(s, image, at_fit, target), axis=0)
                              + np.sum(model_var, axis=0)) / n**2
-                            + frame_calibration_variance(s, means[0]), means[0] * scale, kappa,
+                            + frame_calibration_variance(s, means[0])
+                            + target_tone_variance(s, result, means[0]), means[0] * scale, kappa,
                             interval)
     observed = region_mean(image)
     names = _channels(s)
@@ -1138,6 +1139,18 @@ def frame_calibration_variance(s, radiance):
     shares over all its pixels, so a region mean keeps it whole; 0 without."""
     sd = frame_calibration_sd(s)
     return 0.0 if sd is None else (np.asarray(sd, dtype=float) * radiance) ** 2
+
+
+def target_tone_variance(s, result, radiance):
+    """Variance [(W m^-2 sr^-1)^2] a region mean of the target's values at ``radiance`` (T, 3)
+    takes from the target's camera's own tone curve (its ingest's, :func:`~.tone.region_tone`:
+    each independent error's move at the region's codes), where the target is not the fit's own
+    sequence (there the fit's parameters carry the same error); 0 where its ingest counted no
+    curve. Counted apart from the fit's share of the same camera's curve, which may cancel it
+    (the same camera, surfaces at its levels) or add to it."""
+    if s.tone is None or result.get("sequence_run_id") == s.run_id:
+        return 0.0
+    return np.sum(np.square(s.tone[0] * np.asarray(radiance)[..., None]), axis=-1)
 
 
 def image_noise_variance(s, image, radiance, target):
