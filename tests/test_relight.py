@@ -636,12 +636,12 @@ def test_a_frame_calibrated_on_its_own_keeps_its_calibrations_error_in_the_band(
     assert frame_calibration_variance(SimpleNamespace(doc={"source": "render"}), radiance) == 0.0
 
 
-def test_another_photographed_target_keeps_its_own_tone_curves_error_in_the_band():
+def test_another_cameras_target_keeps_its_own_tone_curves_error_in_the_band():
     """relight's target_tone_variance: a target ingested with a camera's own tone curve counted
     (its region's moves at one sd of each independent error) keeps each mean's (move x value)^2
-    summed over the errors, where it is another sequence than the fit's; on the fit's own
-    sequence the parameters carry that error already, and a target without the curve adds
-    nothing."""
+    summed over the errors where the fit counted another camera's curve, or none; on the fit's
+    own sequence, another of the fit's camera, or a camera either does not name, the fit's
+    parameters carry the same curve's error; a target without the curve adds nothing."""
     from types import SimpleNamespace
 
     from skyfit_mi.fitting.relight import target_tone_variance
@@ -649,9 +649,19 @@ def test_another_photographed_target_keeps_its_own_tone_curves_error_in_the_band
     radiance = np.array([[10.0, 20.0, 30.0], [1.0, 2.0, 3.0]])                    # (T, 3)
     move = np.zeros((4, 2, 3, 2))                              # (P, T, C, E): a region's moves
     move[:, :, :, 0], move[:, 1, :, 1] = 0.1, -0.2
-    target = SimpleNamespace(tone=move, run_id="b")
     want = (0.1 * radiance) ** 2 + np.array([[0.0], [0.04]]) * radiance ** 2
-    np.testing.assert_allclose(target_tone_variance(target, {"sequence_run_id": "a"}, radiance),
-                               want)
-    assert target_tone_variance(target, {"sequence_run_id": "b"}, radiance) == 0.0
-    assert target_tone_variance(SimpleNamespace(tone=None, run_id="b"), {}, radiance) == 0.0
+
+    def target(make, tone=move):
+        model = None if make is None else "X1"
+        return SimpleNamespace(tone=tone, run_id="b", doc={"frames": [
+            {"photo": {"make": make, "model": model}}, {"photo": {"make": make, "model": model}}]})
+
+    other = {"sequence_run_id": "a", "tone_curve_cameras": ["Acme X1"]}
+    np.testing.assert_allclose(target_tone_variance(target("Other"), other, radiance), want)
+    np.testing.assert_allclose(target_tone_variance(target("Acme"), {"sequence_run_id": "a"},
+                                                    radiance), want)        # fit counted none
+    for same in (other, {**other, "tone_curve_cameras": []}):
+        assert target_tone_variance(target("Acme"), same, radiance) == 0.0
+    assert target_tone_variance(target(None), other, radiance) == 0.0
+    assert target_tone_variance(target("Other"), {"sequence_run_id": "b"}, radiance) == 0.0
+    assert target_tone_variance(target("Other", None), other, radiance) == 0.0

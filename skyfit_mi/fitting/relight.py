@@ -35,7 +35,7 @@ from ..physics.sky_shape import shape_variants, shaped
 from ..pipeline.fit_result import check_fit_sequence
 from ..pipeline.illumination import envmap_from_record
 from ..pipeline.manifest import (FILENAME, RENDERED_SOURCES, check_frames, frame_axis, frame_label,
-                                 frame_sky, is_table, load_manifest, manifest_file,
+                                 frame_sky, is_table, load_manifest, manifest_file, photo_cameras,
                                  read_frame_image, rendered_frames)
 from ..pipeline.pixels import frame_values, material_regions
 from ..pipeline.observation_table import relative_scale, table_regions
@@ -1144,12 +1144,20 @@ def frame_calibration_variance(s, radiance):
 def target_tone_variance(s, result, radiance):
     """Variance [(W m^-2 sr^-1)^2] a region mean of the target's values at ``radiance`` (T, 3)
     takes from the target's camera's own tone curve (its ingest's, :func:`~.tone.region_tone`:
-    each independent error's move at the region's codes), where the target is not the fit's own
-    sequence (there the fit's parameters carry the same error); 0 where its ingest counted no
-    curve. Counted apart from the fit's share of the same camera's curve, which may cancel it
-    (the same camera, surfaces at its levels) or add to it."""
+    each independent error's move at the region's codes), where that curve is not the one the
+    fit counted: another camera (EXIF), or a fit that counted none. On the fit's own sequence,
+    or another of its camera (or where either's camera is unknown, taken as the same), the
+    fit's parameters carry the same curve's error, which the target's largely cancels (the
+    sample board's curved camera relit onto another of its days: counted twice, the median band
+    36% -> 71% for a median error of 2.7%). 0 where the target's ingest counted no curve."""
     if s.tone is None or result.get("sequence_run_id") == s.run_id:
         return 0.0
+    counted = result.get("tone_curve_cameras",
+                         [] if "tone_curve_error_sd" in result else None)   # [] unnamed
+    if counted is not None:
+        mine = photo_cameras(s.doc)
+        if not counted or not mine or set(counted) == set(mine):
+            return 0.0
     return np.sum(np.square(s.tone[0] * np.asarray(radiance)[..., None]), axis=-1)
 
 

@@ -334,6 +334,13 @@ def rendered_frames(doc):
     return [f for f in doc["frames"] if f.get("status") == "rendered"]
 
 
+def photo_cameras(doc):
+    """The EXIF cameras (make and model, sorted) of an ingested sequence's photographs; [] where
+    none states one (a render, a table, files without EXIF)."""
+    return sorted({" ".join(str(f["photo"].get(k) or "").strip() for k in ("make", "model"))
+                   .strip() for f in doc["frames"] if f.get("photo")} - {""})
+
+
 def is_table(doc):
     """Whether a manifest's frames are observed as a table (not images)."""
     return any(f.get("observations", {}).get("kind") == "table" for f in doc["frames"])
