@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from skyfit_mi.errors import SkyfitError
 from skyfit_mi.physics import tone_curve as tc
 from skyfit_testkit.photo_sim import camera_tone
 
@@ -126,20 +127,52 @@ def test_a_map_s_fits_take_the_curve_s_error_by_their_own_codes():
     # greys of several levels measured one: each value is read at its own code, relative to
     # its frame's anchor (a frame whose references read none takes the others' mean)
     w = np.array([1.5, -0.5, 0.3, 0.2, -0.4])
-    doc["ingest"]["tone_curve"]["weights"] = w.tolist()
-    doc["ingest"]["tone_curve"]["anchor_basis"]["2"] = [[None] * tc.DEGREE] * 3
-    read = curve_reading(doc, obs)
+    rec = doc["ingest"]["tone_curve"]
+    rec.update(weights=w.tolist(), root=(0.5 * np.eye(5)).tolist())
+    rec["anchor_basis"]["2"] = [[None] * tc.DEGREE] * 3
+    with pytest.raises(SkyfitError, match="ingest the photographs again"):
+        curve_reading(doc, obs)                  # ingested before values were read through it
+    rec["measured_ln_signal"] = [tc.T_MIN, 0.0]
+    read, slope = curve_reading(doc, obs)
     np.testing.assert_allclose(read[:2], 0.0, atol=1e-12)
     np.testing.assert_allclose(read[2:], tc.moves(t[1], t[0]) @ w, rtol=1e-9)
+    np.testing.assert_allclose(slope[2:], tc.basis_slope(t[1]) @ tc.PRIOR_ROOT @ w, rtol=1e-9)
+    # within the measured levels, every value moves by the posterior at the region's median
+    inside = region_tone(SimpleNamespace(doc=doc, obs=obs))
+    t_median = np.log(sensor.linearise(code.mean()))
+    np.testing.assert_allclose(inside, np.broadcast_to(0.5 * tc.moves(t_median, t[0]),
+                                                       inside.shape), rtol=1e-9)
     # measured only about the anchor's level: the brighter values take the curve's value at
-    # the highest measured level, and the prior's error, not the posterior's
-    rec = doc["ingest"]["tone_curve"]
-    rec.update(measured_ln_signal=[t[0] - 0.1, t[0] + 0.1], root=(0.5 * np.eye(5)).tolist())
-    np.testing.assert_allclose(curve_reading(doc, obs)[2:], tc.moves(t[0] + 0.1, t[0]) @ w,
+    # the highest measured level, no slope, and the prior's error at their own codes, not the
+    # posterior's at the region's (whose median lies within)
+    rec["measured_ln_signal"] = [t[0] - 0.1, t[0] + 0.1]
+    read, slope = curve_reading(doc, obs)
+    np.testing.assert_allclose(read[2:], tc.moves(t[0] + 0.1, t[0]) @ w, rtol=1e-9)
+    assert not slope[2:].any()
+    y3 = y.copy()
+    y3[2] = code[0]                          # three pixels at the anchor's code, the median's
+    obs3 = SimpleNamespace(**{**vars(obs), "y": y3})
+    move = region_tone(SimpleNamespace(doc=doc, obs=obs3))
+    np.testing.assert_allclose(move[:3], 0.0, atol=1e-12)
+    np.testing.assert_allclose(move[3], np.broadcast_to(tc.moves(t[1], t[0]), move[3].shape),
                                rtol=1e-9)
-    move = level_tone(doc, obs, y)
-    np.testing.assert_allclose(move[2:], np.broadcast_to(tc.moves(t[1], t[0]), move[2:].shape),
-                               rtol=1e-9)
+
+
+def test_a_measured_curves_reading_and_its_slope():
+    """physics.tone_curve.reading: the factor is (phi(t) - phi(anchor)) PRIOR_ROOT w within the
+    measured levels and held at their ends beyond; its slope is the factor's derivative in t
+    there (by which a value's noise moves its own reading) and 0 beyond."""
+    w = np.array([1.5, -0.5, 0.3, 0.2, -0.4])
+    anchor = tc.basis(np.log(0.18))
+    t = np.linspace(-4.5, -0.3, 9)
+    span = (-4.0, -0.5)
+    factor, slope = tc.reading(t, anchor, w, span)
+    np.testing.assert_allclose(factor, tc.moves_from(np.clip(t, *span), anchor) @ w, rtol=1e-12)
+    h = 1e-6
+    numeric = (tc.reading(t + h, anchor, w, (-9, 0))[0] - tc.reading(t, anchor, w, (-9, 0))[0]) / h
+    inside = (t >= span[0]) & (t <= span[1])
+    np.testing.assert_allclose(slope[inside], numeric[inside], rtol=1e-4)
+    assert not slope[~inside].any()
 
 
 def test_greys_at_several_levels_measure_the_curve_and_one_grey_measures_none():

@@ -18,6 +18,7 @@ from scipy.special import log_ndtr, ndtr
 
 from . import uncertainty as unc
 from .tone import curve_reading
+from ..physics import tone_curve
 from ..physics.camera import SensorModel
 from ..errors import SkyfitError
 from ..physics.colour import SRGB_LUMINANCE
@@ -358,7 +359,8 @@ def load_observations(manifest_path, pixels, frames=None, min_frames=2, one_fit=
                        np.stack(gain, 1), sensor, warnings)
     reading = curve_reading(doc, obs)      # a camera's own tone curve, measured at ingest
     if reading is not None:
-        obs.gain = obs.gain * np.exp(reading)
+        obs.gain = obs.gain * np.exp(reading[0])
+        obs.sigma = obs.sigma * np.maximum(np.abs(1.0 - reading[1]), tone_curve.SLOPE_FLOOR)
     return obs
 
 

@@ -86,10 +86,10 @@ def fit_warnings(s, fit):
             warnings.append(
                 f"{', '.join(led)}: the camera's own JPEG tone curve, measured by the grey "
                 "references' levels and read through, but not exactly (its four terms cannot "
-                "follow a camera's curve everywhere, least beyond the greys' levels), more than "
-                "the data sets their intervals: this surface's codes lie far from the greys' "
-                "weighted mean; RAW files, or a grey nearer this surface's brightness, narrow "
-                "it.")
+                "follow a camera's curve everywhere), more than the data sets their intervals: "
+                "this surface's codes lie far from where the greys calibrate the exposure, or "
+                "beyond the greys' levels, where the curve keeps its prior's error; RAW files, "
+                "or greys spanning this surface's brightness, narrow it.")
         elif led:
             warnings.append(
                 f"{', '.join(led)}: the camera's own JPEG tone curve, not known (read as "

@@ -927,8 +927,10 @@ def _fit_terms(sessions, level, terms, told, warnings, light_terms=0):
         fitted.tone_curve = {
             "weights": u[K:].tolist(), "sd": sd[K:].tolist(), "asked": asked.tolist(),
             "meaning": "the weights of a camera's own JPEG tone curve's independent errors "
-                       "(skyfit_mi.physics.tone_curve.PRIOR_ROOT's columns, each N(0, 1)), "
-                       "held at 0 (the codes read through the response's curve); asked: the "
+                       "(skyfit_mi.physics.tone_curve.PRIOR_ROOT's columns, each N(0, 1); "
+                       "where grey references measured the curve, its posterior's within "
+                       "their levels), held at 0 (the codes read through the response's "
+                       "curve, or the curve the references measured); asked: the "
                        "step from 0 the regions' values ask for (linearised); sd: their error "
                        "about 0 (what the values leave of the prior, widened by that step), "
                        "through the light's fit and directly in the light's share of every "

@@ -10,59 +10,79 @@ import warnings
 import numpy as np
 
 from . import uncertainty as unc
+from ..errors import SkyfitError
 from ..physics import tone_curve
 
 
-def _from_anchor(doc, obs, codes, clip=False):
-    """(the ``ingest.tone_curve`` record, phi(t) - phi(anchor) (..., T, C, DEGREE), whether t
-    lies within the levels references measured the curve at (..., T, C)) of values at ``codes``
-    (..., T, C) [DN] of ``obs``'s frames, t their ln signal as the response reads it (``clip``:
-    taken to the nearest measured level) and the anchor their frame's (where its references
-    calibrate it; a frame whose references were clipped took the others' scale, so their mean
-    anchor; full scale for a given exposure); 0 for a value without a signal. None where the
-    ingest counted no curve."""
+def _from_anchor(doc, obs, codes):
+    """(the ``ingest.tone_curve`` record, t (..., T, C), the anchors' phi (T, C, DEGREE)) of
+    values at ``codes`` (..., T, C) [DN] of ``obs``'s frames: t their ln signal as the response
+    reads it (NaN without a signal), each anchor its frame's (where its references calibrate
+    it; a frame whose references were clipped took the others' scale, so their mean anchor;
+    full scale for a given exposure). None where the ingest counted no curve."""
     rec = (doc.get("ingest") or {}).get("tone_curve")
     if obs.rays is not None or not rec:
         return None
     with np.errstate(all="ignore"):
         t = np.log(obs.sensor.linearise(np.asarray(codes, dtype=float)))
-    span = rec.get("measured_ln_signal") or (-np.inf, np.inf)
-    inside = tone_curve.covered(t, span)
-    if clip:
-        t = np.clip(t, *span)
-    phi = tone_curve.frame_anchors(rec.get("anchor_basis"), obs.frames)
+    return rec, np.where(np.isfinite(t), t, np.nan), \
+        tone_curve.frame_anchors(rec.get("anchor_basis"), obs.frames)
+
+
+def _moves(t, phi):
+    """The prior's moves (..., E) of values at ln signal ``t`` (NaN: no signal, no move) from
+    anchors ``phi``: (phi(t) - anchor) PRIOR_ROOT."""
     ok = np.isfinite(t)
-    return rec, np.where(ok[..., None], tone_curve.basis(np.where(ok, t, 0.0)) - phi, 0.0), inside
+    return np.where(ok[..., None], tone_curve.basis(np.where(ok, t, 0.0)) - phi, 0.0) \
+        @ tone_curve.PRIOR_ROOT
 
 
 def curve_reading(doc, obs):
-    """The ln factor (P, T, C) [unitless] by which each of ``obs``'s values, read through the
+    """(The ln factor (P, T, C) [unitless] by which each of ``obs``'s values, read through the
     response at its own code, stands above the true signal under the camera's own tone curve
-    that grey references of several levels measured (``ingest.tone_curve.weights``; beyond
-    their levels, its value at the nearest, :func:`~skyfit_mi.physics.tone_curve.covered`):
-    true = read exp(-factor), relative to its frame's anchor. None where none was measured."""
-    found = _from_anchor(doc, obs, obs.y, clip=True)
+    that grey references of several levels measured, relative to its frame's anchor
+    (``ingest.tone_curve.weights``; beyond their levels at the nearest,
+    :func:`~skyfit_mi.physics.tone_curve.reading`): true = read exp(-factor); and its slope
+    (P, T, C), by which each value's sigma is one of (1 - slope) sigma in the true signal.)
+    None where none was measured."""
+    found = _from_anchor(doc, obs, obs.y)
     if found is None or not found[0].get("weights"):
         return None
-    rec, dphi, _ = found
-    return dphi @ tone_curve.PRIOR_ROOT @ np.asarray(rec["weights"], dtype=float)
+    rec, t, phi = found
+    if rec.get("measured_ln_signal") is None:
+        raise SkyfitError("the sequence was ingested before skyfit read each value through the "
+                          "tone curve its grey references measured (its manifest's "
+                          "ingest.tone_curve has weights but no measured_ln_signal); ingest the "
+                          "photographs again.")
+    ok = np.isfinite(t)
+    factor, slope = tone_curve.reading(np.where(ok, t, 0.0), phi, rec["weights"],
+                                       rec["measured_ln_signal"])
+    return np.where(ok, factor, 0.0), np.where(ok, slope, 0.0)
 
 
-def level_tone(doc, obs, codes):
+def level_tone(doc, obs, codes, own=None):
     """The moves (..., T, C, E) [unitless] of values at ``codes`` (..., T, C) [DN] of ``obs``'s
     frames under a camera's own tone curve (:mod:`~skyfit_mi.physics.tone_curve`; ``doc``'s
     ``ingest.tone_curve``), each relative to its frame's anchor: its relative change at one sd
     of each independent error the curve's prior leaves, or, within the levels references
     measured it at, its posterior (:func:`curve_reading` reads the values through that curve).
-    None where the ingest counted no curve."""
+    ``own`` (..., T, C) [DN]: the values' own codes, which decide whether each lies within
+    those levels, and beyond them its prior's moves there. None where the ingest counted no
+    curve."""
     found = _from_anchor(doc, obs, codes)
     if found is None:
         return None
-    rec, dphi, inside = found
-    move = dphi @ tone_curve.PRIOR_ROOT
+    rec, t, phi = found
+    move = _moves(t, phi)
     if not rec.get("root"):
         return move
-    return np.where(inside[..., None], move @ np.asarray(rec["root"], dtype=float), move)
+    span = rec.get("measured_ln_signal") or (-np.inf, np.inf)
+    move = np.where(tone_curve.covered(t, span)[..., None],
+                    move @ np.asarray(rec["root"], dtype=float), move)
+    if own is None:
+        return move
+    _, t_own, _ = _from_anchor(doc, obs, own)
+    return np.where(tone_curve.covered(t_own, span)[..., None], move, _moves(t_own, phi))
 
 
 def median_codes(obs, rows=slice(None)):
@@ -78,8 +98,9 @@ def median_codes(obs, rows=slice(None)):
 
 def region_tone(s):
     """:func:`level_tone`'s moves (P, T, C, E) of session ``s``'s values at the region's
-    :func:`median_codes`, None where its ingest counted no curve."""
-    move = level_tone(s.doc, s.obs, median_codes(s.obs))
+    :func:`median_codes` (beyond the levels references measured the curve at, each at its own
+    code), None where its ingest counted no curve."""
+    move = level_tone(s.doc, s.obs, median_codes(s.obs), own=s.obs.y)
     return None if move is None else np.broadcast_to(move, s.obs.y.shape + move.shape[-1:])
 
 

@@ -51,6 +51,37 @@ def basis(t):
                      for j in range(1, DEGREE + 1)], axis=-1)
 
 
+def basis_slope(t):
+    """d phi / d t (..., DEGREE) [unitless] at ln signal ``t`` (...,); 0 beyond [T_MIN, 0],
+    where :func:`basis` holds its end value."""
+    t = np.asarray(t, dtype=float)
+    x = 1.0 + 2.0 * np.clip(t, T_MIN, 0.0) / -T_MIN
+    inside = ((t >= T_MIN) & (t <= 0.0))[..., None]
+    return np.where(inside, np.stack([legendre.legval(x, legendre.legder(np.eye(DEGREE + 1)[j]))
+                                      for j in range(1, DEGREE + 1)], axis=-1) * 2.0 / -T_MIN,
+                    0.0)
+
+
+#: The least share of a value's sigma its error keeps in the true signal where a measured
+#: curve reads it (:func:`reading`: (1 - slope) sigma) [unitless]: cameras' curves depart from
+#: sRGB's by slopes of 0.1-0.5 in ln; near 1 the reading would call a value exact.
+SLOPE_FLOOR = 0.25
+
+
+def reading(t, anchor_basis, weights, span):
+    """(The ln factor (...) by which a value at ln signal ``t`` (...) read through the response
+    stands above the true signal under a curve that grey references measured (``weights`` of
+    PRIOR_ROOT's columns, over the levels ``span`` (lo, hi), relative to the anchor's phi
+    ``anchor_basis`` (..., DEGREE)): true = read exp(-factor), beyond ``span`` the factor at
+    its nearest end (:func:`covered`); its slope d factor / d t (...), 0 beyond ``span``, by
+    which the value's noise moves its own reading: a value's error of sigma is one of
+    (1 - slope) sigma in the true signal.)"""
+    t = np.asarray(t, dtype=float)
+    w = PRIOR_ROOT @ np.asarray(weights, dtype=float)
+    factor = (basis(np.clip(t, *span)) - np.asarray(anchor_basis, dtype=float)) @ w
+    return factor, np.where(covered(t, span), basis_slope(t) @ w, 0.0)
+
+
 def moves(t, anchor=0.0, root=None):
     """Each independent error's relative change (..., E) [unitless, at one sd] of a value at
     ln signal ``t`` (...,) calibrated at ln signal ``anchor`` (broadcast with ``t``; 0: full

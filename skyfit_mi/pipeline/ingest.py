@@ -1277,6 +1277,30 @@ def frame_exposures(frames, patches, noise, o, log):
                                        bool((calibration or {}).get("per_frame")), o, log))
 
 
+#: Points of the table a frame's values are read through a measured tone curve by.
+CURVE_TABLE = 2048
+
+
+def _curve_reading(signal, curve, index):
+    """:func:`~skyfit_mi.physics.tone_curve.reading` (factor, slope) of a frame's ``signal``
+    (H, W, 3) [fraction of full scale] under the measured ``curve`` (``ingest.tone_curve``) at
+    frame ``index``'s anchor, interpolated in a table of :data:`CURVE_TABLE` ln signals per
+    channel over the measured levels (held beyond them, the slope 0 there): a frame at a
+    time, as the fit reads its values (:func:`~skyfit_mi.fitting.tone.curve_reading`)."""
+    span = curve["measured_ln_signal"]
+    grid = np.linspace(*span, CURVE_TABLE)
+    phi = tone_curve.frame_anchors(curve["anchor_basis"], [index])[0]           # (3, DEGREE)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.log(signal)
+    factor, moved = np.zeros(signal.shape), np.zeros(signal.shape)
+    for c in range(signal.shape[-1]):
+        f_c, m_c = tone_curve.reading(grid, phi[c], curve["weights"], span)
+        tc = np.where(np.isfinite(t[..., c]), t[..., c], span[0])
+        factor[..., c] = np.interp(tc, grid, f_c)
+        moved[..., c] = np.where(tone_curve.covered(tc, span), np.interp(tc, grid, m_c), 0.0)
+    return factor, moved
+
+
 def tone_curve_record(frames, sensor, references, per_frame, o, log):
     """The record of the error a camera's own JPEG tone curve leaves
     (:mod:`skyfit_mi.physics.tone_curve`), or None where the codes' curve is known: linear
@@ -1400,7 +1424,6 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
     from tqdm import tqdm
 
     curve = exposures.tone_curve if (exposures.tone_curve or {}).get("weights") else None
-    curve_w = None if curve is None else np.asarray(curve["weights"], dtype=float)
     for f, p, photo, v in tqdm(zip(frames.spec.frames, paths, photos, linear.values),
                                total=len(paths), desc="ingest", unit="frame", disable=not progress):
         rec = frame_record(f, 0, out)
@@ -1432,13 +1455,14 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
                 v = _unmix(v, mixing["mixing"], sensor)
             s = sensor.linearise(np.nan_to_num(v))
             slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code
+            moved = 0.0
             if curve is not None:      # read through the curve the references measured
-                with np.errstate(divide="ignore"):
-                    phi = tone_curve.frame_anchors(curve["anchor_basis"], [f.index])[0]
-                    t = np.clip(np.log(s), *curve["measured_ln_signal"])
-                    gain = gain * np.exp(tone_curve.moves_from(t, phi) @ curve_w)
+                factor, moved = _curve_reading(s, curve, f.index)
+                gain = gain * np.exp(factor)
             radiance = np.where(np.isfinite(v), s / gain, np.nan).astype(np.float32)
-            rad_sd = np.where(np.isfinite(v), sig / (slope * gain), np.inf).astype(np.float32)
+            rad_sd = np.where(np.isfinite(v), sig * np.maximum(np.abs(1.0 - moved),
+                                                               tone_curve.SLOPE_FLOOR)
+                              / (slope * gain), np.inf).astype(np.float32)
             names = write_frame(out, f.index, radiance, rad_sd, v, sig, f.time)
             rec.update(status="rendered", **names,
                        exposure={"exposure": float(e @ SRGB_LUMINANCE),
