@@ -1287,17 +1287,21 @@ def _curve_reading(signal, curve, index):
     frame ``index``'s anchor, interpolated in a table of :data:`CURVE_TABLE` ln signals per
     channel over the measured levels (held beyond them, the slope 0 there): a frame at a
     time, as the fit reads its values (:func:`~skyfit_mi.fitting.tone.curve_reading`)."""
-    span = curve["measured_ln_signal"]
-    grid = np.linspace(*span, CURVE_TABLE)
+    lo, hi = span = curve["measured_ln_signal"]
+    grid = np.linspace(lo, hi, CURVE_TABLE)
     phi = tone_curve.frame_anchors(curve["anchor_basis"], [index])[0]           # (3, DEGREE)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.log(signal)
-    factor, moved = np.zeros(signal.shape), np.zeros(signal.shape)
+    factor = np.empty(signal.shape, np.float32)
+    moved = np.empty(signal.shape, np.float32)
     for c in range(signal.shape[-1]):
         f_c, m_c = tone_curve.reading(grid, phi[c], curve["weights"], span)
-        tc = np.where(np.isfinite(t[..., c]), t[..., c], span[0])
-        factor[..., c] = np.interp(tc, grid, f_c)
-        moved[..., c] = np.where(tone_curve.covered(tc, span), np.interp(tc, grid, m_c), 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pos = (np.log(signal[..., c]) - lo) * ((CURVE_TABLE - 1) / (hi - lo))
+        inside = (pos >= 0) & (pos <= CURVE_TABLE - 1)              # NaN: neither
+        pos = np.clip(np.nan_to_num(pos, nan=0.0), 0, CURVE_TABLE - 1)
+        i = np.minimum(pos.astype(np.int32), CURVE_TABLE - 2)
+        frac = pos - i
+        factor[..., c] = f_c[i] * (1 - frac) + f_c[i + 1] * frac
+        moved[..., c] = np.where(inside, m_c[i] * (1 - frac) + m_c[i + 1] * frac, 0.0)
     return factor, moved
 
 
