@@ -588,7 +588,7 @@ def _add_camera(sub, common):
 
 
 def _sky_series(args):
-    from .pipeline.sky_series import CardOptions, sky_series
+    from .pipeline.sky_series import CardOptions, ShotOptions, sky_series
 
     card = None
     if args.card:
@@ -605,8 +605,8 @@ def _sky_series(args):
     elif args.card_box is not None:
         raise SkyfitError("--card-box belongs to --card (the grey card's shots).")
     doc = sky_series(args.photos, args.output, card=card, tz=args.tz, times_csv=args.times,
-                     flat=args.flat, gap_s=args.bracket_gap_s, lens=args.lens,
-                     exact_curve=args.exact_curve, overwrite=args.overwrite,
+                     shots=ShotOptions(args.flat, args.lens, args.exact_curve),
+                     gap_s=args.bracket_gap_s, overwrite=args.overwrite,
                      log=(lambda *a: None) if args.quiet else print)
     lines = [f"{len(doc['maps'])} sky maps in {args.output}; in the spec:", "[sky]",
              'type = "envmap"',

@@ -22,6 +22,7 @@ from skyfit_mi.pipeline.sky_series import (
     SATURATION_LUMINANCE,
     SERIES_NAME,
     CardOptions,
+    ShotOptions,
     fisheye_directions,
     sky_series,
 )
@@ -107,7 +108,7 @@ def series(folder, **kw):
     told the shots' codes are sRGB's exactly, as this camera writes them (``exact_curve``)."""
     return sky_series([folder / "shots"], folder / "sky",
                       card=CardOptions((str(folder / "card"),), CARD_BOX), log=lambda *a: None,
-                      **{"exact_curve": True, **kw})
+                      **{"shots": ShotOptions(exact_curve=True), **kw})
 
 
 def photographed_day(folder, scans, size=16, noise_percent=1.0, spp=128, gamma=None,
@@ -140,7 +141,7 @@ def photographed_day(folder, scans, size=16, noise_percent=1.0, spp=128, gamma=N
                            north_rotation_deg=NORTH_DEG, gamma=gamma)
             photograph_card(sky, t + dt.timedelta(seconds=30), card, seed=10 + k, gamma=gamma)
     sky_series([shots], folder / f"sky{tag}", card=CardOptions((str(card),), CARD_BOX),
-               exact_curve=exact, overwrite=True, log=lambda *a: None)
+               shots=ShotOptions(exact_curve=exact), overwrite=True, log=lambda *a: None)
     spec = json.loads((folder / "measured_sky.json").read_text())
     spec["sky"] = {"type": "envmap", "file": f"sky{tag}/{SERIES_NAME}",
                    "north_rotation_deg": NORTH_DEG, "ground_albedo": 0.2}

@@ -28,6 +28,7 @@ from skyfit_mi.pipeline.photos import read_photo  # noqa: E402
 from skyfit_mi.pipeline.sky_series import (  # noqa: E402
     SERIES_NAME,
     CardOptions,
+    ShotOptions,
     fisheye_directions,
     sky_series,
 )
@@ -196,8 +197,8 @@ def test_a_flat_field_undoes_the_fisheyes_vignetting(tmp_path):
     ratio = {}
     for flat in (None, tmp_path / "flat.png"):
         doc = sky_series([tmp_path / "shots"], tmp_path / str(flat is None),
-                         card=CardOptions((str(tmp_path / "card"),), CARD_BOX), flat=flat,
-                         exact_curve=True, log=lambda *a: None)
+                         card=CardOptions((str(tmp_path / "card"),), CARD_BOX),
+                         shots=ShotOptions(flat=flat, exact_curve=True), log=lambda *a: None)
         m = read_photo(tmp_path / str(flat is None) / doc["maps"][0]["file"]).values
         ratio[flat is None] = np.median((m[low] @ SRGB_LUMINANCE) / (truth[low] @ SRGB_LUMINANCE))
         ghi = float(sky.horizontal_irradiance() @ SRGB_LUMINANCE)
@@ -216,8 +217,8 @@ def test_large_shots_are_binned_to_the_maps_size(tmp_path, monkeypatch):
     photograph_sky(sky, T0, tmp_path / "shots", size=130)
     for most, across in ((64, 43), (65, 65)):
         monkeypatch.setattr(ss, "MAP_PIXELS", most)
-        doc = sky_series([tmp_path / "shots"], tmp_path / str(most), exact_curve=True,
-                         log=lambda *a: None)
+        doc = sky_series([tmp_path / "shots"], tmp_path / str(most),
+                         shots=ShotOptions(exact_curve=True), log=lambda *a: None)
         m = read_photo(tmp_path / str(most) / doc["maps"][0]["file"]).values
         assert m.shape == (across, across, 3) and doc["sun_mask_deg"] is not None
     truth = fisheye_radiance(sky, 65)
@@ -381,7 +382,8 @@ def test_a_cameras_own_curve_is_measured_on_the_brackets_or_warned_when_said_exa
         for name, exact in (("srgb", True), ("camera", True), ("camera", False)):
             said[name, exact] = []
             out = tmp / f"{name}_{exact}"
-            docs[name, exact] = sky_series([tmp / name], out, exact_curve=exact,
+            docs[name, exact] = sky_series([tmp / name], out,
+                                           shots=ShotOptions(exact_curve=exact),
                                            log=said[name, exact].append)
             m = read_photo(out / docs[name, exact]["maps"][0]["file"]).values
             level[name, exact] = float(np.median(m[away] @ SRGB_LUMINANCE / truth))

@@ -97,7 +97,7 @@ def test_a_map_s_fits_take_the_curve_s_error_by_their_own_codes():
     by nothing, one 4x brighter by the prior's sd there, on every channel's C at once."""
     from types import SimpleNamespace
 
-    from skyfit_mi.fitting.tone import curve_reading, level_tone, region_tone, tone_level_rows
+    from skyfit_mi.fitting.tone import curve_reading, region_tone, tone_level_rows
     from skyfit_mi.fitting.uncertainty import rows_sd
     from skyfit_mi.physics.camera import SensorModel
 

@@ -54,6 +54,30 @@ def search_warnings(search_open):
             for p, ends in search_open.items() for end, x in ends]
 
 
+def tone_warnings(s, fit, names):
+    """The warning naming the parameters whose interval a camera's own tone curve (measured by
+    greys of several levels, or not) at least doubles; none where it counted no curve."""
+    if fit.tone_sd is None:
+        return []
+    led = [p for p, big in zip(names, doubles_interval(fit, fit.tone_sd)) if big]
+    if not led:
+        return []
+    if ((s.doc.get("ingest") or {}).get("tone_curve") or {}).get("weights"):
+        return [f"{', '.join(led)}: the camera's own JPEG tone curve, measured by the grey "
+                "references' levels and read through, but not exactly (its four terms cannot "
+                "follow a camera's curve everywhere), more than the data sets their intervals: "
+                "this surface's codes lie far from where the greys calibrate the exposure, or "
+                "beyond the greys' levels, where the curve keeps its prior's error; RAW files, "
+                "or greys spanning this surface's brightness, narrow it."]
+    return [f"{', '.join(led)}: the camera's own JPEG tone curve, not known (read as "
+            f"{s.doc['sensor'].get('response', 'srgb')}'s), more than the data sets their "
+            "intervals: this surface's codes lie far from the grey references', where "
+            "cameras' curves depart most; RAW files, greys of several reflectances in the "
+            "frames (a ColorChecker's, or several --calibrate greys at ingest), which "
+            "measure the curve, or ingest --exact-curve (codes written from linear values "
+            "by software) narrow it."]
+
+
 def fit_warnings(s, fit):
     """All warnings of ``fit``, in the order the user should read them."""
     names, method, theta, chi2 = s.names, fit.method, fit.theta, fit.chi2
@@ -79,26 +103,7 @@ def fit_warnings(s, fit):
             f"error of {falloff / 2:.1%} (1 sd); ingest with --vignetting cos4, or a flat field "
             "of this lens (--vignetting FLAT), to correct it, or --vignetting corrected if the "
             "camera did.")
-    if fit.tone_sd is not None:
-        led = [p for p, big in zip(names, doubles_interval(fit, fit.tone_sd)) if big]
-        measured = bool(((s.doc.get("ingest") or {}).get("tone_curve") or {}).get("weights"))
-        if led and measured:
-            warnings.append(
-                f"{', '.join(led)}: the camera's own JPEG tone curve, measured by the grey "
-                "references' levels and read through, but not exactly (its four terms cannot "
-                "follow a camera's curve everywhere), more than the data sets their intervals: "
-                "this surface's codes lie far from where the greys calibrate the exposure, or "
-                "beyond the greys' levels, where the curve keeps its prior's error; RAW files, "
-                "or greys spanning this surface's brightness, narrow it.")
-        elif led:
-            warnings.append(
-                f"{', '.join(led)}: the camera's own JPEG tone curve, not known (read as "
-                f"{s.doc['sensor'].get('response', 'srgb')}'s), more than the data sets their "
-                "intervals: this surface's codes lie far from the grey references', where "
-                "cameras' curves depart most; RAW files, greys of several reflectances in the "
-                "frames (a ColorChecker's, or several --calibrate greys at ingest), which "
-                "measure the curve, or ingest --exact-curve (codes written from linear values "
-                "by software) narrow it.")
+    warnings += tone_warnings(s, fit, names)
     led = [p for p, big in zip(names, doubles_interval(fit, fit.matrix_sd)) if big]
     if led:
         warnings.append(f"{', '.join(led)}: {matrix_note(s)}; it, more than the "

@@ -486,17 +486,26 @@ def _card_entry(readings, t, image, clipped, card, name, log):
             "sun_sd": card.sd * ghi / max(ghi - e_map, SUN_SHARE_FLOOR * ghi)}
 
 
-def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
-               gap_s=BRACKET_GAP_S, lens="equidistant", exact_curve=False, overwrite=False,
-               log=print):
+@dataclass(frozen=True)
+class ShotOptions:
+    """How the sky's camera reads: ``flat`` its lens's flat field (None: none), undoing the
+    sky's vignetting (not the card's: keep its box central); ``lens`` its projection
+    (:data:`LENSES`; the maps are equidistant); ``exact_curve``: its integer codes follow their
+    stated curve exactly (written from linear values by software), else they are read through
+    the camera's own tone curve measured on the brackets' overlaps (:func:`bracket_curve`)."""
+
+    flat: object = None
+    lens: str = "equidistant"
+    exact_curve: bool = False
+
+
+def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, shots=ShotOptions(),
+               gap_s=BRACKET_GAP_S, overwrite=False, log=print):
     """Merge the bracketed fisheye shots ``items`` into ``out_dir``: one EXR per bracket and
     :data:`SERIES_NAME`; returns the series document.  ``card`` (:class:`CardOptions`) gives
-    each map its global irradiance; ``flat`` undoes the sky's vignetting (not the card's: keep
-    its box central); ``lens`` the shots' projection (:data:`LENSES`), the maps equidistant.
-    Integer codes read through a curve are read through the camera's own tone curve measured
-    on the brackets' overlaps (:func:`bracket_curve`) unless ``exact_curve`` (codes written
-    from linear values by software). A refusal leaves nothing; ``overwrite`` removes the
-    replaced maps."""
+    each map its global irradiance; ``shots`` (:class:`ShotOptions`) how the camera reads. A
+    refusal leaves nothing; ``overwrite`` removes the replaced maps."""
+    options, flat, lens = shots, shots.flat, shots.lens
     _check_options(card, gap_s)
     if lens not in LENSES:
         raise SkyfitError(f"--lens {lens}: give one of {', '.join(LENSES)} (the fisheye's "
@@ -513,7 +522,7 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, flat=None,
             raise SkyfitError(f"{both[0].name}: given both as a sky shot and as a card shot; "
                               "put the card's shots in a folder of their own (--card).")
     shots = read_shots(items, tz, times_csv, flat)
-    curve = None if exact_curve else bracket_curve(brackets(shots, gap_s))
+    curve = None if options.exact_curve else bracket_curve(brackets(shots, gap_s))
     if curve is not None:
         shots = read_through(shots, curve)
         log(f"the camera's own tone curve measured on the brackets' overlaps "
