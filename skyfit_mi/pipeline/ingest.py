@@ -1359,8 +1359,11 @@ def tone_curve_record(frames, sensor, references, per_frame, o, log):
             warnings.simplefilter("ignore", RuntimeWarning)
             spread = np.nanmedian(np.nanmax(t, axis=2) - np.nanmin(t, axis=2))
         if spread > np.log(TONE_LEVELS_MIN):
+            with warnings.catch_warnings():      # the levels of groups that read two or more
+                warnings.simplefilter("ignore", RuntimeWarning)
+                told = np.where((np.isfinite(t).sum(axis=2) >= 2)[..., None], t, np.nan)
             record.update(weights=weights.tolist(), root=root.tolist(),
-                          measured_ln_signal=[float(np.nanmin(t)), float(np.nanmax(t))],
+                          measured_ln_signal=[float(np.nanmin(told)), float(np.nanmax(told))],
                           references_chi2_per_dof=chi2)
             log(f"encoding: the camera's own tone curve measured on the references' "
                 f"{len(labels)} levels (their exposures agree to chi-square {chi2:.2g} per dof "
