@@ -11,6 +11,7 @@ tests/test_sky_series.py and scripts/sky_series_fit.py.
 """
 import datetime as dt
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -118,8 +119,7 @@ def photographed_day(folder, scans, size=16, noise_percent=1.0, spp=128, gamma=N
     ``gamma``: the camera's own curve, :func:`photograph_sky`) and its card 30 s after, merged by
     ``skyfit sky-series`` (``exact_curve``: told the codes are sRGB's; default so for an sRGB
     camera, else the curve measured), and the day relabelled with the light a spec naming the
-    series gives: (the day, the relabelled day, the relabelled frames' skies by time); rendered
-    and photographed once into ``folder``."""
+    series gives: (the day, the relabelled day, the relabelled frames' skies by time)."""
     from measured_light import measured_disc_day, relabelled
 
     from skyfit_mi.pipeline.manifest import frame_sky, load_manifest
@@ -128,18 +128,17 @@ def photographed_day(folder, scans, size=16, noise_percent=1.0, spp=128, gamma=N
     folder = Path(folder)
     exact = gamma is None if exact_curve is None else exact_curve
     tag = "" if gamma is None and exact else f"_g{gamma}_{'exact' if exact else 'measured'}"
-    day = folder / "day"
-    if not (day / "manifest.json").exists():
-        day = measured_disc_day(folder, scans, size=size, noise_percent=noise_percent, spp=spp)
+    day = measured_disc_day(folder, scans, size=size, noise_percent=noise_percent, spp=spp)
     doc, _ = load_manifest(day)
     shots, card = (folder / (k if gamma is None else f"{k}_g{gamma}") for k in ("shots", "card"))
-    if not shots.exists():
-        for k, f in enumerate(doc["frames"]):
-            t = dt.datetime.fromisoformat(f["time"])
-            sky = frame_sky(f, day)
-            photograph_sky(sky, t - dt.timedelta(seconds=2), shots, seed=k,
-                           north_rotation_deg=NORTH_DEG, gamma=gamma)
-            photograph_card(sky, t + dt.timedelta(seconds=30), card, seed=10 + k, gamma=gamma)
+    for old in (shots, card):                   # the shots of this day only
+        shutil.rmtree(old, ignore_errors=True)
+    for k, f in enumerate(doc["frames"]):
+        t = dt.datetime.fromisoformat(f["time"])
+        sky = frame_sky(f, day)
+        photograph_sky(sky, t - dt.timedelta(seconds=2), shots, seed=k,
+                       north_rotation_deg=NORTH_DEG, gamma=gamma)
+        photograph_card(sky, t + dt.timedelta(seconds=30), card, seed=10 + k, gamma=gamma)
     sky_series([shots], folder / f"sky{tag}", card=CardOptions((str(card),), CARD_BOX),
                shots=ShotOptions(exact_curve=exact), overwrite=True, log=lambda *a: None)
     spec = json.loads((folder / "measured_sky.json").read_text())

@@ -638,30 +638,45 @@ def test_a_frame_calibrated_on_its_own_keeps_its_calibrations_error_in_the_band(
 
 def test_another_cameras_target_keeps_its_own_tone_curves_error_in_the_band():
     """relight's target_tone_variance: a target ingested with a camera's own tone curve counted
-    (its region's moves at one sd of each independent error) keeps each mean's (move x value)^2
-    summed over the errors where the fit counted another camera's curve, or none; on the fit's
-    own sequence, another of the fit's camera, or a camera either does not name, the fit's
-    parameters carry the same curve's error; a target without the curve adds nothing."""
+    keeps each mean's (move x value)^2 summed over the curve's independent errors, the moves
+    those of the region's median codes, where the fit counted another camera's curve, none, or
+    one measured by greys where the target's was not; on the fit's own sequence, another of the
+    fit's camera read alike, or a camera either does not name, the fit's parameters carry the
+    same curve's error; a target without the curve adds nothing."""
     from types import SimpleNamespace
 
     from skyfit_mi.fitting.relight import target_tone_variance
+    from skyfit_mi.physics import tone_curve as tc
+    from skyfit_mi.physics.camera import SensorModel
 
+    sensor = SensorModel(1.0, response="srgb", bits=8)
+    code = sensor.respond(np.array([0.1, 0.4])) * sensor.max_code
+    y = np.empty((4, 2, 3))                        # (P, T, C): the median pixel 4x the anchor
+    y[0], y[1:] = code[0], code[1]
+    y[3, 0] = 0.0                         # a value left out (sigma inf): not the region's level
+    phi = tc.basis(np.full(3, np.log(0.1))).tolist()
     radiance = np.array([[10.0, 20.0, 30.0], [1.0, 2.0, 3.0]])                    # (T, 3)
-    move = np.zeros((4, 2, 3, 2))                              # (P, T, C, E): a region's moves
-    move[:, :, :, 0], move[:, 1, :, 1] = 0.1, -0.2
-    want = (0.1 * radiance) ** 2 + np.array([[0.0], [0.04]]) * radiance ** 2
+    t = np.log(sensor.linearise(code))
+    want = np.sum(np.square(tc.moves(t[1], t[0])), axis=-1) * radiance ** 2
 
-    def target(make, tone=move):
+    def target(make, tone=True):
         model = None if make is None else "X1"
-        return SimpleNamespace(tone=tone, run_id="b", doc={"frames": [
-            {"photo": {"make": make, "model": model}}, {"photo": {"make": make, "model": model}}]})
+        doc = {"ingest": {"tone_curve": {"anchor_basis": {"0": phi, "1": phi}}},
+               "frames": [{"photo": {"make": make, "model": model}}] * 2}
+        sigma = np.ones_like(y)
+        sigma[3, 0] = np.inf
+        obs = SimpleNamespace(rays=None, y=y, sigma=sigma, sensor=sensor, frames=[0, 1])
+        return SimpleNamespace(tone=np.zeros((4, 2, 3, 5)) if tone else None, run_id="b",
+                               doc=doc, obs=obs)
 
     other = {"sequence_run_id": "a", "tone_curve_cameras": ["Acme X1"]}
     np.testing.assert_allclose(target_tone_variance(target("Other"), other, radiance), want)
     np.testing.assert_allclose(target_tone_variance(target("Acme"), {"sequence_run_id": "a"},
                                                     radiance), want)        # fit counted none
+    np.testing.assert_allclose(target_tone_variance(target("Acme"), {
+        **other, "tone_curve_measured": True}, radiance), want)        # read otherwise
     for same in (other, {**other, "tone_curve_cameras": []}):
         assert target_tone_variance(target("Acme"), same, radiance) == 0.0
     assert target_tone_variance(target(None), other, radiance) == 0.0
     assert target_tone_variance(target("Other"), {"sequence_run_id": "b"}, radiance) == 0.0
-    assert target_tone_variance(target("Other", None), other, radiance) == 0.0
+    assert target_tone_variance(target("Other", tone=False), other, radiance) == 0.0

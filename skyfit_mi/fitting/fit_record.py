@@ -48,7 +48,8 @@ def fit_record(s, fit, warnings, start, seed, evaluations, wall, t_method):
             "the region shares in a frame; added in quadrature to the intervals"}
            if np.any(fit.jpeg_shared_sd > 0) else {}),
         **({"tone_curve_error_sd": dict(zip(names, fit.tone_sd.tolist())),
-            "tone_curve_error": TONE_NOTE, "tone_curve_cameras": photo_cameras(s.doc)}
+            "tone_curve_error": TONE_NOTE, "tone_curve_cameras": photo_cameras(s.doc),
+            "tone_curve_measured": bool(s.doc["ingest"]["tone_curve"].get("weights"))}
            if fit.tone_sd is not None and np.any(fit.tone_sd > 0) else {}),
         **({"colour_matrix_error_sd": dict(zip(names, fit.matrix_sd.tolist())),
             "colour_matrix_error": matrix_note(s)}

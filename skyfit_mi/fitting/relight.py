@@ -27,6 +27,7 @@ from .fit import FitCache, FitSession, trace_sessions
 from .geometry import ANGLES_BEYOND_DEG, angles_beyond, highlight_beyond
 from .held_out import local_error_scale
 from .intervals import frame_calibration_sd
+from .tone import level_tone, median_codes
 from .landscape import truth_parameters
 from .sky_fit import light_tints, reference_light_factor, sky_level_at
 from .uncertainty import band_half_width, widen
@@ -1144,21 +1145,25 @@ def frame_calibration_variance(s, radiance):
 def target_tone_variance(s, result, radiance):
     """Variance [(W m^-2 sr^-1)^2] a region mean of the target's values at ``radiance`` (T, 3)
     takes from the target's camera's own tone curve (its ingest's, :func:`~.tone.region_tone`:
-    each independent error's move at the region's codes), where that curve is not the one the
-    fit counted: another camera (EXIF), or a fit that counted none. On the fit's own sequence,
-    or another of its camera (or where either's camera is unknown, taken as the same), the
-    fit's parameters carry the same curve's error, which the target's largely cancels (the
-    sample board's curved camera relit onto another of its days: counted twice, the median band
-    36% -> 71% for a median error of 2.7%). 0 where the target's ingest counted no curve."""
+    each independent error's move at the region's median codes), where that curve is not the
+    one the fit counted: another camera (EXIF), a fit that counted none, or one of the two
+    measured by greys and the other not. On the fit's own sequence, or another of its camera
+    read alike (or where either's camera is unknown, taken as the same; a fit JSON without
+    ``tone_curve_cameras``: unknown), the fit's parameters carry the same curve's error, which
+    the target's largely cancels (the sample board's curved camera relit onto another of its
+    days: counted twice, the median band 36% -> 71% for a median error of 2.7%). 0 where the
+    target's ingest counted no curve."""
     if s.tone is None or result.get("sequence_run_id") == s.run_id:
         return 0.0
     counted = result.get("tone_curve_cameras",
                          [] if "tone_curve_error_sd" in result else None)   # [] unnamed
-    if counted is not None:
+    measured = bool(((s.doc.get("ingest") or {}).get("tone_curve") or {}).get("weights"))
+    if counted is not None and result.get("tone_curve_measured", False) == measured:
         mine = photo_cameras(s.doc)
         if not counted or not mine or set(counted) == set(mine):
             return 0.0
-    return np.sum(np.square(s.tone[0] * np.asarray(radiance)[..., None]), axis=-1)
+    move = level_tone(s.doc, s.obs, median_codes(s.obs))[0]            # (T, C, E) the region's
+    return np.sum(np.square(move * np.asarray(radiance)[..., None]), axis=-1)
 
 
 def image_noise_variance(s, image, radiance, target):

@@ -82,6 +82,33 @@ def reading(t, anchor_basis, weights, span):
     return factor, np.where(covered(t, span), basis_slope(t) @ w, 0.0)
 
 
+#: Points of the table :func:`read_table` interpolates in.
+TABLE_POINTS = 2048
+
+
+def read_table(signal, anchor_basis, weights, span):
+    """:func:`reading` (factor, slope; float32, the shape of ``signal``) of linear signals
+    ``signal`` (..., C) [fraction of full scale] with channel c's anchor ``anchor_basis[c]``
+    (C, DEGREE), interpolated linearly in a table of :data:`TABLE_POINTS` ln signals per channel
+    over ``span`` (held beyond it, the slope 0 there; a signal of 0 or NaN takes the low end):
+    whole images at a time, to 2e-7 of the direct reading."""
+    lo, hi = span
+    grid = np.linspace(lo, hi, TABLE_POINTS)
+    factor = np.empty(np.shape(signal), np.float32)
+    slope = np.empty(np.shape(signal), np.float32)
+    for c in range(factor.shape[-1]):
+        f_c, m_c = reading(grid, anchor_basis[c], weights, span)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pos = (np.log(signal[..., c]) - lo) * ((TABLE_POINTS - 1) / (hi - lo))
+        inside = (pos >= 0) & (pos <= TABLE_POINTS - 1)              # NaN: neither
+        pos = np.clip(np.nan_to_num(pos, nan=0.0), 0, TABLE_POINTS - 1)
+        i = np.minimum(pos.astype(np.int32), TABLE_POINTS - 2)
+        frac = pos - i
+        factor[..., c] = f_c[i] * (1 - frac) + f_c[i + 1] * frac
+        slope[..., c] = np.where(inside, m_c[i] * (1 - frac) + m_c[i + 1] * frac, 0.0)
+    return factor, slope
+
+
 def moves(t, anchor=0.0, root=None):
     """Each independent error's relative change (..., E) [unitless, at one sd] of a value at
     ln signal ``t`` (...,) calibrated at ln signal ``anchor`` (broadcast with ``t``; 0: full

@@ -1277,34 +1277,6 @@ def frame_exposures(frames, patches, noise, o, log):
                                        bool((calibration or {}).get("per_frame")), o, log))
 
 
-#: Points of the table a frame's values are read through a measured tone curve by.
-CURVE_TABLE = 2048
-
-
-def _curve_reading(signal, curve, index):
-    """:func:`~skyfit_mi.physics.tone_curve.reading` (factor, slope) of a frame's ``signal``
-    (H, W, 3) [fraction of full scale] under the measured ``curve`` (``ingest.tone_curve``) at
-    frame ``index``'s anchor, interpolated in a table of :data:`CURVE_TABLE` ln signals per
-    channel over the measured levels (held beyond them, the slope 0 there): a frame at a
-    time, as the fit reads its values (:func:`~skyfit_mi.fitting.tone.curve_reading`)."""
-    lo, hi = span = curve["measured_ln_signal"]
-    grid = np.linspace(lo, hi, CURVE_TABLE)
-    phi = tone_curve.frame_anchors(curve["anchor_basis"], [index])[0]           # (3, DEGREE)
-    factor = np.empty(signal.shape, np.float32)
-    moved = np.empty(signal.shape, np.float32)
-    for c in range(signal.shape[-1]):
-        f_c, m_c = tone_curve.reading(grid, phi[c], curve["weights"], span)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            pos = (np.log(signal[..., c]) - lo) * ((CURVE_TABLE - 1) / (hi - lo))
-        inside = (pos >= 0) & (pos <= CURVE_TABLE - 1)              # NaN: neither
-        pos = np.clip(np.nan_to_num(pos, nan=0.0), 0, CURVE_TABLE - 1)
-        i = np.minimum(pos.astype(np.int32), CURVE_TABLE - 2)
-        frac = pos - i
-        factor[..., c] = f_c[i] * (1 - frac) + f_c[i + 1] * frac
-        moved[..., c] = np.where(inside, m_c[i] * (1 - frac) + m_c[i + 1] * frac, 0.0)
-    return factor, moved
-
-
 def tone_curve_record(frames, sensor, references, per_frame, o, log):
     """The record of the error a camera's own JPEG tone curve leaves
     (:mod:`skyfit_mi.physics.tone_curve`), or None where the codes' curve is known: linear
@@ -1464,7 +1436,9 @@ def _write(out, frames, linear, registration, noise, exposures, options, run_id,
             slope = sensor.slope(np.clip(s, 1e-6, 1 - 1e-6)) * sensor.max_code
             moved = 0.0
             if curve is not None:      # read through the curve the references measured
-                factor, moved = _curve_reading(s, curve, f.index)
+                factor, moved = tone_curve.read_table(
+                    s, tone_curve.frame_anchors(curve["anchor_basis"], [f.index])[0],
+                    curve["weights"], curve["measured_ln_signal"])
                 gain = gain * np.exp(factor)
             radiance = np.where(np.isfinite(v), s / gain, np.nan).astype(np.float32)
             rad_sd = np.where(np.isfinite(v), sig * np.maximum(np.abs(1.0 - moved),

@@ -28,7 +28,7 @@ import json
 import os
 import shutil
 import tempfile
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -269,9 +269,13 @@ def bracket_curve(groups, seed=0):
                          constant_values=np.nan))
         rs.append(np.pad(np.moveaxis(r, 2, 1).reshape(-1, len(group)), pad,
                          constant_values=np.nan))
-    if not ts or not np.isfinite(np.concatenate(ts)).any():
+    if not ts:
         return None
     t, r = np.concatenate(ts), np.concatenate(rs)
+    pairs = np.isfinite(t).sum(axis=1) >= 2                   # a pixel seen in two shots or more
+    if not pairs.any():
+        return None
+    t, r = t[pairs], r[pairs]
     weights, root, _, chi2 = tone_curve.fit_references(t, r, np.full(t.shape, CURVE_SD))
     return {"weights": weights.tolist(), "root": root.tolist(), "chi2_per_dof": chi2,
             "measured_ln_signal": [float(np.nanmin(t)), float(np.nanmax(t))],
@@ -280,17 +284,16 @@ def bracket_curve(groups, seed=0):
 
 def read_through(shots, curve):
     """``shots`` with their curved ones' values read through the measured ``curve``
-    (:func:`bracket_curve`): v exp(-d(ln s)), s the signal before the flat field, taken to the
-    nearest measured level beyond them (:func:`~skyfit_mi.physics.tone_curve.covered`)."""
-    w = np.asarray(curve["weights"], dtype=float)
-    out = []
+    (:func:`bracket_curve`), in place: v exp(-d(ln s)), s the signal before the flat field,
+    taken to the nearest measured level beyond them
+    (:func:`~skyfit_mi.physics.tone_curve.read_table`, anchored at full scale)."""
+    full_scale = np.zeros((3, tone_curve.DEGREE))
     for s in shots:
         if s.curved:
-            with np.errstate(divide="ignore"):
-                t = np.clip(np.log(s.linear * s.flat), *curve["measured_ln_signal"])
-            s = replace(s, linear=(s.linear * np.exp(-tone_curve.moves(t) @ w)).astype(np.float32))
-        out.append(s)
-    return out
+            factor, _ = tone_curve.read_table(s.linear * s.flat, full_scale, curve["weights"],
+                                              curve["measured_ln_signal"])
+            np.multiply(s.linear, np.exp(-factor), out=s.linear)
+    return shots
 
 
 def merge(bracket):
@@ -523,6 +526,10 @@ def sky_series(items, out_dir, *, card=None, tz=None, times_csv=None, shots=Shot
                               "put the card's shots in a folder of their own (--card).")
     shots = read_shots(items, tz, times_csv, flat)
     curve = None if options.exact_curve else bracket_curve(brackets(shots, gap_s))
+    if curve is None and not options.exact_curve and any(s.curved for s in shots):
+        log("the shots' codes are read through their files' stated curve alone: no two shots of "
+            "a bracket both expose a pixel, which a camera's own tone curve is measured on "
+            "(bracket each exposure with others two stops apart)")
     if curve is not None:
         shots = read_through(shots, curve)
         log(f"the camera's own tone curve measured on the brackets' overlaps "
