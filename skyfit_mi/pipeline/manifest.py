@@ -30,6 +30,7 @@ from ..physics.camera import SensorModel
 from ..physics.gensky import from_gensky
 from ..physics.sky import Sky
 from ..render.image import check_exr, read_exr_checked
+from .photos import camera_name
 from .illumination import (directional_from_record, directional_record, envmap_from_record,
                            envmap_record, perez_from_irradiance)
 
@@ -337,8 +338,7 @@ def rendered_frames(doc):
 def photo_cameras(doc):
     """The EXIF cameras (make and model, sorted) of an ingested sequence's photographs; [] where
     none states one (a render, a table, files without EXIF)."""
-    return sorted({" ".join(str(f["photo"].get(k) or "").strip() for k in ("make", "model"))
-                   .strip() for f in doc["frames"] if f.get("photo")} - {""})
+    return sorted({camera_name(f["photo"]) for f in doc["frames"] if f.get("photo")} - {""})
 
 
 def is_table(doc):
